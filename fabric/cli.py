@@ -1,0 +1,69 @@
+"""The ``robofabric`` command line.
+
+Subcommands arrive as plugins through the entry-point group
+``robofabric.commands``: each entry is a callable ``register(app)`` that adds
+commands to the root Typer app. ``fabric`` therefore never imports a peer
+package, and a user can add a peer of their own by declaring an entry point.
+A plugin that fails to load is reported and skipped: the rest still works.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+from importlib.metadata import entry_points
+
+import typer
+
+from fabric.cli_common import UserError, bench_app
+from fabric.config import ConfigError
+
+GROUP = "robofabric.commands"
+
+app = typer.Typer(
+    name="robofabric",
+    help="Multi-user robot simulation fabric over Zenoh: run routers and peers, inspect live keys, record and replay.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+
+_broken: list[tuple[str, str]] = []
+
+
+def _load_plugins() -> None:
+    for ep in sorted(entry_points(group=GROUP), key=lambda e: e.name):
+        try:
+            register = ep.load()
+            register(app)
+        except Exception as exc:  # a broken plugin must not take the whole CLI down
+            _broken.append((ep.name, f"{type(exc).__name__}: {exc}"))
+    app.add_typer(bench_app, name="bench")
+
+
+@app.callback()
+def _root(
+    verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="More logging (-v info, -vv debug)."),
+) -> None:
+    level = logging.WARNING - 10 * min(verbose, 2)
+    logging.basicConfig(level=int(os.environ.get("ROBOFABRIC_LOG_LEVEL", level)), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    for name, why in _broken:
+        print(f"warning: plugin {name!r} could not be loaded: {why}", file=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    _load_plugins()
+    try:
+        app(args=argv, prog_name="robofabric", standalone_mode=True)
+    except (UserError, ConfigError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except SystemExit as exc:
+        code = exc.code
+        return code if isinstance(code, int) else (0 if code is None else 1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,88 @@
+"""Options every peer command shares, and the one way CLI errors are reported.
+
+A peer package's ``cli.py`` takes these annotated types as parameters so that
+``--world``, ``--connect``, ``--listen``, ``--id``, ``--profile`` and
+``--zenoh-config`` mean the same everywhere, and raises :class:`UserError` for
+anything the user got wrong: the CLI prints one line and exits 2, no traceback.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from fabric.config import ConfigError, FabricConfig
+
+__all__ = [
+    "UserError",
+    "World",
+    "Connect",
+    "Listen",
+    "PeerId",
+    "Profile",
+    "ZenohConfig",
+    "make_config",
+    "bench_app",
+]
+
+
+class UserError(Exception):
+    """Something the user asked for cannot be done; printed as one line, exit code 2."""
+
+
+World = Annotated[
+    Optional[str],
+    typer.Option("--world", "-w", help="World name: the key prefix rf/WORLD. Env ROBOFABRIC_WORLD; default 'demo'."),
+]
+Connect = Annotated[
+    Optional[list[str]],
+    typer.Option(
+        "--connect",
+        "-e",
+        help="Router endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable). Env ROBOFABRIC_CONNECT (comma-separated).",
+    ),
+]
+Listen = Annotated[
+    Optional[list[str]],
+    typer.Option("--listen", "-l", help="Endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)."),
+]
+PeerId = Annotated[Optional[str], typer.Option("--id", help="This peer's id (default: KIND-HOST-RANDOM).")]
+Profile = Annotated[
+    Optional[str],
+    typer.Option(
+        "--profile",
+        help="embedded (this process is the router), client (connect to routers; default) or peer (LAN multicast scouting).",
+    ),
+]
+ZenohConfig = Annotated[
+    Optional[Path],
+    typer.Option("--zenoh-config", help="A zenoh json5 config file (TLS, auth, access control...); flags override its endpoints."),
+]
+
+
+def make_config(
+    world: str | None = None,
+    connect: list[str] | None = None,
+    listen: list[str] | None = None,
+    profile: str | None = None,
+    zenoh_config: Path | None = None,
+) -> FabricConfig:
+    """Flags + environment -> FabricConfig, with configuration mistakes turned into :class:`UserError`."""
+    try:
+        return FabricConfig.resolve(
+            world=world,
+            profile=profile,
+            connect=connect,
+            listen=listen,
+            config_file=str(zenoh_config) if zenoh_config else None,
+        )
+    except (ConfigError, ValueError) as exc:
+        raise UserError(str(exc)) from None
+
+
+bench_app = typer.Typer(
+    help="Benchmarks: each prints a table and can append it to docs/benchmarks.md (see --help of each).",
+    no_args_is_help=True,
+)

@@ -1,0 +1,134 @@
+"""How a peer reaches the others: profiles, endpoints and the zenoh config behind them.
+
+Three profiles (DESIGN.md): ``embedded`` opens this process as the router
+(the demo, tests, a one-machine class); ``client`` connects to routers (the
+default: ``tcp/127.0.0.1:7447`` unless ``--connect`` or ``ROBOFABRIC_CONNECT``
+says otherwise); ``peer`` scouts the LAN by multicast. Values come from flags
+first, then the environment, then an optional zenoh json5 file, whose every
+other setting (TLS, auth, access control) is kept.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import uuid
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import zenoh
+
+from fabric.keys import validate_id
+
+PROFILES = ("embedded", "client", "peer")
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+DEFAULT_WORLD = "demo"
+ENV_CONNECT = "ROBOFABRIC_CONNECT"
+ENV_WORLD = "ROBOFABRIC_WORLD"
+ENV_PROFILE = "ROBOFABRIC_PROFILE"
+ENV_CONFIG = "ROBOFABRIC_ZENOH_CONFIG"
+
+
+class ConfigError(ValueError):
+    """A configuration the user gave cannot work; the text says why."""
+
+
+def default_peer_id(kind: str) -> str:
+    host = socket.gethostname().split(".")[0] or "host"
+    safe = "".join(c if c.isalnum() or c in "-_" else "-" for c in host)
+    return f"{kind}-{safe}-{uuid.uuid4().hex[:6]}"
+
+
+def _check_endpoint(ep: str) -> str:
+    proto, sep, rest = ep.partition("/")
+    if not sep or proto not in ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream") or not rest:
+        raise ConfigError(f"endpoint {ep!r} is not of the form PROTO/ADDRESS:PORT, e.g. tcp/192.168.1.10:7447")
+    return ep
+
+
+@dataclass(frozen=True, slots=True)
+class FabricConfig:
+    """Everything a peer needs to join a world. Build with :meth:`resolve` to apply env defaults."""
+
+    world: str = DEFAULT_WORLD
+    profile: str = "client"
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    config_file: str | None = None
+    lease_ms: int = 2000
+    multicast: bool | None = None
+    extra: tuple[tuple[str, str], ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        validate_id(self.world, what="world")
+        if self.profile not in PROFILES:
+            raise ConfigError(f"unknown profile {self.profile!r}; expected one of {', '.join(PROFILES)}")
+        for ep in (*self.connect, *self.listen):
+            _check_endpoint(ep)
+        if self.lease_ms < 100:
+            raise ConfigError(f"lease of {self.lease_ms} ms is too short (at least 100 ms)")
+        if self.config_file is not None and not Path(self.config_file).is_file():
+            raise ConfigError(f"zenoh config file {self.config_file!r} does not exist")
+
+    @classmethod
+    def resolve(
+        cls,
+        *,
+        world: str | None = None,
+        profile: str | None = None,
+        connect: list[str] | tuple[str, ...] | None = None,
+        listen: list[str] | tuple[str, ...] | None = None,
+        config_file: str | None = None,
+        lease_ms: int | None = None,
+        env: dict[str, str] | None = None,
+    ) -> "FabricConfig":
+        """Flags win over the environment, which wins over defaults."""
+        env = os.environ if env is None else env
+        connect = tuple(connect or ())
+        if not connect and env.get(ENV_CONNECT):
+            connect = tuple(e.strip() for e in env[ENV_CONNECT].split(",") if e.strip())
+        prof = profile or env.get(ENV_PROFILE) or "client"
+        return cls(
+            world=world or env.get(ENV_WORLD) or DEFAULT_WORLD,
+            profile=prof,
+            connect=connect,
+            listen=tuple(listen or ()),
+            config_file=config_file or env.get(ENV_CONFIG) or None,
+            lease_ms=lease_ms or 2000,
+        )
+
+    def with_(self, **changes) -> "FabricConfig":
+        return replace(self, **changes)
+
+    def endpoints(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """(connect, listen) after profile defaults."""
+        if self.profile == "embedded":
+            return self.connect, self.listen or (DEFAULT_ENDPOINT,)
+        if self.profile == "client":
+            return self.connect or (DEFAULT_ENDPOINT,), self.listen
+        return self.connect, self.listen
+
+    def zenoh_config(self) -> zenoh.Config:
+        if self.config_file:
+            try:
+                conf = zenoh.Config.from_file(self.config_file)
+            except Exception as exc:
+                raise ConfigError(f"cannot read zenoh config {self.config_file!r}: {exc}") from None
+        else:
+            conf = zenoh.Config()
+        mode = {"embedded": "router", "client": "client", "peer": "peer"}[self.profile]
+        connect, listen = self.endpoints()
+        multicast = self.multicast if self.multicast is not None else self.profile == "peer"
+        conf.insert_json5("mode", json.dumps(mode))
+        conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast))
+        if connect:
+            conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+        if listen:
+            conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+        conf.insert_json5("transport/link/tx/lease", json.dumps(self.lease_ms))
+        # Timestamps let advanced subscribers ask publishers' caches for history.
+        conf.insert_json5("timestamping/enabled", json.dumps({"router": True, "peer": True, "client": True}))
+        for key, value in self.extra:
+            conf.insert_json5(key, value)
+        return conf

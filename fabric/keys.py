@@ -1,0 +1,168 @@
+"""Key expressions of a robofabric world.
+
+Every key in the fabric is built here and nowhere else, so that the layout in
+DESIGN.md has one source of truth and a malformed id is refused before it ever
+reaches the wire. Parsing is the inverse: tools such as ``echo`` and the
+recorder use :func:`parse` to learn what a key holds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+PREFIX = "rf"
+
+ROBOT_STREAMS = ("joints", "pose", "scan", "path")
+COMMANDS = ("joints", "twist", "path", "stop", "reset")
+SERVICES = ("ik", "fk", "jacobian", "plan", "map", "world")
+PEER_KINDS = ("sim", "compute", "user", "viewer", "recorder", "router", "tool")
+
+_FORBIDDEN = set("/*$#? \t\n\r")
+
+
+def validate_id(value: str, *, what: str = "id") -> str:
+    """Return ``value`` if it can be one chunk of a key, else raise ``ValueError`` naming it."""
+    if not isinstance(value, str):
+        raise ValueError(f"{what} must be a string, got {type(value).__name__}: {value!r}")
+    if not value:
+        raise ValueError(f"{what} must not be empty")
+    bad = sorted(set(value) & _FORBIDDEN)
+    if bad:
+        raise ValueError(f"{what} {value!r} contains forbidden character(s) {''.join(bad)!r}")
+    if value in (".", ".."):
+        raise ValueError(f"{what} {value!r} is not allowed")
+    return value
+
+
+def _choice(value: str, allowed: tuple[str, ...], what: str) -> str:
+    if value not in allowed:
+        raise ValueError(f"unknown {what} {value!r}; expected one of {', '.join(allowed)}")
+    return value
+
+
+def world_root(world: str) -> str:
+    return f"{PREFIX}/{validate_id(world, what='world')}"
+
+
+def world_all(world: str) -> str:
+    """Every key of one world: what ``record`` takes by default."""
+    return f"{world_root(world)}/**"
+
+
+def robot_stream(world: str, robot: str, stream: str) -> str:
+    return f"{world_root(world)}/robot/{validate_id(robot, what='robot id')}/{_choice(stream, ROBOT_STREAMS, 'stream')}"
+
+
+def robot_joints(world: str, robot: str) -> str:
+    return robot_stream(world, robot, "joints")
+
+
+def robot_pose(world: str, robot: str) -> str:
+    return robot_stream(world, robot, "pose")
+
+
+def robot_scan(world: str, robot: str) -> str:
+    return robot_stream(world, robot, "scan")
+
+
+def robot_path(world: str, robot: str) -> str:
+    return robot_stream(world, robot, "path")
+
+
+def robot_cmd(world: str, robot: str, command: str) -> str:
+    return f"{world_root(world)}/robot/{validate_id(robot, what='robot id')}/cmd/{_choice(command, COMMANDS, 'command')}"
+
+
+def robot_cmd_all(world: str, robot: str = "*") -> str:
+    r = robot if robot == "*" else validate_id(robot, what="robot id")
+    return f"{world_root(world)}/robot/{r}/cmd/*"
+
+
+def robot_all(world: str, robot: str = "*") -> str:
+    r = robot if robot == "*" else validate_id(robot, what="robot id")
+    return f"{world_root(world)}/robot/{r}/**"
+
+
+def object_pose(world: str, obj: str) -> str:
+    return f"{world_root(world)}/object/{validate_id(obj, what='object id')}/pose"
+
+
+def map_key(world: str, name: str) -> str:
+    return f"{world_root(world)}/map/{validate_id(name, what='map name')}"
+
+
+def own(world: str, obj: str) -> str:
+    return f"{world_root(world)}/own/{validate_id(obj, what='object id')}"
+
+
+def own_all(world: str) -> str:
+    return f"{world_root(world)}/own/*"
+
+
+def srv(world: str, service: str, *rest: str) -> str:
+    """A service key: ``srv(w, "ik", "arm1")`` -> ``rf/w/srv/ik/arm1``."""
+    base = f"{world_root(world)}/srv/{_choice(service, SERVICES, 'service')}"
+    parts = [validate_id(p, what="service argument") for p in rest]
+    return "/".join([base, *parts])
+
+
+def srv_all(world: str, service: str) -> str:
+    return f"{world_root(world)}/srv/{_choice(service, SERVICES, 'service')}/**"
+
+
+def peer(world: str, kind: str, peer_id: str) -> str:
+    return f"{world_root(world)}/peer/{_choice(kind, PEER_KINDS, 'peer kind')}/{validate_id(peer_id, what='peer id')}"
+
+
+def peers_all(world: str, kind: str = "*") -> str:
+    k = kind if kind == "*" else _choice(kind, PEER_KINDS, "peer kind")
+    return f"{world_root(world)}/peer/{k}/*"
+
+
+def event(world: str, *parts: str) -> str:
+    if not parts:
+        raise ValueError("an event key needs at least one part, e.g. event(world, 'reject', robot)")
+    return "/".join([f"{world_root(world)}/event", *(validate_id(p, what="event part") for p in parts)])
+
+
+def event_all(world: str) -> str:
+    return f"{world_root(world)}/event/**"
+
+
+@dataclass(frozen=True, slots=True)
+class ParsedKey:
+    """What a concrete key names. ``category`` is robot, cmd, object, map, own, srv, peer or event."""
+
+    world: str
+    category: str
+    subject: str = ""  # robot id, object id, map name, service name, peer kind
+    leaf: str = ""  # stream name, command, peer id, event tail
+    rest: tuple[str, ...] = ()
+
+
+def parse(key: str) -> ParsedKey:
+    """Parse a concrete key; raise ``ValueError`` saying what is wrong with it."""
+    parts = str(key).split("/")
+    if len(parts) < 3 or parts[0] != PREFIX:
+        raise ValueError(f"key {key!r} is not a robofabric key (expected '{PREFIX}/WORLD/...')")
+    world, kind, tail = parts[1], parts[2], parts[3:]
+    validate_id(world, what="world")
+    for p in tail:
+        validate_id(p, what=f"part of key {key!r}")
+    if kind == "robot" and len(tail) == 2 and tail[1] in ROBOT_STREAMS:
+        return ParsedKey(world, "robot", tail[0], tail[1])
+    if kind == "robot" and len(tail) == 3 and tail[1] == "cmd" and tail[2] in COMMANDS:
+        return ParsedKey(world, "cmd", tail[0], tail[2])
+    if kind == "object" and len(tail) == 2 and tail[1] == "pose":
+        return ParsedKey(world, "object", tail[0], "pose")
+    if kind == "map" and len(tail) == 1:
+        return ParsedKey(world, "map", tail[0])
+    if kind == "own" and len(tail) == 1:
+        return ParsedKey(world, "own", tail[0])
+    if kind == "srv" and len(tail) >= 1 and tail[0] in SERVICES:
+        return ParsedKey(world, "srv", tail[0], "/".join(tail[1:]), tuple(tail[1:]))
+    if kind == "peer" and len(tail) == 2 and tail[0] in PEER_KINDS:
+        return ParsedKey(world, "peer", tail[0], tail[1])
+    if kind == "event" and len(tail) >= 1:
+        return ParsedKey(world, "event", tail[0], "/".join(tail[1:]), tuple(tail))
+    raise ValueError(f"key {key!r} does not match any robofabric key layout")

@@ -1,0 +1,150 @@
+"""Clocks and fixed-rate loops.
+
+The paper streamed at a fixed update rate independent of the simulation's
+frame rate; here each stream owns a :class:`RateLoop`. Ticks are scheduled on
+an absolute grid (``start + k / hz``) so error does not accumulate; a tick that
+runs late is counted as an overrun and the grid skips ahead instead of firing a
+burst of catch-up calls.
+
+Time is injected: loops and leases take a :class:`Clock`, and tests pass a
+:class:`FakeClock` whose ``sleep`` advances time instead of waiting.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable, Protocol
+
+
+class Clock(Protocol):
+    def now(self) -> float: ...
+
+    def sleep(self, seconds: float) -> None: ...
+
+
+class MonotonicClock:
+    """Real time from ``time.monotonic``."""
+
+    def now(self) -> float:
+        return time.monotonic()
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            time.sleep(seconds)
+
+
+class FakeClock:
+    """A clock for tests: time moves only when told to, and never backwards."""
+
+    def __init__(self, start: float = 0.0) -> None:
+        self._now = float(start)
+        self._lock = threading.Lock()
+
+    def now(self) -> float:
+        with self._lock:
+            return self._now
+
+    def jump(self, seconds: float) -> None:
+        if seconds < 0:
+            raise ValueError(f"time cannot go backwards (jump of {seconds} s)")
+        with self._lock:
+            self._now += seconds
+
+    def sleep(self, seconds: float) -> None:
+        self.jump(max(0.0, seconds))
+
+
+@dataclass(frozen=True, slots=True)
+class RateStats:
+    """What a loop has done: ticks run, ticks skipped because the callback overran, and its period."""
+
+    ticks: int
+    overruns: int
+    skipped: int
+    period: float
+
+
+class RateLoop:
+    """Call ``callback(now)`` at ``hz`` on an absolute schedule.
+
+    ``step()`` runs at most one due tick and returns the time until the next;
+    ``run(stop)`` loops until ``stop`` is set; ``start()`` runs it in a daemon thread.
+    """
+
+    def __init__(self, hz: float, callback: Callable[[float], None], *, clock: Clock | None = None, name: str = "") -> None:
+        if not hz > 0:
+            raise ValueError(f"rate must be positive, got {hz}")
+        self.hz = float(hz)
+        self.period = 1.0 / self.hz
+        self.callback = callback
+        self.clock = clock or MonotonicClock()
+        self.name = name
+        self._next: float | None = None
+        self._ticks = 0
+        self._overruns = 0
+        self._skipped = 0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def stats(self) -> RateStats:
+        return RateStats(self._ticks, self._overruns, self._skipped, self.period)
+
+    def step(self) -> float:
+        now = self.clock.now()
+        if self._next is None:
+            self._next = now
+        if now < self._next:
+            return self._next - now
+        self.callback(now)
+        self._ticks += 1
+        self._next += self.period
+        after = self.clock.now()
+        if after >= self._next:
+            missed = int((after - self._next) // self.period) + 1
+            self._overruns += 1
+            self._skipped += missed
+            self._next += missed * self.period
+        return max(0.0, self._next - after)
+
+    def run(self, stop: threading.Event | None = None) -> None:
+        stop = stop or self._stop
+        while not stop.is_set():
+            wait = self.step()
+            if wait > 0:
+                if isinstance(self.clock, MonotonicClock):
+                    stop.wait(wait)
+                else:
+                    self.clock.sleep(wait)
+
+    def start(self) -> "RateLoop":
+        self._thread = threading.Thread(target=self.run, name=f"rate-{self.name or self.hz}", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+
+def parse_rates(spec: str, defaults: dict[str, float]) -> dict[str, float]:
+    """Parse ``joints=100,pose=50`` into rates over ``defaults``; unknown streams or bad numbers raise ``ValueError``."""
+    rates = dict(defaults)
+    if not spec:
+        return rates
+    for item in spec.split(","):
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        if not sep or name not in defaults:
+            raise ValueError(f"bad rate {item!r}: expected NAME=HZ with NAME in {', '.join(defaults)}")
+        try:
+            hz = float(value)
+        except ValueError:
+            raise ValueError(f"bad rate {item!r}: {value!r} is not a number") from None
+        if not hz > 0 or hz > 100_000:
+            raise ValueError(f"bad rate {item!r}: must be in (0, 100000] Hz")
+        rates[name] = hz
+    return rates

@@ -1,0 +1,313 @@
+"""A peer's handle on a world: one zenoh session plus the fabric's habits.
+
+:class:`Fabric` opens the session for a profile, declares the peer's
+liveliness token ``rf/{world}/peer/{kind}/{id}``, encodes and stamps what it
+publishes, and decodes what it receives. A malformed payload never reaches a
+callback: it is counted, logged once per key, published as an event under
+``rf/{world}/event/decode/{peer}``, and the peer goes on.
+
+Services are queryables whose requests and replies are fabric messages; a
+handler refuses a request by raising :class:`ServiceError`, which the caller
+gets back as the same exception with the same reason.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable
+
+import zenoh
+
+from fabric import keys
+from fabric.codec import DecodeError, decode, encode
+from fabric.config import FabricConfig, default_peer_id
+from fabric.messages import Event, Header
+
+log = logging.getLogger("robofabric")
+
+__all__ = ["Fabric", "ServiceError", "Reply", "open_fabric", "shutdown_event"]
+
+
+class ServiceError(RuntimeError):
+    """A service refused a request, or nobody answered; ``reason`` says which and why."""
+
+    def __init__(self, reason: str, *, key: str = "") -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.key = key
+
+
+@dataclass(frozen=True, slots=True)
+class Reply:
+    """One answer to a query: the replying key, the decoded message, and who answered."""
+
+    key: str
+    message: Any
+    source: str
+
+
+class Fabric:
+    """One peer in one world. A context manager; ``close()`` is idempotent."""
+
+    def __init__(self, config: FabricConfig, *, kind: str, peer_id: str | None = None, token: bool = True) -> None:
+        self.config = config
+        self.world = config.world
+        self.kind = kind
+        self.peer_id = keys.validate_id(peer_id or default_peer_id(kind), what="peer id")
+        self.counters: Counter[str] = Counter()
+        self._seq: dict[str, int] = {}
+        self._lock = threading.Lock()
+        self._warned: set[str] = set()
+        self._closed = False
+        self._resources: list[Any] = []
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self.session = zenoh.open(config.zenoh_config())
+        self.token = (
+            self.session.liveliness().declare_token(keys.peer(self.world, kind, self.peer_id)) if token else None
+        )
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def __enter__(self) -> "Fabric":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def close(self) -> None:
+        """Undeclare everything this peer declared and close the session; safe to call twice."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+        for res in reversed(self._resources):
+            try:
+                res.undeclare()
+            except Exception:  # already gone with a dying session
+                pass
+        if self.token is not None:
+            try:
+                self.token.undeclare()
+            except Exception:
+                pass
+        try:
+            self.session.close()
+        except Exception:
+            pass
+
+    # ------------------------------------------------------------------ publishing
+
+    def header(self, key: str, *, stamp: float = 0.0) -> Header:
+        """A header for the next message on ``key``: per-key sequence, wall time now, this peer as source."""
+        with self._lock:
+            seq = self._seq.get(key, 0)
+            self._seq[key] = seq + 1
+        return Header(stamp=float(stamp), wall_ns=time.time_ns(), seq=seq, source=self.peer_id)
+
+    def publish(self, key: str, msg: Any) -> int:
+        """Encode and put ``msg`` on ``key``; returns the payload size in bytes."""
+        payload = encode(msg)
+        pub = self._publishers.get(key)
+        if pub is None:
+            pub = self.session.declare_publisher(key)
+            self._publishers[key] = pub
+            self._resources.append(pub)
+        pub.put(payload)
+        self.counters["published"] += 1
+        return len(payload)
+
+    def put_raw(self, key: str, payload: bytes) -> None:
+        """Put bytes as they are (replay, tools); nothing is checked."""
+        self.session.put(key, payload)
+
+    def emit(self, event: Event, *parts: str) -> None:
+        """Publish an event on ``rf/{world}/event/{parts...}`` and log it."""
+        level = {"debug": logging.DEBUG, "info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
+        log.log(level.get(event.severity, logging.INFO), "%s %s: %s", event.kind, event.object or "", event.reason)
+        try:
+            self.publish(keys.event(self.world, *(parts or (event.kind,))), event)
+        except Exception as exc:  # a closing session must not turn an event into a crash
+            log.debug("could not publish event: %s", exc)
+
+    # ------------------------------------------------------------------ receiving
+
+    def _bad_payload(self, key: str, exc: DecodeError) -> None:
+        self.counters["decode_errors"] += 1
+        if key not in self._warned:
+            self._warned.add(key)
+            log.warning("bad payload on %s: %s (further ones on this key are counted, not logged)", key, exc)
+        self.emit(
+            Event(kind="decode_error", reason=str(exc), severity="warning", data={"key": key}, header=self.header("event")),
+            "decode",
+            self.peer_id,
+        )
+
+    def subscribe(
+        self,
+        key_expr: str,
+        callback: Callable[[str, Any], None],
+        *,
+        expected: type | tuple[type, ...] | None = None,
+    ) -> zenoh.Subscriber:
+        """Call ``callback(key, message)`` for every valid message on ``key_expr``."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            if sample.kind != zenoh.SampleKind.PUT:
+                return
+            key = str(sample.key_expr)
+            self.counters["received"] += 1
+            try:
+                msg = decode(sample.payload.to_bytes(), expected)
+            except DecodeError as exc:
+                self._bad_payload(key, exc)
+                return
+            try:
+                callback(key, msg)
+            except Exception:
+                self.counters["callback_errors"] += 1
+                log.exception("callback for %s failed", key)
+
+        sub = self.session.declare_subscriber(key_expr, on_sample)
+        self._resources.append(sub)
+        return sub
+
+    def subscribe_raw(self, key_expr: str, callback: Callable[[zenoh.Sample], None]) -> zenoh.Subscriber:
+        sub = self.session.declare_subscriber(key_expr, callback)
+        self._resources.append(sub)
+        return sub
+
+    # ------------------------------------------------------------------ services
+
+    def serve(
+        self,
+        key_expr: str,
+        handler: Callable[[str, Any], Any],
+        *,
+        expected: type | tuple[type, ...] | None = None,
+        complete: bool = False,
+    ) -> zenoh.Queryable:
+        """Answer queries on ``key_expr`` with ``handler(key, request_or_None) -> message``.
+
+        A handler raising :class:`ServiceError` (or ``ValueError``) sends the reason back as an error
+        reply; a bad request payload is answered with the decode error. Nothing escapes to zenoh.
+        """
+
+        def on_query(query: zenoh.Query) -> None:
+            key = str(query.key_expr)
+            self.counters["queries"] += 1
+            try:
+                request = None
+                if query.payload is not None and len(query.payload.to_bytes()) > 0:
+                    request = decode(query.payload.to_bytes(), expected)
+                answer = handler(key, request)
+                if answer is not None:
+                    query.reply(key, encode(answer))
+            except (DecodeError, ServiceError, ValueError) as exc:
+                self.counters["query_errors"] += 1
+                reason = exc.reason if isinstance(exc, ServiceError) else str(exc)
+                query.reply_err(encode(Event(kind="service_error", reason=reason, severity="warning", header=self.header("srv"))))
+            except Exception as exc:
+                self.counters["query_errors"] += 1
+                log.exception("service %s failed", key)
+                query.reply_err(encode(Event(kind="service_error", reason=f"internal error: {exc}", severity="error")))
+
+        q = self.session.declare_queryable(key_expr, on_query, complete=complete)
+        self._resources.append(q)
+        return q
+
+    def query(
+        self,
+        selector: str,
+        request: Any = None,
+        *,
+        timeout: float = 2.0,
+        expected: type | tuple[type, ...] | None = None,
+        all_replies: bool = False,
+    ) -> list[Reply]:
+        """Send a query and return the decoded replies.
+
+        Raises :class:`ServiceError` when a replier refuses (its reason), or when nobody answers.
+        With ``all_replies`` every replier's answer is returned (no consolidation).
+        """
+        kwargs: dict[str, Any] = {"timeout": timeout}
+        if request is not None:
+            kwargs["payload"] = encode(request)
+        if all_replies:
+            kwargs["target"] = zenoh.QueryTarget.ALL
+            kwargs["consolidation"] = zenoh.ConsolidationMode.NONE
+        replies: list[Reply] = []
+        errors: list[str] = []
+        for rep in self.session.get(selector, **kwargs):
+            if rep.ok is not None:
+                try:
+                    msg = decode(rep.ok.payload.to_bytes(), expected)
+                except DecodeError as exc:
+                    errors.append(f"bad reply: {exc}")
+                    continue
+                src = getattr(getattr(msg, "header", None), "source", "")
+                replies.append(Reply(str(rep.ok.key_expr), msg, src))
+            else:
+                try:
+                    ev = decode(rep.err.payload.to_bytes(), Event)
+                    errors.append(ev.reason)
+                except DecodeError:
+                    errors.append(rep.err.payload.to_string() if rep.err.payload is not None else "error")
+        if not replies:
+            if errors:
+                raise ServiceError(errors[0], key=selector)
+            raise ServiceError(f"no reply on {selector} within {timeout:.1f} s (is a peer serving it?)", key=selector)
+        return replies
+
+    def call(self, selector: str, request: Any = None, *, timeout: float = 2.0, expected: Any = None) -> Any:
+        """One query, one answer: the first reply's message."""
+        return self.query(selector, request, timeout=timeout, expected=expected)[0].message
+
+    # ------------------------------------------------------------------ liveliness
+
+    def live_peers(self, kind: str = "*", *, timeout: float = 1.0) -> list[tuple[str, str]]:
+        """(kind, id) of every live peer in this world, from liveliness tokens."""
+        out = []
+        for rep in self.session.liveliness().get(keys.peers_all(self.world, kind), timeout=timeout):
+            if rep.ok is not None:
+                p = keys.parse(str(rep.ok.key_expr))
+                out.append((p.subject, p.leaf))
+        return sorted(set(out))
+
+    def watch_peers(self, callback: Callable[[str, str, bool], None], kind: str = "*") -> zenoh.Subscriber:
+        """``callback(kind, id, alive)`` on every token that appears or goes (existing ones first)."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            try:
+                p = keys.parse(str(sample.key_expr))
+            except ValueError:
+                return
+            callback(p.subject, p.leaf, sample.kind == zenoh.SampleKind.PUT)
+
+        sub = self.session.liveliness().declare_subscriber(keys.peers_all(self.world, kind), on_sample, history=True)
+        self._resources.append(sub)
+        return sub
+
+
+def open_fabric(config: FabricConfig, *, kind: str, peer_id: str | None = None) -> Fabric:
+    return Fabric(config, kind=kind, peer_id=peer_id)
+
+
+def shutdown_event(signals: Iterable[int] = (signal.SIGINT, signal.SIGTERM)) -> threading.Event:
+    """An event set on SIGINT/SIGTERM, so a peer's loop can end cleanly and close its session.
+
+    Only the main thread can install handlers; elsewhere the event simply never fires by signal.
+    """
+    ev = threading.Event()
+    if threading.current_thread() is threading.main_thread():
+        for s in signals:
+            signal.signal(s, lambda *_: ev.set())
+    return ev

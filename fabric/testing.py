@@ -1,0 +1,115 @@
+"""Helpers for tests that run real sessions and real processes (used by every package's tests).
+
+Waiting is always on a condition with a deadline (:func:`wait_until`), never a
+fixed sleep; every process started through :class:`ProcessGroup` is ended by
+its pid when the group closes, SIGTERM first, then SIGKILL.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from fabric.config import FabricConfig
+from fabric.session import Fabric
+
+
+def free_port() -> int:
+    """A TCP port on loopback that was free a moment ago."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_until(
+    predicate: Callable[[], Any], *, timeout: float = 10.0, interval: float = 0.02, what: str = "condition",
+    seen: Callable[[], Any] | None = None,
+) -> Any:
+    """Poll ``predicate`` until it returns something truthy; on timeout fail saying what was seen."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            detail = f"; last seen: {seen()!r}" if seen is not None else f"; last value: {value!r}"
+            raise AssertionError(f"timed out after {timeout:.1f} s waiting for {what}{detail}")
+        time.sleep(interval)
+
+
+def router_config(world: str, port: int) -> FabricConfig:
+    """An embedded (router) profile listening on loopback ``port``, scouting off."""
+    return FabricConfig(world=world, profile="embedded", listen=(f"tcp/127.0.0.1:{port}",))
+
+
+def client_config(world: str, port: int) -> FabricConfig:
+    return FabricConfig(world=world, profile="client", connect=(f"tcp/127.0.0.1:{port}",))
+
+
+def client(world: str, port: int, *, kind: str = "tool", peer_id: str | None = None) -> Fabric:
+    return Fabric(client_config(world, port), kind=kind, peer_id=peer_id)
+
+
+def robofabric_cmd(*args: str) -> list[str]:
+    """The argv that runs the CLI with this interpreter (no reliance on PATH)."""
+    return [sys.executable, "-m", "fabric.cli", *args]
+
+
+class ProcessGroup:
+    """Child processes of one test; ``close()`` ends them all by pid."""
+
+    def __init__(self, log_dir: Path | None = None) -> None:
+        self.procs: list[subprocess.Popen] = []
+        self.log_dir = log_dir
+
+    def start(self, argv: list[str], *, name: str = "proc", env: dict[str, str] | None = None) -> subprocess.Popen:
+        out: Any = subprocess.PIPE
+        if self.log_dir is not None:
+            out = open(self.log_dir / f"{name}-{len(self.procs)}.log", "w+b")
+        full_env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})}
+        proc = subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT, env=full_env, start_new_session=True)
+        proc.name = name  # type: ignore[attr-defined]
+        self.procs.append(proc)
+        return proc
+
+    def output(self, proc: subprocess.Popen) -> str:
+        f = proc.stdout
+        if f is None:
+            return ""
+        if hasattr(f, "seek") and self.log_dir is not None:
+            f.flush()
+            f.seek(0)
+            return f.read().decode(errors="replace")
+        return ""
+
+    def kill(self, proc: subprocess.Popen, sig: int = signal.SIGKILL) -> None:
+        if proc.poll() is None:
+            os.kill(proc.pid, sig)
+        proc.wait(timeout=10)
+
+    def close(self) -> None:
+        for proc in self.procs:
+            if proc.poll() is None:
+                try:
+                    os.kill(proc.pid, signal.SIGTERM)
+                except ProcessLookupError:
+                    pass
+        deadline = time.monotonic() + 5
+        for proc in self.procs:
+            try:
+                proc.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                os.kill(proc.pid, signal.SIGKILL)
+                proc.wait(timeout=5)
+
+    def __enter__(self) -> "ProcessGroup":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
