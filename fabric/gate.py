@@ -1,0 +1,37 @@
+"""The seam between a simulating peer and whoever decides who may command its robots.
+
+The sim peer is the authority for its robots (DESIGN.md): every command it
+receives passes through a :class:`CommandGate` before it touches the
+simulation, and the sim peer reports each robot's motion so the gate can refuse
+a takeover while the robot moves. ``ownership`` provides the real gate;
+:class:`OpenGate` admits everything, for worlds run without ownership.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from fabric.messages import Command
+
+
+class CommandGate(Protocol):
+    def admit(self, robot: str, command: Command) -> str | None:
+        """None to let the command through, else the reason it is refused (sent back as an event)."""
+
+    def update_motion(self, robot: str, moving: bool) -> None:
+        """The authority's latest view of whether ``robot`` is in motion."""
+
+    def close(self) -> None: ...
+
+
+class OpenGate:
+    """Admits every well-formed command: no ownership."""
+
+    def admit(self, robot: str, command: Command) -> str | None:
+        return None
+
+    def update_motion(self, robot: str, moving: bool) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
