@@ -1,4 +1,4 @@
-"""The fabric's own subcommands: router, ps, echo, hz, up, demo (and the transport bench)."""
+"""Entry point of the fabric's own subcommands: router, ps, echo, hz, up, demo, bench transport."""
 
 from __future__ import annotations
 
@@ -6,6 +6,8 @@ import typer
 
 
 def register(app: typer.Typer) -> None:
-    from fabric import tools_cli  # noqa: F401  (kept apart so import of this module stays cheap)
+    from fabric import bench_transport, launch_cli, tools_cli
 
     tools_cli.register(app)
+    launch_cli.register(app)
+    bench_transport.register()

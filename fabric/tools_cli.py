@@ -1,15 +1,41 @@
-"""Implementations of the fabric's introspection and process commands."""
+"""The fabric's own commands: router, ps, echo, hz (introspection in the spirit of ``ros2 node/topic``)."""
 
 from __future__ import annotations
 
+import json
 import sys
+import threading
 import time
+from collections import defaultdict
+from typing import Annotated, Optional
 
 import typer
+import zenoh
 
 from fabric import keys
 from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config
+from fabric.codec import DecodeError, decode, to_plain
 from fabric.session import Fabric, shutdown_event
+from fabric.stats import StreamStats
+
+
+def _open(kind: str, world, connect, listen, profile, zenoh_config, peer_id=None) -> Fabric:
+    cfg = make_config(world, connect, listen, profile, zenoh_config)
+    try:
+        return Fabric(cfg, kind=kind, peer_id=peer_id)
+    except Exception as exc:
+        where = ", ".join(cfg.endpoints()[0] or cfg.endpoints()[1]) or "the LAN"
+        raise UserError(f"cannot join world {cfg.world!r} via {where}: {exc}") from None
+
+
+def resolve_key(key: str, world: str) -> str:
+    """Accept full keys (``rf/demo/robot/arm1/joints``) or world-relative ones (``robot/arm1/joints``)."""
+    full = key if key.startswith(keys.PREFIX + "/") else f"{keys.world_root(world)}/{key.lstrip('/')}"
+    try:
+        zenoh.KeyExpr(full)
+    except Exception as exc:
+        raise UserError(f"{key!r} is not a valid key expression: {exc}") from None
+    return full
 
 
 def router(
@@ -33,5 +59,144 @@ def router(
     print("router stopped", flush=True)
 
 
+def ps(
+    as_json: Annotated[bool, typer.Option("--json", help="One JSON document instead of a table.")] = False,
+    timeout: Annotated[float, typer.Option(help="Seconds to wait for liveliness replies.")] = 1.0,
+    world: World = None,
+    connect: Connect = None,
+    listen: Listen = None,
+    profile: Profile = None,
+    zenoh_config: ZenohConfig = None,
+) -> None:
+    """List the live peers of a world, by kind, from their liveliness tokens."""
+    with _open("tool", world, connect, listen, profile, zenoh_config) as fab:
+        peers = [(k, i) for k, i in fab.live_peers(timeout=timeout) if i != fab.peer_id]
+    if as_json:
+        by_kind: dict[str, list[str]] = defaultdict(list)
+        for k, i in peers:
+            by_kind[k].append(i)
+        print(json.dumps({"world": fab.world, "peers": dict(by_kind), "count": len(peers)}))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"world {fab.world}: {len(peers)} peer(s)")
+    table.add_column("kind")
+    table.add_column("id")
+    for k, i in peers:
+        table.add_row(k, i)
+    Console().print(table)
+
+
+def echo(
+    key: Annotated[str, typer.Argument(help="Key expression, full (rf/demo/robot/arm1/joints) or world-relative (robot/*/pose).")],
+    count: Annotated[Optional[int], typer.Option("--count", "-n", help="Exit after N messages.")] = None,
+    duration: Annotated[Optional[float], typer.Option(help="Exit after S seconds.")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="One JSON object per line: {key, message}.")] = False,
+    world: World = None,
+    connect: Connect = None,
+    listen: Listen = None,
+    profile: Profile = None,
+    zenoh_config: ZenohConfig = None,
+) -> None:
+    """Print decoded messages on a key; malformed payloads are reported on stderr and skipped."""
+    if count is not None and count <= 0:
+        raise UserError("--count must be positive")
+    stop = shutdown_event()
+    printed = 0
+    bad = 0
+    lock = threading.Lock()
+    with _open("tool", world, connect, listen, profile, zenoh_config) as fab:
+        full = resolve_key(key, fab.world)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            nonlocal printed, bad
+            k = str(sample.key_expr)
+            try:
+                msg = decode(sample.payload.to_bytes())
+            except DecodeError as exc:
+                with lock:
+                    bad += 1
+                print(f"{k}: bad payload: {exc}", file=sys.stderr, flush=True)
+                return
+            with lock:
+                if count is not None and printed >= count:
+                    return
+                printed += 1
+                if as_json:
+                    line = json.dumps({"key": k, "message": to_plain(msg)})
+                else:
+                    line = f"--- {k}\n{msg}"
+                print(line, flush=True)
+                if count is not None and printed >= count:
+                    stop.set()
+
+        fab.subscribe_raw(full, on_sample)
+        stop.wait(duration)
+    if bad:
+        print(f"{bad} malformed payload(s) skipped", file=sys.stderr)
+
+
+def hz(
+    key: Annotated[str, typer.Argument(help="Key expression; each matching key is measured separately.")],
+    duration: Annotated[Optional[float], typer.Option(help="Measure for S seconds, then print the summary and exit.")] = None,
+    window: Annotated[int, typer.Option(help="Intervals kept per key for the running statistics.")] = 10_000,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the final summary as JSON.")] = False,
+    world: World = None,
+    connect: Connect = None,
+    listen: Listen = None,
+    profile: Profile = None,
+    zenoh_config: ZenohConfig = None,
+) -> None:
+    """Rate, jitter and bandwidth of the keys matching KEY (like ``ros2 topic hz`` and ``bw``)."""
+    stop = shutdown_event()
+    stats: dict[str, StreamStats] = {}
+    lock = threading.Lock()
+    with _open("tool", world, connect, listen, profile, zenoh_config) as fab:
+        full = resolve_key(key, fab.world)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            now = time.monotonic()
+            k = str(sample.key_expr)
+            with lock:
+                st = stats.get(k)
+                if st is None:
+                    st = stats[k] = StreamStats(window=window)
+                st.add(now, len(sample.payload))
+
+        fab.subscribe_raw(full, on_sample)
+        start = time.monotonic()
+        end = None if duration is None else start + duration
+        while not stop.is_set():
+            left = 1.0 if end is None else min(1.0, end - time.monotonic())
+            if left <= 0 or stop.wait(left):
+                break
+            if not as_json:
+                with lock:
+                    snap = {k: s.summary() for k, s in stats.items()}
+                for k, s in sorted(snap.items()):
+                    print(_hz_line(k, s), flush=True)
+                if not snap:
+                    print(f"no messages on {full} yet", flush=True)
+    with lock:
+        final = {k: s.summary() for k, s in sorted(stats.items())}
+    if as_json:
+        print(json.dumps({"key": full, "streams": final}))
+    else:
+        print("summary:" if final else f"no messages on {full}")
+        for k, s in final.items():
+            print(_hz_line(k, s))
+
+
+def _hz_line(key: str, s: dict) -> str:
+    return (
+        f"{key}: {s['rate_hz']:.1f} Hz  jitter {s['jitter_ms']:.3f} ms  min {s['min_ms']:.3f} ms  "
+        f"max {s['max_ms']:.3f} ms  {s['bytes_per_s'] / 1000:.1f} kB/s  n={s['count']}"
+    )
+
+
 def register(app: typer.Typer) -> None:
     app.command("router")(router)
+    app.command("ps")(ps)
+    app.command("echo")(echo)
+    app.command("hz")(hz)

@@ -1,0 +1,314 @@
+"""Launch files: which peers to start on this machine, and the supervisor that runs them.
+
+A launch file is TOML (see ``examples/demo.toml``)::
+
+    [launch]
+    world = "demo"
+    router = "tcp/127.0.0.1:7447"   # this process hosts the router here (omit on machines that only connect)
+    connect = ["tcp/10.0.0.5:7447"] # where children connect (default: the router above)
+
+    [[peer]]
+    name = "sim"
+    args = ["sim", "--scene", "combined"]  # a robofabric subcommand; --world and --connect are appended
+    role = "service"                       # service: runs until the launch ends; task: awaited, exit code reported
+    restart = "on-failure"                 # no | on-failure | always (services)
+    after = ["sim"]                        # start once these peers are ready
+    ready = "peer/sim/*"                   # liveliness key expression that says this peer is ready
+
+``{out}`` and ``{world}`` in args are replaced by the output directory and the world.
+Parsing (pure) is apart from supervising (processes), so mistakes in a file are
+reported with its name and line before anything starts.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, TextIO
+
+from fabric import keys
+
+ROLES = ("service", "task")
+RESTARTS = ("no", "on-failure", "always")
+_DEFAULT_READY = {"sim": "peer/sim/*", "compute": "peer/compute/*", "view": "peer/viewer/*", "record": "peer/recorder/*"}
+
+
+class LaunchError(ValueError):
+    """A launch file is wrong; the message names the file and, where known, the line."""
+
+
+@dataclass(frozen=True, slots=True)
+class PeerSpec:
+    name: str
+    args: tuple[str, ...]
+    role: str = "service"
+    restart: str = "on-failure"
+    after: tuple[str, ...] = ()
+    ready: str | None = None
+    max_restarts: int = 5
+    env: tuple[tuple[str, str], ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class LaunchSpec:
+    path: str
+    world: str = "demo"
+    router: str | None = None
+    connect: tuple[str, ...] = ()
+    peers: tuple[PeerSpec, ...] = field(default=())
+
+    def child_connect(self) -> tuple[str, ...]:
+        if self.connect:
+            return self.connect
+        if self.router:
+            return (self.router.replace("0.0.0.0", "127.0.0.1"),)
+        return ()
+
+
+def _peer_lines(text: str) -> list[int]:
+    return [i + 1 for i, line in enumerate(text.splitlines()) if re.match(r"^\s*\[\[\s*peer\s*\]\]", line)]
+
+
+def parse_launch(text: str, path: str = "<launch>") -> LaunchSpec:
+    """Parse and check a launch file's text; raise :class:`LaunchError` naming file and line."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise LaunchError(f"{path}: {exc}") from None
+    lines = _peer_lines(text)
+    unknown = set(data) - {"launch", "peer"}
+    if unknown:
+        raise LaunchError(f"{path}: unknown section(s) {', '.join(sorted(unknown))} (expected [launch] and [[peer]])")
+    head = data.get("launch", {})
+    if not isinstance(head, dict):
+        raise LaunchError(f"{path}: [launch] must be a table")
+    bad = set(head) - {"world", "router", "connect"}
+    if bad:
+        raise LaunchError(f"{path}: [launch] has unknown key(s) {', '.join(sorted(bad))}")
+    world = head.get("world", "demo")
+    try:
+        keys.validate_id(world, what="world")
+    except ValueError as exc:
+        raise LaunchError(f"{path}: [launch] {exc}") from None
+    router = head.get("router")
+    connect = head.get("connect", [])
+    if router is not None and not isinstance(router, str):
+        raise LaunchError(f"{path}: [launch] router must be an endpoint string like 'tcp/0.0.0.0:7447'")
+    if isinstance(connect, str):
+        connect = [connect]
+    if not isinstance(connect, list) or not all(isinstance(c, str) for c in connect):
+        raise LaunchError(f"{path}: [launch] connect must be a list of endpoint strings")
+
+    raw_peers = data.get("peer", [])
+    if not isinstance(raw_peers, list):
+        raise LaunchError(f"{path}: 'peer' must be an array of tables ([[peer]])")
+    peers: list[PeerSpec] = []
+    names: set[str] = set()
+    for i, p in enumerate(raw_peers):
+        where = f"{path}:{lines[i]}" if i < len(lines) else path
+        unknown = set(p) - {"name", "args", "role", "restart", "after", "ready", "max_restarts", "env"}
+        if unknown:
+            raise LaunchError(f"{where}: peer has unknown key(s) {', '.join(sorted(unknown))}")
+        name = p.get("name")
+        if not isinstance(name, str) or not name:
+            raise LaunchError(f"{where}: every [[peer]] needs a name")
+        if name in names:
+            raise LaunchError(f"{where}: peer name {name!r} is used twice")
+        args = p.get("args")
+        if not isinstance(args, list) or not args or not all(isinstance(a, str) for a in args):
+            raise LaunchError(f"{where}: peer {name!r} needs args = [\"SUBCOMMAND\", ...] (a non-empty list of strings)")
+        role = p.get("role", "service")
+        if role not in ROLES:
+            raise LaunchError(f"{where}: peer {name!r} has role {role!r}; expected one of {', '.join(ROLES)}")
+        restart = p.get("restart", "on-failure" if role == "service" else "no")
+        if restart not in RESTARTS:
+            raise LaunchError(f"{where}: peer {name!r} has restart {restart!r}; expected one of {', '.join(RESTARTS)}")
+        after = p.get("after", [])
+        if isinstance(after, str):
+            after = [after]
+        missing = [a for a in after if a not in names]
+        if missing:
+            raise LaunchError(f"{where}: peer {name!r} starts after {', '.join(missing)}, which no earlier [[peer]] defines")
+        env = p.get("env", {})
+        if not isinstance(env, dict):
+            raise LaunchError(f"{where}: peer {name!r} env must be a table of strings")
+        max_restarts = p.get("max_restarts", 5)
+        if not isinstance(max_restarts, int) or max_restarts < 0:
+            raise LaunchError(f"{where}: peer {name!r} max_restarts must be a non-negative integer")
+        ready = p.get("ready", _DEFAULT_READY.get(args[0]))
+        names.add(name)
+        peers.append(
+            PeerSpec(
+                name=name,
+                args=tuple(args),
+                role=role,
+                restart=restart,
+                after=tuple(after),
+                ready=ready,
+                max_restarts=max_restarts,
+                env=tuple((str(k), str(v)) for k, v in env.items()),
+            )
+        )
+    return LaunchSpec(path=path, world=world, router=router, connect=tuple(connect), peers=tuple(peers))
+
+
+def load_launch(path: str | Path) -> LaunchSpec:
+    p = Path(path)
+    if not p.is_file():
+        raise LaunchError(f"{path}: no such launch file")
+    return parse_launch(p.read_text(), str(path))
+
+
+# --------------------------------------------------------------------------- supervisor
+
+
+@dataclass
+class PeerProcess:
+    spec: PeerSpec
+    proc: subprocess.Popen | None = None
+    restarts: int = 0
+    exit_code: int | None = None
+    started_at: float = 0.0
+    done: bool = False
+
+
+class Supervisor:
+    """Starts a launch spec's peers as child processes, restarts services per policy, stops them all.
+
+    Output of each child is prefixed with its name on ``console`` and kept in ``out/logs/NAME.log``.
+    ``is_ready(expr)`` says whether a liveliness key expression has a live token (given by the caller,
+    which holds the session), so the supervisor itself stays free of zenoh.
+    """
+
+    def __init__(
+        self,
+        spec: LaunchSpec,
+        *,
+        out_dir: Path,
+        is_ready: Callable[[str], bool],
+        console: TextIO = sys.stdout,
+        extra_args: tuple[str, ...] = (),
+        ready_timeout: float = 60.0,
+    ) -> None:
+        self.spec = spec
+        self.out_dir = out_dir
+        self.is_ready = is_ready
+        self.console = console
+        self.extra_args = extra_args
+        self.ready_timeout = ready_timeout
+        self.peers: dict[str, PeerProcess] = {p.name: PeerProcess(p) for p in spec.peers}
+        self._lock = threading.Lock()
+        self._stopping = False
+        (out_dir / "logs").mkdir(parents=True, exist_ok=True)
+
+    def _argv(self, spec: PeerSpec) -> list[str]:
+        sub = {"{out}": str(self.out_dir), "{world}": self.spec.world}
+        args = []
+        for a in spec.args:
+            for k, v in sub.items():
+                a = a.replace(k, v)
+            args.append(a)
+        argv = [sys.executable, "-m", "fabric.cli", *args, "--world", self.spec.world]
+        for ep in self.spec.child_connect():
+            argv += ["--connect", ep]
+        return argv + list(self.extra_args)
+
+    def _pump(self, name: str, stream, log_path: Path) -> None:
+        with open(log_path, "ab") as log:
+            for line in iter(stream.readline, b""):
+                log.write(line)
+                log.flush()
+                text = line.decode(errors="replace").rstrip()
+                with self._lock:
+                    print(f"[{name}] {text}", file=self.console, flush=True)
+
+    def _spawn(self, pp: PeerProcess) -> None:
+        argv = self._argv(pp.spec)
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", **dict(pp.spec.env)}
+        pp.proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, start_new_session=True)
+        pp.started_at = time.monotonic()
+        pp.exit_code = None
+        threading.Thread(target=self._pump, args=(pp.spec.name, pp.proc.stdout, self.out_dir / "logs" / f"{pp.spec.name}.log"), daemon=True).start()
+        self.say(f"started {pp.spec.name} (pid {pp.proc.pid}): robofabric {' '.join(argv[3:])}")
+
+    def say(self, text: str) -> None:
+        with self._lock:
+            print(f"[launch] {text}", file=self.console, flush=True)
+
+    def _wait_ready(self, name: str, deadline: float) -> bool:
+        pp = self.peers[name]
+        expr = pp.spec.ready
+        if expr is None:
+            return True
+        full = expr if expr.startswith(keys.PREFIX + "/") else f"{keys.world_root(self.spec.world)}/{expr}"
+        while time.monotonic() < deadline and not self._stopping:
+            if self.is_ready(full):
+                return True
+            if pp.proc is not None and pp.proc.poll() is not None:
+                return False
+            time.sleep(0.1)
+        return False
+
+    def start_all(self) -> None:
+        for spec in self.spec.peers:
+            for dep in spec.after:
+                if not self._wait_ready(dep, time.monotonic() + self.ready_timeout):
+                    self.say(f"warning: {dep} not ready after {self.ready_timeout:.0f} s; starting {spec.name} anyway")
+            if self._stopping:
+                return
+            self._spawn(self.peers[spec.name])
+
+    def poll(self) -> None:
+        """Reap exited children and restart services per their policy."""
+        for pp in self.peers.values():
+            if pp.proc is None or pp.done or pp.proc.poll() is None:
+                continue
+            code = pp.proc.returncode
+            pp.exit_code = code
+            if self._stopping:
+                pp.done = True
+                continue
+            if pp.spec.role == "task":
+                pp.done = True
+                self.say(f"{pp.spec.name} finished with exit code {code}")
+                continue
+            again = pp.spec.restart == "always" or (pp.spec.restart == "on-failure" and code != 0)
+            if again and pp.restarts < pp.spec.max_restarts:
+                pp.restarts += 1
+                self.say(f"{pp.spec.name} exited with code {code}; restart {pp.restarts}/{pp.spec.max_restarts}")
+                time.sleep(min(2.0, 0.2 * 2**pp.restarts))
+                self._spawn(pp)
+            else:
+                pp.done = True
+                self.say(f"{pp.spec.name} exited with code {code}; not restarted")
+
+    def tasks_done(self) -> bool:
+        tasks = [p for p in self.peers.values() if p.spec.role == "task"]
+        return bool(tasks) and all(p.done for p in tasks)
+
+    def stop_all(self, grace: float = 5.0) -> None:
+        """SIGINT (so peers flush recordings), then SIGTERM, then SIGKILL, each by pid."""
+        self._stopping = True
+        live = [p for p in self.peers.values() if p.proc is not None and p.proc.poll() is None]
+        for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, 3.0), (signal.SIGKILL, 3.0)):
+            for pp in live:
+                if pp.proc.poll() is None:
+                    try:
+                        os.kill(pp.proc.pid, sig)
+                    except ProcessLookupError:
+                        pass
+            deadline = time.monotonic() + wait
+            while time.monotonic() < deadline and any(p.proc.poll() is None for p in live):
+                time.sleep(0.05)
+            live = [p for p in live if p.proc.poll() is None]
+            if not live:
+                break
+        self.poll()

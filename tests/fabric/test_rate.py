@@ -1,0 +1,55 @@
+import pytest
+
+from fabric.rate import FakeClock, RateLoop, parse_rates
+
+
+class SlowCallback:
+    """Records tick times and, on chosen ticks, advances the fake clock as if the work took long."""
+
+    def __init__(self, clock, costs=None):
+        self.clock, self.costs, self.times = clock, costs or {}, []
+
+    def __call__(self, now):
+        self.times.append(now)
+        self.clock.jump(self.costs.get(len(self.times), 0.0))
+
+
+def test_ticks_land_on_absolute_grid_without_drift():
+    clock = FakeClock(100.0)
+    cb = SlowCallback(clock, {i: 0.003 for i in range(1, 1000)})  # each tick costs 3 ms of a 10 ms period
+    loop = RateLoop(100, cb, clock=clock)
+    while len(cb.times) < 500:
+        clock.sleep(loop.step())
+    assert cb.times[-1] == pytest.approx(100.0 + 499 * 0.01, abs=1e-9)
+    assert loop.stats.overruns == 0
+
+
+def test_overrun_is_counted_and_grid_skips_ahead_without_burst():
+    clock = FakeClock()
+    cb = SlowCallback(clock, {3: 0.035})  # tick 3 takes 3.5 periods
+    loop = RateLoop(100, cb, clock=clock)
+    while len(cb.times) < 8:
+        clock.sleep(loop.step())
+    assert loop.stats.overruns == 1
+    assert loop.stats.skipped == 3
+    gaps = [b - a for a, b in zip(cb.times, cb.times[1:])]
+    assert min(gaps) >= 0.01 - 1e-9  # no catch-up burst
+    assert cb.times[3] == pytest.approx(0.06)
+
+
+def test_fake_clock_refuses_to_go_backwards():
+    with pytest.raises(ValueError):
+        FakeClock().jump(-1)
+
+
+def test_rate_must_be_positive():
+    with pytest.raises(ValueError):
+        RateLoop(0, lambda now: None)
+
+
+def test_parse_rates():
+    d = {"joints": 100.0, "pose": 50.0, "scan": 20.0}
+    assert parse_rates("joints=200, scan=10", d) == {"joints": 200.0, "pose": 50.0, "scan": 10.0}
+    for bad in ("speed=3", "joints", "joints=fast", "joints=-1"):
+        with pytest.raises(ValueError, match="bad rate"):
+            parse_rates(bad, d)
