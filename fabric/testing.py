@@ -69,24 +69,26 @@ class ProcessGroup:
         self.log_dir = log_dir
 
     def start(self, argv: list[str], *, name: str = "proc", env: dict[str, str] | None = None) -> subprocess.Popen:
-        out: Any = subprocess.PIPE
+        out: Any = subprocess.DEVNULL
+        log_path = None
         if self.log_dir is not None:
-            out = open(self.log_dir / f"{name}-{len(self.procs)}.log", "w+b")
+            log_path = self.log_dir / f"{name}-{len(self.procs)}.log"
+            out = open(log_path, "wb")
         full_env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})}
         proc = subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT, env=full_env, start_new_session=True)
+        if log_path is not None:
+            out.close()  # the child holds its own descriptor
         proc.name = name  # type: ignore[attr-defined]
+        proc.log_path = log_path  # type: ignore[attr-defined]
         self.procs.append(proc)
         return proc
 
     def output(self, proc: subprocess.Popen) -> str:
-        f = proc.stdout
-        if f is None:
+        """Everything the process printed so far (stdout and stderr)."""
+        path = getattr(proc, "log_path", None)
+        if path is None or not path.exists():
             return ""
-        if hasattr(f, "seek") and self.log_dir is not None:
-            f.flush()
-            f.seek(0)
-            return f.read().decode(errors="replace")
-        return ""
+        return path.read_text(errors="replace")
 
     def kill(self, proc: subprocess.Popen, sig: int = signal.SIGKILL) -> None:
         if proc.poll() is None:

@@ -19,8 +19,11 @@ from fabric.session import Fabric, shutdown_event
 from fabric.stats import StreamStats
 
 
-def _open(kind: str, world, connect, listen, profile, zenoh_config, peer_id=None) -> Fabric:
+def _open(kind: str, world, connect, listen, profile, zenoh_config, peer_id=None, *, key: str | None = None) -> Fabric:
+    """Join the world; a key given is checked first, so a typo fails before any network wait."""
     cfg = make_config(world, connect, listen, profile, zenoh_config)
+    if key is not None:
+        resolve_key(key, cfg.world)
     try:
         return Fabric(cfg, kind=kind, peer_id=peer_id)
     except Exception as exc:
@@ -67,9 +70,10 @@ def ps(
     listen: Listen = None,
     profile: Profile = None,
     zenoh_config: ZenohConfig = None,
+    peer_id: PeerId = None,
 ) -> None:
     """List the live peers of a world, by kind, from their liveliness tokens."""
-    with _open("tool", world, connect, listen, profile, zenoh_config) as fab:
+    with _open("tool", world, connect, listen, profile, zenoh_config, peer_id) as fab:
         peers = [(k, i) for k, i in fab.live_peers(timeout=timeout) if i != fab.peer_id]
     if as_json:
         by_kind: dict[str, list[str]] = defaultdict(list)
@@ -98,6 +102,7 @@ def echo(
     listen: Listen = None,
     profile: Profile = None,
     zenoh_config: ZenohConfig = None,
+    peer_id: PeerId = None,
 ) -> None:
     """Print decoded messages on a key; malformed payloads are reported on stderr and skipped."""
     if count is not None and count <= 0:
@@ -106,7 +111,7 @@ def echo(
     printed = 0
     bad = 0
     lock = threading.Lock()
-    with _open("tool", world, connect, listen, profile, zenoh_config) as fab:
+    with _open("tool", world, connect, listen, profile, zenoh_config, peer_id, key=key) as fab:
         full = resolve_key(key, fab.world)
 
         def on_sample(sample: zenoh.Sample) -> None:
@@ -147,12 +152,13 @@ def hz(
     listen: Listen = None,
     profile: Profile = None,
     zenoh_config: ZenohConfig = None,
+    peer_id: PeerId = None,
 ) -> None:
     """Rate, jitter and bandwidth of the keys matching KEY (like ``ros2 topic hz`` and ``bw``)."""
     stop = shutdown_event()
     stats: dict[str, StreamStats] = {}
     lock = threading.Lock()
-    with _open("tool", world, connect, listen, profile, zenoh_config) as fab:
+    with _open("tool", world, connect, listen, profile, zenoh_config, peer_id, key=key) as fab:
         full = resolve_key(key, fab.world)
 
         def on_sample(sample: zenoh.Sample) -> None:
@@ -188,6 +194,66 @@ def hz(
             print(_hz_line(k, s))
 
 
+def pub(
+    key: Annotated[str, typer.Argument(help="Concrete key, full or world-relative (robot/base1/cmd/twist).")],
+    msg_type: Annotated[str, typer.Option("--type", "-t", help="Message type, e.g. Twist, JointTarget, Pose, Stop.")],
+    data: Annotated[str, typer.Option("--data", "-d", help='Fields as JSON, e.g. \'{"v": 0.3, "omega": 0.1}\'.')] = "{}",
+    user: Annotated[Optional[str], typer.Option(help="Wrap in a Command from this user (for cmd/* keys).")] = None,
+    epoch: Annotated[int, typer.Option(help="Ownership epoch stamped on the Command.")] = 0,
+    rate: Annotated[float, typer.Option(help="Publish at this rate in Hz (0: once).")] = 0.0,
+    count: Annotated[Optional[int], typer.Option("--count", "-n", help="Number of messages (default 1, or forever with --rate).")] = None,
+    world: World = None,
+    connect: Connect = None,
+    listen: Listen = None,
+    profile: Profile = None,
+    zenoh_config: ZenohConfig = None,
+    peer_id: PeerId = None,
+) -> None:
+    """Publish a message built from JSON (like ``ros2 topic pub``); checked by the codec before it leaves."""
+    from fabric.codec import encode, registered
+    from fabric.messages import Command
+    from fabric.rate import RateLoop
+
+    types = registered()
+    cls = types.get(msg_type)
+    if cls is None:
+        raise UserError(f"unknown message type {msg_type!r}; known: {', '.join(sorted(types))}")
+    try:
+        fields = json.loads(data)
+        if not isinstance(fields, dict):
+            raise ValueError("expected a JSON object")
+        body = cls(**fields)
+        msg = Command(user=user, epoch=epoch, body=body) if user else body
+        encode(msg)
+    except (ValueError, TypeError) as exc:
+        raise UserError(f"cannot build {msg_type} from {data!r}: {exc}") from None
+    n = count if count is not None else (None if rate > 0 else 1)
+    stop = shutdown_event()
+    with _open("tool", world, connect, listen, profile, zenoh_config, peer_id, key=key) as fab:
+        full = resolve_key(key, fab.world)
+        if "*" in full or "$" in full:
+            raise UserError(f"{full!r} is a pattern; pub needs a concrete key")
+        fab.session.declare_publisher(full)  # routes to existing subscribers before the first put
+        time.sleep(0.3)
+        sent = 0
+
+        def tick(_now: float) -> None:
+            nonlocal sent
+            fab.publish(full, msg)
+            sent += 1
+            if n is not None and sent >= n:
+                stop.set()
+
+        if rate > 0:
+            loop = RateLoop(rate, tick)
+            loop.run(stop)
+        else:
+            for _ in range(n or 1):
+                tick(0.0)
+        time.sleep(0.2)
+    print(f"published {sent} {msg_type} on {full}")
+
+
 def _hz_line(key: str, s: dict) -> str:
     return (
         f"{key}: {s['rate_hz']:.1f} Hz  jitter {s['jitter_ms']:.3f} ms  min {s['min_ms']:.3f} ms  "
@@ -200,3 +266,4 @@ def register(app: typer.Typer) -> None:
     app.command("ps")(ps)
     app.command("echo")(echo)
     app.command("hz")(hz)
+    app.command("pub")(pub)

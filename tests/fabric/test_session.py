@@ -1,0 +1,114 @@
+"""Real zenoh sessions on loopback: pub/sub, bad payloads, services, liveliness."""
+
+import json
+
+import numpy as np
+import pytest
+
+from fabric import keys
+from fabric.config import ConfigError, FabricConfig
+from fabric.messages import Event, JointState, Stop, Twist
+from fabric.session import ServiceError
+from fabric.testing import robofabric_cmd, wait_until
+
+
+def test_publish_subscribe_with_headers(world, connect):
+    sim, user = connect("sim", "sim1"), connect("user", "alice")
+    got = []
+    user.subscribe(keys.robot_all(world), lambda k, m: got.append((k, m)))
+    key = keys.robot_joints(world, "arm1")
+
+    def send():
+        sim.publish(key, JointState(["j1"], [0.5], [0.0], header=sim.header(key, stamp=1.0)))
+        return len(got) > 0
+
+    wait_until(send, timeout=10, what="first joint state to arrive", seen=lambda: got)
+    k, msg = got[0]
+    assert k == key and msg.q.tolist() == [0.5]
+    assert msg.header.source == "sim1" and msg.header.wall_ns > 0
+
+
+def test_bad_payload_is_counted_reported_and_subscriber_keeps_working(world, connect):
+    sim, user = connect("sim", "sim1"), connect("user", "bob")
+    got, events = [], []
+    key = keys.robot_joints(world, "arm1")
+    user.subscribe(key, lambda k, m: got.append(m))
+    sim.subscribe(keys.event_all(world), lambda k, m: events.append((k, m)))
+    wait_until(lambda: (sim.put_raw(key, b"\x93garbage"), user.counters["decode_errors"] > 0)[1], what="decode error")
+    wait_until(lambda: events, what="decode event", seen=lambda: events)
+    k, ev = events[0]
+    assert k == keys.event(world, "decode", "bob")
+    assert ev.kind == "decode_error" and ev.data["key"] == key and "not a msgpack message" in ev.reason
+    wait_until(lambda: (sim.publish(key, JointState(["a"], [1.0], [0.0])), got)[1], what="valid message after a bad one")
+
+
+def test_service_replies_and_refusals(world, connect):
+    server, caller = connect("compute", "c1"), connect("user", "u1")
+
+    def handler(key, request):
+        if request is None:
+            raise ServiceError("a Twist request is required")
+        return Twist(request.v * 2, request.omega, header=server.header(key))
+
+    key = keys.srv(world, "fk", "arm1")
+    server.serve(key, handler, expected=Twist)
+    reply = wait_until(lambda: _try(lambda: caller.call(key, Twist(1.5, 0.0))), what="service reply")
+    assert reply.v == 3.0 and reply.header.source == "c1"
+    with pytest.raises(ServiceError, match="a Twist request is required"):
+        caller.call(key)
+    with pytest.raises(ServiceError, match="expected Twist, got Stop"):
+        caller.call(key, Stop())
+    with pytest.raises(ServiceError, match="no reply"):
+        caller.call(keys.srv(world, "ik", "nobody"), timeout=0.3)
+
+
+def _try(fn):
+    try:
+        return fn()
+    except ServiceError:
+        return None
+
+
+def test_all_replies_reaches_every_server(world, connect):
+    a, b, caller = connect("compute", "ca"), connect("compute", "cb"), connect("user", "u")
+    key = keys.srv(world, "plan", "base1")
+    for fab in (a, b):
+        fab.serve(key, lambda k, r, fab=fab: Event(kind="pong", reason=fab.peer_id, header=fab.header(k)))
+    wait_until(
+        lambda: len(_try(lambda: caller.query(key, all_replies=True, timeout=0.5)) or []) == 2, what="two replies"
+    )
+    sources = sorted(r.message.reason for r in caller.query(key, all_replies=True))
+    assert sources == ["ca", "cb"]
+
+
+def test_liveliness_tracks_a_process_that_exits_and_one_that_is_killed(world, router, connect, procs):
+    port = router[1]
+    seen = {}
+    watcher = connect("tool", "watcher")
+    watcher.watch_peers(lambda kind, pid, alive: seen.__setitem__(pid, alive))
+    argv = robofabric_cmd("echo", "robot/**", "--world", world, "--connect", f"tcp/127.0.0.1:{port}")
+    p_exit = procs.start(argv, name="echo1")
+    wait_until(lambda: any(v for k, v in seen.items() if k.startswith("tool-")), what="echo peer token", seen=lambda: seen)
+    first = next(k for k, v in seen.items() if v and k.startswith("tool-"))
+    procs.kill(p_exit, sig=15)  # SIGTERM: clean exit
+    wait_until(lambda: seen.get(first) is False, timeout=5, what="token gone after exit", seen=lambda: seen)
+    p_kill = procs.start(argv, name="echo2")
+    wait_until(lambda: any(v for k, v in seen.items() if k.startswith("tool-") and k != first), what="second token")
+    second = next(k for k, v in seen.items() if v and k.startswith("tool-") and k != first)
+    procs.kill(p_kill)  # SIGKILL: the OS closes the socket
+    wait_until(lambda: seen.get(second) is False, timeout=5, what="token gone after SIGKILL", seen=lambda: seen)
+
+
+def test_config_profiles_and_env():
+    cfg = FabricConfig.resolve(env={"ROBOFABRIC_CONNECT": "tcp/10.0.0.5:7447, tcp/10.0.0.6:7447", "ROBOFABRIC_WORLD": "lab"})
+    assert cfg.world == "lab" and cfg.connect == ("tcp/10.0.0.5:7447", "tcp/10.0.0.6:7447")
+    assert FabricConfig.resolve(world="w", connect=["tcp/1.2.3.4:1"], env={"ROBOFABRIC_CONNECT": "tcp/9.9.9.9:9"}).connect == (
+        "tcp/1.2.3.4:1",
+    )
+    assert FabricConfig(profile="embedded").endpoints() == ((), ("tcp/127.0.0.1:7447",))
+    assert FabricConfig().endpoints() == (("tcp/127.0.0.1:7447",), ())
+    conf = json.loads(str(FabricConfig(profile="peer").zenoh_config().get_json("scouting/multicast/enabled")))
+    assert conf is True
+    for bad in (dict(profile="cloud"), dict(world="a/b"), dict(connect=("192.168.1.1",)), dict(lease_ms=5)):
+        with pytest.raises((ConfigError, ValueError)):
+            FabricConfig(**bad)
