@@ -110,3 +110,16 @@ def test_bad_launch_file_is_one_line_exit_2(tmp_path):
     out = _up(tmp_path, '[[peer]]\nname = "a"\nargs = "sim"\n')
     assert out.returncode == 2
     assert "launch.toml:1: peer 'a' needs args" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_shipped_launch_files_parse():
+    from pathlib import Path
+
+    from fabric.launch import load_launch
+
+    root = Path(__file__).resolve().parents[2] / "examples"
+    files = sorted(root.rglob("*.toml"))
+    assert len(files) >= 5
+    for f in files:
+        spec = load_launch(f)
+        assert spec.child_connect(), f
