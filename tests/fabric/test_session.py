@@ -91,6 +91,7 @@ def test_liveliness_tracks_a_process_that_exits_and_one_that_is_killed(world, ro
     wait_until(lambda: any(v for k, v in seen.items() if k.startswith("tool-")), what="echo peer token", seen=lambda: seen)
     first = next(k for k, v in seen.items() if v and k.startswith("tool-"))
     procs.kill(p_exit, sig=15)  # SIGTERM: clean exit
+    assert p_exit.returncode == 0, procs.output(p_exit)
     wait_until(lambda: seen.get(first) is False, timeout=5, what="token gone after exit", seen=lambda: seen)
     p_kill = procs.start(argv, name="echo2")
     wait_until(lambda: any(v for k, v in seen.items() if k.startswith("tool-") and k != first), what="second token")
