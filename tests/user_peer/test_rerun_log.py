@@ -1,0 +1,56 @@
+"""Pure drawing helpers: scans in the world frame, grid images, map pixel coordinates."""
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fabric.messages import OccupancyGrid, Pose, Scan
+from user_peer.rerun_log import grid_rgb, scan_world_points, world_to_map_pixels, yaw_of
+
+
+def _pose(x, y, yaw):
+    return Pose([x, y, 0.0], [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(-5, 5), st.floats(-5, 5), st.floats(-3.1, 3.1), st.floats(0.2, 9.0))
+def test_scan_hits_lie_at_their_range_from_the_lidar(x, y, yaw, r):
+    scan = Scan.from_ranges(np.full(9, r), angle_min=-1.0, angle_increment=0.25, range_max=10.0)
+    origin, pts, hit = scan_world_points(scan, _pose(x, y, yaw), (0.1, 0.0, 0.3))
+    assert hit.all()
+    assert np.allclose(origin[:2], [x + 0.1 * math.cos(yaw), y + 0.1 * math.sin(yaw)])
+    d = np.linalg.norm(pts[:, :2] - origin[:2], axis=1)
+    assert np.allclose(d, round(r * 1000) / 1000, atol=1e-9)
+    # the middle ray (angle 0) points along the heading
+    mid = pts[4, :2] - origin[:2]
+    assert math.isclose(math.atan2(mid[1], mid[0]), math.atan2(math.sin(yaw), math.cos(yaw)), abs_tol=1e-6)
+
+
+def test_misses_are_masked_out():
+    scan = Scan.from_ranges([1.0, float("inf"), 12.0, 2.0], angle_min=0, angle_increment=0.1, range_max=10.0)
+    _, _, hit = scan_world_points(scan, None)
+    assert hit.tolist() == [True, False, False, True]
+
+
+def test_yaw_of_quaternion():
+    for yaw in (-3.0, -1.0, 0.0, 0.5, 2.9):
+        assert math.isclose(yaw_of(_pose(0, 0, yaw).quaternion), yaw, abs_tol=1e-9)
+
+
+def test_grid_image_is_north_up_with_unknown_grey():
+    cells = np.full((4, 6), 255, np.uint8)
+    cells[0, 0] = 100  # row 0 = lowest y: bottom-left of the image
+    cells[3, 5] = 0  # top-right, free
+    img = grid_rgb(OccupancyGrid(0.1, [0, 0, 0], cells))
+    assert img.shape == (4, 6, 3) and img.dtype == np.uint8
+    assert img[3, 0].tolist() == [0, 0, 0]
+    assert img[0, 5].tolist() == [255, 255, 255]
+    assert img[1, 1].tolist() == [150, 160, 180]
+
+
+def test_world_to_map_pixels_matches_grid_image():
+    grid = OccupancyGrid(0.05, [-2.0, -1.0, 0.0], np.zeros((40, 80), np.uint8))
+    uv = world_to_map_pixels(grid, np.array([[-2.0, -1.0], [2.0, 1.0], [0.0, 0.0]]))
+    assert np.allclose(uv, [[0, 40], [80, 0], [40, 20]])

@@ -1,0 +1,106 @@
+"""Forward kinematics and link shapes of an arm, for drawing it: Pinocchio over the robot's URDF.
+
+The viewer needs every link's placement from a JointState; the compute peer
+answers FK queries too, but a query per frame at 100 Hz would be wasteful and a
+recording has no compute peer to ask. Pinocchio on the same URDF the sim and
+the compute peer use (robots/) gives the same numbers locally, with no second
+copy of the geometry.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+
+@dataclass(frozen=True, slots=True)
+class Shape:
+    """One visual primitive of a link: kind in box/cylinder/sphere/capsule/mesh, sizes in metres."""
+
+    name: str
+    kind: str
+    size: tuple[float, ...]  # box: half sizes (3); cylinder/capsule: (radius, length); sphere: (radius,)
+    mesh_path: str = ""
+    color: tuple[int, int, int, int] = (180, 180, 190, 255)
+
+
+@dataclass(frozen=True, slots=True)
+class Placement:
+    """A rigid transform: translation (3,) and quaternion (x, y, z, w) as Rerun wants it."""
+
+    translation: np.ndarray
+    quat_xyzw: np.ndarray
+
+
+def _placement(se3) -> Placement:
+    import pinocchio as pin
+
+    q = pin.Quaternion(se3.rotation)
+    return Placement(np.array(se3.translation, dtype=float), np.array([q.x, q.y, q.z, q.w], dtype=float))
+
+
+class ArmModel:
+    """An arm built from a URDF: joint names, FK to joint origins, and placements of visual shapes."""
+
+    def __init__(self, urdf: str | Path, *, urdf_text: str | None = None) -> None:
+        import pinocchio as pin
+
+        self._pin = pin
+        if urdf_text is not None:
+            self.model = pin.buildModelFromXML(urdf_text)
+            try:
+                self.visual = pin.buildGeomFromUrdfString(self.model, urdf_text, pin.GeometryType.VISUAL)
+            except Exception:
+                self.visual = pin.GeometryModel()
+        else:
+            path = str(urdf)
+            self.model = pin.buildModelFromUrdf(path)
+            try:
+                self.visual = pin.buildGeomFromUrdf(self.model, path, pin.GeometryType.VISUAL, package_dirs=[str(Path(path).parent)])
+            except Exception:
+                self.visual = pin.GeometryModel()
+        self.data = self.model.createData()
+        self.joint_names: tuple[str, ...] = tuple(self.model.names[1:])
+        self.shapes: list[tuple[Shape, int, object]] = [s for s in (self._shape(g) for g in self.visual.geometryObjects) if s]
+
+    def _shape(self, g) -> tuple[Shape, int, object] | None:
+        geom = g.geometry
+        kind = type(geom).__name__.lower()
+        color = tuple(int(max(0.0, min(1.0, c)) * 255) for c in np.asarray(g.meshColor, dtype=float))
+        if len(color) != 4 or color == (0, 0, 0, 0):
+            color = (180, 180, 190, 255)
+        if kind == "box":
+            size: tuple[float, ...] = tuple(float(h) for h in geom.halfSide)
+        elif kind in ("cylinder", "capsule"):
+            size = (float(geom.radius), 2.0 * float(geom.halfLength))
+        elif kind == "sphere":
+            size = (float(geom.radius),)
+        elif g.meshPath:
+            kind, size = "mesh", ()
+        else:
+            return None
+        return Shape(g.name, "mesh" if kind == "mesh" else kind, size, str(g.meshPath or ""), color), int(g.parentJoint), g.placement
+
+    def fk(self, q: Sequence[float]) -> list[Placement]:
+        """Placement of every joint frame (base first: the universe), in the arm's base frame."""
+        pin = self._pin
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self.model.nq,):
+            raise ValueError(f"arm model has {self.model.nq} joints, got {q.shape[0] if q.ndim else 0} values")
+        pin.forwardKinematics(self.model, self.data, q)
+        return [_placement(m) for m in self.data.oMi]
+
+    def joint_origins(self, q: Sequence[float]) -> np.ndarray:
+        """(n+1, 3) positions of the base and each joint origin: the arm's skeleton."""
+        return np.array([p.translation for p in self.fk(q)])
+
+    def shape_placements(self, q: Sequence[float]) -> list[tuple[Shape, Placement]]:
+        """Each visual shape with its placement in the base frame (FK must be current: call after ``fk``)."""
+        self.fk(q)
+        out = []
+        for shape, joint, local in self.shapes:
+            out.append((shape, _placement(self.data.oMi[joint] * local)))
+        return out

@@ -1,0 +1,90 @@
+"""``robofabric view``, ``export``, ``user`` and ``scenario``: the user peer's commands."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config
+
+RERUN_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://", "http://", "https://")
+
+
+def _split_connect(connect: list[str] | None) -> tuple[list[str], list[str]]:
+    """``--connect`` takes Zenoh endpoints (tcp/...) and Rerun viewer URLs (rerun+http://...): split them."""
+    zenoh_eps, rerun_urls = [], []
+    for c in connect or []:
+        (rerun_urls if c.startswith(RERUN_SCHEMES) else zenoh_eps).append(c)
+    return zenoh_eps, rerun_urls
+
+
+def view(
+    spawn: Annotated[bool, typer.Option("--spawn", help="Start a local Rerun viewer and stream to it.")] = False,
+    serve_web: Annotated[bool, typer.Option("--serve-web", help="Serve a web viewer (open http://HOST:WEB_PORT).")] = False,
+    save: Annotated[Optional[Path], typer.Option("--save", help="Write the view to FILE.rrd.")] = None,
+    duration: Annotated[Optional[float], typer.Option("--duration", help="Stop after S seconds (default: until Ctrl-C).")] = None,
+    web_port: Annotated[int, typer.Option(help="Port of the web viewer (--serve-web).")] = 9090,
+    grpc_port: Annotated[int, typer.Option(help="Port of the Rerun gRPC server (--spawn, --serve-web).")] = 9876,
+    max_hz: Annotated[float, typer.Option(help="Thin 3D and plot updates to this rate per stream (0: all).")] = 30.0,
+    world: World = None,
+    connect: Connect = None,
+    listen: Listen = None,
+    peer_id: PeerId = None,
+    profile: Profile = None,
+    zenoh_config: ZenohConfig = None,
+) -> None:
+    """Show a world live in Rerun: robots, scans, maps, paths, target and goal, ownership, plots.
+
+    --connect takes both Zenoh endpoints (tcp/HOST:7447: where the router is) and Rerun viewer
+    URLs (rerun+http://HOST:9876/proxy: stream to a viewer running elsewhere).
+    """
+    from fabric.session import shutdown_event
+    from user_peer.viewer import Viewer, ViewerOptions
+
+    zenoh_eps, rerun_urls = _split_connect(connect)
+    if len(rerun_urls) > 1:
+        raise UserError("give at most one Rerun viewer URL")
+    if save is not None and save.suffix != ".rrd":
+        raise UserError(f"--save {save}: the file must end in .rrd")
+    opts = ViewerOptions(
+        spawn=spawn, connect_url=rerun_urls[0] if rerun_urls else None, serve_web=serve_web,
+        web_port=web_port, grpc_port=grpc_port, save=save, max_hz=max_hz,
+    )
+    if not (spawn or serve_web or save or rerun_urls):
+        raise UserError("nowhere to show the world: give --spawn, --connect rerun+http://HOST:PORT/proxy, --serve-web or --save FILE.rrd")
+    cfg = make_config(world, zenoh_eps, listen, profile, zenoh_config)
+    stop = shutdown_event()
+    with Viewer(cfg, opts, peer_id=peer_id) as viewer:
+        print(f"viewer on world {cfg.world!r}" + (f", saving to {save}" if save else ""), flush=True)
+        n = viewer.run(stop, duration)
+    print(f"viewer: {n} messages logged, {viewer.dropped} dropped, {viewer.logger.skipped} thinned; robots: {', '.join(sorted(viewer.logger.robots)) or 'none'}", flush=True)
+
+
+def export(
+    src: Annotated[Path, typer.Argument(help="An MCAP recording (from robofabric record).")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="The .rrd file to write.")],
+    max_hz: Annotated[float, typer.Option(help="Thin 3D and plot updates to this rate per stream (0: all).")] = 0.0,
+) -> None:
+    """Turn a recording into a Rerun .rrd with the live viewer's views."""
+    from user_peer.export import ExportError, export_mcap
+
+    if out.suffix != ".rrd":
+        raise UserError(f"-o {out}: the file must end in .rrd")
+    try:
+        stats = export_mcap(src, out, max_hz=max_hz)
+    except ExportError as exc:
+        raise UserError(str(exc)) from None
+    if stats.messages == 0:
+        raise UserError(f"{src}: no readable messages")
+    print(
+        f"exported {stats.messages} messages ({stats.drawn} drawn, {stats.bad} undecodable) "
+        f"to {out}; robots: {', '.join(stats.robots) or 'none'}"
+    )
+
+
+def register(app: typer.Typer) -> None:
+    app.command("view")(view)
+    app.command("export")(export)

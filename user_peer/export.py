@@ -1,0 +1,86 @@
+"""``robofabric export FILE.mcap -o FILE.rrd``: the live viewer's views, from a recording.
+
+Messages are read with the standard ``mcap`` reader in log-time order and go
+through the very :class:`~user_peer.rerun_log.WorldLogger` the live viewer
+uses, with the receive time as the wall clock. Payloads that do not decode are
+counted and skipped; a file that is not MCAP at all is an error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import rerun as rr
+
+from fabric.codec import DecodeError, decode
+from user_peer.catalog import RobotCatalog
+from user_peer.rerun_log import WorldLogger, blueprint
+from user_peer.viewer import APP_ID
+
+__all__ = ["ExportStats", "ExportError", "read_mcap", "export_mcap"]
+
+
+class ExportError(ValueError):
+    """The recording cannot be read; the text says why."""
+
+
+@dataclass(frozen=True, slots=True)
+class ExportStats:
+    messages: int
+    drawn: int
+    bad: int
+    robots: tuple[str, ...]
+
+
+def read_mcap(path: Path, counts: dict[str, int] | None = None) -> Iterator[tuple[str, object, int]]:
+    """(key, decoded message, log time ns) for every message of an MCAP file, in file order.
+
+    The streaming reader is used on purpose: it needs no summary section, so the file of a
+    recorder killed mid-write is read up to its last complete chunk.
+    """
+    from mcap.exceptions import McapError
+    from mcap.reader import NonSeekingReader
+
+    if not path.is_file():
+        raise ExportError(f"{path}: no such file")
+    with open(path, "rb") as f:
+        if f.read(8)[:5] != b"\x89MCAP":
+            raise ExportError(f"{path}: not an MCAP file")
+        f.seek(0)
+        reader = NonSeekingReader(f)
+        try:
+            for _schema, channel, message in reader.iter_messages(log_time_order=False):
+                try:
+                    msg = decode(message.data)
+                except DecodeError:
+                    if counts is not None:
+                        counts["bad"] = counts.get("bad", 0) + 1
+                    continue
+                yield channel.topic, msg, int(message.log_time)
+        except (McapError, EOFError, ValueError) as exc:
+            # A recorder killed mid-chunk leaves a tail that cannot be read: keep what came before it.
+            if counts is not None:
+                counts["truncated"] = 1
+                counts["error"] = str(exc)  # type: ignore[assignment]
+
+
+def export_mcap(src: Path, dst: Path, *, max_hz: float = 0.0) -> ExportStats:
+    """Write ``dst`` (.rrd) from the recording ``src``; every message is drawn unless ``max_hz`` thins it."""
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    rec = rr.RecordingStream(APP_ID, recording_id=f"export-{src.stem}")
+    rec.save(str(dst), default_blueprint=blueprint())
+    catalog = RobotCatalog(None)
+    logger = WorldLogger(rec, robot_info=catalog.info, max_hz=max_hz)
+    counts: dict[str, int] = {}
+    n = drawn = 0
+    try:
+        for key, msg, t in read_mcap(src, counts):
+            n += 1
+            if logger.log(key, msg, t):
+                drawn += 1
+    finally:
+        rec.flush(timeout_sec=30.0)
+        rec.disconnect()
+    return ExportStats(n, drawn, counts.get("bad", 0), tuple(sorted(logger.robots)))

@@ -1,0 +1,175 @@
+"""The Rerun viewer peer: subscribe to a world, log everything it shows to Rerun.
+
+Zenoh callbacks only enqueue ``(key, message, receive time)``; one thread
+drains the queue into a :class:`~user_peer.rerun_log.WorldLogger`, so the
+logger needs no locks and a slow sink never stalls Zenoh. When the queue is
+full the oldest sample is dropped and counted: a viewer must never slow the
+world down.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import rerun as rr
+
+from fabric import keys
+from fabric.config import FabricConfig
+from fabric.session import Fabric, ServiceError
+from user_peer.catalog import RobotCatalog
+from user_peer.rerun_log import WorldLogger, blueprint
+
+log = logging.getLogger("robofabric.viewer")
+
+__all__ = ["ViewerOptions", "Viewer", "make_recording", "query_world_info"]
+
+APP_ID = "robofabric"
+
+
+@dataclass(frozen=True, slots=True)
+class ViewerOptions:
+    """Where the view goes: any combination of a spawned viewer, a remote viewer, a web viewer, a file."""
+
+    spawn: bool = False
+    connect_url: str | None = None
+    serve_web: bool = False
+    web_port: int = 9090
+    grpc_port: int = 9876
+    save: Path | None = None
+    max_hz: float = 30.0
+
+
+def make_recording(opts: ViewerOptions, *, recording_id: str | None = None) -> rr.RecordingStream:
+    """A recording stream with the requested sinks and the default blueprint."""
+    rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
+    sinks: list[Any] = []
+    if opts.save is not None:
+        opts.save.parent.mkdir(parents=True, exist_ok=True)
+        sinks.append(rr.FileSink(str(opts.save)))
+    if opts.spawn:
+        rr.spawn(port=opts.grpc_port, connect=False)
+        sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{opts.grpc_port}/proxy"))
+    if opts.connect_url:
+        sinks.append(rr.GrpcSink(opts.connect_url))
+    if opts.serve_web:
+        server = rr.GrpcServerSink(port=opts.grpc_port)
+        sinks.append(server)
+    if not sinks:
+        raise ValueError("nowhere to show the world: give --spawn, --connect URL, --serve-web or --save FILE.rrd")
+    rec.set_sinks(*sinks, default_blueprint=blueprint())
+    if opts.serve_web:
+        rr.serve_web_viewer(web_port=opts.web_port, open_browser=False, connect_to=f"rerun+http://127.0.0.1:{opts.grpc_port}/proxy")
+    return rec
+
+
+def query_world_info(fab: Fabric, timeout: float = 2.0) -> Any:
+    """The sim peer's world description, or None when no sim answers (the viewer then guesses types)."""
+    try:
+        import sim_peer.messages  # noqa: F401  (registers WorldInfo with the codec)
+    except Exception:
+        pass
+    try:
+        return fab.call(keys.srv(fab.world, "world"), timeout=timeout)
+    except (ServiceError, Exception) as exc:
+        log.info("no world description (%s); robot types are guessed from joint names", exc)
+        return None
+
+
+class Viewer:
+    """A viewer peer on one world. ``run(stop, duration)`` blocks; ``close()`` flushes the sinks."""
+
+    def __init__(self, config: FabricConfig, opts: ViewerOptions, *, peer_id: str | None = None, queue_size: int = 5000) -> None:
+        self.opts = opts
+        self.fab = Fabric(config, kind="viewer", peer_id=peer_id)
+        self.rec = make_recording(opts)
+        self.queue: queue.Queue[tuple[str, Any, int]] = queue.Queue(maxsize=queue_size)
+        self.dropped = 0
+        self.catalog = RobotCatalog(None)
+        self.logger = WorldLogger(self.rec, robot_info=self.catalog.info, max_hz=opts.max_hz)
+        self._closed = False
+
+    def _enqueue(self, key: str, msg: Any) -> None:
+        item = (key, msg, time.time_ns())
+        try:
+            self.queue.put_nowait(item)
+        except queue.Full:
+            try:
+                self.queue.get_nowait()
+                self.dropped += 1
+            except queue.Empty:
+                pass
+            try:
+                self.queue.put_nowait(item)
+            except queue.Full:
+                self.dropped += 1
+
+    def start(self) -> None:
+        """Learn the world, subscribe, and ask for the state a late joiner missed (ownership, maps)."""
+        self.catalog.world_info = query_world_info(self.fab)
+        self.fab.subscribe(keys.world_all(self.fab.world), self._enqueue)
+        for expr in (keys.own_all(self.fab.world),):
+            try:
+                for rep in self.fab.query(expr, timeout=1.0, all_replies=True):
+                    self._enqueue(rep.key, rep.message)
+            except ServiceError:
+                pass
+
+    def drain(self, until: float) -> int:
+        """Log queued samples until the monotonic deadline ``until``; returns how many."""
+        n = 0
+        while True:
+            left = until - time.monotonic()
+            if left <= 0:
+                return n
+            try:
+                key, msg, t = self.queue.get(timeout=min(left, 0.1))
+            except queue.Empty:
+                continue
+            try:
+                self.logger.log(key, msg, t)
+            except Exception:
+                log.exception("could not log %s", key)
+            n += 1
+
+    def run(self, stop: threading.Event, duration: float | None = None) -> int:
+        self.start()
+        t_end = time.monotonic() + duration if duration is not None else None
+        n = 0
+        while not stop.is_set():
+            until = time.monotonic() + 0.25
+            if t_end is not None:
+                until = min(until, t_end)
+            n += self.drain(until)
+            if t_end is not None and time.monotonic() >= t_end:
+                break
+        return n
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self.fab.close()
+        # Whatever is already queued still goes to the sinks.
+        while True:
+            try:
+                key, msg, t = self.queue.get_nowait()
+            except queue.Empty:
+                break
+            try:
+                self.logger.log(key, msg, t)
+            except Exception:
+                pass
+        self.rec.flush(timeout_sec=10.0)
+        self.rec.disconnect()
+
+    def __enter__(self) -> "Viewer":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
