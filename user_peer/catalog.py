@@ -1,24 +1,32 @@
-"""What kind of robot is behind an id: from the world's description service, or from robots/ by joint names.
+"""What kind of robot is behind an id, and where it stands: world description, scenes, joint names.
 
 A live viewer asks the sim peer's world description (``rf/{world}/srv/world``)
-so it needs no local copy of the world; an export from a recording has no one
-to ask, so it matches a JointState's joint names against the robot types in
-``robots/``. Either way the geometry comes from the same robot descriptions the
-sim uses.
+so it needs no local copy of the world. An export from a recording has no one
+to ask: it looks the id up in the scene descriptions of ``robots/`` (type and
+placement), and failing that matches a JointState's joint names against the
+robot types. Either way the geometry comes from the same robot descriptions
+(URDF) the sim and the compute peer use.
 """
 
 from __future__ import annotations
 
 import logging
-from pathlib import Path
+import math
 from typing import Any
 
+import numpy as np
+
+import robots
 from user_peer.arm_model import ArmModel, Placement
 from user_peer.rerun_log import RobotInfo
 
 log = logging.getLogger("robofabric.viewer")
 
-__all__ = ["RobotCatalog"]
+__all__ = ["RobotCatalog", "placement_xyz_yaw"]
+
+
+def placement_xyz_yaw(x: float, y: float, z: float, yaw: float) -> Placement:
+    return Placement(np.array([x, y, z], dtype=float), np.array([0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)]))
 
 
 def _field(obj: Any, *names: str, default: Any = None) -> Any:
@@ -31,93 +39,99 @@ def _field(obj: Any, *names: str, default: Any = None) -> Any:
 
 
 class RobotCatalog:
-    """Builds :class:`RobotInfo` for robot ids; caches arm models per type."""
+    """Builds :class:`RobotInfo` for robot ids; caches descriptions and arm models per type."""
 
-    def __init__(self, world_info: Any = None) -> None:
+    def __init__(self, world_info: Any = None, *, scene: str | None = None) -> None:
         self.world_info = world_info
+        self.scene_name = scene
         self._models: dict[str, ArmModel | None] = {}
-        self._types: dict[str, dict] | None = None
+        self._descs: dict[str, robots.RobotDescription] | None = None
+        self._scene_robots: list[robots.SceneRobot] | None = None
 
-    # ---------------------------------------------------------------- robots/ descriptions
+    def descriptions(self) -> dict[str, robots.RobotDescription]:
+        if self._descs is None:
+            self._descs = {}
+            for name in robots.available_robots():
+                try:
+                    self._descs[name] = robots.load(name)
+                except robots.DescriptionError as exc:
+                    log.warning("skipping robot type %s: %s", name, exc)
+        return self._descs
 
-    def _robot_types(self) -> dict[str, dict]:
-        """type name -> {"kind", "joints", "urdf", ...} from robots/, empty if robots/ cannot tell."""
-        if self._types is not None:
-            return self._types
-        out: dict[str, dict] = {}
-        try:
-            import robots
-
-            names = list(robots.available()) if hasattr(robots, "available") else []
+    def scene_robots(self) -> list[robots.SceneRobot]:
+        """Robots placed by the named scene, or by every known scene (first placement of an id wins)."""
+        if self._scene_robots is None:
+            names = [self.scene_name] if self.scene_name else robots.available_scenes()
+            out: list[robots.SceneRobot] = []
             for name in names:
                 try:
-                    d = robots.load(name)
-                except Exception as exc:
-                    log.debug("robots.load(%r) failed: %s", name, exc)
-                    continue
-                out[name] = {
-                    "kind": _field(d, "kind", default=""),
-                    "joints": tuple(_field(d, "joints", "joint_names", default=()) or ()),
-                    "urdf": _field(d, "urdf_path", "urdf", default=None),
-                    "desc": d,
-                }
-        except Exception as exc:  # robots/ not importable: draw without geometry
-            log.debug("robot descriptions unavailable: %s", exc)
-        self._types = out
-        return out
+                    out.extend(robots.scene(name).robots)
+                except robots.DescriptionError as exc:
+                    log.warning("skipping scene %s: %s", name, exc)
+            self._scene_robots = out
+        return self._scene_robots
 
     def arm_model(self, rtype: str) -> ArmModel | None:
         if rtype not in self._models:
             model = None
-            t = self._robot_types().get(rtype)
-            urdf = t.get("urdf") if t else None
-            if urdf is not None and Path(str(urdf)).is_file():
+            d = self.descriptions().get(rtype)
+            if d is not None and d.urdf_path is not None:
                 try:
-                    model = ArmModel(urdf)
+                    model = ArmModel(d.urdf_path)
                 except Exception as exc:
-                    log.warning("cannot build a kinematic model of %s from %s: %s", rtype, urdf, exc)
+                    log.warning("cannot build a kinematic model of %s from %s: %s", rtype, d.urdf_path, exc)
             self._models[rtype] = model
         return self._models[rtype]
 
-    def _world_entry(self, rid: str) -> Any:
-        robots = _field(self.world_info, "robots", default=()) or ()
-        for r in robots:
+    def _world_entry(self, rid: str) -> tuple[str, Placement | None] | None:
+        for r in _field(self.world_info, "robots", default=()) or ():
             if _field(r, "id", "name") == rid:
-                return r
+                rtype = str(_field(r, "type", "robot_type", default="") or "")
+                pose = _field(r, "pose", default=None)
+                base = placement_xyz_yaw(*[float(v) for v in pose][:4]) if pose is not None and len(pose) >= 4 else None
+                return rtype, base
         return None
 
     def info(self, rid: str, hint: dict) -> RobotInfo:
-        """RobotInfo for ``rid``: world description first, else a type whose joint names match."""
-        entry = self._world_entry(rid)
-        rtype, kind = "", ""
-        base: Placement | None = None
-        if entry is not None:
-            rtype = _field(entry, "type", "robot_type", default="") or ""
-            kind = _field(entry, "kind", default="") or ""
-            pos = _field(entry, "base_position", "position", default=None)
-            quat = _field(entry, "base_quaternion", "quaternion", default=None)
-            if pos is not None:
-                import numpy as np
-
-                q = np.asarray(quat if quat is not None else [1, 0, 0, 0], dtype=float)
-                base = Placement(np.asarray(pos, dtype=float), np.array([q[1], q[2], q[3], q[0]]))
+        """RobotInfo for ``rid``: world description, then scenes, then joint names."""
+        rtype, base = "", None
+        found = self._world_entry(rid)
         names = tuple(hint.get("joint_names", ()))
-        if not rtype and names:
-            for tname, t in self._robot_types().items():
-                if t["joints"] and tuple(t["joints"]) == names:
-                    rtype, kind = tname, t["kind"] or "arm"
+        if found is not None:
+            rtype, base = found
+        else:
+            for sr in self.scene_robots():
+                d = self.descriptions().get(sr.type)
+                if sr.id == rid and d is not None and (not names or d.joint_names == names):
+                    rtype, base = sr.type, placement_xyz_yaw(*sr.pose)
                     break
-        if not kind:
-            if rtype and rtype in self._robot_types():
-                kind = self._robot_types()[rtype]["kind"]
-            elif hint.get("mobile"):
-                kind = "mobile"
-        info = RobotInfo(rid, rtype, kind, base=base)
-        if kind == "arm" and rtype:
+        if not rtype and names:
+            rtype = next((n for n, d in self.descriptions().items() if d.joint_names == names), "")
+        d = self.descriptions().get(rtype)
+        kind = d.kind if d is not None else ("mobile" if hint.get("mobile") else "")
+        info = RobotInfo(rid, rtype, kind)
+        if kind == "arm":
             info.arm = self.arm_model(rtype)
-        if kind == "mobile" and rtype in self._robot_types():
-            d = self._robot_types()[rtype]["desc"]
-            radius = _field(d, "radius", "base_radius", default=None)
-            if radius:
-                info.radius = float(radius)
+            info.base = base
+        elif d is not None and d.base is not None:
+            info.radius = d.base.radius
+            info.height = d.base.height or info.height
+            info.lidar_offset = self.lidar_offset(d)
         return info
+
+    def lidar_offset(self, d: robots.RobotDescription) -> tuple[float, float, float]:
+        """Where the LIDAR sits on the base (from the robot's MJCF site), so scans are drawn from it."""
+        default = (0.0, 0.0, 0.3)
+        if d.lidar is None:
+            return default
+        try:
+            import mujoco
+
+            m = mujoco.MjModel.from_xml_path(str(d.mjcf_path))
+            sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, d.lidar.site)
+            if sid < 0:
+                return default
+            return tuple(float(v) for v in m.site_pos[sid])  # type: ignore[return-value]
+        except Exception as exc:
+            log.debug("no lidar offset for %s: %s", d.name, exc)
+            return default

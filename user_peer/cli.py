@@ -67,6 +67,7 @@ def export(
     src: Annotated[Path, typer.Argument(help="An MCAP recording (from robofabric record).")],
     out: Annotated[Path, typer.Option("-o", "--out", help="The .rrd file to write.")],
     max_hz: Annotated[float, typer.Option(help="Thin 3D and plot updates to this rate per stream (0: all).")] = 0.0,
+    scene: Annotated[Optional[str], typer.Option(help="Scene the recording was made in (places the arms), e.g. combined.")] = None,
 ) -> None:
     """Turn a recording into a Rerun .rrd with the live viewer's views."""
     from user_peer.export import ExportError, export_mcap
@@ -74,7 +75,7 @@ def export(
     if out.suffix != ".rrd":
         raise UserError(f"-o {out}: the file must end in .rrd")
     try:
-        stats = export_mcap(src, out, max_hz=max_hz)
+        stats = export_mcap(src, out, max_hz=max_hz, scene=scene)
     except ExportError as exc:
         raise UserError(str(exc)) from None
     if stats.messages == 0:

@@ -22,6 +22,10 @@ from user_peer.viewer import APP_ID
 __all__ = ["ExportStats", "ExportError", "read_mcap", "export_mcap"]
 
 
+SKIPPED_SCHEMAS = ("raw", "liveliness")
+"""Recorded samples that are not fabric messages (see fabric/recording/format.py): nothing to draw."""
+
+
 class ExportError(ValueError):
     """The recording cannot be read; the text says why."""
 
@@ -34,6 +38,15 @@ class ExportStats:
     robots: tuple[str, ...]
 
 
+def check_mcap(path: Path) -> None:
+    """Raise :class:`ExportError` unless ``path`` is a readable file starting with the MCAP magic."""
+    if not path.is_file():
+        raise ExportError(f"{path}: no such file")
+    with open(path, "rb") as f:
+        if f.read(8)[:5] != b"\x89MCAP":
+            raise ExportError(f"{path}: not an MCAP file")
+
+
 def read_mcap(path: Path, counts: dict[str, int] | None = None) -> Iterator[tuple[str, object, int]]:
     """(key, decoded message, log time ns) for every message of an MCAP file, in file order.
 
@@ -43,15 +56,13 @@ def read_mcap(path: Path, counts: dict[str, int] | None = None) -> Iterator[tupl
     from mcap.exceptions import McapError
     from mcap.reader import NonSeekingReader
 
-    if not path.is_file():
-        raise ExportError(f"{path}: no such file")
+    check_mcap(path)
     with open(path, "rb") as f:
-        if f.read(8)[:5] != b"\x89MCAP":
-            raise ExportError(f"{path}: not an MCAP file")
-        f.seek(0)
         reader = NonSeekingReader(f)
         try:
-            for _schema, channel, message in reader.iter_messages(log_time_order=False):
+            for schema, channel, message in reader.iter_messages(log_time_order=False):
+                if schema is not None and schema.name in SKIPPED_SCHEMAS:
+                    continue
                 try:
                     msg = decode(message.data)
                 except DecodeError:
@@ -66,12 +77,17 @@ def read_mcap(path: Path, counts: dict[str, int] | None = None) -> Iterator[tupl
                 counts["error"] = str(exc)  # type: ignore[assignment]
 
 
-def export_mcap(src: Path, dst: Path, *, max_hz: float = 0.0) -> ExportStats:
-    """Write ``dst`` (.rrd) from the recording ``src``; every message is drawn unless ``max_hz`` thins it."""
+def export_mcap(src: Path, dst: Path, *, max_hz: float = 0.0, scene: str | None = None) -> ExportStats:
+    """Write ``dst`` (.rrd) from the recording ``src``; every message is drawn unless ``max_hz`` thins it.
+
+    ``scene`` names the scene the recording was made in, which places the arms (a recording holds
+    streams, not the world description); without it the first scene placing each robot id is used.
+    """
+    check_mcap(src)
     dst.parent.mkdir(parents=True, exist_ok=True)
     rec = rr.RecordingStream(APP_ID, recording_id=f"export-{src.stem}")
     rec.save(str(dst), default_blueprint=blueprint())
-    catalog = RobotCatalog(None)
+    catalog = RobotCatalog(None, scene=scene)
     logger = WorldLogger(rec, robot_info=catalog.info, max_hz=max_hz)
     counts: dict[str, int] = {}
     n = drawn = 0

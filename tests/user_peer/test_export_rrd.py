@@ -1,0 +1,90 @@
+"""`robofabric export FILE.mcap -o FILE.rrd`: the viewer's entities, from a recording read with the mcap package."""
+
+import math
+import subprocess
+
+import numpy as np
+from mcap.writer import Writer
+
+from fabric import keys
+from fabric.codec import encode
+from fabric.messages import Header, JointState, OccupancyGrid, Path, Pose, Scan
+from fabric.testing import robofabric_cmd
+from user_peer.export import export_mcap
+from userpeer_rrd import entities_with_data, rows_per_entity
+
+ARM_JOINTS = ("joint_1", "joint_2", "joint_3", "joint_4", "joint_5", "joint_6")
+
+
+def write_recording(path, world="demo", n=40, truncate=False):
+    with open(path, "wb") as f:
+        w = Writer(f, chunk_size=4096)
+        w.start(profile="robofabric", library="test")
+        channels = {}
+        schemas = {}
+
+        def put(key, msg, t):
+            name = type(msg).__name__
+            if name not in schemas:
+                schemas[name] = w.register_schema(name=name, encoding="robofabric-msgpack", data=b"")
+            if key not in channels:
+                channels[key] = w.register_channel(topic=key, message_encoding="msgpack", schema_id=schemas[name])
+            w.add_message(channels[key], log_time=t, publish_time=t, data=encode(msg))
+
+        t0 = 1_700_000_000_000_000_000
+        for i in range(n):
+            t = t0 + i * 50_000_000
+            h = Header(stamp=i * 0.05, wall_ns=t, seq=i, source="sim")
+            put(keys.robot_joints(world, "arm1"), JointState(ARM_JOINTS, np.full(6, 0.02 * i), np.full(6, 0.4), h), t)
+            yaw = 0.05 * i
+            put(keys.robot_pose(world, "base1"), Pose([0.05 * i, 0, 0], [math.cos(yaw / 2), 0, 0, math.sin(yaw / 2)], header=h), t)
+            put(keys.robot_scan(world, "base1"), Scan.from_ranges(np.full(240, 2.5), angle_min=-1.178, angle_increment=2.356 / 239, range_max=12.0, header=h), t)
+        put(keys.map_key(world, "base1"), OccupancyGrid(0.05, [-5, -5, 0], np.zeros((100, 100), np.uint8)), t0)
+        put(keys.robot_path(world, "base1"), Path([0, 1, 2], [0, 1, 1], [0, 0.5, 0]), t0)
+        w.add_message(channels[keys.robot_pose(world, "base1")], log_time=t0, publish_time=t0, data=b"garbage")
+        if truncate:
+            f.flush()
+            return
+        w.finish()
+
+
+def test_export_draws_robots_scans_maps_and_paths(tmp_path):
+    src, dst = tmp_path / "rec.mcap", tmp_path / "rec.rrd"
+    write_recording(src)
+    stats = export_mcap(src, dst, scene="combined")
+    assert stats.messages == 122 and stats.bad == 1
+    assert stats.robots == ("arm1", "base1")
+    rows = rows_per_entity(dst)
+    links = entities_with_data(dst, "/world/robots/arm1/links/")
+    assert len([e for e in links if not e.endswith("/shape")]) == 7  # meca500's seven visual shapes, each moved by FK
+    assert all(rows[e] == 40 for e in links if not e.endswith("/shape"))
+    assert rows["/world/robots/arm1/skeleton"] == 40
+    assert rows["/world/robots/base1/scan"] == 40
+    assert rows["/world/robots/base1/base"] == 40
+    assert rows["/map/base1"] == 1
+    assert rows["/world/robots/base1/path"] == 1
+
+
+def test_export_cli_and_bad_files(tmp_path):
+    src, dst = tmp_path / "rec.mcap", tmp_path / "out.rrd"
+    write_recording(src, n=5)
+    ok = subprocess.run(robofabric_cmd("export", str(src), "-o", str(dst), "--scene", "combined"), capture_output=True, text=True, timeout=120)
+    assert ok.returncode == 0, ok.stderr
+    assert "exported 17 messages" in ok.stdout and "arm1" in ok.stdout
+    assert rows_per_entity(dst)["/world/robots/base1/scan"] == 5
+    junk = tmp_path / "junk.mcap"
+    junk.write_bytes(b"not an mcap file at all")
+    for bad in (junk, tmp_path / "missing.mcap"):
+        r = subprocess.run(robofabric_cmd("export", str(bad), "-o", str(dst)), capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2 and r.stderr.count("\n") <= 6, r.stderr
+        assert "error:" in r.stderr
+
+
+def test_export_reads_a_truncated_recording(tmp_path):
+    src, dst = tmp_path / "cut.mcap", tmp_path / "cut.rrd"
+    write_recording(src, n=40, truncate=True)
+    data = src.read_bytes()
+    src.write_bytes(data[: len(data) - 100])
+    stats = export_mcap(src, dst, scene="combined")
+    assert 0 < stats.messages < 122
+    assert rows_per_entity(dst)["/world/robots/base1/scan"] > 0
