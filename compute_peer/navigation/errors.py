@@ -1,0 +1,12 @@
+"""The one error type of mapping and planning.
+
+Every refusal (goal outside the map, start in an obstacle, empty map, no path)
+is a :class:`NavigationError` whose message is the reason a user reads; the
+service turns it into a :class:`fabric.session.ServiceError` with the same text.
+"""
+
+from __future__ import annotations
+
+
+class NavigationError(ValueError):
+    """A map or plan request cannot be satisfied; ``str(exc)`` says why."""

@@ -1,0 +1,37 @@
+"""Planar pose helpers shared by mapping and planning (pure numpy)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+TWO_PI = 2.0 * math.pi
+
+
+def wrap_angle(a: Any) -> Any:
+    """Angle(s) wrapped to [-pi, pi)."""
+    return (np.asarray(a) + math.pi) % TWO_PI - math.pi if isinstance(a, np.ndarray) else (a + math.pi) % TWO_PI - math.pi
+
+
+def yaw_from_quaternion(q: Any) -> float:
+    """Yaw (rotation about z) of a (w, x, y, z) quaternion."""
+    w, x, y, z = (float(v) for v in q)
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def quaternion_from_yaw(yaw: float) -> np.ndarray:
+    return np.array([math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)])
+
+
+def arc(x0: Any, y0: Any, th0: Any, kappa: float, s: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Poses after driving signed arc length ``s`` (negative = reverse) at curvature ``kappa``.
+
+    Exact for circles and straight lines, vectorised over ``s`` (and broadcast over the start).
+    """
+    s = np.asarray(s, dtype=np.float64)
+    th = th0 + kappa * s
+    if abs(kappa) < 1e-12:
+        return x0 + s * np.cos(th0), y0 + s * np.sin(th0), th + 0.0 * s
+    return x0 + (np.sin(th) - np.sin(th0)) / kappa, y0 - (np.cos(th) - np.cos(th0)) / kappa, th
