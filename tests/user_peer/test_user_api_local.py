@@ -1,0 +1,63 @@
+"""The user API's own parts over real Zenoh, no sim needed: token, scene objects, streams, refusals."""
+
+import numpy as np
+import pytest
+
+import user_peer
+from fabric import keys
+from fabric.messages import OwnershipRecord, Pose
+from fabric.testing import client_config, wait_until
+from user_peer.api import Arm, World
+from user_peer.services import RobotEntry
+
+
+@pytest.fixture
+def alice(world, router):
+    w = World(client_config(world, router[1]), "alice", timeout=2.0)
+    yield w
+    w.close()
+
+
+def test_user_peer_declares_a_user_token_named_by_its_id(alice, connect):
+    tool = connect()
+    wait_until(lambda: ("user", "alice") in tool.live_peers("user"), what="alice's token")
+
+
+def test_scene_object_pose_reaches_other_peers_and_iterators(alice, connect, world):
+    tool = connect()
+    got = []
+    tool.subscribe(keys.object_pose(world, "target"), lambda k, m: got.append(m))
+    with alice.stream("object/target/pose", timeout=3.0, limit=1) as it:
+        wait_until(lambda: (alice.object("target").set_pose([0.2, 0.1, 0.3]), got)[1], what="pose at the tool")
+        samples = list(it)
+    assert np.allclose(got[-1].position, [0.2, 0.1, 0.3])
+    assert samples and samples[0].key == keys.object_pose(world, "target")
+    pose = alice.object("goal").set_pose([1.0, 2.0, 0.0], yaw=np.pi / 2)
+    assert np.allclose(pose.quaternion, [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)])
+
+
+def test_commands_are_refused_locally_without_ownership(alice, connect, world):
+    arm = Arm(alice, RobotEntry("arm1", "meca500", "arm", tuple(f"joint_{i}" for i in range(1, 7)), (-1.0,) * 6, (1.0,) * 6))
+    with pytest.raises(user_peer.NotOwner, match="does not own arm1"):
+        arm.move_joints(np.zeros(6), wait=False)
+    # The replica follows the authority's records: owned by bob, still refused, and the reason says who.
+    auth = connect("sim", "sim-test")
+    auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="bob", epoch=3))
+    wait_until(lambda: arm.owner == "bob", what="replica of bob's record")
+    with pytest.raises(user_peer.NotOwner, match="owner: bob"):
+        arm.move_joints(np.zeros(6), wait=False)
+    # Once the record names alice, the command goes out with her epoch.
+    sent = []
+    auth.subscribe(keys.robot_cmd(world, "arm1", "joints"), lambda k, m: sent.append(m))
+    auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="alice", epoch=4))
+    wait_until(lambda: arm.is_owner, what="alice owns arm1")
+    wait_until(lambda: (arm.move_joints([0.1] * 6, wait=False), sent)[1], what="command at the authority")
+    assert sent[0].user == "alice" and sent[0].epoch == 4 and np.allclose(sent[0].body.q, 0.1)
+    with pytest.raises(user_peer.Unreachable, match="outside its limits"):
+        arm.move_joints([2.0] + [0.0] * 5, wait=False)
+
+
+def test_waiting_without_data_times_out_with_a_reason(alice):
+    arm = Arm(alice, RobotEntry("arm9", "meca500", "arm", ("j",), (-1.0,), (1.0,)))
+    with pytest.raises(user_peer.Timeout, match="no joints from arm9"):
+        arm.wait_for("joints", timeout=0.3)

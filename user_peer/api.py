@@ -1,0 +1,486 @@
+"""The Python API for users: a world, its robots and scene objects, as plain objects and blocking calls.
+
+The replacement for the paper's MATLAB scripts::
+
+    import user_peer
+    with user_peer.connect(world="demo", user="alice") as world:
+        arm = world.robot("arm1")
+        arm.request()
+        arm.move_to([3.15, 0.0, 1.0])      # IK by a compute peer, then the joints
+        print(arm.joints)
+
+A :class:`World` is one user peer: one Zenoh session with a liveliness token
+``rf/{world}/peer/user/{user}`` (ownership leases rely on it), replicas of the
+latest joints, pose, scan, path and ownership record of every robot it has
+been asked about, and the services of compute peers. Blocking calls wait on
+those replicas with deadlines and raise :class:`NotOwner`, :class:`Unreachable`
+or :class:`Timeout` with a reason; nothing blocks forever. Works the same in a
+script and in Jupyter (no event loop of its own: Zenoh's threads feed it).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from typing import Any, Callable, Iterable, Sequence
+
+import numpy as np
+
+from fabric import keys
+from fabric.config import FabricConfig
+from fabric.messages import (
+    Command,
+    Event,
+    JointState,
+    JointTarget,
+    OccupancyGrid,
+    OwnershipRecord,
+    Path,
+    Pose,
+    Reset,
+    Scan,
+    Stop,
+    Twist,
+)
+from fabric.session import Fabric, ServiceError
+from user_peer import services
+from user_peer.errors import NotOwner, Timeout, Unreachable
+from user_peer.ownership_link import OwnershipLink
+from user_peer.streams import StreamIterator, Subscription
+
+log = logging.getLogger("robofabric.user")
+
+__all__ = ["connect", "World", "Robot", "Arm", "Base", "SceneObject"]
+
+
+def _wrap_angle(a: float) -> float:
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+class _Latest:
+    """The latest message per key, with a condition to wait for a newer one."""
+
+    def __init__(self) -> None:
+        self._values: dict[str, tuple[Any, int]] = {}
+        self._cond = threading.Condition()
+        self._gen = 0
+
+    def put(self, key: str, msg: Any) -> None:
+        with self._cond:
+            self._gen += 1
+            self._values[key] = (msg, self._gen)
+            self._cond.notify_all()
+
+    def get(self, key: str) -> Any:
+        with self._cond:
+            v = self._values.get(key)
+            return v[0] if v else None
+
+    def wait_for(self, predicate: Callable[[], Any], timeout: float) -> Any:
+        """Re-evaluate ``predicate`` on every new message until it is truthy or ``timeout`` passes."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                value = predicate()
+                if value:
+                    return value
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return value
+                self._cond.wait(min(left, 0.1))
+
+
+class World:
+    """A user's handle on one world. A context manager; ``close()`` is idempotent."""
+
+    def __init__(self, config: FabricConfig, user: str, *, timeout: float = 5.0) -> None:
+        self.user = keys.validate_id(user, what="user id")
+        self.name = config.world
+        self.timeout = timeout
+        self.fabric = Fabric(config, kind="user", peer_id=self.user)
+        self.latest = _Latest()
+        self.events: list[Event] = []
+        self._events_lock = threading.Lock()
+        self._robots: dict[str, Robot] = {}
+        self._objects: dict[str, SceneObject] = {}
+        self._info: Any = None
+        self.fabric.subscribe(f"{keys.world_root(self.name)}/robot/*/joints", self.latest.put)
+        self.fabric.subscribe(f"{keys.world_root(self.name)}/robot/*/pose", self.latest.put)
+        self.fabric.subscribe(f"{keys.world_root(self.name)}/robot/*/scan", self.latest.put)
+        self.fabric.subscribe(f"{keys.world_root(self.name)}/robot/*/path", self.latest.put)
+        self.fabric.subscribe(f"{keys.world_root(self.name)}/object/*/pose", self.latest.put)
+        self.fabric.subscribe(f"{keys.world_root(self.name)}/map/*", self.latest.put)
+        self.fabric.subscribe(keys.event_all(self.name), self._on_event, expected=Event)
+        self.ownership = OwnershipLink(self.fabric, self.user, on_record=self.latest.put)
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def close(self) -> None:
+        self.ownership.close()
+        self.fabric.close()
+
+    def __enter__(self) -> "World":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"<World {self.name!r} as {self.user!r}>"
+
+    # ------------------------------------------------------------------ what is there
+
+    def info(self, *, refresh: bool = False) -> Any:
+        """The sim peer's world description (robots, types, limits, sensors)."""
+        if self._info is None or refresh:
+            try:
+                self._info = services.world_info(self.fabric, timeout=self.timeout)
+            except ServiceError as exc:
+                raise Timeout(f"no world description for {self.name!r}: {exc.reason} (is a sim peer running?)") from None
+        return self._info
+
+    def robots(self) -> list[str]:
+        """Ids of the robots in the world (from the sim's description)."""
+        return sorted(r.id for r in services.robot_entries(self.info()))
+
+    def robot(self, robot_id: str) -> "Robot":
+        """An :class:`Arm` or a :class:`Base`, by the robot's kind in the world description."""
+        if robot_id not in self._robots:
+            entry = next((r for r in services.robot_entries(self.info()) if r.id == robot_id), None)
+            if entry is None:
+                raise Unreachable(f"no robot {robot_id!r} in world {self.name!r}; robots: {', '.join(self.robots()) or 'none'}")
+            cls = Arm if entry.kind == "arm" else Base
+            self._robots[robot_id] = cls(self, entry)
+        return self._robots[robot_id]
+
+    def object(self, object_id: str) -> "SceneObject":
+        """A scene object (the IK target sphere, the goal pointer): anyone may move it."""
+        keys.validate_id(object_id, what="object id")
+        if object_id not in self._objects:
+            self._objects[object_id] = SceneObject(self, object_id)
+        return self._objects[object_id]
+
+    # ------------------------------------------------------------------ streams
+
+    def on(self, key_expr: str, callback: Callable[[str, Any], None]) -> Subscription:
+        """Call ``callback(key, message)`` for each message on ``key_expr`` (relative keys get ``rf/WORLD/``)."""
+        return Subscription(self.fabric, self._abs(key_expr), callback)
+
+    def stream(self, key_expr: str, *, timeout: float | None = 5.0, limit: int | None = None) -> StreamIterator:
+        """Iterate over messages on ``key_expr``; stops after ``timeout`` s of silence or ``limit`` messages."""
+        return StreamIterator(self.fabric, self._abs(key_expr), timeout=timeout, limit=limit)
+
+    def _abs(self, key_expr: str) -> str:
+        return key_expr if key_expr.startswith(keys.PREFIX + "/") else f"{keys.world_root(self.name)}/{key_expr}"
+
+    def _on_event(self, key: str, ev: Event) -> None:
+        with self._events_lock:
+            self.events.append(ev)
+            if len(self.events) > 1000:
+                del self.events[:500]
+        self.latest.put(key, ev)
+
+    def rejections(self, robot: str, since_ns: int) -> list[Event]:
+        """Events refusing this user's commands to ``robot`` since a wall time."""
+        with self._events_lock:
+            return [
+                e for e in self.events
+                if e.object == robot and e.user == self.user and e.header.wall_ns >= since_ns
+                and e.kind in ("reject", "rejected", "command_rejected", "not_owner", "stale_epoch")
+            ]
+
+
+class Robot:
+    """What every robot offers: ownership, stop, reset, its streams."""
+
+    kind = ""
+
+    def __init__(self, world: World, entry: services.RobotEntry) -> None:
+        self.world = world
+        self.id = entry.id
+        self.type = entry.type
+        self.entry = entry
+        self._w = world.name
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.id!r} ({self.type}) owner={self.owner or '-'}>"
+
+    # ------------------------------------------------------------------ ownership
+
+    @property
+    def record(self) -> OwnershipRecord | None:
+        return self.world.ownership.record(self.id)
+
+    @property
+    def owner(self) -> str:
+        rec = self.record
+        return rec.owner if rec else ""
+
+    @property
+    def is_owner(self) -> bool:
+        return self.owner == self.world.user
+
+    def request(self, *, timeout: float | None = None, wait: bool = False) -> int:
+        """Ask to own the robot; returns the epoch. ``wait``: stay queued until granted or ``timeout``.
+
+        Raises :class:`NotOwner` with the authority's reason when denied (in motion, owned by X, queued).
+        """
+        return self.world.ownership.request(self.id, timeout=timeout or self.world.timeout, wait=wait)
+
+    def release(self) -> None:
+        self.world.ownership.release(self.id, timeout=self.world.timeout)
+
+    # ------------------------------------------------------------------ commands
+
+    def send(self, command: str, body: Any) -> None:
+        """Send a command under this user's current epoch; :class:`NotOwner` if we know we do not own it."""
+        rec = self.record
+        if rec is None or rec.owner != self.world.user:
+            who = rec.owner if rec and rec.owner else "nobody"
+            raise NotOwner(f"{self.world.user} does not own {self.id} (owner: {who}); call request() first")
+        key = keys.robot_cmd(self._w, self.id, command)
+        self.world.fabric.publish(key, Command(self.world.user, rec.epoch, body, self.world.fabric.header(key)))
+
+    def stop(self) -> None:
+        key = keys.robot_cmd(self._w, self.id, "stop")
+        self.send("stop", Stop(self.world.fabric.header(key)))
+
+    def reset(self) -> None:
+        key = keys.robot_cmd(self._w, self.id, "reset")
+        self.send("reset", Reset(self.world.fabric.header(key)))
+
+    def _check_rejected(self, since_ns: int) -> None:
+        rej = self.world.rejections(self.id, since_ns)
+        if rej:
+            raise NotOwner(f"{self.id} refused the command: {rej[-1].reason}")
+
+    # ------------------------------------------------------------------ streams
+
+    def latest(self, stream: str) -> Any:
+        return self.world.latest.get(keys.robot_stream(self._w, self.id, stream))
+
+    def on(self, stream: str, callback: Callable[[str, Any], None]) -> Subscription:
+        """``callback(key, message)`` on each message of one of this robot's streams (joints, pose, scan, path)."""
+        return self.world.on(keys.robot_stream(self._w, self.id, stream), callback)
+
+    def stream(self, stream: str, **kw: Any) -> StreamIterator:
+        return self.world.stream(keys.robot_stream(self._w, self.id, stream), **kw)
+
+    def wait_for(self, stream: str, *, timeout: float | None = None) -> Any:
+        """The latest message of a stream, waiting for a first one if none has arrived yet."""
+        key = keys.robot_stream(self._w, self.id, stream)
+        msg = self.world.latest.wait_for(lambda: self.world.latest.get(key), timeout or self.world.timeout)
+        if msg is None:
+            raise Timeout(f"no {stream} from {self.id} within {timeout or self.world.timeout:.1f} s (is the sim running?)")
+        return msg
+
+
+class Arm(Robot):
+    """A robot arm: joint moves and Cartesian moves through a compute peer's IK."""
+
+    kind = "arm"
+
+    @property
+    def joint_state(self) -> JointState | None:
+        return self.latest("joints")
+
+    @property
+    def joints(self) -> np.ndarray | None:
+        """The latest joint positions (rad), or None before the first JointState."""
+        js = self.joint_state
+        return None if js is None else np.array(js.q)
+
+    @property
+    def flange(self) -> Pose | None:
+        return self.latest("pose")
+
+    def move_joints(
+        self, q: Sequence[float], *, wait: bool = True, tol: float = 1e-3, timeout: float = 20.0, speed_scale: float = 1.0
+    ) -> np.ndarray:
+        """Command joint targets (rad). With ``wait``, block until within ``tol`` of them and still."""
+        target = np.asarray(q, dtype=float)
+        n = len(self.entry.joint_names)
+        if target.shape != (n,):
+            raise ValueError(f"{self.id} has {n} joints, got {target.shape[0] if target.ndim else 0} values")
+        if not np.isfinite(target).all():
+            raise ValueError(f"joint targets must be finite, got {target.tolist()}")
+        lo, hi = np.asarray(self.entry.lower), np.asarray(self.entry.upper)
+        if lo.shape == target.shape and ((target < lo - 1e-9) | (target > hi + 1e-9)).any():
+            j = int(np.flatnonzero((target < lo - 1e-9) | (target > hi + 1e-9))[0])
+            raise Unreachable(
+                f"{self.entry.joint_names[j]} target {math.degrees(target[j]):.1f} deg is outside its limits "
+                f"[{math.degrees(lo[j]):.1f}, {math.degrees(hi[j]):.1f}] deg"
+            )
+        t0 = time.time_ns()
+        key = keys.robot_cmd(self._w, self.id, "joints")
+        self.send("joints", JointTarget(target, speed_scale, self.world.fabric.header(key)))
+        if not wait:
+            return target
+        return self._wait_joints(target, tol, timeout, t0)
+
+    def _wait_joints(self, target: np.ndarray, tol: float, timeout: float, t0: int) -> np.ndarray:
+        key = keys.robot_joints(self._w, self.id)
+
+        def done() -> bool:
+            self._check_rejected(t0)
+            js = self.world.latest.get(key)
+            if js is None or js.header.wall_ns < t0:
+                return False
+            return bool(np.max(np.abs(np.asarray(js.q) - target)) <= tol and np.max(np.abs(js.dq)) < 1e-2)
+
+        if not self.world.latest.wait_for(done, timeout):
+            js = self.world.latest.get(key)
+            err = float(np.max(np.abs(np.asarray(js.q) - target))) if js is not None else float("nan")
+            raise Timeout(f"{self.id} did not reach its joint targets within {timeout:.1f} s (max error {math.degrees(err):.2f} deg)")
+        return np.array(self.world.latest.get(key).q)
+
+    def ik(self, xyz: Sequence[float], quaternion: Sequence[float] | None = None) -> np.ndarray:
+        """Joint angles placing the flange at ``xyz`` (world frame, m), from a compute peer."""
+        try:
+            return services.ik(self.world.fabric, self.id, xyz, quaternion, self.joints, timeout=self.world.timeout)
+        except ServiceError as exc:
+            raise Unreachable(f"IK for {self.id} at {list(map(float, xyz))}: {exc.reason}") from None
+
+    def move_to(
+        self, xyz: Sequence[float], quaternion: Sequence[float] | None = None, *, wait: bool = True, tol: float = 2e-3, timeout: float = 20.0
+    ) -> np.ndarray:
+        """Move the flange to ``xyz`` (world frame, m) through IK; :class:`Unreachable` if IK refuses."""
+        q = self.ik(xyz, quaternion)
+        return self.move_joints(q, wait=wait, tol=tol if tol < 1e-2 else 1e-3, timeout=timeout)
+
+
+class Base(Robot):
+    """A mobile base: twist driving, mapping, planning and path following."""
+
+    kind = "mobile"
+
+    @property
+    def pose(self) -> Pose | None:
+        return self.latest("pose")
+
+    @property
+    def scan(self) -> Scan | None:
+        return self.latest("scan")
+
+    @property
+    def xy_theta(self) -> tuple[float, float, float] | None:
+        p = self.pose
+        if p is None:
+            return None
+        w, x, y, z = (float(v) for v in p.quaternion)
+        return float(p.position[0]), float(p.position[1]), math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+    def twist(self, v: float, omega: float) -> None:
+        """One twist command (m/s, rad/s); the sim keeps it until the next one or a stop."""
+        key = keys.robot_cmd(self._w, self.id, "twist")
+        self.send("twist", Twist(float(v), float(omega), self.world.fabric.header(key)))
+
+    def drive(self, v: float, omega: float, duration: float, *, rate: float = 10.0) -> tuple[float, float, float] | None:
+        """Drive at (v, omega) for ``duration`` seconds (repeating the twist at ``rate`` Hz), then stop."""
+        t0 = time.time_ns()
+        end = time.monotonic() + duration
+        try:
+            while True:
+                self.twist(v, omega)
+                self._check_rejected(t0)
+                left = end - time.monotonic()
+                if left <= 0:
+                    break
+                time.sleep(min(left, 1.0 / rate))
+        finally:
+            try:
+                self.twist(0.0, 0.0)
+            except NotOwner:
+                pass
+        return self.xy_theta
+
+    def build_map(self, *, name: str | None = None, timeout: float | None = None) -> OccupancyGrid:
+        """Ask a compute peer for the map built from this robot's scans so far."""
+        try:
+            return services.build_map(self.world.fabric, self.id, name=name, timeout=timeout or max(self.world.timeout, 10.0))
+        except ServiceError as exc:
+            raise Unreachable(f"map for {self.id}: {exc.reason}") from None
+
+    def plan_to(self, x: float, y: float, theta: float = 0.0, *, planner: str = "hybrid_astar", timeout: float | None = None) -> Path:
+        """A collision-free path from the robot's pose to (x, y, theta), from a compute peer."""
+        try:
+            return services.plan(self.world.fabric, self.id, (x, y, theta), planner=planner, timeout=timeout or max(self.world.timeout, 10.0))
+        except ServiceError as exc:
+            raise Unreachable(f"no path for {self.id} to ({x:.2f}, {y:.2f}, {theta:.2f}): {exc.reason}") from None
+
+    def follow(self, path: Path, *, wait: bool = True, tol: float = 0.25, timeout: float = 120.0) -> tuple[float, float, float] | None:
+        """Send ``path`` to the sim's follower; with ``wait``, block until the base stops near its end."""
+        if len(path) == 0:
+            raise ValueError("cannot follow an empty path")
+        t0 = time.time_ns()
+        key = keys.robot_cmd(self._w, self.id, "path")
+        body = Path(path.x, path.y, path.theta, path.frame, self.world.fabric.header(key))
+        self.send("path", body)
+        if not wait:
+            return self.xy_theta
+        gx, gy = float(path.x[-1]), float(path.y[-1])
+        pkey = keys.robot_pose(self._w, self.id)
+
+        def arrived() -> bool:
+            self._check_rejected(t0)
+            p = self.world.latest.get(pkey)
+            if p is None or p.header.wall_ns < t0:
+                return False
+            near = math.hypot(p.position[0] - gx, p.position[1] - gy) <= tol
+            still = math.hypot(p.linear[0], p.linear[1]) < 0.02 and abs(p.angular[2]) < 0.05
+            return near and still
+
+        if not self.world.latest.wait_for(arrived, timeout):
+            xy = self.xy_theta
+            where = f"({xy[0]:.2f}, {xy[1]:.2f})" if xy else "unknown"
+            raise Timeout(f"{self.id} did not reach the end of its path ({gx:.2f}, {gy:.2f}) within {timeout:.0f} s; it is at {where}")
+        return self.xy_theta
+
+
+class SceneObject:
+    """A scene object (policy ``scene``: anyone writes, last writer wins)."""
+
+    def __init__(self, world: World, object_id: str) -> None:
+        self.world = world
+        self.id = object_id
+        self.key = keys.object_pose(world.name, object_id)
+
+    def __repr__(self) -> str:
+        return f"<SceneObject {self.id!r}>"
+
+    @property
+    def pose(self) -> Pose | None:
+        return self.world.latest.get(self.key)
+
+    def set_pose(self, position: Sequence[float], quaternion: Sequence[float] = (1.0, 0.0, 0.0, 0.0), *, yaw: float | None = None) -> Pose:
+        """Move the object to ``position`` (m, world frame); ``yaw`` (rad) overrides ``quaternion``."""
+        if yaw is not None:
+            quaternion = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+        pose = Pose(np.asarray(position, dtype=float), np.asarray(quaternion, dtype=float), header=self.world.fabric.header(self.key))
+        self.world.fabric.publish(self.key, pose)
+        self.world.latest.put(self.key, pose)
+        return pose
+
+    def on(self, callback: Callable[[str, Any], None]) -> Subscription:
+        return self.world.on(self.key, callback)
+
+
+def connect(
+    world: str | None = None,
+    connect: Iterable[str] | str | None = None,
+    user: str | None = None,
+    *,
+    profile: str | None = None,
+    zenoh_config: str | None = None,
+    timeout: float = 5.0,
+) -> World:
+    """Join a world as ``user`` (default: $USER). ``connect``: router endpoints, e.g. ``["tcp/10.0.0.5:7447"]``."""
+    import getpass
+
+    if isinstance(connect, str):
+        connect = [connect]
+    cfg = FabricConfig.resolve(world=world, profile=profile, connect=list(connect or ()), config_file=zenoh_config)
+    uid = user or "".join(c if c.isalnum() or c in "-_" else "-" for c in getpass.getuser()) or "user"
+    return World(cfg, uid, timeout=timeout)

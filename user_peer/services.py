@@ -1,0 +1,113 @@
+"""Calls to the services other peers serve: the sim's world description, the compute peer's IK, map and plan.
+
+The message types belong to the peers that serve them (``sim_peer.messages``,
+``compute_peer.messages``, ``compute_peer.navigation.messages``); this module
+is the one place that builds their requests and reads their replies, so the
+API above it deals only in numpy arrays and fabric messages.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+import robots
+from fabric import keys
+from fabric.messages import OccupancyGrid, Path
+from fabric.session import Fabric, ServiceError
+
+__all__ = ["RobotEntry", "robot_entries", "world_info", "ik", "build_map", "plan"]
+
+
+def _module(name: str) -> Any:
+    try:
+        return importlib.import_module(name)
+    except ImportError as exc:
+        raise ServiceError(f"{name} is not available in this installation ({exc})") from None
+
+
+def _get(obj: Any, *names: str, default: Any = None) -> Any:
+    for n in names:
+        if hasattr(obj, n):
+            return getattr(obj, n)
+        if isinstance(obj, dict) and n in obj:
+            return obj[n]
+    return default
+
+
+@dataclass(frozen=True, slots=True)
+class RobotEntry:
+    """One robot of a world, as the user API needs it."""
+
+    id: str
+    type: str
+    kind: str
+    joint_names: tuple[str, ...] = ()
+    lower: tuple[float, ...] = ()
+    upper: tuple[float, ...] = ()
+    max_speed: tuple[float, ...] = ()
+
+
+def robot_entries(info: Any) -> list[RobotEntry]:
+    """Robots of a world description; what the description leaves out comes from ``robots.load(type)``."""
+    out = []
+    for r in _get(info, "robots", default=()) or ():
+        rid = str(_get(r, "id", "name"))
+        rtype = str(_get(r, "type", "robot_type", default="") or "")
+        try:
+            d = robots.load(rtype) if rtype else None
+        except robots.DescriptionError:
+            d = None
+        kind = str(_get(r, "kind", default="") or (d.kind if d else ""))
+        names = tuple(_get(r, "joint_names", "joints", default=()) or (d.joint_names if d else ()))
+        lower = tuple(float(v) for v in (_get(r, "lower", default=None) or (d.lower if d else ())))
+        upper = tuple(float(v) for v in (_get(r, "upper", default=None) or (d.upper if d else ())))
+        speed = tuple(float(v) for v in (_get(r, "max_speed", default=None) or (d.max_speed if d else ())))
+        out.append(RobotEntry(rid, rtype, kind, names, lower, upper, speed))
+    return out
+
+
+def world_info(fab: Fabric, *, timeout: float = 5.0) -> Any:
+    """The sim peer's world description (``rf/{world}/srv/world``)."""
+    _module("sim_peer.messages")  # registers WorldInfo with the codec
+    return fab.call(keys.srv(fab.world, "world"), timeout=timeout)
+
+
+def ik(fab: Fabric, robot: str, xyz: Sequence[float], quaternion: Sequence[float] | None, seed: Any, *, timeout: float = 5.0) -> np.ndarray:
+    """Joint angles for a flange position (world frame) from a compute peer."""
+    m = _module("compute_peer.messages")
+    req = m.IKRequest.make(xyz, quaternion, seed) if hasattr(m.IKRequest, "make") else m.IKRequest(
+        np.asarray(xyz, dtype=float),
+        np.asarray(quaternion if quaternion is not None else [], dtype=float),
+        np.asarray(seed if seed is not None else [], dtype=float),
+    )
+    reply = fab.call(keys.srv(fab.world, "ik", robot), req, timeout=timeout)
+    q = _get(reply, "q", "joints")
+    if q is None:
+        raise ServiceError(f"IK reply without joints: {reply!r}")
+    return np.asarray(q, dtype=float)
+
+
+def build_map(fab: Fabric, robot: str, *, name: str | None = None, timeout: float = 10.0) -> OccupancyGrid:
+    """The occupancy grid a compute peer built from ``robot``'s scans."""
+    m = _module("compute_peer.navigation.messages")
+    req = m.MapRequest(robot=robot, name=name or robot) if hasattr(m, "MapRequest") else None
+    reply = fab.call(keys.srv(fab.world, "map", robot), req, timeout=timeout)
+    grid = reply if isinstance(reply, OccupancyGrid) else _get(reply, "grid", "map")
+    if not isinstance(grid, OccupancyGrid):
+        raise ServiceError(f"map reply without a grid: {type(reply).__name__}")
+    return grid
+
+
+def plan(fab: Fabric, robot: str, goal: tuple[float, float, float], *, planner: str = "hybrid_astar", timeout: float = 10.0) -> Path:
+    """A path from ``robot``'s pose to ``goal`` from a compute peer."""
+    m = _module("compute_peer.navigation.messages")
+    req = m.PlanRequest(goal=np.asarray(goal, dtype=float), planner=planner)
+    reply = fab.call(keys.srv(fab.world, "plan", robot), req, timeout=timeout)
+    path = reply if isinstance(reply, Path) else _get(reply, "path")
+    if not isinstance(path, Path):
+        raise ServiceError(f"plan reply without a path: {type(reply).__name__}")
+    return path
