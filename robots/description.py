@@ -68,6 +68,7 @@ class UltrasonicSpec:
     range_min: float
     range_max: float
     noise_std: float = 0.0
+    center: tuple[float, float] = (0.0, 0.0)  # ring centre in the robot frame (x, y)
 
 
 @dataclass(frozen=True, slots=True)
@@ -269,6 +270,7 @@ def load(name: str) -> RobotDescription:
                 range_min=_num(us, "range_min", w, 0.0),
                 range_max=_num(us, "range_max", w),
                 noise_std=_num(us, "noise_std", w, 0.0),
+                center=_floats(us, "center", w, 2) if "center" in us else (0.0, 0.0),  # type: ignore[arg-type]
             )
     base_joints = tuple(r.get("base_joints", ()))
     if kind == "mobile" and len(base_joints) != 3:

@@ -1,0 +1,212 @@
+"""Kinematic controllers: joint position control for arms, twist control for differential-drive bases.
+
+Pure numpy, no MuJoCo and no Zenoh: inputs are commands and a time step,
+outputs are the new joint positions and velocities. The world writes them into
+MuJoCo; tests drive them directly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from robots import BaseSpec
+
+MOVING_JOINT_SPEED = 1e-3  # rad/s: above this a joint counts as moving (the ownership gate's "in motion")
+MOVING_BASE_SPEED = 1e-3  # m/s and rad/s
+ABSURD_FACTOR = 5.0  # a twist above this multiple of the robot's limits is refused, not clamped
+
+
+class CommandRejected(ValueError):
+    """A command the robot cannot take at all; ``reason`` is a short machine-friendly tag, the text says why."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(detail)
+        self.reason = reason
+
+
+@dataclass(frozen=True, slots=True)
+class Clamp:
+    """What a command asked for outside the robot's limits and what was applied instead."""
+
+    what: tuple[str, ...]
+    requested: tuple[float, ...]
+    applied: tuple[float, ...]
+
+
+def _finite_vector(values, n: int, what: str) -> np.ndarray:
+    try:
+        q = np.asarray(values, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise CommandRejected("bad_value", f"{what} must be numbers") from None
+    if q.shape[0] != n:
+        raise CommandRejected("wrong_joint_count", f"{what} has {q.shape[0]} values, the robot has {n} joints")
+    if not np.isfinite(q).all():
+        raise CommandRejected("not_finite", f"{what} contains NaN or infinity")
+    return q
+
+
+class ArmController:
+    """Moves joints toward a target in a straight line in joint space, no joint faster than its limit.
+
+    All joints start and arrive together (the slowest joint sets the pace), like a
+    robot controller's joint move. Targets outside the range are clamped to it.
+    """
+
+    def __init__(self, names, lower, upper, max_speed) -> None:
+        self.names = tuple(names)
+        self.lower = np.asarray(lower, dtype=np.float64)
+        self.upper = np.asarray(upper, dtype=np.float64)
+        self.max_speed = np.asarray(max_speed, dtype=np.float64)
+        n = len(self.names)
+        self.q = np.clip(np.zeros(n), self.lower, self.upper)
+        self.dq = np.zeros(n)
+        self.target = self.q.copy()
+        self.scale = 1.0
+
+    @property
+    def dof(self) -> int:
+        return len(self.names)
+
+    def set_target(self, q, speed_scale: float = 1.0) -> Clamp | None:
+        """Aim at ``q``; raise :class:`CommandRejected` for a wrong length or non-finite values; report clamps."""
+        q = _finite_vector(q, self.dof, "joint target")
+        if not (math.isfinite(speed_scale) and 0 < speed_scale <= 1):
+            raise CommandRejected("bad_speed_scale", f"speed_scale must be in (0, 1], got {speed_scale}")
+        applied = np.clip(q, self.lower, self.upper)
+        self.target = applied
+        self.scale = float(speed_scale)
+        bad = np.flatnonzero(applied != q)
+        if bad.size == 0:
+            return None
+        return Clamp(tuple(self.names[i] for i in bad), tuple(float(q[i]) for i in bad), tuple(float(applied[i]) for i in bad))
+
+    def stop(self) -> None:
+        """Hold where the joints are now."""
+        self.target = self.q.copy()
+        self.dq[:] = 0.0
+
+    def reset(self) -> None:
+        """Go back to zero (within range), at the speed limits."""
+        self.target = np.clip(np.zeros(self.dof), self.lower, self.upper)
+        self.scale = 1.0
+
+    def teleport(self, q) -> None:
+        """Put the joints at ``q`` at once (clamped), holding there: for restoring a known state."""
+        self.q = np.clip(np.asarray(q, dtype=np.float64), self.lower, self.upper)
+        self.target = self.q.copy()
+        self.dq[:] = 0.0
+
+    def step(self, dt: float) -> None:
+        err = self.target - self.q
+        vmax = self.max_speed * self.scale
+        duration = float(np.max(np.abs(err) / vmax)) if err.size else 0.0
+        if duration <= dt:
+            self.dq = err / dt if duration > 0 else np.zeros_like(err)
+            self.q = self.target.copy()
+        else:
+            self.dq = err / duration
+            self.q = self.q + self.dq * dt
+
+    @property
+    def moving(self) -> bool:
+        return bool(np.any(np.abs(self.dq) > MOVING_JOINT_SPEED))
+
+
+def wrap_angle(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+class BaseController:
+    """A differential-drive base driven by (v, omega), with speed and acceleration limits.
+
+    The pose (x, y, yaw) is that of the midpoint of the wheel axle, the point the
+    base turns about; an in-place turn leaves it where it is. A path follower, when
+    set, supplies the desired twist each step instead of the last twist command.
+    """
+
+    def __init__(self, spec: BaseSpec, pose: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+        self.spec = spec
+        self.home = tuple(float(p) for p in pose)
+        self.x, self.y, self.yaw = self.home
+        self.v = 0.0
+        self.omega = 0.0
+        self.v_cmd = 0.0
+        self.omega_cmd = 0.0
+        self.wheels = np.zeros(2)  # left, right wheel angles (rad)
+        self.wheel_speeds = np.zeros(2)
+        self.follower = None  # anything with step(x, y, yaw, v, dt) -> (v, omega, done)
+
+    def twist(self, v: float, omega: float) -> Clamp | None:
+        """Drive at (v, omega) until told otherwise; absurd values are refused, excessive ones clamped."""
+        s = self.spec
+        if not (math.isfinite(v) and math.isfinite(omega)):
+            raise CommandRejected("not_finite", "twist contains NaN or infinity")
+        if abs(v) > ABSURD_FACTOR * s.max_speed or abs(omega) > ABSURD_FACTOR * s.max_omega:
+            raise CommandRejected(
+                "absurd_twist",
+                f"twist ({v:g} m/s, {omega:g} rad/s) is beyond {ABSURD_FACTOR:g}x the limits ({s.max_speed:g} m/s, {s.max_omega:g} rad/s)",
+            )
+        self.follower = None
+        av = max(-s.max_speed, min(s.max_speed, v))
+        aw = max(-s.max_omega, min(s.max_omega, omega))
+        self.v_cmd, self.omega_cmd = av, aw
+        if (av, aw) == (v, omega):
+            return None
+        names, req, app = [], [], []
+        if av != v:
+            names.append("v"), req.append(v), app.append(av)
+        if aw != omega:
+            names.append("omega"), req.append(omega), app.append(aw)
+        return Clamp(tuple(names), tuple(req), tuple(app))
+
+    def follow(self, follower) -> None:
+        self.follower = follower
+
+    def stop(self) -> None:
+        """Stop at once and forget any path."""
+        self.follower = None
+        self.v_cmd = self.omega_cmd = 0.0
+        self.v = self.omega = 0.0
+        self.wheel_speeds[:] = 0.0
+
+    def reset(self) -> None:
+        """Back to the spawn pose, at rest."""
+        self.stop()
+        self.x, self.y, self.yaw = self.home
+
+    def teleport(self, x: float, y: float, yaw: float) -> None:
+        self.stop()
+        self.x, self.y, self.yaw = float(x), float(y), wrap_angle(float(yaw))
+
+    def step(self, dt: float) -> None:
+        s = self.spec
+        if self.follower is not None:
+            v_d, w_d, done = self.follower.step(self.x, self.y, self.yaw, self.v, dt)
+            if done:
+                self.follower = None
+                v_d = w_d = 0.0
+            self.v_cmd, self.omega_cmd = v_d, w_d
+        dv = max(-s.max_accel * dt, min(s.max_accel * dt, self.v_cmd - self.v))
+        dw = max(-s.max_alpha * dt, min(s.max_alpha * dt, self.omega_cmd - self.omega))
+        self.v += dv
+        self.omega += dw
+        v, w = self.v, self.omega
+        if abs(w) > 1e-9:
+            r = v / w
+            self.x += r * (math.sin(self.yaw + w * dt) - math.sin(self.yaw))
+            self.y -= r * (math.cos(self.yaw + w * dt) - math.cos(self.yaw))
+        else:
+            self.x += v * dt * math.cos(self.yaw)
+            self.y += v * dt * math.sin(self.yaw)
+        self.yaw = wrap_angle(self.yaw + w * dt)
+        half = s.wheel_separation / 2
+        self.wheel_speeds[0] = (v - w * half) / s.wheel_radius
+        self.wheel_speeds[1] = (v + w * half) / s.wheel_radius
+        self.wheels += self.wheel_speeds * dt
+
+    @property
+    def moving(self) -> bool:
+        return abs(self.v) > MOVING_BASE_SPEED or abs(self.omega) > MOVING_BASE_SPEED or self.follower is not None
