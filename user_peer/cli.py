@@ -57,7 +57,13 @@ def view(
         raise UserError("nowhere to show the world: give --spawn, --connect rerun+http://HOST:PORT/proxy, --serve-web or --save FILE.rrd")
     cfg = make_config(world, zenoh_eps, listen, profile, zenoh_config)
     stop = shutdown_event()
-    with Viewer(cfg, opts, peer_id=peer_id) as viewer:
+    try:
+        viewer = Viewer(cfg, opts, peer_id=peer_id)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    except Exception as exc:  # zenoh.ZError: no router there
+        raise UserError(f"cannot join world {cfg.world!r} via {', '.join(cfg.connect) or 'the default router'}: {exc}".split(" at /")[0]) from None
+    with viewer:
         print(f"viewer on world {cfg.world!r}" + (f", saving to {save}" if save else ""), flush=True)
         n = viewer.run(stop, duration)
     print(f"viewer: {n} messages logged, {viewer.dropped} dropped, {viewer.logger.skipped} thinned; robots: {', '.join(sorted(viewer.logger.robots)) or 'none'}", flush=True)
@@ -86,6 +92,54 @@ def export(
     )
 
 
+UserOpt = Annotated[Optional[str], typer.Option("--user", "-u", help="Your user id (default: $USER); ownership is by user id.")]
+
+
+def _open_world(world, connect, profile, zenoh_config, user, timeout: float = 5.0):
+    from user_peer.api import World, connect as _connect
+
+    zenoh_eps, _ = _split_connect(connect)
+    cfg = make_config(world, zenoh_eps, None, profile, zenoh_config)
+    try:
+        return _connect(world=cfg.world, connect=list(cfg.connect), user=user, profile=cfg.profile,
+                        zenoh_config=cfg.config_file, timeout=timeout)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    except Exception as exc:  # zenoh.ZError: no router there
+        raise UserError(f"cannot join world {cfg.world!r} via {', '.join(cfg.connect) or 'the default router'}: {exc}".split(" at /")[0]) from None
+
+
+def user(
+    arm: Annotated[Optional[str], typer.Option(help="Arm to control (default: the world's first arm).")] = None,
+    base: Annotated[Optional[str], typer.Option(help="Mobile base to drive (default: the world's first base).")] = None,
+    user_id: UserOpt = None,
+    world: World = None,
+    connect: Connect = None,
+    profile: Profile = None,
+    zenoh_config: ZenohConfig = None,
+) -> None:
+    """Terminal UI: joint sliders, arrow-key driving, ownership, live joints, scan, latency."""
+    from user_peer.errors import FabricUserError
+    from user_peer.tui import UserApp
+
+    w = _open_world(world, connect, profile, zenoh_config, user_id)
+    try:
+        try:
+            ids = w.robots()
+            kinds = {rid: w.robot(rid).kind for rid in ids}
+        except FabricUserError as exc:
+            raise UserError(exc.reason) from None
+        arm_id = arm or next((r for r in ids if kinds[r] == "arm"), None)
+        base_id = base or next((r for r in ids if kinds[r] == "mobile"), None)
+        for rid, kind in ((arm, "arm"), (base, "mobile")):
+            if rid is not None and kinds.get(rid) != kind:
+                raise UserError(f"{rid!r} is not a{'n' if kind == 'arm' else ''} {kind} robot in world {w.name!r}; robots: {', '.join(ids)}")
+        UserApp(w, arm=w.robot(arm_id) if arm_id else None, base=w.robot(base_id) if base_id else None).run()
+    finally:
+        w.close()
+
+
 def register(app: typer.Typer) -> None:
+    app.command("user")(user)
     app.command("view")(view)
     app.command("export")(export)

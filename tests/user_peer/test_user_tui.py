@@ -1,0 +1,93 @@
+"""The terminal UI under Textual's headless pilot, against a real world with a stand-in authority."""
+
+import asyncio
+import math
+
+import numpy as np
+import pytest
+
+from fabric import keys
+from fabric.messages import Header, JointState, OwnershipRecord, Pose, Scan
+from fabric.testing import client_config, wait_until
+from user_peer.api import Arm, Base, World
+from user_peer.services import RobotEntry
+from user_peer.slider import JointSlider
+from user_peer.tui import SPEEDS, UserApp
+
+NAMES = tuple(f"joint_{i}" for i in range(1, 7))
+
+
+async def until(pilot, predicate, what, timeout=10.0):
+    """Let the app run until ``predicate()`` holds (the UI refreshes on timers)."""
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout
+    while not predicate():
+        if loop.time() > end:
+            raise AssertionError(f"timed out waiting for {what}")
+        await pilot.pause(0.05)
+
+
+@pytest.fixture
+def setup(world, router, connect):
+    auth = connect("sim", "sim-test")
+    alice = World(client_config(world, router[1]), "alice", timeout=2.0)
+    arm = Arm(alice, RobotEntry("arm1", "meca500", "arm", NAMES, (-1.0,) * 6, (1.0,) * 6))
+    base = Base(alice, RobotEntry("base1", "reeman", "mobile", ("wheel_left", "wheel_right")))
+    cmds = []
+    auth.subscribe(keys.robot_cmd_all(world), lambda k, m: cmds.append((k, m)))
+    h = Header(wall_ns=1)
+    auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="bob", epoch=1, queue=("carol",)))
+    auth.publish(keys.own(world, "base1"), OwnershipRecord("base1", owner="", epoch=1))
+    auth.publish(keys.robot_joints(world, "arm1"), JointState(NAMES, np.full(6, 0.1), np.zeros(6), Header.now()))
+    auth.publish(keys.robot_pose(world, "base1"), Pose([1.0, 2.0, 0.0], header=Header.now()))
+    auth.publish(keys.robot_scan(world, "base1"), Scan.from_ranges(np.linspace(1, 4, 240), angle_min=-1.17, angle_increment=0.01, range_max=12, header=h))
+    wait_until(lambda: arm.record is not None and base.record is not None and base.scan is not None and arm.joints is not None, what="replicas")
+    yield auth, alice, arm, base, cmds
+    alice.close()
+
+
+def test_controls_follow_ownership_and_send_commands(setup, world):
+    asyncio.run(_drive_the_ui(*setup, world))
+
+
+async def _drive_the_ui(auth, alice, arm, base, cmds, world):
+    app = UserApp(alice, arm=arm, base=base)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await pilot.pause(0.2)
+        sliders = list(app.query(JointSlider))
+        assert len(sliders) == 6 and all(s.disabled for s in sliders)
+        owner_text = str(app.query_one("#arm-owner").render())
+        assert "bob" in owner_text and "disabled" in owner_text and "carol" in owner_text
+        assert math.isclose(sliders[0].actual, 0.1)
+        assert len(app.query_one("#scan").data) == 240
+
+        # Arrow keys while not owning the base: refused locally, the reason on the status line, nothing sent.
+        await pilot.press("up")
+        await pilot.pause(0.1)
+        assert "does not own base1" in app.message and not cmds
+
+        # The authority hands both robots to alice: controls come alive.
+        auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="alice", epoch=2))
+        auth.publish(keys.own(world, "base1"), OwnershipRecord("base1", owner="alice", epoch=5))
+        await until(pilot, lambda: not sliders[0].disabled and not app.query_one("#base-stop").disabled, "controls enabled")
+        assert "you" in str(app.query_one("#arm-owner").render())
+
+        sliders[1].focus()
+        await pilot.press("plus", "plus", "plus")
+        await until(pilot, lambda: any(k.endswith("/cmd/joints") for k, _ in cmds), "joint command")
+        last = [m for k, m in cmds if k.endswith("/cmd/joints")][-1]
+        assert last.user == "alice" and last.epoch == 2
+        assert math.isclose(last.body.q[1], math.radians(3.0), abs_tol=1e-9)
+
+        await pilot.press("3", "up", "left")
+        await until(pilot, lambda: any(k.endswith("/cmd/twist") and m.body.omega > 0 for k, m in cmds), "twist command")
+        tw = [m for k, m in cmds if k.endswith("/cmd/twist")][-1]
+        assert tw.epoch == 5 and (tw.body.v, tw.body.omega) == SPEEDS[3]
+        await pilot.press("space")
+        await until(pilot, lambda: [m for k, m in cmds if k.endswith("/cmd/twist")][-1].body.v == 0.0, "stop twist")
+
+        await pilot.click("#arm-stop")
+        await until(pilot, lambda: any(k.endswith("/cmd/stop") for k, _ in cmds), "stop command")
+        await pilot.click("#arm-reset")
+        await until(pilot, lambda: any(k.endswith("/cmd/reset") for k, _ in cmds), "reset command")
+        assert all(s.value == 0.0 for s in sliders)
