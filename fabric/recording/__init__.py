@@ -1,0 +1,51 @@
+"""Recording and replaying key streams with MCAP.
+
+``Recorder`` writes every sample of some key expressions into an MCAP file
+(one channel per key, the fabric message type as schema name, msgpack as
+message encoding, receive time as log time, header wall time as publish
+time; zstd chunks that reach the disk every half second, so a killed
+recorder leaves a readable file). ``read_info`` and ``iter_messages`` read
+files back, finished or not; ``plan_replay`` + ``Replayer`` republish the
+exact bytes on the recorded timeline, optionally filtered, windowed, sped up
+and remapped into another world. The CLI (``record``, ``info``, ``replay``,
+``bench record``) is in :mod:`fabric.recording.cli`; see docs/recording.md.
+"""
+
+from fabric.recording.format import LIVELINESS_SCHEMA, MESSAGE_ENCODING, RAW_SCHEMA, Peek, peek, remap_world, world_of
+from fabric.recording.reader import (
+    ChannelInfo,
+    RecordedMessage,
+    RecordingError,
+    RecordingInfo,
+    iter_messages,
+    key_filter,
+    read_info,
+)
+from fabric.recording.recorder import Recorder, RecorderStats
+from fabric.recording.replayer import Replayer, ReplayPlan, ReplayStats, due_time, plan_replay
+from fabric.recording.sink import McapSink
+
+__all__ = [
+    "Recorder",
+    "RecorderStats",
+    "McapSink",
+    "Replayer",
+    "ReplayPlan",
+    "ReplayStats",
+    "plan_replay",
+    "due_time",
+    "RecordingError",
+    "RecordingInfo",
+    "ChannelInfo",
+    "RecordedMessage",
+    "read_info",
+    "iter_messages",
+    "key_filter",
+    "peek",
+    "Peek",
+    "remap_world",
+    "world_of",
+    "MESSAGE_ENCODING",
+    "RAW_SCHEMA",
+    "LIVELINESS_SCHEMA",
+]

@@ -1,0 +1,252 @@
+"""``robofabric record | info | replay`` and ``robofabric bench record``.
+
+Every user mistake (missing or non-MCAP file, empty selection, unknown world,
+bad window) becomes a :class:`fabric.cli_common.UserError`: one line, exit 2.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from fabric import keys
+from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, bench_app, make_config
+
+__all__ = ["register", "record", "info", "replay"]
+
+
+def _join(kind: str, cfg, peer_id: str | None):
+    from fabric.session import Fabric
+
+    try:
+        return Fabric(cfg, kind=kind, peer_id=peer_id)
+    except Exception as exc:
+        where = ", ".join(cfg.endpoints()[0] or cfg.endpoints()[1]) or "the LAN"
+        raise UserError(f"cannot join world {cfg.world!r} via {where}: {exc}") from None
+
+
+def _resolve(expr: str, world: str) -> str:
+    """Full (``rf/demo/robot/**``) or world-relative (``robot/*/pose``) key expression, validated."""
+    import zenoh
+
+    full = expr if expr.startswith(keys.PREFIX + "/") else f"{keys.world_root(world)}/{expr.lstrip('/')}"
+    try:
+        zenoh.KeyExpr(full)
+    except Exception as exc:
+        raise UserError(f"{expr!r} is not a valid key expression: {exc}") from None
+    return full
+
+
+# --------------------------------------------------------------------------- record
+
+
+def record(
+    output: Annotated[Path, typer.Option("--output", "-o", help="The MCAP file to write (overwritten if it exists).")],
+    keyexprs: Annotated[
+        Optional[list[str]],
+        typer.Argument(help="Key expressions to record, full or world-relative (default: the whole world, rf/WORLD/**)."),
+    ] = None,
+    duration: Annotated[Optional[float], typer.Option(help="Stop after S seconds (default: until Ctrl-C / SIGTERM).")] = None,
+    liveliness: Annotated[bool, typer.Option("--liveliness", help="Also record peers' liveliness tokens appearing and going.")] = False,
+    compression: Annotated[str, typer.Option(help="Chunk compression: zstd, lz4 or none.")] = "zstd",
+    chunk_size: Annotated[int, typer.Option(help="Close a chunk once it holds this many bytes.")] = 1 << 20,
+    flush_interval: Annotated[float, typer.Option(help="Close the open chunk and hand it to the OS at least this often (s): what a crash can lose.")] = 0.5,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress line.")] = False,
+    world: World = None,
+    connect: Connect = None,
+    listen: Listen = None,
+    profile: Profile = None,
+    zenoh_config: ZenohConfig = None,
+    peer_id: PeerId = None,
+) -> None:
+    """Record every sample on the selected keys into an MCAP file (one channel per key, zstd chunks)."""
+    from fabric.recording.recorder import Recorder
+    from fabric.recording.sink import COMPRESSIONS
+    from fabric.session import shutdown_event
+
+    if duration is not None and not duration > 0:
+        raise UserError("--duration must be positive")
+    if compression not in COMPRESSIONS:
+        raise UserError(f"--compression must be one of {', '.join(COMPRESSIONS)}, got {compression!r}")
+    if chunk_size < 1024:
+        raise UserError("--chunk-size must be at least 1024 bytes")
+    if not flush_interval > 0:
+        raise UserError("--flush-interval must be positive")
+    if output.is_dir():
+        raise UserError(f"{output} is a directory; give a file name such as {output / 'run.mcap'}")
+    if not output.parent.exists():
+        raise UserError(f"directory {output.parent} does not exist")
+    cfg = make_config(world, connect, listen, profile, zenoh_config)
+    exprs = [_resolve(e, cfg.world) for e in keyexprs] if keyexprs else [keys.world_all(cfg.world)]
+    stop = shutdown_event()
+    tty = sys.stderr.isatty()
+    with _join("recorder", cfg, peer_id) as fab:
+        try:
+            rec = Recorder(
+                fab, output, exprs, liveliness=liveliness, compression=compression,
+                chunk_size=chunk_size, flush_interval=flush_interval,
+            )
+            rec.start()
+        except OSError as exc:
+            raise UserError(f"cannot write {output}: {exc.strerror or exc}") from None
+        print(f"recording {', '.join(exprs)} to {output}; Ctrl-C to stop", file=sys.stderr, flush=True)
+        t0 = time.monotonic()
+        last_line = t0
+        while True:
+            left = None if duration is None else duration - (time.monotonic() - t0)
+            if left is not None and left <= 0:
+                break
+            if stop.wait(0.5 if left is None else min(0.5, left)):
+                break
+            if rec.error is not None:
+                break
+            now = time.monotonic()
+            if not quiet and (tty or now - last_line >= 5.0):
+                last_line = now
+                line = rec.stats.line()
+                print(f"\r{line}\x1b[K" if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
+        try:
+            stats = rec.stop()
+        except RuntimeError as exc:
+            raise UserError(f"recording to {output} failed: {exc}") from None
+    if tty and not quiet:
+        print(file=sys.stderr)
+    print(f"recorded {stats.line()} -> {output}", file=sys.stderr, flush=True)
+    if stats.messages == 0:
+        raise UserError(
+            f"nothing was recorded on {', '.join(exprs)} (unknown world or no publisher?); {output} is an empty recording"
+        )
+
+
+# --------------------------------------------------------------------------- info
+
+
+def _size(n: float) -> str:
+    for unit in ("B", "kB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1000
+    return f"{n:.1f} GB"
+
+
+def info(
+    file: Annotated[Path, typer.Argument(help="An MCAP recording.")],
+    as_json: Annotated[bool, typer.Option("--json", help="One JSON document instead of tables.")] = False,
+) -> None:
+    """Duration, keys, message counts, rates, sizes and schemas of a recording, and whether it is complete."""
+    from fabric.recording.reader import RecordingError, read_info
+
+    try:
+        inf = read_info(file)
+    except RecordingError as exc:
+        raise UserError(str(exc)) from None
+    if as_json:
+        print(json.dumps(inf.to_json()))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    con = Console()
+    state = "[green]complete[/]" if inf.complete else f"[bold red]UNFINISHED[/] - {inf.detail}"
+    con.print(f"[bold]{inf.path}[/]: {state}")
+    ratio = inf.payload_bytes / inf.file_bytes if inf.file_bytes else 0.0
+    rate = (inf.messages - 1) / inf.duration_s if inf.messages > 1 and inf.duration_s > 0 else 0.0
+    con.print(
+        f"duration {inf.duration_s:.3f} s   messages {inf.messages} ({rate:.1f}/s)   payload {_size(inf.payload_bytes)}   "
+        f"file {_size(inf.file_bytes)} ({ratio:.1f}x, {inf.chunks} chunk(s), {', '.join(inf.compression) or 'none'})"
+    )
+    con.print(f"worlds: {', '.join(inf.worlds) or '-'}   schemas: {', '.join(inf.schemas) or '-'}")
+    if inf.metadata:
+        con.print("recorded by " + ", ".join(f"{k}={v}" for k, v in sorted(inf.metadata.items()) if v))
+    table = Table()
+    for col, just in (("key", "left"), ("schema", "left"), ("messages", "right"), ("rate Hz", "right"), ("bytes", "right"), ("avg B", "right")):
+        table.add_column(col, justify=just)
+    for c in inf.channels:
+        table.add_row(c.key, c.schema, str(c.messages), f"{c.rate_hz:.1f}", _size(c.bytes), f"{c.bytes / c.messages:.0f}")
+    con.print(table)
+
+
+# --------------------------------------------------------------------------- replay
+
+
+def replay(
+    file: Annotated[Path, typer.Argument(help="An MCAP recording (unfinished ones replay up to their last complete chunk).")],
+    speed: Annotated[float, typer.Option(help="Time scale: 2 plays twice as fast, 0.5 at half speed.")] = 1.0,
+    loop: Annotated[bool, typer.Option("--loop", help="Start again at the end, until Ctrl-C.")] = False,
+    start: Annotated[Optional[float], typer.Option(help="Begin S seconds into the recording.")] = None,
+    end: Annotated[Optional[float], typer.Option(help="Stop S seconds into the recording.")] = None,
+    key_exprs: Annotated[
+        Optional[list[str]],
+        typer.Option("--keys", "-k", help="Only keys matching this expression, full or world-relative (repeatable)."),
+    ] = None,
+    remap_world: Annotated[Optional[str], typer.Option("--remap-world", help="Publish into this world instead of the recorded one.")] = None,
+    wait: Annotated[float, typer.Option(help="Wait up to S seconds for a subscriber before starting.")] = 2.0,
+    world: World = None,
+    connect: Connect = None,
+    listen: Listen = None,
+    profile: Profile = None,
+    zenoh_config: ZenohConfig = None,
+    peer_id: PeerId = None,
+) -> None:
+    """Republish a recording's exact bytes on the recorded timeline (scaled by --speed), optionally into another world.
+
+    --world selects which recorded world to replay (default: every world in the file).
+    """
+    from fabric.recording.reader import RecordingError
+    from fabric.recording.replayer import Replayer, plan_replay
+    from fabric.session import shutdown_event
+
+    if wait < 0:
+        raise UserError("--wait must be >= 0")
+    exprs = None
+    if key_exprs:
+        scope = world or "*"
+        exprs = []
+        for e in key_exprs:
+            full = e if e.startswith(keys.PREFIX + "/") else f"{keys.PREFIX}/{scope}/{e.lstrip('/')}"
+            exprs.append(_check_expr(e, full))
+    try:
+        plan = plan_replay(file, speed=speed, start=start, end=end, keys=exprs, world=world, remap_world=remap_world)
+    except RecordingError as exc:
+        raise UserError(str(exc)) from None
+    target_world = remap_world or world or (plan.worlds[0] if plan.worlds else None)
+    cfg = make_config(target_world, connect, listen, profile, zenoh_config)
+    stop = shutdown_event()
+    with _join("tool", cfg, peer_id) as fab:
+        into = f" into world {remap_world!r}" if remap_world else ""
+        print(
+            f"replaying {plan.messages} msgs on {len(plan.keys)} key(s) from {file}{into} at {speed:g}x"
+            + (" (loop)" if loop else ""),
+            file=sys.stderr,
+            flush=True,
+        )
+        rp = Replayer(fab, plan, loop=loop, wait_for_subscribers=wait)
+        try:
+            stats = rp.run(stop)
+        finally:
+            rp.close()
+    print(stats.line(), flush=True)
+
+
+def _check_expr(given: str, full: str) -> str:
+    import zenoh
+
+    try:
+        zenoh.KeyExpr(full)
+    except Exception as exc:
+        raise UserError(f"{given!r} is not a valid key expression: {exc}") from None
+    return full
+
+
+def register(app: typer.Typer) -> None:
+    app.command("record")(record)
+    app.command("info")(info)
+    app.command("replay")(replay)
+    from fabric.recording import bench
+
+    bench_app.command("record")(bench.bench_record)

@@ -1,0 +1,260 @@
+"""The recorder: every sample on some key expressions, into one MCAP file.
+
+Zenoh calls the subscriber callback on its own threads; the callback only
+stamps the receive time and queues the bytes, so the network is never held up
+by compression or disk. One writer thread owns the :class:`McapSink`. The
+stamp and the enqueue happen under one lock, so file order is receive order
+and a replay can stream the file without sorting it.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable
+
+import msgpack
+import zenoh
+
+from fabric import keys
+from fabric.recording.format import LIVELINESS_SCHEMA, RAW_SCHEMA
+from fabric.recording.sink import McapSink
+
+__all__ = ["Recorder", "RecorderStats"]
+
+_STOP = object()
+
+
+@dataclass(frozen=True, slots=True)
+class RecorderStats:
+    """A snapshot of a recorder: what it wrote, how fast, and whether the writer keeps up (``queued``)."""
+
+    messages: int
+    payload_bytes: int
+    file_bytes: int
+    keys: int
+    elapsed_s: float
+    queued: int
+    raw: int
+    liveliness: int
+
+    @property
+    def rate_hz(self) -> float:
+        return self.messages / self.elapsed_s if self.elapsed_s > 0 else 0.0
+
+    @property
+    def bytes_per_s(self) -> float:
+        return self.payload_bytes / self.elapsed_s if self.elapsed_s > 0 else 0.0
+
+    def line(self) -> str:
+        """The progress line: messages, bytes, rates."""
+        return (
+            f"{self.messages} msgs  {_human(self.payload_bytes)}  ({self.rate_hz:.0f} msg/s, {_human(self.bytes_per_s)}/s)"
+            f"  {self.keys} keys  file {_human(self.file_bytes)}  {self.elapsed_s:.1f} s"
+            + (f"  backlog {self.queued}" if self.queued > 100 else "")
+        )
+
+
+def _human(n: float) -> str:
+    for unit in ("B", "kB", "MB", "GB"):
+        if abs(n) < 1000 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1000
+    return f"{n:.1f} GB"
+
+
+class Recorder:
+    """Record the samples of ``keyexprs`` (default: the fabric's whole world) seen by ``fabric`` into ``path``.
+
+    A context manager: ``with Recorder(fab, "run.mcap"): ...`` starts on entry and finishes the file
+    on exit. ``stop()`` is idempotent and returns the final :class:`RecorderStats`. With
+    ``liveliness=True`` the appearance and loss of peers' liveliness tokens under the same key
+    expressions is recorded too (schema ``liveliness``; replay skips those by default).
+    """
+
+    def __init__(
+        self,
+        fabric: Any,
+        path: str | Path,
+        keyexprs: Iterable[str] | None = None,
+        *,
+        liveliness: bool = False,
+        compression: str = "zstd",
+        chunk_size: int = 1 << 20,
+        flush_interval: float = 0.5,
+        metadata: dict[str, str] | None = None,
+    ) -> None:
+        self.fabric = fabric
+        self.path = Path(path)
+        exprs = list(keyexprs) if keyexprs else [keys.world_all(fabric.world)]
+        for e in exprs:
+            zenoh.KeyExpr(e)  # raises on an invalid expression before anything is opened
+        self.keyexprs = tuple(exprs)
+        self.liveliness = liveliness
+        self._sink_args = dict(compression=compression, chunk_size=chunk_size, flush_interval=flush_interval)
+        self._metadata = {
+            "world": fabric.world,
+            "keyexprs": ",".join(self.keyexprs),
+            "recorder": getattr(fabric, "peer_id", ""),
+            "started_ns": "",
+            "liveliness": str(bool(liveliness)).lower(),
+            **(metadata or {}),
+        }
+        self._q: queue.SimpleQueue = queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self._subs: list[Any] = []
+        self._thread: threading.Thread | None = None
+        self._sink: McapSink | None = None
+        self._t0 = 0.0
+        self._t_end: float | None = None
+        self._queued = 0
+        self._written = 0
+        self._raw = 0
+        self._live = 0
+        self._keys: Counter[str] = Counter()
+        self._first_match: dict[str, int] = {}
+        self._started = False
+        self._stopped = False
+        self.error: BaseException | None = None
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def __enter__(self) -> "Recorder":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def start(self) -> "Recorder":
+        if self._started:
+            return self
+        self._started = True
+        self._metadata["started_ns"] = str(time.time_ns())
+        self._sink = McapSink(self.path, metadata=self._metadata, **self._sink_args)
+        self._t0 = time.monotonic()
+        self._thread = threading.Thread(target=self._write_loop, name="recorder-writer", daemon=True)
+        self._thread.start()
+        session = self.fabric.session
+        for i, expr in enumerate(self.keyexprs):
+            self._subs.append(session.declare_subscriber(expr, self._on_sample_for(i)))
+            if self.liveliness:
+                self._subs.append(session.liveliness().declare_subscriber(expr, self._on_token_for(i), history=True))
+        return self
+
+    def stop(self) -> "RecorderStats":
+        """Stop listening, write what is queued, finish the file (summary + footer). Idempotent."""
+        if not self._started or self._stopped:
+            return self.stats
+        self._stopped = True
+        for sub in self._subs:
+            try:
+                sub.undeclare()
+            except Exception:
+                pass
+        self._subs.clear()
+        self._t_end = time.monotonic()
+        self._q.put(_STOP)
+        if self._thread is not None:
+            self._thread.join()
+        assert self._sink is not None
+        self._sink.close()
+        if self.error is not None:
+            raise RuntimeError(f"recorder writer failed: {self.error}") from self.error
+        return self.stats
+
+    @property
+    def stats(self) -> RecorderStats:
+        end = self._t_end if self._t_end is not None else time.monotonic()
+        sink = self._sink
+        return RecorderStats(
+            messages=self._written,
+            payload_bytes=sink.payload_bytes if sink else 0,
+            file_bytes=sink.file_bytes if sink and not self._stopped else (self.path.stat().st_size if self.path.exists() else 0),
+            keys=len(self._keys),
+            elapsed_s=(end - self._t0) if self._started else 0.0,
+            queued=max(0, self._queued - self._written),
+            raw=self._raw,
+            liveliness=self._live,
+        )
+
+    # ------------------------------------------------------------------ receiving (zenoh threads)
+
+    def _owns(self, i: int, key: str) -> bool:
+        """With overlapping expressions a sample reaches several subscribers: only the first one records it."""
+        if len(self.keyexprs) == 1:
+            return True
+        first = self._first_match.get(key)
+        if first is None:
+            first = next((j for j, e in enumerate(self.keyexprs) if zenoh.KeyExpr(e).intersects(key)), i)
+            self._first_match[key] = first
+        return first == i
+
+    def _on_sample_for(self, i: int):
+        def on_sample(sample: zenoh.Sample) -> None:
+            if sample.kind != zenoh.SampleKind.PUT:
+                return
+            key = str(sample.key_expr)
+            if not self._owns(i, key):
+                return
+            payload = sample.payload.to_bytes()
+            with self._lock:
+                self._q.put((key, payload, time.time_ns(), None))
+                self._queued += 1
+
+        return on_sample
+
+    def _on_token_for(self, i: int):
+        def on_token(sample: zenoh.Sample) -> None:
+            key = str(sample.key_expr)
+            if not self._owns(i, key):
+                return
+            alive = sample.kind == zenoh.SampleKind.PUT
+            with self._lock:
+                self._q.put((key, msgpack.packb({"alive": alive}), time.time_ns(), LIVELINESS_SCHEMA))
+                self._queued += 1
+
+        return on_token
+
+    # ------------------------------------------------------------------ writing (one thread)
+
+    def _write_loop(self) -> None:
+        sink = self._sink
+        assert sink is not None
+        q = self._q
+        try:
+            while True:
+                try:
+                    item = q.get(timeout=0.05)
+                except queue.Empty:
+                    sink.maybe_flush()
+                    continue
+                if item is _STOP:
+                    break
+                self._write(sink, item)
+                # drain what is already queued before looking at the clock again
+                for _ in range(1000):
+                    try:
+                        item = q.get_nowait()
+                    except queue.Empty:
+                        break
+                    if item is _STOP:
+                        return
+                    self._write(sink, item)
+                sink.maybe_flush()
+        except BaseException as exc:  # a full disk must not pass silently
+            self.error = exc
+
+    def _write(self, sink: McapSink, item: tuple) -> None:
+        key, payload, t_ns, schema = item
+        if schema is None:
+            if sink.write(key, payload, t_ns) == RAW_SCHEMA:
+                self._raw += 1
+        else:
+            sink.write_with(key, schema, payload, t_ns, t_ns)
+            self._live += 1
+        self._written += 1
+        self._keys[key] += 1
