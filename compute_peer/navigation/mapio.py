@@ -137,7 +137,10 @@ def load_pgm_yaml(yaml_path: str | Path) -> OccupancyGrid:
     if abs(origin[2]) > 1e-9:
         raise NavigationError(f"{yaml_path}: rotated map origins are not supported")
     mode = meta.get("mode", "trinary")
-    px = np.flipud(_read_pgm(yaml_path.parent / meta["image"]))
+    image = yaml_path.parent / meta["image"]
+    if not image.is_file():
+        raise NavigationError(f"{yaml_path}: image {image.name} not found beside it")
+    px = np.flipud(_read_pgm(image))
     occ = px / 255.0 if negate else (255.0 - px) / 255.0
     cells = np.full(px.shape, UNKNOWN, dtype=np.uint8)
     cells[occ > occ_t] = 100

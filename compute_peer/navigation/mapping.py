@@ -89,19 +89,25 @@ class OccupancyMapper:
         hit = r < rmax - 1e-6
         a = angles + yaw
         ca, sa = np.cos(a), np.sin(a)
-        # free cells: samples strictly before the end point
+        # free samples: strictly before each ray's end point, ``step`` cells apart, all rays in one flat array
         free_len = np.clip(r - 0.5, 0.0, None)
-        n = int(math.ceil(float(free_len.max(initial=0.0)) / c.step)) + 1
-        t = np.arange(n, dtype=np.float64) * c.step
-        keep = t[None, :] < free_len[:, None]
-        tk = np.broadcast_to(t, keep.shape)[keep]
-        rows = np.nonzero(keep)[0]
-        fx = sx + tk * ca[rows]
-        fy = sy + tk * sa[rows]
-        free_idx = self._flat(fx, fy)
-        hx = sx + r[hit] * ca[hit]
-        hy = sy + r[hit] * sa[hit]
-        hit_idx = self._flat(hx, hy)
+        counts = np.ceil(free_len / c.step).astype(np.intp)
+        total = int(counts.sum())
+        ray = np.repeat(np.arange(r.shape[0]), counts)
+        first = np.repeat(np.cumsum(counts) - counts, counts)
+        t = (np.arange(total) - first) * c.step
+        fx = sx + t * ca[ray]
+        fy = sy + t * sa[ray]
+        # a ray is a segment: if the sensor and every end point are inside, so is every sample
+        ex = sx + r * ca
+        ey = sy + r * sa
+        all_inside = (
+            0 <= sx < c.width and 0 <= sy < c.height
+            and ex.min(initial=0.0) >= 0 and ex.max(initial=0.0) < c.width
+            and ey.min(initial=0.0) >= 0 and ey.max(initial=0.0) < c.height
+        )
+        free_idx = self._flat(fx, fy, all_inside)
+        hit_idx = self._flat(ex[hit], ey[hit], all_inside)
         lo = self.logodds.reshape(-1)
         ob = self.observed.reshape(-1)
         before_hits = lo[hit_idx]
@@ -111,10 +117,12 @@ class OccupancyMapper:
         ob[hit_idx] = True
         self.scans += 1
 
-    def _flat(self, cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
+    def _flat(self, cx: np.ndarray, cy: np.ndarray, all_inside: bool) -> np.ndarray:
         c = self.config
-        inside = (cx >= 0) & (cx < c.width) & (cy >= 0) & (cy < c.height)
-        return cy[inside].astype(np.intp) * c.width + cx[inside].astype(np.intp)
+        if not all_inside:
+            inside = (cx >= 0) & (cx < c.width) & (cy >= 0) & (cy < c.height)
+            cx, cy = cx[inside], cy[inside]
+        return cy.astype(np.intp) * c.width + cx.astype(np.intp)
 
     def integrate_scan(self, scan: Scan, pose: Pose, *, sensor_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
         """Add a fabric Scan taken at a fabric Pose; ``sensor_offset`` is (x, y, yaw) of the sensor on the robot."""

@@ -1,0 +1,349 @@
+"""Mapping and navigation served over Zenoh: the paper's Test B.
+
+:func:`register_navigation` attaches a :class:`NavigationService` to a peer's
+:class:`~fabric.session.Fabric`:
+
+* mapping mode: it listens to the robots' ``scan`` and ``pose`` keys and, while
+  mapping is on, folds every scan (taken at the pose nearest in sim time) into
+  a log-odds grid as the user drives;
+* ``rf/{world}/srv/map/{name}`` (:class:`MapRequest`): start/stop mapping, build the binary
+  map with a threshold and publish it on ``rf/{world}/map/{name}``, get, reset,
+  save/load (only inside ``maps_dir``), set a map, status;
+* ``rf/{world}/srv/plan/{robot}`` (:class:`PlanRequest`): plan from the robot's current
+  pose (or a given start) to the ``goal`` object's pose (or a given goal) with
+  Hybrid A* or OMPL, publish the path on ``rf/{world}/robot/{robot}/path`` and
+  return it. Following it is the user's decision: they send it on ``cmd/path``.
+
+Every refusal (unknown robot, no pose yet, no map, goal outside the map or in an
+obstacle, no path) is a :class:`~fabric.session.ServiceError` reply with the
+reason; nothing here can make a query time out or take the peer down. This is
+the only module of the package that touches the session.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections import deque
+from dataclasses import replace
+from pathlib import Path as FsPath
+from typing import Any
+
+import numpy as np
+
+from fabric import keys
+from fabric.messages import Header, OccupancyGrid, Path, Pose, Scan
+from fabric.session import Fabric, ServiceError
+
+from .costmap import Costmap, build_costmap
+from .errors import NavigationError
+from .geometry import yaw_from_quaternion
+from .grid import check_grid, is_empty
+from .mapio import load_map, save_map
+from .mapping import MapperConfig, OccupancyMapper
+from .messages import MapReply, MapRequest, PlanReply, PlanRequest, empty_grid
+from .model import VehicleModel
+from .planner import PlannerSettings, plan_path
+
+log = logging.getLogger("robofabric.navigation")
+
+__all__ = ["NavigationService", "register_navigation"]
+
+POSE_HISTORY = 64
+
+
+class NavigationService:
+    """Mapping + planning for one world. A context manager; ``close()`` is idempotent.
+
+    ``robots``: the robot ids to map and plan for; None means every robot seen on the world.
+    """
+
+    def __init__(
+        self,
+        fabric: Fabric,
+        *,
+        robots: list[str] | None = None,
+        mapper_config: MapperConfig | None = None,
+        settings: PlannerSettings | None = None,
+        map_name: str = "map",
+        goal_object: str = "goal",
+        maps_dir: str | FsPath | None = None,
+        mapping: bool = True,
+        sensor_offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        self.fabric = fabric
+        self.world = fabric.world
+        self.robots = None if robots is None else [keys.validate_id(r, what="robot id") for r in robots]
+        self.settings = settings or PlannerSettings()
+        self.map_name = keys.validate_id(map_name, what="map name")
+        self.goal_object = keys.validate_id(goal_object, what="object id")
+        self.maps_dir = FsPath(maps_dir) if maps_dir is not None else None
+        self.sensor_offset = sensor_offset
+        self.mapper = OccupancyMapper(mapper_config)
+        self.mapping = bool(mapping)
+        self.maps: dict[str, OccupancyGrid] = {}
+        self.counters: dict[str, int] = {"scans": 0, "scans_without_pose": 0, "scans_rejected": 0, "plans": 0, "refusals": 0}
+        self._versions: dict[str, int] = {}
+        self._costmaps: dict[tuple, Costmap] = {}
+        self._poses: dict[str, deque[Pose]] = {}
+        self._goal: Pose | None = None
+        self._lock = threading.RLock()  # map and pose state
+        self._plan_lock = threading.Lock()  # one plan at a time: planning is CPU-bound
+        self._closed = False
+        self._resources: list[Any] = []
+        self._declare()
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def _declare(self) -> None:
+        f = self.fabric
+        if self.robots is None:
+            self._resources.append(f.subscribe(keys.robot_all(self.world), self._on_robot))
+        else:
+            for r in self.robots:
+                self._resources.append(f.subscribe(keys.robot_pose(self.world, r), self._on_robot, expected=Pose))
+                self._resources.append(f.subscribe(keys.robot_scan(self.world, r), self._on_robot, expected=Scan))
+        self._resources.append(f.subscribe(keys.object_pose(self.world, self.goal_object), self._on_goal, expected=Pose))
+        self._resources.append(f.serve(keys.srv_all(self.world, "map"), self._on_map, expected=MapRequest))
+        self._resources.append(f.serve(keys.srv_all(self.world, "plan"), self._on_plan, expected=PlanRequest))
+
+    def __enter__(self) -> "NavigationService":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Undeclare this service's subscribers and queryables (the session stays open); safe twice."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+        for res in reversed(self._resources):
+            try:
+                res.undeclare()
+            except Exception:  # already gone with a closing session
+                pass
+
+    # ------------------------------------------------------------------ inputs
+
+    def _on_robot(self, key: str, msg: Any) -> None:
+        parsed = keys.parse(key)
+        robot = parsed.subject
+        if parsed.category != "robot" or (self.robots is not None and robot not in self.robots):
+            return
+        if isinstance(msg, Pose) and parsed.leaf == "pose":
+            with self._lock:
+                self._poses.setdefault(robot, deque(maxlen=POSE_HISTORY)).append(msg)
+        elif isinstance(msg, Scan) and parsed.leaf == "scan":
+            self._on_scan(robot, msg)
+
+    def _pose_at(self, robot: str, stamp: float) -> Pose | None:
+        """The pose nearest in sim time to ``stamp`` (the latest one when stamps are not set)."""
+        hist = self._poses.get(robot)
+        if not hist:
+            return None
+        if stamp <= 0.0:
+            return hist[-1]
+        return min(hist, key=lambda p: abs(p.header.stamp - stamp))
+
+    def _on_scan(self, robot: str, scan: Scan) -> None:
+        with self._lock:
+            if not self.mapping or self._closed:
+                return
+            pose = self._pose_at(robot, scan.header.stamp)
+            if pose is None:
+                self.counters["scans_without_pose"] += 1
+                return
+            try:
+                self.mapper.integrate_scan(scan, pose, sensor_offset=self.sensor_offset)
+            except NavigationError as exc:
+                self.counters["scans_rejected"] += 1
+                log.warning("scan from %s rejected: %s", robot, exc)
+                return
+            self.counters["scans"] += 1
+
+    def _on_goal(self, key: str, msg: Pose) -> None:
+        with self._lock:
+            self._goal = msg
+
+    # ------------------------------------------------------------------ map service
+
+    def _store(self, name: str, grid: OccupancyGrid) -> OccupancyGrid:
+        """Keep ``grid`` as map ``name`` (stamped by this peer), drop stale costmaps, publish it."""
+        key = keys.map_key(self.world, name)
+        grid = replace(grid, header=self.fabric.header(key))
+        with self._lock:
+            self.maps[name] = grid
+            self._versions[name] = self._versions.get(name, 0) + 1
+            self._costmaps = {k: v for k, v in self._costmaps.items() if k[0] != name}
+        self.fabric.publish(key, grid)
+        return grid
+
+    def _file(self, name: str) -> FsPath:
+        if self.maps_dir is None:
+            raise NavigationError("this compute peer has no maps folder: saving and loading are disabled")
+        if not name or "/" in name or "\\" in name or name.startswith("."):
+            raise NavigationError(f"map file name {name!r} must be a plain file name inside the maps folder")
+        return self.maps_dir / name
+
+    def build_map(self, name: str | None = None, threshold: float = 0.65) -> OccupancyGrid:
+        """Threshold the accumulated scans into a binary map, keep it as ``name`` and publish it."""
+        name = name or self.map_name
+        with self._lock:
+            if self.mapper.scans == 0:
+                raise NavigationError(
+                    "no scans accumulated yet: is mapping on and are the robots publishing scan and pose?"
+                )
+            grid = self.mapper.grid(threshold=threshold)
+        return self._store(name, grid)
+
+    def map_request(self, req: MapRequest) -> MapReply:
+        """Handle one map request (also usable in-process, without Zenoh)."""
+        name = keys.validate_id(req.name, what="map name")
+        grid = empty_grid()
+        file = ""
+        a = req.action
+        if a == "start":
+            self.mapping = True
+        elif a == "stop":
+            self.mapping = False
+        elif a == "reset":
+            with self._lock:
+                self.mapper.reset()
+                self.maps.pop(name, None)
+                self._costmaps = {k: v for k, v in self._costmaps.items() if k[0] != name}
+        elif a == "build":
+            grid = self.build_map(name, req.threshold)
+        elif a == "get":
+            with self._lock:
+                stored = self.maps.get(name)
+                if stored is not None:
+                    grid = stored
+                elif name == self.map_name and self.mapper.scans > 0:
+                    grid = self.mapper.grid(header=self.fabric.header(keys.map_key(self.world, name)))
+                else:
+                    raise NavigationError(f"no map named {name!r} (build, load or set one first)")
+        elif a == "save":
+            with self._lock:
+                stored = self.maps.get(name)
+            if stored is None:
+                raise NavigationError(f"no map named {name!r} to save (build, load or set one first)")
+            path = save_map(stored, self._file(req.file or f"{name}.yaml"))
+            file = path.name
+        elif a == "load":
+            path = self._file(req.file or f"{name}.yaml")
+            grid = self._store(name, load_map(path))
+            file = path.name
+        elif a == "set":
+            if req.grid.cells.size == 0:
+                raise NavigationError("action 'set' needs a grid with cells")
+            check_grid(req.grid)
+            grid = self._store(name, req.grid)
+        elif a != "status":
+            raise NavigationError(f"unknown map action {a!r}")
+        with self._lock:
+            scans = self.mapper.scans
+        return MapReply(a, name, grid, scans, int(self.mapping), file, self.fabric.header(keys.srv(self.world, "map", name)))
+
+    def _on_map(self, key: str, req: MapRequest | None) -> MapReply:
+        if req is None:
+            req = MapRequest("get", name=keys.parse(key).leaf or self.map_name)
+        try:
+            return self.map_request(req)
+        except (NavigationError, OSError) as exc:
+            self.counters["refusals"] += 1
+            raise ServiceError(str(exc), key=key) from None
+
+    # ------------------------------------------------------------------ plan service
+
+    def _known(self, robot: str) -> bool:
+        if self.robots is not None:
+            return robot in self.robots
+        return robot in self._poses
+
+    def _costmap(self, name: str, robot_radius: float) -> Costmap:
+        with self._lock:
+            grid = self.maps.get(name)
+            version = self._versions.get(name, 0)
+            can_build = name == self.map_name and self.mapper.scans > 0
+        if grid is None:
+            if can_build:  # navigation before an explicit build: build with the default threshold
+                grid = self.build_map(name)
+                version = self._versions[name]
+            else:
+                raise NavigationError(
+                    f"no map named {name!r}: drive with mapping on and build it (map service, action 'build'), or load/set one"
+                )
+        if is_empty(grid):
+            raise NavigationError(f"map {name!r} is empty: no cell is known to be free")
+        s = self.settings
+        ck = (name, version, robot_radius, s.threshold, s.unknown_is_occupied)
+        with self._lock:
+            cm = self._costmaps.get(ck)
+        if cm is None:
+            cm = build_costmap(grid, robot_radius, threshold=s.threshold, unknown_is_occupied=s.unknown_is_occupied)
+            with self._lock:
+                self._costmaps[ck] = cm
+        return cm
+
+    def plan_request(self, req: PlanRequest) -> PlanReply:
+        """Handle one plan request (also usable in-process, without Zenoh)."""
+        robot = keys.validate_id(req.robot, what="robot id")
+        if not self._known(robot):
+            which = "configured for this peer" if self.robots is not None else "seen on this world (no pose received)"
+            raise NavigationError(f"unknown robot {robot!r}: not {which}")
+        with self._lock:
+            if req.start.shape[0] == 3:
+                start = tuple(float(v) for v in req.start)
+            else:
+                pose = self._pose_at(robot, 0.0)
+                if pose is None:
+                    raise NavigationError(f"no pose received for robot {robot!r} yet; give a start or wait for its pose")
+                start = (float(pose.position[0]), float(pose.position[1]), yaw_from_quaternion(pose.quaternion))
+            if req.goal.shape[0] == 3:
+                goal = tuple(float(v) for v in req.goal)
+            elif self._goal is not None:
+                g = self._goal
+                goal = (float(g.position[0]), float(g.position[1]), yaw_from_quaternion(g.quaternion))
+            else:
+                raise NavigationError(
+                    f"no goal given and no pose received on {keys.object_pose(self.world, self.goal_object)} yet"
+                )
+        s = self.settings
+        v = s.vehicle
+        vehicle = VehicleModel(
+            robot_radius=req.robot_radius or v.robot_radius,
+            turning_radius=req.turning_radius or v.turning_radius,
+            allow_reverse=v.allow_reverse if req.direction == "default" else req.direction == "both",
+        )
+        costmap = self._costmap(req.map, vehicle.robot_radius)
+        with self._plan_lock:
+            result = plan_path(costmap, start, goal, planner=req.planner, settings=replace(s, vehicle=vehicle))
+        key = keys.robot_path(self.world, robot)
+        path = Path(result.x, result.y, result.theta, "world", self.fabric.header(key))
+        self.fabric.publish(key, path)
+        self.counters["plans"] += 1
+        return PlanReply(
+            path, robot, result.planner, result.seconds, result.length, result.expansions, req.map,
+            self.fabric.header(keys.srv(self.world, "plan", robot)),
+        )
+
+    def _on_plan(self, key: str, req: PlanRequest | None) -> PlanReply:
+        if req is None:
+            self.counters["refusals"] += 1
+            raise ServiceError("a plan query needs a PlanRequest payload (robot, goal, planner...)", key=key)
+        tail = keys.parse(key).leaf
+        if tail and tail != req.robot:
+            self.counters["refusals"] += 1
+            raise ServiceError(f"query on {key} names robot {tail!r} but the request is for {req.robot!r}", key=key)
+        try:
+            return self.plan_request(req)
+        except NavigationError as exc:
+            self.counters["refusals"] += 1
+            raise ServiceError(str(exc), key=key) from None
+
+
+def register_navigation(fabric: Fabric, *, robots: list[str] | None = None, **options: Any) -> NavigationService:
+    """Serve mapping and navigation for ``fabric``'s world; ``options`` go to :class:`NavigationService`."""
+    return NavigationService(fabric, robots=robots, **options)
