@@ -396,19 +396,31 @@ class Base(Robot):
                 pass
         return self.xy_theta
 
-    def build_map(self, *, name: str | None = None, timeout: float | None = None) -> OccupancyGrid:
-        """Ask a compute peer for the map built from this robot's scans so far."""
+    def start_mapping(self, *, name: str = "map") -> None:
+        """Ask the compute peer to fold this world's scans into map ``name`` (it may already be on)."""
         try:
-            return services.build_map(self.world.fabric, self.id, name=name, timeout=timeout or max(self.world.timeout, 10.0))
+            services.map_request(self.world.fabric, "start", name=name, timeout=self.world.timeout)
+        except ServiceError as exc:
+            raise Unreachable(f"mapping for {self.id}: {exc.reason}") from None
+
+    def build_map(self, *, name: str = "map", threshold: float = 0.65, timeout: float | None = None) -> OccupancyGrid:
+        """The binary map a compute peer built from the scans so far (also published on ``map/{name}``)."""
+        try:
+            return services.build_map(self.world.fabric, name=name, threshold=threshold, timeout=timeout or max(self.world.timeout, 10.0))
         except ServiceError as exc:
             raise Unreachable(f"map for {self.id}: {exc.reason}") from None
 
-    def plan_to(self, x: float, y: float, theta: float = 0.0, *, planner: str = "hybrid_astar", timeout: float | None = None) -> Path:
-        """A collision-free path from the robot's pose to (x, y, theta), from a compute peer."""
+    def plan_to(
+        self, x: float | None = None, y: float | None = None, theta: float = 0.0, *, planner: str = "hybrid_astar",
+        map_name: str = "map", timeout: float | None = None,
+    ) -> Path:
+        """A collision-free path from the robot's pose to (x, y, theta), or to the goal object without x, y."""
+        goal = None if x is None or y is None else (float(x), float(y), float(theta))
         try:
-            return services.plan(self.world.fabric, self.id, (x, y, theta), planner=planner, timeout=timeout or max(self.world.timeout, 10.0))
+            return services.plan(self.world.fabric, self.id, goal, planner=planner, map_name=map_name, timeout=timeout or max(self.world.timeout, 15.0))
         except ServiceError as exc:
-            raise Unreachable(f"no path for {self.id} to ({x:.2f}, {y:.2f}, {theta:.2f}): {exc.reason}") from None
+            where = "the goal object" if goal is None else f"({goal[0]:.2f}, {goal[1]:.2f}, {goal[2]:.2f})"
+            raise Unreachable(f"no path for {self.id} to {where}: {exc.reason}") from None
 
     def follow(self, path: Path, *, wait: bool = True, tol: float = 0.25, timeout: float = 120.0) -> tuple[float, float, float] | None:
         """Send ``path`` to the sim's follower; with ``wait``, block until the base stops near its end."""

@@ -139,7 +139,52 @@ def user(
         w.close()
 
 
+def scenario(
+    name: Annotated[str, typer.Argument(help="test-a (arm follows the IK target) or test-b (map, plan, follow).")],
+    user_id: UserOpt = None,
+    robot: Annotated[Optional[str], typer.Option(help="Robot to use (default arm1 for test-a, base1 for test-b).")] = None,
+    wait: Annotated[float, typer.Option(help="Wait up to S seconds for the world (sim peer) to answer.")] = 30.0,
+    world: World = None,
+    connect: Connect = None,
+    profile: Profile = None,
+    zenoh_config: ZenohConfig = None,
+) -> None:
+    """Run one of the paper's scenarios as a scripted user; exit 0 on success."""
+    import time
+
+    from user_peer.errors import FabricUserError
+    from user_peer.scenarios import SCENARIOS
+
+    if name not in SCENARIOS:
+        raise UserError(f"unknown scenario {name!r}; expected one of {', '.join(SCENARIOS)}")
+    w = _open_world(world, connect, profile, zenoh_config, user_id)
+    try:
+        deadline = time.monotonic() + wait
+        while True:
+            try:
+                w.info()
+                break
+            except FabricUserError as exc:
+                if time.monotonic() > deadline:
+                    raise UserError(exc.reason) from None
+                time.sleep(0.5)
+        kw = {}
+        if robot:
+            kw["arm_id" if name == "test-a" else "base_id"] = robot
+        try:
+            res = SCENARIOS[name](w, **kw)
+        except FabricUserError as exc:
+            print(f"[{name} {w.user}] FAILED: {type(exc).__name__}: {exc.reason}", flush=True)
+            raise typer.Exit(1) from None
+    finally:
+        w.close()
+    figures = ", ".join(f"{k}={v:.3g}" for k, v in res.figures.items())
+    print(f"[{name} {res.user}] {'ok' if res.ok else 'FAILED'}: {figures}", flush=True)
+    raise typer.Exit(0 if res.ok else 1)
+
+
 def register(app: typer.Typer) -> None:
+    app.command("scenario")(scenario)
     app.command("user")(user)
     app.command("view")(view)
     app.command("export")(export)

@@ -19,7 +19,7 @@ from fabric import keys
 from fabric.messages import OccupancyGrid, Path
 from fabric.session import Fabric, ServiceError
 
-__all__ = ["RobotEntry", "robot_entries", "world_info", "ik", "build_map", "plan"]
+__all__ = ["RobotEntry", "robot_entries", "world_info", "ik", "map_request", "build_map", "plan"]
 
 
 def _module(name: str) -> Any:
@@ -91,21 +91,27 @@ def ik(fab: Fabric, robot: str, xyz: Sequence[float], quaternion: Sequence[float
     return np.asarray(q, dtype=float)
 
 
-def build_map(fab: Fabric, robot: str, *, name: str | None = None, timeout: float = 10.0) -> OccupancyGrid:
-    """The occupancy grid a compute peer built from ``robot``'s scans."""
+def map_request(fab: Fabric, action: str, *, name: str = "map", threshold: float = 0.65, timeout: float = 10.0) -> Any:
+    """One request to the mapping service on ``rf/{world}/srv/map/{name}``; returns its MapReply."""
     m = _module("compute_peer.navigation.messages")
-    req = m.MapRequest(robot=robot, name=name or robot) if hasattr(m, "MapRequest") else None
-    reply = fab.call(keys.srv(fab.world, "map", robot), req, timeout=timeout)
-    grid = reply if isinstance(reply, OccupancyGrid) else _get(reply, "grid", "map")
-    if not isinstance(grid, OccupancyGrid):
-        raise ServiceError(f"map reply without a grid: {type(reply).__name__}")
+    return fab.call(keys.srv(fab.world, "map", name), m.MapRequest(action, name=name, threshold=threshold), timeout=timeout)
+
+
+def build_map(fab: Fabric, *, name: str = "map", threshold: float = 0.65, timeout: float = 10.0) -> OccupancyGrid:
+    """Threshold the scans a compute peer accumulated into map ``name`` (also published on ``map/{name}``)."""
+    reply = map_request(fab, "build", name=name, threshold=threshold, timeout=timeout)
+    grid = reply.grid
+    if not isinstance(grid, OccupancyGrid) or grid.cells.size == 0:
+        raise ServiceError(f"the map service built no grid for {name!r}")
     return grid
 
 
-def plan(fab: Fabric, robot: str, goal: tuple[float, float, float], *, planner: str = "hybrid_astar", timeout: float = 10.0) -> Path:
-    """A path from ``robot``'s pose to ``goal`` from a compute peer."""
+def plan(
+    fab: Fabric, robot: str, goal: tuple[float, float, float] | None, *, planner: str = "hybrid_astar", map_name: str = "map", timeout: float = 10.0
+) -> Path:
+    """A path from ``robot``'s pose to ``goal`` (None: the goal object's pose) from a compute peer."""
     m = _module("compute_peer.navigation.messages")
-    req = m.PlanRequest(goal=np.asarray(goal, dtype=float), planner=planner)
+    req = m.PlanRequest(robot, goal=np.asarray(goal if goal is not None else (), dtype=float), planner=planner, map=map_name)
     reply = fab.call(keys.srv(fab.world, "plan", robot), req, timeout=timeout)
     path = reply if isinstance(reply, Path) else _get(reply, "path")
     if not isinstance(path, Path):
