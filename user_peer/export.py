@@ -39,7 +39,7 @@ class ExportStats:
 
 
 def check_mcap(path: Path) -> None:
-    """Raise :class:`ExportError` unless ``path`` is a readable file starting with the MCAP magic."""
+    """Raise :class:`ExportError` unless ``path`` is a readable MCAP file."""
     if not path.is_file():
         raise ExportError(f"{path}: no such file")
     with open(path, "rb") as f:
@@ -48,33 +48,28 @@ def check_mcap(path: Path) -> None:
 
 
 def read_mcap(path: Path, counts: dict[str, int] | None = None) -> Iterator[tuple[str, object, int]]:
-    """(key, decoded message, log time ns) for every message of an MCAP file, in file order.
+    """(key, decoded message, log time ns) of every fabric message of a recording, in file order.
 
-    The streaming reader is used on purpose: it needs no summary section, so the file of a
-    recorder killed mid-write is read up to its last complete chunk.
+    Reading goes through :func:`fabric.recording.iter_messages` (the ``mcap`` package underneath),
+    which stops quietly at the torn tail of a recorder killed mid-write. Samples recorded as raw
+    bytes or liveliness are skipped; payloads that do not decode are counted as ``bad``.
     """
-    from mcap.exceptions import McapError
-    from mcap.reader import NonSeekingReader
+    from fabric.recording import RecordingError, iter_messages
 
     check_mcap(path)
-    with open(path, "rb") as f:
-        reader = NonSeekingReader(f)
-        try:
-            for schema, channel, message in reader.iter_messages(log_time_order=False):
-                if schema is not None and schema.name in SKIPPED_SCHEMAS:
-                    continue
-                try:
-                    msg = decode(message.data)
-                except DecodeError:
-                    if counts is not None:
-                        counts["bad"] = counts.get("bad", 0) + 1
-                    continue
-                yield channel.topic, msg, int(message.log_time)
-        except (McapError, EOFError, ValueError) as exc:
-            # A recorder killed mid-chunk leaves a tail that cannot be read: keep what came before it.
-            if counts is not None:
-                counts["truncated"] = 1
-                counts["error"] = str(exc)  # type: ignore[assignment]
+    try:
+        for m in iter_messages(path):
+            if m.schema in SKIPPED_SCHEMAS:
+                continue
+            try:
+                msg = decode(m.payload)
+            except DecodeError:
+                if counts is not None:
+                    counts["bad"] = counts.get("bad", 0) + 1
+                continue
+            yield m.key, msg, int(m.log_time)
+    except RecordingError as exc:
+        raise ExportError(str(exc)) from None
 
 
 def export_mcap(src: Path, dst: Path, *, max_hz: float = 0.0, scene: str | None = None) -> ExportStats:

@@ -88,3 +88,28 @@ def test_export_reads_a_truncated_recording(tmp_path):
     stats = export_mcap(src, dst, scene="combined")
     assert 0 < stats.messages < 122
     assert rows_per_entity(dst)["/world/robots/base1/scan"] > 0
+
+
+def test_export_of_a_live_recording(world, connect, tmp_path):
+    from fabric.recording import Recorder
+    from fabric.testing import wait_until
+
+    pub = connect("sim", "fake-sim")
+    rec_fab = connect("recorder", "rec")
+    src, dst = tmp_path / "live.mcap", tmp_path / "live.rrd"
+    with Recorder(rec_fab, src) as rec:
+        i = 0
+
+        def step():
+            nonlocal i
+            h = Header(stamp=i * 0.05, wall_ns=0, seq=i)
+            pub.publish(keys.robot_pose(world, "base1"), Pose([0.1 * i, 0, 0], header=h))
+            pub.publish(keys.robot_scan(world, "base1"), Scan.from_ranges(np.full(240, 3.0), angle_min=-1.178, angle_increment=0.00986, range_max=12.0, header=h))
+            i += 1
+            return rec.stats.messages >= 20
+
+        wait_until(step, timeout=15, interval=0.05, what="20 recorded messages")
+    stats = export_mcap(src, dst)
+    assert stats.messages >= 20 and stats.bad == 0 and stats.robots == ("base1",)
+    rows = rows_per_entity(dst)
+    assert rows["/world/robots/base1/scan"] >= 10 and rows["/world/robots/base1/base"] >= 10
