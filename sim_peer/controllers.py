@@ -138,6 +138,7 @@ class BaseController:
         self.wheels = np.zeros(2)  # left, right wheel angles (rad)
         self.wheel_speeds = np.zeros(2)
         self.follower = None  # anything with step(x, y, yaw, v, dt) -> (v, omega, done)
+        self.paths_done = 0  # paths followed to their end (not stopped or replaced)
 
     def twist(self, v: float, omega: float) -> Clamp | None:
         """Drive at (v, omega) until told otherwise; absurd values are refused, excessive ones clamped."""
@@ -187,6 +188,7 @@ class BaseController:
             v_d, w_d, done = self.follower.step(self.x, self.y, self.yaw, self.v, dt)
             if done:
                 self.follower = None
+                self.paths_done += 1
                 v_d = w_d = 0.0
             self.v_cmd, self.omega_cmd = v_d, w_d
         dv = max(-s.max_accel * dt, min(s.max_accel * dt, self.v_cmd - self.v))

@@ -112,6 +112,13 @@ class ArmRobot(SimRobot):
         mujoco.mju_mat2Quat(quat, data.site_xmat[self.flange_id])
         return data.site_xpos[self.flange_id].copy(), quat
 
+    def flange_velocity(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        """Linear and angular flange velocity (world frame) from the site Jacobian and the joint speeds."""
+        jacp = np.zeros((3, self.model.nv))
+        jacr = np.zeros((3, self.model.nv))
+        mujoco.mj_jacSite(self.model, data, jacp, jacr, self.flange_id)
+        return jacp[:, self.vadr] @ self.ctrl.dq, jacr[:, self.vadr] @ self.ctrl.dq
+
     def state(self, data: mujoco.MjData) -> dict[str, Any]:
         pos, quat = self.flange(data)
         return {

@@ -214,6 +214,7 @@ class World:
         """Make positions (bodies, sites) match the current state; cheap when nothing changed."""
         if self._dirty:
             mujoco.mj_kinematics(self.model, self.data)
+            mujoco.mj_comPos(self.model, self.data)  # for Jacobians (flange velocity)
             self._dirty = False
 
     def reset(self) -> None:
@@ -277,11 +278,20 @@ class World:
         return r.sonar.read(self.data)
 
     def flange(self, robot_id: str) -> tuple[np.ndarray, np.ndarray]:
+        """Flange position and quaternion (w, x, y, z) of an arm, world frame."""
         r = self.robot(robot_id)
         if not isinstance(r, ArmRobot):
             raise KeyError(f"robot {robot_id!r} is not an arm")
         self.sync()
         return r.flange(self.data)
+
+    def flange_velocity(self, robot_id: str) -> tuple[np.ndarray, np.ndarray]:
+        """Flange linear and angular velocity of an arm, world frame (J(q) dq)."""
+        r = self.robot(robot_id)
+        if not isinstance(r, ArmRobot):
+            raise KeyError(f"robot {robot_id!r} is not an arm")
+        self.sync()
+        return r.flange_velocity(self.data)
 
     def state(self, robot_id: str) -> dict[str, Any]:
         """A robot's last known state as a small dict of plain values (for the ownership record)."""

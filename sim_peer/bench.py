@@ -1,0 +1,99 @@
+"""``robofabric bench sim``: real-time factor and ray-cast cost of the headless simulation.
+
+Measured without any network: the world stepped as fast as it goes, LIDAR (and the
+ultrasonic ring) read at a fixed rate of sim time, as the peer's scan stream would.
+"""
+
+from __future__ import annotations
+
+import math
+import platform
+import time
+from pathlib import Path
+from typing import Annotated, Optional
+
+import numpy as np
+import typer
+
+
+def rtf(world, seconds: float, scan_hz: float = 20.0) -> float:
+    """Sim seconds per wall second over ``seconds`` of sim time, scanning every robot at ``scan_hz``."""
+    from sim_peer.simrobot import MobileRobot
+
+    mobiles = [rid for rid, r in world.robots.items() if isinstance(r, MobileRobot) and r.lidar is not None]
+    for rid in mobiles:  # keep them driving in circles so the scans see a changing world
+        world.robot(rid).twist(0.3, 0.2)
+    per_scan = max(1, int(round(1.0 / (scan_hz * world.dt))))
+    total = int(round(seconds / world.dt))
+    t0 = time.perf_counter()
+    done = 0
+    while done < total:
+        n = min(per_scan, total - done)
+        world.step(n)
+        done += n
+        for rid in mobiles:
+            world.scan(rid)
+            if world.robot(rid).sonar is not None:
+                world.sonar(rid)
+    return seconds / (time.perf_counter() - t0)
+
+
+def scan_cost(world, robot_id: str, n: int = 2000) -> tuple[float, float]:
+    """Median and p99 wall time (us) of one LIDAR scan."""
+    world.sync()
+    lidar = world.robot(robot_id).lidar
+    samples = np.empty(n)
+    for i in range(n):
+        t = time.perf_counter()
+        lidar.read(world.data)
+        samples[i] = time.perf_counter() - t
+    return float(np.median(samples) * 1e6), float(np.percentile(samples, 99) * 1e6)
+
+
+def bench_sim(
+    seconds: Annotated[float, typer.Option(help="Sim seconds per real-time-factor run.")] = 10.0,
+    counts: Annotated[str, typer.Option(help="Mobile robot counts for the scaling runs.")] = "1,10,50",
+    out: Annotated[Optional[Path], typer.Option(help="Write the markdown table to this file.")] = None,
+) -> None:
+    """Real-time factor of `combined` with LIDAR at 20 Hz, one 240-ray scan's cost, RTF with N mobile robots."""
+    from sim_peer.world import World
+
+    rows = []
+    w = World("combined", seed=1)
+    r = rtf(w, seconds)
+    rows.append(("combined (Meca500 + Reeman), LIDAR 240 rays @ 20 Hz + ultrasonic", f"{r:.0f}x", ">= 50x", "ok" if r >= 50 else "MISSED"))
+    med, p99 = scan_cost(w, "base1")
+    rows.append(("one 240-ray LIDAR scan (combined), median / p99", f"{med:.1f} / {p99:.1f} us", "<= 50 us", "ok" if med <= 50 else "MISSED"))
+    for n in [int(c) for c in counts.split(",") if c.strip()]:
+        extra = [f"reeman:m{i}" for i in range(n)]
+        wn = World("warehouse", extra, scene_robots=False, seed=1)
+        secs = max(1.0, seconds / max(1, n / 5))
+        r = rtf(wn, secs)
+        rows.append((f"warehouse, {n} mobile robots, each LIDAR @ 20 Hz + ultrasonic", f"{r:.1f}x", "", ""))
+    lines = [
+        f"Command: `robofabric bench sim --seconds {seconds:g} --counts {counts}`",
+        f"Machine: {platform.machine()} {platform.processor() or ''} ({_cpus()} CPUs visible), Python {platform.python_version()}, MuJoCo {_mujoco()}",
+        "",
+        "| measurement | result | target | |",
+        "|---|---|---|---|",
+        *[f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows],
+    ]
+    text = "\n".join(lines)
+    print(text)
+    if out is not None:
+        out.write_text(text + "\n")
+
+
+def _cpus() -> int:
+    import os
+
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 0)
+
+
+def _mujoco() -> str:
+    import mujoco
+
+    return mujoco.__version__
+
+
+__all__ = ["bench_sim", "rtf", "scan_cost"]

@@ -1,0 +1,110 @@
+"""``robofabric sim``: run a simulation peer; ``robofabric bench sim``: measure it."""
+
+from __future__ import annotations
+
+import logging
+import sys
+from typing import Annotated, Optional
+
+import typer
+
+from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, bench_app, make_config
+from fabric.gate import CommandGate, OpenGate
+from fabric.rate import parse_rates
+
+log = logging.getLogger("robofabric.sim")
+
+
+def make_gate(fabric, world, ownership: bool) -> CommandGate:
+    """The ownership Authority when asked for and installed, else an OpenGate (with a warning if asked for)."""
+    if not ownership:
+        return OpenGate()
+    try:
+        from ownership import Authority  # lazy: the sim peer runs without the ownership package
+    except ImportError as exc:
+        print(f"warning: ownership is not available ({exc}); commands are not gated (OpenGate)", file=sys.stderr)
+        return OpenGate()
+    objects = {rid: "exclusive" for rid in world.robots}
+    objects.update({obj: "scene" for obj in world.objects})
+    return Authority(fabric, objects=objects)
+
+
+def sim(
+    scene: Annotated[str, typer.Option("--scene", "-s", help="Scene name (robots/scenes/NAME.toml) or path to a scene .toml.")] = "combined",
+    robot: Annotated[
+        Optional[list[str]],
+        typer.Option("--robot", "-r", help="Add a robot: TYPE:ID or TYPE:ID@X,Y[,YAW_DEG[,Z]] (repeatable)."),
+    ] = None,
+    scene_robots: Annotated[bool, typer.Option("--scene-robots/--no-scene-robots", help="Include the robots the scene places.")] = True,
+    rate: Annotated[str, typer.Option("--rate", help="Stream rates in Hz, e.g. joints=100,pose=50,scan=20.")] = "",
+    speed: Annotated[str, typer.Option("--speed", help="1 = real time, X = X times real time, max = as fast as possible.")] = "1",
+    duration: Annotated[Optional[float], typer.Option("--duration", help="Stop after this many seconds of sim time.")] = None,
+    seed: Annotated[Optional[int], typer.Option("--seed", help="Seed of the sensor noise.")] = None,
+    noise: Annotated[Optional[float], typer.Option("--noise", help="Gaussian range noise std (m) for LIDAR and ultrasonic.")] = None,
+    lidar_rays: Annotated[Optional[int], typer.Option("--lidar-rays", help="LIDAR ray count (default from the robot, 240).")] = None,
+    lidar_fov: Annotated[Optional[float], typer.Option("--lidar-fov", help="LIDAR field of view in degrees (default 135).")] = None,
+    ownership: Annotated[bool, typer.Option("--ownership/--no-ownership", help="Gate commands by ownership (needs the ownership package).")] = True,
+    world: World = None,
+    connect: Connect = None,
+    listen: Listen = None,
+    profile: Profile = None,
+    zenoh_config: ZenohConfig = None,
+    peer_id: PeerId = None,
+) -> None:
+    """Simulate a scene's robots and serve them on the fabric: joints, poses, scans out; commands in."""
+    from fabric.session import Fabric, shutdown_event
+    from sim_peer.pacing import parse_speed
+    from sim_peer.peer import DEFAULT_RATES, SimPeer
+    from sim_peer.world import World as SimWorld
+    from sim_peer.world import WorldError
+
+    try:
+        rates = parse_rates(rate, DEFAULT_RATES)
+        pace = parse_speed(speed)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    if duration is not None and not duration > 0:
+        raise UserError(f"--duration must be positive, got {duration}")
+    if noise is not None and not noise >= 0:
+        raise UserError(f"--noise must be >= 0, got {noise}")
+    try:
+        sim_world = SimWorld(
+            scene, robot or [], scene_robots=scene_robots, seed=seed, noise_std=noise, lidar_rays=lidar_rays, lidar_fov_deg=lidar_fov
+        )
+    except WorldError as exc:
+        raise UserError(str(exc)) from None
+    if not sim_world.robots:
+        raise UserError(f"scene {sim_world.scene.name!r} has no robots and none were added with --robot")
+    cfg = make_config(world, connect, listen, profile, zenoh_config)
+    stop = shutdown_event()
+    try:
+        fab = Fabric(cfg, kind="sim", peer_id=peer_id)
+    except Exception as exc:
+        where = ", ".join(cfg.endpoints()[0] or cfg.endpoints()[1]) or "the LAN"
+        raise UserError(f"cannot join world {cfg.world!r} via {where}: {exc}") from None
+    with fab:
+        gate = make_gate(fab, sim_world, ownership)
+        peer = SimPeer(fab, sim_world, gate=gate, rates=rates, speed=pace)
+        listing = ", ".join(f"{rid} ({r.desc.name})" for rid, r in sim_world.robots.items())
+        pace_text = "max speed" if pace is None else ("real time" if pace == 1 else f"{pace:g}x real time")
+        print(f"sim {fab.peer_id}: scene {sim_world.scene.name}, robots {listing}; world {fab.world}, {pace_text}; Ctrl-C to stop", flush=True)
+        try:
+            peer.run(stop, duration)
+        finally:
+            peer.close()
+            close = getattr(gate, "close", None)
+            if callable(close):
+                close()
+        c = peer.counters
+        print(
+            f"sim stopped at t={sim_world.time:.3f} s: {c['steps']} steps, {c['commands']} commands "
+            f"({c['accepted']} accepted, {c['rejected']} rejected, {c['clamped']} clamped)",
+            flush=True,
+        )
+
+
+def register(app: typer.Typer) -> None:
+    app.command("sim")(sim)
+    from sim_peer import bench
+
+    bench_app.command("sim")(bench.bench_sim)

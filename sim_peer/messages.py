@@ -1,0 +1,152 @@
+"""The sim peer's service message: :class:`WorldInfo`, the answer on ``rf/{world}/srv/world``.
+
+It carries what other peers need to work with the world without a local copy of
+the robot files: each robot's id, type, kind, spawn pose, joint names, limits and
+speeds, base limits and sensor configuration, and the scene objects.
+Registered with :mod:`fabric.codec` on import.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from fabric.codec import Arr, DecodeError, F, Map, Msg, S, Strs, register
+from fabric.messages import Header
+
+
+def _ro(a: Any) -> np.ndarray:
+    arr = np.array(a, dtype=np.float64, copy=True)
+    arr.setflags(write=False)
+    return arr
+
+
+class Msgs:
+    """A list of nested messages of one class (the codec's ``Msg`` for a single one)."""
+
+    def __init__(self, cls: type) -> None:
+        self.one = Msg(cls)
+
+    def check(self, v: Any, where: str) -> tuple:
+        if not isinstance(v, list):
+            raise DecodeError(f"{where}: expected a list of messages, got {type(v).__name__}")
+        if len(v) > 10_000:
+            raise DecodeError(f"{where}: {len(v)} entries is too many")
+        return tuple(self.one.check(x, f"{where}[{i}]") for i, x in enumerate(v))
+
+    def dump(self, v: Any) -> Any:
+        return [self.one.dump(x) for x in v]
+
+
+@dataclass(frozen=True, slots=True)
+class RobotInfo:
+    """One robot of a world. ``pose`` is its spawn pose (x, y, z, yaw); limits in rad, speeds in rad/s.
+
+    ``base`` (mobile robots): radius, wheel_separation, wheel_radius, max_speed, max_omega, max_accel, max_alpha.
+    ``sensors``: lidar_* (rays, fov, angle_min, angle_increment, range_min, range_max, noise_std, site,
+    offset [x, y, z] in the robot frame) and sonar_* (angles, radius, height, center, range_min, range_max).
+    """
+
+    id: str
+    type: str
+    kind: str
+    pose: np.ndarray
+    joint_names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    max_speed: np.ndarray
+    flange_site: str = ""
+    flange_frame: str = ""
+    base_radius: float = 0.0
+    base: dict = field(default_factory=dict)
+    sensors: dict = field(default_factory=dict)
+
+    SPEC: ClassVar[dict] = {
+        "id": S(nonempty=True),
+        "type": S(nonempty=True),
+        "kind": S(choices=("arm", "mobile")),
+        "pose": Arr(np.float64, shape=(4,)),
+        "joint_names": Strs(),
+        "lower": Arr(np.float64, ndim=1),
+        "upper": Arr(np.float64, ndim=1),
+        "max_speed": Arr(np.float64, ndim=1),
+        "flange_site": S(),
+        "flange_frame": S(),
+        "base_radius": F(lo=0.0),
+        "base": Map(),
+        "sensors": Map(),
+    }
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "joint_names", tuple(self.joint_names))
+        for name in ("pose", "lower", "upper", "max_speed"):
+            object.__setattr__(self, name, _ro(getattr(self, name)))
+
+    def check(self) -> None:
+        n = len(self.joint_names)
+        if not (self.lower.shape[0] == self.upper.shape[0] == self.max_speed.shape[0] == n):
+            raise ValueError(f"RobotInfo {self.id}: {n} joints but limits/speeds of other lengths")
+
+
+@dataclass(frozen=True, slots=True)
+class ObjectInfo:
+    """A scene object (mocap body) anyone may move: id, kind (ik_target, goal_pointer...), policy, current pose."""
+
+    id: str
+    kind: str
+    policy: str
+    position: np.ndarray
+    quaternion: np.ndarray
+
+    SPEC: ClassVar[dict] = {
+        "id": S(nonempty=True),
+        "kind": S(),
+        "policy": S(choices=("scene", "exclusive")),
+        "position": Arr(np.float64, shape=(3,)),
+        "quaternion": Arr(np.float64, shape=(4,)),
+    }
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position", _ro(self.position))
+        object.__setattr__(self, "quaternion", _ro(self.quaternion))
+
+
+@dataclass(frozen=True, slots=True)
+class WorldInfo:
+    """The world a sim peer simulates: scene, timestep, stream rates (Hz), robots and scene objects."""
+
+    world: str
+    scene: str
+    timestep: float
+    rates: dict
+    robots: tuple[RobotInfo, ...]
+    objects: tuple[ObjectInfo, ...] = ()
+    header: Header = field(default_factory=Header)
+
+    SPEC: ClassVar[dict] = {
+        "world": S(nonempty=True),
+        "scene": S(),
+        "timestep": F(lo=1e-6, hi=1.0),
+        "rates": Map(),
+        "robots": Msgs(RobotInfo),
+        "objects": Msgs(ObjectInfo),
+        "header": Msg(Header),
+    }
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "robots", tuple(self.robots))
+        object.__setattr__(self, "objects", tuple(self.objects))
+
+    def robot(self, robot_id: str) -> RobotInfo:
+        for r in self.robots:
+            if r.id == robot_id:
+                return r
+        raise KeyError(f"no robot {robot_id!r} in world {self.world!r}")
+
+
+for _cls in (RobotInfo, ObjectInfo, WorldInfo):
+    register(_cls)
+
+__all__ = ["RobotInfo", "ObjectInfo", "WorldInfo"]

@@ -1,0 +1,389 @@
+"""The sim peer: a :class:`~sim_peer.world.World` served on the fabric.
+
+Streams, each on its own :class:`fabric.rate.RateLoop` (wall-clock rates,
+independent of the physics step; headers carry sim time):
+
+* ``joints`` - every robot's JointState; an arm's flange Pose goes out with it on the robot's ``pose`` key;
+* ``pose`` - every mobile robot's base Pose (axle midpoint) with its velocities;
+* ``scan`` - every LIDAR as a Scan (and the ultrasonic ring on ``sonar`` where fabric.keys has that stream).
+
+Commands on ``rf/{world}/robot/{id}/cmd/*`` pass through the :class:`fabric.gate.CommandGate`
+first; anything refused or unusable is published as an ``Event(kind="reject")`` under
+``event/reject/{robot}`` with the reason, counted, and the robot keeps its last valid command.
+Clamped commands are applied and reported as ``Event(kind="clamp")``. Scene objects move on
+``rf/{world}/object/{id}/pose``. ``rf/{world}/srv/world`` answers a :class:`WorldInfo`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections import Counter
+from typing import Any, Callable
+
+import numpy as np
+
+from fabric import keys
+from fabric.gate import CommandGate, OpenGate
+from fabric.messages import COMMAND_BODIES, Command, Event, JointState, Path, Pose, Scan
+from fabric.rate import Clock, RateLoop
+from fabric.session import Fabric
+from sim_peer.controllers import Clamp, CommandRejected
+from sim_peer.messages import ObjectInfo, RobotInfo, WorldInfo
+from sim_peer.pacing import Pacer
+from sim_peer.simrobot import ArmRobot, MobileRobot
+from sim_peer.world import World
+
+log = logging.getLogger("robofabric.sim")
+
+DEFAULT_RATES = {"joints": 100.0, "pose": 50.0, "scan": 20.0}
+SONAR_STREAM = "sonar"
+
+
+class SimPeer:
+    """Serve ``world`` on ``fabric``. ``start()`` runs physics in a thread; ``run()`` runs it in the caller's.
+
+    The peer owns neither the fabric nor the gate: whoever made them closes them.
+    """
+
+    def __init__(
+        self,
+        fabric: Fabric,
+        world: World,
+        *,
+        gate: CommandGate | None = None,
+        rates: dict[str, float] | None = None,
+        speed: float | None = 1.0,
+        clock: Clock | None = None,
+    ) -> None:
+        self.fabric = fabric
+        self.world = world
+        self.gate: CommandGate = gate if gate is not None else OpenGate()
+        self.rates = {**DEFAULT_RATES, **(rates or {})}
+        self.speed = speed
+        self.pacer = Pacer(world.dt, speed, clock=clock)
+        self.lock = threading.RLock()
+        self.counters: Counter[str] = Counter()
+        self._moving = {rid: False for rid in world.robots}
+        self._paths_done = {rid: 0 for rid in world.robots}
+        self._loops: list[RateLoop] = []
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._opened = False
+        self._closed = False
+        self._sonar = SONAR_STREAM in keys.ROBOT_STREAMS
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def open(self) -> "SimPeer":
+        """Declare subscriptions and the world service, start the stream loops. Physics is not stepped yet."""
+        if self._opened:
+            return self
+        self._opened = True
+        f, w = self.fabric, self.fabric.world
+        f.subscribe(keys.robot_cmd_all(w), self._on_command, expected=Command)
+        for obj in self.world.objects:
+            f.subscribe(keys.object_pose(w, obj), self._on_object, expected=Pose)
+        f.serve(keys.srv(w, "world"), self._on_world_query)
+        provider = getattr(self.gate, "set_state_provider", None)
+        if callable(provider):
+            provider(self.last_state)
+        for rid in self.world.robots:
+            self._safe_gate_motion(rid, False)
+        for name, fn in (("joints", self._publish_joints), ("pose", self._publish_poses), ("scan", self._publish_scans)):
+            self._loops.append(RateLoop(self.rates[name], self._guard(name, fn), name=f"sim-{name}").start())
+        return self
+
+    def start(self, duration: float | None = None) -> "SimPeer":
+        """Open and step physics in a daemon thread until :meth:`close` (or ``duration`` of sim time)."""
+        self.open()
+        self._thread = threading.Thread(target=self.run, args=(self._stop, duration), name="sim-physics", daemon=True)
+        self._thread.start()
+        return self
+
+    def run(self, stop: threading.Event | None = None, duration: float | None = None) -> None:
+        """Step the world, paced, until ``stop`` is set or sim time reaches ``duration``."""
+        self.open()
+        stop = stop or self._stop
+        end_steps = None if duration is None else self.world.steps + int(round(duration / self.world.dt))
+        while not stop.is_set() and not self._stop.is_set():
+            n = self.pacer.due()
+            if end_steps is not None:
+                n = min(n, end_steps - self.world.steps)
+            if n <= 0:
+                if end_steps is not None and self.world.steps >= end_steps:
+                    break
+                stop.wait(min(self.pacer.wait(), 0.005) or 0.0005)
+                continue
+            with self.lock:
+                self.world.step(n)
+                changes = self._motion_changes()
+            self.pacer.done(n)
+            self.counters["steps"] += n
+            for rid, moving, path_done in changes:
+                if moving is not None:
+                    self._safe_gate_motion(rid, moving)
+                if path_done:
+                    self._event("path_done", rid, "path followed to its end", severity="info")
+            if self.speed is None:
+                time.sleep(0)  # let streams and commands have the interpreter between chunks
+
+    def close(self) -> None:
+        """Stop physics and streams; idempotent. The fabric and the gate stay open."""
+        if self._closed:
+            return
+        self._closed = True
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(5.0)
+        for loop in self._loops:
+            loop.stop()
+
+    def __enter__(self) -> "SimPeer":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ state
+
+    def last_state(self, robot_id: str) -> dict[str, Any]:
+        """A robot's last known state as a small dict of plain values (for ownership records)."""
+        with self.lock:
+            return self.world.state(robot_id)
+
+    def world_info(self) -> WorldInfo:
+        with self.lock:
+            robots = [self._robot_info(rid) for rid in self.world.robots]
+            objects = []
+            for o in self.world.scene.objects:
+                pos, quat = self.world.object_pose(o.id)
+                objects.append(ObjectInfo(o.id, o.kind, o.policy, pos, quat))
+            return WorldInfo(
+                world=self.fabric.world,
+                scene=self.world.scene.name,
+                timestep=self.world.dt,
+                rates=dict(self.rates),
+                robots=tuple(robots),
+                objects=tuple(objects),
+                header=self.fabric.header("srv/world", stamp=self.world.time),
+            )
+
+    def _robot_info(self, rid: str) -> RobotInfo:
+        r = self.world.robots[rid]
+        d = r.desc
+        base: dict[str, Any] = {}
+        sensors: dict[str, Any] = {}
+        if d.base is not None:
+            b = d.base
+            base = {
+                "radius": b.radius, "height": b.height, "wheel_separation": b.wheel_separation, "wheel_radius": b.wheel_radius,
+                "max_speed": b.max_speed, "max_omega": b.max_omega, "max_accel": b.max_accel, "max_alpha": b.max_alpha,
+            }
+        if isinstance(r, MobileRobot) and r.lidar is not None:
+            li = r.lidar.spec
+            sensors.update(
+                lidar_site=li.site, lidar_rays=li.rays, lidar_fov=li.fov, lidar_angle_min=li.angle_min,
+                lidar_angle_increment=li.angle_increment, lidar_range_min=li.range_min, lidar_range_max=li.range_max,
+                lidar_noise_std=li.noise_std, lidar_offset=[float(v) for v in self.world.model.site_pos[r.lidar.site_id]],
+            )
+        if isinstance(r, MobileRobot) and r.sonar is not None:
+            us = r.sonar.spec
+            sensors.update(
+                sonar_angles=list(us.angles), sonar_radius=us.radius, sonar_height=us.height, sonar_center=list(us.center),
+                sonar_range_min=us.range_min, sonar_range_max=us.range_max, sonar_noise_std=us.noise_std,
+            )
+        return RobotInfo(
+            id=rid, type=d.name, kind=d.kind, pose=np.array(self.world.placements[rid].pose), joint_names=d.joint_names,
+            lower=np.array(d.lower), upper=np.array(d.upper), max_speed=np.array(d.max_speed), flange_site=d.flange_site,
+            flange_frame=d.flange_frame, base_radius=d.base_radius, base=base, sensors=sensors,
+        )
+
+    def _motion_changes(self) -> list[tuple[str, bool | None, bool]]:
+        out = []
+        for rid, r in self.world.robots.items():
+            moving = r.moving
+            done = r.ctrl.paths_done if isinstance(r, MobileRobot) else 0
+            path_done = done != self._paths_done[rid]
+            changed = moving != self._moving[rid]
+            if changed or path_done:
+                out.append((rid, moving if changed else None, path_done))
+            self._moving[rid] = moving
+            self._paths_done[rid] = done
+        return out
+
+    def _safe_gate_motion(self, rid: str, moving: bool) -> None:
+        try:
+            self.gate.update_motion(rid, moving)
+        except Exception:
+            self.counters["gate_errors"] += 1
+            log.exception("gate.update_motion(%s) failed", rid)
+
+    # ------------------------------------------------------------------ commands
+
+    def _event(self, kind: str, robot: str, reason: str, *, user: str = "", severity: str = "warning", data: dict | None = None) -> None:
+        key_parts = (kind, robot) if robot else (kind,)
+        try:
+            ev = Event(
+                kind=kind, reason=reason, object=robot, user=user, severity=severity, data=data or {},
+                header=self.fabric.header("event", stamp=self.world.time),
+            )
+            self.fabric.emit(ev, *key_parts)
+        except ValueError:  # a robot id that cannot be a key part: publish without it
+            self.fabric.emit(Event(kind=kind, reason=reason, object="", user=user, severity=severity, data=data or {}), kind)
+
+    def _reject(self, robot: str, command: str, reason: str, detail: str, user: str = "") -> None:
+        self.counters["rejected"] += 1
+        self.counters[f"rejected:{reason}"] += 1
+        self._event("reject", robot, reason, user=user, data={"command": command, "detail": detail})
+
+    def _on_command(self, key: str, cmd: Command) -> None:
+        self.counters["commands"] += 1
+        try:
+            parsed = keys.parse(key)
+        except ValueError as exc:
+            self._reject("", "?", "bad_key", str(exc), cmd.user)
+            return
+        rid, name = parsed.subject, parsed.leaf
+        robot = self.world.robots.get(rid)
+        if robot is None:
+            self._reject(rid, name, "unknown_robot", f"no robot {rid!r} here; robots: {', '.join(self.world.robots)}", cmd.user)
+            return
+        want = COMMAND_BODIES.get(name)
+        if want is None or not isinstance(cmd.body, want):
+            self._reject(rid, name, "wrong_body", f"cmd/{name} carries {getattr(want, '__name__', '?')}, got {type(cmd.body).__name__}", cmd.user)
+            return
+        try:
+            refusal = self.gate.admit(rid, cmd)
+        except Exception as exc:
+            log.exception("gate.admit failed")
+            refusal = f"gate error: {exc}"
+        if refusal:
+            self._reject(rid, name, refusal, f"the gate refused {cmd.user}'s {name} command (epoch {cmd.epoch})", cmd.user)
+            return
+        try:
+            with self.lock:
+                clamp = self._apply(robot, name, cmd.body)
+        except CommandRejected as exc:
+            self._reject(rid, name, exc.reason, str(exc), cmd.user)
+            return
+        self.counters["accepted"] += 1
+        if clamp is not None:
+            self.counters["clamped"] += 1
+            self._event(
+                "clamp", rid, "out_of_range" if name == "joints" else "over_limit", user=cmd.user,
+                data={"command": name, "what": list(clamp.what), "requested": list(clamp.requested), "applied": list(clamp.applied)},
+            )
+
+    def _apply(self, robot, name: str, body: Any) -> Clamp | None:
+        if name == "joints":
+            return robot.joints(body.q, body.speed_scale)
+        if name == "twist":
+            return robot.twist(body.v, body.omega)
+        if name == "path":
+            if body.frame not in ("world", ""):
+                raise CommandRejected("bad_frame", f"paths must be in the world frame, got {body.frame!r}")
+            robot.path(body.x, body.y, body.theta)
+            return None
+        if name == "stop":
+            robot.stop()
+            return None
+        if name == "reset":
+            robot.reset()
+            return None
+        raise CommandRejected("unknown_command", f"unknown command {name!r}")
+
+    def _on_object(self, key: str, pose: Pose) -> None:
+        obj = keys.parse(key).subject
+        if pose.frame not in ("world", ""):
+            self._reject(obj, "pose", "bad_frame", f"object poses must be in the world frame, got {pose.frame!r}")
+            return
+        try:
+            with self.lock:
+                self.world.set_object_pose(obj, pose.position, pose.quaternion)
+        except (KeyError, ValueError) as exc:
+            self._reject(obj, "pose", "bad_object_pose", str(exc))
+            return
+        self.counters["object_updates"] += 1
+
+    def _on_world_query(self, key: str, request: Any) -> WorldInfo:
+        return self.world_info()
+
+    # ------------------------------------------------------------------ streams
+
+    def _guard(self, name: str, fn: Callable[[float], None]) -> Callable[[float], None]:
+        def tick(now: float) -> None:
+            if self.fabric.closed:
+                return
+            try:
+                fn(now)
+            except Exception:
+                self.counters[f"stream_errors:{name}"] += 1
+                log.exception("stream %s failed", name)
+
+        return tick
+
+    def _publish_joints(self, now: float) -> None:
+        w, world = self.fabric.world, self.world
+        out = []
+        with self.lock:
+            stamp = world.time
+            for rid, r in world.robots.items():
+                names, q, dq = r.joint_state()
+                flange = None
+                if isinstance(r, ArmRobot) and r.flange_id >= 0:
+                    pos, quat = world.flange(rid)
+                    lin, ang = world.flange_velocity(rid)
+                    flange = (pos, quat, lin, ang)
+                out.append((rid, names, q, dq, flange))
+        for rid, names, q, dq, flange in out:
+            jk = keys.robot_joints(w, rid)
+            self.fabric.publish(jk, JointState(names, q, dq, self.fabric.header(jk, stamp=stamp)))
+            if flange is not None:
+                pk = keys.robot_pose(w, rid)
+                pos, quat, lin, ang = flange
+                self.fabric.publish(pk, Pose(pos, quat, lin, ang, "world", self.fabric.header(pk, stamp=stamp)))
+
+    def _publish_poses(self, now: float) -> None:
+        w = self.fabric.world
+        out = []
+        with self.lock:
+            stamp = self.world.time
+            for rid, r in self.world.robots.items():
+                if isinstance(r, MobileRobot):
+                    out.append((rid, r.pose()))
+        for rid, (pos, quat, lin, ang) in out:
+            k = keys.robot_pose(w, rid)
+            self.fabric.publish(k, Pose(pos, quat, lin, ang, "world", self.fabric.header(k, stamp=stamp)))
+
+    def _publish_scans(self, now: float) -> None:
+        w = self.fabric.world
+        out = []
+        with self.lock:
+            stamp = self.world.time
+            for rid, r in self.world.robots.items():
+                if isinstance(r, MobileRobot):
+                    lidar = self.world.scan(rid) if r.lidar is not None else None
+                    sonar = self.world.sonar(rid) if (r.sonar is not None and self._sonar) else None
+                    out.append((rid, r, lidar, sonar))
+        for rid, r, lidar, sonar in out:
+            if lidar is not None:
+                s = r.lidar.spec
+                k = keys.robot_scan(w, rid)
+                self.fabric.publish(
+                    k, Scan.from_ranges(lidar, angle_min=s.angle_min, angle_increment=s.angle_increment, range_max=s.range_max,
+                                        header=self.fabric.header(k, stamp=stamp)),
+                )
+            if sonar is not None:
+                s = r.sonar.spec
+                k = keys.robot_stream(w, rid, SONAR_STREAM)
+                inc = (s.angles[1] - s.angles[0]) if len(s.angles) > 1 else 0.0
+                self.fabric.publish(
+                    k, Scan.from_ranges(sonar, angle_min=s.angles[0], angle_increment=inc, range_max=s.range_max,
+                                        header=self.fabric.header(k, stamp=stamp)),
+                )
+
+
+__all__ = ["SimPeer", "DEFAULT_RATES"]

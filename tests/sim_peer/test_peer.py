@@ -1,0 +1,217 @@
+"""The sim peer end to end over a real router: commands in, joints/poses/scans/events out, the world service."""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import numpy as np
+import pytest
+
+from fabric import keys
+from fabric.messages import Command, Event, JointState, JointTarget, Pose, Reset, Scan, Stop, Twist
+from fabric.testing import robofabric_cmd, wait_until
+from sim_peer.messages import WorldInfo
+from sim_peer.peer import SimPeer
+from sim_peer.world import World
+
+
+class Inbox:
+    """Latest message per key and every event, from a subscription."""
+
+    def __init__(self) -> None:
+        self.latest: dict[str, object] = {}
+        self.events: list[Event] = []
+        self.lock = threading.Lock()
+
+    def __call__(self, key: str, msg: object) -> None:
+        with self.lock:
+            self.latest[key] = msg
+            if isinstance(msg, Event):
+                self.events.append(msg)
+
+    def event(self, kind: str, reason: str | None = None) -> Event | None:
+        with self.lock:
+            for ev in self.events:
+                if ev.kind == kind and (reason is None or ev.reason == reason):
+                    return ev
+        return None
+
+
+class RecordingGate:
+    """Refuses one user; records motion updates."""
+
+    def __init__(self) -> None:
+        self.motion: list[tuple[str, bool]] = []
+
+    def admit(self, robot: str, command: Command) -> str | None:
+        return "not_owner" if command.user == "mallory" else None
+
+    def update_motion(self, robot: str, moving: bool) -> None:
+        self.motion.append((robot, moving))
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.fixture
+def sim(world, connect):
+    gate = RecordingGate()
+    fab = connect("sim", "sim-test")
+    peer = SimPeer(fab, World("combined", seed=3), gate=gate, rates={"joints": 50, "pose": 50, "scan": 20})
+    peer.start()
+    try:
+        yield peer, gate
+    finally:
+        peer.close()
+
+
+@pytest.fixture
+def user(world, connect):
+    fab = connect("user", "alice")
+    inbox = Inbox()
+    fab.subscribe(keys.robot_all(world), inbox)
+    fab.subscribe(keys.event_all(world), inbox, expected=Event)
+    return fab, inbox
+
+
+def send(fab, world, robot, name, body, user="alice"):
+    fab.publish(keys.robot_cmd(world, robot, name), Command(user=user, epoch=1, body=body))
+
+
+def test_a_joint_command_goes_in_and_the_joints_come_out(world, sim, user):
+    peer, gate = sim
+    fab, inbox = user
+    target = np.array([0.4, 0.2, -0.3, 0.5, 0.3, -0.6])
+    jk = keys.robot_joints(world, "arm1")
+    wait_until(lambda: jk in inbox.latest, what="first joint state")
+    send(fab, world, "arm1", "joints", JointTarget(target))
+
+    def arrived():
+        js = inbox.latest.get(jk)
+        return isinstance(js, JointState) and np.allclose(js.q, target, atol=1e-9) and not js.dq.any()
+
+    wait_until(arrived, timeout=10, what="arm at target", seen=lambda: inbox.latest.get(jk))
+    js = inbox.latest[jk]
+    assert js.names == tuple(f"joint_{i}" for i in range(1, 7)) and js.header.source == "sim-test"
+    # the flange pose goes out with the joints, and agrees with the world's kinematics
+    pose = inbox.latest[keys.robot_pose(world, "arm1")]
+    assert isinstance(pose, Pose)
+    pos, _ = peer.world.flange("arm1")
+    wait_until(lambda: np.allclose(inbox.latest[keys.robot_pose(world, "arm1")].position, pos, atol=1e-9), what="flange pose")
+    # the gate heard the arm start and stop moving
+    wait_until(lambda: ("arm1", False) in gate.motion[1:], what="motion updates", seen=lambda: gate.motion)
+    assert ("arm1", True) in gate.motion
+    assert peer.last_state("arm1")["q"] == pytest.approx(list(target))
+
+
+def test_twist_moves_the_base_and_pose_and_scan_are_published(world, sim, user):
+    peer, _ = sim
+    fab, inbox = user
+    send(fab, world, "base1", "twist", Twist(0.5, 0.0))
+    pk = keys.robot_pose(world, "base1")
+    wait_until(lambda: isinstance(inbox.latest.get(pk), Pose) and inbox.latest[pk].position[0] > 0.2, timeout=10, what="base moving")
+    assert inbox.latest[pk].linear[0] > 0.1
+    send(fab, world, "base1", "stop", Stop())
+    wait_until(lambda: not peer.world.robot("base1").moving, what="base stopped")
+    scan = wait_until(lambda: inbox.latest.get(keys.robot_scan(world, "base1")), what="scan")
+    assert isinstance(scan, Scan) and scan.ranges_mm.shape == (240,)
+    send(fab, world, "base1", "reset", Reset())
+    wait_until(lambda: peer.world.robot("base1").ctrl.x == 0.0, what="base reset")
+
+
+@pytest.mark.parametrize(
+    "robot, name, body, reason",
+    [
+        ("nobody", "joints", JointTarget(np.zeros(6)), "unknown_robot"),
+        ("arm1", "joints", JointTarget(np.zeros(5)), "wrong_joint_count"),
+        ("arm1", "joints", Twist(0.1, 0.0), "wrong_body"),
+        ("base1", "twist", Twist(50.0, 0.0), "absurd_twist"),
+        ("arm1", "twist", Twist(0.1, 0.0), "unsupported"),
+    ],
+)
+def test_bad_commands_are_rejected_with_a_reason_and_the_last_valid_command_stands(world, sim, user, robot, name, body, reason):
+    peer, _ = sim
+    fab, inbox = user
+    good = np.array([0.3, 0.0, 0.0, 0.0, 0.0, 0.0])
+    send(fab, world, "arm1", "joints", JointTarget(good))
+    wait_until(lambda: peer.counters["accepted"] >= 1, what="good command accepted")
+    send(fab, world, robot, name, body)
+    ev = wait_until(lambda: inbox.event("reject", reason), what=f"reject event {reason}", seen=lambda: inbox.events)
+    assert ev.object == robot and ev.user == "alice" and ev.data["command"] == name
+    assert peer.counters["rejected"] == 1 and peer.counters[f"rejected:{reason}"] == 1
+    wait_until(lambda: np.allclose(peer.last_state("arm1")["q"], good), what="arm still reaching the good target")
+
+
+def test_garbage_is_counted_and_the_peer_goes_on(world, sim, user):
+    peer, _ = sim
+    fab, inbox = user
+    fab.put_raw(keys.robot_cmd(world, "arm1", "joints"), b"\x93\xff garbage")
+    nan = np.array([0.0, 0.0, math.nan, 0.0, 0.0, 0.0])
+    fab.put_raw(keys.robot_cmd(world, "arm1", "joints"), b"")
+    fab.publish(keys.robot_cmd(world, "arm1", "joints"), Command("alice", 1, JointTarget(nan)))  # refused by the decoder
+    wait_until(lambda: peer.fabric.counters["decode_errors"] >= 3, what="decode errors counted")
+    assert peer.counters["commands"] == 0 and peer.last_state("arm1")["target"] == [0.0] * 6
+    send(fab, world, "arm1", "joints", JointTarget(np.full(6, 0.1)))
+    wait_until(lambda: np.allclose(peer.last_state("arm1")["q"], 0.1), what="arm obeys the next good command")
+
+
+def test_clamped_targets_are_applied_and_reported(world, sim, user):
+    peer, _ = sim
+    fab, inbox = user
+    send(fab, world, "arm1", "joints", JointTarget(np.array([0.0, 3.0, 0.0, 0.0, 0.0, 0.0])))
+    ev = wait_until(lambda: inbox.event("clamp"), what="clamp event")
+    assert ev.object == "arm1" and ev.data["what"] == ["joint_2"] and ev.data["applied"] == [pytest.approx(math.pi / 2)]
+    wait_until(lambda: math.isclose(peer.last_state("arm1")["q"][1], math.pi / 2), what="arm at the clamped target")
+
+
+def test_the_gate_refuses_and_the_refusal_is_an_event(world, sim, user):
+    peer, _ = sim
+    fab, inbox = user
+    send(fab, world, "arm1", "joints", JointTarget(np.full(6, 0.2)), user="mallory")
+    ev = wait_until(lambda: inbox.event("reject", "not_owner"), what="gate refusal event")
+    assert ev.user == "mallory" and ev.object == "arm1"
+    assert peer.last_state("arm1")["target"] == [0.0] * 6
+
+
+def test_scene_objects_move_and_the_world_service_describes_everything(world, sim, user):
+    peer, _ = sim
+    fab, inbox = user
+    fab.publish(keys.object_pose(world, "target"), Pose(np.array([3.2, 0.1, 1.0])))
+    wait_until(lambda: np.allclose(peer.world.object_pose("target")[0], [3.2, 0.1, 1.0]), what="target moved")
+    info = fab.call(keys.srv(world, "world"), timeout=5)
+    assert isinstance(info, WorldInfo) and info.scene == "combined" and info.world == world
+    arm, base = info.robot("arm1"), info.robot("base1")
+    assert arm.kind == "arm" and arm.type == "meca500" and len(arm.joint_names) == 6
+    np.testing.assert_allclose(np.degrees(arm.max_speed), [150, 150, 180, 300, 300, 500])
+    np.testing.assert_allclose(arm.pose, [3.0, 0.0, 0.75, 0.0])
+    assert base.kind == "mobile" and base.sensors["lidar_rays"] == 240 and base.base["max_speed"] > 0
+    assert math.isclose(base.sensors["lidar_fov"], math.radians(135))
+    objs = {o.id: o for o in info.objects}
+    assert set(objs) == {"target", "goal"} and objs["target"].policy == "scene"
+    np.testing.assert_allclose(objs["target"].position, [3.2, 0.1, 1.0])
+
+
+def test_the_cli_runs_a_sim_peer_that_answers_the_world_service(world, router, connect, procs):
+    port = router[1]
+    proc = procs.start(
+        robofabric_cmd("sim", "--scene", "arm_cell", "--no-ownership", "--world", world, "--connect", f"tcp/127.0.0.1:{port}", "--id", "sim1"),
+        name="sim",
+    )
+    fab = connect()
+    wait_until(lambda: ("sim", "sim1") in fab.live_peers("sim"), timeout=30, what="sim peer alive", seen=lambda: procs.output(proc))
+    info = fab.call(keys.srv(world, "world"), timeout=5)
+    assert [r.id for r in info.robots] == ["arm1"]
+    inbox = Inbox()
+    fab.subscribe(keys.robot_joints(world, "arm1"), inbox)
+    send(fab, world, "arm1", "joints", JointTarget(np.full(6, 0.05)))
+    wait_until(lambda: any(np.allclose(m.q, 0.05) for m in inbox.latest.values()), timeout=10, what="joints from the CLI peer")
+
+
+def test_cli_mistakes_are_one_line_errors(procs):
+    import subprocess
+
+    out = subprocess.run(robofabric_cmd("sim", "--robot", "reeman", "--no-ownership"), capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "TYPE:ID" in out.stderr and "Traceback" not in out.stderr
+    out = subprocess.run(robofabric_cmd("sim", "--speed", "fast", "--no-ownership"), capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "speed" in out.stderr
