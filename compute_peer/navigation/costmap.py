@@ -31,6 +31,7 @@ class Costmap:
     origin_y: float
     robot_radius: float
     margin: float
+    occupied: np.ndarray  # (H, W) bool, the obstacles themselves (and unknown cells if they count)
     collision: np.ndarray  # (H, W) bool, inflated by robot_radius
     blocked: np.ndarray  # (H, W) bool, inflated by robot_radius + margin
     blocked_flat: bytes = field(repr=False, default=b"")  # one byte per cell, for scalar checks in callbacks
@@ -73,8 +74,11 @@ class Costmap:
         if not self.inside(x, y):
             x0, y0, x1, y1 = self.bounds
             return f"{what} ({x:.2f}, {y:.2f}) is outside the map [{x0:.2f}, {x1:.2f}] x [{y0:.2f}, {y1:.2f}]"
-        if not bool(self.free(np.array([x]), np.array([y]), strict=False)[0]):
-            return f"{what} ({x:.2f}, {y:.2f}) is inside an obstacle or unknown space (within the robot radius {self.robot_radius:.2f} m)"
+        r, c, _ = self.cells(np.array([x]), np.array([y]))
+        if self.occupied[r[0], c[0]]:
+            return f"{what} ({x:.2f}, {y:.2f}) is inside an obstacle or unknown space"
+        if self.collision[r[0], c[0]]:
+            return f"{what} ({x:.2f}, {y:.2f}) is within the robot radius ({self.robot_radius:.2f} m) of an obstacle"
         if not bool(self.free(np.array([x]), np.array([y]))[0]):
             return f"{what} ({x:.2f}, {y:.2f}) is closer than {self.robot_radius + self.margin:.2f} m to an obstacle (robot radius + margin)"
         return None
@@ -103,6 +107,7 @@ def build_costmap(
         origin_y=float(grid.origin[1]),
         robot_radius=float(robot_radius),
         margin=margin,
+        occupied=occ,
         collision=collision,
         blocked=blocked,
         blocked_flat=blocked.astype(np.uint8).tobytes(),

@@ -8,7 +8,8 @@ from the space's maximum extent), which is what the costmap's margin assumes.
 
 RRT* and BIT* are anytime planners: by default planning stops at the first
 exact solution (or the time limit), the path is shortcut by OMPL's simplifier,
-then interpolated to half a map cell between poses. ``refine_time`` lets the
+then interpolated to half a map cell between poses. OMPL's interpolation may
+put a Reeds-Shepp cusp between two poses (Hybrid A* always has a pose on it). ``refine_time`` lets the
 planner keep improving the solution for that long before stopping.
 """
 
@@ -50,7 +51,6 @@ class OmplConfig:
     refine_time: float = 0.0  # extra seconds to improve it (anytime planners)
     simplify_time: float = 0.05
     goal_tolerance: float = 1e-3  # in the state space's distance (metres of Dubins/Reeds-Shepp length)
-    seed: int | None = None
 
     def __post_init__(self) -> None:
         if self.planner not in OMPL_PLANNERS:
@@ -65,10 +65,6 @@ def plan_ompl(costmap: Costmap, start: Pose2, goal: Pose2, vehicle: VehicleModel
     t0 = time.perf_counter()
     check_endpoints(costmap, start, goal)
     ob, og = _ompl()
-    if cfg.seed is not None:
-        from ompl import util as ou
-
-        ou.RNG.setSeed(cfg.seed)
     space = ob.ReedsSheppStateSpace(vehicle.turning_radius) if vehicle.allow_reverse else ob.DubinsStateSpace(vehicle.turning_radius)
     x0, y0, x1, y1 = costmap.bounds
     bounds = ob.RealVectorBounds(2)
