@@ -17,7 +17,7 @@ import rerun as rr
 from fabric.codec import DecodeError, decode
 from user_peer.catalog import RobotCatalog
 from user_peer.rerun_log import WorldLogger, blueprint
-from user_peer.viewer import APP_ID
+from user_peer.viewer import APP_ID, log_scene
 
 __all__ = ["ExportStats", "ExportError", "read_mcap", "export_mcap"]
 
@@ -84,6 +84,8 @@ def export_mcap(src: Path, dst: Path, *, max_hz: float = 0.0, scene: str | None 
     rec.save(str(dst), default_blueprint=blueprint())
     catalog = RobotCatalog(None, scene=scene)
     logger = WorldLogger(rec, robot_info=catalog.info, max_hz=max_hz)
+    if scene:
+        log_scene(logger, scene)
     counts: dict[str, int] = {}
     n = drawn = 0
     try:

@@ -465,6 +465,25 @@ class WorldLogger:
         self.rec.log("events", rr.TextLog(f"{ev.kind}{who}{obj} {ev.reason}".strip(), level=level))
         return True
 
+    def log_scene(self, boxes: Iterable[Any], name: str = "scene") -> None:
+        """The static scene (walls, shelves, tables) once, as boxes: see :mod:`user_peer.scene_geometry`."""
+        boxes = list(boxes)
+        if not boxes:
+            return
+        self.rec.log(
+            f"world/{name}",
+            rr.Boxes3D(
+                centers=[b.center for b in boxes],
+                half_sizes=[b.half_size for b in boxes],
+                quaternions=[rr.Quaternion(xyzw=b.quat_xyzw) for b in boxes],
+                colors=[b.rgba for b in boxes],
+                labels=[b.name for b in boxes],
+                fill_mode="solid",
+                show_labels=False,
+            ),
+            static=True,
+        )
+
     def log_all(self, items: Iterable[tuple[str, Any, int]]) -> int:
         """Log a sequence of (key, message, log_time_ns); returns how many were drawn."""
         return sum(1 for key, msg, t in items if self.log(key, msg, t))

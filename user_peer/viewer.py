@@ -27,7 +27,7 @@ from user_peer.rerun_log import WorldLogger, blueprint
 
 log = logging.getLogger("robofabric.viewer")
 
-__all__ = ["ViewerOptions", "Viewer", "make_recording", "query_world_info"]
+__all__ = ["ViewerOptions", "Viewer", "make_recording", "query_world_info", "log_scene"]
 
 APP_ID = "robofabric"
 
@@ -66,6 +66,19 @@ def make_recording(opts: ViewerOptions, *, recording_id: str | None = None) -> r
     if opts.serve_web:
         rr.serve_web_viewer(web_port=opts.web_port, open_browser=False, connect_to=f"rerun+http://127.0.0.1:{opts.grpc_port}/proxy")
     return rec
+
+
+def log_scene(logger: WorldLogger, scene: str) -> bool:
+    """Draw a scene's static geometry from robots/ (nothing if the scene is unknown here)."""
+    try:
+        import robots
+        from user_peer.scene_geometry import static_boxes
+
+        logger.log_scene(static_boxes(robots.scene(scene).mjcf_path))
+        return True
+    except Exception as exc:
+        log.info("no static geometry for scene %r: %s", scene, exc)
+        return False
 
 
 def query_world_info(fab: Fabric, timeout: float = 2.0) -> Any:
@@ -112,6 +125,9 @@ class Viewer:
     def start(self) -> None:
         """Learn the world, subscribe, and ask for the state a late joiner missed (ownership, maps)."""
         self.catalog.world_info = query_world_info(self.fab)
+        scene = getattr(self.catalog.world_info, "scene", "") or ""
+        if scene:
+            log_scene(self.logger, scene)
         self.fab.subscribe(keys.world_all(self.fab.world), self._enqueue)
         for expr in (keys.own_all(self.fab.world),):
             try:

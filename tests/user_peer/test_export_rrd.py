@@ -63,6 +63,7 @@ def test_export_draws_robots_scans_maps_and_paths(tmp_path):
     assert rows["/world/robots/base1/base"] == 40
     assert rows["/map/base1"] == 1
     assert rows["/world/robots/base1/path"] == 1
+    assert rows["/world/scene"] == 1  # the combined scene's walls, shelves and table, drawn once
 
 
 def test_export_cli_and_bad_files(tmp_path):
