@@ -215,3 +215,17 @@ def test_cli_mistakes_are_one_line_errors(procs):
     assert out.returncode == 2 and "TYPE:ID" in out.stderr and "Traceback" not in out.stderr
     out = subprocess.run(robofabric_cmd("sim", "--speed", "fast", "--no-ownership"), capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "speed" in out.stderr
+
+
+def test_cli_runs_for_a_duration_at_max_speed_and_exits_cleanly(world, tmp_path):
+    import subprocess
+
+    from fabric.testing import free_port
+
+    argv = robofabric_cmd(
+        "sim", "--scene", "warehouse", "--speed", "max", "--duration", "3", "--no-ownership", "--profile", "embedded",
+        "--listen", f"tcp/127.0.0.1:{free_port()}", "--world", world, "--robot", "reeman:extra",
+    )
+    out = subprocess.run(argv, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "robots base1 (reeman), extra (reeman)" in out.stdout and "sim stopped at t=3.000 s: 1500 steps" in out.stdout

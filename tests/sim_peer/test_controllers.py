@@ -1,0 +1,53 @@
+"""Properties of the controllers for any targets: limits and speeds are never exceeded, targets are reached."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import robots
+from sim_peer.controllers import ArmController, BaseController
+
+ARM = robots.load("meca500")
+BASE = robots.load("reeman").base
+
+angles = st.lists(st.floats(-10, 10, allow_nan=False), min_size=6, max_size=6)
+
+
+@settings(max_examples=50, deadline=None)
+@given(angles, angles, st.floats(0.05, 1.0))
+def test_arm_stays_in_range_under_its_speed_limits_and_reaches_the_clamped_target(first, second, scale):
+    c = ArmController(ARM.joint_names, ARM.lower, ARM.upper, ARM.max_speed)
+    vmax = np.array(ARM.max_speed)
+    dt = 0.002
+    for target in (first, second):
+        c.set_target(target, scale)
+        for _ in range(int(6.0 / scale / dt)):
+            prev = c.q.copy()
+            c.step(dt)
+            assert np.all(np.abs(c.q - prev) <= vmax * scale * dt * (1 + 1e-9))
+            assert np.all(c.q >= ARM.lower) and np.all(c.q <= ARM.upper)
+            if not c.moving and np.array_equal(c.q, c.target):
+                break
+        np.testing.assert_allclose(c.q, np.clip(target, ARM.lower, ARM.upper), atol=1e-12)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(-1, 1), st.floats(-1.5, 1.5))
+def test_base_respects_speed_and_acceleration_limits(v, w):
+    b = BaseController(BASE)
+    b.twist(v, w)
+    dt = 0.002
+    pv, pw = 0.0, 0.0
+    for _ in range(1500):
+        b.step(dt)
+        assert abs(b.v) <= BASE.max_speed + 1e-12 and abs(b.omega) <= BASE.max_omega + 1e-12
+        assert abs(b.v - pv) <= BASE.max_accel * dt + 1e-12 and abs(b.omega - pw) <= BASE.max_alpha * dt + 1e-12
+        pv, pw = b.v, b.omega
+    assert math.isclose(b.v, v, abs_tol=1e-9) and math.isclose(b.omega, w, abs_tol=1e-9)
+    # wheel speeds are the differential-drive inverse kinematics of (v, omega)
+    half = BASE.wheel_separation / 2
+    np.testing.assert_allclose(b.wheel_speeds, [(v - w * half) / BASE.wheel_radius, (v + w * half) / BASE.wheel_radius])
