@@ -1,0 +1,185 @@
+"""The map and plan services end to end over Zenoh: a router, a compute peer, a fake sim and a user."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from compute_peer.navigation import MapperConfig, PlannerSettings, VehicleModel, path_collision, register_navigation
+from compute_peer.navigation.grid import UNKNOWN, make_grid
+from compute_peer.navigation.messages import MapReply, MapRequest, PlanReply, PlanRequest
+from fabric import keys
+from fabric.codec import encode
+from fabric.messages import OccupancyGrid, Path
+from fabric.session import ServiceError
+from fabric.testing import wait_until
+from navscenes import drive_poses, pose_at, scan_at, small_room
+
+ROBOT = "base1"
+SETTINGS = PlannerSettings(vehicle=VehicleModel(robot_radius=0.25, turning_radius=0.5))
+ROOM = MapperConfig(resolution=0.05, width=200, height=200, origin_x=0.0, origin_y=0.0)
+
+
+@pytest.fixture
+def peers(connect, tmp_path):
+    compute = connect("compute", "compute-1")
+    sim = connect("sim", "sim-1")
+    user = connect("user", "user-1")
+    nav = register_navigation(compute, robots=[ROBOT], mapper_config=ROOM, settings=SETTINGS, maps_dir=tmp_path)
+    # the queryables are reachable once a status query is answered
+    wait_until(lambda: _try(lambda: user.call(keys.srv(user.world, "map", "map"), MapRequest("status"), timeout=1.0)), what="map service")
+    yield nav, sim, user
+    nav.close()
+
+
+def _try(fn):
+    try:
+        return fn()
+    except ServiceError:
+        return None
+
+
+def call(user, service, arg, request, timeout=10.0):
+    return user.call(keys.srv(user.world, service, arg), request, timeout=timeout)
+
+
+def refused(user, service, arg, request) -> str:
+    with pytest.raises(ServiceError) as info:
+        call(user, service, arg, request)
+    return info.value.reason
+
+
+def drive_and_scan(nav, sim, scene, poses):
+    """The sim's part: publish each pose, then the scan taken there (same sim stamp)."""
+    world = sim.world
+    for k, (x, y, yaw) in enumerate(poses):
+        stamp = 1.0 + 0.05 * k
+        sim.publish(keys.robot_pose(world, ROBOT), pose_at(x, y, yaw, stamp=stamp, seq=k))
+        wait_until(lambda: nav._pose_at(ROBOT, 0.0) is not None and nav._pose_at(ROBOT, 0.0).header.seq == k, what=f"pose {k}")
+        sim.publish(keys.robot_scan(world, ROBOT), scan_at(scene, x, y, yaw, stamp=stamp, seq=k))
+    wait_until(lambda: nav.counters["scans"] >= len(poses), what="all scans mapped", seen=lambda: nav.counters)
+
+
+def test_mapping_mode_build_publish_and_navigate(peers):
+    nav, sim, user = peers
+    world = user.world
+    scene = small_room()
+    maps: list[OccupancyGrid] = []
+    paths: list[Path] = []
+    user.subscribe(keys.map_key(world, "map"), lambda k, m: maps.append(m), expected=OccupancyGrid)
+    user.subscribe(keys.robot_path(world, ROBOT), lambda k, m: paths.append(m), expected=Path)
+
+    poses = drive_poses(scene, step=1.5)
+    drive_and_scan(nav, sim, scene, poses)
+    reply = call(user, "map", "map", MapRequest("build", threshold=0.65))
+    assert isinstance(reply, MapReply) and reply.scans == len(poses) and reply.mapping == 1
+    truth = scene.rasterize(0.05).cells == 100
+    built = reply.grid.cells
+    assert ((built == 100) & truth).sum() > 0.5 * (truth & (built != UNKNOWN)).sum()
+    assert ((built == 0) & ~truth).sum() > 0.5 * (~truth).sum()
+    wait_until(lambda: maps, what="map published")
+    assert np.array_equal(maps[-1].cells, built) and maps[-1].header.source == "compute-1"
+
+    # navigation: from the robot's latest pose to the goal pointer, around the inner wall
+    sim.publish(keys.robot_pose(world, ROBOT), pose_at(2.0, 2.0, 0.0, stamp=99.0, seq=999))
+    wait_until(lambda: nav._pose_at(ROBOT, 0.0).header.seq == 999, what="start pose")
+    user.publish(keys.object_pose(world, "goal"), pose_at(8.0, 2.0, -math.pi / 2))
+    wait_until(lambda: nav._goal is not None, what="goal pose")
+    plan = call(user, "plan", ROBOT, PlanRequest(ROBOT))
+    assert isinstance(plan, PlanReply) and plan.planner == "hybrid_astar" and plan.robot == ROBOT
+    p = plan.path
+    assert (p.x[0], p.y[0]) == pytest.approx((2.0, 2.0)) and (p.x[-1], p.y[-1]) == pytest.approx((8.0, 2.0))
+    assert p.y.max() > 7.0  # it went round the wall's end, not through it
+    assert plan.length == pytest.approx(float(np.hypot(np.diff(p.x), np.diff(p.y)).sum()))
+    costmap = nav._costmap("map", 0.25)
+    assert path_collision(costmap, p.x, p.y) is None
+    wait_until(lambda: paths, what="path published on the robot's path key")
+    assert np.array_equal(paths[-1].x, p.x) and np.array_equal(paths[-1].theta, p.theta)
+
+
+def test_injected_map_with_ompl_given_start_and_goal(peers):
+    nav, sim, user = peers
+    cells = np.zeros((100, 100), dtype=np.uint8)
+    cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = 100
+    cells[:70, 48:52] = 100  # a wall from the bottom, gap at the top
+    reply = call(user, "map", "lab", MapRequest("set", name="lab", grid=make_grid(cells, 0.1)))
+    assert reply.grid.cells.shape == (100, 100)
+    for planner in ("ompl", "hybrid_astar"):
+        plan = call(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[8.0, 2.0, 0.0], start=[2.0, 2.0, 0.0], planner=planner, map="lab", direction="both"))
+        assert plan.planner.startswith(planner) and plan.map == "lab"
+        assert plan.path.y.max() > 7.0
+        assert path_collision(nav._costmap("lab", 0.25), plan.path.x, plan.path.y) is None
+
+
+def test_bad_requests_get_reasons_and_the_service_keeps_answering(peers):
+    nav, sim, user = peers
+    world = user.world
+    # no map yet, no scans
+    assert "no map named 'map'" in refused(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[1.0, 1.0, 0.0], start=[2.0, 2.0, 0.0]))
+    assert "no scans accumulated" in refused(user, "map", "map", MapRequest("build"))
+    # unknown robot, and a key that names another robot than the request
+    assert "unknown robot 'ghost'" in refused(user, "plan", "ghost", PlanRequest("ghost", goal=[1.0, 1.0, 0.0]))
+    assert "names robot" in refused(user, "plan", "other", PlanRequest(ROBOT, goal=[1.0, 1.0, 0.0]))
+    # no pose received, no goal pointer
+    assert "no pose received" in refused(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[1.0, 1.0, 0.0]))
+    cells = np.zeros((60, 60), dtype=np.uint8)
+    cells[20:40, 20:40] = 100
+    call(user, "map", "map", MapRequest("set", grid=make_grid(cells, 0.1)))
+    assert "no goal given" in refused(user, "plan", ROBOT, PlanRequest(ROBOT, start=[0.5, 0.5, 0.0]))
+    # NaN in the goal: refused by the decoder, with the field named
+    assert "not finite" in refused(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[math.nan, 1.0, 0.0], start=[0.5, 0.5, 0.0]))
+    # goals outside the map and inside obstacles
+    assert "outside the map" in refused(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[9.0, 1.0, 0.0], start=[0.5, 0.5, 0.0]))
+    assert "inside an obstacle" in refused(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[3.0, 3.0, 0.0], start=[0.5, 0.5, 0.0]))
+    # an all-unknown map is empty
+    call(user, "map", "dark", MapRequest("set", name="dark", grid=make_grid(np.full((30, 30), UNKNOWN, np.uint8), 0.1)))
+    assert "is empty" in refused(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[1.0, 1.0, 0.0], start=[2.0, 2.0, 0.0], map="dark"))
+    # garbage instead of a request
+    with pytest.raises(ServiceError, match="not a msgpack|message"):
+        for rep in user.session.get(keys.srv(world, "plan", ROBOT), payload=b"\x01\x02garbage", timeout=5.0):
+            if rep.err is not None:
+                from fabric.codec import decode
+                from fabric.messages import Event
+
+                raise ServiceError(decode(rep.err.payload.to_bytes(), Event).reason)
+    # file names that would leave the maps folder
+    assert "plain file name" in refused(user, "map", "map", MapRequest("save", file="../escape.yaml"))
+    # still alive and counting
+    status = call(user, "map", "map", MapRequest("status"))
+    assert status.action == "status"
+    assert nav.counters["refusals"] == 10  # the two undecodable requests were refused by the fabric layer
+    assert nav.fabric.counters["query_errors"] == 12
+
+
+def test_save_load_reset_stop_start(peers, tmp_path):
+    nav, sim, user = peers
+    cells = np.zeros((40, 50), dtype=np.uint8)
+    cells[10:20, 10:30] = 100
+    grid = make_grid(cells, 0.1, (1.0, 2.0))
+    call(user, "map", "map", MapRequest("set", grid=grid))
+    saved = call(user, "map", "map", MapRequest("save", file="office.yaml"))
+    assert saved.file == "office.yaml" and (tmp_path / "office.pgm").is_file()
+    call(user, "map", "map", MapRequest("save", file="office.npz"))
+    for file in ("office.yaml", "office.npz"):
+        loaded = call(user, "map", "copy", MapRequest("load", name="copy", file=file))
+        assert np.array_equal(loaded.grid.cells, cells) and np.allclose(loaded.grid.origin, grid.origin)
+    got = call(user, "map", "copy", MapRequest("get", name="copy"))
+    assert np.array_equal(got.grid.cells, cells)
+    assert "no map file" in refused(user, "map", "map", MapRequest("load", file="absent.npz"))
+    # stop: scans are ignored; start: they count again
+    assert call(user, "map", "map", MapRequest("stop")).mapping == 0
+    scene = small_room()
+    sim.publish(keys.robot_pose(sim.world, ROBOT), pose_at(2.0, 2.0, 0.0, stamp=1.0))
+    wait_until(lambda: nav._pose_at(ROBOT, 0.0) is not None, what="pose")
+    sim.publish(keys.robot_scan(sim.world, ROBOT), scan_at(scene, 2.0, 2.0, 0.0, stamp=1.0))
+    assert call(user, "map", "map", MapRequest("start")).mapping == 1
+    assert nav.counters["scans"] == 0
+    sim.publish(keys.robot_scan(sim.world, ROBOT), scan_at(scene, 2.0, 2.0, 0.0, stamp=1.0))
+    wait_until(lambda: nav.counters["scans"] == 1, what="scan mapped after start")
+    live = call(user, "map", "live", MapRequest("get", name="map"))
+    assert live.grid.cells.shape == cells.shape  # the map that was set is still the stored one
+    reset = call(user, "map", "map", MapRequest("reset"))
+    assert reset.scans == 0
+    assert "no map named 'map'" in refused(user, "map", "map", MapRequest("get"))
