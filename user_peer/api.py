@@ -222,6 +222,12 @@ class Robot:
     def is_owner(self) -> bool:
         return self.owner == self.world.user
 
+    @property
+    def can_command(self) -> bool:
+        """True when this user owns the robot, or the world runs without ownership (no record at all)."""
+        rec = self.record
+        return rec is None or rec.owner == self.world.user
+
     def request(self, *, timeout: float | None = None, wait: bool = False) -> int:
         """Ask to own the robot; returns the epoch. ``wait``: stay queued until granted or ``timeout``.
 
@@ -235,13 +241,18 @@ class Robot:
     # ------------------------------------------------------------------ commands
 
     def send(self, command: str, body: Any) -> None:
-        """Send a command under this user's current epoch; :class:`NotOwner` if we know we do not own it."""
+        """Send a command under this user's current epoch; :class:`NotOwner` if we know we do not own it.
+
+        With no ownership record at all (a world run without ownership) the command goes out with
+        epoch 0 and the sim, the authority, decides.
+        """
         rec = self.record
-        if rec is None or rec.owner != self.world.user:
-            who = rec.owner if rec and rec.owner else "nobody"
+        if rec is not None and rec.owner != self.world.user:
+            who = rec.owner or "nobody"
             raise NotOwner(f"{self.world.user} does not own {self.id} (owner: {who}); call request() first")
         key = keys.robot_cmd(self._w, self.id, command)
-        self.world.fabric.publish(key, Command(self.world.user, rec.epoch, body, self.world.fabric.header(key)))
+        epoch = rec.epoch if rec is not None else 0
+        self.world.fabric.publish(key, Command(self.world.user, epoch, body, self.world.fabric.header(key)))
 
     def stop(self) -> None:
         key = keys.robot_cmd(self._w, self.id, "stop")

@@ -179,7 +179,7 @@ class UserApp(App):
 
     def keep_driving(self) -> None:
         """Repeat a non-zero twist so the base keeps moving while a key was last pressed."""
-        if self.base is not None and (self.v or self.omega) and self.base.is_owner:
+        if self.base is not None and (self.v or self.omega) and self.base.can_command:
             try:
                 self.base.twist(self.v, self.omega)
             except FabricUserError:
@@ -190,7 +190,7 @@ class UserApp(App):
     def _owner_text(self, robot) -> str:
         rec = robot.record
         if rec is None:
-            return "owner: unknown (no record from the authority yet)"
+            return "owner: no ownership record (a world without ownership, or the authority has not answered yet)"
         mine = rec.owner == self.world.user
         who = "you" if mine else (rec.owner or "nobody")
         text = f"owner: {who} · epoch {rec.epoch} · {rec.state}"
@@ -205,7 +205,7 @@ class UserApp(App):
     def refresh_view(self) -> None:
         status = []
         if self.arm is not None:
-            mine = self.arm.is_owner
+            mine = self.arm.can_command
             self.query_one("#arm-owner", Label).update(self._owner_text(self.arm))
             js = self.arm.joint_state
             for i, s in enumerate(self.query(JointSlider)):
@@ -218,7 +218,7 @@ class UserApp(App):
             lat = _latency_ms(js)
             status.append(f"arm joints age {lat:.0f} ms" if lat is not None else "arm: no joints yet")
         if self.base is not None:
-            mine = self.base.is_owner
+            mine = self.base.can_command
             self.query_one("#base-owner", Label).update(self._owner_text(self.base))
             for bid in ("#base-stop", "#base-release"):
                 self.query_one(bid, Button).disabled = not mine

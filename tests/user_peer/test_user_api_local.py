@@ -36,23 +36,28 @@ def test_scene_object_pose_reaches_other_peers_and_iterators(alice, connect, wor
     assert np.allclose(pose.quaternion, [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)])
 
 
-def test_commands_are_refused_locally_without_ownership(alice, connect, world):
+def test_commands_follow_the_ownership_replica(alice, connect, world):
     arm = Arm(alice, RobotEntry("arm1", "meca500", "arm", tuple(f"joint_{i}" for i in range(1, 7)), (-1.0,) * 6, (1.0,) * 6))
-    with pytest.raises(user_peer.NotOwner, match="does not own arm1"):
-        arm.move_joints(np.zeros(6), wait=False)
-    # The replica follows the authority's records: owned by bob, still refused, and the reason says who.
     auth = connect("sim", "sim-test")
+    sent = []
+    auth.subscribe(keys.robot_cmd(world, "arm1", "joints"), lambda k, m: sent.append(m))
+    # No record at all (a world without ownership): the command goes out with epoch 0, the sim decides.
+    wait_until(lambda: (arm.move_joints(np.zeros(6), wait=False), sent)[1], what="epoch-0 command")
+    assert sent[0].epoch == 0 and arm.can_command
+    sent.clear()
+    # The replica follows the authority's records: owned by bob, refused locally, and the reason says who.
     auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="bob", epoch=3))
     wait_until(lambda: arm.owner == "bob", what="replica of bob's record")
     with pytest.raises(user_peer.NotOwner, match="owner: bob"):
         arm.move_joints(np.zeros(6), wait=False)
+    assert not arm.can_command
     # Once the record names alice, the command goes out with her epoch.
-    sent = []
-    auth.subscribe(keys.robot_cmd(world, "arm1", "joints"), lambda k, m: sent.append(m))
     auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="alice", epoch=4))
     wait_until(lambda: arm.is_owner, what="alice owns arm1")
-    wait_until(lambda: (arm.move_joints([0.1] * 6, wait=False), sent)[1], what="command at the authority")
-    assert sent[0].user == "alice" and sent[0].epoch == 4 and np.allclose(sent[0].body.q, 0.1)
+    mine = lambda: [m for m in sent if m.epoch == 4]  # noqa: E731
+    wait_until(lambda: (arm.move_joints([0.1] * 6, wait=False), mine())[1], what="command at the authority")
+    assert mine()[0].user == "alice" and np.allclose(mine()[0].body.q, 0.1)
+    assert {m.epoch for m in sent} <= {0, 4}  # nothing went out while bob owned it
     with pytest.raises(user_peer.Unreachable, match="outside its limits"):
         arm.move_joints([2.0] + [0.0] * 5, wait=False)
 
