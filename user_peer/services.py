@@ -14,7 +14,6 @@ from typing import Any, Sequence
 
 import numpy as np
 
-import robots
 from fabric import keys
 from fabric.messages import OccupancyGrid, Path
 from fabric.session import Fabric, ServiceError
@@ -52,22 +51,14 @@ class RobotEntry:
 
 
 def robot_entries(info: Any) -> list[RobotEntry]:
-    """Robots of a world description; what the description leaves out comes from ``robots.load(type)``."""
-    out = []
-    for r in _get(info, "robots", default=()) or ():
-        rid = str(_get(r, "id", "name"))
-        rtype = str(_get(r, "type", "robot_type", default="") or "")
-        try:
-            d = robots.load(rtype) if rtype else None
-        except robots.DescriptionError:
-            d = None
-        kind = str(_get(r, "kind", default="") or (d.kind if d else ""))
-        names = tuple(_get(r, "joint_names", "joints", default=()) or (d.joint_names if d else ()))
-        lower = tuple(float(v) for v in (_get(r, "lower", default=None) or (d.lower if d else ())))
-        upper = tuple(float(v) for v in (_get(r, "upper", default=None) or (d.upper if d else ())))
-        speed = tuple(float(v) for v in (_get(r, "max_speed", default=None) or (d.max_speed if d else ())))
-        out.append(RobotEntry(rid, rtype, kind, names, lower, upper, speed))
-    return out
+    """Robots of a world description (``sim_peer.messages.WorldInfo``)."""
+    return [
+        RobotEntry(
+            r.id, r.type, r.kind, tuple(r.joint_names),
+            tuple(float(v) for v in r.lower), tuple(float(v) for v in r.upper), tuple(float(v) for v in r.max_speed),
+        )
+        for r in info.robots
+    ]
 
 
 def world_info(fab: Fabric, *, timeout: float = 5.0) -> Any:

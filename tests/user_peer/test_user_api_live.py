@@ -1,0 +1,95 @@
+"""The user API against a live world: `robofabric sim` (and `robofabric compute`) as real processes."""
+
+from __future__ import annotations
+
+import math
+import uuid
+
+import numpy as np
+import pytest
+
+import user_peer
+from fabric.messages import Path
+from fabric.testing import ProcessGroup, client_config, free_port, robofabric_cmd, router_config, wait_until
+from fabric.session import Fabric
+from user_peer.api import Arm, Base, World
+from user_peer.catalog import RobotCatalog
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory):
+    """One router, one sim peer (scene combined) for the module's tests; yields (world name, port, procs)."""
+    world = f"t{uuid.uuid4().hex[:8]}"
+    port = free_port()
+    router = Fabric(router_config(world, port), kind="router", peer_id="router")
+    procs = ProcessGroup(tmp_path_factory.mktemp("live"))
+    ep = f"tcp/127.0.0.1:{port}"
+    sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep), name="sim")
+    try:
+        wait_until(lambda: router.live_peers("sim"), timeout=60, what="sim peer", seen=lambda: procs.output(sim)[-2000:])
+        yield world, port, procs
+    finally:
+        procs.close()
+        router.close()
+
+
+@pytest.fixture
+def user(live):
+    worlds: list[World] = []
+
+    def make(name: str) -> World:
+        w = World(client_config(live[0], live[1]), name, timeout=10.0)
+        worlds.append(w)
+        return w
+
+    yield make
+    for w in worlds:
+        w.close()
+
+
+def test_world_description_lists_robots_by_kind(user):
+    w = user("alice")
+    assert w.robots() == ["arm1", "base1"]
+    assert isinstance(w.robot("arm1"), Arm) and isinstance(w.robot("base1"), Base)
+    with pytest.raises(user_peer.Unreachable, match="no robot 'nope'"):
+        w.robot("nope")
+
+
+def test_move_joints_reaches_targets_and_matches_the_viewers_fk(user):
+    w = user("alice")
+    arm = w.robot("arm1")
+    arm.wait_for("joints")
+    if arm.record is not None and not arm.is_owner:
+        arm.request(timeout=10)
+    target = np.radians([20.0, 10.0, -20.0, 15.0, 30.0, -10.0])
+    q = arm.move_joints(target, tol=1e-3, timeout=20)
+    assert np.max(np.abs(q - target)) <= 1e-3
+    # The flange the sim publishes is where the viewer's Pinocchio FK (robots/ URDF + world pose) puts it.
+    info = RobotCatalog(w.info()).info("arm1", {"joint_names": arm.entry.joint_names})
+    wait_until(lambda: arm.flange is not None and arm.flange.header.wall_ns > 0, what="flange pose")
+    fk = info.arm.fk(arm.joints)[-1]
+    from user_peer.rerun_log import _compose
+
+    pos, _ = _compose(info.base, fk)
+    flange = np.asarray(arm.flange.position)
+    assert np.linalg.norm(pos - flange) < 1e-3, (pos, flange)
+    with pytest.raises(user_peer.Unreachable, match="outside its limits"):
+        arm.move_joints(np.radians([0, 120, 0, 0, 0, 0]))
+
+
+def test_drive_then_follow_a_path_to_its_end(user):
+    w = user("bob")
+    base = w.robot("base1")
+    base.wait_for("pose")
+    if base.record is not None and not base.is_owner:
+        base.request(timeout=10)
+    x0, y0, th0 = base.xy_theta
+    x1, y1, _ = base.drive(0.3, 0.0, 1.0)
+    moved = math.hypot(x1 - x0, y1 - y0)
+    assert 0.1 < moved < 0.5, moved
+    gx, gy = x1 + 1.0, y1 + 0.8
+    xs = np.linspace(x1, gx, 20)
+    ys = np.linspace(y1, gy, 20)
+    path = Path(xs, ys, np.full(20, math.atan2(gy - y1, gx - x1)))
+    xf, yf, _ = base.follow(path, tol=0.25, timeout=40)
+    assert math.hypot(xf - gx, yf - gy) <= 0.25
