@@ -212,6 +212,11 @@ class HybridAStar:
                 nprim.append(p)
                 ndir.append(float(pr.direction[p]))
                 heapq.heappush(heap, (g + w * hj, len(nx) - 1))
+        if expansions <= 1:
+            raise NavigationError(
+                f"the robot cannot drive away from its start ({start[0]:.2f}, {start[1]:.2f}, {start[2]:.2f} rad) "
+                f"without touching an obstacle" + ("" if self.vehicle.allow_reverse else " (forwards only: allow reversing?)")
+            )
         raise NavigationError(
             f"no path from ({start[0]:.2f}, {start[1]:.2f}) to ({goal[0]:.2f}, {goal[1]:.2f}): the search space is exhausted "
             f"after {expansions} expansions (turning radius {self.vehicle.turning_radius:.2f} m)"
