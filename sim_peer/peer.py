@@ -120,6 +120,7 @@ class SimPeer:
             with self.lock:
                 self.world.step(n)
                 changes = self._motion_changes()
+                bumps, self.world.collisions = self.world.collisions, []
             self.pacer.done(n)
             self.counters["steps"] += n
             for rid, moving, path_done in changes:
@@ -127,6 +128,9 @@ class SimPeer:
                     self._safe_gate_motion(rid, moving)
                 if path_done:
                     self._event("path_done", rid, "path followed to its end", severity="info")
+            for rid, t in bumps:
+                self.counters["collisions"] += 1
+                self._event("collision", rid, "bumper", data={"t": t, "detail": "stopped before an obstacle ahead"})
             if self.speed is None:
                 time.sleep(0)  # let streams and commands have the interpreter between chunks
 

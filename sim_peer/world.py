@@ -27,6 +27,16 @@ from sim_peer.simrobot import ArmRobot, MobileRobot, SimRobot
 from sim_peer.sensors import SENSED_GROUPS
 
 
+BUMPER_PERIOD = 0.01  # s of sim time between bumper checks
+BUMPER_HEIGHTS = (0.1, 0.4)  # m above the base: low obstacles and table tops
+
+
+def _bumper_fan() -> np.ndarray:
+    """Unit rays over +-75 deg around +x: the bumper looks where the base is going."""
+    a = np.radians(np.linspace(-75, 75, 11))
+    return np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)]).reshape(-1)
+
+
 class WorldError(ValueError):
     """A world cannot be built as asked (unknown robot type, duplicate id, bad spec); the text says why."""
 
@@ -69,6 +79,7 @@ class World:
         lidar_rays: int | None = None,
         lidar_fov_deg: float | None = None,
         timestep: float | None = None,
+        bumper: bool = True,
     ) -> None:
         try:
             self.scene = scene if isinstance(scene, SceneDescription) else robots_pkg.scene(scene)
@@ -145,6 +156,12 @@ class World:
             self.objects[o.id] = mocap
         self.object_home = {o: (self.data.mocap_pos[i].copy(), self.data.mocap_quat[i].copy()) for o, i in self.objects.items()}
         self.steps = 0
+        self.bumper = bumper
+        self.collisions: list[tuple[str, float]] = []  # (robot id, sim time) of bumper stops, for the peer to report
+        self._bump_every = max(1, int(round(BUMPER_PERIOD / self.dt)))
+        self._bump_dirs = _bumper_fan()
+        self._bump_gid = np.zeros(len(self._bump_dirs) // 3, np.int32)
+        self._bump_dist = np.zeros(len(self._bump_dirs) // 3)
         self._apply()
         mujoco.mj_forward(self.model, self.data)
         self._dirty = False
@@ -208,7 +225,36 @@ class World:
             mujoco.mj_step(m, d)  # the rest of the world, against the robots where they were
             self._apply()  # robots are kinematic: their controllers, not dynamics, say where they are
             self.steps += 1
+            if self.bumper and self.steps % self._bump_every == 0:
+                self._bump()
         self._dirty = True
+
+    def _bump(self) -> None:
+        """Stop a base that is about to drive into something (a ray bumper ahead of its direction of travel)."""
+        reach_time = self._bump_every * self.dt
+        for rid, r in self.robots.items():
+            if not isinstance(r, MobileRobot) or abs(r.ctrl.v) < 1e-6:
+                continue
+            c = r.ctrl
+            spec = r.desc.ultrasonic
+            cx, cy = spec.center if spec is not None else (0.0, 0.0)
+            shell = spec.radius if spec is not None else r.desc.base_radius
+            cos, sin = math.cos(c.yaw), math.sin(c.yaw)
+            heading = c.yaw if c.v > 0 else c.yaw + math.pi
+            ch, sh = math.cos(heading), math.sin(heading)
+            fan = self._bump_dirs.reshape(-1, 3)
+            vec = np.column_stack([ch * fan[:, 0] - sh * fan[:, 1], sh * fan[:, 0] + ch * fan[:, 1], fan[:, 2]]).reshape(-1)
+            origin_xy = (c.x + cos * cx - sin * cy, c.y + sin * cx + cos * cy)
+            reach = shell + abs(c.v) * reach_time + 0.01
+            for h in BUMPER_HEIGHTS:
+                mujoco.mj_multiRay(
+                    self.model, self.data, np.array([origin_xy[0], origin_xy[1], h]), vec, SENSED_GROUPS, 1, r.body_id,
+                    self._bump_gid, self._bump_dist, None, len(self._bump_gid), reach,
+                )
+                if ((self._bump_dist >= 0) & (self._bump_dist < reach)).any():
+                    c.stop()
+                    self.collisions.append((rid, self.time))
+                    break
 
     def sync(self) -> None:
         """Make positions (bodies, sites) match the current state; cheap when nothing changed."""

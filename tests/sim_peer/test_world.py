@@ -222,3 +222,22 @@ def test_moving_flag_follows_motion_and_objects_move():
     assert st["kind"] == "arm" and len(st["q"]) == 6 and st["moving"] is False
     w.reset()
     assert w.time == 0.0 and w.robot("arm1").ctrl.q.tolist() == [0.0] * 6
+
+
+def test_the_bumper_stops_a_base_before_a_wall(room):
+    from tests.sim_peer.conftest import FRONT
+
+    w = World(room)
+    base = w.robot("bot")
+    base.twist(1.0, 0.0)
+    run(w, 4.0)
+    assert not base.moving and w.collisions and w.collisions[0][0] == "bot"
+    front = base.ctrl.x + 0.05 + 0.25  # chassis centre 5 cm ahead of the axle, radius 0.25 m
+    assert FRONT - 0.05 < front <= FRONT
+    base.twist(-0.3, 0.0)  # backing away is allowed
+    run(w, 1.0)
+    assert base.ctrl.x < FRONT - 0.3 - 0.2 and len(w.collisions) == 1
+    quiet = World(room, bumper=False)
+    quiet.robot("bot").twist(1.0, 0.0)
+    run(quiet, 4.0)
+    assert quiet.robot("bot").ctrl.x > FRONT and not quiet.collisions  # without it, walls are no obstacle
