@@ -45,6 +45,19 @@ def _cpu_s(pid: int) -> float:
         return float("nan")
 
 
+def _drained(pid: int, idle: float = 0.05, timeout: float = 20.0) -> tuple[float, float]:
+    """Wait until a process uses under ``idle`` of a core over 0.3 s; return (its CPU s, the time)."""
+    deadline = time.monotonic() + timeout
+    c, t = _cpu_s(pid), time.monotonic()
+    while time.monotonic() < deadline:
+        time.sleep(0.3)
+        c2, t2 = _cpu_s(pid), time.monotonic()
+        if (c2 - c) / (t2 - t) < idle:
+            return c2, t2
+        c, t = c2, t2
+    return c, t
+
+
 def _cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "fabric.cli", *args]
 
@@ -75,16 +88,17 @@ def _end(proc: subprocess.Popen, sig: int = signal.SIGINT, timeout: float = 30.0
         return proc.wait(timeout=10)
 
 
-def _throughput(router, ep: str, tmp: Path, scale: float, robots: int, duration: float) -> dict:
+def _throughput(router, ep: str, tmp: Path, scale: float, robots: int, duration: float, precompute: int = 0) -> dict:
     from fabric.recording.reader import iter_messages, read_info
 
-    out = tmp / f"rec-x{scale:g}.mcap"
-    rec = _start_recorder(out, WORLD, ep, tmp / f"rec-x{scale:g}.log")
+    tag = f"x{scale:g}" + ("p" if precompute else "")
+    out = tmp / f"rec-{tag}.mcap"
+    rec = _start_recorder(out, WORLD, ep, tmp / f"rec-{tag}.log")
     try:
         _wait_token(router.session, f"rf/{WORLD}/peer/recorder/rec-{out.stem}", 30)
         pub = subprocess.Popen(
             [sys.executable, "-m", "fabric.recording.bench", "pub", "--endpoint", ep, "--world", WORLD,
-             "--robots", str(robots), "--scale", str(scale), "--duration", str(duration)],
+             "--robots", str(robots), "--scale", str(scale), "--duration", str(duration), "--precompute", str(precompute)],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
         )
         # The publisher waits for the recorder's subscription, then prints "go" and starts.
@@ -94,9 +108,8 @@ def _throughput(router, ep: str, tmp: Path, scale: float, robots: int, duration:
         c0, t0 = _cpu_s(rec.pid), time.monotonic()
         res = json.loads(pub.stdout.readline().decode())
         pub.wait(timeout=30)
-        # let the recorder drain what is in flight, then measure its CPU over the publishing window
-        time.sleep(0.5)
-        c1, t1 = _cpu_s(rec.pid), time.monotonic()
+        # let the recorder drain what is in flight (its CPU use falls to idle), and count that work too
+        c1, t1 = _drained(rec.pid)
     finally:
         code = _end(rec)
     info = read_info(out)
@@ -110,9 +123,11 @@ def _throughput(router, ep: str, tmp: Path, scale: float, robots: int, duration:
     n = sum(sent.values())
     return {
         "scale": scale,
+        "precomputed": bool(precompute),
         "robots": robots,
         "streams": len(sent),
         "offered_hz": res["offered_hz"],
+        "sent_hz": n / res["elapsed"],
         "sent": n,
         "recorded": sum(got[k] for k in sent),
         "lost": lost,
@@ -177,7 +192,9 @@ def _replay_timing(router, ep: str, tmp: Path, source: Path, duration: float) ->
     }
 
 
-def run_bench(scales: list[float], robots: int, duration: float, replay: bool, keep: Path | None = None) -> dict:
+def run_bench(
+    scales: list[float], robots: int, duration: float, replay: bool, keep: Path | None = None, fast_scales: list[float] = ()
+) -> dict:
     from fabric.session import Fabric
     from fabric.testing import free_port, router_config
 
@@ -190,6 +207,8 @@ def run_bench(scales: list[float], robots: int, duration: float, replay: bool, k
         with Fabric(router_config(WORLD, port), kind="router", peer_id="bench-router") as router:
             for s in scales:
                 results["throughput"].append(_throughput(router, ep, tmp, s, robots, duration))
+            for s in fast_scales:
+                results["throughput"].append(_throughput(router, ep, tmp, s, robots, duration, precompute=200))
             if replay:
                 src = next((Path(r["file"]) for r in results["throughput"] if r["scale"] == 1.0), Path(results["throughput"][0]["file"]))
                 results["replay"] = _replay_timing(router, ep, tmp, src, duration)
@@ -198,12 +217,13 @@ def run_bench(scales: list[float], robots: int, duration: float, replay: bool, k
 
 def format_tables(res: dict) -> str:
     lines = [
-        "| robots | load | offered msg/s | sent | recorded | loss % | msg/s written | payload MB/s | file MB/s | zstd ratio | recorder CPU (cores) | file |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| robots | load | offered msg/s | sent msg/s | sent | recorded | loss % | msg/s written | payload MB/s | file MB/s | zstd ratio | recorder CPU (cores) | file |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in res["throughput"]:
         lines.append(
-            f"| {r['robots']} | x{r['scale']:g} | {r['offered_hz']:.0f} | {r['sent']} | {r['recorded']} | {r['loss_pct']:.2f} | "
+            f"| {r['robots']} | x{r['scale']:g}{' pre-encoded' if r.get('precomputed') else ''} | {r['offered_hz']:.0f} | "
+            f"{r.get('sent_hz', 0):.0f} | {r['sent']} | {r['recorded']} | {r['loss_pct']:.2f} | "
             f"{r['msgs_per_s']:.0f} | {r['mb_per_s']:.3f} | {r['file_mb_per_s']:.3f} | {r['ratio']:.1f} | {r['cpu_core']:.2f} | "
             f"{'complete' if r['complete'] else 'UNFINISHED'} |"
         )
@@ -223,6 +243,7 @@ def bench_record(
     scales: Annotated[str, typer.Option(help="Comma-separated load multiples of the default rates (1 = 10 robots at 100/50/20 Hz).")] = "1,4",
     robots: Annotated[int, typer.Option(help="Robots in the synthetic world.")] = 10,
     duration: Annotated[float, typer.Option(help="Seconds of publishing per load.")] = 10.0,
+    fast: Annotated[str, typer.Option(help="Extra loads whose publisher cycles pre-encoded payloads (to find the recorder's ceiling, not the publisher's); '' for none.")] = "",
     replay: Annotated[bool, typer.Option("--replay/--no-replay", help="Also measure replay timing on the x1 file.")] = True,
     as_json: Annotated[bool, typer.Option("--json")] = False,
     out: Annotated[Optional[Path], typer.Option(help="Append the markdown tables to this file.")] = None,
@@ -233,11 +254,12 @@ def bench_record(
 
     try:
         scale_list = [float(x) for x in scales.split(",") if x.strip()]
+        fast_list = [float(x) for x in fast.split(",") if x.strip()]
     except ValueError:
-        raise UserError(f"--scales {scales!r}: expected numbers like 1,4,8") from None
-    if not scale_list or any(s <= 0 for s in scale_list) or duration <= 0 or robots <= 0:
-        raise UserError("--scales and --duration must be positive, --robots at least 1")
-    res = run_bench(scale_list, robots, duration, replay, keep)
+        raise UserError(f"--scales {scales!r} / --fast {fast!r}: expected numbers like 1,4,8") from None
+    if not scale_list or any(s <= 0 for s in scale_list + fast_list) or duration <= 0 or robots <= 0:
+        raise UserError("--scales, --fast and --duration must be positive, --robots at least 1")
+    res = run_bench(scale_list, robots, duration, replay, keep, fast_list)
     if as_json:
         print(json.dumps(res))
         return
@@ -258,7 +280,7 @@ def _child_pub(a: argparse.Namespace) -> None:
     from fabric.recording.load import robot_streams, run_load
     from fabric.session import Fabric
 
-    streams = robot_streams(a.world, a.robots, scale=a.scale)
+    streams = robot_streams(a.world, a.robots, scale=a.scale, precompute=a.precompute)
     with Fabric(FabricConfig(world=a.world, connect=(a.endpoint,)), kind="sim", peer_id="bench-world") as fab:
         pubs = {s.key: fab.session.declare_publisher(s.key, congestion_control=zenoh.CongestionControl.BLOCK) for s in streams}
         deadline = time.monotonic() + 20
@@ -280,6 +302,7 @@ def _main() -> None:
     ap.add_argument("--robots", type=int, default=10)
     ap.add_argument("--scale", type=float, default=1.0)
     ap.add_argument("--duration", type=float, default=10.0)
+    ap.add_argument("--precompute", type=int, default=0)
     _child_pub(ap.parse_args())
 
 

@@ -62,15 +62,27 @@ def _scan(source: str) -> Callable[[int, float], bytes]:
     return make
 
 
-def robot_streams(world: str, robots: int, *, scale: float = 1.0, rates: dict[str, float] | None = None, prefix: str = "r") -> list[Stream]:
-    """``robots`` robots x (joints, pose, scan) at ``rates`` (default rates) times ``scale``."""
+def _cycled(make: Callable[[int, float], bytes], n: int) -> Callable[[int, float], bytes]:
+    payloads = [make(i, i * 0.01) for i in range(n)]
+    return lambda seq, _t: payloads[seq % n]
+
+
+def robot_streams(
+    world: str, robots: int, *, scale: float = 1.0, rates: dict[str, float] | None = None, prefix: str = "r", precompute: int = 0
+) -> list[Stream]:
+    """``robots`` robots x (joints, pose, scan) at ``rates`` (default rates) times ``scale``.
+
+    ``precompute > 0`` cycles through that many pre-encoded payloads per stream instead of encoding
+    each message: a publisher fast enough to find the recorder's ceiling rather than its own.
+    """
     rates = {**DEFAULT_RATES, **(rates or {})}
     makers = {"joints": _joints, "pose": _pose, "scan": _scan}
     out = []
     for i in range(robots):
         rid = f"{prefix}{i}"
         for stream, hz in rates.items():
-            out.append(Stream(keys.robot_stream(world, rid, stream), hz * scale, makers[stream](rid)))
+            make = makers[stream](rid)
+            out.append(Stream(keys.robot_stream(world, rid, stream), hz * scale, _cycled(make, precompute) if precompute > 0 else make))
     return out
 
 

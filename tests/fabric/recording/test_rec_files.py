@@ -5,6 +5,7 @@ import json
 from collections import Counter
 
 import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
 from mcap.reader import NonSeekingReader, make_reader
 
 from fabric.recording import MESSAGE_ENCODING, RecordingError, iter_messages, read_info
@@ -125,3 +126,24 @@ def test_per_key_counts_survive_a_round_trip(tmp_path):
     path = tmp_path / "a.mcap"
     write_recording(path, samples)
     assert Counter(m.key for m in iter_messages(path)) == Counter(k for k, _, _ in samples)
+
+
+_keys = st.sampled_from(["rf/w/robot/a/joints", "rf/w/robot/b/scan", "rf/v/event/x", "rf/w/map/m"])
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(_keys, st.integers(0, 10**6), st.binary(max_size=2000)), max_size=60),
+       st.sampled_from(["zstd", "lz4", "none"]), st.sampled_from([1024, 1 << 20]))
+def test_whatever_is_written_is_read_back_exactly(tmp_path, items, compression, chunk_size):
+    t = 1_000_000_000
+    samples = []
+    for key, dt, payload in items:
+        t += dt
+        samples.append((key, t, payload))
+    path = tmp_path / "h.mcap"
+    write_recording(path, samples, compression=compression, chunk_size=chunk_size)
+    assert [(m.key, m.log_time, m.payload) for m in iter_messages(path)] == samples
+    with open(path, "rb") as f:
+        mine = [(c.topic, m.log_time, m.data) for _s, c, m in make_reader(f).iter_messages(log_time_order=False)]
+    assert mine == samples
+    assert read_info(path).complete
