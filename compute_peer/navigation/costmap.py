@@ -69,8 +69,11 @@ class Costmap:
         x0, y0, x1, y1 = self.bounds
         return x0 <= x < x1 and y0 <= y < y1
 
-    def clearance_reason(self, x: float, y: float, what: str) -> str | None:
-        """Why (x, y) cannot hold the robot, or None when it can."""
+    def clearance_reason(self, x: float, y: float, what: str, *, tight_ok: bool = False) -> str | None:
+        """Why (x, y) cannot hold the robot, or None when it can.
+
+        With ``tight_ok`` a point clear of ``collision`` but inside the margin is accepted.
+        """
         if not self.inside(x, y):
             x0, y0, x1, y1 = self.bounds
             return f"{what} ({x:.2f}, {y:.2f}) is outside the map [{x0:.2f}, {x1:.2f}] x [{y0:.2f}, {y1:.2f}]"
@@ -79,7 +82,7 @@ class Costmap:
             return f"{what} ({x:.2f}, {y:.2f}) is inside an obstacle or unknown space"
         if self.collision[r[0], c[0]]:
             return f"{what} ({x:.2f}, {y:.2f}) is within the robot radius ({self.robot_radius:.2f} m) of an obstacle"
-        if not bool(self.free(np.array([x]), np.array([y]))[0]):
+        if not tight_ok and not bool(self.free(np.array([x]), np.array([y]))[0]):
             return f"{what} ({x:.2f}, {y:.2f}) is closer than {self.robot_radius + self.margin:.2f} m to an obstacle (robot radius + margin)"
         return None
 

@@ -32,7 +32,7 @@ from .dubins import dubins_paths
 from .errors import NavigationError
 from .geometry import TWO_PI, arc, wrap_angle
 from .heuristic import DistanceField
-from .model import PlanResult, Pose2, VehicleModel, check_endpoints, finish
+from .model import PlanResult, Pose2, Tight, VehicleModel, check_endpoints, finish
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,7 +110,7 @@ class HybridAStar:
         hb = int(round((th % TWO_PI) / (TWO_PI / cfg.heading_bins))) % cfg.heading_bins
         return (int(math.floor(x / cfg.xy_resolution)), int(math.floor(y / cfg.xy_resolution)), hb)
 
-    def _shot(self, pose: Pose2, goal: Pose2) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    def _shot(self, pose: Pose2, goal: Pose2, tight: Tight) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """A collision-free Dubins path (forward, or backward if allowed) from ``pose`` to ``goal``, or None."""
         R = self.vehicle.turning_radius
         cands = [(p, 1.0) for p in dubins_paths(pose, goal, R)]
@@ -123,7 +123,7 @@ class HybridAStar:
         for path, d in cands:
             start = pose if d > 0 else (pose[0], pose[1], pose[2] + math.pi)
             xs, ys, ts = path.sample(*start, self.check_step)
-            if self.costmap.free(xs, ys).all():
+            if self.costmap.free(xs, ys).all() or (tight and tight.motion_ok(xs, ys)):
                 return xs, ys, (ts if d > 0 else ts - math.pi)
         return None
 
@@ -132,8 +132,8 @@ class HybridAStar:
     def plan(self, start: Pose2, goal: Pose2) -> PlanResult:
         t0 = time.perf_counter()
         cfg, cm, pr = self.config, self.costmap, self.prims
-        check_endpoints(cm, start, goal)
-        field = DistanceField(cm.blocked, cm.resolution, (cm.origin_x, cm.origin_y), self.factor, (goal[0], goal[1]))
+        tight = check_endpoints(cm, start, goal)
+        field = DistanceField(cm.collision, cm.resolution, (cm.origin_x, cm.origin_y), self.factor, (goal[0], goal[1]))
         h0 = float(field.lookup(np.array([start[0]]), np.array([start[1]]))[0])
         if not math.isfinite(h0):
             raise NavigationError(
@@ -164,7 +164,7 @@ class HybridAStar:
                 )
             dist_goal = math.hypot(gx - x, gy - y)
             if dist_goal < near or expansions % cfg.analytic_every == 1:
-                shot = self._shot((x, y, th), goal)
+                shot = self._shot((x, y, th), goal, tight)
                 if shot is not None:
                     xs, ys, ts = self._reconstruct(i, nx, ny, nth, nparent, nprim)
                     return finish(
@@ -180,6 +180,9 @@ class HybridAStar:
             wx = x + c * pr.dx - s * pr.dy
             wy = y + s * pr.dx + c * pr.dy
             ok = cm.free(wx, wy).all(axis=1)
+            if tight and not ok.all() and tight.near(x, y):
+                for p in np.flatnonzero(~ok).tolist():
+                    ok[p] = tight.motion_ok(np.append(x, wx[p]), np.append(y, wy[p]))
             if not ok.any():
                 continue
             idx = np.flatnonzero(ok)

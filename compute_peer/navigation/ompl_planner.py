@@ -63,7 +63,7 @@ def plan_ompl(costmap: Costmap, start: Pose2, goal: Pose2, vehicle: VehicleModel
     vehicle = vehicle or VehicleModel()
     cfg = config or OmplConfig()
     t0 = time.perf_counter()
-    check_endpoints(costmap, start, goal)
+    tight = check_endpoints(costmap, start, goal)
     ob, og = _ompl()
     space = ob.ReedsSheppStateSpace(vehicle.turning_radius) if vehicle.allow_reverse else ob.DubinsStateSpace(vehicle.turning_radius)
     x0, y0, x1, y1 = costmap.bounds
@@ -75,7 +75,11 @@ def plan_ompl(costmap: Costmap, start: Pose2, goal: Pose2, vehicle: VehicleModel
     space.setBounds(bounds)
     ss = og.SimpleSetup(space)
     free_xy = costmap.free_xy
-    ss.setStateValidityChecker(lambda s: free_xy(s.getX(), s.getY()))
+    if tight:
+        tight_ok = tight.state_ok
+        ss.setStateValidityChecker(lambda s: free_xy(s.getX(), s.getY()) or tight_ok(s.getX(), s.getY()))
+    else:
+        ss.setStateValidityChecker(lambda s: free_xy(s.getX(), s.getY()))
     si = ss.getSpaceInformation()
     si.setStateValidityCheckingResolution(0.9 * costmap.resolution / space.getMaximumExtent())
     s_state = space.allocState()
@@ -94,24 +98,40 @@ def plan_ompl(costmap: Costmap, start: Pose2, goal: Pose2, vehicle: VehicleModel
     planner = og.RRTstar(si) if cfg.planner == "rrtstar" else og.BITstar(si)
     ss.setPlanner(planner)
     ss.setup()
-    status = ss.solve(cfg.time_limit)
-    if cfg.refine_time > 0 and ss.haveExactSolutionPath():
-        objective.setCostThreshold(ob.Cost(0.0))
-        ss.solve(cfg.refine_time)
-    if not ss.haveExactSolutionPath():
-        raise NavigationError(
-            f"OMPL {cfg.planner} found no path from ({start[0]:.2f}, {start[1]:.2f}) to ({goal[0]:.2f}, {goal[1]:.2f}) "
-            f"within {cfg.time_limit:.2f} s ({status.asString()})"
-        )
-    if cfg.simplify_time > 0:
-        ss.simplifySolution(cfg.simplify_time)
-    path = ss.getSolutionPath()
-    n = max(2, math.ceil(path.length() / (0.5 * costmap.resolution)) + 1)
+    # near a tight endpoint states are checked without the full margin, so a path may graze a
+    # collision cell between two checked states: finish() refuses it, and OMPL tries afresh
+    attempts = 4 if tight else 1
+    for attempt in range(attempts):
+        if attempt:
+            ss.clear()
+            objective.setCostThreshold(ob.Cost(math.inf))
+        status = ss.solve(cfg.time_limit)
+        if cfg.refine_time > 0 and ss.haveExactSolutionPath():
+            objective.setCostThreshold(ob.Cost(0.0))
+            ss.solve(cfg.refine_time)
+        if not ss.haveExactSolutionPath():
+            raise NavigationError(
+                f"OMPL {cfg.planner} found no path from ({start[0]:.2f}, {start[1]:.2f}) to ({goal[0]:.2f}, {goal[1]:.2f}) "
+                f"within {cfg.time_limit:.2f} s ({status.asString()})"
+            )
+        if cfg.simplify_time > 0:
+            ss.simplifySolution(cfg.simplify_time)
+        xs, ys, ts = _states(ss.getSolutionPath(), costmap.resolution)
+        xs[-1], ys[-1], ts[-1] = goal  # the goal state is reached within goal_tolerance: end exactly on it
+        try:
+            return finish(costmap, xs, ys, ts, planner=f"ompl:{cfg.planner}", seconds=time.perf_counter() - t0)
+        except NavigationError:
+            if attempt == attempts - 1:
+                raise
+    raise AssertionError("unreachable")
+
+
+def _states(path, resolution: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The solution interpolated to half a map cell between poses, as arrays."""
+    n = max(2, math.ceil(path.length() / (0.5 * resolution)) + 1)
     path.interpolate(n)
     states = path.getStates()
     xs = np.fromiter((s.getX() for s in states), dtype=np.float64, count=len(states))
     ys = np.fromiter((s.getY() for s in states), dtype=np.float64, count=len(states))
     ts = np.fromiter((s.getYaw() for s in states), dtype=np.float64, count=len(states))
-    # the goal state is reached within goal_tolerance: end exactly on it
-    xs[-1], ys[-1], ts[-1] = goal
-    return finish(costmap, xs, ys, ts, planner=f"ompl:{cfg.planner}", seconds=time.perf_counter() - t0)
+    return xs, ys, ts

@@ -118,12 +118,26 @@ def test_plan_on_a_grid_builds_the_costmap(scene):
         ((2.0, 2.0, 0.0), (25.0, 5.0, 0.0), "goal .* outside the map"),
         ((-1.0, 2.0, 0.0), (5.0, 5.0, 0.0), "start .* outside the map"),
         ((9.5, 4.5, 0.0), (5.0, 5.0, 0.0), "start .* inside an obstacle"),  # in a pillar
-        ((2.0, 2.0, 0.0), (6.58, 5.0, 0.0), "closer than"),  # 0.305 m: clear of the radius, not of radius + margin
     ],
 )
 def test_bad_endpoints_are_refused_with_a_reason(costmap, planner, start, goal, match):
     with pytest.raises(NavigationError, match=match):
         plan_path(costmap, start, goal, planner=planner, settings=settings(False))
+
+
+@pytest.mark.parametrize("planner", ["hybrid_astar", "ompl"])
+@pytest.mark.parametrize("reverse", [False, True], ids=["forward", "reverse"])
+@pytest.mark.parametrize("gap", [0.28, 0.32])
+def test_start_and_goal_close_to_a_wall_are_accepted(scene, costmap, planner, reverse, gap):
+    # both poses lie in cells whose centres are 0.30 m from the partitions' cells: the robot fits
+    # (radius 0.25) but sits inside the planners' margin (0.32 m)
+    start, goal = (6.275 + gap, 5.0, math.pi / 2), (13.025 - gap, 9.0, -math.pi / 2)
+    assert not costmap.free_xy(*start[:2]) and not costmap.free_xy(*goal[:2])
+    result = plan_path(costmap, start, goal, planner=planner, settings=settings(reverse))
+    check_drivable(result, start, goal, reverse)
+    assert path_collision(costmap, result.x, result.y) is None
+    xs, ys = densify(result.x, result.y, RES / 10)
+    assert scene_clearance(scene, xs, ys).min() >= ROBOT - RES
 
 
 def test_unreachable_goal_is_refused_without_searching():
