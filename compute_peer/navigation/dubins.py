@@ -51,10 +51,14 @@ class DubinsPath:
         return np.concatenate(xs), np.concatenate(ys), np.concatenate(ts)
 
     def end(self, x: float, y: float, th: float) -> tuple[float, float, float]:
+        """End pose after driving the path from (x, y, th) (scalar math: called for every candidate)."""
         for ch, seg in zip(self.word, self.lengths):
             k = _KAPPA[ch] / self.radius
-            px, py, pt = arc(x, y, th, k, np.array([seg]))
-            x, y, th = float(px[0]), float(py[0]), float(pt[0])
+            if k == 0.0:
+                x, y = x + seg * math.cos(th), y + seg * math.sin(th)
+            else:
+                t2 = th + k * seg
+                x, y, th = x + (math.sin(t2) - math.sin(th)) / k, y - (math.cos(t2) - math.cos(th)) / k, t2
         return x, y, th
 
 

@@ -66,6 +66,11 @@ class DistanceField:
                             push(pq, (nd, j))
         return np.array(dist).reshape(hc, wc) * self.cell
 
+    def at(self, x: float, y: float) -> float:
+        """Distance for one world point (scalar)."""
+        r, c = self.cell_of(x, y)
+        return float(self.dist[r, c])
+
     def lookup(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Distance for world points (vectorised); inf where the goal cannot be reached."""
         hc, wc = self.shape

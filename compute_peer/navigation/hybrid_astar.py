@@ -142,6 +142,8 @@ class HybridAStar:
             )
         w = cfg.heuristic_weight
         near = 2.0 * self.vehicle.turning_radius + 2.0 * cfg.xy_resolution
+        sight_slack = 2.0 * math.pi * self.vehicle.turning_radius + 2.0 * field.cell
+        field_at = field.at
         # node storage: parallel lists; parent -1 for the root, prim -1 for the root
         nx, ny, nth, ng, nparent, nprim, ndir = [start[0]], [start[1]], [start[2]], [0.0], [-1], [-1], [1.0]
         best_g: dict[tuple[int, int, int], float] = {self._key(*start): 0.0}
@@ -163,7 +165,11 @@ class HybridAStar:
                     f"(turning radius {self.vehicle.turning_radius:.2f} m may be too large for this map)"
                 )
             dist_goal = math.hypot(gx - x, gy - y)
-            if dist_goal < near or expansions % cfg.analytic_every == 1:
+            # shoot only with a line of sight, more or less: where the distance around obstacles exceeds
+            # the straight distance by more than a turning circle, a Dubins path would hit something
+            if (dist_goal < near or expansions % cfg.analytic_every == 1) and (
+                field_at(x, y) <= dist_goal + sight_slack
+            ):
                 shot = self._shot((x, y, th), goal, tight)
                 if shot is not None:
                     xs, ys, ts = self._reconstruct(i, nx, ny, nth, nparent, nprim)
