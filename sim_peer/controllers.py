@@ -65,6 +65,7 @@ class ArmController:
         self.dq = np.zeros(n)
         self.target = self.q.copy()
         self.scale = 1.0
+        self._idle = False
 
     @property
     def dof(self) -> int:
@@ -77,6 +78,7 @@ class ArmController:
             raise CommandRejected("bad_speed_scale", f"speed_scale must be in (0, 1], got {speed_scale}")
         applied = np.clip(q, self.lower, self.upper)
         self.target = applied
+        self._idle = False
         self.scale = float(speed_scale)
         bad = np.flatnonzero(applied != q)
         if bad.size == 0:
@@ -86,26 +88,32 @@ class ArmController:
     def stop(self) -> None:
         """Hold where the joints are now."""
         self.target = self.q.copy()
-        self.dq[:] = 0.0
+        self.dq = np.zeros(self.dof)
+        self._idle = False
 
     def reset(self) -> None:
         """Go back to zero (within range), at the speed limits."""
         self.target = np.clip(np.zeros(self.dof), self.lower, self.upper)
         self.scale = 1.0
+        self._idle = False
 
     def teleport(self, q) -> None:
         """Put the joints at ``q`` at once (clamped), holding there: for restoring a known state."""
         self.q = np.clip(np.asarray(q, dtype=np.float64), self.lower, self.upper)
         self.target = self.q.copy()
-        self.dq[:] = 0.0
+        self.dq = np.zeros(self.dof)
+        self._idle = False
 
     def step(self, dt: float) -> None:
+        if self._idle:
+            return
         err = self.target - self.q
         vmax = self.max_speed * self.scale
         duration = float(np.max(np.abs(err) / vmax)) if err.size else 0.0
         if duration <= dt:
             self.dq = err / dt if duration > 0 else np.zeros_like(err)
             self.q = self.target.copy()
+            self._idle = duration == 0  # at the target and at rest: nothing to do until the next command
         else:
             self.dq = err / duration
             self.q = self.q + self.dq * dt

@@ -82,6 +82,7 @@ class ArmRobot(SimRobot):
         self.qadr = np.array([model.joint(prefix + j).qposadr[0] for j in desc.joint_names])
         self.vadr = np.array([model.joint(prefix + j).dofadr[0] for j in desc.joint_names])
         self.flange_id = model.site(prefix + desc.flange_site).id if desc.flange_site else -1
+        self._dynamic = True  # the world clears this when mj_step never runs (then only the controller writes qpos)
 
     def joints(self, q, speed_scale: float = 1.0) -> Clamp | None:
         return self.ctrl.set_target(q, speed_scale)
@@ -96,6 +97,8 @@ class ArmRobot(SimRobot):
         self.ctrl.step(dt)
 
     def apply(self, data: mujoco.MjData) -> None:
+        if self.ctrl._idle and not self._dynamic:
+            return  # nothing moved and nothing else writes these joints
         data.qpos[self.qadr] = self.ctrl.q
         data.qvel[self.vadr] = self.ctrl.dq
 

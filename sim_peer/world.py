@@ -27,14 +27,14 @@ from sim_peer.simrobot import ArmRobot, MobileRobot, SimRobot
 from sim_peer.sensors import SENSED_GROUPS
 
 
-BUMPER_PERIOD = 0.01  # s of sim time between bumper checks
+BUMPER_PERIOD = 0.02  # s of sim time between bumper checks
 BUMPER_HEIGHTS = (0.1, 0.4)  # m above the base: low obstacles and table tops
 
 
 def _bumper_fan() -> np.ndarray:
     """Unit rays over +-75 deg around +x: the bumper looks where the base is going."""
     a = np.radians(np.linspace(-75, 75, 11))
-    return np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)]).reshape(-1)
+    return np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)])
 
 
 class WorldError(ValueError):
@@ -155,13 +155,17 @@ class World:
                 raise WorldError(f"scene {self.scene.name}: object {o.id!r} needs a mocap body named {o.body!r}")
             self.objects[o.id] = mocap
         self.object_home = {o: (self.data.mocap_pos[i].copy(), self.data.mocap_quat[i].copy()) for o, i in self.objects.items()}
+        robot_dofs = sum(len(r.vadr) for r in self.robots.values())
+        self.dynamic = self.model.nv > robot_dofs  # free bodies or other joints beyond the robots' own: step them
+        for r in self.robots.values():
+            r._dynamic = self.dynamic
         self.steps = 0
         self.bumper = bumper
         self.collisions: list[tuple[str, float]] = []  # (robot id, sim time) of bumper stops, for the peer to report
         self._bump_every = max(1, int(round(BUMPER_PERIOD / self.dt)))
         self._bump_dirs = _bumper_fan()
-        self._bump_gid = np.zeros(len(self._bump_dirs) // 3, np.int32)
-        self._bump_dist = np.zeros(len(self._bump_dirs) // 3)
+        self._bump_gid = np.zeros(len(self._bump_dirs), np.int32)
+        self._bump_dist = np.zeros(len(self._bump_dirs))
         self._apply()
         mujoco.mj_forward(self.model, self.data)
         self._dirty = False
@@ -222,7 +226,10 @@ class World:
         for _ in range(n):
             for r in self.robots.values():
                 r.step(dt)
-            mujoco.mj_step(m, d)  # the rest of the world, against the robots where they were
+            if self.dynamic:
+                mujoco.mj_step(m, d)  # the rest of the world, against the robots where they were
+            else:
+                d.time += dt  # nothing but kinematic robots and mocap markers: no dynamics to integrate
             self._apply()  # robots are kinematic: their controllers, not dynamics, say where they are
             self.steps += 1
             if self.bumper and self.steps % self._bump_every == 0:
@@ -242,13 +249,13 @@ class World:
             cos, sin = math.cos(c.yaw), math.sin(c.yaw)
             heading = c.yaw if c.v > 0 else c.yaw + math.pi
             ch, sh = math.cos(heading), math.sin(heading)
-            fan = self._bump_dirs.reshape(-1, 3)
-            vec = np.column_stack([ch * fan[:, 0] - sh * fan[:, 1], sh * fan[:, 0] + ch * fan[:, 1], fan[:, 2]]).reshape(-1)
-            origin_xy = (c.x + cos * cx - sin * cy, c.y + sin * cx + cos * cy)
+            vec = (self._bump_dirs @ np.array([[ch, sh, 0.0], [-sh, ch, 0.0], [0.0, 0.0, 1.0]])).reshape(-1)
+            origin = np.array([c.x + cos * cx - sin * cy, c.y + sin * cx + cos * cy, 0.0])
             reach = shell + abs(c.v) * reach_time + 0.01
             for h in BUMPER_HEIGHTS:
+                origin[2] = h
                 mujoco.mj_multiRay(
-                    self.model, self.data, np.array([origin_xy[0], origin_xy[1], h]), vec, SENSED_GROUPS, 1, r.body_id,
+                    self.model, self.data, origin, vec, SENSED_GROUPS, 1, r.body_id,
                     self._bump_gid, self._bump_dist, None, len(self._bump_gid), reach,
                 )
                 if ((self._bump_dist >= 0) & (self._bump_dist < reach)).any():

@@ -241,3 +241,26 @@ def test_the_bumper_stops_a_base_before_a_wall(room):
     quiet.robot("bot").twist(1.0, 0.0)
     run(quiet, 4.0)
     assert quiet.robot("bot").ctrl.x > FRONT and not quiet.collisions  # without it, walls are no obstacle
+
+
+def test_free_bodies_are_simulated_while_robots_stay_kinematic(tmp_path):
+    import robots
+
+    (tmp_path / "drop.xml").write_text(
+        '<mujoco><worldbody><geom type="plane" size="3 3 0.1"/>'
+        '<body name="box" pos="0.6 0.6 1.0"><freejoint/><geom type="box" size="0.05 0.05 0.05"/></body>'
+        '<body name="target" mocap="true" pos="0 0 -1"><geom type="sphere" size="0.01" group="3" contype="0" conaffinity="0"/></body>'
+        "</worldbody></mujoco>"
+    )
+    (tmp_path / "drop.toml").write_text(
+        '[scene]\nmjcf = "drop.xml"\n[[robot]]\ntype = "meca500"\nid = "arm"\npose = [0.0, 0.0, 0.0, 0.0]\n'
+        '[[object]]\nid = "target"\n'
+    )
+    w = World(robots.scene(str(tmp_path / "drop.toml")))
+    assert w.dynamic
+    w.robot("arm").joints([0.0, 0.5, 0.0, 0.0, 0.0, 0.0])
+    run(w, 1.0)
+    w.sync()
+    assert w.data.xpos[w.model.body("box").id][2] < 0.06  # fell onto the floor under gravity
+    np.testing.assert_allclose(w.data.qpos[w.robot("arm").qadr], [0.0, 0.5, 0.0, 0.0, 0.0, 0.0], atol=1e-12)  # held, no sag
+    assert not World("combined").dynamic  # only kinematic robots and markers: no dynamics to integrate
