@@ -82,7 +82,14 @@ class NavigationService:
         self.mapper = OccupancyMapper(mapper_config)
         self.mapping = bool(mapping)
         self.maps: dict[str, OccupancyGrid] = {}
-        self.counters: dict[str, int] = {"scans": 0, "scans_without_pose": 0, "scans_rejected": 0, "plans": 0, "refusals": 0}
+        self.counters: dict[str, int] = {
+            "scans": 0,  # folded into the map
+            "scans_ignored": 0,  # arrived while mapping was off
+            "scans_without_pose": 0,
+            "scans_rejected": 0,
+            "plans": 0,
+            "refusals": 0,
+        }
         self._versions: dict[str, int] = {}
         self._costmaps: dict[tuple, Costmap] = {}
         self._poses: dict[str, deque[Pose]] = {}
@@ -150,6 +157,7 @@ class NavigationService:
     def _on_scan(self, robot: str, scan: Scan) -> None:
         with self._lock:
             if not self.mapping or self._closed:
+                self.counters["scans_ignored"] += 1
                 return
             pose = self._pose_at(robot, scan.header.stamp)
             if pose is None:

@@ -174,8 +174,9 @@ def test_save_load_reset_stop_start(peers, tmp_path):
     sim.publish(keys.robot_pose(sim.world, ROBOT), pose_at(2.0, 2.0, 0.0, stamp=1.0))
     wait_until(lambda: nav._pose_at(ROBOT, 0.0) is not None, what="pose")
     sim.publish(keys.robot_scan(sim.world, ROBOT), scan_at(scene, 2.0, 2.0, 0.0, stamp=1.0))
-    assert call(user, "map", "map", MapRequest("start")).mapping == 1
+    wait_until(lambda: nav.counters["scans_ignored"] == 1, what="scan ignored while stopped")
     assert nav.counters["scans"] == 0
+    assert call(user, "map", "map", MapRequest("start")).mapping == 1
     sim.publish(keys.robot_scan(sim.world, ROBOT), scan_at(scene, 2.0, 2.0, 0.0, stamp=1.0))
     wait_until(lambda: nav.counters["scans"] == 1, what="scan mapped after start")
     live = call(user, "map", "live", MapRequest("get", name="map"))
@@ -183,3 +184,28 @@ def test_save_load_reset_stop_start(peers, tmp_path):
     reset = call(user, "map", "map", MapRequest("reset"))
     assert reset.scans == 0
     assert "no map named 'map'" in refused(user, "map", "map", MapRequest("get"))
+
+
+def test_every_robot_of_the_world_when_none_are_named(connect):
+    compute = connect("compute", "compute-2")
+    sim = connect("sim", "sim-2")
+    user = connect("user", "user-2")
+    world = user.world
+    with register_navigation(compute, settings=SETTINGS, mapper_config=ROOM) as nav:
+        cells = np.zeros((60, 60), dtype=np.uint8)
+        cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = 100
+        wait_until(lambda: _try(lambda: call(user, "map", "map", MapRequest("set", grid=make_grid(cells, 0.1)), timeout=1.0)), what="map set")
+        # joints and commands share the robot's key space: they must not disturb the service
+        from fabric.messages import JointState
+
+        sim.publish(keys.robot_joints(world, "rover7"), JointState(("a",), np.zeros(1), np.zeros(1)))
+        assert "unknown robot 'rover7'" in refused(user, "plan", "rover7", PlanRequest("rover7", goal=[4.0, 4.0, 0.0]))
+        sim.publish(keys.robot_pose(world, "rover7"), pose_at(1.0, 1.0, 0.0))
+        wait_until(lambda: nav._pose_at("rover7", 0.0) is not None, what="rover7 pose")
+        plan = call(user, "plan", "rover7", PlanRequest("rover7", goal=[4.0, 4.0, math.pi / 2]))
+        assert (plan.path.x[0], plan.path.y[0]) == pytest.approx((1.0, 1.0))
+        assert compute.counters["decode_errors"] == 0 and compute.counters["callback_errors"] == 0
+    # closed: the queryables are gone, the session is not
+    assert not compute.closed
+    with pytest.raises(ServiceError, match="no reply"):
+        user.call(keys.srv(world, "plan", "rover7"), PlanRequest("rover7", goal=[4.0, 4.0, 0.0]), timeout=0.5)
