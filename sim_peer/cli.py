@@ -43,6 +43,10 @@ def sim(
     noise: Annotated[Optional[float], typer.Option("--noise", help="Gaussian range noise std (m) for LIDAR and ultrasonic.")] = None,
     lidar_rays: Annotated[Optional[int], typer.Option("--lidar-rays", help="LIDAR ray count (default from the robot, 240).")] = None,
     lidar_fov: Annotated[Optional[float], typer.Option("--lidar-fov", help="LIDAR field of view in degrees (default 135).")] = None,
+    twist_timeout: Annotated[
+        Optional[float], typer.Option("--twist-timeout", help="Stop a base when no twist came for this long (s of sim time); default: twists hold.")
+    ] = None,
+    bumper: Annotated[bool, typer.Option("--bumper/--no-bumper", help="Stop bases before obstacles ahead.")] = True,
     ownership: Annotated[bool, typer.Option("--ownership/--no-ownership", help="Gate commands by ownership (needs the ownership package).")] = True,
     world: World = None,
     connect: Connect = None,
@@ -69,7 +73,8 @@ def sim(
         raise UserError(f"--noise must be >= 0, got {noise}")
     try:
         sim_world = SimWorld(
-            scene, robot or [], scene_robots=scene_robots, seed=seed, noise_std=noise, lidar_rays=lidar_rays, lidar_fov_deg=lidar_fov
+            scene, robot or [], scene_robots=scene_robots, seed=seed, noise_std=noise, lidar_rays=lidar_rays, lidar_fov_deg=lidar_fov,
+            bumper=bumper, twist_timeout=twist_timeout,
         )
     except WorldError as exc:
         raise UserError(str(exc)) from None

@@ -130,13 +130,19 @@ def wrap_angle(a: float) -> float:
 class BaseController:
     """A differential-drive base driven by (v, omega), with speed and acceleration limits.
 
+    A twist holds until the next command, or, with ``twist_timeout``, until that much sim
+    time passes without a fresh twist (a dead-man for teleoperation over a network).
+
     The pose (x, y, yaw) is that of the midpoint of the wheel axle, the point the
     base turns about; an in-place turn leaves it where it is. A path follower, when
     set, supplies the desired twist each step instead of the last twist command.
     """
 
-    def __init__(self, spec: BaseSpec, pose: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+    def __init__(self, spec: BaseSpec, pose: tuple[float, float, float] = (0.0, 0.0, 0.0), *, twist_timeout: float | None = None) -> None:
         self.spec = spec
+        self.twist_timeout = twist_timeout  # s of sim time a twist holds without a fresh one (None: until told otherwise)
+        self._since_twist = 0.0
+        self.twists_expired = 0
         self.home = tuple(float(p) for p in pose)
         self.x, self.y, self.yaw = self.home
         self.v = 0.0
@@ -159,6 +165,7 @@ class BaseController:
                 f"twist ({v:g} m/s, {omega:g} rad/s) is beyond {ABSURD_FACTOR:g}x the limits ({s.max_speed:g} m/s, {s.max_omega:g} rad/s)",
             )
         self.follower = None
+        self._since_twist = 0.0
         av = max(-s.max_speed, min(s.max_speed, v))
         aw = max(-s.max_omega, min(s.max_omega, omega))
         self.v_cmd, self.omega_cmd = av, aw
@@ -199,6 +206,11 @@ class BaseController:
                 self.paths_done += 1
                 v_d = w_d = 0.0
             self.v_cmd, self.omega_cmd = v_d, w_d
+        elif self.twist_timeout is not None and (self.v_cmd or self.omega_cmd):
+            self._since_twist += dt
+            if self._since_twist > self.twist_timeout:  # the sender went quiet: slow to a halt
+                self.v_cmd = self.omega_cmd = 0.0
+                self.twists_expired += 1
         dv = max(-s.max_accel * dt, min(s.max_accel * dt, self.v_cmd - self.v))
         dw = max(-s.max_alpha * dt, min(s.max_alpha * dt, self.omega_cmd - self.omega))
         self.v += dv

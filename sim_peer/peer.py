@@ -68,6 +68,7 @@ class SimPeer:
         self.counters: Counter[str] = Counter()
         self._moving = {rid: False for rid in world.robots}
         self._paths_done = {rid: 0 for rid in world.robots}
+        self._expired = {rid: 0 for rid in world.robots}
         self._loops: list[RateLoop] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -123,11 +124,13 @@ class SimPeer:
                 bumps, self.world.collisions = self.world.collisions, []
             self.pacer.done(n)
             self.counters["steps"] += n
-            for rid, moving, path_done in changes:
+            for rid, moving, news in changes:
                 if moving is not None:
                     self._safe_gate_motion(rid, moving)
-                if path_done:
+                if news == "path_done":
                     self._event("path_done", rid, "path followed to its end", severity="info")
+                elif news == "twist_timeout":
+                    self._event("twist_timeout", rid, "no fresh twist within the timeout: stopping", severity="info")
             for rid, t in bumps:
                 self.counters["collisions"] += 1
                 self._event("collision", rid, "bumper", data={"t": t, "detail": "stopped before an obstacle ahead"})
@@ -205,17 +208,22 @@ class SimPeer:
             flange_frame=d.flange_frame, base_radius=d.base_radius, base=base, sensors=sensors,
         )
 
-    def _motion_changes(self) -> list[tuple[str, bool | None, bool]]:
+    def _motion_changes(self) -> list[tuple[str, bool | None, str]]:
+        """(robot, new motion state or None, news) for robots whose motion changed or that finished something."""
         out = []
         for rid, r in self.world.robots.items():
             moving = r.moving
-            done = r.ctrl.paths_done if isinstance(r, MobileRobot) else 0
-            path_done = done != self._paths_done[rid]
+            news = ""
+            if isinstance(r, MobileRobot):
+                if r.ctrl.paths_done != self._paths_done[rid]:
+                    news = "path_done"
+                elif r.ctrl.twists_expired != self._expired[rid]:
+                    news = "twist_timeout"
+                self._paths_done[rid], self._expired[rid] = r.ctrl.paths_done, r.ctrl.twists_expired
             changed = moving != self._moving[rid]
-            if changed or path_done:
-                out.append((rid, moving if changed else None, path_done))
+            if changed or news:
+                out.append((rid, moving if changed else None, news))
             self._moving[rid] = moving
-            self._paths_done[rid] = done
         return out
 
     def _safe_gate_motion(self, rid: str, moving: bool) -> None:

@@ -137,10 +137,12 @@ class ArmRobot(SimRobot):
 class MobileRobot(SimRobot):
     kind = "mobile"
 
-    def __init__(self, robot_id: str, desc: RobotDescription, model: mujoco.MjModel, prefix: str, pose, rng=None) -> None:
+    def __init__(
+        self, robot_id: str, desc: RobotDescription, model: mujoco.MjModel, prefix: str, pose, rng=None, twist_timeout: float | None = None
+    ) -> None:
         super().__init__(robot_id, desc, model, prefix)
         assert desc.base is not None
-        self.ctrl = BaseController(desc.base, pose)
+        self.ctrl = BaseController(desc.base, pose, twist_timeout=twist_timeout)
         self.qadr = np.array([model.joint(prefix + j).qposadr[0] for j in desc.base_joints])
         self.vadr = np.array([model.joint(prefix + j).dofadr[0] for j in desc.base_joints])
         self.lidar = (

@@ -80,6 +80,7 @@ class World:
         lidar_fov_deg: float | None = None,
         timestep: float | None = None,
         bumper: bool = True,
+        twist_timeout: float | None = None,
     ) -> None:
         try:
             self.scene = scene if isinstance(scene, SceneDescription) else robots_pkg.scene(scene)
@@ -113,6 +114,8 @@ class World:
             if desc.ultrasonic is not None and noise_std is not None:
                 desc = replace(desc, ultrasonic=replace(desc.ultrasonic, noise_std=float(noise_std)))
             self.descriptions[r.id] = desc
+        if twist_timeout is not None and not twist_timeout > 0:
+            raise WorldError(f"twist timeout must be positive, got {twist_timeout}")
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         placed = self._place(placed)
@@ -146,7 +149,7 @@ class World:
                 self.robots[r.id] = ArmRobot(r.id, desc, self.model, f"{r.id}/")
             else:
                 x, y, z, yaw = r.pose
-                self.robots[r.id] = MobileRobot(r.id, desc, self.model, f"{r.id}/", (x, y, yaw), self.rng)
+                self.robots[r.id] = MobileRobot(r.id, desc, self.model, f"{r.id}/", (x, y, yaw), self.rng, twist_timeout)
         self.objects: dict[str, int] = {}
         for o in self.scene.objects:
             bid = self.model.body(o.body).id if _has_body(self.model, o.body) else -1

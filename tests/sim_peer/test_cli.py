@@ -50,4 +50,4 @@ def test_bench_sim_command_writes_its_table(tmp_path):
     res = subprocess.run(robofabric_cmd("bench", "sim", "--seconds", "0.2", "--counts", "1,2", "--out", str(out)), capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
     table = out.read_text()
-    assert "| combined (Meca500 + Reeman)" in table and "| warehouse, 2 mobile robots" in table and "240-ray" in table
+    assert "| combined (Meca500 sweeping + Reeman driving)" in table and "| warehouse, 2 mobile robots" in table and "240-ray" in table

@@ -264,3 +264,17 @@ def test_free_bodies_are_simulated_while_robots_stay_kinematic(tmp_path):
     assert w.data.xpos[w.model.body("box").id][2] < 0.06  # fell onto the floor under gravity
     np.testing.assert_allclose(w.data.qpos[w.robot("arm").qadr], [0.0, 0.5, 0.0, 0.0, 0.0, 0.0], atol=1e-12)  # held, no sag
     assert not World("combined").dynamic  # only kinematic robots and markers: no dynamics to integrate
+
+
+def test_with_a_twist_timeout_a_quiet_sender_lets_the_base_stop():
+    w = World("warehouse", twist_timeout=0.5)
+    base = w.robot("base1")
+    base.twist(0.5, 0.0)
+    run(w, 0.4)
+    base.twist(0.5, 0.0)  # refreshed in time: keeps going
+    run(w, 0.4)
+    assert base.ctrl.v == pytest.approx(0.5)
+    run(w, 1.5)
+    assert not base.moving and base.ctrl.twists_expired == 1
+    with pytest.raises(WorldError, match="twist timeout"):
+        World("warehouse", twist_timeout=0)
