@@ -229,3 +229,19 @@ def test_cli_runs_for_a_duration_at_max_speed_and_exits_cleanly(world, tmp_path)
     out = subprocess.run(argv, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "robots base1 (reeman), extra (reeman)" in out.stdout and "sim stopped at t=3.000 s: 1500 steps" in out.stdout
+
+
+def test_paths_and_bumps_are_announced_as_events(world, connect, user):
+    from fabric.messages import Path
+
+    fab, inbox = user
+    peer = SimPeer(connect("sim", "fast-sim"), World("combined"), speed=10.0)
+    with peer:
+        xs = np.linspace(0.0, 0.6, 7)
+        fab.publish(keys.robot_cmd(world, "base1", "path"), Command("alice", 1, Path(xs, np.zeros(7), np.zeros(7))))
+        ev = wait_until(lambda: inbox.event("path_done"), timeout=20, what="path_done event", seen=lambda: inbox.events)
+        assert ev.object == "base1" and abs(peer.last_state("base1")["pose"][0] - 0.6) < 0.08
+        send(fab, world, "base1", "twist", Twist(1.0, 0.0))  # straight at the table in front of the arm
+        ev = wait_until(lambda: inbox.event("collision"), timeout=20, what="collision event", seen=lambda: inbox.events)
+        assert ev.object == "base1" and ev.reason == "bumper" and peer.counters["collisions"] == 1
+        assert not peer.world.robot("base1").moving and peer.last_state("base1")["pose"][0] < 2.85 - 0.25
