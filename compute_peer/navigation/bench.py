@@ -137,11 +137,15 @@ def bench_planning(
     return results
 
 
-def format_tables(mapping: dict, planning: list[dict]) -> str:
+def format_tables(mapping: dict | list[dict], planning: list[dict]) -> str:
+    rows = mapping if isinstance(mapping, list) else [mapping]
     lines = [
         "| map update | scans | p50 (ms) | p90 (ms) | p99 (ms) | max (ms) |",
         "|---|---|---|---|---|---|",
-        f"| {mapping['what']} | {mapping['n']} | {mapping['p50_ms']:.3f} | {mapping['p90_ms']:.3f} | {mapping['p99_ms']:.3f} | {mapping['max_ms']:.3f} |",
+        *(
+            f"| {m['what']} | {m['n']} | {m['p50_ms']:.3f} | {m['p90_ms']:.3f} | {m['p99_ms']:.3f} | {m['max_ms']:.3f} |"
+            for m in rows
+        ),
         "",
         "| planner | motion | solved | p50 (ms) | p90 (ms) | max (ms) | mean length (m) |",
         "|---|---|---|---|---|---|---|",
@@ -175,6 +179,7 @@ def register_bench() -> None:
         turning_radius: Annotated[float, typer.Option(help="Minimum turning radius (m).")] = 0.6,
         robot_radius: Annotated[float, typer.Option(help="Robot radius for inflation (m).")] = 0.25,
         planners: Annotated[str, typer.Option(help="Comma-separated: hybrid_astar, ompl:rrtstar, ompl:bitstar.")] = "hybrid_astar,ompl:rrtstar,ompl:bitstar",
+        fovs: Annotated[str, typer.Option(help="Comma-separated LIDAR fields of view (deg) for the map update; 240 rays each.")] = "135,360",
         seed: Annotated[int, typer.Option(help="Seed of the start/goal pairs and scan poses.")] = 2,
         as_json: Annotated[bool, typer.Option("--json", help="Print the results as JSON.")] = False,
         out: Annotated[Optional[FsPath], typer.Option(help="Append the markdown tables to this file.")] = None,
@@ -186,7 +191,13 @@ def register_bench() -> None:
             raise UserError(f"--planners: unknown planner(s) {', '.join(bad) or '(none)'}; use hybrid_astar, ompl:rrtstar, ompl:bitstar")
         if scans < 1 or queries < 1 or turning_radius <= 0 or robot_radius < 0:
             raise UserError("--scans and --queries must be >= 1, --turning-radius > 0, --robot-radius >= 0")
-        mapping = bench_mapping(scans, seed=seed)
+        try:
+            fov_list = [float(f) for f in fovs.split(",") if f.strip()]
+        except ValueError:
+            raise UserError(f"--fovs {fovs!r}: expected degrees like 135,360") from None
+        if not fov_list or not all(0 < f <= 360 for f in fov_list):
+            raise UserError("--fovs: each field of view must be in (0, 360] degrees")
+        mapping = [bench_mapping(scans, fov_deg=f, seed=seed) for f in fov_list]
         planning = bench_planning(queries, seed, robot_radius, turning_radius, names)
         if as_json:
             print(json.dumps({"mapping": mapping, "planning": planning}))

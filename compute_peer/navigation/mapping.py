@@ -3,8 +3,8 @@
 Each ray marks the cells it crosses as seen free and the cell of its end point
 as seen occupied (a ray that reads ``range_max`` hit nothing and marks only
 free cells). Ray traversal is vectorised: all rays of a scan are sampled at
-once on a common arc-length grid (step below one cell), the samples become
-flat cell indices, and ``logodds[idx] += l_free`` applies at most one update
+once at one-cell steps in one flat array (clipped at the map's edge, so no
+sample needs a bounds check), the samples become flat cell indices, and ``logodds[idx] += l_free`` applies at most one update
 per cell per scan however many samples fell in it (numpy's buffered fancy
 assignment) - the same rule as a per-ray DDA with a visited set, at array speed.
 Hits win over free marks from other rays of the same scan.
@@ -37,7 +37,7 @@ class MapperConfig:
     l_free: float = -0.4
     l_min: float = -2.0
     l_max: float = 3.5
-    step: float = 0.8  # ray sampling step, in cells (< 1 so no cell on a ray is skipped twice in a row)
+    step: float = 1.0  # ray sampling step along a ray, in cells (a cell a ray only clips at a corner may be missed)
 
     def __post_init__(self) -> None:
         if not (self.resolution > 0 and self.width > 0 and self.height > 0):
@@ -89,25 +89,26 @@ class OccupancyMapper:
         hit = r < rmax - 1e-6
         a = angles + yaw
         ca, sa = np.cos(a), np.sin(a)
-        # free samples: strictly before each ray's end point, ``step`` cells apart, all rays in one flat array
-        free_len = np.clip(r - 0.5, 0.0, None)
-        counts = np.ceil(free_len / c.step).astype(np.intp)
-        total = int(counts.sum())
-        ray = np.repeat(np.arange(r.shape[0]), counts)
-        first = np.repeat(np.cumsum(counts) - counts, counts)
-        t = (np.arange(total) - first) * c.step
-        fx = sx + t * ca[ray]
-        fy = sy + t * sa[ray]
-        # a ray is a segment: if the sensor and every end point are inside, so is every sample
         ex = sx + r * ca
         ey = sy + r * sa
-        all_inside = (
-            0 <= sx < c.width and 0 <= sy < c.height
-            and ex.min(initial=0.0) >= 0 and ex.max(initial=0.0) < c.width
-            and ey.min(initial=0.0) >= 0 and ey.max(initial=0.0) < c.height
-        )
-        free_idx = self._flat(fx, fy, all_inside)
-        hit_idx = self._flat(ex[hit], ey[hit], all_inside)
+        sensor_inside = 0 <= sx < c.width and 0 <= sy < c.height
+        # free samples: strictly before each ray's end point (and, from a sensor inside the map, before the
+        # map's edge, so no sample needs a bounds check), ``step`` cells apart, all rays in one flat array
+        free_len = np.clip(r - 0.5, 0.0, None)
+        if sensor_inside:
+            with np.errstate(divide="ignore"):
+                tx = np.where(ca > 0, (c.width - 1e-3 - sx) / ca, np.where(ca < 0, -sx / ca, np.inf))
+                ty = np.where(sa > 0, (c.height - 1e-3 - sy) / sa, np.where(sa < 0, -sy / sa, np.inf))
+            free_len = np.minimum(free_len, np.minimum(tx, ty))
+        counts = np.ceil(free_len / c.step).astype(np.intp)
+        total = int(counts.sum())
+        ray = np.repeat(np.arange(r.shape[0], dtype=np.int32), counts)
+        first = np.repeat((np.cumsum(counts) - counts).astype(np.int32), counts)
+        t = (np.arange(total, dtype=np.int32) - first).astype(np.float32) * np.float32(c.step)
+        fx = np.float32(sx) + t * ca.astype(np.float32)[ray]
+        fy = np.float32(sy) + t * sa.astype(np.float32)[ray]
+        free_idx = self._flat(fx, fy, sensor_inside)
+        hit_idx = self._flat(ex[hit], ey[hit], False)
         lo = self.logodds.reshape(-1)
         ob = self.observed.reshape(-1)
         before_hits = lo[hit_idx]
@@ -117,12 +118,13 @@ class OccupancyMapper:
         ob[hit_idx] = True
         self.scans += 1
 
-    def _flat(self, cx: np.ndarray, cy: np.ndarray, all_inside: bool) -> np.ndarray:
+    def _flat(self, cx: np.ndarray, cy: np.ndarray, inside_known: bool) -> np.ndarray:
+        """Flat cell indices of points in cell units; points outside the grid are dropped unless known inside."""
         c = self.config
-        if not all_inside:
+        if not inside_known:
             inside = (cx >= 0) & (cx < c.width) & (cy >= 0) & (cy < c.height)
             cx, cy = cx[inside], cy[inside]
-        return cy.astype(np.intp) * c.width + cx.astype(np.intp)
+        return cy.astype(np.int32) * np.int32(c.width) + cx.astype(np.int32)
 
     def integrate_scan(self, scan: Scan, pose: Pose, *, sensor_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
         """Add a fabric Scan taken at a fabric Pose; ``sensor_offset`` is (x, y, yaw) of the sensor on the robot."""
