@@ -4,9 +4,10 @@ Each ray marks the cells it crosses as seen free and the cell of its end point
 as seen occupied (a ray that reads ``range_max`` hit nothing and marks only
 free cells). Ray traversal is vectorised: all rays of a scan are sampled at
 once at one-cell steps in one flat array (clipped at the map's edge, so no
-sample needs a bounds check), the samples become flat cell indices, and ``logodds[idx] += l_free`` applies at most one update
-per cell per scan however many samples fell in it (numpy's buffered fancy
-assignment) - the same rule as a per-ray DDA with a visited set, at array speed.
+sample needs a bounds check), the samples become flat cell indices, and
+``logodds[idx] += l_free`` applies at most one update per cell per scan however
+many samples fell in it (numpy's buffered fancy assignment) - the same rule as
+a per-ray DDA with a visited set, at array speed.
 Hits win over free marks from other rays of the same scan.
 """
 
