@@ -198,6 +198,9 @@ class BaseController:
         self.x, self.y, self.yaw = float(x), float(y), wrap_angle(float(yaw))
 
     def step(self, dt: float) -> None:
+        if self.follower is None and not (self.v or self.omega or self.v_cmd or self.omega_cmd):
+            self.wheel_speeds[:] = 0.0
+            return  # at rest with nothing to do
         s = self.spec
         if self.follower is not None:
             v_d, w_d, done = self.follower.step(self.x, self.y, self.yaw, self.v, dt)

@@ -145,6 +145,8 @@ class MobileRobot(SimRobot):
         self.ctrl = BaseController(desc.base, pose, twist_timeout=twist_timeout)
         self.qadr = np.array([model.joint(prefix + j).qposadr[0] for j in desc.base_joints])
         self.vadr = np.array([model.joint(prefix + j).dofadr[0] for j in desc.base_joints])
+        self._qadr3 = tuple(int(a) for a in self.qadr)
+        self._vadr3 = tuple(int(a) for a in self.vadr)
         self.lidar = (
             Lidar(model, desc.lidar, model.site(prefix + desc.lidar.site).id, self.body_id, rng) if desc.lidar else None
         )
@@ -169,8 +171,11 @@ class MobileRobot(SimRobot):
 
     def apply(self, data: mujoco.MjData) -> None:
         c = self.ctrl
-        data.qpos[self.qadr] = (c.x, c.y, c.yaw)
-        data.qvel[self.vadr] = (c.v * math.cos(c.yaw), c.v * math.sin(c.yaw), c.omega)
+        q, v = data.qpos, data.qvel
+        qx, qy, qyaw = self._qadr3
+        vx, vy, vyaw = self._vadr3
+        q[qx], q[qy], q[qyaw] = c.x, c.y, c.yaw  # scalar writes: several times cheaper than fancy indexing
+        v[vx], v[vy], v[vyaw] = c.v * math.cos(c.yaw), c.v * math.sin(c.yaw), c.omega
 
     @property
     def moving(self) -> bool:

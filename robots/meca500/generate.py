@@ -85,7 +85,7 @@ def mjcf() -> str:
     out.append("  <default>")
     out.append(f'    <default class="{g.NAME}">')
     out.append('      <joint damping="0.5" armature="0.01"/>')
-    out.append('      <geom type="capsule" rgba="0.85 0.85 0.88 1" contype="1" conaffinity="1"/>')
+    out.append('      <geom type="capsule" rgba="0.85 0.85 0.88 1" contype="2" conaffinity="0" group="1"/>')
     out.append("    </default>")
     out.append("  </default>")
     out.append("  <worldbody>")
