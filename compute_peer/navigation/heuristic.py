@@ -42,29 +42,31 @@ class DistanceField:
 
     def _dijkstra(self, blocked: np.ndarray, gr: int, gc: int) -> np.ndarray:
         hc, wc = blocked.shape
-        free = (~blocked).ravel().tolist()
+        # pad with a blocked border so that neighbours need no bounds checks: flat index offsets only
+        w = wc + 2
+        free = np.zeros((hc + 2, w), dtype=bool)
+        free[1:-1, 1:-1] = ~blocked
+        g = (gr + 1) * w + (gc + 1)
+        free[gr + 1, gc + 1] = True  # the goal itself was checked by the caller
+        ok = free.ravel().tolist()
         inf = math.inf
-        dist = [inf] * (hc * wc)
-        g = gr * wc + gc
+        dist = [inf] * len(ok)
         dist[g] = 0.0
-        free[g] = True  # the goal itself was checked by the caller
+        steps = [(dr * w + dc, cost) for dr, dc, cost in _NEIGHBOURS]
         pq = [(0.0, g)]
         pop, push = heapq.heappop, heapq.heappush
         while pq:
             d, i = pop(pq)
             if d > dist[i]:
                 continue
-            r, c = divmod(i, wc)
-            for dr, dc, cost in _NEIGHBOURS:
-                rr, cc = r + dr, c + dc
-                if 0 <= rr < hc and 0 <= cc < wc:
-                    j = rr * wc + cc
-                    if free[j]:
-                        nd = d + cost
-                        if nd < dist[j]:
-                            dist[j] = nd
-                            push(pq, (nd, j))
-        return np.array(dist).reshape(hc, wc) * self.cell
+            for off, cost in steps:
+                j = i + off
+                if ok[j]:
+                    nd = d + cost
+                    if nd < dist[j]:
+                        dist[j] = nd
+                        push(pq, (nd, j))
+        return np.array(dist).reshape(hc + 2, w)[1:-1, 1:-1] * self.cell
 
     def at(self, x: float, y: float) -> float:
         """Distance for one world point (scalar)."""

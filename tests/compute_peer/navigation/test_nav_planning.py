@@ -218,3 +218,21 @@ def test_inflation_is_a_disk_dilation():
             ok = (r >= 0) & (r < 50) & (c >= 0) & (c < 60)
             expect[r[ok], c[ok]] = True
         assert np.array_equal(dilate(mask, radius), expect)
+
+
+def test_distance_field_is_octile_in_the_open_and_goes_around_walls():
+    from compute_peer.navigation.heuristic import DistanceField
+
+    blocked = np.zeros((40, 40), dtype=bool)
+    field = DistanceField(blocked, 0.1, (0.0, 0.0), 2, (0.1, 0.1))  # 0.2 m cells, goal in cell (0, 0)
+    r, c = np.mgrid[0:20, 0:20]
+    octile = (np.maximum(r, c) + (math.sqrt(2) - 1) * np.minimum(r, c)) * 0.2
+    assert np.allclose(field.dist, octile)
+    blocked[:, 20:22] = True  # a full-height wall: the right half is unreachable
+    blocked[10:12, :20] = True  # and a wall with a gap on the right
+    blocked[10:12, 18:20] = False
+    field = DistanceField(blocked, 0.1, (0.0, 0.0), 2, (0.1, 0.1))
+    assert np.isinf(field.lookup(np.array([3.0]), np.array([1.0])))[0]
+    above = field.at(0.1, 3.0)
+    assert above > 2 * 1.9  # around the gap at x = 1.8..2.0 and back
+    assert math.isfinite(above)
