@@ -1,8 +1,9 @@
 """Reading recordings back, finished or not.
 
 The reader walks the file record by record (mcap's record classes, chunks
-opened lazily here) instead of trusting the summary at the end, because the file we most need to read is the one whose recorder was
-killed before it could write a summary. A file with a footer is
+opened lazily here) instead of trusting the summary at the end, because the
+file we most need to read is the one whose recorder was killed before it
+could write a summary. A file with a footer is
 ``complete``; one without is ``unfinished``: everything up to its last whole
 chunk is read and the torn tail is reported, not raised. Only a file that is
 not MCAP at all, or has no readable header, is refused
@@ -14,14 +15,13 @@ from __future__ import annotations
 import io
 import struct
 import zlib
-
 from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
-import zenoh
 import lz4.frame
+import zenoh
 import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
