@@ -104,17 +104,12 @@ def bench_planning(
     for reverse in directions:
         vehicle = VehicleModel(robot_radius=robot_radius, turning_radius=turning_radius, allow_reverse=reverse)
         for name in planners:
-            kind, _, variant = name.partition(":")
-            settings = PlannerSettings(
-                vehicle=vehicle,
-                hybrid=HybridAStarConfig(),
-                ompl=OmplConfig(planner=variant or "rrtstar", time_limit=5.0),
-            )
+            settings = PlannerSettings(vehicle=vehicle, hybrid=HybridAStarConfig(), ompl=OmplConfig(time_limit=5.0))
             times, lengths, failures = [], [], []
             for s, g in pairs:
                 t = time.perf_counter()
                 try:
-                    res = plan_path(cm, s, g, planner=kind, settings=settings)
+                    res = plan_path(cm, s, g, planner=name, settings=settings)
                 except NavigationError as exc:
                     failures.append(str(exc))
                     continue

@@ -18,7 +18,7 @@ from fabric.messages import Header, OccupancyGrid, Path
 
 __all__ = ["PlanRequest", "PlanReply", "MapRequest", "MapReply", "MAP_ACTIONS", "PLANNER_NAMES", "DIRECTIONS", "empty_grid"]
 
-PLANNER_NAMES = ("hybrid_astar", "ompl")
+PLANNER_NAMES = ("hybrid_astar", "ompl", "ompl:rrtstar", "ompl:bitstar")
 DIRECTIONS = ("default", "forward", "both")
 MAP_ACTIONS = ("start", "stop", "build", "get", "reset", "save", "load", "set", "status")
 
@@ -45,7 +45,8 @@ class PlanRequest:
     """Plan a path for ``robot``.
 
     ``goal``: (x, y, theta), or empty to use the goal object's pose; ``start``: (x, y, theta), or
-    empty to use the robot's latest pose. ``direction``: forward only, both (reversing allowed) or the
+    empty to use the robot's latest pose. ``planner``: hybrid_astar, ompl (the service's OMPL planner),
+    ompl:rrtstar or ompl:bitstar. ``direction``: forward only, both (reversing allowed) or the
     service's default. ``turning_radius`` / ``robot_radius``: 0 means the service's default.
     """
 

@@ -12,7 +12,7 @@ from .errors import NavigationError
 from .geometry import wrap_angle
 from .grid import dilate
 
-PLANNERS = ("hybrid_astar", "ompl")
+PLANNERS = ("hybrid_astar", "ompl", "ompl:rrtstar", "ompl:bitstar")  # "ompl": the configured OMPL planner
 
 
 @dataclass(frozen=True, slots=True)

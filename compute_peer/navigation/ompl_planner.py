@@ -46,7 +46,7 @@ def _ompl():
 
 @dataclass(frozen=True, slots=True)
 class OmplConfig:
-    planner: str = "rrtstar"
+    planner: str = "bitstar"  # RRT* on the asymmetric Dubins space has a long tail (docs/benchmarks/navigation.md)
     time_limit: float = 2.0  # seconds to find a first solution
     refine_time: float = 0.0  # extra seconds to improve it (anytime planners)
     simplify_time: float = 0.05

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from fabric.messages import OccupancyGrid
 
@@ -32,7 +32,10 @@ def plan_path(
     planner: str = "hybrid_astar",
     settings: PlannerSettings | None = None,
 ) -> PlanResult:
-    """Plan from ``start`` to ``goal`` (each (x, y, theta)) on a map or a prepared costmap."""
+    """Plan from ``start`` to ``goal`` (each (x, y, theta)) on a map or a prepared costmap.
+
+    ``planner``: "hybrid_astar", "ompl" (the OMPL planner of ``settings.ompl``), "ompl:rrtstar" or "ompl:bitstar".
+    """
     settings = settings or PlannerSettings()
     if planner not in PLANNERS:
         raise NavigationError(f"unknown planner {planner!r}; expected one of {', '.join(PLANNERS)}")
@@ -49,4 +52,7 @@ def plan_path(
         )
     if planner == "hybrid_astar":
         return plan_hybrid_astar(costmap, s, g, settings.vehicle, settings.hybrid)
-    return plan_ompl(costmap, s, g, settings.vehicle, settings.ompl)
+    ompl = settings.ompl
+    if ":" in planner:
+        ompl = replace(ompl, planner=planner.split(":", 1)[1])
+    return plan_ompl(costmap, s, g, settings.vehicle, ompl)

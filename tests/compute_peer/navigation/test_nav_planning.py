@@ -80,7 +80,7 @@ def check_drivable(result, start, goal, reverse: bool) -> None:
     assert result.length == pytest.approx(ds.sum())
 
 
-@pytest.mark.parametrize("planner", ["hybrid_astar", "ompl"])
+@pytest.mark.parametrize("planner", ["hybrid_astar", "ompl:rrtstar", "ompl:bitstar"])
 @pytest.mark.parametrize("reverse", [False, True], ids=["forward", "reverse"])
 @pytest.mark.parametrize("case", range(len(CASES)))
 def test_paths_are_collision_free_and_drivable(scene, costmap, planner, reverse, case):
@@ -95,10 +95,12 @@ def test_paths_are_collision_free_and_drivable(scene, costmap, planner, reverse,
     assert scene_clearance(scene, xs, ys).min() >= ROBOT - RES
 
 
-def test_bitstar_is_selectable(costmap):
+def test_ompl_means_the_configured_ompl_planner(costmap):
     start, goal = CASES[0]
     result = plan_path(costmap, start, goal, planner="ompl", settings=settings(False, "bitstar"))
     assert result.planner == "ompl:bitstar"
+    result = plan_path(costmap, start, goal, planner="ompl", settings=settings(False, "rrtstar"))
+    assert result.planner == "ompl:rrtstar"
     check_drivable(result, start, goal, False)
     assert path_collision(costmap, result.x, result.y) is None
 
