@@ -4,8 +4,8 @@
 (one channel per key, the fabric message type as schema name, msgpack as
 message encoding, receive time as log time, header wall time as publish
 time; zstd chunks that reach the disk every half second, so a killed
-recorder leaves a readable file). ``read_info`` and ``iter_messages`` read
-files back, finished or not; ``plan_replay`` + ``Replayer`` republish the
+recorder leaves a readable file). ``read_info``, ``iter_messages`` and
+``read_samples`` read files back, finished or not; ``plan_replay`` + ``Replayer`` republish the
 exact bytes on the recorded timeline, optionally filtered, windowed, sped up
 and remapped into another world. The CLI (``record``, ``info``, ``replay``,
 ``bench record``) is in :mod:`fabric.recording.cli`; see docs/recording.md.
@@ -20,6 +20,7 @@ from fabric.recording.reader import (
     iter_messages,
     key_filter,
     read_info,
+    read_samples,
 )
 from fabric.recording.recorder import Recorder, RecorderStats
 from fabric.recording.replayer import Replayer, ReplayPlan, ReplayStats, due_time, plan_replay
@@ -40,6 +41,7 @@ __all__ = [
     "RecordedMessage",
     "read_info",
     "iter_messages",
+    "read_samples",
     "key_filter",
     "peek",
     "Peek",

@@ -37,6 +37,7 @@ __all__ = [
     "RecordingInfo",
     "read_info",
     "iter_messages",
+    "read_samples",
     "key_filter",
 ]
 
@@ -420,3 +421,11 @@ def iter_messages(
             continue
         if match(ch.topic):
             yield RecordedMessage(ch.topic, m.log_time, m.publish_time, bytes(m.data), schema, m.sequence)
+
+
+def read_samples(
+    path: str | Path, keys: Iterable[str] | str | None = None, *, start_ns: int | None = None, end_ns: int | None = None
+) -> Iterator[tuple[str, int, int, bytes]]:
+    """``(key, log_time, publish_time, payload)`` of every recorded sample, for scripts that want plain tuples."""
+    for m in iter_messages(path, keys, start_ns=start_ns, end_ns=end_ns):
+        yield m.key, m.log_time, m.publish_time, m.payload

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 from mcap.reader import NonSeekingReader, make_reader
 
-from fabric.recording import MESSAGE_ENCODING, RecordingError, iter_messages, read_info
+from fabric.recording import MESSAGE_ENCODING, RecordingError, iter_messages, read_info, read_samples
 
 from rec_helpers import synthetic, write_recording
 
@@ -126,6 +126,7 @@ def test_per_key_counts_survive_a_round_trip(tmp_path):
     path = tmp_path / "a.mcap"
     write_recording(path, samples)
     assert Counter(m.key for m in iter_messages(path)) == Counter(k for k, _, _ in samples)
+    assert [(k, t, p) for k, t, _pt, p in read_samples(path)] == samples
 
 
 _keys = st.sampled_from(["rf/w/robot/a/joints", "rf/w/robot/b/scan", "rf/v/event/x", "rf/w/map/m"])

@@ -84,7 +84,9 @@ def test_record_replay_into_another_world_and_record_again(tmp_path, world, rout
     assert rp.returncode == 0, rp.stderr
     assert f"replayed {total} msgs" in rp.stdout
     wait_until(lambda: _count(second) >= total, timeout=20, what="the replay to be recorded", seen=lambda: _count(second))
-    procs.kill(rec2, signal.SIGINT)
+    procs.kill(rec2, signal.SIGTERM)
+    assert rec2.returncode == 0, procs.output(rec2)
+    assert read_info(second).complete
 
     a, b = _by_key(first), _by_key(second)
     assert sorted(k.replace(f"rf/{world}/", f"rf/{other}/") for k in a) == sorted(b)
