@@ -72,6 +72,7 @@ class UserApp(App):
         self.omega = 0.0
         self.message = ""
         self.sent = 0
+        self._synced = False
         self.title = f"robofabric · {world.name} · {world.user}"
 
     # ------------------------------------------------------------------ layout
@@ -212,6 +213,13 @@ class UserApp(App):
                 s.disabled = not mine
                 if js is not None and i < len(js.q):
                     s.actual = float(js.q[i])
+                    if not mine or not self._synced:
+                        # Targets follow the robot until you own it, so a first change moves one joint only.
+                        s.set_value(float(js.q[i]), notify=False)
+            if js is not None and mine:
+                self._synced = True
+            elif not mine:
+                self._synced = False
             for bid in ("#arm-stop", "#arm-reset", "#arm-release"):
                 self.query_one(bid, Button).disabled = not mine
             self.query_one("#arm-request", Button).disabled = mine

@@ -77,7 +77,9 @@ async def _drive_the_ui(auth, alice, arm, base, cmds, world):
         await until(pilot, lambda: any(k.endswith("/cmd/joints") for k, _ in cmds), "joint command")
         last = [m for k, m in cmds if k.endswith("/cmd/joints")][-1]
         assert last.user == "alice" and last.epoch == 2
-        assert math.isclose(last.body.q[1], math.radians(3.0), abs_tol=1e-9)
+        # Targets started from the robot's joints (0.1 rad): one slider moved, the others held.
+        assert math.isclose(last.body.q[1], 0.1 + math.radians(3.0), abs_tol=1e-9)
+        assert np.allclose(np.delete(last.body.q, 1), 0.1)
 
         await pilot.press("3", "up", "left")
         await until(pilot, lambda: any(k.endswith("/cmd/twist") and m.body.omega > 0 for k, m in cmds), "twist command")
