@@ -54,6 +54,9 @@ def _acquire(robot, res: ScenarioResult, timeout: float) -> int:
             res.say(f"owns {robot.id} (epoch {epoch})")
             return epoch
         except NotOwner as exc:
+            if exc.reason.startswith("ownership is not available") and robot.record is None:
+                res.say(f"this world runs without ownership: commanding {robot.id} without a lease")
+                return 0
             if exc.reason != last:
                 res.say(f"waiting for {robot.id}: {exc.reason}")
                 last = exc.reason
