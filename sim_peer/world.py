@@ -89,9 +89,17 @@ class World:
         placed: list[SceneRobot] = list(self.scene.robots) if scene_robots else []
         placed += [parse_robot_spec(r) if isinstance(r, str) else r for r in robots]
         ids = [r.id for r in placed]
+        for i in ids:
+            try:
+                validate_id(i, what="robot id")
+            except ValueError as exc:
+                raise WorldError(str(exc)) from None
         dup = sorted({i for i in ids if ids.count(i) > 1})
         if dup:
             raise WorldError(f"robot ids must be unique in a world; repeated: {', '.join(dup)}")
+        clash = sorted(set(ids) & {o.id for o in self.scene.objects})
+        if clash:  # one ownership namespace: robots and scene objects
+            raise WorldError(f"robot id(s) {', '.join(clash)} are also scene objects of {self.scene.name}")
         self.descriptions: dict[str, RobotDescription] = {}
         for r in placed:
             try:

@@ -8,6 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 
+import robots as robots_pkg
 from sim_peer.controllers import CommandRejected
 from sim_peer.world import World, WorldError
 
@@ -201,6 +202,10 @@ def test_robots_have_ids_and_bad_worlds_are_clear_errors():
         World("combined", ["reeman"])
     with pytest.raises(WorldError, match="unknown scene"):
         World("nowhere")
+    with pytest.raises(WorldError, match="also scene objects"):
+        World("combined", ["reeman:target"])
+    with pytest.raises(WorldError, match="forbidden"):
+        World("combined", [robots_pkg.SceneRobot("reeman", "a/b", (1.0, 1.0, 0.0, 0.0))])
 
 
 def test_moving_flag_follows_motion_and_objects_move():
