@@ -48,6 +48,7 @@ def sim(
     ] = None,
     bumper: Annotated[bool, typer.Option("--bumper/--no-bumper", help="Stop bases before obstacles ahead.")] = True,
     ownership: Annotated[bool, typer.Option("--ownership/--no-ownership", help="Gate commands by ownership (needs the ownership package).")] = True,
+    list_: Annotated[bool, typer.Option("--list", help="List the known robot types and scenes, then exit.")] = False,
     world: World = None,
     connect: Connect = None,
     listen: Listen = None,
@@ -56,6 +57,9 @@ def sim(
     peer_id: PeerId = None,
 ) -> None:
     """Simulate a scene's robots and serve them on the fabric: joints, poses, scans out; commands in."""
+    if list_:
+        _print_catalog()
+        return
     from fabric.session import Fabric, shutdown_event
     from sim_peer.pacing import parse_speed
     from sim_peer.peer import DEFAULT_RATES, SimPeer
@@ -106,6 +110,26 @@ def sim(
             f"({c['accepted']} accepted, {c['rejected']} rejected, {c['clamped']} clamped)",
             flush=True,
         )
+
+
+def _print_catalog() -> None:
+    import robots
+
+    print("robot types:")
+    for name in robots.available_robots():
+        try:
+            d = robots.load(name)
+            print(f"  {name:<12} {d.kind:<7} {d.dof} joints  {d.description}")
+        except robots.DescriptionError as exc:
+            print(f"  {name:<12} (broken: {exc})")
+    print("scenes:")
+    for name in robots.available_scenes():
+        try:
+            sc = robots.scene(name)
+            who = ", ".join(f"{r.id} ({r.type})" for r in sc.robots) or "no robots"
+            print(f"  {name:<12} {who}; objects {', '.join(o.id for o in sc.objects) or 'none'}")
+        except robots.DescriptionError as exc:
+            print(f"  {name:<12} (broken: {exc})")
 
 
 def register(app: typer.Typer) -> None:

@@ -51,3 +51,14 @@ def test_bench_sim_command_writes_its_table(tmp_path):
     assert res.returncode == 0, res.stderr
     table = out.read_text()
     assert "| combined (Meca500 sweeping + Reeman driving)" in table and "| warehouse, 2 mobile robots" in table and "240-ray" in table
+
+
+def test_sim_list_shows_robot_types_and_scenes():
+    import subprocess
+
+    from fabric.testing import robofabric_cmd
+
+    out = subprocess.run(robofabric_cmd("sim", "--list"), capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0
+    assert "meca500      arm" in out.stdout and "reeman       mobile" in out.stdout
+    assert "combined     arm1 (meca500), base1 (reeman); objects target, goal" in out.stdout
