@@ -23,6 +23,7 @@ the only module of the package that touches the session.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from collections import deque
 from dataclasses import replace
@@ -32,7 +33,8 @@ from typing import Any
 import numpy as np
 
 from fabric import keys
-from fabric.messages import Header, OccupancyGrid, Path, Pose, Scan
+from fabric.messages import OccupancyGrid, Path, Pose, Scan
+from fabric.rate import Clock, MonotonicClock
 from fabric.session import Fabric, ServiceError
 
 from .costmap import Costmap, build_costmap
@@ -69,7 +71,10 @@ class NavigationService:
         goal_object: str = "goal",
         maps_dir: str | FsPath | None = None,
         mapping: bool = True,
-        sensor_offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        sensor_offset: tuple[float, float, float] | None = None,
+        sensor_offsets: dict[str, tuple[float, float, float]] | None = None,
+        discover: bool = True,
+        clock: Clock | None = None,
     ) -> None:
         self.fabric = fabric
         self.world = fabric.world
@@ -78,7 +83,17 @@ class NavigationService:
         self.map_name = keys.validate_id(map_name, what="map name")
         self.goal_object = keys.validate_id(goal_object, what="object id")
         self.maps_dir = FsPath(maps_dir) if maps_dir is not None else None
+        # where each robot's LIDAR sits on it, (x, y, yaw) in the robot frame: given per robot, given for all,
+        # or learnt from the sim's world description (srv/world); (0, 0, 0) when nobody tells
         self.sensor_offset = sensor_offset
+        self._offsets: dict[str, tuple[float, float, float]] = dict(sensor_offsets or {})
+        self._radii: dict[str, float] = {}  # robot radius per robot, from the world description
+        self._discover = bool(discover)
+        self._clock = clock or MonotonicClock()
+        self._first_seen: dict[str, float] = {}
+        self._discovery_started = -math.inf
+        self._discovery_ended = -math.inf
+        self._discovering = False
         self.mapper = OccupancyMapper(mapper_config)
         self.mapping = bool(mapping)
         self.maps: dict[str, OccupancyGrid] = {}
@@ -86,6 +101,7 @@ class NavigationService:
             "scans": 0,  # folded into the map
             "scans_ignored": 0,  # arrived while mapping was off
             "scans_without_pose": 0,
+            "scans_waiting_for_sensor": 0,  # dropped while the sensor's mounting is being looked up
             "scans_rejected": 0,
             "plans": 0,
             "refusals": 0,
@@ -141,6 +157,8 @@ class NavigationService:
             return
         if isinstance(msg, Pose) and parsed.leaf == "pose":
             with self._lock:
+                if robot not in self._poses:
+                    self._sensor_offset(robot)  # a new robot: look its sensor up before its scans come
                 self._poses.setdefault(robot, deque(maxlen=POSE_HISTORY)).append(msg)
         elif isinstance(msg, Scan) and parsed.leaf == "scan":
             self._on_scan(robot, msg)
@@ -163,13 +181,77 @@ class NavigationService:
             if pose is None:
                 self.counters["scans_without_pose"] += 1
                 return
+            offset = self._sensor_offset(robot)
+            if offset is None:
+                self.counters["scans_waiting_for_sensor"] += 1
+                return
             try:
-                self.mapper.integrate_scan(scan, pose, sensor_offset=self.sensor_offset)
+                self.mapper.integrate_scan(scan, pose, sensor_offset=offset)
             except NavigationError as exc:
                 self.counters["scans_rejected"] += 1
                 log.warning("scan from %s rejected: %s", robot, exc)
                 return
             self.counters["scans"] += 1
+
+    # ------------------------------------------------------------------ robot descriptions
+
+    def _sensor_offset(self, robot: str) -> tuple[float, float, float] | None:
+        """The LIDAR mounting of ``robot``, or None while it is being looked up (call with the lock held)."""
+        if robot in self._offsets:
+            return self._offsets[robot]
+        if self.sensor_offset is not None:
+            return self.sensor_offset
+        if not self._discover:
+            return (0.0, 0.0, 0.0)
+        now = self._clock.now()
+        first = self._first_seen.setdefault(robot, now)
+        if self._discovery_ended >= first:  # asked after this robot appeared, and nobody described it
+            return (0.0, 0.0, 0.0)
+        if not self._discovering and now - self._discovery_started >= 1.0:
+            self._discovering = True
+            self._discovery_started = now
+            threading.Thread(target=self._run_discovery, name="nav-discovery", daemon=True).start()
+        return None
+
+    def _run_discovery(self) -> None:
+        try:
+            if not self._closed:
+                self.discover_robots()
+        except Exception as exc:  # a session closing under us: nothing learnt, nothing to report
+            log.debug("robot discovery failed: %s", exc)
+        finally:
+            with self._lock:
+                self._discovering = False
+                self._discovery_ended = self._clock.now()
+
+    def discover_robots(self, timeout: float = 2.0) -> int:
+        """Learn each mobile robot's LIDAR mounting and radius from the sim peers' ``srv/world``; returns how many.
+
+        The world description's message types belong to the sim peer; without it installed nothing is learnt.
+        Explicit ``sensor_offsets`` are never overridden.
+        """
+        try:
+            import sim_peer.messages  # noqa: F401  (registers WorldInfo with the codec)
+        except ImportError:
+            return 0
+        try:
+            replies = self.fabric.query(keys.srv(self.world, "world"), timeout=timeout, all_replies=True)
+        except ServiceError:
+            return 0
+        found = 0
+        with self._lock:
+            for rep in replies:
+                for r in getattr(rep.message, "robots", ()):
+                    if getattr(r, "kind", "") != "mobile":
+                        continue
+                    off = r.sensors.get("lidar_offset")
+                    if isinstance(off, list) and len(off) >= 2 and r.id not in self._offsets:
+                        self._offsets[r.id] = (float(off[0]), float(off[1]), 0.0)
+                    radius = float(r.base_radius or r.base.get("radius", 0.0) or 0.0)
+                    if radius > 0:
+                        self._radii[r.id] = radius
+                    found += 1
+        return found
 
     def _on_goal(self, key: str, msg: Pose) -> None:
         with self._lock:
@@ -321,7 +403,7 @@ class NavigationService:
         s = self.settings
         v = s.vehicle
         vehicle = VehicleModel(
-            robot_radius=req.robot_radius or v.robot_radius,
+            robot_radius=req.robot_radius or self._radii.get(robot, v.robot_radius),
             turning_radius=req.turning_radius or v.turning_radius,
             allow_reverse=v.allow_reverse if req.direction == "default" else req.direction == "both",
         )

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from compute_peer.navigation import MapperConfig, PlannerSettings, VehicleModel, path_collision, register_navigation
-from compute_peer.navigation.grid import UNKNOWN, make_grid
+from compute_peer.navigation.grid import UNKNOWN, dilate, make_grid
 from compute_peer.navigation.messages import MapReply, MapRequest, PlanReply, PlanRequest
 from fabric import keys
 from fabric.codec import encode
@@ -27,7 +27,9 @@ def peers(connect, tmp_path):
     compute = connect("compute", "compute-1")
     sim = connect("sim", "sim-1")
     user = connect("user", "user-1")
-    nav = register_navigation(compute, robots=[ROBOT], mapper_config=ROOM, settings=SETTINGS, maps_dir=tmp_path)
+    nav = register_navigation(
+        compute, robots=[ROBOT], mapper_config=ROOM, settings=SETTINGS, maps_dir=tmp_path, sensor_offset=(0.0, 0.0, 0.0)
+    )
     # the queryables are reachable once a status query is answered
     wait_until(lambda: _try(lambda: user.call(keys.srv(user.world, "map", "map"), MapRequest("status"), timeout=1.0)), what="map service")
     yield nav, sim, user
@@ -209,3 +211,43 @@ def test_every_robot_of_the_world_when_none_are_named(connect):
     assert not compute.closed
     with pytest.raises(ServiceError, match="no reply"):
         user.call(keys.srv(world, "plan", "rover7"), PlanRequest("rover7", goal=[4.0, 4.0, 0.0]), timeout=0.5)
+
+
+def test_sensor_mounting_and_radius_come_from_the_world_description(connect):
+    """A sim peer's srv/world says where the LIDAR sits: scans are folded in from there, plans use its radius."""
+    from sim_peer.messages import RobotInfo, WorldInfo
+
+    compute = connect("compute", "compute-3")
+    sim = connect("sim", "sim-3")
+    user = connect("user", "user-3")
+    world = user.world
+    info = WorldInfo(
+        world=world, scene="test", timestep=0.002, rates={},
+        robots=(
+            RobotInfo(
+                id="rover", type="reeman", kind="mobile", pose=np.zeros(4), joint_names=(), lower=np.zeros(0),
+                upper=np.zeros(0), max_speed=np.zeros(0), base_radius=0.4, sensors={"lidar_offset": [0.5, 0.0, 0.25]},
+            ),
+        ),
+    )
+    sim.serve(keys.srv(world, "world"), lambda key, req: info)
+    scene = small_room()
+    with register_navigation(compute, settings=SETTINGS, mapper_config=ROOM) as nav:
+        wait_until(lambda: nav.discover_robots(timeout=1.0) == 1, what="world description")
+        # the robot stands at (2, 2) facing +x; its LIDAR is 0.5 m ahead, at (2.5, 2)
+        sim.publish(keys.robot_pose(world, "rover"), pose_at(2.0, 2.0, 0.0, stamp=1.0))
+        wait_until(lambda: nav._pose_at("rover", 0.0) is not None, what="pose")
+        sim.publish(keys.robot_scan(world, "rover"), scan_at(scene, 2.5, 2.0, 0.0, stamp=1.0))
+        wait_until(lambda: nav.counters["scans"] == 1, what="scan mapped", seen=lambda: nav.counters)
+        grid = nav.mapper.grid(threshold=0.65)
+        truth = scene.rasterize(0.05).cells == 100
+        hits = grid.cells == 100
+        assert hits.sum() > 50
+        assert (hits & dilate(truth, 1)).sum() == hits.sum()  # every hit on a true wall: the offset was applied
+        call(user, "map", "map", MapRequest("set", grid=scene.rasterize(0.05)))
+        plan = call(user, "plan", "rover", PlanRequest("rover", goal=[2.0, 8.5, math.pi / 2], start=[2.0, 2.0, math.pi / 2]))
+        # radius 0.4 from the description: 0.45 m from the wall cells at y = 9.8..10 is too close
+        assert plan.length > 6.0
+        assert "within the robot radius" in refused(
+            user, "plan", "rover", PlanRequest("rover", goal=[2.0, 9.4, math.pi / 2], start=[2.0, 2.0, math.pi / 2])
+        )
