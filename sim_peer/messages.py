@@ -139,6 +139,13 @@ class WorldInfo:
         object.__setattr__(self, "robots", tuple(self.robots))
         object.__setattr__(self, "objects", tuple(self.objects))
 
+    def check(self) -> None:
+        for r in self.robots:
+            r.check()
+        ids = [r.id for r in self.robots]
+        if len(set(ids)) != len(ids):
+            raise ValueError(f"WorldInfo robot ids repeat: {ids}")
+
     def robot(self, robot_id: str) -> RobotInfo:
         for r in self.robots:
             if r.id == robot_id:
