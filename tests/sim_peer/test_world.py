@@ -283,3 +283,12 @@ def test_with_a_twist_timeout_a_quiet_sender_lets_the_base_stop():
     assert not base.moving and base.ctrl.twists_expired == 1
     with pytest.raises(WorldError, match="twist timeout"):
         World("warehouse", twist_timeout=0)
+
+
+def test_the_sim_core_does_not_import_zenoh():
+    import subprocess
+    import sys
+
+    code = "import sys, sim_peer, sim_peer.world, sim_peer.pacing, robots; print('zenoh' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "False", out.stderr
