@@ -6,7 +6,6 @@ ultrasonic ring) read at a fixed rate of sim time, as the peer's scan stream wou
 
 from __future__ import annotations
 
-import math
 import platform
 import time
 from pathlib import Path

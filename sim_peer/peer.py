@@ -17,7 +17,6 @@ Clamped commands are applied and reported as ``Event(kind="clamp")``. Scene obje
 from __future__ import annotations
 
 import logging
-import math
 import threading
 import time
 from collections import Counter
@@ -27,7 +26,7 @@ import numpy as np
 
 from fabric import keys
 from fabric.gate import CommandGate, OpenGate
-from fabric.messages import COMMAND_BODIES, Command, Event, JointState, Path, Pose, Scan
+from fabric.messages import COMMAND_BODIES, Command, Event, JointState, Pose, Scan
 from fabric.rate import Clock, RateLoop
 from fabric.session import Fabric
 from sim_peer.controllers import Clamp, CommandRejected

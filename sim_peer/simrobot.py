@@ -20,12 +20,6 @@ from sim_peer.follower import PurePursuit
 from sim_peer.sensors import Lidar, Ultrasonic
 
 
-def _quat_to_mat(q: np.ndarray) -> np.ndarray:
-    m = np.zeros(9)
-    mujoco.mju_quat2Mat(m, np.asarray(q, dtype=np.float64))
-    return m.reshape(3, 3)
-
-
 class SimRobot:
     """Common surface; subclasses fill in ``apply`` (controller -> qpos) and the commands they support."""
 
