@@ -127,9 +127,38 @@ class OccupancyMapper:
             cx, cy = cx[inside], cy[inside]
         return cy.astype(np.int32) * np.int32(c.width) + cx.astype(np.int32)
 
-    def integrate_scan(self, scan: Scan, pose: Pose, *, sensor_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
-        """Add a fabric Scan taken at a fabric Pose; ``sensor_offset`` is (x, y, yaw) of the sensor on the robot."""
+    def clear_footprint(self, x: float, y: float, radius: float) -> None:
+        """Mark the disk the robot stands on as seen free (once): no sensor sees the floor under the robot."""
+        c = self.config
+        if radius <= 0:
+            return
+        cx, cy = (x - c.origin_x) / c.resolution, (y - c.origin_y) / c.resolution
+        rc = radius / c.resolution
+        r0, r1 = max(int(cy - rc), 0), min(int(cy + rc) + 1, c.height)
+        c0, c1 = max(int(cx - rc), 0), min(int(cx + rc) + 1, c.width)
+        if r0 >= r1 or c0 >= c1:
+            return
+        rr, cc = np.mgrid[r0:r1, c0:c1]
+        inside = (rr + 0.5 - cy) ** 2 + (cc + 0.5 - cx) ** 2 <= rc * rc
+        lo = self.logodds[r0:r1, c0:c1]
+        lo[inside] = np.maximum(lo[inside] + c.l_free, c.l_min)
+        self.observed[r0:r1, c0:c1] |= inside
+
+    def integrate_scan(
+        self,
+        scan: Scan,
+        pose: Pose,
+        *,
+        sensor_offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        footprint: float = 0.0,
+    ) -> None:
+        """Add a fabric Scan taken at a fabric Pose; ``sensor_offset`` is (x, y, yaw) of the sensor on the robot.
+
+        ``footprint`` > 0 also marks the robot's own disk of that radius free (the robot stands there).
+        """
         yaw = yaw_from_quaternion(pose.quaternion)
+        if footprint > 0:
+            self.clear_footprint(float(pose.position[0]), float(pose.position[1]), footprint)
         ox, oy, oyaw = sensor_offset
         cy, sy = math.cos(yaw), math.sin(yaw)
         x = float(pose.position[0]) + cy * ox - sy * oy

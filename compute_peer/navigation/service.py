@@ -186,7 +186,8 @@ class NavigationService:
                 self.counters["scans_waiting_for_sensor"] += 1
                 return
             try:
-                self.mapper.integrate_scan(scan, pose, sensor_offset=offset)
+                footprint = self._radii.get(robot, self.settings.vehicle.robot_radius)
+                self.mapper.integrate_scan(scan, pose, sensor_offset=offset, footprint=footprint)
             except NavigationError as exc:
                 self.counters["scans_rejected"] += 1
                 log.warning("scan from %s rejected: %s", robot, exc)

@@ -87,3 +87,14 @@ def test_bad_scans_are_refused():
     with pytest.raises(NavigationError):
         MapperConfig(resolution=-1.0)
     assert mapper.scans == 0
+
+
+def test_the_floor_under_the_robot_is_marked_free():
+    mapper = OccupancyMapper(MapperConfig(resolution=0.1, width=40, height=40, origin_x=0.0, origin_y=0.0))
+    mapper.clear_footprint(2.0, 2.0, 0.3)
+    cells = mapper.grid(threshold=0.5).cells
+    centres = (np.arange(40) + 0.5) * 0.1
+    disk = (centres[:, None] - 2.0) ** 2 + (centres[None, :] - 2.0) ** 2 <= 0.3**2 + 1e-9
+    assert np.array_equal(cells == 0, disk) and np.array_equal(cells == UNKNOWN, ~disk)
+    mapper.clear_footprint(-5.0, -5.0, 0.3)  # off the map: nothing, no error
+    assert np.array_equal(mapper.grid(threshold=0.5).cells == 0, disk)
