@@ -4,8 +4,10 @@
 :class:`~fabric.session.Fabric`:
 
 * mapping mode: it listens to the robots' ``scan`` and ``pose`` keys and, while
-  mapping is on, folds every scan (taken at the pose nearest in sim time) into
-  a log-odds grid as the user drives;
+  mapping is on, folds every scan (taken at the pose nearest in sim time, from
+  where the LIDAR sits on the robot) into a log-odds grid as the user drives;
+  each robot's LIDAR mounting and radius are learnt from the sim's world
+  description (``srv/world``) unless given;
 * ``rf/{world}/srv/map/{name}`` (:class:`MapRequest`): start/stop mapping, build the binary
   map with a threshold and publish it on ``rf/{world}/map/{name}``, get, reset,
   save/load (only inside ``maps_dir``), set a map, status;
@@ -30,7 +32,6 @@ from dataclasses import replace
 from pathlib import Path as FsPath
 from typing import Any
 
-import numpy as np
 
 from fabric import keys
 from fabric.messages import OccupancyGrid, Path, Pose, Scan
@@ -58,6 +59,12 @@ class NavigationService:
     """Mapping + planning for one world. A context manager; ``close()`` is idempotent.
 
     ``robots``: the robot ids to map and plan for; None means every robot seen on the world.
+    ``mapper_config``: the grid (default 20 m x 20 m at 5 cm around the origin). ``settings``: vehicle and
+    planner defaults. ``map_name``: the map built from scans. ``goal_object``: the scene object whose pose is
+    the default goal. ``maps_dir``: the only folder ``save``/``load`` may touch (None: disabled).
+    ``mapping``: accumulate scans from the start. ``sensor_offset`` (all robots) / ``sensor_offsets`` (per
+    robot): LIDAR mounting (x, y, yaw) in the robot frame; otherwise learnt from ``srv/world`` when
+    ``discover``, else (0, 0, 0). ``clock``: for the discovery's rate limit.
     """
 
     def __init__(

@@ -9,7 +9,7 @@ import pytest
 
 from compute_peer.navigation import MapperConfig, NavigationError, OccupancyMapper
 from compute_peer.navigation.grid import UNKNOWN, dilate
-from navscenes import RANGE_MAX, drive_poses, pose_at, scan_at, small_room
+from navscenes import drive_poses, pose_at, scan_at, small_room
 
 RES = 0.05
 

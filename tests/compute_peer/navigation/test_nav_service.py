@@ -11,7 +11,6 @@ from compute_peer.navigation import MapperConfig, PlannerSettings, VehicleModel,
 from compute_peer.navigation.grid import UNKNOWN, dilate, make_grid
 from compute_peer.navigation.messages import MapReply, MapRequest, PlanReply, PlanRequest
 from fabric import keys
-from fabric.codec import encode
 from fabric.messages import OccupancyGrid, Path
 from fabric.session import ServiceError
 from fabric.testing import wait_until
