@@ -103,11 +103,12 @@ class OccupancyMapper:
             free_len = np.minimum(free_len, np.minimum(tx, ty))
         counts = np.ceil(free_len / c.step).astype(np.intp)
         total = int(counts.sum())
-        ray = np.repeat(np.arange(r.shape[0], dtype=np.int32), counts)
-        first = np.repeat((np.cumsum(counts) - counts).astype(np.int32), counts)
-        t = (np.arange(total, dtype=np.int32) - first).astype(np.float32) * np.float32(c.step)
-        fx = np.float32(sx) + t * ca.astype(np.float32)[ray]
-        fy = np.float32(sy) + t * sa.astype(np.float32)[ray]
+        # sample k of a ray is at sensor + k * step * (cos, sin): the per-ray terms are repeated, not gathered
+        # float32 halves the memory traffic; it holds every sample index exactly below 2**24 samples
+        ft = np.float32 if total < 2**24 else np.float64
+        k = np.arange(total, dtype=ft) - np.repeat((np.cumsum(counts) - counts).astype(ft), counts)
+        fx = ft(sx) + k * np.repeat((ca * c.step).astype(ft), counts)
+        fy = ft(sy) + k * np.repeat((sa * c.step).astype(ft), counts)
         free_idx = self._flat(fx, fy, sensor_inside)
         hit_idx = self._flat(ex[hit], ey[hit], False)
         lo = self.logodds.reshape(-1)
