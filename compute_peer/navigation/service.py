@@ -382,6 +382,8 @@ class NavigationService:
         if cm is None:
             cm = build_costmap(grid, robot_radius, threshold=s.threshold, unknown_is_occupied=s.unknown_is_occupied)
             with self._lock:
+                while len(self._costmaps) >= 8:  # requests may vary the radius: keep the cache bounded
+                    self._costmaps.pop(next(iter(self._costmaps)))
                 self._costmaps[ck] = cm
         return cm
 
