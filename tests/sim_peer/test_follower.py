@@ -38,7 +38,7 @@ def drive(xs, ys, theta=None, seconds: float = 60.0, dt: float = 0.01):
 waypoints = st.lists(st.tuples(st.floats(-3, 3), st.floats(-3, 3)), min_size=1, max_size=5)
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=300, deadline=None)
 @given(waypoints)
 def test_any_polyline_is_followed_to_its_end(points):
     pts = densify(np.array([(0.0, 0.0), *points]))
@@ -52,6 +52,12 @@ def test_final_heading_is_the_paths_last_theta():
     xs = np.linspace(0, 2, 41)
     b, _ = drive(xs, np.zeros_like(xs), np.full_like(xs, -math.pi / 2))
     assert abs(b.x - 2) < 0.1 and abs(b.yaw + math.pi / 2) < 0.05
+
+
+def test_a_path_that_passes_its_own_end_on_the_way_out_is_driven_in_full():
+    pts = densify(np.array([(0.0, 0.0), (0.0, -2.0), (0.0, -1.0)]))  # found by hypothesis: it used to stop at y = -1 outbound
+    b, trace = drive(pts[:, 0], pts[:, 1])
+    assert trace[:, 1].min() < -1.9 and math.hypot(b.x, b.y + 1.0) < 0.1
 
 
 def test_a_path_that_doubles_back_is_not_shortcut():
