@@ -355,11 +355,14 @@ class Arm(Robot):
             raise Unreachable(f"IK for {self.id} at {list(map(float, xyz))}: {exc.reason}") from None
 
     def move_to(
-        self, xyz: Sequence[float], quaternion: Sequence[float] | None = None, *, wait: bool = True, tol: float = 2e-3, timeout: float = 20.0
+        self, xyz: Sequence[float], quaternion: Sequence[float] | None = None, *, wait: bool = True, tol: float = 1e-3, timeout: float = 20.0
     ) -> np.ndarray:
-        """Move the flange to ``xyz`` (world frame, m) through IK; :class:`Unreachable` if IK refuses."""
+        """Move the flange to ``xyz`` (world frame, m) through IK; :class:`Unreachable` if IK refuses.
+
+        ``tol`` is on the joints (rad), as in :meth:`move_joints`; returns the joints reached.
+        """
         q = self.ik(xyz, quaternion)
-        return self.move_joints(q, wait=wait, tol=tol if tol < 1e-2 else 1e-3, timeout=timeout)
+        return self.move_joints(q, wait=wait, tol=tol, timeout=timeout)
 
 
 class Base(Robot):
