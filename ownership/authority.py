@@ -1,0 +1,162 @@
+"""The ownership authority: hosted by the sim peer, the only writer of ``rf/{world}/own/{object}``.
+
+It runs :mod:`ownership.state` behind one lock, serves requests/releases/renewals
+and record queries on ``rf/{world}/own/{object}``, follows users' liveliness
+tokens, ticks leases on its own thread, and gates commands by (user, epoch).
+It never touches the simulation: on handover the robot simply continues.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Any
+
+from fabric import keys
+from fabric.messages import Command, Event, OwnershipRecord
+from fabric.rate import Clock, MonotonicClock
+from fabric.session import Fabric, ServiceError
+
+from ownership import state as st
+from ownership.messages import OwnReply, OwnRequest
+
+log = logging.getLogger("robofabric.ownership")
+
+__all__ = ["Authority"]
+
+
+class Authority:
+    """A :class:`fabric.gate.CommandGate` backed by the ownership state machine."""
+
+    def __init__(
+        self,
+        fabric: Fabric,
+        objects: dict[str, str],
+        *,
+        lease_s: float = 2.0,
+        grace_s: float = 10.0,
+        clock: Clock | None = None,
+        tick_s: float | None = None,
+    ) -> None:
+        self.fabric = fabric
+        self.clock = clock or MonotonicClock()
+        self._lock = threading.RLock()
+        self._state = st.initial(objects, lease_s=lease_s, grace_s=grace_s, authority=fabric.peer_id)
+        self._tick_s = tick_s if tick_s is not None else min(0.02, lease_s / 10)
+        self._stop = threading.Event()
+        self.counters = {"requests": 0, "rejected": 0, "handovers": 0}
+        for obj in objects:
+            self._publish(self._state.records[obj])
+        self._queryable = fabric.serve(keys.own_all(fabric.world), self._serve, expected=OwnRequest)
+        self._watch = fabric.watch_peers(self._on_peer, kind="user")
+        self._thread = threading.Thread(target=self._run, name="ownership-tick", daemon=True)
+        self._thread.start()
+
+    # ------------------------------------------------------------------ state
+
+    def records(self) -> dict[str, OwnershipRecord]:
+        with self._lock:
+            return dict(self._state.records)
+
+    def _apply(self, ev: st.Event) -> list[st.Effect]:
+        with self._lock:
+            before = self._state.records
+            self._state, effects = st.step(self._state, ev)
+            changed = [r for o, r in self._state.records.items() if r is not before.get(o)]
+            for rec in changed:
+                self._publish(rec)
+        for eff in effects:
+            if eff.kind in ("handover", "revoked", "expired", "restored", "released"):
+                if eff.kind == "handover":
+                    self.counters["handovers"] += 1
+                self._emit(Event(kind=f"own_{eff.kind}", reason=eff.reason, object=eff.object, user=eff.user,
+                                 header=self.fabric.header("event")))
+        return effects
+
+    def _publish(self, rec: OwnershipRecord) -> None:
+        key = keys.own(self.fabric.world, rec.object)
+        try:
+            self.fabric.publish(key, rec.__class__(**{**_fields(rec), "header": self.fabric.header(key)}))
+        except Exception:  # a closing session must not break the state machine
+            log.debug("publish %s failed", key, exc_info=True)
+
+    def _emit(self, event: Event) -> None:
+        try:
+            self.fabric.emit(event, "own", event.object)
+        except Exception:
+            log.debug("emit failed", exc_info=True)
+
+    # ------------------------------------------------------------------ peers, ticks, service
+
+    def _on_peer(self, kind: str, peer_id: str, alive: bool) -> None:
+        now = self.clock.now()
+        self._apply(st.Join(peer_id, now) if alive else st.Leave(peer_id, now))
+
+    def _run(self) -> None:
+        while not self._stop.wait(self._tick_s):
+            try:
+                self._apply(st.Tick(self.clock.now()))
+            except Exception:
+                log.exception("ownership tick failed")
+
+    def _serve(self, key: str, request: Any) -> Any:
+        obj = keys.parse(key).leaf
+        with self._lock:
+            rec = self._state.records.get(obj)
+        if rec is None:
+            raise ServiceError(f"unknown object {obj!r} (known: {', '.join(sorted(self._state.records))})")
+        if request is None:
+            return rec.__class__(**{**_fields(rec), "header": self.fabric.header(key)})
+        self.counters["requests"] += 1
+        now = self.clock.now()
+        if request.op == "request":
+            ev: st.Event = st.Request(request.user, obj, now, request.wait)
+        elif request.op == "release":
+            ev = st.Release(request.user, obj, now)
+        else:
+            ev = st.Renew(request.user, obj, now)
+        effects = self._apply(ev)
+        mine = [e for e in effects if e.user == request.user and e.object == obj and e.kind != "revoked"]
+        eff = mine[0] if mine else st.Effect("denied", obj, request.user, "no effect")
+        outcome = {"handover": "granted", "restored": "granted"}.get(eff.kind, eff.kind)
+        if outcome not in ("granted", "denied", "queued", "released", "renewed"):
+            outcome = "denied"
+        with self._lock:
+            rec = self._state.records[obj]
+        return OwnReply(outcome, eff.reason, eff.position, rec, header=self.fabric.header(key))
+
+    # ------------------------------------------------------------------ CommandGate
+
+    def admit(self, robot: str, command: Command) -> str | None:
+        with self._lock:
+            rec = self._state.records.get(robot)
+        if rec is None:
+            return f"{robot!r} has no ownership record"
+        if rec.policy == "scene":
+            return None
+        reason = None
+        if not rec.owner:
+            reason = f"{robot} is not owned; request it first"
+        elif command.user != rec.owner:
+            reason = f"{robot} is owned by {rec.owner}, not {command.user}"
+        elif command.epoch != rec.epoch:
+            reason = f"stale epoch {command.epoch} for {robot} (current {rec.epoch})"
+        if reason:
+            self.counters["rejected"] += 1
+        return reason
+
+    def update_motion(self, robot: str, moving: bool) -> None:
+        with self._lock:
+            rec = self._state.records.get(robot)
+            if rec is None or (rec.state == "moving") == bool(moving):
+                return
+        self._apply(st.Motion(robot, bool(moving)))
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+
+
+def _fields(rec: OwnershipRecord) -> dict:
+    return {f: getattr(rec, f) for f in rec.__dataclass_fields__}

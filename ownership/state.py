@@ -1,0 +1,266 @@
+"""Pure ownership state machine: events in, (new state, effects) out.
+
+No zenoh and no clock: ``now`` arrives inside the events, so the same code runs
+in the authority and in hypothesis property tests. Records are
+:class:`fabric.messages.OwnershipRecord` (the replicated wire record).
+
+Rules (DESIGN.md, issue 5):
+- ``exclusive`` objects have at most one owner, always a live user; ``scene``
+  objects are never owned (anyone writes, last writer wins).
+- The owner's epoch (fencing token) increases on every change of owner.
+- Waiting users are kept sorted by *join order* (the order users first joined
+  the world), so a user reconnecting within grace returns to its old place.
+- A request on a still robot hands it over at once; on a moving one it is
+  denied (or queued when the requester asks to wait). A release, lease expiry
+  or owner departure passes ownership to the head of the queue.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+from typing import Mapping
+
+from fabric.messages import OwnershipRecord
+
+__all__ = [
+    "Effect", "OwnState", "Join", "Leave", "Request", "Release", "Renew", "Tick", "Motion",
+    "initial", "step",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class Join:
+    user: str
+    now: float
+
+
+@dataclass(frozen=True, slots=True)
+class Leave:
+    user: str
+    now: float
+
+
+@dataclass(frozen=True, slots=True)
+class Request:
+    user: str
+    object: str
+    now: float
+    wait: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class Release:
+    user: str
+    object: str
+    now: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class Renew:
+    user: str
+    object: str
+    now: float
+
+
+@dataclass(frozen=True, slots=True)
+class Tick:
+    now: float
+
+
+@dataclass(frozen=True, slots=True)
+class Motion:
+    object: str
+    moving: bool
+
+
+Event = Join | Leave | Request | Release | Renew | Tick | Motion
+
+
+@dataclass(frozen=True, slots=True)
+class Effect:
+    """What happened: ``kind`` is granted|denied|queued|released|handover|expired|revoked|restored|renewed."""
+
+    kind: str
+    object: str = ""
+    user: str = ""
+    reason: str = ""
+    position: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Away:
+    """A user whose token went: its join rank and the objects it held or waited for, until ``deadline``."""
+
+    deadline: float
+    owned: frozenset[str]
+    queued: frozenset[str]
+
+
+@dataclass(frozen=True, slots=True)
+class OwnState:
+    records: Mapping[str, OwnershipRecord]
+    rank: Mapping[str, int] = field(default_factory=dict)  # user -> join rank (live or away)
+    live: frozenset[str] = frozenset()
+    away: Mapping[str, Away] = field(default_factory=dict)
+    next_rank: int = 0
+    lease_s: float = 2.0
+    grace_s: float = 10.0
+    authority: str = ""
+
+
+def initial(objects: Mapping[str, str], *, lease_s: float = 2.0, grace_s: float = 10.0, authority: str = "") -> OwnState:
+    recs = {}
+    for obj, policy in objects.items():
+        if policy not in ("scene", "exclusive"):
+            raise ValueError(f"object {obj!r}: policy must be scene or exclusive, not {policy!r}")
+        recs[obj] = OwnershipRecord(object=obj, policy=policy, authority=authority)
+    return OwnState(records=MappingProxyType(recs), lease_s=lease_s, grace_s=grace_s, authority=authority)
+
+
+# ---------------------------------------------------------------------- helpers
+
+def _sorted_queue(s: OwnState, users) -> tuple[str, ...]:
+    return tuple(sorted(set(users), key=lambda u: (s.rank.get(u, 1 << 60), u)))
+
+
+def _with(s: OwnState, recs: dict, **kw) -> OwnState:
+    return replace(s, records=MappingProxyType(recs), **kw)
+
+
+def _join(s: OwnState, user: str) -> OwnState:
+    if user in s.live:
+        return s
+    rank = dict(s.rank)
+    nxt = s.next_rank
+    if user not in rank:
+        rank[user] = nxt
+        nxt += 1
+    return replace(s, rank=MappingProxyType(rank), live=s.live | {user}, next_rank=nxt)
+
+
+def _pass_on(s: OwnState, rec: OwnershipRecord, now: float, effects: list, why: str) -> OwnershipRecord:
+    """The owner goes (``why``): the head of the live queue owns next, else the object is free."""
+    queue = [u for u in rec.queue if u in s.live]
+    if queue:
+        nxt = queue.pop(0)
+        effects.append(Effect("handover", rec.object, nxt, f"{why} by {rec.owner}" if rec.owner else why))
+        return replace(rec, owner=nxt, epoch=rec.epoch + 1, lease_expiry=now + s.lease_s, queue=tuple(queue))
+    effects.append(Effect("released", rec.object, rec.owner, why))
+    return replace(rec, owner="", epoch=rec.epoch + 1, lease_expiry=0.0, queue=tuple(queue))
+
+
+# ---------------------------------------------------------------------- step
+
+def step(s: OwnState, ev: Event) -> tuple[OwnState, list[Effect]]:
+    """Apply one event; never raises for a well-typed event on a known object."""
+    effects: list[Effect] = []
+    recs = dict(s.records)
+
+    if isinstance(ev, Join):
+        was_away = s.away.get(ev.user)
+        s = _join(s, ev.user)
+        if was_away is not None and ev.now <= was_away.deadline:
+            away = {k: v for k, v in s.away.items() if k != ev.user}
+            s = replace(s, away=MappingProxyType(away))
+            for obj in sorted(was_away.owned | was_away.queued):
+                rec = recs[obj]
+                if not rec.owner and obj in was_away.owned:
+                    recs[obj] = replace(rec, owner=ev.user, epoch=rec.epoch + 1, lease_expiry=ev.now + s.lease_s)
+                    effects.append(Effect("restored", obj, ev.user, "owner again"))
+                elif rec.owner != ev.user:
+                    q = _sorted_queue(s, rec.queue + (ev.user,))
+                    recs[obj] = replace(rec, queue=q)
+                    effects.append(Effect("restored", obj, ev.user, "queued", q.index(ev.user) + 1))
+            return _with(s, recs), effects
+        if was_away is not None:  # grace over: a new join rank
+            away = {k: v for k, v in s.away.items() if k != ev.user}
+            rank = {k: v for k, v in s.rank.items() if k != ev.user}
+            s = replace(s, away=MappingProxyType(away), rank=MappingProxyType(rank), live=s.live - {ev.user})
+            s = _join(s, ev.user)
+        return s, effects
+
+    if isinstance(ev, Leave):
+        if ev.user not in s.live:
+            return s, effects
+        s = replace(s, live=s.live - {ev.user})
+        owned, queued = set(), set()
+        for obj, rec in list(recs.items()):
+            if rec.owner == ev.user:
+                owned.add(obj)
+                recs[obj] = _pass_on(s, rec, ev.now, effects, "left")
+            elif ev.user in rec.queue:
+                queued.add(obj)
+                recs[obj] = replace(rec, queue=tuple(u for u in rec.queue if u != ev.user))
+        away = dict(s.away)
+        away[ev.user] = Away(ev.now + s.grace_s, frozenset(owned), frozenset(queued))
+        return _with(s, recs, away=MappingProxyType(away)), effects
+
+    if isinstance(ev, Tick):
+        for obj, rec in list(recs.items()):
+            if rec.owner and ev.now > rec.lease_expiry:
+                recs[obj] = _pass_on(s, rec, ev.now, effects, "lease expired")
+                effects.append(Effect("expired", obj, rec.owner, "lease expired"))
+        gone = [u for u, a in s.away.items() if ev.now > a.deadline]
+        if gone:
+            away = {k: v for k, v in s.away.items() if k not in gone}
+            rank = {k: v for k, v in s.rank.items() if k not in gone}
+            s = replace(s, away=MappingProxyType(away), rank=MappingProxyType(rank))
+        return _with(s, recs), effects
+
+    if isinstance(ev, Motion):
+        rec = recs[ev.object]
+        state = "moving" if ev.moving else "still"
+        if rec.state != state:
+            recs[ev.object] = replace(rec, state=state)
+        return _with(s, recs), effects
+
+    rec = recs.get(ev.object)
+    if rec is None:
+        effects.append(Effect("denied", ev.object, ev.user, f"unknown object {ev.object!r}"))
+        return s, effects
+
+    if isinstance(ev, Request):
+        s = _join(s, ev.user)  # a request proves the user is there, even before its token arrives
+        if rec.policy == "scene":
+            effects.append(Effect("granted", rec.object, ev.user, "scene object: anyone writes"))
+            return s, effects
+        if rec.owner == ev.user:
+            recs[rec.object] = replace(rec, lease_expiry=ev.now + s.lease_s)
+            effects.append(Effect("granted", rec.object, ev.user, "already owner"))
+            return _with(s, recs), effects
+        if not rec.owner or rec.state == "still":
+            prev = rec.owner
+            queue = tuple(u for u in rec.queue if u != ev.user)
+            recs[rec.object] = replace(rec, owner=ev.user, epoch=rec.epoch + 1, lease_expiry=ev.now + s.lease_s, queue=queue)
+            effects.append(Effect("granted", rec.object, ev.user, f"taken over from {prev} (still)" if prev else "free"))
+            if prev:
+                effects.append(Effect("revoked", rec.object, prev, f"handed over to {ev.user} while still"))
+            return _with(s, recs), effects
+        if ev.wait:
+            q = _sorted_queue(s, rec.queue + (ev.user,))
+            recs[rec.object] = replace(rec, queue=q)
+            effects.append(Effect("queued", rec.object, ev.user, f"in motion, owned by {rec.owner}", q.index(ev.user) + 1))
+            return _with(s, recs), effects
+        effects.append(Effect("denied", rec.object, ev.user, f"in motion, owned by {rec.owner}"))
+        return s, effects
+
+    if isinstance(ev, Release):
+        if rec.owner == ev.user:
+            recs[rec.object] = _pass_on(s, rec, ev.now, effects, "released")
+        elif ev.user in rec.queue:
+            recs[rec.object] = replace(rec, queue=tuple(u for u in rec.queue if u != ev.user))
+            effects.append(Effect("released", rec.object, ev.user, "left the queue"))
+        else:
+            effects.append(Effect("denied", rec.object, ev.user, f"not the owner ({rec.owner or 'free'})"))
+        return _with(s, recs), effects
+
+    if isinstance(ev, Renew):
+        if rec.owner == ev.user:
+            recs[rec.object] = replace(rec, lease_expiry=ev.now + s.lease_s)
+            effects.append(Effect("renewed", rec.object, ev.user))
+            return _with(s, recs), effects
+        effects.append(Effect("denied", rec.object, ev.user, f"not the owner ({rec.owner or 'free'})"))
+        return s, effects
+
+    raise TypeError(f"not an ownership event: {ev!r}")

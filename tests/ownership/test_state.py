@@ -1,0 +1,170 @@
+"""Property tests of the pure ownership state machine over random event sequences."""
+
+from __future__ import annotations
+
+from hypothesis import given, settings, strategies as hs
+
+from ownership import state as st
+
+USERS = ["a", "b", "c", "d"]
+OBJECTS = {"arm": "exclusive", "base": "exclusive", "ball": "scene"}
+LEASE, GRACE = 2.0, 10.0
+
+
+def events():
+    user = hs.sampled_from(USERS)
+    obj = hs.sampled_from(sorted(OBJECTS))
+    dt = hs.floats(0.0, 3.0)
+    return hs.lists(
+        hs.one_of(
+            hs.tuples(hs.just("join"), user, dt),
+            hs.tuples(hs.just("leave"), user, dt),
+            hs.tuples(hs.just("request"), user, obj, hs.booleans(), dt),
+            hs.tuples(hs.just("release"), user, obj, dt),
+            hs.tuples(hs.just("renew"), user, obj, dt),
+            hs.tuples(hs.just("tick"), dt),
+            hs.tuples(hs.just("motion"), obj, hs.booleans()),
+        ),
+        max_size=60,
+    )
+
+
+def build(raw, now):
+    kind = raw[0]
+    if kind == "join":
+        return st.Join(raw[1], now)
+    if kind == "leave":
+        return st.Leave(raw[1], now)
+    if kind == "request":
+        return st.Request(raw[1], raw[2], now, raw[3])
+    if kind == "release":
+        return st.Release(raw[1], raw[2], now)
+    if kind == "renew":
+        return st.Renew(raw[1], raw[2], now)
+    if kind == "tick":
+        return st.Tick(now)
+    return st.Motion(raw[1], raw[2])
+
+
+def check_invariants(s: st.OwnState) -> None:
+    for obj, rec in s.records.items():
+        if rec.policy == "scene":
+            assert rec.owner == "" and rec.queue == ()
+            continue
+        if rec.owner:
+            assert rec.owner in s.live, f"{obj}: owner {rec.owner} is not live"
+            assert rec.owner not in rec.queue
+        assert len(set(rec.queue)) == len(rec.queue)
+        ranks = [s.rank[u] for u in rec.queue]
+        assert ranks == sorted(ranks), f"{obj}: queue {rec.queue} out of join order"
+        assert all(u in s.live for u in rec.queue)
+
+
+@settings(max_examples=300, deadline=None)
+@given(events())
+def test_invariants_over_random_sequences(seq):
+    s = st.initial(OBJECTS, lease_s=LEASE, grace_s=GRACE)
+    now = 0.0
+    for raw in seq:
+        now += raw[-1] if raw[0] not in ("motion",) and isinstance(raw[-1], float) else 0.0
+        before = s
+        ev = build(raw, now)
+        s, effects = st.step(s, ev)
+        check_invariants(s)
+        for obj in OBJECTS:
+            a, b = before.records[obj], s.records[obj]
+            assert b.epoch >= a.epoch
+            if a.owner != b.owner:
+                assert b.epoch > a.epoch, f"{obj}: owner changed {a.owner!r}->{b.owner!r} without a new epoch"
+        if isinstance(ev, st.Request) and OBJECTS[ev.object] == "exclusive" and before.records[ev.object].owner not in ("", ev.user):
+            rec = before.records[ev.object]
+            if rec.state == "moving":
+                assert s.records[ev.object].owner == rec.owner, "a moving robot was handed over on request"
+            else:
+                assert s.records[ev.object].owner == ev.user, "a still robot was not handed over"
+
+
+def test_moving_robot_is_not_handed_over_until_released():
+    s = st.initial({"arm": "exclusive"})
+    s, _ = st.step(s, st.Join("a", 0.0))
+    s, _ = st.step(s, st.Join("b", 0.0))
+    s, eff = st.step(s, st.Request("a", "arm", 0.0))
+    assert eff[0].kind == "granted" and s.records["arm"].owner == "a"
+    s, _ = st.step(s, st.Motion("arm", True))
+    s, eff = st.step(s, st.Request("b", "arm", 0.1))
+    assert eff[0].kind == "denied" and "in motion" in eff[0].reason and "owned by a" in eff[0].reason
+    s, eff = st.step(s, st.Request("b", "arm", 0.1, wait=True))
+    assert (eff[0].kind, eff[0].position) == ("queued", 1)
+    e1 = s.records["arm"].epoch
+    s, eff = st.step(s, st.Release("a", "arm", 0.2))
+    assert s.records["arm"].owner == "b" and s.records["arm"].epoch == e1 + 1
+    assert s.records["arm"].state == "moving"  # nothing resets on handover
+
+
+def test_still_robot_is_handed_over():
+    s = st.initial({"arm": "exclusive"})
+    s, _ = st.step(s, st.Request("a", "arm", 0.0))
+    s, eff = st.step(s, st.Request("b", "arm", 0.5))
+    assert s.records["arm"].owner == "b" and [e.kind for e in eff] == ["granted", "revoked"]
+
+
+def test_lease_expiry_passes_to_next_in_join_order():
+    s = st.initial({"arm": "exclusive"}, lease_s=1.0)
+    for u in ("a", "c", "b"):
+        s, _ = st.step(s, st.Join(u, 0.0))
+    s, _ = st.step(s, st.Request("a", "arm", 0.0))
+    s, _ = st.step(s, st.Motion("arm", True))
+    s, _ = st.step(s, st.Request("b", "arm", 0.1, wait=True))
+    s, _ = st.step(s, st.Request("c", "arm", 0.2, wait=True))
+    assert s.records["arm"].queue == ("c", "b")  # join order, not request order
+    s, _ = st.step(s, st.Renew("a", "arm", 0.5))
+    s, _ = st.step(s, st.Tick(1.4))
+    assert s.records["arm"].owner == "a"
+    s, _ = st.step(s, st.Tick(1.6))
+    assert s.records["arm"].owner == "c" and s.records["arm"].queue == ("b",)
+
+
+def test_reconnect_within_grace_restores_queue_place():
+    s = st.initial({"arm": "exclusive"}, grace_s=10.0)
+    for u in ("a", "b", "c"):
+        s, _ = st.step(s, st.Join(u, 0.0))
+    s, _ = st.step(s, st.Request("a", "arm", 0.0))
+    s, _ = st.step(s, st.Motion("arm", True))
+    s, _ = st.step(s, st.Request("c", "arm", 0.0, wait=True))
+    s, _ = st.step(s, st.Request("b", "arm", 0.0, wait=True))
+    s, _ = st.step(s, st.Leave("b", 1.0))
+    assert s.records["arm"].queue == ("c",)
+    s, eff = st.step(s, st.Join("b", 5.0))
+    assert s.records["arm"].queue == ("b", "c")
+    assert eff[0].kind == "restored" and eff[0].position == 1
+    # the owner leaves: ownership passes on; it comes back in grace: queued at its old (first) place
+    s, _ = st.step(s, st.Leave("a", 6.0))
+    assert s.records["arm"].owner == "b"
+    s, _ = st.step(s, st.Join("a", 7.0))
+    assert s.records["arm"].queue == ("a", "c")
+
+
+def test_reconnect_after_grace_is_a_new_join():
+    s = st.initial({"arm": "exclusive"}, grace_s=1.0)
+    for u in ("a", "b", "c"):
+        s, _ = st.step(s, st.Join(u, 0.0))
+    s, _ = st.step(s, st.Request("c", "arm", 0.0))
+    s, _ = st.step(s, st.Motion("arm", True))
+    s, _ = st.step(s, st.Request("a", "arm", 0.0, wait=True))
+    s, _ = st.step(s, st.Request("b", "arm", 0.0, wait=True))
+    s, _ = st.step(s, st.Leave("a", 0.5))
+    s, _ = st.step(s, st.Tick(2.0))
+    s, _ = st.step(s, st.Join("a", 2.1))
+    assert s.records["arm"].queue == ("b",)
+    s, _ = st.step(s, st.Request("a", "arm", 2.2, wait=True))
+    assert s.records["arm"].queue == ("b", "a")
+
+
+def test_owner_alone_leaves_and_returns_as_owner():
+    s = st.initial({"arm": "exclusive"})
+    s, _ = st.step(s, st.Request("a", "arm", 0.0))
+    s, _ = st.step(s, st.Leave("a", 1.0))
+    assert s.records["arm"].owner == ""
+    e = s.records["arm"].epoch
+    s, _ = st.step(s, st.Join("a", 2.0))
+    assert s.records["arm"].owner == "a" and s.records["arm"].epoch == e + 1
