@@ -6,6 +6,7 @@ renewals, replica); :func:`extrapolate` is the paper's latency compensation (Eq.
 """
 
 from ownership.authority import Authority
+from ownership.client import OwnershipClient, Outcome
 from ownership.extrapolate import extrapolate
 
-__all__ = ["Authority", "extrapolate"]
+__all__ = ["Authority", "OwnershipClient", "Outcome", "extrapolate"]

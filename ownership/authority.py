@@ -8,6 +8,7 @@ It never touches the simulation: on handover the robot simply continues.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 from typing import Any
@@ -47,7 +48,11 @@ class Authority:
         self.counters = {"requests": 0, "rejected": 0, "handovers": 0}
         for obj in objects:
             self._publish(self._state.records[obj])
-        self._queryable = fabric.serve(keys.own_all(fabric.world), self._serve, expected=OwnRequest)
+        # one queryable per object, so a wildcard query (a replica joining) gets one record from each
+        self._queryables = [
+            fabric.serve(keys.own(fabric.world, obj), lambda key, req, obj=obj: self._serve(obj, req), expected=OwnRequest)
+            for obj in objects
+        ]
         self._watch = fabric.watch_peers(self._on_peer, kind="user")
         self._thread = threading.Thread(target=self._run, name="ownership-tick", daemon=True)
         self._thread.start()
@@ -99,8 +104,8 @@ class Authority:
             except Exception:
                 log.exception("ownership tick failed")
 
-    def _serve(self, key: str, request: Any) -> Any:
-        obj = keys.parse(key).leaf
+    def _serve(self, obj: str, request: Any) -> Any:
+        key = keys.own(self.fabric.world, obj)
         with self._lock:
             rec = self._state.records.get(obj)
         if rec is None:
@@ -159,4 +164,4 @@ class Authority:
 
 
 def _fields(rec: OwnershipRecord) -> dict:
-    return {f: getattr(rec, f) for f in rec.__dataclass_fields__}
+    return {f.name: getattr(rec, f.name) for f in dataclasses.fields(rec)}

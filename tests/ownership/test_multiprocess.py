@@ -1,0 +1,103 @@
+"""Ownership over real Zenoh with the authority and users in separate processes."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fabric import keys
+from fabric.messages import Command, Event, JointTarget
+from fabric.testing import wait_until
+
+from ownership import OwnershipClient
+
+HERE = Path(__file__).parent
+LEASE, GRACE = 0.5, 10.0
+
+
+def _start_host(procs, world, port, motion: Path):
+    motion.write_text("still")
+    host = procs.start([sys.executable, str(HERE / "authority_host.py"), world, str(port), str(motion), str(LEASE), str(GRACE)], name="host")
+    wait_until(lambda: "ready" in procs.output(host), timeout=20, what="authority host ready", seen=lambda: procs.output(host))
+    return host
+
+
+def _user(procs, world, port, user, obj="arm", wait=False):
+    argv = [sys.executable, str(HERE / "user_proc.py"), world, str(port), user, obj] + (["wait"] if wait else [])
+    p = procs.start(argv, name=user)
+    wait_until(lambda: "outcome" in procs.output(p), timeout=20, what=f"{user} outcome", seen=lambda: procs.output(p))
+    return p
+
+
+def test_handover_enforcement_kill_and_reconnect(world, router, connect, procs, tmp_path):
+    port = router[1]
+    motion = tmp_path / "motion"
+    _start_host(procs, world, port, motion)
+    events: list[Event] = []
+    watcher = connect("tool", "watcher")
+    watcher.subscribe(keys.event_all(world), lambda k, e: events.append(e) if e.object == "arm" else None, expected=Event)
+
+    a = _user(procs, world, port, "alice")
+    assert "granted" in procs.output(a)
+
+    fb = connect("user", "bob")
+    bob = OwnershipClient(fb, "bob", renew_s=0.1)
+    wait_until(lambda: bob.records.get("arm") and bob.records["arm"].owner == "alice", what="bob's replica sees alice",
+               seen=lambda: bob.records)
+
+    # moving: denied, then queued
+    motion.write_text("moving")
+    wait_until(lambda: bob.records["arm"].state == "moving", what="arm moving in replica", seen=lambda: bob.records)
+    out = bob.request("arm")
+    assert out.outcome == "denied" and "in motion" in out.reason and "alice" in out.reason, out
+    out = bob.request("arm", wait=True)
+    assert (out.outcome, out.position) == ("queued", 1), out
+
+    # bob's commands are rejected while alice owns the arm
+    def send(user, epoch):
+        fb.publish(keys.robot_cmd(world, "arm", "joints"), Command(user, epoch, JointTarget(np.zeros(3))))
+
+    send("bob", bob.epoch("arm"))
+    wait_until(lambda: any(e.kind == "reject" and e.user == "bob" and "owned by alice" in e.reason for e in events),
+               what="bob's command rejected", seen=lambda: events)
+
+    # alice SIGKILLed: bob owns the arm (the arm is still moving: nothing reset)
+    epoch_alice = bob.epoch("arm")
+    procs.kill(a)
+    wait_until(lambda: bob.records["arm"].owner == "bob", timeout=LEASE + 3.0, what="bob owns after alice's death",
+               seen=lambda: bob.records)
+    assert bob.records["arm"].epoch > epoch_alice
+    assert bob.records["arm"].state == "moving"
+
+    # stale epoch rejected, current epoch accepted
+    send("bob", epoch_alice)
+    wait_until(lambda: any(e.kind == "reject" and "stale epoch" in e.reason for e in events), what="stale epoch rejected",
+               seen=lambda: events)
+    send("bob", bob.epoch("arm"))
+    wait_until(lambda: any(e.kind == "accept" and e.user == "bob" for e in events), what="bob's command accepted",
+               seen=lambda: events)
+
+    # alice comes back within grace: queued at her old (first) place, bob keeps the arm past several leases
+    a2 = procs.start([sys.executable, str(HERE / "user_proc.py"), world, str(port), "alice", "arm", "wait"], name="alice2")
+    wait_until(lambda: bob.records["arm"].queue == ("alice",), timeout=20, what="alice queued again", seen=lambda: bob.records)
+    wait_until(lambda: "outcome" in procs.output(a2), timeout=20, what="alice2 outcome", seen=lambda: procs.output(a2))
+    assert "queued at position 1" in procs.output(a2)
+    time.sleep(0)  # no fixed waits: the renewal is checked through the lease below
+    deadline = bob.records["arm"].lease_expiry
+    wait_until(lambda: bob.records["arm"].lease_expiry > deadline + LEASE, what="bob renews", seen=lambda: bob.records)
+    assert bob.records["arm"].owner == "bob"
+
+    # still: a request hands it over at once
+    motion.write_text("still")
+    wait_until(lambda: bob.records["arm"].state == "still", what="arm still", seen=lambda: bob.records)
+    fc = connect("user", "carol")
+    carol = OwnershipClient(fc, "carol")
+    assert carol.records["arm"].owner == "bob"  # late joiner's replica is filled by the query at once
+    out = carol.request("arm")
+    assert out.outcome == "granted", out
+    wait_until(lambda: bob.records["arm"].owner == "carol", what="bob sees carol", seen=lambda: bob.records)
+    bob.close()
+    carol.close()
