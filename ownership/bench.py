@@ -1,0 +1,98 @@
+"""The ownership benchmark: handover latency among N users, recovery after the owner is SIGKILLed.
+
+Everything runs over real Zenoh on loopback: an embedded router, the Authority, and N user
+sessions in this process (each a full Fabric session with its liveliness token); the
+killed owner is a child process. Times are wall clock of the observing user's replica.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import uuid
+
+import numpy as np
+
+from fabric.session import Fabric
+from fabric.testing import client, free_port, router_config, wait_until
+
+from ownership.authority import Authority
+from ownership.client import OwnershipClient
+
+
+def _pct(xs, q) -> float:
+    return float(np.percentile(np.asarray(xs) * 1e3, q)) if xs else float("nan")
+
+
+def run_one(n: int, *, lease_s: float, kills: int) -> dict:
+    world = f"bench{uuid.uuid4().hex[:6]}"
+    port = free_port()
+    router = Fabric(router_config(world, port), kind="router", peer_id="router")
+    host = client(world, port, kind="sim", peer_id="host")
+    auth = Authority(host, {"arm": "exclusive"}, lease_s=lease_s, grace_s=30.0)
+    fabs = [client(world, port, kind="user", peer_id=f"u{i:03d}") for i in range(n)]
+    users = [OwnershipClient(f, f.peer_id, renew_s=lease_s / 4) for f in fabs]
+    try:
+        auth.update_motion("arm", True)  # moving: requests queue instead of taking over
+        users[0].request("arm")
+        for u in users[1:]:
+            u.request("arm", wait=True)
+        handovers = []
+        for prev, nxt in zip(users, users[1:]):
+            t0 = time.perf_counter()
+            prev.release("arm")
+            wait_until(lambda: nxt.owns("arm"), timeout=5, interval=0.0005, what="handover")
+            handovers.append(time.perf_counter() - t0)
+        recoveries = []
+        last = users[-1]
+        last.release("arm")
+        for k in range(kills):
+            owner_id = f"k{k}"
+            proc = subprocess.Popen([sys.executable, "-m", "ownership.bench_user", world, str(port), owner_id],
+                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+            wait_until(lambda: last.records["arm"].owner == owner_id, timeout=30, what="killable owner")
+            last.request("arm", wait=True)
+            t0 = time.perf_counter()
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=10)
+            wait_until(lambda: last.owns("arm"), timeout=lease_s + 10, interval=0.0005, what="recovery")
+            recoveries.append(time.perf_counter() - t0)
+            last.release("arm")
+        frozen = []
+        for k in range(kills):  # SIGSTOP: the token stays (connection open), so only the lease can end it
+            owner_id = f"f{k}"
+            proc = subprocess.Popen([sys.executable, "-m", "ownership.bench_user", world, str(port), owner_id],
+                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+            wait_until(lambda: last.records["arm"].owner == owner_id, timeout=30, what="freezable owner")
+            last.request("arm", wait=True)
+            t0 = time.perf_counter()
+            os.kill(proc.pid, signal.SIGSTOP)
+            wait_until(lambda: last.owns("arm"), timeout=lease_s + 10, interval=0.0005, what="lease recovery")
+            frozen.append(time.perf_counter() - t0)
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=10)
+            last.release("arm")
+        return {"n": n, "frozen_p50": _pct(frozen, 50), "frozen_max": _pct(frozen, 100), "handover_p50": _pct(handovers, 50), "handover_p99": _pct(handovers, 99),
+                "recovery_p50": _pct(recoveries, 50), "recovery_max": _pct(recoveries, 100), "handovers": len(handovers)}
+    finally:
+        for u in users:
+            u.close()
+        auth.close()
+        for f in fabs:
+            f.close()
+        host.close()
+        router.close()
+
+
+def run_bench(counts: list[int], *, lease_s: float, kills: int) -> list[dict]:
+    rows = []
+    print(f"| users | handovers | handover p50 (ms) | handover p99 (ms) | recovery after SIGKILL p50 / max (ms) | recovery after SIGSTOP (lease {lease_s*1e3:.0f} ms) p50 / max (ms) |")
+    print("|---|---|---|---|---|---|")
+    for n in counts:
+        r = run_one(n, lease_s=lease_s, kills=kills)
+        rows.append(r)
+        print(f"| {n} | {r['handovers']} | {r['handover_p50']:.1f} | {r['handover_p99']:.1f} | {r['recovery_p50']:.1f} / {r['recovery_max']:.1f} | {r['frozen_p50']:.1f} / {r['frozen_max']:.1f} |", flush=True)
+    return rows

@@ -1,0 +1,117 @@
+"""``robofabric own list|request|release|watch`` and ``robofabric bench ownership``."""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated, Optional
+
+import typer
+
+from fabric.cli_common import Connect, Profile, UserError, World, ZenohConfig, bench_app, make_config
+from fabric.session import Fabric, ServiceError, shutdown_event
+
+from ownership.client import OwnershipClient
+
+own_app = typer.Typer(help="Ownership of shared robots: who owns what, request, release, watch.", no_args_is_help=True)
+
+User = Annotated[Optional[str], typer.Option("--user", "-u", help="Your user id (default: $USER).")]
+
+
+def _user(user: str | None) -> str:
+    import getpass
+
+    return user or getpass.getuser()
+
+
+def _client(world, connect, profile, zenoh_config, user) -> tuple[Fabric, OwnershipClient]:
+    fab = Fabric(make_config(world, connect, None, profile, zenoh_config), kind="user", peer_id=_user(user))
+    return fab, OwnershipClient(fab, fab.peer_id)
+
+
+def _line(rec) -> str:
+    if rec.policy == "scene":
+        return f"{rec.object:16} scene      anyone writes"
+    owner = rec.owner or "(free)"
+    queue = ", ".join(rec.queue) or "-"
+    return f"{rec.object:16} exclusive  owner {owner:12} epoch {rec.epoch:<5} {rec.state:7} queue {queue}"
+
+
+@own_app.command("list")
+def list_cmd(world: World = None, connect: Connect = None, profile: Profile = None, zenoh_config: ZenohConfig = None,
+             user: User = None, as_json: Annotated[bool, typer.Option("--json", help="One JSON object per record.")] = False) -> None:
+    """Every object's owner, epoch, motion state and queue."""
+    fab, cl = _client(world, connect, profile, zenoh_config, user)
+    with fab:
+        if not cl.records:
+            raise UserError(f"no ownership authority answered in world {fab.world!r} (is a sim peer running?)")
+        for obj in sorted(cl.records):
+            rec = cl.records[obj]
+            if as_json:
+                print(json.dumps({"object": rec.object, "policy": rec.policy, "owner": rec.owner, "epoch": rec.epoch,
+                                  "queue": list(rec.queue), "state": rec.state, "authority": rec.authority}))
+            else:
+                print(_line(rec))
+        cl.close()
+
+
+def _ask(op: str, obj: str, world, connect, profile, zenoh_config, user, wait: bool = False) -> None:
+    fab, cl = _client(world, connect, profile, zenoh_config, user)
+    with fab:
+        try:
+            out = cl.request(obj, wait=wait) if op == "request" else cl.release(obj)
+        except ServiceError as exc:
+            raise UserError(f"{op} {obj}: {exc.reason}") from None
+        finally:
+            cl.close()
+        print(f"{obj}: {out}")
+        if out.outcome == "denied":
+            raise typer.Exit(1)
+
+
+@own_app.command("request")
+def request_cmd(obj: Annotated[str, typer.Argument(help="Object id (robot or scene object).")], world: World = None,
+                connect: Connect = None, profile: Profile = None, zenoh_config: ZenohConfig = None, user: User = None,
+                wait: Annotated[bool, typer.Option("--wait", help="Queue if the robot is moving.")] = False) -> None:
+    """Ask for OBJ: granted, denied (in motion / owned by X) or queued at position N.
+
+    Ownership lasts while a renewing peer holds it: this command exits, so its lease lapses after
+    the lease time; hold it from your program (OwnershipClient) or the TUI.
+    """
+    _ask("request", obj, world, connect, profile, zenoh_config, user, wait)
+
+
+@own_app.command("release")
+def release_cmd(obj: Annotated[str, typer.Argument(help="Object id.")], world: World = None, connect: Connect = None,
+                profile: Profile = None, zenoh_config: ZenohConfig = None, user: User = None) -> None:
+    """Give OBJ up (or leave its queue); the next waiting user owns it."""
+    _ask("release", obj, world, connect, profile, zenoh_config, user)
+
+
+@own_app.command("watch")
+def watch_cmd(world: World = None, connect: Connect = None, profile: Profile = None, zenoh_config: ZenohConfig = None,
+              user: User = None) -> None:
+    """Print every ownership change until Ctrl-C."""
+    stop = shutdown_event()
+    fab, cl = _client(world, connect, profile, zenoh_config, user)
+    with fab:
+        for obj in sorted(cl.records):
+            print(_line(cl.records[obj]), flush=True)
+        cl.on_change(lambda rec: print(_line(rec), flush=True))
+        stop.wait()
+        cl.close()
+
+
+@bench_app.command("ownership")
+def bench_cmd(
+    users: Annotated[str, typer.Option("--users", help="Comma-separated user counts.")] = "10,50,100",
+    lease: Annotated[float, typer.Option("--lease", help="Lease (s).")] = 0.5,
+    kills: Annotated[int, typer.Option("--kills", help="Owner kills per user count.")] = 3,
+) -> None:
+    """N users in one world hand the arm over in turn; then the owner is SIGKILLed."""
+    from ownership.bench import run_bench
+
+    run_bench([int(x) for x in users.split(",")], lease_s=lease, kills=kills)
+
+
+def register(app: typer.Typer) -> None:
+    app.add_typer(own_app, name="own")
