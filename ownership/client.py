@@ -90,6 +90,8 @@ class OwnershipClient:
     # ------------------------------------------------------------------ requests
 
     def _ask(self, obj: str, op: str, wait: bool = False) -> OwnReply:
+        if self.records and obj not in self.records:
+            raise ServiceError(f"unknown object {obj!r} (known: {', '.join(sorted(self.records))})")
         req = OwnRequest(op, self.user, wait, header=self.fabric.header("own-req"))
         reply = self.fabric.call(keys.own(self.fabric.world, obj), req, timeout=self.timeout, expected=OwnReply)
         self._on_record(keys.own(self.fabric.world, obj), reply.record)
