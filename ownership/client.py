@@ -28,6 +28,11 @@ class Outcome:
     reason: str = ""
     position: int = 0
     epoch: int = 0
+    record: OwnershipRecord | None = None
+
+    @property
+    def granted(self) -> bool:
+        return self.outcome == "granted"
 
     def __str__(self) -> str:
         if self.outcome == "queued":
@@ -89,21 +94,24 @@ class OwnershipClient:
 
     # ------------------------------------------------------------------ requests
 
-    def _ask(self, obj: str, op: str, wait: bool = False) -> OwnReply:
+    def record(self, obj: str) -> OwnershipRecord | None:
+        return self.records.get(obj)
+
+    def _ask(self, obj: str, op: str, wait: bool = False, timeout: float | None = None) -> OwnReply:
         if self.records and obj not in self.records:
             raise ServiceError(f"unknown object {obj!r} (known: {', '.join(sorted(self.records))})")
         req = OwnRequest(op, self.user, wait, header=self.fabric.header("own-req"))
-        reply = self.fabric.call(keys.own(self.fabric.world, obj), req, timeout=self.timeout, expected=OwnReply)
+        reply = self.fabric.call(keys.own(self.fabric.world, obj), req, timeout=timeout or self.timeout, expected=OwnReply)
         self._on_record(keys.own(self.fabric.world, obj), reply.record)
         return reply
 
-    def request(self, obj: str, *, wait: bool = False) -> Outcome:
-        r = self._ask(obj, "request", wait)
-        return Outcome(r.outcome, r.reason, r.position, r.record.epoch)
+    def request(self, obj: str, *, wait: bool = False, timeout: float | None = None) -> Outcome:
+        r = self._ask(obj, "request", wait, timeout)
+        return Outcome(r.outcome, r.reason, r.position, r.record.epoch, r.record)
 
-    def release(self, obj: str) -> Outcome:
-        r = self._ask(obj, "release")
-        return Outcome(r.outcome, r.reason, r.position, r.record.epoch)
+    def release(self, obj: str, *, timeout: float | None = None) -> Outcome:
+        r = self._ask(obj, "release", timeout=timeout)
+        return Outcome(r.outcome, r.reason, r.position, r.record.epoch, r.record)
 
     def _renew_loop(self) -> None:
         while not self._stop.wait(self._renew_s):
