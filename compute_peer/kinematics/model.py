@@ -1,0 +1,77 @@
+"""One arm's kinematics: Pinocchio model from the URDF the sim uses (no second copy of the geometry)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+import robots
+
+
+class Unreachable(ValueError):
+    """The target cannot be reached inside the joint limits; the message says why."""
+
+
+class ArmModel:
+    """FK, geometric Jacobian (paper Eq. 3-6), twist, Eq. 7 speeds and DLS IK for one robot type."""
+
+    def __init__(self, robot_type: str) -> None:
+        desc = robots.load(robot_type)
+        if desc.urdf_path is None:
+            raise ValueError(f"robot {robot_type!r} has no URDF")
+        self.description = desc
+        self.model = pin.buildModelFromUrdf(str(desc.urdf_path))
+        self.data = self.model.createData()
+        frame = desc.flange_frame or self.model.frames[-1].name
+        self.frame_id = self.model.getFrameId(frame)
+        self.lower = np.asarray(desc.lower, float)
+        # each joint's axis in its own frame, read once from the model (constant for revolute joints)
+        pin.computeJointJacobians(self.model, self.data, pin.neutral(self.model))
+        self._axes = [pin.getJointJacobian(self.model, self.data, i, pin.LOCAL)[3:, i - 1].copy()
+                      for i in range(1, self.model.njoints)]
+        self.upper = np.asarray(desc.upper, float)
+
+    def fk(self, q: np.ndarray) -> pin.SE3:
+        """Flange pose in the base frame."""
+        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, float))
+        return self.data.oMf[self.frame_id].copy()
+
+    def joint_frames(self, q: np.ndarray) -> list[pin.SE3]:
+        """World placements of the revolute joints (their z axes are z_{i-1} of Eq. 4-5)."""
+        pin.forwardKinematics(self.model, self.data, np.asarray(q, float))
+        return [self.data.oMi[i].copy() for i in range(1, self.model.njoints)]
+
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        """6xN geometric Jacobian [z x (o_n - o_i); z], written out as the paper's Eq. 4-6."""
+        o_n = self.fk(q).translation
+        cols = []
+        for i, m in enumerate(self.joint_frames(q), start=1):
+            # z_{i-1}: the joint axis in the world (URDF axes need not be local z)
+            z = m.rotation @ self._axes[i - 1]
+            cols.append(np.concatenate([np.cross(z, o_n - m.translation), z]))
+        return np.stack(cols, axis=1)
+
+    def twist(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """End-effector twist xi = J(q) dq (Eq. 3): linear then angular velocity."""
+        return self.jacobian(q) @ np.asarray(dq, float)
+
+    def joint_speed_magnitudes(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """Eq. 7: per joint, the norm of its column's linear+angular contribution times its rate."""
+        return np.linalg.norm(self.jacobian(q), axis=0) * np.abs(np.asarray(dq, float))
+
+    def ik_position(self, target: np.ndarray, q0: np.ndarray, *, tol: float = 1e-9,
+                    iters: int = 200, damping: float = 1e-4) -> np.ndarray:
+        """Damped least squares on the position, clamped to limits; raises Unreachable on failure."""
+        target = np.asarray(target, float)
+        if not np.all(np.isfinite(target)):
+            raise Unreachable("target is not finite")
+        q = np.clip(np.asarray(q0, float), self.lower, self.upper)
+        for _ in range(iters):
+            err = target - self.fk(q).translation
+            if float(err @ err) < tol * tol:
+                return q
+            jv = self.jacobian(q)[:3]
+            dq = jv.T @ np.linalg.solve(jv @ jv.T + damping * np.eye(3), err)
+            q = np.clip(q + dq, self.lower, self.upper)
+        raise Unreachable(f"no joint solution within limits for {target.tolist()} "
+                          f"(residual {np.linalg.norm(err):.3g} m)")
