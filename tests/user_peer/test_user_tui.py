@@ -53,18 +53,19 @@ def test_controls_follow_ownership_and_send_commands(setup, world):
 async def _drive_the_ui(auth, alice, arm, base, cmds, world):
     app = UserApp(alice, arm=arm, base=base)
     async with app.run_test(size=(120, 40)) as pilot:
-        await pilot.pause(0.2)
+        # the UI fills itself on timers: wait for it (a loaded CI machine may take a while) instead of a fixed pause
+        await until(pilot, lambda: len(app.query(JointSlider)) == 6 and len(app.query("#arm-owner")) == 1, "the UI mounted")
         sliders = list(app.query(JointSlider))
-        assert len(sliders) == 6 and all(s.disabled for s in sliders)
+        assert all(s.disabled for s in sliders)
+        await until(pilot, lambda: "carol" in str(app.query_one("#arm-owner").render()), "owner shown")
         owner_text = str(app.query_one("#arm-owner").render())
-        assert "bob" in owner_text and "disabled" in owner_text and "carol" in owner_text
-        assert math.isclose(sliders[0].actual, 0.1)
-        assert len(app.query_one("#scan").data) == 240
+        assert "bob" in owner_text and "disabled" in owner_text
+        await until(pilot, lambda: math.isclose(sliders[0].actual, 0.1) and len(app.query_one("#scan").data) == 240, "joints and scan shown")
 
         # Arrow keys while not owning the base: refused locally, the reason on the status line, nothing sent.
         await pilot.press("up")
-        await pilot.pause(0.1)
-        assert "does not own base1" in app.message and not cmds
+        await until(pilot, lambda: "does not own base1" in app.message, "the refusal on the status line")
+        assert not cmds
 
         # The authority hands both robots to alice: controls come alive.
         auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="alice", epoch=2))
