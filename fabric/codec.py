@@ -266,6 +266,30 @@ def _ensure_core() -> None:
         import fabric.messages  # noqa: F401  (registers the core types)
 
 
+_plugins_loaded = False
+
+
+def load_plugins() -> bool:
+    """Import the message modules installed packages declare (entry points ``robofabric.messages``), once.
+
+    So that any peer (a viewer, ``echo``, an export) decodes every type on the wire without fabric
+    importing the peer packages. Sessions call it when they open, not ``decode``: the imports take a few
+    hundred milliseconds, which must not land inside a subscriber callback. Returns whether it loaded now.
+    """
+    global _plugins_loaded
+    if _plugins_loaded:
+        return False
+    _plugins_loaded = True
+    from importlib.metadata import entry_points
+
+    for ep in entry_points(group="robofabric.messages"):
+        try:
+            ep.load()
+        except Exception:  # a broken plugin must not break decoding of everything else
+            continue
+    return True
+
+
 # --------------------------------------------------------------------------- encode
 
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 PREFIX = "rf"
 
-ROBOT_STREAMS = ("joints", "pose", "scan", "path")
+ROBOT_STREAMS = ("joints", "pose", "scan", "path", "ik")
 COMMANDS = ("joints", "twist", "path", "stop", "reset")
 SERVICES = ("ik", "fk", "jacobian", "plan", "map", "world")
 PEER_KINDS = ("sim", "compute", "user", "viewer", "recorder", "router", "tool")
@@ -69,6 +69,11 @@ def robot_path(world: str, robot: str) -> str:
     return robot_stream(world, robot, "path")
 
 
+def robot_stream_all(world: str, stream: str) -> str:
+    """One stream of every robot: ``rf/{world}/robot/*/{stream}``."""
+    return f"{world_root(world)}/robot/*/{_choice(stream, ROBOT_STREAMS, 'stream')}"
+
+
 def robot_cmd(world: str, robot: str, command: str) -> str:
     return f"{world_root(world)}/robot/{validate_id(robot, what='robot id')}/cmd/{_choice(command, COMMANDS, 'command')}"
 
@@ -108,6 +113,12 @@ def srv(world: str, service: str, *rest: str) -> str:
 
 def srv_all(world: str, service: str) -> str:
     return f"{world_root(world)}/srv/{_choice(service, SERVICES, 'service')}/**"
+
+
+def srv_per_subject(world: str, service: str, peer_id: str | None = None) -> str:
+    """``srv/{service}/*`` (any peer's) or ``srv/{service}/*/{peer_id}`` (one peer's, to pick or spread)."""
+    base = f"{world_root(world)}/srv/{_choice(service, SERVICES, 'service')}/*"
+    return base if peer_id is None else f"{base}/{validate_id(peer_id, what='peer id')}"
 
 
 def peer(world: str, kind: str, peer_id: str) -> str:

@@ -24,7 +24,7 @@ from typing import Any, Callable, Iterable
 import zenoh
 
 from fabric import keys
-from fabric.codec import DecodeError, decode, encode
+from fabric.codec import DecodeError, decode, encode, load_plugins
 from fabric.config import FabricConfig, default_peer_id
 from fabric.messages import Event, Header
 
@@ -55,6 +55,7 @@ class Fabric:
     """One peer in one world. A context manager; ``close()`` is idempotent."""
 
     def __init__(self, config: FabricConfig, *, kind: str, peer_id: str | None = None, token: bool = True) -> None:
+        load_plugins()  # every installed message type, before the first sample can arrive
         self.config = config
         self.world = config.world
         self.kind = kind

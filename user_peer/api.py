@@ -112,6 +112,11 @@ class World:
         self.fabric.subscribe(f"{keys.world_root(self.name)}/robot/*/path", self.latest.put)
         self.fabric.subscribe(f"{keys.world_root(self.name)}/object/*/pose", self.latest.put)
         self.fabric.subscribe(f"{keys.world_root(self.name)}/map/*", self.latest.put)
+        try:  # the compute peer's streamed IK (Test A); its message type belongs to compute_peer
+            services._module("compute_peer.messages")
+            self.fabric.subscribe(keys.robot_stream_all(self.name, "ik"), self.latest.put)
+        except ServiceError as exc:
+            log.warning("IK streams are not available: %s", exc.reason)
         self.fabric.subscribe(keys.event_all(self.name), self._on_event, expected=Event)
         self.ownership = OwnershipLink(self.fabric, self.user, on_record=self.latest.put)
 
@@ -348,11 +353,42 @@ class Arm(Robot):
         return np.array(self.world.latest.get(key).q)
 
     def ik(self, xyz: Sequence[float], quaternion: Sequence[float] | None = None) -> np.ndarray:
-        """Joint angles placing the flange at ``xyz`` (world frame, m), from a compute peer."""
+        """Joint angles placing the flange at ``xyz`` (world frame, m), from a compute peer.
+
+        :class:`Unreachable` when the compute peer refuses (with its reason), :class:`Timeout` when none answers.
+        """
         try:
             return services.ik(self.world.fabric, self.id, xyz, quaternion, self.joints, timeout=self.world.timeout)
         except ServiceError as exc:
+            if exc.reason.startswith("no reply"):
+                raise Timeout(f"IK for {self.id}: {exc.reason}") from None
             raise Unreachable(f"IK for {self.id} at {list(map(float, xyz))}: {exc.reason}") from None
+
+    @property
+    def ik_stream(self) -> Any:
+        """The latest streamed IK solution (``compute_peer.messages.IKStream``) for this arm, or None."""
+        return self.latest("ik")
+
+    def wait_ik_stream(self, xyz: Sequence[float], *, timeout: float | None = None, tol: float = 1e-9) -> Any:
+        """The streamed IK solution for a target at ``xyz`` (world frame), once a compute peer has solved it.
+
+        Streaming runs in a compute peer started with ``--stream ROBOT:OBJECT``; :class:`Timeout` if no
+        solution for this target arrives in time. Check ``.ok`` / ``.reason`` before applying ``.q``.
+        """
+        goal = np.asarray(xyz, dtype=float)
+        key = keys.robot_stream(self._w, self.id, "ik")
+
+        def match() -> Any:
+            msg = self.world.latest.get(key)
+            if msg is not None and np.max(np.abs(np.asarray(msg.position) - goal)) <= tol:
+                return msg
+            return None
+
+        wait = self.world.timeout if timeout is None else timeout
+        msg = self.world.latest.wait_for(match, wait)
+        if msg is None:
+            raise Timeout(f"no streamed IK for {self.id} at {goal.tolist()} within {wait:.1f} s (is a compute peer streaming it?)")
+        return msg
 
     def move_to(
         self, xyz: Sequence[float], quaternion: Sequence[float] | None = None, *, wait: bool = True, tol: float = 1e-3, timeout: float = 20.0

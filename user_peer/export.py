@@ -14,7 +14,7 @@ from typing import Iterator
 
 import rerun as rr
 
-from fabric.codec import DecodeError, decode
+from fabric.codec import DecodeError, decode, load_plugins
 from user_peer.catalog import RobotCatalog
 from user_peer.rerun_log import WorldLogger, blueprint
 from user_peer.viewer import APP_ID, log_scene
@@ -57,6 +57,7 @@ def read_mcap(path: Path, counts: dict[str, int] | None = None) -> Iterator[tupl
     from fabric.recording import RecordingError, iter_messages
 
     check_mcap(path)
+    load_plugins()  # the recording may hold any installed package's message types
     try:
         for m in iter_messages(path):
             if m.schema in SKIPPED_SCHEMAS:

@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from user_peer.api import Arm, Base, World
-from user_peer.errors import FabricUserError, NotOwner
+from user_peer.errors import FabricUserError, NotOwner, Timeout, Unreachable
 
 __all__ = ["ScenarioResult", "test_a", "test_b", "SCENARIOS", "target_path"]
 
@@ -104,15 +104,20 @@ def test_a(world: World, *, arm_id: str = "arm1", points: int = 8, radius: float
     _acquire(arm, res, timeout=60.0)
     t0 = time.monotonic()
     errors = []
+    streamed = [0, 0]  # targets solved by the IK stream, by a query
     try:
         center = _arm_reach_center(world, arm)
         for i, p in enumerate(target_path(center, radius, points)):
             target.set_pose(p)
             before = time.time_ns()
-            q = arm.move_to(p, timeout=20.0)
+            q, how = _joints_for(arm, p, streamed)
+            arm.move_joints(q, timeout=20.0)
             err = _flange_error(arm, p, before)
             errors.append(err)
-            res.say(f"target {i + 1}/{points} at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}): joints {np.round(np.degrees(q), 1).tolist()} deg, error {err * 1000:.2f} mm")
+            res.say(
+                f"target {i + 1}/{points} at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}): joints {np.round(np.degrees(q), 1).tolist()} deg "
+                f"({how}), error {err * 1000:.2f} mm"
+            )
             time.sleep(hold)
     finally:
         try:
@@ -120,13 +125,29 @@ def test_a(world: World, *, arm_id: str = "arm1", points: int = 8, radius: float
             res.say(f"released {arm.id}")
         except FabricUserError as exc:
             res.say(f"release failed: {exc.reason}")
-    res.figures.update(targets=len(errors), max_error_mm=max(errors) * 1000 if errors else float("nan"), seconds=time.monotonic() - t0)
+    res.figures.update(
+        targets=len(errors), streamed=streamed[0], queried=streamed[1],
+        max_error_mm=max(errors) * 1000 if errors else float("nan"), seconds=time.monotonic() - t0,
+    )
     res.ok = len(errors) == points and max(errors) <= tol
     res.say(
         f"{'reached' if res.ok else 'FAILED'}: {len(errors)}/{points} targets, max error {res.figures['max_error_mm']:.2f} mm "
         f"(tolerance {tol * 1000:.1f} mm) in {res.figures['seconds']:.1f} s"
     )
     return res
+
+
+def _joints_for(arm: Arm, p: np.ndarray, counts: list[int]) -> tuple[np.ndarray, str]:
+    """The joints for target ``p``: the compute peer's streamed solution (the paper's Test A), else an IK query."""
+    try:
+        sol = arm.wait_ik_stream(p, timeout=3.0)
+    except Timeout:
+        counts[1] += 1
+        return arm.ik(p), "IK query: no stream"
+    if not sol.ok:
+        raise Unreachable(f"the IK stream refused the target: {sol.reason}")
+    counts[0] += 1
+    return np.asarray(sol.q), f"streamed, {sol.seconds:.2f} s move"
 
 
 def test_b(

@@ -210,3 +210,10 @@ def test_messages_are_frozen_values():
         js.q[0] = 2.0
     with pytest.raises(Exception):
         js.names = ("b",)
+
+
+def test_installed_packages_message_types_are_loaded_by_entry_point():
+    from fabric.codec import load_plugins, registered
+
+    load_plugins()
+    assert {"WorldInfo", "IKStream", "IKRequest", "PlanRequest", "MapReply", "OwnRequest"} <= set(registered())

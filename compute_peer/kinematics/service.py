@@ -1,0 +1,317 @@
+"""Kinematics served over Zenoh: ``srv/{ik,fk,jacobian}/{robot}`` and streamed IK (the paper's Test A).
+
+:func:`register_kinematics` attaches a :class:`KinematicsService` to a peer's
+:class:`~fabric.session.Fabric`. It learns each arm's type and base placement
+from the sim's world description (``srv/world``), so it needs no local copy of
+the scene, and builds one Pinocchio model per robot type from robots/.
+
+Every robot's services answer on two keys: ``rf/{world}/srv/ik/{robot}`` (the
+shared name: Zenoh's best-matching target sends it to the nearest compute peer)
+and ``rf/{world}/srv/ik/{robot}/{peer_id}`` (this peer only), so a user can
+pick a compute peer (a local one, say) or spread queries over several.
+
+Streaming mode follows scene objects: for each ``(robot, object)`` pair it
+watches the object's pose, solves position IK near the arm's current joints at
+a fixed rate whenever the target moved, and publishes :class:`IKStream` on
+``rf/{world}/robot/{robot}/ik``; applying it is the owner's choice.
+
+Refusals (unknown robot, NaN, wrong joint counts, unreachable targets) are error
+replies with the reason: never a timeout, never a crash. This is the only module
+of :mod:`compute_peer.kinematics` that touches the session.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Iterable
+
+import numpy as np
+
+from fabric import keys
+from fabric.messages import Event, JointState, Pose
+from fabric.rate import Clock, MonotonicClock, RateLoop
+from fabric.session import Fabric, ServiceError
+
+from ..messages import FKReply, FKRequest, IKReply, IKRequest, IKStream, JacobianReply, JacobianRequest
+from .arm import PlacedArm
+from .model import ArmModel, Unreachable
+
+log = logging.getLogger("robofabric.kinematics")
+
+__all__ = ["KinematicsService", "register_kinematics", "ArmPlacement"]
+
+DISCOVERY_INTERVAL = 1.0  # s between two srv/world lookups
+
+
+@dataclass(frozen=True, slots=True)
+class ArmPlacement:
+    """What the service needs of one arm: its robot type and base pose (x, y, z, yaw) in the world."""
+
+    type: str
+    pose: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+
+
+class KinematicsService:
+    """IK/FK/Jacobian queryables and IK streaming for the arms of one world. ``close()`` is idempotent.
+
+    ``arms``: robot id -> :class:`ArmPlacement`, for worlds without a sim peer to ask; otherwise the arms
+    are learnt from ``srv/world`` (``discover``). ``streams``: (robot, object) pairs to follow at
+    ``stream_rate`` Hz.
+    """
+
+    def __init__(
+        self,
+        fabric: Fabric,
+        *,
+        arms: dict[str, ArmPlacement] | None = None,
+        streams: Iterable[tuple[str, str]] = (),
+        stream_rate: float = 20.0,
+        discover: bool = True,
+        clock: Clock | None = None,
+    ) -> None:
+        self.fabric = fabric
+        self.world = fabric.world
+        self._clock = clock or MonotonicClock()
+        self._models: dict[str, ArmModel] = {}
+        self._arms: dict[str, PlacedArm] = {}
+        self._joints: dict[str, JointState] = {}
+        self._targets: dict[str, Pose] = {}
+        self._solved: dict[tuple[str, str], tuple[float, ...]] = {}
+        self.streams = [(keys.validate_id(r, what="robot id"), keys.validate_id(o, what="object id")) for r, o in streams]
+        self._lock = threading.RLock()
+        self._discover = bool(discover)
+        self._last_discovery = -1e18
+        self._discovering = False
+        self._closed = False
+        self.counters: dict[str, int] = {"ik": 0, "fk": 0, "jacobian": 0, "refusals": 0, "streamed": 0, "stream_unreachable": 0}
+        for rid, placement in (arms or {}).items():
+            self.add_arm(rid, placement)
+        self._resources: list[Any] = []
+        self._declare()
+        self._loop: RateLoop | None = None
+        if self.streams:
+            self._loop = RateLoop(stream_rate, self._stream_tick, clock=self._clock, name="ik-stream").start()
+        if self._discover:
+            self._discover_soon()
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def _declare(self) -> None:
+        f, w = self.fabric, self.world
+        handlers = {"ik": (self._on_ik, IKRequest), "fk": (self._on_fk, FKRequest), "jacobian": (self._on_jacobian, JacobianRequest)}
+        for name, (handler, expected) in handlers.items():
+            self._resources.append(f.serve(keys.srv_per_subject(w, name), handler, expected=expected))
+            self._resources.append(f.serve(keys.srv_per_subject(w, name, f.peer_id), handler, expected=expected))
+        self._resources.append(f.subscribe(keys.robot_stream_all(w, "joints"), self._on_joints, expected=JointState))
+        for _, obj in self.streams:
+            self._resources.append(f.subscribe(keys.object_pose(w, obj), self._on_target, expected=Pose))
+
+    def __enter__(self) -> "KinematicsService":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop streaming and undeclare this service's keys (the session stays open); safe twice."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+        if self._loop is not None:
+            self._loop.stop()
+        for res in reversed(self._resources):
+            try:
+                res.undeclare()
+            except Exception:  # already gone with a closing session
+                pass
+
+    # ------------------------------------------------------------------ arms
+
+    def add_arm(self, robot: str, placement: ArmPlacement) -> PlacedArm:
+        """Serve ``robot`` (an arm of type ``placement.type`` at ``placement.pose``)."""
+        keys.validate_id(robot, what="robot id")
+        with self._lock:
+            model = self._models.get(placement.type)
+            if model is None:
+                model = self._models[placement.type] = ArmModel(placement.type)
+            arm = self._arms[robot] = PlacedArm(model, placement.pose)
+        return arm
+
+    @property
+    def arms(self) -> list[str]:
+        with self._lock:
+            return sorted(self._arms)
+
+    def discover(self, timeout: float = 2.0) -> int:
+        """Learn the arms of the world from the sim peers' ``srv/world``; returns how many are known."""
+        try:
+            import sim_peer.messages  # noqa: F401  (registers WorldInfo with the codec)
+        except ImportError:
+            return len(self.arms)
+        try:
+            replies = self.fabric.query(keys.srv(self.world, "world"), timeout=timeout, all_replies=True)
+        except ServiceError:
+            return len(self.arms)
+        for rep in replies:
+            for r in getattr(rep.message, "robots", ()):
+                if getattr(r, "kind", "") != "arm" or r.id in self._arms:
+                    continue
+                try:
+                    self.add_arm(r.id, ArmPlacement(r.type, tuple(float(v) for v in r.pose)))
+                    log.info("serving kinematics for %s (%s)", r.id, r.type)
+                except Exception as exc:  # a robot type this installation has no model for
+                    log.warning("cannot serve kinematics for %s (%s): %s", r.id, r.type, exc)
+        return len(self.arms)
+
+    def _discover_soon(self) -> None:
+        """Look the world up in a thread (never inside a Zenoh callback), at most once a second."""
+        with self._lock:
+            now = self._clock.now()
+            if self._discovering or self._closed or now - self._last_discovery < DISCOVERY_INTERVAL:
+                return
+            self._discovering = True
+            self._last_discovery = now
+
+        def run() -> None:
+            try:
+                self.discover()
+            except Exception as exc:  # a session closing under us
+                log.debug("arm discovery failed: %s", exc)
+            finally:
+                with self._lock:
+                    self._discovering = False
+
+        threading.Thread(target=run, name="kinematics-discovery", daemon=True).start()
+
+    def arm(self, robot: str) -> PlacedArm:
+        """The placed arm ``robot``; :class:`ServiceError` naming the known ones otherwise."""
+        with self._lock:
+            arm = self._arms.get(robot)
+            known = sorted(self._arms)
+        if arm is None:
+            if self._discover:
+                self._discover_soon()
+            raise ServiceError(f"unknown arm {robot!r}: this compute peer serves {', '.join(known) or 'no arms yet'}")
+        return arm
+
+    # ------------------------------------------------------------------ handlers
+
+    @staticmethod
+    def _robot_of(key: str) -> str:
+        """The robot a service key names (``srv/ik/{robot}[/{peer}]``)."""
+        parsed = keys.parse(key)
+        if parsed.category == "srv":
+            return parsed.rest[0] if parsed.rest else ""
+        return parsed.subject
+
+    def _refuse(self, exc: Exception) -> ServiceError:
+        self.counters["refusals"] += 1
+        return ServiceError(getattr(exc, "reason", None) or str(exc))
+
+    def _seed(self, robot: str, seed: np.ndarray) -> np.ndarray | None:
+        if seed.shape[0] > 0:
+            return seed
+        with self._lock:
+            js = self._joints.get(robot)
+        return None if js is None else np.asarray(js.q, float)
+
+    def ik(self, robot: str, req: IKRequest) -> IKReply:
+        """Handle one IK request (also usable in-process)."""
+        arm = self.arm(robot)
+        t0 = time.perf_counter()
+        quat = req.quaternion if req.quaternion.shape[0] else None
+        sol = arm.ik(req.position, quat, self._seed(robot, req.seed), frame=req.frame, method=req.method)
+        us = (time.perf_counter() - t0) * 1e6
+        self.counters["ik"] += 1
+        hdr = self.fabric.header(keys.srv(self.world, "ik", robot))
+        return IKReply(robot, sol.q, sol.solver, sol.position_error, sol.orientation_error, sol.candidates, us, hdr)
+
+    def _on_ik(self, key: str, req: IKRequest | None) -> IKReply:
+        robot = self._robot_of(key)
+        if req is None:
+            raise self._refuse(ValueError("an IK query needs an IKRequest payload (position, optional quaternion)"))
+        try:
+            return self.ik(robot, req)
+        except (Unreachable, ValueError, ServiceError) as exc:
+            raise self._refuse(exc) from None
+
+    def _on_fk(self, key: str, req: FKRequest | None) -> FKReply:
+        robot = self._robot_of(key)
+        try:
+            if req is None:
+                raise ValueError("an FK query needs an FKRequest payload (q)")
+            pos, quat = self.arm(robot).fk(req.q, req.frame)
+        except (ValueError, ServiceError) as exc:
+            raise self._refuse(exc) from None
+        self.counters["fk"] += 1
+        return FKReply(robot, pos, quat, req.frame, self.fabric.header(keys.srv(self.world, "fk", robot)))
+
+    def _on_jacobian(self, key: str, req: JacobianRequest | None) -> JacobianReply:
+        robot = self._robot_of(key)
+        try:
+            if req is None:
+                raise ValueError("a Jacobian query needs a JacobianRequest payload (q, optional dq)")
+            j, twist, speeds = self.arm(robot).jacobian(req.q, req.dq, req.frame)
+        except (ValueError, ServiceError) as exc:
+            raise self._refuse(exc) from None
+        self.counters["jacobian"] += 1
+        return JacobianReply(robot, j, twist, speeds, req.frame, self.fabric.header(keys.srv(self.world, "jacobian", robot)))
+
+    # ------------------------------------------------------------------ streaming (Test A)
+
+    def _on_joints(self, key: str, msg: JointState) -> None:
+        robot = self._robot_of(key)
+        with self._lock:
+            self._joints[robot] = msg
+
+    def _on_target(self, key: str, msg: Pose) -> None:
+        obj = self._robot_of(key)
+        with self._lock:
+            self._targets[obj] = msg
+
+    def _stream_tick(self, now: float) -> None:
+        for robot, obj in self.streams:
+            with self._lock:
+                target = self._targets.get(obj)
+                arm = self._arms.get(robot)
+                js = self._joints.get(robot)
+            if target is None:
+                continue
+            if arm is None:
+                if self._discover:
+                    self._discover_soon()
+                continue
+            position = tuple(float(v) for v in target.position)
+            if self._solved.get((robot, obj)) == position:
+                continue  # the target has not moved since the last solution
+            try:
+                self.publish_stream(robot, obj, arm, np.asarray(position), None if js is None else np.asarray(js.q, float))
+            except Exception as exc:  # a closing session; the next tick tries again
+                log.debug("IK stream for %s failed: %s", robot, exc)
+                continue
+            self._solved[(robot, obj)] = position
+
+    def publish_stream(self, robot: str, obj: str, arm: PlacedArm, position: np.ndarray, q_now: np.ndarray | None) -> IKStream:
+        """Solve one streamed target and publish it on ``robot/{robot}/ik``."""
+        step = arm.stream_step(position, q_now)
+        key = keys.robot_stream(self.world, robot, "ik")
+        msg = IKStream(robot, obj, position, step.ok, step.reason, step.q, step.dq, step.speeds, step.seconds, self.fabric.header(key))
+        self.fabric.publish(key, msg)
+        if step.ok:
+            self.counters["streamed"] += 1
+        else:
+            self.counters["stream_unreachable"] += 1
+            self.fabric.emit(
+                Event(kind="ik_unreachable", reason=step.reason, object=robot, severity="warning", header=self.fabric.header("event")),
+                "compute", robot,
+            )
+        return msg
+
+
+def register_kinematics(fabric: Fabric, **options: Any) -> KinematicsService:
+    """Serve kinematics on ``fabric``'s world; see :class:`KinematicsService` for the options."""
+    return KinematicsService(fabric, **options)

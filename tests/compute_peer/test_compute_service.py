@@ -1,0 +1,148 @@
+"""The kinematics services over real Zenoh: IK/FK/Jacobian queries, refusals, peer choice and IK streaming."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+
+import msgpack
+import numpy as np
+import pytest
+
+from compute_peer.kinematics.service import ArmPlacement, KinematicsService
+from compute_peer.messages import FKRequest, IKReply, IKRequest, IKStream, JacobianRequest
+from fabric import keys
+from fabric.codec import encode
+from fabric.messages import Event, JointState, Pose
+from fabric.session import ServiceError
+from fabric.testing import robofabric_cmd, wait_until
+
+BASE = (3.0, 0.5, 0.75, math.radians(30.0))  # an arm on a table, turned: exercises the world <-> base frames
+Q = np.array([0.3, 0.2, -0.4, 0.5, 0.6, -0.2])
+
+
+@pytest.fixture
+def served(world, connect):
+    comp = connect("compute", "c1")
+    svc = KinematicsService(comp, arms={"arm1": ArmPlacement("meca500", BASE)}, streams=[("arm1", "target")], discover=False)
+    user = connect("user", "alice")
+    yield svc, comp, user
+    svc.close()
+
+
+def test_fk_ik_round_trip_in_world_and_base_frames(served, world):
+    _, _, user = served
+    fk_w = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
+    fk_b = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q, frame="base"))
+    c, s = math.cos(BASE[3]), math.sin(BASE[3])
+    rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    assert np.allclose(fk_w.position, rot @ fk_b.position + np.array(BASE[:3]), atol=1e-12)
+
+    rep = user.call(keys.srv(world, "ik", "arm1"), IKRequest.make(fk_w.position, fk_w.quaternion, Q))
+    assert isinstance(rep, IKReply) and rep.solver == "closed_form" and rep.candidates >= 1
+    assert np.allclose(rep.q, Q, atol=1e-9)  # seeded with Q, the nearest solution is Q itself
+    back = user.call(keys.srv(world, "fk", "arm1"), FKRequest(rep.q))
+    assert np.linalg.norm(back.position - fk_w.position) <= 1e-9
+
+    # position only: any orientation will do, the flange must still land on the point
+    pos = user.call(keys.srv(world, "ik", "arm1"), IKRequest.make(fk_w.position))
+    reached = user.call(keys.srv(world, "fk", "arm1"), FKRequest(pos.q)).position
+    assert np.linalg.norm(reached - fk_w.position) <= 1e-6
+
+
+def test_jacobian_twist_and_speeds(served, world):
+    svc, _, user = served
+    dq = np.array([0.1, -0.2, 0.3, 0.0, 0.5, -0.1])
+    rep = user.call(keys.srv(world, "jacobian", "arm1"), JacobianRequest(Q, dq))
+    assert rep.jacobian.shape == (6, 6)
+    assert np.allclose(rep.twist, rep.jacobian @ dq)
+    assert np.allclose(rep.speeds, np.linalg.norm(rep.jacobian, axis=0) * np.abs(dq))
+    # the linear rows are the flange velocity: compare with a finite difference of the FK service's answer
+    h = 1e-6
+    p1 = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q + h * dq)).position
+    p0 = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q - h * dq)).position
+    assert np.allclose((p1 - p0) / (2 * h), rep.twist[:3], atol=1e-6)
+    assert svc.counters["jacobian"] == 1
+
+
+def _refusal(user, key, payload) -> str:
+    with pytest.raises(ServiceError) as err:
+        if isinstance(payload, bytes):
+            replies = list(user.session.get(key, payload=payload, timeout=5.0))
+            assert replies and replies[0].err is not None, "a garbage query must get an error reply"
+            raise ServiceError(replies[0].err.payload.to_bytes().decode("utf-8", "replace"))
+        user.call(key, payload, timeout=5.0)
+    return str(err.value)
+
+
+def test_bad_requests_get_reasons_not_timeouts(served, world):
+    svc, comp, user = served
+    ik = keys.srv(world, "ik", "arm1")
+    assert "unknown arm 'arm9'" in _refusal(user, keys.srv(world, "ik", "arm9"), IKRequest.make([3.0, 0.5, 1.0]))
+    assert "out of reach" in _refusal(user, ik, IKRequest.make([9.0, 0.5, 1.0]))
+    assert "finite" in _refusal(user, ik, IKRequest.make([float("nan"), 0.5, 1.0]))
+    assert "6" in _refusal(user, ik, IKRequest.make([3.1, 0.5, 1.0], None, [0.0, 0.0]))
+    assert "6" in _refusal(user, keys.srv(world, "fk", "arm1"), FKRequest(np.zeros(3)))
+    assert "IKRequest" in _refusal(user, ik, encode(FKRequest(Q)))
+    assert _refusal(user, ik, msgpack.packb(["IKRequest", [1, 2]]))
+    assert _refusal(user, ik, b"\xc1garbage")
+    # refusals of well-formed requests are the service's; undecodable payloads are counted by the session
+    assert svc.counters["refusals"] == 4 and comp.counters["query_errors"] == 8
+    # and the service still answers good requests
+    fk = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
+    assert user.call(ik, IKRequest.make(fk.position, fk.quaternion, Q)).solver == "closed_form"
+
+
+def test_a_chosen_peer_answers_on_its_own_key(world, connect):
+    svcs = [
+        KinematicsService(connect("compute", pid), arms={"arm1": ArmPlacement("meca500", BASE)}, discover=False)
+        for pid in ("c1", "c2")
+    ]
+    user = connect("user", "bob")
+    try:
+        fk = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
+        everyone = user.query(keys.srv(world, "ik", "arm1"), IKRequest.make(fk.position, fk.quaternion, Q), all_replies=True, timeout=5.0)
+        assert sorted(r.source for r in everyone) == ["c1", "c2"]
+        for pid in ("c1", "c2"):
+            rep = user.call(keys.srv(world, "ik", "arm1", pid), IKRequest.make(fk.position, fk.quaternion, Q))
+            assert rep.header.source == pid
+    finally:
+        for s in svcs:
+            s.close()
+
+
+def test_ik_streaming_follows_the_target(served, world):
+    svc, _, user = served
+    got: list[IKStream] = []
+    events: list[Event] = []
+    user.subscribe(keys.robot_stream(world, "arm1", "ik"), lambda k, m: got.append(m))
+    user.subscribe(keys.event_all(world), lambda k, m: events.append(m), expected=Event)
+    q_now = np.array([0.1, 0.1, -0.2, 0.0, 0.3, 0.0])
+    user.publish(keys.robot_joints(world, "arm1"), JointState(tuple(f"joint_{i}" for i in range(1, 7)), q_now, np.zeros(6)))
+    wait_until(lambda: "arm1" in svc._joints, what="joints seen by the service")
+    goal = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q)).position
+    user.publish(keys.object_pose(world, "target"), Pose(goal))
+    wait_until(lambda: any(np.allclose(m.position, goal) for m in got), what="a streamed solution", seen=lambda: got)
+    sol = [m for m in got if np.allclose(m.position, goal)][-1]
+    assert sol.ok and sol.robot == "arm1" and sol.target == "target"
+    reached = user.call(keys.srv(world, "fk", "arm1"), FKRequest(sol.q)).position
+    assert np.linalg.norm(reached - goal) <= 1e-6
+    # a synchronised move at the speed limits: the slowest joint takes `seconds`, none is faster than its limit
+    limits = np.radians([150, 150, 180, 300, 300, 500])
+    assert np.allclose(sol.dq * sol.seconds, sol.q - q_now, atol=1e-9)
+    assert np.all(np.abs(sol.dq) <= limits + 1e-9) and np.isclose(np.max(np.abs(sol.dq) / limits), 1.0)
+    n_before = len(got)
+
+    far = np.array([9.0, 9.0, 9.0])
+    user.publish(keys.object_pose(world, "target"), Pose(far))
+    wait_until(lambda: any(np.allclose(m.position, far) for m in got[n_before:]), what="a refusal on the stream")
+    bad = [m for m in got if np.allclose(m.position, far)][-1]
+    assert not bad.ok and "reach" in bad.reason and bad.q.size == 0
+    wait_until(lambda: any(e.kind == "ik_unreachable" for e in events), what="an ik_unreachable event")
+
+
+def test_compute_cli_refuses_bad_flags():
+    for args in (["--stream", "arm1"], ["--stream-rate", "0"], ["--no-kinematics", "--no-navigation"]):
+        r = subprocess.run(robofabric_cmd("compute", *args), capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2, (args, r.stdout, r.stderr)
+        assert "Traceback" not in r.stderr
