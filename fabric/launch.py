@@ -178,6 +178,7 @@ class PeerProcess:
     exit_code: int | None = None
     started_at: float = 0.0
     done: bool = False
+    last_line: str = ""  # the last thing it printed: a task's verdict for the summary
 
 
 class Supervisor:
@@ -228,6 +229,8 @@ class Supervisor:
                 log.flush()
                 text = line.decode(errors="replace").rstrip()
                 with self._lock:
+                    if text.strip():
+                        self.peers[name].last_line = text.strip()
                     print(f"[{name}] {text}", file=self.console, flush=True)
 
     def _spawn(self, pp: PeerProcess) -> None:

@@ -114,6 +114,7 @@ def _summary(sup: Supervisor, watch: _Watch, elapsed: float, out: Path, demo: bo
     table.add_column("role")
     table.add_column("exit")
     table.add_column("restarts")
+    table.add_column("last word")
     failed = []
     for pp in sup.peers.values():
         code = pp.exit_code
@@ -121,7 +122,7 @@ def _summary(sup: Supervisor, watch: _Watch, elapsed: float, out: Path, demo: bo
         if pp.spec.role == "task" and code != 0:
             failed.append(pp.spec.name)
             status = f"[red]{status}[/red]"
-        table.add_row(pp.spec.name, pp.spec.role, status, str(pp.restarts))
+        table.add_row(pp.spec.name, pp.spec.role, status, str(pp.restarts), pp.last_line[:100])
     console.print(table)
     kinds = Counter(k for k, _ in watch.peers_seen)
     console.print("peers seen: " + (", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) or "none"))
