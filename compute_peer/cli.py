@@ -15,6 +15,10 @@ def compute(
         Optional[list[str]],
         typer.Option("--stream", help="Stream IK for ROBOT:OBJECT (the arm follows the object's pose; repeatable), e.g. arm1:target."),
     ] = None,
+    arm: Annotated[
+        Optional[list[str]],
+        typer.Option("--arm", help="Serve an arm without asking a sim: ID:TYPE[@X,Y,Z[,YAW_DEG]] (repeatable), e.g. arm1:meca500@3,0,0.75."),
+    ] = None,
     stream_rate: Annotated[float, typer.Option("--stream-rate", help="IK streaming rate in Hz.")] = 20.0,
     kinematics: Annotated[bool, typer.Option("--kinematics/--no-kinematics", help="Serve srv/ik, srv/fk, srv/jacobian.")] = True,
     navigation: Annotated[bool, typer.Option("--navigation/--no-navigation", help="Serve srv/map and srv/plan; map from scans.")] = True,
@@ -35,7 +39,7 @@ def compute(
     Several compute peers may serve one world: a query on srv/ik/ROBOT goes to the nearest one, and
     srv/ik/ROBOT/PEER_ID to one chosen peer. Arms and sensors are learnt from the sim peer's srv/world.
     """
-    from compute_peer.peer import ComputeOptions, ComputePeer, parse_streams
+    from compute_peer.peer import ComputeOptions, ComputePeer, parse_arms, parse_streams
     from fabric.session import Fabric, shutdown_event
 
     if not (kinematics or navigation):
@@ -50,6 +54,10 @@ def compute(
         streams = parse_streams(stream or [])
     except ValueError as exc:
         raise UserError(str(exc)) from None
+    try:
+        arms = parse_arms(arm or [])
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
     if streams and not kinematics:
         raise UserError("--stream needs kinematics (drop --no-kinematics)")
     cfg = make_config(world, connect, listen, profile, zenoh_config)
@@ -59,13 +67,13 @@ def compute(
     except Exception as exc:
         where = ", ".join(cfg.endpoints()[0] or cfg.endpoints()[1]) or "the LAN"
         raise UserError(f"cannot join world {cfg.world!r} via {where}: {exc}") from None
-    options = ComputeOptions(kinematics, navigation, streams, stream_rate, maps_dir, mapping)
+    options = ComputeOptions(kinematics, navigation, streams, stream_rate, maps_dir, mapping, arms=arms)
     with fab, ComputePeer(fab, options) as peer:
-        arms = peer.discover(timeout=2.0)
+        served_arms = peer.discover(timeout=2.0)
         served = [s for s, on in (("ik/fk/jacobian", kinematics), ("map/plan", navigation)) if on]
         streaming = ", ".join(f"{r}<-{o}" for r, o in streams) or "none"
         print(
-            f"compute {fab.peer_id}: world {fab.world}, serving {' + '.join(served)}; arms {', '.join(arms) or 'none yet (asked srv/world)'}; "
+            f"compute {fab.peer_id}: world {fab.world}, serving {' + '.join(served)}; arms {', '.join(served_arms) or 'none yet (asked srv/world)'}; "
             f"IK streams {streaming}; Ctrl-C to stop",
             flush=True,
         )

@@ -34,6 +34,7 @@ class ComputeOptions:
     maps_dir: Path | None = None
     mapping: bool = True
     navigation_options: dict[str, Any] = field(default_factory=dict)
+    arms: dict[str, Any] = field(default_factory=dict)  # robot id -> ArmPlacement, for worlds without a sim to ask
 
 
 class ComputePeer:
@@ -48,7 +49,7 @@ class ComputePeer:
         if o.kinematics:
             from compute_peer.kinematics.service import KinematicsService
 
-            self.kinematics = KinematicsService(fabric, streams=o.streams, stream_rate=o.stream_rate)
+            self.kinematics = KinematicsService(fabric, arms=o.arms, streams=o.streams, stream_rate=o.stream_rate)
         if o.navigation:
             from compute_peer.navigation.service import NavigationService
 
@@ -95,3 +96,38 @@ def parse_streams(specs: Iterable[str]) -> tuple[tuple[str, str], ...]:
             raise ValueError(f"--stream {spec!r}: expected ROBOT:OBJECT, e.g. arm1:target")
         out.append((keys.validate_id(robot, what="robot id"), keys.validate_id(obj, what="object id")))
     return tuple(out)
+
+
+def parse_arms(specs: Iterable[str]) -> dict[str, Any]:
+    """``ID:TYPE[@X,Y,Z[,YAW_DEG]]`` into arm placements; ``ValueError`` naming the bad spec or robot type."""
+    import math
+
+    import robots
+    from compute_peer.kinematics.service import ArmPlacement
+    from fabric import keys
+
+    out: dict[str, Any] = {}
+    for spec in specs:
+        head, _, where = spec.partition("@")
+        rid, sep, rtype = head.partition(":")
+        if not sep or not rid or not rtype:
+            raise ValueError(f"--arm {spec!r}: expected ID:TYPE[@X,Y,Z[,YAW_DEG]], e.g. arm1:meca500@3,0,0.75")
+        keys.validate_id(rid, what="robot id")
+        try:
+            desc = robots.load(rtype)
+        except Exception as exc:
+            raise ValueError(f"--arm {spec!r}: {exc}") from None
+        if desc.kind != "arm":
+            raise ValueError(f"--arm {spec!r}: {rtype} is a {desc.kind} robot, not an arm")
+        pose = [0.0, 0.0, 0.0, 0.0]
+        if where:
+            try:
+                vals = [float(v) for v in where.split(",")]
+            except ValueError:
+                raise ValueError(f"--arm {spec!r}: the placement must be numbers X,Y,Z[,YAW_DEG]") from None
+            if not 3 <= len(vals) <= 4 or not all(math.isfinite(v) for v in vals):
+                raise ValueError(f"--arm {spec!r}: the placement must be 3 or 4 finite numbers X,Y,Z[,YAW_DEG]")
+            pose[: len(vals)] = vals
+            pose[3] = math.radians(pose[3])
+        out[rid] = ArmPlacement(rtype, tuple(pose))
+    return out

@@ -146,3 +146,17 @@ def test_compute_cli_refuses_bad_flags():
         r = subprocess.run(robofabric_cmd("compute", *args), capture_output=True, text=True, timeout=60)
         assert r.returncode == 2, (args, r.stdout, r.stderr)
         assert "Traceback" not in r.stderr
+
+
+def test_compute_cli_arm_flag_names_bad_arms():
+    for spec, words in (("arm1", "ID:TYPE"), ("arm1:reeman", "not an arm"), ("arm1:meca500@1,2", "3 or 4"), ("arm1:nope", "unknown robot type")):
+        r = subprocess.run(robofabric_cmd("compute", "--arm", spec), capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2 and words in r.stderr, (spec, r.stderr)
+
+
+def test_ik_query_round_trip_bench_smoke():
+    from compute_peer.kinematics.bench_query import measure_query
+
+    res = measure_query(n=20, warmup=5)
+    assert set(res) == {"ik_pose", "ik_position", "fk"}
+    assert all(0 < r["p50_ms"] <= r["p99_ms"] <= r["max_ms"] for r in res.values())
