@@ -35,6 +35,7 @@ import rerun.blueprint as rrb
 
 from fabric import keys
 from fabric.messages import Event, JointState, OccupancyGrid, OwnershipRecord, Path, Pose, Scan
+from ownership.extrapolate import age_s, extrapolate
 from user_peer.arm_model import ArmModel, Placement
 
 __all__ = [
@@ -51,6 +52,7 @@ __all__ = [
 
 TIMELINE_SIM = "sim_time"
 TIMELINE_WALL = "wall_time"
+EXTRAPOLATION_CAP_S = 0.2  # s: never move a stale pose further than its velocity times this (paper Eq. 8)
 
 ROBOT_COLORS = [(230, 120, 40), (40, 140, 230), (90, 200, 90), (200, 80, 200), (230, 200, 40)]
 
@@ -77,6 +79,18 @@ def yaw_of(quat_wxyz: np.ndarray) -> float:
     """Heading (rad) of a (w, x, y, z) quaternion about the world z axis."""
     w, x, y, z = (float(v) for v in quat_wxyz)
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def shown_position(pose: Pose, now_ns: int) -> tuple[np.ndarray, float | None]:
+    """Where to draw a remote pose at ``now_ns``, and its age in s (None without timestamps).
+
+    The paper's Eq. 8: the pose moved on by its velocity times its age, the age capped so that a stale
+    or clock-skewed message never flings a robot across the room.
+    """
+    if now_ns <= 0 or pose.header.wall_ns <= 0:
+        return np.asarray(pose.position, dtype=float), None
+    age = age_s(pose.header.wall_ns, now_ns, cap_s=EXTRAPOLATION_CAP_S)
+    return extrapolate(pose.position, pose.linear, age, cap_s=EXTRAPOLATION_CAP_S), age
 
 
 def scan_world_points(scan: Scan, pose: Pose | None, lidar_offset: tuple[float, float, float] = (0.0, 0.0, 0.3)) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -287,7 +301,7 @@ class WorldLogger:
             if isinstance(msg, JointState):
                 return self.log_joints(p.subject, msg, due=self._due(key, t))
             if isinstance(msg, Pose):
-                return self.log_pose(p.subject, msg, due=self._due(key, t))
+                return self.log_pose(p.subject, msg, due=self._due(key, t), now_ns=t)
             if isinstance(msg, Scan):
                 return self.log_scan(p.subject, msg) if self._due(key, t) else True
             if isinstance(msg, Path):
@@ -361,7 +375,8 @@ class WorldLogger:
             return
         self.rec.log(f"{path}/shape", arch, static=True)
 
-    def log_pose(self, rid: str, pose: Pose, *, due: bool = True) -> bool:
+    def log_pose(self, rid: str, pose: Pose, *, due: bool = True, now_ns: int = 0) -> bool:
+        """A base's pose is drawn where it is by now: moved on by velocity x age (paper Eq. 8, capped)."""
         info = self._robot(rid, {"mobile": True} if not self.robots.get(rid) or not self.robots[rid].arm else {})
         if info.arm is not None:
             # An arm's pose key carries its flange pose: draw it as a frame marker.
@@ -378,7 +393,10 @@ class WorldLogger:
         if not due:
             return True
         path = f"world/robots/{rid}/base"
-        self.rec.log(path, rr.Transform3D(translation=pose.position, quaternion=rr.Quaternion(xyzw=_quat_xyzw(pose.quaternion))))
+        shown, age = shown_position(pose, now_ns)
+        if age is not None:
+            self.rec.log(f"plots/latency/{rid}", rr.Scalars(age * 1e3))
+        self.rec.log(path, rr.Transform3D(translation=shown, quaternion=rr.Quaternion(xyzw=_quat_xyzw(pose.quaternion))))
         if path not in self._static_done:
             self._static_done.add(path)
             r, h = info.radius, info.height

@@ -54,3 +54,18 @@ def test_world_to_map_pixels_matches_grid_image():
     grid = OccupancyGrid(0.05, [-2.0, -1.0, 0.0], np.zeros((40, 80), np.uint8))
     uv = world_to_map_pixels(grid, np.array([[-2.0, -1.0], [2.0, 1.0], [0.0, 0.0]]))
     assert np.allclose(uv, [[0, 40], [80, 0], [40, 20]])
+
+
+def test_bases_are_drawn_where_they_are_by_now_eq8():
+    from fabric.messages import Header
+    from user_peer.rerun_log import EXTRAPOLATION_CAP_S, shown_position
+
+    t = 1_700_000_000_000_000_000
+    pose = Pose([1.0, 2.0, 0.0], linear=[0.5, -0.2, 0.0], header=Header(wall_ns=t))
+    at, age = shown_position(pose, t + 40_000_000)  # seen 40 ms after it was published
+    assert math.isclose(age, 0.04) and np.allclose(at, [1.02, 1.992, 0.0])
+    late, age = shown_position(pose, t + 5_000_000_000)  # 5 s stale: moved on by the cap only
+    assert age == EXTRAPOLATION_CAP_S and np.allclose(late, [1.0 + 0.5 * EXTRAPOLATION_CAP_S, 2.0 - 0.2 * EXTRAPOLATION_CAP_S, 0.0])
+    early, age = shown_position(pose, t - 1_000_000)  # clock skew: never moved backwards
+    assert age == 0.0 and np.allclose(early, pose.position)
+    assert shown_position(Pose([1.0, 2.0, 0.0], linear=[1.0, 0, 0]), t)[1] is None  # no timestamp, no guess
