@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 PREFIX = "rf"
 
-ROBOT_STREAMS = ("joints", "pose", "scan", "path", "ik")
+ROBOT_STREAMS = ("joints", "pose", "scan", "sonar", "path", "ik")
 COMMANDS = ("joints", "twist", "path", "stop", "reset")
 SERVICES = ("ik", "fk", "jacobian", "plan", "map", "world")
 PEER_KINDS = ("sim", "compute", "user", "viewer", "recorder", "router", "tool")

@@ -117,6 +117,9 @@ class RobotCatalog:
             info.radius = d.base.radius
             info.height = d.base.height or info.height
             info.lidar_offset = self.lidar_offset(d)
+            if d.ultrasonic is not None:
+                us = d.ultrasonic
+                info.sonar = (float(us.center[0]), float(us.center[1]), float(us.height), float(us.radius))
         return info
 
     def lidar_offset(self, d: robots.RobotDescription) -> tuple[float, float, float]:

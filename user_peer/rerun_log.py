@@ -69,6 +69,7 @@ class RobotInfo:
     radius: float = 0.25  # mobile footprint radius
     height: float = 0.3
     lidar_offset: tuple[float, float, float] = (0.0, 0.0, 0.3)
+    sonar: tuple[float, float, float, float] | None = None  # ring centre x, y, height, radius (robot frame)
     color: tuple[int, int, int] = (230, 120, 40)
 
 
@@ -302,6 +303,8 @@ class WorldLogger:
                 return self.log_joints(p.subject, msg, due=self._due(key, t))
             if isinstance(msg, Pose):
                 return self.log_pose(p.subject, msg, due=self._due(key, t), now_ns=t)
+            if isinstance(msg, Scan) and p.leaf == "sonar":
+                return self.log_sonar(p.subject, msg) if self._due(key, t) else True
             if isinstance(msg, Scan):
                 return self.log_scan(p.subject, msg) if self._due(key, t) else True
             if isinstance(msg, Path):
@@ -421,6 +424,19 @@ class WorldLogger:
         step = max(1, len(pts) // 60)
         rays = [[origin, p] for p in pts[::step]]
         self.rec.log(f"world/robots/{rid}/scan/rays", rr.LineStrips3D(rays, radii=0.002, colors=[(240, 150, 150)]))
+        return True
+
+    def log_sonar(self, rid: str, scan: Scan) -> bool:
+        """The ultrasonic ring: each sensor's echo as a point, rays from the ring's rim."""
+        info = self._robot(rid, {"mobile": True})
+        cx, cy, h, radius = info.sonar or (0.0, 0.0, 0.12, 0.26)
+        # ranges are measured from the rim: from the ring's centre they are `radius` longer
+        ranges = np.where(np.isfinite(scan.ranges), scan.ranges + radius, np.inf)
+        centred = Scan.from_ranges(ranges, angle_min=scan.angle_min, angle_increment=scan.angle_increment,
+                                   range_max=scan.range_max + radius, header=scan.header)
+        origin, pts, hit = scan_world_points(centred, self.poses.get(rid), (cx, cy, h))
+        self.rec.log(f"world/robots/{rid}/sonar", rr.Points3D(pts[hit], radii=0.03, colors=[(40, 170, 230)]))
+        self.rec.log(f"world/robots/{rid}/sonar/rays", rr.LineStrips3D([[origin, q] for q in pts[hit]], radii=0.003, colors=[(120, 200, 240)]))
         return True
 
     def log_path(self, rid: str, path: Path) -> bool:

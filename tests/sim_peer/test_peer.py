@@ -116,6 +116,8 @@ def test_twist_moves_the_base_and_pose_and_scan_are_published(world, sim, user):
     wait_until(lambda: not peer.world.robot("base1").moving, what="base stopped")
     scan = wait_until(lambda: inbox.latest.get(keys.robot_scan(world, "base1")), what="scan")
     assert isinstance(scan, Scan) and scan.ranges_mm.shape == (240,)
+    sonar = wait_until(lambda: inbox.latest.get(keys.robot_stream(world, "base1", "sonar")), what="ultrasonic ring")
+    assert isinstance(sonar, Scan) and sonar.ranges_mm.shape == (8,) and sonar.range_max == 3.0
     send(fab, world, "base1", "reset", Reset())
     wait_until(lambda: peer.world.robot("base1").ctrl.x == 0.0, what="base reset")
 

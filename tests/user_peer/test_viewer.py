@@ -30,6 +30,7 @@ def test_viewer_saves_robots_scans_maps_paths(world, router, connect, tmp_path):
         yaw = 0.1 * i
         pub.publish(keys.robot_pose(world, "base1"), Pose([0.1 * i, 0, 0], [math.cos(yaw / 2), 0, 0, math.sin(yaw / 2)], [0.2, 0, 0], [0, 0, 0.1], header=h))
         pub.publish(keys.robot_scan(world, "base1"), Scan.from_ranges(np.linspace(1, 3, 240), angle_min=-1.178, angle_increment=2.356 / 239, range_max=8.0, header=h))
+        pub.publish(keys.robot_stream(world, "base1", "sonar"), Scan.from_ranges(np.full(8, 0.5), angle_min=0.0, angle_increment=math.pi / 4, range_max=3.0, header=h))
         if i % 5 == 0:
             pub.publish(keys.map_key(world, "base1"), OccupancyGrid(0.05, [-5, -5, 0], np.full((200, 200), 255, np.uint8), h))
             pub.publish(keys.robot_path(world, "base1"), Path([0, 1, 2], [0, 0.5, 1], [0, 0.4, 0.8], header=h))
@@ -52,6 +53,7 @@ def test_viewer_saves_robots_scans_maps_paths(world, router, connect, tmp_path):
     rows = rows_per_entity(out)
     assert rows["/world/robots/base1/scan"] >= 3
     assert rows["/world/robots/base1/scan/rays"] >= 3
+    assert rows["/world/robots/base1/sonar"] >= 3  # the ultrasonic ring apart from the LIDAR
     assert rows["/world/robots/base1/base"] >= 3
     assert rows["/plots/latency/base1"] >= 3  # the age each base pose was drawn with (Eq. 8)
     assert rows["/map/base1"] >= 3
