@@ -95,8 +95,10 @@ class _Latest:
 class World:
     """A user's handle on one world. A context manager; ``close()`` is idempotent."""
 
-    def __init__(self, config: FabricConfig, user: str, *, timeout: float = 5.0) -> None:
+    def __init__(self, config: FabricConfig, user: str, *, timeout: float = 5.0, compute: str | None = None) -> None:
         self.user = keys.validate_id(user, what="user id")
+        # the compute peer to ask (its peer id, e.g. a local one); None: the nearest that serves the world
+        self.compute = None if compute is None else keys.validate_id(compute, what="compute peer id")
         self.name = config.world
         self.timeout = timeout
         self.fabric = Fabric(config, kind="user", peer_id=self.user)
@@ -119,6 +121,10 @@ class World:
             log.warning("IK streams are not available: %s", exc.reason)
         self.fabric.subscribe(keys.event_all(self.name), self._on_event, expected=Event)
         self.ownership = OwnershipLink(self.fabric, self.user, on_record=self.latest.put)
+
+    def compute_peers(self) -> list[str]:
+        """Ids of the compute peers serving this world (from liveliness): candidates for ``compute``."""
+        return sorted(pid for _, pid in self.fabric.live_peers("compute"))
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -358,7 +364,7 @@ class Arm(Robot):
         :class:`Unreachable` when the compute peer refuses (with its reason), :class:`Timeout` when none answers.
         """
         try:
-            return services.ik(self.world.fabric, self.id, xyz, quaternion, self.joints, timeout=self.world.timeout)
+            return services.ik(self.world.fabric, self.id, xyz, quaternion, self.joints, timeout=self.world.timeout, peer=self.world.compute)
         except ServiceError as exc:
             if exc.reason.startswith("no reply"):
                 raise Timeout(f"IK for {self.id}: {exc.reason}") from None
@@ -449,14 +455,16 @@ class Base(Robot):
     def start_mapping(self, *, name: str = "map") -> None:
         """Ask the compute peer to fold this world's scans into map ``name`` (it may already be on)."""
         try:
-            services.map_request(self.world.fabric, "start", name=name, timeout=self.world.timeout)
+            services.map_request(self.world.fabric, "start", name=name, timeout=self.world.timeout, peer=self.world.compute)
         except ServiceError as exc:
             raise Unreachable(f"mapping for {self.id}: {exc.reason}") from None
 
     def build_map(self, *, name: str = "map", threshold: float = 0.65, timeout: float | None = None) -> OccupancyGrid:
         """The binary map a compute peer built from the scans so far (also published on ``map/{name}``)."""
         try:
-            return services.build_map(self.world.fabric, name=name, threshold=threshold, timeout=timeout or max(self.world.timeout, 10.0))
+            return services.build_map(
+                self.world.fabric, name=name, threshold=threshold, timeout=timeout or max(self.world.timeout, 10.0), peer=self.world.compute
+            )
         except ServiceError as exc:
             raise Unreachable(f"map for {self.id}: {exc.reason}") from None
 
@@ -467,7 +475,10 @@ class Base(Robot):
         """A collision-free path from the robot's pose to (x, y, theta), or to the goal object without x, y."""
         goal = None if x is None or y is None else (float(x), float(y), float(theta))
         try:
-            return services.plan(self.world.fabric, self.id, goal, planner=planner, map_name=map_name, timeout=timeout or max(self.world.timeout, 15.0))
+            return services.plan(
+                self.world.fabric, self.id, goal, planner=planner, map_name=map_name, timeout=timeout or max(self.world.timeout, 15.0),
+                peer=self.world.compute,
+            )
         except ServiceError as exc:
             where = "the goal object" if goal is None else f"({goal[0]:.2f}, {goal[1]:.2f}, {goal[2]:.2f})"
             raise Unreachable(f"no path for {self.id} to {where}: {exc.reason}") from None
@@ -537,12 +548,17 @@ def connect(
     profile: str | None = None,
     zenoh_config: str | None = None,
     timeout: float = 5.0,
+    compute: str | None = None,
 ) -> World:
-    """Join a world as ``user`` (default: $USER). ``connect``: router endpoints, e.g. ``["tcp/10.0.0.5:7447"]``."""
+    """Join a world as ``user`` (default: $USER). ``connect``: router endpoints, e.g. ``["tcp/10.0.0.5:7447"]``.
+
+    ``compute``: the peer id of the compute peer to use (``robofabric ps`` lists them), e.g. one running on
+    this machine; by default queries go to the nearest compute peer serving the world.
+    """
     import getpass
 
     if isinstance(connect, str):
         connect = [connect]
     cfg = FabricConfig.resolve(world=world, profile=profile, connect=list(connect or ()), config_file=zenoh_config)
     uid = user or "".join(c if c.isalnum() or c in "-_" else "-" for c in getpass.getuser()) or "user"
-    return World(cfg, uid, timeout=timeout)
+    return World(cfg, uid, timeout=timeout, compute=compute)

@@ -8,7 +8,7 @@
   where the LIDAR sits on the robot) into a log-odds grid as the user drives;
   each robot's LIDAR mounting and radius are learnt from the sim's world
   description (``srv/world``) unless given;
-* ``rf/{world}/srv/map/{name}`` (:class:`MapRequest`): start/stop mapping, build the binary
+* ``rf/{world}/srv/map/{name}`` (and ``.../{name}/{peer_id}`` for this peer only; :class:`MapRequest`): start/stop mapping, build the binary
   map with a threshold and publish it on ``rf/{world}/map/{name}``, get, reset,
   save/load (only inside ``maps_dir``), set a map, status;
 * ``rf/{world}/srv/plan/{robot}`` (:class:`PlanRequest`): plan from the robot's current
@@ -134,8 +134,10 @@ class NavigationService:
                 self._resources.append(f.subscribe(keys.robot_pose(self.world, r), self._on_robot, expected=Pose))
                 self._resources.append(f.subscribe(keys.robot_scan(self.world, r), self._on_robot, expected=Scan))
         self._resources.append(f.subscribe(keys.object_pose(self.world, self.goal_object), self._on_goal, expected=Pose))
-        self._resources.append(f.serve(keys.srv_all(self.world, "map"), self._on_map, expected=MapRequest))
-        self._resources.append(f.serve(keys.srv_all(self.world, "plan"), self._on_plan, expected=PlanRequest))
+        # srv/{map,plan}/{name}: the nearest compute peer; srv/{map,plan}/{name}/{peer_id}: this one (docs/compute.md)
+        for peer in (None, f.peer_id):
+            self._resources.append(f.serve(keys.srv_per_subject(self.world, "map", peer), self._on_map, expected=MapRequest))
+            self._resources.append(f.serve(keys.srv_per_subject(self.world, "plan", peer), self._on_plan, expected=PlanRequest))
 
     def __enter__(self) -> "NavigationService":
         return self
@@ -346,7 +348,8 @@ class NavigationService:
 
     def _on_map(self, key: str, req: MapRequest | None) -> MapReply:
         if req is None:
-            req = MapRequest("get", name=keys.parse(key).leaf or self.map_name)
+            rest = keys.parse(key).rest
+            req = MapRequest("get", name=rest[0] if rest else self.map_name)
         try:
             return self.map_request(req)
         except (NavigationError, OSError) as exc:
@@ -433,7 +436,8 @@ class NavigationService:
         if req is None:
             self.counters["refusals"] += 1
             raise ServiceError("a plan query needs a PlanRequest payload (robot, goal, planner...)", key=key)
-        tail = keys.parse(key).leaf
+        rest = keys.parse(key).rest
+        tail = rest[0] if rest else ""
         if tail and tail != req.robot:
             self.counters["refusals"] += 1
             raise ServiceError(f"query on {key} names robot {tail!r} but the request is for {req.robot!r}", key=key)

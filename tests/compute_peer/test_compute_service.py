@@ -160,3 +160,39 @@ def test_ik_query_round_trip_bench_smoke():
     res = measure_query(n=20, warmup=5)
     assert set(res) == {"ik_pose", "ik_position", "fk"}
     assert all(0 < r["p50_ms"] <= r["p99_ms"] <= r["max_ms"] for r in res.values())
+
+
+def test_a_user_can_pick_a_compute_peer(world, router, connect):
+    from fabric.testing import client_config
+    from user_peer import services
+    from user_peer.api import World
+
+    svcs = {pid: KinematicsService(connect("compute", pid), arms={"arm1": ArmPlacement("meca500", BASE)}, discover=False) for pid in ("c1", "c2")}
+    try:
+        with World(client_config(world, router[1]), "carol", compute="c2") as w:
+            assert w.compute_peers() == ["c1", "c2"]
+            fk = w.fabric.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
+            for _ in range(3):
+                q = services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=w.compute)
+                assert np.allclose(q, Q, atol=1e-9)
+        assert svcs["c2"].counters["ik"] == 3 and svcs["c1"].counters["ik"] == 0
+    finally:
+        for s in svcs.values():
+            s.close()
+
+
+def test_navigation_answers_on_its_own_key_too(world, connect):
+    from compute_peer.navigation.messages import MapReply, MapRequest
+    from compute_peer.navigation.service import NavigationService
+
+    navs = [NavigationService(connect("compute", pid), discover=False) for pid in ("n1", "n2")]
+    user = connect("user", "dave")
+    try:
+        for pid in ("n1", "n2"):
+            rep = user.call(keys.srv(world, "map", "map", pid), MapRequest("status"), timeout=5.0)
+            assert isinstance(rep, MapReply) and rep.header.source == pid
+        everyone = user.query(keys.srv(world, "map", "map"), MapRequest("status"), all_replies=True, timeout=5.0)
+        assert sorted(r.message.header.source for r in everyone) == ["n1", "n2"]
+    finally:
+        for n in navs:
+            n.close()
