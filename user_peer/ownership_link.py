@@ -9,25 +9,19 @@ from __future__ import annotations
 
 import logging
 import threading
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from fabric import keys
 from fabric.messages import OwnershipRecord
-from fabric.session import Fabric
+from fabric.session import Fabric, ServiceError
 from user_peer.errors import NotOwner, Timeout
+
+if TYPE_CHECKING:
+    from ownership.client import Outcome, OwnershipClient
 
 log = logging.getLogger("robofabric.user")
 
 __all__ = ["OwnershipLink"]
-
-
-def _get(obj: Any, *names: str, default: Any = None) -> Any:
-    for n in names:
-        if hasattr(obj, n):
-            return getattr(obj, n)
-        if isinstance(obj, dict) and n in obj:
-            return obj[n]
-    return default
 
 
 class OwnershipLink:
@@ -39,7 +33,7 @@ class OwnershipLink:
         self._records: dict[str, OwnershipRecord] = {}
         self._lock = threading.Lock()
         self._on_record = on_record
-        self._client: Any = None
+        self._client: OwnershipClient | None = None
         fab.subscribe(keys.own_all(fab.world), self._on, expected=OwnershipRecord)
         try:
             for rep in fab.query(keys.own_all(fab.world), timeout=1.0, all_replies=True):
@@ -49,7 +43,7 @@ class OwnershipLink:
             pass  # no authority yet: records arrive when it publishes
 
     @property
-    def client(self) -> Any:
+    def client(self) -> "OwnershipClient":
         if self._client is None:
             try:
                 from ownership import OwnershipClient
@@ -68,48 +62,37 @@ class OwnershipLink:
             self._on_record(key, rec)
 
     def record(self, obj: str) -> OwnershipRecord | None:
+        """The newest record of ``obj`` seen by the subscription or by the client's replies."""
         with self._lock:
             rec = self._records.get(obj)
-        if self._client is not None:
-            other = self._client_record(obj)
-            if other is not None and (rec is None or other.epoch > rec.epoch):
-                return other
+        other = self._client.record(obj) if self._client is not None else None
+        if other is not None and (rec is None or other.epoch > rec.epoch):
+            return other
         return rec
 
-    def _client_record(self, obj: str) -> OwnershipRecord | None:
-        for name in ("record", "replica"):
-            fn = getattr(self._client, name, None)
-            if callable(fn):
-                try:
-                    r = fn(obj)
-                    return r if isinstance(r, OwnershipRecord) else None
-                except Exception:
-                    return None
-        return None
+    def _ask(self, op: str, obj: str, timeout: float, wait: bool = False) -> Outcome:
+        """One request to the authority; its silence is :class:`Timeout`, its refusal :class:`NotOwner`."""
+        client = self.client
+        try:
+            out = client.request(obj, timeout=timeout, wait=wait) if op == "request" else client.release(obj, timeout=timeout)
+        except ServiceError as exc:
+            if exc.reason.startswith("no reply"):
+                raise Timeout(f"no ownership answer for {obj} within {timeout:.1f} s (is the sim peer, its authority, running?)") from None
+            raise NotOwner(f"{obj}: {exc.reason}") from None
+        if out.record is not None:
+            self._on(keys.own(self.fab.world, obj), out.record)
+        return out
 
     def request(self, obj: str, *, timeout: float, wait: bool = False) -> int:
-        """Own ``obj`` and return the epoch, or raise :class:`NotOwner` with the authority's reason."""
-        try:
-            answer = self.client.request(obj, timeout=timeout, wait=wait) if wait else self.client.request(obj, timeout=timeout)
-        except TimeoutError as exc:
-            raise Timeout(f"no ownership answer for {obj} within {timeout:.1f} s: {exc}") from None
-        granted = _get(answer, "granted", "ok", default=None)
-        epoch = _get(answer, "epoch", default=None)
-        reason = _get(answer, "reason", default="")
-        record = _get(answer, "record", default=None)
-        if isinstance(record, OwnershipRecord):
-            self._on(keys.own(self.fab.world, obj), record)
-        if granted is None and isinstance(answer, int):
-            granted, epoch = True, answer
-        if not granted:
-            raise NotOwner(f"{obj} not granted to {self.user}: {reason or 'denied'}")
-        return int(epoch if epoch is not None else 0)
+        """Own ``obj`` and return the epoch, or raise :class:`NotOwner` with the authority's answer."""
+        out = self._ask("request", obj, timeout, wait)
+        if not out.granted:
+            raise NotOwner(f"{obj} not granted to {self.user}: {out}")
+        return out.epoch
 
     def release(self, obj: str, *, timeout: float) -> None:
-        self.client.release(obj, timeout=timeout)
+        self._ask("release", obj, timeout)
 
     def close(self) -> None:
         if self._client is not None:
-            close = getattr(self._client, "close", None)
-            if callable(close):
-                close()
+            self._client.close()
