@@ -7,7 +7,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config
+from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
 
 
 def compute(
@@ -40,7 +40,7 @@ def compute(
     srv/ik/ROBOT/PEER_ID to one chosen peer. Arms and sensors are learnt from the sim peer's srv/world.
     """
     from compute_peer.peer import ComputeOptions, ComputePeer, parse_arms, parse_streams
-    from fabric.session import Fabric, shutdown_event
+    from fabric.session import shutdown_event
 
     if not (kinematics or navigation):
         raise UserError("nothing to serve: --no-kinematics and --no-navigation together leave the peer idle")
@@ -62,11 +62,7 @@ def compute(
         raise UserError("--stream needs kinematics (drop --no-kinematics)")
     cfg = make_config(world, connect, listen, profile, zenoh_config)
     stop = shutdown_event()
-    try:
-        fab = Fabric(cfg, kind="compute", peer_id=peer_id)
-    except Exception as exc:
-        where = ", ".join(cfg.endpoints()[0] or cfg.endpoints()[1]) or "the LAN"
-        raise UserError(f"cannot join world {cfg.world!r} via {where}: {exc}") from None
+    fab = open_fabric(cfg, "compute", peer_id)
     options = ComputeOptions(kinematics, navigation, streams, stream_rate, maps_dir, mapping, arms=arms)
     with fab, ComputePeer(fab, options) as peer:
         served_arms = peer.discover(timeout=2.0)

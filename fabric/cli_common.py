@@ -9,11 +9,14 @@ anything the user got wrong: the CLI prints one line and exits 2, no traceback.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 
 from fabric.config import ConfigError, FabricConfig
+
+if TYPE_CHECKING:
+    from fabric.session import Fabric
 
 __all__ = [
     "UserError",
@@ -24,6 +27,8 @@ __all__ = [
     "Profile",
     "ZenohConfig",
     "make_config",
+    "join_error",
+    "open_fabric",
     "bench_app",
 ]
 
@@ -80,6 +85,24 @@ def make_config(
         )
     except (ConfigError, ValueError) as exc:
         raise UserError(str(exc)) from None
+
+
+def join_error(cfg: FabricConfig, exc: BaseException) -> UserError:
+    """The one-line error for a session that could not open: which world, through where, and Zenoh's words."""
+    connect, listen = cfg.endpoints()
+    where = ", ".join(connect or listen) or "the LAN"
+    reason = str(exc).split(" at /")[0]  # zenoh appends the Rust source location
+    return UserError(f"cannot join world {cfg.world!r} via {where}: {reason}")
+
+
+def open_fabric(cfg: FabricConfig, kind: str, peer_id: str | None = None) -> "Fabric":
+    """Join the world as a peer of ``kind``; a router that is not there is a :class:`UserError`, not a traceback."""
+    from fabric.session import Fabric
+
+    try:
+        return Fabric(cfg, kind=kind, peer_id=peer_id)
+    except Exception as exc:
+        raise join_error(cfg, exc) from None
 
 
 bench_app = typer.Typer(

@@ -13,7 +13,7 @@ import typer
 import zenoh
 
 from fabric import keys
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config
+from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
 from fabric.codec import DecodeError, decode, to_plain
 from fabric.session import Fabric, shutdown_event
 from fabric.stats import StreamStats
@@ -24,11 +24,7 @@ def _open(kind: str, world, connect, listen, profile, zenoh_config, peer_id=None
     cfg = make_config(world, connect, listen, profile, zenoh_config)
     if key is not None:
         resolve_key(key, cfg.world)
-    try:
-        return Fabric(cfg, kind=kind, peer_id=peer_id)
-    except Exception as exc:
-        where = ", ".join(cfg.endpoints()[0] or cfg.endpoints()[1]) or "the LAN"
-        raise UserError(f"cannot join world {cfg.world!r} via {where}: {exc}") from None
+    return open_fabric(cfg, kind, peer_id)
 
 
 def resolve_key(key: str, world: str) -> str:

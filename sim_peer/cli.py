@@ -8,7 +8,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, bench_app, make_config
+from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, bench_app, make_config, open_fabric
 from fabric.gate import CommandGate, OpenGate
 from fabric.rate import parse_rates
 
@@ -60,7 +60,7 @@ def sim(
     if list_:
         _print_catalog()
         return
-    from fabric.session import Fabric, shutdown_event
+    from fabric.session import shutdown_event
     from sim_peer.pacing import parse_speed
     from sim_peer.peer import DEFAULT_RATES, SimPeer
     from sim_peer.world import World as SimWorld
@@ -86,11 +86,7 @@ def sim(
         raise UserError(f"scene {sim_world.scene.name!r} has no robots and none were added with --robot")
     cfg = make_config(world, connect, listen, profile, zenoh_config)
     stop = shutdown_event()
-    try:
-        fab = Fabric(cfg, kind="sim", peer_id=peer_id)
-    except Exception as exc:
-        where = ", ".join(cfg.endpoints()[0] or cfg.endpoints()[1]) or "the LAN"
-        raise UserError(f"cannot join world {cfg.world!r} via {where}: {exc}") from None
+    fab = open_fabric(cfg, "sim", peer_id)
     with fab:
         gate = make_gate(fab, sim_world, ownership)
         peer = SimPeer(fab, sim_world, gate=gate, rates=rates, speed=pace)

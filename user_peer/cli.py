@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
 
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config
+from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, join_error, make_config
 
 RERUN_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://", "http://", "https://")
 
@@ -62,7 +61,7 @@ def view(
     except ValueError as exc:
         raise UserError(str(exc)) from None
     except Exception as exc:  # zenoh.ZError: no router there
-        raise UserError(f"cannot join world {cfg.world!r} via {', '.join(cfg.connect) or 'the default router'}: {exc}".split(" at /")[0]) from None
+        raise join_error(cfg, exc) from None
     with viewer:
         print(f"viewer on world {cfg.world!r}" + (f", saving to {save}" if save else ""), flush=True)
         n = viewer.run(stop, duration)
@@ -96,7 +95,7 @@ UserOpt = Annotated[Optional[str], typer.Option("--user", "-u", help="Your user 
 
 
 def _open_world(world, connect, profile, zenoh_config, user, timeout: float = 5.0):
-    from user_peer.api import World, connect as _connect
+    from user_peer.api import connect as _connect
 
     zenoh_eps, _ = _split_connect(connect)
     cfg = make_config(world, zenoh_eps, None, profile, zenoh_config)
@@ -106,7 +105,7 @@ def _open_world(world, connect, profile, zenoh_config, user, timeout: float = 5.
     except ValueError as exc:
         raise UserError(str(exc)) from None
     except Exception as exc:  # zenoh.ZError: no router there
-        raise UserError(f"cannot join world {cfg.world!r} via {', '.join(cfg.connect) or 'the default router'}: {exc}".split(" at /")[0]) from None
+        raise join_error(cfg, exc) from None
 
 
 def user(

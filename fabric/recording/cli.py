@@ -15,19 +15,9 @@ from typing import Annotated, Optional
 import typer
 
 from fabric import keys
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, bench_app, make_config
+from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, bench_app, make_config, open_fabric
 
 __all__ = ["register", "record", "info", "replay"]
-
-
-def _join(kind: str, cfg, peer_id: str | None):
-    from fabric.session import Fabric
-
-    try:
-        return Fabric(cfg, kind=kind, peer_id=peer_id)
-    except Exception as exc:
-        where = ", ".join(cfg.endpoints()[0] or cfg.endpoints()[1]) or "the LAN"
-        raise UserError(f"cannot join world {cfg.world!r} via {where}: {exc}") from None
 
 
 def _resolve(expr: str, world: str) -> str:
@@ -85,7 +75,7 @@ def record(
     exprs = [_resolve(e, cfg.world) for e in keyexprs] if keyexprs else [keys.world_all(cfg.world)]
     stop = shutdown_event()
     tty = sys.stderr.isatty()
-    with _join("recorder", cfg, peer_id) as fab:
+    with open_fabric(cfg, "recorder", peer_id) as fab:
         try:
             rec = Recorder(
                 fab, output, exprs, liveliness=liveliness, compression=compression,
@@ -217,7 +207,7 @@ def replay(
     target_world = remap_world or world or (plan.worlds[0] if plan.worlds else None)
     cfg = make_config(target_world, connect, listen, profile, zenoh_config)
     stop = shutdown_event()
-    with _join("tool", cfg, peer_id) as fab:
+    with open_fabric(cfg, "tool", peer_id) as fab:
         into = f" into world {remap_world!r}" if remap_world else ""
         print(
             f"replaying {plan.messages} msgs on {len(plan.keys)} key(s) from {file}{into} at {speed:g}x"

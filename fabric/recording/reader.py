@@ -238,7 +238,7 @@ def _messages(w: _Walk) -> Iterator[tuple[Channel, Message]]:
                 w.tail_error = f"file ends inside a record header after byte {pos}"
                 break
             op, length = _REC_HEAD.unpack(head)
-            body, nxt = pos + 9, pos + 9 + length
+            nxt = pos + 9 + length
             if nxt > size:
                 w.tail_error = f"file ends inside a record after byte {pos} ({nxt - size} byte(s) missing)"
                 break

@@ -38,7 +38,7 @@ def _cylinder_origin(seg: g.Segment) -> tuple[tuple[float, float, float], tuple[
 
 
 def urdf() -> str:
-    out = [f'<?xml version="1.0"?>', f"<!-- {HEADER} -->", f'<robot name="{g.NAME}">']
+    out = ['<?xml version="1.0"?>', f"<!-- {HEADER} -->", f'<robot name="{g.NAME}">']
     for link in g.LINKS:
         ine = g.INERTIALS[link]
         out.append(f'  <link name="{link}">')

@@ -41,7 +41,6 @@ def test_drive_map_plan_and_follow(world, connect):
             assert nav._offsets[ROBOT][0] == pytest.approx(0.22)  # the LIDAR is 22 cm ahead of the axle
             # mapping mode: the user turns the robot on the spot, a little more than once around
             wait_until(lambda: poses, what="robot pose")
-            yaw0 = yaw_from_quaternion(poses[-1].quaternion)
             turned = [0.0]
 
             def turning() -> bool:
