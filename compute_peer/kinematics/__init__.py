@@ -2,9 +2,11 @@
 
 FK, the paper's geometric Jacobian (Eq. 3-6), twists, Eq. 7 joint speed
 magnitudes and a damped-least-squares IK that refuses (``Unreachable``)
-instead of returning a silent best effort.
+instead of returning a silent best effort; :func:`solve` is the IK entry point
+(the Meca500's closed form, or Levenberg-Marquardt for any arm).
 """
 
+from compute_peer.kinematics.ik import IKSolution, meca500_ik, solve, solve_numerical
 from compute_peer.kinematics.model import ArmModel, Unreachable
 
-__all__ = ["ArmModel", "Unreachable"]
+__all__ = ["ArmModel", "IKSolution", "Unreachable", "meca500_ik", "solve", "solve_numerical"]

@@ -1,0 +1,570 @@
+"""Inverse kinematics: a closed form for the Meca500 and a numerical solver for any arm.
+
+:func:`solve` is the one entry point (the service layer calls it). It takes a
+flange target in the arm's base frame, a position and optionally a quaternion
+(w, x, y, z), and returns an :class:`IKSolution` inside the joint limits or
+raises :class:`~compute_peer.kinematics.model.Unreachable` saying why; it never
+returns a best effort. Malformed input (wrong shapes, NaN) raises plain
+``ValueError``.
+
+The Meca500 has a spherical wrist, so its IK splits into a position problem for
+the wrist centre (J1-J3) and an orientation problem for the wrist (J4-J6), each
+with two branches: up to 8 solutions, plus 2 pi twins of joints whose range
+allows them (J6 spans +-180 deg). Every dimension comes from
+:mod:`robots.meca500.geometry`, and every returned solution is checked by forward
+kinematics through Pinocchio, which catches a derivation slip instead of
+returning a wrong pose.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from robots.meca500 import geometry as _geo
+
+from .model import ArmModel, Unreachable
+
+TWO_PI = 2.0 * math.pi
+
+POSITION_CHECK = 1e-9
+"""m: a closed-form solution whose FK misses the target by more is a bug, and is dropped."""
+ROTATION_CHECK = 1e-8
+"""rad: the same for orientation."""
+LIMIT_SLACK = 1e-9
+"""rad: a joint this close outside a limit is rounding, and is clamped onto it."""
+WRIST_SINGULAR = 1e-9
+"""sin(q5) below this: J4 and J6 are one rotation; J4 keeps the seed's value."""
+SHOULDER_SINGULAR = 1e-10
+"""m: a wrist centre this close to the J1 axis leaves q1 free; it keeps the seed's value."""
+
+METHODS = ("auto", "closed_form", "numerical")
+
+
+@dataclass(frozen=True, slots=True)
+class IKSolution:
+    """One joint vector reaching the target, how it was found and how well FK agrees."""
+
+    q: np.ndarray  # joint angles (rad), within limits; read-only
+    solver: str  # "closed_form" | "numerical"
+    position_error: float  # m, from FK of q
+    orientation_error: float  # rad (0.0 for position-only targets)
+    candidates: int  # in-limit solutions the closed form found (0 for numerical)
+
+
+# --------------------------------------------------------------------------- small math helpers
+
+
+def quaternion_to_matrix(w: float, x: float, y: float, z: float) -> tuple[tuple[float, ...], ...]:
+    """Rotation matrix (row tuples) of a unit quaternion (w, x, y, z)."""
+    return (
+        (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+        (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+        (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
+    )
+
+
+def rotation_distance(a: Sequence[Sequence[float]], b: Sequence[Sequence[float]]) -> float:
+    """Angle (rad) between two rotations, from the Frobenius norm of their difference.
+
+    ``acos((trace - 1) / 2)`` cannot resolve angles below ~1e-8 rad (1 - cos is
+    under machine epsilon there); ``|A - B|_F = 2 sqrt(2) sin(angle / 2)`` can.
+    """
+    s = 0.0
+    for ra, rb in zip(a, b):
+        for u, v in zip(ra, rb):
+            s += (u - v) * (u - v)
+    return 2.0 * math.asin(min(1.0, math.sqrt(s) / (2.0 * math.sqrt(2.0))))
+
+
+def _wrap(a: float) -> float:
+    """Angle in (-pi, pi]."""
+    a = math.fmod(a, TWO_PI)
+    if a > math.pi:
+        a -= TWO_PI
+    elif a <= -math.pi:
+        a += TWO_PI
+    return a
+
+
+@dataclass(frozen=True, slots=True)
+class _ArmConstants:
+    """Per-arm lists read once: plain floats, because the closed form's budget is ~100 us."""
+
+    limits: tuple[tuple[float, float, bool], ...]  # lower, upper, spans a full turn (2 pi twins possible)
+    weights: tuple[float, ...]
+
+
+_CONSTANTS: weakref.WeakKeyDictionary[ArmModel, _ArmConstants] = weakref.WeakKeyDictionary()
+
+
+def _constants(arm: ArmModel) -> _ArmConstants:
+    c = _CONSTANTS.get(arm)
+    if c is None:
+        lo, hi = arm.lower.tolist(), arm.upper.tolist()
+        limits = tuple((a, b, b - a >= TWO_PI - 2 * LIMIT_SLACK) for a, b in zip(lo, hi))
+        c = _CONSTANTS[arm] = _ArmConstants(limits, tuple(_weights(arm)))
+    return c
+
+
+def _limits(arm: ArmModel) -> tuple[tuple[float, float, bool], ...]:
+    return _constants(arm).limits
+
+
+def _weights(arm: ArmModel) -> list[float]:
+    """Per-joint weights of the seed distance: 1 / max speed, so the distance is roughly a move time.
+
+    A degree of J1 (150 deg/s) costs more than a degree of J6 (500 deg/s), so the
+    nearest solution is the quickest to reach, not the one with the least total angle.
+    """
+    speeds = arm.description.max_speed
+    if len(speeds) == arm.model.nq and all(s > 0 for s in speeds):
+        return [1.0 / s for s in speeds]
+    return [1.0] * arm.model.nq
+
+
+def joint_distance(arm: ArmModel, q: Sequence[float], seed: Sequence[float]) -> float:
+    """Weighted squared joint distance (s^2 at full speed); no 2 pi wrapping: joints with limits travel."""
+    return sum((w * (a - b)) ** 2 for w, a, b in zip(_constants(arm).weights, q, seed))
+
+
+def _pose_errors(arm: ArmModel, q: Sequence[float], p: Sequence[float],
+                 rot: Sequence[Sequence[float]] | None) -> tuple[float, float]:
+    m = arm.fk(np.asarray(q, float))
+    t = m.translation.tolist()
+    pe = math.sqrt((t[0] - p[0]) ** 2 + (t[1] - p[1]) ** 2 + (t[2] - p[2]) ** 2)
+    re = 0.0 if rot is None else rotation_distance(m.rotation.tolist(), rot)
+    return pe, re
+
+
+def _deg(a: float) -> str:
+    return f"{math.degrees(a):.1f}\N{DEGREE SIGN}"
+
+
+# --------------------------------------------------------------------------- Meca500 closed form
+
+
+@dataclass(frozen=True, slots=True)
+class _Meca500Geometry:
+    """The dimensions the closed form needs, read from robots.meca500.geometry (and checked to fit)."""
+
+    shoulder_z: float  # J2 axis height above the base frame
+    upper_arm: float  # J2 -> J3
+    forearm_x: float  # J3 -> wrist centre, along the forearm (the J4 axis)
+    forearm_z: float  # J3 -> J4 axis, perpendicular to the forearm
+    wrist_to_flange: float  # wrist centre -> flange, along the J6 axis
+    flange: tuple[tuple[float, ...], ...]  # flange rotation in link 6
+    reach_min: float  # |J2 -> wrist centre| bounds
+    reach_max: float
+    elbow_phi: float  # angle of the J3 -> wrist vector from link 3's z axis, at q3 = 0
+
+    @classmethod
+    def from_module(cls) -> _Meca500Geometry:
+        j = _geo.JOINTS
+        axes = tuple(jt.axis for jt in j)
+        if axes != (_geo.Z, _geo.Y, _geo.Y, _geo.X, _geo.Y, _geo.X) or len(j) != 6:
+            raise RuntimeError(f"meca500 geometry changed: joint axes {axes} do not fit the closed form")
+        # the derivation assumes these offsets are zero (a planar arm on the J1 axis, a spherical wrist)
+        zero = (j[0].origin[:2], j[1].origin[:2], j[2].origin[:2], j[3].origin[:2], j[4].origin[1:], j[5].origin[1:])
+        if any(v != 0.0 for pair in zero for v in pair):
+            raise RuntimeError("meca500 geometry changed: an offset the closed form assumes zero is not")
+        fx, fz = j[4].origin[0], j[3].origin[2]
+        d = math.hypot(fx, fz)
+        l2 = j[2].origin[2]
+        return cls(
+            shoulder_z=j[0].origin[2] + j[1].origin[2],
+            upper_arm=l2,
+            forearm_x=fx,
+            forearm_z=fz,
+            wrist_to_flange=j[5].origin[0],
+            flange=quaternion_to_matrix(*_geo.FLANGE_QUAT),
+            reach_min=abs(l2 - d),
+            reach_max=l2 + d,
+            elbow_phi=math.atan2(fx, fz),
+        )
+
+
+_MECA = _Meca500Geometry.from_module()
+
+
+@dataclass(frozen=True, slots=True)
+class _Candidate:
+    q: tuple[float, ...]
+    position_error: float
+    orientation_error: float
+
+
+def _meca500_raw(p: Sequence[float], rot: Sequence[Sequence[float]], seed: Sequence[float]
+                 ) -> tuple[list[list[float]], str]:
+    """All (up to 8) joint vectors for the flange pose, limits ignored; or [] and the reason.
+
+    Derivation (link frames are parallel to the base frame at the zero pose):
+    R6 = R Rf^T is link 6's rotation; the wrist centre is c = p - w R6 x.
+    In J1's plane (u radial, h above J2), the wrist centre is
+    Ry(q2) [(0, 0, L2) + Ry(q3) (a, 0, b)], so |c|^2 = L2^2 + d^2 + 2 L2 (b c3 - a s3)
+    gives q3 (elbow up/down) and the direction of c gives q2. Then
+    Rx(q4) Ry(q5) Rx(q6) = (Rz(q1) Ry(q2 + q3))^T R6, an X-Y-X Euler triple
+    with two branches (wrist flip).
+    """
+    g = _MECA
+    f = g.flange
+    # R6 = R Rf^T: row i, column j = sum_k R[i][k] Rf[j][k]
+    r6 = [[rot[i][0] * f[jj][0] + rot[i][1] * f[jj][1] + rot[i][2] * f[jj][2] for jj in range(3)] for i in range(3)]
+    w = g.wrist_to_flange
+    cx, cy, cz = p[0] - w * r6[0][0], p[1] - w * r6[1][0], p[2] - w * r6[2][0]
+    r = math.hypot(cx, cy)
+    h = cz - g.shoulder_z
+    dist = math.hypot(r, h)
+    if dist > g.reach_max * (1 + 1e-12):
+        return [], (f"out of reach: wrist centre {dist:.4f} m from the shoulder > max {g.reach_max:.4f} m")
+    if dist < g.reach_min * (1 - 1e-12):
+        return [], (f"too close: wrist centre {dist:.4f} m from the shoulder < min {g.reach_min:.4f} m")
+    if r < SHOULDER_SINGULAR:
+        q1a = seed[0]
+        u = cx * math.cos(q1a) + cy * math.sin(q1a)
+        shoulders = ((q1a, u), (_wrap(q1a + math.pi), -u))
+    else:
+        q1a = math.atan2(cy, cx)
+        shoulders = ((q1a, r), (_wrap(q1a + math.pi), -r))
+    l2, a, b = g.upper_arm, g.forearm_x, g.forearm_z
+    d = math.hypot(a, b)
+    # b c3 - a s3 = d cos(q3 + phi) = k
+    k = (dist * dist - l2 * l2 - d * d) / (2.0 * l2)
+    t = math.acos(max(-1.0, min(1.0, k / d)))
+    elbows = (t - g.elbow_phi,) if t < 1e-12 else (t - g.elbow_phi, -t - g.elbow_phi)
+    out: list[list[float]] = []
+    for q1, u in shoulders:
+        c1, s1 = math.cos(q1), math.sin(q1)
+        # link 6 rotation expressed after J1: Rz(-q1) R6
+        m1 = [[c1 * r6[0][j] + s1 * r6[1][j] for j in range(3)],
+              [-s1 * r6[0][j] + c1 * r6[1][j] for j in range(3)],
+              r6[2]]
+        for q3r in elbows:
+            q3 = _wrap(q3r)
+            c3, s3 = math.cos(q3), math.sin(q3)
+            vx, vz = a * c3 + b * s3, l2 - a * s3 + b * c3
+            q2 = _wrap(math.atan2(vz, vx) - math.atan2(h, u))
+            th = q2 + q3
+            ct, st = math.cos(th), math.sin(th)
+            # M = Ry(th)^T m1: rows are Ry's columns dotted with m1's columns
+            m = [[ct * m1[0][j] - st * m1[2][j] for j in range(3)],
+                 m1[1],
+                 [st * m1[0][j] + ct * m1[2][j] for j in range(3)]]
+            s5 = math.hypot(m[0][1], m[0][2])
+            if s5 < WRIST_SINGULAR:
+                q4 = seed[3]
+                if m[0][0] > 0:  # q5 = 0: Rx(q4 + q6)
+                    q5 = math.atan2(s5, m[0][0])
+                    q6 = _wrap(math.atan2(m[2][1], m[1][1]) - q4)
+                else:  # q5 = pi (outside the Meca500's J5 range; kept for completeness): Rx(q4 - q6)
+                    q5 = math.pi
+                    q6 = _wrap(q4 - math.atan2(m[2][1], m[1][1]))
+                out.append([q1, q2, q3, q4, q5, q6])
+                continue
+            q5 = math.atan2(s5, m[0][0])
+            q4 = math.atan2(m[1][0], -m[2][0])
+            q6 = math.atan2(m[0][1], m[0][2])
+            out.append([q1, q2, q3, q4, q5, q6])
+            out.append([q1, q2, q3, _wrap(q4 + math.pi), -q5, _wrap(q6 + math.pi)])
+    return out, ""
+
+
+def _within_limits(arm: ArmModel, qs: list[list[float]]) -> tuple[list[list[float]], list[tuple[int, float]]]:
+    """Every in-limit version of each q (2 pi twins included); and, per rejected q, its first bad joint."""
+    lims = _limits(arm)
+    ok: list[list[float]] = []
+    bad: list[tuple[int, float]] = []
+    for q in qs:
+        out = list(q)
+        twins: list[tuple[int, float]] = []
+        for i, (lo, hi, wide) in enumerate(lims):
+            v = out[i]
+            if not lo - LIMIT_SLACK <= v <= hi + LIMIT_SLACK:
+                # the angles come wrapped into (-pi, pi]: a joint whose range leaves it may still fit 2 pi away
+                v = v + TWO_PI if v < lo else v - TWO_PI
+                if not lo - LIMIT_SLACK <= v <= hi + LIMIT_SLACK:
+                    break
+            out[i] = v = min(hi, max(lo, v))
+            if wide:
+                for t in (v - TWO_PI, v + TWO_PI):
+                    if lo - LIMIT_SLACK <= t <= hi + LIMIT_SLACK:
+                        twins.append((i, min(hi, max(lo, t))))
+        else:
+            ok.append(out)
+            if twins:  # rare: J6 at exactly +-180 deg, or a joint spanning more than a turn
+                ok.extend(_twin_combinations(out, twins))
+            continue
+        bad.append((i, q[i]))
+    return ok, bad
+
+
+def _twin_combinations(q: list[float], twins: list[tuple[int, float]]) -> list[list[float]]:
+    """Every q with some of its joints replaced by their 2 pi twins (q itself excluded)."""
+    combos = [q]
+    for i, t in twins:
+        combos += [c[:i] + [t] + c[i + 1:] for c in combos if c[i] == q[i]]
+    return combos[1:]
+
+
+def _limit_reason(arm: ArmModel, n: int, bad: list[tuple[int, float]]) -> str:
+    names = []
+    for i, v in bad:
+        s = (f"J{i + 1} at {_deg(_wrap(v))} (limits {math.degrees(arm.lower[i]):.0f}.."
+             f"{math.degrees(arm.upper[i]):.0f}\N{DEGREE SIGN})")
+        if s not in names:
+            names.append(s)
+    return f"all {n} solutions violate joint limits: " + ", ".join(names[:4]) + (" ..." if len(names) > 4 else "")
+
+
+def _meca500_candidates(arm: ArmModel, p: Sequence[float], rot: Sequence[Sequence[float]],
+                        seed: Sequence[float]) -> tuple[list[_Candidate], str]:
+    raw, reason = _meca500_raw(p, rot, seed)
+    if not raw:
+        return [], reason
+    inside, bad = _within_limits(arm, raw)
+    if not inside:
+        return [], _limit_reason(arm, len(raw), bad)
+    out: list[_Candidate] = []
+    dropped = 0
+    for q in inside:
+        pe, re = _pose_errors(arm, q, p, rot)
+        if pe > POSITION_CHECK or re > ROTATION_CHECK:
+            dropped += 1
+            continue
+        out.append(_Candidate(tuple(q), pe, re))
+    if not out:
+        return [], f"closed form: {dropped} in-limit solution(s) failed the FK check (a derivation bug)"
+    return out, ""
+
+
+def meca500_ik(arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequence[float]],
+               seed: Sequence[float] | None = None) -> list[np.ndarray]:
+    """Every in-limit Meca500 joint vector putting the flange at ``position`` with ``rotation`` (base frame).
+
+    Nearest to ``seed`` (weighted joint distance, see :func:`joint_distance`)
+    first; the seed also fixes q4 at the wrist singularity and q1 at the shoulder
+    singularity. Each one passed an FK check through ``arm``. Raises
+    :class:`Unreachable` when there is none.
+    """
+    p = [float(v) for v in position]
+    rot = np.asarray(rotation, float).tolist()
+    s = _default_seed(arm) if seed is None else [float(v) for v in seed]
+    cands, reason = _meca500_candidates(arm, p, rot, s)
+    if not cands:
+        raise Unreachable(reason)
+    cands.sort(key=lambda c: joint_distance(arm, c.q, s))
+    return [np.array(c.q) for c in cands]
+
+
+ClosedForm = Callable[[ArmModel, Sequence[float], Sequence[Sequence[float]], Sequence[float]],
+                      tuple[list[_Candidate], str]]
+
+CLOSED_FORMS: dict[str, ClosedForm] = {"meca500": _meca500_candidates}
+"""Robot type -> closed-form solver (candidates verified by FK, or [] and a reason)."""
+
+
+def nearest(arm: ArmModel, solutions: Sequence[Sequence[float]], seed: Sequence[float]) -> int:
+    """Index of the solution nearest ``seed`` in weighted joint distance."""
+    if not solutions:
+        raise ValueError("no solutions to choose from")
+    d = [joint_distance(arm, q, seed) for q in solutions]
+    return d.index(min(d))
+
+
+# --------------------------------------------------------------------------- numerical
+
+
+def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequence[float]] | None = None,
+                    seed: Sequence[float] | None = None, *, restarts: int = 8, iters: int = 80,
+                    rng_seed: int = 0, position_tol: float = 1e-9, rotation_tol: float = 1e-8,
+                    orientation_scale: float = 0.1) -> tuple[np.ndarray, float, float]:
+    """Levenberg-Marquardt IK for any arm, inside the joint limits; returns (q, position err, rotation err).
+
+    Errors are the target's position minus the flange's, and log3(R_target R^T)
+    (world frame) scaled by ``orientation_scale`` m/rad so that both count alike.
+    Steps are clamped to the limits; a joint resting on a limit that the error
+    pushes further out is frozen for that step, so the others still converge.
+    When a start stalls, the solver restarts from ``restarts`` random in-limit
+    joint vectors drawn with ``rng_seed`` (deterministic). Raises
+    :class:`Unreachable` with the best residual and the joints on limits.
+    """
+    model, data, fid = arm.model, arm.data, arm.frame_id
+    lo, hi = arm.lower, arm.upper
+    target = np.asarray(position, float)
+    rt = None if rotation is None else np.asarray(rotation, float)
+    rows = 3 if rt is None else 6
+    q0 = _default_seed(arm) if seed is None else seed
+    rng = np.random.default_rng(rng_seed)
+    starts = [np.clip(np.asarray(q0, float), lo, hi)]
+    starts += [rng.uniform(lo, hi) for _ in range(restarts)]
+    best: tuple[float, np.ndarray, float, float] | None = None
+    eye = np.eye(model.nq)
+
+    def residual(q: np.ndarray) -> tuple[np.ndarray, float, float]:
+        pin.framesForwardKinematics(model, data, q)
+        m = data.oMf[fid]
+        ep = target - m.translation
+        if rt is None:
+            return ep, float(np.linalg.norm(ep)), 0.0
+        er = pin.log3(rt @ m.rotation.T)
+        return np.concatenate([ep, orientation_scale * er]), float(np.linalg.norm(ep)), float(np.linalg.norm(er))
+
+    for q in starts:
+        q = q.copy()
+        e, pe, re = residual(q)
+        cost = float(e @ e)
+        lam = 1e-3
+        for _ in range(iters):
+            if pe <= position_tol and re <= rotation_tol:
+                return q, pe, re
+            jac = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)[:rows]
+            if rt is not None:
+                jac = jac.copy()
+                jac[3:] *= orientation_scale
+            grad = jac.T @ e
+            frozen = ((q <= lo + 1e-12) & (grad < 0)) | ((q >= hi - 1e-12) & (grad > 0))
+            if frozen.any():
+                jac = jac.copy()
+                jac[:, frozen] = 0.0
+                grad = jac.T @ e
+            jtj = jac.T @ jac
+            while True:
+                dq = np.linalg.solve(jtj + lam * (eye + np.diag(np.diag(jtj))), grad)
+                qn = np.clip(q + dq, lo, hi)
+                en, pen, ren = residual(qn)
+                cn = float(en @ en)
+                if cn < cost:
+                    q, e, pe, re, cost = qn, en, pen, ren, cn
+                    lam = max(lam / 3.0, 1e-12)
+                    break
+                lam *= 4.0
+                if lam > 1e6:
+                    break
+            if lam > 1e6:
+                break  # stalled: a local minimum or a limit; restart
+        if pe <= position_tol and re <= rotation_tol:
+            return q, pe, re
+        if best is None or cost < best[0]:
+            best = (cost, q, pe, re)
+    assert best is not None
+    _, q, pe, re = best
+    at = [f"J{i + 1} at its {'lower' if q[i] <= lo[i] + 1e-9 else 'upper'} limit {_deg(q[i])}"
+          for i in range(len(q)) if q[i] <= lo[i] + 1e-9 or q[i] >= hi[i] - 1e-9]
+    what = f"{pe:.3g} m" + ("" if rt is None else f", {re:.3g} rad")
+    raise Unreachable(f"numerical IK did not converge from {len(starts)} starts: best residual {what}"
+                      + (f" ({', '.join(at)})" if at else ""))
+
+
+# --------------------------------------------------------------------------- entry point
+
+
+def _default_seed(arm: ArmModel) -> list[float]:
+    """The zero pose clamped into the limits: what a seedless request is nearest to."""
+    return np.clip(np.zeros(arm.model.nq), arm.lower, arm.upper).tolist()
+
+
+def _vector(name: str, value: object, n: int) -> np.ndarray:
+    try:
+        v = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected {n} numbers, got {value!r}") from None
+    if v.shape != (n,):
+        raise ValueError(f"{name}: expected shape ({n},), got {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name}: not finite: {v.tolist()}")
+    return v
+
+
+def _orientation_options(arm: ArmModel, p: list[float], seed: list[float]) -> list[tuple[str, list[list[float]]]]:
+    """Flange orientations worth trying for a position-only target, in order of preference."""
+    cur = arm.fk(np.asarray(seed)).rotation.tolist()
+    phi = math.atan2(p[1], p[0]) if math.hypot(p[0], p[1]) > 1e-9 else seed[0]
+    c, s = math.cos(phi), math.sin(phi)
+    # columns: flange x, y, z. Down: z = -base z, x radially outward. Horizontal: z outward, x down.
+    down = [[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]]
+    horizontal = [[0.0, -s, c], [0.0, c, s], [-1.0, 0.0, 0.0]]
+    return [("seed", cur), ("down", down), ("horizontal", horizontal)]
+
+
+def _fix_q6(arm: ArmModel, q: tuple[float, ...], seed: list[float], p: list[float]) -> tuple[float, ...] | None:
+    """For position-only targets, J6 keeps the seed's angle: it rolls the tool about its own axis.
+
+    The flange origin lies on the J6 axis, so q6 never moves it; the FK check confirms.
+    """
+    q6 = min(arm.upper[5], max(arm.lower[5], seed[5]))
+    out = q[:5] + (float(q6),)
+    pe, _ = _pose_errors(arm, out, p, None)
+    return out if pe <= POSITION_CHECK else None
+
+
+def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] | None = None,
+          seed: Sequence[float] | None = None, *, method: str = "auto") -> IKSolution:
+    """Joint angles putting ``arm``'s flange at ``position`` (and ``quaternion``, w x y z), base frame.
+
+    ``method``: "auto" (the robot type's closed form if it has one, else
+    numerical), "closed_form" or "numerical". The result is the solution nearest
+    ``seed`` (default: the zero pose) in weighted joint distance. Without a
+    quaternion the orientation is free: the closed form tries the seed's flange
+    orientation, then the tool pointing down, then horizontal and radially
+    outward, then falls back to numerical position-only IK from the seed.
+    Raises :class:`Unreachable` (with the reason) when nothing inside the limits
+    reaches the target, ``ValueError`` for malformed input.
+    """
+    if method not in METHODS:
+        raise ValueError(f"method {method!r}: expected one of {', '.join(METHODS)}")
+    nq = arm.model.nq
+    p = _vector("position", position, 3).tolist()
+    rot: list[list[float]] | None = None
+    if quaternion is not None:
+        qv = _vector("quaternion", quaternion, 4)
+        n = float(np.linalg.norm(qv))
+        if n <= 1e-6:
+            raise ValueError(f"quaternion: norm {n:.3g} is too small to normalize")
+        rot = [list(r) for r in quaternion_to_matrix(*(qv / n).tolist())]
+    s = _default_seed(arm) if seed is None else np.clip(_vector("seed", seed, nq), arm.lower, arm.upper).tolist()
+    closed = CLOSED_FORMS.get(arm.description.name)
+    if method == "closed_form" and closed is None:
+        raise ValueError(f"robot type {arm.description.name!r} has no closed-form IK")
+    if method == "numerical" or closed is None:
+        q, pe, re = solve_numerical(arm, p, rot, s)
+        return _solution(q, "numerical", pe, re, 0)
+    if rot is not None:
+        cands, reason = closed(arm, p, rot, s)
+        if not cands:
+            raise Unreachable(reason)
+        best = cands[nearest(arm, [c.q for c in cands], s)]
+        return _solution(best.q, "closed_form", best.position_error, best.orientation_error, len(cands))
+    return _solve_position_closed(arm, closed, p, s)
+
+
+def _solve_position_closed(arm: ArmModel, closed: ClosedForm, p: list[float], s: list[float]) -> IKSolution:
+    g = _MECA
+    dist = math.hypot(math.hypot(p[0], p[1]), p[2] - g.shoulder_z)
+    far = g.reach_max + g.wrist_to_flange
+    if dist > far:
+        raise Unreachable(f"out of reach: distance to shoulder {dist:.4f} m > max {far:.4f} m")
+    reasons = []
+    for name, rot in _orientation_options(arm, p, s):
+        cands, reason = closed(arm, p, rot, s)
+        fixed = [q for q in (_fix_q6(arm, c.q, s, p) for c in cands) if q is not None]
+        if fixed:
+            q = fixed[nearest(arm, fixed, s)]
+            pe, _ = _pose_errors(arm, q, p, None)
+            return _solution(q, "closed_form", pe, 0.0, len(fixed))
+        reasons.append(f"tool {name}: {reason}")
+    try:
+        q, pe, _ = solve_numerical(arm, p, None, s)
+    except Unreachable as exc:
+        raise Unreachable(f"{exc}; closed form: " + "; ".join(reasons)) from None
+    return _solution(q, "numerical", pe, 0.0, 0)
+
+
+def _solution(q: Sequence[float], solver: str, pe: float, re: float, n: int) -> IKSolution:
+    arr = np.array(q, dtype=float)
+    arr.flags.writeable = False
+    return IKSolution(arr, solver, float(pe), float(re), n)
