@@ -413,7 +413,7 @@ def nearest(arm: ArmModel, solutions: Sequence[Sequence[float]], seed: Sequence[
 
 
 def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequence[float]] | None = None,
-                    seed: Sequence[float] | None = None, *, restarts: int = 8, iters: int = 80,
+                    seed: Sequence[float] | None = None, *, restarts: int = 24, iters: int = 80,
                     rng_seed: int = 0, position_tol: float = 1e-9, rotation_tol: float = 1e-8,
                     orientation_scale: float = 0.1) -> tuple[np.ndarray, float, float]:
     """Levenberg-Marquardt IK for any arm, inside the joint limits; returns (q, position err, rotation err).
@@ -452,13 +452,18 @@ def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence
         e, pe, re = residual(q)
         cost = float(e @ e)
         lam = 1e-3
-        for _ in range(iters):
+        for it in range(iters):
             if pe <= position_tol and re <= rotation_tol:
                 return q, pe, re
+            if it % 10 == 0:
+                if it and cost > 0.5 * checkpoint:
+                    break  # crawling (a limit, a local minimum): a fresh start is cheaper
+                checkpoint = cost
             jac = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)[:rows]
             if rt is not None:
+                # e_r = log3(R_t R^T); turning the flange by w (world) changes it by -Jlog3(R_t R^T) w
                 jac = jac.copy()
-                jac[3:] *= orientation_scale
+                jac[3:] = orientation_scale * (pin.Jlog3(rt @ data.oMf[fid].rotation.T) @ jac[3:])
             grad = jac.T @ e
             frozen = ((q <= lo + 1e-12) & (grad < 0)) | ((q >= hi - 1e-12) & (grad > 0))
             if frozen.any():
@@ -540,6 +545,23 @@ def _fix_q6(arm: ArmModel, q: tuple[float, ...], seed: list[float], p: list[floa
     return out if pe <= POSITION_CHECK else None
 
 
+def _refuse_base_column(arm: ArmModel, p: list[float]) -> None:
+    """A flange target inside the base column (``base_radius``, up to J1's frame) is refused up front.
+
+    Kinematics alone would fold the arm over its own base to get there (the
+    Meca500 reaches (0, 0, 0.05) with J2 at 90 deg); this is not collision
+    checking, only the one keep-out every target request can be tested against.
+    """
+    radius = arm.description.base_radius
+    if radius <= 0.0:
+        return
+    top = float(arm.model.jointPlacements[1].translation[2])
+    r = math.hypot(p[0], p[1])
+    if r < radius and p[2] < top:
+        raise Unreachable(f"inside the base column: {r:.3f} m from its axis < radius {radius:.3f} m, "
+                          f"{p[2]:.3f} m high < top {top:.3f} m")
+
+
 def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] | None = None,
           seed: Sequence[float] | None = None, *, method: str = "auto") -> IKSolution:
     """Joint angles putting ``arm``'s flange at ``position`` (and ``quaternion``, w x y z), base frame.
@@ -568,6 +590,7 @@ def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] 
         s = _default_seed(arm)
     else:  # a seed is a hint (often a measured state a hair past a limit): clamp it, don't refuse it
         s = [min(hi, max(lo, v)) for v, (lo, hi, _) in zip(_vector("seed", seed, nq), _constants(arm).limits)]
+    _refuse_base_column(arm, p)
     closed = CLOSED_FORMS.get(arm.description.name)
     if method == "closed_form" and closed is None:
         raise ValueError(f"robot type {arm.description.name!r} has no closed-form IK")
