@@ -508,6 +508,8 @@ def _default_seed(arm: ArmModel) -> list[float]:
 
 def _vector(name: str, value: object, n: int) -> list[float]:
     """``value`` as ``n`` finite floats, or ValueError. Plain lists: this runs on every solve."""
+    if isinstance(value, (str, bytes)):
+        raise ValueError(f"{name}: expected {n} numbers, got {value!r}")
     if isinstance(value, np.ndarray):
         if value.shape != (n,):
             raise ValueError(f"{name}: expected shape ({n},), got {value.shape}")
