@@ -547,6 +547,17 @@ def _fix_q6(arm: ArmModel, q: tuple[float, ...], seed: list[float], p: list[floa
     return out if pe <= POSITION_CHECK else None
 
 
+def _base_column(arm: ArmModel) -> tuple[float, float]:
+    """(radius, top height) of the base column: ``base_radius`` up to J1's frame; radius 0 when none."""
+    return arm.description.base_radius, float(arm.model.jointPlacements[1].translation[2])
+
+
+def in_base_column(arm: ArmModel, position: Sequence[float]) -> bool:
+    """Whether a flange position lies inside the base column, which :func:`solve` refuses."""
+    radius, top = _base_column(arm)
+    return math.hypot(position[0], position[1]) < radius and position[2] < top
+
+
 def _refuse_base_column(arm: ArmModel, p: list[float]) -> None:
     """A flange target inside the base column (``base_radius``, up to J1's frame) is refused up front.
 
@@ -554,14 +565,10 @@ def _refuse_base_column(arm: ArmModel, p: list[float]) -> None:
     Meca500 reaches (0, 0, 0.05) with J2 at 90 deg); this is not collision
     checking, only the one keep-out every target request can be tested against.
     """
-    radius = arm.description.base_radius
-    if radius <= 0.0:
-        return
-    top = float(arm.model.jointPlacements[1].translation[2])
-    r = math.hypot(p[0], p[1])
-    if r < radius and p[2] < top:
-        raise Unreachable(f"inside the base column: {r:.3f} m from its axis < radius {radius:.3f} m, "
-                          f"{p[2]:.3f} m high < top {top:.3f} m")
+    if in_base_column(arm, p):
+        radius, top = _base_column(arm)
+        raise Unreachable(f"inside the base column: {math.hypot(p[0], p[1]):.3f} m from its axis < radius "
+                          f"{radius:.3f} m, {p[2]:.3f} m high < top {top:.3f} m")
 
 
 def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] | None = None,

@@ -15,7 +15,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from compute_peer.kinematics import ArmModel, IKSolution, Unreachable, meca500_ik, solve
+from compute_peer.kinematics import ArmModel, IKSolution, Unreachable, in_base_column, meca500_ik, solve
 from compute_peer.kinematics import ik as ik_module
 
 
@@ -30,7 +30,7 @@ def _quat(m: pin.SE3) -> list[float]:
 
 
 def _in_column(arm, p) -> bool:
-    return math.hypot(p[0], p[1]) < arm.description.base_radius and p[2] < 0.09
+    return in_base_column(arm, p)
 
 
 def _rot_err(a: np.ndarray, b: np.ndarray) -> float:
@@ -193,8 +193,9 @@ def test_unreachable_targets_are_refused_with_reasons(arm):
     with pytest.raises(Unreachable, match=r"out of reach"):
         solve(arm, [0.0, 0.5, 0.3], [1.0, 0.0, 0.0, 0.0], method="closed_form")
     for method in ("auto", "numerical"):
-        with pytest.raises(Unreachable, match="inside the base column"):
+        with pytest.raises(Unreachable, match=r"inside the base column: 0\.010 m from its axis < radius 0\.060 m"):
             solve(arm, [0.01, 0.0, 0.05], method=method)
+    assert in_base_column(arm, [0.0, 0.05, 0.0]) and not in_base_column(arm, [0.0, 0.05, 0.1])
     # within reach, impossible orientation: the tool pointing straight up just over the base
     with pytest.raises(Unreachable, match=r"all 8 solutions violate joint limits: J5 at 146\.7° \(limits -115\.\.115°\)"):
         solve(arm, [0.1, 0.0, 0.1], [1.0, 0.0, 0.0, 0.0])

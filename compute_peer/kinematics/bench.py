@@ -1,0 +1,157 @@
+"""``robofabric bench ik``: how long :func:`~compute_peer.kinematics.ik.solve` takes on the Meca500.
+
+In this process, no network. Targets are FK of seeded random in-limit joint
+vectors (so every one is reachable), skipping those whose flange lands inside
+the base column, which ``solve`` refuses by design. Three workloads, each timed
+around ``solve`` alone (input checks, solving, the FK check, choosing):
+
+- closed form, full pose: seed an unrelated random joint vector;
+- closed form, position only: the same; falls back to numerical when the
+  three preferred orientations all fail (counted in ``numerical_fallback``);
+- numerical (Levenberg-Marquardt), full pose: half the seeds near the answer
+  (+ N(0, 0.3 rad) per joint, like tracking a moving target), half anywhere.
+
+A refusal counts against the success rate, not the times.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Annotated
+
+import numpy as np
+import pinocchio as pin
+import typer
+
+from .ik import in_base_column, solve
+from .model import ArmModel, Unreachable
+
+ROBOT = "meca500"
+
+
+def _stats(times: list[float], ok: int, n: int) -> dict:
+    us = [t * 1e6 for t in times]
+    return {
+        "n": n,
+        "success": ok / n if n else math.nan,
+        "median_us": float(np.median(us)) if us else math.nan,
+        "p99_us": float(np.percentile(us, 99)) if us else math.nan,
+    }
+
+
+def _targets(arm: ArmModel, n: int, rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray, list[float]]]:
+    """``n`` reachable flange targets: (joint vector, position, quaternion w x y z)."""
+    out = []
+    while len(out) < n:
+        q = rng.uniform(arm.lower, arm.upper)
+        m = arm.fk(q)
+        p = m.translation.copy()
+        if in_base_column(arm, p):
+            continue
+        quat = pin.Quaternion(m.rotation)
+        out.append((q, p, [quat.w, quat.x, quat.y, quat.z]))
+    return out
+
+
+def measure_solve(n: int = 2000, seed: int = 0) -> dict:
+    """Median and p99 (us) and success rates of ``solve`` for the three workloads, ``n`` targets each."""
+    if n < 1:
+        raise ValueError("n must be >= 1")
+    arm = ArmModel(ROBOT)
+    rng = np.random.default_rng(seed)
+    targets = _targets(arm, n, rng)
+    seeds = [rng.uniform(arm.lower, arm.upper) for _ in range(n)]
+    result: dict = {"robot": ROBOT, "n": n, "seed": seed}
+
+    times, ok = [], 0
+    for (_, p, quat), s in zip(targets, seeds):
+        t0 = time.perf_counter()
+        try:
+            solve(arm, p, quat, s)
+        except Unreachable:
+            continue
+        times.append(time.perf_counter() - t0)
+        ok += 1
+    result["closed_form"] = _stats(times, ok, n)
+
+    times, ok, fallback = [], 0, 0
+    for (_, p, _), s in zip(targets, seeds):
+        t0 = time.perf_counter()
+        try:
+            sol = solve(arm, p, None, s)
+        except Unreachable:
+            continue
+        times.append(time.perf_counter() - t0)
+        ok += 1
+        fallback += sol.solver == "numerical"
+    result["closed_form_position"] = _stats(times, ok, n) | {"numerical_fallback": fallback}
+
+    times, ok = [], 0
+    for i, ((q, p, quat), s) in enumerate(zip(targets, seeds)):
+        start = np.clip(q + rng.normal(0.0, 0.3, q.shape), arm.lower, arm.upper) if i % 2 == 0 else s
+        t0 = time.perf_counter()
+        try:
+            solve(arm, p, quat, start, method="numerical")
+        except Unreachable:
+            continue
+        times.append(time.perf_counter() - t0)
+        ok += 1
+    result["numerical"] = _stats(times, ok, n)
+    return result
+
+
+ROWS = (
+    ("closed_form", "closed form, full pose"),
+    ("closed_form_position", "closed form, position only"),
+    ("numerical", "numerical (LM), full pose"),
+)
+
+
+def format_table(result: dict) -> str:
+    """The result as a markdown table (for docs/benchmarks/kinematics.md)."""
+    lines = [
+        "| solver | targets | success | median (us) | p99 (us) |",
+        "|---|---|---|---|---|",
+    ]
+    for key, label in ROWS:
+        r = result[key]
+        extra = f" ({r['numerical_fallback']} via numerical)" if "numerical_fallback" in r else ""
+        lines.append(f"| {label} | {r['n']} | {100 * r['success']:.2f}%{extra} | {r['median_us']:.1f} | {r['p99_us']:.1f} |")
+    return "\n".join(lines)
+
+
+def register_bench(bench_app: typer.Typer | None = None) -> None:
+    """Add ``ik`` to ``robofabric bench`` (idempotent); ``bench_app`` defaults to fabric's."""
+    if bench_app is None:
+        from fabric.cli_common import bench_app as default
+
+        bench_app = default
+    if any(c.name == "ik" for c in bench_app.registered_commands):
+        return
+
+    @bench_app.command("ik")
+    def ik(
+        n: Annotated[int, typer.Option("--n", help="Random reachable targets per workload.")] = 2000,
+        seed: Annotated[int, typer.Option(help="Seed of the targets and IK seeds.")] = 0,
+    ) -> None:
+        """Meca500 IK solve times: closed form (full pose, position only) and numerical."""
+        from rich.console import Console
+        from rich.table import Table
+
+        from fabric.cli_common import UserError
+
+        if n < 1:
+            raise UserError("--n must be >= 1")
+        result = measure_solve(n, seed)
+        table = Table(title=f"IK solve, {ROBOT}, {n} targets per row (seed {seed})")
+        for col in ("solver", "success", "median (us)", "p99 (us)"):
+            table.add_column(col, justify="left" if col == "solver" else "right")
+        for key, label in ROWS:
+            r = result[key]
+            extra = f" ({r['numerical_fallback']} numerical)" if "numerical_fallback" in r else ""
+            table.add_row(label, f"{100 * r['success']:.2f}%{extra}", f"{r['median_us']:.1f}", f"{r['p99_us']:.1f}")
+        Console().print(table)
+
+
+register = register_bench
