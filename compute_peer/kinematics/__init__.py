@@ -6,7 +6,13 @@ instead of returning a silent best effort; :func:`solve` is the IK entry point
 (the Meca500's closed form, or Levenberg-Marquardt for any arm).
 """
 
-from compute_peer.kinematics.ik import IKSolution, in_base_column, meca500_ik, solve, solve_numerical
+from compute_peer.kinematics.ik import (
+    IKSolution,
+    in_base_column,
+    meca500_ik,
+    solve,
+    solve_numerical,
+)
 from compute_peer.kinematics.model import ArmModel, Unreachable
 
 __all__ = ["ArmModel", "IKSolution", "Unreachable", "in_base_column", "meca500_ik", "solve", "solve_numerical"]

@@ -69,19 +69,6 @@ def quaternion_to_matrix(w: float, x: float, y: float, z: float) -> tuple[tuple[
     )
 
 
-def rotation_distance(a: Sequence[Sequence[float]], b: Sequence[Sequence[float]]) -> float:
-    """Angle (rad) between two rotations, from the Frobenius norm of their difference.
-
-    ``acos((trace - 1) / 2)`` cannot resolve angles below ~1e-8 rad (1 - cos is
-    under machine epsilon there); ``|A - B|_F = 2 sqrt(2) sin(angle / 2)`` can.
-    """
-    s = 0.0
-    for ra, rb in zip(a, b):
-        for u, v in zip(ra, rb):
-            s += (u - v) * (u - v)
-    return 2.0 * math.asin(min(1.0, math.sqrt(s) / (2.0 * math.sqrt(2.0))))
-
-
 def _wrap(a: float) -> float:
     """Angle in (-pi, pi]."""
     a = math.fmod(a, TWO_PI)
@@ -138,6 +125,7 @@ def _pose_errors(arm: ArmModel, q: Sequence[float], p: Sequence[float],
     pe = math.sqrt((t[0] - p[0]) ** 2 + (t[1] - p[1]) ** 2 + (t[2] - p[2]) ** 2)
     if rot is None:
         return pe, 0.0
+    # angle from |A - B|_F = 2 sqrt(2) sin(angle / 2): acos((trace - 1) / 2) cannot resolve angles below ~1e-8 rad
     (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = m.rotation.tolist()
     (x0, x1, x2), (y0, y1, y2), (z0, z1, z2) = rot
     s = ((a0 - x0) ** 2 + (a1 - x1) ** 2 + (a2 - x2) ** 2 + (b0 - y0) ** 2 + (b1 - y1) ** 2
@@ -210,7 +198,7 @@ def _fit(v: float, lim: tuple[float, float, bool]) -> float | None:
     elif v > hi + LIMIT_SLACK:
         v -= TWO_PI
     if lo - LIMIT_SLACK <= v <= hi + LIMIT_SLACK:
-        return hi if v > hi else lo if v < lo else v
+        return min(hi, max(lo, v))
     return None
 
 
@@ -393,11 +381,26 @@ def meca500_ik(arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequ
     return [np.array(c.q) for c in cands]
 
 
-ClosedForm = Callable[[ArmModel, Sequence[float], Sequence[Sequence[float]], Sequence[float]],
-                      tuple[list[_Candidate], str]]
+@dataclass(frozen=True, slots=True)
+class ClosedForm:
+    """A robot type's closed-form IK, and what position-only solving needs to know about the arm."""
 
-CLOSED_FORMS: dict[str, ClosedForm] = {"meca500": _meca500_candidates}
-"""Robot type -> closed-form solver (candidates verified by FK, or [] and a reason)."""
+    candidates: Callable[[ArmModel, Sequence[float], Sequence[Sequence[float]], Sequence[float]],
+                         tuple[list[_Candidate], str]]
+    """(arm, position, rotation, seed) -> FK-checked in-limit candidates, or [] and the reason."""
+    shoulder: tuple[float, float, float]
+    """Every reachable flange position lies within ``reach`` of this point (base frame)."""
+    reach: float
+    roll_joint: int | None
+    """A joint that only rolls the flange about its own z axis (the flange origin is on its axis): with the
+    orientation free it keeps the seed's angle, since it cannot move the flange."""
+
+
+CLOSED_FORMS: dict[str, ClosedForm] = {
+    "meca500": ClosedForm(_meca500_candidates, (0.0, 0.0, _MECA.shoulder_z),
+                          _MECA.reach_max + _MECA.wrist_to_flange, roll_joint=5),
+}
+"""Robot type -> closed-form solver; :func:`solve` uses it for method "auto" and "closed_form"."""
 
 
 def nearest(arm: ArmModel, solutions: Sequence[Sequence[float]], seed: Sequence[float]) -> int:
@@ -451,13 +454,13 @@ def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence
     for q in starts:
         q = q.copy()
         e, pe, re = residual(q)
-        cost = float(e @ e)
+        cost = checkpoint = float(e @ e)
         lam = 1e-3
         for it in range(iters):
             if pe <= position_tol and re <= rotation_tol:
                 return q, pe, re
-            if it % 10 == 0:
-                if it and cost > 0.5 * checkpoint:
+            if it and it % 10 == 0:
+                if cost > 0.5 * checkpoint:
                     break  # crawling (a limit, a local minimum): a fresh start is cheaper
                 checkpoint = cost
             jac = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)[:rows]
@@ -510,7 +513,7 @@ def _default_seed(arm: ArmModel) -> list[float]:
 def _vector(name: str, value: object, n: int) -> list[float]:
     """``value`` as ``n`` finite floats, or ValueError. Plain lists: this runs on every solve."""
     if isinstance(value, (str, bytes)):
-        raise ValueError(f"{name}: expected {n} numbers, got {value!r}")
+        raise ValueError(f"{name}: expected {n} numbers, got {value!r}")  # noqa: TRY004 (the contract: ValueError)
     if isinstance(value, np.ndarray):
         if value.shape != (n,):
             raise ValueError(f"{name}: expected shape ({n},), got {value.shape}")
@@ -537,15 +540,14 @@ def _orientation_options(arm: ArmModel, p: list[float], seed: list[float]) -> li
     return [("seed", cur), ("down", down), ("horizontal", horizontal)]
 
 
-def _fix_q6(arm: ArmModel, q: tuple[float, ...], seed: list[float], p: list[float]) -> tuple[float, ...] | None:
-    """For position-only targets, J6 keeps the seed's angle: it rolls the tool about its own axis.
-
-    The flange origin lies on the J6 axis, so q6 never moves it; the FK check confirms.
-    """
-    q6 = min(arm.upper[5], max(arm.lower[5], seed[5]))
-    out = q[:5] + (float(q6),)
-    pe, _ = _pose_errors(arm, out, p, None)
-    return out if pe <= POSITION_CHECK else None
+def _keep_roll(arm: ArmModel, q: tuple[float, ...], joint: int | None, seed: list[float],
+               p: list[float]) -> tuple[tuple[float, ...], float] | None:
+    """``q`` with the roll joint at the seed's angle, and its position error (FK); None if FK disagrees."""
+    if joint is not None:
+        v = min(arm.upper[joint], max(arm.lower[joint], seed[joint]))
+        q = q[:joint] + (float(v),) + q[joint + 1:]
+    pe, _ = _pose_errors(arm, q, p, None)
+    return (q, pe) if pe <= POSITION_CHECK else None
 
 
 def _base_column(arm: ArmModel) -> tuple[float, float]:
@@ -608,7 +610,7 @@ def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] 
         q, pe, re = solve_numerical(arm, p, rot, s)
         return _solution(q, "numerical", pe, re, 0)
     if rot is not None:
-        cands, reason = closed(arm, p, rot, s)
+        cands, reason = closed.candidates(arm, p, rot, s)
         if not cands:
             raise Unreachable(reason)
         best = cands[nearest(arm, [c.q for c in cands], s)]
@@ -617,20 +619,19 @@ def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] 
 
 
 def _solve_position_closed(arm: ArmModel, closed: ClosedForm, p: list[float], s: list[float]) -> IKSolution:
-    g = _MECA
-    dist = math.hypot(math.hypot(p[0], p[1]), p[2] - g.shoulder_z)
-    far = g.reach_max + g.wrist_to_flange
-    if dist > far:
-        raise Unreachable(f"out of reach: distance to shoulder {dist:.4f} m > max {far:.4f} m")
+    dist = math.dist(p, closed.shoulder)
+    if dist > closed.reach:
+        raise Unreachable(f"out of reach: distance to shoulder {dist:.4f} m > max {closed.reach:.4f} m")
     reasons = []
     for name, rot in _orientation_options(arm, p, s):
-        cands, reason = closed(arm, p, rot, s)
-        fixed = [q for q in (_fix_q6(arm, c.q, s, p) for c in cands) if q is not None]
-        if fixed:
-            q = fixed[nearest(arm, fixed, s)]
-            pe, _ = _pose_errors(arm, q, p, None)
-            return _solution(q, "closed_form", pe, 0.0, len(fixed))
-        reasons.append(f"tool {name}: {reason}")
+        cands, reason = closed.candidates(arm, p, rot, s)
+        # twins that differed only in the roll joint become one
+        kept = {k[0]: k[1] for k in (_keep_roll(arm, c.q, closed.roll_joint, s, p) for c in cands) if k is not None}
+        if kept:
+            qs = list(kept)
+            q = qs[nearest(arm, qs, s)]
+            return _solution(q, "closed_form", kept[q], 0.0, len(qs))
+        reasons.append(f"tool {name}: {reason or 'the FK check failed'}")
     try:
         q, pe, _ = solve_numerical(arm, p, None, s)
     except Unreachable as exc:

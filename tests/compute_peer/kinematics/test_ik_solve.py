@@ -15,7 +15,14 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from compute_peer.kinematics import ArmModel, IKSolution, Unreachable, in_base_column, meca500_ik, solve
+from compute_peer.kinematics import (
+    ArmModel,
+    IKSolution,
+    Unreachable,
+    in_base_column,
+    meca500_ik,
+    solve,
+)
 from compute_peer.kinematics import ik as ik_module
 
 
