@@ -14,6 +14,9 @@ allows them (J6 spans +-180 deg). Every dimension comes from
 :mod:`robots.meca500.geometry`, and every returned solution is checked by forward
 kinematics through Pinocchio, which catches a derivation slip instead of
 returning a wrong pose.
+
+Targets inside the base column (the description's ``base_radius``, up to J1)
+are refused for every method: kinematics alone would fold the arm over its base.
 """
 
 from __future__ import annotations
@@ -371,6 +374,8 @@ def meca500_ik(arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequ
     singularity. Each one passed an FK check through ``arm``. Raises
     :class:`Unreachable` when there is none.
     """
+    if arm.description.name != _geo.NAME:
+        raise ValueError(f"meca500_ik: arm is a {arm.description.name!r}, not a {_geo.NAME!r}")
     p = [float(v) for v in position]
     rot = np.asarray(rotation, float).tolist()
     s = _default_seed(arm) if seed is None else [float(v) for v in seed]
@@ -397,7 +402,7 @@ class ClosedForm:
 
 
 CLOSED_FORMS: dict[str, ClosedForm] = {
-    "meca500": ClosedForm(_meca500_candidates, (0.0, 0.0, _MECA.shoulder_z),
+    _geo.NAME: ClosedForm(_meca500_candidates, (0.0, 0.0, _MECA.shoulder_z),
                           _MECA.reach_max + _MECA.wrist_to_flange, roll_joint=5),
 }
 """Robot type -> closed-form solver; :func:`solve` uses it for method "auto" and "closed_form"."""
@@ -583,8 +588,9 @@ def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] 
     ``seed`` (default: the zero pose) in weighted joint distance. Without a
     quaternion the orientation is free: the closed form tries the seed's flange
     orientation, then the tool pointing down, then horizontal and radially
-    outward, then falls back to numerical position-only IK from the seed.
-    Raises :class:`Unreachable` (with the reason) when nothing inside the limits
+    outward, then falls back to numerical position-only IK from the seed; the
+    closed form keeps the roll joint (J6) at the seed's angle, as it cannot move
+    the flange. Raises :class:`Unreachable` (with the reason) when nothing inside the limits
     reaches the target, ``ValueError`` for malformed input.
     """
     if method not in METHODS:
