@@ -80,13 +80,8 @@ def compute(
 
 def register(app: typer.Typer) -> None:
     app.command("compute")(compute)
+    from compute_peer.kinematics.bench import register_bench as register_ik_bench
     from compute_peer.navigation.bench import register_bench as register_nav_bench
 
+    register_ik_bench()
     register_nav_bench()
-    try:
-        from compute_peer.kinematics.bench import register_bench as register_ik_bench
-    except ImportError:  # written alongside; absent in partial installs
-        return
-    from fabric.cli_common import bench_app
-
-    register_ik_bench(bench_app)

@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Annotated
+from pathlib import Path
+from typing import Annotated, Optional
 
 import numpy as np
 import pinocchio as pin
@@ -40,7 +41,7 @@ def _stats(times: list[float], ok: int, n: int) -> dict:
     }
 
 
-def _targets(arm: ArmModel, n: int, rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray, list[float]]]:
+def reachable_targets(arm: ArmModel, n: int, rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray, list[float]]]:
     """``n`` reachable flange targets: (joint vector, position, quaternion w x y z)."""
     out = []
     while len(out) < n:
@@ -60,7 +61,7 @@ def measure_solve(n: int = 2000, seed: int = 0) -> dict:
         raise ValueError("n must be >= 1")
     arm = ArmModel(ROBOT)
     rng = np.random.default_rng(seed)
-    targets = _targets(arm, n, rng)
+    targets = reachable_targets(arm, n, rng)
     seeds = [rng.uniform(arm.lower, arm.upper) for _ in range(n)]
     result: dict = {"robot": ROBOT, "n": n, "seed": seed}
 
@@ -134,8 +135,13 @@ def register_bench(bench_app: typer.Typer | None = None) -> None:
     def ik(
         n: Annotated[int, typer.Option("--n", help="Random reachable targets per workload.")] = 2000,
         seed: Annotated[int, typer.Option(help="Seed of the targets and IK seeds.")] = 0,
+        queries: Annotated[int, typer.Option(help="IK/FK queries for the round trip through a router (0: skip it).")] = 1000,
+        out: Annotated[Optional[Path], typer.Option(help="Append the markdown tables to this file.")] = None,
     ) -> None:
-        """Meca500 IK solve times: closed form (full pose, position only) and numerical."""
+        """Meca500 IK solve times (closed form full pose / position only, numerical) and the query round trip.
+
+        The round trip runs a `robofabric compute` process behind a router hosted here, as on a LAN.
+        """
         from rich.console import Console
         from rich.table import Table
 
@@ -152,6 +158,22 @@ def register_bench(bench_app: typer.Typer | None = None) -> None:
             extra = f" ({r['numerical_fallback']} numerical)" if "numerical_fallback" in r else ""
             table.add_row(label, f"{100 * r['success']:.2f}%{extra}", f"{r['median_us']:.1f}", f"{r['p99_us']:.1f}")
         Console().print(table)
+        md = [f"IK solve, {ROBOT}, {n} targets per row (seed {seed}):", "", format_table(result)]
+        if queries > 0:
+            from .bench_query import measure_query
+
+            rt = measure_query(queries, seed)
+            qt = Table(title=f"query round trip through a router, compute peer in its own process ({queries} each)")
+            for col in ("query", "p50 (ms)", "p99 (ms)", "max (ms)"):
+                qt.add_column(col, justify="left" if col == "query" else "right")
+            md += ["", "| query | p50 (ms) | p99 (ms) | max (ms) |", "|---|---|---|---|"]
+            for name, r in rt.items():
+                qt.add_row(name, f"{r['p50_ms']:.3f}", f"{r['p99_ms']:.3f}", f"{r['max_ms']:.3f}")
+                md.append(f"| {name} | {r['p50_ms']:.3f} | {r['p99_ms']:.3f} | {r['max_ms']:.3f} |")
+            Console().print(qt)
+        if out is not None:
+            with open(out, "a", encoding="utf-8") as fh:
+                fh.write("\n".join(md) + "\n\n")
 
 
 register = register_bench

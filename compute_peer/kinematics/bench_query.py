@@ -25,8 +25,7 @@ def _percentiles(samples: list[float]) -> dict[str, float]:
 
 def measure_query(n: int = 1000, seed: int = 0, warmup: int = 50) -> dict[str, dict[str, float]]:
     """Median and p99 (ms) of IK (full pose and position only) and FK queries to a compute peer process."""
-    import pinocchio as pin
-
+    from compute_peer.kinematics.bench import reachable_targets
     from compute_peer.kinematics.model import ArmModel
     from compute_peer.messages import FKRequest, IKRequest
     from fabric import keys
@@ -35,14 +34,8 @@ def measure_query(n: int = 1000, seed: int = 0, warmup: int = 50) -> dict[str, d
 
     world = f"bench{uuid.uuid4().hex[:6]}"
     port = free_port()
-    arm = ArmModel("meca500")
     rng = np.random.default_rng(seed)
-    qs = rng.uniform(arm.lower, arm.upper, size=(n + warmup, 6))
-    targets = []
-    for q in qs:
-        m = arm.fk(q)
-        x, y, z, w = pin.Quaternion(m.rotation).coeffs()
-        targets.append((m.translation.copy(), np.array([w, x, y, z]), q))
+    targets = reachable_targets(ArmModel("meca500"), n + warmup, rng)
     argv = robofabric_cmd("compute", "--no-navigation", "--arm", "arm1:meca500", "--world", world, "--connect", f"tcp/127.0.0.1:{port}")
     with Fabric(router_config(world, port), kind="router", peer_id="router") as router:
         proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
@@ -52,7 +45,7 @@ def measure_query(n: int = 1000, seed: int = 0, warmup: int = 50) -> dict[str, d
                 ik_key, fk_key = keys.srv(world, "ik", "arm1"), keys.srv(world, "fk", "arm1")
                 wait_until(lambda: _answers(fab, fk_key), timeout=30, what="compute peer answering")
                 out: dict[str, list[float]] = {"ik_pose": [], "ik_position": [], "fk": []}
-                for i, (p, quat, q) in enumerate(targets):
+                for i, (q, p, quat) in enumerate(targets):
                     seed_q = q + rng.normal(0.0, 0.05, 6)
                     for name, key, req in (
                         ("ik_pose", ik_key, IKRequest.make(p, quat, seed_q, frame="base")),

@@ -26,8 +26,9 @@ def test_bench_ik_command():
     app = typer.Typer()
     app.add_typer(bench, name="bench")
     runner = CliRunner()
-    res = runner.invoke(app, ["bench", "ik", "--n", "5"])
+    res = runner.invoke(app, ["bench", "ik", "--n", "5", "--queries", "20"])
     assert res.exit_code == 0, res.output
     assert "closed form, full pose" in res.output and "numerical (LM)" in res.output
+    assert "query round trip" in res.output and "ik_pose" in res.output
     res = runner.invoke(app, ["bench", "ik", "--n", "0"])
     assert res.exit_code != 0
