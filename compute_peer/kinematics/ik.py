@@ -542,7 +542,24 @@ def _orientation_options(arm: ArmModel, p: list[float], seed: list[float]) -> li
     # columns: flange x, y, z. Down: z = -base z, x radially outward. Horizontal: z outward, x down.
     down = [[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]]
     horizontal = [[0.0, -s, c], [0.0, c, s], [-1.0, 0.0, 0.0]]
-    return [("seed", cur), ("down", down), ("horizontal", horizontal)]
+    options = [("seed", cur), ("down", down), ("horizontal", horizontal)]
+    # then the tool tilted in and around the radial plane: cheap closed-form tries before the numerical solver
+    for elevation, azimuth in TILTS:
+        options.append((f"tilted {elevation:+.0f}/{azimuth:+.0f} deg", _tool_frame(phi + math.radians(azimuth), math.radians(elevation))))
+    return options
+
+
+TILTS = ((-45.0, 0.0), (45.0, 0.0), (-60.0, 45.0), (-60.0, -45.0), (0.0, 60.0), (0.0, -60.0), (70.0, 0.0), (-20.0, 0.0))
+"""(elevation, azimuth from radial) of the extra tool directions tried for position-only targets, in degrees."""
+
+
+def _tool_frame(azimuth: float, elevation: float) -> list[list[float]]:
+    """A flange rotation whose z (the tool) points at ``azimuth`` / ``elevation``; x in the vertical plane."""
+    ca, sa, ce, se = math.cos(azimuth), math.sin(azimuth), math.cos(elevation), math.sin(elevation)
+    z = (ce * ca, ce * sa, se)
+    x = (se * ca, se * sa, -ce)  # perpendicular to z, pointing down-ish like Mecademic's convention
+    y = (z[1] * x[2] - z[2] * x[1], z[2] * x[0] - z[0] * x[2], z[0] * x[1] - z[1] * x[0])
+    return [[x[0], y[0], z[0]], [x[1], y[1], z[1]], [x[2], y[2], z[2]]]
 
 
 def _keep_roll(arm: ArmModel, q: tuple[float, ...], joint: int | None, seed: list[float],
