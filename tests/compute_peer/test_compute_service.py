@@ -65,6 +65,15 @@ def test_jacobian_twist_and_speeds(served, world):
     assert svc.counters["jacobian"] == 1
 
 
+def _answers(fab, key, request) -> bool:
+    """Whether ``key`` is served yet (a queryable declared on another session reaches the router a moment later)."""
+    try:
+        fab.call(key, request, timeout=1.0)
+        return True
+    except ServiceError:
+        return False
+
+
 def _refusal(user, key, payload) -> str:
     with pytest.raises(ServiceError) as err:
         if isinstance(payload, bytes):
@@ -100,6 +109,7 @@ def test_a_chosen_peer_answers_on_its_own_key(world, connect):
     ]
     user = connect("user", "bob")
     try:
+        wait_until(lambda: all(_answers(user, keys.srv(world, "fk", "arm1", pid), FKRequest(Q)) for pid in ("c1", "c2")), what="both peers")
         fk = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
         everyone = user.query(keys.srv(world, "ik", "arm1"), IKRequest.make(fk.position, fk.quaternion, Q), all_replies=True, timeout=5.0)
         assert sorted(r.source for r in everyone) == ["c1", "c2"]
@@ -170,7 +180,8 @@ def test_a_user_can_pick_a_compute_peer(world, router, connect):
     svcs = {pid: KinematicsService(connect("compute", pid), arms={"arm1": ArmPlacement("meca500", BASE)}, discover=False) for pid in ("c1", "c2")}
     try:
         with World(client_config(world, router[1]), "carol", compute="c2") as w:
-            assert w.compute_peers() == ["c1", "c2"]
+            wait_until(lambda: w.compute_peers() == ["c1", "c2"], what="both compute peers' tokens", seen=w.compute_peers)
+            wait_until(lambda: _answers(w.fabric, keys.srv(world, "fk", "arm1", "c2"), FKRequest(Q)), what="c2 serving")
             fk = w.fabric.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
             for _ in range(3):
                 q = services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=w.compute)
@@ -188,6 +199,7 @@ def test_navigation_answers_on_its_own_key_too(world, connect):
     navs = [NavigationService(connect("compute", pid), discover=False) for pid in ("n1", "n2")]
     user = connect("user", "dave")
     try:
+        wait_until(lambda: all(_answers(user, keys.srv(world, "map", "map", pid), MapRequest("status")) for pid in ("n1", "n2")), what="both peers")
         for pid in ("n1", "n2"):
             rep = user.call(keys.srv(world, "map", "map", pid), MapRequest("status"), timeout=5.0)
             assert isinstance(rep, MapReply) and rep.header.source == pid
