@@ -108,17 +108,11 @@ class World:
         self._robots: dict[str, Robot] = {}
         self._objects: dict[str, SceneObject] = {}
         self._info: Any = None
-        self.fabric.subscribe(f"{keys.world_root(self.name)}/robot/*/joints", self.latest.put)
-        self.fabric.subscribe(f"{keys.world_root(self.name)}/robot/*/pose", self.latest.put)
-        self.fabric.subscribe(f"{keys.world_root(self.name)}/robot/*/scan", self.latest.put)
-        self.fabric.subscribe(f"{keys.world_root(self.name)}/robot/*/path", self.latest.put)
+        # the latest of every robot stream (ik: a compute peer's streamed IK, Test A), scene object and map
+        for stream in ("joints", "pose", "scan", "path", "ik"):
+            self.fabric.subscribe(keys.robot_stream_all(self.name, stream), self.latest.put)
         self.fabric.subscribe(f"{keys.world_root(self.name)}/object/*/pose", self.latest.put)
         self.fabric.subscribe(f"{keys.world_root(self.name)}/map/*", self.latest.put)
-        try:  # the compute peer's streamed IK (Test A); its message type belongs to compute_peer
-            services._module("compute_peer.messages")
-            self.fabric.subscribe(keys.robot_stream_all(self.name, "ik"), self.latest.put)
-        except ServiceError as exc:
-            log.warning("IK streams are not available: %s", exc.reason)
         self.fabric.subscribe(keys.event_all(self.name), self._on_event, expected=Event)
         self.ownership = OwnershipLink(self.fabric, self.user, on_record=self.latest.put)
 
