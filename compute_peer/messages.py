@@ -33,7 +33,7 @@ __all__ = [
 ]
 
 FRAMES = ("world", "base")
-IK_METHODS = ("auto", "closed_form", "numerical")
+IK_METHODS = ("auto", "closed_form", "numerical", "casadi")
 
 _HEADER = Msg(Header)
 

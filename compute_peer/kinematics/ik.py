@@ -46,7 +46,7 @@ WRIST_SINGULAR = 1e-9
 SHOULDER_SINGULAR = 1e-10
 """m: a wrist centre this close to the J1 axis leaves q1 free; it keeps the seed's value."""
 
-METHODS = ("auto", "closed_form", "numerical")
+METHODS = ("auto", "closed_form", "numerical", "casadi")
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,7 +54,7 @@ class IKSolution:
     """One joint vector reaching the target, how it was found and how well FK agrees."""
 
     q: np.ndarray  # joint angles (rad), within limits; read-only
-    solver: str  # "closed_form" | "numerical"
+    solver: str  # "closed_form" | "numerical" | "casadi"
     position_error: float  # m, from FK of q
     orientation_error: float  # rad (0.0 for position-only targets)
     candidates: int  # in-limit solutions the closed form found (0 for numerical)
@@ -601,7 +601,8 @@ def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] 
     """Joint angles putting ``arm``'s flange at ``position`` (and ``quaternion``, w x y z), base frame.
 
     ``method``: "auto" (the robot type's closed form if it has one, else
-    numerical), "closed_form" or "numerical". The result is the solution nearest
+    numerical), "closed_form", "numerical" or "casadi" (IPOPT, hard joint limits:
+    :mod:`~compute_peer.kinematics.casadi_ik`). The result is the solution nearest
     ``seed`` (default: the zero pose) in weighted joint distance. Without a
     quaternion the orientation is free: the closed form tries the seed's flange
     orientation, then the tool pointing down, then horizontal and radially
@@ -629,6 +630,11 @@ def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] 
     closed = CLOSED_FORMS.get(arm.description.name)
     if method == "closed_form" and closed is None:
         raise ValueError(f"robot type {arm.description.name!r} has no closed-form IK")
+    if method == "casadi":
+        from .casadi_ik import solve_casadi  # imports CasADi on first use only
+
+        q, pe, re = solve_casadi(arm, p, rot, s)
+        return _solution(q, "casadi", pe, re, 0)
     if method == "numerical" or closed is None:
         q, pe, re = solve_numerical(arm, p, rot, s)
         return _solution(q, "numerical", pe, re, 0)
