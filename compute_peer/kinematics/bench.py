@@ -9,7 +9,9 @@ around ``solve`` alone (input checks, solving, the FK check, choosing):
 - closed form, position only: the same; falls back to numerical when the
   three preferred orientations all fail (counted in ``numerical_fallback``);
 - numerical (Levenberg-Marquardt), full pose: half the seeds near the answer
-  (+ N(0, 0.3 rad) per joint, like tracking a moving target), half anywhere.
+  (+ N(0, 0.3 rad) per joint, like tracking a moving target), half anywhere;
+- CasADi + IPOPT, full pose: the first ``min(n, CASADI_TARGETS)`` targets with
+  the closed form's seeds (it takes milliseconds a solve).
 
 A refusal counts against the success rate, not the times.
 """
@@ -29,6 +31,8 @@ from .ik import in_base_column, solve
 from .model import ArmModel, Unreachable
 
 ROBOT = "meca500"
+CASADI_TARGETS = 300
+"""The CasADi row solves at most this many of the targets (~10 ms each)."""
 
 
 def _stats(times: list[float], ok: int, n: int) -> dict:
@@ -56,7 +60,7 @@ def reachable_targets(arm: ArmModel, n: int, rng: np.random.Generator) -> list[t
 
 
 def measure_solve(n: int = 2000, seed: int = 0) -> dict:
-    """Median and p99 (us) and success rates of ``solve`` for the three workloads, ``n`` targets each."""
+    """Median and p99 (us) and success rates of ``solve`` per workload: ``n`` targets each, CasADi fewer."""
     if n < 1:
         raise ValueError("n must be >= 1")
     arm = ArmModel(ROBOT)
@@ -99,6 +103,18 @@ def measure_solve(n: int = 2000, seed: int = 0) -> dict:
         times.append(time.perf_counter() - t0)
         ok += 1
     result["numerical"] = _stats(times, ok, n)
+
+    m = min(n, CASADI_TARGETS)
+    times, ok = [], 0
+    for (_, p, quat), s in zip(targets[:m], seeds[:m]):
+        t0 = time.perf_counter()
+        try:
+            solve(arm, p, quat, s, method="casadi")
+        except Unreachable:
+            continue
+        times.append(time.perf_counter() - t0)
+        ok += 1
+    result["casadi"] = _stats(times, ok, m)
     return result
 
 
@@ -106,6 +122,7 @@ ROWS = (
     ("closed_form", "closed form, full pose"),
     ("closed_form_position", "closed form, position only"),
     ("numerical", "numerical (LM), full pose"),
+    ("casadi", "CasADi + IPOPT, full pose"),
 )
 
 
@@ -138,7 +155,7 @@ def register_bench(bench_app: typer.Typer | None = None) -> None:
         queries: Annotated[int, typer.Option(help="IK/FK queries for the round trip through a router (0: skip it).")] = 1000,
         out: Annotated[Optional[Path], typer.Option(help="Append the markdown tables to this file.")] = None,
     ) -> None:
-        """Meca500 IK solve times (closed form full pose / position only, numerical) and the query round trip.
+        """Meca500 IK solve times (closed form full pose / position only, numerical, CasADi) and the query round trip.
 
         The round trip runs a `robofabric compute` process behind a router hosted here, as on a LAN.
         """
@@ -150,7 +167,7 @@ def register_bench(bench_app: typer.Typer | None = None) -> None:
         if n < 1:
             raise UserError("--n must be >= 1")
         result = measure_solve(n, seed)
-        table = Table(title=f"IK solve, {ROBOT}, {n} targets per row (seed {seed})")
+        table = Table(title=f"IK solve, {ROBOT}, {n} targets per row, CasADi {min(n, CASADI_TARGETS)} (seed {seed})")
         for col in ("solver", "success", "median (us)", "p99 (us)"):
             table.add_column(col, justify="left" if col == "solver" else "right")
         for key, label in ROWS:
@@ -158,7 +175,8 @@ def register_bench(bench_app: typer.Typer | None = None) -> None:
             extra = f" ({r['numerical_fallback']} numerical)" if "numerical_fallback" in r else ""
             table.add_row(label, f"{100 * r['success']:.2f}%{extra}", f"{r['median_us']:.1f}", f"{r['p99_us']:.1f}")
         Console().print(table)
-        md = [f"IK solve, {ROBOT}, {n} targets per row (seed {seed}):", "", format_table(result)]
+        md = [f"IK solve, {ROBOT}, {n} targets per row, CasADi {min(n, CASADI_TARGETS)} (seed {seed}):", "",
+              format_table(result)]
         if queries > 0:
             from .bench_query import measure_query
 
