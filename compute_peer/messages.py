@@ -61,7 +61,7 @@ class IKRequest:
     """Joint angles putting the flange at ``position`` (m) and, if given, ``quaternion``.
 
     ``seed``: the joints to stay near (empty: the robot's latest published joints, else zeros).
-    ``method``: auto (closed form where the robot has one), closed_form or numerical.
+    ``method``: auto (closed form where the robot has one), closed_form, numerical (LM) or casadi (IPOPT, hard limits).
     """
 
     position: np.ndarray
