@@ -30,7 +30,17 @@ from fabric.messages import Event, Header
 
 log = logging.getLogger("robofabric")
 
-__all__ = ["Fabric", "ServiceError", "Reply", "open_fabric", "shutdown_event"]
+__all__ = ["Fabric", "ServiceError", "Reply", "open_fabric", "shutdown_event", "undeclare_all"]
+
+
+def undeclare_all(resources: list[Any]) -> None:
+    """Undeclare what a service declared on a shared session, newest first; what a closing session
+    already took away is skipped, so a service can close before or after its session."""
+    for res in reversed(resources):
+        try:
+            res.undeclare()
+        except Exception:  # already gone with a closing session
+            pass
 
 
 class ServiceError(RuntimeError):
@@ -90,16 +100,7 @@ class Fabric:
             if self._closed:
                 return
             self._closed = True
-        for res in reversed(self._resources):
-            try:
-                res.undeclare()
-            except Exception:  # already gone with a dying session
-                pass
-        if self.token is not None:
-            try:
-                self.token.undeclare()
-            except Exception:
-                pass
+        undeclare_all(([self.token] if self.token is not None else []) + self._resources)
         try:
             self.session.close()
         except Exception:

@@ -33,7 +33,7 @@ import numpy as np
 from fabric import keys
 from fabric.messages import Event, JointState, Pose
 from fabric.rate import Clock, MonotonicClock, RateLoop
-from fabric.session import Fabric, ServiceError
+from fabric.session import Fabric, ServiceError, undeclare_all
 
 from ..messages import FKReply, FKRequest, IKReply, IKRequest, IKStream, JacobianReply, JacobianRequest
 from .arm import PlacedArm
@@ -123,11 +123,7 @@ class KinematicsService:
             self._closed = True
         if self._loop is not None:
             self._loop.stop()
-        for res in reversed(self._resources):
-            try:
-                res.undeclare()
-            except Exception:  # already gone with a closing session
-                pass
+        undeclare_all(self._resources)
 
     # ------------------------------------------------------------------ arms
 

@@ -36,7 +36,7 @@ from typing import Any
 from fabric import keys
 from fabric.messages import OccupancyGrid, Path, Pose, Scan
 from fabric.rate import Clock, MonotonicClock
-from fabric.session import Fabric, ServiceError
+from fabric.session import Fabric, ServiceError, undeclare_all
 
 from .costmap import Costmap, build_costmap
 from .errors import NavigationError
@@ -151,11 +151,7 @@ class NavigationService:
             if self._closed:
                 return
             self._closed = True
-        for res in reversed(self._resources):
-            try:
-                res.undeclare()
-            except Exception:  # already gone with a closing session
-                pass
+        undeclare_all(self._resources)
 
     # ------------------------------------------------------------------ inputs
 

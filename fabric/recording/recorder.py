@@ -23,6 +23,7 @@ import zenoh
 from fabric import keys
 from fabric.recording.format import LIVELINESS_SCHEMA, RAW_SCHEMA
 from fabric.recording.sink import McapSink
+from fabric.session import undeclare_all
 
 __all__ = ["Recorder", "RecorderStats"]
 
@@ -150,11 +151,7 @@ class Recorder:
         if not self._started or self._stopped:
             return self.stats
         self._stopped = True
-        for sub in self._subs:
-            try:
-                sub.undeclare()
-            except Exception:
-                pass
+        undeclare_all(self._subs)
         self._subs.clear()
         self._t_end = time.monotonic()
         self._q.put(_STOP)
