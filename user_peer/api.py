@@ -48,6 +48,7 @@ from fabric.session import Fabric, ServiceError
 from user_peer import services
 from user_peer.errors import NotOwner, Timeout, Unreachable
 from user_peer.ownership_link import OwnershipLink
+from user_peer.spread import SPREAD, RoundRobin
 from user_peer.streams import StreamIterator, Subscription
 
 log = logging.getLogger("robofabric.user")
@@ -97,7 +98,8 @@ class World:
 
     def __init__(self, config: FabricConfig, user: str, *, timeout: float = 5.0, compute: str | None = None) -> None:
         self.user = keys.validate_id(user, what="user id")
-        # the compute peer to ask (its peer id, e.g. a local one); None: the nearest that serves the world
+        # the compute peer to ask (its peer id, e.g. a local one); None: the nearest that serves the world;
+        # "spread": kinematics queries in turn to every live compute peer
         self.compute = None if compute is None else keys.validate_id(compute, what="compute peer id")
         self.name = config.world
         self.timeout = timeout
@@ -115,6 +117,26 @@ class World:
         self.fabric.subscribe(f"{keys.world_root(self.name)}/map/*", self.latest.put)
         self.fabric.subscribe(keys.event_all(self.name), self._on_event, expected=Event)
         self.ownership = OwnershipLink(self.fabric, self.user, on_record=self.latest.put)
+        self._spread = RoundRobin(self.compute_peers) if self.compute == SPREAD else None
+
+    def ask_kinematics(self, call: Callable[[str | None], Any]) -> Any:
+        """``call(peer)`` with the compute peer for the next kinematics query: the chosen one, the next in
+        turn (``compute="spread"``), or None (the nearest). A spread peer that left since the list was read
+        is skipped and the nearest asked instead, so a peer going away costs one timeout, not an error."""
+        if self._spread is None:
+            return call(self.compute)
+        peer = self._spread.next()
+        try:
+            return call(peer)
+        except ServiceError as exc:
+            if peer is None or not exc.reason.startswith("no reply"):
+                raise
+            self._spread.forget(peer)
+            return call(None)
+
+    def navigation_peer(self) -> str | None:
+        """The compute peer for maps and plans: the chosen one, else the nearest (a map is not spread)."""
+        return None if self.compute == SPREAD else self.compute
 
     def compute_peers(self) -> list[str]:
         """Ids of the compute peers serving this world (from liveliness): candidates for ``compute``."""
@@ -358,7 +380,9 @@ class Arm(Robot):
         :class:`Unreachable` when the compute peer refuses (with its reason), :class:`Timeout` when none answers.
         """
         try:
-            return services.ik(self.world.fabric, self.id, xyz, quaternion, self.joints, timeout=self.world.timeout, peer=self.world.compute)
+            return self.world.ask_kinematics(
+                lambda peer: services.ik(self.world.fabric, self.id, xyz, quaternion, self.joints, timeout=self.world.timeout, peer=peer)
+            )
         except ServiceError as exc:
             if exc.reason.startswith("no reply"):
                 raise Timeout(f"IK for {self.id}: {exc.reason}") from None
@@ -449,7 +473,7 @@ class Base(Robot):
     def start_mapping(self, *, name: str = "map") -> None:
         """Ask the compute peer to fold this world's scans into map ``name`` (it may already be on)."""
         try:
-            services.map_request(self.world.fabric, "start", name=name, timeout=self.world.timeout, peer=self.world.compute)
+            services.map_request(self.world.fabric, "start", name=name, timeout=self.world.timeout, peer=self.world.navigation_peer())
         except ServiceError as exc:
             raise Unreachable(f"mapping for {self.id}: {exc.reason}") from None
 
@@ -457,7 +481,7 @@ class Base(Robot):
         """The binary map a compute peer built from the scans so far (also published on ``map/{name}``)."""
         try:
             return services.build_map(
-                self.world.fabric, name=name, threshold=threshold, timeout=timeout or max(self.world.timeout, 10.0), peer=self.world.compute
+                self.world.fabric, name=name, threshold=threshold, timeout=timeout or max(self.world.timeout, 10.0), peer=self.world.navigation_peer()
             )
         except ServiceError as exc:
             raise Unreachable(f"map for {self.id}: {exc.reason}") from None
@@ -471,7 +495,7 @@ class Base(Robot):
         try:
             return services.plan(
                 self.world.fabric, self.id, goal, planner=planner, map_name=map_name, timeout=timeout or max(self.world.timeout, 15.0),
-                peer=self.world.compute,
+                peer=self.world.navigation_peer(),
             )
         except ServiceError as exc:
             where = "the goal object" if goal is None else f"({goal[0]:.2f}, {goal[1]:.2f}, {goal[2]:.2f})"
@@ -547,7 +571,8 @@ def connect(
     """Join a world as ``user`` (default: $USER). ``connect``: router endpoints, e.g. ``["tcp/10.0.0.5:7447"]``.
 
     ``compute``: the peer id of the compute peer to use (``robofabric ps`` lists them), e.g. one running on
-    this machine; by default queries go to the nearest compute peer serving the world.
+    this machine; ``"spread"`` sends IK queries to every live compute peer in turn; by default queries go
+    to the nearest compute peer serving the world.
     """
     import getpass
 

@@ -208,3 +208,29 @@ def test_navigation_answers_on_its_own_key_too(world, connect):
     finally:
         for n in navs:
             n.close()
+
+
+def test_a_user_can_spread_ik_over_every_compute_peer(world, router, connect):
+    from fabric.testing import client_config
+    from user_peer import services
+    from user_peer.api import World
+
+    svcs = {pid: KinematicsService(connect("compute", pid), arms={"arm1": ArmPlacement("meca500", BASE)}, discover=False) for pid in ("c1", "c2")}
+    try:
+        with World(client_config(world, router[1]), "erin", compute="spread") as w:
+            wait_until(lambda: w.compute_peers() == ["c1", "c2"], what="both compute peers' tokens", seen=w.compute_peers)
+            wait_until(lambda: all(_answers(w.fabric, keys.srv(world, "fk", "arm1", p), FKRequest(Q)) for p in ("c1", "c2")), what="both serving")
+            fk = w.fabric.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
+            for _ in range(4):
+                q = w.ask_kinematics(lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer))
+                assert np.allclose(q, Q, atol=1e-9)
+            assert svcs["c1"].counters["ik"] == 2 and svcs["c2"].counters["ik"] == 2
+            assert w.navigation_peer() is None  # maps are not spread: the nearest peer holds one
+            svcs.pop("c2").close()  # c2 stops serving; its token stays with its session until the list is read again
+            for _ in range(2):
+                q = w.ask_kinematics(lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer))
+                assert np.allclose(q, Q, atol=1e-9)
+            assert svcs["c1"].counters["ik"] == 4
+    finally:
+        for s in svcs.values():
+            s.close()
