@@ -54,30 +54,53 @@ def list_cmd(world: World = None, connect: Connect = None, profile: Profile = No
         cl.close()
 
 
-def _ask(op: str, obj: str, world, connect, profile, zenoh_config, user, wait: bool = False) -> None:
+def _ask(op: str, obj: str, world, connect, profile, zenoh_config, user, wait: bool = False,
+         hold: bool = False, duration: float | None = None) -> None:
+    stop = shutdown_event() if hold else None
     fab, cl = _client(world, connect, profile, zenoh_config, user)
     with fab:
         try:
-            out = cl.request(obj, wait=wait) if op == "request" else cl.release(obj)
-        except ServiceError as exc:
-            raise UserError(f"{op} {obj}: {exc.reason}") from None
+            try:
+                out = cl.request(obj, wait=wait) if op == "request" else cl.release(obj)
+            except ServiceError as exc:
+                raise UserError(f"{op} {obj}: {exc.reason}") from None
+            print(f"{obj}: {out}", flush=True)
+            if out.outcome == "denied":
+                raise typer.Exit(1)
+            if stop is not None:
+                _hold(cl, obj, stop, duration)
         finally:
             cl.close()
-        print(f"{obj}: {out}")
-        if out.outcome == "denied":
-            raise typer.Exit(1)
+
+
+def _hold(cl: OwnershipClient, obj: str, stop, duration: float | None) -> None:
+    """Keep the lease (token + renewals) until Ctrl-C / SIGTERM / ``duration``, then give the object up.
+
+    Prints each change of the object's record, so a queued user sees the moment it is granted."""
+    cl.on_change(lambda rec: print(_line(rec), flush=True) if rec.object == obj else None)
+    print(f"holding {obj} as {cl.user} (Ctrl-C releases it)", flush=True)
+    stop.wait(duration)
+    try:
+        print(f"{obj}: {cl.release(obj)}", flush=True)
+    except ServiceError as exc:  # the authority went away: the lease lapses on its own
+        print(f"{obj}: release not confirmed: {exc.reason}", flush=True)
 
 
 @own_app.command("request")
 def request_cmd(obj: Annotated[str, typer.Argument(help="Object id (robot or scene object).")], world: World = None,
                 connect: Connect = None, profile: Profile = None, zenoh_config: ZenohConfig = None, user: User = None,
-                wait: Annotated[bool, typer.Option("--wait", help="Queue if the robot is moving.")] = False) -> None:
+                wait: Annotated[bool, typer.Option("--wait", help="Queue if the robot is moving.")] = False,
+                hold: Annotated[bool, typer.Option("--hold", help="Keep holding (renewing the lease) until Ctrl-C, then release.")] = False,
+                duration: Annotated[Optional[float], typer.Option("--duration", help="With --hold: release after S seconds.")] = None) -> None:
     """Ask for OBJ: granted, denied (in motion / owned by X) or queued at position N.
 
-    Ownership lasts while a renewing peer holds it: this command exits, so its lease lapses after
-    the lease time; hold it from your program (OwnershipClient) or the TUI.
+    Ownership lasts while a renewing peer holds it. Without --hold this command exits at once, so
+    the lease lapses after the lease time; with --hold it renews (and keeps a queue place, printing
+    the grant when it comes) until Ctrl-C, like a program's OwnershipClient or the TUI.
     """
-    _ask("request", obj, world, connect, profile, zenoh_config, user, wait)
+    if duration is not None and not hold:
+        raise UserError("--duration needs --hold")
+    _ask("request", obj, world, connect, profile, zenoh_config, user, wait, hold, duration)
 
 
 @own_app.command("release")

@@ -34,3 +34,42 @@ def test_own_list_request_release(world, router, connect):
         assert r.returncode == 2 and "unknown object" in r.stderr, r.stdout + r.stderr
     finally:
         auth.close()
+
+
+def test_own_request_hold_renews_until_interrupted_then_releases(world, router, connect):
+    import signal
+
+    from fabric.testing import wait_until
+
+    port = router[1]
+    auth = Authority(connect("sim", "host"), {"arm": "exclusive"}, lease_s=1.5)
+    ann = OwnershipClient(connect("user", "ann"), "ann")
+    procs = []
+    try:
+        assert ann.request("arm").outcome == "granted"
+        auth.update_motion("arm", True)
+        argv = robofabric_cmd("own", "request", "arm", "--wait", "--hold", "--user", "dee", "--world", world, "--connect", f"tcp/127.0.0.1:{port}")
+        dee = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        procs.append(dee)
+        owner = lambda: auth.records()["arm"].owner  # noqa: E731
+        wait_until(lambda: auth.records()["arm"].queue == ("dee",), what="dee queued", seen=lambda: auth.records()["arm"])
+        auth.update_motion("arm", False)
+        ann.release("arm")  # the queued holder is next
+        wait_until(lambda: owner() == "dee", what="dee granted from the queue", seen=lambda: auth.records()["arm"])
+        n0 = auth.counters["requests"]
+        wait_until(lambda: auth.counters["requests"] >= n0 + 6, timeout=30, what="renewals over two leases", seen=lambda: auth.counters)
+        assert owner() == "dee", auth.records()["arm"]  # renewed past the 1.5 s lease
+        dee.send_signal(signal.SIGINT)
+        out, _ = dee.communicate(timeout=30)
+        assert dee.returncode == 0, out
+        assert "queued at position 1" in out and "holding arm as dee" in out and "owner dee" in out and "arm: released" in out, out
+        assert owner() == "", auth.records()["arm"]  # free
+        r = _own(world, port, "request", "arm", "--duration", "1", "--user", "eve")
+        assert r.returncode == 2 and "--duration needs --hold" in r.stderr, r.stdout + r.stderr
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        ann.close()
+        auth.close()
