@@ -151,6 +151,21 @@ class ParsedKey:
     rest: tuple[str, ...] = ()
 
 
+def is_latched(key: str) -> bool:
+    """Keys whose latest value a late joiner needs at once: scene objects, maps and planned paths.
+
+    A goal set before the compute peer started, a map built before the viewer joined: their
+    publishers keep the last sample in a cache and subscribers that ask for history get it on
+    joining (the role Firebase's latest value played in the paper). Streams that refresh at a
+    fixed rate and commands (never to be replayed to a robot) are not latched.
+    """
+    try:
+        p = parse(key)
+    except ValueError:
+        return False
+    return p.category in ("object", "map") or (p.category == "robot" and p.leaf == "path")
+
+
 def parse(key: str) -> ParsedKey:
     """Parse a concrete key; raise ``ValueError`` saying what is wrong with it."""
     parts = str(key).split("/")

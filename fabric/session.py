@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 
 import zenoh
+import zenoh.ext
 
 from fabric import keys
 from fabric.codec import DecodeError, decode, encode, load_plugins
@@ -116,11 +117,23 @@ class Fabric:
         return Header(stamp=float(stamp), wall_ns=time.time_ns(), seq=seq, source=self.peer_id)
 
     def publish(self, key: str, msg: Any) -> int:
-        """Encode and put ``msg`` on ``key``; returns the payload size in bytes."""
+        """Encode and put ``msg`` on ``key``; returns the payload size in bytes.
+
+        On a latched key (:func:`fabric.keys.is_latched`: scene objects, maps, paths) the publisher
+        keeps its last sample for subscribers that join later and ask for history."""
         payload = encode(msg)
         pub = self._publishers.get(key)
         if pub is None:
-            pub = self.session.declare_publisher(key)
+            if keys.is_latched(key):
+                # sequence numbers make the subscriber track each publisher on its own: without them it
+                # orders one session's publishers by timestamp and drops history replies that arrive out
+                # of that order (measured: 8 of 30 latched values lost, 0 of 90 with them)
+                pub = zenoh.ext.declare_advanced_publisher(
+                    self.session, key, cache=zenoh.ext.CacheConfig(max_samples=1), publisher_detection=True,
+                    sample_miss_detection=zenoh.ext.MissDetectionConfig(),
+                )
+            else:
+                pub = self.session.declare_publisher(key)
             self._publishers[key] = pub
             self._resources.append(pub)
         pub.put(payload)
@@ -159,8 +172,12 @@ class Fabric:
         callback: Callable[[str, Any], None],
         *,
         expected: type | tuple[type, ...] | None = None,
-    ) -> zenoh.Subscriber:
-        """Call ``callback(key, message)`` for every valid message on ``key_expr``."""
+        history: bool = False,
+    ) -> Any:
+        """Call ``callback(key, message)`` for every valid message on ``key_expr``.
+
+        ``history``: first the latest sample of every latched key that matches (published before
+        this subscriber existed, by publishers still alive), then live samples as usual."""
 
         def on_sample(sample: zenoh.Sample) -> None:
             if sample.kind != zenoh.SampleKind.PUT:
@@ -178,12 +195,16 @@ class Fabric:
                 self.counters["callback_errors"] += 1
                 log.exception("callback for %s failed", key)
 
-        sub = self.session.declare_subscriber(key_expr, on_sample)
-        self._resources.append(sub)
-        return sub
+        return self.subscribe_raw(key_expr, on_sample, history=history)
 
-    def subscribe_raw(self, key_expr: str, callback: Callable[[zenoh.Sample], None]) -> zenoh.Subscriber:
-        sub = self.session.declare_subscriber(key_expr, callback)
+    def subscribe_raw(self, key_expr: str, callback: Callable[[zenoh.Sample], None], *, history: bool = False) -> Any:
+        """``callback(sample)`` for every sample, undecoded; ``history`` as in :meth:`subscribe`."""
+        if history:
+            sub = zenoh.ext.declare_advanced_subscriber(
+                self.session, key_expr, callback, history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=1)
+            )
+        else:
+            sub = self.session.declare_subscriber(key_expr, callback)
         self._resources.append(sub)
         return sub
 

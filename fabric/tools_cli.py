@@ -93,6 +93,9 @@ def echo(
     count: Annotated[Optional[int], typer.Option("--count", "-n", help="Exit after N messages.")] = None,
     duration: Annotated[Optional[float], typer.Option(help="Exit after S seconds.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object per line: {key, message}.")] = False,
+    latest: Annotated[
+        bool, typer.Option("--latest/--no-latest", help="First the latest value of latched keys (maps, paths, scene objects) set before echo started.")
+    ] = True,
     world: World = None,
     connect: Connect = None,
     listen: Listen = None,
@@ -132,7 +135,7 @@ def echo(
                 if count is not None and printed >= count:
                     stop.set()
 
-        fab.subscribe_raw(full, on_sample)
+        fab.subscribe_raw(full, on_sample, history=latest)
         stop.wait(duration)
     if bad:
         print(f"{bad} malformed payload(s) skipped", file=sys.stderr)

@@ -85,7 +85,7 @@ class SimPeer:
         f, w = self.fabric, self.fabric.world
         f.subscribe(keys.robot_cmd_all(w), self._on_command, expected=Command)
         for obj in self.world.objects:
-            f.subscribe(keys.object_pose(w, obj), self._on_object, expected=Pose)
+            f.subscribe(keys.object_pose(w, obj), self._on_object, expected=Pose, history=True)
         f.serve(keys.srv(w, "world"), self._on_world_query)
         provider = getattr(self.gate, "set_state_provider", None)
         if callable(provider):

@@ -111,10 +111,11 @@ class World:
         self._objects: dict[str, SceneObject] = {}
         self._info: Any = None
         # the latest of every robot stream (ik: a compute peer's streamed IK, Test A), scene object and map
+        # scene objects, maps and paths are latched: what was set before this user joined comes at once
         for stream in ("joints", "pose", "scan", "path", "ik"):
-            self.fabric.subscribe(keys.robot_stream_all(self.name, stream), self.latest.put)
-        self.fabric.subscribe(f"{keys.world_root(self.name)}/object/*/pose", self.latest.put)
-        self.fabric.subscribe(f"{keys.world_root(self.name)}/map/*", self.latest.put)
+            self.fabric.subscribe(keys.robot_stream_all(self.name, stream), self.latest.put, history=stream == "path")
+        self.fabric.subscribe(f"{keys.world_root(self.name)}/object/*/pose", self.latest.put, history=True)
+        self.fabric.subscribe(f"{keys.world_root(self.name)}/map/*", self.latest.put, history=True)
         self.fabric.subscribe(keys.event_all(self.name), self._on_event, expected=Event)
         self.ownership = OwnershipLink(self.fabric, self.user, on_record=self.latest.put)
         self._spread = RoundRobin(self.compute_peers) if self.compute == SPREAD else None

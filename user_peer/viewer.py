@@ -128,7 +128,7 @@ class Viewer:
         scene = getattr(self.catalog.world_info, "scene", "") or ""
         if scene:
             log_scene(self.logger, scene)
-        self.fab.subscribe(keys.world_all(self.fab.world), self._enqueue)
+        self.fab.subscribe(keys.world_all(self.fab.world), self._enqueue, history=True)  # maps, paths, objects set before we joined
         for expr in (keys.own_all(self.fab.world),):
             try:
                 for rep in self.fab.query(expr, timeout=1.0, all_replies=True):

@@ -133,7 +133,7 @@ class NavigationService:
             for r in self.robots:
                 self._resources.append(f.subscribe(keys.robot_pose(self.world, r), self._on_robot, expected=Pose))
                 self._resources.append(f.subscribe(keys.robot_scan(self.world, r), self._on_robot, expected=Scan))
-        self._resources.append(f.subscribe(keys.object_pose(self.world, self.goal_object), self._on_goal, expected=Pose))
+        self._resources.append(f.subscribe(keys.object_pose(self.world, self.goal_object), self._on_goal, expected=Pose, history=True))
         # srv/{map,plan}/{name}: the nearest compute peer; srv/{map,plan}/{name}/{peer_id}: this one (docs/compute.md)
         for peer in (None, f.peer_id):
             self._resources.append(f.serve(keys.srv_per_subject(self.world, "map", peer), self._on_map, expected=MapRequest))
