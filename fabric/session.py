@@ -31,7 +31,7 @@ from fabric.messages import Event, Header
 
 log = logging.getLogger("robofabric")
 
-__all__ = ["Fabric", "ServiceError", "Reply", "open_fabric", "shutdown_event", "undeclare_all"]
+__all__ = ["Fabric", "ServiceError", "Reply", "open_fabric", "shutdown_event", "undeclare_all", "declare_publisher"]
 
 
 def undeclare_all(resources: list[Any]) -> None:
@@ -42,6 +42,20 @@ def undeclare_all(resources: list[Any]) -> None:
             res.undeclare()
         except Exception:  # already gone with a closing session
             pass
+
+
+def declare_publisher(session: zenoh.Session, key: str, **options: Any) -> Any:
+    """A publisher for ``key``; on a latched key (:func:`fabric.keys.is_latched`) one whose last sample
+    stays in a cache for subscribers that join later and ask for history."""
+    if not keys.is_latched(key):
+        return session.declare_publisher(key, **options)
+    # sequence numbers make the subscriber track each publisher on its own: without them it orders one
+    # session's publishers by timestamp and drops history replies that arrive out of that order
+    # (measured: 8 of 30 latched values lost, 0 of 90 with them)
+    return zenoh.ext.declare_advanced_publisher(
+        session, key, cache=zenoh.ext.CacheConfig(max_samples=1), publisher_detection=True,
+        sample_miss_detection=zenoh.ext.MissDetectionConfig(), **options,
+    )
 
 
 class ServiceError(RuntimeError):
@@ -124,16 +138,7 @@ class Fabric:
         payload = encode(msg)
         pub = self._publishers.get(key)
         if pub is None:
-            if keys.is_latched(key):
-                # sequence numbers make the subscriber track each publisher on its own: without them it
-                # orders one session's publishers by timestamp and drops history replies that arrive out
-                # of that order (measured: 8 of 30 latched values lost, 0 of 90 with them)
-                pub = zenoh.ext.declare_advanced_publisher(
-                    self.session, key, cache=zenoh.ext.CacheConfig(max_samples=1), publisher_detection=True,
-                    sample_miss_detection=zenoh.ext.MissDetectionConfig(),
-                )
-            else:
-                pub = self.session.declare_publisher(key)
+            pub = declare_publisher(self.session, key)
             self._publishers[key] = pub
             self._resources.append(pub)
         pub.put(payload)

@@ -27,6 +27,7 @@ import zenoh
 from fabric.rate import Clock, MonotonicClock
 from fabric.recording.format import LIVELINESS_SCHEMA, remap_world, world_of
 from fabric.recording.reader import RecordingError, RecordingInfo, iter_messages, key_filter, read_info
+from fabric.session import declare_publisher
 from fabric.stats import percentiles
 
 __all__ = ["Replayer", "ReplayPlan", "ReplayStats", "plan_replay", "due_time"]
@@ -174,6 +175,13 @@ class ReplayStats:
 Publish = Callable[[str, bytes], None]
 
 
+def _matching(pub: Any) -> bool:
+    """Whether a subscriber listens to ``pub`` (a MatchingStatus object is always truthy: ask ``.matching``).
+    Advanced publishers (latched keys) do not say; the plain ones beside them do."""
+    status = getattr(pub, "matching_status", None)
+    return bool(getattr(status, "matching", False))
+
+
 class Replayer:
     """Republish a :class:`ReplayPlan` through ``target``: a Fabric, a zenoh Session, or a ``publish(key, payload)``.
 
@@ -223,7 +231,8 @@ class Replayer:
         pub.put(payload)
 
     def _declare(self, key: str) -> Any:
-        pub = self._session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+        # latched keys (maps, paths, scene objects) keep their last replayed value for late joiners, as live
+        pub = declare_publisher(self._session, key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
         self._pubs[key] = pub
         return pub
 
@@ -234,7 +243,7 @@ class Replayer:
             self._declare(self.plan.target(k))
         deadline = time.monotonic() + self.wait_for_subscribers
         while time.monotonic() < deadline and not stop.is_set():
-            if any(p.matching_status for p in self._pubs.values()):
+            if any(_matching(p) for p in self._pubs.values()):
                 break
             stop.wait(0.01)
 

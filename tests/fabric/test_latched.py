@@ -98,3 +98,4 @@ def test_echo_prints_the_latest_latched_value_without_waiting_for_a_new_one(worl
     assert out.returncode == 0, out.stdout + out.stderr
     line = json.loads(out.stdout.splitlines()[0])
     assert line["key"] == goal and line["message"]["position"] == [4.0, 1.0, 0.0]
+
