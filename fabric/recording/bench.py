@@ -284,7 +284,7 @@ def _child_pub(a: argparse.Namespace) -> None:
     with Fabric(FabricConfig(world=a.world, connect=(a.endpoint,)), kind="sim", peer_id="bench-world") as fab:
         pubs = {s.key: fab.session.declare_publisher(s.key, congestion_control=zenoh.CongestionControl.BLOCK) for s in streams}
         deadline = time.monotonic() + 20
-        while not all(p.matching_status for p in pubs.values()):
+        while not all(p.matching_status.matching for p in pubs.values()):
             if time.monotonic() > deadline:
                 print("error: no subscriber matched the world's keys", flush=True)
                 sys.exit(1)

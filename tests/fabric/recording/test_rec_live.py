@@ -153,7 +153,7 @@ def test_recorder_api_key_filters_overlaps_and_liveliness(tmp_path, world, conne
     with Recorder(rec_fab, path, exprs, liveliness=True) as rec:
         key = keys.robot_joints(world, "r0")
         pubs = [sim.session.declare_publisher(k) for k in (key, keys.robot_joints(world, "r1"), keys.event(world, "x"))]
-        wait_until(lambda: all(p.matching_status for p in pubs[::2]), what="recorder subscriptions")
+        wait_until(lambda: all(p.matching_status.matching for p in pubs[::2]), what="recorder subscriptions")
         for p in pubs:
             for i in range(20):
                 p.put(bytes([i]) * 3)
