@@ -1,4 +1,4 @@
-"""Entry point of the fabric's own subcommands: router, ps, echo, hz, up, demo, bench transport."""
+"""Entry point of the fabric's own subcommands: router, ps, echo, hz, pub, call, up, demo, bench transport."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The fabric's own commands: router, ps, echo, hz (introspection in the spirit of ``ros2 node/topic``)."""
+"""The fabric's own commands: router, ps, echo, hz, pub, call (introspection in the spirit of ``ros2 node/topic/service``)."""
 
 from __future__ import annotations
 
@@ -209,19 +209,12 @@ def pub(
     peer_id: PeerId = None,
 ) -> None:
     """Publish a message built from JSON (like ``ros2 topic pub``); checked by the codec before it leaves."""
-    from fabric.codec import encode, registered
+    from fabric.codec import encode
     from fabric.messages import Command
     from fabric.rate import RateLoop
 
-    types = registered()
-    cls = types.get(msg_type)
-    if cls is None:
-        raise UserError(f"unknown message type {msg_type!r}; known: {', '.join(sorted(types))}")
+    body = _message_from_json(msg_type, data)
     try:
-        fields = json.loads(data)
-        if not isinstance(fields, dict):
-            raise ValueError("expected a JSON object")
-        body = cls(**fields)
         msg = Command(user=user, epoch=epoch, body=body) if user else body
         encode(msg)
     except (ValueError, TypeError) as exc:
@@ -253,6 +246,60 @@ def pub(
     print(f"published {sent} {msg_type} on {full}")
 
 
+def _message_from_json(msg_type: str, data: str):
+    """A message of any installed type (plugins included) from a JSON object of its fields."""
+    from fabric.codec import encode, load_plugins, registered
+
+    load_plugins()
+    types = registered()
+    cls = types.get(msg_type)
+    if cls is None:
+        raise UserError(f"unknown message type {msg_type!r}; known: {', '.join(sorted(types))}")
+    try:
+        fields = json.loads(data)
+        if not isinstance(fields, dict):
+            raise ValueError("expected a JSON object")
+        msg = cls(**fields)
+        encode(msg)
+    except (ValueError, TypeError) as exc:
+        raise UserError(f"cannot build {msg_type} from {data!r}: {exc}") from None
+    return msg
+
+
+def call(
+    key: Annotated[str, typer.Argument(help="Service key, full or world-relative: srv/world, srv/ik/arm1, srv/map/map/PEER.")],
+    msg_type: Annotated[Optional[str], typer.Option("--type", "-t", help="Request type, e.g. IKRequest, FKRequest, MapRequest, PlanRequest (none: an empty query).")] = None,
+    data: Annotated[str, typer.Option("--data", "-d", help='Request fields as JSON, e.g. \'{"q": [0, 0, 0, 0, 0, 0]}\'.')] = "{}",
+    all_replies: Annotated[bool, typer.Option("--all", help="Ask every peer serving the key, not only the nearest.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="One JSON object per reply: {key, source, message}.")] = False,
+    timeout: Annotated[float, typer.Option(help="Seconds to wait for replies.")] = 5.0,
+    world: World = None,
+    connect: Connect = None,
+    listen: Listen = None,
+    profile: Profile = None,
+    zenoh_config: ZenohConfig = None,
+    peer_id: PeerId = None,
+) -> None:
+    """Call a service and print its replies (like ``ros2 service call``); a refusal prints its reason, exit 1."""
+    from fabric.session import ServiceError
+
+    if timeout <= 0:
+        raise UserError("--timeout must be positive")
+    request = _message_from_json(msg_type, data) if msg_type else None
+    with _open("tool", world, connect, listen, profile, zenoh_config, peer_id, key=key) as fab:
+        full = resolve_key(key, fab.world)
+        try:
+            replies = fab.query(full, request, timeout=timeout, all_replies=all_replies)
+        except ServiceError as exc:
+            print(f"{full}: {exc.reason}", file=sys.stderr, flush=True)
+            raise typer.Exit(1) from None
+        for rep in replies:
+            if as_json:
+                print(json.dumps({"key": rep.key, "source": rep.source, "message": to_plain(rep.message)}), flush=True)
+            else:
+                print(f"--- {rep.key} (from {rep.source or '?'})\n{rep.message}", flush=True)
+
+
 def _hz_line(key: str, s: dict) -> str:
     return (
         f"{key}: {s['rate_hz']:.1f} Hz  jitter {s['jitter_ms']:.3f} ms  min {s['min_ms']:.3f} ms  "
@@ -266,3 +313,4 @@ def register(app: typer.Typer) -> None:
     app.command("echo")(echo)
     app.command("hz")(hz)
     app.command("pub")(pub)
+    app.command("call")(call)

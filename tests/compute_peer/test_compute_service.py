@@ -234,3 +234,26 @@ def test_a_user_can_spread_ik_over_every_compute_peer(world, router, connect):
     finally:
         for s in svcs.values():
             s.close()
+
+
+def test_robofabric_call_asks_a_service_from_the_command_line(served, world, router):
+    import json
+
+    ep = f"tcp/127.0.0.1:{router[1]}"
+
+    def call(*args):
+        return subprocess.run(robofabric_cmd("call", *args, "--world", world, "--connect", ep), capture_output=True, text=True, timeout=60)
+
+    out = call("srv/fk/arm1", "-t", "FKRequest", "-d", '{"q": [0, 0, 0, 0, 0, 0], "frame": "base"}', "--json")
+    assert out.returncode == 0, out.stdout + out.stderr
+    reply = json.loads(out.stdout.splitlines()[0])
+    assert reply["source"] == "c1" and reply["message"]["type"] == "FKReply"
+    assert np.allclose(reply["message"]["position"], [0.190, 0.0, 0.308], atol=1e-9)  # the Meca500's zero pose
+
+    out = call("srv/ik/arm1", "-t", "IKRequest", "-d", '{"position": [9, 9, 9]}')
+    assert out.returncode == 1 and "out of reach" in out.stderr, out.stdout + out.stderr  # a refusal says why
+
+    out = call("srv/ik/arm1", "-t", "NoSuchRequest")
+    assert out.returncode == 2 and "unknown message type" in out.stderr, out.stdout + out.stderr
+    out = call("srv/ik/arm1", "-t", "IKRequest", "-d", '{"position": [1, 2]}')
+    assert out.returncode == 2 and "cannot build IKRequest" in out.stderr, out.stdout + out.stderr
