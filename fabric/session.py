@@ -46,29 +46,18 @@ def undeclare_all(resources: list[Any]) -> None:
 
 def declare_publisher(session: zenoh.Session, key: str, **options: Any) -> Any:
     """A publisher for ``key``; on a latched key (:func:`fabric.keys.is_latched`) one whose last sample
-    stays in a cache for subscribers that join later and ask for history.
-
-    Latched values and robot commands use congestion control BLOCK (zenoh's default is DROP): they are
-    sent once, not refreshed next tick, so a full queue must wait rather than lose them (a dropped
-    ``cmd/stop`` or map is never resent). Fixed-rate streams keep DROP: the next sample replaces a lost one."""
-    if keys.is_latched(key) or _is_command(key):
-        options.setdefault("congestion_control", zenoh.CongestionControl.BLOCK)
+    stays in a cache for subscribers that join later and ask for history."""
     if not keys.is_latched(key):
         return session.declare_publisher(key, **options)
     # sequence numbers make the subscriber track each publisher on its own: without them it orders one
     # session's publishers by timestamp and drops history replies that arrive out of that order
     # (measured: 8 of 30 latched values lost, 0 of 90 with them)
+    # state, not a stream: a full queue waits rather than dropping it (a dropped map is never resent)
+    options.setdefault("congestion_control", zenoh.CongestionControl.BLOCK)
     return zenoh.ext.declare_advanced_publisher(
         session, key, cache=zenoh.ext.CacheConfig(max_samples=1), publisher_detection=True,
         sample_miss_detection=zenoh.ext.MissDetectionConfig(), **options,
     )
-
-
-def _is_command(key: str) -> bool:
-    try:
-        return keys.parse(key).category == "cmd"
-    except ValueError:
-        return False
 
 
 class ServiceError(RuntimeError):
