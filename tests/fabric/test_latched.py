@@ -99,3 +99,23 @@ def test_echo_prints_the_latest_latched_value_without_waiting_for_a_new_one(worl
     line = json.loads(out.stdout.splitlines()[0])
     assert line["key"] == goal and line["message"]["position"] == [4.0, 1.0, 0.0]
 
+
+
+def test_latched_values_block_streams_and_commands_drop(world, connect):
+    import zenoh
+
+    from fabric.session import declare_publisher
+
+    fab = connect("tool", "qos")
+    block, drop = zenoh.CongestionControl.BLOCK, zenoh.CongestionControl.DROP
+    for key, want in (
+        (keys.map_key(world, "map"), block),  # published once: a dropped map is never resent
+        (keys.object_pose(world, "goal"), block),
+        (keys.robot_cmd(world, "base1", "path"), drop),  # see docs/architecture.md: blocking commands stalled peers
+        (keys.robot_joints(world, "arm1"), drop),  # the next sample replaces a lost one
+    ):
+        pub = declare_publisher(fab.session, key)
+        try:
+            assert pub.congestion_control == want, key
+        finally:
+            pub.undeclare()
