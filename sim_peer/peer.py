@@ -83,10 +83,12 @@ class SimPeer:
             return self
         self._opened = True
         f, w = self.fabric, self.fabric.world
+        f.serve(keys.srv(w, "world"), self._on_world_query)
         f.subscribe(keys.robot_cmd_all(w), self._on_command, expected=Command)
         for obj in self.world.objects:
-            f.subscribe(keys.object_pose(w, obj), self._on_object, expected=Pose, history=True)
-        f.serve(keys.srv(w, "world"), self._on_world_query)
+            # no history here: the authority's start must not wait on other peers' caches (with
+            # history=True a sim started under load answered nothing for 30 s in two CI runs)
+            f.subscribe(keys.object_pose(w, obj), self._on_object, expected=Pose)
         provider = getattr(self.gate, "set_state_provider", None)
         if callable(provider):
             provider(self.last_state)

@@ -194,6 +194,15 @@ def test_scene_objects_move_and_the_world_service_describes_everything(world, si
     np.testing.assert_allclose(objs["target"].position, [3.2, 0.1, 1.0])
 
 
+def _world_info(fab, world):
+    from fabric.session import ServiceError
+
+    try:
+        return fab.call(keys.srv(world, "world"), timeout=1.0)
+    except ServiceError:
+        return None
+
+
 def test_the_cli_runs_a_sim_peer_that_answers_the_world_service(world, router, connect, procs):
     port = router[1]
     proc = procs.start(
@@ -202,7 +211,8 @@ def test_the_cli_runs_a_sim_peer_that_answers_the_world_service(world, router, c
     )
     fab = connect()
     wait_until(lambda: ("sim", "sim1") in fab.live_peers("sim"), timeout=30, what="sim peer alive", seen=lambda: procs.output(proc))
-    info = fab.call(keys.srv(world, "world"), timeout=5)
+    # alive (token) comes a moment before serving: wait for the answer, and show the peer's output if none comes
+    info = wait_until(lambda: _world_info(fab, world), timeout=30, what="srv/world answered", seen=lambda: procs.output(proc))
     assert [r.id for r in info.robots] == ["arm1"]
     inbox = Inbox()
     fab.subscribe(keys.robot_joints(world, "arm1"), inbox)

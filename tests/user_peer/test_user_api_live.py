@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 import uuid
 
 import numpy as np
@@ -64,9 +65,12 @@ def test_move_joints_reaches_targets_and_matches_the_viewers_fk(user):
     target = np.radians([20.0, 10.0, -20.0, 15.0, 30.0, -10.0])
     q = arm.move_joints(target, tol=1e-3, timeout=20)
     assert np.max(np.abs(q - target)) <= 1e-3
-    # The flange the sim publishes is where the viewer's Pinocchio FK (robots/ URDF + world pose) puts it.
+    settled_ns = time.time_ns()
+    # The flange the sim publishes is where the viewer's Pinocchio FK (robots/ URDF + world pose) puts it;
+    # compare joints and a flange pose both published after the arm settled (not one from mid-motion).
     info = RobotCatalog(w.info()).info("arm1", {"joint_names": arm.entry.joint_names})
-    wait_until(lambda: arm.flange is not None and arm.flange.header.wall_ns > 0, what="flange pose")
+    wait_until(lambda: arm.flange is not None and arm.flange.header.wall_ns > settled_ns
+               and arm.joint_state.header.wall_ns > settled_ns, what="flange pose and joints after settling")
     fk = info.arm.fk(arm.joints)[-1]
     from user_peer.rerun_log import _compose
 
