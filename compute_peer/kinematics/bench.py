@@ -59,6 +59,20 @@ def reachable_targets(arm: ArmModel, n: int, rng: np.random.Generator) -> list[t
     return out
 
 
+def _timed(arm: ArmModel, jobs: list, method: str = "auto") -> tuple[list[float], list]:
+    """Solve time (s) and solution of every (position, quaternion or None, seed) job that succeeds."""
+    times, sols = [], []
+    for p, quat, s in jobs:
+        t0 = time.perf_counter()
+        try:
+            sol = solve(arm, p, quat, s, method=method)
+        except Unreachable:
+            continue
+        times.append(time.perf_counter() - t0)
+        sols.append(sol)
+    return times, sols
+
+
 def measure_solve(n: int = 2000, seed: int = 0) -> dict:
     """Median and p99 (us) and success rates of ``solve`` per workload: ``n`` targets each, CasADi fewer."""
     if n < 1:
@@ -69,52 +83,22 @@ def measure_solve(n: int = 2000, seed: int = 0) -> dict:
     seeds = [rng.uniform(arm.lower, arm.upper) for _ in range(n)]
     result: dict = {"robot": ROBOT, "n": n, "seed": seed}
 
-    times, ok = [], 0
-    for (_, p, quat), s in zip(targets, seeds):
-        t0 = time.perf_counter()
-        try:
-            solve(arm, p, quat, s)
-        except Unreachable:
-            continue
-        times.append(time.perf_counter() - t0)
-        ok += 1
-    result["closed_form"] = _stats(times, ok, n)
+    times, sols = _timed(arm, [(p, quat, s) for (_, p, quat), s in zip(targets, seeds)])
+    result["closed_form"] = _stats(times, len(sols), n)
 
-    times, ok, fallback = [], 0, 0
-    for (_, p, _), s in zip(targets, seeds):
-        t0 = time.perf_counter()
-        try:
-            sol = solve(arm, p, None, s)
-        except Unreachable:
-            continue
-        times.append(time.perf_counter() - t0)
-        ok += 1
-        fallback += sol.solver == "numerical"
-    result["closed_form_position"] = _stats(times, ok, n) | {"numerical_fallback": fallback}
+    times, sols = _timed(arm, [(p, None, s) for (_, p, _), s in zip(targets, seeds)])
+    fallback = sum(sol.solver == "numerical" for sol in sols)
+    result["closed_form_position"] = _stats(times, len(sols), n) | {"numerical_fallback": fallback}
 
-    times, ok = [], 0
-    for i, ((q, p, quat), s) in enumerate(zip(targets, seeds)):
-        start = np.clip(q + rng.normal(0.0, 0.3, q.shape), arm.lower, arm.upper) if i % 2 == 0 else s
-        t0 = time.perf_counter()
-        try:
-            solve(arm, p, quat, start, method="numerical")
-        except Unreachable:
-            continue
-        times.append(time.perf_counter() - t0)
-        ok += 1
-    result["numerical"] = _stats(times, ok, n)
+    # half the starts near the answer (a tracking seed), half anywhere in the limits
+    starts = [np.clip(q + rng.normal(0.0, 0.3, q.shape), arm.lower, arm.upper) if i % 2 == 0 else s
+              for i, ((q, _, _), s) in enumerate(zip(targets, seeds))]
+    times, sols = _timed(arm, [(p, quat, st) for (_, p, quat), st in zip(targets, starts)], "numerical")
+    result["numerical"] = _stats(times, len(sols), n)
 
     m = min(n, CASADI_TARGETS)
-    times, ok = [], 0
-    for (_, p, quat), s in zip(targets[:m], seeds[:m]):
-        t0 = time.perf_counter()
-        try:
-            solve(arm, p, quat, s, method="casadi")
-        except Unreachable:
-            continue
-        times.append(time.perf_counter() - t0)
-        ok += 1
-    result["casadi"] = _stats(times, ok, m)
+    times, sols = _timed(arm, [(p, quat, s) for (_, p, quat), s in zip(targets[:m], seeds[:m])], "casadi")
+    result["casadi"] = _stats(times, len(sols), m)
     return result
 
 
