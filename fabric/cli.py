@@ -26,7 +26,7 @@ app = typer.Typer(
     help="Multi-user robot simulation fabric over Zenoh: run routers and peers, inspect live keys, record and replay.",
     no_args_is_help=True,
     pretty_exceptions_enable=False,
-    add_completion=False,
+    add_completion=True,  # --install-completion / --show-completion (bash, zsh, fish, PowerShell)
 )
 
 _broken: list[tuple[str, str]] = []
@@ -42,9 +42,26 @@ def _load_plugins() -> None:
     app.add_typer(bench_app, name="bench")
 
 
+def version_text() -> str:
+    """``robofabric X.Y.Z`` from the installed distribution's metadata (``0+unknown`` in a bare source tree)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return f"robofabric {version('robofabric')}"
+    except PackageNotFoundError:
+        return "robofabric 0+unknown"
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        print(version_text())
+        raise typer.Exit(0)
+
+
 @app.callback()
 def _root(
     verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="More logging (-v info, -vv debug)."),
+    version: bool = typer.Option(False, "--version", help="Print the version and exit.", callback=_print_version, is_eager=True),
 ) -> None:
     level = logging.WARNING - 10 * min(verbose, 2)
     logging.basicConfig(level=int(os.environ.get("ROBOFABRIC_LOG_LEVEL", level)), format="%(asctime)s %(levelname)s %(name)s: %(message)s")

@@ -1,6 +1,6 @@
 """Launch files: which peers to start on this machine, and the supervisor that runs them.
 
-A launch file is TOML (see ``examples/demo.toml``)::
+A launch file is TOML (see ``fabric/demo.toml``, the demo, also at ``examples/demo.toml``)::
 
     [launch]
     world = "demo"

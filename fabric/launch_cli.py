@@ -14,10 +14,23 @@ import zenoh
 from fabric import keys
 from fabric.cli_common import UserError
 from fabric.config import FabricConfig
-from fabric.launch import LaunchError, LaunchSpec, Supervisor, load_launch
+from fabric.launch import LaunchError, LaunchSpec, Supervisor, load_launch, parse_launch
 from fabric.session import Fabric, shutdown_event
 
-DEMO_FILE = Path(__file__).resolve().parents[1] / "examples" / "demo.toml"
+DEMO_RESOURCE = "demo.toml"
+"""The demo's launch file ships inside the package (``fabric/demo.toml``; ``examples/demo.toml`` links to it)."""
+
+
+def load_demo_spec() -> LaunchSpec:
+    """The built-in demo's launch spec, read from the installed package (works from a wheel, not only a checkout)."""
+    from importlib.resources import files
+
+    res = files("fabric").joinpath(DEMO_RESOURCE)
+    try:
+        text = res.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise LaunchError(f"the built-in demo launch file {res} cannot be read: {exc}") from None
+    return parse_launch(text, str(res))
 
 
 class _Watch:
@@ -166,9 +179,8 @@ def demo(
     router: Annotated[Optional[str], typer.Option(help="Router endpoint (default from the launch file, tcp/127.0.0.1:7447).")] = None,
 ) -> None:
     """Run the embedded default: router, sim peer with both robots, compute peer and scripted users."""
-    path = launch or DEMO_FILE
     try:
-        spec = load_launch(path)
+        spec = load_launch(launch) if launch is not None else load_demo_spec()
     except LaunchError as exc:
         raise UserError(str(exc)) from None
     raise typer.Exit(_run(spec, out=out, duration=duration, router=router, demo=True))
