@@ -21,6 +21,8 @@ from typing import Any
 import msgpack
 import numpy as np
 
+from fabric.limits import quote, validate_user
+
 __all__ = [
     "DecodeError",
     "encode",
@@ -36,10 +38,14 @@ __all__ = [
     "Arr",
     "Msg",
     "Map",
+    "User",
 ]
 
 EXT_NDARRAY = 1
-MAX_ARRAY_BYTES = 64 * 1024 * 1024
+MAX_ARRAY_BYTES = 16 * 1024 * 1024
+"""No array field may be larger, whatever its spec says (routers cap messages at a few MB anyway)."""
+MAX_ITEMS = 256
+"""Default cap on a list of strings (joint names, a queue) and on a free-form map's entries."""
 MAX_DIMS = 4
 
 _DTYPES: dict[int, np.dtype] = {
@@ -117,7 +123,7 @@ class S:
         if len(v) > self.max_len:
             raise DecodeError(f"{where}: string of {len(v)} characters is too long")
         if self.choices is not None and v not in self.choices:
-            raise DecodeError(f"{where}: {v!r} is not one of {', '.join(self.choices)}")
+            raise DecodeError(f"{where}: {quote(v)} is not one of {', '.join(self.choices)}")
         return v
 
     def dump(self, v: Any) -> Any:
@@ -126,14 +132,21 @@ class S:
 
 @dataclass(frozen=True, slots=True)
 class Strs:
-    """A list of strings (names, queues)."""
+    """A list of at most ``max_items`` strings of at most ``max_len`` characters (names, queues)."""
+
+    max_items: int = MAX_ITEMS
+    max_len: int = 256
 
     def check(self, v: Any, where: str) -> tuple[str, ...]:
         if not isinstance(v, (list, tuple)):
             raise DecodeError(f"{where}: expected a list of strings, got {type(v).__name__}")
+        if len(v) > self.max_items:
+            raise DecodeError(f"{where}: {len(v)} strings is too many (at most {self.max_items})")
         for i, s in enumerate(v):
             if not isinstance(s, str):
                 raise DecodeError(f"{where}[{i}]: expected a string, got {type(s).__name__}")
+            if len(s) > self.max_len:
+                raise DecodeError(f"{where}[{i}]: string of {len(s)} characters is too long (at most {self.max_len})")
         return tuple(v)
 
     def dump(self, v: Any) -> Any:
@@ -141,12 +154,31 @@ class Strs:
 
 
 @dataclass(frozen=True, slots=True)
+class User:
+    """A user name (:func:`fabric.limits.validate_user`: at most 64 characters of a safe alphabet)."""
+
+    def check(self, v: Any, where: str) -> str:
+        try:
+            return validate_user(v, what=where)
+        except ValueError as exc:
+            raise DecodeError(str(exc)) from None
+
+    def dump(self, v: Any) -> Any:
+        return v
+
+
+@dataclass(frozen=True, slots=True)
 class Arr:
-    """A numpy array of one dtype, with a fixed shape or a fixed number of dims; finite if float."""
+    """A numpy array of one dtype, with a fixed shape or a fixed number of dims; finite if float.
+
+    ``max_elems`` caps its size (a scan cannot hold a million rays); every array is also capped
+    at :data:`MAX_ARRAY_BYTES` when it is unpacked, before any spec is consulted.
+    """
 
     dtype: Any
     ndim: int | None = None
     shape: tuple[int, ...] | None = None
+    max_elems: int = 1 << 16
 
     def check(self, v: Any, where: str) -> np.ndarray:
         if not isinstance(v, np.ndarray):
@@ -158,6 +190,8 @@ class Arr:
             raise DecodeError(f"{where}: expected shape {tuple(self.shape)}, got {tuple(v.shape)}")
         if self.ndim is not None and v.ndim != self.ndim:
             raise DecodeError(f"{where}: expected {self.ndim}-D array, got shape {tuple(v.shape)}")
+        if v.size > self.max_elems:
+            raise DecodeError(f"{where}: {v.size} elements is too many (at most {self.max_elems})")
         if v.dtype.kind == "f" and not np.isfinite(v).all():
             bad = int(np.flatnonzero(~np.isfinite(v.ravel()))[0])
             raise DecodeError(f"{where}: element {bad} is not finite ({v.ravel()[bad]})")
@@ -199,13 +233,22 @@ _SCALARS = (str, int, float, bool, type(None))
 class Map:
     """A small free-form map of string keys to scalars or lists of scalars (event details)."""
 
+    max_items: int = MAX_ITEMS
+    max_list: int = 4096
+
     def check(self, v: Any, where: str) -> dict:
         if not isinstance(v, dict):
             raise DecodeError(f"{where}: expected a map, got {type(v).__name__}")
+        if len(v) > self.max_items:
+            raise DecodeError(f"{where}: {len(v)} entries is too many (at most {self.max_items})")
         for k, x in v.items():
             if not isinstance(k, str):
                 raise DecodeError(f"{where}: keys must be strings, got {type(k).__name__}")
+            if len(k) > 256:
+                raise DecodeError(f"{where}: a key of {len(k)} characters is too long (at most 256)")
             items = x if isinstance(x, list) else [x]
+            if len(items) > self.max_list:
+                raise DecodeError(f"{where}.{k}: {len(items)} values is too many (at most {self.max_list})")
             for item in items:
                 if not isinstance(item, _SCALARS):
                     raise DecodeError(f"{where}.{k}: unsupported value of type {type(item).__name__}")
@@ -361,7 +404,7 @@ def _from_list(m: list, where: str) -> Any:
     name = m[0]
     cls = _BY_NAME.get(name)
     if cls is None:
-        raise DecodeError(f"{where}: unknown message type {name!r}")
+        raise DecodeError(f"{where}: unknown message type {quote(name, 64)}")
     spec: dict = cls.SPEC
     if len(m) - 1 != len(spec):
         raise DecodeError(f"{name}: expected {len(spec)} fields, got {len(m) - 1}")

@@ -28,6 +28,11 @@ ENV_CONNECT = "ROBOFABRIC_CONNECT"
 ENV_WORLD = "ROBOFABRIC_WORLD"
 ENV_PROFILE = "ROBOFABRIC_PROFILE"
 ENV_CONFIG = "ROBOFABRIC_ZENOH_CONFIG"
+MAX_MESSAGE_SIZE = 8 * 1024 * 1024
+"""``transport/link/rx/max_message_size`` of every session we open (zenoh's default is 1 GiB): a
+larger message is dropped on arrival and the link stays up (checked on zenoh 1.10). The largest
+message the fabric itself sends is a map of at most 4 MiB (fabric.messages.MAX_GRID_CELLS)."""
+ZENOH_DEFAULT_MAX_MESSAGE_SIZE = 1 << 30
 
 
 class ConfigError(ValueError):
@@ -127,6 +132,9 @@ class FabricConfig:
         if listen:
             conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
         conf.insert_json5("transport/link/tx/lease", json.dumps(self.lease_ms))
+        # a file that chose its own cap keeps it; otherwise a few MB, not zenoh's 1 GiB
+        if json.loads(conf.get_json("transport/link/rx/max_message_size")) == ZENOH_DEFAULT_MAX_MESSAGE_SIZE:
+            conf.insert_json5("transport/link/rx/max_message_size", json.dumps(MAX_MESSAGE_SIZE))
         # Timestamps let advanced subscribers ask publishers' caches for history.
         conf.insert_json5("timestamping/enabled", json.dumps({"router": True, "peer": True, "client": True}))
         for key, value in self.extra:

@@ -18,7 +18,17 @@ from typing import Any, ClassVar, Union
 
 import numpy as np
 
-from fabric.codec import Arr, F, I, S, Strs, Msg, Map, register
+from fabric.codec import Arr, F, I, S, Strs, Msg, Map, User, register
+from fabric.limits import MAX_USER_LEN
+
+MAX_JOINTS = 256
+MAX_RAYS = 8192
+"""A scan cannot hold a million rays: 8192 is 20x the densest LIDAR a robot here carries."""
+MAX_PATH_POINTS = 1 << 16
+MAX_GRID_CELLS = 1 << 22
+"""2048 x 2048 cells (102 m square at 5 cm), 4 MiB: inside the routers' 8 MiB message cap."""
+MAX_QUEUE = 64
+"""Users waiting for one object (ownership.state refuses the 65th)."""
 
 
 def _ro(a: Any, dtype: Any) -> np.ndarray:
@@ -60,9 +70,9 @@ class JointState:
     header: Header = field(default_factory=_header)
 
     SPEC: ClassVar[dict] = {
-        "names": Strs(),
-        "q": Arr(np.float64, ndim=1),
-        "dq": Arr(np.float64, ndim=1),
+        "names": Strs(max_items=MAX_JOINTS),
+        "q": Arr(np.float64, ndim=1, max_elems=MAX_JOINTS),
+        "dq": Arr(np.float64, ndim=1, max_elems=MAX_JOINTS),
         "header": _HEADER,
     }
 
@@ -125,7 +135,7 @@ class Scan:
         "angle_min": F(lo=-2 * math.pi, hi=2 * math.pi),
         "angle_increment": F(lo=-math.pi, hi=math.pi),
         "range_max": F(lo=0.0, hi=65.535),
-        "ranges_mm": Arr(np.uint16, ndim=1),
+        "ranges_mm": Arr(np.uint16, ndim=1, max_elems=MAX_RAYS),
         "header": _HEADER,
     }
 
@@ -160,9 +170,9 @@ class Path:
     header: Header = field(default_factory=_header)
 
     SPEC: ClassVar[dict] = {
-        "x": Arr(np.float64, ndim=1),
-        "y": Arr(np.float64, ndim=1),
-        "theta": Arr(np.float64, ndim=1),
+        "x": Arr(np.float64, ndim=1, max_elems=MAX_PATH_POINTS),
+        "y": Arr(np.float64, ndim=1, max_elems=MAX_PATH_POINTS),
+        "theta": Arr(np.float64, ndim=1, max_elems=MAX_PATH_POINTS),
         "frame": S(),
         "header": _HEADER,
     }
@@ -192,7 +202,7 @@ class OccupancyGrid:
     SPEC: ClassVar[dict] = {
         "resolution": F(lo=1e-4, hi=100.0),
         "origin": Arr(np.float64, shape=(3,)),
-        "cells": Arr(np.uint8, ndim=2),
+        "cells": Arr(np.uint8, ndim=2, max_elems=MAX_GRID_CELLS),
         "header": _HEADER,
     }
 
@@ -214,7 +224,7 @@ class JointTarget:
     speed_scale: float = 1.0
     header: Header = field(default_factory=_header)
 
-    SPEC: ClassVar[dict] = {"q": Arr(np.float64, ndim=1), "speed_scale": F(lo=1e-6, hi=1.0), "header": _HEADER}
+    SPEC: ClassVar[dict] = {"q": Arr(np.float64, ndim=1, max_elems=MAX_JOINTS), "speed_scale": F(lo=1e-6, hi=1.0), "header": _HEADER}
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "q", _ro(self.q, np.float64))
@@ -258,7 +268,7 @@ class Command:
     header: Header = field(default_factory=_header)
 
     SPEC: ClassVar[dict] = {
-        "user": S(nonempty=True),
+        "user": User(),
         "epoch": I(lo=0),
         "body": Msg(JointTarget, Twist, Path, Stop, Reset),
         "header": _HEADER,
@@ -286,10 +296,10 @@ class OwnershipRecord:
     SPEC: ClassVar[dict] = {
         "object": S(nonempty=True),
         "policy": S(choices=("scene", "exclusive")),
-        "owner": S(),
+        "owner": S(max_len=MAX_USER_LEN),
         "epoch": I(lo=0),
         "lease_expiry": F(),
-        "queue": Strs(),
+        "queue": Strs(max_items=MAX_QUEUE, max_len=MAX_USER_LEN),
         "state": S(choices=("still", "moving")),
         "authority": S(),
         "header": _HEADER,
@@ -315,7 +325,7 @@ class Event:
         "kind": S(nonempty=True),
         "reason": S(),
         "object": S(),
-        "user": S(),
+        "user": S(max_len=MAX_USER_LEN),
         "severity": S(choices=("debug", "info", "warning", "error")),
         "data": Map(),
         "header": _HEADER,

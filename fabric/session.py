@@ -3,8 +3,12 @@
 :class:`Fabric` opens the session for a profile, declares the peer's
 liveliness token ``rf/{world}/peer/{kind}/{id}``, encodes and stamps what it
 publishes, and decodes what it receives. A malformed payload never reaches a
-callback: it is counted, logged once per key, published as an event under
-``rf/{world}/event/decode/{peer}``, and the peer goes on.
+callback: it is counted, logged and published as an event under
+``rf/{world}/event/decode/{peer}`` at most once per subscription per
+:attr:`Fabric.report_interval` (with the count of what was suppressed, quoting at
+most ~200 characters of what the client sent), and the peer goes on. Nothing a
+client makes up (keys, payloads) grows a peer's memory: publishers and sequence
+counters are kept for at most :data:`MAX_KEYS` keys.
 
 Services are queryables whose requests and replies are fabric messages; a
 handler refuses a request by raising :class:`ServiceError`, which the caller
@@ -27,9 +31,17 @@ import zenoh.ext
 from fabric import keys
 from fabric.codec import DecodeError, decode, encode, load_plugins
 from fabric.config import FabricConfig, default_peer_id
+from fabric.limits import RateLimiter, clip
 from fabric.messages import Event, Header
 
 log = logging.getLogger("robofabric")
+
+MAX_KEYS = 1024
+"""Publishers and per-key sequence numbers kept per session; keys beyond are published uncached."""
+REPORT_INTERVAL = 5.0
+REPORT_BURST = 5
+"""Reports (log line + event) of bad input per subscription or reason per :data:`REPORT_INTERVAL` seconds;
+the rest are counted and the next report says how many were suppressed."""
 
 __all__ = ["Fabric", "ServiceError", "Reply", "open_fabric", "shutdown_event", "undeclare_all", "declare_publisher"]
 
@@ -90,7 +102,8 @@ class Fabric:
         self.counters: Counter[str] = Counter()
         self._seq: dict[str, int] = {}
         self._lock = threading.Lock()
-        self._warned: set[str] = set()
+        self.report_interval = REPORT_INTERVAL
+        self._limiter = RateLimiter(REPORT_INTERVAL, burst=REPORT_BURST, max_keys=256)
         self._closed = False
         self._resources: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
@@ -129,7 +142,8 @@ class Fabric:
         """A header for the next message on ``key``: per-key sequence, wall time now, this peer as source."""
         with self._lock:
             seq = self._seq.get(key, 0)
-            self._seq[key] = seq + 1
+            if seq or len(self._seq) < MAX_KEYS:
+                self._seq[key] = seq + 1
         return Header(stamp=float(stamp), wall_ns=time.time_ns(), seq=seq, source=self.peer_id)
 
     def publish(self, key: str, msg: Any) -> int:
@@ -140,6 +154,11 @@ class Fabric:
         payload = encode(msg)
         pub = self._publishers.get(key)
         if pub is None:
+            if len(self._publishers) >= MAX_KEYS:  # a safety net: callers should not publish on made-up keys
+                self.counters["uncached_puts"] += 1
+                self.session.put(key, payload)
+                self.counters["published"] += 1
+                return len(payload)
             pub = declare_publisher(self.session, key)
             self._publishers[key] = pub
             self._resources.append(pub)
@@ -151,10 +170,31 @@ class Fabric:
         """Put bytes as they are (replay, tools); nothing is checked."""
         self.session.put(key, payload)
 
-    def emit(self, event: Event, *parts: str) -> None:
-        """Publish an event on ``rf/{world}/event/{parts...}`` and log it."""
+    def should_report(self, key: str) -> int | None:
+        """Rate limit for reports about ``key`` (a fixed reason, never client text): ``None`` to stay
+        quiet, else the number of reports suppressed since the last one."""
+        with self._lock:
+            verdict = self._limiter.check(key, time.monotonic())
+        if not verdict.report:
+            self.counters["reports_suppressed"] += 1
+            return None
+        return verdict.suppressed
+
+    def emit(self, event: Event, *parts: str, limit: str | None = None) -> None:
+        """Publish an event on ``rf/{world}/event/{parts...}`` and log it.
+
+        ``limit``: a key (never client text) under which this kind of event is published and logged
+        at most once per :attr:`report_interval`; the next one says how many were suppressed."""
+        if limit is not None:
+            suppressed = self.should_report(limit)
+            if suppressed is None:
+                return
+            if suppressed:
+                event = Event(kind=event.kind, reason=event.reason, object=event.object, user=event.user,
+                              severity=event.severity, data={**event.data, "suppressed": suppressed}, header=event.header)
         level = {"debug": logging.DEBUG, "info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
-        log.log(level.get(event.severity, logging.INFO), "%s %s: %s", event.kind, event.object or "", event.reason)
+        more = f" ({event.data['suppressed']} more like it suppressed)" if event.data.get("suppressed") else ""
+        log.log(level.get(event.severity, logging.INFO), "%s %s: %s%s", event.kind, event.object or "", event.reason, more)
         try:
             self.publish(keys.event(self.world, *(parts or (event.kind,))), event)
         except Exception as exc:  # a closing session must not turn an event into a crash
@@ -162,15 +202,18 @@ class Fabric:
 
     # ------------------------------------------------------------------ receiving
 
-    def _bad_payload(self, key: str, exc: DecodeError) -> None:
+    def bad_payload(self, key: str, exc: Exception, *, where: str) -> None:
+        """Count a payload that could not be used; report it at most once per ``where`` per interval.
+
+        ``where`` is what the peer subscribed to (a fixed key expression), never the concrete key: a
+        flood on made-up keys under one wildcard is one report per interval, not one per key."""
         self.counters["decode_errors"] += 1
-        if key not in self._warned:
-            self._warned.add(key)
-            log.warning("bad payload on %s: %s (further ones on this key are counted, not logged)", key, exc)
         self.emit(
-            Event(kind="decode_error", reason=str(exc), severity="warning", data={"key": key}, header=self.header("event")),
+            Event(kind="decode_error", reason=clip(str(exc)), severity="warning",
+                  data={"key": clip(key), "subscription": clip(where)}, header=self.header("event")),
             "decode",
             self.peer_id,
+            limit=f"decode:{where}",
         )
 
     def subscribe(
@@ -194,7 +237,7 @@ class Fabric:
             try:
                 msg = decode(sample.payload.to_bytes(), expected)
             except DecodeError as exc:
-                self._bad_payload(key, exc)
+                self.bad_payload(key, exc, where=key_expr)
                 return
             try:
                 callback(key, msg)
@@ -243,12 +286,12 @@ class Fabric:
                     query.reply(key, encode(answer))
             except (DecodeError, ServiceError, ValueError) as exc:
                 self.counters["query_errors"] += 1
-                reason = exc.reason if isinstance(exc, ServiceError) else str(exc)
+                reason = clip(exc.reason if isinstance(exc, ServiceError) else str(exc), 400)
                 query.reply_err(encode(Event(kind="service_error", reason=reason, severity="warning", header=self.header("srv"))))
             except Exception as exc:
                 self.counters["query_errors"] += 1
                 log.exception("service %s failed", key)
-                query.reply_err(encode(Event(kind="service_error", reason=f"internal error: {exc}", severity="error")))
+                query.reply_err(encode(Event(kind="service_error", reason=f"internal error: {clip(str(exc))}", severity="error")))
 
         q = self.session.declare_queryable(key_expr, on_query, complete=complete)
         self._resources.append(q)

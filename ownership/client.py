@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from fabric import keys
+from fabric.limits import validate_user
 from fabric.messages import OwnershipRecord
 from fabric.session import Fabric, ServiceError
 
@@ -47,7 +48,7 @@ class OwnershipClient:
 
     def __init__(self, fabric: Fabric, user: str, *, renew_s: float = 0.5, timeout: float = 2.0) -> None:
         self.fabric = fabric
-        self.user = user
+        self.user = validate_user(user)  # refused here, not by the authority's decoder after a timeout
         self.timeout = timeout
         self.records: dict[str, OwnershipRecord] = {}
         self._lock = threading.Lock()

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-from fabric.codec import I, Msg, S, register
+from fabric.codec import I, Msg, S, User, register
 from fabric.messages import Header, OwnershipRecord
 
 __all__ = ["OwnRequest", "OwnReply"]
@@ -28,7 +28,7 @@ class OwnRequest:
 
     SPEC: ClassVar[dict] = {
         "op": S(choices=("request", "release", "renew")),
-        "user": S(nonempty=True),
+        "user": User(),
         "wait": I(lo=0, hi=1),
         "header": _HEADER,
     }

@@ -13,6 +13,10 @@ Rules (DESIGN.md, issue 5):
 - A request on a still robot hands it over at once; on a moving one it is
   denied (or queued when the requester asks to wait). A release, lease expiry
   or owner departure passes ownership to the head of the queue.
+- Bounded against made-up users (issue 14): a queue holds at most
+  :data:`fabric.messages.MAX_QUEUE` users, and a user that requested without a
+  liveliness token (a :class:`Join`) is dropped, from queues and ownership, once
+  ``grace_s`` has passed without one: forged requesters leave on their own.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Mapping
 
-from fabric.messages import OwnershipRecord
+from fabric.messages import MAX_QUEUE, OwnershipRecord
 
 __all__ = [
     "Effect", "OwnState", "Join", "Leave", "Request", "Release", "Renew", "Tick", "Motion",
@@ -104,6 +108,7 @@ class OwnState:
     live: frozenset[str] = frozenset()
     away: Mapping[str, Away] = field(default_factory=dict)
     next_rank: int = 0
+    unproven: Mapping[str, float] = field(default_factory=dict)  # user -> deadline for its token (requested without one)
     lease_s: float = 2.0
     grace_s: float = 10.0
     authority: str = ""
@@ -150,6 +155,23 @@ def _pass_on(s: OwnState, rec: OwnershipRecord, now: float, effects: list, why: 
     return replace(rec, owner="", epoch=rec.epoch + 1, lease_expiry=0.0, queue=tuple(queue))
 
 
+def _drop_unproven(s: OwnState, recs: dict, user: str, now: float, effects: list) -> OwnState:
+    """``user`` requested without a liveliness token and none came within grace: it leaves everything
+    (no grace to come back: it never was there), and nothing is kept about it."""
+    for obj, rec in list(recs.items()):
+        if rec.owner == user:
+            recs[obj] = _pass_on(replace(s, live=s.live - {user}), rec, now, effects, "no liveliness token")
+        elif user in rec.queue:
+            recs[obj] = replace(rec, queue=tuple(u for u in rec.queue if u != user))
+            effects.append(Effect("released", obj, user, "left the queue: no liveliness token"))
+    return replace(
+        s,
+        live=s.live - {user},
+        rank=MappingProxyType({k: v for k, v in s.rank.items() if k != user}),
+        unproven=MappingProxyType({k: v for k, v in s.unproven.items() if k != user}),
+    )
+
+
 # ---------------------------------------------------------------------- step
 
 def step(s: OwnState, ev: Event) -> tuple[OwnState, list[Effect]]:
@@ -159,6 +181,8 @@ def step(s: OwnState, ev: Event) -> tuple[OwnState, list[Effect]]:
 
     if isinstance(ev, Join):
         was_away = s.away.get(ev.user)
+        if ev.user in s.unproven:
+            s = replace(s, unproven=MappingProxyType({k: v for k, v in s.unproven.items() if k != ev.user}))
         s = _join(s, ev.user)
         if was_away is not None and ev.now <= was_away.deadline:
             away = {k: v for k, v in s.away.items() if k != ev.user}
@@ -183,7 +207,7 @@ def step(s: OwnState, ev: Event) -> tuple[OwnState, list[Effect]]:
     if isinstance(ev, Leave):
         if ev.user not in s.live:
             return s, effects
-        s = replace(s, live=s.live - {ev.user})
+        s = replace(s, live=s.live - {ev.user}, unproven=MappingProxyType({k: v for k, v in s.unproven.items() if k != ev.user}))
         owned, queued = set(), set()
         for obj, rec in list(recs.items()):
             if rec.owner == ev.user:
@@ -201,6 +225,8 @@ def step(s: OwnState, ev: Event) -> tuple[OwnState, list[Effect]]:
             if rec.owner and ev.now > rec.lease_expiry:
                 recs[obj] = _pass_on(s, rec, ev.now, effects, "lease expired")
                 effects.append(Effect("expired", obj, rec.owner, "lease expired"))
+        for user in [u for u, d in s.unproven.items() if ev.now > d]:
+            s = _drop_unproven(s, recs, user, ev.now, effects)
         gone = [u for u, a in s.away.items() if ev.now > a.deadline]
         if gone:
             away = {k: v for k, v in s.away.items() if k not in gone}
@@ -221,7 +247,9 @@ def step(s: OwnState, ev: Event) -> tuple[OwnState, list[Effect]]:
         return s, effects
 
     if isinstance(ev, Request):
-        s = _join(s, ev.user)  # a request proves the user is there, even before its token arrives
+        if ev.user not in s.live:  # a request proves the user is there, until grace runs out without its token
+            s = replace(s, unproven=MappingProxyType({**s.unproven, ev.user: ev.now + s.grace_s}))
+        s = _join(s, ev.user)
         if rec.policy == "scene":
             effects.append(Effect("granted", rec.object, ev.user, "scene object: anyone writes"))
             return s, effects
@@ -237,6 +265,9 @@ def step(s: OwnState, ev: Event) -> tuple[OwnState, list[Effect]]:
             if prev:
                 effects.append(Effect("revoked", rec.object, prev, f"handed over to {ev.user} while still"))
             return _with(s, recs), effects
+        if ev.wait and ev.user not in rec.queue and len(rec.queue) >= MAX_QUEUE:
+            effects.append(Effect("denied", rec.object, ev.user, f"the queue is full ({MAX_QUEUE} waiting)"))
+            return s, effects
         if ev.wait:
             q = _sorted_queue(s, rec.queue + (ev.user,))
             recs[rec.object] = replace(rec, queue=q)

@@ -10,6 +10,13 @@ independent of the physics step; headers carry sim time):
 Commands on ``rf/{world}/robot/{id}/cmd/*`` pass through the :class:`fabric.gate.CommandGate`
 first; anything refused or unusable is published as an ``Event(kind="reject")`` under
 ``event/reject/{robot}`` with the reason, counted, and the robot keeps its last valid command.
+A command for a robot this sim does not have is refused from its key alone, before it is
+decoded or anything is kept for it, on the one fixed key ``event/reject``. Admitted commands
+leave zenoh's callback thread at once: they wait in a bounded per-robot
+:class:`~sim_peer.inbox.CommandQueue` (the latest target wins, a stop or reset is never
+dropped) that a worker thread applies, so a flood on one key cannot hold up another robot.
+Refusals and bad payloads are reported at most a few times per reason per interval
+(:meth:`fabric.session.Fabric.emit` with ``limit``), with the count of the rest.
 Clamped commands are applied and reported as ``Event(kind="clamp")``. Scene objects move on
 ``rf/{world}/object/{id}/pose``. ``rf/{world}/srv/world`` answers a :class:`WorldInfo`.
 """
@@ -25,11 +32,16 @@ from typing import Any, Callable
 import numpy as np
 
 from fabric import keys
+import zenoh
+
+from fabric.codec import DecodeError, decode
 from fabric.gate import CommandGate, OpenGate
+from fabric.limits import clip, quote
 from fabric.messages import COMMAND_BODIES, Command, Event, JointState, Pose, Scan
 from fabric.rate import Clock, RateLoop
 from fabric.session import Fabric
 from sim_peer.controllers import Clamp, CommandRejected
+from sim_peer.inbox import CommandQueue
 from sim_peer.messages import ObjectInfo, RobotInfo, WorldInfo
 from sim_peer.pacing import Pacer
 from sim_peer.simrobot import ArmRobot, MobileRobot
@@ -74,6 +86,9 @@ class SimPeer:
         self._opened = False
         self._closed = False
         self._sonar = SONAR_STREAM in keys.ROBOT_STREAMS
+        self._queues: dict[str, CommandQueue[Command]] = {rid: CommandQueue() for rid in world.robots}
+        self._queued = threading.Condition(threading.Lock())
+        self._worker: threading.Thread | None = None
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -84,7 +99,9 @@ class SimPeer:
         self._opened = True
         f, w = self.fabric, self.fabric.world
         f.serve(keys.srv(w, "world"), self._on_world_query)
-        f.subscribe(keys.robot_cmd_all(w), self._on_command, expected=Command)
+        self._worker = threading.Thread(target=self._drain, name="sim-commands", daemon=True)
+        self._worker.start()
+        f.subscribe_raw(keys.robot_cmd_all(w), self._on_command_sample)
         for obj in self.world.objects:
             # no history here: the authority's start must not wait on other peers' caches (with
             # history=True a sim started under load answered nothing for 30 s in two CI runs)
@@ -144,8 +161,12 @@ class SimPeer:
             return
         self._closed = True
         self._stop.set()
+        with self._queued:
+            self._queued.notify_all()
         if self._thread is not None:
             self._thread.join(5.0)
+        if self._worker is not None:
+            self._worker.join(5.0)
         for loop in self._loops:
             loop.stop()
 
@@ -236,46 +257,115 @@ class SimPeer:
 
     # ------------------------------------------------------------------ commands
 
-    def _event(self, kind: str, robot: str, reason: str, *, user: str = "", severity: str = "warning", data: dict | None = None) -> None:
-        key_parts = (kind, robot) if robot else (kind,)
-        try:
-            ev = Event(
-                kind=kind, reason=reason, object=robot, user=user, severity=severity, data=data or {},
-                header=self.fabric.header("event", stamp=self.world.time),
-            )
+    def _event(self, kind: str, robot: str, reason: str, *, user: str = "", severity: str = "warning", data: dict | None = None,
+               limit: str | None = None) -> None:
+        key_parts = (kind, robot) if robot in self.world.robots or robot in self.world.objects else (kind,)
+        ev = Event(
+            kind=kind, reason=reason, object=robot, user=user, severity=severity, data=data or {},
+            header=self.fabric.header("event", stamp=self.world.time),
+        )
+        if limit is None:
             self.fabric.emit(ev, *key_parts)
-        except ValueError:  # a robot id that cannot be a key part: publish without it
-            self.fabric.emit(Event(kind=kind, reason=reason, object="", user=user, severity=severity, data=data or {}), kind)
+        else:
+            self.fabric.emit(ev, *key_parts, limit=limit)
 
-    def _reject(self, robot: str, command: str, reason: str, detail: str, user: str = "") -> None:
+    def _reject(self, robot: str, command: str, reason: str, detail: str, user: str = "", *, code: str | None = None) -> None:
+        """Count and report a refusal. ``code`` (default ``reason``) is the counter and rate-limit name:
+        a fixed word, never client text, so made-up users or ids cannot grow the counters."""
+        code = code or reason
         self.counters["rejected"] += 1
-        self.counters[f"rejected:{reason}"] += 1
-        self._event("reject", robot, reason, user=user, data={"command": command, "detail": detail})
+        self.counters[f"rejected:{code}"] += 1
+        known = robot if (robot in self.world.robots or robot in self.world.objects) else "?"
+        self._event("reject", robot, reason, user=user, data={"command": command, "detail": detail},
+                    limit=f"reject:{known}:{code}")
 
-    def _on_command(self, key: str, cmd: Command) -> None:
+    def _on_command_sample(self, sample: zenoh.Sample) -> None:
+        """Zenoh's callback: refuse unknown robots from the key alone, decode, admit, queue. Never applies."""
+        if sample.kind != zenoh.SampleKind.PUT:
+            return
+        key = str(sample.key_expr)
+        self.fabric.counters["received"] += 1
+        try:
+            parsed = keys.parse(key)
+        except ValueError as exc:
+            self.counters["commands"] += 1
+            self._reject("", "?", "bad_key", clip(str(exc)))
+            return
+        rid = parsed.subject
+        if rid not in self._queues:  # undecoded: the sender is not known, nothing is kept
+            self.counters["commands"] += 1
+            self._reject(clip(rid, 64), parsed.leaf, "unknown_robot", f"no robot {quote(rid, 64)} here; robots: {', '.join(self.world.robots)}")
+            return
+        try:
+            cmd = decode(sample.payload.to_bytes(), Command)
+        except DecodeError as exc:
+            self.fabric.bad_payload(key, exc, where=keys.robot_cmd_all(self.fabric.world, rid))
+            return
+        admitted = self._admit(key, cmd)
+        if admitted is None:
+            return
+        name, _ = admitted
+        with self._queued:
+            self._queues[rid].put(name, cmd)
+            self._queued.notify()
+
+    def _drain(self) -> None:
+        """The command worker: apply what the queues hold, robot by robot, until :meth:`close`."""
+        while not self._stop.is_set():
+            with self._queued:
+                batch = [(rid, q.take()) for rid, q in self._queues.items() if q]
+                if not batch:
+                    self._queued.wait(0.5)
+                    continue
+            for rid, items in batch:
+                for name, cmd in items:
+                    try:
+                        self._execute(rid, name, cmd)
+                    except Exception:
+                        self.counters["command_errors"] += 1
+                        log.exception("command %s for %s failed", name, rid)
+
+    def superseded(self) -> int:
+        """Admitted commands a later one of the same robot replaced before they were applied."""
+        with self._queued:
+            return sum(q.superseded for q in self._queues.values())
+
+    def _admit(self, key: str, cmd: Command) -> tuple[str, Any] | None:
+        """Check a decoded command (robot, body, gate); ``(name, robot)`` when it may be applied."""
         self.counters["commands"] += 1
         try:
             parsed = keys.parse(key)
         except ValueError as exc:
-            self._reject("", "?", "bad_key", str(exc), cmd.user)
-            return
+            self._reject("", "?", "bad_key", clip(str(exc)), cmd.user)
+            return None
         rid, name = parsed.subject, parsed.leaf
         robot = self.world.robots.get(rid)
         if robot is None:
-            self._reject(rid, name, "unknown_robot", f"no robot {rid!r} here; robots: {', '.join(self.world.robots)}", cmd.user)
-            return
+            self._reject(clip(rid, 64), name, "unknown_robot", f"no robot {quote(rid, 64)} here; robots: {', '.join(self.world.robots)}", cmd.user)
+            return None
         want = COMMAND_BODIES.get(name)
         if want is None or not isinstance(cmd.body, want):
             self._reject(rid, name, "wrong_body", f"cmd/{name} carries {getattr(want, '__name__', '?')}, got {type(cmd.body).__name__}", cmd.user)
-            return
+            return None
         try:
             refusal = self.gate.admit(rid, cmd)
         except Exception as exc:
             log.exception("gate.admit failed")
-            refusal = f"gate error: {exc}"
+            refusal = f"gate error: {clip(str(exc))}"
         if refusal:
-            self._reject(rid, name, refusal, f"the gate refused {cmd.user}'s {name} command (epoch {cmd.epoch})", cmd.user)
-            return
+            self._reject(rid, name, refusal, f"the gate refused {cmd.user}'s {name} command (epoch {cmd.epoch})", cmd.user,
+                         code="refused")
+            return None
+        return name, robot
+
+    def _on_command(self, key: str, cmd: Command) -> None:
+        """Admit and apply one decoded command now, in the caller's thread (tests, in-process use)."""
+        admitted = self._admit(key, cmd)
+        if admitted is not None:
+            self._execute(keys.parse(key).subject, admitted[0], cmd)
+
+    def _execute(self, rid: str, name: str, cmd: Command) -> None:
+        robot = self.world.robots[rid]
         try:
             with self.lock:
                 clamp = self._apply(robot, name, cmd.body)
@@ -288,6 +378,7 @@ class SimPeer:
             self._event(
                 "clamp", rid, "out_of_range" if name == "joints" else "over_limit", user=cmd.user,
                 data={"command": name, "what": list(clamp.what), "requested": list(clamp.requested), "applied": list(clamp.applied)},
+                limit=f"clamp:{rid}",
             )
 
     def _apply(self, robot, name: str, body: Any) -> Clamp | None:
@@ -309,7 +400,7 @@ class SimPeer:
         raise CommandRejected("unknown_command", f"unknown command {name!r}")
 
     def _on_object(self, key: str, pose: Pose) -> None:
-        obj = keys.parse(key).subject
+        obj = keys.parse(key).subject  # one subscription per scene object: never a made-up id
         if pose.frame not in ("world", ""):
             self._reject(obj, "pose", "bad_frame", f"object poses must be in the world frame, got {pose.frame!r}")
             return

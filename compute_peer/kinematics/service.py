@@ -31,6 +31,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from fabric import keys
+from fabric.limits import quote
 from fabric.messages import Event, JointState, Pose
 from fabric.rate import Clock, MonotonicClock, RateLoop
 from fabric.session import Fabric, ServiceError, undeclare_all
@@ -191,7 +192,7 @@ class KinematicsService:
         if arm is None:
             if self._discover:
                 self._discover_soon()
-            raise ServiceError(f"unknown arm {robot!r}: this compute peer serves {', '.join(known) or 'no arms yet'}")
+            raise ServiceError(f"unknown arm {quote(robot, 64)}: this compute peer serves {', '.join(known) or 'no arms yet'}")
         return arm
 
     # ------------------------------------------------------------------ handlers
@@ -260,12 +261,19 @@ class KinematicsService:
     # ------------------------------------------------------------------ streaming (Test A)
 
     def _on_joints(self, key: str, msg: JointState) -> None:
+        """Keep the latest joints of the arms this peer serves, and of nothing else (a flood of
+        made-up robot ids must not grow it: 16 fake 23 MB states once took this peer to 1 GB)."""
         robot = self._robot_of(key)
         with self._lock:
-            self._joints[robot] = msg
+            if robot in self._arms:
+                self._joints[robot] = msg
+                return
+        self.counters["unknown_robot"] = self.counters.get("unknown_robot", 0) + 1
+        if self._discover:
+            self._discover_soon()
 
     def _on_target(self, key: str, msg: Pose) -> None:
-        obj = self._robot_of(key)
+        obj = self._robot_of(key)  # one subscription per streamed object: never a made-up id
         with self._lock:
             self._targets[obj] = msg
 

@@ -53,6 +53,8 @@ log = logging.getLogger("robofabric.navigation")
 __all__ = ["NavigationService", "register_navigation"]
 
 POSE_HISTORY = 64
+MAX_ROBOTS = 64
+"""Robots whose poses are kept when no world description says which exist (a flood of made-up ids stops here)."""
 
 
 class NavigationService:
@@ -98,6 +100,7 @@ class NavigationService:
         self._discover = bool(discover)
         self._clock = clock or MonotonicClock()
         self._first_seen: dict[str, float] = {}
+        self._described: set[str] | None = None  # mobile robots of the world, once a sim described them
         self._discovery_started = -math.inf
         self._discovery_ended = -math.inf
         self._discovering = False
@@ -160,6 +163,11 @@ class NavigationService:
         robot = parsed.subject
         if parsed.category != "robot" or (self.robots is not None and robot not in self.robots):
             return
+        if robot not in self._poses:  # nothing is kept for robots the world does not have
+            known = self._described
+            if (known is not None and robot not in known) or len(self._poses) >= MAX_ROBOTS:
+                self.counters["unknown_robot"] = self.counters.get("unknown_robot", 0) + 1
+                return
         if isinstance(msg, Pose) and parsed.leaf == "pose":
             with self._lock:
                 if robot not in self._poses:
@@ -246,10 +254,12 @@ class NavigationService:
             return 0
         found = 0
         with self._lock:
+            known = set(self._described or ())
             for rep in replies:
                 for r in getattr(rep.message, "robots", ()):
                     if getattr(r, "kind", "") != "mobile":
                         continue
+                    known.add(r.id)
                     off = r.sensors.get("lidar_offset")
                     if isinstance(off, list) and len(off) >= 2 and r.id not in self._offsets:
                         self._offsets[r.id] = (float(off[0]), float(off[1]), 0.0)
@@ -257,6 +267,8 @@ class NavigationService:
                     if radius > 0:
                         self._radii[r.id] = radius
                     found += 1
+            if replies:
+                self._described = known | set(self._poses)  # robots already followed stay
         return found
 
     def _on_goal(self, key: str, msg: Pose) -> None:

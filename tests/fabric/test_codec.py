@@ -70,7 +70,8 @@ bodies = st.one_of(
     st.builds(Stop, headers),
     st.builds(Reset, headers),
 )
-commands = st.builds(Command, text.filter(bool), st.integers(0, 2**40), bodies, headers)
+users = st.from_regex(r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,63}", fullmatch=True)  # fabric.limits.USER_PATTERN
+commands = st.builds(Command, users, st.integers(0, 2**40), bodies, headers)
 records = st.builds(
     OwnershipRecord,
     text.filter(bool),

@@ -112,3 +112,38 @@ def test_config_profiles_and_env():
     for bad in (dict(profile="cloud"), dict(world="a/b"), dict(connect=("192.168.1.1",)), dict(lease_ms=5)):
         with pytest.raises((ConfigError, ValueError)):
             FabricConfig(**bad)
+
+
+def test_sessions_cap_message_size_and_an_oversized_message_is_dropped_not_the_link(world, connect):
+    from fabric.config import MAX_MESSAGE_SIZE
+
+    conf = FabricConfig(profile="client").zenoh_config()
+    assert json.loads(conf.get_json("transport/link/rx/max_message_size")) == MAX_MESSAGE_SIZE
+    sender, receiver = connect("tool", "big"), connect("tool", "rx")
+    got = []
+    key = keys.robot_joints(world, "arm1")
+    receiver.subscribe_raw(key, lambda s: got.append(len(s.payload.to_bytes())))
+    wait_until(lambda: (sender.put_raw(key, b"warm"), got)[1], what="link up")
+    sender.put_raw(key, b"x" * (3 * MAX_MESSAGE_SIZE))
+    sender.put_raw(key, b"after")
+    wait_until(lambda: 5 in got, timeout=30, what="the message after the oversized one", seen=lambda: got)
+    assert 3 * MAX_MESSAGE_SIZE not in got
+
+
+def test_a_flood_of_bad_payloads_is_counted_in_full_and_reported_a_few_times(world, connect):
+    from fabric.session import REPORT_BURST
+
+    sender, receiver = connect("tool", "junk"), connect("user", "carol")
+    events = []
+    key = keys.robot_joints(world, "arm1")
+    receiver.subscribe(keys.robot_stream_all(world, "joints"), lambda k, m: None)
+    sender.subscribe(keys.event_all(world), lambda k, m: events.append(m), expected=Event)
+    wait_until(lambda: (sender.put_raw(key, b"\x93junk"), receiver.counters["decode_errors"])[1], what="first decode error")
+    for i in range(500):  # a new robot id each time: still one subscription, one report key
+        sender.put_raw(keys.robot_joints(world, f"r{i}"), b"\x93junk" * 1000)
+    wait_until(lambda: receiver.counters["decode_errors"] >= 501, what="every bad payload counted", seen=lambda: receiver.counters)
+    wait_until(lambda: events, what="a decode event")
+    assert len(events) <= REPORT_BURST
+    assert receiver.counters["reports_suppressed"] >= 501 - REPORT_BURST
+    assert all(len(e.reason) <= 240 and len(e.data["key"]) <= 240 for e in events)
+    assert len(receiver._publishers) <= 2  # the event key, nothing per robot id

@@ -168,3 +168,63 @@ def test_owner_alone_leaves_and_returns_as_owner():
     e = s.records["arm"].epoch
     s, _ = st.step(s, st.Join("a", 2.0))
     assert s.records["arm"].owner == "a" and s.records["arm"].epoch == e + 1
+
+
+def test_a_requester_without_a_token_leaves_queue_and_robot_after_grace():
+    s = st.initial({"arm": "exclusive"}, lease_s=100.0, grace_s=5.0)
+    s, _ = st.step(s, st.Join("a", 0.0))
+    s, _ = st.step(s, st.Request("a", "arm", 0.0))
+    s, _ = st.step(s, st.Motion("arm", True))
+    s, eff = st.step(s, st.Request("ghost", "arm", 1.0, wait=True))  # never declares a token
+    s, _ = st.step(s, st.Request("b", "arm", 1.0, wait=True))
+    s, _ = st.step(s, st.Join("b", 2.0))  # b's token arrives late, within grace: b stays
+    assert eff[0].kind == "queued" and s.records["arm"].queue == ("ghost", "b")
+    s, _ = st.step(s, st.Tick(5.9))
+    assert s.records["arm"].queue == ("ghost", "b")
+    s, eff = st.step(s, st.Tick(6.1))
+    assert s.records["arm"].queue == ("b",) and "ghost" not in s.rank and "ghost" not in s.live
+    assert [(e.kind, e.user) for e in eff] == [("released", "ghost")]
+    assert not s.unproven
+
+
+def test_a_tokenless_owner_loses_the_robot_after_grace():
+    s = st.initial({"arm": "exclusive"}, lease_s=100.0, grace_s=5.0)
+    s, _ = st.step(s, st.Request("ghost", "arm", 0.0))
+    s, _ = st.step(s, st.Renew("ghost", "arm", 4.0))
+    s, _ = st.step(s, st.Tick(5.5))
+    assert s.records["arm"].owner == "" and s.records["arm"].epoch == 2
+
+
+def test_the_queue_is_capped():
+    from fabric.messages import MAX_QUEUE
+
+    s = st.initial({"arm": "exclusive"})
+    s, _ = st.step(s, st.Join("owner", 0.0))
+    s, _ = st.step(s, st.Request("owner", "arm", 0.0))
+    s, _ = st.step(s, st.Motion("arm", True))
+    for i in range(MAX_QUEUE):
+        s, _ = st.step(s, st.Join(f"u{i}", 0.0))
+        s, eff = st.step(s, st.Request(f"u{i}", "arm", 0.0, wait=True))
+        assert eff[0].kind == "queued"
+    s, eff = st.step(s, st.Request("late", "arm", 0.0, wait=True))
+    assert eff[0].kind == "denied" and "queue is full" in eff[0].reason and len(s.records["arm"].queue) == MAX_QUEUE
+    s, eff = st.step(s, st.Request("u3", "arm", 0.0, wait=True))  # already waiting: asking again is fine
+    assert eff[0].kind == "queued"
+
+
+@settings(max_examples=200, deadline=None)
+@given(events())
+def test_nothing_is_kept_about_tokenless_users_once_grace_is_over(seq):
+    s = st.initial(OBJECTS, lease_s=LEASE, grace_s=GRACE)
+    now = 0.0
+    joined = set()
+    for raw in seq:
+        now += raw[-1] if raw[0] not in ("motion",) and isinstance(raw[-1], float) else 0.0
+        if raw[0] == "join":
+            joined.add(raw[1])
+        s, _ = st.step(s, build(raw, now))
+    s, _ = st.step(s, st.Tick(now + GRACE + 1.0))
+    check_invariants(s)
+    assert not s.unproven
+    for rec in s.records.values():
+        assert set(rec.queue) <= joined and rec.owner in joined | {""}

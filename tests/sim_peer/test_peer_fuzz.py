@@ -30,7 +30,7 @@ class StubFabric:
     def header(self, key: str, *, stamp: float = 0.0) -> Header:
         return Header(stamp=stamp)
 
-    def emit(self, event: Event, *parts: str) -> None:
+    def emit(self, event: Event, *parts: str, limit: str | None = None) -> None:
         keys.event(self.world, *parts)  # the key must be buildable
         self.events.append(event)
 
