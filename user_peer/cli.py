@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -70,25 +71,77 @@ def view(
 
 def export(
     src: Annotated[Path, typer.Argument(help="An MCAP recording (from robofabric record).")],
-    out: Annotated[Path, typer.Option("-o", "--out", help="The .rrd file to write.")],
-    max_hz: Annotated[float, typer.Option(help="Thin 3D and plot updates to this rate per stream (0: all).")] = 0.0,
-    scene: Annotated[Optional[str], typer.Option(help="Scene the recording was made in (places the arms), e.g. combined.")] = None,
+    out: Annotated[Path, typer.Option("-o", "--out", help="The file to write: .rrd (Rerun) or .mcap (with --to).")],
+    to: Annotated[
+        Optional[str],
+        typer.Option("--to", help="rrd (Rerun), foxglove (Foxglove's schemas, JSON for the rest) or ros2 (CDR, ROS 2 types). Default: from -o's suffix."),
+    ] = None,
+    max_hz: Annotated[float, typer.Option(help="Rerun only: thin 3D and plot updates to this rate per stream (0: all).")] = 0.0,
+    scene: Annotated[Optional[str], typer.Option(help="Scene the recording was made in (places the arms, draws the walls), e.g. combined.")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
-    """Turn a recording into a Rerun .rrd with the live viewer's views."""
-    from user_peer.export import ExportError, export_mcap
+    """Turn a recording into a Rerun .rrd (the live viewer's views), or an MCAP that Foxglove or ROS 2 opens."""
+    from user_peer.openfmt import FORMATS
 
-    if out.suffix != ".rrd":
-        raise UserError(f"-o {out}: the file must end in .rrd")
-    try:
-        stats = export_mcap(src, out, max_hz=max_hz, scene=scene)
-    except ExportError as exc:
-        raise UserError(str(exc)) from None
-    if stats.messages == 0:
-        raise UserError(f"{src}: no readable messages")
-    print(
-        f"exported {stats.messages} messages ({stats.drawn} drawn, {stats.bad} undecodable) "
-        f"to {out}; robots: {', '.join(stats.robots) or 'none'}"
-    )
+    fmt = to or ("rrd" if out.suffix == ".rrd" else None)
+    if fmt is None:
+        raise UserError(f"-o {out}: say which format with --to rrd|{'|'.join(FORMATS)} (an .mcap needs --to foxglove or --to ros2)")
+    if fmt not in ("rrd", *FORMATS):
+        raise UserError(f"--to {fmt}: expected rrd, {', '.join(FORMATS)}")
+    if fmt == "rrd" and out.suffix != ".rrd":
+        raise UserError(f"-o {out}: a Rerun export must end in .rrd")
+    if fmt != "rrd" and out.suffix != ".mcap":
+        raise UserError(f"-o {out}: a {fmt} export is an MCAP file and must end in .mcap")
+    if out.resolve() == src.resolve():
+        raise UserError(f"-o {out} would overwrite the recording it reads")
+    with _progress(f"export {src.name} -> {out.name}", quiet) as progress:
+        if fmt == "rrd":
+            from user_peer.export import ExportError, export_mcap
+
+            try:
+                stats = export_mcap(src, out, max_hz=max_hz, scene=scene, progress=progress)
+            except ExportError as exc:
+                raise UserError(str(exc)) from None
+            if stats.messages == 0:
+                raise UserError(f"{src}: no readable messages")
+            line = f"exported {stats.messages} messages ({stats.drawn} drawn, {stats.bad} undecodable) to {out}"
+        else:
+            from user_peer.openfmt import export_recording
+            from user_peer.openfmt.convert import ExportError as OpenExportError
+
+            try:
+                st = export_recording(src, out, fmt, scene=scene, progress=progress)
+            except OpenExportError as exc:
+                raise UserError(str(exc)) from None
+            if st.messages == 0:
+                raise UserError(f"{src}: no readable messages")
+            line = (
+                f"exported {st.messages} messages as {st.written} {fmt} messages ({st.bad} undecodable, "
+                f"{st.skipped} without a place) to {out}"
+            )
+            stats = st
+    print(f"{line}; robots: {', '.join(stats.robots) or 'none'}")
+
+
+@contextmanager
+def _progress(what: str, quiet: bool):
+    """A rich progress bar on stderr; yields ``update(done, total)`` (a no-op when quiet)."""
+    if quiet:
+        yield lambda done, total: None
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    with Progress(
+        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
+        console=Console(stderr=True), transient=False,
+    ) as bar:
+        task = bar.add_task(what, total=None)
+
+        def update(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        yield update
 
 
 UserOpt = Annotated[Optional[str], typer.Option("--user", "-u", help="Your user id (default: $USER); ownership is by user id.")]

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 import rerun as rr
 
@@ -73,7 +73,9 @@ def read_mcap(path: Path, counts: dict[str, int] | None = None) -> Iterator[tupl
         raise ExportError(str(exc)) from None
 
 
-def export_mcap(src: Path, dst: Path, *, max_hz: float = 0.0, scene: str | None = None) -> ExportStats:
+def export_mcap(
+    src: Path, dst: Path, *, max_hz: float = 0.0, scene: str | None = None, progress: Callable[[int, int], None] | None = None
+) -> ExportStats:
     """Write ``dst`` (.rrd) from the recording ``src``; every message is drawn unless ``max_hz`` thins it.
 
     ``scene`` names the scene the recording was made in, which places the arms (a recording holds
@@ -89,12 +91,27 @@ def export_mcap(src: Path, dst: Path, *, max_hz: float = 0.0, scene: str | None 
         log_scene(logger, scene)
     counts: dict[str, int] = {}
     n = drawn = 0
+    total = _count(src) if progress is not None else 0
     try:
         for key, msg, t in read_mcap(src, counts):
             n += 1
             if logger.log(key, msg, t):
                 drawn += 1
+            if progress is not None and n % 200 == 0:
+                progress(n, total)
     finally:
         rec.flush(timeout_sec=30.0)
         rec.disconnect()
+    if progress is not None:
+        progress(n, n)
     return ExportStats(n, drawn, counts.get("bad", 0), tuple(sorted(logger.robots)))
+
+
+def _count(src: Path) -> int:
+    """Messages in the recording per its summary (0 when unknown: an unfinished file)."""
+    from fabric.recording import RecordingError, read_info
+
+    try:
+        return read_info(src).messages
+    except RecordingError:
+        return 0

@@ -47,6 +47,11 @@ def record(
     chunk_size: Annotated[int, typer.Option(help="Close a chunk once it holds this many bytes.")] = 1 << 20,
     flush_interval: Annotated[float, typer.Option(help="Close the open chunk and hand it to the OS at least this often (s): what a crash can lose.")] = 0.5,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress line.")] = False,
+    to: Annotated[
+        Optional[str],
+        typer.Option("--to", help="Write another format live instead of the fabric's own: foxglove or ros2 (see `robofabric export`)."),
+    ] = None,
+    scene: Annotated[Optional[str], typer.Option(help="With --to: the scene being recorded (places the arms, draws the walls).")] = None,
     world: World = None,
     connect: Connect = None,
     listen: Listen = None,
@@ -54,7 +59,11 @@ def record(
     zenoh_config: ZenohConfig = None,
     peer_id: PeerId = None,
 ) -> None:
-    """Record every sample on the selected keys into an MCAP file (one channel per key, zstd chunks)."""
+    """Record every sample on the selected keys into an MCAP file (one channel per key, zstd chunks).
+
+    With --to foxglove|ros2 the file is written in that format as the samples arrive (decoded
+    messages only; replay and info need the fabric's own format, which `export --to` converts from).
+    """
     from fabric.recording.recorder import Recorder
     from fabric.recording.sink import COMPRESSIONS
     from fabric.session import shutdown_event
@@ -75,6 +84,9 @@ def record(
     exprs = [_resolve(e, cfg.world) for e in keyexprs] if keyexprs else [keys.world_all(cfg.world)]
     stop = shutdown_event()
     tty = sys.stderr.isatty()
+    if to is not None:
+        _record_as(to, output, exprs, duration, quiet, scene, cfg, peer_id, stop, tty)
+        return
     with open_fabric(cfg, "recorder", peer_id) as fab:
         try:
             rec = Recorder(
@@ -111,6 +123,44 @@ def record(
         raise UserError(
             f"nothing was recorded on {', '.join(exprs)} (unknown world or no publisher?); {output} is an empty recording"
         )
+
+
+def _record_as(to, output, exprs, duration, quiet, scene, cfg, peer_id, stop, tty) -> None:
+    """``record --to FORMAT``: decode live samples into another format's writer (fabric.recording.live_convert)."""
+    from fabric.recording.live_convert import LiveConverter, open_exporter
+
+    if output.suffix != ".mcap":
+        raise UserError(f"--output {output}: a {to} recording is an MCAP file and must end in .mcap")
+    with open_fabric(cfg, "recorder", peer_id) as fab:
+        try:
+            sink = open_exporter(to, output, scene=scene)
+        except KeyError as exc:
+            raise UserError(str(exc.args[0])) from None
+        except OSError as exc:
+            raise UserError(f"cannot write {output}: {exc.strerror or exc}") from None
+        conv = LiveConverter(fab, sink, exprs).start()
+        print(f"recording {', '.join(exprs)} as {to} to {output}; Ctrl-C to stop", file=sys.stderr, flush=True)
+        t0 = last_line = time.monotonic()
+        while True:
+            left = None if duration is None else duration - (time.monotonic() - t0)
+            if left is not None and left <= 0:
+                break
+            if stop.wait(0.5 if left is None else min(0.5, left)) or conv.error is not None:
+                break
+            now = time.monotonic()
+            if not quiet and (tty or now - last_line >= 5.0):
+                last_line = now
+                line = conv.stats.line()
+                print(f"\r{line}\x1b[K" if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
+        try:
+            stats = conv.stop()
+        except RuntimeError as exc:
+            raise UserError(f"recording to {output} failed: {exc}") from None
+    if tty and not quiet:
+        print(file=sys.stderr)
+    print(f"recorded {stats.line()} -> {output} ({to})", file=sys.stderr, flush=True)
+    if stats.written == 0:
+        raise UserError(f"nothing was recorded on {', '.join(exprs)} (unknown world or no publisher?); {output} is empty")
 
 
 # --------------------------------------------------------------------------- info

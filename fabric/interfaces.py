@@ -1,0 +1,232 @@
+"""What each message type looks like from outside: its fields (for ``robofabric interfaces``) and a JSON Schema.
+
+Both are read off the classes' ``SPEC`` (the same table the decoder validates
+against), so they cannot drift from the wire format. The JSON Schema describes
+:func:`plain_view` of a message (arrays as nested lists, a ``type`` member
+naming the class); exports that write JSON channels declare it
+so a reader (Foxglove, ``jsonschema``) can check every message.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fabric.codec import Arr, F, I, Map, Msg, S, Strs, load_plugins, registered, to_plain
+
+__all__ = ["FieldInfo", "fields_of", "describe_spec", "json_schema", "message_types", "type_doc", "plain_view"]
+
+
+@dataclass(frozen=True, slots=True)
+class FieldInfo:
+    """One field of a message type: name, a short type text (``float64[3]``, ``Header``) and its constraints."""
+
+    name: str
+    type: str
+    constraints: str = ""
+    default: str = ""
+
+
+def message_types() -> dict[str, type]:
+    """Every message type the codec knows, installed plugins' included, by name."""
+    load_plugins()
+    return dict(sorted(registered().items()))
+
+
+def _name_of(cls: type) -> str:
+    for name, c in registered().items():
+        if c is cls:
+            return name
+    return cls.__name__
+
+
+def _range(lo: Any, hi: Any) -> str:
+    if lo is None and hi is None:
+        return ""
+    return f"[{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}]"
+
+
+def describe_spec(spec: Any) -> tuple[str, str]:
+    """(type text, constraints text) of one field spec."""
+    if isinstance(spec, F):
+        return "float", _range(spec.lo, spec.hi)
+    if isinstance(spec, I):
+        return "int", _range(spec.lo, spec.hi)
+    if isinstance(spec, S):
+        parts = []
+        if spec.choices:
+            parts.append("one of " + ", ".join(spec.choices))
+        if spec.nonempty:
+            parts.append("non-empty")
+        return "string", "; ".join(parts)
+    if isinstance(spec, Strs):
+        return "string[]", ""
+    if isinstance(spec, Arr):
+        dt = np.dtype(spec.dtype).name
+        if spec.shape is not None:
+            return dt + "".join(f"[{n}]" for n in spec.shape), ""
+        return dt + "[]" * (spec.ndim or 1), ""
+    if isinstance(spec, Msg):
+        return " | ".join(_name_of(c) for c in spec.classes), ""
+    if isinstance(spec, Map):
+        return "map", "string keys; scalars or lists of scalars"
+    one = getattr(spec, "one", None)
+    if isinstance(one, Msg):
+        return f"{' | '.join(_name_of(c) for c in one.classes)}[]", ""
+    return type(spec).__name__, ""
+
+
+def _default_text(f: dataclasses.Field) -> str:
+    if f.default is not dataclasses.MISSING:
+        return repr(f.default)
+    if f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
+        try:
+            v = f.default_factory()  # type: ignore[misc]
+        except Exception:
+            return ""
+        if isinstance(v, np.ndarray):
+            return repr(v.tolist())
+        if dataclasses.is_dataclass(v):
+            return f"{type(v).__name__}()"
+        return repr(v)
+    return ""
+
+
+def fields_of(cls: type) -> list[FieldInfo]:
+    """The fields of a message class in wire order, with types, constraints and defaults."""
+    by_name = {f.name: f for f in dataclasses.fields(cls)} if dataclasses.is_dataclass(cls) else {}
+    out = []
+    for name, spec in cls.SPEC.items():
+        t, c = describe_spec(spec)
+        f = by_name.get(name)
+        out.append(FieldInfo(name, t, c, _default_text(f) if f is not None else ""))
+    return out
+
+
+# --------------------------------------------------------------------------- JSON view and its schema
+
+
+def plain_view(msg: Any) -> dict[str, Any]:
+    """A message as JSON-ready data following its ``SPEC`` (what :func:`json_schema` describes).
+
+    Like :func:`fabric.codec.to_plain`, with each field in its wire form: an ``I`` field is an integer
+    even where the class holds a bool, an ``F`` field a float.
+    """
+    out: dict[str, Any] = {"type": _name_of(type(msg))}
+    for name, spec in type(msg).SPEC.items():
+        out[name] = _plain_field(spec, getattr(msg, name))
+    return out
+
+
+def _plain_field(spec: Any, v: Any) -> Any:
+    if isinstance(spec, F):
+        return float(v)
+    if isinstance(spec, I):
+        return int(v)
+    if isinstance(spec, S):
+        return str(v)
+    if isinstance(spec, Strs):
+        return [str(x) for x in v]
+    if isinstance(spec, Arr):
+        return np.asarray(v).tolist()
+    if isinstance(spec, Msg):
+        return plain_view(v)
+    if isinstance(spec, Map):
+        return spec.dump(v)
+    one = getattr(spec, "one", None)
+    if isinstance(one, Msg):
+        return [plain_view(x) for x in v]
+    return to_plain(v)
+
+_SCALAR = {"type": ["string", "number", "integer", "boolean", "null"]}
+
+
+def _spec_schema(spec: Any, defs: dict[str, Any]) -> dict[str, Any]:
+    if isinstance(spec, F):
+        s: dict[str, Any] = {"type": "number"}
+        if spec.lo is not None:
+            s["minimum"] = spec.lo
+        if spec.hi is not None:
+            s["maximum"] = spec.hi
+        return s
+    if isinstance(spec, I):
+        s = {"type": "integer"}
+        if spec.lo is not None:
+            s["minimum"] = spec.lo
+        if spec.hi is not None:
+            s["maximum"] = spec.hi
+        return s
+    if isinstance(spec, S):
+        s = {"type": "string"}
+        if spec.choices:
+            s["enum"] = list(spec.choices)
+        if spec.nonempty:
+            s["minLength"] = 1
+        return s
+    if isinstance(spec, Strs):
+        return {"type": "array", "items": {"type": "string"}}
+    if isinstance(spec, Arr):
+        item: dict[str, Any] = {"type": "integer" if np.dtype(spec.dtype).kind in "iu" else "number"}
+        if spec.shape is not None:
+            for n in reversed(spec.shape):
+                item = {"type": "array", "items": item, "minItems": n, "maxItems": n}
+            return item
+        for _ in range(spec.ndim or 1):
+            item = {"type": "array", "items": item}
+        return item
+    if isinstance(spec, Msg):
+        refs = [_ref(c, defs) for c in spec.classes]
+        return refs[0] if len(refs) == 1 else {"anyOf": refs}
+    if isinstance(spec, Map):
+        return {"type": "object", "additionalProperties": {"anyOf": [_SCALAR, {"type": "array", "items": _SCALAR}]}}
+    one = getattr(spec, "one", None)
+    if isinstance(one, Msg):
+        return {"type": "array", "items": _spec_schema(one, defs)}
+    return {}
+
+
+def _object_schema(cls: type, defs: dict[str, Any]) -> dict[str, Any]:
+    name = _name_of(cls)
+    props: dict[str, Any] = {"type": {"const": name}}
+    for field, spec in cls.SPEC.items():
+        props[field] = _spec_schema(spec, defs)
+    doc = type_doc(cls)
+    out: dict[str, Any] = {"type": "object", "title": name, "properties": props, "required": ["type", *cls.SPEC]}
+    if doc:
+        out["description"] = " ".join(doc.split())
+    return out
+
+
+def type_doc(cls: type) -> str:
+    """The first paragraph of a message class's docstring ("" for dataclasses' generated signature)."""
+    doc = (cls.__doc__ or "").strip()
+    if not doc or doc.startswith(f"{cls.__name__}("):
+        return ""
+    return " ".join(doc.split("\n\n")[0].split())
+
+
+def _ref(cls: type, defs: dict[str, Any]) -> dict[str, Any]:
+    name = _name_of(cls)
+    if name not in defs:
+        defs[name] = {}  # placeholder first: a type may (indirectly) contain itself
+        defs[name] = _object_schema(cls, defs)
+    return {"$ref": f"#/$defs/{name}"}
+
+
+def json_schema(cls: type, *, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    """A JSON Schema (draft 2020-12) of :func:`plain_view` for messages of ``cls``.
+
+    ``extra`` adds properties (name -> schema) that a writer puts beside the message's own fields.
+    """
+    defs: dict[str, Any] = {}
+    top = _object_schema(cls, defs)
+    if extra:
+        top["properties"].update(extra)
+        top["required"] = [*top["required"], *extra]
+    top["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    if defs:
+        top["$defs"] = defs
+    return top

@@ -1,0 +1,143 @@
+"""``robofabric record --to FORMAT``: write a live world straight into another format (Foxglove, ROS 2).
+
+Kept apart from :mod:`fabric.recording.recorder` (which writes the fabric's own MCAP byte for byte):
+here each sample is decoded and handed to a writer found through the entry-point group
+``robofabric.exporters`` (``user_peer.openfmt`` declares ``foxglove`` and ``ros2``), so ``fabric``
+imports no peer package. Zenoh callbacks only stamp and enqueue; one thread decodes and writes.
+The queue is bounded: when the writer falls behind, the oldest samples are dropped and counted
+(the converter must never hold the world up), and the count is reported.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from dataclasses import dataclass
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+import zenoh
+
+from fabric.codec import DecodeError, decode, load_plugins
+
+__all__ = ["EXPORTERS", "exporters", "LiveConverter", "LiveStats"]
+
+EXPORTERS = "robofabric.exporters"
+
+
+def exporters() -> dict[str, Callable[..., Any]]:
+    """Installed writers by format name: each ``factory(path, scene=None)`` returns ``write``/``close``."""
+    return {ep.name: ep for ep in entry_points(group=EXPORTERS)}  # type: ignore[misc]
+
+
+@dataclass(frozen=True, slots=True)
+class LiveStats:
+    received: int
+    written: int  # fabric messages handed to the writer
+    bad: int  # payloads that did not decode (not fabric messages)
+    dropped: int  # oldest samples dropped because the writer fell behind
+    elapsed_s: float
+
+    def line(self) -> str:
+        return (
+            f"{self.written} msgs converted  {self.bad} undecodable  {self.dropped} dropped  "
+            f"({self.written / self.elapsed_s if self.elapsed_s > 0 else 0:.0f} msg/s)  {self.elapsed_s:.1f} s"
+        )
+
+
+class LiveConverter:
+    """Subscribe to ``keyexprs`` on ``fabric`` and write every decodable message with ``sink``."""
+
+    def __init__(self, fabric: Any, sink: Any, keyexprs: Iterable[str], *, queue_size: int = 20_000) -> None:
+        self.fabric = fabric
+        self.sink = sink
+        self.keyexprs = tuple(keyexprs)
+        self._q: queue.Queue = queue.Queue(maxsize=queue_size)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="convert-writer", daemon=True)
+        self._subs: list[Any] = []
+        self._lock = threading.Lock()
+        self.received = self.written = self.bad = self.dropped = 0
+        self.error: BaseException | None = None
+        self._t0 = 0.0
+        self._t_end: float | None = None
+        self._stopped = False
+
+    def start(self) -> "LiveConverter":
+        load_plugins()
+        self._t0 = time.monotonic()
+        self._thread.start()
+        for expr in self.keyexprs:
+            # history: the latest map, path and scene objects published before we joined
+            self._subs.append(self.fabric.subscribe_raw(expr, self._on_sample, history=True))
+        return self
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        if sample.kind != zenoh.SampleKind.PUT:
+            return
+        item = (str(sample.key_expr), sample.payload.to_bytes(), time.time_ns())
+        with self._lock:
+            self.received += 1
+            while True:
+                try:
+                    self._q.put_nowait(item)
+                    return
+                except queue.Full:
+                    try:
+                        self._q.get_nowait()
+                        self.dropped += 1
+                    except queue.Empty:
+                        pass
+
+    def _loop(self) -> None:
+        try:
+            while not (self._stop.is_set() and self._q.empty()):
+                try:
+                    key, payload, t_ns = self._q.get(timeout=0.1)
+                except queue.Empty:
+                    continue
+                try:
+                    msg = decode(payload)
+                except DecodeError:
+                    self.bad += 1
+                    continue
+                header = getattr(msg, "header", None)
+                wall = int(getattr(header, "wall_ns", 0) or 0)
+                self.sink.write(key, msg, t_ns, wall or t_ns)
+                self.written += 1
+        except BaseException as exc:  # a full disk must not pass silently
+            self.error = exc
+
+    @property
+    def stats(self) -> LiveStats:
+        end = self._t_end if self._t_end is not None else time.monotonic()
+        return LiveStats(self.received, self.written, self.bad, self.dropped, end - self._t0 if self._t0 else 0.0)
+
+    def stop(self) -> LiveStats:
+        """Stop listening, write what is queued, finish the file. Idempotent."""
+        if self._stopped:
+            return self.stats
+        self._stopped = True
+        for sub in self._subs:
+            try:
+                sub.undeclare()
+            except Exception:
+                pass
+        self._stop.set()
+        self._thread.join()
+        self._t_end = time.monotonic()
+        self.sink.close()
+        if self.error is not None:
+            raise RuntimeError(f"converting writer failed: {self.error}") from self.error
+        return self.stats
+
+
+def open_exporter(name: str, path: Path, scene: str | None = None) -> Any:
+    """The writer of format ``name`` at ``path``; ``KeyError`` naming the installed formats when unknown."""
+    found = exporters()
+    if name not in found:
+        raise KeyError(f"no writer for format {name!r}; installed: {', '.join(sorted(found)) or 'none'}")
+    factory = found[name].load()  # type: ignore[attr-defined]
+    return factory(path, scene=scene)

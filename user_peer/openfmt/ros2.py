@@ -1,0 +1,192 @@
+"""ROS 2's MCAP (what rosbag2's MCAP storage reads): CDR messages, ``ros2msg`` schemas, profile ``ros2``.
+
+=================  ==========================  ======================================
+fabric             ROS 2 topic                 type
+=================  ==========================  ======================================
+JointState         ``/KEY``                    ``sensor_msgs/msg/JointState``
+Scan               ``/KEY``                    ``sensor_msgs/msg/LaserScan`` (``ID/lidar``)
+Pose               ``/KEY``                    ``geometry_msgs/msg/PoseStamped``
+OccupancyGrid      ``/KEY``                    ``nav_msgs/msg/OccupancyGrid`` (255 -> -1)
+Path               ``/KEY``                    ``nav_msgs/msg/Path``
+poses and arm FK   ``/tf``                     ``tf2_msgs/msg/TFMessage``
+anything else      ``/KEY``                    ``std_msgs/msg/String`` holding the JSON
+=================  ==========================  ======================================
+
+Topic names are the fabric keys with a leading slash; characters ROS names do not allow become
+``_``. Written with ``mcap-ros2-support``'s writer.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path as FsPath
+from typing import Any
+
+import numpy as np
+from mcap_ros2.writer import Writer as Ros2McapWriter
+
+from fabric.interfaces import plain_view
+from fabric.messages import JointState, OccupancyGrid, Path, Pose, Scan
+from user_peer.catalog import RobotCatalog
+from user_peer.openfmt.foxglove import msg_time_ns
+from user_peer.openfmt.frames import WORLD, FrameTracker, key_owner, yaw_quat_xyzw
+from user_peer.openfmt.ros2_msgdefs import definition
+
+__all__ = ["Ros2Writer", "ros_topic", "TF_TOPIC"]
+
+TF_TOPIC = "/tf"
+_BAD = re.compile(r"[^A-Za-z0-9_/]")
+
+
+def ros_topic(key: str) -> str:
+    """``rf/demo/robot/arm1/joints`` -> ``/rf/demo/robot/arm1/joints`` (invalid characters -> ``_``)."""
+    parts = [_BAD.sub("_", p) for p in key.split("/") if p]
+    parts = [f"_{p}" if p[0].isdigit() else p for p in parts]
+    return "/" + "/".join(parts)
+
+
+def _time(ns: int) -> dict:
+    return {"sec": int(ns // 1_000_000_000), "nanosec": int(ns % 1_000_000_000)}
+
+
+def _header(ns: int, frame: str) -> dict:
+    return {"stamp": _time(ns), "frame_id": frame}
+
+
+def _pose(t: Any, q_xyzw: Any) -> dict:
+    return {
+        "position": {"x": float(t[0]), "y": float(t[1]), "z": float(t[2])},
+        "orientation": {"x": float(q_xyzw[0]), "y": float(q_xyzw[1]), "z": float(q_xyzw[2]), "w": float(q_xyzw[3])},
+    }
+
+
+def grid_data(cells: np.ndarray) -> list[int]:
+    """Fabric cells (0..100, 255 unknown) as ROS occupancy values (0..100, -1 unknown), row-major."""
+    a = np.asarray(cells, dtype=np.int16).ravel()
+    return np.where(a == 255, -1, a).astype(np.int8).tolist()
+
+
+class Ros2Writer:
+    """Write fabric messages as a ROS 2 MCAP bag; ``close()`` finishes it."""
+
+    def __init__(self, path: FsPath, *, catalog: RobotCatalog | None = None, scene: str | None = None) -> None:
+        self.path = FsPath(path)
+        self._f = open(self.path, "wb")
+        self._w = Ros2McapWriter(self._f)
+        self._schemas: dict[str, Any] = {}
+        self.frames = FrameTracker(catalog or RobotCatalog(None, scene=scene))
+        self.written = 0
+        self.skipped = 0
+        self._closed = False
+
+    def _schema(self, type_name: str) -> Any:
+        s = self._schemas.get(type_name)
+        if s is None:
+            s = self._schemas[type_name] = self._w.register_msgdef(type_name, definition(type_name))
+        return s
+
+    def _put(self, topic: str, type_name: str, message: dict, log_time: int, pub: int) -> None:
+        self._w.write_message(topic, self._schema(type_name), message, log_time=log_time, publish_time=pub)
+        self.written += 1
+
+    def write(self, key: str, msg: Any, log_time_ns: int, publish_time_ns: int | None = None) -> None:
+        pub = int(publish_time_ns if publish_time_ns is not None else log_time_ns)
+        t = msg_time_ns(msg, log_time_ns)
+        topic = ros_topic(key)
+        frames = self.frames.frames(key, msg)
+        if frames:
+            tfs = [
+                {
+                    "header": _header(t, f.parent),
+                    "child_frame_id": f.child,
+                    "transform": {
+                        "translation": {"x": f.translation[0], "y": f.translation[1], "z": f.translation[2]},
+                        "rotation": {"x": f.rotation[0], "y": f.rotation[1], "z": f.rotation[2], "w": f.rotation[3]},
+                    },
+                }
+                for f in frames
+            ]
+            self._put(TF_TOPIC, "tf2_msgs/msg/TFMessage", {"transforms": tfs}, log_time_ns, pub)
+        owner = key_owner(key)
+        rid = owner[1] if owner else WORLD
+        if isinstance(msg, JointState):
+            self._put(
+                topic, "sensor_msgs/msg/JointState",
+                {"header": _header(t, rid), "name": list(msg.names), "position": [float(v) for v in msg.q],
+                 "velocity": [float(v) for v in msg.dq], "effort": []},
+                log_time_ns, pub,
+            )
+        elif isinstance(msg, Scan):
+            n = int(msg.ranges_mm.shape[0])
+            frame = f"{rid}/{'sonar' if key.endswith('/sonar') else 'lidar'}"
+            self._put(
+                topic, "sensor_msgs/msg/LaserScan",
+                {"header": _header(t, frame), "angle_min": float(msg.angle_min),
+                 "angle_max": float(msg.angle_min + msg.angle_increment * max(n - 1, 0)),
+                 "angle_increment": float(msg.angle_increment), "time_increment": 0.0, "scan_time": 0.0,
+                 "range_min": 0.0, "range_max": float(msg.range_max), "ranges": [float(r) for r in msg.ranges], "intensities": []},
+                log_time_ns, pub,
+            )
+        elif isinstance(msg, OccupancyGrid):
+            h, w = msg.cells.shape
+            ox, oy, oth = (float(v) for v in msg.origin)
+            self._put(
+                topic, "nav_msgs/msg/OccupancyGrid",
+                {"header": _header(t, WORLD),
+                 "info": {"map_load_time": _time(t), "resolution": float(msg.resolution), "width": int(w), "height": int(h),
+                          "origin": _pose((ox, oy, 0.0), yaw_quat_xyzw(oth))},
+                 "data": grid_data(msg.cells)},
+                log_time_ns, pub,
+            )
+        elif isinstance(msg, Path):
+            frame = msg.frame or WORLD
+            poses = [
+                {"header": _header(t, frame), "pose": _pose((float(x), float(y), 0.0), yaw_quat_xyzw(float(th)))}
+                for x, y, th in zip(msg.x, msg.y, msg.theta)
+            ]
+            self._put(topic, "nav_msgs/msg/Path", {"header": _header(t, frame), "poses": poses}, log_time_ns, pub)
+        elif isinstance(msg, Pose):
+            q = msg.quaternion
+            self._put(
+                topic, "geometry_msgs/msg/PoseStamped",
+                {"header": _header(t, msg.frame or WORLD), "pose": _pose(msg.position, (q[1], q[2], q[3], q[0]))},
+                log_time_ns, pub,
+            )
+        else:
+            plain = plain_view(msg) if hasattr(type(msg), "SPEC") else None
+            if plain is None or not all(_finite(v) for v in _leaves(plain)):
+                self.skipped += 1
+                return
+            self._put(topic, "std_msgs/msg/String", {"data": json.dumps(plain)}, log_time_ns, pub)
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._w.finish()
+        finally:
+            self._f.close()
+
+    def __enter__(self) -> "Ros2Writer":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _leaves(x: Any):
+    if isinstance(x, dict):
+        for v in x.values():
+            yield from _leaves(v)
+    elif isinstance(x, list):
+        for v in x:
+            yield from _leaves(v)
+    else:
+        yield x
+
+
+def _finite(v: Any) -> bool:
+    return not isinstance(v, float) or math.isfinite(v)
