@@ -16,6 +16,19 @@ A launch file is TOML (see ``fabric/demo.toml``, the demo, also at ``examples/de
     ready = "peer/sim/*"                   # liveliness key expression that says this peer is ready
 
 ``{out}`` and ``{world}`` in args are replaced by the output directory and the world.
+
+Arguments instead of hard-coded addresses: a file may declare ``[args]`` with defaults and use
+them as ``{name}`` in any string of ``[launch]`` and ``[[peer]]``::
+
+    [args]
+    connect = "tcp/10.0.0.5:7447"     # the router machine
+    [launch]
+    connect = ["{connect}"]           # a comma-separated value becomes several endpoints
+
+Each argument's value is, first to last: ``NAME=VALUE`` on the command line
+(``robofabric up FILE connect=tcp/10.0.0.9:7447``), the environment variable ``ROBOFABRIC_NAME``
+(``ROBOFABRIC_CONNECT``), the file's default. ``world=``, ``router=`` and ``connect=`` on the command
+line also work for files that declare no such argument: they replace ``[launch]``'s value.
 Parsing (pure) is apart from supervising (processes), so mistakes in a file are
 reported with its name and line before anything starts.
 """
@@ -32,11 +45,14 @@ import time
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, TextIO
+from typing import Any, Callable, TextIO
 
 from fabric import keys
 
 ROLES = ("service", "task")
+BUILTIN_ARGS = ("world", "router", "connect")
+_ARG_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_PLACEHOLDER = re.compile(r"\{([A-Za-z_][A-Za-z0-9_]*)\}")
 RESTARTS = ("no", "on-failure", "always")
 _DEFAULT_READY = {"sim": "peer/sim/*", "compute": "peer/compute/*", "view": "peer/viewer/*", "record": "peer/recorder/*"}
 
@@ -64,6 +80,7 @@ class LaunchSpec:
     router: str | None = None
     connect: tuple[str, ...] = ()
     peers: tuple[PeerSpec, ...] = field(default=())
+    args: tuple[tuple[str, str], ...] = ()  # the arguments' values as resolved (command line > env > default)
 
     def child_connect(self) -> tuple[str, ...]:
         if self.connect:
@@ -77,22 +94,77 @@ def _peer_lines(text: str) -> list[int]:
     return [i + 1 for i, line in enumerate(text.splitlines()) if re.match(r"^\s*\[\[\s*peer\s*\]\]", line)]
 
 
-def parse_launch(text: str, path: str = "<launch>") -> LaunchSpec:
-    """Parse and check a launch file's text; raise :class:`LaunchError` naming file and line."""
+def parse_cli_args(items: list[str] | tuple[str, ...]) -> dict[str, str]:
+    """``["connect=tcp/h:7447", "world=lab2"]`` -> a dict; ``LaunchError`` for anything not NAME=VALUE."""
+    out: dict[str, str] = {}
+    for item in items:
+        name, eq, value = item.partition("=")
+        if not eq or not _ARG_NAME.match(name):
+            raise LaunchError(f"launch argument {item!r} is not NAME=VALUE (e.g. connect=tcp/10.0.0.5:7447, world=lab2)")
+        out[name] = value
+    return out
+
+
+def resolve_args(declared: dict[str, Any], given: dict[str, str], env: dict[str, str], path: str) -> dict[str, str]:
+    """Values of a file's ``[args]``: command line, then ``ROBOFABRIC_NAME`` in ``env``, then the default."""
+    values: dict[str, str] = {}
+    for name, default in declared.items():
+        if not _ARG_NAME.match(name):
+            raise LaunchError(f"{path}: [args] name {name!r} must be letters, digits and _")
+        if isinstance(default, bool) or not isinstance(default, (str, int, float)):
+            raise LaunchError(f"{path}: [args] {name} must have a string or number default")
+        env_value = env.get(f"ROBOFABRIC_{name.upper()}")
+        values[name] = given[name] if name in given else env_value if env_value is not None else str(default)
+    unknown = set(given) - set(declared) - set(BUILTIN_ARGS)
+    if unknown:
+        takes = ", ".join(sorted({*declared, *BUILTIN_ARGS}))
+        raise LaunchError(f"{path}: unknown launch argument(s) {', '.join(sorted(unknown))}; this file takes {takes}")
+    return values
+
+
+def _substitute(obj: Any, values: dict[str, str]) -> Any:
+    """``{name}`` of declared arguments replaced in every string of a TOML value (others left for later)."""
+    if isinstance(obj, str):
+        return _PLACEHOLDER.sub(lambda m: values.get(m.group(1), m.group(0)), obj)
+    if isinstance(obj, list):
+        return [_substitute(x, values) for x in obj]
+    if isinstance(obj, dict):
+        return {k: _substitute(v, values) for k, v in obj.items()}
+    return obj
+
+
+def parse_launch(
+    text: str, path: str = "<launch>", *, args: dict[str, str] | None = None, env: dict[str, str] | None = None
+) -> LaunchSpec:
+    """Parse and check a launch file's text; raise :class:`LaunchError` naming file and line.
+
+    ``args``: NAME=VALUE arguments from the command line; ``env``: where ``ROBOFABRIC_NAME``
+    overrides are read (default: none, so parsing stays pure; the CLI passes ``os.environ``).
+    """
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise LaunchError(f"{path}: {exc}") from None
     lines = _peer_lines(text)
-    unknown = set(data) - {"launch", "peer"}
+    unknown = set(data) - {"launch", "peer", "args"}
     if unknown:
-        raise LaunchError(f"{path}: unknown section(s) {', '.join(sorted(unknown))} (expected [launch] and [[peer]])")
+        raise LaunchError(f"{path}: unknown section(s) {', '.join(sorted(unknown))} (expected [args], [launch] and [[peer]])")
+    declared = data.pop("args", {})
+    if not isinstance(declared, dict):
+        raise LaunchError(f"{path}: [args] must be a table of NAME = default")
+    given = dict(args or {})
+    values = resolve_args(declared, given, dict(env or {}), path)
+    data = _substitute(data, values)
     head = data.get("launch", {})
     if not isinstance(head, dict):
         raise LaunchError(f"{path}: [launch] must be a table")
     bad = set(head) - {"world", "router", "connect"}
     if bad:
         raise LaunchError(f"{path}: [launch] has unknown key(s) {', '.join(sorted(bad))}")
+    head = dict(head)
+    for name in BUILTIN_ARGS:
+        if name in given and name not in declared:
+            head[name] = given[name]
     world = head.get("world", "demo")
     try:
         keys.validate_id(world, what="world")
@@ -106,6 +178,9 @@ def parse_launch(text: str, path: str = "<launch>") -> LaunchSpec:
         connect = [connect]
     if not isinstance(connect, list) or not all(isinstance(c, str) for c in connect):
         raise LaunchError(f"{path}: [launch] connect must be a list of endpoint strings")
+    connect = [e.strip() for c in connect for e in c.split(",") if e.strip()]  # "{connect}" may hold several
+    if router is not None and not router.strip():
+        router = None  # router = "{router}" with an empty value: this machine hosts none
 
     raw_peers = data.get("peer", [])
     if not isinstance(raw_peers, list):
@@ -157,14 +232,16 @@ def parse_launch(text: str, path: str = "<launch>") -> LaunchSpec:
                 env=tuple((str(k), str(v)) for k, v in env.items()),
             )
         )
-    return LaunchSpec(path=path, world=world, router=router, connect=tuple(connect), peers=tuple(peers))
+    return LaunchSpec(
+        path=path, world=world, router=router, connect=tuple(connect), peers=tuple(peers), args=tuple(sorted(values.items()))
+    )
 
 
-def load_launch(path: str | Path) -> LaunchSpec:
+def load_launch(path: str | Path, *, args: dict[str, str] | None = None, env: dict[str, str] | None = None) -> LaunchSpec:
     p = Path(path)
     if not p.is_file():
         raise LaunchError(f"{path}: no such launch file")
-    return parse_launch(p.read_text(), str(path))
+    return parse_launch(p.read_text(), str(path), args=args, env=env)
 
 
 # --------------------------------------------------------------------------- supervisor

@@ -87,12 +87,14 @@ def _run(spec: LaunchSpec, *, out: Path, duration: float | None, router: str | N
     out.mkdir(parents=True, exist_ok=True)
     stop = shutdown_event()
     if router:
-        spec = LaunchSpec(spec.path, spec.world, router, spec.connect, spec.peers)
+        spec = LaunchSpec(spec.path, spec.world, router, spec.connect, spec.peers, spec.args)
     with _open_launcher(spec, router) as fab:
         watch = _Watch(fab)
         sup = Supervisor(spec, out_dir=out, is_ready=watch.is_ready)
         where = spec.router or ", ".join(spec.child_connect())
         sup.say(f"world {spec.world!r} via {where}; {len(spec.peers)} peer(s) from {spec.path}; output in {out}")
+        if spec.args:
+            sup.say("arguments: " + ", ".join(f"{k}={v}" for k, v in spec.args))
         t0 = time.monotonic()
         starter = threading.Thread(target=sup.start_all, daemon=True)
         starter.start()
@@ -159,14 +161,28 @@ def _summary(sup: Supervisor, watch: _Watch, elapsed: float, out: Path, demo: bo
 
 
 def up(
-    file: Annotated[Path, typer.Argument(help="Launch file (TOML): [launch] world/router/connect and [[peer]] entries.")],
+    file: Annotated[Path, typer.Argument(help="Launch file (TOML): [args], [launch] world/router/connect and [[peer]] entries.")],
+    args: Annotated[
+        Optional[list[str]],
+        typer.Argument(
+            help="NAME=VALUE launch arguments: the file's [args] (env ROBOFABRIC_NAME otherwise), or world=, router=, connect= for any file.",
+            show_default=False,
+        ),
+    ] = None,
     out: Annotated[Path, typer.Option(help="Directory for peers' output and logs.")] = Path("out/launch"),
     duration: Annotated[Optional[float], typer.Option(help="Stop everything after S seconds (default: until Ctrl-C).")] = None,
     router: Annotated[Optional[str], typer.Option(help="Host the router on this endpoint instead of the file's.")] = None,
 ) -> None:
-    """Start the peers a launch file lists on this machine; restart per policy; Ctrl-C stops them all."""
+    """Start the peers a launch file lists on this machine; restart per policy; Ctrl-C stops them all.
+
+    Example: robofabric up examples/lan/sim.toml connect=tcp/10.0.0.5:7447 world=lab2
+    """
+    import os
+
+    from fabric.launch import parse_cli_args
+
     try:
-        spec = load_launch(file)
+        spec = load_launch(file, args=parse_cli_args(args or []), env=dict(os.environ))
     except LaunchError as exc:
         raise UserError(str(exc)) from None
     raise typer.Exit(_run(spec, out=out, duration=duration, router=router, demo=False))
