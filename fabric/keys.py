@@ -19,6 +19,11 @@ PEER_KINDS = ("sim", "compute", "user", "viewer", "recorder", "router", "tool")
 
 _FORBIDDEN = set("/*$#? \t\n\r")
 
+#: The chunk before the writer's user id in every key a user writes (commands, ownership requests,
+#: scene-object poses): ``.../cmd/joints/by/alice``. Not ``@alice``: zenoh treats a chunk starting
+#: with ``@`` as verbatim, which no wildcard matches, so ``rf/demo/**`` (record, echo) would miss it.
+BY = "by"
+
 
 def validate_id(value: str, *, what: str = "id") -> str:
     """Return ``value`` if it can be one chunk of a key, else raise ``ValueError`` naming it."""
@@ -74,13 +79,22 @@ def robot_stream_all(world: str, stream: str) -> str:
     return f"{world_root(world)}/robot/*/{_choice(stream, ROBOT_STREAMS, 'stream')}"
 
 
-def robot_cmd(world: str, robot: str, command: str) -> str:
-    return f"{world_root(world)}/robot/{validate_id(robot, what='robot id')}/cmd/{_choice(command, COMMANDS, 'command')}"
+def _by(user: str) -> str:
+    return f"{BY}/{validate_id(user, what='user id')}"
+
+
+def robot_cmd(world: str, robot: str, command: str, user: str) -> str:
+    """Where ``user`` commands ``robot``: ``rf/{world}/robot/{id}/cmd/{command}/by/{user}``.
+
+    The user is part of the key so a router's access control can allow each identity its own
+    keys only; the sim peer takes the sender from the key, not from the payload."""
+    return f"{world_root(world)}/robot/{validate_id(robot, what='robot id')}/cmd/{_choice(command, COMMANDS, 'command')}/{_by(user)}"
 
 
 def robot_cmd_all(world: str, robot: str = "*") -> str:
+    """Every command to ``robot`` (default: every robot) from every user."""
     r = robot if robot == "*" else validate_id(robot, what="robot id")
-    return f"{world_root(world)}/robot/{r}/cmd/*"
+    return f"{world_root(world)}/robot/{r}/cmd/*/{BY}/*"
 
 
 def robot_all(world: str, robot: str = "*") -> str:
@@ -88,8 +102,15 @@ def robot_all(world: str, robot: str = "*") -> str:
     return f"{world_root(world)}/robot/{r}/**"
 
 
-def object_pose(world: str, obj: str) -> str:
-    return f"{world_root(world)}/object/{validate_id(obj, what='object id')}/pose"
+def object_pose(world: str, obj: str, user: str) -> str:
+    """Where ``user`` moves scene object ``obj``: ``rf/{world}/object/{id}/pose/by/{user}``."""
+    return f"{world_root(world)}/object/{validate_id(obj, what='object id')}/pose/{_by(user)}"
+
+
+def object_pose_all(world: str, obj: str = "*") -> str:
+    """Poses of ``obj`` (default: every object) from every writer: what readers subscribe to."""
+    o = obj if obj == "*" else validate_id(obj, what="object id")
+    return f"{world_root(world)}/object/{o}/pose/{BY}/*"
 
 
 def map_key(world: str, name: str) -> str:
@@ -102,6 +123,19 @@ def own(world: str, obj: str) -> str:
 
 def own_all(world: str) -> str:
     return f"{world_root(world)}/own/*"
+
+
+def own_request(world: str, obj: str, user: str) -> str:
+    """Where ``user`` asks the authority for ``obj`` (request, release, renew): ``own/{obj}/by/{user}``.
+
+    ``own/{obj}`` itself only carries the record (written and served by the authority)."""
+    return f"{world_root(world)}/own/{validate_id(obj, what='object id')}/{_by(user)}"
+
+
+def own_request_all(world: str, obj: str = "*") -> str:
+    """Every user's requests for ``obj`` (default: every object): what the authority serves."""
+    o = obj if obj == "*" else validate_id(obj, what="object id")
+    return f"{world_root(world)}/own/{o}/{BY}/*"
 
 
 def srv(world: str, service: str, *rest: str) -> str:
@@ -149,6 +183,7 @@ class ParsedKey:
     subject: str = ""  # robot id, object id, map name, service name, peer kind
     leaf: str = ""  # stream name, command, peer id, event tail
     rest: tuple[str, ...] = ()
+    user: str = ""  # the writer named by a user key (cmd, own request, object pose): ``.../by/{user}``
 
 
 def is_latched(key: str) -> bool:
@@ -177,14 +212,16 @@ def parse(key: str) -> ParsedKey:
         validate_id(p, what=f"part of key {key!r}")
     if kind == "robot" and len(tail) == 2 and tail[1] in ROBOT_STREAMS:
         return ParsedKey(world, "robot", tail[0], tail[1])
-    if kind == "robot" and len(tail) == 3 and tail[1] == "cmd" and tail[2] in COMMANDS:
-        return ParsedKey(world, "cmd", tail[0], tail[2])
-    if kind == "object" and len(tail) == 2 and tail[1] == "pose":
-        return ParsedKey(world, "object", tail[0], "pose")
+    if kind == "robot" and len(tail) == 5 and tail[1] == "cmd" and tail[2] in COMMANDS and tail[3] == BY:
+        return ParsedKey(world, "cmd", tail[0], tail[2], user=tail[4])
+    if kind == "object" and len(tail) == 4 and tail[1] == "pose" and tail[2] == BY:
+        return ParsedKey(world, "object", tail[0], "pose", user=tail[3])
     if kind == "map" and len(tail) == 1:
         return ParsedKey(world, "map", tail[0])
     if kind == "own" and len(tail) == 1:
         return ParsedKey(world, "own", tail[0])
+    if kind == "own" and len(tail) == 3 and tail[1] == BY:
+        return ParsedKey(world, "own_request", tail[0], user=tail[2])
     if kind == "srv" and len(tail) >= 1 and tail[0] in SERVICES:
         return ParsedKey(world, "srv", tail[0], "/".join(tail[1:]), tuple(tail[1:]))
     if kind == "peer" and len(tail) == 2 and tail[0] in PEER_KINDS:

@@ -37,6 +37,20 @@ def resolve_key(key: str, world: str) -> str:
     return full
 
 
+def _user_key(full: str, user: str | None) -> str:
+    """``robot/arm1/cmd/joints`` with ``--user alice`` is alice's command key ``.../cmd/joints/by/alice``
+    (the sim takes the sender from the key); a key that already names its writer is kept."""
+    parts = full.split("/")
+    if user and len(parts) == 6 and parts[2] == "robot" and parts[4] == "cmd":
+        try:
+            return keys.robot_cmd(parts[1], parts[3], parts[5], user)
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
+    if user and len(parts) == 5 and parts[2] == "object" and parts[4] == "pose":
+        return keys.object_pose(parts[1], parts[3], user)
+    return full
+
+
 def router(
     listen: Listen = None,
     connect: Connect = None,
@@ -194,7 +208,7 @@ def hz(
 
 
 def pub(
-    key: Annotated[str, typer.Argument(help="Concrete key, full or world-relative (robot/base1/cmd/twist).")],
+    key: Annotated[str, typer.Argument(help="Concrete key, full or world-relative (robot/base1/cmd/twist: with --user, that user's key .../by/USER).")],
     msg_type: Annotated[str, typer.Option("--type", "-t", help="Message type, e.g. Twist, JointTarget, Pose, Stop.")],
     data: Annotated[str, typer.Option("--data", "-d", help='Fields as JSON, e.g. \'{"v": 0.3, "omega": 0.1}\'.')] = "{}",
     user: Annotated[Optional[str], typer.Option(help="Wrap in a Command from this user (for cmd/* keys).")] = None,
@@ -222,7 +236,7 @@ def pub(
     n = count if count is not None else (None if rate > 0 else 1)
     stop = shutdown_event()
     with _open("tool", world, connect, listen, profile, zenoh_config, peer_id, key=key) as fab:
-        full = resolve_key(key, fab.world)
+        full = _user_key(resolve_key(key, fab.world), user)
         if "*" in full or "$" in full:
             raise UserError(f"{full!r} is a pattern; pub needs a concrete key")
         fab.session.declare_publisher(full)  # routes to existing subscribers before the first put

@@ -48,9 +48,15 @@ class Authority:
         self.counters = {"requests": 0, "rejected": 0, "handovers": 0}
         for obj in objects:
             self._publish(self._state.records[obj])
-        # one queryable per object, so a wildcard query (a replica joining) gets one record from each
+        # one queryable per object, so a wildcard query (a replica joining) gets one record from each;
+        # requests come on the asker's own key (own/{obj}/by/{user}): the user is taken from the key,
+        # where a router's access control vouches for it, never from the payload alone
         self._queryables = [
-            fabric.serve(keys.own(fabric.world, obj), lambda key, req, obj=obj: self._serve(obj, req), expected=OwnRequest)
+            fabric.serve(keys.own(fabric.world, obj), lambda key, req, obj=obj: self._serve_record(obj), expected=OwnRequest)
+            for obj in objects
+        ] + [
+            fabric.serve(keys.own_request_all(fabric.world, obj), lambda key, req, obj=obj: self._serve(obj, key, req),
+                         expected=OwnRequest)
             for obj in objects
         ]
         self._watch = fabric.watch_peers(self._on_peer, kind="user")
@@ -104,31 +110,46 @@ class Authority:
             except Exception:
                 log.exception("ownership tick failed")
 
-    def _serve(self, obj: str, request: Any) -> Any:
+    def _serve_record(self, obj: str) -> OwnershipRecord:
+        """``own/{obj}``: the record, whatever the query carries (requests go to the asker's own key)."""
         key = keys.own(self.fabric.world, obj)
         with self._lock:
             rec = self._state.records.get(obj)
         if rec is None:
             raise ServiceError(f"unknown object {obj!r} (known: {', '.join(sorted(self._state.records))})")
+        return rec.__class__(**{**_fields(rec), "header": self.fabric.header(key)})
+
+    def _serve(self, obj: str, key: str, request: Any) -> Any:
+        """``own/{obj}/by/{user}``: a request, release or renewal by the user the key names."""
         if request is None:
-            return rec.__class__(**{**_fields(rec), "header": self.fabric.header(key)})
+            return self._serve_record(obj)
+        user = keys.parse(key).user
+        if request.user != user:
+            self.counters["rejected"] += 1
+            self._emit(Event(kind="own_refused", reason=f"request names {request.user!r} but comes from {user!r}",
+                             object=obj, user=user, severity="warning", header=self.fabric.header("event")))
+            raise ServiceError(f"refused: the request names {request.user!r} but was sent by {user!r}")
+        with self._lock:
+            known = obj in self._state.records
+        if not known:
+            raise ServiceError(f"unknown object {obj!r} (known: {', '.join(sorted(self._state.records))})")
         self.counters["requests"] += 1
         now = self.clock.now()
         if request.op == "request":
-            ev: st.Event = st.Request(request.user, obj, now, request.wait)
+            ev: st.Event = st.Request(user, obj, now, request.wait)
         elif request.op == "release":
-            ev = st.Release(request.user, obj, now)
+            ev = st.Release(user, obj, now)
         else:
-            ev = st.Renew(request.user, obj, now)
+            ev = st.Renew(user, obj, now)
         effects = self._apply(ev)
-        mine = [e for e in effects if e.user == request.user and e.object == obj and e.kind != "revoked"]
-        eff = mine[0] if mine else st.Effect("denied", obj, request.user, "no effect")
+        mine = [e for e in effects if e.user == user and e.object == obj and e.kind != "revoked"]
+        eff = mine[0] if mine else st.Effect("denied", obj, user, "no effect")
         outcome = {"handover": "granted", "restored": "granted"}.get(eff.kind, eff.kind)
         if outcome not in ("granted", "denied", "queued", "released", "renewed"):
             outcome = "denied"
         with self._lock:
             rec = self._state.records[obj]
-        return OwnReply(outcome, eff.reason, eff.position, rec, header=self.fabric.header(key))
+        return OwnReply(outcome, eff.reason, eff.position, rec, header=self.fabric.header(keys.own(self.fabric.world, obj)))
 
     # ------------------------------------------------------------------ CommandGate
 

@@ -2,12 +2,21 @@
 
 The replica subscribes to ``rf/{world}/own/*`` and queries it once on start, so a
 late joiner sees the current owners at once. ``epoch(obj)`` is the fencing token
-to stamp on commands.
+to stamp on commands. Requests go to the user's own key ``own/{obj}/by/{user}``.
+
+Trust: a record counts only when it comes from the authority (its ``authority`` is a live sim
+peer, whose liveliness token only sim identities may declare in a secure world, and the one this
+client already follows while that one lives) and its epoch is plausible: never backwards, never
+further ahead than the authority could have counted since the last record
+(:func:`epoch_plausible`). Anything else is counted in ``counters`` and changes nothing, so a
+forged record cannot stop renewals or hide later real ones.
 """
 
 from __future__ import annotations
 
 import threading
+import time
+from collections import Counter
 from dataclasses import dataclass
 from typing import Callable
 
@@ -18,7 +27,28 @@ from fabric.session import Fabric, ServiceError
 
 from ownership.messages import OwnReply, OwnRequest
 
-__all__ = ["OwnershipClient", "Outcome"]
+#: Epoch changes the authority can make per second (each is one request, release, expiry or
+#: handover it processed) and the slack on top, for :func:`epoch_plausible`. Generous: the
+#: authority serves a few thousand requests per second at most on any machine measured.
+MAX_EPOCH_RATE = 10_000.0
+EPOCH_SLACK = 1_000
+
+
+def epoch_plausible(old: int | None, new: int, elapsed_s: float, *, rate: float = MAX_EPOCH_RATE,
+                    slack: int = EPOCH_SLACK) -> str | None:
+    """None when the authority could have moved an object's epoch from ``old`` to ``new`` in
+    ``elapsed_s`` seconds, else why not (backwards, or a jump beyond ``slack + rate * elapsed``)."""
+    if old is None:
+        return None
+    if new < old:
+        return f"epoch {new} goes back from {old}"
+    limit = old + slack + int(rate * max(0.0, elapsed_s))
+    if new > limit:
+        return f"epoch {new} jumps past {limit}, more than the authority could have issued since {old}"
+    return None
+
+
+__all__ = ["OwnershipClient", "Outcome", "epoch_plausible"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,16 +74,30 @@ class Outcome:
 
 
 class OwnershipClient:
-    """One user's ownership handle in one world; renews every ``renew_s`` while it owns something."""
+    """One user's ownership handle in one world; renews every ``renew_s`` while it owns something.
 
-    def __init__(self, fabric: Fabric, user: str, *, renew_s: float = 0.5, timeout: float = 2.0) -> None:
+    ``clock`` (monotonic seconds) is only used to bound epoch jumps between records."""
+
+    def __init__(self, fabric: Fabric, user: str, *, renew_s: float = 0.5, timeout: float = 2.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.fabric = fabric
         self.user = validate_user(user)  # refused here, not by the authority's decoder after a timeout
         self.timeout = timeout
         self.records: dict[str, OwnershipRecord] = {}
+        self.counters: Counter[str] = Counter()
+        self._seen_at: dict[str, float] = {}
+        self._clock = clock
         self._lock = threading.Lock()
         self._callbacks: list[Callable[[OwnershipRecord], None]] = []
         self._stop = threading.Event()
+        self._held: set[str] = set()  # granted to us by the authority's replies; renewed until it says otherwise
+        self._sims: set[str] = set()
+        self._authority: str | None = None
+        fabric.watch_peers(self._on_sim, kind="sim")
+        try:
+            self._sims.update(pid for _, pid in fabric.live_peers("sim", timeout=min(timeout, 1.0)))
+        except Exception:
+            pass  # the watch fills it in
         fabric.subscribe(keys.own_all(fabric.world), self._on_record, expected=OwnershipRecord)
         self.refresh()
         self._renew_s = renew_s
@@ -61,6 +105,13 @@ class OwnershipClient:
         self._thread.start()
 
     # ------------------------------------------------------------------ replica
+
+    def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
+        with self._lock:
+            if alive:
+                self._sims.add(peer_id)
+            else:
+                self._sims.discard(peer_id)
 
     def refresh(self) -> None:
         """Query the authority for every record (late join)."""
@@ -71,12 +122,32 @@ class OwnershipClient:
         except ServiceError:
             pass  # no authority yet: the subscription fills the replica when one appears
 
+    def _refusal(self, rec: OwnershipRecord, now: float) -> str | None:
+        """Why ``rec`` is not the authority's word (None when it is); call with the lock held."""
+        if rec.authority not in self._sims:
+            return "foreign"  # not a live sim peer: not an authority at all
+        if self._authority is not None and rec.authority != self._authority and self._authority in self._sims:
+            return "foreign"  # another sim speaking for the object of the one we follow
+        old = self.records.get(rec.object)
+        if old is not None and old.authority != rec.authority:
+            old = None  # a new authority (the old one left): its own epochs
+        if old is not None and old.epoch == rec.epoch and old.header.wall_ns > rec.header.wall_ns:
+            return "stale"  # an older record (query answer racing a publication)
+        why = epoch_plausible(None if old is None else old.epoch, rec.epoch, now - self._seen_at.get(rec.object, now))
+        if why is not None:
+            return "stale" if rec.epoch < (old.epoch if old else 0) else "implausible"
+        return None
+
     def _on_record(self, key: str, rec: OwnershipRecord) -> None:
+        now = self._clock()
         with self._lock:
-            old = self.records.get(rec.object)
-            if old is not None and (old.epoch > rec.epoch or (old.epoch == rec.epoch and old.header.wall_ns > rec.header.wall_ns)):
-                return  # an older record (query answer racing a publication)
+            why = self._refusal(rec, now)
+            if why is not None:
+                self.counters[f"records_{why}"] += 1
+                return
+            self._authority = rec.authority
             self.records[rec.object] = rec
+            self._seen_at[rec.object] = now
             callbacks = list(self._callbacks)
         for cb in callbacks:
             cb(rec)
@@ -102,26 +173,44 @@ class OwnershipClient:
         if self.records and obj not in self.records:
             raise ServiceError(f"unknown object {obj!r} (known: {', '.join(sorted(self.records))})")
         req = OwnRequest(op, self.user, wait, header=self.fabric.header("own-req"))
-        reply = self.fabric.call(keys.own(self.fabric.world, obj), req, timeout=timeout or self.timeout, expected=OwnReply)
+        key = keys.own_request(self.fabric.world, obj, self.user)
+        reply = self.fabric.call(key, req, timeout=timeout or self.timeout, expected=OwnReply)
         self._on_record(keys.own(self.fabric.world, obj), reply.record)
         return reply
 
     def request(self, obj: str, *, wait: bool = False, timeout: float | None = None) -> Outcome:
         r = self._ask(obj, "request", wait, timeout)
+        if r.outcome == "granted":
+            with self._lock:
+                self._held.add(obj)
         return Outcome(r.outcome, r.reason, r.position, r.record.epoch, r.record)
 
     def release(self, obj: str, *, timeout: float | None = None) -> Outcome:
+        with self._lock:
+            self._held.discard(obj)
         r = self._ask(obj, "release", timeout=timeout)
         return Outcome(r.outcome, r.reason, r.position, r.record.epoch, r.record)
 
+    def _to_renew(self) -> list[str]:
+        """What we hold: granted in a reply, or handed to us in a trusted record (a queue's turn).
+
+        Only the authority's answer to a renewal ends it, never a published record on its own."""
+        with self._lock:
+            for obj, rec in self.records.items():
+                if rec.owner == self.user and rec.policy == "exclusive":
+                    self._held.add(obj)
+            return sorted(self._held)
+
     def _renew_loop(self) -> None:
         while not self._stop.wait(self._renew_s):
-            for obj, rec in list(self.records.items()):
-                if rec.owner == self.user and rec.policy == "exclusive":
-                    try:
-                        self._ask(obj, "renew")
-                    except ServiceError:
-                        pass
+            for obj in self._to_renew():
+                try:
+                    reply = self._ask(obj, "renew")
+                except ServiceError:
+                    continue  # no answer this time: try again next period
+                if reply.outcome != "renewed" and reply.record.owner != self.user:
+                    with self._lock:
+                        self._held.discard(obj)
 
     def close(self) -> None:
         self._stop.set()

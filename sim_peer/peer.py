@@ -7,7 +7,8 @@ independent of the physics step; headers carry sim time):
 * ``pose`` - every mobile robot's base Pose (axle midpoint) with its velocities;
 * ``scan`` - every LIDAR as a Scan (and the ultrasonic ring on ``sonar`` where fabric.keys has that stream).
 
-Commands on ``rf/{world}/robot/{id}/cmd/*`` pass through the :class:`fabric.gate.CommandGate`
+Commands on ``rf/{world}/robot/{id}/cmd/*/by/{user}`` (the sender is the key's user; a payload naming
+someone else is refused) pass through the :class:`fabric.gate.CommandGate`
 first; anything refused or unusable is published as an ``Event(kind="reject")`` under
 ``event/reject/{robot}`` with the reason, counted, and the robot keeps its last valid command.
 A command for a robot this sim does not have is refused from its key alone, before it is
@@ -18,7 +19,7 @@ dropped) that a worker thread applies, so a flood on one key cannot hold up anot
 Refusals and bad payloads are reported at most a few times per reason per interval
 (:meth:`fabric.session.Fabric.emit` with ``limit``), with the count of the rest.
 Clamped commands are applied and reported as ``Event(kind="clamp")``. Scene objects move on
-``rf/{world}/object/{id}/pose``. ``rf/{world}/srv/world`` answers a :class:`WorldInfo`.
+``rf/{world}/object/{id}/pose/by/{user}``. ``rf/{world}/srv/world`` answers a :class:`WorldInfo`.
 """
 
 from __future__ import annotations
@@ -105,7 +106,7 @@ class SimPeer:
         for obj in self.world.objects:
             # no history here: the authority's start must not wait on other peers' caches (with
             # history=True a sim started under load answered nothing for 30 s in two CI runs)
-            f.subscribe(keys.object_pose(w, obj), self._on_object, expected=Pose)
+            f.subscribe(keys.object_pose_all(w, obj), self._on_object, expected=Pose)
         provider = getattr(self.gate, "set_state_provider", None)
         if callable(provider):
             provider(self.last_state)
@@ -338,10 +339,16 @@ class SimPeer:
         except ValueError as exc:
             self._reject("", "?", "bad_key", clip(str(exc)), cmd.user)
             return None
-        rid, name = parsed.subject, parsed.leaf
+        rid, name, sender = parsed.subject, parsed.leaf, parsed.user
         robot = self.world.robots.get(rid)
         if robot is None:
             self._reject(clip(rid, 64), name, "unknown_robot", f"no robot {quote(rid, 64)} here; robots: {', '.join(self.world.robots)}", cmd.user)
+            return None
+        if cmd.user != sender:
+            # the key names the sender (a router's access control vouches for it); a payload claiming
+            # someone else is a forgery or a bug, never a command
+            self._reject(rid, name, "user_mismatch", f"the command names {quote(cmd.user, 64)} but was sent on {quote(sender, 64)}'s key",
+                         sender)
             return None
         want = COMMAND_BODIES.get(name)
         if want is None or not isinstance(cmd.body, want):

@@ -114,7 +114,8 @@ class World:
         # scene objects, maps and paths are latched: what was set before this user joined comes at once
         for stream in ("joints", "pose", "scan", "path", "ik"):
             self.fabric.subscribe(keys.robot_stream_all(self.name, stream), self.latest.put, history=stream == "path")
-        self.fabric.subscribe(f"{keys.world_root(self.name)}/object/*/pose", self.latest.put, history=True)
+        # every writer's pose of an object is kept under the object's reader key (object/{id}/pose/by/*)
+        self.fabric.subscribe(keys.object_pose_all(self.name), self._on_object_pose, history=True)
         self.fabric.subscribe(f"{keys.world_root(self.name)}/map/*", self.latest.put, history=True)
         self.fabric.subscribe(keys.event_all(self.name), self._on_event, expected=Event)
         self.ownership = OwnershipLink(self.fabric, self.user, on_record=self.latest.put)
@@ -182,6 +183,9 @@ class World:
             cls = Arm if entry.kind == "arm" else Base
             self._robots[robot_id] = cls(self, entry)
         return self._robots[robot_id]
+
+    def _on_object_pose(self, key: str, msg: Any) -> None:
+        self.latest.put(keys.object_pose_all(self.name, keys.parse(key).subject), msg)
 
     def object(self, object_id: str) -> "SceneObject":
         """A scene object (the IK target sphere, the goal pointer): anyone may move it."""
@@ -278,16 +282,16 @@ class Robot:
         if rec is not None and rec.owner != self.world.user:
             who = rec.owner or "nobody"
             raise NotOwner(f"{self.world.user} does not own {self.id} (owner: {who}); call request() first")
-        key = keys.robot_cmd(self._w, self.id, command)
+        key = keys.robot_cmd(self._w, self.id, command, self.world.user)
         epoch = rec.epoch if rec is not None else 0
         self.world.fabric.publish(key, Command(self.world.user, epoch, body, self.world.fabric.header(key)))
 
     def stop(self) -> None:
-        key = keys.robot_cmd(self._w, self.id, "stop")
+        key = keys.robot_cmd(self._w, self.id, "stop", self.world.user)
         self.send("stop", Stop(self.world.fabric.header(key)))
 
     def reset(self) -> None:
-        key = keys.robot_cmd(self._w, self.id, "reset")
+        key = keys.robot_cmd(self._w, self.id, "reset", self.world.user)
         self.send("reset", Reset(self.world.fabric.header(key)))
 
     def _check_rejected(self, since_ns: int) -> None:
@@ -353,7 +357,7 @@ class Arm(Robot):
                 f"[{math.degrees(lo[j]):.1f}, {math.degrees(hi[j]):.1f}] deg"
             )
         t0 = time.time_ns()
-        key = keys.robot_cmd(self._w, self.id, "joints")
+        key = keys.robot_cmd(self._w, self.id, "joints", self.world.user)
         self.send("joints", JointTarget(target, speed_scale, self.world.fabric.header(key)))
         if not wait:
             return target
@@ -449,7 +453,7 @@ class Base(Robot):
 
     def twist(self, v: float, omega: float) -> None:
         """One twist command (m/s, rad/s); the sim keeps it until the next one or a stop."""
-        key = keys.robot_cmd(self._w, self.id, "twist")
+        key = keys.robot_cmd(self._w, self.id, "twist", self.world.user)
         self.send("twist", Twist(float(v), float(omega), self.world.fabric.header(key)))
 
     def drive(self, v: float, omega: float, duration: float, *, rate: float = 10.0) -> tuple[float, float, float] | None:
@@ -507,7 +511,7 @@ class Base(Robot):
         if len(path) == 0:
             raise ValueError("cannot follow an empty path")
         t0 = time.time_ns()
-        key = keys.robot_cmd(self._w, self.id, "path")
+        key = keys.robot_cmd(self._w, self.id, "path", self.world.user)
         body = Path(path.x, path.y, path.theta, path.frame, self.world.fabric.header(key))
         self.send("path", body)
         if not wait:
@@ -537,14 +541,15 @@ class SceneObject:
     def __init__(self, world: World, object_id: str) -> None:
         self.world = world
         self.id = object_id
-        self.key = keys.object_pose(world.name, object_id)
+        self.key = keys.object_pose(world.name, object_id, world.user)  # where this user writes it
+        self.any_key = keys.object_pose_all(world.name, object_id)  # where anyone's pose of it is read
 
     def __repr__(self) -> str:
         return f"<SceneObject {self.id!r}>"
 
     @property
     def pose(self) -> Pose | None:
-        return self.world.latest.get(self.key)
+        return self.world.latest.get(self.any_key)
 
     def set_pose(self, position: Sequence[float], quaternion: Sequence[float] = (1.0, 0.0, 0.0, 0.0), *, yaw: float | None = None) -> Pose:
         """Move the object to ``position`` (m, world frame); ``yaw`` (rad) overrides ``quaternion``."""
@@ -552,11 +557,11 @@ class SceneObject:
             quaternion = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
         pose = Pose(np.asarray(position, dtype=float), np.asarray(quaternion, dtype=float), header=self.world.fabric.header(self.key))
         self.world.fabric.publish(self.key, pose)
-        self.world.latest.put(self.key, pose)
+        self.world.latest.put(self.any_key, pose)
         return pose
 
     def on(self, callback: Callable[[str, Any], None]) -> Subscription:
-        return self.world.on(self.key, callback)
+        return self.world.on(self.any_key, callback)
 
 
 def connect(

@@ -8,7 +8,6 @@ latest record of each object for the UI.
 from __future__ import annotations
 
 import logging
-import threading
 from typing import TYPE_CHECKING, Any, Callable
 
 from fabric import keys
@@ -25,50 +24,34 @@ __all__ = ["OwnershipLink"]
 
 
 class OwnershipLink:
-    """Requests and releases through the ownership client; replicas of every ``own/*`` record."""
+    """Requests and releases through the ownership client; its replica of every ``own/*`` record.
+
+    The client's replica takes records only from the authority (``ownership.client``): a forged
+    record must not change the epoch this user stamps on commands nor what the UI shows."""
 
     def __init__(self, fab: Fabric, user: str, *, on_record: Callable[[str, Any], None] | None = None) -> None:
+        from ownership import OwnershipClient
+
         self.fab = fab
         self.user = user
-        self._records: dict[str, OwnershipRecord] = {}
-        self._lock = threading.Lock()
         self._on_record = on_record
-        self._client: OwnershipClient | None = None
-        fab.subscribe(keys.own_all(fab.world), self._on, expected=OwnershipRecord)
-        try:
-            for rep in fab.query(keys.own_all(fab.world), timeout=1.0, all_replies=True):
-                if isinstance(rep.message, OwnershipRecord):
-                    self._on(rep.key, rep.message)
-        except Exception:
-            pass  # no authority yet: records arrive when it publishes
+        self._client = OwnershipClient(fab, user, timeout=1.0)
+        self._client.timeout = 2.0  # the first refresh waits 1 s at most when no authority runs yet
+        self._client.on_change(lambda rec: self._on(keys.own(fab.world, rec.object), rec))
+        for rec in list(self._client.records.values()):
+            self._on(keys.own(fab.world, rec.object), rec)
 
     @property
     def client(self) -> "OwnershipClient":
-        if self._client is None:
-            try:
-                from ownership import OwnershipClient
-            except ImportError as exc:
-                raise NotOwner(f"ownership is not available in this installation ({exc})") from None
-            self._client = OwnershipClient(self.fab, self.user)
         return self._client
 
     def _on(self, key: str, rec: OwnershipRecord) -> None:
-        with self._lock:
-            old = self._records.get(rec.object)
-            if old is not None and rec.epoch < old.epoch:
-                return  # late duplicate of an older record
-            self._records[rec.object] = rec
         if self._on_record is not None:
             self._on_record(key, rec)
 
     def record(self, obj: str) -> OwnershipRecord | None:
-        """The newest record of ``obj`` seen by the subscription or by the client's replies."""
-        with self._lock:
-            rec = self._records.get(obj)
-        other = self._client.record(obj) if self._client is not None else None
-        if other is not None and (rec is None or other.epoch > rec.epoch):
-            return other
-        return rec
+        """The newest record of ``obj`` from the authority."""
+        return self._client.record(obj)
 
     def _ask(self, op: str, obj: str, timeout: float, wait: bool = False) -> Outcome:
         """One request to the authority; its silence is :class:`Timeout`, its refusal :class:`NotOwner`."""
@@ -79,8 +62,6 @@ class OwnershipLink:
             if exc.reason.startswith("no reply"):
                 raise Timeout(f"no ownership answer for {obj} within {timeout:.1f} s (is the sim peer, its authority, running?)") from None
             raise NotOwner(f"{obj}: {exc.reason}") from None
-        if out.record is not None:
-            self._on(keys.own(self.fab.world, obj), out.record)
         return out
 
     def request(self, obj: str, *, timeout: float, wait: bool = False) -> int:
@@ -94,5 +75,4 @@ class OwnershipLink:
         self._ask("release", obj, timeout)
 
     def close(self) -> None:
-        if self._client is not None:
-            self._client.close()
+        self._client.close()

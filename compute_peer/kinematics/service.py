@@ -108,7 +108,7 @@ class KinematicsService:
             self._resources.append(f.serve(keys.srv_per_subject(w, name, f.peer_id), handler, expected=expected))
         self._resources.append(f.subscribe(keys.robot_stream_all(w, "joints"), self._on_joints, expected=JointState))
         for _, obj in self.streams:
-            self._resources.append(f.subscribe(keys.object_pose(w, obj), self._on_target, expected=Pose, history=True))
+            self._resources.append(f.subscribe(keys.object_pose_all(w, obj), self._on_target, expected=Pose, history=True))
 
     def __enter__(self) -> "KinematicsService":
         return self

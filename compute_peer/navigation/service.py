@@ -136,7 +136,7 @@ class NavigationService:
             for r in self.robots:
                 self._resources.append(f.subscribe(keys.robot_pose(self.world, r), self._on_robot, expected=Pose))
                 self._resources.append(f.subscribe(keys.robot_scan(self.world, r), self._on_robot, expected=Scan))
-        self._resources.append(f.subscribe(keys.object_pose(self.world, self.goal_object), self._on_goal, expected=Pose, history=True))
+        self._resources.append(f.subscribe(keys.object_pose_all(self.world, self.goal_object), self._on_goal, expected=Pose, history=True))
         # srv/{map,plan}/{name}: the nearest compute peer; srv/{map,plan}/{name}/{peer_id}: this one (docs/compute.md)
         for peer in (None, f.peer_id):
             self._resources.append(f.serve(keys.srv_per_subject(self.world, "map", peer), self._on_map, expected=MapRequest))
@@ -419,7 +419,7 @@ class NavigationService:
                 goal = (float(g.position[0]), float(g.position[1]), yaw_from_quaternion(g.quaternion))
             else:
                 raise NavigationError(
-                    f"no goal given and no pose received on {keys.object_pose(self.world, self.goal_object)} yet"
+                    f"no goal given and no pose received on {keys.object_pose_all(self.world, self.goal_object)} yet"
                 )
         s = self.settings
         v = s.vehicle

@@ -131,7 +131,7 @@ def test_ik_streaming_follows_the_target(served, world):
     user.publish(keys.robot_joints(world, "arm1"), JointState(tuple(f"joint_{i}" for i in range(1, 7)), q_now, np.zeros(6)))
     wait_until(lambda: "arm1" in svc._joints, what="joints seen by the service")
     goal = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q)).position
-    user.publish(keys.object_pose(world, "target"), Pose(goal))
+    user.publish(keys.object_pose(world, "target", "alice"), Pose(goal))
     wait_until(lambda: any(np.allclose(m.position, goal) for m in got), what="a streamed solution", seen=lambda: got)
     sol = [m for m in got if np.allclose(m.position, goal)][-1]
     assert sol.ok and sol.robot == "arm1" and sol.target == "target"
@@ -144,7 +144,7 @@ def test_ik_streaming_follows_the_target(served, world):
     n_before = len(got)
 
     far = np.array([9.0, 9.0, 9.0])
-    user.publish(keys.object_pose(world, "target"), Pose(far))
+    user.publish(keys.object_pose(world, "target", "alice"), Pose(far))
     wait_until(lambda: any(np.allclose(m.position, far) for m in got[n_before:]), what="a refusal on the stream")
     bad = [m for m in got if np.allclose(m.position, far)][-1]
     assert not bad.ok and "reach" in bad.reason and bad.q.size == 0

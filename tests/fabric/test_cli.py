@@ -24,9 +24,9 @@ def cli_router(procs, world):
 
 
 def test_two_processes_talk_through_the_router(cli_router, world, procs):
-    key = keys.robot_cmd(world, "base1", "twist")
+    key = keys.robot_cmd(world, "base1", "twist", "alice")
     echo = procs.start(
-        robofabric_cmd("echo", "robot/*/cmd/*", "--json", "--count", "3", "--world", world, "--connect", cli_router),
+        robofabric_cmd("echo", "robot/*/cmd/*/by/*", "--json", "--count", "3", "--world", world, "--connect", cli_router),
         name="echo",
     )
     wait_until(lambda: _live(world, cli_router, "tool"), timeout=20, what="echo to join")
@@ -55,15 +55,15 @@ def _live(world, ep, kind):
 def test_ps_and_hz_see_a_live_publisher(cli_router, world, procs):
     pub = procs.start(
         robofabric_cmd(
-            "pub", "robot/arm1/cmd/stop", "-t", "Stop", "--rate", "50", "--world", world, "--connect", cli_router,
+            "pub", "robot/arm1/cmd/stop/by/ann", "-t", "Stop", "--rate", "50", "--world", world, "--connect", cli_router,
             "--id", "stopper",
         ),
         name="pub",
     )
     wait_until(lambda: "stopper" in (_live(world, cli_router, "tool") or []), timeout=20, what="publisher in ps")
-    out = run_cli("hz", "robot/arm1/cmd/stop", "--duration", "3", "--json", "--world", world, "--connect", cli_router)
+    out = run_cli("hz", "robot/arm1/cmd/stop/by/ann", "--duration", "3", "--json", "--world", world, "--connect", cli_router)
     assert out.returncode == 0, out.stderr
-    stream = json.loads(out.stdout)["streams"][keys.robot_cmd(world, "arm1", "stop")]
+    stream = json.loads(out.stdout)["streams"][keys.robot_cmd(world, "arm1", "stop", "ann")]
     assert 30 < stream["rate_hz"] < 70, stream
     assert stream["bytes_per_s"] > 0 and stream["count"] > 50
     table = run_cli("ps", "--world", world, "--connect", cli_router)

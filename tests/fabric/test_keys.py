@@ -8,8 +8,12 @@ def test_builders_follow_design_layout():
     assert keys.robot_pose("demo", "base1") == "rf/demo/robot/base1/pose"
     assert keys.robot_scan("demo", "base1") == "rf/demo/robot/base1/scan"
     assert keys.robot_path("demo", "base1") == "rf/demo/robot/base1/path"
-    assert keys.robot_cmd("demo", "arm1", "joints") == "rf/demo/robot/arm1/cmd/joints"
-    assert keys.object_pose("demo", "target") == "rf/demo/object/target/pose"
+    assert keys.robot_cmd("demo", "arm1", "joints", "alice") == "rf/demo/robot/arm1/cmd/joints/by/alice"
+    assert keys.robot_cmd_all("demo") == "rf/demo/robot/*/cmd/*/by/*"
+    assert keys.object_pose("demo", "target", "bob") == "rf/demo/object/target/pose/by/bob"
+    assert keys.object_pose_all("demo", "target") == "rf/demo/object/target/pose/by/*"
+    assert keys.own_request("demo", "arm1", "alice") == "rf/demo/own/arm1/by/alice"
+    assert keys.own_request_all("demo") == "rf/demo/own/*/by/*"
     assert keys.map_key("demo", "floor") == "rf/demo/map/floor"
     assert keys.own("demo", "arm1") == "rf/demo/own/arm1"
     assert keys.srv("demo", "ik", "arm1") == "rf/demo/srv/ik/arm1"
@@ -29,7 +33,7 @@ def test_bad_ids_raise_naming_the_id(bad):
 
 def test_unknown_stream_command_service_kind():
     with pytest.raises(ValueError, match="unknown command"):
-        keys.robot_cmd("demo", "arm1", "fly")
+        keys.robot_cmd("demo", "arm1", "fly", "alice")
     with pytest.raises(ValueError, match="unknown service"):
         keys.srv("demo", "teleport")
     with pytest.raises(ValueError, match="unknown peer kind"):
@@ -40,8 +44,8 @@ def test_unknown_stream_command_service_kind():
     "key,expected",
     [
         ("rf/w/robot/arm1/joints", ("robot", "arm1", "joints")),
-        ("rf/w/robot/arm1/cmd/twist", ("cmd", "arm1", "twist")),
-        ("rf/w/object/goal/pose", ("object", "goal", "pose")),
+        ("rf/w/robot/arm1/cmd/twist/by/alice", ("cmd", "arm1", "twist")),
+        ("rf/w/object/goal/pose/by/bob", ("object", "goal", "pose")),
         ("rf/w/map/floor", ("map", "floor", "")),
         ("rf/w/own/arm1", ("own", "arm1", "")),
         ("rf/w/srv/ik/arm1", ("srv", "ik", "arm1")),
@@ -55,7 +59,21 @@ def test_parse_inverts_builders(key, expected):
     assert (p.category, p.subject, p.leaf) == expected
 
 
-@pytest.mark.parametrize("bad", ["ros/x/y", "rf", "rf/w/robot/arm1", "rf/w/robot/arm1/cmd/fly", "rf/w/nope/x", "rf/w/robot/*/pose"])
+@pytest.mark.parametrize("bad", ["ros/x/y", "rf", "rf/w/robot/arm1", "rf/w/robot/arm1/cmd/fly/by/a", "rf/w/robot/arm1/cmd/twist",
+                                 "rf/w/robot/arm1/cmd/twist/to/alice", "rf/w/object/goal/pose", "rf/w/nope/x", "rf/w/robot/*/pose"])
 def test_parse_rejects_foreign_or_malformed_keys(bad):
     with pytest.raises(ValueError):
         keys.parse(bad)
+
+
+def test_user_keys_name_the_writer():
+    """Everything a user writes names the user in the key, where the router's access control sees it."""
+    assert keys.parse(keys.robot_cmd("w", "arm1", "stop", "alice")).user == "alice"
+    assert keys.parse(keys.object_pose("w", "goal", "bob")).user == "bob"
+    p = keys.parse(keys.own_request("w", "arm1", "carol"))
+    assert (p.category, p.subject, p.user) == ("own_request", "arm1", "carol")
+    assert keys.parse(keys.own("w", "arm1")).user == ""
+    with pytest.raises(ValueError, match="user id"):
+        keys.robot_cmd("w", "arm1", "stop", "a/b")
+    with pytest.raises(ValueError, match="user id"):
+        keys.own_request("w", "arm1", "*")

@@ -15,12 +15,12 @@ from fabric.testing import wait_until
 @pytest.mark.parametrize(
     ("key", "latched"),
     [
-        ("rf/w/object/goal/pose", True),
+        ("rf/w/object/goal/pose/by/alice", True),
         ("rf/w/map/map", True),
         ("rf/w/robot/base1/path", True),
         ("rf/w/robot/base1/pose", False),
         ("rf/w/robot/arm1/joints", False),
-        ("rf/w/robot/base1/cmd/path", False),  # a command is never replayed to a robot
+        ("rf/w/robot/base1/cmd/path/by/alice", False),  # a command is never replayed to a robot
         ("rf/w/own/arm1", False),  # replicas query the authority instead
         ("rf/w/event/own", False),
         ("not/a/key", False),
@@ -46,7 +46,7 @@ class Inbox:
 
 def test_a_late_subscriber_gets_the_latest_latched_values_then_live_ones(world, connect):
     pub = connect("user", "setter")
-    goal, grid, path, joints = (keys.object_pose(world, "goal"), keys.map_key(world, "map"),
+    goal, grid, path, joints = (keys.object_pose(world, "goal", "alice"), keys.map_key(world, "map"),
                                 keys.robot_path(world, "base1"), keys.robot_joints(world, "arm1"))
     for x in (1.0, 2.0, 3.0):  # only the last goal matters to a late joiner
         pub.publish(goal, Pose(np.array([x, 0.0, 0.0]), np.array([1.0, 0.0, 0.0, 0.0]), header=pub.header(goal)))
@@ -89,10 +89,10 @@ def test_echo_prints_the_latest_latched_value_without_waiting_for_a_new_one(worl
     from fabric.testing import robofabric_cmd
 
     pub = connect("user", "setter")
-    goal = keys.object_pose(world, "goal")
+    goal = keys.object_pose(world, "goal", "alice")
     pub.publish(goal, Pose(np.array([4.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0, 0.0]), header=pub.header(goal)))
     out = subprocess.run(
-        robofabric_cmd("echo", "object/goal/pose", "--json", "--count", "1", "--world", world, "--connect", f"tcp/127.0.0.1:{router[1]}"),
+        robofabric_cmd("echo", "object/goal/pose/by/*", "--json", "--count", "1", "--world", world, "--connect", f"tcp/127.0.0.1:{router[1]}"),
         capture_output=True, text=True, timeout=60,
     )
     assert out.returncode == 0, out.stdout + out.stderr
@@ -110,8 +110,8 @@ def test_latched_values_block_streams_and_commands_drop(world, connect):
     block, drop = zenoh.CongestionControl.BLOCK, zenoh.CongestionControl.DROP
     for key, want in (
         (keys.map_key(world, "map"), block),  # published once: a dropped map is never resent
-        (keys.object_pose(world, "goal"), block),
-        (keys.robot_cmd(world, "base1", "path"), drop),  # see docs/architecture.md: blocking commands stalled peers
+        (keys.object_pose(world, "goal", "alice"), block),
+        (keys.robot_cmd(world, "base1", "path", "alice"), drop),  # see docs/architecture.md: blocking commands stalled peers
         (keys.robot_joints(world, "arm1"), drop),  # the next sample replaces a lost one
     ):
         pub = declare_publisher(fab.session, key)

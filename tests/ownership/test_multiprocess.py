@@ -58,7 +58,7 @@ def test_handover_enforcement_kill_and_reconnect(world, router, connect, procs, 
 
     # bob's commands are rejected while alice owns the arm
     def send(user, epoch):
-        fb.publish(keys.robot_cmd(world, "arm", "joints"), Command(user, epoch, JointTarget(np.zeros(3))))
+        fb.publish(keys.robot_cmd(world, "arm", "joints", user), Command(user, epoch, JointTarget(np.zeros(3))))
 
     send("bob", bob.epoch("arm"))
     wait_until(lambda: any(e.kind == "reject" and e.user == "bob" and "owned by alice" in e.reason for e in events),

@@ -39,7 +39,7 @@ def test_arm_continues_after_owner_is_killed(world, router, connect, procs):
     out = bob.request("arm1")
     assert out.outcome == "denied" and "in motion" in out.reason, out
     assert bob.request("arm1", wait=True).outcome == "queued"
-    fb.publish(keys.robot_cmd(world, "arm1", "joints"), Command("bob", bob.epoch("arm1"), JointTarget(np.zeros(6))))
+    fb.publish(keys.robot_cmd(world, "arm1", "joints", "bob"), Command("bob", bob.epoch("arm1"), JointTarget(np.zeros(6))))
     wait_until(lambda: any(e.kind == "reject" and e.user == "bob" for e in events), what="bob's command rejected",
                seen=lambda: events[-5:])
 
@@ -54,5 +54,5 @@ def test_arm_continues_after_owner_is_killed(world, router, connect, procs):
     assert np.linalg.norm(q_after) >= np.linalg.norm(q_kill) - 1e-6, (q_kill, q_after)
     assert np.linalg.norm(q_after - target) <= np.linalg.norm(q_kill - target) + 1e-6, (q_kill, q_after)
     # bob commands it under his epoch
-    fb.publish(keys.robot_cmd(world, "arm1", "joints"), Command("bob", bob.epoch("arm1"), JointTarget(q_after)))
+    fb.publish(keys.robot_cmd(world, "arm1", "joints", "bob"), Command("bob", bob.epoch("arm1"), JointTarget(q_after)))
     bob.close()

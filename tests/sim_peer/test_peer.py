@@ -76,7 +76,7 @@ def user(world, connect):
 
 
 def send(fab, world, robot, name, body, user="alice"):
-    fab.publish(keys.robot_cmd(world, robot, name), Command(user=user, epoch=1, body=body))
+    fab.publish(keys.robot_cmd(world, robot, name, user), Command(user=user, epoch=1, body=body))
 
 
 def test_a_joint_command_goes_in_and_the_joints_come_out(world, sim, user):
@@ -149,10 +149,10 @@ def test_bad_commands_are_rejected_with_a_reason_and_the_last_valid_command_stan
 def test_garbage_is_counted_and_the_peer_goes_on(world, sim, user):
     peer, _ = sim
     fab, inbox = user
-    fab.put_raw(keys.robot_cmd(world, "arm1", "joints"), b"\x93\xff garbage")
+    fab.put_raw(keys.robot_cmd(world, "arm1", "joints", "alice"), b"\x93\xff garbage")
     nan = np.array([0.0, 0.0, math.nan, 0.0, 0.0, 0.0])
-    fab.put_raw(keys.robot_cmd(world, "arm1", "joints"), b"")
-    fab.publish(keys.robot_cmd(world, "arm1", "joints"), Command("alice", 1, JointTarget(nan)))  # refused by the decoder
+    fab.put_raw(keys.robot_cmd(world, "arm1", "joints", "alice"), b"")
+    fab.publish(keys.robot_cmd(world, "arm1", "joints", "alice"), Command("alice", 1, JointTarget(nan)))  # refused by the decoder
     wait_until(lambda: peer.fabric.counters["decode_errors"] >= 3, what="decode errors counted")
     assert peer.counters["commands"] == 0 and peer.last_state("arm1")["target"] == [0.0] * 6
     send(fab, world, "arm1", "joints", JointTarget(np.full(6, 0.1)))
@@ -177,10 +177,20 @@ def test_the_gate_refuses_and_the_refusal_is_an_event(world, sim, user):
     assert peer.last_state("arm1")["target"] == [0.0] * 6
 
 
+def test_a_payload_naming_someone_else_than_the_key_is_refused(world, sim, user):
+    """The sender is the key's user (the router's access control vouches for it), not the payload's."""
+    peer, _ = sim
+    fab, inbox = user
+    fab.publish(keys.robot_cmd(world, "arm1", "joints", "mallory"), Command("alice", 1, JointTarget(np.full(6, 0.2))))
+    ev = wait_until(lambda: inbox.event("reject", "user_mismatch"), what="user_mismatch event", seen=lambda: inbox.events)
+    assert ev.user == "mallory" and ev.object == "arm1" and "'alice'" in ev.data["detail"]
+    assert peer.counters["accepted"] == 0 and peer.last_state("arm1")["target"] == [0.0] * 6
+
+
 def test_scene_objects_move_and_the_world_service_describes_everything(world, sim, user):
     peer, _ = sim
     fab, inbox = user
-    fab.publish(keys.object_pose(world, "target"), Pose(np.array([3.2, 0.1, 1.0])))
+    fab.publish(keys.object_pose(world, "target", "alice"), Pose(np.array([3.2, 0.1, 1.0])))
     wait_until(lambda: np.allclose(peer.world.object_pose("target")[0], [3.2, 0.1, 1.0]), what="target moved")
     info = fab.call(keys.srv(world, "world"), timeout=5)
     assert isinstance(info, WorldInfo) and info.scene == "combined" and info.world == world
@@ -251,7 +261,7 @@ def test_paths_and_bumps_are_announced_as_events(world, connect, user):
     peer = SimPeer(connect("sim", "fast-sim"), World("combined"), speed=10.0)
     with peer:
         xs = np.linspace(0.0, 0.6, 7)
-        fab.publish(keys.robot_cmd(world, "base1", "path"), Command("alice", 1, Path(xs, np.zeros(7), np.zeros(7))))
+        fab.publish(keys.robot_cmd(world, "base1", "path", "alice"), Command("alice", 1, Path(xs, np.zeros(7), np.zeros(7))))
         ev = wait_until(lambda: inbox.event("path_done"), timeout=20, what="path_done event", seen=lambda: inbox.events)
         assert ev.object == "base1" and abs(peer.last_state("base1")["pose"][0] - 0.6) < 0.08
         send(fab, world, "base1", "twist", Twist(1.0, 0.0))  # straight at the table in front of the arm

@@ -26,12 +26,12 @@ def test_user_peer_declares_a_user_token_named_by_its_id(alice, connect):
 def test_scene_object_pose_reaches_other_peers_and_iterators(alice, connect, world):
     tool = connect()
     got = []
-    tool.subscribe(keys.object_pose(world, "target"), lambda k, m: got.append(m))
-    with alice.stream("object/target/pose", timeout=3.0, limit=1) as it:
+    tool.subscribe(keys.object_pose_all(world, "target"), lambda k, m: got.append(m))
+    with alice.stream("object/target/pose/by/*", timeout=3.0, limit=1) as it:
         wait_until(lambda: (alice.object("target").set_pose([0.2, 0.1, 0.3]), got)[1], what="pose at the tool")
         samples = list(it)
     assert np.allclose(got[-1].position, [0.2, 0.1, 0.3])
-    assert samples and samples[0].key == keys.object_pose(world, "target")
+    assert samples and samples[0].key == keys.object_pose(world, "target", "alice")
     pose = alice.object("goal").set_pose([1.0, 2.0, 0.0], yaw=np.pi / 2)
     assert np.allclose(pose.quaternion, [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)])
 
@@ -40,19 +40,19 @@ def test_commands_follow_the_ownership_replica(alice, connect, world):
     arm = Arm(alice, RobotEntry("arm1", "meca500", "arm", tuple(f"joint_{i}" for i in range(1, 7)), (-1.0,) * 6, (1.0,) * 6))
     auth = connect("sim", "sim-test")
     sent = []
-    auth.subscribe(keys.robot_cmd(world, "arm1", "joints"), lambda k, m: sent.append(m))
+    auth.subscribe(keys.robot_cmd(world, "arm1", "joints", "alice"), lambda k, m: sent.append(m))
     # No record at all (a world without ownership): the command goes out with epoch 0, the sim decides.
     wait_until(lambda: (arm.move_joints(np.zeros(6), wait=False), sent)[1], what="epoch-0 command")
     assert sent[0].epoch == 0 and arm.can_command
     sent.clear()
     # The replica follows the authority's records: owned by bob, refused locally, and the reason says who.
-    auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="bob", epoch=3))
+    auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="bob", epoch=3, authority="sim-test"))
     wait_until(lambda: arm.owner == "bob", what="replica of bob's record")
     with pytest.raises(user_peer.NotOwner, match="owner: bob"):
         arm.move_joints(np.zeros(6), wait=False)
     assert not arm.can_command
     # Once the record names alice, the command goes out with her epoch.
-    auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="alice", epoch=4))
+    auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="alice", epoch=4, authority="sim-test"))
     wait_until(lambda: arm.is_owner, what="alice owns arm1")
     mine = lambda: [m for m in sent if m.epoch == 4]  # noqa: E731
     wait_until(lambda: (arm.move_joints([0.1] * 6, wait=False), mine())[1], what="command at the authority")

@@ -36,8 +36,8 @@ def setup(world, router, connect):
     cmds = []
     auth.subscribe(keys.robot_cmd_all(world), lambda k, m: cmds.append((k, m)))
     h = Header(wall_ns=1)
-    auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="bob", epoch=1, queue=("carol",)))
-    auth.publish(keys.own(world, "base1"), OwnershipRecord("base1", owner="", epoch=1))
+    auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="bob", epoch=1, queue=("carol",), authority="sim-test"))
+    auth.publish(keys.own(world, "base1"), OwnershipRecord("base1", owner="", epoch=1, authority="sim-test"))
     auth.publish(keys.robot_joints(world, "arm1"), JointState(NAMES, np.full(6, 0.1), np.zeros(6), Header.now()))
     auth.publish(keys.robot_pose(world, "base1"), Pose([1.0, 2.0, 0.0], header=Header.now()))
     auth.publish(keys.robot_scan(world, "base1"), Scan.from_ranges(np.linspace(1, 4, 240), angle_min=-1.17, angle_increment=0.01, range_max=12, header=h))
@@ -68,29 +68,29 @@ async def _drive_the_ui(auth, alice, arm, base, cmds, world):
         assert not cmds
 
         # The authority hands both robots to alice: controls come alive.
-        auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="alice", epoch=2))
-        auth.publish(keys.own(world, "base1"), OwnershipRecord("base1", owner="alice", epoch=5))
+        auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="alice", epoch=2, authority="sim-test"))
+        auth.publish(keys.own(world, "base1"), OwnershipRecord("base1", owner="alice", epoch=5, authority="sim-test"))
         await until(pilot, lambda: not sliders[0].disabled and not app.query_one("#base-stop").disabled, "controls enabled")
         assert "you" in str(app.query_one("#arm-owner").render())
 
         sliders[1].focus()
         await pilot.press("plus", "plus", "plus")
-        await until(pilot, lambda: any(k.endswith("/cmd/joints") for k, _ in cmds), "joint command")
-        last = [m for k, m in cmds if k.endswith("/cmd/joints")][-1]
+        await until(pilot, lambda: any("/cmd/joints/by/alice" in k for k, _ in cmds), "joint command")
+        last = [m for k, m in cmds if "/cmd/joints/by/alice" in k][-1]
         assert last.user == "alice" and last.epoch == 2
         # Targets started from the robot's joints (0.1 rad): one slider moved, the others held.
         assert math.isclose(last.body.q[1], 0.1 + math.radians(3.0), abs_tol=1e-9)
         assert np.allclose(np.delete(last.body.q, 1), 0.1)
 
         await pilot.press("3", "up", "left")
-        await until(pilot, lambda: any(k.endswith("/cmd/twist") and m.body.omega > 0 for k, m in cmds), "twist command")
-        tw = [m for k, m in cmds if k.endswith("/cmd/twist")][-1]
+        await until(pilot, lambda: any("/cmd/twist/by/alice" in k and m.body.omega > 0 for k, m in cmds), "twist command")
+        tw = [m for k, m in cmds if "/cmd/twist/by/alice" in k][-1]
         assert tw.epoch == 5 and (tw.body.v, tw.body.omega) == SPEEDS[3]
         await pilot.press("space")
-        await until(pilot, lambda: [m for k, m in cmds if k.endswith("/cmd/twist")][-1].body.v == 0.0, "stop twist")
+        await until(pilot, lambda: [m for k, m in cmds if "/cmd/twist/by/alice" in k][-1].body.v == 0.0, "stop twist")
 
         await pilot.click("#arm-stop")
-        await until(pilot, lambda: any(k.endswith("/cmd/stop") for k, _ in cmds), "stop command")
+        await until(pilot, lambda: any("/cmd/stop/by/alice" in k for k, _ in cmds), "stop command")
         await pilot.click("#arm-reset")
-        await until(pilot, lambda: any(k.endswith("/cmd/reset") for k, _ in cmds), "reset command")
+        await until(pilot, lambda: any("/cmd/reset/by/alice" in k for k, _ in cmds), "reset command")
         assert all(s.value == 0.0 for s in sliders)

@@ -34,7 +34,7 @@ def test_viewer_saves_robots_scans_maps_paths(world, router, connect, tmp_path):
         if i % 5 == 0:
             pub.publish(keys.map_key(world, "base1"), OccupancyGrid(0.05, [-5, -5, 0], np.full((200, 200), 255, np.uint8), h))
             pub.publish(keys.robot_path(world, "base1"), Path([0, 1, 2], [0, 0.5, 1], [0, 0.4, 0.8], header=h))
-            pub.publish(keys.object_pose(world, "target"), Pose([0.2, 0.0, 0.3], header=h))
+            pub.publish(keys.object_pose(world, "target", "alice"), Pose([0.2, 0.0, 0.3], header=h))
             pub.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="alice", epoch=1 + i))
 
     i = 0

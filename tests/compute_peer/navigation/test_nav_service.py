@@ -86,7 +86,7 @@ def test_mapping_mode_build_publish_and_navigate(peers):
     # navigation: from the robot's latest pose to the goal pointer, around the inner wall
     sim.publish(keys.robot_pose(world, ROBOT), pose_at(2.0, 2.0, 0.0, stamp=99.0, seq=999))
     wait_until(lambda: nav._pose_at(ROBOT, 0.0).header.seq == 999, what="start pose")
-    user.publish(keys.object_pose(world, "goal"), pose_at(8.0, 2.0, -math.pi / 2))
+    user.publish(keys.object_pose(world, "goal", "alice"), pose_at(8.0, 2.0, -math.pi / 2))
     wait_until(lambda: nav._goal is not None, what="goal pose")
     plan = call(user, "plan", ROBOT, PlanRequest(ROBOT))
     assert isinstance(plan, PlanReply) and plan.planner == "hybrid_astar" and plan.robot == ROBOT

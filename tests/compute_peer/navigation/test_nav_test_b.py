@@ -44,13 +44,13 @@ def test_drive_map_plan_and_follow(world, connect):
             turned = [0.0]
 
             def turning() -> bool:
-                user.publish(keys.robot_cmd(world, ROBOT, "twist"), Command("alice", 1, Twist(0.0, 1.2)))
+                user.publish(keys.robot_cmd(world, ROBOT, "twist", "alice"), Command("alice", 1, Twist(0.0, 1.2)))
                 yaws = np.unwrap([yaw_from_quaternion(p.quaternion) for p in poses[-400:]])
                 turned[0] = abs(yaws[-1] - yaws[0]) if len(yaws) > 1 else 0.0
                 return nav.counters["scans"] >= 40 and turned[0] > 2 * math.pi + 0.5
 
             wait_until(turning, timeout=30.0, interval=0.1, what="a full turn of scans", seen=lambda: (nav.counters, turned))
-            user.publish(keys.robot_cmd(world, ROBOT, "stop"), Command("alice", 1, Stop()))
+            user.publish(keys.robot_cmd(world, ROBOT, "stop", "alice"), Command("alice", 1, Stop()))
             built = user.call(keys.srv(world, "map", "map"), MapRequest("build"), timeout=10.0).grid
             # the hall's walls and the shelves facing the robot are in the map where MuJoCo has them
             cells = built.cells
@@ -69,14 +69,14 @@ def test_drive_map_plan_and_follow(world, connect):
 
             # navigation mode: the goal pointer is moved to the aisle behind the shelves' gap
             goal = (0.0, 4.0, math.pi / 2)
-            user.publish(keys.object_pose(world, "goal"), Pose(np.array([goal[0], goal[1], 0.0]), quaternion_from_yaw(goal[2])))
+            user.publish(keys.object_pose(world, "goal", "alice"), Pose(np.array([goal[0], goal[1], 0.0]), quaternion_from_yaw(goal[2])))
             wait_until(lambda: nav._goal is not None, what="goal pointer")
             reply = user.call(keys.srv(world, "plan", ROBOT), PlanRequest(ROBOT), timeout=20.0)
             path = reply.path
             assert (path.x[-1], path.y[-1]) == pytest.approx(goal[:2])
             assert path_collision(nav._costmap("map", 0.30), path.x, path.y) is None  # radius from the description
             # the user decides to follow it: the path as a command, and the robot drives it
-            user.publish(keys.robot_cmd(world, ROBOT, "path"), Command("alice", 1, path))
+            user.publish(keys.robot_cmd(world, ROBOT, "path", "alice"), Command("alice", 1, path))
 
             def arrived() -> bool:
                 p = poses[-1].position

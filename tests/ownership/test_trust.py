@@ -1,0 +1,81 @@
+"""The authority takes the user from the key; the client trusts only the authority's records.
+
+Real sessions through a real router, no access control here (tests/fabric/test_secure_*.py adds
+the router's): what the authority and the client refuse on their own."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given, strategies as st
+
+from fabric import keys
+from fabric.messages import Event, OwnershipRecord
+from fabric.session import ServiceError
+from fabric.testing import wait_until
+
+from ownership import Authority, OwnershipClient
+from ownership.client import EPOCH_SLACK, epoch_plausible
+from ownership.messages import OwnReply, OwnRequest
+
+
+@pytest.fixture
+def host(connect):
+    auth = Authority(connect("sim", "host"), {"arm": "exclusive"}, lease_s=0.6, grace_s=5.0)
+    yield auth
+    auth.close()
+
+
+def test_a_request_naming_someone_else_is_refused(host, connect, world):
+    alice = OwnershipClient(connect("user", "alice"), "alice", renew_s=0.1)
+    assert alice.request("arm").granted
+    mallory = connect("user", "mallory")
+    events: list[Event] = []
+    mallory.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
+    # on her own key with alice's name in the payload: refused, alice keeps the arm
+    with pytest.raises(ServiceError, match="names 'alice' but was sent by 'mallory'"):
+        mallory.call(keys.own_request(world, "arm", "mallory"), OwnRequest("release", "alice"), expected=OwnReply)
+    wait_until(lambda: any(e.kind == "own_refused" and e.user == "mallory" for e in events), what="refusal event")
+    assert host.records()["arm"].owner == "alice"
+    # on her own key as herself: an honest release of what she does not own changes nothing
+    rep = mallory.call(keys.own_request(world, "arm", "mallory"), OwnRequest("release", "mallory"), expected=OwnReply)
+    assert rep.outcome != "released" and host.records()["arm"].owner == "alice"
+    # a query on the record key is answered with the record, whatever it carries
+    rec = mallory.call(keys.own(world, "arm"), OwnRequest("release", "alice"), expected=OwnershipRecord)
+    assert rec.owner == "alice" and host.records()["arm"].owner == "alice"
+    alice.close()
+
+
+def test_forged_records_never_stop_renewal(host, connect, world):
+    alice = OwnershipClient(connect("user", "alice"), "alice", renew_s=0.1)
+    assert alice.request("arm").granted
+    real_epoch = alice.epoch("arm")
+    forger = connect("tool", "mallory")  # not a sim peer
+    fake_sim = connect("sim", "fake")  # a sim peer, but not the authority alice follows
+    for fab, authority, epoch in ((forger, "host", 2**40), (forger, "mallory", real_epoch + 1),
+                                  (fake_sim, "fake", real_epoch + 1), (fake_sim, "host", 2**40), (fake_sim, "host", 0)):
+        fab.publish(keys.own(world, "arm"), OwnershipRecord("arm", owner="mallory", epoch=epoch, authority=authority))
+    wait_until(lambda: sum(alice.counters.values()) >= 5, what="five forged records refused", seen=lambda: alice.counters)
+    assert alice.counters["records_foreign"] >= 2 and alice.counters["records_implausible"] >= 1, alice.counters
+    assert alice.records["arm"].owner == "alice" and alice.epoch("arm") == real_epoch
+    # three lease periods later alice still holds the arm: she kept renewing
+    deadline_owner = []
+    wait_until(lambda: (deadline_owner.append(host.records()["arm"].owner), len(deadline_owner) > 18)[1], timeout=10,
+               interval=0.1, what="lease periods to pass")
+    assert set(deadline_owner) == {"alice"}, deadline_owner
+    # and later real records still arrive: alice releases, the replica follows
+    assert alice.release("arm").outcome == "released"
+    wait_until(lambda: alice.records["arm"].owner == "", what="release in the replica", seen=lambda: alice.records)
+    alice.close()
+
+
+@given(old=st.integers(0, 2**40), step=st.integers(-10, 2**41), elapsed=st.floats(0, 1e4))
+def test_epoch_plausible_bounds(old, step, elapsed):
+    new = max(0, old + step)
+    why = epoch_plausible(old, new, elapsed)
+    if new < old:
+        assert why is not None and "back" in why
+    elif new - old <= EPOCH_SLACK:
+        assert why is None
+    elif new - old > EPOCH_SLACK + 10_000 * elapsed + 1:
+        assert why is not None and "jumps" in why
+    assert epoch_plausible(None, new, elapsed) is None
