@@ -1,4 +1,4 @@
-"""Entry point of the fabric's own subcommands: router, ps, echo, hz, pub, call, up, demo, bench transport."""
+"""Entry point of the fabric's own subcommands: router, ps, echo, hz, pub, call, list, interfaces, up, demo, bench transport."""
 
 from __future__ import annotations
 
@@ -6,8 +6,9 @@ import typer
 
 
 def register(app: typer.Typer) -> None:
-    from fabric import bench_transport, launch_cli, tools_cli
+    from fabric import bench_transport, introspect_cli, launch_cli, tools_cli
 
     tools_cli.register(app)
+    introspect_cli.register(app)
     launch_cli.register(app)
     bench_transport.register()

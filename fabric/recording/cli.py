@@ -175,10 +175,32 @@ def _size(n: float) -> str:
 
 
 def info(
-    file: Annotated[Path, typer.Argument(help="An MCAP recording.")],
+    target: Annotated[str, typer.Argument(help="A recording (FILE.mcap) or a live key (robot/arm1/joints, rf/demo/map/map).")],
     as_json: Annotated[bool, typer.Option("--json", help="One JSON document instead of tables.")] = False,
+    duration: Annotated[float, typer.Option(help="Live key: seconds to watch it.")] = 2.0,
+    world: World = None,
+    connect: Connect = None,
+    listen: Listen = None,
+    profile: Profile = None,
+    zenoh_config: ZenohConfig = None,
+    peer_id: PeerId = None,
 ) -> None:
-    """Duration, keys, message counts, rates, sizes and schemas of a recording, and whether it is complete."""
+    """A recording's summary (duration, keys, counts, rates, sizes, schemas, complete or not), or a live key's.
+
+    TARGET ending in .mcap or naming an existing file is a recording; anything else is a key of the
+    world (type and fields, publishers, rate, subscribers), as ``ros2 topic info`` gives.
+    """
+    path = Path(target)
+    if target.endswith(".mcap") or path.is_file():
+        _recording_info(path, as_json)
+        return
+    from fabric.introspect_cli import key_info
+
+    key_info(target, as_json=as_json, duration=duration, world=world, connect=connect, listen=listen,
+             profile=profile, zenoh_config=zenoh_config, peer_id=peer_id)
+
+
+def _recording_info(file: Path, as_json: bool) -> None:
     from fabric.recording.reader import RecordingError, read_info
 
     try:

@@ -1,0 +1,186 @@
+"""``robofabric list``, ``robofabric info KEY`` and ``robofabric interfaces``: what is live, and what the types are.
+
+In the spirit of ``ros2 topic list -v``, ``ros2 topic info`` and ``ros2 interface show``.
+``info`` also reads recordings: ``robofabric info FILE.mcap`` (an argument ending in ``.mcap``
+or naming an existing file) keeps its recording summary; anything else is a live key. The
+dispatch lives in :mod:`fabric.recording.cli`, which owns the ``info`` command.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from typing import Annotated, Optional
+
+import typer
+import zenoh
+
+from fabric import keys
+from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
+from fabric.introspect import KeyObserver, KeyStats
+
+__all__ = ["register", "list_keys", "key_info", "interfaces", "observe"]
+
+
+def _resolve(expr: str, world: str) -> str:
+    full = expr if expr.startswith(keys.PREFIX + "/") else f"{keys.world_root(world)}/{expr.lstrip('/')}"
+    try:
+        zenoh.KeyExpr(full)
+    except Exception as exc:
+        raise UserError(f"{expr!r} is not a valid key expression: {exc}") from None
+    return full
+
+
+def observe(fab, expr: str, duration: float) -> list[KeyStats]:
+    """Watch ``expr`` for ``duration`` s (latched keys' latest values included) and summarise per key."""
+    obs = KeyObserver()
+    lock = threading.Lock()
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        if sample.kind != zenoh.SampleKind.PUT:
+            return
+        t = time.monotonic()
+        payload = sample.payload.to_bytes()
+        with lock:
+            obs.add(str(sample.key_expr), payload, t)
+
+    fab.subscribe_raw(expr, on_sample, history=True)
+    time.sleep(duration)
+    with lock:
+        return obs.snapshot()
+
+
+def list_keys(
+    keyexpr: Annotated[Optional[str], typer.Argument(help="Key expression, full or world-relative (default: the whole world).")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="One JSON document instead of a table.")] = False,
+    duration: Annotated[float, typer.Option(help="Seconds to watch (rates are measured over this window).")] = 2.0,
+    world: World = None,
+    connect: Connect = None,
+    listen: Listen = None,
+    profile: Profile = None,
+    zenoh_config: ZenohConfig = None,
+    peer_id: PeerId = None,
+) -> None:
+    """Live keys with their type, publishers and rate (like ``ros2 topic list -v``)."""
+    if not duration > 0:
+        raise UserError("--duration must be positive")
+    cfg = make_config(world, connect, listen, profile, zenoh_config)
+    expr = _resolve(keyexpr, cfg.world) if keyexpr else keys.world_all(cfg.world)
+    with open_fabric(cfg, "tool", peer_id) as fab:
+        stats = observe(fab, expr, duration)
+    if as_json:
+        print(json.dumps({"world": cfg.world, "keyexpr": expr, "duration_s": duration, "keys": [s.to_json() for s in stats]}))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"{expr}: {len(stats)} key(s) in {duration:g} s")
+    for col, just in (("key", "left"), ("type", "left"), ("publishers", "left"), ("rate Hz", "right"), ("msgs", "right"), ("kB/s", "right")):
+        table.add_column(col, justify=just)
+    for s in stats:
+        table.add_row(
+            s.key + (" (latched)" if s.latched else ""), ", ".join(s.types), ", ".join(s.publishers) or "-",
+            f"{s.rate_hz:.1f}", str(s.messages), f"{s.bytes_per_s / 1000:.1f}",
+        )
+    Console().print(table)
+    if not stats:
+        print(f"nothing published on {expr} in {duration:g} s (world {cfg.world!r})")
+
+
+def key_info(
+    key: str, *, as_json: bool, duration: float, world, connect, listen, profile, zenoh_config, peer_id
+) -> None:
+    """``robofabric info KEY``: type and its fields, publishers, rate, whether anyone subscribes."""
+    from fabric.interfaces import fields_of, message_types
+
+    if not duration > 0:
+        raise UserError("--duration must be positive")
+    cfg = make_config(world, connect, listen, profile, zenoh_config)
+    full = _resolve(key, cfg.world)
+    with open_fabric(cfg, "tool", peer_id) as fab:
+        stats = observe(fab, full, duration)
+        subscribed = None
+        if "*" not in full and "$" not in full:
+            try:
+                pub = fab.session.declare_publisher(full)
+                time.sleep(0.2)  # let the routing tables tell the new publisher about subscribers
+                subscribed = bool(pub.matching_status.matching)
+                pub.undeclare()
+            except Exception:
+                subscribed = None
+    types = message_types()
+    seen_types = sorted({t for s in stats for t in s.types})
+    if as_json:
+        doc = {
+            "key": full, "latched": keys.is_latched(full) if "*" not in full else None, "subscribers": subscribed,
+            "keys": [s.to_json() for s in stats],
+            "types": {t: [f.__getattribute__("name") for f in fields_of(types[t])] for t in seen_types if t in types},
+        }
+        print(json.dumps(doc))
+        return
+    print(f"key: {full}")
+    if not stats:
+        print(f"no message on {full} in {duration:g} s")
+    for s in stats:
+        print(f"  {s.key}: type {', '.join(s.types)}; publishers {', '.join(s.publishers) or '-'}; "
+              f"{s.rate_hz:.1f} Hz, {s.bytes_per_s / 1000:.1f} kB/s, last {s.last_bytes} B, {s.messages} msgs in {duration:g} s"
+              + ("; latched (late joiners get the latest value)" if s.latched else ""))
+    if subscribed is not None:
+        print(f"subscribers: {'yes' if subscribed else 'none'} (zenoh matching status)")
+    for t in seen_types:
+        if t in types:
+            print(f"{t}:")
+            for f in fields_of(types[t]):
+                print(f"  {f.name}: {f.type}" + (f"  {f.constraints}" if f.constraints else ""))
+
+
+def interfaces(
+    type_name: Annotated[Optional[str], typer.Argument(help="A message type, e.g. JointState (default: list every type).")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="JSON instead of tables.")] = False,
+    schema: Annotated[bool, typer.Option("--schema", help="Print the type's JSON Schema (what Foxglove exports declare).")] = False,
+) -> None:
+    """Message types and their fields (like ``ros2 interface list`` / ``show``), plugins' types included."""
+    from fabric.interfaces import fields_of, json_schema, message_types, type_doc
+
+    types = message_types()
+    if type_name is None:
+        if schema:
+            raise UserError("--schema needs a TYPE")
+        rows = [(n, c.__module__, len(c.SPEC), type_doc(c)) for n, c in types.items()]
+        if as_json:
+            print(json.dumps({"types": [{"name": n, "module": m, "fields": k, "doc": d} for n, m, k, d in rows]}))
+            return
+        from rich.console import Console
+        from rich.table import Table
+
+        table = Table(title=f"{len(rows)} message types")
+        for col in ("type", "module", "fields", "what"):
+            table.add_column(col, overflow="fold")
+        for n, m, k, d in rows:
+            table.add_row(n, m, str(k), d[:90])
+        Console().print(table)
+        return
+    cls = types.get(type_name)
+    if cls is None:
+        raise UserError(f"unknown message type {type_name!r}; known: {', '.join(types)}")
+    if schema:
+        print(json.dumps(json_schema(cls), indent=2))
+        return
+    fields = fields_of(cls)
+    if as_json:
+        print(json.dumps({
+            "name": type_name, "module": cls.__module__, "doc": type_doc(cls),
+            "fields": [{"name": f.name, "type": f.type, "constraints": f.constraints, "default": f.default} for f in fields],
+        }))
+        return
+    print(f"{type_name} ({cls.__module__})" + (f": {type_doc(cls)}" if type_doc(cls) else ""))
+    width = max(len(f.name) for f in fields) if fields else 0
+    for f in fields:
+        extra = "  ".join(x for x in (f.constraints, f"default {f.default}" if f.default else "") if x)
+        print(f"  {f.name.ljust(width)}  {f.type}" + (f"  ({extra})" if extra else ""))
+
+
+def register(app: typer.Typer) -> None:
+    app.command("list")(list_keys)
+    app.command("interfaces")(interfaces)

@@ -1,0 +1,86 @@
+"""``robofabric list``, ``info KEY`` and ``interfaces`` against a live world (real router, real publishers)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import threading
+
+import numpy as np
+import pytest
+
+from fabric import keys
+from fabric.introspect import KeyObserver, source_of
+from fabric.codec import encode
+from fabric.messages import Header, JointState, OccupancyGrid
+from fabric.testing import robofabric_cmd
+
+NAMES = ("j1", "j2")
+
+
+def _cli(*args: str, timeout: float = 90) -> subprocess.CompletedProcess:
+    return subprocess.run(robofabric_cmd(*args), capture_output=True, text=True, timeout=timeout)
+
+
+def test_observer_counts_rates_types_and_publishers_from_the_payload():
+    obs = KeyObserver()
+    for i in range(11):
+        obs.add("rf/w/robot/a/joints", encode(JointState(NAMES, np.zeros(2), np.zeros(2), Header(seq=i, source="sim-7"))), 10.0 + 0.1 * i)
+    obs.add("rf/w/map/map", encode(OccupancyGrid(0.1, np.zeros(3), np.zeros((2, 2), dtype=np.uint8))), 10.5)
+    obs.add("rf/w/event/x", b"\x00raw", 10.6)
+    ev, grid, joints = obs.snapshot()  # sorted by key
+    assert (joints.types, joints.publishers, joints.messages) == (("JointState",), ("sim-7",), 11)
+    assert joints.rate_hz == pytest.approx(10.0) and not joints.latched
+    assert grid.latched and grid.rate_hz == 0.0 and grid.publishers == ()
+    assert ev.types == ("raw",) and source_of(b"\x00raw") == ""
+
+
+@pytest.fixture
+def live_world(router, connect, world):
+    """A publisher of an arm's joints at ~50 Hz and a latched map, until the test ends."""
+    pub = connect("tool", peer_id="sim-test")
+    pub.publish(keys.map_key(world, "map"), OccupancyGrid(0.1, np.zeros(3), np.zeros((4, 4), dtype=np.uint8), Header(source="sim-test")))
+    stop = threading.Event()
+
+    def run() -> None:
+        i = 0
+        while not stop.wait(0.02):
+            pub.publish(keys.robot_joints(world, "arm1"), JointState(NAMES, np.full(2, 0.01 * i), np.zeros(2), Header.now(seq=i, source="sim-test")))
+            i += 1
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    yield f"tcp/127.0.0.1:{router[1]}"
+    stop.set()
+    t.join(timeout=5)
+
+
+@pytest.mark.slow
+def test_list_info_and_interfaces_against_a_live_world(live_world, world):
+    ep = live_world
+    out = _cli("list", "--json", "--duration", "2", "--world", world, "--connect", ep)
+    assert out.returncode == 0, out.stderr
+    doc = json.loads(out.stdout)
+    by_key = {k["key"]: k for k in doc["keys"]}
+    j = by_key[keys.robot_joints(world, "arm1")]
+    assert j["type"] == "JointState" and j["publishers"] == ["sim-test"] and 10 < j["rate_hz"] < 200 and not j["latched"]
+    m = by_key[keys.map_key(world, "map")]
+    assert m["type"] == "OccupancyGrid" and m["latched"]  # published before list started: the latched value
+
+    only = json.loads(_cli("list", "robot/**", "--json", "--duration", "1", "--world", world, "--connect", ep).stdout)
+    assert [k["key"] for k in only["keys"]] == [keys.robot_joints(world, "arm1")]
+
+    info = _cli("info", "robot/arm1/joints", "--duration", "1.5", "--world", world, "--connect", ep)
+    assert info.returncode == 0, info.stderr
+    assert "type JointState" in info.stdout and "publishers sim-test" in info.stdout and "names: string[]" in info.stdout, info.stdout
+    info_json = json.loads(_cli("info", "map/map", "--json", "--duration", "1", "--world", world, "--connect", ep).stdout)
+    assert info_json["latched"] is True and info_json["types"]["OccupancyGrid"][:3] == ["resolution", "origin", "cells"]
+
+    types = json.loads(_cli("interfaces", "--json").stdout)["types"]
+    names = {t["name"] for t in types}
+    assert {"JointState", "Scan", "OccupancyGrid", "WorldInfo", "IKRequest", "PlanRequest"} <= names  # plugins' types too
+    scan = json.loads(_cli("interfaces", "Scan", "--json").stdout)
+    assert [f["name"] for f in scan["fields"]] == ["angle_min", "angle_increment", "range_max", "ranges_mm", "header"]
+    assert scan["fields"][3]["type"] == "uint16[]"
+    bad = _cli("interfaces", "Nope")
+    assert bad.returncode == 2 and "unknown message type 'Nope'" in bad.stderr
