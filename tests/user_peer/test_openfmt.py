@@ -24,6 +24,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 import robots
+from fabric import keys
 from compute_peer.messages import IKStream
 from fabric.codec import encode
 from fabric.messages import Command, Event, Header, JointState, OccupancyGrid, OwnershipRecord, Path as FPath, Pose, Scan, Twist
@@ -60,10 +61,10 @@ def source_messages() -> list[tuple[str, int, object]]:
             ranges[::17] = np.inf  # misses read range_max
             out.append((f"rf/{W}/robot/base1/scan", t + 2, Scan.from_ranges(ranges, angle_min=-math.pi, angle_increment=2 * math.pi / 240, range_max=8.0, header=h)))
         if i % 10 == 0:
-            out.append((f"rf/{W}/object/target/pose", t + 3, Pose(np.array([3.1, 0.1 * i, 1.0]), header=h)))
+            out.append((keys.object_pose(W, "target", "alice"), t + 3, Pose(np.array([3.1, 0.1 * i, 1.0]), header=h)))
             out.append((f"rf/{W}/own/arm1", t + 4, OwnershipRecord("arm1", owner="alice", epoch=i + 1, queue=("bob",), authority="sim-1", header=h)))
             out.append((f"rf/{W}/event/ownership/arm1", t + 5, Event("granted", reason="free", object="arm1", user="alice", data={"epoch": i + 1, "queue": ["bob"]}, header=h)))
-            out.append((f"rf/{W}/robot/base1/cmd/twist", t + 6, Command("bob", 3, Twist(0.2, -0.1, h), h)))
+            out.append((keys.robot_cmd(W, "base1", "twist", "bob"), t + 6, Command("bob", 3, Twist(0.2, -0.1, h), h)))
             out.append((
                 f"rf/{W}/robot/arm1/ik", t + 7,
                 IKStream("arm1", "target", np.array([3.1, 0.0, 1.0]), True, "", q, q * 0.1, np.abs(q), 1.5, h),
@@ -140,7 +141,8 @@ def test_foxglove_export_every_message_parses_against_its_schema_and_matches(rec
     assert schemas[f"{k}/map/map"] == "foxglove.Grid"
     assert schemas[f"{k}/robot/base1/path"] == "foxglove.PosesInFrame"
     assert schemas["/tf"] == "foxglove.FrameTransforms" and schemas["/scene"] == "foxglove.SceneUpdate"
-    for topic in ("robot/arm1/joints", "own/arm1", "event/ownership/arm1", "robot/base1/cmd/twist", "robot/arm1/ik"):
+    assert schemas[f"{k}/object/target/pose/by/alice"] == "foxglove.PoseInFrame"
+    for topic in ("robot/arm1/joints", "own/arm1", "event/ownership/arm1", "robot/base1/cmd/twist/by/bob", "robot/arm1/ik"):
         assert schemas[f"{k}/{topic}"].startswith("robofabric."), (topic, schemas[f"{k}/{topic}"])
 
     # Values: joints (plottable by name), scans, map cells, path, transforms of both robots.

@@ -3,7 +3,7 @@
 Frame names: ``world`` is the root; a robot's base is its id (``arm1``, ``base1``); an arm's joint
 frames are ``ID/JOINT`` (placed by forward kinematics from its JointState, relative to the base);
 a mobile robot's LIDAR and sonar ring are ``ID/lidar`` and ``ID/sonar``; scene objects are
-``object/ID``. What a robot is (arm or mobile base, its URDF, where an arm stands) comes from the
+``object/ID`` (whoever moved it: its key is ``rf/W/object/ID/pose/by/USER``). What a robot is (arm or mobile base, its URDF, where an arm stands) comes from the
 same robot descriptions the live viewer uses (:class:`user_peer.catalog.RobotCatalog`).
 """
 
@@ -71,7 +71,8 @@ class FrameTracker:
         if owner is None:
             return []
         what, oid = owner
-        if isinstance(msg, Pose) and key.endswith("/pose"):
+        leaf = key.split("/")[4]  # rf/W/robot/ID/pose, rf/W/object/ID/pose/by/USER
+        if isinstance(msg, Pose) and leaf == "pose":
             p = Placement(np.asarray(msg.position, dtype=float), _xyzw(msg.quaternion))
             if what == "object":
                 return [_frame(WORLD, f"object/{oid}", p)]
@@ -83,7 +84,7 @@ class FrameTracker:
                     cx, cy, h, _r = info.sonar
                     out.append(Frame(oid, f"{oid}/sonar", (cx, cy, h), (0.0, 0.0, 0.0, 1.0)))
             return out
-        if isinstance(msg, JointState) and key.endswith("/joints") and what == "robot":
+        if isinstance(msg, JointState) and leaf == "joints" and what == "robot":
             info = self.robot(oid, {"joint_names": msg.names})
             if info.kind != "arm" or info.arm is None or len(msg.names) != len(info.arm.joint_names):
                 return []
