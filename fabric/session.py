@@ -31,6 +31,7 @@ import zenoh.ext
 from fabric import keys
 from fabric.codec import DecodeError, decode, encode, load_plugins
 from fabric.config import FabricConfig, default_peer_id
+from fabric.exit import at_exit
 from fabric.limits import RateLimiter, clip
 from fabric.messages import Event, Header
 
@@ -111,6 +112,9 @@ class Fabric:
         self.token = (
             self.session.liveliness().declare_token(keys.peer(self.world, kind, self.peer_id)) if token else None
         )
+        # zenoh's callback threads keep the interpreter alive until the session closes: a script that
+        # never calls close() must still exit (fabric/exit.py)
+        self._cancel_exit = at_exit(self.close)
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -130,6 +134,7 @@ class Fabric:
             if self._closed:
                 return
             self._closed = True
+        self._cancel_exit()
         undeclare_all(([self.token] if self.token is not None else []) + self._resources)
         try:
             self.session.close()

@@ -46,6 +46,7 @@ from fabric.messages import (
 )
 from fabric.session import Fabric, ServiceError
 from user_peer import services
+from fabric.exit import at_exit
 from user_peer.errors import NotOwner, Timeout, Unreachable
 from user_peer.ownership_link import OwnershipLink
 from user_peer.spread import SPREAD, RoundRobin
@@ -61,23 +62,46 @@ def _wrap_angle(a: float) -> float:
 
 
 class _Latest:
-    """The latest message per key, with a condition to wait for a newer one."""
+    """The latest message per key, with a condition to wait for a newer one.
 
-    def __init__(self) -> None:
-        self._values: dict[str, tuple[Any, int]] = {}
+    Freshness is judged on this machine only: every message gets a local arrival number (``mark()``
+    reads the current one) and a local receive time from ``clock`` (monotonic ns). A header's
+    ``wall_ns`` comes from another machine's clock and is never compared with ours (issue 15).
+    """
+
+    def __init__(self, clock: Callable[[], int] = time.monotonic_ns) -> None:
+        self._values: dict[str, tuple[Any, int, int]] = {}
         self._cond = threading.Condition()
         self._gen = 0
+        self._clock = clock
 
     def put(self, key: str, msg: Any) -> None:
         with self._cond:
             self._gen += 1
-            self._values[key] = (msg, self._gen)
+            self._values[key] = (msg, self._gen, self._clock())
             self._cond.notify_all()
 
     def get(self, key: str) -> Any:
         with self._cond:
             v = self._values.get(key)
             return v[0] if v else None
+
+    def mark(self) -> int:
+        """The arrival number of the newest message so far: ``get_after(key, mark)`` ignores older ones."""
+        with self._cond:
+            return self._gen
+
+    def get_after(self, key: str, mark: int) -> Any:
+        """The latest message on ``key`` if it arrived after ``mark``, else None."""
+        with self._cond:
+            v = self._values.get(key)
+            return v[0] if v and v[1] > mark else None
+
+    def age(self, key: str) -> float | None:
+        """Seconds since the latest message on ``key`` arrived here (None: nothing yet)."""
+        with self._cond:
+            v = self._values.get(key)
+        return None if v is None else max(0.0, (self._clock() - v[2]) * 1e-9)
 
     def wait_for(self, predicate: Callable[[], Any], timeout: float) -> Any:
         """Re-evaluate ``predicate`` on every new message until it is truthy or ``timeout`` passes."""
@@ -93,20 +117,38 @@ class _Latest:
                 self._cond.wait(min(left, 0.1))
 
 
+REJECT_KINDS = ("reject", "rejected", "command_rejected", "not_owner", "stale_epoch")
+"""Event kinds with which an authority refuses a user's command."""
+
+
+def _fmt_age(age: float | None) -> str:
+    if age is None:
+        return "no data yet"
+    return f"{age * 1e3:.0f} ms ago" if age < 1.0 else f"{age:.1f} s ago"
+
+
 class World:
     """A user's handle on one world. A context manager; ``close()`` is idempotent."""
 
-    def __init__(self, config: FabricConfig, user: str, *, timeout: float = 5.0, compute: str | None = None) -> None:
+    def __init__(
+        self, config: FabricConfig, user: str, *, timeout: float = 5.0, compute: str | None = None,
+        join_timeout: float | None = None,
+    ) -> None:
         self.user = keys.validate_id(user, what="user id")
         # the compute peer to ask (its peer id, e.g. a local one); None: the nearest that serves the world;
         # "spread": kinematics queries in turn to every live compute peer
         self.compute = None if compute is None else keys.validate_id(compute, what="compute peer id")
         self.name = config.world
         self.timeout = timeout
+        # how long the first look at the world waits for a sim to serve it (a sim may start after us)
+        self.join_timeout = max(timeout, 30.0) if join_timeout is None else join_timeout
         self.fabric = Fabric(config, kind="user", peer_id=self.user)
         self.latest = _Latest()
         self.events: list[Event] = []
+        self._event_log: list[tuple[int, Event]] = []  # (local arrival number, event)
+        self._events_seen = 0
         self._events_lock = threading.Lock()
+        self._closed = False
         self._robots: dict[str, Robot] = {}
         self._objects: dict[str, SceneObject] = {}
         self._info: Any = None
@@ -120,6 +162,9 @@ class World:
         self.fabric.subscribe(keys.event_all(self.name), self._on_event, expected=Event)
         self.ownership = OwnershipLink(self.fabric, self.user, on_record=self.latest.put)
         self._spread = RoundRobin(self.compute_peers) if self.compute == SPREAD else None
+        # registered after the session's own closer, so it runs first: robots are released, then the session
+        # closes; a script that never calls close() exits and other users see a release, not a lease expiry
+        self._cancel_exit = at_exit(self.close)
 
     def ask_kinematics(self, call: Callable[[str | None], Any]) -> Any:
         """``call(peer)`` with the compute peer for the next kinematics query: the chosen one, the next in
@@ -147,8 +192,22 @@ class World:
     # ------------------------------------------------------------------ lifecycle
 
     def close(self) -> None:
-        self.ownership.close()
-        self.fabric.close()
+        """Release every robot this user owns or waits for, then leave the world. Idempotent; also runs
+        by itself when the interpreter exits (a script need not call it)."""
+        with self._events_lock:
+            if self._closed:
+                return
+            self._closed = True
+        self._cancel_exit()
+        try:
+            self.ownership.release_all(timeout=min(self.timeout, 2.0))
+        finally:
+            self.ownership.close()
+            self.fabric.close()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
 
     def __enter__(self) -> "World":
         return self
@@ -157,18 +216,49 @@ class World:
         self.close()
 
     def __repr__(self) -> str:
-        return f"<World {self.name!r} as {self.user!r}>"
+        if self._closed:
+            return f"<World {self.name!r} as {self.user!r}, closed>"
+        robots = "; ".join(r.status() for r in self._robots.values())
+        known = "" if self._info is not None else ", world not seen yet"
+        return f"<World {self.name!r} as {self.user!r}{known}" + (f": {robots}>" if robots else ">")
 
     # ------------------------------------------------------------------ what is there
 
-    def info(self, *, refresh: bool = False) -> Any:
-        """The sim peer's world description (robots, types, limits, sensors)."""
+    def info(self, *, refresh: bool = False, timeout: float | None = None) -> Any:
+        """The sim peer's world description (robots, types, limits, sensors).
+
+        The first call waits up to ``timeout`` (default ``join_timeout``) for a sim peer to serve it, so a
+        script may start before the sim; :class:`Timeout` says how long it waited and what it saw.
+        """
         if self._info is None or refresh:
-            try:
-                self._info = services.world_info(self.fabric, timeout=self.timeout)
-            except ServiceError as exc:
-                raise Timeout(f"no world description for {self.name!r}: {exc.reason} (is a sim peer running?)") from None
+            wait = self.join_timeout if timeout is None else timeout
+            self._info = self._wait_world(wait)
         return self._info
+
+    def _wait_world(self, wait: float) -> Any:
+        key = keys.srv(self.name, "world")
+        t0 = time.monotonic()
+        deadline = t0 + wait
+        last = ""
+        while True:
+            left = deadline - time.monotonic()
+            try:
+                # at most a few seconds per try: a query sent before any sim existed is never answered later
+                return services.world_info(self.fabric, timeout=max(0.05, min(left, 2.0)))
+            except ServiceError as exc:
+                if not exc.reason.startswith("no reply"):
+                    raise Unreachable(f"the sim of world {self.name!r} refused its description: {exc.reason}") from None
+                last = exc.reason
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            time.sleep(min(0.2, left))  # no queryable yet: zenoh answers at once, so pace the retries
+        sims = sorted(pid for _, pid in self.fabric.live_peers("sim", timeout=0.5))
+        seen = f"sim peers alive: {', '.join(sims)}" if sims else "no sim peer alive in this world"
+        raise Timeout(
+            f"no world description for {self.name!r} after {time.monotonic() - t0:.1f} s of waiting: "
+            f"nobody served {key} ({seen}; last answer: {last}). Is a sim peer running on world {self.name!r}?"
+        )
 
     def robots(self) -> list[str]:
         """Ids of the robots in the world (from the sim's description)."""
@@ -209,18 +299,26 @@ class World:
 
     def _on_event(self, key: str, ev: Event) -> None:
         with self._events_lock:
+            self._events_seen += 1
             self.events.append(ev)
+            self._event_log.append((self._events_seen, ev))
             if len(self.events) > 1000:
                 del self.events[:500]
+                del self._event_log[:500]
         self.latest.put(key, ev)
 
-    def rejections(self, robot: str, since_ns: int) -> list[Event]:
-        """Events refusing this user's commands to ``robot`` since a wall time."""
+    def event_mark(self) -> int:
+        """How many events have arrived so far: pass it to :meth:`rejections` to see only later ones."""
+        with self._events_lock:
+            return self._events_seen
+
+    def rejections(self, robot: str, since: int) -> list[Event]:
+        """Events refusing this user's commands to ``robot`` that arrived after ``since`` (an
+        :meth:`event_mark`). Judged by arrival here, never by the sender's clock (issue 15)."""
         with self._events_lock:
             return [
-                e for e in self.events
-                if e.object == robot and e.user == self.user and e.header.wall_ns >= since_ns
-                and e.kind in ("reject", "rejected", "command_rejected", "not_owner", "stale_epoch")
+                e for n, e in self._event_log
+                if n > since and e.object == robot and e.user == self.user and e.kind in REJECT_KINDS
             ]
 
 
@@ -236,8 +334,27 @@ class Robot:
         self.entry = entry
         self._w = world.name
 
+    _data_stream = "joints"  # the stream whose age repr reports
+
+    def status(self) -> str:
+        """One line: id, owner (you / someone / nobody), motion state, age of the latest data here."""
+        rec = self.record
+        if rec is None:
+            who = "no ownership record"
+        elif rec.owner == self.world.user:
+            who = "owned by you"
+        elif rec.owner:
+            who = f"owned by {rec.owner}"
+        else:
+            who = "free"
+        if rec is not None and rec.queue:
+            who += f", queue: {', '.join(rec.queue)}"
+        state = f", {rec.state}" if rec is not None else ""
+        age = self.world.latest.age(keys.robot_stream(self._w, self.id, self._data_stream))
+        return f"{self.id} ({self.type}): {who}{state}, {self._data_stream} {_fmt_age(age)}"
+
     def __repr__(self) -> str:
-        return f"<{type(self).__name__} {self.id!r} ({self.type}) owner={self.owner or '-'}>"
+        return f"<{type(self).__name__} {self.status()}>"
 
     # ------------------------------------------------------------------ ownership
 
@@ -261,9 +378,11 @@ class Robot:
         return rec is None or rec.owner == self.world.user
 
     def request(self, *, timeout: float | None = None, wait: bool = False) -> int:
-        """Ask to own the robot; returns the epoch. ``wait``: stay queued until granted or ``timeout``.
+        """Ask to own the robot; returns the epoch (the fencing token the commands carry).
 
-        Raises :class:`NotOwner` with the authority's reason when denied (in motion, owned by X, queued).
+        Without ``wait`` a refusal raises :class:`NotOwner` with the authority's reason (in motion, owned
+        by X). With ``wait`` the user takes a place in the queue and this call returns the epoch when that
+        place becomes ownership, or raises :class:`Timeout` after ``timeout`` s, leaving the queue.
         """
         return self.world.ownership.request(self.id, timeout=timeout or self.world.timeout, wait=wait)
 
@@ -279,6 +398,8 @@ class Robot:
         epoch 0 and the sim, the authority, decides.
         """
         rec = self.record
+        if rec is None:  # no replica yet (joined before the authority published): ask it, briefly
+            rec = self.world.ownership.fetch(self.id, timeout=min(self.world.timeout, 1.0))
         if rec is not None and rec.owner != self.world.user:
             who = rec.owner or "nobody"
             raise NotOwner(f"{self.world.user} does not own {self.id} (owner: {who}); call request() first")
@@ -294,8 +415,8 @@ class Robot:
         key = keys.robot_cmd(self._w, self.id, "reset", self.world.user)
         self.send("reset", Reset(self.world.fabric.header(key)))
 
-    def _check_rejected(self, since_ns: int) -> None:
-        rej = self.world.rejections(self.id, since_ns)
+    def _check_rejected(self, since: int) -> None:
+        rej = self.world.rejections(self.id, since)
         if rej:
             raise NotOwner(f"{self.id} refused the command: {rej[-1].reason}")
 
@@ -303,6 +424,11 @@ class Robot:
 
     def latest(self, stream: str) -> Any:
         return self.world.latest.get(keys.robot_stream(self._w, self.id, stream))
+
+    def age(self, stream: str) -> float | None:
+        """Seconds since this robot's latest ``stream`` message arrived here (None: none yet). Measured
+        on this machine's clock only, so a sim whose clock is off ours does not skew it."""
+        return self.world.latest.age(keys.robot_stream(self._w, self.id, stream))
 
     def on(self, stream: str, callback: Callable[[str, Any], None]) -> Subscription:
         """``callback(key, message)`` on each message of one of this robot's streams (joints, pose, scan, path)."""
@@ -356,20 +482,23 @@ class Arm(Robot):
                 f"{self.entry.joint_names[j]} target {math.degrees(target[j]):.1f} deg is outside its limits "
                 f"[{math.degrees(lo[j]):.1f}, {math.degrees(hi[j]):.1f}] deg"
             )
-        t0 = time.time_ns()
+        marks = self.world.event_mark(), self.world.latest.mark()
         key = keys.robot_cmd(self._w, self.id, "joints", self.world.user)
         self.send("joints", JointTarget(target, speed_scale, self.world.fabric.header(key)))
         if not wait:
             return target
-        return self._wait_joints(target, tol, timeout, t0)
+        return self._wait_joints(target, tol, timeout, marks)
 
-    def _wait_joints(self, target: np.ndarray, tol: float, timeout: float, t0: int) -> np.ndarray:
+    def _wait_joints(self, target: np.ndarray, tol: float, timeout: float, marks: tuple[int, int]) -> np.ndarray:
+        """Until joints that arrived after the command (local arrival order, never the sim's clock) are at
+        ``target`` and still; a rejection that arrived after it raises :class:`NotOwner`."""
         key = keys.robot_joints(self._w, self.id)
+        events_mark, data_mark = marks
 
         def done() -> bool:
-            self._check_rejected(t0)
-            js = self.world.latest.get(key)
-            if js is None or js.header.wall_ns < t0:
+            self._check_rejected(events_mark)
+            js = self.world.latest.get_after(key, data_mark)
+            if js is None:
                 return False
             return bool(np.max(np.abs(np.asarray(js.q) - target)) <= tol and np.max(np.abs(js.dq)) < 1e-2)
 
@@ -434,6 +563,7 @@ class Base(Robot):
     """A mobile base: twist driving, mapping, planning and path following."""
 
     kind = "mobile"
+    _data_stream = "pose"
 
     @property
     def pose(self) -> Pose | None:
@@ -458,12 +588,12 @@ class Base(Robot):
 
     def drive(self, v: float, omega: float, duration: float, *, rate: float = 10.0) -> tuple[float, float, float] | None:
         """Drive at (v, omega) for ``duration`` seconds (repeating the twist at ``rate`` Hz), then stop."""
-        t0 = time.time_ns()
+        since = self.world.event_mark()
         end = time.monotonic() + duration
         try:
             while True:
                 self.twist(v, omega)
-                self._check_rejected(t0)
+                self._check_rejected(since)
                 left = end - time.monotonic()
                 if left <= 0:
                     break
@@ -510,7 +640,7 @@ class Base(Robot):
         """Send ``path`` to the sim's follower; with ``wait``, block until the base stops near its end."""
         if len(path) == 0:
             raise ValueError("cannot follow an empty path")
-        t0 = time.time_ns()
+        events_mark, data_mark = self.world.event_mark(), self.world.latest.mark()
         key = keys.robot_cmd(self._w, self.id, "path", self.world.user)
         body = Path(path.x, path.y, path.theta, path.frame, self.world.fabric.header(key))
         self.send("path", body)
@@ -520,9 +650,9 @@ class Base(Robot):
         pkey = keys.robot_pose(self._w, self.id)
 
         def arrived() -> bool:
-            self._check_rejected(t0)
-            p = self.world.latest.get(pkey)
-            if p is None or p.header.wall_ns < t0:
+            self._check_rejected(events_mark)
+            p = self.world.latest.get_after(pkey, data_mark)  # a pose that arrived after the command
+            if p is None:
                 return False
             near = math.hypot(p.position[0] - gx, p.position[1] - gy) <= tol
             still = math.hypot(p.linear[0], p.linear[1]) < 0.02 and abs(p.angular[2]) < 0.05
@@ -573,12 +703,22 @@ def connect(
     zenoh_config: str | None = None,
     timeout: float = 5.0,
     compute: str | None = None,
+    wait: bool = True,
+    join_timeout: float | None = None,
 ) -> World:
-    """Join a world as ``user`` (default: $USER). ``connect``: router endpoints, e.g. ``["tcp/10.0.0.5:7447"]``.
+    """Join a world as ``user`` (default: $USER). ``connect``: router endpoints, e.g. ``["tcp/10.0.0.5:7447"]``
+    (default ``$ROBOFABRIC_CONNECT``); ``world`` defaults to ``$ROBOFABRIC_WORLD`` or ``demo``.
+
+    With ``wait`` (the default) it returns once a sim peer serves the world's description, waiting up
+    to ``join_timeout`` seconds (default 30, at least ``timeout``) for one to start; :class:`Timeout`
+    otherwise, saying how long it waited. ``timeout`` is the default for service calls afterwards.
 
     ``compute``: the peer id of the compute peer to use (``robofabric ps`` lists them), e.g. one running on
     this machine; ``"spread"`` sends IK queries to every live compute peer in turn; by default queries go
     to the nearest compute peer serving the world.
+
+    The world closes itself when the interpreter exits (its robots are released first), so a script
+    may end without ``close()``; ``with user_peer.connect(...) as world:`` closes it sooner.
     """
     import getpass
 
@@ -586,4 +726,11 @@ def connect(
         connect = [connect]
     cfg = FabricConfig.resolve(world=world, profile=profile, connect=list(connect or ()), config_file=zenoh_config)
     uid = user or "".join(c if c.isalnum() or c in "-_" else "-" for c in getpass.getuser()) or "user"
-    return World(cfg, uid, timeout=timeout, compute=compute)
+    w = World(cfg, uid, timeout=timeout, compute=compute, join_timeout=join_timeout)
+    if wait:
+        try:
+            w.info()
+        except BaseException:
+            w.close()
+            raise
+    return w

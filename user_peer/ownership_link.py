@@ -8,6 +8,8 @@ latest record of each object for the UI.
 from __future__ import annotations
 
 import logging
+import threading
+import time
 from typing import TYPE_CHECKING, Any, Callable
 
 from fabric import keys
@@ -35,6 +37,7 @@ class OwnershipLink:
         self.fab = fab
         self.user = user
         self._on_record = on_record
+        self._changed = threading.Condition()  # notified on every record the client accepts
         self._client = OwnershipClient(fab, user, timeout=1.0)
         self._client.timeout = 2.0  # the first refresh waits 1 s at most when no authority runs yet
         self._client.on_change(lambda rec: self._on(keys.own(fab.world, rec.object), rec))
@@ -46,6 +49,8 @@ class OwnershipLink:
         return self._client
 
     def _on(self, key: str, rec: OwnershipRecord) -> None:
+        with self._changed:
+            self._changed.notify_all()
         if self._on_record is not None:
             self._on_record(key, rec)
 
@@ -64,15 +69,59 @@ class OwnershipLink:
             raise NotOwner(f"{obj}: {exc.reason}") from None
         return out
 
+    def fetch(self, obj: str, *, timeout: float) -> OwnershipRecord | None:
+        """The authority's current record of ``obj`` (None when no authority answers: a world without
+        ownership, or one not started yet)."""
+        self._client.refresh()  # through the client: only the authority's records count (its own time limit)
+        return self.record(obj)
+
     def request(self, obj: str, *, timeout: float, wait: bool = False) -> int:
-        """Own ``obj`` and return the epoch, or raise :class:`NotOwner` with the authority's answer."""
+        """Own ``obj`` and return the epoch.
+
+        Without ``wait``: a refusal raises :class:`NotOwner` with the authority's answer. With ``wait``:
+        queued, this waits until the queue place becomes ownership (a record naming this user as owner)
+        and returns its epoch; after ``timeout`` it leaves the queue and raises :class:`Timeout`.
+        """
+        t0 = time.monotonic()
         out = self._ask("request", obj, timeout, wait)
-        if not out.granted:
+        if out.granted:
+            return out.epoch
+        if not wait or out.outcome != "queued":
             raise NotOwner(f"{obj} not granted to {self.user}: {out}")
-        return out.epoch
+        deadline = t0 + timeout
+        while True:
+            rec = self.record(obj)
+            if rec is not None and rec.owner == self.user:
+                return rec.epoch
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            with self._changed:
+                self._changed.wait(min(left, 0.1))  # a record landing just before the wait costs <= 0.1 s
+        waited = time.monotonic() - t0
+        try:
+            self._ask("release", obj, min(timeout, 2.0))  # leave the queue (or give back a grant that just came)
+        except (NotOwner, Timeout) as exc:
+            log.info("could not leave the queue of %s: %s", obj, exc)
+        where = f"queued at position {rec.queue.index(self.user) + 1}" if rec is not None and self.user in rec.queue else "queued"
+        owner = f"owner {rec.owner}, {rec.state}" if rec is not None and rec.owner else "no owner"
+        raise Timeout(f"{obj} not granted to {self.user} after {waited:.1f} s of waiting ({where}; {owner}); left the queue")
 
     def release(self, obj: str, *, timeout: float) -> None:
         self._ask("release", obj, timeout)
+
+    def release_all(self, *, timeout: float) -> list[str]:
+        """Release every object this user owns or waits for (what ``World.close`` does); returns them.
+        Best effort: an authority that does not answer will see the user's token go instead."""
+        held = [o for o, r in list(self._client.records.items()) if r.owner == self.user or self.user in r.queue]
+        done = []
+        for obj in held:
+            try:
+                self._ask("release", obj, timeout)
+                done.append(obj)
+            except Exception as exc:  # closing must go on
+                log.info("could not release %s on close: %s", obj, exc)
+        return done
 
     def close(self) -> None:
         self._client.close()

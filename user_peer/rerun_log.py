@@ -82,15 +82,17 @@ def yaw_of(quat_wxyz: np.ndarray) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-def shown_position(pose: Pose, now_ns: int) -> tuple[np.ndarray, float | None]:
-    """Where to draw a remote pose at ``now_ns``, and its age in s (None without timestamps).
+def shown_position(pose: Pose, received_ns: int, now_ns: int) -> tuple[np.ndarray, float | None]:
+    """Where to draw a remote pose at ``now_ns``, and its age in s (None when either time is unknown).
 
     The paper's Eq. 8: the pose moved on by its velocity times its age, the age capped so that a stale
-    or clock-skewed message never flings a robot across the room.
+    message never flings a robot across the room. ``received_ns`` (when it arrived) and ``now_ns`` are
+    both read from this machine's clock: the header's ``wall_ns`` is the sender's clock, which may be
+    seconds off ours on another machine, and is never compared with ours (issue 15).
     """
-    if now_ns <= 0 or pose.header.wall_ns <= 0:
+    if received_ns <= 0 or now_ns <= 0:
         return np.asarray(pose.position, dtype=float), None
-    age = age_s(pose.header.wall_ns, now_ns, cap_s=EXTRAPOLATION_CAP_S)
+    age = age_s(received_ns, now_ns, cap_s=EXTRAPOLATION_CAP_S)
     return extrapolate(pose.position, pose.linear, age, cap_s=EXTRAPOLATION_CAP_S), age
 
 
@@ -237,8 +239,12 @@ class WorldLogger:
         robot_info: Callable[[str, dict], RobotInfo] | None = None,
         max_hz: float = 30.0,
         rate_period_s: float = 0.5,
+        clock: Callable[[], int] | None = None,
     ) -> None:
         self.rec = rec
+        # live views: the clock that stamped log_time_ns when a message arrived (Eq. 8 ages are now - arrival);
+        # None (export from a recording): no extrapolation, nothing is "now"
+        self.clock = clock
         self.robot_info = robot_info or (lambda rid, hint: RobotInfo(rid))
         self.robots: dict[str, RobotInfo] = {}
         self.poses: dict[str, Pose] = {}
@@ -302,7 +308,7 @@ class WorldLogger:
             if isinstance(msg, JointState):
                 return self.log_joints(p.subject, msg, due=self._due(key, t))
             if isinstance(msg, Pose):
-                return self.log_pose(p.subject, msg, due=self._due(key, t), now_ns=t)
+                return self.log_pose(p.subject, msg, due=self._due(key, t), received_ns=t)
             if isinstance(msg, Scan) and p.leaf == "sonar":
                 return self.log_sonar(p.subject, msg) if self._due(key, t) else True
             if isinstance(msg, Scan):
@@ -378,8 +384,9 @@ class WorldLogger:
             return
         self.rec.log(f"{path}/shape", arch, static=True)
 
-    def log_pose(self, rid: str, pose: Pose, *, due: bool = True, now_ns: int = 0) -> bool:
-        """A base's pose is drawn where it is by now: moved on by velocity x age (paper Eq. 8, capped)."""
+    def log_pose(self, rid: str, pose: Pose, *, due: bool = True, received_ns: int = 0) -> bool:
+        """A base's pose is drawn where it is by now: moved on by velocity x the time since it arrived
+        (paper Eq. 8, capped; local clock only)."""
         info = self._robot(rid, {"mobile": True} if not self.robots.get(rid) or not self.robots[rid].arm else {})
         if info.arm is not None:
             # An arm's pose key carries its flange pose: draw it as a frame marker.
@@ -396,9 +403,10 @@ class WorldLogger:
         if not due:
             return True
         path = f"world/robots/{rid}/base"
-        shown, age = shown_position(pose, now_ns)
+        now_ns = self.clock() if self.clock is not None and received_ns > 0 else 0
+        shown, age = shown_position(pose, received_ns, now_ns)
         if age is not None:
-            self.rec.log(f"plots/latency/{rid}", rr.Scalars(age * 1e3))
+            self.rec.log(f"plots/age/{rid}", rr.Scalars(age * 1e3))
         self.rec.log(path, rr.Transform3D(translation=shown, quaternion=rr.Quaternion(xyzw=_quat_xyzw(pose.quaternion))))
         if path not in self._static_done:
             self._static_done.add(path)

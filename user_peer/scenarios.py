@@ -24,6 +24,7 @@ from typing import Callable
 
 import numpy as np
 
+from fabric import keys
 from user_peer.api import Arm, Base, World
 from user_peer.errors import FabricUserError, NotOwner, Timeout, Unreachable
 
@@ -86,12 +87,14 @@ def _arm_reach_center(world: World, arm: Arm) -> np.ndarray:
     return np.array([x + c * local[0] - s * local[1], y + s * local[0] + c * local[1], z + local[2]])
 
 
-def _flange_error(arm: Arm, target: np.ndarray, after_ns: int, timeout: float = 3.0) -> float:
-    """Distance from the published flange position to ``target``, from a flange pose newer than ``after_ns``."""
+def _flange_error(arm: Arm, target: np.ndarray, after: int, timeout: float = 3.0) -> float:
+    """Distance from the published flange position to ``target``, from a flange pose that arrived after
+    the mark ``after`` (``world.latest.mark()``: local arrival order, never the sim's clock)."""
     deadline = time.monotonic() + timeout
+    key = keys.robot_pose(arm.world.name, arm.id)
     while time.monotonic() < deadline:
-        p = arm.flange
-        if p is not None and p.header.wall_ns >= after_ns:
+        p = arm.world.latest.get_after(key, after)
+        if p is not None:
             return float(np.linalg.norm(np.asarray(p.position) - target))
         time.sleep(0.02)
     raise FabricUserError(f"no flange pose from {arm.id} after the move")
@@ -116,7 +119,7 @@ def test_a(world: World, *, arm_id: str = "arm1", points: int = 8, radius: float
             target.set_pose(p)
             q, how = _joints_for(arm, p, streamed)
             arm.move_joints(q, timeout=20.0)
-            err = _flange_error(arm, p, time.time_ns())  # from a flange pose published after the arm settled
+            err = _flange_error(arm, p, world.latest.mark())  # from a flange pose that arrived after the arm settled
             errors.append(err)
             res.say(
                 f"target {i + 1}/{points} at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}): joints {np.round(np.degrees(q), 1).tolist()} deg "

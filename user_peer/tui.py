@@ -13,12 +13,12 @@ objects, so tests drive it with Textual's pilot against a real world.
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
+from textual.css.query import NoMatches
 from textual.widgets import Button, Footer, Header, Label, Sparkline, Static
 
 from user_peer.api import Arm, Base, World
@@ -31,11 +31,11 @@ SPEEDS = {1: (0.2, 0.4), 2: (0.5, 0.8), 3: (1.0, 1.5)}
 """Speed level -> (forward m/s, turn rad/s) for the arrow keys."""
 
 
-def _latency_ms(msg) -> float | None:
-    h = getattr(msg, "header", None)
-    if h is None or not h.wall_ns:
-        return None
-    return (time.time_ns() - h.wall_ns) / 1e6
+def _age_ms(robot, stream: str) -> float | None:
+    """Milliseconds since the latest message of a stream arrived here. Local time only: the sim's
+    header clock may be seconds off ours on another machine (issue 15)."""
+    age = robot.age(stream)
+    return None if age is None else age * 1e3
 
 
 class UserApp(App):
@@ -204,6 +204,12 @@ class UserApp(App):
         return text
 
     def refresh_view(self) -> None:
+        try:
+            self._refresh_view()
+        except NoMatches:
+            pass  # a timer tick while the screen is still mounting or already torn down: nothing to update
+
+    def _refresh_view(self) -> None:
         status = []
         if self.arm is not None:
             mine = self.arm.can_command
@@ -223,7 +229,7 @@ class UserApp(App):
             for bid in ("#arm-stop", "#arm-reset", "#arm-release"):
                 self.query_one(bid, Button).disabled = not mine
             self.query_one("#arm-request", Button).disabled = mine
-            lat = _latency_ms(js)
+            lat = _age_ms(self.arm, "joints")
             status.append(f"arm joints age {lat:.0f} ms" if lat is not None else "arm: no joints yet")
         if self.base is not None:
             mine = self.base.can_command
@@ -241,7 +247,7 @@ class UserApp(App):
             scan = self.base.scan
             if scan is not None:
                 self.query_one("#scan", Sparkline).data = [float(r) for r in scan.ranges[::-1]]
-            lat = _latency_ms(pose)
+            lat = _age_ms(self.base, "pose")
             status.append(f"base pose age {lat:.0f} ms" if lat is not None else "base: no pose yet")
         status.append(f"sent {self.sent}")
         if self.message:

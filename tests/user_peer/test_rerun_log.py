@@ -3,6 +3,7 @@
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -56,16 +57,42 @@ def test_world_to_map_pixels_matches_grid_image():
     assert np.allclose(uv, [[0, 40], [80, 0], [40, 20]])
 
 
-def test_bases_are_drawn_where_they_are_by_now_eq8():
+@pytest.mark.parametrize("skew_s", [-5.0, 0.0, 5.0])
+def test_bases_are_drawn_where_they_are_by_now_eq8(skew_s):
+    """The age is time since arrival on this machine's clock; the sender's header clock, here off ours by
+    +-5 s, changes nothing (issue 15)."""
     from fabric.messages import Header
     from user_peer.rerun_log import EXTRAPOLATION_CAP_S, shown_position
 
-    t = 1_700_000_000_000_000_000
-    pose = Pose([1.0, 2.0, 0.0], linear=[0.5, -0.2, 0.0], header=Header(wall_ns=t))
-    at, age = shown_position(pose, t + 40_000_000)  # seen 40 ms after it was published
+    t = 1_700_000_000_000_000_000  # our clock when the pose arrived
+    pose = Pose([1.0, 2.0, 0.0], linear=[0.5, -0.2, 0.0], header=Header(wall_ns=t + int(skew_s * 1e9)))
+    at, age = shown_position(pose, t, t + 40_000_000)  # drawn 40 ms after it arrived
     assert math.isclose(age, 0.04) and np.allclose(at, [1.02, 1.992, 0.0])
-    late, age = shown_position(pose, t + 5_000_000_000)  # 5 s stale: moved on by the cap only
+    late, age = shown_position(pose, t, t + 5_000_000_000)  # 5 s stale: moved on by the cap only
     assert age == EXTRAPOLATION_CAP_S and np.allclose(late, [1.0 + 0.5 * EXTRAPOLATION_CAP_S, 2.0 - 0.2 * EXTRAPOLATION_CAP_S, 0.0])
-    early, age = shown_position(pose, t - 1_000_000)  # clock skew: never moved backwards
-    assert age == 0.0 and np.allclose(early, pose.position)
-    assert shown_position(Pose([1.0, 2.0, 0.0], linear=[1.0, 0, 0]), t)[1] is None  # no timestamp, no guess
+    at_once, age = shown_position(pose, t, t)
+    assert age == 0.0 and np.allclose(at_once, pose.position)
+    assert shown_position(pose, 0, t)[1] is None  # arrival unknown (a recording): no guess
+
+
+def test_viewer_logger_ages_poses_by_arrival_not_by_the_senders_clock():
+    """WorldLogger with a clock: the Eq. 8 age it plots is now - arrival, whatever the header says."""
+    import rerun as rr
+
+    from fabric.messages import Header
+    from user_peer.rerun_log import WorldLogger
+
+    now = [2_000_000_000_000]
+    logged: list = []
+    rec = rr.RecordingStream("skew-test")
+    rec.log = lambda path, *a, **k: logged.append((path, a))  # type: ignore[method-assign]
+    logger = WorldLogger(rec, max_hz=0, clock=lambda: now[0])
+    for skew in (-5e9, 5e9):
+        logged.clear()
+        pose = Pose([0.0, 0.0, 0.0], linear=[1.0, 0.0, 0.0], header=Header(wall_ns=int(now[0] + skew)))
+        arrived = now[0]
+        now[0] += 30_000_000  # drawn 30 ms after arrival
+        logger.log("rf/w/robot/base1/pose", pose, arrived)
+        ages = [a[0] for p, a in logged if p == "plots/age/base1"]
+        assert len(ages) == 1
+        assert np.allclose(np.asarray(ages[0].scalars.as_arrow_array().to_pylist()).ravel(), [30.0]), ages

@@ -55,7 +55,7 @@ def test_viewer_saves_robots_scans_maps_paths(world, router, connect, tmp_path):
     assert rows["/world/robots/base1/scan/rays"] >= 3
     assert rows["/world/robots/base1/sonar"] >= 3  # the ultrasonic ring apart from the LIDAR
     assert rows["/world/robots/base1/base"] >= 3
-    assert rows["/plots/latency/base1"] >= 3  # the age each base pose was drawn with (Eq. 8)
+    assert rows["/plots/age/base1"] >= 3  # the age (since arrival, local clock) each base pose was drawn with (Eq. 8)
     assert rows["/map/base1"] >= 3
     assert rows["/world/robots/base1/path"] >= 3
     assert rows["/map/base1/paths/base1"] >= 1

@@ -1,0 +1,174 @@
+"""The API behaves like a library (issue 11): scripts exit without close(), joining waits for the sim,
+queued requests wait their turn, non-owners are told at once. Real router, real sim, real scripts."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import textwrap
+import time
+import uuid
+
+import numpy as np
+import pytest
+
+import user_peer
+from fabric.session import Fabric
+from fabric.testing import ProcessGroup, free_port, robofabric_cmd, router_config, wait_until
+from user_peer.api import World
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory):
+    """One router (this process) and one sim peer (scene combined); yields (world, port, procs)."""
+    world = f"t{uuid.uuid4().hex[:8]}"
+    port = free_port()
+    router = Fabric(router_config(world, port), kind="router", peer_id="router")
+    procs = ProcessGroup(tmp_path_factory.mktemp("lifecycle"))
+    sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"), name="sim")
+    try:
+        wait_until(lambda: router.live_peers("sim"), timeout=60, what="sim peer", seen=lambda: procs.output(sim)[-2000:])
+        yield world, port, procs
+    finally:
+        procs.close()
+        router.close()
+
+
+@pytest.fixture
+def user(live):
+    made: list[World] = []
+
+    def make(name: str) -> World:
+        w = user_peer.connect(world=live[0], connect=f"tcp/127.0.0.1:{live[1]}", user=name, timeout=10.0, join_timeout=60.0)
+        made.append(w)
+        return w
+
+    yield make
+    for w in made:
+        w.close()
+
+
+def script(procs: ProcessGroup, name: str, body: str) -> subprocess.Popen:
+    """A user's script as its own interpreter (what `python script.py` does)."""
+    return procs.start([sys.executable, "-c", textwrap.dedent(body)], name=name)
+
+
+def printed(procs: ProcessGroup, proc: subprocess.Popen, marker: str, timeout: float = 90.0) -> None:
+    wait_until(lambda: marker in procs.output(proc) or proc.poll() is not None, timeout=timeout,
+               what=f"{marker!r} from {proc.name}", seen=lambda: procs.output(proc)[-2000:])
+    assert marker in procs.output(proc), procs.output(proc)[-2000:]
+
+
+def test_script_that_never_closes_exits_and_releases_its_robot(live, user):
+    world, port, procs = live
+    bob = user("bob")
+    events: list = []
+    bob.on("event/own/arm1", lambda k, ev: events.append(ev))
+    carol = script(procs, "carol", f"""
+        import user_peer
+        w = user_peer.connect(world={world!r}, connect=["tcp/127.0.0.1:{port}"], user="carol")
+        arm = w.robot("arm1")
+        arm.request()
+        print("owned", flush=True)
+    """)
+    printed(procs, carol, "owned")
+    t_owned = time.monotonic()
+    carol.wait(timeout=30)  # the issue: without the fix it never exits
+    exited_after = time.monotonic() - t_owned
+    assert carol.returncode == 0, procs.output(carol)[-2000:]
+    assert exited_after < 5.0, f"the script took {exited_after:.1f} s to exit after its last line"
+    # the release is explicit (reason "released"), not the token loss ("left") or a lease expiry
+    wait_until(lambda: any(e.kind == "own_released" and e.user == "carol" for e in events), timeout=10,
+               what="carol's release", seen=lambda: [(e.kind, e.user, e.reason) for e in events])
+    rel = [e for e in events if e.kind == "own_released" and e.user == "carol"]
+    assert rel[0].reason == "released", [(e.kind, e.user, e.reason) for e in events]
+    assert not any(e.kind == "own_expired" for e in events)
+
+
+def test_joining_waits_for_a_sim_that_starts_later(tmp_path):
+    """A script started one second before the sim (as a launch file may do) succeeds."""
+    world = f"t{uuid.uuid4().hex[:8]}"
+    port = free_port()
+    with Fabric(router_config(world, port), kind="router", peer_id="router"), ProcessGroup(tmp_path) as procs:
+        early = script(procs, "early", f"""
+            import time, user_peer
+            t0 = time.monotonic()
+            w = user_peer.connect(world={world!r}, connect="tcp/127.0.0.1:{port}", user="early", join_timeout=90)
+            print("robots", w.robots(), "after", round(time.monotonic() - t0, 1), flush=True)
+        """)
+        printed(procs, early, "", timeout=1)  # started (output may still be empty)
+        time.sleep(1.0)  # the scenario itself: the sim starts one second after the script
+        procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"), name="sim")
+        early.wait(timeout=120)
+        out = procs.output(early)
+        assert early.returncode == 0, out[-2000:]
+        assert "robots ['arm1', 'base1']" in out, out[-2000:]
+
+
+def test_joining_an_empty_world_says_how_long_it_waited(live):
+    world, port, _ = live
+    with pytest.raises(user_peer.Timeout) as exc:
+        user_peer.connect(world=world + "x", connect=f"tcp/127.0.0.1:{port}", user="dan", join_timeout=1.5)
+    m = re.search(r"after ([0-9.]+) s of waiting", exc.value.reason)
+    assert m and float(m.group(1)) >= 1.5, exc.value.reason
+    assert "no sim peer alive" in exc.value.reason and "srv/world" in exc.value.reason
+
+
+MOVER = """
+    import time, user_peer
+    w = user_peer.connect(world={world!r}, connect="tcp/127.0.0.1:{port}", user="dave")
+    arm = w.robot("arm1")
+    arm.request(timeout=30)
+    far = [[1.2, 0.4, -0.4, 1.0, 0.8, 1.5], [-1.2, -0.4, 0.4, -1.0, -0.8, -1.5]]
+    end = time.monotonic() + {seconds}
+    i = 0
+    # never reach a target: a new one every 0.3 s keeps the arm in motion (a still arm is handed over at once)
+    while time.monotonic() < end:
+        arm.move_joints(far[i % 2], wait=False, speed_scale=0.2)
+        if i == 0:
+            w.latest.wait_for(lambda: arm.record.state == "moving", 10)
+            print("moving", arm.record.state, flush=True)
+        i += 1
+        time.sleep(0.3 if i % 8 else 0.01)
+    print("done", flush=True)
+"""
+
+
+def test_queued_request_waits_for_the_owner_to_leave(live, user):
+    world, port, procs = live
+    bob = user("bob")
+    arm = bob.robot("arm1")
+    dave = script(procs, "dave", MOVER.format(world=world, port=port, seconds=8))
+    printed(procs, dave, "moving moving")
+    # a non-owner's command is refused at once, naming the owner (not after the move's timeout)
+    t0 = time.monotonic()
+    with pytest.raises(user_peer.NotOwner, match="owner: dave"):
+        arm.move_joints(np.zeros(6), timeout=60)
+    assert time.monotonic() - t0 < 5.0
+    # without wait: refused with the authority's reason
+    with pytest.raises(user_peer.NotOwner, match="in motion, owned by dave"):
+        arm.request()
+    # with wait: queued; the place becomes ownership when dave's script ends (it never calls close())
+    epoch = arm.request(wait=True, timeout=60)
+    assert dave.poll() is not None or "done" in procs.output(dave), "granted while dave still ran"
+    assert arm.is_owner and arm.record.epoch == epoch
+    assert "owned by you" in repr(arm) and "arm1" in repr(bob)
+    arm.release()
+
+
+def test_queued_request_times_out_and_leaves_the_queue(live, user):
+    world, port, procs = live
+    erin = user("erin")
+    arm = erin.robot("arm1")
+    dave = script(procs, "dave", MOVER.format(world=world, port=port, seconds=20))
+    printed(procs, dave, "moving moving")
+    t0 = time.monotonic()
+    with pytest.raises(user_peer.Timeout, match=r"not granted to erin after [0-9.]+ s of waiting .*left the queue"):
+        arm.request(wait=True, timeout=1.5)
+    assert time.monotonic() - t0 >= 1.5
+    wait_until(lambda: "erin" not in erin.ownership.fetch("arm1", timeout=2.0).queue, timeout=10, what="erin out of the queue",
+               seen=lambda: arm.record)
+    procs.kill(dave)
