@@ -213,3 +213,30 @@ def test_doc_block_runs(block: Block, docs_world):
         pytest.fail(f"{block.id} ran past {LIMIT_S:.0f} s; output:\n{out.decode(errors='replace')[-3000:]}")
     text = out.decode(errors="replace")
     assert proc.returncode == 0, f"{block.id} exited {proc.returncode}:\n{block.code}\n--- output ---\n{text[-3000:]}"
+
+
+# ---------------------------------------------------------------------------- the classroom notebook (slow)
+
+
+@pytest.mark.slow
+def test_classroom_notebook_runs(docs_world, monkeypatch):
+    """examples/classroom.ipynb, executed by nbclient in a real kernel against the same world: join, own
+    the arm, IK move, plot the joints, drive, map, plan, follow. The inline Rerun view is switched off
+    (it needs a browser); its code path is the one ``tests/user_peer/test_notebook_view.py`` checks."""
+    import nbformat
+    from nbclient import NotebookClient
+
+    env, scratch, _ = docs_world
+    for k in ("ROBOFABRIC_CONNECT", "ROBOFABRIC_WORLD", "PATH"):
+        monkeypatch.setenv(k, env[k])  # the kernel inherits this process's environment
+    monkeypatch.setenv("ROBOFABRIC_NOTEBOOK_VIEW", "0")
+    monkeypatch.delenv("MPLBACKEND", raising=False)  # the kernel's inline backend draws into the outputs
+    nb = nbformat.read(ROOT / "examples" / "classroom.ipynb", as_version=4)
+    assert not any(c.get("outputs") for c in nb.cells if c.cell_type == "code"), "commit the notebook without outputs"
+    NotebookClient(nb, timeout=int(LIMIT_S), kernel_name="python3", resources={"metadata": {"path": str(scratch)}}).execute()
+    outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs]
+    assert not [o for o in outputs if o.output_type == "error"]
+    images = [o for o in outputs if "image/png" in o.get("data", {})]
+    assert len(images) == 2, "the joints plot and the map with the path"
+    text = "\n".join(str(o.get("text", "")) + str(o.get("data", {}).get("text/plain", "")) for o in outputs)
+    assert "owned by you" in text and "poses planned; stopped at" in text, text[-2000:]

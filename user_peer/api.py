@@ -218,6 +218,9 @@ class World:
     def __repr__(self) -> str:
         if self._closed:
             return f"<World {self.name!r} as {self.user!r}, closed>"
+        if self._info is not None:  # every robot of the world, not only those asked for so far
+            for entry in services.robot_entries(self._info):
+                self.robot(entry.id)
         robots = "; ".join(r.status() for r in self._robots.values())
         known = "" if self._info is not None else ", world not seen yet"
         return f"<World {self.name!r} as {self.user!r}{known}" + (f": {robots}>" if robots else ">")
