@@ -32,8 +32,14 @@ class SkewedSim:
         self.reject = False
         self._seq = 0
         self._lock = threading.Lock()
-        fab.subscribe(keys.robot_cmd(fab.world, "arm1", "joints"), self._on_joints, expected=Command)
-        fab.subscribe(keys.robot_cmd(fab.world, "base1", "path"), self._on_path, expected=Command)
+        fab.subscribe(keys.robot_cmd_all(fab.world), self._on_command, expected=Command)
+
+    def _on_command(self, key: str, cmd: Command) -> None:
+        p = keys.parse(key)
+        if (p.subject, p.leaf) == ("arm1", "joints"):
+            self._on_joints(key, cmd)
+        elif (p.subject, p.leaf) == ("base1", "path"):
+            self._on_path(key, cmd)
 
     def header(self) -> Header:
         with self._lock:
