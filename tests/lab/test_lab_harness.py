@@ -1,0 +1,142 @@
+"""The lab harness itself: hosts reach each other over the bridge and nothing else; cuts, freezes,
+shifted clocks; and nothing it made is left behind, even when the code using it fails."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import time
+
+import pytest
+
+from fabric.lab import Lab, LabError, RemoteError, faketime_library, netns_list
+from fabric.testing import wait_until
+
+pytestmark = [pytest.mark.lab, pytest.mark.slow]
+
+SERVE = """
+import socket, threading
+srv = socket.socket(); srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+srv.bind(("0.0.0.0", 5000)); srv.listen()
+def _serve():
+    while True:
+        c, _ = srv.accept(); c.sendall(b"hello from " + socket.gethostname().encode()); c.close()
+threading.Thread(target=_serve, daemon=True).start()
+"""
+
+FETCH = """
+import socket
+def fetch(ip, port=5000, timeout=1.0):
+    try:
+        with socket.create_connection((ip, port), timeout=timeout) as c:
+            return c.recv(100).decode()
+    except OSError as exc:
+        return f"error: {exc.__class__.__name__}: {exc}"
+"""
+
+
+def test_two_hosts_talk_over_the_bridge_and_reach_nothing_else(lab: Lab):
+    a, b = lab.add_host("a"), lab.add_host("b")
+    assert (a.ip, b.ip) == ("10.77.0.1", "10.77.0.2")
+    pa, pb = a.python(name="client"), b.python(name="server")
+    pb.call(SERVE)
+    pa.call(FETCH)
+    assert pa.call(f"fetch({b.ip!r})").startswith("hello from")
+    # the only route is the lab's /24: no default route, an outside address is unreachable at once
+    routes = a.run(["ip", "-4", "route"]).stdout.strip().splitlines()
+    assert routes == [f"10.77.0.0/24 dev eth0 proto kernel scope link src {a.ip} "] or [r.strip() for r in routes] == [
+        f"10.77.0.0/24 dev eth0 proto kernel scope link src {a.ip}"], routes
+    outside = pa.call("fetch('192.0.2.1', 80)")  # TEST-NET-1: not on the lab's LAN
+    assert "unreachable" in outside.lower(), outside
+    # the host sees only its own lo and eth0
+    links = a.run(["ip", "-o", "link"]).stdout
+    assert [line.split(":")[1].strip().split("@")[0] for line in links.splitlines()] == ["lo", "eth0"], links
+
+
+def test_cut_and_restore_a_link(lab: Lab):
+    a, b = lab.add_host("a"), lab.add_host("b")
+    pa, pb = a.python(name="client"), b.python(name="server")
+    pb.call(SERVE)
+    pa.call(FETCH)
+    assert pa.call(f"fetch({b.ip!r})").startswith("hello")
+    lab.cut(b)
+    assert not lab.link_up(b)
+    assert pa.call(f"fetch({b.ip!r}, timeout=0.5)").startswith("error"), "b still reachable with its cable cut"
+    lab.restore(b)
+    assert lab.link_up(b)
+    wait_until(lambda: pa.call(f"fetch({b.ip!r}, timeout=0.5)").startswith("hello"), timeout=20, what="b reachable again")
+
+
+def test_freeze_thaw_kill_and_a_shifted_clock(lab: Lab):
+    if faketime_library() is None:
+        pytest.skip("Debian's faketime is not installed (.ci/run installs it)")
+    a = lab.add_host("a")
+    b = lab.add_host("b", clock_offset="-5")
+    pa, pb = a.python(name="a"), b.python(name="b")
+    skew = pb.call("import time; time.time()") - pa.call("import time; time.time()")
+    assert -5.6 < skew < -4.4, skew
+    # the monotonic clock is left alone: intervals stay right on a host whose wall clock is wrong
+    assert pb.call("t = time.monotonic(); time.sleep(0.2); time.monotonic() - t") == pytest.approx(0.2, abs=0.15)
+    ahead = a.python(name="ahead", clock_offset="+5")
+    assert 4.4 < ahead.call("import time; time.time()") - pa.call("time.time()") < 5.6
+
+    pending = pb.submit("time.sleep(0.3); 'done'")
+    pb.proc.freeze()
+    time.sleep(0.6)
+    with pytest.raises(TimeoutError):
+        pending(timeout=0.3)  # frozen: no answer although the snippet needed only 0.3 s
+    pb.proc.thaw()
+    assert pending(timeout=20) == "done"
+    with pytest.raises(RemoteError, match="ZeroDivisionError"):
+        pb.call("1 / 0")
+    pb.proc.kill()
+    assert not pb.proc.alive()
+    with pytest.raises(LabError, match="ended"):
+        pb.call("1")
+
+
+def test_everything_is_removed_even_when_the_user_fails(lab_ok, tmp_path):
+    made: dict = {}
+    with pytest.raises(RuntimeError, match="test failed here"):
+        with Lab(log_dir=tmp_path) as lab:
+            h = lab.add_host("h")
+            sleeper = h.spawn(["sleep", "300"], name="sleeper")
+            frozen = h.spawn(["sleep", "300"], name="frozen")
+            frozen.freeze()
+            made.update(ns=[lab.ns, h.ns], pids=[sleeper.pid, frozen.pid], procs=[sleeper, frozen])
+            assert set(made["ns"]) <= set(netns_list())
+            raise RuntimeError("test failed here")
+    assert not set(made["ns"]) & set(netns_list())
+    for proc in made["procs"]:
+        assert proc.popen.poll() is not None, f"pid {proc.pid} still running"
+    lab.close()  # idempotent
+    with pytest.raises(LabError, match="closed"):
+        lab.add_host("late")
+
+
+def test_bad_subnets_and_names_are_refused(lab_ok, tmp_path):
+    with pytest.raises(LabError, match="private /24"):
+        Lab(subnet="8.8.8.0/24", log_dir=tmp_path)
+    with Lab(log_dir=tmp_path, subnet="10.78.1.0/24") as lab:
+        assert lab.add_host("x").ip == "10.78.1.1"
+        with pytest.raises(LabError, match="fresh name"):
+            lab.add_host("x")
+        with pytest.raises(LabError, match="fresh name"):
+            lab.add_host("a b")
+
+
+def test_a_killed_runs_namespaces_are_swept(lab_ok, tmp_path):
+    """A run killed by SIGKILL cannot clean up; the next run removes its empty namespaces, and only those."""
+    from fabric.lab import sweep_stale
+
+    script = (
+        "import os, sys; from fabric.lab import Lab; lab = Lab(log_dir=sys.argv[1]); lab.add_host('h'); "
+        "print(lab.ns, flush=True); os.kill(os.getpid(), 9)"
+    )
+    proc = subprocess.run([os.sys.executable, "-c", script, str(tmp_path)], capture_output=True, text=True, timeout=60)
+    left = proc.stdout.split()[0]
+    prefix = left.rsplit("-", 1)[0]
+    assert left in netns_list()
+    removed = sweep_stale()
+    assert sorted(removed) == sorted([f"{prefix}-lan", f"{prefix}-h"]), removed
+    assert not [n for n in netns_list() if n.startswith(prefix + "-")]
