@@ -16,9 +16,11 @@ is missing, plain ``atexit`` is the fallback.
 from __future__ import annotations
 
 import atexit
+import inspect
 import itertools
 import logging
 import threading
+import weakref
 from typing import Callable
 
 log = logging.getLogger("robofabric")
@@ -60,11 +62,23 @@ def _install() -> None:
 
 def at_exit(fn: Callable[[], None]) -> Callable[[], None]:
     """Call ``fn`` when the interpreter exits, before non-daemon threads are joined; returns a
-    function that cancels it (call it from an explicit ``close()``, so nothing is closed twice)."""
+    function that cancels it (call it from an explicit ``close()``, so nothing is closed twice).
+
+    A bound method is held weakly: registering ``obj.close`` does not keep ``obj`` alive, so an object
+    nobody refers to any more is collected as it was before (and is simply not closed again at exit)."""
+    if inspect.ismethod(fn):
+        ref = weakref.WeakMethod(fn)
+
+        def call() -> None:
+            method = ref()
+            if method is not None:
+                method()
+    else:
+        call = fn
     with _lock:
         _install()
         key = next(_ids)
-        _closers[key] = fn
+        _closers[key] = call
 
     def cancel() -> None:
         with _lock:

@@ -21,6 +21,7 @@ import rerun as rr
 
 from fabric import keys
 from fabric.config import FabricConfig
+from fabric.exit import at_exit
 from fabric.session import Fabric, ServiceError
 from user_peer.catalog import RobotCatalog
 from user_peer.rerun_log import WorldLogger, blueprint
@@ -107,6 +108,8 @@ class Viewer:
         # the clock that stamps arrivals in _enqueue: Eq. 8 ages are measured on it alone
         self.logger = WorldLogger(self.rec, robot_info=self.catalog.info, max_hz=opts.max_hz, clock=time.time_ns)
         self._closed = False
+        # a script that never closes the viewer still flushes its sinks, then its session closes (fabric/exit.py)
+        self._cancel_exit = at_exit(self.close)
 
     def _enqueue(self, key: str, msg: Any) -> None:
         item = (key, msg, time.time_ns())
@@ -171,6 +174,7 @@ class Viewer:
         if self._closed:
             return
         self._closed = True
+        self._cancel_exit()
         self.fab.close()
         # Whatever is already queued still goes to the sinks.
         while True:

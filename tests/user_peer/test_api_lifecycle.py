@@ -172,3 +172,50 @@ def test_queued_request_times_out_and_leaves_the_queue(live, user):
     wait_until(lambda: "erin" not in erin.ownership.fetch("arm1", timeout=2.0).queue, timeout=10, what="erin out of the queue",
                seen=lambda: arm.record)
     procs.kill(dave)
+
+
+EVERYTHING = """
+    import time
+    from pathlib import Path
+    from fabric.testing import client_config, router_config
+    from fabric.session import Fabric
+    from fabric.recording import Recorder
+    from sim_peer.cli import make_gate
+    from sim_peer.peer import SimPeer
+    from sim_peer.world import World as SimWorld
+    from compute_peer.peer import ComputeOptions, ComputePeer
+    from user_peer.api import World
+    from user_peer.viewer import Viewer, ViewerOptions
+
+    w, port, out = {world!r}, {port}, Path({out!r})
+    router = Fabric(router_config(w, port), kind="router", peer_id="router")
+    sim_fab = Fabric(client_config(w, port), kind="sim", peer_id="sim")
+    sim_world = SimWorld("combined")
+    SimPeer(sim_fab, sim_world, gate=make_gate(sim_fab, sim_world, True)).start()
+    ComputePeer(Fabric(client_config(w, port), kind="compute", peer_id="compute"), ComputeOptions(streams=[("arm1", "target")])).discover()
+    viewer = Viewer(client_config(w, port), ViewerOptions(save=out / "view.rrd"))
+    viewer.start()
+    Recorder(Fabric(client_config(w, port), kind="recorder", peer_id="rec"), out / "rec.mcap").start()
+    user = World(client_config(w, port), "frank", timeout=10.0, join_timeout=60.0)
+    arm = user.robot("arm1")
+    arm.request()
+    arm.move_joints([0.1, 0, 0, 0, 0, 0], timeout=30)
+    viewer.drain(time.monotonic() + 1.0)
+    print("everything running", flush=True)
+"""
+
+
+def test_nothing_the_fabric_starts_keeps_a_script_alive(tmp_path):
+    """A router, a sim peer with its authority, a compute peer, a viewer, a recorder and a user that owns
+    a robot, all in one script that closes none of them: it exits, and the viewer's file is complete."""
+    world = f"t{uuid.uuid4().hex[:8]}"
+    with ProcessGroup(tmp_path) as procs:
+        p = script(procs, "everything", EVERYTHING.format(world=world, port=free_port(), out=str(tmp_path)))
+        printed(procs, p, "everything running", timeout=120)
+        t0 = time.monotonic()
+        p.wait(timeout=60)
+        took = time.monotonic() - t0
+        assert p.returncode == 0, procs.output(p)[-3000:]
+        assert took < 10.0, f"took {took:.1f} s to exit after its last line"
+    assert (tmp_path / "view.rrd").stat().st_size > 10_000
+    assert (tmp_path / "rec.mcap").stat().st_size > 1_000
