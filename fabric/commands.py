@@ -6,11 +6,12 @@ import typer
 
 
 def register(app: typer.Typer) -> None:
-    from fabric import bench_transport, introspect_cli, launch_cli, tools_cli
+    from fabric import bench_transport, introspect_cli, launch_cli, secure_cli, tools_cli
     from fabric.lab import cli as lab_cli
 
     tools_cli.register(app)
     introspect_cli.register(app)
     launch_cli.register(app)
+    secure_cli.register(app)
     bench_transport.register()
     lab_cli.register(app)

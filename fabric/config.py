@@ -106,13 +106,56 @@ class FabricConfig:
     def with_(self, **changes) -> "FabricConfig":
         return replace(self, **changes)
 
+    def file_value(self, key: str) -> object:
+        """A setting of the zenoh config file (None without a file or when it is unset)."""
+        if not self.config_file:
+            return None
+        try:
+            return json.loads(zenoh.Config.from_file(self.config_file).get_json(key))
+        except Exception:
+            return None
+
+    def _file_endpoints(self, which: str) -> tuple[str, ...]:
+        """Endpoints the file lists (a plain list; zenoh's own per-mode defaults are a map and do not count)."""
+        value = self.file_value(f"{which}/endpoints")
+        return tuple(str(v) for v in value) if isinstance(value, list) else ()
+
     def endpoints(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
-        """(connect, listen) after profile defaults."""
+        """(connect, listen) after defaults: flags, then the zenoh config file's, then the profile's."""
+        file_connect = self._file_endpoints("connect") if not self.connect else ()
+        file_listen = self._file_endpoints("listen") if not self.listen else ()
+        connect, listen = self.connect or file_connect, self.listen or file_listen
         if self.profile == "embedded":
-            return self.connect, self.listen or (DEFAULT_ENDPOINT,)
+            return connect, listen or (DEFAULT_ENDPOINT,)
         if self.profile == "client":
-            return self.connect or (DEFAULT_ENDPOINT,), self.listen
-        return self.connect, self.listen
+            return connect or (DEFAULT_ENDPOINT,), listen
+        return connect, listen
+
+    def identity(self) -> str | None:
+        """Who the router will know this session as: the usrpwd user or the TLS certificate's common
+        name of the zenoh config file (``robofabric secure init``); None without credentials."""
+        user = self.file_value("transport/auth/usrpwd/user")
+        if isinstance(user, str) and user:
+            return user
+        cert = self.file_value("transport/link/tls/connect_certificate")
+        if isinstance(cert, str) and cert:
+            from fabric.secure import certificate_common_name
+
+            try:
+                return certificate_common_name(cert)
+            except (OSError, ValueError) as exc:
+                raise ConfigError(f"cannot read the certificate {cert!r} of {self.config_file!r}: {exc}") from None
+        return None
+
+    def user_id(self, user: str | None) -> str | None:
+        """The user a session speaks for: the authenticated identity when there is one (a different
+        ``user`` is a :class:`ConfigError`), else ``user``."""
+        ident = self.identity()
+        if ident is None:
+            return user
+        if user is not None and user != ident:
+            raise ConfigError(f"{self.config_file} logs in as {ident!r}: the user id is the identity, not {user!r}")
+        return ident
 
     def zenoh_config(self) -> zenoh.Config:
         if self.config_file:

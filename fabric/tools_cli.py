@@ -59,7 +59,9 @@ def router(
     peer_id: PeerId = None,
 ) -> None:
     """Run a zenoh router for the fabric (any standard zenohd works in its place)."""
-    cfg = make_config(world, connect, listen or ["tcp/0.0.0.0:7447"], "embedded", zenoh_config)
+    cfg = make_config(world, connect, listen, "embedded", zenoh_config)
+    if not listen and not cfg.file_value("listen/endpoints"):
+        cfg = cfg.with_(listen=("tcp/0.0.0.0:7447",))
     stop = shutdown_event()
     try:
         fab = Fabric(cfg, kind="router", peer_id=peer_id)
@@ -228,6 +230,10 @@ def pub(
     from fabric.rate import RateLoop
 
     body = _message_from_json(msg_type, data)
+    try:
+        user = make_config(world, connect, listen, profile, zenoh_config).user_id(user)  # a secure login is the user
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
     try:
         msg = Command(user=user, epoch=epoch, body=body) if user else body
         encode(msg)

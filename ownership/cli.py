@@ -7,7 +7,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from fabric.cli_common import Connect, Profile, UserError, World, ZenohConfig, bench_app, make_config
+from fabric.cli_common import Connect, Profile, UserError, World, ZenohConfig, bench_app, make_config, open_fabric
 from fabric.session import Fabric, ServiceError, shutdown_event
 
 from ownership.client import OwnershipClient
@@ -24,7 +24,12 @@ def _user(user: str | None) -> str:
 
 
 def _client(world, connect, profile, zenoh_config, user) -> tuple[Fabric, OwnershipClient]:
-    fab = Fabric(make_config(world, connect, None, profile, zenoh_config), kind="user", peer_id=_user(user))
+    cfg = make_config(world, connect, None, profile, zenoh_config)
+    try:
+        uid = cfg.user_id(user) or _user(None)  # with a secure config, the login is the user
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    fab = open_fabric(cfg, "user", uid)
     return fab, OwnershipClient(fab, fab.peer_id)
 
 

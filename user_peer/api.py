@@ -134,7 +134,7 @@ class World:
         self, config: FabricConfig, user: str, *, timeout: float = 5.0, compute: str | None = None,
         join_timeout: float | None = None,
     ) -> None:
-        self.user = keys.validate_id(user, what="user id")
+        self.user = keys.validate_id(config.user_id(user) or user, what="user id")  # a secure login is the user
         # the compute peer to ask (its peer id, e.g. a local one); None: the nearest that serves the world;
         # "spread": kinematics queries in turn to every live compute peer
         self.compute = None if compute is None else keys.validate_id(compute, what="compute peer id")
@@ -728,7 +728,8 @@ def connect(
     if isinstance(connect, str):
         connect = [connect]
     cfg = FabricConfig.resolve(world=world, profile=profile, connect=list(connect or ()), config_file=zenoh_config)
-    uid = user or "".join(c if c.isalnum() or c in "-_" else "-" for c in getpass.getuser()) or "user"
+    # with a secure zenoh config the user id is the login (a different ``user`` is a ConfigError)
+    uid = cfg.user_id(user) or "".join(c if c.isalnum() or c in "-_" else "-" for c in getpass.getuser()) or "user"
     w = World(cfg, uid, timeout=timeout, compute=compute, join_timeout=join_timeout)
     if wait:
         try:

@@ -1,0 +1,101 @@
+"""`robofabric secure init`: the files a class needs, their secrets, and what a config says about who logs in."""
+
+from __future__ import annotations
+
+import json
+import stat
+import subprocess
+
+import pytest
+import zenoh
+
+from fabric.config import ConfigError, FabricConfig
+from fabric.secure import Identity, access_control, certificate_common_name, init, read_credentials
+from fabric.testing import robofabric_cmd
+
+
+def run_cli(*args, timeout=60):
+    return subprocess.run(robofabric_cmd(*args), capture_output=True, text=True, timeout=timeout)
+
+
+def _mode(path) -> int:
+    return stat.S_IMODE(path.stat().st_mode)
+
+
+def test_init_writes_router_and_one_config_per_identity_private_and_loadable(tmp_path):
+    d = tmp_path / "class"
+    out = init(d, users=["alice", "bob"], listen=["tcp/127.0.0.1:7999"])
+    assert set(out.clients) == {"alice", "bob", "sim", "compute", "viewer"}
+    for path in [out.router, *out.clients.values(), d / "credentials.txt"]:
+        assert _mode(path) == 0o600, path
+        if path.suffix == ".json5":
+            zenoh.Config.from_file(str(path))  # zenoh itself accepts it
+    assert _mode(d) == 0o700
+    creds = read_credentials(d / "credentials.txt")
+    assert set(creds) == set(out.clients) and len(set(creds.values())) == 5 and all(len(p) >= 20 for p in creds.values())
+    cfg = FabricConfig(config_file=str(out.clients["alice"]))
+    assert cfg.identity() == "alice" and cfg.endpoints()[0] == ("tcp/127.0.0.1:7999",)
+    assert FabricConfig(config_file=str(out.router), profile="embedded").endpoints()[1] == ("tcp/127.0.0.1:7999",)
+    router = zenoh.Config.from_file(str(out.router))
+    assert json.loads(router.get_json("access_control/default_permission")) == "deny"
+    assert 1 << 20 <= json.loads(router.get_json("transport/link/rx/max_message_size")) <= 16 << 20
+
+
+def test_a_second_run_keeps_every_secret_and_adds_the_new_names(tmp_path):
+    d = tmp_path / "class"
+    init(d, users=["alice", "bob"])
+    before = read_credentials(d / "credentials.txt")
+    out = init(d, users=["carol"])  # alice and bob are not named again: they stay
+    after = read_credentials(d / "credentials.txt")
+    assert {k: after[k] for k in before} == before and "carol" in after
+    assert out.created == ("carol",) and set(out.kept) == {"sim", "compute", "viewer"}
+    rules = json.loads(zenoh.Config.from_file(str(out.router)).get_json("access_control/subjects"))
+    assert {s["id"] for s in rules} >= {"alice", "bob", "carol"}
+
+
+def test_a_secure_config_fixes_the_user_id(tmp_path):
+    out = init(tmp_path / "c", users=["alice"])
+    cfg = FabricConfig(config_file=str(out.clients["alice"]))
+    assert cfg.user_id(None) == "alice" and cfg.user_id("alice") == "alice"
+    with pytest.raises(ConfigError, match="logs in as 'alice'.*not 'bob'"):
+        cfg.user_id("bob")
+    assert FabricConfig().user_id("bob") == "bob"  # no credentials: the name given
+
+
+def test_tls_makes_a_ca_and_a_certificate_per_identity_named_by_common_name(tmp_path):
+    d = tmp_path / "c"
+    out = init(d, users=["alice"], tls=True, listen=["tls/0.0.0.0:7447"], connect=["tls/10.0.0.5:7447"])
+    t = d / "tls"
+    assert certificate_common_name(t / "alice.pem") == "alice" and certificate_common_name(t / "sim.pem") == "sim"
+    assert _mode(t / "ca-key.pem") == 0o600 and _mode(t / "alice-key.pem") == 0o600
+    assert FabricConfig(config_file=str(out.clients["alice"])).identity() == "alice"
+    ca = (t / "ca.pem").read_bytes()
+    again = init(d, users=["alice", "bob"], tls=True, listen=["tls/0.0.0.0:7447"], connect=["tls/10.0.0.5:7447"])
+    assert (t / "ca.pem").read_bytes() == ca and again.created == ("bob",)
+    from cryptography import x509
+
+    router = x509.load_pem_x509_certificate((t / "router.pem").read_bytes())
+    sans = router.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert "10.0.0.5" in [str(ip) for ip in sans.get_values_for_type(x509.IPAddress)]
+
+
+def test_rules_allow_each_user_only_keys_that_name_them():
+    acl = access_control([Identity("alice", "user"), Identity("sim", "sim")])
+    rules = {r["id"]: r for r in acl["rules"]}
+    assert acl["default_permission"] == "deny"
+    assert rules["alice-put"]["key_exprs"][1:] == ["rf/*/robot/*/cmd/*/by/alice", "rf/*/object/*/pose/by/alice"]
+    assert "rf/*/own/*" in rules["sim-put"]["key_exprs"] and "rf/*/own/*" not in rules["alice-put"]["key_exprs"]
+    assert rules["alice-ask"]["key_exprs"] == ["rf/*/own/*/by/alice"]
+    policy = {p["id"]: p["rules"] for p in acl["policies"]}
+    assert "sim-serve" not in policy["alice"] and "alice-put" not in policy["sim"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--users", ""], "no users"),
+    (["--users", "alice,alice"], "named twice"),
+    (["--users", "a/b"], "letters, digits"),
+    (["--users", "alice", "--listen", "tls/0.0.0.0:7447"], "tcp/HOST:PORT"),
+])
+def test_init_mistakes_are_one_line_errors(tmp_path, args, message):
+    out = run_cli("secure", "init", str(tmp_path / "c"), *args)
+    assert out.returncode == 2 and message in out.stderr and "Traceback" not in out.stderr, out.stderr
