@@ -1,0 +1,279 @@
+"""A class world behind a real router started with `robofabric secure init`'s config.
+
+The router, the sim peer (and, for Test A / Test B, the compute peer and the viewer) run as their
+own processes with their own credentials; alice, bob and mallory log in as themselves. mallory
+tries what a student could: forge alice's commands, ownership records and releases, publish robot
+state and serve the world service. The router refuses what her login may not say; the sim and the
+authority refuse what names someone other than its key's user.
+
+"The router refused it" is shown by order: after each forgery mallory sends something she may
+send on the same session; once that has arrived, the forgery would have arrived before it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import threading
+import time
+import uuid
+
+import numpy as np
+import pytest
+
+from fabric import keys
+from fabric.config import FabricConfig
+from fabric.messages import Command, Event, JointState, JointTarget, OwnershipRecord, Stop
+from fabric.secure import init
+from fabric.session import Fabric, ServiceError
+from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
+from ownership.messages import OwnReply, OwnRequest
+
+pytestmark = pytest.mark.slow
+
+
+def _cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    return subprocess.run(robofabric_cmd(*args), capture_output=True, text=True, timeout=timeout)
+
+
+class SecureWorld:
+    def __init__(self, tmp, procs: ProcessGroup) -> None:
+        self.world = f"s{uuid.uuid4().hex[:8]}"
+        self.port = free_port()
+        self.ep = f"tcp/127.0.0.1:{self.port}"
+        self.dir = tmp / "class"
+        self.files = init(self.dir, users=["alice", "bob", "mallory"], listen=[self.ep]).clients
+        self.procs = procs
+        self.router = procs.start(robofabric_cmd("router", "--zenoh-config", str(self.dir / "router.json5")), name="router")
+        wait_until(lambda: "listening" in procs.output(self.router), timeout=30, what="router", seen=lambda: procs.output(self.router))
+        self.fabrics: list[Fabric] = []
+
+    def config(self, name: str) -> FabricConfig:
+        return FabricConfig(world=self.world, config_file=str(self.files[name]))
+
+    def fabric(self, name: str, kind: str = "user", peer_id: str | None = None) -> Fabric:
+        fab = Fabric(self.config(name), kind=kind, peer_id=peer_id or name)
+        self.fabrics.append(fab)
+        return fab
+
+    def start(self, name: str, *args: str):
+        return self.procs.start(robofabric_cmd(*args, "--world", self.world, "--zenoh-config", str(self.files[name])), name=name)
+
+    def close(self) -> None:
+        for fab in self.fabrics:
+            fab.close()
+
+
+@pytest.fixture(scope="module")
+def secure(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("secure")
+    with ProcessGroup(tmp) as procs:
+        w = SecureWorld(tmp, procs)
+        sim = w.start("sim", "sim", "--scene", "combined")
+        viewer = w.fabric("viewer", kind="viewer", peer_id="watcher")
+        wait_until(lambda: viewer.live_peers("sim"), timeout=90, what="the sim peer", seen=lambda: procs.output(sim)[-2000:])
+        w.sim = sim
+        try:
+            yield w
+        finally:
+            w.close()
+
+
+class Seen:
+    """Everything one subscription delivered, for assertions on what never arrived."""
+
+    def __init__(self, fab: Fabric, key_expr: str, expected=None) -> None:
+        self.items: list[tuple[str, object]] = []
+        self.lock = threading.Lock()
+        fab.subscribe(key_expr, self._on, expected=expected)
+
+    def _on(self, key: str, msg: object) -> None:
+        with self.lock:
+            self.items.append((key, msg))
+
+    def messages(self) -> list:
+        with self.lock:
+            return [m for _, m in self.items]
+
+
+def _marker(mallory: Fabric, seen_events: Seen, world: str, tag: str) -> None:
+    """mallory sends what she may send (a decode report); once it arrived, everything before it did."""
+    mallory.publish(keys.event(world, "decode", "mallory"), Event(kind="marker", reason=tag, header=mallory.header("m")))
+    wait_until(lambda: any(getattr(e, "reason", "") == tag for e in seen_events.messages()), timeout=20,
+               what=f"mallory's marker {tag}")
+
+
+@pytest.fixture(scope="module")
+def alice_owns_arm(secure):
+    import user_peer
+
+    alice = user_peer.connect(world=secure.world, zenoh_config=str(secure.files["alice"]), timeout=10.0)
+    arm = alice.robot("arm1")
+    arm.wait_for("joints", timeout=30)
+    arm.request(timeout=10)
+    arm.move_joints([0.1] * 6, timeout=30)
+    yield alice, arm
+    alice.close()
+
+
+def test_mallory_cannot_command_alices_arm(secure, alice_owns_arm):
+    alice, arm = alice_owns_arm
+    assert alice.user == "alice"  # the login is the user id
+    w = secure.world
+    watcher = secure.fabric("viewer", kind="viewer", peer_id="watch1")
+    events, joints = Seen(watcher, keys.event_all(w), Event), Seen(watcher, keys.robot_joints(w, "arm1"), JointState)
+    mallory = secure.fabric("mallory")
+    epoch = alice.ownership.record("arm1").epoch
+    bad = JointTarget(np.full(6, 0.5))
+    mallory.publish(keys.robot_cmd(w, "arm1", "joints", "alice"), Command("alice", epoch, bad))  # alice's key: the router refuses
+    mallory.publish(keys.robot_cmd(w, "arm1", "joints", "mallory"), Command("alice", epoch, bad))  # her key, alice's name
+    ev = wait_until(lambda: [e for e in events.messages() if e.kind == "reject" and e.reason == "user_mismatch"], timeout=20,
+                    what="the sim refusing the payload's name", seen=events.messages)[0]
+    assert ev.user == "mallory" and ev.object == "arm1"
+    # the forgery on alice's key went first on the same session: had the router passed it, the sim had it by now
+    assert not [e for e in events.messages() if e.kind == "reject" and e.user == "alice"]
+    n = len(joints.messages())
+    wait_until(lambda: len(joints.messages()) > n + 20, timeout=20, what="joint states after the forgeries")
+    assert all(np.allclose(js.q, 0.1, atol=1e-3) for js in joints.messages()[n:]), "the arm moved"
+
+
+def test_a_fake_ownership_record_is_refused_and_alice_keeps_renewing(secure, alice_owns_arm):
+    alice, arm = alice_owns_arm
+    w = secure.world
+    watcher = secure.fabric("viewer", kind="viewer", peer_id="watch2")
+    events, records = Seen(watcher, keys.event_all(w), Event), Seen(watcher, keys.own_all(w), OwnershipRecord)
+    mallory = secure.fabric("mallory")
+    rec = alice.ownership.record("arm1")
+    # plausible in every way the client can check: the authority's name, the next epoch
+    mallory.publish(keys.own(w, "arm1"), OwnershipRecord("arm1", owner="mallory", epoch=rec.epoch + 1, authority=rec.authority))
+    mallory.publish(keys.own(w, "arm1"), OwnershipRecord("arm1", owner="mallory", epoch=2**40, authority=rec.authority))
+    _marker(mallory, events, w, "after-records")
+    assert not [r for r in records.messages() if r.owner == "mallory"]
+    assert alice.ownership.record("arm1").owner == "alice"
+    # two lease periods (2 s each) later alice still owns it: she kept renewing
+    first = watcher.call(keys.own(w, "arm1"), expected=OwnershipRecord)
+    time.sleep(4.5)  # the lease must have run out had she stopped renewing; nothing to poll for
+    later = watcher.call(keys.own(w, "arm1"), expected=OwnershipRecord)
+    assert later.owner == "alice" and later.epoch == first.epoch and later.lease_expiry > first.lease_expiry + 3.0
+
+
+def test_mallory_cannot_release_alices_arm(secure, alice_owns_arm):
+    alice, arm = alice_owns_arm
+    w = secure.world
+    mallory = secure.fabric("mallory")
+    with pytest.raises(ServiceError, match="no reply"):  # alice's key: the router does not pass the query
+        mallory.call(keys.own_request(w, "arm1", "alice"), OwnRequest("release", "alice"), timeout=2.0, expected=OwnReply)
+    with pytest.raises(ServiceError, match="names 'alice' but was sent by 'mallory'"):
+        mallory.call(keys.own_request(w, "arm1", "mallory"), OwnRequest("release", "alice"), timeout=10.0, expected=OwnReply)
+    honest = mallory.call(keys.own_request(w, "arm1", "mallory"), OwnRequest("release", "mallory"), timeout=10.0, expected=OwnReply)
+    assert honest.outcome != "released" and honest.record.owner == "alice"
+    rec = mallory.call(keys.own(w, "arm1"), OwnRequest("release", "alice"), timeout=10.0, expected=OwnershipRecord)
+    assert rec.owner == "alice"  # the record key only ever answers with the record
+    assert alice.ownership.record("arm1").owner == "alice"
+
+
+def test_a_user_cannot_publish_robot_state_or_serve_the_world(secure):
+    w = secure.world
+    watcher = secure.fabric("viewer", kind="viewer", peer_id="watch3")
+    events, joints = Seen(watcher, keys.event_all(w), Event), Seen(watcher, keys.robot_joints(w, "arm1"), JointState)
+    mallory = secure.fabric("mallory")
+    fake_sim = secure.fabric("mallory", kind="sim", peer_id="fake-sim")  # her login, a sim's token: refused
+    mallory.publish(keys.robot_joints(w, "arm1"), JointState([f"joint_{i}" for i in range(1, 7)], np.full(6, 1.0), np.zeros(6)))
+    mallory.serve(keys.srv(w, "world"), lambda key, req: Event(kind="fake", reason="mallory's world"))
+    mallory.serve(keys.own(w, "arm1"), lambda key, req: OwnershipRecord("arm1", owner="mallory", epoch=2**40))
+    _marker(mallory, events, w, "after-state")
+    assert not [js for js in joints.messages() if js.header.source == "mallory"]
+    answers = watcher.query(keys.srv(w, "world"), timeout=5.0, all_replies=True)
+    assert answers and all(a.source.startswith("sim") for a in answers), answers
+    records = watcher.query(keys.own(w, "arm1"), timeout=5.0, all_replies=True)
+    assert records and all(r.message.owner != "mallory" for r in records)
+    assert ("sim", "fake-sim") not in watcher.live_peers("sim")
+    assert fake_sim.peer_id == "fake-sim"
+
+
+@pytest.mark.parametrize("case", ["no credentials", "wrong password", "unknown user"])
+def test_refused_logins_are_one_line_errors(secure, tmp_path, case):
+    args = ["ps", "--world", secure.world]
+    if case == "no credentials":
+        args += ["--connect", secure.ep]
+    else:
+        cfg = json.loads("\n".join(secure.files["mallory"].read_text().splitlines()[2:]))
+        if case == "wrong password":
+            cfg["transport"]["auth"]["usrpwd"]["password"] = "guess"
+        else:
+            cfg["transport"]["auth"]["usrpwd"]["user"] = "eve"
+        bad = tmp_path / "bad.json5"
+        bad.write_text(json.dumps(cfg))
+        args += ["--zenoh-config", str(bad)]
+    out = _cli(*args)
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 2 and len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
+    assert lines[0].startswith("error: authentication failed") and secure.ep in lines[0], lines
+    who = {"no credentials": "at ", "wrong password": "for mallory at", "unknown user": "for eve at"}[case]
+    assert who in lines[0]
+    ok = _cli("ps", "--world", secure.world, "--zenoh-config", str(secure.files["bob"]))
+    assert ok.returncode == 0, ok.stderr
+
+
+def test_tls_refuses_a_certificate_from_another_ca(tmp_path):
+    ep = f"tls/127.0.0.1:{free_port()}"
+    mine = init(tmp_path / "mine", users=["alice"], tls=True, listen=[ep])
+    other = init(tmp_path / "other", users=["alice"], tls=True, listen=[ep])
+    with ProcessGroup(tmp_path) as procs:
+        router = procs.start(robofabric_cmd("router", "--zenoh-config", str(mine.router)), name="router")
+        wait_until(lambda: "listening" in procs.output(router), timeout=30, what="TLS router", seen=lambda: procs.output(router))
+        out = _cli("ps", "--zenoh-config", str(other.clients["alice"]))
+        lines = out.stderr.strip().splitlines()
+        assert out.returncode == 2 and len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
+        assert lines[0] == f"error: authentication failed for alice at {ep}: the router refused this login " \
+                           "(wrong password, unknown user, or a certificate it does not trust)"
+        good = _cli("ps", "--json", "--zenoh-config", str(mine.clients["alice"]))
+        assert good.returncode == 0 and json.loads(good.stdout)["peers"].get("router"), good.stderr
+        # identities by certificate common name: alice may not publish robot state even over TLS
+        alice = Fabric(FabricConfig(config_file=str(mine.clients["alice"])), kind="user", peer_id="alice")
+        sim = Fabric(FabricConfig(config_file=str(mine.clients["sim"])), kind="sim", peer_id="sim")
+        try:
+            got = Seen(sim, "rf/demo/**")
+            alice.publish(keys.robot_joints("demo", "arm1"), JointState(["j"], np.zeros(1), np.zeros(1)))
+            alice.publish(keys.robot_cmd("demo", "arm1", "stop", "alice"), Command("alice", 0, Stop()))
+            wait_until(lambda: any("/cmd/stop/by/alice" in k for k, _ in got.items), timeout=20, what="alice's own command over TLS")
+            assert not [k for k, _ in got.items if k.endswith("/joints")]
+        finally:
+            alice.close()
+            sim.close()
+
+
+def test_paper_tests_a_and_b_in_a_secure_world(secure, alice_owns_arm):
+    """Router, sim, compute and viewer with their own logins; alice runs Test A, bob Test B (trimmed)."""
+    import user_peer
+    from user_peer.scenarios import test_a, test_b
+
+    alice, arm = alice_owns_arm
+    arm.release()
+    procs = secure.procs
+    compute = secure.start("compute", "compute", "--stream", "arm1:target")
+    rrd = secure.dir.parent / "secure.rrd"
+    viewer = secure.start("viewer", "view", "--save", str(rrd))
+    watcher = secure.fabric("viewer", kind="viewer", peer_id="watch4")
+    # the compute peer's token comes before its services: its "serving" line says they are declared
+    wait_until(lambda: "serving" in procs.output(compute) and watcher.live_peers("viewer"), timeout=90, what="compute and viewer",
+               seen=lambda: (procs.output(compute)[-1500:], procs.output(viewer)[-1500:]))
+    bob = user_peer.connect(world=secure.world, zenoh_config=str(secure.files["bob"]), timeout=10.0)
+    results = {}
+    try:
+        tb = threading.Thread(target=lambda: results.setdefault("b", test_b(bob, tol=0.35)), daemon=True)
+        ta = threading.Thread(target=lambda: results.setdefault("a", test_a(alice, points=3)), daemon=True)
+        ta.start()
+        tb.start()
+        ta.join(240)
+        tb.join(240)
+    finally:
+        bob.close()
+    a, b = results.get("a"), results.get("b")
+    assert a is not None and a.ok, a and a.lines
+    assert b is not None and b.ok, b and b.lines
+    assert a.user == "alice" and b.user == "bob"
+    assert any("took arm1 over where it was" in line for line in b.lines), b.lines
+    assert procs.output(compute) is not None and compute.poll() is None and viewer.poll() is None
+    assert math.isfinite(b.figures["goal_error_m"])
