@@ -221,15 +221,16 @@ def test_doc_block_runs(block: Block, docs_world):
 @pytest.mark.slow
 def test_classroom_notebook_runs(docs_world, monkeypatch):
     """examples/classroom.ipynb, executed by nbclient in a real kernel against the same world: join, own
-    the arm, IK move, plot the joints, drive, map, plan, follow. The inline Rerun view is switched off
-    (it needs a browser); its code path is the one ``tests/user_peer/test_notebook_view.py`` checks."""
+    the arm, IK move, plot the joints, drive, map, plan, follow. Where the notebook extra is installed
+    the inline Rerun view is created too (a widget output; no browser is needed to create it); without
+    it the notebook says how to get it. ``tests/user_peer/test_notebook_view.py`` checks its drawing."""
     import nbformat
     from nbclient import NotebookClient
 
     env, scratch, _ = docs_world
     for k in ("ROBOFABRIC_CONNECT", "ROBOFABRIC_WORLD", "PATH"):
         monkeypatch.setenv(k, env[k])  # the kernel inherits this process's environment
-    monkeypatch.setenv("ROBOFABRIC_NOTEBOOK_VIEW", "0")
+    monkeypatch.delenv("ROBOFABRIC_NOTEBOOK_VIEW", raising=False)
     monkeypatch.delenv("MPLBACKEND", raising=False)  # the kernel's inline backend draws into the outputs
     nb = nbformat.read(ROOT / "examples" / "classroom.ipynb", as_version=4)
     assert not any(c.get("outputs") for c in nb.cells if c.cell_type == "code"), "commit the notebook without outputs"
@@ -240,3 +241,10 @@ def test_classroom_notebook_runs(docs_world, monkeypatch):
     assert len(images) == 2, "the joints plot and the map with the path"
     text = "\n".join(str(o.get("text", "")) + str(o.get("data", {}).get("text/plain", "")) for o in outputs)
     assert "owned by you" in text and "poses planned; stopped at" in text, text[-2000:]
+    from user_peer import notebook
+
+    widgets = [o for o in outputs if "application/vnd.jupyter.widget-view+json" in o.get("data", {})]
+    if notebook.available():
+        assert widgets, "the inline Rerun view was not created"
+    else:
+        assert not widgets and "pip install 'robofabric[notebook]'" in text
