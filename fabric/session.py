@@ -324,6 +324,7 @@ class Fabric:
             kwargs["consolidation"] = zenoh.ConsolidationMode.NONE
         replies: list[Reply] = []
         errors: list[str] = []
+        t0 = time.monotonic()
         for rep in self.session.get(selector, **kwargs):
             if rep.ok is not None:
                 try:
@@ -342,7 +343,11 @@ class Fabric:
         if not replies:
             if errors:
                 raise ServiceError(errors[0], key=selector)
-            raise ServiceError(f"no reply on {selector} within {timeout:.1f} s (is a peer serving it?)", key=selector)
+            # say what happened: zenoh ends a query at once when nobody serves the key, and waits the whole
+            # time limit only for a server that is there but silent (issue 11: "within 5 s" after 0 s misleads)
+            waited = time.monotonic() - t0
+            why = "nobody serves it" if waited < 0.5 * timeout else "no server answered in time"
+            raise ServiceError(f"no reply on {selector} after {waited:.1f} s of {timeout:.1f} s: {why}", key=selector)
         return replies
 
     def call(self, selector: str, request: Any = None, *, timeout: float = 2.0, expected: Any = None) -> Any:

@@ -65,7 +65,7 @@ class OwnershipLink:
             out = client.request(obj, timeout=timeout, wait=wait) if op == "request" else client.release(obj, timeout=timeout)
         except ServiceError as exc:
             if exc.reason.startswith("no reply"):
-                raise Timeout(f"no ownership answer for {obj} within {timeout:.1f} s (is the sim peer, its authority, running?)") from None
+                raise Timeout(f"no ownership answer for {obj}: {exc.reason} (is the sim peer, its authority, running?)") from None
             raise NotOwner(f"{obj}: {exc.reason}") from None
         return out
 

@@ -66,3 +66,14 @@ def test_waiting_without_data_times_out_with_a_reason(alice):
     arm = Arm(alice, RobotEntry("arm9", "meca500", "arm", ("j",), (-1.0,), (1.0,)))
     with pytest.raises(user_peer.Timeout, match="no joints from arm9"):
         arm.wait_for("joints", timeout=0.3)
+
+
+def test_a_service_nobody_serves_says_so_without_claiming_a_wait(alice):
+    """zenoh ends a query at once when nobody serves the key: the message says so, and how long it took."""
+    import re
+
+    arm = Arm(alice, RobotEntry("arm1", "meca500", "arm", tuple(f"joint_{i}" for i in range(1, 7)), (-1.0,) * 6, (1.0,) * 6))
+    with pytest.raises(user_peer.Timeout) as exc:
+        arm.ik([3.2, 0.0, 1.0])
+    m = re.search(r"no reply on \S+ after ([0-9.]+) s of 2.0 s: nobody serves it", exc.value.reason)
+    assert m and float(m.group(1)) < 1.0, exc.value.reason
