@@ -165,6 +165,12 @@ class World:
         # registered after the session's own closer, so it runs first: robots are released, then the session
         # closes; a script that never calls close() exits and other users see a release, not a lease expiry
         self._cancel_exit = at_exit(self.close)
+        # the sim peers serving the world, from liveliness: one that dies is seen at once, one cut off or
+        # frozen within the transport lease; "world gone" is reported here (log, callbacks, world_alive)
+        self._sims: set[str] = set()
+        self._world_callbacks: list[Callable[[bool, str], None]] = []
+        self._world_cond = threading.Condition()
+        self.fabric.watch_peers(self._on_sim, kind="sim")
 
     def ask_kinematics(self, call: Callable[[str | None], Any]) -> Any:
         """``call(peer)`` with the compute peer for the next kinematics query: the chosen one, the next in
@@ -224,6 +230,70 @@ class World:
         robots = "; ".join(r.status() for r in self._robots.values())
         known = "" if self._info is not None else ", world not seen yet"
         return f"<World {self.name!r} as {self.user!r}{known}" + (f": {robots}>" if robots else ">")
+
+    # ------------------------------------------------------------------ is the world there
+
+    @property
+    def world_alive(self) -> bool:
+        """True while at least one sim peer of this world is alive (its liveliness token is there)."""
+        with self._world_cond:
+            return bool(self._sims)
+
+    def sims(self) -> list[str]:
+        """Ids of the live sim peers of this world."""
+        with self._world_cond:
+            return sorted(self._sims)
+
+    def on_world(self, callback: Callable[[bool, str], None]) -> None:
+        """``callback(alive, why)`` each time the world goes (its last sim peer left) or comes back."""
+        with self._world_cond:
+            self._world_callbacks.append(callback)
+
+    def wait_world(self, *, alive: bool = True, timeout: float | None = None) -> bool:
+        """Block until the world is there (``alive``) or gone; False if that did not happen within ``timeout``.
+
+        There means serving: a restarted sim's token arrives before its services (the world description,
+        ownership), and a request sent in between finds nobody to answer it; so this also waits for the
+        world description, which the sim serves once its ownership authority is up."""
+        deadline = time.monotonic() + (self.join_timeout if timeout is None else timeout)
+        with self._world_cond:
+            while bool(self._sims) != alive:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._world_cond.wait(min(left, 0.1))
+        if not alive:
+            return True
+        while True:
+            left = deadline - time.monotonic()
+            try:
+                self._info = services.world_info(self.fabric, timeout=max(0.05, min(left, 2.0)))
+                return True
+            except ServiceError:
+                if left <= 0:
+                    return False
+                time.sleep(min(0.1, max(0.0, left)))
+
+    def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
+        with self._world_cond:
+            was = bool(self._sims)
+            (self._sims.add if alive else self._sims.discard)(peer_id)
+            now = bool(self._sims)
+            callbacks = list(self._world_callbacks) if now != was else []
+            self._world_cond.notify_all()
+        if now == was:
+            return
+        why = f"sim peer {peer_id} is back" if now else f"world {self.name!r} gone: its sim peer {peer_id} left (died, or cut off)"
+        if now:
+            self._info = None  # a restarted sim may describe a different world: ask again
+            log.info("world %s is back: sim peer %s", self.name, peer_id)
+        else:
+            log.warning("%s", why)
+        for cb in callbacks:
+            try:
+                cb(now, why)
+            except Exception:
+                log.exception("world callback failed")
 
     # ------------------------------------------------------------------ what is there
 
