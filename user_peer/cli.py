@@ -23,7 +23,11 @@ def _split_connect(connect: list[str] | None) -> tuple[list[str], list[str]]:
 
 def view(
     spawn: Annotated[bool, typer.Option("--spawn", help="Start a local Rerun viewer and stream to it.")] = False,
-    serve_web: Annotated[bool, typer.Option("--serve-web", help="Serve a web viewer (open http://HOST:WEB_PORT).")] = False,
+    serve_web: Annotated[bool, typer.Option("--serve-web", help="Serve a web viewer; prints the URL to open from any machine.")] = False,
+    advertise: Annotated[
+        Optional[str],
+        typer.Option("--advertise", help="With --serve-web: this machine's name or address as other machines reach it (default: its host name)."),
+    ] = None,
     save: Annotated[Optional[Path], typer.Option("--save", help="Write the view to FILE.rrd.")] = None,
     duration: Annotated[Optional[float], typer.Option("--duration", help="Stop after S seconds (default: until Ctrl-C).")] = None,
     web_port: Annotated[int, typer.Option(help="Port of the web viewer (--serve-web).")] = 9090,
@@ -51,8 +55,10 @@ def view(
         raise UserError(f"--save {save}: the file must end in .rrd")
     opts = ViewerOptions(
         spawn=spawn, connect_url=rerun_urls[0] if rerun_urls else None, serve_web=serve_web,
-        web_port=web_port, grpc_port=grpc_port, save=save, max_hz=max_hz,
+        web_port=web_port, grpc_port=grpc_port, save=save, max_hz=max_hz, advertise=advertise,
     )
+    if advertise is not None and not serve_web:
+        raise UserError("--advertise goes with --serve-web")
     if not (spawn or serve_web or save or rerun_urls):
         raise UserError("nowhere to show the world: give --spawn, --connect rerun+http://HOST:PORT/proxy, --serve-web or --save FILE.rrd")
     cfg = make_config(world, zenoh_eps, listen, profile, zenoh_config)
@@ -65,6 +71,12 @@ def view(
         raise join_error(cfg, exc) from None
     with viewer:
         print(f"viewer on world {cfg.world!r}" + (f", saving to {save}" if save else ""), flush=True)
+        if serve_web:
+            from user_peer.viewer import default_advertise, web_urls
+
+            page, grpc = web_urls(advertise or default_advertise(), web_port, grpc_port)
+            print(f"web viewer: open {page}", flush=True)
+            print(f"  (from any machine that reaches this one; TCP ports {web_port} (page) and {grpc_port} (data {grpc}) must be open)", flush=True)
         n = viewer.run(stop, duration)
     print(f"viewer: {n} messages logged, {viewer.dropped} dropped, {viewer.logger.skipped} thinned; robots: {', '.join(sorted(viewer.logger.robots)) or 'none'}", flush=True)
 

@@ -28,7 +28,7 @@ from user_peer.rerun_log import WorldLogger, blueprint
 
 log = logging.getLogger("robofabric.viewer")
 
-__all__ = ["ViewerOptions", "Viewer", "make_recording", "query_world_info", "log_scene"]
+__all__ = ["ViewerOptions", "Viewer", "make_recording", "query_world_info", "log_scene", "web_urls", "default_advertise"]
 
 APP_ID = "robofabric"
 
@@ -41,9 +41,31 @@ class ViewerOptions:
     connect_url: str | None = None
     serve_web: bool = False
     web_port: int = 9090
+    advertise: str | None = None  # the host name or address other machines reach this one by (--serve-web)
     grpc_port: int = 9876
     save: Path | None = None
     max_hz: float = 30.0
+
+
+def default_advertise() -> str:
+    """The name other machines are most likely to reach this one by: its host name."""
+    import socket
+
+    return socket.gethostname() or "localhost"
+
+
+def web_urls(host: str, web_port: int, grpc_port: int) -> tuple[str, str]:
+    """(page URL for a browser, gRPC URL the page streams from), both naming ``host``.
+
+    The web viewer Rerun serves does not know where the data is: the page must be told with
+    ``?url=``. A page opened on another machine with a ``127.0.0.1`` data URL would look for the
+    data on that other machine, which is why ``host`` must be this machine's name as others see it.
+    """
+    from urllib.parse import quote
+
+    h = f"[{host}]" if ":" in host and not host.startswith("[") else host  # IPv6 literals
+    grpc = f"rerun+http://{h}:{grpc_port}/proxy"
+    return f"http://{h}:{web_port}/?url={quote(grpc, safe='')}", grpc
 
 
 def make_recording(opts: ViewerOptions, *, recording_id: str | None = None) -> rr.RecordingStream:
@@ -59,13 +81,19 @@ def make_recording(opts: ViewerOptions, *, recording_id: str | None = None) -> r
     if opts.connect_url:
         sinks.append(rr.GrpcSink(opts.connect_url))
     if opts.serve_web:
-        server = rr.GrpcServerSink(port=opts.grpc_port)
+        # All interfaces, and the web page's origin on any host name allowed to stream (Rerun's default
+        # CORS list holds only localhost and rerun.io, so a page from http://HOST:WEB_PORT would be refused).
+        server = rr.GrpcServerSink(
+            bind_ip="0.0.0.0", port=opts.grpc_port,
+            cors_allow_origin=[f"http://*:{opts.web_port}", f"https://*:{opts.web_port}"],
+        )
         sinks.append(server)
     if not sinks:
         raise ValueError("nowhere to show the world: give --spawn, --connect URL, --serve-web or --save FILE.rrd")
     rec.set_sinks(*sinks, default_blueprint=blueprint())
     if opts.serve_web:
-        rr.serve_web_viewer(web_port=opts.web_port, open_browser=False, connect_to=f"rerun+http://127.0.0.1:{opts.grpc_port}/proxy")
+        _page, grpc = web_urls(opts.advertise or default_advertise(), opts.web_port, opts.grpc_port)
+        rr.serve_web_viewer(web_port=opts.web_port, open_browser=False, connect_to=grpc)
     return rec
 
 
