@@ -248,6 +248,7 @@ def replay(
     ] = None,
     remap_world: Annotated[Optional[str], typer.Option("--remap-world", help="Publish into this world instead of the recorded one.")] = None,
     wait: Annotated[float, typer.Option(help="Wait up to S seconds for a subscriber before starting.")] = 2.0,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
     world: World = None,
     connect: Connect = None,
     listen: Listen = None,
@@ -289,10 +290,37 @@ def replay(
         )
         rp = Replayer(fab, plan, loop=loop, wait_for_subscribers=wait)
         try:
-            stats = rp.run(stop)
+            stats = _run_with_progress(rp, plan.messages, loop, stop, quiet)
         finally:
             rp.close()
+    if rp.error is not None:
+        raise UserError(f"replay of {file} failed: {rp.error}")
     print(stats.line(), flush=True)
+
+
+def _run_with_progress(rp, total: int, loop: bool, stop, quiet: bool):
+    """Run the replayer on its thread with a rich progress bar on stderr (messages sent of the recording's)."""
+    rp.start()
+    if quiet:
+        while not rp.done:
+            if stop.wait(0.2):
+                return rp.stop()
+        return rp.stats
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    with Progress(
+        TextColumn("replay"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
+        console=Console(stderr=True),
+    ) as bar:
+        task = bar.add_task("replay", total=None if loop else total)
+        while not rp.done:
+            if stop.wait(0.2):
+                bar.update(task, completed=rp.stats.messages)
+                return rp.stop()
+            bar.update(task, completed=rp.stats.messages)
+        bar.update(task, completed=rp.stats.messages)
+    return rp.stats
 
 
 def _check_expr(given: str, full: str) -> str:
