@@ -1,0 +1,142 @@
+"""Scenario 5, clock skew: the sim's host runs 5 s behind alice's, then 5 s ahead (libfaketime).
+
+``move_joints(wait=True)``, ``move_to``, ``follow``, refusals, ages (Eq. 8) and the viewer must behave
+as with no skew: freshness is judged by local arrival, never by comparing two machines' wall clocks.
+The same checks run first with no skew, as the reference, in the same lab.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from typing import Iterator
+
+import pytest
+
+from fabric.lab import Lab, LabProcess, faketime_library
+from fabric.testing import wait_until
+
+pytestmark = [pytest.mark.lab, pytest.mark.slow]
+
+JOIN = """
+import time, numpy as np, user_peer
+from fabric import keys
+from fabric.messages import Command, JointTarget, Path
+from user_peer import scenarios
+from user_peer.errors import NotOwner
+w = user_peer.connect(world="demo", connect=["{router}"], user="{user}", timeout=10.0)
+"""
+
+# one run of every check; returns the figures the test asserts on
+CHECKS = """
+assert w.wait_world(timeout=120), "no sim"
+arm, base = w.robot("arm1"), w.robot("base1")
+arm.wait_for("joints", timeout=30); base.wait_for("pose", timeout=30)
+arm.request(); base.request()
+out = {}
+n = len(arm.entry.joint_names)
+moves = []
+for q in (np.full(n, 0.3), np.zeros(n)):
+    t = time.monotonic(); got = arm.move_joints(q, timeout=20); moves.append(time.monotonic() - t)
+    out.setdefault("joint_error", 0.0); out["joint_error"] = max(out["joint_error"], float(np.max(np.abs(got - q))))
+out["move_joints_s"] = moves
+target = scenarios._arm_reach_center(w, arm) + np.array([0.0, 0.03, 0.0])
+t = time.monotonic(); arm.move_to(target, timeout=20); out["move_to_s"] = time.monotonic() - t
+mark = w.latest.mark()
+pose = w.latest.wait_for(lambda: w.latest.get_after(keys.robot_pose(w.name, "arm1"), mark), 5.0)
+out["flange_error_mm"] = float(np.linalg.norm(np.asarray(pose.position) - target)) * 1000
+out["joints_age_s"] = arm.age("joints")
+js = arm.joint_state
+out["sim_clock_ahead_s"] = (js.header.wall_ns - time.time_ns()) / 1e9  # the skew is real: the sim's stamps vs our clock
+x0, y0, th0 = base.xy_theta
+xs = x0 + np.linspace(0.0, 0.6, 7) * np.cos(th0); ys = y0 + np.linspace(0.0, 0.6, 7) * np.sin(th0)
+t = time.monotonic(); end = base.follow(Path(xs, ys, np.full(7, th0)), tol=0.25, timeout=60); out["follow_s"] = time.monotonic() - t
+out["follow_error_m"] = float(np.hypot(end[0] - xs[-1], end[1] - ys[-1]))
+base.release()
+out
+"""
+
+REFUSE = """
+m = w.event_mark()
+k = keys.robot_cmd(w.name, "arm1", "joints", "bob")
+t = time.monotonic()
+w.fabric.publish(k, Command("bob", 0, JointTarget(np.zeros(6), 1.0), w.fabric.header(k)))
+w.latest.wait_for(lambda: w.rejections("arm1", m), 10.0)
+[time.monotonic() - t, [e.reason for e in w.rejections("arm1", m)]]
+"""
+
+
+class Classroom:
+    def __init__(self, lab: Lab) -> None:
+        self.lab = lab
+        self.router_host = lab.add_host("router")
+        self.router_ep = self.router_host.endpoint()
+        self.router = self.router_host.start(["router", "--listen", self.router_ep], name="router")
+        wait_until(lambda: "listening" in self.router.output() or not self.router.alive(), timeout=120, what="router")
+        self.sim_host = lab.add_host("sim")
+        self.compute = lab.add_host("compute").start(["compute", "--connect", self.router_ep], name="compute")
+        self.viewer_host = lab.add_host("viewer")
+        self.sim: LabProcess | None = None
+        self.offset: str | None = None
+        self.start_sim(None)  # users join a world that is there (connect() waits for it)
+        self.users = {name: lab.add_host(name).python(name=name) for name in ("alice", "bob")}
+        for name, py in self.users.items():
+            py.call(JOIN.format(router=self.router_ep, user=name), timeout=120)
+
+    def start_sim(self, offset: str | None) -> None:
+        if self.sim is not None and self.sim.alive() and offset == self.offset:
+            return
+        if self.sim is not None:
+            self.sim.kill()
+            for py in self.users.values():
+                assert py.call("w.wait_world(alive=False, timeout=30)", timeout=60)
+        self.sim = self.sim_host.start(["sim", "--scene", "combined", "--connect", self.router_ep], name="sim", clock_offset=offset)
+        self.offset = offset
+
+
+@pytest.fixture(scope="module")
+def room(lab_ok, tmp_path_factory) -> Iterator[Classroom]:
+    if faketime_library() is None:
+        pytest.skip("Debian's faketime is not installed (.ci/run installs it)")
+    with Lab(log_dir=tmp_path_factory.mktemp("lab-skew")) as lab:
+        yield Classroom(lab)
+
+
+REFERENCE: dict = {}
+
+
+@pytest.mark.parametrize("offset", [None, "-5", "+5"], ids=["no-skew", "sim-5s-behind", "sim-5s-ahead"])
+def test_sim_clock_skew_changes_nothing(room: Classroom, offset):
+    room.start_sim(offset)
+    alice, bob = room.users["alice"], room.users["bob"]
+    skew = room.sim_host.run(["python3", "-c", "import time; print(time.time())"], clock_offset=offset).stdout
+    assert skew.strip(), "could not read the sim host's clock"
+    viewer = room.viewer_host.start(["view", "--save", str(room.lab.log_dir / f"view{offset}.rrd"), "--duration", "8",
+                                     "--connect", room.router_ep], name="view")
+    figures = alice.call(CHECKS, timeout=240)
+    wait_until(lambda: bob.call("w.world_alive"), timeout=30, what="bob sees the sim")
+    refused_after, reasons = bob.call(REFUSE, timeout=60)
+    alice.call("arm.release(); None")
+    viewer.popen.wait(timeout=120)
+    view_out = viewer.output()
+    print(f"clock {offset or '0'}: {figures}; bob refused after {refused_after:.2f} s; viewer: {view_out.strip().splitlines()[-1]}")
+
+    want = float(offset or 0)
+    assert abs(figures["sim_clock_ahead_s"] - want) < 1.0, f"the sim's clock is {figures['sim_clock_ahead_s']:.2f} s off ours, not {want}"
+    assert figures["joint_error"] <= 1e-3, figures  # the state that ended the wait really was at the target
+    assert figures["flange_error_mm"] <= 5.0, figures
+    assert figures["follow_error_m"] <= 0.25, figures
+    assert figures["joints_age_s"] is not None and figures["joints_age_s"] < 1.0, figures
+    assert reasons and refused_after < 5.0, (refused_after, reasons)
+    assert viewer.popen.returncode == 0, view_out[-2000:]
+    m = re.search(r"viewer: (\d+) messages logged.*robots: ([\w, ]+)", view_out)
+    assert m and int(m.group(1)) > 0 and {"arm1", "base1"} <= set(m.group(2).replace(" ", "").split(",")), view_out[-1000:]
+    if offset is None:
+        REFERENCE.update(figures)
+        return
+    # as with no skew: a wait that compared the sim's clock with ours would take 5 s longer (or end early)
+    assert REFERENCE, "the no-skew reference did not run"
+    for i, (s, ref) in enumerate(zip(figures["move_joints_s"], REFERENCE["move_joints_s"])):
+        assert s <= ref + 2.0, f"move {i}: {s:.2f} s with the sim's clock {offset} s off, {ref:.2f} s without"
+    assert figures["move_to_s"] <= REFERENCE["move_to_s"] + 2.0, (figures, REFERENCE)
+    assert figures["follow_s"] <= REFERENCE["follow_s"] + 3.0, (figures, REFERENCE)
