@@ -351,12 +351,30 @@ def _ext_default(obj: Any) -> Any:
     raise TypeError(f"cannot encode {type(obj).__name__}")
 
 
+def _optional_tail(cls: type) -> tuple[tuple[str, Any], ...]:
+    """The trailing fields a class marks as added later (``OPTIONAL_TAIL``), with their defaults.
+
+    Older peers and recordings lack them: they decode to the default. On the way out a trailing run
+    of such fields still at their default is left off, so a message that does not use a new field
+    keeps the wire form (and size) it had before the field existed."""
+    n = int(getattr(cls, "OPTIONAL_TAIL", 0) or 0)
+    if n <= 0:
+        return ()
+    fields = dataclasses.fields(cls)[-n:]
+    return tuple((f.name, f.default) for f in fields)
+
+
 def _to_list(msg: Any) -> list:
     cls = type(msg)
     name = _NAME_OF.get(cls)
     if name is None:
         raise TypeError(f"{cls.__name__} is not a registered message type")
-    return [name, *(spec.dump(getattr(msg, key)) for key, spec in cls.SPEC.items())]
+    out = [name, *(spec.dump(getattr(msg, key)) for key, spec in cls.SPEC.items())]
+    for key, default in reversed(_optional_tail(cls)):
+        if getattr(msg, key) != default:
+            break
+        out.pop()
+    return out
 
 
 def encode(msg: Any) -> bytes:
@@ -406,8 +424,10 @@ def _from_list(m: list, where: str) -> Any:
     if cls is None:
         raise DecodeError(f"{where}: unknown message type {quote(name, 64)}")
     spec: dict = cls.SPEC
-    if len(m) - 1 != len(spec):
-        raise DecodeError(f"{name}: expected {len(spec)} fields, got {len(m) - 1}")
+    optional = _optional_tail(cls)
+    if not len(spec) - len(optional) <= len(m) - 1 <= len(spec):
+        want = f"{len(spec)}" if not optional else f"{len(spec) - len(optional)} to {len(spec)}"
+        raise DecodeError(f"{name}: expected {want} fields, got {len(m) - 1}")
     kwargs = {}
     for (key, fspec), value in zip(spec.items(), m[1:]):
         kwargs[key] = fspec.check(value, f"{name}.{key}")

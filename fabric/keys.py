@@ -14,7 +14,7 @@ PREFIX = "rf"
 
 ROBOT_STREAMS = ("joints", "pose", "scan", "sonar", "path", "ik")
 COMMANDS = ("joints", "twist", "path", "stop", "reset")
-SERVICES = ("ik", "fk", "jacobian", "plan", "map", "world")
+SERVICES = ("ik", "fk", "jacobian", "plan", "map", "world", "state")
 PEER_KINDS = ("sim", "compute", "user", "viewer", "recorder", "router", "tool")
 
 _FORBIDDEN = set("/*$#? \t\n\r")

@@ -39,18 +39,26 @@ def _ro(a: Any, dtype: Any) -> np.ndarray:
 
 @dataclass(frozen=True, slots=True)
 class Header:
-    """Stamps every message: sim time (s), wall time (ns), per-stream sequence, source peer id."""
+    """Stamps every message: sim time (s), wall time (ns), per-stream sequence, source peer id, and
+    ``term``: the authority epoch of the sim that wrote it (issue 16; 0 = no authority, e.g. a user).
+
+    ``term`` is the fencing token of replicated authority: a standby that takes a world over raises
+    it, and consumers ignore robot state and ownership records with a lower one
+    (:mod:`fabric.fencing`). It is an optional trailing field: a header of term 0 has the wire form
+    it had before terms existed, and old recordings decode with term 0."""
 
     stamp: float = 0.0
     wall_ns: int = 0
     seq: int = 0
     source: str = ""
+    term: int = 0
 
-    SPEC: ClassVar[dict] = {"stamp": F(), "wall_ns": I(lo=0), "seq": I(lo=0), "source": S()}
+    SPEC: ClassVar[dict] = {"stamp": F(), "wall_ns": I(lo=0), "seq": I(lo=0), "source": S(), "term": I(lo=0)}
+    OPTIONAL_TAIL: ClassVar[int] = 1
 
     @classmethod
-    def now(cls, *, stamp: float = 0.0, seq: int = 0, source: str = "") -> "Header":
-        return cls(stamp=stamp, wall_ns=time.time_ns(), seq=seq, source=source)
+    def now(cls, *, stamp: float = 0.0, seq: int = 0, source: str = "", term: int = 0) -> "Header":
+        return cls(stamp=stamp, wall_ns=time.time_ns(), seq=seq, source=source, term=term)
 
 
 register(Header, "Header")

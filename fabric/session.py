@@ -32,6 +32,7 @@ from fabric import keys
 from fabric.codec import DecodeError, decode, encode, load_plugins
 from fabric.config import FabricConfig, default_peer_id
 from fabric.exit import at_exit
+from fabric.fencing import Fence, is_authority_key
 from fabric.limits import RateLimiter, clip
 from fabric.messages import Event, Header
 
@@ -101,6 +102,10 @@ class Fabric:
         self.kind = kind
         self.peer_id = keys.validate_id(peer_id or default_peer_id(kind), what="peer id")
         self.counters: Counter[str] = Counter()
+        self.term = 0
+        """The authority epoch this peer stamps on what it publishes (a sim authority's; 0 for everyone else)."""
+        self.fence = Fence()
+        """The highest authority epoch heard on authority keys; :meth:`subscribe` drops state below it."""
         self._seq: dict[str, int] = {}
         self._lock = threading.Lock()
         self.report_interval = REPORT_INTERVAL
@@ -149,7 +154,7 @@ class Fabric:
             seq = self._seq.get(key, 0)
             if seq or len(self._seq) < MAX_KEYS:
                 self._seq[key] = seq + 1
-        return Header(stamp=float(stamp), wall_ns=time.time_ns(), seq=seq, source=self.peer_id)
+        return Header(stamp=float(stamp), wall_ns=time.time_ns(), seq=seq, source=self.peer_id, term=self.term)
 
     def publish(self, key: str, msg: Any) -> int:
         """Encode and put ``msg`` on ``key``; returns the payload size in bytes.
@@ -244,6 +249,8 @@ class Fabric:
             except DecodeError as exc:
                 self.bad_payload(key, exc, where=key_expr)
                 return
+            if not self._believe(key, msg):
+                return
             try:
                 callback(key, msg)
             except Exception:
@@ -251,6 +258,16 @@ class Fabric:
                 log.exception("callback for %s failed", key)
 
         return self.subscribe_raw(key_expr, on_sample, history=history)
+
+    def _believe(self, key: str, msg: Any) -> bool:
+        """False for authority state stamped with a lower authority epoch than one already heard (issue 16)."""
+        header = getattr(msg, "header", None)
+        if header is None or not is_authority_key(key):
+            return True
+        if self.fence.check(header.term).accept:
+            return True
+        self.counters["stale_authority"] += 1
+        return False
 
     def subscribe_raw(self, key_expr: str, callback: Callable[[zenoh.Sample], None], *, history: bool = False) -> Any:
         """``callback(sample)`` for every sample, undecoded; ``history`` as in :meth:`subscribe`."""
@@ -331,6 +348,9 @@ class Fabric:
                     msg = decode(rep.ok.payload.to_bytes(), expected)
                 except DecodeError as exc:
                     errors.append(f"bad reply: {exc}")
+                    continue
+                if not self._believe(str(rep.ok.key_expr), msg):
+                    errors.append(f"stale authority epoch on {rep.ok.key_expr}")
                     continue
                 src = getattr(getattr(msg, "header", None), "source", "")
                 replies.append(Reply(str(rep.ok.key_expr), msg, src))

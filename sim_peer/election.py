@@ -1,0 +1,109 @@
+"""Who is a world's sim authority: a pure election and fencing core (issue 16).
+
+One primary serves the world; any number of standbys follow it. Each sim peer runs this state
+machine on what it observes, events in, (new state, effects) out, no clock and no zenoh, so the
+same code runs in the peer and in hypothesis property tests.
+
+Rules:
+
+- The authority epoch (``term``) only grows. A primary stamps its term on everything it writes.
+- A standby follows the source of the highest term it has heard (``Heard``).
+- When the primary's liveliness token goes (``Peers`` without it), the standby with the lowest id
+  among the live standbys takes over with ``term + 1``; the others wait. If that one dies too, the
+  next ``Peers`` makes the next lowest take over. Deterministic: every standby that sees the same
+  set of live peers agrees on one candidate.
+- A primary that hears a higher term steps down and becomes a standby of its source; one that hears
+  its own term from another peer (two standbys disagreed about who was alive) keeps authority only
+  if its id is the lower: the pair converges on one authority without talking.
+- State with a lower term than the highest heard is ignored (effect ``ignore``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Iterable
+
+__all__ = ["Role", "Election", "Heard", "Peers", "Effect", "candidate", "start", "step", "PRIMARY", "STANDBY"]
+
+PRIMARY = "primary"
+STANDBY = "standby"
+Role = str
+
+
+@dataclass(frozen=True, slots=True)
+class Election:
+    """What one sim peer believes: its role, the highest term heard (its own when primary), who leads."""
+
+    me: str
+    role: Role
+    term: int = 0
+    leader: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class Heard:
+    """Authority state from ``source`` stamped with ``term``."""
+
+    source: str
+    term: int
+
+
+@dataclass(frozen=True, slots=True)
+class Peers:
+    """The sim peers whose liveliness tokens are alive now (this one included or not: it is added)."""
+
+    live: frozenset[str]
+
+
+Event = Heard | Peers
+
+
+@dataclass(frozen=True, slots=True)
+class Effect:
+    """``take_over`` (serve the world with ``term``), ``step_down`` (stop serving, follow ``leader``),
+    ``follow`` (a new leader to follow), ``ignore`` (stale state: do not use it)."""
+
+    kind: str
+    term: int = 0
+    leader: str = ""
+
+
+def candidate(standbys: Iterable[str]) -> str | None:
+    """The standby that takes over: the lowest id (plain string order), None when there is none."""
+    return min(standbys, default=None)
+
+
+def start(me: str, *, standby: bool, term: int = 0) -> Election:
+    """A primary starts at ``term`` (>= 1 on the wire: 0 means 'no authority'); a standby knows nothing yet."""
+    if standby:
+        return Election(me, STANDBY, 0, "")
+    return Election(me, PRIMARY, max(1, term), me)
+
+
+def step(s: Election, ev: Event) -> tuple[Election, list[Effect]]:
+    """Apply one observation."""
+    if isinstance(ev, Heard):
+        if ev.source == s.me:
+            return s, []
+        if ev.term < s.term:
+            return s, [Effect("ignore", ev.term, ev.source)]
+        if s.role == PRIMARY:
+            if ev.term > s.term or (ev.term == s.term and ev.source < s.me):
+                s = replace(s, role=STANDBY, term=ev.term, leader=ev.source)
+                return s, [Effect("step_down", ev.term, ev.source)]
+            return s, [Effect("ignore", ev.term, ev.source)]  # same term, higher id: it steps down, not us
+        if ev.term > s.term or ev.source != s.leader:
+            if ev.term == s.term and s.leader and ev.source > s.leader:
+                return s, [Effect("ignore", ev.term, ev.source)]  # the same tie, seen from a standby
+            s = replace(s, term=ev.term, leader=ev.source)
+            return s, [Effect("follow", ev.term, ev.source)]
+        return s, []
+    if isinstance(ev, Peers):
+        if s.role == PRIMARY or not s.leader or s.leader in ev.live:
+            return s, []  # nothing to take over: we lead, follow nobody yet, or the leader lives
+        standbys = set(ev.live) | {s.me}
+        if candidate(standbys) != s.me:
+            return s, []
+        s = replace(s, role=PRIMARY, term=s.term + 1, leader=s.me)
+        return s, [Effect("take_over", s.term, s.me)]
+    raise TypeError(f"not an election event: {ev!r}")

@@ -1,0 +1,88 @@
+"""The authority epoch on the wire (Header.term, an optional trailing field) and the consumers' fence."""
+
+from __future__ import annotations
+
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as hs
+
+from fabric import keys
+from fabric.codec import DecodeError, decode, encode
+from fabric.fencing import Fence, is_authority_key
+from fabric.messages import Header, JointState, OwnershipRecord
+from fabric.testing import wait_until
+
+
+def test_a_header_of_term_zero_keeps_the_old_wire_form_and_old_payloads_decode():
+    js = JointState(("a",), [1.0], [0.0], Header(1.0, 5, 7, "sim"))
+    raw = msgpack.unpackb(encode(js), raw=False, strict_map_key=False, ext_hook=lambda c, d: d)
+    assert raw[-1] == ["Header", 1.0, 5, 7, "sim"]  # no term on the wire
+    old = msgpack.packb(["Header", 1.0, 5, 7, "sim"])
+    assert decode(old) == Header(1.0, 5, 7, "sim", 0)
+    h = Header(1.0, 5, 7, "sim", term=3)
+    assert decode(encode(h)) == h
+    with pytest.raises(DecodeError, match="expected 4 to 5 fields"):
+        decode(msgpack.packb(["Header", 1.0, 5]))
+    with pytest.raises(DecodeError, match="Header.term"):
+        decode(msgpack.packb(["Header", 1.0, 5, 7, "sim", -1]))
+
+
+@settings(max_examples=100, deadline=None)
+@given(hs.integers(0, 2**40), hs.text(max_size=10), hs.integers(0, 2**31))
+def test_term_round_trips_in_nested_records(term, source, seq):
+    rec = OwnershipRecord("arm1", owner="alice", epoch=4, header=Header(0.5, 1, seq, source, term))
+    assert decode(encode(rec)).header.term == term
+
+
+@pytest.mark.parametrize("key,auth", [
+    ("rf/w/robot/arm1/joints", True), ("rf/w/robot/base1/scan", True), ("rf/w/robot/base1/path", False),
+    ("rf/w/own/arm1", True), ("rf/w/own/arm1/by/alice", False), ("rf/w/srv/world", True), ("rf/w/srv/state", True),
+    ("rf/w/srv/ik", False), ("rf/w/robot/arm1/cmd/joints/by/alice", False), ("rf/w/object/ball/pose/by/bob", False),
+    ("nonsense", False),
+])
+def test_authority_keys(key, auth):
+    assert is_authority_key(key) is auth
+
+
+@settings(max_examples=200, deadline=None)
+@given(hs.lists(hs.integers(0, 8), max_size=50))
+def test_fence_accepts_exactly_the_terms_at_or_above_the_highest_so_far(terms):
+    f = Fence()
+    top = 0
+    for t in terms:
+        v = f.check(t)
+        assert v.accept == (t >= top) and v.raised == (t > top)
+        top = max(top, t)
+        assert f.term == top
+
+
+def test_subscribers_drop_authority_state_of_a_lower_term(world, connect):
+    pub, sub = connect("sim", "old"), connect("tool", "watch")
+    got: list[JointState] = []
+    key = keys.robot_joints(world, "arm1")
+    sub.subscribe(key, lambda k, m: got.append(m), expected=JointState)
+    wait_until(lambda: _put(pub, key, 1) or len(got) > 0, timeout=20, what="first joints")
+    pub.term = 2
+    wait_until(lambda: _put(pub, key, 2) or any(m.header.term == 2 for m in got), timeout=20, what="term 2")
+    n = len(got)
+    pub.term = 1
+    for _ in range(5):
+        _put(pub, key, 1)
+    pub.term = 2
+    wait_until(lambda: _put(pub, key, 2) or len(got) > n + 2, timeout=20, what="more term-2 joints")
+    assert all(m.header.term == 2 for m in got[n:]), [m.header.term for m in got[n:]]
+    assert sub.counters["stale_authority"] >= 1
+    # user keys are never fenced: a command at term 0 still arrives
+    cmds: list = []
+    ck = keys.robot_path(world, "base1")
+    from fabric.messages import Path
+
+    sub.subscribe(ck, lambda k, m: cmds.append(m), expected=Path)
+    user = connect("user", "alice")
+    wait_until(lambda: user.publish(ck, Path([0.0], [0.0], [0.0], header=user.header(ck))) and cmds, timeout=20, what="a path")
+
+
+def _put(fab, key, term):
+    fab.publish(key, JointState(("a",), [float(term)], [0.0], fab.header(key)))
+    return False

@@ -1,0 +1,140 @@
+"""Property tests of the pure election and fencing core (sim_peer.election) over random histories:
+peers die, freeze and come back, heartbeats and liveliness views arrive late or not at all."""
+
+from __future__ import annotations
+
+from hypothesis import given, settings, strategies as hs
+
+from sim_peer import election as el
+
+IDS = ["sim-a", "sim-b", "sim-c", "sim-d"]
+
+
+def test_candidate_is_the_lowest_id():
+    assert el.candidate(["sim-c", "sim-a", "sim-b"]) == "sim-a"
+    assert el.candidate([]) is None
+
+
+def test_standby_takes_over_when_the_primary_goes_and_steps_down_for_a_higher_term():
+    p = el.start("p", standby=False)
+    s = el.start("s", standby=True)
+    s, eff = el.step(s, el.Heard("p", p.term))
+    assert eff == [el.Effect("follow", 1, "p")] and s.leader == "p"
+    s, eff = el.step(s, el.Peers(frozenset({"p", "s"})))
+    assert eff == [] and s.role == el.STANDBY
+    s, eff = el.step(s, el.Peers(frozenset({"s"})))
+    assert eff == [el.Effect("take_over", 2, "s")] and s.role == el.PRIMARY
+    # the old primary comes back (SIGCONT): it hears term 2 and steps down
+    p, eff = el.step(p, el.Heard("s", 2))
+    assert eff == [el.Effect("step_down", 2, "s")] and p.role == el.STANDBY and p.term == 2
+    # the new primary ignores what the old one said before it noticed
+    s, eff = el.step(s, el.Heard("p", 1))
+    assert eff == [el.Effect("ignore", 1, "p")] and s.role == el.PRIMARY
+
+
+def test_only_the_lowest_live_standby_takes_over():
+    states = {i: el.step(el.start(i, standby=True), el.Heard("p", 3))[0] for i in ("s2", "s1", "s3")}
+    live = frozenset({"s1", "s2", "s3"})
+    takers = [i for i, s in states.items() if el.step(s, el.Peers(live))[1]]
+    assert takers == ["s1"]
+    # s1 died with the primary: s2 is next
+    takers = [i for i, s in states.items() if i != "s1" and el.step(s, el.Peers(live - {"s1"}))[1]]
+    assert takers == ["s2"]
+
+
+def test_same_term_tie_goes_to_the_lower_id():
+    a = el.Election("a", el.PRIMARY, 5, "a")
+    b = el.Election("b", el.PRIMARY, 5, "b")
+    a2, ea = el.step(a, el.Heard("b", 5))
+    b2, eb = el.step(b, el.Heard("a", 5))
+    assert a2.role == el.PRIMARY and ea[0].kind == "ignore"
+    assert b2.role == el.STANDBY and eb == [el.Effect("step_down", 5, "a")]
+
+
+def histories():
+    peer = hs.sampled_from(IDS)
+    return hs.lists(
+        hs.one_of(
+            hs.tuples(hs.just("kill"), peer),
+            hs.tuples(hs.just("freeze"), peer),
+            hs.tuples(hs.just("thaw"), peer),
+            hs.tuples(hs.just("beat"), peer, peer),  # a primary's state reaches one peer
+            hs.tuples(hs.just("view"), peer),  # a peer's liveliness view catches up
+        ),
+        max_size=80,
+    )
+
+
+def _deliver(states, who, ev, log):
+    before = states[who]
+    states[who], effects = el.step(before, ev)
+    assert states[who].term >= before.term, (before, ev, states[who])  # terms never go back
+    for e in effects:
+        if e.kind == "take_over":
+            log.append((who, e.term))
+    return effects
+
+
+def _settle(states, alive, log):
+    """Every live peer hears every live primary and sees who is alive, until nothing changes."""
+    for _ in range(4 * len(IDS) + 4):
+        before = dict(states)
+        for who in sorted(alive):
+            _deliver(states, who, el.Peers(frozenset(alive)), log)
+        for src in sorted(alive):
+            if states[src].role == el.PRIMARY:
+                for dst in sorted(alive):
+                    _deliver(states, dst, el.Heard(src, states[src].term), log)
+        if states == before:
+            return
+    raise AssertionError(f"no fixpoint: {states}")
+
+
+@settings(max_examples=300, deadline=None)
+@given(histories())
+def test_any_history_converges_to_one_authority_with_the_highest_term(history):
+    first = IDS[0]
+    states = {i: el.start(i, standby=i != first) for i in IDS}
+    log: list[tuple[str, int]] = []
+    for i in IDS[1:]:
+        _deliver(states, i, el.Heard(first, states[first].term), log)
+    alive, frozen, dead = set(IDS), set(), set()
+    for raw in history:
+        kind = raw[0]
+        if kind == "kill":
+            alive.discard(raw[1]), frozen.discard(raw[1]), dead.add(raw[1])
+        elif kind == "freeze" and raw[1] in alive:
+            alive.discard(raw[1]), frozen.add(raw[1])
+        elif kind == "thaw" and raw[1] in frozen:
+            frozen.discard(raw[1]), alive.add(raw[1])
+        elif kind == "beat" and raw[1] in alive and raw[2] in alive and states[raw[1]].role == el.PRIMARY:
+            _deliver(states, raw[2], el.Heard(raw[1], states[raw[1]].term), log)
+        elif kind == "view" and raw[1] in alive:
+            _deliver(states, raw[1], el.Peers(frozenset(alive)), log)
+    if not alive:
+        return
+    highest = max(s.term for s in states.values())
+    _settle(states, alive, log)
+    leaders = [i for i in alive if states[i].role == el.PRIMARY]
+    assert len(leaders) == 1, (leaders, states)
+    lead = states[leaders[0]]
+    assert lead.term >= highest
+    assert all(states[i].leader == lead.me and states[i].term == lead.term for i in alive), states
+    # one take-over per term among the peers that saw the same live set: never two live winners of one term
+    winners = {}
+    for who, term in log:
+        winners.setdefault(term, set()).add(who)
+    assert lead.me in winners.get(lead.term, {lead.me})
+
+
+@settings(max_examples=200, deadline=None)
+@given(hs.lists(hs.tuples(hs.sampled_from(IDS), hs.integers(0, 6)), max_size=40))
+def test_a_standby_never_follows_a_lower_term(heard):
+    s = el.start("sim-z", standby=True)
+    top = 0
+    for src, term in heard:
+        s, eff = el.step(s, el.Heard(src, term))
+        if term < top:
+            assert eff == [el.Effect("ignore", term, src)]
+        top = max(top, term)
+        assert s.term == top and s.role == el.STANDBY
