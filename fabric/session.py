@@ -106,6 +106,13 @@ class Fabric:
         """The authority epoch this peer stamps on what it publishes (a sim authority's; 0 for everyone else)."""
         self.fence = Fence()
         """The highest authority epoch heard on authority keys; :meth:`subscribe` drops state below it."""
+        self.muzzled = False
+        """While set, nothing is published and no query is answered (an authority unsure it still is one)."""
+        self.freeze_gap: float | None = None
+        """When set: a gap longer than this (s) between two publications means this process was frozen
+        (SIGSTOP, a stalled VM); the fabric muzzles itself and calls :attr:`on_freeze` in a new thread."""
+        self.on_freeze: Callable[[float], None] | None = None
+        self._last_put = 0.0
         self._seq: dict[str, int] = {}
         self._lock = threading.Lock()
         self.report_interval = REPORT_INTERVAL
@@ -161,6 +168,9 @@ class Fabric:
 
         On a latched key (:func:`fabric.keys.is_latched`: scene objects, maps, paths) the publisher
         keeps its last sample for subscribers that join later and ask for history."""
+        if self.muzzled:
+            self.counters["muzzled"] += 1
+            return 0
         payload = encode(msg)
         pub = self._publishers.get(key)
         if pub is None:
@@ -172,9 +182,28 @@ class Fabric:
             pub = declare_publisher(self.session, key)
             self._publishers[key] = pub
             self._resources.append(pub)
-        pub.put(payload)
+        if self.freeze_gap is not None and self._watch_freeze():
+            self.counters["muzzled"] += 1
+            return 0
+        pub.put(payload)  # right after the check: a thread stopped between the two sends one stale sample
         self.counters["published"] += 1
         return len(payload)
+
+    def _watch_freeze(self) -> bool:
+        """True when muzzled (now or before); detects a freeze from the gap since the last publication."""
+        now = time.monotonic()
+        with self._lock:
+            gap = now - self._last_put if self._last_put else 0.0
+            self._last_put = now
+            frozen = self.freeze_gap is not None and gap > self.freeze_gap and not self.muzzled
+            if frozen:
+                self.muzzled = True
+        if frozen:
+            self.counters["freezes"] += 1
+            log.warning("%.1f s without publishing (frozen?): muzzled until the authority is confirmed", gap)
+            if self.on_freeze is not None:
+                threading.Thread(target=self.on_freeze, args=(gap,), name="fabric-freeze", daemon=True).start()
+        return self.muzzled
 
     def put_raw(self, key: str, payload: bytes) -> None:
         """Put bytes as they are (replay, tools); nothing is checked."""
@@ -299,6 +328,8 @@ class Fabric:
         def on_query(query: zenoh.Query) -> None:
             key = str(query.key_expr)
             self.counters["queries"] += 1
+            if self.muzzled:
+                return  # no answer at all: the asker times out or hears the real authority
             try:
                 request = None
                 if query.payload is not None and len(query.payload.to_bytes()) > 0:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import threading
+from types import MappingProxyType
 from typing import Any
 
 from fabric import keys
@@ -18,6 +19,7 @@ from fabric.messages import Command, Event, OwnershipRecord
 from fabric.rate import Clock, MonotonicClock
 from fabric.session import Fabric, ServiceError
 
+from ownership import replica
 from ownership import state as st
 from ownership.messages import OwnReply, OwnRequest
 
@@ -38,11 +40,22 @@ class Authority:
         grace_s: float = 10.0,
         clock: Clock | None = None,
         tick_s: float | None = None,
+        restored: tuple[Any, Any] | None = None,
     ) -> None:
+        """``restored``: ``(records, users)`` as :meth:`export_state` gave them on the authority this one
+        replaces (a standby taking over): owners, epochs, queues and leases carry on (issue 16)."""
         self.fabric = fabric
         self.clock = clock or MonotonicClock()
         self._lock = threading.RLock()
-        self._state = st.initial(objects, lease_s=lease_s, grace_s=grace_s, authority=fabric.peer_id)
+        if restored is None:
+            self._state = st.initial(objects, lease_s=lease_s, grace_s=grace_s, authority=fabric.peer_id)
+        else:
+            self._state = replica.restore(restored[0], restored[1], self.clock.now(), lease_s=lease_s, grace_s=grace_s,
+                                          authority=fabric.peer_id)
+            missing = {o: p for o, p in objects.items() if o not in self._state.records}
+            if missing:
+                fresh = st.initial(missing, lease_s=lease_s, grace_s=grace_s, authority=fabric.peer_id)
+                self._state = dataclasses.replace(self._state, records=MappingProxyType({**self._state.records, **fresh.records}))
         self._tick_s = tick_s if tick_s is not None else min(0.02, lease_s / 10)
         self._stop = threading.Event()
         self.counters = {"requests": 0, "rejected": 0, "handovers": 0}
@@ -59,6 +72,8 @@ class Authority:
                          expected=OwnRequest)
             for obj in objects
         ]
+        self._unconfirmed: set[str] = set(self._state.live) if restored is not None else set()
+        self._confirm_by = self.clock.now() + lease_s + 1.0
         self._watch = fabric.watch_peers(self._on_peer, kind="user")
         self._thread = threading.Thread(target=self._run, name="ownership-tick", daemon=True)
         self._thread.start()
@@ -68,6 +83,22 @@ class Authority:
     def records(self) -> dict[str, OwnershipRecord]:
         with self._lock:
             return dict(self._state.records)
+
+    def export_state(self) -> tuple[tuple[OwnershipRecord, ...], dict[str, Any]]:
+        """The whole ownership state for a standby, times relative to now (:func:`ownership.replica.export`)."""
+        with self._lock:
+            return replica.export(self._state, self.clock.now())
+
+    def _forget_absent_users(self) -> None:
+        """After a take-over: users the old authority counted live whose token has not shown up here
+        within a lease (plus a second for the liveliness history) left while no authority listened;
+        they leave now (grace keeps their place). The others just carry on."""
+        with self._lock:
+            gone = sorted(self._unconfirmed)
+            self._unconfirmed.clear()
+        now = self.clock.now()
+        for user in gone:
+            self._apply(st.Leave(user, now))
 
     def _apply(self, ev: st.Event) -> list[st.Effect]:
         with self._lock:
@@ -101,10 +132,14 @@ class Authority:
 
     def _on_peer(self, kind: str, peer_id: str, alive: bool) -> None:
         now = self.clock.now()
+        with self._lock:
+            self._unconfirmed.discard(peer_id)
         self._apply(st.Join(peer_id, now) if alive else st.Leave(peer_id, now))
 
     def _run(self) -> None:
         while not self._stop.wait(self._tick_s):
+            if self._unconfirmed and self.clock.now() > self._confirm_by:
+                self._forget_absent_users()
             try:
                 self._apply(st.Tick(self.clock.now()))
             except Exception:
@@ -147,8 +182,7 @@ class Authority:
         outcome = {"handover": "granted", "restored": "granted"}.get(eff.kind, eff.kind)
         if outcome not in ("granted", "denied", "queued", "released", "renewed"):
             outcome = "denied"
-        with self._lock:
-            rec = self._state.records[obj]
+        rec = self._serve_record(obj)  # stamped now, with this authority's term
         return OwnReply(outcome, eff.reason, eff.position, rec, header=self.fabric.header(keys.own(self.fabric.world, obj)))
 
     # ------------------------------------------------------------------ CommandGate

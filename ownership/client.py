@@ -93,6 +93,7 @@ class OwnershipClient:
         self._held: set[str] = set()  # granted to us by the authority's replies; renewed until it says otherwise
         self._sims: set[str] = set()
         self._authority: str | None = None
+        self._term = 0  # the authority epoch of the authority followed (issue 16)
         fabric.watch_peers(self._on_sim, kind="sim")
         try:
             self._sims.update(pid for _, pid in fabric.live_peers("sim", timeout=min(timeout, 1.0)))
@@ -126,7 +127,11 @@ class OwnershipClient:
         """Why ``rec`` is not the authority's word (None when it is); call with the lock held."""
         if rec.authority not in self._sims:
             return "foreign"  # not a live sim peer: not an authority at all
-        if self._authority is not None and rec.authority != self._authority and self._authority in self._sims:
+        term = rec.header.term
+        if not self.fabric.fence.check(term).accept:
+            return "stale"  # a lower authority epoch: a primary that lost the world and has not noticed yet
+        newer = term > self._term  # a standby took the world over: it speaks for every object now
+        if not newer and self._authority is not None and rec.authority != self._authority and self._authority in self._sims:
             return "foreign"  # another sim speaking for the object of the one we follow
         old = self.records.get(rec.object)
         if old is not None and old.authority != rec.authority:
@@ -146,6 +151,7 @@ class OwnershipClient:
                 self.counters[f"records_{why}"] += 1
                 return
             self._authority = rec.authority
+            self._term = max(self._term, rec.header.term)
             self.records[rec.object] = rec
             self._seen_at[rec.object] = now
             callbacks = list(self._callbacks)

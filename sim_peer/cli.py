@@ -15,8 +15,10 @@ from fabric.rate import parse_rates
 log = logging.getLogger("robofabric.sim")
 
 
-def make_gate(fabric, world, ownership: bool) -> CommandGate:
-    """The ownership Authority when asked for and installed, else an OpenGate (with a warning if asked for)."""
+def make_gate(fabric, world, ownership: bool, restored=None) -> CommandGate:
+    """The ownership Authority when asked for and installed, else an OpenGate (with a warning if asked for).
+
+    ``restored``: the ownership state a standby carries over when it takes the world (issue 16)."""
     if not ownership:
         return OpenGate()
     try:
@@ -26,6 +28,8 @@ def make_gate(fabric, world, ownership: bool) -> CommandGate:
         return OpenGate()
     objects = {rid: "exclusive" for rid in world.robots}
     objects.update({obj: "scene" for obj in world.objects})
+    if restored is not None:
+        return Authority(fabric, objects=objects, restored=restored)
     return Authority(fabric, objects=objects)
 
 
@@ -48,6 +52,9 @@ def sim(
     ] = None,
     bumper: Annotated[bool, typer.Option("--bumper/--no-bumper", help="Stop bases before obstacles ahead.")] = True,
     ownership: Annotated[bool, typer.Option("--ownership/--no-ownership", help="Gate commands by ownership (needs the ownership package).")] = True,
+    standby: Annotated[
+        bool, typer.Option("--standby", help="Follow the world's primary sim and take the world over (no reset) if it goes; see docs/sim.md.")
+    ] = False,
     list_: Annotated[bool, typer.Option("--list", help="List the known robot types and scenes, then exit.")] = False,
     world: World = None,
     connect: Connect = None,
@@ -75,17 +82,23 @@ def sim(
         raise UserError(f"--duration must be positive, got {duration}")
     if noise is not None and not noise >= 0:
         raise UserError(f"--noise must be >= 0, got {noise}")
-    try:
-        sim_world = SimWorld(
+    def build():
+        return SimWorld(
             scene, robot or [], scene_robots=scene_robots, seed=seed, noise_std=noise, lidar_rays=lidar_rays, lidar_fov_deg=lidar_fov,
             bumper=bumper, twist_timeout=twist_timeout,
         )
+
+    try:
+        sim_world = build()
     except WorldError as exc:
         raise UserError(str(exc)) from None
     if not sim_world.robots:
         raise UserError(f"scene {sim_world.scene.name!r} has no robots and none were added with --robot")
     cfg = make_config(world, connect, listen, profile, zenoh_config)
     stop = shutdown_event()
+    if standby or not replicated_off():
+        _run_replicated(cfg, peer_id, sim_world, build, ownership, rates, pace, stop, duration, standby)
+        return
     fab = open_fabric(cfg, "sim", peer_id)
     with fab:
         gate = make_gate(fab, sim_world, ownership)
@@ -106,6 +119,47 @@ def sim(
             f"({c['accepted']} accepted, {c['rejected']} rejected, {c['clamped']} clamped)",
             flush=True,
         )
+
+
+def replicated_off() -> bool:
+    """ROBOFABRIC_SIM_SINGLE=1 runs the sim without the replication layer (no srv/state, term 0)."""
+    import os
+
+    return os.environ.get("ROBOFABRIC_SIM_SINGLE", "") not in ("", "0")
+
+
+def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, stop, duration, standby) -> None:
+    """Primary or standby through :func:`sim_peer.standby.run_replicated` (issue 16)."""
+    from fabric.config import default_peer_id
+    from sim_peer.standby import run_replicated
+
+    pid = peer_id or default_peer_id("sim")  # one id across sessions: a primary that steps down stays itself
+    worlds = [first_world]
+
+    def make_world():
+        return worlds.pop() if worlds else build()
+
+    def announce(text: str) -> None:
+        print(text, flush=True)
+
+    robots = ", ".join(f"{rid} ({r.desc.name})" for rid, r in first_world.robots.items())
+    pace_text = "max speed" if pace is None else ("real time" if pace == 1 else f"{pace:g}x real time")
+    print(f"sim {pid}{' (standby)' if standby else ''}: scene {first_world.scene.name}, robots {robots}; world {cfg.world}, "
+          f"{pace_text}; Ctrl-C to stop", flush=True)
+    host = run_replicated(
+        lambda: open_fabric(cfg, "sim", pid), make_world, lambda fab, w, restored: make_gate(fab, w, ownership, restored), stop,
+        standby=standby, rates=rates, speed=pace, duration=duration, announce=announce,
+    )
+    peer = host.peer if host is not None else None
+    if peer is None:
+        print(f"sim {pid} stopped as a standby", flush=True)
+        return
+    c = peer.counters
+    print(
+        f"sim stopped at t={peer.world.time:.3f} s: {c['steps']} steps, {c['commands']} commands "
+        f"({c['accepted']} accepted, {c['rejected']} rejected, {c['clamped']} clamped)",
+        flush=True,
+    )
 
 
 def _print_catalog() -> None:

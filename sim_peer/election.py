@@ -8,7 +8,7 @@ Rules:
 
 - The authority epoch (``term``) only grows. A primary stamps its term on everything it writes.
 - A standby follows the source of the highest term it has heard (``Heard``).
-- When the primary's liveliness token goes (``Peers`` without it), the standby with the lowest id
+- When the primary's liveliness token goes (``Peers`` without it, after one with it), the standby with the lowest id
   among the live standbys takes over with ``term + 1``; the others wait. If that one dies too, the
   next ``Peers`` makes the next lowest take over. Deterministic: every standby that sees the same
   set of live peers agrees on one candidate.
@@ -38,6 +38,7 @@ class Election:
     role: Role
     term: int = 0
     leader: str = ""
+    leader_seen: bool = False  # the leader's liveliness token was seen alive since we follow it
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,12 +96,16 @@ def step(s: Election, ev: Event) -> tuple[Election, list[Effect]]:
         if ev.term > s.term or ev.source != s.leader:
             if ev.term == s.term and s.leader and ev.source > s.leader:
                 return s, [Effect("ignore", ev.term, ev.source)]  # the same tie, seen from a standby
-            s = replace(s, term=ev.term, leader=ev.source)
+            s = replace(s, term=ev.term, leader=ev.source, leader_seen=s.leader_seen and ev.source == s.leader)
             return s, [Effect("follow", ev.term, ev.source)]
         return s, []
     if isinstance(ev, Peers):
-        if s.role == PRIMARY or not s.leader or s.leader in ev.live:
-            return s, []  # nothing to take over: we lead, follow nobody yet, or the leader lives
+        if s.role == PRIMARY or not s.leader:
+            return s, []  # nothing to take over: we lead, or follow nobody yet
+        if s.leader in ev.live:
+            return (s if s.leader_seen else replace(s, leader_seen=True)), []
+        if not s.leader_seen:
+            return s, []  # a token we never saw cannot have gone (liveliness history still arriving)
         standbys = set(ev.live) | {s.me}
         if candidate(standbys) != s.me:
             return s, []

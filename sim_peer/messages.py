@@ -13,8 +13,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from fabric.codec import Arr, DecodeError, F, Map, Msg, S, Strs, register
-from fabric.messages import Header
+from fabric.codec import Arr, DecodeError, F, I, Map, Msg, S, Strs, register
+from fabric.messages import MAX_PATH_POINTS, Header, OwnershipRecord
 
 
 def _ro(a: Any) -> np.ndarray:
@@ -156,4 +156,71 @@ class WorldInfo:
 for _cls in (RobotInfo, ObjectInfo, WorldInfo):
     register(_cls)
 
-__all__ = ["RobotInfo", "ObjectInfo", "WorldInfo"]
+__all__ = ["RobotInfo", "ObjectInfo", "WorldInfo", "RobotState", "WorldState"]
+
+
+# ---------------------------------------------------------------------- replicated authority (issue 16)
+
+@dataclass(frozen=True, slots=True)
+class RobotState:
+    """One robot's controller state. Arm: ``q``/``dq``/``target`` are joints. Base: ``q`` is (x, y, yaw),
+    ``dq`` (v, omega), ``target`` the commanded (v, omega), ``path`` the follower's (N, 2) points (empty:
+    none). ``extra`` holds the scalars: speed scale, wheel angles, follower progress, counters."""
+
+    id: str
+    kind: str
+    q: np.ndarray
+    dq: np.ndarray
+    target: np.ndarray
+    path: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    extra: dict = field(default_factory=dict)
+
+    SPEC: ClassVar[dict] = {
+        "id": S(nonempty=True),
+        "kind": S(choices=("arm", "mobile")),
+        "q": Arr(np.float64, ndim=1, max_elems=256),
+        "dq": Arr(np.float64, ndim=1, max_elems=256),
+        "target": Arr(np.float64, ndim=1, max_elems=256),
+        "path": Arr(np.float64, ndim=2, max_elems=2 * MAX_PATH_POINTS),
+        "extra": Map(),
+    }
+
+    def __post_init__(self) -> None:
+        for name in ("q", "dq", "target"):
+            object.__setattr__(self, name, _ro(getattr(self, name)))
+        object.__setattr__(self, "path", _ro(np.asarray(self.path, dtype=np.float64).reshape(-1, 2)))
+
+
+@dataclass(frozen=True, slots=True)
+class WorldState:
+    """Everything a standby needs to carry a world on: sim time, robots, objects, ownership, sequences.
+
+    ``records`` carry ``lease_expiry`` as seconds *remaining* and ``users`` the ownership users' state
+    (:func:`ownership.replica.export`); ``seqs`` the primary's next sequence number per key."""
+
+    time: float
+    steps: int
+    robots: tuple[RobotState, ...]
+    objects: tuple[ObjectInfo, ...]
+    records: tuple[OwnershipRecord, ...] = ()
+    users: dict = field(default_factory=dict)
+    seqs: dict = field(default_factory=dict)
+    header: Header = field(default_factory=Header)
+
+    SPEC: ClassVar[dict] = {
+        "time": F(lo=0.0),
+        "steps": I(lo=0),
+        "robots": Msgs(RobotState),
+        "objects": Msgs(ObjectInfo),
+        "records": Msgs(OwnershipRecord),
+        "users": Map(max_items=4096),
+        "seqs": Map(max_items=4096),
+        "header": Msg(Header),
+    }
+
+    def robot(self, rid: str) -> RobotState | None:
+        return next((r for r in self.robots if r.id == rid), None)
+
+
+register(RobotState)
+register(WorldState)

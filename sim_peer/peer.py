@@ -79,8 +79,9 @@ class SimPeer:
         self.lock = threading.RLock()
         self.counters: Counter[str] = Counter()
         self._moving = {rid: False for rid in world.robots}
-        self._paths_done = {rid: 0 for rid in world.robots}
-        self._expired = {rid: 0 for rid in world.robots}
+        # counters as the world has them (a world restored by a standby has followed paths before)
+        self._paths_done = {rid: getattr(r.ctrl, "paths_done", 0) for rid, r in world.robots.items()}
+        self._expired = {rid: getattr(r.ctrl, "twists_expired", 0) for rid, r in world.robots.items()}
         self._loops: list[RateLoop] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None

@@ -34,12 +34,22 @@ def test_standby_takes_over_when_the_primary_goes_and_steps_down_for_a_higher_te
 
 def test_only_the_lowest_live_standby_takes_over():
     states = {i: el.step(el.start(i, standby=True), el.Heard("p", 3))[0] for i in ("s2", "s1", "s3")}
+    states = {i: el.step(s, el.Peers(frozenset({"p", "s1", "s2", "s3"})))[0] for i, s in states.items()}
     live = frozenset({"s1", "s2", "s3"})
     takers = [i for i, s in states.items() if el.step(s, el.Peers(live))[1]]
     assert takers == ["s1"]
     # s1 died with the primary: s2 is next
     takers = [i for i, s in states.items() if i != "s1" and el.step(s, el.Peers(live - {"s1"}))[1]]
     assert takers == ["s2"]
+
+
+def test_a_token_never_seen_alive_cannot_go():
+    s = el.step(el.start("s", standby=True), el.Heard("p", 1))[0]
+    s, eff = el.step(s, el.Peers(frozenset({"s"})))  # liveliness history still arriving: p not in it yet
+    assert eff == [] and s.role == el.STANDBY
+    s, eff = el.step(s, el.Peers(frozenset({"s", "p"})))
+    s, eff = el.step(s, el.Peers(frozenset({"s"})))
+    assert eff == [el.Effect("take_over", 2, "s")]
 
 
 def test_same_term_tie_goes_to_the_lower_id():
@@ -98,6 +108,7 @@ def test_any_history_converges_to_one_authority_with_the_highest_term(history):
     log: list[tuple[str, int]] = []
     for i in IDS[1:]:
         _deliver(states, i, el.Heard(first, states[first].term), log)
+        _deliver(states, i, el.Peers(frozenset(IDS)), log)
     alive, frozen, dead = set(IDS), set(), set()
     for raw in history:
         kind = raw[0]

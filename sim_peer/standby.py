@@ -1,0 +1,308 @@
+"""Replicated authority (issue 16): a sim peer as a world's primary or as a standby that takes it over.
+
+:class:`Host` runs one fabric session in one role at a time, driven by the pure election core
+(:mod:`sim_peer.election`):
+
+- **primary**: a :class:`~sim_peer.peer.SimPeer` with its ownership gate, every message stamped with
+  the authority epoch (``fabric.term``), and the whole world state served on ``rf/{world}/srv/state``
+  (:class:`~sim_peer.messages.WorldState`). It listens to the joints streams: a higher term from
+  another sim makes it step down. A publication gap longer than the transport lease means it was
+  frozen: it muzzles itself (publishes and answers nothing), asks ``srv/state`` who is authority now,
+  and steps down if someone holds a higher term, else carries on.
+- **standby**: builds the same scene, publishes nothing users act on (no streams, no records, no
+  services), polls ``srv/state`` and keeps the newest joints and poses from the streams. When the
+  leader's liveliness token goes and it is the lowest live standby, it takes over: term + 1, the
+  world restored to the last state it saw (no reset), the ownership records and users carried over,
+  sequence numbers continued, then streams, ``srv/world`` and the ownership queryables served again.
+
+A host that stepped down returns from :meth:`Host.run`; the caller opens a fresh session and runs a
+standby (``run_replicated``), so nothing the primary declared survives the change of role.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Any, Callable
+
+from fabric import keys
+from fabric.messages import JointState, Pose
+from fabric.session import Fabric, ServiceError
+from sim_peer import election as el
+from sim_peer import replica
+from sim_peer.messages import WorldState
+from sim_peer.peer import SimPeer
+from sim_peer.world import World
+
+log = logging.getLogger("robofabric.sim")
+
+__all__ = ["Host", "run_replicated", "POLL_S"]
+
+POLL_S = 0.05
+"""How often a standby asks the primary for the whole state (the streams fill in between)."""
+
+GateFactory = Callable[[Fabric, World, Any], Any]
+
+
+class Host:
+    """One session of one sim peer in one role; ``run`` returns when stopped or after stepping down."""
+
+    def __init__(
+        self,
+        fabric: Fabric,
+        world: World,
+        make_gate: GateFactory,
+        *,
+        standby: bool,
+        rates: dict[str, float] | None = None,
+        speed: float | None = 1.0,
+        term: int = 0,
+        leader: str = "",
+        poll_s: float = POLL_S,
+        freeze_gap: float | None = None,
+        announce: Callable[[str], None] | None = None,
+    ) -> None:
+        self.fabric = fabric
+        self.world = world
+        self.make_gate = make_gate
+        self.rates = rates
+        self.speed = speed
+        self.poll_s = poll_s
+        self.announce = announce or (lambda text: log.info("%s", text))
+        me = fabric.peer_id
+        if standby:
+            self.election = el.Election(me, el.STANDBY, term, leader)
+        else:
+            self.election = el.start(me, standby=False, term=term + 1)
+        self.peer: SimPeer | None = None
+        self.gate: Any = None
+        self.snapshot: WorldState | None = None
+        self.joints: dict[str, JointState] = {}
+        self.poses: dict[str, Pose] = {}
+        self.live: set[str] = set()
+        self.takeovers: list[dict[str, Any]] = []
+        self._lock = threading.RLock()
+        self._stepped_down = threading.Event()
+        self._stop = threading.Event()
+        self._poller: threading.Thread | None = None
+        self.freeze_gap = freeze_gap if freeze_gap is not None else fabric.config.lease_ms / 1000.0
+
+    # ------------------------------------------------------------------ lifecycle
+
+    @property
+    def role(self) -> str:
+        return self.election.role
+
+    def open(self, duration: float | None = None) -> "Host":
+        f, w = self.fabric, self.fabric.world
+        self._duration = duration
+        f.serve(keys.srv(w, "state"), self._on_state_query)
+        f.subscribe(keys.robot_stream_all(w, "joints"), self._on_joints, expected=JointState)
+        f.subscribe(keys.robot_stream_all(w, "pose"), self._on_pose, expected=Pose)
+        f.watch_peers(self._on_sim, kind="sim")
+        if self.role == el.PRIMARY:
+            self._serve(None)
+        else:
+            self._poller = threading.Thread(target=self._poll, name="standby-poll", daemon=True)
+            self._poller.start()
+            self.announce(f"standby {f.peer_id}: following {self.election.leader or 'the primary'} (term {self.election.term})")
+        return self
+
+    def run(self, stop: threading.Event, duration: float | None = None) -> str:
+        """Serve or follow until ``stop`` or a step-down; returns the role it ended in."""
+        self.open(duration)
+        try:
+            while not stop.is_set() and not self._stepped_down.is_set():
+                stop.wait(0.1)
+                physics = self.peer._thread if self.peer is not None else None
+                if physics is not None and not physics.is_alive():
+                    break  # --duration reached
+        finally:
+            self.close()
+        return self.role
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._poller is not None:
+            self._poller.join(2.0)
+        if self.peer is not None:
+            self.peer.close()
+        close = getattr(self.gate, "close", None)
+        if callable(close):
+            close()
+
+    # ------------------------------------------------------------------ primary
+
+    def _serve(self, state: WorldState | None) -> None:
+        """Serve the world as its authority with the current term, from ``state`` when taking over."""
+        f = self.fabric
+        restored = None
+        with self._lock:
+            if state is not None:
+                replica.restore(self.world, state)
+                src = self._followed(state)
+                at = {rid: state.time for rid in self.world.robots}
+                for rid, js in self.joints.items():
+                    if js.header.stamp >= state.time and js.header.source == src and rid in at:
+                        replica.overlay_joints(self.world, rid, js)
+                        at[rid] = js.header.stamp
+                for rid, p in self.poses.items():
+                    if p.header.stamp >= state.time and p.header.source == src and rid in at:
+                        replica.overlay_pose(self.world, rid, p)
+                        at[rid] = p.header.stamp
+                newest = max([state.time, *at.values()])
+                replica.advance(self.world, {rid: newest - t for rid, t in at.items()})
+                self.world.data.time = newest  # sim time goes on from the newest state heard, never back
+                seqs = {str(k): int(v) for k, v in state.seqs.items()}
+                for d in (self.joints, self.poses):
+                    for rid, m in d.items():
+                        k = keys.robot_joints(f.world, rid) if d is self.joints else keys.robot_pose(f.world, rid)
+                        seqs[k] = max(seqs.get(k, 0), m.header.seq + 1)
+                with f._lock:
+                    for k, v in seqs.items():
+                        f._seq[k] = max(f._seq.get(k, 0), v)
+                restored = (state.records, state.users)
+            f.term = self.election.term
+            f.fence.raise_to(f.term)
+        f.freeze_gap = self.freeze_gap
+        f.on_freeze = self._on_freeze
+        self.gate = self.make_gate(f, self.world, restored)
+        self.peer = SimPeer(f, self.world, gate=self.gate, rates=self.rates, speed=self.speed)
+        self.peer.start(self._duration)
+
+    def _on_state_query(self, key: str, request: Any) -> WorldState:
+        peer = self.peer
+        if self.role != el.PRIMARY or peer is None:
+            raise ServiceError(f"{self.fabric.peer_id} is a standby (term {self.election.term})")
+        export = getattr(self.gate, "export_state", None)
+        records, users = export() if callable(export) else ((), {})
+        with peer.lock:
+            t, steps, robots, objects = replica.capture(self.world)
+        with self.fabric._lock:
+            seqs = {k: v for k, v in self.fabric._seq.items() if k.startswith(keys.world_root(self.fabric.world))}
+        return WorldState(t, steps, robots, objects, tuple(records), dict(users), seqs,
+                          header=self.fabric.header(keys.srv(self.fabric.world, "state"), stamp=t))
+
+    def _on_freeze(self, gap: float) -> None:
+        """Frozen for ``gap`` s (longer than the lease): the others dropped our token and a standby may hold
+        the world now. Stay muzzled until connected again, then ask: step down if a higher term answers,
+        carry on if no other sim is there or none holds a higher term."""
+        f = self.fabric
+        deadline = time.monotonic() + max(30.0, 10 * self.freeze_gap)
+        while time.monotonic() < deadline and not self._stop.is_set() and self.role == el.PRIMARY:
+            info = f.session.info
+            if not (list(info.routers_zid()) or list(info.peers_zid())):
+                time.sleep(0.1)  # not connected yet: nobody to ask, nobody to tell
+                continue
+            others = [pid for _, pid in f.live_peers("sim", timeout=1.0) if pid != f.peer_id]
+            replies = []
+            if others:
+                try:
+                    replies = f.query(keys.srv(f.world, "state"), timeout=1.0, expected=WorldState, all_replies=True)
+                except ServiceError:
+                    replies = []  # standbys answer with a refusal: no other authority
+            for rep in replies:
+                self._heard(rep.message.header.source, rep.message.header.term)
+            break
+        if self.role == el.PRIMARY:
+            f.muzzled = False
+            self.announce(f"sim {f.peer_id}: frozen {gap:.1f} s, still the authority (term {f.term})")
+
+    # ------------------------------------------------------------------ standby
+
+    def _followed(self, state: WorldState) -> str:
+        return state.header.source
+
+    def _poll(self) -> None:
+        f = self.fabric
+        while not self._stop.wait(self.poll_s):
+            if self.role != el.STANDBY:
+                return
+            try:
+                replies = f.query(keys.srv(f.world, "state"), timeout=1.0, expected=WorldState, all_replies=True)
+            except ServiceError:
+                continue
+            best = max((r.message for r in replies), key=lambda m: m.header.term, default=None)
+            if best is None:
+                continue
+            self._heard(best.header.source, best.header.term)
+            with self._lock:
+                if best.header.source == self.election.leader:
+                    self.snapshot = best
+
+    def _on_joints(self, key: str, js: JointState) -> None:
+        self._heard(js.header.source, js.header.term)
+        if self.role == el.STANDBY and js.header.source == self.election.leader:
+            with self._lock:
+                self.joints[keys.parse(key).subject] = js
+
+    def _on_pose(self, key: str, p: Pose) -> None:
+        if self.role == el.STANDBY and p.header.source == self.election.leader:
+            with self._lock:
+                self.poses[keys.parse(key).subject] = p
+
+    def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
+        with self._lock:
+            (self.live.add if alive else self.live.discard)(peer_id)
+            live = frozenset(self.live)
+        self._step(el.Peers(live))
+
+    def _heard(self, source: str, term: int) -> None:
+        if term > 0:
+            self._step(el.Heard(source, term))
+
+    def _step(self, ev: el.Event) -> None:
+        with self._lock:
+            self.election, effects = el.step(self.election, ev)
+        for e in effects:
+            if e.kind == "take_over":
+                threading.Thread(target=self._take_over, args=(time.monotonic(),), name="take-over", daemon=True).start()
+            elif e.kind == "step_down":
+                self.fabric.muzzled = True  # from now on nothing with the old term goes out
+                self.announce(f"sim {self.fabric.peer_id}: {e.leader} holds term {e.term}; stepping down to standby")
+                self._stepped_down.set()
+            elif e.kind == "follow" and self.role == el.STANDBY:
+                self.announce(f"standby {self.fabric.peer_id}: following {e.leader} (term {e.term})")
+                with self._lock:
+                    live = frozenset(self.live)
+                self._step(el.Peers(live))  # is the new leader's token alive now? (only changes report it)
+
+    def _take_over(self, t0: float) -> None:
+        with self._lock:
+            state = self.snapshot
+        if state is None:
+            self.announce(f"sim {self.fabric.peer_id}: took over with no state seen; the world starts from its scene")
+        self._serve(state)
+        took = time.monotonic() - t0
+        self.takeovers.append({"term": self.election.term, "s": took, "from": state.header.source if state else ""})
+        self.announce(f"sim {self.fabric.peer_id}: took over the world with term {self.election.term} in {took * 1000:.0f} ms"
+                      + (f" from the state of {state.header.source} at t={state.time:.3f} s" if state else ""))
+
+
+def run_replicated(
+    open_fabric: Callable[[], Fabric],
+    make_world: Callable[[], World],
+    make_gate: GateFactory,
+    stop: threading.Event,
+    *,
+    standby: bool,
+    rates: dict[str, float] | None = None,
+    speed: float | None = 1.0,
+    duration: float | None = None,
+    announce: Callable[[str], None] | None = None,
+) -> "Host | None":
+    """Run a sim peer until ``stop``: as primary or standby, a fresh session and world after each step-down.
+    Returns the last host (its ``peer`` holds the counters when it served)."""
+    term, leader = 0, ""
+    host = None
+    while not stop.is_set():
+        with open_fabric() as fab:
+            host = Host(fab, make_world(), make_gate, standby=standby, rates=rates, speed=speed, term=term, leader=leader,
+                        announce=announce)
+            role = host.run(stop, duration)
+            term, leader = host.election.term, host.election.leader
+        if role != el.STANDBY or stop.is_set():
+            return host
+        standby = True
+    return host

@@ -1,0 +1,190 @@
+"""Replicated authority over real processes (issue 16): a primary sim, a standby, users.
+
+SIGKILL the primary while alice's arm moves and bob's base follows a path: the standby takes over
+with a higher authority epoch, from the last state (no reset), owners keep their robots and epochs,
+streams resume, the motions go on. SIGSTOP the primary past the lease, SIGCONT it: it steps down.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from fabric import keys
+from fabric.codec import DecodeError, decode
+from fabric.messages import Command, Event, JointState, JointTarget, Path, Pose
+from fabric.testing import robofabric_cmd, wait_until
+
+from ownership import OwnershipClient
+
+pytestmark = pytest.mark.slow
+
+
+@dataclass
+class Seen:
+    t: float
+    key: str
+    msg: object
+
+
+class Tape:
+    """Every joints/pose sample on the wire, undecided by any fence, with its arrival time."""
+
+    def __init__(self, fab, world):
+        self.items: list[Seen] = []
+        self.lock = threading.Lock()
+        for stream in ("joints", "pose"):
+            fab.subscribe_raw(keys.robot_stream_all(world, stream), self._on)
+
+    def _on(self, sample):
+        try:
+            msg = decode(sample.payload.to_bytes())
+        except DecodeError:
+            return
+        with self.lock:
+            self.items.append(Seen(time.monotonic(), str(sample.key_expr), msg))
+
+    def of(self, robot, stream, term=None):
+        with self.lock:
+            return [s for s in self.items if s.key.endswith(f"/{robot}/{stream}") and (term is None or s.msg.header.term == term)]
+
+
+def _send(fab, world, robot, command, user, cmd) -> bool:
+    fab.publish(keys.robot_cmd(world, robot, command, user), cmd)
+    return False
+
+
+def _start(procs, world, ep, pid, *extra):
+    return procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep, "--id", pid, *extra), name=pid)
+
+
+def _pair(procs, world, port):
+    ep = f"tcp/127.0.0.1:{port}"
+    primary = _start(procs, world, ep, "sim-a")
+    standby = _start(procs, world, ep, "sim-b", "--standby")
+    wait_until(lambda: "following sim-a (term 1)" in procs.output(standby), timeout=90, what="standby following the primary",
+               seen=lambda: (procs.output(primary)[-1500:], procs.output(standby)[-1500:]))
+    return primary, standby
+
+
+def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, connect, procs):
+    port = router[1]
+    primary, standby = _pair(procs, world, port)
+    fa, fb = connect("user", "alice"), connect("user", "bob")
+    tape = Tape(fb, world)
+    events: list[Event] = []
+    fb.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
+    alice = OwnershipClient(fa, "alice", renew_s=0.2, timeout=10.0)
+    bob = OwnershipClient(fb, "bob", renew_s=0.2, timeout=10.0)
+    wait_until(lambda: "arm1" in alice.records and "base1" in bob.records and tape.of("base1", "pose"), timeout=30,
+               what="records and poses", seen=lambda: (alice.records, len(tape.items)))
+    assert alice.request("arm1", timeout=10).granted and bob.request("base1", timeout=10).granted
+    ea, eb = alice.epoch("arm1"), bob.epoch("base1")
+
+    target = np.radians([60.0, 30.0, -40.0, 30.0, 50.0, -30.0])
+    arm_cmd = Command("alice", ea, JointTarget(target, speed_scale=0.05))
+    x0, y0 = tape.of("base1", "pose")[-1].msg.position[:2]
+    gx, gy = x0 + 1.0, y0 + 0.8
+    xs, ys = np.linspace(x0, gx, 20), np.linspace(y0, gy, 20)
+    path_cmd = Command("bob", eb, Path(xs, ys, np.full(20, math.atan2(gy - y0, gx - x0))))
+    # resent until they move: a first put on a fresh publisher can go out before the route to the sim exists
+    wait_until(lambda: alice.records["arm1"].state == "moving" or _send(fa, world, "arm1", "joints", "alice", arm_cmd),
+               timeout=20, interval=0.5, what="arm moving")
+    wait_until(lambda: bob.records["base1"].state == "moving" or _send(fb, world, "base1", "path", "bob", path_cmd),
+               timeout=20, interval=0.5, what="base moving")
+    wait_until(lambda: math.hypot(*(tape.of("base1", "pose")[-1].msg.position[:2] - np.array([x0, y0]))) > 0.2,
+               timeout=30, what="arm moving, base on its path", seen=lambda: (alice.records.get("arm1"), bob.records.get("base1")))
+
+    procs.kill(primary)  # SIGKILL
+    t_kill = time.monotonic()
+    wait_until(lambda: tape.of("arm1", "joints", 2) and tape.of("base1", "pose", 2), timeout=20, what="state from the new authority",
+               seen=lambda: procs.output(standby)[-1500:])
+    assert "took over the world with term 2" in procs.output(standby)
+
+    # the arm: the first new state is the last old one carried on (no reset); error at take-over
+    # = the new state minus the motion since the old one (velocity x sim time between them)
+    old_j, new_j = tape.of("arm1", "joints", 1)[-1], tape.of("arm1", "joints", 2)[0]
+    dt = new_j.msg.header.stamp - old_j.msg.header.stamp
+    assert 0.0 <= dt < 1.0, dt  # sim time goes on from where it was
+    err_q = np.abs(new_j.msg.q - (old_j.msg.q + old_j.msg.dq * dt)).max()
+    assert err_q <= 0.01, (err_q, old_j.msg.q, new_j.msg.q, dt)
+    old_p, new_p = tape.of("arm1", "pose", 1)[-1].msg, tape.of("arm1", "pose", 2)[0].msg
+    dtp = new_p.header.stamp - old_p.header.stamp
+    err_mm = 1000 * np.linalg.norm(new_p.position - (old_p.position + old_p.linear * dtp))
+    assert err_mm <= 1.0, (err_mm, dtp)
+    # streams resume within 1 s of the last state the old authority published
+    gap = tape.of("arm1", "joints", 2)[0].t - tape.of("arm1", "joints", 1)[-1].t
+    assert gap <= 1.0, gap
+    assert new_j.msg.header.seq > old_j.msg.header.seq  # sequence numbers continue
+
+    # owners keep their robots and their epochs; the new authority is the one they follow
+    wait_until(lambda: alice.records["arm1"].authority == "sim-b" and bob.records["base1"].authority == "sim-b", timeout=10,
+               what="records from sim-b", seen=lambda: (alice.records["arm1"], bob.records["base1"]))
+    own_events = [(e.kind, e.object, e.user, e.reason, e.header.source) for e in events if e.kind.startswith("own_")]
+    assert alice.owns("arm1") and alice.epoch("arm1") == ea and bob.owns("base1") and bob.epoch("base1") == eb, own_events
+    assert alice.records["arm1"].header.term == 2
+
+    # the motions go on to their ends: the arm reaches alice's target, the base the path's end
+    wait_until(lambda: np.abs(tape.of("arm1", "joints", 2)[-1].msg.q - target).max() < 1e-3, timeout=90,
+               what="arm at alice's target", seen=lambda: tape.of("arm1", "joints", 2)[-1].msg.q)
+    wait_until(lambda: any(e.kind == "path_done" and e.object == "base1" and e.header.term == 2 for e in events), timeout=60,
+               what="path_done from the new authority", seen=lambda: [e.kind for e in events[-10:]])
+    end = tape.of("base1", "pose", 2)[-1].msg.position
+    assert math.hypot(end[0] - gx, end[1] - gy) <= 0.25, (end, gx, gy)
+    # leases resumed: still owned after several lease periods, and commands under the old epoch are obeyed
+    t_after = time.monotonic()
+    wait_until(lambda: time.monotonic() - t_after > 3 * 2.0, timeout=10, what="three leases")
+    assert alice.owns("arm1") and alice.epoch("arm1") == ea and bob.owns("base1") and bob.epoch("base1") == eb
+    fa.publish(keys.robot_cmd(world, "arm1", "joints", "alice"), Command("alice", ea, JointTarget(np.zeros(6))))
+    wait_until(lambda: np.abs(tape.of("arm1", "joints", 2)[-1].msg.q).max() < 1e-3, timeout=60, what="arm back at zero")
+    assert not any(e.kind == "reject" and e.user in ("alice", "bob") for e in events), [e for e in events if e.kind == "reject"]
+    assert time.monotonic() - t_kill < 300
+    alice.close(), bob.close()
+
+
+def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, procs):
+    port = router[1]
+    primary, standby = _pair(procs, world, port)
+    fa = connect("user", "alice")
+    tape = Tape(fa, world)
+    events: list[Event] = []
+    fa.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
+    alice = OwnershipClient(fa, "alice", renew_s=0.2, timeout=10.0)
+    wait_until(lambda: "arm1" in alice.records and tape.of("arm1", "joints", 1), timeout=30, what="record and joints")
+    assert alice.request("arm1", timeout=10).granted
+    ea = alice.epoch("arm1")
+    cmd = Command("alice", ea, JointTarget(np.radians([40.0, 20.0, -20.0, 10.0, 30.0, 0.0]), speed_scale=0.05))
+    # resent until it moves: a first put on a fresh publisher can go out before the route to the sim exists
+    wait_until(lambda: alice.records["arm1"].state == "moving" or _send(fa, world, "arm1", "joints", "alice", cmd), timeout=20,
+               interval=0.5, what="arm moving", seen=lambda: (alice.records["arm1"], tape.of("arm1", "joints")[-1].msg.q,
+                                                              [e for e in events if e.kind == "reject"][-3:]))
+
+    os.kill(primary.pid, signal.SIGSTOP)
+    try:
+        wait_until(lambda: tape.of("arm1", "joints", 2), timeout=30, what="the standby takes over after the lease",
+                   seen=lambda: procs.output(standby)[-1500:])
+        wait_until(lambda: alice.records["arm1"].authority == "sim-b", timeout=10, what="alice follows sim-b")
+    finally:
+        os.kill(primary.pid, signal.SIGCONT)
+    wait_until(lambda: "stepping down" in procs.output(primary) and "standby sim-a: following sim-b (term 2)" in procs.output(primary),
+               timeout=60, what="the old primary steps down and follows", seen=lambda: procs.output(primary)[-1500:])
+    t_down = time.monotonic()
+    n = len(tape.of("arm1", "joints", 2))
+    wait_until(lambda: len(tape.of("arm1", "joints", 2)) > n + 50, timeout=20, what="term-2 joints go on")
+    assert alice.owns("arm1") and alice.epoch("arm1") == ea and alice.records["arm1"].authority == "sim-b"
+    # exactly one authority epoch publishing at any instant: once term 2 spoke, nothing was published
+    # with term 1 (by the publication instant each header carries: samples the frozen process had
+    # queued before SIGSTOP may still reach the wire on SIGCONT, with their old stamps, and every
+    # consumer's fence drops them)
+    first2 = min(s.msg.header.wall_ns for s in tape.items if s.msg.header.term == 2)
+    late1 = [s for s in tape.items if s.msg.header.term == 1 and s.msg.header.wall_ns > first2]
+    assert not late1, [(s.key, (s.msg.header.wall_ns - first2) / 1e9) for s in late1[:5]]
+    assert not [s for s in tape.items if s.t > t_down + 0.5 and s.msg.header.source == "sim-a"]
+    alice.close()
