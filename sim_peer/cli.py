@@ -187,3 +187,6 @@ def register(app: typer.Typer) -> None:
     from sim_peer import bench
 
     bench_app.command("sim")(bench.bench_sim)
+    from sim_peer import bench_failover
+
+    bench_app.command("failover")(bench_failover.bench_failover)
