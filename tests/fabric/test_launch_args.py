@@ -81,6 +81,7 @@ def test_shipped_lan_files_take_the_router_address_as_an_argument():
     assert spec.router == "tcp/0.0.0.0:7448"
 
 
+@pytest.mark.slow
 def test_up_reports_a_bad_argument_in_one_line(tmp_path):
     out = subprocess.run(robofabric_cmd("up", str(REPO / "examples" / "lan" / "sim.toml"), "conect=tcp/x:1"), capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "unknown launch argument(s) conect" in out.stderr and "Traceback" not in out.stderr, out.stderr

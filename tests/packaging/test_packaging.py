@@ -8,6 +8,8 @@ import sys
 from importlib.metadata import version
 from pathlib import Path
 
+import pytest
+
 from fabric.launch_cli import load_demo_spec
 from robofabric.clash import fabric_clash
 
@@ -20,12 +22,14 @@ def _robofabric(*args: str, env: dict[str, str] | None = None) -> subprocess.Com
     )
 
 
+@pytest.mark.slow
 def test_version_names_the_installed_distribution():
     out = _robofabric("--version")
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == f"robofabric {version('robofabric')}"
 
 
+@pytest.mark.slow
 def test_shell_completion_completes_subcommands():
     script = _robofabric("--show-completion", "bash")
     assert script.returncode == 0 and "_ROBOFABRIC_COMPLETE" in script.stdout, script.stdout + script.stderr
@@ -57,6 +61,7 @@ def test_clash_with_the_ssh_library_fabric_is_detected(tmp_path):
     assert warning is not None and "'fabric' 3.2.2" in warning and "SSH" in warning and "pip uninstall fabric" in warning
 
 
+@pytest.mark.slow
 def test_the_console_script_warns_at_start_when_fabric_is_installed(tmp_path):
     _dist_info(tmp_path, "fabric", "3.2.2")
     out = _robofabric("--version", env={"PYTHONPATH": str(tmp_path)})

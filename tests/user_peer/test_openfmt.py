@@ -227,6 +227,7 @@ def test_ros2_export_every_message_decodes_with_the_ros_types_and_values(recordi
 # --------------------------------------------------------------------------- CLI
 
 
+@pytest.mark.slow
 def test_export_command_writes_each_format_and_refuses_mistakes(recording, tmp_path):
     for to in ("foxglove", "ros2"):
         out = subprocess.run(

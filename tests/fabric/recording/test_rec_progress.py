@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 import subprocess
 
 from rec_helpers import synthetic, write_recording
@@ -13,6 +15,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run(robofabric_cmd(*args), capture_output=True, text=True, timeout=120)
 
 
+@pytest.mark.slow
 def test_replay_and_export_show_progress_unless_quiet(tmp_path, world, router):
     src = tmp_path / "small.mcap"
     samples = synthetic(world, n=20)
