@@ -159,14 +159,18 @@ def _progress(what: str, quiet: bool):
 UserOpt = Annotated[Optional[str], typer.Option("--user", "-u", help="Your user id (default: $USER); ownership is by user id.")]
 
 
-def _open_world(world, connect, profile, zenoh_config, user, timeout: float = 5.0):
+def _open_world(world, connect, profile, zenoh_config, user, timeout: float = 5.0, join_timeout: float = 30.0):
+    """Join as a user, waiting up to ``join_timeout`` s for a sim to serve the world."""
     from user_peer.api import connect as _connect
+    from user_peer.errors import FabricUserError
 
     zenoh_eps, _ = _split_connect(connect)
     cfg = make_config(world, zenoh_eps, None, profile, zenoh_config)
     try:
         return _connect(world=cfg.world, connect=list(cfg.connect), user=user, profile=cfg.profile,
-                        zenoh_config=cfg.config_file, timeout=timeout)
+                        zenoh_config=cfg.config_file, timeout=timeout, join_timeout=join_timeout)
+    except FabricUserError as exc:  # the router answered, the world did not: say that, not "no router"
+        raise UserError(exc.reason) from None
     except ValueError as exc:
         raise UserError(str(exc)) from None
     except Exception as exc:  # zenoh.ZError: no router there
@@ -214,24 +218,13 @@ def scenario(
     zenoh_config: ZenohConfig = None,
 ) -> None:
     """Run one of the paper's scenarios as a scripted user; exit 0 on success."""
-    import time
-
     from user_peer.errors import FabricUserError
     from user_peer.scenarios import SCENARIOS
 
     if name not in SCENARIOS:
         raise UserError(f"unknown scenario {name!r}; expected one of {', '.join(SCENARIOS)}")
-    w = _open_world(world, connect, profile, zenoh_config, user_id)
+    w = _open_world(world, connect, profile, zenoh_config, user_id, join_timeout=wait)
     try:
-        deadline = time.monotonic() + wait
-        while True:
-            try:
-                w.info()
-                break
-            except FabricUserError as exc:
-                if time.monotonic() > deadline:
-                    raise UserError(exc.reason) from None
-                time.sleep(0.5)
         kw = {}
         if robot:
             kw["arm_id" if name == "test-a" else "base_id"] = robot
