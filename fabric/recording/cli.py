@@ -200,11 +200,24 @@ def info(
              profile=profile, zenoh_config=zenoh_config, peer_id=peer_id)
 
 
+LONG_INFO_BYTES = 20_000_000
+"""``info`` reads a recording through (it must, for unfinished files): a progress bar above this size."""
+
+
 def _recording_info(file: Path, as_json: bool) -> None:
     from fabric.recording.reader import RecordingError, read_info
 
+    big = not as_json and file.is_file() and file.stat().st_size > LONG_INFO_BYTES
     try:
-        inf = read_info(file)
+        if big:
+            from rich.console import Console
+            from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
+
+            with Progress(TextColumn("reading"), BarColumn(), DownloadColumn(), TimeRemainingColumn(), console=Console(stderr=True), transient=True) as bar:
+                task = bar.add_task("info", total=file.stat().st_size)
+                inf = read_info(file, progress=lambda done, total: bar.update(task, completed=done, total=total))
+        else:
+            inf = read_info(file)
     except RecordingError as exc:
         raise UserError(str(exc)) from None
     if as_json:

@@ -337,15 +337,22 @@ def key_filter(exprs: Iterable[str] | str | None) -> Callable[[str], bool]:
     return match
 
 
-def read_info(path: str | Path) -> RecordingInfo:
-    """Summarise a recording by reading it through; works on unfinished files (see module doc)."""
+def read_info(path: str | Path, *, progress: Callable[[int, int], None] | None = None) -> RecordingInfo:
+    """Summarise a recording by reading it through; works on unfinished files (see module doc).
+
+    ``progress(bytes_read, file_bytes)`` is called as the reading goes (for a progress bar).
+    """
     counts: Counter[int] = Counter()
     sizes: Counter[int] = Counter()
     first: dict[int, int] = {}
     last: dict[int, int] = {}
 
     w = _Walk(Path(path))
+    seen = 0
     for ch, m in _messages(w):
+        seen += 1
+        if progress is not None and seen % 2000 == 0:
+            progress(w.good_end, w.file_bytes)
         cid = ch.id
         counts[cid] += 1
         sizes[cid] += len(m.data)
@@ -364,6 +371,8 @@ def read_info(path: str | Path) -> RecordingInfo:
             key=lambda c: (c.key, c.schema),
         )
     )
+    if progress is not None:
+        progress(w.file_bytes, w.file_bytes)
     n = sum(counts.values())
     start = min(first.values()) if first else 0
     end = max(last.values()) if last else 0

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import pytest
-
 import subprocess
 
+import pytest
 from rec_helpers import synthetic, write_recording
 
 from fabric.testing import robofabric_cmd
@@ -31,3 +30,16 @@ def test_replay_and_export_show_progress_unless_quiet(tmp_path, world, router):
     exp = _cli("export", str(src), "-o", str(tmp_path / "f.mcap"), "--to", "foxglove")
     assert exp.returncode == 0, exp.stderr
     assert f"{len(samples)}/{len(samples)}" in exp.stderr and f"exported {fabric_msgs} messages" in exp.stdout, exp.stderr + exp.stdout
+
+
+def test_info_reports_its_progress_through_the_file(tmp_path, world):
+    from fabric.recording import read_info
+
+    src = tmp_path / "info.mcap"
+    write_recording(src, synthetic(world, n=1500), chunk_size=4096)
+    seen: list[tuple[int, int]] = []
+    inf = read_info(src, progress=lambda done, total: seen.append((done, total)))
+    size = src.stat().st_size
+    assert inf.messages > 2000 and len(seen) >= 2
+    assert all(t == size for _, t in seen) and [d for d, _ in seen] == sorted(d for d, _ in seen) and seen[-1] == (size, size)
+    assert 0 < seen[0][0] < size  # reported while reading, not only at the end
