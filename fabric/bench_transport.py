@@ -199,6 +199,21 @@ def _run_one(transport: str, endpoint: str, rate: float, duration: float) -> dic
     return result
 
 
+def _wait_listening(port: int, proc: subprocess.Popen, timeout: float = 60.0) -> None:
+    """Until the router child accepts connections on ``port`` (its start takes seconds on a loaded machine)."""
+    import socket
+
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=1.0):
+                return
+        except OSError:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"the benchmark router did not listen on port {port} within {timeout:.0f} s") from None
+            time.sleep(0.1)
+
+
 def run_bench(rates: list[float], duration: float, mqtt: bool) -> list[dict]:
     results: list[dict] = []
     port = _free_port()
@@ -211,7 +226,7 @@ def run_bench(rates: list[float], duration: float, mqtt: bool) -> list[dict]:
     broker = None
     tmp = None
     try:
-        time.sleep(1.0)
+        _wait_listening(port, router)
         for r in rates:
             results.append(_run_one("zenoh", f"tcp/127.0.0.1:{port}", r, duration))
         if mqtt:

@@ -28,11 +28,17 @@ ENV_CONNECT = "ROBOFABRIC_CONNECT"
 ENV_WORLD = "ROBOFABRIC_WORLD"
 ENV_PROFILE = "ROBOFABRIC_PROFILE"
 ENV_CONFIG = "ROBOFABRIC_ZENOH_CONFIG"
-MAX_MESSAGE_SIZE = 8 * 1024 * 1024
+MAX_MESSAGE_SIZE = 4 * 1024 * 1024
 """``transport/link/rx/max_message_size`` of every session we open (zenoh's default is 1 GiB): a
 larger message is dropped on arrival and the link stays up (checked on zenoh 1.10). The largest
-message the fabric itself sends is a map of at most 4 MiB (fabric.messages.MAX_GRID_CELLS)."""
+message the fabric itself sends is a map of at most 2 MiB (fabric.messages.MAX_GRID_CELLS)."""
 ZENOH_DEFAULT_MAX_MESSAGE_SIZE = 1 << 30
+SOCKET_BUFFER = 64 * 1024
+"""TCP ``so_sndbuf``/``so_rcvbuf`` of every link. With the kernel's autotuned loopback buffers (MBs),
+a flood of small junk samples piled up in the sockets between the router and the sim, ahead of an
+owner's command (1.2 s of backlog for the sim to decode); with small buffers the backlog stays in
+the router's per-priority queues, where commands and ownership (fabric.session.priority_for) go first
+and junk is dropped under zenoh's congestion control."""
 
 
 class ConfigError(ValueError):
@@ -63,6 +69,14 @@ class FabricConfig:
     config_file: str | None = None
     lease_ms: int = 2000
     multicast: bool | None = None
+    socket_buffer: int | None = SOCKET_BUFFER
+    """TCP send/receive buffer size (bytes) of every link; None leaves the kernel's autotuning."""
+    shared_memory: bool = False
+    """zenoh's shared-memory transport (on by default in zenoh): off unless asked for. With it, any
+    process on the host can map its own memory into a peer (a flood of 5 MB messages added 35 MB of
+    shared pages to the sim's and the compute peer's resident memory) and the router's message size
+    cap does not apply; fabric messages are small (a 240-ray scan is ~560 bytes, under zenoh's
+    3 kB threshold for using shared memory at all), so nothing is lost by leaving it off."""
     extra: tuple[tuple[str, str], ...] = field(default=())
 
     def __post_init__(self) -> None:
@@ -175,6 +189,11 @@ class FabricConfig:
         if listen:
             conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
         conf.insert_json5("transport/link/tx/lease", json.dumps(self.lease_ms))
+        if self.socket_buffer is not None:
+            conf.insert_json5("transport/link/tcp/so_sndbuf", json.dumps(self.socket_buffer))
+            conf.insert_json5("transport/link/tcp/so_rcvbuf", json.dumps(self.socket_buffer))
+        if not self.shared_memory:
+            conf.insert_json5("transport/shared_memory/enabled", "false")
         # a file that chose its own cap keeps it; otherwise a few MB, not zenoh's 1 GiB
         if json.loads(conf.get_json("transport/link/rx/max_message_size")) == ZENOH_DEFAULT_MAX_MESSAGE_SIZE:
             conf.insert_json5("transport/link/rx/max_message_size", json.dumps(MAX_MESSAGE_SIZE))

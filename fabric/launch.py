@@ -35,6 +35,7 @@ reported with its name and line before anything starts.
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import signal
@@ -44,6 +45,7 @@ import threading
 import time
 import tomllib
 from dataclasses import dataclass, field
+from logging.handlers import RotatingFileHandler
 from pathlib import Path
 from typing import Any, Callable, TextIO
 
@@ -261,7 +263,9 @@ class PeerProcess:
 class Supervisor:
     """Starts a launch spec's peers as child processes, restarts services per policy, stops them all.
 
-    Output of each child is prefixed with its name on ``console`` and kept in ``out/logs/NAME.log``.
+    Output of each child is prefixed with its name on ``console`` and kept in ``out/logs/NAME.log``,
+    rotated at ``log_max_bytes`` into ``NAME.log.1`` .. ``NAME.log.{log_backups}`` (stdlib
+    ``RotatingFileHandler``): a chatty or flooded peer cannot fill the disk.
     ``is_ready(expr)`` says whether a liveliness key expression has a live token (given by the caller,
     which holds the session), so the supervisor itself stays free of zenoh.
     """
@@ -275,8 +279,12 @@ class Supervisor:
         console: TextIO = sys.stdout,
         extra_args: tuple[str, ...] = (),
         ready_timeout: float = 60.0,
+        log_max_bytes: int = 10_000_000,
+        log_backups: int = 3,
     ) -> None:
         self.spec = spec
+        self.log_max_bytes = log_max_bytes
+        self.log_backups = log_backups
         self.out_dir = out_dir
         self.is_ready = is_ready
         self.console = console
@@ -300,15 +308,19 @@ class Supervisor:
         return argv + list(self.extra_args)
 
     def _pump(self, name: str, stream, log_path: Path) -> None:
-        with open(log_path, "ab") as log:
+        log = RotatingFileHandler(log_path, maxBytes=self.log_max_bytes, backupCount=self.log_backups, encoding="utf-8")
+        log.setFormatter(logging.Formatter("%(message)s"))
+        try:
             for line in iter(stream.readline, b""):
-                log.write(line)
-                log.flush()
-                text = line.decode(errors="replace").rstrip()
+                text = line.decode(errors="replace").rstrip("\n")
+                log.emit(logging.makeLogRecord({"msg": text, "args": None}))
+                text = text.rstrip()
                 with self._lock:
                     if text.strip():
                         self.peers[name].last_line = text.strip()
                     print(f"[{name}] {text}", file=self.console, flush=True)
+        finally:
+            log.close()
 
     def _spawn(self, pp: PeerProcess) -> None:
         argv = self._argv(pp.spec)

@@ -25,8 +25,8 @@ MAX_JOINTS = 256
 MAX_RAYS = 8192
 """A scan cannot hold a million rays: 8192 is 20x the densest LIDAR a robot here carries."""
 MAX_PATH_POINTS = 1 << 16
-MAX_GRID_CELLS = 1 << 22
-"""2048 x 2048 cells (102 m square at 5 cm), 4 MiB: inside the routers' 8 MiB message cap."""
+MAX_GRID_CELLS = 1 << 21
+"""2 MiB of cells (a 72 m square at 5 cm): inside the sessions' 4 MiB message cap (fabric.config)."""
 MAX_QUEUE = 64
 """Users waiting for one object (ownership.state refuses the 65th)."""
 

@@ -45,7 +45,7 @@ REPORT_BURST = 5
 """Reports (log line + event) of bad input per subscription or reason per :data:`REPORT_INTERVAL` seconds;
 the rest are counted and the next report says how many were suppressed."""
 
-__all__ = ["Fabric", "ServiceError", "Reply", "open_fabric", "shutdown_event", "undeclare_all", "declare_publisher"]
+__all__ = ["Fabric", "ServiceError", "Reply", "open_fabric", "shutdown_event", "undeclare_all", "declare_publisher", "priority_for"]
 
 
 def undeclare_all(resources: list[Any]) -> None:
@@ -58,9 +58,23 @@ def undeclare_all(resources: list[Any]) -> None:
             pass
 
 
+def priority_for(key: str) -> zenoh.Priority | None:
+    """zenoh priority of what travels on ``key``: robot commands and ownership (records, requests,
+    renewals, their replies) go ahead of data, so that a flood of data on any key (junk included:
+    a flooder's samples carry the default priority) cannot queue an owner's command or renewal
+    behind it in a router's per-priority queues. None for everything else (zenoh's default)."""
+    parts = key.split("/")
+    if len(parts) >= 4 and (parts[2] == "own" or (parts[2] == "robot" and len(parts) >= 5 and parts[4] == "cmd")):
+        return zenoh.Priority.INTERACTIVE_HIGH
+    return None
+
+
 def declare_publisher(session: zenoh.Session, key: str, **options: Any) -> Any:
     """A publisher for ``key``; on a latched key (:func:`fabric.keys.is_latched`) one whose last sample
-    stays in a cache for subscribers that join later and ask for history."""
+    stays in a cache for subscribers that join later and ask for history. Priority: :func:`priority_for`."""
+    prio = priority_for(key)
+    if prio is not None:
+        options.setdefault("priority", prio)
     if not keys.is_latched(key):
         return session.declare_publisher(key, **options)
     # sequence numbers make the subscriber track each publisher on its own: without them it orders one
@@ -242,18 +256,20 @@ class Fabric:
     # ------------------------------------------------------------------ receiving
 
     def bad_payload(self, key: str, exc: Exception, *, where: str) -> None:
-        """Count a payload that could not be used; report it at most once per ``where`` per interval.
+        """Count a payload that could not be used; report it at most a few times per ``where`` per interval.
 
         ``where`` is what the peer subscribed to (a fixed key expression), never the concrete key: a
-        flood on made-up keys under one wildcard is one report per interval, not one per key."""
+        flood on made-up keys under one wildcard is a few reports per interval, not one per key. The
+        check comes first: a suppressed report costs a counter and a lock, nothing is built for it."""
         self.counters["decode_errors"] += 1
-        self.emit(
-            Event(kind="decode_error", reason=clip(str(exc)), severity="warning",
-                  data={"key": clip(key), "subscription": clip(where)}, header=self.header("event")),
-            "decode",
-            self.peer_id,
-            limit=f"decode:{where}",
-        )
+        suppressed = self.should_report(f"decode:{where}")
+        if suppressed is None:
+            return
+        data = {"key": clip(key), "subscription": clip(where)}
+        if suppressed:
+            data["suppressed"] = suppressed
+        self.emit(Event(kind="decode_error", reason=clip(str(exc)), severity="warning", data=data, header=self.header("event")),
+                  "decode", self.peer_id)
 
     def subscribe(
         self,
@@ -325,6 +341,8 @@ class Fabric:
         reply; a bad request payload is answered with the decode error. Nothing escapes to zenoh.
         """
 
+        prio = priority_for(key_expr)
+
         def on_query(query: zenoh.Query) -> None:
             key = str(query.key_expr)
             self.counters["queries"] += 1
@@ -336,7 +354,10 @@ class Fabric:
                     request = decode(query.payload.to_bytes(), expected)
                 answer = handler(key, request)
                 if answer is not None:
-                    query.reply(key, encode(answer))
+                    if prio is None:
+                        query.reply(key, encode(answer))
+                    else:
+                        query.reply(key, encode(answer), priority=prio)
             except (DecodeError, ServiceError, ValueError) as exc:
                 self.counters["query_errors"] += 1
                 reason = clip(exc.reason if isinstance(exc, ServiceError) else str(exc), 400)
@@ -365,6 +386,9 @@ class Fabric:
         With ``all_replies`` every replier's answer is returned (no consolidation).
         """
         kwargs: dict[str, Any] = {"timeout": timeout}
+        prio = priority_for(selector)
+        if prio is not None:
+            kwargs["priority"] = prio
         if request is not None:
             kwargs["payload"] = encode(request)
         if all_replies:

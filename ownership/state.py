@@ -16,7 +16,9 @@ Rules (DESIGN.md, issue 5):
 - Bounded against made-up users (issue 14): a queue holds at most
   :data:`fabric.messages.MAX_QUEUE` users, and a user that requested without a
   liveliness token (a :class:`Join`) is dropped, from queues and ownership, once
-  ``grace_s`` has passed without one: forged requesters leave on their own.
+  ``grace_s`` has passed without one: forged requesters leave on their own. Until its
+  token is seen such a user may take a free robot but never take one over from its owner
+  (a flood of forged requests took a still robot from its owner a thousand times in a row).
 """
 
 from __future__ import annotations
@@ -257,6 +259,17 @@ def step(s: OwnState, ev: Event) -> tuple[OwnState, list[Effect]]:
             recs[rec.object] = replace(rec, lease_expiry=ev.now + s.lease_s)
             effects.append(Effect("granted", rec.object, ev.user, "already owner"))
             return _with(s, recs), effects
+        if rec.owner and ev.user in s.unproven:  # no token seen yet: it may take a free robot, never someone's
+            if ev.wait and ev.user not in rec.queue and len(rec.queue) < MAX_QUEUE:
+                q = _sorted_queue(s, rec.queue + (ev.user,))
+                recs[rec.object] = replace(rec, queue=q)
+                effects.append(Effect("queued", rec.object, ev.user, f"owned by {rec.owner}; no liveliness token seen yet",
+                                      q.index(ev.user) + 1))
+                return _with(s, recs), effects
+            full = ev.wait and ev.user not in rec.queue
+            why = f"the queue is full ({MAX_QUEUE} waiting)" if full else f"owned by {rec.owner}; no liveliness token seen yet"
+            effects.append(Effect("denied", rec.object, ev.user, why))
+            return s, effects
         if not rec.owner or rec.state == "still":
             prev = rec.owner
             queue = tuple(u for u in rec.queue if u != ev.user)

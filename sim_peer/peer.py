@@ -261,25 +261,39 @@ class SimPeer:
 
     def _event(self, kind: str, robot: str, reason: str, *, user: str = "", severity: str = "warning", data: dict | None = None,
                limit: str | None = None) -> None:
+        """Publish an event on ``event/{kind}/{robot}`` (``event/{kind}`` for ids this sim does not have).
+
+        ``limit``: a rate-limit key of fixed words (fabric.session.Fabric.should_report), checked before
+        anything is built, so a flood of refusals costs a counter each."""
+        if limit is not None:
+            suppressed = self.fabric.should_report(limit)
+            if suppressed is None:
+                return
+            if suppressed:
+                data = {**(data or {}), "suppressed": suppressed}
         key_parts = (kind, robot) if robot in self.world.robots or robot in self.world.objects else (kind,)
         ev = Event(
             kind=kind, reason=reason, object=robot, user=user, severity=severity, data=data or {},
             header=self.fabric.header("event", stamp=self.world.time),
         )
-        if limit is None:
-            self.fabric.emit(ev, *key_parts)
-        else:
-            self.fabric.emit(ev, *key_parts, limit=limit)
+        self.fabric.emit(ev, *key_parts)
 
-    def _reject(self, robot: str, command: str, reason: str, detail: str, user: str = "", *, code: str | None = None) -> None:
+    def _reject(self, robot: str, command: str, reason: str | Callable[[], str], detail: str | Callable[[], str], user: str = "",
+                *, code: str | None = None) -> None:
         """Count and report a refusal. ``code`` (default ``reason``) is the counter and rate-limit name:
-        a fixed word, never client text, so made-up users or ids cannot grow the counters."""
-        code = code or reason
+        a fixed word, never client text, so made-up users or ids cannot grow the counters. ``reason``
+        and ``detail`` may be callables, built only when the refusal is reported."""
+        code = code or (reason if isinstance(reason, str) else "refused")
         self.counters["rejected"] += 1
         self.counters[f"rejected:{code}"] += 1
-        known = robot if (robot in self.world.robots or robot in self.world.objects) else "?"
-        self._event("reject", robot, reason, user=user, data={"command": command, "detail": detail},
-                    limit=f"reject:{known}:{code}")
+        known = robot in self.world.robots or robot in self.world.objects
+        suppressed = self.fabric.should_report(f"reject:{robot if known else '?'}:{code}")
+        if suppressed is None:
+            return
+        data = {"command": command, "detail": detail() if callable(detail) else detail}
+        if suppressed:
+            data["suppressed"] = suppressed
+        self._event("reject", robot if known else clip(robot, 64), reason() if callable(reason) else reason, user=user, data=data)
 
     def _on_command_sample(self, sample: zenoh.Sample) -> None:
         """Zenoh's callback: refuse unknown robots from the key alone, decode, admit, queue. Never applies."""
@@ -296,7 +310,7 @@ class SimPeer:
         rid = parsed.subject
         if rid not in self._queues:  # undecoded: the sender is not known, nothing is kept
             self.counters["commands"] += 1
-            self._reject(clip(rid, 64), parsed.leaf, "unknown_robot", f"no robot {quote(rid, 64)} here; robots: {', '.join(self.world.robots)}")
+            self._reject(rid, parsed.leaf, "unknown_robot", lambda: f"no robot {quote(rid, 64)} here; robots: {', '.join(self.world.robots)}")
             return
         try:
             cmd = decode(sample.payload.to_bytes(), Command)
@@ -343,7 +357,7 @@ class SimPeer:
         rid, name, sender = parsed.subject, parsed.leaf, parsed.user
         robot = self.world.robots.get(rid)
         if robot is None:
-            self._reject(clip(rid, 64), name, "unknown_robot", f"no robot {quote(rid, 64)} here; robots: {', '.join(self.world.robots)}", cmd.user)
+            self._reject(rid, name, "unknown_robot", lambda: f"no robot {quote(rid, 64)} here; robots: {', '.join(self.world.robots)}", cmd.user)
             return None
         if cmd.user != sender:
             # the key names the sender (a router's access control vouches for it); a payload claiming

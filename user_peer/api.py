@@ -44,6 +44,7 @@ from fabric.messages import (
     Stop,
     Twist,
 )
+from fabric.reliable import resend_until
 from fabric.session import Fabric, ServiceError
 from user_peer import services
 from fabric.exit import at_exit
@@ -395,6 +396,15 @@ class World:
             ]
 
 
+def _still_after(msg: Any, seq: int) -> bool:
+    """Whether ``msg`` (a robot's JointState or Pose) came after sequence number ``seq`` and shows it still."""
+    if msg is None or msg.header.seq <= seq:
+        return False
+    if isinstance(msg, JointState):
+        return float(np.max(np.abs(msg.dq), initial=0.0)) < 1e-6
+    return float(np.linalg.norm(msg.linear)) < 1e-3 and float(np.linalg.norm(msg.angular)) < 1e-3
+
+
 class Robot:
     """What every robot offers: ownership, stop, reset, its streams."""
 
@@ -480,13 +490,30 @@ class Robot:
         epoch = rec.epoch if rec is not None else 0
         self.world.fabric.publish(key, Command(self.world.user, epoch, body, self.world.fabric.header(key)))
 
-    def stop(self) -> None:
-        key = keys.robot_cmd(self._w, self.id, "stop", self.world.user)
-        self.send("stop", Stop(self.world.fabric.header(key)))
+    def stop(self, *, confirm: bool = True, timeout: float = 3.0) -> bool:
+        """Stop the robot where it is. Commands are dropped, not queued, when the network is congested, so
+        with ``confirm`` the stop is sent again every 0.1 s until the robot's own stream shows it still
+        (:func:`fabric.reliable.resend_until`); returns whether it was seen still within ``timeout``."""
+        return self._control("stop", Stop, confirm, timeout)
 
-    def reset(self) -> None:
-        key = keys.robot_cmd(self._w, self.id, "reset", self.world.user)
-        self.send("reset", Reset(self.world.fabric.header(key)))
+    def reset(self, *, confirm: bool = True, timeout: float = 10.0) -> bool:
+        """Send the robot back to its start (an arm at its speed limits); with ``confirm``, sent again until
+        the robot is seen still, as :meth:`stop`. Returns whether it was seen still within ``timeout``."""
+        return self._control("reset", Reset, confirm, timeout)
+
+    def _control(self, command: str, body_type: type, confirm: bool, timeout: float) -> bool:
+        key = keys.robot_cmd(self._w, self.id, command, self.world.user)
+        stream = "joints" if self.kind == "arm" else "pose"
+        before = self.latest(stream)
+        seq0 = -1 if before is None else before.header.seq
+
+        def send() -> None:
+            self.send(command, body_type(self.world.fabric.header(key)))
+
+        if not confirm:
+            send()
+            return False
+        return resend_until(send, lambda: _still_after(self.latest(stream), seq0), interval=0.1, timeout=timeout).done
 
     def _check_rejected(self, since: int) -> None:
         rej = self.world.rejections(self.id, since)

@@ -52,6 +52,8 @@ def record(
         typer.Option("--to", help="Write another format live instead of the fabric's own: foxglove or ros2 (see `robofabric export`)."),
     ] = None,
     scene: Annotated[Optional[str], typer.Option(help="With --to: the scene being recorded (places the arms, draws the walls).")] = None,
+    max_queue_mb: Annotated[float, typer.Option("--max-queue-mb", help="Payload waiting for the disk at most; beyond, samples are dropped and counted.")] = 256.0,
+    quota_mb: Annotated[Optional[float], typer.Option("--quota-mb", help="Write at most this many MB of payload; later samples are dropped and counted.")] = None,
     world: World = None,
     connect: Connect = None,
     listen: Listen = None,
@@ -76,6 +78,8 @@ def record(
         raise UserError("--chunk-size must be at least 1024 bytes")
     if not flush_interval > 0:
         raise UserError("--flush-interval must be positive")
+    if not max_queue_mb > 0 or (quota_mb is not None and not quota_mb > 0):
+        raise UserError("--max-queue-mb and --quota-mb must be positive")
     if output.is_dir():
         raise UserError(f"{output} is a directory; give a file name such as {output / 'run.mcap'}")
     if not output.parent.exists():
@@ -91,7 +95,8 @@ def record(
         try:
             rec = Recorder(
                 fab, output, exprs, liveliness=liveliness, compression=compression,
-                chunk_size=chunk_size, flush_interval=flush_interval,
+                chunk_size=chunk_size, flush_interval=flush_interval, max_queue_bytes=int(max_queue_mb * 1e6),
+                quota_bytes=None if quota_mb is None else int(quota_mb * 1e6),
             )
             rec.start()
         except OSError as exc:
@@ -119,6 +124,9 @@ def record(
     if tty and not quiet:
         print(file=sys.stderr)
     print(f"recorded {stats.line()} -> {output}", file=sys.stderr, flush=True)
+    if stats.dropped:
+        why = "the disk quota was reached" if stats.quota_reached else "the queue to the disk was full or too many keys"
+        print(f"warning: {stats.dropped} samples ({stats.dropped_bytes} bytes) were not recorded: {why}", file=sys.stderr, flush=True)
     if stats.messages == 0:
         raise UserError(
             f"nothing was recorded on {', '.join(exprs)} (unknown world or no publisher?); {output} is an empty recording"

@@ -5,6 +5,12 @@ stamps the receive time and queues the bytes, so the network is never held up
 by compression or disk. One writer thread owns the :class:`McapSink`. The
 stamp and the enqueue happen under one lock, so file order is receive order
 and a replay can stream the file without sorting it.
+
+Bounded (issue 14): the queue holds at most ``max_queue_bytes`` of payload, the file gets
+at most ``max_keys`` channels, and an optional ``quota_bytes`` caps what is written; what
+does not fit is dropped and counted (``RecorderStats.dropped``, ``dropped_bytes``), never
+silently: the progress line and the final report say so. A 60 x 10 MB junk flood once took
+an unbounded recorder from 163 to 712 MB of memory and wrote 629 MB in 2 s.
 """
 
 from __future__ import annotations
@@ -42,6 +48,9 @@ class RecorderStats:
     queued: int
     raw: int
     liveliness: int
+    dropped: int = 0
+    dropped_bytes: int = 0
+    quota_reached: bool = False
 
     @property
     def rate_hz(self) -> float:
@@ -57,6 +66,8 @@ class RecorderStats:
             f"{self.messages} msgs  {_human(self.payload_bytes)}  ({self.rate_hz:.0f} msg/s, {_human(self.bytes_per_s)}/s)"
             f"  {self.keys} keys  file {_human(self.file_bytes)}  {self.elapsed_s:.1f} s"
             + (f"  backlog {self.queued}" if self.queued > 100 else "")
+            + (f"  DROPPED {self.dropped} msgs ({_human(self.dropped_bytes)})" if self.dropped else "")
+            + ("  disk quota reached" if self.quota_reached else "")
         )
 
 
@@ -88,7 +99,15 @@ class Recorder:
         chunk_size: int = 1 << 20,
         flush_interval: float = 0.5,
         metadata: dict[str, str] | None = None,
+        max_queue_bytes: int = 256 * 1024 * 1024,
+        max_keys: int = 4096,
+        quota_bytes: int | None = None,
     ) -> None:
+        if max_queue_bytes < 1 or max_keys < 1 or (quota_bytes is not None and quota_bytes < 1):
+            raise ValueError("max_queue_bytes, max_keys and quota_bytes must be positive")
+        self.max_queue_bytes = int(max_queue_bytes)
+        self.max_keys = int(max_keys)
+        self.quota_bytes = quota_bytes
         self.fabric = fabric
         self.path = Path(path)
         exprs = list(keyexprs) if keyexprs else [keys.world_all(fabric.world)]
@@ -113,6 +132,11 @@ class Recorder:
         self._t0 = 0.0
         self._t_end: float | None = None
         self._queued = 0
+        self._queued_bytes = 0
+        self._dropped = 0
+        self._dropped_bytes = 0
+        self._quota_reached = False
+        self._accepted_keys: set[str] = set()
         self._written = 0
         self._raw = 0
         self._live = 0
@@ -176,6 +200,9 @@ class Recorder:
             queued=max(0, self._queued - self._written),
             raw=self._raw,
             liveliness=self._live,
+            dropped=self._dropped,
+            dropped_bytes=self._dropped_bytes,
+            quota_reached=self._quota_reached,
         )
 
     # ------------------------------------------------------------------ receiving (zenoh threads)
@@ -187,8 +214,24 @@ class Recorder:
         first = self._first_match.get(key)
         if first is None:
             first = next((j for j, e in enumerate(self.keyexprs) if zenoh.KeyExpr(e).intersects(key)), i)
-            self._first_match[key] = first
+            if len(self._first_match) < self.max_keys:
+                self._first_match[key] = first
         return first == i
+
+    def _admit(self, key: str, size: int) -> bool:
+        """Room for one more sample (called with the lock held)? Counts what it turns away."""
+        if (
+            self._quota_reached
+            or self._queued_bytes + size > self.max_queue_bytes
+            or (key not in self._accepted_keys and len(self._accepted_keys) >= self.max_keys)
+        ):
+            self._dropped += 1
+            self._dropped_bytes += size
+            return False
+        self._accepted_keys.add(key)
+        self._queued_bytes += size
+        self._queued += 1
+        return True
 
     def _on_sample_for(self, i: int):
         def on_sample(sample: zenoh.Sample) -> None:
@@ -199,8 +242,8 @@ class Recorder:
                 return
             payload = sample.payload.to_bytes()
             with self._lock:
-                self._q.put((key, payload, time.time_ns(), None))
-                self._queued += 1
+                if self._admit(key, len(payload)):
+                    self._q.put((key, payload, time.time_ns(), None))
 
         return on_sample
 
@@ -210,9 +253,10 @@ class Recorder:
             if not self._owns(i, key):
                 return
             alive = sample.kind == zenoh.SampleKind.PUT
+            payload = msgpack.packb({"alive": alive})
             with self._lock:
-                self._q.put((key, msgpack.packb({"alive": alive}), time.time_ns(), LIVELINESS_SCHEMA))
-                self._queued += 1
+                if self._admit(key, len(payload)):
+                    self._q.put((key, payload, time.time_ns(), LIVELINESS_SCHEMA))
 
         return on_token
 
@@ -247,6 +291,15 @@ class Recorder:
 
     def _write(self, sink: McapSink, item: tuple) -> None:
         key, payload, t_ns, schema = item
+        with self._lock:
+            self._queued_bytes -= len(payload)
+            if self.quota_bytes is not None and not self._quota_reached and sink.payload_bytes + len(payload) > self.quota_bytes:
+                self._quota_reached = True
+            if self._quota_reached:
+                self._dropped += 1
+                self._dropped_bytes += len(payload)
+                self._queued -= 1
+                return
         if schema is None:
             if sink.write(key, payload, t_ns) == RAW_SCHEMA:
                 self._raw += 1

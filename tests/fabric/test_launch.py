@@ -123,3 +123,19 @@ def test_shipped_launch_files_parse():
     for f in files:
         spec = load_launch(f)
         assert spec.child_connect(), f
+
+
+def test_peer_logs_rotate(tmp_path):
+    import io
+
+    from fabric.launch import Supervisor
+
+    sup = Supervisor(parse_launch(GOOD, "good.toml"), out_dir=tmp_path, is_ready=lambda e: True, console=io.StringIO(),
+                     log_max_bytes=2_000, log_backups=2)
+    lines = b"".join(b"line %05d of a chatty peer\n" % i for i in range(1_000))  # ~27 kB
+    sup._pump("sim", io.BytesIO(lines), tmp_path / "logs" / "sim.log")
+    logs = sorted(p.name for p in (tmp_path / "logs").iterdir())
+    assert logs == ["sim.log", "sim.log.1", "sim.log.2"]
+    assert all((tmp_path / "logs" / n).stat().st_size <= 2_000 for n in logs)
+    assert (tmp_path / "logs" / "sim.log").read_text().rstrip().endswith("line 00999 of a chatty peer")
+    assert sup.peers["sim"].last_line == "line 00999 of a chatty peer"

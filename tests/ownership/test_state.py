@@ -76,7 +76,8 @@ def test_invariants_over_random_sequences(seq):
             assert b.epoch >= a.epoch
             if a.owner != b.owner:
                 assert b.epoch > a.epoch, f"{obj}: owner changed {a.owner!r}->{b.owner!r} without a new epoch"
-        if isinstance(ev, st.Request) and OBJECTS[ev.object] == "exclusive" and before.records[ev.object].owner not in ("", ev.user):
+        if (isinstance(ev, st.Request) and OBJECTS[ev.object] == "exclusive" and before.records[ev.object].owner not in ("", ev.user)
+                and ev.user in before.live and ev.user not in before.unproven):
             rec = before.records[ev.object]
             if rec.state == "moving":
                 assert s.records[ev.object].owner == rec.owner, "a moving robot was handed over on request"
@@ -104,8 +105,22 @@ def test_moving_robot_is_not_handed_over_until_released():
 def test_still_robot_is_handed_over():
     s = st.initial({"arm": "exclusive"})
     s, _ = st.step(s, st.Request("a", "arm", 0.0))
+    s, _ = st.step(s, st.Join("b", 0.2))
     s, eff = st.step(s, st.Request("b", "arm", 0.5))
     assert s.records["arm"].owner == "b" and [e.kind for e in eff] == ["granted", "revoked"]
+
+
+def test_a_user_without_a_token_takes_a_free_robot_but_never_someones():
+    s = st.initial({"arm": "exclusive"}, lease_s=100.0)
+    s, eff = st.step(s, st.Request("a", "arm", 0.0))  # free: granted before a's token arrives
+    assert eff[0].kind == "granted"
+    s, eff = st.step(s, st.Request("ghost", "arm", 0.5))
+    assert s.records["arm"].owner == "a" and eff[0].kind == "denied" and "no liveliness token" in eff[0].reason
+    s, eff = st.step(s, st.Request("ghost", "arm", 0.5, wait=True))
+    assert eff[0].kind == "queued" and s.records["arm"].queue == ("ghost",)
+    s, _ = st.step(s, st.Join("ghost", 0.6))
+    s, eff = st.step(s, st.Request("ghost", "arm", 0.7))
+    assert s.records["arm"].owner == "ghost"
 
 
 def test_lease_expiry_passes_to_next_in_join_order():

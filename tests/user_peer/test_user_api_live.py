@@ -97,3 +97,18 @@ def test_drive_then_follow_a_path_to_its_end(user):
     path = Path(xs, ys, np.full(20, math.atan2(gy - y1, gx - x1)))
     xf, yf, _ = base.follow(path, tol=0.25, timeout=40)
     assert math.hypot(xf - gx, yf - gy) <= 0.25
+
+
+def test_stop_is_confirmed_by_the_robot_standing_still(user):
+    w = user("carol")
+    arm = w.robot("arm1")
+    arm.wait_for("joints")
+    if arm.record is not None and not arm.is_owner:
+        arm.request(timeout=10)
+    arm.move_joints(np.radians([0.0, 0.0, 0.0, 0.0, 0.0, 170.0]), wait=False, speed_scale=0.05)
+    wait_until(lambda: np.max(np.abs(arm.joint_state.dq)) > 0.01, what="the arm moving")
+    assert arm.stop() is True  # sent until the joint stream shows it still
+    q = arm.joints
+    assert np.max(np.abs(arm.joint_state.dq)) < 1e-6 and abs(q[5]) < math.radians(170.0) - 0.05
+    assert arm.reset() is True
+    assert np.max(np.abs(arm.joints)) < 1e-6

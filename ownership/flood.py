@@ -1,0 +1,361 @@
+"""The flood harness (issue 14): an owner commands a robot while other clients flood the world.
+
+Real processes over loopback: a router (this process), a sim peer and a compute peer (each a
+``robofabric`` child process with its log in a file), the owner ``alice`` (a session in this
+process: she owns ``arm1``, renews her lease and sends a joint target every ``period_s``), and
+a flooder child process (:mod:`ownership.flood_client`) that sends, as fast as it can:
+commands to unique robot ids, junk payloads on every key the peers subscribe to, large
+payloads, fake joint streams for the compute peer and forged ownership requests.
+
+How a command is known to be applied, from outside: alice moves only the last joint, towards
++/-2.5 rad alternately, at a speed scale that encodes the command's number (mod 60). The sim's
+controller moves a joint at ``max_speed * speed_scale`` towards its target, so the first
+published JointState whose last-joint velocity has that sign and magnitude shows that command
+applied; the latency is from alice's send to that message's arrival.
+
+What it measures: alice's command latency (p50/p99, commands never seen), whether her lease
+ever lapsed, resident memory (VmRSS) and CPU of the sim and compute processes, and their log
+sizes. Counts are a :class:`Load`, bounded; everything started is ended by pid.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fabric import keys
+from fabric.messages import Command, JointState, JointTarget, Stop
+from fabric.reliable import Resent, resend_until
+from fabric.session import Fabric, ServiceError
+from fabric.testing import client, free_port, robofabric_cmd, router_config, wait_until
+
+from ownership.client import OwnershipClient
+
+__all__ = ["Load", "FloodResult", "run_flood", "proc_rss_mb", "proc_cpu_s"]
+
+JOINT = 5  # the last joint of the arm: the one alice moves
+SCALES = 60  # command numbers are told apart modulo this
+AMPLITUDE = 2.5
+
+
+@dataclass(frozen=True, slots=True)
+class Load:
+    """What the flooder sends (the issue's test counts by default) and how long alice goes on."""
+
+    unique_commands: int = 20_000
+    junk_per_key: int = 10_000
+    big_payloads: int = 100
+    big_bytes: int = 5_000_000
+    fake_joint_streams: int = 1_000
+    forged_requests: int = 1_000
+    warm_s: float = 3.0
+    settle_s: float = 5.0
+    period_s: float = 0.05
+
+    def scaled(self, factor: float) -> "Load":
+        """The same load times ``factor`` (counts only)."""
+        f = float(factor)
+        return Load(int(self.unique_commands * f), int(self.junk_per_key * f), int(self.big_payloads * f), self.big_bytes,
+                    int(self.fake_joint_streams * f), int(self.forged_requests * f), self.warm_s, self.settle_s, self.period_s)
+
+
+@dataclass
+class FloodResult:
+    """What one run measured. Latencies in seconds; memory in MB; CPU in seconds of the flood phase."""
+
+    flooded: bool
+    commands: int = 0
+    applied: int = 0
+    latencies: list[float] = field(default_factory=list)
+    lapses: list[str] = field(default_factory=list)
+    rss_before: dict[str, float] = field(default_factory=dict)
+    rss_peak: dict[str, float] = field(default_factory=dict)
+    cpu_s: dict[str, float] = field(default_factory=dict)
+    log_bytes: dict[str, int] = field(default_factory=dict)
+    flood_s: float = 0.0
+    phase_s: float = 0.0
+    flooder: dict[str, Any] = field(default_factory=dict)
+    slowest: list[tuple[float, float]] = field(default_factory=list)  # (sent at, s after the flood began; latency s)
+    stop: dict[str, Any] = field(default_factory=dict)  # the mid-flood stop: done, sends, seconds
+
+    def pct(self, q: float) -> float:
+        return float(np.percentile(self.latencies, q)) if self.latencies else float("inf")
+
+    @property
+    def not_applied(self) -> int:
+        """Commands never seen themselves (superseded by a later one, or lost)."""
+        return self.commands - self.applied
+
+    def growth(self, name: str) -> float:
+        return self.rss_peak.get(name, 0.0) - self.rss_before.get(name, 0.0)
+
+    def summary(self) -> dict[str, Any]:
+        out = asdict(self)
+        out.pop("latencies")
+        out.update(p50_ms=self.pct(50) * 1e3, p99_ms=self.pct(99) * 1e3, not_applied=self.not_applied,
+                   growth_mb={k: round(self.growth(k), 1) for k in self.rss_peak})
+        return out
+
+
+def proc_rss_mb(pid: int, field: str = "VmRSS") -> float:
+    """Resident memory of a process, from /proc/PID/status (``VmRSS``, or ``RssAnon``, ``RssShmem``...), in MB."""
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith(field + ":"):
+                return int(line.split()[1]) / 1024.0
+    return 0.0
+
+
+def proc_cpu_s(pid: int) -> float:
+    """User + system CPU seconds a process used so far, from /proc/PID/stat."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+class _Owner:
+    """Alice: owns arm1, renews, sends a coded joint target every period, sees each applied."""
+
+    def __init__(self, fab: Fabric, world: str, vmax: float, dof: int) -> None:
+        self.fab, self.world, self.vmax, self.dof = fab, world, vmax, dof
+        self.own = OwnershipClient(fab, "alice", renew_s=0.4)
+        self.sent: dict[int, tuple[float, int]] = {}  # k -> (send time, sign)
+        self.seen: dict[int, float] = {}  # k -> arrival time of the first JointState showing it
+        self.lapses: list[str] = []
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._k = 0
+        self._key = keys.robot_cmd(world, "arm1", "joints")
+        self.paused = threading.Event()
+        self.still_since: float | None = None  # arrival time of the first still JointState after motion
+        fab.subscribe(keys.robot_joints(world, "arm1"), self._on_joints, expected=JointState)
+        self.own.on_change(self._on_record)
+        self._thread: threading.Thread | None = None
+
+    def take(self) -> None:
+        wait_until(lambda: self.own.request("arm1").granted or self.own.owns("arm1"), timeout=30, what="alice owns arm1")
+
+    def _on_record(self, rec) -> None:
+        if rec.object == "arm1" and rec.owner != "alice" and not self._stop.is_set() and self._thread is not None:
+            self.lapses.append(f"owner became {rec.owner or 'nobody'} (epoch {rec.epoch})")
+
+    def _on_joints(self, key: str, js: JointState) -> None:
+        now = time.monotonic()
+        if js.dq.shape[0] <= JOINT:
+            return
+        still = float(np.max(np.abs(js.dq))) < 1e-9
+        with self._lock:
+            if not still:
+                self.still_since = None
+            elif self.still_since is None:
+                self.still_since = now
+        v = float(js.dq[JOINT])
+        scale = abs(v) / self.vmax
+        if scale < 0.05:
+            return
+        sign = 1 if v > 0 else -1
+        m = int(round((scale - 0.1) / 0.015)) % SCALES
+        with self._lock:
+            # the latest command sent with this code: if its sign matches and it is new, it is applied now
+            k = self._k - ((self._k - m) % SCALES)
+            if k in self.sent and k not in self.seen and self.sent[k][1] == sign:
+                self.seen[k] = now
+
+    def latency(self, k: int) -> float:
+        """Send to first sight; a command never seen was superseded (the sim keeps the latest target), so
+        its effect was there, at the latest, when a later command was first seen: that bound is its latency."""
+        t = self.seen.get(k)
+        if t is None:
+            later = [self.seen[j] for j in self.seen if j > k]
+            if not later:
+                return float("inf")
+            t = min(later)
+        return t - self.sent[k][0]
+
+    def send_one(self) -> None:
+        with self._lock:
+            self._k += 1
+            k = self._k
+            sign = 1 if k % 2 else -1
+            self.sent[k] = (time.monotonic(), sign)
+        q = np.zeros(self.dof)
+        q[JOINT] = sign * AMPLITUDE
+        self.fab.publish(self._key, Command("alice", self.own.epoch("arm1"), JointTarget(q, 0.1 + 0.015 * (k % SCALES))))
+
+    def start(self, period: float) -> None:
+        def loop() -> None:
+            nxt = time.monotonic()
+            while not self._stop.is_set():
+                try:
+                    if not self.paused.is_set():
+                        self.send_one()
+                except Exception:
+                    pass
+                nxt += period
+                self._stop.wait(max(0.0, nxt - time.monotonic()))
+
+        self._thread = threading.Thread(target=loop, name="alice", daemon=True)
+        self._thread.start()
+
+    def stop_robot(self, timeout: float) -> Resent:
+        """Pause the commands, then send ``cmd/stop`` again every 0.1 s until arm1's joints show it still."""
+        self.paused.set()
+        t0 = time.monotonic()
+        key = keys.robot_cmd(self.world, "arm1", "stop")
+
+        def send() -> None:
+            self.fab.publish(key, Command("alice", self.own.epoch("arm1"), Stop()))
+
+        def still() -> bool:
+            with self._lock:
+                return self.still_since is not None and self.still_since > t0
+
+        return resend_until(send, still, interval=0.1, timeout=timeout)
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(5)
+
+    def close(self) -> None:
+        self.stop()
+        self.own.close()
+
+
+def _start(argv: list[str], log_path: Path) -> subprocess.Popen:
+    out = open(log_path, "wb")
+    try:
+        return subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
+                                env={**os.environ, "PYTHONUNBUFFERED": "1", **({"MALLOC_MMAP_THRESHOLD_": "131072"} if os.environ.get("WT14_MMAP") else {})})
+    finally:
+        out.close()
+
+
+def _end(procs: list[subprocess.Popen]) -> None:
+    for p in procs:
+        if p.poll() is None:
+            try:
+                os.kill(p.pid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+    deadline = time.monotonic() + 10
+    for p in procs:
+        try:
+            p.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            os.kill(p.pid, signal.SIGKILL)
+            p.wait(timeout=5)
+
+
+def run_flood(load: Load, out_dir: Path, *, flood: bool = True, stop_at: float | None = 2.0) -> FloodResult:
+    """One run: warm up, flood (or not), settle; returns what was measured. Logs go to ``out_dir``.
+
+    ``stop_at``: seconds after the flood began, alice stops sending targets and stops the arm with
+    :func:`fabric.reliable.resend_until` (re-sent until her joint stream shows it still), then goes on."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    world = f"flood{uuid.uuid4().hex[:6]}"
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    result = FloodResult(flooded=flood)
+    router = Fabric(router_config(world, port), kind="router", peer_id="router")
+    procs: list[subprocess.Popen] = []
+    owner: _Owner | None = None
+    fab: Fabric | None = None
+    try:
+        peers = {
+            "sim": _start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep, "--id", "sim-flood"), out_dir / "sim.log"),
+            "compute": _start(robofabric_cmd("compute", "--world", world, "--connect", ep, "--id", "compute-flood"), out_dir / "compute.log"),
+        }
+        procs.extend(peers.values())
+        fab = client(world, port, kind="user", peer_id="alice")
+        info = wait_until(lambda: _world_info(fab, world), timeout=90, interval=0.5, what="the sim's srv/world")
+        arm = next(r for r in info.robots if r.id == "arm1")
+        owner = _Owner(fab, world, float(arm.max_speed[JOINT]), len(arm.joint_names))
+        wait_until(lambda: fab.live_peers("compute"), timeout=90, interval=0.5, what="the compute peer")
+        owner.take()
+        owner.start(load.period_s)
+        time.sleep(load.warm_s)  # a measurement phase of fixed length, not a wait for a condition
+        result.rss_before = {n: proc_rss_mb(p.pid) for n, p in peers.items()}
+        for n, p in peers.items():
+            for fld in ("RssAnon", "RssShmem", "RssFile"):
+                result.rss_before[f"{n}:{fld}"] = proc_rss_mb(p.pid, fld)
+        cpu0 = {n: proc_cpu_s(p.pid) for n, p in peers.items()}
+        peak = dict(result.rss_before)
+        t0 = time.monotonic()
+        flooder = None
+        if flood:
+            spec = json.dumps(asdict(load))
+            flooder = _start([sys.executable, "-m", "ownership.flood_client", world, str(port), spec], out_dir / "flooder.log")
+            procs.append(flooder)
+        end = None
+        stopped = stop_at is None
+        while True:
+            if not stopped and time.monotonic() - t0 >= stop_at:
+                r = owner.stop_robot(timeout=10.0)
+                result.stop = {"done": r.done, "sends": r.sends, "seconds": round(r.seconds, 3),
+                               "flooder_running": flooder is not None and flooder.poll() is None}
+                owner.paused.clear()
+                stopped = True
+            for n, p in peers.items():
+                peak[n] = max(peak[n], proc_rss_mb(p.pid))
+                for fld in ("RssAnon", "RssShmem", "RssFile"):
+                    peak[f"{n}:{fld}"] = max(peak.get(f"{n}:{fld}", 0.0), proc_rss_mb(p.pid, fld))
+            now = time.monotonic()
+            if end is None and (flooder is None or flooder.poll() is not None):
+                result.flood_s = now - t0
+                end = now + load.settle_s
+            if end is not None and now >= end:
+                break
+            if now - t0 > 600:
+                raise RuntimeError("the flooder ran for more than 600 s")
+            time.sleep(0.1)
+        result.phase_s = time.monotonic() - t0
+        result.cpu_s = {n: proc_cpu_s(p.pid) - cpu0[n] for n, p in peers.items()}
+        result.rss_peak = peak
+        owner.stop()
+        if flooder is not None:
+            try:
+                result.flooder = json.loads((out_dir / "flooder.log").read_text().strip().splitlines()[-1])
+            except (ValueError, IndexError):
+                result.flooder = {"output": (out_dir / "flooder.log").read_text(errors="replace")[-2000:]}
+        with owner._lock:
+            last = max((t for t, _ in owner.sent.values()), default=0.0)
+            # from the start of warm-up; the last second's commands may not have been published yet
+            measured = [k for k, (t, _) in owner.sent.items() if t0 - load.warm_s <= t <= last - 1.0]
+            result.commands = len(measured)
+            lat = {k: owner.latency(k) for k in measured}
+            result.latencies = sorted(lat.values())
+            slow = sorted(((owner.sent[k][0] - t0, v) for k, v in lat.items()), key=lambda x: -x[1])
+            result.slowest = [(round(a, 3), round(b, 3)) for a, b in slow[:8]]
+            result.applied = sum(1 for k in measured if k in owner.seen)
+        result.lapses = list(owner.lapses)
+    finally:
+        if owner is not None:
+            owner.close()
+        if fab is not None:
+            fab.close()
+        _end(procs)
+        router.close()
+    result.log_bytes = {n: (out_dir / f"{n}.log").stat().st_size for n in ("sim", "compute") if (out_dir / f"{n}.log").exists()}
+    return result
+
+
+def _world_info(fab: Fabric, world: str) -> Any:
+    import sim_peer.messages  # noqa: F401  (WorldInfo)
+
+    try:
+        return fab.call(keys.srv(world, "world"), timeout=2.0)
+    except ServiceError:
+        return None
