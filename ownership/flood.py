@@ -136,7 +136,7 @@ class _Owner:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._k = 0
-        self._key = keys.robot_cmd(world, "arm1", "joints")
+        self._key = keys.robot_cmd(world, "arm1", "joints", "alice")
         self.paused = threading.Event()
         self.still_since: float | None = None  # arrival time of the first still JointState after motion
         fab.subscribe(keys.robot_joints(world, "arm1"), self._on_joints, expected=JointState)
@@ -212,7 +212,7 @@ class _Owner:
         """Pause the commands, then send ``cmd/stop`` again every 0.1 s until arm1's joints show it still."""
         self.paused.set()
         t0 = time.monotonic()
-        key = keys.robot_cmd(self.world, "arm1", "stop")
+        key = keys.robot_cmd(self.world, "arm1", "stop", "alice")
 
         def send() -> None:
             self.fab.publish(key, Command("alice", self.own.epoch("arm1"), Stop()))

@@ -25,12 +25,13 @@ def flood(world: str, port: int, load: dict) -> dict:
         root = keys.world_root(world)
         cmd = encode(Command("mallory", 1, JointTarget(np.zeros(6))))
         for i in range(load["unique_commands"]):
-            s.put(f"{root}/robot/ghost{i}/cmd/joints", cmd)
+            s.put(keys.robot_cmd(world, f"ghost{i}", "joints", "mallory"), cmd)
         sent["unique_commands"] = load["unique_commands"]
         sent["t_unique_commands"] = round(time.monotonic() - t0, 3)
         junk_keys = [
-            keys.robot_cmd(world, "arm1", "joints"), keys.robot_cmd(world, "arm1", "stop"), keys.robot_cmd(world, "base1", "twist"),
-            keys.object_pose(world, "target"), keys.object_pose(world, "goal"),
+            keys.robot_cmd(world, "arm1", "joints", "mallory"), keys.robot_cmd(world, "arm1", "stop", "mallory"),
+            keys.robot_cmd(world, "base1", "twist", "mallory"),
+            keys.object_pose(world, "target", "mallory"), keys.object_pose(world, "goal", "mallory"),
             keys.robot_joints(world, "arm1"), keys.robot_pose(world, "base1"), keys.robot_scan(world, "base1"),
         ]
         pubs = [s.declare_publisher(k) for k in junk_keys]
@@ -44,7 +45,7 @@ def flood(world: str, port: int, load: dict) -> dict:
         sent["junk"] = load["junk_per_key"] * len(pubs)
         sent["t_junk"] = round(time.monotonic() - t0, 3)
         for i in range(load["junk_per_key"] // 10):  # junk queries too: ownership and a service
-            for k in (keys.own(world, "arm1"), keys.srv(world, "ik", "arm1")):
+            for k in (keys.own_request(world, "arm1", "mallory"), keys.srv(world, "ik", "arm1")):
                 s.get(k, lambda r: None, payload=junk[i % len(junk)])
         sent["junk_queries"] = 2 * (load["junk_per_key"] // 10)
         sent["t_junk_queries"] = round(time.monotonic() - t0, 3)
@@ -59,7 +60,8 @@ def flood(world: str, port: int, load: dict) -> dict:
         sent["fake_joint_streams"] = load["fake_joint_streams"]
         sent["t_fake_joint_streams"] = round(time.monotonic() - t0, 3)
         for i in range(load["forged_requests"]):
-            s.get(keys.own(world, "arm1"), lambda r: None, payload=encode(OwnRequest("request", f"forged{i}", True)), timeout=5.0)
+            s.get(keys.own_request(world, "arm1", f"forged{i}"), lambda r: None, payload=encode(OwnRequest("request", f"forged{i}", True)),
+                  timeout=5.0)
         sent["forged_requests"] = load["forged_requests"]
         sent["t_forged_requests"] = round(time.monotonic() - t0, 3)
         time.sleep(1.0)  # let the last puts leave before the session closes

@@ -37,7 +37,7 @@ import zenoh
 
 from fabric.codec import DecodeError, decode
 from fabric.gate import CommandGate, OpenGate
-from fabric.limits import clip, quote
+from fabric.limits import clip, is_valid_user, quote
 from fabric.messages import COMMAND_BODIES, Command, Event, JointState, Pose, Scan
 from fabric.rate import Clock, RateLoop
 from fabric.session import Fabric
@@ -363,7 +363,7 @@ class SimPeer:
             # the key names the sender (a router's access control vouches for it); a payload claiming
             # someone else is a forgery or a bug, never a command
             self._reject(rid, name, "user_mismatch", f"the command names {quote(cmd.user, 64)} but was sent on {quote(sender, 64)}'s key",
-                         sender)
+                         sender if is_valid_user(sender) else "")
             return None
         want = COMMAND_BODIES.get(name)
         if want is None or not isinstance(cmd.body, want):

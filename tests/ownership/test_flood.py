@@ -5,7 +5,8 @@ arm1 every 50 ms, and a flooder process sending the issue's load once, as fast a
 commands to unique robot ids, 10,000 junk payloads on each of the 8 keys the peers subscribe to
 (plus junk queries on ownership and IK), 100 payloads of 5 MB, 1,000 fake joint streams for the
 compute peer and 1,000 forged ownership requests. Pass criteria are the issue's, measured at the
-process level (/proc); see ownership.flood for how a command is known to be applied.
+process level (/proc); see ownership.flood for how a command is known to be applied. Two seconds
+into the flood alice also stops the arm, and the stop must be seen (fabric.reliable.resend_until).
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ def test_an_owner_is_not_starved_and_peers_stay_bounded_under_the_flood(tmp_path
     assert r.commands >= 100, report
     assert r.pct(99) <= 0.5, report  # alice's commands applied with p99 <= 0.5 s
     assert not r.lapses, report  # her lease never lapsed (nobody else ever owned arm1)
+    # mid-flood, alice stops the arm: cmd/stop sent again every 0.1 s until her joint stream shows it still
+    assert r.stop.get("done") and r.stop.get("flooder_running"), report
     for peer in ("sim", "compute"):
         assert r.growth(peer) <= 50.0, report  # resident memory grew by at most 50 MB
         assert r.log_bytes[peer] <= 1_000_000, report  # each log file stays under 1 MB
