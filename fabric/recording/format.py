@@ -46,6 +46,7 @@ class Peek:
     schema: str
     wall_ns: int | None = None
     seq: int | None = None
+    term: int = 0
 
 
 _RAW = Peek(RAW_SCHEMA)
@@ -62,13 +63,14 @@ def peek(payload: bytes) -> Peek:
     head = msg[-1]
     if (
         isinstance(head, list)
-        and len(head) == 5
+        and len(head) in (5, 6)  # 6: with the authority epoch (Header.term, issue 16)
         and head[0] == "Header"
         and isinstance(head[2], int)
         and isinstance(head[3], int)
         and head[2] >= 0
     ):
-        return Peek(msg[0], head[2], head[3])
+        term = head[5] if len(head) == 6 and isinstance(head[5], int) and head[5] >= 0 else 0
+        return Peek(msg[0], head[2], head[3], term)
     return Peek(msg[0])
 
 

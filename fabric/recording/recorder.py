@@ -28,7 +28,7 @@ import zenoh
 
 from fabric import keys
 from fabric.recording.format import LIVELINESS_SCHEMA, RAW_SCHEMA
-from fabric.recording.sink import McapSink
+from fabric.recording.sink import STALE, McapSink
 from fabric.session import undeclare_all
 
 __all__ = ["Recorder", "RecorderStats"]
@@ -301,7 +301,10 @@ class Recorder:
                 self._queued -= 1
                 return
         if schema is None:
-            if sink.write(key, payload, t_ns) == RAW_SCHEMA:
+            written = sink.write(key, payload, t_ns)
+            if written == STALE:
+                return  # a primary that lost the world, heard after its successor (counted by the sink)
+            if written == RAW_SCHEMA:
                 self._raw += 1
         else:
             sink.write_with(key, schema, payload, t_ns, t_ns)

@@ -19,7 +19,11 @@ from typing import BinaryIO
 
 from mcap.writer import CompressionType, Writer
 
+from fabric.fencing import Fence, is_authority_key
 from fabric.recording.format import MESSAGE_ENCODING, METADATA_NAME, PROFILE, peek, schema_data
+
+STALE = "stale"
+"""What :meth:`McapSink.write` returns for a sample it left out: authority state of a lower authority epoch."""
 
 __all__ = ["McapSink", "COMPRESSIONS"]
 
@@ -58,6 +62,8 @@ class McapSink:
         self._last_flush = time.monotonic()
         self._closed = False
         self.messages = 0
+        self.fence = Fence()
+        self.stale = 0
         self.payload_bytes = 0
 
     # ------------------------------------------------------------------ writing
@@ -79,8 +85,13 @@ class McapSink:
         return cid
 
     def write(self, key: str, payload: bytes, log_time_ns: int) -> str:
-        """Write one sample; publish time and sequence come from its header when it has one. Returns the schema name."""
+        """Write one sample; publish time and sequence come from its header when it has one. Returns the schema name,
+        or ``stale`` for authority state of a lower authority epoch than one already written (not written: issue 16)."""
         p = peek(payload)
+        if p.term or self.fence.term:
+            if is_authority_key(key) and not self.fence.check(p.term).accept:
+                self.stale += 1
+                return STALE
         self.write_with(key, p.schema, payload, log_time_ns, p.wall_ns if p.wall_ns is not None else log_time_ns, p.seq or 0)
         return p.schema
 
