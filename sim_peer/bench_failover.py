@@ -33,7 +33,7 @@ def bench_failover(
     """Time from the primary's SIGKILL to the new authority's first state, and the state error at take-over."""
     from fabric import keys
     from fabric.codec import DecodeError, decode
-    from fabric.messages import Command, JointState, JointTarget, Pose
+    from fabric.messages import Command, Event, JointTarget
     from fabric.session import Fabric
     from fabric.testing import ProcessGroup, client, free_port, robofabric_cmd, router_config, wait_until
     from ownership import OwnershipClient
@@ -64,6 +64,8 @@ def bench_failover(
             client(world, port, kind="user", peer_id="bench") as fab:
         for stream in ("joints", "pose"):
             fab.subscribe_raw(keys.robot_stream_all(world, stream), on_sample)
+        events: list = []
+        fab.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
 
         def sim(pid: str, *extra: str):
             return procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep, "--id", pid, *extra),
@@ -83,14 +85,19 @@ def bench_failover(
                        what=f"standby {i + 1} following", seen=lambda: procs.output(standby)[-800:])
             cmd = Command("bench", epoch, JointTarget(poses[i % 2], speed_scale=0.05))
 
-            def moving() -> bool:
-                js = of("joints", term)
-                if js and np.abs(js[-1][1].dq).max() > 0.01:
+            t_cmd = time.monotonic()
+
+            def moving() -> bool:  # toward this round's target (the last round's motion may still be going)
+                js = [m for t, m in of("joints", term) if t > t_cmd + 0.05]
+                if len(js) >= 2 and np.abs(js[-1].dq).max() > 0.01 and \
+                        np.abs(js[-1].q - cmd.body.q).max() < np.abs(js[0].q - cmd.body.q).max():
                     return True
                 fab.publish(keys.robot_cmd(world, "arm1", "joints", "bench"), cmd)
                 return False
 
-            wait_until(moving, timeout=30, interval=0.3, what="the arm moving")
+            wait_until(moving, timeout=30, interval=0.3, what="the arm moving",
+                       seen=lambda: (own.records.get("arm1"), [(e.kind, e.reason, e.header.source) for e in events[-4:]],
+                                     procs.output(current)[-600:]))
             time.sleep(0.3)  # some way into the motion (a measurement pause, not a synchronisation)
             t_kill = time.monotonic()
             procs.kill(current, signal.SIGKILL)
