@@ -35,9 +35,9 @@ def export(s: st.OwnState, now: float) -> tuple[tuple[OwnershipRecord, ...], dic
     for u in s.live:
         users[f"live:{u}"] = True
     for u, a in s.away.items():
-        users[f"away:{u}"] = [max(0.0, a.deadline - now), *(f"o:{o}" for o in sorted(a.owned)), *(f"q:{o}" for o in sorted(a.queued))]
+        users[f"away:{u}"] = [a.deadline - now, *(f"o:{o}" for o in sorted(a.owned)), *(f"q:{o}" for o in sorted(a.queued))]
     for u, d in s.unproven.items():
-        users[f"unproven:{u}"] = max(0.0, d - now)
+        users[f"unproven:{u}"] = d - now  # may be past: the next tick drops it, as it would have
     return recs, users
 
 
