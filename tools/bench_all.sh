@@ -20,5 +20,6 @@ run sim --out "$OUT.sim" && cat "$OUT.sim" >> "$OUT" && rm -f "$OUT.sim"
 run ik --out "$OUT"
 run nav --out "$OUT"
 run ownership | tee -a "$OUT"
+run failover --kills 10 --out "$OUT.failover" && cat "$OUT.failover" >> "$OUT" && rm -f "$OUT.failover"
 run record --out "$OUT"
 echo "wrote $OUT" >&2
