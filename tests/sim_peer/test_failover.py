@@ -104,7 +104,8 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
 
     procs.kill(primary)  # SIGKILL
     t_kill = time.monotonic()
-    wait_until(lambda: tape.of("arm1", "joints", 2) and tape.of("base1", "pose", 2), timeout=20, what="state from the new authority",
+    wait_until(lambda: tape.of("arm1", "joints", 2) and tape.of("arm1", "pose", 2) and tape.of("base1", "pose", 2), timeout=20,
+               what="state from the new authority",
                seen=lambda: procs.output(standby)[-1500:])
     assert "took over the world with term 2" in procs.output(standby)
 
