@@ -74,7 +74,7 @@ def _child_pub(a: argparse.Namespace) -> None:
         from fabric.config import FabricConfig
         from fabric.session import Fabric
 
-        fab = Fabric(FabricConfig(world="bench", connect=(a.endpoint,)), kind="tool", peer_id="bench-pub")
+        fab = Fabric(FabricConfig(world="bench", connect=(a.endpoint,), config_file=a.zenoh_config), kind="tool", peer_id="bench-pub")
         pub = fab.session.declare_publisher(KEY, congestion_control=zenoh.CongestionControl.BLOCK)
         time.sleep(0.5)  # route establishment before the first sample; the subscriber is already up
         sent = _pace(a.rate, a.count, a.duration, pub.put)
@@ -119,7 +119,7 @@ def _child_sub(a: argparse.Namespace) -> None:
         from fabric.config import FabricConfig
         from fabric.session import Fabric
 
-        fab = Fabric(FabricConfig(world="bench", connect=(a.endpoint,)), kind="tool", peer_id="bench-sub")
+        fab = Fabric(FabricConfig(world="bench", connect=(a.endpoint,), config_file=a.zenoh_config), kind="tool", peer_id="bench-sub")
         fab.subscribe_raw(KEY, lambda s: on_payload(s.payload.to_bytes()))
         closer = fab.close
     else:
@@ -169,17 +169,21 @@ def _free_port() -> int:
     return free_port()
 
 
-def _run_one(transport: str, endpoint: str, rate: float, duration: float) -> dict:
+def _run_one(transport: str, endpoint: str, rate: float, duration: float, *, pub_config: str | None = None,
+             sub_config: str | None = None) -> dict:
+    """One publisher/subscriber pair; ``pub_config``/``sub_config``: zenoh configs (credentials, TLS)."""
     count = int(rate * duration) if rate > 0 else 0
     me = [sys.executable, "-m", "fabric.bench_transport"]
     common = ["--transport", transport, "--endpoint", endpoint]
-    sub = subprocess.Popen(me + ["sub", *common], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    sub_args = ["--zenoh-config", sub_config] if sub_config else []
+    pub_args = ["--zenoh-config", pub_config] if pub_config else []
+    sub = subprocess.Popen(me + ["sub", *common, *sub_args], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
         assert sub.stdout is not None and sub.stdin is not None
         if sub.stdout.readline().strip() != "ready":
             raise RuntimeError("benchmark subscriber did not start")
         pub = subprocess.run(
-            me + ["pub", *common, "--rate", str(rate), "--count", str(count), "--duration", str(duration)],
+            me + ["pub", *common, *pub_args, "--rate", str(rate), "--count", str(count), "--duration", str(duration)],
             capture_output=True,
             text=True,
             timeout=duration * 3 + 30,
@@ -308,6 +312,7 @@ def _main() -> None:
     ap.add_argument("--rate", type=float, default=1000.0)
     ap.add_argument("--count", type=int, default=1000)
     ap.add_argument("--duration", type=float, default=3.0)
+    ap.add_argument("--zenoh-config", default=None, help="zenoh config file (credentials, TLS) for this side")
     a = ap.parse_args()
     (_child_pub if a.role == "pub" else _child_sub)(a)
 

@@ -6,6 +6,7 @@ A launch file is TOML (see ``fabric/demo.toml``, the demo, also at ``examples/de
     world = "demo"
     router = "tcp/127.0.0.1:7447"   # this process hosts the router here (omit on machines that only connect)
     connect = ["tcp/10.0.0.5:7447"] # where children connect (default: the router above)
+    zenoh_config = "class/router.json5"  # optional: this process's own zenoh config (examples/secure/)
 
     [[peer]]
     name = "sim"
@@ -83,6 +84,7 @@ class LaunchSpec:
     connect: tuple[str, ...] = ()
     peers: tuple[PeerSpec, ...] = field(default=())
     args: tuple[tuple[str, str], ...] = ()  # the arguments' values as resolved (command line > env > default)
+    zenoh_config: str | None = None  # the launcher's own session: the router's config when it hosts one, else a login
 
     def child_connect(self) -> tuple[str, ...]:
         if self.connect:
@@ -160,7 +162,7 @@ def parse_launch(
     head = data.get("launch", {})
     if not isinstance(head, dict):
         raise LaunchError(f"{path}: [launch] must be a table")
-    bad = set(head) - {"world", "router", "connect"}
+    bad = set(head) - {"world", "router", "connect", "zenoh_config"}
     if bad:
         raise LaunchError(f"{path}: [launch] has unknown key(s) {', '.join(sorted(bad))}")
     head = dict(head)
@@ -183,6 +185,9 @@ def parse_launch(
     connect = [e.strip() for c in connect for e in c.split(",") if e.strip()]  # "{connect}" may hold several
     if router is not None and not router.strip():
         router = None  # router = "{router}" with an empty value: this machine hosts none
+    zenoh_config = head.get("zenoh_config") or None
+    if zenoh_config is not None and not isinstance(zenoh_config, str):
+        raise LaunchError(f"{path}: [launch] zenoh_config must be a file name, e.g. 'class/router.json5'")
 
     raw_peers = data.get("peer", [])
     if not isinstance(raw_peers, list):
@@ -235,7 +240,8 @@ def parse_launch(
             )
         )
     return LaunchSpec(
-        path=path, world=world, router=router, connect=tuple(connect), peers=tuple(peers), args=tuple(sorted(values.items()))
+        path=path, world=world, router=router, connect=tuple(connect), peers=tuple(peers), args=tuple(sorted(values.items())),
+        zenoh_config=zenoh_config,
     )
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import threading
 import time
 from collections import Counter
@@ -72,10 +74,13 @@ class _Watch:
 
 def _open_launcher(spec: LaunchSpec, router: str | None) -> Fabric:
     ep = router or spec.router
-    if ep:
-        cfg = FabricConfig(world=spec.world, profile="embedded", listen=(ep,))
-    else:
-        cfg = FabricConfig(world=spec.world, profile="client", connect=spec.child_connect())
+    try:
+        if ep:
+            cfg = FabricConfig(world=spec.world, profile="embedded", listen=(ep,), config_file=spec.zenoh_config)
+        else:
+            cfg = FabricConfig(world=spec.world, profile="client", connect=spec.child_connect(), config_file=spec.zenoh_config)
+    except ValueError as exc:  # a zenoh_config that is not there: say which
+        raise UserError(f"{spec.path}: {exc}") from None
     try:
         return Fabric(cfg, kind="router" if ep else "tool", peer_id="launch-router" if ep else None)
     except Exception as exc:
@@ -87,7 +92,7 @@ def _run(spec: LaunchSpec, *, out: Path, duration: float | None, router: str | N
     out.mkdir(parents=True, exist_ok=True)
     stop = shutdown_event()
     if router:
-        spec = LaunchSpec(spec.path, spec.world, router, spec.connect, spec.peers, spec.args)
+        spec = dataclasses.replace(spec, router=router)
     with _open_launcher(spec, router) as fab:
         watch = _Watch(fab)
         sup = Supervisor(spec, out_dir=out, is_ready=watch.is_ready)

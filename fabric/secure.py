@@ -81,18 +81,19 @@ def _own_rules(ident: Identity) -> list[dict]:
     if r == "user":
         mine = [f"{W}/robot/*/cmd/*/{BY}/{n}", f"{W}/object/*/pose/{BY}/{n}"]
         put += mine
+        # a latched publisher's cache (zenoh.ext) is a queryable under KEY/@adv/... that replies on KEY itself
         latched = [f"{W}/object/*/pose/{BY}/{n}/{ADV}"]
-        serve += latched
+        serve += latched + mine[1:]
         tokens += [f"{W}/peer/user/{n}", f"{W}/peer/viewer/*", f"{W}/peer/recorder/*", *latched]
         ask += [f"{W}/own/*/{BY}/{n}"]
     elif r == "sim":
         put += [f"{W}/robot/*/{s}" for s in ("joints", "pose", "scan", "sonar")] + [f"{W}/own/*", f"{W}/event/**"]
         serve += [f"{W}/srv/world", f"{W}/own/*", f"{W}/own/*/{BY}/*"]
-        tokens += [f"{W}/peer/sim/*"]
+        tokens += [f"{W}/peer/sim/*", f"{W}/peer/recorder/*"]  # a recorder on the sim machine, under its login
     elif r == "compute":
         put += [f"{W}/robot/*/ik", f"{W}/robot/*/path", f"{W}/map/*", f"{W}/event/compute/**"]
         latched = [f"{W}/robot/*/path/{ADV}", f"{W}/map/*/{ADV}"]
-        serve += [f"{W}/srv/{s}/**" for s in ("ik", "fk", "jacobian", "plan", "map")] + latched
+        serve += [f"{W}/srv/{s}/**" for s in ("ik", "fk", "jacobian", "plan", "map")] + latched + [f"{W}/robot/*/path", f"{W}/map/*"]
         tokens += [f"{W}/peer/compute/*", *latched]
     else:  # viewer
         tokens += [f"{W}/peer/viewer/*", f"{W}/peer/recorder/*"]

@@ -57,12 +57,21 @@ def router(
     world: World = None,
     zenoh_config: ZenohConfig = None,
     peer_id: PeerId = None,
+    audit: Annotated[bool, typer.Option("--audit", help="Count what access control refuses (by login, message and key) and print a summary per interval; costs CPU with traffic.")] = False,
+    audit_every: Annotated[float, typer.Option(help="Seconds between --audit summaries.")] = 10.0,
 ) -> None:
     """Run a zenoh router for the fabric (any standard zenohd works in its place)."""
     cfg = make_config(world, connect, listen, "embedded", zenoh_config)
     if not listen and not cfg.file_value("listen/endpoints"):
         cfg = cfg.with_(listen=("tcp/0.0.0.0:7447",))
+    if audit and audit_every <= 0:
+        raise UserError("--audit-every must be positive")
     stop = shutdown_event()
+    auditor = None
+    if audit:
+        from fabric.router_audit import Audit
+
+        auditor = Audit(every=audit_every)
     try:
         fab = Fabric(cfg, kind="router", peer_id=peer_id)
     except Exception as exc:
@@ -71,6 +80,8 @@ def router(
         print(f"router {fab.peer_id} listening on {', '.join(cfg.endpoints()[1])} (world {cfg.world}); Ctrl-C to stop", flush=True)
         while not stop.wait(0.5):
             pass
+    if auditor is not None:
+        auditor.close()
     print("router stopped", flush=True)
 
 

@@ -99,3 +99,46 @@ def test_rules_allow_each_user_only_keys_that_name_them():
 def test_init_mistakes_are_one_line_errors(tmp_path, args, message):
     out = run_cli("secure", "init", str(tmp_path / "c"), *args)
     assert out.returncode == 2 and message in out.stderr and "Traceback" not in out.stderr, out.stderr
+
+
+def test_the_secure_example_launch_files_give_every_peer_its_own_login():
+    from pathlib import Path
+
+    from fabric.launch import load_launch
+
+    root = Path(__file__).resolve().parents[2] / "examples" / "secure"
+    files = sorted(root.glob("*.toml"))
+    assert {f.stem for f in files} >= {"router", "sim", "compute", "viewer", "users", "class"}
+    for f in files:
+        spec = load_launch(f, args={"secrets": "/srv/class"}, env={})
+        assert spec.zenoh_config and spec.zenoh_config.startswith("/srv/class/"), f
+        for peer in spec.peers:
+            i = peer.args.index("--zenoh-config")
+            login = Path(peer.args[i + 1]).stem
+            assert login in ("sim", "compute", "viewer", "alice", "bob"), (f, peer)
+            assert "--user" not in peer.args  # the login is the user
+
+
+def test_the_audit_counts_dropped_messages_by_the_decision_that_dropped_them():
+    from collections import Counter
+
+    from fabric.router_audit import UNKNOWN, Refusal, RefusalCounter, parse_refusal, summary
+
+    def line(thread, text, module="zenoh::net::routing::interceptor::access_control"):
+        return (f"\x1b[2m2026-11-23T16:58:13.924332Z\x1b[0m \x1b[35mTRACE\x1b[0m rx-1 ThreadId({thread}) "
+                f"\x1b[2m{module}\x1b[0m\x1b[2m:\x1b[0m {text}")
+
+    denied = line(9, "7acdde4b4ac85c54 on Interface(lo)+Username(mallory)+Transport(Tcp)+7acdde4b4ac85c54 is unauthorized to Put (ingress) on rf/w/own/arm1")
+    assert parse_refusal(denied) == Refusal("mallory", "put", "ingress", "rf/w/own/arm1")
+    assert parse_refusal(denied.replace("is unauthorized", "is authorized")) is None
+    dropped = line(9, "Msg intercepted!", module="zenoh::net::routing::interceptor")
+    cached = line(8, "Using cached result: 7acdde4b4ac85c54 is unauthorized to Put (ingress) on rf/w/own/arm1")
+    c = RefusalCounter()
+    for text in (denied, dropped, cached, line(8, "Msg intercepted!", module="zenoh::net::routing::interceptor"),
+                 line(4, "Msg intercepted!", module="zenoh::net::routing::interceptor"),
+                 denied.replace("is unauthorized", "is authorized"), "some other line"):
+        c.feed(text)
+    ref = Refusal("mallory", "put", "ingress", "rf/w/own/arm1")
+    assert c.counts == Counter({ref: 2, UNKNOWN: 1})  # a decision is logged once per key; each drop counts
+    text = summary(Counter({ref: 3, Refusal("eve", "query", "ingress", "rf/w/own/arm1/by/bob"): 1}), prefix="refused")
+    assert text.startswith("refused: 4 (put 3, query 1); mallory put rf/w/own/arm1 x3")

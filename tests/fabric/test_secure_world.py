@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import threading
 import time
@@ -45,7 +46,8 @@ class SecureWorld:
         self.dir = tmp / "class"
         self.files = init(self.dir, users=["alice", "bob", "mallory"], listen=[self.ep]).clients
         self.procs = procs
-        self.router = procs.start(robofabric_cmd("router", "--zenoh-config", str(self.dir / "router.json5")), name="router")
+        self.router = procs.start(robofabric_cmd("router", "--zenoh-config", str(self.dir / "router.json5"), "--audit",
+                                                 "--audit-every", "1"), name="router")
         wait_until(lambda: "listening" in procs.output(self.router), timeout=30, what="router", seen=lambda: procs.output(self.router))
         self.fabrics: list[Fabric] = []
 
@@ -136,6 +138,10 @@ def test_mallory_cannot_command_alices_arm(secure, alice_owns_arm):
     n = len(joints.messages())
     wait_until(lambda: len(joints.messages()) > n + 20, timeout=20, what="joint states after the forgeries")
     assert all(np.allclose(js.q, 0.1, atol=1e-3) for js in joints.messages()[n:]), "the arm moved"
+    # the router counted the refusal (robofabric router --audit), naming the login and the key
+    refused = f"mallory put {keys.robot_cmd(w, 'arm1', 'joints', 'alice')}"
+    wait_until(lambda: refused in secure.procs.output(secure.router), timeout=20, what="the router's count of the refusal",
+               seen=lambda: secure.procs.output(secure.router)[-1500:])
 
 
 def test_a_fake_ownership_record_is_refused_and_alice_keeps_renewing(secure, alice_owns_arm):
@@ -275,5 +281,16 @@ def test_paper_tests_a_and_b_in_a_secure_world(secure, alice_owns_arm):
     assert b is not None and b.ok, b and b.lines
     assert a.user == "alice" and b.user == "bob"
     assert any("took arm1 over where it was" in line for line in b.lines), b.lines
-    assert procs.output(compute) is not None and compute.poll() is None and viewer.poll() is None
+    assert compute.poll() is None and viewer.poll() is None
     assert math.isfinite(b.figures["goal_error_m"])
+    # a late joiner gets the latched values (scene objects, the map) from their writers' caches
+    late = secure.fabric("viewer", kind="viewer", peer_id="late")
+    got: dict[str, object] = {}
+    late.subscribe(keys.object_pose_all(secure.world), lambda k, m: got.setdefault(k, m), history=True)
+    late.subscribe(keys.map_key(secure.world, "map"), lambda k, m: got.setdefault(k, m), history=True)
+    wait_until(lambda: keys.object_pose(secure.world, "target", "alice") in got and keys.map_key(secure.world, "map") in got,
+               timeout=20, what="latched values for a late joiner", seen=lambda: sorted(got))
+    # and the router refused nothing of what the honest logins said (its --audit summaries name every refusal)
+    time.sleep(1.5)  # one more audit interval: the summaries of the last second
+    honest = re.findall(r"\b(alice|bob|sim|compute|viewer) (\w+) (rf/\S+) x\d+", procs.output(secure.router))
+    assert not honest, honest
