@@ -88,7 +88,7 @@ def _own_rules(ident: Identity) -> list[dict]:
         ask += [f"{W}/own/*/{BY}/{n}"]
     elif r == "sim":
         put += [f"{W}/robot/*/{s}" for s in ("joints", "pose", "scan", "sonar")] + [f"{W}/own/*", f"{W}/event/**"]
-        serve += [f"{W}/srv/world", f"{W}/own/*", f"{W}/own/*/{BY}/*"]
+        serve += [f"{W}/srv/world", f"{W}/srv/state", f"{W}/own/*", f"{W}/own/*/{BY}/*"]  # srv/state: a standby follows the primary
         tokens += [f"{W}/peer/sim/*", f"{W}/peer/recorder/*"]  # a recorder on the sim machine, under its login
     elif r == "compute":
         put += [f"{W}/robot/*/ik", f"{W}/robot/*/path", f"{W}/map/*", f"{W}/event/compute/**"]
