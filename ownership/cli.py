@@ -163,6 +163,12 @@ def bench_flood_cmd(
         print(f"| {name} | {r.pct(50) * 1e3:.1f} / {r.pct(99) * 1e3:.1f} | {r.commands} ({r.not_applied}) | {len(r.lapses)} "
               f"| {r.rss_before['sim']:.0f} -> {r.rss_peak['sim']:.0f} | {r.rss_before['compute']:.0f} -> {r.rss_peak['compute']:.0f} "
               f"| {r.cpu_s['sim']:.1f} / {r.cpu_s['compute']:.1f} | {r.phase_s:.1f} | {r.log_bytes.get('sim', 0)} / {r.log_bytes.get('compute', 0)} |")
+    for name, r in rows:
+        if r.lapses:
+            print(f"{name}: lease lapses: {'; '.join(r.lapses[:5])}")
+        st = r.stop
+        print(f"{name}: a stop 2 s in, resent every 0.1 s: {'seen still' if st.get('done') else 'NOT seen still'} after "
+              f"{st.get('sends')} send(s), {st.get('seconds')} s (flooder {'running' if st.get('flooder_running') else 'idle'})")
     flooder = rows[1][1].flooder
     print("flooder sent:", ", ".join(f"{k}={v}" for k, v in flooder.items() if not k.startswith("t_")))
 
