@@ -99,7 +99,6 @@ def test_joining_waits_for_a_sim_that_starts_later(tmp_path):
             w = user_peer.connect(world={world!r}, connect="tcp/127.0.0.1:{port}", user="early", join_timeout=90)
             print("robots", w.robots(), "after", round(time.monotonic() - t0, 1), flush=True)
         """)
-        printed(procs, early, "", timeout=1)  # started (output may still be empty)
         time.sleep(1.0)  # the scenario itself: the sim starts one second after the script
         procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"), name="sim")
         early.wait(timeout=120)
@@ -123,16 +122,18 @@ MOVER = """
     arm = w.robot("arm1")
     arm.request(timeout=30)
     far = [[1.2, 0.4, -0.4, 1.0, 0.8, 1.5], [-1.2, -0.4, 0.4, -1.0, -0.8, -1.5]]
+    q = arm.wait_for("joints").q
+    i = 0 if max(abs(a - b) for a, b in zip(q, far[0])) > max(abs(a - b) for a, b in zip(q, far[1])) else 1  # the far one
+    first = i
     end = time.monotonic() + {seconds}
-    i = 0
     # never reach a target: a new one every 0.3 s keeps the arm in motion (a still arm is handed over at once)
     while time.monotonic() < end:
         arm.move_joints(far[i % 2], wait=False, speed_scale=0.2)
-        if i == 0:
+        if i == first:
             w.latest.wait_for(lambda: arm.record.state == "moving", 10)
-            print("moving", arm.record.state, flush=True)
+            print("moving", arm.record.state, arm.record, [(e.kind, e.reason) for e in w.events][-5:], flush=True)
         i += 1
-        time.sleep(0.3 if i % 8 else 0.01)
+        time.sleep(0.3)
     print("done", flush=True)
 """
 
@@ -141,8 +142,10 @@ def test_queued_request_waits_for_the_owner_to_leave(live, user):
     world, port, procs = live
     bob = user("bob")
     arm = bob.robot("arm1")
-    dave = script(procs, "dave", MOVER.format(world=world, port=port, seconds=8))
+    dave = script(procs, "dave", MOVER.format(world=world, port=port, seconds=12))
     printed(procs, dave, "moving moving")
+    wait_until(lambda: arm.owner == "dave" and arm.record.state == "moving", timeout=10, what="bob's replica: dave, moving",
+               seen=lambda: arm.record)
     # a non-owner's command is refused at once, naming the owner (not after the move's timeout)
     t0 = time.monotonic()
     with pytest.raises(user_peer.NotOwner, match="owner: dave"):
@@ -165,6 +168,7 @@ def test_queued_request_times_out_and_leaves_the_queue(live, user):
     arm = erin.robot("arm1")
     dave = script(procs, "dave", MOVER.format(world=world, port=port, seconds=20))
     printed(procs, dave, "moving moving")
+    wait_until(lambda: arm.owner == "dave", timeout=10, what="erin's replica: dave", seen=lambda: arm.record)
     t0 = time.monotonic()
     with pytest.raises(user_peer.Timeout, match=r"not granted to erin after [0-9.]+ s of waiting .*left the queue"):
         arm.request(wait=True, timeout=1.5)
