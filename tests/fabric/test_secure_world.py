@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 
 from fabric import keys
+from fabric.codec import encode
 from fabric.config import FabricConfig
 from fabric.messages import Command, Event, JointState, JointTarget, OwnershipRecord, Stop
 from fabric.secure import init
@@ -99,9 +100,20 @@ class Seen:
             return [m for _, m in self.items]
 
 
+def _send(fab: Fabric, key: str, msg: object) -> None:
+    """Put ``msg`` once a subscriber matches: a client drops a put nobody it knows of listens to, and a
+    forgery that never left the client would prove nothing about the router."""
+    pub = fab.session.declare_publisher(key)
+    try:
+        wait_until(lambda: pub.matching_status.matching, timeout=20, what=f"a subscriber for {key}")
+        pub.put(encode(msg))
+    finally:
+        pub.undeclare()
+
+
 def _marker(mallory: Fabric, seen_events: Seen, world: str, tag: str) -> None:
     """mallory sends what she may send (a decode report); once it arrived, everything before it did."""
-    mallory.publish(keys.event(world, "decode", "mallory"), Event(kind="marker", reason=tag, header=mallory.header("m")))
+    _send(mallory, keys.event(world, "decode", "mallory"), Event(kind="marker", reason=tag, header=mallory.header("m")))
     wait_until(lambda: any(getattr(e, "reason", "") == tag for e in seen_events.messages()), timeout=20,
                what=f"mallory's marker {tag}")
 
@@ -128,8 +140,8 @@ def test_mallory_cannot_command_alices_arm(secure, alice_owns_arm):
     mallory = secure.fabric("mallory")
     epoch = alice.ownership.record("arm1").epoch
     bad = JointTarget(np.full(6, 0.5))
-    mallory.publish(keys.robot_cmd(w, "arm1", "joints", "alice"), Command("alice", epoch, bad))  # alice's key: the router refuses
-    mallory.publish(keys.robot_cmd(w, "arm1", "joints", "mallory"), Command("alice", epoch, bad))  # her key, alice's name
+    _send(mallory, keys.robot_cmd(w, "arm1", "joints", "alice"), Command("alice", epoch, bad))  # alice's key: the router refuses
+    _send(mallory, keys.robot_cmd(w, "arm1", "joints", "mallory"), Command("alice", epoch, bad))  # her key, alice's name
     ev = wait_until(lambda: [e for e in events.messages() if e.kind == "reject" and e.reason == "user_mismatch"], timeout=20,
                     what="the sim refusing the payload's name", seen=events.messages)[0]
     assert ev.user == "mallory" and ev.object == "arm1"
@@ -152,8 +164,8 @@ def test_a_fake_ownership_record_is_refused_and_alice_keeps_renewing(secure, ali
     mallory = secure.fabric("mallory")
     rec = alice.ownership.record("arm1")
     # plausible in every way the client can check: the authority's name, the next epoch
-    mallory.publish(keys.own(w, "arm1"), OwnershipRecord("arm1", owner="mallory", epoch=rec.epoch + 1, authority=rec.authority))
-    mallory.publish(keys.own(w, "arm1"), OwnershipRecord("arm1", owner="mallory", epoch=2**40, authority=rec.authority))
+    _send(mallory, keys.own(w, "arm1"), OwnershipRecord("arm1", owner="mallory", epoch=rec.epoch + 1, authority=rec.authority))
+    _send(mallory, keys.own(w, "arm1"), OwnershipRecord("arm1", owner="mallory", epoch=2**40, authority=rec.authority))
     _marker(mallory, events, w, "after-records")
     assert not [r for r in records.messages() if r.owner == "mallory"]
     assert alice.ownership.record("arm1").owner == "alice"
@@ -185,7 +197,8 @@ def test_a_user_cannot_publish_robot_state_or_serve_the_world(secure):
     events, joints = Seen(watcher, keys.event_all(w), Event), Seen(watcher, keys.robot_joints(w, "arm1"), JointState)
     mallory = secure.fabric("mallory")
     fake_sim = secure.fabric("mallory", kind="sim", peer_id="fake-sim")  # her login, a sim's token: refused
-    mallory.publish(keys.robot_joints(w, "arm1"), JointState([f"joint_{i}" for i in range(1, 7)], np.full(6, 1.0), np.zeros(6)))
+    _send(mallory, keys.robot_joints(w, "arm1"), JointState([f"joint_{i}" for i in range(1, 7)], np.full(6, 1.0), np.zeros(6),
+                                                             mallory.header("j")))
     mallory.serve(keys.srv(w, "world"), lambda key, req: Event(kind="fake", reason="mallory's world"))
     mallory.serve(keys.own(w, "arm1"), lambda key, req: OwnershipRecord("arm1", owner="mallory", epoch=2**40))
     _marker(mallory, events, w, "after-state")
@@ -241,9 +254,13 @@ def test_tls_refuses_a_certificate_from_another_ca(tmp_path):
         sim = Fabric(FabricConfig(config_file=str(mine.clients["sim"])), kind="sim", peer_id="sim")
         try:
             got = Seen(sim, "rf/demo/**")
-            alice.publish(keys.robot_joints("demo", "arm1"), JointState(["j"], np.zeros(1), np.zeros(1)))
-            alice.publish(keys.robot_cmd("demo", "arm1", "stop", "alice"), Command("alice", 0, Stop()))
-            wait_until(lambda: any("/cmd/stop/by/alice" in k for k, _ in got.items), timeout=20, what="alice's own command over TLS")
+
+            def send() -> bool:  # again until the routes are up: the subscription is new
+                alice.publish(keys.robot_joints("demo", "arm1"), JointState(["j"], np.zeros(1), np.zeros(1)))
+                alice.publish(keys.robot_cmd("demo", "arm1", "stop", "alice"), Command("alice", 0, Stop()))
+                return any("/cmd/stop/by/alice" in k for k, _ in got.items)
+
+            wait_until(send, timeout=20, interval=0.2, what="alice's own command over TLS")
             assert not [k for k, _ in got.items if k.endswith("/joints")]
         finally:
             alice.close()
