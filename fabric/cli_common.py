@@ -87,42 +87,9 @@ def make_config(
         raise UserError(str(exc)) from None
 
 
-def _reachable(endpoint: str, timeout: float = 1.0) -> bool:
-    """Whether something accepts a TCP connection at a tcp/ or tls/ endpoint."""
-    import socket
-
-    proto, _, addr = endpoint.partition("/")
-    host, _, port = addr.rpartition(":")
-    if proto not in ("tcp", "tls") or not port.isdigit():
-        return False
-    try:
-        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
-            return True
-    except OSError:
-        return False
-
-
 def join_error(cfg: FabricConfig, exc: BaseException) -> UserError:
-    """The one-line error for a session that could not open: which world, through where, and why.
-
-    zenoh says only "Unable to connect" whether nobody listens or the router refused the login; a
-    TCP connection that succeeds tells the two apart: then it was the credentials."""
-    connect, listen = cfg.endpoints()
-    where = ", ".join(connect or listen) or "the LAN"
-    reason = str(exc).split(" at /")[0]  # zenoh appends the Rust source location
-    if cfg.profile == "client" and connect and "Unable to connect" in reason:
-        up = [ep for ep in connect if _reachable(ep)]
-        if up:
-            try:
-                who = cfg.identity()
-            except ValueError:
-                who = None
-            if who is not None:
-                return UserError(f"authentication failed for {who} at {up[0]}: the router refused this login "
-                                 f"(wrong password, unknown user, or a certificate it does not trust)")
-            return UserError(f"authentication failed at {up[0]}: the router refused the connection "
-                             f"(it may require credentials: --zenoh-config FILE from your instructor)")
-    return UserError(f"cannot join world {cfg.world!r} via {where}: {reason}")
+    """The one-line error for a session that could not open (:meth:`FabricConfig.join_failure`)."""
+    return UserError(cfg.join_failure(exc))
 
 
 def open_fabric(cfg: FabricConfig, kind: str, peer_id: str | None = None) -> "Fabric":

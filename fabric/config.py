@@ -51,6 +51,19 @@ def default_peer_id(kind: str) -> str:
     return f"{kind}-{safe}-{uuid.uuid4().hex[:6]}"
 
 
+def _reachable(endpoint: str, timeout: float = 1.0) -> bool:
+    """Whether something accepts a TCP connection at a tcp/ or tls/ endpoint."""
+    proto, _, addr = endpoint.partition("/")
+    host, _, port = addr.rpartition(":")
+    if proto not in ("tcp", "tls") or not port.isdigit():
+        return False
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
+            return True
+    except OSError:
+        return False
+
+
 def _check_endpoint(ep: str) -> str:
     proto, sep, rest = ep.partition("/")
     if not sep or proto not in ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream") or not rest:
@@ -160,6 +173,30 @@ class FabricConfig:
             except (OSError, ValueError) as exc:
                 raise ConfigError(f"cannot read the certificate {cert!r} of {self.config_file!r}: {exc}") from None
         return None
+
+    def join_failure(self, exc: BaseException) -> str:
+        """One line saying why a session could not open: which world, through where, and why.
+
+        zenoh says only "Unable to connect" whether nobody listens or the router refused the login;
+        a TCP connection that succeeds tells the two apart: then it was the credentials."""
+        reason = str(exc).split(" at /")[0]  # zenoh appends the Rust source location
+        if reason.startswith("authentication failed"):
+            return reason  # said already
+        connect, listen = self.endpoints()
+        where = ", ".join(connect or listen) or "the LAN"
+        if self.profile == "client" and connect and "Unable to connect" in reason:
+            up = [ep for ep in connect if _reachable(ep)]
+            if up:
+                try:
+                    who = self.identity()
+                except ValueError:
+                    who = None
+                if who is not None:
+                    return (f"authentication failed for {who} at {up[0]}: the router refused this login "
+                            f"(wrong password, unknown user, or a certificate it does not trust)")
+                return (f"authentication failed at {up[0]}: the router refused the connection "
+                        f"(it may require credentials: --zenoh-config FILE from your instructor)")
+        return f"cannot join world {self.world!r} via {where}: {reason}"
 
     def user_id(self, user: str | None) -> str | None:
         """The user a session speaks for: the authenticated identity when there is one (a different

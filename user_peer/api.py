@@ -143,7 +143,10 @@ class World:
         self.timeout = timeout
         # how long the first look at the world waits for a sim to serve it (a sim may start after us)
         self.join_timeout = max(timeout, 30.0) if join_timeout is None else join_timeout
-        self.fabric = Fabric(config, kind="user", peer_id=self.user)
+        try:
+            self.fabric = Fabric(config, kind="user", peer_id=self.user)
+        except Exception as exc:  # zenoh.ZError: nobody there, or the router refused the login
+            raise Unreachable(config.join_failure(exc)) from None
         self.latest = _Latest()
         self.events: list[Event] = []
         self._event_log: list[tuple[int, Event]] = []  # (local arrival number, event)

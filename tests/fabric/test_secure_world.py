@@ -311,3 +311,18 @@ def test_paper_tests_a_and_b_in_a_secure_world(secure, alice_owns_arm):
     time.sleep(1.5)  # one more audit interval: the summaries of the last second
     honest = re.findall(r"\b(alice|bob|sim|compute|viewer) (\w+) (rf/\S+) x\d+", procs.output(secure.router))
     assert not honest, honest
+
+
+def test_the_python_api_says_who_was_refused_and_keeps_the_login_as_the_user(secure, tmp_path):
+    import user_peer
+    from fabric.config import ConfigError
+    from user_peer.errors import Unreachable
+
+    cfg = json.loads("\n".join(secure.files["bob"].read_text().splitlines()[2:]))
+    cfg["transport"]["auth"]["usrpwd"]["password"] = "guess"
+    bad = tmp_path / "bob-bad.json5"
+    bad.write_text(json.dumps(cfg))
+    with pytest.raises(Unreachable, match=f"^authentication failed for bob at {secure.ep}: the router refused this login"):
+        user_peer.connect(world=secure.world, zenoh_config=str(bad), wait=False)
+    with pytest.raises(ConfigError, match="logs in as 'bob'.*not 'alice'"):
+        user_peer.connect(world=secure.world, zenoh_config=str(secure.files["bob"]), user="alice", wait=False)
