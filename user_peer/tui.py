@@ -211,6 +211,8 @@ class UserApp(App):
 
     def _refresh_view(self) -> None:
         status = []
+        if not self.world.world_alive:  # its last sim peer left: died, or cut off (issue 15)
+            status.append(f"WORLD GONE: no sim peer of {self.world.name!r} (waiting for one)")
         if self.arm is not None:
             mine = self.arm.can_command
             self.query_one("#arm-owner", Label).update(self._owner_text(self.arm))

@@ -136,6 +136,8 @@ class Viewer:
         # the clock that stamps arrivals in _enqueue: Eq. 8 ages are measured on it alone
         self.logger = WorldLogger(self.rec, robot_info=self.catalog.info, max_hz=opts.max_hz, clock=time.time_ns)
         self._closed = False
+        self._sims: set[str] = set()
+        self._sims_lock = threading.Lock()
         # a script that never closes the viewer still flushes its sinks, then its session closes (fabric/exit.py)
         self._cancel_exit = at_exit(self.close)
 
@@ -161,12 +163,30 @@ class Viewer:
         if scene:
             log_scene(self.logger, scene)
         self.fab.subscribe(keys.world_all(self.fab.world), self._enqueue, history=True)  # maps, paths, objects set before we joined
+        self.fab.watch_peers(self._on_sim, kind="sim")  # "world gone" when the last sim peer leaves (issue 15)
         for expr in (keys.own_all(self.fab.world),):
             try:
                 for rep in self.fab.query(expr, timeout=1.0, all_replies=True):
                     self._enqueue(rep.key, rep.message)
             except ServiceError:
                 pass
+
+    def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
+        """Say when the world goes (its last sim peer left: died, or cut off) and when it comes back:
+        on the terminal and in the view's event log; the robots keep their last drawn state."""
+        with self._sims_lock:
+            was = bool(self._sims)
+            (self._sims.add if alive else self._sims.discard)(peer_id)
+            now = bool(self._sims)
+        if now == was:
+            return
+        text = (f"world {self.fab.world!r} is back: sim peer {peer_id}" if now
+                else f"world {self.fab.world!r} gone: its sim peer {peer_id} left (died, or cut off)")
+        print(f"viewer: {text}", flush=True)
+        try:
+            self.rec.log("events", rr.TextLog(text, level="INFO" if now else "WARN"))
+        except Exception:
+            log.debug("could not log the world's state", exc_info=True)
 
     def drain(self, until: float) -> int:
         """Log queued samples until the monotonic deadline ``until``; returns how many."""

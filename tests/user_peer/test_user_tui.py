@@ -94,3 +94,17 @@ async def _drive_the_ui(auth, alice, arm, base, cmds, world):
         await pilot.click("#arm-reset")
         await until(pilot, lambda: any("/cmd/reset/by/alice" in k for k, _ in cmds), "reset command")
         assert all(s.value == 0.0 for s in sliders)
+
+
+def test_status_says_when_the_world_is_gone(setup, world):
+    """The sim peer (here the test's "sim" session) leaves: the status line says the world is gone (issue 15)."""
+    asyncio.run(_world_gone(*setup))
+
+
+async def _world_gone(auth, alice, arm, base, cmds):
+    app = UserApp(alice, arm=arm, base=base)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await until(pilot, lambda: len(app.query("#status")) == 1, "the UI mounted")
+        assert "WORLD GONE" not in str(app.query_one("#status").render())
+        auth.close()
+        await until(pilot, lambda: "WORLD GONE" in str(app.query_one("#status").render()), "world gone shown")
