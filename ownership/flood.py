@@ -1,7 +1,8 @@
 """The flood harness (issue 14): an owner commands a robot while other clients flood the world.
 
-Real processes over loopback: a router (this process), a sim peer and a compute peer (each a
-``robofabric`` child process with its log in a file), the owner ``alice`` (a session in this
+Real processes over loopback: a router, a sim peer and a compute peer (each a ``robofabric``
+child process with its log in a file; the router apart from alice, so that forwarding the flood
+does not take her process's time), the owner ``alice`` (a session in this
 process: she owns ``arm1``, renews her lease and sends a joint target every ``period_s``), and
 a flooder child process (:mod:`ownership.flood_client`) that sends, as fast as it can:
 commands to unique robot ids, junk payloads on every key the peers subscribe to, large
@@ -11,7 +12,8 @@ How a command is known to be applied, from outside: alice moves only the last jo
 +/-2.5 rad alternately, at a speed scale that encodes the command's number (mod 60). The sim's
 controller moves a joint at ``max_speed * speed_scale`` towards its target, so the first
 published JointState whose last-joint velocity has that sign and magnitude shows that command
-applied; the latency is from alice's send to that message's arrival.
+applied; the latency is from alice's send to the sim's publish stamp on that message (one host,
+one clock): when the sim applied it, not when the flooded joint stream brought the news to alice.
 
 What it measures: alice's command latency (p50/p99, commands never seen), whether her lease
 ever lapsed, resident memory (VmRSS) and CPU of the sim and compute processes, and their log
@@ -38,7 +40,7 @@ from fabric import keys
 from fabric.messages import Command, JointState, JointTarget, Stop
 from fabric.reliable import Resent, resend_until
 from fabric.session import Fabric, ServiceError
-from fabric.testing import client, free_port, robofabric_cmd, router_config, wait_until
+from fabric.testing import client, free_port, robofabric_cmd, wait_until
 
 from ownership.client import OwnershipClient
 
@@ -130,8 +132,8 @@ class _Owner:
     def __init__(self, fab: Fabric, world: str, vmax: float, dof: int) -> None:
         self.fab, self.world, self.vmax, self.dof = fab, world, vmax, dof
         self.own = OwnershipClient(fab, "alice", renew_s=0.4)
-        self.sent: dict[int, tuple[float, int]] = {}  # k -> (send time, sign)
-        self.seen: dict[int, float] = {}  # k -> arrival time of the first JointState showing it
+        self.sent: dict[int, tuple[float, int, float]] = {}  # k -> (send time monotonic, sign, send time wall)
+        self.seen: dict[int, float] = {}  # k -> wall time the sim published the first JointState showing it
         self.lapses: list[str] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -170,7 +172,9 @@ class _Owner:
             # the latest command sent with this code: if its sign matches and it is new, it is applied now
             k = self._k - ((self._k - m) % SCALES)
             if k in self.sent and k not in self.seen and self.sent[k][1] == sign:
-                self.seen[k] = now
+                # the sim's publish stamp (same host, same clock), not the arrival here: the joint stream
+                # is flooded too, and what is measured is when the sim applied the command
+                self.seen[k] = js.header.wall_ns * 1e-9
 
     def latency(self, k: int) -> float:
         """Send to first sight; a command never seen was superseded (the sim keeps the latest target), so
@@ -181,14 +185,14 @@ class _Owner:
             if not later:
                 return float("inf")
             t = min(later)
-        return t - self.sent[k][0]
+        return t - self.sent[k][2]
 
     def send_one(self) -> None:
         with self._lock:
             self._k += 1
             k = self._k
             sign = 1 if k % 2 else -1
-            self.sent[k] = (time.monotonic(), sign)
+            self.sent[k] = (time.monotonic(), sign, time.time())
         q = np.zeros(self.dof)
         q[JOINT] = sign * AMPLITUDE
         self.fab.publish(self._key, Command("alice", self.own.epoch("arm1"), JointTarget(q, 0.1 + 0.015 * (k % SCALES))))
@@ -269,17 +273,17 @@ def run_flood(load: Load, out_dir: Path, *, flood: bool = True, stop_at: float |
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
     result = FloodResult(flooded=flood)
-    router = Fabric(router_config(world, port), kind="router", peer_id="router")
-    procs: list[subprocess.Popen] = []
+    procs: list[subprocess.Popen] = [_start(robofabric_cmd("router", "--listen", ep, "--world", world), out_dir / "router.log")]
     owner: _Owner | None = None
     fab: Fabric | None = None
     try:
+        # peers connect once, at start: the router must listen first
+        fab = wait_until(lambda: _try_client(world, port), timeout=90, interval=0.5, what="the router to accept alice")
         peers = {
             "sim": _start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep, "--id", "sim-flood"), out_dir / "sim.log"),
             "compute": _start(robofabric_cmd("compute", "--world", world, "--connect", ep, "--id", "compute-flood"), out_dir / "compute.log"),
         }
         procs.extend(peers.values())
-        fab = client(world, port, kind="user", peer_id="alice")
         info = wait_until(lambda: _world_info(fab, world), timeout=90, interval=0.5, what="the sim's srv/world")
         arm = next(r for r in info.robots if r.id == "arm1")
         owner = _Owner(fab, world, float(arm.max_speed[JOINT]), len(arm.joint_names))
@@ -331,9 +335,9 @@ def run_flood(load: Load, out_dir: Path, *, flood: bool = True, stop_at: float |
             except (ValueError, IndexError):
                 result.flooder = {"output": (out_dir / "flooder.log").read_text(errors="replace")[-2000:]}
         with owner._lock:
-            last = max((t for t, _ in owner.sent.values()), default=0.0)
+            last = max((t for t, _, _ in owner.sent.values()), default=0.0)
             # from the start of warm-up; the last second's commands may not have been published yet
-            measured = [k for k, (t, _) in owner.sent.items() if t0 - load.warm_s <= t <= last - 1.0]
+            measured = [k for k, (t, _, _) in owner.sent.items() if t0 - load.warm_s <= t <= last - 1.0]
             result.commands = len(measured)
             lat = {k: owner.latency(k) for k in measured}
             result.latencies = sorted(lat.values())
@@ -347,9 +351,15 @@ def run_flood(load: Load, out_dir: Path, *, flood: bool = True, stop_at: float |
         if fab is not None:
             fab.close()
         _end(procs)
-        router.close()
     result.log_bytes = {n: (out_dir / f"{n}.log").stat().st_size for n in ("sim", "compute") if (out_dir / f"{n}.log").exists()}
     return result
+
+
+def _try_client(world: str, port: int) -> Fabric | None:
+    try:
+        return client(world, port, kind="user", peer_id="alice")
+    except Exception:  # the router child is not listening yet
+        return None
 
 
 def _world_info(fab: Fabric, world: str) -> Any:
