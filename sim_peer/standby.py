@@ -6,8 +6,8 @@
 - **primary**: a :class:`~sim_peer.peer.SimPeer` with its ownership gate, every message stamped with
   the authority epoch (``fabric.term``), and the whole world state served on ``rf/{world}/srv/state``
   (:class:`~sim_peer.messages.WorldState`). It listens to the joints streams: a higher term from
-  another sim makes it step down. A publication gap longer than the transport lease means it was
-  frozen: it muzzles itself (publishes and answers nothing), asks ``srv/state`` who is authority now,
+  another sim makes it step down. A publication gap longer than half the transport lease means it
+  may have been frozen: it muzzles itself (publishes and answers nothing), asks ``srv/state`` who is authority now,
   and steps down if someone holds a higher term, else carries on.
 - **standby**: builds the same scene, publishes nothing users act on (no streams, no records, no
   services), polls ``srv/state`` and keeps the newest joints and poses from the streams. When the
@@ -86,7 +86,9 @@ class Host:
         self._stepped_down = threading.Event()
         self._stop = threading.Event()
         self._poller: threading.Thread | None = None
-        self.freeze_gap = freeze_gap if freeze_gap is not None else fabric.config.lease_ms / 1000.0
+        # half the transport lease: a freeze long enough for the others to drop our token (a lease) is
+        # always caught, with margin; a false alarm (a starved process) costs one query, muzzled
+        self.freeze_gap = freeze_gap if freeze_gap is not None else fabric.config.lease_ms / 2000.0
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -189,6 +191,12 @@ class Host:
         the world now. Stay muzzled until connected again, then ask: step down if a higher term answers,
         carry on if no other sim is there or none holds a higher term."""
         f = self.fabric
+        lease = f.config.lease_ms / 1000.0
+        if gap > lease:
+            # our token was dropped: a standby may have taken over, and our session may not even know yet
+            # that its link died. Listen (muzzled) for a lease: a new authority's streams reach us once the
+            # session is back, and hearing its higher term steps us down before anything goes out
+            self._stop.wait(lease + 0.5)
         deadline = time.monotonic() + max(30.0, 10 * self.freeze_gap)
         while time.monotonic() < deadline and not self._stop.is_set() and self.role == el.PRIMARY:
             info = f.session.info

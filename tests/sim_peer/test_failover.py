@@ -150,9 +150,12 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
     alice.close(), bob.close()
 
 
-def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, procs):
+def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, procs, tmp_path):
     port = router[1]
     primary, standby = _pair(procs, world, port)
+    mcap = tmp_path / "run.mcap"
+    recorder = procs.start(robofabric_cmd("record", "-o", str(mcap), "-q", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"),
+                           name="recorder")
     fa = connect("user", "alice")
     tape = Tape(fa, world)
     events: list[Event] = []
@@ -167,12 +170,18 @@ def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, 
                interval=0.5, what="arm moving", seen=lambda: (alice.records["arm1"], tape.of("arm1", "joints")[-1].msg.q,
                                                               [e for e in events if e.kind == "reject"][-3:]))
 
+    wait_until(mcap.exists, timeout=60, what="the recorder's file", seen=lambda: procs.output(recorder)[-800:])
+    size = mcap.stat().st_size
+    wait_until(lambda: mcap.stat().st_size > size + 1000, timeout=30, what="the recorder writing",
+               seen=lambda: procs.output(recorder)[-800:])  # a chunk of samples flushed: it hears term 1
+    stop_ns = time.time_ns()
     os.kill(primary.pid, signal.SIGSTOP)
     try:
         wait_until(lambda: tape.of("arm1", "joints", 2), timeout=30, what="the standby takes over after the lease",
                    seen=lambda: procs.output(standby)[-1500:])
         wait_until(lambda: alice.records["arm1"].authority == "sim-b", timeout=10, what="alice follows sim-b")
     finally:
+        cont_ns = time.time_ns()
         os.kill(primary.pid, signal.SIGCONT)
     wait_until(lambda: "stepping down" in procs.output(primary) and "standby sim-a: following sim-b (term 2)" in procs.output(primary),
                timeout=60, what="the old primary steps down and follows", seen=lambda: procs.output(primary)[-1500:])
@@ -186,8 +195,22 @@ def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, 
     # consumer's fence drops them)
     first2 = min(s.msg.header.wall_ns for s in tape.items if s.msg.header.term == 2)
     late1 = [s for s in tape.items if s.msg.header.term == 1 and s.msg.header.wall_ns > first2]
-    assert not late1, [(s.key, (s.msg.header.wall_ns - first2) / 1e9) for s in late1[:5]]
+    assert not late1, ([(s.key, (s.msg.header.wall_ns - first2) / 1e9, s.msg.header.seq) for s in late1[:5]],
+                       (stop_ns - first2) / 1e9, (cont_ns - first2) / 1e9, procs.output(primary)[-1500:])
     assert not [s for s in tape.items if s.t > t_down + 0.5 and s.msg.header.source == "sim-a"]
+    # and the recording of the whole run says the same
+    procs.kill(recorder, signal.SIGTERM)
+    from fabric.fencing import is_authority_key
+    from fabric.recording.reader import iter_messages
+
+    stamped = []
+    for m in iter_messages(mcap):
+        if is_authority_key(m.key):
+            h = decode(m.payload).header
+            stamped.append((h.wall_ns, h.term, h.source))
+    assert {t for _, t, _ in stamped} == {1, 2}, sorted({(t, src) for _, t, src in stamped})
+    first2 = min(w for w, t, _ in stamped if t == 2)
+    assert not [(w - first2) / 1e9 for w, t, _ in stamped if t == 1 and w > first2]
     alice.close()
 
 
