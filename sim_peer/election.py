@@ -8,7 +8,8 @@ Rules:
 
 - The authority epoch (``term``) only grows. A primary stamps its term on everything it writes.
 - A standby follows the source of the highest term it has heard (``Heard``).
-- When the primary's liveliness token goes (``Peers`` without it, after one with it), the standby with the lowest id
+- When the primary's liveliness token is not among the live ones (``Peers``: a complete view, the
+  caller's job; a liveliness history still arriving is not one), the standby with the lowest id
   among the live standbys takes over with ``term + 1``; the others wait. If that one dies too, the
   next ``Peers`` makes the next lowest take over. Deterministic: every standby that sees the same
   set of live peers agrees on one candidate.
@@ -16,6 +17,10 @@ Rules:
   its own term from another peer (two standbys disagreed about who was alive) keeps authority only
   if its id is the lower: the pair converges on one authority without talking.
 - State with a lower term than the highest heard is ignored (effect ``ignore``).
+- A primary back from a freeze longer than the lease that finds no higher term (``Resumed``) goes on
+  under term + 1 (effect ``reassert``): a standby that took over and died meanwhile may have had
+  consumers fence at that term. (If several did, one after the other, and all died before the old
+  primary came back, consumers that heard the last of them ignore it: docs/sim.md, limits.)
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Iterable
 
-__all__ = ["Role", "Election", "Heard", "Peers", "Effect", "candidate", "start", "step", "PRIMARY", "STANDBY"]
+__all__ = ["Role", "Election", "Heard", "Peers", "Resumed", "Effect", "candidate", "start", "step", "PRIMARY", "STANDBY"]
 
 PRIMARY = "primary"
 STANDBY = "standby"
@@ -38,7 +43,8 @@ class Election:
     role: Role
     term: int = 0
     leader: str = ""
-    leader_seen: bool = False  # the leader's liveliness token was seen alive since we follow it
+    leader_seen: bool = False  # the leader's liveliness token was seen alive since we follow it (informative)
+    live: frozenset[str] = frozenset()  # the live sim peers as last reported (``Peers``)
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,7 +62,12 @@ class Peers:
     live: frozenset[str]
 
 
-Event = Heard | Peers
+@dataclass(frozen=True, slots=True)
+class Resumed:
+    """This peer was frozen longer than the lease (its token was dropped) and found no higher term."""
+
+
+Event = Heard | Peers | Resumed
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,19 +107,26 @@ def step(s: Election, ev: Event) -> tuple[Election, list[Effect]]:
         if ev.term > s.term or ev.source != s.leader:
             if ev.term == s.term and s.leader and ev.source > s.leader:
                 return s, [Effect("ignore", ev.term, ev.source)]  # the same tie, seen from a standby
-            s = replace(s, term=ev.term, leader=ev.source, leader_seen=s.leader_seen and ev.source == s.leader)
+            seen = (s.leader_seen and ev.source == s.leader) or ev.source in s.live
+            s = replace(s, term=ev.term, leader=ev.source, leader_seen=seen)
             return s, [Effect("follow", ev.term, ev.source)]
         return s, []
     if isinstance(ev, Peers):
+        s = replace(s, live=frozenset(ev.live))
         if s.role == PRIMARY or not s.leader:
             return s, []  # nothing to take over: we lead, or follow nobody yet
         if s.leader in ev.live:
             return (s if s.leader_seen else replace(s, leader_seen=True)), []
-        if not s.leader_seen:
-            return s, []  # a token we never saw cannot have gone (liveliness history still arriving)
         standbys = set(ev.live) | {s.me}
         if candidate(standbys) != s.me:
             return s, []
         s = replace(s, role=PRIMARY, term=s.term + 1, leader=s.me)
         return s, [Effect("take_over", s.term, s.me)]
+    if isinstance(ev, Resumed):
+        if s.role != PRIMARY:
+            return s, []
+        # a standby may have taken over and died meanwhile, its term heard by consumers but not by us:
+        # come back under a new term, so whoever fenced at that one takes us again
+        s = replace(s, term=s.term + 1)
+        return s, [Effect("reassert", s.term, s.me)]
     raise TypeError(f"not an election event: {ev!r}")

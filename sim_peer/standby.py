@@ -59,6 +59,7 @@ class Host:
         speed: float | None = 1.0,
         term: int = 0,
         leader: str = "",
+        snapshot: WorldState | None = None,
         poll_s: float = POLL_S,
         freeze_gap: float | None = None,
         announce: Callable[[str], None] | None = None,
@@ -77,11 +78,12 @@ class Host:
             self.election = el.start(me, standby=False, term=term + 1)
         self.peer: SimPeer | None = None
         self.gate: Any = None
-        self.snapshot: WorldState | None = None
+        self.snapshot: WorldState | None = snapshot  # a primary that stepped down starts from its own last state
         self.joints: dict[str, JointState] = {}
         self.poses: dict[str, Pose] = {}
         self.live: set[str] = set()
         self.takeovers: list[dict[str, Any]] = []
+        self.last_state: WorldState | None = None
         self._lock = threading.RLock()
         self._stepped_down = threading.Event()
         self._stop = threading.Event()
@@ -102,7 +104,17 @@ class Host:
         f.serve(keys.srv(w, "state"), self._on_state_query)
         f.subscribe(keys.robot_stream_all(w, "joints"), self._on_joints, expected=JointState)
         f.subscribe(keys.robot_stream_all(w, "pose"), self._on_pose, expected=Pose)
+        # first a complete view of the live sims (a liveliness query), then changes: the election reads a
+        # leader missing from a view as gone, so the view must not be a history still arriving
+        try:
+            initial = {pid for _, pid in f.live_peers("sim", timeout=2.0)}
+        except Exception:
+            initial = set()
+        with self._lock:
+            self.live |= initial | {f.peer_id}
+            live = frozenset(self.live)
         f.watch_peers(self._on_sim, kind="sim")
+        self._step(el.Peers(live))
         if self.role == el.PRIMARY:
             self._serve(None)
         else:
@@ -126,6 +138,11 @@ class Host:
 
     def close(self) -> None:
         self._stop.set()
+        if self.peer is not None and self.role == el.STANDBY:  # stepped down: keep what we had, in case
+            try:
+                self.last_state = self._on_state_query("", None, force=True)
+            except Exception:
+                log.debug("no state kept at step-down", exc_info=True)
         if self._poller is not None:
             self._poller.join(2.0)
         if self.peer is not None:
@@ -173,9 +190,9 @@ class Host:
         self.peer = SimPeer(f, self.world, gate=self.gate, rates=self.rates, speed=self.speed)
         self.peer.start(self._duration)
 
-    def _on_state_query(self, key: str, request: Any) -> WorldState:
+    def _on_state_query(self, key: str, request: Any, *, force: bool = False) -> WorldState:
         peer = self.peer
-        if self.role != el.PRIMARY or peer is None:
+        if peer is None or (self.role != el.PRIMARY and not force):
             raise ServiceError(f"{self.fabric.peer_id} is a standby (term {self.election.term})")
         export = getattr(self.gate, "export_state", None)
         records, users = export() if callable(export) else ((), {})
@@ -214,6 +231,8 @@ class Host:
                 self._heard(rep.message.header.source, rep.message.header.term)
             break
         if self.role == el.PRIMARY:
+            if gap > lease:
+                self._step(el.Resumed())
             f.muzzled = False
             self.announce(f"sim {f.peer_id}: frozen {gap:.1f} s, still the authority (term {f.term})")
 
@@ -254,6 +273,8 @@ class Host:
         with self._lock:
             (self.live.add if alive else self.live.discard)(peer_id)
             live = frozenset(self.live)
+        if alive:
+            return  # a token appearing (or the history repeating one) never starts a take-over
         self._step(el.Peers(live))
 
     def _heard(self, source: str, term: int) -> None:
@@ -270,11 +291,12 @@ class Host:
                 self.fabric.muzzled = True  # from now on nothing with the old term goes out
                 self.announce(f"sim {self.fabric.peer_id}: {e.leader} holds term {e.term}; stepping down to standby")
                 self._stepped_down.set()
+            elif e.kind == "reassert":
+                with self._lock:
+                    self.fabric.term = e.term
+                    self.fabric.fence.raise_to(e.term)
             elif e.kind == "follow" and self.role == el.STANDBY:
                 self.announce(f"standby {self.fabric.peer_id}: following {e.leader} (term {e.term})")
-                with self._lock:
-                    live = frozenset(self.live)
-                self._step(el.Peers(live))  # is the new leader's token alive now? (only changes report it)
 
     def _take_over(self, t0: float) -> None:
         with self._lock:
@@ -303,13 +325,15 @@ def run_replicated(
     """Run a sim peer until ``stop``: as primary or standby, a fresh session and world after each step-down.
     Returns the last host (its ``peer`` holds the counters when it served)."""
     term, leader = 0, ""
+    last: WorldState | None = None
     host = None
     while not stop.is_set():
         with open_fabric() as fab:
             host = Host(fab, make_world(), make_gate, standby=standby, rates=rates, speed=speed, term=term, leader=leader,
-                        announce=announce)
+                        snapshot=last, announce=announce)
             role = host.run(stop, duration)
             term, leader = host.election.term, host.election.leader
+            last = host.last_state
         if role != el.STANDBY or stop.is_set():
             return host
         standby = True
