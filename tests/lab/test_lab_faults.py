@@ -45,6 +45,8 @@ class World:
         self.sim = self.start_sim()
         self.recording = lab.log_dir / "faults.mcap"
         self.recorder = self.obs_host.start(["record", "-o", str(self.recording), "-q", "--connect", self.router_ep], name="record")
+        wait_until(lambda: "Ctrl-C to stop" in self.recorder.output() or not self.recorder.alive(), timeout=120,
+                   what="the recorder subscribed", seen=lambda: self.recorder.output()[-500:])
         self.viewer = self.obs_host.start(["view", "--save", str(lab.log_dir / "faults.rrd"), "--connect", self.router_ep], name="view")
         self.users: dict[str, RemotePython] = {}
         for name in ("alice", "bob"):
