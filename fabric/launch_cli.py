@@ -177,6 +177,10 @@ def up(
     out: Annotated[Path, typer.Option(help="Directory for peers' output and logs.")] = Path("out/launch"),
     duration: Annotated[Optional[float], typer.Option(help="Stop everything after S seconds (default: until Ctrl-C).")] = None,
     router: Annotated[Optional[str], typer.Option(help="Host the router on this endpoint instead of the file's.")] = None,
+    zenoh_config: Annotated[
+        Optional[Path],
+        typer.Option("--zenoh-config", help="This launcher's own zenoh config (the router's where it hosts one), instead of [launch] zenoh_config."),
+    ] = None,
 ) -> None:
     """Start the peers a launch file lists on this machine; restart per policy; Ctrl-C stops them all.
 
@@ -190,6 +194,8 @@ def up(
         spec = load_launch(file, args=parse_cli_args(args or []), env=dict(os.environ))
     except LaunchError as exc:
         raise UserError(str(exc)) from None
+    if zenoh_config is not None:
+        spec = dataclasses.replace(spec, zenoh_config=str(zenoh_config))
     raise typer.Exit(_run(spec, out=out, duration=duration, router=router, demo=False))
 
 

@@ -142,3 +142,11 @@ def test_the_audit_counts_dropped_messages_by_the_decision_that_dropped_them():
     assert c.counts == Counter({ref: 2, UNKNOWN: 1})  # a decision is logged once per key; each drop counts
     text = summary(Counter({ref: 3, Refusal("eve", "query", "ingress", "rf/w/own/arm1/by/bob"): 1}), prefix="refused")
     assert text.startswith("refused: 4 (put 3, query 1); mallory put rf/w/own/arm1 x3")
+
+
+def test_up_takes_the_launchers_login_from_the_command_line(tmp_path):
+    from pathlib import Path
+
+    router_toml = Path(__file__).resolve().parents[2] / "examples" / "secure" / "router.toml"
+    out = run_cli("up", str(router_toml), "--zenoh-config", str(tmp_path / "missing.json5"), "--duration", "1")
+    assert out.returncode == 2 and "missing.json5' does not exist" in out.stderr and "Traceback" not in out.stderr, out.stderr
