@@ -70,6 +70,11 @@ class Fence:
             self._term = term
             return Verdict(True, raised)
 
+    def reset(self) -> None:
+        """Forget the highest term: the world's last sim left, and a sim started afresh begins at term 1."""
+        with self._lock:
+            self._term = 0
+
     def raise_to(self, term: int) -> None:
         """Never go below ``term`` from now on (an authority taking over fences its own past)."""
         with self._lock:

@@ -135,6 +135,8 @@ class Fabric:
         self._resources: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
         self.session = zenoh.open(config.zenoh_config())
+        self._sims: set[str] = set()
+        self._sim_watch: Any = None
         self.token = (
             self.session.liveliness().declare_token(keys.peer(self.world, kind, self.peer_id)) if token else None
         )
@@ -309,10 +311,41 @@ class Fabric:
         header = getattr(msg, "header", None)
         if header is None or not is_authority_key(key):
             return True
+        if self._sim_watch is None and header.term:
+            self._watch_sims()
         if self.fence.check(header.term).accept:
             return True
         self.counters["stale_authority"] += 1
         return False
+
+    def _watch_sims(self) -> None:
+        """Follow the world's sim tokens once terms are in use: when the last one goes, the fence resets,
+        so a world restarted from scratch (term 1) is believed again after an earlier take-over."""
+        with self._lock:
+            if self._sim_watch is not None or self._closed:
+                return
+            self._sim_watch = True
+
+        def on_token(sample: zenoh.Sample) -> None:
+            try:
+                pid = keys.parse(str(sample.key_expr)).leaf
+            except ValueError:
+                return
+            with self._lock:
+                if sample.kind == zenoh.SampleKind.PUT:
+                    self._sims.add(pid)
+                    return
+                self._sims.discard(pid)
+                empty = not self._sims
+            if empty:
+                self.fence.reset()
+                self.counters["fence_resets"] += 1
+
+        try:
+            sub = self.session.liveliness().declare_subscriber(keys.peers_all(self.world, "sim"), on_token, history=True)
+        except Exception:  # a closing session
+            return
+        self._resources.append(sub)
 
     def subscribe_raw(self, key_expr: str, callback: Callable[[zenoh.Sample], None], *, history: bool = False) -> Any:
         """``callback(sample)`` for every sample, undecoded; ``history`` as in :meth:`subscribe`."""

@@ -86,3 +86,22 @@ def test_subscribers_drop_authority_state_of_a_lower_term(world, connect):
 def _put(fab, key, term):
     fab.publish(key, JointState(("a",), [float(term)], [0.0], fab.header(key)))
     return False
+
+
+def test_the_fence_resets_when_the_worlds_last_sim_leaves(world, connect):
+    """After a take-over (term 2) the world's sims all stop; a sim started afresh (term 1) is believed."""
+    watcher = connect("tool", "watch")
+    got: list[JointState] = []
+    key = keys.robot_joints(world, "arm1")
+    watcher.subscribe(key, lambda k, m: got.append(m), expected=JointState)
+    old = connect("sim", "sim-old")
+    old.term = 2
+    wait_until(lambda: _put(old, key, 2) or any(m.header.term == 2 for m in got), timeout=20, what="term 2 heard")
+    wait_until(lambda: watcher.counters["fence_resets"] == 0 and watcher._sims == {"sim-old"}, timeout=20,
+               what="the watcher follows the sim tokens", seen=lambda: watcher._sims)
+    old.close()
+    wait_until(lambda: watcher.counters["fence_resets"] >= 1, timeout=20, what="the fence reset", seen=lambda: watcher._sims)
+    new = connect("sim", "sim-new")
+    new.term = 1
+    wait_until(lambda: _put(new, key, 1) or any(m.header.source == "sim-new" for m in got), timeout=20, what="term 1 believed again")
+    assert watcher.fence.term == 1
