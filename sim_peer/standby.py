@@ -102,6 +102,8 @@ class Host:
         f, w = self.fabric, self.fabric.world
         self._duration = duration
         f.serve(keys.srv(w, "state"), self._on_state_query)
+        if self.role == el.PRIMARY:
+            self._serve(None)  # the world first: nothing below may delay a primary's streams and services
         f.subscribe(keys.robot_stream_all(w, "joints"), self._on_joints, expected=JointState)
         f.subscribe(keys.robot_stream_all(w, "pose"), self._on_pose, expected=Pose)
         # first a complete view of the live sims (a liveliness query), then changes: the election reads a
@@ -115,9 +117,7 @@ class Host:
             live = frozenset(self.live)
         f.watch_peers(self._on_sim, kind="sim")
         self._step(el.Peers(live))
-        if self.role == el.PRIMARY:
-            self._serve(None)
-        else:
+        if self.role != el.PRIMARY:
             self._poller = threading.Thread(target=self._poll, name="standby-poll", daemon=True)
             self._poller.start()
             self.announce(f"standby {f.peer_id}: following {self.election.leader or 'the primary'} (term {self.election.term})")
