@@ -7,7 +7,10 @@ runs late is counted as an overrun and the grid skips ahead instead of firing a
 burst of catch-up calls.
 
 Time is injected: loops and leases take a :class:`Clock`, and tests pass a
-:class:`FakeClock` whose ``sleep`` advances time instead of waiting.
+:class:`FakeClock` whose ``sleep`` and ``wait`` advance time instead of waiting.
+Every clock can ``wait(seconds, stop)``: a wait that a ``threading.Event``
+cuts short (as trio's ``Clock`` owns how a deadline turns into sleeping), so
+loops never need to know which clock they hold.
 """
 
 from __future__ import annotations
@@ -23,9 +26,23 @@ class Clock(Protocol):
 
     def sleep(self, seconds: float) -> None: ...
 
+    def wait(self, seconds: float, stop: threading.Event | None = None) -> bool:
+        """Wait ``seconds`` of this clock's time, or less if ``stop`` is set; True when ``stop`` is set."""
+        ...
+
 
 class MonotonicClock:
-    """Real time from ``time.monotonic``."""
+    """Real time from ``time.monotonic``.
+
+    ``spin_s`` > 0 makes :meth:`wait` sleep until that long before the end and
+    then spin (yielding the CPU) for the rest: a thread sleep may overshoot by
+    tens of microseconds, which matters to a replayer keeping recorded gaps.
+    """
+
+    def __init__(self, spin_s: float = 0.0) -> None:
+        if spin_s < 0:
+            raise ValueError(f"spin time must not be negative, got {spin_s}")
+        self.spin_s = float(spin_s)
 
     def now(self) -> float:
         return time.monotonic()
@@ -33,6 +50,21 @@ class MonotonicClock:
     def sleep(self, seconds: float) -> None:
         if seconds > 0:
             time.sleep(seconds)
+
+    def wait(self, seconds: float, stop: threading.Event | None = None) -> bool:
+        end = time.monotonic() + max(0.0, seconds)
+        coarse = seconds - self.spin_s
+        if coarse > 0:
+            if stop is not None:
+                if stop.wait(coarse):
+                    return True
+            else:
+                time.sleep(coarse)
+        while time.monotonic() < end:
+            if stop is not None and stop.is_set():
+                return True
+            time.sleep(0)
+        return stop is not None and stop.is_set()
 
 
 class FakeClock:
@@ -54,6 +86,13 @@ class FakeClock:
 
     def sleep(self, seconds: float) -> None:
         self.jump(max(0.0, seconds))
+
+    def wait(self, seconds: float, stop: threading.Event | None = None) -> bool:
+        """Advance by the whole wait at once, unless ``stop`` is already set (then time stands still)."""
+        if stop is not None and stop.is_set():
+            return True
+        self.jump(max(0.0, seconds))
+        return stop is not None and stop.is_set()
 
 
 @dataclass(frozen=True, slots=True)
@@ -114,10 +153,7 @@ class RateLoop:
         while not stop.is_set():
             wait = self.step()
             if wait > 0:
-                if isinstance(self.clock, MonotonicClock):
-                    stop.wait(wait)
-                else:
-                    self.clock.sleep(wait)
+                self.clock.wait(wait, stop)
 
     def start(self) -> "RateLoop":
         self._thread = threading.Thread(target=self.run, name=f"rate-{self.name or self.hz}", daemon=True)

@@ -203,7 +203,7 @@ class Replayer:
     ) -> None:
         self.plan = plan
         self.loop = loop
-        self.clock = clock or MonotonicClock()
+        self.clock = clock or MonotonicClock(spin_s=spin_s)
         self.wait_for_subscribers = wait_for_subscribers
         self.spin_s = spin_s
         self._pubs: dict[str, Any] = {}
@@ -259,18 +259,12 @@ class Replayer:
 
     def _wait_until(self, due: float, stop: threading.Event) -> None:
         clock = self.clock
-        real = isinstance(clock, MonotonicClock)
         while True:
             left = due - clock.now()
             if left <= 0:
                 return
-            if not real:
-                clock.sleep(left)
-            elif left > self.spin_s:
-                if stop.wait(left - self.spin_s):
-                    return
-            else:
-                time.sleep(0)
+            if clock.wait(left, stop):
+                return
 
     # ------------------------------------------------------------------ running
 
