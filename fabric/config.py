@@ -14,7 +14,7 @@ import json
 import os
 import socket
 import uuid
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import zenoh
@@ -129,9 +129,6 @@ class FabricConfig:
             config_file=config_file or env.get(ENV_CONFIG) or None,
             lease_ms=lease_ms or 2000,
         )
-
-    def with_(self, **changes) -> "FabricConfig":
-        return replace(self, **changes)
 
     def file_value(self, key: str) -> object:
         """A setting of the zenoh config file (None without a file or when it is unset)."""

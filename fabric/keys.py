@@ -145,10 +145,6 @@ def srv(world: str, service: str, *rest: str) -> str:
     return "/".join([base, *parts])
 
 
-def srv_all(world: str, service: str) -> str:
-    return f"{world_root(world)}/srv/{_choice(service, SERVICES, 'service')}/**"
-
-
 def srv_per_subject(world: str, service: str, peer_id: str | None = None) -> str:
     """``srv/{service}/*`` (any peer's) or ``srv/{service}/*/{peer_id}`` (one peer's, to pick or spread)."""
     base = f"{world_root(world)}/srv/{_choice(service, SERVICES, 'service')}/*"

@@ -45,7 +45,7 @@ REPORT_BURST = 5
 """Reports (log line + event) of bad input per subscription or reason per :data:`REPORT_INTERVAL` seconds;
 the rest are counted and the next report says how many were suppressed."""
 
-__all__ = ["Fabric", "ServiceError", "Reply", "open_fabric", "shutdown_event", "undeclare_all", "declare_publisher", "priority_for"]
+__all__ = ["Fabric", "ServiceError", "Reply", "shutdown_event", "undeclare_all", "declare_publisher", "priority_for"]
 
 
 def undeclare_all(resources: list[Any]) -> None:
@@ -486,10 +486,6 @@ class Fabric:
         sub = self.session.liveliness().declare_subscriber(keys.peers_all(self.world, kind), on_sample, history=True)
         self._resources.append(sub)
         return sub
-
-
-def open_fabric(config: FabricConfig, *, kind: str, peer_id: str | None = None) -> Fabric:
-    return Fabric(config, kind=kind, peer_id=peer_id)
 
 
 def shutdown_event(signals: Iterable[int] = (signal.SIGINT, signal.SIGTERM)) -> threading.Event:

@@ -7,6 +7,7 @@ import sys
 import threading
 import time
 from collections import defaultdict
+from dataclasses import replace
 from typing import Annotated, Optional
 
 import typer
@@ -63,7 +64,7 @@ def router(
     """Run a zenoh router for the fabric (any standard zenohd works in its place)."""
     cfg = make_config(world, connect, listen, "embedded", zenoh_config)
     if not listen and not cfg.file_value("listen/endpoints"):
-        cfg = cfg.with_(listen=("tcp/0.0.0.0:7447",))
+        cfg = replace(cfg, listen=("tcp/0.0.0.0:7447",))
     if audit and audit_every <= 0:
         raise UserError("--audit-every must be positive")
     stop = shutdown_event()

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fabric.geometry import wrap_angle
 from robots import BaseSpec
 
 MOVING_JOINT_SPEED = 1e-3  # rad/s: above this a joint counts as moving (the ownership gate's "in motion")
@@ -121,10 +122,6 @@ class ArmController:
     @property
     def moving(self) -> bool:
         return bool(np.any(np.abs(self.dq) > MOVING_JOINT_SPEED))
-
-
-def wrap_angle(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
 
 
 class BaseController:

@@ -16,7 +16,8 @@ import math
 
 import numpy as np
 
-from sim_peer.controllers import CommandRejected, wrap_angle
+from fabric.geometry import wrap_angle
+from sim_peer.controllers import CommandRejected
 
 
 class PurePursuit:
@@ -48,7 +49,7 @@ class PurePursuit:
         seg = np.diff(pts, axis=0)
         self.cumulative = np.concatenate([[0.0], np.cumsum(np.linalg.norm(seg, axis=1))])
         heading = np.arctan2(seg[:, 1], seg[:, 0])
-        bend = np.abs((np.diff(heading) + math.pi) % (2 * math.pi) - math.pi)
+        bend = np.abs(wrap_angle(np.diff(heading)))
         cusps = [int(i) + 1 for i in np.flatnonzero(bend > turn_in_place)]
         self.stops = [*cusps, len(pts) - 1]  # vertices to stop at: cusps, then the end
         self.stretch = 0

@@ -58,10 +58,6 @@ log = logging.getLogger("robofabric.user")
 __all__ = ["connect", "World", "Robot", "Arm", "Base", "SceneObject"]
 
 
-def _wrap_angle(a: float) -> float:
-    return math.atan2(math.sin(a), math.cos(a))
-
-
 class _Latest:
     """The latest message per key, with a condition to wait for a newer one.
 
@@ -118,8 +114,8 @@ class _Latest:
                 self._cond.wait(min(left, 0.1))
 
 
-REJECT_KINDS = ("reject", "rejected", "command_rejected", "not_owner", "stale_epoch")
-"""Event kinds with which an authority refuses a user's command."""
+REJECT_KINDS = ("reject",)
+"""Event kinds with which a sim refuses a user's command (the reason says why: ``not_owner``, ...)."""
 
 
 def _fmt_age(age: float | None) -> str:

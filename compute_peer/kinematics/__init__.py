@@ -1,9 +1,9 @@
 """Arm kinematics on a Pinocchio model built from the robots package's URDF.
 
 FK, the paper's geometric Jacobian (Eq. 3-6), twists, Eq. 7 joint speed
-magnitudes and a damped-least-squares IK that refuses (``Unreachable``)
-instead of returning a silent best effort; :func:`solve` is the IK entry point
-(the Meca500's closed form, or Levenberg-Marquardt for any arm).
+magnitudes and an IK that refuses (``Unreachable``) instead of returning a
+silent best effort; :func:`solve` is the IK entry point (the Meca500's closed
+form, or Levenberg-Marquardt for any arm).
 """
 
 from compute_peer.kinematics.ik import (

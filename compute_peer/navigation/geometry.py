@@ -7,12 +7,9 @@ from typing import Any
 
 import numpy as np
 
-TWO_PI = 2.0 * math.pi
+from fabric.geometry import TWO_PI, wrap_angle
 
-
-def wrap_angle(a: Any) -> Any:
-    """Angle(s) wrapped to [-pi, pi)."""
-    return (np.asarray(a) + math.pi) % TWO_PI - math.pi if isinstance(a, np.ndarray) else (a + math.pi) % TWO_PI - math.pi
+__all__ = ["TWO_PI", "wrap_angle"]  # re-exported: the planners import them from here
 
 
 def yaw_from_quaternion(q: Any) -> float:

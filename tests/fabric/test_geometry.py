@@ -1,0 +1,48 @@
+"""The one wrap_angle every peer uses: [-pi, pi), same angle, arrays element-wise."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from hypothesis import given
+from hypothesis import strategies as st
+
+from fabric.geometry import TWO_PI, wrap_angle
+
+angles = st.floats(min_value=-1e4, max_value=1e4, allow_nan=False)
+
+
+@given(angles)
+def test_wrapped_angle_is_in_range_and_the_same_direction(a):
+    w = wrap_angle(a)
+    assert -math.pi <= w < math.pi
+    assert math.isclose(math.cos(w), math.cos(a), abs_tol=1e-9)
+    assert math.isclose(math.sin(w), math.sin(a), abs_tol=1e-9)
+
+
+@given(st.floats(min_value=-math.pi, max_value=math.pi - 1e-9))
+def test_an_angle_already_in_range_is_left_alone(a):
+    # (just under pi, a + pi rounds to 2 pi and the angle comes back as -pi: the same direction)
+    assert math.isclose(wrap_angle(a), a, abs_tol=1e-12)
+
+
+@given(st.lists(angles, min_size=1, max_size=30))
+def test_an_array_is_wrapped_element_wise(values):
+    out = wrap_angle(np.array(values))
+    assert isinstance(out, np.ndarray) and out.shape == (len(values),)
+    assert out.tolist() == [wrap_angle(v) for v in values]
+
+
+def test_the_ends_of_the_range():
+    assert wrap_angle(math.pi) == -math.pi
+    assert wrap_angle(-math.pi) == -math.pi
+    assert wrap_angle(TWO_PI) == 0.0
+    assert isinstance(wrap_angle(3.5), float)
+
+
+def test_the_peers_share_the_one_definition():
+    from compute_peer.navigation import geometry as nav_geometry
+    from sim_peer import controllers
+
+    assert nav_geometry.wrap_angle is wrap_angle and controllers.wrap_angle is wrap_angle
