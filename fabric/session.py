@@ -44,6 +44,9 @@ REPORT_INTERVAL = 5.0
 REPORT_BURST = 5
 """Reports (log line + event) of bad input per subscription or reason per :data:`REPORT_INTERVAL` seconds;
 the rest are counted and the next report says how many were suppressed."""
+MAX_DEPARTED_SIMS = 256
+"""Ids of sims whose token went, kept so their late samples cannot re-raise a reset fence (bounded:
+anyone may declare a token)."""
 
 __all__ = ["Fabric", "ServiceError", "Reply", "shutdown_event", "undeclare_all", "declare_publisher", "priority_for"]
 
@@ -136,6 +139,7 @@ class Fabric:
         self._publishers: dict[str, zenoh.Publisher] = {}
         self.session = zenoh.open(config.zenoh_config())
         self._sims: set[str] = set()
+        self._departed: set[str] = set()  # sims whose token went: their late samples must not re-raise the fence
         self._sim_watch: Any = None
         self.token = (
             self.session.liveliness().declare_token(keys.peer(self.world, kind, self.peer_id)) if token else None
@@ -313,6 +317,9 @@ class Fabric:
             return True
         if self._sim_watch is None and header.term:
             self._watch_sims()
+        if header.term and header.source in self._departed:
+            self.counters["stale_authority"] += 1  # in flight when its sim left: it must not fence out a new sim
+            return False
         if self.fence.check(header.term).accept:
             return True
         self.counters["stale_authority"] += 1
@@ -334,8 +341,11 @@ class Fabric:
             with self._lock:
                 if sample.kind == zenoh.SampleKind.PUT:
                     self._sims.add(pid)
+                    self._departed.discard(pid)
                     return
                 self._sims.discard(pid)
+                if len(self._departed) < MAX_DEPARTED_SIMS:
+                    self._departed.add(pid)
                 empty = not self._sims
             if empty:
                 self.fence.reset()
@@ -374,7 +384,7 @@ class Fabric:
         reply; a bad request payload is answered with the decode error. Nothing escapes to zenoh.
         """
 
-        prio = priority_for(key_expr)
+        # zenoh 1.10 ignores a reply's priority (and warns): replies travel at the query's priority.
 
         def on_query(query: zenoh.Query) -> None:
             key = str(query.key_expr)
@@ -387,10 +397,7 @@ class Fabric:
                     request = decode(query.payload.to_bytes(), expected)
                 answer = handler(key, request)
                 if answer is not None:
-                    if prio is None:
-                        query.reply(key, encode(answer))
-                    else:
-                        query.reply(key, encode(answer), priority=prio)
+                    query.reply(key, encode(answer))
             except (DecodeError, ServiceError, ValueError) as exc:
                 self.counters["query_errors"] += 1
                 reason = clip(exc.reason if isinstance(exc, ServiceError) else str(exc), 400)

@@ -105,3 +105,27 @@ def test_the_fence_resets_when_the_worlds_last_sim_leaves(world, connect):
     new.term = 1
     wait_until(lambda: _put(new, key, 1) or any(m.header.source == "sim-new" for m in got), timeout=20, what="term 1 believed again")
     assert watcher.fence.term == 1
+
+
+def test_a_departed_sims_late_samples_do_not_fence_out_a_new_sim(world, connect):
+    """State still in flight when the last sim left (term 2) arrives after the reset: it is dropped, and a
+    sim started afresh at term 1 is believed (seen in a CI run as a race in the test above)."""
+    watcher = connect("tool", "watch")
+    got: list[JointState] = []
+    key = keys.robot_joints(world, "arm1")
+    watcher.subscribe(key, lambda k, m: got.append(m), expected=JointState)
+    old = connect("sim", "sim-old")
+    old.term = 2
+    wait_until(lambda: _put(old, key, 2) or any(m.header.term == 2 for m in got), timeout=20, what="term 2 heard")
+    wait_until(lambda: watcher._sims == {"sim-old"}, timeout=20, what="the sim's token", seen=lambda: watcher._sims)
+    old.close()
+    wait_until(lambda: watcher.counters["fence_resets"] >= 1, timeout=20, what="the fence reset", seen=lambda: watcher._sims)
+    late = connect("tool", "sim-old")  # the departed sim's id and term, as a late sample carries them
+    late.term = 2
+    stale = watcher.counters["stale_authority"]
+    wait_until(lambda: _put(late, key, 2) or watcher.counters["stale_authority"] > stale, timeout=20, what="the late sample dropped")
+    assert watcher.fence.term == 0
+    new = connect("sim", "sim-new")
+    new.term = 1
+    wait_until(lambda: _put(new, key, 1) or any(m.header.source == "sim-new" for m in got), timeout=20, what="term 1 believed again")
+    assert watcher.fence.term == 1
