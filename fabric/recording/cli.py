@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import json
 import sys
+import threading
 import time
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, Optional
 
 import typer
 
@@ -102,27 +103,7 @@ def record(
         except OSError as exc:
             raise UserError(f"cannot write {output}: {exc.strerror or exc}") from None
         print(f"recording {', '.join(exprs)} to {output}; Ctrl-C to stop", file=sys.stderr, flush=True)
-        t0 = time.monotonic()
-        last_line = t0
-        while True:
-            left = None if duration is None else duration - (time.monotonic() - t0)
-            if left is not None and left <= 0:
-                break
-            if stop.wait(0.5 if left is None else min(0.5, left)):
-                break
-            if rec.error is not None:
-                break
-            now = time.monotonic()
-            if not quiet and (tty or now - last_line >= 5.0):
-                last_line = now
-                line = rec.stats.line()
-                print(f"\r{line}\x1b[K" if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
-        try:
-            stats = rec.stop()
-        except RuntimeError as exc:
-            raise UserError(f"recording to {output} failed: {exc}") from None
-    if tty and not quiet:
-        print(file=sys.stderr)
+        stats = _run_until_done(rec, output, duration, stop, quiet, tty)
     print(f"recorded {stats.line()} -> {output}", file=sys.stderr, flush=True)
     if stats.dropped:
         why = "the disk quota was reached" if stats.quota_reached else "the queue to the disk was full or too many keys"
@@ -131,6 +112,31 @@ def record(
         raise UserError(
             f"nothing was recorded on {', '.join(exprs)} (unknown world or no publisher?); {output} is an empty recording"
         )
+
+
+def _run_until_done(worker: Any, output: Path, duration: float | None, stop: threading.Event, quiet: bool, tty: bool) -> Any:
+    """Run a recorder or live converter until ``duration``, Ctrl-C or its error, showing its progress line
+    (in place on a terminal, every 5 s otherwise); returns its final stats."""
+    t0 = last_line = time.monotonic()
+    while True:
+        left = None if duration is None else duration - (time.monotonic() - t0)
+        if left is not None and left <= 0:
+            break
+        if stop.wait(0.5 if left is None else min(0.5, left)) or worker.error is not None:
+            break
+        now = time.monotonic()
+        if not quiet and (tty or now - last_line >= 5.0):
+            last_line = now
+            line = worker.stats.line()
+            print(f"\r{line}\x1b[K" if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
+    try:
+        stats = worker.stop()
+    except RuntimeError as exc:
+        raise UserError(f"recording to {output} failed: {exc}") from None
+    finally:
+        if tty and not quiet:
+            print(file=sys.stderr)
+    return stats
 
 
 def _record_as(to, output, exprs, duration, quiet, scene, cfg, peer_id, stop, tty) -> None:
@@ -148,24 +154,7 @@ def _record_as(to, output, exprs, duration, quiet, scene, cfg, peer_id, stop, tt
             raise UserError(f"cannot write {output}: {exc.strerror or exc}") from None
         conv = LiveConverter(fab, sink, exprs).start()
         print(f"recording {', '.join(exprs)} as {to} to {output}; Ctrl-C to stop", file=sys.stderr, flush=True)
-        t0 = last_line = time.monotonic()
-        while True:
-            left = None if duration is None else duration - (time.monotonic() - t0)
-            if left is not None and left <= 0:
-                break
-            if stop.wait(0.5 if left is None else min(0.5, left)) or conv.error is not None:
-                break
-            now = time.monotonic()
-            if not quiet and (tty or now - last_line >= 5.0):
-                last_line = now
-                line = conv.stats.line()
-                print(f"\r{line}\x1b[K" if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
-        try:
-            stats = conv.stop()
-        except RuntimeError as exc:
-            raise UserError(f"recording to {output} failed: {exc}") from None
-    if tty and not quiet:
-        print(file=sys.stderr)
+        stats = _run_until_done(conv, output, duration, stop, quiet, tty)
     print(f"recorded {stats.line()} -> {output} ({to})", file=sys.stderr, flush=True)
     if stats.written == 0:
         raise UserError(f"nothing was recorded on {', '.join(exprs)} (unknown world or no publisher?); {output} is empty")
