@@ -81,8 +81,8 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
     tape = Tape(fb, world)
     events: list[Event] = []
     fb.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
-    alice = OwnershipClient(fa, "alice", renew_s=0.2, timeout=10.0)
-    bob = OwnershipClient(fb, "bob", renew_s=0.2, timeout=10.0)
+    alice = OwnershipClient(fa, "alice", renew_s=0.2, timeout=10.0).start()
+    bob = OwnershipClient(fb, "bob", renew_s=0.2, timeout=10.0).start()
     wait_until(lambda: "arm1" in alice.records and "base1" in bob.records and tape.of("base1", "pose"), timeout=30,
                what="records and poses", seen=lambda: (alice.records, len(tape.items)))
     assert alice.request("arm1", timeout=10).granted and bob.request("base1", timeout=10).granted
@@ -104,10 +104,11 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
 
     procs.kill(primary)  # SIGKILL
     t_kill = time.monotonic()
-    wait_until(lambda: tape.of("arm1", "joints", 2) and tape.of("arm1", "pose", 2) and tape.of("base1", "pose", 2), timeout=20,
-               what="state from the new authority",
+    # the standby announces the take-over after its peer has started streaming: wait for both
+    wait_until(lambda: tape.of("arm1", "joints", 2) and tape.of("arm1", "pose", 2) and tape.of("base1", "pose", 2)
+               and "took over the world with term 2" in procs.output(standby), timeout=20,
+               what="state from the new authority and its announcement",
                seen=lambda: procs.output(standby)[-1500:])
-    assert "took over the world with term 2" in procs.output(standby)
 
     # the arm: the first new state is the last old one carried on (no reset); error at take-over
     # = the new state minus the motion since the old one (velocity x sim time between them)
@@ -160,7 +161,7 @@ def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, 
     tape = Tape(fa, world)
     events: list[Event] = []
     fa.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
-    alice = OwnershipClient(fa, "alice", renew_s=0.2, timeout=10.0)
+    alice = OwnershipClient(fa, "alice", renew_s=0.2, timeout=10.0).start()
     wait_until(lambda: "arm1" in alice.records and tape.of("arm1", "joints", 1), timeout=30, what="record and joints")
     assert alice.request("arm1", timeout=10).granted
     ea = alice.epoch("arm1")
