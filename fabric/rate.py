@@ -109,7 +109,8 @@ class RateLoop:
     """Call ``callback(now)`` at ``hz`` on an absolute schedule.
 
     ``step()`` runs at most one due tick and returns the time until the next;
-    ``run(stop)`` loops until ``stop`` is set; ``start()`` runs it in a daemon thread.
+    ``run(stop)`` loops until ``stop`` is set; ``start()`` (or ``with RateLoop(...) as loop:``)
+    runs it in a daemon thread, which ``stop()`` (or leaving the ``with``) ends.
     """
 
     def __init__(self, hz: float, callback: Callable[[float], None], *, clock: Clock | None = None, name: str = "") -> None:
@@ -162,8 +163,14 @@ class RateLoop:
 
     def stop(self, timeout: float = 2.0) -> None:
         self._stop.set()
-        if self._thread is not None:
+        if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout)
+
+    def __enter__(self) -> "RateLoop":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
 
 
 def parse_rates(spec: str, defaults: dict[str, float]) -> dict[str, float]:

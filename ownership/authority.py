@@ -29,7 +29,11 @@ __all__ = ["Authority"]
 
 
 class Authority:
-    """A :class:`fabric.gate.CommandGate` backed by the ownership state machine."""
+    """A :class:`fabric.gate.CommandGate` backed by the ownership state machine.
+
+    Constructing one publishes the records and serves them; leases tick only once it is started
+    (``start()`` or ``with Authority(...) as auth:``), so a test or a standby can build one, look at
+    it, and decide when time begins to count. ``close()`` (or leaving the ``with``) stops the ticks."""
 
     def __init__(
         self,
@@ -75,8 +79,21 @@ class Authority:
         self._unconfirmed: set[str] = set(self._state.live) if restored is not None else set()
         self._confirm_by = self.clock.now() + lease_s + 1.0
         self._watch = fabric.watch_peers(self._on_peer, kind="user")
-        self._thread = threading.Thread(target=self._run, name="ownership-tick", daemon=True)
-        self._thread.start()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> "Authority":
+        """Start ticking leases on a daemon thread (once; a second call does nothing)."""
+        with self._lock:
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name="ownership-tick", daemon=True)
+                self._thread.start()
+        return self
+
+    def __enter__(self) -> "Authority":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     # ------------------------------------------------------------------ state
 
@@ -214,8 +231,9 @@ class Authority:
 
     def close(self) -> None:
         self._stop.set()
-        if self._thread.is_alive() and self._thread is not threading.current_thread():
-            self._thread.join(timeout=2.0)
+        thread = self._thread
+        if thread is not None and thread.is_alive() and thread is not threading.current_thread():
+            thread.join(timeout=2.0)
 
 
 def _fields(rec: OwnershipRecord) -> dict:

@@ -32,9 +32,9 @@ def run_one(n: int, *, lease_s: float, kills: int) -> dict:
     port = free_port()
     router = Fabric(router_config(world, port), kind="router", peer_id="router")
     host = client(world, port, kind="sim", peer_id="host")
-    auth = Authority(host, {"arm": "exclusive"}, lease_s=lease_s, grace_s=30.0)
+    auth = Authority(host, {"arm": "exclusive"}, lease_s=lease_s, grace_s=30.0).start()
     fabs = [client(world, port, kind="user", peer_id=f"u{i:03d}") for i in range(n)]
-    users = [OwnershipClient(f, f.peer_id, renew_s=lease_s / 4) for f in fabs]
+    users = [OwnershipClient(f, f.peer_id, renew_s=lease_s / 4).start() for f in fabs]
     try:
         auth.update_motion("arm", True)  # moving: requests queue instead of taking over
         users[0].request("arm")

@@ -31,7 +31,7 @@ def _client(world, connect, profile, zenoh_config, user) -> tuple[Fabric, Owners
     except ValueError as exc:
         raise UserError(str(exc)) from None
     fab = open_fabric(cfg, "user", uid)
-    return fab, OwnershipClient(fab, fab.peer_id)
+    return fab, OwnershipClient(fab, fab.peer_id).start()
 
 
 def _line(rec) -> str:

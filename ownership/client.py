@@ -76,6 +76,10 @@ class Outcome:
 class OwnershipClient:
     """One user's ownership handle in one world; renews every ``renew_s`` while it owns something.
 
+    Constructing one follows the records (subscription and a first query); renewals run once it is
+    started (``start()`` or ``with OwnershipClient(...) as own:``) and stop on ``close()``.
+    ``records`` is written by Zenoh's callback threads: read it through :meth:`record`, :meth:`epoch`,
+    :meth:`owns` or :meth:`snapshot`, which take the lock.
     ``clock`` (monotonic seconds) is only used to bound epoch jumps between records."""
 
     def __init__(self, fabric: Fabric, user: str, *, renew_s: float = 0.5, timeout: float = 2.0,
@@ -102,8 +106,21 @@ class OwnershipClient:
         fabric.subscribe(keys.own_all(fabric.world), self._on_record, expected=OwnershipRecord)
         self.refresh()
         self._renew_s = renew_s
-        self._thread = threading.Thread(target=self._renew_loop, name=f"own-renew-{user}", daemon=True)
-        self._thread.start()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> "OwnershipClient":
+        """Start renewing what this user holds, on a daemon thread (once; a second call does nothing)."""
+        with self._lock:
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._renew_loop, name=f"own-renew-{self.user}", daemon=True)
+                self._thread.start()
+        return self
+
+    def __enter__(self) -> "OwnershipClient":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     # ------------------------------------------------------------------ replica
 
@@ -162,22 +179,29 @@ class OwnershipClient:
         with self._lock:
             self._callbacks.append(callback)
 
+    def snapshot(self) -> dict[str, OwnershipRecord]:
+        """A copy of the trusted records, taken under the lock."""
+        with self._lock:
+            return dict(self.records)
+
     def epoch(self, obj: str) -> int:
-        rec = self.records.get(obj)
+        rec = self.record(obj)
         return rec.epoch if rec is not None else 0
 
     def owns(self, obj: str) -> bool:
-        rec = self.records.get(obj)
+        rec = self.record(obj)
         return rec is not None and rec.owner == self.user
 
     # ------------------------------------------------------------------ requests
 
     def record(self, obj: str) -> OwnershipRecord | None:
-        return self.records.get(obj)
+        with self._lock:
+            return self.records.get(obj)
 
     def _ask(self, obj: str, op: str, wait: bool = False, timeout: float | None = None) -> OwnReply:
-        if self.records and obj not in self.records:
-            raise ServiceError(f"unknown object {obj!r} (known: {', '.join(sorted(self.records))})")
+        known = self.snapshot()
+        if known and obj not in known:
+            raise ServiceError(f"unknown object {obj!r} (known: {', '.join(sorted(known))})")
         req = OwnRequest(op, self.user, wait, header=self.fabric.header("own-req"))
         key = keys.own_request(self.fabric.world, obj, self.user)
         reply = self.fabric.call(key, req, timeout=timeout or self.timeout, expected=OwnReply)
@@ -220,5 +244,6 @@ class OwnershipClient:
 
     def close(self) -> None:
         self._stop.set()
-        if self._thread is not threading.current_thread():
-            self._thread.join(timeout=2.0)
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=2.0)

@@ -131,7 +131,7 @@ class _Owner:
 
     def __init__(self, fab: Fabric, world: str, vmax: float, dof: int) -> None:
         self.fab, self.world, self.vmax, self.dof = fab, world, vmax, dof
-        self.own = OwnershipClient(fab, "alice", renew_s=0.4)
+        self.own = OwnershipClient(fab, "alice", renew_s=0.4).start()
         self.sent: dict[int, tuple[float, int, float]] = {}  # k -> (send time monotonic, sign, send time wall)
         self.seen: dict[int, float] = {}  # k -> wall time the sim published the first JointState showing it
         self.lapses: list[str] = []

@@ -73,10 +73,10 @@ def bench_failover(
 
         current = sim("sim-00")
         standby = sim("sim-01", "--standby")
-        own = OwnershipClient(fab, "bench", renew_s=0.2, timeout=10.0)
-        wait_until(lambda: "arm1" in own.records and of("joints", 1), timeout=120, what="the primary's joints")
+        own = OwnershipClient(fab, "bench", renew_s=0.2, timeout=10.0).start()
+        wait_until(lambda: own.record("arm1") is not None and of("joints", 1), timeout=120, what="the primary's joints")
         if not own.request("arm1", timeout=10).granted:
-            raise typer.Exit(f"could not own arm1: {own.records.get('arm1')}")
+            raise typer.Exit(f"could not own arm1: {own.record('arm1')}")
         epoch = own.epoch("arm1")
         poses = [np.radians([60.0, 30.0, -40.0, 30.0, 50.0, -30.0]), np.radians([-60.0, -20.0, 30.0, -30.0, -50.0, 30.0])]
         for i in range(kills):
@@ -96,7 +96,7 @@ def bench_failover(
                 return False
 
             wait_until(moving, timeout=30, interval=0.3, what="the arm moving",
-                       seen=lambda: (own.records.get("arm1"), [(e.kind, e.reason, e.header.source) for e in events[-4:]],
+                       seen=lambda: (own.record("arm1"), [(e.kind, e.reason, e.header.source) for e in events[-4:]],
                                      procs.output(current)[-600:]))
             time.sleep(0.3)  # some way into the motion (a measurement pause, not a synchronisation)
             t_kill = time.monotonic()
@@ -114,7 +114,7 @@ def bench_failover(
                   f"error {r['err_rad']:.5f} rad / {r['err_mm']:.3f} mm", flush=True)
             current, standby = standby, sim(f"sim-{i + 2:02d}", "--standby")
             if own.epoch("arm1") != epoch or not own.owns("arm1"):
-                print(f"  ownership changed! {own.records.get('arm1')}", flush=True)
+                print(f"  ownership changed! {own.record('arm1')}", flush=True)
                 epoch = own.epoch("arm1")
         own.close()
 

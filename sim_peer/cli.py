@@ -29,8 +29,8 @@ def make_gate(fabric, world, ownership: bool, restored=None) -> CommandGate:
     objects = {rid: "exclusive" for rid in world.robots}
     objects.update({obj: "scene" for obj in world.objects})
     if restored is not None:
-        return Authority(fabric, objects=objects, restored=restored)
-    return Authority(fabric, objects=objects)
+        return Authority(fabric, objects=objects, restored=restored).start()
+    return Authority(fabric, objects=objects).start()
 
 
 def sim(

@@ -38,10 +38,10 @@ class OwnershipLink:
         self.user = user
         self._on_record = on_record
         self._changed = threading.Condition()  # notified on every record the client accepts
-        self._client = OwnershipClient(fab, user, timeout=1.0)
+        self._client = OwnershipClient(fab, user, timeout=1.0).start()
         self._client.timeout = 2.0  # the first refresh waits 1 s at most when no authority runs yet
         self._client.on_change(lambda rec: self._on(keys.own(fab.world, rec.object), rec))
-        for rec in list(self._client.records.values()):
+        for rec in self._client.snapshot().values():
             self._on(keys.own(fab.world, rec.object), rec)
 
     @property
@@ -113,7 +113,7 @@ class OwnershipLink:
     def release_all(self, *, timeout: float) -> list[str]:
         """Release every object this user owns or waits for (what ``World.close`` does); returns them.
         Best effort: an authority that does not answer will see the user's token go instead."""
-        held = [o for o, r in list(self._client.records.items()) if r.owner == self.user or self.user in r.queue]
+        held = [o for o, r in self._client.snapshot().items() if r.owner == self.user or self.user in r.queue]
         done = []
         for obj in held:
             try:

@@ -53,3 +53,23 @@ def test_parse_rates():
     for bad in ("speed=3", "joints", "joints=fast", "joints=-1"):
         with pytest.raises(ValueError, match="bad rate"):
             parse_rates(bad, d)
+
+
+def _threads(prefix: str) -> list[str]:
+    import threading
+
+    return [t.name for t in threading.enumerate() if t.name.startswith(prefix)]
+
+
+def test_a_loop_runs_only_between_enter_and_exit():
+    from fabric.testing import wait_until
+
+    ticks: list[float] = []
+    loop = RateLoop(200, ticks.append, name="cm-test")
+    assert not _threads("rate-cm-test") and loop.stats.ticks == 0  # building one starts nothing
+    with loop as running:
+        assert running is loop
+        wait_until(lambda: len(ticks) >= 3, timeout=20, what="three ticks", seen=lambda: ticks)
+    assert not _threads("rate-cm-test")  # leaving the with ended the thread
+    after = len(ticks)
+    assert loop.stats.ticks == after

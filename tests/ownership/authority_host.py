@@ -24,7 +24,7 @@ def main() -> None:
     world, port, motion_file, lease_s, grace_s = sys.argv[1], int(sys.argv[2]), Path(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])
     stop = shutdown_event()
     with client(world, port, kind="sim", peer_id="host") as fab:
-        auth = Authority(fab, {"arm": "exclusive", "ball": "scene"}, lease_s=lease_s, grace_s=grace_s)
+        auth = Authority(fab, {"arm": "exclusive", "ball": "scene"}, lease_s=lease_s, grace_s=grace_s).start()
 
         def on_cmd(key: str, cmd: Command) -> None:
             reason = auth.admit("arm", cmd)

@@ -21,7 +21,7 @@ if __name__ == "__main__":
     q = np.array([float(x) for x in sys.argv[5].split(",")])
     stop = shutdown_event()
     with client(world, port, kind="user", peer_id=user) as fab:
-        own = OwnershipClient(fab, user, renew_s=0.1, timeout=10.0)
+        own = OwnershipClient(fab, user, renew_s=0.1, timeout=10.0).start()
         out = own.request(robot)
         print("outcome", out, flush=True)
         fab.publish(keys.robot_cmd(world, robot, "joints", user), Command(user, out.epoch, JointTarget(q, speed_scale=0.1)))

@@ -44,7 +44,7 @@ def test_handover_enforcement_kill_and_reconnect(world, router, connect, procs, 
     assert "granted" in procs.output(a)
 
     fb = connect("user", "bob")
-    bob = OwnershipClient(fb, "bob", renew_s=0.1)
+    bob = OwnershipClient(fb, "bob", renew_s=0.1).start()
     wait_until(lambda: bob.records.get("arm") and bob.records["arm"].owner == "alice", what="bob's replica sees alice",
                seen=lambda: bob.records)
 
@@ -94,7 +94,7 @@ def test_handover_enforcement_kill_and_reconnect(world, router, connect, procs, 
     motion.write_text("still")
     wait_until(lambda: bob.records["arm"].state == "still", what="arm still", seen=lambda: bob.records)
     fc = connect("user", "carol")
-    carol = OwnershipClient(fc, "carol")
+    carol = OwnershipClient(fc, "carol").start()
     assert carol.records["arm"].owner == "bob"  # late joiner's replica is filled by the query at once
     out = carol.request("arm")
     assert out.outcome == "granted", out

@@ -14,11 +14,11 @@ def _own(world, port, *args):
 
 def test_own_list_request_release(world, router, connect):
     port = router[1]
-    auth = Authority(connect("sim", "host"), {"arm": "exclusive", "ball": "scene"}, lease_s=5.0)
+    auth = Authority(connect("sim", "host"), {"arm": "exclusive", "ball": "scene"}, lease_s=5.0).start()
     try:
         r = _own(world, port, "request", "ball", "--user", "ann")
         assert r.returncode == 0 and "ball: granted" in r.stdout and "anyone writes" in r.stdout, r.stdout + r.stderr
-        ann = OwnershipClient(connect("user", "ann"), "ann")  # a holder that stays (a CLI request ends with its process)
+        ann = OwnershipClient(connect("user", "ann"), "ann").start()  # a holder that stays (a CLI request ends with its process)
         assert ann.request("arm").outcome == "granted"
         auth.update_motion("arm", True)
         r = _own(world, port, "request", "arm", "--user", "ben")
@@ -42,8 +42,8 @@ def test_own_request_hold_renews_until_interrupted_then_releases(world, router, 
     from fabric.testing import wait_until
 
     port = router[1]
-    auth = Authority(connect("sim", "host"), {"arm": "exclusive"}, lease_s=1.5)
-    ann = OwnershipClient(connect("user", "ann"), "ann")
+    auth = Authority(connect("sim", "host"), {"arm": "exclusive"}, lease_s=1.5).start()
+    ann = OwnershipClient(connect("user", "ann"), "ann").start()
     procs = []
     try:
         assert ann.request("arm").outcome == "granted"

@@ -27,7 +27,7 @@ def test_arm_continues_after_owner_is_killed(world, router, connect, procs):
     fb.subscribe(keys.robot_joints(world, "arm1"), lambda k, m: joints.append(m), expected=JointState)
     events: list[Event] = []
     fb.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
-    bob = OwnershipClient(fb, "bob", renew_s=0.1, timeout=10.0)
+    bob = OwnershipClient(fb, "bob", renew_s=0.1, timeout=10.0).start()
     wait_until(lambda: "arm1" in bob.records and joints, timeout=30, what="arm1 record and joints", seen=lambda: bob.records)
 
     target = np.radians([60.0, 30.0, -40.0, 30.0, 50.0, -30.0])

@@ -20,13 +20,13 @@ from ownership.messages import OwnReply, OwnRequest
 
 @pytest.fixture
 def host(connect):
-    auth = Authority(connect("sim", "host"), {"arm": "exclusive"}, lease_s=0.6, grace_s=5.0)
+    auth = Authority(connect("sim", "host"), {"arm": "exclusive"}, lease_s=0.6, grace_s=5.0).start()
     yield auth
     auth.close()
 
 
 def test_a_request_naming_someone_else_is_refused(host, connect, world):
-    alice = OwnershipClient(connect("user", "alice"), "alice", renew_s=0.1)
+    alice = OwnershipClient(connect("user", "alice"), "alice", renew_s=0.1).start()
     assert alice.request("arm").granted
     mallory = connect("user", "mallory")
     events: list[Event] = []
@@ -46,7 +46,7 @@ def test_a_request_naming_someone_else_is_refused(host, connect, world):
 
 
 def test_forged_records_never_stop_renewal(host, connect, world):
-    alice = OwnershipClient(connect("user", "alice"), "alice", renew_s=0.1)
+    alice = OwnershipClient(connect("user", "alice"), "alice", renew_s=0.1).start()
     assert alice.request("arm").granted
     real_epoch = alice.epoch("arm")
     forger = connect("tool", "mallory")  # not a sim peer
@@ -79,3 +79,24 @@ def test_epoch_plausible_bounds(old, step, elapsed):
     elif new - old > EPOCH_SLACK + 10_000 * elapsed + 1:
         assert why is not None and "jumps" in why
     assert epoch_plausible(None, new, elapsed) is None
+
+
+def _threads(prefix: str) -> list[str]:
+    import threading
+
+    return [t.name for t in threading.enumerate() if t.name.startswith(prefix)]
+
+
+def test_authority_and_client_start_their_threads_on_enter_not_on_construction(connect):
+    auth = Authority(connect("sim", "cm-host"), {"arm": "exclusive"}, lease_s=0.6, grace_s=5.0)
+    before = len(_threads("ownership-tick"))
+    with auth:
+        assert len(_threads("ownership-tick")) == before + 1
+        carol = OwnershipClient(connect("user", "carol"), "carol", renew_s=0.1)
+        assert not _threads("own-renew-carol")  # follows records already, renews nothing yet
+        wait_until(lambda: carol.record("arm") is not None, what="carol's replica", seen=carol.snapshot)
+        with carol as own:
+            assert own is carol and _threads("own-renew-carol")
+            assert own.request("arm").granted and own.owns("arm") and own.epoch("arm") == own.snapshot()["arm"].epoch
+        assert not _threads("own-renew-carol")
+    assert len(_threads("ownership-tick")) == before

@@ -18,7 +18,7 @@ def main() -> None:
     wait = len(sys.argv) > 5 and sys.argv[5] == "wait"
     stop = shutdown_event()
     with client(world, port, kind="user", peer_id=user) as fab:
-        own = OwnershipClient(fab, user, renew_s=0.1)
+        own = OwnershipClient(fab, user, renew_s=0.1).start()
         print("outcome", own.request(obj, wait=wait), flush=True)
         stop.wait()
         own.close()

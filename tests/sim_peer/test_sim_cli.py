@@ -15,13 +15,18 @@ class FakeAuthority:
     def __init__(self, fabric, *, objects):
         self.fabric = fabric
         self.objects = objects
+        self.started = False
+
+    def start(self):
+        self.started = True
+        return self
 
 
 def test_ownership_gate_is_built_with_exclusive_robots_and_scene_objects(monkeypatch):
     monkeypatch.setitem(sys.modules, "ownership", types.SimpleNamespace(Authority=FakeAuthority))
     w = World("combined")
     gate = make_gate("FAB", w, True)
-    assert isinstance(gate, FakeAuthority) and gate.fabric == "FAB"
+    assert isinstance(gate, FakeAuthority) and gate.fabric == "FAB" and gate.started  # leases tick from the start
     assert gate.objects == {"arm1": "exclusive", "base1": "exclusive", "target": "scene", "goal": "scene"}
 
 
