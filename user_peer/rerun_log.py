@@ -4,8 +4,8 @@
 arrived (live from Zenoh, or from an MCAP recording) and logs them to a
 ``rerun.RecordingStream``. It keeps only what drawing needs (the latest base
 pose to put scans in the world frame, stream rates, the latest map for the map
-view's overlay). The geometry helpers (:func:`scan_world_points`,
-:func:`grid_rgb`, :func:`world_to_map_pixels`) are pure and tested on their own.
+view's overlay). The geometry it needs (:func:`scan_world_points`, :func:`grid_rgb`,
+:func:`world_to_map_pixels`, ...) is pure and lives in :mod:`user_peer.geometry`, re-exported here.
 
 Entity layout::
 
@@ -35,8 +35,10 @@ import rerun.blueprint as rrb
 
 from fabric import keys
 from fabric.messages import Event, JointState, OccupancyGrid, OwnershipRecord, Path, Pose, Scan
-from ownership.extrapolate import age_s, extrapolate
 from user_peer.arm_model import ArmModel, Placement
+from user_peer.geometry import EXTRAPOLATION_CAP_S, grid_rgb, scan_world_points, shown_position, world_to_map_pixels, yaw_of
+from user_peer.geometry import compose as _compose
+from user_peer.geometry import quat_xyzw as _quat_xyzw
 
 __all__ = [
     "RobotInfo",
@@ -46,13 +48,14 @@ __all__ = [
     "grid_rgb",
     "world_to_map_pixels",
     "yaw_of",
+    "shown_position",
+    "EXTRAPOLATION_CAP_S",
     "TIMELINE_SIM",
     "TIMELINE_WALL",
 ]
 
 TIMELINE_SIM = "sim_time"
 TIMELINE_WALL = "wall_time"
-EXTRAPOLATION_CAP_S = 0.2  # s: never move a stale pose further than its velocity times this (paper Eq. 8)
 
 ROBOT_COLORS = [(230, 120, 40), (40, 140, 230), (90, 200, 90), (200, 80, 200), (230, 200, 40)]
 
@@ -71,114 +74,6 @@ class RobotInfo:
     lidar_offset: tuple[float, float, float] = (0.0, 0.0, 0.3)
     sonar: tuple[float, float, float, float] | None = None  # ring centre x, y, height, radius (robot frame)
     color: tuple[int, int, int] = (230, 120, 40)
-
-
-# --------------------------------------------------------------------------- pure helpers
-
-
-def yaw_of(quat_wxyz: np.ndarray) -> float:
-    """Heading (rad) of a (w, x, y, z) quaternion about the world z axis."""
-    w, x, y, z = (float(v) for v in quat_wxyz)
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
-def shown_position(pose: Pose, received_ns: int, now_ns: int) -> tuple[np.ndarray, float | None]:
-    """Where to draw a remote pose at ``now_ns``, and its age in s (None when either time is unknown).
-
-    The paper's Eq. 8: the pose moved on by its velocity times its age, the age capped so that a stale
-    message never flings a robot across the room. ``received_ns`` (when it arrived) and ``now_ns`` are
-    both read from this machine's clock: the header's ``wall_ns`` is the sender's clock, which may be
-    seconds off ours on another machine, and is never compared with ours (issue 15).
-    """
-    if received_ns <= 0 or now_ns <= 0:
-        return np.asarray(pose.position, dtype=float), None
-    age = age_s(received_ns, now_ns, cap_s=EXTRAPOLATION_CAP_S)
-    return extrapolate(pose.position, pose.linear, age, cap_s=EXTRAPOLATION_CAP_S), age
-
-
-def scan_world_points(scan: Scan, pose: Pose | None, lidar_offset: tuple[float, float, float] = (0.0, 0.0, 0.3)) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(origin (3,), hit points (n, 3), hit mask (n,)) of a planar scan in the world frame.
-
-    Rays that read ``range_max`` hit nothing; they are returned but masked out of the hits.
-    Without a pose the scan is drawn at the world origin.
-    """
-    px, py, yaw = 0.0, 0.0, 0.0
-    if pose is not None:
-        px, py = float(pose.position[0]), float(pose.position[1])
-        yaw = yaw_of(pose.quaternion)
-    c, s = math.cos(yaw), math.sin(yaw)
-    ox = px + c * lidar_offset[0] - s * lidar_offset[1]
-    oy = py + s * lidar_offset[0] + c * lidar_offset[1]
-    oz = lidar_offset[2]
-    ranges = scan.ranges
-    angles = scan.angles + yaw
-    pts = np.stack([ox + ranges * np.cos(angles), oy + ranges * np.sin(angles), np.full_like(ranges, oz)], axis=1)
-    hit = scan.ranges_mm < int(round(scan.range_max * 1000.0))
-    return np.array([ox, oy, oz]), pts, hit
-
-
-def grid_rgb(grid: OccupancyGrid) -> np.ndarray:
-    """An (h, w, 3) uint8 image of a grid, row 0 at the top = the map's highest y (so north is up).
-
-    Free cells are white, occupied black, shades between, unknown mid grey.
-    """
-    cells = np.asarray(grid.cells)
-    unknown = cells == OccupancyGrid.UNKNOWN
-    shade = (255 - (np.clip(cells, 0, 100).astype(np.float32) * 2.55)).astype(np.uint8)
-    shade[unknown] = 128
-    img = np.repeat(shade[:, :, None], 3, axis=2)
-    img[unknown] = (150, 160, 180)
-    return np.ascontiguousarray(img[::-1])
-
-
-def world_to_map_pixels(grid: OccupancyGrid, xy: np.ndarray) -> np.ndarray:
-    """World (x, y) points to pixel coordinates of :func:`grid_rgb`'s image (u right, v down)."""
-    xy = np.atleast_2d(np.asarray(xy, dtype=float))
-    ox, oy, oth = (float(v) for v in grid.origin)
-    dx, dy = xy[:, 0] - ox, xy[:, 1] - oy
-    c, s = math.cos(-oth), math.sin(-oth)
-    lx, ly = c * dx - s * dy, s * dx + c * dy
-    h = grid.cells.shape[0]
-    return np.stack([lx / grid.resolution, h - ly / grid.resolution], axis=1)
-
-
-def _quat_xyzw(quat_wxyz: np.ndarray) -> list[float]:
-    w, x, y, z = (float(v) for v in quat_wxyz)
-    return [x, y, z, w]
-
-
-def _compose(base: Placement | None, p: Placement) -> tuple[np.ndarray, list[float]]:
-    """base * p, as (translation, quaternion xyzw)."""
-    if base is None:
-        return p.translation, list(p.quat_xyzw)
-    rb = _rot(base.quat_xyzw)
-    t = base.translation + rb @ p.translation
-    q = _quat_mul(base.quat_xyzw, p.quat_xyzw)
-    return t, list(q)
-
-
-def _rot(q: np.ndarray) -> np.ndarray:
-    x, y, z, w = (float(v) for v in q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    ax, ay, az, aw = (float(v) for v in a)
-    bx, by, bz, bw = (float(v) for v in b)
-    return np.array(
-        [
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        ]
-    )
 
 
 # --------------------------------------------------------------------------- blueprint

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fabric.messages import OccupancyGrid, Pose, Scan
-from user_peer.rerun_log import grid_rgb, scan_world_points, world_to_map_pixels, yaw_of
+from user_peer.geometry import grid_rgb, scan_world_points, world_to_map_pixels, yaw_of
 
 
 def _pose(x, y, yaw):
@@ -62,7 +62,7 @@ def test_bases_are_drawn_where_they_are_by_now_eq8(skew_s):
     """The age is time since arrival on this machine's clock; the sender's header clock, here off ours by
     +-5 s, changes nothing (issue 15)."""
     from fabric.messages import Header
-    from user_peer.rerun_log import EXTRAPOLATION_CAP_S, shown_position
+    from user_peer.geometry import EXTRAPOLATION_CAP_S, shown_position
 
     t = 1_700_000_000_000_000_000  # our clock when the pose arrived
     pose = Pose([1.0, 2.0, 0.0], linear=[0.5, -0.2, 0.0], header=Header(wall_ns=t + int(skew_s * 1e9)))

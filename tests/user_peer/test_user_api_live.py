@@ -72,9 +72,9 @@ def test_move_joints_reaches_targets_and_matches_the_viewers_fk(user):
     wait_until(lambda: arm.flange is not None and arm.flange.header.wall_ns > settled_ns
                and arm.joint_state.header.wall_ns > settled_ns, what="flange pose and joints after settling")
     fk = info.arm.fk(arm.joints)[-1]
-    from user_peer.rerun_log import _compose
+    from user_peer.geometry import compose
 
-    pos, _ = _compose(info.base, fk)
+    pos, _ = compose(info.base, fk)
     flange = np.asarray(arm.flange.position)
     assert np.linalg.norm(pos - flange) < 1e-3, (pos, flange)
     with pytest.raises(user_peer.Unreachable, match="outside its limits"):
