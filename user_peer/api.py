@@ -497,7 +497,7 @@ class Robot:
 
     def reset(self, *, confirm: bool = True, timeout: float = 10.0) -> bool:
         """Send the robot back to its start (an arm at its speed limits); with ``confirm``, sent again until
-        the robot is seen still, as :meth:`stop`. Returns whether it was seen still within ``timeout``."""
+        the robot is seen still (an arm: still at its start), as :meth:`stop`. Returns whether it was within ``timeout``."""
         return self._control("reset", Reset, confirm, timeout)
 
     def _control(self, command: str, body_type: type, confirm: bool, timeout: float) -> bool:
@@ -512,7 +512,24 @@ class Robot:
         if not confirm:
             send()
             return False
-        return resend_until(send, lambda: _still_after(self.latest(stream), seq0), interval=0.1, timeout=timeout).done
+        at = self._reset_target() if command == "reset" else None
+
+        def done() -> bool:
+            msg = self.latest(stream)
+            if not _still_after(msg, seq0):
+                return False
+            # a still arm right after the send may not have begun its reset yet: it must be still *there*
+            return at is None or float(np.max(np.abs(np.asarray(msg.q) - at), initial=0.0)) < 1e-3
+
+        return resend_until(send, done, interval=0.1, timeout=timeout).done
+
+    def _reset_target(self) -> np.ndarray | None:
+        """Where an arm's reset takes its joints (zero, within range, as the sim's controller does); None
+        for a base (teleported home, still at once) or an arm whose limits the world did not give."""
+        e = self.entry
+        if self.kind != "arm" or not e.lower or len(e.lower) != len(e.upper):
+            return None
+        return np.clip(np.zeros(len(e.lower)), np.asarray(e.lower), np.asarray(e.upper))
 
     def _check_rejected(self, since: int) -> None:
         rej = self.world.rejections(self.id, since)
