@@ -14,6 +14,7 @@ forged record cannot stop renewals or hide later real ones.
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections import Counter
@@ -26,6 +27,8 @@ from fabric.messages import OwnershipRecord
 from fabric.session import Fabric, ServiceError
 
 from ownership.messages import OwnReply, OwnRequest
+
+log = logging.getLogger("robofabric.ownership")
 
 #: Epoch changes the authority can make per second (each is one request, release, expiry or
 #: handover it processed) and the slack on top, for :func:`epoch_plausible`. Generous: the
@@ -98,6 +101,8 @@ class OwnershipClient:
         self._sims: set[str] = set()
         self._authority: str | None = None
         self._term = 0  # the authority epoch of the authority followed (issue 16)
+        self._ready = False  # a new sim's token triggers a refresh only after the first one below
+        self._refreshing = self._refresh_again = False
         fabric.watch_peers(self._on_sim, kind="sim")
         try:
             self._sims.update(pid for _, pid in fabric.live_peers("sim", timeout=min(timeout, 1.0)))
@@ -105,6 +110,8 @@ class OwnershipClient:
             pass  # the watch fills it in
         fabric.subscribe(keys.own_all(fabric.world), self._on_record, expected=OwnershipRecord)
         self.refresh()
+        with self._lock:
+            self._ready = True
         self._renew_s = renew_s
         self._thread: threading.Thread | None = None
 
@@ -126,10 +133,32 @@ class OwnershipClient:
 
     def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
         with self._lock:
+            new = alive and peer_id not in self._sims
             if alive:
                 self._sims.add(peer_id)
             else:
                 self._sims.discard(peer_id)
+            if not (new and self._ready) or self._stop.is_set():
+                return
+            # its records may have come before its token and been refused as foreign: ask again, once
+            # at a time (made-up sim tokens must not make a thread each)
+            self._refresh_again = True
+            if self._refreshing:
+                return
+            self._refreshing = True
+        threading.Thread(target=self._refresh_while_wanted, name=f"own-refresh-{self.user}", daemon=True).start()
+
+    def _refresh_while_wanted(self) -> None:
+        while True:
+            with self._lock:
+                if not self._refresh_again or self._stop.is_set():
+                    self._refreshing = False
+                    return
+                self._refresh_again = False
+            try:
+                self.refresh()
+            except Exception:  # a closing session
+                log.debug("refresh after a new sim failed", exc_info=True)
 
     def refresh(self) -> None:
         """Query the authority for every record (late join)."""
