@@ -16,11 +16,12 @@ Pure: time is passed in as a value.
 
 from __future__ import annotations
 
+import queue
 import re
 from collections import OrderedDict
 from dataclasses import dataclass
 
-__all__ = ["MAX_USER_LEN", "QUOTE_LEN", "USER_PATTERN", "validate_user", "is_valid_user", "quote", "clip", "RateLimiter", "Verdict"]
+__all__ = ["MAX_USER_LEN", "QUOTE_LEN", "USER_PATTERN", "validate_user", "is_valid_user", "quote", "clip", "RateLimiter", "Verdict", "put_dropping_oldest"]
 
 MAX_USER_LEN = 64
 QUOTE_LEN = 200
@@ -115,3 +116,19 @@ class RateLimiter:
     def pending(self) -> dict[str, int]:
         """Keys with suppressed reports not yet told, and how many."""
         return {k: w[2] for k, w in self._windows.items() if w[2]}
+
+
+def put_dropping_oldest(q: "queue.Queue", item: object) -> int:
+    """Put ``item`` on a bounded queue, dropping the oldest entries to make room, and return how many were
+    dropped: a slow consumer loses old samples and never blocks the producer (zenoh's callback thread)."""
+    dropped = 0
+    while True:
+        try:
+            q.put_nowait(item)
+            return dropped
+        except queue.Full:
+            try:
+                q.get_nowait()
+                dropped += 1
+            except queue.Empty:
+                pass

@@ -6,6 +6,7 @@ import queue
 import time
 from typing import Any, Callable, Iterator
 
+from fabric.limits import put_dropping_oldest
 from fabric.session import Fabric
 
 __all__ = ["Sample", "Subscription", "StreamIterator"]
@@ -71,17 +72,7 @@ class StreamIterator:
         self._sub = Subscription(fab, key_expr, self._put)
 
     def _put(self, key: str, msg: Any) -> None:
-        s = Sample(key, msg, time.time_ns())
-        while True:
-            try:
-                self._q.put_nowait(s)
-                return
-            except queue.Full:
-                try:
-                    self._q.get_nowait()
-                    self.dropped += 1
-                except queue.Empty:
-                    pass
+        self.dropped += put_dropping_oldest(self._q, Sample(key, msg, time.time_ns()))
 
     def __iter__(self) -> Iterator[Sample]:
         return self

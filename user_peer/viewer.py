@@ -22,6 +22,7 @@ import rerun as rr
 from fabric import keys
 from fabric.config import FabricConfig
 from fabric.exit import at_exit
+from fabric.limits import put_dropping_oldest
 from fabric.session import Fabric, ServiceError
 from user_peer.catalog import RobotCatalog
 from user_peer.rerun_log import WorldLogger, blueprint
@@ -142,19 +143,7 @@ class Viewer:
         self._cancel_exit = at_exit(self.close)
 
     def _enqueue(self, key: str, msg: Any) -> None:
-        item = (key, msg, time.time_ns())
-        try:
-            self.queue.put_nowait(item)
-        except queue.Full:
-            try:
-                self.queue.get_nowait()
-                self.dropped += 1
-            except queue.Empty:
-                pass
-            try:
-                self.queue.put_nowait(item)
-            except queue.Full:
-                self.dropped += 1
+        self.dropped += put_dropping_oldest(self.queue, (key, msg, time.time_ns()))
 
     def start(self) -> None:
         """Learn the world, subscribe, and ask for the state a late joiner missed (ownership, maps)."""

@@ -21,6 +21,7 @@ from typing import Any, Callable, Iterable
 import zenoh
 
 from fabric.codec import DecodeError, decode, load_plugins
+from fabric.limits import put_dropping_oldest
 
 __all__ = ["EXPORTERS", "exporters", "LiveConverter", "LiveStats"]
 
@@ -80,16 +81,7 @@ class LiveConverter:
         item = (str(sample.key_expr), sample.payload.to_bytes(), time.time_ns())
         with self._lock:
             self.received += 1
-            while True:
-                try:
-                    self._q.put_nowait(item)
-                    return
-                except queue.Full:
-                    try:
-                        self._q.get_nowait()
-                        self.dropped += 1
-                    except queue.Empty:
-                        pass
+            self.dropped += put_dropping_oldest(self._q, item)
 
     def _loop(self) -> None:
         try:

@@ -87,3 +87,14 @@ def test_rate_limiter_bounds(events, burst):
             suppressed_told += v.suppressed
     assert reports + suppressed_told + sum(rl.pending().values()) <= checks
     assert reports >= min(checks, 1)
+
+
+def test_put_dropping_oldest_keeps_the_newest_and_counts_what_it_dropped():
+    import queue
+
+    from fabric.limits import put_dropping_oldest
+
+    q: queue.Queue = queue.Queue(maxsize=3)
+    dropped = sum(put_dropping_oldest(q, i) for i in range(10))
+    assert dropped == 7
+    assert [q.get_nowait() for _ in range(3)] == [7, 8, 9]
