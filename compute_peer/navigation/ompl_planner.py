@@ -27,6 +27,8 @@ from .errors import NavigationError
 from .model import PlanResult, Pose2, VehicleModel, check_endpoints, finish
 
 OMPL_PLANNERS = ("rrtstar", "bitstar")
+RESTART_FIRST_SLICE = 0.5  # s: the first tree's time before a fresh one is tried (then 1, 2, 4 ... s)
+FINISH_ATTEMPTS = 4  # paths finish() may refuse near a tight endpoint before the planner gives up
 
 _quiet = threading.Lock()
 _quieted = False
@@ -98,32 +100,42 @@ def plan_ompl(costmap: Costmap, start: Pose2, goal: Pose2, vehicle: VehicleModel
     planner = og.RRTstar(si) if cfg.planner == "rrtstar" else og.BITstar(si)
     ss.setPlanner(planner)
     ss.setup()
-    # near a tight endpoint states are checked without the full margin, so a path may graze a
-    # collision cell between two checked states: finish() refuses it, and OMPL tries afresh
-    attempts = 4 if tight else 1
-    for attempt in range(attempts):
-        if attempt:
-            ss.clear()
-            objective.setCostThreshold(ob.Cost(math.inf))
-        status = ss.solve(cfg.time_limit)
-        if cfg.refine_time > 0 and ss.haveExactSolutionPath():
-            objective.setCostThreshold(ob.Cost(0.0))
-            ss.solve(cfg.refine_time)
-        if not ss.haveExactSolutionPath():
+    # A tree that starts badly (wedged in beside a wall) can take seconds where a fresh one takes
+    # milliseconds: the time to a first solution has a heavy tail (40 tight Reeds-Shepp runs: median
+    # 14 ms, worst 6.6 s; one CI run hit the 10 s limit). So the budget is spent in restarts with a fresh
+    # tree, each slice twice the last, until time_limit is used up.
+    # Near a tight endpoint states are checked without the full margin, so a path may also graze a
+    # collision cell between two checked states: finish() refuses it, and OMPL tries afresh.
+    deadline = t0 + cfg.time_limit
+    slice_s = min(cfg.time_limit, RESTART_FIRST_SLICE)
+    refused = 0
+    status = None
+    while True:
+        remaining = deadline - time.perf_counter()
+        if remaining <= 0:
             raise NavigationError(
                 f"OMPL {cfg.planner} found no path from ({start[0]:.2f}, {start[1]:.2f}) to ({goal[0]:.2f}, {goal[1]:.2f}) "
-                f"within {cfg.time_limit:.2f} s ({status.asString()})"
+                f"within {cfg.time_limit:.2f} s ({status.asString() if status is not None else 'no time to plan'})"
             )
-        if cfg.simplify_time > 0:
-            ss.simplifySolution(cfg.simplify_time)
-        xs, ys, ts = _states(ss.getSolutionPath(), costmap.resolution)
-        xs[-1], ys[-1], ts[-1] = goal  # the goal state is reached within goal_tolerance: end exactly on it
-        try:
-            return finish(costmap, xs, ys, ts, planner=f"ompl:{cfg.planner}", seconds=time.perf_counter() - t0)
-        except NavigationError:
-            if attempt == attempts - 1:
-                raise
-    raise AssertionError("unreachable")
+        status = ss.solve(min(slice_s, remaining))
+        if ss.haveExactSolutionPath():
+            if cfg.refine_time > 0:
+                objective.setCostThreshold(ob.Cost(0.0))
+                ss.solve(cfg.refine_time)
+            if cfg.simplify_time > 0:
+                ss.simplifySolution(cfg.simplify_time)
+            xs, ys, ts = _states(ss.getSolutionPath(), costmap.resolution)
+            xs[-1], ys[-1], ts[-1] = goal  # the goal state is reached within goal_tolerance: end exactly on it
+            try:
+                return finish(costmap, xs, ys, ts, planner=f"ompl:{cfg.planner}", seconds=time.perf_counter() - t0)
+            except NavigationError:
+                refused += 1
+                if not tight or refused >= FINISH_ATTEMPTS:
+                    raise
+        else:
+            slice_s *= 2
+        ss.clear()
+        objective.setCostThreshold(ob.Cost(math.inf))
 
 
 def _states(path, resolution: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
