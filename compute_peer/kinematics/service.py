@@ -44,7 +44,8 @@ log = logging.getLogger("robofabric.kinematics")
 
 __all__ = ["KinematicsService", "register_kinematics", "ArmPlacement"]
 
-DISCOVERY_INTERVAL = 1.0  # s between two srv/world lookups
+DISCOVERY_INTERVAL = 1.0  # s between two srv/world lookups set off by streams
+REQUEST_DISCOVERY_INTERVAL = 0.2  # s: a request for an unknown arm may look again this soon (a sim that just came)
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,6 +87,11 @@ class KinematicsService:
         self._discover = bool(discover)
         self._last_discovery = -1e18
         self._discovering = False
+        self._discovered = threading.Event()
+        self._discovered.set()
+        self._last_discovery_error = ""
+        self._sims_changed = 0  # bumped when a sim peer comes or goes: the world's arms may have changed
+        self._answered_at = -1  # the value of _sims_changed when srv/world last answered
         self._closed = False
         self.counters: dict[str, int] = {"ik": 0, "fk": 0, "jacobian": 0, "refusals": 0, "streamed": 0, "stream_unreachable": 0}
         for rid, placement in (arms or {}).items():
@@ -109,6 +115,15 @@ class KinematicsService:
         self._resources.append(f.subscribe(keys.robot_stream_all(w, "joints"), self._on_joints, expected=JointState))
         for _, obj in self.streams:
             self._resources.append(f.subscribe(keys.object_pose_all(w, obj), self._on_target, expected=Pose, history=True))
+        if self._discover:
+            self._resources.append(f.watch_peers(self._on_sim, kind="sim"))
+
+    def _on_sim(self, kind: str, peer: str, alive: bool) -> None:
+        """A sim came or went: look the world up again now (its description may name other arms)."""
+        with self._lock:
+            self._sims_changed += 1
+            self._last_discovery = -1e18
+        self._discover_soon()
 
     def __enter__(self) -> "KinematicsService":
         return self
@@ -147,12 +162,18 @@ class KinematicsService:
         """Learn the arms of the world from the sim peers' ``srv/world``; returns how many are known."""
         try:
             import sim_peer.messages  # noqa: F401  (registers WorldInfo with the codec)
-        except ImportError:
+        except ImportError as exc:
+            self._discovery_failed(f"cannot read the world description: {exc}")
             return len(self.arms)
+        with self._lock:
+            generation = self._sims_changed
         try:
             replies = self.fabric.query(keys.srv(self.world, "world"), timeout=timeout, all_replies=True)
-        except ServiceError:
+        except ServiceError as exc:
+            self._discovery_failed(str(exc))
             return len(self.arms)
+        with self._lock:
+            self._answered_at = generation
         for rep in replies:
             for r in getattr(rep.message, "robots", ()):
                 if getattr(r, "kind", "") != "arm" or r.id in self._arms:
@@ -164,34 +185,73 @@ class KinematicsService:
                     log.warning("cannot serve kinematics for %s (%s): %s", r.id, r.type, exc)
         return len(self.arms)
 
-    def _discover_soon(self) -> None:
-        """Look the world up in a thread (never inside a Zenoh callback), at most once a second."""
+    def _discovery_failed(self, why: str) -> None:
+        self.counters["discovery_failed"] = self.counters.get("discovery_failed", 0) + 1
+        # said once per distinct reason: "nobody serves it" is normal until the sim is up
+        if why != self._last_discovery_error:
+            self._last_discovery_error = why
+            log.warning("looking the world's arms up: %s", why)
+
+    def _claim_discovery(self, interval: float = DISCOVERY_INTERVAL) -> bool:
+        """Whether this caller should look the world up now (none running, none in the last ``interval``)."""
         with self._lock:
             now = self._clock.now()
-            if self._discovering or self._closed or now - self._last_discovery < DISCOVERY_INTERVAL:
-                return
+            if self._discovering or self._closed or now - self._last_discovery < interval:
+                return False
             self._discovering = True
             self._last_discovery = now
+            self._discovered.clear()
+            return True
 
-        def run() -> None:
-            try:
-                self.discover()
-            except Exception as exc:  # a session closing under us
-                log.debug("arm discovery failed: %s", exc)
-            finally:
-                with self._lock:
-                    self._discovering = False
+    def _run_discovery(self, timeout: float = 2.0) -> None:
+        try:
+            self.discover(timeout=timeout)
+        except Exception as exc:  # a session closing under us
+            self._discovery_failed(f"{type(exc).__name__}: {exc}")
+        finally:
+            with self._lock:
+                self._discovering = False
+            self._discovered.set()
 
-        threading.Thread(target=run, name="kinematics-discovery", daemon=True).start()
+    def _discover_soon(self) -> None:
+        """Look the world up in a thread (never inside a Zenoh callback), at most once a second."""
+        if self._claim_discovery():
+            threading.Thread(target=self._run_discovery, name="kinematics-discovery", daemon=True).start()
+
+    def _discover_now(self, timeout: float = 2.0) -> None:
+        """Look the world up before answering a request for an arm not known yet (a sim that just came,
+        or joints that have not arrived): the request waits up to ``timeout`` rather than failing.
+
+        Runs in the query's own handler thread; joins a lookup already under way. Once the world has
+        answered with the sims there are now, an unknown id is refused at once: a flood of made-up ids
+        never stalls the service."""
+        deadline = time.monotonic() + timeout
+        while True:
+            with self._lock:
+                if self._answered_at == self._sims_changed or self._closed:
+                    return
+                wait = self._last_discovery + REQUEST_DISCOVERY_INTERVAL - self._clock.now()
+            if self._claim_discovery(REQUEST_DISCOVERY_INTERVAL):
+                self._run_discovery(max(0.1, deadline - time.monotonic()))
+                return
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return
+            if not self._discovered.is_set():
+                self._discovered.wait(left)
+                return
+            time.sleep(min(max(wait, 0.01), left))
 
     def arm(self, robot: str) -> PlacedArm:
         """The placed arm ``robot``; :class:`ServiceError` naming the known ones otherwise."""
         with self._lock:
             arm = self._arms.get(robot)
-            known = sorted(self._arms)
+        if arm is None and self._discover:
+            self._discover_now()
+            with self._lock:
+                arm = self._arms.get(robot)
         if arm is None:
-            if self._discover:
-                self._discover_soon()
+            known = self.arms
             raise ServiceError(f"unknown arm {quote(robot, 64)}: this compute peer serves {', '.join(known) or 'no arms yet'}")
         return arm
 

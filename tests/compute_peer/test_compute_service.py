@@ -257,3 +257,23 @@ def test_robofabric_call_asks_a_service_from_the_command_line(served, world, rou
     assert out.returncode == 2 and "unknown message type" in out.stderr, out.stdout + out.stderr
     out = call("srv/ik/arm1", "-t", "IKRequest", "-d", '{"position": [1, 2]}')
     assert out.returncode == 2 and "cannot build IKRequest" in out.stderr, out.stdout + out.stderr
+
+
+def test_an_arm_asked_for_before_its_joints_arrive_is_looked_up_not_refused(world, connect):
+    """A sim that comes after the compute peer, and a request before any joints: the request waits for
+    the world's description instead of failing with "serves no arms yet" (a lab run failed that way)."""
+    from sim_peer.messages import RobotInfo, WorldInfo
+
+    svc = KinematicsService(connect("compute"), discover=True)
+    try:
+        sim = connect("sim")
+        six = np.zeros(6)
+        info = WorldInfo(world, "test", 0.002, {}, (RobotInfo("arm1", "meca500", "arm", np.array(BASE), tuple(f"j{i}" for i in range(6)), six - 3, six + 3, six + 1),))
+        sim.serve(keys.srv(world, "world"), lambda key, req: info)
+        user = connect("user")
+        wait_until(lambda: user.call(keys.srv(world, "world"), timeout=1.0), timeout=10.0, what="the world served")
+        target = np.array(BASE[:3]) + np.array([0.19, 0.0, 0.31])
+        reply = user.call(keys.srv(world, "ik", "arm1"), IKRequest(target), timeout=10.0, expected=IKReply)
+        assert reply.robot == "arm1" and svc.arms == ["arm1"], svc.counters
+    finally:
+        svc.close()

@@ -113,7 +113,10 @@ def test_sim_clock_skew_changes_nothing(room: Classroom, offset):
     assert skew.strip(), "could not read the sim host's clock"
     viewer = room.viewer_host.start(["view", "--save", str(room.lab.log_dir / f"view{offset}.rrd"), "--duration", "8",
                                      "--connect", room.router_ep], name="view")
-    figures = alice.call(CHECKS, timeout=240)
+    try:
+        figures = alice.call(CHECKS, timeout=240)
+    except Exception as exc:  # say what the other hosts' peers said: a CI run failed here with no trace of why
+        raise AssertionError(f"{exc}\n--- compute:\n{room.compute.output()[-3000:]}\n--- sim:\n{room.sim.output()[-3000:]}") from exc
     wait_until(lambda: bob.call("w.world_alive"), timeout=30, what="bob sees the sim")
     refused_after, reasons = bob.call(REFUSE, timeout=60)
     alice.call("arm.release(); None")
