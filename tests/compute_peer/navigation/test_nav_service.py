@@ -58,7 +58,7 @@ def drive_and_scan(nav, sim, scene, poses):
     for k, (x, y, yaw) in enumerate(poses):
         stamp = 1.0 + 0.05 * k
         sim.publish(keys.robot_pose(world, ROBOT), pose_at(x, y, yaw, stamp=stamp, seq=k))
-        wait_until(lambda: nav._pose_at(ROBOT, 0.0) is not None and nav._pose_at(ROBOT, 0.0).header.seq == k, what=f"pose {k}")
+        wait_until(lambda: nav.poses.at(ROBOT) is not None and nav.poses.at(ROBOT).header.seq == k, what=f"pose {k}")
         sim.publish(keys.robot_scan(world, ROBOT), scan_at(scene, x, y, yaw, stamp=stamp, seq=k))
     wait_until(lambda: nav.counters["scans"] >= len(poses), what="all scans mapped", seen=lambda: nav.counters)
 
@@ -85,16 +85,16 @@ def test_mapping_mode_build_publish_and_navigate(peers):
 
     # navigation: from the robot's latest pose to the goal pointer, around the inner wall
     sim.publish(keys.robot_pose(world, ROBOT), pose_at(2.0, 2.0, 0.0, stamp=99.0, seq=999))
-    wait_until(lambda: nav._pose_at(ROBOT, 0.0).header.seq == 999, what="start pose")
+    wait_until(lambda: nav.poses.at(ROBOT).header.seq == 999, what="start pose")
     user.publish(keys.object_pose(world, "goal", "alice"), pose_at(8.0, 2.0, -math.pi / 2))
-    wait_until(lambda: nav._goal is not None, what="goal pose")
+    wait_until(lambda: nav.plan_service.goal is not None, what="goal pose")
     plan = call(user, "plan", ROBOT, PlanRequest(ROBOT))
     assert isinstance(plan, PlanReply) and plan.planner == "hybrid_astar" and plan.robot == ROBOT
     p = plan.path
     assert (p.x[0], p.y[0]) == pytest.approx((2.0, 2.0)) and (p.x[-1], p.y[-1]) == pytest.approx((8.0, 2.0))
     assert p.y.max() > 7.0  # it went round the wall's end, not through it
     assert plan.length == pytest.approx(float(np.hypot(np.diff(p.x), np.diff(p.y)).sum()))
-    costmap = nav._costmap("map", 0.25)
+    costmap = nav.plan_service.costmap("map", 0.25)
     assert path_collision(costmap, p.x, p.y) is None
     wait_until(lambda: paths, what="path published on the robot's path key")
     assert np.array_equal(paths[-1].x, p.x) and np.array_equal(paths[-1].theta, p.theta)
@@ -111,7 +111,7 @@ def test_injected_map_with_ompl_given_start_and_goal(peers):
         plan = call(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[8.0, 2.0, 0.0], start=[2.0, 2.0, 0.0], planner=planner, map="lab", direction="both"))
         assert plan.planner.startswith(planner) and plan.map == "lab"
         assert plan.path.y.max() > 7.0
-        assert path_collision(nav._costmap("lab", 0.25), plan.path.x, plan.path.y) is None
+        assert path_collision(nav.plan_service.costmap("lab", 0.25), plan.path.x, plan.path.y) is None
 
 
 def test_bad_requests_get_reasons_and_the_service_keeps_answering(peers):
@@ -173,7 +173,7 @@ def test_save_load_reset_stop_start(peers, tmp_path):
     assert call(user, "map", "map", MapRequest("stop")).mapping == 0
     scene = small_room()
     sim.publish(keys.robot_pose(sim.world, ROBOT), pose_at(2.0, 2.0, 0.0, stamp=1.0))
-    wait_until(lambda: nav._pose_at(ROBOT, 0.0) is not None, what="pose")
+    wait_until(lambda: nav.poses.at(ROBOT) is not None, what="pose")
     sim.publish(keys.robot_scan(sim.world, ROBOT), scan_at(scene, 2.0, 2.0, 0.0, stamp=1.0))
     wait_until(lambda: nav.counters["scans_ignored"] == 1, what="scan ignored while stopped")
     assert nav.counters["scans"] == 0
@@ -202,7 +202,7 @@ def test_every_robot_of_the_world_when_none_are_named(connect):
         sim.publish(keys.robot_joints(world, "rover7"), JointState(("a",), np.zeros(1), np.zeros(1)))
         assert "unknown robot 'rover7'" in refused(user, "plan", "rover7", PlanRequest("rover7", goal=[4.0, 4.0, 0.0]))
         sim.publish(keys.robot_pose(world, "rover7"), pose_at(1.0, 1.0, 0.0))
-        wait_until(lambda: nav._pose_at("rover7", 0.0) is not None, what="rover7 pose")
+        wait_until(lambda: nav.poses.at("rover7") is not None, what="rover7 pose")
         plan = call(user, "plan", "rover7", PlanRequest("rover7", goal=[4.0, 4.0, math.pi / 2]))
         assert (plan.path.x[0], plan.path.y[0]) == pytest.approx((1.0, 1.0))
         assert compute.counters["decode_errors"] == 0 and compute.counters["callback_errors"] == 0
@@ -235,7 +235,7 @@ def test_sensor_mounting_and_radius_come_from_the_world_description(connect):
         wait_until(lambda: nav.discover_robots(timeout=1.0) == 1, what="world description")
         # the robot stands at (2, 2) facing +x; its LIDAR is 0.5 m ahead, at (2.5, 2)
         sim.publish(keys.robot_pose(world, "rover"), pose_at(2.0, 2.0, 0.0, stamp=1.0))
-        wait_until(lambda: nav._pose_at("rover", 0.0) is not None, what="pose")
+        wait_until(lambda: nav.poses.at("rover") is not None, what="pose")
         sim.publish(keys.robot_scan(world, "rover"), scan_at(scene, 2.5, 2.0, 0.0, stamp=1.0))
         wait_until(lambda: nav.counters["scans"] == 1, what="scan mapped", seen=lambda: nav.counters)
         grid = nav.mapper.grid(threshold=0.65)

@@ -38,7 +38,7 @@ def test_drive_map_plan_and_follow(world, connect):
         user.subscribe(keys.robot_pose(world, ROBOT), lambda k, m: poses.append(m), expected=Pose)
         with register_navigation(compute) as nav:
             wait_until(lambda: nav.discover_robots(timeout=1.0) >= 1, what="the sim's world description")
-            assert nav._offsets[ROBOT][0] == pytest.approx(0.22)  # the LIDAR is 22 cm ahead of the axle
+            assert nav.descriptions.learnt_offset(ROBOT)[0] == pytest.approx(0.22)  # the LIDAR is 22 cm ahead of the axle
             # mapping mode: the user turns the robot on the spot, a little more than once around
             wait_until(lambda: poses, what="robot pose")
             turned = [0.0]
@@ -70,11 +70,11 @@ def test_drive_map_plan_and_follow(world, connect):
             # navigation mode: the goal pointer is moved to the aisle behind the shelves' gap
             goal = (0.0, 4.0, math.pi / 2)
             user.publish(keys.object_pose(world, "goal", "alice"), Pose(np.array([goal[0], goal[1], 0.0]), quaternion_from_yaw(goal[2])))
-            wait_until(lambda: nav._goal is not None, what="goal pointer")
+            wait_until(lambda: nav.plan_service.goal is not None, what="goal pointer")
             reply = user.call(keys.srv(world, "plan", ROBOT), PlanRequest(ROBOT), timeout=20.0)
             path = reply.path
             assert (path.x[-1], path.y[-1]) == pytest.approx(goal[:2])
-            assert path_collision(nav._costmap("map", 0.30), path.x, path.y) is None  # radius from the description
+            assert path_collision(nav.plan_service.costmap("map", 0.30), path.x, path.y) is None  # radius from the description
             # the user decides to follow it: the path as a command, and the robot drives it
             user.publish(keys.robot_cmd(world, ROBOT, "path", "alice"), Command("alice", 1, path))
 

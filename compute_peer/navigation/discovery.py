@@ -1,0 +1,150 @@
+"""What the navigation service learns about the world's mobile robots from the sim peers' ``srv/world``.
+
+Where each robot's LIDAR sits on it, (x, y, yaw) in the robot frame, and the robot's radius. A scan folded in
+from the wrong mounting blurs walls (the Reeman's LIDAR is 0.22 m ahead of its axle), so a new robot's scans wait
+while its description is looked up; the lookup runs on a thread of its own, at most once a second, because it is
+a query and scans arrive on Zenoh's callback threads. Once a sim has answered, the robots it described are the
+only ones followed (plus those already followed), so made-up ids on the robot keys cost nothing.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from typing import TYPE_CHECKING, Callable, Iterable
+
+from fabric import keys
+from fabric.rate import Clock, MonotonicClock
+
+if TYPE_CHECKING:
+    from fabric.session import Fabric
+
+log = logging.getLogger("robofabric.navigation")
+
+__all__ = ["RobotDescriptions"]
+
+Offset = tuple[float, float, float]
+NO_OFFSET: Offset = (0.0, 0.0, 0.0)
+
+
+class RobotDescriptions:
+    """Each mobile robot's LIDAR mounting and radius: given, or learnt from ``srv/world`` when ``discover``.
+
+    ``sensor_offset`` (all robots) / ``sensor_offsets`` (per robot) are given mountings and are never overridden.
+    ``followed``: the robots the service already follows (they stay followed whatever a sim says).
+    ``clock``: for the lookup's rate limit.
+    """
+
+    def __init__(
+        self,
+        fabric: "Fabric",
+        *,
+        followed: Callable[[], Iterable[str]],
+        sensor_offset: Offset | None = None,
+        sensor_offsets: dict[str, Offset] | None = None,
+        discover: bool = True,
+        clock: Clock | None = None,
+    ) -> None:
+        self.fabric = fabric
+        self.world = fabric.world
+        self._followed = followed
+        self.sensor_offset_all = sensor_offset
+        self._offsets: dict[str, Offset] = dict(sensor_offsets or {})
+        self._radii: dict[str, float] = {}
+        self._discover = bool(discover)
+        self._clock = clock or MonotonicClock()
+        self._first_seen: dict[str, float] = {}
+        self._described: set[str] | None = None  # mobile robots of the world, once a sim described them
+        self._discovery_started = -math.inf
+        self._discovery_ended = -math.inf
+        self._discovering = False
+        self._closed = False
+        self._lock = threading.RLock()
+
+    def close(self) -> None:
+        """No lookup starts after this (one under way ends on its own)."""
+        self._closed = True
+
+    # ------------------------------------------------------------------ reading
+
+    def admits(self, robot: str) -> bool:
+        """False for a robot the world's sims described without it (True before any sim answered)."""
+        with self._lock:
+            return self._described is None or robot in self._described
+
+    def radius(self, robot: str, default: float) -> float:
+        """The robot's radius from its description, else ``default``."""
+        with self._lock:
+            return self._radii.get(robot, default)
+
+    def learnt_offset(self, robot: str) -> Offset | None:
+        """The LIDAR mounting given or learnt for ``robot`` alone (None: none), without starting a lookup."""
+        with self._lock:
+            return self._offsets.get(robot)
+
+    def sensor_offset(self, robot: str) -> Offset | None:
+        """The LIDAR mounting of ``robot``, or None while it is being looked up (a lookup starts if none runs)."""
+        with self._lock:
+            if robot in self._offsets:
+                return self._offsets[robot]
+            if self.sensor_offset_all is not None:
+                return self.sensor_offset_all
+            if not self._discover:
+                return NO_OFFSET
+            now = self._clock.now()
+            first = self._first_seen.setdefault(robot, now)
+            if self._discovery_ended >= first:  # asked after this robot appeared, and nobody described it
+                return NO_OFFSET
+            if not self._discovering and not self._closed and now - self._discovery_started >= 1.0:
+                self._discovering = True
+                self._discovery_started = now
+                threading.Thread(target=self._run_discovery, name="nav-discovery", daemon=True).start()
+            return None
+
+    # ------------------------------------------------------------------ the lookup
+
+    def _run_discovery(self) -> None:
+        try:
+            if not self._closed:
+                self.discover()
+        except Exception as exc:  # a session closing under us: nothing learnt, nothing to report
+            log.debug("robot discovery failed: %s", exc)
+        finally:
+            with self._lock:
+                self._discovering = False
+                self._discovery_ended = self._clock.now()
+
+    def discover(self, timeout: float = 2.0) -> int:
+        """Ask the sim peers' ``srv/world`` now and learn their mobile robots; returns how many were described.
+
+        The world description's message types belong to the sim peer; without it installed nothing is learnt.
+        """
+        from fabric.session import ServiceError
+
+        try:
+            import sim_peer.messages  # noqa: F401  (registers WorldInfo with the codec)
+        except ImportError:
+            return 0
+        try:
+            replies = self.fabric.query(keys.srv(self.world, "world"), timeout=timeout, all_replies=True)
+        except ServiceError:
+            return 0
+        found = 0
+        with self._lock:
+            known = set(self._described or ())
+            for rep in replies:
+                for r in getattr(rep.message, "robots", ()):
+                    if getattr(r, "kind", "") != "mobile":
+                        continue
+                    known.add(r.id)
+                    off = r.sensors.get("lidar_offset")
+                    if isinstance(off, list) and len(off) >= 2 and r.id not in self._offsets:
+                        self._offsets[r.id] = (float(off[0]), float(off[1]), 0.0)
+                    radius = float(r.base_radius or r.base.get("radius", 0.0) or 0.0)
+                    if radius > 0:
+                        self._radii[r.id] = radius
+                    found += 1
+            if replies:
+                self._described = known | set(self._followed())  # robots already followed stay
+        return found

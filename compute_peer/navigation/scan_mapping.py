@@ -1,0 +1,91 @@
+"""Mapping mode: fold the robots' scans into one occupancy grid as they arrive (no session here).
+
+Each scan is taken at the robot pose nearest to it in sim time, from where the robot's LIDAR sits on it, and
+marks the disk the robot stands on free. A scan that cannot be placed (mapping off, no pose yet, mounting still
+being looked up, malformed) is dropped and counted by reason, never raised: scans come from the wire.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Callable
+
+from fabric.messages import Header, OccupancyGrid, Scan
+
+from .errors import NavigationError
+from .mapping import MapperConfig, OccupancyMapper
+from .poses import PoseHistory
+
+log = logging.getLogger("robofabric.navigation")
+
+__all__ = ["ScanMapping"]
+
+
+class ScanMapping:
+    """An :class:`OccupancyMapper` fed with scans while ``on``; counts into ``counters``.
+
+    ``sensor_offset(robot)``: the LIDAR mounting, or None while it is unknown yet. ``radius(robot)``: the robot's
+    footprint radius.
+    """
+
+    def __init__(
+        self,
+        poses: PoseHistory,
+        *,
+        sensor_offset: Callable[[str], tuple[float, float, float] | None],
+        radius: Callable[[str], float],
+        counters: dict[str, int],
+        config: MapperConfig | None = None,
+        on: bool = True,
+    ) -> None:
+        self.poses = poses
+        self.mapper = OccupancyMapper(config)
+        self.on = bool(on)
+        self._sensor_offset = sensor_offset
+        self._radius = radius
+        self.counters = counters
+        for name in ("scans", "scans_ignored", "scans_without_pose", "scans_waiting_for_sensor", "scans_rejected"):
+            counters.setdefault(name, 0)
+        self._lock = threading.Lock()
+
+    @property
+    def scans(self) -> int:
+        """Scans folded in since the start or the last reset."""
+        with self._lock:
+            return self.mapper.scans
+
+    def integrate(self, robot: str, scan: Scan) -> bool:
+        """Fold ``scan`` of ``robot`` in; False (and counted by reason) when it was dropped."""
+        with self._lock:
+            if not self.on:
+                self.counters["scans_ignored"] += 1  # arrived while mapping was off
+                return False
+            pose = self.poses.at(robot, scan.header.stamp)
+            if pose is None:
+                self.counters["scans_without_pose"] += 1
+                return False
+            offset = self._sensor_offset(robot)
+            if offset is None:
+                self.counters["scans_waiting_for_sensor"] += 1  # the sensor's mounting is being looked up
+                return False
+            try:
+                self.mapper.integrate_scan(scan, pose, sensor_offset=offset, footprint=self._radius(robot))
+            except NavigationError as exc:
+                self.counters["scans_rejected"] += 1
+                log.warning("scan from %s rejected: %s", robot, exc)
+                return False
+            self.counters["scans"] += 1
+            return True
+
+    def grid(self, *, threshold: float | None = None, header: Header | None = None) -> OccupancyGrid | None:
+        """The map so far (binary with ``threshold``, else probabilities in percent); None before any scan."""
+        with self._lock:
+            if self.mapper.scans == 0:
+                return None
+            return self.mapper.grid(threshold=threshold, header=header)
+
+    def reset(self) -> None:
+        """Forget every scan (mapping stays on or off as it was)."""
+        with self._lock:
+            self.mapper.reset()

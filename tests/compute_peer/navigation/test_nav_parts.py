@@ -1,0 +1,93 @@
+"""The navigation service's session-free parts on their own: pose history, scan mapping, map store."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from compute_peer.navigation.errors import NavigationError
+from compute_peer.navigation.grid import UNKNOWN, make_grid
+from compute_peer.navigation.map_store import COSTMAP_CACHE, MapStore
+from compute_peer.navigation.mapping import MapperConfig
+from compute_peer.navigation.poses import PoseHistory
+from compute_peer.navigation.scan_mapping import ScanMapping
+from navscenes import pose_at, scan_at, small_room
+
+ROOM = MapperConfig(resolution=0.1, width=100, height=100, origin_x=0.0, origin_y=0.0)
+
+
+def test_pose_history_nearest_in_sim_time_latest_without_stamp_and_bounded():
+    poses = PoseHistory(depth=3)
+    assert poses.at("r") is None and "r" not in poses
+    assert poses.add("r", pose_at(0.0, 0.0, 0.0, stamp=1.0, seq=1)) is True
+    assert poses.add("r", pose_at(1.0, 0.0, 0.0, stamp=2.0, seq=2)) is False
+    poses.add("r", pose_at(2.0, 0.0, 0.0, stamp=3.0, seq=3))
+    assert poses.at("r", 2.2).header.seq == 2
+    assert poses.at("r").header.seq == 3  # no stamp: the latest
+    poses.add("r", pose_at(3.0, 0.0, 0.0, stamp=4.0, seq=4))
+    assert poses.at("r", 0.5).header.seq == 2  # the oldest kept: the first was dropped
+    assert poses.robots() == {"r"} and len(poses) == 1
+
+
+def _mapping(offsets: dict[str, tuple[float, float, float] | None], on: bool = True) -> tuple[ScanMapping, PoseHistory, dict]:
+    poses = PoseHistory()
+    counters: dict[str, int] = {}
+    m = ScanMapping(poses, sensor_offset=offsets.get, radius=lambda r: 0.2, counters=counters, config=ROOM, on=on)
+    return m, poses, counters
+
+
+def test_scan_mapping_counts_each_reason_a_scan_is_dropped():
+    scene = small_room()
+    m, poses, counters = _mapping({"r": (0.0, 0.0, 0.0), "waiting": None})
+    scan = scan_at(scene, 2.0, 2.0, 0.0, stamp=1.0)
+    assert m.grid() is None
+    assert not m.integrate("r", scan) and counters["scans_without_pose"] == 1
+    poses.add("r", pose_at(2.0, 2.0, 0.0, stamp=1.0))
+    poses.add("waiting", pose_at(2.0, 2.0, 0.0, stamp=1.0))
+    assert not m.integrate("waiting", scan) and counters["scans_waiting_for_sensor"] == 1
+    assert m.integrate("r", scan) and counters["scans"] == 1 and m.scans == 1
+    m.on = False
+    assert not m.integrate("r", scan) and counters["scans_ignored"] == 1
+    grid = m.grid(threshold=0.65)
+    assert (grid.cells == 100).any() and (grid.cells == 0).any()
+    m.reset()
+    assert m.scans == 0 and m.grid() is None
+
+
+def test_map_store_versions_invalidate_costmaps_and_the_cache_is_bounded():
+    store = MapStore()
+    with pytest.raises(NavigationError, match="no map named 'm'"):
+        store.costmap("m", 0.2, threshold=50, unknown_is_occupied=True)
+    cells = np.zeros((40, 40), dtype=np.uint8)
+    store.put("m", make_grid(cells, 0.1))
+    first = store.costmap("m", 0.2, threshold=50, unknown_is_occupied=True)
+    assert store.costmap("m", 0.2, threshold=50, unknown_is_occupied=True) is first  # cached
+    cells[10:20, 10:20] = 100
+    store.put("m", make_grid(cells, 0.1))  # a new version
+    second = store.costmap("m", 0.2, threshold=50, unknown_is_occupied=True)
+    assert second is not first and second.collision.any()
+    for k in range(COSTMAP_CACHE + 3):
+        store.costmap("m", 0.1 + 0.01 * k, threshold=50, unknown_is_occupied=True)
+    assert len(store._costmaps) <= COSTMAP_CACHE
+    store.put("dark", make_grid(np.full((10, 10), UNKNOWN, np.uint8), 0.1))
+    with pytest.raises(NavigationError, match="is empty"):
+        store.costmap("dark", 0.2, threshold=50, unknown_is_occupied=True)
+    store.drop("m")
+    assert store.get("m") is None
+
+
+def test_map_store_files_stay_inside_the_maps_folder(tmp_path):
+    with pytest.raises(NavigationError, match="no maps folder"):
+        MapStore().file("a.yaml")
+    store = MapStore(tmp_path)
+    for bad in ("", "../a.yaml", "sub/a.yaml", ".hidden", "a\\b"):
+        with pytest.raises(NavigationError, match="plain file name"):
+            store.file(bad)
+    with pytest.raises(NavigationError, match="no map named 'm' to save"):
+        store.save("m", "m.npz")
+    cells = np.zeros((20, 30), dtype=np.uint8)
+    cells[5, 5] = 100
+    store.put("m", make_grid(cells, 0.1, (1.0, 2.0)))
+    assert store.save("m", "m.npz") == tmp_path / "m.npz"
+    grid, path = store.read("m.npz")
+    assert path == tmp_path / "m.npz" and np.array_equal(grid.cells, cells)
