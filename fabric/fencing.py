@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from fabric import keys
 
-__all__ = ["AUTHORITY_STREAMS", "Fence", "Verdict", "is_authority_key"]
+__all__ = ["AUTHORITY_STREAMS", "Fence", "FenceVerdict", "is_authority_key"]
 
 AUTHORITY_STREAMS = frozenset({"joints", "pose", "scan", "sonar"})
 """Robot streams only a sim authority writes (paths and IK results come from compute and users)."""
@@ -41,7 +41,7 @@ def is_authority_key(key: str) -> bool:
 
 
 @dataclass(frozen=True, slots=True)
-class Verdict:
+class FenceVerdict:
     """``accept``: believe the message; ``raised``: it carried a higher term than any before."""
 
     accept: bool
@@ -60,15 +60,15 @@ class Fence:
     def term(self) -> int:
         return self._term
 
-    def check(self, term: int) -> Verdict:
+    def check(self, term: int) -> FenceVerdict:
         """Accept ``term`` if it is at least the highest seen (raising that mark); count and refuse it otherwise."""
         with self._lock:
             if term < self._term:
                 self.stale += 1
-                return Verdict(False)
+                return FenceVerdict(False)
             raised = term > self._term
             self._term = term
-            return Verdict(True, raised)
+            return FenceVerdict(True, raised)
 
     def reset(self) -> None:
         """Forget the highest term: the world's last sim left, and a sim started afresh begins at term 1."""

@@ -21,7 +21,7 @@ import re
 from collections import OrderedDict
 from dataclasses import dataclass
 
-__all__ = ["MAX_USER_LEN", "QUOTE_LEN", "USER_PATTERN", "validate_user", "is_valid_user", "quote", "clip", "RateLimiter", "Verdict", "put_dropping_oldest"]
+__all__ = ["MAX_USER_LEN", "QUOTE_LEN", "USER_PATTERN", "validate_user", "is_valid_user", "quote", "clip", "RateLimiter", "ReportVerdict", "put_dropping_oldest"]
 
 MAX_USER_LEN = 64
 QUOTE_LEN = 200
@@ -62,7 +62,7 @@ def validate_user(name: object, *, what: str = "user") -> str:
 
 
 @dataclass(frozen=True, slots=True)
-class Verdict:
+class ReportVerdict:
     """Whether to report now, and how many reports on this key were suppressed since the last one."""
 
     report: bool
@@ -93,25 +93,25 @@ class RateLimiter:
     def __len__(self) -> int:
         return len(self._windows)
 
-    def check(self, key: str, now: float) -> Verdict:
+    def check(self, key: str, now: float) -> ReportVerdict:
         """Report ``key`` now? ``now`` is any monotonic time in seconds."""
         w = self._windows.get(key)
         if w is None:
             self._windows[key] = [now, 1, 0]
             while len(self._windows) > self.max_keys:
                 self._windows.popitem(last=False)
-            return Verdict(True, 0)
+            return ReportVerdict(True, 0)
         if now - w[0] >= self.interval:
             suppressed = w[2]
             w[0], w[1], w[2] = now, 1, 0
             self._windows.move_to_end(key)
-            return Verdict(True, suppressed)
+            return ReportVerdict(True, suppressed)
         if w[1] < self.burst:
             w[1] += 1
             suppressed, w[2] = w[2], 0
-            return Verdict(True, suppressed)
+            return ReportVerdict(True, suppressed)
         w[2] += 1
-        return Verdict(False)
+        return ReportVerdict(False)
 
     def pending(self) -> dict[str, int]:
         """Keys with suppressed reports not yet told, and how many."""

@@ -28,7 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Iterable
 
-__all__ = ["Role", "Election", "Heard", "Peers", "Resumed", "Effect", "candidate", "start", "step", "PRIMARY", "STANDBY"]
+__all__ = ["Role", "Election", "Heard", "Peers", "Resumed", "ElectionEffect", "candidate", "start", "step", "PRIMARY", "STANDBY"]
 
 PRIMARY = "primary"
 STANDBY = "standby"
@@ -71,7 +71,7 @@ Event = Heard | Peers | Resumed
 
 
 @dataclass(frozen=True, slots=True)
-class Effect:
+class ElectionEffect:
     """``take_over`` (serve the world with ``term``), ``step_down`` (stop serving, follow ``leader``),
     ``follow`` (a new leader to follow), ``ignore`` (stale state: do not use it)."""
 
@@ -92,24 +92,24 @@ def start(me: str, *, standby: bool, term: int = 0) -> Election:
     return Election(me, PRIMARY, max(1, term), me)
 
 
-def step(s: Election, ev: Event) -> tuple[Election, list[Effect]]:
+def step(s: Election, ev: Event) -> tuple[Election, list[ElectionEffect]]:
     """Apply one observation."""
     if isinstance(ev, Heard):
         if ev.source == s.me:
             return s, []
         if ev.term < s.term:
-            return s, [Effect("ignore", ev.term, ev.source)]
+            return s, [ElectionEffect("ignore", ev.term, ev.source)]
         if s.role == PRIMARY:
             if ev.term > s.term or (ev.term == s.term and ev.source < s.me):
                 s = replace(s, role=STANDBY, term=ev.term, leader=ev.source)
-                return s, [Effect("step_down", ev.term, ev.source)]
-            return s, [Effect("ignore", ev.term, ev.source)]  # same term, higher id: it steps down, not us
+                return s, [ElectionEffect("step_down", ev.term, ev.source)]
+            return s, [ElectionEffect("ignore", ev.term, ev.source)]  # same term, higher id: it steps down, not us
         if ev.term > s.term or ev.source != s.leader:
             if ev.term == s.term and s.leader and ev.source > s.leader:
-                return s, [Effect("ignore", ev.term, ev.source)]  # the same tie, seen from a standby
+                return s, [ElectionEffect("ignore", ev.term, ev.source)]  # the same tie, seen from a standby
             seen = (s.leader_seen and ev.source == s.leader) or ev.source in s.live
             s = replace(s, term=ev.term, leader=ev.source, leader_seen=seen)
-            return s, [Effect("follow", ev.term, ev.source)]
+            return s, [ElectionEffect("follow", ev.term, ev.source)]
         return s, []
     if isinstance(ev, Peers):
         s = replace(s, live=frozenset(ev.live))
@@ -121,12 +121,12 @@ def step(s: Election, ev: Event) -> tuple[Election, list[Effect]]:
         if candidate(standbys) != s.me:
             return s, []
         s = replace(s, role=PRIMARY, term=s.term + 1, leader=s.me)
-        return s, [Effect("take_over", s.term, s.me)]
+        return s, [ElectionEffect("take_over", s.term, s.me)]
     if isinstance(ev, Resumed):
         if s.role != PRIMARY:
             return s, []
         # a standby may have taken over and died meanwhile, its term heard by consumers but not by us:
         # come back under a new term, so whoever fenced at that one takes us again
         s = replace(s, term=s.term + 1)
-        return s, [Effect("reassert", s.term, s.me)]
+        return s, [ElectionEffect("reassert", s.term, s.me)]
     raise TypeError(f"not an election event: {ev!r}")

@@ -1,6 +1,6 @@
 """Replicated authority (issue 16): a sim peer as a world's primary or as a standby that takes it over.
 
-:class:`Host` runs one fabric session in one role at a time, driven by the pure election core
+:class:`ReplicaHost` runs one fabric session in one role at a time, driven by the pure election core
 (:mod:`sim_peer.election`):
 
 - **primary**: a :class:`~sim_peer.peer.SimPeer` with its ownership gate, every message stamped with
@@ -15,7 +15,7 @@
   world restored to the last state it saw (no reset), the ownership records and users carried over,
   sequence numbers continued, then streams, ``srv/world`` and the ownership queryables served again.
 
-A host that stepped down returns from :meth:`Host.run`; the caller opens a fresh session and runs a
+A host that stepped down returns from :meth:`ReplicaHost.run`; the caller opens a fresh session and runs a
 standby (``run_replicated``), so nothing the primary declared survives the change of role.
 """
 
@@ -37,7 +37,7 @@ from sim_peer.world import World
 
 log = logging.getLogger("robofabric.sim")
 
-__all__ = ["Host", "run_replicated", "POLL_S"]
+__all__ = ["ReplicaHost", "run_replicated", "POLL_S"]
 
 POLL_S = 0.05
 """How often a standby asks the primary for the whole state (the streams fill in between)."""
@@ -45,7 +45,7 @@ POLL_S = 0.05
 GateFactory = Callable[[Fabric, World, Any], Any]
 
 
-class Host:
+class ReplicaHost:
     """One session of one sim peer in one role; ``run`` returns when stopped or after stepping down."""
 
     def __init__(
@@ -98,7 +98,7 @@ class Host:
     def role(self) -> str:
         return self.election.role
 
-    def open(self, duration: float | None = None) -> "Host":
+    def open(self, duration: float | None = None) -> "ReplicaHost":
         f, w = self.fabric, self.fabric.world
         self._duration = duration
         f.serve(keys.srv(w, "state"), self._on_state_query)
@@ -321,7 +321,7 @@ def run_replicated(
     speed: float | None = 1.0,
     duration: float | None = None,
     announce: Callable[[str], None] | None = None,
-) -> "Host | None":
+) -> "ReplicaHost | None":
     """Run a sim peer until ``stop``: as primary or standby, a fresh session and world after each step-down.
     Returns the last host (its ``peer`` holds the counters when it served)."""
     term, leader = 0, ""
@@ -329,7 +329,7 @@ def run_replicated(
     host = None
     while not stop.is_set():
         with open_fabric() as fab:
-            host = Host(fab, make_world(), make_gate, standby=standby, rates=rates, speed=speed, term=term, leader=leader,
+            host = ReplicaHost(fab, make_world(), make_gate, standby=standby, rates=rates, speed=speed, term=term, leader=leader,
                         snapshot=last, announce=announce)
             role = host.run(stop, duration)
             term, leader = host.election.term, host.election.leader

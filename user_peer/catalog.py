@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 
 import robots
-from user_peer.arm_model import ArmModel, Placement
-from user_peer.rerun_log import RobotInfo
+from user_peer.arm_geometry import ArmGeometry, Placement
+from user_peer.rerun_log import RobotDrawing
 
 log = logging.getLogger("robofabric.viewer")
 
@@ -39,12 +39,12 @@ def _field(obj: Any, *names: str, default: Any = None) -> Any:
 
 
 class RobotCatalog:
-    """Builds :class:`RobotInfo` for robot ids; caches descriptions and arm models per type."""
+    """Builds :class:`RobotDrawing` for robot ids; caches descriptions and arm geometries per type."""
 
     def __init__(self, world_info: Any = None, *, scene: str | None = None) -> None:
         self.world_info = world_info
         self.scene_name = scene
-        self._models: dict[str, ArmModel | None] = {}
+        self._models: dict[str, ArmGeometry | None] = {}
         self._descs: dict[str, robots.RobotDescription] | None = None
         self._scene_robots: list[robots.SceneRobot] | None = None
 
@@ -71,13 +71,13 @@ class RobotCatalog:
             self._scene_robots = out
         return self._scene_robots
 
-    def arm_model(self, rtype: str) -> ArmModel | None:
+    def arm_geometry(self, rtype: str) -> ArmGeometry | None:
         if rtype not in self._models:
             model = None
             d = self.descriptions().get(rtype)
             if d is not None and d.urdf_path is not None:
                 try:
-                    model = ArmModel(d.urdf_path)
+                    model = ArmGeometry(d.urdf_path)
                 except Exception as exc:
                     log.warning("cannot build a kinematic model of %s from %s: %s", rtype, d.urdf_path, exc)
             self._models[rtype] = model
@@ -92,8 +92,8 @@ class RobotCatalog:
                 return rtype, base
         return None
 
-    def info(self, rid: str, hint: dict) -> RobotInfo:
-        """RobotInfo for ``rid``: world description, then scenes, then joint names."""
+    def drawing(self, rid: str, hint: dict) -> RobotDrawing:
+        """RobotDrawing for ``rid``: world description, then scenes, then joint names."""
         rtype, base = "", None
         found = self._world_entry(rid)
         names = tuple(hint.get("joint_names", ()))
@@ -109,9 +109,9 @@ class RobotCatalog:
             rtype = next((n for n, d in self.descriptions().items() if d.joint_names == names), "")
         d = self.descriptions().get(rtype)
         kind = d.kind if d is not None else ("mobile" if hint.get("mobile") else "")
-        info = RobotInfo(rid, rtype, kind)
+        info = RobotDrawing(rid, rtype, kind)
         if kind == "arm":
-            info.arm = self.arm_model(rtype)
+            info.arm = self.arm_geometry(rtype)
             info.base = base
         elif d is not None and d.base is not None:
             info.radius = d.base.radius

@@ -119,11 +119,11 @@ def export(
             line = f"exported {stats.messages} messages ({stats.drawn} drawn, {stats.bad} undecodable) to {out}"
         else:
             from user_peer.openfmt import export_recording
-            from user_peer.openfmt.convert import ExportError as OpenExportError
+            from user_peer.openfmt.convert import ExportError
 
             try:
                 st = export_recording(src, out, fmt, scene=scene, progress=progress)
-            except OpenExportError as exc:
+            except ExportError as exc:
                 raise UserError(str(exc)) from None
             if st.messages == 0:
                 raise UserError(f"{src}: no readable messages")

@@ -16,22 +16,21 @@ import rerun as rr
 
 from fabric.codec import DecodeError, decode, load_plugins
 from user_peer.catalog import RobotCatalog
+from user_peer.openfmt.convert import ExportError
 from user_peer.rerun_log import WorldLogger, blueprint
 from user_peer.viewer import APP_ID, log_scene
 
-__all__ = ["ExportStats", "ExportError", "read_mcap", "export_mcap"]
+__all__ = ["RerunExportStats", "ExportError", "read_mcap", "export_mcap"]
 
 
 SKIPPED_SCHEMAS = ("raw", "liveliness")
 """Recorded samples that are not fabric messages (see fabric/recording/format.py): nothing to draw."""
 
 
-class ExportError(ValueError):
-    """The recording cannot be read; the text says why."""
-
-
 @dataclass(frozen=True, slots=True)
-class ExportStats:
+class RerunExportStats:
+    """What an export to a Rerun file did (the other formats' counterpart: ``user_peer.openfmt.ExportStats``)."""
+
     messages: int
     drawn: int
     bad: int
@@ -75,7 +74,7 @@ def read_mcap(path: Path, counts: dict[str, int] | None = None) -> Iterator[tupl
 
 def export_mcap(
     src: Path, dst: Path, *, max_hz: float = 0.0, scene: str | None = None, progress: Callable[[int, int], None] | None = None
-) -> ExportStats:
+) -> RerunExportStats:
     """Write ``dst`` (.rrd) from the recording ``src``; every message is drawn unless ``max_hz`` thins it.
 
     ``scene`` names the scene the recording was made in, which places the arms (a recording holds
@@ -86,7 +85,7 @@ def export_mcap(
     rec = rr.RecordingStream(APP_ID, recording_id=f"export-{src.stem}")
     rec.save(str(dst), default_blueprint=blueprint())
     catalog = RobotCatalog(None, scene=scene)
-    logger = WorldLogger(rec, robot_info=catalog.info, max_hz=max_hz)
+    logger = WorldLogger(rec, drawing=catalog.drawing, max_hz=max_hz)
     if scene:
         log_scene(logger, scene)
     counts: dict[str, int] = {}
@@ -104,7 +103,7 @@ def export_mcap(
         rec.disconnect()
     if progress is not None:
         progress(n, n)
-    return ExportStats(n, drawn, counts.get("bad", 0), tuple(sorted(logger.robots)))
+    return RerunExportStats(n, drawn, counts.get("bad", 0), tuple(sorted(logger.robots)))
 
 
 def _count(src: Path) -> int:

@@ -3,7 +3,7 @@
 Split out of :mod:`user_peer.rerun_log` (issue 12) so that the logger only maps messages to Rerun
 calls, and these helpers can be read and tested without Rerun: numpy and the fabric's messages only.
 Quaternions come in two orders here on purpose: fabric messages carry (w, x, y, z) (MuJoCo's order),
-Rerun and :class:`user_peer.arm_model.Placement` use (x, y, z, w).
+Rerun and :class:`user_peer.arm_geometry.Placement` use (x, y, z, w).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 
 from fabric.messages import OccupancyGrid, Pose, Scan
 from ownership.extrapolate import age_s, extrapolate
-from user_peer.arm_model import Placement
+from user_peer.arm_geometry import Placement
 
 __all__ = [
     "EXTRAPOLATION_CAP_S",

@@ -41,7 +41,7 @@ class NotebookView:
         self.world = world
         self.rec = rr.RecordingStream(APP_ID)
         self.catalog = RobotCatalog(world.info())
-        self.logger = WorldLogger(self.rec, robot_info=self.catalog.info, max_hz=max_hz, clock=time.time_ns)
+        self.logger = WorldLogger(self.rec, drawing=self.catalog.drawing, max_hz=max_hz, clock=time.time_ns)
         scene = getattr(self.catalog.world_info, "scene", "") or ""
         if scene:
             log_scene(self.logger, scene)

@@ -35,13 +35,13 @@ import rerun.blueprint as rrb
 
 from fabric import keys
 from fabric.messages import Event, JointState, OccupancyGrid, OwnershipRecord, Path, Pose, Scan
-from user_peer.arm_model import ArmModel, Placement
+from user_peer.arm_geometry import ArmGeometry, Placement
 from user_peer.geometry import EXTRAPOLATION_CAP_S, grid_rgb, scan_world_points, shown_position, world_to_map_pixels, yaw_of
 from user_peer.geometry import compose as _compose
 from user_peer.geometry import quat_xyzw as _quat_xyzw
 
 __all__ = [
-    "RobotInfo",
+    "RobotDrawing",
     "WorldLogger",
     "blueprint",
     "scan_world_points",
@@ -61,13 +61,17 @@ ROBOT_COLORS = [(230, 120, 40), (40, 140, 230), (90, 200, 90), (200, 80, 200), (
 
 
 @dataclass
-class RobotInfo:
-    """What the viewer knows about one robot: its kind and how to draw it."""
+class RobotDrawing:
+    """What the viewer knows about one robot: its kind and how to draw it.
+
+    Built on the user's side from the robot descriptions (:class:`user_peer.catalog.RobotCatalog`); not the sim's
+    ``RobotInfo`` message, which describes a robot of the world over the wire.
+    """
 
     id: str
     type: str = ""
     kind: str = ""  # "arm" or "mobile"; "" until known
-    arm: ArmModel | None = None
+    arm: ArmGeometry | None = None
     base: Placement | None = None  # an arm's base in the world (fixed)
     radius: float = 0.25  # mobile footprint radius
     height: float = 0.3
@@ -122,8 +126,8 @@ class _Rates:
 class WorldLogger:
     """Logs a world's messages to one Rerun recording; the same code serves ``view`` and ``export``.
 
-    ``robot_info(id, hint)`` is asked once per robot the first time it appears, with a hint dict
-    (``joint_names`` for arms, ``mobile`` for robots with a pose/scan) and returns a :class:`RobotInfo`.
+    ``drawing(id, hint)`` is asked once per robot the first time it appears, with a hint dict
+    (``joint_names`` for arms, ``mobile`` for robots with a pose/scan) and returns a :class:`RobotDrawing`.
     ``max_hz`` thins out 3D and plot updates per key (0: log everything).
     """
 
@@ -131,7 +135,7 @@ class WorldLogger:
         self,
         rec: rr.RecordingStream,
         *,
-        robot_info: Callable[[str, dict], RobotInfo] | None = None,
+        drawing: Callable[[str, dict], RobotDrawing] | None = None,
         max_hz: float = 30.0,
         rate_period_s: float = 0.5,
         clock: Callable[[], int] | None = None,
@@ -140,8 +144,8 @@ class WorldLogger:
         # live views: the clock that stamped log_time_ns when a message arrived (Eq. 8 ages are now - arrival);
         # None (export from a recording): no extrapolation, nothing is "now"
         self.clock = clock
-        self.robot_info = robot_info or (lambda rid, hint: RobotInfo(rid))
-        self.robots: dict[str, RobotInfo] = {}
+        self.drawing = drawing or (lambda rid, hint: RobotDrawing(rid))
+        self.robots: dict[str, RobotDrawing] = {}
         self.poses: dict[str, Pose] = {}
         self.grids: dict[str, OccupancyGrid] = {}
         self.paths: dict[str, Path] = {}
@@ -226,11 +230,11 @@ class WorldLogger:
 
     # ------------------------------------------------------------------ robots
 
-    def _robot(self, rid: str, hint: dict) -> RobotInfo:
+    def _robot(self, rid: str, hint: dict) -> RobotDrawing:
         info = self.robots.get(rid)
         if info is None or (not info.kind and hint):
-            info = self.robot_info(rid, hint)
-            if not info.color or info.color == RobotInfo.color:
+            info = self.drawing(rid, hint)
+            if not info.color or info.color == RobotDrawing.color:
                 info.color = ROBOT_COLORS[len(self.robots) % len(ROBOT_COLORS)]
             self.robots[rid] = info
         return info

@@ -135,7 +135,7 @@ class Viewer:
         self.dropped = 0
         self.catalog = RobotCatalog(None)
         # the clock that stamps arrivals in _enqueue: Eq. 8 ages are measured on it alone
-        self.logger = WorldLogger(self.rec, robot_info=self.catalog.info, max_hz=opts.max_hz, clock=time.time_ns)
+        self.logger = WorldLogger(self.rec, drawing=self.catalog.drawing, max_hz=opts.max_hz, clock=time.time_ns)
         self._closed = False
         self._sims: set[str] = set()
         self._sims_lock = threading.Lock()

@@ -19,17 +19,17 @@ def test_standby_takes_over_when_the_primary_goes_and_steps_down_for_a_higher_te
     p = el.start("p", standby=False)
     s = el.start("s", standby=True)
     s, eff = el.step(s, el.Heard("p", p.term))
-    assert eff == [el.Effect("follow", 1, "p")] and s.leader == "p"
+    assert eff == [el.ElectionEffect("follow", 1, "p")] and s.leader == "p"
     s, eff = el.step(s, el.Peers(frozenset({"p", "s"})))
     assert eff == [] and s.role == el.STANDBY
     s, eff = el.step(s, el.Peers(frozenset({"s"})))
-    assert eff == [el.Effect("take_over", 2, "s")] and s.role == el.PRIMARY
+    assert eff == [el.ElectionEffect("take_over", 2, "s")] and s.role == el.PRIMARY
     # the old primary comes back (SIGCONT): it hears term 2 and steps down
     p, eff = el.step(p, el.Heard("s", 2))
-    assert eff == [el.Effect("step_down", 2, "s")] and p.role == el.STANDBY and p.term == 2
+    assert eff == [el.ElectionEffect("step_down", 2, "s")] and p.role == el.STANDBY and p.term == 2
     # the new primary ignores what the old one said before it noticed
     s, eff = el.step(s, el.Heard("p", 1))
-    assert eff == [el.Effect("ignore", 1, "p")] and s.role == el.PRIMARY
+    assert eff == [el.ElectionEffect("ignore", 1, "p")] and s.role == el.PRIMARY
 
 
 def test_only_the_lowest_live_standby_takes_over():
@@ -46,7 +46,7 @@ def test_only_the_lowest_live_standby_takes_over():
 def test_a_primary_back_from_a_long_freeze_comes_back_under_a_new_term():
     p = el.start("p", standby=False)
     p, eff = el.step(p, el.Resumed())
-    assert eff == [el.Effect("reassert", 2, "p")] and p.term == 2 and p.role == el.PRIMARY
+    assert eff == [el.ElectionEffect("reassert", 2, "p")] and p.term == 2 and p.role == el.PRIMARY
     s = el.Election("s", el.STANDBY, 2, "p")
     assert el.step(s, el.Resumed()) == (s, [])
 
@@ -57,7 +57,7 @@ def test_same_term_tie_goes_to_the_lower_id():
     a2, ea = el.step(a, el.Heard("b", 5))
     b2, eb = el.step(b, el.Heard("a", 5))
     assert a2.role == el.PRIMARY and ea[0].kind == "ignore"
-    assert b2.role == el.STANDBY and eb == [el.Effect("step_down", 5, "a")]
+    assert b2.role == el.STANDBY and eb == [el.ElectionEffect("step_down", 5, "a")]
 
 
 def histories():
@@ -151,6 +151,6 @@ def test_a_standby_never_follows_a_lower_term(heard):
     for src, term in heard:
         s, eff = el.step(s, el.Heard(src, term))
         if term < top:
-            assert eff == [el.Effect("ignore", term, src)]
+            assert eff == [el.ElectionEffect("ignore", term, src)]
         top = max(top, term)
         assert s.term == top and s.role == el.STANDBY

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from user_peer import geometry as g
 from user_peer import rerun_log
-from user_peer.arm_model import Placement
+from user_peer.arm_geometry import Placement
 
 _unit = st.lists(st.floats(-1, 1), min_size=4, max_size=4).filter(lambda v: np.linalg.norm(v) > 0.1).map(
     lambda v: np.asarray(v) / np.linalg.norm(v))

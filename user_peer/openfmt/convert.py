@@ -17,7 +17,7 @@ SKIPPED_SCHEMAS = ("raw", "liveliness")
 
 
 class ExportError(ValueError):
-    """The recording cannot be read or the format is unknown; the text says why."""
+    """The recording cannot be read or the format is unknown; the text says why (every export, Rerun's too)."""
 
 
 @dataclass(frozen=True, slots=True)

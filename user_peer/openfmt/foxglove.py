@@ -48,7 +48,7 @@ from mcap_protobuf.schema import register_schema
 
 from fabric.interfaces import json_schema, plain_view
 from fabric.messages import JointState, OccupancyGrid, Path, Pose, Scan
-from user_peer.arm_model import Placement, Shape
+from user_peer.arm_geometry import Placement, Shape
 from user_peer.catalog import RobotCatalog
 from user_peer.openfmt.frames import WORLD, Frame, FrameTracker, key_owner, yaw_quat_xyzw
 

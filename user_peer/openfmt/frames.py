@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 
 from fabric.messages import JointState, Pose
-from user_peer.arm_model import Placement, Shape
+from user_peer.arm_geometry import Placement, Shape
 from user_peer.catalog import RobotCatalog
-from user_peer.rerun_log import RobotInfo
+from user_peer.rerun_log import RobotDrawing
 
 __all__ = ["Frame", "FrameTracker", "WORLD", "key_owner", "yaw_quat_xyzw"]
 
@@ -58,12 +58,12 @@ class FrameTracker:
 
     def __init__(self, catalog: RobotCatalog) -> None:
         self.catalog = catalog
-        self.robots: dict[str, RobotInfo] = {}
+        self.robots: dict[str, RobotDrawing] = {}
 
-    def robot(self, rid: str, hint: dict) -> RobotInfo:
+    def robot(self, rid: str, hint: dict) -> RobotDrawing:
         info = self.robots.get(rid)
         if info is None or (not info.kind and hint):
-            info = self.robots[rid] = self.catalog.info(rid, hint)
+            info = self.robots[rid] = self.catalog.drawing(rid, hint)
         return info
 
     def frames(self, key: str, msg: Any) -> list[Frame]:

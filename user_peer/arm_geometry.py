@@ -42,8 +42,11 @@ def _placement(se3) -> Placement:
     return Placement(np.array(se3.translation, dtype=float), np.array([q.x, q.y, q.z, q.w], dtype=float))
 
 
-class ArmModel:
-    """An arm built from a URDF: joint names, FK to joint origins, and placements of visual shapes."""
+class ArmGeometry:
+    """An arm's geometry built from a URDF: joint names, FK to joint origins, and placements of visual shapes.
+
+    For drawing only; the compute peer's ``compute_peer.kinematics.ArmModel`` is the solver's model (limits, IK).
+    """
 
     def __init__(self, urdf: str | Path, *, urdf_text: str | None = None) -> None:
         import pinocchio as pin
