@@ -1,4 +1,4 @@
-"""``robofabric compute``: run a compute peer; ``robofabric bench ik`` and ``bench nav``: measure it."""
+"""``robofabric compute``: run a compute peer (its benchmarks: robofabric/bench/ik.py and nav.py)."""
 
 from __future__ import annotations
 
@@ -80,8 +80,3 @@ def compute(
 
 def register(app: typer.Typer) -> None:
     app.command("compute")(compute)
-    from compute_peer.kinematics.bench import register_bench as register_ik_bench
-    from compute_peer.navigation.bench import register_bench as register_nav_bench
-
-    register_ik_bench()
-    register_nav_bench()

@@ -16,7 +16,7 @@ from importlib.metadata import entry_points
 
 import typer
 
-from fabric.cli_common import UserError, bench_app
+from fabric.cli_common import UserError
 from fabric.config import ConfigError
 
 GROUP = "robofabric.commands"
@@ -39,7 +39,6 @@ def _load_plugins() -> None:
             register(app)
         except Exception as exc:  # a broken plugin must not take the whole CLI down
             _broken.append((ep.name, f"{type(exc).__name__}: {exc}"))
-    app.add_typer(bench_app, name="bench")
 
 
 def version_text() -> str:

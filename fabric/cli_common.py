@@ -29,7 +29,6 @@ __all__ = [
     "make_config",
     "join_error",
     "open_fabric",
-    "bench_app",
 ]
 
 
@@ -100,9 +99,3 @@ def open_fabric(cfg: FabricConfig, kind: str, peer_id: str | None = None) -> "Fa
         return Fabric(cfg, kind=kind, peer_id=peer_id)
     except Exception as exc:
         raise join_error(cfg, exc) from None
-
-
-bench_app = typer.Typer(
-    help="Benchmarks: each prints a table and can append it to docs/benchmarks.md (see --help of each).",
-    no_args_is_help=True,
-)

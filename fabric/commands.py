@@ -1,4 +1,4 @@
-"""Entry point of the fabric's own subcommands: router, ps, echo, hz, pub, call, list, interfaces, up, demo, bench transport."""
+"""Entry point of the fabric's own subcommands: router, ps, echo, hz, pub, call, list, interfaces, up, demo, secure, lab."""
 
 from __future__ import annotations
 
@@ -6,12 +6,11 @@ import typer
 
 
 def register(app: typer.Typer) -> None:
-    from fabric import bench_transport, introspect_cli, launch_cli, secure_cli, tools_cli
+    from fabric import introspect_cli, launch_cli, secure_cli, tools_cli
     from fabric.lab import cli as lab_cli
 
     tools_cli.register(app)
     introspect_cli.register(app)
     launch_cli.register(app)
     secure_cli.register(app)
-    bench_transport.register()
     lab_cli.register(app)

@@ -1,14 +1,13 @@
-"""``robofabric own list|request|release|watch`` and ``robofabric bench ownership``."""
+"""``robofabric own list|request|release|watch`` (its benchmarks: robofabric/bench/ownership.py and flood.py)."""
 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
 
-from fabric.cli_common import Connect, Profile, UserError, World, ZenohConfig, bench_app, make_config, open_fabric
+from fabric.cli_common import Connect, Profile, UserError, World, ZenohConfig, make_config, open_fabric
 from fabric.session import Fabric, ServiceError, shutdown_event
 
 from ownership.client import OwnershipClient
@@ -128,49 +127,6 @@ def watch_cmd(world: World = None, connect: Connect = None, profile: Profile = N
         cl.on_change(lambda rec: print(_line(rec), flush=True))
         stop.wait()
         cl.close()
-
-
-@bench_app.command("ownership")
-def bench_cmd(
-    users: Annotated[str, typer.Option("--users", help="Comma-separated user counts.")] = "10,50,100",
-    lease: Annotated[float, typer.Option("--lease", help="Lease (s).")] = 0.5,
-    kills: Annotated[int, typer.Option("--kills", help="Owner kills per user count.")] = 3,
-) -> None:
-    """N users in one world hand the arm over in turn; then the owner is SIGKILLed."""
-    from ownership.bench import run_bench
-
-    run_bench([int(x) for x in users.split(",")], lease_s=lease, kills=kills)
-
-
-@bench_app.command("flood")
-def bench_flood_cmd(
-    scale: Annotated[float, typer.Option("--scale", help="Times the issue's flood (20k unique-id commands, 10k junk per key, 100 x 5 MB, 1k fake streams, 1k forged requests).")] = 2.0,
-    out: Annotated[Path, typer.Option("--out", help="Folder for the peers' logs.")] = Path("out/bench-flood"),
-    settle: Annotated[float, typer.Option("--settle", help="Seconds alice goes on after the flood.")] = 5.0,
-) -> None:
-    """An owner commands arm1 every 50 ms while other clients flood the world: her command latency, lease,
-    each peer's memory, CPU and log size, side by side with no flood (real sim and compute processes)."""
-    import dataclasses
-
-    from ownership.flood import Load, run_flood
-
-    load = dataclasses.replace(Load().scaled(scale), settle_s=settle)
-    rows = [("no flood", run_flood(load, out / "quiet", flood=False)), (f"flood x{scale:g}", run_flood(load, out / "flood", flood=True))]
-    print("| run | alice p50 / p99 (ms) | commands (never seen) | lease lapses | sim RSS before -> peak (MB) | compute RSS before -> peak (MB) "
-          "| sim / compute CPU (s) | phase (s) | sim / compute log (bytes) |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for name, r in rows:
-        print(f"| {name} | {r.pct(50) * 1e3:.1f} / {r.pct(99) * 1e3:.1f} | {r.commands} ({r.not_applied}) | {len(r.lapses)} "
-              f"| {r.rss_before['sim']:.0f} -> {r.rss_peak['sim']:.0f} | {r.rss_before['compute']:.0f} -> {r.rss_peak['compute']:.0f} "
-              f"| {r.cpu_s['sim']:.1f} / {r.cpu_s['compute']:.1f} | {r.phase_s:.1f} | {r.log_bytes.get('sim', 0)} / {r.log_bytes.get('compute', 0)} |")
-    for name, r in rows:
-        if r.lapses:
-            print(f"{name}: lease lapses: {'; '.join(r.lapses[:5])}")
-        st = r.stop
-        print(f"{name}: a stop 2 s in, resent every 0.1 s: {'seen still' if st.get('done') else 'NOT seen still'} after "
-              f"{st.get('sends')} send(s), {st.get('seconds')} s (flooder {'running' if st.get('flooder_running') else 'idle'})")
-    flooder = rows[1][1].flooder
-    print("flooder sent:", ", ".join(f"{k}={v}" for k, v in flooder.items() if not k.startswith("t_")))
 
 
 def register(app: typer.Typer) -> None:

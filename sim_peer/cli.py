@@ -1,4 +1,4 @@
-"""``robofabric sim``: run a simulation peer; ``robofabric bench sim``: measure it."""
+"""``robofabric sim``: run a simulation peer (its benchmarks: robofabric/bench/sim.py and failover.py)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, bench_app, make_config, open_fabric
+from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
 from fabric.gate import CommandGate, OpenGate
 from fabric.rate import parse_rates
 
@@ -184,9 +184,3 @@ def _print_catalog() -> None:
 
 def register(app: typer.Typer) -> None:
     app.command("sim")(sim)
-    from sim_peer import bench
-
-    bench_app.command("sim")(bench.bench_sim)
-    from sim_peer import bench_failover
-
-    bench_app.command("failover")(bench_failover.bench_failover)

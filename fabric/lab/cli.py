@@ -57,7 +57,4 @@ def sweep() -> None:
 
 
 def register(app: typer.Typer) -> None:
-    from fabric.lab import bench
-
     app.add_typer(lab_app, name="lab")
-    bench.register()

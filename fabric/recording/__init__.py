@@ -7,8 +7,8 @@ time; zstd chunks that reach the disk every half second, so a killed
 recorder leaves a readable file). ``read_info``, ``iter_messages`` and
 ``read_samples`` read files back, finished or not; ``plan_replay`` + ``Replayer`` republish the
 exact bytes on the recorded timeline, optionally filtered, windowed, sped up
-and remapped into another world. The CLI (``record``, ``info``, ``replay``,
-``bench record``) is in :mod:`fabric.recording.cli`; see docs/recording.md.
+and remapped into another world. The CLI (``record``, ``info``, ``replay``)
+is in :mod:`fabric.recording.cli` (``bench record``: robofabric/bench/record.py); see docs/recording.md.
 """
 
 from fabric.recording.format import LIVELINESS_SCHEMA, MESSAGE_ENCODING, RAW_SCHEMA, Peek, peek, remap_world, world_of

@@ -1,4 +1,4 @@
-"""``robofabric record | info | replay`` and ``robofabric bench record``.
+"""``robofabric record | info | replay``.
 
 Every user mistake (missing or non-MCAP file, empty selection, unknown world,
 bad window) becomes a :class:`fabric.cli_common.UserError`: one line, exit 2.
@@ -16,7 +16,7 @@ from typing import Annotated, Any, Optional
 import typer
 
 from fabric import keys
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, bench_app, make_config, open_fabric
+from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
 
 __all__ = ["register", "record", "info", "replay"]
 
@@ -347,6 +347,3 @@ def register(app: typer.Typer) -> None:
     app.command("record")(record)
     app.command("info")(info)
     app.command("replay")(replay)
-    from fabric.recording import bench
-
-    bench_app.command("record")(bench.bench_record)

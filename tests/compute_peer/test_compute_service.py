@@ -164,14 +164,6 @@ def test_compute_cli_arm_flag_names_bad_arms():
         assert r.returncode == 2 and words in r.stderr, (spec, r.stderr)
 
 
-def test_ik_query_round_trip_bench_smoke():
-    from compute_peer.kinematics.bench_query import measure_query
-
-    res = measure_query(n=20, warmup=5)
-    assert set(res) == {"ik_pose", "ik_position", "fk"}
-    assert all(0 < r["p50_ms"] <= r["p99_ms"] <= r["max_ms"] for r in res.values())
-
-
 def test_a_user_can_pick_a_compute_peer(world, router, connect):
     from fabric.testing import client_config
     from user_peer import services

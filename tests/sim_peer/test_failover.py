@@ -213,18 +213,3 @@ def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, 
     first2 = min(w for w, t, _ in stamped if t == 2)
     assert not [(w - first2) / 1e9 for w, t, _ in stamped if t == 1 and w > first2]
     alice.close()
-
-
-def test_bench_failover_runs_one_round(tmp_path):
-    import re
-    import subprocess
-
-    out = tmp_path / "failover.md"
-    proc = subprocess.run(robofabric_cmd("bench", "failover", "--kills", "1", "--out", str(out)), capture_output=True, text=True,
-                          timeout=300)
-    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
-    text = out.read_text()
-    took = re.search(r"new term, here \| (\d+) / (\d+) ms", text)
-    err = re.search(r"joint error at take-over, motion-compensated \| ([\d.]+) / ([\d.]+) rad", text)
-    assert took and err, text
-    assert 0 < int(took.group(1)) and float(err.group(2)) <= 0.01, text

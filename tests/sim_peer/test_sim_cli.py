@@ -1,4 +1,4 @@
-"""The CLI's ownership wiring (with stand-in ownership modules) and the benchmark command."""
+"""The CLI's ownership wiring (with stand-in ownership modules)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,6 @@ import sys
 import types
 
 from fabric.gate import OpenGate
-from sim_peer.bench import rtf, scan_cost
 from sim_peer.cli import make_gate
 from sim_peer.world import World
 
@@ -36,26 +35,6 @@ def test_without_an_authority_the_sim_warns_and_opens_the_gate(monkeypatch, caps
     assert isinstance(gate, OpenGate)
     assert "not gated" in capsys.readouterr().err
     assert isinstance(make_gate("FAB", World("arm_cell"), False), OpenGate)
-
-
-def test_benchmark_helpers_measure_something():
-    w = World("combined")
-    assert rtf(w, 0.2) > 0
-    assert w.time >= 0.2 - 1e-9 and w.robot("base1").moving  # the mobile robot was driven during the run
-    med, p99 = scan_cost(w, "base1", n=50)
-    assert 0 < med <= p99
-
-
-def test_bench_sim_command_writes_its_table(tmp_path):
-    import subprocess
-
-    from fabric.testing import robofabric_cmd
-
-    out = tmp_path / "sim.md"
-    res = subprocess.run(robofabric_cmd("bench", "sim", "--seconds", "0.2", "--counts", "1,2", "--out", str(out)), capture_output=True, text=True, timeout=120)
-    assert res.returncode == 0, res.stderr
-    table = out.read_text()
-    assert "| combined (Meca500 sweeping + Reeman driving)" in table and "| warehouse, 2 mobile robots" in table and "240-ray" in table
 
 
 def test_sim_list_shows_robot_types_and_scenes():

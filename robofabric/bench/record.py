@@ -1,7 +1,7 @@
 """``robofabric bench record``: recording throughput and replay timing.
 
 Throughput: a router (this process), a recorder (``robofabric record``, its own
-process) and a synthetic world publisher (``python -m fabric.recording.bench
+process) and a synthetic world publisher (``python -m robofabric.bench.record
 pub``, its own process): 10 robots x (joints 100 Hz + pose 50 Hz + 240-ray
 scan 20 Hz) at each ``--scales`` multiple. Reported: messages and MB/s written,
 loss (sent minus found in the file, per key), and the recorder's CPU use as a
@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -30,28 +29,16 @@ from typing import Annotated, Optional
 import typer
 
 from fabric.stats import percentiles
+from robofabric.bench.common import append, end_process, proc_cpu_s
 
 WORLD = "benchrec"
-_TICK = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
-
-
-def _cpu_s(pid: int) -> float:
-    """User + system CPU seconds of a process (Linux /proc)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            fields = f.read().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / _TICK
-    except (OSError, IndexError, ValueError):
-        return float("nan")
-
-
 def _drained(pid: int, idle: float = 0.05, timeout: float = 20.0) -> tuple[float, float]:
     """Wait until a process uses under ``idle`` of a core over 0.3 s; return (its CPU s, the time)."""
     deadline = time.monotonic() + timeout
-    c, t = _cpu_s(pid), time.monotonic()
+    c, t = proc_cpu_s(pid), time.monotonic()
     while time.monotonic() < deadline:
         time.sleep(0.3)
-        c2, t2 = _cpu_s(pid), time.monotonic()
+        c2, t2 = proc_cpu_s(pid), time.monotonic()
         if (c2 - c) / (t2 - t) < idle:
             return c2, t2
         c, t = c2, t2
@@ -78,16 +65,6 @@ def _start_recorder(out: Path, world: str, ep: str, log: Path) -> subprocess.Pop
     )
 
 
-def _end(proc: subprocess.Popen, sig: int = signal.SIGINT, timeout: float = 30.0) -> int:
-    if proc.poll() is None:
-        os.kill(proc.pid, sig)
-    try:
-        return proc.wait(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        os.kill(proc.pid, signal.SIGKILL)
-        return proc.wait(timeout=10)
-
-
 def _throughput(router, ep: str, tmp: Path, scale: float, robots: int, duration: float, precompute: int = 0) -> dict:
     from fabric.recording.reader import iter_messages, read_info
 
@@ -97,7 +74,7 @@ def _throughput(router, ep: str, tmp: Path, scale: float, robots: int, duration:
     try:
         _wait_token(router.session, f"rf/{WORLD}/peer/recorder/rec-{out.stem}", 30)
         pub = subprocess.Popen(
-            [sys.executable, "-m", "fabric.recording.bench", "pub", "--endpoint", ep, "--world", WORLD,
+            [sys.executable, "-m", "robofabric.bench.record", "pub", "--endpoint", ep, "--world", WORLD,
              "--robots", str(robots), "--scale", str(scale), "--duration", str(duration), "--precompute", str(precompute)],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
         )
@@ -105,13 +82,13 @@ def _throughput(router, ep: str, tmp: Path, scale: float, robots: int, duration:
         line = pub.stdout.readline().decode().strip()
         if line != "go":
             raise RuntimeError(f"publisher failed: {line} {pub.stderr.read().decode()[-500:]}")
-        c0, t0 = _cpu_s(rec.pid), time.monotonic()
+        c0, t0 = proc_cpu_s(rec.pid), time.monotonic()
         res = json.loads(pub.stdout.readline().decode())
         pub.wait(timeout=30)
         # let the recorder drain what is in flight (its CPU use falls to idle), and count that work too
         c1, t1 = _drained(rec.pid)
     finally:
-        code = _end(rec)
+        code = end_process(rec, signal.SIGINT, 30.0)
     info = read_info(out)
     got: Counter[str] = Counter()
     nbytes = 0
@@ -160,7 +137,7 @@ def _replay_timing(router, ep: str, tmp: Path, source: Path, duration: float) ->
             rp.close()
         time.sleep(0.5)
     finally:
-        _end(rec)
+        end_process(rec, signal.SIGINT, 30.0)
     # end to end: per (key, seq order), offset from the first message, original vs replayed
     orig: dict[str, list[int]] = defaultdict(list)
     for m in iter_messages(source, end_ns=plan.end_ns):
@@ -239,7 +216,7 @@ def format_tables(res: dict) -> str:
     return "\n".join(lines)
 
 
-def bench_record(
+def command(
     scales: Annotated[str, typer.Option(help="Comma-separated load multiples of the default rates (1 = 10 robots at 100/50/20 Hz).")] = "1,4",
     robots: Annotated[int, typer.Option(help="Robots in the synthetic world.")] = 10,
     duration: Annotated[float, typer.Option(help="Seconds of publishing per load.")] = 10.0,
@@ -265,9 +242,7 @@ def bench_record(
         return
     table = format_tables(res)
     print(table)
-    if out is not None:
-        with open(out, "a") as f:
-            f.write(table + "\n")
+    append(out, table)
 
 
 # --------------------------------------------------------------------------- child: the synthetic world
@@ -295,7 +270,7 @@ def _child_pub(a: argparse.Namespace) -> None:
 
 
 def _main() -> None:
-    ap = argparse.ArgumentParser(prog="python -m fabric.recording.bench")
+    ap = argparse.ArgumentParser(prog="python -m robofabric.bench.record")
     ap.add_argument("role", choices=("pub",))
     ap.add_argument("--endpoint", required=True)
     ap.add_argument("--world", default=WORLD)

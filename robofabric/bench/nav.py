@@ -1,7 +1,7 @@
 """``robofabric bench nav``: map update per scan, and Hybrid A* beside OMPL on a 20 m x 20 m map at 5 cm.
 
 Everything runs in this process on synthetic data with known geometry
-(:func:`~compute_peer.navigation.scenes.office`): scans are ray-cast exactly
+(:func:`compute_peer.navigation.scenes.office`): scans are ray-cast exactly
 and quantised to millimetres like the sim's, start/goal pairs are drawn with a
 seed among poses where the robot fits. Each planner gets the same pairs; a
 refused or failed query counts against its success rate, not its times.
@@ -18,17 +18,17 @@ from typing import Annotated, Optional
 import numpy as np
 import typer
 
+from compute_peer.navigation.costmap import build_costmap
+from compute_peer.navigation.errors import NavigationError
+from compute_peer.navigation.geometry import quaternion_from_yaw
+from compute_peer.navigation.hybrid_astar import HybridAStarConfig
+from compute_peer.navigation.mapping import MapperConfig, OccupancyMapper
+from compute_peer.navigation.model import VehicleModel
+from compute_peer.navigation.ompl_planner import OmplConfig
+from compute_peer.navigation.planner import PlannerSettings, plan_path
+from compute_peer.navigation.scenes import office, scan_angles
 from fabric.messages import Header, Pose, Scan
-
-from .costmap import build_costmap
-from .errors import NavigationError
-from .geometry import quaternion_from_yaw
-from .hybrid_astar import HybridAStarConfig
-from .mapping import MapperConfig, OccupancyMapper
-from .model import VehicleModel
-from .ompl_planner import OmplConfig
-from .planner import PlannerSettings, plan_path
-from .scenes import office, scan_angles
+from robofabric.bench.common import append
 
 RES = 0.05
 SIZE = 20.0
@@ -156,52 +156,37 @@ def format_tables(mapping: dict | list[dict], planning: list[dict]) -> str:
     return "\n".join(lines)
 
 
-_registered = False
+def command(
+    scans: Annotated[int, typer.Option(help="Scans to integrate for the map-update timing.")] = 200,
+    queries: Annotated[int, typer.Option(help="Random start/goal pairs per planner and motion model.")] = 20,
+    turning_radius: Annotated[float, typer.Option(help="Minimum turning radius (m).")] = 0.6,
+    robot_radius: Annotated[float, typer.Option(help="Robot radius for inflation (m).")] = 0.25,
+    planners: Annotated[str, typer.Option(help="Comma-separated: hybrid_astar, ompl:rrtstar, ompl:bitstar.")] = "hybrid_astar,ompl:rrtstar,ompl:bitstar",
+    fovs: Annotated[str, typer.Option(help="Comma-separated LIDAR fields of view (deg) for the map update; 240 rays each.")] = "135,360",
+    seed: Annotated[int, typer.Option(help="Seed of the start/goal pairs and scan poses.")] = 2,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the results as JSON.")] = False,
+    out: Annotated[Optional[FsPath], typer.Option(help="Append the markdown tables to this file.")] = None,
+) -> None:
+    """Map update per 240-ray scan on a 400x400 grid; Hybrid A* beside OMPL on a 20 m x 20 m map at 5 cm."""
+    from fabric.cli_common import UserError
 
-
-def register_bench() -> None:
-    """Add ``nav`` to ``robofabric bench`` (idempotent). Call it from the compute peer's ``cli.register``."""
-    global _registered
-    if _registered:
+    names = tuple(p.strip() for p in planners.split(",") if p.strip())
+    bad = [p for p in names if p not in ("hybrid_astar", "ompl", "ompl:rrtstar", "ompl:bitstar")]
+    if bad or not names:
+        raise UserError(f"--planners: unknown planner(s) {', '.join(bad) or '(none)'}; use hybrid_astar, ompl:rrtstar, ompl:bitstar")
+    if scans < 1 or queries < 1 or turning_radius <= 0 or robot_radius < 0:
+        raise UserError("--scans and --queries must be >= 1, --turning-radius > 0, --robot-radius >= 0")
+    try:
+        fov_list = [float(f) for f in fovs.split(",") if f.strip()]
+    except ValueError:
+        raise UserError(f"--fovs {fovs!r}: expected degrees like 135,360") from None
+    if not fov_list or not all(0 < f <= 360 for f in fov_list):
+        raise UserError("--fovs: each field of view must be in (0, 360] degrees")
+    mapping = [bench_mapping(scans, fov_deg=f, seed=seed) for f in fov_list]
+    planning = bench_planning(queries, seed, robot_radius, turning_radius, names)
+    if as_json:
+        print(json.dumps({"mapping": mapping, "planning": planning}))
         return
-    _registered = True
-    from fabric.cli_common import UserError, bench_app
-
-    @bench_app.command("nav")
-    def nav(
-        scans: Annotated[int, typer.Option(help="Scans to integrate for the map-update timing.")] = 200,
-        queries: Annotated[int, typer.Option(help="Random start/goal pairs per planner and motion model.")] = 20,
-        turning_radius: Annotated[float, typer.Option(help="Minimum turning radius (m).")] = 0.6,
-        robot_radius: Annotated[float, typer.Option(help="Robot radius for inflation (m).")] = 0.25,
-        planners: Annotated[str, typer.Option(help="Comma-separated: hybrid_astar, ompl:rrtstar, ompl:bitstar.")] = "hybrid_astar,ompl:rrtstar,ompl:bitstar",
-        fovs: Annotated[str, typer.Option(help="Comma-separated LIDAR fields of view (deg) for the map update; 240 rays each.")] = "135,360",
-        seed: Annotated[int, typer.Option(help="Seed of the start/goal pairs and scan poses.")] = 2,
-        as_json: Annotated[bool, typer.Option("--json", help="Print the results as JSON.")] = False,
-        out: Annotated[Optional[FsPath], typer.Option(help="Append the markdown tables to this file.")] = None,
-    ) -> None:
-        """Map update per 240-ray scan on a 400x400 grid; Hybrid A* beside OMPL on a 20 m x 20 m map at 5 cm."""
-        names = tuple(p.strip() for p in planners.split(",") if p.strip())
-        bad = [p for p in names if p not in ("hybrid_astar", "ompl", "ompl:rrtstar", "ompl:bitstar")]
-        if bad or not names:
-            raise UserError(f"--planners: unknown planner(s) {', '.join(bad) or '(none)'}; use hybrid_astar, ompl:rrtstar, ompl:bitstar")
-        if scans < 1 or queries < 1 or turning_radius <= 0 or robot_radius < 0:
-            raise UserError("--scans and --queries must be >= 1, --turning-radius > 0, --robot-radius >= 0")
-        try:
-            fov_list = [float(f) for f in fovs.split(",") if f.strip()]
-        except ValueError:
-            raise UserError(f"--fovs {fovs!r}: expected degrees like 135,360") from None
-        if not fov_list or not all(0 < f <= 360 for f in fov_list):
-            raise UserError("--fovs: each field of view must be in (0, 360] degrees")
-        mapping = [bench_mapping(scans, fov_deg=f, seed=seed) for f in fov_list]
-        planning = bench_planning(queries, seed, robot_radius, turning_radius, names)
-        if as_json:
-            print(json.dumps({"mapping": mapping, "planning": planning}))
-            return
-        table = format_tables(mapping, planning)
-        print(table)
-        if out is not None:
-            with open(out, "a") as f:
-                f.write(table + "\n")
-
-
-register = register_bench
+    table = format_tables(mapping, planning)
+    print(table)
+    append(out, table)

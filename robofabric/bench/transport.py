@@ -1,7 +1,7 @@
 """Transport benchmark: 240-ray scans from one process to another through a router, side by side with MQTT.
 
 ``robofabric bench transport`` starts a router, then for each rate a subscriber
-and a publisher, each in its own process (``python -m fabric.bench_transport
+and a publisher, each in its own process (``python -m robofabric.bench.transport
 pub|sub``), and reports delivered %, latency percentiles (header wall time to
 receive wall time, one host clock) and bytes/s. With ``--mqtt`` and a
 ``mosquitto`` on PATH, the same workload runs through mosquitto with paho
@@ -27,6 +27,7 @@ import numpy as np
 import typer
 
 from fabric.stats import percentiles
+from robofabric.bench.common import append
 
 KEY = "rf/bench/robot/base1/scan"
 TOPIC = "rf/bench/robot/base1/scan"
@@ -169,11 +170,11 @@ def _free_port() -> int:
     return free_port()
 
 
-def _run_one(transport: str, endpoint: str, rate: float, duration: float, *, pub_config: str | None = None,
+def run_one(transport: str, endpoint: str, rate: float, duration: float, *, pub_config: str | None = None,
              sub_config: str | None = None) -> dict:
     """One publisher/subscriber pair; ``pub_config``/``sub_config``: zenoh configs (credentials, TLS)."""
     count = int(rate * duration) if rate > 0 else 0
-    me = [sys.executable, "-m", "fabric.bench_transport"]
+    me = [sys.executable, "-m", "robofabric.bench.transport"]
     common = ["--transport", transport, "--endpoint", endpoint]
     sub_args = ["--zenoh-config", sub_config] if sub_config else []
     pub_args = ["--zenoh-config", pub_config] if pub_config else []
@@ -232,7 +233,7 @@ def run_bench(rates: list[float], duration: float, mqtt: bool) -> list[dict]:
     try:
         _wait_listening(port, router)
         for r in rates:
-            results.append(_run_one("zenoh", f"tcp/127.0.0.1:{port}", r, duration))
+            results.append(run_one("zenoh", f"tcp/127.0.0.1:{port}", r, duration))
         if mqtt:
             exe = shutil.which("mosquitto") or ("/usr/sbin/mosquitto" if os.path.exists("/usr/sbin/mosquitto") else None)
             if exe is None:
@@ -245,7 +246,7 @@ def run_bench(rates: list[float], duration: float, mqtt: bool) -> list[dict]:
                 broker = subprocess.Popen([exe, "-c", tmp.name], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
                 time.sleep(0.5)
                 for r in rates:
-                    results.append(_run_one("mqtt", f"127.0.0.1:{mport}", r, duration))
+                    results.append(run_one("mqtt", f"127.0.0.1:{mport}", r, duration))
     finally:
         for p in (router, broker):
             if p is not None and p.poll() is None:
@@ -273,39 +274,33 @@ def format_table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def register() -> None:
-    from fabric.cli_common import bench_app
+def command(
+    rates: Annotated[str, typer.Option(help="Comma-separated rates in Hz; 0 means flat out.")] = "20,100,1000,0",
+    duration: Annotated[float, typer.Option(help="Seconds per rate.")] = 5.0,
+    mqtt: Annotated[bool, typer.Option("--mqtt/--no-mqtt", help="Also run through mosquitto + paho (QoS 0).")] = True,
+    as_json: Annotated[bool, typer.Option("--json")] = False,
+    out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
+) -> None:
+    """240-ray scans, publisher and subscriber in separate processes through a router on loopback."""
+    from fabric.cli_common import UserError
 
-    @bench_app.command("transport")
-    def transport(
-        rates: Annotated[str, typer.Option(help="Comma-separated rates in Hz; 0 means flat out.")] = "20,100,1000,0",
-        duration: Annotated[float, typer.Option(help="Seconds per rate.")] = 5.0,
-        mqtt: Annotated[bool, typer.Option("--mqtt/--no-mqtt", help="Also run through mosquitto + paho (QoS 0).")] = True,
-        as_json: Annotated[bool, typer.Option("--json")] = False,
-        out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
-    ) -> None:
-        """240-ray scans, publisher and subscriber in separate processes through a router on loopback."""
-        from fabric.cli_common import UserError
-
-        try:
-            rate_list = [float(x) for x in rates.split(",") if x.strip()]
-        except ValueError:
-            raise UserError(f"--rates {rates!r}: expected numbers like 20,100,1000,0") from None
-        if not rate_list or any(r < 0 for r in rate_list) or duration <= 0:
-            raise UserError("--rates must be non-negative numbers and --duration positive")
-        results = run_bench(rate_list, duration, mqtt)
-        if as_json:
-            print(json.dumps(results))
-            return
-        table = format_table(results)
-        print(table)
-        if out is not None:
-            with open(out, "a") as f:
-                f.write(table + "\n")
+    try:
+        rate_list = [float(x) for x in rates.split(",") if x.strip()]
+    except ValueError:
+        raise UserError(f"--rates {rates!r}: expected numbers like 20,100,1000,0") from None
+    if not rate_list or any(r < 0 for r in rate_list) or duration <= 0:
+        raise UserError("--rates must be non-negative numbers and --duration positive")
+    results = run_bench(rate_list, duration, mqtt)
+    if as_json:
+        print(json.dumps(results))
+        return
+    table = format_table(results)
+    print(table)
+    append(out, table)
 
 
 def _main() -> None:
-    ap = argparse.ArgumentParser(prog="python -m fabric.bench_transport")
+    ap = argparse.ArgumentParser(prog="python -m robofabric.bench.transport")
     ap.add_argument("role", choices=("pub", "sub"))
     ap.add_argument("--transport", choices=("zenoh", "mqtt"), default="zenoh")
     ap.add_argument("--endpoint", required=True)

@@ -13,7 +13,6 @@ for the next round, so the terms climb 1, 2, 3... Per round:
 
 from __future__ import annotations
 
-import platform
 import signal
 import statistics
 import tempfile
@@ -25,8 +24,10 @@ from typing import Annotated, Optional
 import numpy as np
 import typer
 
+from robofabric.bench.common import machine, write
 
-def bench_failover(
+
+def command(
     kills: Annotated[int, typer.Option(help="Take-overs to measure (each one SIGKILLs the current authority).")] = 5,
     out: Annotated[Optional[Path], typer.Option(help="Write the markdown table to this file.")] = None,
 ) -> None:
@@ -124,7 +125,7 @@ def bench_failover(
 
     lines = [
         f"Command: `robofabric bench failover --kills {kills}`",
-        f"Machine: {platform.machine()} ({_cpus()} CPUs visible), Python {platform.python_version()}; "
+        f"Machine: {machine()}; "
         "processes on loopback through one router, lease 2 s",
         "",
         "| measurement (median / max) | result |",
@@ -137,14 +138,7 @@ def bench_failover(
     ]
     text = "\n".join(lines)
     print(text)
-    if out is not None:
-        out.write_text(text + "\n")
+    write(out, text)
 
 
-def _cpus() -> int:
-    import os
-
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 0)
-
-
-__all__ = ["bench_failover"]
+__all__ = ["command"]

@@ -24,8 +24,9 @@ from typing import Annotated, Any, Optional
 import typer
 
 from fabric.lab.lab import Lab, LabProcess
+from robofabric.bench.common import append
 
-__all__ = ["run_lab_bench", "to_markdown"]
+__all__ = ["run_lab_bench", "to_markdown", "command"]
 
 JOIN = """
 import time, numpy as np, user_peer
@@ -156,28 +157,23 @@ def to_markdown(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def register() -> None:
-    from fabric.cli_common import UserError, bench_app
+def command(
+    runs: Annotated[int, typer.Option(help="Repetitions of each fault.")] = 5,
+    as_json: Annotated[bool, typer.Option("--json")] = False,
+    out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
+) -> None:
+    """Recovery times in a lab of network namespaces (needs root): partition handover, router loss, lost sim."""
+    from fabric.cli_common import UserError
+    from fabric.lab import namespaces_available
 
-    @bench_app.command("lab")
-    def lab_bench(
-        runs: Annotated[int, typer.Option(help="Repetitions of each fault.")] = 5,
-        as_json: Annotated[bool, typer.Option("--json")] = False,
-        out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
-    ) -> None:
-        """Recovery times in a lab of network namespaces (needs root): partition handover, router loss, lost sim."""
-        from fabric.lab import namespaces_available
-
-        ok, why = namespaces_available()
-        if not ok:
-            raise UserError(why)
-        if runs < 1:
-            raise UserError("--runs must be at least 1")
-        result = run_lab_bench(runs)
-        if as_json:
-            print(json.dumps(result))
-        else:
-            print(to_markdown(result))
-        if out is not None:
-            with open(out, "a") as f:
-                f.write(to_markdown(result) + "\n")
+    ok, why = namespaces_available()
+    if not ok:
+        raise UserError(why)
+    if runs < 1:
+        raise UserError("--runs must be at least 1")
+    result = run_lab_bench(runs)
+    if as_json:
+        print(json.dumps(result))
+    else:
+        print(to_markdown(result))
+    append(out, to_markdown(result))

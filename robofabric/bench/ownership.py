@@ -1,8 +1,9 @@
-"""The ownership benchmark: handover latency among N users, recovery after the owner is SIGKILLed.
+"""``robofabric bench ownership``: handover latency among N users, recovery after the owner is SIGKILLed or frozen.
 
 Everything runs over real Zenoh on loopback: an embedded router, the Authority, and N user
 sessions in this process (each a full Fabric session with its liveliness token); the
-killed owner is a child process. Times are wall clock of the observing user's replica.
+killed owner is a child process (``python -m robofabric.bench.ownership WORLD PORT USER``:
+requests the arm and holds it until killed). Times are wall clock of the observing user's replica.
 """
 
 from __future__ import annotations
@@ -11,16 +12,21 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 import uuid
+from typing import Annotated
 
 import numpy as np
+import typer
 
 from fabric.session import Fabric
 from fabric.testing import client, free_port, router_config, wait_until
-
 from ownership.authority import Authority
 from ownership.client import OwnershipClient
+
+HOLDER = [sys.executable, "-m", "robofabric.bench.ownership"]
+"""The owner that is killed: a child process that requests the arm and holds it (argv WORLD PORT USER)."""
 
 
 def _pct(xs, q) -> float:
@@ -51,7 +57,7 @@ def run_one(n: int, *, lease_s: float, kills: int) -> dict:
         last.release("arm")
         for k in range(kills):
             owner_id = f"k{k}"
-            proc = subprocess.Popen([sys.executable, "-m", "ownership.bench_user", world, str(port), owner_id],
+            proc = subprocess.Popen([*HOLDER, world, str(port), owner_id],
                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
             wait_until(lambda: last.records["arm"].owner == owner_id, timeout=30, what="killable owner")
             last.request("arm", wait=True)
@@ -64,7 +70,7 @@ def run_one(n: int, *, lease_s: float, kills: int) -> dict:
         frozen = []
         for k in range(kills):  # SIGSTOP: the token stays (connection open), so only the lease can end it
             owner_id = f"f{k}"
-            proc = subprocess.Popen([sys.executable, "-m", "ownership.bench_user", world, str(port), owner_id],
+            proc = subprocess.Popen([*HOLDER, world, str(port), owner_id],
                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
             wait_until(lambda: last.records["arm"].owner == owner_id, timeout=30, what="freezable owner")
             last.request("arm", wait=True)
@@ -96,3 +102,24 @@ def run_bench(counts: list[int], *, lease_s: float, kills: int) -> list[dict]:
         rows.append(r)
         print(f"| {n} | {r['handovers']} | {r['handover_p50']:.1f} | {r['handover_p99']:.1f} | {r['recovery_p50']:.1f} / {r['recovery_max']:.1f} | {r['frozen_p50']:.1f} / {r['frozen_max']:.1f} |", flush=True)
     return rows
+
+
+def command(
+    users: Annotated[str, typer.Option("--users", help="Comma-separated user counts.")] = "10,50,100",
+    lease: Annotated[float, typer.Option("--lease", help="Lease (s).")] = 0.5,
+    kills: Annotated[int, typer.Option("--kills", help="Owner kills per user count.")] = 3,
+) -> None:
+    """N users in one world hand the arm over in turn; then the owner is SIGKILLed."""
+    run_bench([int(x) for x in users.split(",")], lease_s=lease, kills=kills)
+
+
+def _hold(world: str, port: int, user: str) -> None:
+    """The killable owner: request the arm, say so, hold it (renewing) until this process is killed."""
+    with client(world, port, kind="user", peer_id=user) as fab:
+        own = OwnershipClient(fab, user, renew_s=0.1).start()
+        print(own.request("arm"), flush=True)
+        threading.Event().wait()
+
+
+if __name__ == "__main__":
+    _hold(sys.argv[1], int(sys.argv[2]), sys.argv[3])

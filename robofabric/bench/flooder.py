@@ -1,4 +1,4 @@
-"""The flooder of :mod:`ownership.flood`: argv WORLD PORT LOAD_JSON. Sends everything once, as fast as it
+"""The flooder of :mod:`robofabric.bench.flood` (a child process): argv WORLD PORT LOAD_JSON. Sends everything once, as fast as it
 can (zenoh drops what its queues cannot take), prints one JSON line of what it sent, exits."""
 
 from __future__ import annotations

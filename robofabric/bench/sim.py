@@ -6,13 +6,14 @@ ultrasonic ring) read at a fixed rate of sim time, as the peer's scan stream wou
 
 from __future__ import annotations
 
-import platform
 import time
 from pathlib import Path
 from typing import Annotated, Optional
 
 import numpy as np
 import typer
+
+from robofabric.bench.common import machine, write
 
 
 def rtf(world, seconds: float, scan_hz: float = 20.0) -> float:
@@ -57,7 +58,7 @@ def scan_cost(world, robot_id: str, n: int = 2000) -> tuple[float, float]:
     return float(np.median(samples) * 1e6), float(np.percentile(samples, 99) * 1e6)
 
 
-def bench_sim(
+def command(
     seconds: Annotated[float, typer.Option(help="Sim seconds per real-time-factor run.")] = 10.0,
     counts: Annotated[str, typer.Option(help="Mobile robot counts for the scaling runs.")] = "1,10,50",
     out: Annotated[Optional[Path], typer.Option(help="Write the markdown table to this file.")] = None,
@@ -82,7 +83,7 @@ def bench_sim(
         rows.append((f"warehouse, {n} mobile robots, each LIDAR @ 20 Hz + ultrasonic, bumper off", f"{r:.1f}x", "", ""))
     lines = [
         f"Command: `robofabric bench sim --seconds {seconds:g} --counts {counts}`",
-        f"Machine: {platform.machine()} {platform.processor() or ''} ({_cpus()} CPUs visible), Python {platform.python_version()}, MuJoCo {_mujoco()}",
+        f"Machine: {machine()}, MuJoCo {_mujoco()}",
         "",
         "| measurement | result | target | |",
         "|---|---|---|---|",
@@ -90,14 +91,7 @@ def bench_sim(
     ]
     text = "\n".join(lines)
     print(text)
-    if out is not None:
-        out.write_text(text + "\n")
-
-
-def _cpus() -> int:
-    import os
-
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 0)
+    write(out, text)
 
 
 def _mujoco() -> str:
@@ -106,4 +100,4 @@ def _mujoco() -> str:
     return mujoco.__version__
 
 
-__all__ = ["bench_sim", "rtf", "scan_cost"]
+__all__ = ["command", "rtf", "scan_cost"]

@@ -25,7 +25,7 @@ def _percentiles(samples: list[float]) -> dict[str, float]:
 
 def measure_query(n: int = 1000, seed: int = 0, warmup: int = 50) -> dict[str, dict[str, float]]:
     """Median and p99 (ms) of IK (full pose and position only) and FK queries to a compute peer process."""
-    from compute_peer.kinematics.bench import reachable_targets
+    from robofabric.bench.ik import reachable_targets
     from compute_peer.kinematics.model import ArmModel
     from compute_peer.messages import FKRequest, IKRequest
     from fabric import keys
@@ -77,7 +77,7 @@ def _answers(fab, key: str) -> bool:
         return False
 
 
-if __name__ == "__main__":  # python -m compute_peer.kinematics.bench_query [N]
+if __name__ == "__main__":  # python -m robofabric.bench.ik_query [N]
     res = measure_query(int(sys.argv[1]) if len(sys.argv) > 1 else 1000)
     for name, r in res.items():
         print(f"{name:<12} p50 {r['p50_ms']:.3f} ms  p99 {r['p99_ms']:.3f} ms  max {r['max_ms']:.3f} ms")

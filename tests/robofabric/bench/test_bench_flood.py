@@ -5,7 +5,7 @@ arm1 every 50 ms, and a flooder process sending the issue's load once, as fast a
 commands to unique robot ids, 10,000 junk payloads on each of the 8 keys the peers subscribe to
 (plus junk queries on ownership and IK), 100 payloads of 5 MB, 1,000 fake joint streams for the
 compute peer and 1,000 forged ownership requests. Pass criteria are the issue's, measured at the
-process level (/proc); see ownership.flood for how a command is known to be applied. Two seconds
+process level (/proc); see robofabric.bench.flood for how a command is known to be applied. Two seconds
 into the flood alice also stops the arm, and the stop must be seen (fabric.reliable.resend_until).
 """
 
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import pytest
 
-from ownership.flood import Load, run_flood
+from robofabric.bench.flood import Load, run_flood
 
 
 @pytest.mark.slow

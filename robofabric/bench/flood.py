@@ -1,10 +1,10 @@
-"""The flood harness (issue 14): an owner commands a robot while other clients flood the world.
+"""``robofabric bench flood``, the flood harness (issue 14): an owner commands a robot while other clients flood the world.
 
 Real processes over loopback: a router, a sim peer and a compute peer (each a ``robofabric``
 child process with its log in a file; the router apart from alice, so that forwarding the flood
 does not take her process's time), the owner ``alice`` (a session in this
 process: she owns ``arm1``, renews her lease and sends a joint target every ``period_s``), and
-a flooder child process (:mod:`ownership.flood_client`) that sends, as fast as it can:
+a flooder child process (:mod:`robofabric.bench.flooder`) that sends, as fast as it can:
 commands to unique robot ids, junk payloads on every key the peers subscribe to, large
 payloads, fake joint streams for the compute peer and forged ownership requests.
 
@@ -32,19 +32,20 @@ import time
 import uuid
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+import typer
 
 from fabric import keys
 from fabric.messages import Command, JointState, JointTarget, Stop
 from fabric.reliable import Resent, resend_until
 from fabric.session import Fabric, ServiceError
 from fabric.testing import client, free_port, robofabric_cmd, wait_until
-
 from ownership.client import OwnershipClient
+from robofabric.bench.common import proc_cpu_s, proc_rss_mb
 
-__all__ = ["Load", "FloodResult", "run_flood", "proc_rss_mb", "proc_cpu_s"]
+__all__ = ["Load", "FloodResult", "run_flood", "command"]
 
 JOINT = 5  # the last joint of the arm: the one alice moves
 SCALES = 60  # command numbers are told apart modulo this
@@ -108,22 +109,6 @@ class FloodResult:
         out.update(p50_ms=self.pct(50) * 1e3, p99_ms=self.pct(99) * 1e3, not_applied=self.not_applied,
                    growth_mb={k: round(self.growth(k), 1) for k in self.rss_peak})
         return out
-
-
-def proc_rss_mb(pid: int, field: str = "VmRSS") -> float:
-    """Resident memory of a process, from /proc/PID/status (``VmRSS``, or ``RssAnon``, ``RssShmem``...), in MB."""
-    with open(f"/proc/{pid}/status") as f:
-        for line in f:
-            if line.startswith(field + ":"):
-                return int(line.split()[1]) / 1024.0
-    return 0.0
-
-
-def proc_cpu_s(pid: int) -> float:
-    """User + system CPU seconds a process used so far, from /proc/PID/stat."""
-    with open(f"/proc/{pid}/stat") as f:
-        fields = f.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 class _Owner:
@@ -301,7 +286,7 @@ def run_flood(load: Load, out_dir: Path, *, flood: bool = True, stop_at: float |
         flooder = None
         if flood:
             spec = json.dumps(asdict(load))
-            flooder = _start([sys.executable, "-m", "ownership.flood_client", world, str(port), spec], out_dir / "flooder.log")
+            flooder = _start([sys.executable, "-m", "robofabric.bench.flooder", world, str(port), spec], out_dir / "flooder.log")
             procs.append(flooder)
         end = None
         stopped = stop_at is None
@@ -369,3 +354,31 @@ def _world_info(fab: Fabric, world: str) -> Any:
         return fab.call(keys.srv(world, "world"), timeout=2.0)
     except ServiceError:
         return None
+
+
+def command(
+    scale: Annotated[float, typer.Option("--scale", help="Times the issue's flood (20k unique-id commands, 10k junk per key, 100 x 5 MB, 1k fake streams, 1k forged requests).")] = 2.0,
+    out: Annotated[Path, typer.Option("--out", help="Folder for the peers' logs.")] = Path("out/bench-flood"),
+    settle: Annotated[float, typer.Option("--settle", help="Seconds alice goes on after the flood.")] = 5.0,
+) -> None:
+    """An owner commands arm1 every 50 ms while other clients flood the world: her command latency, lease,
+    each peer's memory, CPU and log size, side by side with no flood (real sim and compute processes)."""
+    import dataclasses
+
+    load = dataclasses.replace(Load().scaled(scale), settle_s=settle)
+    rows = [("no flood", run_flood(load, out / "quiet", flood=False)), (f"flood x{scale:g}", run_flood(load, out / "flood", flood=True))]
+    print("| run | alice p50 / p99 (ms) | commands (never seen) | lease lapses | sim RSS before -> peak (MB) | compute RSS before -> peak (MB) "
+          "| sim / compute CPU (s) | phase (s) | sim / compute log (bytes) |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name, r in rows:
+        print(f"| {name} | {r.pct(50) * 1e3:.1f} / {r.pct(99) * 1e3:.1f} | {r.commands} ({r.not_applied}) | {len(r.lapses)} "
+              f"| {r.rss_before['sim']:.0f} -> {r.rss_peak['sim']:.0f} | {r.rss_before['compute']:.0f} -> {r.rss_peak['compute']:.0f} "
+              f"| {r.cpu_s['sim']:.1f} / {r.cpu_s['compute']:.1f} | {r.phase_s:.1f} | {r.log_bytes.get('sim', 0)} / {r.log_bytes.get('compute', 0)} |")
+    for name, r in rows:
+        if r.lapses:
+            print(f"{name}: lease lapses: {'; '.join(r.lapses[:5])}")
+        st = r.stop
+        print(f"{name}: a stop 2 s in, resent every 0.1 s: {'seen still' if st.get('done') else 'NOT seen still'} after "
+              f"{st.get('sends')} send(s), {st.get('seconds')} s (flooder {'running' if st.get('flooder_running') else 'idle'})")
+    flooder = rows[1][1].flooder
+    print("flooder sent:", ", ".join(f"{k}={v}" for k, v in flooder.items() if not k.startswith("t_")))

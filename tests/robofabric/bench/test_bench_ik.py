@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import typer
+import pytest
 from typer.testing import CliRunner
 
-from compute_peer.kinematics.bench import format_table, measure_solve, register_bench
+from robofabric.bench.cli import build_app
+from robofabric.bench.ik import format_table, measure_solve
 
 
 def test_measure_solve_reports_every_workload():
@@ -19,18 +20,24 @@ def test_measure_solve_reports_every_workload():
     assert "| CasADi + IPOPT, full pose | 20 | 100.00% |" in table
 
 
-def test_bench_ik_command():
-    bench = typer.Typer()
-    register_bench(bench)
-    register_bench(bench)  # idempotent: one command, not two
-    assert [c.name for c in bench.registered_commands].count("ik") == 1
-    app = typer.Typer()
-    app.add_typer(bench, name="bench")
+@pytest.mark.slow
+def test_bench_ik_command(tmp_path):
     runner = CliRunner()
-    res = runner.invoke(app, ["bench", "ik", "--n", "5", "--queries", "20"])
+    out = tmp_path / "ik.md"
+    res = runner.invoke(build_app(), ["ik", "--n", "5", "--queries", "20", "--out", str(out)])
     assert res.exit_code == 0, res.output
     assert "closed form, full pose" in res.output and "numerical (LM)" in res.output
     assert "CasADi + IPOPT" in res.output
     assert "query round trip" in res.output and "ik_pose" in res.output
-    res = runner.invoke(app, ["bench", "ik", "--n", "0"])
+    assert "| closed form, full pose | 5 |" in out.read_text() and "| ik_pose |" in out.read_text()
+    res = runner.invoke(build_app(), ["ik", "--n", "0"])
     assert res.exit_code != 0
+
+
+@pytest.mark.slow
+def test_ik_query_round_trip_bench_smoke():
+    from robofabric.bench.ik_query import measure_query
+
+    res = measure_query(n=20, warmup=5)
+    assert set(res) == {"ik_pose", "ik_position", "fk"}
+    assert all(0 < r["p50_ms"] <= r["p99_ms"] <= r["max_ms"] for r in res.values())

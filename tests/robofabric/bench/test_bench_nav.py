@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import json
 
-import typer
 from typer.testing import CliRunner
 
-from compute_peer.navigation.bench import bench_mapping, bench_planning, format_tables, register_bench
-from fabric.cli_common import bench_app
+from robofabric.bench.cli import build_app
+from robofabric.bench.nav import bench_mapping, bench_planning, format_tables
 
 
 def test_bench_functions_report_all_planners():
@@ -22,17 +21,13 @@ def test_bench_functions_report_all_planners():
 
 
 def test_bench_nav_command(tmp_path):
-    register_bench()
-    register_bench()  # idempotent: one command, not two
-    assert [c.name for c in bench_app.registered_commands].count("nav") == 1
-    app = typer.Typer()
-    app.add_typer(bench_app, name="bench")
+    app = build_app()
     runner = CliRunner()
     out = tmp_path / "nav.md"
-    res = runner.invoke(app, ["bench", "nav", "--scans", "3", "--queries", "1", "--planners", "hybrid_astar", "--out", str(out)])
+    res = runner.invoke(app, ["nav", "--scans", "3", "--queries", "1", "--planners", "hybrid_astar", "--out", str(out)])
     assert res.exit_code == 0, res.output
     assert "| hybrid_astar | dubins | 1/1 |" in out.read_text()
-    res = runner.invoke(app, ["bench", "nav", "--scans", "3", "--queries", "1", "--planners", "hybrid_astar", "--json"])
+    res = runner.invoke(app, ["nav", "--scans", "3", "--queries", "1", "--planners", "hybrid_astar", "--json"])
     assert json.loads(res.output)["planning"][0]["solved"] == 1
-    res = runner.invoke(app, ["bench", "nav", "--planners", "dijkstra"])
+    res = runner.invoke(app, ["nav", "--planners", "dijkstra"])
     assert res.exit_code != 0

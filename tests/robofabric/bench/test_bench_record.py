@@ -3,9 +3,12 @@
 import json
 import subprocess
 
+import pytest
+
 from fabric.testing import robofabric_cmd
 
 
+@pytest.mark.slow
 def test_bench_record_smoke():
     out = subprocess.run(
         robofabric_cmd("bench", "record", "--scales", "1", "--robots", "1", "--duration", "1", "--json"),

@@ -1,4 +1,4 @@
-"""``robofabric bench ik``: how long :func:`~compute_peer.kinematics.ik.solve` takes on the Meca500.
+"""``robofabric bench ik``: how long :func:`compute_peer.kinematics.ik.solve` takes on the Meca500.
 
 In this process, no network. Targets are FK of seeded random in-limit joint
 vectors (so every one is reachable), skipping those whose flange lands inside
@@ -21,14 +21,15 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import numpy as np
-import pinocchio as pin
 import typer
 
-from .ik import in_base_column, solve
-from .model import ArmModel, Unreachable
+from robofabric.bench.common import append
+
+if TYPE_CHECKING:
+    from compute_peer.kinematics.model import ArmModel
 
 ROBOT = "meca500"
 CASADI_TARGETS = 300
@@ -47,6 +48,10 @@ def _stats(times: list[float], ok: int, n: int) -> dict:
 
 def reachable_targets(arm: ArmModel, n: int, rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray, list[float]]]:
     """``n`` reachable flange targets: (joint vector, position, quaternion w x y z)."""
+    import pinocchio as pin
+
+    from compute_peer.kinematics.ik import in_base_column
+
     out = []
     while len(out) < n:
         q = rng.uniform(arm.lower, arm.upper)
@@ -61,6 +66,9 @@ def reachable_targets(arm: ArmModel, n: int, rng: np.random.Generator) -> list[t
 
 def _timed(arm: ArmModel, jobs: list, method: str = "auto") -> tuple[list[float], list]:
     """Solve time (s) and solution of every (position, quaternion or None, seed) job that succeeds."""
+    from compute_peer.kinematics.ik import solve
+    from compute_peer.kinematics.model import Unreachable
+
     times, sols = [], []
     for p, quat, s in jobs:
         t0 = time.perf_counter()
@@ -75,6 +83,8 @@ def _timed(arm: ArmModel, jobs: list, method: str = "auto") -> tuple[list[float]
 
 def measure_solve(n: int = 2000, seed: int = 0) -> dict:
     """Median and p99 (us) and success rates of ``solve`` per workload: ``n`` targets each, CasADi fewer."""
+    from compute_peer.kinematics.model import ArmModel
+
     if n < 1:
         raise ValueError("n must be >= 1")
     arm = ArmModel(ROBOT)
@@ -123,59 +133,44 @@ def format_table(result: dict) -> str:
     return "\n".join(lines)
 
 
-def register_bench(bench_app: typer.Typer | None = None) -> None:
-    """Add ``ik`` to ``robofabric bench`` (idempotent); ``bench_app`` defaults to fabric's."""
-    if bench_app is None:
-        from fabric.cli_common import bench_app as default
+def command(
+    n: Annotated[int, typer.Option("--n", help="Random reachable targets per workload.")] = 2000,
+    seed: Annotated[int, typer.Option(help="Seed of the targets and IK seeds.")] = 0,
+    queries: Annotated[int, typer.Option(help="IK/FK queries for the round trip through a router (0: skip it).")] = 1000,
+    out: Annotated[Optional[Path], typer.Option(help="Append the markdown tables to this file.")] = None,
+) -> None:
+    """Meca500 IK solve times (closed form full pose / position only, numerical, CasADi) and the query round trip.
 
-        bench_app = default
-    if any(c.name == "ik" for c in bench_app.registered_commands):
-        return
+    The round trip runs a `robofabric compute` process behind a router hosted here, as on a LAN.
+    """
+    from rich.console import Console
+    from rich.table import Table
 
-    @bench_app.command("ik")
-    def ik(
-        n: Annotated[int, typer.Option("--n", help="Random reachable targets per workload.")] = 2000,
-        seed: Annotated[int, typer.Option(help="Seed of the targets and IK seeds.")] = 0,
-        queries: Annotated[int, typer.Option(help="IK/FK queries for the round trip through a router (0: skip it).")] = 1000,
-        out: Annotated[Optional[Path], typer.Option(help="Append the markdown tables to this file.")] = None,
-    ) -> None:
-        """Meca500 IK solve times (closed form full pose / position only, numerical, CasADi) and the query round trip.
+    from fabric.cli_common import UserError
 
-        The round trip runs a `robofabric compute` process behind a router hosted here, as on a LAN.
-        """
-        from rich.console import Console
-        from rich.table import Table
+    if n < 1:
+        raise UserError("--n must be >= 1")
+    result = measure_solve(n, seed)
+    table = Table(title=f"IK solve, {ROBOT}, {n} targets per row, CasADi {min(n, CASADI_TARGETS)} (seed {seed})")
+    for col in ("solver", "success", "median (us)", "p99 (us)"):
+        table.add_column(col, justify="left" if col == "solver" else "right")
+    for key, label in ROWS:
+        r = result[key]
+        extra = f" ({r['numerical_fallback']} numerical)" if "numerical_fallback" in r else ""
+        table.add_row(label, f"{100 * r['success']:.2f}%{extra}", f"{r['median_us']:.1f}", f"{r['p99_us']:.1f}")
+    Console().print(table)
+    md = [f"IK solve, {ROBOT}, {n} targets per row, CasADi {min(n, CASADI_TARGETS)} (seed {seed}):", "",
+          format_table(result)]
+    if queries > 0:
+        from robofabric.bench.ik_query import measure_query
 
-        from fabric.cli_common import UserError
-
-        if n < 1:
-            raise UserError("--n must be >= 1")
-        result = measure_solve(n, seed)
-        table = Table(title=f"IK solve, {ROBOT}, {n} targets per row, CasADi {min(n, CASADI_TARGETS)} (seed {seed})")
-        for col in ("solver", "success", "median (us)", "p99 (us)"):
-            table.add_column(col, justify="left" if col == "solver" else "right")
-        for key, label in ROWS:
-            r = result[key]
-            extra = f" ({r['numerical_fallback']} numerical)" if "numerical_fallback" in r else ""
-            table.add_row(label, f"{100 * r['success']:.2f}%{extra}", f"{r['median_us']:.1f}", f"{r['p99_us']:.1f}")
-        Console().print(table)
-        md = [f"IK solve, {ROBOT}, {n} targets per row, CasADi {min(n, CASADI_TARGETS)} (seed {seed}):", "",
-              format_table(result)]
-        if queries > 0:
-            from .bench_query import measure_query
-
-            rt = measure_query(queries, seed)
-            qt = Table(title=f"query round trip through a router, compute peer in its own process ({queries} each)")
-            for col in ("query", "p50 (ms)", "p99 (ms)", "max (ms)"):
-                qt.add_column(col, justify="left" if col == "query" else "right")
-            md += ["", "| query | p50 (ms) | p99 (ms) | max (ms) |", "|---|---|---|---|"]
-            for name, r in rt.items():
-                qt.add_row(name, f"{r['p50_ms']:.3f}", f"{r['p99_ms']:.3f}", f"{r['max_ms']:.3f}")
-                md.append(f"| {name} | {r['p50_ms']:.3f} | {r['p99_ms']:.3f} | {r['max_ms']:.3f} |")
-            Console().print(qt)
-        if out is not None:
-            with open(out, "a", encoding="utf-8") as fh:
-                fh.write("\n".join(md) + "\n\n")
-
-
-register = register_bench
+        rt = measure_query(queries, seed)
+        qt = Table(title=f"query round trip through a router, compute peer in its own process ({queries} each)")
+        for col in ("query", "p50 (ms)", "p99 (ms)", "max (ms)"):
+            qt.add_column(col, justify="left" if col == "query" else "right")
+        md += ["", "| query | p50 (ms) | p99 (ms) | max (ms) |", "|---|---|---|---|"]
+        for name, r in rt.items():
+            qt.add_row(name, f"{r['p50_ms']:.3f}", f"{r['p99_ms']:.3f}", f"{r['max_ms']:.3f}")
+            md.append(f"| {name} | {r['p50_ms']:.3f} | {r['p99_ms']:.3f} | {r['max_ms']:.3f} |")
+        Console().print(qt)
+    append(out, "\n".join(md) + "\n")

@@ -1,23 +1,22 @@
-"""What security costs: plain TCP, TCP + access control, TLS + access control, side by side in one run.
+"""``robofabric bench secure``: what security costs: plain TCP, TCP + access control, TLS + access control, side by side.
 
-    .venv/bin/python tools/bench_secure.py [--rounds 2] [--duration 5] [--queries 500] [--out FILE.md]
+    robofabric bench secure [--rounds 2] [--duration 5] [--queries 500] [--out FILE.md]
 
 For each mode a fresh router (``robofabric router``, with ``robofabric secure init``'s
 ``router.json5`` for the secure modes) and, on it:
 
 * transport: 240-ray scans at 1 kHz from a publisher logged in as the sim to a subscriber logged in
-  as the viewer, each in its own process (fabric.bench_transport's children): delivered %, latency
+  as the viewer, each in its own process (robofabric.bench.transport's children): delivered %, latency
   p50 / p99 (header wall time to receive, one host clock);
 * IK round trip: a compute peer process (``robofabric compute --arm arm1:meca500``, logged in as the
   compute identity) answers ``srv/ik/arm1`` queries from a user (alice) for FK-reachable targets.
 
 Modes alternate within each round so a noisy machine hurts them alike; the table holds medians
-over rounds of each mode's percentiles. Not installed with the package (tools/).
+over rounds of each mode's percentiles.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import statistics
 import subprocess
@@ -26,18 +25,13 @@ import tempfile
 import time
 import uuid
 from pathlib import Path
+from typing import Annotated, Optional
 
 import numpy as np
+import typer
 
-from compute_peer.kinematics.bench import reachable_targets
-from compute_peer.kinematics.model import ArmModel
-from compute_peer.messages import IKRequest
-from fabric import keys
-from fabric.bench_transport import _run_one
-from fabric.config import FabricConfig
-from fabric.secure import init
-from fabric.session import Fabric, ServiceError
 from fabric.testing import free_port, robofabric_cmd, wait_until
+from robofabric.bench.common import append, end_process
 
 MODES = ("tcp", "tcp+acl", "tls+acl")
 
@@ -46,18 +40,10 @@ def _start(argv: list[str]) -> subprocess.Popen:
     return subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
 
 
-def _stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-
-
 def _mode_setup(mode: str, tmp: Path) -> tuple[str, list[str], dict[str, str | None]]:
     """(endpoint, router argv, identity -> client config) for one mode."""
+    from fabric.secure import init
+
     proto = "tls" if mode == "tls+acl" else "tcp"
     ep = f"{proto}/127.0.0.1:{free_port()}"
     if mode == "tcp":
@@ -67,6 +53,13 @@ def _mode_setup(mode: str, tmp: Path) -> tuple[str, list[str], dict[str, str | N
 
 
 def _ik_round_trips(ep: str, configs: dict[str, str | None], n: int, warmup: int = 30) -> list[float]:
+    from compute_peer.kinematics.model import ArmModel
+    from compute_peer.messages import IKRequest
+    from fabric import keys
+    from fabric.config import FabricConfig
+    from fabric.session import Fabric, ServiceError
+    from robofabric.bench.ik import reachable_targets
+
     world = f"b{uuid.uuid4().hex[:6]}"
     argv = robofabric_cmd("compute", "--no-navigation", "--arm", "arm1:meca500", "--world", world, "--connect", ep)
     if configs["compute"]:
@@ -97,10 +90,13 @@ def _ik_round_trips(ep: str, configs: dict[str, str | None], n: int, warmup: int
                     out.append((time.perf_counter() - t0) * 1e3)
             return out
     finally:
-        _stop(proc)
+        end_process(proc)
 
 
 def run(rounds: int, duration: float, queries: int) -> dict[str, list[dict]]:
+    """``rounds`` rounds of every mode in turn; per mode, one row per round (delivered %, scan and IK percentiles)."""
+    from robofabric.bench.transport import run_one
+
     results: dict[str, list[dict]] = {m: [] for m in MODES}
     with tempfile.TemporaryDirectory() as tmpdir:
         tmp = Path(tmpdir)
@@ -113,10 +109,10 @@ def run(rounds: int, duration: float, queries: int) -> dict[str, list[dict]]:
                     line = router.stdout.readline()
                     if "listening" not in line:
                         raise RuntimeError(f"router for {mode} did not start: {line.strip()}")
-                    scans = _run_one("zenoh", ep, 1000.0, duration, pub_config=configs["sim"], sub_config=configs["viewer"])
+                    scans = run_one("zenoh", ep, 1000.0, duration, pub_config=configs["sim"], sub_config=configs["viewer"])
                     ik = _ik_round_trips(ep, configs, queries)
                 finally:
-                    _stop(router)
+                    end_process(router)
                 row = {"delivered_pct": scans["delivered_pct"], "scan_p50": scans["p50"], "scan_p99": scans["p99"],
                        "ik_p50": float(np.median(ik)), "ik_p99": float(np.percentile(ik, 99))}
                 results[mode].append(row)
@@ -141,20 +137,17 @@ def table(results: dict[str, list[dict]]) -> str:
     return "\n".join(lines)
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--rounds", type=int, default=2)
-    ap.add_argument("--duration", type=float, default=5.0, help="seconds of 1 kHz scans per mode and round")
-    ap.add_argument("--queries", type=int, default=500, help="IK queries per mode and round")
-    ap.add_argument("--out", type=Path, default=None, help="append the markdown table to this file")
-    a = ap.parse_args()
-    res = run(a.rounds, a.duration, a.queries)
-    t = table(res)
+def command(
+    rounds: Annotated[int, typer.Option(help="Rounds; each runs every mode once, in turn.")] = 2,
+    duration: Annotated[float, typer.Option(help="Seconds of 1 kHz scans per mode and round.")] = 5.0,
+    queries: Annotated[int, typer.Option(help="IK queries per mode and round.")] = 500,
+    out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
+) -> None:
+    """Scans at 1 kHz and IK round trips over plain TCP, TCP + access control and TLS + access control."""
+    from fabric.cli_common import UserError
+
+    if rounds < 1 or duration <= 0 or queries < 1:
+        raise UserError("--rounds and --queries must be at least 1, --duration positive")
+    t = table(run(rounds, duration, queries))
     print(t)
-    if a.out:
-        with open(a.out, "a") as f:
-            f.write(t + "\n")
-
-
-if __name__ == "__main__":
-    main()
+    append(out, t)

@@ -1,0 +1,72 @@
+"""Helpers the benchmarks share: where tables go, the machine line, a process's CPU and memory, ending children.
+
+Pure or /proc-reading functions only; no benchmark logic. Percentiles come from :mod:`fabric.stats`
+(the replayer and ``robofabric hz`` use them too).
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import signal
+import subprocess
+from pathlib import Path
+
+__all__ = ["append", "write", "cpus", "machine", "proc_cpu_s", "proc_rss_mb", "end_process"]
+
+
+def append(out: Path | str | None, text: str) -> None:
+    """Append ``text`` and a newline to ``out`` (``--out FILE`` of a benchmark); nothing when ``out`` is None."""
+    if out is not None:
+        with open(out, "a", encoding="utf-8") as f:
+            f.write(text + "\n")
+
+
+def write(out: Path | str | None, text: str) -> None:
+    """Replace ``out`` with ``text`` and a newline; nothing when ``out`` is None."""
+    if out is not None:
+        Path(out).write_text(text + "\n", encoding="utf-8")
+
+
+def cpus() -> int:
+    """CPUs this process may run on (its affinity), which is what a benchmark gets on a shared machine."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 0)
+
+
+def machine() -> str:
+    """One line naming the machine, for the head of a result table."""
+    proc = platform.processor() or ""
+    return f"{platform.machine()} {proc}".strip() + f" ({cpus()} CPUs visible), Python {platform.python_version()}"
+
+
+def proc_cpu_s(pid: int) -> float:
+    """User + system CPU seconds a process used so far, from /proc/PID/stat (NaN when it is gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return float("nan")
+
+
+def proc_rss_mb(pid: int, field: str = "VmRSS") -> float:
+    """Resident memory of a process, from /proc/PID/status (``VmRSS``, or ``RssAnon``, ``RssShmem``...), in MB."""
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith(field + ":"):
+                return int(line.split()[1]) / 1024.0
+    return 0.0
+
+
+def end_process(proc: subprocess.Popen, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int:
+    """Send ``sig`` to a child (by pid) unless it has exited, wait ``timeout``, then SIGKILL; its exit code."""
+    if proc.poll() is None:
+        try:
+            os.kill(proc.pid, sig)
+        except ProcessLookupError:
+            pass
+    try:
+        return proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return proc.wait(timeout=10)
