@@ -44,8 +44,15 @@ def wait_until(
 
 
 def router_config(world: str, port: int) -> FabricConfig:
-    """An embedded (router) profile listening on loopback ``port``, scouting off."""
-    return FabricConfig(world=world, profile="embedded", listen=(f"tcp/127.0.0.1:{port}",))
+    """An embedded (router) profile listening on loopback ``port``, scouting off.
+
+    ``scouting/delay`` 0: a router opens after waiting that long for peers to scout (zenoh's default 500 ms),
+    and with multicast off and nothing to connect to there is nothing to wait for; at half a second per test
+    that wait was most of the fast suite's time.
+    """
+    return FabricConfig(
+        world=world, profile="embedded", listen=(f"tcp/127.0.0.1:{port}",), extra=(("scouting/delay", "0"),)
+    )
 
 
 def client_config(world: str, port: int) -> FabricConfig:
