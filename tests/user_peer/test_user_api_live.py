@@ -68,7 +68,7 @@ def test_move_joints_reaches_targets_and_matches_the_viewers_fk(user):
     settled_ns = time.time_ns()
     # The flange the sim publishes is where the viewer's Pinocchio FK (robots/ URDF + world pose) puts it;
     # compare joints and a flange pose both published after the arm settled (not one from mid-motion).
-    info = RobotCatalog(w.info()).info("arm1", {"joint_names": arm.entry.joint_names})
+    info = RobotCatalog(w.info()).drawing("arm1", {"joint_names": arm.entry.joint_names})
     wait_until(lambda: arm.flange is not None and arm.flange.header.wall_ns > settled_ns
                and arm.joint_state.header.wall_ns > settled_ns, what="flange pose and joints after settling")
     fk = info.arm.fk(arm.joints)[-1]
@@ -81,6 +81,7 @@ def test_move_joints_reaches_targets_and_matches_the_viewers_fk(user):
         arm.move_joints(np.radians([0, 120, 0, 0, 0, 0]))
 
 
+@pytest.mark.slow
 def test_drive_then_follow_a_path_to_its_end(user):
     w = user("bob")
     base = w.robot("base1")
