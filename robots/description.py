@@ -3,7 +3,9 @@
 A robot is a folder holding ``robot.toml`` plus its MJCF (and, for arms, a
 URDF); a scene is a ``NAME.toml`` next to its MJCF. Both are data: a user adds
 a robot or a scene by dropping files in a folder listed in
-``ROBOFABRIC_ROBOTS_PATH`` (or passing a path), no code involved.
+``ROBOFABRIC_ROBOTS_PATH`` (or passing a path). A robot type the sim's built-in
+arm and mobile base do not cover names its own simulation hooks (``hooks``,
+resolved by ``sim_peer.registry``; docs/robots.md); this package only reads the name.
 """
 
 from __future__ import annotations
@@ -93,6 +95,7 @@ class RobotDescription:
     lidar: LidarSpec | None = None
     ultrasonic: UltrasonicSpec | None = None
     base_joints: tuple[str, ...] = ()  # mobile: planar x, y, yaw joints of the root body
+    hooks: str = ""  # the sim's plug-in for this type: "package.module:Class" or "file.py:Class" beside robot.toml; "" = by kind
 
     @property
     def dof(self) -> int:
@@ -294,7 +297,16 @@ def load(name: str) -> RobotDescription:
         lidar=lidar,
         ultrasonic=sonar,
         base_joints=base_joints,
+        hooks=_hooks_ref(r, where),
     )
+
+
+def _hooks_ref(r: dict, where: str) -> str:
+    """``[robot] hooks``: where the sim finds this type's plug-in (resolved by sim_peer.registry, not here)."""
+    ref = r.get("hooks", "")
+    if not isinstance(ref, str) or (ref and ref.count(":") != 1):
+        raise DescriptionError(f"{where}: hooks must be \"package.module:Class\" or \"file.py:Class\", got {ref!r}")
+    return ref
 
 
 def _find_scene(name: str) -> Path:

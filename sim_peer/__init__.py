@@ -1,16 +1,18 @@
 """The simulation peer: MuJoCo worlds with robots, their controllers and sensors, and the peer that serves them.
 
-The core (:mod:`sim_peer.world`, :mod:`sim_peer.controllers`, :mod:`sim_peer.follower`,
-:mod:`sim_peer.sensors`) has no Zenoh import; :mod:`sim_peer.peer` composes it with
-the fabric: streams, commands through a :class:`fabric.gate.CommandGate`, the
-world service.
+The core (:mod:`sim_peer.world` and the modules it composes: :mod:`sim_peer.build`, :mod:`sim_peer.placement`,
+:mod:`sim_peer.bumper`; the robot plug-ins :mod:`sim_peer.robot`, :mod:`sim_peer.simrobot`,
+:mod:`sim_peer.registry`; :mod:`sim_peer.controllers`, :mod:`sim_peer.follower`, :mod:`sim_peer.sensors`) has
+no Zenoh import; :mod:`sim_peer.peer` composes it with the fabric: streams, commands through a
+:class:`fabric.gate.CommandGate`, the world service.
 """
 
 from sim_peer.controllers import ArmController, BaseController, Clamp, CommandRejected
 from sim_peer.follower import PurePursuit
-from sim_peer.sensors import Lidar, Ultrasonic
-from sim_peer.simrobot import ArmRobot, MobileRobot, SimRobot
-from sim_peer.world import World, WorldError, parse_robot_spec
+from sim_peer.robot import HOOKS, Mount, Note, Physics, Robot, Stream
+from sim_peer.sensors import Lidar, Sensor, Ultrasonic
+from sim_peer.simrobot import ArmRobot, MobileRobot
+from sim_peer.world import SimWorld, WorldError, parse_robot_spec
 
 __all__ = [
     "ArmController",
@@ -18,12 +20,18 @@ __all__ = [
     "BaseController",
     "Clamp",
     "CommandRejected",
+    "HOOKS",
     "Lidar",
     "MobileRobot",
+    "Mount",
+    "Note",
+    "Physics",
     "PurePursuit",
-    "SimRobot",
+    "Robot",
+    "Sensor",
+    "SimWorld",
+    "Stream",
     "Ultrasonic",
-    "World",
     "WorldError",
     "parse_robot_spec",
 ]

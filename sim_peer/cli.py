@@ -70,7 +70,7 @@ def sim(
     from fabric.session import shutdown_event
     from sim_peer.pacing import parse_speed
     from sim_peer.peer import DEFAULT_RATES, SimPeer
-    from sim_peer.world import World as SimWorld
+    from sim_peer.world import SimWorld
     from sim_peer.world import WorldError
 
     try:

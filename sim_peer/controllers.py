@@ -8,6 +8,7 @@ MuJoCo; tests drive them directly.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,6 +73,11 @@ class ArmController:
     def dof(self) -> int:
         return len(self.names)
 
+    @property
+    def idle(self) -> bool:
+        """At the target and at rest since the last step: stepping changes nothing until the next command."""
+        return self._idle
+
     def set_target(self, q, speed_scale: float = 1.0) -> Clamp | None:
         """Aim at ``q``; raise :class:`CommandRejected` for a wrong length or non-finite values; report clamps."""
         q = _finite_vector(q, self.dof, "joint target")
@@ -135,8 +141,12 @@ class BaseController:
     set, supplies the desired twist each step instead of the last twist command.
     """
 
-    def __init__(self, spec: BaseSpec, pose: tuple[float, float, float] = (0.0, 0.0, 0.0), *, twist_timeout: float | None = None) -> None:
+    def __init__(
+        self, spec: BaseSpec, pose: tuple[float, float, float] = (0.0, 0.0, 0.0), *, twist_timeout: float | None = None,
+        on_news: Callable[[str], None] | None = None,
+    ) -> None:
         self.spec = spec
+        self.on_news = on_news  # told "path_done" or "twist_timeout" when they happen (no cost per step)
         self.twist_timeout = twist_timeout  # s of sim time a twist holds without a fresh one (None: until told otherwise)
         self._since_twist = 0.0
         self.twists_expired = 0
@@ -204,6 +214,8 @@ class BaseController:
             if done:
                 self.follower = None
                 self.paths_done += 1
+                if self.on_news is not None:
+                    self.on_news("path_done")
                 v_d = w_d = 0.0
             self.v_cmd, self.omega_cmd = v_d, w_d
         elif self.twist_timeout is not None and (self.v_cmd or self.omega_cmd):
@@ -211,6 +223,8 @@ class BaseController:
             if self._since_twist > self.twist_timeout:  # the sender went quiet: slow to a halt
                 self.v_cmd = self.omega_cmd = 0.0
                 self.twists_expired += 1
+                if self.on_news is not None:
+                    self.on_news("twist_timeout")
         dv = max(-s.max_accel * dt, min(s.max_accel * dt, self.v_cmd - self.v))
         dw = max(-s.max_alpha * dt, min(s.max_alpha * dt, self.omega_cmd - self.omega))
         self.v += dv

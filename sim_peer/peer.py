@@ -1,11 +1,13 @@
-"""The sim peer: a :class:`~sim_peer.world.World` served on the fabric.
+"""The sim peer: a :class:`~sim_peer.world.SimWorld` served on the fabric.
 
-Streams, each on its own :class:`fabric.rate.RateLoop` (wall-clock rates,
-independent of the physics step; headers carry sim time):
+The peer never asks what kind of robot it holds: it loops over the robots' hooks (:mod:`sim_peer.robot`).
+Streams are what robots' ``streams()`` declare, grouped by rate, each group on its own
+:class:`fabric.rate.RateLoop` (wall-clock rates, independent of the physics step; headers carry sim time).
+With the built-in robots:
 
 * ``joints`` - every robot's JointState; an arm's flange Pose goes out with it on the robot's ``pose`` key;
 * ``pose`` - every mobile robot's base Pose (axle midpoint) with its velocities;
-* ``scan`` - every LIDAR as a Scan (and the ultrasonic ring on ``sonar`` where fabric.keys has that stream).
+* ``scan`` - every LIDAR as a Scan, and the ultrasonic ring on ``sonar``.
 
 Commands on ``rf/{world}/robot/{id}/cmd/*/by/{user}`` (the sender is the key's user; a payload naming
 someone else is refused) pass through the :class:`fabric.gate.CommandGate`
@@ -18,8 +20,11 @@ leave zenoh's callback thread at once: they wait in a bounded per-robot
 dropped) that a worker thread applies, so a flood on one key cannot hold up another robot.
 Refusals and bad payloads are reported at most a few times per reason per interval
 (:meth:`fabric.session.Fabric.emit` with ``limit``), with the count of the rest.
-Clamped commands are applied and reported as ``Event(kind="clamp")``. Scene objects move on
-``rf/{world}/object/{id}/pose/by/{user}``. ``rf/{world}/srv/world`` answers a :class:`WorldInfo`.
+Clamped commands are applied and reported as ``Event(kind="clamp")``. A command kind a robot's
+``commands()`` does not list is refused with reason ``unsupported``. What robots and sensors note while
+stepping (a path followed to its end, a bumper stop) goes out as events. Scene objects move on
+``rf/{world}/object/{id}/pose/by/{user}``. ``rf/{world}/srv/world`` answers a :class:`WorldInfo` made of
+the robots' ``describe()``.
 """
 
 from __future__ import annotations
@@ -30,28 +35,26 @@ import time
 from collections import Counter
 from typing import Any, Callable
 
-import numpy as np
+import zenoh
 
 from fabric import keys
-import zenoh
 
 from fabric.codec import DecodeError, decode
 from fabric.gate import CommandGate, OpenGate
 from fabric.limits import clip, is_valid_user, quote
-from fabric.messages import COMMAND_BODIES, Command, Event, JointState, Pose, Scan
+from fabric.messages import Command, Event, Pose
 from fabric.rate import Clock, RateLoop
 from fabric.session import Fabric
 from sim_peer.controllers import Clamp, CommandRejected
 from sim_peer.inbox import CommandQueue
-from sim_peer.messages import ObjectInfo, RobotInfo, WorldInfo
+from sim_peer.messages import ObjectInfo, WorldInfo
 from sim_peer.pacing import Pacer
-from sim_peer.simrobot import ArmRobot, MobileRobot
-from sim_peer.world import World
+from sim_peer.robot import Build, CommandHandler, Stream, body_mismatch
+from sim_peer.world import SimWorld
 
 log = logging.getLogger("robofabric.sim")
 
 DEFAULT_RATES = {"joints": 100.0, "pose": 50.0, "scan": 20.0}
-SONAR_STREAM = "sonar"
 
 
 class SimPeer:
@@ -63,7 +66,7 @@ class SimPeer:
     def __init__(
         self,
         fabric: Fabric,
-        world: World,
+        world: SimWorld,
         *,
         gate: CommandGate | None = None,
         rates: dict[str, float] | None = None,
@@ -74,20 +77,21 @@ class SimPeer:
         self.world = world
         self.gate: CommandGate = gate if gate is not None else OpenGate()
         self.rates = {**DEFAULT_RATES, **(rates or {})}
+        self._streams = self._gather_streams(fabric.world, world)
+        for group, entries in self._streams.items():
+            self.rates.setdefault(group, entries[0][1].hz)
+        self._handlers: dict[str, dict[str, CommandHandler]] = {rid: dict(r.commands()) for rid, r in world.robots.items()}
         self.speed = speed
         self.pacer = Pacer(world.dt, speed, clock=clock)
         self.lock = threading.RLock()
         self.counters: Counter[str] = Counter()
         self._moving = {rid: False for rid in world.robots}
-        # counters as the world has them (a world restored by a standby has followed paths before)
-        self._paths_done = {rid: getattr(r.ctrl, "paths_done", 0) for rid, r in world.robots.items()}
-        self._expired = {rid: getattr(r.ctrl, "twists_expired", 0) for rid, r in world.robots.items()}
+        world.take_notes()  # news from before the peer (a standby's catch-up steps) is not the world's to tell
         self._loops: list[RateLoop] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._opened = False
         self._closed = False
-        self._sonar = SONAR_STREAM in keys.ROBOT_STREAMS
         self._queues: dict[str, CommandQueue[Command]] = {rid: CommandQueue() for rid in world.robots}
         self._queued = threading.Condition(threading.Lock())
         self._worker: threading.Thread | None = None
@@ -113,8 +117,9 @@ class SimPeer:
             provider(self.last_state)
         for rid in self.world.robots:
             self._safe_gate_motion(rid, False)
-        for name, fn in (("joints", self._publish_joints), ("pose", self._publish_poses), ("scan", self._publish_scans)):
-            self._loops.append(RateLoop(self.rates[name], self._guard(name, fn), name=f"sim-{name}").start())
+        for group, entries in self._streams.items():
+            tick = self._guard(group, self._publisher(entries))
+            self._loops.append(RateLoop(self.rates[group], tick, name=f"sim-{group}").start())
         return self
 
     def start(self, duration: float | None = None) -> "SimPeer":
@@ -141,19 +146,15 @@ class SimPeer:
             with self.lock:
                 self.world.step(n)
                 changes = self._motion_changes()
-                bumps, self.world.collisions = self.world.collisions, []
+                notes = self.world.take_notes()
             self.pacer.done(n)
             self.counters["steps"] += n
-            for rid, moving, news in changes:
-                if moving is not None:
-                    self._safe_gate_motion(rid, moving)
-                if news == "path_done":
-                    self._event("path_done", rid, "path followed to its end", severity="info")
-                elif news == "twist_timeout":
-                    self._event("twist_timeout", rid, "no fresh twist within the timeout: stopping", severity="info")
-            for rid, t in bumps:
-                self.counters["collisions"] += 1
-                self._event("collision", rid, "bumper", data={"t": t, "detail": "stopped before an obstacle ahead"})
+            for rid, moving in changes:
+                self._safe_gate_motion(rid, moving)
+            for rid, note in notes:
+                if note.counter:
+                    self.counters[note.counter] += 1
+                self._event(note.kind, rid, note.reason, severity=note.severity, data=dict(note.data) or None)
             if self.speed is None:
                 time.sleep(0)  # let streams and commands have the interpreter between chunks
 
@@ -187,7 +188,7 @@ class SimPeer:
 
     def world_info(self) -> WorldInfo:
         with self.lock:
-            robots = [self._robot_info(rid) for rid in self.world.robots]
+            robots = [r.describe() for r in self.world.robots.values()]
             objects = []
             for o in self.world.scene.objects:
                 pos, quat = self.world.object_pose(o.id)
@@ -202,52 +203,14 @@ class SimPeer:
                 header=self.fabric.header("srv/world", stamp=self.world.time),
             )
 
-    def _robot_info(self, rid: str) -> RobotInfo:
-        r = self.world.robots[rid]
-        d = r.desc
-        base: dict[str, Any] = {}
-        sensors: dict[str, Any] = {}
-        if d.base is not None:
-            b = d.base
-            base = {
-                "radius": b.radius, "height": b.height, "wheel_separation": b.wheel_separation, "wheel_radius": b.wheel_radius,
-                "max_speed": b.max_speed, "max_omega": b.max_omega, "max_accel": b.max_accel, "max_alpha": b.max_alpha,
-            }
-        if isinstance(r, MobileRobot) and r.lidar is not None:
-            li = r.lidar.spec
-            sensors.update(
-                lidar_site=li.site, lidar_rays=li.rays, lidar_fov=li.fov, lidar_angle_min=li.angle_min,
-                lidar_angle_increment=li.angle_increment, lidar_range_min=li.range_min, lidar_range_max=li.range_max,
-                lidar_noise_std=li.noise_std, lidar_offset=[float(v) for v in self.world.model.site_pos[r.lidar.site_id]],
-            )
-        if isinstance(r, MobileRobot) and r.sonar is not None:
-            us = r.sonar.spec
-            sensors.update(
-                sonar_angles=list(us.angles), sonar_radius=us.radius, sonar_height=us.height, sonar_center=list(us.center),
-                sonar_range_min=us.range_min, sonar_range_max=us.range_max, sonar_noise_std=us.noise_std,
-            )
-        return RobotInfo(
-            id=rid, type=d.name, kind=d.kind, pose=np.array(self.world.placements[rid].pose), joint_names=d.joint_names,
-            lower=np.array(d.lower), upper=np.array(d.upper), max_speed=np.array(d.max_speed), flange_site=d.flange_site,
-            flange_frame=d.flange_frame, base_radius=d.base_radius, base=base, sensors=sensors,
-        )
-
-    def _motion_changes(self) -> list[tuple[str, bool | None, str]]:
-        """(robot, new motion state or None, news) for robots whose motion changed or that finished something."""
+    def _motion_changes(self) -> list[tuple[str, bool]]:
+        """(robot, new motion state) for robots that started or stopped moving."""
         out = []
         for rid, r in self.world.robots.items():
             moving = r.moving
-            news = ""
-            if isinstance(r, MobileRobot):
-                if r.ctrl.paths_done != self._paths_done[rid]:
-                    news = "path_done"
-                elif r.ctrl.twists_expired != self._expired[rid]:
-                    news = "twist_timeout"
-                self._paths_done[rid], self._expired[rid] = r.ctrl.paths_done, r.ctrl.twists_expired
-            changed = moving != self._moving[rid]
-            if changed or news:
-                out.append((rid, moving if changed else None, news))
-            self._moving[rid] = moving
+            if moving != self._moving[rid]:
+                out.append((rid, moving))
+                self._moving[rid] = moving
         return out
 
     def _safe_gate_motion(self, rid: str, moving: bool) -> None:
@@ -283,7 +246,7 @@ class SimPeer:
         """Count and report a refusal. ``code`` (default ``reason``) is the counter and rate-limit name:
         a fixed word, never client text, so made-up users or ids cannot grow the counters. ``reason``
         and ``detail`` may be callables, built only when the refusal is reported."""
-        code = code or (reason if isinstance(reason, str) else "refused")
+        code = code or ("refused" if callable(reason) else reason)
         self.counters["rejected"] += 1
         self.counters[f"rejected:{code}"] += 1
         known = robot in self.world.robots or robot in self.world.objects
@@ -365,9 +328,9 @@ class SimPeer:
             self._reject(rid, name, "user_mismatch", f"the command names {quote(cmd.user, 64)} but was sent on {quote(sender, 64)}'s key",
                          sender if is_valid_user(sender) else "")
             return None
-        want = COMMAND_BODIES.get(name)
-        if want is None or not isinstance(cmd.body, want):
-            self._reject(rid, name, "wrong_body", f"cmd/{name} carries {getattr(want, '__name__', '?')}, got {type(cmd.body).__name__}", cmd.user)
+        mismatch = body_mismatch(name, cmd.body)
+        if mismatch:
+            self._reject(rid, name, "wrong_body", mismatch, cmd.user)
             return None
         try:
             refusal = self.gate.admit(rid, cmd)
@@ -387,10 +350,9 @@ class SimPeer:
             self._execute(keys.parse(key).subject, admitted[0], cmd)
 
     def _execute(self, rid: str, name: str, cmd: Command) -> None:
-        robot = self.world.robots[rid]
         try:
             with self.lock:
-                clamp = self._apply(robot, name, cmd.body)
+                clamp = self._apply(rid, name, cmd.body)
         except CommandRejected as exc:
             self._reject(rid, name, exc.reason, str(exc), cmd.user)
             return
@@ -403,23 +365,13 @@ class SimPeer:
                 limit=f"clamp:{rid}",
             )
 
-    def _apply(self, robot, name: str, body: Any) -> Clamp | None:
-        if name == "joints":
-            return robot.joints(body.q, body.speed_scale)
-        if name == "twist":
-            return robot.twist(body.v, body.omega)
-        if name == "path":
-            if body.frame not in ("world", ""):
-                raise CommandRejected("bad_frame", f"paths must be in the world frame, got {body.frame!r}")
-            robot.path(body.x, body.y, body.theta)
-            return None
-        if name == "stop":
-            robot.stop()
-            return None
-        if name == "reset":
-            robot.reset()
-            return None
-        raise CommandRejected("unknown_command", f"unknown command {name!r}")
+    def _apply(self, rid: str, name: str, body: Any) -> Clamp | None:
+        handler = self._handlers[rid].get(name)
+        if handler is None:
+            robot = self.world.robots[rid]
+            raise CommandRejected("unsupported", f"robot {rid} ({robot.desc.name}) does not take {name} commands; "
+                                                 f"it takes {', '.join(self._handlers[rid]) or 'none'}")
+        return handler(body)
 
     def _on_object(self, key: str, pose: Pose) -> None:
         obj = keys.parse(key).subject  # one subscription per scene object: never a made-up id
@@ -451,65 +403,39 @@ class SimPeer:
 
         return tick
 
-    def _publish_joints(self, now: float) -> None:
-        w, world = self.fabric.world, self.world
-        out = []
-        with self.lock:
-            stamp = world.time
-            for rid, r in world.robots.items():
-                names, q, dq = r.joint_state()
-                flange = None
-                if isinstance(r, ArmRobot) and r.flange_id >= 0:
-                    pos, quat = world.flange(rid)
-                    lin, ang = world.flange_velocity(rid)
-                    flange = (pos, quat, lin, ang)
-                out.append((rid, names, q, dq, flange))
-        for rid, names, q, dq, flange in out:
-            jk = keys.robot_joints(w, rid)
-            self.fabric.publish(jk, JointState(names, q, dq, self.fabric.header(jk, stamp=stamp)))
-            if flange is not None:
-                pk = keys.robot_pose(w, rid)
-                pos, quat, lin, ang = flange
-                self.fabric.publish(pk, Pose(pos, quat, lin, ang, "world", self.fabric.header(pk, stamp=stamp)))
+    @staticmethod
+    def _gather_streams(world_name: str, world: SimWorld) -> dict[str, list[tuple[str, Stream]]]:
+        """Every robot's streams by rate group, each with its key; streams on keys fabric.keys does not know are
+        left out with a warning (a new stream name is a protocol change: fabric.keys.ROBOT_STREAMS)."""
+        groups: dict[str, list[tuple[str, Stream]]] = {g: [] for g in DEFAULT_RATES}
+        for rid, r in world.robots.items():
+            for st in r.streams():
+                if st.name not in keys.ROBOT_STREAMS:
+                    log.warning("robot %s: stream %r is not a robot stream of fabric.keys; not published", rid, st.name)
+                    continue
+                groups.setdefault(st.rate, []).append((keys.robot_stream(world_name, rid, st.name), st))
+        return {g: entries for g, entries in groups.items() if entries}
 
-    def _publish_poses(self, now: float) -> None:
-        w = self.fabric.world
-        out = []
-        with self.lock:
-            stamp = self.world.time
-            for rid, r in self.world.robots.items():
-                if isinstance(r, MobileRobot):
-                    out.append((rid, r.pose()))
-        for rid, (pos, quat, lin, ang) in out:
-            k = keys.robot_pose(w, rid)
-            self.fabric.publish(k, Pose(pos, quat, lin, ang, "world", self.fabric.header(k, stamp=stamp)))
+    def _publisher(self, entries: list[tuple[str, Stream]]) -> Callable[[float], None]:
+        """One rate group's tick: read every stream under the lock, then build and publish outside it."""
+        positions = any(st.positions for _, st in entries)
 
-    def _publish_scans(self, now: float) -> None:
-        w = self.fabric.world
-        out = []
-        with self.lock:
-            stamp = self.world.time
-            for rid, r in self.world.robots.items():
-                if isinstance(r, MobileRobot):
-                    lidar = self.world.scan(rid) if r.lidar is not None else None
-                    sonar = self.world.sonar(rid) if (r.sonar is not None and self._sonar) else None
-                    out.append((rid, r, lidar, sonar))
-        for rid, r, lidar, sonar in out:
-            if lidar is not None:
-                s = r.lidar.spec
-                k = keys.robot_scan(w, rid)
-                self.fabric.publish(
-                    k, Scan.from_ranges(lidar, angle_min=s.angle_min, angle_increment=s.angle_increment, range_max=s.range_max,
-                                        header=self.fabric.header(k, stamp=stamp)),
-                )
-            if sonar is not None:
-                s = r.sonar.spec
-                k = keys.robot_stream(w, rid, SONAR_STREAM)
-                inc = (s.angles[1] - s.angles[0]) if len(s.angles) > 1 else 0.0
-                self.fabric.publish(
-                    k, Scan.from_ranges(sonar, angle_min=s.angles[0], angle_increment=inc, range_max=s.range_max,
-                                        header=self.fabric.header(k, stamp=stamp)),
-                )
+        def publish(now: float) -> None:
+            world = self.world
+            out: list[tuple[str, Build]] = []
+            with self.lock:
+                stamp = world.time
+                if positions:
+                    world.sync()
+                physics = world.physics
+                for key, st in entries:
+                    build = st.read(physics)
+                    if build is not None:
+                        out.append((key, build))
+            for key, build in out:
+                self.fabric.publish(key, build(self.fabric.header(key, stamp=stamp)))
+
+        return publish
 
 
 __all__ = ["SimPeer", "DEFAULT_RATES"]

@@ -18,14 +18,13 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-import mujoco
 import numpy as np
 
 from fabric.messages import JointState, Pose
 from sim_peer.follower import PurePursuit
 from sim_peer.messages import ObjectInfo, RobotState, WorldState
 from sim_peer.simrobot import ArmRobot, MobileRobot
-from sim_peer.world import World
+from sim_peer.world import SimWorld
 
 __all__ = ["RobotState", "WorldState", "capture", "restore", "overlay_joints", "overlay_pose", "advance"]
 
@@ -52,7 +51,7 @@ def _robot_state(rid: str, r: Any) -> RobotState:
     return RobotState(rid, "mobile", [c.x, c.y, c.yaw], [c.v, c.omega], [c.v_cmd, c.omega_cmd], path, extra)
 
 
-def capture(world: World) -> tuple[float, int, tuple[RobotState, ...], tuple[ObjectInfo, ...]]:
+def capture(world: SimWorld) -> tuple[float, int, tuple[RobotState, ...], tuple[ObjectInfo, ...]]:
     """(sim time, steps, robots, objects) of ``world`` now; call with the world's lock held."""
     robots = tuple(_robot_state(rid, r) for rid, r in world.robots.items())
     objects = []
@@ -99,7 +98,7 @@ def _restore_robot(r: Any, s: RobotState) -> None:
         c.follower = f
 
 
-def restore(world: World, state: WorldState) -> None:
+def restore(world: SimWorld, state: WorldState) -> None:
     """Put ``world`` into ``state``: time, every robot's controller, every object. Robots or objects
     the state does not name keep what they have; call with the world's lock held."""
     for s in state.robots:
@@ -111,12 +110,10 @@ def restore(world: World, state: WorldState) -> None:
             world.set_object_pose(o.id, o.position, o.quaternion)
     world.data.time = float(state.time)
     world.steps = int(state.steps)
-    world._apply()
-    mujoco.mj_forward(world.model, world.data)
-    world._dirty = False
+    world.settle()
 
 
-def overlay_joints(world: World, rid: str, js: JointState) -> None:
+def overlay_joints(world: SimWorld, rid: str, js: JointState) -> None:
     """An arm's joints from its stream (newer than the last snapshot): where it is and how fast it goes."""
     r = world.robots.get(rid)
     if isinstance(r, ArmRobot) and js.q.shape == r.ctrl.q.shape:
@@ -125,7 +122,7 @@ def overlay_joints(world: World, rid: str, js: JointState) -> None:
         r.ctrl._idle = False
 
 
-def overlay_pose(world: World, rid: str, pose: Pose) -> None:
+def overlay_pose(world: SimWorld, rid: str, pose: Pose) -> None:
     """A base's pose from its stream: position, heading and the velocities the stream carries."""
     r = world.robots.get(rid)
     if not isinstance(r, MobileRobot):
@@ -138,7 +135,7 @@ def overlay_pose(world: World, rid: str, pose: Pose) -> None:
     c.omega = float(pose.angular[2])
 
 
-def advance(world: World, lag: dict[str, float]) -> None:
+def advance(world: SimWorld, lag: dict[str, float]) -> None:
     """Step each robot's controller alone by its ``lag`` (s): robots last heard at different sim times
     are brought to one time the way the primary would have moved them (the controllers are
     deterministic; the bumper and the rest of the world are not stepped for these few milliseconds)."""
@@ -146,6 +143,5 @@ def advance(world: World, lag: dict[str, float]) -> None:
         r = world.robots.get(rid)
         n = int(round(t / world.dt)) if t > 0 else 0
         for _ in range(min(n, 5000)):
-            r.step(world.dt)
-    world._apply()
-    world._dirty = True
+            r.before_step(world.physics)
+    world.touch()

@@ -8,21 +8,45 @@ above are invisible to the rays. A ray that hits nothing within range reads
 
 MuJoCo 4 signature: ``mj_multiRay(m, d, pnt, vec, geomgroup, flg_static,
 bodyexclude, geomid, dist, normal, nray, cutoff)``; ``dist`` is -1 for a miss.
+
+Sensors are plug-ins of the robot that holds them (:mod:`sim_peer.robot`): ``describe()`` gives their part of
+the robot's description, ``streams()`` what they publish, ``after_step()`` a check run every step.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import mujoco
 import numpy as np
 
+from fabric.messages import Scan
 from robots import LidarSpec, UltrasonicSpec
+from sim_peer.robot import Build, Physics, Stream
 
 SENSED_GROUPS = np.array([1, 1, 1, 0, 0, 0], dtype=np.uint8)  # environment 0, robots 1, extra 2; markers 3 unseen
+SONAR_STREAM = "sonar"
 
 
-class Lidar:
+class Sensor:
+    """Empty hooks: a sensor overrides the ones it needs. ``every``: its ``after_step`` runs on the steps that
+    are multiples of it, while the world is stepping."""
+
+    every = 1
+
+    def describe(self) -> dict[str, Any]:
+        """Its entries in the robot's description (``RobotInfo.sensors``)."""
+        return {}
+
+    def after_step(self, physics: Physics) -> None:
+        """A check after every step (the bumper's)."""
+
+    def streams(self) -> tuple[Stream, ...]:
+        return ()
+
+
+class Lidar(Sensor):
     """A planar LIDAR on a site: ``read(data)`` gives ranges (m) for rays from angle_min by angle_increment."""
 
     def __init__(self, model: mujoco.MjModel, spec: LidarSpec, site_id: int, body_id: int, rng: np.random.Generator | None = None) -> None:
@@ -48,8 +72,26 @@ class Lidar:
         )
         return _finish(self._dist, s.range_min, s.range_max, s.noise_std, self.rng)
 
+    def describe(self) -> dict[str, Any]:
+        li = self.spec
+        return dict(
+            lidar_site=li.site, lidar_rays=li.rays, lidar_fov=li.fov, lidar_angle_min=li.angle_min,
+            lidar_angle_increment=li.angle_increment, lidar_range_min=li.range_min, lidar_range_max=li.range_max,
+            lidar_noise_std=li.noise_std, lidar_offset=[float(v) for v in self.model.site_pos[self.site_id]],
+        )
 
-class Ultrasonic:
+    def streams(self) -> tuple[Stream, ...]:
+        return (Stream("scan", "scan", self._sample, positions=True),)
+
+    def _sample(self, physics: Physics) -> Build:
+        ranges = self.read(physics.data)
+        s = self.spec
+        return lambda header: Scan.from_ranges(
+            ranges, angle_min=s.angle_min, angle_increment=s.angle_increment, range_max=s.range_max, header=header
+        )
+
+
+class Ultrasonic(Sensor):
     """A ring of range sensors around a mobile base: ``read(data)`` gives one range (m) per sensor."""
 
     BEAM = math.radians(15.0)  # half-width of each sensor's fan of three rays
@@ -82,6 +124,23 @@ class Ultrasonic:
         hit = np.where(d >= 0, d, np.inf).min(axis=0)
         hit = np.where(np.isfinite(hit), hit, -1.0)
         return _finish(hit, s.range_min, s.range_max, s.noise_std, self.rng)
+
+    def describe(self) -> dict[str, Any]:
+        us = self.spec
+        return dict(
+            sonar_angles=list(us.angles), sonar_radius=us.radius, sonar_height=us.height, sonar_center=list(us.center),
+            sonar_range_min=us.range_min, sonar_range_max=us.range_max, sonar_noise_std=us.noise_std,
+        )
+
+    def streams(self) -> tuple[Stream, ...]:
+        """The ring on its own key (``sonar``), published with the LIDAR's rate group."""
+        return (Stream(SONAR_STREAM, "scan", self._sample, positions=True),)
+
+    def _sample(self, physics: Physics) -> Build:
+        ranges = self.read(physics.data)
+        s = self.spec
+        inc = (s.angles[1] - s.angles[0]) if len(s.angles) > 1 else 0.0
+        return lambda header: Scan.from_ranges(ranges, angle_min=s.angles[0], angle_increment=inc, range_max=s.range_max, header=header)
 
 
 def _finish(dist: np.ndarray, range_min: float, range_max: float, noise_std: float, rng: np.random.Generator | None) -> np.ndarray:

@@ -1,85 +1,72 @@
-"""One simulated robot in a world: its description, its controller, its MuJoCo addresses and sensors.
+"""The two built-in robot types: :class:`ArmRobot` (joint position control) and :class:`MobileRobot`
+(a differential-drive base with its sensors), as plug-ins with the hooks of :mod:`sim_peer.robot`.
 
-:class:`ArmRobot` and :class:`MobileRobot` share one command surface
-(``joints``, ``twist``, ``path``, ``stop``, ``reset``) so the peer can dispatch
-without caring which is which; a command a robot kind cannot take raises
-:class:`CommandRejected` with reason ``unsupported``.
+Each keeps its command methods (``joints``, ``twist``, ``path``, ``stop``, ``reset``) for tests and tools;
+``commands()`` lists the ones the peer may route to it, so a command a type does not list is refused with
+reason ``unsupported`` without the peer knowing which type it is.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 import mujoco
 import numpy as np
 
-from robots import RobotDescription
+from fabric.messages import JointState, Pose
+from sim_peer.bumper import Bumper
 from sim_peer.controllers import ArmController, BaseController, Clamp, CommandRejected
 from sim_peer.follower import PurePursuit
-from sim_peer.sensors import Lidar, Ultrasonic
+from sim_peer.messages import RobotInfo
+from sim_peer.robot import Build, CommandHandler, Mount, Note, Physics, Robot, Stream, check_hooks
+from sim_peer.sensors import Lidar, Sensor, Ultrasonic
+
+def _joint_addresses(model: mujoco.MjModel, prefix: str, names) -> tuple[np.ndarray, np.ndarray]:
+    qadr = np.array([model.joint(prefix + j).qposadr[0] for j in names], dtype=np.int64)
+    vadr = np.array([model.joint(prefix + j).dofadr[0] for j in names], dtype=np.int64)
+    return qadr, vadr
 
 
-class SimRobot:
-    """Common surface; subclasses fill in ``apply`` (controller -> qpos) and the commands they support."""
+def _joint_stream(robot: Any) -> Stream:
+    def read(physics: Physics) -> Build:
+        names, q, dq = robot.joint_state()
+        return lambda header: JointState(names, q, dq, header)
 
-    kind = ""
-
-    def __init__(self, robot_id: str, desc: RobotDescription, model: mujoco.MjModel, prefix: str) -> None:
-        self.id = robot_id
-        self.desc = desc
-        self.model = model
-        self.prefix = prefix
-        self.body_id = model.body(prefix + desc.root_body).id
-
-    # commands --------------------------------------------------------------
-    def joints(self, q, speed_scale: float = 1.0) -> Clamp | None:
-        raise CommandRejected("unsupported", f"robot {self.id} ({self.desc.name}) does not take joint targets")
-
-    def twist(self, v: float, omega: float) -> Clamp | None:
-        raise CommandRejected("unsupported", f"robot {self.id} ({self.desc.name}) does not take twists")
-
-    def path(self, x, y, theta) -> None:
-        raise CommandRejected("unsupported", f"robot {self.id} ({self.desc.name}) does not follow paths")
-
-    def stop(self) -> None:
-        raise NotImplementedError
-
-    def reset(self) -> None:
-        raise NotImplementedError
-
-    # stepping ---------------------------------------------------------------
-    def step(self, dt: float) -> None:
-        raise NotImplementedError
-
-    def apply(self, data: mujoco.MjData) -> None:
-        """Write the controller's state into ``data.qpos``/``qvel``."""
-        raise NotImplementedError
-
-    @property
-    def moving(self) -> bool:
-        raise NotImplementedError
-
-    def joint_state(self) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
-        raise NotImplementedError
-
-    def state(self, data: mujoco.MjData) -> dict[str, Any]:
-        raise NotImplementedError
+    return Stream("joints", "joints", read)
 
 
-class ArmRobot(SimRobot):
+@check_hooks
+class ArmRobot(Robot):
+    """An arm driven joint by joint toward a target; publishes its joints and, with them, its flange pose."""
+
     kind = "arm"
 
-    def __init__(self, robot_id: str, desc: RobotDescription, model: mujoco.MjModel, prefix: str) -> None:
-        super().__init__(robot_id, desc, model, prefix)
+    def __init__(self, mount: Mount) -> None:
+        super().__init__(mount)
+        desc, model, prefix = mount.desc, mount.model, mount.prefix
         self.ctrl = ArmController(desc.joint_names, desc.lower, desc.upper, desc.max_speed)
-        self.qadr = np.array([model.joint(prefix + j).qposadr[0] for j in desc.joint_names])
-        self.vadr = np.array([model.joint(prefix + j).dofadr[0] for j in desc.joint_names])
+        self.qadr, self.vadr = _joint_addresses(model, prefix, desc.joint_names)
         self.flange_id = model.site(prefix + desc.flange_site).id if desc.flange_site else -1
-        self._dynamic = True  # the world clears this when mj_step never runs (then only the controller writes qpos)
+
+    # commands ---------------------------------------------------------------
+    def commands(self) -> Mapping[str, CommandHandler]:
+        return {
+            "joints": lambda body: self.joints(body.q, body.speed_scale),
+            "stop": lambda body: self.stop(),
+            "reset": lambda body: self.reset(),
+        }
 
     def joints(self, q, speed_scale: float = 1.0) -> Clamp | None:
         return self.ctrl.set_target(q, speed_scale)
+
+    def twist(self, v: float, omega: float) -> Clamp | None:
+        raise self.unsupported("take twists")
+
+    def path(self, x, y, theta) -> None:
+        raise self.unsupported("follow paths")
 
     def stop(self) -> None:
         self.ctrl.stop()
@@ -87,18 +74,38 @@ class ArmRobot(SimRobot):
     def reset(self) -> None:
         self.ctrl.reset()
 
-    def step(self, dt: float) -> None:
-        self.ctrl.step(dt)
+    # hooks ------------------------------------------------------------------
+    def initialize(self, physics: Physics) -> None:
+        self.ctrl.teleport(np.zeros(self.ctrl.dof))
 
-    def apply(self, data: mujoco.MjData) -> None:
-        if self.ctrl._idle and not self._dynamic:
+    def before_step(self, physics: Physics) -> None:
+        self.ctrl.step(physics.dt)
+
+    def after_step(self, physics: Physics) -> None:
+        if self.ctrl.idle and not physics.dynamic:
             return  # nothing moved and nothing else writes these joints
-        data.qpos[self.qadr] = self.ctrl.q
-        data.qvel[self.vadr] = self.ctrl.dq
+        physics.data.qpos[self.qadr] = self.ctrl.q
+        physics.data.qvel[self.vadr] = self.ctrl.dq
 
+    def streams(self) -> tuple[Stream, ...]:
+        out = [_joint_stream(self)]
+        if self.flange_id >= 0:
+            out.append(Stream("pose", "joints", self._flange_sample, positions=True))
+        return tuple(out)
+
+    def _flange_sample(self, physics: Physics) -> Build:
+        pos, quat = self.flange(physics.data)
+        lin, ang = self.flange_velocity(physics.data)
+        return lambda header: Pose(pos, quat, lin, ang, "world", header)
+
+    # state ------------------------------------------------------------------
     @property
     def moving(self) -> bool:
         return self.ctrl.moving
+
+    @property
+    def kinematic_dofs(self) -> int:
+        return len(self.vadr)
 
     def joint_state(self):
         return self.desc.joint_names, self.ctrl.q.copy(), self.ctrl.dq.copy()
@@ -116,8 +123,8 @@ class ArmRobot(SimRobot):
         mujoco.mj_jacSite(self.model, data, jacp, jacr, self.flange_id)
         return jacp[:, self.vadr] @ self.ctrl.dq, jacr[:, self.vadr] @ self.ctrl.dq
 
-    def state(self, data: mujoco.MjData) -> dict[str, Any]:
-        pos, quat = self.flange(data)
+    def state(self, physics: Physics) -> dict[str, Any]:
+        pos, _ = self.flange(physics.data)
         return {
             "type": self.desc.name,
             "kind": self.kind,
@@ -128,23 +135,48 @@ class ArmRobot(SimRobot):
         }
 
 
-class MobileRobot(SimRobot):
+@check_hooks
+class MobileRobot(Robot):
+    """A differential-drive base (twists, paths) with a LIDAR, an ultrasonic ring and a bumper as its sensors."""
+
     kind = "mobile"
 
-    def __init__(
-        self, robot_id: str, desc: RobotDescription, model: mujoco.MjModel, prefix: str, pose, rng=None, twist_timeout: float | None = None
-    ) -> None:
-        super().__init__(robot_id, desc, model, prefix)
+    def __init__(self, mount: Mount) -> None:
+        super().__init__(mount)
+        desc, model, prefix = mount.desc, mount.model, mount.prefix
         assert desc.base is not None
-        self.ctrl = BaseController(desc.base, pose, twist_timeout=twist_timeout)
-        self.qadr = np.array([model.joint(prefix + j).qposadr[0] for j in desc.base_joints])
-        self.vadr = np.array([model.joint(prefix + j).dofadr[0] for j in desc.base_joints])
+        x, y, _, yaw = mount.pose
+        self.ctrl = BaseController(desc.base, (x, y, yaw), twist_timeout=mount.twist_timeout, on_news=self._on_news)
+        self.qadr, self.vadr = _joint_addresses(model, prefix, desc.base_joints)
         self._qadr3 = tuple(int(a) for a in self.qadr)
         self._vadr3 = tuple(int(a) for a in self.vadr)
         self.lidar = (
-            Lidar(model, desc.lidar, model.site(prefix + desc.lidar.site).id, self.body_id, rng) if desc.lidar else None
+            Lidar(model, desc.lidar, model.site(prefix + desc.lidar.site).id, self.body_id, mount.rng) if desc.lidar else None
         )
-        self.sonar = Ultrasonic(model, desc.ultrasonic, self.body_id, rng) if desc.ultrasonic else None
+        self.sonar = Ultrasonic(model, desc.ultrasonic, self.body_id, mount.rng) if desc.ultrasonic else None
+        self.bumper = Bumper(self, float(model.opt.timestep)) if mount.bumper else None
+        self.sensors: tuple[Sensor, ...] = tuple(s for s in (self.lidar, self.sonar, self.bumper) if s is not None)
+        checked = [s for s in self.sensors if type(s).after_step is not Sensor.after_step]
+        self._checks = tuple((s.after_step, s.every) for s in checked)
+        self._check_every = math.gcd(*(s.every for s in checked)) if checked else 0  # steps between sensor checks
+
+    @staticmethod
+    def frame(pose: tuple[float, float, float, float]) -> tuple[list[float], list[float]]:
+        """At the height of the pose only: the base joints carry x, y and yaw."""
+        return [0.0, 0.0, pose[2]], [1.0, 0.0, 0.0, 0.0]
+
+    # commands ---------------------------------------------------------------
+    def commands(self) -> Mapping[str, CommandHandler]:
+        return {"twist": lambda body: self.twist(body.v, body.omega), "path": self._path_command,
+                "stop": lambda body: self.stop(), "reset": lambda body: self.reset()}
+
+    def _path_command(self, body: Any) -> None:
+        if body.frame not in ("world", ""):
+            raise CommandRejected("bad_frame", f"paths must be in the world frame, got {body.frame!r}")
+        self.path(body.x, body.y, body.theta)
+
+    def joints(self, q, speed_scale: float = 1.0) -> Clamp | None:
+        raise self.unsupported("take joint targets")
 
     def twist(self, v: float, omega: float) -> Clamp | None:
         return self.ctrl.twist(v, omega)
@@ -160,20 +192,61 @@ class MobileRobot(SimRobot):
     def reset(self) -> None:
         self.ctrl.reset()
 
-    def step(self, dt: float) -> None:
-        self.ctrl.step(dt)
+    # hooks ------------------------------------------------------------------
+    def describe(self) -> RobotInfo:
+        info = super().describe()
+        b = self.desc.base
+        assert b is not None
+        base = {
+            "radius": b.radius, "height": b.height, "wheel_separation": b.wheel_separation, "wheel_radius": b.wheel_radius,
+            "max_speed": b.max_speed, "max_omega": b.max_omega, "max_accel": b.max_accel, "max_alpha": b.max_alpha,
+        }
+        sensors: dict[str, Any] = {}
+        for s in self.sensors:
+            sensors.update(s.describe())
+        return replace(info, base=base, sensors=sensors)
 
-    def apply(self, data: mujoco.MjData) -> None:
-        c = self.ctrl
-        q, v = data.qpos, data.qvel
+    def initialize(self, physics: Physics) -> None:
+        self.ctrl.reset()
+
+    def before_step(self, physics: Physics) -> None:
+        self.ctrl.step(physics.dt)
+
+    def _on_news(self, news: str) -> None:
+        if news == "path_done":
+            self.note(Note("path_done", "path followed to its end"))
+        else:
+            self.note(Note("twist_timeout", "no fresh twist within the timeout: stopping"))
+
+    def after_step(self, physics: Physics) -> None:
+        c, d = self.ctrl, physics.data
+        q, v = d.qpos, d.qvel
         qx, qy, qyaw = self._qadr3
         vx, vy, vyaw = self._vadr3
         q[qx], q[qy], q[qyaw] = c.x, c.y, c.yaw  # scalar writes: several times cheaper than fancy indexing
         v[vx], v[vy], v[vyaw] = c.v * math.cos(c.yaw), c.v * math.sin(c.yaw), c.omega
+        every = self._check_every
+        if every and not physics.steps % every and physics.stepping:
+            for check, every in self._checks:
+                if not physics.steps % every:
+                    check(physics)
 
+    def streams(self) -> tuple[Stream, ...]:
+        own = (_joint_stream(self), Stream("pose", "pose", self._pose_sample))
+        return own + tuple(st for s in self.sensors for st in s.streams())
+
+    def _pose_sample(self, physics: Physics) -> Build:
+        pos, quat, lin, ang = self.pose()
+        return lambda header: Pose(pos, quat, lin, ang, "world", header)
+
+    # state ------------------------------------------------------------------
     @property
     def moving(self) -> bool:
         return self.ctrl.moving
+
+    @property
+    def kinematic_dofs(self) -> int:
+        return len(self.vadr)
 
     @property
     def following(self) -> bool:
@@ -192,7 +265,7 @@ class MobileRobot(SimRobot):
         ang = np.array([0.0, 0.0, c.omega])
         return pos, quat, lin, ang
 
-    def state(self, data: mujoco.MjData) -> dict[str, Any]:
+    def state(self, physics: Physics) -> dict[str, Any]:
         c = self.ctrl
         return {
             "type": self.desc.name,
@@ -202,3 +275,6 @@ class MobileRobot(SimRobot):
             "moving": self.moving,
             "following": self.following,
         }
+
+
+__all__ = ["ArmRobot", "MobileRobot"]

@@ -33,7 +33,7 @@ from sim_peer import election as el
 from sim_peer import replica
 from sim_peer.messages import WorldState
 from sim_peer.peer import SimPeer
-from sim_peer.world import World
+from sim_peer.world import SimWorld
 
 log = logging.getLogger("robofabric.sim")
 
@@ -42,7 +42,7 @@ __all__ = ["ReplicaHost", "run_replicated", "POLL_S"]
 POLL_S = 0.05
 """How often a standby asks the primary for the whole state (the streams fill in between)."""
 
-GateFactory = Callable[[Fabric, World, Any], Any]
+GateFactory = Callable[[Fabric, SimWorld, Any], Any]
 
 
 class ReplicaHost:
@@ -51,7 +51,7 @@ class ReplicaHost:
     def __init__(
         self,
         fabric: Fabric,
-        world: World,
+        world: SimWorld,
         make_gate: GateFactory,
         *,
         standby: bool,
@@ -312,7 +312,7 @@ class ReplicaHost:
 
 def run_replicated(
     open_fabric: Callable[[], Fabric],
-    make_world: Callable[[], World],
+    make_world: Callable[[], SimWorld],
     make_gate: GateFactory,
     stop: threading.Event,
     *,

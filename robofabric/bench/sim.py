@@ -64,10 +64,10 @@ def command(
     out: Annotated[Optional[Path], typer.Option(help="Write the markdown table to this file.")] = None,
 ) -> None:
     """Real-time factor of `combined` with LIDAR at 20 Hz, one 240-ray scan's cost, RTF with N mobile robots."""
-    from sim_peer.world import World
+    from sim_peer.world import SimWorld
 
     rows = []
-    w = World("combined", seed=1)
+    w = SimWorld("combined", seed=1)
     r = rtf(w, seconds)
     label = "combined (Meca500 sweeping + Reeman driving), LIDAR 240 rays @ 20 Hz + ultrasonic, bumper on"
     if w.collisions:
@@ -77,7 +77,7 @@ def command(
     rows.append(("one 240-ray LIDAR scan (combined), median / p99", f"{med:.1f} / {p99:.1f} us", "<= 50 us", "ok" if med <= 50 else "MISSED"))
     for n in [int(c) for c in counts.split(",") if c.strip()]:
         extra = [f"reeman:m{i}" for i in range(n)]
-        wn = World("warehouse", extra, scene_robots=False, seed=1, bumper=False)  # 0.8 m apart, 1 m circles: they cross
+        wn = SimWorld("warehouse", extra, scene_robots=False, seed=1, bumper=False)  # 0.8 m apart, 1 m circles: they cross
         secs = max(1.0, seconds / max(1, n / 5))
         r = rtf(wn, secs)
         rows.append((f"warehouse, {n} mobile robots, each LIDAR @ 20 Hz + ultrasonic, bumper off", f"{r:.1f}x", "", ""))

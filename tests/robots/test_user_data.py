@@ -5,7 +5,7 @@ from __future__ import annotations
 import shutil
 
 import robots
-from sim_peer.world import World
+from sim_peer.world import SimWorld
 
 
 def test_a_robot_and_a_scene_added_as_files_are_loaded_and_simulated(tmp_path, monkeypatch):
@@ -23,7 +23,7 @@ def test_a_robot_and_a_scene_added_as_files_are_loaded_and_simulated(tmp_path, m
     )
     monkeypatch.setenv(robots.description.ENV_PATH, str(tmp_path))
     assert "scout" in robots.available_robots() and "hall" in robots.available_scenes()
-    w = World("hall", ["reeman:r1@-1,0"])
+    w = SimWorld("hall", ["reeman:r1@-1,0"])
     w.step()
     assert w.robot("s1").desc.name == "scout" and w.scan("s1").shape == (135,)
     assert w.scan("r1").shape == (240,)

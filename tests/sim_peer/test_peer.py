@@ -13,7 +13,7 @@ from fabric.messages import Command, Event, JointState, JointTarget, Pose, Reset
 from fabric.testing import robofabric_cmd, wait_until
 from sim_peer.messages import WorldInfo
 from sim_peer.peer import SimPeer
-from sim_peer.world import World
+from sim_peer.world import SimWorld
 
 
 class Inbox:
@@ -58,7 +58,7 @@ class RecordingGate:
 def sim(world, connect):
     gate = RecordingGate()
     fab = connect("sim", "sim-test")
-    peer = SimPeer(fab, World("combined", seed=3), gate=gate, rates={"joints": 50, "pose": 50, "scan": 20})
+    peer = SimPeer(fab, SimWorld("combined", seed=3), gate=gate, rates={"joints": 50, "pose": 50, "scan": 20})
     peer.start()
     try:
         yield peer, gate
@@ -258,7 +258,7 @@ def test_paths_and_bumps_are_announced_as_events(world, connect, user):
     from fabric.messages import Path
 
     fab, inbox = user
-    peer = SimPeer(connect("sim", "fast-sim"), World("combined"), speed=10.0)
+    peer = SimPeer(connect("sim", "fast-sim"), SimWorld("combined"), speed=10.0)
     with peer:
         xs = np.linspace(0.0, 0.6, 7)
         fab.publish(keys.robot_cmd(world, "base1", "path", "alice"), Command("alice", 1, Path(xs, np.zeros(7), np.zeros(7))))

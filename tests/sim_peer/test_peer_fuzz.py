@@ -15,9 +15,9 @@ from hypothesis import strategies as st
 from fabric import keys
 from fabric.messages import Command, Event, Header, JointTarget, Path, Reset, Stop, Twist
 from sim_peer.peer import SimPeer
-from sim_peer.world import World
+from sim_peer.world import SimWorld
 
-WORLD = World("combined")
+WORLD = SimWorld("combined")
 
 
 class StubFabric:

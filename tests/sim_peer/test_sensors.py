@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fabric.messages import Scan
-from sim_peer.world import World
+from sim_peer.world import SimWorld
 from tests.sim_peer.conftest import FRONT, LEFT, RIGHT
 
 QUANTUM = 0.0005  # Scan carries millimetres: rounding error is at most half of one
@@ -32,7 +32,7 @@ def expected_ranges(px: float, py: float, heading: float, angles: np.ndarray, rm
 
 @pytest.mark.parametrize("pose", [(0.0, 0.0, 0.0), (0.4, 0.3, math.radians(25)), (-1.0, -0.2, math.radians(-40))])
 def test_lidar_ranges_match_the_walls_to_the_quantisation_step(room, pose):
-    w = World(room)
+    w = SimWorld(room)
     bot = w.robot("bot")
     bot.ctrl.teleport(*pose)
     w.step()
@@ -49,26 +49,26 @@ def test_lidar_ranges_match_the_walls_to_the_quantisation_step(room, pose):
 
 
 def test_markers_are_invisible_but_other_robots_are_seen(room):
-    w = World(room, ["reeman:other@1.2,0"])
+    w = SimWorld(room, ["reeman:other@1.2,0"])
     w.step()
     ranges = w.scan("bot")
     mid = len(ranges) // 2  # 0.28 deg off the axis with 240 rays: 1 mm is plenty
     # straight ahead: the other robot's chassis (x = 1.2 + 0.05 - 0.25) rather than the wall, not the goal marker at 1 m
     assert abs(ranges[mid] - (1.2 + 0.05 - 0.25 - 0.22)) < 1e-3
-    w2 = World(room)
+    w2 = SimWorld(room)
     w2.step()
     assert abs(w2.scan("bot")[mid] - (FRONT - 0.22)) < 1e-3
 
 
 def test_configurable_ray_count_and_field_of_view(room):
-    w = World(room, lidar_rays=135, lidar_fov_deg=134)
+    w = SimWorld(room, lidar_rays=135, lidar_fov_deg=134)
     w.step()
     assert w.scan("bot").shape == (135,)
     assert math.isclose(w.robot("bot").desc.lidar.angle_increment, math.radians(1))
 
 
 def test_nothing_hit_reads_range_max(room):
-    w = World(room)
+    w = SimWorld(room)
     w.robot("bot").ctrl.teleport(-2.5, 0.0, math.pi)  # facing out of the open side of the room (walls end at x = -3)
     w.step()
     spec = w.robot("bot").desc.lidar
@@ -76,22 +76,22 @@ def test_nothing_hit_reads_range_max(room):
 
 
 def test_noise_is_gaussian_and_seeded(room):
-    a = World(room, seed=7, noise_std=0.01)
-    b = World(room, seed=7, noise_std=0.01)
-    c = World(room, seed=8, noise_std=0.01)
+    a = SimWorld(room, seed=7, noise_std=0.01)
+    b = SimWorld(room, seed=7, noise_std=0.01)
+    c = SimWorld(room, seed=8, noise_std=0.01)
     for w in (a, b, c):
         w.step()
     ra, rb, rc = a.scan("bot"), b.scan("bot"), c.scan("bot")
     np.testing.assert_array_equal(ra, rb)
     assert not np.array_equal(ra, rc)
-    clean = World(room)
+    clean = SimWorld(room)
     clean.step()
     err = ra - clean.scan("bot")
     assert 0.007 < float(np.std(err)) < 0.013 and abs(float(np.mean(err))) < 0.003
 
 
 def test_ultrasonic_ring_reads_the_walls(room):
-    w = World(room)
+    w = SimWorld(room)
     w.step()
     sonar = w.sonar("bot")
     spec = w.robot("bot").desc.ultrasonic

@@ -7,7 +7,7 @@ import types
 
 from fabric.gate import OpenGate
 from sim_peer.cli import make_gate
-from sim_peer.world import World
+from sim_peer.world import SimWorld
 
 
 class FakeAuthority:
@@ -23,7 +23,7 @@ class FakeAuthority:
 
 def test_ownership_gate_is_built_with_exclusive_robots_and_scene_objects(monkeypatch):
     monkeypatch.setitem(sys.modules, "ownership", types.SimpleNamespace(Authority=FakeAuthority))
-    w = World("combined")
+    w = SimWorld("combined")
     gate = make_gate("FAB", w, True)
     assert isinstance(gate, FakeAuthority) and gate.fabric == "FAB" and gate.started  # leases tick from the start
     assert gate.objects == {"arm1": "exclusive", "base1": "exclusive", "target": "scene", "goal": "scene"}
@@ -31,10 +31,10 @@ def test_ownership_gate_is_built_with_exclusive_robots_and_scene_objects(monkeyp
 
 def test_without_an_authority_the_sim_warns_and_opens_the_gate(monkeypatch, capsys):
     monkeypatch.setitem(sys.modules, "ownership", types.ModuleType("ownership"))  # no Authority in it
-    gate = make_gate("FAB", World("arm_cell"), True)
+    gate = make_gate("FAB", SimWorld("arm_cell"), True)
     assert isinstance(gate, OpenGate)
     assert "not gated" in capsys.readouterr().err
-    assert isinstance(make_gate("FAB", World("arm_cell"), False), OpenGate)
+    assert isinstance(make_gate("FAB", SimWorld("arm_cell"), False), OpenGate)
 
 
 def test_sim_list_shows_robot_types_and_scenes():

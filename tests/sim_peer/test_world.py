@@ -9,20 +9,20 @@ import pytest
 
 import robots as robots_pkg
 from sim_peer.controllers import CommandRejected
-from sim_peer.world import World, WorldError
+from sim_peer.world import SimWorld, WorldError
 
 
 @pytest.fixture(scope="module")
-def combined() -> World:
-    return World("combined")
+def combined() -> SimWorld:
+    return SimWorld("combined")
 
 
-def run(w: World, seconds: float) -> None:
+def run(w: SimWorld, seconds: float) -> None:
     w.step(int(round(seconds / w.dt)))
 
 
 def test_zero_pose_flange_is_190_0_308_mm_from_the_arm_base():
-    w = World("arm_cell")
+    w = SimWorld("arm_cell")
     x, y, z, _ = w.placements["arm1"].pose
     pos, quat = w.flange("arm1")
     np.testing.assert_allclose((pos - [x, y, z]) * 1000, [190.0, 0.0, 308.0], atol=1e-9)
@@ -30,7 +30,7 @@ def test_zero_pose_flange_is_190_0_308_mm_from_the_arm_base():
 
 
 def test_joint_speed_limits_are_obeyed_over_a_move_and_the_target_is_reached():
-    w = World("arm_cell")
+    w = SimWorld("arm_cell")
     arm = w.robot("arm1")
     target = np.array([1.0, 0.5, -1.0, 2.0, -1.5, 3.0])
     assert arm.joints(target) is None
@@ -54,7 +54,7 @@ def test_joint_speed_limits_are_obeyed_over_a_move_and_the_target_is_reached():
 
 
 def test_speed_scale_slows_the_move():
-    w = World("arm_cell")
+    w = SimWorld("arm_cell")
     arm = w.robot("arm1")
     arm.joints([0.0, 0.0, 0.0, 0.0, 0.0, 1.0], speed_scale=0.5)
     w.step()
@@ -62,7 +62,7 @@ def test_speed_scale_slows_the_move():
 
 
 def test_out_of_range_targets_are_clamped_and_reported():
-    w = World("arm_cell")
+    w = SimWorld("arm_cell")
     arm = w.robot("arm1")
     clamp = arm.joints([0.0, math.radians(120), math.radians(-200), 0.0, 0.0, 0.0])
     assert clamp is not None and clamp.what == ("joint_2", "joint_3")
@@ -76,7 +76,7 @@ def test_out_of_range_targets_are_clamped_and_reported():
     [([0.0] * 5, "wrong_joint_count"), ([0.0] * 7, "wrong_joint_count"), ([0, 0, math.nan, 0, 0, 0], "not_finite"), ([math.inf] * 6, "not_finite")],
 )
 def test_bad_joint_targets_are_rejected_and_the_last_valid_one_kept(q, reason):
-    w = World("arm_cell")
+    w = SimWorld("arm_cell")
     arm = w.robot("arm1")
     arm.joints([0.3] * 6)
     with pytest.raises(CommandRejected) as exc:
@@ -87,7 +87,7 @@ def test_bad_joint_targets_are_rejected_and_the_last_valid_one_kept(q, reason):
 
 
 def test_stop_holds_all_motion_and_reset_returns_to_zero():
-    w = World("combined")
+    w = SimWorld("combined")
     arm, base = w.robot("arm1"), w.robot("base1")
     arm.joints([1.0, 0.8, -1.0, 1.0, 1.0, 1.0])
     base.twist(0.5, 0.3)
@@ -109,7 +109,7 @@ def test_stop_holds_all_motion_and_reset_returns_to_zero():
 
 
 def test_a_twist_of_v_for_t_moves_v_t():
-    w = World("warehouse")
+    w = SimWorld("warehouse")
     base = w.robot("base1")
     v, t = 0.6, 3.0
     a = base.desc.base.max_accel
@@ -123,7 +123,7 @@ def test_a_twist_of_v_for_t_moves_v_t():
 
 
 def test_an_in_place_turn_keeps_the_axle_midpoint_fixed():
-    w = World("warehouse")
+    w = SimWorld("warehouse")
     base = w.robot("base1")
     m = w.model
     left, right, chassis = (m.geom(f"base1/{n}").id for n in ("wheel_left", "wheel_right", "chassis"))
@@ -143,7 +143,7 @@ def test_an_in_place_turn_keeps_the_axle_midpoint_fixed():
 
 
 def test_twists_beyond_limits_are_clamped_and_absurd_ones_refused():
-    w = World("warehouse")
+    w = SimWorld("warehouse")
     base = w.robot("base1")
     clamp = base.twist(2.0, 0.0)
     assert clamp is not None and clamp.what == ("v",) and clamp.applied == (base.desc.base.max_speed,)
@@ -159,7 +159,7 @@ def test_twists_beyond_limits_are_clamped_and_absurd_ones_refused():
 
 
 def test_the_path_follower_drives_to_the_end_of_the_path():
-    w = World("warehouse")
+    w = SimWorld("warehouse")
     base = w.robot("base1")
     xs = np.concatenate([np.linspace(0, 1.5, 16), np.full(15, 1.5)])
     ys = np.concatenate([np.zeros(16), np.linspace(0.1, 1.5, 15)])
@@ -175,7 +175,7 @@ def test_the_path_follower_drives_to_the_end_of_the_path():
 
 
 def test_a_path_behind_the_robot_makes_it_turn_to_face_it_first():
-    w = World("warehouse")
+    w = SimWorld("warehouse")
     base = w.robot("base1")
     base.path(np.linspace(0, -1.0, 11), np.zeros(11), None)
     xs = []
@@ -189,26 +189,26 @@ def test_a_path_behind_the_robot_makes_it_turn_to_face_it_first():
 
 
 def test_robots_have_ids_and_bad_worlds_are_clear_errors():
-    w = World("combined", ["reeman:base2", "reeman:base3@-3,0,90"])
+    w = SimWorld("combined", ["reeman:base2", "reeman:base3@-3,0,90"])
     assert set(w.robots) == {"arm1", "base1", "base2", "base3"}
     assert w.placements["base3"].pose[:2] == (-3.0, 0.0)
     assert math.isclose(w.robot("base3").ctrl.yaw, math.pi / 2)
     with pytest.raises(WorldError, match="unique"):
-        World("combined", ["reeman:base1"])
+        SimWorld("combined", ["reeman:base1"])
     with pytest.raises(WorldError, match="unknown robot type"):
-        World("combined", ["tank:t1"])
+        SimWorld("combined", ["tank:t1"])
     with pytest.raises(WorldError, match="TYPE:ID"):
-        World("combined", ["reeman"])
+        SimWorld("combined", ["reeman"])
     with pytest.raises(WorldError, match="unknown scene"):
-        World("nowhere")
+        SimWorld("nowhere")
     with pytest.raises(WorldError, match="also scene objects"):
-        World("combined", ["reeman:target"])
+        SimWorld("combined", ["reeman:target"])
     with pytest.raises(WorldError, match="forbidden"):
-        World("combined", [robots_pkg.SceneRobot("reeman", "a/b", (1.0, 1.0, 0.0, 0.0))])
+        SimWorld("combined", [robots_pkg.SceneRobot("reeman", "a/b", (1.0, 1.0, 0.0, 0.0))])
 
 
 def test_moving_flag_follows_motion_and_objects_move():
-    w = World("combined")
+    w = SimWorld("combined")
     assert w.moving() == {"arm1": False, "base1": False}
     w.robot("arm1").joints([0.2] * 6)
     w.step()
@@ -231,7 +231,7 @@ def test_moving_flag_follows_motion_and_objects_move():
 def test_the_bumper_stops_a_base_before_a_wall(room):
     from tests.sim_peer.conftest import FRONT
 
-    w = World(room)
+    w = SimWorld(room)
     base = w.robot("bot")
     base.twist(1.0, 0.0)
     run(w, 4.0)
@@ -241,7 +241,7 @@ def test_the_bumper_stops_a_base_before_a_wall(room):
     base.twist(-0.3, 0.0)  # backing away is allowed
     run(w, 1.0)
     assert base.ctrl.x < FRONT - 0.3 - 0.2 and len(w.collisions) == 1
-    quiet = World(room, bumper=False)
+    quiet = SimWorld(room, bumper=False)
     quiet.robot("bot").twist(1.0, 0.0)
     run(quiet, 4.0)
     assert quiet.robot("bot").ctrl.x > FRONT and not quiet.collisions  # without it, walls are no obstacle
@@ -260,18 +260,18 @@ def test_free_bodies_are_simulated_while_robots_stay_kinematic(tmp_path):
         '[scene]\nmjcf = "drop.xml"\n[[robot]]\ntype = "meca500"\nid = "arm"\npose = [0.0, 0.0, 0.0, 0.0]\n'
         '[[object]]\nid = "target"\n'
     )
-    w = World(robots.scene(str(tmp_path / "drop.toml")))
+    w = SimWorld(robots.scene(str(tmp_path / "drop.toml")))
     assert w.dynamic
     w.robot("arm").joints([0.0, 0.5, 0.0, 0.0, 0.0, 0.0])
     run(w, 1.0)
     w.sync()
     assert w.data.xpos[w.model.body("box").id][2] < 0.06  # fell onto the floor under gravity
     np.testing.assert_allclose(w.data.qpos[w.robot("arm").qadr], [0.0, 0.5, 0.0, 0.0, 0.0, 0.0], atol=1e-12)  # held, no sag
-    assert not World("combined").dynamic  # only kinematic robots and markers: no dynamics to integrate
+    assert not SimWorld("combined").dynamic  # only kinematic robots and markers: no dynamics to integrate
 
 
 def test_with_a_twist_timeout_a_quiet_sender_lets_the_base_stop():
-    w = World("warehouse", twist_timeout=0.5)
+    w = SimWorld("warehouse", twist_timeout=0.5)
     base = w.robot("base1")
     base.twist(0.5, 0.0)
     run(w, 0.4)
@@ -281,7 +281,7 @@ def test_with_a_twist_timeout_a_quiet_sender_lets_the_base_stop():
     run(w, 1.5)
     assert not base.moving and base.ctrl.twists_expired == 1
     with pytest.raises(WorldError, match="twist timeout"):
-        World("warehouse", twist_timeout=0)
+        SimWorld("warehouse", twist_timeout=0)
 
 
 def test_the_sim_core_does_not_import_zenoh():

@@ -7,11 +7,11 @@ import numpy as np
 from fabric.codec import decode, encode
 from sim_peer import replica
 from sim_peer.messages import WorldState
-from sim_peer.world import World
+from sim_peer.world import SimWorld
 
 
-def _moving_world() -> World:
-    w = World("combined", seed=1)
+def _moving_world() -> SimWorld:
+    w = SimWorld("combined", seed=1)
     w.robots["arm1"].joints(np.radians([60.0, 30.0, -40.0, 30.0, 50.0, -30.0]), 0.3)
     w.robots["base1"].path(np.linspace(0, 1.0, 20), np.linspace(0, 0.8, 20), np.full(20, 0.67))
     w.set_object_pose("target", [3.2, 0.1, 1.0])
@@ -24,7 +24,7 @@ def test_a_restored_world_continues_the_motions_in_progress_exactly():
     t, steps, robots, objects = replica.capture(w)
     state = decode(encode(WorldState(t, steps, robots, objects)))
     assert state.robot("base1").path.shape[0] == 20 and state.robot("arm1").extra["scale"] == 0.3
-    w2 = World("combined", seed=1)
+    w2 = SimWorld("combined", seed=1)
     replica.restore(w2, state)
     assert w2.time == w.time and w2.steps == w.steps
     assert np.allclose(w2.object_pose("target")[0], [3.2, 0.1, 1.0])
@@ -47,7 +47,7 @@ def test_stream_samples_and_advance_bring_robots_to_one_time():
     names, q, dq = w.robots["arm1"].joint_state()
     js = JointState(names, q, dq, Header(stamp=w.time))
     w.step(15)  # ...and dies 30 ms after that
-    w2 = World("combined", seed=1)
+    w2 = SimWorld("combined", seed=1)
     replica.restore(w2, state)
     replica.overlay_joints(w2, "arm1", js)
     replica.advance(w2, {"arm1": w.time - js.header.stamp, "base1": w.time - state.time})

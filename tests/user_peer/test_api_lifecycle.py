@@ -186,7 +186,7 @@ EVERYTHING = """
     from fabric.recording import Recorder
     from sim_peer.cli import make_gate
     from sim_peer.peer import SimPeer
-    from sim_peer.world import World as SimWorld
+    from sim_peer.world import SimWorld
     from compute_peer.peer import ComputeOptions, ComputePeer
     from user_peer.api import World
     from user_peer.viewer import Viewer, ViewerOptions

@@ -7,7 +7,7 @@ import threading
 
 from fabric.testing import client_config, wait_until
 from sim_peer.peer import SimPeer
-from sim_peer.world import World as SimWorld
+from sim_peer.world import SimWorld
 from user_peer import notebook
 from user_peer.api import World
 

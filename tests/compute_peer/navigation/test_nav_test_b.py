@@ -20,7 +20,7 @@ from fabric import keys
 from fabric.messages import Command, Pose, Stop, Twist
 from fabric.testing import wait_until
 from sim_peer.peer import SimPeer
-from sim_peer.world import World
+from sim_peer.world import SimWorld
 
 pytestmark = pytest.mark.slow
 
@@ -29,7 +29,7 @@ ROBOT = "base1"
 
 def test_drive_map_plan_and_follow(world, connect):
     sim_fab = connect("sim", "sim-b")
-    sim = SimPeer(sim_fab, World("warehouse", seed=1), rates={"joints": 10, "pose": 50, "scan": 20}, speed=3.0)
+    sim = SimPeer(sim_fab, SimWorld("warehouse", seed=1), rates={"joints": 10, "pose": 50, "scan": 20}, speed=3.0)
     sim.start()
     try:
         compute = connect("compute", "compute-b")

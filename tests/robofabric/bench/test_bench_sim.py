@@ -8,11 +8,11 @@ import pytest
 
 from fabric.testing import robofabric_cmd
 from robofabric.bench.sim import rtf, scan_cost
-from sim_peer.world import World
+from sim_peer.world import SimWorld
 
 
 def test_benchmark_helpers_measure_something():
-    w = World("combined")
+    w = SimWorld("combined")
     assert rtf(w, 0.2) > 0
     assert w.time >= 0.2 - 1e-9 and w.robot("base1").moving  # the mobile robot was driven during the run
     med, p99 = scan_cost(w, "base1", n=50)
