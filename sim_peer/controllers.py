@@ -111,6 +111,17 @@ class ArmController:
         self.dq = np.zeros(self.dof)
         self._idle = False
 
+    def restore(self, q, dq, target=None, scale: float | None = None) -> None:
+        """Joints at ``q`` moving at ``dq`` (a replicated state: positions and targets clamped to the range);
+        the next step decides whether it is at rest."""
+        self.q = np.clip(np.array(q, dtype=np.float64), self.lower, self.upper)
+        self.dq = np.array(dq, dtype=np.float64)
+        if target is not None:
+            self.target = np.clip(np.array(target, dtype=np.float64), self.lower, self.upper)
+        if scale is not None:
+            self.scale = float(scale)
+        self._idle = False
+
     def step(self, dt: float) -> None:
         if self._idle:
             return

@@ -30,7 +30,7 @@ import numpy as np
 from fabric.messages import COMMAND_BODIES
 from robots import RobotDescription
 from sim_peer.controllers import Clamp, CommandRejected
-from sim_peer.messages import RobotInfo
+from sim_peer.messages import RobotInfo, RobotState
 
 HOOKS = ("describe", "initialize", "before_step", "after_step", "streams", "commands")
 _HOOKISH = ("describe", "initialize", "before_", "after_", "stream", "command")
@@ -170,6 +170,17 @@ class Robot:
     def state(self, physics: Physics) -> dict[str, Any]:
         """The last known state as a small dict of plain values (the ownership record's ``state``)."""
         return {"type": self.desc.name, "kind": self.desc.kind, "moving": self.moving}
+
+    # a standby's take-over (sim_peer/replica.py, docs/sim.md) -------------------
+    def snapshot(self) -> RobotState | None:
+        """The controllers' whole state, for a standby to carry the robot on; None: not carried over."""
+        return None
+
+    def restore(self, state: RobotState) -> None:
+        """Put the controllers back into ``state`` (a snapshot of the same type); ValueError if it does not fit."""
+
+    def overlay(self, stream: str, message: Any) -> None:
+        """Where the robot was by its own stream (``joints``, ``pose``), newer than the last snapshot."""
 
     def note(self, note: Note) -> None:
         """Say something as an event (the peer publishes it after the step)."""

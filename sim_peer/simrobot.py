@@ -20,7 +20,7 @@ from fabric.messages import JointState, Pose
 from sim_peer.bumper import Bumper
 from sim_peer.controllers import ArmController, BaseController, Clamp, CommandRejected
 from sim_peer.follower import PurePursuit
-from sim_peer.messages import RobotInfo
+from sim_peer.messages import RobotInfo, RobotState
 from sim_peer.robot import Build, CommandHandler, Mount, Note, Physics, Robot, Stream, check_hooks
 from sim_peer.sensors import Lidar, Sensor, Ultrasonic
 
@@ -106,6 +106,20 @@ class ArmRobot(Robot):
     @property
     def kinematic_dofs(self) -> int:
         return len(self.vadr)
+
+    def snapshot(self) -> RobotState:
+        c = self.ctrl
+        return RobotState(self.id, "arm", c.q, c.dq, c.target, extra={"scale": c.scale, "idle": bool(c.idle)})
+
+    def restore(self, state: RobotState) -> None:
+        c = self.ctrl
+        if state.kind != "arm" or state.q.shape != c.q.shape:
+            raise ValueError(f"robot {state.id}: state of a {state.kind} with {state.q.shape[0]} joints for an arm with {c.dof}")
+        c.restore(state.q, state.dq, state.target, float(state.extra.get("scale", 1.0)))
+
+    def overlay(self, stream: str, message: Any) -> None:
+        if stream == "joints" and message.q.shape == self.ctrl.q.shape:
+            self.ctrl.restore(message.q, message.dq)
 
     def joint_state(self):
         return self.desc.joint_names, self.ctrl.q.copy(), self.ctrl.dq.copy()
@@ -247,6 +261,56 @@ class MobileRobot(Robot):
     @property
     def kinematic_dofs(self) -> int:
         return len(self.vadr)
+
+    def snapshot(self) -> RobotState:
+        c = self.ctrl
+        extra: dict[str, Any] = {
+            "wheels": [float(w) for w in c.wheels], "wheel_speeds": [float(w) for w in c.wheel_speeds],
+            "since_twist": c._since_twist, "twists_expired": c.twists_expired, "paths_done": c.paths_done,
+        }
+        path = np.zeros((0, 2))
+        f = c.follower
+        if isinstance(f, PurePursuit):
+            path = f.points
+            extra.update(index=f.index, stretch=f.stretch, arrived=bool(f.arrived), done=bool(f.done))
+            if f.final_yaw is not None:
+                extra["final_yaw"] = float(f.final_yaw)
+        return RobotState(self.id, "mobile", [c.x, c.y, c.yaw], [c.v, c.omega], [c.v_cmd, c.omega_cmd], path, extra)
+
+    def restore(self, state: RobotState) -> None:
+        c = self.ctrl
+        if state.kind != "mobile" or state.q.shape != (3,):
+            raise ValueError(f"robot {state.id}: state of a {state.kind} for a mobile base")
+        c.x, c.y, c.yaw = (float(v) for v in state.q)
+        c.v, c.omega = (float(v) for v in state.dq)
+        c.v_cmd, c.omega_cmd = (float(v) for v in state.target)
+        e = state.extra
+        c.wheels[:] = e.get("wheels", [0.0, 0.0])
+        c.wheel_speeds[:] = e.get("wheel_speeds", [0.0, 0.0])
+        c._since_twist = float(e.get("since_twist", 0.0))
+        c.twists_expired = int(e.get("twists_expired", 0))
+        c.paths_done = int(e.get("paths_done", 0))
+        c.follower = None
+        if state.path.shape[0]:
+            b = self.desc.base
+            assert b is not None
+            f = PurePursuit(state.path[:, 0], state.path[:, 1], None, max_speed=b.max_speed, max_omega=b.max_omega, max_accel=b.max_accel)
+            f.final_yaw = float(e["final_yaw"]) if "final_yaw" in e else None
+            f.index = min(int(e.get("index", 0)), f.points.shape[0] - 1)
+            f.stretch = min(int(e.get("stretch", 0)), len(f.stops) - 1)
+            f.arrived, f.done = bool(e.get("arrived", False)), bool(e.get("done", False))
+            c.follower = f
+
+    def overlay(self, stream: str, message: Any) -> None:
+        """The base's pose from its stream: position, heading and the velocities the stream carries."""
+        if stream != "pose":
+            return
+        c = self.ctrl
+        c.x, c.y = float(message.position[0]), float(message.position[1])
+        w, z = float(message.quaternion[0]), float(message.quaternion[3])
+        c.yaw = 2.0 * math.atan2(z, w)
+        c.v = float(message.linear[0] * math.cos(c.yaw) + message.linear[1] * math.sin(c.yaw))
+        c.omega = float(message.angular[2])
 
     @property
     def following(self) -> bool:

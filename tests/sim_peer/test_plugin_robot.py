@@ -55,6 +55,26 @@ def test_the_world_builds_and_steps_a_robot_type_from_its_description_and_hooks(
     assert type(w2.robot("p2")).__name__ == "Planar2Arm" and w2.placements["p2"].pose[:2] == (-2.0, 1.0)
 
 
+def test_a_standby_carries_the_new_type_on_through_its_snapshot_and_restore_hooks(plugin_path):
+    from sim_peer import replica
+    from sim_peer.messages import WorldState
+
+    w = SimWorld("planar_cell")
+    w.robot("p1").commands()["joints"](JointTarget(np.array([1.2, 0.4])))
+    w.step(100)  # on its way: 0.2 s at 2 rad/s
+    t, steps, states, objects = replica.capture(w)
+    assert {s.id for s in states} == {"p1", "arm1"}
+    w2 = SimWorld("planar_cell")
+    replica.restore(w2, WorldState(t, steps, states, objects))
+    p2 = w2.robot("p1")
+    np.testing.assert_allclose(p2.q, w.robot("p1").q)
+    np.testing.assert_allclose(p2.target, [1.2, 0.4])
+    assert 0 < p2.q[0] < 1.2  # mid-move, not at either end
+    w.step(500)
+    w2.step(500)
+    np.testing.assert_allclose(w2.robot("p1").q, w.robot("p1").q, atol=1e-12)  # both went on the same way
+
+
 def test_a_bad_hooks_reference_is_a_world_error_naming_the_type(plugin_path, tmp_path, monkeypatch):
     bad = tmp_path / "broken"
     bad.mkdir()

@@ -15,6 +15,7 @@ import numpy as np
 
 from fabric.messages import JointState, Pose
 from sim_peer.controllers import Clamp, CommandRejected
+from sim_peer.messages import RobotState
 from sim_peer.robot import Build, CommandHandler, Mount, Physics, Robot, Stream
 
 MOVING = 1e-3  # rad/s
@@ -92,6 +93,14 @@ class Planar2Arm(Robot):
     @property
     def kinematic_dofs(self) -> int:
         return 2
+
+    def snapshot(self) -> RobotState:
+        return RobotState(self.id, "arm", self.q, self.dq, self.target)
+
+    def restore(self, state: RobotState) -> None:
+        if state.q.shape != (2,):
+            raise ValueError(f"robot {state.id}: a planar2 arm has 2 joints, the state {state.q.shape[0]}")
+        self.q, self.dq, self.target = np.array(state.q), np.array(state.dq), np.array(state.target)
 
     def state(self, physics: Physics) -> dict[str, Any]:
         return {"type": self.desc.name, "kind": self.kind, "q": self.q.tolist(), "target": self.target.tolist(), "moving": self.moving}
