@@ -1,11 +1,11 @@
-# The two commands: `make demo` and `make test`. Each creates .venv when missing.
+# The two commands: `make demo` and `make test` (`make test-fast`: without the slow tests). Each creates .venv when missing.
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 STAMP_TEST := $(VENV)/.installed-test
 
-.PHONY: demo test install clean bench
+.PHONY: demo test test-fast install clean bench
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -26,6 +26,10 @@ demo: $(STAMP)
 
 test: $(STAMP_TEST)
 	$(PY) -m pytest -q
+
+# the fast suite: no process-spawning or multi-second tests (those are marked slow)
+test-fast: $(STAMP_TEST)
+	$(PY) -m pytest -q -m "not slow"
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis

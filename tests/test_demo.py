@@ -3,8 +3,11 @@
 import subprocess
 
 from mcap.reader import make_reader
+import pytest
 
 from fabric.testing import free_port, robofabric_cmd
+
+pytestmark = pytest.mark.slow  # every test here starts processes or runs for seconds
 
 # The demo takes about 20 s on a 2-core machine; the cap only bounds a hung run (tasks still running at the
 # cap are stopped and reported as failed, so a slow machine fails loudly rather than passing quietly).

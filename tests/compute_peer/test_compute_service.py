@@ -151,6 +151,7 @@ def test_ik_streaming_follows_the_target(served, world):
     wait_until(lambda: any(e.kind == "ik_unreachable" for e in events), what="an ik_unreachable event")
 
 
+@pytest.mark.slow
 def test_compute_cli_refuses_bad_flags():
     for args in (["--stream", "arm1"], ["--stream-rate", "0"], ["--no-kinematics", "--no-navigation"]):
         r = subprocess.run(robofabric_cmd("compute", *args), capture_output=True, text=True, timeout=60)
@@ -158,6 +159,7 @@ def test_compute_cli_refuses_bad_flags():
         assert "Traceback" not in r.stderr
 
 
+@pytest.mark.slow
 def test_compute_cli_arm_flag_names_bad_arms():
     for spec, words in (("arm1", "ID:TYPE"), ("arm1:reeman", "not an arm"), ("arm1:meca500@1,2", "3 or 4"), ("arm1:nope", "unknown robot type")):
         r = subprocess.run(robofabric_cmd("compute", "--arm", spec), capture_output=True, text=True, timeout=60)
@@ -228,6 +230,7 @@ def test_a_user_can_spread_ik_over_every_compute_peer(world, router, connect):
             s.close()
 
 
+@pytest.mark.slow
 def test_robofabric_call_asks_a_service_from_the_command_line(served, world, router):
     import json
 

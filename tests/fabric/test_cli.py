@@ -8,6 +8,8 @@ import pytest
 from fabric import keys
 from fabric.testing import free_port, robofabric_cmd, wait_until
 
+pytestmark = pytest.mark.slow  # every test here starts processes or runs for seconds
+
 
 def run_cli(*args, timeout=60):
     return subprocess.run(robofabric_cmd(*args), capture_output=True, text=True, timeout=timeout)

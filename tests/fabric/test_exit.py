@@ -8,6 +8,8 @@ import sys
 import textwrap
 import weakref
 
+import pytest
+
 from fabric.exit import at_exit
 
 
@@ -15,6 +17,7 @@ def _run(code: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=60)
 
 
+@pytest.mark.slow
 def test_closers_run_before_non_daemon_threads_are_joined_newest_first():
     out = _run("""
         import threading
@@ -31,6 +34,7 @@ def test_closers_run_before_non_daemon_threads_are_joined_newest_first():
     assert out.stdout.splitlines() == ["end of script", "second registered", "first registered"]
 
 
+@pytest.mark.slow
 def test_a_failing_closer_does_not_stop_the_others():
     out = _run("""
         from fabric.exit import at_exit

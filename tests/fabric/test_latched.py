@@ -82,6 +82,7 @@ def test_a_user_who_joins_late_sees_the_goal_and_the_map(world, router):
             wait_until(lambda: late.latest.get(grid_key) is not None, what="the map built before joining")
 
 
+@pytest.mark.slow
 def test_echo_prints_the_latest_latched_value_without_waiting_for_a_new_one(world, router, connect):
     import json
     import subprocess

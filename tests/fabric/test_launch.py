@@ -64,6 +64,7 @@ def _up(tmp_path, text, *extra, timeout=90):
     )
 
 
+@pytest.mark.slow
 def test_up_restarts_a_failing_service_up_to_its_limit(tmp_path, world):
     text = f"""
 [launch]
@@ -82,6 +83,7 @@ max_restarts = 2
     assert out.stdout.count("unknown message type 'NoSuchType'") == 3
 
 
+@pytest.mark.slow
 def test_up_runs_a_task_and_reports_it(tmp_path, world):
     text = f"""
 [launch]
@@ -99,6 +101,7 @@ role = "task"
     assert (tmp_path / "out" / "logs" / "once.log").read_text().strip().endswith(f"rf/{world}/robot/x/cmd/stop")
 
 
+@pytest.mark.slow
 def test_failed_task_fails_the_launch(tmp_path, world):
     text = f'[launch]\nworld = "{world}"\n[[peer]]\nname = "bad"\nargs = ["pub", "robot/x/cmd/stop", "-t", "Nope"]\nrole = "task"\n'
     out = _up(tmp_path, text, "--duration", "40")
@@ -106,6 +109,7 @@ def test_failed_task_fails_the_launch(tmp_path, world):
     assert "failed: bad" in out.stdout
 
 
+@pytest.mark.slow
 def test_bad_launch_file_is_one_line_exit_2(tmp_path):
     out = _up(tmp_path, '[[peer]]\nname = "a"\nargs = "sim"\n')
     assert out.returncode == 2

@@ -90,6 +90,7 @@ def test_rules_allow_each_user_only_keys_that_name_them():
     assert "sim-serve" not in policy["alice"] and "alice-put" not in policy["sim"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args, message", [
     (["--users", ""], "no users"),
     (["--users", "alice,alice"], "named twice"),
@@ -144,6 +145,7 @@ def test_the_audit_counts_dropped_messages_by_the_decision_that_dropped_them():
     assert text.startswith("refused: 4 (put 3, query 1); mallory put rf/w/own/arm1 x3")
 
 
+@pytest.mark.slow
 def test_up_takes_the_launchers_login_from_the_command_line(tmp_path):
     from pathlib import Path
 

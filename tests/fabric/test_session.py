@@ -81,6 +81,7 @@ def test_all_replies_reaches_every_server(world, connect):
     assert sources == ["ca", "cb"]
 
 
+@pytest.mark.slow
 def test_liveliness_tracks_a_process_that_exits_and_one_that_is_killed(world, router, connect, procs):
     port = router[1]
     seen = {}

@@ -7,12 +7,15 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from fabric import keys
 from fabric.messages import Command, Event, JointTarget
 from fabric.testing import wait_until
 
 from ownership import OwnershipClient
+
+pytestmark = pytest.mark.slow  # every test here starts processes or runs for seconds
 
 HERE = Path(__file__).parent
 LEASE, GRACE = 0.5, 10.0

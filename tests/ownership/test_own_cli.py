@@ -2,9 +2,13 @@
 
 import subprocess
 
+import pytest
+
 from fabric.testing import robofabric_cmd
 
 from ownership import Authority, OwnershipClient
+
+pytestmark = pytest.mark.slow  # every test here starts processes or runs for seconds
 
 
 def _own(world, port, *args):

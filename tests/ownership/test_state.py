@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 from hypothesis import given, settings, strategies as hs
 
 from ownership import state as st
@@ -227,6 +228,7 @@ def test_the_queue_is_capped():
     assert eff[0].kind == "queued"
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(events())
 def test_nothing_is_kept_about_tokenless_users_once_grace_is_over(seq):

@@ -45,6 +45,7 @@ def test_a_request_naming_someone_else_is_refused(host, connect, world):
     alice.close()
 
 
+@pytest.mark.slow
 def test_forged_records_never_stop_renewal(host, connect, world):
     alice = OwnershipClient(connect("user", "alice"), "alice", renew_s=0.1).start()
     assert alice.request("arm").granted

@@ -7,6 +7,7 @@ import math
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
+import pytest
 
 import robots
 from sim_peer.controllers import ArmController, BaseController
@@ -17,6 +18,7 @@ BASE = robots.load("reeman").base
 angles = st.lists(st.floats(-10, 10, allow_nan=False), min_size=6, max_size=6)
 
 
+@pytest.mark.slow
 @settings(max_examples=50, deadline=None)
 @given(angles, angles, st.floats(0.05, 1.0))
 def test_arm_stays_in_range_under_its_speed_limits_and_reaches_the_clamped_target(first, second, scale):

@@ -7,6 +7,7 @@ import math
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
+import pytest
 
 import robots
 from sim_peer.controllers import BaseController
@@ -38,6 +39,7 @@ def drive(xs, ys, theta=None, seconds: float = 60.0, dt: float = 0.01):
 waypoints = st.lists(st.tuples(st.floats(-3, 3), st.floats(-3, 3)), min_size=1, max_size=5)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(waypoints)
 def test_any_polyline_is_followed_to_its_end(points):

@@ -214,6 +214,7 @@ def _world_info(fab, world):
         return None
 
 
+@pytest.mark.slow
 def test_the_cli_runs_a_sim_peer_that_answers_the_world_service(world, router, connect, procs):
     port = router[1]
     proc = procs.start(
@@ -231,6 +232,7 @@ def test_the_cli_runs_a_sim_peer_that_answers_the_world_service(world, router, c
     wait_until(lambda: any(np.allclose(m.q, 0.05) for m in inbox.latest.values()), timeout=10, what="joints from the CLI peer")
 
 
+@pytest.mark.slow
 def test_cli_mistakes_are_one_line_errors(procs):
     import subprocess
 
@@ -240,6 +242,7 @@ def test_cli_mistakes_are_one_line_errors(procs):
     assert out.returncode == 2 and "speed" in out.stderr
 
 
+@pytest.mark.slow
 def test_cli_runs_for_a_duration_at_max_speed_and_exits_cleanly(world, tmp_path):
     import subprocess
 

@@ -11,6 +11,7 @@ import math
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
+import pytest
 
 from fabric import keys
 from fabric.messages import Command, Event, Header, JointTarget, Path, Reset, Stop, Twist
@@ -54,6 +55,7 @@ commands = st.lists(
 )
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None)
 @given(commands)
 def test_every_command_is_accepted_or_rejected_with_a_reason(seq):

@@ -5,6 +5,8 @@ from __future__ import annotations
 import sys
 import types
 
+import pytest
+
 from fabric.gate import OpenGate
 from sim_peer.cli import make_gate
 from sim_peer.world import SimWorld
@@ -37,6 +39,7 @@ def test_without_an_authority_the_sim_warns_and_opens_the_gate(monkeypatch, caps
     assert isinstance(make_gate("FAB", SimWorld("arm_cell"), False), OpenGate)
 
 
+@pytest.mark.slow
 def test_sim_list_shows_robot_types_and_scenes():
     import subprocess
 

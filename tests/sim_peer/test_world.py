@@ -284,6 +284,7 @@ def test_with_a_twist_timeout_a_quiet_sender_lets_the_base_stop():
         SimWorld("warehouse", twist_timeout=0)
 
 
+@pytest.mark.slow
 def test_the_sim_core_does_not_import_zenoh():
     import subprocess
     import sys

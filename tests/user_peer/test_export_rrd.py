@@ -5,6 +5,7 @@ import subprocess
 
 import numpy as np
 from mcap.writer import Writer
+import pytest
 
 from fabric import keys
 from fabric.codec import encode
@@ -66,6 +67,7 @@ def test_export_draws_robots_scans_maps_and_paths(tmp_path):
     assert rows["/world/scene"] == 1  # the combined scene's walls, shelves and table, drawn once
 
 
+@pytest.mark.slow
 def test_export_cli_and_bad_files(tmp_path):
     src, dst = tmp_path / "rec.mcap", tmp_path / "out.rrd"
     write_recording(src, n=5)

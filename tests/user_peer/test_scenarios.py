@@ -8,10 +8,14 @@ from __future__ import annotations
 
 import uuid
 
+import pytest
+
 from fabric.session import Fabric
 from fabric.testing import client_config, free_port, robofabric_cmd, router_config, wait_until
 from user_peer.api import World
 from user_peer.scenarios import SCENARIOS
+
+pytestmark = pytest.mark.slow  # every test here starts processes or runs for seconds
 
 
 def test_b_then_a_against_sim_and_compute_processes(procs):

@@ -16,6 +16,8 @@ from fabric.session import Fabric
 from user_peer.api import Arm, Base, World
 from user_peer.catalog import RobotCatalog
 
+pytestmark = pytest.mark.slow  # every test here starts processes or runs for seconds
+
 
 @pytest.fixture(scope="module")
 def live(tmp_path_factory):
@@ -81,7 +83,6 @@ def test_move_joints_reaches_targets_and_matches_the_viewers_fk(user):
         arm.move_joints(np.radians([0, 120, 0, 0, 0, 0]))
 
 
-@pytest.mark.slow
 def test_drive_then_follow_a_path_to_its_end(user):
     w = user("bob")
     base = w.robot("base1")

@@ -46,6 +46,7 @@ def setup(world, router, connect):
     alice.close()
 
 
+@pytest.mark.slow
 def test_controls_follow_ownership_and_send_commands(setup, world):
     asyncio.run(_drive_the_ui(*setup, world))
 

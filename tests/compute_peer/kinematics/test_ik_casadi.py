@@ -59,6 +59,7 @@ def test_symbolic_fk_equals_pinocchio(arm):
     _fk_matches(arm, 200, np.random.default_rng(0))
 
 
+@pytest.mark.slow
 def test_full_pose_round_trip(arm):
     rng = np.random.default_rng(1)
     targets = _targets(arm, 200, rng)
@@ -80,6 +81,7 @@ def test_full_pose_round_trip(arm):
     assert len(failures) <= 0.01 * len(targets), failures
 
 
+@pytest.mark.slow
 def test_position_only_round_trip(arm):
     rng = np.random.default_rng(2)
     targets = _targets(arm, 200, rng)
@@ -190,6 +192,7 @@ def _robot(tmp_path, monkeypatch, name: str, joints, tool: str = "0.1 0 0") -> A
     return ArmModel(name)
 
 
+@pytest.mark.slow
 def test_a_three_joint_arm_from_a_urdf(tmp_path, monkeypatch):
     """Yaw, pitch, then an elbow about a tilted axis (revolute-unaligned in Pinocchio); position-only targets."""
     arm = _robot(tmp_path, monkeypatch, "tribot", [

@@ -53,6 +53,7 @@ def _same_angles(a, b, tol=1e-6) -> bool:
     return bool(np.all(np.abs(np.remainder(d + math.pi, 2 * math.pi) - math.pi) < tol))
 
 
+@pytest.mark.slow
 def test_closed_form_full_pose_round_trip(arm):
     rng = np.random.default_rng(10)
     n, ok, column, failures, candidates = 5000, 0, 0, [], 0
@@ -130,6 +131,7 @@ def test_position_only_prefers_the_seed_orientation(arm):
     assert sol.solver == "closed_form" and _same_angles(sol.q, q)
 
 
+@pytest.mark.slow
 def test_numerical_round_trip_near_and_far_seeds(arm):
     rng = np.random.default_rng(13)
     n, ok, failures = 300, 0, []

@@ -95,6 +95,7 @@ def test_paths_are_collision_free_and_drivable(scene, costmap, planner, reverse,
     assert scene_clearance(scene, xs, ys).min() >= ROBOT - RES
 
 
+@pytest.mark.slow
 def test_ompl_means_the_configured_ompl_planner(costmap):
     start, goal = CASES[0]
     result = plan_path(costmap, start, goal, planner="ompl", settings=settings(False, "bitstar"))
@@ -150,6 +151,7 @@ def test_unreachable_goal_is_refused_without_searching():
         plan_path(grid, (1.5, 1.5, 0.0), (5.0, 5.0, 0.0), settings=settings(False))
 
 
+@pytest.mark.slow
 def test_too_large_turning_radius_ends_with_a_reason():
     cells = np.zeros((40, 200), dtype=np.uint8)  # a 2 m wide, 20 m long corridor
     cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = 100

@@ -12,6 +12,8 @@ from fabric.testing import robofabric_cmd, wait_until
 
 from rec_helpers import synthetic, write_recording
 
+pytestmark = pytest.mark.slow  # every test here starts processes or runs for seconds
+
 
 def run_cli(*args, timeout=60):
     return subprocess.run(robofabric_cmd(*args), capture_output=True, text=True, timeout=timeout)

@@ -14,6 +14,7 @@ from collections import Counter, defaultdict
 import msgpack
 import numpy as np
 from mcap.reader import NonSeekingReader
+import pytest
 
 from fabric import keys
 from fabric.recording import Recorder, iter_messages, read_info
@@ -53,6 +54,7 @@ def _by_key(path):
     return out
 
 
+@pytest.mark.slow
 def test_record_replay_into_another_world_and_record_again(tmp_path, world, router, connect, procs):
     first, second = tmp_path / "first.mcap", tmp_path / "second.mcap"
     other = world + "b"
@@ -104,6 +106,7 @@ def test_record_replay_into_another_world_and_record_again(tmp_path, world, rout
     assert abs(span_b - span_a) < 0.1 * span_a, (span_a, span_b)
 
 
+@pytest.mark.slow
 def test_a_sigkilled_recorder_leaves_a_readable_unfinished_file(tmp_path, world, router, connect, procs):
     path = tmp_path / "killed.mcap"
     watcher = connect("tool")

@@ -23,6 +23,7 @@ def test_bench_record_smoke():
     assert rp["messages"] == rp["expected"] == row["sent"] and rp["received"] == rp["messages"]
 
 
+@pytest.mark.slow
 def test_bench_record_rejects_bad_options():
     out = subprocess.run(robofabric_cmd("bench", "record", "--scales", "x"), capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "error: --scales" in out.stderr

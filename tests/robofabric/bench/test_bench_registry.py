@@ -56,6 +56,7 @@ def test_the_bench_group_lists_every_benchmark_and_nothing_else():
         assert res.exit_code == 0 and "Usage" in res.output, name
 
 
+@pytest.mark.slow
 def test_the_installed_cli_reaches_the_registry():
     """``robofabric bench`` comes through the entry point ``bench`` only: its commands are exactly the registry's."""
     import typer
