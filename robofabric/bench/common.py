@@ -12,7 +12,7 @@ import signal
 import subprocess
 from pathlib import Path
 
-__all__ = ["append", "write", "cpus", "machine", "proc_cpu_s", "proc_rss_mb", "end_process"]
+__all__ = ["append", "write", "pct", "cpus", "machine", "proc_cpu_s", "proc_rss_mb", "end_process"]
 
 
 def append(out: Path | str | None, text: str) -> None:
@@ -26,6 +26,15 @@ def write(out: Path | str | None, text: str) -> None:
     """Replace ``out`` with ``text`` and a newline; nothing when ``out`` is None."""
     if out is not None:
         Path(out).write_text(text + "\n", encoding="utf-8")
+
+
+def pct(values, q: float, scale: float = 1.0) -> float:
+    """The ``q``-th percentile of ``values`` times ``scale`` (1e3: seconds to ms); NaN when there are none,
+    so a table shows a row that measured nothing instead of failing."""
+    import numpy as np
+
+    arr = np.asarray(list(values), dtype=np.float64)
+    return float(np.percentile(arr, q) * scale) if arr.size else float("nan")
 
 
 def cpus() -> int:

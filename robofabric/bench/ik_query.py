@@ -15,12 +15,13 @@ import uuid
 
 import numpy as np
 
+from robofabric.bench.common import pct
+
 __all__ = ["measure_query"]
 
 
 def _percentiles(samples: list[float]) -> dict[str, float]:
-    a = np.asarray(samples) * 1e3
-    return {"p50_ms": float(np.median(a)), "p99_ms": float(np.percentile(a, 99)), "max_ms": float(a.max())}
+    return {"p50_ms": pct(samples, 50, 1e3), "p99_ms": pct(samples, 99, 1e3), "max_ms": pct(samples, 100, 1e3)}
 
 
 def measure_query(n: int = 1000, seed: int = 0, warmup: int = 50) -> dict[str, dict[str, float]]:

@@ -28,14 +28,10 @@ from compute_peer.navigation.ompl_planner import OmplConfig
 from compute_peer.navigation.planner import PlannerSettings, plan_path
 from compute_peer.navigation.scenes import office, scan_angles
 from fabric.messages import Header, Pose, Scan
-from robofabric.bench.common import append
+from robofabric.bench.common import append, pct
 
 RES = 0.05
 SIZE = 20.0
-
-
-def _pct(values: list[float], q: float) -> float:
-    return float(np.percentile(values, q)) if values else math.nan
 
 
 def bench_mapping(scans: int = 200, rays: int = 240, fov_deg: float = 135.0, range_max: float = 12.0, seed: int = 1) -> dict:
@@ -60,9 +56,9 @@ def bench_mapping(scans: int = 200, rays: int = 240, fov_deg: float = 135.0, ran
     return {
         "what": f"map update, {rays} rays over {fov_deg:.0f} deg, {range_max:.0f} m, {cells}x{cells} grid",
         "n": len(ms),
-        "p50_ms": _pct(ms, 50),
-        "p90_ms": _pct(ms, 90),
-        "p99_ms": _pct(ms, 99),
+        "p50_ms": pct(ms, 50),
+        "p90_ms": pct(ms, 90),
+        "p99_ms": pct(ms, 99),
         "max_ms": max(ms),
     }
 
@@ -121,8 +117,8 @@ def bench_planning(
                     "motion": "reeds-shepp" if reverse else "dubins",
                     "queries": len(pairs),
                     "solved": len(times),
-                    "p50_ms": _pct(times, 50),
-                    "p90_ms": _pct(times, 90),
+                    "p50_ms": pct(times, 50),
+                    "p90_ms": pct(times, 90),
                     "max_ms": max(times) if times else math.nan,
                     "mean_length_m": float(np.mean(lengths)) if lengths else math.nan,
                     "inflate_ms": inflate_ms,

@@ -15,22 +15,23 @@ import sys
 import threading
 import time
 import uuid
-from typing import Annotated
+from pathlib import Path
+from typing import Annotated, Optional
 
-import numpy as np
 import typer
 
 from fabric.session import Fabric
 from fabric.testing import client, free_port, router_config, wait_until
 from ownership.authority import Authority
 from ownership.client import OwnershipClient
+from robofabric.bench.common import append, pct
 
 HOLDER = [sys.executable, "-m", "robofabric.bench.ownership"]
 """The owner that is killed: a child process that requests the arm and holds it (argv WORLD PORT USER)."""
 
 
-def _pct(xs, q) -> float:
-    return float(np.percentile(np.asarray(xs) * 1e3, q)) if xs else float("nan")
+def _pct(xs: list[float], q: float) -> float:
+    return pct(xs, q, 1e3)
 
 
 def run_one(n: int, *, lease_s: float, kills: int) -> dict:
@@ -93,14 +94,26 @@ def run_one(n: int, *, lease_s: float, kills: int) -> dict:
         router.close()
 
 
+def header(lease_s: float) -> list[str]:
+    """The markdown table's head (the lease is part of a column's name)."""
+    return [f"| users | handovers | handover p50 (ms) | handover p99 (ms) | recovery after SIGKILL p50 / max (ms) | recovery after SIGSTOP (lease {lease_s*1e3:.0f} ms) p50 / max (ms) |",
+            "|---|---|---|---|---|---|"]
+
+
+def format_row(r: dict) -> str:
+    """One row of the table from :func:`run_one`'s result."""
+    return (f"| {r['n']} | {r['handovers']} | {r['handover_p50']:.1f} | {r['handover_p99']:.1f} | "
+            f"{r['recovery_p50']:.1f} / {r['recovery_max']:.1f} | {r['frozen_p50']:.1f} / {r['frozen_max']:.1f} |")
+
+
 def run_bench(counts: list[int], *, lease_s: float, kills: int) -> list[dict]:
+    """Run each user count in turn, printing the table a row at a time (a 100-user run takes a while)."""
     rows = []
-    print(f"| users | handovers | handover p50 (ms) | handover p99 (ms) | recovery after SIGKILL p50 / max (ms) | recovery after SIGSTOP (lease {lease_s*1e3:.0f} ms) p50 / max (ms) |")
-    print("|---|---|---|---|---|---|")
+    print("\n".join(header(lease_s)))
     for n in counts:
         r = run_one(n, lease_s=lease_s, kills=kills)
         rows.append(r)
-        print(f"| {n} | {r['handovers']} | {r['handover_p50']:.1f} | {r['handover_p99']:.1f} | {r['recovery_p50']:.1f} / {r['recovery_max']:.1f} | {r['frozen_p50']:.1f} / {r['frozen_max']:.1f} |", flush=True)
+        print(format_row(r), flush=True)
     return rows
 
 
@@ -108,9 +121,19 @@ def command(
     users: Annotated[str, typer.Option("--users", help="Comma-separated user counts.")] = "10,50,100",
     lease: Annotated[float, typer.Option("--lease", help="Lease (s).")] = 0.5,
     kills: Annotated[int, typer.Option("--kills", help="Owner kills per user count.")] = 3,
+    out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
 ) -> None:
     """N users in one world hand the arm over in turn; then the owner is SIGKILLed."""
-    run_bench([int(x) for x in users.split(",")], lease_s=lease, kills=kills)
+    from fabric.cli_common import UserError
+
+    try:
+        counts = [int(x) for x in users.split(",") if x.strip()]
+    except ValueError:
+        raise UserError(f"--users {users!r}: expected counts like 10,50,100") from None
+    if not counts or min(counts) < 2 or lease <= 0 or kills < 0:
+        raise UserError("--users: each count at least 2 (a handover needs two); --lease positive; --kills >= 0")
+    rows = run_bench(counts, lease_s=lease, kills=kills)
+    append(out, "\n".join([*header(lease), *map(format_row, rows)]))
 
 
 def _hold(world: str, port: int, user: str) -> None:
