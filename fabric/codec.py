@@ -37,6 +37,8 @@ __all__ = [
     "Strs",
     "Arr",
     "Msg",
+    "Msgs",
+    "Opt",
     "Map",
     "User",
 ]
@@ -226,6 +228,37 @@ class Msg:
         return _to_list(v)
 
 
+class Msgs:
+    """A list of nested messages of the given classes (``Msg`` for a single one)."""
+
+    def __init__(self, *classes: type, max_items: int = 10_000) -> None:
+        self.one = Msg(*classes)
+        self.max_items = max_items
+
+    def check(self, v: Any, where: str) -> tuple:
+        if not isinstance(v, list):
+            raise DecodeError(f"{where}: expected a list of messages, got {type(v).__name__}")
+        if len(v) > self.max_items:
+            raise DecodeError(f"{where}: {len(v)} entries is too many (at most {self.max_items})")
+        return tuple(self.one.check(x, f"{where}[{i}]") for i, x in enumerate(v))
+
+    def dump(self, v: Any) -> Any:
+        return [self.one.dump(x) for x in v]
+
+
+@dataclass(frozen=True, slots=True)
+class Opt:
+    """``inner`` or nothing: None travels as msgpack nil (a robot without a LIDAR has no ``lidar``)."""
+
+    inner: Any
+
+    def check(self, v: Any, where: str) -> Any:
+        return None if v is None else self.inner.check(v, where)
+
+    def dump(self, v: Any) -> Any:
+        return None if v is None else self.inner.dump(v)
+
+
 _SCALARS = (str, int, float, bool, type(None))
 
 
@@ -306,7 +339,7 @@ def registered() -> dict[str, type]:
 
 def _ensure_core() -> None:
     if "JointState" not in _BY_NAME:
-        import fabric.messages  # noqa: F401  (registers the core types)
+        import fabric.interfaces  # noqa: F401  (registers the built-in types)
 
 
 _plugins_loaded = False
@@ -315,7 +348,8 @@ _plugins_loaded = False
 def load_plugins() -> bool:
     """Import the message modules installed packages declare (entry points ``robofabric.messages``), once.
 
-    So that any peer (a viewer, ``echo``, an export) decodes every type on the wire without fabric
+    The built-in types need none: :mod:`fabric.interfaces` registers them when it is imported. The
+    entry points are for third-party packages' own types, so that any peer (a viewer, ``echo``, an export) decodes every type on the wire without fabric
     importing the peer packages. Sessions call it when they open, not ``decode``: the imports take a few
     hundred milliseconds, which must not land inside a subscriber callback. Returns whether it loaded now.
     """

@@ -31,7 +31,7 @@ ENV_CONFIG = "ROBOFABRIC_ZENOH_CONFIG"
 MAX_MESSAGE_SIZE = 4 * 1024 * 1024
 """``transport/link/rx/max_message_size`` of every session we open (zenoh's default is 1 GiB): a
 larger message is dropped on arrival and the link stays up (checked on zenoh 1.10). The largest
-message the fabric itself sends is a map of at most 2 MiB (fabric.messages.MAX_GRID_CELLS)."""
+message the fabric itself sends is a map of at most 2 MiB (fabric.interfaces.MAX_GRID_CELLS)."""
 ZENOH_DEFAULT_MAX_MESSAGE_SIZE = 1 << 30
 SOCKET_BUFFER = 64 * 1024
 """TCP ``so_sndbuf``/``so_rcvbuf`` of every link. With the kernel's autotuned loopback buffers (MBs),

@@ -1,7 +1,7 @@
 """Fencing by authority epoch (issue 16): which state a consumer may believe.
 
 A world's authority (the sim peer that owns the robots and the ownership records) stamps its
-authority epoch, the *term*, on every message it writes (:attr:`fabric.messages.Header.term`).
+authority epoch, the *term*, on every message it writes (:attr:`fabric.interfaces.Header.term`).
 A standby that takes the world over raises the term; a primary that comes back from a freeze still
 stamps the old one until it notices and steps down. Consumers keep the highest term they have seen
 per world and ignore authority state stamped with a lower one, so for them there is never more than

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from fabric.messages import Command
+from fabric.interfaces import Command
 
 
 class CommandGate(Protocol):

@@ -11,8 +11,10 @@ client makes up (keys, payloads) grows a peer's memory: publishers and sequence
 counters are kept for at most :data:`MAX_KEYS` keys.
 
 Services are queryables whose requests and replies are fabric messages; a
-handler refuses a request by raising :class:`ServiceError`, which the caller
-gets back as the same exception with the same reason.
+handler refuses a request by raising :class:`~fabric.interfaces.ServiceError`, which the caller
+gets back as :class:`~fabric.interfaces.Refused` (a ``ServiceError``) with the same reason; a query
+nobody answers raises :class:`~fabric.interfaces.NoReply`. The error types live in
+:mod:`fabric.interfaces.errors` and are importable from here as before.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ from fabric.config import FabricConfig, default_peer_id
 from fabric.exit import at_exit
 from fabric.fencing import Fence, is_authority_key
 from fabric.limits import RateLimiter, clip
-from fabric.messages import Event, Header
+from fabric.interfaces import Event, Header, NoReply, Refused, ServiceError
 
 log = logging.getLogger("robofabric")
 
@@ -48,7 +50,7 @@ MAX_DEPARTED_SIMS = 256
 """Ids of sims whose token went, kept so their late samples cannot re-raise a reset fence (bounded:
 anyone may declare a token)."""
 
-__all__ = ["Fabric", "ServiceError", "Reply", "shutdown_event", "undeclare_all", "declare_publisher", "priority_for"]
+__all__ = ["Fabric", "ServiceError", "Refused", "NoReply", "Reply", "shutdown_event", "undeclare_all", "declare_publisher", "priority_for"]
 
 
 def undeclare_all(resources: list[Any]) -> None:
@@ -89,15 +91,6 @@ def declare_publisher(session: zenoh.Session, key: str, **options: Any) -> Any:
         session, key, cache=zenoh.ext.CacheConfig(max_samples=1), publisher_detection=True,
         sample_miss_detection=zenoh.ext.MissDetectionConfig(), **options,
     )
-
-
-class ServiceError(RuntimeError):
-    """A service refused a request, or nobody answered; ``reason`` says which and why."""
-
-    def __init__(self, reason: str, *, key: str = "") -> None:
-        super().__init__(reason)
-        self.reason = reason
-        self.key = key
 
 
 @dataclass(frozen=True, slots=True)
@@ -422,7 +415,8 @@ class Fabric:
     ) -> list[Reply]:
         """Send a query and return the decoded replies.
 
-        Raises :class:`ServiceError` when a replier refuses (its reason), or when nobody answers.
+        Raises :class:`~fabric.interfaces.Refused` when a replier refuses (its reason), or
+        :class:`~fabric.interfaces.NoReply` when nobody answers (both are ``ServiceError``).
         With ``all_replies`` every replier's answer is returned (no consolidation).
         """
         kwargs: dict[str, Any] = {"timeout": timeout}
@@ -457,12 +451,12 @@ class Fabric:
                     errors.append(rep.err.payload.to_string() if rep.err.payload is not None else "error")
         if not replies:
             if errors:
-                raise ServiceError(errors[0], key=selector)
+                raise Refused(errors[0], key=selector)
             # say what happened: zenoh ends a query at once when nobody serves the key, and waits the whole
             # time limit only for a server that is there but silent (issue 11: "within 5 s" after 0 s misleads)
             waited = time.monotonic() - t0
             why = "nobody serves it" if waited < 0.5 * timeout else "no server answered in time"
-            raise ServiceError(f"no reply on {selector} after {waited:.1f} s of {timeout:.1f} s: {why}", key=selector)
+            raise NoReply(f"no reply on {selector} after {waited:.1f} s of {timeout:.1f} s: {why}", key=selector)
         return replies
 
     def call(self, selector: str, request: Any = None, *, timeout: float = 2.0, expected: Any = None) -> Any:

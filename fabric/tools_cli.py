@@ -238,7 +238,7 @@ def pub(
 ) -> None:
     """Publish a message built from JSON (like ``ros2 topic pub``); checked by the codec before it leaves."""
     from fabric.codec import encode
-    from fabric.messages import Command
+    from fabric.interfaces import Command
     from fabric.rate import RateLoop
 
     body = _message_from_json(msg_type, data)

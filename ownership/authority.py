@@ -15,13 +15,13 @@ from types import MappingProxyType
 from typing import Any
 
 from fabric import keys
-from fabric.messages import Command, Event, OwnershipRecord
+from fabric.interfaces import Command, Event, OwnershipRecord
 from fabric.rate import Clock, MonotonicClock
 from fabric.session import Fabric, ServiceError
 
 from ownership import replica
 from ownership import state as st
-from ownership.messages import OwnReply, OwnRequest
+from fabric.interfaces import OwnReply, OwnRequest
 
 log = logging.getLogger("robofabric.ownership")
 

@@ -23,10 +23,10 @@ from typing import Callable
 
 from fabric import keys
 from fabric.limits import validate_user
-from fabric.messages import OwnershipRecord
+from fabric.interfaces import OwnershipRecord
 from fabric.session import Fabric, ServiceError
 
-from ownership.messages import OwnReply, OwnRequest
+from fabric.interfaces import OwnReply, OwnRequest
 
 log = logging.getLogger("robofabric.ownership")
 

@@ -17,7 +17,7 @@ from dataclasses import replace
 from types import MappingProxyType
 from typing import Any, Mapping
 
-from fabric.messages import OwnershipRecord
+from fabric.interfaces import OwnershipRecord
 
 from ownership import state as st
 

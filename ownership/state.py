@@ -2,7 +2,7 @@
 
 No zenoh and no clock: ``now`` arrives inside the events, so the same code runs
 in the authority and in hypothesis property tests. Records are
-:class:`fabric.messages.OwnershipRecord` (the replicated wire record).
+:class:`fabric.interfaces.OwnershipRecord` (the replicated wire record).
 
 Rules (DESIGN.md, issue 5):
 - ``exclusive`` objects have at most one owner, always a live user; ``scene``
@@ -14,7 +14,7 @@ Rules (DESIGN.md, issue 5):
   denied (or queued when the requester asks to wait). A release, lease expiry
   or owner departure passes ownership to the head of the queue.
 - Bounded against made-up users (issue 14): a queue holds at most
-  :data:`fabric.messages.MAX_QUEUE` users, and a user that requested without a
+  :data:`fabric.interfaces.MAX_QUEUE` users, and a user that requested without a
   liveliness token (a :class:`Join`) is dropped, from queues and ownership, once
   ``grace_s`` has passed without one: forged requesters leave on their own. Until its
   token is seen such a user may take a free robot but never take one over from its owner
@@ -27,7 +27,7 @@ from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Mapping
 
-from fabric.messages import MAX_QUEUE, OwnershipRecord
+from fabric.interfaces import MAX_QUEUE, OwnershipRecord
 
 __all__ = [
     "Effect", "OwnState", "Join", "Leave", "Request", "Release", "Renew", "Tick", "Motion",

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fabric.geometry import wrap_angle
+from fabric.interfaces import wrap_angle
 from robots import BaseSpec
 
 MOVING_JOINT_SPEED = 1e-3  # rad/s: above this a joint counts as moving (the ownership gate's "in motion")

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from fabric.geometry import wrap_angle
+from fabric.interfaces import wrap_angle
 from sim_peer.controllers import CommandRejected
 
 

@@ -42,12 +42,11 @@ from fabric import keys
 from fabric.codec import DecodeError, decode
 from fabric.gate import CommandGate, OpenGate
 from fabric.limits import clip, is_valid_user, quote
-from fabric.messages import Command, Event, Pose
+from fabric.interfaces import Command, Event, ObjectInfo, Pose, WorldInfo
 from fabric.rate import Clock, RateLoop
 from fabric.session import Fabric
 from sim_peer.controllers import Clamp, CommandRejected
 from sim_peer.inbox import CommandQueue
-from sim_peer.messages import ObjectInfo, WorldInfo
 from sim_peer.pacing import Pacer
 from sim_peer.robot import Build, CommandHandler, Stream, body_mismatch
 from sim_peer.world import SimWorld

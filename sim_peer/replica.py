@@ -15,8 +15,7 @@ No zenoh here: the peer and the standby do the I/O.
 
 from __future__ import annotations
 
-from fabric.messages import JointState, Pose
-from sim_peer.messages import ObjectInfo, RobotState, WorldState
+from fabric.interfaces import JointState, ObjectInfo, Pose, RobotState, WorldState
 from sim_peer.world import SimWorld
 
 __all__ = ["RobotState", "WorldState", "capture", "restore", "overlay_joints", "overlay_pose", "advance"]

@@ -27,16 +27,15 @@ from typing import Any, ClassVar
 import mujoco
 import numpy as np
 
-from fabric.messages import COMMAND_BODIES
+from fabric.interfaces import COMMAND_BODIES, RobotInfo, RobotState
 from robots import RobotDescription
 from sim_peer.controllers import Clamp, CommandRejected
-from sim_peer.messages import RobotInfo, RobotState
 
 HOOKS = ("describe", "initialize", "before_step", "after_step", "streams", "commands")
 _HOOKISH = ("describe", "initialize", "before_", "after_", "stream", "command")
 
 Build = Callable[[Any], Any]
-"""Builds a message from a ``fabric.messages.Header`` (called outside the world's lock)."""
+"""Builds a message from a ``fabric.interfaces.Header`` (called outside the world's lock)."""
 
 CommandHandler = Callable[[Any], "Clamp | None"]
 """Applies a command's body (``JointTarget``, ``Twist`` ...); returns a :class:`Clamp` when it clipped

@@ -21,7 +21,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from fabric.messages import Scan
+from fabric.interfaces import Scan
 from robots import LidarSpec, UltrasonicSpec
 from sim_peer.robot import Build, Physics, Stream
 

@@ -16,11 +16,10 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from fabric.messages import JointState, Pose
+from fabric.interfaces import JointState, Pose, RobotInfo, RobotState
 from sim_peer.bumper import Bumper
 from sim_peer.controllers import ArmController, BaseController, Clamp, CommandRejected
 from sim_peer.follower import PurePursuit
-from sim_peer.messages import RobotInfo, RobotState
 from sim_peer.robot import Build, CommandHandler, Mount, Note, Physics, Robot, Stream, check_hooks
 from sim_peer.sensors import Lidar, Sensor, Ultrasonic
 

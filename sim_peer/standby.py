@@ -5,7 +5,7 @@
 
 - **primary**: a :class:`~sim_peer.peer.SimPeer` with its ownership gate, every message stamped with
   the authority epoch (``fabric.term``), and the whole world state served on ``rf/{world}/srv/state``
-  (:class:`~sim_peer.messages.WorldState`). It listens to the joints streams: a higher term from
+  (:class:`~fabric.interfaces.WorldState`). It listens to the joints streams: a higher term from
   another sim makes it step down. A publication gap longer than half the transport lease means it
   may have been frozen: it muzzles itself (publishes and answers nothing), asks ``srv/state`` who is authority now,
   and steps down if someone holds a higher term, else carries on.
@@ -27,11 +27,11 @@ import time
 from typing import Any, Callable
 
 from fabric import keys
-from fabric.messages import JointState, Pose
+from fabric.interfaces import JointState, Pose
 from fabric.session import Fabric, ServiceError
 from sim_peer import election as el
 from sim_peer import replica
-from sim_peer.messages import WorldState
+from fabric.interfaces import WorldState
 from sim_peer.peer import SimPeer
 from sim_peer.world import SimWorld
 

@@ -30,7 +30,7 @@ import numpy as np
 
 from fabric import keys
 from fabric.config import FabricConfig
-from fabric.messages import (
+from fabric.interfaces import (
     Command,
     Event,
     JointState,
@@ -640,7 +640,7 @@ class Arm(Robot):
 
     @property
     def ik_stream(self) -> Any:
-        """The latest streamed IK solution (``compute_peer.messages.IKStream``) for this arm, or None."""
+        """The latest streamed IK solution (``fabric.interfaces.IKStream``) for this arm, or None."""
         return self.latest("ik")
 
     def wait_ik_stream(self, xyz: Sequence[float], *, timeout: float | None = None, tol: float = 1e-9) -> Any:

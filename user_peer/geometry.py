@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from fabric.messages import OccupancyGrid, Pose, Scan
+from fabric.interfaces import OccupancyGrid, Pose, Scan
 from ownership.extrapolate import age_s, extrapolate
 from user_peer.arm_geometry import Placement
 

@@ -13,7 +13,7 @@ import time
 from typing import TYPE_CHECKING, Any, Callable
 
 from fabric import keys
-from fabric.messages import OwnershipRecord
+from fabric.interfaces import OwnershipRecord
 from fabric.session import Fabric, ServiceError
 from user_peer.errors import NotOwner, Timeout
 

@@ -34,7 +34,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from fabric import keys
-from fabric.messages import Event, JointState, OccupancyGrid, OwnershipRecord, Path, Pose, Scan
+from fabric.interfaces import Event, JointState, OccupancyGrid, OwnershipRecord, Path, Pose, Scan
 from user_peer.arm_geometry import ArmGeometry, Placement
 from user_peer.geometry import EXTRAPOLATION_CAP_S, grid_rgb, scan_world_points, shown_position, world_to_map_pixels, yaw_of
 from user_peer.geometry import compose as _compose

@@ -114,10 +114,6 @@ def log_scene(logger: WorldLogger, scene: str) -> bool:
 def query_world_info(fab: Fabric, timeout: float = 2.0) -> Any:
     """The sim peer's world description, or None when no sim answers (the viewer then guesses types)."""
     try:
-        import sim_peer.messages  # noqa: F401  (registers WorldInfo with the codec)
-    except Exception:
-        pass
-    try:
         return fab.call(keys.srv(fab.world, "world"), timeout=timeout)
     except (ServiceError, Exception) as exc:
         log.info("no world description (%s); robot types are guessed from joint names", exc)

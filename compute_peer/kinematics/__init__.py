@@ -1,7 +1,7 @@
 """Arm kinematics on a Pinocchio model built from the robots package's URDF.
 
 FK, the paper's geometric Jacobian (Eq. 3-6), twists, Eq. 7 joint speed
-magnitudes and an IK that refuses (``Unreachable``) instead of returning a
+magnitudes and an IK that refuses (``NoIKSolution``) instead of returning a
 silent best effort; :func:`solve` is the IK entry point (the Meca500's closed
 form, or Levenberg-Marquardt for any arm).
 """
@@ -13,6 +13,6 @@ from compute_peer.kinematics.ik import (
     solve,
     solve_numerical,
 )
-from compute_peer.kinematics.model import ArmModel, Unreachable
+from compute_peer.kinematics.model import ArmModel, NoIKSolution
 
-__all__ = ["ArmModel", "IKSolution", "Unreachable", "in_base_column", "meca500_ik", "solve", "solve_numerical"]
+__all__ = ["ArmModel", "IKSolution", "NoIKSolution", "in_base_column", "meca500_ik", "solve", "solve_numerical"]

@@ -87,7 +87,7 @@ class PlacedArm:
         self, position: Sequence[float], quaternion: Sequence[float] | None = None, seed: Sequence[float] | None = None, *,
         frame: str = "world", method: str = "auto",
     ) -> IKSolution:
-        """Joints for a flange target in ``frame``; :class:`~.model.Unreachable` with the reason when none."""
+        """Joints for a flange target in ``frame``; :class:`~.model.NoIKSolution` with the reason when none."""
         quat = None if quaternion is None or len(quaternion) == 0 else finite_vector(quaternion, 4, "quaternion")
         if quat is not None and float(np.linalg.norm(quat)) < 1e-6:
             raise ValueError("quaternion has zero norm")
@@ -125,12 +125,12 @@ class PlacedArm:
 
     def stream_step(self, position: Sequence[float], q_now: np.ndarray | None) -> StreamStep:
         """Test A: position-only IK for the target sphere near the current joints, and the move to it."""
-        from .model import Unreachable
+        from .model import NoIKSolution
 
         now = np.zeros(self.nq) if q_now is None else self._q(q_now)
         try:
             sol = self.ik(position, None, now)
-        except (Unreachable, ValueError) as exc:
+        except (NoIKSolution, ValueError) as exc:
             empty = np.zeros(0)
             return StreamStep(False, str(exc), empty, empty, empty, 0.0)
         dq, speeds, seconds = self.move(now, sol.q)

@@ -31,7 +31,7 @@ Two ``nlpsol`` per robot type and target kind (full pose / position only) are
 built on first use; targets and seed are parameters, so a solve does not
 rebuild anything. Every answer is checked by Pinocchio's FK and the limits; a
 failed start is retried from seeded random in-limit starts (deterministic),
-then :class:`~compute_peer.kinematics.model.Unreachable` is raised with IPOPT's
+then :class:`~compute_peer.kinematics.model.NoIKSolution` is raised with IPOPT's
 status and the best residuals.
 """
 
@@ -44,7 +44,7 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
-from .model import ArmModel, Unreachable
+from .model import ArmModel, NoIKSolution
 
 POSITION_TOL = 1e-6
 """m: an answer whose FK misses the target position by more is rejected."""
@@ -212,7 +212,7 @@ class CasadiIK:
         residual of the target within the bounds, which gets onto the solution
         set (IPOPT started off it often declares the constraints infeasible),
         then the nearest-to-the-seed program from that point. ``seed`` is clamped
-        into the limits (``ik.solve`` already does). Raises :class:`Unreachable`
+        into the limits (``ik.solve`` already does). Raises :class:`NoIKSolution`
         with IPOPT's status and the best residuals.
         """
         p = np.asarray(position, float)
@@ -222,7 +222,7 @@ class CasadiIK:
             centre, radius = self.reach
             dist = float(np.linalg.norm(p - centre))
             if dist > radius * (1 + 1e-9):
-                raise Unreachable(f"out of reach: {dist:.4f} m from the first joint > the chain's {radius:.4f} m")
+                raise NoIKSolution(f"out of reach: {dist:.4f} m from the first joint > the chain's {radius:.4f} m")
         ok, pe, re = self._check(arm, s, p, rt)
         if ok:  # the seed is on target: nothing is nearer (and IPOPT's barrier would only nudge it off)
             return s, pe, re
@@ -257,7 +257,7 @@ class CasadiIK:
         at = [f"J{i + 1} at its {'lower' if q[i] <= self.lower[i] + 1e-6 else 'upper'} limit {_deg(q[i])}"
               for i in range(self.nq) if q[i] <= self.lower[i] + 1e-6 or q[i] >= self.upper[i] - 1e-6]
         what = f"{pe:.3g} m" + ("" if rt is None else f", {re:.3g} rad")
-        raise Unreachable(f"casadi IK found no solution within limits from {tries} starts (IPOPT {status}); "
+        raise NoIKSolution(f"casadi IK found no solution within limits from {tries} starts (IPOPT {status}); "
                           f"best residual {what}" + (f" ({', '.join(at)})" if at else ""))
 
     def _check(self, arm: ArmModel, q: np.ndarray, p: np.ndarray, rt: np.ndarray | None) -> tuple[bool, float, float]:

@@ -32,7 +32,7 @@ from .ik_common import (
     joint_distance,
     quaternion_to_matrix,
 )
-from .model import ArmModel, Unreachable
+from .model import ArmModel, NoIKSolution
 
 WRIST_SINGULAR = 1e-9
 """sin(q5) below this: J4 and J6 are one rotation; J4 keeps the seed's value."""
@@ -269,7 +269,7 @@ def meca500_ik(arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequ
     Nearest to ``seed`` (weighted joint distance, see :func:`joint_distance`)
     first; the seed also fixes q4 at the wrist singularity and q1 at the shoulder
     singularity. Each one passed an FK check through ``arm``. Raises
-    :class:`Unreachable` when there is none.
+    :class:`NoIKSolution` when there is none.
     """
     if arm.description.name != _geo.NAME:
         raise ValueError(f"meca500_ik: arm is a {arm.description.name!r}, not a {_geo.NAME!r}")
@@ -278,7 +278,7 @@ def meca500_ik(arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequ
     s = _default_seed(arm) if seed is None else [float(v) for v in seed]
     cands, reason = _meca500_candidates(arm, p, rot, s)
     if not cands:
-        raise Unreachable(reason)
+        raise NoIKSolution(reason)
     cands.sort(key=lambda c: joint_distance(arm, c.q, s))
     return [np.array(c.q) for c in cands]
 

@@ -3,7 +3,7 @@
 :func:`solve` is the one entry point (the service layer calls it). It takes a
 flange target in the arm's base frame, a position and optionally a quaternion
 (w, x, y, z), and returns an :class:`IKSolution` inside the joint limits or
-raises :class:`~compute_peer.kinematics.model.Unreachable` saying why; it never
+raises :class:`~compute_peer.kinematics.model.NoIKSolution` saying why; it never
 returns a best effort. Malformed input (wrong shapes, NaN) raises plain
 ``ValueError``.
 
@@ -43,7 +43,7 @@ from .ik_common import (
     nearest,
     quaternion_to_matrix,
 )
-from .model import ArmModel, Unreachable
+from .model import ArmModel, NoIKSolution
 from .numerical_ik import solve_numerical
 
 __all__ = [
@@ -133,7 +133,7 @@ def _refuse_base_column(arm: ArmModel, p: list[float]) -> None:
     """
     if in_base_column(arm, p):
         radius, top = _base_column(arm)
-        raise Unreachable(f"inside the base column: {math.hypot(p[0], p[1]):.3f} m from its axis < radius "
+        raise NoIKSolution(f"inside the base column: {math.hypot(p[0], p[1]):.3f} m from its axis < radius "
                           f"{radius:.3f} m, {p[2]:.3f} m high < top {top:.3f} m")
 
 
@@ -149,7 +149,7 @@ def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] 
     orientation, then the tool pointing down, then horizontal and radially
     outward, then falls back to numerical position-only IK from the seed; the
     closed form keeps the roll joint (J6) at the seed's angle, as it cannot move
-    the flange. Raises :class:`Unreachable` (with the reason) when nothing inside the limits
+    the flange. Raises :class:`NoIKSolution` (with the reason) when nothing inside the limits
     reaches the target, ``ValueError`` for malformed input.
     """
     if method not in METHODS:
@@ -182,7 +182,7 @@ def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] 
     if rot is not None:
         cands, reason = closed.candidates(arm, p, rot, s)
         if not cands:
-            raise Unreachable(reason)
+            raise NoIKSolution(reason)
         best = cands[nearest(arm, [c.q for c in cands], s)]
         return _solution(best.q, "closed_form", best.position_error, best.orientation_error, len(cands))
     return _solve_position_closed(arm, closed, p, s)
@@ -191,7 +191,7 @@ def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] 
 def _solve_position_closed(arm: ArmModel, closed: ClosedForm, p: list[float], s: list[float]) -> IKSolution:
     dist = math.dist(p, closed.shoulder)
     if dist > closed.reach:
-        raise Unreachable(f"out of reach: distance to shoulder {dist:.4f} m > max {closed.reach:.4f} m")
+        raise NoIKSolution(f"out of reach: distance to shoulder {dist:.4f} m > max {closed.reach:.4f} m")
     reasons = []
     for name, rot in _orientation_options(arm, p, s):
         cands, reason = closed.candidates(arm, p, rot, s)
@@ -204,8 +204,8 @@ def _solve_position_closed(arm: ArmModel, closed: ClosedForm, p: list[float], s:
         reasons.append(f"tool {name}: {reason or 'the FK check failed'}")
     try:
         q, pe, _ = solve_numerical(arm, p, None, s)
-    except Unreachable as exc:
-        raise Unreachable(f"{exc}; closed form: " + "; ".join(reasons)) from None
+    except NoIKSolution as exc:
+        raise NoIKSolution(f"{exc}; closed form: " + "; ".join(reasons)) from None
     return _solution(q, "numerical", pe, 0.0, 0)
 
 

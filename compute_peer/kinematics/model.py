@@ -8,8 +8,12 @@ import pinocchio as pin
 import robots
 
 
-class Unreachable(ValueError):
-    """The target cannot be reached inside the joint limits; the message says why."""
+class NoIKSolution(ValueError):
+    """No joint solution puts the flange at the target inside the joint limits; the message says why.
+
+    The solvers' refusal, inside the compute peer: the service sends its text back as a
+    :class:`fabric.interfaces.Refused` reply, which the user API raises as ``user_peer.Unreachable``
+    (the one class of that name: a target a user asked for cannot be reached)."""
 
 
 class ArmModel:
@@ -61,10 +65,10 @@ class ArmModel:
 
     def ik_position(self, target: np.ndarray, q0: np.ndarray, *, tol: float = 1e-9,
                     iters: int = 200, damping: float = 1e-4) -> np.ndarray:
-        """Damped least squares on the position, clamped to limits; raises Unreachable on failure."""
+        """Damped least squares on the position, clamped to limits; raises NoIKSolution on failure."""
         target = np.asarray(target, float)
         if not np.all(np.isfinite(target)):
-            raise Unreachable("target is not finite")
+            raise NoIKSolution("target is not finite")
         q = np.clip(np.asarray(q0, float), self.lower, self.upper)
         for _ in range(iters):
             err = target - self.fk(q).translation
@@ -73,5 +77,5 @@ class ArmModel:
             jv = self.jacobian(q)[:3]
             dq = jv.T @ np.linalg.solve(jv @ jv.T + damping * np.eye(3), err)
             q = np.clip(q + dq, self.lower, self.upper)
-        raise Unreachable(f"no joint solution within limits for {target.tolist()} "
+        raise NoIKSolution(f"no joint solution within limits for {target.tolist()} "
                           f"(residual {np.linalg.norm(err):.3g} m)")

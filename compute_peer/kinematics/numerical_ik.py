@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 
 from .ik_common import _default_seed, _deg
-from .model import ArmModel, Unreachable
+from .model import ArmModel, NoIKSolution
 
 
 def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequence[float]] | None = None,
@@ -23,7 +23,7 @@ def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence
     pushes further out is frozen for that step, so the others still converge.
     When a start stalls, the solver restarts from ``restarts`` random in-limit
     joint vectors drawn with ``rng_seed`` (deterministic). Raises
-    :class:`Unreachable` with the best residual and the joints on limits.
+    :class:`NoIKSolution` with the best residual and the joints on limits.
     """
     model, data, fid = arm.model, arm.data, arm.frame_id
     lo, hi = arm.lower, arm.upper
@@ -93,5 +93,5 @@ def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence
     at = [f"J{i + 1} at its {'lower' if q[i] <= lo[i] + 1e-9 else 'upper'} limit {_deg(q[i])}"
           for i in range(len(q)) if q[i] <= lo[i] + 1e-9 or q[i] >= hi[i] - 1e-9]
     what = f"{pe:.3g} m" + ("" if rt is None else f", {re:.3g} rad")
-    raise Unreachable(f"numerical IK did not converge from {len(starts)} starts: best residual {what}"
+    raise NoIKSolution(f"numerical IK did not converge from {len(starts)} starts: best residual {what}"
                       + (f" ({', '.join(at)})" if at else ""))

@@ -32,13 +32,13 @@ import numpy as np
 
 from fabric import keys
 from fabric.limits import quote
-from fabric.messages import Event, JointState, Pose
+from fabric.interfaces import Event, JointState, Pose
 from fabric.rate import Clock, MonotonicClock, RateLoop
 from fabric.session import Fabric, ServiceError, undeclare_all
 
-from ..messages import FKReply, FKRequest, IKReply, IKRequest, IKStream, JacobianReply, JacobianRequest
+from fabric.interfaces import FKReply, FKRequest, IKReply, IKRequest, IKStream, JacobianReply, JacobianRequest
 from .arm import PlacedArm
-from .model import ArmModel, Unreachable
+from .model import ArmModel, NoIKSolution
 
 log = logging.getLogger("robofabric.kinematics")
 
@@ -160,11 +160,6 @@ class KinematicsService:
 
     def discover(self, timeout: float = 2.0) -> int:
         """Learn the arms of the world from the sim peers' ``srv/world``; returns how many are known."""
-        try:
-            import sim_peer.messages  # noqa: F401  (registers WorldInfo with the codec)
-        except ImportError as exc:
-            self._discovery_failed(f"cannot read the world description: {exc}")
-            return len(self.arms)
         with self._lock:
             generation = self._sims_changed
         try:
@@ -293,7 +288,7 @@ class KinematicsService:
             raise self._refuse(ValueError("an IK query needs an IKRequest payload (position, optional quaternion)"))
         try:
             return self.ik(robot, req)
-        except (Unreachable, ValueError, ServiceError) as exc:
+        except (NoIKSolution, ValueError, ServiceError) as exc:
             raise self._refuse(exc) from None
 
     def _on_fk(self, key: str, req: FKRequest | None) -> FKReply:

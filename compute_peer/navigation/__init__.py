@@ -6,7 +6,7 @@ inflation), :mod:`.hybrid_astar` and :mod:`.ompl_planner` (the two planners,
 chosen through :func:`plan_path`). :mod:`.service` serves them over the fabric:
 ``register_navigation(fabric)`` declares ``srv/map/**`` and ``srv/plan/**``.
 The service names are loaded lazily so that importing the pure parts never
-imports zenoh.
+imports zenoh. The services' requests and replies are in :mod:`fabric.interfaces.navigation`.
 """
 
 from typing import Any
@@ -16,7 +16,6 @@ from .errors import NavigationError
 from .hybrid_astar import HybridAStar, HybridAStarConfig, plan_hybrid_astar
 from .mapio import load_map, load_npz, load_pgm_yaml, save_map, save_npz, save_pgm_yaml
 from .mapping import MapperConfig, OccupancyMapper
-from .messages import MapReply, MapRequest, PlanReply, PlanRequest
 from .model import PlanResult, VehicleModel
 from .ompl_planner import OmplConfig, plan_ompl
 from .planner import PlannerSettings, plan_path
@@ -25,15 +24,11 @@ __all__ = [
     "Costmap",
     "HybridAStar",
     "HybridAStarConfig",
-    "MapReply",
-    "MapRequest",
     "MapperConfig",
     "NavigationError",
     "NavigationService",
     "OccupancyMapper",
     "OmplConfig",
-    "PlanReply",
-    "PlanRequest",
     "PlanResult",
     "PlannerSettings",
     "VehicleModel",

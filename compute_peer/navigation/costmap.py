@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fabric.messages import OccupancyGrid
+from fabric.interfaces import OccupancyGrid
 
 from .errors import NavigationError
 from .grid import check_grid, dilate, occupied_mask

@@ -116,16 +116,9 @@ class RobotDescriptions:
                 self._discovery_ended = self._clock.now()
 
     def discover(self, timeout: float = 2.0) -> int:
-        """Ask the sim peers' ``srv/world`` now and learn their mobile robots; returns how many were described.
+        """Ask the sim peers' ``srv/world`` now and learn their mobile robots; returns how many were described."""
+        from fabric.interfaces import ServiceError
 
-        The world description's message types belong to the sim peer; without it installed nothing is learnt.
-        """
-        from fabric.session import ServiceError
-
-        try:
-            import sim_peer.messages  # noqa: F401  (registers WorldInfo with the codec)
-        except ImportError:
-            return 0
         try:
             replies = self.fabric.query(keys.srv(self.world, "world"), timeout=timeout, all_replies=True)
         except ServiceError:

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.geometry import TWO_PI, wrap_angle
+from fabric.interfaces import TWO_PI, wrap_angle
 
 __all__ = ["TWO_PI", "wrap_angle"]  # re-exported: the planners import them from here
 

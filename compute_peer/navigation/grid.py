@@ -1,4 +1,4 @@
-"""Occupancy grids as :class:`fabric.messages.OccupancyGrid` values, and the cell arithmetic around them.
+"""Occupancy grids as :class:`fabric.interfaces.OccupancyGrid` values, and the cell arithmetic around them.
 
 The fabric message is the map type everywhere (no second map class): cells are
 row-major with row = y, 0 free .. 100 occupied, 255 unknown, and ``origin`` is
@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from fabric.messages import Header, OccupancyGrid
+from fabric.interfaces import Header, OccupancyGrid
 
 from .errors import NavigationError
 

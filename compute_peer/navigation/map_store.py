@@ -11,7 +11,7 @@ from __future__ import annotations
 import threading
 from pathlib import Path as FsPath
 
-from fabric.messages import OccupancyGrid
+from fabric.interfaces import OccupancyGrid
 
 from .costmap import Costmap, build_costmap
 from .errors import NavigationError

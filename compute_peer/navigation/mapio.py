@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fabric.messages import OccupancyGrid
+from fabric.interfaces import OccupancyGrid
 
 from .errors import NavigationError
 from .grid import UNKNOWN, check_grid, make_grid

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fabric.messages import Header, OccupancyGrid, Pose, Scan
+from fabric.interfaces import Header, OccupancyGrid, Pose, Scan
 
 from .errors import NavigationError
 from .geometry import yaw_from_quaternion

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
-from fabric.messages import OccupancyGrid
+from fabric.interfaces import OccupancyGrid
 
 from .costmap import Costmap, build_costmap
 from .errors import NavigationError

@@ -10,7 +10,7 @@ from __future__ import annotations
 import threading
 from collections import deque
 
-from fabric.messages import Pose
+from fabric.interfaces import Pose
 
 __all__ = ["MAX_ROBOTS", "POSE_HISTORY", "PoseHistory"]
 

@@ -11,7 +11,7 @@ import logging
 import threading
 from typing import Callable
 
-from fabric.messages import Header, OccupancyGrid, Scan
+from fabric.interfaces import Header, OccupancyGrid, Scan
 
 from .errors import NavigationError
 from .mapping import MapperConfig, OccupancyMapper

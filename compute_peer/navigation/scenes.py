@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fabric.messages import OccupancyGrid
+from fabric.interfaces import OccupancyGrid
 
 from .grid import make_grid
 

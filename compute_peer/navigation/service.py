@@ -35,7 +35,7 @@ from pathlib import Path as FsPath
 from typing import Any
 
 from fabric import keys
-from fabric.messages import OccupancyGrid, Pose, Scan
+from fabric.interfaces import OccupancyGrid, Pose, Scan
 from fabric.rate import Clock
 from fabric.session import Fabric, ServiceError, undeclare_all
 
@@ -44,7 +44,7 @@ from .errors import NavigationError
 from .map_service import MapService
 from .map_store import MapStore
 from .mapping import MapperConfig, OccupancyMapper
-from .messages import MapReply, MapRequest, PlanReply, PlanRequest
+from fabric.interfaces import MapReply, MapRequest, PlanReply, PlanRequest
 from .plan_service import PlanService
 from .planner import PlannerSettings
 from .poses import MAX_ROBOTS, POSE_HISTORY, PoseHistory

@@ -20,7 +20,7 @@ import numpy as np
 
 from fabric import keys
 from fabric.codec import encode
-from fabric.messages import Header, JointState, Pose, Scan
+from fabric.interfaces import Header, JointState, Pose, Scan
 
 __all__ = ["Stream", "robot_streams", "run_load", "DEFAULT_RATES"]
 

@@ -34,7 +34,7 @@ def command(
     """Time from the primary's SIGKILL to the new authority's first state, and the state error at take-over."""
     from fabric import keys
     from fabric.codec import DecodeError, decode
-    from fabric.messages import Command, Event, JointTarget
+    from fabric.interfaces import Command, Event, JointTarget
     from fabric.session import Fabric
     from fabric.testing import ProcessGroup, client, free_port, robofabric_cmd, router_config, wait_until
     from ownership import OwnershipClient

@@ -38,7 +38,7 @@ import numpy as np
 import typer
 
 from fabric import keys
-from fabric.messages import Command, JointState, JointTarget, Stop
+from fabric.interfaces import Command, JointState, JointTarget, Stop
 from fabric.reliable import Resent, resend_until
 from fabric.session import Fabric, ServiceError
 from fabric.testing import client, free_port, robofabric_cmd, wait_until
@@ -348,8 +348,6 @@ def _try_client(world: str, port: int) -> Fabric | None:
 
 
 def _world_info(fab: Fabric, world: str) -> Any:
-    import sim_peer.messages  # noqa: F401  (WorldInfo)
-
     try:
         return fab.call(keys.srv(world, "world"), timeout=2.0)
     except ServiceError:

@@ -12,9 +12,9 @@ import numpy as np
 
 from fabric import keys
 from fabric.codec import encode
-from fabric.messages import Command, JointState, JointTarget
+from fabric.interfaces import Command, JointState, JointTarget
 from fabric.testing import client
-from ownership.messages import OwnRequest
+from fabric.interfaces import OwnRequest
 
 
 def flood(world: str, port: int, load: dict) -> dict:

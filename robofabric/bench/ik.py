@@ -67,14 +67,14 @@ def reachable_targets(arm: ArmModel, n: int, rng: np.random.Generator) -> list[t
 def _timed(arm: ArmModel, jobs: list, method: str = "auto") -> tuple[list[float], list]:
     """Solve time (s) and solution of every (position, quaternion or None, seed) job that succeeds."""
     from compute_peer.kinematics.ik import solve
-    from compute_peer.kinematics.model import Unreachable
+    from compute_peer.kinematics.model import NoIKSolution
 
     times, sols = [], []
     for p, quat, s in jobs:
         t0 = time.perf_counter()
         try:
             sol = solve(arm, p, quat, s, method=method)
-        except Unreachable:
+        except NoIKSolution:
             continue
         times.append(time.perf_counter() - t0)
         sols.append(sol)

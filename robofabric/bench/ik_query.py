@@ -28,7 +28,7 @@ def measure_query(n: int = 1000, seed: int = 0, warmup: int = 50) -> dict[str, d
     """Median and p99 (ms) of IK (full pose and position only) and FK queries to a compute peer process."""
     from robofabric.bench.ik import reachable_targets
     from compute_peer.kinematics.model import ArmModel
-    from compute_peer.messages import FKRequest, IKRequest
+    from fabric.interfaces import FKRequest, IKRequest
     from fabric import keys
     from fabric.session import Fabric
     from fabric.testing import client, free_port, robofabric_cmd, router_config, wait_until
@@ -68,7 +68,7 @@ def measure_query(n: int = 1000, seed: int = 0, warmup: int = 50) -> dict[str, d
 
 
 def _answers(fab, key: str) -> bool:
-    from compute_peer.messages import FKRequest
+    from fabric.interfaces import FKRequest
     from fabric.session import ServiceError
 
     try:

@@ -27,7 +27,7 @@ from compute_peer.navigation.model import VehicleModel
 from compute_peer.navigation.ompl_planner import OmplConfig
 from compute_peer.navigation.planner import PlannerSettings, plan_path
 from compute_peer.navigation.scenes import office, scan_angles
-from fabric.messages import Header, Pose, Scan
+from fabric.interfaces import Header, Pose, Scan
 from robofabric.bench.common import append, pct
 
 RES = 0.05

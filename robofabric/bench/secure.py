@@ -54,7 +54,7 @@ def _mode_setup(mode: str, tmp: Path) -> tuple[str, list[str], dict[str, str | N
 
 def _ik_round_trips(ep: str, configs: dict[str, str | None], n: int, warmup: int = 30) -> list[float]:
     from compute_peer.kinematics.model import ArmModel
-    from compute_peer.messages import IKRequest
+    from fabric.interfaces import IKRequest
     from fabric import keys
     from fabric.config import FabricConfig
     from fabric.session import Fabric, ServiceError

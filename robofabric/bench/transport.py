@@ -36,7 +36,7 @@ RAYS = 240
 
 def _scan_payload(seq: int, rng: np.random.Generator, ranges: np.ndarray) -> bytes:
     from fabric.codec import encode
-    from fabric.messages import Header, Scan
+    from fabric.interfaces import Header, Scan
 
     h = Header(stamp=seq * 0.001, wall_ns=time.time_ns(), seq=seq, source="bench-pub")
     return encode(Scan(-1.178, 2.356 / (RAYS - 1), 12.0, ranges, h))

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from compute_peer.kinematics.service import ArmPlacement, KinematicsService
-from compute_peer.messages import FKRequest, IKReply, IKRequest, IKStream, JacobianRequest
+from fabric.interfaces import FKRequest, IKReply, IKRequest, IKStream, JacobianRequest
 from fabric import keys
 from fabric.codec import encode
-from fabric.messages import Event, JointState, Pose
+from fabric.interfaces import Event, JointState, Pose
 from fabric.session import ServiceError
 from fabric.testing import robofabric_cmd, wait_until
 
@@ -187,7 +187,7 @@ def test_a_user_can_pick_a_compute_peer(world, router, connect):
 
 
 def test_navigation_answers_on_its_own_key_too(world, connect):
-    from compute_peer.navigation.messages import MapReply, MapRequest
+    from fabric.interfaces import MapReply, MapRequest
     from compute_peer.navigation.service import NavigationService
 
     navs = [NavigationService(connect("compute", pid), discover=False) for pid in ("n1", "n2")]
@@ -257,7 +257,7 @@ def test_robofabric_call_asks_a_service_from_the_command_line(served, world, rou
 def test_an_arm_asked_for_before_its_joints_arrive_is_looked_up_not_refused(world, connect):
     """A sim that comes after the compute peer, and a request before any joints: the request waits for
     the world's description instead of failing with "serves no arms yet" (a lab run failed that way)."""
-    from sim_peer.messages import RobotInfo, WorldInfo
+    from fabric.interfaces import RobotInfo, WorldInfo
 
     svc = KinematicsService(connect("compute"), discover=True)
     try:

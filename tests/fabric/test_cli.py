@@ -79,7 +79,7 @@ def test_echo_reports_garbage_and_keeps_going(cli_router, world, procs, router):
         name="echo",
     )
     from fabric.config import FabricConfig
-    from fabric.messages import JointState
+    from fabric.interfaces import JointState
     from fabric.session import Fabric
 
     with Fabric(FabricConfig(world=world, connect=(cli_router,)), kind="sim", peer_id="sim1") as sim:

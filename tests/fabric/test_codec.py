@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from fabric.codec import DecodeError, decode, encode, messages_equal, to_plain
-from fabric.messages import (
+from fabric.interfaces import (
     Command,
     Event,
     Header,

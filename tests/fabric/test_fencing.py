@@ -10,7 +10,7 @@ from hypothesis import given, settings, strategies as hs
 from fabric import keys
 from fabric.codec import DecodeError, decode, encode
 from fabric.fencing import Fence, is_authority_key
-from fabric.messages import Header, JointState, OwnershipRecord
+from fabric.interfaces import Header, JointState, OwnershipRecord
 from fabric.testing import wait_until
 
 
@@ -76,7 +76,7 @@ def test_subscribers_drop_authority_state_of_a_lower_term(world, connect):
     # user keys are never fenced: a command at term 0 still arrives
     cmds: list = []
     ck = keys.robot_path(world, "base1")
-    from fabric.messages import Path
+    from fabric.interfaces import Path
 
     sub.subscribe(ck, lambda k, m: cmds.append(m), expected=Path)
     user = connect("user", "alice")

@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from fabric.geometry import TWO_PI, wrap_angle
+from fabric.interfaces import TWO_PI, wrap_angle
 
 angles = st.floats(min_value=-1e4, max_value=1e4, allow_nan=False)
 

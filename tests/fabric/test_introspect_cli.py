@@ -12,7 +12,7 @@ import pytest
 from fabric import keys
 from fabric.introspect import KeyObserver, source_of
 from fabric.codec import encode
-from fabric.messages import Header, JointState, OccupancyGrid
+from fabric.interfaces import Header, JointState, OccupancyGrid
 from fabric.testing import robofabric_cmd
 
 NAMES = ("j1", "j2")

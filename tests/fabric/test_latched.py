@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fabric import keys
-from fabric.messages import JointState, OccupancyGrid, Path, Pose
+from fabric.interfaces import JointState, OccupancyGrid, Path, Pose
 from fabric.testing import wait_until
 
 

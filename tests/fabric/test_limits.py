@@ -7,7 +7,7 @@ from hypothesis import given, settings, strategies as hs
 
 from fabric.codec import DecodeError, decode, encode
 from fabric.limits import MAX_USER_LEN, RateLimiter, clip, is_valid_user, quote, validate_user
-from fabric.messages import Command, JointState, Scan, Stop
+from fabric.interfaces import Command, JointState, Scan, Stop
 
 
 @pytest.mark.parametrize("name", ["alice", "a", "user-host-1a2b3c", "Bob_2.0", "x" * MAX_USER_LEN])

@@ -7,7 +7,7 @@ import zenoh
 
 from fabric import keys
 from fabric.config import ConfigError, FabricConfig
-from fabric.messages import Event, JointState, Stop, Twist
+from fabric.interfaces import Event, JointState, Stop, Twist
 from fabric.session import ServiceError
 from fabric.testing import robofabric_cmd, wait_until
 

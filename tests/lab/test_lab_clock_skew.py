@@ -21,7 +21,7 @@ pytestmark = [pytest.mark.lab, pytest.mark.slow]
 JOIN = """
 import time, numpy as np, user_peer
 from fabric import keys
-from fabric.messages import Command, JointTarget, Path
+from fabric.interfaces import Command, JointTarget, Path
 from user_peer import scenarios
 from user_peer.errors import NotOwner
 w = user_peer.connect(world="demo", connect=["{router}"], user="{user}", timeout=10.0)

@@ -102,7 +102,7 @@ def test_owner_partition_bob_takes_over_alice_is_refused(world: World):
     assert epoch_b > epoch_a
     bob.call("arm.move_joints(np.zeros(len(arm.entry.joint_names)), wait=False); None")
     # alice, cut off, still believes she owns it and keeps commanding: her packets go nowhere
-    alice.call("arm.send('joints', __import__('fabric.messages', fromlist=['JointTarget']).JointTarget(far, 1.0)) if arm.is_owner else None")
+    alice.call("arm.send('joints', __import__('fabric.interfaces', fromlist=['JointTarget']).JointTarget(far, 1.0)) if arm.is_owner else None")
     world.lab.restore("alice")
     # she is told: her replica follows the authority's record again (renewal refused, record received)
     wait_until(lambda: alice.call("arm.owner") == "bob", timeout=30, what="alice's replica shows bob as owner",
@@ -110,7 +110,7 @@ def test_owner_partition_bob_takes_over_alice_is_refused(world: World):
     assert alice.call("arm.is_owner") is False
     # a command stamped with her old epoch (sent raw, as a stale client would) is refused by the authority
     alice.call(
-        "from fabric import keys\nfrom fabric.messages import Command, JointTarget\n"
+        "from fabric import keys\nfrom fabric.interfaces import Command, JointTarget\n"
         "k = keys.robot_cmd(w.name, 'arm1', 'joints', 'alice')\n"
         "w.fabric.publish(k, Command('alice', %d, JointTarget(far, 1.0), w.fabric.header(k))); None" % epoch_a
     )

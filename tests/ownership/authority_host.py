@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 from fabric import keys
-from fabric.messages import Command, Event
+from fabric.interfaces import Command, Event
 from fabric.session import shutdown_event
 from fabric.testing import client
 

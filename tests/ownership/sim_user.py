@@ -10,7 +10,7 @@ import sys
 import numpy as np
 
 from fabric import keys
-from fabric.messages import Command, JointTarget
+from fabric.interfaces import Command, JointTarget
 from fabric.session import shutdown_event
 from fabric.testing import client
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from fabric import keys
-from fabric.messages import Command, Event, JointTarget
+from fabric.interfaces import Command, Event, JointTarget
 from fabric.testing import wait_until
 
 from ownership import OwnershipClient

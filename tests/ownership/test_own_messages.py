@@ -3,9 +3,9 @@
 from hypothesis import given, strategies as hs
 
 from fabric.codec import decode, encode
-from fabric.messages import OwnershipRecord
+from fabric.interfaces import OwnershipRecord
 
-from ownership.messages import OwnReply, OwnRequest
+from fabric.interfaces import OwnReply, OwnRequest
 
 ids = hs.text("abcxyz0123", min_size=1, max_size=8)
 

@@ -212,7 +212,7 @@ def test_a_tokenless_owner_loses_the_robot_after_grace():
 
 
 def test_the_queue_is_capped():
-    from fabric.messages import MAX_QUEUE
+    from fabric.interfaces import MAX_QUEUE
 
     s = st.initial({"arm": "exclusive"})
     s, _ = st.step(s, st.Join("owner", 0.0))

@@ -9,13 +9,13 @@ import pytest
 from hypothesis import given, strategies as st
 
 from fabric import keys
-from fabric.messages import Event, OwnershipRecord
+from fabric.interfaces import Event, OwnershipRecord
 from fabric.session import ServiceError
 from fabric.testing import wait_until
 
 from ownership import Authority, OwnershipClient
 from ownership.client import EPOCH_SLACK, epoch_plausible
-from ownership.messages import OwnReply, OwnRequest
+from fabric.interfaces import OwnReply, OwnRequest
 
 
 @pytest.fixture

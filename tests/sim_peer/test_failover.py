@@ -19,7 +19,7 @@ import pytest
 
 from fabric import keys
 from fabric.codec import DecodeError, decode
-from fabric.messages import Command, Event, JointState, JointTarget, Path, Pose
+from fabric.interfaces import Command, Event, JointState, JointTarget, Path, Pose
 from fabric.testing import robofabric_cmd, wait_until
 
 from ownership import OwnershipClient

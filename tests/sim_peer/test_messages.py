@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fabric.codec import DecodeError, decode, encode, messages_equal
-from sim_peer.messages import ObjectInfo, RobotInfo, WorldInfo
+from fabric.interfaces import ObjectInfo, RobotInfo, WorldInfo
 
 ids = st.text("abcdefghijklmnopqrstuvwxyz0123456789_-", min_size=1, max_size=12)
 fl = st.floats(-1e3, 1e3, allow_nan=False)

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from fabric import keys
-from fabric.messages import Command, Event, JointState, JointTarget, Pose, Reset, Scan, Stop, Twist
+from fabric.interfaces import Command, Event, JointState, JointTarget, Pose, Reset, Scan, Stop, Twist
 from fabric.testing import robofabric_cmd, wait_until
-from sim_peer.messages import WorldInfo
+from fabric.interfaces import WorldInfo
 from sim_peer.peer import SimPeer
 from sim_peer.world import SimWorld
 
@@ -258,7 +258,7 @@ def test_cli_runs_for_a_duration_at_max_speed_and_exits_cleanly(world, tmp_path)
 
 
 def test_paths_and_bumps_are_announced_as_events(world, connect, user):
-    from fabric.messages import Path
+    from fabric.interfaces import Path
 
     fab, inbox = user
     peer = SimPeer(connect("sim", "fast-sim"), SimWorld("combined"), speed=10.0)

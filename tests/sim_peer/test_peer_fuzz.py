@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 import pytest
 
 from fabric import keys
-from fabric.messages import Command, Event, Header, JointTarget, Path, Reset, Stop, Twist
+from fabric.interfaces import Command, Event, Header, JointTarget, Path, Reset, Stop, Twist
 from sim_peer.peer import SimPeer
 from sim_peer.world import SimWorld
 

@@ -14,10 +14,9 @@ import pytest
 import robots
 import sim_peer.peer
 from fabric import keys
-from fabric.messages import Command, Event, JointState, JointTarget, Pose, Twist
+from fabric.interfaces import Command, Event, JointState, JointTarget, Pose, Twist, WorldInfo
 from fabric.testing import wait_until
 from ownership import Authority, OwnershipClient
-from sim_peer.messages import WorldInfo
 from sim_peer.peer import SimPeer
 from sim_peer.robot import HOOKS, Robot, Stream
 from sim_peer.world import SimWorld, WorldError
@@ -57,7 +56,7 @@ def test_the_world_builds_and_steps_a_robot_type_from_its_description_and_hooks(
 
 def test_a_standby_carries_the_new_type_on_through_its_snapshot_and_restore_hooks(plugin_path):
     from sim_peer import replica
-    from sim_peer.messages import WorldState
+    from fabric.interfaces import WorldState
 
     w = SimWorld("planar_cell")
     w.robot("p1").commands()["joints"](JointTarget(np.array([1.2, 0.4])))

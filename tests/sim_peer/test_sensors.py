@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from fabric.messages import Scan
+from fabric.interfaces import Scan
 from sim_peer.world import SimWorld
 from tests.sim_peer.conftest import FRONT, LEFT, RIGHT
 

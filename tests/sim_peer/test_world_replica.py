@@ -6,7 +6,7 @@ import numpy as np
 
 from fabric.codec import decode, encode
 from sim_peer import replica
-from sim_peer.messages import WorldState
+from fabric.interfaces import WorldState
 from sim_peer.world import SimWorld
 
 
@@ -42,7 +42,7 @@ def test_stream_samples_and_advance_bring_robots_to_one_time():
     t, steps, robots, objects = replica.capture(w)
     state = WorldState(t, steps, robots, objects)
     w.step(25)  # 50 ms later the primary publishes joints...
-    from fabric.messages import Header, JointState
+    from fabric.interfaces import Header, JointState
 
     names, q, dq = w.robots["arm1"].joint_state()
     js = JointState(names, q, dq, Header(stamp=w.time))

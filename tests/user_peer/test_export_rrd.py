@@ -9,7 +9,7 @@ import pytest
 
 from fabric import keys
 from fabric.codec import encode
-from fabric.messages import Header, JointState, OccupancyGrid, Path, Pose, Scan
+from fabric.interfaces import Header, JointState, OccupancyGrid, Path, Pose, Scan
 from fabric.testing import robofabric_cmd
 from user_peer.export import export_mcap
 from userpeer_rrd import entities_with_data, rows_per_entity

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fabric.messages import OccupancyGrid, Pose, Scan
+from fabric.interfaces import OccupancyGrid, Pose, Scan
 from user_peer.geometry import grid_rgb, scan_world_points, world_to_map_pixels, yaw_of
 
 
@@ -61,7 +61,7 @@ def test_world_to_map_pixels_matches_grid_image():
 def test_bases_are_drawn_where_they_are_by_now_eq8(skew_s):
     """The age is time since arrival on this machine's clock; the sender's header clock, here off ours by
     +-5 s, changes nothing (issue 15)."""
-    from fabric.messages import Header
+    from fabric.interfaces import Header
     from user_peer.geometry import EXTRAPOLATION_CAP_S, shown_position
 
     t = 1_700_000_000_000_000_000  # our clock when the pose arrived
@@ -79,7 +79,7 @@ def test_viewer_logger_ages_poses_by_arrival_not_by_the_senders_clock():
     """WorldLogger with a clock: the Eq. 8 age it plots is now - arrival, whatever the header says."""
     import rerun as rr
 
-    from fabric.messages import Header
+    from fabric.interfaces import Header
     from user_peer.rerun_log import WorldLogger
 
     now = [2_000_000_000_000]

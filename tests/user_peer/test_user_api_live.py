@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import user_peer
-from fabric.messages import Path
+from fabric.interfaces import Path
 from fabric.testing import ProcessGroup, client_config, free_port, robofabric_cmd, router_config, wait_until
 from fabric.session import Fabric
 from user_peer.api import Arm, Base, World

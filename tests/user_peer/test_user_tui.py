@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fabric import keys
-from fabric.messages import Header, JointState, OwnershipRecord, Pose, Scan
+from fabric.interfaces import Header, JointState, OwnershipRecord, Pose, Scan
 from fabric.testing import client_config, wait_until
 from user_peer.api import Arm, Base, World
 from user_peer.services import RobotEntry

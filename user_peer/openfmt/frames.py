@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.messages import JointState, Pose
+from fabric.interfaces import JointState, Pose
 from user_peer.arm_geometry import Placement, Shape
 from user_peer.catalog import RobotCatalog
 from user_peer.rerun_log import RobotDrawing

@@ -12,7 +12,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from compute_peer.kinematics import ArmModel, Unreachable, in_base_column, solve
+from compute_peer.kinematics import ArmModel, NoIKSolution, in_base_column, solve
 from compute_peer.kinematics.casadi_ik import casadi_ik, symbolic_fk
 from robots.description import ENV_PATH
 
@@ -68,7 +68,7 @@ def test_full_pose_round_trip(arm):
         seed = rng.uniform(arm.lower, arm.upper)
         try:
             sol = solve(arm, m.translation, _quat(m), seed, method="casadi")
-        except Unreachable as exc:
+        except NoIKSolution as exc:
             failures.append((q.tolist(), str(exc)))
             continue
         got = arm.fk(sol.q)
@@ -90,7 +90,7 @@ def test_position_only_round_trip(arm):
         seed = rng.uniform(arm.lower, arm.upper)
         try:
             sol = solve(arm, m.translation, None, seed, method="casadi")
-        except Unreachable as exc:
+        except NoIKSolution as exc:
             failures.append((q.tolist(), str(exc)))
             continue
         assert sol.solver == "casadi" and _within(arm, sol.q)
@@ -133,19 +133,19 @@ def test_position_only_is_nearer_than_the_seed_allows(arm):
 
 def test_refusals(arm):
     # out of reach: the chain's length bound, before IPOPT runs
-    with pytest.raises(Unreachable, match="out of reach"):
+    with pytest.raises(NoIKSolution, match="out of reach"):
         solve(arm, [1.0, 0.0, 0.3], [1.0, 0.0, 0.0, 0.0], method="casadi")
-    with pytest.raises(Unreachable, match="out of reach"):
+    with pytest.raises(NoIKSolution, match="out of reach"):
         solve(arm, [0.0, -0.5, 0.3], None, method="casadi")
     # a pose whose only solutions violate a limit (J5 at 126 deg > 115 deg): the closed form proves it, casadi agrees
     m = arm.fk(np.array([0.3, 0.3, 0.3, 0.0, 2.2, 0.0]))
-    with pytest.raises(Unreachable, match="violate joint limits"):
+    with pytest.raises(NoIKSolution, match="violate joint limits"):
         solve(arm, m.translation, _quat(m), method="closed_form")
-    with pytest.raises(Unreachable, match=r"no solution within limits .*IPOPT.*best residual .* m, .* rad") as exc:
+    with pytest.raises(NoIKSolution, match=r"no solution within limits .*IPOPT.*best residual .* m, .* rad") as exc:
         solve(arm, m.translation, _quat(m), method="casadi")
     assert "J5 at its upper limit" in str(exc.value)
     # the base column and the input checks are the dispatcher's, shared with every method
-    with pytest.raises(Unreachable, match="base column"):
+    with pytest.raises(NoIKSolution, match="base column"):
         solve(arm, [0.0, 0.0, 0.05], None, method="casadi")
     with pytest.raises(ValueError, match="quaternion"):
         solve(arm, [0.2, 0.0, 0.2], [0.0, 0.0, 0.0, 0.0], method="casadi")
@@ -209,7 +209,7 @@ def test_a_three_joint_arm_from_a_urdf(tmp_path, monkeypatch):
         p = arm.fk(q).translation
         try:
             sol = solve(arm, p, None, rng.uniform(arm.lower, arm.upper), method="casadi")
-        except Unreachable as exc:
+        except NoIKSolution as exc:
             failures.append((q.tolist(), str(exc)))
             continue
         assert sol.solver == "casadi" and _within(arm, sol.q)
@@ -217,9 +217,9 @@ def test_a_three_joint_arm_from_a_urdf(tmp_path, monkeypatch):
     assert len(failures) <= 1, failures
     # the base joint cannot turn past 2.5 rad: a target straight behind it is out of its limits
     behind = arm.fk(np.array([math.pi, 0.3, 0.2])).translation
-    with pytest.raises(Unreachable, match="no solution within limits"):
+    with pytest.raises(NoIKSolution, match="no solution within limits"):
         solve(arm, behind, None, method="casadi")
-    with pytest.raises(Unreachable, match="out of reach"):
+    with pytest.raises(NoIKSolution, match="out of reach"):
         solve(arm, [2.0, 0.0, 0.0], None, method="casadi")
 
 

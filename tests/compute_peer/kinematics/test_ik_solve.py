@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from compute_peer.kinematics import (
     ArmModel,
     IKSolution,
-    Unreachable,
+    NoIKSolution,
     in_base_column,
     meca500_ik,
     solve,
@@ -66,7 +66,7 @@ def test_closed_form_full_pose_round_trip(arm):
         seed = rng.uniform(arm.lower, arm.upper)
         try:
             sol = solve(arm, m.translation, _quat(m), seed)
-        except Unreachable as exc:
+        except NoIKSolution as exc:
             failures.append((q.tolist(), str(exc)))
             continue
         got = arm.fk(sol.q)
@@ -112,7 +112,7 @@ def test_position_only_round_trip(arm):
         seed = rng.uniform(arm.lower, arm.upper)
         try:
             sol = solve(arm, p, None, seed)
-        except Unreachable as exc:
+        except NoIKSolution as exc:
             failures.append((q.tolist(), str(exc)))
             continue
         assert _within(arm, sol.q) and sol.orientation_error == 0.0
@@ -141,7 +141,7 @@ def test_numerical_round_trip_near_and_far_seeds(arm):
         seed = np.clip(q + rng.normal(0.0, 0.3, 6), arm.lower, arm.upper) if i % 2 else rng.uniform(arm.lower, arm.upper)
         try:
             sol = solve(arm, m.translation, _quat(m), seed, method="numerical")
-        except Unreachable as exc:
+        except NoIKSolution as exc:
             failures.append((q.tolist(), str(exc)))
             continue
         got = arm.fk(sol.q)
@@ -195,20 +195,20 @@ def test_j6_at_180_degrees_gives_both_twins(arm):
 
 
 def test_unreachable_targets_are_refused_with_reasons(arm):
-    with pytest.raises(Unreachable, match=r"out of reach: distance to shoulder 1\.\d+ m > max 0\.33\d+ m"):
+    with pytest.raises(NoIKSolution, match=r"out of reach: distance to shoulder 1\.\d+ m > max 0\.33\d+ m"):
         solve(arm, [1.0, 0.0, 0.3])
-    with pytest.raises(Unreachable, match=r"out of reach: wrist centre"):
+    with pytest.raises(NoIKSolution, match=r"out of reach: wrist centre"):
         solve(arm, [1.0, 0.0, 0.3], [1.0, 0.0, 0.0, 0.0])
-    with pytest.raises(Unreachable, match=r"out of reach"):
+    with pytest.raises(NoIKSolution, match=r"out of reach"):
         solve(arm, [0.0, 0.5, 0.3], [1.0, 0.0, 0.0, 0.0], method="closed_form")
     for method in ("auto", "numerical"):
-        with pytest.raises(Unreachable, match=r"inside the base column: 0\.010 m from its axis < radius 0\.060 m"):
+        with pytest.raises(NoIKSolution, match=r"inside the base column: 0\.010 m from its axis < radius 0\.060 m"):
             solve(arm, [0.01, 0.0, 0.05], method=method)
     assert in_base_column(arm, [0.0, 0.05, 0.0]) and not in_base_column(arm, [0.0, 0.05, 0.1])
     # within reach, impossible orientation: the tool pointing straight up just over the base
-    with pytest.raises(Unreachable, match=r"all 8 solutions violate joint limits: J5 at 146\.7° \(limits -115\.\.115°\)"):
+    with pytest.raises(NoIKSolution, match=r"all 8 solutions violate joint limits: J5 at 146\.7° \(limits -115\.\.115°\)"):
         solve(arm, [0.1, 0.0, 0.1], [1.0, 0.0, 0.0, 0.0])
-    with pytest.raises(Unreachable, match=r"did not converge from 25 starts: best residual .* m, .* rad \(J\d at its"):
+    with pytest.raises(NoIKSolution, match=r"did not converge from 25 starts: best residual .* m, .* rad \(J\d at its"):
         solve(arm, [0.1, 0.0, 0.1], [1.0, 0.0, 0.0, 0.0], method="numerical")
 
 
@@ -232,7 +232,7 @@ def test_unreachable_targets_are_refused_with_reasons(arm):
 def test_malformed_input_is_a_plain_value_error(arm, position, quaternion, seed, what):
     with pytest.raises(ValueError, match=what) as info:
         solve(arm, position, quaternion, seed)
-    assert not isinstance(info.value, Unreachable)
+    assert not isinstance(info.value, NoIKSolution)
 
 
 def test_methods_and_registry(arm, monkeypatch):
@@ -270,7 +270,7 @@ def test_solve_returns_a_valid_solution_or_refuses(x, y, z, quat):
     arm = _ARM
     try:
         sol = solve(arm, [x, y, z], quat)
-    except Unreachable as exc:
+    except NoIKSolution as exc:
         assert str(exc)
         return
     assert _within(arm, sol.q)

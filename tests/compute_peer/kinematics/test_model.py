@@ -2,7 +2,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from compute_peer.kinematics import ArmModel, Unreachable
+from compute_peer.kinematics import ArmModel, NoIKSolution
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,7 @@ def test_ik_position_round_trip(arm):
 
 
 def test_unreachable_refused(arm):
-    with pytest.raises(Unreachable):
+    with pytest.raises(NoIKSolution):
         arm.ik_position([2.0, 0.0, 0.3], np.zeros(6))
-    with pytest.raises(Unreachable):
+    with pytest.raises(NoIKSolution):
         arm.ik_position([np.nan, 0.0, 0.3], np.zeros(6))

@@ -8,7 +8,7 @@ import numpy as np
 
 from compute_peer.navigation.geometry import quaternion_from_yaw
 from compute_peer.navigation.scenes import Scene, room, scan_angles
-from fabric.messages import Header, Pose, Scan
+from fabric.interfaces import Header, Pose, Scan
 
 RAYS = 240
 FOV = 270.0

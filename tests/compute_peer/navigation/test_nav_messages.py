@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from compute_peer.navigation.messages import (
+from fabric.interfaces import (
     DIRECTIONS,
     MAP_ACTIONS,
     PLANNER_NAMES,
@@ -20,7 +20,7 @@ from compute_peer.navigation.messages import (
     empty_grid,
 )
 from fabric.codec import DecodeError, decode, encode, messages_equal
-from fabric.messages import Header, OccupancyGrid, Path
+from fabric.interfaces import Header, OccupancyGrid, Path
 
 finite = st.floats(-1e6, 1e6, allow_nan=False)
 ids = st.text(st.characters(whitelist_categories=("Ll", "Lu", "Nd")), min_size=1, max_size=12)

@@ -9,9 +9,9 @@ import pytest
 
 from compute_peer.navigation import MapperConfig, PlannerSettings, VehicleModel, path_collision, register_navigation
 from compute_peer.navigation.grid import UNKNOWN, dilate, make_grid
-from compute_peer.navigation.messages import MapReply, MapRequest, PlanReply, PlanRequest
+from fabric.interfaces import MapReply, MapRequest, PlanReply, PlanRequest
 from fabric import keys
-from fabric.messages import OccupancyGrid, Path
+from fabric.interfaces import OccupancyGrid, Path
 from fabric.session import ServiceError
 from fabric.testing import wait_until
 from navscenes import drive_poses, pose_at, scan_at, small_room
@@ -142,7 +142,7 @@ def test_bad_requests_get_reasons_and_the_service_keeps_answering(peers):
         for rep in user.session.get(keys.srv(world, "plan", ROBOT), payload=b"\x01\x02garbage", timeout=5.0):
             if rep.err is not None:
                 from fabric.codec import decode
-                from fabric.messages import Event
+                from fabric.interfaces import Event
 
                 raise ServiceError(decode(rep.err.payload.to_bytes(), Event).reason)
     # file names that would leave the maps folder
@@ -197,7 +197,7 @@ def test_every_robot_of_the_world_when_none_are_named(connect):
         cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = 100
         wait_until(lambda: _try(lambda: call(user, "map", "map", MapRequest("set", grid=make_grid(cells, 0.1)), timeout=1.0)), what="map set")
         # joints and commands share the robot's key space: they must not disturb the service
-        from fabric.messages import JointState
+        from fabric.interfaces import JointState
 
         sim.publish(keys.robot_joints(world, "rover7"), JointState(("a",), np.zeros(1), np.zeros(1)))
         assert "unknown robot 'rover7'" in refused(user, "plan", "rover7", PlanRequest("rover7", goal=[4.0, 4.0, 0.0]))
@@ -214,7 +214,7 @@ def test_every_robot_of_the_world_when_none_are_named(connect):
 
 def test_sensor_mounting_and_radius_come_from_the_world_description(connect):
     """A sim peer's srv/world says where the LIDAR sits: scans are folded in from there, plans use its radius."""
-    from sim_peer.messages import RobotInfo, WorldInfo
+    from fabric.interfaces import RobotInfo, WorldInfo
 
     compute = connect("compute", "compute-3")
     sim = connect("sim", "sim-3")

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from fabric.codec import encode
-from fabric.messages import Header, JointState, Pose, Scan
+from fabric.interfaces import Header, JointState, Pose, Scan
 
 
 def joint_payload(seq: int, wall_ns: int, source: str = "sim") -> bytes:

@@ -4,7 +4,7 @@ carry a term, and authority state of a lower term than one already written is le
 from __future__ import annotations
 
 from fabric.codec import encode
-from fabric.messages import Header, JointState, Path
+from fabric.interfaces import Header, JointState, Path
 from fabric.recording.format import peek
 from fabric.recording.reader import iter_messages
 from fabric.recording.sink import STALE, McapSink

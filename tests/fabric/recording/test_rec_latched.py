@@ -8,7 +8,7 @@ import numpy as np
 
 from fabric import keys
 from fabric.codec import encode
-from fabric.messages import Header, OccupancyGrid
+from fabric.interfaces import Header, OccupancyGrid
 from fabric.recording import Replayer, plan_replay
 from fabric.testing import wait_until
 

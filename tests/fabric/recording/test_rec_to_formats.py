@@ -13,7 +13,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from fabric import keys
-from fabric.messages import Header, JointState, OccupancyGrid, Scan
+from fabric.interfaces import Header, JointState, OccupancyGrid, Scan
 from fabric.testing import robofabric_cmd, wait_until
 
 pytestmark = pytest.mark.slow

@@ -1,7 +1,7 @@
 """The sim's plug-in for the 2-link planar arm: what a third party writes to add a robot type.
 
 Only the public plug-in surface is used (:mod:`sim_peer.robot`, :mod:`sim_peer.controllers`' errors,
-:mod:`fabric.messages`); the sim peer is not touched. Its own controller, on purpose: each joint moves toward
+:mod:`fabric.interfaces`); the sim peer is not touched. Its own controller, on purpose: each joint moves toward
 its target at its own speed limit (not the built-in arm's synchronised straight line in joint space).
 """
 
@@ -13,9 +13,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from fabric.messages import JointState, Pose
+from fabric.interfaces import JointState, Pose, RobotState
 from sim_peer.controllers import Clamp, CommandRejected
-from sim_peer.messages import RobotState
 from sim_peer.robot import Build, CommandHandler, Mount, Physics, Robot, Stream
 
 MOVING = 1e-3  # rad/s

@@ -1,43 +1,24 @@
-"""The sim peer's service message: :class:`WorldInfo`, the answer on ``rf/{world}/srv/world``.
+"""What a world holds: its robots, their sensors and scene objects (``rf/{world}/srv/world``), and the whole
+world state a standby sim takes over (``rf/{world}/srv/state``).
 
-It carries what other peers need to work with the world without a local copy of
-the robot files: each robot's id, type, kind, spawn pose, joint names, limits and
-speeds, base limits and sensor configuration, and the scene objects.
-Registered with :mod:`fabric.codec` on import.
+:class:`WorldInfo` carries what other peers need to work with the world without a local copy of the
+robot files: each robot's id, type, kind, spawn pose, joint names, limits and speeds, base limits and
+sensors, and the scene objects. :class:`WorldState` is replicated authority (issue 16).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
-from fabric.codec import Arr, DecodeError, F, I, Map, Msg, S, Strs, register
-from fabric.messages import MAX_PATH_POINTS, Header, OwnershipRecord
+from fabric.codec import Arr, F, I, Map, Msg, Msgs, S, Strs, register
+from fabric.interfaces._arrays import frozen
+from fabric.interfaces.ownership import OwnershipRecord
+from fabric.interfaces.std import MAX_PATH_POINTS, Header
 
-
-def _ro(a: Any) -> np.ndarray:
-    arr = np.array(a, dtype=np.float64, copy=True)
-    arr.setflags(write=False)
-    return arr
-
-
-class Msgs:
-    """A list of nested messages of one class (the codec's ``Msg`` for a single one)."""
-
-    def __init__(self, cls: type) -> None:
-        self.one = Msg(cls)
-
-    def check(self, v: Any, where: str) -> tuple:
-        if not isinstance(v, list):
-            raise DecodeError(f"{where}: expected a list of messages, got {type(v).__name__}")
-        if len(v) > 10_000:
-            raise DecodeError(f"{where}: {len(v)} entries is too many")
-        return tuple(self.one.check(x, f"{where}[{i}]") for i, x in enumerate(v))
-
-    def dump(self, v: Any) -> Any:
-        return [self.one.dump(x) for x in v]
+__all__ = ["RobotInfo", "ObjectInfo", "WorldInfo", "RobotState", "WorldState"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,7 +63,7 @@ class RobotInfo:
     def __post_init__(self) -> None:
         object.__setattr__(self, "joint_names", tuple(self.joint_names))
         for name in ("pose", "lower", "upper", "max_speed"):
-            object.__setattr__(self, name, _ro(getattr(self, name)))
+            object.__setattr__(self, name, frozen(getattr(self, name)))
 
     def check(self) -> None:
         n = len(self.joint_names)
@@ -109,8 +90,8 @@ class ObjectInfo:
     }
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "position", _ro(self.position))
-        object.__setattr__(self, "quaternion", _ro(self.quaternion))
+        object.__setattr__(self, "position", frozen(self.position))
+        object.__setattr__(self, "quaternion", frozen(self.quaternion))
 
 
 @dataclass(frozen=True, slots=True)
@@ -153,12 +134,6 @@ class WorldInfo:
         raise KeyError(f"no robot {robot_id!r} in world {self.world!r}")
 
 
-for _cls in (RobotInfo, ObjectInfo, WorldInfo):
-    register(_cls)
-
-__all__ = ["RobotInfo", "ObjectInfo", "WorldInfo", "RobotState", "WorldState"]
-
-
 # ---------------------------------------------------------------------- replicated authority (issue 16)
 
 @dataclass(frozen=True, slots=True)
@@ -187,8 +162,8 @@ class RobotState:
 
     def __post_init__(self) -> None:
         for name in ("q", "dq", "target"):
-            object.__setattr__(self, name, _ro(getattr(self, name)))
-        object.__setattr__(self, "path", _ro(np.asarray(self.path, dtype=np.float64).reshape(-1, 2)))
+            object.__setattr__(self, name, frozen(getattr(self, name)))
+        object.__setattr__(self, "path", frozen(np.asarray(self.path, dtype=np.float64).reshape(-1, 2)))
 
 
 @dataclass(frozen=True, slots=True)
@@ -222,5 +197,5 @@ class WorldState:
         return next((r for r in self.robots if r.id == rid), None)
 
 
-register(RobotState)
-register(WorldState)
+for _cls in (RobotInfo, ObjectInfo, WorldInfo, RobotState, WorldState):
+    register(_cls)

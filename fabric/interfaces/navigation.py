@@ -1,9 +1,9 @@
-"""Request and reply messages of the ``map`` and ``plan`` services, registered with the fabric codec.
+"""Request and reply messages of the compute peer's ``map`` and ``plan`` services.
 
-Same habits as :mod:`fabric.messages`: frozen slotted dataclasses, positional
-msgpack, arrays as raw bytes, field rules in ``SPEC`` and cross-field rules in
-``check()``. Optional poses are arrays of length 0 (absent) or 3 (x, y, theta);
-NaN and infinities are refused by the decoder before a handler sees them.
+``rf/{world}/srv/map/{name}`` takes a :class:`MapRequest` and answers a :class:`MapReply`;
+``rf/{world}/srv/plan/{robot}`` takes a :class:`PlanRequest` and answers a :class:`PlanReply`.
+Optional poses are arrays of length 0 (absent) or 3 (x, y, theta); NaN and infinities are refused by
+the decoder before a handler sees them.
 """
 
 from __future__ import annotations
@@ -14,26 +14,14 @@ from typing import ClassVar
 import numpy as np
 
 from fabric.codec import Arr, F, I, Msg, S, register
-from fabric.messages import Header, OccupancyGrid, Path
+from fabric.interfaces._arrays import vector
+from fabric.interfaces.std import HEADER, Header, OccupancyGrid, Path, _header
 
 __all__ = ["PlanRequest", "PlanReply", "MapRequest", "MapReply", "MAP_ACTIONS", "PLANNER_NAMES", "DIRECTIONS", "empty_grid"]
 
 PLANNER_NAMES = ("hybrid_astar", "ompl", "ompl:rrtstar", "ompl:bitstar")
 DIRECTIONS = ("default", "forward", "both")
 MAP_ACTIONS = ("start", "stop", "build", "get", "reset", "save", "load", "set", "status")
-
-_HEADER = Msg(Header)
-
-
-def _header() -> Header:
-    return Header()
-
-
-def _pose3(v) -> np.ndarray:
-    a = np.array(v if v is not None else (), dtype=np.float64, copy=True).reshape(-1)
-    a.setflags(write=False)
-    return a
-
 
 def empty_grid() -> OccupancyGrid:
     """The "no grid" value of MapRequest.grid / MapReply.grid: zero cells."""
@@ -69,12 +57,12 @@ class PlanRequest:
         "direction": S(choices=DIRECTIONS),
         "turning_radius": F(lo=0.0, hi=100.0),
         "robot_radius": F(lo=0.0, hi=100.0),
-        "header": _HEADER,
+        "header": HEADER,
     }
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "goal", _pose3(self.goal))
-        object.__setattr__(self, "start", _pose3(self.start))
+        object.__setattr__(self, "goal", vector(self.goal))
+        object.__setattr__(self, "start", vector(self.start))
 
     def check(self) -> None:
         for name in ("goal", "start"):
@@ -104,7 +92,7 @@ class PlanReply:
         "length": F(lo=0.0),
         "expansions": I(lo=0),
         "map": S(),
-        "header": _HEADER,
+        "header": HEADER,
     }
 
 
@@ -131,7 +119,7 @@ class MapRequest:
         "threshold": F(lo=0.0, hi=1.0),
         "file": S(max_len=255),
         "grid": Msg(OccupancyGrid),
-        "header": _HEADER,
+        "header": HEADER,
     }
 
 
@@ -154,7 +142,7 @@ class MapReply:
         "scans": I(lo=0),
         "mapping": I(lo=0, hi=1),
         "file": S(),
-        "header": _HEADER,
+        "header": HEADER,
     }
 
 

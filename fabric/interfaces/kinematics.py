@@ -7,7 +7,7 @@ streaming mode the compute peer publishes :class:`IKStream` on
 ``frame`` says ``base`` (the arm's own base frame), because users think in the
 world the viewer shows, while the arm's base sits wherever the scene put it.
 Quaternions are (w, x, y, z) like every fabric message. Optional arrays are
-empty when absent. Registered with :mod:`fabric.codec` on import.
+empty when absent.
 """
 
 from __future__ import annotations
@@ -17,8 +17,9 @@ from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
-from fabric.codec import Arr, F, I, Msg, S, register
-from fabric.messages import Header
+from fabric.codec import Arr, F, I, S, register
+from fabric.interfaces._arrays import frozen, vector
+from fabric.interfaces.std import HEADER, Header
 
 __all__ = [
     "FRAMES",
@@ -34,20 +35,6 @@ __all__ = [
 
 FRAMES = ("world", "base")
 IK_METHODS = ("auto", "closed_form", "numerical", "casadi")
-
-_HEADER = Msg(Header)
-
-
-def _vec(v: Any) -> np.ndarray:
-    a = np.array(() if v is None else v, dtype=np.float64, copy=True).reshape(-1)
-    a.setflags(write=False)
-    return a
-
-
-def _ro(v: Any) -> np.ndarray:
-    a = np.array(v, dtype=np.float64, copy=True)
-    a.setflags(write=False)
-    return a
 
 
 def _check_len(owner: str, name: str, arr: np.ndarray, allowed: tuple[int, ...]) -> None:
@@ -77,13 +64,13 @@ class IKRequest:
         "seed": Arr(np.float64, ndim=1),
         "frame": S(choices=FRAMES),
         "method": S(choices=IK_METHODS),
-        "header": _HEADER,
+        "header": HEADER,
     }
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "position", _vec(self.position))
-        object.__setattr__(self, "quaternion", _vec(self.quaternion))
-        object.__setattr__(self, "seed", _vec(self.seed))
+        object.__setattr__(self, "position", vector(self.position))
+        object.__setattr__(self, "quaternion", vector(self.quaternion))
+        object.__setattr__(self, "seed", vector(self.seed))
 
     def check(self) -> None:
         _check_len("IKRequest", "position", self.position, (3,))
@@ -98,7 +85,7 @@ class IKRequest:
         cls, position: Sequence[float], quaternion: Sequence[float] | None = None, seed: Sequence[float] | None = None, **kw: Any
     ) -> "IKRequest":
         """Build from plain sequences (None for absent), as the user API holds them."""
-        return cls(_vec(position), _vec(quaternion), _vec(seed), **kw)
+        return cls(vector(position), vector(quaternion), vector(seed), **kw)
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,11 +109,11 @@ class IKReply:
         "orientation_error": F(lo=0.0),
         "candidates": I(lo=0),
         "solve_us": F(lo=0.0),
-        "header": _HEADER,
+        "header": HEADER,
     }
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "q", _vec(self.q))
+        object.__setattr__(self, "q", vector(self.q))
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,10 +124,10 @@ class FKRequest:
     frame: str = "world"
     header: Header = field(default_factory=Header)
 
-    SPEC: ClassVar[dict] = {"q": Arr(np.float64, ndim=1), "frame": S(choices=FRAMES), "header": _HEADER}
+    SPEC: ClassVar[dict] = {"q": Arr(np.float64, ndim=1), "frame": S(choices=FRAMES), "header": HEADER}
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "q", _vec(self.q))
+        object.__setattr__(self, "q", vector(self.q))
 
 
 @dataclass(frozen=True, slots=True)
@@ -158,12 +145,12 @@ class FKReply:
         "position": Arr(np.float64, shape=(3,)),
         "quaternion": Arr(np.float64, shape=(4,)),
         "frame": S(choices=FRAMES),
-        "header": _HEADER,
+        "header": HEADER,
     }
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "position", _vec(self.position))
-        object.__setattr__(self, "quaternion", _vec(self.quaternion))
+        object.__setattr__(self, "position", vector(self.position))
+        object.__setattr__(self, "quaternion", vector(self.quaternion))
 
 
 @dataclass(frozen=True, slots=True)
@@ -179,12 +166,12 @@ class JacobianRequest:
         "q": Arr(np.float64, ndim=1),
         "dq": Arr(np.float64, ndim=1),
         "frame": S(choices=FRAMES),
-        "header": _HEADER,
+        "header": HEADER,
     }
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "q", _vec(self.q))
-        object.__setattr__(self, "dq", _vec(self.dq))
+        object.__setattr__(self, "q", vector(self.q))
+        object.__setattr__(self, "dq", vector(self.dq))
 
     def check(self) -> None:
         if self.dq.shape[0] not in (0, self.q.shape[0]):
@@ -208,13 +195,13 @@ class JacobianReply:
         "twist": Arr(np.float64, ndim=1),
         "speeds": Arr(np.float64, ndim=1),
         "frame": S(choices=FRAMES),
-        "header": _HEADER,
+        "header": HEADER,
     }
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "jacobian", _ro(self.jacobian))
-        object.__setattr__(self, "twist", _vec(self.twist))
-        object.__setattr__(self, "speeds", _vec(self.speeds))
+        object.__setattr__(self, "jacobian", frozen(self.jacobian))
+        object.__setattr__(self, "twist", vector(self.twist))
+        object.__setattr__(self, "speeds", vector(self.speeds))
 
 
 @dataclass(frozen=True, slots=True)
@@ -248,13 +235,13 @@ class IKStream:
         "dq": Arr(np.float64, ndim=1),
         "speeds": Arr(np.float64, ndim=1),
         "seconds": F(lo=0.0),
-        "header": _HEADER,
+        "header": HEADER,
     }
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "ok", bool(self.ok))
         for name in ("position", "q", "dq", "speeds"):
-            object.__setattr__(self, name, _vec(getattr(self, name)))
+            object.__setattr__(self, name, vector(getattr(self, name)))
 
 
 for _cls in (IKRequest, IKReply, FKRequest, FKReply, JacobianRequest, JacobianReply, IKStream):

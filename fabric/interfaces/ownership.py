@@ -1,0 +1,98 @@
+"""Ownership: the replicated record of who owns an object, and what a user asks its authority.
+
+The authority (the sim that simulates the object) is the only writer of ``rf/{world}/own/{object}``
+(an :class:`OwnershipRecord`); a user's :class:`OwnRequest` travels as a query payload on
+``rf/{world}/own/{object}/by/{user}`` and is answered with an :class:`OwnReply`. A query on
+``own/{object}`` without payload is answered with the current record.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+from fabric.codec import F, I, Msg, S, Strs, User, register
+from fabric.interfaces.std import HEADER, Header, _header
+from fabric.limits import MAX_USER_LEN
+
+__all__ = ["MAX_QUEUE", "OwnershipRecord", "OwnRequest", "OwnReply"]
+
+MAX_QUEUE = 64
+"""Users waiting for one object (ownership.state refuses the 65th)."""
+
+
+@dataclass(frozen=True, slots=True)
+class OwnershipRecord:
+    """Replicated ownership state of one object, written only by its authority.
+
+    ``owner`` is empty when the object is free; ``lease_expiry`` is in the
+    authority's clock (seconds); ``queue`` holds waiting users in join order.
+    """
+
+    object: str
+    policy: str = "exclusive"
+    owner: str = ""
+    epoch: int = 0
+    lease_expiry: float = 0.0
+    queue: tuple[str, ...] = ()
+    state: str = "still"
+    authority: str = ""
+    header: Header = field(default_factory=_header)
+
+    SPEC: ClassVar[dict] = {
+        "object": S(nonempty=True),
+        "policy": S(choices=("scene", "exclusive")),
+        "owner": S(max_len=MAX_USER_LEN),
+        "epoch": I(lo=0),
+        "lease_expiry": F(),
+        "queue": Strs(max_items=MAX_QUEUE, max_len=MAX_USER_LEN),
+        "state": S(choices=("still", "moving")),
+        "authority": S(),
+        "header": HEADER,
+    }
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "queue", tuple(self.queue))
+
+
+@dataclass(frozen=True, slots=True)
+class OwnRequest:
+    """``op`` is request|release|renew; ``wait`` asks to be queued when the robot moves."""
+
+    op: str
+    user: str
+    wait: bool = False
+    header: Header = field(default_factory=Header)
+
+    SPEC: ClassVar[dict] = {
+        "op": S(choices=("request", "release", "renew")),
+        "user": User(),
+        "wait": I(lo=0, hi=1),
+        "header": HEADER,
+    }
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "wait", bool(self.wait))
+
+
+@dataclass(frozen=True, slots=True)
+class OwnReply:
+    """``outcome`` is granted|denied|queued|released|renewed; ``position`` counts from 1 when queued."""
+
+    outcome: str
+    reason: str
+    position: int
+    record: OwnershipRecord
+    header: Header = field(default_factory=Header)
+
+    SPEC: ClassVar[dict] = {
+        "outcome": S(choices=("granted", "denied", "queued", "released", "renewed")),
+        "reason": S(),
+        "position": I(lo=0),
+        "record": Msg(OwnershipRecord),
+        "header": HEADER,
+    }
+
+
+for _cls in (OwnershipRecord, OwnRequest, OwnReply):
+    register(_cls)

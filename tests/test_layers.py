@@ -1,0 +1,130 @@
+"""Who may import whom: the import-linter contracts of pyproject.toml hold on the code, and they do bite.
+
+``test_contracts_hold`` runs ``lint-imports`` on the project itself. The other tests run the same
+contracts on a small tree of empty packages named like ours, with one import added, so a contract that
+could never break (a typo in a module name, a wildcard that matches nothing) fails here.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+LINT = Path(sys.executable).with_name("lint-imports")
+
+pytestmark = pytest.mark.skipif(not LINT.exists(), reason="import-linter is not installed (pip install -e '.[test]')")
+
+
+def _run(config: Path, cwd: Path, extra_path: Path | None = None, contract: str | None = None) -> subprocess.CompletedProcess:
+    env = dict(os.environ)
+    if extra_path is not None:
+        env["PYTHONPATH"] = str(extra_path)
+    only = ["--contract", contract] if contract else []
+    return subprocess.run(
+        [str(LINT), "--config", str(config), "--no-cache", *only],
+        cwd=cwd, env=env, capture_output=True, text=True, timeout=120,
+    )
+
+
+def test_contracts_hold():
+    out = _run(ROOT / "pyproject.toml", ROOT)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "0 broken" in out.stdout
+    for contract in ("Layers", "fabric.interfaces imports nothing", "fabric.codec and fabric.limits"):
+        assert contract in out.stdout, out.stdout
+
+
+def _importlinter_section() -> str:
+    """The ``[tool.importlinter]`` tables of pyproject.toml, verbatim."""
+    lines = (ROOT / "pyproject.toml").read_text().splitlines()
+    out: list[str] = []
+    inside = False
+    for line in lines:
+        if line.startswith("["):
+            inside = line.strip("[] ").startswith("tool.importlinter")
+        if inside:
+            out.append(line)
+    assert out, "pyproject.toml has no [tool.importlinter] section"
+    return "\n".join(out) + "\n"
+
+
+MODULES = [
+    "robofabric/__init__.py",
+    "sim_peer/__init__.py",
+    "sim_peer/peer.py",
+    "compute_peer/__init__.py",
+    "compute_peer/service.py",
+    "user_peer/__init__.py",
+    "user_peer/api.py",
+    "ownership/__init__.py",
+    "ownership/client.py",
+    "robots/__init__.py",
+    "fabric/__init__.py",
+    "fabric/limits.py",
+    "fabric/codec.py",
+    "fabric/session.py",
+    "fabric/keys.py",
+    "fabric/interfaces/__init__.py",
+    "fabric/interfaces/std.py",
+]
+"""A skeleton of the project's packages; every module imports what the real one may import."""
+
+ALLOWED = {
+    "fabric/codec.py": "import fabric.limits\n\n\ndef _ensure_core():\n    import fabric.interfaces\n",
+    "fabric/interfaces/std.py": "from fabric.codec import encode\nimport fabric.limits\n",
+    "fabric/session.py": "import fabric.interfaces\nimport fabric.keys\n",
+    "ownership/client.py": "import fabric.session\nimport fabric.interfaces\n",
+    "sim_peer/peer.py": "import ownership.client\nimport robots\nimport fabric.interfaces\n",
+    "compute_peer/service.py": "import robots\nimport fabric.interfaces.std\n",
+    "user_peer/api.py": "import ownership.client\nimport fabric.session\n",
+    "robofabric/__init__.py": "import sim_peer.peer\nimport user_peer.api\n",
+}
+
+
+def _skeleton(tmp_path: Path, bad: tuple[str, str] | None) -> Path:
+    src = tmp_path / "src"
+    for rel in MODULES:
+        f = src / rel
+        f.parent.mkdir(parents=True, exist_ok=True)
+        text = ALLOWED.get(rel, "")
+        if bad is not None and bad[0] == rel:
+            text += bad[1]
+        f.write_text(text)
+    config = tmp_path / "importlinter.toml"
+    config.write_text(_importlinter_section())
+    return src
+
+
+def test_skeleton_without_bad_imports_keeps_every_contract(tmp_path):
+    src = _skeleton(tmp_path, None)
+    out = _run(tmp_path / "importlinter.toml", tmp_path, src)
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+@pytest.mark.parametrize(
+    "where, line, contract",
+    [
+        ("compute_peer/service.py", "import sim_peer.peer\n", "layers"),  # a peer importing another peer
+        ("user_peer/api.py", "from compute_peer import service\n", "layers"),
+        ("sim_peer/peer.py", "import user_peer\n", "layers"),
+        ("ownership/client.py", "import sim_peer\n", "layers"),  # the library importing a peer
+        ("fabric/session.py", "import user_peer.api\n", "layers"),  # the ground floor importing upwards
+        ("robots/__init__.py", "import ownership\n", "layers"),
+        ("fabric/interfaces/std.py", "import fabric.session\n", "interfaces"),
+        ("fabric/interfaces/__init__.py", "from fabric import keys\n", "interfaces"),
+        ("fabric/interfaces/std.py", "import robots\n", "interfaces"),
+        ("fabric/codec.py", "import fabric.session\n", "codec"),
+        ("fabric/limits.py", "import fabric.keys\n", "codec"),
+    ],
+)
+def test_a_bad_import_breaks_its_contract(tmp_path, where, line, contract):
+    """``contract`` is the id of the contract that must catch ``line`` added to ``where``, run alone."""
+    src = _skeleton(tmp_path, (where, line))
+    out = _run(tmp_path / "importlinter.toml", tmp_path, src, contract=contract)
+    assert out.returncode != 0, f"{where}: {line.strip()} was not caught by {contract!r}:\n{out.stdout}{out.stderr}"
+    assert "BROKEN" in out.stdout and "1 broken" in out.stdout, out.stdout
