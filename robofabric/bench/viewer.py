@@ -31,7 +31,7 @@ def _messages(n: int, grids: int, seed: int) -> dict[str, list[tuple[str, Any]]]
     """``n`` messages per stream type (``grids`` grids), as (key, message), built before any timing."""
     import robots
     from fabric import keys
-    from fabric.messages import Header, JointState, OccupancyGrid, Pose, Scan
+    from fabric.interfaces import Header, JointState, OccupancyGrid, Pose, Scan
 
     rng = np.random.default_rng(seed)
     arm = robots.load("meca500")
