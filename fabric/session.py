@@ -36,7 +36,7 @@ from fabric.config import FabricConfig, default_peer_id
 from fabric.exit import at_exit
 from fabric.fencing import Fence, is_authority_key
 from fabric.limits import RateLimiter, clip
-from fabric.interfaces import Event, Header, NoReply, Refused, ServiceError
+from fabric.interfaces import Event, EventKind, Header, NoReply, Refused, ServiceError
 
 log = logging.getLogger("robofabric")
 
@@ -267,7 +267,7 @@ class Fabric:
         data = {"key": clip(key), "subscription": clip(where)}
         if suppressed:
             data["suppressed"] = suppressed
-        self.emit(Event(kind="decode_error", reason=clip(str(exc)), severity="warning", data=data, header=self.header("event")),
+        self.emit(Event(kind=EventKind.DECODE_ERROR, reason=clip(str(exc)), severity="warning", data=data, header=self.header("event")),
                   "decode", self.peer_id)
 
     def subscribe(
@@ -394,11 +394,11 @@ class Fabric:
             except (DecodeError, ServiceError, ValueError) as exc:
                 self.counters["query_errors"] += 1
                 reason = clip(exc.reason if isinstance(exc, ServiceError) else str(exc), 400)
-                query.reply_err(encode(Event(kind="service_error", reason=reason, severity="warning", header=self.header("srv"))))
+                query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=reason, severity="warning", header=self.header("srv"))))
             except Exception as exc:
                 self.counters["query_errors"] += 1
                 log.exception("service %s failed", key)
-                query.reply_err(encode(Event(kind="service_error", reason=f"internal error: {clip(str(exc))}", severity="error")))
+                query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=f"internal error: {clip(str(exc))}", severity="error")))
 
         q = self.session.declare_queryable(key_expr, on_query, complete=complete)
         self._resources.append(q)

@@ -313,7 +313,7 @@ def call(
     peer_id: PeerId = None,
 ) -> None:
     """Call a service and print its replies (like ``ros2 service call``); a refusal prints its reason, exit 1."""
-    from fabric.session import ServiceError
+    from fabric.interfaces import ServiceError
 
     if timeout <= 0:
         raise UserError("--timeout must be positive")

@@ -15,13 +15,12 @@ from types import MappingProxyType
 from typing import Any
 
 from fabric import keys
-from fabric.interfaces import Command, Event, OwnershipRecord
+from fabric.interfaces import Command, Event, EventKind, OwnershipRecord, OwnReply, OwnRequest, ServiceError
 from fabric.rate import Clock, MonotonicClock
-from fabric.session import Fabric, ServiceError
+from fabric.session import Fabric
 
 from ownership import replica
 from ownership import state as st
-from fabric.interfaces import OwnReply, OwnRequest
 
 log = logging.getLogger("robofabric.ownership")
 
@@ -128,7 +127,7 @@ class Authority:
             if eff.kind in ("handover", "revoked", "expired", "restored", "released"):
                 if eff.kind == "handover":
                     self.counters["handovers"] += 1
-                self._emit(Event(kind=f"own_{eff.kind}", reason=eff.reason, object=eff.object, user=eff.user,
+                self._emit(Event(kind=EventKind.ownership(eff.kind), reason=eff.reason, object=eff.object, user=eff.user,
                                  header=self.fabric.header("event")))
         return effects
 
@@ -178,7 +177,7 @@ class Authority:
         user = keys.parse(key).user
         if request.user != user:
             self.counters["rejected"] += 1
-            self._emit(Event(kind="own_refused", reason=f"request names {request.user!r} but comes from {user!r}",
+            self._emit(Event(kind=EventKind.OWN_REFUSED, reason=f"request names {request.user!r} but comes from {user!r}",
                              object=obj, user=user, severity="warning", header=self.fabric.header("event")))
             raise ServiceError(f"refused: the request names {request.user!r} but was sent by {user!r}")
         with self._lock:

@@ -8,7 +8,8 @@ from typing import Annotated, Optional
 import typer
 
 from fabric.cli_common import Connect, Profile, UserError, World, ZenohConfig, make_config, open_fabric
-from fabric.session import Fabric, ServiceError, shutdown_event
+from fabric.interfaces import ServiceError
+from fabric.session import Fabric, shutdown_event
 
 from ownership.client import OwnershipClient
 

@@ -23,10 +23,9 @@ from typing import Callable
 
 from fabric import keys
 from fabric.limits import validate_user
-from fabric.interfaces import OwnershipRecord
-from fabric.session import Fabric, ServiceError
+from fabric.interfaces import OwnershipRecord, OwnReply, OwnRequest, ServiceError
+from fabric.session import Fabric
 
-from fabric.interfaces import OwnReply, OwnRequest
 
 log = logging.getLogger("robofabric.ownership")
 

@@ -3,7 +3,7 @@
 Every ``BUMPER_PERIOD`` of sim time, a fan of rays (+-75 deg around the direction of travel, at two heights:
 low obstacles and table tops) is cast from the base's shell; a hit within the distance the base covers
 before the next check stops it and says so (a ``collision`` note, published by the peer as
-``Event(kind="collision", reason="bumper")``). A sensor of the robot that holds it (:mod:`sim_peer.robot`).
+``Event(kind=EventKind.COLLISION, reason="bumper")``). A sensor of the robot that holds it (:mod:`sim_peer.robot`).
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import mujoco
 import numpy as np
 
+from fabric.interfaces import EventKind
 from sim_peer.robot import Note, Physics
 from sim_peer.sensors import SENSED_GROUPS, Sensor
 
@@ -63,6 +64,6 @@ class Bumper(Sensor):
             )
             if ((self._dist >= 0) & (self._dist < reach)).any():
                 c.stop()
-                self.robot.note(Note("collision", "bumper", "warning", {"t": physics.time, "detail": "stopped before an obstacle ahead"},
+                self.robot.note(Note(EventKind.COLLISION, "bumper", "warning", {"t": physics.time, "detail": "stopped before an obstacle ahead"},
                                      counter="collisions"))
                 break

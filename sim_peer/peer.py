@@ -11,7 +11,7 @@ With the built-in robots:
 
 Commands on ``rf/{world}/robot/{id}/cmd/*/by/{user}`` (the sender is the key's user; a payload naming
 someone else is refused) pass through the :class:`fabric.gate.CommandGate`
-first; anything refused or unusable is published as an ``Event(kind="reject")`` under
+first; anything refused or unusable is published as an ``Event(kind=EventKind.REJECT)`` under
 ``event/reject/{robot}`` with the reason, counted, and the robot keeps its last valid command.
 A command for a robot this sim does not have is refused from its key alone, before it is
 decoded or anything is kept for it, on the one fixed key ``event/reject``. Admitted commands
@@ -20,7 +20,7 @@ leave zenoh's callback thread at once: they wait in a bounded per-robot
 dropped) that a worker thread applies, so a flood on one key cannot hold up another robot.
 Refusals and bad payloads are reported at most a few times per reason per interval
 (:meth:`fabric.session.Fabric.emit` with ``limit``), with the count of the rest.
-Clamped commands are applied and reported as ``Event(kind="clamp")``. A command kind a robot's
+Clamped commands are applied and reported as ``Event(kind=EventKind.CLAMP)``. A command kind a robot's
 ``commands()`` does not list is refused with reason ``unsupported``. What robots and sensors note while
 stepping (a path followed to its end, a bumper stop) goes out as events. Scene objects move on
 ``rf/{world}/object/{id}/pose/by/{user}``. ``rf/{world}/srv/world`` answers a :class:`WorldInfo` made of
@@ -41,8 +41,8 @@ from fabric import keys
 
 from fabric.codec import DecodeError, decode
 from fabric.gate import CommandGate, OpenGate
+from fabric.interfaces import Command, Event, EventKind, ObjectInfo, Pose, WorldInfo
 from fabric.limits import clip, is_valid_user, quote
-from fabric.interfaces import Command, Event, ObjectInfo, Pose, WorldInfo
 from fabric.rate import Clock, RateLoop
 from fabric.session import Fabric
 from sim_peer.controllers import Clamp, CommandRejected
@@ -255,7 +255,7 @@ class SimPeer:
         data = {"command": command, "detail": detail() if callable(detail) else detail}
         if suppressed:
             data["suppressed"] = suppressed
-        self._event("reject", robot if known else clip(robot, 64), reason() if callable(reason) else reason, user=user, data=data)
+        self._event(EventKind.REJECT, robot if known else clip(robot, 64), reason() if callable(reason) else reason, user=user, data=data)
 
     def _on_command_sample(self, sample: zenoh.Sample) -> None:
         """Zenoh's callback: refuse unknown robots from the key alone, decode, admit, queue. Never applies."""
@@ -359,7 +359,7 @@ class SimPeer:
         if clamp is not None:
             self.counters["clamped"] += 1
             self._event(
-                "clamp", rid, "out_of_range" if name == "joints" else "over_limit", user=cmd.user,
+                EventKind.CLAMP, rid, "out_of_range" if name == "joints" else "over_limit", user=cmd.user,
                 data={"command": name, "what": list(clamp.what), "requested": list(clamp.requested), "applied": list(clamp.applied)},
                 limit=f"clamp:{rid}",
             )

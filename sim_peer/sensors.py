@@ -9,19 +9,20 @@ above are invisible to the rays. A ray that hits nothing within range reads
 MuJoCo 4 signature: ``mj_multiRay(m, d, pnt, vec, geomgroup, flg_static,
 bodyexclude, geomid, dist, normal, nray, cutoff)``; ``dist`` is -1 for a miss.
 
-Sensors are plug-ins of the robot that holds them (:mod:`sim_peer.robot`): ``describe()`` gives their part of
-the robot's description, ``streams()`` what they publish, ``after_step()`` a check run every step.
+Sensors are plug-ins of the robot that holds them (:mod:`sim_peer.robot`): ``describe(info)`` fills in their
+typed part of the robot's description (``RobotInfo.lidar``, ``.sonar``), ``streams()`` what they publish,
+``after_step()`` a check run every step.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any
+from dataclasses import replace
 
 import mujoco
 import numpy as np
 
-from fabric.interfaces import Scan
+from fabric.interfaces import LidarInfo, RobotInfo, Scan, SonarInfo
 from robots import LidarSpec, UltrasonicSpec
 from sim_peer.robot import Build, Physics, Stream
 
@@ -35,9 +36,9 @@ class Sensor:
 
     every = 1
 
-    def describe(self) -> dict[str, Any]:
-        """Its entries in the robot's description (``RobotInfo.sensors``)."""
-        return {}
+    def describe(self, info: RobotInfo) -> RobotInfo:
+        """The robot's description with this sensor's part filled in (a sensor others need not know of: as is)."""
+        return info
 
     def after_step(self, physics: Physics) -> None:
         """A check after every step (the bumper's)."""
@@ -72,13 +73,13 @@ class Lidar(Sensor):
         )
         return _finish(self._dist, s.range_min, s.range_max, s.noise_std, self.rng)
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self, info: RobotInfo) -> RobotInfo:
         li = self.spec
-        return dict(
-            lidar_site=li.site, lidar_rays=li.rays, lidar_fov=li.fov, lidar_angle_min=li.angle_min,
-            lidar_angle_increment=li.angle_increment, lidar_range_min=li.range_min, lidar_range_max=li.range_max,
-            lidar_noise_std=li.noise_std, lidar_offset=[float(v) for v in self.model.site_pos[self.site_id]],
-        )
+        return replace(info, lidar=LidarInfo(
+            site=li.site, rays=li.rays, fov=li.fov, angle_min=li.angle_min, angle_increment=li.angle_increment,
+            range_min=li.range_min, range_max=li.range_max, noise_std=li.noise_std,
+            offset=np.array(self.model.site_pos[self.site_id], dtype=np.float64),  # in the robot frame
+        ))
 
     def streams(self) -> tuple[Stream, ...]:
         return (Stream("scan", "scan", self._sample, positions=True),)
@@ -125,12 +126,12 @@ class Ultrasonic(Sensor):
         hit = np.where(np.isfinite(hit), hit, -1.0)
         return _finish(hit, s.range_min, s.range_max, s.noise_std, self.rng)
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self, info: RobotInfo) -> RobotInfo:
         us = self.spec
-        return dict(
-            sonar_angles=list(us.angles), sonar_radius=us.radius, sonar_height=us.height, sonar_center=list(us.center),
-            sonar_range_min=us.range_min, sonar_range_max=us.range_max, sonar_noise_std=us.noise_std,
-        )
+        return replace(info, sonar=SonarInfo(
+            angles=np.array(us.angles, dtype=np.float64), radius=us.radius, height=us.height, range_min=us.range_min,
+            range_max=us.range_max, noise_std=us.noise_std, center=np.array(us.center, dtype=np.float64),
+        ))
 
     def streams(self) -> tuple[Stream, ...]:
         """The ring on its own key (``sonar``), published with the LIDAR's rate group."""

@@ -16,7 +16,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from fabric.interfaces import JointState, Pose, RobotInfo, RobotState
+from fabric.interfaces import BaseInfo, EventKind, JointState, Pose, RobotInfo, RobotState
 from sim_peer.bumper import Bumper
 from sim_peer.controllers import ArmController, BaseController, Clamp, CommandRejected
 from sim_peer.follower import PurePursuit
@@ -207,17 +207,15 @@ class MobileRobot(Robot):
 
     # hooks ------------------------------------------------------------------
     def describe(self) -> RobotInfo:
-        info = super().describe()
         b = self.desc.base
         assert b is not None
-        base = {
-            "radius": b.radius, "height": b.height, "wheel_separation": b.wheel_separation, "wheel_radius": b.wheel_radius,
-            "max_speed": b.max_speed, "max_omega": b.max_omega, "max_accel": b.max_accel, "max_alpha": b.max_alpha,
-        }
-        sensors: dict[str, Any] = {}
+        info = replace(super().describe(), base=BaseInfo(
+            radius=b.radius, height=b.height, wheel_separation=b.wheel_separation, wheel_radius=b.wheel_radius,
+            max_speed=b.max_speed, max_omega=b.max_omega, max_accel=b.max_accel, max_alpha=b.max_alpha,
+        ))
         for s in self.sensors:
-            sensors.update(s.describe())
-        return replace(info, base=base, sensors=sensors)
+            info = s.describe(info)
+        return info
 
     def initialize(self, physics: Physics) -> None:
         self.ctrl.reset()
@@ -227,9 +225,9 @@ class MobileRobot(Robot):
 
     def _on_news(self, news: str) -> None:
         if news == "path_done":
-            self.note(Note("path_done", "path followed to its end"))
+            self.note(Note(EventKind.PATH_DONE, "path followed to its end"))
         else:
-            self.note(Note("twist_timeout", "no fresh twist within the timeout: stopping"))
+            self.note(Note(EventKind.TWIST_TIMEOUT, "no fresh twist within the timeout: stopping"))
 
     def after_step(self, physics: Physics) -> None:
         c, d = self.ctrl, physics.data

@@ -27,11 +27,10 @@ import time
 from typing import Any, Callable
 
 from fabric import keys
-from fabric.interfaces import JointState, Pose
-from fabric.session import Fabric, ServiceError
+from fabric.interfaces import JointState, Pose, ServiceError, WorldState
+from fabric.session import Fabric
 from sim_peer import election as el
 from sim_peer import replica
-from fabric.interfaces import WorldState
 from sim_peer.peer import SimPeer
 from sim_peer.world import SimWorld
 

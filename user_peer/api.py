@@ -31,6 +31,7 @@ import numpy as np
 from fabric import keys
 from fabric.config import FabricConfig
 from fabric.interfaces import (
+    REJECT_KINDS,
     Command,
     Event,
     JointState,
@@ -45,7 +46,8 @@ from fabric.interfaces import (
     Twist,
 )
 from fabric.reliable import resend_until
-from fabric.session import Fabric, ServiceError
+from fabric.interfaces import ServiceError
+from fabric.session import Fabric
 from user_peer import services
 from fabric.exit import at_exit
 from user_peer.errors import NotOwner, Timeout, Unreachable
@@ -112,10 +114,6 @@ class _Latest:
                 if left <= 0:
                     return value
                 self._cond.wait(min(left, 0.1))
-
-
-REJECT_KINDS = ("reject",)
-"""Event kinds with which a sim refuses a user's command (the reason says why: ``not_owner``, ...)."""
 
 
 def _fmt_age(age: float | None) -> str:

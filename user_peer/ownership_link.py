@@ -13,8 +13,8 @@ import time
 from typing import TYPE_CHECKING, Any, Callable
 
 from fabric import keys
-from fabric.interfaces import OwnershipRecord
-from fabric.session import Fabric, ServiceError
+from fabric.interfaces import OwnershipRecord, ServiceError
+from fabric.session import Fabric
 from user_peer.errors import NotOwner, Timeout
 
 if TYPE_CHECKING:

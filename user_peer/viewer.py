@@ -23,7 +23,8 @@ from fabric import keys
 from fabric.config import FabricConfig
 from fabric.exit import at_exit
 from fabric.limits import put_dropping_oldest
-from fabric.session import Fabric, ServiceError
+from fabric.interfaces import ServiceError
+from fabric.session import Fabric
 from user_peer.catalog import RobotCatalog
 from user_peer.rerun_log import WorldLogger, blueprint
 

@@ -31,12 +31,25 @@ from typing import Any, Iterable
 import numpy as np
 
 from fabric import keys
+from fabric.interfaces import (
+    Event,
+    EventKind,
+    FKReply,
+    FKRequest,
+    IKReply,
+    IKRequest,
+    IKStream,
+    JacobianReply,
+    JacobianRequest,
+    JointState,
+    Pose,
+    ServiceError,
+    WorldInfo,
+)
 from fabric.limits import quote
-from fabric.interfaces import Event, JointState, Pose
 from fabric.rate import Clock, MonotonicClock, RateLoop
-from fabric.session import Fabric, ServiceError, undeclare_all
+from fabric.session import Fabric, undeclare_all
 
-from fabric.interfaces import FKReply, FKRequest, IKReply, IKRequest, IKStream, JacobianReply, JacobianRequest
 from .arm import PlacedArm
 from .model import ArmModel, NoIKSolution
 
@@ -163,15 +176,15 @@ class KinematicsService:
         with self._lock:
             generation = self._sims_changed
         try:
-            replies = self.fabric.query(keys.srv(self.world, "world"), timeout=timeout, all_replies=True)
+            replies = self.fabric.query(keys.srv(self.world, "world"), timeout=timeout, all_replies=True, expected=WorldInfo)
         except ServiceError as exc:
             self._discovery_failed(str(exc))
             return len(self.arms)
         with self._lock:
             self._answered_at = generation
         for rep in replies:
-            for r in getattr(rep.message, "robots", ()):
-                if getattr(r, "kind", "") != "arm" or r.id in self._arms:
+            for r in rep.message.robots:
+                if r.kind != "arm" or r.id in self._arms:
                     continue
                 try:
                     self.add_arm(r.id, ArmPlacement(r.type, tuple(float(v) for v in r.pose)))
@@ -365,7 +378,7 @@ class KinematicsService:
         else:
             self.counters["stream_unreachable"] += 1
             self.fabric.emit(
-                Event(kind="ik_unreachable", reason=step.reason, object=robot, severity="warning", header=self.fabric.header("event")),
+                Event(kind=EventKind.IK_UNREACHABLE, reason=step.reason, object=robot, severity="warning", header=self.fabric.header("event")),
                 "compute", robot,
             )
         return msg

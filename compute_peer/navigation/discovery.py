@@ -15,6 +15,7 @@ import threading
 from typing import TYPE_CHECKING, Callable, Iterable
 
 from fabric import keys
+from fabric.interfaces import ServiceError, WorldInfo
 from fabric.rate import Clock, MonotonicClock
 
 if TYPE_CHECKING:
@@ -117,24 +118,21 @@ class RobotDescriptions:
 
     def discover(self, timeout: float = 2.0) -> int:
         """Ask the sim peers' ``srv/world`` now and learn their mobile robots; returns how many were described."""
-        from fabric.interfaces import ServiceError
-
         try:
-            replies = self.fabric.query(keys.srv(self.world, "world"), timeout=timeout, all_replies=True)
+            replies = self.fabric.query(keys.srv(self.world, "world"), timeout=timeout, all_replies=True, expected=WorldInfo)
         except ServiceError:
             return 0
         found = 0
         with self._lock:
             known = set(self._described or ())
             for rep in replies:
-                for r in getattr(rep.message, "robots", ()):
-                    if getattr(r, "kind", "") != "mobile":
+                for r in rep.message.robots:
+                    if r.kind != "mobile":
                         continue
                     known.add(r.id)
-                    off = r.sensors.get("lidar_offset")
-                    if isinstance(off, list) and len(off) >= 2 and r.id not in self._offsets:
-                        self._offsets[r.id] = (float(off[0]), float(off[1]), 0.0)
-                    radius = float(r.base_radius or r.base.get("radius", 0.0) or 0.0)
+                    if r.lidar is not None and r.id not in self._offsets:
+                        self._offsets[r.id] = (float(r.lidar.offset[0]), float(r.lidar.offset[1]), 0.0)
+                    radius = float(r.base_radius or (r.base.radius if r.base is not None else 0.0))
                     if radius > 0:
                         self._radii[r.id] = radius
                     found += 1

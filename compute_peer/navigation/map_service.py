@@ -12,12 +12,11 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from fabric import keys
-from fabric.interfaces import OccupancyGrid
+from fabric.interfaces import empty_grid, MapReply, MapRequest, OccupancyGrid
 
 from .errors import NavigationError
 from .grid import check_grid
 from .map_store import MapStore
-from fabric.interfaces import MapReply, MapRequest, empty_grid
 from .scan_mapping import ScanMapping
 
 if TYPE_CHECKING:

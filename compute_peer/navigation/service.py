@@ -35,16 +35,15 @@ from pathlib import Path as FsPath
 from typing import Any
 
 from fabric import keys
-from fabric.interfaces import OccupancyGrid, Pose, Scan
+from fabric.interfaces import MapReply, MapRequest, OccupancyGrid, PlanReply, PlanRequest, Pose, Scan, ServiceError
 from fabric.rate import Clock
-from fabric.session import Fabric, ServiceError, undeclare_all
+from fabric.session import Fabric, undeclare_all
 
 from .discovery import RobotDescriptions
 from .errors import NavigationError
 from .map_service import MapService
 from .map_store import MapStore
 from .mapping import MapperConfig, OccupancyMapper
-from fabric.interfaces import MapReply, MapRequest, PlanReply, PlanRequest
 from .plan_service import PlanService
 from .planner import PlannerSettings
 from .poses import MAX_ROBOTS, POSE_HISTORY, PoseHistory

@@ -13,8 +13,9 @@ Modules, one room each:
 - :mod:`.std`: header, joint states, poses, scans, paths, occupancy grids, and the size caps
 - :mod:`.commands`: what an owner sends a robot (joint targets, twists, paths, stop, reset) in a ``Command``
 - :mod:`.ownership`: the ownership record and the request/reply of the ownership service
-- :mod:`.events`: ``Event`` and the event kinds
-- :mod:`.world`: the world description (robots, sensors, scene objects) and a standby's world state
+- :mod:`.events`: ``Event`` and ``EventKind``, every event kind robofabric sends
+- :mod:`.sensors`: what a robot carries: its mobile base, LIDAR and sonar ring (parts of ``RobotInfo``)
+- :mod:`.world`: the world description (robots, scene objects) and a standby's world state
 - :mod:`.kinematics`: IK, FK and Jacobian requests and replies, the streamed IK solution
 - :mod:`.navigation`: map and plan requests and replies
 - :mod:`.errors`: ``ServiceError``, ``Refused``, ``NoReply`` (and the codec's ``DecodeError``)
@@ -36,7 +37,8 @@ from fabric.interfaces.std import (
 )
 from fabric.interfaces.commands import COMMAND_BODIES, Command, CommandBody, JointTarget, Reset, Stop, Twist
 from fabric.interfaces.ownership import MAX_QUEUE, OwnershipRecord, OwnReply, OwnRequest
-from fabric.interfaces.events import Event
+from fabric.interfaces.events import REJECT_KINDS, Event, EventKind
+from fabric.interfaces.sensors import BaseInfo, LidarInfo, SonarInfo
 from fabric.interfaces.world import ObjectInfo, RobotInfo, RobotState, WorldInfo, WorldState
 from fabric.interfaces.kinematics import (
     FRAMES,
@@ -80,8 +82,9 @@ __all__ = [
     # ownership
     "MAX_QUEUE", "OwnershipRecord", "OwnReply", "OwnRequest",
     # events
-    "Event",
-    # world
+    "REJECT_KINDS", "Event", "EventKind",
+    # sensors, world
+    "BaseInfo", "LidarInfo", "SonarInfo",
     "ObjectInfo", "RobotInfo", "RobotState", "WorldInfo", "WorldState",
     # kinematics
     "FRAMES", "IK_METHODS", "FKReply", "FKRequest", "IKReply", "IKRequest", "IKStream", "JacobianReply",

@@ -1,9 +1,14 @@
 """Events: what peers tell the world on ``rf/{world}/event/**`` (a refused command, an ownership change,
-a clamp, a warning), and the error replies of services.
+a clamp, a warning), and the error replies of services; :class:`EventKind` names every kind sent.
+
+An event's ``kind`` is a plain string on the wire (a third-party peer may send kinds of its own), but
+every kind robofabric sends is a member of :class:`EventKind`, and code that sends or matches one
+names the member, so a sender and a listener cannot drift apart on spelling.
 """
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -11,7 +16,44 @@ from fabric.codec import Map, S, register
 from fabric.interfaces.std import HEADER, Header, _header
 from fabric.limits import MAX_USER_LEN
 
-__all__ = ["Event"]
+__all__ = ["Event", "EventKind", "REJECT_KINDS"]
+
+
+class EventKind(enum.StrEnum):
+    """Every event kind robofabric sends; a member is its string (``EventKind.REJECT == "reject"``)."""
+
+    # any peer (fabric.session)
+    DECODE_ERROR = "decode_error"
+    """A payload that did not decode (on ``event/decode/{peer}``)."""
+    SERVICE_ERROR = "service_error"
+    """A service's refusal: the payload of an error reply, not published."""
+    # the sim (sim_peer.peer), on event/{kind}/{robot}
+    REJECT = "reject"
+    """A command the sim refused; ``reason``: not_owner, stale_epoch, unknown_robot, user_mismatch, wrong_body, ..."""
+    CLAMP = "clamp"
+    """A command applied after clamping to the robot's limits (``reason``: out_of_range, over_limit)."""
+    PATH_DONE = "path_done"
+    TWIST_TIMEOUT = "twist_timeout"
+    COLLISION = "collision"
+    """The bumper stopped a base before an obstacle."""
+    # the compute peer, on event/ik_unreachable/{robot}
+    IK_UNREACHABLE = "ik_unreachable"
+    # the ownership authority, on event/own/{object}
+    OWN_REFUSED = "own_refused"
+    OWN_HANDOVER = "own_handover"
+    OWN_REVOKED = "own_revoked"
+    OWN_EXPIRED = "own_expired"
+    OWN_RESTORED = "own_restored"
+    OWN_RELEASED = "own_released"
+
+    @classmethod
+    def ownership(cls, effect: str) -> "EventKind":
+        """The event kind of an ownership change (``handover`` -> ``own_handover``); ValueError for other effects."""
+        return cls(f"own_{effect}")
+
+
+REJECT_KINDS: frozenset[str] = frozenset({EventKind.REJECT})
+"""Kinds with which a sim refuses a user's command (the reason says why)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -35,6 +77,9 @@ class Event:
         "data": Map(),
         "header": HEADER,
     }
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", str(self.kind))  # an EventKind member travels as its plain string
 
 
 register(Event)

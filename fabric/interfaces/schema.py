@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.codec import Arr, F, I, Map, Msg, S, Strs, load_plugins, registered, to_plain
+from fabric.codec import Arr, F, I, Map, Msg, Opt, S, Strs, load_plugins, registered, to_plain
 
 __all__ = ["FieldInfo", "fields_of", "describe_spec", "json_schema", "message_types", "type_doc", "plain_view"]
 
@@ -51,6 +51,9 @@ def _range(lo: Any, hi: Any) -> str:
 
 def describe_spec(spec: Any) -> tuple[str, str]:
     """(type text, constraints text) of one field spec."""
+    if isinstance(spec, Opt):
+        t, c = describe_spec(spec.inner)
+        return f"{t} | None", c
     if isinstance(spec, F):
         return "float", _range(spec.lo, spec.hi)
     if isinstance(spec, I):
@@ -122,6 +125,8 @@ def plain_view(msg: Any) -> dict[str, Any]:
 
 
 def _plain_field(spec: Any, v: Any) -> Any:
+    if isinstance(spec, Opt):
+        return None if v is None else _plain_field(spec.inner, v)
     if isinstance(spec, F):
         return float(v)
     if isinstance(spec, I):
@@ -145,6 +150,8 @@ _SCALAR = {"type": ["string", "number", "integer", "boolean", "null"]}
 
 
 def _spec_schema(spec: Any, defs: dict[str, Any]) -> dict[str, Any]:
+    if isinstance(spec, Opt):
+        return {"anyOf": [_spec_schema(spec.inner, defs), {"type": "null"}]}
     if isinstance(spec, F):
         s: dict[str, Any] = {"type": "number"}
         if spec.lo is not None:
@@ -194,7 +201,9 @@ def _object_schema(cls: type, defs: dict[str, Any]) -> dict[str, Any]:
     for field, spec in cls.SPEC.items():
         props[field] = _spec_schema(spec, defs)
     doc = type_doc(cls)
-    out: dict[str, Any] = {"type": "object", "title": name, "properties": props, "required": ["type", *cls.SPEC]}
+    # a class with a field named ``type`` (RobotInfo) shadows the tag in plain_view: list it once
+    required = list(dict.fromkeys(["type", *cls.SPEC]))
+    out: dict[str, Any] = {"type": "object", "title": name, "properties": props, "required": required}
     if doc:
         out["description"] = " ".join(doc.split())
     return out

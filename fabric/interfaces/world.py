@@ -13,9 +13,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from fabric.codec import Arr, F, I, Map, Msg, Msgs, S, Strs, register
+from fabric.codec import Arr, F, I, Map, Msg, Msgs, Opt, S, Strs, register
 from fabric.interfaces._arrays import frozen
 from fabric.interfaces.ownership import OwnershipRecord
+from fabric.interfaces.sensors import BaseInfo, LidarInfo, SonarInfo
 from fabric.interfaces.std import MAX_PATH_POINTS, Header
 
 __all__ = ["RobotInfo", "ObjectInfo", "WorldInfo", "RobotState", "WorldState"]
@@ -25,9 +26,8 @@ __all__ = ["RobotInfo", "ObjectInfo", "WorldInfo", "RobotState", "WorldState"]
 class RobotInfo:
     """One robot of a world. ``pose`` is its spawn pose (x, y, z, yaw); limits in rad, speeds in rad/s.
 
-    ``base`` (mobile robots): radius, wheel_separation, wheel_radius, max_speed, max_omega, max_accel, max_alpha.
-    ``sensors``: lidar_* (rays, fov, angle_min, angle_increment, range_min, range_max, noise_std, site,
-    offset [x, y, z] in the robot frame) and sonar_* (angles, radius, height, center, range_min, range_max).
+    ``base`` (mobile robots), ``lidar`` and ``sonar`` describe what it carries (:mod:`fabric.interfaces.sensors`);
+    each is None when the robot has none.
     """
 
     id: str
@@ -41,8 +41,9 @@ class RobotInfo:
     flange_site: str = ""
     flange_frame: str = ""
     base_radius: float = 0.0
-    base: dict = field(default_factory=dict)
-    sensors: dict = field(default_factory=dict)
+    base: BaseInfo | None = None
+    lidar: LidarInfo | None = None
+    sonar: SonarInfo | None = None
 
     SPEC: ClassVar[dict] = {
         "id": S(nonempty=True),
@@ -56,8 +57,9 @@ class RobotInfo:
         "flange_site": S(),
         "flange_frame": S(),
         "base_radius": F(lo=0.0),
-        "base": Map(),
-        "sensors": Map(),
+        "base": Opt(Msg(BaseInfo)),
+        "lidar": Opt(Msg(LidarInfo)),
+        "sonar": Opt(Msg(SonarInfo)),
     }
 
     def __post_init__(self) -> None:
@@ -69,6 +71,9 @@ class RobotInfo:
         n = len(self.joint_names)
         if not (self.lower.shape[0] == self.upper.shape[0] == self.max_speed.shape[0] == n):
             raise ValueError(f"RobotInfo {self.id}: {n} joints but limits/speeds of other lengths")
+        for part in (self.lidar, self.sonar):
+            if part is not None:
+                part.check()
 
 
 @dataclass(frozen=True, slots=True)

@@ -38,9 +38,9 @@ import numpy as np
 import typer
 
 from fabric import keys
-from fabric.interfaces import Command, JointState, JointTarget, Stop
+from fabric.interfaces import Command, JointState, JointTarget, ServiceError, Stop
 from fabric.reliable import Resent, resend_until
-from fabric.session import Fabric, ServiceError
+from fabric.session import Fabric
 from fabric.testing import client, free_port, robofabric_cmd, wait_until
 from ownership.client import OwnershipClient
 from robofabric.bench.common import proc_cpu_s, proc_rss_mb

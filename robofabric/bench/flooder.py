@@ -12,9 +12,8 @@ import numpy as np
 
 from fabric import keys
 from fabric.codec import encode
-from fabric.interfaces import Command, JointState, JointTarget
+from fabric.interfaces import Command, JointState, JointTarget, OwnRequest
 from fabric.testing import client
-from fabric.interfaces import OwnRequest
 
 
 def flood(world: str, port: int, load: dict) -> dict:

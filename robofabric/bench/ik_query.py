@@ -69,7 +69,7 @@ def measure_query(n: int = 1000, seed: int = 0, warmup: int = 50) -> dict[str, d
 
 def _answers(fab, key: str) -> bool:
     from fabric.interfaces import FKRequest
-    from fabric.session import ServiceError
+    from fabric.interfaces import ServiceError
 
     try:
         fab.call(key, FKRequest(np.zeros(6)), timeout=1.0)

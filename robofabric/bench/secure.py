@@ -57,7 +57,8 @@ def _ik_round_trips(ep: str, configs: dict[str, str | None], n: int, warmup: int
     from fabric.interfaces import IKRequest
     from fabric import keys
     from fabric.config import FabricConfig
-    from fabric.session import Fabric, ServiceError
+    from fabric.interfaces import ServiceError
+    from fabric.session import Fabric
     from robofabric.bench.ik import reachable_targets
 
     world = f"b{uuid.uuid4().hex[:6]}"

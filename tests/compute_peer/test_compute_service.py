@@ -10,10 +10,9 @@ import numpy as np
 import pytest
 
 from compute_peer.kinematics.service import ArmPlacement, KinematicsService
-from fabric.interfaces import FKRequest, IKReply, IKRequest, IKStream, JacobianRequest
+from fabric.interfaces import Event, FKRequest, IKReply, IKRequest, IKStream, JacobianRequest, JointState, Pose
 from fabric import keys
 from fabric.codec import encode
-from fabric.interfaces import Event, JointState, Pose
 from fabric.session import ServiceError
 from fabric.testing import robofabric_cmd, wait_until
 

@@ -26,11 +26,10 @@ import pytest
 from fabric import keys
 from fabric.codec import encode
 from fabric.config import FabricConfig
-from fabric.interfaces import Command, Event, JointState, JointTarget, OwnershipRecord, Stop
+from fabric.interfaces import Command, Event, JointState, JointTarget, OwnershipRecord, OwnReply, OwnRequest, Stop
 from fabric.secure import init
 from fabric.session import Fabric, ServiceError
 from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
-from fabric.interfaces import OwnReply, OwnRequest
 
 pytestmark = pytest.mark.slow
 

@@ -3,9 +3,8 @@
 from hypothesis import given, strategies as hs
 
 from fabric.codec import decode, encode
-from fabric.interfaces import OwnershipRecord
+from fabric.interfaces import OwnershipRecord, OwnReply, OwnRequest
 
-from fabric.interfaces import OwnReply, OwnRequest
 
 ids = hs.text("abcxyz0123", min_size=1, max_size=8)
 

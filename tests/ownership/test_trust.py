@@ -9,13 +9,12 @@ import pytest
 from hypothesis import given, strategies as st
 
 from fabric import keys
-from fabric.interfaces import Event, OwnershipRecord
+from fabric.interfaces import Event, OwnershipRecord, OwnReply, OwnRequest
 from fabric.session import ServiceError
 from fabric.testing import wait_until
 
 from ownership import Authority, OwnershipClient
 from ownership.client import EPOCH_SLACK, epoch_plausible
-from fabric.interfaces import OwnReply, OwnRequest
 
 
 @pytest.fixture

@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 
 from fabric import keys
-from fabric.interfaces import Command, Event, JointState, JointTarget, Pose, Reset, Scan, Stop, Twist
+from fabric.interfaces import Command, Event, JointState, JointTarget, Pose, Reset, Scan, Stop, Twist, WorldInfo
 from fabric.testing import robofabric_cmd, wait_until
-from fabric.interfaces import WorldInfo
 from sim_peer.peer import SimPeer
 from sim_peer.world import SimWorld
 
@@ -198,8 +197,9 @@ def test_scene_objects_move_and_the_world_service_describes_everything(world, si
     assert arm.kind == "arm" and arm.type == "meca500" and len(arm.joint_names) == 6
     np.testing.assert_allclose(np.degrees(arm.max_speed), [150, 150, 180, 300, 300, 500])
     np.testing.assert_allclose(arm.pose, [3.0, 0.0, 0.75, 0.0])
-    assert base.kind == "mobile" and base.sensors["lidar_rays"] == 240 and base.base["max_speed"] > 0
-    assert math.isclose(base.sensors["lidar_fov"], math.radians(135))
+    assert base.kind == "mobile" and base.lidar.rays == 240 and base.base.max_speed > 0 and base.sonar is not None
+    assert math.isclose(base.lidar.fov, math.radians(135)) and base.lidar.offset[0] > 0.1  # ahead of the axle
+    assert arm.lidar is None and arm.sonar is None and arm.base is None
     objs = {o.id: o for o in info.objects}
     assert set(objs) == {"target", "goal"} and objs["target"].policy == "scene"
     np.testing.assert_allclose(objs["target"].position, [3.2, 0.1, 1.0])

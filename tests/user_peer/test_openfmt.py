@@ -25,9 +25,20 @@ from mcap_ros2.decoder import DecoderFactory
 
 import robots
 from fabric import keys
-from fabric.interfaces import IKStream
+from fabric.interfaces import (
+    Command,
+    Event,
+    Header,
+    IKStream,
+    JointState,
+    OccupancyGrid,
+    OwnershipRecord,
+    Path as FPath,
+    Pose,
+    Scan,
+    Twist,
+)
 from fabric.codec import encode
-from fabric.interfaces import Command, Event, Header, JointState, OccupancyGrid, OwnershipRecord, Path as FPath, Pose, Scan, Twist
 from fabric.recording import McapSink
 from fabric.testing import robofabric_cmd
 from user_peer.openfmt import export_recording

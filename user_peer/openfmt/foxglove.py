@@ -46,8 +46,7 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_protobuf.schema import register_schema
 
-from fabric.interfaces import json_schema, plain_view
-from fabric.interfaces import JointState, OccupancyGrid, Path, Pose, Scan
+from fabric.interfaces import JointState, json_schema, OccupancyGrid, Path, plain_view, Pose, Scan
 from user_peer.arm_geometry import Placement, Shape
 from user_peer.catalog import RobotCatalog
 from user_peer.openfmt.frames import WORLD, Frame, FrameTracker, key_owner, yaw_quat_xyzw

@@ -27,8 +27,7 @@ from typing import Any
 import numpy as np
 from mcap_ros2.writer import Writer as Ros2McapWriter
 
-from fabric.interfaces import plain_view
-from fabric.interfaces import JointState, OccupancyGrid, Path, Pose, Scan
+from fabric.interfaces import JointState, OccupancyGrid, Path, plain_view, Pose, Scan
 from user_peer.catalog import RobotCatalog
 from user_peer.openfmt.foxglove import msg_time_ns
 from user_peer.openfmt.frames import WORLD, FrameTracker, key_owner, yaw_quat_xyzw

@@ -9,9 +9,8 @@ import pytest
 
 from compute_peer.navigation import MapperConfig, PlannerSettings, VehicleModel, path_collision, register_navigation
 from compute_peer.navigation.grid import UNKNOWN, dilate, make_grid
-from fabric.interfaces import MapReply, MapRequest, PlanReply, PlanRequest
+from fabric.interfaces import MapReply, MapRequest, OccupancyGrid, Path, PlanReply, PlanRequest
 from fabric import keys
-from fabric.interfaces import OccupancyGrid, Path
 from fabric.session import ServiceError
 from fabric.testing import wait_until
 from navscenes import drive_poses, pose_at, scan_at, small_room
@@ -214,7 +213,7 @@ def test_every_robot_of_the_world_when_none_are_named(connect):
 
 def test_sensor_mounting_and_radius_come_from_the_world_description(connect):
     """A sim peer's srv/world says where the LIDAR sits: scans are folded in from there, plans use its radius."""
-    from fabric.interfaces import RobotInfo, WorldInfo
+    from fabric.interfaces import LidarInfo, RobotInfo, WorldInfo
 
     compute = connect("compute", "compute-3")
     sim = connect("sim", "sim-3")
@@ -225,7 +224,8 @@ def test_sensor_mounting_and_radius_come_from_the_world_description(connect):
         robots=(
             RobotInfo(
                 id="rover", type="reeman", kind="mobile", pose=np.zeros(4), joint_names=(), lower=np.zeros(0),
-                upper=np.zeros(0), max_speed=np.zeros(0), base_radius=0.4, sensors={"lidar_offset": [0.5, 0.0, 0.25]},
+                upper=np.zeros(0), max_speed=np.zeros(0), base_radius=0.4,
+                lidar=LidarInfo("lidar", 240, 2.356, -1.178, 0.00985, 0.05, 12.0, offset=np.array([0.5, 0.0, 0.25])),
             ),
         ),
     )

@@ -15,9 +15,8 @@ import pytest
 
 from compute_peer.navigation import path_collision, register_navigation
 from compute_peer.navigation.geometry import quaternion_from_yaw, yaw_from_quaternion
-from fabric.interfaces import MapRequest, PlanRequest
+from fabric.interfaces import Command, MapRequest, PlanRequest, Pose, Stop, Twist
 from fabric import keys
-from fabric.interfaces import Command, Pose, Stop, Twist
 from fabric.testing import wait_until
 from sim_peer.peer import SimPeer
 from sim_peer.world import SimWorld
