@@ -27,7 +27,7 @@ from typing import Any, ClassVar
 import mujoco
 import numpy as np
 
-from fabric.interfaces import COMMAND_BODIES, RobotInfo, RobotState
+from fabric.interfaces import COMMAND_BODIES, RobotInfo, RobotState, quaternion_from_yaw
 from robots import RobotDescription
 from sim_peer.controllers import Clamp, CommandRejected
 
@@ -130,7 +130,7 @@ class Robot:
     def frame(pose: tuple[float, float, float, float]) -> tuple[list[float], list[float]]:
         """Position and quaternion of the frame the robot's MJCF is attached at, from its spawn pose."""
         x, y, z, yaw = pose
-        return [x, y, z], [float(np.cos(yaw / 2)), 0.0, 0.0, float(np.sin(yaw / 2))]
+        return [x, y, z], quaternion_from_yaw(yaw).tolist()
 
     # hooks ---------------------------------------------------------------------
     def describe(self) -> RobotInfo:

@@ -44,6 +44,8 @@ from fabric.interfaces import (
     Scan,
     Stop,
     Twist,
+    quaternion_from_yaw,
+    yaw_from_quaternion,
 )
 from fabric.reliable import resend_until
 from fabric.interfaces import ServiceError
@@ -692,8 +694,7 @@ class Base(Robot):
         p = self.pose
         if p is None:
             return None
-        w, x, y, z = (float(v) for v in p.quaternion)
-        return float(p.position[0]), float(p.position[1]), math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+        return float(p.position[0]), float(p.position[1]), yaw_from_quaternion(p.quaternion)
 
     def twist(self, v: float, omega: float) -> None:
         """One twist command (m/s, rad/s); the sim keeps it until the next one or a stop."""
@@ -798,7 +799,7 @@ class SceneObject:
     def set_pose(self, position: Sequence[float], quaternion: Sequence[float] = (1.0, 0.0, 0.0, 0.0), *, yaw: float | None = None) -> Pose:
         """Move the object to ``position`` (m, world frame); ``yaw`` (rad) overrides ``quaternion``."""
         if yaw is not None:
-            quaternion = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+            quaternion = quaternion_from_yaw(yaw)
         pose = Pose(np.asarray(position, dtype=float), np.asarray(quaternion, dtype=float), header=self.world.fabric.header(self.key))
         self.world.fabric.publish(self.key, pose)
         self.world.latest.put(self.any_key, pose)

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from fabric.interfaces import OccupancyGrid, Pose, Scan
+from fabric.interfaces import OccupancyGrid, Pose, Scan, yaw_from_quaternion
 from ownership.extrapolate import age_s, extrapolate
 from user_peer.arm_geometry import Placement
 
@@ -32,10 +32,9 @@ __all__ = [
 EXTRAPOLATION_CAP_S = 0.2  # s: never move a stale pose further than its velocity times this (paper Eq. 8)
 
 
-def yaw_of(quat_wxyz: np.ndarray) -> float:
-    """Heading (rad) of a (w, x, y, z) quaternion about the world z axis."""
-    w, x, y, z = (float(v) for v in quat_wxyz)
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+yaw_of = yaw_from_quaternion
+"""Heading (rad) of a (w, x, y, z) quaternion about the world z axis: the views' name for
+:func:`fabric.interfaces.yaw_from_quaternion` (one definition)."""
 
 
 def shown_position(pose: Pose, received_ns: int, now_ns: int) -> tuple[np.ndarray, float | None]:

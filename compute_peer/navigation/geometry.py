@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -10,16 +9,6 @@ import numpy as np
 from fabric.interfaces import TWO_PI, wrap_angle
 
 __all__ = ["TWO_PI", "wrap_angle"]  # re-exported: the planners import them from here
-
-
-def yaw_from_quaternion(q: Any) -> float:
-    """Yaw (rotation about z) of a (w, x, y, z) quaternion."""
-    w, x, y, z = (float(v) for v in q)
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
-def quaternion_from_yaw(yaw: float) -> np.ndarray:
-    return np.array([math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)])
 
 
 def arc(x0: Any, y0: Any, th0: Any, kappa: float, s: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

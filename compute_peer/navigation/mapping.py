@@ -18,10 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fabric.interfaces import Header, OccupancyGrid, Pose, Scan
+from fabric.interfaces import Header, OccupancyGrid, Pose, Scan, yaw_from_quaternion
 
 from .errors import NavigationError
-from .geometry import yaw_from_quaternion
 from .grid import UNKNOWN
 
 

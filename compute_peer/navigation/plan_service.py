@@ -13,12 +13,11 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Callable
 
 from fabric import keys
-from fabric.interfaces import Path, PlanReply, PlanRequest, Pose
+from fabric.interfaces import Path, PlanReply, PlanRequest, Pose, yaw_from_quaternion
 
 from .costmap import Costmap
 from .discovery import RobotDescriptions
 from .errors import NavigationError
-from .geometry import yaw_from_quaternion
 from .map_service import MapService
 from .model import VehicleModel
 from .planner import PlannerSettings, plan_path

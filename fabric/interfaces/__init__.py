@@ -19,7 +19,7 @@ Modules, one room each:
 - :mod:`.kinematics`: IK, FK and Jacobian requests and replies, the streamed IK solution
 - :mod:`.navigation`: map and plan requests and replies
 - :mod:`.errors`: ``ServiceError``, ``Refused``, ``NoReply`` (and the codec's ``DecodeError``)
-- :mod:`.geometry`: angles (``wrap_angle``)
+- :mod:`.geometry`: angles and headings (``wrap_angle``, ``yaw_from_quaternion``, ``quaternion_from_yaw``)
 - :mod:`.schema`: the fields and JSON Schema of each type, read off its ``SPEC``
 """
 
@@ -62,7 +62,7 @@ from fabric.interfaces.navigation import (
     empty_grid,
 )
 from fabric.interfaces.errors import DecodeError, NoReply, Refused, ServiceError
-from fabric.interfaces.geometry import TWO_PI, wrap_angle
+from fabric.interfaces.geometry import TWO_PI, quaternion_from_yaw, wrap_angle, yaw_from_quaternion
 from fabric.interfaces.schema import (
     FieldInfo,
     describe_spec,
@@ -94,7 +94,7 @@ __all__ = [
     # errors
     "DecodeError", "NoReply", "Refused", "ServiceError",
     # geometry
-    "TWO_PI", "wrap_angle",
+    "TWO_PI", "quaternion_from_yaw", "wrap_angle", "yaw_from_quaternion",
     # schema
     "FieldInfo", "describe_spec", "fields_of", "json_schema", "message_types", "plain_view", "type_doc",
 ]

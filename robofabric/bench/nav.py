@@ -20,14 +20,13 @@ import typer
 
 from compute_peer.navigation.costmap import build_costmap
 from compute_peer.navigation.errors import NavigationError
-from compute_peer.navigation.geometry import quaternion_from_yaw
 from compute_peer.navigation.hybrid_astar import HybridAStarConfig
 from compute_peer.navigation.mapping import MapperConfig, OccupancyMapper
 from compute_peer.navigation.model import VehicleModel
 from compute_peer.navigation.ompl_planner import OmplConfig
 from compute_peer.navigation.planner import PlannerSettings, plan_path
 from compute_peer.navigation.scenes import office, scan_angles
-from fabric.interfaces import Header, Pose, Scan
+from fabric.interfaces import Header, Pose, Scan, quaternion_from_yaw
 from robofabric.bench.common import append, pct
 
 RES = 0.05

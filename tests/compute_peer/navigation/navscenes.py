@@ -6,9 +6,8 @@ import math
 
 import numpy as np
 
-from compute_peer.navigation.geometry import quaternion_from_yaw
 from compute_peer.navigation.scenes import Scene, room, scan_angles
-from fabric.interfaces import Header, Pose, Scan
+from fabric.interfaces import Header, Pose, Scan, quaternion_from_yaw
 
 RAYS = 240
 FOV = 270.0

@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 
 from compute_peer.navigation import path_collision, register_navigation
-from compute_peer.navigation.geometry import quaternion_from_yaw, yaw_from_quaternion
-from fabric.interfaces import Command, MapRequest, PlanRequest, Pose, Stop, Twist
+from fabric.interfaces import Command, MapRequest, PlanRequest, Pose, Stop, Twist, quaternion_from_yaw, yaw_from_quaternion
 from fabric import keys
 from fabric.testing import wait_until
 from sim_peer.peer import SimPeer

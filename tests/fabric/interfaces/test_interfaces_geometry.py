@@ -46,3 +46,21 @@ def test_the_peers_share_the_one_definition():
     from sim_peer import controllers
 
     assert nav_geometry.wrap_angle is wrap_angle and controllers.wrap_angle is wrap_angle
+
+
+@given(st.floats(min_value=-math.pi + 1e-9, max_value=math.pi - 1e-9))
+def test_yaw_and_quaternion_are_inverse_and_unit(yaw):
+    from fabric.interfaces import quaternion_from_yaw, yaw_from_quaternion
+
+    q = quaternion_from_yaw(yaw)
+    assert math.isclose(float(np.linalg.norm(q)), 1.0, abs_tol=1e-12)
+    assert math.isclose(yaw_from_quaternion(q), yaw, abs_tol=1e-9)
+    assert math.isclose(yaw_from_quaternion(-q), yaw, abs_tol=1e-9)  # q and -q are the same rotation
+
+
+def test_one_heading_helper_for_every_peer():
+    import fabric.interfaces as fi
+    from user_peer import geometry as views
+
+    assert views.yaw_of is fi.yaw_from_quaternion
+    assert fi.quaternion_from_yaw(math.pi / 2).tolist() == [math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4)]
