@@ -9,7 +9,7 @@ no Zenoh import; :mod:`sim_peer.peer` composes it with the fabric: streams, comm
 
 from sim_peer.controllers import ArmController, BaseController, Clamp, CommandRejected
 from sim_peer.follower import PurePursuit
-from sim_peer.robot import HOOKS, Mount, Note, Physics, Robot, Stream
+from sim_peer.robot import HOOKS, Mount, Note, Physics, SimRobot, Stream
 from sim_peer.sensors import Lidar, Sensor, Ultrasonic
 from sim_peer.simrobot import ArmRobot, MobileRobot
 from sim_peer.world import SimWorld, WorldError, parse_robot_spec
@@ -27,7 +27,7 @@ __all__ = [
     "Note",
     "Physics",
     "PurePursuit",
-    "Robot",
+    "SimRobot",
     "Sensor",
     "SimWorld",
     "Stream",

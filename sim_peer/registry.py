@@ -1,10 +1,10 @@
-"""Which :class:`~sim_peer.robot.Robot` class simulates a robot type: found from the type's description.
+"""Which :class:`~sim_peer.robot.SimRobot` class simulates a robot type: found from the type's description.
 
 One path: the description's ``[robot] hooks`` names the class, as ``"package.module:Class"`` (an importable
 module, e.g. in an installed package) or ``"file.py:Class"`` (a Python file beside ``robot.toml``, loaded from
 there: a robot folder dropped on ``ROBOFABRIC_ROBOTS_PATH`` brings its MJCF, its description and its hooks).
 A description without ``hooks`` gets the built-in class of its ``kind`` (``arm``: :class:`ArmRobot`,
-``mobile``: :class:`MobileRobot`). Classes are checked once (a :class:`Robot` subclass, no misspelt hook)
+``mobile``: :class:`MobileRobot`). Classes are checked once (a :class:`SimRobot` subclass, no misspelt hook)
 and kept per reference.
 """
 
@@ -18,15 +18,15 @@ from pathlib import Path
 
 from robots import RobotDescription
 from sim_peer.errors import WorldError
-from sim_peer.robot import Robot, check_hooks
+from sim_peer.robot import SimRobot, check_hooks
 
 BUILTIN = {"arm": "sim_peer.simrobot:ArmRobot", "mobile": "sim_peer.simrobot:MobileRobot"}
 
-_cache: dict[tuple[str, str], type[Robot]] = {}
+_cache: dict[tuple[str, str], type[SimRobot]] = {}
 _lock = threading.Lock()
 
 
-def robot_class(desc: RobotDescription) -> type[Robot]:
+def robot_class(desc: RobotDescription) -> type[SimRobot]:
     """The class that simulates robots of type ``desc``; :class:`WorldError` naming the description if none."""
     ref = desc.hooks or BUILTIN.get(desc.kind, "")
     if not ref:
@@ -41,7 +41,7 @@ def robot_class(desc: RobotDescription) -> type[Robot]:
     return cls
 
 
-def _load(desc: RobotDescription, module: str, name: str) -> type[Robot]:
+def _load(desc: RobotDescription, module: str, name: str) -> type[SimRobot]:
     where = f"robot type {desc.name} (hooks {module}:{name})"
     try:
         mod = _import_file(Path(desc.directory) / module, desc.name) if module.endswith(".py") else importlib.import_module(module)
@@ -50,8 +50,8 @@ def _load(desc: RobotDescription, module: str, name: str) -> type[Robot]:
     except Exception as exc:  # the plug-in's own import error, whatever it is, named with the robot type
         raise WorldError(f"{where}: cannot import: {type(exc).__name__}: {exc}") from exc
     cls = getattr(mod, name, None)
-    if not (isinstance(cls, type) and issubclass(cls, Robot)):
-        raise WorldError(f"{where}: {name} is not a sim_peer.robot.Robot subclass in {module}")
+    if not (isinstance(cls, type) and issubclass(cls, SimRobot)):
+        raise WorldError(f"{where}: {name} is not a sim_peer.robot.SimRobot subclass in {module}")
     try:
         return check_hooks(cls)
     except TypeError as exc:

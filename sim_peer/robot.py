@@ -1,6 +1,6 @@
 """What a robot type plugs into the sim: hooks with empty defaults, in the spirit of dm_control's composer.
 
-A robot type is a :class:`Robot` subclass found from its description (:mod:`sim_peer.registry`). The world
+A robot type is a :class:`SimRobot` subclass found from its description (:mod:`sim_peer.registry`). The world
 calls its hooks; the peer loops over them and never asks what kind of robot it holds:
 
 * ``describe()`` - what the robot is, as the :class:`RobotInfo` the world description carries;
@@ -109,11 +109,13 @@ class Stream:
     hz: float = 10.0
 
 
-class Robot:
+class SimRobot:
     """The base of every robot type: empty hooks, the common identity, and the surface tests and tools use.
 
     ``kind`` is what other peers make of the robot (``arm``: joints and a flange; ``mobile``: a base pose
-    and range sensors), carried in its :class:`RobotInfo`; the sim itself never looks at it.
+    and range sensors), carried in its :class:`RobotInfo`; the sim itself never looks at it. Named for the
+    side it lives on, like :class:`~sim_peer.world.SimWorld`: ``user_peer.api.Robot`` is a user's handle on a
+    robot of the world.
     """
 
     kind: ClassVar[str] = ""
@@ -207,4 +209,4 @@ def check_hooks(cls: type) -> type:
     return cls
 
 
-__all__ = ["Build", "CommandHandler", "HOOKS", "Mount", "Note", "Physics", "Robot", "Stream", "body_mismatch", "check_hooks"]
+__all__ = ["Build", "CommandHandler", "HOOKS", "Mount", "Note", "Physics", "SimRobot", "Stream", "body_mismatch", "check_hooks"]

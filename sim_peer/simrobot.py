@@ -20,7 +20,7 @@ from fabric.interfaces import BaseInfo, EventKind, JointState, Pose, RobotInfo, 
 from sim_peer.bumper import Bumper
 from sim_peer.controllers import ArmController, BaseController, Clamp, CommandRejected
 from sim_peer.follower import PurePursuit
-from sim_peer.robot import Build, CommandHandler, Mount, Note, Physics, Robot, Stream, check_hooks
+from sim_peer.robot import Build, CommandHandler, Mount, Note, Physics, SimRobot, Stream, check_hooks
 from sim_peer.sensors import Lidar, Sensor, Ultrasonic
 
 def _joint_addresses(model: mujoco.MjModel, prefix: str, names) -> tuple[np.ndarray, np.ndarray]:
@@ -38,7 +38,7 @@ def _joint_stream(robot: Any) -> Stream:
 
 
 @check_hooks
-class ArmRobot(Robot):
+class ArmRobot(SimRobot):
     """An arm driven joint by joint toward a target; publishes its joints and, with them, its flange pose."""
 
     kind = "arm"
@@ -149,7 +149,7 @@ class ArmRobot(Robot):
 
 
 @check_hooks
-class MobileRobot(Robot):
+class MobileRobot(SimRobot):
     """A differential-drive base (twists, paths) with a LIDAR, an ultrasonic ring and a bumper as its sensors."""
 
     kind = "mobile"

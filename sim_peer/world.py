@@ -27,7 +27,7 @@ from sim_peer.build import SensorOptions, compile_model, load_scene, resolve, sc
 from sim_peer.errors import WorldError
 from sim_peer.placement import parse_robot_spec, place
 from sim_peer.registry import robot_class
-from sim_peer.robot import Mount, Note, Physics, Robot
+from sim_peer.robot import Mount, Note, Physics, SimRobot
 
 MAX_NOTES = 1024  # notes kept until the peer takes them; a headless world that never does keeps the newest
 
@@ -66,7 +66,7 @@ class SimWorld:
         self.dt = float(self.model.opt.timestep)
         self.bumper = bumper
         self.notes: deque[tuple[str, Note]] = deque(maxlen=MAX_NOTES)
-        self.robots: dict[str, Robot] = {
+        self.robots: dict[str, SimRobot] = {
             r.id: classes[r.id](Mount(r.id, self.descriptions[r.id], self.model, r.pose, self.rng, self._report, twist_timeout, bumper))
             for r in placed
         }

@@ -22,14 +22,14 @@ from fabric import keys
 from fabric.codec import encode
 from fabric.interfaces import Header, JointState, Pose, Scan
 
-__all__ = ["Stream", "robot_streams", "run_load", "DEFAULT_RATES"]
+__all__ = ["LoadStream", "robot_streams", "run_load", "DEFAULT_RATES"]
 
 DEFAULT_RATES = {"joints": 100.0, "pose": 50.0, "scan": 20.0}
 _JOINTS = tuple(f"joint{i}" for i in range(1, 7))
 
 
 @dataclass(frozen=True, slots=True)
-class Stream:
+class LoadStream:
     key: str
     hz: float
     make: Callable[[int, float], bytes]  # (seq, t) -> payload
@@ -69,7 +69,7 @@ def _cycled(make: Callable[[int, float], bytes], n: int) -> Callable[[int, float
 
 def robot_streams(
     world: str, robots: int, *, scale: float = 1.0, rates: dict[str, float] | None = None, prefix: str = "r", precompute: int = 0
-) -> list[Stream]:
+) -> list[LoadStream]:
     """``robots`` robots x (joints, pose, scan) at ``rates`` (default rates) times ``scale``.
 
     ``precompute > 0`` cycles through that many pre-encoded payloads per stream instead of encoding
@@ -82,13 +82,13 @@ def robot_streams(
         rid = f"{prefix}{i}"
         for stream, hz in rates.items():
             make = makers[stream](rid)
-            out.append(Stream(keys.robot_stream(world, rid, stream), hz * scale, _cycled(make, precompute) if precompute > 0 else make))
+            out.append(LoadStream(keys.robot_stream(world, rid, stream), hz * scale, _cycled(make, precompute) if precompute > 0 else make))
     return out
 
 
 def run_load(
     put: Callable[[str, bytes], Any],
-    streams: list[Stream],
+    streams: list[LoadStream],
     *,
     duration: float,
     stop: threading.Event | None = None,

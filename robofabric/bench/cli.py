@@ -18,7 +18,7 @@ import typer
 
 from robofabric.bench import BENCHMARKS, Benchmark, names
 
-__all__ = ["build_app", "register", "run_all", "Outcome"]
+__all__ = ["build_app", "register", "run_all", "BenchOutcome"]
 
 HELP = "Benchmarks: each prints a table and can append it to docs/benchmarks.md (see --help of each)."
 
@@ -50,7 +50,7 @@ def list_cmd(
 
 
 @dataclass(frozen=True, slots=True)
-class Outcome:
+class BenchOutcome:
     """What ``bench all`` did with one benchmark: its exit code (None: skipped, with the reason) and its time."""
 
     name: str
@@ -105,19 +105,19 @@ def _header() -> str:
             f"Machine: {machine()}; git {rev or '?'}\n")
 
 
-def run_all(selected: list[Benchmark], *, quick: bool, out: Path, progress: Callable[[str], None] = print) -> list[Outcome]:
+def run_all(selected: list[Benchmark], *, quick: bool, out: Path, progress: Callable[[str], None] = print) -> list[BenchOutcome]:
     """Run each benchmark in its own process (``python -m robofabric bench NAME ...``), one after the other,
     and write its table (from its ``--out`` file, else its output) under a heading in ``out``."""
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(_header(), encoding="utf-8")
-    outcomes: list[Outcome] = []
+    outcomes: list[BenchOutcome] = []
     with tempfile.TemporaryDirectory(prefix="bench-all-") as tmp:
         for b in selected:
             shown = ("robofabric", *b.argv(quick=quick))
             why = b.unavailable()
             if why:
                 progress(f"== {' '.join(shown)}: skipped ({why})")
-                outcomes.append(Outcome(b.name, shown, None, 0.0, why))
+                outcomes.append(BenchOutcome(b.name, shown, None, 0.0, why))
                 with open(out, "a", encoding="utf-8") as f:
                     f.write(f"\n## `{' '.join(shown)}`\n\nskipped: {why}\n")
                 continue
@@ -132,7 +132,7 @@ def run_all(selected: list[Benchmark], *, quick: bool, out: Path, progress: Call
             code, text = _run_streaming(argv)
             seconds = time.monotonic() - t0
             body = table.read_text(encoding="utf-8") if table.exists() else text
-            outcomes.append(Outcome(b.name, shown, code, seconds))
+            outcomes.append(BenchOutcome(b.name, shown, code, seconds))
             with open(out, "a", encoding="utf-8") as f:
                 f.write(f"\n## `{' '.join(shown)}`\n\n{body.rstrip()}\n")
                 if code != 0:

@@ -18,7 +18,7 @@ from fabric.interfaces import Command, Event, JointState, JointTarget, Pose, Twi
 from fabric.testing import wait_until
 from ownership import Authority, OwnershipClient
 from sim_peer.peer import SimPeer
-from sim_peer.robot import HOOKS, Robot, Stream
+from sim_peer.robot import HOOKS, SimRobot, Stream
 from sim_peer.world import SimWorld, WorldError
 
 PLUGINS = Path(__file__).parent / "plugin_robots"
@@ -39,7 +39,7 @@ def test_the_world_builds_and_steps_a_robot_type_from_its_description_and_hooks(
     assert "planar2" in robots.available_robots() and "planar_cell" in robots.available_scenes()
     w = SimWorld("planar_cell")
     p1 = w.robot("p1")
-    assert type(p1).__name__ == "Planar2Arm" and isinstance(p1, Robot) and set(w.robots) == {"p1", "arm1"}
+    assert type(p1).__name__ == "Planar2Arm" and isinstance(p1, SimRobot) and set(w.robots) == {"p1", "arm1"}
     assert not w.dynamic  # its two hinges are its own (kinematic_dofs): nothing left for MuJoCo to integrate
     assert p1.commands()["joints"](JointTarget(np.array([0.6, -0.9]))) is None
     w.step(int(1.0 / w.dt))  # 0.9 rad at 3 rad/s and 0.6 at 2 rad/s: there within 0.3 s
@@ -83,9 +83,9 @@ def test_a_bad_hooks_reference_is_a_world_error_naming_the_type(plugin_path, tmp
     (bad / "robot.toml").write_text(toml.replace("hooks.py:Planar2Arm", "hooks.py:Nope"))
     (bad / "hooks.py").write_text("class Nope:\n    pass\n")
     monkeypatch.setenv(robots.description.ENV_PATH, f"{tmp_path}")
-    with pytest.raises(WorldError, match="broken.*not a sim_peer.robot.Robot subclass"):
+    with pytest.raises(WorldError, match="broken.*not a sim_peer.robot.SimRobot subclass"):
         SimWorld("combined", ["broken:b1@-2,0"])
-    (bad / "hooks.py").write_text("from sim_peer.robot import Robot\nclass Nope(Robot):\n    def after_substep(self, physics):\n        pass\n")
+    (bad / "hooks.py").write_text("from sim_peer.robot import SimRobot\nclass Nope(SimRobot):\n    def after_substep(self, physics):\n        pass\n")
     (bad / "robot.toml").write_text(toml.replace("hooks.py:Planar2Arm", "hooks2.py:Nope"))
     (bad / "hooks2.py").write_text((bad / "hooks.py").read_text())
     with pytest.raises(WorldError, match="after_substep looks like a hook"):

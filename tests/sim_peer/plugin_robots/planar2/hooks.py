@@ -15,12 +15,12 @@ import numpy as np
 
 from fabric.interfaces import JointState, Pose, RobotState
 from sim_peer.controllers import Clamp, CommandRejected
-from sim_peer.robot import Build, CommandHandler, Mount, Physics, Robot, Stream
+from sim_peer.robot import Build, CommandHandler, Mount, Physics, SimRobot, Stream
 
 MOVING = 1e-3  # rad/s
 
 
-class Planar2Arm(Robot):
+class Planar2Arm(SimRobot):
     kind = "arm"
 
     def __init__(self, mount: Mount) -> None:
