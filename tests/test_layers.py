@@ -31,12 +31,17 @@ def _run(config: Path, cwd: Path, extra_path: Path | None = None, contract: str 
     )
 
 
-def test_contracts_hold():
-    out = _run(ROOT / "pyproject.toml", ROOT)
-    assert out.returncode == 0, out.stdout + out.stderr
-    assert "0 broken" in out.stdout
+def test_contracts_hold(monkeypatch, capsys):
+    """``lint-imports`` on the project, in this process (no child process: it stays in the fast suite)."""
+    from importlinter.cli import lint_imports
+
+    monkeypatch.chdir(ROOT)
+    code = lint_imports(config_filename=str(ROOT / "pyproject.toml"), no_cache=True)
+    out = capsys.readouterr()
+    assert code == 0, out.out + out.err
+    assert "0 broken" in out.out
     for contract in ("Layers", "fabric.interfaces imports nothing", "fabric.codec and fabric.limits"):
-        assert contract in out.stdout, out.stdout
+        assert contract in out.out, out.out
 
 
 def _importlinter_section() -> str:
@@ -100,12 +105,14 @@ def _skeleton(tmp_path: Path, bad: tuple[str, str] | None) -> Path:
     return src
 
 
+@pytest.mark.slow
 def test_skeleton_without_bad_imports_keeps_every_contract(tmp_path):
     src = _skeleton(tmp_path, None)
     out = _run(tmp_path / "importlinter.toml", tmp_path, src)
     assert out.returncode == 0, out.stdout + out.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "where, line, contract",
     [
