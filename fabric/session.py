@@ -49,6 +49,9 @@ the rest are counted and the next report says how many were suppressed."""
 MAX_DEPARTED_SIMS = 256
 """Ids of sims whose token went, kept so their late samples cannot re-raise a reset fence (bounded:
 anyone may declare a token)."""
+ZENOH_QUERY_TIMEOUT = "Timeout"
+"""The error reply zenoh itself gives a query whose time limit ran out while a server was known: a
+silence, which must read as NoReply (retried by those who wait), not as a server's refusal."""
 
 __all__ = ["Fabric", "ServiceError", "Refused", "NoReply", "Reply", "shutdown_event", "undeclare_all", "declare_publisher", "priority_for"]
 
@@ -448,7 +451,10 @@ class Fabric:
                     ev = decode(rep.err.payload.to_bytes(), Event)
                     errors.append(ev.reason)
                 except DecodeError:
-                    errors.append(rep.err.payload.to_string() if rep.err.payload is not None else "error")
+                    text = rep.err.payload.to_string() if rep.err.payload is not None else "error"
+                    if text == ZENOH_QUERY_TIMEOUT:
+                        continue  # zenoh's own word that the time limit ran out: no answer, not a refusal
+                    errors.append(text)
         if not replies:
             if errors:
                 raise Refused(errors[0], key=selector)

@@ -1,6 +1,7 @@
 """Real zenoh sessions on loopback: pub/sub, bad payloads, services, liveliness."""
 
 import json
+import time
 
 import pytest
 import zenoh
@@ -150,3 +151,23 @@ def test_a_flood_of_bad_payloads_is_counted_in_full_and_reported_a_few_times(wor
     assert receiver.counters["reports_suppressed"] >= 501 - REPORT_BURST
     assert all(len(e.reason) <= 240 and len(e.data["key"]) <= 240 for e in events)
     assert len(receiver._publishers) <= 2  # the event key, nothing per robot id
+
+
+def test_a_server_that_answers_too_late_is_no_reply_not_a_refusal(world, connect):
+    """zenoh ends such a query with an error reply of its own ("Timeout"); read as a refusal, it made
+    a user's join fail at once ("refused its description: Timeout") instead of waiting for the sim."""
+    from fabric.interfaces import NoReply, Refused
+
+    server, caller = connect("sim", "s1"), connect("user", "u1")
+
+    def handler(key, request):
+        if request is not None:  # the real call: answers after the caller's limit
+            time.sleep(1.0)
+        return Twist(1.0, 0.0)
+
+    key = keys.srv(world, "world")
+    server.serve(key, handler)
+    wait_until(lambda: _try(lambda: caller.call(key, timeout=1.0)), what="the server answering a probe")
+    with pytest.raises(NoReply, match="no server answered in time") as err:
+        caller.call(key, Stop(), timeout=0.3)
+    assert not isinstance(err.value, Refused)
