@@ -68,8 +68,7 @@ def test_cut_and_restore_a_link(lab: Lab):
 
 
 def test_freeze_thaw_kill_and_a_shifted_clock(lab: Lab):
-    if faketime_library() is None:
-        pytest.skip("Debian's faketime is not installed (.ci/run installs it)")
+    assert faketime_library() is not None, "Debian's faketime is not installed (apt-get install faketime; .ci/run does)"
     a = lab.add_host("a")
     b = lab.add_host("b", clock_offset="-5")
     pa, pb = a.python(name="a"), b.python(name="b")
