@@ -19,6 +19,7 @@ import subprocess
 import threading
 import time
 import uuid
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -26,7 +27,7 @@ import pytest
 from fabric import keys
 from fabric.codec import encode
 from fabric.config import FabricConfig
-from fabric.interfaces import Command, Event, JointState, JointTarget, OwnershipRecord, OwnReply, OwnRequest, Stop
+from fabric.interfaces import Command, Event, Header, JointState, JointTarget, OwnershipRecord, OwnReply, OwnRequest, Stop, WorldInfo
 from fabric.secure import init
 from fabric.session import Fabric, ServiceError
 from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
@@ -117,6 +118,17 @@ def _marker(mallory: Fabric, seen_events: Seen, world: str, tag: str) -> None:
                what=f"mallory's marker {tag}")
 
 
+def _forged_header(real: Header) -> Header:
+    """The header the real authority would put on its next message: its source and term, a fresh stamp."""
+    return replace(real, wall_ns=time.time_ns(), seq=real.seq + 1)
+
+
+def _refused_by_router(secure: SecureWorld, text: str) -> None:
+    """The router's --audit summaries (fabric/router_audit.py) name the refused login, message and key."""
+    wait_until(lambda: text in secure.procs.output(secure.router), timeout=20, what=f"the router's count of '{text}'",
+               seen=lambda: secure.procs.output(secure.router)[-1500:])
+
+
 @pytest.fixture(scope="module")
 def alice_owns_arm(secure):
     import user_peer
@@ -162,12 +174,17 @@ def test_a_fake_ownership_record_is_refused_and_alice_keeps_renewing(secure, ali
     events, records = Seen(watcher, keys.event_all(w), Event), Seen(watcher, keys.own_all(w), OwnershipRecord)
     mallory = secure.fabric("mallory")
     rec = alice.ownership.record("arm1")
-    # plausible in every way the client can check: the authority's name, the next epoch
-    _send(mallory, keys.own(w, "arm1"), OwnershipRecord("arm1", owner="mallory", epoch=rec.epoch + 1, authority=rec.authority))
-    _send(mallory, keys.own(w, "arm1"), OwnershipRecord("arm1", owner="mallory", epoch=2**40, authority=rec.authority))
+    assert rec.header.term >= 1  # the clients' fence is up: a forgery must carry the term to get past it
+    # plausible in every way a client can check: the authority's name, source and term, the next epoch;
+    # only the router's access control stands between these and alice's client
+    forged = OwnershipRecord("arm1", owner="mallory", epoch=rec.epoch + 1, lease_expiry=rec.lease_expiry + 10.0,
+                             authority=rec.authority, header=_forged_header(rec.header))
+    _send(mallory, keys.own(w, "arm1"), forged)
+    _send(mallory, keys.own(w, "arm1"), replace(forged, epoch=2**40, header=_forged_header(rec.header)))
     _marker(mallory, events, w, "after-records")
     assert not [r for r in records.messages() if r.owner == "mallory"]
     assert alice.ownership.record("arm1").owner == "alice"
+    _refused_by_router(secure, f"mallory put {keys.own(w, 'arm1')}")
     # two lease periods (2 s each) later alice still owns it: she kept renewing
     first = watcher.call(keys.own(w, "arm1"), expected=OwnershipRecord)
     time.sleep(4.5)  # the lease must have run out had she stopped renewing; nothing to poll for
@@ -196,16 +213,24 @@ def test_a_user_cannot_publish_robot_state_or_serve_the_world(secure):
     events, joints = Seen(watcher, keys.event_all(w), Event), Seen(watcher, keys.robot_joints(w, "arm1"), JointState)
     mallory = secure.fabric("mallory")
     fake_sim = secure.fabric("mallory", kind="sim", peer_id="fake-sim")  # her login, a sim's token: refused
-    _send(mallory, keys.robot_joints(w, "arm1"), JointState([f"joint_{i}" for i in range(1, 7)], np.full(6, 1.0), np.zeros(6),
-                                                             mallory.header("j")))
-    mallory.serve(keys.srv(w, "world"), lambda key, req: Event(kind="fake", reason="mallory's world"))
-    mallory.serve(keys.own(w, "arm1"), lambda key, req: OwnershipRecord("arm1", owner="mallory", epoch=2**40))
+    # every forgery carries the sim's own source and term (read from its real messages), so that the
+    # clients' fences would believe it: only the router's access control keeps it out
+    real_js = wait_until(lambda: joints.messages(), timeout=20, what="a real joint state")[-1]
+    real_world = mallory.call(keys.srv(w, "world"), timeout=10.0, expected=WorldInfo)
+    real_rec = mallory.call(keys.own(w, "arm1"), timeout=10.0, expected=OwnershipRecord)
+    assert real_js.header.term >= 1 and real_world.header.term >= 1 and real_rec.header.term >= 1
+    marker_q = np.full(len(real_js.q), 1.2345)
+    _send(mallory, keys.robot_joints(w, "arm1"), replace(real_js, q=marker_q, header=_forged_header(real_js.header)))
+    mallory.serve(keys.srv(w, "world"), lambda key, req: replace(real_world, scene="mallory's", header=_forged_header(real_world.header)))
+    mallory.serve(keys.own(w, "arm1"), lambda key, req: replace(real_rec, owner="mallory", epoch=real_rec.epoch + 1,
+                                                                  header=_forged_header(real_rec.header)))
     _marker(mallory, events, w, "after-state")
-    assert not [js for js in joints.messages() if js.header.source == "mallory"]
+    assert not [js for js in joints.messages() if np.allclose(js.q, 1.2345)]
     answers = watcher.query(keys.srv(w, "world"), timeout=5.0, all_replies=True)
-    assert answers and all(a.source.startswith("sim") for a in answers), answers
+    assert answers and all(a.message.scene != "mallory's" for a in answers), answers
     records = watcher.query(keys.own(w, "arm1"), timeout=5.0, all_replies=True)
     assert records and all(r.message.owner != "mallory" for r in records)
+    _refused_by_router(secure, f"mallory put {keys.robot_joints(w, 'arm1')}")
     assert ("sim", "fake-sim") not in watcher.live_peers("sim")
     assert fake_sim.peer_id == "fake-sim"
 
