@@ -11,13 +11,14 @@ robot types. Either way the geometry comes from the same robot descriptions
 from __future__ import annotations
 
 import logging
-import math
-from typing import Any
 
 import numpy as np
 
 import robots
+from fabric.interfaces import WorldInfo
+from fabric.interfaces.geometry import quaternion_from_yaw
 from user_peer.arm_geometry import ArmGeometry, Placement
+from user_peer.geometry import quat_xyzw
 from user_peer.rerun_log import RobotDrawing
 
 log = logging.getLogger("robofabric.viewer")
@@ -26,23 +27,15 @@ __all__ = ["RobotCatalog", "placement_xyz_yaw"]
 
 
 def placement_xyz_yaw(x: float, y: float, z: float, yaw: float) -> Placement:
-    return Placement(np.array([x, y, z], dtype=float), np.array([0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)]))
-
-
-def _field(obj: Any, *names: str, default: Any = None) -> Any:
-    for n in names:
-        if isinstance(obj, dict) and n in obj:
-            return obj[n]
-        if hasattr(obj, n):
-            return getattr(obj, n)
-    return default
+    """A base standing at (x, y, z) turned by ``yaw`` about z (Placement keeps quaternions as x, y, z, w)."""
+    return Placement(np.array([x, y, z], dtype=float), np.array(quat_xyzw(quaternion_from_yaw(yaw))))
 
 
 class RobotCatalog:
     """Builds :class:`RobotDrawing` for robot ids; caches descriptions and arm geometries per type."""
 
-    def __init__(self, world_info: Any = None, *, scene: str | None = None) -> None:
-        self.world_info = world_info
+    def __init__(self, world_info: WorldInfo | None = None, *, scene: str | None = None) -> None:
+        self.world_info: WorldInfo | None = world_info
         self.scene_name = scene
         self._models: dict[str, ArmGeometry | None] = {}
         self._descs: dict[str, robots.RobotDescription] | None = None
@@ -84,12 +77,12 @@ class RobotCatalog:
         return self._models[rtype]
 
     def _world_entry(self, rid: str) -> tuple[str, Placement | None] | None:
-        for r in _field(self.world_info, "robots", default=()) or ():
-            if _field(r, "id", "name") == rid:
-                rtype = str(_field(r, "type", "robot_type", default="") or "")
-                pose = _field(r, "pose", default=None)
-                base = placement_xyz_yaw(*[float(v) for v in pose][:4]) if pose is not None and len(pose) >= 4 else None
-                return rtype, base
+        """(type, base placement) of ``rid`` in the sim's world description, or None (no description, or not in it)."""
+        if self.world_info is None:
+            return None
+        for r in self.world_info.robots:
+            if r.id == rid:
+                return r.type, placement_xyz_yaw(*(float(v) for v in r.pose))
         return None
 
     def drawing(self, rid: str, hint: dict) -> RobotDrawing:

@@ -42,9 +42,9 @@ class NotebookView:
         self.rec = rr.RecordingStream(APP_ID)
         self.catalog = RobotCatalog(world.info())
         self.logger = WorldLogger(self.rec, drawing=self.catalog.drawing, max_hz=max_hz, clock=time.time_ns)
-        scene = getattr(self.catalog.world_info, "scene", "") or ""
-        if scene:
-            log_scene(self.logger, scene)
+        info = self.catalog.world_info
+        if info is not None and info.scene:
+            log_scene(self.logger, info.scene)
         self.queue: queue.Queue[tuple[str, Any, int]] = queue.Queue(maxsize=queue_size)
         self.dropped = 0
         self.drawn = 0

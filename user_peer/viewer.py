@@ -23,8 +23,9 @@ from fabric import keys
 from fabric.config import FabricConfig
 from fabric.exit import at_exit
 from fabric.limits import put_dropping_oldest
-from fabric.interfaces import ServiceError
+from fabric.interfaces import ServiceError, WorldInfo
 from fabric.session import Fabric
+from user_peer import services
 from user_peer.catalog import RobotCatalog
 from user_peer.rerun_log import WorldLogger, blueprint
 
@@ -112,11 +113,11 @@ def log_scene(logger: WorldLogger, scene: str) -> bool:
         return False
 
 
-def query_world_info(fab: Fabric, timeout: float = 2.0) -> Any:
+def query_world_info(fab: Fabric, timeout: float = 2.0) -> WorldInfo | None:
     """The sim peer's world description, or None when no sim answers (the viewer then guesses types)."""
     try:
-        return fab.call(keys.srv(fab.world, "world"), timeout=timeout)
-    except (ServiceError, Exception) as exc:
+        return services.world_info(fab, timeout=timeout)
+    except ServiceError as exc:  # Refused (e.g. a reply that is no WorldInfo) or NoReply
         log.info("no world description (%s); robot types are guessed from joint names", exc)
         return None
 
@@ -144,10 +145,9 @@ class Viewer:
 
     def start(self) -> None:
         """Learn the world, subscribe, and ask for the state a late joiner missed (ownership, maps)."""
-        self.catalog.world_info = query_world_info(self.fab)
-        scene = getattr(self.catalog.world_info, "scene", "") or ""
-        if scene:
-            log_scene(self.logger, scene)
+        info = self.catalog.world_info = query_world_info(self.fab)
+        if info is not None and info.scene:
+            log_scene(self.logger, info.scene)
         self.fab.subscribe(keys.world_all(self.fab.world), self._enqueue, history=True)  # maps, paths, objects set before we joined
         self.fab.watch_peers(self._on_sim, kind="sim")  # "world gone" when the last sim peer leaves (issue 15)
         for expr in (keys.own_all(self.fab.world),):

@@ -16,8 +16,10 @@ from typing import Any
 import numpy as np
 
 from fabric.interfaces import JointState, Pose
+from fabric.interfaces.geometry import quaternion_from_yaw
 from user_peer.arm_geometry import Placement, Shape
 from user_peer.catalog import RobotCatalog
+from user_peer.geometry import quat_xyzw
 from user_peer.rerun_log import RobotDrawing
 
 __all__ = ["Frame", "FrameTracker", "WORLD", "key_owner", "yaw_quat_xyzw"]
@@ -36,7 +38,9 @@ class Frame:
 
 
 def yaw_quat_xyzw(yaw: float) -> tuple[float, float, float, float]:
-    return (0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0))
+    """The rotation by ``yaw`` about z as an (x, y, z, w) quaternion, the order of Foxglove's and ROS 2's messages."""
+    x, y, z, w = quat_xyzw(quaternion_from_yaw(yaw))
+    return (x, y, z, w)
 
 
 def _frame(parent: str, child: str, p: Placement) -> Frame:
@@ -116,8 +120,7 @@ class FrameTracker:
 
 
 def _xyzw(quat_wxyz: np.ndarray) -> np.ndarray:
-    w, x, y, z = (float(v) for v in quat_wxyz)
-    return np.array([x, y, z, w])
+    return np.array(quat_xyzw(quat_wxyz))
 
 
 def _xyzw_from_matrix(r: np.ndarray) -> np.ndarray:
