@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
+import time
 import uuid
 
 __all__ = ["LabError", "ip", "namespaces_available", "netns_list", "netns_pids", "sweep_stale"]
@@ -58,19 +60,56 @@ def namespaces_available() -> tuple[bool, str]:
     return True, ""
 
 
-def sweep_stale(prefix: str = "rflab") -> list[str]:
+def sweep_stale(prefix: str = "rflab", *, timeout: float = 10.0) -> list[str]:
     """Delete lab namespaces left by runs that died without cleaning up (SIGKILL, a power cut).
 
-    Only names of the form ``{prefix}{PID}x{N}-...`` whose PID is no longer alive and that hold no
-    process are touched: a live run's lab, or anything else on the machine, is never removed.
+    Only names of the form ``{prefix}{PID}x{N}-...`` whose PID is no longer alive are touched: a live
+    run's lab, or anything else on the machine, is never removed. The processes such a run started
+    lead their own sessions, so they outlive it; every process still inside one of its namespaces is
+    SIGKILLed first (a namespace whose processes do not go within ``timeout`` is left for next time).
     """
-    removed = []
+    stale = []
     for ns in netns_list():
         if not ns.startswith(prefix):
             continue
         pid_part = ns[len(prefix):].split("x", 1)[0]
-        if not pid_part.isdigit() or os.path.exists(f"/proc/{pid_part}") or netns_pids(ns):
+        if pid_part.isdigit() and not os.path.exists(f"/proc/{pid_part}"):
+            stale.append(ns)
+    for ns in stale:
+        for pid in netns_pids(ns) + _entering(ns):
+            _kill(pid)
+    deadline = time.monotonic() + timeout
+    removed = []
+    for ns in stale:
+        while (netns_pids(ns) or _entering(ns)) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        if netns_pids(ns) or _entering(ns):
             continue
         if ip("netns", "del", ns, check=False).returncode == 0:
             removed.append(ns)
     return removed
+
+
+def _entering(ns: str) -> list[int]:
+    """Pids of ``ip netns exec NS ...`` processes not yet inside ``ns`` (one frozen right after it was
+    started stops before its ``setns``): ``ip netns pids`` cannot see them, and they would never end."""
+    want = ["netns", "exec", ns]
+    found = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/cmdline", "rb") as f:
+                argv = f.read().decode(errors="replace").split("\0")
+        except OSError:
+            continue
+        if os.path.basename(argv[0]) == "ip" and argv[1:4] == want:
+            found.append(int(entry))
+    return found
+
+
+def _kill(pid: int) -> None:
+    try:
+        os.kill(pid, signal.SIGKILL)  # a frozen (SIGSTOPped) process dies of SIGKILL too
+    except (ProcessLookupError, PermissionError):
+        pass

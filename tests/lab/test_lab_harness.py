@@ -124,18 +124,34 @@ def test_bad_subnets_and_names_are_refused(lab_ok, tmp_path):
             lab.add_host("a b")
 
 
-def test_a_killed_runs_namespaces_are_swept(lab_ok, tmp_path):
-    """A run killed by SIGKILL cannot clean up; the next run removes its empty namespaces, and only those."""
+def _gone(pid: int) -> bool:
+    """Ended: no such process, or a zombie its new parent has not reaped yet."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
+    except FileNotFoundError:
+        return True
+
+
+def test_a_killed_runs_namespaces_and_processes_are_swept(lab_ok, tmp_path):
+    """A run killed by SIGKILL cannot clean up, and what it started (own sessions) outlives it; the next
+    run kills the processes inside its namespaces and removes the namespaces, and only those."""
     from fabric.lab import sweep_stale
 
     script = (
-        "import os, sys; from fabric.lab import Lab; lab = Lab(log_dir=sys.argv[1]); lab.add_host('h'); "
-        "print(lab.ns, flush=True); os.kill(os.getpid(), 9)"
+        "import os, sys; from fabric.lab import Lab; lab = Lab(log_dir=sys.argv[1]); h = lab.add_host('h'); "
+        "a = h.spawn(['sleep', '300'], name='a'); b = h.spawn(['sleep', '300'], name='b'); b.freeze(); "
+        "print(lab.ns, a.pid, b.pid, flush=True); os.kill(os.getpid(), 9)"
     )
-    proc = subprocess.run([os.sys.executable, "-c", script, str(tmp_path)], capture_output=True, text=True, timeout=60)
-    left = proc.stdout.split()[0]
-    prefix = left.rsplit("-", 1)[0]
-    assert left in netns_list()
-    removed = sweep_stale()
-    assert sorted(removed) == sorted([f"{prefix}-lan", f"{prefix}-h"]), removed
-    assert not [n for n in netns_list() if n.startswith(prefix + "-")]
+    with Lab(log_dir=tmp_path / "live") as live:  # a live run's lab, with a process: left alone
+        bystander = live.add_host("h").spawn(["sleep", "300"], name="bystander")
+        proc = subprocess.run([os.sys.executable, "-c", script, str(tmp_path)], capture_output=True, text=True, timeout=60)
+        left, *pids = proc.stdout.split()
+        prefix = left.rsplit("-", 1)[0]
+        assert left in netns_list()
+        assert not any(_gone(int(p)) for p in pids), "the killed run's processes should have outlived it"
+        removed = sweep_stale()
+        assert sorted(removed) == sorted([f"{prefix}-lan", f"{prefix}-h"]), removed
+        assert not [n for n in netns_list() if n.startswith(prefix + "-")]
+        assert all(_gone(int(p)) for p in pids), f"still running after the sweep: {pids}"
+        assert bystander.alive() and {live.ns, live.host("h").ns} <= set(netns_list())
