@@ -6,7 +6,8 @@ The convention every page follows:
 - a block meant to be run is fenced ```bash, ```sh or ```python;
 - a block that needs a LAN, a display, credentials or a long-running foreground process is preceded,
   on the line immediately before the fence, by ``<!-- not-run: REASON -->``;
-- output, config excerpts and pseudo-code use ```text, ```toml, ```json5, ```console... (never run).
+- output, config excerpts and pseudo-code use ```text, ```toml, ```json5, ```console... (never run);
+- every fence names its language: a bare one is an error (it hid commands from the runner before).
 
 The world: a router hosted by this process, a sim peer (scene ``combined``) and a compute peer
 (``--stream arm1:target``), on a loopback port of its own. Blocks see it through the environment:
@@ -84,6 +85,8 @@ def extract(text: str, path: str = "<text>") -> list[Block]:
             continue
         fence, lang = f.group("fence"), f.group("info").strip().split(" ")[0].lower()
         start = i
+        if not lang:  # a bare fence hides commands from the runner: every block says what it holds
+            raise DocFormatError(f"{path}:{start + 1}: fence without a language (```bash or ```python to run, ```text for output)")
         body: list[str] = []
         i += 1
         while i < len(lines) and not re.match(rf"^\s*{re.escape(fence[0])}{{{len(fence)},}}\s*$", lines[i]):
@@ -143,6 +146,8 @@ def test_extract_follows_the_convention():
         extract("<!-- not-run: -->\n```bash\nls\n```\n")
     with pytest.raises(DocFormatError, match="never closed"):
         extract("```bash\nls\n")
+    with pytest.raises(DocFormatError, match="without a language"):
+        extract("# T\n```\nrobofabric ps\n```\n")
     assert lan_addresses("connect tcp/10.0.0.5:7447, tcp/127.0.0.1:1 tcp/0.0.0.0:7447 v1.10.2") == ["10.0.0.5"]
     assert lan_addresses("x = 1  # or tcp/10.0.0.5:7447\n# 10.0.0.6\ny = 'tcp/10.0.0.7:1'") == ["10.0.0.7"]
 
