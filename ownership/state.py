@@ -19,6 +19,11 @@ Rules (DESIGN.md, issue 5):
   ``grace_s`` has passed without one: forged requesters leave on their own. Until its
   token is seen such a user may take a free robot but never take one over from its owner
   (a flood of forged requests took a still robot from its owner a thousand times in a row).
+  At most :data:`MAX_UNPROVEN` such users are held at once; a request from one more is
+  denied before anything is copied or kept, so a flood of forged names costs each request
+  the same small work (every step copies these maps, and an unbounded one made 20k forged
+  requests quadratic: ~28 s under the authority's lock, long enough to expire real leases).
+  ``rank`` and ``live`` hold only users with a token (or away within grace) and these.
 """
 
 from __future__ import annotations
@@ -31,8 +36,11 @@ from fabric.interfaces import MAX_QUEUE, OwnershipRecord
 
 __all__ = [
     "Effect", "OwnState", "Join", "Leave", "Request", "Release", "Renew", "Tick", "Motion",
-    "initial", "step",
+    "initial", "step", "MAX_UNPROVEN",
 ]
+
+MAX_UNPROVEN = 256
+"""Requesters without a liveliness token held at once; more are refused until grace drops some."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -249,6 +257,10 @@ def step(s: OwnState, ev: Event) -> tuple[OwnState, list[Effect]]:
         return s, effects
 
     if isinstance(ev, Request):
+        if ev.user not in s.live and len(s.unproven) >= MAX_UNPROVEN:  # checked before anything is copied
+            effects.append(Effect("denied", rec.object, ev.user, f"too many requesters without a liveliness token "
+                                  f"({MAX_UNPROVEN}); connect with a fabric session and ask again"))
+            return s, effects
         if ev.user not in s.live:  # a request proves the user is there, until grace runs out without its token
             s = replace(s, unproven=MappingProxyType({**s.unproven, ev.user: ev.now + s.grace_s}))
         s = _join(s, ev.user)

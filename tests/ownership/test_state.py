@@ -228,6 +228,30 @@ def test_the_queue_is_capped():
     assert eff[0].kind == "queued"
 
 
+def test_tokenless_requesters_are_capped_and_one_more_costs_no_copy():
+    """A flood of forged names (no liveliness token) holds at most MAX_UNPROVEN of them; each request
+    past the cap is refused with the state untouched (the same object: nothing copied), so the work per
+    request stays the same however long the flood (20k forged requests took ~28 s before the cap)."""
+    s = st.initial({"arm": "exclusive"}, lease_s=100.0, grace_s=5.0)
+    s, _ = st.step(s, st.Join("alice", 0.0))
+    s, _ = st.step(s, st.Request("alice", "arm", 0.0))
+    for i in range(st.MAX_UNPROVEN + 300):
+        before = s
+        s, eff = st.step(s, st.Request(f"fake{i}", "arm", 1.0, wait=i % 2 == 0))
+        if i >= st.MAX_UNPROVEN:
+            assert s is before and eff[0].kind == "denied" and "too many requesters without a liveliness token" in eff[0].reason
+    assert len(s.unproven) == st.MAX_UNPROVEN
+    assert len(s.rank) == len(s.live) == st.MAX_UNPROVEN + 1  # rank: live users and away ones, never more
+    assert s.records["arm"].owner == "alice"
+    s, _ = st.step(s, st.Join("bob", 2.0))  # a user with a token is not turned away by the flood
+    s, eff = st.step(s, st.Request("bob", "arm", 2.0))
+    assert eff[0].kind == "granted" and s.records["arm"].owner == "bob"
+    s, _ = st.step(s, st.Tick(6.5))  # grace over: the fakes are gone, and a new requester is heard again
+    assert not s.unproven and set(s.rank) == set(s.live) == {"alice", "bob"}
+    s, eff = st.step(s, st.Request("late", "arm", 7.0, wait=True))
+    assert eff[0].kind == "queued" and "late" in s.unproven
+
+
 @pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(events())
