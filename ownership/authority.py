@@ -16,6 +16,7 @@ from typing import Any
 
 from fabric import keys
 from fabric.interfaces import Command, Event, EventKind, OwnershipRecord, OwnReply, OwnRequest, ServiceError
+from fabric.limits import MAX_USER_LEN, is_valid_user, quote
 from fabric.rate import Clock, MonotonicClock
 from fabric.session import Fabric
 
@@ -138,9 +139,9 @@ class Authority:
         except Exception:  # a closing session must not break the state machine
             log.debug("publish %s failed", key, exc_info=True)
 
-    def _emit(self, event: Event) -> None:
+    def _emit(self, event: Event, *, limit: str | None = None) -> None:
         try:
-            self.fabric.emit(event, "own", event.object)
+            self.fabric.emit(event, "own", event.object, limit=limit)
         except Exception:
             log.debug("emit failed", exc_info=True)
 
@@ -176,10 +177,14 @@ class Authority:
             return self._serve_record(obj)
         user = keys.parse(key).user
         if request.user != user:
+            # the key's user is whatever the asker put in its key (a 20 KB name without a router's access
+            # control): quoted short, and logged and published at most a few times per interval
             self.counters["rejected"] += 1
-            self._emit(Event(kind=EventKind.OWN_REFUSED, reason=f"request names {request.user!r} but comes from {user!r}",
-                             object=obj, user=user, severity="warning", header=self.fabric.header("event")))
-            raise ServiceError(f"refused: the request names {request.user!r} but was sent by {user!r}")
+            named, sender = quote(request.user, MAX_USER_LEN), quote(user, MAX_USER_LEN)
+            self._emit(Event(kind=EventKind.OWN_REFUSED, reason=f"request names {named} but comes from {sender}",
+                             object=obj, user=user if is_valid_user(user) else "", severity="warning",
+                             header=self.fabric.header("event")), limit=f"own_refused:{obj}")
+            raise ServiceError(f"refused: the request names {named} but was sent by {sender}")
         with self._lock:
             known = obj in self._state.records
         if not known:

@@ -5,6 +5,8 @@ the router's): what the authority and the client refuse on their own."""
 
 from __future__ import annotations
 
+import logging
+
 import pytest
 from hypothesis import given, strategies as st
 
@@ -42,6 +44,23 @@ def test_a_request_naming_someone_else_is_refused(host, connect, world):
     rec = mallory.call(keys.own(world, "arm"), OwnRequest("release", "alice"), expected=OwnershipRecord)
     assert rec.owner == "alice" and host.records()["arm"].owner == "alice"
     alice.close()
+
+
+def test_a_burst_of_refusals_writes_a_bounded_log(host, connect, world, caplog):
+    """30 refused requests on a key naming a 20 KB user: a few short log lines, not 600 KB."""
+    from fabric.session import REPORT_BURST
+
+    mallory = connect("user", "mallory")
+    key = f"{keys.own(world, 'arm')}/by/{'m' * 20_000}"
+    with caplog.at_level(logging.INFO, logger="robofabric"):
+        for _ in range(30):
+            with pytest.raises(ServiceError, match="names 'alice' but was sent by 'mmm") as err:
+                mallory.call(key, OwnRequest("release", "alice"), expected=OwnReply)
+            assert len(str(err.value)) < 400
+    refused = [r.getMessage() for r in caplog.records if "own_refused" in r.getMessage()]
+    assert 1 <= len(refused) <= REPORT_BURST + 1, len(refused)  # one interval, perhaps the start of a second
+    assert sum(len(line) for line in caplog.messages) < 5_000, sum(len(line) for line in caplog.messages)
+    assert host.counters["rejected"] == 30
 
 
 @pytest.mark.slow
