@@ -375,7 +375,8 @@ class SimPeer:
     def _on_object(self, key: str, pose: Pose) -> None:
         obj = keys.parse(key).subject  # one subscription per scene object: never a made-up id
         if pose.frame not in ("world", ""):
-            self._reject(obj, "pose", "bad_frame", f"object poses must be in the world frame, got {pose.frame!r}")
+            frame = pose.frame  # client text (up to the codec's string limit): quoted short, built only when reported
+            self._reject(obj, "pose", "bad_frame", lambda: f"object poses must be in the world frame, got {quote(frame)}")
             return
         try:
             with self.lock:

@@ -2,22 +2,29 @@
 
 Each scan is taken at the robot pose nearest to it in sim time, from where the robot's LIDAR sits on it, and
 marks the disk the robot stands on free. A scan that cannot be placed (mapping off, no pose yet, mounting still
-being looked up, malformed) is dropped and counted by reason, never raised: scans come from the wire.
+being looked up, malformed) is dropped and counted by reason, never raised: scans come from the wire. A rejected
+scan is logged at most a few times per interval (with the count suppressed since), its reason clipped: a flood
+of malformed scans must not fill the compute peer's log (issue 14).
 """
 
 from __future__ import annotations
 
 import logging
 import threading
+import time
 from typing import Callable
 
 from fabric.interfaces import Header, OccupancyGrid, Scan
+from fabric.limits import RateLimiter, clip, quote
 
 from .errors import NavigationError
 from .mapping import MapperConfig, OccupancyMapper
 from .poses import PoseHistory
 
 log = logging.getLogger("robofabric.navigation")
+
+REPORT_INTERVAL = 5.0  # seconds: rejected scans are logged at most REPORT_BURST times per interval
+REPORT_BURST = 3
 
 __all__ = ["ScanMapping"]
 
@@ -38,6 +45,7 @@ class ScanMapping:
         counters: dict[str, int],
         config: MapperConfig | None = None,
         on: bool = True,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.poses = poses
         self.mapper = OccupancyMapper(config)
@@ -48,6 +56,8 @@ class ScanMapping:
         for name in ("scans", "scans_ignored", "scans_without_pose", "scans_waiting_for_sensor", "scans_rejected"):
             counters.setdefault(name, 0)
         self._lock = threading.Lock()
+        self._clock = clock
+        self._reports = RateLimiter(REPORT_INTERVAL, burst=REPORT_BURST, max_keys=1)
 
     @property
     def scans(self) -> int:
@@ -73,7 +83,10 @@ class ScanMapping:
                 self.mapper.integrate_scan(scan, pose, sensor_offset=offset, footprint=self._radius(robot))
             except NavigationError as exc:
                 self.counters["scans_rejected"] += 1
-                log.warning("scan from %s rejected: %s", robot, exc)
+                verdict = self._reports.check("scan_rejected", self._clock())  # one fixed key: robot ids come from the wire
+                if verdict:
+                    more = f" ({verdict.suppressed} more rejected since the last report)" if verdict.suppressed else ""
+                    log.warning("scan from %s rejected: %s%s", quote(robot, 64), clip(str(exc)), more)
                 return False
             self.counters["scans"] += 1
             return True

@@ -54,6 +54,30 @@ def test_scan_mapping_counts_each_reason_a_scan_is_dropped():
     assert m.scans == 0 and m.grid() is None
 
 
+def test_a_burst_of_rejected_scans_writes_a_few_log_lines(caplog):
+    """500 scans that cannot be placed: counted each, logged a few times per interval with the count
+    suppressed (every one was logged before: a flood filled compute.log)."""
+    from compute_peer.navigation import scan_mapping
+
+    scene = small_room()
+    now = [0.0]
+    poses = PoseHistory()
+    counters: dict[str, int] = {}
+    m = ScanMapping(poses, sensor_offset=lambda r: (float("nan"), 0.0, 0.0), radius=lambda r: 0.2, counters=counters,
+                    config=ROOM, clock=lambda: now[0])
+    poses.add("r", pose_at(2.0, 2.0, 0.0, stamp=1.0))
+    scan = scan_at(scene, 2.0, 2.0, 0.0, stamp=1.0)
+    with caplog.at_level("WARNING", logger="robofabric.navigation"):
+        for _ in range(500):
+            assert not m.integrate("r", scan)
+        now[0] += scan_mapping.REPORT_INTERVAL + 0.1
+        assert not m.integrate("r", scan)
+    assert counters["scans_rejected"] == 501
+    lines = [r.getMessage() for r in caplog.records if "rejected" in r.getMessage()]
+    assert len(lines) == scan_mapping.REPORT_BURST + 1, lines
+    assert lines[-1].endswith(f"({500 - scan_mapping.REPORT_BURST} more rejected since the last report)")
+
+
 def test_map_store_versions_invalidate_costmaps_and_the_cache_is_bounded():
     store = MapStore()
     with pytest.raises(NavigationError, match="no map named 'm'"):
