@@ -41,12 +41,14 @@ SCHEMA_ENCODING = "robofabric-msgpack"
 
 @dataclass(frozen=True, slots=True)
 class Peek:
-    """What a payload says about itself: its type name, and its header's wall time and sequence if any."""
+    """What a payload says about itself: its type name, and its header's wall time, sequence,
+    authority epoch and source peer if any."""
 
     schema: str
     wall_ns: int | None = None
     seq: int | None = None
     term: int = 0
+    source: str = ""
 
 
 _RAW = Peek(RAW_SCHEMA)
@@ -70,7 +72,7 @@ def peek(payload: bytes) -> Peek:
         and head[2] >= 0
     ):
         term = head[5] if len(head) == 6 and isinstance(head[5], int) and head[5] >= 0 else 0
-        return Peek(msg[0], head[2], head[3], term)
+        return Peek(msg[0], head[2], head[3], term, head[4] if isinstance(head[4], str) else "")
     return Peek(msg[0])
 
 

@@ -34,6 +34,35 @@ from fabric.session import undeclare_all
 __all__ = ["Recorder", "RecorderStats"]
 
 _STOP = object()
+_SIMS_OF_EVERY_WORLD = f"{keys.PREFIX}/*/peer/sim/*"
+
+
+@dataclass(frozen=True, slots=True)
+class _SimToken:
+    """A sim peer's liveliness token came or went: queued with the samples, so the sink's fence
+    resets in receive order (after the last sample heard from the world's last sim)."""
+
+    world: str
+    peer_id: str
+    alive: bool
+
+
+def _sim_token_exprs(exprs: Iterable[str]) -> list[str]:
+    """Where the sims of the recorded worlds keep their liveliness tokens: the named worlds', or every
+    world's when an expression leaves the world open (``rf/**``, ``rf/*/robot/**``, ``**``)."""
+    worlds: set[str] = set()
+    for e in exprs:
+        parts = e.split("/")
+        first = parts[0]
+        if first != keys.PREFIX and "*" not in first and "$" not in first:
+            continue  # not fabric keys: nothing in them is fenced
+        if first != keys.PREFIX or len(parts) < 2:
+            return [_SIMS_OF_EVERY_WORLD]
+        try:
+            worlds.add(keys.validate_id(parts[1], what="world"))
+        except ValueError:
+            return [_SIMS_OF_EVERY_WORLD]
+    return [keys.peers_all(w, "sim") for w in sorted(worlds)]
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,6 +115,10 @@ class Recorder:
     on exit. ``stop()`` is idempotent and returns the final :class:`RecorderStats`. With
     ``liveliness=True`` the appearance and loss of peers' liveliness tokens under the same key
     expressions is recorded too (schema ``liveliness``; replay skips those by default).
+
+    Authority state of a lower authority epoch than one already recorded is left out (issue 16); the
+    recorder follows the recorded worlds' sim tokens so that, like a session's, a world's fence resets
+    when its last sim goes and a world restarted from scratch is recorded again.
     """
 
     def __init__(
@@ -168,6 +201,8 @@ class Recorder:
             self._subs.append(session.declare_subscriber(expr, self._on_sample_for(i)))
             if self.liveliness:
                 self._subs.append(session.liveliness().declare_subscriber(expr, self._on_token_for(i), history=True))
+        for expr in _sim_token_exprs(self.keyexprs):
+            self._subs.append(session.liveliness().declare_subscriber(expr, self._on_sim_token, history=True))
         return self
 
     def stop(self) -> "RecorderStats":
@@ -260,6 +295,14 @@ class Recorder:
 
         return on_token
 
+    def _on_sim_token(self, sample: zenoh.Sample) -> None:
+        try:
+            p = keys.parse(str(sample.key_expr))
+        except ValueError:
+            return
+        if p.category == "peer" and p.subject == "sim":
+            self._q.put(_SimToken(p.world, p.leaf, sample.kind == zenoh.SampleKind.PUT))
+
     # ------------------------------------------------------------------ writing (one thread)
 
     def _write_loop(self) -> None:
@@ -289,7 +332,10 @@ class Recorder:
         except BaseException as exc:  # a full disk must not pass silently
             self.error = exc
 
-    def _write(self, sink: McapSink, item: tuple) -> None:
+    def _write(self, sink: McapSink, item: tuple | _SimToken) -> None:
+        if isinstance(item, _SimToken):
+            (sink.sim_seen if item.alive else sink.sim_left)(item.world, item.peer_id)
+            return
         key, payload, t_ns, schema = item
         with self._lock:
             self._queued_bytes -= len(payload)

@@ -8,6 +8,12 @@ killed with SIGKILL therefore leaves a file whose complete chunks any MCAP
 reader can stream; only the last ``flush_interval`` of data is lost, and the
 missing footer tells :func:`fabric.recording.reader.read_info` the file is
 unfinished.
+
+Fenced like a session (issue 16, :mod:`fabric.fencing`): per world, authority state of a lower
+authority epoch than one already written is left out. The recorder tells the sink when a world's
+sim peers come and go (:meth:`McapSink.sim_seen`, :meth:`McapSink.sim_left`): when the last one
+goes the world's fence resets, so a world restarted from scratch at term 1 after a take-over is
+recorded again, and late samples of a departed sim cannot fence the new one out.
 """
 
 from __future__ import annotations
@@ -19,13 +25,17 @@ from typing import BinaryIO
 
 from mcap.writer import CompressionType, Writer
 
+from fabric import keys
 from fabric.fencing import Fence, is_authority_key
 from fabric.recording.format import MESSAGE_ENCODING, METADATA_NAME, PROFILE, peek, schema_data
 
 STALE = "stale"
 """What :meth:`McapSink.write` returns for a sample it left out: authority state of a lower authority epoch."""
 
-__all__ = ["McapSink", "COMPRESSIONS"]
+__all__ = ["McapSink", "COMPRESSIONS", "STALE"]
+
+MAX_DEPARTED_SIMS = 256
+"""Departed sims remembered per world (as :data:`fabric.session.MAX_DEPARTED_SIMS`): bounded memory."""
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 
@@ -62,8 +72,12 @@ class McapSink:
         self._last_flush = time.monotonic()
         self._closed = False
         self.messages = 0
-        self.fence = Fence()
+        self.fences: dict[str, Fence] = {}  # per world, created by the first authority state with a term
+        self._world_of: dict[str, str | None] = {}  # key -> its world when it is an authority key
+        self._sims: dict[str, set[str]] = {}  # live sim peers per world
+        self._departed: dict[str, set[str]] = {}  # sims whose token went: their late samples are left out
         self.stale = 0
+        self.fence_resets = 0
         self.payload_bytes = 0
 
     # ------------------------------------------------------------------ writing
@@ -86,14 +100,49 @@ class McapSink:
 
     def write(self, key: str, payload: bytes, log_time_ns: int) -> str:
         """Write one sample; publish time and sequence come from its header when it has one. Returns the schema name,
-        or ``stale`` for authority state of a lower authority epoch than one already written (not written: issue 16)."""
+        or ``stale`` for authority state of a lower authority epoch than one already written in its world, or
+        stamped by a sim that has left (not written: issue 16)."""
         p = peek(payload)
-        if p.term or self.fence.term:
-            if is_authority_key(key) and not self.fence.check(p.term).accept:
-                self.stale += 1
-                return STALE
+        if (p.term or self.fences) and not self._believe(key, p.term, p.source):
+            self.stale += 1
+            return STALE
         self.write_with(key, p.schema, payload, log_time_ns, p.wall_ns if p.wall_ns is not None else log_time_ns, p.seq or 0)
         return p.schema
+
+    def _believe(self, key: str, term: int, source: str) -> bool:
+        world = self._world_of.get(key, "")
+        if world == "":
+            world = self._world_of[key] = keys.parse(key).world if is_authority_key(key) else None
+        if world is None:
+            return True
+        fence = self.fences.get(world)
+        if fence is None:
+            if not term:
+                return True
+            fence = self.fences[world] = Fence()
+        if term and source in self._departed.get(world, ()):
+            return False
+        return fence.check(term).accept
+
+    # ------------------------------------------------------------------ the world's sims
+
+    def sim_seen(self, world: str, peer_id: str) -> None:
+        """A sim peer of ``world`` is alive (its liveliness token appeared)."""
+        self._sims.setdefault(world, set()).add(peer_id)
+        self._departed.get(world, set()).discard(peer_id)
+
+    def sim_left(self, world: str, peer_id: str) -> None:
+        """A sim peer of ``world`` is gone; when it was the last one, the world's fence resets."""
+        sims = self._sims.get(world)
+        if sims is None or peer_id not in sims:
+            return
+        sims.discard(peer_id)
+        departed = self._departed.setdefault(world, set())
+        if len(departed) < MAX_DEPARTED_SIMS:
+            departed.add(peer_id)
+        if not sims and world in self.fences:
+            self.fences[world].reset()
+            self.fence_resets += 1
 
     def write_with(self, key: str, schema: str, payload: bytes, log_time_ns: int, publish_time_ns: int, seq: int = 0) -> None:
         self._writer.add_message(
