@@ -44,6 +44,7 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
+from .ik_common import _deg, rotation_error
 from .model import ArmModel, NoIKSolution
 
 POSITION_TOL = 1e-6
@@ -115,15 +116,6 @@ def symbolic_fk(arm: ArmModel) -> ca.Function:
     r = ca.mtimes(rot[j], ca.DM(frame.placement.rotation))
     p = pos[j] + ca.mtimes(rot[j], ca.DM(frame.placement.translation))
     return ca.Function("fk", [q], [p, r], ["q"], ["position", "rotation"])
-
-
-def _rotation_error(a: np.ndarray, b: np.ndarray) -> float:
-    """Angle between two rotations from |A - B|_F = 2 sqrt(2) sin(angle / 2) (exact near zero, unlike acos)."""
-    return 2.0 * math.asin(min(1.0, float(np.linalg.norm(a - b)) / (2.0 * math.sqrt(2.0))))
-
-
-def _deg(a: float) -> str:
-    return f"{math.degrees(a):.1f}\N{DEGREE SIGN}"
 
 
 class CasadiIK:
@@ -272,7 +264,7 @@ class CasadiIK:
     def _errors(arm: ArmModel, q: np.ndarray, p: np.ndarray, rt: np.ndarray | None) -> tuple[float, float]:
         m = arm.fk(q)
         pe = float(np.linalg.norm(m.translation - p))
-        return pe, (0.0 if rt is None else _rotation_error(m.rotation, rt))
+        return pe, (0.0 if rt is None else rotation_error(m.rotation, rt))
 
 
 _CACHE: dict[tuple[str, str], CasadiIK] = {}

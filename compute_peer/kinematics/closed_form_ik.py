@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fabric.interfaces.geometry import wrap_angle
 from robots.meca500 import geometry as _geo
 
 from .ik_common import (
@@ -28,7 +29,6 @@ from .ik_common import (
     _default_seed,
     _deg,
     _pose_errors,
-    _wrap,
     joint_distance,
     quaternion_to_matrix,
 )
@@ -151,7 +151,7 @@ def _meca500_branches(p: Sequence[float], rot: Sequence[Sequence[float]], seed: 
     l1, l2lim, l3, l4, l5, l6 = lims
     wide = [i for i, lim in enumerate(lims) if lim[2]]
     # below, "v if lo <= v <= hi else _fit(v, lim)" inlines the common case: ~25 calls saved per solve
-    for q1raw, uu in ((q1a, u), (_wrap(q1a + math.pi), -u)):
+    for q1raw, uu in ((q1a, u), (wrap_angle(q1a + math.pi, include_pi=True), -u)):
         q1 = q1raw if l1[0] <= q1raw <= l1[1] else _fit(q1raw, l1)
         if q1 is None:
             n += 2 * len(elbows)
@@ -165,10 +165,10 @@ def _meca500_branches(p: Sequence[float], rot: Sequence[Sequence[float]], seed: 
         m12 = r6[2]
         for q3r in elbows:
             n += 2
-            q3w = _wrap(q3r)
+            q3w = wrap_angle(q3r, include_pi=True)
             c3, s3 = math.cos(q3w), math.sin(q3w)
             vx, vz = a * c3 + b * s3, l2 - a * s3 + b * c3
-            q2w = _wrap(math.atan2(vz, vx) - math.atan2(h, uu))
+            q2w = wrap_angle(math.atan2(vz, vx) - math.atan2(h, uu), include_pi=True)
             q2 = q2w if l2lim[0] <= q2w <= l2lim[1] else _fit(q2w, l2lim)
             if q2 is None:
                 bad.append((1, q2w))
@@ -191,16 +191,17 @@ def _meca500_branches(p: Sequence[float], rot: Sequence[Sequence[float]], seed: 
                 q4 = seed[3]
                 if m00 > 0:  # q5 = 0: Rx(q4 + q6)
                     q5 = math.atan2(s5, m00)
-                    q6 = _wrap(math.atan2(m21, m11_) - q4)
+                    q6 = wrap_angle(math.atan2(m21, m11_) - q4, include_pi=True)
                 else:  # q5 = pi (outside the Meca500's J5 range; kept for completeness): Rx(q4 - q6)
                     q5 = math.pi
-                    q6 = _wrap(q4 - math.atan2(m21, m11_))
+                    q6 = wrap_angle(q4 - math.atan2(m21, m11_), include_pi=True)
                 wrists = ((q4, q5, q6),)
             else:
                 q5 = math.atan2(s5, m00)
                 q4 = math.atan2(m10_, -m20)
                 q6 = math.atan2(m01, m02)
-                wrists = ((q4, q5, q6), (_wrap(q4 + math.pi), -q5, _wrap(q6 + math.pi)))
+                wrists = ((q4, q5, q6),
+                          (wrap_angle(q4 + math.pi, include_pi=True), -q5, wrap_angle(q6 + math.pi, include_pi=True)))
             for q4r, q5r, q6r in wrists:
                 q4 = q4r if l4[0] <= q4r <= l4[1] else _fit(q4r, l4)
                 if q4 is None:
@@ -235,7 +236,7 @@ def _twin_combinations(q: list[float], twins: list[tuple[int, float]]) -> list[l
 def _limit_reason(arm: ArmModel, n: int, bad: list[tuple[int, float]]) -> str:
     names = []
     for i, v in bad:
-        s = (f"J{i + 1} at {_deg(_wrap(v))} (limits {math.degrees(arm.lower[i]):.0f}.."
+        s = (f"J{i + 1} at {_deg(wrap_angle(v, include_pi=True))} (limits {math.degrees(arm.lower[i]):.0f}.."
              f"{math.degrees(arm.upper[i]):.0f}\N{DEGREE SIGN})")
         if s not in names:
             names.append(s)

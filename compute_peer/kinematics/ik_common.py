@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .model import ArmModel
+from fabric.interfaces.geometry import TWO_PI
 
-TWO_PI = 2.0 * math.pi
+from .model import ArmModel
 
 POSITION_CHECK = 1e-9
 """m: a closed-form solution whose FK misses the target by more is a bug, and is dropped."""
@@ -44,16 +44,6 @@ def quaternion_to_matrix(w: float, x: float, y: float, z: float) -> tuple[tuple[
         (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
         (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
     )
-
-
-def _wrap(a: float) -> float:
-    """Angle in (-pi, pi]."""
-    a = math.fmod(a, TWO_PI)
-    if a > math.pi:
-        a -= TWO_PI
-    elif a <= -math.pi:
-        a += TWO_PI
-    return a
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,15 +92,29 @@ def _pose_errors(arm: ArmModel, q: Sequence[float], p: Sequence[float],
     pe = math.sqrt((t[0] - p[0]) ** 2 + (t[1] - p[1]) ** 2 + (t[2] - p[2]) ** 2)
     if rot is None:
         return pe, 0.0
-    # angle from |A - B|_F = 2 sqrt(2) sin(angle / 2): acos((trace - 1) / 2) cannot resolve angles below ~1e-8 rad
     (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = m.rotation.tolist()
     (x0, x1, x2), (y0, y1, y2), (z0, z1, z2) = rot
     s = ((a0 - x0) ** 2 + (a1 - x1) ** 2 + (a2 - x2) ** 2 + (b0 - y0) ** 2 + (b1 - y1) ** 2
          + (b2 - y2) ** 2 + (c0 - z0) ** 2 + (c1 - z1) ** 2 + (c2 - z2) ** 2)
-    return pe, 2.0 * math.asin(min(1.0, math.sqrt(s) / (2.0 * math.sqrt(2.0))))
+    return pe, angle_from_frobenius(math.sqrt(s))
+
+
+def angle_from_frobenius(d: float) -> float:
+    """Angle (rad) between two rotations whose matrices differ by ``d = |A - B|_F = 2 sqrt(2) sin(angle / 2)``.
+
+    Exact near zero, where ``acos((trace - 1) / 2)`` cannot resolve angles below ~1e-8 rad: the solvers'
+    FK checks are tighter than that.
+    """
+    return 2.0 * math.asin(min(1.0, d / (2.0 * math.sqrt(2.0))))
+
+
+def rotation_error(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle (rad) between two rotation matrices (see :func:`angle_from_frobenius`)."""
+    return angle_from_frobenius(float(np.linalg.norm(np.asarray(a) - np.asarray(b))))
 
 
 def _deg(a: float) -> str:
+    """An angle (rad) as degrees for a refusal's reason, e.g. ``"12.3°"``."""
     return f"{math.degrees(a):.1f}\N{DEGREE SIGN}"
 
 

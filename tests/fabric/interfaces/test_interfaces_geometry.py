@@ -1,4 +1,4 @@
-"""The one wrap_angle every peer uses: [-pi, pi), same angle, arrays element-wise."""
+"""The one wrap_angle every peer uses: [-pi, pi) (or (-pi, pi] on request), same angle, arrays element-wise."""
 
 from __future__ import annotations
 
@@ -41,11 +41,37 @@ def test_the_ends_of_the_range():
     assert isinstance(wrap_angle(3.5), float)
 
 
+@given(angles)
+def test_including_pi_wraps_to_the_other_half_open_range(a):
+    w = wrap_angle(a, include_pi=True)
+    assert -math.pi < w <= math.pi
+    assert math.isclose(math.cos(w), math.cos(a), abs_tol=1e-9)
+    assert math.isclose(math.sin(w), math.sin(a), abs_tol=1e-9)
+    assert wrap_angle(np.array([a]), include_pi=True).tolist() == [w]
+
+
+@given(st.floats(min_value=-math.pi, max_value=math.pi, exclude_min=True))
+def test_including_pi_leaves_an_angle_in_range_bit_for_bit(a):
+    # the closed-form IK's solutions stay exactly what they were: no rounding through a + pi
+    assert wrap_angle(a, include_pi=True) == a
+    assert wrap_angle(np.array([a]), include_pi=True).tolist() == [a]
+
+
+def test_the_ends_of_the_range_including_pi():
+    assert wrap_angle(math.pi, include_pi=True) == math.pi
+    assert wrap_angle(-math.pi, include_pi=True) == math.pi
+    assert wrap_angle(-TWO_PI, include_pi=True) == 0.0
+    assert isinstance(wrap_angle(3.5, include_pi=True), float)
+
+
 def test_the_peers_share_the_one_definition():
+    from compute_peer.kinematics import closed_form_ik, ik_common
     from compute_peer.navigation import geometry as nav_geometry
     from sim_peer import controllers
 
     assert nav_geometry.wrap_angle is wrap_angle and controllers.wrap_angle is wrap_angle
+    assert closed_form_ik.wrap_angle is wrap_angle and ik_common.TWO_PI is TWO_PI
+    assert not hasattr(ik_common, "_wrap")
 
 
 @given(st.floats(min_value=-math.pi + 1e-9, max_value=math.pi - 1e-9))
