@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -39,7 +40,7 @@ import typer
 
 from fabric import keys
 from fabric.interfaces import Command, JointState, JointTarget, ServiceError, Stop
-from fabric.reliable import Resent, resend_until
+from fabric.reliable import resend_until
 from fabric.session import Fabric
 from fabric.testing import client, free_port, robofabric_cmd, wait_until
 from ownership.client import OwnershipClient
@@ -50,6 +51,7 @@ __all__ = ["Load", "FloodResult", "run_flood", "command"]
 JOINT = 5  # the last joint of the arm: the one alice moves
 SCALES = 60  # command numbers are told apart modulo this
 AMPLITUDE = 2.5
+FAR_SPEED = 0.02  # the mid-flood stop's slow target: below the 0.05 speed scale the latency code reads
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,7 +92,8 @@ class FloodResult:
     phase_s: float = 0.0
     flooder: dict[str, Any] = field(default_factory=dict)
     slowest: list[tuple[float, float]] = field(default_factory=list)  # (sent at, s after the flood began; latency s)
-    stop: dict[str, Any] = field(default_factory=dict)  # the mid-flood stop: done, sends, seconds
+    stop: dict[str, Any] = field(default_factory=dict)  # the mid-flood stop: moving, done, sends, seconds, effect_s, short_by
+    sim_counts: dict[str, int] = field(default_factory=dict)  # the sim's own count of commands received and rejected
 
     def pct(self, q: float) -> float:
         return float(np.percentile(self.latencies, q)) if self.latencies else float("inf")
@@ -126,6 +129,8 @@ class _Owner:
         self._key = keys.robot_cmd(world, "arm1", "joints", "alice")
         self.paused = threading.Event()
         self.still_since: float | None = None  # arrival time of the first still JointState after motion
+        self.still_at: tuple[float, float] = (0.0, 0.0)  # (sim's publish wall time, last joint) of that JointState
+        self.last: JointState | None = None
         fab.subscribe(keys.robot_joints(world, "arm1"), self._on_joints, expected=JointState)
         self.own.on_change(self._on_record)
         self._thread: threading.Thread | None = None
@@ -143,10 +148,12 @@ class _Owner:
             return
         still = float(np.max(np.abs(js.dq))) < 1e-9
         with self._lock:
+            self.last = js
             if not still:
                 self.still_since = None
             elif self.still_since is None:
                 self.still_since = now
+                self.still_at = (js.header.wall_ns * 1e-9, float(js.q[JOINT]))
         v = float(js.dq[JOINT])
         scale = abs(v) / self.vmax
         if scale < 0.05:
@@ -197,11 +204,30 @@ class _Owner:
         self._thread = threading.Thread(target=loop, name="alice", daemon=True)
         self._thread.start()
 
-    def stop_robot(self, timeout: float) -> Resent:
-        """Pause the commands, then send ``cmd/stop`` again every 0.1 s until arm1's joints show it still."""
+    def stop_robot(self, timeout: float) -> dict[str, Any]:
+        """Pause the commands, set the last joint off slowly towards a target ~15 s away, and once it moves
+        send ``cmd/stop`` again every 0.1 s until arm1's joints show it still.
+
+        Only a stop that arrived stops it short of that target: a lost stop leaves it moving past
+        ``timeout`` (with alice's own targets, the arm reached them within ~6 s and was still anyway).
+        ``effect_s``: from the first stop sent to the sim's publish stamp of the first still JointState."""
         self.paused.set()
-        t0 = time.monotonic()
+        with self._lock:
+            here = float(self.last.q[JOINT]) if self.last is not None else 0.0
+        target = -AMPLITUDE if here > 0 else AMPLITUDE
+        q = np.zeros(self.dof)
+        q[JOINT] = target
+        far = Command("alice", self.own.epoch("arm1"), JointTarget(q, FAR_SPEED))
+        speed = FAR_SPEED * self.vmax
+
+        def moving() -> bool:
+            with self._lock:
+                v = float(self.last.dq[JOINT]) if self.last is not None else 0.0
+            return v * (target - here) > 0 and 0.5 * speed <= abs(v) <= 1.5 * speed
+
+        went = resend_until(lambda: self.fab.publish(self._key, far), moving, interval=0.2, timeout=timeout)
         key = keys.robot_cmd(self.world, "arm1", "stop", "alice")
+        t0, wall0 = time.monotonic(), time.time()
 
         def send() -> None:
             self.fab.publish(key, Command("alice", self.own.epoch("arm1"), Stop()))
@@ -210,7 +236,12 @@ class _Owner:
             with self._lock:
                 return self.still_since is not None and self.still_since > t0
 
-        return resend_until(send, still, interval=0.1, timeout=timeout)
+        r = resend_until(send, still, interval=0.1, timeout=timeout)
+        with self._lock:
+            stamp, at = self.still_at
+        return {"moving": went.done, "done": r.done, "sends": r.sends, "seconds": round(r.seconds, 3),
+                "effect_s": round(stamp - wall0, 3) if r.done else None, "target": target,
+                "short_by": round(abs(target - at), 3) if r.done else None}
 
     def stop(self) -> None:
         self._stop.set()
@@ -292,9 +323,7 @@ def run_flood(load: Load, out_dir: Path, *, flood: bool = True, stop_at: float |
         stopped = stop_at is None
         while True:
             if not stopped and time.monotonic() - t0 >= stop_at:
-                r = owner.stop_robot(timeout=10.0)
-                result.stop = {"done": r.done, "sends": r.sends, "seconds": round(r.seconds, 3),
-                               "flooder_running": flooder is not None and flooder.poll() is None}
+                result.stop = {**owner.stop_robot(timeout=10.0), "flooder_running": flooder is not None and flooder.poll() is None}
                 owner.paused.clear()
                 stopped = True
             for n, p in peers.items():
@@ -337,7 +366,18 @@ def run_flood(load: Load, out_dir: Path, *, flood: bool = True, stop_at: float |
             fab.close()
         _end(procs)
     result.log_bytes = {n: (out_dir / f"{n}.log").stat().st_size for n in ("sim", "compute") if (out_dir / f"{n}.log").exists()}
+    result.sim_counts = sim_counts((out_dir / "sim.log").read_text(errors="replace") if (out_dir / "sim.log").exists() else "")
     return result
+
+
+_SIM_STOPPED = re.compile(r"sim stopped at .*: (?P<steps>\d+) steps, (?P<commands>\d+) commands \((?P<accepted>\d+) accepted, "
+                          r"(?P<rejected>\d+) rejected")
+
+
+def sim_counts(log_text: str) -> dict[str, int]:
+    """The sim's own counts from its last line (printed when it stops): what of the flood reached it."""
+    found = list(_SIM_STOPPED.finditer(log_text))
+    return {k: int(v) for k, v in found[-1].groupdict().items()} if found else {}
 
 
 def _try_client(world: str, port: int) -> Fabric | None:
@@ -376,7 +416,10 @@ def command(
         if r.lapses:
             print(f"{name}: lease lapses: {'; '.join(r.lapses[:5])}")
         st = r.stop
-        print(f"{name}: a stop 2 s in, resent every 0.1 s: {'seen still' if st.get('done') else 'NOT seen still'} after "
-              f"{st.get('sends')} send(s), {st.get('seconds')} s (flooder {'running' if st.get('flooder_running') else 'idle'})")
+        print(f"{name}: a stop 2 s in (the last joint slowly on its way to {st.get('target')} rad), resent every 0.1 s: "
+              f"{'seen still' if st.get('done') else 'NOT seen still'} after {st.get('sends')} send(s), {st.get('seconds')} s; "
+              f"took effect {st.get('effect_s')} s after the first send, {st.get('short_by')} rad short of the target "
+              f"(flooder {'running' if st.get('flooder_running') else 'idle'})")
+        print(f"{name}: the sim counted {r.sim_counts.get('commands', '?')} commands, {r.sim_counts.get('rejected', '?')} rejected")
     flooder = rows[1][1].flooder
     print("flooder sent:", ", ".join(f"{k}={v}" for k, v in flooder.items() if not k.startswith("t_")))
