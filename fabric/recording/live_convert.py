@@ -21,7 +21,9 @@ from typing import Any, Callable, Iterable
 import zenoh
 
 from fabric.codec import DecodeError, decode, load_plugins
+from fabric.exit import at_exit
 from fabric.limits import put_dropping_oldest
+from fabric.session import undeclare_all
 
 __all__ = ["EXPORTERS", "exporters", "LiveConverter", "LiveStats"]
 
@@ -49,7 +51,13 @@ class LiveStats:
 
 
 class LiveConverter:
-    """Subscribe to ``keyexprs`` on ``fabric`` and write every decodable message with ``sink``."""
+    """Subscribe to ``keyexprs`` on ``fabric`` and write every decodable message with ``sink``.
+
+    A context manager like :class:`~fabric.recording.recorder.Recorder`: ``with LiveConverter(fab, sink,
+    exprs): ...`` starts on entry and finishes the file on exit. The converter owns ``sink`` from the
+    start: ``stop()`` (idempotent) closes it. A script that never calls ``stop()`` still gets a finished
+    file: it runs when the interpreter exits, before the session closes (issue 11).
+    """
 
     def __init__(self, fabric: Any, sink: Any, keyexprs: Iterable[str], *, queue_size: int = 20_000) -> None:
         self.fabric = fabric
@@ -57,19 +65,36 @@ class LiveConverter:
         self.keyexprs = tuple(keyexprs)
         self._q: queue.Queue = queue.Queue(maxsize=queue_size)
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._loop, name="convert-writer", daemon=True)
+        self._thread: threading.Thread | None = None
         self._subs: list[Any] = []
         self._lock = threading.Lock()
         self.received = self.written = self.bad = self.dropped = 0
         self.error: BaseException | None = None
         self._t0 = 0.0
         self._t_end: float | None = None
+        self._started = False
         self._stopped = False
+        self._cancel_exit: Any = None
+
+    def __enter__(self) -> "LiveConverter":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
 
     def start(self) -> "LiveConverter":
+        """Start the writer thread and listen. Idempotent; refused after ``stop()`` (the file is finished)."""
+        if self._stopped:
+            raise RuntimeError("this converter was stopped: its file is finished")
+        if self._started:
+            return self
+        self._started = True
         load_plugins()
         self._t0 = time.monotonic()
+        self._thread = threading.Thread(target=self._loop, name="convert-writer", daemon=True)
         self._thread.start()
+        # before the session's own closer (newest first): the file gets its footer at exit
+        self._cancel_exit = at_exit(self.stop)
         for expr in self.keyexprs:
             # history: the latest map, path and scene objects published before we joined
             self._subs.append(self.fabric.subscribe_raw(expr, self._on_sample, history=True))
@@ -112,13 +137,13 @@ class LiveConverter:
         if self._stopped:
             return self.stats
         self._stopped = True
-        for sub in self._subs:
-            try:
-                sub.undeclare()
-            except Exception:
-                pass
+        if self._cancel_exit is not None:
+            self._cancel_exit()
+        undeclare_all(self._subs)
+        self._subs.clear()
         self._stop.set()
-        self._thread.join()
+        if self._thread is not None:
+            self._thread.join()
         self._t_end = time.monotonic()
         self.sink.close()
         if self.error is not None:

@@ -27,6 +27,7 @@ import msgpack
 import zenoh
 
 from fabric import keys
+from fabric.exit import at_exit
 from fabric.recording.format import LIVELINESS_SCHEMA, RAW_SCHEMA
 from fabric.recording.sink import STALE, McapSink
 from fabric.session import undeclare_all
@@ -112,7 +113,8 @@ class Recorder:
     """Record the samples of ``keyexprs`` (default: the fabric's whole world) seen by ``fabric`` into ``path``.
 
     A context manager: ``with Recorder(fab, "run.mcap"): ...`` starts on entry and finishes the file
-    on exit. ``stop()`` is idempotent and returns the final :class:`RecorderStats`. With
+    on exit. ``stop()`` is idempotent and returns the final :class:`RecorderStats`; a script that
+    never calls it still gets a finished file, as ``stop()`` runs when the interpreter exits (issue 11). With
     ``liveliness=True`` the appearance and loss of peers' liveliness tokens under the same key
     expressions is recorded too (schema ``liveliness``; replay skips those by default).
 
@@ -177,6 +179,7 @@ class Recorder:
         self._first_match: dict[str, int] = {}
         self._started = False
         self._stopped = False
+        self._cancel_exit: Any = None
         self.error: BaseException | None = None
 
     # ------------------------------------------------------------------ lifecycle
@@ -193,6 +196,8 @@ class Recorder:
         self._started = True
         self._metadata["started_ns"] = str(time.time_ns())
         self._sink = McapSink(self.path, metadata=self._metadata, **self._sink_args)
+        # before the session's own closer (newest first): the file gets its footer at exit
+        self._cancel_exit = at_exit(self.stop)
         self._t0 = time.monotonic()
         self._thread = threading.Thread(target=self._write_loop, name="recorder-writer", daemon=True)
         self._thread.start()
@@ -210,6 +215,8 @@ class Recorder:
         if not self._started or self._stopped:
             return self.stats
         self._stopped = True
+        if self._cancel_exit is not None:
+            self._cancel_exit()
         undeclare_all(self._subs)
         self._subs.clear()
         self._t_end = time.monotonic()

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import user_peer
+from fabric.recording import read_info
 from fabric.session import Fabric
 from fabric.testing import ProcessGroup, free_port, robofabric_cmd, router_config, wait_until
 from user_peer.api import World
@@ -89,22 +90,28 @@ def test_script_that_never_closes_exits_and_releases_its_robot(live, user):
 
 
 def test_joining_waits_for_a_sim_that_starts_later(tmp_path):
-    """A script started one second before the sim (as a launch file may do) succeeds."""
+    """A script started one second before the sim (as a launch file may do) succeeds: the sim is started
+    only once the script is inside connect(), a second later, and connect() reports that it waited."""
     world = f"t{uuid.uuid4().hex[:8]}"
     port = free_port()
     with Fabric(router_config(world, port), kind="router", peer_id="router"), ProcessGroup(tmp_path) as procs:
         early = script(procs, "early", f"""
             import time, user_peer
+            print("joining", flush=True)
             t0 = time.monotonic()
             w = user_peer.connect(world={world!r}, connect="tcp/127.0.0.1:{port}", user="early", join_timeout=90)
-            print("robots", w.robots(), "after", round(time.monotonic() - t0, 1), flush=True)
+            print("joined after", round(time.monotonic() - t0, 2), "s", flush=True)
+            print("robots", w.robots(), flush=True)
         """)
-        time.sleep(1.0)  # the scenario itself: the sim starts one second after the script
+        printed(procs, early, "joining")
+        time.sleep(1.0)  # the scenario itself: the sim starts one second after the script began to join
         procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"), name="sim")
         early.wait(timeout=120)
         out = procs.output(early)
         assert early.returncode == 0, out[-2000:]
         assert "robots ['arm1', 'base1']" in out, out[-2000:]
+        waited = re.search(r"joined after ([0-9.]+) s", out)
+        assert waited and float(waited.group(1)) >= 1.0, out[-2000:]  # connect() waited for the sim, not returned early
 
 
 def test_joining_an_empty_world_says_how_long_it_waited(live):
@@ -181,9 +188,11 @@ def test_queued_request_times_out_and_leaves_the_queue(live, user):
 EVERYTHING = """
     import time
     from pathlib import Path
+    from fabric import keys
     from fabric.testing import client_config, router_config
     from fabric.session import Fabric
     from fabric.recording import Recorder
+    from fabric.recording.live_convert import LiveConverter, open_exporter
     from sim_peer.cli import make_gate
     from sim_peer.peer import SimPeer
     from sim_peer.world import SimWorld
@@ -200,6 +209,8 @@ EVERYTHING = """
     viewer = Viewer(client_config(w, port), ViewerOptions(save=out / "view.rrd"))
     viewer.start()
     Recorder(Fabric(client_config(w, port), kind="recorder", peer_id="rec"), out / "rec.mcap").start()
+    fox = open_exporter("foxglove", out / "live-foxglove.mcap", scene="combined")  # what record --to foxglove runs
+    LiveConverter(Fabric(client_config(w, port), kind="recorder", peer_id="conv"), fox, [keys.world_all(w)]).start()
     user = World(client_config(w, port), "frank", timeout=10.0, join_timeout=60.0)
     arm = user.robot("arm1")
     arm.request()
@@ -210,8 +221,9 @@ EVERYTHING = """
 
 
 def test_nothing_the_fabric_starts_keeps_a_script_alive(tmp_path):
-    """A router, a sim peer with its authority, a compute peer, a viewer, a recorder and a user that owns
-    a robot, all in one script that closes none of them: it exits, and the viewer's file is complete."""
+    """A router, a sim peer with its authority, a compute peer, a viewer, a recorder, a live converter to
+    Foxglove and a user that owns a robot, all in one script that closes none of them: it exits, and the
+    viewer's, the recorder's and the converter's files are complete (footer and summary written)."""
     world = f"t{uuid.uuid4().hex[:8]}"
     with ProcessGroup(tmp_path) as procs:
         p = script(procs, "everything", EVERYTHING.format(world=world, port=free_port(), out=str(tmp_path)))
@@ -222,4 +234,6 @@ def test_nothing_the_fabric_starts_keeps_a_script_alive(tmp_path):
         assert p.returncode == 0, procs.output(p)[-3000:]
         assert took < 10.0, f"took {took:.1f} s to exit after its last line"
     assert (tmp_path / "view.rrd").stat().st_size > 10_000
-    assert (tmp_path / "rec.mcap").stat().st_size > 1_000
+    for name in ("rec.mcap", "live-foxglove.mcap"):
+        info = read_info(tmp_path / name)
+        assert info.complete and info.messages > 10, (name, info.status, info.detail, info.messages)
