@@ -41,9 +41,10 @@ def _publish_world(fab, world, n=40):
     fab.session.put(keys.event(world, "raw"), b"\x00not a fabric message")
 
 
-# One format live is enough: both go through the same LiveConverter, and each writer is checked
-# message by message in tests/user_peer/test_openfmt.py. ros2 here: its decoder checks the CDR.
-@pytest.mark.parametrize("to", ["ros2"])
+# Both formats live: each writer is checked message by message against a source in
+# tests/user_peer/test_openfmt.py; here the live path (record --to, LiveConverter, the entry points) is:
+# ros2's decoder checks the CDR, Foxglove's JSON is validated against its schema and its protobuf parsed.
+@pytest.mark.parametrize("to", ["ros2", "foxglove"])
 def test_record_to_writes_a_live_world_in_the_format(router, connect, world, procs, tmp_path, to):
     _fab, port = router
     out, proc = _record(procs, tmp_path, world, port, to)
@@ -79,7 +80,10 @@ def test_record_to_writes_a_live_world_in_the_format(router, connect, world, pro
                 n += 1
                 topics[channel.topic] = schema.name
                 if channel.message_encoding == "json":
-                    jsonschema.validate(json.loads(message.data), json.loads(schema.data), cls=jsonschema.Draft202012Validator)
+                    doc = json.loads(message.data)
+                    jsonschema.validate(doc, json.loads(schema.data), cls=jsonschema.Draft202012Validator)
+                    if schema.name == "robofabric.JointState":
+                        assert doc["names"][0] == "joint_1" and len(doc["q"]) == 6 and "joint_6" in doc["by_name"]
                 else:
                     fds = descriptor_pb2.FileDescriptorSet.FromString(schema.data)
                     pool = descriptor_pool.DescriptorPool()
@@ -87,6 +91,11 @@ def test_record_to_writes_a_live_world_in_the_format(router, connect, world, pro
                         pool.Add(fd)
                     m = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))()
                     m.ParseFromString(message.data)
+                    if schema.name == "foxglove.Grid":
+                        cells = np.frombuffer(m.data, dtype=np.uint8).reshape(8, 10)
+                        assert m.column_count == 10 and cells[2, 3] == 100 and (cells[5:] == 255).all()
+                    if schema.name == "foxglove.LaserScan":
+                        assert len(m.ranges) == 60 and m.ranges[0] == pytest.approx(1.5)
     assert n >= 80, (n, topics)
     k = f"/rf/{world}"
     expect = (
