@@ -1,8 +1,9 @@
 """The user API's side of ownership: a thin adapter over ``ownership.OwnershipClient``.
 
 The protocol (requests, leases, renewals, replicas) lives in ``ownership/``;
-this adapter turns its answers into the API's exceptions and keeps the
-latest record of each object for the UI.
+this adapter turns its answers into the API's exceptions, keeps the
+latest record of each object for the UI, and tells the user when an object
+she owned was taken from her (a lease that ran out, a handover, a partition).
 """
 
 from __future__ import annotations
@@ -38,6 +39,10 @@ class OwnershipLink:
         self.user = user
         self._on_record = on_record
         self._changed = threading.Condition()  # notified on every record the client accepts
+        self._lock = threading.Lock()
+        self._mine: dict[str, int] = {}  # objects this user owns, by the replica: epoch
+        self._releasing: set[str] = set()  # released by this user: their next owner is no loss
+        self._lost_callbacks: list[Callable[[str, OwnershipRecord], None]] = []
         self._client = OwnershipClient(fab, user, timeout=1.0).start()
         self._client.timeout = 2.0  # the first refresh waits 1 s at most when no authority runs yet
         self._client.on_change(lambda rec: self._on(keys.own(fab.world, rec.object), rec))
@@ -48,11 +53,40 @@ class OwnershipLink:
     def client(self) -> "OwnershipClient":
         return self._client
 
+    def on_lost(self, callback: Callable[[str, OwnershipRecord], None]) -> None:
+        """``callback(obj, record)`` when an object this user owned passes to another user or becomes
+        free without her releasing it (her lease ran out, she was cut off, a handover); ``record`` is
+        the authority's new one. A warning is logged as well (``lost ownership of arm1: ...``)."""
+        with self._lock:
+            self._lost_callbacks.append(callback)
+
     def _on(self, key: str, rec: OwnershipRecord) -> None:
         with self._changed:
             self._changed.notify_all()
         if self._on_record is not None:
             self._on_record(key, rec)
+        self._notice(rec)
+
+    def _notice(self, rec: OwnershipRecord) -> None:
+        with self._lock:
+            obj = rec.object
+            if rec.owner == self.user:
+                self._mine[obj] = rec.epoch
+                self._releasing.discard(obj)
+                return
+            held = self._mine.pop(obj, None)
+            voluntary = obj in self._releasing
+            self._releasing.discard(obj)
+            if held is None or voluntary:
+                return
+            callbacks = list(self._lost_callbacks)
+        now = f"now owned by {rec.owner}" if rec.owner else "now free"
+        log.warning("lost ownership of %s: %s (epoch %d; it was %d)", obj, now, rec.epoch, held)
+        for cb in callbacks:
+            try:
+                cb(obj, rec)
+            except Exception:
+                log.exception("ownership-lost callback failed")
 
     def record(self, obj: str) -> OwnershipRecord | None:
         """The newest record of ``obj`` from the authority."""
@@ -99,6 +133,8 @@ class OwnershipLink:
             with self._changed:
                 self._changed.wait(min(left, 0.1))  # a record landing just before the wait costs <= 0.1 s
         waited = time.monotonic() - t0
+        with self._lock:
+            self._releasing.add(obj)
         try:
             self._ask("release", obj, min(timeout, 2.0))  # leave the queue (or give back a grant that just came)
         except (NotOwner, Timeout) as exc:
@@ -108,12 +144,16 @@ class OwnershipLink:
         raise Timeout(f"{obj} not granted to {self.user} after {waited:.1f} s of waiting ({where}; {owner}); left the queue")
 
     def release(self, obj: str, *, timeout: float) -> None:
+        with self._lock:
+            self._releasing.add(obj)
         self._ask("release", obj, timeout)
 
     def release_all(self, *, timeout: float) -> list[str]:
         """Release every object this user owns or waits for (what ``World.close`` does); returns them.
         Best effort: an authority that does not answer will see the user's token go instead."""
         held = [o for o, r in self._client.snapshot().items() if r.owner == self.user or self.user in r.queue]
+        with self._lock:
+            self._releasing.update(held)
         done = []
         for obj in held:
             try:

@@ -209,10 +209,18 @@ class UserApp(App):
         except NoMatches:
             pass  # a timer tick while the screen is still mounting or already torn down: nothing to update
 
+    def world_status(self) -> str | None:
+        """The status line's warning when the world is gone (its last sim peer left: died, or cut off;
+        issue 15), else None. Read from the world on every refresh, so it clears when a sim is back."""
+        if not self.world.world_alive:
+            return f"WORLD GONE: no sim peer of {self.world.name!r} (waiting for one)"
+        return None
+
     def _refresh_view(self) -> None:
         status = []
-        if not self.world.world_alive:  # its last sim peer left: died, or cut off (issue 15)
-            status.append(f"WORLD GONE: no sim peer of {self.world.name!r} (waiting for one)")
+        gone = self.world_status()
+        if gone:
+            status.append(gone)
         if self.arm is not None:
             mine = self.arm.can_command
             self.query_one("#arm-owner", Label).update(self._owner_text(self.arm))

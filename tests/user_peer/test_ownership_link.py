@@ -1,0 +1,36 @@
+"""The user is told when an object she owned is taken from her (issue 15): a warning naming the new
+owner and epoch, and ``on_lost`` callbacks; her own release tells her nothing."""
+
+from __future__ import annotations
+
+import logging
+
+from fabric.testing import wait_until
+from ownership import Authority
+from user_peer.ownership_link import OwnershipLink
+
+
+def test_a_taken_object_is_announced_and_a_release_is_not(connect, caplog):
+    auth = Authority(connect("sim", "authority"), {"arm": "exclusive"}, lease_s=2.0, grace_s=5.0).start()
+    alice = OwnershipLink(connect("user", "alice"), "alice")
+    bob = OwnershipLink(connect("user", "bob"), "bob")
+    lost: list = []
+    alice.on_lost(lambda obj, rec: lost.append((obj, rec.owner, rec.epoch)))
+    bob.on_lost(lambda obj, rec: lost.append(("bob lost", obj, rec.owner)))
+    try:
+        with caplog.at_level(logging.WARNING, logger="robofabric.user"):
+            epoch_a = alice.request("arm", timeout=5.0)
+            epoch_b = bob.request("arm", timeout=5.0)  # a still arm: bob takes it over
+            assert epoch_b > epoch_a
+            wait_until(lambda: lost, timeout=5.0, what="alice told she lost the arm")
+            assert lost == [("arm", "bob", epoch_b)]
+            assert f"lost ownership of arm: now owned by bob (epoch {epoch_b}" in caplog.text
+            bob.release("arm", timeout=5.0)  # his own release: no notice
+            wait_until(lambda: alice.record("arm").epoch > epoch_b and bob.record("arm").epoch > epoch_b, timeout=5.0,
+                       what="the release's record at both")
+            assert lost == [("arm", "bob", epoch_b)], lost
+            assert caplog.text.count("lost ownership") == 1, caplog.text
+    finally:
+        alice.close()
+        bob.close()
+        auth.close()
