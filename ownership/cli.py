@@ -48,10 +48,11 @@ def list_cmd(world: World = None, connect: Connect = None, profile: Profile = No
     """Every object's owner, epoch, motion state and queue."""
     fab, cl = _client(world, connect, profile, zenoh_config, user)
     with fab:
-        if not cl.records:
+        records = cl.snapshot()  # a copy taken under the client's lock: Zenoh's threads write the replica
+        if not records:
             raise UserError(f"no ownership authority answered in world {fab.world!r} (is a sim peer running?)")
-        for obj in sorted(cl.records):
-            rec = cl.records[obj]
+        for obj in sorted(records):
+            rec = records[obj]
             if as_json:
                 print(json.dumps({"object": rec.object, "policy": rec.policy, "owner": rec.owner, "epoch": rec.epoch,
                                   "queue": list(rec.queue), "state": rec.state, "authority": rec.authority}))
@@ -123,8 +124,9 @@ def watch_cmd(world: World = None, connect: Connect = None, profile: Profile = N
     stop = shutdown_event()
     fab, cl = _client(world, connect, profile, zenoh_config, user)
     with fab:
-        for obj in sorted(cl.records):
-            print(_line(cl.records[obj]), flush=True)
+        records = cl.snapshot()
+        for obj in sorted(records):
+            print(_line(records[obj]), flush=True)
         cl.on_change(lambda rec: print(_line(rec), flush=True))
         stop.wait()
         cl.close()

@@ -80,8 +80,8 @@ class OwnershipClient:
 
     Constructing one follows the records (subscription and a first query); renewals run once it is
     started (``start()`` or ``with OwnershipClient(...) as own:``) and stop on ``close()``.
-    ``records`` is written by Zenoh's callback threads: read it through :meth:`record`, :meth:`epoch`,
-    :meth:`owns` or :meth:`snapshot`, which take the lock.
+    The replica of the records is written by Zenoh's callback threads: read it through :meth:`record`,
+    :meth:`epoch`, :meth:`owns` or :meth:`snapshot`, which take the lock (it is private for that reason).
     ``clock`` (monotonic seconds) is only used to bound epoch jumps between records."""
 
     def __init__(self, fabric: Fabric, user: str, *, renew_s: float = 0.5, timeout: float = 2.0,
@@ -89,7 +89,7 @@ class OwnershipClient:
         self.fabric = fabric
         self.user = validate_user(user)  # refused here, not by the authority's decoder after a timeout
         self.timeout = timeout
-        self.records: dict[str, OwnershipRecord] = {}
+        self._records: dict[str, OwnershipRecord] = {}
         self.counters: Counter[str] = Counter()
         self._seen_at: dict[str, float] = {}
         self._clock = clock
@@ -178,7 +178,7 @@ class OwnershipClient:
         newer = term > self._term  # a standby took the world over: it speaks for every object now
         if not newer and self._authority is not None and rec.authority != self._authority and self._authority in self._sims:
             return "foreign"  # another sim speaking for the object of the one we follow
-        old = self.records.get(rec.object)
+        old = self._records.get(rec.object)
         if old is not None and old.authority != rec.authority:
             old = None  # a new authority (the old one left): its own epochs
         if old is not None and old.epoch == rec.epoch and old.header.wall_ns > rec.header.wall_ns:
@@ -197,7 +197,7 @@ class OwnershipClient:
                 return
             self._authority = rec.authority
             self._term = max(self._term, rec.header.term)
-            self.records[rec.object] = rec
+            self._records[rec.object] = rec
             self._seen_at[rec.object] = now
             callbacks = list(self._callbacks)
         for cb in callbacks:
@@ -210,7 +210,7 @@ class OwnershipClient:
     def snapshot(self) -> dict[str, OwnershipRecord]:
         """A copy of the trusted records, taken under the lock."""
         with self._lock:
-            return dict(self.records)
+            return dict(self._records)
 
     def epoch(self, obj: str) -> int:
         rec = self.record(obj)
@@ -224,7 +224,7 @@ class OwnershipClient:
 
     def record(self, obj: str) -> OwnershipRecord | None:
         with self._lock:
-            return self.records.get(obj)
+            return self._records.get(obj)
 
     def _ask(self, obj: str, op: str, wait: bool = False, timeout: float | None = None) -> OwnReply:
         known = self.snapshot()
@@ -254,7 +254,7 @@ class OwnershipClient:
 
         Only the authority's answer to a renewal ends it, never a published record on its own."""
         with self._lock:
-            for obj, rec in self.records.items():
+            for obj, rec in self._records.items():
                 if rec.owner == self.user and rec.policy == "exclusive":
                     self._held.add(obj)
             return sorted(self._held)

@@ -60,7 +60,7 @@ def run_one(n: int, *, lease_s: float, kills: int) -> dict:
             owner_id = f"k{k}"
             proc = subprocess.Popen([*HOLDER, world, str(port), owner_id],
                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
-            wait_until(lambda: last.records["arm"].owner == owner_id, timeout=30, what="killable owner")
+            wait_until(lambda: last.record("arm").owner == owner_id, timeout=30, what="killable owner")
             last.request("arm", wait=True)
             t0 = time.perf_counter()
             os.kill(proc.pid, signal.SIGKILL)
@@ -73,7 +73,7 @@ def run_one(n: int, *, lease_s: float, kills: int) -> dict:
             owner_id = f"f{k}"
             proc = subprocess.Popen([*HOLDER, world, str(port), owner_id],
                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
-            wait_until(lambda: last.records["arm"].owner == owner_id, timeout=30, what="freezable owner")
+            wait_until(lambda: last.record("arm").owner == owner_id, timeout=30, what="freezable owner")
             last.request("arm", wait=True)
             t0 = time.perf_counter()
             os.kill(proc.pid, signal.SIGSTOP)

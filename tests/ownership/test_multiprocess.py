@@ -48,12 +48,12 @@ def test_handover_enforcement_kill_and_reconnect(world, router, connect, procs, 
 
     fb = connect("user", "bob")
     bob = OwnershipClient(fb, "bob", renew_s=0.1).start()
-    wait_until(lambda: bob.records.get("arm") and bob.records["arm"].owner == "alice", what="bob's replica sees alice",
-               seen=lambda: bob.records)
+    wait_until(lambda: bob.record("arm") and bob.record("arm").owner == "alice", what="bob's replica sees alice",
+               seen=bob.snapshot)
 
     # moving: denied, then queued
     motion.write_text("moving")
-    wait_until(lambda: bob.records["arm"].state == "moving", what="arm moving in replica", seen=lambda: bob.records)
+    wait_until(lambda: bob.record("arm").state == "moving", what="arm moving in replica", seen=bob.snapshot)
     out = bob.request("arm")
     assert out.outcome == "denied" and "in motion" in out.reason and "alice" in out.reason, out
     out = bob.request("arm", wait=True)
@@ -70,10 +70,10 @@ def test_handover_enforcement_kill_and_reconnect(world, router, connect, procs, 
     # alice SIGKILLed: bob owns the arm (the arm is still moving: nothing reset)
     epoch_alice = bob.epoch("arm")
     procs.kill(a)
-    wait_until(lambda: bob.records["arm"].owner == "bob", timeout=LEASE + 3.0, what="bob owns after alice's death",
-               seen=lambda: bob.records)
-    assert bob.records["arm"].epoch > epoch_alice
-    assert bob.records["arm"].state == "moving"
+    wait_until(lambda: bob.record("arm").owner == "bob", timeout=LEASE + 3.0, what="bob owns after alice's death",
+               seen=bob.snapshot)
+    assert bob.record("arm").epoch > epoch_alice
+    assert bob.record("arm").state == "moving"
 
     # stale epoch rejected, current epoch accepted
     send("bob", epoch_alice)
@@ -85,22 +85,22 @@ def test_handover_enforcement_kill_and_reconnect(world, router, connect, procs, 
 
     # alice comes back within grace: queued at her old (first) place, bob keeps the arm past several leases
     a2 = procs.start([sys.executable, str(HERE / "user_proc.py"), world, str(port), "alice", "arm", "wait"], name="alice2")
-    wait_until(lambda: bob.records["arm"].queue == ("alice",), timeout=20, what="alice queued again", seen=lambda: bob.records)
+    wait_until(lambda: bob.record("arm").queue == ("alice",), timeout=20, what="alice queued again", seen=bob.snapshot)
     wait_until(lambda: "outcome" in procs.output(a2), timeout=20, what="alice2 outcome", seen=lambda: procs.output(a2))
     assert "queued at position 1" in procs.output(a2)
     time.sleep(0)  # no fixed waits: the renewal is checked through the lease below
-    deadline = bob.records["arm"].lease_expiry
-    wait_until(lambda: bob.records["arm"].lease_expiry > deadline + LEASE, what="bob renews", seen=lambda: bob.records)
-    assert bob.records["arm"].owner == "bob"
+    deadline = bob.record("arm").lease_expiry
+    wait_until(lambda: bob.record("arm").lease_expiry > deadline + LEASE, what="bob renews", seen=bob.snapshot)
+    assert bob.record("arm").owner == "bob"
 
     # still: a request hands it over at once
     motion.write_text("still")
-    wait_until(lambda: bob.records["arm"].state == "still", what="arm still", seen=lambda: bob.records)
+    wait_until(lambda: bob.record("arm").state == "still", what="arm still", seen=bob.snapshot)
     fc = connect("user", "carol")
     carol = OwnershipClient(fc, "carol").start()
-    assert carol.records["arm"].owner == "bob"  # late joiner's replica is filled by the query at once
+    assert carol.record("arm").owner == "bob"  # late joiner's replica is filled by the query at once
     out = carol.request("arm")
     assert out.outcome == "granted", out
-    wait_until(lambda: bob.records["arm"].owner == "carol", what="bob sees carol", seen=lambda: bob.records)
+    wait_until(lambda: bob.record("arm").owner == "carol", what="bob sees carol", seen=bob.snapshot)
     bob.close()
     carol.close()

@@ -31,14 +31,14 @@ def test_arm_continues_after_owner_is_killed(world, router, connect, procs):
     events: list[Event] = []
     fb.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
     bob = OwnershipClient(fb, "bob", renew_s=0.1, timeout=10.0).start()
-    wait_until(lambda: "arm1" in bob.records and joints, timeout=30, what="arm1 record and joints", seen=lambda: bob.records)
+    wait_until(lambda: bob.record("arm1") is not None and joints, timeout=30, what="arm1 record and joints", seen=bob.snapshot)
 
     target = np.radians([60.0, 30.0, -40.0, 30.0, 50.0, -30.0])
     alice = procs.start([sys.executable, str(HERE / "sim_user.py"), world, str(port), "alice", "arm1",
                          ",".join(str(x) for x in target)], name="alice")
     wait_until(lambda: "sent" in procs.output(alice), timeout=30, what="alice's command", seen=lambda: procs.output(alice))
-    wait_until(lambda: bob.records["arm1"].owner == "alice" and bob.records["arm1"].state == "moving", timeout=20,
-               what="alice owns a moving arm", seen=lambda: (bob.records.get("arm1"), procs.output(alice)))
+    wait_until(lambda: bob.record("arm1").owner == "alice" and bob.record("arm1").state == "moving", timeout=20,
+               what="alice owns a moving arm", seen=lambda: (bob.record("arm1"), procs.output(alice)))
     out = bob.request("arm1")
     assert out.outcome == "denied" and "in motion" in out.reason, out
     assert bob.request("arm1", wait=True).outcome == "queued"
@@ -49,7 +49,7 @@ def test_arm_continues_after_owner_is_killed(world, router, connect, procs):
     procs.kill(alice)
     q_kill = np.asarray(joints[-1].q).copy()
     assert np.linalg.norm(q_kill) > 1e-3  # it had moved away from zero
-    wait_until(lambda: bob.owns("arm1"), timeout=10, what="bob owns after alice's death", seen=lambda: bob.records)
+    wait_until(lambda: bob.owns("arm1"), timeout=10, what="bob owns after alice's death", seen=bob.snapshot)
     n = len(joints)
     wait_until(lambda: len(joints) > n + 5, what="joints after handover")
     q_after = np.asarray(joints[-1].q)

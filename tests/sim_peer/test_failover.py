@@ -83,8 +83,8 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
     fb.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
     alice = OwnershipClient(fa, "alice", renew_s=0.2, timeout=10.0).start()
     bob = OwnershipClient(fb, "bob", renew_s=0.2, timeout=10.0).start()
-    wait_until(lambda: "arm1" in alice.records and "base1" in bob.records and tape.of("base1", "pose"), timeout=30,
-               what="records and poses", seen=lambda: (alice.records, len(tape.items)))
+    wait_until(lambda: alice.record("arm1") is not None and bob.record("base1") is not None and tape.of("base1", "pose"),
+               timeout=30, what="records and poses", seen=lambda: (alice.snapshot(), len(tape.items)))
     assert alice.request("arm1", timeout=10).granted and bob.request("base1", timeout=10).granted
     ea, eb = alice.epoch("arm1"), bob.epoch("base1")
 
@@ -95,12 +95,12 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
     xs, ys = np.linspace(x0, gx, 20), np.linspace(y0, gy, 20)
     path_cmd = Command("bob", eb, Path(xs, ys, np.full(20, math.atan2(gy - y0, gx - x0))))
     # resent until they move: a first put on a fresh publisher can go out before the route to the sim exists
-    wait_until(lambda: alice.records["arm1"].state == "moving" or _send(fa, world, "arm1", "joints", "alice", arm_cmd),
+    wait_until(lambda: alice.record("arm1").state == "moving" or _send(fa, world, "arm1", "joints", "alice", arm_cmd),
                timeout=20, interval=0.5, what="arm moving")
-    wait_until(lambda: bob.records["base1"].state == "moving" or _send(fb, world, "base1", "path", "bob", path_cmd),
+    wait_until(lambda: bob.record("base1").state == "moving" or _send(fb, world, "base1", "path", "bob", path_cmd),
                timeout=20, interval=0.5, what="base moving")
     wait_until(lambda: math.hypot(*(tape.of("base1", "pose")[-1].msg.position[:2] - np.array([x0, y0]))) > 0.2,
-               timeout=30, what="arm moving, base on its path", seen=lambda: (alice.records.get("arm1"), bob.records.get("base1")))
+               timeout=30, what="arm moving, base on its path", seen=lambda: (alice.record("arm1"), bob.record("base1")))
 
     procs.kill(primary)  # SIGKILL
     t_kill = time.monotonic()
@@ -127,11 +127,11 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
     assert new_j.msg.header.seq > old_j.msg.header.seq  # sequence numbers continue
 
     # owners keep their robots and their epochs; the new authority is the one they follow
-    wait_until(lambda: alice.records["arm1"].authority == "sim-b" and bob.records["base1"].authority == "sim-b", timeout=10,
-               what="records from sim-b", seen=lambda: (alice.records["arm1"], bob.records["base1"]))
+    wait_until(lambda: alice.record("arm1").authority == "sim-b" and bob.record("base1").authority == "sim-b", timeout=10,
+               what="records from sim-b", seen=lambda: (alice.record("arm1"), bob.record("base1")))
     own_events = [(e.kind, e.object, e.user, e.reason, e.header.source) for e in events if e.kind.startswith("own_")]
     assert alice.owns("arm1") and alice.epoch("arm1") == ea and bob.owns("base1") and bob.epoch("base1") == eb, own_events
-    assert alice.records["arm1"].header.term == 2
+    assert alice.record("arm1").header.term == 2
 
     # the motions go on to their ends: the arm reaches alice's target, the base the path's end
     wait_until(lambda: np.abs(tape.of("arm1", "joints", 2)[-1].msg.q - target).max() < 1e-3, timeout=90,
@@ -162,13 +162,13 @@ def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, 
     events: list[Event] = []
     fa.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
     alice = OwnershipClient(fa, "alice", renew_s=0.2, timeout=10.0).start()
-    wait_until(lambda: "arm1" in alice.records and tape.of("arm1", "joints", 1), timeout=30, what="record and joints")
+    wait_until(lambda: alice.record("arm1") is not None and tape.of("arm1", "joints", 1), timeout=30, what="record and joints")
     assert alice.request("arm1", timeout=10).granted
     ea = alice.epoch("arm1")
     cmd = Command("alice", ea, JointTarget(np.radians([40.0, 20.0, -20.0, 10.0, 30.0, 0.0]), speed_scale=0.05))
     # resent until it moves: a first put on a fresh publisher can go out before the route to the sim exists
-    wait_until(lambda: alice.records["arm1"].state == "moving" or _send(fa, world, "arm1", "joints", "alice", cmd), timeout=20,
-               interval=0.5, what="arm moving", seen=lambda: (alice.records["arm1"], tape.of("arm1", "joints")[-1].msg.q,
+    wait_until(lambda: alice.record("arm1").state == "moving" or _send(fa, world, "arm1", "joints", "alice", cmd), timeout=20,
+               interval=0.5, what="arm moving", seen=lambda: (alice.record("arm1"), tape.of("arm1", "joints")[-1].msg.q,
                                                               [e for e in events if e.kind == "reject"][-3:]))
 
     wait_until(mcap.exists, timeout=60, what="the recorder's file", seen=lambda: procs.output(recorder)[-800:])
@@ -180,7 +180,7 @@ def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, 
     try:
         wait_until(lambda: tape.of("arm1", "joints", 2), timeout=30, what="the standby takes over after the lease",
                    seen=lambda: procs.output(standby)[-1500:])
-        wait_until(lambda: alice.records["arm1"].authority == "sim-b", timeout=10, what="alice follows sim-b")
+        wait_until(lambda: alice.record("arm1").authority == "sim-b", timeout=10, what="alice follows sim-b")
     finally:
         cont_ns = time.time_ns()
         os.kill(primary.pid, signal.SIGCONT)
@@ -189,7 +189,7 @@ def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, 
     t_down = time.monotonic()
     n = len(tape.of("arm1", "joints", 2))
     wait_until(lambda: len(tape.of("arm1", "joints", 2)) > n + 50, timeout=20, what="term-2 joints go on")
-    assert alice.owns("arm1") and alice.epoch("arm1") == ea and alice.records["arm1"].authority == "sim-b"
+    assert alice.owns("arm1") and alice.epoch("arm1") == ea and alice.record("arm1").authority == "sim-b"
     # exactly one authority epoch publishing at any instant: once term 2 spoke, nothing was published
     # with term 1 (by the publication instant each header carries: samples the frozen process had
     # queued before SIGSTOP may still reach the wire on SIGCONT, with their old stamps, and every

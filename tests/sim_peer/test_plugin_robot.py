@@ -133,7 +133,7 @@ def test_the_third_robot_type_is_described_streamed_and_commanded_by_its_owner(p
         assert peer.last_state("p1")["target"] == [0.0, 0.0]
 
         # its owner's joint command moves it
-        wait_until(lambda: "p1" in alice.records, timeout=20, what="p1's ownership record", seen=lambda: alice.records)
+        wait_until(lambda: alice.record("p1") is not None, timeout=20, what="p1's ownership record", seen=alice.snapshot)
         out = alice.request("p1")
         assert out.outcome == "granted", out
         goal = np.array([0.7, -1.1])

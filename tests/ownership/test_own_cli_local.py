@@ -1,0 +1,75 @@
+"""``robofabric own list`` and ``watch`` print from the client's locked copy of its replica, never the live dict.
+
+No session: the client is stood in by one that offers only the public read side (``snapshot``), as
+OwnershipClient does since its replica is private (Zenoh's threads write it)."""
+
+from __future__ import annotations
+
+import json
+import threading
+
+import pytest
+
+from fabric.interfaces import OwnershipRecord
+from ownership import cli
+
+
+class _Fabric:
+    world = "w"
+
+    def __enter__(self) -> "_Fabric":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        pass
+
+
+class _Client:
+    """Only what OwnershipClient offers publicly for reading records."""
+
+    def __init__(self, records: dict[str, OwnershipRecord]) -> None:
+        self._records = records
+        self.snapshots = 0
+        self.changes: list = []
+        self.closed = False
+
+    def snapshot(self) -> dict[str, OwnershipRecord]:
+        self.snapshots += 1
+        return dict(self._records)
+
+    def on_change(self, cb) -> None:
+        self.changes.append(cb)
+
+    def close(self) -> None:
+        self.closed = True
+
+
+@pytest.fixture
+def client(monkeypatch):
+    c = _Client({"ball": OwnershipRecord("ball", policy="scene"), "arm": OwnershipRecord("arm", owner="ann", epoch=3)})
+    monkeypatch.setattr(cli, "_client", lambda *a: (_Fabric(), c))
+    return c
+
+
+def test_list_prints_every_record_of_one_snapshot(client, capsys):
+    cli.list_cmd(as_json=True)
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [(r["object"], r["owner"], r["epoch"]) for r in rows] == [("arm", "ann", 3), ("ball", "", 0)]
+    assert client.snapshots == 1 and client.closed
+
+
+def test_watch_starts_from_one_snapshot(client, capsys, monkeypatch):
+    stop = threading.Event()
+    stop.set()
+    monkeypatch.setattr(cli, "shutdown_event", lambda: stop)
+    cli.watch_cmd()
+    out = capsys.readouterr().out.splitlines()
+    assert [line.split()[0] for line in out] == ["arm", "ball"] and "owner ann" in out[0]
+    assert client.snapshots == 1 and len(client.changes) == 1 and client.closed
+
+
+def test_list_without_records_says_no_authority_answered(monkeypatch):
+    monkeypatch.setattr(cli, "_client", lambda *a: (_Fabric(), _Client({})))
+    with pytest.raises(cli.UserError, match="no ownership authority answered"):
+        cli.list_cmd()
+
