@@ -24,6 +24,7 @@ import logging
 import math
 import threading
 import time
+from collections import OrderedDict
 from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
@@ -68,17 +69,54 @@ class _Latest:
     Freshness is judged on this machine only: every message gets a local arrival number (``mark()``
     reads the current one) and a local receive time from ``clock`` (monotonic ns). A header's
     ``wall_ns`` comes from another machine's clock and is never compared with ours (issue 15).
+
+    Bounded by what the world has, not by what clients make up (issue 14): once ``world_info()``
+    gives the world description, a robot key (``robot/{id}/...``) or record (``own/{id}``) is kept only
+    for a robot or object of that description; anything else (before the description, maps, events)
+    shares ``max_other`` places, the least recently updated forgotten first. A made-up
+    ``robot/fakeN/scan`` of 4 MiB each no longer grows a user's memory without bound.
     """
 
-    def __init__(self, clock: Callable[[], int] = time.monotonic_ns) -> None:
+    def __init__(self, clock: Callable[[], int] = time.monotonic_ns, *, world_info: Callable[[], Any] | None = None,
+                 max_other: int = 64) -> None:
         self._values: dict[str, tuple[Any, int, int]] = {}
+        self._other: OrderedDict[str, None] = OrderedDict()  # keys outside the description, oldest update first
         self._cond = threading.Condition()
         self._gen = 0
         self._clock = clock
+        self._world_info = world_info
+        self._max_other = max_other
+        self._ids: tuple[Any, frozenset[str]] = (None, frozenset())  # (description, its robot and object ids)
+        self.dropped = 0  # messages on keys of robots the world does not have
+
+    def _known(self, key: str) -> bool | None:
+        """True: a key of the world's robots or objects; False: of one it does not have; None: no description
+        yet, or a key of another kind."""
+        info = self._world_info() if self._world_info is not None else None
+        if info is None:
+            return None
+        if self._ids[0] is not info:
+            self._ids = (info, frozenset(r.id for r in info.robots) | frozenset(o.id for o in getattr(info, "objects", ())))
+        parts = key.split("/", 4)  # rf/{world}/{category}/{subject}/...: the object pose key here ends in a wildcard
+        if len(parts) >= 4 and parts[2] in ("robot", "own", "object"):
+            return parts[3] in self._ids[1]
+        return None
 
     def put(self, key: str, msg: Any) -> None:
+        known = self._known(key)
+        if known is False:
+            self.dropped += 1
+            return
         with self._cond:
             self._gen += 1
+            if known:
+                self._other.pop(key, None)
+            elif key in self._other:
+                self._other.move_to_end(key)
+            else:
+                self._other[key] = None
+                while len(self._other) > self._max_other:
+                    self._values.pop(self._other.popitem(last=False)[0], None)
             self._values[key] = (msg, self._gen, self._clock())
             self._cond.notify_all()
 
@@ -143,7 +181,7 @@ class World:
             self.fabric = Fabric(config, kind="user", peer_id=self.user)
         except Exception as exc:  # zenoh.ZError: nobody there, or the router refused the login
             raise Unreachable(config.join_failure(exc)) from None
-        self.latest = _Latest()
+        self.latest = _Latest(world_info=lambda: getattr(self, "_info", None))  # keeps the robots of the description only
         self.events: list[Event] = []
         self._event_log: list[tuple[int, Event]] = []  # (local arrival number, event)
         self._events_seen = 0
