@@ -182,6 +182,39 @@ def test_foxglove_export_every_message_parses_against_its_schema_and_matches(rec
     assert {"base1", "object/target", "world"} <= drawn and any(f.startswith("arm1/joint_") for f in drawn), drawn
 
 
+def _strict_json(data: bytes) -> object:
+    """JSON as the standard has it: Python's json also reads NaN and Infinity, which no other reader does."""
+
+    def refuse(word: str) -> None:
+        raise ValueError(f"{word} is not JSON")
+
+    return json.loads(data, parse_constant=refuse)
+
+
+def test_foxglove_json_is_valid_json_a_non_finite_message_is_skipped_and_counted(tmp_path):
+    """A message holding NaN or infinity (one the codec would refuse, built in-process) is not written:
+    JSON has neither; every message written parses as standard JSON against its schema."""
+    from user_peer.openfmt.foxglove import FoxgloveWriter
+
+    names = ("joint_1", "joint_2")
+    h = Header(0.0, T0, 0, "sim-1")
+    fine = JointState(names, np.array([0.1, 0.2]), np.zeros(2), h)
+    nan = JointState(names, np.array([0.1, 0.2]), np.array([np.nan, 0.0]), h)
+    inf = Event("granted", reason="free", object="arm1", user="alice", data={"speed": math.inf}, header=h)
+    out = tmp_path / "fox.mcap"
+    with FoxgloveWriter(out) as w:
+        for i, msg in enumerate((fine, nan, fine, inf)):
+            w.write(f"rf/{W}/event/x" if msg is inf else f"rf/{W}/robot/arm9/joints", msg, T0 + i)
+    assert (w.written, w.skipped) == (2, 2)
+    docs = []
+    with open(out, "rb") as f:
+        for schema, _channel, message in make_reader(f).iter_messages():
+            doc = _strict_json(message.data)
+            jsonschema.validate(doc, json.loads(schema.data), cls=jsonschema.Draft202012Validator)
+            docs.append(doc)
+    assert [d["dq"] for d in docs] == [[0.0, 0.0], [0.0, 0.0]]
+
+
 # --------------------------------------------------------------------------- ROS 2
 
 

@@ -13,7 +13,11 @@ anything else          ``/KEY``                          JSON, schema from the t
 =====================  ================================  =========================================
 
 JointState goes to JSON (so every joint can be plotted, by index or by name under ``by_name``)
-and to ``/tf`` through forward kinematics. Written with the ``mcap`` writer and
+and to ``/tf`` through forward kinematics. JSON has no NaN or infinity: a message holding a
+non-finite number is not written but counted in ``skipped``, as the ROS 2 writer does. Such a
+message cannot come from the fabric (the codec refuses non-finite floats in every field), only from
+a caller handing the writer a message built in-process; skipping keeps every file valid JSON and
+the declared schemas exact (a plotted number is never ``null``). Written with the ``mcap`` writer and
 ``mcap-protobuf-support``'s schema registration (the FileDescriptorSet Foxglove expects).
 """
 
@@ -206,7 +210,12 @@ class FoxgloveWriter:
             plain["by_name"] = {
                 n: {"position": float(q), "velocity": float(dq)} for n, q, dq in zip(msg.names, msg.q, msg.dq)
             }
-        self._put(self._json_channel(topic, type_name, cls), json.dumps(plain).encode(), log_time, pub)
+        try:
+            data = json.dumps(plain, allow_nan=False)
+        except ValueError:  # NaN or infinity: not JSON, and not a message the fabric's codec accepts
+            self.skipped += 1
+            return
+        self._put(self._json_channel(topic, type_name, cls), data.encode(), log_time, pub)
 
     def _tf(self, f: Frame, t: int) -> FrameTransform:
         return FrameTransform(
