@@ -199,6 +199,16 @@ class BaseController:
     def follow(self, follower) -> None:
         self.follower = follower
 
+    @property
+    def since_twist(self) -> float:
+        """Sim time (s) the current twist has held without a fresh one: what ``twist_timeout`` is counted on."""
+        return self._since_twist
+
+    def resume_twist_clock(self, since: float) -> None:
+        """Carry on a replicated count: ``since`` s have passed since the last twist (a standby taking over), so
+        a twist times out here when it would have on the sim that sent it."""
+        self._since_twist = float(since)
+
     def stop(self) -> None:
         """Stop at once and forget any path."""
         self.follower = None

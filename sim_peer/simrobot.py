@@ -263,7 +263,7 @@ class MobileRobot(SimRobot):
         c = self.ctrl
         extra: dict[str, Any] = {
             "wheels": [float(w) for w in c.wheels], "wheel_speeds": [float(w) for w in c.wheel_speeds],
-            "since_twist": c._since_twist, "twists_expired": c.twists_expired, "paths_done": c.paths_done,
+            "since_twist": c.since_twist, "twists_expired": c.twists_expired, "paths_done": c.paths_done,
         }
         path = np.zeros((0, 2))
         f = c.follower
@@ -284,7 +284,7 @@ class MobileRobot(SimRobot):
         e = state.extra
         c.wheels[:] = e.get("wheels", [0.0, 0.0])
         c.wheel_speeds[:] = e.get("wheel_speeds", [0.0, 0.0])
-        c._since_twist = float(e.get("since_twist", 0.0))
+        c.resume_twist_clock(float(e.get("since_twist", 0.0)))
         c.twists_expired = int(e.get("twists_expired", 0))
         c.paths_done = int(e.get("paths_done", 0))
         c.follower = None

@@ -53,3 +53,25 @@ def test_base_respects_speed_and_acceleration_limits(v, w):
     # wheel speeds are the differential-drive inverse kinematics of (v, omega)
     half = BASE.wheel_separation / 2
     np.testing.assert_allclose(b.wheel_speeds, [(v - w * half) / BASE.wheel_radius, (v + w * half) / BASE.wheel_radius])
+
+
+def test_a_resumed_twist_clock_times_out_when_the_original_would():
+    """A standby carries the twist timeout's count on (sim_peer.simrobot restore), through the public method."""
+    dt, n = 0.01, 30
+    first = BaseController(BASE, twist_timeout=0.5)
+    first.twist(0.2, 0.0)
+    for _ in range(n):
+        first.step(dt)
+    assert math.isclose(first.since_twist, n * dt)
+    second = BaseController(BASE, twist_timeout=0.5)
+    second.twist(0.2, 0.0)
+    second.resume_twist_clock(first.since_twist)
+    steps = []
+    for c in (first, second):
+        k = 0
+        while c.twists_expired == 0:
+            c.step(dt)
+            k += 1
+        steps.append(k)
+    assert steps[0] == steps[1]  # the same step on both (0.3 s held, ~0.2 s more reaches the 0.5 s timeout)
+    assert abs(steps[0] * dt - 0.2) <= dt + 1e-9
