@@ -84,8 +84,10 @@ def _open_launcher(spec: LaunchSpec, router: str | None) -> Fabric:
     try:
         return Fabric(cfg, kind="router" if ep else "tool", peer_id="launch-router" if ep else None)
     except Exception as exc:
-        where = ep or ", ".join(spec.child_connect()) or "default router"
-        raise UserError(f"cannot start the launch's router on {where}: {exc} (is another router using that port?)") from None
+        said = cfg.join_failure(exc)  # the one line every command gives: a refused login names the identity
+        if not ep or said.startswith("authentication failed"):
+            raise UserError(said) from None  # joining another router: no router of ours, no port of ours
+        raise UserError(f"cannot start the launch's router on {ep}: {exc} (is another router using that port?)") from None
 
 
 def _run(spec: LaunchSpec, *, out: Path, duration: float | None, router: str | None, demo: bool) -> int:

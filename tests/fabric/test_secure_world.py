@@ -259,6 +259,22 @@ def test_refused_logins_are_one_line_errors(secure, tmp_path, case):
     assert ok.returncode == 0, ok.stderr
 
 
+def test_up_with_a_refused_login_says_so_in_one_line(secure, tmp_path):
+    """``robofabric up`` joining the class router with a wrong password: the same line as every command
+    (it said "cannot start the launch's router ... is another router using that port?")."""
+    cfg = json.loads("\n".join(secure.files["mallory"].read_text().splitlines()[2:]))
+    cfg["transport"]["auth"]["usrpwd"]["password"] = "guess"
+    bad = tmp_path / "bad.json5"
+    bad.write_text(json.dumps(cfg))
+    launch = tmp_path / "up.toml"
+    launch.write_text(f'[launch]\nworld = "{secure.world}"\nconnect = ["{secure.ep}"]\nzenoh_config = "{bad}"\n\n'
+                      '[[peer]]\nname = "ps"\nargs = ["ps"]\nrole = "task"\n')
+    out = _cli("up", str(launch), "--out", str(tmp_path / "out"))
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 2 and len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
+    assert lines[0].startswith(f"error: authentication failed for mallory at {secure.ep}: the router refused this login"), lines
+
+
 def test_tls_refuses_a_certificate_from_another_ca(tmp_path):
     ep = f"tls/127.0.0.1:{free_port()}"
     mine = init(tmp_path / "mine", users=["alice"], tls=True, listen=[ep])
