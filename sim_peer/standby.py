@@ -10,10 +10,12 @@
   may have been frozen: it muzzles itself (publishes and answers nothing), asks ``srv/state`` who is authority now,
   and steps down if someone holds a higher term, else carries on.
 - **standby**: builds the same scene, publishes nothing users act on (no streams, no records, no
-  services), polls ``srv/state`` and keeps the newest joints and poses from the streams. When the
-  leader's liveliness token goes and it is the lowest live standby, it takes over: term + 1, the
-  world restored to the last state it saw (no reset), the ownership records and users carried over,
-  sequence numbers continued, then streams, ``srv/world`` and the ownership queryables served again.
+  events; its ``srv/state`` answers with a refusal), polls ``srv/state``, keeps the newest joints and
+  poses from the streams and the commands of the last seconds. When the leader's liveliness token
+  goes and it is the lowest live standby, it takes over: term + 1, the world restored to the last
+  state it saw (no reset), the commands that came after that state applied again (those the restored
+  ownership admits), the ownership records and users carried over, sequence numbers continued, then
+  streams, ``srv/world`` and the ownership queryables served again.
 
 A host that stepped down returns from :meth:`ReplicaHost.run`; the caller opens a fresh session and runs a
 standby (``run_replicated``), so nothing the primary declared survives the change of role.
@@ -24,10 +26,12 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
 from typing import Any, Callable
 
 from fabric import keys
-from fabric.interfaces import JointState, Pose, ServiceError, WorldState
+from fabric.codec import DecodeError, decode
+from fabric.interfaces import Command, JointState, Pose, ServiceError, WorldState
 from fabric.session import Fabric
 from sim_peer import election as el
 from sim_peer import replica
@@ -36,10 +40,20 @@ from sim_peer.world import SimWorld
 
 log = logging.getLogger("robofabric.sim")
 
-__all__ = ["ReplicaHost", "run_replicated", "POLL_S"]
+__all__ = ["ReplicaHost", "run_replicated", "POLL_S", "REPLAY_MARGIN_S", "KEEP_COMMANDS_S"]
 
 POLL_S = 0.05
 """How often a standby asks the primary for the whole state (the streams fill in between)."""
+
+REPLAY_MARGIN_S = 0.05
+"""At a take-over, the commands heard from this long before the last snapshot was asked for are applied
+again: a command reaches the standby and the primary by different routes, so one heard a little before
+the query may have reached the primary after it answered. Applying one twice is harmless (a joint
+target, a twist or an object pose is set to the same value; a path restarts from where the base is,
+a few milliseconds along it)."""
+
+KEEP_COMMANDS_S = 5.0
+"""How long a standby keeps the commands it hears (far more than a poll period: a slow answer)."""
 
 GateFactory = Callable[[Fabric, SimWorld, Any], Any]
 
@@ -80,6 +94,11 @@ class ReplicaHost:
         self.snapshot: WorldState | None = snapshot  # a primary that stepped down starts from its own last state
         self.joints: dict[str, JointState] = {}
         self.poses: dict[str, Pose] = {}
+        # (local arrival, key, message) of robot commands and object poses, and when the snapshot we hold
+        # was asked for: what came after it is applied again at a take-over (a joint target sent in the
+        # last poll period before the primary died is otherwise lost, and the arm stops short)
+        self.commands: deque[tuple[float, str, Any]] = deque()
+        self.snapshot_asked = time.monotonic()
         self.live: set[str] = set()
         self.takeovers: list[dict[str, Any]] = []
         self.last_state: WorldState | None = None
@@ -105,6 +124,10 @@ class ReplicaHost:
             self._serve(None)  # the world first: nothing below may delay a primary's streams and services
         f.subscribe(keys.robot_stream_all(w, "joints"), self._on_joints, expected=JointState)
         f.subscribe(keys.robot_stream_all(w, "pose"), self._on_pose, expected=Pose)
+        if self.role != el.PRIMARY:
+            f.subscribe_raw(keys.robot_cmd_all(w), self._on_command_sample)
+            for obj in self.world.objects:
+                f.subscribe(keys.object_pose_all(w, obj), self._on_object, expected=Pose)
         # first a complete view of the live sims (a liveliness query), then changes: the election reads a
         # leader missing from a view as gone, so the view must not be a history still arriving
         try:
@@ -187,7 +210,27 @@ class ReplicaHost:
         f.on_freeze = self._on_freeze
         self.gate = self.make_gate(f, self.world, restored)
         self.peer = SimPeer(f, self.world, gate=self.gate, rates=self.rates, speed=self.speed)
+        if state is not None:
+            self._replay(self.peer)
         self.peer.start(self._duration)
+
+    def _replay(self, peer: SimPeer) -> None:
+        """Apply again what users sent after the snapshot was asked for, in arrival order, before the new
+        authority steps: the commands its restored ownership admits (the others the old authority
+        refused, or would have; refusing them again would only repeat its events)."""
+        with self._lock:
+            since = self.snapshot_asked - REPLAY_MARGIN_S
+            todo = [(key, msg) for t, key, msg in self.commands if t >= since]
+            self.commands.clear()
+        for key, msg in todo:
+            try:
+                if isinstance(msg, Command):
+                    if self.gate.admit(keys.parse(key).subject, msg) is None:
+                        peer._on_command(key, msg)
+                else:
+                    peer._on_object(key, msg)
+            except Exception:
+                log.exception("replaying %s at take-over failed", key)
 
     def _on_state_query(self, key: str, request: Any, *, force: bool = False) -> WorldState:
         peer = self.peer
@@ -245,6 +288,7 @@ class ReplicaHost:
         while not self._stop.wait(self.poll_s):
             if self.role != el.STANDBY:
                 return
+            asked = time.monotonic()
             try:
                 replies = f.query(keys.srv(f.world, "state"), timeout=1.0, expected=WorldState, all_replies=True)
             except ServiceError:
@@ -255,13 +299,31 @@ class ReplicaHost:
             self._heard(best.header.source, best.header.term)
             with self._lock:
                 if best.header.source == self.election.leader:
-                    self.snapshot = best
+                    self.snapshot, self.snapshot_asked = best, asked
 
     def _on_joints(self, key: str, js: JointState) -> None:
         self._heard(js.header.source, js.header.term)
         if self.role == el.STANDBY and js.header.source == self.election.leader:
             with self._lock:
                 self.joints[keys.parse(key).subject] = js
+
+    def _keep(self, key: str, msg: Any) -> None:
+        now = time.monotonic()
+        with self._lock:
+            if self.peer is not None:
+                return  # serving: the peer takes commands itself (until it subscribes, they wait here)
+            self.commands.append((now, key, msg))
+            while self.commands and self.commands[0][0] < now - KEEP_COMMANDS_S:
+                self.commands.popleft()
+
+    def _on_command_sample(self, sample: Any) -> None:
+        try:
+            self._keep(str(sample.key_expr), decode(sample.payload.to_bytes(), Command))
+        except DecodeError:
+            pass  # the authority reports it; a standby keeps only what it could apply
+
+    def _on_object(self, key: str, pose: Pose) -> None:
+        self._keep(key, pose)
 
     def _on_pose(self, key: str, p: Pose) -> None:
         if self.role == el.STANDBY and p.header.source == self.election.leader:
