@@ -38,7 +38,10 @@ class ComputeOptions:
 
 
 class ComputePeer:
-    """The services of one compute peer on ``fabric``; a context manager."""
+    """The services of one compute peer on ``fabric``; a context manager.
+
+    Constructing one declares the services (they answer queries at once); ``start()`` (or ``with``, or
+    ``discover()``) starts what runs on threads of its own: IK streaming and background world lookups."""
 
     def __init__(self, fabric: Fabric, options: ComputeOptions | None = None) -> None:
         self.fabric = fabric
@@ -55,8 +58,16 @@ class ComputePeer:
 
             self.navigation = NavigationService(fabric, maps_dir=o.maps_dir, mapping=o.mapping, **o.navigation_options)
 
+    def start(self) -> "ComputePeer":
+        """Start the services' threads (once; a second call does nothing)."""
+        if self.kinematics is not None:
+            self.kinematics.start()
+        return self
+
     def discover(self, timeout: float = 2.0) -> list[str]:
-        """Look the world's arms up now (the services also do it lazily); returns the arms served."""
+        """Start the peer if it is not yet, and look the world's arms up now (the services also do it
+        lazily); returns the arms served."""
+        self.start()
         if self.kinematics is None:
             return []
         self.kinematics.discover(timeout=timeout)
@@ -79,7 +90,7 @@ class ComputePeer:
                 svc.close()
 
     def __enter__(self) -> "ComputePeer":
-        return self
+        return self.start()
 
     def __exit__(self, *exc: object) -> None:
         self.close()

@@ -75,6 +75,10 @@ class KinematicsService:
     ``arms``: robot id -> :class:`ArmPlacement`, for worlds without a sim peer to ask; otherwise the arms
     are learnt from ``srv/world`` (``discover``). ``streams``: (robot, object) pairs to follow at
     ``stream_rate`` Hz.
+
+    Constructing one declares its keys and answers queries at once; it starts no thread. The stream
+    loop and the background lookups of the world (on a sim's coming, on joints of an unknown arm) run
+    once it is started (``start()`` or ``with KinematicsService(...) as svc:``).
     """
 
     def __init__(
@@ -109,13 +113,11 @@ class KinematicsService:
         self.counters: dict[str, int] = {"ik": 0, "fk": 0, "jacobian": 0, "refusals": 0, "streamed": 0, "stream_unreachable": 0}
         for rid, placement in (arms or {}).items():
             self.add_arm(rid, placement)
+        self._stream_rate = stream_rate
+        self._started = False
+        self._loop: RateLoop | None = None
         self._resources: list[Any] = []
         self._declare()
-        self._loop: RateLoop | None = None
-        if self.streams:
-            self._loop = RateLoop(stream_rate, self._stream_tick, clock=self._clock, name="ik-stream").start()
-        if self._discover:
-            self._discover_soon()
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -138,8 +140,21 @@ class KinematicsService:
             self._last_discovery = -1e18
         self._discover_soon()
 
-    def __enter__(self) -> "KinematicsService":
+    def start(self) -> "KinematicsService":
+        """Start streaming (when there are streams) and look the world up in the background (once; a
+        second call, or one after ``close()``, does nothing)."""
+        with self._lock:
+            if self._started or self._closed:
+                return self
+            self._started = True
+            if self.streams:
+                self._loop = RateLoop(self._stream_rate, self._stream_tick, clock=self._clock, name="ik-stream").start()
+        if self._discover:
+            self._discover_soon()
         return self
+
+    def __enter__(self) -> "KinematicsService":
+        return self.start()
 
     def __exit__(self, *exc: object) -> None:
         self.close()
@@ -222,8 +237,9 @@ class KinematicsService:
             self._discovered.set()
 
     def _discover_soon(self) -> None:
-        """Look the world up in a thread (never inside a Zenoh callback), at most once a second."""
-        if self._claim_discovery():
+        """Look the world up in a thread (never inside a Zenoh callback), at most once a second; not before
+        ``start()``, which looks it up itself (a sim's token seen while declaring only marks the world changed)."""
+        if self._started and self._claim_discovery():
             threading.Thread(target=self._run_discovery, name="kinematics-discovery", daemon=True).start()
 
     def _discover_now(self, timeout: float = 2.0) -> None:
@@ -385,5 +401,5 @@ class KinematicsService:
 
 
 def register_kinematics(fabric: Fabric, **options: Any) -> KinematicsService:
-    """Serve kinematics on ``fabric``'s world; see :class:`KinematicsService` for the options."""
-    return KinematicsService(fabric, **options)
+    """Serve kinematics on ``fabric``'s world, started; see :class:`KinematicsService` for the options."""
+    return KinematicsService(fabric, **options).start()

@@ -23,10 +23,9 @@ Q = np.array([0.3, 0.2, -0.4, 0.5, 0.6, -0.2])
 @pytest.fixture
 def served(world, connect):
     comp = connect("compute", "c1")
-    svc = KinematicsService(comp, arms={"arm1": ArmPlacement("meca500", BASE)}, streams=[("arm1", "target")], discover=False)
-    user = connect("user", "alice")
-    yield svc, comp, user
-    svc.close()
+    with KinematicsService(comp, arms={"arm1": ArmPlacement("meca500", BASE)}, streams=[("arm1", "target")], discover=False) as svc:
+        user = connect("user", "alice")
+        yield svc, comp, user
 
 
 def test_fk_ik_round_trip_in_world_and_base_frames(served, world):
@@ -258,7 +257,7 @@ def test_an_arm_asked_for_before_its_joints_arrive_is_looked_up_not_refused(worl
     the world's description instead of failing with "serves no arms yet" (a lab run failed that way)."""
     from fabric.interfaces import RobotInfo, WorldInfo
 
-    svc = KinematicsService(connect("compute"), discover=True)
+    svc = KinematicsService(connect("compute"), discover=True).start()
     try:
         sim = connect("sim")
         six = np.zeros(6)
@@ -269,5 +268,32 @@ def test_an_arm_asked_for_before_its_joints_arrive_is_looked_up_not_refused(worl
         target = np.array(BASE[:3]) + np.array([0.19, 0.0, 0.31])
         reply = user.call(keys.srv(world, "ik", "arm1"), IKRequest(target), timeout=10.0, expected=IKReply)
         assert reply.robot == "arm1" and svc.arms == ["arm1"], svc.counters
+    finally:
+        svc.close()
+
+
+def _threads(prefix: str) -> list[str]:
+    import threading
+
+    return [t.name for t in threading.enumerate() if t.name.startswith(prefix)]
+
+
+def test_the_service_starts_its_threads_on_start_not_on_construction(world, connect):
+    """Declared on construction (it answers at once); streaming and background lookups only once started."""
+    sim = connect("sim")  # a sim's token (no srv/world): seen while declaring, it would set a lookup off
+    streams = len(_threads("rate-ik-stream"))
+    svc = KinematicsService(connect("compute", "c9"), arms={"arm1": ArmPlacement("meca500", BASE)}, streams=[("arm1", "target")])
+    try:
+        wait_until(lambda: ("sim", sim.peer_id) in svc.fabric.live_peers("sim"), what="the sim's token")
+        assert len(_threads("rate-ik-stream")) == streams
+        # a lookup thread lives until its lookup has failed and been counted: neither means none ran
+        assert not _threads("kinematics-discovery") and "discovery_failed" not in svc.counters, svc.counters
+        assert connect("user").call(keys.srv(world, "fk", "arm1"), FKRequest(Q)).position.shape == (3,)  # serving already
+        with svc as same:
+            assert same is svc and len(_threads("rate-ik-stream")) == streams + 1
+            wait_until(lambda: svc.counters.get("discovery_failed", 0) >= 1, what="the first lookup, in the background")
+            svc.start()  # once
+            assert len(_threads("rate-ik-stream")) == streams + 1
+        wait_until(lambda: len(_threads("rate-ik-stream")) == streams, what="the stream loop stopped on close")
     finally:
         svc.close()
