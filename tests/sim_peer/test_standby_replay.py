@@ -1,0 +1,72 @@
+"""A standby applies again, at its take-over, the commands sent after its last snapshot (issue 16).
+
+In-process hosts (sim_peer.standby.ReplicaHost) on a real router, the standby's polling held after one
+snapshot, so that a joint target sent afterwards is certainly not in it: the arm it set moving must go on
+to that target under the new authority, not back to the snapshot's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fabric import keys
+from fabric.gate import OpenGate
+from fabric.interfaces import Command, JointTarget
+from fabric.testing import client, wait_until
+from sim_peer import election as el
+from sim_peer.standby import ReplicaHost
+from sim_peer.world import SimWorld
+
+pytestmark = pytest.mark.slow  # two sim hosts and a router: seconds
+
+
+def _gate(fabric, world, restored):
+    return OpenGate()
+
+
+def _send(fab, key, msg) -> bool:
+    fab.publish(key, msg)
+    return False
+
+
+def _host(world: str, port: int, peer_id: str, *, standby: bool) -> ReplicaHost:
+    fab = client(world, port, kind="sim", peer_id=peer_id)
+    return ReplicaHost(fab, SimWorld("combined", seed=1), _gate, standby=standby).open()
+
+
+def test_a_joint_target_sent_after_the_last_snapshot_goes_on_under_the_new_authority(world, router, connect):
+    port = router[1]
+    primary = _host(world, port, "sim-a", standby=False)
+    standby = _host(world, port, "sim-b", standby=True)
+    try:
+        wait_until(lambda: standby.snapshot is not None and standby.snapshot.header.source == "sim-a", timeout=20,
+                   what="a first snapshot")
+        # hold the polling: after the poll under way (if any) no snapshot comes until the take-over
+        asked = standby.snapshot_asked
+        standby.poll_s = 3600.0
+        wait_until(lambda: standby.snapshot_asked != asked, timeout=10, what="the last poll")
+        held = standby.snapshot
+        arm = standby.world.robots["arm1"]
+        assert np.abs(held.robot("arm1").target).max() < 1e-9  # the snapshot knows no target but the spawn pose
+
+        user = connect("user", "alice")
+        target = np.radians([50.0, 20.0, -30.0, 20.0, 40.0, -20.0])
+        cmd = Command("alice", 0, JointTarget(target, speed_scale=0.2))
+        moving = lambda: "arm1" in standby.joints and np.abs(standby.joints["arm1"].dq).max() > 0.05  # noqa: E731
+        # resent until the primary moves: a first put on a fresh publisher can go out before the route exists
+        wait_until(lambda: moving() or _send(user, keys.robot_cmd(world, "arm1", "joints", "alice"), cmd), timeout=20,
+                   interval=0.3, what="the primary moving the arm")
+        assert standby.snapshot is held  # still the one from before the command
+        assert any(isinstance(m, Command) for _, _, m in standby.commands)
+
+        primary.close()
+        primary.fabric.close()  # its token goes: the standby takes over
+        wait_until(lambda: standby.role == el.PRIMARY and standby.peer is not None, timeout=20, what="the take-over")
+        wait_until(lambda: np.abs(arm.ctrl.q - target).max() < 1e-3, timeout=30, what="the arm at the target sent after the snapshot",
+                   seen=lambda: (np.degrees(arm.ctrl.q).round(1), np.degrees(arm.ctrl.target).round(1)))
+        assert standby.peer.counters["accepted"] >= 1
+    finally:
+        for host in (standby, primary):
+            host.close()
+            host.fabric.close()
