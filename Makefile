@@ -31,5 +31,9 @@ test: $(STAMP_TEST)
 test-fast: $(STAMP_TEST)
 	$(PY) -m pytest -q -m "not slow"
 
+# every benchmark, shortened (`robofabric bench all` without --quick for the figures in docs/benchmarks.md)
+bench: $(STAMP)
+	$(VENV)/bin/robofabric bench all --quick
+
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fabric.interfaces import wrap_angle
+from fabric.interfaces import EventKind, wrap_angle
 from robots import BaseSpec
 
 MOVING_JOINT_SPEED = 1e-3  # rad/s: above this a joint counts as moving (the ownership gate's "in motion")
@@ -154,10 +154,10 @@ class BaseController:
 
     def __init__(
         self, spec: BaseSpec, pose: tuple[float, float, float] = (0.0, 0.0, 0.0), *, twist_timeout: float | None = None,
-        on_news: Callable[[str], None] | None = None,
+        on_news: Callable[[EventKind], None] | None = None,
     ) -> None:
         self.spec = spec
-        self.on_news = on_news  # told "path_done" or "twist_timeout" when they happen (no cost per step)
+        self.on_news = on_news  # told EventKind.PATH_DONE or TWIST_TIMEOUT when they happen (no cost per step)
         self.twist_timeout = twist_timeout  # s of sim time a twist holds without a fresh one (None: until told otherwise)
         self._since_twist = 0.0
         self.twists_expired = 0
@@ -236,7 +236,7 @@ class BaseController:
                 self.follower = None
                 self.paths_done += 1
                 if self.on_news is not None:
-                    self.on_news("path_done")
+                    self.on_news(EventKind.PATH_DONE)
                 v_d = w_d = 0.0
             self.v_cmd, self.omega_cmd = v_d, w_d
         elif self.twist_timeout is not None and (self.v_cmd or self.omega_cmd):
@@ -245,7 +245,7 @@ class BaseController:
                 self.v_cmd = self.omega_cmd = 0.0
                 self.twists_expired += 1
                 if self.on_news is not None:
-                    self.on_news("twist_timeout")
+                    self.on_news(EventKind.TWIST_TIMEOUT)
         dv = max(-s.max_accel * dt, min(s.max_accel * dt, self.v_cmd - self.v))
         dw = max(-s.max_alpha * dt, min(s.max_alpha * dt, self.omega_cmd - self.omega))
         self.v += dv

@@ -223,8 +223,8 @@ class MobileRobot(SimRobot):
     def before_step(self, physics: Physics) -> None:
         self.ctrl.step(physics.dt)
 
-    def _on_news(self, news: str) -> None:
-        if news == "path_done":
+    def _on_news(self, news: EventKind) -> None:
+        if news == EventKind.PATH_DONE:
             self.note(Note(EventKind.PATH_DONE, "path followed to its end"))
         else:
             self.note(Note(EventKind.TWIST_TIMEOUT, "no fresh twist within the timeout: stopping"))

@@ -22,6 +22,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from fabric.interfaces import EventKind
 from robots import SceneDescription, SceneRobot
 from sim_peer.build import SensorOptions, compile_model, load_scene, resolve, scene_objects
 from sim_peer.errors import WorldError
@@ -163,7 +164,7 @@ class SimWorld:
     @property
     def collisions(self) -> list[tuple[str, float]]:
         """(robot id, sim time) of the bumper stops not taken yet."""
-        return [(rid, n.data["t"]) for rid, n in self.notes if n.kind == "collision"]
+        return [(rid, n.data["t"]) for rid, n in self.notes if n.kind == EventKind.COLLISION]
 
     # ------------------------------------------------------------------ robots and objects
 

@@ -62,3 +62,40 @@ def test_the_scan_finds_a_literal_kind():
     tree = ast.parse('Event(kind="reject")\nself._event("clamp", rid, "x")\nEvent(kind=f"own_{k}")\nEvent(kind=EventKind.REJECT)\n'
                      'Note("collision", "bumper")\nNote(EventKind.PATH_DONE, "done")')
     assert [t for _, t in _literal_kinds(tree)] == ["'reject'", "'clamp'", "f'own_{k}'", "'collision'"]
+
+
+def _literal_matches(tree: ast.AST) -> list[tuple[int, str]]:
+    """(line, text) of comparisons of a ``kind`` (name or attribute) with a string literal that is an event kind:
+    ``note.kind == "collision"``, ``kind in ("reject", "clamp")`` (a robot's kind, ``"arm"``, is no event kind)."""
+    kinds = {k.value for k in EventKind}
+
+    def strings(n: ast.AST) -> list[str]:
+        if isinstance(n, ast.Constant) and isinstance(n.value, str):
+            return [n.value]
+        if isinstance(n, (ast.Tuple, ast.List, ast.Set)):
+            return [v for e in n.elts for v in strings(e)]
+        return []
+
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Compare):
+            operands = [node.left, *node.comparators]
+            if any((isinstance(o, ast.Attribute) and o.attr == "kind") or (isinstance(o, ast.Name) and o.id == "kind")
+                   for o in operands) and any(v in kinds for o in operands for v in strings(o)):
+                out.append((node.lineno, ast.unparse(node)))
+    return out
+
+
+def test_no_reader_matches_a_kind_as_a_string():
+    found = []
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            for line, text in _literal_matches(ast.parse(path.read_text(), str(path))):
+                found.append(f"{path.relative_to(ROOT)}:{line}: {text}")
+    assert not found, "event kinds matched as strings (use fabric.interfaces.EventKind):\n" + "\n".join(found)
+
+
+def test_the_scan_finds_a_literal_match():
+    tree = ast.parse('n.kind == "collision"\nkind in ("reject", "x")\nr.kind == "arm"\nn.kind == EventKind.COLLISION\n'
+                     '"path_done" != ev.kind\nname == "clamp"')
+    assert [t for _, t in _literal_matches(tree)] == ["n.kind == 'collision'", "kind in ('reject', 'x')", "'path_done' != ev.kind"]
