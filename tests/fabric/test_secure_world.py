@@ -307,6 +307,44 @@ def test_tls_refuses_a_certificate_from_another_ca(tmp_path):
             sim.close()
 
 
+def _expire_certificate(d, name: str) -> None:
+    """Replace ``name``'s certificate by one the class's own CA signed but that ran out yesterday."""
+    import datetime as dt
+
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+
+    ca = x509.load_pem_x509_certificate((d / "ca.pem").read_bytes())
+    ca_key = serialization.load_pem_private_key((d / "ca-key.pem").read_bytes(), password=None)
+    key = serialization.load_pem_private_key((d / f"{name}-key.pem").read_bytes(), password=None)
+    old = x509.load_pem_x509_certificate((d / f"{name}.pem").read_bytes())
+    now = dt.datetime.now(dt.timezone.utc)
+    builder = (x509.CertificateBuilder().subject_name(old.subject).issuer_name(ca.subject).public_key(key.public_key())
+               .serial_number(x509.random_serial_number()).not_valid_before(now - dt.timedelta(days=10))
+               .not_valid_after(now - dt.timedelta(days=1)))
+    for ext in old.extensions:
+        builder = builder.add_extension(ext.value, critical=ext.critical)
+    (d / f"{name}.pem").write_bytes(builder.sign(ca_key, hashes.SHA256()).public_bytes(serialization.Encoding.PEM))
+
+
+def test_tls_refuses_an_expired_certificate(tmp_path):
+    ep = f"tls/127.0.0.1:{free_port()}"
+    made = init(tmp_path / "class", users=["alice", "bob"], tls=True, listen=[ep])
+    from fabric.secure import TLS_DIR
+
+    _expire_certificate(tmp_path / "class" / TLS_DIR, "alice")
+    with ProcessGroup(tmp_path) as procs:
+        router = procs.start(robofabric_cmd("router", "--zenoh-config", str(made.router)), name="router")
+        wait_until(lambda: "listening" in procs.output(router), timeout=30, what="TLS router", seen=lambda: procs.output(router))
+        good = _cli("ps", "--json", "--zenoh-config", str(made.clients["bob"]))  # the router is there for a valid one
+        assert good.returncode == 0, good.stderr
+        out = _cli("ps", "--zenoh-config", str(made.clients["alice"]))
+        lines = out.stderr.strip().splitlines()
+        assert out.returncode == 2 and len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
+        assert lines[0] == f"error: authentication failed for alice at {ep}: the router refused this login " \
+                           "(wrong password, unknown user, or a certificate it does not trust)"
+
+
 def test_paper_tests_a_and_b_in_a_secure_world(secure, alice_owns_arm):
     """Router, sim, compute and viewer with their own logins; alice runs Test A, bob Test B (trimmed)."""
     import user_peer
