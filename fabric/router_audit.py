@@ -28,7 +28,9 @@ __all__ = ["Refusal", "RefusalCounter", "parse_refusal", "summary", "Audit", "LO
 
 LOG_FILTER = "error,zenoh::net::routing::interceptor=trace"
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
-_REFUSED = re.compile(r"is unauthorized to (?P<message>\w+) \((?P<flow>\w+)\) on (?P<key>\S+)")
+# the message is one word (Put, Query, Reply) or, for declarations, several: "Declare Queryable",
+# "Declare/Undeclare Liveliness Token" (zenoh 1.10); named as in the config's rules (declare_queryable)
+_REFUSED = re.compile(r"is unauthorized to (?P<message>\w[\w/ ]*?) \((?P<flow>\w+)\) on (?P<key>\S+)")
 _SUBJECT = re.compile(r"(?:Username|CertCommonName|CommonName)\((?P<who>[^)]*)\)")
 _ACL_LINE = "zenoh::net::routing::interceptor"
 _DROPPED = "Msg intercepted!"
@@ -92,7 +94,15 @@ def parse_refusal(line: str, logins: dict[str, str] | None = None) -> Refusal | 
     if name is None and logins:
         z = _ZID.search(text)
         name = logins.get(z.group("zid")) if z else None
-    return Refusal(name or "?", m.group("message").lower(), m.group("flow"), m.group("key"))
+    return Refusal(name or "?", _message_name(m.group("message")), m.group("flow"), m.group("key"))
+
+
+def _message_name(text: str) -> str:
+    """zenoh's words for a message as the access-control rules spell it: ``Declare/Undeclare Queryable``
+    and ``Declare Queryable`` -> ``declare_queryable``, ``Declare/Undeclare Liveliness Token`` ->
+    ``liveliness_token``, ``Put`` -> ``put``."""
+    name = text.lower().replace("declare/undeclare ", "declare ").replace(" ", "_")
+    return "liveliness_token" if name == "declare_liveliness_token" else name
 
 
 class Audit:

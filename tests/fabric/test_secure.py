@@ -141,6 +141,19 @@ def test_the_audit_counts_dropped_messages_by_the_decision_that_dropped_them():
         c.feed(text)
     ref = Refusal("mallory", "put", "ingress", "rf/w/own/arm1")
     assert c.counts == Counter({ref: 2, UNKNOWN: 1})  # a decision is logged once per key; each drop counts
+    # a declaration: zenoh caches every kind of message for the key (the last one logged is Declare/Undeclare
+    # Liveliness Token), then drops the declaration after a cached decision; it was counted as the last
+    # one-word decision before it ("Delete"), the multi-word ones not being read
+    who = "57948cd3 on Interface(lo)+Username(mallory)+Transport(Tcp)+57948cd3"
+    c = RefusalCounter()
+    for text in [line(8, f"{who} is unauthorized to {m} (ingress) on rf/w/srv/world")
+                 for m in ("Reply", "Put", "Delete", "Declare/Undeclare Queryable", "Declare/Undeclare Liveliness Token")] + [
+            line(8, "Using cached result: 57948cd3 is unauthorized to Declare Queryable (ingress) on rf/w/srv/world"),
+            line(8, "Msg intercepted!", module="zenoh::net::routing::interceptor")]:
+        c.feed(text)
+    assert c.counts == Counter({Refusal("mallory", "declare_queryable", "ingress", "rf/w/srv/world"): 1})
+    assert parse_refusal(line(8, f"{who} is unauthorized to Declare/Undeclare Liveliness Token (ingress) on rf/w/peer/sim/x")) \
+        == Refusal("mallory", "liveliness_token", "ingress", "rf/w/peer/sim/x")  # as the rules name it
     text = summary(Counter({ref: 3, Refusal("eve", "query", "ingress", "rf/w/own/arm1/by/bob"): 1}), prefix="refused")
     assert text.startswith("refused: 4 (put 3, query 1); mallory put rf/w/own/arm1 x3")
 
