@@ -186,6 +186,14 @@ def test_a_payload_naming_someone_else_than_the_key_is_refused(world, sim, user)
     assert peer.counters["accepted"] == 0 and peer.last_state("arm1")["target"] == [0.0] * 6
 
 
+def test_a_pose_in_a_made_up_frame_is_refused_quoting_little_of_it(world, sim, user):
+    peer, _ = sim
+    fab, inbox = user
+    fab.publish(keys.object_pose(world, "target", "alice"), Pose(np.array([3.2, 0.1, 1.0]), frame="f" * 4000))
+    ev = wait_until(lambda: inbox.event("reject", "bad_frame"), what="bad_frame event", seen=lambda: inbox.events)
+    assert ev.object == "target" and len(ev.data["detail"]) < 300 and "(4000 characters)" in ev.data["detail"], ev.data
+
+
 def test_scene_objects_move_and_the_world_service_describes_everything(world, sim, user):
     peer, _ = sim
     fab, inbox = user
