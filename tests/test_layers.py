@@ -7,6 +7,7 @@ could never break (a typo in a module name, a wildcard that matches nothing) fai
 
 from __future__ import annotations
 
+import logging
 import os
 import subprocess
 import sys
@@ -36,7 +37,16 @@ def test_contracts_hold(monkeypatch, capsys):
     from importlinter.cli import lint_imports
 
     monkeypatch.chdir(ROOT)
-    code = lint_imports(config_filename=str(ROOT / "pyproject.toml"), no_cache=True)
+    # import-linter configures logging with dictConfig, which disables every logger that exists: put them
+    # back, or every later test in this process that reads the fabric's log lines (caplog) hears nothing
+    manager = logging.root.manager
+    disabled = {name: lg.disabled for name, lg in manager.loggerDict.items() if isinstance(lg, logging.Logger)}
+    try:
+        code = lint_imports(config_filename=str(ROOT / "pyproject.toml"), no_cache=True)
+    finally:
+        for name, lg in list(manager.loggerDict.items()):
+            if isinstance(lg, logging.Logger):
+                lg.disabled = disabled.get(name, lg.disabled)
     out = capsys.readouterr()
     assert code == 0, out.out + out.err
     assert "0 broken" in out.out
