@@ -45,6 +45,7 @@ from fabric.interfaces import (
     Scan,
     Stop,
     Twist,
+    WorldInfo,
     quaternion_from_yaw,
     yaw_from_quaternion,
 )
@@ -189,7 +190,7 @@ class World:
         self._closed = False
         self._robots: dict[str, Robot] = {}
         self._objects: dict[str, SceneObject] = {}
-        self._info: Any = None
+        self._info: WorldInfo | None = None
         # the latest of every robot stream (ik: a compute peer's streamed IK, Test A), scene object and map
         # scene objects, maps and paths are latched: what was set before this user joined comes at once
         for stream in ("joints", "pose", "scan", "path", "ik"):
@@ -335,7 +336,7 @@ class World:
 
     # ------------------------------------------------------------------ what is there
 
-    def info(self, *, refresh: bool = False, timeout: float | None = None) -> Any:
+    def info(self, *, refresh: bool = False, timeout: float | None = None) -> WorldInfo:
         """The sim peer's world description (robots, types, limits, sensors).
 
         The first call waits up to ``timeout`` (default ``join_timeout``) for a sim peer to serve it, so a
@@ -346,7 +347,7 @@ class World:
             self._info = self._wait_world(wait)
         return self._info
 
-    def _wait_world(self, wait: float) -> Any:
+    def _wait_world(self, wait: float) -> WorldInfo:
         key = keys.srv(self.name, "world")
         t0 = time.monotonic()
         deadline = t0 + wait
