@@ -231,7 +231,9 @@ def test_a_user_cannot_publish_robot_state_or_serve_the_world(secure):
     records = watcher.query(keys.own(w, "arm1"), timeout=5.0, all_replies=True)
     assert records and all(r.message.owner != "mallory" for r in records)
     _refused_by_router(secure, f"mallory put {keys.robot_joints(w, 'arm1')}")
-    for key in (keys.srv(w, "world"), keys.own(w, "arm1")):  # her queryables: refused when declared
+    # nor a compute's services: an IK "answer" of hers would steer whoever asks into her joints
+    mallory.serve(keys.srv(w, "ik", "arm1"), lambda key, req: Event(kind="forged", reason="mallory's IK"))
+    for key in (keys.srv(w, "world"), keys.own(w, "arm1"), keys.srv(w, "ik", "arm1")):  # her queryables: refused when declared
         _refused_by_router(secure, f"mallory declare_queryable {key} x")
     _refused_by_router(secure, f"mallory liveliness_token {keys.peer(w, 'sim', 'fake-sim')} x")  # her sim token
     assert ("sim", "fake-sim") not in watcher.live_peers("sim")
