@@ -100,6 +100,7 @@ class ReplicaHost:
         self.commands: deque[tuple[float, str, Any]] = deque()
         self.snapshot_asked = time.monotonic()
         self.live: set[str] = set()
+        self._settled = False  # the first complete view of the live sims is in (open)
         self.takeovers: list[dict[str, Any]] = []
         self.last_state: WorldState | None = None
         self._lock = threading.RLock()
@@ -128,16 +129,20 @@ class ReplicaHost:
             f.subscribe_raw(keys.robot_cmd_all(w), self._on_command_sample)
             for obj in self.world.objects:
                 f.subscribe(keys.object_pose_all(w, obj), self._on_object, expected=Pose)
-        # first a complete view of the live sims (a liveliness query), then changes: the election reads a
-        # leader missing from a view as gone, so the view must not be a history still arriving
+        # first a complete view of the live sims, then changes: the election reads a leader missing from a
+        # view as gone, so the view must not be a history still arriving. The watch comes first (what it
+        # hears meanwhile is kept, but decides nothing until the view is settled), then a liveliness query
+        f.watch_peers(self._on_sim, kind="sim")
         try:
             initial = {pid for _, pid in f.live_peers("sim", timeout=2.0)}
         except Exception:
             initial = set()
         with self._lock:
             self.live |= initial | {f.peer_id}
+        self._await_leader(self.election.leader)
+        with self._lock:
+            self._settled = True
             live = frozenset(self.live)
-        f.watch_peers(self._on_sim, kind="sim")
         self._step(el.Peers(live))
         if self.role != el.PRIMARY:
             self._poller = threading.Thread(target=self._poll, name="standby-poll", daemon=True)
@@ -330,12 +335,29 @@ class ReplicaHost:
             with self._lock:
                 self.poses[keys.parse(key).subject] = p
 
+    def _await_leader(self, leader: str) -> None:
+        """A standby that already follows ``leader`` (a primary that just stepped down on hearing its higher
+        term) waits up to a transport lease for its token: the first liveliness query of a fresh session
+        can answer before the router's tokens have reached it (seen in the lab after a healed partition:
+        the view held only our own token, and the stepped-down primary took the world back at once, with
+        its own stale state). A leader whose token does not show within the lease is gone: take over."""
+        if self.role != el.STANDBY or not leader or leader == self.fabric.peer_id:
+            return
+        deadline = time.monotonic() + self.fabric.config.lease_ms / 1000.0
+        while time.monotonic() < deadline and not self._stop.is_set():
+            with self._lock:
+                if leader in self.live:
+                    return
+            time.sleep(0.02)
+
     def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
         with self._lock:
             (self.live.add if alive else self.live.discard)(peer_id)
             live = frozenset(self.live)
-        if alive:
-            return  # a token appearing (or the history repeating one) never starts a take-over
+            settled = self._settled
+        if alive or not settled:
+            return  # a token appearing (or the history repeating one) never starts a take-over; nor does
+            # one going before the first view is settled (open() steps on the whole view then)
         self._step(el.Peers(live))
 
     def _heard(self, source: str, term: int) -> None:

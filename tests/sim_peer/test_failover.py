@@ -2,7 +2,9 @@
 
 SIGKILL the primary while alice's arm moves and bob's base follows a path: the standby takes over
 with a higher authority epoch, from the last state (no reset), owners keep their robots and epochs,
-streams resume, the motions go on. SIGSTOP the primary past the lease, SIGCONT it: it steps down.
+streams resume, the motions go on. The paper's Test A and Test B themselves, run through the user API
+with a compute peer, survive two such kills with two standbys (the lowest id takes over each time).
+SIGSTOP the primary past the lease, SIGCONT it: it steps down.
 """
 
 from __future__ import annotations
@@ -286,10 +288,13 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
     sims = {"sim-a": _start(procs, world, ep, "sim-a")}
     wait_until(lambda: "world" in procs.output(sims["sim-a"]) and router[0].live_peers("sim"), timeout=90, what="the primary",
                seen=lambda: procs.output(sims["sim-a"])[-1500:])
-    # the higher id first: the one that takes over is chosen by id, not by who came first
+    # the higher id first, following before the other starts: the one that takes over is chosen by id,
+    # not by who came first
     sims["sim-c"] = _start(procs, world, ep, "sim-c", "--standby")
-    sims["sim-b"] = _start(procs, world, ep, "sim-b", "--standby")
     comp = procs.start(robofabric_cmd("compute", "--world", world, "--connect", ep), name="compute")
+    wait_until(lambda: "following sim-a (term 1)" in procs.output(sims["sim-c"]), timeout=90, what="sim-c following sim-a",
+               seen=lambda: procs.output(sims["sim-c"])[-1500:])
+    sims["sim-b"] = _start(procs, world, ep, "sim-b", "--standby")
     for sid in ("sim-b", "sim-c"):
         wait_until(lambda: "following sim-a (term 1)" in procs.output(sims[sid]), timeout=90, what=f"{sid} following sim-a",
                    seen=lambda: procs.output(sims[sid])[-1500:])

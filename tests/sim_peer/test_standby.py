@@ -1,11 +1,16 @@
-"""A standby applies again, at its take-over, the commands sent after its last snapshot (issue 16).
+"""sim_peer.standby.ReplicaHost in-process on a real router (issue 16).
 
-In-process hosts (sim_peer.standby.ReplicaHost) on a real router, the standby's polling held after one
-snapshot, so that a joint target sent afterwards is certainly not in it: the arm it set moving must go on
-to that target under the new authority, not back to the snapshot's.
+- A standby applies again, at its take-over, the commands sent after its last snapshot: its polling is
+  held after one snapshot, so that a joint target sent afterwards is certainly not in it; the arm it set
+  moving must go on to that target under the new authority, not back to the snapshot's.
+- A standby that already follows a leader (a primary that stepped down) does not read a first view of
+  the live sims that lacks it as the leader's death: it waits up to a lease for the leader's token.
 """
 
 from __future__ import annotations
+
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -62,7 +67,7 @@ def test_a_joint_target_sent_after_the_last_snapshot_goes_on_under_the_new_autho
 
         primary.close()
         primary.fabric.close()  # its token goes: the standby takes over
-        wait_until(lambda: standby.role == el.PRIMARY and standby.peer is not None, timeout=20, what="the take-over")
+        wait_until(lambda: standby.takeovers, timeout=20, what="the take-over done")
         wait_until(lambda: np.abs(arm.ctrl.q - target).max() < 1e-3, timeout=30, what="the arm at the target sent after the snapshot",
                    seen=lambda: (np.degrees(arm.ctrl.q).round(1), np.degrees(arm.ctrl.target).round(1)))
         assert standby.peer.counters["accepted"] >= 1
@@ -70,3 +75,47 @@ def test_a_joint_target_sent_after_the_last_snapshot_goes_on_under_the_new_autho
         for host in (standby, primary):
             host.close()
             host.fabric.close()
+
+
+def test_a_standby_told_its_leader_waits_for_its_token_before_taking_over(world, router):
+    """A primary that stepped down reopens as a standby of the leader it just heard; its fresh session's
+    first liveliness query may not hold the leader's token yet (here: the token shows 0.3 s later). It
+    must stay a standby, not take the world back with its own stale state."""
+    port = router[1]
+    leader: list = []
+    late = threading.Timer(0.3, lambda: leader.append(client(world, port, kind="sim", peer_id="sim-x")))
+    late.start()
+    fab = client(world, port, kind="sim", peer_id="sim-a")
+    host = ReplicaHost(fab, SimWorld("combined", seed=1), _gate, standby=True, term=2, leader="sim-x")
+    try:
+        host.open()
+        assert host.role == el.STANDBY and host.election.leader == "sim-x" and host.peer is None, host.election
+        assert "sim-x" in host.live
+        # and the leader going is still seen: the standby takes over with the next term
+        late.join()
+        leader[0].close()
+        wait_until(lambda: host.takeovers, timeout=20, what="the take-over done",
+                   seen=lambda: host.election)
+        assert host.election.term == 3
+    finally:
+        late.cancel()
+        host.close()
+        fab.close()
+        for f in leader:
+            f.close()
+
+
+def test_a_standby_whose_leader_never_shows_takes_over_after_a_lease(world, router):
+    """The leader died while we switched sessions: its token never shows, so no token going will ever
+    be heard; after a lease the standby takes over."""
+    fab = client(world, router[1], kind="sim", peer_id="sim-a")
+    host = ReplicaHost(fab, SimWorld("combined", seed=1), _gate, standby=True, term=2, leader="sim-x")
+    try:
+        t0 = time.monotonic()
+        host.open()
+        wait_until(lambda: host.takeovers, timeout=20, what="the take-over done")
+        assert host.election.term == 3
+        assert time.monotonic() - t0 >= fab.config.lease_ms / 1000.0  # not on the first, partial view
+    finally:
+        host.close()
+        fab.close()
