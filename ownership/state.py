@@ -316,6 +316,19 @@ def step(s: OwnState, ev: Event) -> tuple[OwnState, list[Effect]]:
             recs[rec.object] = replace(rec, lease_expiry=ev.now + s.lease_s)
             effects.append(Effect("renewed", rec.object, ev.user))
             return _with(s, recs), effects
+        away = s.away.get(ev.user)
+        if (not rec.owner and away is not None and rec.object in away.owned and ev.now <= away.deadline
+                and len(s.unproven) < MAX_UNPROVEN):
+            # Her token went (a router restart closes every link) and her renewal is back before it: the
+            # renewal proves she is there, as a request does, so she gets back what she held, as her
+            # token's return would give it. Left to the token, the renewal was denied, her client stopped
+            # renewing, and a restore it then missed expired a lease later (router loss, issue 15).
+            s = replace(s, unproven=MappingProxyType({**s.unproven, ev.user: ev.now + s.grace_s}))
+            s = _join(s, ev.user)
+            recs[rec.object] = replace(rec, owner=ev.user, epoch=rec.epoch + 1, lease_expiry=ev.now + s.lease_s,
+                                       queue=tuple(u for u in rec.queue if u != ev.user))
+            effects.append(Effect("restored", rec.object, ev.user, "owner again: renewed within grace"))
+            return _with(s, recs), effects
         effects.append(Effect("denied", rec.object, ev.user, f"not the owner ({rec.owner or 'free'})"))
         return s, effects
 

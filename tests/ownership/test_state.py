@@ -269,3 +269,34 @@ def test_nothing_is_kept_about_tokenless_users_once_grace_is_over(seq):
     assert not s.unproven
     for rec in s.records.values():
         assert set(rec.queue) <= joined and rec.owner in joined | {""}
+
+
+def test_an_owner_whose_renewal_is_back_before_her_token_gets_her_robot_back():
+    """A router restart closes every link: the authority sees alice's token go and frees her arm, and
+    her renewal can come back before her token does. It proves she is there (as a request does): she is
+    owner again under a newer epoch, as her token's return would make her. Past grace, or once someone
+    else took the arm, the renewal is denied as before."""
+    s = st.initial({"arm": "exclusive"}, lease_s=2.0, grace_s=10.0)
+    s, _ = st.step(s, st.Join("alice", 0.0))
+    s, _ = st.step(s, st.Request("alice", "arm", 0.0))
+    e1 = s.records["arm"].epoch
+    s, _ = st.step(s, st.Leave("alice", 1.0))
+    assert s.records["arm"].owner == "" and "alice" in s.away
+    back, eff = st.step(s, st.Renew("alice", "arm", 2.0))
+    assert [(e.kind, e.user) for e in eff] == [("restored", "alice")]
+    assert back.records["arm"].owner == "alice" and back.records["arm"].epoch > e1 + 1
+    check_invariants(back)
+    back, eff = st.step(back, st.Join("alice", 2.5))  # her token follows: nothing changes hands again
+    assert back.records["arm"].owner == "alice" and not eff and not back.unproven and "alice" not in back.away
+    # too late: grace is over
+    late, eff = st.step(s, st.Renew("alice", "arm", 11.5))
+    assert late.records["arm"].owner == "" and eff[0].kind == "denied"
+    # someone else took the free arm meanwhile
+    s2, _ = st.step(s, st.Join("bob", 1.5))
+    s2, _ = st.step(s2, st.Request("bob", "arm", 1.5))
+    taken, eff = st.step(s2, st.Renew("alice", "arm", 2.0))
+    assert taken.records["arm"].owner == "bob" and eff[0].kind == "denied"
+    # a user who never held it is not given it by renewing
+    s3, _ = st.step(s, st.Join("carol", 1.5))
+    s3, eff = st.step(s3, st.Renew("carol", "arm", 2.0))
+    assert s3.records["arm"].owner == "" and eff[0].kind == "denied"
