@@ -55,6 +55,11 @@ a few milliseconds along it)."""
 KEEP_COMMANDS_S = 5.0
 """How long a standby keeps the commands it hears (far more than a poll period: a slow answer)."""
 
+MAX_KEPT_COMMANDS = 4096
+MAX_KEPT_BYTES = 16 * 1024 * 1024
+"""Caps on what a standby keeps of those seconds (oldest dropped first): a client flooding commands
+must not grow a standby's memory (issue 14); a class's real commands in 5 s are far fewer."""
+
 GateFactory = Callable[[Fabric, SimWorld, Any], Any]
 
 
@@ -97,7 +102,8 @@ class ReplicaHost:
         # (local arrival, key, message) of robot commands and object poses, and when the snapshot we hold
         # was asked for: what came after it is applied again at a take-over (a joint target sent in the
         # last poll period before the primary died is otherwise lost, and the arm stops short)
-        self.commands: deque[tuple[float, str, Any]] = deque()
+        self.commands: deque[tuple[float, str, Any, int]] = deque()  # (arrival, key, message, payload bytes)
+        self._kept_bytes = 0
         self.snapshot_asked = time.monotonic()
         self.live: set[str] = set()
         self._settled = False  # the first complete view of the live sims is in (open)
@@ -225,8 +231,9 @@ class ReplicaHost:
         refused, or would have; refusing them again would only repeat its events)."""
         with self._lock:
             since = self.snapshot_asked - REPLAY_MARGIN_S
-            todo = [(key, msg) for t, key, msg in self.commands if t >= since]
+            todo = [(key, msg) for t, key, msg, _ in self.commands if t >= since]
             self.commands.clear()
+            self._kept_bytes = 0
         for key, msg in todo:
             try:
                 if isinstance(msg, Command):
@@ -312,23 +319,30 @@ class ReplicaHost:
             with self._lock:
                 self.joints[keys.parse(key).subject] = js
 
-    def _keep(self, key: str, msg: Any) -> None:
+    def _keep(self, key: str, msg: Any, size: int = 0) -> None:
         now = time.monotonic()
         with self._lock:
             if self.peer is not None:
                 return  # serving: the peer takes commands itself (until it subscribes, they wait here)
-            self.commands.append((now, key, msg))
-            while self.commands and self.commands[0][0] < now - KEEP_COMMANDS_S:
-                self.commands.popleft()
+            self.commands.append((now, key, msg, size))
+            self._kept_bytes += size
+            # the last seconds, and never more than a cap in count and bytes whatever clients send (issue 14)
+            while self.commands and (
+                self.commands[0][0] < now - KEEP_COMMANDS_S
+                or len(self.commands) > MAX_KEPT_COMMANDS
+                or self._kept_bytes > MAX_KEPT_BYTES
+            ):
+                self._kept_bytes -= self.commands.popleft()[3]
 
     def _on_command_sample(self, sample: Any) -> None:
         try:
-            self._keep(str(sample.key_expr), decode(sample.payload.to_bytes(), Command))
+            payload = sample.payload.to_bytes()
+            self._keep(str(sample.key_expr), decode(payload, Command), len(payload))
         except DecodeError:
             pass  # the authority reports it; a standby keeps only what it could apply
 
     def _on_object(self, key: str, pose: Pose) -> None:
-        self._keep(key, pose)
+        self._keep(key, pose, 256)  # a pose is small and fixed in size (the codec caps its frame)
 
     def _on_pose(self, key: str, p: Pose) -> None:
         if self.role == el.STANDBY and p.header.source == self.election.leader:

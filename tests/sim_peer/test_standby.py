@@ -63,7 +63,7 @@ def test_a_joint_target_sent_after_the_last_snapshot_goes_on_under_the_new_autho
         wait_until(lambda: moving() or _send(user, keys.robot_cmd(world, "arm1", "joints", "alice"), cmd), timeout=20,
                    interval=0.3, what="the primary moving the arm")
         assert standby.snapshot is held  # still the one from before the command
-        assert any(isinstance(m, Command) for _, _, m in standby.commands)
+        assert any(isinstance(m, Command) for _, _, m, _ in standby.commands)
 
         primary.close()
         primary.fabric.close()  # its token goes: the standby takes over
@@ -119,3 +119,24 @@ def test_a_standby_whose_leader_never_shows_takes_over_after_a_lease(world, rout
     finally:
         host.close()
         fab.close()
+
+
+def test_what_a_standby_keeps_of_the_commands_it_hears_is_capped(world, router):
+    """A client flooding commands must not grow a standby's memory (issue 14): the seconds it keeps for
+    a take-over are capped in count and in bytes, oldest dropped first."""
+    from sim_peer import standby as sb
+
+    host = _host(world, router[1], "sim-b", standby=True)
+    try:
+        cmd = Command("alice", 0, JointTarget(np.zeros(6)))
+        key = keys.robot_cmd(world, "arm1", "joints", "alice")
+        for _ in range(sb.MAX_KEPT_COMMANDS + 500):
+            host._keep(key, cmd, 100)
+        assert len(host.commands) == sb.MAX_KEPT_COMMANDS
+        for _ in range(10):
+            host._keep(key, cmd, sb.MAX_KEPT_BYTES // 4)  # big payloads: the byte cap
+        assert host._kept_bytes <= sb.MAX_KEPT_BYTES and len(host.commands) <= 4
+        assert host._kept_bytes == sum(c[3] for c in host.commands)
+    finally:
+        host.close()
+        host.fabric.close()
