@@ -113,6 +113,7 @@ class ReplicaHost:
         self._stepped_down = threading.Event()
         self._stop = threading.Event()
         self._poller: threading.Thread | None = None
+        self._taking_over: threading.Thread | None = None
         # half the transport lease: a freeze long enough for the others to drop our token (a lease) is
         # always caught, with margin; a false alarm (a starved process) costs one query, muzzled
         self.freeze_gap = freeze_gap if freeze_gap is not None else fabric.config.lease_ms / 2000.0
@@ -171,6 +172,11 @@ class ReplicaHost:
 
     def close(self) -> None:
         self._stop.set()
+        # a take-over under way finishes first: closed meanwhile, it raised from its thread and could
+        # start a peer after close() had looked for one
+        taking = self._taking_over
+        if taking is not None and taking is not threading.current_thread():
+            taking.join(10.0)
         if self.peer is not None and self.role == el.STANDBY:  # stepped down: keep what we had, in case
             try:
                 self.last_state = self._on_state_query("", None, force=True)
@@ -383,7 +389,9 @@ class ReplicaHost:
             self.election, effects = el.step(self.election, ev)
         for e in effects:
             if e.kind == "take_over":
-                threading.Thread(target=self._take_over, args=(time.monotonic(),), name="take-over", daemon=True).start()
+                t = threading.Thread(target=self._take_over, args=(time.monotonic(),), name="take-over", daemon=True)
+                self._taking_over = t
+                t.start()
             elif e.kind == "step_down":
                 self.fabric.muzzled = True  # from now on nothing with the old term goes out
                 self.announce(f"sim {self.fabric.peer_id}: {e.leader} holds term {e.term}; stepping down to standby")
@@ -396,6 +404,8 @@ class ReplicaHost:
                 self.announce(f"standby {self.fabric.peer_id}: following {e.leader} (term {e.term})")
 
     def _take_over(self, t0: float) -> None:
+        if self._stop.is_set():
+            return  # closing: a world that is going away is not served again
         with self._lock:
             state = self.snapshot
         if state is None:

@@ -140,3 +140,15 @@ def test_what_a_standby_keeps_of_the_commands_it_hears_is_capped(world, router):
     finally:
         host.close()
         host.fabric.close()
+
+
+def test_a_closed_standby_does_not_take_over(world, router):
+    """A take-over decided as the host closes must not serve a world that is going away (it raised from
+    its thread, or started a peer after close() had looked for one)."""
+    host = _host(world, router[1], "sim-b", standby=True)
+    host.close()
+    try:
+        host._take_over(time.monotonic())
+        assert host.peer is None and not host.takeovers
+    finally:
+        host.fabric.close()
