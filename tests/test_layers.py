@@ -18,7 +18,6 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 LINT = Path(sys.executable).with_name("lint-imports")
 
-pytestmark = pytest.mark.skipif(not LINT.exists(), reason="import-linter is not installed (pip install -e '.[test]')")
 
 
 def _run(config: Path, cwd: Path, extra_path: Path | None = None, contract: str | None = None) -> subprocess.CompletedProcess:
