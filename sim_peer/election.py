@@ -15,7 +15,9 @@ Rules:
   set of live peers agrees on one candidate.
 - A primary that hears a higher term steps down and becomes a standby of its source; one that hears
   its own term from another peer (two standbys disagreed about who was alive) keeps authority only
-  if its id is the lower: the pair converges on one authority without talking.
+  if its id is the lower: the pair converges on one authority without talking. A standby settles
+  the same tie the same way, unless the lower one's token is gone (it died, and a standby that
+  never heard its term took over with the same one).
 - State with a lower term than the highest heard is ignored (effect ``ignore``).
 - A primary back from a freeze longer than the lease that finds no higher term (``Resumed``) goes on
   under term + 1 (effect ``reassert``): a standby that took over and died meanwhile may have had
@@ -105,8 +107,10 @@ def step(s: Election, ev: Event) -> tuple[Election, list[ElectionEffect]]:
                 return s, [ElectionEffect("step_down", ev.term, ev.source)]
             return s, [ElectionEffect("ignore", ev.term, ev.source)]  # same term, higher id: it steps down, not us
         if ev.term > s.term or ev.source != s.leader:
-            if ev.term == s.term and s.leader and ev.source > s.leader:
-                return s, [ElectionEffect("ignore", ev.term, ev.source)]  # the same tie, seen from a standby
+            if ev.term == s.term and s.leader and ev.source > s.leader and s.leader in s.live:
+                # the same tie, seen from a standby; but a leader whose token went is no tie: a standby that
+                # never heard the dead one's term takes over with the same term, and must be followed
+                return s, [ElectionEffect("ignore", ev.term, ev.source)]
             seen = (s.leader_seen and ev.source == s.leader) or ev.source in s.live
             s = replace(s, term=ev.term, leader=ev.source, leader_seen=seen)
             return s, [ElectionEffect("follow", ev.term, ev.source)]
