@@ -19,10 +19,14 @@ from dataclasses import dataclass
 
 from fabric import keys
 
-__all__ = ["AUTHORITY_STREAMS", "Fence", "FenceVerdict", "is_authority_key"]
+__all__ = ["AUTHORITY_STREAMS", "Fence", "FenceVerdict", "SimFence", "MAX_DEPARTED_SIMS", "is_authority_key"]
 
 AUTHORITY_STREAMS = frozenset({"joints", "pose", "scan", "sonar"})
 """Robot streams only a sim authority writes (paths and IK results come from compute and users)."""
+
+MAX_DEPARTED_SIMS = 256
+"""Ids of sims whose token went, kept so their late samples cannot re-raise a reset fence (bounded:
+anyone may declare a token)."""
 
 
 def is_authority_key(key: str) -> bool:
@@ -79,3 +83,43 @@ class Fence:
         """Never go below ``term`` from now on (an authority taking over fences its own past)."""
         with self._lock:
             self._term = max(self._term, int(term))
+
+
+class SimFence:
+    """One world's :class:`Fence` and the sim peers it follows (their liveliness tokens); thread-safe.
+
+    When the world's last sim leaves, the fence resets, so a world restarted from scratch (term 1) is
+    believed again after an earlier take-over; a departed sim's late samples, in flight when it left,
+    are refused so that they cannot raise the fence again over the new sim. Sessions and the recorder's
+    sink keep one per world they fence."""
+
+    def __init__(self, fence: Fence | None = None) -> None:
+        self.fence = fence if fence is not None else Fence()
+        self.sims: set[str] = set()
+        self.resets = 0
+        self._departed: set[str] = set()
+        self._lock = threading.Lock()
+
+    def believe(self, term: int, source: str) -> bool:
+        """Whether authority state stamped ``term`` by ``source`` may be believed."""
+        with self._lock:
+            departed = bool(term) and source in self._departed
+        return not departed and self.fence.check(term).accept
+
+    def sim_seen(self, peer_id: str) -> None:
+        """A sim peer of the world is alive (its token appeared)."""
+        with self._lock:
+            self.sims.add(peer_id)
+            self._departed.discard(peer_id)
+
+    def sim_left(self, peer_id: str) -> bool:
+        """A sim peer is gone; True when it was the last one and the fence was reset."""
+        with self._lock:
+            self.sims.discard(peer_id)
+            if len(self._departed) < MAX_DEPARTED_SIMS:
+                self._departed.add(peer_id)
+            if self.sims:
+                return False
+            self.resets += 1
+        self.fence.reset()
+        return True

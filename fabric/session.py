@@ -34,7 +34,7 @@ from fabric import keys
 from fabric.codec import DecodeError, decode, encode, load_plugins
 from fabric.config import FabricConfig, default_peer_id
 from fabric.exit import at_exit
-from fabric.fencing import Fence, is_authority_key
+from fabric.fencing import SimFence, is_authority_key
 from fabric.limits import RateLimiter, clip
 from fabric.interfaces import Event, EventKind, Header, NoReply, Refused, ServiceError
 
@@ -46,9 +46,6 @@ REPORT_INTERVAL = 5.0
 REPORT_BURST = 5
 """Reports (log line + event) of bad input per subscription or reason per :data:`REPORT_INTERVAL` seconds;
 the rest are counted and the next report says how many were suppressed."""
-MAX_DEPARTED_SIMS = 256
-"""Ids of sims whose token went, kept so their late samples cannot re-raise a reset fence (bounded:
-anyone may declare a token)."""
 ZENOH_QUERY_TIMEOUT = "Timeout"
 """The error reply zenoh itself gives a query whose time limit ran out while a server was known: a
 silence, which must read as NoReply (retried by those who wait), not as a server's refusal."""
@@ -117,7 +114,9 @@ class Fabric:
         self.counters: Counter[str] = Counter()
         self.term = 0
         """The authority epoch this peer stamps on what it publishes (a sim authority's; 0 for everyone else)."""
-        self.fence = Fence()
+        self.sim_fence = SimFence()
+        """The world's sims as this session follows them (once terms are in use), and its fence."""
+        self.fence = self.sim_fence.fence
         """The highest authority epoch heard on authority keys; :meth:`subscribe` drops state below it."""
         self.muzzled = False
         """While set, nothing is published and no query is answered (an authority unsure it still is one)."""
@@ -134,8 +133,6 @@ class Fabric:
         self._resources: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
         self.session = zenoh.open(config.zenoh_config())
-        self._sims: set[str] = set()
-        self._departed: set[str] = set()  # sims whose token went: their late samples must not re-raise the fence
         self._sim_watch: Any = None
         self.token = (
             self.session.liveliness().declare_token(keys.peer(self.world, kind, self.peer_id)) if token else None
@@ -313,12 +310,9 @@ class Fabric:
             return True
         if self._sim_watch is None and header.term:
             self._watch_sims()
-        if header.term and header.source in self._departed:
-            self.counters["stale_authority"] += 1  # in flight when its sim left: it must not fence out a new sim
-            return False
-        if self.fence.check(header.term).accept:
+        if self.sim_fence.believe(header.term, header.source):
             return True
-        self.counters["stale_authority"] += 1
+        self.counters["stale_authority"] += 1  # a lower term, or in flight when its sim left
         return False
 
     def _watch_sims(self) -> None:
@@ -334,17 +328,9 @@ class Fabric:
                 pid = keys.parse(str(sample.key_expr)).leaf
             except ValueError:
                 return
-            with self._lock:
-                if sample.kind == zenoh.SampleKind.PUT:
-                    self._sims.add(pid)
-                    self._departed.discard(pid)
-                    return
-                self._sims.discard(pid)
-                if len(self._departed) < MAX_DEPARTED_SIMS:
-                    self._departed.add(pid)
-                empty = not self._sims
-            if empty:
-                self.fence.reset()
+            if sample.kind == zenoh.SampleKind.PUT:
+                self.sim_fence.sim_seen(pid)
+            elif self.sim_fence.sim_left(pid):
                 self.counters["fence_resets"] += 1
 
         try:

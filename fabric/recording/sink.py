@@ -26,16 +26,13 @@ from typing import BinaryIO
 from mcap.writer import CompressionType, Writer
 
 from fabric import keys
-from fabric.fencing import Fence, is_authority_key
+from fabric.fencing import SimFence, is_authority_key
 from fabric.recording.format import MESSAGE_ENCODING, METADATA_NAME, PROFILE, peek, schema_data
 
 STALE = "stale"
 """What :meth:`McapSink.write` returns for a sample it left out: authority state of a lower authority epoch."""
 
 __all__ = ["McapSink", "COMPRESSIONS", "STALE"]
-
-MAX_DEPARTED_SIMS = 256
-"""Departed sims remembered per world (as :data:`fabric.session.MAX_DEPARTED_SIMS`): bounded memory."""
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 
@@ -72,12 +69,9 @@ class McapSink:
         self._last_flush = time.monotonic()
         self._closed = False
         self.messages = 0
-        self.fences: dict[str, Fence] = {}  # per world, created by the first authority state with a term
+        self.fences: dict[str, SimFence] = {}  # per world: its sims and its fence
         self._world_of: dict[str, str | None] = {}  # key -> its world when it is an authority key
-        self._sims: dict[str, set[str]] = {}  # live sim peers per world
-        self._departed: dict[str, set[str]] = {}  # sims whose token went: their late samples are left out
         self.stale = 0
-        self.fence_resets = 0
         self.payload_bytes = 0
 
     # ------------------------------------------------------------------ writing
@@ -119,30 +113,25 @@ class McapSink:
         if fence is None:
             if not term:
                 return True
-            fence = self.fences[world] = Fence()
-        if term and source in self._departed.get(world, ()):
-            return False
-        return fence.check(term).accept
+            fence = self.fences[world] = SimFence()
+        return fence.believe(term, source)
 
     # ------------------------------------------------------------------ the world's sims
 
     def sim_seen(self, world: str, peer_id: str) -> None:
         """A sim peer of ``world`` is alive (its liveliness token appeared)."""
-        self._sims.setdefault(world, set()).add(peer_id)
-        self._departed.get(world, set()).discard(peer_id)
+        self.fences.setdefault(world, SimFence()).sim_seen(peer_id)
 
     def sim_left(self, world: str, peer_id: str) -> None:
         """A sim peer of ``world`` is gone; when it was the last one, the world's fence resets."""
-        sims = self._sims.get(world)
-        if sims is None or peer_id not in sims:
-            return
-        sims.discard(peer_id)
-        departed = self._departed.setdefault(world, set())
-        if len(departed) < MAX_DEPARTED_SIMS:
-            departed.add(peer_id)
-        if not sims and world in self.fences:
-            self.fences[world].reset()
-            self.fence_resets += 1
+        fence = self.fences.get(world)
+        if fence is not None:
+            fence.sim_left(peer_id)
+
+    @property
+    def fence_resets(self) -> int:
+        """How often a world's fence was reset (its last sim left)."""
+        return sum(f.resets for f in self.fences.values())
 
     def write_with(self, key: str, schema: str, payload: bytes, log_time_ns: int, publish_time_ns: int, seq: int = 0) -> None:
         self._writer.add_message(

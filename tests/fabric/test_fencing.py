@@ -97,10 +97,10 @@ def test_the_fence_resets_when_the_worlds_last_sim_leaves(world, connect):
     old = connect("sim", "sim-old")
     old.term = 2
     wait_until(lambda: _put(old, key, 2) or any(m.header.term == 2 for m in got), timeout=20, what="term 2 heard")
-    wait_until(lambda: watcher.counters["fence_resets"] == 0 and watcher._sims == {"sim-old"}, timeout=20,
-               what="the watcher follows the sim tokens", seen=lambda: watcher._sims)
+    wait_until(lambda: watcher.counters["fence_resets"] == 0 and watcher.sim_fence.sims == {"sim-old"}, timeout=20,
+               what="the watcher follows the sim tokens", seen=lambda: watcher.sim_fence.sims)
     old.close()
-    wait_until(lambda: watcher.counters["fence_resets"] >= 1, timeout=20, what="the fence reset", seen=lambda: watcher._sims)
+    wait_until(lambda: watcher.counters["fence_resets"] >= 1, timeout=20, what="the fence reset", seen=lambda: watcher.sim_fence.sims)
     new = connect("sim", "sim-new")
     new.term = 1
     wait_until(lambda: _put(new, key, 1) or any(m.header.source == "sim-new" for m in got), timeout=20, what="term 1 believed again")
@@ -117,9 +117,9 @@ def test_a_departed_sims_late_samples_do_not_fence_out_a_new_sim(world, connect)
     old = connect("sim", "sim-old")
     old.term = 2
     wait_until(lambda: _put(old, key, 2) or any(m.header.term == 2 for m in got), timeout=20, what="term 2 heard")
-    wait_until(lambda: watcher._sims == {"sim-old"}, timeout=20, what="the sim's token", seen=lambda: watcher._sims)
+    wait_until(lambda: watcher.sim_fence.sims == {"sim-old"}, timeout=20, what="the sim's token", seen=lambda: watcher.sim_fence.sims)
     old.close()
-    wait_until(lambda: watcher.counters["fence_resets"] >= 1, timeout=20, what="the fence reset", seen=lambda: watcher._sims)
+    wait_until(lambda: watcher.counters["fence_resets"] >= 1, timeout=20, what="the fence reset", seen=lambda: watcher.sim_fence.sims)
     late = connect("tool", "sim-old")  # the departed sim's id and term, as a late sample carries them
     late.term = 2
     stale = watcher.counters["stale_authority"]
