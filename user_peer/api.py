@@ -78,7 +78,7 @@ class _Latest:
     ``robot/fakeN/scan`` of 4 MiB each no longer grows a user's memory without bound.
     """
 
-    def __init__(self, clock: Callable[[], int] = time.monotonic_ns, *, world_info: Callable[[], Any] | None = None,
+    def __init__(self, clock: Callable[[], int] = time.monotonic_ns, *, world_info: Callable[[], WorldInfo | None] | None = None,
                  max_other: int = 64) -> None:
         self._values: dict[str, tuple[Any, int, int]] = {}
         self._other: OrderedDict[str, None] = OrderedDict()  # keys outside the description, oldest update first
@@ -97,7 +97,7 @@ class _Latest:
         if info is None:
             return None
         if self._ids[0] is not info:
-            self._ids = (info, frozenset(r.id for r in info.robots) | frozenset(o.id for o in getattr(info, "objects", ())))
+            self._ids = (info, frozenset(r.id for r in info.robots) | frozenset(o.id for o in info.objects))
         parts = key.split("/", 4)  # rf/{world}/{category}/{subject}/...: the object pose key here ends in a wildcard
         if len(parts) >= 4 and parts[2] in ("robot", "own", "object"):
             return parts[3] in self._ids[1]
@@ -182,7 +182,8 @@ class World:
             self.fabric = Fabric(config, kind="user", peer_id=self.user)
         except Exception as exc:  # zenoh.ZError: nobody there, or the router refused the login
             raise Unreachable(config.join_failure(exc)) from None
-        self.latest = _Latest(world_info=lambda: getattr(self, "_info", None))  # keeps the robots of the description only
+        self._info: WorldInfo | None = None
+        self.latest = _Latest(world_info=lambda: self._info)  # keeps the robots of the description only
         self.events: list[Event] = []
         self._event_log: list[tuple[int, Event]] = []  # (local arrival number, event)
         self._events_seen = 0
@@ -190,7 +191,6 @@ class World:
         self._closed = False
         self._robots: dict[str, Robot] = {}
         self._objects: dict[str, SceneObject] = {}
-        self._info: WorldInfo | None = None
         # the latest of every robot stream (ik: a compute peer's streamed IK, Test A), scene object and map
         # scene objects, maps and paths are latched: what was set before this user joined comes at once
         for stream in ("joints", "pose", "scan", "path", "ik"):
