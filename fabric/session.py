@@ -185,22 +185,44 @@ class Fabric:
             self.counters["muzzled"] += 1
             return 0
         payload = encode(msg)
-        pub = self._publishers.get(key)
-        if pub is None:
-            if len(self._publishers) >= MAX_KEYS:  # a safety net: callers should not publish on made-up keys
-                self.counters["uncached_puts"] += 1
-                self.session.put(key, payload)
-                self.counters["published"] += 1
-                return len(payload)
-            pub = declare_publisher(self.session, key)
-            self._publishers[key] = pub
-            self._resources.append(pub)
+        pub = self._publisher(key)
+        if pub is None:  # a safety net: callers should not publish on made-up keys
+            self.counters["uncached_puts"] += 1
+            self.session.put(key, payload)
+            self.counters["published"] += 1
+            return len(payload)
         if self.freeze_gap is not None and self._watch_freeze():
             self.counters["muzzled"] += 1
             return 0
         pub.put(payload)  # right after the check: a thread stopped between the two sends one stale sample
         self.counters["published"] += 1
         return len(payload)
+
+    def _publisher(self, key: str) -> Any:
+        """The cached publisher of ``key`` (declared on first use); None past :data:`MAX_KEYS`."""
+        pub = self._publishers.get(key)
+        if pub is None and len(self._publishers) < MAX_KEYS:
+            pub = declare_publisher(self.session, key)
+            self._publishers[key] = pub
+            self._resources.append(pub)
+        return pub
+
+    def wait_matching(self, key: str, timeout: float) -> bool:
+        """Wait up to ``timeout`` s until a subscriber of ``key`` is known to this session; returns whether one is.
+
+        A client session drops a put that nobody it knows of listens to, and a subscriber declared a moment
+        ago (a sim that has just started: its token and ``srv/world`` can reach a user before its command
+        subscription does) is not known yet: a command sent then is lost without a word."""
+        pub = self._publisher(key)
+        status = getattr(pub, "matching_status", None)
+        if status is None:
+            return True  # nothing to ask: put and hope, as before
+        deadline = time.monotonic() + timeout
+        while not pub.matching_status.matching:
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.005)
+        return True
 
     def _watch_freeze(self) -> bool:
         """True when muzzled (now or before); detects a freeze from the gap since the last publication."""

@@ -64,6 +64,10 @@ log = logging.getLogger("robofabric.user")
 __all__ = ["connect", "World", "Robot", "Arm", "Base", "SceneObject"]
 
 
+COMMAND_ROUTE_WAIT_S = 0.5
+"""How long a command waits for its sim's subscription to be known before it is put anyway."""
+
+
 class _Latest:
     """The latest message per key, with a condition to wait for a newer one.
 
@@ -526,6 +530,9 @@ class Robot:
             raise NotOwner(f"{self.world.user} does not own {self.id} (owner: {who}); call request() first")
         key = keys.robot_cmd(self._w, self.id, command, self.world.user)
         epoch = rec.epoch if rec is not None else 0
+        # a sim that has just (re)started may not be known as a listener yet: its first command was lost
+        # (the lab's clock-skew scenario, sim restarted: the sim counted 0 commands, the move timed out)
+        self.world.fabric.wait_matching(key, COMMAND_ROUTE_WAIT_S)
         self.world.fabric.publish(key, Command(self.world.user, epoch, body, self.world.fabric.header(key)))
 
     def stop(self, *, confirm: bool = True, timeout: float = 3.0) -> bool:
