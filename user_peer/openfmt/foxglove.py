@@ -108,6 +108,7 @@ class FoxgloveWriter:
         self._json_schemas: dict[str, int] = {}
         self.frames = FrameTracker(catalog or RobotCatalog(None, scene=scene))
         self._drawn: set[str] = set()
+        self._tf_pub = 0
         self._static: list[SceneEntity] = []  # the scene's fixed geometry, written with the first message
         self.written = 0
         self.skipped = 0
@@ -154,9 +155,10 @@ class FoxgloveWriter:
             self._static = []
         t = msg_time_ns(msg, log_time_ns)
         topic = "/" + key
-        frames = self.frames.frames(key, msg)
+        frames = self.frames.frames(key, msg, t)
         if frames:
-            self._proto(TF_TOPIC, FrameTransforms(transforms=[self._tf(f, t) for f in frames]), log_time_ns, pub)
+            self._tf_pub = max(self._tf_pub, pub)  # /tf's publish times never go back (it merges every robot's keys)
+            self._proto(TF_TOPIC, FrameTransforms(transforms=[self._tf(f, t) for f in frames]), log_time_ns, self._tf_pub)
             self._draw_new(key, t, log_time_ns, pub)
         if isinstance(msg, Scan):
             owner = key_owner(key)

@@ -2,9 +2,17 @@
 
 Frame names: ``world`` is the root; a robot's base is its id (``arm1``, ``base1``); an arm's joint
 frames are ``ID/JOINT`` (placed by forward kinematics from its JointState, relative to the base);
-a mobile robot's LIDAR and sonar ring are ``ID/lidar`` and ``ID/sonar``; scene objects are
-``object/ID`` (whoever moved it: its key is ``rf/W/object/ID/pose/by/USER``). What a robot is (arm or mobile base, its URDF, where an arm stands) comes from the
-same robot descriptions the live viewer uses (:class:`user_peer.catalog.RobotCatalog`).
+an arm's flange (the sim's ``robot/ID/pose``, a world pose) is ``ID/flange``, a child of the base
+``ID``; a mobile robot's LIDAR and sonar ring are ``ID/lidar`` and ``ID/sonar``; scene objects are
+``object/ID`` (whoever moved it: its key is ``rf/W/object/ID/pose/by/USER``). What a robot is (arm or
+mobile base, its URDF, where an arm stands) comes from the same robot descriptions the live viewer
+uses (:class:`user_peer.catalog.RobotCatalog`).
+
+One transform tree, as tf2 and Foxglove require: every frame has one parent and one source (an
+arm's base and joints come from its JointState, its flange from its pose, a mobile base from its
+pose), and each frame's stamps never go back: a transform older than the last one written for the
+same frame (two sims' clocks during a failover, a late sample) is dropped (counted in ``stale``).
+An arm's base is bolted down: the same transform from ``world`` every time.
 """
 
 from __future__ import annotations
@@ -63,14 +71,31 @@ class FrameTracker:
     def __init__(self, catalog: RobotCatalog) -> None:
         self.catalog = catalog
         self.robots: dict[str, RobotDrawing] = {}
+        self._stamps: dict[str, int] = {}  # child frame -> the newest stamp written for it
+        self.stale = 0  # transforms dropped because their frame already had a newer one
 
     def robot(self, rid: str, hint: dict) -> RobotDrawing:
         info = self.robots.get(rid)
-        if info is None or (not info.kind and hint):
+        # a guess from a pose alone (no type: "mobile" by hint) gives way to joint names that name the type
+        if info is None or (not info.kind and hint) or (not info.type and hint.get("joint_names")):
             info = self.robots[rid] = self.catalog.drawing(rid, hint)
         return info
 
-    def frames(self, key: str, msg: Any) -> list[Frame]:
+    def frames(self, key: str, msg: Any, stamp_ns: int | None = None) -> list[Frame]:
+        """The transforms ``msg`` on ``key`` gives; with ``stamp_ns``, only those not older than their frame's last."""
+        out = self._frames(key, msg)
+        if stamp_ns is None or not out:
+            return out
+        fresh = []
+        for f in out:
+            if self._stamps.get(f.child, stamp_ns) > stamp_ns:
+                self.stale += 1
+                continue
+            self._stamps[f.child] = stamp_ns
+            fresh.append(f)
+        return fresh
+
+    def _frames(self, key: str, msg: Any) -> list[Frame]:
         owner = key_owner(key)
         if owner is None:
             return []
@@ -81,6 +106,10 @@ class FrameTracker:
             if what == "object":
                 return [_frame(WORLD, f"object/{oid}", p)]
             info = self.robot(oid, {"mobile": True})
+            if info.kind == "arm":  # the flange: its own frame under the base, never the base itself
+                if info.base is None:
+                    return [_frame(WORLD, f"{oid}/flange", p)]
+                return [_frame(oid, f"{oid}/flange", _relative(info.base, p))]
             out = [_frame(WORLD, oid, p)]
             if info.kind == "mobile":
                 out.append(Frame(oid, f"{oid}/lidar", tuple(float(v) for v in info.lidar_offset), (0.0, 0.0, 0.0, 1.0)))  # type: ignore[arg-type]
@@ -117,6 +146,24 @@ class FrameTracker:
             body = Shape(f"{rid}_body", "cylinder", (info.radius, info.height), color=(*info.color, 255))
             return [(rid, body, Placement(np.array([0.0, 0.0, info.height / 2.0]), np.array([0.0, 0.0, 0.0, 1.0])))]
         return []
+
+
+def _relative(base: Placement, p: Placement) -> Placement:
+    """``p`` (a world placement) expressed in ``base``'s frame: base^-1 * p."""
+    rb = _matrix_from_xyzw(np.asarray(base.quat_xyzw, dtype=float))
+    rp = _matrix_from_xyzw(np.asarray(p.quat_xyzw, dtype=float))
+    t = rb.T @ (np.asarray(p.translation, dtype=float) - np.asarray(base.translation, dtype=float))
+    q = _xyzw_from_matrix(rb.T @ rp)
+    return Placement(t, q / np.linalg.norm(q))
+
+
+def _matrix_from_xyzw(q: np.ndarray) -> np.ndarray:
+    x, y, z, w = (float(v) for v in q / np.linalg.norm(q))
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
 
 
 def _xyzw(quat_wxyz: np.ndarray) -> np.ndarray:

@@ -75,6 +75,7 @@ class Ros2Writer:
         self._f = open(self.path, "wb")
         self._w = Ros2McapWriter(self._f)
         self._schemas: dict[str, Any] = {}
+        self._tf_pub = 0
         self.frames = FrameTracker(catalog or RobotCatalog(None, scene=scene))
         self.written = 0
         self.skipped = 0
@@ -94,7 +95,7 @@ class Ros2Writer:
         pub = int(publish_time_ns if publish_time_ns is not None else log_time_ns)
         t = msg_time_ns(msg, log_time_ns)
         topic = ros_topic(key)
-        frames = self.frames.frames(key, msg)
+        frames = self.frames.frames(key, msg, t)
         if frames:
             tfs = [
                 {
@@ -107,7 +108,8 @@ class Ros2Writer:
                 }
                 for f in frames
             ]
-            self._put(TF_TOPIC, "tf2_msgs/msg/TFMessage", {"transforms": tfs}, log_time_ns, pub)
+            self._tf_pub = max(self._tf_pub, pub)  # /tf's publish times never go back (it merges every robot's keys)
+            self._put(TF_TOPIC, "tf2_msgs/msg/TFMessage", {"transforms": tfs}, log_time_ns, self._tf_pub)
         owner = key_owner(key)
         rid = owner[1] if owner else WORLD
         if isinstance(msg, JointState):
