@@ -82,4 +82,5 @@ def restore(
         lease_s=lease_s,
         grace_s=grace_s,
         authority=authority,
+        deaf_s=lease_s / 2,
     )

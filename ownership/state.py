@@ -13,6 +13,10 @@ Rules (DESIGN.md, issue 5):
 - A request on a still robot hands it over at once; on a moving one it is
   denied (or queued when the requester asks to wait). A release, lease expiry
   or owner departure passes ownership to the head of the queue.
+- The authority's own trouble is never an owner's fault: a lease expires only when its owner's
+  renewals stopped while the authority was hearing others (:func:`may_expire`). Nothing heard
+  from anyone for ``deaf_s`` (a stalled router, a backlog, a lost link) or a late tick (the
+  authority paused) stops expiries, and once it hears again every owner has a whole lease to renew.
 - Bounded against made-up users (issue 14): a queue holds at most
   :data:`fabric.interfaces.MAX_QUEUE` users, and a user that requested without a
   liveliness token (a :class:`Join`) is dropped, from queues and ownership, once
@@ -36,7 +40,7 @@ from fabric.interfaces import MAX_QUEUE, OwnershipRecord
 
 __all__ = [
     "Effect", "OwnState", "Join", "Leave", "Request", "Release", "Renew", "Tick", "Motion",
-    "initial", "step", "MAX_UNPROVEN",
+    "initial", "step", "may_expire", "MAX_UNPROVEN",
 ]
 
 MAX_UNPROVEN = 256
@@ -122,15 +126,21 @@ class OwnState:
     lease_s: float = 2.0
     grace_s: float = 10.0
     authority: str = ""
+    deaf_s: float = 1.0  # nothing heard from any user for longer: the authority (or its router) is deaf
+    heard: float = float("-inf")  # when the last request, release, renewal or token reached the authority
+    hearing_since: float = float("-inf")  # when it last started hearing again after a silence or its own pause
+    last_tick: float = float("-inf")
 
 
-def initial(objects: Mapping[str, str], *, lease_s: float = 2.0, grace_s: float = 10.0, authority: str = "") -> OwnState:
+def initial(objects: Mapping[str, str], *, lease_s: float = 2.0, grace_s: float = 10.0, authority: str = "",
+            deaf_s: float | None = None) -> OwnState:
     recs = {}
     for obj, policy in objects.items():
         if policy not in ("scene", "exclusive"):
             raise ValueError(f"object {obj!r}: policy must be scene or exclusive, not {policy!r}")
         recs[obj] = OwnershipRecord(object=obj, policy=policy, authority=authority)
-    return OwnState(records=MappingProxyType(recs), lease_s=lease_s, grace_s=grace_s, authority=authority)
+    return OwnState(records=MappingProxyType(recs), lease_s=lease_s, grace_s=grace_s, authority=authority,
+                    deaf_s=deaf_s if deaf_s is not None else lease_s / 2)
 
 
 # ---------------------------------------------------------------------- helpers
@@ -182,154 +192,212 @@ def _drop_unproven(s: OwnState, recs: dict, user: str, now: float, effects: list
     )
 
 
+# ---------------------------------------------------------------------- hearing
+
+def _hear(s: OwnState, now: float) -> OwnState:
+    """Something from a user reached the authority at ``now`` (a request, release, renewal or token):
+    after a silence longer than ``deaf_s`` the authority starts hearing again from ``now``."""
+    since = s.hearing_since if now - s.heard <= s.deaf_s else now
+    if s.heard >= now and since == s.hearing_since:
+        return s
+    return replace(s, heard=max(s.heard, now), hearing_since=since)
+
+
+def may_expire(s: OwnState, rec: OwnershipRecord, now: float) -> bool:
+    """Whether ``rec``'s lease may end at ``now``: it ran out, the authority has been hearing users
+    (nothing from anyone for ``deaf_s`` means the authority, or its router, is the deaf one), and the
+    owner had a whole lease to renew since the authority hears again (after its own pause or a backlog,
+    renewals sent meanwhile are still on their way)."""
+    return (bool(rec.owner) and now > rec.lease_expiry and now - s.heard <= s.deaf_s
+            and now > s.hearing_since + s.lease_s)
+
+
 # ---------------------------------------------------------------------- step
 
 def step(s: OwnState, ev: Event) -> tuple[OwnState, list[Effect]]:
     """Apply one event; never raises for a well-typed event on a known object."""
+    handler = _HANDLERS.get(type(ev))
+    if handler is None:
+        raise TypeError(f"not an ownership event: {ev!r}")
     effects: list[Effect] = []
+    if isinstance(ev, (Join, Request, Release, Renew)):
+        s = _hear(s, ev.now)
+    return handler(s, ev, effects), effects
+
+
+def _on_join(s: OwnState, ev: Join, effects: list[Effect]) -> OwnState:
+    """A user's token appeared: a new join rank, or its old place back within grace."""
+    was_away = s.away.get(ev.user)
+    if ev.user in s.unproven:
+        s = replace(s, unproven=MappingProxyType({k: v for k, v in s.unproven.items() if k != ev.user}))
+    s = _join(s, ev.user)
+    if was_away is None:
+        return s
+    away = {k: v for k, v in s.away.items() if k != ev.user}
+    if ev.now > was_away.deadline:  # grace over: a new join rank
+        rank = {k: v for k, v in s.rank.items() if k != ev.user}
+        s = replace(s, away=MappingProxyType(away), rank=MappingProxyType(rank), live=s.live - {ev.user})
+        return _join(s, ev.user)
+    s = replace(s, away=MappingProxyType(away))
     recs = dict(s.records)
+    for obj in sorted(was_away.owned | was_away.queued):
+        rec = recs[obj]
+        if not rec.owner and obj in was_away.owned:
+            recs[obj] = replace(rec, owner=ev.user, epoch=rec.epoch + 1, lease_expiry=ev.now + s.lease_s)
+            effects.append(Effect("restored", obj, ev.user, "owner again"))
+        elif rec.owner != ev.user:
+            q = _sorted_queue(s, rec.queue + (ev.user,))
+            recs[obj] = replace(rec, queue=q)
+            effects.append(Effect("restored", obj, ev.user, "queued", q.index(ev.user) + 1))
+    return _with(s, recs)
 
-    if isinstance(ev, Join):
-        was_away = s.away.get(ev.user)
-        if ev.user in s.unproven:
-            s = replace(s, unproven=MappingProxyType({k: v for k, v in s.unproven.items() if k != ev.user}))
-        s = _join(s, ev.user)
-        if was_away is not None and ev.now <= was_away.deadline:
-            away = {k: v for k, v in s.away.items() if k != ev.user}
-            s = replace(s, away=MappingProxyType(away))
-            for obj in sorted(was_away.owned | was_away.queued):
-                rec = recs[obj]
-                if not rec.owner and obj in was_away.owned:
-                    recs[obj] = replace(rec, owner=ev.user, epoch=rec.epoch + 1, lease_expiry=ev.now + s.lease_s)
-                    effects.append(Effect("restored", obj, ev.user, "owner again"))
-                elif rec.owner != ev.user:
-                    q = _sorted_queue(s, rec.queue + (ev.user,))
-                    recs[obj] = replace(rec, queue=q)
-                    effects.append(Effect("restored", obj, ev.user, "queued", q.index(ev.user) + 1))
-            return _with(s, recs), effects
-        if was_away is not None:  # grace over: a new join rank
-            away = {k: v for k, v in s.away.items() if k != ev.user}
-            rank = {k: v for k, v in s.rank.items() if k != ev.user}
-            s = replace(s, away=MappingProxyType(away), rank=MappingProxyType(rank), live=s.live - {ev.user})
-            s = _join(s, ev.user)
-        return s, effects
 
-    if isinstance(ev, Leave):
-        if ev.user not in s.live:
-            return s, effects
-        s = replace(s, live=s.live - {ev.user}, unproven=MappingProxyType({k: v for k, v in s.unproven.items() if k != ev.user}))
-        owned, queued = set(), set()
-        for obj, rec in list(recs.items()):
-            if rec.owner == ev.user:
-                owned.add(obj)
-                recs[obj] = _pass_on(s, rec, ev.now, effects, "left")
-            elif ev.user in rec.queue:
-                queued.add(obj)
-                recs[obj] = replace(rec, queue=tuple(u for u in rec.queue if u != ev.user))
-        away = dict(s.away)
-        away[ev.user] = Away(ev.now + s.grace_s, frozenset(owned), frozenset(queued))
-        return _with(s, recs, away=MappingProxyType(away)), effects
-
-    if isinstance(ev, Tick):
-        for obj, rec in list(recs.items()):
-            if rec.owner and ev.now > rec.lease_expiry:
-                recs[obj] = _pass_on(s, rec, ev.now, effects, "lease expired")
-                effects.append(Effect("expired", obj, rec.owner, "lease expired"))
-        for user in [u for u, d in s.unproven.items() if ev.now > d]:
-            s = _drop_unproven(s, recs, user, ev.now, effects)
-        gone = [u for u, a in s.away.items() if ev.now > a.deadline]
-        if gone:
-            away = {k: v for k, v in s.away.items() if k not in gone}
-            rank = {k: v for k, v in s.rank.items() if k not in gone}
-            s = replace(s, away=MappingProxyType(away), rank=MappingProxyType(rank))
-        return _with(s, recs), effects
-
-    if isinstance(ev, Motion):
-        rec = recs[ev.object]
-        state = "moving" if ev.moving else "still"
-        if rec.state != state:
-            recs[ev.object] = replace(rec, state=state)
-        return _with(s, recs), effects
-
-    rec = recs.get(ev.object)
-    if rec is None:
-        effects.append(Effect("denied", ev.object, ev.user, f"unknown object {ev.object!r}"))
-        return s, effects
-
-    if isinstance(ev, Request):
-        if ev.user not in s.live and len(s.unproven) >= MAX_UNPROVEN:  # checked before anything is copied
-            effects.append(Effect("denied", rec.object, ev.user, f"too many requesters without a liveliness token "
-                                  f"({MAX_UNPROVEN}); connect with a fabric session and ask again"))
-            return s, effects
-        if ev.user not in s.live:  # a request proves the user is there, until grace runs out without its token
-            s = replace(s, unproven=MappingProxyType({**s.unproven, ev.user: ev.now + s.grace_s}))
-        s = _join(s, ev.user)
-        if rec.policy == "scene":
-            effects.append(Effect("granted", rec.object, ev.user, "scene object: anyone writes"))
-            return s, effects
+def _on_leave(s: OwnState, ev: Leave, effects: list[Effect]) -> OwnState:
+    """A user's token went: what it owned passes on, its queue places go; grace keeps them for its return."""
+    if ev.user not in s.live:
+        return s
+    s = replace(s, live=s.live - {ev.user}, unproven=MappingProxyType({k: v for k, v in s.unproven.items() if k != ev.user}))
+    recs = dict(s.records)
+    owned, queued = set(), set()
+    for obj, rec in list(recs.items()):
         if rec.owner == ev.user:
-            recs[rec.object] = replace(rec, lease_expiry=ev.now + s.lease_s)
-            effects.append(Effect("granted", rec.object, ev.user, "already owner"))
-            return _with(s, recs), effects
-        if rec.owner and ev.user in s.unproven:  # no token seen yet: it may take a free robot, never someone's
-            if ev.wait and ev.user not in rec.queue and len(rec.queue) < MAX_QUEUE:
-                q = _sorted_queue(s, rec.queue + (ev.user,))
-                recs[rec.object] = replace(rec, queue=q)
-                effects.append(Effect("queued", rec.object, ev.user, f"owned by {rec.owner}; no liveliness token seen yet",
-                                      q.index(ev.user) + 1))
-                return _with(s, recs), effects
-            full = ev.wait and ev.user not in rec.queue
-            why = f"the queue is full ({MAX_QUEUE} waiting)" if full else f"owned by {rec.owner}; no liveliness token seen yet"
-            effects.append(Effect("denied", rec.object, ev.user, why))
-            return s, effects
-        if not rec.owner or rec.state == "still":
-            prev = rec.owner
-            queue = tuple(u for u in rec.queue if u != ev.user)
-            recs[rec.object] = replace(rec, owner=ev.user, epoch=rec.epoch + 1, lease_expiry=ev.now + s.lease_s, queue=queue)
-            effects.append(Effect("granted", rec.object, ev.user, f"taken over from {prev} (still)" if prev else "free"))
-            if prev:
-                effects.append(Effect("revoked", rec.object, prev, f"handed over to {ev.user} while still"))
-            return _with(s, recs), effects
-        if ev.wait and ev.user not in rec.queue and len(rec.queue) >= MAX_QUEUE:
-            effects.append(Effect("denied", rec.object, ev.user, f"the queue is full ({MAX_QUEUE} waiting)"))
-            return s, effects
-        if ev.wait:
+            owned.add(obj)
+            recs[obj] = _pass_on(s, rec, ev.now, effects, "left")
+        elif ev.user in rec.queue:
+            queued.add(obj)
+            recs[obj] = replace(rec, queue=tuple(u for u in rec.queue if u != ev.user))
+    away = dict(s.away)
+    away[ev.user] = Away(ev.now + s.grace_s, frozenset(owned), frozenset(queued))
+    return _with(s, recs, away=MappingProxyType(away))
+
+
+def _on_tick(s: OwnState, ev: Tick, effects: list[Effect]) -> OwnState:
+    """Time passes: leases that may end (:func:`may_expire`) end, tokenless requesters and away users past
+    grace are forgotten. A tick long after the last one means the authority itself was paused: it hears
+    again from now, so every owner gets a whole lease to renew."""
+    if s.last_tick != float("-inf") and ev.now - s.last_tick > s.deaf_s:
+        s = replace(s, hearing_since=max(s.hearing_since, ev.now))
+    s = replace(s, last_tick=ev.now)
+    recs = dict(s.records)
+    for obj, rec in list(recs.items()):
+        if may_expire(s, rec, ev.now):
+            quiet = ev.now - (rec.lease_expiry - s.lease_s)
+            why = f"lease of {obj} ({rec.owner}) expired: no renewal for {quiet:.1f} s"
+            recs[obj] = _pass_on(s, rec, ev.now, effects, why)
+            effects.append(Effect("expired", obj, rec.owner, why))
+    for user in [u for u, d in s.unproven.items() if ev.now > d]:
+        s = _drop_unproven(s, recs, user, ev.now, effects)
+    gone = [u for u, a in s.away.items() if ev.now > a.deadline]
+    if gone:
+        away = {k: v for k, v in s.away.items() if k not in gone}
+        rank = {k: v for k, v in s.rank.items() if k not in gone}
+        s = replace(s, away=MappingProxyType(away), rank=MappingProxyType(rank))
+    return _with(s, recs)
+
+
+def _on_motion(s: OwnState, ev: Motion, effects: list[Effect]) -> OwnState:
+    rec = s.records[ev.object]
+    state = "moving" if ev.moving else "still"
+    if rec.state == state:
+        return s
+    return _with(s, {**s.records, ev.object: replace(rec, state=state)})
+
+
+def _unknown(s: OwnState, ev: Request | Release | Renew, effects: list[Effect]) -> bool:
+    if ev.object in s.records:
+        return False
+    effects.append(Effect("denied", ev.object, ev.user, f"unknown object {ev.object!r}"))
+    return True
+
+
+def _on_request(s: OwnState, ev: Request, effects: list[Effect]) -> OwnState:
+    """Granted when free or still (a take-over), queued or denied while it moves; tokenless users only get free robots."""
+    if _unknown(s, ev, effects):
+        return s
+    rec = s.records[ev.object]
+    if ev.user not in s.live and len(s.unproven) >= MAX_UNPROVEN:  # checked before anything is copied
+        effects.append(Effect("denied", rec.object, ev.user, f"too many requesters without a liveliness token "
+                              f"({MAX_UNPROVEN}); connect with a fabric session and ask again"))
+        return s
+    if ev.user not in s.live:  # a request proves the user is there, until grace runs out without its token
+        s = replace(s, unproven=MappingProxyType({**s.unproven, ev.user: ev.now + s.grace_s}))
+    s = _join(s, ev.user)
+    recs = dict(s.records)
+    if rec.policy == "scene":
+        effects.append(Effect("granted", rec.object, ev.user, "scene object: anyone writes"))
+        return s
+    if rec.owner == ev.user:
+        recs[rec.object] = replace(rec, lease_expiry=ev.now + s.lease_s)
+        effects.append(Effect("granted", rec.object, ev.user, "already owner"))
+        return _with(s, recs)
+    if rec.owner and ev.user in s.unproven:  # no token seen yet: it may take a free robot, never someone's
+        if ev.wait and ev.user not in rec.queue and len(rec.queue) < MAX_QUEUE:
             q = _sorted_queue(s, rec.queue + (ev.user,))
             recs[rec.object] = replace(rec, queue=q)
-            effects.append(Effect("queued", rec.object, ev.user, f"in motion, owned by {rec.owner}", q.index(ev.user) + 1))
-            return _with(s, recs), effects
-        effects.append(Effect("denied", rec.object, ev.user, f"in motion, owned by {rec.owner}"))
-        return s, effects
+            effects.append(Effect("queued", rec.object, ev.user, f"owned by {rec.owner}; no liveliness token seen yet",
+                                  q.index(ev.user) + 1))
+            return _with(s, recs)
+        full = ev.wait and ev.user not in rec.queue
+        why = f"the queue is full ({MAX_QUEUE} waiting)" if full else f"owned by {rec.owner}; no liveliness token seen yet"
+        effects.append(Effect("denied", rec.object, ev.user, why))
+        return s
+    if not rec.owner or rec.state == "still":
+        prev = rec.owner
+        queue = tuple(u for u in rec.queue if u != ev.user)
+        recs[rec.object] = replace(rec, owner=ev.user, epoch=rec.epoch + 1, lease_expiry=ev.now + s.lease_s, queue=queue)
+        effects.append(Effect("granted", rec.object, ev.user, f"taken over from {prev} (still)" if prev else "free"))
+        if prev:
+            effects.append(Effect("revoked", rec.object, prev, f"handed over to {ev.user} while still"))
+        return _with(s, recs)
+    if ev.wait and ev.user not in rec.queue and len(rec.queue) >= MAX_QUEUE:
+        effects.append(Effect("denied", rec.object, ev.user, f"the queue is full ({MAX_QUEUE} waiting)"))
+        return s
+    if ev.wait:
+        q = _sorted_queue(s, rec.queue + (ev.user,))
+        recs[rec.object] = replace(rec, queue=q)
+        effects.append(Effect("queued", rec.object, ev.user, f"in motion, owned by {rec.owner}", q.index(ev.user) + 1))
+        return _with(s, recs)
+    effects.append(Effect("denied", rec.object, ev.user, f"in motion, owned by {rec.owner}"))
+    return s
 
-    if isinstance(ev, Release):
-        if rec.owner == ev.user:
-            recs[rec.object] = _pass_on(s, rec, ev.now, effects, "released")
-        elif ev.user in rec.queue:
-            recs[rec.object] = replace(rec, queue=tuple(u for u in rec.queue if u != ev.user))
-            effects.append(Effect("released", rec.object, ev.user, "left the queue"))
-        else:
-            effects.append(Effect("denied", rec.object, ev.user, f"not the owner ({rec.owner or 'free'})"))
-        return _with(s, recs), effects
 
-    if isinstance(ev, Renew):
-        if rec.owner == ev.user:
-            recs[rec.object] = replace(rec, lease_expiry=ev.now + s.lease_s)
-            effects.append(Effect("renewed", rec.object, ev.user))
-            return _with(s, recs), effects
-        away = s.away.get(ev.user)
-        if (not rec.owner and away is not None and rec.object in away.owned and ev.now <= away.deadline
-                and len(s.unproven) < MAX_UNPROVEN):
-            # Her token went (a router restart closes every link) and her renewal is back before it: the
-            # renewal proves she is there, as a request does, so she gets back what she held, as her
-            # token's return would give it. Left to the token, the renewal was denied, her client stopped
-            # renewing, and a restore it then missed expired a lease later (router loss, issue 15).
-            s = replace(s, unproven=MappingProxyType({**s.unproven, ev.user: ev.now + s.grace_s}))
-            s = _join(s, ev.user)
-            recs[rec.object] = replace(rec, owner=ev.user, epoch=rec.epoch + 1, lease_expiry=ev.now + s.lease_s,
-                                       queue=tuple(u for u in rec.queue if u != ev.user))
-            effects.append(Effect("restored", rec.object, ev.user, "owner again: renewed within grace"))
-            return _with(s, recs), effects
-        effects.append(Effect("denied", rec.object, ev.user, f"not the owner ({rec.owner or 'free'})"))
-        return s, effects
+def _on_release(s: OwnState, ev: Release, effects: list[Effect]) -> OwnState:
+    """The owner lets go (the next in the queue owns it), or a waiting user leaves the queue."""
+    if _unknown(s, ev, effects):
+        return s
+    rec = s.records[ev.object]
+    if rec.owner == ev.user:
+        return _with(s, {**s.records, rec.object: _pass_on(s, rec, ev.now, effects, "released")})
+    if ev.user in rec.queue:
+        effects.append(Effect("released", rec.object, ev.user, "left the queue"))
+        return _with(s, {**s.records, rec.object: replace(rec, queue=tuple(u for u in rec.queue if u != ev.user))})
+    effects.append(Effect("denied", rec.object, ev.user, f"not the owner ({rec.owner or 'free'})"))
+    return s
 
-    raise TypeError(f"not an ownership event: {ev!r}")
+
+def _on_renew(s: OwnState, ev: Renew, effects: list[Effect]) -> OwnState:
+    """The owner's lease starts again; an owner away within grace whose robot is still free gets it back."""
+    if _unknown(s, ev, effects):
+        return s
+    rec = s.records[ev.object]
+    if rec.owner == ev.user:
+        effects.append(Effect("renewed", rec.object, ev.user))
+        return _with(s, {**s.records, rec.object: replace(rec, lease_expiry=ev.now + s.lease_s)})
+    away = s.away.get(ev.user)
+    if (not rec.owner and away is not None and rec.object in away.owned and ev.now <= away.deadline
+            and len(s.unproven) < MAX_UNPROVEN):
+        # Her token went (a router restart closes every link) and her renewal is back before it: the
+        # renewal proves she is there, as a request does, so she gets back what she held, as her
+        # token's return would give it; denied, her client would stop renewing and lose the robot.
+        s = replace(s, unproven=MappingProxyType({**s.unproven, ev.user: ev.now + s.grace_s}))
+        s = _join(s, ev.user)
+        back = replace(rec, owner=ev.user, epoch=rec.epoch + 1, lease_expiry=ev.now + s.lease_s,
+                       queue=tuple(u for u in rec.queue if u != ev.user))
+        effects.append(Effect("restored", rec.object, ev.user, "owner again: renewed within grace"))
+        return _with(s, {**s.records, rec.object: back})
+    effects.append(Effect("denied", rec.object, ev.user, f"not the owner ({rec.owner or 'free'})"))
+    return s
+
+
+_HANDLERS = {Join: _on_join, Leave: _on_leave, Tick: _on_tick, Motion: _on_motion,
+             Request: _on_request, Release: _on_release, Renew: _on_renew}

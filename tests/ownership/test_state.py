@@ -134,10 +134,88 @@ def test_lease_expiry_passes_to_next_in_join_order():
     s, _ = st.step(s, st.Request("c", "arm", 0.2, wait=True))
     assert s.records["arm"].queue == ("c", "b")  # join order, not request order
     s, _ = st.step(s, st.Renew("a", "arm", 0.5))
+    for t in (0.9, 1.3):  # the authority hears others (a waiting user's renewal is denied, but heard)
+        s, _ = st.step(s, st.Renew("b", "arm", t))
     s, _ = st.step(s, st.Tick(1.4))
     assert s.records["arm"].owner == "a"
-    s, _ = st.step(s, st.Tick(1.6))
+    s, eff = st.step(s, st.Tick(1.6))
     assert s.records["arm"].owner == "c" and s.records["arm"].queue == ("b",)
+    assert ("expired", "a", "lease of arm (a) expired: no renewal for 1.1 s") in [(e.kind, e.user, e.reason) for e in eff]
+
+
+def _owned_by_a(lease: float = 2.0) -> st.OwnState:
+    s = st.initial({"arm": "exclusive", "base": "exclusive"}, lease_s=lease)
+    for u in ("a", "b"):
+        s, _ = st.step(s, st.Join(u, 0.0))
+    s, _ = st.step(s, st.Request("a", "arm", 0.0))
+    s, _ = st.step(s, st.Request("b", "base", 0.0))
+    s, _ = st.step(s, st.Tick(0.0))
+    return s
+
+
+def test_a_paused_authority_extends_leases_instead_of_expiring_them():
+    """The authority's ticks stop for 10 s (SIGSTOP, a starved process): when it runs again, every owner
+    has a whole lease to renew, although every lease ran out long ago by the clock."""
+    s = _owned_by_a()
+    s, eff = st.step(s, st.Tick(10.0))
+    assert not eff and s.records["arm"].owner == "a" and s.records["base"].owner == "b"
+    s, _ = st.step(s, st.Renew("b", "base", 10.3))  # renewals sent during the pause arrive, b's first
+    s, eff = st.step(s, st.Tick(10.4))
+    assert not eff and s.records["arm"].owner == "a"
+    s, _ = st.step(s, st.Renew("a", "arm", 10.5))
+    for t in (11.0, 11.5, 12.0, 12.5):
+        s, _ = st.step(s, st.Renew("b", "base", t))
+        s, eff = st.step(s, st.Tick(t))
+    assert not eff and s.records["arm"].owner == "a" and s.records["arm"].epoch == 1
+
+
+def test_an_authority_that_hears_nobody_expires_no_lease():
+    """Nothing from any user for 5 s while the ticks run (a stalled router, a lost link): no lease ends.
+    Once users are heard again, an owner who still does not renew loses the robot a lease later."""
+    s = _owned_by_a()
+    for i in range(1, 51):
+        s, eff = st.step(s, st.Tick(i * 0.1))
+        assert not eff, (i, eff)
+    s, _ = st.step(s, st.Renew("b", "base", 5.0))  # b is heard again; a never is
+    for t in (5.5, 6.0, 6.5):
+        s, _ = st.step(s, st.Renew("b", "base", t))
+        s, eff = st.step(s, st.Tick(t))
+        assert not eff and s.records["arm"].owner == "a"
+    s, _ = st.step(s, st.Renew("b", "base", 7.0))
+    s, eff = st.step(s, st.Tick(7.05))
+    assert [(e.kind, e.object) for e in eff] == [("released", "arm"), ("expired", "arm")]
+    assert "no renewal for 7.0 s" in eff[1].reason and s.records["base"].owner == "b"
+
+
+def test_an_owner_who_stops_renewing_while_others_are_heard_loses_the_robot():
+    s = _owned_by_a()
+    for i in range(1, 30):
+        s, _ = st.step(s, st.Renew("b", "base", i * 0.1))
+        s, eff = st.step(s, st.Tick(i * 0.1))
+        if eff:
+            break
+    assert [(e.kind, e.user) for e in eff] == [("released", "a"), ("expired", "a")] and 2.0 < i * 0.1 <= 2.2
+
+
+@settings(max_examples=300, deadline=None)
+@given(events())
+def test_no_lease_expires_when_the_authority_heard_nothing_since_the_owners_last_word(seq):
+    """Whatever happened before: a tick that follows the owner's last request or renewal with nothing
+    heard from any user in between (a pause, a backlog, a stalled router) never expires that lease."""
+    s = st.initial(OBJECTS, lease_s=LEASE, grace_s=GRACE)
+    now = 0.0
+    last_heard = float("-inf")
+    for raw in seq:
+        now += raw[-1] if raw[0] not in ("motion",) and isinstance(raw[-1], float) else 0.0
+        ev = build(raw, now)
+        before = s
+        s, effects = st.step(s, ev)
+        if isinstance(ev, st.Tick):
+            for e in effects:
+                if e.kind == "expired":
+                    assert last_heard > before.records[e.object].lease_expiry - LEASE, (e, last_heard)
+        elif not isinstance(ev, (st.Leave, st.Motion)):
+            last_heard = now
 
 
 def test_reconnect_within_grace_restores_queue_place():
