@@ -224,6 +224,30 @@ class Fabric:
             time.sleep(0.005)
         return True
 
+    def muzzle(self) -> None:
+        """Publish and answer nothing from now on (an authority unsure it still is one, or stepping down)."""
+        with self._lock:
+            self.muzzled = True
+
+    def unmuzzle(self) -> None:
+        """Publish and answer again. The freeze watch starts over: the time spent muzzled is not a freeze
+        (read as one, every unmuzzle after a long pause muzzled the sim again, for ever)."""
+        with self._lock:
+            self.muzzled = False
+            self._last_put = 0.0
+
+    def connected(self) -> bool:
+        """Whether this session can hear anyone now: a router (the embedded profile) always can; a client
+        or a peer needs a live link to a router or a peer. False after its link died (the other side
+        dropped it while this process was paused) until the session is connected again."""
+        if self.config.profile == "embedded":
+            return True
+        try:
+            info = self.session.info
+            return bool(list(info.routers_zid()) or list(info.peers_zid()))
+        except Exception:  # a closing session
+            return False
+
     def _watch_freeze(self) -> bool:
         """True when muzzled (now or before); detects a freeze from the gap since the last publication."""
         now = time.monotonic()

@@ -76,8 +76,11 @@ class Authority:
                          expected=OwnRequest)
             for obj in objects
         ]
+        self._lease_s = lease_s
+        # users who may have left while no authority listened (a take-over) or while our link was down:
+        # confirmed by their token within a lease of hearing again, else they leave
         self._unconfirmed: set[str] = set(self._state.live) if restored is not None else set()
-        self._confirm_by = self.clock.now() + lease_s + 1.0
+        self._confirm_by: float | None = self.clock.now() + lease_s + 1.0
         self._watch = fabric.watch_peers(self._on_peer, kind="user")
         self._thread: threading.Thread | None = None
 
@@ -128,8 +131,13 @@ class Authority:
             if eff.kind in ("handover", "revoked", "expired", "restored", "released"):
                 if eff.kind == "handover":
                     self.counters["handovers"] += 1
+                # a robot taken from its owner without her asking (expiry, departure, take-over) is a warning:
+                # logged by the sim with its reason, whatever the log level
+                unasked = eff.kind in ("expired", "revoked") or (eff.kind in ("released", "handover") and eff.reason != "released"
+                                                                   and not eff.reason.startswith("released by")
+                                                                   and eff.reason != "left the queue")
                 self._emit(Event(kind=EventKind.ownership(eff.kind), reason=eff.reason, object=eff.object, user=eff.user,
-                                 header=self.fabric.header("event")))
+                                 severity="warning" if unasked else "info", header=self.fabric.header("event")))
         return effects
 
     def _publish(self, rec: OwnershipRecord) -> None:
@@ -149,18 +157,48 @@ class Authority:
 
     def _on_peer(self, kind: str, peer_id: str, alive: bool) -> None:
         now = self.clock.now()
+        if not alive and not self.fabric.connected():
+            # our link died (the router dropped it while this process was paused, or the router went):
+            # every user's token goes with it, and none of them left. Kept until the link is back and a
+            # lease (plus a second for the liveliness history) has passed without their token
+            with self._lock:
+                known = peer_id in self._state.live
+                if known:
+                    self._unconfirmed.add(peer_id)
+                    self._confirm_by = None
+            if known and self.fabric.should_report("own:link_lost") is not None:
+                log.warning("lost the link: user tokens are gone with it (%s first); owners keep their robots "
+                            "until the link is back and a lease passes without their token", peer_id)
+            return
         with self._lock:
             self._unconfirmed.discard(peer_id)
         self._apply(st.Join(peer_id, now) if alive else st.Leave(peer_id, now))
 
     def _run(self) -> None:
         while not self._stop.wait(self._tick_s):
-            if self._unconfirmed and self.clock.now() > self._confirm_by:
-                self._forget_absent_users()
+            if self._unconfirmed:
+                self._confirm_when_connected()
             try:
                 self._apply(st.Tick(self.clock.now()))
             except Exception:
                 log.exception("ownership tick failed")
+
+    def _confirm_when_connected(self) -> None:
+        """Users whose tokens went with our link: once connected again, those whose token did not come
+        back within a lease and a second left while nobody could tell; they leave now (grace keeps their
+        place). The clock for that starts when the link is back, never while it is down."""
+        now = self.clock.now()
+        if not self.fabric.connected():
+            with self._lock:
+                self._confirm_by = None
+            return
+        with self._lock:
+            if self._confirm_by is None:
+                self._confirm_by = now + self._lease_s + 1.0
+                return
+            due = now > self._confirm_by
+        if due:
+            self._forget_absent_users()
 
     def _serve_record(self, obj: str) -> OwnershipRecord:
         """``own/{obj}``: the record, whatever the query carries (requests go to the asker's own key)."""
@@ -203,6 +241,10 @@ class Authority:
         outcome = {"handover": "granted", "restored": "granted"}.get(eff.kind, eff.kind)
         if outcome not in ("granted", "denied", "queued", "released", "renewed"):
             outcome = "denied"
+        if outcome == "denied":
+            self.counters["denied"] = self.counters.get("denied", 0) + 1
+            if self.fabric.should_report(f"own_denied:{obj}") is not None:
+                log.info("%s of %s by %s denied: %s", request.op, obj, user, eff.reason)
         rec = self._serve_record(obj)  # stamped now, with this authority's term
         return OwnReply(outcome, eff.reason, eff.position, rec, header=self.fabric.header(keys.own(self.fabric.world, obj)))
 

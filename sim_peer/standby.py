@@ -106,6 +106,7 @@ class ReplicaHost:
         self._kept_bytes = 0
         self.snapshot_asked = time.monotonic()
         self.live: set[str] = set()
+        self._gone_at: dict[str, float] = {}  # sim id -> when its token went (monotonic): was it there when we froze?
         self._settled = False  # the first complete view of the live sims is in (open)
         self.takeovers: list[dict[str, Any]] = []
         self.last_state: WorldState | None = None
@@ -264,20 +265,27 @@ class ReplicaHost:
                           header=self.fabric.header(keys.srv(self.fabric.world, "state"), stamp=t))
 
     def _on_freeze(self, gap: float) -> None:
-        """Frozen for ``gap`` s (longer than the lease): the others dropped our token and a standby may hold
-        the world now. Stay muzzled until connected again, then ask: step down if a higher term answers,
-        carry on if no other sim is there or none holds a higher term."""
+        """Frozen for ``gap`` s: muzzled until it is known whether another sim may hold the world now.
+
+        With no other sim alive when the freeze began (nothing could have taken over), publish again at
+        once. Otherwise, after a gap longer than the lease (the others dropped our token, and our session
+        may not even know yet that its link died), listen muzzled for a lease: a new authority's streams
+        reach us once the session is back, and hearing its higher term steps us down before anything goes
+        out; then ask ``srv/state``, step down if a higher term answers, carry on otherwise."""
         f = self.fabric
         lease = f.config.lease_ms / 1000.0
+        began = time.monotonic() - gap
+        with self._lock:
+            rivals = {p for p in self.live if p != f.peer_id} | {p for p, t in self._gone_at.items() if t >= began}
+        if not rivals:
+            f.unmuzzle()
+            self.announce(f"sim {f.peer_id}: paused {gap:.1f} s with no other sim in the world; publishing again (term {f.term})")
+            return
         if gap > lease:
-            # our token was dropped: a standby may have taken over, and our session may not even know yet
-            # that its link died. Listen (muzzled) for a lease: a new authority's streams reach us once the
-            # session is back, and hearing its higher term steps us down before anything goes out
             self._stop.wait(lease + 0.5)
         deadline = time.monotonic() + max(30.0, 10 * self.freeze_gap)
         while time.monotonic() < deadline and not self._stop.is_set() and self.role == el.PRIMARY:
-            info = f.session.info
-            if not (list(info.routers_zid()) or list(info.peers_zid())):
+            if not f.connected():
                 time.sleep(0.1)  # not connected yet: nobody to ask, nobody to tell
                 continue
             others = [pid for _, pid in f.live_peers("sim", timeout=1.0) if pid != f.peer_id]
@@ -293,7 +301,7 @@ class ReplicaHost:
         if self.role == el.PRIMARY:
             if gap > lease:
                 self._step(el.Resumed())
-            f.muzzled = False
+            f.unmuzzle()
             self.announce(f"sim {f.peer_id}: frozen {gap:.1f} s, still the authority (term {f.term})")
 
     # ------------------------------------------------------------------ standby
@@ -373,6 +381,10 @@ class ReplicaHost:
     def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
         with self._lock:
             (self.live.add if alive else self.live.discard)(peer_id)
+            if not alive:
+                self._gone_at[peer_id] = time.monotonic()
+                if len(self._gone_at) > 256:  # made-up sim tokens must not grow this
+                    self._gone_at.pop(min(self._gone_at, key=self._gone_at.__getitem__))
             live = frozenset(self.live)
             settled = self._settled
         if alive or not settled:
@@ -393,7 +405,7 @@ class ReplicaHost:
                 self._taking_over = t
                 t.start()
             elif e.kind == "step_down":
-                self.fabric.muzzled = True  # from now on nothing with the old term goes out
+                self.fabric.muzzle()  # from now on nothing with the old term goes out
                 self.announce(f"sim {self.fabric.peer_id}: {e.leader} holds term {e.term}; stepping down to standby")
                 self._stepped_down.set()
             elif e.kind == "reassert":
