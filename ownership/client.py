@@ -17,13 +17,14 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from collections import Counter
 from dataclasses import dataclass
 from typing import Callable
 
 from fabric import keys
 from fabric.limits import validate_user
-from fabric.interfaces import OwnershipRecord, OwnReply, OwnRequest, ServiceError
+from fabric.interfaces import NoReply, OwnershipRecord, OwnReply, OwnRequest, ServiceError
 from fabric.session import Fabric
 
 
@@ -96,6 +97,7 @@ class OwnershipClient:
         self._lock = threading.Lock()
         self._callbacks: list[Callable[[OwnershipRecord], None]] = []
         self._stop = threading.Event()
+        self._renewing: set[str] = set()  # renewals sent and not answered yet
         self._held: set[str] = set()  # granted to us by the authority's replies; renewed until it says otherwise
         self._sims: set[str] = set()
         self._authority: str | None = None
@@ -227,12 +229,20 @@ class OwnershipClient:
             return self._records.get(obj)
 
     def _ask(self, obj: str, op: str, wait: bool = False, timeout: float | None = None) -> OwnReply:
-        known = self.snapshot()
-        if known and obj not in known:
-            raise ServiceError(f"unknown object {obj!r} (known: {', '.join(sorted(known))})")
+        """One request to the authority. The replica may still be filling (a user joining while records
+        arrive): an object it does not know is asked all the same, and only the authority's silence about
+        it is read as 'unknown'."""
         req = OwnRequest(op, self.user, wait, header=self.fabric.header("own-req"))
         key = keys.own_request(self.fabric.world, obj, self.user)
-        reply = self.fabric.call(key, req, timeout=timeout or self.timeout, expected=OwnReply)
+        limit = timeout or self.timeout
+        t0 = time.monotonic()
+        try:
+            reply = self.fabric.call(key, req, timeout=limit, expected=OwnReply)
+        except NoReply:
+            known = self.snapshot()
+            if known and obj not in known and time.monotonic() - t0 < 0.5 * limit:  # ended at once: nobody serves it
+                raise ServiceError(f"unknown object {obj!r}: no authority serves it (known: {', '.join(sorted(known))})") from None
+            raise
         self._on_record(keys.own(self.fabric.world, obj), reply.record)
         return reply
 
@@ -260,15 +270,39 @@ class OwnershipClient:
             return sorted(self._held)
 
     def _renew_loop(self) -> None:
-        while not self._stop.wait(self._renew_s):
-            for obj in self._to_renew():
-                try:
-                    reply = self._ask(obj, "renew")
-                except ServiceError:
-                    continue  # no answer this time: try again next period
-                if reply.outcome != "renewed" and reply.record.owner != self.user:
+        """Every ``renew_s`` from the start of the last round, renew everything held, all at once: a slow
+        answer (a busy authority, a loaded machine) delays neither the other robots' renewals nor the
+        next round, so a lease sees a renewal every ``renew_s`` however long each round trip takes."""
+        with ThreadPoolExecutor(max_workers=8, thread_name_prefix=f"own-renew-{self.user}") as pool:
+            next_at = time.monotonic() + self._renew_s
+            while not self._stop.wait(max(0.0, next_at - time.monotonic())):
+                next_at = max(next_at + self._renew_s, time.monotonic())
+                for obj in self._to_renew():
                     with self._lock:
-                        self._held.discard(obj)
+                        if obj in self._renewing:
+                            continue  # still waiting for the last answer: one renewal per robot in flight
+                        self._renewing.add(obj)
+                    pool.submit(self._renew, obj)
+
+    def _renew(self, obj: str) -> None:
+        try:
+            self._renew_once(obj)
+        finally:
+            with self._lock:
+                self._renewing.discard(obj)
+
+    def _renew_once(self, obj: str) -> None:
+        try:
+            reply = self._ask(obj, "renew")
+        except ServiceError:
+            return  # no answer this time: the next round asks again
+        except Exception:  # the session is closing
+            if not (self._stop.is_set() or self.fabric.closed):
+                log.debug("renewal of %s failed", obj, exc_info=True)
+            return
+        if reply.outcome != "renewed" and reply.record.owner != self.user:
+            with self._lock:
+                self._held.discard(obj)
 
     def close(self) -> None:
         self._stop.set()

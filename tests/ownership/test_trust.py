@@ -145,3 +145,24 @@ def test_records_that_came_before_their_sims_token_are_asked_for_again(router, c
         auth.close()
         quiet.close()
         alice.close()
+
+
+def test_a_robot_missing_from_a_partial_replica_is_asked_of_its_authority(connect):
+    """A student's replica holds only some records (hers come from the sim she follows; another sim's are
+    not in it yet): a request for a robot it has not heard of goes to the authority, which grants it,
+    instead of 'unknown object' from the replica alone. An object nobody serves is still refused at once."""
+    first = Authority(connect("sim", "s1"), {"arm3": "exclusive"}, lease_s=2.0).start()
+    alice = OwnershipClient(connect("user", "alice"), "alice").start()
+    wait_until(lambda: alice.record("arm3") is not None, what="arm3 in alice's replica")
+    second = Authority(connect("sim", "s2"), {"arm4": "exclusive"}, lease_s=2.0).start()
+    try:
+        assert alice.record("arm4") is None  # s2 is not the authority alice follows: arm4 is not in her replica
+        out = alice.request("arm4", timeout=5.0)
+        assert out.granted, out
+        assert second.records()["arm4"].owner == "alice"
+        with pytest.raises(ServiceError, match="unknown object 'arm9'"):
+            alice.request("arm9", timeout=5.0)
+    finally:
+        alice.close()
+        second.close()
+        first.close()
