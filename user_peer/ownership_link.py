@@ -71,8 +71,9 @@ class OwnershipLink:
         with self._lock:
             obj = rec.object
             if rec.owner == self.user:
+                # a record naming us while a release is on its way (a renewal's answer, a publication) keeps
+                # the release voluntary: the next record, free or someone else's, is no loss
                 self._mine[obj] = rec.epoch
-                self._releasing.discard(obj)
                 return
             held = self._mine.pop(obj, None)
             voluntary = obj in self._releasing
@@ -117,6 +118,8 @@ class OwnershipLink:
         and returns its epoch; after ``timeout`` it leaves the queue and raises :class:`Timeout`.
         """
         t0 = time.monotonic()
+        with self._lock:
+            self._releasing.discard(obj)  # asked for again: losing it from now on is a loss
         out = self._ask("request", obj, timeout, wait)
         if out.granted:
             return out.epoch

@@ -34,3 +34,40 @@ def test_a_taken_object_is_announced_and_a_release_is_not(connect, caplog):
         alice.close()
         bob.close()
         auth.close()
+
+
+def test_a_release_is_no_loss_when_a_record_naming_her_comes_in_between(connect, caplog):
+    """The authority publishes her robot's record often (every renewal, every start and stop of motion): one
+    naming her as owner that lands while her release is on its way must not turn the release into a loss
+    (a class's students were all told "lost ownership" of both their robots as they closed)."""
+    import threading
+
+    auth = Authority(connect("sim", "authority"), {"arm": "exclusive"}, lease_s=2.0, grace_s=5.0).start()
+    alice = OwnershipLink(connect("user", "alice"), "alice")
+    lost: list = []
+    alice.on_lost(lambda obj, rec: lost.append((obj, rec.owner, rec.epoch)))
+    stop = threading.Event()
+
+    def toggle() -> None:  # the arm starting and stopping: a record naming its owner each time
+        moving = False
+        while not stop.wait(0.0005):
+            moving = not moving
+            auth.update_motion("arm", moving)
+
+    toggler = threading.Thread(target=toggle, daemon=True)
+    try:
+        with caplog.at_level(logging.WARNING, logger="robofabric.user"):
+            auth.update_motion("arm", False)
+            toggler.start()
+            for _ in range(30):
+                alice.request("arm", timeout=5.0)
+                alice.release("arm", timeout=5.0)
+            stop.set()
+            toggler.join(2.0)
+            wait_until(lambda: alice.record("arm").owner == "", timeout=5.0, what="the last release's record")
+        assert not lost, lost
+        assert "lost ownership" not in caplog.text
+    finally:
+        stop.set()
+        alice.close()
+        auth.close()
