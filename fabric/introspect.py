@@ -21,14 +21,17 @@ __all__ = ["KeyStats", "KeyObserver", "source_of"]
 
 
 def source_of(payload: bytes) -> str:
-    """The ``header.source`` of a fabric message ("" when it has none or is not a fabric message)."""
+    """The ``header.source`` of a fabric message ("" when it has none or is not a fabric message).
+
+    Headers of any version: the five fields of the first one (``Header, stamp, wall_ns, seq, source``)
+    lead, and whatever a later version appends (``term`` today) is not looked at."""
     try:
         msg = msgpack.unpackb(payload, raw=False, strict_map_key=False)
     except Exception:
         return ""
     if isinstance(msg, list) and msg:
         head = msg[-1]
-        if isinstance(head, list) and len(head) == 5 and head[0] == "Header" and isinstance(head[4], str):
+        if isinstance(head, list) and len(head) >= 5 and head[0] == "Header" and isinstance(head[4], str):
             return head[4]
     return ""
 

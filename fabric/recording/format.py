@@ -65,13 +65,13 @@ def peek(payload: bytes) -> Peek:
     head = msg[-1]
     if (
         isinstance(head, list)
-        and len(head) in (5, 6)  # 6: with the authority epoch (Header.term, issue 16)
+        and len(head) >= 5  # 6: with the authority epoch (Header.term); later versions may add trailing fields
         and head[0] == "Header"
         and isinstance(head[2], int)
         and isinstance(head[3], int)
         and head[2] >= 0
     ):
-        term = head[5] if len(head) == 6 and isinstance(head[5], int) and head[5] >= 0 else 0
+        term = head[5] if len(head) >= 6 and isinstance(head[5], int) and head[5] >= 0 else 0
         return Peek(msg[0], head[2], head[3], term, head[4] if isinstance(head[4], str) else "")
     return Peek(msg[0])
 

@@ -35,6 +35,19 @@ def test_observer_counts_rates_types_and_publishers_from_the_payload():
     assert ev.types == ("raw",) and source_of(b"\x00raw") == ""
 
 
+def test_publishers_are_read_from_headers_of_any_version():
+    """A sim's header carries a sixth field (its authority term); a later version may append more."""
+    import msgpack
+
+    obs = KeyObserver()
+    obs.add("rf/w/robot/a/joints", encode(JointState(NAMES, np.zeros(2), np.zeros(2), Header(seq=1, source="sim-a", term=3))), 1.0)
+    later = msgpack.unpackb(encode(JointState(NAMES, np.zeros(2), np.zeros(2), Header(seq=2, source="sim-b", term=4))), raw=False)
+    later[-1] = [*later[-1], "a field of a later version"]
+    obs.add("rf/w/robot/a/joints", msgpack.packb(later, use_bin_type=True), 1.1)
+    (joints,) = obs.snapshot()
+    assert joints.types == ("JointState",) and joints.publishers == ("sim-a", "sim-b")
+
+
 @pytest.fixture
 def live_world(router, connect, world):
     """A publisher of an arm's joints at ~50 Hz and a latched map, until the test ends."""
