@@ -231,8 +231,23 @@ class FabricConfig:
         # a file that chose its own cap keeps it; otherwise a few MB, not zenoh's 1 GiB
         if json.loads(conf.get_json("transport/link/rx/max_message_size")) == ZENOH_DEFAULT_MAX_MESSAGE_SIZE:
             conf.insert_json5("transport/link/rx/max_message_size", json.dumps(MAX_MESSAGE_SIZE))
+        # A router answers read-only queries on its admin space (``@/ZID/router/{subscriber,queryable,token}/KEY``):
+        # who subscribes to and serves what, for ``robofabric ps -v``, ``list`` and ``info`` (fabric/declarations.py).
+        # Never writable; a config file that sets the admin space keeps its choice; ACLs still decide who may ask.
+        if mode == "router" and not json.loads(conf.get_json("adminspace/enabled")) and not (
+            self.config_file and "adminspace" in _file_text(self.config_file)
+        ):
+            conf.insert_json5("adminspace", json.dumps({"enabled": True, "permissions": {"read": True, "write": False}}))
         # Timestamps let advanced subscribers ask publishers' caches for history.
         conf.insert_json5("timestamping/enabled", json.dumps({"router": True, "peer": True, "client": True}))
         for key, value in self.extra:
             conf.insert_json5(key, value)
         return conf
+
+
+def _file_text(path: str) -> str:
+    try:
+        with open(path, encoding="utf-8") as f:
+            return f.read()
+    except OSError:
+        return ""

@@ -9,6 +9,7 @@ dispatch lives in :mod:`fabric.recording.cli`, which owns the ``info`` command.
 from __future__ import annotations
 
 import json
+import sys
 import threading
 import time
 from typing import Annotated, Optional
@@ -55,6 +56,7 @@ def list_keys(
     keyexpr: Annotated[Optional[str], typer.Argument(help="Key expression, full or world-relative (default: the whole world).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON document instead of a table.")] = False,
     duration: Annotated[float, typer.Option(help="Seconds to watch (rates are measured over this window).")] = 2.0,
+    services: Annotated[bool, typer.Option("--services", help="Services (queryables) with their request and reply types and who serves them.")] = False,
     world: World = None,
     connect: Connect = None,
     listen: Listen = None,
@@ -62,30 +64,70 @@ def list_keys(
     zenoh_config: ZenohConfig = None,
     peer_id: PeerId = None,
 ) -> None:
-    """Live keys with their type, publishers and rate (like ``ros2 topic list -v``)."""
+    """Live keys with their type, publishers, subscribers and rate (like ``ros2 topic list -v``); --services: services."""
+    from fabric.declarations import read_declarations, service_types
+
     if not duration > 0:
         raise UserError("--duration must be positive")
     cfg = make_config(world, connect, listen, profile, zenoh_config)
     expr = _resolve(keyexpr, cfg.world) if keyexpr else keys.world_all(cfg.world)
     with open_fabric(cfg, "tool", peer_id) as fab:
-        stats = observe(fab, expr, duration)
-    if as_json:
-        print(json.dumps({"world": cfg.world, "keyexpr": expr, "duration_s": duration, "keys": [s.to_json() for s in stats]}))
+        decl = read_declarations(fab.session, cfg.world)
+        stats = [] if services else observe(fab, expr, duration)
+    if services:
+        rows = [
+            {"key": k, "kind": "service", "request": service_types(k)[0], "reply": service_types(k)[1], "servers": who}
+            for k, who in decl.queryables.items() if _intersects(k, expr)
+        ]
+        if as_json:
+            print(json.dumps({"world": cfg.world, "keyexpr": expr, "declarations_visible": decl.available, "services": rows}))
+            return
+        table = _table(f"{expr}: {len(rows)} service(s)", ("key", "request", "reply", "served by"))
+        for r in rows:
+            table.add_row(r["key"], r["request"], r["reply"], ", ".join(r["servers"]))
+        _print(table)
+        if not decl.available:
+            print("the router does not show its admin space: services unknown", file=sys.stderr)
         return
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table(title=f"{expr}: {len(stats)} key(s) in {duration:g} s")
-    for col, just in (("key", "left"), ("type", "left"), ("publishers", "left"), ("rate Hz", "right"), ("msgs", "right"), ("kB/s", "right")):
-        table.add_column(col, justify=just)
+    subs = {s.key: decl.matching(decl.subscribers, s.key) for s in stats}
+    if as_json:
+        docs = [{**s.to_json(), "subscribers": subs[s.key]} for s in stats]
+        print(json.dumps({"world": cfg.world, "keyexpr": expr, "duration_s": duration, "declarations_visible": decl.available, "keys": docs}))
+        return
+    table = _table(f"{expr}: {len(stats)} key(s) in {duration:g} s", ("key", "type", "publishers", "subscribers", "rate Hz", "msgs", "kB/s"))
     for s in stats:
         table.add_row(
             s.key + (" (latched)" if s.latched else ""), ", ".join(s.types), ", ".join(s.publishers) or "-",
+            (", ".join(subs[s.key]) or "-") if decl.available else "?",
             f"{s.rate_hz:.1f}", str(s.messages), f"{s.bytes_per_s / 1000:.1f}",
         )
-    Console().print(table)
+    _print(table)
     if not stats:
-        print(f"nothing published on {expr} in {duration:g} s (world {cfg.world!r})")
+        print(f"nothing published on {expr} in {duration:g} s (world {cfg.world!r}); services: robofabric list --services")
+
+
+def _intersects(a: str, b: str) -> bool:
+    try:
+        return zenoh.KeyExpr(a).intersects(zenoh.KeyExpr(b))
+    except Exception:
+        return False
+
+
+def _table(title: str, columns: tuple[str, ...]):
+    """A table whose key column folds rather than being cut: it fits the terminal, every key whole."""
+    from rich.table import Table
+
+    table = Table(title=title)
+    for col in columns:
+        numeric = col in ("rate Hz", "msgs", "kB/s")
+        table.add_column(col, justify="right" if numeric else "left", overflow="fold", no_wrap=numeric)
+    return table
+
+
+def _print(table) -> None:
+    from rich.console import Console
+
+    Console().print(table)
 
 
 def key_info(
@@ -98,7 +140,10 @@ def key_info(
         raise UserError("--duration must be positive")
     cfg = make_config(world, connect, listen, profile, zenoh_config)
     full = _resolve(key, cfg.world)
+    from fabric.declarations import read_declarations, service_types
+
     with open_fabric(cfg, "tool", peer_id) as fab:
+        decl = read_declarations(fab.session, cfg.world)
         stats = observe(fab, full, duration)
         subscribed = None
         if "*" not in full and "$" not in full:
@@ -111,22 +156,31 @@ def key_info(
                 subscribed = None
     types = message_types()
     seen_types = sorted({t for s in stats for t in s.types})
+    subscriber_names = decl.matching(decl.subscribers, full)
+    servers = {k: who for k, who in decl.queryables.items() if _intersects(k, full)}
     if as_json:
         doc = {
             "key": full, "latched": keys.is_latched(full) if "*" not in full else None, "subscribers": subscribed,
+            "subscribed_by": subscriber_names, "declarations_visible": decl.available,
+            "services": [{"key": k, "request": service_types(k)[0], "reply": service_types(k)[1], "servers": who} for k, who in servers.items()],
             "keys": [s.to_json() for s in stats],
             "types": {t: [f.__getattribute__("name") for f in fields_of(types[t])] for t in seen_types if t in types},
         }
         print(json.dumps(doc))
         return
     print(f"key: {full}")
-    if not stats:
+    for k, who in servers.items():
+        req, rep = service_types(k)
+        print(f"  service {k}: request {req}, reply {rep}; served by {', '.join(who)}")
+    if not stats and not servers:
         print(f"no message on {full} in {duration:g} s")
     for s in stats:
         print(f"  {s.key}: type {', '.join(s.types)}; publishers {', '.join(s.publishers) or '-'}; "
               f"{s.rate_hz:.1f} Hz, {s.bytes_per_s / 1000:.1f} kB/s, last {s.last_bytes} B, {s.messages} msgs in {duration:g} s"
               + ("; latched (late joiners get the latest value)" if s.latched else ""))
-    if subscribed is not None:
+    if decl.available and not servers:
+        print(f"subscribers: {', '.join(subscriber_names) or 'none'}")
+    elif subscribed is not None and not servers:
         print(f"subscribers: {'yes' if subscribed else 'none'} (zenoh matching status)")
     for t in seen_types:
         if t in types:

@@ -87,8 +87,11 @@ def router(
 
 
 def ps(
+    peer: Annotated[Optional[str], typer.Argument(help="With -v: only this peer (its id).")] = None,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="What each peer publishes, subscribes to and serves (like ros2 node info).")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON document instead of a table.")] = False,
     timeout: Annotated[float, typer.Option(help="Seconds to wait for liveliness replies.")] = 1.0,
+    duration: Annotated[float, typer.Option(help="With -v: seconds to watch the world's traffic for what each peer publishes.")] = 1.5,
     world: World = None,
     connect: Connect = None,
     listen: Listen = None,
@@ -96,21 +99,71 @@ def ps(
     zenoh_config: ZenohConfig = None,
     peer_id: PeerId = None,
 ) -> None:
-    """List the live peers of a world, by kind, from their liveliness tokens."""
+    """List the live peers of a world, by kind, from their liveliness tokens; -v: what each publishes, subscribes, serves.
+
+    A token whose key names no peer (any login may declare one) is shown quoted on stderr and skipped."""
+    from fabric.declarations import live_tokens, quoted, read_declarations
+
+    if peer is not None and not verbose:
+        verbose = True
+    decl = None
+    published: dict[str, list[str]] = {}
     with _open("tool", world, connect, listen, profile, zenoh_config, peer_id) as fab:
-        peers = [(k, i) for k, i in fab.live_peers(timeout=timeout) if i != fab.peer_id]
+        found, bad = live_tokens(fab.session, fab.world, timeout=timeout)
+        peers = [(p.kind, p.id) for p in found if p.id != fab.peer_id]
+        if verbose:
+            from fabric.introspect_cli import observe
+
+            decl = read_declarations(fab.session, fab.world, timeout=timeout)
+            for s in observe(fab, keys.world_all(fab.world), duration):
+                for src in s.publishers:
+                    published.setdefault(src, []).append(s.key)
+    for k in bad:
+        print(f"skipped a token that names no peer: {quoted(k)}", file=sys.stderr)
+    if peer is not None:
+        peers = [(k, i) for k, i in peers if i == peer]
+        if not peers:
+            raise UserError(f"no live peer {peer!r} in world {fab.world!r}")
+
+    def detail(pid: str) -> dict:
+        subs, served = decl.of_peer(pid) if decl is not None else ([], [])
+        return {"publishes": sorted(published.get(pid, [])), "subscribes": subs, "serves": served}
+
     if as_json:
         by_kind: dict[str, list[str]] = defaultdict(list)
         for k, i in peers:
             by_kind[k].append(i)
-        print(json.dumps({"world": fab.world, "peers": dict(by_kind), "count": len(peers)}))
+        doc: dict = {"world": fab.world, "peers": dict(by_kind), "count": len(peers), "bad_tokens": bad}
+        if verbose:
+            doc["declarations_visible"] = bool(decl and decl.available)
+            doc["info"] = {i: detail(i) for _k, i in peers}
+        print(json.dumps(doc))
+        return
+    if verbose:
+        from fabric.declarations import service_types
+
+        if decl is not None and not decl.available:
+            print("(the router does not show its admin space: subscriptions and services unknown)", file=sys.stderr)
+        for k, i in peers:
+            d = detail(i)
+            print(f"{i} ({k})")
+            print("  publishes:" + ("" if d["publishes"] else " -"))
+            for key in d["publishes"]:
+                print(f"    {key}")
+            print("  subscribes:" + ("" if d["subscribes"] else " -"))
+            for key in d["subscribes"]:
+                print(f"    {key}")
+            print("  serves:" + ("" if d["serves"] else " -"))
+            for key in d["serves"]:
+                req, rep = service_types(key)
+                print(f"    {key}  ({req} -> {rep})")
         return
     from rich.console import Console
     from rich.table import Table
 
     table = Table(title=f"world {fab.world}: {len(peers)} peer(s)")
     table.add_column("kind")
-    table.add_column("id")
+    table.add_column("id", overflow="fold")
     for k, i in peers:
         table.add_row(k, i)
     Console().print(table)

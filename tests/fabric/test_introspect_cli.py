@@ -97,3 +97,66 @@ def test_list_info_and_interfaces_against_a_live_world(live_world, world):
     assert scan["fields"][3]["type"] == "uint16[]"
     bad = _cli("interfaces", "Nope")
     assert bad.returncode == 2 and "unknown message type 'Nope'" in bad.stderr
+
+
+@pytest.fixture
+def peers_world(router, connect, world):
+    """A sim-like peer (publishes joints with a term-3 header, takes commands, serves srv/world), a compute-like
+    peer serving IK, and tokens no peer could name: what any login may declare."""
+    from fabric.interfaces import WorldInfo
+
+    sim = connect("sim", peer_id="sim-x")
+    comp = connect("compute", peer_id="compute-x")
+    sim.subscribe_raw(keys.robot_cmd_all(world, "arm1"), lambda s: None)
+    sim.serve(keys.srv(world, "world"), lambda k, r: WorldInfo(world=world))
+    comp.serve(keys.srv_per_subject(world, "ik"), lambda k, r: None)
+    odd = connect("tool", peer_id="mallory-tool")
+    tokens = [odd.session.liveliness().declare_token(f"rf/{world}/peer/viewer/with space"),
+              odd.session.liveliness().declare_token(f"rf/{world}/peer/nokind/x"),
+              odd.session.liveliness().declare_token(f"rf/{world}/peer/viewer/a/b")]
+    stop = threading.Event()
+
+    def run() -> None:
+        i = 0
+        while not stop.wait(0.02):
+            sim.publish(keys.robot_joints(world, "arm1"), JointState(NAMES, np.zeros(2), np.zeros(2), Header.now(seq=i, source="sim-x", term=3)))
+            i += 1
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    yield f"tcp/127.0.0.1:{router[1]}"
+    stop.set()
+    t.join(timeout=5)
+    for tok in tokens:
+        tok.undeclare()
+
+
+@pytest.mark.slow
+def test_ps_list_and_info_name_publishers_subscribers_and_services_and_skip_bad_tokens(peers_world, world):
+    ep = peers_world
+    ps = _cli("ps", "--world", world, "--connect", ep)
+    assert ps.returncode == 0, ps.stderr
+    assert "sim-x" in ps.stdout and "compute-x" in ps.stdout and "Traceback" not in ps.stderr
+    assert "'rf/%s/peer/viewer/with space'" % world in ps.stderr, ps.stderr
+    doc = json.loads(_cli("ps", "--json", "--world", world, "--connect", ep).stdout)
+    assert doc["peers"]["sim"] == ["sim-x"] and len(doc["bad_tokens"]) == 2, doc  # peer/viewer/a/b is not a peer/KIND/ID key at all
+
+    v = json.loads(_cli("ps", "-v", "sim-x", "--json", "--world", world, "--connect", ep).stdout)
+    assert v["declarations_visible"] and list(v["info"]) == ["sim-x"], v
+    info = v["info"]["sim-x"]
+    assert info["publishes"] == [keys.robot_joints(world, "arm1")]
+    assert keys.robot_cmd_all(world, "arm1") in info["subscribes"] and info["serves"] == [keys.srv(world, "world")], info
+    text = _cli("ps", "-v", "compute-x", "--world", world, "--connect", ep)
+    assert text.returncode == 0 and f"rf/{world}/srv/ik/*  (IKRequest -> IKReply)" in text.stdout, text.stdout + text.stderr
+
+    lst = json.loads(_cli("list", "robot/**", "--json", "--duration", "1", "--world", world, "--connect", ep).stdout)
+    (j,) = lst["keys"]
+    assert j["publishers"] == ["sim-x"] and j["subscribers"] == [], j
+    srv = json.loads(_cli("list", "--services", "--json", "--world", world, "--connect", ep).stdout)
+    assert {(s["key"], s["request"], s["reply"], tuple(s["servers"])) for s in srv["services"]} == {
+        (keys.srv(world, "world"), "-", "WorldInfo", ("sim-x",)), (f"rf/{world}/srv/ik/*", "IKRequest", "IKReply", ("compute-x",)),
+    }
+    w = _cli("info", "srv/world", "--duration", "0.5", "--world", world, "--connect", ep)
+    assert w.returncode == 0 and "reply WorldInfo; served by sim-x" in w.stdout and "no message" not in w.stdout, w.stdout
+    cmd = json.loads(_cli("info", "robot/arm1/cmd/joints/by/alice", "--json", "--duration", "0.5", "--world", world, "--connect", ep).stdout)
+    assert cmd["subscribed_by"] == ["sim-x"], cmd
