@@ -201,7 +201,11 @@ class NavigationService:
         return robot in self.poses
 
     def _on_robot(self, key: str, msg: Any) -> None:
-        parsed = keys.parse(key)
+        try:
+            parsed = keys.parse(key)
+        except ValueError:  # any login may put on robot/**: a key of no layout is counted, never a traceback
+            self.counters["bad_key"] = self.counters.get("bad_key", 0) + 1
+            return
         robot = parsed.subject
         if parsed.category != "robot" or (self.robots is not None and robot not in self.robots):
             return

@@ -250,3 +250,21 @@ def test_sensor_mounting_and_radius_come_from_the_world_description(connect):
         assert "within the robot radius" in refused(
             user, "plan", "rover", PlanRequest("rover", goal=[2.0, 9.4, math.pi / 2], start=[2.0, 2.0, math.pi / 2])
         )
+
+
+def test_a_key_of_no_layout_on_a_robots_keys_is_counted_never_a_traceback(connect, caplog):
+    """Any login may put on ``robot/**``: a twist without its ``by/USER`` (what ``pub`` sent without --user)."""
+    from fabric.interfaces import Twist
+
+    compute = connect("compute", "compute-3")
+    user = connect("user", "user-3")
+    world = user.world
+    with register_navigation(compute, settings=SETTINGS, mapper_config=ROOM) as nav:
+        wait_until(lambda: _try(lambda: call(user, "map", "map", MapRequest("status"), timeout=1.0)), what="map service")
+        with caplog.at_level("DEBUG"):
+            for key in (f"rf/{world}/robot/base1/cmd/twist", f"rf/{world}/robot/base1/no/such/layout"):
+                user.publish(key, Twist(0.3, 0.0))
+            wait_until(lambda: nav.counters.get("bad_key", 0) >= 2, what="bad keys counted", seen=lambda: nav.counters)
+        assert compute.counters["callback_errors"] == 0
+        assert not [r for r in caplog.records if r.levelname in ("ERROR", "CRITICAL") or r.exc_info], caplog.text
+        assert call(user, "map", "map", MapRequest("status")).action == "status"  # still serving
