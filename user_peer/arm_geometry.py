@@ -96,10 +96,6 @@ class ArmGeometry:
         pin.forwardKinematics(self.model, self.data, q)
         return [_placement(m) for m in self.data.oMi]
 
-    def joint_origins(self, q: Sequence[float]) -> np.ndarray:
-        """(n+1, 3) positions of the base and each joint origin: the arm's skeleton."""
-        return np.array([p.translation for p in self.fk(q)])
-
     def shape_placements(self, q: Sequence[float]) -> list[tuple[Shape, Placement]]:
         """Each visual shape with its placement in the base frame (FK must be current: call after ``fk``)."""
         self.fk(q)

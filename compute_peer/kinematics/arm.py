@@ -111,7 +111,7 @@ class PlacedArm:
         if dq is None or len(dq) == 0:
             return j, np.zeros(0), np.zeros(0)
         dqv = finite_vector(dq, self.nq, "joint rates")
-        return j, j @ dqv, np.linalg.norm(j, axis=0) * np.abs(dqv)
+        return j, j @ dqv, self.model.joint_speed_magnitudes(qv, dqv, jacobian=j)
 
     def move(self, q_now: np.ndarray, q_goal: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """A synchronised move at the speed limits: joint rates, their Eq. 7 speeds (at ``q_now``), duration."""

@@ -17,7 +17,7 @@ class NoIKSolution(ValueError):
 
 
 class ArmModel:
-    """FK, geometric Jacobian (paper Eq. 3-6), twist, Eq. 7 speeds and DLS IK for one robot type."""
+    """FK, geometric Jacobian (paper Eq. 3-6), Eq. 7 speeds and DLS IK for one robot type."""
 
     def __init__(self, robot_type: str) -> None:
         desc = robots.load(robot_type)
@@ -55,13 +55,14 @@ class ArmModel:
             cols.append(np.concatenate([np.cross(z, o_n - m.translation), z]))
         return np.stack(cols, axis=1)
 
-    def twist(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
-        """End-effector twist xi = J(q) dq (Eq. 3): linear then angular velocity."""
-        return self.jacobian(q) @ np.asarray(dq, float)
+    def joint_speed_magnitudes(self, q: np.ndarray, dq: np.ndarray, *, jacobian: np.ndarray | None = None) -> np.ndarray:
+        """Eq. 7: per joint, the norm of its column's linear+angular contribution times its rate.
 
-    def joint_speed_magnitudes(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
-        """Eq. 7: per joint, the norm of its column's linear+angular contribution times its rate."""
-        return np.linalg.norm(self.jacobian(q), axis=0) * np.abs(np.asarray(dq, float))
+        ``jacobian`` is J(q) when the caller has it already, in any frame: a rotation of both halves of a
+        column keeps its norm, so the speeds are the same in the base and the world frame.
+        """
+        j = self.jacobian(q) if jacobian is None else jacobian
+        return np.linalg.norm(j, axis=0) * np.abs(np.asarray(dq, float))
 
     def ik_position(self, target: np.ndarray, q0: np.ndarray, *, tol: float = 1e-9,
                     iters: int = 200, damping: float = 1e-4) -> np.ndarray:

@@ -1,5 +1,5 @@
 """The interfaces package: every built-in type registered under its class name, the wire form of before the
-move, and the old import path ``fabric.messages`` as a re-export.
+move, and no second import path for the types.
 
 ``GOLDEN`` holds bytes encoded by the code before issue 12 moved the types (commit 9679bd3, when they lived in
 ``fabric.messages``, ``sim_peer.messages``, ``compute_peer.messages``, ``compute_peer.navigation.messages`` and
@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 import fabric.interfaces as fi
-import fabric.messages
 from fabric.codec import decode, encode, messages_equal, registered
 
 GOLDEN = {
@@ -70,13 +69,7 @@ def test_every_built_in_type_is_registered_under_its_class_name():
     assert {n for n in fi.__all__ if n in types} == set(mine)  # each is exported by fabric.interfaces
 
 
-def test_fabric_messages_is_a_thin_re_export():
-    assert fabric.messages.__all__ == fi.__all__
-    for name in fi.__all__:
-        assert getattr(fabric.messages, name) is getattr(fi, name), name
-
-
-@pytest.mark.parametrize("old", ["sim_peer.messages", "compute_peer.messages", "compute_peer.navigation.messages", "ownership.messages"])
+@pytest.mark.parametrize("old", ["fabric.messages", "sim_peer.messages", "compute_peer.messages", "compute_peer.navigation.messages", "ownership.messages"])
 def test_the_peers_message_modules_are_gone(old):
     with pytest.raises(ModuleNotFoundError):
         importlib.import_module(old)
