@@ -37,8 +37,23 @@ def _joint_stream(robot: Any) -> Stream:
     return Stream("joints", "joints", read)
 
 
+class _Driven(SimRobot):
+    """A robot whose controller ``ctrl`` moves it and writes the joints at ``vadr`` itself (both types)."""
+
+    ctrl: ArmController | BaseController
+    vadr: np.ndarray
+
+    @property
+    def moving(self) -> bool:
+        return self.ctrl.moving
+
+    @property
+    def kinematic_dofs(self) -> int:
+        return len(self.vadr)
+
+
 @check_hooks
-class ArmRobot(SimRobot):
+class ArmRobot(_Driven):
     """An arm driven joint by joint toward a target; publishes its joints and, with them, its flange pose."""
 
     kind = "arm"
@@ -98,14 +113,6 @@ class ArmRobot(SimRobot):
         return lambda header: Pose(pos, quat, lin, ang, "world", header)
 
     # state ------------------------------------------------------------------
-    @property
-    def moving(self) -> bool:
-        return self.ctrl.moving
-
-    @property
-    def kinematic_dofs(self) -> int:
-        return len(self.vadr)
-
     def snapshot(self) -> RobotState:
         c = self.ctrl
         return RobotState(self.id, "arm", c.q, c.dq, c.target, extra={"scale": c.scale, "idle": bool(c.idle)})
@@ -149,7 +156,7 @@ class ArmRobot(SimRobot):
 
 
 @check_hooks
-class MobileRobot(SimRobot):
+class MobileRobot(_Driven):
     """A differential-drive base (twists, paths) with a LIDAR, an ultrasonic ring and a bumper as its sensors."""
 
     kind = "mobile"
@@ -251,14 +258,6 @@ class MobileRobot(SimRobot):
         return lambda header: Pose(pos, quat, lin, ang, "world", header)
 
     # state ------------------------------------------------------------------
-    @property
-    def moving(self) -> bool:
-        return self.ctrl.moving
-
-    @property
-    def kinematic_dofs(self) -> int:
-        return len(self.vadr)
-
     def snapshot(self) -> RobotState:
         c = self.ctrl
         extra: dict[str, Any] = {
