@@ -278,10 +278,11 @@ def pub(
     key: Annotated[str, typer.Argument(help="Concrete key, full or world-relative (robot/base1/cmd/twist: with --user, that user's key .../by/USER).")],
     msg_type: Annotated[str, typer.Option("--type", "-t", help="Message type, e.g. Twist, JointTarget, Pose, Stop.")],
     data: Annotated[str, typer.Option("--data", "-d", help='Fields as JSON, e.g. \'{"v": 0.3, "omega": 0.1}\'.')] = "{}",
-    user: Annotated[Optional[str], typer.Option(help="Wrap in a Command from this user (for cmd/* keys).")] = None,
-    epoch: Annotated[int, typer.Option(help="Ownership epoch stamped on the Command.")] = 0,
+    user: Annotated[Optional[str], typer.Option(help="Wrap in a Command from this user (required for cmd/* keys unless the login names the user).")] = None,
+    epoch: Annotated[Optional[int], typer.Option(help="Ownership epoch stamped on the Command (default: the user's current one, read from own/ROBOT).")] = None,
     rate: Annotated[float, typer.Option(help="Publish at this rate in Hz (0: once).")] = 0.0,
     count: Annotated[Optional[int], typer.Option("--count", "-n", help="Number of messages (default 1, or forever with --rate).")] = None,
+    wait: Annotated[float, typer.Option(help="Seconds to wait for the sim's answer to a command (0: do not wait).")] = 1.0,
     world: World = None,
     connect: Connect = None,
     listen: Listen = None,
@@ -289,7 +290,11 @@ def pub(
     zenoh_config: ZenohConfig = None,
     peer_id: PeerId = None,
 ) -> None:
-    """Publish a message built from JSON (like ``ros2 topic pub``); checked by the codec before it leaves."""
+    """Publish a message built from JSON (like ``ros2 topic pub``); checked by the codec before it leaves.
+
+    The key must match a robofabric key layout (refused before sending otherwise). A command (``robot/ID/cmd/NAME``)
+    needs its user, from ``--user`` or the login; ``pub`` then listens for the sim's refusal for ``--wait`` s:
+    exit 1 with the sim's reason when it refuses, or when no sim listens on the key; exit 0 when none came."""
     from fabric.codec import encode
     from fabric.interfaces import Command
     from fabric.rate import RateLoop
@@ -299,19 +304,39 @@ def pub(
         user = make_config(world, connect, listen, profile, zenoh_config).user_id(user)  # a secure login is the user
     except ValueError as exc:
         raise UserError(str(exc)) from None
-    try:
-        msg = Command(user=user, epoch=epoch, body=body) if user else body
-        encode(msg)
-    except (ValueError, TypeError) as exc:
-        raise UserError(f"cannot build {msg_type} from {data!r}: {exc}") from None
+    if wait < 0:
+        raise UserError("--wait must not be negative")
     n = count if count is not None else (None if rate > 0 else 1)
     stop = shutdown_event()
     with _open("tool", world, connect, listen, profile, zenoh_config, peer_id, key=key) as fab:
         full = _user_key(resolve_key(key, fab.world), user)
         if "*" in full or "$" in full:
             raise UserError(f"{full!r} is a pattern; pub needs a concrete key")
-        fab.session.declare_publisher(full)  # routes to existing subscribers before the first put
-        time.sleep(0.3)
+        parsed = _parse_pub_key(full, user)
+        is_cmd = parsed.category == "cmd"
+        if is_cmd and not user:
+            user = parsed.user  # a key that names its writer (.../by/ann) is that user's command
+        if is_cmd and epoch is None:
+            epoch = _current_epoch(fab, parsed.subject, parsed.user)
+        try:
+            msg = Command(user=user, epoch=epoch or 0, body=body) if user else body
+            encode(msg)
+        except (ValueError, TypeError) as exc:
+            raise UserError(f"cannot build {msg_type} from {data!r}: {exc}") from None
+        refusals: list[str] = []
+        if is_cmd and wait > 0:
+            from fabric.interfaces import Event, EventKind
+
+            def on_event(_key: str, ev: Event) -> None:
+                if ev.kind == EventKind.REJECT and ev.user == parsed.user:
+                    refusals.append(ev.reason)
+
+            fab.subscribe(keys.event(fab.world, "reject", parsed.subject), on_event, expected=Event)
+        publisher = fab.session.declare_publisher(full)  # routes to existing subscribers before the first put
+        deadline = time.monotonic() + 0.5
+        while not publisher.matching_status.matching and time.monotonic() < deadline:
+            time.sleep(0.02)
+        heard = bool(publisher.matching_status.matching)
         sent = 0
 
         def tick(_now: float) -> None:
@@ -327,8 +352,53 @@ def pub(
         else:
             for _ in range(n or 1):
                 tick(0.0)
-        time.sleep(0.2)
-    print(f"published {sent} {msg_type} on {full}")
+        if is_cmd and wait > 0 and heard:
+            end = time.monotonic() + wait
+            while not refusals and time.monotonic() < end:
+                time.sleep(0.02)
+        else:
+            time.sleep(0.2)
+        publisher.undeclare()
+    if refusals:
+        print(f"refused: {refusals[0]} ({sent} {msg_type} sent on {full})", file=sys.stderr)
+        raise typer.Exit(1)
+    if is_cmd and wait > 0 and not heard:
+        print(f"no sim listens on {full}: {sent} {msg_type} sent, nobody took it", file=sys.stderr)
+        raise typer.Exit(1)
+    if is_cmd and wait > 0:
+        print(f"published {sent} {msg_type} on {full}; applied (not refused within {wait:g} s)")
+    else:
+        print(f"published {sent} {msg_type} on {full}")
+
+
+def _parse_pub_key(full: str, user: str | None):
+    """The layout ``full`` matches; a key of none, or a command without its user, is refused before sending."""
+    try:
+        parsed = keys.parse(full)
+    except ValueError as exc:
+        parts = full.split("/")
+        if len(parts) == 6 and parts[2] == "robot" and parts[4] == "cmd" and not user:
+            raise UserError(f"{full!r} is a command key: a command needs its user (--user NAME, or a login that names it); "
+                            "the sim takes the sender from the key .../by/USER") from None
+        raise UserError(f"{exc}; nothing sent") from None
+    if parsed.category == "cmd" and user and parsed.user != user:
+        raise UserError(f"{full!r} is {parsed.user}'s command key, not {user}'s") from None
+    return parsed
+
+
+def _current_epoch(fab: Fabric, robot: str, user: str) -> int:
+    """The ownership epoch ``user`` holds ``robot`` under (0 when she does not own it or no authority answers)."""
+    from fabric.interfaces import OwnershipRecord, ServiceError
+
+    try:
+        replies = fab.query(keys.own(fab.world, robot), timeout=0.5, expected=OwnershipRecord)
+    except (ServiceError, ValueError):
+        return 0
+    for rep in replies:
+        rec = rep.message
+        if isinstance(rec, OwnershipRecord) and rec.owner == user:
+            return int(rec.epoch)
+    return 0
 
 
 def _message_from_json(msg_type: str, data: str):

@@ -91,14 +91,14 @@ world = "{world}"
 
 [[peer]]
 name = "once"
-args = ["pub", "robot/x/cmd/stop", "-t", "Stop"]
+args = ["pub", "robot/x/cmd/stop", "-t", "Stop", "--user", "ann", "--wait", "0"]
 role = "task"
 """
     out = _up(tmp_path, text, "--duration", "40")
     assert "once finished with exit code 0" in out.stdout
     assert "published 1 Stop" in out.stdout
     assert out.returncode == 0, out.stdout + out.stderr
-    assert (tmp_path / "out" / "logs" / "once.log").read_text().strip().endswith(f"rf/{world}/robot/x/cmd/stop")
+    assert (tmp_path / "out" / "logs" / "once.log").read_text().strip().endswith(f"rf/{world}/robot/x/cmd/stop/by/ann")
 
 
 @pytest.mark.slow

@@ -1,0 +1,53 @@
+"""``robofabric pub`` on command keys against a live sim: applied, refused with the sim's reason, bad keys refused."""
+
+from __future__ import annotations
+
+import subprocess
+
+import pytest
+
+from fabric.testing import robofabric_cmd, wait_until
+from ownership import OwnershipClient
+
+pytestmark = pytest.mark.slow  # starts a sim process
+
+
+@pytest.fixture
+def sim_world(router, procs, world):
+    ep = f"tcp/127.0.0.1:{router[1]}"
+    sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep), name="sim")
+    wait_until(lambda: router[0].live_peers("sim"), timeout=60, what="sim peer", seen=lambda: procs.output(sim)[-2000:])
+    return ep
+
+
+def _pub(world, ep, *args):
+    return subprocess.run(
+        robofabric_cmd("pub", *args, "--world", world, "--connect", ep), capture_output=True, text=True, timeout=60
+    )
+
+
+def test_pub_exit_codes_applied_refused_and_bad_keys(sim_world, world, connect):
+    ep = sim_world
+    twist = ("-t", "Twist", "-d", '{"v": 0.2, "omega": 0}')
+    alice = OwnershipClient(connect("user", "alice"), "alice").start()
+    try:
+        wait_until(lambda: alice.request("base1").outcome == "granted", timeout=20, what="alice owns base1")
+        ok = _pub(world, ep, "robot/base1/cmd/twist", *twist, "--user", "alice")
+        assert ok.returncode == 0 and "applied" in ok.stdout, ok.stdout + ok.stderr
+        # bob does not own it: the sim's reason, exit 1
+        bob = _pub(world, ep, "robot/base1/cmd/twist", *twist, "--user", "bob")
+        assert bob.returncode == 1 and "refused:" in bob.stderr and "alice" in bob.stderr, bob.stdout + bob.stderr
+        # free robot: refused too
+        free = _pub(world, ep, "robot/arm1/cmd/stop", "-t", "Stop", "--user", "bob")
+        assert free.returncode == 1 and "not owned" in free.stderr, free.stdout + free.stderr
+    finally:
+        alice.close()
+    # no user: refused before sending; a key of no layout too
+    nouser = _pub(world, ep, "robot/base1/cmd/twist", *twist)
+    assert nouser.returncode == 2 and "needs its user" in nouser.stderr, nouser.stdout + nouser.stderr
+    nolayout = _pub(world, ep, "robot/base1/warp/drive", *twist)
+    assert nolayout.returncode == 2 and "does not match any robofabric key layout" in nolayout.stderr and "nothing sent" in nolayout.stderr
+    badcmd = _pub(world, ep, "robot/base1/cmd/warp", *twist, "--user", "alice")
+    assert badcmd.returncode == 2, badcmd.stdout + badcmd.stderr
+    for out in (ok, bob, free, nouser, nolayout, badcmd):
+        assert "Traceback" not in out.stderr
