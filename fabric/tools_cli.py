@@ -174,6 +174,7 @@ def echo(
     count: Annotated[Optional[int], typer.Option("--count", "-n", help="Exit after N messages.")] = None,
     duration: Annotated[Optional[float], typer.Option(help="Exit after S seconds.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object per line: {key, message}.")] = False,
+    timeout: Annotated[Optional[float], typer.Option(help="Exit 1 with 'nothing on KEY in S s' when no message came within S seconds.")] = None,
     latest: Annotated[
         bool, typer.Option("--latest/--no-latest", help="First the latest value of latched keys (maps, paths, scene objects) set before echo started.")
     ] = True,
@@ -187,6 +188,8 @@ def echo(
     """Print decoded messages on a key; malformed payloads are reported on stderr and skipped."""
     if count is not None and count <= 0:
         raise UserError("--count must be positive")
+    if timeout is not None and not timeout > 0:
+        raise UserError("--timeout must be positive")
     stop = shutdown_event()
     printed = 0
     bad = 0
@@ -217,9 +220,20 @@ def echo(
                     stop.set()
 
         fab.subscribe_raw(full, on_sample, history=latest)
-        stop.wait(duration)
+        if timeout is not None and (duration is None or timeout < duration):
+            stop.wait(timeout)
+            with lock:
+                silent = printed == 0 and bad == 0
+            if not silent and not stop.is_set():
+                stop.wait(None if duration is None else duration - timeout)
+        else:
+            stop.wait(duration)
+            silent = False
     if bad:
         print(f"{bad} malformed payload(s) skipped", file=sys.stderr)
+    if timeout is not None and silent:
+        print(f"nothing on {full} in {timeout:g} s", file=sys.stderr)
+        raise typer.Exit(1)
 
 
 def hz(

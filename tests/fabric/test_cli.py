@@ -122,3 +122,9 @@ def test_every_command_has_help():
         assert cmd in out.stdout
         sub = run_cli(cmd, "--help")
         assert sub.returncode == 0 and "Usage" in sub.stdout, cmd
+
+
+def test_echo_timeout_on_a_silent_key_exits_1_saying_so(router, world):
+    ep = f"tcp/127.0.0.1:{router[1]}"
+    out = run_cli("echo", "robot/arm9/joints", "--timeout", "0.5", "--world", world, "--connect", ep)
+    assert out.returncode == 1 and f"nothing on rf/{world}/robot/arm9/joints in 0.5 s" in out.stderr, out.stdout + out.stderr
