@@ -44,12 +44,12 @@ from fabric.interfaces import (
     JointState,
     Pose,
     ServiceError,
-    WorldInfo,
 )
 from fabric.limits import quote
 from fabric.rate import Clock, MonotonicClock, RateLoop
 from fabric.session import Fabric, undeclare_all
 
+from ..world_lookup import BackgroundLookup, described_robots
 from .arm import PlacedArm
 from .model import ArmModel, NoIKSolution
 
@@ -102,10 +102,8 @@ class KinematicsService:
         self.streams = [(keys.validate_id(r, what="robot id"), keys.validate_id(o, what="object id")) for r, o in streams]
         self._lock = threading.RLock()
         self._discover = bool(discover)
-        self._last_discovery = -1e18
-        self._discovering = False
-        self._discovered = threading.Event()
-        self._discovered.set()
+        self._lookup = BackgroundLookup(self.discover, name="kinematics-discovery", clock=self._clock,
+                                        on_error=lambda exc: self._discovery_failed(f"{type(exc).__name__}: {exc}"))
         self._last_discovery_error = ""
         self._sims_changed = 0  # bumped when a sim peer comes or goes: the world's arms may have changed
         self._answered_at = -1  # the value of _sims_changed when srv/world last answered
@@ -137,7 +135,7 @@ class KinematicsService:
         """A sim came or went: look the world up again now (its description may name other arms)."""
         with self._lock:
             self._sims_changed += 1
-            self._last_discovery = -1e18
+        self._lookup.again_now()
         self._discover_soon()
 
     def start(self) -> "KinematicsService":
@@ -165,6 +163,7 @@ class KinematicsService:
             if self._closed:
                 return
             self._closed = True
+        self._lookup.close()
         if self._loop is not None:
             self._loop.stop()
         undeclare_all(self._resources)
@@ -191,21 +190,20 @@ class KinematicsService:
         with self._lock:
             generation = self._sims_changed
         try:
-            replies = self.fabric.query(keys.srv(self.world, "world"), timeout=timeout, all_replies=True, expected=WorldInfo)
+            described = described_robots(self.fabric, "arm", timeout=timeout)
         except ServiceError as exc:
             self._discovery_failed(str(exc))
             return len(self.arms)
         with self._lock:
             self._answered_at = generation
-        for rep in replies:
-            for r in rep.message.robots:
-                if r.kind != "arm" or r.id in self._arms:
-                    continue
-                try:
-                    self.add_arm(r.id, ArmPlacement(r.type, tuple(float(v) for v in r.pose)))
-                    log.info("serving kinematics for %s (%s)", r.id, r.type)
-                except Exception as exc:  # a robot type this installation has no model for
-                    log.warning("cannot serve kinematics for %s (%s): %s", r.id, r.type, exc)
+        for r in described:
+            if r.id in self._arms:
+                continue
+            try:
+                self.add_arm(r.id, ArmPlacement(r.type, tuple(float(v) for v in r.pose)))
+                log.info("serving kinematics for %s (%s)", r.id, r.type)
+            except Exception as exc:  # a robot type this installation has no model for
+                log.warning("cannot serve kinematics for %s (%s): %s", r.id, r.type, exc)
         return len(self.arms)
 
     def _discovery_failed(self, why: str) -> None:
@@ -215,32 +213,11 @@ class KinematicsService:
             self._last_discovery_error = why
             log.warning("looking the world's arms up: %s", why)
 
-    def _claim_discovery(self, interval: float = DISCOVERY_INTERVAL) -> bool:
-        """Whether this caller should look the world up now (none running, none in the last ``interval``)."""
-        with self._lock:
-            now = self._clock.now()
-            if self._discovering or self._closed or now - self._last_discovery < interval:
-                return False
-            self._discovering = True
-            self._last_discovery = now
-            self._discovered.clear()
-            return True
-
-    def _run_discovery(self, timeout: float = 2.0) -> None:
-        try:
-            self.discover(timeout=timeout)
-        except Exception as exc:  # a session closing under us
-            self._discovery_failed(f"{type(exc).__name__}: {exc}")
-        finally:
-            with self._lock:
-                self._discovering = False
-            self._discovered.set()
-
     def _discover_soon(self) -> None:
         """Look the world up in a thread (never inside a Zenoh callback), at most once a second; not before
         ``start()``, which looks it up itself (a sim's token seen while declaring only marks the world changed)."""
-        if self._started and self._claim_discovery():
-            threading.Thread(target=self._run_discovery, name="kinematics-discovery", daemon=True).start()
+        if self._started:
+            self._lookup.start(DISCOVERY_INTERVAL)
 
     def _discover_now(self, timeout: float = 2.0) -> None:
         """Look the world up before answering a request for an arm not known yet (a sim that just came,
@@ -254,15 +231,15 @@ class KinematicsService:
             with self._lock:
                 if self._answered_at == self._sims_changed or self._closed:
                     return
-                wait = self._last_discovery + REQUEST_DISCOVERY_INTERVAL - self._clock.now()
-            if self._claim_discovery(REQUEST_DISCOVERY_INTERVAL):
-                self._run_discovery(max(0.1, deadline - time.monotonic()))
+            wait = self._lookup.until_allowed(REQUEST_DISCOVERY_INTERVAL)
+            if self._lookup.claim(REQUEST_DISCOVERY_INTERVAL):
+                self._lookup.run(max(0.1, deadline - time.monotonic()))
                 return
             left = deadline - time.monotonic()
             if left <= 0:
                 return
-            if not self._discovered.is_set():
-                self._discovered.wait(left)
+            if self._lookup.running:
+                self._lookup.wait(left)
                 return
             time.sleep(min(max(wait, 0.01), left))
 

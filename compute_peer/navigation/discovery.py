@@ -10,13 +10,13 @@ only ones followed (plus those already followed), so made-up ids on the robot ke
 from __future__ import annotations
 
 import logging
-import math
 import threading
 from typing import TYPE_CHECKING, Callable, Iterable
 
-from fabric import keys
-from fabric.interfaces import ServiceError, WorldInfo
+from fabric.interfaces import ServiceError
 from fabric.rate import Clock, MonotonicClock
+
+from ..world_lookup import BackgroundLookup, described_robots
 
 if TYPE_CHECKING:
     from fabric.session import Fabric
@@ -57,15 +57,13 @@ class RobotDescriptions:
         self._clock = clock or MonotonicClock()
         self._first_seen: dict[str, float] = {}
         self._described: set[str] | None = None  # mobile robots of the world, once a sim described them
-        self._discovery_started = -math.inf
-        self._discovery_ended = -math.inf
-        self._discovering = False
-        self._closed = False
+        self._lookup = BackgroundLookup(self.discover, name="nav-discovery", clock=self._clock,
+                                        on_error=lambda exc: log.debug("robot discovery failed: %s", exc))
         self._lock = threading.RLock()
 
     def close(self) -> None:
         """No lookup starts after this (one under way ends on its own)."""
-        self._closed = True
+        self._lookup.close()
 
     # ------------------------------------------------------------------ reading
 
@@ -95,47 +93,27 @@ class RobotDescriptions:
                 return NO_OFFSET
             now = self._clock.now()
             first = self._first_seen.setdefault(robot, now)
-            if self._discovery_ended >= first:  # asked after this robot appeared, and nobody described it
+            if self._lookup.ended >= first:  # asked after this robot appeared, and nobody described it
                 return NO_OFFSET
-            if not self._discovering and not self._closed and now - self._discovery_started >= 1.0:
-                self._discovering = True
-                self._discovery_started = now
-                threading.Thread(target=self._run_discovery, name="nav-discovery", daemon=True).start()
+            self._lookup.start(1.0)
             return None
 
     # ------------------------------------------------------------------ the lookup
 
-    def _run_discovery(self) -> None:
-        try:
-            if not self._closed:
-                self.discover()
-        except Exception as exc:  # a session closing under us: nothing learnt, nothing to report
-            log.debug("robot discovery failed: %s", exc)
-        finally:
-            with self._lock:
-                self._discovering = False
-                self._discovery_ended = self._clock.now()
-
     def discover(self, timeout: float = 2.0) -> int:
         """Ask the sim peers' ``srv/world`` now and learn their mobile robots; returns how many were described."""
         try:
-            replies = self.fabric.query(keys.srv(self.world, "world"), timeout=timeout, all_replies=True, expected=WorldInfo)
+            described = described_robots(self.fabric, "mobile", timeout=timeout)
         except ServiceError:
             return 0
-        found = 0
         with self._lock:
             known = set(self._described or ())
-            for rep in replies:
-                for r in rep.message.robots:
-                    if r.kind != "mobile":
-                        continue
-                    known.add(r.id)
-                    if r.lidar is not None and r.id not in self._offsets:
-                        self._offsets[r.id] = (float(r.lidar.offset[0]), float(r.lidar.offset[1]), 0.0)
-                    radius = float(r.base_radius or (r.base.radius if r.base is not None else 0.0))
-                    if radius > 0:
-                        self._radii[r.id] = radius
-                    found += 1
-            if replies:
-                self._described = known | set(self._followed())  # robots already followed stay
-        return found
+            for r in described:
+                known.add(r.id)
+                if r.lidar is not None and r.id not in self._offsets:
+                    self._offsets[r.id] = (float(r.lidar.offset[0]), float(r.lidar.offset[1]), 0.0)
+                radius = float(r.base_radius or (r.base.radius if r.base is not None else 0.0))
+                if radius > 0:
+                    self._radii[r.id] = radius
+            self._described = known | set(self._followed())  # robots already followed stay
+        return len(described)
