@@ -22,22 +22,6 @@ from user_peer.api import World
 pytestmark = pytest.mark.slow
 
 
-@pytest.fixture(scope="module")
-def live(tmp_path_factory):
-    """One router (this process) and one sim peer (scene combined); yields (world, port, procs)."""
-    world = f"t{uuid.uuid4().hex[:8]}"
-    port = free_port()
-    router = Fabric(router_config(world, port), kind="router", peer_id="router")
-    procs = ProcessGroup(tmp_path_factory.mktemp("lifecycle"))
-    sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"), name="sim")
-    try:
-        wait_until(lambda: router.live_peers("sim"), timeout=60, what="sim peer", seen=lambda: procs.output(sim)[-2000:])
-        yield world, port, procs
-    finally:
-        procs.close()
-        router.close()
-
-
 @pytest.fixture
 def user(live):
     made: list[World] = []

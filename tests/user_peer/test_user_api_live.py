@@ -4,36 +4,17 @@ from __future__ import annotations
 
 import math
 import time
-import uuid
 
 import numpy as np
 import pytest
 
 import user_peer
 from fabric.interfaces import Path
-from fabric.testing import ProcessGroup, client_config, free_port, robofabric_cmd, router_config, wait_until
-from fabric.session import Fabric
+from fabric.testing import client_config, wait_until
 from user_peer.api import Arm, Base, World
 from user_peer.catalog import RobotCatalog
 
 pytestmark = pytest.mark.slow  # every test here starts processes or runs for seconds
-
-
-@pytest.fixture(scope="module")
-def live(tmp_path_factory):
-    """One router, one sim peer (scene combined) for the module's tests; yields (world name, port, procs)."""
-    world = f"t{uuid.uuid4().hex[:8]}"
-    port = free_port()
-    router = Fabric(router_config(world, port), kind="router", peer_id="router")
-    procs = ProcessGroup(tmp_path_factory.mktemp("live"))
-    ep = f"tcp/127.0.0.1:{port}"
-    sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep), name="sim")
-    try:
-        wait_until(lambda: router.live_peers("sim"), timeout=60, what="sim peer", seen=lambda: procs.output(sim)[-2000:])
-        yield world, port, procs
-    finally:
-        procs.close()
-        router.close()
 
 
 @pytest.fixture
