@@ -49,6 +49,19 @@ def world_root(world: str) -> str:
     return f"{PREFIX}/{validate_id(world, what='world')}"
 
 
+def in_world(expr: str, world: str) -> str:
+    """A key expression a person typed, full (``rf/demo/robot/**``) or world-relative (``robot/*/pose``,
+    ``/robot/*/pose``), as the full key expression; ``ValueError`` naming ``expr`` when zenoh refuses it."""
+    import zenoh  # here, not at the top: the key layout itself needs no session library
+
+    full = expr if expr.startswith(PREFIX + "/") else f"{world_root(world)}/{expr.lstrip('/')}"
+    try:
+        zenoh.KeyExpr(full)
+    except Exception as exc:  # zenoh raises its own ZError, not a ValueError
+        raise ValueError(f"{expr!r} is not a valid key expression: {exc}") from None
+    return full
+
+
 def world_all(world: str) -> str:
     """Every key of one world: what ``record`` takes by default."""
     return f"{world_root(world)}/**"

@@ -145,104 +145,154 @@ def parse_launch(
     ``args``: NAME=VALUE arguments from the command line; ``env``: where ``ROBOFABRIC_NAME``
     overrides are read (default: none, so parsing stays pure; the CLI passes ``os.environ``).
     """
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise LaunchError(f"{path}: {exc}") from None
-    lines = _peer_lines(text)
-    unknown = set(data) - {"launch", "peer", "args"}
-    if unknown:
-        raise LaunchError(f"{path}: unknown section(s) {', '.join(sorted(unknown))} (expected [args], [launch] and [[peer]])")
+    data = _load_toml(text, path)
     declared = data.pop("args", {})
     if not isinstance(declared, dict):
         raise LaunchError(f"{path}: [args] must be a table of NAME = default")
     given = dict(args or {})
     values = resolve_args(declared, given, dict(env or {}), path)
     data = _substitute(data, values)
-    head = data.get("launch", {})
+    overrides = {name: given[name] for name in BUILTIN_ARGS if name in given and name not in declared}
+    head = _parse_head(data.get("launch", {}), overrides, path)
+    peers = _parse_peers(data.get("peer", []), _peer_lines(text), head.world, path)
+    return LaunchSpec(
+        path=path, world=head.world, router=head.router, connect=head.connect, peers=peers,
+        args=tuple(sorted(values.items())), zenoh_config=head.zenoh_config,
+    )
+
+
+def _load_toml(text: str, path: str) -> dict[str, Any]:
+    """The file's tables, with a known section name each."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise LaunchError(f"{path}: {exc}") from None
+    unknown = set(data) - {"launch", "peer", "args"}
+    if unknown:
+        raise LaunchError(f"{path}: unknown section(s) {', '.join(sorted(unknown))} (expected [args], [launch] and [[peer]])")
+    return data
+
+
+@dataclass(frozen=True, slots=True)
+class _Head:
+    """What ``[launch]`` says, checked."""
+
+    world: str
+    router: str | None
+    connect: tuple[str, ...]
+    zenoh_config: str | None
+
+
+def _parse_head(head: Any, overrides: dict[str, str], path: str) -> _Head:
+    """``[launch]``, with ``world=``/``router=``/``connect=`` from the command line in place of its values."""
     if not isinstance(head, dict):
         raise LaunchError(f"{path}: [launch] must be a table")
     bad = set(head) - {"world", "router", "connect", "zenoh_config"}
     if bad:
         raise LaunchError(f"{path}: [launch] has unknown key(s) {', '.join(sorted(bad))}")
-    head = dict(head)
-    for name in BUILTIN_ARGS:
-        if name in given and name not in declared:
-            head[name] = given[name]
+    head = {**head, **overrides}
     world = head.get("world", "demo")
     try:
         keys.validate_id(world, what="world")
     except ValueError as exc:
         raise LaunchError(f"{path}: [launch] {exc}") from None
-    router = head.get("router")
-    connect = head.get("connect", [])
+    router = _parse_router(head.get("router"), path)
+    connect = _parse_connect(head.get("connect", []), path)
+    zenoh_config = head.get("zenoh_config") or None
+    if zenoh_config is not None and not isinstance(zenoh_config, str):
+        raise LaunchError(f"{path}: [launch] zenoh_config must be a file name, e.g. 'class/router.json5'")
+    return _Head(world, router, connect, zenoh_config)
+
+
+def _parse_router(router: Any, path: str) -> str | None:
+    """The endpoint this process hosts the router on; None (an empty ``{router}`` included): none here."""
     if router is not None and not isinstance(router, str):
         raise LaunchError(f"{path}: [launch] router must be an endpoint string like 'tcp/0.0.0.0:7447'")
+    return router if router is not None and router.strip() else None
+
+
+def _parse_connect(connect: Any, path: str) -> tuple[str, ...]:
+    """The children's endpoints: a string or a list of them, each possibly comma-separated (``"{connect}"``)."""
     if isinstance(connect, str):
         connect = [connect]
     if not isinstance(connect, list) or not all(isinstance(c, str) for c in connect):
         raise LaunchError(f"{path}: [launch] connect must be a list of endpoint strings")
-    connect = [e.strip() for c in connect for e in c.split(",") if e.strip()]  # "{connect}" may hold several
-    if router is not None and not router.strip():
-        router = None  # router = "{router}" with an empty value: this machine hosts none
-    zenoh_config = head.get("zenoh_config") or None
-    if zenoh_config is not None and not isinstance(zenoh_config, str):
-        raise LaunchError(f"{path}: [launch] zenoh_config must be a file name, e.g. 'class/router.json5'")
+    return tuple(e.strip() for c in connect for e in c.split(",") if e.strip())
 
-    raw_peers = data.get("peer", [])
+
+_PEER_KEYS = {"name", "args", "role", "restart", "after", "ready", "max_restarts", "env"}
+
+
+def _parse_peers(raw_peers: Any, lines: list[int], world: str, path: str) -> tuple[PeerSpec, ...]:
+    """Every ``[[peer]]`` in file order; ``after`` may name only earlier ones, so the order starts them."""
     if not isinstance(raw_peers, list):
         raise LaunchError(f"{path}: 'peer' must be an array of tables ([[peer]])")
     peers: list[PeerSpec] = []
     names: set[str] = set()
     for i, p in enumerate(raw_peers):
         where = f"{path}:{lines[i]}" if i < len(lines) else path
-        unknown = set(p) - {"name", "args", "role", "restart", "after", "ready", "max_restarts", "env"}
-        if unknown:
-            raise LaunchError(f"{where}: peer has unknown key(s) {', '.join(sorted(unknown))}")
-        name = p.get("name")
-        if not isinstance(name, str) or not name:
-            raise LaunchError(f"{where}: every [[peer]] needs a name")
-        if name in names:
-            raise LaunchError(f"{where}: peer name {name!r} is used twice")
-        args = p.get("args")
-        if not isinstance(args, list) or not args or not all(isinstance(a, str) for a in args):
-            raise LaunchError(f"{where}: peer {name!r} needs args = [\"SUBCOMMAND\", ...] (a non-empty list of strings)")
-        role = p.get("role", "service")
-        if role not in ROLES:
-            raise LaunchError(f"{where}: peer {name!r} has role {role!r}; expected one of {', '.join(ROLES)}")
-        restart = p.get("restart", "on-failure" if role == "service" else "no")
-        if restart not in RESTARTS:
-            raise LaunchError(f"{where}: peer {name!r} has restart {restart!r}; expected one of {', '.join(RESTARTS)}")
-        after = p.get("after", [])
-        if isinstance(after, str):
-            after = [after]
-        missing = [a for a in after if a not in names]
-        if missing:
-            raise LaunchError(f"{where}: peer {name!r} starts after {', '.join(missing)}, which no earlier [[peer]] defines")
-        env = p.get("env", {})
-        if not isinstance(env, dict):
-            raise LaunchError(f"{where}: peer {name!r} env must be a table of strings")
-        max_restarts = p.get("max_restarts", 5)
-        if not isinstance(max_restarts, int) or max_restarts < 0:
-            raise LaunchError(f"{where}: peer {name!r} max_restarts must be a non-negative integer")
-        ready = p.get("ready", _DEFAULT_READY.get(args[0]))
-        names.add(name)
-        peers.append(
-            PeerSpec(
-                name=name,
-                args=tuple(args),
-                role=role,
-                restart=restart,
-                after=tuple(after),
-                ready=ready,
-                max_restarts=max_restarts,
-                env=tuple((str(k), str(v)) for k, v in env.items()),
-            )
-        )
-    return LaunchSpec(
-        path=path, world=world, router=router, connect=tuple(connect), peers=tuple(peers), args=tuple(sorted(values.items())),
-        zenoh_config=zenoh_config,
+        spec = _parse_peer(p, names, world, where)
+        names.add(spec.name)
+        peers.append(spec)
+    return tuple(peers)
+
+
+def _parse_peer(p: dict[str, Any], earlier: set[str], world: str, where: str) -> PeerSpec:
+    """One ``[[peer]]`` table; ``earlier``: the names of the peers before it."""
+    unknown = set(p) - _PEER_KEYS
+    if unknown:
+        raise LaunchError(f"{where}: peer has unknown key(s) {', '.join(sorted(unknown))}")
+    name = p.get("name")
+    if not isinstance(name, str) or not name:
+        raise LaunchError(f"{where}: every [[peer]] needs a name")
+    if name in earlier:
+        raise LaunchError(f"{where}: peer name {name!r} is used twice")
+    args = p.get("args")
+    if not isinstance(args, list) or not args or not all(isinstance(a, str) for a in args):
+        raise LaunchError(f"{where}: peer {name!r} needs args = [\"SUBCOMMAND\", ...] (a non-empty list of strings)")
+    role, restart, max_restarts = _parse_policy(p, name, where)
+    after = p.get("after", [])
+    if isinstance(after, str):
+        after = [after]
+    missing = [a for a in after if a not in earlier]
+    if missing:
+        raise LaunchError(f"{where}: peer {name!r} starts after {', '.join(missing)}, which no earlier [[peer]] defines")
+    env = p.get("env", {})
+    if not isinstance(env, dict):
+        raise LaunchError(f"{where}: peer {name!r} env must be a table of strings")
+    return PeerSpec(
+        name=name, args=tuple(args), role=role, restart=restart, after=tuple(after),
+        ready=_parse_ready(p.get("ready", _DEFAULT_READY.get(args[0])), name, world, where),
+        max_restarts=max_restarts, env=tuple((str(k), str(v)) for k, v in env.items()),
     )
+
+
+def _parse_policy(p: dict[str, Any], name: str, where: str) -> tuple[str, str, int]:
+    """(role, restart, max_restarts): a service restarts on failure unless told otherwise, a task never."""
+    role = p.get("role", "service")
+    if role not in ROLES:
+        raise LaunchError(f"{where}: peer {name!r} has role {role!r}; expected one of {', '.join(ROLES)}")
+    restart = p.get("restart", "on-failure" if role == "service" else "no")
+    if restart not in RESTARTS:
+        raise LaunchError(f"{where}: peer {name!r} has restart {restart!r}; expected one of {', '.join(RESTARTS)}")
+    max_restarts = p.get("max_restarts", 5)
+    if not isinstance(max_restarts, int) or max_restarts < 0:
+        raise LaunchError(f"{where}: peer {name!r} max_restarts must be a non-negative integer")
+    return role, restart, max_restarts
+
+
+def _parse_ready(ready: Any, name: str, world: str, where: str) -> str | None:
+    """The liveliness key expression that says the peer is ready (world-relative or full), checked now so
+    that a bad one is named with its line before anything starts."""
+    if ready is None:
+        return None
+    if not isinstance(ready, str):
+        raise LaunchError(f"{where}: peer {name!r} ready must be a key expression string like 'peer/sim/*'")
+    try:
+        keys.in_world(ready, world)
+    except ValueError as exc:
+        raise LaunchError(f"{where}: peer {name!r} ready: {exc}") from None
+    return ready
 
 
 def load_launch(path: str | Path, *, args: dict[str, str] | None = None, env: dict[str, str] | None = None) -> LaunchSpec:
@@ -346,7 +396,7 @@ class Supervisor:
         expr = pp.spec.ready
         if expr is None:
             return True
-        full = expr if expr.startswith(keys.PREFIX + "/") else f"{keys.world_root(self.spec.world)}/{expr}"
+        full = keys.in_world(expr, self.spec.world)  # checked by parse_launch
         while time.monotonic() < deadline and not self._stopping:
             if self.is_ready(full):
                 return True

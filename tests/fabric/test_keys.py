@@ -77,3 +77,14 @@ def test_user_keys_name_the_writer():
         keys.robot_cmd("w", "arm1", "stop", "a/b")
     with pytest.raises(ValueError, match="user id"):
         keys.own_request("w", "arm1", "*")
+
+
+def test_in_world_takes_full_or_world_relative_expressions():
+    """What the tools and launch files accept from a person: the one place that turns it into a key."""
+    assert keys.in_world("rf/other/robot/**", "demo") == "rf/other/robot/**"
+    assert keys.in_world("robot/*/pose", "demo") == "rf/demo/robot/*/pose"
+    assert keys.in_world("/robot/*/pose", "demo") == "rf/demo/robot/*/pose"
+    with pytest.raises(ValueError, match="'robot/\\*\\*/\\*\\*' is not a valid key expression"):
+        keys.in_world("robot/**/**", "demo")
+    with pytest.raises(ValueError, match="world"):
+        keys.in_world("robot/*/pose", "a b")

@@ -44,6 +44,9 @@ def test_parse_good_file():
         ('[launch]\nworld = "a b"\n', "world 'a b' contains forbidden"),
         ('[robots]\nx = 1\n', "unknown section(s) robots"),
         ('[[peer]]\nname = "a"\nargs = ["sim"]\ncolour = "red"\n', "unknown key(s) colour"),
+        # a ready expression zenoh refuses, or no string at all, is named with its line before anything starts
+        ('[[peer]]\nname = "a"\nargs = ["sim"]\nready = "peer/**/**"\n', "bad.toml:1: peer 'a' ready: 'peer/**/**' is not a valid key expression"),
+        ('[[peer]]\nname = "a"\nargs = ["sim"]\nready = 3\n', "bad.toml:1: peer 'a' ready must be a key expression"),
     ],
 )
 def test_bad_files_name_file_and_line(text, needle):
