@@ -13,6 +13,7 @@ was wrong and how, so a peer can count it, publish an event and go on.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import struct
 from dataclasses import dataclass
@@ -370,21 +371,38 @@ def load_plugins() -> bool:
 # --------------------------------------------------------------------------- encode
 
 
+_ARRAY_HEADS: dict[tuple[np.dtype, tuple[int, ...]], tuple[bytes, np.dtype]] = {}
+"""(dtype, shape) -> (the extension's head bytes, the little-endian dtype written): a sim sends the same few
+shapes thousands of times a second, and building the head each time was a third of an array's cost."""
+
+
+def _array_head(obj: np.ndarray) -> tuple[bytes, np.dtype]:
+    key = (obj.dtype, obj.shape)
+    cached = _ARRAY_HEADS.get(key)
+    if cached is not None:
+        return cached
+    dt = obj.dtype.newbyteorder("<") if obj.dtype.byteorder == ">" else obj.dtype
+    code = _DTYPE_CODES.get(np.dtype(dt))
+    if code is None:
+        raise TypeError(f"arrays of dtype {obj.dtype} cannot be encoded")
+    if obj.ndim > MAX_DIMS:
+        raise TypeError(f"arrays of more than {MAX_DIMS} dims cannot be encoded")
+    head = struct.pack("<BB", code, obj.ndim) + struct.pack(f"<{obj.ndim}I", *obj.shape)
+    if len(_ARRAY_HEADS) < 4096:  # shapes come from our own messages and a client's; never an unbounded cache
+        _ARRAY_HEADS[key] = (head, _DTYPES[code])
+    return head, _DTYPES[code]
+
+
 def _ext_default(obj: Any) -> Any:
     if isinstance(obj, np.ndarray):
-        dt = obj.dtype.newbyteorder("<") if obj.dtype.byteorder == ">" else obj.dtype
-        code = _DTYPE_CODES.get(np.dtype(dt))
-        if code is None:
-            raise TypeError(f"arrays of dtype {obj.dtype} cannot be encoded")
-        if obj.ndim > MAX_DIMS:
-            raise TypeError(f"arrays of more than {MAX_DIMS} dims cannot be encoded")
-        head = struct.pack("<BB", code, obj.ndim) + struct.pack(f"<{obj.ndim}I", *obj.shape)
-        return msgpack.ExtType(EXT_NDARRAY, head + np.ascontiguousarray(obj, dtype=_DTYPES[code]).tobytes())
+        head, dtype = _array_head(obj)
+        return msgpack.ExtType(EXT_NDARRAY, head + np.ascontiguousarray(obj, dtype=dtype).tobytes())
     if isinstance(obj, np.generic):
         return obj.item()
     raise TypeError(f"cannot encode {type(obj).__name__}")
 
 
+@functools.lru_cache(maxsize=None)
 def _optional_tail(cls: type) -> tuple[tuple[str, Any], ...]:
     """The trailing fields a class marks as added later (``OPTIONAL_TAIL``), with their defaults.
 

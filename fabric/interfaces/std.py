@@ -117,7 +117,8 @@ class Pose:
             object.__setattr__(self, name, frozen(getattr(self, name), np.float64))
 
     def check(self) -> None:
-        n = float(np.linalg.norm(self.quaternion))
+        q = self.quaternion
+        n = math.sqrt(float(q @ q))
         if not (0.99 < n < 1.01):
             raise ValueError(f"Pose quaternion must have unit norm, got norm {n:.4f}")
 

@@ -1,0 +1,105 @@
+"""The sim's CPU per robot per second of sim time, for one or more source trees side by side.
+
+    python tools/sim_cost.py --robots 32 --trees /tmp/before,. --rounds 3
+
+For each tree (a checkout of robofabric: ``git worktree add /tmp/before COMMIT``) it starts a router and a
+``robofabric sim --scene warehouse --no-scene-robots`` with N/2 Meca500 arms and N/2 Reeman bases from that
+tree (``python -m fabric.cli`` run inside it), lets it settle, then reads the sim's CPU time (/proc) and its
+sim time (the joints headers of arm0) over ``--seconds``. Trees alternate round by round, so a busy machine
+weighs on each alike; the medians and the ratio to the first tree are printed. Nobody owns or commands the
+robots: this is the cost of simulating and publishing them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from pathlib import Path
+
+
+def _cpu_s(pid: int) -> float:
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def measure(tree: Path, robots: int, seconds: float, settle: float) -> tuple[float, float]:
+    """(sim CPU in cores, real-time factor) of one run of ``tree``'s sim with ``robots`` robots."""
+    from fabric import keys
+    from fabric.interfaces import JointState
+    from fabric.testing import client, free_port, wait_until
+
+    world, port = f"cost{uuid.uuid4().hex[:6]}", free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    cli = [sys.executable, "-m", "fabric.cli"]
+    router = subprocess.Popen([*cli, "router", "--world", world, "--listen", ep], cwd=tree, env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    specs = [x for i in range(robots // 2) for x in ("--robot", f"meca500:arm{i}", "--robot", f"reeman:base{i}")]
+    sim = None
+    try:
+        time.sleep(1.5)  # the router binding its port (a child: nothing to poll but the port)
+        sim = subprocess.Popen([*cli, "sim", "--scene", "warehouse", "--no-scene-robots", *specs, "--world", world,
+                                "--connect", ep, "--id", "sim"], cwd=tree, env=env, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+        stamps: list[tuple[float, float]] = []
+        lock = threading.Lock()
+
+        def on(key: str, js: JointState) -> None:
+            with lock:
+                stamps.append((time.monotonic(), js.header.stamp))
+
+        with client(world, port, kind="tool", peer_id="cost") as fab:
+            fab.subscribe(keys.robot_joints(world, "arm0"), on, expected=JointState)
+            wait_until(lambda: len(stamps) > 10, timeout=120, what="the sim's joints")
+            time.sleep(settle)  # past the start-up (model compile, first publishers)
+            c0, t0 = _cpu_s(sim.pid), time.monotonic()
+            time.sleep(seconds)  # the measurement window
+            c1, t1 = _cpu_s(sim.pid), time.monotonic()
+            with lock:
+                pts = [(w, s) for w, s in stamps if t0 <= w <= t1]
+        rtf = (pts[-1][1] - pts[0][1]) / (pts[-1][0] - pts[0][0]) if len(pts) > 1 else float("nan")
+        return (c1 - c0) / (t1 - t0), rtf
+    finally:
+        for p in (sim, router):
+            if p is not None:
+                p.terminate()
+                try:
+                    p.wait(10)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--robots", type=int, default=32, help="robots in the world (half arms, half bases)")
+    ap.add_argument("--trees", default=".", help="comma-separated source trees, the first is the reference")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--seconds", type=float, default=10.0)
+    ap.add_argument("--settle", type=float, default=5.0)
+    args = ap.parse_args()
+    trees = [Path(t).resolve() for t in args.trees.split(",") if t]
+    res: dict[Path, list[tuple[float, float]]] = {t: [] for t in trees}
+    for r in range(args.rounds):
+        for t in trees:
+            cores, rtf = measure(t, args.robots, args.seconds, args.settle)
+            res[t].append((cores, rtf))
+            print(f"round {r + 1} {t}: sim {cores:.2f} cores, real-time factor {rtf:.3f}", flush=True)
+    ref = None
+    print(f"\n| tree | sim CPU (cores) | real-time factor | CPU per robot per sim second (ms) | vs {trees[0].name} |\n|---|---|---|---|---|")
+    for t in trees:
+        cores = statistics.median(c for c, _ in res[t])
+        rtf = statistics.median(x for _, x in res[t])
+        per = cores / args.robots / rtf * 1e3
+        ref = per if ref is None else ref
+        print(f"| {t} | {cores:.2f} | {rtf:.3f} | {per:.2f} | {per / ref:.2f}x |")
+
+
+if __name__ == "__main__":
+    main()
