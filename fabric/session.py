@@ -314,7 +314,7 @@ class Fabric:
         if suppressed:
             data["suppressed"] = suppressed
         self.emit(Event(kind=EventKind.DECODE_ERROR, reason=clip(str(exc)), severity="warning", data=data, header=self.header("event")),
-                  "decode", self.peer_id)
+                  keys.DECODE, keys.BY, self.config.identity() or self.peer_id)  # event/decode/by/{login}: its own key
 
     def subscribe(
         self,
@@ -508,7 +508,11 @@ class Fabric:
         out = []
         for rep in self.session.liveliness().get(keys.peers_all(self.world, kind), timeout=timeout):
             if rep.ok is not None:
-                p = keys.parse(str(rep.ok.key_expr))
+                try:
+                    p = keys.parse(str(rep.ok.key_expr))
+                except ValueError:  # a token any login may declare that names no peer: not one of ours
+                    self.counters["bad_tokens"] += 1
+                    continue
                 out.append((p.subject, p.leaf))
         return sorted(set(out))
 

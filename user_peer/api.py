@@ -31,6 +31,7 @@ import numpy as np
 
 from fabric import keys
 from fabric.config import FabricConfig
+from fabric.fencing import is_authority_event
 from fabric.interfaces import (
     REJECT_KINDS,
     Command,
@@ -63,6 +64,12 @@ log = logging.getLogger("robofabric.user")
 
 __all__ = ["connect", "World", "Robot", "Arm", "Base", "SceneObject"]
 
+
+FOLLOWED_STREAMS = ("joints", "pose", "scan", "path", "ik")
+"""The streams a robot handle keeps the latest of (:meth:`World.robot`)."""
+
+FIRST_STATE_WAIT_S = 1.0
+"""How long a new robot handle waits for the robot's first state (a live sim sends it within a stream period)."""
 
 COMMAND_ROUTE_WAIT_S = 0.5
 """How long a command waits for its sim's subscription to be known before it is put anyway."""
@@ -189,16 +196,19 @@ class World:
         self._info: WorldInfo | None = None
         self.latest = _Latest(world_info=lambda: self._info)  # keeps the robots of the description only
         self.events: list[Event] = []
-        self._event_log: list[tuple[int, Event]] = []  # (local arrival number, event)
+        # (local arrival number, event, trusted): trusted when a sim-only key carried it from the object's
+        # authority (_from_authority); only those can refuse a command here, the rest is display-only
+        self._event_log: list[tuple[int, Event, bool]] = []
+        self.untrusted_events = 0  # events acted on by nothing: any login may write their keys, or not the authority's
         self._events_seen = 0
         self._events_lock = threading.Lock()
         self._closed = False
         self._robots: dict[str, Robot] = {}
         self._objects: dict[str, SceneObject] = {}
-        # the latest of every robot stream (ik: a compute peer's streamed IK, Test A), scene object and map
-        # scene objects, maps and paths are latched: what was set before this user joined comes at once
-        for stream in ("joints", "pose", "scan", "path", "ik"):
-            self.fabric.subscribe(keys.robot_stream_all(self.name, stream), self.latest.put, history=stream == "path")
+        # the latest of every scene object and map (latched: what was set before this user joined comes at
+        # once); a robot's streams are followed from its first handle on (robot()): a student of a class
+        # decodes her own robots' streams, not the whole world's (32 robots: ~4,600 messages a second each)
+        self._followed: set[str] = set()
         # every writer's pose of an object is kept under the object's reader key (object/{id}/pose/by/*)
         self.fabric.subscribe(keys.object_pose_all(self.name), self._on_object_pose, history=True)
         self.fabric.subscribe(f"{keys.world_root(self.name)}/map/*", self.latest.put, history=True)
@@ -390,6 +400,17 @@ class World:
             self._robots[robot_id] = cls(self, entry)
         return self._robots[robot_id]
 
+    def keep_latest(self, robot_id: str) -> bool:
+        """Keep the latest of ``robot_id``'s streams from now on; True the first time it is asked for the robot
+        (a :class:`Robot` handle asks, once per robot) (ik: a compute peer's streamed IK, Test A); paths are
+        latched (a path planned before the handle comes at once)."""
+        if robot_id in self._followed:
+            return False
+        self._followed.add(robot_id)
+        for stream in FOLLOWED_STREAMS:
+            self.fabric.subscribe(keys.robot_stream(self.name, robot_id, stream), self.latest.put, history=stream == "path")
+        return True
+
     def _on_object_pose(self, key: str, msg: Any) -> None:
         self.latest.put(keys.object_pose_all(self.name, keys.parse(key).subject), msg)
 
@@ -413,11 +434,27 @@ class World:
     def _abs(self, key_expr: str) -> str:
         return key_expr if key_expr.startswith(keys.PREFIX + "/") else f"{keys.world_root(self.name)}/{key_expr}"
 
+    def _from_authority(self, key: str, ev: Event) -> bool:
+        """Whether ``ev`` may change what this user's program does: it came on a key only sims may write
+        (``fabric.fencing.is_authority_event``; never ``event/decode/by/*``, which any login writes) from a
+        live sim that is the authority of the object it names (its ownership record's ``authority``)."""
+        if not is_authority_event(key):
+            return False
+        source = ev.header.source
+        if source not in getattr(self, "_sims", ()):  # (events may come before __init__ is done: untrusted)
+            return False
+        link = getattr(self, "ownership", None)
+        rec = link.record(ev.object) if link is not None and ev.object else None
+        return rec is None or rec.authority == source
+
     def _on_event(self, key: str, ev: Event) -> None:
+        trusted = self._from_authority(key, ev)
         with self._events_lock:
             self._events_seen += 1
             self.events.append(ev)
-            self._event_log.append((self._events_seen, ev))
+            self._event_log.append((self._events_seen, ev, trusted))
+            if not trusted:
+                self.untrusted_events += 1
             if len(self.events) > 1000:
                 del self.events[:500]
                 del self._event_log[:500]
@@ -430,12 +467,20 @@ class World:
 
     def rejections(self, robot: str, since: int) -> list[Event]:
         """Events refusing this user's commands to ``robot`` that arrived after ``since`` (an
-        :meth:`event_mark`). Judged by arrival here, never by the sender's clock (issue 15)."""
+        :meth:`event_mark`). Judged by arrival here, never by the sender's clock (issue 15). Only the robot's
+        authority can refuse (:meth:`_from_authority`): a forged ``reject`` on a key any login may write is
+        display-only."""
         with self._events_lock:
             return [
-                e for n, e in self._event_log
-                if n > since and e.object == robot and e.user == self.user and e.kind in REJECT_KINDS
+                e for n, e, trusted in self._event_log
+                if trusted and n > since and e.object == robot and e.user == self.user and e.kind in REJECT_KINDS
             ]
+
+    def recent_events(self, limit: int = 20) -> list[tuple[Event, bool]]:
+        """The latest ``limit`` events, oldest first, each with whether it came from its object's authority
+        (False: display-only, e.g. a decode report any login may write; the TUI marks those)."""
+        with self._events_lock:
+            return [(e, trusted) for _, e, trusted in self._event_log[-limit:]]
 
 
 def _still_after(msg: Any, seq: int) -> bool:
@@ -458,6 +503,9 @@ class Robot:
         self.type = entry.type
         self.entry = entry
         self._w = world.name
+        if world.keep_latest(self.id):  # a new handle: its first state, briefly (the latest was not kept before)
+            key = keys.robot_stream(self._w, self.id, self._data_stream)
+            world.latest.wait_for(lambda: world.latest.get(key), min(world.timeout, FIRST_STATE_WAIT_S))
 
     _data_stream = "joints"  # the stream whose age repr reports
 
@@ -769,7 +817,8 @@ class Base(Robot):
     def start_mapping(self, *, name: str = "map") -> None:
         """Ask the compute peer to fold this world's scans into map ``name`` (it may already be on)."""
         try:
-            services.map_request(self.world.fabric, "start", name=name, timeout=self.world.timeout, peer=self.world.navigation_peer())
+            services.map_request(self.world.fabric, "start", name=name, timeout=self.world.timeout, peer=self.world.navigation_peer(),
+                                 user=self.world.user)
         except ServiceError as exc:
             raise Unreachable(f"mapping for {self.id}: {exc.reason}") from None
 
@@ -777,7 +826,8 @@ class Base(Robot):
         """The binary map a compute peer built from the scans so far (also published on ``map/{name}``)."""
         try:
             return services.build_map(
-                self.world.fabric, name=name, threshold=threshold, timeout=timeout or max(self.world.timeout, 10.0), peer=self.world.navigation_peer()
+                self.world.fabric, name=name, threshold=threshold, timeout=timeout or max(self.world.timeout, 10.0), peer=self.world.navigation_peer(),
+                user=self.world.user,
             )
         except ServiceError as exc:
             raise Unreachable(f"map for {self.id}: {exc.reason}") from None
@@ -791,7 +841,7 @@ class Base(Robot):
         try:
             return services.plan(
                 self.world.fabric, self.id, goal, planner=planner, map_name=map_name, timeout=timeout or max(self.world.timeout, 15.0),
-                peer=self.world.navigation_peer(),
+                peer=self.world.navigation_peer(), user=self.world.user,
             )
         except ServiceError as exc:
             where = "the goal object" if goal is None else f"({goal[0]:.2f}, {goal[1]:.2f}, {goal[2]:.2f})"
