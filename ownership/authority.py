@@ -124,7 +124,9 @@ class Authority:
         with self._lock:
             before = self._state.records
             self._state, effects = st.step(self._state, ev)
-            changed = [r for o, r in self._state.records.items() if r is not before.get(o)]
+            # a renewal moves only the lease's end (on the authority's clock, which means nothing elsewhere):
+            # the renewer has it in the reply, and nobody else needs a record 64 times a second for a class
+            changed = [r for o, r in self._state.records.items() if r is not before.get(o) and not _lease_only(before.get(o), r)]
             for rec in changed:
                 self._publish(rec)
         for eff in effects:
@@ -280,6 +282,11 @@ class Authority:
         thread = self._thread
         if thread is not None and thread.is_alive() and thread is not threading.current_thread():
             thread.join(timeout=2.0)
+
+
+def _lease_only(old: OwnershipRecord | None, new: OwnershipRecord) -> bool:
+    """Whether ``new`` differs from ``old`` in its lease's end alone."""
+    return old is not None and dataclasses.replace(old, lease_expiry=new.lease_expiry) == new
 
 
 def _fields(rec: OwnershipRecord) -> dict:

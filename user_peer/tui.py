@@ -195,8 +195,6 @@ class UserApp(App):
         mine = rec.owner == self.world.user
         who = "you" if mine else (rec.owner or "nobody")
         text = f"owner: {who} · epoch {rec.epoch} · {rec.state}"
-        if rec.owner:
-            text += f" · lease until {rec.lease_expiry:.1f} s"
         if rec.queue:
             text += f" · waiting: {', '.join(rec.queue)}"
         if not mine:

@@ -26,7 +26,9 @@ class OwnershipRecord:
     """Replicated ownership state of one object, written only by its authority.
 
     ``owner`` is empty when the object is free; ``lease_expiry`` is in the
-    authority's clock (seconds); ``queue`` holds waiting users in join order.
+    authority's clock (seconds) and meaningful to the authority alone: a renewal is answered
+    with the record, not published (published records change with owner, epoch, queue or
+    motion); ``queue`` holds waiting users in join order.
     """
 
     object: str
