@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from fabric import keys
 
-__all__ = ["AUTHORITY_STREAMS", "Fence", "FenceVerdict", "SimFence", "MAX_DEPARTED_SIMS", "is_authority_key"]
+__all__ = ["AUTHORITY_STREAMS", "Fence", "FenceVerdict", "SimFence", "MAX_DEPARTED_SIMS", "is_authority_event", "is_authority_key"]
 
 AUTHORITY_STREAMS = frozenset({"joints", "pose", "scan", "sonar"})
 """Robot streams only a sim authority writes (paths and IK results come from compute and users)."""
@@ -42,6 +42,21 @@ def is_authority_key(key: str) -> bool:
     if p.category == "srv":
         return p.subject in ("world", "state")
     return False
+
+
+NOT_SIM_EVENTS = frozenset({keys.DECODE, "compute"})
+"""Event chunks others than sims write: decode reports (every login, ``event/decode/by/{login}``) and the
+compute peers' (``event/compute/**``). A class's router lets only sims write the rest of ``event/**``."""
+
+
+def is_authority_event(key: str) -> bool:
+    """Whether an event on ``key`` can only have come from a sim (docs/security.md): a client acts on such an
+    event alone (and only when its source is the object's authority); what any login may write is display-only."""
+    try:
+        p = keys.parse(key)
+    except ValueError:
+        return False
+    return p.category == "event" and p.subject not in NOT_SIM_EVENTS
 
 
 @dataclass(frozen=True, slots=True)

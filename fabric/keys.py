@@ -164,6 +164,28 @@ def srv_per_subject(world: str, service: str, peer_id: str | None = None) -> str
     return base if peer_id is None else f"{base}/{validate_id(peer_id, what='peer id')}"
 
 
+def srv_asked(world: str, service: str, subject: str, user: str, peer_id: str | None = None) -> str:
+    """``user`` asking a shared service: ``srv/{service}/{subject}[/{peer_id}]/by/{user}``.
+
+    Like commands, the asker is in the key: a router lets each login ask on its own ``by/{user}`` only,
+    and the service takes the asker from the key (docs/architecture.md, "Identity in the key"). The
+    forms without ``by/{user}`` are the staff's (sim, compute and instructor logins; anyone in a world
+    without access control)."""
+    parts = [subject] if peer_id is None else [subject, peer_id]
+    return f"{srv(world, service, *parts)}/{_by(user)}"
+
+
+def srv_asked_all(world: str, service: str, peer_id: str | None = None) -> str:
+    """What a service serves to askers who name themselves: ``srv/{service}/*[/{peer_id}]/by/*``."""
+    return f"{srv_per_subject(world, service, peer_id)}/{BY}/*"
+
+
+def asker(parsed: "ParsedKey") -> str:
+    """The user a parsed service key names as its asker (``.../by/{user}``), '' for the staff's forms."""
+    rest = parsed.rest
+    return rest[-1] if parsed.category == "srv" and len(rest) >= 3 and rest[-2] == BY else ""
+
+
 def peer(world: str, kind: str, peer_id: str) -> str:
     return f"{world_root(world)}/peer/{_choice(kind, PEER_KINDS, 'peer kind')}/{validate_id(peer_id, what='peer id')}"
 
@@ -181,6 +203,16 @@ def event(world: str, *parts: str) -> str:
 
 def event_all(world: str) -> str:
     return f"{world_root(world)}/event/**"
+
+
+DECODE = "decode"
+"""The event kind chunk of decode reports, which every login writes (on its own ``by/{writer}`` key)."""
+
+
+def event_decode(world: str, writer: str) -> str:
+    """Where ``writer`` (its login, else its peer id) reports payloads it could not decode:
+    ``event/decode/by/{writer}``. Any login may write one, so what arrives there is display-only."""
+    return f"{world_root(world)}/event/{DECODE}/{_by(writer)}"
 
 
 @dataclass(frozen=True, slots=True)

@@ -60,8 +60,11 @@ def world_info(fab: Fabric, *, timeout: float = 5.0) -> WorldInfo:
     return fab.call(keys.srv(fab.world, "world"), timeout=timeout, expected=WorldInfo)
 
 
-def _service_key(fab: Fabric, service: str, subject: str, peer: str | None) -> str:
-    """``srv/{service}/{subject}``: the nearest compute peer; with ``peer``, that compute peer only."""
+def _service_key(fab: Fabric, service: str, subject: str, peer: str | None, user: str | None = None) -> str:
+    """``srv/{service}/{subject}``: the nearest compute peer; with ``peer``, that compute peer only; with
+    ``user``, asked in that user's name (``.../by/{user}``, what a class's router lets a student ask)."""
+    if user is not None:
+        return keys.srv_asked(fab.world, service, subject, user, peer)
     return keys.srv(fab.world, service, subject) if peer is None else keys.srv(fab.world, service, subject, peer)
 
 
@@ -75,16 +78,19 @@ def ik(
 
 
 def map_request(
-    fab: Fabric, action: str, *, name: str = "map", threshold: float = 0.65, timeout: float = 10.0, peer: str | None = None
+    fab: Fabric, action: str, *, name: str = "map", threshold: float = 0.65, timeout: float = 10.0, peer: str | None = None,
+    user: str | None = None,
 ) -> MapReply:
-    """One request to the mapping service on ``rf/{world}/srv/map/{name}``; returns its MapReply."""
+    """One request to the mapping service on ``rf/{world}/srv/map/{name}`` (``.../by/{user}`` in ``user``'s
+    name: set, reset, stop, save and load are then refused, docs/security.md); returns its MapReply."""
     req = MapRequest(action, name=name, threshold=threshold)
-    return fab.call(_service_key(fab, "map", name, peer), req, timeout=timeout, expected=MapReply)
+    return fab.call(_service_key(fab, "map", name, peer, user), req, timeout=timeout, expected=MapReply)
 
 
-def build_map(fab: Fabric, *, name: str = "map", threshold: float = 0.65, timeout: float = 10.0, peer: str | None = None) -> OccupancyGrid:
+def build_map(fab: Fabric, *, name: str = "map", threshold: float = 0.65, timeout: float = 10.0, peer: str | None = None,
+              user: str | None = None) -> OccupancyGrid:
     """Threshold the scans a compute peer accumulated into map ``name`` (also published on ``map/{name}``)."""
-    reply = map_request(fab, "build", name=name, threshold=threshold, timeout=timeout, peer=peer)
+    reply = map_request(fab, "build", name=name, threshold=threshold, timeout=timeout, peer=peer, user=user)
     grid = reply.grid
     if grid.cells.size == 0:
         raise ServiceError(f"the map service built no grid for {name!r}")
@@ -93,8 +99,9 @@ def build_map(fab: Fabric, *, name: str = "map", threshold: float = 0.65, timeou
 
 def plan(
     fab: Fabric, robot: str, goal: tuple[float, float, float] | None, *, planner: str = "hybrid_astar", map_name: str = "map", timeout: float = 10.0,
-    peer: str | None = None,
+    peer: str | None = None, user: str | None = None,
 ) -> Path:
-    """A path from ``robot``'s pose to ``goal`` (None: the goal object's pose) from a compute peer."""
+    """A path from ``robot``'s pose to ``goal`` (None: the goal object's pose) from a compute peer; asked in
+    ``user``'s name, it is published on the robot's ``path`` key only if she owns the robot (else in the reply only)."""
     req = PlanRequest(robot, goal=np.asarray(goal if goal is not None else (), dtype=float), planner=planner, map=map_name)
-    return fab.call(_service_key(fab, "plan", robot, peer), req, timeout=timeout, expected=PlanReply).path
+    return fab.call(_service_key(fab, "plan", robot, peer, user), req, timeout=timeout, expected=PlanReply).path
