@@ -70,8 +70,9 @@ class PlanService:
         s = self.settings
         return m.store.costmap(name, robot_radius, threshold=s.threshold, unknown_is_occupied=s.unknown_is_occupied)
 
-    def handle(self, req: PlanRequest) -> PlanReply:
-        """Handle one plan request (also usable in-process, without Zenoh)."""
+    def handle(self, req: PlanRequest, *, publish: bool = True) -> PlanReply:
+        """Handle one plan request (also usable in-process, without Zenoh); the path goes on the robot's
+        ``path`` key only with ``publish`` (the asker owns the robot, or is the staff)."""
         robot = keys.validate_id(req.robot, what="robot id")
         if not self._known(robot):
             raise NavigationError(f"unknown robot {robot!r}: not {self._unknown_reason}")
@@ -88,7 +89,8 @@ class PlanService:
             result = plan_path(costmap, start, goal, planner=req.planner, settings=replace(s, vehicle=vehicle))
         key = keys.robot_path(self.world, robot)
         path = Path(result.x, result.y, result.theta, "world", self.fabric.header(key))
-        self.fabric.publish(key, path)
+        if publish:
+            self.fabric.publish(key, path)
         self.counters["plans"] += 1
         return PlanReply(
             path, robot, result.planner, result.seconds, result.length, result.expansions, req.map,

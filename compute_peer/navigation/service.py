@@ -16,6 +16,13 @@
   Hybrid A* or OMPL, publish the path on ``rf/{world}/robot/{robot}/path`` and
   return it. Following it is the user's decision: they send it on ``cmd/path``.
 
+Who asks (docs/security.md): a user asks on ``.../by/{user}`` (:func:`fabric.keys.srv_asked`; a class's
+router lets each login ask in its own name only). Such an asker gets every plan in the reply, but it is
+published on the robot's ``path`` key only when the trusted ownership replica says she owns the robot,
+and map ``set``/``reset``/``stop``/``save``/``load`` (:data:`STAFF_MAP_ACTIONS`), which change the map
+the whole class plans on, are refused to her with the reason. The forms without ``by/`` are the staff's
+(sim, compute and instructor logins in a class; anyone in a world without access control): served in full.
+
 Every refusal (unknown robot, no pose yet, no map, goal outside the map or in an
 obstacle, no path) is a :class:`~fabric.session.ServiceError` reply with the
 reason; nothing here can make a query time out or take the peer down.
@@ -49,7 +56,10 @@ from .planner import PlannerSettings
 from .poses import MAX_ROBOTS, POSE_HISTORY, PoseHistory
 from .scan_mapping import ScanMapping
 
-__all__ = ["MAX_ROBOTS", "POSE_HISTORY", "NavigationService", "register_navigation"]
+__all__ = ["MAX_ROBOTS", "POSE_HISTORY", "STAFF_MAP_ACTIONS", "NavigationService", "register_navigation"]
+
+STAFF_MAP_ACTIONS = frozenset({"set", "reset", "stop", "save", "load"})
+"""Map actions that change what every user of the world plans on: refused to a user asking in her name."""
 
 
 class NavigationService:
@@ -97,7 +107,9 @@ class NavigationService:
             "scans_waiting_for_sensor": 0,  # dropped while the sensor's mounting is being looked up
             "scans_rejected": 0,
             "plans": 0,
+            "plans_unpublished": 0,  # a plan for a robot its asker does not own: in the reply only
             "refusals": 0,
+            "refused_staff_only": 0,  # a map action of the staff's asked by a user (also in refusals)
         }
         self.poses = PoseHistory(POSE_HISTORY)
         self.descriptions = RobotDescriptions(
@@ -120,7 +132,28 @@ class NavigationService:
         self._lock = threading.Lock()  # new robots: the check and the first pose together
         self._closed = False
         self._resources: list[Any] = []
+        self.ownership: Any = None  # the trusted replica of the ownership records (ownership.OwnershipClient)
+        # its first query may wait for an authority: not on the way of the services' start
+        threading.Thread(target=self._follow_ownership, name="nav-ownership", daemon=True).start()
         self._declare()
+
+    def _follow_ownership(self) -> None:
+        from ownership import OwnershipClient
+
+        try:
+            client = OwnershipClient(self.fabric, self.fabric.peer_id, timeout=1.0)  # never started: reads, never renews
+        except Exception:  # a session closing under it
+            return
+        with self._lock:
+            closed, self.ownership = self._closed, client
+        if closed:
+            client.close()
+
+    def owner_of(self, robot: str) -> str | None:
+        """``robot``'s owner as the authority last said (None: free, or not known yet)."""
+        client = self.ownership
+        rec = client.record(robot) if client is not None else None
+        return rec.owner if rec is not None and rec.owner else None
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -134,9 +167,11 @@ class NavigationService:
                 self._resources.append(f.subscribe(keys.robot_scan(self.world, r), self._on_robot, expected=Scan))
         self._resources.append(f.subscribe(keys.object_pose_all(self.world, self.goal_object), self._on_goal, expected=Pose, history=True))
         # srv/{map,plan}/{name}: the nearest compute peer; srv/{map,plan}/{name}/{peer_id}: this one (docs/compute.md)
+        # and each with .../by/{user}: a user asking in her own name (keys.srv_asked)
         for peer in (None, f.peer_id):
-            self._resources.append(f.serve(keys.srv_per_subject(self.world, "map", peer), self._on_map, expected=MapRequest))
-            self._resources.append(f.serve(keys.srv_per_subject(self.world, "plan", peer), self._on_plan, expected=PlanRequest))
+            for service, handler, expected in (("map", self._on_map, MapRequest), ("plan", self._on_plan, PlanRequest)):
+                self._resources.append(f.serve(keys.srv_per_subject(self.world, service, peer), handler, expected=expected))
+                self._resources.append(f.serve(keys.srv_asked_all(self.world, service, peer), handler, expected=expected))
 
     def __enter__(self) -> "NavigationService":
         return self
@@ -152,6 +187,8 @@ class NavigationService:
             self._closed = True
         self.descriptions.close()
         undeclare_all(self._resources)
+        if self.ownership is not None:
+            self.ownership.close()
 
     # ------------------------------------------------------------------ the parts, for in-process use
 
@@ -230,9 +267,15 @@ class NavigationService:
     # ------------------------------------------------------------------ queries
 
     def _on_map(self, key: str, req: MapRequest | None) -> MapReply:
+        parsed = keys.parse(key)
         if req is None:
-            rest = keys.parse(key).rest
-            req = MapRequest("get", name=rest[0] if rest else self.map_name)
+            req = MapRequest("get", name=parsed.rest[0] if parsed.rest else self.map_name)
+        asker = keys.asker(parsed)
+        if asker and req.action in STAFF_MAP_ACTIONS:
+            self.counters["refusals"] += 1
+            self.counters["refused_staff_only"] += 1
+            raise ServiceError(f"map {req.action!r} changes the map everyone plans on: an instructor's, not {asker}'s "
+                               f"(start, status, build and get are open)", key=key)
         try:
             return self.map_service.handle(req)
         except (NavigationError, OSError) as exc:
@@ -243,16 +286,24 @@ class NavigationService:
         if req is None:
             self.counters["refusals"] += 1
             raise ServiceError("a plan query needs a PlanRequest payload (robot, goal, planner...)", key=key)
-        rest = keys.parse(key).rest
+        parsed = keys.parse(key)
+        rest = parsed.rest
         tail = rest[0] if rest else ""
         if tail and tail != req.robot:
             self.counters["refusals"] += 1
             raise ServiceError(f"query on {key} names robot {tail!r} but the request is for {req.robot!r}", key=key)
+        asker = keys.asker(parsed)
+        # a user's plan is published on the robot's path key only when she owns the robot: else another
+        # user's base would show, and might follow, a path it was never planned for
+        publish = not asker or self.owner_of(req.robot) == asker
         try:
-            return self.plan_service.handle(req)
+            reply = self.plan_service.handle(req, publish=publish)
         except NavigationError as exc:
             self.counters["refusals"] += 1
             raise ServiceError(str(exc), key=key) from None
+        if not publish:
+            self.counters["plans_unpublished"] += 1
+        return reply
 
 
 def register_navigation(fabric: Fabric, *, robots: list[str] | None = None, **options: Any) -> NavigationService:

@@ -268,3 +268,35 @@ def test_a_key_of_no_layout_on_a_robots_keys_is_counted_never_a_traceback(connec
         assert compute.counters["callback_errors"] == 0
         assert not [r for r in caplog.records if r.levelname in ("ERROR", "CRITICAL") or r.exc_info], caplog.text
         assert call(user, "map", "map", MapRequest("status")).action == "status"  # still serving
+
+
+def test_a_user_asking_in_her_name_may_not_change_the_map_nor_publish_a_plan_for_a_robot_she_does_not_own(peers):
+    """srv/{map,plan}/.../by/{user} (what a class's router lets a student ask): set, reset, stop, save and load
+    are refused with the reason and counted; start, status, build and get answer; a plan comes in the reply
+    but is not published on the robot's path key (no authority here says she owns it). The staff's form
+    (no by/) still does everything, and publishes."""
+    nav, sim, user = peers
+    world = user.world
+    paths: list[Path] = []
+    user.subscribe(keys.robot_path(world, ROBOT), lambda k, m: paths.append(m), expected=Path)
+    cells = np.zeros((100, 100), np.uint8)
+    assert call(user, "map", "map", MapRequest("set", grid=make_grid(cells, 0.1))).action == "set"  # the staff's form
+    full = make_grid(np.full((100, 100), 100, np.uint8), 0.1)
+    asked = keys.srv_asked(world, "map", "map", "mallory")
+    for action, req in (("set", MapRequest("set", grid=full)), ("reset", MapRequest("reset")), ("stop", MapRequest("stop")),
+                        ("save", MapRequest("save", file="mine.yaml")), ("load", MapRequest("load", file="mine.yaml"))):
+        with pytest.raises(ServiceError, match=f"map '{action}' changes the map everyone plans on: an instructor's, not mallory's"):
+            user.call(asked, req, timeout=5.0)
+    assert nav.counters["refused_staff_only"] == 5 and nav.counters["refusals"] >= 5
+    assert nav.mapping and not (nav.store.get("map").cells == 100).any()  # still on, still free
+    for action in ("start", "status", "get"):
+        assert user.call(asked, MapRequest(action), timeout=5.0, expected=MapReply).action == action
+    plan = PlanRequest(ROBOT, goal=[8.0, 2.0, 0.0], start=[2.0, 2.0, 0.0], direction="both")
+    reply = user.call(keys.srv_asked(world, "plan", ROBOT, "mallory"), plan, timeout=20.0, expected=PlanReply)
+    assert len(reply.path) > 1 and nav.counters["plans_unpublished"] == 1
+    staff = user.call(keys.srv(world, "plan", ROBOT), plan, timeout=20.0, expected=PlanReply)  # published
+    wait_until(lambda: paths, what="the staff's plan on the path key")
+    assert len(paths) == 1 and np.allclose(paths[0].x, staff.path.x)  # hers never came before it
+    # the per-peer form in her name too
+    with pytest.raises(ServiceError, match="an instructor's, not mallory's"):
+        user.call(keys.srv_asked(world, "map", "map", "mallory", nav.fabric.peer_id), MapRequest("reset"), timeout=5.0)
