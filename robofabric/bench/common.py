@@ -10,9 +10,10 @@ import os
 import platform
 import signal
 import subprocess
+import time
 from pathlib import Path
 
-__all__ = ["append", "write", "pct", "cpus", "machine", "proc_cpu_s", "proc_rss_mb", "end_process"]
+__all__ = ["append", "write", "pct", "cpus", "machine", "proc_cpu_s", "proc_rss_mb", "end_process", "end_processes"]
 
 
 def append(out: Path | str | None, text: str) -> None:
@@ -69,13 +70,27 @@ def proc_rss_mb(pid: int, field: str = "VmRSS") -> float:
 
 def end_process(proc: subprocess.Popen, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int:
     """Send ``sig`` to a child (by pid) unless it has exited, wait ``timeout``, then SIGKILL; its exit code."""
-    if proc.poll() is None:
-        try:
-            os.kill(proc.pid, sig)
-        except ProcessLookupError:
-            pass
+    _signal(proc, sig)
     try:
         return proc.wait(timeout=timeout)
     except subprocess.TimeoutExpired:
         proc.kill()
         return proc.wait(timeout=10)
+
+
+def end_processes(procs: list[subprocess.Popen], sig: int = signal.SIGTERM, timeout: float = 10.0) -> list[int]:
+    """End several children together: ``sig`` to each first, then each waited for (``timeout`` in all before
+    the stragglers get SIGKILL); their exit codes, in order."""
+    for proc in procs:
+        _signal(proc, sig)
+    deadline = time.monotonic() + timeout
+    return [end_process(proc, sig, max(0.1, deadline - time.monotonic())) for proc in procs]
+
+
+def _signal(proc: subprocess.Popen, sig: int) -> None:
+    """``sig`` to a child that has not exited (by pid; one gone meanwhile is no error)."""
+    if proc.poll() is None:
+        try:
+            os.kill(proc.pid, sig)
+        except ProcessLookupError:
+            pass

@@ -1,4 +1,4 @@
-"""``robofabric bench flood``, the flood harness (issue 14): an owner commands a robot while other clients flood the world.
+"""``robofabric bench flood``, the flood harness: an owner commands a robot while other clients flood the world.
 
 Real processes over loopback: a router, a sim peer and a compute peer (each a ``robofabric``
 child process with its log in a file; the router apart from alice, so that forwarding the flood
@@ -25,7 +25,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import signal
 import subprocess
 import sys
 import threading
@@ -44,9 +43,9 @@ from fabric.reliable import resend_until
 from fabric.session import Fabric
 from fabric.testing import client, free_port, robofabric_cmd, wait_until
 from ownership.client import OwnershipClient
-from robofabric.bench.common import proc_cpu_s, proc_rss_mb
+from robofabric.bench.common import end_processes, pct, proc_cpu_s, proc_rss_mb
 
-__all__ = ["Load", "FloodResult", "run_flood", "command"]
+__all__ = ["Load", "FloodResult", "run_flood", "report", "command"]
 
 JOINT = 5  # the last joint of the arm: the one alice moves
 SCALES = 60  # command numbers are told apart modulo this
@@ -96,7 +95,8 @@ class FloodResult:
     sim_counts: dict[str, int] = field(default_factory=dict)  # the sim's own count of commands received and rejected
 
     def pct(self, q: float) -> float:
-        return float(np.percentile(self.latencies, q)) if self.latencies else float("inf")
+        """The ``q``-th percentile of the latencies, s (NaN when none was measured)."""
+        return pct(self.latencies, q)
 
     @property
     def not_applied(self) -> int:
@@ -243,6 +243,21 @@ class _Owner:
                 "effect_s": round(stamp - wall0, 3) if r.done else None, "target": target,
                 "short_by": round(abs(target - at), 3) if r.done else None}
 
+    def score(self, result: FloodResult, *, since: float, t0: float) -> None:
+        """Fill ``result`` with the commands sent from ``since`` (monotonic) to a second before the last one
+        (those may not have been published yet): their latencies, the slowest (sent at, s after ``t0``), how
+        many were seen themselves, and the lease lapses."""
+        with self._lock:
+            last = max((t for t, _, _ in self.sent.values()), default=0.0)
+            measured = [k for k, (t, _, _) in self.sent.items() if since <= t <= last - 1.0]
+            lat = {k: self.latency(k) for k in measured}
+            slow = sorted(((self.sent[k][0] - t0, v) for k, v in lat.items()), key=lambda x: -x[1])
+            result.commands = len(measured)
+            result.latencies = sorted(lat.values())
+            result.slowest = [(round(a, 3), round(b, 3)) for a, b in slow[:8]]
+            result.applied = sum(1 for k in measured if k in self.seen)
+        result.lapses = list(self.lapses)
+
     def stop(self) -> None:
         self._stop.set()
         if self._thread is not None:
@@ -254,120 +269,148 @@ class _Owner:
 
 
 def _start(argv: list[str], log_path: Path) -> subprocess.Popen:
+    """A ``robofabric`` child in a session of its own, its output in ``log_path`` (the log sizes are measured)."""
     out = open(log_path, "wb")
     try:
         return subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
-                                env={**os.environ, "PYTHONUNBUFFERED": "1", **({"MALLOC_MMAP_THRESHOLD_": "131072"} if os.environ.get("WT14_MMAP") else {})})
+                                env={**os.environ, "PYTHONUNBUFFERED": "1"})
     finally:
         out.close()
 
 
-def _end(procs: list[subprocess.Popen]) -> None:
-    for p in procs:
-        if p.poll() is None:
-            try:
-                os.kill(p.pid, signal.SIGTERM)
-            except ProcessLookupError:
-                pass
-    deadline = time.monotonic() + 10
-    for p in procs:
-        try:
-            p.wait(timeout=max(0.1, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            os.kill(p.pid, signal.SIGKILL)
-            p.wait(timeout=5)
+class _Rig:
+    """What one run starts: a router, alice's session, the sim and compute peers, alice herself (and the flooder).
+
+    ``close()`` ends everything it started, the children by pid, whatever step failed."""
+
+    def __init__(self, out_dir: Path) -> None:
+        self.out_dir = out_dir
+        self.world = f"flood{uuid.uuid4().hex[:6]}"
+        self.port = free_port()
+        self.ep = f"tcp/127.0.0.1:{self.port}"
+        self.procs: list[subprocess.Popen] = []
+        self.peers: dict[str, subprocess.Popen] = {}
+        self.fab: Fabric | None = None
+        self.owner: _Owner | None = None
+
+    def start(self, name: str, argv: list[str]) -> subprocess.Popen:
+        proc = _start(argv, self.out_dir / f"{name}.log")
+        self.procs.append(proc)
+        return proc
+
+    def set_up(self) -> _Owner:
+        """Router, then alice's session (peers connect once, at start: the router must listen first), the
+        sim and compute peers; alice owns arm1 when it returns."""
+        w, ep = self.world, self.ep
+        self.start("router", robofabric_cmd("router", "--listen", ep, "--world", w))
+        fab = self.fab = wait_until(lambda: _try_client(w, self.port), timeout=90, interval=0.5, what="the router to accept alice")
+        self.peers = {
+            "sim": self.start("sim", robofabric_cmd("sim", "--scene", "combined", "--world", w, "--connect", ep, "--id", "sim-flood")),
+            "compute": self.start("compute", robofabric_cmd("compute", "--world", w, "--connect", ep, "--id", "compute-flood")),
+        }
+        info = wait_until(lambda: _world_info(fab, w), timeout=90, interval=0.5, what="the sim's srv/world")
+        arm = next(r for r in info.robots if r.id == "arm1")
+        self.owner = _Owner(fab, w, float(arm.max_speed[JOINT]), len(arm.joint_names))
+        wait_until(lambda: fab.live_peers("compute"), timeout=90, interval=0.5, what="the compute peer")
+        self.owner.take()
+        return self.owner
+
+    def start_flooder(self, load: Load) -> subprocess.Popen:
+        return self.start("flooder", [sys.executable, "-m", "robofabric.bench.flooder", self.world, str(self.port), json.dumps(asdict(load))])
+
+    def memory(self) -> dict[str, float]:
+        """Each peer's resident memory now, MB: ``sim`` (VmRSS) and its parts (``sim:RssAnon``, ...)."""
+        out: dict[str, float] = {}
+        for n, p in self.peers.items():
+            out[n] = proc_rss_mb(p.pid)
+            for fld in ("RssAnon", "RssShmem", "RssFile"):
+                out[f"{n}:{fld}"] = proc_rss_mb(p.pid, fld)
+        return out
+
+    def cpu(self) -> dict[str, float]:
+        return {n: proc_cpu_s(p.pid) for n, p in self.peers.items()}
+
+    def close(self) -> None:
+        if self.owner is not None:
+            self.owner.close()
+        if self.fab is not None:
+            self.fab.close()
+        end_processes(self.procs)
+
+    def __enter__(self) -> "_Rig":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def run_flood(load: Load, out_dir: Path, *, flood: bool = True, stop_at: float | None = 2.0) -> FloodResult:
-    """One run: warm up, flood (or not), settle; returns what was measured. Logs go to ``out_dir``.
+    """One run: set up, warm up, flood (or not) and settle, then what was measured. Logs go to ``out_dir``.
 
     ``stop_at``: seconds after the flood began, alice stops sending targets and stops the arm with
     :func:`fabric.reliable.resend_until` (re-sent until her joint stream shows it still), then goes on."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    world = f"flood{uuid.uuid4().hex[:6]}"
-    port = free_port()
-    ep = f"tcp/127.0.0.1:{port}"
     result = FloodResult(flooded=flood)
-    procs: list[subprocess.Popen] = [_start(robofabric_cmd("router", "--listen", ep, "--world", world), out_dir / "router.log")]
-    owner: _Owner | None = None
-    fab: Fabric | None = None
-    try:
-        # peers connect once, at start: the router must listen first
-        fab = wait_until(lambda: _try_client(world, port), timeout=90, interval=0.5, what="the router to accept alice")
-        peers = {
-            "sim": _start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep, "--id", "sim-flood"), out_dir / "sim.log"),
-            "compute": _start(robofabric_cmd("compute", "--world", world, "--connect", ep, "--id", "compute-flood"), out_dir / "compute.log"),
-        }
-        procs.extend(peers.values())
-        info = wait_until(lambda: _world_info(fab, world), timeout=90, interval=0.5, what="the sim's srv/world")
-        arm = next(r for r in info.robots if r.id == "arm1")
-        owner = _Owner(fab, world, float(arm.max_speed[JOINT]), len(arm.joint_names))
-        wait_until(lambda: fab.live_peers("compute"), timeout=90, interval=0.5, what="the compute peer")
-        owner.take()
+    with _Rig(out_dir) as rig:
+        owner = rig.set_up()
         owner.start(load.period_s)
         time.sleep(load.warm_s)  # a measurement phase of fixed length, not a wait for a condition
-        result.rss_before = {n: proc_rss_mb(p.pid) for n, p in peers.items()}
-        for n, p in peers.items():
-            for fld in ("RssAnon", "RssShmem", "RssFile"):
-                result.rss_before[f"{n}:{fld}"] = proc_rss_mb(p.pid, fld)
-        cpu0 = {n: proc_cpu_s(p.pid) for n, p in peers.items()}
-        peak = dict(result.rss_before)
-        t0 = time.monotonic()
-        flooder = None
-        if flood:
-            spec = json.dumps(asdict(load))
-            flooder = _start([sys.executable, "-m", "robofabric.bench.flooder", world, str(port), spec], out_dir / "flooder.log")
-            procs.append(flooder)
-        end = None
-        stopped = stop_at is None
-        while True:
-            if not stopped and time.monotonic() - t0 >= stop_at:
-                result.stop = {**owner.stop_robot(timeout=10.0), "flooder_running": flooder is not None and flooder.poll() is None}
-                owner.paused.clear()
-                stopped = True
-            for n, p in peers.items():
-                peak[n] = max(peak[n], proc_rss_mb(p.pid))
-                for fld in ("RssAnon", "RssShmem", "RssFile"):
-                    peak[f"{n}:{fld}"] = max(peak.get(f"{n}:{fld}", 0.0), proc_rss_mb(p.pid, fld))
-            now = time.monotonic()
-            if end is None and (flooder is None or flooder.poll() is not None):
-                result.flood_s = now - t0
-                end = now + load.settle_s
-            if end is not None and now >= end:
-                break
-            if now - t0 > 600:
-                raise RuntimeError("the flooder ran for more than 600 s")
-            time.sleep(0.1)
-        result.phase_s = time.monotonic() - t0
-        result.cpu_s = {n: proc_cpu_s(p.pid) - cpu0[n] for n, p in peers.items()}
-        result.rss_peak = peak
+        t0 = _flood_phase(rig, load, result, flood=flood, stop_at=stop_at)
         owner.stop()
-        if flooder is not None:
-            try:
-                result.flooder = json.loads((out_dir / "flooder.log").read_text().strip().splitlines()[-1])
-            except (ValueError, IndexError):
-                result.flooder = {"output": (out_dir / "flooder.log").read_text(errors="replace")[-2000:]}
-        with owner._lock:
-            last = max((t for t, _, _ in owner.sent.values()), default=0.0)
-            # from the start of warm-up; the last second's commands may not have been published yet
-            measured = [k for k, (t, _, _) in owner.sent.items() if t0 - load.warm_s <= t <= last - 1.0]
-            result.commands = len(measured)
-            lat = {k: owner.latency(k) for k in measured}
-            result.latencies = sorted(lat.values())
-            slow = sorted(((owner.sent[k][0] - t0, v) for k, v in lat.items()), key=lambda x: -x[1])
-            result.slowest = [(round(a, 3), round(b, 3)) for a, b in slow[:8]]
-            result.applied = sum(1 for k in measured if k in owner.seen)
-        result.lapses = list(owner.lapses)
-    finally:
-        if owner is not None:
-            owner.close()
-        if fab is not None:
-            fab.close()
-        _end(procs)
+        if flood:
+            result.flooder = _flooder_report(out_dir / "flooder.log")
+        owner.score(result, since=t0 - load.warm_s, t0=t0)  # from the start of warm-up
+    _read_logs(out_dir, result)
+    return result
+
+
+def _flood_phase(rig: _Rig, load: Load, result: FloodResult, *, flood: bool, stop_at: float | None) -> float:
+    """Flood (or not), stop the arm ``stop_at`` s in, go on ``load.settle_s`` after the flooder ended, sampling
+    the peers' memory every 0.1 s; fills the phase's figures and returns when it began (monotonic)."""
+    owner = rig.owner
+    assert owner is not None
+    result.rss_before = rig.memory()
+    cpu0 = rig.cpu()
+    peak = dict(result.rss_before)
+    t0 = time.monotonic()
+    flooder = rig.start_flooder(load) if flood else None
+    end = None
+    stopped = stop_at is None
+    while True:
+        if not stopped and time.monotonic() - t0 >= stop_at:
+            result.stop = {**owner.stop_robot(timeout=10.0), "flooder_running": flooder is not None and flooder.poll() is None}
+            owner.paused.clear()
+            stopped = True
+        peak = {k: max(peak.get(k, 0.0), v) for k, v in rig.memory().items()}
+        now = time.monotonic()
+        if end is None and (flooder is None or flooder.poll() is not None):
+            result.flood_s = now - t0
+            end = now + load.settle_s
+        if end is not None and now >= end:
+            break
+        if now - t0 > 600:
+            raise RuntimeError("the flooder ran for more than 600 s")
+        time.sleep(0.1)
+    result.phase_s = time.monotonic() - t0
+    cpu1 = rig.cpu()
+    result.cpu_s = {n: cpu1[n] - cpu0[n] for n in cpu0}
+    result.rss_peak = peak
+    return t0
+
+
+def _flooder_report(log: Path) -> dict[str, Any]:
+    """What the flooder says it sent (its last line, JSON), else the tail of its output."""
+    try:
+        return json.loads(log.read_text().strip().splitlines()[-1])
+    except (ValueError, IndexError):
+        return {"output": log.read_text(errors="replace")[-2000:]}
+
+
+def _read_logs(out_dir: Path, result: FloodResult) -> None:
+    """The peers' log sizes and the sim's own command counts, once they have stopped."""
     result.log_bytes = {n: (out_dir / f"{n}.log").stat().st_size for n in ("sim", "compute") if (out_dir / f"{n}.log").exists()}
     result.sim_counts = sim_counts((out_dir / "sim.log").read_text(errors="replace") if (out_dir / "sim.log").exists() else "")
-    return result
 
 
 _SIM_STOPPED = re.compile(r"sim stopped at .*: (?P<steps>\d+) steps, (?P<commands>\d+) commands \((?P<accepted>\d+) accepted, "
@@ -405,21 +448,32 @@ def command(
 
     load = dataclasses.replace(Load().scaled(scale), settle_s=settle)
     rows = [("no flood", run_flood(load, out / "quiet", flood=False)), (f"flood x{scale:g}", run_flood(load, out / "flood", flood=True))]
-    print("| run | alice p50 / p99 (ms) | commands (never seen) | lease lapses | sim RSS before -> peak (MB) | compute RSS before -> peak (MB) "
-          "| sim / compute CPU (s) | phase (s) | sim / compute log (bytes) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print(report(rows))
+
+
+def report(rows: list[tuple[str, FloodResult]]) -> str:
+    """The runs side by side (a markdown table), then per run its lapses, the mid-flood stop and the sim's
+    counts, and what the flooder of the last run sent."""
+    lines = [
+        "| run | alice p50 / p99 (ms) | commands (never seen) | lease lapses | sim RSS before -> peak (MB) | compute RSS before -> peak (MB) "
+        "| sim / compute CPU (s) | phase (s) | sim / compute log (bytes) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for name, r in rows:
-        print(f"| {name} | {r.pct(50) * 1e3:.1f} / {r.pct(99) * 1e3:.1f} | {r.commands} ({r.not_applied}) | {len(r.lapses)} "
-              f"| {r.rss_before['sim']:.0f} -> {r.rss_peak['sim']:.0f} | {r.rss_before['compute']:.0f} -> {r.rss_peak['compute']:.0f} "
-              f"| {r.cpu_s['sim']:.1f} / {r.cpu_s['compute']:.1f} | {r.phase_s:.1f} | {r.log_bytes.get('sim', 0)} / {r.log_bytes.get('compute', 0)} |")
+        lines.append(
+            f"| {name} | {r.pct(50) * 1e3:.1f} / {r.pct(99) * 1e3:.1f} | {r.commands} ({r.not_applied}) | {len(r.lapses)} "
+            f"| {r.rss_before['sim']:.0f} -> {r.rss_peak['sim']:.0f} | {r.rss_before['compute']:.0f} -> {r.rss_peak['compute']:.0f} "
+            f"| {r.cpu_s['sim']:.1f} / {r.cpu_s['compute']:.1f} | {r.phase_s:.1f} | {r.log_bytes.get('sim', 0)} / {r.log_bytes.get('compute', 0)} |")
     for name, r in rows:
         if r.lapses:
-            print(f"{name}: lease lapses: {'; '.join(r.lapses[:5])}")
+            lines.append(f"{name}: lease lapses: {'; '.join(r.lapses[:5])}")
         st = r.stop
-        print(f"{name}: a stop 2 s in (the last joint slowly on its way to {st.get('target')} rad), resent every 0.1 s: "
-              f"{'seen still' if st.get('done') else 'NOT seen still'} after {st.get('sends')} send(s), {st.get('seconds')} s; "
-              f"took effect {st.get('effect_s')} s after the first send, {st.get('short_by')} rad short of the target "
-              f"(flooder {'running' if st.get('flooder_running') else 'idle'})")
-        print(f"{name}: the sim counted {r.sim_counts.get('commands', '?')} commands, {r.sim_counts.get('rejected', '?')} rejected")
-    flooder = rows[1][1].flooder
-    print("flooder sent:", ", ".join(f"{k}={v}" for k, v in flooder.items() if not k.startswith("t_")))
+        lines.append(
+            f"{name}: a stop 2 s in (the last joint slowly on its way to {st.get('target')} rad), resent every 0.1 s: "
+            f"{'seen still' if st.get('done') else 'NOT seen still'} after {st.get('sends')} send(s), {st.get('seconds')} s; "
+            f"took effect {st.get('effect_s')} s after the first send, {st.get('short_by')} rad short of the target "
+            f"(flooder {'running' if st.get('flooder_running') else 'idle'})")
+        lines.append(f"{name}: the sim counted {r.sim_counts.get('commands', '?')} commands, {r.sim_counts.get('rejected', '?')} rejected")
+    flooder = rows[-1][1].flooder
+    lines.append("flooder sent: " + ", ".join(f"{k}={v}" for k, v in flooder.items() if not k.startswith("t_")))
+    return "\n".join(lines)
