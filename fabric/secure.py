@@ -3,10 +3,17 @@
 ``robofabric secure init DIR --users alice,bob`` (fabric/secure_cli.py) calls :func:`init`, which
 writes ``DIR/router.json5`` (authentication + access control, default deny) and one client config
 per identity, ``DIR/NAME.json5``. The rules (:func:`access_control`) follow the key layout
-(fabric/keys.py, docs/architecture.md): a user writes only keys that end in ``by/{user}``, only
-sim identities write robot state, ownership records and events and serve ``srv/world`` and the
-ownership queryables, only compute identities serve kinematics, mapping and planning. Everyone may
-read everything of every world (``rf/**``): a class shares one view of the world.
+(fabric/keys.py, docs/architecture.md): a user writes only keys that end in ``by/{user}`` (decode
+reports included: ``event/decode/by/{user}``), only sim identities write robot state, ownership
+records and the other events and serve ``srv/world`` and the ownership queryables, only compute
+identities serve kinematics, mapping and planning. A student asks the map and plan services on her
+own ``by/{user}`` keys, where the compute peer refuses her what changes the class's map; the staff
+(sim, compute and instructor logins) may also ask on the forms without ``by/``, which it serves in
+full. Everyone may read everything of every world (``rf/**``): a class shares one view of the world.
+
+zenoh 1.x has no limit on how many subscribers, queryables or tokens one session declares (no such
+config key; checked on the 1.10 sources): the router's config bounds what zenoh does offer
+(:func:`router_limits`: sessions, pending handshakes, message and payload sizes).
 
 Identities are zenoh usernames (``transport/auth/usrpwd``) or, with TLS, certificate common names
 (mutual TLS, one certificate per identity, signed by the class's own CA). Passwords come from
@@ -35,11 +42,17 @@ from fabric.keys import BY, validate_id
 
 __all__ = ["Identity", "ROLES", "SecureInit", "access_control", "router_config", "client_config", "init", "parse_names"]
 
-ROLES = ("user", "sim", "compute", "viewer")
+ROLES = ("user", "instructor", "sim", "compute", "viewer")
+STAFF = ("instructor", "sim", "compute")
+"""Roles that may change a class's shared map (set, reset, stop, save, load) and plan without owning."""
+SHARED_SERVICES = ("map", "plan")
+"""The compute peer's services whose askers are checked: a student asks on ``.../by/{user}`` only."""
 W = "rf/*"  # every world: one router can serve several worlds of the class
 ADV = "@adv/**"  # where zenoh.ext keeps a latched publisher's cache and liveliness token
 ALL_MESSAGES = ("put", "delete", "declare_subscriber", "query", "declare_queryable", "reply", "liveliness_token",
                 "declare_liveliness_subscriber", "liveliness_query")
+OPEN_SERVICES = ("ik", "fk", "jacobian")
+"""Compute services anyone may ask in any form: they answer the asker and change nothing."""
 CREDENTIALS = "credentials.txt"
 TLS_DIR = "tls"
 _NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
@@ -74,18 +87,21 @@ def _rule(rule_id: str, messages: Iterable[str], key_exprs: Iterable[str], flows
 def _own_rules(ident: Identity) -> list[dict]:
     """What this identity alone may do, beyond what every identity may (reading)."""
     n, r = ident.name, ident.role
-    put: list[str] = [f"{W}/event/decode/*"]  # every peer reports payloads it could not decode
+    put: list[str] = [f"{W}/event/decode/{BY}/{n}"]  # every peer reports payloads it could not decode, on its own key
     serve: list[str] = []  # declare_queryable + reply
     tokens: list[str] = [f"{W}/peer/tool/*"]  # CLI tools (ps, echo, own list...) under this login
-    ask: list[str] = []  # queries beyond the common ones
-    if r == "user":
+    # the map and plan services in this login's name; the staff also on the forms without by/ (keys.srv_asked)
+    ask: list[str] = [f"{W}/srv/{s}/**/{BY}/{n}" for s in SHARED_SERVICES]
+    if r in STAFF:
+        ask += [f"{W}/srv/{s}/{tail}" for s in SHARED_SERVICES for tail in ("*", "*/*")]
+    if r in ("user", "instructor"):
         mine = [f"{W}/robot/*/cmd/*/{BY}/{n}", f"{W}/object/*/pose/{BY}/{n}"]
         put += mine
         # a latched publisher's cache (zenoh.ext) is a queryable under KEY/@adv/... that replies on KEY itself
         latched = [f"{W}/object/*/pose/{BY}/{n}/{ADV}"]
         serve += latched + mine[1:]
         tokens += [f"{W}/peer/user/{n}", f"{W}/peer/viewer/*", f"{W}/peer/recorder/*", *latched]
-        ask += [f"{W}/own/*/{BY}/{n}"]
+        ask.append(f"{W}/own/*/{BY}/{n}")
     elif r == "sim":
         put += [f"{W}/robot/*/{s}" for s in ("joints", "pose", "scan", "sonar")] + [f"{W}/own/*", f"{W}/event/**"]
         serve += [f"{W}/srv/world", f"{W}/srv/state", f"{W}/own/*", f"{W}/own/*/{BY}/*"]  # srv/state: a standby follows the primary
@@ -113,7 +129,9 @@ def access_control(identities: Iterable[Identity], *, tls: bool = False) -> dict
     common = [
         # reading: subscribe to anything, watch liveliness, ask services, records and latched caches
         _rule("read", ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"], ["rf/**", f"rf/**/{ADV}"]),
-        _rule("ask", ["query"], [f"{W}/own/*", f"{W}/srv/**", f"rf/**/{ADV}"]),
+        # (srv/map and srv/plan: each login in its own name, _own_rules)
+        _rule("ask", ["query"], [f"{W}/own/*", f"{W}/srv/world", f"{W}/srv/state", *(f"{W}/srv/{s}/**" for s in OPEN_SERVICES),
+                                 f"rf/**/{ADV}"]),
         # what the router delivers to a session: samples, queries for its queryables, replies, declarations
         _rule("deliver", ALL_MESSAGES, ["rf/**", f"rf/**/{ADV}"], flows=("egress",)),
     ]
@@ -139,10 +157,42 @@ def _tls_section(d: Path, name: str, *, side: str) -> dict:
     return sec
 
 
+SESSIONS_PER_LOGIN = 8
+"""Sessions the router admits per login of the class, plus :data:`SPARE_SESSIONS` (a user, her TUI, a
+viewer, a few CLI tools); zenoh's default is 1,000 for everyone together."""
+SPARE_SESSIONS = 32
+PAYLOAD_LIMITS = {
+    f"{W}/event/decode/{BY}/*": 16 * 1024,  # a decode report: a clipped reason and the key it was about
+    f"{W}/object/*/pose/{BY}/*": 4 * 1024,  # a scene object's pose
+    f"{W}/robot/*/cmd/*/{BY}/*": 2 * 1024 * 1024,  # a command; a path of MAX_PATH_POINTS is 1.5 MiB
+}
+"""Largest payload the router takes on ingress on each key any user may write (zenoh's ``low_pass_filter``);
+anything larger is dropped at the router, before it reaches every subscriber."""
+
+
+def router_limits(n_identities: int) -> dict:
+    """The limits zenoh 1.x offers a router, for a class of ``n_identities`` logins: sessions
+    (``transport/unicast/max_sessions``), message size (``transport/link/rx/max_message_size``) and the
+    payload sizes on user keys (``low_pass_filter``). zenoh has none on declarations (subscribers,
+    queryables, tokens per session): docs/security.md says what a flood of them costs."""
+    return {
+        "transport": {
+            "unicast": {"max_sessions": min(1000, SPARE_SESSIONS + SESSIONS_PER_LOGIN * n_identities)},
+            "link": {"rx": {"max_message_size": MAX_MESSAGE_SIZE}},
+        },
+        "low_pass_filter": [
+            {"id": f"user-{i}", "flows": ["ingress"], "messages": ["put"], "key_exprs": [ke], "size_limit": size}
+            for i, (ke, size) in enumerate(PAYLOAD_LIMITS.items())
+        ],
+    }
+
+
 def router_config(d: Path, identities: Iterable[Identity], *, listen: list[str], tls: bool = False) -> dict:
-    """The router's zenoh config: listen, authenticate, authorize; the message size capped."""
-    link: dict = {"rx": {"max_message_size": MAX_MESSAGE_SIZE}}
-    transport: dict = {"link": link}
+    """The router's zenoh config: listen, authenticate, authorize; sessions, message and payload sizes capped."""
+    idents = list(identities)
+    limits = router_limits(len(idents))
+    transport: dict = limits["transport"]
+    link: dict = transport["link"]
     if tls:
         link["tls"] = _tls_section(d, "router", side="listen")
     else:
@@ -152,7 +202,8 @@ def router_config(d: Path, identities: Iterable[Identity], *, listen: list[str],
         "listen": {"endpoints": listen},
         "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
         "transport": transport,
-        "access_control": access_control(identities, tls=tls),
+        "low_pass_filter": limits["low_pass_filter"],
+        "access_control": access_control(idents, tls=tls),
     }
 
 
@@ -295,6 +346,7 @@ def init(
     sims: Iterable[str] = ("sim",),
     computes: Iterable[str] = ("compute",),
     viewers: Iterable[str] = ("viewer",),
+    instructors: Iterable[str] = (),
     tls: bool = False,
     listen: list[str] | None = None,
     connect: list[str] | None = None,
@@ -304,7 +356,8 @@ def init(
 
     ``listen``: the router's endpoints (default ``PROTO/0.0.0.0:7447``); ``connect``: where clients
     find it (default the listen address, ``127.0.0.1`` for an unspecified one). With ``tls`` the
-    router's certificate names every host of ``connect`` so clients can check it."""
+    router's certificate names every host of ``connect`` so clients can check it. ``instructors``: user
+    logins that may also change the class's map (docs/security.md)."""
     d = Path(d).resolve()
     proto = "tls" if tls else "tcp"
     listen = list(listen or [f"{proto}/0.0.0.0:7447"])
@@ -313,7 +366,8 @@ def init(
     for ep in [*listen, *connect]:
         if not ep.startswith(proto + "/"):
             raise ValueError(f"endpoint {ep!r} must be {proto}/HOST:PORT" + (" with --tls" if tls else " (tls/ needs --tls)"))
-    identities = ([Identity(n, "user") for n in users] + [Identity(n, "sim") for n in sims]
+    identities = ([Identity(n, "user") for n in users] + [Identity(n, "instructor") for n in instructors]
+                  + [Identity(n, "sim") for n in sims]
                   + [Identity(n, "compute") for n in computes] + [Identity(n, "viewer") for n in viewers])
     seen: set[str] = set()
     for ident in identities:

@@ -20,6 +20,7 @@ def init_cmd(
     sims: Annotated[str, typer.Option("--sims", help="Comma-separated sim identities (may publish robot state and ownership).")] = "sim",
     computes: Annotated[str, typer.Option("--computes", help="Comma-separated compute identities (serve IK, maps, plans).")] = "compute",
     viewers: Annotated[str, typer.Option("--viewers", help="Comma-separated viewer identities (read only).")] = "viewer",
+    instructors: Annotated[str, typer.Option("--instructors", help="Comma-separated instructor identities: users who may also set, reset, stop, save and load the class's map.")] = "",
     tls: Annotated[bool, typer.Option("--tls", help="Mutual TLS: a CA and one certificate per identity; endpoints tls/...")] = False,
     listen: Annotated[Optional[list[str]], typer.Option("--listen", "-l", help="Router endpoint (default tcp/0.0.0.0:7447, tls/... with --tls).")] = None,
     connect: Annotated[Optional[list[str]], typer.Option("--connect", "-e", help="Where clients reach the router, e.g. tcp/10.0.0.5:7447 (default: the listen address).")] = None,
@@ -31,7 +32,7 @@ def init_cmd(
 
     try:
         out = init(directory, users=parse_names(users), sims=parse_names(sims), computes=parse_names(computes),
-                   viewers=parse_names(viewers), tls=tls, listen=listen, connect=connect, days=days)
+                   viewers=parse_names(viewers), instructors=parse_names(instructors), tls=tls, listen=listen, connect=connect, days=days)
     except (ValueError, OSError) as exc:
         raise UserError(str(exc)) from None
     print(f"router:  robofabric router --zenoh-config {out.router}")

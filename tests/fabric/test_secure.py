@@ -85,9 +85,42 @@ def test_rules_allow_each_user_only_keys_that_name_them():
     assert acl["default_permission"] == "deny"
     assert rules["alice-put"]["key_exprs"][1:] == ["rf/*/robot/*/cmd/*/by/alice", "rf/*/object/*/pose/by/alice"]
     assert "rf/*/own/*" in rules["sim-put"]["key_exprs"] and "rf/*/own/*" not in rules["alice-put"]["key_exprs"]
-    assert rules["alice-ask"]["key_exprs"] == ["rf/*/own/*/by/alice"]
+    assert rules["alice-ask"]["key_exprs"] == ["rf/*/srv/map/**/by/alice", "rf/*/srv/plan/**/by/alice", "rf/*/own/*/by/alice"]
     policy = {p["id"]: p["rules"] for p in acl["policies"]}
     assert "sim-serve" not in policy["alice"] and "alice-put" not in policy["sim"]
+
+
+def test_rules_give_each_login_its_own_decode_key_and_the_staff_the_map():
+    """Decode reports go on the writer's own key (a forged reject there named alice's arm, issue 23); a student
+    asks map and plan in her own name only, the staff (instructor, sim, compute) also in the staff's forms."""
+    acl = access_control([Identity("alice", "user"), Identity("carol", "instructor"), Identity("sim", "sim"),
+                          Identity("compute", "compute"), Identity("viewer", "viewer")])
+    rules = {r["id"]: r for r in acl["rules"]}
+    for name in ("alice", "carol", "sim", "compute", "viewer"):
+        assert rules[f"{name}-put"]["key_exprs"][0] == f"rf/*/event/decode/by/{name}"
+    assert not [ke for r in acl["rules"] for ke in r["key_exprs"] if ke.startswith("rf/*/event/decode/*")]
+    common = rules["ask"]["key_exprs"]
+    assert not [ke for ke in common if "/srv/map" in ke or "/srv/plan" in ke or ke == "rf/*/srv/**"]
+    staff_forms = ["rf/*/srv/map/*", "rf/*/srv/map/*/*", "rf/*/srv/plan/*", "rf/*/srv/plan/*/*"]
+    for name in ("carol", "sim", "compute"):
+        assert set(staff_forms) <= set(rules[f"{name}-ask"]["key_exprs"]), name
+    assert not set(staff_forms) & set(rules["alice-ask"]["key_exprs"])
+    assert "rf/*/robot/*/cmd/*/by/carol" in rules["carol-put"]["key_exprs"]  # an instructor is a user too
+
+
+def test_the_router_config_sets_the_limits_zenoh_offers(tmp_path):
+    out = init(tmp_path / "c", users=["alice", "bob"], instructors=["carol"], listen=["tcp/127.0.0.1:7447"])
+    import json
+
+    cfg = json.loads("\n".join(out.router.read_text().splitlines()[2:]))
+    assert cfg["transport"]["unicast"]["max_sessions"] == 32 + 8 * 6  # alice, bob, carol, sim, compute, viewer
+    assert cfg["transport"]["link"]["rx"]["max_message_size"] == 4 * 1024 * 1024
+    limits = {f["key_exprs"][0]: f["size_limit"] for f in cfg["low_pass_filter"]}
+    assert limits["rf/*/event/decode/by/*"] == 16 * 1024 and limits["rf/*/robot/*/cmd/*/by/*"] >= 3 * 8 * (1 << 16)
+    import zenoh
+
+    zenoh.Config.from_file(str(out.router))  # zenoh knows every key (it refuses unknown ones)
+    assert "(role: instructor)" in out.clients["carol"].read_text().splitlines()[0]
 
 
 @pytest.mark.slow
