@@ -102,8 +102,11 @@ def _fit(v: float, lim: tuple[float, float, bool]) -> float | None:
     return None
 
 
-def _meca500_branches(p: Sequence[float], rot: Sequence[Sequence[float]], seed: Sequence[float],
-                      lims: tuple[tuple[float, float, bool], ...]
+Limits = tuple[tuple[float, float, bool], ...]
+"""Per joint (lower, upper, wide): wide when its range holds a 2 pi twin of some angles."""
+
+
+def _meca500_branches(p: Sequence[float], rot: Sequence[Sequence[float]], seed: Sequence[float], lims: Limits
                       ) -> tuple[list[list[float]], list[tuple[int, float]], int, str]:
     """The in-limit joint vectors among the (up to 8) branches for the flange pose.
 
@@ -118,111 +121,171 @@ def _meca500_branches(p: Sequence[float], rot: Sequence[Sequence[float]], seed: 
     gives q3 (elbow up/down) and the direction of c gives q2. Then
     Rx(q4) Ry(q5) Rx(q6) = (Rz(q1) Ry(q2 + q3))^T R6, an X-Y-X Euler triple
     with two branches (wrist flip).
+
+    The steps are plain-float functions (numpy is ~10x slower at this size); the limit checks inline the
+    common case, ``v if lo <= v <= hi else _fit(v, lim)``, which saves ~25 calls a solve.
     """
-    g = _MECA
-    f = g.flange
-    (f00, f01, f02), (f10, f11, f12), (f20, f21, f22) = f
-    # R6 = R Rf^T (row i, column j = sum_k R[i][k] Rf[j][k]), unrolled: plain floats are ~10x faster than numpy here
-    r6 = [(a0 * f00 + a1 * f01 + a2 * f02, a0 * f10 + a1 * f11 + a2 * f12, a0 * f20 + a1 * f21 + a2 * f22)
-          for a0, a1, a2 in rot]
-    w = g.wrist_to_flange
-    cx, cy, cz = p[0] - w * r6[0][0], p[1] - w * r6[1][0], p[2] - w * r6[2][0]
-    r = math.hypot(cx, cy)
-    h = cz - g.shoulder_z
-    dist = math.hypot(r, h)
-    if dist > g.reach_max * (1 + 1e-12):
-        return [], [], 0, f"out of reach: wrist centre {dist:.4f} m from the shoulder > max {g.reach_max:.4f} m"
-    if dist < g.reach_min * (1 - 1e-12):
-        return [], [], 0, f"too close: wrist centre {dist:.4f} m from the shoulder < min {g.reach_min:.4f} m"
-    if r < SHOULDER_SINGULAR:
-        q1a = seed[0]
-        u = cx * math.cos(q1a) + cy * math.sin(q1a)
-    else:
-        q1a, u = math.atan2(cy, cx), r
-    l2, a, b = g.upper_arm, g.forearm_x, g.forearm_z
-    d = math.hypot(a, b)
-    # b c3 - a s3 = d cos(q3 + phi) = k
-    k = (dist * dist - l2 * l2 - d * d) / (2.0 * l2)
-    t = math.acos(max(-1.0, min(1.0, k / d)))
-    elbows = (t - g.elbow_phi,) if t < 1e-12 else (t - g.elbow_phi, -t - g.elbow_phi)
+    r6 = _link6_rotation(rot)
+    cx, cy, h, dist = _wrist_centre(p, r6)
+    reason = _reach_reason(dist)
+    if reason:
+        return [], [], 0, reason
+    q1a, u = _shoulder(cx, cy, seed[0])
+    elbows = _elbows(dist)
     inside: list[list[float]] = []
     bad: list[tuple[int, float]] = []
     n = 0
-    l1, l2lim, l3, l4, l5, l6 = lims
+    l1 = lims[0]
     wide = [i for i, lim in enumerate(lims) if lim[2]]
-    # below, "v if lo <= v <= hi else _fit(v, lim)" inlines the common case: ~25 calls saved per solve
     for q1raw, uu in ((q1a, u), (wrap_angle(q1a + math.pi, include_pi=True), -u)):
         q1 = q1raw if l1[0] <= q1raw <= l1[1] else _fit(q1raw, l1)
         if q1 is None:
             n += 2 * len(elbows)
             bad.append((0, q1raw))
             continue
-        c1, s1 = math.cos(q1), math.sin(q1)
-        # link 6 rotation seen after J1: Rz(-q1) R6
-        (x0, x1, x2), (y0, y1, y2) = r6[0], r6[1]
-        m10 = (c1 * x0 + s1 * y0, c1 * x1 + s1 * y1, c1 * x2 + s1 * y2)
-        m11 = (c1 * y0 - s1 * x0, c1 * y1 - s1 * x1, c1 * y2 - s1 * x2)
-        m12 = r6[2]
+        after_j1 = _after_j1(r6, q1)
         for q3r in elbows:
             n += 2
-            q3w = wrap_angle(q3r, include_pi=True)
-            c3, s3 = math.cos(q3w), math.sin(q3w)
-            vx, vz = a * c3 + b * s3, l2 - a * s3 + b * c3
-            q2w = wrap_angle(math.atan2(vz, vx) - math.atan2(h, uu), include_pi=True)
-            q2 = q2w if l2lim[0] <= q2w <= l2lim[1] else _fit(q2w, l2lim)
-            if q2 is None:
-                bad.append((1, q2w))
+            upper = _upper_arm(q3r, h, uu, lims, bad)
+            if upper is None:
                 continue
-            q3 = q3w if l3[0] <= q3w <= l3[1] else _fit(q3w, l3)
-            if q3 is None:
-                bad.append((2, q3w))
-                continue
-            th = q2 + q3
-            ct, st = math.cos(th), math.sin(th)
-            # M = Ry(th)^T (Rz(-q1) R6); only the entries the X-Y-X angles need
-            m00 = ct * m10[0] - st * m12[0]
-            m01 = ct * m10[1] - st * m12[1]
-            m02 = ct * m10[2] - st * m12[2]
-            m10_, m20 = m11[0], st * m10[0] + ct * m12[0]
-            s5 = math.hypot(m01, m02)
-            if s5 < WRIST_SINGULAR:
-                n -= 1  # J4 and J6 merge: one wrist branch, not two
-                m11_, m21 = m11[1], st * m10[1] + ct * m12[1]
-                q4 = seed[3]
-                if m00 > 0:  # q5 = 0: Rx(q4 + q6)
-                    q5 = math.atan2(s5, m00)
-                    q6 = wrap_angle(math.atan2(m21, m11_) - q4, include_pi=True)
-                else:  # q5 = pi (outside the Meca500's J5 range; kept for completeness): Rx(q4 - q6)
-                    q5 = math.pi
-                    q6 = wrap_angle(q4 - math.atan2(m21, m11_), include_pi=True)
-                wrists = ((q4, q5, q6),)
-            else:
-                q5 = math.atan2(s5, m00)
-                q4 = math.atan2(m10_, -m20)
-                q6 = math.atan2(m01, m02)
-                wrists = ((q4, q5, q6),
-                          (wrap_angle(q4 + math.pi, include_pi=True), -q5, wrap_angle(q6 + math.pi, include_pi=True)))
-            for q4r, q5r, q6r in wrists:
-                q4 = q4r if l4[0] <= q4r <= l4[1] else _fit(q4r, l4)
-                if q4 is None:
-                    bad.append((3, q4r))
-                    continue
-                q5 = q5r if l5[0] <= q5r <= l5[1] else _fit(q5r, l5)
-                if q5 is None:
-                    bad.append((4, q5r))
-                    continue
-                q6 = q6r if l6[0] <= q6r <= l6[1] else _fit(q6r, l6)
-                if q6 is None:
-                    bad.append((5, q6r))
-                    continue
-                q = [q1, q2, q3, q4, q5, q6]
+            q2, q3 = upper
+            wrists = _wrists(after_j1, q2 + q3, seed[3])
+            n -= 2 - len(wrists)  # at the wrist singularity J4 and J6 merge: one wrist branch, not two
+            for wrist in _wrists_in_limits(wrists, lims, bad):
+                q = [q1, q2, q3, *wrist]
                 inside.append(q)
                 if wide:
-                    twins = [(i, min(lims[i][1], max(lims[i][0], t2))) for i in wide for t2 in (q[i] - TWO_PI, q[i] + TWO_PI)
-                             if lims[i][0] - LIMIT_SLACK <= t2 <= lims[i][1] + LIMIT_SLACK]
-                    if twins:  # rare: J6 at exactly +-180 deg, or a joint spanning more than a turn
-                        inside.extend(_twin_combinations(q, twins))
+                    inside.extend(_twins(q, lims, wide))
     return inside, bad, n, ""
+
+
+def _link6_rotation(rot: Sequence[Sequence[float]]) -> list[tuple[float, float, float]]:
+    """R6 = R Rf^T (row i, column j = sum_k R[i][k] Rf[j][k]), unrolled."""
+    (f00, f01, f02), (f10, f11, f12), (f20, f21, f22) = _MECA.flange
+    return [(a0 * f00 + a1 * f01 + a2 * f02, a0 * f10 + a1 * f11 + a2 * f12, a0 * f20 + a1 * f21 + a2 * f22)
+            for a0, a1, a2 in rot]
+
+
+def _wrist_centre(p: Sequence[float], r6: list[tuple[float, float, float]]) -> tuple[float, float, float, float]:
+    """The wrist centre c = p - w R6 x: (cx, cy, its height above J2, its distance from J2)."""
+    g = _MECA
+    w = g.wrist_to_flange
+    cx, cy, cz = p[0] - w * r6[0][0], p[1] - w * r6[1][0], p[2] - w * r6[2][0]
+    h = cz - g.shoulder_z
+    return cx, cy, h, math.hypot(math.hypot(cx, cy), h)
+
+
+def _reach_reason(dist: float) -> str:
+    """Why no branch reaches a wrist centre ``dist`` from the shoulder, or '' when some does."""
+    g = _MECA
+    if dist > g.reach_max * (1 + 1e-12):
+        return f"out of reach: wrist centre {dist:.4f} m from the shoulder > max {g.reach_max:.4f} m"
+    if dist < g.reach_min * (1 - 1e-12):
+        return f"too close: wrist centre {dist:.4f} m from the shoulder < min {g.reach_min:.4f} m"
+    return ""
+
+
+def _shoulder(cx: float, cy: float, seed_q1: float) -> tuple[float, float]:
+    """(q1, u): J1 facing the wrist centre and the centre's radial distance in J1's plane; on the J1 axis,
+    where q1 is free, the seed's q1."""
+    r = math.hypot(cx, cy)
+    if r < SHOULDER_SINGULAR:
+        return seed_q1, cx * math.cos(seed_q1) + cy * math.sin(seed_q1)
+    return math.atan2(cy, cx), r
+
+
+def _elbows(dist: float) -> tuple[float, ...]:
+    """q3 of elbow up and elbow down (one at full stretch): b c3 - a s3 = d cos(q3 + phi) = k."""
+    g = _MECA
+    l2, d = g.upper_arm, math.hypot(g.forearm_x, g.forearm_z)
+    k = (dist * dist - l2 * l2 - d * d) / (2.0 * l2)
+    t = math.acos(max(-1.0, min(1.0, k / d)))
+    return (t - g.elbow_phi,) if t < 1e-12 else (t - g.elbow_phi, -t - g.elbow_phi)
+
+
+def _after_j1(r6: list[tuple[float, float, float]], q1: float) -> tuple[tuple[float, ...], ...]:
+    """Link 6's rotation seen after J1, Rz(-q1) R6, by rows."""
+    c1, s1 = math.cos(q1), math.sin(q1)
+    (x0, x1, x2), (y0, y1, y2) = r6[0], r6[1]
+    return ((c1 * x0 + s1 * y0, c1 * x1 + s1 * y1, c1 * x2 + s1 * y2),
+            (c1 * y0 - s1 * x0, c1 * y1 - s1 * x1, c1 * y2 - s1 * x2),
+            r6[2])
+
+
+def _upper_arm(q3r: float, h: float, u: float, lims: Limits, bad: list[tuple[int, float]]) -> tuple[float, float] | None:
+    """(q2, q3) in limits for the elbow ``q3r`` and the wrist centre at (u, h) in J1's plane; None, and the
+    first joint outside its limits added to ``bad``, otherwise."""
+    g = _MECA
+    l2, a, b = g.upper_arm, g.forearm_x, g.forearm_z
+    l2lim, l3 = lims[1], lims[2]
+    q3w = wrap_angle(q3r, include_pi=True)
+    c3, s3 = math.cos(q3w), math.sin(q3w)
+    vx, vz = a * c3 + b * s3, l2 - a * s3 + b * c3
+    q2w = wrap_angle(math.atan2(vz, vx) - math.atan2(h, u), include_pi=True)
+    q2 = q2w if l2lim[0] <= q2w <= l2lim[1] else _fit(q2w, l2lim)
+    if q2 is None:
+        bad.append((1, q2w))
+        return None
+    q3 = q3w if l3[0] <= q3w <= l3[1] else _fit(q3w, l3)
+    if q3 is None:
+        bad.append((2, q3w))
+        return None
+    return q2, q3
+
+
+def _wrists(after_j1: tuple[tuple[float, ...], ...], th: float, seed_q4: float) -> tuple[tuple[float, float, float], ...]:
+    """(q4, q5, q6) of both wrist branches (flip), from the X-Y-X angles of M = Ry(q2 + q3)^T Rz(-q1) R6;
+    one branch at the wrist singularity, where J4 keeps the seed's angle."""
+    m10, m11, m12 = after_j1
+    ct, st = math.cos(th), math.sin(th)
+    # only the entries of M the X-Y-X angles need
+    m00 = ct * m10[0] - st * m12[0]
+    m01 = ct * m10[1] - st * m12[1]
+    m02 = ct * m10[2] - st * m12[2]
+    s5 = math.hypot(m01, m02)
+    if s5 < WRIST_SINGULAR:
+        m11_, m21 = m11[1], st * m10[1] + ct * m12[1]
+        q4 = seed_q4
+        if m00 > 0:  # q5 = 0: Rx(q4 + q6)
+            return ((q4, math.atan2(s5, m00), wrap_angle(math.atan2(m21, m11_) - q4, include_pi=True)),)
+        # q5 = pi (outside the Meca500's J5 range; kept for completeness): Rx(q4 - q6)
+        return ((q4, math.pi, wrap_angle(q4 - math.atan2(m21, m11_), include_pi=True)),)
+    m10_, m20 = m11[0], st * m10[0] + ct * m12[0]
+    q5 = math.atan2(s5, m00)
+    q4 = math.atan2(m10_, -m20)
+    q6 = math.atan2(m01, m02)
+    return ((q4, q5, q6), (wrap_angle(q4 + math.pi, include_pi=True), -q5, wrap_angle(q6 + math.pi, include_pi=True)))
+
+
+def _wrists_in_limits(wrists: tuple[tuple[float, float, float], ...], lims: Limits,
+                      bad: list[tuple[int, float]]) -> list[tuple[float, float, float]]:
+    """The wrist branches inside J4-J6's limits (fitted onto them); each other one's first joint outside goes to ``bad``."""
+    l4, l5, l6 = lims[3], lims[4], lims[5]
+    out = []
+    for q4r, q5r, q6r in wrists:
+        q4 = q4r if l4[0] <= q4r <= l4[1] else _fit(q4r, l4)
+        if q4 is None:
+            bad.append((3, q4r))
+            continue
+        q5 = q5r if l5[0] <= q5r <= l5[1] else _fit(q5r, l5)
+        if q5 is None:
+            bad.append((4, q5r))
+            continue
+        q6 = q6r if l6[0] <= q6r <= l6[1] else _fit(q6r, l6)
+        if q6 is None:
+            bad.append((5, q6r))
+            continue
+        out.append((q4, q5, q6))
+    return out
+
+
+def _twins(q: list[float], lims: Limits, wide: list[int]) -> list[list[float]]:
+    """The 2 pi twins of ``q`` its ``wide`` joints' ranges allow (rare: J6 at exactly +-180 deg, or a joint
+    spanning more than a turn)."""
+    twins = [(i, min(lims[i][1], max(lims[i][0], t2))) for i in wide for t2 in (q[i] - TWO_PI, q[i] + TWO_PI)
+             if lims[i][0] - LIMIT_SLACK <= t2 <= lims[i][1] + LIMIT_SLACK]
+    return _twin_combinations(q, twins) if twins else []
 
 
 def _twin_combinations(q: list[float], twins: list[tuple[int, float]]) -> list[list[float]]:
