@@ -53,15 +53,81 @@ def default_peer_id(kind: str) -> str:
 
 def _reachable(endpoint: str, timeout: float = 1.0) -> bool:
     """Whether something accepts a TCP connection at a tcp/ or tls/ endpoint."""
-    proto, _, addr = endpoint.partition("/")
-    host, _, port = addr.rpartition(":")
-    if proto not in ("tcp", "tls") or not port.isdigit():
+    parts = _split(endpoint)
+    if parts is None:
         return False
     try:
-        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
+        with socket.create_connection(parts[1:], timeout=timeout):
             return True
     except OSError:
         return False
+
+
+def _split(endpoint: str) -> tuple[str, str, int] | None:
+    """(proto, host, port) of a tcp/ or tls/ endpoint, else None."""
+    proto, _, addr = endpoint.partition("/")
+    host, _, port = addr.rpartition(":")
+    if proto not in ("tcp", "tls") or not port.isdigit():
+        return None
+    return proto, host.strip("[]"), int(port)
+
+
+def _tls_refusal(endpoint: str, ca: object, cert: object, key: object, timeout: float = 2.0) -> str | None:
+    """Why this side refuses the router's TLS certificate at ``endpoint``, or None (it is accepted, or the
+    handshake failed for another reason: then the router refused us). zenoh says "Unable to connect" either
+    way; a handshake of our own with the same CA, the endpoint's host as the expected name, and the same
+    client certificate tells the router's certificate apart from ours."""
+    import ssl
+
+    parts = _split(endpoint)
+    if parts is None or parts[0] != "tls" or not isinstance(ca, str) or not ca:
+        return None
+    _, host, port = parts
+    try:
+        ctx = ssl.create_default_context(cafile=ca)
+        if isinstance(cert, str) and isinstance(key, str) and cert and key:
+            ctx.load_cert_chain(cert, key)
+    except (OSError, ssl.SSLError, ValueError):
+        return None
+    try:
+        with socket.create_connection((host, port), timeout=timeout) as sock, ctx.wrap_socket(sock, server_hostname=host):
+            return None
+    except ssl.SSLCertVerificationError as exc:
+        if exc.verify_code == 62 or "mismatch" in str(exc.verify_message).lower():  # X509_V_ERR_HOSTNAME_MISMATCH
+            names = _certificate_names(host, port, timeout)
+            return f"the router's certificate does not name {host}" + (f" (it names {', '.join(names)})" if names else "") + \
+                " (connect to a name it has, or re-run secure init with --connect naming this host)"
+        return f"this client does not trust the router's certificate ({exc.verify_message}: is this login from the router's class?)"
+    except (OSError, ssl.SSLError):
+        return None
+
+
+def _certificate_names(host: str, port: int, timeout: float) -> list[str]:
+    """The DNS names and addresses the certificate served at host:port names (unverified: only to say so)."""
+    import ssl
+
+    from cryptography import x509
+
+    ctx = ssl.create_default_context()
+    ctx.check_hostname = False
+    ctx.verify_mode = ssl.CERT_NONE
+    try:
+        with socket.create_connection((host, port), timeout=timeout) as sock, ctx.wrap_socket(sock) as tls:
+            der = tls.getpeercert(binary_form=True)
+        sans = x509.load_der_x509_certificate(der).extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    except Exception:  # only for a message: nothing to add
+        return []
+    return [*sans.get_values_for_type(x509.DNSName), *map(str, sans.get_values_for_type(x509.IPAddress))]
+
+
+@dataclass(frozen=True, slots=True)
+class JoinFailure:
+    """Why a session could not open: ``endpoint`` (where it tried), ``cause`` (why, in words) and ``text``,
+    the one line saying both (what commands print and the user API's :class:`JoinFailed` carries)."""
+
+    endpoint: str
+    cause: str
+    text: str
 
 
 def _check_endpoint(ep: str) -> str:
@@ -172,15 +238,20 @@ class FabricConfig:
         return None
 
     def join_failure(self, exc: BaseException) -> str:
-        """One line saying why a session could not open: which world, through where, and why.
+        """One line saying why a session could not open: which world, through where, and why."""
+        return self.diagnose_join(exc).text
 
-        zenoh says only "Unable to connect" whether nobody listens or the router refused the login;
-        a TCP connection that succeeds tells the two apart: then it was the credentials."""
+    def diagnose_join(self, exc: BaseException) -> JoinFailure:
+        """Where and why a session could not open (:class:`JoinFailure`).
+
+        zenoh says only "Unable to connect" whether nobody listens, the router refused the login or this
+        client refused the router's TLS certificate; a TCP connection that succeeds says a router is there,
+        and a TLS handshake of our own says whether its certificate is the problem (:func:`_tls_refusal`)."""
         reason = str(exc).split(" at /")[0]  # zenoh appends the Rust source location
-        if reason.startswith("authentication failed"):
-            return reason  # said already
         connect, listen = self.endpoints()
         where = ", ".join(connect or listen) or "the LAN"
+        if reason.startswith("authentication failed"):
+            return JoinFailure(where, reason, reason)  # said already
         if self.profile == "client" and connect and "Unable to connect" in reason:
             up = [ep for ep in connect if _reachable(ep)]
             if up:
@@ -188,12 +259,20 @@ class FabricConfig:
                     who = self.identity()
                 except ValueError:
                     who = None
+                tls = _tls_refusal(up[0], self.file_value("transport/link/tls/root_ca_certificate"),
+                                   self.file_value("transport/link/tls/connect_certificate"),
+                                   self.file_value("transport/link/tls/connect_private_key"))
+                if tls is not None:
+                    return JoinFailure(up[0], tls, f"cannot join world {self.world!r} at {up[0]}: {tls}")
                 if who is not None:
-                    return (f"authentication failed for {who} at {up[0]}: the router refused this login "
-                            f"(wrong password, unknown user, or a certificate it does not trust)")
-                return (f"authentication failed at {up[0]}: the router refused the connection "
-                        f"(it may require credentials: --zenoh-config FILE from your instructor)")
-        return f"cannot join world {self.world!r} via {where}: {reason}"
+                    cause = "the router refused this login (wrong password, unknown user, or a certificate it does not trust)"
+                    return JoinFailure(up[0], cause, f"authentication failed for {who} at {up[0]}: {cause}")
+                cause = "the router refused the connection (it may require credentials: --zenoh-config FILE from your instructor)"
+                return JoinFailure(up[0], cause, f"authentication failed at {up[0]}: {cause}")
+            if connect:
+                cause = "nobody accepts a connection there (is the router running, and is this its address?)"
+                return JoinFailure(where, cause, f"cannot join world {self.world!r} via {where}: {reason}")
+        return JoinFailure(where, reason, f"cannot join world {self.world!r} via {where}: {reason}")
 
     def user_id(self, user: str | None) -> str | None:
         """The user a session speaks for: the authenticated identity when there is one (a different

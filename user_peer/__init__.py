@@ -5,7 +5,7 @@
 """
 
 from user_peer.api import Arm, Base, Robot, SceneObject, World, connect
-from user_peer.errors import FabricUserError, NotOwner, Timeout, Unreachable
+from user_peer.errors import FabricUserError, JoinFailed, NotOwner, Timeout, Unreachable
 from user_peer.streams import Sample, StreamIterator, Subscription
 
 __all__ = [
@@ -19,6 +19,7 @@ __all__ = [
     "NotOwner",
     "Timeout",
     "Unreachable",
+    "JoinFailed",
     "Sample",
     "StreamIterator",
     "Subscription",

@@ -55,7 +55,7 @@ from fabric.interfaces import ServiceError
 from fabric.session import Fabric
 from user_peer import services
 from fabric.exit import at_exit
-from user_peer.errors import NotOwner, Timeout, Unreachable
+from user_peer.errors import JoinFailed, NotOwner, Timeout, Unreachable
 from user_peer.ownership_link import OwnershipLink
 from user_peer.spread import SPREAD, RoundRobin
 from user_peer.streams import StreamIterator, Subscription
@@ -191,8 +191,9 @@ class World:
         self.join_timeout = max(timeout, 30.0) if join_timeout is None else join_timeout
         try:
             self.fabric = Fabric(config, kind="user", peer_id=self.user)
-        except Exception as exc:  # zenoh.ZError: nobody there, or the router refused the login
-            raise Unreachable(config.join_failure(exc)) from None
+        except Exception as exc:  # zenoh.ZError: nobody there, the router refused the login, or we refused the router
+            why = config.diagnose_join(exc)
+            raise JoinFailed(why.text, endpoint=why.endpoint, cause=why.cause) from None
         self._info: WorldInfo | None = None
         self.latest = _Latest(world_info=lambda: self._info)  # keeps the robots of the description only
         self.events: list[Event] = []
@@ -928,6 +929,10 @@ def connect(
     this machine; ``"spread"`` sends IK queries to every live compute peer in turn; by default queries go
     to the nearest compute peer serving the world.
 
+    A world that cannot be joined raises :class:`~user_peer.errors.JoinFailed` (an ``Unreachable``) with
+    ``endpoint`` and ``cause``: nobody listens there, the router refused this login, or this client refused
+    the router's TLS certificate (one that does not name the host asked for, or from another class's CA).
+
     The world closes itself when the interpreter exits (its robots are released first), so a script
     may end without ``close()``; ``with user_peer.connect(...) as world:`` closes it sooner.
     """
@@ -938,7 +943,10 @@ def connect(
     cfg = FabricConfig.resolve(world=world, profile=profile, connect=list(connect or ()), config_file=zenoh_config)
     # with a secure zenoh config the user id is the login (a different ``user`` is a ConfigError)
     uid = cfg.user_id(user) or "".join(c if c.isalnum() or c in "-_" else "-" for c in getpass.getuser()) or "user"
-    w = World(cfg, uid, timeout=timeout, compute=compute, join_timeout=join_timeout)
+    try:
+        w = World(cfg, uid, timeout=timeout, compute=compute, join_timeout=join_timeout)
+    except JoinFailed as exc:  # raised here: a script's traceback ends at its own connect() call
+        raise JoinFailed(exc.reason, endpoint=exc.endpoint, cause=exc.cause) from None
     if wait:
         try:
             w.info()

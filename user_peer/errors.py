@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["FabricUserError", "NotOwner", "Unreachable", "Timeout"]
+__all__ = ["FabricUserError", "NotOwner", "Unreachable", "JoinFailed", "Timeout"]
 
 
 class FabricUserError(RuntimeError):
@@ -19,6 +19,17 @@ class NotOwner(FabricUserError):
 
 class Unreachable(FabricUserError):
     """A target cannot be reached: outside the workspace or limits, no IK solution, no path, no service."""
+
+
+class JoinFailed(Unreachable):
+    """The world could not be joined (what ``user_peer.connect()`` raises when no session opens): ``endpoint``
+    is where it tried, ``cause`` why (nobody listens there, the router refused this login, the router's TLS
+    certificate does not name the host this client asked for...); the message says both in one line."""
+
+    def __init__(self, reason: str, *, endpoint: str = "", cause: str = "") -> None:
+        super().__init__(reason)
+        self.endpoint = endpoint
+        self.cause = cause or reason
 
 
 class Timeout(FabricUserError):
