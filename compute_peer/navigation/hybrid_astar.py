@@ -130,106 +130,14 @@ class HybridAStar:
     # ------------------------------------------------------------------ search
 
     def plan(self, start: Pose2, goal: Pose2) -> PlanResult:
-        t0 = time.perf_counter()
-        cfg, cm, pr = self.config, self.costmap, self.prims
-        tight = check_endpoints(cm, start, goal)
-        field = DistanceField(cm.collision, cm.resolution, (cm.origin_x, cm.origin_y), self.factor, (goal[0], goal[1]))
-        h0 = float(field.lookup(np.array([start[0]]), np.array([start[1]]))[0])
-        if not math.isfinite(h0):
-            raise NavigationError(
-                f"goal ({goal[0]:.2f}, {goal[1]:.2f}) cannot be reached from start ({start[0]:.2f}, {start[1]:.2f}): "
-                f"no corridor wide enough for a robot of radius {self.vehicle.robot_radius:.2f} m"
-            )
-        w = cfg.heuristic_weight
-        near = 2.0 * self.vehicle.turning_radius + 2.0 * cfg.xy_resolution
-        sight_slack = 2.0 * math.pi * self.vehicle.turning_radius + 2.0 * field.cell
-        field_at = field.at
-        # node storage: parallel lists; parent -1 for the root, prim -1 for the root
-        nx, ny, nth, ng, nparent, nprim, ndir = [start[0]], [start[1]], [start[2]], [0.0], [-1], [-1], [1.0]
-        best_g: dict[tuple[int, int, int], float] = {self._key(*start): 0.0}
-        closed: set[tuple[int, int, int]] = set()
-        heap: list[tuple[float, int]] = [(w * max(h0, math.hypot(goal[0] - start[0], goal[1] - start[1])), 0)]
-        expansions = 0
-        gx, gy = goal[0], goal[1]
-        while heap:
-            _, i = heapq.heappop(heap)
-            x, y, th = nx[i], ny[i], nth[i]
-            key = self._key(x, y, th)
-            if key in closed:
-                continue
-            closed.add(key)
-            expansions += 1
-            if expansions > cfg.max_expansions or (expansions & 63 == 0 and time.perf_counter() - t0 > cfg.time_limit):
-                raise NavigationError(
-                    f"hybrid A* found no path within {expansions - 1} expansions / {time.perf_counter() - t0:.2f} s "
-                    f"(turning radius {self.vehicle.turning_radius:.2f} m may be too large for this map)"
-                )
-            dist_goal = math.hypot(gx - x, gy - y)
-            # shoot only with a line of sight, more or less: where the distance around obstacles exceeds
-            # the straight distance by more than a turning circle, a Dubins path would hit something
-            if (dist_goal < near or expansions % cfg.analytic_every == 1) and (
-                field_at(x, y) <= dist_goal + sight_slack
-            ):
-                shot = self._shot((x, y, th), goal, tight)
-                if shot is not None:
-                    xs, ys, ts = self._reconstruct(i, nx, ny, nth, nparent, nprim)
-                    return finish(
-                        cm,
-                        np.concatenate([xs, shot[0][1:]]),
-                        np.concatenate([ys, shot[1][1:]]),
-                        np.concatenate([ts, shot[2][1:]]),
-                        planner=self.name,
-                        seconds=time.perf_counter() - t0,
-                        expansions=expansions,
-                    )
-            c, s = math.cos(th), math.sin(th)
-            wx = x + c * pr.dx - s * pr.dy
-            wy = y + s * pr.dx + c * pr.dy
-            ok = cm.free(wx, wy).all(axis=1)
-            if tight and not ok.all() and tight.near(x, y):
-                for p in np.flatnonzero(~ok).tolist():
-                    ok[p] = tight.motion_ok(np.append(x, wx[p]), np.append(y, wy[p]))
-            if not ok.any():
-                continue
-            idx = np.flatnonzero(ok)
-            ex, ey = wx[idx, -1], wy[idx, -1]
-            eth = wrap_angle(th + pr.dth[idx, -1])
-            h = np.maximum(field.lookup(ex, ey) - field.cell, np.hypot(gx - ex, gy - ey))
-            g_here, d_here = ng[i], ndir[i]
-            k_here = pr.kappa[nprim[i]] if nprim[i] >= 0 else 0.0
-            for j, p in enumerate(idx.tolist()):
-                hj = float(h[j])
-                if not math.isfinite(hj):
-                    continue
-                exj, eyj, ethj = float(ex[j]), float(ey[j]), float(eth[j])
-                kj = self._key(exj, eyj, ethj)
-                if kj in closed:
-                    continue
-                g = g_here + float(pr.cost[p])
-                if pr.direction[p] != d_here and nprim[i] >= 0:
-                    g += cfg.switch_penalty
-                if pr.kappa[p] != k_here:
-                    g += cfg.steer_change_penalty
-                if g >= best_g.get(kj, math.inf):
-                    continue
-                best_g[kj] = g
-                nx.append(exj)
-                ny.append(eyj)
-                nth.append(ethj)
-                ng.append(g)
-                nparent.append(i)
-                nprim.append(p)
-                ndir.append(float(pr.direction[p]))
-                heapq.heappush(heap, (g + w * hj, len(nx) - 1))
-        if expansions <= 1:
-            raise NavigationError(
-                f"the robot cannot drive away from its start ({start[0]:.2f}, {start[1]:.2f}, {start[2]:.2f} rad) "
-                f"without touching an obstacle" + ("" if self.vehicle.allow_reverse else " (forwards only: allow reversing?)")
-            )
-        raise NavigationError(
-            f"no path from ({start[0]:.2f}, {start[1]:.2f}) to ({goal[0]:.2f}, {goal[1]:.2f}): the search space is exhausted "
-            f"after {expansions} expansions (turning radius {self.vehicle.turning_radius:.2f} m)"
-        )
+        """The path from ``start`` to ``goal``; :class:`NavigationError` saying why when there is none."""
+        search = _Search(self, start, goal)
+        while (i := search.pop()) is not None:
+            result = search.shoot(i)
+            if result is not None:
+                return result
+            search.expand(i)
+        raise search.exhausted()
 
     def _reconstruct(self, i: int, nx, ny, nth, nparent, nprim) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         chain = []
@@ -247,6 +155,151 @@ class HybridAStar:
             ys.append(y + s * pr.dx[p] + c * pr.dy[p])
             ts.append(th + pr.dth[p])
         return np.concatenate(xs), np.concatenate(ys), np.concatenate(ts)
+
+
+class _Search:
+    """One search of a :class:`HybridAStar`: its nodes, open heap, closed bins and budget.
+
+    Nodes are parallel lists (``parent`` and ``prim`` are -1 for the root); a node holds the exact pose it
+    was reached at, and only its bin (:meth:`HybridAStar._key`) is closed."""
+
+    def __init__(self, planner: HybridAStar, start: Pose2, goal: Pose2) -> None:
+        self.t0 = time.perf_counter()
+        self.planner, self.start, self.goal = planner, start, goal
+        cm, cfg, vehicle = planner.costmap, planner.config, planner.vehicle
+        self.tight = check_endpoints(cm, start, goal)
+        self.field = DistanceField(cm.collision, cm.resolution, (cm.origin_x, cm.origin_y), planner.factor, (goal[0], goal[1]))
+        h0 = float(self.field.lookup(np.array([start[0]]), np.array([start[1]]))[0])
+        if not math.isfinite(h0):
+            raise NavigationError(
+                f"goal ({goal[0]:.2f}, {goal[1]:.2f}) cannot be reached from start ({start[0]:.2f}, {start[1]:.2f}): "
+                f"no corridor wide enough for a robot of radius {vehicle.robot_radius:.2f} m"
+            )
+        self.near = 2.0 * vehicle.turning_radius + 2.0 * cfg.xy_resolution
+        self.sight_slack = 2.0 * math.pi * vehicle.turning_radius + 2.0 * self.field.cell
+        self.nx, self.ny, self.nth = [start[0]], [start[1]], [start[2]]
+        self.ng, self.nparent, self.nprim, self.ndir = [0.0], [-1], [-1], [1.0]
+        self.best_g: dict[tuple[int, int, int], float] = {planner._key(*start): 0.0}
+        self.closed: set[tuple[int, int, int]] = set()
+        self.heap: list[tuple[float, int]] = [
+            (cfg.heuristic_weight * max(h0, math.hypot(goal[0] - start[0], goal[1] - start[1])), 0)]
+        self.expansions = 0
+
+    def pop(self) -> int | None:
+        """The next node to expand (its bin now closed), None when none is left; NavigationError past the budget."""
+        cfg, key, closed = self.planner.config, self.planner._key, self.closed
+        while self.heap:
+            _, i = heapq.heappop(self.heap)
+            k = key(self.nx[i], self.ny[i], self.nth[i])
+            if k in closed:
+                continue
+            closed.add(k)
+            self.expansions += 1
+            e = self.expansions
+            if e > cfg.max_expansions or (e & 63 == 0 and time.perf_counter() - self.t0 > cfg.time_limit):
+                raise NavigationError(
+                    f"hybrid A* found no path within {e - 1} expansions / {time.perf_counter() - self.t0:.2f} s "
+                    f"(turning radius {self.planner.vehicle.turning_radius:.2f} m may be too large for this map)"
+                )
+            return i
+        return None
+
+    def shoot(self, i: int) -> PlanResult | None:
+        """The analytic expansion from node ``i``: the whole path when a Dubins shot to the goal is free.
+
+        Tried near the goal, and every ``analytic_every`` expansions elsewhere, only with a line of sight more
+        or less: where the distance around obstacles exceeds the straight one by more than a turning circle,
+        a Dubins path would hit something."""
+        x, y, th = self.nx[i], self.ny[i], self.nth[i]
+        gx, gy = self.goal[0], self.goal[1]
+        dist_goal = math.hypot(gx - x, gy - y)
+        if not (dist_goal < self.near or self.expansions % self.planner.config.analytic_every == 1):
+            return None
+        if self.field.at(x, y) > dist_goal + self.sight_slack:
+            return None
+        shot = self.planner._shot((x, y, th), self.goal, self.tight)
+        if shot is None:
+            return None
+        xs, ys, ts = self.planner._reconstruct(i, self.nx, self.ny, self.nth, self.nparent, self.nprim)
+        return finish(
+            self.planner.costmap,
+            np.concatenate([xs, shot[0][1:]]),
+            np.concatenate([ys, shot[1][1:]]),
+            np.concatenate([ts, shot[2][1:]]),
+            planner=self.planner.name,
+            seconds=time.perf_counter() - self.t0,
+            expansions=self.expansions,
+        )
+
+    def _free_edges(self, x: float, y: float, th: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The primitives from (x, y, th) clear of obstacles: their indices and sample points (world frame)."""
+        pr, cm, tight = self.planner.prims, self.planner.costmap, self.tight
+        c, s = math.cos(th), math.sin(th)
+        wx = x + c * pr.dx - s * pr.dy
+        wy = y + s * pr.dx + c * pr.dy
+        ok = cm.free(wx, wy).all(axis=1)
+        if tight and not ok.all() and tight.near(x, y):
+            for p in np.flatnonzero(~ok).tolist():
+                ok[p] = tight.motion_ok(np.append(x, wx[p]), np.append(y, wy[p]))
+        return np.flatnonzero(ok), wx, wy
+
+    def expand(self, i: int) -> None:
+        """Push the children of node ``i`` that reach a bin not closed, cheaper than it was reached before."""
+        planner = self.planner
+        cfg, pr, key = planner.config, planner.prims, planner._key
+        x, y, th = self.nx[i], self.ny[i], self.nth[i]
+        idx, wx, wy = self._free_edges(x, y, th)
+        if not idx.size:
+            return
+        gx, gy = self.goal[0], self.goal[1]
+        ex, ey = wx[idx, -1], wy[idx, -1]
+        eth = wrap_angle(th + pr.dth[idx, -1])
+        h = np.maximum(self.field.lookup(ex, ey) - self.field.cell, np.hypot(gx - ex, gy - ey))
+        w = cfg.heuristic_weight
+        closed, best_g, heap = self.closed, self.best_g, self.heap
+        prim_here = self.nprim[i]
+        g_here, d_here = self.ng[i], self.ndir[i]
+        k_here = pr.kappa[prim_here] if prim_here >= 0 else 0.0
+        for j, p in enumerate(idx.tolist()):
+            hj = float(h[j])
+            if not math.isfinite(hj):
+                continue
+            exj, eyj, ethj = float(ex[j]), float(ey[j]), float(eth[j])
+            kj = key(exj, eyj, ethj)
+            if kj in closed:
+                continue
+            g = g_here + float(pr.cost[p])
+            if pr.direction[p] != d_here and prim_here >= 0:
+                g += cfg.switch_penalty
+            if pr.kappa[p] != k_here:
+                g += cfg.steer_change_penalty
+            if g >= best_g.get(kj, math.inf):
+                continue
+            best_g[kj] = g
+            self._add(exj, eyj, ethj, g, i, p)
+            heapq.heappush(heap, (g + w * hj, len(self.nx) - 1))
+
+    def _add(self, x: float, y: float, th: float, g: float, parent: int, prim: int) -> None:
+        self.nx.append(x)
+        self.ny.append(y)
+        self.nth.append(th)
+        self.ng.append(g)
+        self.nparent.append(parent)
+        self.nprim.append(prim)
+        self.ndir.append(float(self.planner.prims.direction[prim]))
+
+    def exhausted(self) -> NavigationError:
+        """Why the search ended with no path: stuck at the start, or every reachable bin tried."""
+        start, goal, vehicle = self.start, self.goal, self.planner.vehicle
+        if self.expansions <= 1:
+            return NavigationError(
+                f"the robot cannot drive away from its start ({start[0]:.2f}, {start[1]:.2f}, {start[2]:.2f} rad) "
+                f"without touching an obstacle" + ("" if vehicle.allow_reverse else " (forwards only: allow reversing?)")
+            )
+        return NavigationError(
+            f"no path from ({start[0]:.2f}, {start[1]:.2f}) to ({goal[0]:.2f}, {goal[1]:.2f}): the search space is exhausted "
+            f"after {self.expansions} expansions (turning radius {vehicle.turning_radius:.2f} m)"
+        )
 
 
 def plan_hybrid_astar(
