@@ -1,4 +1,4 @@
-"""The API behaves like a library (issue 11): scripts exit without close(), joining waits for the sim,
+"""The API behaves like a library: scripts exit without close(), joining waits for the sim,
 queued requests wait their turn, non-owners are told at once. Real router, real sim, real scripts."""
 
 from __future__ import annotations

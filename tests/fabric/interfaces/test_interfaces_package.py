@@ -1,7 +1,7 @@
 """The interfaces package: every built-in type registered under its class name, the wire form of before the
 move, and no second import path for the types.
 
-``GOLDEN`` holds bytes encoded by the code before issue 12 moved the types (commit 9679bd3, when they lived in
+``GOLDEN`` holds bytes encoded at commit 9679bd3, before the types moved here (they lived in
 ``fabric.messages``, ``sim_peer.messages``, ``compute_peer.messages``, ``compute_peer.navigation.messages`` and
 ``ownership.messages``): recordings made then must still decode to the same messages.
 """
@@ -58,7 +58,7 @@ def test_every_built_in_type_is_registered_under_its_class_name():
     types = registered()
     mine = {n: c for n, c in types.items() if c.__module__.startswith("fabric.interfaces")}
     assert all(c.__name__ == n for n, c in mine.items())
-    before = {  # the wire type names before issue 12: none may disappear or be renamed
+    before = {  # the wire type names before the move: none may disappear or be renamed
         "Header", "JointState", "Pose", "Scan", "Path", "OccupancyGrid", "JointTarget", "Twist", "Stop", "Reset",
         "Command", "OwnershipRecord", "Event", "RobotInfo", "ObjectInfo", "WorldInfo", "RobotState", "WorldState",
         "IKRequest", "IKReply", "FKRequest", "FKReply", "JacobianRequest", "JacobianReply", "IKStream",
