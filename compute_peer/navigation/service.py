@@ -160,7 +160,10 @@ class NavigationService:
     def _declare(self) -> None:
         f = self.fabric
         if self.robots is None:
-            self._resources.append(f.subscribe(keys.robot_all(self.world), self._on_robot))
+            # poses and scans only: a class's arms publish joints and flange poses at 100 Hz each, which this
+            # service never uses (robot/** made a compute peer decode the whole world, 0.3 cores for 32 robots)
+            self._resources.append(f.subscribe(keys.robot_stream_all(self.world, "pose"), self._on_robot, expected=Pose))
+            self._resources.append(f.subscribe(keys.robot_stream_all(self.world, "scan"), self._on_robot, expected=Scan))
         else:
             for r in self.robots:
                 self._resources.append(f.subscribe(keys.robot_pose(self.world, r), self._on_robot, expected=Pose))
