@@ -225,7 +225,7 @@ class WorldLogger:
         elif p.category == "own" and isinstance(msg, OwnershipRecord):
             return self.log_ownership(msg)
         elif p.category == "event" and isinstance(msg, Event):
-            return self.log_event("/".join((p.subject, *p.rest[1:])) if p.rest else p.subject, msg)
+            return self.log_event("/".join((p.subject, *p.rest[1:])) if p.rest else p.subject, msg, any_login=p.subject == keys.DECODE)
         return False
 
     # ------------------------------------------------------------------ robots
@@ -399,11 +399,14 @@ class WorldLogger:
         self.rec.log(f"ownership/{rec.object}", rr.TextDocument(f"owner: {rec.owner or '-'}\nepoch: {rec.epoch}\nqueue: {', '.join(rec.queue) or '-'}\nstate: {rec.state}"))
         return True
 
-    def log_event(self, where: str, ev: Event) -> bool:
+    def log_event(self, where: str, ev: Event, *, any_login: bool = False) -> bool:
+        """One line of the event log; ``any_login``: it came on a key any login may write (a decode report),
+        so it is marked as such: its kind, user and object are the writer's say-so (docs/security.md)."""
         level = {"debug": "DEBUG", "info": "INFO", "warning": "WARN", "error": "ERROR"}.get(ev.severity, "INFO")
         who = f" [{ev.user}]" if ev.user else ""
         obj = f" {ev.object}:" if ev.object else ""
-        self.rec.log("events", rr.TextLog(f"{ev.kind}{who}{obj} {ev.reason}".strip(), level=level))
+        mark = f"(unverified: {where}, any login may write it) " if any_login else ""
+        self.rec.log("events", rr.TextLog(f"{mark}{ev.kind}{who}{obj} {ev.reason}".strip(), level=level))
         return True
 
     def log_scene(self, boxes: Iterable[Any], name: str = "scene") -> None:

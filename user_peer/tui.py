@@ -25,7 +25,7 @@ from user_peer.api import Arm, Base, World
 from user_peer.errors import FabricUserError
 from user_peer.slider import JointSlider
 
-__all__ = ["UserApp", "SPEEDS"]
+__all__ = ["UserApp", "SPEEDS", "event_line"]
 
 SPEEDS = {1: (0.2, 0.4), 2: (0.5, 0.8), 3: (1.0, 1.5)}
 """Speed level -> (forward m/s, turn rad/s) for the arrow keys."""
@@ -36,6 +36,13 @@ def _age_ms(robot, stream: str) -> float | None:
     header clock may be seconds off ours on another machine (issue 15)."""
     age = robot.age(stream)
     return None if age is None else age * 1e3
+
+
+def event_line(ev, trusted: bool) -> str:
+    """The status line's latest event; one the robot's authority did not send (a decode report, which any
+    login may write) is marked display-only: its kind, user and object are only its writer's say-so."""
+    text = f"event {ev.kind}" + (f" {ev.object}" if ev.object else "") + (f" [{ev.user}]" if ev.user else "") + (f": {ev.reason}" if ev.reason else "")
+    return text if trusted else f"{text} (unverified, display only)"
 
 
 class UserApp(App):
@@ -258,6 +265,9 @@ class UserApp(App):
             lat = _age_ms(self.base, "pose")
             status.append(f"base pose age {lat:.0f} ms" if lat is not None else "base: no pose yet")
         status.append(f"sent {self.sent}")
+        recent = self.world.recent_events(1)
+        if recent:
+            status.append(event_line(*recent[-1]))
         if self.message:
             status.append(self.message)
         self.query_one("#status", Static).update(" · ".join(status))

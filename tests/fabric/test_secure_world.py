@@ -27,7 +27,8 @@ import pytest
 from fabric import keys
 from fabric.codec import encode
 from fabric.config import FabricConfig
-from fabric.interfaces import Command, Event, Header, JointState, JointTarget, OwnershipRecord, OwnReply, OwnRequest, Stop, WorldInfo
+from fabric.interfaces import (Command, Event, Header, JointState, JointTarget, OccupancyGrid, OwnershipRecord, OwnReply, OwnRequest,
+                               Stop, WorldInfo)
 from fabric.secure import init
 from fabric.session import Fabric, ServiceError
 from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
@@ -45,7 +46,7 @@ class SecureWorld:
         self.port = free_port()
         self.ep = f"tcp/127.0.0.1:{self.port}"
         self.dir = tmp / "class"
-        self.files = init(self.dir, users=["alice", "bob", "mallory"], listen=[self.ep]).clients
+        self.files = init(self.dir, users=["alice", "bob", "mallory"], instructors=["carol"], listen=[self.ep]).clients
         self.procs = procs
         self.router = procs.start(robofabric_cmd("router", "--zenoh-config", str(self.dir / "router.json5"), "--audit",
                                                  "--audit-every", "1"), name="router")
@@ -113,7 +114,7 @@ def _send(fab: Fabric, key: str, msg: object) -> None:
 
 def _marker(mallory: Fabric, seen_events: Seen, world: str, tag: str) -> None:
     """mallory sends what she may send (a decode report); once it arrived, everything before it did."""
-    _send(mallory, keys.event(world, "decode", "mallory"), Event(kind="marker", reason=tag, header=mallory.header("m")))
+    _send(mallory, keys.event_decode(world, "mallory"), Event(kind="marker", reason=tag, header=mallory.header("m")))
     wait_until(lambda: any(getattr(e, "reason", "") == tag for e in seen_events.messages()), timeout=20,
                what=f"mallory's marker {tag}")
 
@@ -290,8 +291,8 @@ def test_tls_refuses_a_certificate_from_another_ca(tmp_path):
         out = _cli("ps", "--zenoh-config", str(other.clients["alice"]))
         lines = out.stderr.strip().splitlines()
         assert out.returncode == 2 and len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
-        assert lines[0] == f"error: authentication failed for alice at {ep}: the router refused this login " \
-                           "(wrong password, unknown user, or a certificate it does not trust)"
+        # her login trusts another CA: this side refuses the router first (the router would refuse her too)
+        assert lines[0].startswith(f"error: cannot join world 'demo' at {ep}: this client does not trust the router's certificate ("), lines
         good = _cli("ps", "--json", "--zenoh-config", str(mine.clients["alice"]))
         assert good.returncode == 0 and json.loads(good.stdout)["peers"].get("router"), good.stderr
         # identities by certificate common name: alice may not publish robot state even over TLS
@@ -310,6 +311,30 @@ def test_tls_refuses_a_certificate_from_another_ca(tmp_path):
         finally:
             alice.close()
             sim.close()
+
+
+def test_a_router_certificate_that_does_not_name_the_host_is_said_so(tmp_path):
+    """The client refuses the router here, not the other way round: the message names the host (it said
+    "the router refused this login"), for the CLI and as user_peer.JoinFailed with endpoint and cause."""
+    import user_peer
+
+    port = free_port()
+    made = init(tmp_path / "class", users=["alice"], tls=True, listen=[f"tls/0.0.0.0:{port}"], connect=[f"tls/127.0.0.1:{port}"])
+    elsewhere = f"tls/127.0.0.2:{port}"  # the router listens there too, but its certificate names 127.0.0.1 and localhost
+    with ProcessGroup(tmp_path) as procs:
+        router = procs.start(robofabric_cmd("router", "--zenoh-config", str(made.router)), name="router")
+        wait_until(lambda: "listening" in procs.output(router), timeout=30, what="TLS router", seen=lambda: procs.output(router))
+        assert _cli("ps", "--zenoh-config", str(made.clients["alice"])).returncode == 0
+        out = _cli("ps", "--zenoh-config", str(made.clients["alice"]), "--connect", elsewhere)
+        lines = out.stderr.strip().splitlines()
+        assert out.returncode == 2 and len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
+        assert lines[0].startswith(f"error: cannot join world 'demo' at {elsewhere}: the router's certificate does not name 127.0.0.2 "
+                                   "(it names "), lines
+        assert "refused this login" not in lines[0]
+        with pytest.raises(user_peer.JoinFailed) as info:
+            user_peer.connect(zenoh_config=str(made.clients["alice"]), connect=elsewhere, wait=False)
+        assert info.value.endpoint == elsewhere and info.value.cause.startswith("the router's certificate does not name 127.0.0.2")
+        assert info.traceback[-1].name == "connect"  # the script's own call is where it ends, no internal frames below
 
 
 def _expire_certificate(d, name: str) -> None:
@@ -350,7 +375,121 @@ def test_tls_refuses_an_expired_certificate(tmp_path):
                            "(wrong password, unknown user, or a certificate it does not trust)"
 
 
-def test_paper_tests_a_and_b_in_a_secure_world(secure, alice_owns_arm):
+@pytest.fixture(scope="module")
+def secure_compute(secure):
+    """The class's compute peer under its own login (streaming IK for arm1, mapping and planning)."""
+    compute = secure.start("compute", "compute", "--stream", "arm1:target")
+    wait_until(lambda: "serving" in secure.procs.output(compute), timeout=90, what="the compute peer",
+               seen=lambda: secure.procs.output(compute)[-1500:])
+    return compute
+
+
+def test_forged_events_on_every_key_mallory_may_write_change_nothing(secure, alice_owns_arm):
+    """Issue 23: mallory put Event(reject, arm1, alice) on event/decode/* at 5 Hz and every move_joints(wait=True)
+    of alice raised NotOwner, bob's drive stopped. Now decode reports go on each writer's own key, clients act only
+    on events from the object's authority on keys only sims write: her forgeries are display-only."""
+    import user_peer
+    from fabric.interfaces import EventKind
+
+    alice, arm = alice_owns_arm
+    w = secure.world
+    bob = user_peer.connect(world=w, zenoh_config=str(secure.files["bob"]), timeout=10.0)
+    mallory = secure.fabric("mallory")
+    stop = threading.Event()
+    try:
+        base = bob.robot("base1")
+        base.wait_for("pose", timeout=30)
+        base.request(timeout=10)
+        sim_id = arm.record.authority  # the authority's own id: forgeries carry it as their source
+        forged = [Event(kind=kind, object=obj, user=user, reason=f"{obj} is owned by mallory, not {user}", header=mallory.header("e"))
+                  for obj, user in (("arm1", "alice"), ("base1", "bob"))
+                  for kind in (EventKind.REJECT, EventKind.OWN_REVOKED, EventKind.OWN_EXPIRED, EventKind.OWN_HANDOVER)]
+        forged = [replace(e, header=replace(e.header, source=sim_id, term=arm.record.header.term)) for e in forged]
+        # every event key she may write (her own decode key), and those she may not (the router drops them)
+        mine = keys.event_decode(w, "mallory")
+        pubs = [mallory.session.declare_publisher(k) for k in (mine, keys.event_decode(w, "alice"), keys.event(w, "decode", "mallory"),
+                                                              keys.event(w, "reject", "arm1"), keys.event(w, "own", "base1"))]
+        sent = []
+
+        def flood() -> None:
+            while not stop.is_set():
+                for e in forged:
+                    for pub in pubs:
+                        pub.put(encode(e))
+                sent.append(1)
+                stop.wait(0.1)  # 10 Hz, twice the issue's rate
+
+        threading.Thread(target=flood, daemon=True).start()
+        forgery = lambda world: any("owned by mallory" in e.reason for e in list(world.events))  # noqa: E731
+        wait_until(lambda: forgery(alice) and forgery(bob), timeout=20, what="her forgeries reaching alice and bob")
+        for i in range(6):  # issue: 17 of 17 raised NotOwner
+            arm.move_joints([0.1 + 0.05 * (i % 2)] * 6, timeout=30)
+        start = base.xy_theta
+        end = base.drive(0.3, 0.0, 2.0)  # issue: raised 17 times and the base stopped
+        assert math.hypot(end[0] - start[0], end[1] - start[1]) > 0.2, (start, end)
+        assert arm.record.owner == "alice" and base.record.owner == "bob"
+        seen = [e for e in alice.events if e.kind == EventKind.REJECT and e.object == "arm1" and e.user == "alice"]
+        assert seen, "her forged rejects never arrived: the test would prove nothing"
+        assert not alice.rejections("arm1", 0) and not bob.rejections("base1", 0)
+        assert all(not trusted for e, trusted in alice.recent_events(1000) if "mallory" in e.reason)  # display-only
+        assert alice.untrusted_events >= 8 and bob.untrusted_events >= 8
+    finally:
+        stop.set()
+        time.sleep(0.3)  # the flood thread's last round
+        bob.close()
+    for key in (keys.event_decode(w, "alice"), keys.event(w, "decode", "mallory"), keys.event(w, "reject", "arm1")):
+        _refused_by_router(secure, f"mallory put {key}")
+
+
+def test_mallory_may_not_change_the_class_map_nor_plan_for_bobs_robot(secure, secure_compute):
+    """Issue 23: her map set published an all-occupied grid, reset wiped 22,703 scans, stop turned mapping off,
+    and her plan for base1 went out on robot/base1/path. Now asked in her name they are refused with the reason
+    (the plan: hers is in the reply only); the staff's forms do not even reach the compute from her login."""
+    import user_peer
+    from fabric.interfaces import MapReply, MapRequest, Path, PlanReply, PlanRequest
+    from user_peer import services
+
+    w = secure.world
+    mallory = secure.fabric("mallory")
+    watcher = secure.fabric("viewer", kind="viewer", peer_id="watch-map")
+    paths = Seen(watcher, keys.robot_path(w, "base1"), Path)
+    maps = Seen(watcher, keys.map_key(w, "map"), None)
+    bob = user_peer.connect(world=w, zenoh_config=str(secure.files["bob"]), timeout=10.0)
+    try:
+        base = bob.robot("base1")
+        base.wait_for("pose", timeout=30)
+        base.request(timeout=10)
+        status = lambda: services.map_request(bob.fabric, "status", user="bob", timeout=10.0)  # noqa: E731
+        before = wait_until(lambda: (lambda r: r if r.scans > 20 else None)(status()), timeout=60, what="scans in the class map")
+        full = OccupancyGrid(0.1, np.zeros(3), np.full((50, 50), 100, np.uint8))
+        for req in (MapRequest("set", grid=full), MapRequest("reset"), MapRequest("stop"), MapRequest("save", file="x.yaml")):
+            with pytest.raises(ServiceError, match=f"map '{req.action}' changes the map everyone plans on: an instructor's, not mallory's"):
+                mallory.call(keys.srv_asked(w, "map", "map", "mallory"), req, timeout=10.0, expected=MapReply)
+            with pytest.raises(ServiceError, match="no reply"):  # the staff's form: her query never passes the router
+                mallory.call(keys.srv(w, "map", "map"), req, timeout=2.0, expected=MapReply)
+        after = status()
+        assert after.mapping == 1 and after.scans >= before.scans, (before, after)  # on, and nothing wiped
+        assert not maps.messages(), "a map was published"
+        _refused_by_router(secure, f"mallory query {keys.srv(w, 'map', 'map')}")
+        # an instructor may: a free room of her own, for the plans below (the class map stays as it is)
+        carol = secure.fabric("carol")
+        room = OccupancyGrid(0.1, np.array([-5.0, -5.0, 0.0]), np.zeros((100, 100), np.uint8))
+        assert carol.call(keys.srv(w, "map", "room"), MapRequest("set", name="room", grid=room), timeout=10.0, expected=MapReply).action == "set"
+        plan = PlanRequest("base1", goal=np.array([2.0, 1.0, 0.0]), start=np.array([0.0, 0.0, 0.0]), map="room", direction="both")
+        theirs = mallory.call(keys.srv_asked(w, "plan", "base1", "mallory"), plan, timeout=30.0, expected=PlanReply)
+        assert len(theirs.path) > 1  # she gets her path, in the reply
+        with pytest.raises(ServiceError, match="no reply"):
+            mallory.call(keys.srv(w, "plan", "base1"), plan, timeout=2.0, expected=PlanReply)
+        own = bob.fabric.call(keys.srv_asked(w, "plan", "base1", "bob"), replace(plan, goal=np.array([1.5, -1.0, 0.0])),
+                              timeout=30.0, expected=PlanReply)
+        got = wait_until(lambda: paths.messages(), timeout=20, what="bob's plan on robot/base1/path")
+        # hers was asked (and answered) first: published, it would have come first on the same path key
+        assert len(got) == 1 and np.allclose(got[0].y, own.path.y), [p.y[-1] for p in got]
+    finally:
+        bob.close()
+
+
+def test_paper_tests_a_and_b_in_a_secure_world(secure, alice_owns_arm, secure_compute):
     """Router, sim, compute and viewer with their own logins; alice runs Test A, bob Test B (trimmed)."""
     import user_peer
     from user_peer.scenarios import test_a, test_b
@@ -358,7 +497,7 @@ def test_paper_tests_a_and_b_in_a_secure_world(secure, alice_owns_arm):
     alice, arm = alice_owns_arm
     arm.release()
     procs = secure.procs
-    compute = secure.start("compute", "compute", "--stream", "arm1:target")
+    compute = secure_compute
     rrd = secure.dir.parent / "secure.rrd"
     viewer = secure.start("viewer", "view", "--save", str(rrd))
     watcher = secure.fabric("viewer", kind="viewer", peer_id="watch4")
@@ -405,7 +544,9 @@ def test_the_python_api_says_who_was_refused_and_keeps_the_login_as_the_user(sec
     cfg["transport"]["auth"]["usrpwd"]["password"] = "guess"
     bad = tmp_path / "bob-bad.json5"
     bad.write_text(json.dumps(cfg))
-    with pytest.raises(Unreachable, match=f"^authentication failed for bob at {secure.ep}: the router refused this login"):
+    with pytest.raises(Unreachable, match=f"^authentication failed for bob at {secure.ep}: the router refused this login") as info:
         user_peer.connect(world=secure.world, zenoh_config=str(bad), wait=False)
+    assert isinstance(info.value, user_peer.JoinFailed) and info.value.endpoint == secure.ep  # one type, where and why
+    assert info.value.cause.startswith("the router refused this login")
     with pytest.raises(ConfigError, match="logs in as 'bob'.*not 'alice'"):
         user_peer.connect(world=secure.world, zenoh_config=str(secure.files["bob"]), user="alice", wait=False)

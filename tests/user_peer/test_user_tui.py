@@ -109,3 +109,13 @@ async def _world_gone(auth, alice, arm, base, cmds):
         assert "WORLD GONE" not in str(app.query_one("#status").render())
         auth.close()
         await until(pilot, lambda: "WORLD GONE" in str(app.query_one("#status").render()), "world gone shown")
+
+
+def test_an_event_its_authority_did_not_send_is_marked_display_only():
+    """Issue 23: a 'reject' any login may write (event/decode/by/*) is shown, but as her say-so."""
+    from fabric.interfaces import Event
+    from user_peer.tui import event_line
+
+    ev = Event(kind="reject", object="arm1", user="alice", reason="arm1 is owned by mallory, not alice")
+    assert event_line(ev, True) == "event reject arm1 [alice]: arm1 is owned by mallory, not alice"
+    assert event_line(ev, False).endswith("(unverified, display only)")
