@@ -1,7 +1,8 @@
 """Helpers the benchmarks share: where tables go, the machine line, a process's CPU and memory, ending children.
 
-Pure or /proc-reading functions only; no benchmark logic. Percentiles come from :mod:`fabric.stats`
-(the replayer and ``robofabric hz`` use them too).
+Pure or /proc-reading functions, and the ending of children by pid; no benchmark logic. :func:`pct` is
+the tables' percentile (NaN where nothing was measured); the replayer and ``robofabric hz`` summarise
+with :func:`fabric.stats.percentiles`.
 """
 
 from __future__ import annotations
