@@ -431,7 +431,7 @@ def test_forged_events_on_every_key_mallory_may_write_change_nothing(secure, ali
         seen = [e for e in alice.events if e.kind == EventKind.REJECT and e.object == "arm1" and e.user == "alice"]
         assert seen, "her forged rejects never arrived: the test would prove nothing"
         assert not alice.rejections("arm1", 0) and not bob.rejections("base1", 0)
-        assert all(not trusted for e, trusted in alice.recent_events(1000) if "mallory" in e.reason)  # display-only
+        assert all(not trusted for e, trusted in alice.recent_events(1000) if "owned by mallory" in e.reason)  # display-only
         assert alice.untrusted_events >= 8 and bob.untrusted_events >= 8
     finally:
         stop.set()
