@@ -1,0 +1,34 @@
+"""The benchmarks' shared helpers: children ended together, by pid; percentiles of nothing are NaN."""
+
+from __future__ import annotations
+
+import math
+import signal
+import subprocess
+import sys
+
+from robofabric.bench.common import end_processes, pct
+
+SLEEPER = [sys.executable, "-c", "import time; time.sleep(60)"]
+DEAF = [sys.executable, "-c", "import signal, sys, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); print('ready', flush=True); time.sleep(60)"]
+
+
+def test_end_processes_signals_all_first_then_kills_the_deaf_within_one_timeout():
+    procs = [subprocess.Popen(SLEEPER), subprocess.Popen(SLEEPER), subprocess.Popen(DEAF, stdout=subprocess.PIPE, text=True)]
+    try:
+        assert procs[2].stdout.readline().strip() == "ready"  # its SIGTERM handler is in place
+        done = subprocess.Popen(SLEEPER)
+        done.kill()
+        done.wait()
+        codes = end_processes([*procs, done], timeout=1.0)
+        assert codes == [-signal.SIGTERM, -signal.SIGTERM, -signal.SIGKILL, -signal.SIGKILL]
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+
+
+def test_pct_of_nothing_is_nan():
+    assert math.isnan(pct([], 99))
+    assert pct([1.0, 2.0, 3.0], 50, 1e3) == 2000.0
