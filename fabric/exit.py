@@ -3,7 +3,7 @@
 zenoh-python runs each Python callback (subscribers, queryables, liveliness
 watchers) on a non-daemon Python thread of its own, which ends only when the
 callback is undeclared. A script that opens a session and never closes it
-therefore never exits: the interpreter joins those threads forever (issue 11).
+therefore never exits: the interpreter joins those threads forever.
 ``atexit`` is too late, its functions run after the threads are joined.
 
 :func:`at_exit` registers a closer that runs first, in the order a stack

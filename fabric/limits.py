@@ -1,6 +1,6 @@
 """What a client may make the fabric hold: user names, quoted client text, per-key log and event rates.
 
-Every peer trusts nothing a client sends (issue 14). Three habits live here so that each
+Every peer trusts nothing a client sends. Three habits live here so that each
 is checked in one place:
 
 * :func:`validate_user` - a user name is at most :data:`MAX_USER_LEN` characters of a safe

@@ -1,6 +1,6 @@
 """Pure geometry for drawing a world: where a pose, a scan, a map pixel or an arm link lies.
 
-Split out of :mod:`user_peer.rerun_log` (issue 12) so that the logger only maps messages to Rerun
+Apart from :mod:`user_peer.rerun_log`, so that the logger only maps messages to Rerun
 calls, and these helpers can be read and tested without Rerun: numpy and the fabric's messages only.
 Quaternions come in two orders here on purpose: fabric messages carry (w, x, y, z) (MuJoCo's order),
 Rerun and :class:`user_peer.arm_geometry.Placement` use (x, y, z, w).
@@ -43,7 +43,7 @@ def shown_position(pose: Pose, received_ns: int, now_ns: int) -> tuple[np.ndarra
     The paper's Eq. 8: the pose moved on by its velocity times its age, the age capped so that a stale
     message never flings a robot across the room. ``received_ns`` (when it arrived) and ``now_ns`` are
     both read from this machine's clock: the header's ``wall_ns`` is the sender's clock, which may be
-    seconds off ours on another machine, and is never compared with ours (issue 15).
+    seconds off ours on another machine, and is never compared with ours.
     """
     if received_ns <= 0 or now_ns <= 0:
         return np.asarray(pose.position, dtype=float), None

@@ -33,7 +33,7 @@ SPEEDS = {1: (0.2, 0.4), 2: (0.5, 0.8), 3: (1.0, 1.5)}
 
 def _age_ms(robot, stream: str) -> float | None:
     """Milliseconds since the latest message of a stream arrived here. Local time only: the sim's
-    header clock may be seconds off ours on another machine (issue 15)."""
+    header clock may be seconds off ours on another machine."""
     age = robot.age(stream)
     return None if age is None else age * 1e3
 
@@ -215,8 +215,8 @@ class UserApp(App):
             pass  # a timer tick while the screen is still mounting or already torn down: nothing to update
 
     def world_status(self) -> str | None:
-        """The status line's warning when the world is gone (its last sim peer left: died, or cut off;
-        issue 15), else None. Read from the world on every refresh, so it clears when a sim is back."""
+        """The status line's warning when the world is gone (its last sim peer left: died, or cut
+        off), else None. Read from the world on every refresh, so it clears when a sim is back."""
         if not self.world.world_alive:
             return f"WORLD GONE: no sim peer of {self.world.name!r} (waiting for one)"
         return None

@@ -4,7 +4,7 @@ Each scan is taken at the robot pose nearest to it in sim time, from where the r
 marks the disk the robot stands on free. A scan that cannot be placed (mapping off, no pose yet, mounting still
 being looked up, malformed) is dropped and counted by reason, never raised: scans come from the wire. A rejected
 scan is logged at most a few times per interval (with the count suppressed since), its reason clipped: a flood
-of malformed scans must not fill the compute peer's log (issue 14).
+of malformed scans must not fill the compute peer's log.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@ world state a standby sim takes over (``rf/{world}/srv/state``).
 
 :class:`WorldInfo` carries what other peers need to work with the world without a local copy of the
 robot files: each robot's id, type, kind, spawn pose, joint names, limits and speeds, base limits and
-sensors, and the scene objects. :class:`WorldState` is replicated authority (issue 16).
+sensors, and the scene objects. :class:`WorldState` is the whole state a standby needs to carry the robots on.
 """
 
 from __future__ import annotations
@@ -139,7 +139,7 @@ class WorldInfo:
         raise KeyError(f"no robot {robot_id!r} in world {self.world!r}")
 
 
-# ---------------------------------------------------------------------- replicated authority (issue 16)
+# ---------------------------------------------------------------------- replicated authority
 
 @dataclass(frozen=True, slots=True)
 class RobotState:
