@@ -78,7 +78,9 @@ def view(
             print(f"web viewer: open {page}", flush=True)
             print(f"  (from any machine that reaches this one; TCP ports {web_port} (page) and {grpc_port} (data {grpc}) must be open)", flush=True)
         n = viewer.run(stop, duration)
-    print(f"viewer: {n} messages logged, {viewer.dropped} dropped, {viewer.logger.skipped} thinned; robots: {', '.join(sorted(viewer.logger.robots)) or 'none'}", flush=True)
+    lag = viewer.lag_summary()
+    print(f"viewer: {n} messages logged, {viewer.dropped} dropped, {viewer.logger.skipped} thinned"
+          f"{'; ' + lag if lag else ''}; robots: {', '.join(sorted(viewer.logger.robots)) or 'none'}", flush=True)
 
 
 def export(

@@ -99,6 +99,7 @@ def export_mcap(
             if progress is not None and n % 200 == 0:
                 progress(n, total)
     finally:
+        logger.flush()
         rec.flush(timeout_sec=30.0)
         rec.disconnect()
     if progress is not None:

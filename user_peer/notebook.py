@@ -60,16 +60,24 @@ class NotebookView:
             self.dropped += 1
 
     def _drain(self) -> None:
+        flushed = time.monotonic()
         while not self._stop.is_set():
             try:
-                key, msg, t = self.queue.get(timeout=0.1)
+                key, msg, t = self.queue.get(timeout=0.05)
             except queue.Empty:
-                continue
-            try:
-                if self.logger.log(key, msg, t):
-                    self.drawn += 1
-            except Exception:
-                log.debug("could not draw %s", key, exc_info=True)
+                key = None
+            if key is not None:
+                try:
+                    if self.logger.log(key, msg, t):
+                        self.drawn += 1
+                except Exception:
+                    log.debug("could not draw %s", key, exc_info=True)
+            if time.monotonic() - flushed >= 0.1:  # the logger draws what it filed once per window
+                flushed = time.monotonic()
+                try:
+                    self.logger.flush()
+                except Exception:
+                    log.debug("could not draw a window", exc_info=True)
 
     def display(self, *, width: int | None = None, height: int = 600) -> None:
         """The inline viewer under the current cell (the ``notebook`` extra)."""

@@ -1,33 +1,41 @@
 """Map fabric messages to Rerun log calls: one function per kind of data, shared by live view and export.
 
 :class:`WorldLogger` takes ``(key, message, log_time_ns)`` in the order they
-arrived (live from Zenoh, or from an MCAP recording) and logs them to a
-``rerun.RecordingStream``. It keeps only what drawing needs (the latest base
-pose to put scans in the world frame, stream rates, the latest map for the map
-view's overlay). The geometry it needs (:func:`scan_world_points`, :func:`grid_rgb`,
-:func:`world_to_map_pixels`, ...) is pure and lives in :mod:`user_peer.geometry`, re-exported here.
+arrived (live from Zenoh, or from an MCAP recording). Frequent streams (joints,
+poses, scans, rates) are filed per stream and drawn at :meth:`WorldLogger.flush`
+as columns, one ``send_columns`` per entity (:mod:`user_peer.rerun_columns`);
+what never moves (link shapes, bodies, styles, plot names) is logged once,
+static. It keeps only what drawing needs (the latest base pose to put scans in
+the world frame, the latest map for the map view's overlay). The geometry it
+needs (:func:`scan_world_points`, :func:`grid_rgb`, :func:`world_to_map_pixels`,
+...) is pure and lives in :mod:`user_peer.geometry`, re-exported here.
 
 Entity layout::
 
-    world/robots/{id}/base          Transform3D of a mobile base (from its pose) + body
-    world/robots/{id}/links/{n}     arm shapes, placed by FK from the joints
-    world/robots/{id}/skeleton      arm joint origins as a line strip
-    world/robots/{id}/scan          LIDAR hits (Points3D) and  .../scan/rays (LineStrips3D), world frame
+    world/robots/{id}/base          Transform3D of a mobile base (from its pose); .../body, .../heading, .../label static
+    world/robots/{id}/links         an arm's base (static); .../links/joint_1/joint_2/... one transform per joint,
+                                    the link shapes below their joint, static
+    world/robots/{id}/skeleton      arm joint origins as a line strip and as points
+    world/robots/{id}/flange        the flange frame an arm's pose stream carries
+    world/robots/{id}/scan          LIDAR hits (Points3D) and rays (LineStrips3D), world frame; .../sonar alike
     world/robots/{id}/path          planned path (LineStrips3D)
-    world/robots/{id}/label         ownership label at the robot
+    world/robots/{id}/label         an arm's ownership label (a base's: .../base/label)
     world/objects/{id}              scene objects (target sphere, goal pointer)
     map/{name}                      occupancy grid image; map/{name}/paths/{id}, map/{name}/robots/{id}
-    plots/joints/{id}/{joint}       joint angles (deg);  plots/joint_speed/..., plots/speed/{id}/{v,omega}
-    plots/rates/{label}             stream rates (Hz) over a 1 s window
+    plots/joints/{id}               an arm's joint angles (deg), one series per joint;  plots/joint_speed/{id} (deg/s)
+    plots/wheels/{id}               a base's wheel angles (deg), apart from the arms' joints
+    plots/speed/{id}                a base's v (m/s) and omega (rad/s);  plots/age/{id}: its pose's age when drawn (ms)
+    plots/rates/{label}             stream rates (Hz), one value per 0.5 s
+    plots/viewer/{lag_ms,dropped}   the live viewer's own lag and drops (user_peer.viewer)
     events                          TextLog of events and ownership changes
 """
 
 from __future__ import annotations
 
 import math
-from collections import defaultdict, deque
+from collections import defaultdict
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 import rerun as rr
@@ -39,11 +47,13 @@ from user_peer.arm_geometry import ArmGeometry, Placement
 from user_peer.geometry import EXTRAPOLATION_CAP_S, grid_rgb, scan_world_points, shown_position, world_to_map_pixels, yaw_of
 from user_peer.geometry import compose as _compose
 from user_peer.geometry import quat_xyzw as _quat_xyzw
+from user_peer.rerun_columns import POSITIONS2, POSITIONS3, SCALARS, STRIPS3, ArmChain, column, scalars, send, strips, time_columns, transforms, vectors
 
 __all__ = [
     "RobotDrawing",
     "WorldLogger",
     "blueprint",
+    "framing",
     "scan_world_points",
     "grid_rgb",
     "world_to_map_pixels",
@@ -83,18 +93,38 @@ class RobotDrawing:
 # --------------------------------------------------------------------------- blueprint
 
 
-def blueprint() -> rrb.Blueprint:
-    """3D world on the left; map view, plots and events on the right."""
+def framing(points: Sequence[Sequence[float]]) -> tuple[np.ndarray, np.ndarray] | None:
+    """(eye position, look target) of a 3D camera that sees every point (the robots' places), from the
+    south-west and above; None without points (the viewer's own default then: the scene's bounds, which
+    shelves and walls dominate)."""
+    pts = np.asarray([p[:3] if len(p) >= 3 else (*p[:2], 0.0) for p in points], dtype=float).reshape(-1, 3)
+    if not len(pts):
+        return None
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    target = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, 0.3])
+    radius = max(float(np.linalg.norm((hi - lo)[:2])) / 2 + 0.8, 1.2)  # half the spread, plus a robot's size
+    # a ~60 degree field of view: the circle of `radius` fits at about 2 x radius, seen 40 degrees from above
+    d = 2.0 * radius
+    eye = target + d * np.array([-0.45, -0.6, 0.66])
+    return eye, target
+
+
+def blueprint(frame: tuple[np.ndarray, np.ndarray] | None = None) -> rrb.Blueprint:
+    """3D world on the left (its camera on ``frame``: see :func:`framing`); map view, plots and events on the right."""
+    eye = rrb.EyeControls3D(position=frame[0], look_target=frame[1], eye_up=[0.0, 0.0, 1.0]) if frame is not None else None
+    world = rrb.Spatial3DView(name="world", origin="world", eye_controls=eye) if eye is not None else rrb.Spatial3DView(name="world", origin="world")
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Spatial3DView(name="world", origin="world"),
+            world,
             rrb.Vertical(
                 rrb.Spatial2DView(name="map", origin="map"),
                 rrb.Tabs(
-                    rrb.TimeSeriesView(name="joint angles (deg)", origin="plots/joints"),
-                    rrb.TimeSeriesView(name="joint speeds (deg/s)", origin="plots/joint_speed"),
+                    rrb.TimeSeriesView(name="arm joints (deg)", origin="plots/joints"),
+                    rrb.TimeSeriesView(name="wheels (deg)", origin="plots/wheels"),
+                    rrb.TimeSeriesView(name="arm joint speeds (deg/s)", origin="plots/joint_speed"),
                     rrb.TimeSeriesView(name="base speed", origin="plots/speed"),
                     rrb.TimeSeriesView(name="stream rates (Hz)", origin="plots/rates"),
+                    rrb.TimeSeriesView(name="viewer lag (ms)", origin="plots/viewer"),
                 ),
                 rrb.TextLogView(name="events", origin="events"),
                 row_shares=[3, 3, 1],
@@ -108,19 +138,29 @@ def blueprint() -> rrb.Blueprint:
 # --------------------------------------------------------------------------- the logger
 
 
-class _Rates:
-    """Messages per second per label over a sliding window, from log times (ns)."""
+def _clear(rows: "_Rows") -> None:
+    rows.wall.clear()
+    rows.sim.clear()
+    rows.items.clear()
 
-    def __init__(self, window_s: float = 1.0) -> None:
-        self.window = int(window_s * 1e9)
-        self.times: dict[str, deque[int]] = defaultdict(deque)
 
-    def add(self, label: str, t_ns: int) -> float:
-        d = self.times[label]
-        d.append(t_ns)
-        while d and d[0] < t_ns - self.window:
-            d.popleft()
-        return len(d) * 1e9 / self.window
+class _Rows:
+    """Rows of one stream waiting for the next flush: their times and what each message brought."""
+
+    __slots__ = ("wall", "sim", "items")
+
+    def __init__(self) -> None:
+        self.wall: list[int] = []
+        self.sim: list[float] = []
+        self.items: list[Any] = []
+
+    def add(self, wall: int, sim: float, item: Any) -> None:
+        self.wall.append(wall)
+        self.sim.append(sim)
+        self.items.append(item)
+
+    def times(self) -> list[rr.TimeColumn]:
+        return time_columns(self.wall, self.sim)
 
 
 class WorldLogger:
@@ -129,6 +169,12 @@ class WorldLogger:
     ``drawing(id, hint)`` is asked once per robot the first time it appears, with a hint dict
     (``joint_names`` for arms, ``mobile`` for robots with a pose/scan) and returns a :class:`RobotDrawing`.
     ``max_hz`` thins out 3D and plot updates per key (0: log everything).
+
+    :meth:`log` only files what a message brings under its stream; :meth:`flush` draws everything filed
+    since the last flush, one ``send_columns`` per entity (:mod:`user_peer.rerun_columns`). The live viewer
+    flushes once per window (0.1 s); a caller that never flushes still gets a flush every ``max_pending``
+    messages, and :meth:`log_all` flushes at its end. Rare messages (maps, paths, objects, ownership,
+    events) are logged at once, row by row.
     """
 
     def __init__(
@@ -139,6 +185,7 @@ class WorldLogger:
         max_hz: float = 30.0,
         rate_period_s: float = 0.5,
         clock: Callable[[], int] | None = None,
+        max_pending: int = 4000,
     ) -> None:
         self.rec = rec
         # live views: the clock that stamped log_time_ns when a message arrived (Eq. 8 ages are now - arrival);
@@ -151,46 +198,89 @@ class WorldLogger:
         self.paths: dict[str, Path] = {}
         self.owners: dict[str, OwnershipRecord] = {}
         self.min_dt = int(1e9 / max_hz) if max_hz > 0 else 0
+        self.max_pending = max_pending
         self._last: dict[str, int] = {}
-        self._rates = _Rates()
-        self._rate_logged: dict[str, int] = {}
+        self._keys: dict[str, tuple[keys.ParsedKey, str] | None] = {}
+        self._rate_window: dict[str, list[int]] = {}  # label -> [window start ns, messages since]
         self.rate_period = int(rate_period_s * 1e9)
         self._static_done: set[str] = set()
+        self._chains: dict[int, ArmChain] = {}
+        # filed rows per stream, drawn by flush()
+        self._joints: dict[str, _Rows] = {}
+        self._bases: dict[str, _Rows] = {}
+        self._flanges: dict[str, _Rows] = {}
+        self._scans: dict[tuple[str, str], _Rows] = {}
+        self._rates: dict[str, _Rows] = {}
+        self._labels: dict[str, tuple[str, np.ndarray]] = {}  # robot -> (label entity, where)
+        self._t: tuple[int, float] = (0, 0.0)  # the message being filed: (wall_time ns, sim_time s)
+        self.pending = 0
         self.counts: dict[str, int] = defaultdict(int)
         self.skipped = 0
 
     # ------------------------------------------------------------------ entry point
 
     def log(self, key: str, msg: Any, log_time_ns: int) -> bool:
-        """Log one message; returns False when the key is not something the viewer draws."""
-        try:
-            p = keys.parse(key)
-        except ValueError:
+        """File one message for drawing; returns False when the key is not something the viewer draws."""
+        parsed = self._keys.get(key, False)
+        if parsed is False:
+            parsed = self._parse(key)
+        if parsed is None:
             return False
-        label = self._rate_label(p)
-        rate = self._rates.add(label, log_time_ns)
-        self._set_time(msg, log_time_ns)
-        if log_time_ns - self._rate_logged.get(label, -(10**19)) >= self.rate_period:
-            self._rate_logged[label] = log_time_ns
-            self.rec.log(f"plots/rates/{label}", rr.Scalars(rate))
+        p, label = parsed
+        self._t = self._times(msg, log_time_ns)
+        self._count_rate(label, log_time_ns)
         handled = self._dispatch(p, msg, key, log_time_ns)
         if handled:
             self.counts[type(msg).__name__] += 1
+        if self.pending >= self.max_pending:
+            self.flush()
         return handled
 
-    def _rate_label(self, p: keys.ParsedKey) -> str:
+    def _parse(self, key: str) -> tuple[keys.ParsedKey, str] | None:
+        try:
+            p = keys.parse(key)
+        except ValueError:
+            return None
         if p.category == "robot":
-            return f"{p.subject}/{p.leaf}"
-        if p.category == "cmd":
-            return f"{p.subject}/cmd_{p.leaf}"
-        return f"{p.category}/{p.subject}" if p.subject else p.category
+            label = f"{p.subject}/{p.leaf}"
+        elif p.category == "cmd":
+            label = f"{p.subject}/cmd_{p.leaf}"
+        else:
+            label = f"{p.category}/{p.subject}" if p.subject else p.category
+        if len(self._keys) < 100_000:  # a world's keys repeat; a flood of odd ones is parsed each time
+            self._keys[key] = (p, label)
+        return p, label
+
+    def _count_rate(self, label: str, t_ns: int) -> None:
+        """Messages per second per stream, one value per ``rate_period`` (the messages since the last one)."""
+        w = self._rate_window.get(label)
+        if w is None:
+            self._rate_window[label] = [t_ns, 0]
+            return
+        w[1] += 1
+        if t_ns - w[0] >= self.rate_period:
+            rows = self._rates.get(label)
+            if rows is None:
+                rows = self._rates[label] = _Rows()
+            rows.add(t_ns, 0.0, w[1] * 1e9 / (t_ns - w[0]))
+            self.pending += 1
+            w[0], w[1] = t_ns, 0
+
+    @staticmethod
+    def _times(msg: Any, log_time_ns: int) -> tuple[int, float]:
+        """(wall_time ns: the header's wall clock, else the receive time; sim_time s, 0 when unknown)."""
+        header = getattr(msg, "header", None)
+        if header is None:
+            return log_time_ns, 0.0
+        return (header.wall_ns if header.wall_ns > 0 else log_time_ns), (float(header.stamp) if header.stamp > 0 else 0.0)
 
     def _set_time(self, msg: Any, log_time_ns: int) -> None:
-        header = getattr(msg, "header", None)
-        wall = header.wall_ns if header is not None and header.wall_ns > 0 else log_time_ns
+        """The stream's time for the row-by-row logs of rare messages."""
+        wall, sim = self._t
+        self.rec.reset_time()
         self.rec.set_time(TIMELINE_WALL, timestamp=np.datetime64(int(wall), "ns"))
-        if header is not None and header.stamp > 0:
-            self.rec.set_time(TIMELINE_SIM, duration=float(header.stamp))
+        if sim > 0:
+            self.rec.set_time(TIMELINE_SIM, duration=sim)
 
     def _due(self, key: str, t_ns: int) -> bool:
         if self.min_dt <= 0:
@@ -208,27 +298,33 @@ class WorldLogger:
                 return self.log_joints(p.subject, msg, due=self._due(key, t))
             if isinstance(msg, Pose):
                 return self.log_pose(p.subject, msg, due=self._due(key, t), received_ns=t)
-            if isinstance(msg, Scan) and p.leaf == "sonar":
-                return self.log_sonar(p.subject, msg) if self._due(key, t) else True
             if isinstance(msg, Scan):
-                return self.log_scan(p.subject, msg) if self._due(key, t) else True
+                return self.log_scan(p.subject, msg, sonar=p.leaf == "sonar") if self._due(key, t) else True
             if isinstance(msg, Path):
+                self._set_time(msg, t)
                 return self.log_path(p.subject, msg)
         elif p.category == "cmd" and p.leaf == "path":
             body = getattr(msg, "body", None)
             if isinstance(body, Path):
+                self._set_time(msg, t)
                 return self.log_path(p.subject, body)
         elif p.category == "object" and isinstance(msg, Pose):
-            return self.log_object(p.subject, msg) if self._due(key, t) else True
+            if not self._due(key, t):
+                return True
+            self._set_time(msg, t)
+            return self.log_object(p.subject, msg)
         elif p.category == "map" and isinstance(msg, OccupancyGrid):
+            self._set_time(msg, t)
             return self.log_map(p.subject, msg)
         elif p.category == "own" and isinstance(msg, OwnershipRecord):
+            self._set_time(msg, t)
             return self.log_ownership(msg)
         elif p.category == "event" and isinstance(msg, Event):
+            self._set_time(msg, t)
             return self.log_event("/".join((p.subject, *p.rest[1:])) if p.rest else p.subject, msg, any_login=p.subject == keys.DECODE)
         return False
 
-    # ------------------------------------------------------------------ robots
+    # ------------------------------------------------------------------ robots: filing
 
     def _robot(self, rid: str, hint: dict) -> RobotDrawing:
         info = self.robots.get(rid)
@@ -237,31 +333,224 @@ class WorldLogger:
             if not info.color or info.color == RobotDrawing.color:
                 info.color = ROBOT_COLORS[len(self.robots) % len(ROBOT_COLORS)]
             self.robots[rid] = info
+            self._static_robot(rid, info)
         return info
 
+    def _chain(self, info: RobotDrawing) -> ArmChain | None:
+        if info.arm is None:
+            return None
+        chain = self._chains.get(id(info.arm))
+        if chain is None:
+            chain = self._chains[id(info.arm)] = ArmChain(info.arm)
+        return chain if chain.supported else None
+
     def log_joints(self, rid: str, js: JointState, *, due: bool = True) -> bool:
+        """File a JointState: an arm's joint plots and 3D pose, or a base's wheel angles (their own plot)."""
         info = self._robot(rid, {"joint_names": js.names})
         if not due:
             return True
-        for name, q, dq in zip(js.names, js.q, js.dq):
-            self.rec.log(f"plots/joints/{rid}/{name}", rr.Scalars(math.degrees(float(q))))
-            self.rec.log(f"plots/joint_speed/{rid}/{name}", rr.Scalars(math.degrees(float(dq))))
-        arm = info.arm
-        if arm is None or len(js.q) != len(arm.joint_names):
-            return True
-        q = np.asarray(js.q, dtype=float)
-        origins = [(_compose(info.base, pl))[0] for pl in arm.fk(q)]
-        self.rec.log(f"world/robots/{rid}/skeleton", rr.LineStrips3D([origins], radii=0.006, colors=[info.color]))
-        self.rec.log(f"world/robots/{rid}/joints", rr.Points3D(origins, radii=0.012, colors=[(60, 60, 60)]))
-        for shape, placement in arm.shape_placements(q):
-            path = f"world/robots/{rid}/links/{rr.escape_entity_path_part(shape.name)}"
-            t, quat = _compose(info.base, placement)
-            self.rec.log(path, rr.Transform3D(translation=t, quaternion=rr.Quaternion(xyzw=quat)))
-            if path not in self._static_done:
-                self._static_done.add(path)
-                self._log_shape(path, shape)
-        self._label(rid, origins[0])
+        rows = self._joints.get(rid)
+        if rows is None:
+            rows = self._joints[rid] = _Rows()
+        elif rows.items and len(rows.items[0][0]) != len(js.names):
+            self._flush_joints(rid, rows)  # the robot changed shape: draw what came before on its own
+        rows.add(*self._t, (tuple(js.names), js.q, js.dq))
+        self.pending += 1
         return True
+
+    def log_pose(self, rid: str, pose: Pose, *, due: bool = True, received_ns: int = 0) -> bool:
+        """File a pose: an arm's flange frame, or a mobile base (drawn where it is by now: paper Eq. 8)."""
+        known = self.robots.get(rid)
+        info = self._robot(rid, {"mobile": True} if not known or not known.arm else {})
+        if info.arm is None:
+            self.poses[rid] = pose
+        if not due:
+            return True
+        store = self._flanges if info.arm is not None else self._bases
+        rows = store.get(rid)
+        if rows is None:
+            rows = store[rid] = _Rows()
+        rows.add(*self._t, (pose, received_ns))
+        self.pending += 1
+        return True
+
+    def log_scan(self, rid: str, scan: Scan, *, sonar: bool = False) -> bool:
+        """File a LIDAR scan (or the ultrasonic ring's): its hits and rays in the world frame, from the base's
+        latest pose."""
+        info = self._robot(rid, {"mobile": True})
+        if sonar:
+            cx, cy, h, radius = info.sonar or (0.0, 0.0, 0.12, 0.26)
+            # ranges are measured from the rim: from the ring's centre they are `radius` longer
+            ranges = np.where(np.isfinite(scan.ranges), scan.ranges + radius, np.inf)
+            centred = Scan.from_ranges(ranges, angle_min=scan.angle_min, angle_increment=scan.angle_increment,
+                                       range_max=scan.range_max + radius, header=scan.header)
+            origin, pts, hit = scan_world_points(centred, self.poses.get(rid), (cx, cy, h))
+            ends = pts[hit]
+        else:
+            origin, pts, hit = scan_world_points(scan, self.poses.get(rid), info.lidar_offset)
+            ends = pts[:: max(1, len(pts) // 60)]
+        rays = np.empty((len(ends), 2, 3))
+        rays[:, 0] = origin
+        rays[:, 1] = ends
+        name = "sonar" if sonar else "scan"
+        rows = self._scans.get((rid, name))
+        if rows is None:
+            rows = self._scans[(rid, name)] = _Rows()
+        rows.add(*self._t, (pts[hit], rays))
+        self.pending += 1
+        return True
+
+    # ------------------------------------------------------------------ robots: drawing
+
+    def flush(self) -> int:
+        """Draw everything filed since the last flush; returns how many rows went out."""
+        n = self.pending
+        if not n:
+            return 0
+        for rid, rows in self._joints.items():
+            if rows.items:
+                self._flush_joints(rid, rows)
+        for rid, rows in self._bases.items():
+            if rows.items:
+                self._flush_base(rid, rows)
+        for rid, rows in self._flanges.items():
+            if rows.items:
+                self._flush_flange(rid, rows)
+        for (rid, name), rows in self._scans.items():
+            if rows.items:
+                self._flush_scan(rid, name, rows)
+        for label, rows in self._rates.items():
+            if rows.items:
+                send(self.rec, f"plots/rates/{label}", rows.times(), [scalars(SCALARS, np.asarray(rows.items, dtype=float))])
+                _clear(rows)
+        self.pending = 0
+        return n
+
+    def _once(self, key: str) -> bool:
+        """True the first time ``key`` is asked: static parts are logged once."""
+        if key in self._static_done:
+            return False
+        self._static_done.add(key)
+        return True
+
+    def _static_robot(self, rid: str, info: RobotDrawing) -> None:
+        """What never moves: an arm's base, its link shapes below their joints, the skeleton's style; a base's body,
+        heading and label; done again if a robot's kind is learnt late."""
+        root = f"world/robots/{rid}"
+        chain = self._chain(info)
+        if chain is not None and self._once(f"{rid}/arm"):
+            base = info.base
+            links = f"{root}/links"
+            if base is not None:
+                self.rec.log(links, rr.Transform3D(translation=base.translation, quaternion=rr.Quaternion(xyzw=base.quat_xyzw)), static=True)
+            for shape, joint, pl in chain.shapes():
+                path = f"{chain.path(links, joint - 1)}/{rr.escape_entity_path_part(shape.name)}"
+                self.rec.log(path, rr.Transform3D(translation=pl.translation, quaternion=rr.Quaternion(xyzw=pl.quat_xyzw)), static=True)
+                self._log_shape(path, shape)
+            self.rec.log(f"{root}/skeleton", rr.LineStrips3D.from_fields(radii=0.006, colors=[info.color]),
+                         rr.Points3D.from_fields(radii=0.012, colors=[(60, 60, 60)]), static=True)
+            at = base.translation if base is not None else np.zeros(3)
+            self._label(rid, f"{root}/label", np.asarray(at, dtype=float) + [0.0, 0.0, 0.05])
+        if info.kind == "mobile" and self._once(f"{rid}/base"):
+            path = f"{root}/base"
+            r, h = info.radius, info.height
+            self.rec.log(f"{path}/body", rr.Cylinders3D(lengths=[h], radii=[r], centers=[[0, 0, h / 2]], colors=[info.color], fill_mode="solid"), static=True)
+            self.rec.log(f"{path}/heading", rr.Arrows3D(vectors=[[r * 1.4, 0, 0]], origins=[[0, 0, h + 0.02]], colors=[(20, 20, 20)]), static=True)
+            self.rec.log(f"{root}/scan", rr.Points3D.from_fields(radii=0.02, colors=[(230, 40, 40)]),
+                         rr.LineStrips3D.from_fields(radii=0.002, colors=[(240, 150, 150)]), static=True)
+            self.rec.log(f"{root}/sonar", rr.Points3D.from_fields(radii=0.03, colors=[(40, 170, 230)]),
+                         rr.LineStrips3D.from_fields(radii=0.003, colors=[(120, 200, 240)]), static=True)
+            self.rec.log(f"plots/speed/{rid}", rr.SeriesLines(names=["v (m/s)", "omega (rad/s)"]), static=True)
+            self._label(rid, f"{path}/label", np.array([0.0, 0.0, h + 0.25]))
+
+    def _flush_joints(self, rid: str, rows: _Rows) -> None:
+        info = self.robots[rid]
+        names = rows.items[0][0]
+        q = np.array([it[1] for it in rows.items], dtype=float)
+        times = rows.times()
+        n, k = q.shape
+        plot = "wheels" if info.kind == "mobile" else "joints"
+        if self._once(f"plots/{plot}/{rid}"):
+            self.rec.log(f"plots/{plot}/{rid}", rr.SeriesLines(names=list(names)), static=True)
+        send(self.rec, f"plots/{plot}/{rid}", times, [scalars(SCALARS, np.degrees(q))])
+        if plot == "joints":
+            dq = np.array([it[2] for it in rows.items], dtype=float)
+            if self._once(f"plots/joint_speed/{rid}"):
+                self.rec.log(f"plots/joint_speed/{rid}", rr.SeriesLines(names=list(names)), static=True)
+            send(self.rec, f"plots/joint_speed/{rid}", times, [scalars(SCALARS, np.degrees(dq))])
+        chain = self._chain(info)
+        if chain is not None and k == chain.nq:
+            root = f"world/robots/{rid}"
+            local = ts, qs = chain.local(q)
+            for j in range(len(chain.joints)):
+                send(self.rec, chain.path(f"{root}/links", j), times, transforms(ts[:, j], qs[:, j]))
+            origins = chain.origins(q, info.base, local)  # the skeleton: a line strip through the joint origins, and points at them
+            send(self.rec, f"{root}/skeleton", times, [column(STRIPS3, strips(origins)),
+                                                      column(POSITIONS3, vectors(origins.reshape(-1, 3), 3), np.full(n, origins.shape[1]))])
+        elif info.arm is not None and k == len(info.arm.joint_names):
+            self._draw_arm_rows(rid, info, rows)  # a URDF joint kind the chain does not know: Pinocchio per row
+        _clear(rows)
+
+    def _draw_arm_rows(self, rid: str, info: RobotDrawing, rows: _Rows) -> None:
+        arm = info.arm
+        assert arm is not None
+        for wall, sim, (_names, q, _dq) in zip(rows.wall, rows.sim, rows.items):
+            self.rec.set_time(TIMELINE_WALL, timestamp=np.datetime64(int(wall), "ns"))
+            if sim > 0:
+                self.rec.set_time(TIMELINE_SIM, duration=sim)
+            q = np.asarray(q, dtype=float)
+            origins = [(_compose(info.base, pl))[0] for pl in arm.fk(q)]
+            self.rec.log(f"world/robots/{rid}/skeleton", rr.LineStrips3D([origins], radii=0.006, colors=[info.color]))
+            for shape, placement in arm.shape_placements(q):
+                path = f"world/robots/{rid}/links/{rr.escape_entity_path_part(shape.name)}"
+                t, quat = _compose(info.base, placement)
+                self.rec.log(path, rr.Transform3D(translation=t, quaternion=rr.Quaternion(xyzw=quat)))
+                if self._once(path):
+                    self._log_shape(path, shape)
+
+    def _flush_base(self, rid: str, rows: _Rows) -> None:
+        info = self.robots[rid]
+        poses = [it[0] for it in rows.items]
+        pos = np.array([p.position for p in poses], dtype=float)
+        lin = np.array([p.linear for p in poses], dtype=float)
+        quat = np.array([p.quaternion for p in poses], dtype=float)[:, [1, 2, 3, 0]]  # w, x, y, z -> x, y, z, w
+        received = np.array([it[1] for it in rows.items], dtype=np.int64)
+        times = rows.times()
+        shown = pos
+        if self.clock is not None and (received > 0).all():
+            # Eq. 8: moved on by velocity x the time since arrival (capped), as of this drawing
+            age = np.clip((self.clock() - received) * 1e-9, 0.0, EXTRAPOLATION_CAP_S)
+            shown = pos + lin * age[:, None]
+            send(self.rec, f"plots/age/{rid}", times, [scalars(SCALARS, age * 1e3)])
+        send(self.rec, f"world/robots/{rid}/base", times, transforms(shown, quat))
+        speed = np.stack([np.hypot(lin[:, 0], lin[:, 1]), np.array([p.angular[2] for p in poses], dtype=float)], axis=1)
+        send(self.rec, f"plots/speed/{rid}", times, [scalars(SCALARS, speed)])
+        for name, grid in self.grids.items():
+            entity = f"map/{name}/robots/{rid}"
+            if self._once(entity):
+                self.rec.log(entity, rr.Points2D.from_fields(radii=max(2.0, info.radius / grid.resolution), colors=[info.color], labels=[rid]), static=True)
+            send(self.rec, entity, times, [column(POSITIONS2, vectors(world_to_map_pixels(grid, pos[:, :2]), 2))])
+        _clear(rows)
+
+    def _flush_flange(self, rid: str, rows: _Rows) -> None:
+        poses = [it[0] for it in rows.items]
+        pos = np.array([p.position for p in poses], dtype=float)
+        quat = np.array([p.quaternion for p in poses], dtype=float)[:, [1, 2, 3, 0]]
+        path = f"world/robots/{rid}/flange"
+        if self._once(path):
+            self.rec.log(f"{path}/axes", rr.TransformAxes3D(0.05), static=True)
+        send(self.rec, path, rows.times(), transforms(pos, quat))
+        _clear(rows)
+
+    def _flush_scan(self, rid: str, name: str, rows: _Rows) -> None:
+        times = rows.times()
+        hits = [it[0] for it in rows.items]
+        rays = [it[1] for it in rows.items]
+        # hits as points and rays as lines, one entity
+        send(self.rec, f"world/robots/{rid}/{name}", times,
+             [column(POSITIONS3, vectors(np.concatenate(hits).reshape(-1, 3), 3), [len(h) for h in hits]),
+              column(STRIPS3, strips(np.concatenate(rays).reshape(-1, 2, 3)), [len(r) for r in rays])])
+        _clear(rows)
 
     def _log_shape(self, path: str, shape) -> None:
         color = [shape.color]
@@ -282,69 +571,6 @@ class WorldLogger:
         else:
             return
         self.rec.log(f"{path}/shape", arch, static=True)
-
-    def log_pose(self, rid: str, pose: Pose, *, due: bool = True, received_ns: int = 0) -> bool:
-        """A base's pose is drawn where it is by now: moved on by velocity x the time since it arrived
-        (paper Eq. 8, capped; local clock only)."""
-        info = self._robot(rid, {"mobile": True} if not self.robots.get(rid) or not self.robots[rid].arm else {})
-        if info.arm is not None:
-            # An arm's pose key carries its flange pose: draw it as a frame marker.
-            if due:
-                self.rec.log(
-                    f"world/robots/{rid}/flange",
-                    rr.Transform3D(translation=pose.position, quaternion=rr.Quaternion(xyzw=_quat_xyzw(pose.quaternion))),
-                )
-                if f"{rid}/flange" not in self._static_done:
-                    self._static_done.add(f"{rid}/flange")
-                    self.rec.log(f"world/robots/{rid}/flange/axes", rr.TransformAxes3D(0.05), static=True)
-            return True
-        self.poses[rid] = pose
-        if not due:
-            return True
-        path = f"world/robots/{rid}/base"
-        now_ns = self.clock() if self.clock is not None and received_ns > 0 else 0
-        shown, age = shown_position(pose, received_ns, now_ns)
-        if age is not None:
-            self.rec.log(f"plots/age/{rid}", rr.Scalars(age * 1e3))
-        self.rec.log(path, rr.Transform3D(translation=shown, quaternion=rr.Quaternion(xyzw=_quat_xyzw(pose.quaternion))))
-        if path not in self._static_done:
-            self._static_done.add(path)
-            r, h = info.radius, info.height
-            self.rec.log(
-                f"{path}/body",
-                rr.Cylinders3D(lengths=[h], radii=[r], centers=[[0, 0, h / 2]], colors=[info.color], fill_mode="solid"),
-                static=True,
-            )
-            self.rec.log(f"{path}/heading", rr.Arrows3D(vectors=[[r * 1.4, 0, 0]], origins=[[0, 0, h + 0.02]], colors=[(20, 20, 20)]), static=True)
-        self.rec.log(f"plots/speed/{rid}/v", rr.Scalars(float(np.hypot(pose.linear[0], pose.linear[1]))))
-        self.rec.log(f"plots/speed/{rid}/omega", rr.Scalars(float(pose.angular[2])))
-        for name, grid in self.grids.items():
-            uv = world_to_map_pixels(grid, pose.position[:2])
-            self.rec.log(f"map/{name}/robots/{rid}", rr.Points2D(uv, radii=max(2.0, info.radius / grid.resolution), colors=[info.color], labels=[rid]))
-        self._label(rid, np.array([pose.position[0], pose.position[1], info.height + 0.25]))
-        return True
-
-    def log_scan(self, rid: str, scan: Scan) -> bool:
-        info = self._robot(rid, {"mobile": True})
-        origin, pts, hit = scan_world_points(scan, self.poses.get(rid), info.lidar_offset)
-        self.rec.log(f"world/robots/{rid}/scan", rr.Points3D(pts[hit], radii=0.02, colors=[(230, 40, 40)]))
-        step = max(1, len(pts) // 60)
-        rays = [[origin, p] for p in pts[::step]]
-        self.rec.log(f"world/robots/{rid}/scan/rays", rr.LineStrips3D(rays, radii=0.002, colors=[(240, 150, 150)]))
-        return True
-
-    def log_sonar(self, rid: str, scan: Scan) -> bool:
-        """The ultrasonic ring: each sensor's echo as a point, rays from the ring's rim."""
-        info = self._robot(rid, {"mobile": True})
-        cx, cy, h, radius = info.sonar or (0.0, 0.0, 0.12, 0.26)
-        # ranges are measured from the rim: from the ring's centre they are `radius` longer
-        ranges = np.where(np.isfinite(scan.ranges), scan.ranges + radius, np.inf)
-        centred = Scan.from_ranges(ranges, angle_min=scan.angle_min, angle_increment=scan.angle_increment,
-                                   range_max=scan.range_max + radius, header=scan.header)
-        origin, pts, hit = scan_world_points(centred, self.poses.get(rid), (cx, cy, h))
-        self.rec.log(f"world/robots/{rid}/sonar", rr.Points3D(pts[hit], radii=0.03, colors=[(40, 170, 230)]))
-        self.rec.log(f"world/robots/{rid}/sonar/rays", rr.LineStrips3D([[origin, q] for q in pts[hit]], radii=0.003, colors=[(120, 200, 240)]))
-        return True
 
     def log_path(self, rid: str, path: Path) -> bool:
         info = self._robot(rid, {})
@@ -374,6 +600,7 @@ class WorldLogger:
 
     def log_map(self, name: str, grid: OccupancyGrid) -> bool:
         self.grids[name] = grid
+        self._static_done -= {k for k in self._static_done if k.startswith(f"map/{name}/robots/")}  # its scale may differ
         self.rec.log(f"map/{name}", rr.Image(grid_rgb(grid)))
         for rid, path in self.paths.items():
             if len(path):
@@ -383,16 +610,26 @@ class WorldLogger:
 
     # ------------------------------------------------------------------ ownership and events
 
-    def _label(self, rid: str, at: np.ndarray) -> None:
+    def _label(self, rid: str, entity: str | None = None, at: np.ndarray | None = None) -> None:
+        """The robot's ownership label, at the time of the message being filed: drawn once where the robot
+        is known (an arm's base, above a base's body: it moves with the base) and again when its owner changes."""
+        if entity is not None and at is not None:
+            self._labels[rid] = (entity, at)
+            self.rec.log(entity, rr.Points3D.from_fields(radii=0.005, colors=[(0, 0, 0)]), static=True)
+        where = self._labels.get(rid)
+        if where is None:
+            return
         rec = self.owners.get(rid)
         text = f"{rid}: " + (f"{rec.owner} (epoch {rec.epoch})" if rec and rec.owner else "free")
         if rec and rec.queue:
             text += f", waiting {', '.join(rec.queue)}"
-        self.rec.log(f"world/robots/{rid}/label", rr.Points3D([at], radii=0.005, labels=[text], colors=[(0, 0, 0)]))
+        send(self.rec, where[0], time_columns([self._t[0]], [self._t[1]]), rr.Points3D.columns(positions=[where[1]], labels=[text]))
 
     def log_ownership(self, rec: OwnershipRecord) -> bool:
         before = self.owners.get(rec.object)
         self.owners[rec.object] = rec
+        if before is None or before.owner != rec.owner or before.epoch != rec.epoch or before.queue != rec.queue:
+            self._label(rec.object)
         if before is None or before.owner != rec.owner or before.epoch != rec.epoch:
             who = rec.owner or "nobody"
             self.rec.log("events", rr.TextLog(f"{rec.object}: owned by {who} (epoch {rec.epoch}, {rec.state})", level="INFO"))
@@ -429,5 +666,7 @@ class WorldLogger:
         )
 
     def log_all(self, items: Iterable[tuple[str, Any, int]]) -> int:
-        """Log a sequence of (key, message, log_time_ns); returns how many were drawn."""
-        return sum(1 for key, msg, t in items if self.log(key, msg, t))
+        """Log a sequence of (key, message, log_time_ns) and draw it; returns how many were drawn."""
+        n = sum(1 for key, msg, t in items if self.log(key, msg, t))
+        self.flush()
+        return n

@@ -1,28 +1,33 @@
 """The Rerun viewer peer: subscribe to a world, log everything it shows to Rerun.
 
-Zenoh callbacks only enqueue ``(key, message, receive time)``; one thread
-drains the queue into a :class:`~user_peer.rerun_log.WorldLogger`, so the
-logger needs no locks and a slow sink never stalls Zenoh. When the queue is
-full the oldest sample is dropped and counted: a viewer must never slow the
-world down.
+Zenoh callbacks only append ``(message, receive time)`` to their stream's queue (one per key); one
+thread, once per window (``window_s``, 0.1 s), takes everything queued, in arrival order, files it in a
+:class:`~user_peer.rerun_log.WorldLogger` and flushes it: one ``send_columns`` per entity and window. So
+the logger needs no locks and a slow sink never stalls Zenoh.
+
+Never behind: a sample that waited longer than ``max_lag_s`` (0.5 s) when its window is drawn is dropped,
+oldest first, per stream, and counted, but never a stream's newest sample (a robot's last state is
+always drawn), so the view stays within about ``max_lag_s`` of the world however slow the drawing.
+The viewer plots its own lag (``plots/viewer/lag_ms``: how long the oldest sample of a window waited)
+and drops (``plots/viewer/dropped``), and says so in the event log when it starts dropping.
 """
 
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import rerun as rr
 
 from fabric import keys
 from fabric.config import FabricConfig
 from fabric.exit import at_exit
-from fabric.limits import put_dropping_oldest
 from fabric.interfaces import ServiceError, WorldInfo
 from fabric.session import Fabric
 from user_peer import services
@@ -48,6 +53,8 @@ class ViewerOptions:
     grpc_port: int = 9876
     save: Path | None = None
     max_hz: float = 30.0
+    window_s: float = 0.1  # drawing window: what arrived in it goes out as one chunk per entity
+    max_lag_s: float = 0.5  # a sample older than this when drawn is dropped (never a stream's newest)
 
 
 def default_advertise() -> str:
@@ -129,8 +136,15 @@ class Viewer:
         self.opts = opts
         self.fab = Fabric(config, kind="viewer", peer_id=peer_id)
         self.rec = make_recording(opts)
-        self.queue: queue.Queue[tuple[str, Any, int]] = queue.Queue(maxsize=queue_size)
-        self.dropped = 0
+        # one queue per key: dropping happens per stream, so a busy stream never pushes out another's samples
+        self.queue_size = queue_size
+        self._streams: dict[str, deque[tuple[Any, int]]] = {}
+        self._lock = threading.Lock()
+        self.dropped = 0  # samples dropped, every stream together
+        self.dropped_per_stream: dict[str, int] = {}
+        self.received = 0
+        self.lags_ms: deque[float] = deque(maxlen=10_000)  # per window: how long its oldest sample waited
+        self._warned_ns = 0
         self.catalog = RobotCatalog(None)
         # the clock that stamps arrivals in _enqueue: Eq. 8 ages are measured on it alone
         self.logger = WorldLogger(self.rec, drawing=self.catalog.drawing, max_hz=opts.max_hz, clock=time.time_ns)
@@ -141,7 +155,41 @@ class Viewer:
         self._cancel_exit = at_exit(self.close)
 
     def _enqueue(self, key: str, msg: Any) -> None:
-        self.dropped += put_dropping_oldest(self.queue, (key, msg, time.time_ns()))
+        """Zenoh's callback: file the sample under its key. A stream holding ``queue_size`` samples (the drawing
+        thread stalled) loses its oldest."""
+        item = (msg, time.time_ns())
+        with self._lock:
+            d = self._streams.get(key)
+            if d is None:
+                d = self._streams[key] = deque()
+            if len(d) >= self.queue_size:
+                d.popleft()
+                self._count_drop(key, 1)
+            d.append(item)
+            self.received += 1
+
+    def _count_drop(self, key: str, n: int) -> None:
+        self.dropped += n
+        self.dropped_per_stream[key] = self.dropped_per_stream.get(key, 0) + n
+
+    def take(self, now_ns: int | None = None) -> list[tuple[int, str, Any]]:
+        """Everything queued, as (arrival ns, key, message) in arrival order, less what waited longer than
+        ``max_lag_s`` by ``now_ns``: dropped and counted, except each stream's newest."""
+        now_ns = time.time_ns() if now_ns is None else now_ns
+        oldest_kept = now_ns - int(self.opts.max_lag_s * 1e9)
+        out: list[tuple[int, str, Any]] = []
+        with self._lock:
+            batches = [(key, list(d)) for key, d in self._streams.items() if d]
+            for d in self._streams.values():
+                d.clear()
+            for key, items in batches:
+                keep = [it for it in items[:-1] if it[1] >= oldest_kept]
+                if len(keep) < len(items) - 1:
+                    self._count_drop(key, len(items) - 1 - len(keep))
+                keep.append(items[-1])  # the stream's latest state is always drawn
+                out.extend((t, key, msg) for msg, t in keep)
+        out.sort(key=lambda x: x[0])
+        return out
 
     def start(self) -> None:
         """Learn the world, subscribe, and ask for the state a late joiner missed (ownership, maps)."""
@@ -174,35 +222,68 @@ class Viewer:
         except Exception:
             log.debug("could not log the world's state", exc_info=True)
 
-    def drain(self, until: float) -> int:
-        """Log queued samples until the monotonic deadline ``until``; returns how many."""
+    def draw(self) -> int:
+        """One window: file everything queued (less what is too old) and flush it; returns how many were logged."""
+        dropped_before = self.dropped
+        items = self.take()
         n = 0
-        while True:
-            left = until - time.monotonic()
-            if left <= 0:
-                return n
-            try:
-                key, msg, t = self.queue.get(timeout=min(left, 0.1))
-            except queue.Empty:
-                continue
+        for t, key, msg in items:
             try:
                 self.logger.log(key, msg, t)
             except Exception:
                 log.exception("could not log %s", key)
             n += 1
+        try:
+            self.logger.flush()
+        except Exception:
+            log.exception("could not draw a window")
+        if items:
+            self._show_health(items[0][0], self.dropped - dropped_before)
+        return n
+
+    def _show_health(self, oldest_ns: int, dropped_now: int) -> None:
+        """Plot how long this window's oldest sample waited (the view's lag) and the drops; a line in the event
+        log when dropping starts (at most one per 5 s)."""
+        now = time.time_ns()
+        lag_ms = (now - oldest_ns) / 1e6
+        self.lags_ms.append(lag_ms)
+        try:
+            self.rec.reset_time()
+            self.rec.set_time("wall_time", timestamp=np.datetime64(now, "ns"))
+            self.rec.log("plots/viewer/lag_ms", rr.Scalars(lag_ms))
+            self.rec.log("plots/viewer/dropped", rr.Scalars(float(self.dropped)))
+            if dropped_now and now - self._warned_ns > 5e9:
+                self._warned_ns = now
+                self.rec.log("events", rr.TextLog(
+                    f"viewer behind: dropped {self.dropped} samples so far that waited over {self.opts.max_lag_s:g} s "
+                    "(the oldest of each stream; every robot's latest state is drawn)", level="WARN"))
+        except Exception:
+            log.debug("could not log the viewer's health", exc_info=True)
 
     def run(self, stop: threading.Event, duration: float | None = None) -> int:
         self.start()
         t_end = time.monotonic() + duration if duration is not None else None
         n = 0
+        window = max(0.01, self.opts.window_s)
+        next_at = time.monotonic() + window
         while not stop.is_set():
-            until = time.monotonic() + 0.25
+            left = next_at - time.monotonic()
             if t_end is not None:
-                until = min(until, t_end)
-            n += self.drain(until)
+                left = min(left, t_end - time.monotonic())
+            if left > 0:
+                stop.wait(left)
+            n += self.draw()
+            next_at = max(next_at + window, time.monotonic() + window / 4)  # behind: draw again soon, not at once
             if t_end is not None and time.monotonic() >= t_end:
                 break
         return n
+
+    def lag_summary(self) -> str:
+        """'lag p50 X ms, max Y ms' over the windows drawn ('' before any)."""
+        if not self.lags_ms:
+            return ""
+        arr = np.asarray(self.lags_ms)
+        return f"lag p50 {np.percentile(arr, 50):.0f} ms, max {arr.max():.0f} ms"
 
     def close(self) -> None:
         if self._closed:
@@ -211,15 +292,10 @@ class Viewer:
         self._cancel_exit()
         self.fab.close()
         # Whatever is already queued still goes to the sinks.
-        while True:
-            try:
-                key, msg, t = self.queue.get_nowait()
-            except queue.Empty:
-                break
-            try:
-                self.logger.log(key, msg, t)
-            except Exception:
-                pass
+        try:
+            self.draw()
+        except Exception:
+            log.debug("could not draw the last window", exc_info=True)
         self.rec.flush(timeout_sec=10.0)
         self.rec.disconnect()
 

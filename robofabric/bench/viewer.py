@@ -1,12 +1,23 @@
-"""``robofabric bench viewer``: what drawing one message costs the Rerun viewer, per message type.
+"""``robofabric bench viewer``: what drawing costs the Rerun viewer, per message and for a class world at full rate.
 
 In this process, no network: :class:`user_peer.rerun_log.WorldLogger` (the code behind ``robofabric view``
-and ``export``) logs synthetic messages of the ``combined`` scene's robots to a Rerun recording that
-streams into an ``.rrd`` file, with no thinning (``max_hz=0``), so every message is drawn. Per type, the
-wall time of each ``WorldLogger.log`` call: a Meca500 JointState (plots, Pinocchio FK, link transforms,
-skeleton), a mobile base's Pose, a 240-ray Scan (hits and rays in the world frame) and a 400 x 400
-OccupancyGrid (an image). The messages change every call (joints sweep, the base drives, ranges vary), so
-nothing is served from a cache that a live stream would miss.
+and ``export``) draws synthetic messages of the ``combined`` scene's robot types into an ``.rrd`` file,
+with no thinning (``max_hz=0``), so every message is drawn. It is flushed once per 0.1 s of stream
+time, as the live viewer does (``user_peer.viewer``: the messages of a window are drawn as columns), so
+a message's cost is its ``log`` call plus its share of the flushes and of Rerun's own threads (the
+process's CPU time over the run, the file written included).
+
+1. Per type: a Meca500 JointState (plots, the arm's joint transforms, skeleton), a base's Pose, its wheels'
+   JointState, a 240-ray Scan (hits and rays in the world frame) and a 400 x 400 OccupancyGrid (an image),
+   each stream alone at its sim rate. The messages change every call (joints sweep, the base drives,
+   ranges vary), so nothing is served from a cache that a live stream would miss.
+2. A class world: ``--arms`` arms and ``--bases`` bases at the sim's default rates (joints 100 Hz, an arm's
+   flange pose 100 Hz, a base's pose 50 Hz, wheels 100 Hz, LIDAR and sonar 20 Hz) for ``--seconds`` of world
+   time, interleaved as they arrive: the CPU seconds per second of world time are the share of one core
+   the viewer needs to draw that world at full rate.
+
+For a before/after comparison the same command runs against another checkout's ``user_peer`` (put it first
+on ``PYTHONPATH``): a WorldLogger without ``flush`` draws row by row in ``log``, and is measured the same way.
 """
 
 from __future__ import annotations
@@ -15,106 +26,184 @@ import math
 import tempfile
 import time
 from pathlib import Path
-from typing import Annotated, Any, Callable, Optional
+from typing import Annotated, Any, Callable, Iterator, Optional
 
 import numpy as np
 import typer
 
-from robofabric.bench.common import append
+from robofabric.bench.common import append, machine
 
-__all__ = ["measure", "format_table", "command"]
+__all__ = ["measure", "measure_world", "format_table", "command"]
 
 WORLD = "benchview"
+WINDOW_NS = 100_000_000  # the live viewer's drawing window
+RATES = {"joints": 100.0, "flange": 100.0, "pose": 50.0, "wheels": 100.0, "scan": 20.0, "sonar": 20.0, "grid": 2.0}
 
 
-def _messages(n: int, grids: int, seed: int) -> dict[str, list[tuple[str, Any]]]:
-    """``n`` messages per stream type (``grids`` grids), as (key, message), built before any timing."""
-    import robots
-    from fabric import keys
-    from fabric.interfaces import Header, JointState, OccupancyGrid, Pose, Scan
+class _Streams:
+    """Synthetic messages of the scene's robot types, built on demand (their cost is not timed)."""
 
-    rng = np.random.default_rng(seed)
-    arm = robots.load("meca500")
-    lo, hi = np.asarray(arm.lower), np.asarray(arm.upper)
-    out: dict[str, list[tuple[str, Any]]] = {"JointState": [], "Pose": [], "Scan": [], "OccupancyGrid": []}
-    for i in range(n):
-        h = Header(stamp=i * 0.01, wall_ns=time.time_ns(), seq=i, source="bench")
-        s = 0.5 + 0.5 * math.sin(i / 50)
-        q = lo + (hi - lo) * s * 0.8 + 0.1 * (hi - lo)
-        out["JointState"].append((keys.robot_joints(WORLD, "arm1"), JointState(arm.joint_names, q, np.full(arm.dof, 0.1), h)))
-        yaw = i * 0.01
-        pose = Pose(np.array([math.cos(yaw), math.sin(yaw), 0.0]), np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]),
-                    np.array([0.3, 0.0, 0.0]), np.array([0.0, 0.0, 0.3]), header=h)
-        out["Pose"].append((keys.robot_pose(WORLD, "base1"), pose))
-        ranges = rng.uniform(0.2, 14.0, 240)  # some beyond 12 m: misses, as in a real room
-        out["Scan"].append((keys.robot_scan(WORLD, "base1"),
-                            Scan.from_ranges(ranges, angle_min=-1.178, angle_increment=2.356 / 239, range_max=12.0, header=h)))
-    for i in range(grids):
-        cells = np.full((400, 400), 255, np.uint8)
-        cells[: 40 + i % 300, :] = 0
-        cells[rng.integers(0, 400, 2000), rng.integers(0, 400, 2000)] = 100
-        out["OccupancyGrid"].append((keys.map_key(WORLD, "map"), OccupancyGrid(0.05, np.array([-10.0, -10.0, 0.0]), cells)))
-    return out
+    def __init__(self, seed: int) -> None:
+        import robots
+
+        self.rng = np.random.default_rng(seed)
+        self.arm = robots.load("meca500")
+        self.lo, self.hi = np.asarray(self.arm.lower), np.asarray(self.arm.upper)
+        self.wheels = robots.load("reeman").joint_names
+
+    def make(self, kind: str, rid: str, i: int, t_ns: int) -> tuple[str, Any]:
+        from fabric import keys
+        from fabric.interfaces import Header, JointState, OccupancyGrid, Pose, Scan
+
+        h = Header(stamp=t_ns * 1e-9 + 1e-3, wall_ns=1_700_000_000_000_000_000 + t_ns, seq=i, source="bench")
+        phase = (hash(rid) % 100) / 10
+        if kind == "joints":
+            s = 0.5 + 0.5 * math.sin(i / 50 + phase)
+            q = self.lo + (self.hi - self.lo) * (s * 0.8 + 0.1)
+            return keys.robot_joints(WORLD, rid), JointState(self.arm.joint_names, q, np.full(self.arm.dof, 0.1), h)
+        if kind == "flange":
+            return keys.robot_pose(WORLD, rid), Pose(np.array([0.2, 0.1 * math.sin(i / 30), 0.3]), header=h)
+        if kind == "wheels":
+            return keys.robot_joints(WORLD, rid), JointState(self.wheels, np.array([i * 0.05, i * 0.06]), np.array([5.0, 6.0]), h)
+        if kind == "pose":
+            yaw = i * 0.01 + phase
+            return keys.robot_pose(WORLD, rid), Pose(
+                np.array([math.cos(yaw), math.sin(yaw), 0.0]), np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]),
+                np.array([0.3, 0.0, 0.0]), np.array([0.0, 0.0, 0.3]), header=h)
+        if kind == "scan":
+            ranges = self.rng.uniform(0.2, 14.0, 240)  # some beyond 12 m: misses, as in a real room
+            return keys.robot_scan(WORLD, rid), Scan.from_ranges(ranges, angle_min=-1.178, angle_increment=2.356 / 239, range_max=12.0, header=h)
+        if kind == "sonar":
+            return keys.robot_stream(WORLD, rid, "sonar"), Scan.from_ranges(self.rng.uniform(0.1, 3.5, 8), angle_min=0.0,
+                                                                          angle_increment=math.pi / 4, range_max=3.0, header=h)
+        if kind == "grid":
+            cells = np.full((400, 400), 255, np.uint8)
+            cells[: 40 + i % 300, :] = 0
+            cells[self.rng.integers(0, 400, 2000), self.rng.integers(0, 400, 2000)] = 100
+            return keys.map_key(WORLD, "map"), OccupancyGrid(0.05, np.array([-10.0, -10.0, 0.0]), cells, h)
+        raise ValueError(kind)
 
 
-def measure(n: int = 2000, grids: int = 200, seed: int = 0, clock: Callable[[], float] = time.perf_counter) -> dict[str, dict]:
-    """Per message type: messages drawn, median and p99 cost (us) of one ``WorldLogger.log``, messages/s."""
+def _schedule(streams: list[tuple[str, str]], seconds: float) -> Iterator[tuple[int, str, str, int]]:
+    """(time ns, kind, robot, index) of every message of ``streams`` (kind, robot) at their rates, in time order."""
+    events = []
+    for n, (kind, rid) in enumerate(streams):
+        period = int(1e9 / RATES[kind])
+        offset = (n * 7_919_000) % period  # streams do not tick together
+        events.extend((offset + i * period, kind, rid, i) for i in range(int(seconds * RATES[kind])))
+    events.sort()
+    return iter(events)
+
+
+def _run(streams: list[tuple[str, str]], seconds: float, seed: int, tmp: Path,
+         clock: Callable[[], float] = time.process_time) -> dict[str, Any]:
+    """Draw every message of ``streams`` for ``seconds`` of world time; CPU seconds of log calls and flushes."""
     import rerun as rr
 
     from user_peer.catalog import RobotCatalog
     from user_peer.rerun_log import WorldLogger
 
-    msgs = _messages(n, grids, seed)
+    gen = _Streams(seed)
+    msgs = [(t, *gen.make(kind, rid, i, t), kind, rid) for t, kind, rid, i in _schedule(streams, seconds)]
+    rec = rr.RecordingStream("robofabric-bench-viewer")
+    rec.save(str(tmp / f"bench-{len(streams)}-{seed}.rrd"))
+    logger = WorldLogger(rec, drawing=RobotCatalog(scene="combined").drawing, max_hz=0)
+    flush = getattr(logger, "flush", None)  # None: a row-by-row logger (an older checkout) draws in log()
+    # the first message of each stream sets up static geometry and Rerun's caches: drawn, not timed
+    seen: set[tuple[str, str]] = set()
+    first = []
+    for m in msgs:
+        if (m[3], m[4]) not in seen:
+            seen.add((m[3], m[4]))
+            first.append(m)
+    for t, key, msg, _kind in ((m[0], m[1], m[2], m[3]) for m in first):
+        logger.log(key, msg, t)
+    if flush is not None:
+        flush()
+    firsts = {id(m) for m in first}
+    rec.flush()
+    n = 0
+    next_flush = WINDOW_NS
+    c0 = clock()
+    for m in msgs:
+        if id(m) in firsts:
+            continue
+        t, key, msg = m[0], m[1], m[2]
+        if flush is not None and t >= next_flush:
+            flush()
+            next_flush = (t // WINDOW_NS + 1) * WINDOW_NS
+        if not logger.log(key, msg, t):
+            raise RuntimeError(f"the viewer did not draw {key}")
+        n += 1
+    if flush is not None:
+        flush()
+    rec.flush()  # Rerun's own threads (batching, encoding, the file) count too
+    cost = clock() - c0
+    return {"n": n, "cpu_s": cost, "us_per_msg": cost / max(n, 1) * 1e6, "per_s": n / cost if cost > 0 else float("inf")}
+
+
+def measure(n: int = 2000, grids: int = 200, seed: int = 0) -> dict[str, dict]:
+    """Per message type, each stream alone at its rate: messages drawn, mean cost (us, log + share of the
+    flushes), messages per CPU second."""
+    kinds = {"JointState": [("joints", "arm1")], "Pose": [("pose", "base1")], "wheels": [("wheels", "base1")],
+             "Scan": [("scan", "base1")], "OccupancyGrid": [("grid", "map")]}
     result: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(prefix="bench-viewer-") as tmp:
-        rec = rr.RecordingStream("robofabric-bench-viewer")
-        rec.save(str(Path(tmp) / "bench.rrd"))
-        logger = WorldLogger(rec, drawing=RobotCatalog(scene="combined").drawing, max_hz=0)
-        t_ns = 0
-        for kind in ("Pose", "JointState", "Scan", "OccupancyGrid"):  # a pose first: scans are drawn from it
-            key, first = msgs[kind][0]
-            logger.log(key, first, t_ns)  # the first of each type sets up static geometry: not timed
-            times = []
-            for key, msg in msgs[kind][1:]:
-                t_ns += 1_000_000
-                t0 = clock()
-                drawn = logger.log(key, msg, t_ns)
-                times.append(clock() - t0)
-                if not drawn:
-                    raise RuntimeError(f"the viewer did not draw a {kind} on {key}")
-            us = np.asarray(times) * 1e6
-            result[kind] = {"n": len(times), "median_us": float(np.median(us)), "p99_us": float(np.percentile(us, 99)),
-                            "per_s": float(len(us) / (us.sum() / 1e6))}
-        rec.flush()
+        for name, streams in kinds.items():
+            count = grids if name == "OccupancyGrid" else n
+            kind = streams[0][0]
+            result[name] = _run(streams, count / RATES[kind], seed, Path(tmp))
     return result
 
 
+def measure_world(arms: int = 8, bases: int = 8, seconds: float = 20.0, seed: int = 0) -> dict[str, Any]:
+    """A class world at the sim's default rates: messages, CPU s, us per message, share of one core."""
+    streams = [(k, f"arm{i}") for i in range(arms) for k in ("joints", "flange")]
+    streams += [(k, f"base{i}") for i in range(bases) for k in ("pose", "wheels", "scan", "sonar")]
+    with tempfile.TemporaryDirectory(prefix="bench-viewer-") as tmp:
+        r = _run(streams, seconds, seed, Path(tmp))
+    r.update(arms=arms, bases=bases, seconds=seconds, rate=r["n"] / seconds, core=r["cpu_s"] / seconds)
+    return r
+
+
 LABELS = {
-    "JointState": "JointState (Meca500: 6+6 plots, Pinocchio FK, link transforms, skeleton)",
-    "Pose": "Pose (mobile base: transform, plots, label)",
-    "Scan": "Scan (240 rays: hits as points + rays as lines, world frame)",
-    "OccupancyGrid": "OccupancyGrid 400x400 (image)",
+    "JointState": "JointState (Meca500: 6+6 plots, joint transforms, skeleton), 100 Hz",
+    "Pose": "Pose (mobile base: transform, plots, Eq. 8 age), 50 Hz",
+    "wheels": "JointState (a base's two wheels: plot), 100 Hz",
+    "Scan": "Scan (240 rays: hits as points + rays as lines, world frame), 20 Hz",
+    "OccupancyGrid": "OccupancyGrid 400x400 (image), 2 Hz",
 }
 
 
-def format_table(result: dict[str, dict]) -> str:
-    lines = ["| message | drawn | median (us) | p99 (us) | throughput (msg/s) |", "|---|---|---|---|---|"]
+def format_table(result: dict[str, dict], world: dict[str, Any] | None = None) -> str:
+    lines = ["| message | drawn | mean cost (us of process CPU per message) | throughput (msg per CPU s) |", "|---|---|---|---|"]
     for kind, r in result.items():
-        lines.append(f"| {LABELS[kind]} | {r['n']} | {r['median_us']:.0f} | {r['p99_us']:.0f} | {r['per_s']:.0f} |")
+        lines.append(f"| {LABELS[kind]} | {r['n']} | {r['us_per_msg']:.0f} | {r['per_s']:.0f} |")
+    if world is not None:
+        w = world
+        lines += ["", f"Class world, {w['arms']} arms + {w['bases']} bases at full rate ({w['rate']:.0f} msg/s) for {w['seconds']:g} s "
+                      f"of world time: {w['n']} messages drawn in {w['cpu_s']:.2f} CPU s: **{w['us_per_msg']:.0f} us per message, "
+                      f"{w['core'] * 100:.0f} % of one core**."]
     return "\n".join(lines)
 
 
 def command(
-    n: Annotated[int, typer.Option("--n", help="Messages per type (JointState, Pose, Scan).")] = 2000,
+    n: Annotated[int, typer.Option("--n", help="Messages per type (JointState, Pose, wheels, Scan).")] = 2000,
     grids: Annotated[int, typer.Option(help="Occupancy grids (400x400) to draw.")] = 200,
+    arms: Annotated[int, typer.Option(help="Arms in the class world (0 with --bases 0: no world run).")] = 8,
+    bases: Annotated[int, typer.Option(help="Mobile bases in the class world.")] = 8,
+    seconds: Annotated[float, typer.Option(help="World time of the class world (s).")] = 20.0,
     seed: Annotated[int, typer.Option(help="Seed of the synthetic scans and grids.")] = 0,
     out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
 ) -> None:
-    """Cost of drawing one message in the Rerun viewer (WorldLogger.log to an .rrd file), per message type."""
+    """Cost of drawing in the Rerun viewer (WorldLogger to an .rrd file): per message type, and a class world at full rate."""
     from fabric.cli_common import UserError
 
     if n < 2 or grids < 2:
-        raise UserError("--n and --grids must be at least 2 (the first of each type is not timed)")
-    table = format_table(measure(n, grids, seed))
+        raise UserError("--n and --grids must be at least 2 (the first of each stream is not timed)")
+    if arms < 0 or bases < 0 or seconds <= 0:
+        raise UserError("--arms and --bases at least 0, --seconds positive")
+    world = measure_world(arms, bases, seconds, seed) if arms + bases else None
+    table = f"{machine()}\n\n" + format_table(measure(n, grids, seed), world)
     print(table)
     append(out, table)

@@ -57,10 +57,14 @@ def test_export_draws_robots_scans_maps_and_paths(tmp_path):
     assert stats.robots == ("arm1", "base1")
     rows = rows_per_entity(dst)
     links = entities_with_data(dst, "/world/robots/arm1/links/")
-    assert len([e for e in links if not e.endswith("/shape")]) == 7  # meca500's seven visual shapes, each moved by FK
-    assert all(rows[e] == 40 for e in links if not e.endswith("/shape"))
-    assert rows["/world/robots/arm1/skeleton"] == 40
-    assert rows["/world/robots/base1/scan"] == 40
+    joints = [e for e in links if e.rsplit("/", 1)[-1].startswith("joint_")]
+    assert len(joints) == 6 and all(rows[e] == 40 for e in joints)  # one transform per joint and message
+    shapes = [e for e in links if e.endswith("/shape")]
+    assert len(shapes) == 7 and all(rows[e] == 1 for e in shapes)  # meca500's seven visual shapes, logged once
+    assert "/world/robots/arm1/links/joint_1/joint_2/link_2_0/shape" in shapes  # each below its joint
+    assert rows["/world/robots/arm1/skeleton"] == 41  # 40 rows, and its style once
+    assert rows["/plots/joints/arm1"] == 41  # six series in one entity (and their names once)
+    assert rows["/world/robots/base1/scan"] == 41  # 40 scans (hits and rays), and their style once
     assert rows["/world/robots/base1/base"] == 40
     assert rows["/map/base1"] == 1
     assert rows["/world/robots/base1/path"] == 1
@@ -74,7 +78,7 @@ def test_export_cli_and_bad_files(tmp_path):
     ok = subprocess.run(robofabric_cmd("export", str(src), "-o", str(dst), "--scene", "combined"), capture_output=True, text=True, timeout=120)
     assert ok.returncode == 0, ok.stderr
     assert "exported 17 messages" in ok.stdout and "arm1" in ok.stdout
-    assert rows_per_entity(dst)["/world/robots/base1/scan"] == 5
+    assert rows_per_entity(dst)["/world/robots/base1/scan"] == 6  # 5 scans and their style
     junk = tmp_path / "junk.mcap"
     junk.write_bytes(b"not an mcap file at all")
     for bad in (junk, tmp_path / "missing.mcap"):

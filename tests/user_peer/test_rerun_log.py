@@ -83,16 +83,17 @@ def test_viewer_logger_ages_poses_by_arrival_not_by_the_senders_clock():
     from user_peer.rerun_log import WorldLogger
 
     now = [2_000_000_000_000]
-    logged: list = []
+    sent: list = []
     rec = rr.RecordingStream("skew-test")
-    rec.log = lambda path, *a, **k: logged.append((path, a))  # type: ignore[method-assign]
+    rec.send_columns = lambda path, indexes, columns: sent.append((path, list(columns)))  # type: ignore[method-assign]
     logger = WorldLogger(rec, max_hz=0, clock=lambda: now[0])
     for skew in (-5e9, 5e9):
-        logged.clear()
+        sent.clear()
         pose = Pose([0.0, 0.0, 0.0], linear=[1.0, 0.0, 0.0], header=Header(wall_ns=int(now[0] + skew)))
         arrived = now[0]
-        now[0] += 30_000_000  # drawn 30 ms after arrival
         logger.log("rf/w/robot/base1/pose", pose, arrived)
-        ages = [a[0] for p, a in logged if p == "plots/age/base1"]
+        now[0] += 30_000_000  # drawn 30 ms after arrival
+        logger.flush()
+        ages = [c for p, cols in sent if p == "plots/age/base1" for c in cols]
         assert len(ages) == 1
-        assert np.allclose(np.asarray(ages[0].scalars.as_arrow_array().to_pylist()).ravel(), [30.0]), ages
+        assert np.allclose(np.asarray(ages[0].as_arrow_array().to_pylist()).ravel(), [30.0]), ages
