@@ -323,11 +323,14 @@ class Fabric:
         *,
         expected: type | tuple[type, ...] | None = None,
         history: bool = False,
+        remote_only: bool = False,
     ) -> Any:
         """Call ``callback(key, message)`` for every valid message on ``key_expr``.
 
         ``history``: first the latest sample of every latched key that matches (published before
-        this subscriber existed, by publishers still alive), then live samples as usual."""
+        this subscriber existed, by publishers still alive), then live samples as usual.
+        ``remote_only``: never this session's own publications (a sim listening for other sims' terms
+        on the streams it publishes itself decoded its own ~4,000 messages a second)."""
 
         def on_sample(sample: zenoh.Sample) -> None:
             if sample.kind != zenoh.SampleKind.PUT:
@@ -347,7 +350,7 @@ class Fabric:
                 self.counters["callback_errors"] += 1
                 log.exception("callback for %s failed", key)
 
-        return self.subscribe_raw(key_expr, on_sample, history=history)
+        return self.subscribe_raw(key_expr, on_sample, history=history, remote_only=remote_only)
 
     def _believe(self, key: str, msg: Any) -> bool:
         """False for authority state stamped with a lower authority epoch than one already heard (issue 16)."""
@@ -385,9 +388,14 @@ class Fabric:
             return
         self._resources.append(sub)
 
-    def subscribe_raw(self, key_expr: str, callback: Callable[[zenoh.Sample], None], *, history: bool = False) -> Any:
-        """``callback(sample)`` for every sample, undecoded; ``history`` as in :meth:`subscribe`."""
-        if history:
+    def subscribe_raw(self, key_expr: str, callback: Callable[[zenoh.Sample], None], *, history: bool = False,
+                      remote_only: bool = False) -> Any:
+        """``callback(sample)`` for every sample, undecoded; ``history`` and ``remote_only`` as in :meth:`subscribe`."""
+        if remote_only:
+            if history:
+                raise ValueError("remote_only subscriptions have no history")
+            sub = self.session.declare_subscriber(key_expr, callback, allowed_origin=zenoh.Locality.REMOTE)
+        elif history:
             sub = zenoh.ext.declare_advanced_subscriber(
                 self.session, key_expr, callback, history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=1)
             )

@@ -77,6 +77,8 @@ class Authority:
             for obj in objects
         ]
         self._lease_s = lease_s
+        self._last_tick_at: float | None = None
+        self._resumed_at: float | None = None
         # users who may have left while no authority listened (a take-over) or while our link was down:
         # confirmed by their token within a lease of hearing again, else they leave
         self._unconfirmed: set[str] = set(self._state.live) if restored is not None else set()
@@ -157,9 +159,18 @@ class Authority:
 
     # ------------------------------------------------------------------ peers, ticks, service
 
+    def _deaf_now(self, now: float) -> bool:
+        """Whether a token going now may be this authority's own trouble: its link is down, or its process
+        was paused (no tick for a while, or it resumed less than a lease and a second ago)."""
+        with self._lock:
+            last, resumed = self._last_tick_at, self._resumed_at
+        deaf_s = self._lease_s / 2
+        return (not self.fabric.connected() or (last is not None and now - last > deaf_s)
+                or (resumed is not None and now < resumed + self._lease_s + 1.0))
+
     def _on_peer(self, kind: str, peer_id: str, alive: bool) -> None:
         now = self.clock.now()
-        if not alive and not self.fabric.connected():
+        if not alive and self._deaf_now(now):
             # our link died (the router dropped it while this process was paused, or the router went):
             # every user's token goes with it, and none of them left. Kept until the link is back and a
             # lease (plus a second for the liveliness history) has passed without their token
@@ -169,8 +180,8 @@ class Authority:
                     self._unconfirmed.add(peer_id)
                     self._confirm_by = None
             if known and self.fabric.should_report("own:link_lost") is not None:
-                log.warning("lost the link: user tokens are gone with it (%s first); owners keep their robots "
-                            "until the link is back and a lease passes without their token", peer_id)
+                log.warning("user tokens went while this authority was paused or cut off (%s first); owners keep their "
+                            "robots until a lease passes, with the link up, without their token", peer_id)
             return
         with self._lock:
             self._unconfirmed.discard(peer_id)
@@ -178,6 +189,16 @@ class Authority:
 
     def _run(self) -> None:
         while not self._stop.wait(self._tick_s):
+            now = self.clock.now()
+            with self._lock:
+                if self._last_tick_at is not None and now - self._last_tick_at > self._lease_s / 2:
+                    self._resumed_at = now  # this process was paused or starved: tokens that go now may be ours
+                    paused = now - self._last_tick_at
+                else:
+                    paused = 0.0
+                self._last_tick_at = now
+            if paused:
+                log.warning("ownership authority did not run for %.1f s (paused or starved): leases extended", paused)
             if self._unconfirmed:
                 self._confirm_when_connected()
             try:

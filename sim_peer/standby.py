@@ -131,8 +131,9 @@ class ReplicaHost:
         f.serve(keys.srv(w, "state"), self._on_state_query)
         if self.role == el.PRIMARY:
             self._serve(None)  # the world first: nothing below may delay a primary's streams and services
-        f.subscribe(keys.robot_stream_all(w, "joints"), self._on_joints, expected=JointState)
-        f.subscribe(keys.robot_stream_all(w, "pose"), self._on_pose, expected=Pose)
+        # other sims' streams only: a primary hears a rival's term there, a standby its leader's state
+        f.subscribe(keys.robot_stream_all(w, "joints"), self._on_joints, expected=JointState, remote_only=True)
+        f.subscribe(keys.robot_stream_all(w, "pose"), self._on_pose, expected=Pose, remote_only=True)
         if self.role != el.PRIMARY:
             f.subscribe_raw(keys.robot_cmd_all(w), self._on_command_sample)
             for obj in self.world.objects:
@@ -276,7 +277,7 @@ class ReplicaHost:
         lease = f.config.lease_ms / 1000.0
         began = time.monotonic() - gap
         with self._lock:
-            rivals = {p for p in self.live if p != f.peer_id} | {p for p, t in self._gone_at.items() if t >= began}
+            rivals = {p for p in self.live | {p for p, t in self._gone_at.items() if t >= began} if p != f.peer_id}
         if not rivals:
             f.unmuzzle()
             self.announce(f"sim {f.peer_id}: paused {gap:.1f} s with no other sim in the world; publishing again (term {f.term})")
