@@ -79,6 +79,8 @@ BENCHMARKS: tuple[Benchmark, ...] = (
               full=("--scale", "1"), quick=("--scale", "0.1", "--settle", "2"), out="dir"),
     Benchmark("secure", "secure", "scans and IK round trips over TCP, TCP + access control, TLS + access control",
               full=("--rounds", "3"), quick=("--rounds", "1", "--duration", "1", "--queries", "50")),
+    Benchmark("declflood", "declflood", "a login declaring N subscribers and closing: router stall and memory, owners keep their robots",
+              full=("--counts", "6000,20000"), quick=("--counts", "2000")),
     Benchmark("lab", "lab", "recovery times in a lab of network namespaces: partition, router loss, lost sim",
               full=("--runs", "5"), quick=("--runs", "1"), needs="netns"),
 )
