@@ -131,6 +131,8 @@ def blueprint(frame: tuple[np.ndarray, np.ndarray] | None = None) -> rrb.Bluepri
             ),
             column_shares=[3, 2],
         ),
+        # the columns carry wall_time and sim_time only (Rerun's log_time is not theirs): open on the wall clock, live
+        rrb.TimePanel(timeline=TIMELINE_WALL, play_state="following"),
         collapse_panels=False,
     )
 

@@ -32,7 +32,7 @@ from fabric.interfaces import ServiceError, WorldInfo
 from fabric.session import Fabric
 from user_peer import services
 from user_peer.catalog import RobotCatalog
-from user_peer.rerun_log import WorldLogger, blueprint
+from user_peer.rerun_log import WorldLogger, blueprint, framing
 
 log = logging.getLogger("robofabric.viewer")
 
@@ -101,9 +101,6 @@ def make_recording(opts: ViewerOptions, *, recording_id: str | None = None) -> r
     if not sinks:
         raise ValueError("nowhere to show the world: give --spawn, --connect URL, --serve-web or --save FILE.rrd")
     rec.set_sinks(*sinks, default_blueprint=blueprint())
-    if opts.serve_web:
-        _page, grpc = web_urls(opts.advertise or default_advertise(), opts.web_port, opts.grpc_port)
-        rr.serve_web_viewer(web_port=opts.web_port, open_browser=False, connect_to=grpc)
     return rec
 
 
@@ -136,6 +133,15 @@ class Viewer:
         self.opts = opts
         self.fab = Fabric(config, kind="viewer", peer_id=peer_id)
         self.rec = make_recording(opts)
+        self.page = None
+        if opts.serve_web:  # the page, from this machine alone (user_peer/web_page.py)
+            from user_peer import web_page
+
+            try:
+                self.page = web_page.serve(opts.web_port, opts.grpc_port)
+            except Exception:
+                self.fab.close()
+                raise
         # one queue per key: dropping happens per stream, so a busy stream never pushes out another's samples
         self.queue_size = queue_size
         self._streams: dict[str, deque[tuple[Any, int]]] = {}
@@ -196,6 +202,9 @@ class Viewer:
         info = self.catalog.world_info = query_world_info(self.fab)
         if info is not None and info.scene:
             log_scene(self.logger, info.scene)
+        frame = framing([tuple(float(v) for v in r.pose[:3]) for r in info.robots]) if info is not None else None
+        if frame is not None:  # the first view shows every robot, not the scene's bounds (shelves and walls)
+            self.rec.send_blueprint(blueprint(frame), make_active=True, make_default=True)
         self.fab.subscribe(keys.world_all(self.fab.world), self._enqueue, history=True)  # maps, paths, objects set before we joined
         self.fab.watch_peers(self._on_sim, kind="sim")  # "world gone" when the last sim peer leaves (issue 15)
         for expr in (keys.own_all(self.fab.world),):
@@ -298,6 +307,8 @@ class Viewer:
             log.debug("could not draw the last window", exc_info=True)
         self.rec.flush(timeout_sec=10.0)
         self.rec.disconnect()
+        if self.page is not None:
+            self.page.close()
 
     def __enter__(self) -> "Viewer":
         return self

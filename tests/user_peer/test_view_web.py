@@ -1,11 +1,14 @@
-"""``robofabric view --serve-web --advertise HOST``: the printed URL shows the live world in a browser elsewhere.
+"""``robofabric view --serve-web --advertise HOST``: the plain ``http://HOST:PORT/`` shows the live world in a
+browser elsewhere, and the page asks nothing of any other host.
 
-"Elsewhere" is played by the address 127.0.0.2: the page is loaded from ``http://127.0.0.2:PORT``
+"Elsewhere" is played by the address 127.0.0.2: the page is loaded from ``http://127.0.0.2:PORT/``
 (not ``localhost``, so Rerun's default CORS list would refuse its requests) and must stream from
 ``127.0.0.2`` too (a page told ``127.0.0.1`` would, on another machine, look for the data there).
 Debian's headless ``chromium`` (software WebGL) opens the URL through ``playwright``; the test polls
 screenshots until the 3D view shows the robots, judged by their colours (the mobile base's
-assigned colour, the LIDAR hits), which no part of the static scene has.
+assigned colour, the LIDAR hits), which no part of the static scene has. Every request the browser
+makes is recorded: one to a host other than 127.0.0.2 (fonts, analytics, version checks, examples)
+fails the test.
 """
 
 from __future__ import annotations
@@ -19,6 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
+
+from urllib.parse import urlsplit
 
 from fabric.testing import free_port, robofabric_cmd, wait_until
 
@@ -90,20 +95,24 @@ def test_served_web_viewer_shows_the_robots_from_another_address(router, world, 
 
     shot = tmp_path / "web-viewer.png"
     counts: list[int] = []
+    requests: list[str] = []
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
         try:
             page = browser.new_page(viewport=VIEWPORT)
-            page.goto(url, timeout=120_000)
-            # Screenshots through the DevTools protocol: Page.screenshot waits for web fonts, which the
-            # viewer's page asks for from the internet and this machine cannot reach.
+            page.on("request", lambda r: requests.append(r.url))
+            page.goto(f"http://127.0.0.2:{web}/", timeout=120_000)  # the plain address: it leads to the live world
+            assert f"url=rerun%2Bhttp%3A%2F%2F127.0.0.2%3A{grpc}%2Fproxy" in page.url, page.url
             cdp = page.context.new_cdp_session(page)
             deadline = time.monotonic() + 180
             while True:
                 shot.write_bytes(base64.b64decode(cdp.send("Page.captureScreenshot", {"format": "png"})["data"]))
                 rgb = np.asarray(Image.open(shot).convert("RGB"))
                 counts.append(robot_pixels(rgb[WORLD_VIEW]))
-                if counts[-1] >= ROBOT_PIXELS or time.monotonic() > deadline:
+                # done when the robots show and the page made the calls it meant for other hosts (analytics, the
+                # version check), which must have come here (/_nonet/...)
+                local_calls = {h for h in ("tel.rerun.io", "api.github.com") if any(f"/_nonet/{h}" in u for u in requests)}
+                if (counts[-1] >= ROBOT_PIXELS and len(local_calls) == 2) or time.monotonic() > deadline:
                     break
                 page.wait_for_timeout(3000)
         finally:
@@ -113,3 +122,7 @@ def test_served_web_viewer_shows_the_robots_from_another_address(router, world, 
     shutil.copy(shot, keep)  # for a person to look at (out/ is ignored by git)
     assert counts[-1] >= ROBOT_PIXELS, f"robot-coloured pixels in the 3D view over time: {counts}; screenshot {keep}"
     assert view.poll() is None, procs.output(view)
+    # nothing left the LAN: every request went to the viewer's own host (page, code, data, swallowed analytics)
+    elsewhere = sorted({u for u in requests if urlsplit(u).hostname != "127.0.0.2" and not u.startswith(("data:", "blob:"))})
+    assert not elsewhere, f"the page asked other hosts: {elsewhere}"
+    assert any(f"127.0.0.2:{grpc}" in u for u in requests), requests  # and it streamed the world
