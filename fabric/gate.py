@@ -9,7 +9,7 @@ a takeover while the robot moves. ``ownership`` provides the real gate;
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Any, Protocol
 
 from fabric.interfaces import Command
 
@@ -20,6 +20,9 @@ class CommandGate(Protocol):
 
     def update_motion(self, robot: str, moving: bool) -> None:
         """The authority's latest view of whether ``robot`` is in motion."""
+
+    def export_state(self) -> tuple[tuple[Any, ...], dict[str, Any]]:
+        """What a standby needs to carry the gate over at a take-over (``ownership``: records and users)."""
 
     def close(self) -> None: ...
 
@@ -32,6 +35,9 @@ class OpenGate:
 
     def update_motion(self, robot: str, moving: bool) -> None:
         pass
+
+    def export_state(self) -> tuple[tuple[Any, ...], dict[str, Any]]:
+        return (), {}
 
     def close(self) -> None:
         pass

@@ -32,6 +32,7 @@ import zenoh.ext
 
 from fabric import keys
 from fabric.codec import DecodeError, decode, encode, load_plugins
+from fabric.authority import AuthorityStamp
 from fabric.config import FabricConfig, default_peer_id
 from fabric.exit import at_exit
 from fabric.fencing import SimFence, is_authority_key
@@ -112,19 +113,12 @@ class Fabric:
         self.kind = kind
         self.peer_id = keys.validate_id(peer_id or default_peer_id(kind), what="peer id")
         self.counters: Counter[str] = Counter()
-        self.term = 0
-        """The authority epoch this peer stamps on what it publishes (a sim authority's; 0 for everyone else)."""
+        self.stamp = AuthorityStamp()
+        """Term, muzzle and freeze watch (:mod:`fabric.authority`): what this peer stamps and withholds as an authority."""
         self.sim_fence = SimFence()
         """The world's sims as this session follows them (once terms are in use), and its fence."""
         self.fence = self.sim_fence.fence
         """The highest authority epoch heard on authority keys; :meth:`subscribe` drops state below it."""
-        self.muzzled = False
-        """While set, nothing is published and no query is answered (an authority unsure it still is one)."""
-        self.freeze_gap: float | None = None
-        """When set: a gap longer than this (s) between two publications means this process was frozen
-        (SIGSTOP, a stalled VM); the fabric muzzles itself and calls :attr:`on_freeze` in a new thread."""
-        self.on_freeze: Callable[[float], None] | None = None
-        self._last_put = 0.0
         self._seq: dict[str, int] = {}
         self._lock = threading.Lock()
         self.report_interval = REPORT_INTERVAL
@@ -181,19 +175,19 @@ class Fabric:
 
         On a latched key (:func:`fabric.keys.is_latched`: scene objects, maps, paths) the publisher
         keeps its last sample for subscribers that join later and ask for history."""
-        if self.muzzled:
+        if self.stamp.muzzled:
             self.counters["muzzled"] += 1
             return 0
         payload = encode(msg)
         pub = self._publisher(key)
+        if not self.stamp.may_put():
+            self.counters["muzzled"] += 1
+            return 0
         if pub is None:  # a safety net: callers should not publish on made-up keys
             self.counters["uncached_puts"] += 1
             self.session.put(key, payload)
             self.counters["published"] += 1
             return len(payload)
-        if self.freeze_gap is not None and self._watch_freeze():
-            self.counters["muzzled"] += 1
-            return 0
         pub.put(payload)  # right after the check: a thread stopped between the two sends one stale sample
         self.counters["published"] += 1
         return len(payload)
@@ -224,17 +218,50 @@ class Fabric:
             time.sleep(0.005)
         return True
 
+    # ------------------------------------------------------------------ authority (fabric.authority)
+
+    @property
+    def term(self) -> int:
+        """The authority epoch stamped on what this peer publishes (a sim authority's; 0 for everyone else)."""
+        return self.stamp.term
+
+    @term.setter
+    def term(self, term: int) -> None:
+        self.stamp.assume_term(term)
+
+    @property
+    def muzzled(self) -> bool:
+        """While true, nothing is published and no query is answered."""
+        return self.stamp.muzzled
+
+    def assume_term(self, term: int) -> None:
+        """Stamp ``term`` on everything published from now on, and fence below it."""
+        self.stamp.assume_term(term)
+        self.fence.raise_to(term)
+
     def muzzle(self) -> None:
         """Publish and answer nothing from now on (an authority unsure it still is one, or stepping down)."""
-        with self._lock:
-            self.muzzled = True
+        self.stamp.muzzle()
 
     def unmuzzle(self) -> None:
-        """Publish and answer again. The freeze watch starts over: the time spent muzzled is not a freeze
-        (read as one, every unmuzzle after a long pause muzzled the sim again, for ever)."""
+        """Publish and answer again (the freeze watch starts over)."""
+        self.stamp.unmuzzle()
+
+    def watch_freeze(self, gap: float | None, on_freeze: Callable[[float], None] | None) -> None:
+        """Muzzle on a publication gap longer than ``gap`` s and call ``on_freeze(gap)`` in a new thread."""
+        self.stamp.watch_freeze(gap, on_freeze)
+
+    def sequences(self, prefix: str = "") -> dict[str, int]:
+        """The next sequence number of every key under ``prefix`` this session published on."""
         with self._lock:
-            self.muzzled = False
-            self._last_put = 0.0
+            return {k: v for k, v in self._seq.items() if k.startswith(prefix)}
+
+    def continue_sequences(self, seqs: dict[str, int]) -> None:
+        """Carry on another session's sequence numbers (a standby taking a world over): never back."""
+        with self._lock:
+            for k, v in seqs.items():
+                if k in self._seq or len(self._seq) < MAX_KEYS:
+                    self._seq[k] = max(self._seq.get(k, 0), int(v))
 
     def connected(self) -> bool:
         """Whether this session can hear anyone now: a router (the embedded profile) always can; a client
@@ -247,22 +274,6 @@ class Fabric:
             return bool(list(info.routers_zid()) or list(info.peers_zid()))
         except Exception:  # a closing session
             return False
-
-    def _watch_freeze(self) -> bool:
-        """True when muzzled (now or before); detects a freeze from the gap since the last publication."""
-        now = time.monotonic()
-        with self._lock:
-            gap = now - self._last_put if self._last_put else 0.0
-            self._last_put = now
-            frozen = self.freeze_gap is not None and gap > self.freeze_gap and not self.muzzled
-            if frozen:
-                self.muzzled = True
-        if frozen:
-            self.counters["freezes"] += 1
-            log.warning("%.1f s without publishing (frozen?): muzzled until the authority is confirmed", gap)
-            if self.on_freeze is not None:
-                threading.Thread(target=self.on_freeze, args=(gap,), name="fabric-freeze", daemon=True).start()
-        return self.muzzled
 
     def put_raw(self, key: str, payload: bytes) -> None:
         """Put bytes as they are (replay, tools); nothing is checked."""

@@ -110,9 +110,7 @@ def sim(
             peer.run(stop, duration)
         finally:
             peer.close()
-            close = getattr(gate, "close", None)
-            if callable(close):
-                close()
+            gate.close()
         c = peer.counters
         print(
             f"sim stopped at t={sim_world.time:.3f} s: {c['steps']} steps, {c['commands']} commands "

@@ -111,9 +111,6 @@ class SimPeer:
             # no history here: the authority's start must not wait on other peers' caches (with
             # history=True a sim started under load answered nothing for 30 s in two CI runs)
             f.subscribe(keys.object_pose_all(w, obj), self._on_object, expected=Pose)
-        provider = getattr(self.gate, "set_state_provider", None)
-        if callable(provider):
-            provider(self.last_state)
         for rid in self.world.robots:
             self._safe_gate_motion(rid, False)
         for group, entries in self._streams.items():
@@ -156,6 +153,12 @@ class SimPeer:
                 self._event(note.kind, rid, note.reason, severity=note.severity, data=dict(note.data) or None)
             if self.speed is None:
                 time.sleep(0)  # let streams and commands have the interpreter between chunks
+
+    @property
+    def finished(self) -> bool:
+        """Whether physics stepped in the peer's own thread (``start()``) has ended: its duration was reached,
+        or the peer was closed."""
+        return self._thread is not None and not self._thread.is_alive()
 
     def close(self) -> None:
         """Stop physics and streams; idempotent. The fabric and the gate stay open."""
@@ -342,11 +345,16 @@ class SimPeer:
             return None
         return name, robot
 
-    def _on_command(self, key: str, cmd: Command) -> None:
-        """Admit and apply one decoded command now, in the caller's thread (tests, in-process use)."""
+    def apply_command(self, key: str, cmd: Command) -> None:
+        """Admit and apply one decoded command now, in the caller's thread (a standby replaying what users
+        sent at a take-over; tests; in-process use)."""
         admitted = self._admit(key, cmd)
         if admitted is not None:
             self._execute(keys.parse(key).subject, admitted[0], cmd)
+
+    def apply_object_pose(self, key: str, pose: Pose) -> None:
+        """Set a scene object's pose from a user's ``object/{id}/pose/by/{user}`` sample, now."""
+        self._on_object(key, pose)
 
     def _execute(self, rid: str, name: str, cmd: Command) -> None:
         try:

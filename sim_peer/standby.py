@@ -31,6 +31,7 @@ from typing import Any, Callable
 
 from fabric import keys
 from fabric.codec import DecodeError, decode
+from fabric.gate import CommandGate
 from fabric.interfaces import Command, JointState, Pose, ServiceError, WorldState
 from fabric.session import Fabric
 from sim_peer import election as el
@@ -95,7 +96,7 @@ class ReplicaHost:
         else:
             self.election = el.start(me, standby=False, term=term + 1)
         self.peer: SimPeer | None = None
-        self.gate: Any = None
+        self.gate: CommandGate | None = None
         self.snapshot: WorldState | None = snapshot  # a primary that stepped down starts from its own last state
         self.joints: dict[str, JointState] = {}
         self.poses: dict[str, Pose] = {}
@@ -111,6 +112,7 @@ class ReplicaHost:
         self.takeovers: list[dict[str, Any]] = []
         self.last_state: WorldState | None = None
         self._lock = threading.RLock()
+        self._closed = False
         self._stepped_down = threading.Event()
         self._stop = threading.Event()
         self._poller: threading.Thread | None = None
@@ -165,14 +167,24 @@ class ReplicaHost:
         try:
             while not stop.is_set() and not self._stepped_down.is_set():
                 stop.wait(0.1)
-                physics = self.peer._thread if self.peer is not None else None
-                if physics is not None and not physics.is_alive():
+                if self.peer is not None and self.peer.finished:
                     break  # --duration reached
         finally:
             self.close()
         return self.role
 
+    def __enter__(self) -> "ReplicaHost":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
     def close(self) -> None:
+        """Stop following or serving; idempotent. The fabric stays open (its maker closes it)."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
         self._stop.set()
         # a take-over under way finishes first: closed meanwhile, it raised from its thread and could
         # start a peer after close() had looked for one
@@ -188,9 +200,8 @@ class ReplicaHost:
             self._poller.join(2.0)
         if self.peer is not None:
             self.peer.close()
-        close = getattr(self.gate, "close", None)
-        if callable(close):
-            close()
+        if self.gate is not None:
+            self.gate.close()
 
     # ------------------------------------------------------------------ primary
 
@@ -219,14 +230,10 @@ class ReplicaHost:
                     for rid, m in d.items():
                         k = keys.robot_joints(f.world, rid) if d is self.joints else keys.robot_pose(f.world, rid)
                         seqs[k] = max(seqs.get(k, 0), m.header.seq + 1)
-                with f._lock:
-                    for k, v in seqs.items():
-                        f._seq[k] = max(f._seq.get(k, 0), v)
+                f.continue_sequences(seqs)
                 restored = (state.records, state.users)
-            f.term = self.election.term
-            f.fence.raise_to(f.term)
-        f.freeze_gap = self.freeze_gap
-        f.on_freeze = self._on_freeze
+            f.assume_term(self.election.term)
+        f.watch_freeze(self.freeze_gap, self._on_freeze)
         self.gate = self.make_gate(f, self.world, restored)
         self.peer = SimPeer(f, self.world, gate=self.gate, rates=self.rates, speed=self.speed)
         if state is not None:
@@ -244,11 +251,10 @@ class ReplicaHost:
             self._kept_bytes = 0
         for key, msg in todo:
             try:
-                if isinstance(msg, Command):
-                    if self.gate.admit(keys.parse(key).subject, msg) is None:
-                        peer._on_command(key, msg)
-                else:
-                    peer._on_object(key, msg)
+                if not isinstance(msg, Command):
+                    peer.apply_object_pose(key, msg)
+                elif self.gate.admit(keys.parse(key).subject, msg) is None:
+                    peer.apply_command(key, msg)
             except Exception:
                 log.exception("replaying %s at take-over failed", key)
 
@@ -256,12 +262,10 @@ class ReplicaHost:
         peer = self.peer
         if peer is None or (self.role != el.PRIMARY and not force):
             raise ServiceError(f"{self.fabric.peer_id} is a standby (term {self.election.term})")
-        export = getattr(self.gate, "export_state", None)
-        records, users = export() if callable(export) else ((), {})
+        records, users = self.gate.export_state()
         with peer.lock:
             t, steps, robots, objects = replica.capture(self.world)
-        with self.fabric._lock:
-            seqs = {k: v for k, v in self.fabric._seq.items() if k.startswith(keys.world_root(self.fabric.world))}
+        seqs = self.fabric.sequences(keys.world_root(self.fabric.world))
         return WorldState(t, steps, robots, objects, tuple(records), dict(users), seqs,
                           header=self.fabric.header(keys.srv(self.fabric.world, "state"), stamp=t))
 
@@ -411,8 +415,7 @@ class ReplicaHost:
                 self._stepped_down.set()
             elif e.kind == "reassert":
                 with self._lock:
-                    self.fabric.term = e.term
-                    self.fabric.fence.raise_to(e.term)
+                    self.fabric.assume_term(e.term)
             elif e.kind == "follow" and self.role == el.STANDBY:
                 self.announce(f"standby {self.fabric.peer_id}: following {e.leader} (term {e.term})")
 

@@ -172,7 +172,7 @@ class Host:
     def spawn(self, argv: Sequence[str], *, name: str | None = None, env: dict[str, str] | None = None,
               clock_offset: str | None = None, stdin: Any = subprocess.DEVNULL) -> LabProcess:
         """Start any program in this host (its own session; output to the lab's log directory)."""
-        self.lab._check_open()
+        self.lab.ensure_open()
         full, fenv = self._argv(argv, clock_offset)
         name = name or Path(argv[0]).name
         log_path = self.lab.log_dir / f"{self.name}.{name}.{len(self.processes)}.log"
@@ -194,7 +194,7 @@ class Host:
     def run(self, argv: Sequence[str], *, timeout: float = 60.0, clock_offset: str | None = None,
             env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
         """Run a program in this host to completion; returns its output (never raises on a non-zero exit)."""
-        self.lab._check_open()
+        self.lab.ensure_open()
         full, fenv = self._argv(argv, clock_offset)
         return subprocess.run(full, capture_output=True, text=True, timeout=timeout,
                               env={**os.environ, "PYTHONUNBUFFERED": "1", **fenv, **(env or {})})
@@ -325,7 +325,7 @@ class Lab:
             self.close()
             raise
 
-    def _check_open(self) -> None:
+    def ensure_open(self) -> None:
         if self._closed:
             raise LabError(f"lab {self.name} is closed")
 
@@ -339,7 +339,7 @@ class Lab:
     def add_host(self, name: str, *, clock_offset: str | None = None) -> Host:
         """A new host on the LAN with the next address of the subnet; ``clock_offset`` as libfaketime
         reads it (``"-5"``: five seconds behind) applies to every process started in it."""
-        self._check_open()
+        self.ensure_open()
         if not name.replace("-", "").replace("_", "").isalnum() or name in self.hosts:
             raise LabError(f"host name {name!r} is not a fresh name of letters, digits, - and _")
         index = len(self.hosts) + 1

@@ -63,7 +63,7 @@ def test_every_command_is_accepted_or_rejected_with_a_reason(seq):
     fab = StubFabric()
     peer = SimPeer(fab, WORLD)  # type: ignore[arg-type]
     for robot, name, body in seq:
-        peer._on_command(keys.robot_cmd("fuzz", robot, name, "u"), Command("u", 0, body))
+        peer.apply_command(keys.robot_cmd("fuzz", robot, name, "u"), Command("u", 0, body))
         WORLD.step(5)
     c = peer.counters
     assert c["commands"] == len(seq) == c["accepted"] + c["rejected"]
