@@ -16,6 +16,10 @@ process's CPU time over the run, the file written included).
    time, interleaved as they arrive: the CPU seconds per second of world time are the share of one core
    the viewer needs to draw that world at full rate.
 
+3. ``--live S``: the same class world for real: a router, ``robofabric sim --scene warehouse --no-scene-robots``
+   with the arms and bases, and ``robofabric view --save FILE.rrd --max-hz 0 --duration S`` as its own
+   process; its own count of messages logged and dropped, its lag, and its CPU (from /proc) per second.
+
 For a before/after comparison the same command runs against another checkout's ``user_peer`` (put it first
 on ``PYTHONPATH``): a WorldLogger without ``flush`` draws row by row in ``log``, and is measured the same way.
 """
@@ -175,7 +179,45 @@ LABELS = {
 }
 
 
-def format_table(result: dict[str, dict], world: dict[str, Any] | None = None) -> str:
+def measure_live(arms: int, bases: int, seconds: float) -> dict[str, Any]:
+    """A real sim world and a real ``view --save --max-hz 0`` process: the viewer's counts, lag and CPU share."""
+    import re
+    import uuid
+
+    from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
+    from robofabric.bench.common import end_process, proc_cpu_s
+
+    world = f"bv{uuid.uuid4().hex[:6]}"
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    robots = [x for i in range(arms) for x in ("--robot", f"meca500:arm{i}")]
+    robots += [x for i in range(bases) for x in ("--robot", f"reeman:base{i}")]
+    with tempfile.TemporaryDirectory(prefix="bench-viewer-live-") as tmp, ProcessGroup(Path(tmp)) as procs:
+        router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
+        wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
+        sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *robots, "--world", world,
+                                         "--connect", ep, "--id", "sim"), name="sim")
+        wait_until(lambda: "Ctrl-C to stop" in procs.output(sim), timeout=180, what="the sim", seen=lambda: procs.output(sim)[-1500:])
+        view = procs.start(robofabric_cmd("view", "--save", str(Path(tmp) / "live.rrd"), "--max-hz", "0", "--duration", str(seconds),
+                                          "--world", world, "--connect", ep), name="view")
+        wait_until(lambda: "viewer on world" in procs.output(view), timeout=120, what="the viewer", seen=lambda: procs.output(view)[-1500:])
+        cpu0, t0 = proc_cpu_s(view.pid), time.monotonic()
+        cpu1, t1 = cpu0, t0
+        while view.poll() is None and time.monotonic() < t0 + seconds + 120:
+            if time.monotonic() < t0 + seconds:  # its drawing, not its closing flush
+                cpu1, t1 = proc_cpu_s(view.pid), time.monotonic()
+            time.sleep(0.5)
+        out = procs.output(view)
+        for p in (view, sim, router):
+            end_process(p)
+    m = re.search(r"viewer: (\d+) messages logged, (\d+) dropped, (\d+) thinned(?:; lag p50 (\d+) ms, max (\d+) ms)?", out)
+    if m is None:
+        raise RuntimeError(f"the viewer said no summary: {out[-1500:]}")
+    logged, dropped = int(m.group(1)), int(m.group(2))
+    return {"arms": arms, "bases": bases, "seconds": seconds, "logged": logged, "dropped": dropped, "rate": logged / seconds,
+            "lag_p50": float(m.group(4) or "nan"), "lag_max": float(m.group(5) or "nan"), "core": (cpu1 - cpu0) / max(t1 - t0, 1e-9)}
+
+
+def format_table(result: dict[str, dict], world: dict[str, Any] | None = None, live: dict[str, Any] | None = None) -> str:
     lines = ["| message | drawn | mean cost (us of process CPU per message) | throughput (msg per CPU s) |", "|---|---|---|---|"]
     for kind, r in result.items():
         lines.append(f"| {LABELS[kind]} | {r['n']} | {r['us_per_msg']:.0f} | {r['per_s']:.0f} |")
@@ -184,6 +226,11 @@ def format_table(result: dict[str, dict], world: dict[str, Any] | None = None) -
         lines += ["", f"Class world, {w['arms']} arms + {w['bases']} bases at full rate ({w['rate']:.0f} msg/s) for {w['seconds']:g} s "
                       f"of world time: {w['n']} messages drawn in {w['cpu_s']:.2f} CPU s: **{w['us_per_msg']:.0f} us per message, "
                       f"{w['core'] * 100:.0f} % of one core**."]
+    if live is not None:
+        v = live
+        lines += ["", f"Live: `robofabric sim` with {v['arms']} arms + {v['bases']} bases, `robofabric view --save --max-hz 0` for "
+                      f"{v['seconds']:g} s: **{v['logged']} messages logged ({v['rate']:.0f}/s), {v['dropped']} dropped**, viewer lag "
+                      f"p50 {v['lag_p50']:.0f} ms, max {v['lag_max']:.0f} ms, viewer process {v['core'] * 100:.0f} % of one core."]
     return "\n".join(lines)
 
 
@@ -194,6 +241,7 @@ def command(
     bases: Annotated[int, typer.Option(help="Mobile bases in the class world.")] = 8,
     seconds: Annotated[float, typer.Option(help="World time of the class world (s).")] = 20.0,
     seed: Annotated[int, typer.Option(help="Seed of the synthetic scans and grids.")] = 0,
+    live: Annotated[float, typer.Option(help="Also run the class world for real for this many seconds (a sim and a view process; 0: not).")] = 0.0,
     out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
 ) -> None:
     """Cost of drawing in the Rerun viewer (WorldLogger to an .rrd file): per message type, and a class world at full rate."""
@@ -204,6 +252,7 @@ def command(
     if arms < 0 or bases < 0 or seconds <= 0:
         raise UserError("--arms and --bases at least 0, --seconds positive")
     world = measure_world(arms, bases, seconds, seed) if arms + bases else None
-    table = f"{machine()}\n\n" + format_table(measure(n, grids, seed), world)
+    real = measure_live(arms, bases, live) if live > 0 and arms + bases else None
+    table = f"{machine()}\n\n" + format_table(measure(n, grids, seed), world, real)
     print(table)
     append(out, table)
