@@ -33,6 +33,8 @@ def view(
     web_port: Annotated[int, typer.Option(help="Port of the web viewer (--serve-web).")] = 9090,
     grpc_port: Annotated[int, typer.Option(help="Port of the Rerun gRPC server (--spawn, --serve-web).")] = 9876,
     max_hz: Annotated[float, typer.Option(help="Thin 3D and plot updates to this rate per stream (0: all).")] = 30.0,
+    window: Annotated[float, typer.Option(help="Draw what arrived every this many seconds, as one chunk per entity (longer: less work for slow browsers, a less live view).")] = 0.1,
+    max_lag: Annotated[float, typer.Option(help="Drop samples that waited longer than this (s) when drawn, oldest first per stream; never a stream's newest.")] = 0.5,
     world: World = None,
     connect: Connect = None,
     listen: Listen = None,
@@ -55,8 +57,10 @@ def view(
         raise UserError(f"--save {save}: the file must end in .rrd")
     opts = ViewerOptions(
         spawn=spawn, connect_url=rerun_urls[0] if rerun_urls else None, serve_web=serve_web,
-        web_port=web_port, grpc_port=grpc_port, save=save, max_hz=max_hz, advertise=advertise,
+        web_port=web_port, grpc_port=grpc_port, save=save, max_hz=max_hz, advertise=advertise, window_s=window, max_lag_s=max_lag,
     )
+    if not (0 < window <= 5) or max_lag <= 0:
+        raise UserError("--window must be in (0, 5] s and --max-lag positive")
     if advertise is not None and not serve_web:
         raise UserError("--advertise goes with --serve-web")
     if not (spawn or serve_web or save or rerun_urls):

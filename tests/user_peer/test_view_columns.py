@@ -96,3 +96,13 @@ def test_a_stalled_viewer_keeps_at_most_queue_size_per_stream(world, router, tmp
         assert [m.header.seq for _, _, m in v.take()] == list(range(15, 25))
     finally:
         v.close()
+
+
+def test_view_refuses_a_window_or_lag_that_makes_no_sense(tmp_path):
+    import subprocess
+
+    from fabric.testing import robofabric_cmd
+
+    for bad in (("--window", "0"), ("--window", "9"), ("--max-lag", "0")):
+        r = subprocess.run(robofabric_cmd("view", *bad, "--save", str(tmp_path / "v.rrd")), capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2 and "--window must be in (0, 5] s and --max-lag positive" in r.stderr, (bad, r.stderr)
