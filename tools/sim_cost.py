@@ -29,8 +29,9 @@ def _cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def measure(tree: Path, robots: int, seconds: float, settle: float) -> tuple[float, float]:
-    """(sim CPU in cores, real-time factor) of one run of ``tree``'s sim with ``robots`` robots."""
+def measure(tree: Path, robots: int, seconds: float, settle: float) -> tuple[float, float, float]:
+    """(sim CPU in cores, real-time factor, arm0's joints rate in Hz) of one run of ``tree``'s sim with ``robots``
+    robots. The joints rate (100 Hz asked) tells a sim that kept up from one that thinned its streams."""
     from fabric import keys
     from fabric.interfaces import JointState
     from fabric.testing import client, free_port, wait_until
@@ -65,7 +66,7 @@ def measure(tree: Path, robots: int, seconds: float, settle: float) -> tuple[flo
             with lock:
                 pts = [(w, s) for w, s in stamps if t0 <= w <= t1]
         rtf = (pts[-1][1] - pts[0][1]) / (pts[-1][0] - pts[0][0]) if len(pts) > 1 else float("nan")
-        return (c1 - c0) / (t1 - t0), rtf
+        return (c1 - c0) / (t1 - t0), rtf, len(pts) / (t1 - t0)
     finally:
         for p in (sim, router):
             if p is not None:
@@ -85,20 +86,23 @@ def main() -> None:
     ap.add_argument("--settle", type=float, default=5.0)
     args = ap.parse_args()
     trees = [Path(t).resolve() for t in args.trees.split(",") if t]
-    res: dict[Path, list[tuple[float, float]]] = {t: [] for t in trees}
+    res: dict[Path, list[tuple[float, float, float]]] = {t: [] for t in trees}
     for r in range(args.rounds):
         for t in trees:
-            cores, rtf = measure(t, args.robots, args.seconds, args.settle)
-            res[t].append((cores, rtf))
-            print(f"round {r + 1} {t}: sim {cores:.2f} cores, real-time factor {rtf:.3f}", flush=True)
+            cores, rtf, hz = measure(t, args.robots, args.seconds, args.settle)
+            res[t].append((cores, rtf, hz))
+            print(f"round {r + 1} {t}: sim {cores:.2f} cores, real-time factor {rtf:.3f}, arm0 joints {hz:.0f} Hz "
+                  f"(load average {os.getloadavg()[0]:.1f})", flush=True)
     ref = None
-    print(f"\n| tree | sim CPU (cores) | real-time factor | CPU per robot per sim second (ms) | vs {trees[0].name} |\n|---|---|---|---|---|")
+    print(f"\n| tree | sim CPU (cores) | real-time factor | arm0 joints (Hz) | CPU per robot per sim second (ms) | vs {trees[0].name} |"
+          "\n|---|---|---|---|---|---|")
     for t in trees:
-        cores = statistics.median(c for c, _ in res[t])
-        rtf = statistics.median(x for _, x in res[t])
+        cores = statistics.median(c for c, _, _ in res[t])
+        rtf = statistics.median(x for _, x, _ in res[t])
+        hz = statistics.median(h for _, _, h in res[t])
         per = cores / args.robots / rtf * 1e3
         ref = per if ref is None else ref
-        print(f"| {t} | {cores:.2f} | {rtf:.3f} | {per:.2f} | {per / ref:.2f}x |")
+        print(f"| {t} | {cores:.2f} | {rtf:.3f} | {hz:.0f} | {per:.2f} | {per / ref:.2f}x |")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,20 @@
+"""A class of 8 students on one world (issue 21): eight student processes, each owning an arm and a base,
+drive and move for 15 s through one router and one sim: everyone joins, nothing is lost, no command is
+refused, and every student's arm moves. The figures (move times, pace, CPU) come from ``robofabric bench
+class``; this checks only what must hold at any speed."""
+
+from __future__ import annotations
+
+import pytest
+
+from robofabric.bench.klass import run_one
+
+pytestmark = pytest.mark.slow
+
+
+def test_a_class_of_eight_loses_nothing(tmp_path):
+    r = run_one(8, 15.0, tmp_path)
+    assert r["joined"] == 8, r["errors"]
+    assert r["lost"] == 0, r["lost_detail"]
+    assert r["refused"] == 0, r["errors"]
+    assert r["fewest_moves"] >= 1, r  # every student's arm moved (0.35 s a move when alone)
