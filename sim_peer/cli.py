@@ -95,6 +95,8 @@ def sim(
     if not sim_world.robots:
         raise UserError(f"scene {sim_world.scene.name!r} has no robots and none were added with --robot")
     cfg = make_config(world, connect, listen, profile, zenoh_config)
+    if not standby:
+        _check_world_free(cfg, peer_id, sim_world)
     stop = shutdown_event()
     if standby or not replicated_off():
         _run_replicated(cfg, peer_id, sim_world, build, ownership, rates, pace, stop, duration, standby)
@@ -117,6 +119,48 @@ def sim(
             f"({c['accepted']} accepted, {c['rejected']} rejected, {c['clamped']} clamped)",
             flush=True,
         )
+
+
+def _check_world_free(cfg, peer_id, sim_world) -> None:
+    """Refuse, in one line, to serve a world another live sim serves: a robot id it serves, another scene, or
+    any sim at all (one sim serves a world, with standbys; several sims on one world are not built yet). Left
+    unchecked, the two sims' elections made one of them step down and its robots vanished without a word."""
+    if cfg.profile == "embedded":
+        return  # this process is the router: nobody is there yet
+    from fabric.interfaces import ServiceError, WorldInfo
+    from fabric import keys
+    from fabric.session import Fabric
+
+    try:
+        probe = Fabric(cfg, kind="tool", token=False)
+    except Exception as exc:
+        from fabric.cli_common import join_error
+
+        raise join_error(cfg, exc) from None
+    with probe:
+        others = [pid for _, pid in probe.live_peers("sim", timeout=1.0) if pid != peer_id]
+        if not others:
+            return
+        try:
+            replies = probe.query(keys.srv(cfg.world, "world"), timeout=2.0, expected=WorldInfo, all_replies=True)
+        except ServiceError:
+            replies = []
+    mine = set(sim_world.robots)
+    for rep in replies:
+        info, who = rep.message, rep.source or "another sim"
+        same = sorted(mine & {r.id for r in info.robots})
+        if same:
+            raise UserError(f"robot {', '.join(same)} is already served by sim {who} in world {cfg.world!r}; give it another "
+                            f"id, or run this sim with --standby to follow {who}")
+        if info.scene != sim_world.scene.name:
+            raise UserError(f"world {cfg.world!r} runs scene {info.scene!r} (sim {who}), not {sim_world.scene.name!r}: every "
+                            f"sim of a world loads the same scene")
+        robots = ", ".join(r.id for r in info.robots) or "no robots"
+        raise UserError(f"world {cfg.world!r} is already served by sim {who} ({robots}): one sim serves a world, with "
+                        f"standbys (--standby); several sims sharing one world are not supported yet; use another --world")
+    if replies == [] and others:
+        print(f"warning: sim {', '.join(others)} is live in world {cfg.world!r} but did not describe it (a standby alone, "
+              f"or access control): starting anyway", file=sys.stderr)
 
 
 def replicated_off() -> bool:
