@@ -199,7 +199,10 @@ EVERYTHING = """
     arm = user.robot("arm1")
     arm.request()
     arm.move_joints([0.1, 0, 0, 0, 0, 0], timeout=30)
-    viewer.drain(time.monotonic() + 1.0)
+    end = time.monotonic() + 1.0
+    while time.monotonic() < end:  # a second of windows drawn (Viewer.draw: one window)
+        viewer.draw()
+        time.sleep(0.1)
     print("everything running", flush=True)
 """
 
