@@ -165,8 +165,9 @@ def _children_cpu_s() -> float:
     return ru.ru_utime + ru.ru_stime
 
 
-def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
-    """A class of ``n`` students on a fresh world; the row's figures."""
+def run_one(n: int, seconds: float, tmp: Path, *, extra: int = 0) -> dict[str, Any]:
+    """A class of ``n`` students on a fresh world (plus ``extra`` arms and bases nobody owns, to load the sim);
+    the row's figures."""
     from fabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
 
     world = f"class{uuid.uuid4().hex[:6]}"
@@ -177,7 +178,7 @@ def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
     with ProcessGroup(logs) as procs:
         router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
         wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
-        robots = [x for i in range(n) for x in ("--robot", f"meca500:arm{i}", "--robot", f"reeman:base{i}")]
+        robots = [x for i in range(n + extra) for x in ("--robot", f"meca500:arm{i}", "--robot", f"reeman:base{i}")]
         sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *robots, "--world", world,
                                          "--connect", ep, "--id", "sim"), name="sim")
         compute = procs.start(robofabric_cmd("compute", "--world", world, "--connect", ep, "--id", "compute"), name="compute")
@@ -210,7 +211,7 @@ def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
     moves = [m for r in results for m in r["moves"]]
     joins = [r["join_s"] for r in results if r["join_s"] is not None]
     return {
-        "n": n, "robots": 2 * n, "joined": len(joins), "join_p50": pct(joins, 50), "join_max": pct(joins, 100),
+        "n": n, "robots": 2 * (n + extra), "joined": len(joins), "join_p50": pct(joins, 50), "join_max": pct(joins, 100),
         "move_p50": pct(moves, 50), "move_p95": pct(moves, 95), "moves": len(moves),
         "fewest_moves": min((len(r["moves"]) for r in results), default=0),
         "lost": sum(len(r["lost"]) for r in results), "refused": sum(r["refused"] for r in results),
@@ -239,6 +240,7 @@ def row(r: dict[str, Any], base: float) -> str:
 def command(
     students: Annotated[str, typer.Option("--students", help="Comma-separated class sizes (each student: one arm, one base).")] = "1,4,8,16,32",
     seconds: Annotated[float, typer.Option("--seconds", help="How long each student drives and moves (s).")] = 40.0,
+    extra_robots: Annotated[int, typer.Option("--extra-robots", help="Arms and bases (as many of each) nobody owns, to load the sim.")] = 0,
     out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
     logs: Annotated[Optional[Path], typer.Option(help="Keep every process's output and the students' JSON here.")] = None,
 ) -> None:
@@ -250,16 +252,17 @@ def command(
         sizes = [int(x) for x in students.split(",") if x.strip()]
     except ValueError:
         raise UserError(f"--students {students!r}: expected sizes like 1,4,8,16,32") from None
-    if not sizes or min(sizes) < 1 or seconds <= 0:
-        raise UserError("--students: each size at least 1; --seconds positive")
+    if not sizes or min(sizes) < 1 or seconds <= 0 or extra_robots < 0:
+        raise UserError("--students: each size at least 1; --seconds positive; --extra-robots at least 0")
     rows: list[dict[str, Any]] = []
-    lines = [f"Command: `robofabric bench class --students {students} --seconds {seconds:g}`",
+    more = f" --extra-robots {extra_robots}" if extra_robots else ""
+    lines = [f"Command: `robofabric bench class --students {students} --seconds {seconds:g}{more}`",
              f"Machine: {machine()}; load average at start {os.getloadavg()[0]:.1f}", "", *header()]
     print("\n".join(lines), flush=True)
     base = float("nan")
     with tempfile.TemporaryDirectory() as tmp:
         for n in sizes:
-            r = run_one(n, seconds, logs or Path(tmp))
+            r = run_one(n, seconds, logs or Path(tmp), extra=extra_robots)
             rows.append(r)
             if n == 1 or base != base:
                 base = r["move_p50"] if n == 1 else base
