@@ -135,13 +135,8 @@ class Authority:
             if eff.kind in ("handover", "revoked", "expired", "restored", "released"):
                 if eff.kind == "handover":
                     self.counters["handovers"] += 1
-                # a robot taken from its owner without her asking (expiry, departure, take-over) is a warning:
-                # logged by the sim with its reason, whatever the log level
-                unasked = eff.kind in ("expired", "revoked") or (eff.kind in ("released", "handover") and eff.reason != "released"
-                                                                   and not eff.reason.startswith("released by")
-                                                                   and eff.reason != "left the queue")
                 self._emit(Event(kind=EventKind.ownership(eff.kind), reason=eff.reason, object=eff.object, user=eff.user,
-                                 severity="warning" if unasked else "info", header=self.fabric.header("event")))
+                                 severity="warning" if _unasked(eff) else "info", header=self.fabric.header("event")))
         return effects
 
     def _publish(self, rec: OwnershipRecord) -> None:
@@ -303,6 +298,15 @@ class Authority:
         thread = self._thread
         if thread is not None and thread.is_alive() and thread is not threading.current_thread():
             thread.join(timeout=2.0)
+
+
+def _unasked(eff: st.Effect) -> bool:
+    """A robot taken from its owner without her asking (an expiry, her departure, a take-over): a warning, so
+    the sim logs it with its reason whatever the log level. Her own release (and a handover it caused, whose
+    reason is ``released by ...``) and leaving a queue are not."""
+    if eff.kind in ("expired", "revoked"):
+        return True
+    return eff.kind in ("released", "handover") and not eff.reason.startswith(("released", "left the queue"))
 
 
 def _lease_only(old: OwnershipRecord | None, new: OwnershipRecord) -> bool:
