@@ -24,7 +24,7 @@ def test_an_expiry_is_logged_with_its_reason(connect, world, caplog):
             reply = alice.call(keys.own_request(world, "arm", "alice"), OwnRequest("request", "alice"), expected=OwnReply)
             assert reply.outcome == "granted"
             wait_until(lambda: auth.records()["arm"].owner == "", timeout=10, what="alice's lease to expire")
-            wait_until(lambda: "expired" in caplog.text, timeout=5, what="the expiry logged")
+            wait_until(lambda: "own_expired" in caplog.text, timeout=5, what="the expiry logged")
         line = next(r.getMessage() for r in caplog.records if "own_expired" in r.getMessage())
         assert re.search(r"lease of arm \(alice\) expired: no renewal for \d+\.\d s", line), line
         assert auth.records()["base"].owner == "bob"  # bob kept renewing: his lease never ran out
