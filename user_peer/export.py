@@ -8,6 +8,7 @@ counted and skipped; a file that is not MCAP at all is an error.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
@@ -16,9 +17,11 @@ import rerun as rr
 
 from fabric.codec import DecodeError, decode, load_plugins
 from user_peer.catalog import RobotCatalog
-from user_peer.openfmt.convert import ExportError
+from user_peer.openfmt.convert import ExportError, recorded_world
 from user_peer.rerun_log import WorldLogger, blueprint
 from user_peer.viewer import APP_ID, log_scene
+
+log = logging.getLogger("robofabric.user")
 
 __all__ = ["RerunExportStats", "ExportError", "read_mcap", "export_mcap"]
 
@@ -77,14 +80,19 @@ def export_mcap(
 ) -> RerunExportStats:
     """Write ``dst`` (.rrd) from the recording ``src``; every message is drawn unless ``max_hz`` thins it.
 
-    ``scene`` names the scene the recording was made in, which places the arms (a recording holds
-    streams, not the world description); without it the first scene placing each robot id is used.
+    Robots are placed by the world description the recording holds (the recorder writes ``srv/world``'s answer
+    when a sim comes), else by ``scene``, else by the first scene placing each robot id (with a warning).
     """
     check_mcap(src)
     dst.parent.mkdir(parents=True, exist_ok=True)
     rec = rr.RecordingStream(APP_ID, recording_id=f"export-{src.stem}")
     rec.save(str(dst), default_blueprint=blueprint())
-    catalog = RobotCatalog(None, scene=scene)
+    info = recorded_world(src)
+    if info is None and scene is None:
+        log.warning("%s carries no world description: robots are placed by the scene that names them first; pass "
+                    "--scene NAME to place them by yours", src)
+    scene = scene or (info.scene if info is not None else None)
+    catalog = RobotCatalog(info, scene=scene)
     logger = WorldLogger(rec, drawing=catalog.drawing, max_hz=max_hz)
     if scene:
         log_scene(logger, scene)

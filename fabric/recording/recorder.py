@@ -15,6 +15,7 @@ an unbounded recorder from 163 to 712 MB of memory and wrote 629 MB in 2 s.
 
 from __future__ import annotations
 
+import logging
 import queue
 import threading
 import time
@@ -27,10 +28,14 @@ import msgpack
 import zenoh
 
 from fabric import keys
+from fabric.codec import encode
 from fabric.exit import at_exit
+from fabric.interfaces import WorldInfo
 from fabric.recording.format import LIVELINESS_SCHEMA, RAW_SCHEMA
 from fabric.recording.sink import STALE, McapSink
 from fabric.session import undeclare_all
+
+log = logging.getLogger("robofabric.recording")
 
 __all__ = ["Recorder", "RecorderStats"]
 
@@ -177,6 +182,9 @@ class Recorder:
         self._live = 0
         self._keys: Counter[str] = Counter()
         self._first_match: dict[str, int] = {}
+        self._describing: set[str] = set()
+        self.described = 0
+        """World descriptions recorded (``srv/world`` answers, one each time a sim came)."""
         self._started = False
         self._stopped = False
         self._cancel_exit: Any = None
@@ -308,7 +316,37 @@ class Recorder:
         except ValueError:
             return
         if p.category == "peer" and p.subject == "sim":
-            self._q.put(_SimToken(p.world, p.leaf, sample.kind == zenoh.SampleKind.PUT))
+            alive = sample.kind == zenoh.SampleKind.PUT
+            self._q.put(_SimToken(p.world, p.leaf, alive))
+            if alive:
+                self._describe(p.world)
+
+    def _describe(self, world: str) -> None:
+        """Record the world's description (``srv/world``'s answer, on its key) whenever a sim comes: export and
+        replay place robots from it, with no ``--scene``. One query at a time per world (made-up sim tokens
+        must not make a thread each)."""
+        with self._lock:
+            if world in self._describing or self._stopped:
+                return
+            self._describing.add(world)
+
+        def ask() -> None:
+            key = keys.srv(world, "world")
+            try:
+                time.sleep(0.2)  # a sim's token comes before its queryable: give it a moment
+                for rep in self.fabric.query(key, timeout=3.0, expected=WorldInfo):
+                    payload = encode(rep.message)
+                    with self._lock:
+                        if not self._stopped and self._admit(key, len(payload)):
+                            self._q.put((key, payload, time.time_ns(), None))
+                            self.described += 1
+            except Exception:  # no answer (a standby alone, access control): the recording goes on without it
+                log.debug("no description of world %s to record", world, exc_info=True)
+            finally:
+                with self._lock:
+                    self._describing.discard(world)
+
+        threading.Thread(target=ask, name=f"recorder-describe-{world}", daemon=True).start()
 
     # ------------------------------------------------------------------ writing (one thread)
 

@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+from fabric import keys
 from fabric.codec import DecodeError, decode, load_plugins
+from fabric.interfaces import WorldInfo
 from fabric.recording import RecordingError, iter_messages, read_info
 from user_peer.catalog import RobotCatalog
 
-__all__ = ["FORMATS", "ExportStats", "ExportError", "open_sink", "export_recording"]
+log = logging.getLogger("robofabric.user")
+
+__all__ = ["FORMATS", "ExportStats", "ExportError", "open_sink", "export_recording", "recorded_world"]
 
 FORMATS = ("foxglove", "ros2")
 SKIPPED_SCHEMAS = ("raw", "liveliness")
@@ -52,7 +57,12 @@ def export_recording(
         raise ExportError(str(exc)) from None
     load_plugins()
     dst.parent.mkdir(parents=True, exist_ok=True)
-    sink = open_sink(to, dst, scene=scene)
+    info = recorded_world(src)
+    if info is None and scene is None:
+        log.warning("%s carries no world description (recorded before recorders kept one, or no sim answered): robots "
+                    "are placed by the scene that names them first; pass --scene NAME to place them by yours", src)
+    sink = open_sink(to, dst, scene=scene or (info.scene if info is not None else None),
+                     catalog=RobotCatalog(info, scene=scene or (info.scene if info is not None else None)))
     n = bad = done = 0
     try:
         for m in iter_messages(src):
@@ -75,6 +85,20 @@ def export_recording(
     if progress is not None:
         progress(total, total)
     return ExportStats(n, sink.written, bad, sink.skipped, tuple(sorted(r for r, i in sink.frames.robots.items() if i.kind)))
+
+
+def recorded_world(src: Path) -> WorldInfo | None:
+    """The last world description a recording holds (the recorder writes ``srv/world``'s answer when a sim
+    comes), or None for a recording without one."""
+    found = None
+    for m in iter_messages(src, f"{keys.PREFIX}/*/srv/world"):
+        try:
+            msg = decode(m.payload)
+        except DecodeError:
+            continue
+        if isinstance(msg, WorldInfo):
+            found = msg
+    return found
 
 
 def foxglove_sink(path: Path, scene: str | None = None) -> Any:
