@@ -32,6 +32,26 @@ app = typer.Typer(
 _broken: list[tuple[str, str]] = []
 
 
+def _flags_show_no_type() -> None:
+    """typer 0.29's help prints a type after every option, ``<bool>`` after plain flags (``--help <bool>``,
+    ``--json <bool>``) and ``<int>`` after counters (``-v``), which read as if they took a value: those show
+    none. Every other option keeps its type."""
+    from typer.core import TyperOption
+
+    shown = TyperOption.display_type_rich
+    if getattr(shown, "_robofabric", False):
+        return
+
+    def display_type_rich(self: TyperOption, ctx):  # type: ignore[no-untyped-def]
+        return None if self.is_flag or self.count else shown(self, ctx)
+
+    display_type_rich._robofabric = True  # type: ignore[attr-defined]
+    TyperOption.display_type_rich = display_type_rich  # type: ignore[method-assign]
+
+
+_flags_show_no_type()
+
+
 def _load_plugins() -> None:
     for ep in sorted(entry_points(group=GROUP), key=lambda e: e.name):
         try:

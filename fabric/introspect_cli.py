@@ -12,14 +12,16 @@ import json
 import sys
 import threading
 import time
-from typing import Annotated, Optional
+from typing import Annotated, Optional, TYPE_CHECKING
 
 import typer
 import zenoh
 
 from fabric import keys
 from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
-from fabric.introspect import KeyObserver, KeyStats
+
+if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
+    from fabric.introspect import KeyStats
 
 __all__ = ["register", "list_keys", "key_info", "interfaces", "observe"]
 
@@ -35,6 +37,7 @@ def _resolve(expr: str, world: str) -> str:
 
 def observe(fab, expr: str, duration: float) -> list[KeyStats]:
     """Watch ``expr`` for ``duration`` s (latched keys' latest values included) and summarise per key."""
+    from fabric.introspect import KeyObserver
     obs = KeyObserver()
     lock = threading.Lock()
 

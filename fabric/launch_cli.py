@@ -8,7 +8,7 @@ import threading
 import time
 from collections import Counter
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Optional, TYPE_CHECKING
 
 import typer
 import zenoh
@@ -16,8 +16,10 @@ import zenoh
 from fabric import keys
 from fabric.cli_common import UserError
 from fabric.config import FabricConfig
-from fabric.launch import LaunchError, LaunchSpec, Supervisor, load_launch, parse_launch
-from fabric.session import Fabric, shutdown_event
+
+if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
+    from fabric.launch import LaunchSpec, Supervisor
+    from fabric.session import Fabric
 
 DEMO_RESOURCE = "demo.toml"
 """The demo's launch file ships inside the package (``fabric/demo.toml``; ``examples/demo.toml`` links to it)."""
@@ -25,6 +27,7 @@ DEMO_RESOURCE = "demo.toml"
 
 def load_demo_spec() -> LaunchSpec:
     """The built-in demo's launch spec, read from the installed package (works from a wheel, not only a checkout)."""
+    from fabric.launch import LaunchError, parse_launch
     from importlib.resources import files
 
     res = files("fabric").joinpath(DEMO_RESOURCE)
@@ -73,6 +76,7 @@ class _Watch:
 
 
 def _open_launcher(spec: LaunchSpec, router: str | None) -> Fabric:
+    from fabric.session import Fabric
     ep = router or spec.router
     try:
         if ep:
@@ -91,6 +95,8 @@ def _open_launcher(spec: LaunchSpec, router: str | None) -> Fabric:
 
 
 def _run(spec: LaunchSpec, *, out: Path, duration: float | None, router: str | None, demo: bool) -> int:
+    from fabric.launch import Supervisor
+    from fabric.session import shutdown_event
     out.mkdir(parents=True, exist_ok=True)
     stop = shutdown_event()
     if router:
@@ -188,6 +194,7 @@ def up(
 
     Example: robofabric up examples/lan/sim.toml connect=tcp/10.0.0.5:7447 world=lab2
     """
+    from fabric.launch import LaunchError, load_launch
     import os
 
     from fabric.launch import parse_cli_args
@@ -208,6 +215,7 @@ def demo(
     router: Annotated[Optional[str], typer.Option(help="Router endpoint (default from the launch file, tcp/127.0.0.1:7447).")] = None,
 ) -> None:
     """Run the embedded default: router, sim peer with both robots, compute peer and scripted users."""
+    from fabric.launch import LaunchError, load_launch
     try:
         spec = load_launch(launch) if launch is not None else load_demo_spec()
     except LaunchError as exc:

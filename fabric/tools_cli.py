@@ -8,16 +8,16 @@ import threading
 import time
 from collections import defaultdict
 from dataclasses import replace
-from typing import Annotated, Optional
+from typing import Annotated, Optional, TYPE_CHECKING
 
 import typer
 import zenoh
 
 from fabric import keys
 from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
-from fabric.codec import DecodeError, decode, to_plain
-from fabric.session import Fabric, shutdown_event
-from fabric.stats import StreamStats
+
+if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
+    from fabric.session import Fabric
 
 
 def _open(kind: str, world, connect, listen, profile, zenoh_config, peer_id=None, *, key: str | None = None) -> Fabric:
@@ -62,6 +62,7 @@ def router(
     audit_every: Annotated[float, typer.Option(help="Seconds between --audit summaries.")] = 10.0,
 ) -> None:
     """Run a zenoh router for the fabric (any standard zenohd works in its place)."""
+    from fabric.session import Fabric, shutdown_event
     cfg = make_config(world, connect, listen, "embedded", zenoh_config)
     if not listen and not cfg.file_value("listen/endpoints"):
         cfg = replace(cfg, listen=("tcp/0.0.0.0:7447",))
@@ -186,6 +187,8 @@ def echo(
     peer_id: PeerId = None,
 ) -> None:
     """Print decoded messages on a key; malformed payloads are reported on stderr and skipped."""
+    from fabric.codec import DecodeError, decode, to_plain
+    from fabric.session import shutdown_event
     if count is not None and count <= 0:
         raise UserError("--count must be positive")
     if timeout is not None and not timeout > 0:
@@ -249,6 +252,8 @@ def hz(
     peer_id: PeerId = None,
 ) -> None:
     """Rate, jitter and bandwidth of the keys matching KEY (like ``ros2 topic hz`` and ``bw``)."""
+    from fabric.session import shutdown_event
+    from fabric.stats import StreamStats
     stop = shutdown_event()
     stats: dict[str, StreamStats] = {}
     lock = threading.Lock()
@@ -309,6 +314,7 @@ def pub(
     The key must match a robofabric key layout (refused before sending otherwise). A command (``robot/ID/cmd/NAME``)
     needs its user, from ``--user`` or the login; ``pub`` then listens for the sim's refusal for ``--wait`` s:
     exit 1 with the sim's reason when it refuses, or when no sim listens on the key; exit 0 when none came."""
+    from fabric.session import shutdown_event
     from fabric.codec import encode
     from fabric.interfaces import Command
     from fabric.rate import RateLoop
@@ -450,6 +456,7 @@ def call(
     peer_id: PeerId = None,
 ) -> None:
     """Call a service and print its replies (like ``ros2 service call``); a refusal prints its reason, exit 1."""
+    from fabric.codec import to_plain
     from fabric.interfaces import ServiceError
 
     if timeout <= 0:

@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 import json
-from typing import Annotated, Optional
+from typing import Annotated, Optional, TYPE_CHECKING
 
 import typer
 
 from fabric.cli_common import Connect, Profile, UserError, World, ZenohConfig, make_config, open_fabric
-from fabric.interfaces import ServiceError
-from fabric.session import Fabric, shutdown_event
 
-from ownership.client import OwnershipClient
+if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
+    from fabric.session import Fabric
+    from ownership.client import OwnershipClient
+
 
 own_app = typer.Typer(help="Ownership of shared robots: who owns what, request, release, watch.", no_args_is_help=True)
 
@@ -25,6 +26,7 @@ def _user(user: str | None) -> str:
 
 
 def _client(world, connect, profile, zenoh_config, user) -> tuple[Fabric, OwnershipClient]:
+    from ownership.client import OwnershipClient
     cfg = make_config(world, connect, None, profile, zenoh_config)
     try:
         uid = cfg.user_id(user) or _user(None)  # with a secure config, the login is the user
@@ -63,6 +65,8 @@ def list_cmd(world: World = None, connect: Connect = None, profile: Profile = No
 
 def _ask(op: str, obj: str, world, connect, profile, zenoh_config, user, wait: bool = False,
          hold: bool = False, duration: float | None = None) -> None:
+    from fabric.interfaces import ServiceError
+    from fabric.session import shutdown_event
     stop = shutdown_event() if hold else None
     fab, cl = _client(world, connect, profile, zenoh_config, user)
     with fab:
@@ -84,6 +88,7 @@ def _hold(cl: OwnershipClient, obj: str, stop, duration: float | None) -> None:
     """Keep the lease (token + renewals) until Ctrl-C / SIGTERM / ``duration``, then give the object up.
 
     Prints each change of the object's record, so a queued user sees the moment it is granted."""
+    from fabric.interfaces import ServiceError
     cl.on_change(lambda rec: print(_line(rec), flush=True) if rec.object == obj else None)
     print(f"holding {obj} as {cl.user} (Ctrl-C releases it)", flush=True)
     stop.wait(duration)
@@ -121,6 +126,7 @@ def release_cmd(obj: Annotated[str, typer.Argument(help="Object id.")], world: W
 def watch_cmd(world: World = None, connect: Connect = None, profile: Profile = None, zenoh_config: ZenohConfig = None,
               user: User = None) -> None:
     """Print every ownership change until Ctrl-C."""
+    from fabric.session import shutdown_event
     stop = shutdown_event()
     fab, cl = _client(world, connect, profile, zenoh_config, user)
     with fab:

@@ -7,12 +7,17 @@ no Zenoh import; :mod:`sim_peer.peer` composes it with the fabric: streams, comm
 :class:`fabric.gate.CommandGate`, the world service.
 """
 
-from sim_peer.controllers import ArmController, BaseController, Clamp, CommandRejected
-from sim_peer.follower import PurePursuit
-from sim_peer.robot import HOOKS, Mount, Note, Physics, SimRobot, Stream
-from sim_peer.sensors import Lidar, Sensor, Ultrasonic
-from sim_peer.simrobot import ArmRobot, MobileRobot
-from sim_peer.world import SimWorld, WorldError, parse_robot_spec
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from sim_peer.controllers import ArmController, BaseController, Clamp, CommandRejected
+    from sim_peer.follower import PurePursuit
+    from sim_peer.robot import HOOKS, Mount, Note, Physics, SimRobot, Stream
+    from sim_peer.sensors import Lidar, Sensor, Ultrasonic
+    from sim_peer.simrobot import ArmRobot, MobileRobot
+    from sim_peer.world import SimWorld, WorldError, parse_robot_spec
 
 __all__ = [
     "ArmController",
@@ -35,3 +40,16 @@ __all__ = [
     "WorldError",
     "parse_robot_spec",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """The core loads on first use of one of its names: ``robofabric --help`` imports ``sim_peer.cli``, and with it
+    this package, and must not pay for MuJoCo (a quarter of a second) it never uses."""
+    if name not in __all__:
+        raise AttributeError(f"module 'sim_peer' has no attribute {name!r}")
+    from sim_peer import controllers, follower, robot, sensors, simrobot, world
+
+    for mod in (controllers, follower, robot, sensors, simrobot, world):
+        if hasattr(mod, name):
+            return getattr(mod, name)
+    raise AttributeError(f"module 'sim_peer' has no attribute {name!r}")

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import logging
 import sys
-from typing import Annotated, Optional
+from typing import Annotated, Optional, TYPE_CHECKING
 
 import typer
 
 from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
-from fabric.gate import CommandGate, OpenGate
-from fabric.rate import parse_rates
+
+if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
+    from fabric.gate import CommandGate
 
 log = logging.getLogger("robofabric.sim")
 
@@ -19,6 +20,7 @@ def make_gate(fabric, world, ownership: bool, restored=None) -> CommandGate:
     """The ownership Authority when asked for and installed, else an OpenGate (with a warning if asked for).
 
     ``restored``: the ownership state a standby carries over when it takes the world (issue 16)."""
+    from fabric.gate import OpenGate
     if not ownership:
         return OpenGate()
     try:
@@ -64,6 +66,7 @@ def sim(
     peer_id: PeerId = None,
 ) -> None:
     """Simulate a scene's robots and serve them on the fabric: joints, poses, scans out; commands in."""
+    from fabric.rate import parse_rates
     if list_:
         _print_catalog()
         return

@@ -11,20 +11,25 @@ and remapped into another world. The CLI (``record``, ``info``, ``replay``)
 is in :mod:`fabric.recording.cli` (``bench record``: robofabric/bench/record.py); see docs/recording.md.
 """
 
-from fabric.recording.format import LIVELINESS_SCHEMA, MESSAGE_ENCODING, RAW_SCHEMA, Peek, peek, remap_world, world_of
-from fabric.recording.reader import (
-    ChannelInfo,
-    RecordedMessage,
-    RecordingError,
-    RecordingInfo,
-    iter_messages,
-    key_filter,
-    read_info,
-    read_samples,
-)
-from fabric.recording.recorder import Recorder, RecorderStats
-from fabric.recording.replayer import Replayer, ReplayPlan, ReplayStats, due_time, plan_replay
-from fabric.recording.sink import McapSink
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from fabric.recording.format import LIVELINESS_SCHEMA, MESSAGE_ENCODING, RAW_SCHEMA, Peek, peek, remap_world, world_of
+    from fabric.recording.reader import (
+        ChannelInfo,
+        RecordedMessage,
+        RecordingError,
+        RecordingInfo,
+        iter_messages,
+        key_filter,
+        read_info,
+        read_samples,
+    )
+    from fabric.recording.recorder import Recorder, RecorderStats
+    from fabric.recording.replayer import Replayer, ReplayPlan, ReplayStats, due_time, plan_replay
+    from fabric.recording.sink import McapSink
 
 __all__ = [
     "Recorder",
@@ -51,3 +56,16 @@ __all__ = [
     "RAW_SCHEMA",
     "LIVELINESS_SCHEMA",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """The package's names load on first use: ``robofabric --help`` imports :mod:`fabric.recording.cli`, and with
+    it this package, and must not pay for the session and numpy a recorder needs."""
+    if name not in __all__:
+        raise AttributeError(f"module 'fabric.recording' has no attribute {name!r}")
+    from fabric.recording import format, reader, recorder, replayer, sink
+
+    for mod in (format, reader, recorder, replayer, sink):
+        if hasattr(mod, name):
+            return getattr(mod, name)
+    raise AttributeError(f"module 'fabric.recording' has no attribute {name!r}")

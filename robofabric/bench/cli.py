@@ -16,18 +16,41 @@ from typing import Annotated, Callable, Optional
 
 import typer
 
-from robofabric.bench import BENCHMARKS, Benchmark, names
+import click
+import typer.main
+from typer.core import TyperGroup
+
+from robofabric.bench import BENCHMARKS, Benchmark, get, names
 
 __all__ = ["build_app", "register", "run_all", "BenchOutcome"]
 
 HELP = "Benchmarks: each prints a table and can append it to docs/benchmarks.md (see --help of each)."
 
 
+class _LazyBenchGroup(TyperGroup):
+    """The ``bench`` group: each benchmark's module is imported when that benchmark is named (its command, or
+    ``bench --help``), never when ``robofabric`` starts: most of them import numpy, zenoh or a peer at the top,
+    and every ``robofabric`` command (``--help`` included) paid for all of them."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return [*names(), *super().list_commands(ctx)]
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        cmd = super().get_command(ctx, cmd_name)
+        if cmd is not None or cmd_name not in names():
+            return cmd
+        b = get(cmd_name)
+        one = typer.Typer()
+        one.command(b.name, short_help=b.measures)(b.command())
+        cmd = typer.main.get_command(one)
+        cmd.name = b.name
+        self.add_command(cmd, b.name)
+        return cmd
+
+
 def build_app() -> typer.Typer:
-    """A ``bench`` group with every registered benchmark, ``list`` and ``all``."""
-    app = typer.Typer(help=HELP, no_args_is_help=True)
-    for b in BENCHMARKS:
-        app.command(b.name, short_help=b.measures)(b.command())
+    """A ``bench`` group with every registered benchmark (loaded when named), ``list`` and ``all``."""
+    app = typer.Typer(help=HELP, no_args_is_help=True, cls=_LazyBenchGroup)
     app.command("list", short_help="The registered benchmarks and the command lines of docs/benchmarks.md.")(list_cmd)
     app.command("all", short_help="Run every benchmark (or --only some), one process each, tables in one file.")(all_cmd)
     return app

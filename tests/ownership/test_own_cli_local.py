@@ -61,7 +61,9 @@ def test_list_prints_every_record_of_one_snapshot(client, capsys):
 def test_watch_starts_from_one_snapshot(client, capsys, monkeypatch):
     stop = threading.Event()
     stop.set()
-    monkeypatch.setattr(cli, "shutdown_event", lambda: stop)
+    import fabric.session
+
+    monkeypatch.setattr(fabric.session, "shutdown_event", lambda: stop)  # the command imports it when it runs
     cli.watch_cmd()
     out = capsys.readouterr().out.splitlines()
     assert [line.split()[0] for line in out] == ["arm", "ball"] and "owner ann" in out[0]
