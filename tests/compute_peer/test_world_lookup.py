@@ -11,7 +11,7 @@ from compute_peer.world_lookup import BackgroundLookup, described_robots
 from fabric import keys
 from fabric.interfaces import NoReply, RobotInfo, WorldInfo
 from fabric.rate import FakeClock
-from fabric.testing import client
+from fabric.testing import client, wait_until
 
 
 def test_one_run_per_interval_and_none_after_close():
@@ -65,5 +65,14 @@ def test_described_robots_are_the_sims_robots_of_one_kind(router, world):
             described_robots(compute, "arm", timeout=0.5)
         robots = (_robot("arm1", "arm"), _robot("base1", "mobile"))
         sim.serve(keys.srv(world, "world"), lambda key, req: WorldInfo(world, "s", 0.002, {}, robots))
+        wait_until(lambda: _answers(compute), what="the new queryable known through the router")
         assert [r.id for r in described_robots(compute, "mobile")] == ["base1"]
         assert [r.id for r in described_robots(compute, "arm")] == ["arm1"]
+
+
+def _answers(compute) -> bool:
+    try:
+        described_robots(compute, "arm", timeout=0.5)
+        return True
+    except NoReply:
+        return False

@@ -48,11 +48,17 @@ def test_a_late_subscriber_gets_the_latest_latched_values_then_live_ones(world, 
     pub = connect("user", "setter")
     goal, grid, path, joints = (keys.object_pose(world, "goal", "alice"), keys.map_key(world, "map"),
                                 keys.robot_path(world, "base1"), keys.robot_joints(world, "arm1"))
+    # a witness of the first joints sample: once it has it, the router has routed that sample, and the late
+    # subscriber below cannot get it as a live one (on a busy machine it arrived after the late subscription)
+    witness = Inbox()
+    connect("tool", "witness").subscribe(joints, witness)
+    wait_until(lambda: pub.wait_matching(joints, 0.1), what="the witness's subscription known to the publisher")
     for x in (1.0, 2.0, 3.0):  # only the last goal matters to a late joiner
         pub.publish(goal, Pose(np.array([x, 0.0, 0.0]), np.array([1.0, 0.0, 0.0, 0.0]), header=pub.header(goal)))
     pub.publish(grid, OccupancyGrid(0.05, np.zeros(3), np.zeros((40, 30), np.uint8), header=pub.header(grid)))
     pub.publish(path, Path(np.arange(3.0), np.zeros(3), np.zeros(3), header=pub.header(path)))
     pub.publish(joints, JointState(["j1"], np.zeros(1), np.zeros(1), header=pub.header(joints)))
+    wait_until(lambda: joints in witness.keys(), what="the first joints routed")
 
     late = connect("viewer", "late")
     plain, hist = Inbox(), Inbox()
