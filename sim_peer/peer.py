@@ -255,7 +255,8 @@ class SimPeer:
         suppressed = self.fabric.should_report(f"reject:{robot if known else '?'}:{code}")
         if suppressed is None:
             return
-        data = {"command": command, "detail": detail() if callable(detail) else detail}
+        # code: which check refused it ("refused": the ownership gate), so a client tells NotOwner from a bad command
+        data = {"command": command, "code": code, "detail": detail() if callable(detail) else detail}
         if suppressed:
             data["suppressed"] = suppressed
         self._event(EventKind.REJECT, robot if known else clip(robot, 64), reason() if callable(reason) else reason, user=user, data=data)

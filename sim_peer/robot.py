@@ -114,7 +114,7 @@ class SimRobot:
 
     ``kind`` is what other peers make of the robot (``arm``: joints and a flange; ``mobile``: a base pose
     and range sensors), carried in its :class:`RobotInfo`; the sim itself never looks at it. Named for the
-    side it lives on, like :class:`~sim_peer.world.SimWorld`: ``user_peer.api.Robot`` is a user's handle on a
+    side it lives on, like :class:`~sim_peer.world.SimWorld`: ``user_peer.robot.Robot`` is a user's handle on a
     robot of the world.
     """
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["FabricUserError", "NotOwner", "Unreachable", "JoinFailed", "Timeout"]
+__all__ = ["FabricUserError", "NotOwner", "Rejected", "Unreachable", "JoinFailed", "Timeout"]
 
 
 class FabricUserError(RuntimeError):
@@ -15,6 +15,20 @@ class FabricUserError(RuntimeError):
 
 class NotOwner(FabricUserError):
     """A command or request was refused because someone else owns the robot (or the epoch is stale)."""
+
+
+class Rejected(FabricUserError):
+    """The sim refused a command for what it said, not for who sent it: a path in the wrong frame, a body
+    that does not fit the command, a robot the sim does not have. ``robot`` and ``command`` name what was
+    refused, ``code`` the sim's word for why (``bad_frame``, ``wrong_body``...); ``reason`` says it in full.
+    Ownership refusals are :class:`NotOwner`."""
+
+    def __init__(self, reason: str, *, robot: str = "", command: str = "", code: str = "") -> None:
+        super().__init__(f"{robot} refused the {command or 'command'}: {reason}" if robot else reason)
+        self.reason = reason
+        self.robot = robot
+        self.command = command
+        self.code = code
 
 
 class Unreachable(FabricUserError):

@@ -5,7 +5,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 from fabric import keys
-from user_peer.api import _Latest
+from user_peer.latest import Latest
 
 W = "w"
 INFO = SimpleNamespace(robots=[SimpleNamespace(id="arm1"), SimpleNamespace(id="base1")], objects=[SimpleNamespace(id="target")])
@@ -13,7 +13,7 @@ INFO = SimpleNamespace(robots=[SimpleNamespace(id="arm1"), SimpleNamespace(id="b
 
 def test_keys_of_robots_the_world_does_not_have_are_not_kept():
     info = [None]
-    latest = _Latest(world_info=lambda: info[0], max_other=8)
+    latest = Latest(world_info=lambda: info[0], max_other=8)
     info[0] = INFO
     latest.put(keys.robot_stream(W, "arm1", "joints"), "q")
     latest.put(keys.own(W, "arm1"), "record")
@@ -33,7 +33,7 @@ def test_keys_of_robots_the_world_does_not_have_are_not_kept():
 
 def test_before_the_world_description_every_key_shares_the_bounded_places():
     info = [None]
-    latest = _Latest(world_info=lambda: info[0], max_other=16)
+    latest = Latest(world_info=lambda: info[0], max_other=16)
     for i in range(500):
         latest.put(keys.robot_stream(W, f"r{i}", "scan"), i)
     assert len(latest._values) == 16 and latest.get(keys.robot_stream(W, "r499", "scan")) == 499

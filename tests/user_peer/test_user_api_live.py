@@ -95,3 +95,27 @@ def test_stop_is_confirmed_by_the_robot_standing_still(user):
     assert np.max(np.abs(arm.joint_state.dq)) < 1e-6 and abs(q[5]) < math.radians(170.0) - 0.05
     assert arm.reset() is True
     assert np.max(np.abs(arm.joints)) < 1e-6
+
+
+def test_a_command_the_sim_refuses_for_what_it_says_is_rejected_not_notowner(user):
+    """The owner's absurd twist is refused by the sim's controller: :class:`user_peer.Rejected` naming the robot,
+    the command and the sim's code, never :class:`user_peer.NotOwner` (which says someone else owns it)."""
+    w = user("erin")
+    base = w.robot("base1")
+    base.wait_for("pose")
+    if base.record is not None and not base.is_owner:
+        base.request(timeout=10)
+    with pytest.raises(user_peer.Rejected) as caught:
+        base.drive(1000.0, 0.0, 5.0)  # 1000 m/s: beyond any limit, refused rather than clamped
+    err = caught.value
+    assert not isinstance(err, user_peer.NotOwner)
+    assert (err.robot, err.command, err.code) == ("base1", "twist", "absurd_twist"), (err.robot, err.command, err.code)
+    assert "beyond" in err.reason and "base1 refused the twist" in str(err), str(err)
+
+
+def test_repr_of_a_world_describes_every_robot_and_makes_no_handle(user):
+    w = user("frank")
+    w.info()
+    text = repr(w)
+    assert "arm1 (" in text and "base1 (" in text, text
+    assert w._robots == {} and w._followed == set(), "repr made robot handles or followed their streams"
