@@ -1,4 +1,4 @@
-"""Fencing by authority epoch (issue 16): which state a consumer may believe.
+"""Fencing by authority epoch: which state a consumer may believe.
 
 A world's authority (the sim peer that owns the robots and the ownership records) stamps its
 authority epoch, the *term*, on every message it writes (:attr:`fabric.interfaces.Header.term`).

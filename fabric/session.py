@@ -364,7 +364,7 @@ class Fabric:
         return self.subscribe_raw(key_expr, on_sample, history=history, remote_only=remote_only)
 
     def _believe(self, key: str, msg: Any) -> bool:
-        """False for authority state stamped with a lower authority epoch than one already heard (issue 16)."""
+        """False for authority state stamped with a lower authority epoch than one already heard."""
         header = getattr(msg, "header", None)
         if header is None or not is_authority_key(key):
             return True
@@ -510,7 +510,7 @@ class Fabric:
             if errors:
                 raise Refused(errors[0], key=selector)
             # say what happened: zenoh ends a query at once when nobody serves the key, and waits the whole
-            # time limit only for a server that is there but silent (issue 11: "within 5 s" after 0 s misleads)
+            # time limit only for a server that is there but silent ("within 5 s" after 0 s would mislead)
             waited = time.monotonic() - t0
             why = "nobody serves it" if waited < 0.5 * timeout else "no server answered in time"
             raise NoReply(f"no reply on {selector} after {waited:.1f} s of {timeout:.1f} s: {why}", key=selector)

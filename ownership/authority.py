@@ -47,7 +47,7 @@ class Authority:
         restored: tuple[Any, Any] | None = None,
     ) -> None:
         """``restored``: ``(records, users)`` as :meth:`export_state` gave them on the authority this one
-        replaces (a standby taking over): owners, epochs, queues and leases carry on (issue 16)."""
+        replaces (a standby taking over): owners, epochs, queues and leases carry on."""
         self.fabric = fabric
         self.clock = clock or MonotonicClock()
         self._lock = threading.RLock()

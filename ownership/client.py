@@ -101,7 +101,7 @@ class OwnershipClient:
         self._held: set[str] = set()  # granted to us by the authority's replies; renewed until it says otherwise
         self._sims: set[str] = set()
         self._authority: str | None = None
-        self._term = 0  # the authority epoch of the authority followed (issue 16)
+        self._term = 0  # the authority epoch of the authority followed
         self._ready = False  # a new sim's token triggers a refresh only after the first one below
         self._refreshing = self._refresh_again = False
         fabric.watch_peers(self._on_sim, kind="sim")

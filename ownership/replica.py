@@ -1,4 +1,4 @@
-"""Moving the ownership state from one authority to another (issue 16): pure export and restore.
+"""Moving the ownership state from one authority to another: pure export and restore.
 
 A primary exports its :class:`~ownership.state.OwnState` with every time *relative* to its own
 clock's ``now`` (remaining lease, remaining grace), because the standby that restores it runs

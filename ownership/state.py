@@ -4,7 +4,7 @@ No zenoh and no clock: ``now`` arrives inside the events, so the same code runs
 in the authority and in hypothesis property tests. Records are
 :class:`fabric.interfaces.OwnershipRecord` (the replicated wire record).
 
-Rules (DESIGN.md, issue 5):
+Rules (DESIGN.md):
 - ``exclusive`` objects have at most one owner, always a live user; ``scene``
   objects are never owned (anyone writes, last writer wins).
 - The owner's epoch (fencing token) increases on every change of owner.
@@ -17,7 +17,7 @@ Rules (DESIGN.md, issue 5):
   renewals stopped while the authority was hearing others (:func:`may_expire`). Nothing heard
   from anyone for ``deaf_s`` (a stalled router, a backlog, a lost link) or a late tick (the
   authority paused) stops expiries, and once it hears again every owner has a whole lease to renew.
-- Bounded against made-up users (issue 14): a queue holds at most
+- Bounded against made-up users: a queue holds at most
   :data:`fabric.interfaces.MAX_QUEUE` users, and a user that requested without a
   liveliness token (a :class:`Join`) is dropped, from queues and ownership, once
   ``grace_s`` has passed without one: forged requesters leave on their own. Until its

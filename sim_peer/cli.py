@@ -19,7 +19,7 @@ log = logging.getLogger("robofabric.sim")
 def make_gate(fabric, world, ownership: bool, restored=None) -> CommandGate:
     """The ownership Authority when asked for and installed, else an OpenGate (with a warning if asked for).
 
-    ``restored``: the ownership state a standby carries over when it takes the world (issue 16)."""
+    ``restored``: the ownership state a standby carries over when it takes the world."""
     from fabric.gate import OpenGate
     if not ownership:
         return OpenGate()
@@ -174,7 +174,7 @@ def replicated_off() -> bool:
 
 
 def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, stop, duration, standby) -> None:
-    """Primary or standby through :func:`sim_peer.standby.run_replicated` (issue 16)."""
+    """Primary or standby through :func:`sim_peer.standby.run_replicated`."""
     from fabric.config import default_peer_id
     from sim_peer.standby import run_replicated
 

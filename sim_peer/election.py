@@ -1,4 +1,4 @@
-"""Who is a world's sim authority: a pure election and fencing core (issue 16).
+"""Who is a world's sim authority: a pure election and fencing core.
 
 One primary serves the world; any number of standbys follow it. Each sim peer runs this state
 machine on what it observes, events in, (new state, effects) out, no clock and no zenoh, so the

@@ -1,4 +1,4 @@
-"""A world's whole state as a message, and putting a world back into it (issue 16).
+"""A world's whole state as a message, and putting a world back into it.
 
 The primary serves :class:`WorldState` on ``rf/{world}/srv/state``; a standby polls it and keeps the
 last one, together with the newest joints and poses from the streams (which come ten times more

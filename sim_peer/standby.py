@@ -1,4 +1,4 @@
-"""Replicated authority (issue 16): a sim peer as a world's primary or as a standby that takes it over.
+"""Replicated authority: a sim peer as a world's primary or as a standby that takes it over.
 
 :class:`ReplicaHost` runs one fabric session in one role at a time, driven by the pure election core
 (:mod:`sim_peer.election`):
@@ -59,7 +59,7 @@ KEEP_COMMANDS_S = 5.0
 MAX_KEPT_COMMANDS = 4096
 MAX_KEPT_BYTES = 16 * 1024 * 1024
 """Caps on what a standby keeps of those seconds (oldest dropped first): a client flooding commands
-must not grow a standby's memory (issue 14); a class's real commands in 5 s are far fewer."""
+must not grow a standby's memory; a class's real commands in 5 s are far fewer."""
 
 GateFactory = Callable[[Fabric, SimWorld, Any], Any]
 
@@ -345,7 +345,7 @@ class ReplicaHost:
                 return  # serving: the peer takes commands itself (until it subscribes, they wait here)
             self.commands.append((now, key, msg, size))
             self._kept_bytes += size
-            # the last seconds, and never more than a cap in count and bytes whatever clients send (issue 14)
+            # the last seconds, and never more than a cap in count and bytes whatever clients send
             while self.commands and (
                 self.commands[0][0] < now - KEEP_COMMANDS_S
                 or len(self.commands) > MAX_KEPT_COMMANDS

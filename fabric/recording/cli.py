@@ -23,14 +23,10 @@ __all__ = ["register", "record", "info", "replay"]
 
 def _resolve(expr: str, world: str) -> str:
     """Full (``rf/demo/robot/**``) or world-relative (``robot/*/pose``) key expression, validated."""
-    import zenoh
-
-    full = expr if expr.startswith(keys.PREFIX + "/") else f"{keys.world_root(world)}/{expr.lstrip('/')}"
     try:
-        zenoh.KeyExpr(full)
-    except Exception as exc:
-        raise UserError(f"{expr!r} is not a valid key expression: {exc}") from None
-    return full
+        return keys.in_world(expr, world)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
 
 
 # --------------------------------------------------------------------------- record

@@ -56,7 +56,7 @@ class LiveConverter:
     A context manager like :class:`~fabric.recording.recorder.Recorder`: ``with LiveConverter(fab, sink,
     exprs): ...`` starts on entry and finishes the file on exit. The converter owns ``sink`` from the
     start: ``stop()`` (idempotent) closes it. A script that never calls ``stop()`` still gets a finished
-    file: it runs when the interpreter exits, before the session closes (issue 11).
+    file: it runs when the interpreter exits, before the session closes.
     """
 
     def __init__(self, fabric: Any, sink: Any, keyexprs: Iterable[str], *, queue_size: int = 20_000) -> None:

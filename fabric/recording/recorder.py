@@ -6,7 +6,7 @@ by compression or disk. One writer thread owns the :class:`McapSink`. The
 stamp and the enqueue happen under one lock, so file order is receive order
 and a replay can stream the file without sorting it.
 
-Bounded (issue 14): the queue holds at most ``max_queue_bytes`` of payload, the file gets
+Bounded: the queue holds at most ``max_queue_bytes`` of payload, the file gets
 at most ``max_keys`` channels, and an optional ``quota_bytes`` caps what is written; what
 does not fit is dropped and counted (``RecorderStats.dropped``, ``dropped_bytes``), never
 silently: the progress line and the final report say so. A 60 x 10 MB junk flood once took
@@ -119,11 +119,11 @@ class Recorder:
 
     A context manager: ``with Recorder(fab, "run.mcap"): ...`` starts on entry and finishes the file
     on exit. ``stop()`` is idempotent and returns the final :class:`RecorderStats`; a script that
-    never calls it still gets a finished file, as ``stop()`` runs when the interpreter exits (issue 11). With
+    never calls it still gets a finished file, as ``stop()`` runs when the interpreter exits. With
     ``liveliness=True`` the appearance and loss of peers' liveliness tokens under the same key
     expressions is recorded too (schema ``liveliness``; replay skips those by default).
 
-    Authority state of a lower authority epoch than one already recorded is left out (issue 16); the
+    Authority state of a lower authority epoch than one already recorded is left out; the
     recorder follows the recorded worlds' sim tokens so that, like a session's, a world's fence resets
     when its last sim goes and a world restarted from scratch is recorded again.
     """

@@ -9,7 +9,7 @@ reader can stream; only the last ``flush_interval`` of data is lost, and the
 missing footer tells :func:`fabric.recording.reader.read_info` the file is
 unfinished.
 
-Fenced like a session (issue 16, :mod:`fabric.fencing`): per world, authority state of a lower
+Fenced like a session (:mod:`fabric.fencing`): per world, authority state of a lower
 authority epoch than one already written is left out. The recorder tells the sink when a world's
 sim peers come and go (:meth:`McapSink.sim_seen`, :meth:`McapSink.sim_left`): when the last one
 goes the world's fence resets, so a world restarted from scratch at term 1 after a take-over is
@@ -95,7 +95,7 @@ class McapSink:
     def write(self, key: str, payload: bytes, log_time_ns: int) -> str:
         """Write one sample; publish time and sequence come from its header when it has one. Returns the schema name,
         or ``stale`` for authority state of a lower authority epoch than one already written in its world, or
-        stamped by a sim that has left (not written: issue 16)."""
+        stamped by a sim that has left (not written)."""
         p = peek(payload)
         if (p.term or self.fences) and not self._believe(key, p.term, p.source):
             self.stale += 1

@@ -1,4 +1,4 @@
-"""``robofabric bench declflood``: a login declaring thousands of subscribers, then closing (issue 23).
+"""``robofabric bench declflood``: a login declaring thousands of subscribers, then closing.
 
     robofabric bench declflood [--counts 6000,20000] [--out FILE.md]
 
