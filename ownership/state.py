@@ -150,7 +150,22 @@ def _sorted_queue(s: OwnState, users) -> tuple[str, ...]:
 
 
 def _with(s: OwnState, recs: dict, **kw) -> OwnState:
-    return replace(s, records=MappingProxyType(recs), **kw)
+    out = replace(s, records=MappingProxyType(recs), **kw)
+    return _forfeit_taken(out, s.records) if out.away else out
+
+
+def _forfeit_taken(s: OwnState, before: Mapping[str, OwnershipRecord]) -> OwnState:
+    """An object someone else came to own while its former owner was away is no longer hers to get back:
+    she was not there while another user moved it, so her program must hear that she lost it (a record
+    naming the other owner, or a free one of a newer epoch) rather than find herself owner again."""
+    taken = {obj for obj, rec in s.records.items() if rec.owner and (before.get(obj) is None or before[obj].owner != rec.owner)}
+    if not taken:
+        return s
+    away = {}
+    for user, a in s.away.items():
+        lost = {o for o in a.owned & taken if s.records[o].owner != user}
+        away[user] = replace(a, owned=a.owned - lost, queued=a.queued | lost) if lost else a  # her place behind, kept
+    return replace(s, away=MappingProxyType(away))
 
 
 def _join(s: OwnState, user: str) -> OwnState:
@@ -245,7 +260,7 @@ def _on_join(s: OwnState, ev: Join, effects: list[Effect]) -> OwnState:
         if not rec.owner and obj in was_away.owned:
             recs[obj] = replace(rec, owner=ev.user, epoch=rec.epoch + 1, lease_expiry=ev.now + s.lease_s)
             effects.append(Effect("restored", obj, ev.user, "owner again"))
-        elif rec.owner != ev.user:
+        elif rec.owner and rec.owner != ev.user:  # behind whoever owns it now (a free robot she may request)
             q = _sorted_queue(s, rec.queue + (ev.user,))
             recs[obj] = replace(rec, queue=q)
             effects.append(Effect("restored", obj, ev.user, "queued", q.index(ev.user) + 1))

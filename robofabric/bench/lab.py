@@ -91,7 +91,10 @@ class _Bench:
         t_back = time.monotonic()
         _wait(lambda: a.call("x = arm.age('joints'); x is not None and x < 0.2"), 60, "joints after the router's restart")
         joints = time.monotonic() - t_back
-        _wait(lambda: a.call(f"arm.record.epoch > {epoch}"), 60, "a newer ownership record at alice")
+        # the authority's word on the arm after the restart: alice's under the same epoch (the authority kept
+        # her while its own link was down), or a newer record (passed on, restored or freed)
+        _wait(lambda: a.call(f"r = w.ownership.fetch('arm1', timeout=2.0)\nr is not None and (r.owner == 'alice' or r.epoch > {epoch})"),
+              60, "the authority's record of the arm at alice")
         owned = time.monotonic() - t_back
         restored = bool(a.call("arm.is_owner"))
         a.call("arm.release() if arm.is_owner else None; None")
@@ -144,7 +147,7 @@ def to_markdown(result: dict[str, Any]) -> str:
     labels = {
         "partition_handover": "handover after the owner's link drops (bob queued → granted)",
         "router_joints_back": "router SIGKILLed and restarted: joints at a user again, after the router listens",
-        "router_owner_back": "… the owner holds the arm again (restored within grace; runs where it was)",
+        "router_owner_back": "… the owner holds the arm again (kept under her epoch, or restored within grace)",
         "sim_gone_told": "sim SIGKILLed: the user is told the world is gone",
         "sim_world_serving": "new sim started: the world serves again (from the sim's start)",
         "sim_first_move_done": "… the user's next request + move done (from the sim's start)",

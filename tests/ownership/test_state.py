@@ -378,3 +378,27 @@ def test_an_owner_whose_renewal_is_back_before_her_token_gets_her_robot_back():
     s3, _ = st.step(s, st.Join("carol", 1.5))
     s3, eff = st.step(s3, st.Renew("carol", "arm", 2.0))
     assert s3.records["arm"].owner == "" and eff[0].kind == "denied"
+
+
+def test_an_owner_away_while_someone_else_used_her_robot_does_not_get_it_back():
+    """bench lab: alice's cable is pulled, her token goes and her arm passes to bob, who was queued; bob moves it
+    and releases it; alice comes back within grace. She must not be made owner again as if nothing happened
+    (her program would command an arm someone else moved): neither her renewal nor her token's return restores
+    her, and she reads the newer free record as a loss."""
+    s = st.initial({"arm": "exclusive"}, lease_s=2.0, grace_s=10.0)
+    for u in ("alice", "bob"):
+        s, _ = st.step(s, st.Join(u, 0.0))
+    s, _ = st.step(s, st.Request("alice", "arm", 0.0))
+    s, _ = st.step(s, st.Motion("arm", True))
+    s, _ = st.step(s, st.Request("bob", "arm", 0.1, wait=True))
+    s, _ = st.step(s, st.Leave("alice", 2.0))
+    assert s.records["arm"].owner == "bob"
+    s, _ = st.step(s, st.Motion("arm", False))
+    s, _ = st.step(s, st.Release("bob", "arm", 4.0))
+    assert s.records["arm"].owner == ""
+    check_invariants(s)
+    renewed, eff = st.step(s, st.Renew("alice", "arm", 5.0))
+    assert renewed.records["arm"].owner == "" and [e.kind for e in eff] == ["denied"]
+    joined, eff = st.step(s, st.Join("alice", 5.0))
+    assert joined.records["arm"].owner == "" and not [e for e in eff if e.kind == "restored"]
+    check_invariants(joined)

@@ -15,7 +15,7 @@ def test_report_has_a_row_per_figure_with_median_and_max():
     assert lines[2:6] == [
         "| handover after the owner's link drops (bob queued → granted) | 1.90 s | 2.40 s |",
         "| router SIGKILLed and restarted: joints at a user again, after the router listens | 0.70 s | 3.25 s |",
-        "| … the owner holds the arm again (restored within grace; runs where it was) | 1.95 s | 3.20 s |",
+        "| … the owner holds the arm again (kept under her epoch, or restored within grace) | 1.95 s | 3.20 s |",
         "| sim SIGKILLed: the user is told the world is gone | 0.03 s | 0.05 s |",
     ]
     assert lines[-1] == ("After the router's restart the owner was restored in 2/3 runs "
