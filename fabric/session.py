@@ -35,7 +35,7 @@ from fabric.codec import DecodeError, decode, encode, load_plugins
 from fabric.authority import AuthorityStamp
 from fabric.config import FabricConfig, default_peer_id
 from fabric.exit import at_exit
-from fabric.fencing import SimFence, is_authority_key
+from fabric.fencing import SimFence, authority_scopes, is_authority_key
 from fabric.limits import RateLimiter, clip
 from fabric.interfaces import Event, EventKind, Header, NoReply, Refused, ServiceError
 
@@ -116,9 +116,9 @@ class Fabric:
         self.stamp = AuthorityStamp()
         """Term, muzzle and freeze watch (:mod:`fabric.authority`): what this peer stamps and withholds as an authority."""
         self.sim_fence = SimFence()
-        """The world's sims as this session follows them (once terms are in use), and its fence."""
-        self.fence = self.sim_fence.fence
-        """The highest authority epoch heard on authority keys; :meth:`subscribe` drops state below it."""
+        """The world's sims as this session follows them (once terms are in use), and its fences: the highest
+        authority epoch heard per authority object (:func:`fabric.fencing.authority_scopes`); :meth:`subscribe`
+        and :meth:`query` drop state below it."""
         self._seq: dict[str, int] = {}
         self._lock = threading.Lock()
         self.report_interval = REPORT_INTERVAL
@@ -234,10 +234,11 @@ class Fabric:
         """While true, nothing is published and no query is answered."""
         return self.stamp.muzzled
 
-    def assume_term(self, term: int) -> None:
-        """Stamp ``term`` on everything published from now on, and fence below it."""
+    def assume_term(self, term: int, scopes: Iterable[str] = ()) -> None:
+        """Stamp ``term`` on everything published from now on, and fence below it in ``scopes`` (the robots and
+        objects this authority serves: other sims of the world have terms of their own)."""
         self.stamp.assume_term(term)
-        self.fence.raise_to(term)
+        self.sim_fence.raise_to(term, tuple(scopes))
 
     def muzzle(self) -> None:
         """Publish and answer nothing from now on (an authority unsure it still is one, or stepping down)."""
@@ -370,7 +371,7 @@ class Fabric:
             return True
         if self._sim_watch is None and header.term:
             self._watch_sims()
-        if self.sim_fence.believe(header.term, header.source):
+        if self.sim_fence.believe(header.term, header.source, authority_scopes(key, msg)):
             return True
         self.counters["stale_authority"] += 1  # a lower term, or in flight when its sim left
         return False

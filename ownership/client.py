@@ -100,8 +100,11 @@ class OwnershipClient:
         self._renewing: set[str] = set()  # renewals sent and not answered yet
         self._held: set[str] = set()  # granted to us by the authority's replies; renewed until it says otherwise
         self._sims: set[str] = set()
-        self._authority: str | None = None
-        self._term = 0  # the authority epoch of the authority followed
+        # per object: the sim that is its authority and the authority epoch heard from it (several sims may
+        # serve one world, each the authority of its own robots with terms of its own: docs/sim.md)
+        self._authority_of: dict[str, str] = {}
+        self._term_of: dict[str, int] = {}
+        self._replaced: dict[str, int] = {}  # a sim whose objects a higher term took over -> that term
         self._ready = False  # a new sim's token triggers a refresh only after the first one below
         self._refreshing = self._refresh_again = False
         fabric.watch_peers(self._on_sim, kind="sim")
@@ -139,6 +142,7 @@ class OwnershipClient:
                 self._sims.add(peer_id)
             else:
                 self._sims.discard(peer_id)
+                self._replaced.pop(peer_id, None)  # a sim restarted under this id starts its terms afresh
             if not (new and self._ready) or self._stop.is_set():
                 return
             # its records may have come before its token and been refused as foreign: ask again, once
@@ -175,11 +179,14 @@ class OwnershipClient:
         if rec.authority not in self._sims:
             return "foreign"  # not a live sim peer: not an authority at all
         term = rec.header.term
-        if not self.fabric.fence.check(term).accept:
+        if not self.fabric.sim_fence.believe(term, rec.authority, (rec.object,)):
             return "stale"  # a lower authority epoch: a primary that lost the world and has not noticed yet
-        newer = term > self._term  # a standby took the world over: it speaks for every object now
-        if not newer and self._authority is not None and rec.authority != self._authority and self._authority in self._sims:
-            return "foreign"  # another sim speaking for the object of the one we follow
+        if term < self._replaced.get(rec.authority, 0):
+            return "stale"  # a primary whose shard a standby took over (a record of another of its objects)
+        authority = self._authority_of.get(rec.object)
+        newer = term > self._term_of.get(rec.object, 0)  # a standby took the object's shard over: it speaks for it now
+        if not newer and authority is not None and rec.authority != authority and authority in self._sims:
+            return "foreign"  # another sim speaking for an object of the one we follow for it
         old = self._records.get(rec.object)
         if old is not None and old.authority != rec.authority:
             old = None  # a new authority (the old one left): its own epochs
@@ -197,8 +204,12 @@ class OwnershipClient:
             if why is not None:
                 self.counters[f"records_{why}"] += 1
                 return
-            self._authority = rec.authority
-            self._term = max(self._term, rec.header.term)
+            before = self._authority_of.get(rec.object)
+            if before is not None and before != rec.authority and rec.header.term > self._term_of.get(rec.object, 0):
+                if len(self._replaced) < 256 or before in self._replaced:  # bounded: made-up authorities
+                    self._replaced[before] = max(self._replaced.get(before, 0), rec.header.term)
+            self._authority_of[rec.object] = rec.authority
+            self._term_of[rec.object] = max(self._term_of.get(rec.object, 0), rec.header.term)
             self._records[rec.object] = rec
             self._seen_at[rec.object] = now
             callbacks = list(self._callbacks)

@@ -16,10 +16,11 @@ if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load nump
 log = logging.getLogger("robofabric.sim")
 
 
-def make_gate(fabric, world, ownership: bool, restored=None) -> CommandGate:
+def make_gate(fabric, world, ownership: bool, restored=None, *, objects: bool = True) -> CommandGate:
     """The ownership Authority when asked for and installed, else an OpenGate (with a warning if asked for).
 
-    ``restored``: the ownership state a standby carries over when it takes the world."""
+    ``restored``: the ownership state a standby carries over when it takes the world. ``objects``: whether this
+    sim is the scene objects' authority (their records); a shard joining a served world is its robots' only."""
     from fabric.gate import OpenGate
     if not ownership:
         return OpenGate()
@@ -28,11 +29,12 @@ def make_gate(fabric, world, ownership: bool, restored=None) -> CommandGate:
     except ImportError as exc:
         print(f"warning: ownership is not available ({exc}); commands are not gated (OpenGate)", file=sys.stderr)
         return OpenGate()
-    objects = {rid: "exclusive" for rid in world.robots}
-    objects.update({obj: "scene" for obj in world.objects})
+    owned = {rid: "exclusive" for rid in world.robots}
+    if objects:
+        owned.update({obj: "scene" for obj in world.objects})
     if restored is not None:
-        return Authority(fabric, objects=objects, restored=restored).start()
-    return Authority(fabric, objects=objects).start()
+        return Authority(fabric, objects=owned, restored=restored).start()
+    return Authority(fabric, objects=owned).start()
 
 
 def sim(
@@ -98,16 +100,17 @@ def sim(
     if not sim_world.robots:
         raise UserError(f"scene {sim_world.scene.name!r} has no robots and none were added with --robot")
     cfg = make_config(world, connect, listen, profile, zenoh_config)
+    first = True  # the world's first sim: the scene objects' authority too
     if not standby:
-        _check_world_free(cfg, peer_id, sim_world)
+        first = _check_world_free(cfg, peer_id, sim_world)
     stop = shutdown_event()
     if standby or not replicated_off():
-        _run_replicated(cfg, peer_id, sim_world, build, ownership, rates, pace, stop, duration, standby)
+        _run_replicated(cfg, peer_id, sim_world, build, ownership, rates, pace, stop, duration, standby, first)
         return
     fab = open_fabric(cfg, "sim", peer_id)
     with fab:
-        gate = make_gate(fab, sim_world, ownership)
-        peer = SimPeer(fab, sim_world, gate=gate, rates=rates, speed=pace)
+        gate = make_gate(fab, sim_world, ownership, objects=first)
+        peer = SimPeer(fab, sim_world, gate=gate, rates=rates, speed=pace, objects=first)
         listing = ", ".join(f"{rid} ({r.desc.name})" for rid, r in sim_world.robots.items())
         pace_text = "max speed" if pace is None else ("real time" if pace == 1 else f"{pace:g}x real time")
         print(f"sim {fab.peer_id}: scene {sim_world.scene.name}, robots {listing}; world {fab.world}, {pace_text}; Ctrl-C to stop", flush=True)
@@ -124,12 +127,12 @@ def sim(
         )
 
 
-def _check_world_free(cfg, peer_id, sim_world) -> None:
-    """Refuse, in one line, to serve a world another live sim serves: a robot id it serves, another scene, or
-    any sim at all (one sim serves a world, with standbys; several sims on one world are not built yet). Left
-    unchecked, the two sims' elections made one of them step down and its robots vanished without a word."""
+def _check_world_free(cfg, peer_id, sim_world) -> bool:
+    """Refuse, in one line, to serve a robot another live sim of the world serves, or another scene than the
+    world's; a sim whose robots are disjoint from every live sim's joins the world as a shard (docs/sim.md,
+    "Several sims, one world"). Returns whether this is the world's first sim (the scene objects' authority)."""
     if cfg.profile == "embedded":
-        return  # this process is the router: nobody is there yet
+        return True  # this process is the router: nobody is there yet
     from fabric.interfaces import ServiceError, WorldInfo
     from fabric import keys
     from fabric.session import Fabric
@@ -143,7 +146,7 @@ def _check_world_free(cfg, peer_id, sim_world) -> None:
     with probe:
         others = [pid for _, pid in probe.live_peers("sim", timeout=1.0) if pid != peer_id]
         if not others:
-            return
+            return True
         try:
             replies = probe.query(keys.srv(cfg.world, "world"), timeout=2.0, expected=WorldInfo, all_replies=True)
         except ServiceError:
@@ -158,12 +161,14 @@ def _check_world_free(cfg, peer_id, sim_world) -> None:
         if info.scene != sim_world.scene.name:
             raise UserError(f"world {cfg.world!r} runs scene {info.scene!r} (sim {who}), not {sim_world.scene.name!r}: every "
                             f"sim of a world loads the same scene")
-        robots = ", ".join(r.id for r in info.robots) or "no robots"
-        raise UserError(f"world {cfg.world!r} is already served by sim {who} ({robots}): one sim serves a world, with "
-                        f"standbys (--standby); several sims sharing one world are not supported yet; use another --world")
-    if replies == [] and others:
-        print(f"warning: sim {', '.join(others)} is live in world {cfg.world!r} but did not describe it (a standby alone, "
-              f"or access control): starting anyway", file=sys.stderr)
+    if replies:
+        served = ", ".join(f"{r.source} ({', '.join(x.id for x in r.message.robots)})" for r in replies)
+        print(f"sim {peer_id or 'this sim'}: joining world {cfg.world!r} as a shard beside {served}; the scene objects stay "
+              f"with the first sim", file=sys.stderr, flush=True)
+        return False
+    print(f"warning: sim {', '.join(others)} is live in world {cfg.world!r} but did not describe it (a standby alone, "
+          f"or access control): starting anyway", file=sys.stderr)
+    return True
 
 
 def replicated_off() -> bool:
@@ -173,7 +178,7 @@ def replicated_off() -> bool:
     return os.environ.get("ROBOFABRIC_SIM_SINGLE", "") not in ("", "0")
 
 
-def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, stop, duration, standby) -> None:
+def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, stop, duration, standby, objects=True) -> None:
     """Primary or standby through :func:`sim_peer.standby.run_replicated`."""
     from fabric.config import default_peer_id
     from sim_peer.standby import run_replicated
@@ -192,8 +197,9 @@ def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, st
     print(f"sim {pid}{' (standby)' if standby else ''}: scene {first_world.scene.name}, robots {robots}; world {cfg.world}, "
           f"{pace_text}; Ctrl-C to stop", flush=True)
     host = run_replicated(
-        lambda: open_fabric(cfg, "sim", pid), make_world, lambda fab, w, restored: make_gate(fab, w, ownership, restored), stop,
-        standby=standby, rates=rates, speed=pace, duration=duration, announce=announce,
+        lambda: open_fabric(cfg, "sim", pid), make_world,
+        lambda fab, w, restored, objects=True: make_gate(fab, w, ownership, restored, objects=objects), stop,
+        standby=standby, rates=rates, speed=pace, duration=duration, announce=announce, objects=objects,
     )
     peer = host.peer if host is not None else None
     if peer is None:

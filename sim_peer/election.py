@@ -19,6 +19,10 @@ Rules:
   the same tie the same way, unless the lower one's token is gone (it died, and a standby that
   never heard its term took over with the same one).
 - State with a lower term than the highest heard is ignored (effect ``ignore``).
+- Elections are per **shard** (docs/sim.md, "Several sims, one world"): several sims may serve one world,
+  each the authority of its own robots. A sim's election hears only its own robots' terms (the caller
+  filters ``Heard``) and counts only the sims of its shard (:func:`shard_view`): the sims that serve or
+  follow a robot of its own, and those not asked yet (one world, one shard: what every sim did before).
 - A primary back from a freeze longer than the lease that finds no higher term (``Resumed``) goes on
   under term + 1 (effect ``reassert``): a standby that took over and died meanwhile may have had
   consumers fence at that term. (If several did, one after the other, and all died before the old
@@ -30,7 +34,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Iterable
 
-__all__ = ["Role", "Election", "Heard", "Peers", "Resumed", "ElectionEffect", "candidate", "start", "step", "PRIMARY", "STANDBY"]
+__all__ = ["Role", "Election", "Heard", "Peers", "Resumed", "ElectionEffect", "candidate", "shard_view", "start", "step", "PRIMARY",
+           "STANDBY"]
 
 PRIMARY = "primary"
 STANDBY = "standby"
@@ -85,6 +90,12 @@ class ElectionEffect:
 def candidate(standbys: Iterable[str]) -> str | None:
     """The standby that takes over: the lowest id (plain string order), None when there is none."""
     return min(standbys, default=None)
+
+
+def shard_view(live: Iterable[str], shards: dict[str, frozenset[str]], me: str, mine: frozenset[str]) -> frozenset[str]:
+    """The live sims of ``me``'s shard: those whose robots (``shards``: what each said it serves or follows)
+    meet ``mine``, those not asked yet, and ``me``."""
+    return frozenset(p for p in live if p == me or p not in shards or shards[p] & mine)
 
 
 def start(me: str, *, standby: bool, term: int = 0) -> Election:

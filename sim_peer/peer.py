@@ -29,6 +29,8 @@ the robots' ``describe()``.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import logging
 import threading
 import time
@@ -71,8 +73,13 @@ class SimPeer:
         rates: dict[str, float] | None = None,
         speed: float | None = 1.0,
         clock: Clock | None = None,
+        objects: bool = True,
     ) -> None:
         self.fabric = fabric
+        # the scene objects' authority (moves them on users' poses, describes them): the first sim of a world;
+        # the others of a sharded world keep them where the scene puts them (docs/sim.md, "Several sims, one world")
+        self.objects = objects
+        self._other_sims: set[str] = set()  # other live sims: a command for a robot none of ours may be theirs
         self.world = world
         self.gate: CommandGate = gate if gate is not None else OpenGate()
         self.rates = {**DEFAULT_RATES, **(rates or {})}
@@ -106,8 +113,9 @@ class SimPeer:
         f.serve(keys.srv(w, "world"), self._on_world_query)
         self._worker = threading.Thread(target=self._drain, name="sim-commands", daemon=True)
         self._worker.start()
+        f.watch_peers(self._on_sim, kind="sim")
         f.subscribe_raw(keys.robot_cmd_all(w), self._on_command_sample)
-        for obj in self.world.objects:
+        for obj in (self.world.objects if self.objects else ()):
             # no history here: the authority's start must not wait on other peers' caches (with
             # history=True a sim started under load answered nothing for 30 s in two CI runs)
             f.subscribe(keys.object_pose_all(w, obj), self._on_object, expected=Pose)
@@ -190,9 +198,9 @@ class SimPeer:
 
     def world_info(self) -> WorldInfo:
         with self.lock:
-            robots = [r.describe() for r in self.world.robots.values()]
+            robots = [replace(r.describe(), sim=self.fabric.peer_id) for r in self.world.robots.values()]
             objects = []
-            for o in self.world.scene.objects:
+            for o in (self.world.scene.objects if self.objects else ()):
                 pos, quat = self.world.object_pose(o.id)
                 objects.append(ObjectInfo(o.id, o.kind, o.policy, pos, quat))
             return WorldInfo(
@@ -275,6 +283,9 @@ class SimPeer:
             return
         rid = parsed.subject
         if rid not in self._queues:  # undecoded: the sender is not known, nothing is kept
+            if self._other_sims:  # a sharded world: another sim's robot (or one nobody serves) is not ours to refuse
+                self.counters["not_mine"] += 1
+                return
             self.counters["commands"] += 1
             self._reject(rid, parsed.leaf, "unknown_robot", lambda: f"no robot {quote(rid, 64)} here; robots: {', '.join(self.world.robots)}")
             return
@@ -394,6 +405,10 @@ class SimPeer:
             self._reject(obj, "pose", "bad_object_pose", str(exc))
             return
         self.counters["object_updates"] += 1
+
+    def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
+        if peer_id != self.fabric.peer_id:
+            (self._other_sims.add if alive else self._other_sims.discard)(peer_id)
 
     def _on_world_query(self, key: str, request: Any) -> WorldInfo:
         return self.world_info()

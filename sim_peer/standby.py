@@ -32,7 +32,7 @@ from typing import Any, Callable
 from fabric import keys
 from fabric.codec import DecodeError, decode
 from fabric.gate import CommandGate
-from fabric.interfaces import Command, JointState, Pose, ServiceError, WorldState
+from fabric.interfaces import Command, Event, Header, JointState, Pose, ServiceError, WorldState
 from fabric.session import Fabric
 from sim_peer import election as el
 from sim_peer import replica
@@ -41,7 +41,7 @@ from sim_peer.world import SimWorld
 
 log = logging.getLogger("robofabric.sim")
 
-__all__ = ["ReplicaHost", "run_replicated", "POLL_S", "REPLAY_MARGIN_S", "KEEP_COMMANDS_S"]
+__all__ = ["ReplicaHost", "run_replicated", "POLL_S", "REPLAY_MARGIN_S", "KEEP_COMMANDS_S", "SHARD_QUERY"]
 
 POLL_S = 0.05
 """How often a standby asks the primary for the whole state (the streams fill in between)."""
@@ -52,6 +52,9 @@ again: a command reaches the standby and the primary by different routes, so one
 the query may have reached the primary after it answered. Applying one twice is harmless (a joint
 target, a twist or an object pose is set to the same value; a path restarts from where the base is,
 a few milliseconds along it)."""
+
+SHARD_QUERY = "shard"
+"""The ``Event.kind`` of a ``srv/state`` query asking a sim which robots it serves (its answer's ``data["robots"]``)."""
 
 KEEP_COMMANDS_S = 5.0
 """How long a standby keeps the commands it hears (far more than a poll period: a slow answer)."""
@@ -82,8 +85,14 @@ class ReplicaHost:
         poll_s: float = POLL_S,
         freeze_gap: float | None = None,
         announce: Callable[[str], None] | None = None,
+        objects: bool = True,
     ) -> None:
         self.fabric = fabric
+        # the scene objects' authority: the world's first sim (a shard joining a served world is not); a standby
+        # learns it from its leader's state at a take-over (a primary that is not describes no objects there)
+        self.objects = objects
+        self.mine = frozenset(world.robots)  # this shard: the robots this sim serves, or would serve at a take-over
+        self.shards: dict[str, frozenset[str]] = {}  # live sim -> the robots it serves (from srv/state, asked)
         self.world = world
         self.make_gate = make_gate
         self.rates = rates
@@ -109,6 +118,7 @@ class ReplicaHost:
         self.live: set[str] = set()
         self._gone_at: dict[str, float] = {}  # sim id -> when its token went (monotonic): was it there when we froze?
         self._settled = False  # the first complete view of the live sims is in (open)
+        self._learning = self._learn_again = False  # a shard query under way, and another wanted after it
         self.takeovers: list[dict[str, Any]] = []
         self.last_state: WorldState | None = None
         self._lock = threading.RLock()
@@ -150,11 +160,13 @@ class ReplicaHost:
             initial = set()
         with self._lock:
             self.live |= initial | {f.peer_id}
+        if len(self.live) > 1:
+            self._learn_shards()
         self._await_leader(self.election.leader)
         with self._lock:
             self._settled = True
             live = frozenset(self.live)
-        self._step(el.Peers(live))
+        self._step(el.Peers(self._shard_view(live)))
         if self.role != el.PRIMARY:
             self._poller = threading.Thread(target=self._poll, name="standby-poll", daemon=True)
             self._poller.start()
@@ -232,10 +244,15 @@ class ReplicaHost:
                         seqs[k] = max(seqs.get(k, 0), m.header.seq + 1)
                 f.continue_sequences(seqs)
                 restored = (state.records, state.users)
-            f.assume_term(self.election.term)
+            if state is not None and self.world.objects:
+                self.objects = bool(state.objects)  # the shard we take over was the objects' authority, or not
+            f.assume_term(self.election.term, self._scopes())
         f.watch_freeze(self.freeze_gap, self._on_freeze)
-        self.gate = self.make_gate(f, self.world, restored)
-        self.peer = SimPeer(f, self.world, gate=self.gate, rates=self.rates, speed=self.speed)
+        if self.objects:
+            self.gate = self.make_gate(f, self.world, restored)
+        else:
+            self.gate = self.make_gate(f, self.world, restored, objects=False)
+        self.peer = SimPeer(f, self.world, gate=self.gate, rates=self.rates, speed=self.speed, objects=self.objects)
         if state is not None:
             self._replay(self.peer)
         self.peer.start(self._duration)
@@ -258,13 +275,23 @@ class ReplicaHost:
             except Exception:
                 log.exception("replaying %s at take-over failed", key)
 
-    def _on_state_query(self, key: str, request: Any, *, force: bool = False) -> WorldState:
+    def _scopes(self) -> tuple[str, ...]:
+        """What this sim is the authority of: its robots, and the scene objects when it is their authority."""
+        return tuple(self.world.robots) + (tuple(self.world.objects) if self.objects else ())
+
+    def _on_state_query(self, key: str, request: Any, *, force: bool = False) -> WorldState | Event:
+        if isinstance(request, Event) and request.kind == SHARD_QUERY:
+            # which shard this sim belongs to, primary or standby: its robots (an election counts the sims of its shard)
+            return Event(kind=SHARD_QUERY, reason=self.role, object="", data={"robots": sorted(self.mine)},
+                         header=Header(wall_ns=time.time_ns(), source=self.fabric.peer_id))
         peer = self.peer
         if peer is None or (self.role != el.PRIMARY and not force):
             raise ServiceError(f"{self.fabric.peer_id} is a standby (term {self.election.term})")
         records, users = self.gate.export_state()
         with peer.lock:
             t, steps, robots, objects = replica.capture(self.world)
+        if not self.objects:
+            objects = ()  # the objects' authority is another shard: its standby must not become it
         seqs = self.fabric.sequences(keys.world_root(self.fabric.world))
         return WorldState(t, steps, robots, objects, tuple(records), dict(users), seqs,
                           header=self.fabric.header(keys.srv(self.fabric.world, "state"), stamp=t))
@@ -281,7 +308,7 @@ class ReplicaHost:
         lease = f.config.lease_ms / 1000.0
         began = time.monotonic() - gap
         with self._lock:
-            rivals = {p for p in self.live | {p for p, t in self._gone_at.items() if t >= began} if p != f.peer_id}
+            rivals = {p for p in self.live | {p for p, t in self._gone_at.items() if t >= began} if p != f.peer_id and self._same_shard(p)}
         if not rivals:
             f.unmuzzle()
             self.announce(f"sim {f.peer_id}: paused {gap:.1f} s with no other sim in the world; publishing again (term {f.term})")
@@ -301,7 +328,8 @@ class ReplicaHost:
                 except ServiceError:
                     replies = []  # standbys answer with a refusal: no other authority
             for rep in replies:
-                self._heard(rep.message.header.source, rep.message.header.term)
+                if self._about_mine(rep.message):
+                    self._heard(rep.message.header.source, rep.message.header.term)
             break
         if self.role == el.PRIMARY:
             if gap > lease:
@@ -324,7 +352,7 @@ class ReplicaHost:
                 replies = f.query(keys.srv(f.world, "state"), timeout=1.0, expected=WorldState, all_replies=True)
             except ServiceError:
                 continue
-            best = max((r.message for r in replies), key=lambda m: m.header.term, default=None)
+            best = max((r.message for r in replies if self._about_mine(r.message)), key=lambda m: m.header.term, default=None)
             if best is None:
                 continue
             self._heard(best.header.source, best.header.term)
@@ -332,7 +360,64 @@ class ReplicaHost:
                 if best.header.source == self.election.leader:
                     self.snapshot, self.snapshot_asked = best, asked
 
+    def _about_mine(self, state: Any) -> bool:
+        """Whether a ``srv/state`` answer is this shard's (another shard's terms are none of our election's)."""
+        return isinstance(state, WorldState) and any(r.id in self.mine for r in state.robots)
+
+    def _same_shard(self, peer_id: str) -> bool:
+        """Whether a live sim belongs to this shard; one not asked yet counts as ours (one world, one shard:
+        what every sim did before shards)."""
+        with self._lock:
+            robots = self.shards.get(peer_id)
+        return robots is None or bool(robots & self.mine)
+
+    def _learn_shards(self) -> None:
+        """Ask every live sim which robots it serves (``srv/state`` with a shard query; standbys answer too)."""
+        f = self.fabric
+        try:
+            replies = f.query(keys.srv(f.world, "state"), Event(kind=SHARD_QUERY, reason="ask"), timeout=1.0, expected=Event,
+                              all_replies=True)
+        except Exception:
+            return  # nobody else (or closing): unknown sims count as ours
+        with self._lock:
+            for rep in replies:
+                robots = rep.message.data.get("robots") if isinstance(rep.message.data, dict) else None
+                if rep.message.kind == SHARD_QUERY and isinstance(robots, (list, tuple)) and rep.source:
+                    self.shards[rep.source] = frozenset(str(r) for r in robots)
+            for gone in [p for p in self.shards if p not in self.live]:
+                del self.shards[gone]
+
+    def _learn_shards_soon(self) -> None:
+        """Learn a new sim's shard on a thread of its own (a token's callback must not wait for a query)."""
+        with self._lock:
+            if self._learning or self._closed:
+                self._learn_again = True
+                return
+            self._learning, self._learn_again = True, False
+
+        def run() -> None:
+            while True:
+                self._learn_shards()
+                with self._lock:
+                    if not self._learn_again or self._closed:
+                        self._learning = False
+                        live = frozenset(self.live)
+                        break
+                    self._learn_again = False
+            if self._settled:
+                self._step(el.Peers(self._shard_view(live)))
+
+        threading.Thread(target=run, name="sim-shards", daemon=True).start()
+
+    def _shard_view(self, live: frozenset[str]) -> frozenset[str]:
+        """The live sims of this shard: the election of a shard counts no other shard's sims."""
+        with self._lock:
+            shards = dict(self.shards)
+        return el.shard_view(live, shards, self.fabric.peer_id, self.mine)
+
     def _on_joints(self, key: str, js: JointState) -> None:
+        if keys.parse(key).subject not in self.mine:
+            return  # another shard's robot: its term is its shard's
         self._heard(js.header.source, js.header.term)
         if self.role == el.STANDBY and js.header.source == self.election.leader:
             with self._lock:
@@ -364,6 +449,8 @@ class ReplicaHost:
         self._keep(key, pose, 256)  # a pose is small and fixed in size (the codec caps its frame)
 
     def _on_pose(self, key: str, p: Pose) -> None:
+        if keys.parse(key).subject not in self.mine:
+            return
         if self.role == el.STANDBY and p.header.source == self.election.leader:
             with self._lock:
                 self.poses[keys.parse(key).subject] = p
@@ -392,10 +479,12 @@ class ReplicaHost:
                     self._gone_at.pop(min(self._gone_at, key=self._gone_at.__getitem__))
             live = frozenset(self.live)
             settled = self._settled
+        if alive:
+            self._learn_shards_soon()  # which shard it is (a standby of ours, or another shard's sim)
         if alive or not settled:
             return  # a token appearing (or the history repeating one) never starts a take-over; nor does
             # one going before the first view is settled (open() steps on the whole view then)
-        self._step(el.Peers(live))
+        self._step(el.Peers(self._shard_view(live)))
 
     def _heard(self, source: str, term: int) -> None:
         if term > 0:
@@ -444,18 +533,20 @@ def run_replicated(
     speed: float | None = 1.0,
     duration: float | None = None,
     announce: Callable[[str], None] | None = None,
+    objects: bool = True,
 ) -> "ReplicaHost | None":
     """Run a sim peer until ``stop``: as primary or standby, a fresh session and world after each step-down.
-    Returns the last host (its ``peer`` holds the counters when it served)."""
+    ``objects``: whether this sim is the scene objects' authority (the world's first sim; a shard that joins a
+    served world is not). Returns the last host (its ``peer`` holds the counters when it served)."""
     term, leader = 0, ""
     last: WorldState | None = None
     host = None
     while not stop.is_set():
         with open_fabric() as fab:
             host = ReplicaHost(fab, make_world(), make_gate, standby=standby, rates=rates, speed=speed, term=term, leader=leader,
-                        snapshot=last, announce=announce)
+                        snapshot=last, announce=announce, objects=objects)
             role = host.run(stop, duration)
-            term, leader = host.election.term, host.election.leader
+            term, leader, objects = host.election.term, host.election.leader, host.objects
             last = host.last_state
         if role != el.STANDBY or stop.is_set():
             return host

@@ -44,7 +44,10 @@ class RobotInfo:
     base: BaseInfo | None = None
     lidar: LidarInfo | None = None
     sonar: SonarInfo | None = None
+    sim: str = ""
+    """The sim peer that is the robot's authority (its ``srv/world`` part; "" in recordings from before shards)."""
 
+    OPTIONAL_TAIL: ClassVar[int] = 1
     SPEC: ClassVar[dict] = {
         "id": S(nonempty=True),
         "type": S(nonempty=True),
@@ -60,6 +63,7 @@ class RobotInfo:
         "base": Opt(Msg(BaseInfo)),
         "lidar": Opt(Msg(LidarInfo)),
         "sonar": Opt(Msg(SonarInfo)),
+        "sim": S(),
     }
 
     def __post_init__(self) -> None:

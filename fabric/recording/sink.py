@@ -26,7 +26,7 @@ from typing import BinaryIO
 from mcap.writer import CompressionType, Writer
 
 from fabric import keys
-from fabric.fencing import SimFence, is_authority_key
+from fabric.fencing import SimFence, authority_scopes, is_authority_key
 from fabric.recording.format import MESSAGE_ENCODING, METADATA_NAME, PROFILE, peek, schema_data
 
 STALE = "stale"
@@ -114,7 +114,7 @@ class McapSink:
             if not term:
                 return True
             fence = self.fences[world] = SimFence()
-        return fence.believe(term, source)
+        return fence.believe(term, source, authority_scopes(key))
 
     # ------------------------------------------------------------------ the world's sims
 

@@ -9,7 +9,7 @@ from hypothesis import given, settings, strategies as hs
 
 from fabric import keys
 from fabric.codec import DecodeError, decode, encode
-from fabric.fencing import Fence, is_authority_key
+from fabric.fencing import WORLD_SCOPE, Fence, SimFence, authority_scopes, is_authority_key
 from fabric.interfaces import Header, JointState, OwnershipRecord
 from fabric.testing import wait_until
 
@@ -55,6 +55,47 @@ def test_fence_accepts_exactly_the_terms_at_or_above_the_highest_so_far(terms):
         assert v.accept == (t >= top) and v.raised == (t > top)
         top = max(top, t)
         assert f.term == top
+
+
+def test_scopes_are_the_robot_or_object_or_the_robots_a_description_names():
+    from types import SimpleNamespace as NS
+
+    assert authority_scopes("rf/w/robot/base0/pose") == ("base0",)
+    assert authority_scopes("rf/w/own/target") == ("target",)
+    info = NS(robots=(NS(id="base0"), NS(id="base1")))
+    assert authority_scopes("rf/w/srv/world", info) == ("base0", "base1")
+    assert authority_scopes("rf/w/srv/world") == (WORLD_SCOPE,)
+    assert authority_scopes("rf/w/srv/state", NS(robots=())) == (WORLD_SCOPE,)
+
+
+def test_two_shards_keep_terms_of_their_own_and_a_takeover_fences_its_own_robots_only():
+    f = SimFence()
+    for s in ("sim-a", "sim-b", "sim-b2"):
+        f.sim_seen(s)
+    assert f.believe(1, "sim-a", ("base0",)) and f.believe(1, "sim-b", ("base1",))
+    assert f.believe(2, "sim-b2", ("base1",))  # sim-b's standby took base1 over
+    assert not f.believe(1, "sim-b", ("base1",))  # the old primary of base1 is fenced
+    assert f.believe(1, "sim-a", ("base0",))  # the other shard is not
+    assert not f.believe(1, "sim-a", ("base0", "base1"))  # a description naming a fenced robot at a lower term
+    assert f.stale == 2
+    assert f.sim_left("sim-b2") is False  # base1's fence held sim-b2's term: it resets, base0's does not
+    assert f.term("base1") == 0 and f.term("base0") == 1
+    assert not f.believe(2, "sim-b2", ("base1",))  # a departed sim's late sample
+    f.sim_seen("sim-b3")
+    assert f.believe(1, "sim-b3", ("base1",))  # base1's shard restarted from scratch while sim-a serves on
+    f.sim_left("sim-a"), f.sim_left("sim-b"), f.sim_left("sim-b3")
+    assert f.resets == 1 and f.term("base0") == 0
+
+
+@settings(max_examples=200, deadline=None)
+@given(hs.lists(hs.tuples(hs.sampled_from(["r0", "r1", "r2"]), hs.integers(0, 6)), max_size=60))
+def test_a_scope_accepts_exactly_its_own_terms_at_or_above_its_highest(events):
+    """Whatever other scopes hear, a scope's verdicts are those of a lone Fence fed its own terms."""
+    f = SimFence()
+    alone = {s: Fence() for s in ("r0", "r1", "r2")}
+    for scope, term in events:
+        assert f.believe(term, "sim", (scope,)) == alone[scope].check(term).accept
+        assert f.term(scope) == alone[scope].term
 
 
 def test_subscribers_drop_authority_state_of_a_lower_term(world, connect):
@@ -104,7 +145,7 @@ def test_the_fence_resets_when_the_worlds_last_sim_leaves(world, connect):
     new = connect("sim", "sim-new")
     new.term = 1
     wait_until(lambda: _put(new, key, 1) or any(m.header.source == "sim-new" for m in got), timeout=20, what="term 1 believed again")
-    assert watcher.fence.term == 1
+    assert watcher.sim_fence.term("arm1") == 1
 
 
 def test_a_departed_sims_late_samples_do_not_fence_out_a_new_sim(world, connect):
@@ -124,8 +165,8 @@ def test_a_departed_sims_late_samples_do_not_fence_out_a_new_sim(world, connect)
     late.term = 2
     stale = watcher.counters["stale_authority"]
     wait_until(lambda: _put(late, key, 2) or watcher.counters["stale_authority"] > stale, timeout=20, what="the late sample dropped")
-    assert watcher.fence.term == 0
+    assert watcher.sim_fence.term("arm1") == 0
     new = connect("sim", "sim-new")
     new.term = 1
     wait_until(lambda: _put(new, key, 1) or any(m.header.source == "sim-new" for m in got), timeout=20, what="term 1 believed again")
-    assert watcher.fence.term == 1
+    assert watcher.sim_fence.term("arm1") == 1

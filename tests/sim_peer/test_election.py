@@ -158,3 +158,31 @@ def test_a_standby_never_follows_a_lower_term(heard):
             assert eff == [el.ElectionEffect("ignore", term, src)]
         top = max(top, term)
         assert s.term == top and s.role == el.STANDBY
+
+
+def test_two_shards_elect_apart():
+    """Two primaries of disjoint robots never fight (each hears only its own robots' terms: the host filters);
+    when shard B's primary dies, B's standby takes over even though shard A's sims have lower ids."""
+    shards = {"a": frozenset({"base0"}), "a-sb": frozenset({"base0"}), "b": frozenset({"base1"}), "b-sb": frozenset({"base1"})}
+    view = el.shard_view(frozenset(shards) - {"b"}, shards, "b-sb", frozenset({"base1"}))
+    assert view == frozenset({"b-sb"})
+    s = el.step(el.start("b-sb", standby=True), el.Heard("b", 1))[0]
+    s, eff = el.step(s, el.Peers(el.shard_view(frozenset(shards), shards, "b-sb", frozenset({"base1"}))))
+    assert eff == []
+    s, eff = el.step(s, el.Peers(view))
+    assert eff == [el.ElectionEffect("take_over", 2, "b-sb")]
+    # without the shard view the lowest live id (another shard's primary) was the candidate: nobody took over
+    s0 = el.step(el.start("b-sb", standby=True), el.Heard("b", 1))[0]
+    assert el.step(s0, el.Peers(frozenset(shards) - {"b"}))[1] == []
+
+
+@settings(max_examples=200, deadline=None)
+@given(hs.sets(hs.sampled_from(IDS)), hs.dictionaries(hs.sampled_from(IDS), hs.frozensets(hs.sampled_from(["r0", "r1", "r2"]))),
+       hs.sampled_from(IDS), hs.frozensets(hs.sampled_from(["r0", "r1", "r2"]), min_size=1))
+def test_a_shard_view_is_the_live_sims_that_share_a_robot_or_are_not_known(live, shards, me, mine):
+    view = el.shard_view(frozenset(live), shards, me, mine)
+    assert view <= frozenset(live) | {me}
+    for p in live:
+        assert (p in view) == (p == me or p not in shards or bool(shards[p] & mine))
+    if not shards:  # one world, one shard: the view is every live sim, as before shards
+        assert view == frozenset(live)
