@@ -31,7 +31,7 @@ from fabric.interfaces import (Command, Event, Header, JointState, JointTarget, 
                                Stop, WorldInfo)
 from fabric.secure import init
 from fabric.session import Fabric, ServiceError
-from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
+from fabric.testing import ProcessGroup, client_config, free_port, robofabric_cmd, router_config, wait_until
 
 pytestmark = pytest.mark.slow
 
@@ -239,6 +239,31 @@ def test_a_user_cannot_publish_robot_state_or_serve_the_world(secure):
     _refused_by_router(secure, f"mallory liveliness_token {keys.peer(w, 'sim', 'fake-sim')} x")  # her sim token
     assert ("sim", "fake-sim") not in watcher.live_peers("sim")
     assert fake_sim.peer_id == "fake-sim"
+
+
+def _router_admin_replies(fab: Fabric) -> list[str]:
+    """Keys of the router's admin space (``@/ZID/router/**``: who subscribes to, serves and holds tokens on what)
+    that answer ``fab``'s query; a session's own admin space (``@/ITS-ZID/session/**``) is not the router's."""
+    return [str(r.ok.key_expr) for r in fab.session.get("@/*/router/**", timeout=2.0) if r.ok is not None]
+
+
+def test_a_student_cannot_read_the_routers_admin_space(secure, tmp_path):
+    """The router's admin space names every login's subscriptions, services and tokens, and zenoh ids: in a
+    class world (``secure init``) a student's query of it is answered by nobody, so ``list``/``ps -v`` show her
+    no subscribers (docs/security.md). On an open LAN router the same query is answered: the probe works."""
+    mallory = secure.fabric("mallory")
+    assert _router_admin_replies(mallory) == []
+    world, port = f"o{uuid.uuid4().hex[:8]}", free_port()
+    router = Fabric(router_config(world, port), kind="router", peer_id="router")
+    try:
+        anyone = Fabric(client_config(world, port), kind="user", peer_id="anyone")
+        try:
+            assert wait_until(lambda: [k for k in _router_admin_replies(anyone) if f"rf/{world}/" in k], timeout=20,
+                              what="the open router's admin space answering")
+        finally:
+            anyone.close()
+    finally:
+        router.close()
 
 
 @pytest.mark.parametrize("case", ["no credentials", "wrong password", "unknown user"])
