@@ -465,7 +465,14 @@ def call(
     with _open("tool", world, connect, listen, profile, zenoh_config, peer_id, key=key) as fab:
         full = resolve_key(key, fab.world)
         try:
-            replies = fab.query(full, request, timeout=timeout, all_replies=all_replies)
+            if full == keys.srv(fab.world, "world") and not all_replies and request is None:
+                from fabric.session import Reply
+                from fabric.worldview import describe
+
+                info = describe(fab, timeout=timeout)  # one world: every sim's part (--all: each part)
+                replies = [Reply(full, info, ",".join(sorted({r.sim for r in info.robots if r.sim})) or info.header.source)]
+            else:
+                replies = fab.query(full, request, timeout=timeout, all_replies=all_replies)
         except ServiceError as exc:
             print(f"{full}: {exc.reason}", file=sys.stderr, flush=True)
             raise typer.Exit(1) from None

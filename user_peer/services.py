@@ -13,7 +13,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from fabric import keys
+from fabric import keys, worldview
 from fabric.interfaces import (
     IKReply,
     IKRequest,
@@ -42,6 +42,7 @@ class RobotEntry:
     lower: tuple[float, ...] = ()
     upper: tuple[float, ...] = ()
     max_speed: tuple[float, ...] = ()
+    sim: str = ""  # the sim peer that is its authority
 
 
 def robot_entries(info: WorldInfo) -> list[RobotEntry]:
@@ -49,15 +50,16 @@ def robot_entries(info: WorldInfo) -> list[RobotEntry]:
     return [
         RobotEntry(
             r.id, r.type, r.kind, tuple(r.joint_names),
-            tuple(float(v) for v in r.lower), tuple(float(v) for v in r.upper), tuple(float(v) for v in r.max_speed),
+            tuple(float(v) for v in r.lower), tuple(float(v) for v in r.upper), tuple(float(v) for v in r.max_speed), r.sim,
         )
         for r in info.robots
     ]
 
 
 def world_info(fab: Fabric, *, timeout: float = 5.0) -> WorldInfo:
-    """The sim peer's world description (``rf/{world}/srv/world``)."""
-    return fab.call(keys.srv(fab.world, "world"), timeout=timeout, expected=WorldInfo)
+    """The world's description (``rf/{world}/srv/world``): the union of every live sim's part, each robot with
+    the sim that is its authority (``RobotInfo.sim``; :func:`fabric.worldview.describe`)."""
+    return worldview.describe(fab, timeout=timeout)
 
 
 def _service_key(fab: Fabric, service: str, subject: str, peer: str | None, user: str | None = None) -> str:

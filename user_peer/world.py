@@ -58,6 +58,7 @@ class World:
             why = config.diagnose_join(exc)
             raise JoinFailed(why.text, endpoint=why.endpoint, cause=why.cause) from None
         self._info: WorldInfo | None = None
+        self._known: WorldInfo | None = None  # the last description seen (which robots a departed sim served)
         self.latest = Latest(world_info=lambda: self._info)  # keeps the robots of the description only
         self.events: list[Event] = []
         # (local arrival number, event, trusted): trusted when a sim-only key carried it from the object's
@@ -85,6 +86,8 @@ class World:
         # the sim peers serving the world, from liveliness: one that dies is seen at once, one cut off or
         # frozen within the transport lease; "world gone" is reported here (log, callbacks, world_alive)
         self._sims: set[str] = set()
+        self.robots_gone: list[str] = []  # robots whose sim left while others serve the world (on_robots_gone)
+        self._gone_callbacks: list[Callable[[str, list[str]], None]] = []
         self._world_callbacks: list[Callable[[bool, str], None]] = []
         self._world_cond = threading.Condition()
         self.fabric.watch_peers(self._on_sim, kind="sim")
@@ -191,10 +194,13 @@ class World:
     def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
         with self._world_cond:
             was = bool(self._sims)
+            changed = alive != (peer_id in self._sims)
             (self._sims.add if alive else self._sims.discard)(peer_id)
             now = bool(self._sims)
             callbacks = list(self._world_callbacks) if now != was else []
             self._world_cond.notify_all()
+        if changed and now == was:
+            self._sims_changed(peer_id, alive)
         if now == was:
             return
         why = f"sim peer {peer_id} is back" if now else f"world {self.name!r} gone: its sim peer {peer_id} left (died, or cut off)"
@@ -208,6 +214,33 @@ class World:
                 cb(now, why)
             except Exception:
                 log.exception("world callback failed")
+
+    def _sims_changed(self, peer_id: str, alive: bool) -> None:
+        """Another sim of a world that stays alive came or went: the description is asked again (a shard's
+        robots join or leave it), and the robots a departed sim served are named (``robots_gone``)."""
+        info = self._info or self._known
+        self._info = None  # robots() / robot() ask every sim again
+        if alive or info is None:
+            return
+        gone = sorted(r.id for r in info.robots if r.sim == peer_id)
+        if not gone:
+            return  # a standby, or a sim that served nothing we saw
+        with self._events_lock:
+            self.robots_gone.extend(gone)
+            callbacks = list(self._gone_callbacks)
+        log.warning("robots %s gone from world %s: their sim peer %s left (died, or cut off); the other sims' robots go on",
+                    ", ".join(gone), self.name, peer_id)
+        for cb in callbacks:
+            try:
+                cb(peer_id, gone)
+            except Exception:
+                log.exception("robots-gone callback failed")
+
+    def on_robots_gone(self, callback: Callable[[str, list[str]], None]) -> None:
+        """``callback(sim, robots)`` when a sim of a world that stays alive leaves, with the robots it served (a
+        world served by several sims: the others' robots go on; a standby of that sim may take them over)."""
+        with self._events_lock:
+            self._gone_callbacks.append(callback)
 
     # ------------------------------------------------------------------ what is there
 
@@ -233,7 +266,9 @@ class World:
             left = deadline - time.monotonic()
             try:
                 # at most a few seconds per try: a query sent before any sim existed is never answered later
-                return services.world_info(self.fabric, timeout=max(0.05, min(left, 2.0)))
+                info = services.world_info(self.fabric, timeout=max(0.05, min(left, 2.0)))
+                self._known = info
+                return info
             except ServiceError as exc:
                 if not exc.reason.startswith("no reply"):
                     raise Unreachable(f"the sim of world {self.name!r} refused its description: {exc.reason}") from None
@@ -258,6 +293,8 @@ class World:
         :class:`~user_peer.robot.Arm`, a :class:`~user_peer.robot.Base`); one handle per robot."""
         if robot_id not in self._robots:
             entry = next((r for r in services.robot_entries(self.info()) if r.id == robot_id), None)
+            if entry is None and self._info is not None:  # a sim that joined since the description was asked for
+                entry = next((r for r in services.robot_entries(self.info(refresh=True)) if r.id == robot_id), None)
             if entry is None:
                 raise Unreachable(f"no robot {robot_id!r} in world {self.name!r}; robots: {', '.join(self.robots()) or 'none'}")
             self._robots[robot_id] = Robot.for_kind(entry.kind)(self, entry)

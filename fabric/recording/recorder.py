@@ -31,6 +31,7 @@ from fabric import keys
 from fabric.codec import encode
 from fabric.exit import at_exit
 from fabric.interfaces import WorldInfo
+from fabric.worldview import union
 from fabric.recording.format import LIVELINESS_SCHEMA, RAW_SCHEMA
 from fabric.recording.sink import STALE, McapSink
 from fabric.session import undeclare_all
@@ -322,7 +323,8 @@ class Recorder:
                 self._describe(p.world)
 
     def _describe(self, world: str) -> None:
-        """Record the world's description (``srv/world``'s answer, on its key) whenever a sim comes: export and
+        """Record the world's description (the union of the sims' ``srv/world`` answers, :mod:`fabric.worldview`,
+        on its key) whenever a sim comes: export and
         replay place robots from it, with no ``--scene``. One query at a time per world (made-up sim tokens
         must not make a thread each)."""
         with self._lock:
@@ -334,8 +336,9 @@ class Recorder:
             key = keys.srv(world, "world")
             try:
                 time.sleep(0.2)  # a sim's token comes before its queryable: give it a moment
-                for rep in self.fabric.query(key, timeout=3.0, expected=WorldInfo):
-                    payload = encode(rep.message)
+                replies = self.fabric.query(key, timeout=3.0, expected=WorldInfo, all_replies=True)
+                for info in [union((rep.source, rep.message) for rep in replies)]:  # every sim's part: one world
+                    payload = encode(info)
                     with self._lock:
                         if not self._stopped and self._admit(key, len(payload)):
                             self._q.put((key, payload, time.time_ns(), None))
