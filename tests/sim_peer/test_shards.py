@@ -1,0 +1,100 @@
+"""Several sims, one world (docs/sim.md): two sims of disjoint robots serve one world as shards.
+
+A user sees both robots without knowing which sim runs which, owns and drives both; killing one sim
+leaves the other's robot live (poses keep coming) and owned (same owner, same epoch), and the user is
+told which robots went. A duplicate robot id and another scene are still refused with one line
+(test_world_conflict.py)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import time
+
+import pytest
+
+from fabric import keys
+from fabric.interfaces import WorldInfo
+from fabric.testing import client_config, robofabric_cmd, wait_until
+from user_peer.api import Base, World
+
+pytestmark = pytest.mark.slow
+
+BASE0 = ("--scene", "warehouse", "--no-scene-robots", "--robot", "reeman:base0@0,0")
+BASE1 = ("--scene", "warehouse", "--no-scene-robots", "--robot", "reeman:base1@1.5,0,180")
+
+
+def _parts(fab, world: str) -> dict[str, WorldInfo]:
+    from fabric.interfaces import ServiceError
+
+    try:
+        return {r.source: r.message for r in fab.query(keys.srv(world, "world"), timeout=2.0, expected=WorldInfo, all_replies=True)}
+    except ServiceError:
+        return {}
+
+
+def test_two_sims_serve_one_world_and_one_sims_loss_takes_its_robots_only(world, router, connect, procs):
+    ep = f"tcp/127.0.0.1:{router[1]}"
+    common = ("--world", world, "--connect", ep)
+    probe = connect("tool", "probe")
+    sim_a = procs.start(robofabric_cmd("sim", *BASE0, *common, "--id", "sim-a"), name="sim-a")
+    wait_until(lambda: "sim-a" in _parts(probe, world), timeout=60, what="sim-a serving", seen=lambda: procs.output(sim_a)[-800:])
+    sim_b = procs.start(robofabric_cmd("sim", *BASE1, *common, "--id", "sim-b"), name="sim-b")
+    wait_until(lambda: set(_parts(probe, world)) == {"sim-a", "sim-b"}, timeout=60, what="both sims serving",
+               seen=lambda: procs.output(sim_b)[-800:])
+    assert "as a shard beside sim-a (base0)" in procs.output(sim_b)
+    parts = _parts(probe, world)
+    assert [r.id for r in parts["sim-a"].robots] == ["base0"] and [r.id for r in parts["sim-b"].robots] == ["base1"]
+    assert parts["sim-a"].objects and not parts["sim-b"].objects  # the first sim keeps the scene objects
+
+    # `robofabric call srv/world` prints the one world: both robots, each with its sim
+    r = subprocess.run(robofabric_cmd("call", "srv/world", "--json", *common), capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-800:]
+    (only,) = [json.loads(ln) for ln in r.stdout.splitlines() if ln.strip()]
+    assert {(x["id"], x["sim"]) for x in only["message"]["robots"]} == {("base0", "sim-a"), ("base1", "sim-b")}
+    # `robofabric own list`: every record at its own sim; the scene objects' at the first sim
+    r = subprocess.run(robofabric_cmd("own", "list", "--json", *common), capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-800:]
+    auth = {(rec := json.loads(ln))["object"]: rec["authority"] for ln in r.stdout.splitlines() if ln.strip()}
+    assert auth["base0"] == "sim-a" and auth["base1"] == "sim-b", auth
+    assert {a for o, a in auth.items() if o not in ("base0", "base1")} == {"sim-a"}, auth
+
+    w = World(client_config(world, router[1]), "alice", timeout=10.0)
+    try:
+        assert w.robots() == ["base0", "base1"]
+        b0, b1 = w.robot("base0"), w.robot("base1")
+        assert isinstance(b0, Base) and isinstance(b1, Base)
+        for b in (b0, b1):
+            b.wait_for("pose", timeout=20)
+            b.request(timeout=10)
+        rec0, rec1 = w.ownership.record("base0"), w.ownership.record("base1")
+        assert (rec0.owner, rec0.authority) == ("alice", "sim-a") and (rec1.owner, rec1.authority) == ("alice", "sim-b")
+        x0, x1 = b0.xy_theta[0], b1.xy_theta[0]
+        b0.twist(0.3, 0.0)
+        b1.twist(0.3, 0.0)  # base1 faces -x: it drives away from base0
+        wait_until(lambda: b0.xy_theta[0] > x0 + 0.1 and b1.xy_theta[0] < x1 - 0.1, timeout=20, what="both bases driving",
+                   seen=lambda: (b0.xy_theta, b1.xy_theta, w.events[-3:]))
+        b0.stop(timeout=10)
+        b1.stop(timeout=10)
+        gone: list[tuple[str, list[str]]] = []
+        w.on_robots_gone(lambda sim, robots: gone.append((sim, robots)))
+        epoch0 = w.ownership.record("base0").epoch
+
+        procs.kill(sim_b)  # SIGKILL, by pid
+        wait_until(lambda: gone, timeout=20, what="alice told which robots went", seen=lambda: w.sims())
+        assert gone == [("sim-b", ["base1"])] and w.robots_gone == ["base1"]
+        assert w.world_alive and w.sims() == ["sim-a"]
+        assert w.robots() == ["base0"]  # the world is what the live sims serve
+        # base0 lives on: poses keep coming, alice still owns it with the same epoch, and drives it
+        t = time.time_ns()
+        wait_until(lambda: b0.pose is not None and b0.pose.header.wall_ns > t, timeout=10, what="base0's poses after sim-b died")
+        x = b0.xy_theta[0]
+        b0.twist(0.3, 0.0)
+        wait_until(lambda: b0.xy_theta[0] > x + 0.1, timeout=20, what="base0 driving after sim-b died")
+        b0.stop(timeout=10)
+        rec = w.ownership.record("base0")
+        assert (rec.owner, rec.epoch, rec.authority) == ("alice", epoch0, "sim-a")
+        assert sim_a.poll() is None and "stepping down" not in procs.output(sim_a)
+    finally:
+        w.close()
+
