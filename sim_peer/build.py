@@ -18,6 +18,7 @@ import robots as robots_pkg
 from fabric.keys import validate_id
 from robots import RobotDescription, SceneDescription, SceneRobot
 from sim_peer.errors import WorldError
+from sim_peer.mirrors import add_slots
 from sim_peer.placement import parse_robot_spec
 from sim_peer.registry import robot_class
 
@@ -87,9 +88,12 @@ def with_options(desc: RobotDescription, options: SensorOptions) -> RobotDescrip
     return desc
 
 
-def compile_model(scene: SceneDescription, placed: Sequence[SceneRobot], descriptions: Mapping[str, RobotDescription]) -> mujoco.MjModel:
-    """The scene's MJCF with every robot's MJCF attached under ``"{id}/"``, compiled."""
+def compile_model(scene: SceneDescription, placed: Sequence[SceneRobot], descriptions: Mapping[str, RobotDescription],
+                  *, mirrors: int = 0) -> mujoco.MjModel:
+    """The scene's MJCF with every robot's MJCF attached under ``"{id}/"``, and ``mirrors`` parked mirror slots
+    for robots other sims simulate (:mod:`sim_peer.mirrors`), compiled."""
     spec = mujoco.MjSpec.from_file(str(scene.mjcf_path))
+    add_slots(spec, mirrors)
     for r in placed:
         desc = descriptions[r.id]
         child = mujoco.MjSpec.from_file(str(desc.mjcf_path))

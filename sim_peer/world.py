@@ -26,10 +26,12 @@ from fabric.interfaces import EventKind
 from robots import SceneDescription, SceneRobot
 from sim_peer.build import SensorOptions, compile_model, load_scene, resolve, scene_objects
 from sim_peer.errors import WorldError
+from sim_peer.mirrors import Mirrors
 from sim_peer.placement import parse_robot_spec, place
 from sim_peer.registry import robot_class
 from sim_peer.robot import Mount, Note, Physics, SimRobot
 
+MAX_MIRRORS = 256  # mirror slots a world may have (each costs every ray a bounding-sphere test)
 MAX_NOTES = 1024  # notes kept until the peer takes them; a headless world that never does keeps the newest
 
 
@@ -49,6 +51,7 @@ class SimWorld:
         timestep: float | None = None,
         bumper: bool = True,
         twist_timeout: float | None = None,
+        mirrors: int = 0,
     ) -> None:
         self.scene = load_scene(scene)
         options = SensorOptions(noise_std=noise_std, lidar_rays=lidar_rays, lidar_fov_deg=lidar_fov_deg)
@@ -61,7 +64,9 @@ class SimWorld:
         placed = place(self.scene.mjcf_path, placed, self.descriptions)
         self.placements: dict[str, SceneRobot] = {r.id: r for r in placed}
 
-        self.model = compile_model(self.scene, placed, self.descriptions)
+        if not 0 <= mirrors <= MAX_MIRRORS:
+            raise WorldError(f"mirror slots must be within 0..{MAX_MIRRORS}, got {mirrors}")
+        self.model = compile_model(self.scene, placed, self.descriptions, mirrors=mirrors)
         self.model.opt.timestep = float(timestep or self.scene.timestep)
         self.data = mujoco.MjData(self.model)
         self.dt = float(self.model.opt.timestep)
@@ -72,6 +77,7 @@ class SimWorld:
             for r in placed
         }
         self.objects = scene_objects(self.model, self.scene)
+        self.mirrors = Mirrors(self.model, self.data)  # robots other sims of the world simulate, for the sensors
         self.object_home = {o: (self.data.mocap_pos[i].copy(), self.data.mocap_quat[i].copy()) for o, i in self.objects.items()}
         robot_dofs = sum(r.kinematic_dofs for r in self.robots.values())
         # free bodies or other joints beyond the robots' own: MuJoCo steps them; else only the robots move
@@ -196,6 +202,25 @@ class SimWorld:
     def object_pose(self, obj: str) -> tuple[np.ndarray, np.ndarray]:
         i = self.objects[obj]
         return self.data.mocap_pos[i].copy(), self.data.mocap_quat[i].copy()
+
+    def mirror(self, robot_id: str, *, radius: float, height: float, position: Sequence[float], quaternion: Sequence[float],
+               source: str = "") -> bool:
+        """Show a robot that ``source``, another sim of the world, simulates, where that sim says it is, so this
+        sim's sensors see it (:mod:`sim_peer.mirrors`); False when no slot is free, the pose is not finite, or
+        the robot is one of this world's own."""
+        if robot_id in self.robots or self.mirrors.show(robot_id, radius, height, source) is None:
+            return False
+        placed = self.mirrors.place(robot_id, position, quaternion)
+        self._dirty = True
+        return placed
+
+    def unmirror(self, robot_id: str | None = None, *, source: str | None = None) -> list[str]:
+        """Hide one mirrored robot, or every robot ``source`` simulated (that sim left); the ids hidden."""
+        gone = ([robot_id] if robot_id is not None and self.mirrors.hide(robot_id) else []) + (
+            self.mirrors.hide_from(source) if source is not None else [])
+        if gone:
+            self._dirty = True
+        return gone
 
     def scan(self, robot_id: str) -> np.ndarray:
         """The robot's LIDAR ranges now (m)."""
