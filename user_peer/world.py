@@ -33,6 +33,9 @@ log = logging.getLogger("robofabric.user")
 __all__ = ["World", "FOLLOWED_STREAMS"]
 
 
+REDESCRIBE_S = 1.0
+"""How often :meth:`World.info` asks again while a live sim describes no robot of the world (a standby)."""
+
 FOLLOWED_STREAMS = ("joints", "pose", "scan", "path", "ik")
 """The streams a robot handle keeps the latest of (:meth:`World.robot`)."""
 
@@ -59,6 +62,7 @@ class World:
             raise JoinFailed(why.text, endpoint=why.endpoint, cause=why.cause) from None
         self._info: WorldInfo | None = None
         self._known: WorldInfo | None = None  # the last description seen (which robots a departed sim served)
+        self._info_at = 0.0  # when it was asked for (monotonic)
         self.latest = Latest(world_info=lambda: self._info)  # keeps the robots of the description only
         self.events: list[Event] = []
         # (local arrival number, event, trusted): trusted when a sim-only key carried it from the object's
@@ -249,10 +253,26 @@ class World:
 
         The first call waits up to ``timeout`` (default ``join_timeout``) for a sim peer to serve it, so a
         script may start before the sim; :class:`Timeout` says how long it waited and what it saw.
+
+        The description is the union of every live sim's part (a world served by several sims); while a live
+        sim describes no robot of it (a standby, which may take a shard over without any token changing, or a
+        sim still starting) it is asked again at most every ``REDESCRIBE_S`` seconds.
         """
         if self._info is None or refresh:
             self._info = self._fetch_description(self.join_timeout if timeout is None else timeout)
+        elif time.monotonic() - self._info_at > REDESCRIBE_S and self._undescribed_sims(self._info):
+            self._info_at = time.monotonic()
+            try:
+                self._info = self._fetch_description(min(1.0, self.timeout))
+            except (Timeout, Unreachable):
+                pass  # keep what we had: the world's own trouble is reported by its tokens
         return self._info
+
+    def _undescribed_sims(self, info: WorldInfo) -> bool:
+        """Whether a live sim serves no robot of ``info`` (a standby, or a sim whose part is not in yet)."""
+        described = {r.sim for r in info.robots}
+        with self._world_cond:
+            return bool(self._sims - described)
 
     def _fetch_description(self, wait: float) -> WorldInfo:
         """The world description, asked again until a sim serves it or ``wait`` s pass: the one wait for the
@@ -268,6 +288,7 @@ class World:
                 # at most a few seconds per try: a query sent before any sim existed is never answered later
                 info = services.world_info(self.fabric, timeout=max(0.05, min(left, 2.0)))
                 self._known = info
+                self._info_at = time.monotonic()
                 return info
             except ServiceError as exc:
                 if not exc.reason.startswith("no reply"):

@@ -98,3 +98,60 @@ def test_two_sims_serve_one_world_and_one_sims_loss_takes_its_robots_only(world,
     finally:
         w.close()
 
+
+
+def test_a_shards_standby_takes_its_robots_over_and_the_other_shard_is_not_fenced(world, router, connect, procs):
+    """sim-b's standby (sim-b2) takes base1 over with term 2 when sim-b dies, although sim-a, of another shard,
+    has the lowest id of the live sims; base0 goes on at term 1, believed beside base1's term 2; alice keeps
+    both robots with their epochs."""
+    ep = f"tcp/127.0.0.1:{router[1]}"
+    common = ("--world", world, "--connect", ep)
+    probe = connect("tool", "probe")
+    sim_a = procs.start(robofabric_cmd("sim", *BASE0, *common, "--id", "sim-a"), name="sim-a")
+    wait_until(lambda: "sim-a" in _parts(probe, world), timeout=60, what="sim-a serving", seen=lambda: procs.output(sim_a)[-800:])
+    sim_b = procs.start(robofabric_cmd("sim", *BASE1, *common, "--id", "sim-b"), name="sim-b")
+    wait_until(lambda: set(_parts(probe, world)) == {"sim-a", "sim-b"}, timeout=60, what="both sims serving",
+               seen=lambda: procs.output(sim_b)[-800:])
+    sim_b2 = procs.start(robofabric_cmd("sim", *BASE1, *common, "--id", "sim-b2", "--standby"), name="sim-b2")
+    wait_until(lambda: "following sim-b" in procs.output(sim_b2), timeout=60, what="sim-b2 following sim-b",
+               seen=lambda: procs.output(sim_b2)[-800:])
+    w = World(client_config(world, router[1]), "alice", timeout=10.0)
+    try:
+        b0, b1 = w.robot("base0"), w.robot("base1")
+        for b in (b0, b1):
+            b.wait_for("pose", timeout=20)
+            b.request(timeout=10)
+        epochs = {r: w.ownership.record(r).epoch for r in ("base0", "base1")}
+        gone: list[tuple[str, list[str]]] = []
+        w.on_robots_gone(lambda sim, robots: gone.append((sim, robots)))
+        # drive base1 a little first: the standby carries ownership over from its last snapshot (polled every
+        # 50 ms), and a grant in the last poll period before the death is not in it (docs/sim.md, limits)
+        x = b1.xy_theta[0]
+        b1.twist(0.3, 0.0)
+        wait_until(lambda: b1.xy_theta[0] < x - 0.1, timeout=20, what="base1 driving under sim-b")
+        b1.stop(timeout=10)
+
+        procs.kill(sim_b)
+        wait_until(lambda: "took over the world with term 2" in procs.output(sim_b2), timeout=30, what="sim-b2 taking base1 over",
+                   seen=lambda: procs.output(sim_b2)[-800:])
+        assert "from the state of sim-b" in procs.output(sim_b2)
+        assert gone == [("sim-b", ["base1"])]
+        wait_until(lambda: b1.pose is not None and b1.pose.header.source == "sim-b2" and b1.pose.header.term == 2, timeout=20,
+                   what="base1's poses from sim-b2 at term 2")
+        t = time.time_ns()
+        wait_until(lambda: b0.pose is not None and b0.pose.header.wall_ns > t, timeout=10, what="base0's term-1 poses still believed")
+        assert b0.pose.header.term == 1 and b0.pose.header.source == "sim-a"
+        wait_until(lambda: sorted(w.robots()) == ["base0", "base1"], timeout=20, what="base1 in the world again")
+        assert {(r.id, r.sim) for r in w.info().robots} == {("base0", "sim-a"), ("base1", "sim-b2")}
+        # alice keeps both, same epochs, and base1's new authority takes her commands
+        wait_until(lambda: (w.ownership.record("base1") or b1.record).authority == "sim-b2", timeout=20, what="base1's record from sim-b2")
+        for r in ("base0", "base1"):
+            rec = w.ownership.record(r)
+            assert (rec.owner, rec.epoch) == ("alice", epochs[r]), rec
+        x = b1.xy_theta[0]
+        b1.twist(0.3, 0.0)
+        wait_until(lambda: b1.xy_theta[0] < x - 0.1, timeout=20, what="base1 driving under sim-b2")
+        b1.stop(timeout=10)
+        assert sim_a.poll() is None and "stepping down" not in procs.output(sim_a) and "took over" not in procs.output(sim_a)
+    finally:
+        w.close()
