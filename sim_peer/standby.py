@@ -504,7 +504,7 @@ class ReplicaHost:
                 self._stepped_down.set()
             elif e.kind == "reassert":
                 with self._lock:
-                    self.fabric.assume_term(e.term)
+                    self.fabric.assume_term(e.term, self._scopes())
             elif e.kind == "follow" and self.role == el.STANDBY:
                 self.announce(f"standby {self.fabric.peer_id}: following {e.leader} (term {e.term})")
 
