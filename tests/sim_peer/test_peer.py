@@ -279,3 +279,37 @@ def test_paths_and_bumps_are_announced_as_events(world, connect, user):
         ev = wait_until(lambda: inbox.event("collision"), timeout=20, what="collision event", seen=lambda: inbox.events)
         assert ev.object == "base1" and ev.reason == "bumper" and peer.counters["collisions"] == 1
         assert not peer.world.robot("base1").moving and peer.last_state("base1")["pose"][0] < 2.85 - 0.25
+
+
+def test_a_shard_leaves_other_robots_to_their_sims_and_the_scene_objects_to_the_first(world, connect, user):
+    """A sim that is not alone in its world refuses nothing about a robot it does not serve (another shard's, docs/sim.md),
+    and one that is not the scene objects' authority (objects=False) describes none and leaves users' poses alone."""
+    fab, inbox = user
+    other = connect("sim", "sim-other")  # another sim of the world: its token is there
+    peer = SimPeer(connect("sim", "sim-shard"), SimWorld("combined", seed=3), rates={"joints": 50, "pose": 50, "scan": 20},
+                   objects=False)
+    peer.start()
+    try:
+        info = peer.world_info()
+        assert info.objects == () and {r.sim for r in info.robots} == {"sim-shard"}
+        wait_until(lambda: "sim-other" in peer._other_sims, what="the other sim's token")
+        send(fab, world, "base9", "twist", Twist(0.1, 0.0))
+        wait_until(lambda: peer.counters["not_mine"] >= 1 or send(fab, world, "base9", "twist", Twist(0.1, 0.0)), timeout=10,
+                   what="a command for another sim's robot counted")
+        before = peer.world.object_pose("target")[0].copy()
+        ok = keys.object_pose(world, "target", "alice")
+
+        def own_command_and_a_pose():
+            fab.publish(ok, Pose(np.array([0.3, 0.2, 0.4]), header=fab.header(ok)))  # sent beside it, every try
+            return send(fab, world, "arm1", "joints", JointTarget(np.full(6, 0.1)))
+
+        wait_until(lambda: peer.counters["accepted"] >= 1 or own_command_and_a_pose(), timeout=10, what="its own robot's command")
+        assert peer.counters["rejected"] == 0 and inbox.event("reject") is None
+        assert peer.counters["object_updates"] == 0 and np.array_equal(peer.world.object_pose("target")[0], before)
+        other.close()
+        wait_until(lambda: not peer._other_sims, what="the other sim gone")
+        send(fab, world, "base9", "twist", Twist(0.1, 0.0))
+        wait_until(lambda: peer.counters["rejected:unknown_robot"] >= 1 or send(fab, world, "base9", "twist", Twist(0.1, 0.0)),
+                   timeout=10, what="alone again: an unknown robot is refused")
+    finally:
+        peer.close()
