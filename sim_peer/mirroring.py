@@ -1,0 +1,174 @@
+"""Feeding mirrors: the other sims' mobile robots, from their pose streams, into this sim's world.
+
+A sim that shares its world with other sims (docs/sim.md, "Several sims, one world") follows every
+``robot/*/pose`` another session publishes. A robot that is not this world's own gets a mirror
+(:mod:`sim_peer.mirrors`) sized from its description in the world's ``srv/world`` union (its
+``BaseInfo``), placed at each pose as it arrives, under the peer's lock, between two steps. A mirror is
+hidden when its sim's token goes, or when no pose came for ``stale_s`` (its sim paused or was cut off:
+an obstacle frozen where it was last seen would be a lie the LIDAR keeps telling).
+
+How late a mirror is, is measured here: a pose's age on arrival, by the sender's wall clock (meaningful on
+one machine or with synchronised clocks), plus the stream's period (``bench shards`` reports both).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from typing import Any, Callable
+
+from fabric import keys
+from fabric.interfaces import Pose, RobotInfo, ServiceError, WorldInfo
+from sim_peer.world import SimWorld
+
+log = logging.getLogger("robofabric.sim")
+
+__all__ = ["MirrorFeed", "STALE_S"]
+
+STALE_S = 2.0
+"""A mirror with no pose for this long is hidden (a transport lease: its sim is paused or cut off)."""
+
+DESCRIBE_EVERY_S = 1.0
+"""How often an unknown robot's pose may make the feed ask the world's description again."""
+
+MAX_LAGS = 4096
+
+
+class MirrorFeed:
+    """The other sims' mobile robots as mirrors in ``world``; a context manager, ``close()`` idempotent.
+
+    ``describe()`` answers the world's description (the union of every sim's part); ``lock`` is the lock the
+    sim steps its world under; ``clock`` is monotonic seconds (tests pass their own)."""
+
+    def __init__(self, fab: Any, world: SimWorld, lock: threading.RLock, *, describe: Callable[[], WorldInfo] | None = None,
+                 stale_s: float = STALE_S, clock: Callable[[], float] = time.monotonic) -> None:
+        self.fab, self.world, self.lock = fab, world, lock
+        self.stale_s = stale_s
+        self._clock = clock
+        self._describe = describe or self._ask_world
+        self._bases: dict[str, RobotInfo] = {}  # other sims' mobile robots, from the description
+        self._seen: dict[str, float] = {}  # robot -> when its last pose arrived here
+        self._asked_at = float("-inf")
+        self._asking = False
+        self._state = threading.Lock()
+        self.lag_ms: deque[float] = deque(maxlen=MAX_LAGS)  # a pose's age on arrival, by the sender's clock
+        self.counters = {"poses": 0, "unknown": 0, "shown": 0, "hidden": 0}
+        self._closed = False
+        self._stop = threading.Event()
+        self._subs = [
+            fab.subscribe(keys.robot_stream_all(fab.world, "pose"), self._on_pose, expected=Pose, remote_only=True),
+            fab.watch_peers(self._on_sim, kind="sim"),
+        ]
+        self._sweeper = threading.Thread(target=self._sweep_loop, name="mirror-sweep", daemon=True)
+        self._sweeper.start()
+
+    # ------------------------------------------------------------------ what the others publish
+
+    def _ask_world(self) -> WorldInfo:
+        from fabric.worldview import describe
+
+        return describe(self.fab, timeout=2.0)
+
+    def _learn(self) -> None:
+        """Ask the world's description again (in its own thread: never in a subscriber callback)."""
+        try:
+            info = self._describe()
+        except (ServiceError, ValueError) as exc:
+            log.debug("mirrors: no world description yet: %s", exc)
+            info = None
+        with self._state:
+            self._asking = False
+            if info is not None:
+                self._bases = {r.id: r for r in info.robots if r.base is not None and r.id not in self.world.robots}
+
+    def _footprint(self, robot: str) -> RobotInfo | None:
+        with self._state:
+            info = self._bases.get(robot)
+            if info is not None:
+                return info
+            now = self._clock()
+            if self._asking or now - self._asked_at < DESCRIBE_EVERY_S:
+                return None
+            self._asking, self._asked_at = True, now
+        threading.Thread(target=self._learn, name="mirror-describe", daemon=True).start()
+        return None
+
+    def _on_pose(self, key: str, pose: Pose) -> None:
+        robot = keys.parse(key).subject
+        if robot in self.world.robots or self._closed:
+            return
+        self.counters["poses"] += 1
+        info = self._footprint(robot)
+        if info is None:
+            self.counters["unknown"] += 1
+            return
+        if pose.header.wall_ns:
+            self.lag_ms.append(max(0.0, (time.time_ns() - pose.header.wall_ns) / 1e6))
+        with self.lock:
+            was = robot in self.world.mirrors.held()
+            shown = self.world.mirror(robot, radius=info.base.radius, height=info.base.height or 0.3,
+                                      position=pose.position, quaternion=pose.quaternion, source=info.sim or pose.header.source)
+        if shown:
+            with self._state:
+                self._seen[robot] = self._clock()
+            if not was:
+                self.counters["shown"] += 1
+                log.info("mirroring %s (simulated by %s)", robot, info.sim or pose.header.source)
+
+    def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
+        if alive:
+            with self._state:
+                self._asked_at = float("-inf")  # a new sim: its robots are in the next description
+            return
+        with self.lock:
+            gone = self.world.unmirror(source=peer_id)
+        self._forget(gone, f"its sim {peer_id} left")
+
+    def _forget(self, robots: list[str], why: str) -> None:
+        if not robots:
+            return
+        with self._state:
+            for r in robots:
+                self._seen.pop(r, None)
+        self.counters["hidden"] += len(robots)
+        log.info("no longer mirroring %s: %s", ", ".join(robots), why)
+
+    def _sweep_loop(self) -> None:
+        while not self._stop.wait(min(0.5, self.stale_s / 2)):
+            self.sweep()
+
+    def sweep(self) -> list[str]:
+        """Hide mirrors whose robot sent no pose for ``stale_s``; their ids."""
+        now = self._clock()
+        with self._state:
+            stale = [r for r, t in self._seen.items() if now - t > self.stale_s]
+        gone = []
+        if stale:
+            with self.lock:
+                for r in stale:
+                    gone += self.world.unmirror(r)
+        self._forget(gone, f"no pose for {self.stale_s:g} s")
+        return gone
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self._stop.set()
+        for sub in self._subs:
+            try:
+                sub.undeclare()
+            except Exception:  # the session closed first
+                pass
+        if self._sweeper is not threading.current_thread():
+            self._sweeper.join(timeout=2.0)
+
+    def __enter__(self) -> "MirrorFeed":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
