@@ -15,6 +15,10 @@ if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load nump
 
 log = logging.getLogger("robofabric.sim")
 
+DEFAULT_MIRRORS = 8
+"""Mirror slots a sim has by default: the mobile robots of other sims in its world its sensors can see. Unused
+slots are parked outside every sensor's groups but still cost each LIDAR scan ~1 % each (docs/sim.md)."""
+
 
 def make_gate(fabric, world, ownership: bool, restored=None, *, objects: bool = True) -> CommandGate:
     """The ownership Authority when asked for and installed, else an OpenGate (with a warning if asked for).
@@ -55,6 +59,10 @@ def sim(
         Optional[float], typer.Option("--twist-timeout", help="Stop a base when no twist came for this long (s of sim time); default: twists hold.")
     ] = None,
     bumper: Annotated[bool, typer.Option("--bumper/--no-bumper", help="Stop bases before obstacles ahead.")] = True,
+    mirrors: Annotated[
+        int, typer.Option("--mirrors", help="Mobile robots of other sims of the world this sim's sensors can see (mirror slots; "
+                                            "each costs every LIDAR ray ~1 %); 0: none. See docs/sim.md.")
+    ] = DEFAULT_MIRRORS,
     ownership: Annotated[bool, typer.Option("--ownership/--no-ownership", help="Gate commands by ownership (needs the ownership package).")] = True,
     standby: Annotated[
         bool, typer.Option("--standby", help="Follow the world's primary sim and take the world over (no reset) if it goes; see docs/sim.md.")
@@ -90,7 +98,7 @@ def sim(
     def build():
         return SimWorld(
             scene, robot or [], scene_robots=scene_robots, seed=seed, noise_std=noise, lidar_rays=lidar_rays, lidar_fov_deg=lidar_fov,
-            bumper=bumper, twist_timeout=twist_timeout,
+            bumper=bumper, twist_timeout=twist_timeout, mirrors=mirrors,
         )
 
     try:

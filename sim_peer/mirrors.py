@@ -2,8 +2,8 @@
 
 When several sims share a world, each simulates its own robots; a LIDAR, an ultrasonic ring or a bumper
 here must still see a robot simulated elsewhere. A MuJoCo model cannot gain bodies once compiled, so the
-model is built with a pool of ``slots``: mocap bodies with one cylinder each, parked far below the floor,
-in the robots' geom group (sensed, never colliding: robots are kinematic). A mirror takes a slot, is sized
+model is built with a pool of ``slots``: mocap bodies with one cylinder each, parked far below the floor in
+a geom group no sensor sees (an unused slot costs the rays nothing), never colliding (robots are kinematic). A mirror takes a slot, joins the robots' geom group, is sized
 to the other robot's footprint (its ``BaseInfo`` radius and height) and follows that robot's published pose;
 hiding it parks the slot again. The pose comes from the other sim's ``pose`` stream, so a mirror lags by a
 stream period plus transport (docs/sim.md).
@@ -31,6 +31,9 @@ PARKED_Z = -100.0
 MIRROR_GROUP = 1
 """The robots' geom group: what LIDARs, sonars and bumpers see (:data:`sim_peer.sensors.SENSED_GROUPS`)."""
 
+PARKED_GROUP = 5
+"""A parked slot's geom group, which no sensor casts against: unused slots cost the rays nothing."""
+
 
 def add_slots(spec: mujoco.MjSpec, slots: int) -> None:
     """Add ``slots`` parked mirror bodies to a model spec before it is compiled."""
@@ -38,7 +41,7 @@ def add_slots(spec: mujoco.MjSpec, slots: int) -> None:
         body = spec.worldbody.add_body(name=f"{MIRROR_PREFIX}{i}", pos=[0.0, 0.0, PARKED_Z], mocap=True)
         body.add_geom(
             name=f"{MIRROR_PREFIX}{i}", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.01, 0.01, 0.0],
-            contype=0, conaffinity=0, group=MIRROR_GROUP, rgba=[0.55, 0.6, 0.7, 0.6],
+            contype=0, conaffinity=0, group=PARKED_GROUP, rgba=[0.55, 0.6, 0.7, 0.6],
         )
 
 
@@ -96,6 +99,7 @@ class Mirrors:
             self.model.geom_size[g] = [r, half, 0.0]
             self.model.geom_rbound[g] = float(np.hypot(r, half))  # ray casting culls by these two
             self.model.geom_aabb[g] = [0.0, 0.0, 0.0, r, r, half]
+        self.model.geom_group[self._geom[m.slot]] = MIRROR_GROUP
         m = Mirror(robot, m.slot, float(radius), float(height), source)
         self._held[robot] = m
         return m
@@ -127,6 +131,7 @@ class Mirrors:
             return False
         self.data.mocap_pos[self._mocap[m.slot]] = [0.0, 0.0, PARKED_Z]
         self.data.geom_xpos[self._geom[m.slot]] = [0.0, 0.0, PARKED_Z]
+        self.model.geom_group[self._geom[m.slot]] = PARKED_GROUP
         return True
 
     def hide_from(self, source: str) -> list[str]:

@@ -49,6 +49,7 @@ from fabric.rate import Clock, RateLoop
 from fabric.session import Fabric
 from sim_peer.controllers import Clamp, CommandRejected
 from sim_peer.inbox import CommandQueue
+from sim_peer.mirroring import MirrorFeed
 from sim_peer.pacing import Pacer
 from sim_peer.robot import Build, CommandHandler, Stream, body_mismatch
 from sim_peer.world import SimWorld
@@ -101,6 +102,7 @@ class SimPeer:
         self._queues: dict[str, CommandQueue[Command]] = {rid: CommandQueue() for rid in world.robots}
         self._queued = threading.Condition(threading.Lock())
         self._worker: threading.Thread | None = None
+        self.mirror_feed: MirrorFeed | None = None  # the other sims' bases in this world, once open (mirror slots)
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -124,6 +126,8 @@ class SimPeer:
         for group, entries in self._streams.items():
             tick = self._guard(group, self._publisher(entries))
             self._loops.append(RateLoop(self.rates[group], tick, name=f"sim-{group}").start())
+        if self.world.mirrors.slots:
+            self.mirror_feed = MirrorFeed(f, self.world, self.lock)
         return self
 
     def start(self, duration: float | None = None) -> "SimPeer":
@@ -182,6 +186,8 @@ class SimPeer:
             self._worker.join(5.0)
         for loop in self._loops:
             loop.stop()
+        if self.mirror_feed is not None:
+            self.mirror_feed.close()
 
     def __enter__(self) -> "SimPeer":
         return self.start()

@@ -1,0 +1,57 @@
+"""Sensors see across sims: base0's LIDAR, simulated by sim-a, sees base1, simulated by sim-b, and sees it move.
+
+Each sim mirrors the other sims' mobile robots as kinematic bodies from their pose streams
+(sim_peer/mirrors.py, sim_peer/mirroring.py); when sim-b goes, sim-a's mirror of base1 goes with it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fabric.testing import client_config, robofabric_cmd, wait_until
+from user_peer.api import World
+
+pytestmark = pytest.mark.slow
+
+FORWARD = slice(118, 123)  # the rays straight ahead of a base at yaw 0 (240 rays over the LIDAR's field of view)
+FREE_AHEAD = 4.5  # the warehouse has nothing closer than this ahead of (0, 0) along +x (no other robot)
+
+
+def _ahead(w: World) -> float:
+    scan = w.robot("base0").scan
+    return float(np.median(scan.ranges[FORWARD])) if scan is not None else float("nan")
+
+
+def test_a_lidar_sees_a_robot_another_sim_simulates_and_sees_it_move(world, router, connect, procs):
+    ep = f"tcp/127.0.0.1:{router[1]}"
+    common = ("--world", world, "--connect", ep)
+    scene = ("--scene", "warehouse", "--no-scene-robots")
+    sim_a = procs.start(robofabric_cmd("-v", "sim", *scene, "--robot", "reeman:base0@0,0", *common, "--id", "sim-a"), name="sim-a")
+    probe = connect("tool", "probe")
+    wait_until(lambda: ("sim", "sim-a") in probe.live_peers("sim"), timeout=60, what="sim-a", seen=lambda: procs.output(sim_a)[-800:])
+    w = World(client_config(world, router[1]), "alice", timeout=10.0)
+    try:
+        w.robot("base0").wait_for("scan", timeout=30)
+        alone = wait_until(lambda: _ahead(w) > FREE_AHEAD and _ahead(w), timeout=20, what="a clear view ahead of base0",
+                           seen=lambda: _ahead(w))
+        sim_b = procs.start(robofabric_cmd("sim", *scene, "--robot", "reeman:base1@3,0,180", *common, "--id", "sim-b"), name="sim-b")
+        # sim-a mirrors base1 from sim-b's poses: base0's LIDAR sees its shell, 3 m ahead less radius and LIDAR offset
+        seen = wait_until(lambda: 2.0 < _ahead(w) < 2.9 and _ahead(w), timeout=60, what="base0's LIDAR seeing base1 (sim-b)",
+                          seen=lambda: (_ahead(w), procs.output(sim_a)[-600:], procs.output(sim_b)[-600:]))
+        w.info(refresh=True)
+        base1 = w.robot("base1")
+        base1.wait_for("pose", timeout=20)
+        base1.request(timeout=10)
+        x_before = base1.xy_theta[0]
+        base1.drive(-0.3, 0.0, 1.5)  # base1 faces -x: backing up takes it away from base0
+        assert base1.stop(timeout=10)
+        moved = base1.xy_theta[0] - x_before
+        assert moved > 0.2, moved
+        # base0's LIDAR sees it where sim-b says it is: the reading grew by what base1 moved (noise, and a pose period)
+        wait_until(lambda: abs((_ahead(w) - seen) - moved) < 0.08, timeout=10, what="base0's LIDAR seeing base1 back away",
+                   seen=lambda: (_ahead(w), seen, moved))
+        procs.kill(sim_b)  # sim-b goes: its token with it, and sim-a's mirror of base1
+        wait_until(lambda: _ahead(w) > FREE_AHEAD, timeout=30, what="base1's mirror gone with sim-b", seen=lambda: (_ahead(w), alone))
+        assert "mirroring base1 (simulated by sim-b)" in procs.output(sim_a)
+    finally:
+        w.close()
