@@ -167,3 +167,35 @@ def test_a_robot_missing_from_a_partial_replica_is_asked_of_its_authority(connec
         alice.close()
         second.close()
         first.close()
+
+
+def test_the_client_follows_one_authority_per_object(connect):
+    """Shards (docs/sim.md): each object's records come from its own sim with terms of its own. A higher term
+    from another sim takes an object over (its shard's standby); the sim it replaced is then not believed
+    below that term for any of its objects, while the other shard's term 1 still is."""
+    from fabric.interfaces import Header
+
+    alice = OwnershipClient(connect("user", "alice"), "alice")
+    for sim in ("p", "s", "q"):
+        alice._on_sim("sim", sim, True)
+
+    def rec(obj, authority, term, epoch, owner="alice"):
+        alice._on_record(keys.own("w", obj), OwnershipRecord(obj, owner=owner, epoch=epoch, authority=authority,
+                                                             header=Header(source=authority, term=term)))
+        r = alice.record(obj)
+        return None if r is None else (r.authority, r.epoch)
+
+    try:
+        assert rec("base1", "p", 1, 3) == ("p", 3) and rec("base2", "p", 1, 5) == ("p", 5)
+        assert rec("base0", "q", 1, 7) == ("q", 7)  # another shard, term 1 too
+        assert rec("base1", "s", 1, 4) == ("p", 3)  # another live sim, same term: not base1's authority
+        assert alice.counters["records_foreign"] == 1
+        assert rec("base1", "s", 2, 3) == ("s", 3)  # p's shard taken over by s: epochs kept
+        assert rec("base2", "p", 1, 6) == ("p", 5)  # p speaks for none of its objects below term 2 any more
+        assert alice.counters["records_stale"] == 1
+        assert rec("base0", "q", 1, 8) == ("q", 8)  # the other shard is not fenced
+        alice._on_sim("sim", "p", False)
+        alice._on_sim("sim", "p", True)  # p restarted: its terms start afresh
+        assert rec("base2", "p", 1, 6) == ("p", 6)
+    finally:
+        alice.close()
