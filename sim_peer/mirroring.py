@@ -154,10 +154,23 @@ class MirrorFeed:
 
     # ------------------------------------------------------------------ lifecycle
 
+    def summary(self) -> str:
+        """One line: how many robots were mirrored and how old their poses were on arrival (``bench shards`` reads it)."""
+        lags = sorted(self.lag_ms)
+
+        def q(p: float) -> float:
+            return lags[min(len(lags) - 1, int(round(p / 100 * (len(lags) - 1))))] if lags else float("nan")
+
+        c = self.counters
+        return (f"mirrors: {c['shown']} shown, {c['hidden']} hidden, {self.world.mirrors.refused} without a slot; pose age on arrival "
+                f"p50 {q(50):.1f} ms, p99 {q(99):.1f} ms over {len(lags)} poses")
+
     def close(self) -> None:
         if self._closed:
             return
         self._closed = True
+        if self.counters["poses"]:
+            log.info("%s", self.summary())
         self._stop.set()
         for sub in self._subs:
             try:
