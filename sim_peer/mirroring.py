@@ -34,6 +34,7 @@ DESCRIBE_EVERY_S = 1.0
 """How often an unknown robot's pose may make the feed ask the world's description again."""
 
 MAX_LAGS = 4096
+MAX_DEPARTED = 256  # sims remembered as gone (bounded: anyone may declare a token)
 
 
 class MirrorFeed:
@@ -52,6 +53,7 @@ class MirrorFeed:
         self._seen: dict[str, float] = {}  # robot -> when its last pose arrived here
         self._asked_at = float("-inf")
         self._asking = False
+        self._departed: set[str] = set()  # sims whose token went: their poses still in flight must not show a mirror again
         self._state = threading.Lock()
         self.lag_ms: deque[float] = deque(maxlen=MAX_LAGS)  # a pose's age on arrival, by the sender's clock
         self.counters = {"poses": 0, "unknown": 0, "shown": 0, "hidden": 0}
@@ -106,23 +108,30 @@ class MirrorFeed:
             return
         if pose.header.wall_ns:
             self.lag_ms.append(max(0.0, (time.time_ns() - pose.header.wall_ns) / 1e6))
-        with self.lock:
+        with self.lock:  # (lock, then state: as _on_sim, so a departure and a late pose never interleave)
+            with self._state:
+                if pose.header.source in self._departed:  # sent just before its sim left, arriving just after
+                    return
             was = robot in self.world.mirrors.held()
             shown = self.world.mirror(robot, radius=info.base.radius, height=info.base.height or 0.3,
-                                      position=pose.position, quaternion=pose.quaternion, source=info.sim or pose.header.source)
+                                      position=pose.position, quaternion=pose.quaternion, source=pose.header.source or info.sim)
         if shown:
             with self._state:
                 self._seen[robot] = self._clock()
             if not was:
                 self.counters["shown"] += 1
-                log.info("mirroring %s (simulated by %s)", robot, info.sim or pose.header.source)
+                log.info("mirroring %s (simulated by %s)", robot, pose.header.source or info.sim)
 
     def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
         if alive:
             with self._state:
+                self._departed.discard(peer_id)
                 self._asked_at = float("-inf")  # a new sim: its robots are in the next description
             return
         with self.lock:
+            with self._state:
+                if len(self._departed) < MAX_DEPARTED:
+                    self._departed.add(peer_id)
             gone = self.world.unmirror(source=peer_id)
         self._forget(gone, f"its sim {peer_id} left")
 
