@@ -27,12 +27,10 @@ __all__ = ["register", "list_keys", "key_info", "interfaces", "observe"]
 
 
 def _resolve(expr: str, world: str) -> str:
-    full = expr if expr.startswith(keys.PREFIX + "/") else f"{keys.world_root(world)}/{expr.lstrip('/')}"
     try:
-        zenoh.KeyExpr(full)
-    except Exception as exc:
-        raise UserError(f"{expr!r} is not a valid key expression: {exc}") from None
-    return full
+        return keys.in_world(expr, world)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
 
 
 def observe(fab, expr: str, duration: float) -> list[KeyStats]:

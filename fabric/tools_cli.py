@@ -30,12 +30,10 @@ def _open(kind: str, world, connect, listen, profile, zenoh_config, peer_id=None
 
 def resolve_key(key: str, world: str) -> str:
     """Accept full keys (``rf/demo/robot/arm1/joints``) or world-relative ones (``robot/arm1/joints``)."""
-    full = key if key.startswith(keys.PREFIX + "/") else f"{keys.world_root(world)}/{key.lstrip('/')}"
     try:
-        zenoh.KeyExpr(full)
-    except Exception as exc:
-        raise UserError(f"{key!r} is not a valid key expression: {exc}") from None
-    return full
+        return keys.in_world(key, world)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
 
 
 def _user_key(full: str, user: str | None) -> str:
