@@ -32,7 +32,6 @@ Entity layout::
 
 from __future__ import annotations
 
-import math
 from collections import defaultdict
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Sequence
@@ -175,7 +174,7 @@ class WorldLogger:
     :meth:`log` only files what a message brings under its stream; :meth:`flush` draws everything filed
     since the last flush, one ``send_columns`` per entity (:mod:`user_peer.rerun_columns`). The live viewer
     flushes once per window (0.1 s); a caller that never flushes still gets a flush every ``max_pending``
-    messages, and :meth:`log_all` flushes at its end. Rare messages (maps, paths, objects, ownership,
+    messages. Rare messages (maps, paths, objects, ownership,
     events) are logged at once, row by row.
     """
 
@@ -348,7 +347,7 @@ class WorldLogger:
 
     def log_joints(self, rid: str, js: JointState, *, due: bool = True) -> bool:
         """File a JointState: an arm's joint plots and 3D pose, or a base's wheel angles (their own plot)."""
-        info = self._robot(rid, {"joint_names": js.names})
+        self._robot(rid, {"joint_names": js.names})  # its drawing, made the first time the robot is seen
         if not due:
             return True
         rows = self._joints.get(rid)
@@ -667,8 +666,3 @@ class WorldLogger:
             static=True,
         )
 
-    def log_all(self, items: Iterable[tuple[str, Any, int]]) -> int:
-        """Log a sequence of (key, message, log_time_ns) and draw it; returns how many were drawn."""
-        n = sum(1 for key, msg, t in items if self.log(key, msg, t))
-        self.flush()
-        return n

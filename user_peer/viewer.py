@@ -206,7 +206,7 @@ class Viewer:
         if frame is not None:  # the first view shows every robot, not the scene's bounds (shelves and walls)
             self.rec.send_blueprint(blueprint(frame), make_active=True, make_default=True)
         self.fab.subscribe(keys.world_all(self.fab.world), self._enqueue, history=True)  # maps, paths, objects set before we joined
-        self.fab.watch_peers(self._on_sim, kind="sim")  # "world gone" when the last sim peer leaves (issue 15)
+        self.fab.watch_peers(self._on_sim, kind="sim")  # "world gone" when the last sim peer leaves
         for expr in (keys.own_all(self.fab.world),):
             try:
                 for rep in self.fab.query(expr, timeout=1.0, all_replies=True):
