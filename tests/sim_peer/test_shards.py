@@ -33,15 +33,20 @@ def _parts(fab, world: str) -> dict[str, WorldInfo]:
         return {}
 
 
-def test_two_sims_serve_one_world_and_one_sims_loss_takes_its_robots_only(world, router, connect, procs):
-    ep = f"tcp/127.0.0.1:{router[1]}"
-    common = ("--world", world, "--connect", ep)
+def _two_shards(world, router, connect, procs):
+    """sim-a (base0), then sim-b (base1) joining as a shard, both serving; (common CLI args, probe, sim-a, sim-b)."""
+    common = ("--world", world, "--connect", f"tcp/127.0.0.1:{router[1]}")
     probe = connect("tool", "probe")
     sim_a = procs.start(robofabric_cmd("sim", *BASE0, *common, "--id", "sim-a"), name="sim-a")
     wait_until(lambda: "sim-a" in _parts(probe, world), timeout=60, what="sim-a serving", seen=lambda: procs.output(sim_a)[-800:])
     sim_b = procs.start(robofabric_cmd("sim", *BASE1, *common, "--id", "sim-b"), name="sim-b")
     wait_until(lambda: set(_parts(probe, world)) == {"sim-a", "sim-b"}, timeout=60, what="both sims serving",
                seen=lambda: procs.output(sim_b)[-800:])
+    return common, probe, sim_a, sim_b
+
+
+def test_two_sims_serve_one_world_and_one_sims_loss_takes_its_robots_only(world, router, connect, procs):
+    common, probe, sim_a, sim_b = _two_shards(world, router, connect, procs)
     assert "as a shard beside sim-a (base0)" in procs.output(sim_b)
     parts = _parts(probe, world)
     assert [r.id for r in parts["sim-a"].robots] == ["base0"] and [r.id for r in parts["sim-b"].robots] == ["base1"]
@@ -104,14 +109,7 @@ def test_a_shards_standby_takes_its_robots_over_and_the_other_shard_is_not_fence
     """sim-b's standby (sim-b2) takes base1 over with term 2 when sim-b dies, although sim-a, of another shard,
     has the lowest id of the live sims; base0 goes on at term 1, believed beside base1's term 2; alice keeps
     both robots with their epochs."""
-    ep = f"tcp/127.0.0.1:{router[1]}"
-    common = ("--world", world, "--connect", ep)
-    probe = connect("tool", "probe")
-    sim_a = procs.start(robofabric_cmd("sim", *BASE0, *common, "--id", "sim-a"), name="sim-a")
-    wait_until(lambda: "sim-a" in _parts(probe, world), timeout=60, what="sim-a serving", seen=lambda: procs.output(sim_a)[-800:])
-    sim_b = procs.start(robofabric_cmd("sim", *BASE1, *common, "--id", "sim-b"), name="sim-b")
-    wait_until(lambda: set(_parts(probe, world)) == {"sim-a", "sim-b"}, timeout=60, what="both sims serving",
-               seen=lambda: procs.output(sim_b)[-800:])
+    common, probe, sim_a, sim_b = _two_shards(world, router, connect, procs)
     sim_b2 = procs.start(robofabric_cmd("sim", *BASE1, *common, "--id", "sim-b2", "--standby"), name="sim-b2")
     wait_until(lambda: "following sim-b" in procs.output(sim_b2), timeout=60, what="sim-b2 following sim-b",
                seen=lambda: procs.output(sim_b2)[-800:])
