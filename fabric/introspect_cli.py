@@ -19,6 +19,7 @@ import zenoh
 
 from fabric import keys
 from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
+from fabric.complete import complete_keys, complete_types
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
     from fabric.introspect import KeyStats
@@ -54,7 +55,7 @@ def observe(fab, expr: str, duration: float) -> list[KeyStats]:
 
 
 def list_keys(
-    keyexpr: Annotated[Optional[str], typer.Argument(help="Key expression, full or world-relative (default: the whole world).")] = None,
+    keyexpr: Annotated[Optional[str], typer.Argument(help="Key expression, full or world-relative (default: the whole world).", autocompletion=complete_keys)] = None,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON document instead of a table.")] = False,
     duration: Annotated[float, typer.Option(help="Seconds to watch (rates are measured over this window).")] = 2.0,
     services: Annotated[bool, typer.Option("--services", help="Services (queryables) with their request and reply types and who serves them.")] = False,
@@ -191,7 +192,7 @@ def key_info(
 
 
 def interfaces(
-    type_name: Annotated[Optional[str], typer.Argument(help="A message type, e.g. JointState (default: list every type).")] = None,
+    type_name: Annotated[Optional[str], typer.Argument(help="A message type, e.g. JointState (default: list every type).", autocompletion=complete_types)] = None,
     as_json: Annotated[bool, typer.Option("--json", help="JSON instead of tables.")] = False,
     schema: Annotated[bool, typer.Option("--schema", help="Print the type's JSON Schema (what Foxglove exports declare).")] = False,
 ) -> None:

@@ -15,6 +15,7 @@ import zenoh
 
 from fabric import keys
 from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
+from fabric.complete import complete_keys, complete_types
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
     from fabric.session import Fabric
@@ -169,7 +170,7 @@ def ps(
 
 
 def echo(
-    key: Annotated[str, typer.Argument(help="Key expression, full (rf/demo/robot/arm1/joints) or world-relative (robot/*/pose).")],
+    key: Annotated[str, typer.Argument(help="Key expression, full (rf/demo/robot/arm1/joints) or world-relative (robot/*/pose).", autocompletion=complete_keys)],
     count: Annotated[Optional[int], typer.Option("--count", "-n", help="Exit after N messages.")] = None,
     duration: Annotated[Optional[float], typer.Option(help="Exit after S seconds.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object per line: {key, message}.")] = False,
@@ -238,7 +239,7 @@ def echo(
 
 
 def hz(
-    key: Annotated[str, typer.Argument(help="Key expression; each matching key is measured separately.")],
+    key: Annotated[str, typer.Argument(help="Key expression; each matching key is measured separately.", autocompletion=complete_keys)],
     duration: Annotated[Optional[float], typer.Option(help="Measure for S seconds, then print the summary and exit.")] = None,
     window: Annotated[int, typer.Option(help="Intervals kept per key for the running statistics.")] = 10_000,
     as_json: Annotated[bool, typer.Option("--json", help="Print the final summary as JSON.")] = False,
@@ -292,8 +293,8 @@ def hz(
 
 
 def pub(
-    key: Annotated[str, typer.Argument(help="Concrete key, full or world-relative (robot/base1/cmd/twist: with --user, that user's key .../by/USER).")],
-    msg_type: Annotated[str, typer.Option("--type", "-t", help="Message type, e.g. Twist, JointTarget, Pose, Stop.")],
+    key: Annotated[str, typer.Argument(help="Concrete key, full or world-relative (robot/base1/cmd/twist: with --user, that user's key .../by/USER).", autocompletion=complete_keys)],
+    msg_type: Annotated[str, typer.Option("--type", "-t", help="Message type, e.g. Twist, JointTarget, Pose, Stop.", autocompletion=complete_types)],
     data: Annotated[str, typer.Option("--data", "-d", help='Fields as JSON, e.g. \'{"v": 0.3, "omega": 0.1}\'.')] = "{}",
     user: Annotated[Optional[str], typer.Option(help="Wrap in a Command from this user (required for cmd/* keys unless the login names the user).")] = None,
     epoch: Annotated[Optional[int], typer.Option(help="Ownership epoch stamped on the Command (default: the user's current one, read from own/ROBOT).")] = None,
@@ -440,8 +441,8 @@ def _message_from_json(msg_type: str, data: str):
 
 
 def call(
-    key: Annotated[str, typer.Argument(help="Service key, full or world-relative: srv/world, srv/ik/arm1, srv/map/map/PEER.")],
-    msg_type: Annotated[Optional[str], typer.Option("--type", "-t", help="Request type, e.g. IKRequest, FKRequest, MapRequest, PlanRequest (none: an empty query).")] = None,
+    key: Annotated[str, typer.Argument(help="Service key, full or world-relative: srv/world, srv/ik/arm1, srv/map/map/PEER.", autocompletion=complete_keys)],
+    msg_type: Annotated[Optional[str], typer.Option("--type", "-t", help="Request type, e.g. IKRequest, FKRequest, MapRequest, PlanRequest (none: an empty query).", autocompletion=complete_types)] = None,
     data: Annotated[str, typer.Option("--data", "-d", help='Request fields as JSON, e.g. \'{"q": [0, 0, 0, 0, 0, 0]}\'.')] = "{}",
     all_replies: Annotated[bool, typer.Option("--all", help="Ask every peer serving the key, not only the nearest.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object per reply: {key, source, message}.")] = False,

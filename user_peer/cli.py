@@ -9,6 +9,7 @@ from typing import Annotated, Optional
 import typer
 
 from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, join_error, make_config
+from fabric.complete import complete_export_formats, matching
 
 RERUN_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://", "http://", "https://")
 
@@ -92,7 +93,7 @@ def export(
     out: Annotated[Path, typer.Option("-o", "--out", help="The file to write: .rrd (Rerun) or .mcap (with --to).")],
     to: Annotated[
         Optional[str],
-        typer.Option("--to", help="rrd (Rerun), foxglove (Foxglove's schemas, JSON for the rest) or ros2 (CDR, ROS 2 types). Default: from -o's suffix."),
+        typer.Option("--to", help="rrd (Rerun), foxglove (Foxglove's schemas, JSON for the rest) or ros2 (CDR, ROS 2 types). Default: from -o's suffix.", autocompletion=complete_export_formats),
     ] = None,
     max_hz: Annotated[float, typer.Option(help="Rerun only: thin 3D and plot updates to this rate per stream (0: all).")] = 0.0,
     scene: Annotated[Optional[str], typer.Option(help="Scene the recording was made in (places the arms, draws the walls), e.g. combined.")] = None,
@@ -213,8 +214,18 @@ def user(
         w.close()
 
 
+def complete_scenarios(incomplete: str) -> list[str]:
+    """Scenario names for shell completion (``robofabric scenario <TAB>``); [] if the scenarios do not load."""
+    try:
+        from user_peer.scenarios import SCENARIOS
+
+        return matching(SCENARIOS, incomplete)
+    except Exception:
+        return []
+
+
 def scenario(
-    name: Annotated[str, typer.Argument(help="test-a (arm follows the IK target) or test-b (map, plan, follow).")],
+    name: Annotated[str, typer.Argument(help="test-a (arm follows the IK target) or test-b (map, plan, follow).", autocompletion=complete_scenarios)],
     user_id: UserOpt = None,
     robot: Annotated[Optional[str], typer.Option(help="Robot to use (default arm1 for test-a, base1 for test-b).")] = None,
     wait: Annotated[float, typer.Option(help="Wait up to S seconds for the world (sim peer) to answer.")] = 30.0,

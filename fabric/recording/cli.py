@@ -17,6 +17,7 @@ import typer
 
 from fabric import keys
 from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
+from fabric.complete import complete_formats, complete_keys
 
 __all__ = ["register", "record", "info", "replay"]
 
@@ -36,7 +37,7 @@ def record(
     output: Annotated[Path, typer.Option("--output", "-o", help="The MCAP file to write (overwritten if it exists).")],
     keyexprs: Annotated[
         Optional[list[str]],
-        typer.Argument(help="Key expressions to record, full or world-relative (default: the whole world, rf/WORLD/**)."),
+        typer.Argument(help="Key expressions to record, full or world-relative (default: the whole world, rf/WORLD/**).", autocompletion=complete_keys),
     ] = None,
     duration: Annotated[Optional[float], typer.Option(help="Stop after S seconds (default: until Ctrl-C / SIGTERM).")] = None,
     liveliness: Annotated[bool, typer.Option("--liveliness", help="Also record peers' liveliness tokens appearing and going.")] = False,
@@ -46,7 +47,7 @@ def record(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress line.")] = False,
     to: Annotated[
         Optional[str],
-        typer.Option("--to", help="Write another format live instead of the fabric's own: foxglove or ros2 (see `robofabric export`)."),
+        typer.Option("--to", help="Write another format live instead of the fabric's own: foxglove or ros2 (see `robofabric export`).", autocompletion=complete_formats),
     ] = None,
     scene: Annotated[Optional[str], typer.Option(help="With --to: the scene being recorded (places the arms, draws the walls).")] = None,
     max_queue_mb: Annotated[float, typer.Option("--max-queue-mb", help="Payload waiting for the disk at most; beyond, samples are dropped and counted.")] = 256.0,
