@@ -29,6 +29,7 @@ __all__ = [
     "make_config",
     "join_error",
     "open_fabric",
+    "console",
 ]
 
 
@@ -64,6 +65,22 @@ ZenohConfig = Annotated[
     Optional[Path],
     typer.Option("--zenoh-config", help="A zenoh json5 config file (TLS, auth, access control...); flags override its endpoints."),
 ]
+
+
+def console(*, stderr: bool = False):
+    """The rich console every table and long line of the CLI goes through: as wide as the terminal
+    (``$COLUMNS`` when set, 80 when the output is not a terminal), folding what does not fit rather than
+    cutting it; no markup, highlighting or emoji, so keys and ids from the network print as they are."""
+    from rich.console import Console
+
+    return Console(stderr=stderr, markup=False, highlight=False, emoji=False)
+
+
+def print_folded(*lines: str, stderr: bool = False) -> None:
+    """Lines wrapped to the terminal's width, a word longer than a line (a key) folded, never cut."""
+    out = console(stderr=stderr)
+    for line in lines:
+        out.print(line, overflow="fold")
 
 
 def make_config(

@@ -18,7 +18,7 @@ import typer
 import zenoh
 
 from fabric import keys
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
+from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, print_folded
 from fabric.complete import complete_keys, complete_types
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
@@ -56,7 +56,10 @@ def observe(fab, expr: str, duration: float) -> list[KeyStats]:
 
 def list_keys(
     keyexpr: Annotated[Optional[str], typer.Argument(help="Key expression, full or world-relative (default: the whole world).", autocompletion=complete_keys)] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="One JSON document instead of a table.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help=(
+        'One JSON document instead of a table: {"world", "keyexpr", "duration_s", "declarations_visible", '
+        '"keys": [{key, type, publishers, subscribers, messages, rate_hz, bytes_per_s, last_bytes, latched}]}; '
+        'with --services: {"world", "keyexpr", "declarations_visible", "services": [{key, kind, request, reply, servers}]}.'))] = False,
     duration: Annotated[float, typer.Option(help="Seconds to watch (rates are measured over this window).")] = 2.0,
     services: Annotated[bool, typer.Option("--services", help="Services (queryables) with their request and reply types and who serves them.")] = False,
     world: World = None,
@@ -105,7 +108,7 @@ def list_keys(
         )
     _print(table)
     if not stats:
-        print(f"nothing published on {expr} in {duration:g} s (world {cfg.world!r}); services: robofabric list --services")
+        print_folded(f"nothing published on {expr} in {duration:g} s (world {cfg.world!r}); services: robofabric list --services")
 
 
 def _intersects(a: str, b: str) -> bool:
@@ -120,16 +123,16 @@ def _table(title: str, columns: tuple[str, ...]):
     from rich.table import Table
 
     table = Table(title=title)
-    for col in columns:
+    for i, col in enumerate(columns):
         numeric = col in ("rate Hz", "msgs", "kB/s")
-        table.add_column(col, justify="right" if numeric else "left", overflow="fold", no_wrap=numeric)
+        # the key column keeps a third of the terminal, so a narrow one folds the other columns first
+        min_width = max(12, console().width // 3) if i == 0 else None
+        table.add_column(col, justify="right" if numeric else "left", overflow="fold", no_wrap=numeric, min_width=min_width)
     return table
 
 
 def _print(table) -> None:
-    from rich.console import Console
-
-    Console().print(table)
+    console().print(table)
 
 
 def key_info(
@@ -170,30 +173,31 @@ def key_info(
         }
         print(json.dumps(doc))
         return
-    print(f"key: {full}")
+    lines = [f"key: {full}"]
     for k, who in servers.items():
         req, rep = service_types(k)
-        print(f"  service {k}: request {req}, reply {rep}; served by {', '.join(who)}")
+        lines.append(f"  service {k}: request {req}, reply {rep}; served by {', '.join(who)}")
     if not stats and not servers:
-        print(f"no message on {full} in {duration:g} s")
+        lines.append(f"no message on {full} in {duration:g} s")
     for s in stats:
-        print(f"  {s.key}: type {', '.join(s.types)}; publishers {', '.join(s.publishers) or '-'}; "
-              f"{s.rate_hz:.1f} Hz, {s.bytes_per_s / 1000:.1f} kB/s, last {s.last_bytes} B, {s.messages} msgs in {duration:g} s"
-              + ("; latched (late joiners get the latest value)" if s.latched else ""))
+        lines.append(f"  {s.key}: type {', '.join(s.types)}; publishers {', '.join(s.publishers) or '-'}; "
+                     f"{s.rate_hz:.1f} Hz, {s.bytes_per_s / 1000:.1f} kB/s, last {s.last_bytes} B, {s.messages} msgs in {duration:g} s"
+                     + ("; latched (late joiners get the latest value)" if s.latched else ""))
     if decl.available and not servers:
-        print(f"subscribers: {', '.join(subscriber_names) or 'none'}")
+        lines.append(f"subscribers: {', '.join(subscriber_names) or 'none'}")
     elif subscribed is not None and not servers:
-        print(f"subscribers: {'yes' if subscribed else 'none'} (zenoh matching status)")
+        lines.append(f"subscribers: {'yes' if subscribed else 'none'} (zenoh matching status)")
     for t in seen_types:
         if t in types:
-            print(f"{t}:")
+            lines.append(f"{t}:")
             for f in fields_of(types[t]):
-                print(f"  {f.name}: {f.type}" + (f"  {f.constraints}" if f.constraints else ""))
+                lines.append(f"  {f.name}: {f.type}" + (f"  {f.constraints}" if f.constraints else ""))
+    print_folded(*lines)  # as wide as the terminal: a long key folds, never runs past the edge
 
 
 def interfaces(
     type_name: Annotated[Optional[str], typer.Argument(help="A message type, e.g. JointState (default: list every type).", autocompletion=complete_types)] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="JSON instead of tables.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"types": [{name, module, fields, doc}]}, or with TYPE {"name", "module", "doc", "fields": [{name, type, constraints, default}]}.')] = False,
     schema: Annotated[bool, typer.Option("--schema", help="Print the type's JSON Schema (what Foxglove exports declare).")] = False,
 ) -> None:
     """Message types and their fields (like ``ros2 interface list`` / ``show``), plugins' types included."""
@@ -207,15 +211,10 @@ def interfaces(
         if as_json:
             print(json.dumps({"types": [{"name": n, "module": m, "fields": k, "doc": d} for n, m, k, d in rows]}))
             return
-        from rich.console import Console
-        from rich.table import Table
-
-        table = Table(title=f"{len(rows)} message types")
-        for col in ("type", "module", "fields", "what"):
-            table.add_column(col, overflow="fold")
+        table = _table(f"{len(rows)} message types", ("type", "module", "fields", "what"))
         for n, m, k, d in rows:
             table.add_row(n, m, str(k), d[:90])
-        Console().print(table)
+        _print(table)
         return
     cls = types.get(type_name)
     if cls is None:

@@ -14,7 +14,7 @@ import typer
 import zenoh
 
 from fabric import keys
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
+from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, print_folded
 from fabric.complete import complete_keys, complete_types
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
@@ -89,7 +89,9 @@ def router(
 def ps(
     peer: Annotated[Optional[str], typer.Argument(help="With -v: only this peer (its id).")] = None,
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="What each peer publishes, subscribes to and serves (like ros2 node info).")] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="One JSON document instead of a table.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help=(
+        'One JSON document instead of a table: {"world", "peers": {KIND: [ID]}, "count", "bad_tokens"}; '
+        'with -v also "declarations_visible" and "info": {ID: {publishes, subscribes, serves}}.'))] = False,
     timeout: Annotated[float, typer.Option(help="Seconds to wait for liveliness replies.")] = 1.0,
     duration: Annotated[float, typer.Option(help="With -v: seconds to watch the world's traffic for what each peer publishes.")] = 1.5,
     world: World = None,
@@ -118,8 +120,7 @@ def ps(
             for s in observe(fab, keys.world_all(fab.world), duration):
                 for src in s.publishers:
                     published.setdefault(src, []).append(s.key)
-    for k in bad:
-        print(f"skipped a token that names no peer: {quoted(k)}", file=sys.stderr)
+    print_folded(*(f"skipped a token that names no peer: {quoted(k)}" for k in bad), stderr=True)
     if peer is not None:
         peers = [(k, i) for k, i in peers if i == peer]
         if not peers:
@@ -144,29 +145,28 @@ def ps(
 
         if decl is not None and not decl.available:
             print("(the router does not show its admin space: subscriptions and services unknown)", file=sys.stderr)
+        lines = []
         for k, i in peers:
             d = detail(i)
-            print(f"{i} ({k})")
-            print("  publishes:" + ("" if d["publishes"] else " -"))
-            for key in d["publishes"]:
-                print(f"    {key}")
-            print("  subscribes:" + ("" if d["subscribes"] else " -"))
-            for key in d["subscribes"]:
-                print(f"    {key}")
-            print("  serves:" + ("" if d["serves"] else " -"))
+            lines.append(f"{i} ({k})")
+            lines.append("  publishes:" + ("" if d["publishes"] else " -"))
+            lines.extend(f"    {key}" for key in d["publishes"])
+            lines.append("  subscribes:" + ("" if d["subscribes"] else " -"))
+            lines.extend(f"    {key}" for key in d["subscribes"])
+            lines.append("  serves:" + ("" if d["serves"] else " -"))
             for key in d["serves"]:
                 req, rep = service_types(key)
-                print(f"    {key}  ({req} -> {rep})")
+                lines.append(f"    {key}  ({req} -> {rep})")
+        print_folded(*lines)  # a key longer than the terminal folds, never runs past its edge
         return
-    from rich.console import Console
     from rich.table import Table
 
     table = Table(title=f"world {fab.world}: {len(peers)} peer(s)")
-    table.add_column("kind")
+    table.add_column("kind", overflow="fold")
     table.add_column("id", overflow="fold")
     for k, i in peers:
         table.add_row(k, i)
-    Console().print(table)
+    console().print(table)
 
 
 def echo(
@@ -242,7 +242,7 @@ def hz(
     key: Annotated[str, typer.Argument(help="Key expression; each matching key is measured separately.", autocompletion=complete_keys)],
     duration: Annotated[Optional[float], typer.Option(help="Measure for S seconds, then print the summary and exit.")] = None,
     window: Annotated[int, typer.Option(help="Intervals kept per key for the running statistics.")] = 10_000,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the final summary as JSON.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help='Print only the final summary, as one JSON document: {"key", "streams": {KEY: {count, rate_hz, jitter_ms, min_ms, max_ms, bytes, bytes_per_s}}}.')] = False,
     world: World = None,
     connect: Connect = None,
     listen: Listen = None,

@@ -7,7 +7,7 @@ from typing import Annotated, Optional, TYPE_CHECKING
 
 import typer
 
-from fabric.cli_common import Connect, Profile, UserError, World, ZenohConfig, make_config, open_fabric
+from fabric.cli_common import Connect, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
     from fabric.session import Fabric
@@ -44,23 +44,40 @@ def _line(rec) -> str:
     return f"{rec.object:16} exclusive  owner {owner:12} epoch {rec.epoch:<5} {rec.state:7} queue {queue}"
 
 
+def record_json(rec) -> dict:
+    """One ownership record as ``own list --json`` writes it (stable field names)."""
+    return {"object": rec.object, "policy": rec.policy, "owner": rec.owner, "epoch": rec.epoch,
+            "queue": list(rec.queue), "state": rec.state, "authority": rec.authority}
+
+
 @own_app.command("list")
 def list_cmd(world: World = None, connect: Connect = None, profile: Profile = None, zenoh_config: ZenohConfig = None,
-             user: User = None, as_json: Annotated[bool, typer.Option("--json", help="One JSON object per record.")] = False) -> None:
-    """Every object's owner, epoch, motion state and queue."""
+             user: User = None,
+             as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"world", "records": [{object, policy, owner, epoch, queue, state, authority}]}.')] = False) -> None:
+    """Every object's owner, epoch, motion state and queue (a table as wide as the terminal; --json for scripts)."""
     fab, cl = _client(world, connect, profile, zenoh_config, user)
     with fab:
-        records = cl.snapshot()  # a copy taken under the client's lock: Zenoh's threads write the replica
-        if not records:
-            raise UserError(f"no ownership authority answered in world {fab.world!r} (is a sim peer running?)")
-        for obj in sorted(records):
-            rec = records[obj]
-            if as_json:
-                print(json.dumps({"object": rec.object, "policy": rec.policy, "owner": rec.owner, "epoch": rec.epoch,
-                                  "queue": list(rec.queue), "state": rec.state, "authority": rec.authority}))
-            else:
-                print(_line(rec))
-        cl.close()
+        try:
+            records = cl.snapshot()  # a copy taken under the client's lock: Zenoh's threads write the replica
+            if not records:
+                raise UserError(f"no ownership authority answered in world {fab.world!r} (is a sim peer running?)")
+        finally:
+            cl.close()
+    rows = [records[obj] for obj in sorted(records)]
+    if as_json:
+        print(json.dumps({"world": fab.world, "records": [record_json(r) for r in rows]}))
+        return
+    from rich.table import Table
+
+    table = Table(title=f"world {fab.world}: {len(rows)} object(s)")
+    for col in ("object", "policy", "owner", "epoch", "state", "queue"):
+        table.add_column(col, overflow="fold", justify="right" if col == "epoch" else "left", min_width=9 if col == "policy" else None)
+    for r in rows:
+        if r.policy == "scene":
+            table.add_row(r.object, "scene", "anyone writes", "-", "-", "-")
+        else:
+            table.add_row(r.object, "exclusive", r.owner or "(free)", str(r.epoch), r.state, ", ".join(r.queue) or "-")
+    console().print(table)
 
 
 def _ask(op: str, obj: str, world, connect, profile, zenoh_config, user, wait: bool = False,

@@ -170,7 +170,10 @@ def _size(n: float) -> str:
 
 def info(
     target: Annotated[str, typer.Argument(help="A recording (FILE.mcap) or a live key (robot/arm1/joints, rf/demo/map/map).")],
-    as_json: Annotated[bool, typer.Option("--json", help="One JSON document instead of tables.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help=(
+        'One JSON document instead of tables. A live key: {"key", "latched", "subscribers", "subscribed_by", "declarations_visible", '
+        '"services": [{key, request, reply, servers}], "keys": [{key, type, publishers, messages, rate_hz, bytes_per_s, last_bytes, latched}], '
+        '"types": {TYPE: [field names]}}; a recording: its summary (path, complete, duration_s, messages, channels, ...).'))] = False,
     duration: Annotated[float, typer.Option(help="Live key: seconds to watch it.")] = 2.0,
     world: World = None,
     connect: Connect = None,
@@ -234,7 +237,7 @@ def _recording_info(file: Path, as_json: bool) -> None:
         con.print("recorded by " + ", ".join(f"{k}={v}" for k, v in sorted(inf.metadata.items()) if v))
     table = Table()
     for col, just in (("key", "left"), ("schema", "left"), ("messages", "right"), ("rate Hz", "right"), ("bytes", "right"), ("avg B", "right")):
-        table.add_column(col, justify=just)
+        table.add_column(col, justify=just, overflow="fold")  # as wide as the terminal: a long key folds
     for c in inf.channels:
         table.add_row(c.key, c.schema, str(c.messages), f"{c.rate_hz:.1f}", _size(c.bytes), f"{c.bytes / c.messages:.0f}")
     con.print(table)

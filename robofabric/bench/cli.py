@@ -63,8 +63,14 @@ def register(app: typer.Typer) -> None:
 
 def list_cmd(
     quick: Annotated[bool, typer.Option("--quick", help="Show the smoke-sized arguments instead of the documented ones.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"benchmarks": [{name, measures, needs, argv}]} (argv: the command line after robofabric).')] = False,
 ) -> None:
     """The registered benchmarks: name, what it measures, and the command line of its figures (or its quick run)."""
+    if as_json:
+        import json
+
+        print(json.dumps({"benchmarks": [{"name": b.name, "measures": b.measures, "needs": b.needs, "argv": b.argv(quick=quick)} for b in BENCHMARKS]}))
+        return
     width = max(len(n) for n in names())
     for b in BENCHMARKS:
         need = f" [needs {b.needs}]" if b.needs else ""

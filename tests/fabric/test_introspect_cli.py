@@ -160,3 +160,57 @@ def test_ps_list_and_info_name_publishers_subscribers_and_services_and_skip_bad_
     assert w.returncode == 0 and "reply WorldInfo; served by sim-x" in w.stdout and "no message" not in w.stdout, w.stdout
     cmd = json.loads(_cli("info", "robot/arm1/cmd/joints/by/alice", "--json", "--duration", "0.5", "--world", world, "--connect", ep).stdout)
     assert cmd["subscribed_by"] == ["sim-x"], cmd
+
+
+LONG = "arm_with_a_name_long_enough_to_need_folding_in_a_narrow_terminal"
+
+
+@pytest.mark.slow
+def test_tables_fit_a_60_column_terminal_and_json_is_one_document(peers_world, world, connect):
+    """list, info, ps and ps -v never print a line wider than $COLUMNS (keys fold, whole); --json stays one document."""
+    import os
+
+    pub = connect("sim", peer_id="sim-long")
+    stop = threading.Event()
+
+    def run() -> None:
+        i = 0
+        while not stop.wait(0.02):
+            pub.publish(keys.robot_joints(world, LONG), JointState(NAMES, np.zeros(2), np.zeros(2), Header.now(seq=i, source="sim-long")))
+            i += 1
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    ep = peers_world
+    env = {**os.environ, "COLUMNS": "60"}
+
+    def narrow(*args: str) -> str:
+        out = subprocess.run(robofabric_cmd(*args, "--world", world, "--connect", ep), capture_output=True, text=True, timeout=90, env=env)
+        assert out.returncode == 0, out.stderr
+        wide = [line for line in (out.stdout + out.stderr).splitlines() if len(line) > 60]
+        assert not wide, wide
+        return out.stdout
+
+    def column(text: str, i: int) -> str:
+        """Column ``i`` of a rich table read downwards: a folded key comes out whole."""
+        return "".join(cells[i + 1].strip() for line in text.splitlines() if len(cells := line.split("│")) > i + 1)
+
+    try:
+        table = narrow("list", "--duration", "1")
+        assert keys.robot_joints(world, LONG) in column(table, 0) and "sim-long" in column(table, 2), table
+        assert LONG in "".join(narrow("info", f"robot/{LONG}/joints", "--duration", "1").split())
+        assert "sim-x" in column(narrow("ps"), 1) and "sim-long" in column(narrow("ps"), 1)
+        assert keys.robot_joints(world, LONG) in "".join(narrow("ps", "-v", "sim-long").split())
+        assert keys.srv(world, "world") in column(narrow("list", "--services"), 0)
+        for args in (("list", "--json", "--duration", "1"), ("ps", "--json"), ("ps", "-v", "--json"), ("info", f"robot/{LONG}/joints", "--json", "--duration", "1")):
+            out = subprocess.run(robofabric_cmd(*args, "--world", world, "--connect", ep), capture_output=True, text=True, timeout=90, env=env)
+            doc = json.loads(out.stdout)  # one document, whatever the width: no folding, no markup
+            assert isinstance(doc, dict) and "\x1b" not in out.stdout, args
+        lst = json.loads(subprocess.run(robofabric_cmd("list", "--json", "--duration", "1", "--world", world, "--connect", ep),
+                                        capture_output=True, text=True, timeout=90).stdout)
+        long_key = next(k for k in lst["keys"] if k["key"] == keys.robot_joints(world, LONG))
+        assert set(long_key) == {"key", "type", "publishers", "subscribers", "messages", "rate_hz", "bytes_per_s", "last_bytes", "latched"}
+        assert long_key["publishers"] == ["sim-long"]
+    finally:
+        stop.set()
+        t.join(timeout=5)

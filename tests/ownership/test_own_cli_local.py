@@ -53,9 +53,18 @@ def client(monkeypatch):
 
 def test_list_prints_every_record_of_one_snapshot(client, capsys):
     cli.list_cmd(as_json=True)
-    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
-    assert [(r["object"], r["owner"], r["epoch"]) for r in rows] == [("arm", "ann", 3), ("ball", "", 0)]
+    doc = json.loads(capsys.readouterr().out)  # one JSON document
+    assert doc["world"] == "w" and set(doc["records"][0]) == {"object", "policy", "owner", "epoch", "queue", "state", "authority"}
+    assert [(r["object"], r["owner"], r["epoch"]) for r in doc["records"]] == [("arm", "ann", 3), ("ball", "", 0)]
     assert client.snapshots == 1 and client.closed
+
+
+def test_list_table_fits_a_narrow_terminal(client, capsys, monkeypatch):
+    monkeypatch.setenv("COLUMNS", "60")
+    cli.list_cmd()
+    out = capsys.readouterr().out
+    assert "ann" in out and "anyone" in out and "exclusive" in out
+    assert max(len(line) for line in out.splitlines()) <= 60, out
 
 
 def test_watch_starts_from_one_snapshot(client, capsys, monkeypatch):

@@ -103,3 +103,13 @@ def test_bench_all_runs_the_quick_forms_and_collects_tables(tmp_path):
     assert "## `robofabric bench sim --seconds 1 --counts 1,5`" in text and "| combined (Meca500" in text
     assert "## `robofabric bench nav --queries 3 --scans 50`" in text and "| hybrid_astar | dubins |" in text
     assert "FAILED (exit 2)" in text and "--rates" in text
+
+
+def test_bench_list_json_is_one_document_naming_every_benchmark():
+    import json
+
+    out = CliRunner().invoke(build_app(), ["list", "--json", "--quick"])
+    assert out.exit_code == 0, out.output
+    doc = json.loads(out.output)
+    assert [b["name"] for b in doc["benchmarks"]] == list(names())
+    assert all(b["argv"] == get(b["name"]).argv(quick=True) and set(b) == {"name", "measures", "needs", "argv"} for b in doc["benchmarks"])
