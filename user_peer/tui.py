@@ -18,6 +18,7 @@ import numpy as np
 from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
+from textual.content import Content
 from textual.css.query import NoMatches
 from textual.widgets import Button, Footer, Header, Label, Sparkline, Static
 
@@ -36,6 +37,13 @@ def _age_ms(robot, stream: str) -> float | None:
     header clock may be seconds off ours on another machine."""
     age = robot.age(stream)
     return None if age is None else age * 1e3
+
+
+def plain(text: str) -> Content:
+    """Text for a label, never parsed as markup, its control characters escaped: names, reasons and events
+    come from the network (an owner called ``[/x]`` raised MarkupError in the refresh timer and ended the
+    app; one with an escape sequence could drive the terminal)."""
+    return Content("".join(ch if ch.isprintable() else ascii(ch)[1:-1] for ch in text))
 
 
 def event_line(ev, trusted: bool) -> str:
@@ -89,7 +97,7 @@ class UserApp(App):
         if self.arm is not None:
             e = self.arm.entry
             with Vertical(classes="panel", id="arm-panel"):
-                yield Label(f"arm {self.arm.id} ({self.arm.type})", id="arm-title")
+                yield Label(plain(f"arm {self.arm.id} ({self.arm.type})"), id="arm-title")
                 yield Label("", id="arm-owner", classes="owner")
                 for i, name in enumerate(e.joint_names):
                     lo = e.lower[i] if i < len(e.lower) else -math.pi
@@ -102,7 +110,7 @@ class UserApp(App):
                     yield Button("Reset", id="arm-reset", variant="warning")
         if self.base is not None:
             with Vertical(classes="panel", id="base-panel"):
-                yield Label(f"base {self.base.id} ({self.base.type}): arrows drive, 1-3 speed, space stops", id="base-title")
+                yield Label(plain(f"base {self.base.id} ({self.base.type}): arrows drive, 1-3 speed, space stops"), id="base-title")
                 yield Label("", id="base-owner", classes="owner")
                 yield Label("", id="base-state")
                 yield Sparkline([0.0], id="scan")
@@ -228,7 +236,7 @@ class UserApp(App):
             status.append(gone)
         if self.arm is not None:
             mine = self.arm.can_command
-            self.query_one("#arm-owner", Label).update(self._owner_text(self.arm))
+            self.query_one("#arm-owner", Label).update(plain(self._owner_text(self.arm)))
             js = self.arm.joint_state
             for i, s in enumerate(self.query(JointSlider)):
                 s.disabled = not mine
@@ -248,7 +256,7 @@ class UserApp(App):
             status.append(f"arm joints age {lat:.0f} ms" if lat is not None else "arm: no joints yet")
         if self.base is not None:
             mine = self.base.can_command
-            self.query_one("#base-owner", Label).update(self._owner_text(self.base))
+            self.query_one("#base-owner", Label).update(plain(self._owner_text(self.base)))
             for bid in ("#base-stop", "#base-release"):
                 self.query_one(bid, Button).disabled = not mine
             self.query_one("#base-request", Button).disabled = mine
@@ -258,7 +266,7 @@ class UserApp(App):
             if pose is not None:
                 state += f" · v {math.hypot(pose.linear[0], pose.linear[1]):.2f} m/s · w {pose.angular[2]:+.2f} rad/s"
             state += f" · command v {self.v:+.2f} w {self.omega:+.2f} · speed {self.speed_level}"
-            self.query_one("#base-state", Label).update(state)
+            self.query_one("#base-state", Label).update(plain(state))
             scan = self.base.scan
             if scan is not None:
                 self.query_one("#scan", Sparkline).data = [float(r) for r in scan.ranges[::-1]]
@@ -270,4 +278,4 @@ class UserApp(App):
             status.append(event_line(*recent[-1]))
         if self.message:
             status.append(self.message)
-        self.query_one("#status", Static).update(" · ".join(status))
+        self.query_one("#status", Static).update(plain(" · ".join(status)))

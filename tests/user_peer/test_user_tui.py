@@ -119,3 +119,33 @@ def test_an_event_its_authority_did_not_send_is_marked_display_only():
     ev = Event(kind="reject", object="arm1", user="alice", reason="arm1 is owned by mallory, not alice")
     assert event_line(ev, True) == "event reject arm1 [alice]: arm1 is owned by mallory, not alice"
     assert event_line(ev, False).endswith("(unverified, display only)")
+
+
+def test_names_and_events_from_the_network_are_shown_as_text_and_garbage_is_skipped(setup, world, connect):
+    """Issue 24: an owner named like markup, an event whose reason is markup with an escape sequence, garbage on an
+    ownership key and a token that names no peer: the UI shows the text as it is, skips the garbage, keeps running."""
+    asyncio.run(_hostile(*setup, world, connect))
+
+
+async def _hostile(auth, alice, arm, base, cmds, world, connect):
+    from fabric.interfaces import Event
+
+    mallory = connect("tool", "mallory")
+    app = UserApp(alice, arm=arm, base=base)
+    async with app.run_test(size=(160, 40)) as pilot:
+        await until(pilot, lambda: len(app.query("#arm-owner")) == 1, "the UI mounted")
+        token = mallory.session.liveliness().declare_token(f"rf/{world}/peer/sim/with space")
+        mallory.session.put(keys.own(world, "arm1"), b"\x00not msgpack")
+        mallory.session.put(keys.own(world, "base1"), b"\x93\xa1x")
+        auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="[/x]", epoch=2, queue=("[bold]q",), authority="sim-test"))
+        await until(pilot, lambda: "[/x]" in str(app.query_one("#arm-owner").render()), "the markup-like owner shown as text")
+        assert "[bold]q" in str(app.query_one("#arm-owner").render())
+        await until(pilot, lambda: alice.fabric.counters["decode_errors"] >= 2, "the garbage counted and skipped")
+        # alice's own report of the garbage reaches the status line first, then mallory's event replaces it
+        await until(pilot, lambda: "decode_error" in str(app.query_one("#status").render()), "alice's decode report shown")
+        mallory.publish(keys.event_decode(world, "mallory"), Event(kind="decode_error", reason="[/oops] \x1b[2J gone", header=Header.now()))
+        await until(pilot, lambda: "[/oops]" in str(app.query_one("#status").render()), "the event shown as text")
+        status = str(app.query_one("#status").render())
+        assert "\x1b" not in status and "\\x1b[2J" in status and "unverified" in status
+        assert app.is_running
+        token.undeclare()
