@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from typing import Annotated, Optional, TYPE_CHECKING
 
 import typer
@@ -36,12 +37,18 @@ def _client(world, connect, profile, zenoh_config, user) -> tuple[Fabric, Owners
     return fab, OwnershipClient(fab, fab.peer_id).start()
 
 
+def _shown(text: str) -> str:
+    """A name from the network as printed: control characters escaped, so none reaches the terminal."""
+    return "".join(ch if ch.isprintable() else ascii(ch)[1:-1] for ch in text)
+
+
 def _line(rec) -> str:
+    obj = _shown(rec.object)
     if rec.policy == "scene":
-        return f"{rec.object:16} scene      anyone writes"
-    owner = rec.owner or "(free)"
-    queue = ", ".join(rec.queue) or "-"
-    return f"{rec.object:16} exclusive  owner {owner:12} epoch {rec.epoch:<5} {rec.state:7} queue {queue}"
+        return f"{obj:16} scene      anyone writes"
+    owner = _shown(rec.owner) or "(free)"
+    queue = ", ".join(_shown(u) for u in rec.queue) or "-"
+    return f"{obj:16} exclusive  owner {owner:12} epoch {rec.epoch:<5} {rec.state:7} queue {queue}"
 
 
 def record_json(rec) -> dict:
@@ -74,9 +81,10 @@ def list_cmd(world: World = None, connect: Connect = None, profile: Profile = No
         table.add_column(col, overflow="fold", justify="right" if col == "epoch" else "left", min_width=9 if col == "policy" else None)
     for r in rows:
         if r.policy == "scene":
-            table.add_row(r.object, "scene", "anyone writes", "-", "-", "-")
+            table.add_row(_shown(r.object), "scene", "anyone writes", "-", "-", "-")
         else:
-            table.add_row(r.object, "exclusive", r.owner or "(free)", str(r.epoch), r.state, ", ".join(r.queue) or "-")
+            table.add_row(_shown(r.object), "exclusive", _shown(r.owner) or "(free)", str(r.epoch), r.state,
+                          ", ".join(_shown(u) for u in r.queue) or "-")
     console().print(table)
 
 
@@ -141,9 +149,15 @@ def release_cmd(obj: Annotated[str, typer.Argument(help="Object id.")], world: W
 
 @own_app.command("watch")
 def watch_cmd(world: World = None, connect: Connect = None, profile: Profile = None, zenoh_config: ZenohConfig = None,
-              user: User = None) -> None:
-    """Print every ownership change until Ctrl-C."""
+              user: User = None,
+              duration: Annotated[Optional[float], typer.Option("--duration", help="Stop after S seconds (default: until Ctrl-C).")] = None) -> None:
+    """Print every ownership change until Ctrl-C.
+
+    What cannot be believed is skipped and counted, never printed: payloads that do not decode, and records
+    from no live authority (a made-up sim, a stale term); the counts go to stderr at the end."""
     from fabric.session import shutdown_event
+    if duration is not None and not duration > 0:
+        raise UserError("--duration must be positive")
     stop = shutdown_event()
     fab, cl = _client(world, connect, profile, zenoh_config, user)
     with fab:
@@ -151,8 +165,26 @@ def watch_cmd(world: World = None, connect: Connect = None, profile: Profile = N
         for obj in sorted(records):
             print(_line(records[obj]), flush=True)
         cl.on_change(lambda rec: print(_line(rec), flush=True))
-        stop.wait()
+        stop.wait(duration)
         cl.close()
+        skipped = _skipped(fab, cl)
+    if skipped:
+        print(f"skipped {skipped}", file=sys.stderr, flush=True)
+
+
+def _skipped(fab, cl) -> str:
+    """'2 undecodable payload(s), 1 record(s) from no live authority' ("" when nothing was skipped)."""
+    def count(counters, name: str) -> int:
+        try:
+            return int(counters.get(name, 0))
+        except Exception:
+            return 0
+
+    counters = getattr(cl, "counters", {})
+    undecodable = count(getattr(fab, "counters", {}), "decode_errors")
+    refused = sum(count(counters, f"records_{why}") for why in ("foreign", "stale", "implausible"))
+    parts = [f"{undecodable} undecodable payload(s)"] * bool(undecodable) + [f"{refused} record(s) from no live authority"] * bool(refused)
+    return ", ".join(parts)
 
 
 def register(app: typer.Typer) -> None:

@@ -77,3 +77,29 @@ def test_own_request_hold_renews_until_interrupted_then_releases(world, router, 
                 p.wait()
         ann.close()
         auth.close()
+
+
+def test_own_watch_skips_and_counts_garbage_bad_tokens_and_foreign_records(world, router, connect, procs):
+    """Issue 24: what any login may put on ownership keys or the liveliness space never crashes `own watch`."""
+    from fabric import keys
+    from fabric.interfaces import OwnershipRecord
+    from fabric.testing import wait_until
+
+    port = router[1]
+    auth = Authority(connect("sim", "host"), {"arm": "exclusive"}, lease_s=5.0).start()
+    try:
+        watch = procs.start(robofabric_cmd("own", "watch", "--duration", "3", "--user", "wat", "--world", world,
+                                           "--connect", f"tcp/127.0.0.1:{port}"), name="watch")
+        wait_until(lambda: "arm" in procs.output(watch), timeout=30, what="watch's first snapshot", seen=lambda: procs.output(watch))
+        mallory = connect("tool", "mallory")
+        token = mallory.session.liveliness().declare_token(f"rf/{world}/peer/sim/with space")
+        mallory.session.put(keys.own(world, "arm"), b"\x00not msgpack")
+        mallory.publish(keys.own(world, "arm"), OwnershipRecord("arm", owner="zed", epoch=9, authority="ghost-sim"))
+        watch.wait(timeout=30)
+        out = procs.output(watch)
+        assert watch.returncode == 0, out
+        assert "Traceback" not in out and "zed" not in out, out
+        assert "skipped 1 undecodable payload(s), 1 record(s) from no live authority" in out, out
+        token.undeclare()
+    finally:
+        auth.close()
