@@ -60,7 +60,7 @@ def test_two_sims_serve_one_world_and_one_sims_loss_takes_its_robots_only(world,
     # `robofabric own list`: every record at its own sim; the scene objects' at the first sim
     r = subprocess.run(robofabric_cmd("own", "list", "--json", *common), capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr[-800:]
-    auth = {(rec := json.loads(ln))["object"]: rec["authority"] for ln in r.stdout.splitlines() if ln.strip()}
+    auth = {rec["object"]: rec["authority"] for rec in json.loads(r.stdout)["records"]}  # one JSON document
     assert auth["base0"] == "sim-a" and auth["base1"] == "sim-b", auth
     assert {a for o, a in auth.items() if o not in ("base0", "base1")} == {"sim-a"}, auth
 
