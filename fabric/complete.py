@@ -18,7 +18,7 @@ import threading
 import time
 from typing import Any, Iterable
 
-__all__ = ["live_keys", "complete_keys", "complete_types", "complete_formats", "complete_export_formats", "matching"]
+__all__ = ["live_keys", "complete_keys", "complete_keys_or_recordings", "complete_types", "complete_formats", "complete_export_formats", "matching"]
 
 CONNECT_TIMEOUT_MS = 600
 """How long completion waits for a router before it offers nothing."""
@@ -118,6 +118,22 @@ def complete_keys(ctx: Any, incomplete: str) -> list[str]:
 
         root = world_root(make_config(_param(ctx, "world")).world) + "/"
         return matching((k[len(root):] for k in full if k.startswith(root)), incomplete.lstrip("/"))
+    except Exception:
+        return []
+
+
+def complete_keys_or_recordings(ctx: Any, incomplete: str) -> list[str]:
+    """``info TARGET``: recordings (``*.mcap``) and folders here, then the live world's keys; what looks like a
+    path (``./``, ``/``, ``~``, a dot) is completed as a path only."""
+    try:
+        import glob
+        import os
+
+        paths = [p + "/" if os.path.isdir(p) else p for p in glob.glob(os.path.expanduser(incomplete) + "*")]
+        paths = [p for p in paths if p.endswith("/") or p.endswith(".mcap")]
+        if incomplete.startswith(("/", ".", "~")) or "." in incomplete:
+            return sorted(paths)
+        return sorted(paths) + [k for k in complete_keys(ctx, incomplete) if k not in paths]
     except Exception:
         return []
 

@@ -278,8 +278,7 @@ def hz(
             if not as_json:
                 with lock:
                     snap = {k: s.summary() for k, s in stats.items()}
-                for k, s in sorted(snap.items()):
-                    print(_hz_line(k, s), flush=True)
+                print_folded(*(_hz_line(k, s) for k, s in sorted(snap.items())))  # as wide as the terminal
                 if not snap:
                     print(f"no messages on {full} yet", flush=True)
     with lock:
@@ -288,8 +287,7 @@ def hz(
         print(json.dumps({"key": full, "streams": final}))
     else:
         print("summary:" if final else f"no messages on {full}")
-        for k, s in final.items():
-            print(_hz_line(k, s))
+        print_folded(*(_hz_line(k, s) for k, s in final.items()))
 
 
 def pub(

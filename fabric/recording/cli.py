@@ -17,7 +17,7 @@ import typer
 
 from fabric import keys
 from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
-from fabric.complete import complete_formats, complete_keys
+from fabric.complete import complete_formats, complete_keys, complete_keys_or_recordings
 
 __all__ = ["register", "record", "info", "replay"]
 
@@ -169,7 +169,7 @@ def _size(n: float) -> str:
 
 
 def info(
-    target: Annotated[str, typer.Argument(help="A recording (FILE.mcap) or a live key (robot/arm1/joints, rf/demo/map/map).")],
+    target: Annotated[str, typer.Argument(help="A recording (FILE.mcap) or a live key (robot/arm1/joints, rf/demo/map/map).", autocompletion=complete_keys_or_recordings)],
     as_json: Annotated[bool, typer.Option("--json", help=(
         'One JSON document instead of tables. A live key: {"key", "latched", "subscribers", "subscribed_by", "declarations_visible", '
         '"services": [{key, request, reply, servers}], "keys": [{key, type, publishers, messages, rate_hz, bytes_per_s, last_bytes, latched}], '

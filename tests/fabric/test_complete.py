@@ -93,3 +93,15 @@ def test_bash_completion_through_typer(words, expected):
     out = subprocess.run(robofabric_cmd(), capture_output=True, text=True, timeout=60, env=env)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == expected, out.stdout
+
+
+def test_info_completes_recordings_and_folders_here_and_nothing_else_for_a_path(tmp_path, monkeypatch):
+    from fabric.complete import complete_keys_or_recordings
+
+    (tmp_path / "run1.mcap").write_bytes(b"")
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "run.txt").write_text("")
+    monkeypatch.chdir(tmp_path)
+    no_router = _Ctx({"world": "w", "connect": [f"tcp/127.0.0.1:{free_port()}"]})
+    assert complete_keys_or_recordings(no_router, "ru") == ["run1.mcap", "runs/"]
+    assert complete_keys_or_recordings(no_router, "./ru") == ["./run1.mcap", "./runs/"]
