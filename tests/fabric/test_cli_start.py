@@ -51,3 +51,16 @@ def test_deferred_classes_are_the_real_ones_on_first_use():
         "print('ok')\n"
     )
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
+
+
+def test_robofabric_help_loads_no_markdown_pygments_numpy_or_peer():
+    """What `robofabric --help` must not import (its CPU budget is 0.3 s: docs/benchmarks.md)."""
+    out = _py(
+        "import sys\n"
+        "from robofabric.cli import main\n"
+        "code = main(['--help'])\n"
+        "heavy = sorted(m for m in ('markdown_it', 'pygments', 'numpy', 'mujoco', 'rerun', 'textual', 'fabric.session', 'user_peer.api')"
+        " if m in sys.modules)\n"
+        "print('HEAVY', code, heavy, file=sys.stderr)\n"
+    )
+    assert "HEAVY 0 []" in out.stderr, out.stderr[-2000:]
