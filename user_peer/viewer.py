@@ -78,8 +78,11 @@ def web_urls(host: str, web_port: int, grpc_port: int) -> tuple[str, str]:
     return f"http://{h}:{web_port}/?url={quote(grpc, safe='')}", grpc
 
 
-def make_recording(opts: ViewerOptions, *, recording_id: str | None = None) -> rr.RecordingStream:
-    """A recording stream with the requested sinks and the default blueprint."""
+def make_recording(opts: ViewerOptions, *, recording_id: str | None = None, grpc_server_port: int | None = None) -> rr.RecordingStream:
+    """A recording stream with the requested sinks and the default blueprint.
+
+    ``grpc_server_port``: with ``serve_web``, Rerun's gRPC server listens there on loopback only, behind
+    the per-page relay (user_peer/web_relay.py) on ``grpc_port``; None: on ``grpc_port``, every interface."""
     rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
     sinks: list[Any] = []
     if opts.save is not None:
@@ -94,7 +97,8 @@ def make_recording(opts: ViewerOptions, *, recording_id: str | None = None) -> r
         # All interfaces, and the web page's origin on any host name allowed to stream (Rerun's default
         # CORS list holds only localhost and rerun.io, so a page from http://HOST:WEB_PORT would be refused).
         server = rr.GrpcServerSink(
-            bind_ip="0.0.0.0", port=opts.grpc_port,
+            bind_ip="0.0.0.0" if grpc_server_port is None else "127.0.0.1",
+            port=opts.grpc_port if grpc_server_port is None else grpc_server_port,
             cors_allow_origin=[f"http://*:{opts.web_port}", f"https://*:{opts.web_port}"],
         )
         sinks.append(server)
@@ -132,16 +136,26 @@ class Viewer:
     def __init__(self, config: FabricConfig, opts: ViewerOptions, *, peer_id: str | None = None, queue_size: int = 5000) -> None:
         self.opts = opts
         self.fab = Fabric(config, kind="viewer", peer_id=peer_id)
-        self.rec = make_recording(opts)
         self.page = None
-        if opts.serve_web:  # the page, from this machine alone (user_peer/web_page.py)
+        self.relay = None
+        if opts.serve_web:
+            # the pages stream through the relay, one queue per page (user_peer/web_relay.py), from Rerun's
+            # gRPC server on a loopback port; the page itself comes from this machine alone (user_peer/web_page.py)
             from user_peer import web_page
+            from user_peer.web_relay import Relay
 
             try:
+                inner = web_page.free_loopback_port()
+                self.relay = Relay(("127.0.0.1", inner), opts.grpc_port)
+                self.rec = make_recording(opts, grpc_server_port=inner)
                 self.page = web_page.serve(opts.web_port, opts.grpc_port)
             except Exception:
+                if self.relay is not None:
+                    self.relay.close()
                 self.fab.close()
                 raise
+        else:
+            self.rec = make_recording(opts)
         # one queue per key: dropping happens per stream, so a busy stream never pushes out another's samples
         self.queue_size = queue_size
         self._streams: dict[str, deque[tuple[Any, int]]] = {}
@@ -309,6 +323,8 @@ class Viewer:
         self.rec.disconnect()
         if self.page is not None:
             self.page.close()
+        if self.relay is not None:
+            self.relay.close()
 
     def __enter__(self) -> "Viewer":
         return self

@@ -13,8 +13,8 @@ has no switch for any of them, so this module serves the same files itself, chan
 * ``/`` without a ``?url=`` redirects to the live world's data on the host the browser used, so the
   plain ``http://HOST:PORT/`` a student types shows the world, not Rerun's welcome page.
 
-The files come from Rerun's own web server, run once for a moment in a child process on a loopback port
-(the wheel keeps them inside its native module); they are kept in memory for the viewer's lifetime.
+The files come from Rerun's own web server, run once for a moment in a child process bound to a loopback
+port (the wheel keeps them inside its native modules); they are kept in memory for the viewer's lifetime.
 """
 
 from __future__ import annotations
@@ -30,11 +30,12 @@ import time
 import urllib.error
 import urllib.request
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
 from urllib.parse import parse_qs, quote, urlsplit
 
 log = logging.getLogger("robofabric.viewer")
 
-__all__ = ["NONET", "REMOTE_URLS", "PageServer", "fetch_assets", "patch_index", "patch_wasm", "serve"]
+__all__ = ["NONET", "REMOTE_URLS", "PageServer", "fetch_assets", "free_loopback_port", "patch_index", "patch_wasm", "serve"]
 
 NONET = "/_nonet/"  # 8 characters, as "https://": a remote URL becomes a local path of the same length
 REMOTE_URLS = (
@@ -58,17 +59,32 @@ _assets: dict[str, bytes] | None = None
 _assets_lock = threading.Lock()
 
 
-def _free_loopback_port() -> int:
+def free_loopback_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
 
 
+def _server_argv(port: int) -> list[str]:
+    """Rerun's web server on ``127.0.0.1:port`` alone: the ``rerun`` binary of the wheel (``rerun_cli``) with
+    ``--bind 127.0.0.1``, given a data URL so that it starts no gRPC server; without that binary, the SDK's
+    ``rr.serve_web_viewer``, which has no bind option and listens on every interface for that moment."""
+    try:
+        import rerun_cli
+
+        exe = Path(rerun_cli.__file__).with_name("rerun")
+    except ImportError:
+        exe = None
+    if exe is not None and exe.is_file():
+        return [str(exe), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(port), "rerun+http://127.0.0.1:1/proxy"]
+    code = "import sys, time, rerun as rr; rr.serve_web_viewer(web_port=int(sys.argv[1]), open_browser=False); time.sleep(3600)"
+    return [sys.executable, "-c", code, str(port)]
+
+
 def fetch_assets(timeout: float = 60.0) -> dict[str, bytes]:
     """The web viewer's files (Rerun's names) from Rerun's own server, run for a moment in a child process."""
-    port = _free_loopback_port()
-    code = "import sys, time, rerun as rr; rr.serve_web_viewer(web_port=int(sys.argv[1]), open_browser=False); time.sleep(3600)"
-    child = subprocess.Popen([sys.executable, "-c", code, str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    port = free_loopback_port()
+    child = subprocess.Popen(_server_argv(port), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     out: dict[str, bytes] = {}
     try:
         deadline = time.monotonic() + timeout
@@ -99,6 +115,9 @@ def patch_index(html: bytes) -> bytes:
     text = html.decode("utf-8")
     text = re.sub(r"<link\b[^>]*?fonts\.(?:googleapis|gstatic)\.com[^>]*?>\s*", "", text, flags=re.S)
     text = text.replace("https://fifteen-thirtyeight.rerun.io/script.js", f"{NONET}script.js")
+    # the viewer's handle where a test or a benchmark reads the page's own state (its time cursor: how live it is)
+    text = text.replace("let handle = new wasm_bindgen.WebHandle(options);",
+                        "let handle = new wasm_bindgen.WebHandle(options); window.rerun_handle = handle;")
     return text.encode("utf-8")
 
 

@@ -1,0 +1,163 @@
+"""Browsers on one ``robofabric view --serve-web``: how far behind live each page is, measured from the page.
+
+The page's own measure: its viewer's time cursor on the ``wall_time`` timeline (the page follows live, so
+the cursor is the newest data the page has taken in) against the page's ``Date.now()``, both read in one
+``page.evaluate`` from ``window.rerun_handle.viewer_state()`` (the page user_peer/web_page.py serves
+exposes its handle; the state is Rerun's encoded ``GetStateResponse``, read here without its schema: the
+time cursor is the one integer field that holds nanoseconds since 1970 within an hour of now). The viewer
+and the browsers run on one machine, so one clock.
+
+Pages are opened in Debian's headless ``chromium`` (software WebGL) through ``playwright``; ``stalled``
+further pages have their JavaScript paused (CDP ``Debugger.pause``) once they show the world: they stop
+taking data, as a student's laptop that went to sleep.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from typing import Any
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = [
+    "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox", "--headless",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
+    "--disable-background-timer-throttling", "--disable-renderer-backgrounding", "--disable-backgrounding-occluded-windows",
+]
+STATE_JS = "() => { const h = window.rerun_handle; if (!h) return [Date.now(), null]; " \
+           "try { return [Date.now(), Array.from(h.viewer_state())]; } catch (e) { return [Date.now(), null]; } }"
+
+__all__ = ["CHROMIUM", "CHROMIUM_ARGS", "page_lag", "varints_ns", "open_pages", "measure"]
+
+
+def _fields(buf: bytes, depth: int = 0):
+    """Every varint and fixed64 in a protobuf message, nested messages included (best effort, no schema)."""
+    i, n = 0, len(buf)
+    while i < n:
+        key, i = _varint(buf, i)
+        if key is None:
+            return
+        wt = key & 7
+        if wt == 0:
+            v, i = _varint(buf, i)
+            if v is None:
+                return
+            yield v
+        elif wt == 1:
+            if i + 8 > n:
+                return
+            yield int.from_bytes(buf[i:i + 8], "little", signed=True)
+            i += 8
+        elif wt == 2:
+            ln, i = _varint(buf, i)
+            if ln is None or i + ln > n:
+                return
+            if depth < 8:
+                yield from _fields(buf[i:i + ln], depth + 1)
+            i += ln
+        elif wt == 5:
+            i += 4
+        else:
+            return
+
+
+def _varint(buf: bytes, i: int) -> tuple[int | None, int]:
+    shift = v = 0
+    while i < len(buf):
+        b = buf[i]
+        i += 1
+        v |= (b & 0x7F) << shift
+        if not b & 0x80:
+            return v, i
+        shift += 7
+        if shift > 63:
+            return None, i
+    return None, i
+
+
+def varints_ns(state: bytes, now_ms: float) -> list[int]:
+    """The integers of ``state`` that read as nanoseconds since 1970 within an hour of ``now_ms``."""
+    lo, hi = int((now_ms - 3.6e6) * 1e6), int((now_ms + 3.6e6) * 1e6)
+    return [v for v in _fields(state) if lo <= v <= hi]
+
+
+def page_lag(page: Any) -> float | None:
+    """How far (s) the page's view is behind the page's clock: None before it shows data of the live world."""
+    now_ms, state = page.evaluate(STATE_JS)
+    if not state:
+        return None
+    times = varints_ns(bytes(state), now_ms)
+    if not times:
+        return None
+    return now_ms / 1e3 - max(times) / 1e9
+
+
+def page_fps(page: Any, seconds: float = 3.0) -> float:
+    """The page's animation frames per second over ``seconds`` (the pace its viewer draws, and takes in data, at)."""
+    return page.evaluate("""(ms) => new Promise(done => { let n = 0; const t0 = performance.now();
+        function tick(t) { n++; if (t - t0 < ms) requestAnimationFrame(tick); else done(n * 1000 / (t - t0)); }
+        requestAnimationFrame(tick); })""", seconds * 1000)
+
+
+def open_pages(browser: Any, url: str, n: int, viewport: dict[str, int]) -> list[Any]:
+    pages = []
+    for _ in range(n):
+        ctx = browser.new_context(viewport=viewport)
+        page = ctx.new_page()
+        page.goto(url, timeout=120_000)
+        pages.append(page)
+    return pages
+
+
+def measure(url: str, pages: int, stalled: int = 0, seconds: float = 60.0, viewport: dict[str, int] | None = None,
+            warmup_s: float = 180.0, every_s: float = 2.0, log: Any = print) -> dict[str, Any]:
+    """Open ``pages`` + ``stalled`` pages on ``url``; once every page shows the live world, pause the
+    ``stalled`` ones and sample every live page's lag for ``seconds``. Returns per page lists of lags (s)."""
+    from playwright.sync_api import sync_playwright
+
+    viewport = viewport or {"width": 1280, "height": 800}
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+        try:
+            all_pages = open_pages(browser, url, pages + stalled, viewport)
+            deadline = time.monotonic() + warmup_s
+            while True:
+                lags = [page_lag(pg) for pg in all_pages]
+                if all(lag is not None for lag in lags) or time.monotonic() > deadline:
+                    break
+                all_pages[0].wait_for_timeout(1000)
+            ready = time.monotonic() - (deadline - warmup_s)
+            log(f"pages showing the world after {ready:.0f} s: {sum(lag is not None for lag in lags)}/{len(lags)}; lags {lags}")
+            frozen = all_pages[pages:]
+            for pg in frozen:
+                cdp = pg.context.new_cdp_session(pg)
+                cdp.send("Debugger.enable")
+                cdp.send("Debugger.pause")
+            live = all_pages[:pages]
+            series: list[list[float | None]] = [[] for _ in live]
+            t_end = time.monotonic() + seconds
+            while time.monotonic() < t_end:
+                t0 = time.monotonic()
+                for i, pg in enumerate(live):
+                    series[i].append(page_lag(pg))
+                log(" ".join("-" if s[-1] is None else f"{s[-1]:.2f}" for s in series))
+                left = every_s - (time.monotonic() - t0)
+                if left > 0:
+                    live[0].wait_for_timeout(left * 1000)
+            fps = [page_fps(pg) for pg in live]
+            log(f"frames per second per live page: {[round(f, 1) for f in fps]}")
+            return {"pages": pages, "stalled": stalled, "seconds": seconds, "ready_s": ready, "lags": series, "fps": fps}
+        finally:
+            browser.close()
+
+
+def summary(result: dict[str, Any]) -> dict[str, float]:
+    vals = [v for s in result["lags"] for v in s if v is not None]
+    missing = sum(v is None for s in result["lags"] for v in s)
+    worst_last = max((s[-1] for s in result["lags"] if s and s[-1] is not None), default=float("nan"))
+    vals.sort()
+    p = (lambda q: vals[min(len(vals) - 1, int(q * len(vals)))] if vals else float("nan"))
+    return {"p50": p(0.5), "p90": p(0.9), "max": vals[-1] if vals else float("nan"), "last_worst": worst_last, "missing": missing}
+
+
+_URL = re.compile(r"web viewer: open (http://\S+)")
