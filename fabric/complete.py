@@ -18,7 +18,7 @@ import threading
 import time
 from typing import Any, Iterable
 
-__all__ = ["live_keys", "complete_keys", "complete_keys_or_recordings", "complete_types", "complete_formats", "complete_export_formats", "matching"]
+__all__ = ["live_keys", "complete_keys", "complete_keys_or_recordings", "complete_peers", "complete_types", "complete_formats", "complete_export_formats", "matching"]
 
 CONNECT_TIMEOUT_MS = 600
 """How long completion waits for a router before it offers nothing."""
@@ -118,6 +118,20 @@ def complete_keys(ctx: Any, incomplete: str) -> list[str]:
 
         root = world_root(make_config(_param(ctx, "world")).world) + "/"
         return matching((k[len(root):] for k in full if k.startswith(root)), incomplete.lstrip("/"))
+    except Exception:
+        return []
+
+
+def complete_peers(ctx: Any, incomplete: str) -> list[str]:
+    """``ps -v PEER``: the ids of the live world's peers (from their liveliness tokens ``peer/KIND/ID``)."""
+    try:
+        from fabric.cli_common import make_config
+        from fabric.keys import world_root
+
+        prefix = world_root(make_config(_param(ctx, "world")).world) + "/peer/"
+        full = live_keys(_param(ctx, "world"), _param(ctx, "connect"), _param(ctx, "profile"), _param(ctx, "zenoh_config"), look_s=0.0)
+        ids = [k[len(prefix):].split("/", 1)[1] for k in full if k.startswith(prefix) and k[len(prefix):].count("/") == 1]
+        return matching(ids, incomplete)
     except Exception:
         return []
 

@@ -15,7 +15,7 @@ import zenoh
 
 from fabric import keys
 from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, print_folded
-from fabric.complete import complete_keys, complete_types
+from fabric.complete import complete_keys, complete_peers, complete_types
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
     from fabric.session import Fabric
@@ -87,7 +87,7 @@ def router(
 
 
 def ps(
-    peer: Annotated[Optional[str], typer.Argument(help="With -v: only this peer (its id).")] = None,
+    peer: Annotated[Optional[str], typer.Argument(help="With -v: only this peer (its id).", autocompletion=complete_peers)] = None,
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="What each peer publishes, subscribes to and serves (like ros2 node info).")] = False,
     as_json: Annotated[bool, typer.Option("--json", help=(
         'One JSON document instead of a table: {"world", "peers": {KIND: [ID]}, "count", "bad_tokens"}; '

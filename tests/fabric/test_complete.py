@@ -62,6 +62,9 @@ def test_keys_of_a_live_world_complete_world_relative_or_full(router, connect, w
         assert keys.robot_joints(world, "arm1") in complete_keys(ctx, f"rf/{world}/robot/")  # full keys when typed full
         # the root's options (robofabric --world W list <TAB>) count too
         assert "srv/world" in complete_keys(_Ctx({}, parent=ctx), "srv/")
+        from fabric.complete import complete_peers
+
+        assert complete_peers(ctx, "sim-") == ["sim-c"]
     finally:
         stop.set()
         t.join(timeout=5)

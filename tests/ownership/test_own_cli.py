@@ -28,7 +28,11 @@ def test_own_list_request_release(world, router, connect):
         r = _own(world, port, "request", "arm", "--user", "ben")
         assert r.returncode == 1 and "denied: in motion, owned by ann" in r.stdout, r.stdout + r.stderr
         r = _own(world, port, "list", "--json")
-        assert '"owner": "ann"' in r.stdout and '"state": "moving"' in r.stdout, r.stdout + r.stderr
+        assert r.returncode == 0, r.stderr
+        doc = __import__("json").loads(r.stdout)  # one document
+        recs = {rec["object"]: rec for rec in doc["records"]}
+        assert doc["world"] == world and recs["arm"]["owner"] == "ann" and recs["arm"]["state"] == "moving", doc
+        assert recs["ball"]["policy"] == "scene" and recs["arm"]["authority"] == "host", doc
         r = _own(world, port, "request", "arm", "--wait", "--user", "ben")
         assert r.returncode == 0 and "queued at position 1" in r.stdout, r.stdout + r.stderr
         r = _own(world, port, "release", "arm", "--user", "cy")
