@@ -70,7 +70,7 @@ class _Bench:
 
     def partition(self) -> float:
         a, b = self.alice, self.bob
-        a.call("arm.request(); arm.move_joints(np.full(6, 0.8), wait=False, speed_scale=0.05); None")
+        held = a.call("e = arm.request(); arm.move_joints(np.full(6, 0.8), wait=False, speed_scale=0.05); e")
         _wait(lambda: b.call("r = arm.record; r is not None and r.state == 'moving' and r.owner == 'alice'"), 20, "arm moving")
         granted = b.submit("arm.request(wait=True, timeout=60); time.monotonic()")
         _wait(lambda: b.call("'bob' in tuple(arm.record.queue)"), 20, "bob queued")
@@ -79,7 +79,10 @@ class _Bench:
         handover = granted(timeout=60) - t_cut
         self.lab.restore("alice")
         b.call("arm.move_joints(np.zeros(6), timeout=30); arm.release(); None", timeout=60)
-        _wait(lambda: a.call("arm.owner != 'alice'"), 30, "alice told she lost the arm")
+        # alice's view catches up with what happened while she was cut off: a newer epoch than hers, whether the
+        # arm is free (bob released it before her token came back) or hers again (she came back while bob held
+        # it: queued first, as an ex-owner within grace, she owns it after his release)
+        _wait(lambda: a.call(f"arm.record.epoch > {held}"), 30, "alice's view of the arm catching up (a newer epoch than hers)")
         a.call("w.wait_world(timeout=60); None", timeout=90)
         return handover
 
