@@ -55,6 +55,7 @@ class ViewerOptions:
     max_hz: float = 30.0
     window_s: float = 0.1  # drawing window: what arrived in it goes out as one chunk per entity
     max_lag_s: float = 0.5  # a sample older than this when drawn is dropped (never a stream's newest)
+    web_history: str = "256MiB"  # what Rerun's gRPC server keeps for pages that join late (static data always)
 
 
 def default_advertise() -> str:
@@ -99,6 +100,9 @@ def make_recording(opts: ViewerOptions, *, recording_id: str | None = None, grpc
         server = rr.GrpcServerSink(
             bind_ip="0.0.0.0" if grpc_server_port is None else "127.0.0.1",
             port=opts.grpc_port if grpc_server_port is None else grpc_server_port,
+            # a page that joins gets the live feed first and the history behind it: it shows now at once
+            # instead of ingesting the whole session first (at a software-rendered page's pace, minutes)
+            newest_first=True, server_memory_limit=opts.web_history,
             cors_allow_origin=[f"http://*:{opts.web_port}", f"https://*:{opts.web_port}"],
         )
         sinks.append(server)
