@@ -161,3 +161,69 @@ def summary(result: dict[str, Any]) -> dict[str, float]:
 
 
 _URL = re.compile(r"web viewer: open (http://\S+)")
+
+
+def run(pages: int, stalled: int, seconds: float, width: int, view_args: list[str], log: Any = print) -> dict[str, Any]:
+    """A router, ``robofabric sim --scene combined`` and ``robofabric view --serve-web VIEW_ARGS`` as child
+    processes, then :func:`measure`; every child ended by pid. Adds the viewer's last lines (relay cuts)."""
+    import tempfile
+    import uuid
+    from pathlib import Path
+
+    from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
+
+    world = f"benchweb{uuid.uuid4().hex[:6]}"
+    with tempfile.TemporaryDirectory(prefix="bench-web-") as tmp, ProcessGroup(Path(tmp)) as procs:
+        ep = f"tcp/127.0.0.1:{free_port()}"
+        router = procs.start(robofabric_cmd("router", "--listen", ep, "--world", world), name="router")
+        wait_until(lambda: _accepts(ep), timeout=30, interval=0.1, what="the router to listen", seen=lambda: procs.output(router))
+        sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep), name="sim")
+        web, grpc = free_port(), free_port()
+        view = procs.start(robofabric_cmd("view", "--serve-web", "--advertise", "127.0.0.1", "--web-port", str(web),
+                                          "--grpc-port", str(grpc), "--world", world, "--connect", ep, *view_args), name="view")
+        url = wait_until(lambda: _URL.search(procs.output(view)), timeout=90, interval=0.2, what="the viewer's URL",
+                         seen=lambda: (procs.output(router) + procs.output(sim) + procs.output(view))[-2000:]).group(1)
+        result = measure(url, pages, stalled, seconds, {"width": width, "height": width * 5 // 8}, log=log)
+        result["view_log"] = procs.output(view)
+        result["cut"] = re.findall(r"web relay: page \S+ cut off: (.*)", result["view_log"])
+        result["blocked"] = result["view_log"].count("has been blocked")
+    result.update(width=width, view_args=view_args)
+    return result
+
+
+def _accepts(ep: str) -> bool:
+    import socket
+
+    host, port = ep.split("/", 1)[1].rsplit(":", 1)
+    try:
+        with socket.create_connection((host, int(port)), timeout=1):
+            return True
+    except OSError:
+        return False
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``python -m robofabric.bench.viewer_web --pages 10 --stalled 1 --seconds 60 --width 640 -- --window 0.5 --max-hz 5``"""
+    import argparse
+
+    from robofabric.bench.common import machine
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--pages", type=int, default=10, help="live pages")
+    ap.add_argument("--stalled", type=int, default=1, help="further pages paused once they show the world")
+    ap.add_argument("--seconds", type=float, default=60.0, help="how long the live pages' lag is sampled")
+    ap.add_argument("--width", type=int, default=1280, help="page width (height 5/8 of it)")
+    ap.add_argument("view_args", nargs="*", help="after --: options of robofabric view (e.g. --window 0.5 --max-hz 5)")
+    a = ap.parse_args(argv)
+    r = run(a.pages, a.stalled, a.seconds, a.width, a.view_args)
+    s = summary(r)
+    print(machine())
+    print(f"{a.pages} live pages + {a.stalled} paused, {a.width}x{a.width * 5 // 8}, view {' '.join(a.view_args) or '(defaults)'}: "
+          f"all showing the world after {r['ready_s']:.0f} s; lag over {a.seconds:g} s: p50 {s['p50']:.1f} s, p90 {s['p90']:.1f} s, "
+          f"max {s['max']:.1f} s, worst page at the end {s['last_worst']:.1f} s; frames/s per page "
+          f"{min(r['fps']):.1f}-{max(r['fps']):.1f}; paused pages cut off: {len(r['cut'])} ({'; '.join(r['cut'])}); "
+          f"'sender blocked' reports: {r['blocked']}")
+
+
+if __name__ == "__main__":
+    main()
