@@ -110,7 +110,7 @@ def open_pages(browser: Any, url: str, n: int, viewport: dict[str, int]) -> list
 
 
 def measure(url: str, pages: int, stalled: int = 0, seconds: float = 60.0, viewport: dict[str, int] | None = None,
-            warmup_s: float = 180.0, every_s: float = 2.0, log: Any = print) -> dict[str, Any]:
+            warmup_s: float = 180.0, every_s: float = 2.0, log: Any = print, shot: str | None = None) -> dict[str, Any]:
     """Open ``pages`` + ``stalled`` pages on ``url``; once every page shows the live world, pause the
     ``stalled`` ones and sample every live page's lag for ``seconds``. Returns per page lists of lags (s)."""
     from playwright.sync_api import sync_playwright
@@ -144,6 +144,10 @@ def measure(url: str, pages: int, stalled: int = 0, seconds: float = 60.0, viewp
                 left = every_s - (time.monotonic() - t0)
                 if left > 0:
                     live[0].wait_for_timeout(left * 1000)
+            if shot:  # the first page as it looks, beside its measured lag (its top bar shows Rerun's own "latency")
+                lag = page_lag(live[0])
+                live[0].screenshot(path=shot)
+                log(f"screenshot {shot}: page lag {lag if lag is None else round(lag, 2)} s")
             fps = [page_fps(pg) for pg in live]
             log(f"frames per second per live page: {[round(f, 1) for f in fps]}")
             return {"pages": pages, "stalled": stalled, "seconds": seconds, "ready_s": ready, "lags": series, "fps": fps}
@@ -163,7 +167,7 @@ def summary(result: dict[str, Any]) -> dict[str, float]:
 _URL = re.compile(r"web viewer: open (http://\S+)")
 
 
-def run(pages: int, stalled: int, seconds: float, width: int, view_args: list[str], log: Any = print) -> dict[str, Any]:
+def run(pages: int, stalled: int, seconds: float, width: int, view_args: list[str], log: Any = print, shot: str | None = None) -> dict[str, Any]:
     """A router, ``robofabric sim --scene combined`` and ``robofabric view --serve-web VIEW_ARGS`` as child
     processes, then :func:`measure`; every child ended by pid. Adds the viewer's last lines (relay cuts)."""
     import tempfile
@@ -183,7 +187,7 @@ def run(pages: int, stalled: int, seconds: float, width: int, view_args: list[st
                                           "--grpc-port", str(grpc), "--world", world, "--connect", ep, *view_args), name="view")
         url = wait_until(lambda: _URL.search(procs.output(view)), timeout=90, interval=0.2, what="the viewer's URL",
                          seen=lambda: (procs.output(router) + procs.output(sim) + procs.output(view))[-2000:]).group(1)
-        result = measure(url, pages, stalled, seconds, {"width": width, "height": width * 5 // 8}, log=log)
+        result = measure(url, pages, stalled, seconds, {"width": width, "height": width * 5 // 8}, log=log, shot=shot)
         result["view_log"] = procs.output(view)
         result["cut"] = re.findall(r"web relay: page \S+ cut off: (.*)", result["view_log"])
         result["blocked"] = result["view_log"].count("has been blocked")
@@ -213,9 +217,10 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--stalled", type=int, default=1, help="further pages paused once they show the world")
     ap.add_argument("--seconds", type=float, default=60.0, help="how long the live pages' lag is sampled")
     ap.add_argument("--width", type=int, default=1280, help="page width (height 5/8 of it)")
+    ap.add_argument("--shot", help="save a screenshot of the first page here at the end")
     ap.add_argument("view_args", nargs="*", help="after --: options of robofabric view (e.g. --window 0.5 --max-hz 5)")
     a = ap.parse_args(argv)
-    r = run(a.pages, a.stalled, a.seconds, a.width, a.view_args)
+    r = run(a.pages, a.stalled, a.seconds, a.width, a.view_args, shot=a.shot)
     s = summary(r)
     print(machine())
     print(f"{a.pages} live pages + {a.stalled} paused, {a.width}x{a.width * 5 // 8}, view {' '.join(a.view_args) or '(defaults)'}: "
