@@ -18,7 +18,7 @@ from fabric import keys
 from fabric.interfaces import Command, Event, EventKind, OwnershipRecord, OwnReply, OwnRequest, ServiceError
 from fabric.limits import MAX_USER_LEN, is_valid_user, quote
 from fabric.rate import Clock, MonotonicClock
-from fabric.session import Fabric
+from fabric.session import Fabric, undeclare_all
 
 from ownership import replica
 from ownership import state as st
@@ -294,7 +294,10 @@ class Authority:
         self._apply(st.Motion(robot, bool(moving)))
 
     def close(self) -> None:
+        """Stop ticking and take away the record queryables and the users' watch (a sim rebuilding its world on the
+        same session serves its records from a new authority); idempotent."""
         self._stop.set()
+        undeclare_all([self._watch, *self._queryables])
         thread = self._thread
         if thread is not None and thread.is_alive() and thread is not threading.current_thread():
             thread.join(timeout=2.0)

@@ -95,9 +95,10 @@ def sim(
         raise UserError(f"--duration must be positive, got {duration}")
     if noise is not None and not noise >= 0:
         raise UserError(f"--noise must be >= 0, got {noise}")
-    def build():
+    def build(placements=None):
+        """This sim's world; ``placements``: other robots than the command line's (a robot moved in or out)."""
         return SimWorld(
-            scene, robot or [], scene_robots=scene_robots, seed=seed, noise_std=noise, lidar_rays=lidar_rays, lidar_fov_deg=lidar_fov,
+            scene, (robot or []) if placements is None else placements, scene_robots=scene_robots and placements is None, seed=seed, noise_std=noise, lidar_rays=lidar_rays, lidar_fov_deg=lidar_fov,
             bumper=bumper, twist_timeout=twist_timeout, mirrors=mirrors,
         )
 
@@ -207,7 +208,7 @@ def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, st
     host = run_replicated(
         lambda: open_fabric(cfg, "sim", pid), make_world,
         lambda fab, w, restored, objects=True: make_gate(fab, w, ownership, restored, objects=objects), stop,
-        standby=standby, rates=rates, speed=pace, duration=duration, announce=announce, objects=objects,
+        standby=standby, rates=rates, speed=pace, duration=duration, announce=announce, objects=objects, rebuild=build,
     )
     peer = host.peer if host is not None else None
     if peer is None:
@@ -241,5 +242,24 @@ def _print_catalog() -> None:
             print(f"  {name:<12} (broken: {exc})")
 
 
+def move_cmd(robot: Annotated[str, typer.Argument(help="Robot id.")],
+             to: Annotated[str, typer.Option("--to", help="The sim peer (its id, as `robofabric ps` lists it) to serve the robot.")],
+             world: World = None, connect: Connect = None, profile: Profile = None, zenoh_config: ZenohConfig = None) -> None:
+    """Hand ROBOT, its state and its ownership from its sim to sim TO (rebalancing a world of several sims).
+
+    Its owner keeps it and her epoch; see docs/sim.md, "Moving a robot between sims"."""
+    from sim_peer.handoff import MoveError, move
+    cfg = make_config(world, connect, None, profile, zenoh_config)
+    with open_fabric(cfg, "tool", None) as fab:
+        try:
+            done = move(fab, robot, to)
+        except MoveError as exc:
+            raise UserError(f"robot {robot} not moved: {exc}") from None
+    print(f"moved {done['robot']} from sim {done['from']} to sim {done['to']} (term {done['term']}) in {done['pause_ms']:.0f} ms", flush=True)
+
+
 def register(app: typer.Typer) -> None:
+    from ownership.cli import own_app
+
     app.command("sim")(sim)
+    own_app.command("move")(move_cmd)  # moving a robot hands its ownership over: an `own` subcommand, served by the sims

@@ -46,7 +46,7 @@ from fabric.gate import CommandGate, OpenGate
 from fabric.interfaces import Command, Event, EventKind, ObjectInfo, Pose, WorldInfo
 from fabric.limits import clip, is_valid_user, quote
 from fabric.rate import Clock, RateLoop
-from fabric.session import Fabric
+from fabric.session import Fabric, undeclare_all
 from sim_peer.controllers import Clamp, CommandRejected
 from sim_peer.inbox import CommandQueue
 from sim_peer.mirroring import MirrorFeed
@@ -103,6 +103,7 @@ class SimPeer:
         self._queued = threading.Condition(threading.Lock())
         self._worker: threading.Thread | None = None
         self.mirror_feed: MirrorFeed | None = None  # the other sims' bases in this world, once open (mirror slots)
+        self._declared: list[Any] = []  # what open() declared on the shared session: close() takes it away
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -112,15 +113,16 @@ class SimPeer:
             return self
         self._opened = True
         f, w = self.fabric, self.fabric.world
-        f.serve(keys.srv(w, "world"), self._on_world_query)
+        d = self._declared
+        d.append(f.serve(keys.srv(w, "world"), self._on_world_query))
         self._worker = threading.Thread(target=self._drain, name="sim-commands", daemon=True)
         self._worker.start()
-        f.watch_peers(self._on_sim, kind="sim")
-        f.subscribe_raw(keys.robot_cmd_all(w), self._on_command_sample)
+        d.append(f.watch_peers(self._on_sim, kind="sim"))
+        d.append(f.subscribe_raw(keys.robot_cmd_all(w), self._on_command_sample))
         for obj in (self.world.objects if self.objects else ()):
             # no history here: the authority's start must not wait on other peers' caches (with
             # history=True a sim started under load answered nothing for 30 s in two CI runs)
-            f.subscribe(keys.object_pose_all(w, obj), self._on_object, expected=Pose)
+            d.append(f.subscribe(keys.object_pose_all(w, obj), self._on_object, expected=Pose))
         for rid in self.world.robots:
             self._safe_gate_motion(rid, False)
         for group, entries in self._streams.items():
@@ -173,10 +175,13 @@ class SimPeer:
         return self._thread is not None and not self._thread.is_alive()
 
     def close(self) -> None:
-        """Stop physics and streams; idempotent. The fabric and the gate stay open."""
+        """Stop physics and streams, and take away the subscriptions and the world service it declared (a sim
+        rebuilding its world on the same session, docs/sim.md "Moving a robot between sims"); idempotent. The
+        fabric and the gate stay open."""
         if self._closed:
             return
         self._closed = True
+        undeclare_all(self._declared)
         self._stop.set()
         with self._queued:
             self._queued.notify_all()

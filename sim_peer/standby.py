@@ -27,17 +27,20 @@ import logging
 import threading
 import time
 from collections import deque
+from dataclasses import replace
 from typing import Any, Callable
 
 from fabric import keys
-from fabric.codec import DecodeError, decode
+from fabric.codec import DecodeError, decode, encode
 from fabric.gate import CommandGate
 from fabric.interfaces import Command, Event, Header, JointState, Pose, ServiceError, WorldState
 from fabric.session import Fabric
 from sim_peer import election as el
+from sim_peer import handoff as ho
 from sim_peer import replica
 from sim_peer.peer import SimPeer
 from sim_peer.world import SimWorld
+from robots.description import SceneRobot
 
 log = logging.getLogger("robofabric.sim")
 
@@ -86,8 +89,11 @@ class ReplicaHost:
         freeze_gap: float | None = None,
         announce: Callable[[str], None] | None = None,
         objects: bool = True,
+        rebuild: Callable[[list[SceneRobot]], SimWorld] | None = None,
     ) -> None:
         self.fabric = fabric
+        # builds this sim's world again with other robots (the same scene and options): a robot moved in or out
+        self.rebuild = rebuild
         # the scene objects' authority: the world's first sim (a shard joining a served world is not); a standby
         # learns it from its leader's state at a take-over (a primary that is not describes no objects there)
         self.objects = objects
@@ -284,6 +290,8 @@ class ReplicaHost:
             # which shard this sim belongs to, primary or standby: its robots (an election counts the sims of its shard)
             return Event(kind=SHARD_QUERY, reason=self.role, object="", data={"robots": sorted(self.mine)},
                          header=Header(wall_ns=time.time_ns(), source=self.fabric.peer_id))
+        if isinstance(request, Event) and request.kind in (ho.MOVE_OUT, ho.MOVE_IN):
+            return self._on_move(request)
         peer = self.peer
         if peer is None or (self.role != el.PRIMARY and not force):
             raise ServiceError(f"{self.fabric.peer_id} is a standby (term {self.election.term})")
@@ -295,6 +303,90 @@ class ReplicaHost:
         seqs = self.fabric.sequences(keys.world_root(self.fabric.world))
         return WorldState(t, steps, robots, objects, tuple(records), dict(users), seqs,
                           header=self.fabric.header(keys.srv(self.fabric.world, "state"), stamp=t))
+
+    # ------------------------------------------------------------------ moving a robot between sims
+
+    def _on_move(self, request: Event) -> Event | None:
+        """One step of a move (:mod:`sim_peer.handoff`): hand ``request.object`` out (``move_out``, to the sim that
+        serves it), or take a handed-out robot in (``move_in``, to the sim named in ``data["to"]``). A sim the step
+        is not for does not answer."""
+        rid, data, me = request.object, request.data if isinstance(request.data, dict) else {}, self.fabric.peer_id
+        if request.kind == ho.MOVE_OUT and rid not in self.world.robots:
+            return None
+        if request.kind == ho.MOVE_IN and data.get("to") != me:
+            return None
+        term = int(data.get("term", 0))
+        with self._lock:
+            if self.role != el.PRIMARY or self.peer is None:
+                raise ServiceError(f"sim {me} is not serving (a standby, or taking over)")
+            if self.rebuild is None:
+                raise ServiceError(f"sim {me} cannot rebuild its world (a sim of robofabric sim moves robots)")
+            if term < self.election.term + (request.kind == ho.MOVE_OUT):
+                raise ServiceError(f"move term {term} is not above sim {me}'s term {self.election.term}: ask again")
+            standbys = sorted(p for p, robots in self.shards.items() if p != me and p in self.live and robots & self.mine)
+            if standbys:
+                raise ServiceError(f"sim {me} has standbys ({', '.join(standbys)}): moving a robot of a replicated shard is not supported")
+            if request.kind == ho.MOVE_OUT:
+                if len(self.world.robots) < 2:
+                    raise ServiceError(f"robot {rid} is sim {me}'s last robot: stop that sim and start {rid} on another instead")
+                return self._hand_out(rid, str(data.get("to", "")), term)
+            handoff = ho.from_event(request)
+            if handoff.state.id in self.world.robots:
+                raise ServiceError(f"sim {me} already serves {rid}")
+            self._take_in(handoff, term)
+            return ho.to_event(ho.MOVE_IN, rid, me, term=term, source=me)
+
+    def _stop_serving(self) -> tuple[WorldState, dict[str, SceneRobot]]:
+        """Stop the peer and the gate (call with the lock held); the world's state as they left it."""
+        f, peer = self.fabric, self.peer
+        f.watch_freeze(None, None)  # a rebuild is not a freeze
+        peer.close()
+        records, users = self.gate.export_state()
+        self.gate.close()
+        with peer.lock:
+            t, steps, robots, objects = replica.capture(self.world)
+        state = WorldState(t, steps, robots, objects if self.objects else (), tuple(records), dict(users), {},
+                           header=Header(wall_ns=time.time_ns(), source=f.peer_id))
+        self.peer = self.gate = None
+        return state, dict(self.world.placements)
+
+    def _serve_rebuilt(self, placements: list[SceneRobot], state: WorldState, term: int, seqs: dict[str, int]) -> None:
+        """Serve a world built with ``placements``, restored to ``state``, under ``term`` (the take-over path)."""
+        self.world = self.rebuild(placements)
+        self.mine = frozenset(self.world.robots)
+        self.election = replace(self.election, term=term)
+        self.fabric.continue_sequences(seqs)
+        self._serve(replace(state, header=replace(state.header, term=term)))
+        self._learn_shards_soon()
+
+    def _hand_out(self, rid: str, to: str, term: int) -> Event:
+        t0 = time.monotonic()
+        state, placements = self._stop_serving()
+        robot = next(r for r in state.robots if r.id == rid)
+        record = next((r for r in state.records if r.object == rid), None)
+        seqs = self.fabric.sequences(keys.world_root(self.fabric.world) + f"/robot/{rid}/")
+        handoff = ho.Handoff(robot, placements[rid], record, ho.named_users(state.users, record), seqs, term,
+                             self.fabric.peer_id)
+        answer = ho.to_event(ho.MOVE_OUT, rid, to, handoff, term=term, source=self.fabric.peer_id)
+        try:
+            ho.from_event(decode(encode(answer), Event))  # what the tool will read: never hand out what cannot arrive
+        except Exception as exc:
+            self._serve_rebuilt(list(placements.values()), state, self.election.term, {})
+            raise ServiceError(f"sim {self.fabric.peer_id} could not hand {rid} out ({exc}); it keeps serving it") from None
+        rest = replace(state, robots=tuple(r for r in state.robots if r.id != rid), records=ho.merge_records(state.records, drop=rid))
+        self._serve_rebuilt([p for r, p in placements.items() if r != rid], rest, term, {})
+        self.announce(f"sim {self.fabric.peer_id}: handed {rid} out to {to} (term {term}) in {(time.monotonic() - t0) * 1000:.0f} ms")
+        return answer
+
+    def _take_in(self, handoff: ho.Handoff, term: int) -> None:
+        t0 = time.monotonic()
+        state, placements = self._stop_serving()
+        rid = handoff.state.id
+        state = replace(state, robots=(*state.robots, handoff.state), records=ho.merge_records(state.records, add=handoff.record),
+                        users=ho.merge_users(state.users, handoff.users))
+        self._serve_rebuilt([*placements.values(), handoff.placement], state, term, dict(handoff.seqs))
+        self.announce(f"sim {self.fabric.peer_id}: took {rid} in from {handoff.source or 'another sim'} (term {term}) in "
+                      f"{(time.monotonic() - t0) * 1000:.0f} ms")
 
     def _on_freeze(self, gap: float) -> None:
         """Frozen for ``gap`` s: muzzled until it is known whether another sim may hold the world now.
@@ -534,6 +626,7 @@ def run_replicated(
     duration: float | None = None,
     announce: Callable[[str], None] | None = None,
     objects: bool = True,
+    rebuild: Callable[[list[SceneRobot]], SimWorld] | None = None,
 ) -> "ReplicaHost | None":
     """Run a sim peer until ``stop``: as primary or standby, a fresh session and world after each step-down.
     ``objects``: whether this sim is the scene objects' authority (the world's first sim; a shard that joins a
@@ -544,7 +637,7 @@ def run_replicated(
     while not stop.is_set():
         with open_fabric() as fab:
             host = ReplicaHost(fab, make_world(), make_gate, standby=standby, rates=rates, speed=speed, term=term, leader=leader,
-                        snapshot=last, announce=announce, objects=objects)
+                        snapshot=last, announce=announce, objects=objects, rebuild=rebuild)
             role = host.run(stop, duration)
             term, leader, objects = host.election.term, host.election.leader, host.objects
             last = host.last_state
