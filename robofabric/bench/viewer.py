@@ -20,6 +20,9 @@ process's CPU time over the run, the file written included).
    with the arms and bases, and ``robofabric view --save FILE.rrd --max-hz 0 --duration S`` as its own
    process; its own count of messages logged and dropped, its lag, and its CPU (from /proc) per second.
 
+4. ``--pages N``: N headless Chromium pages (plus ``--stalled`` paused ones) on one ``view --serve-web`` of the
+   ``combined`` world, each page's lag read from the page itself (robofabric/bench/viewer_web.py).
+
 For a before/after comparison the same command runs against another checkout's ``user_peer`` (put it first
 on ``PYTHONPATH``): a WorldLogger without ``flush`` draws row by row in ``log``, and is measured the same way.
 """
@@ -243,6 +246,12 @@ def command(
     seed: Annotated[int, typer.Option(help="Seed of the synthetic scans and grids.")] = 0,
     live: Annotated[float, typer.Option(help="Also run the class world for real for this many seconds (a sim and a view process; 0: not).")] = 0.0,
     out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
+    pages: Annotated[int, typer.Option(help="Also open this many browser pages (headless chromium) on `view --serve-web` and read each one's lag from the page (0: not).")] = 0,
+    stalled: Annotated[int, typer.Option(help="With --pages: further pages, paused once they show the world.")] = 1,
+    page_seconds: Annotated[float, typer.Option(help="With --pages: how long their lag is sampled (s).")] = 60.0,
+    page_width: Annotated[int, typer.Option(help="With --pages: page width in pixels (height 5/8 of it).")] = 640,
+    page_window: Annotated[float, typer.Option(help="With --pages: the viewer's --window.")] = 0.5,
+    page_max_hz: Annotated[float, typer.Option(help="With --pages: the viewer's --max-hz.")] = 5.0,
 ) -> None:
     """Cost of drawing in the Rerun viewer (WorldLogger to an .rrd file): per message type, and a class world at full rate."""
     from fabric.cli_common import UserError
@@ -254,5 +263,16 @@ def command(
     world = measure_world(arms, bases, seconds, seed) if arms + bases else None
     real = measure_live(arms, bases, live) if live > 0 and arms + bases else None
     table = f"{machine()}\n\n" + format_table(measure(n, grids, seed), world, real)
+    if pages > 0:  # browsers on one served viewer (robofabric/bench/viewer_web.py)
+        from robofabric.bench import viewer_web
+
+        r = viewer_web.run(pages, stalled, page_seconds, page_width,
+                           ["--window", f"{page_window:g}", "--max-hz", f"{page_max_hz:g}"], log=lambda *a: None)
+        s = viewer_web.summary(r)
+        table += (f"\n\nBrowsers: {pages} live pages + {stalled} paused on one `view --serve-web --window {page_window:g} "
+                  f"--max-hz {page_max_hz:g}`, {page_width}x{page_width * 5 // 8}: all showing the world after {r['ready_s']:.0f} s; "
+                  f"lag read from each page over {page_seconds:g} s: p50 {s['p50']:.1f} s, p90 {s['p90']:.1f} s, max {s['max']:.1f} s; "
+                  f"{min(r['fps']):.1f}-{max(r['fps']):.1f} frames/s per page; paused pages cut off by the relay: {len(r['cut'])}; "
+                  f"'sender blocked' reports: {r['blocked']}.")
     print(table)
     append(out, table)
