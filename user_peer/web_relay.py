@@ -34,6 +34,7 @@ log = logging.getLogger("robofabric.viewer")
 __all__ = ["Relay", "PageLink"]
 
 CHUNK = 256 * 1024
+SNDBUF = 512 * 1024
 
 
 @dataclass
@@ -87,6 +88,9 @@ class Relay:
             for s in (down, up):
                 s.settimeout(None)
                 s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            # what a page has not taken waits in its queue, where its age is seen, not in a kernel buffer that
+            # grows to megabytes on its own (a LAN's round trip needs far less)
+            down.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SNDBUF)
             link = PageLink(peer=f"{addr[0]}:{addr[1]}", sockets=(down, up))
             with self._lock:
                 self.links = [lk for lk in self.links if not lk.closed] + [link]
