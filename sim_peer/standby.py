@@ -185,8 +185,9 @@ class ReplicaHost:
         try:
             while not stop.is_set() and not self._stepped_down.is_set():
                 stop.wait(0.1)
-                if self.peer is not None and self.peer.finished:
-                    break  # --duration reached
+                with self._lock:  # a robot moving in or out rebuilds under the lock: its closed peer is not the end
+                    if self.peer is not None and self.peer.finished:
+                        break  # --duration reached
         finally:
             self.close()
         return self.role
