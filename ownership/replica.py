@@ -5,7 +5,8 @@ clock's ``now`` (remaining lease, remaining grace), because the standby that res
 another clock (another process, maybe another machine). The standby rebases them on its ``now``.
 
 What is kept: every record (owner, epoch, queue, motion state), the users' join order, who was
-live, who is away within grace and what they held, who requested without a token yet. Owners keep
+live, who is away within grace and what they held, who requested without a token yet, and when the
+authority last heard a user, started hearing again and ticked (the lease rule's memory). Owners keep
 their objects and their epochs, so the commands they stamp stay valid. A lease resumes with what
 remained of it, but never less than one full lease: while no authority answered, an owner could
 not renew, and losing a robot to the failover itself is what this exists to prevent.
@@ -38,6 +39,9 @@ def export(s: st.OwnState, now: float) -> tuple[tuple[OwnershipRecord, ...], dic
         users[f"away:{u}"] = [a.deadline - now, *(f"o:{o}" for o in sorted(a.owned)), *(f"q:{o}" for o in sorted(a.queued))]
     for u, d in s.unproven.items():
         users[f"unproven:{u}"] = d - now  # may be past: the next tick drops it, as it would have
+    # what the lease rule knows of the authority's hearing and its own pauses (never heard / never ticked: None),
+    # so the restored authority judges a lease exactly as the old one would have
+    users["clock"] = [None if t == float("-inf") else t - now for t in (s.heard, s.hearing_since, s.last_tick)]
     return recs, users
 
 
@@ -83,4 +87,15 @@ def restore(
         grace_s=grace_s,
         authority=authority,
         deaf_s=lease_s / 2,
+        **_clock(users.get("clock"), now),
     )
+
+
+def _clock(value: Any, now: float) -> dict[str, float]:
+    """``heard``, ``hearing_since`` and ``last_tick`` on this clock, from :func:`export`'s relative times; an
+    export without them (an older authority) leaves them unknown, as a fresh authority has them."""
+    vals = list(value) if isinstance(value, (list, tuple)) and len(value) == 3 else [None, None, None]
+    out = {}
+    for name, v in zip(("heard", "hearing_since", "last_tick"), vals):
+        out[name] = float("-inf") if v is None else now + float(v)
+    return out
