@@ -175,6 +175,7 @@ class Viewer:
         self._closed = False
         self._sims: set[str] = set()
         self._sims_lock = threading.Lock()
+        self._stopped = threading.Event()  # set at close: background looks at the world end
         # a script that never closes the viewer still flushes its sinks, then its session closes (fabric/exit.py)
         self._cancel_exit = at_exit(self.close)
 
@@ -237,8 +238,11 @@ class Viewer:
         on the terminal and in the view's event log; the robots keep their last drawn state."""
         with self._sims_lock:
             was = bool(self._sims)
+            new = alive and peer_id not in self._sims
             (self._sims.add if alive else self._sims.discard)(peer_id)
             now = bool(self._sims)
+        if new and self.catalog.world_info is not None:  # a sim joining the world (a shard) describes robots of its own
+            threading.Thread(target=self._learn_world, args=(peer_id,), name="viewer-world", daemon=True).start()
         if now == was:
             return
         text = (f"world {self.fab.world!r} is back: sim peer {peer_id}" if now
@@ -248,6 +252,23 @@ class Viewer:
             self.rec.log("events", rr.TextLog(text, level="INFO" if now else "WARN"))
         except Exception:
             log.debug("could not log the world's state", exc_info=True)
+
+    def _learn_world(self, sim: str, wait_s: float = 5.0) -> None:
+        """Ask the world's description again (the union of every sim's part), off Zenoh's callback threads, until
+        it has robots of ``sim`` (its token comes before its service) or ``wait_s`` pass (a standby has none)."""
+        deadline = time.monotonic() + wait_s
+        while not self._stopped.is_set():
+            try:
+                info = query_world_info(self.fab)
+            except Exception:  # the session closed under it
+                return
+            if info is not None:
+                self.catalog.world_info = info
+                if any(r.sim == sim for r in info.robots):
+                    return
+            if time.monotonic() > deadline:
+                return
+            self._stopped.wait(0.2)
 
     def draw(self) -> int:
         """One window: file everything queued (less what is too old) and flush it; returns how many were logged."""
@@ -316,6 +337,7 @@ class Viewer:
         if self._closed:
             return
         self._closed = True
+        self._stopped.set()
         self._cancel_exit()
         self.fab.close()
         # Whatever is already queued still goes to the sinks.

@@ -1,0 +1,37 @@
+"""The viewer in a world of several sims: a sim that joins later (a shard) has its robots described too."""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import replace
+
+from fabric import keys
+from fabric.interfaces import WorldInfo
+from fabric.testing import client_config, wait_until
+from sim_peer.world import SimWorld
+from user_peer.viewer import Viewer, ViewerOptions
+
+
+def _part(world: str, sim: str, robot: str) -> WorldInfo:
+    w = SimWorld("warehouse", [f"reeman:{robot}@{1.5 if robot == 'base1' else 0},0"], scene_robots=False)
+    return WorldInfo(world=world, scene="warehouse", timestep=w.dt, rates={}, robots=(replace(w.robot(robot).describe(), sim=sim),))
+
+
+def test_a_shard_joining_later_has_its_robots_in_the_viewers_world(world, router, connect, tmp_path):
+    sim_a = connect("sim", "sim-a")
+    sim_a.serve(keys.srv(world, "world"), lambda key, req: _part(world, "sim-a", "base0"))
+    viewer = Viewer(client_config(world, router[1]), ViewerOptions(save=tmp_path / "v.rrd", max_hz=0), peer_id="viewer-shards")
+    stop = threading.Event()
+    t = threading.Thread(target=viewer.run, args=(stop,), daemon=True)
+    t.start()
+    try:
+        wait_until(lambda: viewer.catalog.world_info is not None, timeout=20, what="the viewer's first look at the world")
+        assert [r.id for r in viewer.catalog.world_info.robots] == ["base0"]
+        sim_b = connect("sim", "sim-b")  # its token: a sim joining the world, serving its own part
+        sim_b.serve(keys.srv(world, "world"), lambda key, req: _part(world, "sim-b", "base1"))
+        wait_until(lambda: {r.id: r.sim for r in viewer.catalog.world_info.robots} == {"base0": "sim-a", "base1": "sim-b"},
+                   timeout=20, what="both sims' robots in the viewer's world",
+                   seen=lambda: [(r.id, r.sim) for r in viewer.catalog.world_info.robots])
+    finally:
+        stop.set()
+        t.join(timeout=20)
