@@ -29,7 +29,7 @@ import typer
 
 from robofabric.bench.common import append, end_process, machine, pct, proc_cpu_s
 
-__all__ = ["command", "run_one", "spots"]
+__all__ = ["command", "run_one", "run_lab", "spots"]
 
 MOVING_MS = 1e-3
 """A pose showing the base faster than this (m/s) shows it moving: low enough that the base's acceleration limit
@@ -102,8 +102,44 @@ def _command_to_motion(world: str, endpoint: str, robots: list[str], rounds: int
     return out
 
 
+def _shares(robots: int, sims: int) -> list[list[str]]:
+    """Each sim's ``--robot`` specs: the spots one sim would give all ``robots``, dealt out in turn."""
+    every = spots(robots)
+    return [every[i::sims] for i in range(sims)]
+
+
+def _sim_args(specs: list[str], robots: int, world: str, ep: str, i: int) -> list[str]:
+    args = [x for s in specs for x in ("--robot", s)]
+    return ["-v", "sim", "--scene", "warehouse", "--no-scene-robots", *args, "--mirrors", str(robots - len(specs)),
+            "--world", world, "--connect", ep, "--id", f"sim-{i}"]
+
+
+def _figures(robots: int, mine: list[list[str]], rtf: dict[str, float], cpu_s: list[float], window_s: float,
+             outputs: list[str], latencies: list[float]) -> dict[str, Any]:
+    """The row: per sim its real-time factor, cores and CPU per robot, its mirror summary; the command latencies."""
+    sims = len(mine)
+    rtfs = [rtf.get(f"sim-{i}", float("nan")) for i in range(sims)]
+    mirror = [MIRROR_LINE.search(out) for out in outputs]
+    lag50 = [float(m.group(2)) for m in mirror if m and m.group(2) != "nan"]
+    lag99 = [float(m.group(3)) for m in mirror if m and m.group(3) != "nan"]
+    return {
+        "robots": robots, "sims": sims, "rtf": rtfs, "rtf_min": min(rtfs),
+        "cpu_per_robot_ms": [1e3 * c / (len(specs) * max(1e-9, window_s * r)) for c, specs, r in zip(cpu_s, mine, rtfs) if r == r],
+        "sim_cores": [c / window_s for c in cpu_s],
+        "mirrored": [int(m.group(1)) if m else 0 for m in mirror],
+        "mirror_p50": statistics.median(lag50) if lag50 else float("nan"),
+        "mirror_p99": max(lag99) if lag99 else float("nan"),
+        "cmd_p50": pct(latencies, 50, 1e3), "cmd_p99": pct(latencies, 99, 1e3), "cmd_n": len(latencies),
+    }
+
+
+def _firsts(mine: list[list[str]]) -> list[str]:
+    """One robot of each sim: the one a user commands for the latency figure."""
+    return [specs[0].split(":")[1].split("@")[0] for specs in mine]
+
+
 def run_one(robots: int, sims: int, seconds: float, tmp: Path) -> dict[str, Any]:
-    """``robots`` bases over ``sims`` sim processes on a fresh world; the row's figures."""
+    """``robots`` bases over ``sims`` sim processes on this machine, a fresh world; the row's figures."""
     from fabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
 
     world = f"shards{uuid.uuid4().hex[:6]}"
@@ -111,49 +147,73 @@ def run_one(robots: int, sims: int, seconds: float, tmp: Path) -> dict[str, Any]
     ep = f"tcp/127.0.0.1:{port}"
     logs = tmp / f"s{sims}"
     logs.mkdir(parents=True, exist_ok=True)
-    every = spots(robots)
-    mine = [every[i::sims] for i in range(sims)]
+    mine = _shares(robots, sims)
     with ProcessGroup(logs) as procs:
         router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
         wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
         started = []
         for i, specs in enumerate(mine):
-            args = [x for s in specs for x in ("--robot", s)]
-            p = procs.start(robofabric_cmd("-v", "sim", "--scene", "warehouse", "--no-scene-robots", *args, "--mirrors",
-                                           str(robots - len(specs)), "--world", world, "--connect", ep, "--id", f"sim-{i}"),
-                            name=f"sim-{i}")
+            p = procs.start(robofabric_cmd(*_sim_args(specs, robots, world, ep, i)), name=f"sim-{i}")
             started.append(p)
             wait_until(lambda: "Ctrl-C to stop" in procs.output(p), timeout=180, what=f"sim-{i}", seen=lambda: procs.output(p)[-1500:])
         with client(world, port, kind="tool", peer_id="probe") as fab:
             poses = _Poses(fab, world)
             wait_until(lambda: len(poses.by_sim) == sims, timeout=60, what="poses from every sim", seen=lambda: list(poses.by_sim))
-            cpu0 = {p.pid: proc_cpu_s(p.pid) for p in started}
+            cpu0 = [proc_cpu_s(p.pid) for p in started]
             t0 = time.monotonic()
-            firsts = [specs[0].split(":")[1].split("@")[0] for specs in mine]
-            latencies = _command_to_motion(world, ep, firsts, rounds=4)
+            latencies = _command_to_motion(world, ep, _firsts(mine), rounds=4)
             left = seconds - (time.monotonic() - t0)
             if left > 0:
                 time.sleep(left)  # the world runs on for the rest of the window: the figures are of its steady state
             t1 = time.monotonic()
-            cpu = {p.pid: (proc_cpu_s(p.pid) - cpu0[p.pid]) for p in started}
+            cpu = [proc_cpu_s(p.pid) - c0 for p, c0 in zip(started, cpu0)]
             rtf = poses.rtf(t0 + 1.0, t1)
         for p in started:
             end_process(p)
         end_process(router)
-        mirror = [MIRROR_LINE.search(procs.output(p)) for p in started]
-    rtfs = [rtf.get(f"sim-{i}", float("nan")) for i in range(sims)]
-    cpu_per_robot_ms = [1e3 * cpu[p.pid] / (len(specs) * max(1e-9, (t1 - t0) * r))
-                        for p, specs, r in zip(started, mine, rtfs) if r == r]
-    lag50 = [float(m.group(2)) for m in mirror if m and m.group(2) != "nan"]
-    lag99 = [float(m.group(3)) for m in mirror if m and m.group(3) != "nan"]
-    return {
-        "robots": robots, "sims": sims, "rtf": rtfs, "rtf_min": min(rtfs), "cpu_per_robot_ms": cpu_per_robot_ms,
-        "sim_cores": [cpu[p.pid] / (t1 - t0) for p in started],
-        "mirrored": [int(m.group(1)) if m else 0 for m in mirror],
-        "mirror_p50": statistics.median(lag50) if lag50 else float("nan"),
-        "mirror_p99": max(lag99) if lag99 else float("nan"),
-        "cmd_p50": pct(latencies, 50, 1e3), "cmd_p99": pct(latencies, 99, 1e3), "cmd_n": len(latencies),
-    }
+        outputs = [procs.output(p) for p in started]
+    return _figures(robots, mine, rtf, cpu, t1 - t0, outputs, latencies)
+
+
+def run_lab(robots: int, sims: int, seconds: float, log_dir: Path) -> dict[str, Any]:
+    """The same over the lab's network namespaces: a router host, one host per sim, and a probe host whose
+    Python process watches the poses and drives the robots (the lab's hosts share this machine's clock and CPU)."""
+    from fabric.lab.lab import Lab
+    from fabric.testing import wait_until
+
+    world = f"shards{uuid.uuid4().hex[:6]}"
+    mine = _shares(robots, sims)
+    with Lab(log_dir=log_dir) as lab:
+        rh = lab.add_host("router")
+        ep = rh.endpoint()
+        router = rh.start(["router", "--world", world, "--listen", ep], name="router")
+        wait_until(lambda: "listening" in router.output(), timeout=120, what="the lab's router", seen=lambda: router.output()[-1500:])
+        started = []
+        for i, specs in enumerate(mine):
+            p = lab.add_host(f"sim{i}").start(_sim_args(specs, robots, world, ep, i), name=f"sim-{i}")
+            started.append(p)
+            wait_until(lambda: "Ctrl-C to stop" in p.output(), timeout=180, what=f"sim-{i}", seen=lambda: p.output()[-1500:])
+        py = lab.add_host("probe").python(name="probe")
+        py.call("from fabric.config import FabricConfig\nfrom fabric.session import Fabric\n"
+                "from robofabric.bench.shards import _Poses, _command_to_motion\n"
+                f"fab = Fabric(FabricConfig.resolve(world={world!r}, connect=[{ep!r}]), kind='tool', peer_id='probe')\n"
+                f"poses = _Poses(fab, {world!r}); None", timeout=120)
+        wait_until(lambda: py.call("len(poses.by_sim)") == sims, timeout=60, what="poses from every sim at the probe host")
+        cpu0 = [proc_cpu_s(p.pid) for p in started]
+        t0 = time.monotonic()  # one machine: every namespace reads the same monotonic clock
+        latencies = py.call(f"_command_to_motion({world!r}, {ep!r}, {_firsts(mine)!r}, rounds=4)", timeout=300)
+        left = seconds - (time.monotonic() - t0)
+        if left > 0:
+            time.sleep(left)
+        t1 = time.monotonic()
+        cpu = [proc_cpu_s(p.pid) - c0 for p, c0 in zip(started, cpu0)]
+        rtf = py.call(f"poses.rtf({t0 + 1.0}, {t1})")
+        py.call("fab.close(); None")
+        for p in started:
+            p.stop()  # a clean exit: each sim logs its mirrors' summary on leaving
+        outputs = [p.output() for p in started]
+        router.stop()
+    return _figures(robots, mine, rtf, cpu, t1 - t0, outputs, latencies)
 
 
 def header() -> list[str]:
@@ -177,6 +237,7 @@ def command(
     robots: Annotated[int, typer.Option("--robots", help="Mobile robots with LIDAR in the world.")] = 32,
     sims: Annotated[str, typer.Option("--sims", help="Comma-separated sim process counts to compare.")] = "1,2,4",
     seconds: Annotated[float, typer.Option("--seconds", help="Measured window per sim count.")] = 20.0,
+    lab: Annotated[bool, typer.Option("--lab", help="Over the lab's network namespaces: one host per sim (root, Linux).")] = False,
     out: Annotated[Optional[Path], typer.Option("--out", help="Append the markdown table to this file.")] = None,
 ) -> None:
     """One world of N mobile robots served by 1, 2 and 4 sim processes: each sim's real-time factor and CPU per
@@ -186,10 +247,11 @@ def command(
     counts = [int(x) for x in sims.split(",") if x.strip()]
     if any(c < 1 or robots % c for c in counts):
         raise typer.BadParameter(f"every sim count must divide --robots {robots}: {counts}")
-    lines = [f"`robofabric bench shards --robots {robots} --sims {sims} --seconds {seconds:g}` on {machine()}", "", *header()]
+    where = " --lab" if lab else ""
+    lines = [f"`robofabric bench shards --robots {robots} --sims {sims} --seconds {seconds:g}{where}` on {machine()}", "", *header()]
     with tempfile.TemporaryDirectory(prefix="rf-shards-") as tmp:
         for c in counts:
-            r = run_one(robots, c, seconds, Path(tmp))
+            r = run_lab(robots, c, seconds, Path(tmp) / f"lab{c}") if lab else run_one(robots, c, seconds, Path(tmp))
             lines.append(row(r))
             print(lines[-1], flush=True)
     text = "\n".join(lines) + "\n"
