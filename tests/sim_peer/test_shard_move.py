@@ -17,7 +17,7 @@ from fabric.interfaces import JointState, Pose
 from fabric.testing import client_config, robofabric_cmd, wait_until
 from user_peer.api import World
 
-from tests.sim_peer.test_shards import _parts
+from tests.sim_peer.test_shards import _parts, _two_shards
 
 pytestmark = pytest.mark.slow
 
@@ -27,13 +27,7 @@ V = 0.3  # m/s: base2 drives through the move
 
 
 def test_a_robot_handed_between_sims_keeps_its_pose_joints_owner_and_epoch(world, router, connect, procs):
-    common = ("--world", world, "--connect", f"tcp/127.0.0.1:{router[1]}")
-    probe = connect("tool", "probe")
-    sim_a = procs.start(robofabric_cmd("sim", *SIM_A, *common, "--id", "sim-a"), name="sim-a")
-    wait_until(lambda: "sim-a" in _parts(probe, world), timeout=60, what="sim-a serving", seen=lambda: procs.output(sim_a)[-800:])
-    sim_b = procs.start(robofabric_cmd("sim", *SIM_B, *common, "--id", "sim-b"), name="sim-b")
-    wait_until(lambda: set(_parts(probe, world)) == {"sim-a", "sim-b"}, timeout=60, what="both sims serving",
-               seen=lambda: procs.output(sim_b)[-800:])
+    common, probe, sim_a, sim_b = _two_shards(world, router, connect, procs, SIM_A, SIM_B)
     lock = threading.Lock()
     seen: list[tuple[str, object]] = []  # (stream, message) of base2, in arrival order
 

@@ -33,13 +33,14 @@ def _parts(fab, world: str) -> dict[str, WorldInfo]:
         return {}
 
 
-def _two_shards(world, router, connect, procs):
-    """sim-a (base0), then sim-b (base1) joining as a shard, both serving; (common CLI args, probe, sim-a, sim-b)."""
+def _two_shards(world, router, connect, procs, a=BASE0, b=BASE1):
+    """sim-a (``a``: base0), then sim-b (``b``: base1) joining as a shard, both serving; (common CLI args, probe,
+    sim-a, sim-b)."""
     common = ("--world", world, "--connect", f"tcp/127.0.0.1:{router[1]}")
     probe = connect("tool", "probe")
-    sim_a = procs.start(robofabric_cmd("sim", *BASE0, *common, "--id", "sim-a"), name="sim-a")
+    sim_a = procs.start(robofabric_cmd("sim", *a, *common, "--id", "sim-a"), name="sim-a")
     wait_until(lambda: "sim-a" in _parts(probe, world), timeout=60, what="sim-a serving", seen=lambda: procs.output(sim_a)[-800:])
-    sim_b = procs.start(robofabric_cmd("sim", *BASE1, *common, "--id", "sim-b"), name="sim-b")
+    sim_b = procs.start(robofabric_cmd("sim", *b, *common, "--id", "sim-b"), name="sim-b")
     wait_until(lambda: set(_parts(probe, world)) == {"sim-a", "sim-b"}, timeout=60, what="both sims serving",
                seen=lambda: procs.output(sim_b)[-800:])
     return common, probe, sim_a, sim_b
