@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from fabric import keys
 
 __all__ = ["AUTHORITY_STREAMS", "Fence", "FenceVerdict", "SimFence", "MAX_DEPARTED_SIMS", "MAX_SCOPES", "WORLD_SCOPE",
-           "authority_scopes", "is_authority_event", "is_authority_key"]
+           "authority_scopes", "fenced_scopes", "is_authority_event", "is_authority_key"]
 
 AUTHORITY_STREAMS = frozenset({"joints", "pose", "scan", "sonar"})
 """Robot streams only a sim authority writes (paths and IK results come from compute and users)."""
@@ -42,12 +42,14 @@ WORLD_SCOPE = ""
 """The scope of authority state that names no robot (a ``srv/world`` answer without robots)."""
 
 
-def is_authority_key(key: str) -> bool:
-    """Whether ``key`` carries state only the world's sim authority writes."""
+def _parsed(key: str) -> keys.ParsedKey | None:
     try:
-        p = keys.parse(key)
+        return keys.parse(key)
     except ValueError:
-        return False
+        return None
+
+
+def _is_authority(p: keys.ParsedKey) -> bool:
     if p.category == "robot":
         return p.leaf in AUTHORITY_STREAMS
     if p.category == "own":  # own/{obj}: the record (own/{obj}/by/{user} is a user's request)
@@ -57,13 +59,8 @@ def is_authority_key(key: str) -> bool:
     return False
 
 
-def authority_scopes(key: str, msg: object = None) -> tuple[str, ...]:
-    """The authority objects whose terms fence ``key``'s message: the robot or object it is about, or, for
-    ``srv/world`` and ``srv/state``, the robots ``msg`` describes (``(WORLD_SCOPE,)`` when it names none; ``()``,
-    nothing to fence, for an answer that is no world state)."""
-    try:
-        p = keys.parse(key)
-    except ValueError:
+def _scopes(p: keys.ParsedKey | None, msg: object) -> tuple[str, ...]:
+    if p is None:
         return (WORLD_SCOPE,)
     if p.category in ("robot", "own") and p.subject:
         return (p.subject,)
@@ -74,6 +71,26 @@ def authority_scopes(key: str, msg: object = None) -> tuple[str, ...]:
         ids = tuple(dict.fromkeys(str(getattr(r, "id", "")) for r in robots))
         return ids if all(ids) else (WORLD_SCOPE,)
     return (WORLD_SCOPE,)
+
+
+def is_authority_key(key: str) -> bool:
+    """Whether ``key`` carries state only the world's sim authority writes."""
+    p = _parsed(key)
+    return p is not None and _is_authority(p)
+
+
+def authority_scopes(key: str, msg: object = None) -> tuple[str, ...]:
+    """The authority objects whose terms fence ``key``'s message: the robot or object it is about, or, for
+    ``srv/world`` and ``srv/state``, the robots ``msg`` describes (``(WORLD_SCOPE,)`` when it names none; ``()``,
+    nothing to fence, for an answer that is no world state)."""
+    return _scopes(_parsed(key), msg)
+
+
+def fenced_scopes(key: str, msg: object = None) -> tuple[str, ...] | None:
+    """:func:`authority_scopes` for an authority key, None for any other: the key parsed once, as every
+    subscriber does for every message it fences."""
+    p = _parsed(key)
+    return _scopes(p, msg) if p is not None and _is_authority(p) else None
 
 
 NOT_SIM_EVENTS = frozenset({keys.DECODE, "compute"})

@@ -35,7 +35,7 @@ from fabric.codec import DecodeError, decode, encode, load_plugins
 from fabric.authority import AuthorityStamp
 from fabric.config import FabricConfig, default_peer_id
 from fabric.exit import at_exit
-from fabric.fencing import SimFence, authority_scopes, is_authority_key
+from fabric.fencing import SimFence, fenced_scopes
 from fabric.limits import RateLimiter, clip
 from fabric.interfaces import Event, EventKind, Header, NoReply, Refused, ServiceError
 
@@ -367,11 +367,14 @@ class Fabric:
     def _believe(self, key: str, msg: Any) -> bool:
         """False for authority state stamped with a lower authority epoch than one already heard."""
         header = getattr(msg, "header", None)
-        if header is None or not is_authority_key(key):
+        if header is None:
+            return True
+        scopes = fenced_scopes(key, msg)
+        if scopes is None:
             return True
         if self._sim_watch is None and header.term:
             self._watch_sims()
-        if self.sim_fence.believe(header.term, header.source, authority_scopes(key, msg)):
+        if self.sim_fence.believe(header.term, header.source, scopes):
             return True
         self.counters["stale_authority"] += 1  # a lower term, or in flight when its sim left
         return False

@@ -26,7 +26,7 @@ from typing import BinaryIO
 from mcap.writer import CompressionType, Writer
 
 from fabric import keys
-from fabric.fencing import SimFence, authority_scopes, is_authority_key
+from fabric.fencing import SimFence, fenced_scopes
 from fabric.recording.format import MESSAGE_ENCODING, METADATA_NAME, PROFILE, peek, schema_data
 
 STALE = "stale"
@@ -70,7 +70,8 @@ class McapSink:
         self._closed = False
         self.messages = 0
         self.fences: dict[str, SimFence] = {}  # per world: its sims and its fence
-        self._world_of: dict[str, str | None] = {}  # key -> its world when it is an authority key
+        # key -> (its world, the scopes that fence it) when it is an authority key, else None; one parse per key
+        self._fenced: dict[str, tuple[str, tuple[str, ...]] | None] = {}
         self.stale = 0
         self.payload_bytes = 0
 
@@ -104,17 +105,19 @@ class McapSink:
         return p.schema
 
     def _believe(self, key: str, term: int, source: str) -> bool:
-        world = self._world_of.get(key, "")
-        if world == "":
-            world = self._world_of[key] = keys.parse(key).world if is_authority_key(key) else None
-        if world is None:
+        if key not in self._fenced:
+            scopes = fenced_scopes(key)
+            self._fenced[key] = None if scopes is None else (keys.parse(key).world, scopes)
+        fenced = self._fenced[key]
+        if fenced is None:
             return True
+        world, scopes = fenced
         fence = self.fences.get(world)
         if fence is None:
             if not term:
                 return True
             fence = self.fences[world] = SimFence()
-        return fence.believe(term, source, authority_scopes(key))
+        return fence.believe(term, source, scopes)
 
     # ------------------------------------------------------------------ the world's sims
 

@@ -170,3 +170,13 @@ def test_a_departed_sims_late_samples_do_not_fence_out_a_new_sim(world, connect)
     new.term = 1
     wait_until(lambda: _put(new, key, 1) or any(m.header.source == "sim-new" for m in got), timeout=20, what="term 1 believed again")
     assert watcher.sim_fence.term("arm1") == 1
+
+
+def test_fenced_scopes_are_the_authority_scopes_of_authority_keys_and_none_for_others():
+    from fabric.fencing import fenced_scopes
+
+    for key in ("rf/w/robot/arm1/joints", "rf/w/own/arm1", "rf/w/srv/world", "rf/w/robot/arm1/path", "rf/w/own/arm1/by/alice",
+                "rf/w/event/reject/arm1", "not a key"):
+        expected = authority_scopes(key) if is_authority_key(key) else None
+        assert fenced_scopes(key) == expected, key
+    assert fenced_scopes("rf/w/robot/arm1/joints") == ("arm1",) and fenced_scopes("rf/w/robot/arm1/path") is None
