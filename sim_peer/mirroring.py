@@ -112,7 +112,7 @@ class MirrorFeed:
             with self._state:
                 if pose.header.source in self._departed:  # sent just before its sim left, arriving just after
                     return
-            was = robot in self.world.mirrors.held()
+            was = self.world.mirrors.holds(robot)
             shown = self.world.mirror(robot, radius=info.base.radius, height=info.base.height or 0.3,
                                       position=pose.position, quaternion=pose.quaternion, source=pose.header.source or info.sim)
         if shown:

@@ -83,6 +83,9 @@ class Mirrors:
     def held(self) -> dict[str, Mirror]:
         return dict(self._held)
 
+    def holds(self, robot: str) -> bool:
+        return robot in self._held
+
     def show(self, robot: str, radius: float, height: float, source: str = "") -> Mirror | None:
         """Give ``robot`` a slot sized to its footprint (again: resized); None when every slot is taken."""
         m = self._held.get(robot)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import msgpack
-import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as hs
 
