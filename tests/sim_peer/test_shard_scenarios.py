@@ -6,6 +6,7 @@ import pytest
 
 from fabric.testing import client_config, robofabric_cmd, wait_until
 from user_peer.api import World
+from tests.user_peer.test_scenarios import assert_b_then_a
 from user_peer.scenarios import SCENARIOS
 
 pytestmark = pytest.mark.slow
@@ -28,8 +29,4 @@ def test_b_then_a_with_the_arm_on_one_sim_and_the_base_on_another(world, router,
         res_b = SCENARIOS["test-b"](w, arm_id="arm1")
     with World(client_config(world, port), "alice", timeout=10.0) as w:
         res_a = SCENARIOS["test-a"](w, arm_id="arm1", points=4)
-    assert res_b.ok, "\n".join(res_b.lines)
-    assert res_b.figures["goal_error_m"] <= 0.3
-    assert any("map built" in line for line in res_b.lines) and any(line.startswith("planned") for line in res_b.lines)
-    assert res_a.ok, "\n".join(res_a.lines)
-    assert res_a.figures["queried"] == 4 and res_a.figures["max_error_mm"] <= 5.0
+    assert_b_then_a(res_b, res_a)
