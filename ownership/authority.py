@@ -63,19 +63,6 @@ class Authority:
         self._tick_s = tick_s if tick_s is not None else min(0.02, lease_s / 10)
         self._stop = threading.Event()
         self.counters = {"requests": 0, "rejected": 0, "handovers": 0}
-        for obj in objects:
-            self._publish(self._state.records[obj])
-        # one queryable per object, so a wildcard query (a replica joining) gets one record from each;
-        # requests come on the asker's own key (own/{obj}/by/{user}): the user is taken from the key,
-        # where a router's access control vouches for it, never from the payload alone
-        self._queryables = [
-            fabric.serve(keys.own(fabric.world, obj), lambda key, req, obj=obj: self._serve_record(obj), expected=OwnRequest)
-            for obj in objects
-        ] + [
-            fabric.serve(keys.own_request_all(fabric.world, obj), lambda key, req, obj=obj: self._serve(obj, key, req),
-                         expected=OwnRequest)
-            for obj in objects
-        ]
         self._lease_s = lease_s
         self._last_tick_at: float | None = None
         self._resumed_at: float | None = None
@@ -85,6 +72,20 @@ class Authority:
         self._confirm_by: float | None = self.clock.now() + lease_s + 1.0
         self._watch = fabric.watch_peers(self._on_peer, kind="user")
         self._thread: threading.Thread | None = None
+        # one queryable per object, so a wildcard query (a replica joining) gets one record from each;
+        # requests come on the asker's own key (own/{obj}/by/{user}): the user is taken from the key,
+        # where a router's access control vouches for it, never from the payload alone. Served before the
+        # first records go out: a replica that hears one asks for the rest (ownership.client)
+        self._queryables = [
+            fabric.serve(keys.own(fabric.world, obj), lambda key, req, obj=obj: self._serve_record(obj), expected=OwnRequest)
+            for obj in objects
+        ] + [
+            fabric.serve(keys.own_request_all(fabric.world, obj), lambda key, req, obj=obj: self._serve(obj, key, req),
+                         expected=OwnRequest)
+            for obj in objects
+        ]
+        for obj in objects:
+            self._publish(self._state.records[obj])
 
     def start(self) -> "Authority":
         """Start ticking leases on a daemon thread (once; a second call does nothing)."""

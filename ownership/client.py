@@ -105,6 +105,10 @@ class OwnershipClient:
         self._authority_of: dict[str, str] = {}
         self._term_of: dict[str, int] = {}
         self._replaced: dict[str, int] = {}  # a sim whose objects a higher term took over -> that term
+        # sims whose records we have heard since their token: the first record of one we did not ask (its
+        # authority came up after our query, and our subscription reached it after some of its first
+        # publications) makes us ask it for every record, once
+        self._heard_from: set[str] = set()
         self._ready = False  # a new sim's token triggers a refresh only after the first one below
         self._refreshing = self._refresh_again = False
         fabric.watch_peers(self._on_sim, kind="sim")
@@ -142,15 +146,27 @@ class OwnershipClient:
                 self._sims.add(peer_id)
             else:
                 self._sims.discard(peer_id)
+                self._heard_from.discard(peer_id)
                 self._replaced.pop(peer_id, None)  # a sim restarted under this id starts its terms afresh
-            if not (new and self._ready) or self._stop.is_set():
+            if not new:
                 return
-            # its records may have come before its token and been refused as foreign: ask again, once
-            # at a time (made-up sim tokens must not make a thread each)
-            self._refresh_again = True
-            if self._refreshing:
-                return
-            self._refreshing = True
+            # its records may have come before its token and been refused as foreign: ask again
+            start = self._want_refresh()
+        if start:
+            self._start_refresh()
+
+    def _want_refresh(self) -> bool:
+        """Ask every authority for every record again, once at a time (made-up sim tokens and forged records
+        must not make a thread each); True when the caller must start the asking thread. Lock held."""
+        if not self._ready or self._stop.is_set():
+            return False
+        self._refresh_again = True
+        if self._refreshing:
+            return False
+        self._refreshing = True
+        return True
+
+    def _start_refresh(self) -> None:
         threading.Thread(target=self._refresh_while_wanted, name=f"own-refresh-{self.user}", daemon=True).start()
 
     def _refresh_while_wanted(self) -> None:
@@ -213,6 +229,12 @@ class OwnershipClient:
             self._records[rec.object] = rec
             self._seen_at[rec.object] = now
             callbacks = list(self._callbacks)
+            ask = False
+            if rec.authority not in self._heard_from:
+                self._heard_from.add(rec.authority)  # bounded: only live sims' records get here
+                ask = self._want_refresh()
+        if ask:
+            self._start_refresh()
         for cb in callbacks:
             cb(rec)
 

@@ -305,7 +305,8 @@ def _on_tick(s: OwnState, ev: Tick, effects: list[Effect]) -> OwnState:
     gone = [u for u, a in s.away.items() if ev.now > a.deadline]
     if gone:
         away = {k: v for k, v in s.away.items() if k not in gone}
-        rank = {k: v for k, v in s.rank.items() if k not in gone}
+        # a user who asked again while away (a request before her token came back) is live: her place stays
+        rank = {k: v for k, v in s.rank.items() if k not in gone or k in s.live}
         s = replace(s, away=MappingProxyType(away), rank=MappingProxyType(rank))
     return _with(s, recs)
 

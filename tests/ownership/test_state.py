@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from hypothesis import given, settings, strategies as hs
+from hypothesis import example, given, settings, strategies as hs
 
 from ownership import state as st
 
@@ -63,6 +63,9 @@ def check_invariants(s: st.OwnState) -> None:
 
 @settings(max_examples=300, deadline=None)
 @given(events())
+@example([("join", "c", 0.0), ("leave", "c", 0.0), ("tick", 1.0), ("join", "a", 3.0), ("join", "a", 3.0),
+          ("join", "a", 3.0), ("request", "a", "arm", False, 0.0), ("request", "c", "arm", False, 0.0),
+          ("tick", 1.0), ("request", "c", "arm", True, 0.0)])  # asked while away: her rank outlived her grace
 def test_invariants_over_random_sequences(seq):
     s = st.initial(OBJECTS, lease_s=LEASE, grace_s=GRACE)
     now = 0.0

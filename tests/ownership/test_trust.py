@@ -199,3 +199,24 @@ def test_the_client_follows_one_authority_per_object(connect):
         assert rec("base2", "p", 1, 6) == ("p", 6)
     finally:
         alice.close()
+
+
+def test_a_replica_that_missed_the_first_records_asks_for_the_rest(connect):
+    """A user joins between a sim's token and its authority (the sim elects first): her query finds no
+    authority and her subscription reaches the sim after some of its first records (CI saw arm1's lost
+    for good while target's arrived). The first record she hears from that sim makes her ask for all."""
+    sim = connect("sim", "host")
+    alice = OwnershipClient(connect("user", "alice"), "alice", renew_s=0.1, timeout=1.0)
+    sim.muzzle()  # its first records go nowhere, as they do before a subscription reaches it
+    auth = Authority(sim, {"arm": "exclusive", "base": "exclusive", "target": "scene"}, lease_s=5.0).start()
+    try:
+        sim.unmuzzle()
+        bob = OwnershipClient(connect("user", "bob"), "bob", renew_s=0.1)
+        assert bob.request("base").granted  # one record published: the only one alice hears of herself
+        wait_until(lambda: set(alice.snapshot()) == {"arm", "base", "target"}, timeout=10,
+                   what="every record at alice", seen=alice.snapshot)
+        assert alice.record("base").owner == "bob"
+        bob.close()
+    finally:
+        alice.close()
+        auth.close()
