@@ -16,8 +16,9 @@ if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load nump
 log = logging.getLogger("robofabric.sim")
 
 DEFAULT_MIRRORS = 8
-"""Mirror slots a sim has by default: the mobile robots of other sims in its world its sensors can see. Unused
-slots are parked outside every sensor's groups but still cost each LIDAR scan ~1 % each (docs/sim.md)."""
+"""Mirror slots a sim has by default, for the robots of other sims in its world its sensors can see (a base takes
+one, an arm one per link: 8 hold one arm and one base). Unused slots are parked outside every sensor's groups
+but still cost each LIDAR scan ~1 % each (docs/sim.md)."""
 
 
 def make_gate(fabric, world, ownership: bool, restored=None, *, objects: bool = True) -> CommandGate:
@@ -60,8 +61,8 @@ def sim(
     ] = None,
     bumper: Annotated[bool, typer.Option("--bumper/--no-bumper", help="Stop bases before obstacles ahead.")] = True,
     mirrors: Annotated[
-        int, typer.Option("--mirrors", help="Mobile robots of other sims of the world this sim's sensors can see (mirror slots; "
-                                            "each costs every LIDAR ray ~1 %); 0: none. See docs/sim.md.")
+        int, typer.Option("--mirrors", help="Mirror slots for robots of other sims of the world, so this sim's sensors see them: "
+                                            "a base takes 1, an arm 1 per link (7); each costs every LIDAR ray ~1 %; 0: none. See docs/sim.md.")
     ] = DEFAULT_MIRRORS,
     ownership: Annotated[bool, typer.Option("--ownership/--no-ownership", help="Gate commands by ownership (needs the ownership package).")] = True,
     standby: Annotated[

@@ -1,14 +1,20 @@
-"""Feeding mirrors: the other sims' mobile robots, from their pose streams, into this sim's world.
+"""Feeding mirrors: the other sims' robots, from their pose and joint streams, into this sim's world.
 
 A sim that shares its world with other sims (docs/sim.md, "Several sims, one world") follows every
-``robot/*/pose`` another session publishes. A robot that is not this world's own gets a mirror
-(:mod:`sim_peer.mirrors`) sized from its description in the world's ``srv/world`` union (its
-``BaseInfo``), placed at each pose as it arrives, under the peer's lock, between two steps. A mirror is
-hidden when its sim's token goes, or when no pose came for ``stale_s`` (its sim paused or was cut off:
-an obstacle frozen where it was last seen would be a lie the LIDAR keeps telling).
+``robot/*/pose`` another session publishes. A robot that is not this world's own is looked up in the
+world's ``srv/world`` union and gets a mirror (:mod:`sim_peer.mirrors`):
 
-How late a mirror is, is measured here: a pose's age on arrival, by the sender's wall clock (meaningful on
-one machine or with synchronised clocks), plus the stream's period (``bench shards`` reports both).
+- a mobile base: one cylinder sized from its ``BaseInfo``, placed at each pose as it arrives;
+- an arm: its link geoms (:mod:`sim_peer.arm_mirror`), placed from its ``joints`` stream (its ``pose`` is
+  its flange, which says nothing of its links), followed once the description names it an arm, at most
+  every ``ARM_PERIOD_S``.
+
+Mirrors move under the peer's lock, between two steps. A mirror is hidden when its sim's token goes, or
+when nothing came for ``stale_s`` (its sim paused or was cut off: an obstacle frozen where it was last seen
+would be a lie the LIDAR keeps telling).
+
+How late a mirror is, is measured here: a message's age on arrival, by the sender's wall clock (meaningful
+on one machine or with synchronised clocks), plus the stream's period (``bench shards`` reports both).
 """
 
 from __future__ import annotations
@@ -20,12 +26,13 @@ from collections import deque
 from typing import Any, Callable
 
 from fabric import keys
-from fabric.interfaces import Pose, RobotInfo, ServiceError, WorldInfo
+from fabric.interfaces import JointState, Pose, RobotInfo, ServiceError, WorldInfo
+from sim_peer.arm_mirror import ArmShape, arm_shape
 from sim_peer.world import SimWorld
 
 log = logging.getLogger("robofabric.sim")
 
-__all__ = ["MirrorFeed", "STALE_S"]
+__all__ = ["ARM_PERIOD_S", "MirrorFeed", "STALE_S"]
 
 STALE_S = 2.0
 """A mirror with no pose for this long is hidden (a transport lease: its sim is paused or cut off)."""
@@ -33,12 +40,16 @@ STALE_S = 2.0
 DESCRIBE_EVERY_S = 1.0
 """How often an unknown robot's pose may make the feed ask the world's description again."""
 
+ARM_PERIOD_S = 0.02
+"""An arm's mirror moves at most this often (its joints come at 100 Hz; sensors read at 20-50 Hz)."""
+
+MAX_ARMS = 256  # arms followed (each a subscription): bounded, whatever a world description says
 MAX_LAGS = 4096
 MAX_DEPARTED = 256  # sims remembered as gone (bounded: anyone may declare a token)
 
 
 class MirrorFeed:
-    """The other sims' mobile robots as mirrors in ``world``; a context manager, ``close()`` idempotent.
+    """The other sims' robots as mirrors in ``world``; a context manager, ``close()`` idempotent.
 
     ``describe()`` answers the world's description (the union of every sim's part); ``lock`` is the lock the
     sim steps its world under; ``clock`` is monotonic seconds (tests pass their own)."""
@@ -50,13 +61,17 @@ class MirrorFeed:
         self._clock = clock
         self._describe = describe or self._ask_world
         self._bases: dict[str, RobotInfo] = {}  # other sims' mobile robots, from the description
+        self._arms: dict[str, RobotInfo] = {}  # other sims' arms, from the description
+        self._shapes: dict[str, ArmShape] = {}  # arms followed: their link geoms
+        self._arm_subs: dict[str, Any] = {}  # arm -> its joints subscription
+        self._moved_at: dict[str, float] = {}  # arm -> when its mirror last moved
         self._seen: dict[str, float] = {}  # robot -> when its last pose arrived here
         self._asked_at = float("-inf")
         self._asking = False
         self._departed: set[str] = set()  # sims whose token went: their poses still in flight must not show a mirror again
         self._state = threading.Lock()
         self.lag_ms: deque[float] = deque(maxlen=MAX_LAGS)  # a pose's age on arrival, by the sender's clock
-        self.counters = {"poses": 0, "unknown": 0, "shown": 0, "hidden": 0}
+        self.counters = {"poses": 0, "joints": 0, "unknown": 0, "shown": 0, "hidden": 0, "unmirrorable": 0}
         self._closed = False
         self._stop = threading.Event()
         self._subs = [
@@ -80,10 +95,33 @@ class MirrorFeed:
         except (ServiceError, ValueError) as exc:
             log.debug("mirrors: no world description yet: %s", exc)
             info = None
+        follow: dict[str, ArmShape] = {}
+        if info is not None:
+            for r in info.robots:
+                if r.kind != "arm" or r.id in self.world.robots or r.id in self._shapes or len(self._shapes) + len(follow) >= MAX_ARMS:
+                    continue
+                try:
+                    follow[r.id] = arm_shape(r)
+                except ValueError as exc:  # a type this machine does not have: seen by no sensor here
+                    self.counters["unmirrorable"] += 1
+                    log.warning("cannot mirror %s: %s", r.id, exc)
         with self._state:
             self._asking = False
             if info is not None:
                 self._bases = {r.id: r for r in info.robots if r.base is not None and r.id not in self.world.robots}
+                self._arms = {r.id: r for r in info.robots if r.kind == "arm" and r.id not in self.world.robots}
+            if self._closed:
+                return
+            self._shapes.update(follow)
+        for rid in follow:  # declared here, in this thread: never from a subscriber callback
+            sub = self.fab.subscribe(keys.robot_joints(self.fab.world, rid), self._on_joints, expected=JointState,
+                                     remote_only=True)
+            with self._state:
+                closed = self._closed
+                if not closed:
+                    self._arm_subs[rid] = sub
+            if closed:
+                sub.undeclare()
 
     def _footprint(self, robot: str) -> RobotInfo | None:
         with self._state:
@@ -99,8 +137,8 @@ class MirrorFeed:
 
     def _on_pose(self, key: str, pose: Pose) -> None:
         robot = keys.parse(key).subject
-        if robot in self.world.robots or self._closed:
-            return
+        if robot in self.world.robots or self._closed or robot in self._arms:
+            return  # an arm's pose is its flange: its mirror follows its joints
         self.counters["poses"] += 1
         info = self._footprint(robot)
         if info is None:
@@ -121,6 +159,36 @@ class MirrorFeed:
             if not was:
                 self.counters["shown"] += 1
                 log.info("mirroring %s (simulated by %s)", robot, pose.header.source or info.sim)
+
+    def _on_joints(self, key: str, js: JointState) -> None:
+        robot = keys.parse(key).subject
+        shape = self._shapes.get(robot)
+        if shape is None or robot in self.world.robots or self._closed:
+            return
+        self.counters["joints"] += 1
+        now = self._clock()
+        if now - self._moved_at.get(robot, float("-inf")) < ARM_PERIOD_S:
+            return
+        if js.header.wall_ns:
+            self.lag_ms.append(max(0.0, (time.time_ns() - js.header.wall_ns) / 1e6))
+        info = self._arms.get(robot)
+        source = js.header.source or (info.sim if info is not None else "")
+        with self.lock:
+            with self._state:
+                if source in self._departed:
+                    return
+            poses = shape.poses(js.q)
+            if poses is None:
+                return
+            was = self.world.mirrors.holds(robot)
+            shown = self.world.mirror_shapes(robot, shape.shapes, poses, source=source)
+        if shown:
+            with self._state:
+                self._seen[robot] = now
+                self._moved_at[robot] = now
+            if not was:
+                self.counters["shown"] += 1
+                log.info("mirroring %s (simulated by %s; %d link geoms)", robot, source, len(shape.shapes))
 
     def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
         if alive:
@@ -181,7 +249,10 @@ class MirrorFeed:
         if self.counters["poses"]:
             log.info("%s", self.summary())
         self._stop.set()
-        for sub in self._subs:
+        with self._state:
+            subs = self._subs + list(self._arm_subs.values())
+            self._arm_subs.clear()
+        for sub in subs:
             try:
                 sub.undeclare()
             except Exception:  # the session closed first

@@ -3,13 +3,16 @@
 When several sims share a world, each simulates its own robots; a LIDAR, an ultrasonic ring or a bumper
 here must still see a robot simulated elsewhere. A MuJoCo model cannot gain bodies once compiled, so the
 model is built with a pool of ``slots``: mocap bodies with one cylinder each, parked far below the floor in
-a geom group no sensor sees (an unused slot costs the rays nothing), never colliding (robots are kinematic). A mirror takes a slot, joins the robots' geom group, is sized
-to the other robot's footprint (its ``BaseInfo`` radius and height) and follows that robot's published pose;
-hiding it parks the slot again. The pose comes from the other sim's ``pose`` stream, so a mirror lags by a
-stream period plus transport (docs/sim.md).
+a geom group no sensor sees (an unused slot costs the rays nothing), never colliding (robots are kinematic). A mirror takes slots and puts them in the robots' geom group:
 
-Arms are not mirrored: an arm stands on its table (part of the scene every sim loads), with its links above
-the LIDAR plane. Pure MuJoCo, no Zenoh: the peer feeds it (:mod:`sim_peer.peer`).
+- a mobile base takes one, a cylinder sized to its footprint (its ``BaseInfo`` radius and height), placed
+  at each pose of its ``pose`` stream;
+- an arm takes one per link geom (capsules, boxes, spheres, cylinders: :mod:`sim_peer.arm_mirror` turns
+  its ``joints`` stream into the pose of each), so a bumper or a LIDAR that meets an arm meets its links
+  where its own sim has them.
+
+Hiding a mirror parks its slots again. A mirror lags its robot by a stream period plus transport
+(docs/sim.md). Pure MuJoCo, no Zenoh: the peer feeds it (:mod:`sim_peer.mirroring`).
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-__all__ = ["MIRROR_PREFIX", "PARKED_Z", "Mirror", "Mirrors", "add_slots"]
+__all__ = ["MIRROR_PREFIX", "PARKED_Z", "PRIMITIVES", "Mirror", "Mirrors", "Shape", "add_slots", "footprint"]
 
 MIRROR_PREFIX = "mirror/"
 """Body and geom names of the slots: ``mirror/{i}`` (a robot id cannot contain a slash, so none collides)."""
@@ -45,15 +48,45 @@ def add_slots(spec: mujoco.MjSpec, slots: int) -> None:
         )
 
 
+Shape = tuple[int, tuple[float, float, float]]
+"""One slot's geom: its MuJoCo type (``mjtGeom``: a primitive, never a mesh) and its size."""
+
+PRIMITIVES = {int(mujoco.mjtGeom.mjGEOM_SPHERE), int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_CYLINDER),
+               int(mujoco.mjtGeom.mjGEOM_BOX), int(mujoco.mjtGeom.mjGEOM_ELLIPSOID)}
+
+
+def footprint(radius: float, height: float) -> Shape:
+    """A mobile base's one slot: a cylinder about its turn point, standing on the floor."""
+    return int(mujoco.mjtGeom.mjGEOM_CYLINDER), (max(float(radius), 0.01), max(float(height), 0.02) / 2.0, 0.0)
+
+
+def _bounds(shape: Shape) -> tuple[float, list[float]]:
+    """The bounding sphere radius and half-extents (``geom_rbound``, ``geom_aabb``) ray casting culls by."""
+    kind, (a, b, c) = shape
+    if kind == mujoco.mjtGeom.mjGEOM_SPHERE:
+        half = [a, a, a]
+    elif kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
+        half = [a, a, a + b]
+    elif kind == mujoco.mjtGeom.mjGEOM_CYLINDER:
+        half = [a, a, b]
+    else:  # box, ellipsoid: half-sizes
+        half = [a, b, c]
+    return float(np.linalg.norm(half)), half
+
+
 @dataclass(frozen=True, slots=True)
 class Mirror:
-    """A robot of another sim as this sim holds it: which slot, its footprint, and the sim it comes from."""
+    """A robot of another sim as this sim holds it: which slots, their shapes, and the sim it comes from."""
 
     robot: str
-    slot: int
-    radius: float
-    height: float
+    slots: tuple[int, ...]
+    shapes: tuple[Shape, ...]
     source: str = ""
+
+    @property
+    def height(self) -> float:
+        """A base's standing height (its one cylinder); 0 for several slots."""
+        return 2.0 * self.shapes[0][1][1] if len(self.shapes) == 1 else 0.0
 
 
 class Mirrors:
@@ -73,12 +106,17 @@ class Mirrors:
             self._geom.append(mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"{MIRROR_PREFIX}{i}"))
             i += 1
         self._held: dict[str, Mirror] = {}
+        self._free: list[int] = list(range(len(self._mocap)))  # kept sorted: the lowest slots first
         self._mat = np.zeros(9)
-        self.refused = 0  # robots that found no free slot
+        self.refused = 0  # robots that found too few free slots
 
     @property
     def slots(self) -> int:
         return len(self._mocap)
+
+    @property
+    def free(self) -> int:
+        return len(self._free)
 
     def held(self) -> dict[str, Mirror]:
         return dict(self._held)
@@ -87,54 +125,88 @@ class Mirrors:
         return robot in self._held
 
     def show(self, robot: str, radius: float, height: float, source: str = "") -> Mirror | None:
-        """Give ``robot`` a slot sized to its footprint (again: resized); None when every slot is taken."""
+        """Give a mobile base one slot sized to its footprint (again: resized); None when none is free."""
+        return self.show_shapes(robot, (footprint(radius, height),), source)
+
+    def show_shapes(self, robot: str, shapes: Sequence[Shape], source: str = "") -> Mirror | None:
+        """Give ``robot`` one slot per shape (primitive geoms), in the robots' geom group; None, counted, when too
+        few slots are free. Showing it again with other shapes resizes it, or takes other slots."""
         m = self._held.get(robot)
+        if m is not None and m.source == source and (shapes is m.shapes or tuple(shapes) == m.shapes):
+            return m  # as it is (an arm's every joint message): nothing to resize
+        shapes = tuple((int(k), tuple(float(x) for x in size)) for k, size in shapes)
+        if not shapes or any(k not in PRIMITIVES for k, _ in shapes):
+            raise ValueError(f"mirror of {robot}: one or more primitive geoms needed, got types {[k for k, _ in shapes]}")
+        if m is not None and len(m.slots) != len(shapes):
+            self.hide(robot)
+            m = None
         if m is None:
-            free = sorted(set(range(self.slots)) - {h.slot for h in self._held.values()})
-            if not free:
+            if len(self._free) < len(shapes):
                 self.refused += 1
                 return None
-            m = Mirror(robot, free[0], 0.0, 0.0, source)
-        if (m.radius, m.height) != (radius, height):
-            half = max(float(height), 0.02) / 2.0
-            r = max(float(radius), 0.01)
-            g = self._geom[m.slot]
-            self.model.geom_size[g] = [r, half, 0.0]
-            self.model.geom_rbound[g] = float(np.hypot(r, half))  # ray casting culls by these two
-            self.model.geom_aabb[g] = [0.0, 0.0, 0.0, r, r, half]
-        self.model.geom_group[self._geom[m.slot]] = MIRROR_GROUP
-        m = Mirror(robot, m.slot, float(radius), float(height), source)
+            slots, self._free = tuple(self._free[:len(shapes)]), self._free[len(shapes):]
+            m = Mirror(robot, slots, (), source)
+        for slot, shape, old in zip(m.slots, shapes, m.shapes or (None,) * len(shapes)):
+            g = self._geom[slot]
+            if shape != old:
+                rbound, half = _bounds(shape)
+                self.model.geom_type[g] = shape[0]
+                self.model.geom_size[g] = shape[1]
+                self.model.geom_rbound[g] = rbound  # ray casting culls by these two
+                self.model.geom_aabb[g] = [0.0, 0.0, 0.0, *half]
+            self.model.geom_group[g] = MIRROR_GROUP
+        m = Mirror(robot, m.slots, shapes, source)
         self._held[robot] = m
         return m
 
     def place(self, robot: str, position: Sequence[float], quaternion: Sequence[float]) -> bool:
-        """Put ``robot``'s mirror where its own sim says it is (``position``: the base on the floor); False
-        when it holds no slot or the pose is not finite."""
+        """Put a base's mirror where its own sim says it is (``position``: the base on the floor); False when it
+        holds no slot or the pose is not finite."""
         m = self._held.get(robot)
-        p, q = np.asarray(position, dtype=np.float64), np.asarray(quaternion, dtype=np.float64)
-        if m is None or p.shape != (3,) or q.shape != (4,) or not (np.isfinite(p).all() and np.isfinite(q).all()):
+        if m is None:
             return False
-        n = float(np.linalg.norm(q))
-        if n < 1e-9:
+        return self.place_shapes(robot, [(np.asarray(position, dtype=np.float64) + [0.0, 0.0, m.height / 2.0], quaternion)])
+
+    def place_shapes(self, robot: str, poses: Sequence[tuple[Sequence[float], Sequence[float]]]) -> bool:
+        """Put each of ``robot``'s slots at its pose (centre, quaternion), in slot order; False (nothing moved)
+        when it holds no slots, the count differs, or a pose is not finite."""
+        m = self._held.get(robot)
+        if m is None or len(poses) != len(m.slots):
             return False
-        i, g = self._mocap[m.slot], self._geom[m.slot]
-        centre, q = p + [0.0, 0.0, max(m.height, 0.02) / 2.0], q / n
-        self.data.mocap_pos[i], self.data.mocap_quat[i] = centre, q
-        # where MuJoCo's kinematics would put the geom, now: a world recomputes positions only when something
+        try:
+            p = np.asarray([pos for pos, _ in poses], dtype=np.float64)
+            q = np.asarray([quat for _, quat in poses], dtype=np.float64)
+        except ValueError:  # ragged
+            return False
+        if p.shape != (len(m.slots), 3) or q.shape != (len(m.slots), 4) or not (np.isfinite(p).all() and np.isfinite(q).all()):
+            return False
+        n = np.linalg.norm(q, axis=1)
+        if (n < 1e-9).any():
+            return False
+        q = q / n[:, None]
+        mocap, geoms = self._rows(m)
+        self.data.mocap_pos[mocap], self.data.mocap_quat[mocap] = p, q
+        # where MuJoCo's kinematics would put the geoms, now: a world recomputes positions only when something
         # reads them, and a bumper's rays between two reads must see the mirror where it is
-        self.data.geom_xpos[g] = centre
-        mujoco.mju_quat2Mat(self._mat, q)
-        self.data.geom_xmat[g] = self._mat
+        self.data.geom_xpos[geoms] = p
+        for g, qi in zip(geoms, q):
+            mujoco.mju_quat2Mat(self._mat, qi)
+            self.data.geom_xmat[g] = self._mat
         return True
+
+    def _rows(self, m: Mirror) -> tuple[list[int], list[int]]:
+        return [self._mocap[s] for s in m.slots], [self._geom[s] for s in m.slots]
 
     def hide(self, robot: str) -> bool:
         """Park ``robot``'s mirror (its sim left, or it was handed to this sim); False when it had none."""
         m = self._held.pop(robot, None)
         if m is None:
             return False
-        self.data.mocap_pos[self._mocap[m.slot]] = [0.0, 0.0, PARKED_Z]
-        self.data.geom_xpos[self._geom[m.slot]] = [0.0, 0.0, PARKED_Z]
-        self.model.geom_group[self._geom[m.slot]] = PARKED_GROUP
+        for slot in m.slots:
+            self.data.mocap_pos[self._mocap[slot]] = [0.0, 0.0, PARKED_Z]
+            self.data.geom_xpos[self._geom[slot]] = [0.0, 0.0, PARKED_Z]
+            self.model.geom_group[self._geom[slot]] = PARKED_GROUP
+        self._free = sorted(self._free + list(m.slots))
         return True
 
     def hide_from(self, source: str) -> list[str]:

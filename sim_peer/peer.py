@@ -102,7 +102,7 @@ class SimPeer:
         self._queues: dict[str, CommandQueue[Command]] = {rid: CommandQueue() for rid in world.robots}
         self._queued = threading.Condition(threading.Lock())
         self._worker: threading.Thread | None = None
-        self.mirror_feed: MirrorFeed | None = None  # the other sims' bases in this world, once open (mirror slots)
+        self.mirror_feed: MirrorFeed | None = None  # the other sims' robots in this world, once open (mirror slots)
         self._declared: list[Any] = []  # what open() declared on the shared session: close() takes it away
 
     # ------------------------------------------------------------------ lifecycle

@@ -26,7 +26,7 @@ from fabric.interfaces import EventKind
 from robots import SceneDescription, SceneRobot
 from sim_peer.build import SensorOptions, compile_model, load_scene, resolve, scene_objects
 from sim_peer.errors import WorldError
-from sim_peer.mirrors import Mirrors
+from sim_peer.mirrors import Mirrors, Shape
 from sim_peer.placement import parse_robot_spec, place
 from sim_peer.registry import robot_class
 from sim_peer.robot import Mount, Note, Physics, SimRobot
@@ -211,6 +211,16 @@ class SimWorld:
         if robot_id in self.robots or self.mirrors.show(robot_id, radius, height, source) is None:
             return False
         placed = self.mirrors.place(robot_id, position, quaternion)
+        self._dirty = True
+        return placed
+
+    def mirror_shapes(self, robot_id: str, shapes: Sequence[Shape], poses: Sequence[tuple[Sequence[float], Sequence[float]]],
+                      *, source: str = "") -> bool:
+        """Show a robot of another sim as several geoms (an arm's links: :mod:`sim_peer.arm_mirror`), each at
+        its pose; False when too few slots are free, a pose is not finite, or the robot is this world's own."""
+        if robot_id in self.robots or self.mirrors.show_shapes(robot_id, shapes, source) is None:
+            return False
+        placed = self.mirrors.place_shapes(robot_id, poses)
         self._dirty = True
         return placed
 

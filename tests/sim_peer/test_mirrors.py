@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from fabric import keys
-from fabric.interfaces import Pose, WorldInfo
+from fabric.interfaces import JointState, Pose, RobotInfo, WorldInfo
 from fabric.testing import wait_until
 from sim_peer.mirroring import MirrorFeed
 from sim_peer.world import SimWorld
@@ -120,3 +120,86 @@ def test_a_mirror_whose_robot_falls_silent_is_hidden(world, connect):
         now[0] = 2.5  # no pose for longer than stale_s: hidden by the feed's own sweep, or by this one
         wait_until(lambda: feed.sweep() is not None and "base9" not in mine.mirrors.held(), timeout=5, what="base9 hidden")
         assert feed.counters["hidden"] == 1
+
+
+def arm_elsewhere(q=None, at="1,0.5,30,0") -> tuple[SimWorld, RobotInfo]:
+    """Another sim's arm (spawned on the floor, so a base's LIDAR plane crosses its links) at joints ``q``."""
+    import mujoco
+
+    other = SimWorld("warehouse", [f"meca500:arm9@{at}"], scene_robots=False)
+    info = other.robot("arm9").describe()
+    if q is not None:
+        for name, v in zip(info.joint_names, q):
+            j = mujoco.mj_name2id(other.model, mujoco.mjtObj.mjOBJ_JOINT, f"arm9/{name}")
+            other.data.qpos[other.model.jnt_qposadr[j]] = v
+        mujoco.mj_kinematics(other.model, other.data)
+    return other, info
+
+
+def test_an_arm_mirror_puts_each_link_where_the_arms_own_sim_has_it():
+    import mujoco
+
+    from sim_peer.arm_mirror import arm_shape
+
+    q = [0.4, -0.7, 0.9, 1.1, -0.5, 2.0]
+    other, info = arm_elsewhere(q)
+    shape = arm_shape(info)
+    poses = shape.poses(q)
+    names = [mujoco.mj_id2name(shape.model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in shape._geoms]
+    assert len(poses) == len(shape.shapes) == 7, names  # the base and six links of the Meca500
+    for name, (centre, quat) in zip(names, poses):
+        g = mujoco.mj_name2id(other.model, mujoco.mjtObj.mjOBJ_GEOM, f"arm9/{name}")
+        np.testing.assert_allclose(centre, other.data.geom_xpos[g], atol=1e-9, err_msg=name)
+        mat = np.zeros(9)
+        mujoco.mju_quat2Mat(mat, quat)
+        np.testing.assert_allclose(mat, other.data.geom_xmat[g], atol=1e-9, err_msg=name)
+    assert shape.poses(q[:5]) is None and shape.poses([math.nan] * 6) is None  # a malformed message moves nothing
+
+
+def test_the_lidar_sees_a_mirrored_arm_and_sees_its_links_move():
+    from sim_peer.arm_mirror import arm_shape
+
+    w = SimWorld("warehouse", ["reeman:base0@0,0"], scene_robots=False, mirrors=8)
+    w.step(10)
+    free = ahead(w)
+    _, info = arm_elsewhere(at="1,0,0,0")  # 1 m ahead of base0, on the floor: the upper arm crosses the LIDAR plane
+    shape = arm_shape(info)
+    upright = [0.0] * 6
+    assert w.mirror_shapes("arm9", shape.shapes, shape.poses(upright), source="sim-b")
+    assert w.mirrors.free == 1  # seven of eight slots: one per link geom
+    seen = ahead(w)
+    assert seen == pytest.approx(1.0 - 0.22 - 0.032, abs=0.02)  # the upper arm's capsule, past the LIDAR's offset
+    bowed = [0.0, 1.5, 0.0, 0.0, 0.0, 0.0]  # the shoulder bows the arm forward, under the LIDAR plane
+    assert w.mirror_shapes("arm9", shape.shapes, shape.poses(bowed), source="sim-b")
+    assert ahead(w) > seen + 0.5
+    assert w.mirror("base8", radius=0.3, height=0.5, position=[5, 5, 0], quaternion=[1, 0, 0, 0])  # the last slot
+    assert not w.mirror("base7", radius=0.3, height=0.5, position=[6, 5, 0], quaternion=[1, 0, 0, 0])
+    assert w.unmirror(source="sim-b") == ["arm9"] and w.mirrors.free == 7
+    assert ahead(w) == pytest.approx(free, abs=1e-6)
+
+
+def test_the_feed_mirrors_another_sims_arm_from_its_joints(world, connect):
+    """The arm's pose (its flange) makes the feed learn of it; its joints move its links; its sim's exit hides it."""
+    mine = SimWorld("warehouse", ["reeman:base0@0,0"], scene_robots=False, mirrors=8)
+    other = connect(kind="sim", peer_id="sim-b")
+    _, info = arm_elsewhere(at="1,0,0,0")
+    part = WorldInfo(world=world, scene="warehouse", timestep=mine.dt, rates={}, robots=(replace(info, sim="sim-b"),))
+    pose_key, joints_key = keys.robot_pose(world, "arm9"), keys.robot_joints(world, "arm9")
+    free = ahead(mine)
+    with MirrorFeed(connect(kind="sim", peer_id="sim-a"), mine, threading.RLock(), describe=lambda: part, stale_s=30.0) as feed:
+        def put(q: list[float]) -> None:
+            other.publish(pose_key, Pose(np.array([1.2, 0.0, 0.3]), np.array([1.0, 0, 0, 0]), header=other.header(pose_key)))
+            other.publish(joints_key, JointState(info.joint_names, np.array(q), np.zeros(6), header=other.header(joints_key)))
+
+        upright, bowed = [0.0] * 6, [0.0, 1.5, 0.0, 0.0, 0.0, 0.0]
+        wait_until(lambda: put(upright) or "arm9" in mine.mirrors.held(), timeout=10, interval=0.05, what="arm9 mirrored",
+                   seen=lambda: feed.counters)
+        assert len(mine.mirrors.held()["arm9"].slots) == 7 and mine.mirrors.held()["arm9"].source == "sim-b"
+        wait_until(lambda: put(upright) or ahead(mine) < 0.8, timeout=5, interval=0.05, what="the LIDAR seeing arm9's upper arm",
+                   seen=lambda: ahead(mine))
+        wait_until(lambda: put(bowed) or ahead(mine) > 1.5, timeout=5, interval=0.05, what="the LIDAR seeing arm9 bow under its plane",
+                   seen=lambda: ahead(mine))
+        assert feed.counters["joints"] >= 2 and feed.lag_ms
+        other.close()
+        wait_until(lambda: "arm9" not in mine.mirrors.held(), timeout=10, what="arm9's mirror hidden when sim-b left")
+        assert ahead(mine) == pytest.approx(free, abs=1e-6) and mine.mirrors.free == 8

@@ -1,6 +1,6 @@
 """Sensors see across sims: base0's LIDAR, simulated by sim-a, sees base1, simulated by sim-b, and sees it move.
 
-Each sim mirrors the other sims' mobile robots as kinematic bodies from their pose streams
+Each sim mirrors the other sims' robots as kinematic bodies from their pose and joint streams
 (sim_peer/mirrors.py, sim_peer/mirroring.py); when sim-b goes, sim-a's mirror of base1 goes with it."""
 
 from __future__ import annotations
@@ -53,5 +53,35 @@ def test_a_lidar_sees_a_robot_another_sim_simulates_and_sees_it_move(world, rout
         procs.kill(sim_b)  # sim-b goes: its token with it, and sim-a's mirror of base1
         wait_until(lambda: _ahead(w) > FREE_AHEAD, timeout=30, what="base1's mirror gone with sim-b", seen=lambda: (_ahead(w), alone))
         assert "mirroring base1 (simulated by sim-b)" in procs.output(sim_a)
+    finally:
+        w.close()
+
+
+def test_a_lidar_sees_the_links_of_an_arm_another_sim_simulates(world, router, connect, procs):
+    """An arm on the floor 1 m ahead of base0, on sim-b: sim-a mirrors its links from its joint stream, so base0's
+    LIDAR sees its upper arm, then sees it bow under the LIDAR plane when its owner moves it."""
+    ep = f"tcp/127.0.0.1:{router[1]}"
+    common = ("--world", world, "--connect", ep)
+    scene = ("--scene", "warehouse", "--no-scene-robots")
+    sim_a = procs.start(robofabric_cmd("-v", "sim", *scene, "--robot", "reeman:base0@0,0", *common, "--id", "sim-a"), name="sim-a")
+    probe = connect("tool", "probe")
+    wait_until(lambda: ("sim", "sim-a") in probe.live_peers("sim"), timeout=60, what="sim-a", seen=lambda: procs.output(sim_a)[-800:])
+    sim_b = procs.start(robofabric_cmd("sim", *scene, "--robot", "meca500:arm1@1,0,0,0", *common, "--id", "sim-b"), name="sim-b")
+    wait_until(lambda: ("sim", "sim-b") in probe.live_peers("sim"), timeout=60, what="sim-b", seen=lambda: procs.output(sim_b)[-800:])
+    w = World(client_config(world, router[1]), "alice", timeout=10.0)
+    try:
+        w.robot("base0").wait_for("scan", timeout=30)
+        # the upper arm's capsule, 1 m ahead less the LIDAR's offset (0.22 m) and the capsule's radius
+        wait_until(lambda: 0.65 < _ahead(w) < 0.85, timeout=60, what="base0's LIDAR seeing arm1's links (sim-b)",
+                   seen=lambda: (_ahead(w), procs.output(sim_a)[-600:], procs.output(sim_b)[-600:]))
+        arm = w.robot("arm1")
+        arm.request(timeout=10)
+        arm.move_joints([0.0, 1.5, 0.0, 0.0, 0.0, 0.0], wait=True, timeout=30)  # bowed forward, under the LIDAR plane
+        wait_until(lambda: _ahead(w) > 1.5, timeout=10, what="base0's LIDAR no longer seeing arm1's upper arm",
+                   seen=lambda: (_ahead(w), arm.joints))
+        assert "mirroring arm1 (simulated by sim-b; 7 link geoms)" in procs.output(sim_a)
+        procs.kill(sim_b)
+        wait_until(lambda: "no longer mirroring arm1" in procs.output(sim_a), timeout=30, what="arm1's mirror gone with sim-b",
+                   seen=lambda: procs.output(sim_a)[-600:])
     finally:
         w.close()
