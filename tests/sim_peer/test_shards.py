@@ -8,6 +8,8 @@ told which robots went. A duplicate robot id and another scene are still refused
 from __future__ import annotations
 
 import json
+import os
+import signal
 import subprocess
 import time
 
@@ -154,3 +156,56 @@ def test_a_shards_standby_takes_its_robots_over_and_the_other_shard_is_not_fence
         assert sim_a.poll() is None and "stepping down" not in procs.output(sim_a) and "took over" not in procs.output(sim_a)
     finally:
         w.close()
+
+
+def test_a_paused_shard_stalls_its_robots_only_and_comes_back_with_its_owners(world, router, connect, procs):
+    """SIGSTOP on sim-b for 4 s (a laptop lid, a swap storm): alice's base0, at sim-a, streams, drives and stays hers
+    throughout; when sim-b resumes, it rejoins the world as base1's sim, base1 streams again, and bob still owns it
+    with the same epoch and drives it (no standby, no restart)."""
+    common, probe, sim_a, sim_b = _two_shards(world, router, connect, procs)
+    alice = World(client_config(world, router[1]), "alice", timeout=10.0)
+    bob = World(client_config(world, router[1]), "bob", timeout=10.0)
+    resumed = False
+    try:
+        b0, b1 = alice.robot("base0"), bob.robot("base1")
+        for b in (b0, b1):
+            b.wait_for("pose", timeout=20)
+            b.request(timeout=10)
+        epoch0, epoch1 = alice.ownership.record("base0").epoch, bob.ownership.record("base1").epoch
+        gone: list[tuple[str, list[str]]] = []
+        alice.on_robots_gone(lambda sim, robots: gone.append((sim, robots)))
+
+        os.kill(sim_b.pid, signal.SIGSTOP)
+        stopped = time.time_ns()
+        x = b0.xy_theta[0]
+        b0.twist(0.3, 0.0)
+        wait_until(lambda: b0.xy_theta[0] > x + 0.1, timeout=20, what="base0 driving while sim-b is paused",
+                   seen=lambda: (b0.xy_theta, alice.events[-3:]))
+        b0.stop(timeout=10)
+        # base0's poses keep coming for the whole pause (a condition, not a sleep: a pose stamped 4 s in)
+        wait_until(lambda: b0.pose.header.wall_ns > stopped + 4_000_000_000, timeout=30, what="base0 streaming 4 s into the pause")
+        assert b1.pose.header.wall_ns < stopped + 500_000_000  # nothing from the paused sim meanwhile (the last in flight)
+        os.kill(sim_b.pid, signal.SIGCONT)
+        resumed = True
+        cont = time.time_ns()
+        wait_until(lambda: b1.pose.header.wall_ns > cont, timeout=30, what="base1 streaming again after SIGCONT",
+                   seen=lambda: procs.output(sim_b)[-800:])
+        x1 = b1.xy_theta[0]
+        b1.twist(0.3, 0.0)  # faces -x
+        wait_until(lambda: b1.xy_theta[0] < x1 - 0.1, timeout=20, what="bob driving base1 after the pause",
+                   seen=lambda: (b1.xy_theta, bob.events[-3:], procs.output(sim_b)[-800:]))
+        b1.stop(timeout=10)
+        rec0, rec1 = alice.ownership.record("base0"), bob.ownership.record("base1")
+        assert (rec0.owner, rec0.epoch, rec0.authority) == ("alice", epoch0, "sim-a"), rec0
+        assert (rec1.owner, rec1.epoch, rec1.authority) == ("bob", epoch1, "sim-b"), rec1
+        # 4 s is past the transport lease (2 s): the router dropped sim-b meanwhile and alice was told base1 went;
+        # it is back in her world now, and her own robot never left it
+        assert gone == [("sim-b", ["base1"])], gone
+        wait_until(lambda: sorted(alice.robots()) == ["base0", "base1"], timeout=20, what="base1 back in alice's world",
+                   seen=alice.sims)
+        assert "stepping down" not in procs.output(sim_a) + procs.output(sim_b)
+    finally:
+        if not resumed:
+            os.kill(sim_b.pid, signal.SIGCONT)  # a paused process cannot be ended by SIGTERM
+        alice.close()
+        bob.close()
