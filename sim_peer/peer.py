@@ -77,8 +77,9 @@ class SimPeer:
         objects: bool = True,
     ) -> None:
         self.fabric = fabric
-        # the scene objects' authority (moves them on users' poses, describes them): the first sim of a world;
-        # the others of a sharded world keep them where the scene puts them (docs/sim.md, "Several sims, one world")
+        # the scene objects' authority (describes them, reports bad poses): the first sim of a world; the others of
+        # a sharded world mirror them, moving them on the same users' poses without a word, so the one that adopts
+        # them when their authority goes has them where they were (docs/sim.md, "Several sims, one world")
         self.objects = objects
         self._other_sims: set[str] = set()  # other live sims: a command for a robot none of ours may be theirs
         self.world = world
@@ -119,7 +120,7 @@ class SimPeer:
         self._worker.start()
         d.append(f.watch_peers(self._on_sim, kind="sim"))
         d.append(f.subscribe_raw(keys.robot_cmd_all(w), self._on_command_sample))
-        for obj in (self.world.objects if self.objects else ()):
+        for obj in self.world.objects:
             # no history here: the authority's start must not wait on other peers' caches (with
             # history=True a sim started under load answered nothing for 30 s in two CI runs)
             d.append(f.subscribe(keys.object_pose_all(w, obj), self._on_object, expected=Pose))
@@ -406,16 +407,18 @@ class SimPeer:
     def _on_object(self, key: str, pose: Pose) -> None:
         obj = keys.parse(key).subject  # one subscription per scene object: never a made-up id
         if pose.frame not in ("world", ""):
-            frame = pose.frame  # client text (up to the codec's string limit): quoted short, built only when reported
-            self._reject(obj, "pose", "bad_frame", lambda: f"object poses must be in the world frame, got {quote(frame)}")
+            if self.objects:  # the objects' authority reports; a sim mirroring them drops it without a word
+                frame = pose.frame  # client text (up to the codec's string limit): quoted short, built only when reported
+                self._reject(obj, "pose", "bad_frame", lambda: f"object poses must be in the world frame, got {quote(frame)}")
             return
         try:
             with self.lock:
                 self.world.set_object_pose(obj, pose.position, pose.quaternion)
         except (KeyError, ValueError) as exc:
-            self._reject(obj, "pose", "bad_object_pose", str(exc))
+            if self.objects:
+                self._reject(obj, "pose", "bad_object_pose", str(exc))
             return
-        self.counters["object_updates"] += 1
+        self.counters["object_updates" if self.objects else "object_mirrored"] += 1
 
     def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
         if peer_id != self.fabric.peer_id:

@@ -17,6 +17,11 @@
   ownership admits), the ownership records and users carried over, sequence numbers continued, then
   streams, ``srv/world`` and the ownership queryables served again.
 
+In a world served by several shards, the scene objects have one authority, the world's first sim. When it
+goes and no standby of its shard has taken the objects over within ``adopt_after_s``, the serving primary
+with the lowest id adopts them: it serves its robots and the objects again, one term up, with the objects
+where it mirrored them (every sim moves them on the users' poses).
+
 A host that stepped down returns from :meth:`ReplicaHost.run`; the caller opens a fresh session and runs a
 standby (``run_replicated``), so nothing the primary declared survives the change of role.
 """
@@ -33,7 +38,7 @@ from typing import Any, Callable
 from fabric import keys
 from fabric.codec import DecodeError, decode, encode
 from fabric.gate import CommandGate
-from fabric.interfaces import Command, Event, Header, JointState, Pose, ServiceError, WorldState
+from fabric.interfaces import Command, Event, Header, JointState, Pose, ServiceError, WorldInfo, WorldState
 from fabric.session import Fabric
 from sim_peer import election as el
 from sim_peer import handoff as ho
@@ -90,6 +95,7 @@ class ReplicaHost:
         announce: Callable[[str], None] | None = None,
         objects: bool = True,
         rebuild: Callable[[list[SceneRobot]], SimWorld] | None = None,
+        adopt_after_s: float | None = None,
     ) -> None:
         self.fabric = fabric
         # builds this sim's world again with other robots (the same scene and options): a robot moved in or out
@@ -136,6 +142,10 @@ class ReplicaHost:
         # half the transport lease: a freeze long enough for the others to drop our token (a lease) is
         # always caught, with margin; a false alarm (a starved process) costs one query, muzzled
         self.freeze_gap = freeze_gap if freeze_gap is not None else fabric.config.lease_ms / 2000.0
+        # after a sim leaves, how long a shard waits for the objects' standby (a take-over takes well under a
+        # lease) before asking whether the scene objects still have an authority
+        self.adopt_after_s = adopt_after_s if adopt_after_s is not None else 2.0 * fabric.config.lease_ms / 1000.0 + 1.0
+        self._adopting = self._adopt_again = False
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -389,6 +399,58 @@ class ReplicaHost:
         self.announce(f"sim {self.fabric.peer_id}: took {rid} in from {handoff.source or 'another sim'} (term {term}) in "
                       f"{(time.monotonic() - t0) * 1000:.0f} ms")
 
+    # ------------------------------------------------------------------ the scene objects after their sim
+
+    def _adopt_soon(self) -> None:
+        """A sim left: after ``adopt_after_s``, see whether the scene objects went with it (one thread at a time)."""
+        with self._lock:
+            if self.objects or self._closed:
+                return
+            self._adopt_again = True
+            if self._adopting:
+                return
+            self._adopting = True
+
+        def run() -> None:
+            while not self._stop.wait(self.adopt_after_s):
+                with self._lock:
+                    again, self._adopt_again = self._adopt_again, False
+                    if not again or self.objects or self._closed:
+                        self._adopting = False
+                        return
+                try:
+                    self._adopt_if_orphaned()
+                except Exception:  # a closing session; the next departure asks again
+                    log.debug("adopting the scene objects failed", exc_info=True)
+            with self._lock:
+                self._adopting = False
+
+        threading.Thread(target=run, name="sim-adopt-objects", daemon=True).start()
+
+    def _adopt_if_orphaned(self) -> bool:
+        """Serve the scene objects when no live sim describes them and this is the lowest-id sim that serves a
+        part of the world (every shard asks the same union, so one adopts); True when this one did."""
+        f, me = self.fabric, self.fabric.peer_id
+        try:
+            replies = f.query(keys.srv(f.world, "world"), timeout=2.0, expected=WorldInfo, all_replies=True)
+        except ServiceError:
+            return False
+        parts = {r.source: r.message for r in replies if r.source}
+        if not self.world.objects or any(p.objects for p in parts.values()) or me not in parts or min(parts) != me:
+            return False
+        with self._lock:
+            if self.role != el.PRIMARY or self.peer is None or self.objects or self._closed:
+                return False
+            t0 = time.monotonic()
+            self.objects = True  # before the capture: the state carries the objects where this sim mirrored them
+            state, _ = self._stop_serving()
+            term = self.election.term + 1
+            self.election = replace(self.election, term=term)
+            self._serve(replace(state, header=replace(state.header, term=term)))
+        self.announce(f"sim {me}: no sim serves the scene objects any more; serving {', '.join(self.world.objects)} "
+                      f"with my robots (term {term}) in {(time.monotonic() - t0) * 1000:.0f} ms")
+        return True
+
     def _on_freeze(self, gap: float) -> None:
         """Frozen for ``gap`` s: muzzled until it is known whether another sim may hold the world now.
 
@@ -578,6 +640,8 @@ class ReplicaHost:
             return  # a token appearing (or the history repeating one) never starts a take-over; nor does
             # one going before the first view is settled (open() steps on the whole view then)
         self._step(el.Peers(self._shard_view(live)))
+        if self.role == el.PRIMARY:
+            self._adopt_soon()  # it may have been the scene objects' authority
 
     def _heard(self, source: str, term: int) -> None:
         if term > 0:

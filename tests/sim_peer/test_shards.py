@@ -209,3 +209,47 @@ def test_a_paused_shard_stalls_its_robots_only_and_comes_back_with_its_owners(wo
             os.kill(sim_b.pid, signal.SIGCONT)  # a paused process cannot be ended by SIGTERM
         alice.close()
         bob.close()
+
+
+def test_when_the_scene_objects_sim_dies_another_shard_adopts_them_where_they_were(world, router, connect, procs):
+    """sim-a (the first sim: base0 and the scene objects) is killed with no standby: sim-b, which mirrored the goal
+    pointer's moves, serves the objects one term up, with the goal where alice last put it (no jump back to the
+    scene's default); alice keeps base1 with its epoch and moves the goal again at sim-b."""
+    common, probe, sim_a, sim_b = _two_shards(world, router, connect, procs)
+    w = World(client_config(world, router[1]), "alice", timeout=10.0)
+    try:
+        b1 = w.robot("base1")
+        b1.wait_for("pose", timeout=20)
+        b1.request(timeout=10)
+        epoch1 = w.ownership.record("base1").epoch
+        goal = w.object("goal")
+        goal.set_pose([2.0, 1.0, 0.0])
+        wait_until(lambda: _goal_at(probe, world, "sim-a", (2.0, 1.0)), timeout=20, what="the goal moved at sim-a",
+                   seen=lambda: _parts(probe, world))
+
+        procs.kill(sim_a)
+        wait_until(lambda: _goal_at(probe, world, "sim-b", (2.0, 1.0)), timeout=30, what="sim-b serving the goal where it was",
+                   seen=lambda: (_parts(probe, world), procs.output(sim_b)[-800:]))
+        assert "no sim serves the scene objects any more; serving goal, target with my robots (term 2)" in procs.output(sim_b)
+        r = subprocess.run(robofabric_cmd("own", "list", "--json", *common), capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, r.stderr[-800:]
+        auth = {rec["object"]: rec["authority"] for rec in json.loads(r.stdout)["records"]}
+        assert auth == {"base1": "sim-b", "goal": "sim-b", "target": "sim-b"}, auth
+        goal.set_pose([3.0, -1.0, 0.0])
+        wait_until(lambda: _goal_at(probe, world, "sim-b", (3.0, -1.0)), timeout=20, what="the goal moved at sim-b",
+                   seen=lambda: _parts(probe, world))
+        wait_until(lambda: (w.ownership.record("base1") or b1.record).header.term == 2, timeout=20, what="base1's record at term 2")
+        rec = w.ownership.record("base1")
+        assert (rec.owner, rec.epoch, rec.authority) == ("alice", epoch1, "sim-b"), rec
+        x = b1.xy_theta[0]
+        b1.twist(0.3, 0.0)
+        wait_until(lambda: b1.xy_theta[0] < x - 0.1, timeout=20, what="base1 driving after the adoption")
+        b1.stop(timeout=10)
+    finally:
+        w.close()
+
+
+def _goal_at(fab, world: str, sim: str, xy: tuple[float, float]) -> bool:
+    part = _parts(fab, world).get(sim)
+    goal = next((o for o in part.objects if o.id == "goal"), None) if part is not None else None
+    return goal is not None and abs(goal.position[0] - xy[0]) < 1e-6 and abs(goal.position[1] - xy[1]) < 1e-6
