@@ -97,3 +97,26 @@ def test_viewer_logger_ages_poses_by_arrival_not_by_the_senders_clock():
         ages = [c for p, cols in sent if p == "plots/age/base1" for c in cols]
         assert len(ages) == 1
         assert np.allclose(np.asarray(ages[0].as_arrow_array().to_pylist()).ravel(), [30.0]), ages
+
+
+def test_every_plot_shows_the_last_window_on_both_timelines():
+    """Plots of the whole history cost more at every frame as a class session grows: each one is bounded."""
+    import rerun.blueprint as rrb
+
+    from user_peer.rerun_log import PLOT_WINDOW_S, TIMELINE_SIM, TIMELINE_WALL, blueprint
+
+    plots = []
+
+    def walk(node):
+        if isinstance(node, rrb.TimeSeriesView):
+            plots.append(node)
+        for child in getattr(node, "contents", None) or []:
+            if not isinstance(child, str):
+                walk(child)
+
+    walk(blueprint().root_container)
+    assert len(plots) == 6
+    for view in plots:
+        ranges = {r["timeline"]: r["range"] for r in view.properties["VisibleTimeRanges"].ranges.as_arrow_array().to_pylist()}
+        assert set(ranges) == {TIMELINE_WALL, TIMELINE_SIM}, view.name
+        assert all(r == {"start": -int(PLOT_WINDOW_S * 1e9), "end": 0} for r in ranges.values()), ranges
