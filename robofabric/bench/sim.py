@@ -58,6 +58,25 @@ def scan_cost(world, robot_id: str, n: int = 2000) -> tuple[float, float]:
     return float(np.median(samples) * 1e6), float(np.percentile(samples, 99) * 1e6)
 
 
+def arm_mirror_cost(n: int = 2000) -> tuple[float, float]:
+    """Median and p99 wall time (us) of one arm mirror update: the forward kinematics of another sim's Meca500 at
+    new joint angles, and its seven link geoms placed in this sim's world (what each joint message costs)."""
+    from sim_peer.arm_mirror import arm_shape
+    from sim_peer.world import SimWorld
+
+    other = SimWorld("warehouse", ["meca500:arm9@1,0,0,0"], scene_robots=False)
+    shape = arm_shape(other.robot("arm9").describe())
+    here = SimWorld("warehouse", ["reeman:base0@0,0"], scene_robots=False, mirrors=8)
+    rng = np.random.default_rng(1)
+    qs = rng.uniform(-1.0, 1.0, size=(n, 6))
+    samples = np.empty(n)
+    for i in range(n):
+        t = time.perf_counter()
+        here.mirror_shapes("arm9", shape.shapes, shape.poses(qs[i]), source="other")
+        samples[i] = time.perf_counter() - t
+    return float(np.median(samples) * 1e6), float(np.percentile(samples, 99) * 1e6)
+
+
 def command(
     seconds: Annotated[float, typer.Option(help="Sim seconds per real-time-factor run.")] = 10.0,
     counts: Annotated[str, typer.Option(help="Mobile robot counts for the scaling runs.")] = "1,10,50",
@@ -75,6 +94,9 @@ def command(
     rows.append((label, f"{r:.0f}x", ">= 50x", "ok" if r >= 50 else "MISSED"))
     med, p99 = scan_cost(w, "base1")
     rows.append(("one 240-ray LIDAR scan (combined), median / p99", f"{med:.1f} / {p99:.1f} us", "<= 50 us", "ok" if med <= 50 else "MISSED"))
+    med, p99 = arm_mirror_cost()
+    rows.append(("one arm mirror update (another sim's Meca500: FK, 7 link geoms placed), median / p99",
+                 f"{med:.1f} / {p99:.1f} us", "", ""))
     for n in [int(c) for c in counts.split(",") if c.strip()]:
         extra = [f"reeman:m{i}" for i in range(n)]
         wn = SimWorld("warehouse", extra, scene_robots=False, seed=1, bumper=False)  # 0.8 m apart, 1 m circles: they cross
@@ -100,4 +122,4 @@ def _mujoco() -> str:
     return mujoco.__version__
 
 
-__all__ = ["command", "rtf", "scan_cost"]
+__all__ = ["arm_mirror_cost", "command", "rtf", "scan_cost"]
