@@ -109,9 +109,10 @@ def framing(points: Sequence[Sequence[float]]) -> tuple[np.ndarray, np.ndarray] 
 
 
 PLOT_WINDOW_S = 30.0
-"""What a plot shows: the last this many seconds before the time cursor. A plot of the whole history costs the
-viewer more at every frame as the session grows (a software-rendered browser page fell behind by about a
-second per second); the viewer's own time range controls widen it."""
+"""What a plot shows: the last this many seconds before the time cursor, as rqt_plot and PlotJuggler scroll. A
+plot of the whole history costs the viewer more at every frame as a class session grows to hours; within
+the first minute it makes no measurable difference (a lone software-rendered page: 35.4 s behind after 60 s
+with the window, 33.3 s without; docs/benchmarks.md). The viewer's own time range controls widen it."""
 
 
 def _recent() -> list[rrb.VisibleTimeRange]:
