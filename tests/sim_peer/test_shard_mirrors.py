@@ -22,19 +22,26 @@ def _ahead(w: World) -> float:
     return float(np.median(scan.ranges[FORWARD])) if scan is not None else float("nan")
 
 
-def test_a_lidar_sees_a_robot_another_sim_simulates_and_sees_it_move(world, router, connect, procs):
-    ep = f"tcp/127.0.0.1:{router[1]}"
-    common = ("--world", world, "--connect", ep)
-    scene = ("--scene", "warehouse", "--no-scene-robots")
-    sim_a = procs.start(robofabric_cmd("-v", "sim", *scene, "--robot", "reeman:base0@0,0", *common, "--id", "sim-a"), name="sim-a")
+SCENE = ("--scene", "warehouse", "--no-scene-robots")
+
+
+def _sim_a(world, router, connect, procs):
+    """sim-a, serving base0 at the origin facing +x, logging what it mirrors; (common CLI args, probe, sim-a)."""
+    common = ("--world", world, "--connect", f"tcp/127.0.0.1:{router[1]}")
+    sim_a = procs.start(robofabric_cmd("-v", "sim", *SCENE, "--robot", "reeman:base0@0,0", *common, "--id", "sim-a"), name="sim-a")
     probe = connect("tool", "probe")
     wait_until(lambda: ("sim", "sim-a") in probe.live_peers("sim"), timeout=60, what="sim-a", seen=lambda: procs.output(sim_a)[-800:])
+    return common, probe, sim_a
+
+
+def test_a_lidar_sees_a_robot_another_sim_simulates_and_sees_it_move(world, router, connect, procs):
+    common, probe, sim_a = _sim_a(world, router, connect, procs)
     w = World(client_config(world, router[1]), "alice", timeout=10.0)
     try:
         w.robot("base0").wait_for("scan", timeout=30)
         alone = wait_until(lambda: _ahead(w) > FREE_AHEAD and _ahead(w), timeout=20, what="a clear view ahead of base0",
                            seen=lambda: _ahead(w))
-        sim_b = procs.start(robofabric_cmd("sim", *scene, "--robot", "reeman:base1@3,0,180", *common, "--id", "sim-b"), name="sim-b")
+        sim_b = procs.start(robofabric_cmd("sim", *SCENE, "--robot", "reeman:base1@3,0,180", *common, "--id", "sim-b"), name="sim-b")
         # sim-a mirrors base1 from sim-b's poses: base0's LIDAR sees its shell, 3 m ahead less radius and LIDAR offset
         seen = wait_until(lambda: 2.0 < _ahead(w) < 2.9 and _ahead(w), timeout=60, what="base0's LIDAR seeing base1 (sim-b)",
                           seen=lambda: (_ahead(w), procs.output(sim_a)[-600:], procs.output(sim_b)[-600:]))
@@ -60,13 +67,8 @@ def test_a_lidar_sees_a_robot_another_sim_simulates_and_sees_it_move(world, rout
 def test_a_lidar_sees_the_links_of_an_arm_another_sim_simulates(world, router, connect, procs):
     """An arm on the floor 1 m ahead of base0, on sim-b: sim-a mirrors its links from its joint stream, so base0's
     LIDAR sees its upper arm, then sees it bow under the LIDAR plane when its owner moves it."""
-    ep = f"tcp/127.0.0.1:{router[1]}"
-    common = ("--world", world, "--connect", ep)
-    scene = ("--scene", "warehouse", "--no-scene-robots")
-    sim_a = procs.start(robofabric_cmd("-v", "sim", *scene, "--robot", "reeman:base0@0,0", *common, "--id", "sim-a"), name="sim-a")
-    probe = connect("tool", "probe")
-    wait_until(lambda: ("sim", "sim-a") in probe.live_peers("sim"), timeout=60, what="sim-a", seen=lambda: procs.output(sim_a)[-800:])
-    sim_b = procs.start(robofabric_cmd("sim", *scene, "--robot", "meca500:arm1@1,0,0,0", *common, "--id", "sim-b"), name="sim-b")
+    common, probe, sim_a = _sim_a(world, router, connect, procs)
+    sim_b = procs.start(robofabric_cmd("sim", *SCENE, "--robot", "meca500:arm1@1,0,0,0", *common, "--id", "sim-b"), name="sim-b")
     wait_until(lambda: ("sim", "sim-b") in probe.live_peers("sim"), timeout=60, what="sim-b", seen=lambda: procs.output(sim_b)[-800:])
     w = World(client_config(world, router[1]), "alice", timeout=10.0)
     try:
