@@ -436,6 +436,10 @@ class Fabric:
         """
 
         # zenoh 1.10 ignores a reply's priority (and warns): replies travel at the query's priority.
+        # A reply goes on the queryable's own key when it names one: a wildcard query (``own/*``, a replica or a
+        # viewer joining) then learns which key answered, and the reply is fenced by that key's scopes like a
+        # publication on it (on the query's own ``own/*`` it named no object: unfenced, and unparseable)
+        own_key = key_expr if not any(c in key_expr for c in "*$") else None
 
         def on_query(query: zenoh.Query) -> None:
             key = str(query.key_expr)
@@ -448,7 +452,7 @@ class Fabric:
                     request = decode(query.payload.to_bytes(), expected)
                 answer = handler(key, request)
                 if answer is not None:
-                    query.reply(key, encode(answer))
+                    query.reply(own_key or key, encode(answer))
             except (DecodeError, ServiceError, ValueError) as exc:
                 self.counters["query_errors"] += 1
                 reason = clip(exc.reason if isinstance(exc, ServiceError) else str(exc), 400)

@@ -226,12 +226,16 @@ class Viewer:
             self.rec.send_blueprint(blueprint(frame), make_active=True, make_default=True)
         self.fab.subscribe(keys.world_all(self.fab.world), self._enqueue, history=True)  # maps, paths, objects set before we joined
         self.fab.watch_peers(self._on_sim, kind="sim")  # "world gone" when the last sim peer leaves
-        for expr in (keys.own_all(self.fab.world),):
-            try:
-                for rep in self.fab.query(expr, timeout=1.0, all_replies=True):
-                    self._enqueue(rep.key, rep.message)
-            except ServiceError:
-                pass
+        self._ask_records()
+
+    def _ask_records(self) -> None:
+        """Every ownership record, asked: a record is published only when it changes, so one published before
+        our subscription reached its sim would otherwise never be drawn."""
+        try:
+            for rep in self.fab.query(keys.own_all(self.fab.world), timeout=1.0, all_replies=True):
+                self._enqueue(rep.key, rep.message)
+        except ServiceError:
+            pass
 
     def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
         """Say when the world goes (its last sim peer left: died, or cut off) and when it comes back:
@@ -265,6 +269,7 @@ class Viewer:
             if info is not None:
                 self.catalog.world_info = info
                 if any(r.sim == sim for r in info.robots):
+                    self._ask_records()  # its ownership records too (its authority serves before its world does)
                     return
             if time.monotonic() > deadline:
                 return

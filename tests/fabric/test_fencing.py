@@ -179,3 +179,21 @@ def test_fenced_scopes_are_the_authority_scopes_of_authority_keys_and_none_for_o
         expected = authority_scopes(key) if is_authority_key(key) else None
         assert fenced_scopes(key) == expected, key
     assert fenced_scopes("rf/w/robot/arm1/joints") == ("arm1",) and fenced_scopes("rf/w/robot/arm1/path") is None
+
+
+def test_a_wildcard_query_hears_each_answer_on_its_own_key_fenced_by_its_scopes(world, connect):
+    """``own/*`` (a replica or a viewer joining) is answered on ``own/arm1`` and ``own/base1``: the asker learns
+    which key answered, and an answer of a lower term than its scope's fence is dropped like a publication."""
+    new, old = connect("sim", "new"), connect("sim", "old")
+    asker = connect("tool", "asker")
+    for fab, obj, term in ((new, "arm1", 2), (old, "base1", 1)):
+        key = keys.own(world, obj)
+        fab.serve(key, lambda k, req, fab=fab, obj=obj, key=key, term=term:
+                  OwnershipRecord(obj, authority=fab.peer_id, header=Header(wall_ns=1, source=fab.peer_id, term=term)))
+    wait_until(lambda: len(asker.query(keys.own_all(world), timeout=2.0, expected=OwnershipRecord, all_replies=True)) == 2,
+               timeout=20, what="both records")
+    replies = asker.query(keys.own_all(world), timeout=2.0, expected=OwnershipRecord, all_replies=True)
+    assert sorted(r.key for r in replies) == [keys.own(world, "arm1"), keys.own(world, "base1")]
+    asker.sim_fence.raise_to(2, ("base1",))  # a take-over of base1's shard at term 2 was heard
+    replies = asker.query(keys.own_all(world), timeout=2.0, expected=OwnershipRecord, all_replies=True)
+    assert [r.key for r in replies] == [keys.own(world, "arm1")]  # old's term-1 answer about base1: stale

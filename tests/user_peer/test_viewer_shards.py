@@ -6,7 +6,7 @@ import threading
 from dataclasses import replace
 
 from fabric import keys
-from fabric.interfaces import WorldInfo
+from fabric.interfaces import OwnershipRecord, WorldInfo
 from fabric.testing import client_config, wait_until
 from sim_peer.world import SimWorld
 from user_peer.viewer import Viewer, ViewerOptions
@@ -28,10 +28,17 @@ def test_a_shard_joining_later_has_its_robots_in_the_viewers_world(world, router
         wait_until(lambda: viewer.catalog.world_info is not None, timeout=20, what="the viewer's first look at the world")
         assert [r.id for r in viewer.catalog.world_info.robots] == ["base0"]
         sim_b = connect("sim", "sim-b")  # its token: a sim joining the world, serving its own part
+        # base1's record is served, never published (it went out before the viewer's subscription reached sim-b)
+        rec_key = keys.own(world, "base1")
+        sim_b.serve(rec_key, lambda key, req: OwnershipRecord("base1", owner="bob", epoch=3, authority="sim-b",
+                                                              header=sim_b.header(rec_key)))
         sim_b.serve(keys.srv(world, "world"), lambda key, req: _part(world, "sim-b", "base1"))
         wait_until(lambda: {r.id: r.sim for r in viewer.catalog.world_info.robots} == {"base0": "sim-a", "base1": "sim-b"},
                    timeout=20, what="both sims' robots in the viewer's world",
                    seen=lambda: [(r.id, r.sim) for r in viewer.catalog.world_info.robots])
+        wait_until(lambda: "base1" in viewer.logger.owners, timeout=20, what="base1's record, asked when sim-b joined",
+                   seen=lambda: viewer.logger.owners)
+        assert viewer.logger.owners["base1"].owner == "bob"
     finally:
         stop.set()
         t.join(timeout=20)
