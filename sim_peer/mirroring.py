@@ -44,6 +44,7 @@ ARM_PERIOD_S = 0.02
 """An arm's mirror moves at most this often (its joints come at 100 Hz; sensors read at 20-50 Hz)."""
 
 MAX_ARMS = 256  # arms followed (each a subscription): bounded, whatever a world description says
+MAX_UNSLOTTED = 256  # robots told of as finding no slot (once each; bounded)
 MAX_LAGS = 4096
 MAX_DEPARTED = 256  # sims remembered as gone (bounded: anyone may declare a token)
 
@@ -65,13 +66,14 @@ class MirrorFeed:
         self._shapes: dict[str, ArmShape] = {}  # arms followed: their link geoms
         self._arm_subs: dict[str, Any] = {}  # arm -> its joints subscription
         self._moved_at: dict[str, float] = {}  # arm -> when its mirror last moved
+        self._unslotted: set[str] = set()  # robots that found too few free slots (said once each)
         self._seen: dict[str, float] = {}  # robot -> when its last pose arrived here
         self._asked_at = float("-inf")
         self._asking = False
         self._departed: set[str] = set()  # sims whose token went: their poses still in flight must not show a mirror again
         self._state = threading.Lock()
         self.lag_ms: deque[float] = deque(maxlen=MAX_LAGS)  # a pose's age on arrival, by the sender's clock
-        self.counters = {"poses": 0, "joints": 0, "unknown": 0, "shown": 0, "hidden": 0, "unmirrorable": 0}
+        self.counters = {"poses": 0, "joints": 0, "unknown": 0, "shown": 0, "hidden": 0, "unmirrorable": 0, "unslotted": 0}
         self._closed = False
         self._stop = threading.Event()
         self._subs = [
@@ -159,6 +161,8 @@ class MirrorFeed:
             if not was:
                 self.counters["shown"] += 1
                 log.info("mirroring %s (simulated by %s)", robot, pose.header.source or info.sim)
+        elif not was:
+            self._no_slot(robot, 1, pose.header.source or info.sim)
 
     def _on_joints(self, key: str, js: JointState) -> None:
         robot = keys.parse(key).subject
@@ -189,6 +193,23 @@ class MirrorFeed:
             if not was:
                 self.counters["shown"] += 1
                 log.info("mirroring %s (simulated by %s; %d link geoms)", robot, source, len(shape.shapes))
+        elif not was:
+            self._no_slot(robot, len(shape.shapes), source)
+
+    def _no_slot(self, robot: str, needed: int, source: str) -> None:
+        """Say once per robot that the pool is too small for it (a bad pose, with slots free, says nothing):
+        a LIDAR that does not see another sim's robot is otherwise a mystery."""
+        mirrors = self.world.mirrors
+        if mirrors.free >= needed:
+            return
+        with self._state:
+            if robot in self._unslotted or len(self._unslotted) >= MAX_UNSLOTTED:
+                return
+            self._unslotted.add(robot)
+        self.counters["unslotted"] += 1
+        log.warning("cannot mirror %s (simulated by %s): it needs %d mirror slot%s and %d of %d are free; this sim's "
+                    "sensors do not see it. Start the sim with a larger --mirrors (docs/sim.md)", robot, source or "another sim",
+                    needed, "" if needed == 1 else "s", mirrors.free, mirrors.slots)
 
     def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
         if alive:

@@ -203,3 +203,26 @@ def test_the_feed_mirrors_another_sims_arm_from_its_joints(world, connect):
         other.close()
         wait_until(lambda: "arm9" not in mine.mirrors.held(), timeout=10, what="arm9's mirror hidden when sim-b left")
         assert ahead(mine) == pytest.approx(free, abs=1e-6) and mine.mirrors.free == 8
+
+
+def test_a_robot_that_finds_too_few_slots_is_told_of_once(world, connect, caplog):
+    """An arm needs 7 slots; a sim with 2 says so once, naming --mirrors, however many joint messages come."""
+    import logging
+
+    mine = SimWorld("warehouse", ["reeman:base0@0,0"], scene_robots=False, mirrors=2)
+    other = connect(kind="sim", peer_id="sim-b")
+    _, info = arm_elsewhere(at="1,0,0,0")
+    part = WorldInfo(world=world, scene="warehouse", timestep=mine.dt, rates={}, robots=(replace(info, sim="sim-b"),))
+    pose_key, joints_key = keys.robot_pose(world, "arm9"), keys.robot_joints(world, "arm9")
+    with caplog.at_level(logging.WARNING, logger="robofabric.sim"), \
+            MirrorFeed(connect(kind="sim", peer_id="sim-a"), mine, threading.RLock(), describe=lambda: part, stale_s=30.0) as feed:
+        def put() -> bool:
+            other.publish(pose_key, Pose(np.array([1.2, 0.0, 0.3]), np.array([1.0, 0, 0, 0]), header=other.header(pose_key)))
+            other.publish(joints_key, JointState(info.joint_names, np.zeros(6), np.zeros(6), header=other.header(joints_key)))
+            return False
+
+        wait_until(lambda: put() or feed.counters["joints"] >= 5, timeout=10, interval=0.05, what="five joint messages of arm9",
+                   seen=lambda: feed.counters)
+        assert feed.counters["unslotted"] == 1 and feed.counters["shown"] == 0 and not mine.mirrors.held()
+        said = [r.getMessage() for r in caplog.records if "cannot mirror arm9" in r.getMessage()]
+        assert len(said) == 1 and "needs 7 mirror slots and 2 of 2 are free" in said[0] and "--mirrors" in said[0], said
