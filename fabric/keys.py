@@ -130,6 +130,19 @@ def map_key(world: str, name: str) -> str:
     return f"{world_root(world)}/map/{validate_id(name, what='map name')}"
 
 
+#: Between a user and her map's name in the maps she builds: ``alice.map``. A class's logins are letters,
+#: digits, ``-`` and ``_`` (fabric.secure), so the user before the first ``.`` is never in doubt.
+USER_MAP_SEP = "."
+
+
+def user_map(name: str, user: str) -> str:
+    """The map ``user`` gets when she builds ``name`` in her own name: ``{user}.{name}`` (kept as it is when it
+    already starts with ``{user}.``). A build asked on ``srv/map/.../by/{user}`` never writes the class's map."""
+    prefix = f"{validate_id(user, what='user id')}{USER_MAP_SEP}"
+    name = validate_id(name, what="map name")
+    return name if name.startswith(prefix) and len(name) > len(prefix) else prefix + name
+
+
 def own(world: str, obj: str) -> str:
     return f"{world_root(world)}/own/{validate_id(obj, what='object id')}"
 

@@ -441,7 +441,9 @@ class Base(Robot):
             raise Unreachable(f"mapping for {self.id}: {exc.reason}") from None
 
     def build_map(self, *, name: str = "map", threshold: float = 0.65, timeout: float | None = None) -> OccupancyGrid:
-        """The binary map a compute peer built from the scans so far (also published on ``map/{name}``)."""
+        """The binary map a compute peer built from the scans so far: this user's own, kept and published as
+        ``map/{user}.{name}`` (:func:`fabric.keys.user_map`; the class's map is the staff's). Plan on it with
+        ``plan_to(..., map_name=keys.user_map(name, world.user))``."""
         try:
             return services.build_map(
                 self.world.fabric, name=name, threshold=threshold, timeout=timeout or max(self.world.timeout, 10.0), peer=self.world.navigation_peer(),
@@ -454,7 +456,8 @@ class Base(Robot):
         self, x: float | None = None, y: float | None = None, theta: float = 0.0, *, planner: str = "hybrid_astar",
         map_name: str = "map", timeout: float | None = None,
     ) -> Path:
-        """A collision-free path from the robot's pose to (x, y, theta), or to the goal object without x, y."""
+        """A collision-free path from the robot's pose to (x, y, theta), or to the goal object without x, y, on
+        ``map_name`` (default: the class's map)."""
         goal = None if x is None or y is None else (float(x), float(y), float(theta))
         try:
             return services.plan(

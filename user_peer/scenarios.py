@@ -169,7 +169,8 @@ def test_b(
     tol: float = 0.3,
     turn: float = 2.0 * math.pi,
 ) -> ScenarioResult:
-    """Drive while mapping, build the map, set the goal, plan, follow; then take the arm over in turn."""
+    """Drive while mapping, build the map (the user's own, ``{user}.map``), set the goal, plan on it, follow; then
+    take the arm over in turn."""
     res = ScenarioResult("test-b", world.user)
     base = world.robot(base_id)
     if not isinstance(base, Base):
@@ -185,12 +186,13 @@ def test_b(
         end = base.drive(0.0, omega, turn / omega)
         res.say(f"drove while mapping: turned {math.degrees(turn):.0f} deg in place, now at ({end[0]:.2f}, {end[1]:.2f})")
         grid = base.build_map()
+        mine = keys.user_map("map", world.user)  # a user's build makes her own map; the class's map is the staff's
         known = float(np.mean(grid.cells != 255))
-        res.say(f"map built: {grid.cells.shape[1]}x{grid.cells.shape[0]} cells at {grid.resolution:.2f} m, {known:.0%} known, {int(np.sum((grid.cells >= 50) & (grid.cells != 255)))} occupied")
+        res.say(f"map built as {mine!r}: {grid.cells.shape[1]}x{grid.cells.shape[0]} cells at {grid.resolution:.2f} m, {known:.0%} known, {int(np.sum((grid.cells >= 50) & (grid.cells != 255)))} occupied")
         world.object("goal").set_pose([goal[0], goal[1], 0.0], yaw=goal[2])
         res.say(f"goal set at ({goal[0]:.2f}, {goal[1]:.2f}, {math.degrees(goal[2]):.0f} deg)")
         tp = time.monotonic()
-        path = base.plan_to(*goal)
+        path = base.plan_to(*goal, map_name=mine)
         length = float(np.sum(np.hypot(np.diff(path.x), np.diff(path.y))))
         res.say(f"planned {len(path)} poses, {length:.2f} m, in {time.monotonic() - tp:.2f} s")
         final = base.follow(path, tol=tol, timeout=90.0)

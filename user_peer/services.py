@@ -91,7 +91,8 @@ def map_request(
 
 def build_map(fab: Fabric, *, name: str = "map", threshold: float = 0.65, timeout: float = 10.0, peer: str | None = None,
               user: str | None = None) -> OccupancyGrid:
-    """Threshold the scans a compute peer accumulated into map ``name`` (also published on ``map/{name}``)."""
+    """Threshold the scans a compute peer accumulated into map ``name`` (also published on ``map/{name}``); asked
+    in ``user``'s name it is her own map, ``{user}.{name}`` (:func:`fabric.keys.user_map`)."""
     reply = map_request(fab, "build", name=name, threshold=threshold, timeout=timeout, peer=peer, user=user)
     grid = reply.grid
     if grid.cells.size == 0:

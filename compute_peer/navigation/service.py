@@ -20,8 +20,11 @@ Who asks (docs/security.md): a user asks on ``.../by/{user}`` (:func:`fabric.key
 router lets each login ask in its own name only). Such an asker gets every plan in the reply, but it is
 published on the robot's ``path`` key only when the trusted ownership replica says she owns the robot,
 and map ``set``/``reset``/``stop``/``save``/``load`` (:data:`STAFF_MAP_ACTIONS`), which change the map
-the whole class plans on, are refused to her with the reason. The forms without ``by/`` are the staff's
-(sim, compute and instructor logins in a class; anyone in a world without access control): served in full.
+the whole class plans on, are refused to her with the reason. Her ``build`` makes her own map,
+``{user}.{name}`` (:func:`fabric.keys.user_map`), never the class's, within a few maps per user and a cap for
+all users (:mod:`.map_store`); plans use the class's map unless the request names another. The forms without
+``by/`` are the staff's (sim, compute and instructor logins in a class; anyone in a world without access
+control): served in full.
 
 Every refusal (unknown robot, no pose yet, no map, goal outside the map or in an
 obstacle, no path) is a :class:`~fabric.session.ServiceError` reply with the
@@ -49,7 +52,7 @@ from fabric.session import Fabric, undeclare_all
 from .discovery import RobotDescriptions
 from .errors import NavigationError
 from .map_service import MapService
-from .map_store import MapStore
+from .map_store import MapLimit, MapStore
 from .mapping import MapperConfig, OccupancyMapper
 from .plan_service import PlanService
 from .planner import PlannerSettings
@@ -110,6 +113,7 @@ class NavigationService:
             "plans_unpublished": 0,  # a plan for a robot its asker does not own: in the reply only
             "refusals": 0,
             "refused_staff_only": 0,  # a map action of the staff's asked by a user (also in refusals)
+            "refused_map_limit": 0,  # a user's new map past the store's caps (also in refusals)
         }
         self.poses = PoseHistory(POSE_HISTORY)
         self.descriptions = RobotDescriptions(
@@ -280,7 +284,11 @@ class NavigationService:
             raise ServiceError(f"map {req.action!r} changes the map everyone plans on: an instructor's, not {asker}'s "
                                f"(start, status, build and get are open)", key=key)
         try:
-            return self.map_service.handle(req)
+            return self.map_service.handle(req, user=asker)
+        except MapLimit as exc:
+            self.counters["refusals"] += 1
+            self.counters["refused_map_limit"] += 1
+            raise ServiceError(str(exc), key=key) from None
         except (NavigationError, OSError) as exc:
             self.counters["refusals"] += 1
             raise ServiceError(str(exc), key=key) from None

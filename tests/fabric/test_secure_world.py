@@ -551,8 +551,9 @@ def test_paper_tests_a_and_b_in_a_secure_world(secure, alice_owns_arm, secure_co
     late = secure.fabric("viewer", kind="viewer", peer_id="late")
     got: dict[str, object] = {}
     late.subscribe(keys.object_pose_all(secure.world), lambda k, m: got.setdefault(k, m), history=True)
-    late.subscribe(keys.map_key(secure.world, "map"), lambda k, m: got.setdefault(k, m), history=True)
-    wait_until(lambda: keys.object_pose(secure.world, "target", "alice") in got and keys.map_key(secure.world, "map") in got,
+    bobs_map = keys.map_key(secure.world, keys.user_map("map", "bob"))  # Test B builds and plans on bob's own map
+    late.subscribe(bobs_map, lambda k, m: got.setdefault(k, m), history=True)
+    wait_until(lambda: keys.object_pose(secure.world, "target", "alice") in got and bobs_map in got,
                timeout=20, what="latched values for a late joiner", seen=lambda: sorted(got))
     # and the router refused nothing of what the honest logins said (its --audit summaries name every refusal)
     time.sleep(1.5)  # one more audit interval: the summaries of the last second

@@ -303,3 +303,49 @@ def test_a_user_asking_in_her_name_may_not_change_the_map_nor_publish_a_plan_for
     # the per-peer form in her name too
     with pytest.raises(ServiceError, match="an instructor's, not mallory's"):
         user.call(keys.srv_asked(world, "map", "map", "mallory", nav.fabric.peer_id), MapRequest("reset"), timeout=5.0)
+
+
+def test_a_users_build_makes_her_own_map_checked_and_capped(peers):
+    """Issue 30: mallory's build with threshold 0.001 on srv/map/map/by/mallory republished the class's map with every
+    seen cell occupied (every plan failed), and builds under 1,400 new names grew the compute peer for good. Now a
+    build in her name makes ``mallory.{name}``, its threshold is range-checked, and her new names are capped."""
+    nav, sim, user = peers
+    world = user.world
+    class_maps: list[OccupancyGrid] = []
+    hers: list[OccupancyGrid] = []
+    user.subscribe(keys.map_key(world, "map"), lambda k, m: class_maps.append(m), expected=OccupancyGrid)
+    user.subscribe(keys.map_key(world, "mallory.map"), lambda k, m: hers.append(m), expected=OccupancyGrid)
+    scene = small_room()
+    drive_and_scan(nav, sim, scene, drive_poses(scene, step=1.5))
+    staff = call(user, "map", "map", MapRequest("build"))  # the instructor's build: the class's map
+    wait_until(lambda: class_maps, what="the class's map published")
+    asked = keys.srv_asked(world, "map", "map", "mallory")
+    refusals = nav.counters["refusals"]
+    for threshold in (0.001, 0.3, 0.999):
+        with pytest.raises(ServiceError, match=rf"threshold {threshold:g} is outside \[0.5, 0.99\]"):
+            user.call(asked, MapRequest("build", threshold=threshold), timeout=5.0)
+    assert nav.counters["refusals"] == refusals + 3
+    mine = user.call(asked, MapRequest("build", threshold=0.5), timeout=5.0, expected=MapReply)
+    assert mine.name == "mallory.map" and mine.grid.cells.size
+    wait_until(lambda: hers, what="her map on map/mallory.map")
+    assert np.array_equal(nav.store.get("map").cells, staff.grid.cells) and len(class_maps) == 1  # the class's map untouched
+    assert nav.store.user_maps("mallory") == ["mallory.map"]
+    # plans use the class's map unless they name hers
+    plan = PlanRequest(ROBOT, goal=[8.0, 2.0, 0.0], start=[2.0, 2.0, 0.0], direction="both")
+    assert user.call(keys.srv_asked(world, "plan", ROBOT, "mallory"), plan, timeout=20.0, expected=PlanReply).map == "map"
+    # caps: four maps of hers, then a new name is refused with the reason and counted; rebuilding one of hers is not
+    for name in ("a", "b", "mallory.c"):
+        assert user.call(asked, MapRequest("build", name=name), timeout=5.0, expected=MapReply).name == f"mallory.{name.split('.')[-1]}"
+    with pytest.raises(ServiceError, match=r"mallory holds 4 maps, the most one user may \(mallory.a, mallory.b, mallory.c, mallory.map\)"):
+        user.call(asked, MapRequest("build", name="d"), timeout=5.0)
+    assert nav.counters["refused_map_limit"] == 1
+    assert user.call(asked, MapRequest("build", name="a"), timeout=5.0, expected=MapReply).name == "mallory.a"
+    nav.store.users_total = 5  # the cap for all users together
+    bob = keys.srv_asked(world, "map", "map", "bob")
+    assert user.call(bob, MapRequest("build"), timeout=5.0, expected=MapReply).name == "bob.map"
+    with pytest.raises(ServiceError, match="the users hold 5 maps, the most this compute peer keeps"):
+        user.call(bob, MapRequest("build", name="other"), timeout=5.0)
+    assert nav.counters["refused_map_limit"] == 2 and len(nav.store.user_maps()) == 5
+    with pytest.raises(ServiceError, match="characters long; at most 64"):
+        user.call(asked, MapRequest("build", name="x" * 60), timeout=5.0)
+    assert len(class_maps) == 1 and np.array_equal(nav.store.get("map").cells, staff.grid.cells)
