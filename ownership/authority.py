@@ -3,7 +3,9 @@
 It runs :mod:`ownership.state` behind one lock, serves requests/releases/renewals
 and record queries on ``rf/{world}/own/{object}``, follows users' liveliness
 tokens, ticks leases on its own thread, and gates commands by (user, epoch).
-It never touches the simulation: on handover the robot simply continues.
+It never touches the simulation: when a robot loses its owner (a release, a handover, a take-over, the
+end of her lease, her departure) it tells whoever watches (:meth:`Authority.watch_stops`: the sim), which
+stops the robot, before anyone hears of the new owner.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import dataclasses
 import logging
 import threading
 from types import MappingProxyType
-from typing import Any
+from typing import Any, Callable
 
 from fabric import keys
 from fabric.interfaces import Command, Event, EventKind, OwnershipRecord, OwnReply, OwnRequest, ServiceError
@@ -64,6 +66,7 @@ class Authority:
         self._stop = threading.Event()
         self.counters = {"requests": 0, "rejected": 0, "handovers": 0}
         self._lease_s = lease_s
+        self._stop_watchers: list[Callable[[str, str, str], None]] = []
         self._last_tick_at: float | None = None
         self._resumed_at: float | None = None
         # users who may have left while no authority listened (a take-over) or while our link was down:
@@ -123,10 +126,25 @@ class Authority:
         for user in gone:
             self._apply(st.Leave(user, now))
 
+    def watch_stops(self, callback: Callable[[str, str, str], None]) -> None:
+        """``callback(robot, former_owner, reason)`` whenever a robot loses its owner (the state machine's
+        ``stop`` effect). Called under the authority's lock, before the new record is published or the
+        asker answered, so a stop the sim queues there comes before any command of the new owner; it must
+        be quick and must not call back into this authority."""
+        with self._lock:
+            self._stop_watchers.append(callback)
+
     def _apply(self, ev: st.Event) -> list[st.Effect]:
         with self._lock:
             before = self._state.records
             self._state, effects = st.step(self._state, ev)
+            for eff in effects:
+                if eff.kind == "stop":
+                    for watch in self._stop_watchers:
+                        try:
+                            watch(eff.object, eff.user, eff.reason)
+                        except Exception:  # the sim's trouble must not break the state machine
+                            log.exception("stop of %s failed", eff.object)
             # a renewal moves only the lease's end (on the authority's clock, which means nothing elsewhere):
             # the renewer has it in the reply, and nobody else needs a record 64 times a second for a class
             changed = [r for o, r in self._state.records.items() if r is not before.get(o) and not _lease_only(before.get(o), r)]
@@ -255,7 +273,7 @@ class Authority:
         else:
             ev = st.Renew(user, obj, now)
         effects = self._apply(ev)
-        mine = [e for e in effects if e.user == user and e.object == obj and e.kind != "revoked"]
+        mine = [e for e in effects if e.user == user and e.object == obj and e.kind not in ("revoked", "stop")]
         eff = mine[0] if mine else st.Effect("denied", obj, user, "no effect")
         outcome = {"handover": "granted", "restored": "granted"}.get(eff.kind, eff.kind)
         if outcome not in ("granted", "denied", "queued", "released", "renewed"):

@@ -17,6 +17,9 @@ Rules (DESIGN.md):
   renewals stopped while the authority was hearing others (:func:`may_expire`). Nothing heard
   from anyone for ``deaf_s`` (a stalled router, a backlog, a lost link) or a late tick (the
   authority paused) stops expiries, and once it hears again every owner has a whole lease to renew.
+- A robot moves only while a live owner drives it: every change of owner away from a user (her
+  release, a handover, a take-over, her lease's end, her departure) comes with a ``stop`` effect
+  naming the former owner and why; the authority hands it to the sim, which stops the robot.
 - Bounded against made-up users: a queue holds at most
   :data:`fabric.interfaces.MAX_QUEUE` users, and a user that requested without a
   liveliness token (a :class:`Join`) is dropped, from queues and ownership, once
@@ -97,7 +100,10 @@ Event = Join | Leave | Request | Release | Renew | Tick | Motion
 
 @dataclass(frozen=True, slots=True)
 class Effect:
-    """What happened: ``kind`` is granted|denied|queued|released|handover|expired|revoked|restored|renewed."""
+    """What happened: ``kind`` is granted|denied|queued|released|handover|expired|revoked|restored|renewed|stop.
+
+    ``stop``: the robot lost its owner ``user`` (``reason`` says how) and must stop (DESIGN.md: a robot
+    moves only while a live owner drives it); it is applied by the sim, never by this module."""
 
     kind: str
     object: str = ""
@@ -180,14 +186,27 @@ def _join(s: OwnState, user: str) -> OwnState:
 
 
 def _pass_on(s: OwnState, rec: OwnershipRecord, now: float, effects: list, why: str) -> OwnershipRecord:
-    """The owner goes (``why``): the head of the live queue owns next, else the object is free."""
+    """The owner goes (``why``): the head of the live queue owns next, else the object is free; the robot stops."""
     queue = [u for u in rec.queue if u in s.live]
     if queue:
         nxt = queue.pop(0)
         effects.append(Effect("handover", rec.object, nxt, f"{why} by {rec.owner}" if rec.owner else why))
-        return replace(rec, owner=nxt, epoch=rec.epoch + 1, lease_expiry=now + s.lease_s, queue=tuple(queue))
-    effects.append(Effect("released", rec.object, rec.owner, why))
-    return replace(rec, owner="", epoch=rec.epoch + 1, lease_expiry=0.0, queue=tuple(queue))
+        out = replace(rec, owner=nxt, epoch=rec.epoch + 1, lease_expiry=now + s.lease_s, queue=tuple(queue))
+    else:
+        effects.append(Effect("released", rec.object, rec.owner, why))
+        out = replace(rec, owner="", epoch=rec.epoch + 1, lease_expiry=0.0, queue=tuple(queue))
+    if rec.owner:
+        effects.append(Effect("stop", rec.object, rec.owner, _stop_reason(rec.owner, why)))
+    return out
+
+
+def _stop_reason(owner: str, why: str) -> str:
+    """Why a robot stops, in words: ``released by alice``, ``alice left``, ``lease of ... expired ...``."""
+    if why == "released":
+        return f"released by {owner}"
+    if why == "left":
+        return f"{owner} left"
+    return f"{owner}: {why}" if owner not in why else why
 
 
 def _drop_unproven(s: OwnState, recs: dict, user: str, now: float, effects: list) -> OwnState:
@@ -364,6 +383,7 @@ def _on_request(s: OwnState, ev: Request, effects: list[Effect]) -> OwnState:
         effects.append(Effect("granted", rec.object, ev.user, f"taken over from {prev} (still)" if prev else "free"))
         if prev:
             effects.append(Effect("revoked", rec.object, prev, f"handed over to {ev.user} while still"))
+            effects.append(Effect("stop", rec.object, prev, f"taken over by {ev.user} from {prev}"))
         return _with(s, recs)
     if ev.wait and ev.user not in rec.queue and len(rec.queue) >= MAX_QUEUE:
         effects.append(Effect("denied", rec.object, ev.user, f"the queue is full ({MAX_QUEUE} waiting)"))

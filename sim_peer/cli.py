@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import sys
 from typing import Annotated, Optional, TYPE_CHECKING
 
@@ -42,6 +43,25 @@ def make_gate(fabric, world, ownership: bool, restored=None, *, objects: bool = 
     return Authority(fabric, objects=owned).start()
 
 
+def parse_twist_timeout(text: str | None, speed: float | None) -> float | None:
+    """``--twist-timeout``: seconds of sim time (None: twists hold). Not given: the deadman of
+    :data:`sim_peer.controllers.DEFAULT_TWIST_TIMEOUT` s of *real* time, so ``speed`` times that in sim
+    time, and none at ``--speed max`` (no client can refresh a twist at a pace nobody knows)."""
+    from sim_peer.controllers import DEFAULT_TWIST_TIMEOUT
+
+    if text is None:
+        return None if speed is None else DEFAULT_TWIST_TIMEOUT * speed
+    if text.strip().lower() in ("none", "off", "0", "0.0"):
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"--twist-timeout must be seconds (> 0), 0 or none, got {text!r}") from None
+    if not math.isfinite(value) or value < 0:
+        raise ValueError(f"--twist-timeout must be seconds (> 0), 0 or none, got {text!r}")
+    return value or None
+
+
 def sim(
     scene: Annotated[str, typer.Option("--scene", "-s", help="Scene name (robots/scenes/NAME.toml) or path to a scene .toml.")] = "combined",
     robot: Annotated[
@@ -57,7 +77,9 @@ def sim(
     lidar_rays: Annotated[Optional[int], typer.Option("--lidar-rays", help="LIDAR ray count (default from the robot, 240).")] = None,
     lidar_fov: Annotated[Optional[float], typer.Option("--lidar-fov", help="LIDAR field of view in degrees (default 135).")] = None,
     twist_timeout: Annotated[
-        Optional[float], typer.Option("--twist-timeout", help="Stop a base when no twist came for this long (s of sim time); default: twists hold.")
+        Optional[str], typer.Option("--twist-timeout", help="The twist deadman: a base brakes to a halt when no fresh twist came for this "
+                                                           "long (s of sim time); default 0.5 s of real time (0.5 x --speed; off with "
+                                                           "--speed max); 0 or none: twists hold until the next command. See docs/sim.md.")
     ] = None,
     bumper: Annotated[bool, typer.Option("--bumper/--no-bumper", help="Stop bases before obstacles ahead.")] = True,
     mirrors: Annotated[
@@ -96,11 +118,15 @@ def sim(
         raise UserError(f"--duration must be positive, got {duration}")
     if noise is not None and not noise >= 0:
         raise UserError(f"--noise must be >= 0, got {noise}")
+    try:
+        deadman = parse_twist_timeout(twist_timeout, pace)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
     def build(placements=None):
         """This sim's world; ``placements``: other robots than the command line's (a robot moved in or out)."""
         return SimWorld(
             scene, (robot or []) if placements is None else placements, scene_robots=scene_robots and placements is None, seed=seed, noise_std=noise, lidar_rays=lidar_rays, lidar_fov_deg=lidar_fov,
-            bumper=bumper, twist_timeout=twist_timeout, mirrors=mirrors,
+            bumper=bumper, twist_timeout=deadman, mirrors=mirrors,
         )
 
     try:

@@ -18,6 +18,10 @@ from robots import BaseSpec
 
 MOVING_JOINT_SPEED = 1e-3  # rad/s: above this a joint counts as moving (the ownership gate's "in motion")
 MOVING_BASE_SPEED = 1e-3  # m/s and rad/s
+DEFAULT_TWIST_TIMEOUT = 0.5
+"""Seconds of real time a served base keeps a twist without a fresh one (the ROS teleop deadman): a client
+that drives repeats its twist well within it (the user API at 10 Hz), so a base whose driver went quiet
+(closed her laptop, crashed, lost the network) brakes to a halt. ``robofabric sim --twist-timeout``."""
 ABSURD_FACTOR = 5.0  # a twist above this multiple of the robot's limits is refused, not clamped
 
 
@@ -145,7 +149,8 @@ class BaseController:
     """A differential-drive base driven by (v, omega), with speed and acceleration limits.
 
     A twist holds until the next command, or, with ``twist_timeout``, until that much sim
-    time passes without a fresh twist (a dead-man for teleoperation over a network).
+    time passes without a fresh twist (a dead-man for teleoperation over a network: the sim
+    peer's default, docs/sim.md); the base then brakes within its acceleration limits.
 
     The pose (x, y, yaw) is that of the midpoint of the wheel axle, the point the
     base turns about; an in-place turn leaves it where it is. A path follower, when
@@ -215,6 +220,12 @@ class BaseController:
         self.v_cmd = self.omega_cmd = 0.0
         self.v = self.omega = 0.0
         self.wheel_speeds[:] = 0.0
+
+    def brake(self) -> None:
+        """Forget the twist and any path and slow to a halt within the acceleration limits (its owner let go:
+        a real base cannot stop in one step, and a velocity jump is what a safety review refuses)."""
+        self.follower = None
+        self.v_cmd = self.omega_cmd = 0.0
 
     def reset(self) -> None:
         """Back to the spawn pose, at rest."""

@@ -18,6 +18,12 @@ decoded or anything is kept for it, on the one fixed key ``event/reject``. Admit
 leave zenoh's callback thread at once: they wait in a bounded per-robot
 :class:`~sim_peer.inbox.CommandQueue` (the latest target wins, a stop or reset is never
 dropped) that a worker thread applies, so a flood on one key cannot hold up another robot.
+The gate is asked again when a command is applied, so a command admitted just before its sender lost the
+robot is refused rather than applied after the stop. A robot that loses its owner (a release, a handover, a
+take-over, the end of her lease, her departure: the gate's ``watch_stops``) stops: the stop takes the place
+of her pending commands in the robot's queue before anyone hears of the new owner, so it never lands on the
+new owner's first command; a base brakes within its limits, an arm holds where it is (``SimRobot.halt``), and
+a robot that was moving says why as ``Event(kind=EventKind.OWNER_STOP)`` (docs/ownership.md).
 Refusals and bad payloads are reported at most a few times per reason per interval
 (:meth:`fabric.session.Fabric.emit` with ``limit``), with the count of the rest.
 Clamped commands are applied and reported as ``Event(kind=EventKind.CLAMP)``. A command kind a robot's
@@ -29,7 +35,7 @@ the robots' ``describe()``.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import logging
 import threading
@@ -55,6 +61,14 @@ from sim_peer.robot import Build, CommandHandler, Stream, body_mismatch
 from sim_peer.world import SimWorld
 
 log = logging.getLogger("robofabric.sim")
+
+
+@dataclass(frozen=True, slots=True)
+class Halt:
+    """A stop the sim queues itself when a robot loses its owner ``user`` (``reason`` says how)."""
+
+    user: str
+    reason: str
 
 DEFAULT_RATES = {"joints": 100.0, "pose": 50.0, "scan": 20.0}
 
@@ -100,7 +114,7 @@ class SimPeer:
         self._thread: threading.Thread | None = None
         self._opened = False
         self._closed = False
-        self._queues: dict[str, CommandQueue[Command]] = {rid: CommandQueue() for rid in world.robots}
+        self._queues: dict[str, CommandQueue[Command | Halt]] = {rid: CommandQueue() for rid in world.robots}
         self._queued = threading.Condition(threading.Lock())
         self._worker: threading.Thread | None = None
         self.mirror_feed: MirrorFeed | None = None  # the other sims' robots in this world, once open (mirror slots)
@@ -119,6 +133,9 @@ class SimPeer:
         self._worker = threading.Thread(target=self._drain, name="sim-commands", daemon=True)
         self._worker.start()
         d.append(f.watch_peers(self._on_sim, kind="sim"))
+        watch_stops = getattr(self.gate, "watch_stops", None)  # a gate of before the rule may lack it
+        if watch_stops is not None:
+            watch_stops(self._on_owner_lost)
         d.append(f.subscribe_raw(keys.robot_cmd_all(w), self._on_command_sample))
         for obj in self.world.objects:
             # no history here: the authority's start must not wait on other peers' caches (with
@@ -325,10 +342,46 @@ class SimPeer:
             for rid, items in batch:
                 for name, cmd in items:
                     try:
-                        self._execute(rid, name, cmd)
+                        if isinstance(cmd, Halt):
+                            self._halt(rid, cmd)
+                        elif self._still_admitted(rid, name, cmd):
+                            self._execute(rid, name, cmd)
                     except Exception:
                         self.counters["command_errors"] += 1
                         log.exception("command %s for %s failed", name, rid)
+
+    def _on_owner_lost(self, robot: str, user: str, reason: str) -> None:
+        """The gate's word that ``robot`` lost its owner: its stop goes into the robot's queue now, in the
+        gate's call (before the new owner can know her epoch), superseding the former owner's pending commands."""
+        queue = self._queues.get(robot)
+        if queue is None or self._closed:
+            return
+        with self._queued:
+            queue.put("stop", Halt(user, reason))
+            self._queued.notify()
+
+    def _halt(self, rid: str, halt: Halt) -> None:
+        """Stop a robot whose owner let go (:meth:`SimRobot.halt`); say why when it was moving."""
+        with self.lock:
+            robot = self.world.robots[rid]
+            moving = robot.moving
+            robot.halt()
+        self.counters["owner_stops"] += 1
+        if moving:
+            self._event(EventKind.OWNER_STOP, rid, halt.reason, user=halt.user, severity="info")
+
+    def _still_admitted(self, rid: str, name: str, cmd: Command) -> bool:
+        """Ask the gate again as the command is applied: its sender may have lost the robot since it came."""
+        try:
+            refusal = self.gate.admit(rid, cmd)
+        except Exception as exc:
+            log.exception("gate.admit failed")
+            refusal = f"gate error: {clip(str(exc))}"
+        if refusal:
+            self._reject(rid, name, refusal, f"the gate refused {cmd.user}'s {name} command (epoch {cmd.epoch}) as it was applied",
+                         cmd.user, code="refused")
+            return False
+        return True
 
     def superseded(self) -> int:
         """Admitted commands a later one of the same robot replaced before they were applied."""

@@ -27,7 +27,7 @@ from typing import Any, ClassVar
 import mujoco
 import numpy as np
 
-from fabric.interfaces import COMMAND_BODIES, RobotInfo, RobotState, quaternion_from_yaw
+from fabric.interfaces import COMMAND_BODIES, RobotInfo, RobotState, Stop, quaternion_from_yaw
 from robots import RobotDescription
 from sim_peer.controllers import Clamp, CommandRejected
 
@@ -182,6 +182,14 @@ class SimRobot:
 
     def overlay(self, stream: str, message: Any) -> None:
         """Where the robot was by its own stream (``joints``, ``pose``), newer than the last snapshot."""
+
+    def halt(self) -> None:
+        """Stop because the robot lost its owner (a robot moves only while a live owner drives it): the
+        default is the robot's own ``stop`` command; a type that can stop more gently (a base braking within
+        its limits) says so here. Called under the world's lock by the sim peer."""
+        handler = self.commands().get("stop")
+        if handler is not None:
+            handler(Stop())
 
     def note(self, note: Note) -> None:
         """Say something as an event (the peer publishes it after the step)."""

@@ -209,6 +209,10 @@ class MobileRobot(_Driven):
     def stop(self) -> None:
         self.ctrl.stop()
 
+    def halt(self) -> None:
+        """Its owner let go: brake to a halt within the base's limits (a stop command stops at once)."""
+        self.ctrl.brake()
+
     def reset(self) -> None:
         self.ctrl.reset()
 

@@ -34,8 +34,15 @@ class EventKind(enum.StrEnum):
     """A command applied after clamping to the robot's limits (``reason``: out_of_range, over_limit)."""
     PATH_DONE = "path_done"
     TWIST_TIMEOUT = "twist_timeout"
+    """No fresh twist within the sim's deadman (``--twist-timeout``): the base brakes to a halt."""
+    OWNER_STOP = "owner_stop"
+    """A moving robot lost its owner (released, handed over, taken over, her lease ended, she left) and
+    stopped: a base brakes within its limits, an arm holds where it is; ``reason`` says how, ``user`` names her."""
     COLLISION = "collision"
     """The bumper stopped a base before an obstacle."""
+    MOVE_REFUSED = "move_refused"
+    """A sim refused a step of a move (on ``event/move``): asked on a key every login may ask, no robot handed
+    out in that move, a type not installed here...; ``reason`` says which, ``user`` names the login asking."""
     # the compute peer, on event/ik_unreachable/{robot}
     IK_UNREACHABLE = "ik_unreachable"
     # the ownership authority, on event/own/{object}

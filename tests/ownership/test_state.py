@@ -80,6 +80,12 @@ def test_invariants_over_random_sequences(seq):
             assert b.epoch >= a.epoch
             if a.owner != b.owner:
                 assert b.epoch > a.epoch, f"{obj}: owner changed {a.owner!r}->{b.owner!r} without a new epoch"
+            # a robot moves only while a live owner drives it: losing its owner stops it, and nothing else does
+            stops = [e for e in effects if e.kind == "stop" and e.object == obj]
+            if a.owner and a.owner != b.owner:
+                assert [e.user for e in stops] == [a.owner] and stops[0].reason, f"{obj}: {a.owner} lost it without a stop"
+            else:
+                assert not stops, f"{obj}: stopped while {a.owner!r} kept it: {stops}"
         if (isinstance(ev, st.Request) and OBJECTS[ev.object] == "exclusive" and before.records[ev.object].owner not in ("", ev.user)
                 and ev.user in before.live and ev.user not in before.unproven):
             rec = before.records[ev.object]
@@ -111,7 +117,8 @@ def test_still_robot_is_handed_over():
     s, _ = st.step(s, st.Request("a", "arm", 0.0))
     s, _ = st.step(s, st.Join("b", 0.2))
     s, eff = st.step(s, st.Request("b", "arm", 0.5))
-    assert s.records["arm"].owner == "b" and [e.kind for e in eff] == ["granted", "revoked"]
+    assert s.records["arm"].owner == "b" and [e.kind for e in eff] == ["granted", "revoked", "stop"]
+    assert (eff[2].user, eff[2].reason) == ("a", "taken over by b from a")
 
 
 def test_a_user_without_a_token_takes_a_free_robot_but_never_someones():
@@ -186,8 +193,8 @@ def test_an_authority_that_hears_nobody_expires_no_lease():
         assert not eff and s.records["arm"].owner == "a"
     s, _ = st.step(s, st.Renew("b", "base", 7.0))
     s, eff = st.step(s, st.Tick(7.05))
-    assert [(e.kind, e.object) for e in eff] == [("released", "arm"), ("expired", "arm")]
-    assert "no renewal for 7.0 s" in eff[1].reason and s.records["base"].owner == "b"
+    assert [(e.kind, e.object) for e in eff] == [("released", "arm"), ("stop", "arm"), ("expired", "arm")]
+    assert "no renewal for 7.0 s" in eff[2].reason and s.records["base"].owner == "b"
 
 
 def test_an_owner_who_stops_renewing_while_others_are_heard_loses_the_robot():
@@ -197,7 +204,7 @@ def test_an_owner_who_stops_renewing_while_others_are_heard_loses_the_robot():
         s, eff = st.step(s, st.Tick(i * 0.1))
         if eff:
             break
-    assert [(e.kind, e.user) for e in eff] == [("released", "a"), ("expired", "a")] and 2.0 < i * 0.1 <= 2.2
+    assert [(e.kind, e.user) for e in eff] == [("released", "a"), ("stop", "a"), ("expired", "a")] and 2.0 < i * 0.1 <= 2.2
 
 
 @settings(max_examples=300, deadline=None)
