@@ -146,6 +146,18 @@ class OwnershipLink:
         owner = f"owner {rec.owner}, {rec.state}" if rec is not None and rec.owner else "no owner"
         raise Timeout(f"{obj} not granted to {self.user} after {waited:.1f} s of waiting ({where}; {owner}); left the queue")
 
+    def enqueue(self, obj: str, *, timeout: float) -> int:
+        """Ask for ``obj`` willing to wait, without waiting: the queue place (1: next), or 0 when granted
+        at once; :class:`NotOwner` when refused (a full queue), :class:`Timeout` when no authority answers."""
+        with self._lock:
+            self._releasing.discard(obj)
+        out = self._ask("request", obj, timeout, wait=True)
+        if out.granted:
+            return 0
+        if out.outcome != "queued":
+            raise NotOwner(f"{obj} not granted to {self.user}: {out}")
+        return out.position
+
     def release(self, obj: str, *, timeout: float) -> None:
         with self._lock:
             self._releasing.add(obj)

@@ -170,12 +170,29 @@ class Robot:
         return self.world.ownership.request(self.id, timeout=timeout or self.world.timeout, wait=wait)
 
     def release(self) -> None:
+        """Give the robot up (the next in its queue owns it). The sim stops it: a base brakes, an arm holds."""
+        self.world.twists.drop(self.id)
         self.world.ownership.release(self.id, timeout=self.world.timeout)
+
+    def queue(self, *, timeout: float | None = None) -> int:
+        """Take a place in the robot's queue without waiting for it (a UI's "queue for it"); returns the
+        place (1: next), or 0 when the robot was granted at once (free, or still). :class:`NotOwner` when
+        refused (the queue is full). The place and the grant show in :attr:`record` as they come."""
+        return self.world.ownership.enqueue(self.id, timeout=timeout or self.world.timeout)
+
+    @property
+    def queue_place(self) -> int | None:
+        """This user's place in the robot's queue (1: next), or None when not waiting for it."""
+        rec = self.record
+        if rec is None or self.world.user not in rec.queue:
+            return None
+        return rec.queue.index(self.world.user) + 1
 
     # ------------------------------------------------------------------ commands
 
-    def send(self, command: str, body: Any) -> None:
-        """Send a command under this user's current epoch; :class:`NotOwner` if we know we do not own it.
+    def send(self, command: str, body: Any, *, epoch: int | None = None) -> None:
+        """Send a command under this user's current epoch; :class:`NotOwner` if we know we do not own it
+        (or, with ``epoch``, own it under another epoch: a repeat of a command given before it was lost).
 
         With no ownership record at all (a world run without ownership) the command goes out with
         epoch 0 and the sim, the authority, decides.
@@ -186,6 +203,8 @@ class Robot:
         if rec is not None and rec.owner != self.world.user:
             who = rec.owner or "nobody"
             raise NotOwner(f"{self.world.user} does not own {self.id} (owner: {who}); call request() first")
+        if epoch is not None and rec is not None and rec.epoch != epoch:
+            raise NotOwner(f"{self.id} changed hands since the command was given (epoch {epoch}, now {rec.epoch})")
         key = keys.robot_cmd(self._w, self.id, command, self.world.user)
         epoch = rec.epoch if rec is not None else 0
         # a sim that has just (re)started may not be known as a listener yet: its first command was lost
@@ -197,11 +216,13 @@ class Robot:
         """Stop the robot where it is. Commands are dropped, not queued, when the network is congested, so
         with ``confirm`` the stop is sent again every 0.1 s until the robot's own stream shows it still
         (:func:`fabric.reliable.resend_until`); returns whether it was seen still within ``timeout``."""
+        self.world.twists.drop(self.id)
         return self._control("stop", Stop, confirm, timeout)
 
     def reset(self, *, confirm: bool = True, timeout: float = 10.0) -> bool:
         """Send the robot back to its start (an arm at its speed limits); with ``confirm``, sent again until
         the robot is seen still (an arm: still at its start), as :meth:`stop`. Returns whether it was within ``timeout``."""
+        self.world.twists.drop(self.id)
         return self._control("reset", Reset, confirm, timeout)
 
     def _control(self, command: str, body_type: type, confirm: bool, timeout: float) -> bool:
@@ -409,12 +430,27 @@ class Base(Robot):
         return float(p.position[0]), float(p.position[1]), yaw_from_quaternion(p.quaternion)
 
     def twist(self, v: float, omega: float) -> None:
-        """One twist command (m/s, rad/s); the sim keeps it until the next one or a stop."""
+        """Drive at (v m/s, omega rad/s) until told otherwise, as long as this program lives and owns the base.
+
+        The sim keeps a twist only for its deadman (0.5 s by default, docs/sim.md), so this handle repeats it
+        every 0.1 s (:mod:`user_peer.deadman`) until the next twist, ``twist(0, 0)``, :meth:`stop`,
+        :meth:`reset`, :meth:`follow`, :meth:`release` or the world's close. If the program dies, or the base
+        passes to someone else, the repeats end and the base brakes to a halt."""
+        v, omega = float(v), float(omega)
+        self._send_twist(v, omega)
+        if v or omega:
+            epoch = self.record.epoch if self.record is not None else None
+            self.world.twists.hold(self.id, lambda: self._send_twist(v, omega, epoch))
+        else:
+            self.world.twists.drop(self.id)
+
+    def _send_twist(self, v: float, omega: float, epoch: int | None = None) -> None:
         key = keys.robot_cmd(self._w, self.id, "twist", self.world.user)
-        self.send("twist", Twist(float(v), float(omega), self.world.fabric.header(key)))
+        self.send("twist", Twist(v, omega, self.world.fabric.header(key)), epoch=epoch)
 
     def drive(self, v: float, omega: float, duration: float, *, rate: float = 10.0) -> tuple[float, float, float] | None:
-        """Drive at (v, omega) for ``duration`` seconds (repeating the twist at ``rate`` Hz), then stop."""
+        """Drive at (v, omega) for ``duration`` seconds (repeating the twist at ``rate`` Hz: keep it above the
+        sim's deadman, 2 Hz by default), then a zero twist (the base brakes within its limits)."""
         since = self.world.event_mark()
         end = time.monotonic() + duration
         try:
@@ -473,6 +509,7 @@ class Base(Robot):
         if len(path) == 0:
             raise ValueError("cannot follow an empty path")
         events_mark, data_mark = self.world.event_mark(), self.world.latest.mark()
+        self.world.twists.drop(self.id)  # the sim's follower drives now
         key = keys.robot_cmd(self._w, self.id, "path", self.world.user)
         body = Path(path.x, path.y, path.theta, path.frame, self.world.fabric.header(key))
         self.send("path", body)

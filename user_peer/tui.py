@@ -1,9 +1,11 @@
 """``robofabric user``: the paper's user interface in a terminal (works over SSH).
 
-One slider per arm joint (each change sends a joint target), stop and reset,
-arrow keys to drive the mobile base (``1``-``3`` pick the speed, space stops),
-a button to request or release each robot. Controls are disabled while this
-user does not own the robot, and the owner's name is shown. Live joints, a scan
+One slider per arm joint (each change sends a joint target at the arm speed that
+``[``/``]`` pick), stop and reset, arrow keys to drive the mobile base (``1``-``3`` pick
+the speed, space stops; while a joint slider has the focus ←/→ move that slider, and
+``escape`` gives the arrows back to the base), buttons to request, queue for or release
+each robot. Controls are disabled while this user does not own the robot, and the owner's
+name (and this user's place in its queue) is shown. Live joints, a scan
 preview, and ownership, lease and latency status refresh ten times a second.
 
 The app takes :class:`~user_peer.api.Arm` / :class:`~user_peer.api.Base`
@@ -26,10 +28,13 @@ from user_peer.api import Arm, Base, World
 from user_peer.errors import FabricUserError
 from user_peer.slider import JointSlider
 
-__all__ = ["UserApp", "SPEEDS", "event_line"]
+__all__ = ["UserApp", "SPEEDS", "ARM_SPEEDS", "event_line"]
 
 SPEEDS = {1: (0.2, 0.4), 2: (0.5, 0.8), 3: (1.0, 1.5)}
 """Speed level -> (forward m/s, turn rad/s) for the arrow keys."""
+
+ARM_SPEEDS = (0.1, 0.25, 0.5, 1.0)
+"""The arm's ``speed_scale`` steps (a fraction of each joint's speed limit), ``[`` slower, ``]`` faster."""
 
 
 def _age_ms(robot, stream: str) -> float | None:
@@ -67,12 +72,16 @@ class UserApp(App):
     BINDINGS = [
         Binding("up", "drive(1, 0)", "forward", priority=True),
         Binding("down", "drive(-1, 0)", "back", priority=True),
-        Binding("left", "drive(0, 1)", "turn left", priority=True),
-        Binding("right", "drive(0, -1)", "turn right", priority=True),
+        # not priority: a focused joint slider takes left/right first (docs/user_api.md), the base gets the rest
+        Binding("left", "drive(0, 1)", "turn left"),
+        Binding("right", "drive(0, -1)", "turn right"),
+        Binding("escape", "unfocus", "arrows drive", show=False),
         Binding("space", "halt", "stop base", priority=True),
         Binding("1", "speed(1)", "slow"),
         Binding("2", "speed(2)", "medium"),
         Binding("3", "speed(3)", "fast"),
+        Binding("left_square_bracket", "arm_speed(-1)", "arm slower"),
+        Binding("right_square_bracket", "arm_speed(1)", "arm faster"),
         Binding("q", "quit", "quit"),
     ]
 
@@ -83,6 +92,7 @@ class UserApp(App):
         self.base = base
         self.refresh_hz = refresh_hz
         self.speed_level = 1
+        self.arm_speed = ARM_SPEEDS[-1]
         self.v = 0.0
         self.omega = 0.0
         self.message = ""
@@ -97,7 +107,8 @@ class UserApp(App):
         if self.arm is not None:
             e = self.arm.entry
             with Vertical(classes="panel", id="arm-panel"):
-                yield Label(plain(f"arm {self.arm.id} ({self.arm.type})"), id="arm-title")
+                yield Label(plain(f"arm {self.arm.id} ({self.arm.type}): [ ] arm speed"), id="arm-title")
+                yield Label("", id="arm-speed")
                 yield Label("", id="arm-owner", classes="owner")
                 for i, name in enumerate(e.joint_names):
                     lo = e.lower[i] if i < len(e.lower) else -math.pi
@@ -105,6 +116,7 @@ class UserApp(App):
                     yield JointSlider(name, lo, hi, id=f"joint-{i}")
                 with Horizontal(classes="row"):
                     yield Button("Request arm", id="arm-request", variant="primary")
+                    yield Button("Queue", id="arm-queue")
                     yield Button("Release", id="arm-release")
                     yield Button("Stop", id="arm-stop", variant="error")
                     yield Button("Reset", id="arm-reset", variant="warning")
@@ -116,6 +128,7 @@ class UserApp(App):
                 yield Sparkline([0.0], id="scan")
                 with Horizontal(classes="row"):
                     yield Button("Request base", id="base-request", variant="primary")
+                    yield Button("Queue", id="base-queue")
                     yield Button("Release", id="base-release")
                     yield Button("Stop", id="base-stop", variant="error")
         yield Static("", id="status")
@@ -147,6 +160,10 @@ class UserApp(App):
         action = bid.split("-", 1)[1]
         if action == "request":
             self._try(f"request {robot.id}", robot.request, timeout=3.0)
+        elif action == "queue":
+            place = self._try(f"queue for {robot.id}", robot.queue, timeout=3.0)
+            if place is not None:
+                self.message = f"queue for {robot.id}: " + (f"place {place}" if place else "granted at once")
         elif action == "release":
             self._try(f"release {robot.id}", robot.release)
         elif action == "stop":
@@ -164,8 +181,19 @@ class UserApp(App):
         if self.arm is None:
             return
         q = np.array([s.value for s in self.query(JointSlider)])
-        if self._try(f"{event.slider.joint} -> {math.degrees(event.value):.1f} deg", self.arm.move_joints, q, wait=False) is not None:
+        if self._try(f"{event.slider.joint} -> {math.degrees(event.value):.1f} deg", self.arm.move_joints, q, wait=False,
+                     speed_scale=self.arm_speed) is not None:
             self.sent += 1
+
+    def action_arm_speed(self, step: int) -> None:
+        """One ``speed_scale`` step slower or faster for the arm's next joint targets."""
+        i = min(max(ARM_SPEEDS.index(self.arm_speed) + step, 0), len(ARM_SPEEDS) - 1)
+        self.arm_speed = ARM_SPEEDS[i]
+        self.message = f"arm speed {self.arm_speed:.0%} of its joints' limits"
+
+    def action_unfocus(self) -> None:
+        """Leave the focused slider, so the arrow keys drive the base again."""
+        self.set_focus(None)
 
     def action_speed(self, level: int) -> None:
         self.speed_level = level
@@ -194,12 +222,11 @@ class UserApp(App):
             self.sent += 1
 
     def keep_driving(self) -> None:
-        """Repeat a non-zero twist so the base keeps moving while a key was last pressed."""
-        if self.base is not None and (self.v or self.omega) and self.base.can_command:
-            try:
-                self.base.twist(self.v, self.omega)
-            except FabricUserError:
-                self.v = self.omega = 0.0
+        """The base keeps the last arrow's twist while this app runs and owns it: the world's twist keeper
+        repeats it against the sim's deadman (:meth:`user_peer.robot.Base.twist`). When the keeper gave it up
+        (the base was lost, released or stopped) the command shown goes back to zero."""
+        if self.base is not None and (self.v or self.omega) and not self.world.twists.holding(self.base.id):
+            self.v = self.omega = 0.0
 
     # ------------------------------------------------------------------ live view
 
@@ -212,9 +239,17 @@ class UserApp(App):
         text = f"owner: {who} · epoch {rec.epoch} · {rec.state}"
         if rec.queue:
             text += f" · waiting: {', '.join(rec.queue)}"
+        place = robot.queue_place
+        if place is not None:
+            text += f" · you are #{place} in the queue"
         if not mine:
             text += " · controls disabled until you own it"
         return text
+
+    def _may_queue(self, robot) -> bool:
+        """Queueing makes sense for a robot someone else owns (moving or not) that we do not wait for yet."""
+        rec = robot.record
+        return rec is not None and bool(rec.owner) and rec.owner != self.world.user and robot.queue_place is None
 
     def refresh_view(self) -> None:
         try:
@@ -252,6 +287,8 @@ class UserApp(App):
             for bid in ("#arm-stop", "#arm-reset", "#arm-release"):
                 self.query_one(bid, Button).disabled = not mine
             self.query_one("#arm-request", Button).disabled = mine
+            self.query_one("#arm-queue", Button).disabled = not self._may_queue(self.arm)
+            self.query_one("#arm-speed", Label).update(f"arm speed {self.arm_speed:.0%} of the joint limits")
             lat = _age_ms(self.arm, "joints")
             status.append(f"arm joints age {lat:.0f} ms" if lat is not None else "arm: no joints yet")
         if self.base is not None:
@@ -260,6 +297,7 @@ class UserApp(App):
             for bid in ("#base-stop", "#base-release"):
                 self.query_one(bid, Button).disabled = not mine
             self.query_one("#base-request", Button).disabled = mine
+            self.query_one("#base-queue", Button).disabled = not self._may_queue(self.base)
             pose = self.base.pose
             xy = self.base.xy_theta
             state = f"pose ({xy[0]:+.2f}, {xy[1]:+.2f}, {math.degrees(xy[2]):+.0f}°)" if xy else "pose -"

@@ -20,6 +20,7 @@ from fabric.fencing import is_authority_event
 from fabric.interfaces import REJECT_KINDS, Event, ServiceError, WorldInfo
 from fabric.session import Fabric
 from user_peer import services
+from user_peer.deadman import TwistKeeper
 from user_peer.errors import JoinFailed, Timeout, Unreachable
 from user_peer.latest import Latest
 from user_peer.ownership_link import OwnershipLink
@@ -73,6 +74,7 @@ class World:
         self._events_lock = threading.Lock()
         self._closed = False
         self._robots: dict[str, Robot] = {}
+        self.twists = TwistKeeper()  # repeats the twists bases hold (Base.twist) against the sim's deadman
         self._objects: dict[str, SceneObject] = {}
         # the latest of every scene object and map (latched: what was set before this user joined comes at
         # once); a robot's streams are followed from its first handle on (robot()): a student of a class
@@ -129,6 +131,7 @@ class World:
                 return
             self._closed = True
         self._cancel_exit()
+        self.twists.close()  # no twist goes out after this: the robots released below stop
         try:
             self.ownership.release_all(timeout=min(self.timeout, 2.0))
         finally:

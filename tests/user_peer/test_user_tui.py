@@ -83,7 +83,19 @@ async def _drive_the_ui(auth, alice, arm, base, cmds, world):
         assert math.isclose(last.body.q[1], 0.1 + math.radians(3.0), abs_tol=1e-9)
         assert np.allclose(np.delete(last.body.q, 1), 0.1)
 
-        await pilot.press("3", "up", "left")
+        # ←/→ move the focused slider (issue 31: they turned the base): three Right presses, three degrees, no twist
+        await pilot.press("right", "right", "right")
+        await until(pilot, lambda: math.isclose(sliders[1].value, 0.1 + math.radians(6.0), abs_tol=1e-9), "the slider moved with right")
+        await until(pilot, lambda: math.isclose([m for k, m in cmds if "/cmd/joints/by/alice" in k][-1].body.q[1],
+                                                0.1 + math.radians(6.0), abs_tol=1e-9), "its joint target sent")
+        assert not any("/cmd/twist/by/alice" in k for k, _ in cmds)
+        # the arm speed setting: ']' is already at full speed, '[' twice is 25 %, and the next target carries it
+        await pilot.press("left_square_bracket", "left_square_bracket", "left")
+        await until(pilot, lambda: math.isclose([m for k, m in cmds if "/cmd/joints/by/alice" in k][-1].body.speed_scale, 0.25),
+                    "a target at 25 % speed")
+        assert app.arm_speed == 0.25 and "25%" in str(app.query_one("#arm-speed").render())
+
+        await pilot.press("escape", "3", "up", "left")  # escape leaves the slider: the arrows drive the base again
         await until(pilot, lambda: any("/cmd/twist/by/alice" in k and m.body.omega > 0 for k, m in cmds), "twist command")
         tw = [m for k, m in cmds if "/cmd/twist/by/alice" in k][-1]
         assert tw.epoch == 5 and (tw.body.v, tw.body.omega) == SPEEDS[3]
