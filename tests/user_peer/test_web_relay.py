@@ -1,9 +1,13 @@
-"""The per-page relay in front of Rerun's gRPC server (user_peer/web_relay.py), on loopback with a stand-in server.
+"""The relay in front of Rerun's gRPC server (user_peer/web_relay.py, user_peer/grpc_gate.py), on loopback.
 
-The stand-in plays Rerun's server: it sends every connection the same stream, one write after the other,
+With a stand-in server: the stand-in plays Rerun's server: it sends every connection the same stream, one write after the other,
 and records how long each write waited. Through the relay, a client that reads gets everything in order,
 a client that stops reading is cut off once its queue waited too long, and the server's writes to the
-frozen client never wait for it (with direct connections they would, as Rerun's broadcast does)."""
+frozen client never wait for it (with direct connections they would, as Rerun's broadcast does).
+
+With Rerun's own gRPC server (``rr.GrpcServerSink`` in this process, as ``view --serve-web`` runs it): writes
+are refused and the pages see nothing of them; 100 stalled readers leave the relay within its budget and an
+honest reader receiving; a slow reader joining a long session gets the whole compacted history, not cut."""
 
 from __future__ import annotations
 
@@ -14,7 +18,8 @@ import time
 import pytest
 
 from fabric.testing import free_port, wait_until
-from user_peer.web_relay import Relay
+from tests.user_peer.grpc_web_client import raw_read_request
+from user_peer.web_relay import Relay, RelayLimits
 
 BLOCK = b"x" * 65536
 
@@ -38,7 +43,7 @@ class StandIn:
             threading.Thread(target=self._feed, args=(conn,), daemon=True).start()
 
     def _feed(self, conn: socket.socket) -> None:
-        conn.recv(100)  # the client's "request"
+        conn.recv(4096)  # the client's request
         i = 0
         try:
             while not self.stop.is_set():
@@ -61,14 +66,14 @@ def _client(port: int, rcvbuf: int | None = None) -> socket.socket:
     if rcvbuf is not None:
         c.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
     c.connect(("127.0.0.1", port))
-    c.sendall(b"POST /proxy HTTP/1.1\r\n\r\n")
+    c.sendall(raw_read_request())
     return c
 
 
 @pytest.mark.slow  # ~3 s
 def test_a_frozen_client_is_cut_off_and_holds_up_neither_the_server_nor_the_others():
     server = StandIn()
-    relay = Relay(("127.0.0.1", server.port), free_port(), bind="127.0.0.1", max_queue_bytes=8 << 20, max_wait_s=1.0)
+    relay = Relay(("127.0.0.1", server.port), free_port(), bind="127.0.0.1", limits=RelayLimits(max_queue_bytes=8 << 20, max_stall_s=1.0))
     frozen = _client(relay.port, rcvbuf=4096)  # never reads
     reader = _client(relay.port)
     try:
