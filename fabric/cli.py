@@ -16,14 +16,14 @@ from importlib.metadata import entry_points
 
 import typer
 
-from fabric.cli_common import UserError
+from fabric.cli_common import EXIT_RULE, NothingThere, UserError, reader_gone
 from fabric.config import ConfigError
 
 GROUP = "robofabric.commands"
 
 app = typer.Typer(
     name="robofabric",
-    help="Multi-user robot simulation fabric over Zenoh: run routers and peers, inspect live keys, record and replay.",
+    help="Multi-user robot simulation fabric over Zenoh: run routers and peers, inspect live keys, record and replay.\n\n" + EXIT_RULE,
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=True,  # --install-completion / --show-completion (bash, zsh, fish, PowerShell)
@@ -170,10 +170,28 @@ def main(argv: list[str] | None = None) -> int:
     except (UserError, ConfigError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except NothingThere as exc:
+        print(str(exc), file=sys.stderr)
+        return 1
     except SystemExit as exc:
+        if _stdout_was_closed():
+            return 0  # the reader went away (`| head`): what it asked for, it got
         code = exc.code
         return code if isinstance(code, int) else (0 if code is None else 1)
+    except BrokenPipeError:
+        reader_gone()
+        return 0
     return 0
+
+
+def _stdout_was_closed() -> bool:
+    """Whether typer ended the command on a closed stdout (it wraps stdout and exits 1 on EPIPE)."""
+    from fabric.cli_common import stdout_closed
+
+    if type(sys.stdout).__name__ == "PacifyFlushWrapper":  # by name: click 8.2 deprecates importing it
+        reader_gone()
+        return True
+    return stdout_closed()
 
 
 if __name__ == "__main__":

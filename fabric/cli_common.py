@@ -4,10 +4,18 @@ A peer package's ``cli.py`` takes these annotated types as parameters so that
 ``--world``, ``--connect``, ``--listen``, ``--id``, ``--profile`` and
 ``--zenoh-config`` mean the same everywhere, and raises :class:`UserError` for
 anything the user got wrong: the CLI prints one line and exits 2, no traceback.
+
+The exit-code rule of every command (:data:`EXIT_RULE`): 0 when what was asked happened, 1 when the world
+answered no or had nothing (:class:`NothingThere`), 2 for a usage error or an unreachable router
+(:class:`UserError`). A streaming command writes through :func:`say`: when its reader goes away
+(``robofabric echo KEY | head -3``) it ends quietly with 0, like Ctrl-C.
 """
 
 from __future__ import annotations
 
+import os
+import sys
+import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Optional
 
@@ -20,6 +28,11 @@ if TYPE_CHECKING:
 
 __all__ = [
     "UserError",
+    "NothingThere",
+    "EXIT_RULE",
+    "say",
+    "reader_gone",
+    "stdout_closed",
     "World",
     "Connect",
     "Listen",
@@ -35,6 +48,60 @@ __all__ = [
 
 class UserError(Exception):
     """Something the user asked for cannot be done; printed as one line, exit code 2."""
+
+
+class NothingThere(Exception):
+    """The world answered no or had nothing to show (no such key, no sim, a refusal); printed as one line, exit 1."""
+
+
+EXIT_RULE = (
+    "Exit codes, the same for every command: 0 what was asked happened; 1 the world answered no or had "
+    "nothing (no publisher, no sim, a refusal); 2 a usage error or a router that cannot be reached."
+)
+
+_stdout_gone = threading.Event()
+
+
+def stdout_closed() -> bool:
+    """Whether the reader of stdout went away (a closed pipe)."""
+    return _stdout_gone.is_set()
+
+
+def reader_gone() -> None:
+    """The reader of stdout went away: stdout becomes /dev/null, so that nothing written later (another
+    callback's line, the interpreter's flush at exit) raises or prints a traceback. Idempotent."""
+    if _stdout_gone.is_set():
+        return
+    _stdout_gone.set()
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # no file descriptor behind stdout (a test's capture): nothing to redirect
+        pass
+
+
+def say(*lines: str, stop: threading.Event | None = None) -> bool:
+    """Write ``lines`` to stdout and flush: how a streaming command prints, from any thread.
+
+    Returns False, and sets ``stop``, once the reader has gone (``| head -3`` closed the pipe): the command
+    then ends as if it had been asked to (exit 0), instead of a traceback per message."""
+    if not _stdout_gone.is_set():
+        try:
+            sys.stdout.write("".join(f"{line}\n" for line in lines))
+            sys.stdout.flush()
+            return True
+        except BrokenPipeError:
+            reader_gone()
+        except OSError as exc:  # EPIPE under another name; anything else is a real failure
+            import errno
+
+            if exc.errno != errno.EPIPE:
+                raise
+            reader_gone()
+    if stop is not None:
+        stop.set()
+    return False
 
 
 World = Annotated[
@@ -71,9 +138,26 @@ def console(*, stderr: bool = False):
     """The rich console every table and long line of the CLI goes through: as wide as the terminal
     (``$COLUMNS`` when set, 80 when the output is not a terminal), folding what does not fit rather than
     cutting it; no markup, highlighting or emoji, so keys and ids from the network print as they are."""
-    from rich.console import Console
+    return _console_class()(stderr=stderr, markup=False, highlight=False, emoji=False)
 
-    return Console(stderr=stderr, markup=False, highlight=False, emoji=False)
+
+_CONSOLE: type | None = None
+
+
+def _console_class() -> type:
+    """rich's Console, but a closed stdout ends the command with 0 (rich's own exits 1), as :func:`say` does."""
+    global _CONSOLE
+    if _CONSOLE is None:
+        from rich.console import Console
+
+        class _Console(Console):
+            def on_broken_pipe(self) -> None:
+                self.quiet = True
+                reader_gone()
+                raise SystemExit(0)
+
+        _CONSOLE = _Console
+    return _CONSOLE
 
 
 def print_folded(*lines: str, stderr: bool = False) -> None:

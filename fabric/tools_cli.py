@@ -14,7 +14,9 @@ import typer
 import zenoh
 
 from fabric import keys
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, print_folded
+from fabric.cli_common import (
+    Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, print_folded, say,
+)
 from fabric.complete import complete_keys, complete_peers, complete_types
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
@@ -217,7 +219,7 @@ def echo(
                     line = json.dumps({"key": k, "message": to_plain(msg)})
                 else:
                     line = f"--- {k}\n{msg}"
-                print(line, flush=True)
+                say(line, stop=stop)  # a closed pipe (`| head -3`) ends echo with 0
                 if count is not None and printed >= count:
                     stop.set()
 
@@ -279,15 +281,17 @@ def hz(
                 with lock:
                     snap = {k: s.summary() for k, s in stats.items()}
                 print_folded(*(_hz_line(k, s) for k, s in sorted(snap.items())))  # as wide as the terminal
-                if not snap:
-                    print(f"no messages on {full} yet", flush=True)
+                if not snap and not say(f"no messages on {full} yet", stop=stop):
+                    break
     with lock:
         final = {k: s.summary() for k, s in sorted(stats.items())}
     if as_json:
-        print(json.dumps({"key": full, "streams": final}))
-    else:
-        print("summary:" if final else f"no messages on {full}")
+        say(json.dumps({"key": full, "streams": final}))
+    elif final:
+        say("summary:")
         print_folded(*(_hz_line(k, s) for k, s in final.items()))
+    if not final:
+        raise NothingThere(f"no messages on {full}")  # exit 1: nothing to measure
 
 
 def pub(

@@ -8,7 +8,7 @@ from typing import Annotated, Optional, TYPE_CHECKING
 
 import typer
 
-from fabric.cli_common import Connect, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric
+from fabric.cli_common import Connect, NothingThere, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, say
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
     from fabric.session import Fabric
@@ -66,8 +66,8 @@ def list_cmd(world: World = None, connect: Connect = None, profile: Profile = No
     with fab:
         try:
             records = cl.snapshot()  # a copy taken under the client's lock: Zenoh's threads write the replica
-            if not records:
-                raise UserError(f"no ownership authority answered in world {fab.world!r} (is a sim peer running?)")
+            if not records:  # the world had nothing to list: exit 1 (2 is for what the user got wrong)
+                raise NothingThere(f"no ownership authority answered in world {fab.world!r} (is a sim peer running?)")
         finally:
             cl.close()
     rows = [records[obj] for obj in sorted(records)]
@@ -114,13 +114,13 @@ def _hold(cl: OwnershipClient, obj: str, stop, duration: float | None) -> None:
 
     Prints each change of the object's record, so a queued user sees the moment it is granted."""
     from fabric.interfaces import ServiceError
-    cl.on_change(lambda rec: print(_line(rec), flush=True) if rec.object == obj else None)
-    print(f"holding {obj} as {cl.user} (Ctrl-C releases it)", flush=True)
+    cl.on_change(lambda rec: say(_line(rec), stop=stop) if rec.object == obj else None)
+    say(f"holding {obj} as {cl.user} (Ctrl-C releases it)", stop=stop)
     stop.wait(duration)
     try:
-        print(f"{obj}: {cl.release(obj)}", flush=True)
+        say(f"{obj}: {cl.release(obj)}")
     except ServiceError as exc:  # the authority went away: the lease lapses on its own
-        print(f"{obj}: release not confirmed: {exc.reason}", flush=True)
+        say(f"{obj}: release not confirmed: {exc.reason}")
 
 
 @own_app.command("request")
@@ -162,9 +162,8 @@ def watch_cmd(world: World = None, connect: Connect = None, profile: Profile = N
     fab, cl = _client(world, connect, profile, zenoh_config, user)
     with fab:
         records = cl.snapshot()
-        for obj in sorted(records):
-            print(_line(records[obj]), flush=True)
-        cl.on_change(lambda rec: print(_line(rec), flush=True))
+        say(*(_line(records[obj]) for obj in sorted(records)), stop=stop)
+        cl.on_change(lambda rec: say(_line(rec), stop=stop))  # a closed pipe ends the watch (exit 0)
         stop.wait(duration)
         cl.close()
         skipped = _skipped(fab, cl)
