@@ -14,7 +14,7 @@ PREFIX = "rf"
 
 ROBOT_STREAMS = ("joints", "pose", "scan", "sonar", "path", "ik")
 COMMANDS = ("joints", "twist", "path", "stop", "reset")
-SERVICES = ("ik", "fk", "jacobian", "plan", "map", "world", "state")
+SERVICES = ("ik", "fk", "jacobian", "plan", "map", "world", "state", "move")
 PEER_KINDS = ("sim", "compute", "user", "viewer", "recorder", "router", "tool")
 
 _FORBIDDEN = set("/*$#? \t\n\r")
@@ -191,6 +191,18 @@ def srv_asked(world: str, service: str, subject: str, user: str, peer_id: str | 
 def srv_asked_all(world: str, service: str, peer_id: str | None = None) -> str:
     """What a service serves to askers who name themselves: ``srv/{service}/*[/{peer_id}]/by/*``."""
     return f"{srv_per_subject(world, service, peer_id)}/{BY}/*"
+
+
+def srv_move(world: str, sim: str, login: str) -> str:
+    """``login`` asking sim ``sim`` for one step of a move: ``srv/move/{sim}/by/{login}``. Only the staff's
+    logins (instructor, sim) may ask there (fabric.secure); ``srv/state``, which every login may ask, carries
+    no move (docs/sim.md, "Moving a robot between sims")."""
+    return srv_asked(world, "move", sim, login)
+
+
+def srv_move_served(world: str, sim: str) -> str:
+    """What sim ``sim`` serves of the move service: ``srv/move/{sim}/by/*`` (any asker the router let through)."""
+    return f"{srv(world, 'move', sim)}/{BY}/*"
 
 
 def asker(parsed: "ParsedKey") -> str:

@@ -6,7 +6,8 @@ per identity, ``DIR/NAME.json5``. The rules (:func:`access_control`) follow the 
 (fabric/keys.py, docs/architecture.md): a user writes only keys that end in ``by/{user}`` (decode
 reports included: ``event/decode/by/{user}``), only sim identities write robot state, ownership
 records and the other events and serve ``srv/world`` and the ownership queryables, only compute
-identities serve kinematics, mapping and planning. A student asks the map and plan services on her
+identities serve kinematics, mapping and planning. Only instructor and sim logins move robots between sims
+(``srv/move/{sim}/by/{login}``, :data:`MOVERS`). A student asks the map and plan services on her
 own ``by/{user}`` keys, where the compute peer refuses her what changes the class's map; the staff
 (sim, compute and instructor logins) may also ask on the forms without ``by/``, which it serves in
 full. Everyone may read everything of every world (``rf/**``): a class shares one view of the world.
@@ -45,6 +46,10 @@ __all__ = ["Identity", "ROLES", "SecureInit", "access_control", "router_config",
 ROLES = ("user", "instructor", "sim", "compute", "viewer")
 STAFF = ("instructor", "sim", "compute")
 """Roles that may change a class's shared map (set, reset, stop, save, load) and plan without owning."""
+MOVERS = ("instructor", "sim")
+"""Roles that may move robots between sims (``robofabric own move``): they alone may ask ``srv/move/{sim}/by/{login}``,
+in their own name; a sim asks another for the robot it handed out there too. Every login may ask ``srv/state``,
+and a sim refuses a move asked there (docs/sim.md, "Moving a robot between sims")."""
 SHARED_SERVICES = ("map", "plan")
 """The compute peer's services whose askers are checked: a student asks on ``.../by/{user}`` only."""
 W = "rf/*"  # every world: one router can serve several worlds of the class
@@ -94,6 +99,8 @@ def _own_rules(ident: Identity) -> list[dict]:
     ask: list[str] = [f"{W}/srv/{s}/**/{BY}/{n}" for s in SHARED_SERVICES]
     if r in STAFF:
         ask += [f"{W}/srv/{s}/{tail}" for s in SHARED_SERVICES for tail in ("*", "*/*")]
+    if r in MOVERS:  # moving a robot between sims: the tool asks each sim in its own name; sims ask each other
+        ask.append(f"{W}/srv/move/*/{BY}/{n}")
     if r in ("user", "instructor"):
         mine = [f"{W}/robot/*/cmd/*/{BY}/{n}", f"{W}/object/*/pose/{BY}/{n}"]
         put += mine
@@ -104,7 +111,8 @@ def _own_rules(ident: Identity) -> list[dict]:
         ask.append(f"{W}/own/*/{BY}/{n}")
     elif r == "sim":
         put += [f"{W}/robot/*/{s}" for s in ("joints", "pose", "scan", "sonar")] + [f"{W}/own/*", f"{W}/event/**"]
-        serve += [f"{W}/srv/world", f"{W}/srv/state", f"{W}/own/*", f"{W}/own/*/{BY}/*"]  # srv/state: a standby follows the primary
+        serve += [f"{W}/srv/world", f"{W}/srv/state", f"{W}/own/*", f"{W}/own/*/{BY}/*",  # srv/state: a standby follows the primary
+                  f"{W}/srv/move/*/{BY}/*"]  # srv/move/{sim}/by/{login}: the staff's moves (MOVERS)
         tokens += [f"{W}/peer/sim/*", f"{W}/peer/recorder/*"]  # a recorder on the sim machine, under its login
     elif r == "compute":
         put += [f"{W}/robot/*/ik", f"{W}/robot/*/path", f"{W}/map/*", f"{W}/event/compute/**"]

@@ -10,8 +10,10 @@ resolved by ``sim_peer.registry``; docs/robots.md); this package only reads the 
 
 from __future__ import annotations
 
+import functools
 import math
 import os
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -135,10 +137,36 @@ class SceneDescription:
 # --------------------------------------------------------------------------- search path
 
 
+ENTRY_POINTS = "robofabric.robots"
+"""Entry-point group of packages that install robots: each entry point's value names a package (``"mypkg.robots"``)
+whose folder holds robot folders (``NAME/robot.toml``), as ``robots/`` does."""
+
+_TYPE_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_-]{0,63}$")
+
+
+@functools.cache
+def plugin_dirs() -> tuple[Path, ...]:
+    """The folders of the packages installed under :data:`ENTRY_POINTS` (read once per process: what the
+    operator installed before starting it). A package is found, not run (``importlib.util.find_spec``)."""
+    import importlib.metadata
+    import importlib.util
+
+    out: list[Path] = []
+    for ep in sorted(importlib.metadata.entry_points(group=ENTRY_POINTS), key=lambda e: e.name):
+        try:
+            spec = importlib.util.find_spec(ep.value.partition(":")[0])
+        except (ImportError, ValueError):
+            continue  # a broken plug-in hides its robots, not everyone's
+        if spec is not None:
+            out += [Path(p) for p in (spec.submodule_search_locations or ())]
+    return tuple(out)
+
+
 def search_path() -> list[Path]:
-    """Folders searched for robots (``*/robot.toml``) and scenes (``scenes/*.toml`` or ``*.toml``): env first."""
+    """Folders searched for robots (``*/robot.toml``) and scenes (``scenes/*.toml`` or ``*.toml``): env first, then
+    the packages of :data:`ENTRY_POINTS`, then this package."""
     dirs = [Path(p) for p in os.environ.get(ENV_PATH, "").split(os.pathsep) if p]
-    return [*dirs, HERE]
+    return [*dirs, *plugin_dirs(), HERE]
 
 
 def available_robots() -> list[str]:
@@ -203,8 +231,27 @@ def _find_robot(name: str) -> Path:
 
 
 def load(name: str) -> RobotDescription:
-    """The description of robot type ``name`` (a folder on the search path, or a path to robot.toml)."""
-    path = _find_robot(name)
+    """The description of robot type ``name`` (a folder on the search path, or a path to robot.toml): what the
+    operator names on a sim's command line or in a scene file. A type named over the network: :func:`installed`."""
+    return _load(_find_robot(name))
+
+
+def installed(name: str) -> RobotDescription:
+    """The description of robot type ``name`` as installed on this machine: a NAME (letters, digits, ``-``,
+    ``_``) looked up in the folders of :func:`search_path` (the operator's ``ROBOFABRIC_ROBOTS_PATH``, the
+    :data:`ENTRY_POINTS` packages, this package), never a path nor the working directory. What another peer
+    names (a robot moved in, another sim's arm to mirror) is read from there, so its hooks are the operator's."""
+    if not isinstance(name, str) or not _TYPE_NAME.match(name):
+        raise DescriptionError(f"robot type {str(name)[:80]!r} is not a type name (1-64 letters, digits, '-', '_'): a type "
+                               f"named by another peer is looked up among the installed robots, never read from a path")
+    for d in search_path():
+        cand = d / name / "robot.toml"
+        if cand.is_file():
+            return _load(cand)
+    raise DescriptionError(f"robot type {name!r} is not installed here; installed: {', '.join(available_robots()) or 'none'}")
+
+
+def _load(path: Path) -> RobotDescription:
     data = _read(path)
     where = str(path)
     r = data.get("robot")

@@ -91,7 +91,7 @@ def arm_shape(info: RobotInfo) -> ArmShape:
         desc = _cache.get(info.type)
         if desc is None:
             try:
-                desc = robots_pkg.load(info.type)
+                desc = robots_pkg.installed(info.type)  # a name another sim sent: never a path (nothing it names runs here)
             except robots_pkg.DescriptionError as exc:
                 raise ValueError(f"{info.id}: robot type {info.type!r} is not installed here: {exc}") from None
             _cache[info.type] = desc

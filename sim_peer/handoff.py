@@ -6,10 +6,20 @@ placement, its ownership record and its streams' sequence numbers (a :class:`Han
 the target builds its world again with the robot added, restores every robot (its own from its world, the moved
 one from the handoff) and serves it with its ownership record, so the owner keeps it and her epoch.
 
-The operator's tool (:func:`move`, ``robofabric own move``) drives the three steps through ``srv/state``
-(``Event(kind="move_out" | "move_in")``), so no sim waits on another inside a query: both sims first raise
-their term to ``max(source, target) + 1``: consumers' fences and ownership clients follow a robot's authority by
-its term, and a record of the same term from another sim would be refused while the old sim is alive.
+Moves are the staff's (instructor and sim logins): the operator's tool (:func:`move`, ``robofabric own move``)
+asks each sim on ``srv/move/{sim}/by/{login}`` (:func:`fabric.keys.srv_move`), which a class's router opens to
+those logins only; a sim refuses a move asked on ``srv/state``, which every login may ask. The tool carries no
+robot: the source keeps what it handed out (:class:`HandedOut`) until the target fetches it from the source
+itself (``move_fetch``, sim to sim), or the source takes it back. So a move_in can only serve a robot its source
+handed out in that move, at that move's term, as the source captured it:
+
+1. ``move_out`` (tool -> source): the source asks the target whether it would take the robot (``move_prepare``:
+   the target serves, does not serve that robot, has its type installed) and its term, checks that the move's
+   term is the one the election gives (``max(source, target) + 1``), then stops serving the robot and keeps it.
+2. ``move_in`` (tool -> target): the target fetches the handoff from the source, checks it (the robot, the source,
+   the term), builds its world with the robot before it stops serving its own, and serves it; a failure after it
+   stopped serves its old world again. Should it refuse, the tool asks the source to take the robot back
+   (``move_in`` to the source), which it does from what it kept (never from what the tool says).
 
 Pure helpers here; the tool's I/O is :func:`move`.
 """
@@ -25,18 +35,38 @@ from fabric.codec import DecodeError, decode, encode
 from fabric.interfaces import Event, Header, OwnershipRecord, RobotState, WorldState
 from robots.description import SceneRobot
 
-__all__ = ["MOVE_OUT", "MOVE_IN", "Handoff", "MoveError", "move_term", "merge_records", "merge_users",
-           "to_event", "from_event", "move"]
+__all__ = ["MOVE_OUT", "MOVE_IN", "MOVE_CHECK", "MOVE_PREPARE", "MOVE_FETCH", "Handoff", "HandedOut", "MoveError",
+           "move_term", "merge_records", "merge_users", "to_event", "from_event", "check_handoff", "fetch_refusal",
+           "take_back_refusal", "step", "ask", "NoAnswer", "move"]
 
 MOVE_OUT = "move_out"
-"""``Event.kind`` of a ``srv/state`` query asking the robot's sim to stop serving it and hand it out."""
+"""``Event.kind`` of a ``srv/move`` query asking the robot's sim to stop serving it and keep it for the target."""
 MOVE_IN = "move_in"
-"""``Event.kind`` of a ``srv/state`` query asking a sim to serve a handed-out robot (or, on failure, its source to
+"""``Event.kind`` of a ``srv/move`` query asking a sim to serve a handed-out robot (or, on failure, its source to
 take it back)."""
+MOVE_CHECK = "move_check"
+"""``Event.kind`` of the tool's first ``srv/move`` query: does this sim answer moves asked in this login's name?"""
+MOVE_PREPARE = "move_prepare"
+"""``Event.kind`` of the source's query to the target before it stops serving: would it take the robot, at what term?"""
+MOVE_FETCH = "move_fetch"
+"""``Event.kind`` of the target's query to the source: the handoff it keeps for the target (``data["decline"]``:
+the target gives it back, taking nothing)."""
+STEPS = (MOVE_CHECK, MOVE_OUT, MOVE_PREPARE, MOVE_FETCH, MOVE_IN)
+RETURN_AFTER_S = 30.0
+"""A source takes a robot it handed out back by itself when no target fetched it within this long (the tool died
+between its two steps): a robot is never left without a sim."""
+CHECK_TIMEOUT_S = 3.0
+"""How long the tool waits for the source's answer to its first ``srv/move`` query: no answer at all is how a
+class's router refuses a login that may not move (it drops the query)."""
 
 
 class MoveError(Exception):
     """A move that could not be made; the reason names what refused it."""
+
+
+class NoAnswer(MoveError):
+    """Nobody answered a step of a move on ``srv/move/{sim}/by/{login}`` (a class's router drops the query of a
+    login that may not ask there: it sends no refusal)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,6 +83,69 @@ class Handoff:
     seqs: Mapping[str, int] = field(default_factory=dict)
     term: int = 0
     source: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class HandedOut:
+    """What a source keeps of a robot it handed out, until the target serves it or the source takes it back: the
+    handoff itself, the sim it is for, the move's id (the tool names it in the ``move_in``), its own placement of
+    it (to serve it again), whether the target fetched it, and when it was handed out (monotonic s)."""
+
+    handoff: Handoff
+    to: str
+    move: str
+    placement: SceneRobot | None = None  # where the source had it, its type as the source's operator named it
+    fetched: bool = False
+    at: float = 0.0
+
+
+def fetch_refusal(kept: HandedOut | None, robot: str, to: str, term: int, move_id: str) -> str:
+    """Why a source does not give ``robot`` to sim ``to`` (``''``: it does): it handed out no such robot, or not to
+    that sim, not in that move, or not at that term."""
+    if kept is None:
+        return f"no robot {robot} was handed out here"
+    if kept.to != to:
+        return f"robot {robot} was handed out to sim {kept.to}, not to sim {to}"
+    if kept.move != move_id:
+        return f"robot {robot} was handed out in another move"
+    if kept.handoff.term != int(term):
+        return f"robot {robot} was handed out at term {kept.handoff.term}, not {term}"
+    return ""
+
+
+def take_back_refusal(kept: HandedOut | None, robot: str, move_id: str | None, target_live: bool) -> str:
+    """Why a source does not serve ``robot`` again (``''``: it does). ``move_id`` None: the source's own timer,
+    which names no move. A robot the target fetched is taken back only once the target gave it back or is gone:
+    it may serve it, and two sims serving one robot is the clone the move must never make."""
+    if kept is None:
+        return f"no robot {robot} was handed out here"
+    if move_id is not None and kept.move != move_id:
+        return f"robot {robot} was handed out in another move"
+    if kept.fetched and target_live:
+        return f"sim {kept.to} took robot {robot} (it fetched it and did not give it back): ask sim {kept.to}"
+    return ""
+
+
+def check_handoff(h: Handoff, robot: str, source: str, term: int) -> None:
+    """What a target checks in the handoff it fetched: the robot asked for, from the sim asked, at the move's term
+    (:class:`MoveError` naming what disagrees)."""
+    if h.state.id != robot or h.placement.id != robot or (h.record is not None and h.record.object != robot):
+        raise MoveError(f"sim {source} handed out another robot than {robot}")
+    if h.source != source:
+        raise MoveError(f"the handoff of {robot} comes from sim {h.source or '?'}, not from sim {source}")
+    if int(h.term) != int(term):
+        raise MoveError(f"robot {robot} was handed out at term {h.term}, not at the move's term {term}")
+
+
+def step(kind: str, robot: str, *, to: str = "", source: str = "", term: int = 0, move_id: str = "", rtype: str = "",
+         asker: str = "", decline: bool = False) -> Event:
+    """One step of a move as a ``srv/move`` query or answer (no handoff in it: see :func:`to_event`)."""
+    data: dict[str, Any] = {"to": to, "from": source, "term": int(term), "move": move_id}
+    if rtype:
+        data["type"] = rtype
+    if decline:
+        data["decline"] = True
+    return Event(kind=kind, reason="move", object=robot, data=data, header=Header(wall_ns=time.time_ns(), source=asker))
 
 
 def move_term(source_term: int, target_term: int) -> int:
@@ -123,14 +216,35 @@ def from_event(ev: Event) -> Handoff:
         raise MoveError(f"no robot handed out in this move: {exc}") from None
 
 
+def ask(fabric: Any, sim: str, login: str, request: Event, timeout: float) -> Event:
+    """Ask sim ``sim`` one step of a move on ``srv/move/{sim}/by/{login}``; its answer, taken as soon as it comes.
+    :class:`MoveError` with its refusal; :class:`NoAnswer` when nothing came within ``timeout``."""
+    import zenoh
+
+    from fabric import keys
+
+    errors: list[str] = []
+    for rep in fabric.session.get(keys.srv_move(fabric.world, sim, login), payload=encode(request), timeout=timeout,
+                                  target=zenoh.QueryTarget.ALL, consolidation=zenoh.ConsolidationMode.NONE):
+        try:
+            if rep.ok is not None:
+                return decode(rep.ok.payload.to_bytes(), Event)
+            errors.append(decode(rep.err.payload.to_bytes(), Event).reason)
+        except DecodeError as exc:
+            errors.append(f"bad reply: {exc}")
+    if errors:
+        raise MoveError(errors[0])
+    raise NoAnswer(f"sim {sim} did not answer the {request.kind} step of {request.object} within {timeout:.0f} s")
+
+
 def move(fabric: Any, robot: str, to: str, *, timeout: float = 10.0) -> dict[str, Any]:
     """Move ``robot`` to sim ``to`` (the tool's side): ask the world's sims for their terms, the robot's sim to hand
-    it out, the target to take it in (and, should the target refuse, the source to take it back). Returns
-    ``{"robot", "from", "to", "term", "pause_ms"}``; raises :class:`MoveError` with the refusing sim's reason."""
+    it out, the target to take it in (and, should the target refuse, the source to take it back), each on
+    ``srv/move/{sim}/by/{login}``. Returns ``{"robot", "from", "to", "term", "pause_ms"}``; raises
+    :class:`MoveError` with the refusing sim's reason (or the router's refusal of this login)."""
     from fabric import keys
     from fabric.interfaces import ServiceError, WorldInfo
 
-    srv = keys.srv(fabric.world, "state")
     try:
         parts = fabric.query(keys.srv(fabric.world, "world"), timeout=2.0, expected=WorldInfo, all_replies=True)
     except ServiceError as exc:
@@ -144,34 +258,27 @@ def move(fabric: Any, robot: str, to: str, *, timeout: float = 10.0) -> dict[str
     if to not in terms:
         raise MoveError(f"sim {to} does not serve world {fabric.world!r} (sims: {', '.join(sorted(terms))})")
     term = move_term(terms[source], terms[to])
-    t0 = time.monotonic()
+    login = fabric.config.identity() or fabric.peer_id
 
-    def ask(kind: str, handoff: Handoff | None, at: str) -> Event:
-        """The answer of the one sim the step is for (the others do not answer): taken as soon as it comes, so a
-        sim slow to close the query does not hold the move up."""
-        import zenoh
+    def ask_(sim: str, request: Event, wait: float) -> Event:
+        return ask(fabric, sim, login, request, wait)
 
-        errors: list[str] = []
-        request = encode(to_event(kind, robot, at, handoff, term=term, source=fabric.peer_id))
-        for rep in fabric.session.get(srv, payload=request, timeout=timeout, target=zenoh.QueryTarget.ALL,
-                                      consolidation=zenoh.ConsolidationMode.NONE):
-            try:
-                if rep.ok is not None:
-                    return decode(rep.ok.payload.to_bytes(), Event)
-                errors.append(decode(rep.err.payload.to_bytes(), Event).reason)
-            except DecodeError as exc:
-                errors.append(f"bad reply: {exc}")
-        raise MoveError(errors[0] if errors else f"no sim answered the {kind} step of {robot} within {timeout:.0f} s")
-
-    out = ask(MOVE_OUT, None, to)
-    handoff = from_event(out)
     try:
-        ask(MOVE_IN, handoff, to)
+        ask_(source, step(MOVE_CHECK, robot, to=to, source=source, term=term, asker=fabric.peer_id), CHECK_TIMEOUT_S)
+    except NoAnswer:
+        raise MoveError(f"sim {source} did not answer on srv/move/{source}/by/{login} within {CHECK_TIMEOUT_S:.0f} s: moving "
+                        f"robots is for the instructor and sim logins (a class's router refuses login {login!r} there), or "
+                        f"sim {source} is older than this tool") from None
+    t0 = time.monotonic()
+    out = ask_(source, step(MOVE_OUT, robot, to=to, source=source, term=term, asker=fabric.peer_id), timeout)
+    move_id = str(out.data.get("move", "")) if isinstance(out.data, dict) else ""
+    try:
+        ask_(to, step(MOVE_IN, robot, to=to, source=source, term=term, move_id=move_id, asker=fabric.peer_id), timeout)
     except MoveError as exc:
-        try:
-            ask(MOVE_IN, handoff, source)  # the source takes it back, as it was
+        try:  # the source takes it back, as it kept it
+            ask_(source, step(MOVE_IN, robot, to=source, source=source, term=term, move_id=move_id, asker=fabric.peer_id), timeout)
         except MoveError as back:
-            raise MoveError(f"sim {to} refused {robot} ({exc}) and sim {source} did not take it back ({back}): "
-                            f"restart {source} with it") from None
+            raise MoveError(f"sim {to} refused {robot} ({exc}) and sim {source} did not take it back ({back}); sim {source} "
+                            f"takes it back by itself within {RETURN_AFTER_S:.0f} s if sim {to} never fetched it") from None
         raise MoveError(f"sim {to} refused {robot}: {exc}; it stays with sim {source}") from None
     return {"robot": robot, "from": source, "to": to, "term": term, "pause_ms": (time.monotonic() - t0) * 1000.0}

@@ -1,8 +1,10 @@
 """Which :class:`~sim_peer.robot.SimRobot` class simulates a robot type: found from the type's description.
 
 One path: the description's ``[robot] hooks`` names the class, as ``"package.module:Class"`` (an importable
-module, e.g. in an installed package) or ``"file.py:Class"`` (a Python file beside ``robot.toml``, loaded from
-there: a robot folder dropped on ``ROBOFABRIC_ROBOTS_PATH`` brings its MJCF, its description and its hooks).
+module, e.g. in an installed package) or ``"file.py:Class"`` (a Python file in the folder of ``robot.toml``, loaded
+from there: a robot folder dropped on ``ROBOFABRIC_ROBOTS_PATH`` brings its MJCF, its description and its hooks).
+Only descriptions the operator installed get here: a type another peer names is looked up by name
+(:func:`robots.installed`), never read from a path it sends, so nothing a query carries is imported.
 A description without ``hooks`` gets the built-in class of its ``kind`` (``arm``: :class:`ArmRobot`,
 ``mobile``: :class:`MobileRobot`). Classes are checked once (a :class:`SimRobot` subclass, no misspelt hook)
 and kept per reference.
@@ -44,7 +46,7 @@ def robot_class(desc: RobotDescription) -> type[SimRobot]:
 def _load(desc: RobotDescription, module: str, name: str) -> type[SimRobot]:
     where = f"robot type {desc.name} (hooks {module}:{name})"
     try:
-        mod = _import_file(Path(desc.directory) / module, desc.name) if module.endswith(".py") else importlib.import_module(module)
+        mod = _import_file(_inside(desc, module), desc.name) if module.endswith(".py") else importlib.import_module(module)
     except WorldError:
         raise
     except Exception as exc:  # the plug-in's own import error, whatever it is, named with the robot type
@@ -56,6 +58,15 @@ def _load(desc: RobotDescription, module: str, name: str) -> type[SimRobot]:
         return check_hooks(cls)
     except TypeError as exc:
         raise WorldError(f"{where}: {exc}") from None
+
+
+def _inside(desc: RobotDescription, module: str) -> Path:
+    """The hooks file of ``desc``: inside its robot folder (``hooks = "../../x.py:C"`` is refused, not imported)."""
+    folder = Path(desc.directory).resolve()
+    path = (folder / module).resolve()
+    if not path.is_relative_to(folder):
+        raise WorldError(f"robot type {desc.name}: hooks file {module!r} is outside its folder {folder}")
+    return path
 
 
 def _import_file(path: Path, type_name: str):

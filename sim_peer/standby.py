@@ -29,6 +29,7 @@ standby (``run_replicated``), so nothing the primary declared survives the chang
 from __future__ import annotations
 
 import logging
+import secrets
 import threading
 import time
 from collections import deque
@@ -38,14 +39,17 @@ from typing import Any, Callable
 from fabric import keys
 from fabric.codec import DecodeError, decode, encode
 from fabric.gate import CommandGate
-from fabric.interfaces import Command, Event, Header, JointState, Pose, ServiceError, WorldInfo, WorldState
+from fabric.interfaces import Command, Event, EventKind, Header, JointState, Pose, ServiceError, WorldInfo, WorldState
+from fabric.limits import clip
 from fabric.session import Fabric
 from sim_peer import election as el
 from sim_peer import handoff as ho
 from sim_peer import replica
+from sim_peer.errors import WorldError
 from sim_peer.peer import SimPeer
+from sim_peer.registry import robot_class
 from sim_peer.world import SimWorld
-from robots.description import SceneRobot
+from robots.description import DescriptionError, SceneRobot
 
 log = logging.getLogger("robofabric.sim")
 
@@ -63,6 +67,9 @@ a few milliseconds along it)."""
 
 SHARD_QUERY = "shard"
 """The ``Event.kind`` of a ``srv/state`` query asking a sim which robots it serves (its answer's ``data["robots"]``)."""
+
+MOVE_ASK_S = 2.0
+"""How long a sim waits for another's answer to a step of a move (a round trip; the other may be rebuilding)."""
 
 KEEP_COMMANDS_S = 5.0
 """How long a standby keeps the commands it hears (far more than a poll period: a slow answer)."""
@@ -146,6 +153,11 @@ class ReplicaHost:
         # lease) before asking whether the scene objects still have an authority
         self.adopt_after_s = adopt_after_s if adopt_after_s is not None else 2.0 * fabric.config.lease_ms / 1000.0 + 1.0
         self._adopting = self._adopt_again = False
+        # moving robots: this sim's login (it asks other sims in its own name), what it handed out and keeps until
+        # the target serves it or it takes it back, and the timers that take back what no target fetched
+        self.login = fabric.config.identity() or fabric.peer_id
+        self._handed_out: dict[str, ho.HandedOut] = {}
+        self._timers: list[threading.Timer] = []
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -157,6 +169,7 @@ class ReplicaHost:
         f, w = self.fabric, self.fabric.world
         self._duration = duration
         f.serve(keys.srv(w, "state"), self._on_state_query)
+        f.serve(keys.srv_move_served(w, f.peer_id), self._on_move_query, expected=Event)
         if self.role == el.PRIMARY:
             self._serve(None)  # the world first: nothing below may delay a primary's streams and services
         # other sims' streams only: a primary hears a rival's term there, a standby its leader's state
@@ -215,6 +228,8 @@ class ReplicaHost:
                 return
             self._closed = True
         self._stop.set()
+        for timer in self._timers:
+            timer.cancel()
         # a take-over under way finishes first: closed meanwhile, it raised from its thread and could
         # start a peer after close() had looked for one
         taking = self._taking_over
@@ -301,8 +316,10 @@ class ReplicaHost:
             # which shard this sim belongs to, primary or standby: its robots (an election counts the sims of its shard)
             return Event(kind=SHARD_QUERY, reason=self.role, object="", data={"robots": sorted(self.mine)},
                          header=Header(wall_ns=time.time_ns(), source=self.fabric.peer_id))
-        if isinstance(request, Event) and request.kind in (ho.MOVE_OUT, ho.MOVE_IN):
-            return self._on_move(request)
+        if isinstance(request, Event) and request.kind in ho.STEPS:
+            # every login may ask srv/state: a move asked here is refused, whoever asks (moves: srv/move, the staff's)
+            raise self._move_refused(request, "", f"moves are for the instructor and sim logins: srv/state, which every login "
+                                                  f"may ask, moves nothing (robofabric own move asks srv/move/SIM/by/LOGIN)")
         peer = self.peer
         if peer is None or (self.role != el.PRIMARY and not force):
             raise ServiceError(f"{self.fabric.peer_id} is a standby (term {self.election.term})")
@@ -317,35 +334,132 @@ class ReplicaHost:
 
     # ------------------------------------------------------------------ moving a robot between sims
 
-    def _on_move(self, request: Event) -> Event | None:
-        """One step of a move (:mod:`sim_peer.handoff`): hand ``request.object`` out (``move_out``, to the sim that
-        serves it), or take a handed-out robot in (``move_in``, to the sim named in ``data["to"]``). A sim the step
-        is not for does not answer."""
-        rid, data, me = request.object, request.data if isinstance(request.data, dict) else {}, self.fabric.peer_id
-        if request.kind == ho.MOVE_OUT and rid not in self.world.robots:
-            return None
-        if request.kind == ho.MOVE_IN and data.get("to") != me:
-            return None
-        term = int(data.get("term", 0))
+    def _on_move_query(self, key: str, request: Any) -> Event | None:
+        """One step of a move (:mod:`sim_peer.handoff`) asked on ``srv/move/{me}/by/{login}``: the staff's key (a
+        class's router lets the instructor and sim logins ask there, each in its own name). A refusal is answered
+        with its reason, counted (``moves_refused``), logged and published on ``event/move``."""
+        try:
+            asker = keys.asker(keys.parse(key))
+        except ValueError:
+            asker = ""
+        if not isinstance(request, Event) or request.kind not in ho.STEPS:
+            raise self._move_refused(request, asker, f"a move's step is an Event of kind {', '.join(ho.STEPS)}")
+        try:
+            return self._move_step(request, asker)
+        except (ServiceError, ho.MoveError, WorldError, DescriptionError, ValueError) as exc:
+            raise self._move_refused(request, asker, exc.reason if isinstance(exc, ServiceError) else str(exc)) from None
+
+    def _move_refused(self, request: Any, asker: str, reason: str) -> ServiceError:
+        """Count, log and publish a refused step of a move; the error its asker gets."""
+        f = self.fabric
+        f.counters["moves_refused"] += 1
+        kind = request.kind if isinstance(request, Event) and request.kind in ho.STEPS else "other"
+        robot = request.object if isinstance(request, Event) else ""
+        ev = Event(kind=EventKind.MOVE_REFUSED, reason=clip(reason, 400), object=clip(str(robot), 64), user=clip(asker, 64),
+                   severity="warning", data={"step": kind}, header=f.header("event"))
+        if self.role == el.PRIMARY:
+            f.emit(ev, "move", limit=f"move_refused:{kind}")  # kind: a fixed word, never client text
+        else:
+            log.warning("move refused (%s, by %s): %s", kind, asker or "?", clip(reason, 400))
+        return ServiceError(reason)
+
+    def _move_step(self, request: Event, asker: str) -> Event | None:
+        me, d = self.fabric.peer_id, request.data if isinstance(request.data, dict) else {}
+        rid = keys.validate_id(request.object, what="robot id")
+        to, source, move_id = str(d.get("to", "")), str(d.get("from", "")), str(d.get("move", ""))
+        term = d.get("term", 0)
+        if not isinstance(term, int) or isinstance(term, bool):
+            raise ho.MoveError(f"a move's term is an integer, got {clip(repr(term), 40)}")
+        if request.kind == ho.MOVE_CHECK:
+            with self._lock:
+                self._check_mover()
+                return ho.step(ho.MOVE_CHECK, rid, to=to, source=me, term=self.election.term, asker=me)
+        if request.kind == ho.MOVE_OUT:
+            return self._move_out(rid, keys.validate_id(to, what="target sim"), term, asker)
+        if request.kind == ho.MOVE_PREPARE:
+            return self._prepare(rid, source, str(d.get("type", "")))
+        if request.kind == ho.MOVE_FETCH:
+            return self._fetch(rid, to, term, move_id, bool(d.get("decline", False)))
+        if to != me:
+            raise ho.MoveError(f"this is sim {me}: a move_in to sim {to} is not for it")
+        if source == me:
+            return self._take_back(rid, move_id, asker)
+        return self._move_in(rid, keys.validate_id(source, what="source sim"), term, move_id, asker)
+
+    def _check_mover(self) -> None:
+        """Raise unless this sim may move robots in or out now (call with the lock held)."""
+        me = self.fabric.peer_id
+        if self.role != el.PRIMARY or self.peer is None:
+            raise ServiceError(f"sim {me} is not serving (a standby, or taking over)")
+        if self.rebuild is None:
+            raise ServiceError(f"sim {me} cannot rebuild its world (a sim of robofabric sim moves robots)")
+        standbys = sorted(p for p, robots in self.shards.items() if p != me and p in self.live and robots & self.mine)
+        if standbys:
+            raise ServiceError(f"sim {me} has standbys ({', '.join(standbys)}): moving a robot of a replicated shard is not supported")
+
+    def _ask_sim(self, sim: str, request: Event) -> Event:
+        """Ask another sim one step of a move in this sim's login (a sim login may ask ``srv/move``)."""
+        return ho.ask(self.fabric, sim, self.login, request, MOVE_ASK_S)
+
+    def _move_out(self, rid: str, to: str, term: int, asker: str) -> Event:
+        """The source's step: the target's word first (it would take the robot, and its term), then the robot
+        handed out and kept for it (:meth:`_hand_out`). A target that is not there or would not take it, or a term
+        that is not the election's, changes nothing."""
+        me = self.fabric.peer_id
         with self._lock:
-            if self.role != el.PRIMARY or self.peer is None:
-                raise ServiceError(f"sim {me} is not serving (a standby, or taking over)")
-            if self.rebuild is None:
-                raise ServiceError(f"sim {me} cannot rebuild its world (a sim of robofabric sim moves robots)")
-            if term < self.election.term + (request.kind == ho.MOVE_OUT):
-                raise ServiceError(f"move term {term} is not above sim {me}'s term {self.election.term}: ask again")
-            standbys = sorted(p for p, robots in self.shards.items() if p != me and p in self.live and robots & self.mine)
-            if standbys:
-                raise ServiceError(f"sim {me} has standbys ({', '.join(standbys)}): moving a robot of a replicated shard is not supported")
-            if request.kind == ho.MOVE_OUT:
-                if len(self.world.robots) < 2:
-                    raise ServiceError(f"robot {rid} is sim {me}'s last robot: stop that sim and start {rid} on another instead")
-                return self._hand_out(rid, str(data.get("to", "")), term)
-            handoff = ho.from_event(request)
-            if handoff.state.id in self.world.robots:
-                raise ServiceError(f"sim {me} already serves {rid}")
-            self._take_in(handoff, term)
-            return ho.to_event(ho.MOVE_IN, rid, me, term=term, source=me)
+            self._check_mover()
+            if rid not in self.world.robots:
+                raise ho.MoveError(f"sim {me} does not serve robot {rid}")
+            if rid in self._handed_out:
+                raise ho.MoveError(f"robot {rid} is being moved already")
+            if len(self.world.robots) < 2:
+                raise ho.MoveError(f"robot {rid} is sim {me}'s last robot: stop that sim and start {rid} on another instead")
+            if to == me or to not in self.live:
+                raise ho.MoveError(f"sim {to} is not another live sim of world {self.fabric.world!r}: {rid} stays with sim {me}")
+            my_term, rtype = self.election.term, self.world.robots[rid].desc.name
+        # outside the lock: the target's answer takes a round trip, and this sim keeps serving meanwhile
+        answer = self._ask_sim(to, ho.step(ho.MOVE_PREPARE, rid, to=to, source=me, term=term, rtype=rtype, asker=me))
+        theirs = answer.data.get("term") if isinstance(answer.data, dict) else None
+        if not isinstance(theirs, int) or isinstance(theirs, bool):
+            raise ho.MoveError(f"sim {to} did not say its term")
+        want = ho.move_term(my_term, theirs)
+        if term != want:
+            raise ho.MoveError(f"move term {term} is not the one the election gives ({want}: above sim {me}'s term {my_term} "
+                               f"and sim {to}'s {theirs}): ask again")
+        with self._lock:
+            self._check_mover()
+            if self.election.term != my_term or rid not in self.world.robots or rid in self._handed_out:
+                raise ho.MoveError(f"sim {me} changed while sim {to} was asked: ask again")
+            return self._hand_out(rid, to, term, asker)
+
+    def _prepare(self, rid: str, source: str, rtype: str) -> Event:
+        """The target's word before a source lets a robot go: it serves, does not serve ``rid``, and has its type
+        installed (a NAME, found among this machine's robots: :func:`robots.installed`); its answer gives its term."""
+        import robots
+
+        me = self.fabric.peer_id
+        with self._lock:
+            self._check_mover()
+            if rid in self.world.robots:
+                raise ho.MoveError(f"sim {me} already serves {rid}")
+            term = self.election.term
+        robot_class(robots.installed(rtype))  # the operator's plug-in, by name; a path is refused, never read
+        return ho.step(ho.MOVE_PREPARE, rid, to=me, source=source, term=term, asker=me)
+
+    def _fetch(self, rid: str, to: str, term: int, move_id: str, decline: bool) -> Event:
+        """The source's answer to its target: the robot it handed out to that sim in that move at that term
+        (``decline``: the target gives it back, having served nothing of it)."""
+        me = self.fabric.peer_id
+        with self._lock:
+            kept = self._handed_out.get(rid)
+            why = ho.fetch_refusal(kept, rid, to, term, move_id)
+            if why:
+                raise ho.MoveError(why)
+            assert kept is not None
+            self._handed_out[rid] = replace(kept, fetched=not decline)
+        if decline:
+            return ho.step(ho.MOVE_FETCH, rid, to=to, source=me, term=term, move_id=move_id, asker=me, decline=True)
+        return ho.to_event(ho.MOVE_FETCH, rid, to, kept.handoff, term=term, source=me)
 
     def _stop_serving(self) -> tuple[WorldState, dict[str, SceneRobot]]:
         """Stop the peer and the gate (call with the lock held); the world's state as they left it."""
@@ -361,43 +475,146 @@ class ReplicaHost:
         self.peer = self.gate = None
         return state, dict(self.world.placements)
 
-    def _serve_rebuilt(self, placements: list[SceneRobot], state: WorldState, term: int, seqs: dict[str, int]) -> None:
-        """Serve a world built with ``placements``, restored to ``state``, under ``term`` (the take-over path)."""
-        self.world = self.rebuild(placements)
+    def _serve_rebuilt(self, world: SimWorld, state: WorldState, term: int, seqs: dict[str, int]) -> None:
+        """Serve ``world`` (built with the robots it is to serve), restored to ``state``, under ``term`` (the
+        take-over path)."""
+        self.world = world
         self.mine = frozenset(self.world.robots)
         self.election = replace(self.election, term=term)
         self.fabric.continue_sequences(seqs)
         self._serve(replace(state, header=replace(state.header, term=term)))
         self._learn_shards_soon()
 
-    def _hand_out(self, rid: str, to: str, term: int) -> Event:
-        t0 = time.monotonic()
+    def _serve_again(self, placements: dict[str, SceneRobot], state: WorldState, term: int) -> None:
+        """After a rebuild that failed half-way: whatever started is closed and the old robots served again."""
+        for part in (self.peer, self.gate):
+            if part is not None:
+                try:
+                    part.close()
+                except Exception:
+                    log.debug("closing after a failed rebuild", exc_info=True)
+        self.peer = self.gate = None
+        self._serve_rebuilt(self.rebuild(list(placements.values())), state, term, {})
+
+    def _hand_out(self, rid: str, to: str, term: int, asker: str) -> Event:
+        """Stop serving ``rid`` and keep it for ``to`` (call with the lock held). The world without it is built
+        before anything stops: a world that cannot be built changes nothing."""
+        t0, me = time.monotonic(), self.fabric.peer_id
+        placements = dict(self.world.placements)
+        rest_world = self.rebuild([p for r, p in placements.items() if r != rid])
+        rtype, old_term = self.world.robots[rid].desc.name, self.election.term
         state, placements = self._stop_serving()
         robot = next(r for r in state.robots if r.id == rid)
         record = next((r for r in state.records if r.object == rid), None)
         seqs = self.fabric.sequences(keys.world_root(self.fabric.world) + f"/robot/{rid}/")
-        handoff = ho.Handoff(robot, placements[rid], record, ho.named_users(state.users, record), seqs, term,
-                             self.fabric.peer_id)
-        answer = ho.to_event(ho.MOVE_OUT, rid, to, handoff, term=term, source=self.fabric.peer_id)
-        try:
-            ho.from_event(decode(encode(answer), Event))  # what the tool will read: never hand out what cannot arrive
-        except Exception as exc:
-            self._serve_rebuilt(list(placements.values()), state, self.election.term, {})
-            raise ServiceError(f"sim {self.fabric.peer_id} could not hand {rid} out ({exc}); it keeps serving it") from None
+        handoff = ho.Handoff(robot, replace(placements[rid], type=rtype), record, ho.named_users(state.users, record), seqs, term, me)
         rest = replace(state, robots=tuple(r for r in state.robots if r.id != rid), records=ho.merge_records(state.records, drop=rid))
-        self._serve_rebuilt([p for r, p in placements.items() if r != rid], rest, term, {})
-        self.announce(f"sim {self.fabric.peer_id}: handed {rid} out to {to} (term {term}) in {(time.monotonic() - t0) * 1000:.0f} ms")
-        return answer
+        try:
+            ho.from_event(decode(encode(ho.to_event(ho.MOVE_FETCH, rid, to, handoff, term=term, source=me)), Event))  # it can travel
+            self._serve_rebuilt(rest_world, rest, term, {})
+        except Exception as exc:
+            log.exception("handing %s out failed", rid)
+            self._serve_again(placements, state, old_term)
+            raise ServiceError(f"sim {me} could not hand {rid} out ({exc}); it keeps serving it") from None
+        move_id = secrets.token_hex(8)
+        self._handed_out[rid] = ho.HandedOut(handoff, to, move_id, placement=placements[rid], at=time.monotonic())
+        timer = threading.Timer(ho.RETURN_AFTER_S, self._return_unclaimed, args=(rid, move_id))
+        timer.daemon = True
+        timer.start()
+        self._timers.append(timer)
+        self.announce(f"sim {me}: handed {rid} out to {to} (term {term}) in {(time.monotonic() - t0) * 1000:.0f} ms"
+                      + (f", asked by {asker}" if asker else ""))
+        return ho.step(ho.MOVE_OUT, rid, to=to, source=me, term=term, move_id=move_id, asker=me)
 
-    def _take_in(self, handoff: ho.Handoff, term: int) -> None:
-        t0 = time.monotonic()
+    def _move_in(self, rid: str, source: str, term: int, move_id: str, asker: str) -> Event:
+        """The target's step: the robot fetched from its source (never taken from the query), checked, served. A
+        refusal after the fetch gives it back to the source, which may then serve it again."""
+        import robots
+
+        me = self.fabric.peer_id
+        with self._lock:
+            self._check_mover()
+            if rid in self.world.robots:
+                raise ho.MoveError(f"sim {me} already serves {rid}")
+            if term < self.election.term:
+                raise ho.MoveError(f"move term {term} is below sim {me}'s term {self.election.term}: ask again")
+        handoff = ho.from_event(self._ask_sim(source, ho.step(ho.MOVE_FETCH, rid, to=me, source=source, term=term,
+                                                              move_id=move_id, asker=me)))
+        try:
+            ho.check_handoff(handoff, rid, source, term)
+            desc = robots.installed(handoff.placement.type)  # a name: the operator's installed robot, never a path
+            robot_class(desc)
+            with self._lock:
+                self._check_mover()
+                if rid in self.world.robots or term < self.election.term:
+                    raise ho.MoveError(f"sim {me} changed while sim {source} was asked: ask again")
+                self._take_in(handoff, replace(handoff.placement, type=str(desc.directory / "robot.toml")), term, asker)
+        except BaseException:
+            self._give_back(source, rid, term, move_id)
+            raise
+        return ho.step(ho.MOVE_IN, rid, to=me, source=source, term=term, move_id=move_id, asker=me)
+
+    def _give_back(self, source: str, rid: str, term: int, move_id: str) -> None:
+        try:
+            self._ask_sim(source, ho.step(ho.MOVE_FETCH, rid, to=self.fabric.peer_id, source=source, term=term,
+                                          move_id=move_id, asker=self.fabric.peer_id, decline=True))
+        except ho.MoveError as exc:
+            log.warning("could not give %s back to sim %s: %s", rid, source, exc)
+
+    def _take_in(self, handoff: ho.Handoff, placement: SceneRobot, term: int, asker: str = "") -> None:
+        """Serve ``handoff``'s robot placed at ``placement`` with this sim's own (call with the lock held). The
+        new world is built before anything stops; a failure after the stop serves the old world again."""
+        t0, me = time.monotonic(), self.fabric.peer_id
+        rid, old_term = handoff.state.id, self.election.term
+        world = self.rebuild([*self.world.placements.values(), placement])
         state, placements = self._stop_serving()
-        rid = handoff.state.id
-        state = replace(state, robots=(*state.robots, handoff.state), records=ho.merge_records(state.records, add=handoff.record),
-                        users=ho.merge_users(state.users, handoff.users))
-        self._serve_rebuilt([*placements.values(), handoff.placement], state, term, dict(handoff.seqs))
-        self.announce(f"sim {self.fabric.peer_id}: took {rid} in from {handoff.source or 'another sim'} (term {term}) in "
-                      f"{(time.monotonic() - t0) * 1000:.0f} ms")
+        full = replace(state, robots=(*state.robots, handoff.state), records=ho.merge_records(state.records, add=handoff.record),
+                       users=ho.merge_users(state.users, handoff.users))
+        try:
+            self._serve_rebuilt(world, full, term, dict(handoff.seqs))
+        except Exception as exc:
+            log.exception("taking %s in failed", rid)
+            self._serve_again(placements, state, old_term)
+            raise ServiceError(f"sim {me} could not serve {rid} ({exc}); it serves what it served") from None
+        self.announce(f"sim {me}: took {rid} in from {handoff.source or 'another sim'} (term {term}) in "
+                      f"{(time.monotonic() - t0) * 1000:.0f} ms" + (f", asked by {asker}" if asker else ""))
+
+    def _take_back(self, rid: str, move_id: str | None, asker: str) -> Event:
+        """The source serves a robot it handed out again, as it kept it (``move_id`` None: its own timer)."""
+        me = self.fabric.peer_id
+        with self._lock:
+            self._check_mover()
+            kept = self._handed_out.get(rid)
+            why = ho.take_back_refusal(kept, rid, move_id, kept is not None and kept.to in self.live)
+            if why:
+                raise ho.MoveError(why)
+            assert kept is not None
+            if rid in self.world.robots:
+                raise ho.MoveError(f"sim {me} serves {rid} already")
+            self._take_in(kept.handoff, kept.placement, self.election.term, asker or "this sim")
+            del self._handed_out[rid]
+        return ho.step(ho.MOVE_IN, rid, to=me, source=me, term=self.election.term, move_id=kept.move, asker=me)
+
+    def _return_unclaimed(self, rid: str, move_id: str) -> None:
+        """A robot handed out that no target fetched within :data:`~sim_peer.handoff.RETURN_AFTER_S` (the tool
+        died between its steps) is served here again."""
+        with self._lock:
+            kept = self._handed_out.get(rid)
+            if self._closed or kept is None or kept.move != move_id or kept.fetched:
+                return
+        try:
+            self._take_back(rid, None, "")
+        except (ServiceError, ho.MoveError) as exc:
+            log.warning("could not serve %s again after its move: %s", rid, exc)
+            return
+        self.announce(f"sim {self.fabric.peer_id}: no sim took {rid} within {ho.RETURN_AFTER_S:.0f} s; serving it again")
+
+    def _drop_handed_out(self, rid: str, sim: str, term: int) -> None:
+        """``sim`` serves ``rid`` at ``term`` (its joints came): what this sim kept of it is no longer to be taken back."""
+        with self._lock:
+            kept = self._handed_out.get(rid)
+            if kept is not None and kept.to == sim and term >= kept.handoff.term:
+                del self._handed_out[rid]
 
     # ------------------------------------------------------------------ the scene objects after their sim
 
@@ -571,7 +788,10 @@ class ReplicaHost:
         return el.shard_view(live, shards, self.fabric.peer_id, self.mine)
 
     def _on_joints(self, key: str, js: JointState) -> None:
-        if keys.parse(key).subject not in self.mine:
+        rid = keys.parse(key).subject
+        if rid in self._handed_out:
+            self._drop_handed_out(rid, js.header.source, js.header.term)
+        if rid not in self.mine:
             return  # another shard's robot: its term is its shard's
         self._heard(js.header.source, js.header.term)
         if self.role == el.STANDBY and js.header.source == self.election.leader:
