@@ -198,3 +198,19 @@ def test_up_takes_the_launchers_login_from_the_command_line(tmp_path):
     router_toml = Path(__file__).resolve().parents[2] / "examples" / "secure" / "router.toml"
     out = run_cli("up", str(router_toml), "--zenoh-config", str(tmp_path / "missing.json5"), "--duration", "1")
     assert out.returncode == 2 and "missing.json5' does not exist" in out.stderr and "Traceback" not in out.stderr, out.stderr
+
+
+def test_only_the_instructor_and_sim_logins_may_ask_for_a_move_each_in_its_own_name():
+    """Issue 30: srv/state obeyed any login's move. Moves are asked on srv/move/{sim}/by/{login}; the router lets
+    the instructor and the sims ask there in their own names, nobody else, and only sims serve it."""
+    acl = access_control([Identity("alice", "user"), Identity("carol", "instructor"), Identity("sim-a", "sim"),
+                          Identity("compute", "compute"), Identity("viewer", "viewer")])
+    rules = {r["id"]: r for r in acl["rules"]}
+    asks = {name: [ke for ke in rules.get(f"{name}-ask", {"key_exprs": []})["key_exprs"] if "/srv/move" in ke]
+            for name in ("alice", "carol", "sim-a", "compute", "viewer")}
+    assert asks == {"alice": [], "carol": ["rf/*/srv/move/*/by/carol"], "sim-a": ["rf/*/srv/move/*/by/sim-a"], "compute": [],
+                    "viewer": []}
+    assert not [ke for ke in rules["ask"]["key_exprs"] if "/srv/move" in ke]  # not among what everyone may ask
+    assert "rf/*/srv/state" in rules["ask"]["key_exprs"]  # which is why a sim refuses a move asked there
+    servers = [r["id"] for r in acl["rules"] if any("/srv/move" in ke for ke in r["key_exprs"]) and "reply" in r["messages"]]
+    assert servers == ["sim-a-serve"] and "rf/*/srv/move/*/by/*" in rules["sim-a-serve"]["key_exprs"]

@@ -63,3 +63,46 @@ def test_an_event_without_a_handoff_or_about_another_robot_is_refused():
     ev = ho.to_event(ho.MOVE_IN, "base9", "sim-b", h, term=2)
     with pytest.raises(ho.MoveError, match="disagree"):
         ho.from_event(ev)
+
+
+def _kept(to: str = "sim-b", move: str = "m1", term: int = 2, fetched: bool = False) -> ho.HandedOut:
+    state = RobotState("base2", "mobile", np.zeros(3), np.zeros(2), np.zeros(2))
+    h = ho.Handoff(state, SceneRobot("reeman", "base2"), _rec("base2", "alice", 7), term=term, source="sim-a")
+    return ho.HandedOut(h, to, move, placement=SceneRobot("reeman", "base2"), fetched=fetched)
+
+
+def test_a_source_gives_a_robot_only_to_the_sim_of_the_move_that_handed_it_out():
+    """Steal, clone, phantom (issue 30): a target gets a robot only from what its source kept for it."""
+    assert ho.fetch_refusal(_kept(), "base2", "sim-b", 2, "m1") == ""
+    assert "no robot base2 was handed out" in ho.fetch_refusal(None, "base2", "sim-b", 2, "m1")
+    assert "to sim sim-b, not to sim sim-c" in ho.fetch_refusal(_kept(), "base2", "sim-c", 2, "m1")
+    assert "another move" in ho.fetch_refusal(_kept(), "base2", "sim-b", 2, "forged")
+    assert "at term 2, not 100" in ho.fetch_refusal(_kept(), "base2", "sim-b", 100, "m1")
+
+
+def test_a_source_takes_back_only_what_no_live_target_took():
+    """Two sims never serve one robot: a handoff the target fetched comes back only once it gave it back or is gone."""
+    assert ho.take_back_refusal(_kept(), "base2", "m1", target_live=True) == ""
+    assert ho.take_back_refusal(_kept(), "base2", None, target_live=True) == ""  # the source's own timer
+    assert "took robot base2" in ho.take_back_refusal(_kept(fetched=True), "base2", "m1", target_live=True)
+    assert ho.take_back_refusal(_kept(fetched=True), "base2", "m1", target_live=False) == ""
+    assert "another move" in ho.take_back_refusal(_kept(), "base2", "other", target_live=True)
+    assert "no robot base2" in ho.take_back_refusal(None, "base2", "m1", target_live=True)
+
+
+def test_a_target_checks_the_robot_the_source_and_the_term_of_what_it_fetched():
+    h = _kept().handoff
+    ho.check_handoff(h, "base2", "sim-a", 2)
+    with pytest.raises(ho.MoveError, match="another robot"):
+        ho.check_handoff(h, "base0", "sim-a", 2)
+    with pytest.raises(ho.MoveError, match="not from sim sim-c"):
+        ho.check_handoff(h, "base2", "sim-c", 2)
+    with pytest.raises(ho.MoveError, match="not at the move's term 100"):
+        ho.check_handoff(h, "base2", "sim-a", 100)
+
+
+def test_a_step_carries_no_robot_only_names_and_the_term():
+    ev = decode(encode(ho.step(ho.MOVE_IN, "base2", to="sim-b", source="sim-a", term=3, move_id="m1", asker="t")), Event)
+    assert ev.kind == "move_in" and ev.object == "base2"
+    assert ev.data == {"to": "sim-b", "from": "sim-a", "term": 3, "move": "m1"}
+    assert set(ho.STEPS) == {"move_check", "move_out", "move_prepare", "move_fetch", "move_in"}
