@@ -223,6 +223,8 @@ def ask(fabric: Any, sim: str, login: str, request: Event, timeout: float) -> Ev
 
     from fabric import keys
 
+    from fabric.session import ZENOH_QUERY_TIMEOUT
+
     errors: list[str] = []
     for rep in fabric.session.get(keys.srv_move(fabric.world, sim, login), payload=encode(request), timeout=timeout,
                                   target=zenoh.QueryTarget.ALL, consolidation=zenoh.ConsolidationMode.NONE):
@@ -231,6 +233,8 @@ def ask(fabric: Any, sim: str, login: str, request: Event, timeout: float) -> Ev
                 return decode(rep.ok.payload.to_bytes(), Event)
             errors.append(decode(rep.err.payload.to_bytes(), Event).reason)
         except DecodeError as exc:
+            if rep.err is not None and rep.err.payload is not None and rep.err.payload.to_string() == ZENOH_QUERY_TIMEOUT:
+                continue  # zenoh's own word that the time ran out: no answer, not a refusal
             errors.append(f"bad reply: {exc}")
     if errors:
         raise MoveError(errors[0])
