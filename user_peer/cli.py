@@ -32,6 +32,9 @@ def view(
     save: Annotated[Optional[Path], typer.Option("--save", help="Write the view to FILE.rrd.")] = None,
     duration: Annotated[Optional[float], typer.Option("--duration", help="Stop after S seconds (default: until Ctrl-C).")] = None,
     web_port: Annotated[int, typer.Option(help="Port of the web viewer (--serve-web).")] = 9090,
+    bind: Annotated[
+        str, typer.Option("--bind", help="With --serve-web: the IPv4 address the page and data ports listen on (default: every interface).")
+    ] = "0.0.0.0",
     grpc_port: Annotated[int, typer.Option(help="Port of the Rerun gRPC server (--spawn, --serve-web).")] = 9876,
     max_hz: Annotated[float, typer.Option(help="Thin 3D and plot updates to this rate per stream (0: all).")] = 30.0,
     window: Annotated[float, typer.Option(help="Draw what arrived every this many seconds, as one chunk per entity (longer: less work for slow browsers, a less live view).")] = 0.1,
@@ -58,12 +61,21 @@ def view(
         raise UserError(f"--save {save}: the file must end in .rrd")
     opts = ViewerOptions(
         spawn=spawn, connect_url=rerun_urls[0] if rerun_urls else None, serve_web=serve_web,
-        web_port=web_port, grpc_port=grpc_port, save=save, max_hz=max_hz, advertise=advertise, window_s=window, max_lag_s=max_lag,
+        web_port=web_port, bind=bind, grpc_port=grpc_port, save=save, max_hz=max_hz, advertise=advertise, window_s=window, max_lag_s=max_lag,
     )
     if not (0 < window <= 5) or max_lag <= 0:
         raise UserError("--window must be in (0, 5] s and --max-lag positive")
     if advertise is not None and not serve_web:
         raise UserError("--advertise goes with --serve-web")
+    if bind != "0.0.0.0":
+        import ipaddress
+
+        if not serve_web:
+            raise UserError("--bind goes with --serve-web")
+        try:
+            ipaddress.IPv4Address(bind)
+        except ValueError:
+            raise UserError(f"--bind {bind}: expected an IPv4 address of this machine, e.g. 10.0.0.7 or 127.0.0.1") from None
     if not (spawn or serve_web or save or rerun_urls):
         raise UserError("nowhere to show the world: give --spawn, --connect rerun+http://HOST:PORT/proxy, --serve-web or --save FILE.rrd")
     cfg = make_config(world, zenoh_eps, listen, profile, zenoh_config)
@@ -79,7 +91,7 @@ def view(
         if serve_web:
             from user_peer.viewer import default_advertise, web_urls
 
-            page, grpc = web_urls(advertise or default_advertise(), web_port, grpc_port)
+            page, grpc = web_urls(advertise or (bind if bind != "0.0.0.0" else default_advertise()), web_port, grpc_port)
             print(f"web viewer: open {page}", flush=True)
             print(f"  (from any machine that reaches this one; TCP ports {web_port} (page) and {grpc_port} (data {grpc}) must be open)", flush=True)
         n = viewer.run(stop, duration)

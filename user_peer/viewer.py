@@ -49,13 +49,17 @@ class ViewerOptions:
     connect_url: str | None = None
     serve_web: bool = False
     web_port: int = 9090
+    bind: str = "0.0.0.0"  # the interface --serve-web's page and data ports listen on (default: every one)
     advertise: str | None = None  # the host name or address other machines reach this one by (--serve-web)
     grpc_port: int = 9876
     save: Path | None = None
     max_hz: float = 30.0
     window_s: float = 0.1  # drawing window: what arrived in it goes out as one chunk per entity
     max_lag_s: float = 0.5  # a sample older than this when drawn is dropped (never a stream's newest)
-    web_history: str = "256MiB"  # what Rerun's gRPC server keeps for pages that join late (static data always)
+    # what Rerun's gRPC server keeps for pages that join late, in bytes: the scene (static) and the blueprint always,
+    # and the newest data up to this (at the combined world's ~0.3 MB/s, the last ~100 s). A page that joins is
+    # sent it at once, behind the live feed; the relay holds twice this for each page (RelayLimits.max_queue_bytes)
+    web_history: int = 32 << 20
 
 
 def default_advertise() -> str:
@@ -102,7 +106,7 @@ def make_recording(opts: ViewerOptions, *, recording_id: str | None = None, grpc
             port=opts.grpc_port if grpc_server_port is None else grpc_server_port,
             # a page that joins gets the live feed first and the history behind it: it shows now at once
             # instead of ingesting the whole session first (at a software-rendered page's pace, minutes)
-            newest_first=True, server_memory_limit=opts.web_history,
+            newest_first=True, server_memory_limit=f"{opts.web_history}B",
             cors_allow_origin=[f"http://*:{opts.web_port}", f"https://*:{opts.web_port}"],
         )
         sinks.append(server)
@@ -146,13 +150,14 @@ class Viewer:
             # the pages stream through the relay, one queue per page (user_peer/web_relay.py), from Rerun's
             # gRPC server on a loopback port; the page itself comes from this machine alone (user_peer/web_page.py)
             from user_peer import web_page
-            from user_peer.web_relay import Relay
+            from user_peer.web_relay import Relay, RelayLimits
 
             try:
                 inner = web_page.free_loopback_port()
-                self.relay = Relay(("127.0.0.1", inner), opts.grpc_port)
+                limits = RelayLimits(max_queue_bytes=max(RelayLimits().max_queue_bytes, 2 * opts.web_history))
+                self.relay = Relay(("127.0.0.1", inner), opts.grpc_port, bind=opts.bind, limits=limits)
                 self.rec = make_recording(opts, grpc_server_port=inner)
-                self.page = web_page.serve(opts.web_port, opts.grpc_port)
+                self.page = web_page.serve(opts.web_port, opts.grpc_port, bind=opts.bind)
             except Exception:
                 if self.relay is not None:
                     self.relay.close()
@@ -356,6 +361,10 @@ class Viewer:
             self.page.close()
         if self.relay is not None:
             self.relay.close()
+            k = self.relay.counters()
+            print(f"web relay: {k.refused_requests} requests refused (only reads are relayed), {k.refused_connections} "
+                  f"connections refused, {k.cut} pages cut off; at most {k.peak_queued_bytes / 1e6:.1f} MB queued "
+                  f"for every page together (budget {self.relay.limits.max_total_bytes / 1e6:.0f} MB)", flush=True)
 
     def __enter__(self) -> "Viewer":
         return self

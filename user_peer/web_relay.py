@@ -86,7 +86,7 @@ class PageLink:
     down: socket.socket
     up: socket.socket | None = None
     opened: float = field(default_factory=time.monotonic)
-    cond: threading.Condition = field(default_factory=threading.Condition)
+    cond: threading.Condition = field(default_factory=threading.Condition)  # on the relay's one lock
     queued: deque = field(default_factory=deque)  # bytes read from Rerun, not yet taken by the page
     queued_bytes: int = 0
     sent_bytes: int = 0
@@ -94,6 +94,7 @@ class PageLink:
     progress: float = field(default_factory=time.monotonic)  # the page last took bytes, or its queue filled from empty
     cut_reason: str = ""
     closed: bool = False
+    sockets_closed: bool = False
 
     def stalled_for(self, now: float) -> float:
         """How long this page has taken nothing while data waited for it (0 with an empty queue)."""
@@ -114,9 +115,12 @@ class Relay:
         self.refused_connections = 0
         self.queued_total = 0
         self.peak_queued = 0
-        self._lock = threading.Lock()  # links, counters, queued_total; taken inside a link's cond, never around one
+        # one lock for every link's queue and the counters (each link's cond is a condition on it): the total
+        # budget is checked and enforced in the same step as each read is queued, so it is never exceeded
+        self._lock = threading.Lock()
         self._closed = threading.Event()
-        self._sock = socket.create_server((bind, port), reuse_port=False, backlog=128)
+        family = socket.AF_INET6 if ":" in bind else socket.AF_INET
+        self._sock = socket.create_server((bind, port), family=family, reuse_port=False, backlog=128)
         self._sock.settimeout(0.5)
         self.port = self._sock.getsockname()[1]
         self._thread = threading.Thread(target=self._accept_loop, name="web-relay", daemon=True)
@@ -141,7 +145,7 @@ class Relay:
             # what a page has not taken waits in its queue, where it is counted, not in a kernel buffer that
             # grows to megabytes on its own (a LAN's round trip needs far less)
             down.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SNDBUF)
-            link = PageLink(peer=f"{addr[0]}:{addr[1]}", address=addr[0], down=down)
+            link = PageLink(peer=f"{addr[0]}:{addr[1]}", address=addr[0], down=down, cond=threading.Condition(self._lock))
             with self._lock:
                 self.links.append(link)
             threading.Thread(target=self._serve_requests, args=(link,), daemon=True, name="web-relay-req").start()
@@ -244,29 +248,34 @@ class Relay:
                     break
                 n = len(data)
                 now = time.monotonic()
+                closed: list[PageLink] = []
                 with link.cond:
                     if link.closed:
                         return
-                    if not link.queued:
-                        link.progress = now  # its wait starts now
-                    link.queued.append(data)
-                    link.queued_bytes += n
-                    link.read_bytes += n
-                    link.cond.notify_all()
-                    over = link.queued_bytes > self.limits.max_queue_bytes
-                    with self._lock:
+                    if link.queued_bytes + n > self.limits.max_queue_bytes:
+                        self._close_locked(link, f"not taking its data ({(link.queued_bytes + n) / 1e6:.1f} MB to queue, "
+                                                 f"max_queue_bytes {self.limits.max_queue_bytes / 1e6:.0f} MB)")
+                    while not link.closed and self.queued_total + n > self.limits.max_total_bytes:
+                        victim = self._victim(now, link)
+                        stalled = victim.stalled_for(now)
+                        self._close_locked(victim, f"the relay's budget is full ({self.limits.max_total_bytes / 1e6:.0f} MB "
+                                                   f"queued for every page) and this page holds {victim.queued_bytes / 1e6:.1f} MB"
+                                                   + (f", taking nothing for {stalled:.1f} s" if stalled >= 1.0 else ""))
+                        closed.append(victim)
+                    if not link.closed:
+                        if not link.queued:
+                            link.progress = now  # its wait starts now
+                        link.queued.append(data)
+                        link.queued_bytes += n
+                        link.read_bytes += n
                         self.queued_total += n
                         self.peak_queued = max(self.peak_queued, self.queued_total)
-                        victim = self._victim(now) if self.queued_total > self.limits.max_total_bytes else None
-                if over:
-                    self._finish(link, f"not taking its data ({link.queued_bytes / 1e6:.1f} MB queued, "
-                                       f"max_queue_bytes {self.limits.max_queue_bytes / 1e6:.0f} MB)")
+                        link.cond.notify_all()
+                for lk in closed:
+                    self._after_close(lk)
+                if link.closed:
+                    self._after_close(link)
                     return
-                if victim is not None:
-                    stalled = victim.stalled_for(now)
-                    self._finish(victim, f"the relay's budget is full ({self.limits.max_total_bytes / 1e6:.0f} MB "
-                                         f"queued for every page) and this page holds {victim.queued_bytes / 1e6:.1f} MB"
-                                         + (f", taking nothing for {stalled:.1f} s" if stalled >= 1.0 else ""))
         except OSError:
             pass
         # Rerun closed the stream: let the page have what is queued (the sweep cuts it if it stops taking), then close
@@ -275,12 +284,10 @@ class Relay:
                 link.cond.wait(1.0)
         self._finish(link)
 
-    def _victim(self, now: float) -> PageLink | None:
+    def _victim(self, now: float, reading: PageLink) -> PageLink:
         """(Under ``_lock``.) The page to cut when the total budget is full: the one that took nothing for the
-        longest (a second at least), else the one holding most."""
-        live = [lk for lk in self.links if not lk.closed and lk.queued_bytes]
-        if not live:
-            return None
+        longest (a second at least), else the one holding most (``reading``, whose read needs the room, included)."""
+        live = [lk for lk in self.links if not lk.closed and lk.queued_bytes] + [reading]
         stalled = max(live, key=lambda lk: lk.stalled_for(now))
         if stalled.stalled_for(now) >= 1.0:
             return stalled
@@ -307,8 +314,7 @@ class Relay:
                         link.progress = time.monotonic()
                         link.queued_bytes -= k
                         link.sent_bytes += k
-                        with self._lock:
-                            self.queued_total -= k
+                        self.queued_total -= k
                 with link.cond:
                     if link.queued and link.queued[0] is data:
                         link.queued.popleft()
@@ -319,19 +325,30 @@ class Relay:
     def _finish(self, link: PageLink, reason: str = "") -> None:
         """Close a link (idempotent); with a ``reason`` it was cut off: counted and logged."""
         with link.cond:
-            if link.closed:
-                return
-            link.closed = True
-            link.cut_reason = reason
-            with self._lock:
-                self.queued_total -= link.queued_bytes
-                if reason:
-                    self.cut += 1
-            link.queued.clear()
-            link.queued_bytes = 0
-            link.cond.notify_all()
+            self._close_locked(link, reason)
+        self._after_close(link)
+
+    def _close_locked(self, link: PageLink, reason: str) -> None:
+        """(Under ``_lock``.) Mark a link closed, its queue dropped from the total; its sockets close in
+        :meth:`_after_close`, outside the lock."""
+        if link.closed:
+            return
+        link.closed = True
+        link.cut_reason = reason
+        self.queued_total -= link.queued_bytes
         if reason:
-            log.warning("web relay: page %s cut off: %s", link.peer, reason)
+            self.cut += 1
+        link.queued.clear()
+        link.queued_bytes = 0
+        link.cond.notify_all()
+
+    def _after_close(self, link: PageLink) -> None:
+        with link.cond:
+            if link.sockets_closed:
+                return
+            link.sockets_closed = True
+        if link.cut_reason:
+            log.warning("web relay: page %s cut off: %s", link.peer, link.cut_reason)
         _close(link.down)
         if link.up is not None:
             _close(link.up)

@@ -1,5 +1,5 @@
 """A gRPC-web reader of Rerun's stream, as a browser page is (HTTP/1.1, ``application/grpc-web+proto``), for the
-relay's tests: it reads at a pace it is given, and decodes what it read far enough to search the recording's
+relay's tests and ``python -m robofabric.bench.web_relay``: it reads at a pace it is given, and decodes what it read far enough to search the recording's
 Arrow payloads (``ReadMessagesResponse.log_msg.arrow_msg``, LZ4-decompressed) for a marker.
 
 Protobuf is walked without its schema (field numbers from Rerun's ``sdk_comms.proto`` and ``log_msg.proto``):
