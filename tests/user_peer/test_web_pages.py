@@ -4,7 +4,7 @@ Rerun's gRPC server feeds its clients through one bounded broadcast channel whos
 slowest client, so without the relay (user_peer/web_relay.py) a page that stops taking data (its JavaScript
 paused here with CDP ``Debugger.pause``, as a laptop gone to sleep) stops the view for every page once that
 channel fills. The test pauses one page and keeps it paused until the viewer says the relay cut it off (its
-queue waited over 10 s: proof that it held data it did not take), or for 75 s at most (the browser's own
+page took nothing for 10 s while its data waited: proof that it held data it did not take), or for 75 s at most (the browser's own
 network buffers absorb a paused page's data for 40 s to over two minutes here); meanwhile every other page's own time
 cursor (read from the page, robofabric/bench/viewer_web.py) must go on advancing at no less than half
 the wall clock's pace, and Rerun's server must never report its sender blocked.
@@ -63,7 +63,7 @@ def test_a_frozen_page_does_not_hold_up_the_others(router, world, procs, tmp_pat
             cdp.send("Debugger.pause")
             t0 = time.time()
             start = [t0 - page_lag(pg) for pg in live]  # each page's time cursor (wall clock s) at the pause
-            # frozen until the relay cuts it off (its queue waited over 10 s: it held data it did not take) or
+            # frozen until the relay cuts it off (it took nothing for 10 s while its data waited) or
             # FROZEN_S, whichever first: how soon the cut comes depends on how much the browser's own network
             # buffers absorb for a paused page (40 s to over 2 min here), so the test does not wait on it
             deadline = time.monotonic() + FROZEN_S
