@@ -161,3 +161,32 @@ async def _hostile(auth, alice, arm, base, cmds, world, connect):
         assert "\x1b" not in status and "\\x1b[2J" in status and "unverified" in status
         assert app.is_running
         token.undeclare()
+
+
+@pytest.mark.slow
+def test_queue_for_an_owned_robot_shows_the_place_then_owns_it(live):
+    """Issue 31: "queue for it" on a robot someone else moves, against a real sim: the place is shown, and the
+    controls come alive when bob lets go (a still robot would be taken over at once instead)."""
+    world, port, _ = live
+    with World(client_config(world, port), "bob", timeout=10.0) as bob, World(client_config(world, port), "alice", timeout=10.0) as alice:
+        arm = bob.robot("arm1")
+        arm.request()
+        start = arm.wait_for("joints").q
+        arm.move_joints(np.where(np.asarray(start) > 0, -1.0, 1.0), wait=False, speed_scale=0.02)  # a slow, long move
+        wait_until(lambda: arm.record.state == "moving", timeout=10, what="bob's arm moving")
+        asyncio.run(_queue(alice, bob))
+
+
+async def _queue(alice, bob):
+    arm = alice.robot("arm1")
+    app = UserApp(alice, arm=arm)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await until(pilot, lambda: len(app.query("#arm-queue")) == 1 and not app.query_one("#arm-queue").disabled, "Queue enabled")
+        assert app.query_one("#arm-request").disabled is False and all(s.disabled for s in app.query(JointSlider))
+        await pilot.click("#arm-queue")
+        await until(pilot, lambda: "you are #1 in the queue" in str(app.query_one("#arm-owner").render()), "the queue place shown",
+                    timeout=15)
+        assert app.message == "queue for arm1: place 1" and app.query_one("#arm-queue").disabled
+        await asyncio.get_running_loop().run_in_executor(None, bob.robot("arm1").release)
+        await until(pilot, lambda: not app.query(JointSlider).first().disabled, "alice owns arm1: controls enabled", timeout=15)
+        assert "owner: you" in str(app.query_one("#arm-owner").render())
