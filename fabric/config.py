@@ -270,8 +270,9 @@ class FabricConfig:
                 cause = "the router refused the connection (it may require credentials: --zenoh-config FILE from your instructor)"
                 return JoinFailure(up[0], cause, f"authentication failed at {up[0]}: {cause}")
             if connect:
-                cause = "nobody accepts a connection there (is the router running, and is this its address?)"
-                return JoinFailure(where, cause, f"cannot join world {self.world!r} via {where}: {reason}")
+                # in robofabric's words (zenoh's "Unable to connect to any of [Single(tcp/...)]!" says less)
+                cause = "no router answers there (is it running, and is this its address?)"
+                return JoinFailure(where, cause, f"cannot join world {self.world!r}: no router answers at {where} (is it running, and is this its address?)")
         return JoinFailure(where, reason, f"cannot join world {self.world!r} via {where}: {reason}")
 
     def user_id(self, user: str | None) -> str | None:

@@ -18,7 +18,7 @@ import typer
 import zenoh
 
 from fabric import keys
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, print_folded
+from fabric.cli_common import Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, print_folded
 from fabric.complete import complete_keys, complete_types
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
@@ -98,6 +98,8 @@ def list_keys(
     if as_json:
         docs = [{**s.to_json(), "subscribers": subs[s.key]} for s in stats]
         print(json.dumps({"world": cfg.world, "keyexpr": expr, "duration_s": duration, "declarations_visible": decl.available, "keys": docs}))
+        if not stats:
+            raise NothingThere(f"nothing published on {expr} in {duration:g} s (world {cfg.world!r})")
         return
     table = _table(f"{expr}: {len(stats)} key(s) in {duration:g} s", ("key", "type", "publishers", "subscribers", "rate Hz", "msgs", "kB/s"))
     for s in stats:
@@ -108,7 +110,7 @@ def list_keys(
         )
     _print(table)
     if not stats:
-        print_folded(f"nothing published on {expr} in {duration:g} s (world {cfg.world!r}); services: robofabric list --services")
+        raise NothingThere(f"nothing published on {expr} in {duration:g} s (world {cfg.world!r}); services: robofabric list --services")
 
 
 def _intersects(a: str, b: str) -> bool:
@@ -172,12 +174,15 @@ def key_info(
             "types": {t: [f.__getattribute__("name") for f in fields_of(types[t])] for t in seen_types if t in types},
         }
         print(json.dumps(doc))
+        if not stats and not servers:
+            raise NothingThere(f"no message on {full} in {duration:g} s and no service there")
         return
     lines = [f"key: {full}"]
     for k, who in servers.items():
         req, rep = service_types(k)
         lines.append(f"  service {k}: request {req}, reply {rep}; served by {', '.join(who)}")
-    if not stats and not servers:
+    nothing = not stats and not servers
+    if nothing:
         lines.append(f"no message on {full} in {duration:g} s")
     for s in stats:
         lines.append(f"  {s.key}: type {', '.join(s.types)}; publishers {', '.join(s.publishers) or '-'}; "
@@ -193,6 +198,8 @@ def key_info(
             for f in fields_of(types[t]):
                 lines.append(f"  {f.name}: {f.type}" + (f"  {f.constraints}" if f.constraints else ""))
     print_folded(*lines)  # as wide as the terminal: a long key folds, never runs past the edge
+    if nothing:
+        raise NothingThere(f"nothing publishes or serves {full}")  # exit 1: the world had nothing there
 
 
 def interfaces(

@@ -126,7 +126,7 @@ def ps(
     if peer is not None:
         peers = [(k, i) for k, i in peers if i == peer]
         if not peers:
-            raise UserError(f"no live peer {peer!r} in world {fab.world!r}")
+            raise NothingThere(f"no live peer {peer!r} in world {fab.world!r}")
 
     def detail(pid: str) -> dict:
         subs, served = decl.of_peer(pid) if decl is not None else ([], [])
@@ -141,6 +141,8 @@ def ps(
             doc["declarations_visible"] = bool(decl and decl.available)
             doc["info"] = {i: detail(i) for _k, i in peers}
         print(json.dumps(doc))
+        if not peers:
+            raise NothingThere(f"no live peer in world {fab.world!r}")
         return
     if verbose:
         from fabric.declarations import service_types
@@ -169,6 +171,8 @@ def ps(
     for k, i in peers:
         table.add_row(k, i)
     console().print(table)
+    if not peers:
+        raise NothingThere(f"no live peer in world {fab.world!r}")
 
 
 def echo(

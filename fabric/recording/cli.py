@@ -16,7 +16,7 @@ from typing import Annotated, Any, Optional
 import typer
 
 from fabric import keys
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
+from fabric.cli_common import Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
 from fabric.complete import complete_formats, complete_keys, complete_keys_or_recordings
 
 __all__ = ["register", "record", "info", "replay"]
@@ -105,8 +105,8 @@ def record(
     if stats.dropped:
         why = "the disk quota was reached" if stats.quota_reached else "the queue to the disk was full or too many keys"
         print(f"warning: {stats.dropped} samples ({stats.dropped_bytes} bytes) were not recorded: {why}", file=sys.stderr, flush=True)
-    if stats.messages == 0:
-        raise UserError(
+    if stats.messages == 0:  # exit 1: the world had nothing there
+        raise NothingThere(
             f"nothing was recorded on {', '.join(exprs)} (unknown world or no publisher?); {output} is an empty recording"
         )
 
@@ -154,7 +154,7 @@ def _record_as(to, output, exprs, duration, quiet, scene, cfg, peer_id, stop, tt
         stats = _run_until_done(conv, output, duration, stop, quiet, tty)
     print(f"recorded {stats.line()} -> {output} ({to})", file=sys.stderr, flush=True)
     if stats.written == 0:
-        raise UserError(f"nothing was recorded on {', '.join(exprs)} (unknown world or no publisher?); {output} is empty")
+        raise NothingThere(f"nothing was recorded on {', '.join(exprs)} (unknown world or no publisher?); {output} is empty")
 
 
 # --------------------------------------------------------------------------- info
