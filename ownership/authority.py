@@ -125,6 +125,7 @@ class Authority:
         now = self.clock.now()
         for user in gone:
             self._apply(st.Leave(user, now))
+            self._say_if_held(user)
 
     def watch_stops(self, callback: Callable[[str, str, str], None]) -> None:
         """``callback(robot, former_owner, reason)`` whenever a robot loses its owner (the state machine's
@@ -200,6 +201,17 @@ class Authority:
         with self._lock:
             self._unconfirmed.discard(peer_id)
         self._apply(st.Join(peer_id, now) if alive else st.Leave(peer_id, now))
+        if not alive:
+            self._say_if_held(peer_id)
+
+    def _say_if_held(self, user: str) -> None:
+        """Log (rate-limited) a token loss the state machine held: the authority could not tell it from its own deafness."""
+        with self._lock:
+            held = user in self._state.held
+        if held and self.fabric.should_report("own:held") is not None:
+            log.warning("%s's token went while this authority heard no one (a stalled router?): %s keeps what she owns "
+                        "until her token is back, or for %.0f s without it", quote(user, MAX_USER_LEN), quote(user, MAX_USER_LEN),
+                        self._state.grace_s)
 
     def _run(self) -> None:
         while not self._stop.wait(self._tick_s):

@@ -39,9 +39,11 @@ def export(s: st.OwnState, now: float) -> tuple[tuple[OwnershipRecord, ...], dic
         users[f"away:{u}"] = [a.deadline - now, *(f"o:{o}" for o in sorted(a.owned)), *(f"q:{o}" for o in sorted(a.queued))]
     for u, d in s.unproven.items():
         users[f"unproven:{u}"] = d - now  # may be past: the next tick drops it, as it would have
+    for u, t in s.held.items():
+        users[f"held:{u}"] = t - now  # her token went while hearing was in doubt: grace counts from then
     # what the lease rule knows of the authority's hearing and its own pauses (never heard / never ticked: None),
     # so the restored authority judges a lease exactly as the old one would have
-    users["clock"] = [None if t == float("-inf") else t - now for t in (s.heard, s.hearing_since, s.last_tick)]
+    users["clock"] = [None if t == float("-inf") else t - now for t in (s.heard, s.hearing_since, s.last_tick, s.regained)]
     return recs, users
 
 
@@ -63,6 +65,7 @@ def restore(
     live: set[str] = set()
     away: dict[str, st.Away] = {}
     unproven: dict[str, float] = {}
+    held: dict[str, float] = {}
     for key, value in users.items():
         kind, _, user = str(key).partition(":")
         if kind == "rank":
@@ -76,6 +79,8 @@ def restore(
             away[user] = st.Away(now + float(vals[0]), owned, queued)
         elif kind == "unproven":
             unproven[user] = now + float(value)
+        elif kind == "held":
+            held[user] = now + float(value)
     return st.OwnState(
         records=MappingProxyType(recs),
         rank=MappingProxyType(rank),
@@ -83,6 +88,7 @@ def restore(
         away=MappingProxyType(away),
         next_rank=int(users.get("next_rank", max(rank.values(), default=-1) + 1)),
         unproven=MappingProxyType(unproven),
+        held=MappingProxyType({u: t for u, t in held.items() if u in live}),
         lease_s=lease_s,
         grace_s=grace_s,
         authority=authority,
@@ -92,10 +98,11 @@ def restore(
 
 
 def _clock(value: Any, now: float) -> dict[str, float]:
-    """``heard``, ``hearing_since`` and ``last_tick`` on this clock, from :func:`export`'s relative times; an
-    export without them (an older authority) leaves them unknown, as a fresh authority has them."""
-    vals = list(value) if isinstance(value, (list, tuple)) and len(value) == 3 else [None, None, None]
+    """``heard``, ``hearing_since``, ``last_tick`` and ``regained`` on this clock, from :func:`export`'s relative
+    times; an export without them (an older authority) leaves them unknown, as a fresh authority has them."""
+    vals = list(value) if isinstance(value, (list, tuple)) and len(value) in (3, 4) else []
+    vals += [None] * (4 - len(vals))
     out = {}
-    for name, v in zip(("heard", "hearing_since", "last_tick"), vals):
+    for name, v in zip(("heard", "hearing_since", "last_tick", "regained"), vals):
         out[name] = float("-inf") if v is None else now + float(v)
     return out

@@ -17,6 +17,13 @@ Rules (DESIGN.md):
   renewals stopped while the authority was hearing others (:func:`may_expire`). Nothing heard
   from anyone for ``deaf_s`` (a stalled router, a backlog, a lost link) or a late tick (the
   authority paused) stops expiries, and once it hears again every owner has a whole lease to renew.
+- Likewise a token lost while the authority's hearing is in doubt (:func:`hearing_in_doubt`: it heard
+  nobody for ``deaf_s`` although another owner should have renewed, or heard again after such a deaf
+  spell less than ``grace_s`` ago) is not taken as its user leaving: a
+  stalled router cuts its clients' links and drops their tokens (20,000 declarations at once, or the
+  router paused 8 s, released and restored owners' robots). The user is *held*: she keeps what she
+  owns (her lease does not run out) and her queue places, with no record changed, until her token
+  comes back (nothing happened) or ``grace_s`` passes without it (then she leaves, as on a token loss).
 - A robot moves only while a live owner drives it: every change of owner away from a user (her
   release, a handover, a take-over, her lease's end, her departure) comes with a ``stop`` effect
   naming the former owner and why; the authority hands it to the sim, which stops the robot.
@@ -43,7 +50,7 @@ from fabric.interfaces import MAX_QUEUE, OwnershipRecord
 
 __all__ = [
     "Effect", "OwnState", "Join", "Leave", "Request", "Release", "Renew", "Tick", "Motion",
-    "initial", "step", "may_expire", "MAX_UNPROVEN",
+    "initial", "step", "may_expire", "hearing_in_doubt", "MAX_UNPROVEN",
 ]
 
 MAX_UNPROVEN = 256
@@ -136,6 +143,8 @@ class OwnState:
     heard: float = float("-inf")  # when the last request, release, renewal or token reached the authority
     hearing_since: float = float("-inf")  # when it last started hearing again after a silence or its own pause
     last_tick: float = float("-inf")
+    regained: float = float("-inf")  # when it last heard again after a silence of deaf_s or its own pause (not the first time)
+    held: Mapping[str, float] = field(default_factory=dict)  # user -> when her token went while hearing was in doubt
 
 
 def initial(objects: Mapping[str, str], *, lease_s: float = 2.0, grace_s: float = 10.0, authority: str = "",
@@ -234,7 +243,23 @@ def _hear(s: OwnState, now: float) -> OwnState:
     since = s.hearing_since if now - s.heard <= s.deaf_s else now
     if s.heard >= now and since == s.hearing_since:
         return s
-    return replace(s, heard=max(s.heard, now), hearing_since=since)
+    regained = now if since == now and s.heard != float("-inf") and _overdue(s, now) else s.regained
+    return replace(s, heard=max(s.heard, now), hearing_since=since, regained=regained)
+
+
+def _overdue(s: OwnState, now: float, but: str = "") -> bool:
+    """Whether an owner other than ``but`` has not been heard for ``deaf_s`` (owners renew several times a lease)."""
+    return any(rec.owner and rec.owner != but and now - (rec.lease_expiry - s.lease_s) > s.deaf_s for rec in s.records.values())
+
+
+def hearing_in_doubt(s: OwnState, now: float, user: str = "") -> bool:
+    """Whether ``user``'s token lost at ``now`` may be the authority's (or its router's) trouble rather than her
+    leaving: nobody was heard for ``deaf_s`` although another owner should have renewed, or the authority heard
+    again after such a deaf spell (or its own pause) less than ``grace_s`` ago, while the links its router cut
+    meanwhile are still being closed and reopened. An owner alone going quiet is not doubt: her cable pulled,
+    her renewals stop and her token goes a transport lease later, with nobody else to hear."""
+    silent = s.heard != float("-inf") and now - s.heard > s.deaf_s and _overdue(s, now, but=user)
+    return silent or now <= s.regained + s.grace_s
 
 
 def may_expire(s: OwnState, rec: OwnershipRecord, now: float) -> bool:
@@ -243,7 +268,7 @@ def may_expire(s: OwnState, rec: OwnershipRecord, now: float) -> bool:
     owner had a whole lease to renew since the authority hears again (after its own pause or a backlog,
     renewals sent meanwhile are still on their way)."""
     return (bool(rec.owner) and now > rec.lease_expiry and now - s.heard <= s.deaf_s
-            and now > s.hearing_since + s.lease_s)
+            and now > s.hearing_since + s.lease_s and rec.owner not in s.held)
 
 
 # ---------------------------------------------------------------------- step
@@ -261,6 +286,8 @@ def step(s: OwnState, ev: Event) -> tuple[OwnState, list[Effect]]:
 
 def _on_join(s: OwnState, ev: Join, effects: list[Effect]) -> OwnState:
     """A user's token appeared: a new join rank, or its old place back within grace."""
+    if ev.user in s.held:  # her token went while the authority could not tell why, and is back: nothing happened
+        s = replace(s, held=MappingProxyType({k: v for k, v in s.held.items() if k != ev.user}))
     was_away = s.away.get(ev.user)
     if ev.user in s.unproven:
         s = replace(s, unproven=MappingProxyType({k: v for k, v in s.unproven.items() if k != ev.user}))
@@ -287,10 +314,20 @@ def _on_join(s: OwnState, ev: Join, effects: list[Effect]) -> OwnState:
 
 
 def _on_leave(s: OwnState, ev: Leave, effects: list[Effect]) -> OwnState:
-    """A user's token went: what it owned passes on, its queue places go; grace keeps them for its return."""
-    if ev.user not in s.live:
+    """A user's token went: what it owned passes on, its queue places go; grace keeps them for its return.
+    While the authority's hearing is in doubt (:func:`hearing_in_doubt`) she is held instead: nothing changes."""
+    if ev.user not in s.live or ev.user in s.held:
         return s
-    s = replace(s, live=s.live - {ev.user}, unproven=MappingProxyType({k: v for k, v in s.unproven.items() if k != ev.user}))
+    if hearing_in_doubt(s, ev.now, ev.user):
+        return replace(s, held=MappingProxyType({**s.held, ev.user: ev.now}))
+    return _leave(s, ev.user, ev.now, effects)
+
+
+def _leave(s: OwnState, user: str, now: float, effects: list[Effect]) -> OwnState:
+    """``user`` is gone: what she owned passes on, her queue places go; grace keeps them for her return."""
+    ev = Leave(user, now)
+    s = replace(s, live=s.live - {ev.user}, unproven=MappingProxyType({k: v for k, v in s.unproven.items() if k != ev.user}),
+                held=MappingProxyType({k: v for k, v in s.held.items() if k != ev.user}))
     recs = dict(s.records)
     owned, queued = set(), set()
     for obj, rec in list(recs.items()):
@@ -307,10 +344,11 @@ def _on_leave(s: OwnState, ev: Leave, effects: list[Effect]) -> OwnState:
 
 def _on_tick(s: OwnState, ev: Tick, effects: list[Effect]) -> OwnState:
     """Time passes: leases that may end (:func:`may_expire`) end, tokenless requesters and away users past
-    grace are forgotten. A tick long after the last one means the authority itself was paused: it hears
-    again from now, so every owner gets a whole lease to renew."""
+    grace are forgotten, held users whose token did not come back within grace leave. A tick long after the
+    last one means the authority itself was paused: it hears again from now, so every owner gets a whole
+    lease to renew."""
     if s.last_tick != float("-inf") and ev.now - s.last_tick > s.deaf_s:
-        s = replace(s, hearing_since=max(s.hearing_since, ev.now))
+        s = replace(s, hearing_since=max(s.hearing_since, ev.now), regained=max(s.regained, ev.now))
     s = replace(s, last_tick=ev.now)
     recs = dict(s.records)
     for obj, rec in list(recs.items()):
@@ -321,6 +359,9 @@ def _on_tick(s: OwnState, ev: Tick, effects: list[Effect]) -> OwnState:
             effects.append(Effect("expired", obj, rec.owner, why))
     for user in [u for u, d in s.unproven.items() if ev.now > d]:
         s = _drop_unproven(s, recs, user, ev.now, effects)
+    for user in [u for u, t in s.held.items() if ev.now > t + s.grace_s]:  # her token never came back: she left
+        s = _leave(_with(s, recs), user, ev.now, effects)
+        recs = dict(s.records)
     gone = [u for u, a in s.away.items() if ev.now > a.deadline]
     if gone:
         away = {k: v for k, v in s.away.items() if k not in gone}

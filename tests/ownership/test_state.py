@@ -236,12 +236,16 @@ def test_reconnect_within_grace_restores_queue_place():
     s, _ = st.step(s, st.Motion("arm", True))
     s, _ = st.step(s, st.Request("c", "arm", 0.0, wait=True))
     s, _ = st.step(s, st.Request("b", "arm", 0.0, wait=True))
+    s, _ = st.step(s, st.Renew("a", "arm", 0.5))  # the owner renews as her client does: the authority hears all along
     s, _ = st.step(s, st.Leave("b", 1.0))
     assert s.records["arm"].queue == ("c",)
+    for i in range(2, 10):
+        s, _ = st.step(s, st.Renew("a", "arm", i * 0.5))
     s, eff = st.step(s, st.Join("b", 5.0))
     assert s.records["arm"].queue == ("b", "c")
     assert eff[0].kind == "restored" and eff[0].position == 1
     # the owner leaves: ownership passes on; it comes back in grace: queued at its old (first) place
+    s, _ = st.step(s, st.Renew("a", "arm", 5.5))
     s, _ = st.step(s, st.Leave("a", 6.0))
     assert s.records["arm"].owner == "b"
     s, _ = st.step(s, st.Join("a", 7.0))
@@ -412,3 +416,97 @@ def test_an_owner_away_while_someone_else_used_her_robot_does_not_get_it_back():
     joined, eff = st.step(s, st.Join("alice", 5.0))
     assert joined.records["arm"].owner == "" and not [e for e in eff if e.kind == "restored"]
     check_invariants(joined)
+
+
+def _records(s: st.OwnState) -> dict:
+    return {o: (r.owner, r.epoch, r.queue) for o, r in s.records.items()}
+
+
+def test_a_token_lost_while_the_authority_is_deaf_is_held_and_nothing_changes_when_it_returns():
+    """Issue 30: a router stalled by 20,000 declarations (or paused 8 s) cut its clients' links: bob's token
+    went as it came back, and his base was released, then restored (epoch 5 -> 7). His token lost while
+    nobody was heard (alice's renewals overdue too) holds him: no record changes, his lease does not run
+    out while he reconnects, and his token's return changes nothing."""
+    s = _owned_by_a()  # a owns arm, b owns base
+    for t in (0.5, 1.0):
+        s, _ = st.step(s, st.Renew("a", "arm", t))
+        s, _ = st.step(s, st.Renew("b", "base", t))
+    for i in range(11, 90):  # the router stalls for 8 s: ticks run, nobody is heard
+        s, eff = st.step(s, st.Tick(i * 0.1))
+        assert not eff, (i, eff)
+    before = _records(s)
+    s, eff = st.step(s, st.Leave("b", 9.0))  # the router comes back and closes the links it let expire
+    assert not eff and st.hearing_in_doubt(s, 9.0, "b") and "b" in s.held
+    t = 9.0
+    while t < 13.0:  # alice renews again at once; bob reconnects 4 s later (zenoh's retry)
+        t += 0.1
+        s, _ = st.step(s, st.Renew("a", "arm", t))
+        s, eff = st.step(s, st.Tick(t))
+        assert not eff and _records(s) == before, (t, eff)
+    s, eff = st.step(s, st.Leave("a", 11.0))  # alice's token goes a moment later too (within grace of hearing again)
+    assert not eff and "a" in s.held
+    s, eff = st.step(s, st.Join("b", 13.0))
+    s2, eff2 = st.step(s, st.Join("a", 13.0))
+    assert not eff and not eff2 and _records(s2) == before and not s2.held
+    s2, eff = st.step(s2, st.Renew("b", "base", 13.1))
+    assert [e.kind for e in eff] == ["renewed"] and s2.records["base"].epoch == before["base"][1]
+
+
+def test_a_held_user_whose_token_does_not_return_within_grace_leaves():
+    s = _owned_by_a()
+    for i in range(1, 90):  # nobody heard for 9 s
+        s, _ = st.step(s, st.Tick(i * 0.1))
+    s, eff = st.step(s, st.Leave("b", 9.0))
+    assert not eff and "b" in s.held
+    t, eff = 9.0, []
+    while not eff:
+        t += 0.1
+        s, _ = st.step(s, st.Renew("a", "arm", t))
+        s, eff = st.step(s, st.Tick(t))
+    assert t > 9.0 + GRACE and [(e.kind, e.object, e.user) for e in eff][:2] == [("released", "base", "b"), ("stop", "base", "b")]
+    assert eff[0].reason == "left" and not s.held and "b" not in s.live and s.records["arm"].owner == "a"
+
+
+def test_an_owner_alone_cut_off_is_not_held():
+    """Her cable pulled: her renewals stop and her token goes a transport lease later, with nobody else to hear:
+    that is no doubt about the authority's hearing, and the robot passes to the next in the queue at once."""
+    s = st.initial({"arm": "exclusive"}, lease_s=2.0, grace_s=10.0)
+    for u in ("alice", "bob"):
+        s, _ = st.step(s, st.Join(u, 0.0))
+    s, _ = st.step(s, st.Request("alice", "arm", 0.0))
+    s, _ = st.step(s, st.Motion("arm", True))
+    s, _ = st.step(s, st.Request("bob", "arm", 0.1, wait=True))
+    s, _ = st.step(s, st.Renew("alice", "arm", 0.5))
+    s, eff = st.step(s, st.Leave("alice", 2.5))
+    assert s.records["arm"].owner == "bob" and eff[0].kind == "handover" and not s.held
+
+
+@settings(max_examples=300, deadline=None)
+@given(events(), hs.sampled_from(USERS), hs.lists(hs.floats(0.0, 0.3), max_size=8), hs.floats(0.0, 1.0))
+def test_a_token_lost_and_back_while_hearing_is_in_doubt_changes_no_record(seq, user, ticks, back):
+    """Whatever happened before: after the authority's own pause (a late tick), a user's token going and coming
+    back within grace, with time passing in between, changes no record (owner, epoch, queue) of any object."""
+    s = st.initial(OBJECTS, lease_s=LEASE, grace_s=GRACE)
+    now = 0.0
+    for raw in seq:
+        now += raw[-1] if raw[0] not in ("motion",) and isinstance(raw[-1], float) else 0.0
+        s, _ = st.step(s, build(raw, now))
+    s, _ = st.step(s, st.Tick(now))
+    now += 5.0
+    s, _ = st.step(s, st.Tick(now))  # the authority was paused (or starved) for 5 s
+    if user not in s.live or user in s.held:
+        return
+    before = _records(s)
+    now += 0.1
+    assert st.hearing_in_doubt(s, now, user)
+    s, eff = st.step(s, st.Leave(user, now))
+    assert not eff and _records(s) == before
+    for dt in ticks:
+        now += dt
+        s, eff = st.step(s, st.Tick(now))
+        assert not [e for e in eff if e.object and any(e.user == u for u in (user,))], eff
+    s, eff = st.step(s, st.Join(user, now + back))
+    assert not eff and user not in s.held
+    changed = {o: (before[o], r) for o, r in _records(s).items() if r != before[o]}
+    assert not changed, changed
+    check_invariants(s)
