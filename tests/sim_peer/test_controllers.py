@@ -75,3 +75,24 @@ def test_a_resumed_twist_clock_times_out_when_the_original_would():
         steps.append(k)
     assert steps[0] == steps[1]  # the same step on both (0.3 s held, ~0.2 s more reaches the 0.5 s timeout)
     assert abs(steps[0] * dt - 0.2) <= dt + 1e-9
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(-1, 1), st.floats(-1.5, 1.5))
+def test_a_braking_base_slows_to_zero_within_its_limits_and_forgets_its_twist(v, w):
+    """Its owner let go (SimRobot.halt): no velocity jump, at rest after v/max_accel (or w/max_alpha), and stays there."""
+    b = BaseController(BASE)
+    b.twist(v, w)
+    dt = 0.002
+    for _ in range(1500):
+        b.step(dt)
+    b.brake()
+    assert (b.v_cmd, b.omega_cmd, b.follower) == (0.0, 0.0, None)
+    pv, pw = b.v, b.omega
+    steps = math.ceil(max(abs(v) / BASE.max_accel, abs(w) / BASE.max_alpha) / dt) + 1
+    for _ in range(steps):
+        b.step(dt)
+        assert abs(b.v - pv) <= BASE.max_accel * dt + 1e-12 and abs(b.omega - pw) <= BASE.max_alpha * dt + 1e-12
+        assert abs(b.v) <= abs(pv) + 1e-12 and abs(b.omega) <= abs(pw) + 1e-12  # only ever slower
+        pv, pw = b.v, b.omega
+    assert (b.v, b.omega) == (0.0, 0.0) and not b.moving
