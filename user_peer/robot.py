@@ -429,16 +429,20 @@ class Base(Robot):
             return None
         return float(p.position[0]), float(p.position[1]), yaw_from_quaternion(p.quaternion)
 
-    def twist(self, v: float, omega: float) -> None:
+    def twist(self, v: float, omega: float, *, hold: bool = True) -> None:
         """Drive at (v m/s, omega rad/s) until told otherwise, as long as this program lives and owns the base.
 
         The sim keeps a twist only for its deadman (0.5 s by default, docs/sim.md), so this handle repeats it
         every 0.1 s (:mod:`user_peer.deadman`) until the next twist, ``twist(0, 0)``, :meth:`stop`,
         :meth:`reset`, :meth:`follow`, :meth:`release` or the world's close. If the program dies, or the base
-        passes to someone else, the repeats end and the base brakes to a halt."""
+        passes to someone else, the repeats end and the base brakes to a halt.
+
+        ``hold=False``: one twist, never repeated here, for a client that repeats it itself while its driver is
+        there (a browser page's key held down, a bridge forwarding ROS ``cmd_vel``), so that its own silence
+        stops the base within the deadman."""
         v, omega = float(v), float(omega)
         self._send_twist(v, omega)
-        if v or omega:
+        if (v or omega) and hold:
             epoch = self.record.epoch if self.record is not None else None
             self.world.twists.hold(self.id, lambda: self._send_twist(v, omega, epoch))
         else:
