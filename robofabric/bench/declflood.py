@@ -12,8 +12,9 @@ her login may subscribe to anything) and closes her session. Measured per N:
   the router to the sim) from her first declaration to 10 s after her close: how long the router could
   not route;
 * router RSS before her session, after her declarations, and 5 s after her close;
-* owners: whether alice and bob still own their robots afterwards, and how many times either lost one
-  (the user API's ``on_lost``). zenoh 1.x has no limit on declarations per session: this is what a
+* owners: whether alice and bob still own their robots afterwards, how many times either lost one
+  (the user API's ``on_lost``), and how many records of their robots named another owner or epoch
+  (a release then a restore is two, though each has her robot back by the end). zenoh 1.x has no limit on declarations per session: this is what a
   flood of them costs, bounded only by the router's session limit and the authority's lease rule.
 """
 
@@ -64,6 +65,9 @@ class FloodResult:
     alice_owns: bool
     bob_owns: bool
     losses: int
+    changes: int = 0
+    """Records of arm1 and base1 that named another owner or epoch than before the flood (a release, a
+    restore, a handover): what an owner sees even when she has her robot back by the end."""
 
 
 class _Prober:
@@ -103,6 +107,19 @@ class _Prober:
         return max(b - a for a, b in zip(times, times[1:]))
 
 
+def _watch_records(fab, held: dict[str, tuple[str, int]], changes: list[str]):
+    """Every ownership record of a robot in ``held`` that names another (owner, epoch) is appended to ``changes``."""
+    from fabric import keys
+    from fabric.interfaces import OwnershipRecord
+
+    def on(key: str, rec: OwnershipRecord) -> None:
+        was = held.get(rec.object)
+        if was is not None and (rec.owner, rec.epoch) != was:
+            changes.append(f"{rec.object}: {was[0]}@{was[1]} -> {rec.owner or 'free'}@{rec.epoch}")
+
+    return fab.subscribe(keys.own_all(fab.world), on, expected=OwnershipRecord)
+
+
 def run_flood(counts: list[int], tmp: Path, *, settle: float = 5.0) -> list[FloodResult]:
     """Start the class world under ``tmp``, flood it once per count (a fresh mallory each time), end it all."""
     import user_peer
@@ -122,12 +139,16 @@ def run_flood(counts: list[int], tmp: Path, *, settle: float = 5.0) -> list[Floo
         losses: list[str] = []
         alice.ownership.on_lost(lambda obj, rec: losses.append(obj))
         bob.ownership.on_lost(lambda obj, rec: losses.append(obj))
+        held: dict[str, tuple[str, int]] = {}  # robot -> (owner, epoch) before the flood
+        changes: list[str] = []
         try:
             arm, base = alice.robot("arm1"), bob.robot("base1")
             arm.request(timeout=10)
             base.request(timeout=10)
+            watch = _watch_records(bob.fabric, held, changes)
             for n in counts:
-                lost_before = len(losses)
+                lost_before, changed_before = len(losses), len(changes)
+                held.update({r.id: (r.record.owner, r.record.epoch) for r in (arm, base)})
                 rss0 = proc_rss_mb(router.pid)
                 mallory = subprocess.Popen([sys.executable, "-c", _MALLORY, str(files["mallory"]), world, str(n)],
                                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, start_new_session=True)
@@ -153,8 +174,9 @@ def run_flood(counts: list[int], tmp: Path, *, settle: float = 5.0) -> list[Floo
                 results.append(FloodResult(
                     n, float(declared[2]) if len(declared) == 3 else float("nan"), float(closed[1]) if len(closed) == 2 else float("nan"),
                     stall, misses, rss0, rss1, rss2, arm.record is not None and arm.record.owner == "alice",
-                    base.record is not None and base.record.owner == "bob", len(losses) - lost_before,
+                    base.record is not None and base.record.owner == "bob", len(losses) - lost_before, len(changes) - changed_before,
                 ))
+            watch.undeclare()
         finally:
             alice.close()
             bob.close()
@@ -164,10 +186,10 @@ def run_flood(counts: list[int], tmp: Path, *, settle: float = 5.0) -> list[Floo
 
 def table(results: list[FloodResult]) -> str:
     head = ("| declarations | declare s | close s | longest srv/world gap s | queries unanswered | router RSS before / declared / "
-            "after MB | alice owns | bob owns | ownership losses |\n|---|---|---|---|---|---|---|---|---|")
+            "after MB | alice owns | bob owns | ownership losses | records changed |\n|---|---|---|---|---|---|---|---|---|---|")
     rows = [f"| {r.n} | {r.declare_s:.2f} | {r.close_s:.2f} | {r.stall_s:.2f} | {r.unanswered} | {r.rss_before_mb:.0f} / "
             f"{r.rss_declared_mb:.0f} / {r.rss_after_mb:.0f} | {'yes' if r.alice_owns else 'NO'} | {'yes' if r.bob_owns else 'NO'} | "
-            f"{r.losses} |" for r in results]
+            f"{r.losses} | {r.changes} |" for r in results]
     return "\n".join([head, *rows])
 
 
