@@ -83,6 +83,8 @@ BENCHMARKS: tuple[Benchmark, ...] = (
               full=("--students", "1,4,8,16,32", "--seconds", "40"), quick=("--students", "1,2", "--seconds", "8")),
     Benchmark("declflood", "declflood", "a login declaring N subscribers and closing: router stall and memory, owners keep their robots",
               full=("--counts", "6000,20000"), quick=("--counts", "2000")),
+    Benchmark("mapflood", "mapflood", "a student building maps under new names: what the compute peer keeps, refuses and weighs",
+              full=("--builds", "1400"), quick=("--builds", "20")),
     Benchmark("shards", "shards", "one world of N mobile robots over 1, 2, 4 sim processes: pace, CPU per robot, mirror lag, command latency",
               full=("--robots", "32", "--sims", "1,2,4", "--seconds", "20"), quick=("--robots", "4", "--sims", "1,2", "--seconds", "4")),
     Benchmark("lab", "lab", "recovery times in a lab of network namespaces: partition, router loss, lost sim",
