@@ -22,7 +22,7 @@ from typing import Any
 
 from fabric import keys
 
-__all__ = ["Peer", "Declarations", "live_tokens", "read_declarations", "SERVICE_TYPES", "service_types", "quoted"]
+__all__ = ["Peer", "Declarations", "live_tokens", "read_declarations", "SERVICE_TYPES", "service_types", "quoted", "STREAM_TYPES", "key_type"]
 
 # The request and reply types of each service (``-`` for a query without a payload).
 SERVICE_TYPES: dict[str, tuple[str, str]] = {
@@ -35,6 +35,35 @@ SERVICE_TYPES: dict[str, tuple[str, str]] = {
     "map": ("MapRequest", "MapReply"),
     "own": ("OwnRequest", "OwnershipRecord"),
 }
+
+
+STREAM_TYPES: dict[str, str] = {
+    "joints": "JointState", "pose": "Pose", "scan": "Scan", "sonar": "Scan", "path": "Path", "ik": "IKStream",
+}
+"""The message type each robot stream ``rf/W/robot/ID/{stream}`` carries."""
+
+
+def key_type(key: str) -> str | None:
+    """The message type ``key`` is declared to carry (a command key: its body's type), or None when any may.
+
+    ``pub`` refuses another type before it sends: a Twist on a JointState key only made the sim and the
+    compute log decode errors."""
+    from fabric.interfaces import COMMAND_BODIES
+
+    try:
+        p = keys.parse(key)
+    except ValueError:
+        return None
+    if p.category == "cmd":
+        body = COMMAND_BODIES.get(p.leaf)
+        return body.__name__ if body is not None else None
+    if p.category == "robot":
+        return STREAM_TYPES.get(p.leaf)
+    if p.category == "object" and p.leaf == "pose":
+        return "Pose"
+    if p.category == "map":
+        return "OccupancyGrid"
+    return None
 
 
 def quoted(text: str, limit: int = 120) -> str:

@@ -324,23 +324,33 @@ def pub(
     from fabric.interfaces import Command
     from fabric.rate import RateLoop
 
+    from fabric.declarations import key_type
+
     body = _message_from_json(msg_type, data)
+    cfg = make_config(world, connect, listen, profile, zenoh_config)
     try:
-        user = make_config(world, connect, listen, profile, zenoh_config).user_id(user)  # a secure login is the user
+        user = cfg.user_id(user)  # a secure login is the user
     except ValueError as exc:
         raise UserError(str(exc)) from None
     if wait < 0:
         raise UserError("--wait must not be negative")
     n = count if count is not None else (None if rate > 0 else 1)
+    # the key is checked before joining: a typo or a wrong type fails at once, and nothing is sent
+    full = _user_key(resolve_key(key, cfg.world), user)
+    if "*" in full or "$" in full:
+        raise UserError(f"{full!r} is a pattern; pub needs a concrete key")
+    parsed = _parse_pub_key(full, user)
+    declared = key_type(full)
+    if declared is not None and declared != msg_type:
+        what = "commands" if parsed.category == "cmd" else "messages"
+        raise UserError(f"{full} carries {declared} {what}, not {msg_type}; nothing sent")
+    is_cmd = parsed.category == "cmd"
+    if is_cmd and not user:
+        user = parsed.user  # a key that names its writer (.../by/ann) is that user's command
     stop = shutdown_event()
-    with _open("tool", world, connect, listen, profile, zenoh_config, peer_id, key=key) as fab:
-        full = _user_key(resolve_key(key, fab.world), user)
-        if "*" in full or "$" in full:
-            raise UserError(f"{full!r} is a pattern; pub needs a concrete key")
-        parsed = _parse_pub_key(full, user)
-        is_cmd = parsed.category == "cmd"
-        if is_cmd and not user:
-            user = parsed.user  # a key that names its writer (.../by/ann) is that user's command
+    with open_fabric(cfg, "tool", peer_id) as fab:
+        if is_cmd and wait > 0:
+            _check_robot(fab, parsed.subject, timeout=max(wait, 1.0))
         if is_cmd and epoch is None:
             epoch = _current_epoch(fab, parsed.subject, parsed.user)
         try:
@@ -353,10 +363,13 @@ def pub(
             from fabric.interfaces import Event, EventKind
 
             def on_event(_key: str, ev: Event) -> None:
-                if ev.kind == EventKind.REJECT and ev.user == parsed.user:
+                # a refusal of this user's command, or of any command for a robot the sim does not have
+                # (refused from the key alone: the sender is not known, and the event names no user)
+                if ev.kind == EventKind.REJECT and (ev.user == parsed.user or (not ev.user and ev.object == parsed.subject)):
                     refusals.append(ev.reason)
 
             fab.subscribe(keys.event(fab.world, "reject", parsed.subject), on_event, expected=Event)
+            fab.subscribe(keys.event(fab.world, "reject"), on_event, expected=Event)  # ids the sim has not
         publisher = fab.session.declare_publisher(full)  # routes to existing subscribers before the first put
         deadline = time.monotonic() + 0.5
         while not publisher.matching_status.matching and time.monotonic() < deadline:
@@ -411,6 +424,24 @@ def _parse_pub_key(full: str, user: str | None):
     return parsed
 
 
+def _check_robot(fab: Fabric, robot: str, *, timeout: float) -> None:
+    """Refuse (exit 1, nothing sent) a command for a robot the world's sims do not have, as they would.
+
+    A sim refuses such a command with ``unknown_robot`` but at most a few times per interval, and in a
+    sharded world every sim leaves it to the others: asking the world's description first is what
+    makes the answer certain. No answer (no sim): the command goes, and ``pub`` says nobody took it."""
+    from fabric.interfaces import ServiceError
+    from fabric.worldview import describe
+
+    try:
+        info = describe(fab, timeout=timeout)
+    except ServiceError:
+        return
+    ids = sorted(r.id for r in info.robots)
+    if robot not in ids:
+        raise NothingThere(f"refused: unknown_robot: no robot {robot!r} in world {fab.world!r} (robots: {', '.join(ids) or 'none'}); nothing sent")
+
+
 def _current_epoch(fab: Fabric, robot: str, user: str) -> int:
     """The ownership epoch ``user`` holds ``robot`` under (0 when she does not own it or no authority answers)."""
     from fabric.interfaces import OwnershipRecord, ServiceError
@@ -427,8 +458,12 @@ def _current_epoch(fab: Fabric, robot: str, user: str) -> int:
 
 
 def _message_from_json(msg_type: str, data: str):
-    """A message of any installed type (plugins included) from a JSON object of its fields."""
-    from fabric.codec import encode, load_plugins, registered
+    """A message of any installed type (plugins included) from a JSON object of its fields.
+
+    What is wrong is said in words, naming the field (``Twist needs field 'omega' (a number)``), never as
+    Python's ``Twist.__init__() missing 1 required positional argument``; the message is checked as a
+    receiver would decode it, so nothing the sim would refuse as undecodable leaves."""
+    from fabric.codec import DecodeError, decode, encode, load_plugins, registered
 
     load_plugins()
     types = registered()
@@ -437,13 +472,83 @@ def _message_from_json(msg_type: str, data: str):
         raise UserError(f"unknown message type {msg_type!r}; known: {', '.join(sorted(types))}")
     try:
         fields = json.loads(data)
-        if not isinstance(fields, dict):
-            raise ValueError("expected a JSON object")
+    except ValueError as exc:
+        raise UserError(f"--data is not JSON: {exc}") from None
+    if not isinstance(fields, dict):
+        raise UserError(f"--data must be a JSON object of {msg_type}'s fields ({_fields_words(cls)}), got {data!r}")
+    fields = _checked_fields(cls, fields)
+    try:
         msg = cls(**fields)
-        encode(msg)
+        decode(encode(msg), cls)  # as the receiver will: finiteness, ranges, shapes
+    except DecodeError as exc:
+        raise UserError(f"bad {msg_type}: {exc}") from None
     except (ValueError, TypeError) as exc:
         raise UserError(f"cannot build {msg_type} from {data!r}: {exc}") from None
     return msg
+
+
+def _spec_words(spec) -> str:
+    """What a field's codec spec asks for, in words."""
+    name = type(spec).__name__
+    if name == "F":
+        bounds = f" in [{spec.lo}, {spec.hi}]" if spec.lo is not None or spec.hi is not None else ""
+        return f"a number{bounds}"
+    if name == "I":
+        return "an integer"
+    if name in ("S", "User"):
+        return "a string"
+    if name == "Strs":
+        return "a list of strings"
+    if name == "Arr":
+        return "a list of numbers" if getattr(spec, "ndim", None) in (None, 1) else f"a {spec.ndim}-D array of numbers"
+    return "a value"
+
+
+def _fields_words(cls) -> str:
+    import dataclasses
+
+    spec = getattr(cls, "SPEC", {})
+    return ", ".join(f"{f.name}: {_spec_words(spec.get(f.name))}" for f in dataclasses.fields(cls) if f.name != "header")
+
+
+def _checked_fields(cls, fields: dict) -> dict:
+    """``fields`` for ``cls``, each checked against its spec; a missing, unknown or bad one is a :class:`UserError`
+    naming it."""
+    import dataclasses
+
+    import numpy as np
+
+    from fabric.codec import DecodeError
+
+    name = cls.__name__
+    known = {f.name: f for f in dataclasses.fields(cls)}
+    spec = getattr(cls, "SPEC", {})
+    for k in fields:
+        if k not in known:
+            raise UserError(f"{name} has no field {k!r}; its fields: {_fields_words(cls)}")
+    for k, f in known.items():
+        if k not in fields and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            raise UserError(f"{name} needs field {k!r} ({_spec_words(spec.get(k))}); its fields: {_fields_words(cls)}")
+    out = dict(fields)
+    for k, v in fields.items():
+        s = spec.get(k)
+        kind = type(s).__name__
+        if kind not in ("F", "I", "S", "Strs", "Arr"):
+            continue  # nested messages and maps: the constructor and the codec say what is wrong
+        try:
+            if kind == "Arr":
+                if not isinstance(v, list):
+                    raise DecodeError(f"{name}.{k}: expected {_spec_words(s)}, got {json.dumps(v)}")
+                try:
+                    v = np.asarray(v, dtype=s.dtype)
+                except (ValueError, TypeError):
+                    raise DecodeError(f"{name}.{k}: expected {_spec_words(s)}, got {json.dumps(v)}") from None
+            elif kind == "Strs" and isinstance(v, list):
+                v = tuple(v)
+            out[k] = s.check(v, f"{name}.{k}")
+        except DecodeError as exc:
+            raise UserError(str(exc)) from None
+    return out
 
 
 def call(
