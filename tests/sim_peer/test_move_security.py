@@ -225,6 +225,18 @@ def test_the_sims_refuse_a_bad_move_even_from_the_instructor_and_keep_serving(cl
     assert not cls.marker.exists() and cls.sim_a.poll() is None and cls.sim_b.poll() is None
 
 
+def test_a_robot_no_target_fetched_is_served_by_its_source_again(cls):
+    """The tool died between its two steps: the source serves the robot again after RETURN_AFTER_S, by itself."""
+    carol = cls.fabric("carol", "tool", "carol-tool2")
+    terms = {r.source: r.message.header.term for r in cls.probe.query(keys.srv(cls.world, "world"), expected=WorldInfo, all_replies=True)}
+    ho.ask(carol, "sim-a", "carol", ho.step(ho.MOVE_OUT, "base2", to="sim-b", term=ho.move_term(terms["sim-a"], terms["sim-b"])), 10.0)
+    assert cls.parts() == {"sim-a": ["base0"], "sim-b": ["base1"]}
+    wait_until(lambda: cls.parts() == {"sim-a": ["base0", "base2"], "sim-b": ["base1"]}, timeout=ho.RETURN_AFTER_S + 20,
+               what="base2 served by sim-a again", seen=lambda: (cls.parts(), cls.procs.output(cls.sim_a)[-800:]))
+    assert f"no sim took base2 within {ho.RETURN_AFTER_S:.0f} s; serving it again" in cls.procs.output(cls.sim_a)
+    assert cls.sim_b.poll() is None and "took base2" not in cls.procs.output(cls.sim_b)
+
+
 def test_the_instructors_move_works_and_alice_and_bob_drive_on(cls):
     r = cls.cli("carol", "own", "move", "base2", "--to", "sim-b")
     assert r.returncode == 0, r.stdout + r.stderr
