@@ -147,7 +147,8 @@ _TYPE_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_-]{0,63}$")
 @functools.cache
 def plugin_dirs() -> tuple[Path, ...]:
     """The folders of the packages installed under :data:`ENTRY_POINTS` (read once per process: what the
-    operator installed before starting it). A package is found, not run (``importlib.util.find_spec``)."""
+    operator installed before starting it). A package is found, not run (``importlib.util.find_spec``; a dotted
+    name imports its parent packages)."""
     import importlib.metadata
     import importlib.util
 
