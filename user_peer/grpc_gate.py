@@ -90,9 +90,10 @@ def parse_head(head: bytes) -> Request:
     return Request(method, path, head, length)
 
 
-def read_request(sock: socket.socket, buf: bytearray) -> tuple[Request, bytes] | None:
+def read_request(sock: socket.socket, buf: bytearray, deadline: float | None = None) -> tuple[Request, bytes] | None:
     """The next request head and body from ``sock`` (``buf``: what was received beyond the previous one), or
-    None when the page closed between requests. Raises :class:`Refused`, :class:`Http2` (the connection opened
+    None when the page closed between requests. ``deadline`` (monotonic): the whole request must have come by
+    then (a client sending a byte now and then does not hold a connection open). Raises :class:`Refused`, :class:`Http2` (the connection opened
     with HTTP/2's preface: what was received stays in ``buf``), and OSError (a timeout included)."""
     while True:
         start = bytes(buf[:len(H2_PREFACE)])
@@ -104,7 +105,7 @@ def read_request(sock: socket.socket, buf: bytearray) -> tuple[Request, bytes] |
                 break
         if len(buf) > MAX_HEAD_BYTES:
             raise Refused(f"a request head over {MAX_HEAD_BYTES} bytes")
-        data = sock.recv(65536)
+        data = _recv(sock, deadline)
         if not data:
             if buf:
                 raise Refused("the connection closed inside a request head")
@@ -113,13 +114,22 @@ def read_request(sock: socket.socket, buf: bytearray) -> tuple[Request, bytes] |
     req = parse_head(bytes(buf[:end + 4]))
     del buf[:end + 4]
     while len(buf) < req.body_length:
-        data = sock.recv(65536)
+        data = _recv(sock, deadline)
         if not data:
             raise Refused("the connection closed inside a request body", req.path)
         buf += data
     body = bytes(buf[:req.body_length])
     del buf[:req.body_length]
     return req, body
+
+
+def _recv(sock: socket.socket, deadline: float | None) -> bytes:
+    if deadline is not None:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise socket.timeout("the request did not come in time")
+        sock.settimeout(left)
+    return sock.recv(65536)
 
 
 def http1_refusal(reason: str) -> bytes:

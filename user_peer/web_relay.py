@@ -189,10 +189,10 @@ class Relay:
     def _serve_requests(self, link: PageLink) -> None:
         """Page -> Rerun: each request checked, an allowed one passed on whole; the first opens the link to Rerun."""
         buf = bytearray()
-        link.down.settimeout(self.limits.header_timeout_s)
+        first_by = time.monotonic() + self.limits.header_timeout_s
         try:
             while not link.closed:
-                got = read_request(link.down, buf)
+                got = read_request(link.down, buf, first_by if link.up is None else None)
                 if got is None:
                     break
                 req, body = got
@@ -226,7 +226,11 @@ class Relay:
                         method.rsplit("/", 1)[-1] or "a request", link.peer, reason, n)
 
     def _open_upstream(self, link: PageLink) -> None:
-        up = socket.create_connection(self.upstream, timeout=5)
+        try:
+            up = socket.create_connection(self.upstream, timeout=5)
+        except OSError as exc:
+            log.warning("web relay: Rerun's gRPC server at %s:%d refused a page: %s", *self.upstream, exc)
+            raise
         up.settimeout(None)
         up.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         with link.cond:

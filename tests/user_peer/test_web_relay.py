@@ -325,3 +325,28 @@ def test_a_slow_reader_joining_a_long_session_gets_the_world_first_and_is_not_cu
     finally:
         slow.close()
         s.close()
+
+
+@pytest.mark.slow  # ~1 s
+def test_a_request_sent_a_byte_at_a_time_must_still_come_within_the_timeout():
+    server = StandIn()
+    relay = Relay(("127.0.0.1", server.port), free_port(), bind="127.0.0.1", limits=RelayLimits(header_timeout_s=0.5))
+    c = socket.create_connection(("127.0.0.1", relay.port))
+    try:
+        c.settimeout(10)
+        got = b""
+        for byte in raw_read_request():  # bounded: the request's length; each byte well within the timeout
+            try:
+                c.sendall(bytes([byte]))
+            except OSError:
+                break
+            time.sleep(0.05)
+            if relay.counters().refused_connections:
+                break
+        got = c.recv(4096)
+        assert b"grpc-status: 7" in got and b"no request within" in got, got
+        assert relay.counters().refused_connections == 1, relay.counters()
+    finally:
+        c.close()
+        relay.close()
+        server.close()
