@@ -18,7 +18,7 @@ relay listens where the pages are told to stream from (``--grpc-port``):
   Rerun sends (into the page's own queue), one writes to the page as fast as the page takes. Rerun's server
   only ever waits for this relay, which never waits for a page.
 - **Bounded.** At most ``max_links`` connections (``max_links_per_address`` from one address), each with
-  at most 3 threads; a connection that sends no request within ``header_timeout_s`` is closed; a page's
+  at most 3 threads; a connection whose first request has not come whole within ``header_timeout_s`` is closed; a page's
   queue holds at most ``max_queue_bytes`` and all queues together at most ``max_total_bytes``. A page that
   took nothing for ``max_stall_s`` while its data waited is cut off; when the total budget is full, the
   page that took nothing for the longest is cut off (else the one holding most). Every refusal and cut is
