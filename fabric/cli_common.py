@@ -32,6 +32,7 @@ __all__ = [
     "EXIT_RULE",
     "say",
     "reader_gone",
+    "watch_reader",
     "stdout_closed",
     "World",
     "Connect",
@@ -79,6 +80,37 @@ def reader_gone() -> None:
         os.close(devnull)
     except (OSError, ValueError):  # no file descriptor behind stdout (a test's capture): nothing to redirect
         pass
+
+
+def watch_reader(stop: threading.Event) -> None:
+    """Set ``stop`` when the reader of a piped stdout goes away, even while nothing is written.
+
+    A command that writes only on change (``own watch | head -2`` after its first two lines) would learn of
+    a closed pipe only at its next write, which may never come; Linux reports a pipe without readers as an
+    error condition on the writing end, which a daemon thread waits for. Only for a pipe: a terminal or a
+    file has no reader to lose."""
+    import select
+    import stat
+
+    try:
+        fd = sys.stdout.fileno()
+        if not stat.S_ISFIFO(os.fstat(fd).st_mode) or not hasattr(select, "poll"):
+            return
+    except (OSError, ValueError):
+        return
+
+    def wait() -> None:
+        poller = select.poll()
+        poller.register(fd, 0)  # no events asked: only POLLERR / POLLHUP (no reader left) wake it
+        try:
+            while not poller.poll():
+                pass
+        except OSError:
+            return
+        reader_gone()
+        stop.set()
+
+    threading.Thread(target=wait, name="stdout-reader", daemon=True).start()
 
 
 def say(*lines: str, stop: threading.Event | None = None) -> bool:

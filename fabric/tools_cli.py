@@ -15,7 +15,7 @@ import zenoh
 
 from fabric import keys
 from fabric.cli_common import (
-    Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, print_folded, say,
+    Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, print_folded, say, watch_reader,
 )
 from fabric.complete import complete_keys, complete_peers, complete_types
 
@@ -199,6 +199,7 @@ def echo(
     if timeout is not None and not timeout > 0:
         raise UserError("--timeout must be positive")
     stop = shutdown_event()
+    watch_reader(stop)  # `echo KEY | head -3` ends with head, even on a key gone quiet
     printed = 0
     bad = 0
     lock = threading.Lock()

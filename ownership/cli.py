@@ -8,7 +8,7 @@ from typing import Annotated, Optional, TYPE_CHECKING
 
 import typer
 
-from fabric.cli_common import Connect, NothingThere, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, say
+from fabric.cli_common import Connect, NothingThere, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, say, watch_reader
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
     from fabric.session import Fabric
@@ -159,6 +159,7 @@ def watch_cmd(world: World = None, connect: Connect = None, profile: Profile = N
     if duration is not None and not duration > 0:
         raise UserError("--duration must be positive")
     stop = shutdown_event()
+    watch_reader(stop)  # `own watch | head -2`: ends when head does, though nothing changes after
     fab, cl = _client(world, connect, profile, zenoh_config, user)
     with fab:
         records = cl.snapshot()

@@ -103,7 +103,7 @@ def test_echo_reports_garbage_and_keeps_going(cli_router, world, procs, router):
         (("ps", "--connect", "192.168.1.1"), "is not of the form PROTO/ADDRESS:PORT"),
         (("ps", "--world", "a/b"), "world 'a/b' contains forbidden"),
         (("pub", "robot/a/cmd/twist", "-t", "Warp"), "unknown message type 'Warp'"),
-        (("pub", "robot/a/cmd/twist", "-t", "Twist", "-d", '{"v": "fast"}'), "cannot build Twist"),
+        (("pub", "robot/a/cmd/twist", "-t", "Twist", "-d", '{"v": "fast"}'), "Twist needs field 'omega' (a number)"),
         (("up", "/nonexistent/launch.toml"), "no such launch file"),
         (("bench", "transport", "--rates", "x"), "--rates"),
     ],
