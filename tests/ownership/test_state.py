@@ -82,8 +82,8 @@ def test_invariants_over_random_sequences(seq):
                 assert b.epoch > a.epoch, f"{obj}: owner changed {a.owner!r}->{b.owner!r} without a new epoch"
             # a robot moves only while a live owner drives it: losing its owner stops it, and nothing else does
             stops = [e for e in effects if e.kind == "stop" and e.object == obj]
-            if a.owner and a.owner != b.owner:
-                assert [e.user for e in stops] == [a.owner] and stops[0].reason, f"{obj}: {a.owner} lost it without a stop"
+            if a.owner and a.owner != b.owner:  # (one step may also hand it on and take it back: a stop each)
+                assert stops and stops[0].user == a.owner and stops[0].reason, f"{obj}: {a.owner} lost it without a stop"
             else:
                 assert not stops, f"{obj}: stopped while {a.owner!r} kept it: {stops}"
         if (isinstance(ev, st.Request) and OBJECTS[ev.object] == "exclusive" and before.records[ev.object].owner not in ("", ev.user)
