@@ -22,6 +22,10 @@ goes and no standby of its shard has taken the objects over within ``adopt_after
 with the lowest id adopts them: it serves its robots and the objects again, one term up, with the objects
 where it mirrored them (every sim moves them on the users' poses).
 
+A robot moves between shards on ``srv/move/{sim}/by/{login}`` (:mod:`sim_peer.handoff`), the staff's key; a move
+asked on ``srv/state``, which every login may ask, is refused. A source keeps what it handed out until its target
+fetched it and serves it, or it takes it back; a target serves only what it fetched from the source.
+
 A host that stepped down returns from :meth:`ReplicaHost.run`; the caller opens a fresh session and runs a
 standby (``run_replicated``), so nothing the primary declared survives the change of role.
 """
