@@ -274,7 +274,8 @@ def move_cmd(robot: Annotated[str, typer.Argument(help="Robot id.")],
              world: World = None, connect: Connect = None, profile: Profile = None, zenoh_config: ZenohConfig = None) -> None:
     """Hand ROBOT, its state and its ownership from its sim to sim TO (rebalancing a world of several sims).
 
-    Its owner keeps it and her epoch; see docs/sim.md, "Moving a robot between sims"."""
+    Its owner keeps it and her epoch; see docs/sim.md, "Moving a robot between sims". In a class world only the
+    instructor and sim logins may move robots (docs/security.md)."""
     from sim_peer.handoff import MoveError, move
     cfg = make_config(world, connect, None, profile, zenoh_config)
     with open_fabric(cfg, "tool", None) as fab:
