@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import base64
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 from fabric.codec import DecodeError, decode, encode

@@ -490,7 +490,8 @@ class ReplicaHost:
         self._learn_shards_soon()
 
     def _serve_again(self, placements: dict[str, SceneRobot], state: WorldState, term: int) -> None:
-        """After a rebuild that failed half-way: whatever started is closed and the old robots served again."""
+        """After a rebuild that failed half-way: whatever started is closed and the old robots served again, at the
+        term the failed rebuild took (never lower: anything it published was stamped with it)."""
         for part in (self.peer, self.gate):
             if part is not None:
                 try:
@@ -506,7 +507,7 @@ class ReplicaHost:
         t0, me = time.monotonic(), self.fabric.peer_id
         placements = dict(self.world.placements)
         rest_world = self.rebuild([p for r, p in placements.items() if r != rid])
-        rtype, old_term = self.world.robots[rid].desc.name, self.election.term
+        rtype = self.world.robots[rid].desc.name
         state, placements = self._stop_serving()
         robot = next(r for r in state.robots if r.id == rid)
         record = next((r for r in state.records if r.object == rid), None)
@@ -518,7 +519,7 @@ class ReplicaHost:
             self._serve_rebuilt(rest_world, rest, term, {})
         except Exception as exc:
             log.exception("handing %s out failed", rid)
-            self._serve_again(placements, state, old_term)
+            self._serve_again(placements, state, self.election.term)
             raise ServiceError(f"sim {me} could not hand {rid} out ({exc}); it keeps serving it") from None
         move_id = secrets.token_hex(8)
         self._handed_out[rid] = ho.HandedOut(handoff, to, move_id, placement=placements[rid], at=time.monotonic())
@@ -569,7 +570,7 @@ class ReplicaHost:
         """Serve ``handoff``'s robot placed at ``placement`` with this sim's own (call with the lock held). The
         new world is built before anything stops; a failure after the stop serves the old world again."""
         t0, me = time.monotonic(), self.fabric.peer_id
-        rid, old_term = handoff.state.id, self.election.term
+        rid = handoff.state.id
         world = self.rebuild([*self.world.placements.values(), placement])
         state, placements = self._stop_serving()
         full = replace(state, robots=(*state.robots, handoff.state), records=ho.merge_records(state.records, add=handoff.record),
@@ -578,7 +579,7 @@ class ReplicaHost:
             self._serve_rebuilt(world, full, term, dict(handoff.seqs))
         except Exception as exc:
             log.exception("taking %s in failed", rid)
-            self._serve_again(placements, state, old_term)
+            self._serve_again(placements, state, self.election.term)
             raise ServiceError(f"sim {me} could not serve {rid} ({exc}); it serves what it served") from None
         self.announce(f"sim {me}: took {rid} in from {handoff.source or 'another sim'} (term {term}) in "
                       f"{(time.monotonic() - t0) * 1000:.0f} ms" + (f", asked by {asker}" if asker else ""))
