@@ -270,6 +270,9 @@ def scenario(
 
 
 def register(app: typer.Typer) -> None:
+    from user_peer.console.cli import register as register_console
+
+    register_console(app)
     app.command("scenario")(scenario)
     app.command("user")(user)
     app.command("view")(view)

@@ -1,0 +1,280 @@
+"""``robofabric console`` in a real browser: students log in with their own passwords in a ``secure init`` world.
+
+One class per module: a router with the class's logins, the sim (scene combined) and the compute peer
+under their own logins, and the console process with no login of its own. Debian's chromium, through
+playwright, plays alice's and bob's pages; carol (an instructor) reads the world through the Python
+API to check what the pages did. Every request a page makes is recorded: one to a host other than the
+console server fails the offline test. Screenshots are kept in out/ for a person to look at.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import shutil
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from urllib.parse import urlsplit
+
+import numpy as np
+import pytest
+import zenoh
+
+from fabric import keys
+from fabric.secure import init
+from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
+
+pytestmark = pytest.mark.slow
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = [
+    "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox", "--headless",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
+]
+VIEWPORT = {"width": 1280, "height": 1350}
+OUT = Path(__file__).resolve().parents[3] / "out"
+
+
+@dataclass
+class Klass:
+    world: str
+    url: str
+    host: str
+    passwords: dict[str, str]
+    carol: object  # user_peer.World of the instructor: reads what the pages did
+    procs: ProcessGroup
+    console: object
+
+
+def _password(path: Path) -> str:
+    return json.loads(zenoh.Config.from_file(str(path)).get_json("transport/auth/usrpwd/password"))
+
+
+@pytest.fixture(scope="module")
+def klass(tmp_path_factory):
+    import user_peer
+
+    tmp = tmp_path_factory.mktemp("console")
+    world = f"c{uuid.uuid4().hex[:8]}"
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    d = tmp / "class"
+    files = init(d, users=["alice", "bob", "dave"], instructors=["carol"], listen=[ep]).clients
+    with ProcessGroup(tmp) as procs:
+        router = procs.start(robofabric_cmd("router", "--zenoh-config", str(d / "router.json5")), name="router")
+        wait_until(lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router))
+        sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config", str(files["sim"])), name="sim")
+        procs.start(robofabric_cmd("compute", "--world", world, "--zenoh-config", str(files["compute"])), name="compute")
+        web = free_port()
+        console = procs.start(robofabric_cmd("console", "--world", world, "--connect", ep, "--listen", f"127.0.0.1:{web}", "--grace", "3"),
+                              name="console")
+        url = f"http://127.0.0.1:{web}/"
+        wait_until(lambda: f"console: open {url}" in procs.output(console), timeout=60, what="the console's URL",
+                   seen=lambda: procs.output(console)[-2000:])
+        carol = user_peer.connect(world=world, zenoh_config=str(files["carol"]), join_timeout=120)
+        try:
+            wait_until(lambda: carol.fabric.live_peers("compute"), timeout=120, what="the compute peer", seen=lambda: procs.output(sim)[-2000:])
+            yield Klass(world, url, f"127.0.0.1:{web}", {n: _password(files[n]) for n in ("alice", "bob", "dave")}, carol, procs, console)
+        finally:
+            carol.close()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    assert Path(CHROMIUM).exists() and shutil.which("chromium"), "Debian's chromium is not installed (apt-get install chromium)"
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+        try:
+            yield b
+        finally:
+            b.close()
+
+
+REQUESTS: list[str] = []  # every request any page of this module made
+
+
+def open_page(browser, klass: Klass):
+    page = browser.new_context(viewport=VIEWPORT).new_page()
+    page.on("request", lambda r: REQUESTS.append(r.url))
+    page.set_default_timeout(30_000)
+    page.goto(klass.url, timeout=60_000)
+    return page
+
+
+def log_in(page, name: str, password: str) -> None:
+    page.get_by_label("Name").fill(name)
+    page.get_by_label("Password").fill(password)
+    page.get_by_role("button", name="Log in").click()
+
+
+def logged_in(page, klass: Klass, name: str) -> None:
+    log_in(page, name, klass.passwords[name])
+    page.get_by_text(f"world {klass.world} · {name}").wait_for(timeout=60_000)
+
+
+def shot(page, name: str) -> Path:
+    OUT.mkdir(exist_ok=True)
+    path = OUT / f"console-{name}.png"
+    page.screenshot(path=str(path))
+    return path
+
+
+def message(page) -> str:
+    return page.get_by_role("status").inner_text()
+
+
+def wait_message(page, pattern: str, timeout: float = 30.0) -> str:
+    return wait_until(lambda: re.search(pattern, message(page)) and message(page), timeout=timeout, what=f"the page to say /{pattern}/",
+                      seen=lambda: message(page))
+
+
+def target_label(page) -> np.ndarray:
+    text = page.get_by_text(re.compile(r"^\(-?[0-9.]+, -?[0-9.]+, -?[0-9.]+\) m$")).inner_text()
+    return np.array([float(v) for v in text.strip("() m").split(",")])
+
+
+def nudge(page, buttons: tuple[str, ...], step: float = 0.01) -> np.ndarray:
+    """Press the nudge buttons; returns the target once the page shows it moved and the IK solution for it."""
+    start = target_label(page)
+    want = start.copy()
+    for name in buttons:
+        page.get_by_role("button", name=name).click()
+        want["xyz".index(name[0])] += step if name.endswith("plus") else -step
+    wait_until(lambda: np.allclose(target_label(page), want, atol=5e-4), timeout=10, what=f"the target at {want}",
+               seen=lambda: target_label(page))
+    ik = page.get_by_text(re.compile(r"^IK: "))
+    wait_until(lambda: ik.inner_text().startswith("IK: ["), timeout=30, what="the IK solution", seen=ik.inner_text)
+    return want
+
+
+def test_a_from_the_page_and_bob_sees_alice_own_the_arm(browser, klass):
+    alice = open_page(browser, klass)
+    logged_in(alice, klass, "alice")
+    alice.get_by_role("button", name="arm1", exact=True).click()
+    alice.get_by_role("button", name="Request").click()
+    wait_message(alice, r"request arm1: you own it")
+    apply = alice.get_by_role("button", name="Apply IK")
+    wait_until(lambda: apply.is_enabled(), timeout=10, what="Apply IK enabled for the owner")
+    target = nudge(alice, ("z minus", "z minus", "x minus"))
+    seen = klass.carol.object("target")
+    wait_until(lambda: seen.pose is not None and np.allclose(seen.pose.position, target, atol=1e-6), timeout=10,
+               what="the target where alice's page put it (read through the Python API)", seen=lambda: seen.pose)
+    apply.click()
+    wait_message(alice, r"apply IK .*: ok")
+    arm = klass.carol.robot("arm1")
+
+    def error() -> float | None:
+        p, js = arm.flange, arm.joint_state
+        if p is None or js is None or np.max(np.abs(js.dq)) > 1e-3:
+            return None
+        err = float(np.linalg.norm(np.asarray(p.position) - target))
+        return err if err <= 1e-3 else None
+
+    err = wait_until(error, timeout=30, what="arm1's flange at the target (read through the Python API)",
+                     seen=lambda: (arm.flange, target, alice.get_by_text(re.compile(r"^IK: ")).inner_text()))
+    assert err <= 1e-3
+    shot(alice, "alice-test-a")
+
+    bob = open_page(browser, klass)
+    logged_in(bob, klass, "bob")
+    row = bob.get_by_text(re.compile(r"^arm · owner: alice"))
+    row.wait_for()
+    assert bob.get_by_text(re.compile(r"^arm arm1 .* owner: alice · controls disabled")).is_visible()
+    for name in ("Apply IK", "Stop", "Reset", "z plus"):
+        assert bob.get_by_role("button", name=name, exact=True).is_disabled(), name
+    assert bob.get_by_role("slider", name=re.compile("^J1")).get_attribute("aria-disabled") == "true"
+    shot(bob, "bob-sees-alice")
+
+    # takeover: while alice's arm moves (slowly: speed at its minimum, J1 to its end), bob is refused, with the reason
+    speed = alice.get_by_role("slider", name="Speed scale")
+    box = speed.bounding_box()
+    speed.click(position={"x": 1, "y": box["height"] / 2})  # its left end: the minimum
+    wait_until(lambda: speed.get_attribute("aria-valuenow") == "0.05", timeout=5, what="the speed slider at its minimum",
+               seen=lambda: speed.get_attribute("aria-valuenow"))
+    j1 = alice.get_by_role("slider", name=re.compile("^J1"))
+    box = j1.bounding_box()
+    j1.click(position={"x": box["width"] - 1, "y": box["height"] / 2})
+    wait_until(lambda: arm.record is not None and arm.record.state == "moving", timeout=10, what="arm1 moving",
+               seen=lambda: arm.record)
+    bob.get_by_role("button", name="Request").click()  # arm1 is selected (the first robot)
+    text = wait_message(bob, r"request arm1: NotOwner")
+    assert "alice" in text and "in motion" in text, text
+    shot(bob, "bob-refused")
+    # alice stops it; still, it is bob's for the asking: alice's page then shows her controls disabled
+    alice.get_by_role("button", name="Stop", exact=True).click()
+    wait_until(lambda: arm.record.state == "still", timeout=30, what="arm1 still", seen=lambda: arm.record)
+    bob.get_by_role("button", name="Request").click()
+    wait_message(bob, r"request arm1: you own it")
+    alice.get_by_text(re.compile(r"^arm arm1 .* owner: bob · controls disabled")).wait_for()
+    assert apply.is_disabled()
+    bob.get_by_role("button", name="Release").click()
+    wait_message(bob, r"release arm1: ok")
+    alice.context.close()
+    bob.context.close()
+
+
+def test_holding_up_drives_the_base_and_releasing_stops_it(browser, klass):
+    base = klass.carol.robot("base1")
+    bob = open_page(browser, klass)
+    logged_in(bob, klass, "bob")
+    bob.get_by_role("button", name="base1", exact=True).click()
+    bob.get_by_role("button", name="Request").click()
+    wait_message(bob, r"request base1: you own it")
+    bob.locator("body").click(position={"x": 5, "y": 5})  # focus on the page, not on a control
+
+    def speed() -> float:
+        p = base.pose
+        return math.hypot(p.linear[0], p.linear[1]) if p is not None else 0.0
+
+    start = base.xy_theta
+    poses: list = []
+    sub = base.on("pose", lambda _k, p: poses.append(p))
+    bob.keyboard.down("ArrowUp")
+    try:
+        wait_until(lambda: speed() > 0.1, timeout=10, what="base1 moving while ↑ is held", seen=lambda: (speed(), message(bob)))
+        bob.wait_for_timeout(1500)  # held for longer than the sim's twist deadman: the page refreshes it
+        assert speed() > 0.1, speed()
+    finally:
+        released = time.time_ns()
+        bob.keyboard.up("ArrowUp")
+    wait_until(lambda: speed() < 0.02, timeout=5, what="base1 to stop after ↑ was released", seen=speed)
+    sub.close()
+    # when the sim saw it still (its pose's wall clock, this host's): the test process's own delays (playwright,
+    # this subscription) do not count
+    still = next(p for p in poses if p.header.wall_ns > released and math.hypot(p.linear[0], p.linear[1]) < 0.02)
+    stopped = (still.header.wall_ns - released) / 1e9
+    print(f"base1 stopped {stopped:.3f} s after the key was released (the sim's pose stamps)")
+    moved = math.hypot(base.xy_theta[0] - start[0], base.xy_theta[1] - start[1])
+    shot(bob, "bob-drove")
+    assert moved > 0.2, moved
+    assert stopped <= 0.3, f"base1 took {stopped:.3f} s to stop after the key was released"
+    bob.get_by_role("button", name="Release").click()
+    wait_message(bob, r"release base1: ok")
+    bob.context.close()
+
+
+def test_a_wrong_password_shows_the_error_and_opens_no_session(browser, klass):
+    page = open_page(browser, klass)
+    log_in(page, "dave", "not-" + klass.passwords["dave"])
+    alert = page.get_by_role("alert")
+    wait_until(lambda: "wrong password" in alert.inner_text(), timeout=30, what="the login error", seen=alert.inner_text)
+    shot(page, "wrong-password")
+    assert ("user", "dave") not in klass.carol.fabric.live_peers("user")
+    assert page.get_by_role("button", name="Request").count() == 0
+    page.context.close()
+
+
+def test_the_pages_ask_no_host_but_the_console_server(browser, klass):
+    page = open_page(browser, klass)
+    logged_in(page, klass, "dave")
+    page.get_by_label(re.compile("^Live view")).wait_for()
+    page.wait_for_timeout(2000)
+    shot(page, "dave-view")
+    page.context.close()
+    assert any(urlsplit(u).path.startswith("/_nicegui") for u in REQUESTS), REQUESTS  # its assets came from the console
+    elsewhere = sorted({u for u in REQUESTS if urlsplit(u).netloc != klass.host and not u.startswith(("data:", "blob:"))})
+    assert not elsewhere, f"the pages asked other hosts: {elsewhere}"

@@ -1,0 +1,52 @@
+"""``robofabric console``: serve the student client (a browser page) for one world."""
+
+from __future__ import annotations
+
+from typing import Annotated, Optional
+
+import typer
+
+from fabric.cli_common import Connect, UserError, World, ZenohConfig
+
+__all__ = ["console"]
+
+
+def console(
+    listen: Annotated[str, typer.Option("--listen", help="HOST:PORT the page is served on (0.0.0.0: every interface).")] = "0.0.0.0:8080",
+    grace: Annotated[float, typer.Option(help="Seconds a closed page's robots stay hers (stopped) before her session closes and they pass on.")] = 10.0,
+    rerun_url: Annotated[Optional[str], typer.Option("--rerun-url", help="The Rerun web view to link to (robofabric view --serve-web prints it).")] = None,
+    world: World = None,
+    connect: Connect = None,
+    zenoh_config: ZenohConfig = None,
+) -> None:
+    """Serve the student client: students open the printed URL, log in with their own name and password,
+    and own, drive and plan as their scripts would. Nothing to install on their side; Ctrl-C stops it.
+
+    --zenoh-config: a base zenoh config every page's session starts from (e.g. the class's TLS CA); it must
+    hold no login (each page logs in as its student). Needs the router's address (--connect tcp/HOST:7447).
+    """
+    import os
+
+    from fabric.config import ConfigError, FabricConfig
+    from user_peer.console.server import Console, serve
+
+    host, _, port_text = listen.rpartition(":")
+    if not host or not port_text.isdigit() or not 0 < int(port_text) < 65536:
+        raise UserError(f"--listen {listen}: expected HOST:PORT, e.g. 0.0.0.0:8080")
+    if grace < 0:
+        raise UserError("--grace must be >= 0 s")
+    try:
+        cfg = FabricConfig.resolve(world=world, connect=connect, config_file=zenoh_config)
+        if cfg.identity() is not None:
+            raise UserError(f"--zenoh-config {cfg.config_file} logs in as {cfg.identity()!r}: the console holds no login of its own "
+                            "(each page logs in as its student); give a config without credentials")
+    except ConfigError as exc:
+        raise UserError(str(exc)) from None
+    connect_eps, _ = cfg.endpoints()
+    print(f"console for world {cfg.world!r} via {', '.join(connect_eps)}", flush=True)
+    os.environ.setdefault("NICEGUI_STORAGE_PATH", os.path.join(os.path.expanduser("~"), ".cache", "robofabric", "nicegui"))
+    serve(Console(cfg.world, connect_eps, cfg.config_file, grace, rerun_url), host.strip("[]"), int(port_text))
+
+
+def register(app: typer.Typer) -> None:
+    app.command("console")(console)

@@ -1,0 +1,166 @@
+"""Logins: one zenoh session per logged-in student, in her own name and with her own password.
+
+The console holds no credential of its own. A page's login builds a client config from the class's
+router endpoint plus the typed name and password (the ``transport/auth/usrpwd`` of her ``NAME.json5``,
+written by ``robofabric secure init``), so the router checks her exactly as it checks her scripts; a
+wrong password or unknown name is the router's refusal, shown on the page. In an open world (a router
+without logins) she leaves the password empty and picks a name.
+
+Her pages (two tabs, a reload) share her session: the router knows one session per login. When her
+last page goes away its world is not closed at once: her robots are stopped, and the world is
+closed (her robots released to the next in the queue) after ``grace`` seconds, unless she logs in
+again with the same name and password within it and gets the same world back.
+"""
+
+from __future__ import annotations
+
+import hmac
+import json
+import logging
+import threading
+from dataclasses import dataclass
+from typing import Callable
+
+from fabric import keys
+from fabric.config import ConfigError, FabricConfig
+from user_peer.errors import FabricUserError
+
+__all__ = ["LoginError", "Logins", "login_config"]
+
+log = logging.getLogger("robofabric.console")
+
+
+class LoginError(FabricUserError):
+    """A login the page refuses or the router refused; ``reason`` is what the page shows."""
+
+
+def login_config(world: str, connect: tuple[str, ...], name: str, password: str, *, base_file: str | None = None) -> FabricConfig:
+    """The client config of one page's session: the router's endpoints, the console's base zenoh config file
+    if any (e.g. TLS settings), and the student's usrpwd login when she typed a password."""
+    try:
+        keys.validate_id(name, what="name")
+    except ValueError as exc:
+        raise LoginError(str(exc)) from None
+    extra: tuple[tuple[str, str], ...] = ()
+    if password:
+        extra = (("transport/auth/usrpwd/user", json.dumps(name)), ("transport/auth/usrpwd/password", json.dumps(password)))
+    try:
+        return FabricConfig(world=world, profile="client", connect=connect, config_file=base_file, extra=extra)
+    except ConfigError as exc:
+        raise LoginError(str(exc)) from None
+
+
+@dataclass
+class _Held:
+    world: object  # user_peer.World
+    password: str
+    pages: int = 1
+    closer: threading.Timer | None = None
+
+
+class Logins:
+    """The worlds of the logged-in pages, by user. Thread-safe: logins run off the page's event loop.
+
+    ``open_world(config, name)`` opens a world (``user_peer.api.World``); ``on_leave(world)`` stops what
+    her page was driving when the page goes."""
+
+    def __init__(self, open_world: Callable[[FabricConfig, str], object], *, grace: float, on_leave: Callable[[object], None]) -> None:
+        self._open = open_world
+        self.grace = grace
+        self._on_leave = on_leave
+        self._held: dict[str, _Held] = {}
+        self._lock = threading.Lock()
+        self.refused = 0  # logins refused (wrong password, unknown name, bad name, nobody there)
+
+    def login(self, config: FabricConfig, name: str, password: str):
+        """Her world: a new session, or the one she already has (another tab of hers, or the page she left
+        within the grace), for the same password only: the router knows one session per login, so her
+        pages share it. :class:`LoginError` if the router refuses her."""
+        with self._lock:
+            held = self._shared(name, password)
+            if held is not None:
+                return held
+        try:
+            world = self._open(config, name)
+        except FabricUserError as exc:
+            self.refused += 1
+            raise LoginError(_refusal(name, password, exc.reason)) from None
+        with self._lock:
+            held = self._shared(name, password)  # two of her pages logged in at once: the first session serves both
+            if held is None:
+                self._held[name] = _Held(world, password)
+        if held is not None:
+            _close(world)
+            return held
+        log.info("console: %s logged in", name)
+        return world
+
+    def _shared(self, name: str, password: str):
+        """Her open world for another page of hers (the lock held); None when she has none."""
+        held = self._held.get(name)
+        if held is None:
+            return None
+        if not hmac.compare_digest(held.password.encode(), password.encode()):
+            self.refused += 1
+            # the router's own words for a wrong password: a guesser learns nothing about who is logged in
+            raise LoginError(_refusal(name, password, "authentication failed"))
+        if held.closer is not None:
+            held.closer.cancel()
+            held.closer = None
+            log.info("console: %s is back within the grace", name)
+        held.pages += 1
+        return held.world
+
+    def leave(self, name: str) -> None:
+        """Her page went away: stop her robots now, close her world after the grace."""
+        with self._lock:
+            held = self._held.get(name)
+            if held is None:
+                return
+            held.pages -= 1
+            if held.pages > 0:
+                return
+            held.closer = threading.Timer(self.grace, self._expire, args=(name, held))
+            held.closer.daemon = True
+            held.closer.start()
+        try:
+            self._on_leave(held.world)
+        except Exception:
+            log.exception("console: stopping %s's robots failed", name)
+
+    def _expire(self, name: str, held: _Held) -> None:
+        with self._lock:
+            if self._held.get(name) is not held or held.closer is None:
+                return  # she came back
+            del self._held[name]
+        log.info("console: %s's page left %.0f s ago: her world closes", name, self.grace)
+        _close(held.world)
+
+    def users(self) -> list[str]:
+        with self._lock:
+            return sorted(self._held)
+
+    def close(self) -> None:
+        """Close every world (the console stops)."""
+        with self._lock:
+            held, self._held = list(self._held.values()), {}
+        for h in held:
+            if h.closer is not None:
+                h.closer.cancel()
+            _close(h.world)
+
+
+def _close(world: object) -> None:
+    try:
+        world.close()  # type: ignore[attr-defined]
+    except Exception:
+        log.exception("console: closing a world failed")
+
+
+def _refusal(name: str, password: str, reason: str) -> str:
+    """The page's words for a session that did not open."""
+    if "authentication failed" in reason or "refused" in reason:
+        if password:
+            return f"Login failed for {name}: wrong password or unknown name (the router refused this login)"
+        return f"Login failed for {name}: this world needs a password (the router refused a login without one)"
+    return f"Could not join: {reason}"

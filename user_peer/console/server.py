@@ -1,0 +1,106 @@
+"""The console server: one NiceGUI app serving every student's page, one zenoh session per logged-in page.
+
+NiceGUI (FastAPI + Vue/Quasar, its assets in its wheel: nothing is fetched from another host) was
+built for robot operator UIs: pages are Python, their events (clicks, keys, clicks on an image)
+come back as Python callbacks, so the page uses the same user API as a script and adds nothing
+on the wire.
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+from dataclasses import dataclass, field
+from typing import Any
+
+from user_peer.console.login import Logins
+
+__all__ = ["Console", "serve", "page_urls", "RECONNECT_S"]
+
+RECONNECT_S = 10.0
+"""How long a page whose connection dropped may come back as it was (NiceGUI's reconnect timeout): a busy
+server or a flaky Wi-Fi must not log a student out. After it the page is gone and her grace begins."""
+
+log = logging.getLogger("robofabric.console")
+
+
+@dataclass
+class Console:
+    """What every page shares: where the world is, the class's base zenoh config, the logged-in worlds."""
+
+    world: str
+    connect: tuple[str, ...]
+    base_file: str | None = None
+    grace: float = 10.0
+    rerun_url: str | None = None
+    join_timeout: float = 10.0
+    logins: Logins = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.logins = Logins(self._open, grace=self.grace, on_leave=stop_robots)
+
+    def _open(self, config: Any, name: str) -> Any:
+        from user_peer.world import World
+
+        w = World(config, name, join_timeout=self.join_timeout)
+        try:
+            w.info()
+        except BaseException:
+            w.close()
+            raise
+        return w
+
+
+def stop_robots(world: Any) -> None:
+    """Her page went away: every robot she owns stops where it is (a base brakes, an arm holds)."""
+    for rid in world.robots():
+        r = world.robot(rid)
+        if r.is_owner:
+            try:
+                if r.kind == "mobile":
+                    r.twist(0.0, 0.0)
+                r.stop(confirm=False)
+            except Exception as exc:
+                log.info("console: could not stop %s for %s: %s", rid, world.user, exc)
+
+
+def page_urls(host: str, port: int) -> list[str]:
+    """The URLs to open: every interface's IPv4 address when listening on all of them."""
+    if host not in ("0.0.0.0", "", "::"):
+        return [f"http://{host}:{port}/"]
+    import ifaddr
+
+    addrs = sorted({ip.ip for a in ifaddr.get_adapters() for ip in a.ips if isinstance(ip.ip, str)},
+                   key=lambda a: (a.startswith("127."), a))
+    return [f"http://{a}:{port}/" for a in addrs] or [f"http://{socket.gethostname()}:{port}/"]
+
+
+def serve(console: Console, host: str, port: int) -> None:
+    """Serve the console until Ctrl-C (or SIGTERM); every logged-in world is closed on the way out."""
+    import os
+
+    # NiceGUI serves its own test harness's port when it sees pytest's variable, which a console started by
+    # a test inherits: this process is a real server either way
+    os.environ.pop("PYTEST_CURRENT_TEST", None)
+    from nicegui import app, ui
+
+    from user_peer.console.page import ConsolePage
+
+    @ui.page("/")
+    def index(client: Any) -> None:
+        ConsolePage(console, client).show()
+
+    def started() -> None:
+        for url in page_urls(host, port):
+            print(f"console: open {url}", flush=True)
+
+    app.on_startup(started)
+    app.on_shutdown(console.logins.close)
+    try:
+        ui.run(host=host, port=port, title=f"robofabric console · {console.world}", reload=False, show=False,
+               show_welcome_message=False, reconnect_timeout=RECONNECT_S, favicon="🤖", uvicorn_logging_level="warning")
+    except KeyboardInterrupt:  # uvicorn shuts down, then raises the Ctrl-C it caught again: we are done
+        pass
+    finally:
+        console.logins.close()  # idempotent: the shutdown handler closed them already unless startup failed
+    print("console: stopped", flush=True)

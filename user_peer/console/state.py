@@ -1,0 +1,108 @@
+"""What one page shows, read from its world: the robot list's lines and the live view's picture.
+
+Only reads of the world's cache (ownership replicas, the latest streams); nothing here asks the
+network or blocks, so the page's refresh timer may call it five times a second.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from fabric.interfaces import yaw_from_quaternion
+from user_peer.console import topview
+from user_peer.console.topview import Frame, RobotMark
+
+__all__ = ["RobotLine", "robot_line", "scene_layout", "view_svg"]
+
+log = logging.getLogger("robofabric.console")
+
+
+@dataclass(frozen=True, slots=True)
+class RobotLine:
+    """One row of the robot list."""
+
+    id: str
+    kind: str
+    owner: str
+    state: str
+    queue: tuple[str, ...]
+    place: int  # the page user's place in the queue (1 = next), 0 when not waiting
+    mine: bool
+
+    def text(self) -> str:
+        who = "you" if self.mine else (self.owner or "nobody")
+        out = f"{self.kind} · owner: {who} · {self.state}"
+        if self.queue:
+            out += f" · queue: {', '.join(self.queue)}"
+        if self.place:
+            out += f" · your place: {self.place}"
+        return out
+
+
+def robot_line(world, robot) -> RobotLine:
+    """The robot list's row for ``robot`` (a user_peer handle), from its ownership record."""
+    rec = robot.record
+    if rec is None:
+        return RobotLine(robot.id, robot.kind or "robot", "", "no ownership record yet", (), 0, False)
+    place = rec.queue.index(world.user) + 1 if world.user in rec.queue else 0
+    return RobotLine(robot.id, robot.kind or "robot", rec.owner, rec.state, tuple(rec.queue), place, rec.owner == world.user)
+
+
+def scene_layout(info) -> tuple[Frame, list[tuple[float, float, float, float, float]]]:
+    """The view's frame and the scene's static boxes (walls, shelves) from the scene file when this install
+    has the scene (the sim extra); else a frame around the robots' spawn poses and no boxes."""
+    boxes: list[tuple[float, float, float, float, float]] = []
+    try:
+        import robots
+        from user_peer.scene_geometry import static_boxes
+
+        for b in static_boxes(robots.scene(info.scene).mjcf_path):
+            if b.half_size[2] < 0.01:  # the floor
+                continue
+            x, y, z, w = (float(v) for v in b.quat_xyzw)
+            yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+            boxes.append((float(b.center[0]), float(b.center[1]), float(b.half_size[0]), float(b.half_size[1]), yaw))
+    except Exception as exc:  # no mujoco (a student's install), or a scene this install does not have
+        log.info("no static geometry for scene %r: %s", info.scene, exc)
+    pts = [(r.pose[0], r.pose[1]) for r in info.robots]
+    for cx, cy, hx, hy, _ in boxes:
+        pts += [(cx - hx, cy - hy), (cx + hx, cy + hy)]
+    return topview.frame_around(pts, margin=0.2 if boxes else 2.0, minimum=4.0 if boxes else 10.0), boxes
+
+
+def _mark(world, robot, spawn: dict, selected: set[str]) -> RobotMark | None:
+    rec = robot.record
+    owner = rec.owner if rec is not None else ""
+    pose = robot.latest("pose")
+    if robot.kind == "mobile":
+        if pose is None:
+            return None
+        x, y, yaw = float(pose.position[0]), float(pose.position[1]), yaw_from_quaternion(pose.quaternion)
+        return RobotMark(robot.id, "mobile", owner, x, y, yaw, owner == world.user, robot.id in selected)
+    sx, sy, _, syaw = spawn.get(robot.id, (0.0, 0.0, 0.0, 0.0))
+    flange = (float(pose.position[0]), float(pose.position[1])) if pose is not None else None
+    return RobotMark(robot.id, robot.kind or "robot", owner, sx, sy, syaw, owner == world.user, robot.id in selected, flange)
+
+
+def view_svg(world, robots: list, frame: Frame, boxes, *, base_id: str | None, selected: set[str],
+             goal: tuple[float, float, float] | None, target: tuple[float, float] | None) -> str:
+    """The live view's overlay: every robot with its owner, the selected base's scan and path, the IK target
+    and the goal."""
+    spawn = {r.id: tuple(float(v) for v in r.pose) for r in world.info().robots}
+    marks = [m for m in (_mark(world, r, spawn, selected) for r in robots) if m is not None]
+    scan = None
+    paths = []
+    for r in robots:
+        path = r.latest("path")
+        if path is not None and len(path):
+            paths.append(np.stack([np.asarray(path.x), np.asarray(path.y)], axis=1))
+        if r.id == base_id:
+            s, p = r.latest("scan"), r.latest("pose")
+            if s is not None and p is not None:
+                scan = topview.scan_points(float(p.position[0]), float(p.position[1]), yaw_from_quaternion(p.quaternion),
+                                           s.angle_min, s.angle_increment, s.ranges, s.range_max)
+    return topview.svg(frame, marks, boxes=boxes, scan=scan, paths=paths, target=target, goal=goal)

@@ -1,0 +1,191 @@
+"""The console's live view: the world from above as SVG, and the occupancy map as a PNG under it.
+
+A 2D top view rather than a 3D scene: twenty pages on a 2-core machine's software rendering
+can afford a few hundred SVG shapes each, not twenty WebGL scenes. Pure functions of what a page
+holds (poses, scans, paths, a map): no session, no clock, no browser, so they are tested alone.
+
+Coordinates: :class:`Frame` maps world metres (x east, y north) to image pixels (x right, y down).
+The map PNG is drawn onto the frame's own pixel grid, so clicks on the image are frame pixels.
+"""
+
+from __future__ import annotations
+
+import base64
+import math
+import struct
+import zlib
+from dataclasses import dataclass
+from html import escape
+from typing import Iterable, Sequence
+
+import numpy as np
+
+__all__ = ["Frame", "RobotMark", "svg", "grid_png", "png_gray", "data_url", "frame_around"]
+
+PX_PER_M = 40.0
+"""Image pixels per metre: a 10 m scene is a 400-pixel picture (the browser scales it to the panel)."""
+
+COLORS = {"mine": "#e8590c", "other": "#1c7ed6", "free": "#868e96"}
+
+
+@dataclass(frozen=True, slots=True)
+class Frame:
+    """The part of the world the view shows, and its scale."""
+
+    xmin: float
+    ymin: float
+    xmax: float
+    ymax: float
+    scale: float = PX_PER_M
+
+    @property
+    def width(self) -> int:
+        return max(1, round((self.xmax - self.xmin) * self.scale))
+
+    @property
+    def height(self) -> int:
+        return max(1, round((self.ymax - self.ymin) * self.scale))
+
+    def px(self, x: float, y: float) -> tuple[float, float]:
+        """World metres to image pixels."""
+        return (x - self.xmin) * self.scale, (self.ymax - y) * self.scale
+
+    def world(self, px: float, py: float) -> tuple[float, float]:
+        """Image pixels (a click) to world metres."""
+        return self.xmin + px / self.scale, self.ymax - py / self.scale
+
+
+def frame_around(points: Iterable[Sequence[float]], *, margin: float = 1.0, minimum: float = 10.0, scale: float = PX_PER_M) -> Frame:
+    """A square frame holding ``points`` (x, y) with ``margin``, at least ``minimum`` metres wide, centred on them."""
+    pts = np.asarray([(float(p[0]), float(p[1])) for p in points] or [(0.0, 0.0)])
+    lo, hi = pts.min(axis=0) - margin, pts.max(axis=0) + margin
+    side = max(minimum, float(np.max(hi - lo)))
+    cx, cy = (lo + hi) / 2.0
+    return Frame(cx - side / 2, cy - side / 2, cx + side / 2, cy + side / 2, scale)
+
+
+@dataclass(frozen=True, slots=True)
+class RobotMark:
+    """One robot as drawn: where it stands, who owns it (``mine``: the page's user), an arm's flange."""
+
+    id: str
+    kind: str
+    owner: str
+    x: float
+    y: float
+    yaw: float
+    mine: bool = False
+    selected: bool = False
+    flange: tuple[float, float] | None = None
+
+
+def _f(v: float) -> str:
+    return f"{v:.1f}"
+
+
+def _robot(frame: Frame, r: RobotMark) -> list[str]:
+    color = COLORS["mine"] if r.mine else COLORS["other"] if r.owner else COLORS["free"]
+    cx, cy = frame.px(r.x, r.y)
+    size = 0.3 * frame.scale
+    stroke = ' stroke="#212529" stroke-width="3"' if r.selected else ""
+    out = []
+    if r.kind == "mobile":
+        # a triangle pointing where the base faces
+        pts = []
+        for a, d in ((0.0, size), (2.5, size * 0.8), (-2.5, size * 0.8)):
+            pts.append(f"{_f(cx + d * math.cos(r.yaw + a))},{_f(cy - d * math.sin(r.yaw + a))}")
+        out.append(f'<polygon points="{" ".join(pts)}" fill="{color}"{stroke}/>')
+    else:
+        out.append(f'<rect x="{_f(cx - size / 2)}" y="{_f(cy - size / 2)}" width="{_f(size)}" height="{_f(size)}" fill="{color}"{stroke}/>')
+        if r.flange is not None:
+            fx, fy = frame.px(*r.flange)
+            out.append(f'<line x1="{_f(cx)}" y1="{_f(cy)}" x2="{_f(fx)}" y2="{_f(fy)}" stroke="{color}" stroke-width="4"/>')
+            out.append(f'<circle cx="{_f(fx)}" cy="{_f(fy)}" r="3" fill="#212529"/>')
+    label = f"{r.id} · {r.owner or 'free'}"
+    out.append(f'<text x="{_f(cx + size * 0.7)}" y="{_f(cy - size * 0.7)}" font-size="12" fill="#212529">{escape(label)}</text>')
+    return out
+
+
+def svg(
+    frame: Frame,
+    robots: Sequence[RobotMark],
+    *,
+    boxes: Sequence[tuple[float, float, float, float, float]] = (),
+    scan: np.ndarray | None = None,
+    paths: Sequence[np.ndarray] = (),
+    target: tuple[float, float] | None = None,
+    goal: tuple[float, float, float] | None = None,
+) -> str:
+    """The overlay drawn over the map image (an SVG fragment in frame pixels).
+
+    ``boxes``: static scene parts (cx, cy, half x, half y, yaw); ``scan``: N x 2 world points of the selected
+    base's LIDAR hits; ``paths``: N x 2 world points each; ``target``: the IK target's (x, y); ``goal``: (x, y, yaw).
+    Names come from the network and are escaped."""
+    out: list[str] = []
+    for cx, cy, hx, hy, yaw in boxes:
+        corners = [(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)]
+        c, s = math.cos(yaw), math.sin(yaw)
+        pts = " ".join(f"{_f(p[0])},{_f(p[1])}" for p in (frame.px(cx + c * u - s * v, cy + s * u + c * v) for u, v in corners))
+        out.append(f'<polygon points="{pts}" fill="#ced4da" stroke="#adb5bd"/>')
+    for path in paths:
+        if len(path) >= 2:
+            pts = " ".join(f"{_f(a)},{_f(b)}" for a, b in (frame.px(float(x), float(y)) for x, y in path))
+            out.append(f'<polyline points="{pts}" fill="none" stroke="#2f9e44" stroke-width="2"/>')
+    if scan is not None and len(scan):
+        pix = [frame.px(float(x), float(y)) for x, y in scan]
+        out.append("".join(f'<rect x="{_f(a - 1)}" y="{_f(b - 1)}" width="2" height="2" fill="#f03e3e"/>' for a, b in pix))
+    if goal is not None:
+        gx, gy = frame.px(goal[0], goal[1])
+        tip = frame.px(goal[0] + 0.4 * math.cos(goal[2]), goal[1] + 0.4 * math.sin(goal[2]))
+        out.append(f'<circle cx="{_f(gx)}" cy="{_f(gy)}" r="6" fill="none" stroke="#2f9e44" stroke-width="3"/>')
+        out.append(f'<line x1="{_f(gx)}" y1="{_f(gy)}" x2="{_f(tip[0])}" y2="{_f(tip[1])}" stroke="#2f9e44" stroke-width="3"/>')
+    if target is not None:
+        tx, ty = frame.px(*target)
+        out.append(f'<circle cx="{_f(tx)}" cy="{_f(ty)}" r="5" fill="#f59f00" stroke="#212529"/>')
+    for r in robots:
+        out.extend(_robot(frame, r))
+    return "".join(out)
+
+
+def scan_points(x: float, y: float, yaw: float, angle_min: float, angle_increment: float, ranges: np.ndarray, range_max: float) -> np.ndarray:
+    """World (x, y) of a scan's hits (rays that reached ``range_max`` hit nothing and are left out)."""
+    r = np.asarray(ranges, dtype=float)
+    a = yaw + angle_min + angle_increment * np.arange(len(r))
+    hit = r < range_max - 1e-3
+    return np.stack([x + r[hit] * np.cos(a[hit]), y + r[hit] * np.sin(a[hit])], axis=1)
+
+
+def grid_png(cells: np.ndarray, resolution: float, origin: Sequence[float], frame: Frame) -> bytes:
+    """The occupancy grid resampled onto the frame's pixels (nearest cell) as a grey PNG: free white,
+    occupied black, unknown and outside light grey. The grid's own rotation (origin theta) is honoured."""
+    h, w = frame.height, frame.width
+    px = (np.arange(w) + 0.5) / frame.scale + frame.xmin
+    py = frame.ymax - (np.arange(h) + 0.5) / frame.scale
+    X, Y = np.meshgrid(px, py)
+    ox, oy, th = (float(v) for v in origin)
+    c, s = math.cos(th), math.sin(th)
+    u, v = c * (X - ox) + s * (Y - oy), -s * (X - ox) + c * (Y - oy)
+    col, row = np.floor(u / resolution).astype(int), np.floor(v / resolution).astype(int)
+    inside = (row >= 0) & (row < cells.shape[0]) & (col >= 0) & (col < cells.shape[1])
+    img = np.full((h, w), 230, dtype=np.uint8)
+    val = cells[np.clip(row, 0, cells.shape[0] - 1), np.clip(col, 0, cells.shape[1] - 1)]
+    known = inside & (val != 255)
+    img[known] = (255 - (val[known].astype(np.int32) * 255 // 100)).astype(np.uint8)
+    return png_gray(img)
+
+
+def png_gray(img: np.ndarray) -> bytes:
+    """An 8-bit greyscale PNG of ``img`` (H x W uint8), with the standard library only."""
+    img = np.ascontiguousarray(img, dtype=np.uint8)
+    h, w = img.shape
+    raw = b"".join(b"\x00" + img[i].tobytes() for i in range(h))
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0)) + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b"")
+
+
+def data_url(png: bytes) -> str:
+    """A PNG as a data: URL (the page asks no host for it)."""
+    return "data:image/png;base64," + base64.b64encode(png).decode()
