@@ -61,17 +61,7 @@ def _resolve_annotations(typer_app: typer.Typer) -> None:
     function whose annotations do not resolve is left as it is (typer reports it as before)."""
     from typing import get_type_hints
 
-    def callbacks(t: typer.Typer):
-        if t.registered_callback is not None:
-            yield t.registered_callback.callback
-        for c in t.registered_commands:
-            yield c.callback
-        for g in t.registered_groups:
-            yield g.callback
-            if g.typer_instance is not None:
-                yield from callbacks(g.typer_instance)
-
-    for fn in callbacks(typer_app):
+    for fn in _callbacks(typer_app):
         ann = getattr(fn, "__annotations__", None)
         if not ann or not any(isinstance(a, str) for a in ann.values()):
             continue
@@ -79,6 +69,48 @@ def _resolve_annotations(typer_app: typer.Typer) -> None:
             fn.__annotations__ = get_type_hints(fn, include_extras=True)
         except Exception:
             continue
+
+
+def _callbacks(t: typer.Typer):
+    """Every function behind a command or group of ``t``, its sub-apps' included."""
+    if t.registered_callback is not None:
+        yield t.registered_callback.callback
+    for c in t.registered_commands:
+        yield c.callback
+    for g in t.registered_groups:
+        yield g.callback
+        if g.typer_instance is not None:
+            yield from _callbacks(g.typer_instance)
+
+
+def _plain_help(typer_app: typer.Typer) -> None:
+    """Help texts as a terminal shows them (:func:`fabric.cli_common.plain_doc`): docstrings are written for
+    the API docs, with reStructuredText quoting (``ros2 topic hz`` showed its backquotes) and lines
+    wrapped at the source's width, which the help then wrapped again at the terminal's (broken lines)."""
+    from fabric.cli_common import plain_doc
+
+    for fn in _callbacks(typer_app):
+        doc = getattr(fn, "__doc__", None)
+        if doc and not getattr(fn, "_robofabric_plain", False):
+            try:
+                fn.__doc__ = plain_doc(doc)
+                fn._robofabric_plain = True  # type: ignore[attr-defined]
+            except (AttributeError, TypeError):  # a builtin or a bound method: left as it is
+                continue
+
+    def infos(t: typer.Typer):
+        yield t.info
+        for c in t.registered_commands:
+            yield c
+        for g in t.registered_groups:
+            yield g
+            if g.typer_instance is not None:
+                yield from infos(g.typer_instance)
+
+    for info in infos(typer_app):
+        text = getattr(info, "help", None)
+        if isinstance(text, str) and text:
+            info.help = plain_doc(text)
 
 
 def _defer_rich_extras() -> None:
@@ -162,6 +194,7 @@ def _root(
 def main(argv: list[str] | None = None) -> int:
     _load_plugins()
     _resolve_annotations(app)
+    _plain_help(app)
     args = sys.argv[1:] if argv is None else argv
     if not args or "--help" in args or "-h" in args:
         _defer_rich_extras()

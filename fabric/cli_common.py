@@ -14,10 +14,11 @@ answered no or had nothing (:class:`NothingThere`), 2 for a usage error or an un
 from __future__ import annotations
 
 import os
+import re
 import sys
 import threading
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Collection, Optional, Sequence
 
 import typer
 
@@ -44,6 +45,9 @@ __all__ = [
     "join_error",
     "open_fabric",
     "console",
+    "print_table",
+    "plain_doc",
+    "column_widths",
 ]
 
 
@@ -190,6 +194,78 @@ def _console_class() -> type:
 
         _CONSOLE = _Console
     return _CONSOLE
+
+
+def column_widths(columns: Sequence[str], rows: Sequence[Sequence[str]], width: int) -> list[int] | None:
+    """Widths (without padding) for a table of ``columns`` and ``rows`` to fit ``width`` with no word cut,
+    or None when it cannot.
+
+    Every column is at least as wide as its longest word (an id, a type, a number never breaks), except
+    the first, whose keys may fold from 12 columns up (they read whole down the column); what is left is
+    shared in proportion to what each column would need to show its cells on one line."""
+    n = len(columns)
+    room = width - (3 * n + 1)  # a rich box: a border before each column and after the last, one space each side
+    cells = [[str(columns[i]), *(str(r[i]) for r in rows)] for i in range(n)]
+    natural = [max(len(line) for c in col for line in (c.splitlines() or [""])) for col in cells]
+    least = [max((len(w) for c in col for w in c.split()), default=1) for col in cells]
+    least[0] = min(natural[0], max(12, len(str(columns[0]))))
+    if sum(natural) <= room:
+        return natural
+    if sum(least) > room:
+        return None
+    extra, want = room - sum(least), [nat - lo for nat, lo in zip(natural, least)]
+    total = sum(want) or 1
+    widths = [lo + extra * w // total for lo, w in zip(least, want)]
+    for i in sorted(range(n), key=lambda i: want[i] - (widths[i] - least[i]), reverse=True)[: room - sum(widths)]:
+        widths[i] += 1  # what the rounding left
+    return widths
+
+
+def print_table(title: str, columns: Sequence[str], rows: Sequence[Sequence[str]], *, numeric: Collection[str] = (),
+                stderr: bool = False) -> None:
+    """The one way the CLI prints a table: as wide as the terminal at most, every cell whole.
+
+    Cells wrap between words and no word is cut (:func:`column_widths`); a key in the first column folds
+    and reads whole down it. When the columns cannot fit side by side (a narrow terminal), each row is
+    printed as a block instead: its first cell, then one ``column: value`` line per other column, folded
+    at the terminal's edge. No column is ever dropped."""
+    from rich.table import Table
+
+    out = console(stderr=stderr)
+    widths = column_widths(columns, rows, out.width)
+    if widths is None:
+        lines = [title]
+        for r in rows:
+            lines.append(str(r[0]))
+            lines.extend(f"  {c}: {v}" for c, v in zip(columns[1:], r[1:]))
+        for line in lines:
+            out.print(line, overflow="fold")
+        return
+    table = Table(title=title)
+    for col, w in zip(columns, widths):
+        table.add_column(col, justify="right" if col in numeric else "left", overflow="fold", width=w)
+    for r in rows:
+        table.add_row(*(str(v) for v in r))
+    out.print(table)
+
+
+_ROLE = re.compile(r":[a-z]+(?::[a-z]+)?:`~?([^`<]*?)(?:\s*<[^>]*>)?`")
+_LITERAL = re.compile(r"``(.+?)``")
+
+
+def plain_doc(text: str) -> str:
+    """A docstring as a terminal shows it: reStructuredText markup gone (``x`` -> x, :class:`~a.B` -> B), and
+    each paragraph's lines joined, so the terminal wraps it at its own width (a list or an indented block
+    keeps its lines)."""
+    import inspect
+
+    text = _LITERAL.sub(r"\1", _ROLE.sub(lambda m: m.group(1).rsplit(".", 1)[-1] if "~" in m.group(0) else m.group(1), text))
+    paragraphs = []
+    for para in inspect.cleandoc(text).split("\n\n"):
+        lines = para.splitlines()
+        listed = any(line.lstrip().startswith(("- ", "* ", "\b")) or line.startswith(" ") for line in lines)
+        paragraphs.append(para if listed else " ".join(line.strip() for line in lines))
+    return "\n\n".join(paragraphs)
 
 
 def print_folded(*lines: str, stderr: bool = False) -> None:
