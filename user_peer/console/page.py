@@ -34,6 +34,8 @@ log = logging.getLogger("robofabric.console")
 PLANNERS = {"Hybrid A*": "hybrid_astar", "OMPL": "ompl"}
 NUDGE_STEPS = {"1 mm": 0.001, "1 cm": 0.01, "5 cm": 0.05}
 REFRESH_VIEW_S = 0.2
+FAILED = object()
+"""What :meth:`ConsolePage._call` returns when the call was refused (its reason is on the page)."""
 
 KEYS_JS = """
 for (const type of ['keydown', 'keyup']) document.addEventListener(type, (e) => {
@@ -243,16 +245,17 @@ class ConsolePage:
         self.message.text = text
 
     async def _call(self, what: str, fn: Callable, *args: Any, **kw: Any) -> Any:
-        """``fn`` off the event loop; its refusal is shown with the reason (and the owner), never raised."""
+        """``fn`` off the event loop; its refusal is shown with the reason (and the owner), never raised: it returns
+        :data:`FAILED` then."""
         try:
             out = await run.io_bound(fn, *args, **kw)
         except FabricUserError as exc:
             self._say(f"{what}: {self._why(exc)}")
-            return None
+            return FAILED
         except Exception as exc:  # a network hiccup never ends the page
             log.exception("console: %s failed", what)
             self._say(f"{what}: {type(exc).__name__}: {exc}")
-            return None
+            return FAILED
         self._say(f"{what}: ok")
         return out
 
@@ -283,7 +286,7 @@ class ConsolePage:
             return
         if op == "request":
             epoch = await self._call(f"request {r.id}", r.request)
-            if epoch is not None:
+            if epoch is not FAILED:
                 self._say(f"request {r.id}: you own it (epoch {epoch})")
         elif op == "release":
             if r.kind == "mobile":
@@ -291,7 +294,7 @@ class ConsolePage:
             await self._call(f"release {r.id}", r.release)
         else:
             out = await self._call(f"queue for {r.id}", self.world.ownership.client.request, r.id, wait=True, timeout=self.world.timeout)
-            if out is not None:
+            if out is not FAILED:
                 self._say(f"queue for {r.id}: {out}")
         self._refresh()
 
@@ -303,7 +306,7 @@ class ConsolePage:
                                          wait=False, speed_scale=float(self.speed.value)))
 
     async def _reset(self) -> None:
-        if await self._call(f"reset {self.arm.id}", self.arm.reset, confirm=False) is not None:
+        if await self._call(f"reset {self.arm.id}", self.arm.reset, confirm=False) is not FAILED:
             self._synced = False
 
     def _nudge(self, axis: int, sign: int) -> None:
@@ -354,7 +357,7 @@ class ConsolePage:
             return
         q = self.ik_q
         if await self._call(f"apply IK {np.round(np.degrees(q), 1).tolist()} deg", self.arm.move_joints, q,
-                            wait=False, speed_scale=float(self.speed.value)) is not None:
+                            wait=False, speed_scale=float(self.speed.value)) is not FAILED:
             self._set_sliders(q)
 
     def _set_sliders(self, q: np.ndarray) -> None:
@@ -398,10 +401,10 @@ class ConsolePage:
 
     async def _build_map(self) -> None:
         b = self.base
-        if await self._call("start mapping", b.start_mapping) is None:
+        if await self._call("start mapping", b.start_mapping) is FAILED:
             return
         grid = await self._call("build map", b.build_map)
-        if grid is not None:
+        if grid is not FAILED:
             self.grid = grid
             self._say(f"build map: {grid.cells.shape[1]} x {grid.cells.shape[0]} cells at {grid.resolution:.2f} m")
 
@@ -419,8 +422,10 @@ class ConsolePage:
             self._say("Plan: click on the map to place the goal first")
             return
         planner = PLANNERS[self.planner.value]
-        path = await self._call(f"plan ({planner})", self.base.plan_to, *self.goal, planner=planner)
-        if path is not None:
+        # on her own map: a student's Build map makes {user}.map (the class's map is the staff's)
+        path = await self._call(f"plan ({planner})", self.base.plan_to, *self.goal, planner=planner,
+                                map_name=keys.user_map("map", self.world.user))
+        if path is not FAILED:
             self.path = path
             length = float(np.sum(np.hypot(np.diff(path.x), np.diff(path.y)))) if len(path) > 1 else 0.0
             self._say(f"plan ({planner}): {len(path)} poses, {length:.2f} m")

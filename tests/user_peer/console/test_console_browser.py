@@ -257,6 +257,55 @@ def test_holding_up_drives_the_base_and_releasing_stops_it(browser, klass):
     bob.context.close()
 
 
+def test_b_from_the_page_map_goal_plan_follow(browser, klass):
+    from user_peer.console.state import scene_layout
+
+    base = klass.carol.robot("base1")
+    bob = open_page(browser, klass)
+    logged_in(bob, klass, "bob")
+    bob.get_by_role("button", name="base1", exact=True).click()
+    bob.get_by_role("button", name="Request").click()
+    wait_message(bob, r"request base1: you own it")
+    bob.get_by_role("button", name="Build map").click()  # starts mapping (and builds what the scans saw so far)
+    wait_message(bob, r"build map: \d+ x \d+ cells", timeout=60)
+    # turn in place at speed 3 while the compute peer maps, as the paper's Test B drives
+    bob.locator("body").click(position={"x": 5, "y": 5})
+    bob.keyboard.press("3")
+    bob.keyboard.down("ArrowLeft")
+    bob.wait_for_timeout(5000)
+    bob.keyboard.up("ArrowLeft")
+    wait_until(lambda: base.pose is not None and abs(base.pose.angular[2]) < 0.05, timeout=10, what="base1 still")
+    bob.get_by_role("button", name="Build map").click()
+    wait_message(bob, r"build map: \d+ x \d+ cells", timeout=60)
+    # the goal, clicked on the map where the page draws (-2.5, 0.5): the page's own frame, scaled to the picture
+    goal = (-2.5, 0.5)
+    frame, _ = scene_layout(klass.carol.info())
+    img = bob.get_by_label(re.compile("^Live view")).locator("img").first
+    box = img.bounding_box()
+    px, py = frame.px(*goal)
+    img.click(position={"x": px * box["width"] / frame.width, "y": py * box["height"] / frame.height})
+    wait_message(bob, r"goal at \(-2\.\d\d, 0\.\d\d\)")
+    bob.get_by_role("button", name="Plan").click()
+    wait_message(bob, r"plan \(hybrid_astar\): \d+ poses", timeout=60)
+    bob.get_by_role("button", name="Follow").click()
+    wait_message(bob, r"follow base1: ok")
+
+    def arrived() -> float | None:
+        p = base.pose
+        if p is None or math.hypot(p.linear[0], p.linear[1]) > 0.01 or abs(p.angular[2]) > 0.02:
+            return None
+        d = math.hypot(p.position[0] - goal[0], p.position[1] - goal[1])
+        return d if d < 0.5 else None
+
+    dist = wait_until(arrived, timeout=120, what="base1 at the goal", seen=lambda: base.xy_theta)
+    print(f"Test B from the page: base1 stopped {dist:.3f} m from the goal clicked on the map")
+    shot(bob, "bob-test-b")
+    bob.get_by_role("button", name="Release").click()
+    wait_message(bob, r"release base1: ok")
+    bob.context.close()
+    assert dist <= 0.1, f"base1 stopped {dist:.3f} m from the goal"
+
+
 def test_a_wrong_password_shows_the_error_and_opens_no_session(browser, klass):
     page = open_page(browser, klass)
     log_in(page, "dave", "not-" + klass.passwords["dave"])
