@@ -232,6 +232,7 @@ def _drop_unproven(s: OwnState, recs: dict, user: str, now: float, effects: list
         live=s.live - {user},
         rank=MappingProxyType({k: v for k, v in s.rank.items() if k != user}),
         unproven=MappingProxyType({k: v for k, v in s.unproven.items() if k != user}),
+        held=MappingProxyType({k: v for k, v in s.held.items() if k != user}),
     )
 
 

@@ -48,6 +48,7 @@ def build(raw, now):
 
 
 def check_invariants(s: st.OwnState) -> None:
+    assert set(s.held) <= s.live, f"held users {set(s.held) - s.live} are not live"  # held: her token's loss not taken yet
     for obj, rec in s.records.items():
         if rec.policy == "scene":
             assert rec.owner == "" and rec.queue == ()
