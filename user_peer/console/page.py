@@ -122,10 +122,17 @@ class ConsolePage:
             return
         self.world, self.robots = world, robots
         self.user = name
+        self.client.on_disconnect(self._disconnected)
         self.client.on_delete(self._gone)
         self.root.clear()
         with self.root:
             self._main()
+
+    async def _disconnected(self) -> None:
+        """The connection dropped (the tab closed, the network went): a held key is let go at once, since its
+        release may never come."""
+        if self.base is not None and self.driver.stop():
+            await self._send_twist()
 
     def _gone(self) -> None:
         """The tab closed (or lost its connection for good): her robots stop, her world closes after the grace."""

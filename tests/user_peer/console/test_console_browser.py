@@ -26,6 +26,7 @@ import zenoh
 from fabric import keys
 from fabric.secure import init
 from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
+from user_peer.console.server import RECONNECT_S
 
 pytestmark = pytest.mark.slow
 
@@ -304,6 +305,44 @@ def test_b_from_the_page_map_goal_plan_follow(browser, klass):
     wait_message(bob, r"release base1: ok")
     bob.context.close()
     assert dist <= 0.1, f"base1 stopped {dist:.3f} m from the goal"
+
+
+def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_grace(browser, klass):
+    base = klass.carol.robot("base1")
+    alice = open_page(browser, klass)
+    logged_in(alice, klass, "alice")
+    alice.get_by_role("button", name="base1", exact=True).click()
+    alice.get_by_role("button", name="Request").click()
+    wait_message(alice, r"request base1: you own it")
+    bob = open_page(browser, klass)
+    logged_in(bob, klass, "bob")
+    bob.get_by_role("button", name="base1", exact=True).click()
+    alice.locator("body").click(position={"x": 5, "y": 5})
+    alice.keyboard.down("ArrowDown")  # backwards: room behind it wherever Test B left it
+    wait_until(lambda: base.record.state == "moving", timeout=10, what="base1 moving", seen=lambda: base.record)
+    bob.get_by_role("button", name="Queue").click()  # moving: bob takes a place in the queue
+    wait_message(bob, r"queue for base1: queued at position 1")
+    bob.get_by_text(re.compile(r"^mobile · owner: alice .*your place: 1")).wait_for()
+    closed = time.monotonic()
+    alice.context.close()  # with ↓ still held: its release never comes
+
+    def still() -> bool:
+        p = base.pose
+        return p is not None and math.hypot(p.linear[0], p.linear[1]) < 0.02
+
+    wait_until(still, timeout=15, what="base1 stopped after alice's page closed", seen=lambda: base.pose)
+    stopped = time.monotonic() - closed
+    assert base.record.owner == "alice", base.record  # still hers: the grace has not begun
+    wait_until(lambda: base.record.owner == "bob", timeout=60, what="base1 passed to bob after the grace", seen=lambda: base.record)
+    passed = time.monotonic() - closed
+    print(f"alice's page closed: base1 still after {stopped:.2f} s, bob's after {passed:.1f} s "
+          f"(reconnect window {RECONNECT_S:.0f} s + grace 3 s)")
+    assert passed >= RECONNECT_S + 3.0 - 0.5, passed
+    bob.get_by_text(re.compile(r"^mobile · owner: you")).wait_for()
+    shot(bob, "bob-after-alice-left")
+    bob.get_by_role("button", name="Release").click()
+    wait_message(bob, r"release base1: ok")
+    bob.context.close()
 
 
 def test_a_wrong_password_shows_the_error_and_opens_no_session(browser, klass):
