@@ -196,52 +196,71 @@ def _console_class() -> type:
     return _CONSOLE
 
 
-def column_widths(columns: Sequence[str], rows: Sequence[Sequence[str]], width: int) -> list[int] | None:
+BOXED = 3
+"""Columns a boxed table spends per column (a border and a space each side), plus one for the last border."""
+PLAIN = 3
+"""Columns a borderless table spends between two columns, and none at its edges."""
+
+
+def column_widths(columns: Sequence[str], rows: Sequence[Sequence[str]], width: int, *, boxed: bool = True,
+                  fold_first: bool = True) -> list[int] | None:
     """Widths (without padding) for a table of ``columns`` and ``rows`` to fit ``width`` with no word cut,
     or None when it cannot.
 
-    Every column is at least as wide as its longest word (an id, a type, a number never breaks), except
-    the first, whose keys may fold from 12 columns up (they read whole down the column); what is left is
-    shared in proportion to what each column would need to show its cells on one line."""
+    Every column is at least as wide as its longest word (an id, a type, a number never breaks), except,
+    with ``fold_first``, the first, whose keys may fold from 12 columns up (they read whole down the
+    column); what is left goes first to the columns that need least to show their cells on one line (a
+    long description takes what the others leave)."""
     n = len(columns)
-    room = width - (3 * n + 1)  # a rich box: a border before each column and after the last, one space each side
+    room = width - (BOXED * n + 1 if boxed else PLAIN * (n - 1))
     cells = [[str(columns[i]), *(str(r[i]) for r in rows)] for i in range(n)]
     natural = [max(len(line) for c in col for line in (c.splitlines() or [""])) for col in cells]
     least = [max((len(w) for c in col for w in c.split()), default=1) for col in cells]
-    least[0] = min(natural[0], max(12, len(str(columns[0]))))
+    if fold_first:
+        least[0] = min(natural[0], max(12, len(str(columns[0]))))
     if sum(natural) <= room:
         return natural
     if sum(least) > room:
         return None
-    extra, want = room - sum(least), [nat - lo for nat, lo in zip(natural, least)]
-    total = sum(want) or 1
-    widths = [lo + extra * w // total for lo, w in zip(least, want)]
-    for i in sorted(range(n), key=lambda i: want[i] - (widths[i] - least[i]), reverse=True)[: room - sum(widths)]:
-        widths[i] += 1  # what the rounding left
+    left, want = room - sum(least), [nat - lo for nat, lo in zip(natural, least)]
+    widths = list(least)
+    order = sorted(range(n), key=lambda i: want[i])
+    for k, i in enumerate(order):  # max-min fair: each gets its need or an even share of what is left
+        give = min(want[i], left // (n - k))
+        widths[i] += give
+        left -= give
     return widths
 
 
 def print_table(title: str, columns: Sequence[str], rows: Sequence[Sequence[str]], *, numeric: Collection[str] = (),
-                stderr: bool = False) -> None:
+                fold_first: bool = True, stderr: bool = False) -> None:
     """The one way the CLI prints a table: as wide as the terminal at most, every cell whole.
 
     Cells wrap between words and no word is cut (:func:`column_widths`); a key in the first column folds
     and reads whole down it. When the columns cannot fit side by side (a narrow terminal), each row is
     printed as a block instead: its first cell, then one ``column: value`` line per other column, folded
-    at the terminal's edge. No column is ever dropped."""
+    at the terminal's edge. No column is ever dropped. A table that fits only without its box (``list``'s
+    seven columns at 80) is printed without it."""
+    from rich import box
     from rich.table import Table
 
     out = console(stderr=stderr)
-    widths = column_widths(columns, rows, out.width)
+    boxed = True
+    widths = column_widths(columns, rows, out.width, fold_first=fold_first)
     if widths is None:
-        lines = [title]
+        boxed = False
+        widths = column_widths(columns, rows, out.width, boxed=False, fold_first=fold_first)
+    if widths is None:
+        from rich.padding import Padding
+        from rich.text import Text
+
+        out.print(title, overflow="fold")
         for r in rows:
-            lines.append(str(r[0]))
-            lines.extend(f"  {c}: {v}" for c, v in zip(columns[1:], r[1:]))
-        for line in lines:
-            out.print(line, overflow="fold")
+            out.print(str(r[0]), overflow="fold")
+            for c, v in zip(columns[1:], r[1:]):  # a value that wraps stays indented under its row
+                out.print(Padding(Text(f"{c}: {v}", overflow="fold"), (0, 0, 0, 2)))
         return
-    table = Table(title=title)
+    table = Table(title=title) if boxed else Table(title=title, box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False)
     for col, w in zip(columns, widths):
         table.add_column(col, justify="right" if col in numeric else "left", overflow="fold", width=w)
     for r in rows:

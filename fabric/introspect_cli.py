@@ -18,7 +18,10 @@ import typer
 import zenoh
 
 from fabric import keys
-from fabric.cli_common import Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, print_folded
+from fabric.cli_common import (
+    Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric, plain_doc, print_folded,
+    print_table,
+)
 from fabric.complete import complete_keys, complete_types
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
@@ -87,10 +90,8 @@ def list_keys(
         if as_json:
             print(json.dumps({"world": cfg.world, "keyexpr": expr, "declarations_visible": decl.available, "services": rows}))
             return
-        table = _table(f"{expr}: {len(rows)} service(s)", ("key", "request", "reply", "served by"))
-        for r in rows:
-            table.add_row(r["key"], r["request"], r["reply"], ", ".join(r["servers"]))
-        _print(table)
+        print_table(f"{expr}: {len(rows)} service(s)", ("key", "request", "reply", "served by"),
+                    [(r["key"], r["request"], r["reply"], ", ".join(r["servers"])) for r in rows])
         if not decl.available:
             print("the router does not show its admin space: services unknown", file=sys.stderr)
         return
@@ -101,14 +102,14 @@ def list_keys(
         if not stats:
             raise NothingThere(f"nothing published on {expr} in {duration:g} s (world {cfg.world!r})")
         return
-    table = _table(f"{expr}: {len(stats)} key(s) in {duration:g} s", ("key", "type", "publishers", "subscribers", "rate Hz", "msgs", "kB/s"))
-    for s in stats:
-        table.add_row(
-            s.key + (" (latched)" if s.latched else ""), ", ".join(s.types), ", ".join(s.publishers) or "-",
-            (", ".join(subs[s.key]) or "-") if decl.available else "?",
-            f"{s.rate_hz:.1f}", str(s.messages), f"{s.bytes_per_s / 1000:.1f}",
-        )
-    _print(table)
+    rows = [
+        (s.key + (" (latched)" if s.latched else ""), ", ".join(s.types), ", ".join(s.publishers) or "-",
+         (", ".join(subs[s.key]) or "-") if decl.available else "?",
+         f"{s.rate_hz:.1f}", str(s.messages), f"{s.bytes_per_s / 1000:.1f}")
+        for s in stats
+    ]
+    print_table(f"{expr}: {len(stats)} key(s) in {duration:g} s", ("key", "type", "publishers", "subscribers", "rate Hz", "msgs", "kB/s"),
+                rows, numeric=NUMERIC)
     if not stats:
         raise NothingThere(f"nothing published on {expr} in {duration:g} s (world {cfg.world!r}); services: robofabric list --services")
 
@@ -120,21 +121,8 @@ def _intersects(a: str, b: str) -> bool:
         return False
 
 
-def _table(title: str, columns: tuple[str, ...]):
-    """A table whose key column folds rather than being cut: it fits the terminal, every key whole."""
-    from rich.table import Table
-
-    table = Table(title=title)
-    for i, col in enumerate(columns):
-        numeric = col in ("rate Hz", "msgs", "kB/s")
-        # the key column keeps a third of the terminal, so a narrow one folds the other columns first
-        min_width = max(12, console().width // 3) if i == 0 else None
-        table.add_column(col, justify="right" if numeric else "left", overflow="fold", no_wrap=numeric, min_width=min_width)
-    return table
-
-
-def _print(table) -> None:
-    console().print(table)
+NUMERIC = ("rate Hz", "msgs", "kB/s", "fields")
+"""Columns shown right-aligned."""
 
 
 def key_info(
@@ -218,10 +206,9 @@ def interfaces(
         if as_json:
             print(json.dumps({"types": [{"name": n, "module": m, "fields": k, "doc": d} for n, m, k, d in rows]}))
             return
-        table = _table(f"{len(rows)} message types", ("type", "module", "fields", "what"))
-        for n, m, k, d in rows:
-            table.add_row(n, m, str(k), d[:90])
-        _print(table)
+        # the whole description, as plain text: it wraps in its column (it was cut at 90 characters)
+        print_table(f"{len(rows)} message types", ("type", "module", "fields", "what"),
+                    [(n, m, str(k), plain_doc(d)) for n, m, k, d in rows], numeric=NUMERIC, fold_first=False)
         return
     cls = types.get(type_name)
     if cls is None:
@@ -236,7 +223,7 @@ def interfaces(
             "fields": [{"name": f.name, "type": f.type, "constraints": f.constraints, "default": f.default} for f in fields],
         }))
         return
-    print(f"{type_name} ({cls.__module__})" + (f": {type_doc(cls)}" if type_doc(cls) else ""))
+    print_folded(f"{type_name} ({cls.__module__})" + (f": {plain_doc(type_doc(cls))}" if type_doc(cls) else ""))
     width = max(len(f.name) for f in fields) if fields else 0
     for f in fields:
         extra = "  ".join(x for x in (f.constraints, f"default {f.default}" if f.default else "") if x)

@@ -15,7 +15,8 @@ import zenoh
 
 from fabric import keys
 from fabric.cli_common import (
-    Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, print_folded, say, watch_reader,
+    Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric, print_folded, print_table, say,
+    watch_reader,
 )
 from fabric.complete import complete_keys, complete_peers, complete_types
 
@@ -163,14 +164,7 @@ def ps(
                 lines.append(f"    {key}  ({req} -> {rep})")
         print_folded(*lines)  # a key longer than the terminal folds, never runs past its edge
         return
-    from rich.table import Table
-
-    table = Table(title=f"world {fab.world}: {len(peers)} peer(s)")
-    table.add_column("kind", overflow="fold")
-    table.add_column("id", overflow="fold")
-    for k, i in peers:
-        table.add_row(k, i)
-    console().print(table)
+    print_table(f"world {fab.world}: {len(peers)} peer(s)", ("kind", "id"), peers)
     if not peers:
         raise NothingThere(f"no live peer in world {fab.world!r}")
 

@@ -8,7 +8,9 @@ from typing import Annotated, Optional, TYPE_CHECKING
 
 import typer
 
-from fabric.cli_common import Connect, NothingThere, Profile, UserError, World, ZenohConfig, console, make_config, open_fabric, say, watch_reader
+from fabric.cli_common import (
+    Connect, NothingThere, Profile, UserError, World, ZenohConfig, make_config, open_fabric, print_table, say, watch_reader,
+)
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
     from fabric.session import Fabric
@@ -74,18 +76,12 @@ def list_cmd(world: World = None, connect: Connect = None, profile: Profile = No
     if as_json:
         print(json.dumps({"world": fab.world, "records": [record_json(r) for r in rows]}))
         return
-    from rich.table import Table
-
-    table = Table(title=f"world {fab.world}: {len(rows)} object(s)")
-    for col in ("object", "policy", "owner", "epoch", "state", "queue"):
-        table.add_column(col, overflow="fold", justify="right" if col == "epoch" else "left", min_width=9 if col == "policy" else None)
-    for r in rows:
-        if r.policy == "scene":
-            table.add_row(_shown(r.object), "scene", "anyone writes", "-", "-", "-")
-        else:
-            table.add_row(_shown(r.object), "exclusive", _shown(r.owner) or "(free)", str(r.epoch), r.state,
-                          ", ".join(_shown(u) for u in r.queue) or "-")
-    console().print(table)
+    table = [
+        (_shown(r.object), "scene", "anyone writes", "-", "-", "-") if r.policy == "scene" else
+        (_shown(r.object), "exclusive", _shown(r.owner) or "(free)", str(r.epoch), r.state, ", ".join(_shown(u) for u in r.queue) or "-")
+        for r in rows
+    ]
+    print_table(f"world {fab.world}: {len(rows)} object(s)", ("object", "policy", "owner", "epoch", "state", "queue"), table, numeric=("epoch",))
 
 
 def _ask(op: str, obj: str, world, connect, profile, zenoh_config, user, wait: bool = False,

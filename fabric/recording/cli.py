@@ -16,7 +16,7 @@ from typing import Annotated, Any, Optional
 import typer
 
 from fabric import keys
-from fabric.cli_common import Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
+from fabric.cli_common import Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric, print_table
 from fabric.complete import complete_formats, complete_keys, complete_keys_or_recordings
 
 __all__ = ["register", "record", "info", "replay"]
@@ -221,7 +221,6 @@ def _recording_info(file: Path, as_json: bool) -> None:
         print(json.dumps(inf.to_json()))
         return
     from rich.console import Console
-    from rich.table import Table
 
     con = Console()
     state = "[green]complete[/]" if inf.complete else f"[bold red]UNFINISHED[/] - {inf.detail}"
@@ -235,12 +234,9 @@ def _recording_info(file: Path, as_json: bool) -> None:
     con.print(f"worlds: {', '.join(inf.worlds) or '-'}   schemas: {', '.join(inf.schemas) or '-'}")
     if inf.metadata:
         con.print("recorded by " + ", ".join(f"{k}={v}" for k, v in sorted(inf.metadata.items()) if v))
-    table = Table()
-    for col, just in (("key", "left"), ("schema", "left"), ("messages", "right"), ("rate Hz", "right"), ("bytes", "right"), ("avg B", "right")):
-        table.add_column(col, justify=just, overflow="fold")  # as wide as the terminal: a long key folds
-    for c in inf.channels:
-        table.add_row(c.key, c.schema, str(c.messages), f"{c.rate_hz:.1f}", _size(c.bytes), f"{c.bytes / c.messages:.0f}")
-    con.print(table)
+    print_table(f"{len(inf.channels)} channel(s)", ("key", "schema", "messages", "rate Hz", "bytes", "avg B"),
+                [(c.key, c.schema, str(c.messages), f"{c.rate_hz:.1f}", _size(c.bytes), f"{c.bytes / c.messages:.0f}") for c in inf.channels],
+                numeric=("messages", "rate Hz", "bytes", "avg B"))
 
 
 # --------------------------------------------------------------------------- replay

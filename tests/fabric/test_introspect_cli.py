@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import threading
 
@@ -163,11 +164,35 @@ def test_ps_list_and_info_name_publishers_subscribers_and_services_and_skip_bad_
 
 
 LONG = "arm_with_a_name_long_enough_to_need_folding_in_a_narrow_terminal"
+ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]")
+
+
+def read_down(text: str) -> str:
+    """The first column of a table as printed, read downwards (a folded key comes out whole), whatever the
+    layout: a boxed table (cells between │), a borderless one (the column as wide as its header's gap), or
+    rows printed as blocks (the first cell on lines of its own, each other cell indented)."""
+    lines = [line for line in text.splitlines() if line.strip()]
+    if any("│" in line for line in lines):
+        return "".join(cells[1].strip() for line in lines if len(cells := line.split("│")) > 2)
+    rule = next((i for i, line in enumerate(lines) if set(line.strip()) == {"─"}), None)
+    if rule is not None:  # borderless: the header line above the rule gives the first column's width
+        header = lines[rule - 1]
+        width = len(header) - len(header[len(header.split()[0]):].lstrip()) - 3
+        return "".join(line[:width].strip() for line in lines[rule + 1:])
+    return "".join(line.strip() for line in lines[1:] if not line.startswith("  "))
+
+
+def words(text: str) -> set[str]:
+    return set(re.split(r"[\s│┃,]+", text))
 
 
 @pytest.mark.slow
-def test_tables_fit_a_60_column_terminal_and_json_is_one_document(peers_world, world, connect):
-    """list, info, ps and ps -v never print a line wider than $COLUMNS (keys fold, whole); --json stays one document."""
+@pytest.mark.parametrize("width", [60, 80, 120])
+def test_tables_fit_the_terminal_with_no_column_or_word_cut(peers_world, world, connect, width):
+    """list, list --services, info, ps, ps -v, own list and interfaces never print a line wider than the terminal,
+    drop no column and cut no word: ids and types whole, keys whole when read down their column (issue 32:
+    list at 80 columns lost its msgs and kB/s columns and broke peer ids). In a pipe ($COLUMNS) and on a
+    terminal (its size)."""
     import os
 
     pub = connect("sim", peer_id="sim-long")
@@ -182,35 +207,75 @@ def test_tables_fit_a_60_column_terminal_and_json_is_one_document(peers_world, w
     t = threading.Thread(target=run, daemon=True)
     t.start()
     ep = peers_world
-    env = {**os.environ, "COLUMNS": "60"}
+    env = {**os.environ, "COLUMNS": str(width)}
 
-    def narrow(*args: str) -> str:
-        out = subprocess.run(robofabric_cmd(*args, "--world", world, "--connect", ep), capture_output=True, text=True, timeout=90, env=env)
+    def shown(*args: str, live: bool = True) -> str:
+        argv = robofabric_cmd(*args, *(("--world", world, "--connect", ep) if live else ()))
+        out = subprocess.run(argv, capture_output=True, text=True, timeout=90, env=env)
         assert out.returncode == 0, out.stderr
-        wide = [line for line in (out.stdout + out.stderr).splitlines() if len(line) > 60]
+        wide = [line for line in (out.stdout + out.stderr).splitlines() if len(line) > width]
         assert not wide, wide
         return out.stdout
 
-    def column(text: str, i: int) -> str:
-        """Column ``i`` of a rich table read downwards: a folded key comes out whole."""
-        return "".join(cells[i + 1].strip() for line in text.splitlines() if len(cells := line.split("│")) > i + 1)
-
     try:
-        table = narrow("list", "--duration", "1")
-        assert keys.robot_joints(world, LONG) in column(table, 0) and "sim-long" in column(table, 2), table
-        assert LONG in "".join(narrow("info", f"robot/{LONG}/joints", "--duration", "1").split())
-        assert "sim-x" in column(narrow("ps"), 1) and "sim-long" in column(narrow("ps"), 1)
-        assert keys.robot_joints(world, LONG) in "".join(narrow("ps", "-v", "sim-long").split())
-        assert keys.srv(world, "world") in column(narrow("list", "--services"), 0)
-        for args in (("list", "--json", "--duration", "1"), ("ps", "--json"), ("ps", "-v", "--json"), ("info", f"robot/{LONG}/joints", "--json", "--duration", "1")):
-            out = subprocess.run(robofabric_cmd(*args, "--world", world, "--connect", ep), capture_output=True, text=True, timeout=90, env=env)
-            doc = json.loads(out.stdout)  # one document, whatever the width: no folding, no markup
-            assert isinstance(doc, dict) and "\x1b" not in out.stdout, args
-        lst = json.loads(subprocess.run(robofabric_cmd("list", "--json", "--duration", "1", "--world", world, "--connect", ep),
-                                        capture_output=True, text=True, timeout=90).stdout)
-        long_key = next(k for k in lst["keys"] if k["key"] == keys.robot_joints(world, LONG))
-        assert set(long_key) == {"key", "type", "publishers", "subscribers", "messages", "rate_hz", "bytes_per_s", "last_bytes", "latched"}
-        assert long_key["publishers"] == ["sim-long"]
+        table = shown("list", "--duration", "1")
+        for head in ("type", "publishers", "subscribers", "rate", "Hz", "msgs", "kB/s"):  # the key is each row's first line
+            assert head in words(table) or f"{head}:" in words(table), (head, table)
+        assert {"sim-long", "sim-x", "JointState"} <= words(table), table
+        assert keys.robot_joints(world, LONG) in read_down(table), table
+        assert LONG in "".join(shown("info", f"robot/{LONG}/joints", "--duration", "1").split())
+        assert {"sim-x", "sim-long"} <= words(shown("ps"))
+        assert keys.robot_joints(world, LONG) in "".join(shown("ps", "-v", "sim-long").split())
+        services = shown("list", "--services")
+        assert keys.srv(world, "world") in read_down(services) and {"WorldInfo", "IKRequest", "IKReply"} <= words(services), services
+        types = shown("interfaces", live=False)
+        assert {"JointState", "fabric.interfaces.std", "OccupancyGrid"} <= words(types), types
+        # a description is whole (it was cut at 90 characters): its last words are there
+        assert "rad/s²)." in words(types) and "``" not in types, types
+        if width == 80:  # on a terminal of that size, no $COLUMNS: the same
+            term = _on_a_terminal(robofabric_cmd("list", "--duration", "1", "--world", world, "--connect", ep), cols=width)
+            assert max(len(line) for line in term.splitlines()) <= width, term
+            assert {"sim-long", "sim-x", "msgs", "kB/s"} <= words(term), term
+        if width == 60:
+            for args in (("list", "--json", "--duration", "1"), ("ps", "--json"), ("ps", "-v", "--json"), ("info", f"robot/{LONG}/joints", "--json", "--duration", "1")):
+                out = subprocess.run(robofabric_cmd(*args, "--world", world, "--connect", ep), capture_output=True, text=True, timeout=90, env=env)
+                doc = json.loads(out.stdout)  # one document, whatever the width: no folding, no markup
+                assert isinstance(doc, dict) and "\x1b" not in out.stdout, args
+            lst = json.loads(subprocess.run(robofabric_cmd("list", "--json", "--duration", "1", "--world", world, "--connect", ep),
+                                            capture_output=True, text=True, timeout=90).stdout)
+            long_key = next(k for k in lst["keys"] if k["key"] == keys.robot_joints(world, LONG))
+            assert set(long_key) == {"key", "type", "publishers", "subscribers", "messages", "rate_hz", "bytes_per_s", "last_bytes", "latched"}
+            assert long_key["publishers"] == ["sim-long"]
     finally:
         stop.set()
         t.join(timeout=5)
+
+
+def _on_a_terminal(argv: list[str], *, cols: int) -> str:
+    """What ``argv`` prints on a pseudo-terminal ``cols`` wide ($COLUMNS unset), ANSI styling removed."""
+    import fcntl
+    import os
+    import pty
+    import struct
+    import termios
+
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 50, cols, 0, 0))
+    env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+    proc = subprocess.Popen(argv, stdin=slave, stdout=slave, stderr=slave, env=env, start_new_session=True)
+    os.close(slave)
+    chunks = []
+    try:
+        while True:
+            try:
+                data = os.read(master, 65536)
+            except OSError:  # the child closed the terminal
+                break
+            if not data:
+                break
+            chunks.append(data)
+    finally:
+        proc.wait(timeout=90)
+        os.close(master)
+    assert proc.returncode == 0, b"".join(chunks)
+    return ANSI.sub("", b"".join(chunks).decode(errors="replace")).replace("\r", "")
