@@ -69,7 +69,7 @@ def compute(
         served = [s for s, on in (("ik/fk/jacobian", kinematics), ("map/plan", navigation)) if on]
         streaming = ", ".join(f"{r}<-{o}" for r, o in streams) or "none"
         print(
-            f"compute {fab.peer_id}: world {fab.world}, serving {' + '.join(served)}; arms {', '.join(served_arms) or 'none yet (asked srv/world)'}; "
+            f"compute {fab.peer_id}: world {fab.world}, serving {' + '.join(served)}; arms {', '.join(served_arms) or 'from the sims, as they come'}; "
             f"IK streams {streaming}; Ctrl-C to stop",
             flush=True,
         )

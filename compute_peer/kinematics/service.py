@@ -43,6 +43,7 @@ from fabric.interfaces import (
     JacobianRequest,
     JointState,
     Pose,
+    NoReply,
     ServiceError,
 )
 from fabric.limits import quote
@@ -191,6 +192,10 @@ class KinematicsService:
             generation = self._sims_changed
         try:
             described = described_robots(self.fabric, "arm", timeout=timeout)
+        except NoReply as exc:
+            # no sim yet: normal when the compute starts first (`robofabric up`); its token brings a lookup
+            self._discovery_failed(str(exc), quiet="nobody serves it" in str(exc))
+            return len(self.arms)
         except ServiceError as exc:
             self._discovery_failed(str(exc))
             return len(self.arms)
@@ -206,12 +211,12 @@ class KinematicsService:
                 log.warning("cannot serve kinematics for %s (%s): %s", r.id, r.type, exc)
         return len(self.arms)
 
-    def _discovery_failed(self, why: str) -> None:
+    def _discovery_failed(self, why: str, *, quiet: bool = False) -> None:
         self.counters["discovery_failed"] = self.counters.get("discovery_failed", 0) + 1
-        # said once per distinct reason: "nobody serves it" is normal until the sim is up
+        # said once per distinct reason; "nobody serves it" (no sim yet) is normal at a start: not a warning
         if why != self._last_discovery_error:
             self._last_discovery_error = why
-            log.warning("looking the world's arms up: %s", why)
+            log.log(logging.INFO if quiet else logging.WARNING, "looking the world's arms up: %s", why)
 
     def _discover_soon(self) -> None:
         """Look the world up in a thread (never inside a Zenoh callback), at most once a second; not before
