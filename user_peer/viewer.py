@@ -180,6 +180,7 @@ class Viewer:
         self._closed = False
         self._sims: set[str] = set()
         self._sims_lock = threading.Lock()
+        self._world_seen = False  # "is back" only after the world was there and went
         self._stopped = threading.Event()  # set at close: background looks at the world end
         # a script that never closes the viewer still flushes its sinks, then its session closes (fabric/exit.py)
         self._cancel_exit = at_exit(self.close)
@@ -250,11 +251,13 @@ class Viewer:
             new = alive and peer_id not in self._sims
             (self._sims.add if alive else self._sims.discard)(peer_id)
             now = bool(self._sims)
+            first, self._world_seen = now and not self._world_seen, self._world_seen or now
         if new and self.catalog.world_info is not None:  # a sim joining the world (a shard) describes robots of its own
             threading.Thread(target=self._learn_world, args=(peer_id,), name="viewer-world", daemon=True).start()
         if now == was:
             return
-        text = (f"world {self.fab.world!r} is back: sim peer {peer_id}" if now
+        text = (f"world {self.fab.world!r}: served by sim peer {peer_id}" if first
+                else f"world {self.fab.world!r} is back: sim peer {peer_id}" if now
                 else f"world {self.fab.world!r} gone: its sim peer {peer_id} left (died, or cut off)")
         print(f"viewer: {text}", flush=True)
         try:

@@ -37,6 +37,10 @@ __all__ = ["World", "FOLLOWED_STREAMS"]
 REDESCRIBE_S = 1.0
 """How often :meth:`World.info` asks again while a live sim describes no robot of the world (a standby)."""
 
+FAILOVER_WAIT_S = 15.0
+"""How long after a sim left :meth:`World.on_failover` waits for another sim (its standby) to serve its robots:
+a standby takes over within its leader's token loss plus a transport lease (docs/sim.md)."""
+
 FOLLOWED_STREAMS = ("joints", "pose", "scan", "path", "ik")
 """The streams a robot handle keeps the latest of (:meth:`World.robot`)."""
 
@@ -93,8 +97,11 @@ class World:
         # frozen within the transport lease; "world gone" is reported here (log, callbacks, world_alive)
         self._sims: set[str] = set()
         self.robots_gone: list[str] = []  # robots whose sim left while others serve the world (on_robots_gone)
+        self.failovers: list[tuple[str, str, list[str]]] = []  # (sim, the sim that took its robots, robots): on_failover
+        self._failover_callbacks: list[Callable[[str, str, list[str]], None]] = []
         self._gone_callbacks: list[Callable[[str, list[str]], None]] = []
         self._world_callbacks: list[Callable[[bool, str], None]] = []
+        self._world_seen = False
         self._world_cond = threading.Condition()
         self.fabric.watch_peers(self._on_sim, kind="sim")
 
@@ -204,16 +211,19 @@ class World:
             changed = alive != (peer_id in self._sims)
             (self._sims.add if alive else self._sims.discard)(peer_id)
             now = bool(self._sims)
+            first, self._world_seen = now and not self._world_seen, self._world_seen or now
             callbacks = list(self._world_callbacks) if now != was else []
             self._world_cond.notify_all()
         if changed and now == was:
             self._sims_changed(peer_id, alive)
         if now == was:
             return
-        why = f"sim peer {peer_id} is back" if now else f"world {self.name!r} gone: its sim peer {peer_id} left (died, or cut off)"
+        # "is back" only after the world was there and went: at a start, the first sim is simply there
+        why = (f"sim peer {peer_id} serves world {self.name!r}" if first else f"sim peer {peer_id} is back" if now
+               else f"world {self.name!r} gone: its sim peer {peer_id} left (died, or cut off)")
         if now:
             self._info = None  # a restarted sim may describe a different world: ask again
-            log.info("world %s is back: sim peer %s", self.name, peer_id)
+            log.info("world %s: %s", self.name, why)
         else:
             log.warning("%s", why)
         for cb in callbacks:
@@ -242,6 +252,46 @@ class World:
                 cb(peer_id, gone)
             except Exception:
                 log.exception("robots-gone callback failed")
+        # a standby of that sim (a live sim serving nothing yet) takes them over within its lease: say so when it does
+        threading.Thread(target=self._watch_failover, args=(peer_id, gone), name="world-failover", daemon=True).start()
+
+    def _watch_failover(self, sim: str, robots: list[str]) -> None:
+        """Ask the world's description until another sim serves every robot ``sim`` served, for up to
+        :data:`FAILOVER_WAIT_S`; then tell it as ``sim X failed over to Y`` (log, ``failovers``, :meth:`on_failover`).
+        Without this, a standby's take-over reached scripts only as "robots ... gone from world"."""
+        deadline = time.monotonic() + FAILOVER_WAIT_S
+        while not self._closed and time.monotonic() < deadline:
+            with self._world_cond:
+                if sim in self._sims:
+                    return  # the same sim came back (a pause): not a failover
+            try:
+                info = services.world_info(self.fabric, timeout=1.0)
+            except Exception:  # no sim answers now (the standby is taking over), or the session closed
+                info = None
+            if info is not None:
+                served = {r.id: r.sim for r in info.robots}
+                takers = sorted({served[r] for r in robots if served.get(r) not in (None, "", sim)})
+                if takers and all(served.get(r) not in (None, "", sim) for r in robots):
+                    self._failed_over(sim, ", ".join(takers), robots)
+                    return
+            time.sleep(0.25)
+
+    def _failed_over(self, sim: str, to: str, robots: list[str]) -> None:
+        with self._events_lock:
+            self.failovers.append((sim, to, list(robots)))
+            callbacks = list(self._failover_callbacks)
+        log.warning("sim %s failed over to %s: robots %s go on in world %s", sim, to, ", ".join(robots), self.name)
+        for cb in callbacks:
+            try:
+                cb(sim, to, list(robots))
+            except Exception:
+                log.exception("failover callback failed")
+
+    def on_failover(self, callback: Callable[[str, str, list[str]], None]) -> None:
+        """``callback(sim, standby, robots)`` when the robots of a sim that left are served again by another (its
+        standby took them over): told after :meth:`on_robots_gone`, within :data:`FAILOVER_WAIT_S` of the loss."""
+        with self._events_lock:
+            self._failover_callbacks.append(callback)
 
     def on_robots_gone(self, callback: Callable[[str, list[str]], None]) -> None:
         """``callback(sim, robots)`` when a sim of a world that stays alive leaves, with the robots it served (a
