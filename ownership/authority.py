@@ -209,8 +209,8 @@ class Authority:
         with self._lock:
             held = user in self._state.held
         if held and self.fabric.should_report("own:held") is not None:
-            log.warning("%s's token went while this authority heard no one (a stalled router?): %s keeps what she owns "
-                        "until her token is back, or for %.0f s without it", quote(user, MAX_USER_LEN), quote(user, MAX_USER_LEN),
+            log.warning("the token of user %s went while this authority heard no one (a stalled router?): she keeps what "
+                        "she owns and her queue places until it is back, or for %.0f s without it", quote(user, MAX_USER_LEN),
                         self._state.grace_s)
 
     def _run(self) -> None:
