@@ -9,8 +9,8 @@ her login may subscribe to anything) and closes her session. Measured per N:
 
 * declare: seconds her N declarations took;
 * stall: the longest gap between answers to bob's ``srv/world`` queries (every 50 ms, 1 s timeout, through
-  the router to the sim) from her first declaration to 10 s after her close: how long the router could
-  not route;
+  the router to the sim) from her first declaration to 10 s after the first answer that follows her close
+  (at most :data:`RESUME_TIMEOUT_S`): how long the router could not route;
 * router RSS before her session, after her declarations, and 5 s after her close;
 * owners: whether alice and bob still own their robots afterwards, how many times either lost one
   (the user API's ``on_lost``), and how many records of their robots named another owner or epoch
@@ -34,6 +34,9 @@ import typer
 
 from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 from robofabric.bench.common import append, machine, proc_rss_mb
+
+RESUME_TIMEOUT_S = 120.0
+"""How long after her close the bench waits for the router to answer again."""
 
 _MALLORY = r"""
 import sys, time, zenoh
@@ -101,6 +104,17 @@ class _Prober:
         self._stop.set()
         self._thread.join(timeout=5)
 
+    def first_answer_after(self, t: float, *, timeout: float) -> float | None:
+        """When the first answer after ``t`` came, waiting up to ``timeout`` s for one (None: none came)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            later = [a for a in self.answers if a > t]
+            if later:
+                return later[0]
+            if time.monotonic() > deadline:
+                return None
+            time.sleep(self.period)
+
     def longest_gap(self, since: float, until: float) -> float:
         """The longest time without an answer in [since, until] (the edges count as answers)."""
         times = [since, *[t for t in self.answers if since < t < until], until]
@@ -161,8 +175,11 @@ def run_flood(counts: list[int], tmp: Path, *, settle: float = 5.0) -> list[Floo
                         mallory.stdin.flush()
                         closed = mallory.stdout.readline().split()
                         t_close = time.monotonic()
-                        time.sleep(10.0)  # the window the stall is looked for in
-                        stall = probe.longest_gap(t0, t_close + 10.0)
+                        # the stall may outlast any fixed window (10 s cut it short): until answers resume, then
+                        # 10 s more for what the resumed router does to the owners
+                        resumed = probe.first_answer_after(t_close, timeout=RESUME_TIMEOUT_S)
+                        time.sleep(max(0.0, (resumed or time.monotonic()) + 10.0 - time.monotonic()))
+                        stall = probe.longest_gap(t0, time.monotonic())
                         misses = probe.misses
                     mallory.wait(timeout=30)
                 finally:
