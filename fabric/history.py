@@ -15,7 +15,8 @@ got 499; a live ROS 2 recording lost 603 of 3,000 poses in a minute (issue 32).
   declares): once for the publishers there at the start, and again for each one that appears later (a
   publisher that started later, or a link that came back) by its liveliness token;
 - a cached value is delivered only when it is newer (its timestamp) than every value of that key
-  delivered so far, so a history reply that arrives after a live sample never takes the key back.
+  delivered so far, so a history reply that arrives after a live sample never takes the key back; a live
+  sample whose cache reply came first (the same timestamp: the same publication) is not delivered twice.
 """
 
 from __future__ import annotations
@@ -54,6 +55,8 @@ class LatestThenLive:
         self._closed = False
         self.stale = 0
         """Cached values not delivered because a newer one of their key already was."""
+        self.duplicates = 0
+        """Live samples not delivered because their cache's reply (the same publication) already was."""
         self._resources: list[Any] = [session.declare_subscriber(key_expr, self._on_live)]
         caches = cache_selector(key_expr)
         # late publishers: a token that appears after this point gets its own cache asked
@@ -68,7 +71,11 @@ class LatestThenLive:
             self._callback(sample)  # streams: no lock, no bookkeeping
             return
         with self._lock:  # a latched key: a history reply must not overtake or follow it back in time
-            self._note(key, sample.timestamp)
+            stamp = sample.timestamp
+            if stamp is not None and self._newest.get(key) == stamp:
+                self.duplicates += 1  # its cache's reply came first: the same publication, delivered once
+                return
+            self._note(key, stamp)
             self._callback(sample)
 
     def _on_reply(self, reply: zenoh.Reply) -> None:
