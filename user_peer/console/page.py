@@ -59,6 +59,21 @@ def event_line(ev: Any, trusted: bool) -> str:
     return f"trusted · {text}" if trusted else f"unverified (display only) · {text}"
 
 
+def _first_handles(world: Any, user: str) -> tuple[list, dict[str, Any]]:
+    """The world's robots, and handles for the arm and the base a page shows first: hers if she owns one (a
+    reload), else the first of each kind."""
+    from user_peer import services
+
+    entries = services.robot_entries(world.info())
+    handles = {}
+    for kind in ("arm", "mobile"):
+        mine = [e for e in entries if e.kind == kind and (rec := world.ownership.record(e.id)) is not None and rec.owner == user]
+        first = mine or [e for e in entries if e.kind == kind]
+        if first:
+            handles[first[0].id] = world.robot(first[0].id)
+    return entries, handles
+
+
 class ConsolePage:
     """The page of one browser tab: built by :meth:`show` when the tab opens."""
 
@@ -66,7 +81,9 @@ class ConsolePage:
         self.console = console
         self.client = client
         self.world: Any = None
-        self.robots: list = []
+        self.entries: list = []  # every robot of the world (user_peer.services.RobotEntry)
+        self.handles: dict[str, Any] = {}  # the robots this page follows in full: those she selected
+        self.poses: dict[str, bytes] = {}  # every robot's latest pose, undecoded (decoded at a redraw)
         self.arm: Any = None
         self.base: Any = None
         self.selected: str | None = None
@@ -110,7 +127,7 @@ class ConsolePage:
         try:
             cfg = login_config(self.console.world, self.console.connect, name, password, base_file=self.console.base_file)
             world = await run.io_bound(self.console.logins.login, cfg, name, password)
-            robots = await run.io_bound(lambda: [world.robot(r) for r in world.robots()])
+            entries, handles = await run.io_bound(_first_handles, world, name)
         except LoginError as exc:
             self.login_msg.text = exc.reason
             self.login_btn.enable()
@@ -120,7 +137,7 @@ class ConsolePage:
             self.login_msg.text = f"Could not join world {self.console.world}: {exc.reason}"
             self.login_btn.enable()
             return
-        self.world, self.robots = world, robots
+        self.world, self.entries, self.handles = world, entries, handles
         self.user = name
         self.client.on_disconnect(self._disconnected)
         self.client.on_delete(self._gone)
@@ -145,11 +162,12 @@ class ConsolePage:
     def _main(self) -> None:
         w = self.world
         self.frame, self.boxes = state.scene_layout(w.info())
-        arms = [r for r in self.robots if r.kind == "arm"]
-        bases = [r for r in self.robots if r.kind == "mobile"]
-        self.arm = arms[0] if arms else None
-        self.base = bases[0] if bases else None
-        self.selected = (self.arm or self.base).id if self.robots else None
+        self.arm = next((r for r in self.handles.values() if r.kind == "arm"), None)
+        self.base = next((r for r in self.handles.values() if r.kind == "mobile"), None)
+        self.selected = (self.arm or self.base).id if self.handles else None
+        # every robot's pose for the view, kept undecoded: a page of a 20-robot class decodes 5 poses a second per
+        # robot, not 50 (only the robots she selected are followed in full: joints, scan, path)
+        w.fabric.subscribe_raw(keys.robot_stream_all(w.name, "pose"), self._on_pose)
         info = w.info()
         target = next((o for o in info.objects if o.kind == "ik_target"), None)
         goal = next((o for o in info.objects if o.kind == "goal_pointer"), None)
@@ -188,7 +206,7 @@ class ConsolePage:
         with ui.card().classes("w-full"):
             ui.label("Robots").classes("text-subtitle1")
             self.rows: dict[str, ui.label] = {}
-            for r in self.robots:
+            for r in self.entries:
                 with ui.row().classes("items-center"):
                     ui.button(r.id, on_click=lambda _, rid=r.id: self._select(rid)).props("flat dense no-caps")
                     self.rows[r.id] = ui.label("")
@@ -236,7 +254,7 @@ class ConsolePage:
         with ui.card().classes("w-full"):
             self.base_title = ui.label("").classes("text-subtitle1")
             ui.label("Hold an arrow key to drive · 1-3 speed · space stops").classes("text-caption")
-            self.base_state = ui.label("")
+            self.base_state = ui.label("").classes("rf-base-state")  # bench console reads its data-pose-wall-ms
             with ui.row().classes("items-center"):
                 self.base_stop = ui.button("Stop", color="negative", on_click=self._stop_base).props('aria-label="Stop base"')
                 self.map_btn = ui.button("Build map", on_click=self._build_map)
@@ -268,18 +286,33 @@ class ConsolePage:
 
     def _why(self, exc: FabricUserError) -> str:
         reason = f"{type(exc).__name__}: {exc.reason}"
-        robot = self._robot(self.selected) if self.selected else None
-        owner = robot.owner if robot is not None else ""
+        rec = self.world.ownership.record(self.selected) if self.selected else None
+        owner = rec.owner if rec is not None else ""
         if owner and owner != self.world.user and owner not in exc.reason:
             reason += f" (owner: {owner})"
         return reason
 
-    def _robot(self, rid: str | None) -> Any:
-        return next((r for r in self.robots if r.id == rid), None)
+    def _on_pose(self, sample: Any) -> None:
+        """(zenoh's thread) keep the latest pose of every robot, undecoded."""
+        try:
+            self.poses[keys.parse(str(sample.key_expr)).subject] = sample.payload.to_bytes()
+        except Exception:  # a key that does not parse: not a robot's pose
+            pass
 
-    def _select(self, rid: str) -> None:
+    async def _handle(self, rid: str | None) -> Any:
+        """The robot's user-API handle; made (and its streams followed) the first time she selects it."""
+        if rid is None:
+            return None
+        if rid not in self.handles:
+            r = await self._call(f"select {rid}", self.world.robot, rid)
+            if r is FAILED:
+                return None
+            self.handles[rid] = r
+        return self.handles[rid]
+
+    async def _select(self, rid: str) -> None:
         self.selected = rid
-        r = self._robot(rid)
+        r = await self._handle(rid)
         if r is not None and r.kind == "arm" and r is not self.arm:
             self.arm, self._synced = r, False
         elif r is not None and r.kind == "mobile" and r is not self.base:
@@ -288,7 +321,7 @@ class ConsolePage:
         self._refresh()
 
     async def _ownership(self, op: str) -> None:
-        r = self._robot(self.selected)
+        r = await self._handle(self.selected)
         if r is None:
             return
         if op == "request":
@@ -455,17 +488,16 @@ class ConsolePage:
         w = self.world
         if w is None or w.closed:
             return
-        for r in self.robots:
-            line = state.robot_line(w, r)
+        for r in self.entries:
+            line = state.robot_line(w, r.id, r.kind)
             self.rows[r.id].text = line.text()
-            rec = r.record
+            rec = w.ownership.record(r.id)
             if rec is not None and self._owners.get(r.id, rec.owner) != rec.owner:
                 # records come from the robot's authority only (the ownership replica checks): trusted
                 self.log.push(f"trusted · ownership {r.id}: {self._owners[r.id] or 'nobody'} -> {rec.owner or 'nobody'} (epoch {rec.epoch})")
             if rec is not None:
                 self._owners[r.id] = rec.owner
-        sel = self._robot(self.selected)
-        self.sel_label.text = f"selected: {sel.id}" if sel is not None else "no robot"
+        self.sel_label.text = f"selected: {self.selected}" if self.selected else "no robot"
         if self.arm is not None:
             self._refresh_arm()
         if self.base is not None:
@@ -505,6 +537,9 @@ class ConsolePage:
         text = f"pose ({xy[0]:+.2f}, {xy[1]:+.2f}, {math.degrees(xy[2]):+.0f}°)" if xy else "pose -"
         if pose is not None:
             text += f" · v {math.hypot(pose.linear[0], pose.linear[1]):.2f} m/s"
+            stamp = str(pose.header.wall_ns // 1_000_000)
+            if self.base_state.props.get("data-pose-wall-ms") != stamp:  # the page's own lag: Date.now() against it
+                self.base_state.props(f"data-pose-wall-ms={stamp}")
         v, om = self.driver.twist()
         self.base_state.text = text + f" · speed {self.driver.level} · command v {v:+.2f} w {om:+.2f}"
         if self.goal is not None and xy is not None:
@@ -517,7 +552,8 @@ class ConsolePage:
             self._map_seq = id(grid)
             self.view.set_source(topview.data_url(topview.grid_png(grid.cells, grid.resolution, grid.origin, self.frame)))
         target = (float(self.target[0]), float(self.target[1])) if self.target is not None else None
-        self.view.content = state.view_svg(w, self.robots, self.frame, self.boxes, base_id=self.base.id if self.base else None,
+        self.view.content = state.view_svg(w, self.entries, self.handles, self.poses, self.frame, self.boxes,
+                                           base_id=self.base.id if self.base else None,
                                            selected={self.selected} if self.selected else set(), goal=self.goal, target=target)
 
     def _refresh_events(self) -> None:

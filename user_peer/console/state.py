@@ -12,7 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fabric.interfaces import yaw_from_quaternion
+from typing import Any
+
+from fabric.codec import DecodeError, decode
+from fabric.interfaces import Pose, yaw_from_quaternion
 from user_peer.console import topview
 from user_peer.console.topview import Frame, RobotMark
 
@@ -43,13 +46,13 @@ class RobotLine:
         return out
 
 
-def robot_line(world, robot) -> RobotLine:
-    """The robot list's row for ``robot`` (a user_peer handle), from its ownership record."""
-    rec = robot.record
+def robot_line(world, rid: str, kind: str) -> RobotLine:
+    """The robot list's row for robot ``rid``, from its ownership record (the page's replica of them all)."""
+    rec = world.ownership.record(rid)
     if rec is None:
-        return RobotLine(robot.id, robot.kind or "robot", "", "no ownership record yet", (), 0, False)
+        return RobotLine(rid, kind or "robot", "", "no ownership record yet", (), 0, False)
     place = rec.queue.index(world.user) + 1 if world.user in rec.queue else 0
-    return RobotLine(robot.id, robot.kind or "robot", rec.owner, rec.state, tuple(rec.queue), place, rec.owner == world.user)
+    return RobotLine(rid, kind or "robot", rec.owner, rec.state, tuple(rec.queue), place, rec.owner == world.user)
 
 
 def scene_layout(info) -> tuple[Frame, list[tuple[float, float, float, float, float]]]:
@@ -74,29 +77,41 @@ def scene_layout(info) -> tuple[Frame, list[tuple[float, float, float, float, fl
     return topview.frame_around(pts, margin=0.2 if boxes else 2.0, minimum=4.0 if boxes else 10.0), boxes
 
 
-def _mark(world, robot, spawn: dict, selected: set[str]) -> RobotMark | None:
-    rec = robot.record
+def _pose(handles: dict, poses: dict[str, bytes], rid: str) -> Any:
+    """A robot's latest pose: its handle's (followed in full), else the undecoded latest, decoded now."""
+    if rid in handles:
+        return handles[rid].latest("pose")
+    raw = poses.get(rid)
+    if raw is None:
+        return None
+    try:
+        return decode(raw, Pose)
+    except DecodeError:
+        return None
+
+
+def _mark(world, entry, pose, spawn: dict, selected: set[str]) -> RobotMark | None:
+    rec = world.ownership.record(entry.id)
     owner = rec.owner if rec is not None else ""
-    pose = robot.latest("pose")
-    if robot.kind == "mobile":
+    if entry.kind == "mobile":
         if pose is None:
             return None
         x, y, yaw = float(pose.position[0]), float(pose.position[1]), yaw_from_quaternion(pose.quaternion)
-        return RobotMark(robot.id, "mobile", owner, x, y, yaw, owner == world.user, robot.id in selected)
-    sx, sy, _, syaw = spawn.get(robot.id, (0.0, 0.0, 0.0, 0.0))
+        return RobotMark(entry.id, "mobile", owner, x, y, yaw, owner == world.user, entry.id in selected)
+    sx, sy, _, syaw = spawn.get(entry.id, (0.0, 0.0, 0.0, 0.0))
     flange = (float(pose.position[0]), float(pose.position[1])) if pose is not None else None
-    return RobotMark(robot.id, robot.kind or "robot", owner, sx, sy, syaw, owner == world.user, robot.id in selected, flange)
+    return RobotMark(entry.id, entry.kind or "robot", owner, sx, sy, syaw, owner == world.user, entry.id in selected, flange)
 
 
-def view_svg(world, robots: list, frame: Frame, boxes, *, base_id: str | None, selected: set[str],
-             goal: tuple[float, float, float] | None, target: tuple[float, float] | None) -> str:
-    """The live view's overlay: every robot with its owner, the selected base's scan and path, the IK target
-    and the goal."""
+def view_svg(world, entries: list, handles: dict, poses: dict[str, bytes], frame: Frame, boxes, *, base_id: str | None,
+             selected: set[str], goal: tuple[float, float, float] | None, target: tuple[float, float] | None) -> str:
+    """The live view's overlay: every robot with its owner, the paths and the selected base's scan of the robots
+    this page follows, the IK target and the goal."""
     spawn = {r.id: tuple(float(v) for v in r.pose) for r in world.info().robots}
-    marks = [m for m in (_mark(world, r, spawn, selected) for r in robots) if m is not None]
+    marks = [m for m in (_mark(world, e, _pose(handles, poses, e.id), spawn, selected) for e in entries) if m is not None]
     scan = None
     paths = []
-    for r in robots:
+    for r in handles.values():
         path = r.latest("path")
         if path is not None and len(path):
             paths.append(np.stack([np.asarray(path.x), np.asarray(path.y)], axis=1))
