@@ -172,7 +172,7 @@ def ps(
 def echo(
     key: Annotated[str, typer.Argument(help="Key expression, full (rf/demo/robot/arm1/joints) or world-relative (robot/*/pose).", autocompletion=complete_keys)],
     count: Annotated[Optional[int], typer.Option("--count", "-n", help="Exit after N messages.")] = None,
-    duration: Annotated[Optional[float], typer.Option(help="Exit after S seconds.")] = None,
+    duration: Annotated[Optional[float], typer.Option(help="Exit after S seconds (exit 1 if nothing came).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object per line: {key, message}.")] = False,
     timeout: Annotated[Optional[float], typer.Option(help="Exit 1 with 'nothing on KEY in S s' when no message came within S seconds.")] = None,
     latest: Annotated[
@@ -223,20 +223,18 @@ def echo(
                     stop.set()
 
         fab.subscribe_raw(full, on_sample, history=latest)
-        if timeout is not None and (duration is None or timeout < duration):
-            stop.wait(timeout)
-            with lock:
-                silent = printed == 0 and bad == 0
-            if not silent and not stop.is_set():
-                stop.wait(None if duration is None else duration - timeout)
-        else:
-            stop.wait(duration)
-            silent = False
+        early = timeout is not None and (duration is None or timeout < duration)
+        stop.wait(timeout if early else duration)
+        with lock:
+            silent = printed == 0 and bad == 0
+        if early and not silent and not stop.is_set():
+            stop.wait(None if duration is None else duration - timeout)
+        # set by Ctrl-C / SIGTERM (asked to stop: 0 even with nothing), --count or a closed pipe
+        stopped = stop.is_set()
     if bad:
         print(f"{bad} malformed payload(s) skipped", file=sys.stderr)
-    if timeout is not None and silent:
-        print(f"nothing on {full} in {timeout:g} s", file=sys.stderr)
-        raise typer.Exit(1)
+    if silent and not stopped:  # --timeout or --duration ran out with nothing: the world had nothing there
+        raise NothingThere(f"nothing on {full} in {timeout if early else duration:g} s")
 
 
 def hz(
@@ -289,8 +287,10 @@ def hz(
     elif final:
         say("summary:")
         print_folded(*(_hz_line(k, s) for k, s in final.items()))
-    if not final:
-        raise NothingThere(f"no messages on {full}")  # exit 1: nothing to measure
+    elif stop.is_set():
+        print(f"no messages on {full}", file=sys.stderr)
+    if not final and not stop.is_set():  # --duration ran out with nothing to measure (Ctrl-C: asked to stop, 0)
+        raise NothingThere(f"no messages on {full} in {duration:g} s")
 
 
 def pub(

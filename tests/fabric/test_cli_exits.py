@@ -101,6 +101,7 @@ def test_nothing_there_exits_1(router, world):
         (("own", "list"), "no ownership authority answered"),
         (("list", "--duration", "1"), "nothing published on"),
         (("echo", "robot/**", "--timeout", "1"), "nothing on"),
+        (("echo", "robot/**", "--duration", "1"), "nothing on"),
     ):
         out = _cli(*args, *ep)
         assert out.returncode == 1 and says in out.stderr and "Traceback" not in out.stderr, (args, out.returncode, out.stderr)
