@@ -89,6 +89,8 @@ BENCHMARKS: tuple[Benchmark, ...] = (
               full=("--robots", "32", "--sims", "1,2,4", "--seconds", "20"), quick=("--robots", "4", "--sims", "1,2", "--seconds", "4")),
     Benchmark("lab", "lab", "recovery times in a lab of network namespaces: partition, router loss, lost sim",
               full=("--runs", "5"), quick=("--runs", "1"), needs="netns"),
+    Benchmark("console", "console", "N browser pages on one console server, each driving its base: view lag in the page, key to motion, server CPU",
+              full=("--pages", "1,10,20", "--seconds", "30"), quick=("--pages", "2", "--seconds", "5")),
 )
 
 

@@ -1,0 +1,196 @@
+"""``robofabric bench console``: N browser pages on one ``robofabric console``, each a student driving her own base.
+
+Per page count N, a fresh open world: a router, a sim (``--scene warehouse --no-scene-robots`` with N Reeman
+bases) and one console server. N pages in Debian's headless ``chromium`` (through ``playwright``, one
+context each) log in as ``s0``..``sN-1``, select and request ``baseI`` and hold ← (speed 2): every base turns
+in place, each page refreshing its twist. Then, page after page, for ``--seconds``:
+
+- **key to motion**: the page lets go of ←, and once its base is still presses it again; the time from the
+  press (this process's clock) to the first pose of that base turning (the sim's stamp, same host) is one
+  sample;
+- **view lag, measured in the page**: ``Date.now()`` against the sim's wall stamp of the pose the page shows
+  (the base panel carries it as ``data-pose-wall-ms``), read in one ``page.evaluate``;
+- **the console server's CPU** over the whole drive (cores, from /proc);
+- **robots lost** (a base whose record no longer names its student) and **refusals** (a page whose message
+  line says a command was refused or failed): both should be 0.
+
+Pages, sim and console share this machine (and the chromium processes are the largest load): the figures are
+the whole class on one box, not the server alone.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import uuid
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
+
+from robofabric.bench.common import append, machine, pct, proc_cpu_s
+
+__all__ = ["command", "run_one"]
+
+LAG_JS = ("() => { const e = document.querySelector('.rf-base-state'); "
+          "return [Date.now(), e ? Number(e.dataset.poseWallMs || 0) : 0]; }")
+REFUSED = ("NotOwner", "Rejected", "Timeout", "Unreachable", "Error")
+
+
+def _until(predicate: Any, timeout: float) -> Any:
+    """``predicate()``'s first truthy value within ``timeout`` s (polled every 5 ms), else None."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value or time.monotonic() > deadline:
+            return value or None
+        time.sleep(0.005)
+
+
+def _status(page: Any) -> str | None:
+    """A page's message line; None when the page has none any more (it lost its connection for longer than the
+    console's reconnect window and went back to the login)."""
+    status = page.get_by_role("status")
+    try:
+        return status.inner_text(timeout=5_000)
+    except Exception:
+        return None
+
+
+def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
+    """N pages on one console; the row's figures."""
+    from playwright.sync_api import sync_playwright
+
+    from fabric.interfaces import Pose
+    from fabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
+    from robofabric.bench.viewer_web import CHROMIUM, CHROMIUM_ARGS
+
+    world = f"con{uuid.uuid4().hex[:6]}"
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    logs = tmp / f"n{n}"
+    logs.mkdir(parents=True, exist_ok=True)
+    with ProcessGroup(logs) as procs:
+        router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
+        wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
+        robots = [x for i in range(n) for x in ("--robot", f"reeman:base{i}")]
+        sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *robots, "--world", world,
+                                         "--connect", ep, "--id", "sim"), name="sim")
+        web = free_port()
+        console = procs.start(robofabric_cmd("console", "--world", world, "--connect", ep, "--listen", f"127.0.0.1:{web}"), name="console")
+        url = f"http://127.0.0.1:{web}/"
+        wait_until(lambda: f"console: open {url}" in procs.output(console), timeout=60, what="the console",
+                   seen=lambda: procs.output(console)[-1500:])
+        turning: dict[int, list[int]] = {i: [] for i in range(n)}  # sim wall stamps (ns) of poses that turn
+
+        def on_pose(key: str, msg: Any) -> None:
+            if isinstance(msg, Pose) and abs(float(msg.angular[2])) > 0.05:
+                rid = key.split("/")[3]
+                if rid.startswith("base") and rid[4:].isdigit() and int(rid[4:]) < n:
+                    turning[int(rid[4:])].append(msg.header.wall_ns)
+
+        with client(world, port, kind="tool", peer_id="probe") as fab, sync_playwright() as p:
+            wait_until(lambda: fab.live_peers("sim"), timeout=120, what="the sim", seen=lambda: procs.output(sim)[-1500:])
+            fab.subscribe(f"rf/{world}/robot/*/pose", on_pose)
+            browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+            pages, joined = [], []
+            try:
+                for i in range(n):
+                    t = time.monotonic()
+                    page = browser.new_context(viewport={"width": 1280, "height": 1350}).new_page()
+                    page.set_default_timeout(120_000)
+                    page.goto(url, timeout=120_000)
+                    page.get_by_label("Name").fill(f"s{i}")
+                    page.get_by_role("button", name="Log in").click()
+                    page.get_by_role("button", name=f"base{i}", exact=True).click()
+                    page.get_by_role("button", name="Request").click()
+                    page.get_by_text(f"request base{i}: you own it").wait_for()
+                    page.locator("body").click(position={"x": 5, "y": 5})
+                    page.keyboard.press("2")
+                    page.keyboard.down("ArrowLeft")
+                    pages.append(page)
+                    joined.append(time.monotonic() - t)
+                lags: list[float] = []
+                presses: list[float] = []
+                missed = unstopped = 0
+                cpu0, t0 = proc_cpu_s(console.pid), time.monotonic()
+                k = 0
+                while time.monotonic() - t0 < seconds:
+                    i = k % n
+                    k += 1
+                    page = pages[i]
+                    now_ms, stamp_ms = page.evaluate(LAG_JS)
+                    if stamp_ms:
+                        lags.append((now_ms - stamp_ms) / 1e3)
+                    page.keyboard.up("ArrowLeft")
+                    let_go = time.time_ns()
+                    # still: no turning pose for 0.3 s (a base still turning after 10 s is counted, and pressed anyway)
+                    if not _until(lambda: time.time_ns() - max(turning[i][-1] if turning[i] else 0, let_go) > 300_000_000, 10.0):
+                        unstopped += 1
+                    pressed = time.time_ns()
+                    page.keyboard.down("ArrowLeft")
+                    first = _until(lambda: next((s for s in turning[i] if s > pressed), None), 5.0)
+                    if first is None:
+                        missed += 1  # a press that did not move its base within 5 s
+                    else:
+                        presses.append((first - pressed) / 1e9)
+                cpu = (proc_cpu_s(console.pid) - cpu0) / (time.monotonic() - t0)
+                messages = [_status(pg) for pg in pages]
+                for pg in pages:
+                    pg.keyboard.up("ArrowLeft")
+            finally:
+                browser.close()
+            from ownership.client import OwnershipClient
+
+            own = OwnershipClient(fab, "probe")  # a replica of the records (the probe owns nothing)
+            own.refresh()
+            records = {i: own.record(f"base{i}") for i in range(n)}
+            own.close()
+    lost = sum(1 for i, r in records.items() if r is None or r.owner != f"s{i}")
+    refused = sum(1 for m in messages if m is not None and any(w in m for w in REFUSED))
+    logged_out = sum(1 for m in messages if m is None)
+    return {"n": n, "joined": len(joined), "join_max": max(joined, default=float("nan")), "lag_p50": pct(lags, 50), "lag_max": pct(lags, 100),
+            "key_p50": pct(presses, 50, 1e3), "key_p99": pct(presses, 99, 1e3), "presses": len(presses), "missed": missed, "unstopped": unstopped,
+            "cpu": cpu, "lost": lost, "refused": refused, "logged_out": logged_out}
+
+
+def header() -> list[str]:
+    return ["| pages | joined (slowest, s) | view lag in the page p50 / max (s) | key to motion p50 / p99 (ms), presses "
+            "| presses that moved nothing in 5 s / releases not stopped in 10 s | console server CPU (cores) | robots lost | refused "
+            "| pages back at the login |",
+            "|---|---|---|---|---|---|---|---|---|"]
+
+
+def row(r: dict[str, Any]) -> str:
+    return (f"| {r['n']} | {r['joined']} ({r['join_max']:.1f}) | {r['lag_p50']:.2f} / {r['lag_max']:.2f} | "
+            f"{r['key_p50']:.0f} / {r['key_p99']:.0f}, {r['presses']} | {r['missed']} / {r['unstopped']} | {r['cpu']:.2f} | {r['lost']} | "
+            f"{r['refused']} | {r['logged_out']} |")
+
+
+def command(
+    pages: Annotated[str, typer.Option("--pages", help="Comma-separated page counts (each page: one student, one base).")] = "1,10,20",
+    seconds: Annotated[float, typer.Option("--seconds", help="How long the pages drive while measured (s).")] = 30.0,
+    out: Annotated[Optional[Path], typer.Option("--out", help="Append the markdown table to this file.")] = None,
+) -> None:
+    """N browser pages on one console server, each driving its own base: view lag in the page, key to motion,
+    the server's CPU, robots lost."""
+    import tempfile
+
+    from fabric.cli_common import UserError
+
+    try:
+        counts = [int(x) for x in pages.split(",") if x.strip()]
+    except ValueError:
+        raise UserError(f"--pages {pages!r}: expected counts like 1,10,20") from None
+    if not counts or min(counts) < 1 or seconds <= 0:
+        raise UserError("--pages: each count at least 1; --seconds positive")
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    lines = [f"robofabric bench console --pages {pages} --seconds {seconds:g} on {machine()}, load average {load:.1f} at the start",
+             "", *header()]
+    print("\n".join(lines), flush=True)
+    with tempfile.TemporaryDirectory(prefix="bench-console-") as tmp:
+        for n in counts:
+            line = row(run_one(n, seconds, Path(tmp)))
+            print(line, flush=True)
+            lines.append(line)
+    append(out, "\n".join(lines))
