@@ -94,8 +94,8 @@ def _ask(op: str, obj: str, world, connect, profile, zenoh_config, user, wait: b
         try:
             try:
                 out = cl.request(obj, wait=wait) if op == "request" else cl.release(obj)
-            except ServiceError as exc:
-                raise UserError(f"{op} {obj}: {exc.reason}") from None
+            except ServiceError as exc:  # refused, or no authority answered: the world said no (exit 1)
+                raise NothingThere(f"{op} {obj}: {exc.reason}") from None
             print(f"{obj}: {out}", flush=True)
             if out.outcome == "denied":
                 raise typer.Exit(1)

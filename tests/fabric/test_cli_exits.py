@@ -99,6 +99,7 @@ def test_nothing_there_exits_1(router, world):
         (("hz", "robot/**", "--duration", "1"), "no messages on"),
         (("call", "srv/nope", "--timeout", "1"), "no reply on"),
         (("own", "list"), "no ownership authority answered"),
+        (("own", "request", "arm1", "--user", "ann"), "request arm1: no reply"),
         (("list", "--duration", "1"), "nothing published on"),
         (("echo", "robot/**", "--timeout", "1"), "nothing on"),
         (("echo", "robot/**", "--duration", "1"), "nothing on"),
