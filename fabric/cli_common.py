@@ -203,19 +203,22 @@ PLAIN = 3
 
 
 def column_widths(columns: Sequence[str], rows: Sequence[Sequence[str]], width: int, *, boxed: bool = True,
-                  fold_first: bool = True) -> list[int] | None:
+                  fold_first: bool = True, whole: Collection[int] = ()) -> list[int] | None:
     """Widths (without padding) for a table of ``columns`` and ``rows`` to fit ``width`` with no word cut,
     or None when it cannot.
 
     Every column is at least as wide as its longest word (an id, a type, a number never breaks), except,
     with ``fold_first``, the first, whose keys may fold from 12 columns up (they read whole down the
-    column); what is left goes first to the columns that need least to show their cells on one line (a
-    long description takes what the others leave)."""
+    column), and the columns in ``whole`` (numbers with their units: ``2.9 kB``) are as wide as their
+    widest cell; what is left goes first to the columns that need least to show their cells on one line
+    (a long description takes what the others leave)."""
     n = len(columns)
     room = width - (BOXED * n + 1 if boxed else PLAIN * (n - 1))
     cells = [[str(columns[i]), *(str(r[i]) for r in rows)] for i in range(n)]
     natural = [max(len(line) for c in col for line in (c.splitlines() or [""])) for col in cells]
     least = [max((len(w) for c in col for w in c.split()), default=1) for col in cells]
+    for i in whole:
+        least[i] = max(least[i], max(len(c) for c in cells[i][1:]) if rows else 0)
     if fold_first:
         least[0] = min(natural[0], max(12, len(str(columns[0]))))
     if sum(natural) <= room:
@@ -246,10 +249,11 @@ def print_table(title: str, columns: Sequence[str], rows: Sequence[Sequence[str]
 
     out = console(stderr=stderr)
     boxed = True
-    widths = column_widths(columns, rows, out.width, fold_first=fold_first)
+    whole = [i for i, c in enumerate(columns) if c in numeric]  # a number and its unit on one line
+    widths = column_widths(columns, rows, out.width, fold_first=fold_first, whole=whole)
     if widths is None:
         boxed = False
-        widths = column_widths(columns, rows, out.width, boxed=False, fold_first=fold_first)
+        widths = column_widths(columns, rows, out.width, boxed=False, fold_first=fold_first, whole=whole)
     if widths is None:
         from rich.padding import Padding
         from rich.text import Text
