@@ -246,13 +246,19 @@ def test_holding_up_drives_the_base_and_releasing_stops_it(browser, klass):
     sub.close()
     # when the sim saw it still (its pose's wall clock, this host's): the test process's own delays (playwright,
     # this subscription) do not count
-    still = next(p for p in poses if p.header.wall_ns > released and math.hypot(p.linear[0], p.linear[1]) < 0.02)
-    stopped = (still.header.wall_ns - released) / 1e9
-    print(f"base1 stopped {stopped:.3f} s after the key was released (the sim's pose stamps)")
+    after = [p for p in poses if p.header.wall_ns > released]
+    cruise = max(math.hypot(p.linear[0], p.linear[1]) for p in poses if p.header.wall_ns <= released)
+    braking = next(p for p in after if math.hypot(p.linear[0], p.linear[1]) < 0.9 * cruise)
+    still = next(p for p in after if math.hypot(p.linear[0], p.linear[1]) < 0.02)
+    braked, stopped = (braking.header.wall_ns - released) / 1e9, (still.header.wall_ns - released) / 1e9
+    print(f"base1 braking {braked:.3f} s and still {stopped:.3f} s after the key was released (the sim's pose stamps)")
     moved = math.hypot(base.xy_theta[0] - start[0], base.xy_theta[1] - start[1])
     shot(bob, "bob-drove")
     assert moved > 0.2, moved
-    assert stopped <= 0.3, f"base1 took {stopped:.3f} s to stop after the key was released"
+    # the release's zero twist reached the robot within 0.3 s (the sim's twist deadman, ~0.5 s, would not have), and
+    # it came to rest at its braking limit; the rest of the 0.2-0.3 s is that braking (speed 1: 0.2 m/s), measured
+    assert braked <= 0.3, f"base1 began braking {braked:.3f} s after the key was released"
+    assert stopped <= 1.0, f"base1 took {stopped:.3f} s to stop after the key was released"
     bob.get_by_role("button", name="Release").click()
     wait_message(bob, r"release base1: ok")
     bob.context.close()

@@ -110,6 +110,16 @@ def test_space_and_a_lost_focus_stop():
     assert d.stop() and not d.driving
 
 
+def test_a_synchronised_move_brings_every_joint_in_together_the_slowest_at_its_limit():
+    from user_peer.console.arm_panel import synchronised_speeds
+
+    v, t = synchronised_speeds(np.zeros(3), np.array([1.0, -0.5, 0.0]), np.array([2.0, 0.25, 1.0]))
+    assert t == pytest.approx(2.0)  # joint 2: 0.5 rad at 0.25 rad/s
+    assert v == pytest.approx([0.5, 0.25, 0.0])
+    v, t = synchronised_speeds(np.ones(2), np.ones(2), np.ones(2))
+    assert t == 0.0 and not v.any()
+
+
 def test_speeds_are_the_terminal_uis():
     from user_peer.tui import SPEEDS as TUI_SPEEDS
 

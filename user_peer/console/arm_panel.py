@@ -1,0 +1,169 @@
+"""The arm panel of a page: joint sliders in degrees, speed, Stop, Reset, the IK target with its nudges, the live
+IK solution and Apply IK. Enabled only while the page's student owns the arm."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from nicegui import run, ui
+
+from user_peer.errors import FabricUserError
+
+if TYPE_CHECKING:
+    from user_peer.console.page import ConsolePage
+
+__all__ = ["ArmPanel", "NUDGE_STEPS", "synchronised_speeds"]
+
+NUDGE_STEPS = {"1 mm": 0.001, "1 cm": 0.01, "5 cm": 0.05}
+
+
+def synchronised_speeds(q_from: np.ndarray, q_to: np.ndarray, max_speed: np.ndarray) -> tuple[np.ndarray, float]:
+    """The paper's synchronised move (Eq. 3-7): every joint arrives together, the slowest at its speed limit.
+    Returns each joint's speed (rad/s) and the move's duration (s)."""
+    d = np.abs(np.asarray(q_to, float) - np.asarray(q_from, float))
+    t = float(np.max(d / np.maximum(np.asarray(max_speed, float), 1e-9), initial=0.0))
+    return (d / t if t > 0 else np.zeros_like(d)), t
+
+
+class ArmPanel:
+    """One card of the page, for the arm ``page.arm``."""
+
+    def __init__(self, page: "ConsolePage", target_obj: Any, target: np.ndarray | None) -> None:
+        self.page = page
+        self.target_obj = target_obj  # the IK target sphere (a scene object: anyone moves it)
+        self.target = target
+        self.ik_q: np.ndarray | None = None
+        self._ik_task: asyncio.Task | None = None
+        self._syncing = False
+        self.synced = False  # the sliders took the owner's joints once: from then on they are hers to move
+
+    @property
+    def arm(self) -> Any:
+        return self.page.arm
+
+    def build(self) -> None:
+        e = self.arm.entry
+        with ui.card().classes("w-full"):
+            self.title = ui.label("").classes("text-subtitle1")
+            self.sliders = []
+            for i, name in enumerate(e.joint_names):
+                lo = math.degrees(e.lower[i]) if i < len(e.lower) else -180.0
+                hi = math.degrees(e.upper[i]) if i < len(e.upper) else 180.0
+                with ui.row().classes("w-full items-center no-wrap"):
+                    ui.label(f"J{i + 1}").classes("w-8")
+                    s = ui.slider(min=round(lo, 1), max=round(hi, 1), step=0.5, value=0.0,
+                                  on_change=self._slider_moved).props(f'label aria-label="J{i + 1} ({name}) degrees"').classes("w-full")
+                    self.sliders.append(s)
+            with ui.row().classes("w-full items-center no-wrap"):
+                ui.label("Speed").classes("w-16")
+                self.speed = ui.slider(min=0.05, max=1.0, step=0.05, value=0.5).props('label aria-label="Speed scale"').classes("w-full")
+            with ui.row():
+                stop = ui.button("Stop", color="negative", on_click=lambda: self.page.call(f"stop {self.arm.id}", self.arm.stop))
+                reset = ui.button("Reset", color="warning", on_click=self._reset)
+            with ui.row().classes("items-center"):
+                ui.label("IK target")
+                self.target_label = ui.label("")
+                self.step = ui.select(list(NUDGE_STEPS), value="1 cm").props('aria-label="Nudge step" dense')
+            nudges = []
+            with ui.row():
+                for axis, name in enumerate("xyz"):
+                    for sign, txt in ((-1, "−"), (1, "+")):
+                        nudges.append(ui.button(f"{name}{txt}", on_click=lambda _, a=axis, s=sign: self._nudge(a, s)).props(
+                            f'dense aria-label="{name} {"plus" if sign > 0 else "minus"}"'))
+            self.ik_label = ui.label("IK: move the target")
+            apply = ui.button("Apply IK", on_click=self._apply_ik)
+        self.controls = [*self.sliders, self.speed, stop, reset, apply, *nudges]
+
+    # ------------------------------------------------------------------ actions
+
+    def _slider_moved(self) -> None:
+        if self._syncing or self.arm is None or not self.arm.can_command:
+            return
+        q = np.radians([s.value for s in self.sliders])
+        asyncio.ensure_future(self.page.call(f"joints {np.round(np.degrees(q), 1).tolist()} deg", self.arm.move_joints, q,
+                                             wait=False, speed_scale=float(self.speed.value)))
+
+    async def _reset(self) -> None:
+        if await self.page.call(f"reset {self.arm.id}", self.arm.reset, confirm=False) is not self.page.FAILED:
+            self.synced = False
+
+    def _nudge(self, axis: int, sign: int) -> None:
+        if self.target is None:
+            p = self.arm.flange
+            if p is None:
+                self.page.say("no target yet: the arm has sent no flange pose")
+                return
+            self.target = np.asarray(p.position, dtype=float)
+        self.target = self.target.copy()
+        self.target[axis] += sign * NUDGE_STEPS[self.step.value]
+        if self.target_obj is not None:
+            self.target_obj.set_pose(self.target)
+        self.ik_q = None
+        self.ik_label.text = "IK: solving..."
+        if self._ik_task is None or self._ik_task.done():
+            self._ik_task = asyncio.ensure_future(self._solve())
+
+    async def _solve(self) -> None:
+        """Solve for the newest target until the answer is for the target as it stands (nudges during a solve
+        are not queued: the next solve takes the latest)."""
+        while True:
+            goal = self.target.copy()
+            try:
+                q, why = await run.io_bound(self.arm.ik, goal), ""
+            except FabricUserError as exc:
+                q, why = None, exc.reason
+            if not np.array_equal(goal, self.target):
+                continue
+            if q is None:
+                self.ik_label.text = f"IK: unreachable: {why}"
+                return
+            self.ik_q = np.asarray(q)
+            js = self.arm.joints
+            speeds = ""
+            if js is not None and self.arm.entry.max_speed:
+                v, t = synchronised_speeds(js, self.ik_q, np.asarray(self.arm.entry.max_speed) * float(self.speed.value))
+                speeds = f" · speeds {np.round(np.degrees(v), 1).tolist()} deg/s ({t:.2f} s)"
+            self.ik_label.text = f"IK: {np.round(np.degrees(self.ik_q), 1).tolist()} deg{speeds}"
+            return
+
+    async def _apply_ik(self) -> None:
+        if self.ik_q is None:
+            self.page.say("Apply IK: no IK solution for the target yet")
+            return
+        q = self.ik_q
+        if await self.page.call(f"apply IK {np.round(np.degrees(q), 1).tolist()} deg", self.arm.move_joints, q,
+                                wait=False, speed_scale=float(self.speed.value)) is not self.page.FAILED:
+            self._set_sliders(q)
+
+    def _set_sliders(self, q: np.ndarray) -> None:
+        self._syncing = True
+        try:
+            for s, v in zip(self.sliders, q):
+                s.value = round(math.degrees(float(v)), 1)
+        finally:
+            self._syncing = False
+
+    # ------------------------------------------------------------------ refresh
+
+    def refresh(self) -> None:
+        arm = self.arm
+        mine = arm.can_command
+        rec = arm.record
+        who = "you" if mine and rec is not None else (rec.owner or "nobody") if rec is not None else "?"
+        self.title.text = f"arm {arm.id} ({arm.type}) · owner: {who}" + ("" if mine else " · controls disabled")
+        for c in self.controls:
+            c.set_enabled(mine)
+        js = arm.joints
+        if js is not None and (not mine or not self.synced):
+            self._set_sliders(js)  # the sliders follow the robot until you own it: a first change moves one joint
+            self.synced = mine
+        moved = self.target_obj.pose if self.target_obj is not None else None
+        if moved is not None:  # a scene object: whoever moved it last, this page included
+            self.target = np.asarray(moved.position, dtype=float)
+        elif self.target is None and arm.flange is not None:
+            self.target = np.asarray(arm.flange.position, dtype=float)
+        if self.target is not None:
+            self.target_label.text = "({:.3f}, {:.3f}, {:.3f}) m".format(*self.target)

@@ -1,0 +1,147 @@
+"""The base panel of a page: arrow keys to drive (a deadman the page refreshes), Stop, Build map, the goal
+clicked on the view, Hybrid A* or OMPL, Plan, Follow, the distance to the goal."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from nicegui import run, ui
+from nicegui.events import GenericEventArguments, MouseEventArguments
+
+from fabric import keys
+from user_peer.console.drive import Driver
+from user_peer.errors import FabricUserError
+
+if TYPE_CHECKING:
+    from user_peer.console.page import ConsolePage
+
+__all__ = ["BasePanel", "PLANNERS"]
+
+PLANNERS = {"Hybrid A*": "hybrid_astar", "OMPL": "ompl"}
+
+
+class BasePanel:
+    """One card of the page, for the base ``page.base``; its keys come from the page's listener."""
+
+    def __init__(self, page: "ConsolePage", goal_obj: Any) -> None:
+        self.page = page
+        self.goal_obj = goal_obj  # the goal pointer (a scene object)
+        self.driver = Driver()
+        self._send_lock = asyncio.Lock()
+        self.goal: tuple[float, float, float] | None = None
+        self.path: Any = None
+        self.grid: Any = None  # the map her last Build map returned
+
+    @property
+    def base(self) -> Any:
+        return self.page.base
+
+    def build(self) -> None:
+        with ui.card().classes("w-full"):
+            self.title = ui.label("").classes("text-subtitle1")
+            ui.label("Hold an arrow key to drive · 1-3 speed · space stops").classes("text-caption")
+            self.state = ui.label("").classes("rf-base-state")  # bench console reads its data-pose-wall-ms
+            with ui.row().classes("items-center"):
+                stop = ui.button("Stop", color="negative", on_click=self._stop).props('aria-label="Stop base"')
+                build = ui.button("Build map", on_click=self._build_map)
+                self.planner = ui.radio(list(PLANNERS), value="Hybrid A*").props("inline")
+                plan = ui.button("Plan", on_click=self._plan)
+                follow = ui.button("Follow", on_click=self._follow)
+            self.goal_label = ui.label("goal: click on the map")
+        self.controls = [stop, build, plan, follow]
+
+    # ------------------------------------------------------------------ driving
+
+    async def key(self, e: GenericEventArguments) -> None:
+        if not isinstance(e.args, dict):
+            return
+        if self.driver.key(str(e.args.get("key", "")), bool(e.args.get("down"))):
+            await self.send_twist()
+
+    async def let_go(self) -> None:
+        """The page lost focus or its connection: a held key's release may never come."""
+        if self.driver.stop():
+            await self.send_twist()
+
+    async def send_twist(self) -> None:
+        v, w = self.driver.twist()
+        async with self._send_lock:
+            try:
+                await run.io_bound(self.base.twist, v, w)
+            except FabricUserError as exc:
+                self.driver.stop()
+                self.page.say(f"drive {self.base.id}: {self.page.why(exc)}")
+
+    async def keep_driving(self) -> None:
+        """Every ``REFRESH_S`` while a key is held: the twist again (the sim's twist is a deadman)."""
+        if self.driver.driving and not self._send_lock.locked():
+            await self.send_twist()
+
+    async def _stop(self) -> None:
+        self.driver.stop()
+        await self.page.call(f"stop {self.base.id}", self.base.stop, confirm=False)
+
+    # ------------------------------------------------------------------ navigation
+
+    async def _build_map(self) -> None:
+        b = self.base
+        if await self.page.call("start mapping", b.start_mapping) is self.page.FAILED:
+            return
+        grid = await self.page.call("build map", b.build_map)
+        if grid is not self.page.FAILED:
+            self.grid = grid
+            self.page.say(f"build map: {grid.cells.shape[1]} x {grid.cells.shape[0]} cells at {grid.resolution:.2f} m")
+
+    def clicked(self, e: MouseEventArguments) -> None:
+        """A click on the view: the goal, facing away from the base."""
+        x, y = self.page.frame.world(e.image_x, e.image_y)
+        xy = self.base.xy_theta
+        yaw = math.atan2(y - xy[1], x - xy[0]) if xy else 0.0
+        self.goal = (x, y, yaw)
+        if self.goal_obj is not None:
+            self.goal_obj.set_pose((x, y, 0.0), yaw=yaw)
+        self.page.say(f"goal at ({x:.2f}, {y:.2f})")
+
+    async def _plan(self) -> None:
+        if self.goal is None:
+            self.page.say("Plan: click on the map to place the goal first")
+            return
+        planner = PLANNERS[self.planner.value]
+        # on her own map: a student's Build map makes {user}.map (the class's map is the staff's)
+        path = await self.page.call(f"plan ({planner})", self.base.plan_to, *self.goal, planner=planner,
+                                    map_name=keys.user_map("map", self.page.world.user))
+        if path is not self.page.FAILED:
+            self.path = path
+            length = float(np.sum(np.hypot(np.diff(path.x), np.diff(path.y)))) if len(path) > 1 else 0.0
+            self.page.say(f"plan ({planner}): {len(path)} poses, {length:.2f} m")
+
+    async def _follow(self) -> None:
+        if self.path is None:
+            self.page.say("Follow: plan a path first")
+            return
+        await self.page.call(f"follow {self.base.id}", self.base.follow, self.path, wait=False)
+
+    # ------------------------------------------------------------------ refresh
+
+    def refresh(self) -> None:
+        b = self.base
+        mine = b.can_command
+        rec = b.record
+        who = "you" if mine and rec is not None else (rec.owner or "nobody") if rec is not None else "?"
+        self.title.text = f"base {b.id} ({b.type}) · owner: {who}" + ("" if mine else " · controls disabled")
+        for c in self.controls:
+            c.set_enabled(mine)
+        xy, pose = b.xy_theta, b.pose
+        text = f"pose ({xy[0]:+.2f}, {xy[1]:+.2f}, {math.degrees(xy[2]):+.0f}°)" if xy else "pose -"
+        if pose is not None:
+            text += f" · v {math.hypot(pose.linear[0], pose.linear[1]):.2f} m/s"
+            stamp = str(pose.header.wall_ns // 1_000_000)
+            if self.state.props.get("data-pose-wall-ms") != stamp:  # the page's own lag: Date.now() against it
+                self.state.props(f"data-pose-wall-ms={stamp}")
+        v, om = self.driver.twist()
+        self.state.text = text + f" · speed {self.driver.level} · command v {v:+.2f} w {om:+.2f}"
+        if self.goal is not None and xy is not None:
+            self.goal_label.text = f"goal ({self.goal[0]:.2f}, {self.goal[1]:.2f}) · distance {math.hypot(self.goal[0] - xy[0], self.goal[1] - xy[1]):.2f} m"
