@@ -132,8 +132,10 @@ def svg(
             pts = " ".join(f"{_f(a)},{_f(b)}" for a, b in (frame.px(float(x), float(y)) for x, y in path))
             out.append(f'<polyline points="{pts}" fill="none" stroke="#2f9e44" stroke-width="2"/>')
     if scan is not None and len(scan):
+        # one path of 2-pixel squares, not a shape per ray: a 240-ray scan is ~3 kB a redraw, one element to draw
         pix = [frame.px(float(x), float(y)) for x, y in scan]
-        out.append("".join(f'<rect x="{_f(a - 1)}" y="{_f(b - 1)}" width="2" height="2" fill="#f03e3e"/>' for a, b in pix))
+        d = "".join(f"M{_f(a - 1)} {_f(b - 1)}h2v2h-2z" for a, b in pix)
+        out.append(f'<path d="{d}" fill="#f03e3e"/>')
     if goal is not None:
         gx, gy = frame.px(goal[0], goal[1])
         tip = frame.px(goal[0] + 0.4 * math.cos(goal[2]), goal[1] + 0.4 * math.sin(goal[2]))
