@@ -67,6 +67,9 @@ def check_invariants(s: st.OwnState) -> None:
 @example([("join", "c", 0.0), ("leave", "c", 0.0), ("tick", 1.0), ("join", "a", 3.0), ("join", "a", 3.0),
           ("join", "a", 3.0), ("request", "a", "arm", False, 0.0), ("request", "c", "arm", False, 0.0),
           ("tick", 1.0), ("request", "c", "arm", True, 0.0)])  # asked while away: her rank outlived her grace
+@example([("request", "c", "arm", False, 0.0), ("join", "a", 2.0), ("join", "a", 3.0), ("join", "a", 3.0),
+          ("request", "a", "arm", False, 0.0), ("request", "c", "arm", True, 1.0), ("join", "a", 1.0),
+          ("tick", 1.0)])  # one tick: a's lease ends, the arm passes to c, c's tokenless grace ends too
 def test_invariants_over_random_sequences(seq):
     s = st.initial(OBJECTS, lease_s=LEASE, grace_s=GRACE)
     now = 0.0
