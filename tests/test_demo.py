@@ -32,6 +32,7 @@ def test_demo_runs_both_scenarios_and_writes_its_files(tmp_path):
     assert (tmp_path / "demo.rrd").stat().st_size > 100_000
     with open(tmp_path / "demo.mcap", "rb") as f:
         topics = {ch.topic for ch in make_reader(f).get_summary().channels.values()}
-    for leaf in ("robot/arm1/joints", "robot/arm1/ik", "robot/base1/scan", "robot/base1/path", "map/map"):
+    # Test B plans on the map bob built: his own, map/bob.map (a student never rebuilds the class map)
+    for leaf in ("robot/arm1/joints", "robot/arm1/ik", "robot/base1/scan", "robot/base1/path", "map/bob.map"):
         assert f"rf/demo/{leaf}" in topics, sorted(topics)
     assert any(t.startswith("rf/demo/object/target/pose/by/") for t in topics), sorted(topics)  # the writer in the key
