@@ -55,19 +55,22 @@ def event_line(ev: Any, trusted: bool) -> str:
     return f"trusted · {text}" if trusted else f"unverified (display only) · {text}"
 
 
-def _first_handles(world: Any, user: str) -> tuple[list, dict[str, Any]]:
-    """The world's robots, and handles for the arm and the base a page shows first: hers if she owns one (a
-    reload), else the first of each kind."""
+def _first_handles(world: Any, user: str) -> tuple[list, dict[str, Any], tuple]:
+    """The world's robots, handles for the arm and the base a page shows first (hers if she owns one, after a
+    reload; else the first of each kind) and the view's layout: all of it waits on the network or reads the
+    scene file, so off the pages' event loop."""
     from user_peer import services
 
-    entries = services.robot_entries(world.info())
+    info = world.info()
+    layout = state.scene_layout(info)
+    entries = services.robot_entries(info)
     handles = {}
     for kind in ("arm", "mobile"):
         mine = [e for e in entries if e.kind == kind and (rec := world.ownership.record(e.id)) is not None and rec.owner == user]
         first = mine or [e for e in entries if e.kind == kind]
         if first:
             handles[first[0].id] = world.robot(first[0].id)
-    return entries, handles
+    return entries, handles, layout
 
 
 class ConsolePage:
@@ -124,7 +127,7 @@ class ConsolePage:
             self.login_btn.enable()
             return
         try:
-            entries, handles = await run.io_bound(_first_handles, world, name)
+            entries, handles, (self.frame, self.boxes) = await run.io_bound(_first_handles, world, name)
         except FabricUserError as exc:  # logged in, but the world did not answer
             self.console.logins.leave(name)
             self.login_msg.text = f"Could not join world {self.console.world}: {exc.reason}"
@@ -155,7 +158,6 @@ class ConsolePage:
     def _main(self) -> None:
         w = self.world
         info = w.info()
-        self.frame, self.boxes = state.scene_layout(info)
         self.arm = next((r for r in self.handles.values() if r.kind == "arm"), None)
         self.base = next((r for r in self.handles.values() if r.kind == "mobile"), None)
         self.selected = (self.arm or self.base).id if self.handles else None

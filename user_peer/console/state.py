@@ -6,6 +6,7 @@ network or blocks, so the page's refresh timer may call it five times a second.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass
@@ -55,22 +56,29 @@ def robot_line(world, rid: str, kind: str) -> RobotLine:
     return RobotLine(rid, kind or "robot", rec.owner, rec.state, tuple(rec.queue), place, rec.owner == world.user)
 
 
-def scene_layout(info) -> tuple[Frame, list[tuple[float, float, float, float, float]]]:
-    """The view's frame and the scene's static boxes (walls, shelves) from the scene file when this install
-    has the scene (the sim extra); else a frame around the robots' spawn poses and no boxes."""
-    boxes: list[tuple[float, float, float, float, float]] = []
+@functools.lru_cache(maxsize=8)
+def scene_boxes(scene: str) -> tuple[tuple[float, float, float, float, float], ...]:
+    """The scene's static boxes (walls, shelves) as (cx, cy, half x, half y, yaw), from the scene file when this
+    install has it (the sim extra); none otherwise. Read once per scene: loading the MJCF takes a while."""
+    boxes = []
     try:
         import robots
         from user_peer.scene_geometry import static_boxes
 
-        for b in static_boxes(robots.scene(info.scene).mjcf_path):
+        for b in static_boxes(robots.scene(scene).mjcf_path):
             if b.half_size[2] < 0.01:  # the floor
                 continue
             x, y, z, w = (float(v) for v in b.quat_xyzw)
             yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
             boxes.append((float(b.center[0]), float(b.center[1]), float(b.half_size[0]), float(b.half_size[1]), yaw))
     except Exception as exc:  # no mujoco (a student's install), or a scene this install does not have
-        log.info("no static geometry for scene %r: %s", info.scene, exc)
+        log.info("no static geometry for scene %r: %s", scene, exc)
+    return tuple(boxes)
+
+
+def scene_layout(info) -> tuple[Frame, list[tuple[float, float, float, float, float]]]:
+    """The view's frame and the scene's static boxes; without boxes, a frame around the robots' spawn poses."""
+    boxes = list(scene_boxes(info.scene))
     pts = [(r.pose[0], r.pose[1]) for r in info.robots]
     for cx, cy, hx, hy, _ in boxes:
         pts += [(cx - hx, cy - hy), (cx + hx, cy + hy)]
