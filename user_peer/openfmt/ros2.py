@@ -33,7 +33,7 @@ from user_peer.openfmt.foxglove import msg_time_ns
 from user_peer.openfmt.frames import WORLD, FrameTracker, key_owner, yaw_quat_xyzw
 from user_peer.openfmt.ros2_msgdefs import definition
 
-__all__ = ["Ros2Writer", "ros_topic", "TF_TOPIC"]
+__all__ = ["Ros2Writer", "ros2_message", "ros_topic", "TF_TOPIC"]
 
 TF_TOPIC = "/tf"
 _BAD = re.compile(r"[^A-Za-z0-9_/]")
@@ -65,6 +65,51 @@ def grid_data(cells: np.ndarray) -> list[int]:
     """Fabric cells (0..100, 255 unknown) as ROS occupancy values (0..100, -1 unknown), row-major."""
     a = np.asarray(cells, dtype=np.int16).ravel()
     return np.where(a == 255, -1, a).astype(np.int8).tolist()
+
+
+def ros2_message(key: str, msg: Any, stamp_ns: int) -> tuple[str, dict] | None:
+    """(ROS 2 type name, the message as a dict of its fields) for fabric ``msg`` on ``key``, stamped
+    ``stamp_ns``; None for a message ROS 2 has no place for. The one conversion of the MCAP export and the
+    live bridge (:mod:`user_peer.ros2`), so that both give the same frames, stamps and values."""
+    t = stamp_ns
+    owner = key_owner(key)
+    rid = owner[1] if owner else WORLD
+    if isinstance(msg, JointState):
+        return ("sensor_msgs/msg/JointState",
+                {"header": _header(t, rid), "name": list(msg.names), "position": [float(v) for v in msg.q],
+                 "velocity": [float(v) for v in msg.dq], "effort": []})
+    if isinstance(msg, Scan):
+        n = int(msg.ranges_mm.shape[0])
+        frame = f"{rid}/{'sonar' if key.endswith('/sonar') else 'lidar'}"
+        return ("sensor_msgs/msg/LaserScan",
+                {"header": _header(t, frame), "angle_min": float(msg.angle_min),
+                 "angle_max": float(msg.angle_min + msg.angle_increment * max(n - 1, 0)),
+                 "angle_increment": float(msg.angle_increment), "time_increment": 0.0, "scan_time": 0.0,
+                 "range_min": 0.0, "range_max": float(msg.range_max), "ranges": [float(r) for r in msg.ranges],
+                 "intensities": []})
+    if isinstance(msg, OccupancyGrid):
+        h, w = msg.cells.shape
+        ox, oy, oth = (float(v) for v in msg.origin)
+        return ("nav_msgs/msg/OccupancyGrid",
+                {"header": _header(t, WORLD),
+                 "info": {"map_load_time": _time(t), "resolution": float(msg.resolution), "width": int(w), "height": int(h),
+                          "origin": _pose((ox, oy, 0.0), yaw_quat_xyzw(oth))},
+                 "data": grid_data(msg.cells)})
+    if isinstance(msg, Path):
+        frame = msg.frame or WORLD
+        poses = [
+            {"header": _header(t, frame), "pose": _pose((float(x), float(y), 0.0), yaw_quat_xyzw(float(th)))}
+            for x, y, th in zip(msg.x, msg.y, msg.theta)
+        ]
+        return "nav_msgs/msg/Path", {"header": _header(t, frame), "poses": poses}
+    if isinstance(msg, Pose):
+        q = msg.quaternion
+        return ("geometry_msgs/msg/PoseStamped",
+                {"header": _header(t, msg.frame or WORLD), "pose": _pose(msg.position, (q[1], q[2], q[3], q[0]))})
+    plain = plain_view(msg) if hasattr(type(msg), "SPEC") else None
+    if plain is None or not all(_finite(v) for v in _leaves(plain)):
+        return None
+    return "std_msgs/msg/String", {"data": json.dumps(plain)}
 
 
 class Ros2Writer:
@@ -110,57 +155,11 @@ class Ros2Writer:
             ]
             self._tf_pub = max(self._tf_pub, pub)  # /tf's publish times never go back (it merges every robot's keys)
             self._put(TF_TOPIC, "tf2_msgs/msg/TFMessage", {"transforms": tfs}, log_time_ns, self._tf_pub)
-        owner = key_owner(key)
-        rid = owner[1] if owner else WORLD
-        if isinstance(msg, JointState):
-            self._put(
-                topic, "sensor_msgs/msg/JointState",
-                {"header": _header(t, rid), "name": list(msg.names), "position": [float(v) for v in msg.q],
-                 "velocity": [float(v) for v in msg.dq], "effort": []},
-                log_time_ns, pub,
-            )
-        elif isinstance(msg, Scan):
-            n = int(msg.ranges_mm.shape[0])
-            frame = f"{rid}/{'sonar' if key.endswith('/sonar') else 'lidar'}"
-            self._put(
-                topic, "sensor_msgs/msg/LaserScan",
-                {"header": _header(t, frame), "angle_min": float(msg.angle_min),
-                 "angle_max": float(msg.angle_min + msg.angle_increment * max(n - 1, 0)),
-                 "angle_increment": float(msg.angle_increment), "time_increment": 0.0, "scan_time": 0.0,
-                 "range_min": 0.0, "range_max": float(msg.range_max), "ranges": [float(r) for r in msg.ranges], "intensities": []},
-                log_time_ns, pub,
-            )
-        elif isinstance(msg, OccupancyGrid):
-            h, w = msg.cells.shape
-            ox, oy, oth = (float(v) for v in msg.origin)
-            self._put(
-                topic, "nav_msgs/msg/OccupancyGrid",
-                {"header": _header(t, WORLD),
-                 "info": {"map_load_time": _time(t), "resolution": float(msg.resolution), "width": int(w), "height": int(h),
-                          "origin": _pose((ox, oy, 0.0), yaw_quat_xyzw(oth))},
-                 "data": grid_data(msg.cells)},
-                log_time_ns, pub,
-            )
-        elif isinstance(msg, Path):
-            frame = msg.frame or WORLD
-            poses = [
-                {"header": _header(t, frame), "pose": _pose((float(x), float(y), 0.0), yaw_quat_xyzw(float(th)))}
-                for x, y, th in zip(msg.x, msg.y, msg.theta)
-            ]
-            self._put(topic, "nav_msgs/msg/Path", {"header": _header(t, frame), "poses": poses}, log_time_ns, pub)
-        elif isinstance(msg, Pose):
-            q = msg.quaternion
-            self._put(
-                topic, "geometry_msgs/msg/PoseStamped",
-                {"header": _header(t, msg.frame or WORLD), "pose": _pose(msg.position, (q[1], q[2], q[3], q[0]))},
-                log_time_ns, pub,
-            )
-        else:
-            plain = plain_view(msg) if hasattr(type(msg), "SPEC") else None
-            if plain is None or not all(_finite(v) for v in _leaves(plain)):
-                self.skipped += 1
-                return
-            self._put(topic, "std_msgs/msg/String", {"data": json.dumps(plain)}, log_time_ns, pub)
+        converted = ros2_message(key, msg, t)
+        if converted is None:
+            self.skipped += 1
+            return
+        self._put(topic, converted[0], converted[1], log_time_ns, pub)
 
     def close(self) -> None:
         if self._closed:
