@@ -91,6 +91,8 @@ BENCHMARKS: tuple[Benchmark, ...] = (
               full=("--runs", "5"), quick=("--runs", "1"), needs="netns"),
     Benchmark("console", "console", "N browser pages on one console server, each driving its base: view lag in the page, key to motion, server CPU",
               full=("--pages", "1,10,20", "--seconds", "30"), quick=("--pages", "2", "--seconds", "5")),
+    Benchmark("paper", "paper", "the paper's data-usage tables side by side: zenoh and MQTT at 10-600 Hz, payload and wire bytes, MB/min",
+              full=("--rates", "10,20,50,100,200,600"), quick=("--quick",)),
 )
 
 
