@@ -1,0 +1,95 @@
+"""A plain ROS 2 node for tests/user_peer/test_ros2_bridge.py: it imports nothing from robofabric.
+
+It listens to what ``robofabric ros2`` publishes and writes one JSON line per message to ``--out``
+(topic, stamp in ns, the values the test compares); while the file ``--control/drive`` exists it
+publishes ``geometry_msgs/Twist`` on ``/BASE/cmd_vel`` at 10 Hz with the "v omega" the file holds, as a
+teleop node would, and stops publishing when the file is removed. Runs until SIGTERM.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+import rclpy
+from geometry_msgs.msg import Twist
+from nav_msgs.msg import OccupancyGrid, Odometry
+from rcl_interfaces.msg import Log
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState, LaserScan
+
+
+def stamp_ns(header) -> int:
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--control", required=True)
+    ap.add_argument("--arm", default="arm1")
+    ap.add_argument("--base", default="base1")
+    args = ap.parse_args()
+    out = open(args.out, "a", buffering=1)
+
+    def write(**fields) -> None:
+        out.write(json.dumps(fields) + "\n")
+
+    rclpy.init()
+    node = Node("plain_ros2_test_node")
+    reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    node.create_subscription(
+        JointState, f"/{args.arm}/joint_states",
+        lambda m: write(topic="joint_states", stamp=stamp_ns(m.header), frame=m.header.frame_id, name=list(m.name),
+                        position=list(m.position)), reliable)
+    node.create_subscription(
+        LaserScan, f"/{args.base}/scan",
+        lambda m: write(topic="scan", stamp=stamp_ns(m.header), frame=m.header.frame_id, angle_min=m.angle_min,
+                        angle_increment=m.angle_increment, range_max=m.range_max, ranges=[float(r) for r in m.ranges]),
+        qos_profile_sensor_data)
+    node.create_subscription(
+        Odometry, f"/{args.base}/odom",
+        lambda m: write(topic="odom", stamp=stamp_ns(m.header), frame=m.header.frame_id, child=m.child_frame_id,
+                        position=[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z],
+                        v=m.twist.twist.linear.x), reliable)
+    node.create_subscription(
+        Clock, "/clock", lambda m: write(topic="clock", ns=int(m.clock.sec) * 1_000_000_000 + int(m.clock.nanosec)),
+        QoSProfile(depth=50, reliability=ReliabilityPolicy.BEST_EFFORT))
+    node.create_subscription(
+        OccupancyGrid, "/map",
+        lambda m: write(topic="map", frame=m.header.frame_id, resolution=m.info.resolution, width=m.info.width,
+                        height=m.info.height, data=[int(v) for v in m.data]), latched)
+    node.create_subscription(
+        Log, "/rosout", lambda m: write(topic="rosout", name=m.name, level=int(m.level), msg=m.msg), reliable)
+    cmd = node.create_publisher(Twist, f"/{args.base}/cmd_vel", 10)
+    drive_file = os.path.join(args.control, "drive")
+
+    def tick() -> None:
+        try:
+            with open(drive_file) as f:
+                v, w = (float(x) for x in f.read().split())
+        except (FileNotFoundError, ValueError):
+            return
+        t = Twist()
+        t.linear.x, t.angular.z = v, w
+        cmd.publish(t)
+        write(topic="cmd_vel_sent", v=v, w=w)
+
+    node.create_timer(0.1, tick)
+    write(topic="ready")
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
+        pass
+    finally:
+        out.close()
+        sys.exit(0)
+
+
+if __name__ == "__main__":
+    main()

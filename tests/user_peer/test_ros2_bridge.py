@@ -1,0 +1,205 @@
+"""``robofabric ros2`` against a real ROS 2 node: a plain rclpy process (tests/user_peer/ros2_node.py, importing
+nothing from robofabric) gets joint_states, scan, odom, map and clock equal to robofabric's own streams, drives a
+base through cmd_vel (a stream that stops, stops the base), and without ownership moves nothing and is told why
+on /rosout. Real router, real sim (the ``live`` fixture), real bridge and node processes on a ROS domain of
+their own, discovery kept on this host."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rclpy", reason="the ros2 extra (ROS 2 Kilted's wheels) is not installed")
+
+import user_peer  # noqa: E402
+from fabric import keys  # noqa: E402
+from fabric.interfaces import OccupancyGrid  # noqa: E402
+from fabric.testing import robofabric_cmd, wait_until  # noqa: E402
+
+pytestmark = pytest.mark.slow
+
+NODE = Path(__file__).with_name("ros2_node.py")
+
+
+def ros_env(domain: int) -> dict[str, str]:
+    """A ROS domain of the test's own, discovery on this host only (other engineers' tests never hear it)."""
+    return {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "ROS_LOCALHOST_ONLY": "1"}
+
+
+def domain_for(salt: int) -> int:
+    return 1 + (os.getpid() * 7 + salt) % 100
+
+
+def lines(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    out = []
+    for line in path.read_text().splitlines():
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            pass  # a line being written
+    return out
+
+
+def of(path: Path, topic: str) -> list[dict]:
+    return [r for r in lines(path) if r["topic"] == topic]
+
+
+class Observed:
+    """robofabric's own streams, as a user script sees them: messages by their wall stamp (the ROS stamp)."""
+
+    def __init__(self, world) -> None:
+        self.lock = threading.Lock()
+        self.joints: dict[int, list[float]] = {}
+        self.scans: dict[int, np.ndarray] = {}
+        self.poses: dict[int, tuple[list[float], float]] = {}  # stamp -> (position, speed)
+        self.sim_stamps: set[int] = set()
+        self.subs = [world.on("robot/arm1/joints", self._joints), world.on("robot/base1/scan", self._scan),
+                     world.on("robot/base1/pose", self._pose)]
+
+    def _joints(self, key, msg) -> None:
+        with self.lock:
+            self.joints[msg.header.wall_ns] = [float(v) for v in msg.q]
+            self.sim_stamps.add(int(round(msg.header.stamp * 1e9)))
+
+    def _scan(self, key, msg) -> None:
+        with self.lock:
+            self.scans[msg.header.wall_ns] = np.asarray(msg.ranges, dtype=float)
+            self.sim_stamps.add(int(round(msg.header.stamp * 1e9)))
+
+    def _pose(self, key, msg) -> None:
+        with self.lock:
+            self.poses[msg.header.wall_ns] = ([float(v) for v in msg.position], float(np.linalg.norm(msg.linear[:2])))
+            self.sim_stamps.add(int(round(msg.header.stamp * 1e9)))
+
+    def latest_pose(self) -> tuple[list[float], float]:
+        with self.lock:
+            return self.poses[max(self.poses)]
+
+    def close(self) -> None:
+        for s in self.subs:
+            s.close()
+
+
+@pytest.fixture
+def observer(live):
+    world, port, _ = live
+    w = user_peer.connect(world=world, connect=f"tcp/127.0.0.1:{port}", user="observer")
+    obs = Observed(w)
+    try:
+        yield w, obs
+    finally:
+        obs.close()
+        w.close()
+
+
+def start_bridge(procs, world: str, port: int, domain: int, *extra: str):
+    bridge = procs.start(robofabric_cmd("ros2", "--world", world, "--connect", f"tcp/127.0.0.1:{port}", *extra),
+                         name="bridge", env=ros_env(domain))
+    wait_until(lambda: "bridging world" in procs.output(bridge) or bridge.poll() is not None, timeout=60,
+               what="the bridge up", seen=lambda: procs.output(bridge)[-2000:])
+    assert bridge.poll() is None, procs.output(bridge)[-2000:]
+    return bridge
+
+
+def start_node(procs, tmp_path: Path, domain: int):
+    out, ctl = tmp_path / "ros.jsonl", tmp_path / "ctl"
+    ctl.mkdir()
+    node = procs.start([sys.executable, str(NODE), "--out", str(out), "--control", str(ctl)], name="rosnode",
+                       env=ros_env(domain))
+    wait_until(lambda: of(out, "ready") or node.poll() is not None, timeout=30, what="the ROS node up",
+               seen=lambda: procs.output(node)[-2000:])
+    assert node.poll() is None, procs.output(node)[-2000:]
+    return node, out, ctl
+
+
+def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns(live, observer, procs, tmp_path):
+    world, port, _ = live
+    w, obs = observer
+    # a map, as a compute peer would publish it (latched): the bridge gives it to late ROS joiners
+    cells = np.full((4, 6), 255, dtype=np.uint8)
+    cells[1, 2], cells[2, 3] = 0, 100
+    w.fabric.publish(keys.map_key(world, "map"), OccupancyGrid(0.05, np.array([-1.0, -2.0, 0.0]), cells))
+    domain = domain_for(1)
+    bridge = start_bridge(procs, world, port, domain, "--user", "rosbridge", "--request", "base1")
+    assert "rosbridge owns base1" in procs.output(bridge)
+    node, out, ctl = start_node(procs, tmp_path, domain)
+    seen = lambda: {t: len(of(out, t)) for t in ("joint_states", "scan", "odom", "clock", "map")}  # noqa: E731
+    wait_until(lambda: all(n >= 5 for t, n in seen().items() if t != "map") and seen()["map"] >= 1, timeout=60,
+               what="joint_states, scan, odom, clock and map on ROS 2",
+               seen=lambda: (seen(), procs.output(bridge)[-1500:], procs.output(node)[-1500:]))
+
+    # the values are robofabric's: matched by stamp (the sender's wall clock, as in export --to ros2)
+    with obs.lock:
+        joints, scans, poses, sim_stamps = dict(obs.joints), dict(obs.scans), dict(obs.poses), set(obs.sim_stamps)
+    js = [r for r in of(out, "joint_states") if r["stamp"] in joints]
+    assert len(js) >= 3, (len(of(out, "joint_states")), len(joints))
+    for r in js:
+        assert r["frame"] == "arm1" and r["position"] == joints[r["stamp"]]  # float64 both ways: exact
+    sc = [r for r in of(out, "scan") if r["stamp"] in scans]
+    assert len(sc) >= 3, (len(of(out, "scan")), len(scans))
+    for r in sc:
+        assert r["frame"] == "base1/lidar" and len(r["ranges"]) == len(scans[r["stamp"]])
+        np.testing.assert_allclose(r["ranges"], scans[r["stamp"]], rtol=1e-6)  # float32 in LaserScan
+    od = [r for r in of(out, "odom") if r["stamp"] in poses]
+    assert len(od) >= 3
+    for r in od:
+        assert (r["frame"], r["child"]) == ("world", "base1") and r["position"] == poses[r["stamp"]][0]
+    clocks = [r["ns"] for r in of(out, "clock")]
+    assert clocks == sorted(clocks) and set(clocks) & sim_stamps, (clocks[:5], sorted(sim_stamps)[:5])
+    grid = of(out, "map")[-1]
+    assert (grid["frame"], grid["width"], grid["height"]) == ("world", 6, 4) and math.isclose(grid["resolution"], 0.05, rel_tol=1e-6)
+    assert grid["data"][1 * 6 + 2] == 0 and grid["data"][2 * 6 + 3] == 100 and grid["data"].count(-1) == 22
+
+    # drive: the node's cmd_vel stream moves the base; when the stream stops, the base stops (the sim's deadman)
+    start, _ = obs.latest_pose()
+    (ctl / "drive").write_text("0.4 0.0")
+    wait_until(lambda: math.dist(obs.latest_pose()[0][:2], start[:2]) > 0.15, timeout=20, what="base1 driven by cmd_vel",
+               seen=lambda: (obs.latest_pose(), procs.output(bridge)[-1500:]))
+    (ctl / "drive").unlink()
+    stopped_at = time.monotonic()
+    wait_until(lambda: obs.latest_pose()[1] < 0.01, timeout=10, what="base1 stopped after cmd_vel stopped",
+               seen=obs.latest_pose)
+    braked_in = time.monotonic() - stopped_at
+    there, _ = obs.latest_pose()
+    moved_after = 0.0
+    # still for a second more: nothing repeats the last twist (hold=False)
+    t_end = time.monotonic() + 1.0
+    while time.monotonic() < t_end:
+        moved_after = max(moved_after, math.dist(obs.latest_pose()[0][:2], there[:2]))
+        time.sleep(0.05)
+    assert moved_after < 0.01, moved_after
+    print(f"base1 stopped {braked_in:.2f} s after the last cmd_vel stream tick was written")
+
+
+def test_without_ownership_cmd_vel_moves_nothing_and_the_refusal_is_on_rosout(live, observer, procs, tmp_path):
+    world, port, _ = live
+    w, obs = observer
+    wait_until(lambda: obs.poses, timeout=20, what="base1's pose")
+    wait_until(lambda: obs.latest_pose()[1] < 0.01, timeout=10, what="base1 still", seen=obs.latest_pose)
+    domain = domain_for(2)
+    bridge = start_bridge(procs, world, port, domain, "--user", "rosguest")  # owns nothing
+    node, out, ctl = start_node(procs, tmp_path, domain)
+    start, _ = obs.latest_pose()
+    (ctl / "drive").write_text("0.4 0.0")
+    refusals = lambda: [r for r in of(out, "rosout") if "refused cmd_vel for base1" in r["msg"]]  # noqa: E731
+    wait_until(lambda: refusals() and len(of(out, "cmd_vel_sent")) >= 10, timeout=30,
+               what="the refusal on /rosout after 10 cmd_vel",
+               seen=lambda: (of(out, "rosout")[-3:], len(of(out, "cmd_vel_sent")), procs.output(bridge)[-1500:]))
+    moved = math.dist(obs.latest_pose()[0][:2], start[:2])
+    (ctl / "drive").unlink()
+    r = refusals()[0]
+    assert r["name"].startswith("robofabric_rosguest") and r["level"] >= 30  # WARN
+    assert "rosguest does not own base1" in r["msg"] and "--request base1" in r["msg"]
+    assert moved < 0.005, moved
+    procs.close()  # SIGTERM: the bridge says what it did before it ends
+    assert "refused" in procs.output(bridge) and " 0 commands forwarded" in procs.output(bridge), procs.output(bridge)[-1500:]

@@ -1,0 +1,68 @@
+"""``robofabric ros2``: the live ROS 2 bridge of one world, as one login (docs/ros2.md)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Optional
+
+import typer
+
+from fabric.cli_common import Connect, Profile, UserError, World, ZenohConfig
+
+__all__ = ["ros2", "register", "MISSING_RCLPY"]
+
+MISSING_RCLPY = ("robofabric ros2 needs rclpy: pip install 'robofabric[ros2]' (ROS 2 Kilted's wheels), "
+                 "or source a ROS 2 install (e.g. . /opt/ros/kilted/setup.bash) before running it")
+
+
+def ros2(
+    namespace: Annotated[str, typer.Option("--namespace", help="A ROS namespace put before every topic but /clock (e.g. class1).")] = "",
+    request: Annotated[Optional[list[str]], typer.Option("--request", help="A robot to ask to own at start (repeatable); cmd_vel and joint_command act only on robots this login owns.")] = None,
+    user_id: Annotated[Optional[str], typer.Option("--user", "-u", help="The login the bridge acts as (default: $USER); ownership is by user id.")] = None,
+    world: World = None,
+    connect: Connect = None,
+    profile: Profile = None,
+    zenoh_config: ZenohConfig = None,
+) -> None:
+    """Bridge a world to ROS 2: every robot's joint_states, scan, odom, path, the map and /clock go out as ROS 2
+    topics; cmd_vel and joint_command come in for the robots this login owns (refusals on /rosout). The ROS
+    domain is ROS_DOMAIN_ID's, as for any ROS 2 node. Ctrl-C stops it (its robots are released)."""
+    import logging
+    import os
+
+    try:
+        import rclpy  # noqa: F401
+        from user_peer.ros2.bridge import Ros2Bridge, spin
+    except ImportError:
+        raise UserError(MISSING_RCLPY) from None
+    from user_peer.cli import _open_world
+    from user_peer.errors import FabricUserError
+
+    log = logging.getLogger("robofabric.ros2")
+    w = _open_world(world, connect, profile, zenoh_config, user_id)
+    try:
+        for rid in request or ():
+            try:
+                w.robot(rid).request()
+                print(f"{w.user} owns {rid}", flush=True)
+            except FabricUserError as exc:  # the bridge goes on: its cmd_vel for that robot will be refused, and told
+                log.warning("could not own %s: %s", rid, exc.reason)
+                print(f"{w.user} does not own {rid}: {exc.reason}", flush=True)
+        rclpy.init()
+        node = rclpy.create_node("robofabric_" + "".join(c if c.isalnum() else "_" for c in w.user))
+        bridge = Ros2Bridge(w, node, namespace=namespace)
+        print(f"bridging world {w.name!r} as {w.user!r} to ROS 2 domain {os.environ.get('ROS_DOMAIN_ID', '0')}"
+              f"{' under /' + namespace.strip('/') if namespace.strip('/') else ''}", flush=True)
+        try:
+            spin(bridge)
+        finally:
+            bridge.close()
+            print(bridge.summary(), flush=True)
+            node.destroy_node()
+            if rclpy.ok():
+                rclpy.shutdown()
+    finally:
+        w.close()
+
+
+def register(app: typer.Typer) -> None:
+    app.command("ros2")(ros2)
