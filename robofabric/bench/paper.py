@@ -134,7 +134,8 @@ def _child_pub(a: argparse.Namespace) -> None:
 
     payload_bytes = 0
     n = max(1, round(a.rate * a.duration))
-    print("go", flush=True)
+    print("ready", flush=True)
+    sys.stdin.readline()  # "go": the orchestrator has taken its first count, so every message falls inside
     t0 = time.perf_counter()
     for i in range(n):
         due = t0 + i / a.rate
@@ -247,10 +248,12 @@ def run_one(transport: str, broker_port: int, rate: float, payload: str, duratio
         pub = subprocess.Popen(me + ["pub", *common, "--endpoint", endpoint(proxy.port)], stdin=subprocess.PIPE,
                                stdout=subprocess.PIPE, text=True)
         assert pub.stdout is not None and pub.stdin is not None
-        if pub.stdout.readline().strip() != "go":
+        if pub.stdout.readline().strip() != "ready":
             raise RuntimeError(f"the {transport} publisher did not start")
-        t0 = time.monotonic()
         marks = [proxy.count()]
+        pub.stdin.write("go\n")
+        pub.stdin.flush()
+        t0 = time.monotonic()
         for k in range(1, int(duration / window + 1e-9) + 1):
             time.sleep(max(0.0, t0 + k * window - time.monotonic()))
             marks.append(proxy.count())

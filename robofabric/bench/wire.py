@@ -29,7 +29,7 @@ HEADER_BYTES = 14 + 20 + 32
 MSS_ETHERNET = 1448
 """Payload of a full TCP segment on a 1500-byte MTU link with timestamps (1500 - 20 - 32)."""
 
-_TCPI_BYTES_RECEIVED = 120  # struct tcp_info offsets (linux/tcp.h, kernel >= 4.6)
+_TCPI_BYTES_RECEIVED = 128  # struct tcp_info offsets (linux/tcp.h, kernel >= 4.6; 8-aligned u64s)
 _TCPI_SEGS_IN = 140
 
 

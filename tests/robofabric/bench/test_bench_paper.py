@@ -1,0 +1,115 @@
+"""``robofabric bench paper``: its counting proxy agrees with the kernel, its payloads are what it says, and a
+quick run through a real router and a real mosquitto gives one consistent document (figures go to docs)."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import socket
+import subprocess
+import sys
+import threading
+
+import pytest
+
+from fabric.testing import wait_until
+from robofabric.bench.paper import PAYLOADS, count_numbers, make_payload
+from robofabric.bench.paper_figures import PAPER
+from robofabric.bench.wire import HEADER_BYTES, CountingProxy, ethernet_segments
+
+
+def _sink() -> tuple[socket.socket, list[int], threading.Thread]:
+    """A loopback server that reads one connection to its end, counting what it got."""
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    got = [0]
+
+    def run() -> None:
+        conn, _ = srv.accept()
+        with conn:
+            while data := conn.recv(65536):
+                got[0] += len(data)
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    return srv, got, t
+
+
+def test_the_proxy_counts_what_the_kernel_received_and_forwards_it_all():
+    srv, got, t = _sink()
+    with CountingProxy(srv.getsockname()) as proxy:
+        client = socket.create_connection(("127.0.0.1", proxy.port))
+        sent = 0
+        for i in range(50):
+            chunk = bytes([i]) * (100 + 37 * i)
+            client.sendall(chunk)
+            sent += len(chunk)
+        wait_until(lambda: proxy.count().stream_bytes == sent, timeout=10, what="the proxy counted every byte",
+                   seen=lambda: proxy.count())
+        (conn,) = proxy.connections()
+        assert CountingProxy.kernel_bytes_received(conn) == sent  # the kernel's own count agrees
+        c = proxy.count()
+        assert 1 <= c.segments <= 50 + 3  # at most one per send plus the handshake's ACK
+        assert c.wire_bytes == sent + HEADER_BYTES * c.segments
+        client.close()
+        wait_until(lambda: got[0] == sent, timeout=10, what="the server got every byte", seen=lambda: got[0])
+        wait_until(lambda: not proxy.connections(), timeout=10, what="the proxy closed its side")
+        assert proxy.count().segments >= c.segments  # a closed connection's segments stay counted
+    t.join(timeout=5)
+    srv.close()
+
+
+def test_ethernet_segments():
+    assert ethernet_segments(1) == 1 and ethernet_segments(1448) == 1 and ethernet_segments(1449) == 2
+    assert ethernet_segments(4133) == 3
+
+
+def test_the_paper_payload_is_415_numbers_of_135_rays_and_the_others_decode():
+    from fabric.codec import decode
+    from fabric.interfaces import JointState, Scan
+
+    m = make_payload("paper-135", 7)
+    doc = json.loads(m)
+    assert count_numbers(m) == 415 and doc["n"] == len(doc["rays"]) == 135 and doc["seq"] == 7
+    scan = decode(make_payload("rf-240", 3))
+    assert isinstance(scan, Scan) and scan.ranges_mm.shape == (240,)
+    joints = decode(make_payload("arm-joints", 3))
+    assert isinstance(joints, JointState) and joints.q.shape == (6,)
+
+
+def test_the_paper_figures_name_their_source_and_match_tables_2_and_3():
+    rows = PAPER["data_usage"]
+    assert [r["rate_hz"] for r in rows] == [10, 20, 50, 100, 200, 600]
+    by_rate = {r["rate_hz"]: r for r in rows}
+    assert by_rate[20]["mb_per_min_avg"] == 10.0590 and by_rate[20]["source"] == "Table 3, 20 Hz column"
+    assert by_rate[600]["mb_per_min_avg"] == 139.28 and by_rate[600]["source"].startswith("Table 2")
+    for r in rows:
+        assert r["bytes_per_msg_implied"] == round(r["mb_per_min_avg"] * 1e6 / (r["rate_hz"] * 60))
+
+
+@pytest.mark.slow
+def test_a_quick_run_gives_one_consistent_document():
+    assert shutil.which("mosquitto") or shutil.which("/usr/sbin/mosquitto"), "mosquitto is required (.ci/run installs it)"
+    out = subprocess.run(
+        [sys.executable, "-m", "robofabric", "bench", "paper", "--quick", "--json", "--rates", "50", "--duration", "1"],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    doc = json.loads(out.stdout)
+    assert set(doc) >= {"data_usage", "paper", "machine"} and "resources" not in doc and "multi_user" not in doc
+    rows = doc["data_usage"]
+    assert [(r["transport"], r["payload"]) for r in rows] == [(t, p) for t in ("zenoh", "mqtt") for p in PAYLOADS]
+    for r in rows:
+        assert set(r) >= {"transport", "rate_hz", "payload", "payload_bytes_per_msg", "wire_bytes_per_msg", "mb_per_min_max",
+                          "mb_per_min_avg", "mb_per_min_min", "gb_per_hour"}
+        assert r["rate_hz"] == 50 and r["sent"] == 50
+        assert 0 < r["received"] <= r["sent"]
+        assert r["received_bytes_per_msg"] == pytest.approx(r["payload_bytes_per_msg"], rel=0.05)  # what arrived is what was sent
+        assert r["stream_bytes_per_msg"] >= r["payload_bytes_per_msg"]  # the protocol adds, never removes
+        assert r["segments_per_msg"] > 0 and r["wire_bytes_per_msg"] > r["stream_bytes_per_msg"]  # headers on the wire
+        assert r["windows"] == 2 and r["window_s"] == 0.5
+        assert r["mb_per_min_min"] <= r["mb_per_min_avg"] <= r["mb_per_min_max"]
+        assert r["gb_per_hour"] == pytest.approx(r["mb_per_min_avg"] * 60 / 1e3)
+        assert not any(math.isnan(r[k]) for k in ("mb_per_min_max", "mb_per_min_avg", "mb_per_min_min"))
