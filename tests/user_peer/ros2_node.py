@@ -3,7 +3,8 @@
 It listens to what ``robofabric ros2`` publishes and writes one JSON line per message to ``--out``
 (topic, stamp in ns, the values the test compares); while the file ``--control/drive`` exists it
 publishes ``geometry_msgs/Twist`` on ``/BASE/cmd_vel`` at 10 Hz with the "v omega" the file holds, as a
-teleop node would, and stops publishing when the file is removed. Runs until SIGTERM.
+teleop node would, and stops publishing when the file is removed; while ``--control/joints`` exists (JSON
+``[names, positions]``) it publishes that ``sensor_msgs/JointState`` on ``/ARM/joint_command``. Runs until SIGTERM.
 """
 
 from __future__ import annotations
@@ -67,9 +68,19 @@ def main() -> None:
     node.create_subscription(
         Log, "/rosout", lambda m: write(topic="rosout", name=m.name, level=int(m.level), msg=m.msg), reliable)
     cmd = node.create_publisher(Twist, f"/{args.base}/cmd_vel", 10)
+    joint_cmd = node.create_publisher(JointState, f"/{args.arm}/joint_command", 10)
     drive_file = os.path.join(args.control, "drive")
+    joints_file = os.path.join(args.control, "joints")
 
     def tick() -> None:
+        try:
+            with open(joints_file) as f:
+                names, positions = json.load(f)
+            j = JointState()
+            j.name, j.position = list(names), [float(v) for v in positions]
+            joint_cmd.publish(j)
+        except (FileNotFoundError, ValueError):
+            pass
         try:
             with open(drive_file) as f:
                 v, w = (float(x) for x in f.read().split())

@@ -130,8 +130,8 @@ def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns
     cells[1, 2], cells[2, 3] = 0, 100
     w.fabric.publish(keys.map_key(world, "map"), OccupancyGrid(0.05, np.array([-1.0, -2.0, 0.0]), cells))
     domain = domain_for(1)
-    bridge = start_bridge(procs, world, port, domain, "--user", "rosbridge", "--request", "base1")
-    assert "rosbridge owns base1" in procs.output(bridge)
+    bridge = start_bridge(procs, world, port, domain, "--user", "rosbridge", "--request", "base1", "--request", "arm1")
+    assert "rosbridge owns base1" in procs.output(bridge) and "rosbridge owns arm1" in procs.output(bridge)
     node, out, ctl = start_node(procs, tmp_path, domain)
     seen = lambda: {t: len(of(out, t)) for t in ("joint_states", "scan", "odom", "clock", "map")}  # noqa: E731
     wait_until(lambda: all(n >= 5 for t, n in seen().items() if t != "map") and seen()["map"] >= 1, timeout=60,
@@ -179,6 +179,20 @@ def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns
         time.sleep(0.05)
     assert moved_after < 0.01, moved_after
     print(f"base1 stopped {braked_in:.2f} s after the last cmd_vel stream tick was written")
+
+    # joint_command: positions by name, in another order than the arm's, move the arm there
+    names = list(w.robot("arm1").entry.joint_names)
+    target = [0.3, -0.2, 0.1, 0.0, 0.25, 0.0][: len(names)]
+    (ctl / "joints").write_text(json.dumps([names[::-1], target[::-1]]))
+
+    def at_target() -> bool:
+        with obs.lock:
+            q = obs.joints[max(obs.joints)]
+        return bool(np.allclose(q, target, atol=2e-3))
+
+    wait_until(at_target, timeout=30, what="arm1 at the joint_command's target",
+               seen=lambda: (obs.joints[max(obs.joints)], procs.output(bridge)[-1500:]))
+    (ctl / "joints").unlink()
 
 
 def test_without_ownership_cmd_vel_moves_nothing_and_the_refusal_is_on_rosout(live, observer, procs, tmp_path):
