@@ -93,6 +93,8 @@ BENCHMARKS: tuple[Benchmark, ...] = (
               full=("--pages", "1,10,20", "--seconds", "30"), quick=("--pages", "2", "--seconds", "5")),
     Benchmark("paper", "paper", "the paper's data-usage tables side by side: zenoh and MQTT at 10-600 Hz, payload and wire bytes, MB/min",
               full=("--rates", "10,20,50,100,200,600"), quick=("--quick",)),
+    Benchmark("ros2", "ros2", "N mobile robots through the ROS 2 bridge to an rclpy node: added latency, loss, bridge CPU",
+              full=("--robots", "8", "--seconds", "20"), quick=("--robots", "1", "--seconds", "6")),
 )
 
 

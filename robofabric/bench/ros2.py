@@ -1,0 +1,161 @@
+"""``robofabric bench ros2``: N mobile robots at full rate through the ROS 2 bridge, against zenoh's own delivery.
+
+A router, one sim of N bases (warehouse, LIDAR each), the bridge (``robofabric ros2``) and a plain rclpy node
+(:mod:`robofabric.bench.ros2_listen`) in processes of their own, on a ROS domain of the run's own with discovery
+kept on this machine. This process subscribes to the same streams over zenoh. Each message that reached both is
+matched by its stamp (the sender's wall clock, which the bridge keeps): the bridge's added latency is its ROS
+arrival minus its zenoh arrival (one clock, one machine). Lost: messages zenoh delivered within the window (its
+first ``SETTLE_S`` seconds left out, for discovery) that the ROS node never got. CPU: the bridge's, over the window.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import threading
+import time
+import uuid
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
+
+from robofabric.bench.common import append, end_process, machine, pct, proc_cpu_s
+
+__all__ = ["command", "run_one", "header", "row"]
+
+STREAMS = {"scan": "scan", "pose": "odom", "joints": "joint_states"}
+"""Fabric stream -> the bridge's topic leaf (a base's pose is its odometry)."""
+SETTLE_S = 3.0
+"""Seconds at the window's start left out of the loss count: the ROS node's discovery of the bridge's topics."""
+TAIL_S = 1.0
+"""Seconds at the window's end left out: messages still in flight when the node stops listening."""
+
+
+def ros_env(domain: int) -> dict[str, str]:
+    return {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "ROS_LOCALHOST_ONLY": "1"}
+
+
+class _Zenoh:
+    """Every robot's scan, pose and joints as zenoh delivers them: (robot, stream, stamp) -> arrival (ns)."""
+
+    def __init__(self, fab: Any, world: str) -> None:
+        from fabric import keys
+
+        self.got: dict[tuple[str, str, int], int] = {}
+        self._lock = threading.Lock()
+        # undecoded: the arrival is noted before this process spends anything on the sample (the reference must
+        # not be later than the bridge's own delivery for work of ours)
+        self.subs = [fab.subscribe_raw(keys.robot_stream_all(world, s), self._on) for s in STREAMS]
+
+    def _on(self, sample: Any) -> None:
+        from fabric.codec import DecodeError, decode
+
+        now = time.time_ns()
+        parts = str(sample.key_expr).split("/")
+        try:
+            msg = decode(sample.payload.to_bytes())
+        except DecodeError:
+            return
+        with self._lock:
+            self.got[(parts[3], parts[4], int(msg.header.wall_ns))] = now
+
+    def window(self, t0_ns: int, t1_ns: int) -> dict[tuple[str, str, int], int]:
+        with self._lock:
+            return {k: v for k, v in self.got.items() if t0_ns <= v <= t1_ns}
+
+
+def run_one(robots: int, seconds: float, tmp: Path) -> dict[str, Any]:
+    """One world of ``robots`` bases bridged to ROS 2 for ``seconds``; the row's figures."""
+    from fabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
+    from robofabric.bench.shards import spots
+
+    world = f"ros{uuid.uuid4().hex[:6]}"
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    domain = 1 + (os.getpid() * 13) % 100
+    env = ros_env(domain)
+    ids = [f"base{i}" for i in range(robots)]
+    out_file = tmp / "ros.txt"
+    with ProcessGroup(tmp) as procs:
+        router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
+        wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
+        specs = [x for s in spots(robots) for x in ("--robot", s)]
+        sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *specs, "--world", world,
+                                         "--connect", ep), name="sim")
+        wait_until(lambda: "Ctrl-C to stop" in procs.output(sim), timeout=180, what="the sim", seen=lambda: procs.output(sim)[-1500:])
+        bridge = procs.start(robofabric_cmd("ros2", "--world", world, "--connect", ep, "--user", "bench"), name="bridge", env=env)
+        wait_until(lambda: "bridging world" in procs.output(bridge) or bridge.poll() is not None, timeout=60,
+                   what="the bridge", seen=lambda: procs.output(bridge)[-1500:])
+        with client(world, port, kind="tool", peer_id="probe") as fab:
+            z = _Zenoh(fab, world)
+            listen = procs.start([sys.executable, "-m", "robofabric.bench.ros2_listen", "--robots", ",".join(ids),
+                                  "--seconds", str(seconds), "--out", str(out_file)], name="listen", env=env)
+            wait_until(lambda: "ready" in procs.output(listen) or listen.poll() is not None, timeout=60,
+                       what="the ROS node", seen=lambda: procs.output(listen)[-1500:])
+            t0, cpu0 = time.time_ns(), proc_cpu_s(bridge.pid)
+            listen.wait(timeout=seconds + 60)
+            t1, cpu1 = time.time_ns(), proc_cpu_s(bridge.pid)
+            zen = z.window(t0 + int(SETTLE_S * 1e9), t1 - int(TAIL_S * 1e9))
+        summary_out = procs.output(bridge)
+        end_process(bridge)
+        end_process(sim)
+        end_process(router)
+        bridge_log = procs.output(bridge)[len(summary_out):]
+    leaf_to_stream = {v: k for k, v in STREAMS.items()}
+    ros: dict[tuple[str, str, int], int] = {}
+    for line in out_file.read_text().splitlines():
+        topic, stamp, arrival = line.split()
+        _, rid, leaf = topic.split("/")
+        ros[(rid, leaf_to_stream[leaf], int(stamp))] = int(arrival)
+    out: dict[str, Any] = {"robots": robots, "seconds": seconds, "cores": (cpu1 - cpu0) / ((t1 - t0) / 1e9),
+                           "summary": next((ln for ln in bridge_log.splitlines() if "messages published" in ln), "")}
+    for stream in STREAMS:
+        keys_ = [k for k in zen if k[1] == stream]
+        added = [(ros[k] - zen[k]) / 1e6 for k in keys_ if k in ros]
+        out[stream] = {"zenoh": len(keys_), "lost": sum(1 for k in keys_ if k not in ros),
+                       "p50": pct(added, 50), "p99": pct(added, 99), "rate": len(keys_) / max(1e-9, (t1 - t0) / 1e9 - SETTLE_S - TAIL_S)}
+    return out
+
+
+def header() -> list[str]:
+    return ["| robots | stream | msg/s (all robots) | added latency p50 / p99 (ms) | lost / delivered by zenoh | bridge CPU (cores) |",
+            "|---|---|---|---|---|---|"]
+
+
+def row(r: dict[str, Any]) -> list[str]:
+    return [f"| {r['robots']} | {s} | {r[s]['rate']:.0f} | {r[s]['p50']:.2f} / {r[s]['p99']:.2f} | "
+            f"{r[s]['lost']} / {r[s]['zenoh']} | {r['cores']:.2f} |" for s in STREAMS]
+
+
+def command(
+    robots: Annotated[str, typer.Option("--robots", help="Comma-separated robot counts (mobile bases with LIDAR).")] = "8",
+    seconds: Annotated[float, typer.Option("--seconds", help="Measured window per count.")] = 20.0,
+    out: Annotated[Optional[Path], typer.Option("--out", help="Append the markdown table to this file.")] = None,
+) -> None:
+    """N mobile robots at full rate through the ROS 2 bridge (robofabric ros2) to a plain rclpy node: the latency
+    the bridge adds to zenoh's delivery (p50, p99), the messages lost on the way, and the bridge's CPU."""
+    try:
+        import rclpy  # noqa: F401
+    except ImportError:
+        from fabric.cli_common import UserError
+        from user_peer.ros2.cli import MISSING_RCLPY
+
+        raise UserError(MISSING_RCLPY) from None
+    counts = [int(x) for x in robots.split(",") if x.strip()]
+    if not counts or min(counts) < 1 or seconds <= SETTLE_S + TAIL_S:
+        raise typer.BadParameter(f"--robots needs counts >= 1 and --seconds more than {SETTLE_S + TAIL_S:g}")
+    lines = [f"`robofabric bench ros2 --robots {robots} --seconds {seconds:g}` on {machine()}", "", *header()]
+    summaries = []
+    with tempfile.TemporaryDirectory(prefix="rf-ros2-") as tmp:
+        for n in counts:
+            d = Path(tmp) / f"n{n}"
+            d.mkdir()
+            r = run_one(n, seconds, d)
+            lines.extend(row(r))
+            summaries.append(f"{n} robots: bridge said: {r['summary']}")
+            print("\n".join(row(r)), flush=True)
+    text = "\n".join([*lines, "", *summaries]) + "\n"
+    print(text)
+    append(out, text)
