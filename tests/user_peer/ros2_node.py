@@ -51,7 +51,7 @@ def main() -> None:
     node.create_subscription(
         LaserScan, f"/{args.base}/scan",
         lambda m: write(topic="scan", stamp=stamp_ns(m.header), frame=m.header.frame_id, angle_min=m.angle_min,
-                        angle_increment=m.angle_increment, range_max=m.range_max, ranges=[float(r) for r in m.ranges]),
+                        angle_increment=m.angle_increment, range_min=m.range_min, range_max=m.range_max, ranges=[float(r) for r in m.ranges]),
         qos_profile_sensor_data)
     node.create_subscription(
         Odometry, f"/{args.base}/odom",

@@ -20,10 +20,10 @@ def needs_rclpy() -> None:
     pytest.importorskip("rclpy", reason="the ros2 extra (ROS 2 Kilted's wheels) is not installed")
 
 
-def ros(key: str, msg) -> object:
+def ros(key: str, msg, **kw) -> object:
     from user_peer.ros2.fill import fill, message_class
 
-    type_name, fields = ros2_message(key, msg, STAMP)
+    type_name, fields = ros2_message(key, msg, STAMP, **kw)
     return fill(message_class(type_name)(), fields)
 
 
@@ -34,9 +34,10 @@ def test_the_exports_conversion_fills_live_messages_with_the_same_frames_stamps_
     assert (js.header.stamp.sec, js.header.stamp.nanosec) == (1_764_000_000, 123_456_789)
     assert list(js.name) == ["j1", "j2"] and list(js.position) == [0.25, -1.5] and list(js.velocity) == [0.0, 0.1]
     scan = Scan(-1.0, 0.5, 8.0, np.array([1000, 2500, 8000], dtype=np.uint16))
-    ls = ros("rf/w/robot/base1/scan", scan)
+    ls = ros("rf/w/robot/base1/scan", scan, range_min=0.05)
     assert ls.header.frame_id == "base1/lidar" and ls.range_max == 8.0 and ls.angle_max == pytest.approx(0.0)
-    assert [float(r) for r in ls.ranges] == [1.0, 2.5, 8.0]
+    assert ls.range_min == pytest.approx(0.05)  # the sensor's, which the caller reads from the world description
+    assert [float(r) for r in ls.ranges] == [1.0, 2.5, np.inf]  # no echo (range_max in the fabric): +inf, REP 117
     path = ros("rf/w/robot/base1/path", Path(np.array([0.0, 1.0]), np.array([0.0, 2.0]), np.array([0.0, np.pi / 2])))
     assert len(path.poses) == 2 and path.poses[1].header.frame_id == "world"
     assert (path.poses[1].pose.position.x, path.poses[1].pose.position.y) == (1.0, 2.0)

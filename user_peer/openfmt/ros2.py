@@ -12,6 +12,10 @@ poses and arm FK   ``/tf``                     ``tf2_msgs/msg/TFMessage``
 anything else      ``/KEY``                    ``std_msgs/msg/String`` holding the JSON
 =================  ==========================  ======================================
 
+A LaserScan's ``range_min`` is its sensor's in the world description (0.0 in a recording without one), and a
+missing echo (the fabric's ``range_max``) is +inf, as REP 117 says. The sonar ring's ranges are measured from
+the ring's rim but its frame ``ID/sonar`` is at the ring's centre: not yet converted.
+
 Topic names are the fabric keys with a leading slash; characters ROS names do not allow become
 ``_``. Written with ``mcap-ros2-support``'s writer.
 """
@@ -27,13 +31,13 @@ from typing import Any
 import numpy as np
 from mcap_ros2.writer import Writer as Ros2McapWriter
 
-from fabric.interfaces import JointState, OccupancyGrid, Path, plain_view, Pose, Scan
+from fabric.interfaces import JointState, OccupancyGrid, Path, plain_view, Pose, Scan, WorldInfo
 from user_peer.catalog import RobotCatalog
 from user_peer.openfmt.foxglove import msg_time_ns
 from user_peer.openfmt.frames import WORLD, FrameTracker, key_owner, yaw_quat_xyzw
 from user_peer.openfmt.ros2_msgdefs import definition
 
-__all__ = ["Ros2Writer", "ros2_message", "ros_topic", "TF_TOPIC"]
+__all__ = ["Ros2Writer", "ros2_message", "ros_topic", "scan_ranges", "sensor_range_min", "TF_TOPIC"]
 
 TF_TOPIC = "/tf"
 _BAD = re.compile(r"[^A-Za-z0-9_/]")
@@ -67,10 +71,33 @@ def grid_data(cells: np.ndarray) -> list[int]:
     return np.where(a == 255, -1, a).astype(np.int8).tolist()
 
 
-def ros2_message(key: str, msg: Any, stamp_ns: int) -> tuple[str, dict] | None:
+MISS_TOLERANCE_M = 5e-4
+"""A range within this of ``range_max`` is a missing echo: the sim reads a ray that hit nothing as ``range_max``,
+sent in whole millimetres."""
+
+
+def sensor_range_min(world_info: WorldInfo | None, key: str) -> float:
+    """The ``range_min`` the world description gives the sensor whose scan travels on ``key`` (``.../scan``:
+    the LIDAR, ``.../sonar``: the sonar ring); 0.0 when the description does not say."""
+    owner = key_owner(key)
+    if world_info is None or owner is None or owner[0] != "robot":
+        return 0.0
+    robot = next((r for r in world_info.robots if r.id == owner[1]), None)
+    sensor = None if robot is None else (robot.sonar if key.endswith("/sonar") else robot.lidar)
+    return float(sensor.range_min) if sensor is not None else 0.0
+
+
+def scan_ranges(msg: Scan) -> list[float]:
+    """The ranges of a LaserScan: a missing echo (the fabric's ``range_max``) is +inf, as REP 117 says."""
+    r = np.asarray(msg.ranges, dtype=np.float64)
+    return np.where(r >= float(msg.range_max) - MISS_TOLERANCE_M, np.inf, r).tolist()
+
+
+def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0) -> tuple[str, dict] | None:
     """(ROS 2 type name, the message as a dict of its fields) for fabric ``msg`` on ``key``, stamped
     ``stamp_ns``; None for a message ROS 2 has no place for. The one conversion of the MCAP export and the
-    live bridge (:mod:`user_peer.ros2`), so that both give the same frames, stamps and values."""
+    live bridge (:mod:`user_peer.ros2`), so that both give the same frames, stamps and values. ``range_min``:
+    a scan's sensor's (:func:`sensor_range_min`), which the fabric's Scan does not carry."""
     t = stamp_ns
     owner = key_owner(key)
     rid = owner[1] if owner else WORLD
@@ -85,7 +112,7 @@ def ros2_message(key: str, msg: Any, stamp_ns: int) -> tuple[str, dict] | None:
                 {"header": _header(t, frame), "angle_min": float(msg.angle_min),
                  "angle_max": float(msg.angle_min + msg.angle_increment * max(n - 1, 0)),
                  "angle_increment": float(msg.angle_increment), "time_increment": 0.0, "scan_time": 0.0,
-                 "range_min": 0.0, "range_max": float(msg.range_max), "ranges": [float(r) for r in msg.ranges],
+                 "range_min": float(range_min), "range_max": float(msg.range_max), "ranges": scan_ranges(msg),
                  "intensities": []})
     if isinstance(msg, OccupancyGrid):
         h, w = msg.cells.shape
@@ -155,11 +182,14 @@ class Ros2Writer:
             ]
             self._tf_pub = max(self._tf_pub, pub)  # /tf's publish times never go back (it merges every robot's keys)
             self._put(TF_TOPIC, "tf2_msgs/msg/TFMessage", {"transforms": tfs}, log_time_ns, self._tf_pub)
-        converted = ros2_message(key, msg, t)
+        converted = ros2_message(key, msg, t, range_min=self._range_min(key) if isinstance(msg, Scan) else 0.0)
         if converted is None:
             self.skipped += 1
             return
         self._put(topic, converted[0], converted[1], log_time_ns, pub)
+
+    def _range_min(self, key: str) -> float:
+        return sensor_range_min(self.frames.catalog.world_info, key)
 
     def close(self) -> None:
         if self._closed:

@@ -46,7 +46,7 @@ from fabric import keys
 from user_peer.errors import FabricUserError
 from user_peer.geometry import rotation_xyzw
 from user_peer.openfmt.foxglove import msg_time_ns
-from user_peer.openfmt.ros2 import ros2_message, ros_topic
+from user_peer.openfmt.ros2 import ros2_message, ros_topic, sensor_range_min
 from user_peer.ros2.fill import fill
 from user_peer.world import World
 
@@ -76,6 +76,7 @@ class Ros2Bridge:
         self._inputs: dict[str, Any] = {}  # robot -> its command subscription
         self._kinds: dict[str, str] = {}  # robot -> kind ("arm", "mobile"), from the world description
         self._clock_ns = 0
+        self._described: Any = None  # the last world description (each sensor's range_min), from follow()
         self.published: Counter[str] = Counter()  # topic -> messages published
         self.forwarded: Counter[str] = Counter()  # robot -> commands forwarded
         self.refused: Counter[str] = Counter()  # robot -> commands refused (not owned, rejected)
@@ -86,6 +87,7 @@ class Ros2Bridge:
         self._clock_pub = node.create_publisher(Clock, "/clock", RELIABLE)
         w = world.name
         fab = world.fabric
+        self.follow()  # first: the description's sensors (range_min) are known before the first scan
         self._subs = [
             fab.subscribe(keys.robot_stream_all(w, "joints"), self._on_state),
             fab.subscribe(keys.robot_stream_all(w, "scan"), self._on_state),
@@ -94,7 +96,6 @@ class Ros2Bridge:
             fab.subscribe(f"{keys.world_root(w)}/map/*", self._on_state, history=True),
             fab.subscribe(keys.object_pose_all(w), self._on_state, history=True),
         ]
-        self.follow()
         self._timer = node.create_timer(FOLLOW_PERIOD_S, self._tick)
 
     # ------------------------------------------------------------------ out
@@ -140,11 +141,12 @@ class Ros2Bridge:
             route = self._route(key, msg)
             if route is None:
                 return
-            converted = ros2_message(key, msg, msg_time_ns(msg, time.time_ns()))
+            topic, robot, cls, qos = route
+            range_min = sensor_range_min(self._described, key) if cls is LaserScan else 0.0
+            converted = ros2_message(key, msg, msg_time_ns(msg, time.time_ns()), range_min=range_min)
             if converted is None:
                 self.unconverted += 1
                 return
-            topic, robot, cls, qos = route
             if cls is Odometry:
                 out = self._odometry(robot or "", msg, converted[1])
             else:
@@ -200,7 +202,8 @@ class Ros2Bridge:
     def follow(self) -> None:
         """Give every robot of the world its command topic; drop the topics of robots that left."""
         try:
-            entries = {r.id: r.kind for r in self.world.info().robots}
+            self._described = info = self.world.info()
+            entries = {r.id: r.kind for r in info.robots}
         except FabricUserError as exc:  # no sim now: keep what we have, the world's tokens tell the rest
             log.debug("no world description now: %s", exc)
             return
