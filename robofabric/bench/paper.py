@@ -357,6 +357,7 @@ def command(
     window: Annotated[Optional[float], typer.Option(help="Seconds per MB/min sample (default 1, or 0.5 with --quick).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"data_usage": [...], "paper": {...}, "machine": ...}.')] = False,
     out: Annotated[Optional[Path], typer.Option(help="Append the markdown tables to this file.")] = None,
+    plot: Annotated[Optional[Path], typer.Option(help="Also draw MB/min against rate beside the paper's (SVG/PNG; needs matplotlib).")] = None,
 ) -> None:
     """The paper's data-usage tables side by side: zenoh and MQTT at 10-600 Hz, the paper's 135-ray JSON scan,
     robofabric's 240-ray scan and the arm's joints; payload, stream and wire bytes per message (a counting TCP
@@ -372,8 +373,13 @@ def command(
     if any(r <= 0 for r in rate_list) or duration <= 0 or window <= 0 or window > duration:
         raise UserError("--rates and --duration must be positive, and --window positive and at most --duration")
     rows = run_bench(transport_list, rate_list, payload_list, duration, window)
+    doc = {"machine": machine(), "duration_s": duration, "window_s": window, "data_usage": rows, "paper": PAPER}
+    if plot is not None:
+        from robofabric.bench.paper_plot import plot as draw
+
+        draw(doc, plot)
     if as_json:
-        print(json.dumps({"machine": machine(), "duration_s": duration, "window_s": window, "data_usage": rows, "paper": PAPER}))
+        print(json.dumps(doc))
         return
     table = format_table(rows)
     print(table)

@@ -90,10 +90,11 @@ def test_the_paper_figures_name_their_source_and_match_tables_2_and_3():
 
 
 @pytest.mark.slow
-def test_a_quick_run_gives_one_consistent_document():
+def test_a_quick_run_gives_one_consistent_document(tmp_path):
     assert shutil.which("mosquitto") or shutil.which("/usr/sbin/mosquitto"), "mosquitto is required (.ci/run installs it)"
     out = subprocess.run(
-        [sys.executable, "-m", "robofabric", "bench", "paper", "--quick", "--json", "--rates", "50", "--duration", "1"],
+        [sys.executable, "-m", "robofabric", "bench", "paper", "--quick", "--json", "--rates", "50", "--duration", "1",
+         "--plot", str(tmp_path / "mb.svg")],
         capture_output=True, text=True, timeout=300,
     )
     assert out.returncode == 0, out.stderr[-2000:]
@@ -113,3 +114,5 @@ def test_a_quick_run_gives_one_consistent_document():
         assert r["mb_per_min_min"] <= r["mb_per_min_avg"] <= r["mb_per_min_max"]
         assert r["gb_per_hour"] == pytest.approx(r["mb_per_min_avg"] * 60 / 1e3)
         assert not any(math.isnan(r[k]) for k in ("mb_per_min_max", "mb_per_min_avg", "mb_per_min_min"))
+    svg = (tmp_path / "mb.svg").read_text()
+    assert "zenoh, paper-135" in svg and "mqtt, arm-joints" in svg and "Tables 2-3" in svg
