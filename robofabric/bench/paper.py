@@ -17,7 +17,8 @@ Payloads:
 - ``rf-240``: robofabric's own 240-ray :class:`~fabric.interfaces.Scan` (uint16 millimetres), as the sim sends.
 - ``arm-joints``: the Meca500's :class:`~fabric.interfaces.JointState` (6 names, q, dq, header).
 
-The resources per application (Table 4) and the 5-user test are not measured yet (issue 37).
+``--resources`` adds the paper's Table 4 for robofabric (:mod:`robofabric.bench.paper_resources`); the 5-user
+test is not measured yet (issue 37).
 """
 
 from __future__ import annotations
@@ -336,6 +337,14 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def format_resources(rows: list[dict]) -> str:
+    """Table 4's shape: each application's CPU (% of one core) and RSS, min and max while Test A and B ran."""
+    lines = ["| application | CPU min % | CPU max % | RSS min (MB) | RSS max (MB) | seconds sampled |", "|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['peer']} | {r['cpu_min']:.1f} | {r['cpu_max']:.1f} | {r['rss_min_mb']:.0f} | {r['rss_max_mb']:.0f} | {r['samples']} |")
+    return "\n".join(lines)
+
+
 def _parse_list(text: str, option: str, conv: Callable[[str], object], allowed: tuple | None = None) -> list:
     from fabric.cli_common import UserError
 
@@ -358,6 +367,7 @@ def command(
     as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"data_usage": [...], "paper": {...}, "machine": ...}.')] = False,
     out: Annotated[Optional[Path], typer.Option(help="Append the markdown tables to this file.")] = None,
     plot: Annotated[Optional[Path], typer.Option(help="Also draw MB/min against rate beside the paper's (SVG/PNG; needs matplotlib).")] = None,
+    resources: Annotated[bool, typer.Option("--resources/--no-resources", help="Also Table 4: CPU and RSS of router, sim, compute, viewer, console and the users while Test A and Test B run (about 2 min).")] = False,
 ) -> None:
     """The paper's data-usage tables side by side: zenoh and MQTT at 10-600 Hz, the paper's 135-ray JSON scan,
     robofabric's 240-ray scan and the arm's joints; payload, stream and wire bytes per message (a counting TCP
@@ -374,6 +384,12 @@ def command(
         raise UserError("--rates and --duration must be positive, and --window positive and at most --duration")
     rows = run_bench(transport_list, rate_list, payload_list, duration, window)
     doc = {"machine": machine(), "duration_s": duration, "window_s": window, "data_usage": rows, "paper": PAPER}
+    if resources:
+        from robofabric.bench.paper_resources import measure_resources
+
+        res = measure_resources()
+        doc["resources"] = res["rows"]
+        doc["resources_run"] = {k: v for k, v in res.items() if k != "rows"}
     if plot is not None:
         from robofabric.bench.paper_plot import plot as draw
 
@@ -382,6 +398,8 @@ def command(
         print(json.dumps(doc))
         return
     table = format_table(rows)
+    if "resources" in doc:
+        table += "\n\n" + format_resources(doc["resources"])
     print(table)
     append(out, table)
 

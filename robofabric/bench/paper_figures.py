@@ -11,7 +11,7 @@ Kept as printed, inconsistencies included: Table 3's 10 Hz minimum (5.5 MB) is a
 
 from __future__ import annotations
 
-__all__ = ["PAPER", "paper_rows"]
+__all__ = ["PAPER", "paper_rows", "paper_resources"]
 
 PAPER_SOURCE = ("Unity-MATLAB multi-user robotic simulation framework (the paper in /work/shared/reference), "
                 "Firebase REST API, statistics per minute over a 2-hour trial per rate")
@@ -52,5 +52,25 @@ def paper_rows() -> list[dict]:
     return rows
 
 
-PAPER: dict = {"source": PAPER_SOURCE, "mb": "10^6 bytes", "data_usage": paper_rows()}
+# Table 4: (application, computer) -> (CPU min %, CPU max %, RAM min MB, RAM max MB); its GB taken as 1,000 MB.
+_TABLE4 = {
+    ("Unity Editor-Meca500", "consumer"): (30.1, 35.7, 753.3, 763.1),
+    ("Unity Editor-Reeman", "consumer"): (24.9, 27.1, 539.7, 744.5),
+    ("MATLAB-Meca500", "consumer"): (1.5, 3.8, 1630.0, 1660.0),
+    ("MATLAB-Reeman", "consumer"): (27.9, 37.3, 1711.0, 1751.0),
+    ("Unity Editor-Meca500", "professional"): (27.0, 30.1, 1314.0, 1314.0),
+    ("Unity Editor-Reeman", "professional"): (22.5, 25.6, 1316.0, 1316.0),
+    ("MATLAB-Meca500", "professional"): (1.4, 2.8, 1752.0, 1761.0),
+    ("MATLAB-Reeman", "professional"): (36.9, 43.1, 1814.0, 1837.0),
+}
+
+
+def paper_resources() -> list[dict]:
+    """Table 4 as printed, one row per application and computer (its CPU is presumably a share of the whole machine,
+    16 or 8 cores, as Windows reports it; the paper does not say)."""
+    return [{"source": f"Table 4, {app}, {pc}-grade computer", "application": app, "computer": pc,
+             "cpu_min": a, "cpu_max": b, "rss_min_mb": c, "rss_max_mb": d} for (app, pc), (a, b, c, d) in _TABLE4.items()]
+
+
+PAPER: dict = {"source": PAPER_SOURCE, "mb": "10^6 bytes", "data_usage": paper_rows(), "resources": paper_resources()}
 """The ``paper`` member of ``bench paper --json``."""

@@ -116,3 +116,36 @@ def test_a_quick_run_gives_one_consistent_document(tmp_path):
         assert not any(math.isnan(r[k]) for k in ("mb_per_min_max", "mb_per_min_avg", "mb_per_min_min"))
     svg = (tmp_path / "mb.svg").read_text()
     assert "zenoh, paper-135" in svg and "mqtt, arm-joints" in svg and "Tables 2-3" in svg
+
+
+@pytest.mark.slow
+def test_table_4_samples_every_application_while_both_users_run():
+    """``--resources``: one launch (router, sim, compute, viewer, console, alice's Test A, bob's Test B) that ends
+    by itself once both users finished; every application sampled, min <= max (figures go to docs)."""
+    from robofabric.bench.paper_resources import PEERS, measure_resources
+
+    res = measure_resources(cap_s=400)
+    assert res["up_exit"] == 0, res["up_log_tail"]  # both scenarios succeeded
+    assert [r["peer"] for r in res["rows"]] == list(PEERS)
+    for r in res["rows"]:
+        assert r["samples"] >= 1, r
+        assert 0.0 <= r["cpu_min"] <= r["cpu_max"] and 0.0 < r["rss_min_mb"] <= r["rss_max_mb"], r
+    from fabric.testing import wait_until as wait
+
+    wait(lambda: not any(_name_alive(p) for p in ("scenario", "--save")), timeout=30, what="the launch's peers to end")
+
+
+def _name_alive(word: str) -> bool:
+    """A process of a bench-paper launch (its world is paper + 6 hex digits) whose command line holds ``word``."""
+    import os
+    import re
+
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                cmd = open(f"/proc/{d}/cmdline", "rb").read().decode(errors="replace").split("\0")
+            except OSError:
+                continue
+            if word in cmd and any(re.fullmatch(r"paper[0-9a-f]{6}", c) for c in cmd):
+                return True
+    return False
