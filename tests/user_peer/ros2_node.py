@@ -54,6 +54,11 @@ def main() -> None:
                         angle_increment=m.angle_increment, range_min=m.range_min, range_max=m.range_max, ranges=[float(r) for r in m.ranges]),
         qos_profile_sensor_data)
     node.create_subscription(
+        LaserScan, f"/{args.base}/sonar",
+        lambda m: write(topic="sonar", stamp=stamp_ns(m.header), frame=m.header.frame_id, range_min=m.range_min,
+                        range_max=m.range_max, ranges=[float(r) for r in m.ranges]),
+        qos_profile_sensor_data)
+    node.create_subscription(
         Odometry, f"/{args.base}/odom",
         lambda m: write(topic="odom", stamp=stamp_ns(m.header), frame=m.header.frame_id, child=m.child_frame_id,
                         position=[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z],

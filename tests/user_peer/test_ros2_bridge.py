@@ -61,9 +61,11 @@ class Observed:
         self.lock = threading.Lock()
         self.joints: dict[int, list[float]] = {}
         self.scans: dict[int, np.ndarray] = {}
+        self.sonars: dict[int, np.ndarray] = {}
         self.poses: dict[int, tuple[list[float], float]] = {}  # stamp -> (position, speed)
         self.sim_stamps: set[int] = set()
         self.subs = [world.on("robot/arm1/joints", self._joints), world.on("robot/base1/scan", self._scan),
+                     world.on("robot/base1/sonar", self._sonar),
                      world.on("robot/base1/pose", self._pose)]
 
     def _joints(self, key, msg) -> None:
@@ -75,6 +77,10 @@ class Observed:
         with self.lock:
             self.scans[msg.header.wall_ns] = np.asarray(msg.ranges, dtype=float)
             self.sim_stamps.add(int(round(msg.header.stamp * 1e9)))
+
+    def _sonar(self, key, msg) -> None:
+        with self.lock:
+            self.sonars[msg.header.wall_ns] = np.asarray(msg.ranges, dtype=float)
 
     def _pose(self, key, msg) -> None:
         with self.lock:
@@ -133,7 +139,7 @@ def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns
     bridge = start_bridge(procs, world, port, domain, "--user", "rosbridge", "--request", "base1", "--request", "arm1")
     assert "rosbridge owns base1" in procs.output(bridge) and "rosbridge owns arm1" in procs.output(bridge)
     node, out, ctl = start_node(procs, tmp_path, domain)
-    seen = lambda: {t: len(of(out, t)) for t in ("joint_states", "scan", "odom", "clock", "map")}  # noqa: E731
+    seen = lambda: {t: len(of(out, t)) for t in ("joint_states", "scan", "sonar", "odom", "clock", "map")}  # noqa: E731
     wait_until(lambda: all(n >= 5 for t, n in seen().items() if t != "map") and seen()["map"] >= 1, timeout=60,
                what="joint_states, scan, odom, clock and map on ROS 2",
                seen=lambda: (seen(), procs.output(bridge)[-1500:], procs.output(node)[-1500:]))
@@ -141,6 +147,7 @@ def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns
     # the values are robofabric's: matched by stamp (the sender's wall clock, as in export --to ros2)
     with obs.lock:
         joints, scans, poses, sim_stamps = dict(obs.joints), dict(obs.scans), dict(obs.poses), set(obs.sim_stamps)
+        sonars = dict(obs.sonars)
     js = [r for r in of(out, "joint_states") if r["stamp"] in joints]
     assert len(js) >= 3, (len(of(out, "joint_states")), len(joints))
     for r in js:
@@ -153,6 +160,15 @@ def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns
         mine = scans[r["stamp"]]
         missing = mine >= r["range_max"] - 5e-4  # no echo: robofabric's range_max, ROS's +inf (REP 117)
         np.testing.assert_allclose(r["ranges"], np.where(missing, np.inf, mine), rtol=1e-6)  # float32 in LaserScan
+    # the sonar's ranges, measured from the ring's rim, are given from its centre (the frame base1/sonar is there)
+    radius = next(r.sonar.radius for r in w.info().robots if r.id == "base1")
+    so = [r for r in of(out, "sonar") if r["stamp"] in sonars]
+    assert len(so) >= 3 and radius > 0.1, (len(of(out, "sonar")), len(sonars), radius)
+    for r in so:
+        mine = sonars[r["stamp"]]
+        missing = mine >= r["range_max"] - radius - 5e-4
+        assert r["frame"] == "base1/sonar" and math.isclose(r["range_min"], 0.02 + radius, rel_tol=1e-6)
+        np.testing.assert_allclose(r["ranges"], np.where(missing, np.inf, mine + radius), rtol=1e-6)
     od = [r for r in of(out, "odom") if r["stamp"] in poses]
     assert len(od) >= 3
     for r in od:

@@ -38,6 +38,10 @@ def test_the_exports_conversion_fills_live_messages_with_the_same_frames_stamps_
     assert ls.header.frame_id == "base1/lidar" and ls.range_max == 8.0 and ls.angle_max == pytest.approx(0.0)
     assert ls.range_min == pytest.approx(0.05)  # the sensor's, which the caller reads from the world description
     assert [float(r) for r in ls.ranges] == [1.0, 2.5, np.inf]  # no echo (range_max in the fabric): +inf, REP 117
+    sonar = ros("rf/w/robot/base1/sonar", Scan(0.0, 0.5, 3.0, np.array([400, 3000], dtype=np.uint16)),
+                range_min=0.02, range_offset=0.26)  # measured from a rim of radius 0.26: true from the centre
+    assert sonar.header.frame_id == "base1/sonar" and sonar.range_min == pytest.approx(0.28)
+    assert sonar.range_max == pytest.approx(3.26) and list(sonar.ranges) == pytest.approx([0.66, np.inf])
     path = ros("rf/w/robot/base1/path", Path(np.array([0.0, 1.0]), np.array([0.0, 2.0]), np.array([0.0, np.pi / 2])))
     assert len(path.poses) == 2 and path.poses[1].header.frame_id == "world"
     assert (path.poses[1].pose.position.x, path.poses[1].pose.position.y) == (1.0, 2.0)
@@ -68,3 +72,26 @@ def test_without_rclpy_the_command_says_which_extra_to_install(monkeypatch, caps
     assert main(["ros2", "--world", "w", "--connect", "tcp/127.0.0.1:9"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "robofabric[ros2]" in err[0] and "source a ROS 2 install" in err[0], err
+
+
+def test_the_export_gives_a_sonar_ring_its_ranges_from_the_centre_and_its_sensors_range_min(tmp_path):
+    """``export --to ros2`` of a recording without a world description: the ring's radius comes from the robot's
+    own description (reeman: 0.26 m), so ranges measured from the rim are true in ``base1/sonar`` at its centre."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from user_peer.openfmt.ros2 import Ros2Writer
+
+    h = Header(0.1, STAMP, 1, "sim")
+    with Ros2Writer(tmp_path / "s.mcap") as w:
+        w.write("rf/w/robot/base1/pose", Pose(np.zeros(3), header=h), STAMP)  # base1 is a reeman base
+        w.write("rf/w/robot/base1/sonar", Scan(0.0, 0.5, 3.0, np.array([400, 3000], dtype=np.uint16), header=h), STAMP)
+    factory = DecoderFactory()
+    got = None
+    with open(tmp_path / "s.mcap", "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            if channel.topic.endswith("/sonar"):
+                got = factory.decoder_for(channel.message_encoding, schema)(message.data)
+    assert got is not None and got.header.frame_id == "base1/sonar"
+    assert list(got.ranges) == pytest.approx([0.66, np.inf]) and got.range_max == pytest.approx(3.26)
+    assert got.range_min == pytest.approx(0.26)  # no description recorded: no sensor range_min, only the rim

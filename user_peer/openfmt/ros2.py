@@ -14,7 +14,8 @@ anything else      ``/KEY``                    ``std_msgs/msg/String`` holding t
 
 A LaserScan's ``range_min`` is its sensor's in the world description (0.0 in a recording without one), and a
 missing echo (the fabric's ``range_max``) is +inf, as REP 117 says. The sonar ring's ranges are measured from
-the ring's rim but its frame ``ID/sonar`` is at the ring's centre: not yet converted.
+the ring's rim and its frame ``ID/sonar`` is at the ring's centre: the ring's radius is added to the ranges and
+the limits (from the world description, else the robot's own), so that every range is true in that frame.
 
 Topic names are the fabric keys with a leading slash; characters ROS names do not allow become
 ``_``. Written with ``mcap-ros2-support``'s writer.
@@ -37,7 +38,7 @@ from user_peer.openfmt.foxglove import msg_time_ns
 from user_peer.openfmt.frames import WORLD, FrameTracker, key_owner, yaw_quat_xyzw
 from user_peer.openfmt.ros2_msgdefs import definition
 
-__all__ = ["Ros2Writer", "ros2_message", "ros_topic", "scan_ranges", "sensor_range_min", "TF_TOPIC"]
+__all__ = ["Ros2Writer", "ros2_message", "ros_topic", "scan_ranges", "sensor_range_min", "sonar_radius", "TF_TOPIC"]
 
 TF_TOPIC = "/tf"
 _BAD = re.compile(r"[^A-Za-z0-9_/]")
@@ -87,17 +88,30 @@ def sensor_range_min(world_info: WorldInfo | None, key: str) -> float:
     return float(sensor.range_min) if sensor is not None else 0.0
 
 
-def scan_ranges(msg: Scan) -> list[float]:
-    """The ranges of a LaserScan: a missing echo (the fabric's ``range_max``) is +inf, as REP 117 says."""
+def sonar_radius(world_info: WorldInfo | None, key: str) -> float | None:
+    """The radius of the sonar ring whose ranges travel on ``key`` (``.../sonar``), from the world description;
+    None when it is not a sonar key or the description does not say."""
+    owner = key_owner(key)
+    if world_info is None or owner is None or owner[0] != "robot" or not key.endswith("/sonar"):
+        return None
+    robot = next((r for r in world_info.robots if r.id == owner[1]), None)
+    return float(robot.sonar.radius) if robot is not None and robot.sonar is not None else None
+
+
+def scan_ranges(msg: Scan, offset: float = 0.0) -> list[float]:
+    """The ranges of a LaserScan: a missing echo (the fabric's ``range_max``) is +inf, as REP 117 says; ``offset``
+    added to the others (a sonar's ranges, measured from the ring's rim, made ranges from its centre)."""
     r = np.asarray(msg.ranges, dtype=np.float64)
-    return np.where(r >= float(msg.range_max) - MISS_TOLERANCE_M, np.inf, r).tolist()
+    return np.where(r >= float(msg.range_max) - MISS_TOLERANCE_M, np.inf, r + offset).tolist()
 
 
-def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0) -> tuple[str, dict] | None:
+def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0, range_offset: float = 0.0) -> tuple[str, dict] | None:
     """(ROS 2 type name, the message as a dict of its fields) for fabric ``msg`` on ``key``, stamped
     ``stamp_ns``; None for a message ROS 2 has no place for. The one conversion of the MCAP export and the
     live bridge (:mod:`user_peer.ros2`), so that both give the same frames, stamps and values. ``range_min``:
-    a scan's sensor's (:func:`sensor_range_min`), which the fabric's Scan does not carry."""
+    a scan's sensor's (:func:`sensor_range_min`), which the fabric's Scan does not carry; ``range_offset``: added
+    to every range and to the limits, so that a sonar's ranges, measured from the ring's rim, are true in its
+    frame ``ID/sonar`` at the ring's centre (the ring's radius, :func:`sonar_radius`)."""
     t = stamp_ns
     owner = key_owner(key)
     rid = owner[1] if owner else WORLD
@@ -112,7 +126,8 @@ def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0) -
                 {"header": _header(t, frame), "angle_min": float(msg.angle_min),
                  "angle_max": float(msg.angle_min + msg.angle_increment * max(n - 1, 0)),
                  "angle_increment": float(msg.angle_increment), "time_increment": 0.0, "scan_time": 0.0,
-                 "range_min": float(range_min), "range_max": float(msg.range_max), "ranges": scan_ranges(msg),
+                 "range_min": float(range_min) + range_offset, "range_max": float(msg.range_max) + range_offset,
+                 "ranges": scan_ranges(msg, range_offset),
                  "intensities": []})
     if isinstance(msg, OccupancyGrid):
         h, w = msg.cells.shape
@@ -182,7 +197,9 @@ class Ros2Writer:
             ]
             self._tf_pub = max(self._tf_pub, pub)  # /tf's publish times never go back (it merges every robot's keys)
             self._put(TF_TOPIC, "tf2_msgs/msg/TFMessage", {"transforms": tfs}, log_time_ns, self._tf_pub)
-        converted = ros2_message(key, msg, t, range_min=self._range_min(key) if isinstance(msg, Scan) else 0.0)
+        scan = isinstance(msg, Scan)
+        converted = ros2_message(key, msg, t, range_min=self._range_min(key) if scan else 0.0,
+                                 range_offset=self._sonar_radius(key) if scan else 0.0)
         if converted is None:
             self.skipped += 1
             return
@@ -190,6 +207,15 @@ class Ros2Writer:
 
     def _range_min(self, key: str) -> float:
         return sensor_range_min(self.frames.catalog.world_info, key)
+
+    def _sonar_radius(self, key: str) -> float:
+        """The ring's radius from the recorded description, else from the robot's own description (the catalog's)."""
+        r = sonar_radius(self.frames.catalog.world_info, key)
+        if r is None and key.endswith("/sonar"):
+            owner = key_owner(key)
+            info = self.frames.robots.get(owner[1]) if owner else None
+            r = float(info.sonar[3]) if info is not None and info.sonar is not None else None
+        return r or 0.0
 
     def close(self) -> None:
         if self._closed:

@@ -4,6 +4,7 @@ Out (every robot of the world, followed as sims and robots come and go)::
 
     /NS/ROBOT/joint_states  sensor_msgs/JointState   from rf/W/robot/ROBOT/joints
     /NS/ROBOT/scan          sensor_msgs/LaserScan    from rf/W/robot/ROBOT/scan     (sensor-data QoS: best effort)
+    /NS/ROBOT/sonar         sensor_msgs/LaserScan    from rf/W/robot/ROBOT/sonar    (ranges from the ring's centre)
     /NS/ROBOT/odom          nav_msgs/Odometry        from a mobile base's rf/W/robot/ROBOT/pose
     /NS/ROBOT/pose          geometry_msgs/PoseStamped from an arm's pose (its flange)
     /NS/ROBOT/path          nav_msgs/Path            from rf/W/robot/ROBOT/path     (reliable, transient local)
@@ -46,7 +47,7 @@ from fabric import keys
 from user_peer.errors import FabricUserError
 from user_peer.geometry import rotation_xyzw
 from user_peer.openfmt.foxglove import msg_time_ns
-from user_peer.openfmt.ros2 import ros2_message, ros_topic, sensor_range_min
+from user_peer.openfmt.ros2 import ros2_message, ros_topic, sensor_range_min, sonar_radius
 from user_peer.ros2.fill import fill
 from user_peer.world import World
 
@@ -91,6 +92,7 @@ class Ros2Bridge:
         self._subs = [
             fab.subscribe(keys.robot_stream_all(w, "joints"), self._on_state),
             fab.subscribe(keys.robot_stream_all(w, "scan"), self._on_state),
+            fab.subscribe(keys.robot_stream_all(w, "sonar"), self._on_state),
             fab.subscribe(keys.robot_stream_all(w, "pose"), self._on_state),
             fab.subscribe(keys.robot_stream_all(w, "path"), self._on_state, history=True),
             fab.subscribe(f"{keys.world_root(w)}/map/*", self._on_state, history=True),
@@ -109,8 +111,8 @@ class Ros2Bridge:
             rid, stream = parts[3], parts[4]
             if stream == "joints":
                 return self._topic(rid, "joint_states"), rid, JointState, RELIABLE
-            if stream == "scan":
-                return self._topic(rid, "scan"), rid, LaserScan, qos_profile_sensor_data
+            if stream in ("scan", "sonar"):
+                return self._topic(rid, stream), rid, LaserScan, qos_profile_sensor_data
             if stream == "path":
                 return self._topic(rid, "path"), rid, Path, LATCHED
             if stream == "pose":
@@ -142,8 +144,10 @@ class Ros2Bridge:
             if route is None:
                 return
             topic, robot, cls, qos = route
-            range_min = sensor_range_min(self._described, key) if cls is LaserScan else 0.0
-            converted = ros2_message(key, msg, msg_time_ns(msg, time.time_ns()), range_min=range_min)
+            scan = cls is LaserScan
+            converted = ros2_message(key, msg, msg_time_ns(msg, time.time_ns()),
+                                     range_min=sensor_range_min(self._described, key) if scan else 0.0,
+                                     range_offset=(sonar_radius(self._described, key) or 0.0) if scan else 0.0)
             if converted is None:
                 self.unconverted += 1
                 return
