@@ -149,3 +149,14 @@ def _name_alive(word: str) -> bool:
             if word in cmd and any(re.fullmatch(r"paper[0-9a-f]{6}", c) for c in cmd):
                 return True
     return False
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--rates", "x"], "--rates 'x'"),
+    (["--payloads", "scan"], "paper-135, rf-240, arm-joints"),
+    (["--transports", "dds"], "zenoh, mqtt"),
+    (["--duration", "1", "--window", "5"], "at most --duration"),
+])
+def test_bad_options_are_refused_with_what_is_expected(args, says):
+    out = subprocess.run([sys.executable, "-m", "robofabric", "bench", "paper", *args], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and says in out.stderr, out.stderr
