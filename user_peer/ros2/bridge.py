@@ -139,6 +139,8 @@ class Ros2Bridge:
 
     def _on_state(self, key: str, msg: Any) -> None:
         """A fabric message: convert it as the MCAP export does and publish it (zenoh's thread)."""
+        if self._closed or not self.node.context.ok():
+            return  # stopping (Ctrl-C or SIGTERM shut rclpy's context down before the world closed): nothing to publish on
         try:
             route = self._route(key, msg)
             if route is None:
