@@ -249,7 +249,8 @@ def test_robofabric_call_asks_a_service_from_the_command_line(served, world, rou
     out = call("srv/ik/arm1", "-t", "NoSuchRequest")
     assert out.returncode == 2 and "unknown message type" in out.stderr, out.stdout + out.stderr
     out = call("srv/ik/arm1", "-t", "IKRequest", "-d", '{"position": [1, 2]}')
-    assert out.returncode == 2 and "cannot build IKRequest" in out.stderr, out.stdout + out.stderr
+    # bad data names the field and what was wrong with it, in words (issue 32)
+    assert out.returncode == 2 and "IKRequest.position: expected shape (3,)" in out.stderr, out.stdout + out.stderr
 
 
 def test_an_arm_asked_for_before_its_joints_arrive_is_looked_up_not_refused(world, connect):
