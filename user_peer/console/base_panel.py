@@ -70,7 +70,9 @@ class BasePanel:
         v, w = self.driver.twist()
         async with self._send_lock:
             try:
-                await run.io_bound(self.base.twist, v, w)
+                # hold=False: the page itself repeats a held key's twist (keep_driving), so the sim's deadman
+                # stops the base when the page goes quiet, whatever the server's session does until its grace
+                await run.io_bound(lambda: self.base.twist(v, w, hold=False))
             except FabricUserError as exc:
                 self.driver.stop()
                 self.page.say(f"drive {self.base.id}: {self.page.why(exc)}")
