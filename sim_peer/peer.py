@@ -372,16 +372,20 @@ class SimPeer:
 
     def _still_admitted(self, rid: str, name: str, cmd: Command) -> bool:
         """Ask the gate again as the command is applied: its sender may have lost the robot since it came."""
-        try:
-            refusal = self.gate.admit(rid, cmd)
-        except Exception as exc:
-            log.exception("gate.admit failed")
-            refusal = f"gate error: {clip(str(exc))}"
+        refusal = self._gate_refusal(rid, cmd)
         if refusal:
             self._reject(rid, name, refusal, f"the gate refused {cmd.user}'s {name} command (epoch {cmd.epoch}) as it was applied",
                          cmd.user, code="refused")
             return False
         return True
+
+    def _gate_refusal(self, rid: str, cmd: Command) -> str | None:
+        """The gate's reason to refuse ``cmd`` now (None: admitted); a failing gate refuses, and says so."""
+        try:
+            return self.gate.admit(rid, cmd)
+        except Exception as exc:
+            log.exception("gate.admit failed")
+            return f"gate error: {clip(str(exc))}"
 
     def superseded(self) -> int:
         """Admitted commands a later one of the same robot replaced before they were applied."""
@@ -411,11 +415,7 @@ class SimPeer:
         if mismatch:
             self._reject(rid, name, "wrong_body", mismatch, cmd.user)
             return None
-        try:
-            refusal = self.gate.admit(rid, cmd)
-        except Exception as exc:
-            log.exception("gate.admit failed")
-            refusal = f"gate error: {clip(str(exc))}"
+        refusal = self._gate_refusal(rid, cmd)
         if refusal:
             self._reject(rid, name, refusal, f"the gate refused {cmd.user}'s {name} command (epoch {cmd.epoch})", cmd.user,
                          code="refused")
