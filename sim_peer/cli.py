@@ -184,7 +184,7 @@ def _check_world_free(cfg, peer_id, sim_world) -> bool:
         if not others:
             return True
         try:
-            replies = probe.query(keys.srv(cfg.world, "world"), timeout=2.0, expected=WorldInfo, all_replies=True)
+            replies = probe.rpc.query(keys.srv(cfg.world, "world"), timeout=2.0, expected=WorldInfo, all_replies=True)
         except ServiceError:
             replies = []
     mine = set(sim_world.robots)
@@ -215,9 +215,9 @@ def replicated_off() -> bool:
 
 
 def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, stop, duration, standby, objects=True) -> None:
-    """Primary or standby through :func:`sim_peer.standby.run_replicated`."""
+    """Primary or standby through :func:`sim_peer.replica_host.run_replicated`."""
     from fabric.config import default_peer_id
-    from sim_peer.standby import run_replicated
+    from sim_peer.replica_host import run_replicated
 
     pid = peer_id or default_peer_id("sim")  # one id across sessions: a primary that steps down stays itself
     worlds = [first_world]

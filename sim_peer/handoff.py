@@ -1,7 +1,7 @@
 """Moving a robot from one sim of a world to another (docs/sim.md, "Moving a robot between sims").
 
 A compiled MuJoCo model cannot gain or lose bodies, so a move is two rebuilds on the standby's take-over path
-(:meth:`sim_peer.standby.ReplicaHost._serve`): the source stops serving, hands out the robot's state, its
+(:meth:`sim_peer.replica_host.ReplicaHost.serve_rebuilt`): the source stops serving, hands out the robot's state, its
 placement, its ownership record and its streams' sequence numbers (a :class:`Handoff`) and goes on without it;
 the target builds its world again with the robot added, restores every robot (its own from its world, the moved
 one from the handoff) and serves it with its ownership record, so the owner keeps it and her epoch.
@@ -31,7 +31,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from fabric.codec import DecodeError, decode, encode
+from fabric.codec import decode, encode
 from fabric.interfaces import Event, Header, OwnershipRecord, RobotState, WorldState
 from robots.description import SceneRobot
 
@@ -219,26 +219,15 @@ def from_event(ev: Event) -> Handoff:
 def ask(fabric: Any, sim: str, login: str, request: Event, timeout: float) -> Event:
     """Ask sim ``sim`` one step of a move on ``srv/move/{sim}/by/{login}``; its answer, taken as soon as it comes.
     :class:`MoveError` with its refusal; :class:`NoAnswer` when nothing came within ``timeout``."""
-    import zenoh
-
     from fabric import keys
+    from fabric.interfaces import NoReply, Refused
 
-    from fabric.session import ZENOH_QUERY_TIMEOUT
-
-    errors: list[str] = []
-    for rep in fabric.session.get(keys.srv_move(fabric.world, sim, login), payload=encode(request), timeout=timeout,
-                                  target=zenoh.QueryTarget.ALL, consolidation=zenoh.ConsolidationMode.NONE):
-        try:
-            if rep.ok is not None:
-                return decode(rep.ok.payload.to_bytes(), Event)
-            errors.append(decode(rep.err.payload.to_bytes(), Event).reason)
-        except DecodeError as exc:
-            if rep.err is not None and rep.err.payload is not None and rep.err.payload.to_string() == ZENOH_QUERY_TIMEOUT:
-                continue  # zenoh's own word that the time ran out: no answer, not a refusal
-            errors.append(f"bad reply: {exc}")
-    if errors:
-        raise MoveError(errors[0])
-    raise NoAnswer(f"sim {sim} did not answer the {request.kind} step of {request.object} within {timeout:.0f} s")
+    try:
+        return fabric.rpc.first(keys.srv_move(fabric.world, sim, login), request, timeout=timeout, expected=Event)
+    except Refused as exc:
+        raise MoveError(exc.reason) from None
+    except NoReply:
+        raise NoAnswer(f"sim {sim} did not answer the {request.kind} step of {request.object} within {timeout:.0f} s") from None
 
 
 def move(fabric: Any, robot: str, to: str, *, timeout: float = 10.0) -> dict[str, Any]:
@@ -250,7 +239,7 @@ def move(fabric: Any, robot: str, to: str, *, timeout: float = 10.0) -> dict[str
     from fabric.interfaces import ServiceError, WorldInfo
 
     try:
-        parts = fabric.query(keys.srv(fabric.world, "world"), timeout=2.0, expected=WorldInfo, all_replies=True)
+        parts = fabric.rpc.query(keys.srv(fabric.world, "world"), timeout=2.0, expected=WorldInfo, all_replies=True)
     except ServiceError as exc:
         raise MoveError(f"no sim describes world {fabric.world!r}: {exc}") from None
     terms = {r.source: r.message.header.term for r in parts}

@@ -1,4 +1,4 @@
-"""sim_peer.standby.ReplicaHost in-process on a real router (issue 16).
+"""sim_peer.replica_host.ReplicaHost in-process on a real router.
 
 - A standby applies again, at its take-over, the commands sent after its last snapshot: its polling is
   held after one snapshot, so that a joint target sent afterwards is certainly not in it; the arm it set
@@ -20,7 +20,8 @@ from fabric.gate import OpenGate
 from fabric.interfaces import Command, JointTarget
 from fabric.testing import client, wait_until
 from sim_peer import election as el
-from sim_peer.standby import ReplicaHost
+from sim_peer.kept_commands import MAX_KEPT_BYTES, MAX_KEPT_COMMANDS
+from sim_peer.replica_host import ReplicaHost
 from sim_peer.world import SimWorld
 
 pytestmark = pytest.mark.slow  # two sim hosts and a router: seconds
@@ -45,25 +46,26 @@ def test_a_joint_target_sent_after_the_last_snapshot_goes_on_under_the_new_autho
     primary = _host(world, port, "sim-a", standby=False)
     standby = _host(world, port, "sim-b", standby=True)
     try:
-        wait_until(lambda: standby.snapshot is not None and standby.snapshot.header.source == "sim-a", timeout=20,
+        follower = standby.follower
+        wait_until(lambda: follower.snapshot is not None and follower.snapshot.header.source == "sim-a", timeout=20,
                    what="a first snapshot")
         # hold the polling: after the poll under way (if any) no snapshot comes until the take-over
-        asked = standby.snapshot_asked
-        standby.poll_s = 3600.0
-        wait_until(lambda: standby.snapshot_asked != asked, timeout=10, what="the last poll")
-        held = standby.snapshot
+        asked = follower.snapshot_asked
+        follower.poll_s = 3600.0
+        wait_until(lambda: follower.snapshot_asked != asked, timeout=10, what="the last poll")
+        held = follower.snapshot
         arm = standby.world.robots["arm1"]
         assert np.abs(held.robot("arm1").target).max() < 1e-9  # the snapshot knows no target but the spawn pose
 
         user = connect("user", "alice")
         target = np.radians([50.0, 20.0, -30.0, 20.0, 40.0, -20.0])
         cmd = Command("alice", 0, JointTarget(target, speed_scale=0.2))
-        moving = lambda: "arm1" in standby.joints and np.abs(standby.joints["arm1"].dq).max() > 0.05  # noqa: E731
+        moving = lambda: "arm1" in follower.joints and np.abs(follower.joints["arm1"].dq).max() > 0.05  # noqa: E731
         # resent until the primary moves: a first put on a fresh publisher can go out before the route exists
         wait_until(lambda: moving() or _send(user, keys.robot_cmd(world, "arm1", "joints", "alice"), cmd), timeout=20,
                    interval=0.3, what="the primary moving the arm")
-        assert standby.snapshot is held  # still the one from before the command
-        assert any(isinstance(m, Command) for _, _, m, _ in standby.commands)
+        assert follower.snapshot is held  # still the one from before the command
+        assert any(isinstance(k.message, Command) for k in follower.commands)
 
         primary.close()
         primary.fabric.close()  # its token goes: the standby takes over
@@ -90,7 +92,7 @@ def test_a_standby_told_its_leader_waits_for_its_token_before_taking_over(world,
     try:
         host.open()
         assert host.role == el.STANDBY and host.election.leader == "sim-x" and host.peer is None, host.election
-        assert "sim-x" in host.live
+        assert "sim-x" in host.roles.live
         # and the leader going is still seen: the standby takes over with the next term
         late.join()
         leader[0].close()
@@ -121,22 +123,21 @@ def test_a_standby_whose_leader_never_shows_takes_over_after_a_lease(world, rout
         fab.close()
 
 
-def test_what_a_standby_keeps_of_the_commands_it_hears_is_capped(world, router):
-    """A client flooding commands must not grow a standby's memory (issue 14): the seconds it keeps for
-    a take-over are capped in count and in bytes, oldest dropped first."""
-    from sim_peer import standby as sb
-
+def test_a_standby_keeps_the_commands_it_hears_within_the_caps(world, router):
+    """A standby keeps what users send for its take-over through the host's follower, within the buffer's caps
+    (count and bytes, oldest dropped first: a client flooding commands must not grow its memory)."""
     host = _host(world, router[1], "sim-b", standby=True)
     try:
         cmd = Command("alice", 0, JointTarget(np.zeros(6)))
         key = keys.robot_cmd(world, "arm1", "joints", "alice")
-        for _ in range(sb.MAX_KEPT_COMMANDS + 500):
-            host._keep(key, cmd, 100)
-        assert len(host.commands) == sb.MAX_KEPT_COMMANDS
+        for _ in range(MAX_KEPT_COMMANDS + 500):
+            host.follower.keep(key, cmd, 100)
+        kept = host.follower.commands
+        assert len(kept) == MAX_KEPT_COMMANDS
         for _ in range(10):
-            host._keep(key, cmd, sb.MAX_KEPT_BYTES // 4)  # big payloads: the byte cap
-        assert host._kept_bytes <= sb.MAX_KEPT_BYTES and len(host.commands) <= 4
-        assert host._kept_bytes == sum(c[3] for c in host.commands)
+            host.follower.keep(key, cmd, MAX_KEPT_BYTES // 4)  # big payloads: the byte cap
+        assert kept.kept_bytes <= MAX_KEPT_BYTES and len(kept) <= 4
+        assert kept.kept_bytes == sum(k.size for k in kept)
     finally:
         host.close()
         host.fabric.close()
@@ -148,7 +149,7 @@ def test_a_closed_standby_does_not_take_over(world, router):
     host = _host(world, router[1], "sim-b", standby=True)
     host.close()
     try:
-        host._take_over(time.monotonic())
+        host.take_over(time.monotonic())
         assert host.peer is None and not host.takeovers
     finally:
         host.fabric.close()

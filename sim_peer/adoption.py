@@ -1,0 +1,89 @@
+"""The scene objects after their sim: a shard adopts them when their authority went and nobody took them over.
+
+In a world served by several shards, the scene objects have one authority, the world's first sim. When a sim
+leaves and no standby of its shard has taken the objects over within ``after_s``, the serving primary with the
+lowest id adopts them: it serves its robots and the objects again, one term up, with the objects where it
+mirrored them (every sim moves them on the users' poses).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+from fabric import keys
+from fabric.interfaces import ServiceError, WorldInfo
+from sim_peer import election as el
+
+if TYPE_CHECKING:
+    from sim_peer.replica_host import ReplicaHost
+
+log = logging.getLogger("robofabric.sim")
+
+__all__ = ["ObjectAdoption"]
+
+
+class ObjectAdoption:
+    """Whether, and when, a serving sim that is not the objects' authority becomes it."""
+
+    def __init__(self, host: "ReplicaHost", after_s: float | None = None) -> None:
+        self.host = host
+        # after a sim leaves, how long a shard waits for the objects' standby (a take-over takes well under a
+        # lease) before asking whether the scene objects still have an authority
+        self.after_s = after_s if after_s is not None else 2.0 * host.fabric.config.lease_ms / 1000.0 + 1.0
+        self._adopting = self._again = False
+
+    def soon(self) -> None:
+        """A sim left: after ``after_s``, see whether the scene objects went with it (one thread at a time)."""
+        h = self.host
+        with h.lock:
+            if h.objects or h.closed:
+                return
+            self._again = True
+            if self._adopting:
+                return
+            self._adopting = True
+
+        def run() -> None:
+            while not h.stopping.wait(self.after_s):
+                with h.lock:
+                    again, self._again = self._again, False
+                    if not again or h.objects or h.closed:
+                        self._adopting = False
+                        return
+                try:
+                    self.adopt_if_orphaned()
+                except Exception:  # a closing session; the next departure asks again
+                    log.debug("adopting the scene objects failed", exc_info=True)
+            with h.lock:
+                self._adopting = False
+
+        threading.Thread(target=run, name="sim-adopt-objects", daemon=True).start()
+
+    def adopt_if_orphaned(self) -> bool:
+        """Serve the scene objects when no live sim describes them and this is the lowest-id sim that serves a
+        part of the world (every shard asks the same union, so one adopts); True when this one did."""
+        h = self.host
+        f, me = h.fabric, h.fabric.peer_id
+        try:
+            replies = f.rpc.query(keys.srv(f.world, "world"), timeout=2.0, expected=WorldInfo, all_replies=True)
+        except ServiceError:
+            return False
+        parts = {r.source: r.message for r in replies if r.source}
+        if not h.world.objects or any(p.objects for p in parts.values()) or me not in parts or min(parts) != me:
+            return False
+        with h.lock:
+            if h.role != el.PRIMARY or h.peer is None or h.objects or h.closed:
+                return False
+            t0 = time.monotonic()
+            h.objects = True  # before the capture: the state carries the objects where this sim mirrored them
+            state, _ = h.stop_serving()
+            term = h.election.term + 1
+            h.roles.set_term(term)
+            h.rpc.serve(replace(state, header=replace(state.header, term=term)))
+        h.announce(f"sim {me}: no sim serves the scene objects any more; serving {', '.join(h.world.objects)} "
+                   f"with my robots (term {term}) in {(time.monotonic() - t0) * 1000:.0f} ms")
+        return True

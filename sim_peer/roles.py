@@ -1,0 +1,134 @@
+"""A sim's role in its shard's election, as it lives it: the live sims it sees, and what each change makes it do.
+
+The pure core (:mod:`sim_peer.election`) decides; this part feeds it what the session observes (the sims'
+liveliness tokens, the terms heard on streams and ``srv/state``) and carries out its effects on the host
+(:class:`sim_peer.replica_host.ReplicaHost`): a take-over on a thread of its own, a step-down (muzzled at once,
+then the host's ``run`` returns), a term asserted again after a freeze, a new leader announced.
+
+The first complete view of the live sims comes before any change counts (:meth:`Roles.join`): the election
+reads a leader missing from a view as gone, so the view must not be a history still arriving.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+from sim_peer import election as el
+
+if TYPE_CHECKING:
+    from sim_peer.replica_host import ReplicaHost
+
+__all__ = ["Roles", "MAX_GONE"]
+
+MAX_GONE = 256
+"""How many departed sims' times are remembered (made-up sim tokens must not grow the record)."""
+
+
+class Roles:
+    """The election state of one host, the live sims it sees and when others went."""
+
+    def __init__(self, host: "ReplicaHost", election: el.Election) -> None:
+        self.host = host
+        self.election = election
+        self.live: set[str] = set()
+        self.gone_at: dict[str, float] = {}  # sim id -> when its token went (monotonic): was it there when we froze?
+        self.settled = False  # the first complete view of the live sims is in (join)
+        self.stepped_down = threading.Event()
+        self.taking_over: threading.Thread | None = None
+
+    @property
+    def role(self) -> str:
+        return self.election.role
+
+    def join(self) -> None:
+        """Watch the sims' tokens, take a first complete view of the live ones, and let the election decide on it.
+        The watch comes first (what it hears meanwhile is kept, but decides nothing until the view is settled),
+        then a liveliness query."""
+        h = self.host
+        f = h.fabric
+        f.watch_peers(self.on_sim, kind="sim")
+        try:
+            initial = {pid for _, pid in f.live_peers("sim", timeout=2.0)}
+        except Exception:
+            initial = set()
+        with h.lock:
+            self.live |= initial | {f.peer_id}
+        if len(self.live) > 1:
+            h.shards.learn()
+        self.await_leader(self.election.leader)
+        with h.lock:
+            self.settled = True
+            live = frozenset(self.live)
+        self.step(el.Peers(h.shards.view(live)))
+
+    def await_leader(self, leader: str) -> None:
+        """A standby that already follows ``leader`` (a primary that just stepped down on hearing its higher
+        term) waits up to a transport lease for its token: the first liveliness query of a fresh session
+        can answer before the router's tokens have reached it (seen in the lab after a healed partition:
+        the view held only our own token, and the stepped-down primary took the world back at once, with
+        its own stale state). A leader whose token does not show within the lease is gone: take over."""
+        h = self.host
+        if self.role != el.STANDBY or not leader or leader == h.fabric.peer_id:
+            return
+        deadline = time.monotonic() + h.fabric.config.lease_ms / 1000.0
+        while time.monotonic() < deadline and not h.stopping.is_set():
+            with h.lock:
+                if leader in self.live:
+                    return
+            time.sleep(0.02)
+
+    def on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
+        """A sim's token came or went."""
+        h = self.host
+        with h.lock:
+            (self.live.add if alive else self.live.discard)(peer_id)
+            if not alive:
+                self.gone_at[peer_id] = time.monotonic()
+                if len(self.gone_at) > MAX_GONE:
+                    self.gone_at.pop(min(self.gone_at, key=self.gone_at.__getitem__))
+            live = frozenset(self.live)
+            settled = self.settled
+        if alive:
+            h.shards.learn_soon()  # which shard it is (a standby of ours, or another shard's sim)
+        if alive or not settled:
+            return  # a token appearing (or the history repeating one) never starts a take-over; nor does
+            # one going before the first view is settled (join() steps on the whole view then)
+        self.step(el.Peers(h.shards.view(live)))
+        if self.role == el.PRIMARY:
+            h.adoption.soon()  # it may have been the scene objects' authority
+
+    def gone_since(self, began: float) -> set[str]:
+        """The sims alive now or gone since ``began`` (monotonic; call with the lock held)."""
+        return self.live | {p for p, t in self.gone_at.items() if t >= began}
+
+    def heard(self, source: str, term: int) -> None:
+        """Authority state stamped with ``term`` came from ``source``."""
+        if term > 0:
+            self.step(el.Heard(source, term))
+
+    def set_term(self, term: int) -> None:
+        """Serve on under ``term`` (a move or an adoption took a new one; call with the lock held)."""
+        self.election = replace(self.election, term=term)
+
+    def step(self, ev: el.Event) -> None:
+        """Apply one observation to the election and carry out its effects."""
+        h = self.host
+        with h.lock:
+            self.election, effects = el.step(self.election, ev)
+        for e in effects:
+            if e.kind == "take_over":
+                t = threading.Thread(target=h.take_over, args=(time.monotonic(),), name="take-over", daemon=True)
+                self.taking_over = t
+                t.start()
+            elif e.kind == "step_down":
+                h.fabric.stamp.muzzle()  # from now on nothing with the old term goes out
+                h.announce(f"sim {h.fabric.peer_id}: {e.leader} holds term {e.term}; stepping down to standby")
+                self.stepped_down.set()
+            elif e.kind == "reassert":
+                with h.lock:
+                    h.fabric.assume_term(e.term, h.scopes())
+            elif e.kind == "follow" and self.role == el.STANDBY:
+                h.announce(f"standby {h.fabric.peer_id}: following {e.leader} (term {e.term})")
