@@ -29,7 +29,7 @@ def described_robots(fabric: "Fabric", kind: str, *, timeout: float = 2.0) -> li
     Raises :class:`~fabric.interfaces.ServiceError` when no sim answered (nobody serves ``srv/world``, or
     every answer was a refusal); an empty list means the sims answered and have no such robot.
     """
-    replies = fabric.query(keys.srv(fabric.world, "world"), timeout=timeout, all_replies=True, expected=WorldInfo)
+    replies = fabric.rpc.query(keys.srv(fabric.world, "world"), timeout=timeout, all_replies=True, expected=WorldInfo)
     return [r for rep in replies for r in rep.message.robots if r.kind == kind]
 
 

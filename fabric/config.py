@@ -37,7 +37,7 @@ SOCKET_BUFFER = 64 * 1024
 """TCP ``so_sndbuf``/``so_rcvbuf`` of every link. With the kernel's autotuned loopback buffers (MBs),
 a flood of small junk samples piled up in the sockets between the router and the sim, ahead of an
 owner's command (1.2 s of backlog for the sim to decode); with small buffers the backlog stays in
-the router's per-priority queues, where commands and ownership (fabric.session.priority_for) go first
+the router's per-priority queues, where commands and ownership (fabric.publishers.priority_for) go first
 and junk is dropped under zenoh's congestion control."""
 
 

@@ -22,7 +22,7 @@ Identities are zenoh usernames (``transport/auth/usrpwd``) or, with TLS, certifi
 running :func:`init` again keeps every existing secret and only adds what is missing.
 
 zenoh's ``**`` does not match a chunk that starts with ``@`` (a verbatim chunk), so the caches and
-liveliness tokens of latched publishers (``KEY/@adv/...``, fabric.session.declare_publisher) need
+liveliness tokens of latched publishers (``KEY/@adv/...``, fabric.publishers.declare_publisher) need
 rules of their own.
 """
 

@@ -10,11 +10,10 @@ most ~200 characters of what the client sent), and the peer goes on. Nothing a
 client makes up (keys, payloads) grows a peer's memory: publishers and sequence
 counters are kept for at most :data:`MAX_KEYS` keys.
 
-Services are queryables whose requests and replies are fabric messages; a
-handler refuses a request by raising :class:`~fabric.interfaces.ServiceError`, which the caller
-gets back as :class:`~fabric.interfaces.Refused` (a ``ServiceError``) with the same reason; a query
-nobody answers raises :class:`~fabric.interfaces.NoReply`. The error types live in
-:mod:`fabric.interfaces.errors` and are importable from here as before.
+A session's parts with a job of their own live in modules of their own, and the session holds one of
+each: ``fabric.rpc`` (services: serve, query, call; :mod:`fabric.rpc`), ``fabric.stamp`` (the term it
+stamps, its muzzle and freeze watch; :mod:`fabric.authority_stamp`), ``fabric.seqs`` (per-key sequence
+numbers; :mod:`fabric.sequences`) and the fence over what it believes (:mod:`fabric.fence_watch`).
 """
 
 from __future__ import annotations
@@ -24,21 +23,23 @@ import signal
 import threading
 import time
 from collections import Counter
-from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 
 import zenoh
-import zenoh.ext
 
 from fabric import keys
+from fabric.authority_stamp import AuthorityStamp
 from fabric.codec import DecodeError, decode, encode, load_plugins
-from fabric.authority import AuthorityStamp
 from fabric.config import FabricConfig, default_peer_id
 from fabric.exit import at_exit
-from fabric.fencing import SimFence, fenced_scopes
+from fabric.fence_watch import FenceWatch
+from fabric.fencing import SimFence
 from fabric.history import LatestThenLive
+from fabric.interfaces import Event, EventKind, Header
 from fabric.limits import RateLimiter, clip
-from fabric.interfaces import Event, EventKind, Header, NoReply, Refused, ServiceError
+from fabric.publishers import declare_publisher
+from fabric.rpc import Rpc
+from fabric.sequences import Sequences
 
 log = logging.getLogger("robofabric")
 
@@ -48,11 +49,8 @@ REPORT_INTERVAL = 5.0
 REPORT_BURST = 5
 """Reports (log line + event) of bad input per subscription or reason per :data:`REPORT_INTERVAL` seconds;
 the rest are counted and the next report says how many were suppressed."""
-ZENOH_QUERY_TIMEOUT = "Timeout"
-"""The error reply zenoh itself gives a query whose time limit ran out while a server was known: a
-silence, which must read as NoReply (retried by those who wait), not as a server's refusal."""
 
-__all__ = ["Fabric", "ServiceError", "Refused", "NoReply", "Reply", "shutdown_event", "undeclare_all", "declare_publisher", "priority_for"]
+__all__ = ["Fabric", "shutdown_event", "undeclare_all"]
 
 
 def undeclare_all(resources: list[Any]) -> None:
@@ -63,44 +61,6 @@ def undeclare_all(resources: list[Any]) -> None:
             res.undeclare()
         except Exception:  # already gone with a closing session
             pass
-
-
-def priority_for(key: str) -> zenoh.Priority | None:
-    """zenoh priority of what travels on ``key``: robot commands and ownership (records, requests,
-    renewals, their replies) go ahead of data, so that a flood of data on any key (junk included:
-    a flooder's samples carry the default priority) cannot queue an owner's command or renewal
-    behind it in a router's per-priority queues. None for everything else (zenoh's default)."""
-    parts = key.split("/")
-    if len(parts) >= 4 and (parts[2] == "own" or (parts[2] == "robot" and len(parts) >= 5 and parts[4] == "cmd")):
-        return zenoh.Priority.INTERACTIVE_HIGH
-    return None
-
-
-def declare_publisher(session: zenoh.Session, key: str, **options: Any) -> Any:
-    """A publisher for ``key``; on a latched key (:func:`fabric.keys.is_latched`) one whose last sample
-    stays in a cache for subscribers that join later and ask for history. Priority: :func:`priority_for`."""
-    prio = priority_for(key)
-    if prio is not None:
-        options.setdefault("priority", prio)
-    if not keys.is_latched(key):
-        return session.declare_publisher(key, **options)
-    # the cache and token are what fabric/history.py asks a late joiner's latest value of; the sequence
-    # numbers let a zenoh advanced subscriber elsewhere (not ours) track each publisher on its own
-    # state, not a stream: a full queue waits rather than dropping it (a dropped map is never resent)
-    options.setdefault("congestion_control", zenoh.CongestionControl.BLOCK)
-    return zenoh.ext.declare_advanced_publisher(
-        session, key, cache=zenoh.ext.CacheConfig(max_samples=1), publisher_detection=True,
-        sample_miss_detection=zenoh.ext.MissDetectionConfig(), **options,
-    )
-
-
-@dataclass(frozen=True, slots=True)
-class Reply:
-    """One answer to a query: the replying key, the decoded message, and who answered."""
-
-    key: str
-    message: Any
-    source: str
 
 
 class Fabric:
@@ -114,12 +74,14 @@ class Fabric:
         self.peer_id = keys.validate_id(peer_id or default_peer_id(kind), what="peer id")
         self.counters: Counter[str] = Counter()
         self.stamp = AuthorityStamp()
-        """Term, muzzle and freeze watch (:mod:`fabric.authority`): what this peer stamps and withholds as an authority."""
+        """Term, muzzle and freeze watch (:mod:`fabric.authority_stamp`): what this peer stamps and withholds as an
+        authority (0 and never muzzled for every peer that is no authority)."""
         self.sim_fence = SimFence()
         """The world's sims as this session follows them (once terms are in use), and its fences: the highest
-        authority epoch heard per authority object (:func:`fabric.fencing.authority_scopes`); :meth:`subscribe`
-        and :meth:`query` drop state below it."""
-        self._seq: dict[str, int] = {}
+        term heard per authority object (:func:`fabric.fencing.authority_scopes`); :meth:`subscribe` and
+        ``rpc.query`` drop state below it."""
+        self.seqs = Sequences(MAX_KEYS)
+        """The next sequence number per key this session published on (:mod:`fabric.sequences`)."""
         self._lock = threading.Lock()
         self.report_interval = REPORT_INTERVAL
         self._limiter = RateLimiter(REPORT_INTERVAL, burst=REPORT_BURST, max_keys=256)
@@ -127,7 +89,10 @@ class Fabric:
         self._resources: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
         self.session = zenoh.open(config.zenoh_config())
-        self._sim_watch: Any = None
+        self._fence_watch = FenceWatch(self.session, self.world, self.sim_fence, counters=self.counters, resources=self._resources)
+        self.rpc = Rpc(self.session, counters=self.counters, stamp=self.stamp, header=self.header,
+                       believe=self._fence_watch.believe, resources=self._resources)
+        """Services: ``rpc.serve``, ``rpc.query``, ``rpc.call`` (:mod:`fabric.rpc`)."""
         self.token = (
             self.session.liveliness().declare_token(keys.peer(self.world, kind, self.peer_id)) if token else None
         )
@@ -164,11 +129,8 @@ class Fabric:
 
     def header(self, key: str, *, stamp: float = 0.0) -> Header:
         """A header for the next message on ``key``: per-key sequence, wall time now, this peer as source."""
-        with self._lock:
-            seq = self._seq.get(key, 0)
-            if seq or len(self._seq) < MAX_KEYS:
-                self._seq[key] = seq + 1
-        return Header(stamp=float(stamp), wall_ns=time.time_ns(), seq=seq, source=self.peer_id, term=self.term)
+        return Header(stamp=float(stamp), wall_ns=time.time_ns(), seq=self.seqs.take(key), source=self.peer_id,
+                      term=self.stamp.term)
 
     def publish(self, key: str, msg: Any) -> int:
         """Encode and put ``msg`` on ``key``; returns the payload size in bytes.
@@ -218,51 +180,14 @@ class Fabric:
             time.sleep(0.005)
         return True
 
-    # ------------------------------------------------------------------ authority (fabric.authority)
-
-    @property
-    def term(self) -> int:
-        """The authority epoch stamped on what this peer publishes (a sim authority's; 0 for everyone else)."""
-        return self.stamp.term
-
-    @term.setter
-    def term(self, term: int) -> None:
-        self.stamp.assume_term(term)
-
-    @property
-    def muzzled(self) -> bool:
-        """While true, nothing is published and no query is answered."""
-        return self.stamp.muzzled
+    # ------------------------------------------------------------------ authority (fabric.authority_stamp)
 
     def assume_term(self, term: int, scopes: Iterable[str] = ()) -> None:
         """Stamp ``term`` on everything published from now on, and fence below it in ``scopes`` (the robots and
-        objects this authority serves: other sims of the world have terms of their own)."""
+        objects this authority serves: other sims of the world have terms of their own). The one way to set
+        the term; ``stamp`` only reads it, muzzles and watches for freezes."""
         self.stamp.assume_term(term)
         self.sim_fence.raise_to(term, tuple(scopes))
-
-    def muzzle(self) -> None:
-        """Publish and answer nothing from now on (an authority unsure it still is one, or stepping down)."""
-        self.stamp.muzzle()
-
-    def unmuzzle(self) -> None:
-        """Publish and answer again (the freeze watch starts over)."""
-        self.stamp.unmuzzle()
-
-    def watch_freeze(self, gap: float | None, on_freeze: Callable[[float], None] | None) -> None:
-        """Muzzle on a publication gap longer than ``gap`` s and call ``on_freeze(gap)`` in a new thread."""
-        self.stamp.watch_freeze(gap, on_freeze)
-
-    def sequences(self, prefix: str = "") -> dict[str, int]:
-        """The next sequence number of every key under ``prefix`` this session published on."""
-        with self._lock:
-            return {k: v for k, v in self._seq.items() if k.startswith(prefix)}
-
-    def continue_sequences(self, seqs: dict[str, int]) -> None:
-        """Carry on another session's sequence numbers (a standby taking a world over): never back."""
-        with self._lock:
-            for k, v in seqs.items():
-                if k in self._seq or len(self._seq) < MAX_KEYS:
-                    self._seq[k] = max(self._seq.get(k, 0), int(v))
 
     def connected(self) -> bool:
         """Whether this session can hear anyone now: a router (the embedded profile) always can; a client
@@ -354,7 +279,7 @@ class Fabric:
             except DecodeError as exc:
                 self.bad_payload(key, exc, where=key_expr)
                 return
-            if not self._believe(key, msg):
+            if not self._fence_watch.believe(key, msg):
                 return
             try:
                 callback(key, msg)
@@ -363,45 +288,6 @@ class Fabric:
                 log.exception("callback for %s failed", key)
 
         return self.subscribe_raw(key_expr, on_sample, history=history, remote_only=remote_only)
-
-    def _believe(self, key: str, msg: Any) -> bool:
-        """False for authority state stamped with a lower authority epoch than one already heard."""
-        header = getattr(msg, "header", None)
-        if header is None:
-            return True
-        scopes = fenced_scopes(key, msg)
-        if scopes is None:
-            return True
-        if self._sim_watch is None and header.term:
-            self._watch_sims()
-        if self.sim_fence.believe(header.term, header.source, scopes):
-            return True
-        self.counters["stale_authority"] += 1  # a lower term, or in flight when its sim left
-        return False
-
-    def _watch_sims(self) -> None:
-        """Follow the world's sim tokens once terms are in use: when the last one goes, the fence resets,
-        so a world restarted from scratch (term 1) is believed again after an earlier take-over."""
-        with self._lock:
-            if self._sim_watch is not None or self._closed:
-                return
-            self._sim_watch = True
-
-        def on_token(sample: zenoh.Sample) -> None:
-            try:
-                pid = keys.parse(str(sample.key_expr)).leaf
-            except ValueError:
-                return
-            if sample.kind == zenoh.SampleKind.PUT:
-                self.sim_fence.sim_seen(pid)
-            elif self.sim_fence.sim_left(pid):
-                self.counters["fence_resets"] += 1
-
-        try:
-            sub = self.session.liveliness().declare_subscriber(keys.peers_all(self.world, "sim"), on_token, history=True)
-        except Exception:  # a closing session
-            return
-        self._resources.append(sub)
 
     def subscribe_raw(self, key_expr: str, callback: Callable[[zenoh.Sample], None], *, history: bool = False,
                       remote_only: bool = False) -> Any:
@@ -418,115 +304,6 @@ class Fabric:
             sub = self.session.declare_subscriber(key_expr, callback)
         self._resources.append(sub)
         return sub
-
-    # ------------------------------------------------------------------ services
-
-    def serve(
-        self,
-        key_expr: str,
-        handler: Callable[[str, Any], Any],
-        *,
-        expected: type | tuple[type, ...] | None = None,
-        complete: bool = False,
-    ) -> zenoh.Queryable:
-        """Answer queries on ``key_expr`` with ``handler(key, request_or_None) -> message``.
-
-        A handler raising :class:`ServiceError` (or ``ValueError``) sends the reason back as an error
-        reply; a bad request payload is answered with the decode error. Nothing escapes to zenoh.
-        """
-
-        # zenoh 1.10 ignores a reply's priority (and warns): replies travel at the query's priority.
-        # A reply goes on the queryable's own key when it names one: a wildcard query (``own/*``, a replica or a
-        # viewer joining) then learns which key answered, and the reply is fenced by that key's scopes like a
-        # publication on it (on the query's own ``own/*`` it named no object: unfenced, and unparseable)
-        own_key = key_expr if not any(c in key_expr for c in "*$") else None
-
-        def on_query(query: zenoh.Query) -> None:
-            key = str(query.key_expr)
-            self.counters["queries"] += 1
-            if self.muzzled:
-                return  # no answer at all: the asker times out or hears the real authority
-            try:
-                request = None
-                if query.payload is not None and len(query.payload.to_bytes()) > 0:
-                    request = decode(query.payload.to_bytes(), expected)
-                answer = handler(key, request)
-                if answer is not None:
-                    query.reply(own_key or key, encode(answer))
-            except (DecodeError, ServiceError, ValueError) as exc:
-                self.counters["query_errors"] += 1
-                reason = clip(exc.reason if isinstance(exc, ServiceError) else str(exc), 400)
-                query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=reason, severity="warning", header=self.header("srv"))))
-            except Exception as exc:
-                self.counters["query_errors"] += 1
-                log.exception("service %s failed", key)
-                query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=f"internal error: {clip(str(exc))}", severity="error")))
-
-        q = self.session.declare_queryable(key_expr, on_query, complete=complete)
-        self._resources.append(q)
-        return q
-
-    def query(
-        self,
-        selector: str,
-        request: Any = None,
-        *,
-        timeout: float = 2.0,
-        expected: type | tuple[type, ...] | None = None,
-        all_replies: bool = False,
-    ) -> list[Reply]:
-        """Send a query and return the decoded replies.
-
-        Raises :class:`~fabric.interfaces.Refused` when a replier refuses (its reason), or
-        :class:`~fabric.interfaces.NoReply` when nobody answers (both are ``ServiceError``).
-        With ``all_replies`` every replier's answer is returned (no consolidation).
-        """
-        kwargs: dict[str, Any] = {"timeout": timeout}
-        prio = priority_for(selector)
-        if prio is not None:
-            kwargs["priority"] = prio
-        if request is not None:
-            kwargs["payload"] = encode(request)
-        if all_replies:
-            kwargs["target"] = zenoh.QueryTarget.ALL
-            kwargs["consolidation"] = zenoh.ConsolidationMode.NONE
-        replies: list[Reply] = []
-        errors: list[str] = []
-        t0 = time.monotonic()
-        for rep in self.session.get(selector, **kwargs):
-            if rep.ok is not None:
-                try:
-                    msg = decode(rep.ok.payload.to_bytes(), expected)
-                except DecodeError as exc:
-                    errors.append(f"bad reply: {exc}")
-                    continue
-                if not self._believe(str(rep.ok.key_expr), msg):
-                    errors.append(f"stale authority epoch on {rep.ok.key_expr}")
-                    continue
-                src = getattr(getattr(msg, "header", None), "source", "")
-                replies.append(Reply(str(rep.ok.key_expr), msg, src))
-            else:
-                try:
-                    ev = decode(rep.err.payload.to_bytes(), Event)
-                    errors.append(ev.reason)
-                except DecodeError:
-                    text = rep.err.payload.to_string() if rep.err.payload is not None else "error"
-                    if text == ZENOH_QUERY_TIMEOUT:
-                        continue  # zenoh's own word that the time limit ran out: no answer, not a refusal
-                    errors.append(text)
-        if not replies:
-            if errors:
-                raise Refused(errors[0], key=selector)
-            # say what happened: zenoh ends a query at once when nobody serves the key, and waits the whole
-            # time limit only for a server that is there but silent ("within 5 s" after 0 s would mislead)
-            waited = time.monotonic() - t0
-            why = "nobody serves it" if waited < 0.5 * timeout else "no server answered in time"
-            raise NoReply(f"no reply on {selector} after {waited:.1f} s of {timeout:.1f} s: {why}", key=selector)
-        return replies
-
-    def call(self, selector: str, request: Any = None, *, timeout: float = 2.0, expected: Any = None) -> Any:
-        """One query, one answer: the first reply's message."""
-        return self.query(selector, request, timeout=timeout, expected=expected)[0].message
 
     # ------------------------------------------------------------------ liveliness
 

@@ -442,7 +442,7 @@ def _current_epoch(fab: Fabric, robot: str, user: str) -> int:
     from fabric.interfaces import OwnershipRecord, ServiceError
 
     try:
-        replies = fab.query(keys.own(fab.world, robot), timeout=0.5, expected=OwnershipRecord)
+        replies = fab.rpc.query(keys.own(fab.world, robot), timeout=0.5, expected=OwnershipRecord)
     except (ServiceError, ValueError):
         return 0
     for rep in replies:
@@ -571,13 +571,13 @@ def call(
         full = resolve_key(key, fab.world)
         try:
             if full == keys.srv(fab.world, "world") and not all_replies and request is None:
-                from fabric.session import Reply
+                from fabric.rpc import Reply
                 from fabric.worldview import describe
 
                 info = describe(fab, timeout=timeout)  # one world: every sim's part (--all: each part)
                 replies = [Reply(full, info, ",".join(sorted({r.sim for r in info.robots if r.sim})) or info.header.source)]
             else:
-                replies = fab.query(full, request, timeout=timeout, all_replies=all_replies)
+                replies = fab.rpc.query(full, request, timeout=timeout, all_replies=all_replies)
         except ServiceError as exc:
             print(f"{full}: {exc.reason}", file=sys.stderr, flush=True)
             raise typer.Exit(1) from None

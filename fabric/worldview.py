@@ -41,5 +41,5 @@ def union(parts: Iterable[tuple[str, WorldInfo]]) -> WorldInfo:
 def describe(fab, *, timeout: float = 2.0) -> WorldInfo:
     """Every sim's part of ``fab``'s world, joined (:func:`union`). Raises the query's ``ServiceError`` when no
     sim answers (``NoReply``) or every one refuses (``Refused``)."""
-    replies = fab.query(keys.srv(fab.world, "world"), timeout=timeout, expected=WorldInfo, all_replies=True)
+    replies = fab.rpc.query(keys.srv(fab.world, "world"), timeout=timeout, expected=WorldInfo, all_replies=True)
     return union((rep.source, rep.message) for rep in replies)

@@ -80,10 +80,10 @@ class Authority:
         # where a router's access control vouches for it, never from the payload alone. Served before the
         # first records go out: a replica that hears one asks for the rest (ownership.client)
         self._queryables = [
-            fabric.serve(keys.own(fabric.world, obj), lambda key, req, obj=obj: self._serve_record(obj), expected=OwnRequest)
+            fabric.rpc.serve(keys.own(fabric.world, obj), lambda key, req, obj=obj: self._serve_record(obj), expected=OwnRequest)
             for obj in objects
         ] + [
-            fabric.serve(keys.own_request_all(fabric.world, obj), lambda key, req, obj=obj: self._serve(obj, key, req),
+            fabric.rpc.serve(keys.own_request_all(fabric.world, obj), lambda key, req, obj=obj: self._serve(obj, key, req),
                          expected=OwnRequest)
             for obj in objects
         ]

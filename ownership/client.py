@@ -184,7 +184,7 @@ class OwnershipClient:
     def refresh(self) -> None:
         """Query the authority for every record (late join)."""
         try:
-            for rep in self.fabric.query(keys.own_all(self.fabric.world), timeout=self.timeout,
+            for rep in self.fabric.rpc.query(keys.own_all(self.fabric.world), timeout=self.timeout,
                                          expected=OwnershipRecord, all_replies=True):
                 self._on_record(rep.key, rep.message)
         except ServiceError:
@@ -270,7 +270,7 @@ class OwnershipClient:
         limit = timeout or self.timeout
         t0 = time.monotonic()
         try:
-            reply = self.fabric.call(key, req, timeout=limit, expected=OwnReply)
+            reply = self.fabric.rpc.call(key, req, timeout=limit, expected=OwnReply)
         except NoReply:
             known = self.snapshot()
             if known and obj not in known and time.monotonic() - t0 < 0.5 * limit:  # ended at once: nobody serves it

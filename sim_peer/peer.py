@@ -129,7 +129,7 @@ class SimPeer:
         self._opened = True
         f, w = self.fabric, self.fabric.world
         d = self._declared
-        d.append(f.serve(keys.srv(w, "world"), self._on_world_query))
+        d.append(f.rpc.serve(keys.srv(w, "world"), self._on_world_query))
         self._worker = threading.Thread(target=self._drain, name="sim-commands", daemon=True)
         self._worker.start()
         d.append(f.watch_peers(self._on_sim, kind="sim"))

@@ -75,7 +75,7 @@ def ik(
 ) -> np.ndarray:
     """Joint angles for a flange position (world frame) from a compute peer (``peer``: a chosen one)."""
     req = IKRequest.make(xyz, quaternion, seed)
-    reply = fab.call(_service_key(fab, "ik", robot, peer), req, timeout=timeout, expected=IKReply)
+    reply = fab.rpc.call(_service_key(fab, "ik", robot, peer), req, timeout=timeout, expected=IKReply)
     return np.asarray(reply.q, dtype=float)
 
 
@@ -86,7 +86,7 @@ def map_request(
     """One request to the mapping service on ``rf/{world}/srv/map/{name}`` (``.../by/{user}`` in ``user``'s
     name: set, reset, stop, save and load are then refused, docs/security.md); returns its MapReply."""
     req = MapRequest(action, name=name, threshold=threshold)
-    return fab.call(_service_key(fab, "map", name, peer, user), req, timeout=timeout, expected=MapReply)
+    return fab.rpc.call(_service_key(fab, "map", name, peer, user), req, timeout=timeout, expected=MapReply)
 
 
 def build_map(fab: Fabric, *, name: str = "map", threshold: float = 0.65, timeout: float = 10.0, peer: str | None = None,
@@ -107,4 +107,4 @@ def plan(
     """A path from ``robot``'s pose to ``goal`` (None: the goal object's pose) from a compute peer; asked in
     ``user``'s name, it is published on the robot's ``path`` key only if she owns the robot (else in the reply only)."""
     req = PlanRequest(robot, goal=np.asarray(goal if goal is not None else (), dtype=float), planner=planner, map=map_name)
-    return fab.call(_service_key(fab, "plan", robot, peer, user), req, timeout=timeout, expected=PlanReply).path
+    return fab.rpc.call(_service_key(fab, "plan", robot, peer, user), req, timeout=timeout, expected=PlanReply).path

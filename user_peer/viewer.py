@@ -238,7 +238,7 @@ class Viewer:
         """Every ownership record, asked: a record is published only when it changes, so one published before
         our subscription reached its sim would otherwise never be drawn."""
         try:
-            for rep in self.fab.query(keys.own_all(self.fab.world), timeout=1.0, all_replies=True):
+            for rep in self.fab.rpc.query(keys.own_all(self.fab.world), timeout=1.0, all_replies=True):
                 self._enqueue(rep.key, rep.message)
         except ServiceError:
             pass

@@ -124,8 +124,8 @@ class KinematicsService:
         f, w = self.fabric, self.world
         handlers = {"ik": (self._on_ik, IKRequest), "fk": (self._on_fk, FKRequest), "jacobian": (self._on_jacobian, JacobianRequest)}
         for name, (handler, expected) in handlers.items():
-            self._resources.append(f.serve(keys.srv_per_subject(w, name), handler, expected=expected))
-            self._resources.append(f.serve(keys.srv_per_subject(w, name, f.peer_id), handler, expected=expected))
+            self._resources.append(f.rpc.serve(keys.srv_per_subject(w, name), handler, expected=expected))
+            self._resources.append(f.rpc.serve(keys.srv_per_subject(w, name, f.peer_id), handler, expected=expected))
         self._resources.append(f.subscribe(keys.robot_stream_all(w, "joints"), self._on_joints, expected=JointState))
         for _, obj in self.streams:
             self._resources.append(f.subscribe(keys.object_pose_all(w, obj), self._on_target, expected=Pose, history=True))

@@ -2,7 +2,7 @@
 
 Every refusal (goal outside the map, start in an obstacle, empty map, no path)
 is a :class:`NavigationError` whose message is the reason a user reads; the
-service turns it into a :class:`fabric.session.ServiceError` with the same text.
+service turns it into a :class:`fabric.interfaces.ServiceError` with the same text.
 """
 
 from __future__ import annotations

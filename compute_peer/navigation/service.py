@@ -27,7 +27,7 @@ all users (:mod:`.map_store`); plans use the class's map unless the request name
 control): served in full.
 
 Every refusal (unknown robot, no pose yet, no map, goal outside the map or in an
-obstacle, no path) is a :class:`~fabric.session.ServiceError` reply with the
+obstacle, no path) is a :class:`~fabric.interfaces.ServiceError` reply with the
 reason; nothing here can make a query time out or take the peer down.
 
 This module is the wiring: it declares the subscribers and queryables, routes
@@ -177,8 +177,8 @@ class NavigationService:
         # and each with .../by/{user}: a user asking in her own name (keys.srv_asked)
         for peer in (None, f.peer_id):
             for service, handler, expected in (("map", self._on_map, MapRequest), ("plan", self._on_plan, PlanRequest)):
-                self._resources.append(f.serve(keys.srv_per_subject(self.world, service, peer), handler, expected=expected))
-                self._resources.append(f.serve(keys.srv_asked_all(self.world, service, peer), handler, expected=expected))
+                self._resources.append(f.rpc.serve(keys.srv_per_subject(self.world, service, peer), handler, expected=expected))
+                self._resources.append(f.rpc.serve(keys.srv_asked_all(self.world, service, peer), handler, expected=expected))
 
     def __enter__(self) -> "NavigationService":
         return self

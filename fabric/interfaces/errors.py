@@ -3,7 +3,7 @@ that is not a message.
 
 A service handler refuses a request by raising :class:`ServiceError` (or ``ValueError``); the session
 sends the reason back as an error reply (an :class:`~fabric.interfaces.events.Event`), and the caller's
-:meth:`fabric.session.Fabric.query` raises :class:`Refused` with the same reason. When no replier
+:meth:`fabric.rpc.Rpc.query` raises :class:`Refused` with the same reason. When no replier
 answers at all the caller gets :class:`NoReply`. Both are :class:`ServiceError`, so code that does not
 care which catches that. :class:`~fabric.codec.DecodeError` (what arrived is not a valid message) is
 the codec's and is re-exported here.

@@ -336,7 +336,7 @@ class Recorder:
             key = keys.srv(world, "world")
             try:
                 time.sleep(0.2)  # a sim's token comes before its queryable: give it a moment
-                replies = self.fabric.query(key, timeout=3.0, expected=WorldInfo, all_replies=True)
+                replies = self.fabric.rpc.query(key, timeout=3.0, expected=WorldInfo, all_replies=True)
                 for info in [union((rep.source, rep.message) for rep in replies)]:  # every sim's part: one world
                     payload = encode(info)
                     with self._lock:

@@ -27,7 +27,7 @@ import zenoh
 from fabric.rate import Clock, MonotonicClock
 from fabric.recording.format import LIVELINESS_SCHEMA, remap_world, world_of
 from fabric.recording.reader import RecordingError, RecordingInfo, iter_messages, key_filter, read_info
-from fabric.session import declare_publisher
+from fabric.publishers import declare_publisher
 from fabric.stats import percentiles
 
 __all__ = ["Replayer", "ReplayPlan", "ReplayStats", "plan_replay", "due_time"]

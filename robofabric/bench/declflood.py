@@ -90,7 +90,7 @@ class _Prober:
 
         while not self._stop.is_set():
             try:
-                self.fab.call(self.key, timeout=1.0)
+                self.fab.rpc.call(self.key, timeout=1.0)
                 self.answers.append(time.monotonic())
             except ServiceError:
                 self.misses += 1

@@ -432,7 +432,7 @@ def _try_client(world: str, port: int) -> Fabric | None:
 
 def _world_info(fab: Fabric, world: str) -> Any:
     try:
-        return fab.call(keys.srv(world, "world"), timeout=2.0)
+        return fab.rpc.call(keys.srv(world, "world"), timeout=2.0)
     except ServiceError:
         return None
 

@@ -54,7 +54,7 @@ def measure_query(n: int = 1000, seed: int = 0, warmup: int = 50) -> dict[str, d
                         ("fk", fk_key, FKRequest(q, frame="base")),
                     ):
                         t0 = time.perf_counter()
-                        fab.call(key, req, timeout=5.0)
+                        fab.rpc.call(key, req, timeout=5.0)
                         if i >= warmup:
                             out[name].append(time.perf_counter() - t0)
         finally:
@@ -72,7 +72,7 @@ def _answers(fab, key: str) -> bool:
     from fabric.interfaces import ServiceError
 
     try:
-        fab.call(key, FKRequest(np.zeros(6)), timeout=1.0)
+        fab.rpc.call(key, FKRequest(np.zeros(6)), timeout=1.0)
         return True
     except ServiceError:
         return False

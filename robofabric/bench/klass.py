@@ -98,7 +98,7 @@ class Probe:
         self.echo_ms: list[float] = []
         self.echo_key = f"{keys.world_root(world)}/bench/echo"
         self._echo = echo
-        echo.serve(self.echo_key, lambda key, req: OwnershipRecord("echo"))
+        echo.rpc.serve(self.echo_key, lambda key, req: OwnershipRecord("echo"))
         self._thread = threading.Thread(target=self._ask_ownership, name="probe-own", daemon=True)
 
     def _on_joints(self, key: str, js: Any) -> None:
@@ -121,7 +121,7 @@ class Probe:
             for key, into in ((keys.own(self.world, "arm0"), self.own_ms), (self.echo_key, self.echo_ms)):
                 t = time.perf_counter()
                 try:
-                    self.fab.call(key, timeout=5.0)
+                    self.fab.rpc.call(key, timeout=5.0)
                 except ServiceError:
                     into.append(5000.0)  # unanswered: counted as the time limit
                     continue

@@ -66,7 +66,7 @@ def run_mapflood(builds: int, tmp: Path) -> MapFloodResult:
 
             def scans() -> int:
                 try:
-                    return mallory.call(status, MapRequest("status"), timeout=5.0, expected=MapReply).scans
+                    return mallory.rpc.call(status, MapRequest("status"), timeout=5.0, expected=MapReply).scans
                 except ServiceError:
                     return 0
 
@@ -77,14 +77,14 @@ def run_mapflood(builds: int, tmp: Path) -> MapFloodResult:
             t0 = time.perf_counter()
             for i in range(builds):
                 try:
-                    mallory.call(keys.srv_asked(world, "map", f"m{i}", "mallory"), MapRequest("build", name=f"m{i}"),
+                    mallory.rpc.call(keys.srv_asked(world, "map", f"m{i}", "mallory"), MapRequest("build", name=f"m{i}"),
                                  timeout=10.0, expected=MapReply)
                     kept += 1
                 except ServiceError as exc:
                     reasons.append(exc.reason)
             per = (time.perf_counter() - t0) / max(builds, 1)
             try:
-                mallory.call(status, MapRequest("build", threshold=0.001), timeout=10.0, expected=MapReply)
+                mallory.rpc.call(status, MapRequest("build", threshold=0.001), timeout=10.0, expected=MapReply)
                 low = "kept"
             except ServiceError as exc:
                 low = f"refused: {exc.reason}"

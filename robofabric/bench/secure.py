@@ -76,7 +76,7 @@ def _ik_round_trips(ep: str, configs: dict[str, str | None], n: int, warmup: int
             def answers() -> bool:
                 q, p, quat = targets[0]
                 try:
-                    fab.call(key, IKRequest.make(p, quat, q, frame="base"), timeout=1.0)
+                    fab.rpc.call(key, IKRequest.make(p, quat, q, frame="base"), timeout=1.0)
                     return True
                 except ServiceError:
                     return False
@@ -86,7 +86,7 @@ def _ik_round_trips(ep: str, configs: dict[str, str | None], n: int, warmup: int
             for i, (q, p, quat) in enumerate(targets):
                 req = IKRequest.make(p, quat, q + rng.normal(0.0, 0.05, 6), frame="base")
                 t0 = time.perf_counter()
-                fab.call(key, req, timeout=5.0)
+                fab.rpc.call(key, req, timeout=5.0)
                 if i >= warmup:
                     out.append((time.perf_counter() - t0) * 1e3)
             return out

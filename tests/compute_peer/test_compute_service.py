@@ -13,7 +13,7 @@ from compute_peer.kinematics.service import ArmPlacement, KinematicsService
 from fabric.interfaces import Event, FKRequest, IKReply, IKRequest, IKStream, JacobianRequest, JointState, Pose
 from fabric import keys
 from fabric.codec import encode
-from fabric.session import ServiceError
+from fabric.interfaces import ServiceError
 from fabric.testing import robofabric_cmd, wait_until
 
 BASE = (3.0, 0.5, 0.75, math.radians(30.0))  # an arm on a table, turned: exercises the world <-> base frames
@@ -30,35 +30,35 @@ def served(world, connect):
 
 def test_fk_ik_round_trip_in_world_and_base_frames(served, world):
     _, _, user = served
-    fk_w = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
-    fk_b = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q, frame="base"))
+    fk_w = user.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
+    fk_b = user.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q, frame="base"))
     c, s = math.cos(BASE[3]), math.sin(BASE[3])
     rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
     assert np.allclose(fk_w.position, rot @ fk_b.position + np.array(BASE[:3]), atol=1e-12)
 
-    rep = user.call(keys.srv(world, "ik", "arm1"), IKRequest.make(fk_w.position, fk_w.quaternion, Q))
+    rep = user.rpc.call(keys.srv(world, "ik", "arm1"), IKRequest.make(fk_w.position, fk_w.quaternion, Q))
     assert isinstance(rep, IKReply) and rep.solver == "closed_form" and rep.candidates >= 1
     assert np.allclose(rep.q, Q, atol=1e-9)  # seeded with Q, the nearest solution is Q itself
-    back = user.call(keys.srv(world, "fk", "arm1"), FKRequest(rep.q))
+    back = user.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(rep.q))
     assert np.linalg.norm(back.position - fk_w.position) <= 1e-9
 
     # position only: any orientation will do, the flange must still land on the point
-    pos = user.call(keys.srv(world, "ik", "arm1"), IKRequest.make(fk_w.position))
-    reached = user.call(keys.srv(world, "fk", "arm1"), FKRequest(pos.q)).position
+    pos = user.rpc.call(keys.srv(world, "ik", "arm1"), IKRequest.make(fk_w.position))
+    reached = user.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(pos.q)).position
     assert np.linalg.norm(reached - fk_w.position) <= 1e-6
 
 
 def test_jacobian_twist_and_speeds(served, world):
     svc, _, user = served
     dq = np.array([0.1, -0.2, 0.3, 0.0, 0.5, -0.1])
-    rep = user.call(keys.srv(world, "jacobian", "arm1"), JacobianRequest(Q, dq))
+    rep = user.rpc.call(keys.srv(world, "jacobian", "arm1"), JacobianRequest(Q, dq))
     assert rep.jacobian.shape == (6, 6)
     assert np.allclose(rep.twist, rep.jacobian @ dq)
     assert np.allclose(rep.speeds, np.linalg.norm(rep.jacobian, axis=0) * np.abs(dq))
     # the linear rows are the flange velocity: compare with a finite difference of the FK service's answer
     h = 1e-6
-    p1 = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q + h * dq)).position
-    p0 = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q - h * dq)).position
+    p1 = user.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q + h * dq)).position
+    p0 = user.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q - h * dq)).position
     assert np.allclose((p1 - p0) / (2 * h), rep.twist[:3], atol=1e-6)
     assert svc.counters["jacobian"] == 1
 
@@ -66,7 +66,7 @@ def test_jacobian_twist_and_speeds(served, world):
 def _answers(fab, key, request) -> bool:
     """Whether ``key`` is served yet (a queryable declared on another session reaches the router a moment later)."""
     try:
-        fab.call(key, request, timeout=1.0)
+        fab.rpc.call(key, request, timeout=1.0)
         return True
     except ServiceError:
         return False
@@ -78,7 +78,7 @@ def _refusal(user, key, payload) -> str:
             replies = list(user.session.get(key, payload=payload, timeout=5.0))
             assert replies and replies[0].err is not None, "a garbage query must get an error reply"
             raise ServiceError(replies[0].err.payload.to_bytes().decode("utf-8", "replace"))
-        user.call(key, payload, timeout=5.0)
+        user.rpc.call(key, payload, timeout=5.0)
     return str(err.value)
 
 
@@ -96,8 +96,8 @@ def test_bad_requests_get_reasons_not_timeouts(served, world):
     # refusals of well-formed requests are the service's; undecodable payloads are counted by the session
     assert svc.counters["refusals"] == 4 and comp.counters["query_errors"] == 8
     # and the service still answers good requests
-    fk = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
-    assert user.call(ik, IKRequest.make(fk.position, fk.quaternion, Q)).solver == "closed_form"
+    fk = user.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
+    assert user.rpc.call(ik, IKRequest.make(fk.position, fk.quaternion, Q)).solver == "closed_form"
 
 
 def test_a_chosen_peer_answers_on_its_own_key(world, connect):
@@ -108,11 +108,11 @@ def test_a_chosen_peer_answers_on_its_own_key(world, connect):
     user = connect("user", "bob")
     try:
         wait_until(lambda: all(_answers(user, keys.srv(world, "fk", "arm1", pid), FKRequest(Q)) for pid in ("c1", "c2")), what="both peers")
-        fk = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
-        everyone = user.query(keys.srv(world, "ik", "arm1"), IKRequest.make(fk.position, fk.quaternion, Q), all_replies=True, timeout=5.0)
+        fk = user.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
+        everyone = user.rpc.query(keys.srv(world, "ik", "arm1"), IKRequest.make(fk.position, fk.quaternion, Q), all_replies=True, timeout=5.0)
         assert sorted(r.source for r in everyone) == ["c1", "c2"]
         for pid in ("c1", "c2"):
-            rep = user.call(keys.srv(world, "ik", "arm1", pid), IKRequest.make(fk.position, fk.quaternion, Q))
+            rep = user.rpc.call(keys.srv(world, "ik", "arm1", pid), IKRequest.make(fk.position, fk.quaternion, Q))
             assert rep.header.source == pid
     finally:
         for s in svcs:
@@ -128,12 +128,12 @@ def test_ik_streaming_follows_the_target(served, world):
     q_now = np.array([0.1, 0.1, -0.2, 0.0, 0.3, 0.0])
     user.publish(keys.robot_joints(world, "arm1"), JointState(tuple(f"joint_{i}" for i in range(1, 7)), q_now, np.zeros(6)))
     wait_until(lambda: "arm1" in svc._joints, what="joints seen by the service")
-    goal = user.call(keys.srv(world, "fk", "arm1"), FKRequest(Q)).position
+    goal = user.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q)).position
     user.publish(keys.object_pose(world, "target", "alice"), Pose(goal))
     wait_until(lambda: any(np.allclose(m.position, goal) for m in got), what="a streamed solution", seen=lambda: got)
     sol = [m for m in got if np.allclose(m.position, goal)][-1]
     assert sol.ok and sol.robot == "arm1" and sol.target == "target"
-    reached = user.call(keys.srv(world, "fk", "arm1"), FKRequest(sol.q)).position
+    reached = user.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(sol.q)).position
     assert np.linalg.norm(reached - goal) <= 1e-6
     # a synchronised move at the speed limits: the slowest joint takes `seconds`, none is faster than its limit
     limits = np.radians([150, 150, 180, 300, 300, 500])
@@ -174,7 +174,7 @@ def test_a_user_can_pick_a_compute_peer(world, router, connect):
         with World(client_config(world, router[1]), "carol", compute="c2") as w:
             wait_until(lambda: w.compute_peers() == ["c1", "c2"], what="both compute peers' tokens", seen=w.compute_peers)
             wait_until(lambda: _answers(w.fabric, keys.srv(world, "fk", "arm1", "c2"), FKRequest(Q)), what="c2 serving")
-            fk = w.fabric.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
+            fk = w.fabric.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
             for _ in range(3):
                 q = services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=w.compute)
                 assert np.allclose(q, Q, atol=1e-9)
@@ -193,9 +193,9 @@ def test_navigation_answers_on_its_own_key_too(world, connect):
     try:
         wait_until(lambda: all(_answers(user, keys.srv(world, "map", "map", pid), MapRequest("status")) for pid in ("n1", "n2")), what="both peers")
         for pid in ("n1", "n2"):
-            rep = user.call(keys.srv(world, "map", "map", pid), MapRequest("status"), timeout=5.0)
+            rep = user.rpc.call(keys.srv(world, "map", "map", pid), MapRequest("status"), timeout=5.0)
             assert isinstance(rep, MapReply) and rep.header.source == pid
-        everyone = user.query(keys.srv(world, "map", "map"), MapRequest("status"), all_replies=True, timeout=5.0)
+        everyone = user.rpc.query(keys.srv(world, "map", "map"), MapRequest("status"), all_replies=True, timeout=5.0)
         assert sorted(r.message.header.source for r in everyone) == ["n1", "n2"]
     finally:
         for n in navs:
@@ -212,7 +212,7 @@ def test_a_user_can_spread_ik_over_every_compute_peer(world, router, connect):
         with World(client_config(world, router[1]), "erin", compute="spread") as w:
             wait_until(lambda: w.compute_peers() == ["c1", "c2"], what="both compute peers' tokens", seen=w.compute_peers)
             wait_until(lambda: all(_answers(w.fabric, keys.srv(world, "fk", "arm1", p), FKRequest(Q)) for p in ("c1", "c2")), what="both serving")
-            fk = w.fabric.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
+            fk = w.fabric.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
             for _ in range(4):
                 q = w.ask_kinematics(lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer))
                 assert np.allclose(q, Q, atol=1e-9)
@@ -263,11 +263,11 @@ def test_an_arm_asked_for_before_its_joints_arrive_is_looked_up_not_refused(worl
         sim = connect("sim")
         six = np.zeros(6)
         info = WorldInfo(world, "test", 0.002, {}, (RobotInfo("arm1", "meca500", "arm", np.array(BASE), tuple(f"j{i}" for i in range(6)), six - 3, six + 3, six + 1),))
-        sim.serve(keys.srv(world, "world"), lambda key, req: info)
+        sim.rpc.serve(keys.srv(world, "world"), lambda key, req: info)
         user = connect("user")
-        wait_until(lambda: user.call(keys.srv(world, "world"), timeout=1.0), timeout=10.0, what="the world served")
+        wait_until(lambda: user.rpc.call(keys.srv(world, "world"), timeout=1.0), timeout=10.0, what="the world served")
         target = np.array(BASE[:3]) + np.array([0.19, 0.0, 0.31])
-        reply = user.call(keys.srv(world, "ik", "arm1"), IKRequest(target), timeout=10.0, expected=IKReply)
+        reply = user.rpc.call(keys.srv(world, "ik", "arm1"), IKRequest(target), timeout=10.0, expected=IKReply)
         assert reply.robot == "arm1" and svc.arms == ["arm1"], svc.counters
     finally:
         svc.close()

@@ -64,7 +64,7 @@ def test_described_robots_are_the_sims_robots_of_one_kind(router, world):
         with pytest.raises(NoReply):
             described_robots(compute, "arm", timeout=0.5)
         robots = (_robot("arm1", "arm"), _robot("base1", "mobile"))
-        sim.serve(keys.srv(world, "world"), lambda key, req: WorldInfo(world, "s", 0.002, {}, robots))
+        sim.rpc.serve(keys.srv(world, "world"), lambda key, req: WorldInfo(world, "s", 0.002, {}, robots))
         wait_until(lambda: _answers(compute), what="the new queryable known through the router")
         assert [r.id for r in described_robots(compute, "mobile")] == ["base1"]
         assert [r.id for r in described_robots(compute, "arm")] == ["arm1"]

@@ -41,7 +41,7 @@ def test_scenario_names_complete():
 
 def test_keys_of_a_live_world_complete_world_relative_or_full(router, connect, world):
     sim = connect("sim", peer_id="sim-c")
-    sim.serve(keys.srv(world, "world"), lambda k, r: WorldInfo(world=world))
+    sim.rpc.serve(keys.srv(world, "world"), lambda k, r: WorldInfo(world=world))
     sim.subscribe_raw(keys.robot_cmd_all(world, "arm1"), lambda s: None)
     stop = threading.Event()
 

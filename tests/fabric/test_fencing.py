@@ -103,13 +103,13 @@ def test_subscribers_drop_authority_state_of_a_lower_term(world, connect):
     key = keys.robot_joints(world, "arm1")
     sub.subscribe(key, lambda k, m: got.append(m), expected=JointState)
     wait_until(lambda: _put(pub, key, 1) or len(got) > 0, timeout=20, what="first joints")
-    pub.term = 2
+    pub.assume_term(2)
     wait_until(lambda: _put(pub, key, 2) or any(m.header.term == 2 for m in got), timeout=20, what="term 2")
     n = len(got)
-    pub.term = 1
+    pub.assume_term(1)
     for _ in range(5):
         _put(pub, key, 1)
-    pub.term = 2
+    pub.assume_term(2)
     wait_until(lambda: _put(pub, key, 2) or len(got) > n + 2, timeout=20, what="more term-2 joints")
     assert all(m.header.term == 2 for m in got[n:]), [m.header.term for m in got[n:]]
     assert sub.counters["stale_authority"] >= 1
@@ -135,14 +135,14 @@ def test_the_fence_resets_when_the_worlds_last_sim_leaves(world, connect):
     key = keys.robot_joints(world, "arm1")
     watcher.subscribe(key, lambda k, m: got.append(m), expected=JointState)
     old = connect("sim", "sim-old")
-    old.term = 2
+    old.assume_term(2)
     wait_until(lambda: _put(old, key, 2) or any(m.header.term == 2 for m in got), timeout=20, what="term 2 heard")
     wait_until(lambda: watcher.counters["fence_resets"] == 0 and watcher.sim_fence.sims == {"sim-old"}, timeout=20,
                what="the watcher follows the sim tokens", seen=lambda: watcher.sim_fence.sims)
     old.close()
     wait_until(lambda: watcher.counters["fence_resets"] >= 1, timeout=20, what="the fence reset", seen=lambda: watcher.sim_fence.sims)
     new = connect("sim", "sim-new")
-    new.term = 1
+    new.assume_term(1)
     wait_until(lambda: _put(new, key, 1) or any(m.header.source == "sim-new" for m in got), timeout=20, what="term 1 believed again")
     assert watcher.sim_fence.term("arm1") == 1
 
@@ -155,18 +155,18 @@ def test_a_departed_sims_late_samples_do_not_fence_out_a_new_sim(world, connect)
     key = keys.robot_joints(world, "arm1")
     watcher.subscribe(key, lambda k, m: got.append(m), expected=JointState)
     old = connect("sim", "sim-old")
-    old.term = 2
+    old.assume_term(2)
     wait_until(lambda: _put(old, key, 2) or any(m.header.term == 2 for m in got), timeout=20, what="term 2 heard")
     wait_until(lambda: watcher.sim_fence.sims == {"sim-old"}, timeout=20, what="the sim's token", seen=lambda: watcher.sim_fence.sims)
     old.close()
     wait_until(lambda: watcher.counters["fence_resets"] >= 1, timeout=20, what="the fence reset", seen=lambda: watcher.sim_fence.sims)
     late = connect("tool", "sim-old")  # the departed sim's id and term, as a late sample carries them
-    late.term = 2
+    late.assume_term(2)
     stale = watcher.counters["stale_authority"]
     wait_until(lambda: _put(late, key, 2) or watcher.counters["stale_authority"] > stale, timeout=20, what="the late sample dropped")
     assert watcher.sim_fence.term("arm1") == 0
     new = connect("sim", "sim-new")
-    new.term = 1
+    new.assume_term(1)
     wait_until(lambda: _put(new, key, 1) or any(m.header.source == "sim-new" for m in got), timeout=20, what="term 1 believed again")
     assert watcher.sim_fence.term("arm1") == 1
 
@@ -188,12 +188,12 @@ def test_a_wildcard_query_hears_each_answer_on_its_own_key_fenced_by_its_scopes(
     asker = connect("tool", "asker")
     for fab, obj, term in ((new, "arm1", 2), (old, "base1", 1)):
         key = keys.own(world, obj)
-        fab.serve(key, lambda k, req, fab=fab, obj=obj, key=key, term=term:
+        fab.rpc.serve(key, lambda k, req, fab=fab, obj=obj, key=key, term=term:
                   OwnershipRecord(obj, authority=fab.peer_id, header=Header(wall_ns=1, source=fab.peer_id, term=term)))
-    wait_until(lambda: len(asker.query(keys.own_all(world), timeout=2.0, expected=OwnershipRecord, all_replies=True)) == 2,
+    wait_until(lambda: len(asker.rpc.query(keys.own_all(world), timeout=2.0, expected=OwnershipRecord, all_replies=True)) == 2,
                timeout=20, what="both records")
-    replies = asker.query(keys.own_all(world), timeout=2.0, expected=OwnershipRecord, all_replies=True)
+    replies = asker.rpc.query(keys.own_all(world), timeout=2.0, expected=OwnershipRecord, all_replies=True)
     assert sorted(r.key for r in replies) == [keys.own(world, "arm1"), keys.own(world, "base1")]
     asker.sim_fence.raise_to(2, ("base1",))  # a take-over of base1's shard at term 2 was heard
-    replies = asker.query(keys.own_all(world), timeout=2.0, expected=OwnershipRecord, all_replies=True)
+    replies = asker.rpc.query(keys.own_all(world), timeout=2.0, expected=OwnershipRecord, all_replies=True)
     assert [r.key for r in replies] == [keys.own(world, "arm1")]  # old's term-1 answer about base1: stale

@@ -109,8 +109,8 @@ def peers_world(router, connect, world):
     sim = connect("sim", peer_id="sim-x")
     comp = connect("compute", peer_id="compute-x")
     sim.subscribe_raw(keys.robot_cmd_all(world, "arm1"), lambda s: None)
-    sim.serve(keys.srv(world, "world"), lambda k, r: WorldInfo(world=world))
-    comp.serve(keys.srv_per_subject(world, "ik"), lambda k, r: None)
+    sim.rpc.serve(keys.srv(world, "world"), lambda k, r: WorldInfo(world=world))
+    comp.rpc.serve(keys.srv_per_subject(world, "ik"), lambda k, r: None)
     odd = connect("tool", peer_id="mallory-tool")
     tokens = [odd.session.liveliness().declare_token(f"rf/{world}/peer/viewer/with space"),
               odd.session.liveliness().declare_token(f"rf/{world}/peer/nokind/x"),

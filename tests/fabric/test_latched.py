@@ -111,7 +111,7 @@ def test_echo_prints_the_latest_latched_value_without_waiting_for_a_new_one(worl
 def test_latched_values_block_streams_and_commands_drop(world, connect):
     import zenoh
 
-    from fabric.session import declare_publisher
+    from fabric.publishers import declare_publisher
 
     fab = connect("tool", "qos")
     block, drop = zenoh.CongestionControl.BLOCK, zenoh.CongestionControl.DROP

@@ -30,7 +30,8 @@ from fabric.config import FabricConfig
 from fabric.interfaces import (Command, Event, Header, JointState, JointTarget, OccupancyGrid, OwnershipRecord, OwnReply, OwnRequest,
                                Stop, WorldInfo)
 from fabric.secure import init
-from fabric.session import Fabric, ServiceError
+from fabric.interfaces import ServiceError
+from fabric.session import Fabric
 from fabric.testing import ProcessGroup, client_config, free_port, robofabric_cmd, router_config, wait_until
 
 pytestmark = pytest.mark.slow
@@ -187,9 +188,9 @@ def test_a_fake_ownership_record_is_refused_and_alice_keeps_renewing(secure, ali
     assert alice.ownership.record("arm1").owner == "alice"
     _refused_by_router(secure, f"mallory put {keys.own(w, 'arm1')}")
     # two lease periods (2 s each) later alice still owns it: she kept renewing
-    first = watcher.call(keys.own(w, "arm1"), expected=OwnershipRecord)
+    first = watcher.rpc.call(keys.own(w, "arm1"), expected=OwnershipRecord)
     time.sleep(4.5)  # the lease must have run out had she stopped renewing; nothing to poll for
-    later = watcher.call(keys.own(w, "arm1"), expected=OwnershipRecord)
+    later = watcher.rpc.call(keys.own(w, "arm1"), expected=OwnershipRecord)
     assert later.owner == "alice" and later.epoch == first.epoch and later.lease_expiry > first.lease_expiry + 3.0
 
 
@@ -198,12 +199,12 @@ def test_mallory_cannot_release_alices_arm(secure, alice_owns_arm):
     w = secure.world
     mallory = secure.fabric("mallory")
     with pytest.raises(ServiceError, match="no reply"):  # alice's key: the router does not pass the query
-        mallory.call(keys.own_request(w, "arm1", "alice"), OwnRequest("release", "alice"), timeout=2.0, expected=OwnReply)
+        mallory.rpc.call(keys.own_request(w, "arm1", "alice"), OwnRequest("release", "alice"), timeout=2.0, expected=OwnReply)
     with pytest.raises(ServiceError, match="names 'alice' but was sent by 'mallory'"):
-        mallory.call(keys.own_request(w, "arm1", "mallory"), OwnRequest("release", "alice"), timeout=10.0, expected=OwnReply)
-    honest = mallory.call(keys.own_request(w, "arm1", "mallory"), OwnRequest("release", "mallory"), timeout=10.0, expected=OwnReply)
+        mallory.rpc.call(keys.own_request(w, "arm1", "mallory"), OwnRequest("release", "alice"), timeout=10.0, expected=OwnReply)
+    honest = mallory.rpc.call(keys.own_request(w, "arm1", "mallory"), OwnRequest("release", "mallory"), timeout=10.0, expected=OwnReply)
     assert honest.outcome != "released" and honest.record.owner == "alice"
-    rec = mallory.call(keys.own(w, "arm1"), OwnRequest("release", "alice"), timeout=10.0, expected=OwnershipRecord)
+    rec = mallory.rpc.call(keys.own(w, "arm1"), OwnRequest("release", "alice"), timeout=10.0, expected=OwnershipRecord)
     assert rec.owner == "alice"  # the record key only ever answers with the record
     assert alice.ownership.record("arm1").owner == "alice"
 
@@ -217,23 +218,23 @@ def test_a_user_cannot_publish_robot_state_or_serve_the_world(secure):
     # every forgery carries the sim's own source and term (read from its real messages), so that the
     # clients' fences would believe it: only the router's access control keeps it out
     real_js = wait_until(lambda: joints.messages(), timeout=20, what="a real joint state")[-1]
-    real_world = mallory.call(keys.srv(w, "world"), timeout=10.0, expected=WorldInfo)
-    real_rec = mallory.call(keys.own(w, "arm1"), timeout=10.0, expected=OwnershipRecord)
+    real_world = mallory.rpc.call(keys.srv(w, "world"), timeout=10.0, expected=WorldInfo)
+    real_rec = mallory.rpc.call(keys.own(w, "arm1"), timeout=10.0, expected=OwnershipRecord)
     assert real_js.header.term >= 1 and real_world.header.term >= 1 and real_rec.header.term >= 1
     marker_q = np.full(len(real_js.q), 1.2345)
     _send(mallory, keys.robot_joints(w, "arm1"), replace(real_js, q=marker_q, header=_forged_header(real_js.header)))
-    mallory.serve(keys.srv(w, "world"), lambda key, req: replace(real_world, scene="mallory's", header=_forged_header(real_world.header)))
-    mallory.serve(keys.own(w, "arm1"), lambda key, req: replace(real_rec, owner="mallory", epoch=real_rec.epoch + 1,
+    mallory.rpc.serve(keys.srv(w, "world"), lambda key, req: replace(real_world, scene="mallory's", header=_forged_header(real_world.header)))
+    mallory.rpc.serve(keys.own(w, "arm1"), lambda key, req: replace(real_rec, owner="mallory", epoch=real_rec.epoch + 1,
                                                                   header=_forged_header(real_rec.header)))
     _marker(mallory, events, w, "after-state")
     assert not [js for js in joints.messages() if np.allclose(js.q, 1.2345)]
-    answers = watcher.query(keys.srv(w, "world"), timeout=5.0, all_replies=True)
+    answers = watcher.rpc.query(keys.srv(w, "world"), timeout=5.0, all_replies=True)
     assert answers and all(a.message.scene != "mallory's" for a in answers), answers
-    records = watcher.query(keys.own(w, "arm1"), timeout=5.0, all_replies=True)
+    records = watcher.rpc.query(keys.own(w, "arm1"), timeout=5.0, all_replies=True)
     assert records and all(r.message.owner != "mallory" for r in records)
     _refused_by_router(secure, f"mallory put {keys.robot_joints(w, 'arm1')}")
     # nor a compute's services: an IK "answer" of hers would steer whoever asks into her joints
-    mallory.serve(keys.srv(w, "ik", "arm1"), lambda key, req: Event(kind="forged", reason="mallory's IK"))
+    mallory.rpc.serve(keys.srv(w, "ik", "arm1"), lambda key, req: Event(kind="forged", reason="mallory's IK"))
     for key in (keys.srv(w, "world"), keys.own(w, "arm1"), keys.srv(w, "ik", "arm1")):  # her queryables: refused when declared
         _refused_by_router(secure, f"mallory declare_queryable {key} x")
     _refused_by_router(secure, f"mallory liveliness_token {keys.peer(w, 'sim', 'fake-sim')} x")  # her sim token
@@ -489,9 +490,9 @@ def test_mallory_may_not_change_the_class_map_nor_plan_for_bobs_robot(secure, se
         full = OccupancyGrid(0.1, np.zeros(3), np.full((50, 50), 100, np.uint8))
         for req in (MapRequest("set", grid=full), MapRequest("reset"), MapRequest("stop"), MapRequest("save", file="x.yaml")):
             with pytest.raises(ServiceError, match=f"map '{req.action}' changes the map everyone plans on: an instructor's, not mallory's"):
-                mallory.call(keys.srv_asked(w, "map", "map", "mallory"), req, timeout=10.0, expected=MapReply)
+                mallory.rpc.call(keys.srv_asked(w, "map", "map", "mallory"), req, timeout=10.0, expected=MapReply)
             with pytest.raises(ServiceError, match="no reply"):  # the staff's form: her query never passes the router
-                mallory.call(keys.srv(w, "map", "map"), req, timeout=2.0, expected=MapReply)
+                mallory.rpc.call(keys.srv(w, "map", "map"), req, timeout=2.0, expected=MapReply)
         after = status()
         assert after.mapping == 1 and after.scans >= before.scans, (before, after)  # on, and nothing wiped
         assert not maps.messages(), "a map was published"
@@ -499,13 +500,13 @@ def test_mallory_may_not_change_the_class_map_nor_plan_for_bobs_robot(secure, se
         # an instructor may: a free room of her own, for the plans below (the class map stays as it is)
         carol = secure.fabric("carol")
         room = OccupancyGrid(0.1, np.array([-5.0, -5.0, 0.0]), np.zeros((100, 100), np.uint8))
-        assert carol.call(keys.srv(w, "map", "room"), MapRequest("set", name="room", grid=room), timeout=10.0, expected=MapReply).action == "set"
+        assert carol.rpc.call(keys.srv(w, "map", "room"), MapRequest("set", name="room", grid=room), timeout=10.0, expected=MapReply).action == "set"
         plan = PlanRequest("base1", goal=np.array([2.0, 1.0, 0.0]), start=np.array([0.0, 0.0, 0.0]), map="room", direction="both")
-        theirs = mallory.call(keys.srv_asked(w, "plan", "base1", "mallory"), plan, timeout=30.0, expected=PlanReply)
+        theirs = mallory.rpc.call(keys.srv_asked(w, "plan", "base1", "mallory"), plan, timeout=30.0, expected=PlanReply)
         assert len(theirs.path) > 1  # she gets her path, in the reply
         with pytest.raises(ServiceError, match="no reply"):
-            mallory.call(keys.srv(w, "plan", "base1"), plan, timeout=2.0, expected=PlanReply)
-        own = bob.fabric.call(keys.srv_asked(w, "plan", "base1", "bob"), replace(plan, goal=np.array([1.5, -1.0, 0.0])),
+            mallory.rpc.call(keys.srv(w, "plan", "base1"), plan, timeout=2.0, expected=PlanReply)
+        own = bob.fabric.rpc.call(keys.srv_asked(w, "plan", "base1", "bob"), replace(plan, goal=np.array([1.5, -1.0, 0.0])),
                               timeout=30.0, expected=PlanReply)
         got = wait_until(lambda: paths.messages(), timeout=20, what="bob's plan on robot/base1/path")
         # hers was asked (and answered) first: published, it would have come first on the same path key

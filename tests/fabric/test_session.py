@@ -9,7 +9,7 @@ import zenoh
 from fabric import keys
 from fabric.config import ConfigError, FabricConfig
 from fabric.interfaces import Event, JointState, Stop, Twist
-from fabric.session import ServiceError
+from fabric.interfaces import ServiceError
 from fabric.testing import robofabric_cmd, wait_until
 
 
@@ -52,15 +52,15 @@ def test_service_replies_and_refusals(world, connect):
         return Twist(request.v * 2, request.omega, header=server.header(key))
 
     key = keys.srv(world, "fk", "arm1")
-    server.serve(key, handler, expected=Twist)
-    reply = wait_until(lambda: _try(lambda: caller.call(key, Twist(1.5, 0.0))), what="service reply")
+    server.rpc.serve(key, handler, expected=Twist)
+    reply = wait_until(lambda: _try(lambda: caller.rpc.call(key, Twist(1.5, 0.0))), what="service reply")
     assert reply.v == 3.0 and reply.header.source == "c1"
     with pytest.raises(ServiceError, match="a Twist request is required"):
-        caller.call(key)
+        caller.rpc.call(key)
     with pytest.raises(ServiceError, match="expected Twist, got Stop"):
-        caller.call(key, Stop())
+        caller.rpc.call(key, Stop())
     with pytest.raises(ServiceError, match="no reply"):
-        caller.call(keys.srv(world, "ik", "nobody"), timeout=0.3)
+        caller.rpc.call(keys.srv(world, "ik", "nobody"), timeout=0.3)
 
 
 def _try(fn):
@@ -74,11 +74,11 @@ def test_all_replies_reaches_every_server(world, connect):
     a, b, caller = connect("compute", "ca"), connect("compute", "cb"), connect("user", "u")
     key = keys.srv(world, "plan", "base1")
     for fab in (a, b):
-        fab.serve(key, lambda k, r, fab=fab: Event(kind="pong", reason=fab.peer_id, header=fab.header(k)))
+        fab.rpc.serve(key, lambda k, r, fab=fab: Event(kind="pong", reason=fab.peer_id, header=fab.header(k)))
     wait_until(
-        lambda: len(_try(lambda: caller.query(key, all_replies=True, timeout=0.5)) or []) == 2, what="two replies"
+        lambda: len(_try(lambda: caller.rpc.query(key, all_replies=True, timeout=0.5)) or []) == 2, what="two replies"
     )
-    sources = sorted(r.message.reason for r in caller.query(key, all_replies=True))
+    sources = sorted(r.message.reason for r in caller.rpc.query(key, all_replies=True))
     assert sources == ["ca", "cb"]
 
 
@@ -166,8 +166,8 @@ def test_a_server_that_answers_too_late_is_no_reply_not_a_refusal(world, connect
         return Twist(1.0, 0.0)
 
     key = keys.srv(world, "world")
-    server.serve(key, handler)
-    wait_until(lambda: _try(lambda: caller.call(key, timeout=1.0)), what="the server answering a probe")
+    server.rpc.serve(key, handler)
+    wait_until(lambda: _try(lambda: caller.rpc.call(key, timeout=1.0)), what="the server answering a probe")
     with pytest.raises(NoReply, match="no server answered in time") as err:
-        caller.call(key, Stop(), timeout=0.3)
+        caller.rpc.call(key, Stop(), timeout=0.3)
     assert not isinstance(err.value, Refused)

@@ -271,7 +271,7 @@ def test_router_lost_and_restarted(world: World):
     tokens = json.loads(counted.stdout.strip().splitlines()[-1])
     assert tokens and all(n == 1 for n in tokens.values()), sorted(tokens.items())
     assert {k.split("/")[3] for k in tokens} >= set(PEERS), tokens
-    replies = bob.call("from fabric import keys\nlen(w.fabric.query(keys.srv(w.name, 'world'), timeout=2.0, all_replies=True))")
+    replies = bob.call("from fabric import keys\nlen(w.fabric.rpc.query(keys.srv(w.name, 'world'), timeout=2.0, all_replies=True))")
     assert replies == 1, replies
     # the owner keeps the arm where the lease and grace allow: the authority's record says so, or a newer one
     # (a change of owner) reaches her

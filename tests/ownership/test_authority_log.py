@@ -21,7 +21,7 @@ def test_an_expiry_is_logged_with_its_reason(connect, world, caplog):
     try:
         with caplog.at_level(logging.WARNING, logger="robofabric"):
             assert bob.request("base").granted
-            reply = alice.call(keys.own_request(world, "arm", "alice"), OwnRequest("request", "alice"), expected=OwnReply)
+            reply = alice.rpc.call(keys.own_request(world, "arm", "alice"), OwnRequest("request", "alice"), expected=OwnReply)
             assert reply.outcome == "granted"
             wait_until(lambda: auth.records()["arm"].owner == "", timeout=10, what="alice's lease to expire")
             wait_until(lambda: "own_expired" in caplog.text, timeout=5, what="the expiry logged")

@@ -12,7 +12,7 @@ from hypothesis import given, strategies as st
 
 from fabric import keys
 from fabric.interfaces import Event, OwnershipRecord, OwnReply, OwnRequest
-from fabric.session import ServiceError
+from fabric.interfaces import ServiceError
 from fabric.testing import wait_until
 
 from ownership import Authority, OwnershipClient
@@ -34,14 +34,14 @@ def test_a_request_naming_someone_else_is_refused(host, connect, world):
     mallory.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
     # on her own key with alice's name in the payload: refused, alice keeps the arm
     with pytest.raises(ServiceError, match="names 'alice' but was sent by 'mallory'"):
-        mallory.call(keys.own_request(world, "arm", "mallory"), OwnRequest("release", "alice"), expected=OwnReply)
+        mallory.rpc.call(keys.own_request(world, "arm", "mallory"), OwnRequest("release", "alice"), expected=OwnReply)
     wait_until(lambda: any(e.kind == "own_refused" and e.user == "mallory" for e in events), what="refusal event")
     assert host.records()["arm"].owner == "alice"
     # on her own key as herself: an honest release of what she does not own changes nothing
-    rep = mallory.call(keys.own_request(world, "arm", "mallory"), OwnRequest("release", "mallory"), expected=OwnReply)
+    rep = mallory.rpc.call(keys.own_request(world, "arm", "mallory"), OwnRequest("release", "mallory"), expected=OwnReply)
     assert rep.outcome != "released" and host.records()["arm"].owner == "alice"
     # a query on the record key is answered with the record, whatever it carries
-    rec = mallory.call(keys.own(world, "arm"), OwnRequest("release", "alice"), expected=OwnershipRecord)
+    rec = mallory.rpc.call(keys.own(world, "arm"), OwnRequest("release", "alice"), expected=OwnershipRecord)
     assert rec.owner == "alice" and host.records()["arm"].owner == "alice"
     alice.close()
 
@@ -55,7 +55,7 @@ def test_a_burst_of_refusals_writes_a_bounded_log(host, connect, world, caplog):
     with caplog.at_level(logging.INFO, logger="robofabric"):
         for _ in range(30):
             with pytest.raises(ServiceError, match="names 'alice' but was sent by 'mmm") as err:
-                mallory.call(key, OwnRequest("release", "alice"), expected=OwnReply)
+                mallory.rpc.call(key, OwnRequest("release", "alice"), expected=OwnReply)
             assert len(str(err.value)) < 400
     refused = [r.getMessage() for r in caplog.records if "own_refused" in r.getMessage()]
     assert 1 <= len(refused) <= REPORT_BURST + 1, len(refused)  # one interval, perhaps the start of a second
@@ -207,10 +207,10 @@ def test_a_replica_that_missed_the_first_records_asks_for_the_rest(connect):
     for good while target's arrived). The first record she hears from that sim makes her ask for all."""
     sim = connect("sim", "host")
     alice = OwnershipClient(connect("user", "alice"), "alice", renew_s=0.1, timeout=1.0)
-    sim.muzzle()  # its first records go nowhere, as they do before a subscription reaches it
+    sim.stamp.muzzle()  # its first records go nowhere, as they do before a subscription reaches it
     auth = Authority(sim, {"arm": "exclusive", "base": "exclusive", "target": "scene"}, lease_s=5.0).start()
     try:
-        sim.unmuzzle()
+        sim.stamp.unmuzzle()
         bob = OwnershipClient(connect("user", "bob"), "bob", renew_s=0.1)
         assert bob.request("base").granted  # one record published: the only one alice hears of herself
         wait_until(lambda: set(alice.snapshot()) == {"arm", "base", "target"}, timeout=10,

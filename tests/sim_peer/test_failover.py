@@ -132,7 +132,7 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
         assert first2.msg.header.source == "sim-b", (r, s, first2.msg.header)
         assert first2.t - t_kill <= 1.0 and first2.t - last1.t <= 1.0, (r, s, first2.t - t_kill, first2.t - last1.t)
     # and the world description answers from the new authority
-    info = fb.call(keys.srv(world, "world"), timeout=5.0, expected=WorldInfo)
+    info = fb.rpc.call(keys.srv(world, "world"), timeout=5.0, expected=WorldInfo)
     assert (info.header.term, info.header.source) == (2, "sim-b"), info.header
     assert {r.id for r in info.robots} == {"arm1", "base1"}
 
@@ -337,7 +337,7 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
         for r, s in streams:  # streams resume within 1 s, from the heir
             first = tape.of(r, s, term)[0]
             assert first.msg.header.source == heir and first.t - kills[dead] <= 1.0, (r, s, first.msg.header, first.t - kills[dead])
-        info = obs.call(keys.srv(world, "world"), timeout=5.0, expected=WorldInfo)
+        info = obs.rpc.call(keys.srv(world, "world"), timeout=5.0, expected=WorldInfo)
         assert (info.header.term, info.header.source) == (term, heir), info.header
         if other is not None:
             # the other standby follows the heir and is no authority: nothing on the wire from it, and its
@@ -345,7 +345,7 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
             wait_until(lambda: f"following {heir} (term {term})" in procs.output(sims[other]), timeout=20,
                        what=f"{other} following {heir}", seen=lambda: procs.output(sims[other])[-1500:])
             assert "took over" not in procs.output(sims[other])
-            states = obs.query(keys.srv(world, "state"), timeout=5.0, expected=WorldState, all_replies=True)
+            states = obs.rpc.query(keys.srv(world, "state"), timeout=5.0, expected=WorldState, all_replies=True)
             assert [(r.message.header.source, r.message.header.term) for r in states] == [(heir, term)]
             assert not tape.by(other)
     for t in threads:

@@ -73,7 +73,7 @@ class Class:
 
     def parts(self) -> dict[str, list[str]]:
         try:
-            replies = self.probe.query(keys.srv(self.world, "world"), timeout=3.0, expected=WorldInfo, all_replies=True)
+            replies = self.probe.rpc.query(keys.srv(self.world, "world"), timeout=3.0, expected=WorldInfo, all_replies=True)
         except ServiceError:
             return {}
         return {r.source: sorted(x.id for x in r.message.robots) for r in replies}
@@ -141,7 +141,7 @@ def _forged(c: Class, fab: Fabric, kind: str, rid: str, to: str, *, source_state
 
 def _states(fab: Fabric, world: str) -> list[WorldState]:
     """What srv/state tells any login: every robot's state and record (reading is everyone's)."""
-    return [r.message for r in fab.query(keys.srv(world, "state"), timeout=5.0, expected=WorldState, all_replies=True)]
+    return [r.message for r in fab.rpc.query(keys.srv(world, "state"), timeout=5.0, expected=WorldState, all_replies=True)]
 
 
 def _attacks(c: Class, fab: Fabric) -> dict[str, Event]:
@@ -172,7 +172,7 @@ def test_a_students_hand_made_moves_on_srv_state_are_refused_counted_and_publish
     watcher.subscribe(keys.event(cls.world, "move"), lambda key, ev: refused.append(ev), expected=Event)
     for name, ev in _attacks(cls, mallory).items():
         with pytest.raises(ServiceError) as err:
-            mallory.query(keys.srv(cls.world, "state"), ev, timeout=5.0, all_replies=True)
+            mallory.rpc.query(keys.srv(cls.world, "state"), ev, timeout=5.0, all_replies=True)
         assert STAFF_ONLY in err.value.reason, (name, err.value.reason)
     wait_until(lambda: {e.data.get("step") for e in refused} >= {"move_out", "move_in"}, timeout=20,
                what="the sims' move_refused events", seen=lambda: refused)
@@ -208,7 +208,7 @@ def test_the_sims_refuse_a_bad_move_even_from_the_instructor_and_keep_serving(cl
             ho.ask(carol, "sim-b", "carol", ho.step(ho.MOVE_PREPARE, "ghost", to="sim-b", source="sim-a", term=1, rtype=rtype), 5.0)
     _unchanged(cls)
     # a real hand-out, then a move_in naming another move: refused; the source takes it back as it kept it
-    terms = {r.source: r.message.header.term for r in cls.probe.query(keys.srv(cls.world, "world"), expected=WorldInfo, all_replies=True)}
+    terms = {r.source: r.message.header.term for r in cls.probe.rpc.query(keys.srv(cls.world, "world"), expected=WorldInfo, all_replies=True)}
     term = ho.move_term(terms["sim-a"], terms["sim-b"])
     with pytest.raises(ho.MoveError, match="not the one the election gives"):
         ho.ask(carol, "sim-a", "carol", ho.step(ho.MOVE_OUT, "base2", to="sim-b", term=term + 50), 5.0)
@@ -228,7 +228,7 @@ def test_the_sims_refuse_a_bad_move_even_from_the_instructor_and_keep_serving(cl
 def test_a_robot_no_target_fetched_is_served_by_its_source_again(cls):
     """The tool died between its two steps: the source serves the robot again after RETURN_AFTER_S, by itself."""
     carol = cls.fabric("carol", "tool", "carol-tool2")
-    terms = {r.source: r.message.header.term for r in cls.probe.query(keys.srv(cls.world, "world"), expected=WorldInfo, all_replies=True)}
+    terms = {r.source: r.message.header.term for r in cls.probe.rpc.query(keys.srv(cls.world, "world"), expected=WorldInfo, all_replies=True)}
     ho.ask(carol, "sim-a", "carol", ho.step(ho.MOVE_OUT, "base2", to="sim-b", term=ho.move_term(terms["sim-a"], terms["sim-b"])), 10.0)
     assert cls.parts() == {"sim-a": ["base0"], "sim-b": ["base1"]}
     wait_until(lambda: cls.parts() == {"sim-a": ["base0", "base2"], "sim-b": ["base1"]}, timeout=ho.RETURN_AFTER_S + 20,

@@ -80,7 +80,7 @@ def _pause_and_check(world, procs, sim, fa, alice, joints, events, pause_s) -> N
         first = min(at for at, js in joints.items if at > resumed and js.header.wall_ns > resumed_ns)
     print(f"paused {pause_s:.0f} s: first joints published after SIGCONT arrived {first - resumed:.3f} s after it")
     # ownership is served again, and alice still holds arm1 under the same epoch: nothing changed hands
-    rec = fa.call(keys.own(world, "arm1"), timeout=5.0)
+    rec = fa.rpc.call(keys.own(world, "arm1"), timeout=5.0)
     assert (rec.owner, rec.epoch) == ("alice", epoch), (rec, procs.output(sim)[-1500:])
     # her commands are taken again: the arm goes to a second target
     second = [-20.0, 0.0, 10.0, 0.0, -10.0, 0.0]

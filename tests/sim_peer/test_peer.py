@@ -199,7 +199,7 @@ def test_scene_objects_move_and_the_world_service_describes_everything(world, si
     fab, inbox = user
     fab.publish(keys.object_pose(world, "target", "alice"), Pose(np.array([3.2, 0.1, 1.0])))
     wait_until(lambda: np.allclose(peer.world.object_pose("target")[0], [3.2, 0.1, 1.0]), what="target moved")
-    info = fab.call(keys.srv(world, "world"), timeout=5)
+    info = fab.rpc.call(keys.srv(world, "world"), timeout=5)
     assert isinstance(info, WorldInfo) and info.scene == "combined" and info.world == world
     arm, base = info.robot("arm1"), info.robot("base1")
     assert arm.kind == "arm" and arm.type == "meca500" and len(arm.joint_names) == 6
@@ -214,10 +214,10 @@ def test_scene_objects_move_and_the_world_service_describes_everything(world, si
 
 
 def _world_info(fab, world):
-    from fabric.session import ServiceError
+    from fabric.interfaces import ServiceError
 
     try:
-        return fab.call(keys.srv(world, "world"), timeout=1.0)
+        return fab.rpc.call(keys.srv(world, "world"), timeout=1.0)
     except ServiceError:
         return None
 

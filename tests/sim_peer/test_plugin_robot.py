@@ -159,9 +159,9 @@ def test_the_third_robot_type_is_described_streamed_and_commanded_by_its_owner(p
 
 
 def _world_info(fab, world) -> WorldInfo | None:
-    from fabric.session import ServiceError
+    from fabric.interfaces import ServiceError
 
     try:
-        return fab.call(keys.srv(world, "world"), timeout=1.0)
+        return fab.rpc.call(keys.srv(world, "world"), timeout=1.0)
     except ServiceError:
         return None

@@ -30,7 +30,7 @@ def _parts(fab, world: str) -> dict[str, WorldInfo]:
     from fabric.interfaces import ServiceError
 
     try:
-        return {r.source: r.message for r in fab.query(keys.srv(world, "world"), timeout=2.0, expected=WorldInfo, all_replies=True)}
+        return {r.source: r.message for r in fab.rpc.query(keys.srv(world, "world"), timeout=2.0, expected=WorldInfo, all_replies=True)}
     except ServiceError:
         return {}
 

@@ -46,7 +46,7 @@ def _answers(fab, world: str) -> bool:
     from fabric.interfaces import ServiceError
 
     try:
-        fab.call(keys.srv(world, "world"), timeout=1.0)
+        fab.rpc.call(keys.srv(world, "world"), timeout=1.0)
         return True
     except ServiceError:
         return False

@@ -11,7 +11,7 @@ from compute_peer.navigation import MapperConfig, PlannerSettings, VehicleModel,
 from compute_peer.navigation.grid import UNKNOWN, dilate, make_grid
 from fabric.interfaces import MapReply, MapRequest, OccupancyGrid, Path, PlanReply, PlanRequest
 from fabric import keys
-from fabric.session import ServiceError
+from fabric.interfaces import ServiceError
 from fabric.testing import wait_until
 from navscenes import drive_poses, pose_at, scan_at, small_room
 
@@ -29,7 +29,7 @@ def peers(connect, tmp_path):
         compute, robots=[ROBOT], mapper_config=ROOM, settings=SETTINGS, maps_dir=tmp_path, sensor_offset=(0.0, 0.0, 0.0)
     )
     # the queryables are reachable once a status query is answered
-    wait_until(lambda: _try(lambda: user.call(keys.srv(user.world, "map", "map"), MapRequest("status"), timeout=1.0)), what="map service")
+    wait_until(lambda: _try(lambda: user.rpc.call(keys.srv(user.world, "map", "map"), MapRequest("status"), timeout=1.0)), what="map service")
     yield nav, sim, user
     nav.close()
 
@@ -42,7 +42,7 @@ def _try(fn):
 
 
 def call(user, service, arg, request, timeout=10.0):
-    return user.call(keys.srv(user.world, service, arg), request, timeout=timeout)
+    return user.rpc.call(keys.srv(user.world, service, arg), request, timeout=timeout)
 
 
 def refused(user, service, arg, request) -> str:
@@ -208,7 +208,7 @@ def test_every_robot_of_the_world_when_none_are_named(connect):
     # closed: the queryables are gone, the session is not
     assert not compute.closed
     with pytest.raises(ServiceError, match="no reply"):
-        user.call(keys.srv(world, "plan", "rover7"), PlanRequest("rover7", goal=[4.0, 4.0, 0.0]), timeout=0.5)
+        user.rpc.call(keys.srv(world, "plan", "rover7"), PlanRequest("rover7", goal=[4.0, 4.0, 0.0]), timeout=0.5)
 
 
 def test_sensor_mounting_and_radius_come_from_the_world_description(connect):
@@ -229,7 +229,7 @@ def test_sensor_mounting_and_radius_come_from_the_world_description(connect):
             ),
         ),
     )
-    sim.serve(keys.srv(world, "world"), lambda key, req: info)
+    sim.rpc.serve(keys.srv(world, "world"), lambda key, req: info)
     scene = small_room()
     with register_navigation(compute, settings=SETTINGS, mapper_config=ROOM) as nav:
         wait_until(lambda: nav.discover_robots(timeout=1.0) == 1, what="world description")
@@ -289,20 +289,20 @@ def test_a_user_asking_in_her_name_may_not_change_the_map_nor_publish_a_plan_for
     for action, req in (("set", MapRequest("set", grid=full)), ("reset", MapRequest("reset")), ("stop", MapRequest("stop")),
                         ("save", MapRequest("save", file="mine.yaml")), ("load", MapRequest("load", file="mine.yaml"))):
         with pytest.raises(ServiceError, match=f"map '{action}' changes the map everyone plans on: an instructor's, not mallory's"):
-            user.call(asked, req, timeout=5.0)
+            user.rpc.call(asked, req, timeout=5.0)
     assert nav.counters["refused_staff_only"] == 5 and nav.counters["refusals"] >= 5
     assert nav.mapping and not (nav.store.get("map").cells == 100).any()  # still on, still free
     for action in ("start", "status", "get"):
-        assert user.call(asked, MapRequest(action), timeout=5.0, expected=MapReply).action == action
+        assert user.rpc.call(asked, MapRequest(action), timeout=5.0, expected=MapReply).action == action
     plan = PlanRequest(ROBOT, goal=[8.0, 2.0, 0.0], start=[2.0, 2.0, 0.0], direction="both")
-    reply = user.call(keys.srv_asked(world, "plan", ROBOT, "mallory"), plan, timeout=20.0, expected=PlanReply)
+    reply = user.rpc.call(keys.srv_asked(world, "plan", ROBOT, "mallory"), plan, timeout=20.0, expected=PlanReply)
     assert len(reply.path) > 1 and nav.counters["plans_unpublished"] == 1
-    staff = user.call(keys.srv(world, "plan", ROBOT), plan, timeout=20.0, expected=PlanReply)  # published
+    staff = user.rpc.call(keys.srv(world, "plan", ROBOT), plan, timeout=20.0, expected=PlanReply)  # published
     wait_until(lambda: paths, what="the staff's plan on the path key")
     assert len(paths) == 1 and np.allclose(paths[0].x, staff.path.x)  # hers never came before it
     # the per-peer form in her name too
     with pytest.raises(ServiceError, match="an instructor's, not mallory's"):
-        user.call(keys.srv_asked(world, "map", "map", "mallory", nav.fabric.peer_id), MapRequest("reset"), timeout=5.0)
+        user.rpc.call(keys.srv_asked(world, "map", "map", "mallory", nav.fabric.peer_id), MapRequest("reset"), timeout=5.0)
 
 
 def test_a_users_build_makes_her_own_map_checked_and_capped(peers):
@@ -323,29 +323,29 @@ def test_a_users_build_makes_her_own_map_checked_and_capped(peers):
     refusals = nav.counters["refusals"]
     for threshold in (0.001, 0.3, 0.999):
         with pytest.raises(ServiceError, match=rf"threshold {threshold:g} is outside \[0.5, 0.99\]"):
-            user.call(asked, MapRequest("build", threshold=threshold), timeout=5.0)
+            user.rpc.call(asked, MapRequest("build", threshold=threshold), timeout=5.0)
     assert nav.counters["refusals"] == refusals + 3
-    mine = user.call(asked, MapRequest("build", threshold=0.5), timeout=5.0, expected=MapReply)
+    mine = user.rpc.call(asked, MapRequest("build", threshold=0.5), timeout=5.0, expected=MapReply)
     assert mine.name == "mallory.map" and mine.grid.cells.size
     wait_until(lambda: hers, what="her map on map/mallory.map")
     assert np.array_equal(nav.store.get("map").cells, staff.grid.cells) and len(class_maps) == 1  # the class's map untouched
     assert nav.store.user_maps("mallory") == ["mallory.map"]
     # plans use the class's map unless they name hers
     plan = PlanRequest(ROBOT, goal=[8.0, 2.0, 0.0], start=[2.0, 2.0, 0.0], direction="both")
-    assert user.call(keys.srv_asked(world, "plan", ROBOT, "mallory"), plan, timeout=20.0, expected=PlanReply).map == "map"
+    assert user.rpc.call(keys.srv_asked(world, "plan", ROBOT, "mallory"), plan, timeout=20.0, expected=PlanReply).map == "map"
     # caps: four maps of hers, then a new name is refused with the reason and counted; rebuilding one of hers is not
     for name in ("a", "b", "mallory.c"):
-        assert user.call(asked, MapRequest("build", name=name), timeout=5.0, expected=MapReply).name == f"mallory.{name.split('.')[-1]}"
+        assert user.rpc.call(asked, MapRequest("build", name=name), timeout=5.0, expected=MapReply).name == f"mallory.{name.split('.')[-1]}"
     with pytest.raises(ServiceError, match=r"mallory holds 4 maps, the most one user may \(mallory.a, mallory.b, mallory.c, mallory.map\)"):
-        user.call(asked, MapRequest("build", name="d"), timeout=5.0)
+        user.rpc.call(asked, MapRequest("build", name="d"), timeout=5.0)
     assert nav.counters["refused_map_limit"] == 1
-    assert user.call(asked, MapRequest("build", name="a"), timeout=5.0, expected=MapReply).name == "mallory.a"
+    assert user.rpc.call(asked, MapRequest("build", name="a"), timeout=5.0, expected=MapReply).name == "mallory.a"
     nav.store.users_total = 5  # the cap for all users together
     bob = keys.srv_asked(world, "map", "map", "bob")
-    assert user.call(bob, MapRequest("build"), timeout=5.0, expected=MapReply).name == "bob.map"
+    assert user.rpc.call(bob, MapRequest("build"), timeout=5.0, expected=MapReply).name == "bob.map"
     with pytest.raises(ServiceError, match="the users hold 5 maps, the most this compute peer keeps"):
-        user.call(bob, MapRequest("build", name="other"), timeout=5.0)
+        user.rpc.call(bob, MapRequest("build", name="other"), timeout=5.0)
     assert nav.counters["refused_map_limit"] == 2 and len(nav.store.user_maps()) == 5
     with pytest.raises(ServiceError, match="characters long; at most 64"):
-        user.call(asked, MapRequest("build", name="x" * 60), timeout=5.0)
+        user.rpc.call(asked, MapRequest("build", name="x" * 60), timeout=5.0)
     assert len(class_maps) == 1 and np.array_equal(nav.store.get("map").cells, staff.grid.cells)

@@ -49,7 +49,7 @@ def test_drive_map_plan_and_follow(world, connect):
 
             wait_until(turning, timeout=30.0, interval=0.1, what="a full turn of scans", seen=lambda: (nav.counters, turned))
             user.publish(keys.robot_cmd(world, ROBOT, "stop", "alice"), Command("alice", 1, Stop()))
-            built = user.call(keys.srv(world, "map", "map"), MapRequest("build"), timeout=10.0).grid
+            built = user.rpc.call(keys.srv(world, "map", "map"), MapRequest("build"), timeout=10.0).grid
             # the hall's walls and the shelves facing the robot are in the map where MuJoCo has them
             cells = built.cells
 
@@ -69,7 +69,7 @@ def test_drive_map_plan_and_follow(world, connect):
             goal = (0.0, 4.0, math.pi / 2)
             user.publish(keys.object_pose(world, "goal", "alice"), Pose(np.array([goal[0], goal[1], 0.0]), quaternion_from_yaw(goal[2])))
             wait_until(lambda: nav.plan_service.goal is not None, what="goal pointer")
-            reply = user.call(keys.srv(world, "plan", ROBOT), PlanRequest(ROBOT), timeout=20.0)
+            reply = user.rpc.call(keys.srv(world, "plan", ROBOT), PlanRequest(ROBOT), timeout=20.0)
             path = reply.path
             assert (path.x[-1], path.y[-1]) == pytest.approx(goal[:2])
             assert path_collision(nav.plan_service.costmap("map", 0.30), path.x, path.y) is None  # radius from the description

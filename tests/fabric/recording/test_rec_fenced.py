@@ -66,7 +66,7 @@ def test_the_sinks_fence_resets_when_the_worlds_last_sim_leaves(tmp_path):
 
 
 def _put(fab, key):
-    fab.publish(key, JointState(("a",), [float(fab.term)], [0.0], fab.header(key)))
+    fab.publish(key, JointState(("a",), [float(fab.stamp.term)], [0.0], fab.header(key)))
     return False
 
 
@@ -79,13 +79,13 @@ def test_a_recorder_records_a_world_restarted_after_a_take_over(world, connect, 
     path = tmp_path / "run.mcap"
     with Recorder(connect("recorder", "rec"), path) as rec:
         old = connect("sim", "sim-old")
-        old.term = 2
+        old.assume_term(2)
         wait_until(lambda: _put(old, key) or rec.stats.messages > 0, timeout=20, what="term 2 recorded")
         wait_until(lambda: world in rec._sink.fences and rec._sink.fences[world].sims == {"sim-old"}, timeout=20, what="the recorder follows the sim tokens")
         old.close()
         wait_until(lambda: rec._sink.fence_resets >= 1, timeout=20, what="the fence reset")
         new = connect("sim", "sim-new")
-        new.term = 1
+        new.assume_term(1)
         n = rec.stats.messages
         wait_until(lambda: _put(new, key) or rec.stats.messages >= n + 3, timeout=20, what="term 1 recorded again")
     sources = [decode(m.payload).header.source for m in iter_messages(path, key)]

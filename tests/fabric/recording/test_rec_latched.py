@@ -49,7 +49,7 @@ def test_a_replayed_map_is_latched_for_a_late_joiner(tmp_path, world, connect):
 
 def test_the_replayer_sees_whether_anyone_listens(world, connect):
     from fabric.recording.replayer import _matching
-    from fabric.session import declare_publisher
+    from fabric.publishers import declare_publisher
 
     fab = connect("tool", "replay")
     pub = declare_publisher(fab.session, keys.robot_joints(world, "r0"))

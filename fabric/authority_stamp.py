@@ -4,7 +4,7 @@ The writing side of replicated authority, kept in one place (the reading side, w
 :mod:`fabric.fencing`; who holds the world, :mod:`sim_peer.election`; the host that runs a sim as primary
 or standby, :mod:`sim_peer.standby`):
 
-- the **term** (authority epoch) stamped on every header (0 for every peer that is no authority);
+- the **term** stamped on every header (0 for every peer that is no authority);
 - the **muzzle**: while set, nothing is published and no query is answered (an authority unsure it still
   is one, or stepping down);
 - the **freeze watch**: a gap longer than ``freeze_gap`` between two publications means the process was
@@ -12,8 +12,9 @@ or standby, :mod:`sim_peer.standby`):
   in a new thread, whose owner decides when to :meth:`AuthorityStamp.unmuzzle`. Time spent muzzled is
   never read as a freeze.
 
-:class:`fabric.session.Fabric` holds one and exposes it as ``term``, ``muzzled``, :meth:`assume_term`,
-:meth:`muzzle`, :meth:`unmuzzle` and :meth:`watch_freeze`.
+:class:`fabric.session.Fabric` holds one as ``fabric.stamp``; its peer reads ``stamp.term`` and ``stamp.muzzled``
+and calls ``stamp.muzzle()``, ``stamp.unmuzzle()`` and ``stamp.watch_freeze()`` there, and sets the term with
+:meth:`fabric.session.Fabric.assume_term` (which also fences what the session believes below it).
 """
 
 from __future__ import annotations

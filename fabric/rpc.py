@@ -1,0 +1,196 @@
+"""Services: queryables whose requests and replies are fabric messages, and the queries that ask them.
+
+A handler refuses a request by raising :class:`~fabric.interfaces.ServiceError`, which the caller gets back
+as :class:`~fabric.interfaces.Refused` (a ``ServiceError``) with the same reason; a query nobody answers
+raises :class:`~fabric.interfaces.NoReply`. The error types live in :mod:`fabric.interfaces.errors`.
+
+Kept apart from :mod:`fabric.session` because request/reply is its own protocol over the session (error
+replies, zenoh's own timeout reply, consolidation), while the session's job is publishing and subscribing.
+A :class:`~fabric.session.Fabric` holds one :class:`Rpc` as ``fabric.rpc``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import zenoh
+
+from fabric.authority_stamp import AuthorityStamp
+from fabric.codec import DecodeError, decode, encode
+from fabric.interfaces import Event, EventKind, Header, NoReply, Refused, ServiceError
+from fabric.limits import clip
+from fabric.publishers import priority_for
+
+log = logging.getLogger("robofabric")
+
+ZENOH_QUERY_TIMEOUT = "Timeout"
+"""The error reply zenoh itself gives a query whose time limit ran out while a server was known: a
+silence, which must read as NoReply (retried by those who wait), not as a server's refusal."""
+
+__all__ = ["Rpc", "Reply", "ZENOH_QUERY_TIMEOUT"]
+
+
+@dataclass(frozen=True, slots=True)
+class Reply:
+    """One answer to a query: the replying key, the decoded message, and who answered."""
+
+    key: str
+    message: Any
+    source: str
+
+
+class Rpc:
+    """Serve and query on one session. What it declares goes into ``resources``, which the session
+    undeclares when it closes; ``believe(key, message)`` drops replies stamped below a term already heard."""
+
+    def __init__(self, session: zenoh.Session, *, counters: Any, stamp: AuthorityStamp,
+                 header: Callable[[str], Header], believe: Callable[[str, Any], bool], resources: list[Any]) -> None:
+        self._session = session
+        self._counters = counters
+        self._stamp = stamp
+        self._header = header
+        self._believe = believe
+        self._resources = resources
+
+    def serve(
+        self,
+        key_expr: str,
+        handler: Callable[[str, Any], Any],
+        *,
+        expected: type | tuple[type, ...] | None = None,
+        complete: bool = False,
+    ) -> zenoh.Queryable:
+        """Answer queries on ``key_expr`` with ``handler(key, request_or_None) -> message``.
+
+        A handler raising :class:`ServiceError` (or ``ValueError``) sends the reason back as an error
+        reply; a bad request payload is answered with the decode error. Nothing escapes to zenoh.
+        While the session's stamp is muzzled, no query is answered at all.
+        """
+
+        # zenoh 1.10 ignores a reply's priority (and warns): replies travel at the query's priority.
+        # A reply goes on the queryable's own key when it names one: a wildcard query (``own/*``, a replica or a
+        # viewer joining) then learns which key answered, and the reply is fenced by that key's scopes like a
+        # publication on it (on the query's own ``own/*`` it named no object: unfenced, and unparseable)
+        own_key = key_expr if not any(c in key_expr for c in "*$") else None
+
+        def on_query(query: zenoh.Query) -> None:
+            key = str(query.key_expr)
+            self._counters["queries"] += 1
+            if self._stamp.muzzled:
+                return  # no answer at all: the asker times out or hears the real authority
+            try:
+                request = None
+                if query.payload is not None and len(query.payload.to_bytes()) > 0:
+                    request = decode(query.payload.to_bytes(), expected)
+                answer = handler(key, request)
+                if answer is not None:
+                    query.reply(own_key or key, encode(answer))
+            except (DecodeError, ServiceError, ValueError) as exc:
+                self._counters["query_errors"] += 1
+                reason = clip(exc.reason if isinstance(exc, ServiceError) else str(exc), 400)
+                query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=reason, severity="warning", header=self._header("srv"))))
+            except Exception as exc:
+                self._counters["query_errors"] += 1
+                log.exception("service %s failed", key)
+                query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=f"internal error: {clip(str(exc))}", severity="error")))
+
+        q = self._session.declare_queryable(key_expr, on_query, complete=complete)
+        self._resources.append(q)
+        return q
+
+    def query(
+        self,
+        selector: str,
+        request: Any = None,
+        *,
+        timeout: float = 2.0,
+        expected: type | tuple[type, ...] | None = None,
+        all_replies: bool = False,
+    ) -> list[Reply]:
+        """Send a query and return the decoded replies.
+
+        Raises :class:`~fabric.interfaces.Refused` when a replier refuses (its reason), or
+        :class:`~fabric.interfaces.NoReply` when nobody answers (both are ``ServiceError``).
+        With ``all_replies`` every replier's answer is returned (no consolidation).
+        """
+        replies: list[Reply] = []
+        errors: list[str] = []
+        t0 = time.monotonic()
+        for rep in self._session.get(selector, **self._get_options(selector, request, timeout, all_replies)):
+            if rep.ok is not None:
+                try:
+                    msg = decode(rep.ok.payload.to_bytes(), expected)
+                except DecodeError as exc:
+                    errors.append(f"bad reply: {exc}")
+                    continue
+                if not self._believe(str(rep.ok.key_expr), msg):
+                    errors.append(f"stale term on {rep.ok.key_expr}")
+                    continue
+                src = getattr(getattr(msg, "header", None), "source", "")
+                replies.append(Reply(str(rep.ok.key_expr), msg, src))
+            else:
+                refusal = _refusal(rep.err)
+                if refusal is not None:
+                    errors.append(refusal)
+        if not replies:
+            if errors:
+                raise Refused(errors[0], key=selector)
+            raise _no_reply(selector, time.monotonic() - t0, timeout)
+        return replies
+
+    def call(self, selector: str, request: Any = None, *, timeout: float = 2.0, expected: Any = None) -> Any:
+        """One query, one answer: the first reply's message."""
+        return self.query(selector, request, timeout=timeout, expected=expected)[0].message
+
+    def first(self, selector: str, request: Any = None, *, timeout: float = 2.0,
+              expected: type | tuple[type, ...] | None = None) -> Any:
+        """Ask every server of ``selector`` and return the first answer as soon as it comes, without waiting
+        for the others (a step of a robot's move between sims). Refusals and silence as in :meth:`query`;
+        a reply that does not decode counts as a refusal, and replies are not fenced."""
+        errors: list[str] = []
+        t0 = time.monotonic()
+        for rep in self._session.get(selector, **self._get_options(selector, request, timeout, True)):
+            if rep.ok is not None:
+                try:
+                    return decode(rep.ok.payload.to_bytes(), expected)
+                except DecodeError as exc:
+                    errors.append(f"bad reply: {exc}")
+                    continue
+            refusal = _refusal(rep.err)
+            if refusal is not None:
+                errors.append(refusal)
+        if errors:
+            raise Refused(errors[0], key=selector)
+        raise _no_reply(selector, time.monotonic() - t0, timeout)
+
+    @staticmethod
+    def _get_options(selector: str, request: Any, timeout: float, all_replies: bool) -> dict[str, Any]:
+        kwargs: dict[str, Any] = {"timeout": timeout}
+        prio = priority_for(selector)
+        if prio is not None:
+            kwargs["priority"] = prio
+        if request is not None:
+            kwargs["payload"] = encode(request)
+        if all_replies:
+            kwargs["target"] = zenoh.QueryTarget.ALL
+            kwargs["consolidation"] = zenoh.ConsolidationMode.NONE
+        return kwargs
+
+
+def _refusal(err: Any) -> str | None:
+    """The reason of an error reply; None for zenoh's own word that the time limit ran out (no answer, not a refusal)."""
+    try:
+        return decode(err.payload.to_bytes(), Event).reason
+    except DecodeError:
+        text = err.payload.to_string() if err.payload is not None else "error"
+        return None if text == ZENOH_QUERY_TIMEOUT else text
+
+
+def _no_reply(selector: str, waited: float, timeout: float) -> NoReply:
+    """Say what happened: zenoh ends a query at once when nobody serves the key, and waits the whole time
+    limit only for a server that is there but silent ("within 5 s" after 0 s would mislead)."""
+    why = "nobody serves it" if waited < 0.5 * timeout else "no server answered in time"
+    return NoReply(f"no reply on {selector} after {waited:.1f} s of {timeout:.1f} s: {why}", key=selector)
