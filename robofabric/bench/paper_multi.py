@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from robofabric.bench.common import pct, proc_cpu_s
+from robofabric.bench.paper_figures import PAPER_MULTI_USER
 
 __all__ = ["measure_multi_user", "student", "summarise", "format_multi_user", "PoseWatch", "PAPER_MULTI_USER"]
 
@@ -40,13 +41,6 @@ STUDENT = [sys.executable, "-m", "robofabric.bench.paper_multi", "student"]
 TARGETS_DEG = ([25.0, 15.0, -15.0, 0.0, 20.0, 0.0], [-25.0, -10.0, 10.0, 0.0, -20.0, 0.0])
 """The two arm poses a student alternates between (well inside the Meca500's limits)."""
 AGE_PERIOD_S = 0.1
-
-PAPER_MULTI_USER = {
-    "source": "Section 3.3: 5 of the PUN server's 20 concurrent users for 2 h; 'all users had a 100 ms delay when "
-              "interacting with non-owned network objects' (how it was measured is not said)",
-    "users": 5, "hours": 2.0, "delay_ms": 100.0,
-}
-"""The paper's multi-user test as published (the ``paper_reported`` member of ``multi_user``)."""
 
 
 # ---------------------------------------------------------------------- a student (child process)
