@@ -22,7 +22,7 @@ from robots import RobotDescription
 from sim_peer.errors import WorldError
 from sim_peer.robot import SimRobot, check_hooks
 
-BUILTIN = {"arm": "sim_peer.simrobot:ArmRobot", "mobile": "sim_peer.simrobot:MobileRobot"}
+BUILTIN = {"arm": "sim_peer.robot_kinds:ArmRobot", "mobile": "sim_peer.robot_kinds:MobileRobot"}
 
 _cache: dict[tuple[str, str], type[SimRobot]] = {}
 _lock = threading.Lock()

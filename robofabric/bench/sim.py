@@ -18,7 +18,7 @@ from robofabric.bench.common import machine, write
 
 def rtf(world, seconds: float, scan_hz: float = 20.0) -> float:
     """Sim seconds per wall second over ``seconds`` of sim time, scanning every robot at ``scan_hz``."""
-    from sim_peer.simrobot import MobileRobot
+    from sim_peer.robot_kinds import MobileRobot
 
     mobiles = [rid for rid, r in world.robots.items() if isinstance(r, MobileRobot) and r.lidar is not None]
     for rid in mobiles:  # keep them driving in 1 m circles so the scans see a changing world

@@ -17,7 +17,7 @@ from sim_peer.errors import WorldError
 from sim_peer.registry import robot_class
 
 PLANAR2 = Path(__file__).parent / "plugin_robots" / "planar2"
-EVIL_HOOKS = "from pathlib import Path\nPath({marker!r}).write_text('ran')\nfrom sim_peer.simrobot import ArmRobot as Evil\n"
+EVIL_HOOKS = "from pathlib import Path\nPath({marker!r}).write_text('ran')\nfrom sim_peer import ArmRobot as Evil\n"
 
 
 def _evil_robot(folder: Path, marker: Path, hooks: str = "hooks.py:Evil") -> Path:

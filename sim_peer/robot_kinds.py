@@ -19,7 +19,7 @@ import numpy as np
 from fabric.interfaces import BaseInfo, EventKind, JointState, Pose, RobotInfo, RobotState
 from sim_peer.bumper import Bumper
 from sim_peer.controllers import ArmController, BaseController, Clamp, CommandRejected
-from sim_peer.follower import PurePursuit
+from sim_peer.pure_pursuit import PurePursuit
 from sim_peer.robot import Build, CommandHandler, Mount, Note, Physics, SimRobot, Stream, check_hooks
 from sim_peer.sensors import Lidar, Sensor, Ultrasonic
 
