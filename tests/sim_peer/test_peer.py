@@ -293,7 +293,7 @@ def test_a_shard_leaves_other_robots_to_their_sims_and_the_scene_objects_to_the_
     try:
         info = peer.world_info()
         assert info.objects == () and {r.sim for r in info.robots} == {"sim-shard"}
-        wait_until(lambda: "sim-other" in peer._other_sims, what="the other sim's token")
+        wait_until(lambda: "sim-other" in peer.other_sims, what="the other sim's token")
         send(fab, world, "base9", "twist", Twist(0.1, 0.0))
         wait_until(lambda: peer.counters["not_mine"] >= 1 or send(fab, world, "base9", "twist", Twist(0.1, 0.0)), timeout=10,
                    what="a command for another sim's robot counted")
@@ -309,7 +309,7 @@ def test_a_shard_leaves_other_robots_to_their_sims_and_the_scene_objects_to_the_
         assert peer.counters["rejected"] == 0 and inbox.event("reject") is None
         assert peer.counters["object_updates"] == 0 and np.allclose(peer.world.object_pose("target")[0], [0.3, 0.2, 0.4])
         other.close()
-        wait_until(lambda: not peer._other_sims, what="the other sim gone")
+        wait_until(lambda: not peer.other_sims, what="the other sim gone")
         send(fab, world, "base9", "twist", Twist(0.1, 0.0))
         wait_until(lambda: peer.counters["rejected:unknown_robot"] >= 1 or send(fab, world, "base9", "twist", Twist(0.1, 0.0)),
                    timeout=10, what="alone again: an unknown robot is refused")
