@@ -62,6 +62,11 @@ class ArmShape:
     def joints(self) -> int:
         return int(self._qadr.shape[0])
 
+    @property
+    def geoms(self) -> tuple[int, ...]:
+        """The ids, in its model, of the geoms mirrored, in the order of ``shapes`` and of :meth:`poses`."""
+        return tuple(self._geoms)
+
     def poses(self, q: Sequence[float]) -> list[tuple[np.ndarray, np.ndarray]] | None:
         """Each mirrored geom's world centre and quaternion with the arm at ``q``; None for a wrong length or a
         non-finite angle (a malformed message moves nothing)."""

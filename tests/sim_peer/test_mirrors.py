@@ -145,7 +145,7 @@ def test_an_arm_mirror_puts_each_link_where_the_arms_own_sim_has_it():
     other, info = arm_elsewhere(q)
     shape = arm_shape(info)
     poses = shape.poses(q)
-    names = [mujoco.mj_id2name(shape.model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in shape._geoms]
+    names = [mujoco.mj_id2name(shape.model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in shape.geoms]
     assert len(poses) == len(shape.shapes) == 7, names  # the base and six links of the Meca500
     for name, (centre, quat) in zip(names, poses):
         g = mujoco.mj_name2id(other.model, mujoco.mjtObj.mjOBJ_GEOM, f"arm9/{name}")
