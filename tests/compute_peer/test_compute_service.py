@@ -289,7 +289,7 @@ def test_the_service_starts_its_threads_on_start_not_on_construction(world, conn
         assert len(_threads("rate-ik-stream")) == streams
         # a lookup thread lives until its lookup has failed and been counted: neither means none ran
         assert not _threads("kinematics-discovery") and "discovery_failed" not in svc.counters, svc.counters
-        assert connect("user").call(keys.srv(world, "fk", "arm1"), FKRequest(Q)).position.shape == (3,)  # serving already
+        assert connect("user").rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q)).position.shape == (3,)  # serving already
         with svc as same:
             assert same is svc and len(_threads("rate-ik-stream")) == streams + 1
             wait_until(lambda: svc.counters.get("discovery_failed", 0) >= 1, what="the first lookup, in the background")

@@ -181,15 +181,15 @@ def test_nan_inside_array_and_wrong_shapes_are_refused():
         encode(JointState(["a"], [1.0, 2.0], [0.0]))
     raw = msgpack.unpackb(good, raw=False, ext_hook=lambda c, d: msgpack.ExtType(c, d))
     # Replace the position ext with one holding a NaN, and then with a 2-vector.
-    from fabric.codec import _ext_default
+    from fabric.codec.wire import array_ext
 
-    raw[1] = _ext_default(bad_pos)
+    raw[1] = array_ext(bad_pos)
     with pytest.raises(DecodeError, match="position: element 1 is not finite"):
         decode(msgpack.packb(raw, use_bin_type=True))
-    raw[1] = _ext_default(np.zeros(2))
+    raw[1] = array_ext(np.zeros(2))
     with pytest.raises(DecodeError, match=r"expected shape \(3,\)"):
         decode(msgpack.packb(raw, use_bin_type=True))
-    raw[1] = _ext_default(np.zeros(3, dtype=np.float32))
+    raw[1] = array_ext(np.zeros(3, dtype=np.float32))
     with pytest.raises(DecodeError, match="expected dtype float64"):
         decode(msgpack.packb(raw, use_bin_type=True))
     assert messages_equal(pose, Pose(np.zeros(3)))
