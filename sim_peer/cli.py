@@ -105,7 +105,7 @@ def sim(
         return
     from fabric.session import shutdown_event
     from sim_peer.pacing import parse_speed
-    from sim_peer.peer import DEFAULT_RATES, SimPeer
+    from sim_peer.streams import DEFAULT_RATES
     from sim_peer.world import SimWorld
     from sim_peer.world import WorldError
 
@@ -143,6 +143,13 @@ def sim(
     if standby or not replicated_off():
         _run_replicated(cfg, peer_id, sim_world, build, ownership, rates, pace, stop, duration, standby, first)
         return
+    _run_single(cfg, peer_id, sim_world, ownership, rates, pace, stop, duration, first)
+
+
+def _run_single(cfg, peer_id, sim_world, ownership, rates, pace, stop, duration, first) -> None:
+    """One sim, one session, no replication layer (``ROBOFABRIC_SIM_SINGLE=1``)."""
+    from sim_peer.peer import SimPeer
+
     fab = open_fabric(cfg, "sim", peer_id)
     with fab:
         gate = make_gate(fab, sim_world, ownership, objects=first)
@@ -155,12 +162,16 @@ def sim(
         finally:
             peer.close()
             gate.close()
-        c = peer.counters
-        print(
-            f"sim stopped at t={sim_world.time:.3f} s: {c['steps']} steps, {c['commands']} commands "
-            f"({c['accepted']} accepted, {c['rejected']} rejected, {c['clamped']} clamped)",
-            flush=True,
-        )
+        _print_stopped(peer)
+
+
+def _print_stopped(peer) -> None:
+    c = peer.counters
+    print(
+        f"sim stopped at t={peer.world.time:.3f} s: {c['steps']} steps, {c['commands']} commands "
+        f"({c['accepted']} accepted, {c['rejected']} rejected, {c['clamped']} clamped)",
+        flush=True,
+    )
 
 
 def _check_world_free(cfg, peer_id, sim_world) -> bool:
@@ -241,12 +252,7 @@ def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, st
     if peer is None:
         print(f"sim {pid} stopped as a standby", flush=True)
         return
-    c = peer.counters
-    print(
-        f"sim stopped at t={peer.world.time:.3f} s: {c['steps']} steps, {c['commands']} commands "
-        f"({c['accepted']} accepted, {c['rejected']} rejected, {c['clamped']} clamped)",
-        flush=True,
-    )
+    _print_stopped(peer)
 
 
 def _print_catalog() -> None:

@@ -37,6 +37,15 @@ def _joint_stream(robot: Any) -> Stream:
     return Stream("joints", "joints", read)
 
 
+def _pose_stream(robot: Any) -> Stream:
+    """A base's pose (axle midpoint) with its velocities, from its controller."""
+    def read(physics: Physics) -> Build:
+        pos, quat, lin, ang = robot.pose()
+        return lambda header: Pose(pos, quat, lin, ang, "world", header)
+
+    return Stream("pose", "pose", read)
+
+
 class _Driven(SimRobot):
     """A robot whose controller ``ctrl`` moves it and writes the joints at ``vadr`` itself (both types)."""
 
@@ -50,6 +59,22 @@ class _Driven(SimRobot):
     @property
     def kinematic_dofs(self) -> int:
         return len(self.vadr)
+
+    # commands: what a type does not take is refused, with its reason ----------
+    def joints(self, q, speed_scale: float = 1.0) -> Clamp | None:
+        raise self.unsupported("take joint targets")
+
+    def twist(self, v: float, omega: float) -> Clamp | None:
+        raise self.unsupported("take twists")
+
+    def path(self, x, y, theta) -> None:
+        raise self.unsupported("follow paths")
+
+    def stop(self) -> None:
+        self.ctrl.stop()
+
+    def reset(self) -> None:
+        self.ctrl.reset()
 
 
 @check_hooks
@@ -75,18 +100,6 @@ class ArmRobot(_Driven):
 
     def joints(self, q, speed_scale: float = 1.0) -> Clamp | None:
         return self.ctrl.set_target(q, speed_scale)
-
-    def twist(self, v: float, omega: float) -> Clamp | None:
-        raise self.unsupported("take twists")
-
-    def path(self, x, y, theta) -> None:
-        raise self.unsupported("follow paths")
-
-    def stop(self) -> None:
-        self.ctrl.stop()
-
-    def reset(self) -> None:
-        self.ctrl.reset()
 
     # hooks ------------------------------------------------------------------
     def initialize(self, physics: Physics) -> None:
@@ -195,9 +208,6 @@ class MobileRobot(_Driven):
             raise CommandRejected("bad_frame", f"paths must be in the world frame, got {body.frame!r}")
         self.path(body.x, body.y, body.theta)
 
-    def joints(self, q, speed_scale: float = 1.0) -> Clamp | None:
-        raise self.unsupported("take joint targets")
-
     def twist(self, v: float, omega: float) -> Clamp | None:
         return self.ctrl.twist(v, omega)
 
@@ -206,15 +216,9 @@ class MobileRobot(_Driven):
         assert b is not None
         self.ctrl.follow(PurePursuit(x, y, theta, max_speed=b.max_speed, max_omega=b.max_omega, max_accel=b.max_accel))
 
-    def stop(self) -> None:
-        self.ctrl.stop()
-
     def halt(self) -> None:
         """Its owner let go: brake to a halt within the base's limits (a stop command stops at once)."""
         self.ctrl.brake()
-
-    def reset(self) -> None:
-        self.ctrl.reset()
 
     # hooks ------------------------------------------------------------------
     def describe(self) -> RobotInfo:
@@ -254,12 +258,8 @@ class MobileRobot(_Driven):
                     check(physics)
 
     def streams(self) -> tuple[Stream, ...]:
-        own = (_joint_stream(self), Stream("pose", "pose", self._pose_sample))
+        own = (_joint_stream(self), _pose_stream(self))
         return own + tuple(st for s in self.sensors for st in s.streams())
-
-    def _pose_sample(self, physics: Physics) -> Build:
-        pos, quat, lin, ang = self.pose()
-        return lambda header: Pose(pos, quat, lin, ang, "world", header)
 
     # state ------------------------------------------------------------------
     def snapshot(self) -> RobotState:
