@@ -2,7 +2,7 @@
 
 The writing side of replicated authority, kept in one place (the reading side, which state to believe, is
 :mod:`fabric.fencing`; who holds the world, :mod:`sim_peer.election`; the host that runs a sim as primary
-or standby, :mod:`sim_peer.standby`):
+or standby, :mod:`sim_peer.replica_host`):
 
 - the **term** stamped on every header (0 for every peer that is no authority);
 - the **muzzle**: while set, nothing is published and no query is answered (an authority unsure it still
