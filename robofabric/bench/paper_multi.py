@@ -32,7 +32,7 @@ import uuid
 from pathlib import Path
 from typing import Any, Callable
 
-from robofabric.bench.common import pct, proc_cpu_s
+from robofabric.bench.common import pct, proc_cpu_s, proc_rss_mb
 from robofabric.bench.paper_figures import PAPER_MULTI_USER
 
 __all__ = ["measure_multi_user", "student", "summarise", "format_multi_user", "PoseWatch", "PAPER_MULTI_USER"]
@@ -234,9 +234,11 @@ def _run(minutes: float, n: int, logs: Path, progress: Callable[[str], None]) ->
             Path(o + ".go").write_text(json.dumps([start, end]))
         load0 = os.getloadavg()
         cpu0 = {name: proc_cpu_s(p.pid) for name, p in (("router", router), ("sim", sim))}
+        rss0 = {name: proc_rss_mb(p.pid) for name, p in (("router", router), ("sim", sim))}
         progress(f"multi-user: {n} students for {minutes:g} min")
         wait_until(lambda: time.time() > end, timeout=60 * minutes + 30, interval=1.0, what="the end of the test")
         cpu1 = {name: proc_cpu_s(p.pid) for name, p in (("router", router), ("sim", sim))}
+        rss1 = {name: proc_rss_mb(p.pid) for name, p in (("router", router), ("sim", sim))}
         load1 = os.getloadavg()
         wait_until(lambda: all(k.poll() is not None for k in kids), timeout=180, interval=0.5, what="every student done",
                    seen=lambda: [procs.output(k)[-300:] for k in kids if k.poll() is None][:2])
@@ -247,6 +249,7 @@ def _run(minutes: float, n: int, logs: Path, progress: Callable[[str], None]) ->
     doc.update(students=n, minutes=minutes, robots=2 * n, scene="warehouse", world=world,
                streams="flange pose 100 Hz (arms), pose 50 Hz (bases)", age_period_s=AGE_PERIOD_S,
                cpu_cores={k: (cpu1[k] - cpu0[k]) / (end - start) for k in cpu0},
+               rss_mb={k: [round(rss0[k], 1), round(rss1[k], 1)] for k in rss0},  # start, end: growth over the run
                load_average=[round(load0[0], 1), round(load1[0], 1)], paper_reported=PAPER_MULTI_USER)
     return doc
 
@@ -256,7 +259,8 @@ def format_multi_user(doc: dict[str, Any]) -> str:
     paper = doc["paper_reported"]
     lines = [f"Multi-user test: {doc['students']} students, {doc['minutes']:g} min, {doc['robots']} robots ({doc['scene']}); "
              f"load average {doc['load_average'][0]} at the start, {doc['load_average'][1]} at the end; "
-             f"router {doc['cpu_cores']['router']:.2f} cores, sim {doc['cpu_cores']['sim']:.2f}",
+             f"router {doc['cpu_cores']['router']:.2f} cores, sim {doc['cpu_cores']['sim']:.2f}; RSS from start to end: "
+             f"router {doc['rss_mb']['router'][0]:.0f} -> {doc['rss_mb']['router'][1]:.0f} MB, sim {doc['rss_mb']['sim'][0]:.0f} -> {doc['rss_mb']['sim'][1]:.0f} MB",
              "", "| student | delay p50 / p99 (ms) | age p50 / p99 (ms) | poses received | missing | arm moves | refused | robots lost | real-time factor |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in doc["per_student"]:
@@ -266,6 +270,8 @@ def format_multi_user(doc: dict[str, Any]) -> str:
                  f"{doc['age_ms_p50']:.1f} / {doc['age_ms_p99']:.1f} | {doc['messages']} | {doc['missing']} | {doc['moves']} | "
                  f"{doc['refused']} | {doc['lost']} | |")
     lines.append(f"| the paper (PUN, {paper['users']} users, {paper['hours']:g} h) | ~{paper['delay_ms']:.0f} | | | | | | | |")
+    lines += ["", "Per minute, delay p50 / p99 (ms): " + "; ".join(
+        f"{m['minute']}: {m['delay_ms_p50']:.1f} / {m['delay_ms_p99']:.1f}" for m in doc["per_minute"])]
     return "\n".join(lines)
 
 

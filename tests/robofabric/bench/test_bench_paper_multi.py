@@ -69,7 +69,8 @@ def test_three_students_each_see_every_robot_they_do_not_own_and_none_of_their_o
     assert doc["messages"] == sum(s["messages"] for s in doc["per_student"]) and len(doc["per_minute"]) == 1
     assert 0 < doc["delay_ms_p50"] <= doc["delay_ms_p99"] <= doc["delay_ms_max"]
     table = format_multi_user(doc)
-    assert "| s2 |" in table and "the paper (PUN, 5 users, 2 h) | ~100" in table
+    assert all(doc["rss_mb"][k][0] > 0 and doc["rss_mb"][k][1] > 0 for k in ("router", "sim"))
+    assert "| s2 |" in table and "the paper (PUN, 5 users, 2 h) | ~100" in table and "Per minute" in table
     assert not _running(doc["world"]), "every process of the test's world ended"
 
 
