@@ -110,7 +110,7 @@ class RateLoop:
 
     ``step()`` runs at most one due tick and returns the time until the next;
     ``run(stop)`` loops until ``stop`` is set; ``start()`` (or ``with RateLoop(...) as loop:``)
-    runs it in a daemon thread, which ``stop()`` (or leaving the ``with``) ends.
+    runs it in a daemon thread, which ``close()`` (or leaving the ``with``) ends.
     """
 
     def __init__(self, hz: float, callback: Callable[[float], None], *, clock: Clock | None = None, name: str = "") -> None:
@@ -161,7 +161,7 @@ class RateLoop:
         self._thread.start()
         return self
 
-    def stop(self, timeout: float = 2.0) -> None:
+    def close(self, timeout: float = 2.0) -> None:
         self._stop.set()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout)
@@ -170,7 +170,7 @@ class RateLoop:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
-        self.stop()
+        self.close()
 
 
 def parse_rates(spec: str, defaults: dict[str, float]) -> dict[str, float]:

@@ -323,14 +323,23 @@ class Fabric:
     def watch_peers(self, callback: Callable[[str, str, bool], None], kind: str = "*") -> zenoh.Subscriber:
         """``callback(kind, id, alive)`` on every token that appears or goes (existing ones first)."""
 
-        def on_sample(sample: zenoh.Sample) -> None:
+        def on_token(key: str, alive: bool) -> None:
             try:
-                p = keys.parse(str(sample.key_expr))
+                p = keys.parse(key)
             except ValueError:
                 return
-            callback(p.subject, p.leaf, sample.kind == zenoh.SampleKind.PUT)
+            callback(p.subject, p.leaf, alive)
 
-        sub = self.session.liveliness().declare_subscriber(keys.peers_all(self.world, kind), on_sample, history=True)
+        return self.watch_tokens(keys.peers_all(self.world, kind), on_token)
+
+    def watch_tokens(self, key_expr: str, callback: Callable[[str, bool], None]) -> zenoh.Subscriber:
+        """``callback(key, alive)`` on every liveliness token under ``key_expr`` that appears or goes (existing ones
+        first), its key as declared, parsed or not (a recorder keeps every token it hears, a made-up one too)."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            callback(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+
+        sub = self.session.liveliness().declare_subscriber(key_expr, on_sample, history=True)
         self._resources.append(sub)
         return sub
 

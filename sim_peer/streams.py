@@ -56,7 +56,7 @@ class StreamLoops:
 
     def stop(self) -> None:
         for loop in self._loops:
-            loop.stop()
+            loop.close()
 
     def _guard(self, name: str, fn: Callable[[float], None]) -> Callable[[float], None]:
         def tick(now: float) -> None:

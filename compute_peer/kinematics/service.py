@@ -166,7 +166,7 @@ class KinematicsService:
             self._closed = True
         self._lookup.close()
         if self._loop is not None:
-            self._loop.stop()
+            self._loop.close()
         undeclare_all(self._resources)
 
     # ------------------------------------------------------------------ arms

@@ -127,7 +127,7 @@ def _run_until_done(worker: Any, output: Path, duration: float | None, stop: thr
             line = worker.stats.line()
             print(f"\r{line}\x1b[K" if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
     try:
-        stats = worker.stop()
+        stats = worker.close()
     except RuntimeError as exc:
         raise UserError(f"recording to {output} failed: {exc}") from None
     finally:

@@ -55,7 +55,7 @@ class LiveConverter:
 
     A context manager like :class:`~fabric.recording.recorder.Recorder`: ``with LiveConverter(fab, sink,
     exprs): ...`` starts on entry and finishes the file on exit. The converter owns ``sink`` from the
-    start: ``stop()`` (idempotent) closes it. A script that never calls ``stop()`` still gets a finished
+    start: ``close()`` (idempotent) closes it. A script that never calls ``close()`` still gets a finished
     file: it runs when the interpreter exits, before the session closes.
     """
 
@@ -80,10 +80,10 @@ class LiveConverter:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
-        self.stop()
+        self.close()
 
     def start(self) -> "LiveConverter":
-        """Start the writer thread and listen. Idempotent; refused after ``stop()`` (the file is finished)."""
+        """Start the writer thread and listen. Idempotent; refused after ``close()`` (the file is finished)."""
         if self._stopped:
             raise RuntimeError("this converter was stopped: its file is finished")
         if self._started:
@@ -94,7 +94,7 @@ class LiveConverter:
         self._thread = threading.Thread(target=self._loop, name="convert-writer", daemon=True)
         self._thread.start()
         # before the session's own closer (newest first): the file gets its footer at exit
-        self._cancel_exit = at_exit(self.stop)
+        self._cancel_exit = at_exit(self.close)
         for expr in self.keyexprs:
             # history: the latest map, path and scene objects published before we joined
             self._subs.append(self.fabric.subscribe_raw(expr, self._on_sample, history=True))
@@ -132,7 +132,7 @@ class LiveConverter:
         end = self._t_end if self._t_end is not None else time.monotonic()
         return LiveStats(self.received, self.written, self.bad, self.dropped, end - self._t0 if self._t0 else 0.0)
 
-    def stop(self) -> LiveStats:
+    def close(self) -> LiveStats:
         """Stop listening, write what is queued, finish the file. Idempotent."""
         if self._stopped:
             return self.stats

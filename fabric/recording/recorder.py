@@ -119,8 +119,8 @@ class Recorder:
     """Record the samples of ``keyexprs`` (default: the fabric's whole world) seen by ``fabric`` into ``path``.
 
     A context manager: ``with Recorder(fab, "run.mcap"): ...`` starts on entry and finishes the file
-    on exit. ``stop()`` is idempotent and returns the final :class:`RecorderStats`; a script that
-    never calls it still gets a finished file, as ``stop()`` runs when the interpreter exits. With
+    on exit. ``close()`` is idempotent and returns the final :class:`RecorderStats`; a script that
+    never calls it still gets a finished file, as ``close()`` runs when the interpreter exits. With
     ``liveliness=True`` the appearance and loss of peers' liveliness tokens under the same key
     expressions is recorded too (schema ``liveliness``; replay skips those by default).
 
@@ -197,7 +197,7 @@ class Recorder:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
-        self.stop()
+        self.close()
 
     def start(self) -> "Recorder":
         if self._started:
@@ -206,20 +206,19 @@ class Recorder:
         self._metadata["started_ns"] = str(time.time_ns())
         self._sink = McapSink(self.path, metadata=self._metadata, **self._sink_args)
         # before the session's own closer (newest first): the file gets its footer at exit
-        self._cancel_exit = at_exit(self.stop)
+        self._cancel_exit = at_exit(self.close)
         self._t0 = time.monotonic()
         self._thread = threading.Thread(target=self._write_loop, name="recorder-writer", daemon=True)
         self._thread.start()
-        session = self.fabric.session
         for i, expr in enumerate(self.keyexprs):
-            self._subs.append(session.declare_subscriber(expr, self._on_sample_for(i)))
+            self._subs.append(self.fabric.subscribe_raw(expr, self._on_sample_for(i)))
             if self.liveliness:
-                self._subs.append(session.liveliness().declare_subscriber(expr, self._on_token_for(i), history=True))
+                self._subs.append(self.fabric.watch_tokens(expr, self._on_token_for(i)))
         for expr in _sim_token_exprs(self.keyexprs):
-            self._subs.append(session.liveliness().declare_subscriber(expr, self._on_sim_token, history=True))
+            self._subs.append(self.fabric.watch_tokens(expr, self._on_sim_token))
         return self
 
-    def stop(self) -> "RecorderStats":
+    def close(self) -> "RecorderStats":
         """Stop listening, write what is queued, finish the file (summary + footer). Idempotent."""
         if not self._started or self._stopped:
             return self.stats
@@ -299,11 +298,9 @@ class Recorder:
         return on_sample
 
     def _on_token_for(self, i: int):
-        def on_token(sample: zenoh.Sample) -> None:
-            key = str(sample.key_expr)
+        def on_token(key: str, alive: bool) -> None:
             if not self._owns(i, key):
                 return
-            alive = sample.kind == zenoh.SampleKind.PUT
             payload = msgpack.packb({"alive": alive})
             with self._lock:
                 if self._admit(key, len(payload)):
@@ -311,13 +308,12 @@ class Recorder:
 
         return on_token
 
-    def _on_sim_token(self, sample: zenoh.Sample) -> None:
+    def _on_sim_token(self, key: str, alive: bool) -> None:
         try:
-            p = keys.parse(str(sample.key_expr))
+            p = keys.parse(key)
         except ValueError:
             return
         if p.category == "peer" and p.subject == "sim":
-            alive = sample.kind == zenoh.SampleKind.PUT
             self._q.put(_SimToken(p.world, p.leaf, alive))
             if alive:
                 self._describe(p.world)

@@ -39,7 +39,7 @@ def test_a_recording_made_without_scene_exports_the_arm_on_its_table(world, rout
         wait_until(lambda: rec.described >= 1 and rec.stats.messages > 300, timeout=90, what="the world described and recorded",
                    seen=lambda: (rec.described, rec.stats, procs.output(sim)[-800:]))
     finally:
-        rec.stop()
+        rec.close()
     assert [m.key for m in iter_messages(path, keys.srv(world, "world"))], "no world description in the recording"
     out = tmp_path / "fox.mcap"
     with caplog.at_level(logging.WARNING, logger="robofabric"):

@@ -29,7 +29,7 @@ def test_quota_and_key_cap_drop_and_count(tmp_path, world, connect):
         _flood(pub, lambda i: keys.robot_joints(world, "warm"), 100, 10_000)  # 1 MB on one key: the quota stops it
         wait_until(lambda: rec.stats.dropped >= 40 + 70, timeout=30, what="drops counted", seen=lambda: rec.stats)
     finally:
-        stats = rec.stop()
+        stats = rec.close()
     assert stats.quota_reached and stats.keys <= 10
     assert stats.payload_bytes <= 200_000 and stats.dropped_bytes >= 700_000
     assert "DROPPED" in stats.line() and "quota" in stats.line()
@@ -59,5 +59,5 @@ def test_queue_cap_drops_instead_of_growing(tmp_path, world, connect):
         wait_until(lambda: rec.stats.messages + rec.stats.dropped >= 41, timeout=30, what="every sample written or dropped",
                    seen=lambda: rec.stats)
     finally:
-        stats = rec.stop()
+        stats = rec.close()
     assert stats.dropped >= 25 and stats.messages + stats.dropped >= 41

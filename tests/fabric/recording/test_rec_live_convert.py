@@ -39,7 +39,7 @@ def test_the_converter_is_a_context_manager_that_finishes_its_writer(world, conn
 
         wait_until(publish_and_look, timeout=20, what="a converted message")
     assert sink.closed == 1 and conv.stats.written >= 1 and sink.got[0][0] == key
-    conv.stop()
+    conv.close()
     assert sink.closed == 1  # stop is idempotent
     with pytest.raises(RuntimeError, match="stopped"):
         conv.start()
@@ -48,4 +48,4 @@ def test_the_converter_is_a_context_manager_that_finishes_its_writer(world, conn
 def test_a_converter_never_started_still_finishes_its_writer(world, connect):
     sink = ListSink()
     conv = LiveConverter(connect("recorder"), sink, [keys.world_all(world)])
-    assert conv.stop().written == 0 and sink.closed == 1
+    assert conv.close().written == 0 and sink.closed == 1
