@@ -55,6 +55,11 @@ class Latest:
             return parts[3] in self._ids[1]
         return None
 
+    def __len__(self) -> int:
+        """How many keys are kept (bounded: a client cannot grow it with keys the world does not have)."""
+        with self._cond:
+            return len(self._values)
+
     def put(self, key: str, msg: Any) -> None:
         known = self._known(key)
         if known is False:

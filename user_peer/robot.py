@@ -128,7 +128,7 @@ class Robot:
         self.type = entry.type
         self.entry = entry
         self._w = world.name
-        if world.keep_latest(self.id):  # a new handle: its first state, briefly (the latest was not kept before)
+        if world.following.robot(self.id):  # a new handle: its first state, briefly (the latest was not kept before)
             key = keys.robot_stream(self._w, self.id, self.data_stream)
             world.latest.wait_for(lambda: world.latest.get(key), min(world.timeout, FIRST_STATE_WAIT_S))
 
@@ -363,7 +363,7 @@ class Arm(Robot):
         :class:`Unreachable` when the compute peer refuses (with its reason), :class:`Timeout` when none answers.
         """
         try:
-            return self.world.ask_kinematics(
+            return self.world.compute_route.ask(
                 lambda peer: services.ik(self.world.fabric, self.id, xyz, quaternion, self.joints, timeout=self.world.timeout, peer=peer)
             )
         except ServiceError as exc:
@@ -475,7 +475,7 @@ class Base(Robot):
     def start_mapping(self, *, name: str = "map") -> None:
         """Ask the compute peer to fold this world's scans into map ``name`` (it may already be on)."""
         try:
-            services.map_request(self.world.fabric, "start", name=name, timeout=self.world.timeout, peer=self.world.navigation_peer(),
+            services.map_request(self.world.fabric, "start", name=name, timeout=self.world.timeout, peer=self.world.compute_route.navigation_peer(),
                                  user=self.world.user)
         except ServiceError as exc:
             raise Unreachable(f"mapping for {self.id}: {exc.reason}") from None
@@ -486,7 +486,7 @@ class Base(Robot):
         ``plan_to(..., map_name=keys.user_map(name, world.user))``."""
         try:
             return services.build_map(
-                self.world.fabric, name=name, threshold=threshold, timeout=timeout or max(self.world.timeout, 10.0), peer=self.world.navigation_peer(),
+                self.world.fabric, name=name, threshold=threshold, timeout=timeout or max(self.world.timeout, 10.0), peer=self.world.compute_route.navigation_peer(),
                 user=self.world.user,
             )
         except ServiceError as exc:
@@ -502,7 +502,7 @@ class Base(Robot):
         try:
             return services.plan(
                 self.world.fabric, self.id, goal, planner=planner, map_name=map_name, timeout=timeout or max(self.world.timeout, 15.0),
-                peer=self.world.navigation_peer(), user=self.world.user,
+                peer=self.world.compute_route.navigation_peer(), user=self.world.user,
             )
         except ServiceError as exc:
             where = "the goal object" if goal is None else f"({goal[0]:.2f}, {goal[1]:.2f}, {goal[2]:.2f})"

@@ -175,7 +175,7 @@ class Viewer:
         self.lags_ms: deque[float] = deque(maxlen=10_000)  # per window: how long its oldest sample waited
         self._warned_ns = 0
         self.catalog = RobotCatalog(None)
-        # the clock that stamps arrivals in _enqueue: Eq. 8 ages are measured on it alone
+        # the clock that stamps arrivals in receive: Eq. 8 ages are measured on it alone
         self.logger = WorldLogger(self.rec, drawing=self.catalog.drawing, max_hz=opts.max_hz, clock=time.time_ns)
         self._closed = False
         self._sims: set[str] = set()
@@ -185,7 +185,7 @@ class Viewer:
         # a script that never closes the viewer still flushes its sinks, then its session closes (fabric/exit.py)
         self._cancel_exit = at_exit(self.close)
 
-    def _enqueue(self, key: str, msg: Any) -> None:
+    def receive(self, key: str, msg: Any) -> None:
         """Zenoh's callback: file the sample under its key. A stream holding ``queue_size`` samples (the drawing
         thread stalled) loses its oldest."""
         item = (msg, time.time_ns())
@@ -230,7 +230,7 @@ class Viewer:
         frame = framing([tuple(float(v) for v in r.pose[:3]) for r in info.robots]) if info is not None else None
         if frame is not None:  # the first view shows every robot, not the scene's bounds (shelves and walls)
             self.rec.send_blueprint(blueprint(frame), make_active=True, make_default=True)
-        self.fab.subscribe(keys.world_all(self.fab.world), self._enqueue, history=True)  # maps, paths, objects set before we joined
+        self.fab.subscribe(keys.world_all(self.fab.world), self.receive, history=True)  # maps, paths, objects set before we joined
         self.fab.watch_peers(self._on_sim, kind="sim")  # "world gone" when the last sim peer leaves
         self._ask_records()
 
@@ -239,7 +239,7 @@ class Viewer:
         our subscription reached its sim would otherwise never be drawn."""
         try:
             for rep in self.fab.rpc.query(keys.own_all(self.fab.world), timeout=1.0, all_replies=True):
-                self._enqueue(rep.key, rep.message)
+                self.receive(rep.key, rep.message)
         except ServiceError:
             pass
 

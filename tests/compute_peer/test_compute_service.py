@@ -214,13 +214,13 @@ def test_a_user_can_spread_ik_over_every_compute_peer(world, router, connect):
             wait_until(lambda: all(_answers(w.fabric, keys.srv(world, "fk", "arm1", p), FKRequest(Q)) for p in ("c1", "c2")), what="both serving")
             fk = w.fabric.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
             for _ in range(4):
-                q = w.ask_kinematics(lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer))
+                q = w.compute_route.ask(lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer))
                 assert np.allclose(q, Q, atol=1e-9)
             assert svcs["c1"].counters["ik"] == 2 and svcs["c2"].counters["ik"] == 2
-            assert w.navigation_peer() is None  # maps are not spread: the nearest peer holds one
+            assert w.compute_route.navigation_peer() is None  # maps are not spread: the nearest peer holds one
             svcs.pop("c2").close()  # c2 stops serving; its token stays with its session until the list is read again
             for _ in range(2):
-                q = w.ask_kinematics(lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer))
+                q = w.compute_route.ask(lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer))
                 assert np.allclose(q, Q, atol=1e-9)
             assert svcs["c1"].counters["ik"] == 4
     finally:
@@ -249,7 +249,7 @@ def test_robofabric_call_asks_a_service_from_the_command_line(served, world, rou
     out = call("srv/ik/arm1", "-t", "NoSuchRequest")
     assert out.returncode == 2 and "unknown message type" in out.stderr, out.stdout + out.stderr
     out = call("srv/ik/arm1", "-t", "IKRequest", "-d", '{"position": [1, 2]}')
-    # bad data names the field and what was wrong with it, in words (issue 32)
+    # bad data names the field and what was wrong with it, in words
     assert out.returncode == 2 and "IKRequest.position: expected shape (3,)" in out.stderr, out.stdout + out.stderr
 
 

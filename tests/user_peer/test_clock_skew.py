@@ -1,5 +1,5 @@
-"""A sim whose clock is 5 s off the user's (another machine, no NTP) changes nothing the API decides
-(issue 15): freshness is judged by arrival here, never by comparing the sim's header wall_ns with ours.
+"""A sim whose clock is 5 s off the user's (another machine, no NTP) changes nothing the API decides:
+freshness is judged by arrival here, never by comparing the sim's header wall_ns with ours.
 
 The "sim" is a real Zenoh peer on the test's router whose headers are stamped with a shifted clock; it
 answers joint and path commands the way the sim peer does (state at the target, or a reject event)."""

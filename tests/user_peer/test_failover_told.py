@@ -1,6 +1,6 @@
-"""A standby's take-over reaches a script as what it is (issue 32): "sim sim-a failed over to sim-b", through
-``World.on_failover`` and ``World.failovers``, after the robots' loss (``on_robots_gone``); it reached
-scripts only as "robots ... gone from world". And a world that was there from the start is never "back"."""
+"""A standby's take-over reaches a script as what it is: "sim sim-a failed over to sim-b", through
+``World.on_failover`` and ``World.failovers``, after the robots' loss (``on_robots_gone``), not
+only as "robots ... gone from world". And a world that was there from the start is never "back"."""
 
 from __future__ import annotations
 

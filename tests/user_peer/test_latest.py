@@ -1,4 +1,4 @@
-"""A user's cache of the latest message per key holds what the world has, not what clients make up (issue 14)."""
+"""A user's cache of the latest message per key holds what the world has, not what clients make up."""
 
 from __future__ import annotations
 
@@ -22,10 +22,10 @@ def test_keys_of_robots_the_world_does_not_have_are_not_kept():
         latest.put(keys.robot_stream(W, f"fake{i}", "scan"), b"x")
         latest.put(keys.own(W, f"fake{i}"), "forged")
     assert latest.dropped == 2000 and latest.get(keys.robot_stream(W, "fake3", "scan")) is None
-    assert len(latest._values) == 3
+    assert len(latest) == 3
     for i in range(100):  # other keys (events, maps) share a few places; the world's keys keep theirs
         latest.put(keys.event(W, "decode", f"u{i}"), i)
-    assert len(latest._values) == 3 + 8 and latest.get(keys.event(W, "decode", "u99")) == 99
+    assert len(latest) == 3 + 8 and latest.get(keys.event(W, "decode", "u99")) == 99
     assert latest.get(keys.event(W, "decode", "u0")) is None  # the least recently updated went first
     assert latest.get(keys.robot_stream(W, "arm1", "joints")) == "q" and latest.get(keys.own(W, "arm1")) == "record"
     assert latest.get(keys.object_pose_all(W, "target")) == "pose"
@@ -36,10 +36,10 @@ def test_before_the_world_description_every_key_shares_the_bounded_places():
     latest = Latest(world_info=lambda: info[0], max_other=16)
     for i in range(500):
         latest.put(keys.robot_stream(W, f"r{i}", "scan"), i)
-    assert len(latest._values) == 16 and latest.get(keys.robot_stream(W, "r499", "scan")) == 499
+    assert len(latest) == 16 and latest.get(keys.robot_stream(W, "r499", "scan")) == 499
     latest.put(keys.robot_stream(W, "r499", "scan"), "again")
     info[0] = SimpleNamespace(robots=[SimpleNamespace(id="r499")], objects=[])
     latest.put(keys.robot_stream(W, "r499", "scan"), "known now")  # a key of the world leaves the shared places
     for i in range(100):
         latest.put(keys.event(W, "decode", f"u{i}"), i)
-    assert latest.get(keys.robot_stream(W, "r499", "scan")) == "known now" and len(latest._values) == 17
+    assert latest.get(keys.robot_stream(W, "r499", "scan")) == "known now" and len(latest) == 17

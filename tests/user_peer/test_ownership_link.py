@@ -1,4 +1,4 @@
-"""The user is told when an object she owned is taken from her (issue 15): a warning naming the new
+"""The user is told when an object she owned is taken from her: a warning naming the new
 owner and epoch, and ``on_lost`` callbacks; her own release tells her nothing."""
 
 from __future__ import annotations

@@ -60,7 +60,7 @@ def test_world_to_map_pixels_matches_grid_image():
 @pytest.mark.parametrize("skew_s", [-5.0, 0.0, 5.0])
 def test_bases_are_drawn_where_they_are_by_now_eq8(skew_s):
     """The age is time since arrival on this machine's clock; the sender's header clock, here off ours by
-    +-5 s, changes nothing (issue 15)."""
+    +-5 s, changes nothing."""
     from fabric.interfaces import Header
     from user_peer.geometry import EXTRAPOLATION_CAP_S, shown_position
 

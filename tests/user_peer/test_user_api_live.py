@@ -118,4 +118,4 @@ def test_repr_of_a_world_describes_every_robot_and_makes_no_handle(user):
     w.info()
     text = repr(w)
     assert "arm1 (" in text and "base1 (" in text, text
-    assert w._robots == {} and w._followed == set(), "repr made robot handles or followed their streams"
+    assert w.robot_handles == {} and w.following.robots == frozenset(), "repr made robot handles or followed their streams"

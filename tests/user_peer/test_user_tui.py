@@ -83,7 +83,7 @@ async def _drive_the_ui(auth, alice, arm, base, cmds, world):
         assert math.isclose(last.body.q[1], 0.1 + math.radians(3.0), abs_tol=1e-9)
         assert np.allclose(np.delete(last.body.q, 1), 0.1)
 
-        # ←/→ move the focused slider (issue 31: they turned the base): three Right presses, three degrees, no twist
+        # ←/→ move the focused slider, never the base: three Right presses, three degrees, no twist
         await pilot.press("right", "right", "right")
         await until(pilot, lambda: math.isclose(sliders[1].value, 0.1 + math.radians(6.0), abs_tol=1e-9), "the slider moved with right")
         await until(pilot, lambda: math.isclose([m for k, m in cmds if "/cmd/joints/by/alice" in k][-1].body.q[1],
@@ -110,7 +110,7 @@ async def _drive_the_ui(auth, alice, arm, base, cmds, world):
 
 
 def test_status_says_when_the_world_is_gone(setup, world):
-    """The sim peer (here the test's "sim" session) leaves: the status line says the world is gone (issue 15)."""
+    """The sim peer (here the test's "sim" session) leaves: the status line says the world is gone."""
     asyncio.run(_world_gone(*setup))
 
 

@@ -68,17 +68,17 @@ def test_a_viewer_behind_drops_the_oldest_per_stream_never_a_robots_last_state(v
     stream; each stream's newest is drawn however old (the robot's last state)."""
     arm, base = keys.robot_joints(world, "arm1"), keys.robot_pose(world, "base1")
     for i in range(100):
-        viewer._enqueue(arm, _js(i))
+        viewer.receive(arm, _js(i))
     for i in range(3):
-        viewer._enqueue(base, Pose([0.1 * i, 0.0, 0.0], header=Header(stamp=0.01 * (i + 1), seq=i)))
+        viewer.receive(base, Pose([0.1 * i, 0.0, 0.0], header=Header(stamp=0.01 * (i + 1), seq=i)))
     fresh = viewer.take()  # drawn at once: nothing is late
     assert len(fresh) == 103 and viewer.dropped == 0
     assert [t for t, _, _ in fresh] == sorted(t for t, _, _ in fresh)  # in arrival order across streams
 
     for i in range(100):
-        viewer._enqueue(arm, _js(i))
+        viewer.receive(arm, _js(i))
     for i in range(3):
-        viewer._enqueue(base, Pose([0.1 * i, 0.0, 0.0], header=Header(stamp=0.01 * (i + 1), seq=i)))
+        viewer.receive(base, Pose([0.1 * i, 0.0, 0.0], header=Header(stamp=0.01 * (i + 1), seq=i)))
     late = viewer.take(now_ns=time.time_ns() + 2_000_000_000)  # the drawing thread came back 2 s later
     assert [(key, msg.header.seq) for _, key, msg in late] == [(arm, 99), (base, 2)] or \
         [(key, msg.header.seq) for _, key, msg in late] == [(base, 2), (arm, 99)]
@@ -91,7 +91,7 @@ def test_a_stalled_viewer_keeps_at_most_queue_size_per_stream(world, router, tmp
     try:
         key = keys.robot_joints(world, "arm1")
         for i in range(25):
-            v._enqueue(key, _js(i))
+            v.receive(key, _js(i))
         assert v.dropped == 15
         assert [m.header.seq for _, _, m in v.take()] == list(range(15, 25))
     finally:

@@ -1,4 +1,4 @@
-"""``robofabric view`` against what any login may write on ownership keys and in the liveliness space (issue 24):
+"""``robofabric view`` against what any login may write on ownership keys and in the liveliness space:
 garbage payloads are counted and skipped, a token that names no peer is ignored, names that look like markup or
 carry escape sequences are logged as data; the viewer keeps drawing and logs no traceback."""
 
