@@ -18,7 +18,11 @@ those replicas with deadlines and raise :class:`NotOwner`, :class:`Rejected`,
 Works the same in a script and in Jupyter (no event loop of its own: Zenoh's
 threads feed it).
 
-The rooms: :mod:`user_peer.world` (the session, the cache, the sims alive),
+The rooms: :mod:`user_peer.world` (the session and the handles), behind it
+:mod:`user_peer.description` (what the sims describe), :mod:`user_peer.presence`
+(the sims alive, failovers), :mod:`user_peer.event_log` (the events, and which may
+refuse a command), :mod:`user_peer.following` (which streams are decoded) and
+:mod:`user_peer.compute_route` (which compute peer is asked);
 :mod:`user_peer.latest` (the cache), :mod:`user_peer.robot` (a handle class per
 robot kind), :mod:`user_peer.scene_object`, :mod:`user_peer.errors`. This module
 joins them: :func:`connect`, and the public names in one place.
