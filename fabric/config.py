@@ -229,8 +229,6 @@ class FabricConfig:
             return user
         cert = self.file_value("transport/link/tls/connect_certificate")
         if isinstance(cert, str) and cert:
-            from fabric.secure import certificate_common_name
-
             try:
                 return certificate_common_name(cert)
             except (OSError, ValueError) as exc:
@@ -312,7 +310,7 @@ class FabricConfig:
         if json.loads(conf.get_json("transport/link/rx/max_message_size")) == ZENOH_DEFAULT_MAX_MESSAGE_SIZE:
             conf.insert_json5("transport/link/rx/max_message_size", json.dumps(MAX_MESSAGE_SIZE))
         # A router answers read-only queries on its admin space (``@/ZID/router/{subscriber,queryable,token}/KEY``):
-        # who subscribes to and serves what, for ``robofabric ps -v``, ``list`` and ``info`` (fabric/declarations.py).
+        # who subscribes to and serves what, for ``robofabric ps -v``, ``list`` and ``info`` (robofabric/declarations.py).
         # Never writable; a config file that sets the admin space keeps its choice; ACLs still decide who may ask.
         if mode == "router" and not json.loads(conf.get_json("adminspace/enabled")) and not (
             self.config_file and "adminspace" in _file_text(self.config_file)
@@ -331,3 +329,13 @@ def _file_text(path: str) -> str:
             return f.read()
     except OSError:
         return ""
+
+
+def certificate_common_name(path: str | Path) -> str | None:
+    """The common name of a PEM certificate (an identity, in a TLS world), or None if it has none."""
+    from cryptography import x509
+    from cryptography.x509.oid import NameOID
+
+    cert = x509.load_pem_x509_certificate(Path(path).read_bytes())
+    names = cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
+    return str(names[0].value) if names else None

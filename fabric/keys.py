@@ -131,7 +131,7 @@ def map_key(world: str, name: str) -> str:
 
 
 #: Between a user and her map's name in the maps she builds: ``alice.map``. A class's logins are letters,
-#: digits, ``-`` and ``_`` (fabric.secure), so the user before the first ``.`` is never in doubt.
+#: digits, ``-`` and ``_`` (robofabric.secure), so the user before the first ``.`` is never in doubt.
 USER_MAP_SEP = "."
 
 
@@ -195,7 +195,7 @@ def srv_asked_all(world: str, service: str, peer_id: str | None = None) -> str:
 
 def srv_move(world: str, sim: str, login: str) -> str:
     """``login`` asking sim ``sim`` for one step of a move: ``srv/move/{sim}/by/{login}``. Only the staff's
-    logins (instructor, sim) may ask there (fabric.secure); ``srv/state``, which every login may ask, carries
+    logins (instructor, sim) may ask there (robofabric.secure); ``srv/state``, which every login may ask, carries
     no move (docs/sim.md, "Moving a robot between sims")."""
     return srv_asked(world, "move", sim, login)
 

@@ -65,7 +65,7 @@ def client(world: str, port: int, *, kind: str = "tool", peer_id: str | None = N
 
 def robofabric_cmd(*args: str) -> list[str]:
     """The argv that runs the CLI with this interpreter (no reliance on PATH)."""
-    return [sys.executable, "-m", "fabric.cli", *args]
+    return [sys.executable, "-m", "robofabric.cli", *args]
 
 
 class ProcessGroup:

@@ -4,7 +4,7 @@
 
 For each tree (a checkout of robofabric: ``git worktree add /tmp/before COMMIT``) it starts a router and a
 ``robofabric sim --scene warehouse --no-scene-robots`` with N/2 Meca500 arms and N/2 Reeman bases from that
-tree (``python -m fabric.cli`` run inside it), lets it settle, then reads the sim's CPU time (/proc) and its
+tree (``python -m robofabric.cli`` run inside it), lets it settle, then reads the sim's CPU time (/proc) and its
 sim time (the joints headers of arm0) over ``--seconds``. Trees alternate round by round, so a busy machine
 weighs on each alike; the medians and the ratio to the first tree are printed. Nobody owns or commands the
 robots: this is the cost of simulating and publishing them.
@@ -39,7 +39,7 @@ def measure(tree: Path, robots: int, seconds: float, settle: float) -> tuple[flo
     world, port = f"cost{uuid.uuid4().hex[:6]}", free_port()
     ep = f"tcp/127.0.0.1:{port}"
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    cli = [sys.executable, "-m", "fabric.cli"]
+    cli = [sys.executable, "-m", "robofabric.cli"]
     router = subprocess.Popen([*cli, "router", "--world", world, "--listen", ep], cwd=tree, env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     specs = [x for i in range(robots // 2) for x in ("--robot", f"meca500:arm{i}", "--robot", f"reeman:base{i}")]

@@ -9,7 +9,7 @@ from typing import Annotated, Optional
 import typer
 
 from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, join_error, make_config
-from fabric.complete import complete_export_formats, matching
+from fabric.completion import complete_export_formats, matching
 
 RERUN_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://", "http://", "https://")
 

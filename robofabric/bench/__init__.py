@@ -51,7 +51,7 @@ class Benchmark:
     def unavailable(self) -> str | None:
         """Why it cannot run on this machine now, or None."""
         if self.needs == "netns":
-            from fabric.lab import namespaces_available
+            from robofabric.lab import namespaces_available
 
             ok, why = namespaces_available()
             return None if ok else why

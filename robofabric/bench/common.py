@@ -2,7 +2,7 @@
 
 Pure or /proc-reading functions, and the ending of children by pid; no benchmark logic. :func:`pct` is
 the tables' percentile (NaN where nothing was measured); the replayer and ``robofabric hz`` summarise
-with :func:`fabric.stats.percentiles`.
+with :func:`robofabric.stats.percentiles`.
 """
 
 from __future__ import annotations

@@ -137,7 +137,7 @@ def _watch_records(fab, held: dict[str, tuple[str, int]], changes: list[str]):
 def run_flood(counts: list[int], tmp: Path, *, settle: float = 5.0) -> list[FloodResult]:
     """Start the class world under ``tmp``, flood it once per count (a fresh mallory each time), end it all."""
     import user_peer
-    from fabric.secure import init
+    from robofabric.secure import init
 
     world = f"flood{uuid.uuid4().hex[:6]}"
     ep = f"tcp/127.0.0.1:{free_port()}"

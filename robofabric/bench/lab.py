@@ -23,7 +23,7 @@ from typing import Annotated, Any, Optional
 
 import typer
 
-from fabric.lab.lab import Lab, LabProcess
+from robofabric.lab.lab import Lab, LabProcess
 from robofabric.bench.common import append
 
 __all__ = ["run_lab_bench", "to_markdown", "command"]
@@ -170,7 +170,7 @@ def command(
 ) -> None:
     """Recovery times in a lab of network namespaces (needs root): partition handover, router loss, lost sim."""
     from fabric.cli_common import UserError
-    from fabric.lab import namespaces_available
+    from robofabric.lab import namespaces_available
 
     ok, why = namespaces_available()
     if not ok:

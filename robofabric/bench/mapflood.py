@@ -46,7 +46,7 @@ def run_mapflood(builds: int, tmp: Path) -> MapFloodResult:
     from fabric import keys
     from fabric.config import FabricConfig
     from fabric.interfaces import MapReply, MapRequest, OccupancyGrid, ServiceError
-    from fabric.secure import init
+    from robofabric.secure import init
     from fabric.session import Fabric
 
     world = f"maps{uuid.uuid4().hex[:6]}"

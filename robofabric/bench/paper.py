@@ -207,7 +207,7 @@ def _start_broker(transport: str, tmpdir: str) -> tuple[subprocess.Popen, int]:
 
     port = free_port()
     if transport == "zenoh":
-        argv = [sys.executable, "-m", "fabric.cli", "router", "--listen", f"tcp/127.0.0.1:{port}", "--world", "bench"]
+        argv = [sys.executable, "-m", "robofabric.cli", "router", "--listen", f"tcp/127.0.0.1:{port}", "--world", "bench"]
     else:
         exe = shutil.which("mosquitto") or shutil.which("/usr/sbin/mosquitto")
         if exe is None:

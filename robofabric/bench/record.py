@@ -28,7 +28,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from fabric.stats import percentiles
+from robofabric.stats import percentiles
 from robofabric.bench.common import append, end_process, proc_cpu_s
 
 WORLD = "benchrec"
@@ -46,7 +46,7 @@ def _drained(pid: int, idle: float = 0.05, timeout: float = 20.0) -> tuple[float
 
 
 def _cli(*args: str) -> list[str]:
-    return [sys.executable, "-m", "fabric.cli", *args]
+    return [sys.executable, "-m", "robofabric.cli", *args]
 
 
 def _wait_token(session, expr: str, timeout: float) -> None:
@@ -122,7 +122,7 @@ def _throughput(router, ep: str, tmp: Path, scale: float, robots: int, duration:
 
 def _replay_timing(router, ep: str, tmp: Path, source: Path, duration: float) -> dict:
     from fabric.recording.reader import iter_messages
-    from fabric.recording.replayer import Replayer, plan_replay
+    from robofabric.recording.replayer import Replayer, plan_replay
 
     target = "benchreplay"
     out = tmp / "replayed.mcap"
@@ -252,7 +252,7 @@ def _child_pub(a: argparse.Namespace) -> None:
     import zenoh
 
     from fabric.config import FabricConfig
-    from fabric.recording.load import robot_streams, run_load
+    from robofabric.recording.load import robot_streams, run_load
     from fabric.session import Fabric
 
     streams = robot_streams(a.world, a.robots, scale=a.scale, precompute=a.precompute)

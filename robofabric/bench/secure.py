@@ -42,7 +42,7 @@ def _start(argv: list[str]) -> subprocess.Popen:
 
 def _mode_setup(mode: str, tmp: Path) -> tuple[str, list[str], dict[str, str | None]]:
     """(endpoint, router argv, identity -> client config) for one mode."""
-    from fabric.secure import init
+    from robofabric.secure import init
 
     proto = "tls" if mode == "tls+acl" else "tcp"
     ep = f"{proto}/127.0.0.1:{free_port()}"

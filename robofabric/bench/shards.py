@@ -178,7 +178,7 @@ def run_one(robots: int, sims: int, seconds: float, tmp: Path) -> dict[str, Any]
 def run_lab(robots: int, sims: int, seconds: float, log_dir: Path) -> dict[str, Any]:
     """The same over the lab's network namespaces: a router host, one host per sim, and a probe host whose
     Python process watches the poses and drives the robots (the lab's hosts share this machine's clock and CPU)."""
-    from fabric.lab.lab import Lab
+    from robofabric.lab.lab import Lab
     from fabric.testing import wait_until
 
     world = f"shards{uuid.uuid4().hex[:6]}"

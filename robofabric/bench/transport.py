@@ -26,7 +26,7 @@ from typing import Annotated, Optional
 import numpy as np
 import typer
 
-from fabric.stats import percentiles
+from robofabric.stats import percentiles
 from robofabric.bench.common import append
 
 KEY = "rf/bench/robot/base1/scan"
@@ -223,7 +223,7 @@ def run_bench(rates: list[float], duration: float, mqtt: bool) -> list[dict]:
     results: list[dict] = []
     port = _free_port()
     router = subprocess.Popen(
-        [sys.executable, "-m", "fabric.cli", "router", "--listen", f"tcp/127.0.0.1:{port}", "--world", "bench"],
+        [sys.executable, "-m", "robofabric.cli", "router", "--listen", f"tcp/127.0.0.1:{port}", "--world", "bench"],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         start_new_session=True,

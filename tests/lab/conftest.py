@@ -8,7 +8,7 @@ from typing import Iterator
 
 import pytest
 
-from fabric.lab import Lab, namespaces_available, sweep_stale
+from robofabric.lab import Lab, namespaces_available, sweep_stale
 
 
 @pytest.fixture(scope="session")

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from fabric.lab import Lab
-from fabric.lab.spec import load_lab, start_lab
+from robofabric.lab import Lab
+from robofabric.lab.spec import load_lab, start_lab
 from fabric.testing import wait_until
 
 pytestmark = [pytest.mark.lab, pytest.mark.slow]

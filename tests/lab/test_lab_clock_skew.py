@@ -13,7 +13,7 @@ from typing import Iterator
 
 import pytest
 
-from fabric.lab import Lab, LabProcess, faketime_library
+from robofabric.lab import Lab, LabProcess, faketime_library
 from fabric.testing import wait_until
 
 pytestmark = [pytest.mark.lab, pytest.mark.slow]

@@ -3,7 +3,7 @@
 The primary sim's cable is pulled (not SIGSTOP: the process runs on, its sockets stay open, its clock goes
 on) for longer than the transport lease: the standby takes the world over with term 2. The cable goes back
 in: the old primary hears the higher term and steps down to a standby of the new authority, and a recording
-of the whole run shows exactly one authority epoch publishing at any instant.
+of the whole run shows exactly one term publishing at any instant.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import pytest
 
 from fabric.codec import decode
 from fabric.fencing import is_authority_key
-from fabric.lab import Lab
+from robofabric.lab import Lab
 from fabric.recording.reader import iter_messages
 from fabric.testing import wait_until
 

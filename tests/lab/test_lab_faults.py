@@ -15,7 +15,7 @@ from typing import Iterator
 import pytest
 
 from fabric.codec import decode
-from fabric.lab import Lab, LabProcess, RemotePython
+from robofabric.lab import Lab, LabProcess, RemotePython
 from fabric.recording.reader import iter_messages
 from fabric.testing import wait_until
 

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from fabric.lab import Lab, LabError, RemoteError, faketime_library, netns_list
+from robofabric.lab import Lab, LabError, RemoteError, faketime_library, netns_list
 from fabric.testing import wait_until
 
 pytestmark = [pytest.mark.lab, pytest.mark.slow]
@@ -136,10 +136,10 @@ def _gone(pid: int) -> bool:
 def test_a_killed_runs_namespaces_and_processes_are_swept(lab_ok, tmp_path):
     """A run killed by SIGKILL cannot clean up, and what it started (own sessions) outlives it; the next
     run kills the processes inside its namespaces and removes the namespaces, and only those."""
-    from fabric.lab import sweep_stale
+    from robofabric.lab import sweep_stale
 
     script = (
-        "import os, sys; from fabric.lab import Lab; lab = Lab(log_dir=sys.argv[1]); h = lab.add_host('h'); "
+        "import os, sys; from robofabric.lab import Lab; lab = Lab(log_dir=sys.argv[1]); h = lab.add_host('h'); "
         "a = h.spawn(['sleep', '300'], name='a'); b = h.spawn(['sleep', '300'], name='b'); b.freeze(); "
         "print(lab.ns, a.pid, b.pid, flush=True); os.kill(os.getpid(), 9)"
     )

@@ -9,7 +9,7 @@ from typing import Iterator
 
 import pytest
 
-from fabric.lab import Lab
+from robofabric.lab import Lab
 from fabric.testing import wait_until
 
 pytestmark = [pytest.mark.lab, pytest.mark.slow]

@@ -1,6 +1,6 @@
 """The authority takes the user from the key; the client trusts only the authority's records.
 
-Real sessions through a real router, no access control here (tests/fabric/test_secure_*.py adds
+Real sessions through a real router, no access control here (tests/robofabric/test_secure_*.py adds
 the router's): what the authority and the client refuse on their own."""
 
 from __future__ import annotations

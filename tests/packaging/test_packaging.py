@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from fabric.launch_cli import load_demo_spec
+from robofabric.launch_cli import load_demo_spec
 from robofabric.clash import fabric_clash
 
 REPO = Path(__file__).resolve().parents[2]
@@ -41,10 +41,10 @@ def test_shell_completion_completes_subcommands():
 
 def test_the_demo_launch_file_is_package_data_and_examples_links_to_it():
     spec = load_demo_spec()
-    assert Path(spec.path).parent == Path(__import__("fabric").__file__).parent
+    assert Path(spec.path).parent == Path(__import__("robofabric").__file__).parent
     assert {p.name for p in spec.peers} >= {"recorder", "sim", "compute", "view", "alice", "bob"}
     # examples/demo.toml is the same file (a link), so `robofabric up examples/demo.toml` is the demo.
-    assert (REPO / "examples" / "demo.toml").resolve() == (REPO / "fabric" / "demo.toml").resolve()
+    assert (REPO / "examples" / "demo.toml").resolve() == (REPO / "robofabric" / "demo.toml").resolve()
 
 
 def _dist_info(where: Path, name: str, ver: str) -> None:

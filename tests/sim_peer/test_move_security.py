@@ -25,7 +25,7 @@ import pytest
 from fabric import keys
 from fabric.config import FabricConfig
 from fabric.interfaces import Event, RobotState, ServiceError, WorldInfo, WorldState
-from fabric.secure import init
+from robofabric.secure import init
 from fabric.session import Fabric
 from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 from robots.description import SceneRobot
@@ -114,7 +114,7 @@ def _evil_robot(folder: Path, marker: Path) -> Path:
     toml = (PLANAR2 / "robot.toml").read_text().replace('name = "planar2"', 'name = "evil"')
     (folder / "robot.toml").write_text(toml.replace("hooks.py:Planar2Arm", "hooks.py:Evil"))
     (folder / "hooks.py").write_text(f"from pathlib import Path\nPath({str(marker)!r}).write_text('ran')\n"
-                                     "from sim_peer.simrobot import ArmRobot as Evil\n")
+                                     "from sim_peer import ArmRobot as Evil\n")
     return folder
 
 

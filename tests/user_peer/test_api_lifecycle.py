@@ -176,7 +176,7 @@ EVERYTHING = """
     from fabric.testing import client_config, router_config
     from fabric.session import Fabric
     from fabric.recording import Recorder
-    from fabric.recording.live_convert import LiveConverter, open_exporter
+    from robofabric.recording.live_convert import LiveConverter, open_exporter
     from sim_peer.cli import make_gate
     from sim_peer.peer import SimPeer
     from sim_peer.world import SimWorld

@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from fabric.cli import main
+from robofabric.cli import main
 from fabric.interfaces import Header, JointState, OccupancyGrid, Path, Pose, Scan
 from fabric.interfaces.geometry import quaternion_from_yaw
 from user_peer.openfmt.ros2 import ros2_message

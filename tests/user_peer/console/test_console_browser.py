@@ -24,7 +24,7 @@ import pytest
 import zenoh
 
 from fabric import keys
-from fabric.secure import init
+from robofabric.secure import init
 from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 from user_peer.console.server import RECONNECT_S
 

@@ -8,7 +8,7 @@ import urllib.request
 
 import pytest
 
-from fabric.secure import init
+from robofabric.secure import init
 from fabric.testing import free_port, robofabric_cmd, wait_until
 
 pytestmark = pytest.mark.slow

@@ -1,0 +1,16 @@
+"""Entry point of the fabric's own subcommands: router, ps, echo, hz, pub, call, list, interfaces, up, demo, secure, lab."""
+
+from __future__ import annotations
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    from robofabric import introspect_cli, launch_cli, secure_cli, tools_cli
+    from robofabric.lab import cli as lab_cli
+
+    tools_cli.register(app)
+    introspect_cli.register(app)
+    launch_cli.register(app)
+    secure_cli.register(app)
+    lab_cli.register(app)

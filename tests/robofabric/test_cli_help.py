@@ -1,0 +1,57 @@
+"""Every command's ``--help`` reads as plain text (issue 32): no reStructuredText markup from docstrings
+(```ros2 topic hz``` showed its backquotes), and paragraphs wrapped by the terminal, not by the source."""
+
+from __future__ import annotations
+
+import subprocess
+
+import pytest
+import typer
+
+from robofabric import cli
+from fabric.cli_common import plain_doc
+from fabric.testing import robofabric_cmd
+
+
+def _paths() -> list[tuple[str, ...]]:
+    cli._load_plugins()
+    root = typer.main.get_command(cli.app)
+    out: list[tuple[str, ...]] = []
+
+    def walk(cmd, path: tuple[str, ...]) -> None:
+        out.append(path)
+        for name, sub in getattr(cmd, "commands", {}).items():
+            walk(sub, (*path, name))
+
+    walk(root, ())
+    return out
+
+
+def test_plain_doc_drops_markup_and_joins_a_paragraphs_lines():
+    doc = """Rate of the keys (like ``ros2 topic hz``).
+
+    Uses :class:`~fabric.session.Fabric` and :func:`fabric.keys.parse`, a line
+    wrapped in the source.
+
+    - one
+    - two
+    """
+    assert plain_doc(doc) == "Rate of the keys (like ros2 topic hz).\n\nUses Fabric and fabric.keys.parse, a line wrapped in the source.\n\n- one\n- two"
+
+
+@pytest.mark.slow  # one process per command
+def test_no_help_shows_markup_or_source_line_breaks():
+    import os
+
+    paths = _paths()
+    assert ("own", "request") in paths and ("hz",) in paths, paths
+    env = {**os.environ, "COLUMNS": "80"}
+    for path in paths:
+        out = subprocess.run(robofabric_cmd(*path, "--help"), capture_output=True, text=True, timeout=60, env=env)
+        assert out.returncode == 0, (path, out.stderr)
+        assert "``" not in out.stdout and ":class:" not in out.stdout and ":func:" not in out.stdout, (path, out.stdout)
+        assert max(len(line) for line in out.stdout.splitlines()) <= 80, (path, out.stdout)
+    text = subprocess.run(robofabric_cmd("own", "request", "--help"), capture_output=True, text=True, timeout=60, env=env).stdout
+    # the paragraph reflows at 80 columns: its source line breaks (after "so" and "renews") are gone
+    assert "Without --hold this command exits at once, so the lease" in " ".join(text.split())
+    assert not any(line.rstrip().endswith("so") for line in text.splitlines()), text
