@@ -3,7 +3,7 @@
 A router, one sim of N bases (warehouse, LIDAR each), the bridge (``robofabric ros2``) and a plain rclpy node
 (:mod:`robofabric.bench.ros2_listen`) in processes of their own, on a ROS domain of the run's own with discovery
 kept on this machine. This process subscribes to the same streams over zenoh. Each message that reached both is
-matched by its stamp (the sender's wall clock, which the bridge keeps): the bridge's added latency is its ROS
+matched by its stamp (the sim's time, which the bridge's header stamps carry): the bridge's added latency is its ROS
 arrival minus its zenoh arrival (one clock, one machine). Lost: messages zenoh delivered within the window (its
 first ``SETTLE_S`` seconds left out, for discovery) that the ROS node never got. CPU: the bridge's, over the window.
 """
@@ -51,6 +51,7 @@ class _Zenoh:
 
     def _on(self, sample: Any) -> None:
         from fabric.codec import DecodeError, decode
+        from user_peer.openfmt.ros2 import sim_time_ns
 
         now = time.time_ns()
         parts = str(sample.key_expr).split("/")
@@ -59,7 +60,7 @@ class _Zenoh:
         except DecodeError:
             return
         with self._lock:
-            self.got[(parts[3], parts[4], int(msg.header.wall_ns))] = now
+            self.got[(parts[3], parts[4], sim_time_ns(msg))] = now
 
     def window(self, t0_ns: int, t1_ns: int) -> dict[tuple[str, str, int], int]:
         with self._lock:

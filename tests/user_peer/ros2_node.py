@@ -4,7 +4,9 @@ It listens to what ``robofabric ros2`` publishes and writes one JSON line per me
 (topic, stamp in ns, the values the test compares); while the file ``--control/drive`` exists it
 publishes ``geometry_msgs/Twist`` on ``/BASE/cmd_vel`` at 10 Hz with the "v omega" the file holds, as a
 teleop node would, and stops publishing when the file is removed; while ``--control/joints`` exists (JSON
-``[names, positions]``) it publishes that ``sensor_msgs/JointState`` on ``/ARM/joint_command``. Runs until SIGTERM.
+``[names, positions]``) it publishes that ``sensor_msgs/JointState`` on ``/ARM/joint_command``; while
+``--control/trajectory`` exists (JSON ``[names, [positions, ...]]``) a ``trajectory_msgs/JointTrajectory`` of
+those points, 1 s apart, on ``/ARM/joint_trajectory``. Runs until SIGTERM.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, LaserScan
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 
 def stamp_ns(header) -> int:
@@ -76,8 +79,26 @@ def main() -> None:
     joint_cmd = node.create_publisher(JointState, f"/{args.arm}/joint_command", 10)
     drive_file = os.path.join(args.control, "drive")
     joints_file = os.path.join(args.control, "joints")
+    trajectory = node.create_publisher(JointTrajectory, f"/{args.arm}/joint_trajectory", 10)
+    trajectory_file = os.path.join(args.control, "trajectory")
+
+    def send_trajectory() -> None:
+        try:
+            with open(trajectory_file) as f:
+                names, points = json.load(f)
+        except (FileNotFoundError, ValueError):
+            return
+        t = JointTrajectory()
+        t.joint_names = list(names)
+        for i, positions in enumerate(points):
+            p = JointTrajectoryPoint()
+            p.positions = [float(v) for v in positions]
+            p.time_from_start.sec = i + 1
+            t.points.append(p)
+        trajectory.publish(t)
 
     def tick() -> None:
+        send_trajectory()
         try:
             with open(joints_file) as f:
                 names, positions = json.load(f)

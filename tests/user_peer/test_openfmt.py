@@ -169,7 +169,7 @@ def test_foxglove_export_every_message_parses_against_its_schema_and_matches(rec
     assert grid.column_count == 20 and grid.row_stride == 20 and grid.cell_size.x == pytest.approx(0.05)
     assert np.array_equal(np.frombuffer(grid.data, dtype=np.uint8).reshape(12, 20), g.cells)
     assert (grid.pose.position.x, grid.pose.position.y) == (-1.0, -0.5)
-    (path,) = seen[f"{k}/robot/base1/path"]
+    (path,) = seen["/base1/path"]
     assert [p.position.y for p in path.poses] == pytest.approx(np.sin(np.linspace(0.0, 2.0, 9)).tolist())
     tfs = [t for m in seen["/tf"] for t in m.transforms]
     children = Counter(t.child_frame_id for t in tfs)
@@ -236,34 +236,38 @@ def test_ros2_export_every_message_decodes_with_the_ros_types_and_values(recordi
             seen[channel.topic].append(decoded)
     assert n == stats.written
     k = f"/rf/{W}"
-    assert types[f"{k}/robot/arm1/joints"] == "sensor_msgs/msg/JointState"
-    assert types[f"{k}/robot/base1/scan"] == "sensor_msgs/msg/LaserScan"
-    assert types[f"{k}/robot/base1/pose"] == "geometry_msgs/msg/PoseStamped"
-    assert types[f"{k}/map/map"] == "nav_msgs/msg/OccupancyGrid"
-    assert types[f"{k}/robot/base1/path"] == "nav_msgs/msg/Path"
+    # the live bridge's topic names (user_peer.ros2): one rviz2 configuration for both
+    assert types["/arm1/joint_states"] == "sensor_msgs/msg/JointState"
+    assert types["/base1/scan"] == "sensor_msgs/msg/LaserScan"
+    assert types["/base1/odom"] == "nav_msgs/msg/Odometry"
+    assert types["/map"] == "nav_msgs/msg/OccupancyGrid"
+    assert types["/base1/path"] == "nav_msgs/msg/Path"
+    assert types["/object/target/pose"] == "geometry_msgs/msg/PoseStamped"
     assert types["/tf"] == "tf2_msgs/msg/TFMessage"
-    assert types[f"{k}/own/arm1"] == "std_msgs/msg/String"
+    assert types[f"{k}/own/arm1"] == "std_msgs/msg/String"  # no ROS place: named after its key
 
-    for js, msg in zip(seen[f"{k}/robot/arm1/joints"], src[f"rf/{W}/robot/arm1/joints"], strict=True):
+    for js, msg in zip(seen["/arm1/joint_states"], src[f"rf/{W}/robot/arm1/joints"], strict=True):
         assert list(js.name) == list(msg.names) and list(js.position) == pytest.approx(msg.q.tolist())
         assert list(js.velocity) == pytest.approx(msg.dq.tolist())
-        assert js.header.stamp.sec * 10**9 + js.header.stamp.nanosec == msg.header.wall_ns
-    for scan, msg in zip(seen[f"{k}/robot/base1/scan"], src[f"rf/{W}/robot/base1/scan"], strict=True):
+        # stamped with the sim's time (what /clock carries for use_sim_time), as the live bridge stamps
+        assert js.header.stamp.sec * 10**9 + js.header.stamp.nanosec == round(msg.header.stamp * 1e9)
+    for scan, msg in zip(seen["/base1/scan"], src[f"rf/{W}/robot/base1/scan"], strict=True):
         assert scan.header.frame_id == "base1/lidar" and scan.range_max == pytest.approx(8.0)
         missing = msg.ranges >= 8.0 - 5e-4  # REP 117: no echo is +inf, never range_max
         assert missing.any() and (~missing).any()
         assert list(scan.ranges) == pytest.approx(np.where(missing, np.inf, msg.ranges).tolist(), abs=1e-6)
         assert scan.range_min == 0.0  # no world description in this recording: no sensor to ask
         assert scan.angle_increment == pytest.approx(2 * math.pi / 240)
-    for ps, msg in zip(seen[f"{k}/robot/base1/pose"], src[f"rf/{W}/robot/base1/pose"], strict=True):
-        assert (ps.pose.position.x, ps.pose.position.y) == pytest.approx((msg.position[0], msg.position[1]))
-        assert (ps.pose.orientation.w, ps.pose.orientation.z) == pytest.approx((msg.quaternion[0], msg.quaternion[3]))
-    (grid,) = seen[f"{k}/map/map"]
+    for od, msg in zip(seen["/base1/odom"], src[f"rf/{W}/robot/base1/pose"], strict=True):
+        assert (od.header.frame_id, od.child_frame_id) == ("world", "base1")
+        assert (od.pose.pose.position.x, od.pose.pose.position.y) == pytest.approx((msg.position[0], msg.position[1]))
+        assert (od.pose.pose.orientation.w, od.pose.pose.orientation.z) == pytest.approx((msg.quaternion[0], msg.quaternion[3]))
+    (grid,) = seen["/map"]
     g = _grid()
     assert (grid.info.width, grid.info.height) == (20, 12) and grid.info.resolution == pytest.approx(0.05)
     cells = np.array(list(grid.data), dtype=np.int16).reshape(12, 20)
     assert np.array_equal(cells, np.where(g.cells == 255, -1, g.cells.astype(np.int16)))
-    (path,) = seen[f"{k}/robot/base1/path"]
+    (path,) = seen["/base1/path"]
     assert [p.pose.position.x for p in path.poses] == pytest.approx(np.linspace(0.0, 2.0, 9).tolist())
     tfs = [t for m in seen["/tf"] for t in m.transforms]
     assert {"base1", "arm1", "arm1/joint_1", "base1/lidar", "object/target"} <= {t.child_frame_id for t in tfs}

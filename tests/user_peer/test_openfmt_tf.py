@@ -50,8 +50,8 @@ def _messages() -> list[tuple[str, int, object]]:
         out.append((f"rf/{W}/robot/arm1/pose", t + 1, Pose(FLANGE + [0.0, 0.001 * i, 0.0], _quat_wxyz(0.02 * i, 0.3), header=h)))
         out.append((f"rf/{W}/robot/arm1/joints", t + 2, JointState(names, q, q * 0.0, h)))
         out.append((f"rf/{W}/robot/base1/pose", t + 3, Pose(np.array([0.01 * i, 0.0, 0.0]), header=h)))
-        if i == N // 2:  # late samples: stamped 7 ms before the last ones written for these frames
-            late = Header(i * 0.01, t - LATE, i, "sim-1")
+        if i == N // 2:  # late samples: stamped 7 ms before the last ones written for these frames (both clocks)
+            late = Header(i * 0.01 - LATE / 1e9, t - LATE, i, "sim-1")
             out.append((f"rf/{W}/robot/arm1/joints", t + 4, JointState(names, q + 0.3, q * 0.0, late)))
             out.append((f"rf/{W}/robot/arm1/pose", t + 5, Pose(FLANGE - 0.5, header=late)))
             out.append((f"rf/{W}/robot/base1/pose", t + 6, Pose(np.array([-5.0, 0.0, 0.0]), header=late)))

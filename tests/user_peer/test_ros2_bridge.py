@@ -1,5 +1,6 @@
 """``robofabric ros2`` against a real ROS 2 node: a plain rclpy process (tests/user_peer/ros2_node.py, importing
-nothing from robofabric) gets joint_states, scan, odom, map and clock equal to robofabric's own streams, drives a
+nothing from robofabric) gets joint_states, scan, odom, map and clock equal to robofabric's own streams (stamped with
+the sim's time), moves an arm through joint_command and joint_trajectory, drives a
 base through cmd_vel (a stream that stops, stops the base), and without ownership moves nothing and is told why
 on /rosout. Real router, real sim (the ``live`` fixture), real bridge and node processes on a ROS domain of
 their own, discovery kept on this host."""
@@ -54,8 +55,13 @@ def of(path: Path, topic: str) -> list[dict]:
     return [r for r in lines(path) if r["topic"] == topic]
 
 
+def sim_ns(msg) -> int:
+    """A message's sim time in ns: the ROS header stamp the bridge gives it (and the export, docs/ros2.md)."""
+    return int(round(msg.header.stamp * 1e9))
+
+
 class Observed:
-    """robofabric's own streams, as a user script sees them: messages by their wall stamp (the ROS stamp)."""
+    """robofabric's own streams, as a user script sees them: messages by their sim time (the ROS stamp)."""
 
     def __init__(self, world) -> None:
         self.lock = threading.Lock()
@@ -70,22 +76,22 @@ class Observed:
 
     def _joints(self, key, msg) -> None:
         with self.lock:
-            self.joints[msg.header.wall_ns] = [float(v) for v in msg.q]
-            self.sim_stamps.add(int(round(msg.header.stamp * 1e9)))
+            self.joints[sim_ns(msg)] = [float(v) for v in msg.q]
+            self.sim_stamps.add(sim_ns(msg))
 
     def _scan(self, key, msg) -> None:
         with self.lock:
-            self.scans[msg.header.wall_ns] = np.asarray(msg.ranges, dtype=float)
-            self.sim_stamps.add(int(round(msg.header.stamp * 1e9)))
+            self.scans[sim_ns(msg)] = np.asarray(msg.ranges, dtype=float)
+            self.sim_stamps.add(sim_ns(msg))
 
     def _sonar(self, key, msg) -> None:
         with self.lock:
-            self.sonars[msg.header.wall_ns] = np.asarray(msg.ranges, dtype=float)
+            self.sonars[sim_ns(msg)] = np.asarray(msg.ranges, dtype=float)
 
     def _pose(self, key, msg) -> None:
         with self.lock:
-            self.poses[msg.header.wall_ns] = ([float(v) for v in msg.position], float(np.linalg.norm(msg.linear[:2])))
-            self.sim_stamps.add(int(round(msg.header.stamp * 1e9)))
+            self.poses[sim_ns(msg)] = ([float(v) for v in msg.position], float(np.linalg.norm(msg.linear[:2])))
+            self.sim_stamps.add(sim_ns(msg))
 
     def latest_pose(self) -> tuple[list[float], float]:
         with self.lock:
@@ -144,7 +150,7 @@ def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns
                what="joint_states, scan, odom, clock and map on ROS 2",
                seen=lambda: (seen(), procs.output(bridge)[-1500:], procs.output(node)[-1500:]))
 
-    # the values are robofabric's: matched by stamp (the sender's wall clock, as in export --to ros2)
+    # the values are robofabric's: matched by stamp (the sim's time, which /clock carries, as in export --to ros2)
     with obs.lock:
         joints, scans, poses, sim_stamps = dict(obs.joints), dict(obs.scans), dict(obs.poses), set(obs.sim_stamps)
         sonars = dict(obs.sonars)
@@ -212,6 +218,14 @@ def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns
     wait_until(at_target, timeout=30, what="arm1 at the joint_command's target",
                seen=lambda: (obs.joints[max(obs.joints)], procs.output(bridge)[-1500:]))
     (ctl / "joints").unlink()
+
+    # joint_trajectory: a JointTrajectory (names in another order) takes the arm to its last point (at_target
+    # reads this new target)
+    via, target = [-0.4, 0.3, 0.0, 0.2, 0.0, 0.1][: len(names)], [-0.2, 0.15, 0.2, 0.0, -0.25, 0.3][: len(names)]
+    (ctl / "trajectory").write_text(json.dumps([names[::-1], [via[::-1], target[::-1]]]))
+    wait_until(at_target, timeout=30, what="arm1 at the JointTrajectory's last point",
+               seen=lambda: (obs.joints[max(obs.joints)], procs.output(bridge)[-1500:]))
+    (ctl / "trajectory").unlink()
 
 
 def test_without_ownership_cmd_vel_moves_nothing_and_the_refusal_is_on_rosout(live, observer, procs, tmp_path):

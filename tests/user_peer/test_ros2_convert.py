@@ -54,13 +54,15 @@ def test_the_exports_conversion_fills_live_messages_with_the_same_frames_stamps_
 
 def test_a_bases_odometry_gives_its_twist_in_its_own_frame():
     needs_rclpy()
-    from user_peer.ros2.bridge import Ros2Bridge
+    from nav_msgs.msg import Odometry
+
+    from user_peer.ros2 import direct
 
     yaw = np.pi / 2  # facing +y, driving forward at 0.4 m/s: the sim's world velocity is (0, 0.4)
     pose = Pose(np.array([1.0, 2.0, 0.0]), quaternion_from_yaw(yaw), np.array([0.0, 0.4, 0.0]), np.array([0.0, 0.0, 0.3]),
                 header=Header(wall_ns=STAMP))
-    _, fields = ros2_message("rf/w/robot/base1/pose", pose, STAMP)
-    odom = Ros2Bridge._odometry("base1", pose, fields)
+    odom = direct.odometry(Odometry(), "base1", pose, STAMP)
+    assert odom == ros("rf/w/robot/base1/pose", pose, kind="mobile")  # the export's Odometry, live
     assert (odom.header.frame_id, odom.child_frame_id) == ("world", "base1")
     assert (odom.pose.pose.position.x, odom.pose.pose.position.y) == (1.0, 2.0)
     assert odom.twist.twist.linear.x == pytest.approx(0.4) and odom.twist.twist.linear.y == pytest.approx(0.0, abs=1e-12)

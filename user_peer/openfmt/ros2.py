@@ -1,24 +1,30 @@
 """ROS 2's MCAP (what rosbag2's MCAP storage reads): CDR messages, ``ros2msg`` schemas, profile ``ros2``.
 
-=================  ==========================  ======================================
-fabric             ROS 2 topic                 type
-=================  ==========================  ======================================
-JointState         ``/KEY``                    ``sensor_msgs/msg/JointState``
-Scan               ``/KEY``                    ``sensor_msgs/msg/LaserScan`` (``ID/lidar``)
-Pose               ``/KEY``                    ``geometry_msgs/msg/PoseStamped``
-OccupancyGrid      ``/KEY``                    ``nav_msgs/msg/OccupancyGrid`` (255 -> -1)
-Path               ``/KEY``                    ``nav_msgs/msg/Path``
-poses and arm FK   ``/tf``                     ``tf2_msgs/msg/TFMessage``
-anything else      ``/KEY``                    ``std_msgs/msg/String`` holding the JSON
-=================  ==========================  ======================================
+=================  ===========================  ======================================
+fabric             ROS 2 topic                  type
+=================  ===========================  ======================================
+JointState         ``/ID/joint_states``         ``sensor_msgs/msg/JointState`` (frame ``ID``)
+Scan               ``/ID/scan``, ``/ID/sonar``  ``sensor_msgs/msg/LaserScan`` (``ID/lidar``, ``ID/sonar``)
+a base's Pose      ``/ID/odom``                 ``nav_msgs/msg/Odometry`` (child ``ID``, twist in ``ID``)
+an arm's Pose      ``/ID/pose``                 ``geometry_msgs/msg/PoseStamped`` (the flange)
+OccupancyGrid      ``/map``, ``/maps/NAME``     ``nav_msgs/msg/OccupancyGrid`` (255 -> -1)
+Path               ``/ID/path``                 ``nav_msgs/msg/Path``
+an object's Pose   ``/object/ID/pose``          ``geometry_msgs/msg/PoseStamped``
+poses and arm FK   ``/tf``                      ``tf2_msgs/msg/TFMessage``
+anything else      ``/KEY``                     ``std_msgs/msg/String`` holding the JSON
+=================  ===========================  ======================================
+
+The topic names (:func:`ros2_topic`) and the header stamps (:class:`SimStamps`: the sim's time) are the live
+bridge's (:mod:`user_peer.ros2`), so one rviz2 configuration serves a recording and the live world; a key
+without such a name is named after itself (``rf/W/own/ID`` -> ``/rf/W/own/ID``, :func:`ros_topic`), characters
+ROS names do not allow becoming ``_``.
 
 A LaserScan's ``range_min`` is its sensor's in the world description (0.0 in a recording without one), and a
 missing echo (the fabric's ``range_max``) is +inf, as REP 117 says. The sonar ring's ranges are measured from
 the ring's rim and its frame ``ID/sonar`` is at the ring's centre: the ring's radius is added to the ranges and
 the limits (from the world description, else the robot's own), so that every range is true in that frame.
 
-Topic names are the fabric keys with a leading slash; characters ROS names do not allow become
-``_``. Written with ``mcap-ros2-support``'s writer.
+Written with ``mcap-ros2-support``'s writer.
 """
 
 from __future__ import annotations
@@ -34,11 +40,10 @@ from mcap_ros2.writer import Writer as Ros2McapWriter
 
 from fabric.interfaces import JointState, OccupancyGrid, Path, plain_view, Pose, Scan, WorldInfo
 from user_peer.catalog import RobotCatalog
-from user_peer.openfmt.foxglove import msg_time_ns
 from user_peer.openfmt.frames import WORLD, FrameTracker, key_owner, yaw_quat_xyzw
 from user_peer.openfmt.ros2_msgdefs import definition
 
-__all__ = ["Ros2Writer", "ros2_message", "ros_topic", "scan_ranges", "sensor_range_min", "sonar_radius", "TF_TOPIC"]
+__all__ = ["Ros2Writer", "SimStamps", "odometry_fields", "ros2_message", "ros2_topic", "to_body", "sim_time_ns", "ros_topic", "scan_ranges", "sensor_range_min", "sonar_radius", "TF_TOPIC"]
 
 TF_TOPIC = "/tf"
 _BAD = re.compile(r"[^A-Za-z0-9_/]")
@@ -49,6 +54,29 @@ def ros_topic(key: str) -> str:
     parts = [_BAD.sub("_", p) for p in key.split("/") if p]
     parts = [f"_{p}" if p[0].isdigit() else p for p in parts]
     return "/" + "/".join(parts)
+
+
+_STREAM_TOPICS = {"joints": "joint_states", "scan": "scan", "sonar": "sonar", "path": "path"}
+_POSE_TOPICS = {"mobile": "odom", "arm": "pose"}
+
+
+def ros2_topic(key: str, kind: str | None = None, namespace: str = "") -> str | None:
+    """The ROS 2 topic of fabric ``key``, the same in the live bridge and in ``export --to ros2``, so that one
+    rviz2 configuration serves both: ``/ROBOT/joint_states``, ``/ROBOT/scan``, ``/ROBOT/sonar``,
+    ``/ROBOT/path``, a pose as ``/ROBOT/odom`` (``kind`` "mobile": Odometry) or ``/ROBOT/pose`` (an arm's
+    flange), ``/map`` (other maps ``/maps/NAME``), ``/object/ID/pose``; under ``/NAMESPACE`` when given. None for
+    a key with no such place (a pose of a robot of unknown kind; the export names the others after the key)."""
+    ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
+    parts = key.split("/")  # rf/W/robot/ID/stream, rf/W/map/NAME, rf/W/object/ID/pose/by/USER
+    if len(parts) == 5 and parts[2] == "robot":
+        stream = parts[4]
+        leaf = _POSE_TOPICS.get(kind or "") if stream == "pose" else _STREAM_TOPICS.get(stream)
+        return ros_topic(f"{ns}/{parts[3]}/{leaf}") if leaf else None
+    if len(parts) == 4 and parts[2] == "map":
+        return ros_topic(f"{ns}/map" if parts[3] == "map" else f"{ns}/maps/{parts[3]}")
+    if len(parts) >= 5 and parts[2] == "object" and parts[4] == "pose":
+        return ros_topic(f"{ns}/object/{parts[3]}/pose")
+    return None
 
 
 def _time(ns: int) -> dict:
@@ -105,13 +133,61 @@ def scan_ranges(msg: Scan, offset: float = 0.0) -> list[float]:
     return np.where(r >= float(msg.range_max) - MISS_TOLERANCE_M, np.inf, r + offset).tolist()
 
 
-def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0, range_offset: float = 0.0) -> tuple[str, dict] | None:
+def sim_time_ns(msg: Any) -> int:
+    """A fabric message's sim time (its header's ``stamp``, seconds) in ns; 0 when it has none."""
+    stamp = getattr(getattr(msg, "header", None), "stamp", 0.0) or 0.0
+    return int(round(float(stamp) * 1e9)) if stamp > 0 else 0
+
+
+class SimStamps:
+    """The stamp a ROS 2 message gets, live and in the export alike: the sim's time (the fabric header's
+    ``stamp``), which ``/clock`` carries, so that a node with ``use_sim_time`` (rviz2, Nav2, tf2's buffer) finds
+    stamps near its ``now()``. A message without a sim time (a map, a path or an object moved by a user)
+    gets the newest sim time seen so far (0 before any: ROS's "the latest" for tf lookups), never the wall
+    clock, whose stamps would be decades ahead of /clock's. ``newest`` is /clock's value."""
+
+    def __init__(self) -> None:
+        self.newest = 0
+
+    def __call__(self, msg: Any) -> int:
+        ns = sim_time_ns(msg)
+        if ns > 0:
+            if ns > self.newest:
+                self.newest = ns
+            return ns
+        return self.newest
+
+
+def to_body(q_wxyz: Any, v: Any) -> tuple[float, float, float]:
+    """World vector ``v`` in the frame turned by unit quaternion ``q_wxyz`` (R^T v), in plain floats: the
+    bridge turns every odometry twist with it, where numpy's small-array calls cost more than the arithmetic."""
+    w, x, y, z = (float(c) for c in q_wxyz)
+    a, b, c = (float(c) for c in v)
+    return ((1 - 2 * (y * y + z * z)) * a + 2 * (x * y + z * w) * b + 2 * (x * z - y * w) * c,
+            2 * (x * y - z * w) * a + (1 - 2 * (x * x + z * z)) * b + 2 * (y * z + x * w) * c,
+            2 * (x * z + y * w) * a + 2 * (y * z - x * w) * b + (1 - 2 * (x * x + y * y)) * c)
+
+
+def odometry_fields(robot: str, msg: Pose, stamp_ns: int) -> dict:
+    """A mobile base's pose as ``nav_msgs/Odometry``: the pose in its frame (``world``), child frame the base's id,
+    the twist turned from the world frame (the sim's velocities) into the base's, as REP 105 asks."""
+    q = msg.quaternion
+    v, w = to_body(q, msg.linear), to_body(q, msg.angular)
+    vec = lambda a: {"x": a[0], "y": a[1], "z": a[2]}  # noqa: E731
+    return {"header": _header(stamp_ns, msg.frame or WORLD), "child_frame_id": robot,
+            "pose": {"pose": _pose(msg.position, (q[1], q[2], q[3], q[0])), "covariance": [0.0] * 36},
+            "twist": {"twist": {"linear": vec(v), "angular": vec(w)}, "covariance": [0.0] * 36}}
+
+
+def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0, range_offset: float = 0.0,
+                 kind: str | None = None) -> tuple[str, dict] | None:
     """(ROS 2 type name, the message as a dict of its fields) for fabric ``msg`` on ``key``, stamped
     ``stamp_ns``; None for a message ROS 2 has no place for. The one conversion of the MCAP export and the
     live bridge (:mod:`user_peer.ros2`), so that both give the same frames, stamps and values. ``range_min``:
     a scan's sensor's (:func:`sensor_range_min`), which the fabric's Scan does not carry; ``range_offset``: added
     to every range and to the limits, so that a sonar's ranges, measured from the ring's rim, are true in its
-    frame ``ID/sonar`` at the ring's centre (the ring's radius, :func:`sonar_radius`)."""
+    frame ``ID/sonar`` at the ring's centre (the ring's radius, :func:`sonar_radius`); ``kind``: the robot's
+    ("mobile": its pose is Odometry, :func:`odometry_fields`)."""
     t = stamp_ns
     owner = key_owner(key)
     rid = owner[1] if owner else WORLD
@@ -144,6 +220,8 @@ def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0, r
             for x, y, th in zip(msg.x, msg.y, msg.theta)
         ]
         return "nav_msgs/msg/Path", {"header": _header(t, frame), "poses": poses}
+    if isinstance(msg, Pose) and kind == "mobile" and owner is not None and owner[0] == "robot":
+        return "nav_msgs/msg/Odometry", odometry_fields(rid, msg, t)
     if isinstance(msg, Pose):
         q = msg.quaternion
         return ("geometry_msgs/msg/PoseStamped",
@@ -163,6 +241,7 @@ class Ros2Writer:
         self._w = Ros2McapWriter(self._f)
         self._schemas: dict[str, Any] = {}
         self._tf_pub = 0
+        self._stamps = SimStamps()  # header stamps: the sim's time, as the live bridge's (docs/ros2.md, "Stamps")
         self.frames = FrameTracker(catalog or RobotCatalog(None, scene=scene))
         self.written = 0
         self.skipped = 0
@@ -180,8 +259,7 @@ class Ros2Writer:
 
     def write(self, key: str, msg: Any, log_time_ns: int, publish_time_ns: int | None = None) -> None:
         pub = int(publish_time_ns if publish_time_ns is not None else log_time_ns)
-        t = msg_time_ns(msg, log_time_ns)
-        topic = ros_topic(key)
+        t = self._stamps(msg)
         frames = self.frames.frames(key, msg, t)
         if frames:
             tfs = [
@@ -198,12 +276,20 @@ class Ros2Writer:
             self._tf_pub = max(self._tf_pub, pub)  # /tf's publish times never go back (it merges every robot's keys)
             self._put(TF_TOPIC, "tf2_msgs/msg/TFMessage", {"transforms": tfs}, log_time_ns, self._tf_pub)
         scan = isinstance(msg, Scan)
+        kind = self._kind(key, msg)
         converted = ros2_message(key, msg, t, range_min=self._range_min(key) if scan else 0.0,
-                                 range_offset=self._sonar_radius(key) if scan else 0.0)
+                                 range_offset=self._sonar_radius(key) if scan else 0.0, kind=kind)
         if converted is None:
             self.skipped += 1
             return
-        self._put(topic, converted[0], converted[1], log_time_ns, pub)
+        self._put(ros2_topic(key, kind) or ros_topic(key), converted[0], converted[1], log_time_ns, pub)
+
+    def _kind(self, key: str, msg: Any) -> str | None:
+        """A robot's kind ("arm", "mobile") as the frame tree knows it (a pose alone: a mobile base), else None."""
+        owner = key_owner(key)
+        if owner is None or owner[0] != "robot" or not isinstance(msg, Pose):
+            return None
+        return self.frames.robot(owner[1], {"mobile": True}).kind or None
 
     def _range_min(self, key: str) -> float:
         return sensor_range_min(self.frames.catalog.world_info, key)

@@ -11,30 +11,36 @@ Out (every robot of the world, followed as sims and robots come and go)::
     /NS/map                 nav_msgs/OccupancyGrid   from rf/W/map/map (other maps: /NS/maps/NAME; reliable, transient local)
     /NS/object/ID/pose      geometry_msgs/PoseStamped from rf/W/object/ID/pose/by/*
     /clock                  rosgraph_msgs/Clock      the sims' time (the newest header stamp of robot state)
+    /NS/tf, /NS/tf_static   tf2_msgs/TFMessage       the export's frame tree, where tf2_msgs is importable (tf.py)
 
 In (acted on only for robots this login owns, as for any user; a refusal is logged on /rosout and counted)::
 
-    /NS/ROBOT/cmd_vel        geometry_msgs/Twist     -> Base.twist(linear.x, angular.z, hold=False)
-    /NS/ROBOT/joint_command  sensor_msgs/JointState  -> Arm.move_joints(positions, wait=False)
+    /NS/ROBOT/cmd_vel           geometry_msgs/Twist             -> Base.twist(linear.x, angular.z, hold=False)
+    /NS/ROBOT/joint_command     sensor_msgs/JointState          -> Arm.move_joints(positions, wait=False)
+    /NS/ROBOT/joint_trajectory  trajectory_msgs/JointTrajectory -> Arm.move_joints(its last point, wait=False)
 
-Every message is converted by :func:`user_peer.openfmt.ros2.ros2_message`, the conversion of
-``export --to ros2``: frame ids, stamps (the sender's wall clock) and values are the MCAP export's. Each
-``cmd_vel`` is forwarded once (``hold=False``): the sim's deadman stops a base 0.5 s after the last fresh
-twist, so a ROS stream that stops, stops the base, as a ROS user expects of ``cmd_vel``.
+Topic names, frame ids, stamps and values are those of ``export --to ros2``
+(:func:`user_peer.openfmt.ros2.ros2_topic`, :class:`~user_peer.openfmt.ros2.SimStamps`,
+:func:`~user_peer.openfmt.ros2.ros2_message`): stamps are the sim's time, which /clock carries, so a node
+with ``use_sim_time`` sees them near its ``now()``. The frequent streams (joints, scans, odometry, poses) are
+built straight into one reused rclpy message per topic (:mod:`user_peer.ros2.direct`, held equal to the
+export's conversion by its tests); maps and paths are filled from the export's dicts. Each ``cmd_vel`` is
+forwarded once (``hold=False``): the sim's deadman stops a base 0.5 s after the last fresh twist, so a ROS
+stream that stops, stops the base, as a ROS user expects of ``cmd_vel``.
 
-Threads: zenoh's callbacks convert and publish (rclpy publishers may be used from any thread); the rclpy
-executor runs the command callbacks and a 1 s timer that follows the world's robots.
+Threads: zenoh's callbacks convert and publish (rclpy publishers may be used from any thread), with no lock
+per message (a lock guards the creation of publishers, another /clock's order when the sim time moves on);
+the rclpy executor runs the command callbacks and a 1 s timer that follows the world's robots.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
-import time
 from collections import Counter
+from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
 import rclpy
 from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
@@ -42,13 +48,18 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, LaserScan
+from trajectory_msgs.msg import JointTrajectory
 
 from fabric import keys
+from fabric.interfaces import JointState as FabricJointState
+from fabric.interfaces import Pose, Scan
+from user_peer.catalog import RobotCatalog
 from user_peer.errors import FabricUserError
-from user_peer.geometry import rotation_xyzw
-from user_peer.openfmt.foxglove import msg_time_ns
-from user_peer.openfmt.ros2 import ros2_message, ros_topic, sensor_range_min, sonar_radius
-from user_peer.ros2.fill import fill
+from user_peer.openfmt.ros2 import SimStamps, ros2_message, ros2_topic, ros_topic, sensor_range_min, sim_time_ns, sonar_radius
+from user_peer.ros2 import direct
+from user_peer.ros2.commands import joint_targets, trajectory_targets
+from user_peer.ros2.fill import fill, message_class
+from user_peer.ros2.tf import TfOut
 from user_peer.world import World
 
 __all__ = ["Ros2Bridge", "LATCHED", "RELIABLE"]
@@ -63,20 +74,53 @@ latches those keys."""
 FOLLOW_PERIOD_S = 1.0
 """How often the bridge looks at the world's description for robots that came or went."""
 
+_TYPES: dict[str, tuple[type, QoSProfile]] = {
+    "joint_states": (JointState, RELIABLE), "scan": (LaserScan, qos_profile_sensor_data),
+    "sonar": (LaserScan, qos_profile_sensor_data), "path": (Path, LATCHED), "odom": (Odometry, RELIABLE),
+    "pose": (PoseStamped, RELIABLE), "map": (OccupancyGrid, LATCHED),
+}
+"""A topic's last name -> its ROS type and QoS (``/maps/NAME``: a map; ``/object/ID/pose``: a pose)."""
+
+
+@dataclass(frozen=True, slots=True)
+class _Route:
+    """Where one fabric key goes: its topic and what a message there needs (worked out once per key)."""
+
+    topic: str
+    robot: str | None
+    cls: type
+    qos: QoSProfile
+    frame: str = ""  # a scan's frame
+    range_min: float = 0.0  # a scan's sensor's, from the world description
+    offset: float = 0.0  # a sonar ring's radius (its ranges measured from the rim, given from the centre)
+
+
+class _Out:
+    """One topic's publisher and the message refilled for each sample (one zenoh subscription feeds a topic)."""
+
+    __slots__ = ("pub", "msg")
+
+    def __init__(self, pub: Any, msg: Any) -> None:
+        self.pub, self.msg = pub, msg
+
 
 class Ros2Bridge:
     """Republish ``world``'s streams on ``node`` and forward its ROS commands; ``close()`` ends it."""
 
-    def __init__(self, world: World, node: Node, *, namespace: str = "") -> None:
+    def __init__(self, world: World, node: Node, *, namespace: str = "", tf_message: type | None = None) -> None:
         self.world = world
         self.node = node
-        self.ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
-        self._lock = threading.Lock()
-        self._pubs: dict[str, Any] = {}  # topic -> publisher
+        self.namespace = namespace
+        self._lock = threading.Lock()  # publishers' creation and removal only; never taken per message
+        self._clock_lock = threading.Lock()  # /clock's order, taken when the sim time moves on
+        self._outs: dict[str, _Out] = {}  # topic -> its publisher and message
+        self._routes: dict[str, _Route | None] = {}  # fabric key -> route (rebuilt with each description)
         self._robot_topics: dict[str, set[str]] = {}  # robot -> its topics (destroyed when it leaves)
-        self._inputs: dict[str, Any] = {}  # robot -> its command subscription
+        self._inputs: dict[str, list[Any]] = {}  # robot -> its command subscriptions
         self._kinds: dict[str, str] = {}  # robot -> kind ("arm", "mobile"), from the world description
+        self._stamps = SimStamps()
         self._clock_ns = 0
+        self._clock_msg = Clock()
         self._described: Any = None  # the last world description (each sensor's range_min), from follow()
         self.published: Counter[str] = Counter()  # topic -> messages published
         self.forwarded: Counter[str] = Counter()  # robot -> commands forwarded
@@ -86,6 +130,7 @@ class Ros2Bridge:
         self._subs: list[Any] = []
         self._closed = False
         self._clock_pub = node.create_publisher(Clock, "/clock", RELIABLE)
+        self.tf = TfOut(node, RobotCatalog(None), namespace=namespace, message=tf_message)
         w = world.name
         fab = world.fabric
         self.follow()  # first: the description's sensors (range_min) are known before the first scan
@@ -99,102 +144,99 @@ class Ros2Bridge:
             fab.subscribe(keys.object_pose_all(w), self._on_state, history=True),
         ]
         self._timer = node.create_timer(FOLLOW_PERIOD_S, self._tick)
+        if not self.tf.available:
+            log.warning("no /tf or /tf_static: tf2_msgs is not importable (it is not among the ROS 2 wheels; "
+                        "source a ROS 2 install that has it)")
 
     # ------------------------------------------------------------------ out
-    def _topic(self, *parts: str) -> str:
-        return ros_topic("/".join([self.ns, *parts]))
-
-    def _route(self, key: str, msg: Any) -> tuple[str, str | None, type, QoSProfile] | None:
-        """(topic, robot or None, ROS message class, QoS) for fabric ``key``; None when it has no topic."""
-        parts = key.split("/")  # rf/W/robot/ID/stream, rf/W/map/NAME, rf/W/object/ID/pose/by/USER
-        if len(parts) == 5 and parts[2] == "robot":
-            rid, stream = parts[3], parts[4]
-            if stream == "joints":
-                return self._topic(rid, "joint_states"), rid, JointState, RELIABLE
-            if stream in ("scan", "sonar"):
-                return self._topic(rid, stream), rid, LaserScan, qos_profile_sensor_data
-            if stream == "path":
-                return self._topic(rid, "path"), rid, Path, LATCHED
-            if stream == "pose":
-                if self._kinds.get(rid) == "mobile":
-                    return self._topic(rid, "odom"), rid, Odometry, RELIABLE
-                if self._kinds.get(rid) == "arm":
-                    return self._topic(rid, "pose"), rid, PoseStamped, RELIABLE
+    def _route(self, key: str) -> _Route | None:
+        """The route of fabric ``key`` (cached until the next description); None when it has no topic."""
+        try:
+            return self._routes[key]
+        except KeyError:
+            pass
+        parts = key.split("/")
+        robot = parts[3] if len(parts) == 5 and parts[2] == "robot" else None
+        topic = ros2_topic(key, self._kinds.get(robot or ""), self.namespace)
+        if topic is None:
+            if robot is None or robot in self._kinds:  # a pose of a robot not yet described: ask again later
+                self._routes[key] = None
             return None
-        if len(parts) == 4 and parts[2] == "map":
-            name = parts[3]
-            return (self._topic("map") if name == "map" else self._topic("maps", name)), None, OccupancyGrid, LATCHED
-        if len(parts) >= 5 and parts[2] == "object":
-            return self._topic("object", parts[3], "pose"), None, PoseStamped, RELIABLE
-        return None
+        leaf = topic.rsplit("/", 1)[1]
+        cls, qos = _TYPES.get(leaf, (OccupancyGrid, LATCHED) if "/maps/" in topic else (PoseStamped, RELIABLE))
+        route = _Route(topic, robot, cls, qos)
+        if cls is LaserScan:
+            sonar = leaf == "sonar"
+            route = _Route(topic, robot, cls, qos, f"{robot}/{'sonar' if sonar else 'lidar'}",
+                           sensor_range_min(self._described, key), (sonar_radius(self._described, key) or 0.0) if sonar else 0.0)
+        self._routes[key] = route
+        return route
 
-    def _publisher(self, topic: str, robot: str | None, cls: type, qos: QoSProfile) -> Any:
+    def _out(self, route: _Route) -> _Out | None:
+        out = self._outs.get(route.topic)
+        if out is not None:
+            return out
         with self._lock:
-            pub = self._pubs.get(topic)
-            if pub is None and not self._closed:
-                pub = self._pubs[topic] = self.node.create_publisher(cls, topic, qos)
-                if robot is not None:
-                    self._robot_topics.setdefault(robot, set()).add(topic)
-            return pub
+            out = self._outs.get(route.topic)
+            if out is None and not self._closed:
+                out = self._outs[route.topic] = _Out(self.node.create_publisher(route.cls, route.topic, route.qos), route.cls())
+                if route.robot is not None:
+                    self._robot_topics.setdefault(route.robot, set()).add(route.topic)
+            return out
+
+    def _convert(self, out: _Out, route: _Route, key: str, msg: Any, ns: int) -> Any:
+        """The ROS message of ``msg``: the hot streams built in place (:mod:`user_peer.ros2.direct`), the rest
+        filled from the export's dict; None when ``msg`` is not what the topic carries."""
+        cls = route.cls
+        if cls is JointState and isinstance(msg, FabricJointState):
+            return direct.joint_state(out.msg, route.robot or "", msg, ns)
+        if cls is LaserScan and isinstance(msg, Scan):
+            return direct.laser_scan(out.msg, route.frame, msg, ns, route.range_min, route.offset)
+        if cls is Odometry and isinstance(msg, Pose):
+            return direct.odometry(out.msg, route.robot or "", msg, ns)
+        if cls is PoseStamped and isinstance(msg, Pose):
+            return direct.pose_stamped(out.msg, msg, ns)
+        converted = ros2_message(key, msg, ns)
+        if converted is None or message_class(converted[0]) is not cls:
+            return None
+        return fill(cls(), converted[1])
 
     def _on_state(self, key: str, msg: Any) -> None:
         """A fabric message: convert it as the MCAP export does and publish it (zenoh's thread)."""
         if self._closed or not self.node.context.ok():
             return  # stopping (Ctrl-C or SIGTERM shut rclpy's context down before the world closed): nothing to publish on
         try:
-            route = self._route(key, msg)
+            route = self._route(key)
             if route is None:
                 return
-            topic, robot, cls, qos = route
-            scan = cls is LaserScan
-            converted = ros2_message(key, msg, msg_time_ns(msg, time.time_ns()),
-                                     range_min=sensor_range_min(self._described, key) if scan else 0.0,
-                                     range_offset=(sonar_radius(self._described, key) or 0.0) if scan else 0.0)
-            if converted is None:
+            out = self._out(route)
+            if out is None:
+                return
+            ns = self._stamps(msg)
+            ros = self._convert(out, route, key, msg, ns)
+            if ros is None:
                 self.unconverted += 1
                 return
-            if cls is Odometry:
-                out = self._odometry(robot or "", msg, converted[1])
-            else:
-                out = fill(cls(), converted[1])
-            pub = self._publisher(topic, robot, cls, qos)
-            if pub is None:
-                return
-            pub.publish(out)
-            self.published[topic] += 1
-            if robot is not None:
-                self._tick_clock(msg)
+            out.pub.publish(ros)
+            self.published[route.topic] += 1
+            if route.robot is not None:
+                self.tf.on_state(key, msg, ns)
+                self._tick_clock(sim_time_ns(msg))
         except Exception:  # a message that does not fit must not end the bridge's subscription
             self.unconverted += 1
             log.exception("could not publish %s on ROS 2", key)
 
-    @staticmethod
-    def _odometry(robot: str, msg: Any, pose_stamped: dict) -> Odometry:
-        """A base's pose as Odometry: the PoseStamped of the export (frame ``world``), child frame the base's id,
-        the twist turned from the world frame (the sim's velocities) into the base's, as REP 105 asks."""
-        odom = Odometry()
-        fill(odom.header, pose_stamped["header"])
-        odom.child_frame_id = robot
-        fill(odom.pose.pose, pose_stamped["pose"])
-        o = pose_stamped["pose"]["orientation"]
-        r = rotation_xyzw(np.array([o["x"], o["y"], o["z"], o["w"]]))
-        v = r.T @ np.asarray(msg.linear, dtype=float)
-        w = r.T @ np.asarray(msg.angular, dtype=float)
-        odom.twist.twist.linear.x, odom.twist.twist.linear.y, odom.twist.twist.linear.z = (float(x) for x in v)
-        odom.twist.twist.angular.x, odom.twist.twist.angular.y, odom.twist.twist.angular.z = (float(x) for x in w)
-        return odom
-
-    def _tick_clock(self, msg: Any) -> None:
+    def _tick_clock(self, ns: int) -> None:
         """/clock: the newest sim time seen in robot state, never going back (several sims: the furthest)."""
-        stamp = float(getattr(getattr(msg, "header", None), "stamp", 0.0) or 0.0)
-        ns = int(round(stamp * 1e9))
-        with self._lock:
+        if ns <= self._clock_ns:
+            return
+        with self._clock_lock:
             if ns <= self._clock_ns or self._closed:
                 return
             self._clock_ns = ns
-        c = Clock()
-        c.clock.sec, c.clock.nanosec = ns // 1_000_000_000, ns % 1_000_000_000
-        self._clock_pub.publish(c)
+            c = self._clock_msg
+            c.clock.sec, c.clock.nanosec = ns // 1_000_000_000, ns % 1_000_000_000
+            self._clock_pub.publish(c)
         self.published["/clock"] += 1
 
     # ------------------------------------------------------------------ following the world
@@ -206,30 +248,38 @@ class Ros2Bridge:
             log.exception("following the world failed")
 
     def follow(self) -> None:
-        """Give every robot of the world its command topic; drop the topics of robots that left."""
+        """Give every robot of the world its command topics; drop the topics of robots that left."""
         try:
             self._described = info = self.world.info()
             entries = {r.id: r.kind for r in info.robots}
         except FabricUserError as exc:  # no sim now: keep what we have, the world's tokens tell the rest
             log.debug("no world description now: %s", exc)
             return
+        self._kinds.update(entries)
+        self._routes = {}  # each key's route again, with this description's kinds and sensors
+        self.tf.describe(info)
         for rid, kind in entries.items():
-            self._kinds[rid] = kind
-            if rid in self._inputs:
-                continue
-            if kind == "mobile":
-                self._inputs[rid] = self.node.create_subscription(
-                    Twist, self._topic(rid, "cmd_vel"), lambda m, r=rid: self._on_cmd_vel(r, m), RELIABLE)
-            elif kind == "arm":
-                self._inputs[rid] = self.node.create_subscription(
-                    JointState, self._topic(rid, "joint_command"), lambda m, r=rid: self._on_joint_command(r, m), RELIABLE)
+            if rid not in self._inputs:
+                self._inputs[rid] = self._command_inputs(rid, kind)
         for rid in [r for r in list(self._inputs) if r not in entries]:
-            self.node.destroy_subscription(self._inputs.pop(rid))
+            for sub in self._inputs.pop(rid):
+                self.node.destroy_subscription(sub)
             self._kinds.pop(rid, None)
             with self._lock:
                 for topic in self._robot_topics.pop(rid, set()):
-                    self.node.destroy_publisher(self._pubs.pop(topic))
+                    self.node.destroy_publisher(self._outs.pop(topic).pub)
             self.node.get_logger().info(f"{rid} left world {self.world.name}: its topics are gone")
+
+    def _command_inputs(self, rid: str, kind: str) -> list[Any]:
+        topic = lambda leaf: ros_topic("/".join([self.namespace.strip("/"), rid, leaf]))  # noqa: E731
+        if kind == "mobile":
+            return [self.node.create_subscription(Twist, topic("cmd_vel"), lambda m, r=rid: self._on_cmd_vel(r, m), RELIABLE)]
+        if kind == "arm":
+            return [self.node.create_subscription(JointState, topic("joint_command"),
+                                                  lambda m, r=rid: self._on_arm(r, "joint_command", m), RELIABLE),
+                    self.node.create_subscription(JointTrajectory, topic("joint_trajectory"),
+                                                  lambda m, r=rid: self._on_arm(r, "joint_trajectory", m), RELIABLE)]
+        return []
 
     # ------------------------------------------------------------------ in
     def _refuse(self, robot: str, what: str, why: str) -> None:
@@ -262,23 +312,21 @@ class Ros2Bridge:
         except (FabricUserError, ValueError) as exc:
             self._refuse(robot, "cmd_vel", getattr(exc, "reason", str(exc)))
 
-    def _on_joint_command(self, robot: str, msg: JointState) -> None:
-        arm = self._check_owner(robot, "joint_command")
+    def _on_arm(self, robot: str, what: str, msg: Any) -> None:
+        """A JointState on joint_command or a JointTrajectory on joint_trajectory (its last point): the arm's move."""
+        arm = self._check_owner(robot, what)
         if arm is None:
             return
         names = list(arm.entry.joint_names)
-        positions = [float(v) for v in msg.position]
-        if msg.name:  # by name, in any order; every joint named once
-            if sorted(msg.name) != sorted(names):
-                self._refuse(robot, "joint_command", f"names {list(msg.name)} are not {robot}'s joints {names}")
-                return
-            by_name = dict(zip(msg.name, positions))
-            positions = [by_name[n] for n in names]
         try:
+            if what == "joint_trajectory":
+                positions = trajectory_targets(robot, names, msg)
+            else:
+                positions = joint_targets(robot, names, list(msg.name), list(msg.position))
             arm.move_joints(positions, wait=False)
             self.forwarded[robot] += 1
         except (FabricUserError, ValueError) as exc:
-            self._refuse(robot, "joint_command", getattr(exc, "reason", str(exc)))
+            self._refuse(robot, what, getattr(exc, "reason", str(exc)))
 
     def _report_rejections(self) -> None:
         """The sims' refusals of what this login sent (a lease lost between our look and the sim's) on /rosout."""
@@ -310,7 +358,7 @@ class Ros2Bridge:
         """One line: what went out and what came in."""
         return (f"{sum(self.published.values())} messages published on {len(self.published)} topics, "
                 f"{sum(self.forwarded.values())} commands forwarded, {sum(self.refused.values())} refused, "
-                f"{self.unconverted} not converted")
+                f"{self.unconverted} not converted, {self.tf.sent} /tf messages")
 
 
 def spin(bridge: Ros2Bridge) -> None:

@@ -20,12 +20,13 @@ from mcap.reader import make_reader
 from fabric.codec import decode
 from fabric.recording.reader import iter_messages
 from fabric.testing import robofabric_cmd, wait_until
-from user_peer.openfmt.ros2 import ros_topic
+from user_peer.openfmt.ros2 import ros2_topic
 
 pytestmark = pytest.mark.slow  # a sim and three tools for 30 s
 
 SECONDS = 30
 STREAMS = ("robot/base1/pose", "robot/arm1/joints", "robot/base1/scan")
+KINDS = {"base1": "mobile", "arm1": "arm"}  # a base's pose is its odometry in ROS 2
 
 
 def _native(path) -> dict[str, list[int]]:
@@ -80,7 +81,7 @@ def test_native_ros2_and_echo_hold_the_same_messages_per_stream(router, procs, w
     got_native, got_ros2, got_echo = _native(native), _ros2(ros2), _echo(procs.output(echo))
     for stream in STREAMS:
         key = f"rf/{world}/{stream}"
-        a, b = got_native.get(key, []), got_ros2.get(ros_topic(key), [])
+        a, b = got_native.get(key, []), got_ros2.get(ros2_topic(key, KINDS.get(stream.split("/")[1])), [])
         assert len(a) > 10 * (SECONDS - 5) and b, (stream, len(a), len(b))
         w = _window(a, b)
         assert _inside(b, w) == _inside(a, w), f"{stream}: native {len(_inside(a, w))}, ros2 {len(_inside(b, w))} in the same window"

@@ -1,0 +1,66 @@
+"""The bridge's direct builders (user_peer.ros2.direct) give the messages the export's conversion gives: for any
+joint state, scan, sonar ring and pose, a reused rclpy message refilled in place equals one filled from
+``ros2_message``'s dict, field by field (values, frames, stamps, +inf for a missing echo, the sonar's offset)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+pytest.importorskip("rclpy", reason="the ros2 extra (ROS 2 Kilted's wheels) is not installed")
+
+from fabric.interfaces import Header, JointState, Pose, Scan  # noqa: E402
+from fabric.interfaces.geometry import quaternion_from_yaw  # noqa: E402
+from user_peer.openfmt.ros2 import ros2_message  # noqa: E402
+from user_peer.ros2 import direct  # noqa: E402
+from user_peer.ros2.fill import fill, message_class  # noqa: E402
+
+floats = st.floats(-50.0, 50.0, allow_nan=False)
+stamps = st.integers(1, 2**62)
+
+
+def exported(key: str, msg, ns: int, **kw):
+    type_name, fields = ros2_message(key, msg, ns, **kw)
+    return fill(message_class(type_name)(), fields)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.text("abcxyz_", min_size=1, max_size=6), floats, floats), max_size=8, unique_by=lambda t: t[0]),
+       stamps, stamps)
+def test_a_joint_state_built_in_place_is_the_exports(joints, ns, ns2):
+    from sensor_msgs.msg import JointState as RosJointState
+
+    js = JointState(tuple(j[0] for j in joints), np.array([j[1] for j in joints]), np.array([j[2] for j in joints]))
+    out = RosJointState()
+    direct.joint_state(out, "base", JointState(("old",), np.ones(1), np.ones(1)), ns2)  # a previous sample, overwritten
+    assert direct.joint_state(out, "arm1", js, ns) == exported("rf/w/robot/arm1/joints", js, ns)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.integers(0, 65535), max_size=300), st.floats(-3.0, 3.0), st.floats(-0.1, 0.1),
+       st.floats(0.5, 65.0), st.floats(0.0, 0.5), st.sampled_from(["scan", "sonar"]), stamps)
+def test_a_scan_built_in_place_is_the_exports(mm, angle_min, inc, range_max, range_min, leaf, ns):
+    from sensor_msgs.msg import LaserScan
+
+    scan = Scan(angle_min, inc, range_max, np.array(mm, dtype=np.uint16))
+    offset = 0.26 if leaf == "sonar" else 0.0
+    mine = direct.laser_scan(LaserScan(), f"base1/{'sonar' if leaf == 'sonar' else 'lidar'}", scan, ns, range_min, offset)
+    theirs = exported(f"rf/w/robot/base1/{leaf}", scan, ns, range_min=range_min, range_offset=offset)
+    assert mine == theirs
+    assert all(math.isinf(r) for r, m in zip(mine.ranges, scan.ranges) if m >= range_max - 5e-4)
+
+
+@settings(max_examples=60, deadline=None)
+@given(floats, floats, st.floats(-math.pi, math.pi), floats, floats, floats, stamps)
+def test_a_pose_built_in_place_is_the_exports_odometry_or_pose(x, y, yaw, vx, vy, wz, ns):
+    from geometry_msgs.msg import PoseStamped
+    from nav_msgs.msg import Odometry
+
+    pose = Pose(np.array([x, y, 0.0]), quaternion_from_yaw(yaw), np.array([vx, vy, 0.0]), np.array([0.0, 0.0, wz]),
+                header=Header(stamp=1.0))
+    assert direct.odometry(Odometry(), "base1", pose, ns) == exported("rf/w/robot/base1/pose", pose, ns, kind="mobile")
+    assert direct.pose_stamped(PoseStamped(), pose, ns) == exported("rf/w/robot/arm1/pose", pose, ns, kind="arm")

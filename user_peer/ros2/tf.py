@@ -1,0 +1,88 @@
+"""/tf and /tf_static from the bridge: the frame tree of ``export --to ros2``, where ``tf2_msgs`` is importable.
+
+The frames are :class:`user_peer.openfmt.frames.FrameTracker`'s, the export's: ``world`` the root, a base
+``ROBOT`` from its pose (with ``ROBOT/lidar`` and ``ROBOT/sonar`` on it), an arm's base bolted to ``world``, its
+joints ``ROBOT/JOINT`` by forward kinematics from its JointState, its flange ``ROBOT/flange``; each frame's stamps
+never go back. Every transform goes on ``/tf`` as the export writes it; the sensor mounts, which never move,
+also go once on ``/tf_static`` (transient local), so a node that starts later has them at once.
+
+``tf2_msgs`` is not among ROS 2 Kilted's wheels on PyPI (a ROS 2 install from apt has it): without it, nothing
+is published here and ``available`` is False (the bridge says so once at start).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+from geometry_msgs.msg import TransformStamped
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from fabric.interfaces import WorldInfo
+from user_peer.catalog import RobotCatalog
+from user_peer.openfmt.frames import Frame, FrameTracker
+from user_peer.ros2.direct import stamp
+
+__all__ = ["TfOut", "tf_message_class", "transform", "TF_QOS", "TF_STATIC_QOS"]
+
+TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+TF_STATIC_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""tf2's own QoS: /tf reliable and deep, /tf_static latched for late joiners."""
+
+_MOUNTS = ("/lidar", "/sonar")
+
+
+def tf_message_class() -> type | None:
+    """``tf2_msgs.msg.TFMessage`` where a ROS 2 install provides it, else None."""
+    try:
+        from tf2_msgs.msg import TFMessage
+    except ImportError:
+        return None
+    return TFMessage
+
+
+def transform(f: Frame, ns: int) -> TransformStamped:
+    """One frame as a ``geometry_msgs/TransformStamped``: ``f.child`` in ``f.parent``, stamped ``ns``."""
+    t = TransformStamped()
+    stamp(t.header, ns, f.parent)
+    t.child_frame_id = f.child
+    tr, rot = t.transform.translation, t.transform.rotation
+    tr.x, tr.y, tr.z = (float(v) for v in f.translation)
+    rot.x, rot.y, rot.z, rot.w = (float(v) for v in f.rotation)
+    return t
+
+
+class TfOut:
+    """Publishes the frames robot state gives; ``publisher(topic, qos)`` makes the publishers (the node's by
+    default; the test of the path without tf2_msgs gives its own)."""
+
+    def __init__(self, node: Any, catalog: RobotCatalog, *, namespace: str = "", message: type | None = None,
+                 publisher: Callable[[str, QoSProfile], Any] | None = None) -> None:
+        self.message = message if message is not None else tf_message_class()
+        self.available = self.message is not None
+        self.frames = FrameTracker(catalog)
+        self._static: dict[str, Frame] = {}  # child -> the mount last sent on /tf_static
+        self.sent = 0
+        ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
+        self.topics = (f"{ns}/tf", f"{ns}/tf_static")
+        self._pub = self._static_pub = None
+        if self.available:
+            make = publisher or (lambda topic, qos: node.create_publisher(self.message, topic, qos))
+            self._pub, self._static_pub = make(self.topics[0], TF_QOS), make(self.topics[1], TF_STATIC_QOS)
+
+    def describe(self, info: WorldInfo) -> None:
+        """The world's description: where arms stand, what each robot is."""
+        self.frames.catalog.world_info = info
+
+    def on_state(self, key: str, msg: Any, ns: int) -> None:
+        """A robot's state: its frames, stamped ``ns`` (robot state comes one message at a time per key)."""
+        if not self.available:
+            return
+        frames = self.frames.frames(key, msg, ns)
+        if not frames:
+            return
+        self._pub.publish(self.message(transforms=[transform(f, ns) for f in frames]))
+        self.sent += 1
+        mounts = [f for f in frames if f.child.endswith(_MOUNTS) and self._static.get(f.child) != f]
+        if mounts:
+            self._static.update((f.child, f) for f in mounts)
+            self._static_pub.publish(self.message(transforms=[transform(f, ns) for f in self._static.values()]))
