@@ -44,7 +44,7 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
-from .ik_common import _deg, rotation_error
+from .ik_common import degrees_text, rotation_error
 from .model import ArmModel, NoIKSolution
 
 POSITION_TOL = 1e-6
@@ -246,7 +246,7 @@ class CasadiIK:
                 best = (score, q1, pe, re, status)
         assert best is not None
         _, q, pe, re, status = best
-        at = [f"J{i + 1} at its {'lower' if q[i] <= self.lower[i] + 1e-6 else 'upper'} limit {_deg(q[i])}"
+        at = [f"J{i + 1} at its {'lower' if q[i] <= self.lower[i] + 1e-6 else 'upper'} limit {degrees_text(q[i])}"
               for i in range(self.nq) if q[i] <= self.lower[i] + 1e-6 or q[i] >= self.upper[i] - 1e-6]
         what = f"{pe:.3g} m" + ("" if rt is None else f", {re:.3g} rad")
         raise NoIKSolution(f"casadi IK found no solution within limits from {tries} starts (IPOPT {status}); "

@@ -25,11 +25,11 @@ from .ik_common import (
     POSITION_CHECK,
     ROTATION_CHECK,
     TWO_PI,
-    _constants,
-    _default_seed,
-    _deg,
-    _pose_errors,
+    arm_constants,
+    default_seed,
+    degrees_text,
     joint_distance,
+    pose_errors,
     quaternion_to_matrix,
 )
 from .model import ArmModel, NoIKSolution
@@ -299,7 +299,7 @@ def _twin_combinations(q: list[float], twins: list[tuple[int, float]]) -> list[l
 def _limit_reason(arm: ArmModel, n: int, bad: list[tuple[int, float]]) -> str:
     names = []
     for i, v in bad:
-        s = (f"J{i + 1} at {_deg(wrap_angle(v, include_pi=True))} (limits {math.degrees(arm.lower[i]):.0f}.."
+        s = (f"J{i + 1} at {degrees_text(wrap_angle(v, include_pi=True))} (limits {math.degrees(arm.lower[i]):.0f}.."
              f"{math.degrees(arm.upper[i]):.0f}\N{DEGREE SIGN})")
         if s not in names:
             names.append(s)
@@ -308,7 +308,7 @@ def _limit_reason(arm: ArmModel, n: int, bad: list[tuple[int, float]]) -> str:
 
 def _meca500_candidates(arm: ArmModel, p: Sequence[float], rot: Sequence[Sequence[float]],
                         seed: Sequence[float]) -> tuple[list[_Candidate], str]:
-    inside, bad, n, reason = _meca500_branches(p, rot, seed, _constants(arm).limits)
+    inside, bad, n, reason = _meca500_branches(p, rot, seed, arm_constants(arm).limits)
     if reason:
         return [], reason
     if not inside:
@@ -316,7 +316,7 @@ def _meca500_candidates(arm: ArmModel, p: Sequence[float], rot: Sequence[Sequenc
     out: list[_Candidate] = []
     dropped = 0
     for q in inside:
-        pe, re = _pose_errors(arm, q, p, rot)
+        pe, re = pose_errors(arm, q, p, rot)
         if pe > POSITION_CHECK or re > ROTATION_CHECK:
             dropped += 1
             continue
@@ -339,7 +339,7 @@ def meca500_ik(arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequ
         raise ValueError(f"meca500_ik: arm is a {arm.description.name!r}, not a {_geo.NAME!r}")
     p = [float(v) for v in position]
     rot = np.asarray(rotation, float).tolist()
-    s = _default_seed(arm) if seed is None else [float(v) for v in seed]
+    s = default_seed(arm) if seed is None else [float(v) for v in seed]
     cands, reason = _meca500_candidates(arm, p, rot, s)
     if not cands:
         raise NoIKSolution(reason)

@@ -36,11 +36,11 @@ from .ik_common import (
     ROTATION_CHECK,
     TWO_PI,
     IKSolution,
-    _constants,
-    _default_seed,
-    _pose_errors,
+    arm_constants,
+    default_seed,
     joint_distance,
     nearest,
+    pose_errors,
     quaternion_to_matrix,
 )
 from .model import ArmModel, NoIKSolution
@@ -109,7 +109,7 @@ def _keep_roll(arm: ArmModel, q: tuple[float, ...], joint: int | None, seed: lis
     if joint is not None:
         v = min(arm.upper[joint], max(arm.lower[joint], seed[joint]))
         q = q[:joint] + (float(v),) + q[joint + 1:]
-    pe, _ = _pose_errors(arm, q, p, None)
+    pe, _ = pose_errors(arm, q, p, None)
     return (q, pe) if pe <= POSITION_CHECK else None
 
 
@@ -164,9 +164,9 @@ def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] 
             raise ValueError(f"quaternion: norm {n:.3g} is too small to normalize")
         rot = quaternion_to_matrix(*(x / n for x in qv))
     if seed is None:
-        s = _default_seed(arm)
+        s = default_seed(arm)
     else:  # a seed is a hint (often a measured state a hair past a limit): clamp it, don't refuse it
-        s = [min(hi, max(lo, v)) for v, (lo, hi, _) in zip(_vector("seed", seed, nq), _constants(arm).limits)]
+        s = [min(hi, max(lo, v)) for v, (lo, hi, _) in zip(_vector("seed", seed, nq), arm_constants(arm).limits)]
     _refuse_base_column(arm, p)
     closed = CLOSED_FORMS.get(arm.description.name)
     if method == "closed_form" and closed is None:

@@ -47,22 +47,22 @@ def quaternion_to_matrix(w: float, x: float, y: float, z: float) -> tuple[tuple[
 
 
 @dataclass(frozen=True, slots=True)
-class _ArmConstants:
+class ArmConstants:
     """Per-arm lists read once: plain floats, because the closed form's budget is ~100 us."""
 
     limits: tuple[tuple[float, float, bool], ...]  # lower, upper, spans a full turn (2 pi twins possible)
     weights: tuple[float, ...]
 
 
-_CONSTANTS: weakref.WeakKeyDictionary[ArmModel, _ArmConstants] = weakref.WeakKeyDictionary()
+_CONSTANTS: weakref.WeakKeyDictionary[ArmModel, ArmConstants] = weakref.WeakKeyDictionary()
 
 
-def _constants(arm: ArmModel) -> _ArmConstants:
+def arm_constants(arm: ArmModel) -> ArmConstants:
     c = _CONSTANTS.get(arm)
     if c is None:
         lo, hi = arm.lower.tolist(), arm.upper.tolist()
         limits = tuple((a, b, b - a >= TWO_PI - 2 * LIMIT_SLACK) for a, b in zip(lo, hi))
-        c = _CONSTANTS[arm] = _ArmConstants(limits, tuple(_weights(arm)))
+        c = _CONSTANTS[arm] = ArmConstants(limits, tuple(_weights(arm)))
     return c
 
 
@@ -80,10 +80,10 @@ def _weights(arm: ArmModel) -> list[float]:
 
 def joint_distance(arm: ArmModel, q: Sequence[float], seed: Sequence[float]) -> float:
     """Weighted squared joint distance (s^2 at full speed); no 2 pi wrapping: joints with limits travel."""
-    return sum((w * (a - b)) ** 2 for w, a, b in zip(_constants(arm).weights, q, seed))
+    return sum((w * (a - b)) ** 2 for w, a, b in zip(arm_constants(arm).weights, q, seed))
 
 
-def _pose_errors(arm: ArmModel, q: Sequence[float], p: Sequence[float],
+def pose_errors(arm: ArmModel, q: Sequence[float], p: Sequence[float],
                  rot: Sequence[Sequence[float]] | None) -> tuple[float, float]:
     """FK of ``q`` through the arm's Pinocchio model (what :meth:`ArmModel.fk` does, minus the copy)."""
     pin.framesForwardKinematics(arm.model, arm.data, np.array(q, dtype=float))
@@ -113,7 +113,7 @@ def rotation_error(a: np.ndarray, b: np.ndarray) -> float:
     return angle_from_frobenius(float(np.linalg.norm(np.asarray(a) - np.asarray(b))))
 
 
-def _deg(a: float) -> str:
+def degrees_text(a: float) -> str:
     """An angle (rad) as degrees for a refusal's reason, e.g. ``"12.3°"``."""
     return f"{math.degrees(a):.1f}\N{DEGREE SIGN}"
 
@@ -122,12 +122,12 @@ def nearest(arm: ArmModel, solutions: Sequence[Sequence[float]], seed: Sequence[
     """Index of the solution nearest ``seed`` in weighted joint distance."""
     if not solutions:
         raise ValueError("no solutions to choose from")
-    w = _constants(arm).weights
+    w = arm_constants(arm).weights
     ws = [wi * b for wi, b in zip(w, seed)]
     d = [math.dist([wi * a for wi, a in zip(w, q)], ws) for q in solutions]
     return d.index(min(d))
 
 
-def _default_seed(arm: ArmModel) -> list[float]:
+def default_seed(arm: ArmModel) -> list[float]:
     """The zero pose clamped into the limits: what a seedless request is nearest to."""
     return np.clip(np.zeros(arm.model.nq), arm.lower, arm.upper).tolist()

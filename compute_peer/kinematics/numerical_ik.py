@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 import pinocchio as pin
 
-from .ik_common import _default_seed, _deg
+from .ik_common import default_seed, degrees_text
 from .model import ArmModel, NoIKSolution
 
 
@@ -30,7 +30,7 @@ def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence
     target = np.asarray(position, float)
     rt = None if rotation is None else np.asarray(rotation, float)
     rows = 3 if rt is None else 6
-    q0 = _default_seed(arm) if seed is None else seed
+    q0 = default_seed(arm) if seed is None else seed
     rng = np.random.default_rng(rng_seed)
     starts = [np.clip(np.asarray(q0, float), lo, hi)]
     starts += [rng.uniform(lo, hi) for _ in range(restarts)]
@@ -90,7 +90,7 @@ def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence
             best = (cost, q, pe, re)
     assert best is not None
     _, q, pe, re = best
-    at = [f"J{i + 1} at its {'lower' if q[i] <= lo[i] + 1e-9 else 'upper'} limit {_deg(q[i])}"
+    at = [f"J{i + 1} at its {'lower' if q[i] <= lo[i] + 1e-9 else 'upper'} limit {degrees_text(q[i])}"
           for i in range(len(q)) if q[i] <= lo[i] + 1e-9 or q[i] >= hi[i] - 1e-9]
     what = f"{pe:.3g} m" + ("" if rt is None else f", {re:.3g} rad")
     raise NoIKSolution(f"numerical IK did not converge from {len(starts)} starts: best residual {what}"

@@ -97,7 +97,7 @@ class KinematicsService:
         self._clock = clock or MonotonicClock()
         self._models: dict[str, ArmModel] = {}
         self._arms: dict[str, PlacedArm] = {}
-        self._joints: dict[str, JointState] = {}
+        self.joints: dict[str, JointState] = {}  # the latest joint state of each arm, the seed of its IK
         self._targets: dict[str, Pose] = {}
         self._solved: dict[tuple[str, str], tuple[float, ...]] = {}
         self.streams = [(keys.validate_id(r, what="robot id"), keys.validate_id(o, what="object id")) for r, o in streams]
@@ -279,7 +279,7 @@ class KinematicsService:
         if seed.shape[0] > 0:
             return seed
         with self._lock:
-            js = self._joints.get(robot)
+            js = self.joints.get(robot)
         return None if js is None else np.asarray(js.q, float)
 
     def ik(self, robot: str, req: IKRequest) -> IKReply:
@@ -332,7 +332,7 @@ class KinematicsService:
         robot = self._robot_of(key)
         with self._lock:
             if robot in self._arms:
-                self._joints[robot] = msg
+                self.joints[robot] = msg
                 return
         self.counters["unknown_robot"] = self.counters.get("unknown_robot", 0) + 1
         if self._discover:
@@ -348,7 +348,7 @@ class KinematicsService:
             with self._lock:
                 target = self._targets.get(obj)
                 arm = self._arms.get(robot)
-                js = self._joints.get(robot)
+                js = self.joints.get(robot)
             if target is None:
                 continue
             if arm is None:

@@ -93,6 +93,11 @@ class MapStore:
             raise MapLimit(f"the users hold {len(self._owners)} maps, the most this compute peer keeps: "
                            f"build one of yours again, or ask an instructor")
 
+    def costmaps_cached(self) -> int:
+        """How many inflated maps are cached (at most ``COSTMAP_CACHE``)."""
+        with self._lock:
+            return len(self._costmaps)
+
     def _drop_costmaps(self, name: str) -> None:
         self._costmaps = {k: v for k, v in self._costmaps.items() if k[0] != name}
 

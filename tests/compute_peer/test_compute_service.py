@@ -127,7 +127,7 @@ def test_ik_streaming_follows_the_target(served, world):
     user.subscribe(keys.event_all(world), lambda k, m: events.append(m), expected=Event)
     q_now = np.array([0.1, 0.1, -0.2, 0.0, 0.3, 0.0])
     user.publish(keys.robot_joints(world, "arm1"), JointState(tuple(f"joint_{i}" for i in range(1, 7)), q_now, np.zeros(6)))
-    wait_until(lambda: "arm1" in svc._joints, what="joints seen by the service")
+    wait_until(lambda: "arm1" in svc.joints, what="joints seen by the service")
     goal = user.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q)).position
     user.publish(keys.object_pose(world, "target", "alice"), Pose(goal))
     wait_until(lambda: any(np.allclose(m.position, goal) for m in got), what="a streamed solution", seen=lambda: got)

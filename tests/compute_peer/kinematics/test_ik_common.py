@@ -26,7 +26,7 @@ def test_the_rotation_error_is_the_angle_between_two_rotations(angle, axis):
 
 def test_the_solvers_share_the_helpers():
     assert casadi_ik.rotation_error is ik_common.rotation_error
-    assert casadi_ik._deg is ik_common._deg and numerical_ik._deg is ik_common._deg
+    assert casadi_ik.degrees_text is ik_common.degrees_text and numerical_ik.degrees_text is ik_common.degrees_text
     assert closed_form_ik.wrap_angle is wrap_angle
     assert not hasattr(casadi_ik, "_rotation_error")
-    assert ik_common._deg(math.pi / 2) == "90.0\N{DEGREE SIGN}"
+    assert ik_common.degrees_text(math.pi / 2) == "90.0\N{DEGREE SIGN}"

@@ -92,7 +92,7 @@ def test_map_store_versions_invalidate_costmaps_and_the_cache_is_bounded():
     assert second is not first and second.collision.any()
     for k in range(COSTMAP_CACHE + 3):
         store.costmap("m", 0.1 + 0.01 * k, threshold=50, unknown_is_occupied=True)
-    assert len(store._costmaps) <= COSTMAP_CACHE
+    assert store.costmaps_cached() == COSTMAP_CACHE
     store.put("dark", make_grid(np.full((10, 10), UNKNOWN, np.uint8), 0.1))
     with pytest.raises(NavigationError, match="is empty"):
         store.costmap("dark", 0.2, threshold=50, unknown_is_occupied=True)
