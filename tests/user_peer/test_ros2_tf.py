@@ -1,0 +1,94 @@
+"""The bridge's /tf is the export's frame tree: for the same robot state, the transforms it publishes equal the
+``/tf`` of ``export --to ros2`` (decoded by mcap-ros2-support), stamped with the sim's time; the sensor mounts
+go once more on /tf_static. ``tf2_msgs`` is not among ROS 2 Kilted's wheels, so here the message class and the
+publishers are stand-ins for what a ROS 2 install provides; the bridge publishes /tf only where it is
+importable, and says whether it is."""
+
+from __future__ import annotations
+
+import importlib.util
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+pytest.importorskip("rclpy", reason="the ros2 extra (ROS 2 Kilted's wheels) is not installed")
+
+import robots  # noqa: E402
+from fabric.interfaces import Header, JointState, Pose  # noqa: E402
+from fabric.interfaces.geometry import quaternion_from_yaw  # noqa: E402
+from user_peer.catalog import RobotCatalog  # noqa: E402
+from user_peer.openfmt.ros2 import Ros2Writer  # noqa: E402
+from user_peer.ros2.tf import TfOut, tf_message_class  # noqa: E402
+
+T0 = 1_760_000_000_000_000_000
+
+
+@dataclass
+class TFMessage:
+    """tf2_msgs/TFMessage's one field (the package is not installable here: no machine of ours has it)."""
+
+    transforms: list = field(default_factory=list)
+
+
+class Sent:
+    """What a publisher was given."""
+
+    def __init__(self) -> None:
+        self.msgs: list = []
+
+    def publish(self, msg) -> None:
+        self.msgs.append(msg)
+
+
+def state() -> list[tuple[str, object]]:
+    names = robots.load("meca500").joint_names
+    out: list[tuple[str, object]] = []
+    for i in range(1, 6):
+        h = Header(0.05 * i, T0 + i, i, "sim-1")
+        out.append(("rf/w/robot/base1/pose", Pose(np.array([0.1 * i, 0.2, 0.0]), quaternion_from_yaw(0.3 * i), header=h)))
+        out.append(("rf/w/robot/arm1/joints", JointState(names, np.full(6, 0.1 * i), np.zeros(6), h)))
+    return out
+
+
+def row(parent: str, child: str, ns: int, tr, rot) -> tuple:
+    return (parent, child, ns, tuple(round(v, 9) for v in tr), tuple(round(v, 9) for v in rot))
+
+
+def test_the_bridges_tf_is_the_exports_frame_tree_stamped_with_sim_time(tmp_path):
+    sent: dict[str, Sent] = {}
+    tf = TfOut(None, RobotCatalog(None, scene="combined"), message=TFMessage,
+               publisher=lambda topic, qos: sent.setdefault(topic, Sent()))
+    with Ros2Writer(tmp_path / "e.mcap", scene="combined") as w:
+        for key, msg in state():
+            ns = int(round(msg.header.stamp * 1e9))
+            tf.on_state(key, msg, ns)
+            w.write(key, msg, T0)
+    live = [row(t.header.frame_id, t.child_frame_id, t.header.stamp.sec * 10**9 + t.header.stamp.nanosec,
+                (t.transform.translation.x, t.transform.translation.y, t.transform.translation.z),
+                (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z, t.transform.rotation.w))
+            for m in sent["/tf"].msgs for t in m.transforms]
+    exported = []
+    with open(tmp_path / "e.mcap", "rb") as f:
+        for _s, _c, _m, m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=["/tf"]):
+            exported += [row(t.header.frame_id, t.child_frame_id, t.header.stamp.sec * 10**9 + t.header.stamp.nanosec,
+                             (t.transform.translation.x, t.transform.translation.y, t.transform.translation.z),
+                             (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z, t.transform.rotation.w))
+                         for t in m.transforms]
+    assert live == exported and len(live) > 10
+    children = {r[1] for r in live}
+    assert {"base1", "base1/lidar", "base1/sonar", "arm1", "arm1/joint_6"} <= children, children
+    assert {r[2] for r in live} == {int(round(0.05 * i * 1e9)) for i in range(1, 6)}  # the sim's time
+    static = [t.child_frame_id for m in sent["/tf_static"].msgs for t in m.transforms]
+    assert sorted(static) == ["base1/lidar", "base1/sonar"]  # the mounts, once (they never move)
+    assert tf.sent == len(sent["/tf"].msgs)
+
+
+def test_tf_is_published_only_where_tf2_msgs_is_importable():
+    tf = TfOut(None, RobotCatalog(None))
+    assert tf.available == (importlib.util.find_spec("tf2_msgs") is not None) == (tf_message_class() is not None)
+    if not tf.available:  # nothing to publish on: robot state goes by without error
+        tf.on_state("rf/w/robot/base1/pose", Pose(np.zeros(3), header=Header(1.0)), 10**9)
+        assert tf.sent == 0
