@@ -13,6 +13,7 @@ from fabric.cli_common import (
 )
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
+    from fabric.interfaces import OwnershipRecord
     from fabric.session import Fabric
     from ownership.client import OwnershipClient
 
@@ -44,7 +45,8 @@ def _shown(text: str) -> str:
     return "".join(ch if ch.isprintable() else ascii(ch)[1:-1] for ch in text)
 
 
-def _line(rec) -> str:
+def record_line(rec: OwnershipRecord) -> str:
+    """One record as a line of ``own list``/``watch``: names from the network escaped, never run as terminal codes."""
     obj = _shown(rec.object)
     if rec.policy == "scene":
         return f"{obj:16} scene      anyone writes"
@@ -110,7 +112,7 @@ def _hold(cl: OwnershipClient, obj: str, stop, duration: float | None) -> None:
 
     Prints each change of the object's record, so a queued user sees the moment it is granted."""
     from fabric.interfaces import ServiceError
-    cl.on_change(lambda rec: say(_line(rec), stop=stop) if rec.object == obj else None)
+    cl.on_change(lambda rec: say(record_line(rec), stop=stop) if rec.object == obj else None)
     say(f"holding {obj} as {cl.user} (Ctrl-C releases it)", stop=stop)
     stop.wait(duration)
     try:
@@ -159,8 +161,8 @@ def watch_cmd(world: World = None, connect: Connect = None, profile: Profile = N
     fab, cl = _client(world, connect, profile, zenoh_config, user)
     with fab:
         records = cl.snapshot()
-        say(*(_line(records[obj]) for obj in sorted(records)), stop=stop)
-        cl.on_change(lambda rec: say(_line(rec), stop=stop))  # a closed pipe ends the watch (exit 0)
+        say(*(record_line(records[obj]) for obj in sorted(records)), stop=stop)
+        cl.on_change(lambda rec: say(record_line(rec), stop=stop))  # a closed pipe ends the watch (exit 0)
         stop.wait(duration)
         cl.close()
         skipped = _skipped(fab, cl)

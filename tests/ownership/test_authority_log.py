@@ -1,4 +1,4 @@
-"""Every expiry is logged by the authority with its reason (issue 21): an owner who stops renewing while
+"""Every expiry is logged by the authority with its reason: an owner who stops renewing while
 another owner's renewals keep arriving loses her robot, and the sim's log says whose lease, and how long
 it went without a renewal."""
 

@@ -88,5 +88,5 @@ def test_list_without_records_says_no_authority_answered(monkeypatch):
 
 def test_names_from_the_network_reach_the_terminal_escaped():
     rec = OwnershipRecord("arm\x1b[2J", owner="ann\x07", epoch=1, queue=("b\x1b]0;x\x07",))
-    line = cli._line(rec)
+    line = cli.record_line(rec)
     assert "\x1b" not in line and "\x07" not in line and "arm\\x1b[2J" in line and "ann\\x07" in line

@@ -1,4 +1,4 @@
-"""A robot moves only while a live owner drives it (issue 31), end to end with real sim processes.
+"""A robot moves only while a live owner drives it, end to end with real sim processes.
 
 Times are the sim's own (pose and event headers carry sim time), so a loaded machine slows the test but
 does not change what it measures. Bases turn in place (no bumper in the way); the reeman base brakes at
