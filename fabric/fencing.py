@@ -1,7 +1,7 @@
-"""Fencing by authority epoch: which state a consumer may believe.
+"""Fencing by term: which state a consumer may believe.
 
 A world's authority (the sim peer that owns the robots and the ownership records) stamps its
-authority epoch, the *term*, on every message it writes (:attr:`fabric.interfaces.Header.term`).
+term on every message it writes (:attr:`fabric.interfaces.Header.term`).
 A standby that takes the world over raises the term; a primary that comes back from a freeze still
 stamps the old one until it notices and steps down. Consumers keep the highest term they have seen
 per world and ignore authority state stamped with a lower one, so for them there is never more than
@@ -117,7 +117,7 @@ class FenceVerdict:
 
 
 class Fence:
-    """The highest authority epoch seen; thread-safe. ``check(term)`` says whether to believe a message."""
+    """The highest term seen; thread-safe. ``check(term)`` says whether to believe a message."""
 
     def __init__(self, term: int = 0) -> None:
         self._term = int(term)

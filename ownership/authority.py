@@ -22,7 +22,7 @@ from fabric.limits import MAX_USER_LEN, is_valid_user, quote
 from fabric.rate import Clock, MonotonicClock
 from fabric.session import Fabric, undeclare_all
 
-from ownership import replica
+from ownership import snapshot
 from ownership import state as st
 
 log = logging.getLogger("robofabric.ownership")
@@ -56,7 +56,7 @@ class Authority:
         if restored is None:
             self._state = st.initial(objects, lease_s=lease_s, grace_s=grace_s, authority=fabric.peer_id)
         else:
-            self._state = replica.restore(restored[0], restored[1], self.clock.now(), lease_s=lease_s, grace_s=grace_s,
+            self._state = snapshot.restore(restored[0], restored[1], self.clock.now(), lease_s=lease_s, grace_s=grace_s,
                                           authority=fabric.peer_id)
             missing = {o: p for o, p in objects.items() if o not in self._state.records}
             if missing:
@@ -111,9 +111,9 @@ class Authority:
             return dict(self._state.records)
 
     def export_state(self) -> tuple[tuple[OwnershipRecord, ...], dict[str, Any]]:
-        """The whole ownership state for a standby, times relative to now (:func:`ownership.replica.export`)."""
+        """The whole ownership state for a standby, times relative to now (:func:`ownership.snapshot.export`)."""
         with self._lock:
-            return replica.export(self._state, self.clock.now())
+            return snapshot.export(self._state, self.clock.now())
 
     def _forget_absent_users(self) -> None:
         """After a take-over: users the old authority counted live whose token has not shown up here

@@ -100,7 +100,7 @@ class OwnershipClient:
         self._renewing: set[str] = set()  # renewals sent and not answered yet
         self._held: set[str] = set()  # granted to us by the authority's replies; renewed until it says otherwise
         self._sims: set[str] = set()
-        # per object: the sim that is its authority and the authority epoch heard from it (several sims may
+        # per object: the sim that is its authority and the term heard from it (several sims may
         # serve one world, each the authority of its own robots with terms of its own: docs/sim.md)
         self._authority_of: dict[str, str] = {}
         self._term_of: dict[str, int] = {}
@@ -196,7 +196,7 @@ class OwnershipClient:
             return "foreign"  # not a live sim peer: not an authority at all
         term = rec.header.term
         if not self.fabric.sim_fence.believe(term, rec.authority, (rec.object,)):
-            return "stale"  # a lower authority epoch: a primary that lost the world and has not noticed yet
+            return "stale"  # a lower term: a primary that lost the world and has not noticed yet
         if term < self._replaced.get(rec.authority, 0):
             return "stale"  # a primary whose shard a standby took over (a record of another of its objects)
         authority = self._authority_of.get(rec.object)

@@ -6,7 +6,7 @@ same code runs in the peer and in hypothesis property tests.
 
 Rules:
 
-- The authority epoch (``term``) only grows. A primary stamps its term on everything it writes.
+- The term only grows. A primary stamps its term on everything it writes.
 - A standby follows the source of the highest term it has heard (``Heard``).
 - When the primary's liveliness token is not among the live ones (``Peers``: a complete view, the
   caller's job; a liveliness history still arriving is not one), the standby with the lowest id

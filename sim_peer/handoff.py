@@ -73,7 +73,7 @@ class NoAnswer(MoveError):
 class Handoff:
     """What a sim hands out with a robot: its controller state, its placement (type, id, spawn pose, where the
     target builds it, so a ``reset`` still sends it home), its ownership record (None without ownership), the users that record names (join ranks,
-    liveness, as :func:`ownership.replica.export` writes them), its streams' next sequence numbers, and the term
+    liveness, as :func:`ownership.snapshot.export` writes them), its streams' next sequence numbers, and the term
     both sims serve under after the move."""
 
     state: RobotState

@@ -14,7 +14,7 @@
 The roles:
 
 - **primary**: a :class:`~sim_peer.peer.SimPeer` with its ownership gate, every message stamped with
-  the authority epoch (``fabric.term``), and the whole world state served on ``rf/{world}/srv/state``
+  the term (``fabric.stamp.term``), and the whole world state served on ``rf/{world}/srv/state``
   (:class:`~fabric.interfaces.WorldState`). It listens to the joints streams: a higher term from
   another sim makes it step down. A publication gap longer than half the transport lease means it
   may have been frozen: it muzzles itself (publishes and answers nothing), asks ``srv/state`` who is authority now,

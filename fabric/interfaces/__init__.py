@@ -35,7 +35,7 @@ from fabric.interfaces.std import (
     Pose,
     Scan,
 )
-from fabric.interfaces.commands import COMMAND_BODIES, Command, CommandBody, JointTarget, Reset, Stop, Twist
+from fabric.interfaces.robot_commands import COMMAND_BODIES, Command, CommandBody, JointTarget, Reset, Stop, Twist
 from fabric.interfaces.ownership import MAX_QUEUE, OwnershipRecord, OwnReply, OwnRequest
 from fabric.interfaces.events import REJECT_KINDS, Event, EventKind
 from fabric.interfaces.sensors import BaseInfo, LidarInfo, SonarInfo

@@ -35,7 +35,7 @@ MAX_GRID_CELLS = 1 << 21
 @dataclass(frozen=True, slots=True)
 class Header:
     """Stamps every message: sim time (s), wall time (ns), per-stream sequence, source peer id, and
-    ``term``: the authority epoch of the sim that wrote it (0 = no authority, e.g. a user).
+    ``term``: the term of the sim authority that wrote it (0 = no authority, e.g. a user).
 
     ``term`` is the fencing token of replicated authority: a standby that takes a world over raises
     it, and consumers ignore robot state and ownership records with a lower one

@@ -180,7 +180,7 @@ class WorldState:
     """Everything a standby needs to carry a world on: sim time, robots, objects, ownership, sequences.
 
     ``records`` carry ``lease_expiry`` as seconds *remaining* and ``users`` the ownership users' state
-    (:func:`ownership.replica.export`); ``seqs`` the primary's next sequence number per key."""
+    (:func:`ownership.snapshot.export`); ``seqs`` the primary's next sequence number per key."""
 
     time: float
     steps: int

@@ -42,7 +42,7 @@ SCHEMA_ENCODING = "robofabric-msgpack"
 @dataclass(frozen=True, slots=True)
 class Peek:
     """What a payload says about itself: its type name, and its header's wall time, sequence,
-    authority epoch and source peer if any."""
+    term and source peer if any."""
 
     schema: str
     wall_ns: int | None = None
@@ -65,7 +65,7 @@ def peek(payload: bytes) -> Peek:
     head = msg[-1]
     if (
         isinstance(head, list)
-        and len(head) >= 5  # 6: with the authority epoch (Header.term); later versions may add trailing fields
+        and len(head) >= 5  # 6: with the term (Header.term); later versions may add trailing fields
         and head[0] == "Header"
         and isinstance(head[2], int)
         and isinstance(head[3], int)

@@ -124,7 +124,7 @@ class Recorder:
     ``liveliness=True`` the appearance and loss of peers' liveliness tokens under the same key
     expressions is recorded too (schema ``liveliness``; replay skips those by default).
 
-    Authority state of a lower authority epoch than one already recorded is left out; the
+    Authority state of a lower term than one already recorded is left out; the
     recorder follows the recorded worlds' sim tokens so that, like a session's, a world's fence resets
     when its last sim goes and a world restarted from scratch is recorded again.
     """

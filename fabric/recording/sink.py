@@ -10,7 +10,7 @@ missing footer tells :func:`fabric.recording.reader.read_info` the file is
 unfinished.
 
 Fenced like a session (:mod:`fabric.fencing`): per world, authority state of a lower
-authority epoch than one already written is left out. The recorder tells the sink when a world's
+term than one already written is left out. The recorder tells the sink when a world's
 sim peers come and go (:meth:`McapSink.sim_seen`, :meth:`McapSink.sim_left`): when the last one
 goes the world's fence resets, so a world restarted from scratch at term 1 after a take-over is
 recorded again, and late samples of a departed sim cannot fence the new one out.
@@ -30,7 +30,7 @@ from fabric.fencing import SimFence, fenced_scopes
 from fabric.recording.format import MESSAGE_ENCODING, METADATA_NAME, PROFILE, peek, schema_data
 
 STALE = "stale"
-"""What :meth:`McapSink.write` returns for a sample it left out: authority state of a lower authority epoch."""
+"""What :meth:`McapSink.write` returns for a sample it left out: authority state of a lower term."""
 
 __all__ = ["McapSink", "COMPRESSIONS", "STALE"]
 
@@ -95,7 +95,7 @@ class McapSink:
 
     def write(self, key: str, payload: bytes, log_time_ns: int) -> str:
         """Write one sample; publish time and sequence come from its header when it has one. Returns the schema name,
-        or ``stale`` for authority state of a lower authority epoch than one already written in its world, or
+        or ``stale`` for authority state of a lower term than one already written in its world, or
         stamped by a sim that has left (not written)."""
         p = peek(payload)
         if (p.term or self.fences) and not self._believe(key, p.term, p.source):

@@ -1,4 +1,4 @@
-"""The authority epoch on the wire (Header.term, an optional trailing field) and the consumers' fence."""
+"""The term on the wire (Header.term, an optional trailing field) and the consumers' fence."""
 
 from __future__ import annotations
 

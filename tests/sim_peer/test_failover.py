@@ -1,7 +1,7 @@
 """Replicated authority over real processes (issue 16): a primary sim, a standby, users.
 
 SIGKILL the primary while alice's arm moves and bob's base follows a path: the standby takes over
-with a higher authority epoch, from the last state (no reset), owners keep their robots and epochs,
+with a higher term, from the last state (no reset), owners keep their robots and epochs,
 streams resume, the motions go on. The paper's Test A and Test B themselves, run through the user API
 with a compute peer, survive two such kills with two standbys (the lowest id takes over each time).
 SIGSTOP the primary past the lease, SIGCONT it: it steps down.
@@ -216,7 +216,7 @@ def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, 
     n = len(tape.of("arm1", "joints", 2))
     wait_until(lambda: len(tape.of("arm1", "joints", 2)) > n + 50, timeout=20, what="term-2 joints go on")
     assert alice.owns("arm1") and alice.epoch("arm1") == ea and alice.record("arm1").authority == "sim-b"
-    # exactly one authority epoch publishing at any instant: once term 2 spoke, nothing was published
+    # exactly one term publishing at any instant: once term 2 spoke, nothing was published
     # with term 1 (by the publication instant each header carries: samples the frozen process had
     # queued before SIGSTOP may still reach the wire on SIGCONT, with their old stamps, and every
     # consumer's fence drops them)

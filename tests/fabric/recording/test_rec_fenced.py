@@ -1,4 +1,4 @@
-"""Recordings and the authority epoch (issue 16): publish time and sequence are read from headers that
+"""Recordings and the term (issue 16): publish time and sequence are read from headers that
 carry a term, and authority state of a lower term than one already written is left out and counted."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Ownership state carried from one authority to another (ownership.replica): property tests.
+"""Ownership state carried from one authority to another (ownership.snapshot): property tests.
 
 After any history, export on the old authority's clock and restore on another clock: every record
 (owner, epoch, queue, motion state), the join order, who is live, away (with the grace left) and
@@ -13,7 +13,7 @@ from hypothesis import example, given, settings, strategies as hs
 
 from fabric.codec import decode, encode
 from fabric.interfaces import WorldState
-from ownership import replica
+from ownership import snapshot
 from ownership import state as st
 
 from tests.ownership.test_state import GRACE, LEASE, OBJECTS, build, check_invariants, events
@@ -34,10 +34,10 @@ def _run(s, seq, now):
          later=[("join", "a", 0.0), ("join", "a", 1.0), ("join", "a", 1.0), ("tick", 1.0)], offset=0.0)
 def test_restore_of_export_is_the_same_state_on_another_clock(history, later, offset):
     s, now = _run(st.initial(OBJECTS, lease_s=LEASE, grace_s=GRACE, authority="sim-a"), history, 0.0)
-    recs, users = replica.export(s, now)
+    recs, users = snapshot.export(s, now)
     travelled = decode(encode(WorldState(time=0.0, steps=0, robots=(), objects=(), records=recs, users=users)))
     recs, users = travelled.records, travelled.users  # as it travels in WorldState
-    r = replica.restore(recs, users, now + offset, lease_s=LEASE, grace_s=GRACE, authority="sim-b")
+    r = snapshot.restore(recs, users, now + offset, lease_s=LEASE, grace_s=GRACE, authority="sim-b")
     check_invariants(r)
     assert set(r.records) == set(s.records)
     for obj, a in s.records.items():
