@@ -49,7 +49,8 @@ def test_contracts_hold(monkeypatch, capsys):
     out = capsys.readouterr()
     assert code == 0, out.out + out.err
     assert "0 broken" in out.out
-    for contract in ("Layers", "fabric.interfaces imports nothing", "fabric.codec and fabric.limits"):
+    for contract in ("Layers", "fabric.interfaces imports nothing", "fabric.codec and fabric.limits", "fabric, the ground floor",
+                     "No peer, nor ownership or robots, imports robofabric's tools"):
         assert contract in out.out, out.out
 
 
@@ -69,6 +70,7 @@ def _importlinter_section() -> str:
 
 MODULES = [
     "robofabric/__init__.py",
+    "robofabric/launch.py",
     "sim_peer/__init__.py",
     "sim_peer/peer.py",
     "compute_peer/__init__.py",
@@ -103,6 +105,7 @@ ALLOWED = {
     "compute_peer/service.py": "import robots\nimport fabric.interfaces.std\n",
     "user_peer/api.py": "import ownership.client\nimport fabric.session\n",
     "robofabric/__init__.py": "import sim_peer.peer\nimport user_peer.api\n",
+    "robofabric/launch.py": "import fabric.session\nimport fabric.keys\n",
 }
 
 
@@ -143,6 +146,12 @@ def test_skeleton_without_bad_imports_keeps_every_contract(tmp_path):
         ("fabric/codec/wire.py", "import fabric.session\n", "codec"),
         ("fabric/codec/fields.py", "import fabric.keys\n", "codec"),
         ("fabric/limits.py", "import fabric.keys\n", "codec"),
+        ("fabric/session.py", "from robofabric import launch\n", "ground-floor"),  # the core leaning on a tool
+        ("fabric/keys.py", "def later():\n    import robofabric.launch\n", "ground-floor"),  # even inside a function
+        ("sim_peer/peer.py", "import robofabric.launch\n", "tools"),  # a peer importing a tool
+        ("user_peer/api.py", "from robofabric import launch\n", "tools"),
+        ("ownership/client.py", "import robofabric\n", "tools"),
+        ("robots/__init__.py", "import robofabric.launch\n", "tools"),
     ],
 )
 def test_a_bad_import_breaks_its_contract(tmp_path, where, line, contract):
