@@ -21,6 +21,7 @@ the whole class on one box, not the server alone.
 from __future__ import annotations
 
 import os
+import sys
 import time
 import uuid
 from pathlib import Path
@@ -57,6 +58,14 @@ def _status(page: Any) -> str | None:
         return None
 
 
+def _reloads(seen: list[str], i: int, text: str) -> None:
+    """A page's console line that says it reloads (NiceGUI logs why: a reconnect that timed out, a handshake the
+    server refused because it forgot the page): kept and printed, since a reload is a page back at its login."""
+    if "reloading" in text or "falling back" in text:
+        seen.append(f"page {i}: {text}")
+        print(f"  page {i}: {text}", file=sys.stderr, flush=True)
+
+
 def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
     """N pages on one console; the row's figures."""
     from playwright.sync_api import sync_playwright
@@ -64,6 +73,7 @@ def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
     from fabric.interfaces import Pose
     from fabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
     from robofabric.bench.viewer_web import CHROMIUM, CHROMIUM_ARGS
+    from user_peer.console.health import parse_line
 
     world = f"con{uuid.uuid4().hex[:6]}"
     port = free_port()
@@ -94,26 +104,34 @@ def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
             fab.subscribe(f"rf/{world}/robot/*/pose", on_pose)
             browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
             pages, joined = [], []
+            reloads: list[str] = []  # NiceGUI's own words when a page reloads itself (connection timed out, ...)
             try:
                 for i in range(n):
                     t = time.monotonic()
                     page = browser.new_context(viewport={"width": 1280, "height": 1350}).new_page()
+                    page.on("console", lambda m, i=i: _reloads(reloads, i, m.text))
                     page.set_default_timeout(120_000)
                     page.goto(url, timeout=120_000)
                     page.get_by_label("Name").fill(f"s{i}")
+                    steps = [time.monotonic()]
                     page.get_by_role("button", name="Log in").click()
                     page.get_by_role("button", name=f"base{i}", exact=True).click()
+                    steps.append(time.monotonic())
                     page.get_by_role("button", name="Request").click()
                     page.get_by_text(f"request base{i}: you own it").wait_for()
+                    steps.append(time.monotonic())
                     page.locator("body").click(position={"x": 5, "y": 5})
                     page.keyboard.press("2")
                     page.keyboard.down("ArrowLeft")
                     pages.append(page)
                     joined.append(time.monotonic() - t)
+                    print(f"  page {i}: joined in {joined[-1]:.1f} s (page {steps[0] - t:.1f}, login {steps[1] - steps[0]:.1f}, request "
+                          f"{steps[2] - steps[1]:.1f}), load {os.getloadavg()[0]:.1f}", file=sys.stderr, flush=True)
                 lags: list[float] = []
                 presses: list[float] = []
                 missed = unstopped = 0
                 cpu0, t0 = proc_cpu_s(console.pid), time.monotonic()
+                health_from = len(procs.output(console))
                 k = 0
                 while time.monotonic() - t0 < seconds:
                     i = k % n
@@ -135,6 +153,7 @@ def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
                     else:
                         presses.append((first - pressed) / 1e9)
                 cpu = (proc_cpu_s(console.pid) - cpu0) / (time.monotonic() - t0)
+                health = [h for h in map(parse_line, procs.output(console)[health_from:].splitlines()) if h is not None]
                 messages = [_status(pg) for pg in pages]
                 for pg in pages:
                     pg.keyboard.up("ArrowLeft")
@@ -151,20 +170,24 @@ def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
     logged_out = sum(1 for m in messages if m is None)
     return {"n": n, "joined": len(joined), "join_max": max(joined, default=float("nan")), "lag_p50": pct(lags, 50), "lag_max": pct(lags, 100),
             "key_p50": pct(presses, 50, 1e3), "key_p99": pct(presses, 99, 1e3), "presses": len(presses), "missed": missed, "unstopped": unstopped,
-            "cpu": cpu, "lost": lost, "refused": refused, "logged_out": logged_out}
+            "cpu": cpu, "lost": lost, "refused": refused, "logged_out": logged_out, "reloads": len(reloads),
+            "late_p99": max((h.late_p99 for h in health), default=float("nan")),
+            "late_max": max((h.late_max for h in health), default=float("nan")),
+            "to_server_p99": max((h.to_server_p99 for h in health), default=float("nan")),
+            "to_sent_p99": max((h.to_sent_p99 for h in health), default=float("nan"))}
 
 
 def header() -> list[str]:
     return ["| pages | joined (slowest, s) | view lag in the page p50 / max (s) | key to motion p50 / p99 (ms), presses "
             "| presses that moved nothing in 5 s / releases not stopped in 10 s | console server CPU (cores) | robots lost | refused "
-            "| pages back at the login |",
-            "|---|---|---|---|---|---|---|---|---|"]
+            "| pages back at the login (reloads) | server's event loop late p99 / max (ms) | key to server / to zenoh p99 (ms) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
 
 
 def row(r: dict[str, Any]) -> str:
     return (f"| {r['n']} | {r['joined']} ({r['join_max']:.1f}) | {r['lag_p50']:.2f} / {r['lag_max']:.2f} | "
             f"{r['key_p50']:.0f} / {r['key_p99']:.0f}, {r['presses']} | {r['missed']} / {r['unstopped']} | {r['cpu']:.2f} | {r['lost']} | "
-            f"{r['refused']} | {r['logged_out']} |")
+            f"{r['refused']} | {r['logged_out']} ({r['reloads']}) | {r['late_p99']:.0f} / {r['late_max']:.0f} | {r['to_server_p99']:.0f} / {r['to_sent_p99']:.0f} |")
 
 
 def command(

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import asyncio
 import math
+import time
+from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from nicegui import run, ui
+from nicegui import ui
 from nicegui.events import GenericEventArguments, MouseEventArguments
 
 from fabric import keys
@@ -21,6 +23,10 @@ if TYPE_CHECKING:
 __all__ = ["BasePanel", "PLANNERS"]
 
 PLANNERS = {"Hybrid A*": "hybrid_astar", "OMPL": "ompl"}
+
+TWISTS = ThreadPoolExecutor(max_workers=4, thread_name_prefix="console-twist")
+"""The twists' own threads: a key never waits behind a login, a plan or a map build (each may take seconds
+in NiceGUI's shared pool, six threads on a 2-core machine). A twist is a put: four serve a class."""
 
 
 class BasePanel:
@@ -58,8 +64,11 @@ class BasePanel:
     async def key(self, e: GenericEventArguments) -> None:
         if not isinstance(e.args, dict):
             return
+        arrived = time.time()
         if self.driver.key(str(e.args.get("key", "")), bool(e.args.get("down"))):
             await self.send_twist()
+            t = e.args.get("t")
+            self.page.console.health.key(float(t) if isinstance(t, (int, float)) else None, arrived, time.time())
 
     async def let_go(self) -> None:
         """The page lost focus or its connection: a held key's release may never come."""
@@ -70,15 +79,17 @@ class BasePanel:
         v, w = self.driver.twist()
         async with self._send_lock:
             try:
-                # hold=False: the page itself repeats a held key's twist (keep_driving), so the sim's deadman
+                # hold=False: the browser repeats a held key (keep_driving on its beat), so the sim's deadman
                 # stops the base when the page goes quiet, whatever the server's session does until its grace
-                await run.io_bound(lambda: self.base.twist(v, w, hold=False))
+                base = self.base
+                await asyncio.get_running_loop().run_in_executor(TWISTS, lambda: base.twist(v, w, hold=False))
             except FabricUserError as exc:
                 self.driver.stop()
                 self.page.say(f"drive {self.base.id}: {self.page.why(exc)}")
 
     async def keep_driving(self) -> None:
-        """Every ``REFRESH_S`` while a key is held: the twist again (the sim's twist is a deadman)."""
+        """The browser's beat while a key is held (every ``REFRESH_S``): the twist again (the sim's twist is a
+        deadman). A beat that finds the last send still under way is dropped: the next one comes."""
         if self.driver.driving and not self._send_lock.locked():
             await self.send_twist()
 

@@ -13,13 +13,20 @@ import socket
 from dataclasses import dataclass, field
 from typing import Any
 
+from user_peer.console.health import PERIOD_S, Health
 from user_peer.console.login import Logins
 
-__all__ = ["Console", "serve", "page_urls", "RECONNECT_S"]
+__all__ = ["Console", "serve", "page_urls", "RECONNECT_S", "PING_TIMEOUT_S"]
 
 RECONNECT_S = 10.0
 """How long a page whose connection dropped may come back as it was (NiceGUI's reconnect timeout): a busy
 server or a flaky Wi-Fi must not log a student out. After it the page is gone and her grace begins."""
+
+PING_TIMEOUT_S = 20.0
+"""How long the server waits for a page's answer to its websocket ping (NiceGUI's default for a 10 s reconnect
+window is 4 s). Twenty pages on two cores starve a page's renderer for seconds, and a page cut off for a late
+answer must reconnect within :data:`RECONNECT_S` or go back to its login. Waiting longer is safe: a held key
+is repeated by the browser itself, so a page that went silent stops its base within the sim's deadman."""
 
 log = logging.getLogger("robofabric.console")
 
@@ -35,6 +42,7 @@ class Console:
     rerun_url: str | None = None
     join_timeout: float = 10.0
     logins: Logins = field(init=False)
+    health: Health = field(init=False, default_factory=Health)
 
     def __post_init__(self) -> None:
         self.logins = Logins(self._open, grace=self.grace, on_leave=stop_robots)
@@ -82,7 +90,9 @@ def serve(console: Console, host: str, port: int) -> None:
     # NiceGUI serves its own test harness's port when it sees pytest's variable, which a console started by
     # a test inherits: this process is a real server either way
     os.environ.pop("PYTEST_CURRENT_TEST", None)
-    from nicegui import app, ui
+    import asyncio
+
+    from nicegui import Client, app, background_tasks, core, ui
 
     from user_peer.console.page import ConsolePage
 
@@ -90,11 +100,37 @@ def serve(console: Console, host: str, port: int) -> None:
     def index(client: Any) -> None:
         ConsolePage(console, client).show()
 
-    def started() -> None:
+    async def report() -> None:
+        while True:
+            await asyncio.sleep(PERIOD_S)
+            pages = sum(1 for c in Client.instances.values() if c.has_socket_connection)
+            print(console.health.line(console.health.take(pages)), flush=True)
+
+    async def announce() -> None:
+        """The URLs, once the port takes connections (the startup handlers run before uvicorn listens)."""
+        probe = "127.0.0.1" if host in ("0.0.0.0", "") else "::1" if host == "::" else host
+        while True:
+            try:
+                _, writer = await asyncio.open_connection(probe, port)
+            except OSError:
+                await asyncio.sleep(0.05)
+                continue
+            writer.close()
+            break
         for url in page_urls(host, port):
             print(f"console: open {url}", flush=True)
 
+    def started() -> None:
+        core.sio.eio.ping_timeout = PING_TIMEOUT_S  # after NiceGUI's startup set it from the reconnect window
+        background_tasks.create(announce(), name="console announce")
+        background_tasks.create(console.health.probe(), name="console health probe")
+        background_tasks.create(report(), name="console health report")
+
+    def dropped() -> None:
+        console.health.dropped += 1
+
     app.on_startup(started)
+    app.on_disconnect(dropped)
     app.on_shutdown(console.logins.close)
     try:
         ui.run(host=host, port=port, title=f"robofabric console · {console.world}", reload=False, show=False,
