@@ -95,9 +95,11 @@ def run_one(robots: int, seconds: float, tmp: Path) -> dict[str, Any]:
                                   "--seconds", str(seconds), "--out", str(out_file)], name="listen", env=env)
             wait_until(lambda: "ready" in procs.output(listen) or listen.poll() is not None, timeout=60,
                        what="the ROS node", seen=lambda: procs.output(listen)[-1500:])
-            t0, cpu0 = time.time_ns(), proc_cpu_s(bridge.pid)
-            listen.wait(timeout=seconds + 60)
-            t1, cpu1 = time.time_ns(), proc_cpu_s(bridge.pid)
+            t0, cpu0, lcpu0 = time.time_ns(), proc_cpu_s(bridge.pid), proc_cpu_s(listen.pid)
+            wait_until(lambda: time.time_ns() >= t0 + int(seconds * 1e9) or listen.poll() is not None, timeout=seconds + 60,
+                       what="the measured window")
+            t1, cpu1, lcpu1 = time.time_ns(), proc_cpu_s(bridge.pid), proc_cpu_s(listen.pid)
+            listen.wait(timeout=60)
             zen = z.window(t0 + int(SETTLE_S * 1e9), t1 - int(TAIL_S * 1e9))
         summary_out = procs.output(bridge)
         end_process(bridge)
@@ -111,6 +113,7 @@ def run_one(robots: int, seconds: float, tmp: Path) -> dict[str, Any]:
         _, rid, leaf = topic.split("/")
         ros[(rid, leaf_to_stream[leaf], int(stamp))] = int(arrival)
     out: dict[str, Any] = {"robots": robots, "seconds": seconds, "cores": (cpu1 - cpu0) / ((t1 - t0) / 1e9),
+                           "listener_cores": (lcpu1 - lcpu0) / ((t1 - t0) / 1e9), "load": os.getloadavg()[0],
                            "summary": next((ln for ln in bridge_log.splitlines() if "messages published" in ln), "")}
     for stream in STREAMS:
         keys_ = [k for k in zen if k[1] == stream]
@@ -121,13 +124,13 @@ def run_one(robots: int, seconds: float, tmp: Path) -> dict[str, Any]:
 
 
 def header() -> list[str]:
-    return ["| robots | stream | msg/s (all robots) | added latency p50 / p99 (ms) | lost / delivered by zenoh | bridge CPU (cores) |",
-            "|---|---|---|---|---|---|"]
+    return ["| robots | stream | msg/s (all robots) | added latency p50 / p99 (ms) | lost / delivered by zenoh | bridge CPU (cores) | ROS node CPU (cores) | load (1 min) |",
+            "|---|---|---|---|---|---|---|---|"]
 
 
 def row(r: dict[str, Any]) -> list[str]:
     return [f"| {r['robots']} | {s} | {r[s]['rate']:.0f} | {r[s]['p50']:.2f} / {r[s]['p99']:.2f} | "
-            f"{r[s]['lost']} / {r[s]['zenoh']} | {r['cores']:.2f} |" for s in STREAMS]
+            f"{r[s]['lost']} / {r[s]['zenoh']} | {r['cores']:.2f} | {r['listener_cores']:.2f} | {r['load']:.1f} |" for s in STREAMS]
 
 
 def command(
