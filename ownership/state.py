@@ -47,6 +47,7 @@ from types import MappingProxyType
 from typing import Mapping
 
 from fabric.interfaces import MAX_QUEUE, OwnershipRecord
+from fabric.plant import planted
 
 __all__ = [
     "Effect", "OwnState", "Join", "Leave", "Request", "Release", "Renew", "Tick", "Motion",
@@ -421,7 +422,8 @@ def _on_request(s: OwnState, ev: Request, effects: list[Effect]) -> OwnState:
     if not rec.owner or rec.state == "still":
         prev = rec.owner
         queue = tuple(u for u in rec.queue if u != ev.user)
-        recs[rec.object] = replace(rec, owner=ev.user, epoch=rec.epoch + 1, lease_expiry=ev.now + s.lease_s, queue=queue)
+        bump = 0 if prev and planted("double-owner") else 1  # test-only defect (fabric/plant.py); 1 in every real world
+        recs[rec.object] = replace(rec, owner=ev.user, epoch=rec.epoch + bump, lease_expiry=ev.now + s.lease_s, queue=queue)
         effects.append(Effect("granted", rec.object, ev.user, f"taken over from {prev} (still)" if prev else "free"))
         if prev:
             effects.append(Effect("revoked", rec.object, prev, f"handed over to {ev.user} while still"))

@@ -95,6 +95,8 @@ BENCHMARKS: tuple[Benchmark, ...] = (
               full=("--rates", "10,20,50,100,200,600"), quick=("--quick",)),
     Benchmark("ros2", "ros2", "N mobile robots through the ROS 2 bridge to an rclpy node: added latency, loss, bridge CPU",
               full=("--robots", "8", "--seconds", "20"), quick=("--robots", "1", "--seconds", "6")),
+    Benchmark("soak", "soak", "a class in the lab for M minutes under a seeded nemesis, then the checker: faults by kind, violations, peers' memory",
+              full=("--minutes", "60", "--students", "3", "--seed", "1"), quick=("--minutes", "1", "--students", "2"), out="write", needs="netns"),
 )
 
 

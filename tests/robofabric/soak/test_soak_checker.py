@@ -1,0 +1,224 @@
+"""The checker on hand-made histories: each invariant finds its violation, stays quiet on a clean history,
+and prints the excerpt that shows it; a generated clean history has no violation, and any of a set of
+corruptions of it is caught by the invariant it breaks."""
+
+from __future__ import annotations
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from robofabric.soak.checker import INVARIANTS, Limits, check, summary
+from robofabric.soak.history import Cmd, Fault, Joints, Mark, OwnEvent, OwnRec, ProcExit, ProcSample
+
+A = (0.6, 0.3, -0.3, 0.0, 0.5, 0.1)
+B = (0.4, 0.1, -0.1, 0.2, 0.2, -0.2)
+POISON = (-0.6, 0.0, 0.0, 0.0, -0.3, 0.0)
+
+
+def rec(t, owner, epoch, *, queue=(), state="still", source="sim-a", term=1, obj="arm0"):
+    return OwnRec(t, obj, owner, epoch, tuple(queue), state, source, term)
+
+
+def js(t, q, *, source="sim-a", term=1, robot="arm0"):
+    return Joints(t, robot, tuple(q), t, source, term)
+
+
+def only(inv, history, lim=Limits()):
+    return INVARIANTS[inv](sorted(history, key=lambda r: r.t), lim)
+
+
+# ---------------------------------------------------------------------- owners
+
+def test_two_owners_at_one_epoch_is_a_violation_with_both_records():
+    h = [rec(1, "ann", 3), rec(2, "bob", 3)]
+    (v,) = only("owners", h)
+    assert "two owners at epoch 3: ann and bob" in v.message and v.excerpt == tuple(h)
+
+
+def test_an_epoch_going_back_is_a_violation_but_a_fenced_stale_record_is_not():
+    assert [v.message for v in only("owners", [rec(1, "ann", 5), rec(2, "", 4, term=1)])] == ["arm0's epoch went back from 5 to 4"]
+    stale = [rec(1, "ann", 5, term=2, source="sim-b"), rec(2, "bob", 4, term=1)]  # a paused old primary: consumers drop it
+    assert only("owners", stale) == []
+
+
+def test_owners_clean():
+    assert only("owners", [rec(1, "ann", 1), rec(2, "", 2), rec(3, "bob", 3), rec(4, "bob", 3, state="moving")]) == []
+
+
+# ---------------------------------------------------------------------- applied
+
+def test_a_robot_reaching_a_target_only_a_stale_command_asked_for_is_a_violation():
+    c = Cmd(3.0, "arm0", "ann", 1, "joints", POISON)
+    h = [rec(1, "ann", 2), Cmd(1.5, "arm0", "ann", 2, "joints", A), js(2, A), c, js(4, POISON)]
+    (v,) = only("applied", h)
+    assert "ann's command at epoch 1" in v.message and "owner ann epoch 2" in v.message
+    assert c in v.excerpt and js(4, POISON) in v.excerpt
+
+
+def test_a_refused_command_whose_target_is_never_reached_is_fine():
+    h = [rec(1, "ann", 2), Cmd(1.5, "arm0", "ann", 2, "joints", A), js(2, A), Cmd(3.0, "arm0", "ann", 1, "joints", POISON), js(4, A)]
+    assert only("applied", h) == []
+
+
+def test_a_late_command_with_an_owners_target_proves_nothing():
+    h = [rec(1, "ann", 2), Cmd(1.5, "arm0", "ann", 2, "joints", A), Cmd(3.0, "arm0", "bob", 7, "joints", A), js(4, A)]
+    assert only("applied", h) == []
+
+
+# ---------------------------------------------------------------------- reset
+
+def test_joints_jumping_across_a_fail_over_is_a_violation():
+    h = [js(1, A), js(3, (0.0,) * 6, source="sim-b", term=2)]
+    (v,) = only("reset", h)
+    assert "across the change from sim-a to sim-b" in v.message and v.excerpt == tuple(h)
+
+
+def test_joints_jumping_within_one_sim_faster_than_it_can_move_is_a_violation():
+    (v,) = only("reset", [js(1.0, A), js(1.1, B)])
+    assert "between two samples of one sim" in v.message
+
+
+def test_joints_moving_at_speed_and_a_smooth_fail_over_are_fine():
+    h = [js(1.0, A), js(2.0, B), js(4.0, tuple(x + 0.05 for x in B), source="sim-b", term=2)]
+    assert only("reset", h) == []
+
+
+# ---------------------------------------------------------------------- handover
+
+def test_an_owner_losing_a_moving_robot_without_a_reason_is_a_violation():
+    h = [rec(1, "ann", 1, state="moving"), rec(2, "bob", 2, state="moving")]
+    (v,) = only("handover", h)
+    assert "left ann for bob while moving" in v.message
+
+
+def test_release_expiry_and_take_over_of_a_still_robot_are_fine():
+    h = [rec(1, "ann", 1, state="moving"), OwnEvent(2, "own_released", "arm0", "ann", "released", "sim-a"), rec(2, "", 2),
+         rec(3, "bob", 3, state="moving"), OwnEvent(4, "own_expired", "arm0", "bob", "lease expired", "sim-a"),
+         rec(4, "cat", 4, state="still"), rec(5, "dan", 5)]
+    assert only("handover", h) == []
+
+
+# ---------------------------------------------------------------------- queue
+
+def test_a_queue_changing_order_or_skipping_a_waiting_user_is_a_violation():
+    (v,) = only("queue", [rec(1, "ann", 1, queue=("bob", "cat"), state="moving"), rec(2, "ann", 1, queue=("cat", "bob"))])
+    assert "changed order" in v.message
+    (w,) = only("queue", [rec(1, "ann", 1, queue=("bob", "cat")), rec(2, "cat", 2, queue=("bob",))])
+    assert "went to cat ahead of bob" in w.message
+
+
+def test_a_queue_handing_over_in_order_is_fine():
+    assert only("queue", [rec(1, "ann", 1, queue=("bob", "cat")), rec(2, "bob", 2, queue=("cat",)), rec(3, "cat", 3)]) == []
+
+
+# ---------------------------------------------------------------------- unowned motion
+
+def test_a_robot_moving_long_after_its_owner_went_is_a_violation():
+    (v,) = only("unowned_motion", [rec(1, "", 2), js(5, A), js(5.2, tuple(x - 0.1 for x in A))])
+    assert "with no owner" in v.message
+
+
+def test_a_robot_stopping_after_its_owner_went_is_fine():
+    assert only("unowned_motion", [rec(1, "", 2), js(1.5, B), js(2.5, A), js(5, A), js(7, A)]) == []
+
+
+def test_a_robot_moving_between_two_samples_that_span_a_new_grant_is_owned():
+    """Joints are thinned while still: the step from the last still sample to the first moving one may span the grant."""
+    assert only("unowned_motion", [rec(1, "", 2), js(2, A), js(8, A), rec(8.5, "ann", 3), js(8.7, B)]) == []
+
+
+# ---------------------------------------------------------------------- resources and exits
+
+def _samples(name, slope_mb_h, *, minutes=20, threads=20, fd_rise=0, log_rise=0):
+    return [ProcSample(60.0 * m, name, 7, 100 + slope_mb_h * m / 60, threads, 30 + (fd_rise if m > minutes / 2 else 0),
+                       1000 + log_rise * m) for m in range(minutes + 1)]
+
+
+def test_memory_fds_and_logs_growing_after_warm_up_are_violations():
+    h = [Mark(0, "warm"), *_samples("sim-a", 60, fd_rise=40, log_rise=10_000_000)]
+    msgs = [v.message for v in only("resources", h)]
+    assert any("memory grew 60.0 MB/h" in m for m in msgs)
+    assert any("fds rose from 30 to 70" in m for m in msgs)
+    assert any("log grew" in m for m in msgs)
+
+
+def test_flat_resources_and_short_windows_are_fine():
+    assert only("resources", [Mark(0, "warm"), *_samples("sim-a", 5)]) == []
+    assert only("resources", [Mark(0, "warm"), *_samples("sim-a", 500, minutes=5)]) == []  # too short to judge
+
+
+def test_an_exit_nobody_caused_is_a_violation_and_an_expected_one_is_not():
+    h = [ProcExit(1, "compute", 9, 1, False, "Traceback..."), ProcExit(2, "sim-a", 8, -9, True)]
+    (v,) = only("exits", h)
+    assert "compute (pid 9) ended with 1" in v.message
+
+
+def test_summary_counts_faults_by_kind_and_violations():
+    h = [Fault(1, "pause", "sim-a", 2), Fault(3, "pause", "s00", 4), Fault(5, "router", "router", 6)]
+    lines = summary(h, check([rec(1, "ann", 3), rec(2, "bob", 3)]))
+    assert lines == ["faults: 3", "fault kinds: 2 (pause 2, router 1)", "violations: 1 (owners 1)"]
+    assert str(check([rec(1, "ann", 3), rec(2, "bob", 3)])[0]).splitlines()[1].strip().startswith("t=1.000 record arm0: owner=ann")
+
+
+# ---------------------------------------------------------------------- a generated class
+
+@st.composite
+def histories(draw):
+    """A clean history of one arm: requests, releases, take-overs of a still arm, queue handovers, fail-overs
+    (a new term, the joints carried on), the arm moving between owners' targets at a possible speed."""
+    users = ["ann", "bob", "cat"]
+    t, epoch, owner, queue, term, q = 0.0, 0, "", [], 1, list(A)
+    out: list = [rec(t, owner, epoch)]
+    for step in draw(st.lists(st.sampled_from(["take", "release", "queue", "move", "failover"]), min_size=1, max_size=25)):
+        t += draw(st.floats(0.5, 3.0))
+        src = f"sim-{term}"
+        if step == "take" and (not owner or True):
+            new = draw(st.sampled_from(users))
+            if new != owner:
+                epoch += 1
+                owner = new
+                queue = [u for u in queue if u != new]
+                out.append(rec(t, owner, epoch, queue=queue, source=src, term=term))
+        elif step == "release" and owner:
+            out.append(OwnEvent(t, "own_released" if not queue else "own_handover", "arm0", owner if not queue else queue[0],
+                                "released" if not queue else f"released by {owner}", src))
+            epoch += 1
+            owner = queue.pop(0) if queue else ""
+            out.append(rec(t, owner, epoch, queue=queue, source=src, term=term))
+        elif step == "queue" and owner:
+            u = draw(st.sampled_from(users))
+            if u != owner and u not in queue:
+                queue.append(u)
+                out.append(rec(t, owner, epoch, queue=queue, source=src, term=term))
+        elif step == "move" and owner:
+            target = draw(st.sampled_from([A, B]))
+            out.append(Cmd(t, "arm0", owner, epoch, "joints", target))
+            out.append(js(t + 0.01, q, source=src, term=term))
+            q = list(target)
+            out.append(js(t + 0.5, q, source=src, term=term))
+        elif step == "failover":
+            term += 1
+            out.append(rec(t, owner, epoch, queue=queue, source=f"sim-{term}", term=term))
+            out.append(js(t, q, source=f"sim-{term}", term=term))
+    return sorted(out, key=lambda r: r.t)
+
+
+@settings(max_examples=60, deadline=None)
+@given(histories())
+def test_a_generated_clean_history_has_no_violation(h):
+    assert check(h) == []
+
+
+@settings(max_examples=60, deadline=None)
+@given(histories(), st.sampled_from(["owners", "reset", "applied"]))
+def test_a_corrupted_history_is_caught_by_the_invariant_it_breaks(h, how):
+    last = h[-1].t
+    if how == "owners":
+        top = max(r.epoch for r in h if isinstance(r, OwnRec))
+        bad = [rec(last + 1, "zed", top + 1, term=99, source="x"), rec(last + 2, "yan", top + 1, term=99, source="x")]
+    elif how == "reset":
+        bad = [js(last + 1, A, term=99, source="x"), js(last + 2, (0.0,) * 6, term=100, source="y")]
+    else:
+        bad = [rec(last + 1, "zed", 1000, term=99, source="x"), js(last + 1.5, A, term=99, source="x"),
+               Cmd(last + 2, "arm0", "zed", 999, "joints", POISON), js(last + 3, POISON, term=99, source="x")]
+    assert how in {v.invariant for v in check(sorted(h + bad, key=lambda r: r.t))}
