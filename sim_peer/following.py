@@ -22,7 +22,7 @@ from fabric.codec import DecodeError, decode
 from fabric.interfaces import Command, JointState, Pose, ServiceError, WorldState
 from fabric.plant import planted
 from sim_peer import election as el
-from sim_peer import replica
+from sim_peer import capture
 from sim_peer.kept_commands import CommandBuffer
 
 if TYPE_CHECKING:
@@ -140,19 +140,19 @@ class Follower:
         the ownership records and users to restore the gate with."""
         h = self.host
         f, world = h.fabric, h.world
-        replica.restore(world, state)
+        capture.restore(world, state)
         src = state.header.source
         at = {rid: state.time for rid in world.robots}
         for rid, js in self.joints.items():
             if js.header.stamp >= state.time and js.header.source == src and rid in at:
-                replica.overlay_joints(world, rid, js)
+                capture.overlay_joints(world, rid, js)
                 at[rid] = js.header.stamp
         for rid, p in self.poses.items():
             if p.header.stamp >= state.time and p.header.source == src and rid in at:
-                replica.overlay_pose(world, rid, p)
+                capture.overlay_pose(world, rid, p)
                 at[rid] = p.header.stamp
         newest = max([state.time, *at.values()])
-        replica.advance(world, {rid: newest - t for rid, t in at.items()})
+        capture.advance(world, {rid: newest - t for rid, t in at.items()})
         world.data.time = newest  # sim time goes on from the newest state heard, never back
         if planted("reset"):  # test-only defect (fabric/plant.py): robots start again from their spawn pose
             for r in world.robots.values():

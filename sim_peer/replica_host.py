@@ -46,7 +46,7 @@ from fabric.session import Fabric
 from robots.description import SceneRobot
 from sim_peer import election as el
 from sim_peer import handoff as ho
-from sim_peer import replica
+from sim_peer import capture
 from sim_peer.adoption import ObjectAdoption
 from sim_peer.following import POLL_S, Follower
 from sim_peer.freeze_guard import FreezeGuard
@@ -235,7 +235,7 @@ class ReplicaHost:
             raise ServiceError(f"{self.fabric.peer_id} is a standby (term {self.election.term})")
         records, users = self.gate.export_state()
         with peer.lock:
-            t, steps, robots, objects = replica.capture(self.world)
+            t, steps, robots, objects = capture.capture(self.world)
         if not self.objects:
             objects = ()  # the objects' authority is another shard: its standby must not become it
         seqs = self.fabric.seqs.under(keys.world_root(self.fabric.world))
@@ -262,7 +262,7 @@ class ReplicaHost:
         records, users = self.gate.export_state()
         self.gate.close()
         with peer.lock:
-            t, steps, robots, objects = replica.capture(self.world)
+            t, steps, robots, objects = capture.capture(self.world)
         state = WorldState(t, steps, robots, objects if self.objects else (), tuple(records), dict(users), {},
                            header=Header(wall_ns=time.time_ns(), source=f.peer_id))
         self.peer = self.gate = None

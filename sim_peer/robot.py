@@ -172,7 +172,7 @@ class SimRobot:
         """The last known state as a small dict of plain values (the ownership record's ``state``)."""
         return {"type": self.desc.name, "kind": self.desc.kind, "moving": self.moving}
 
-    # a standby's take-over (sim_peer/replica.py, docs/sim.md) -------------------
+    # a standby's take-over (sim_peer/capture.py, docs/sim.md) -------------------
     def snapshot(self) -> RobotState | None:
         """The controllers' whole state, for a standby to carry the robot on; None: not carried over."""
         return None

@@ -55,16 +55,16 @@ def test_the_world_builds_and_steps_a_robot_type_from_its_description_and_hooks(
 
 
 def test_a_standby_carries_the_new_type_on_through_its_snapshot_and_restore_hooks(plugin_path):
-    from sim_peer import replica
+    from sim_peer import capture
     from fabric.interfaces import WorldState
 
     w = SimWorld("planar_cell")
     w.robot("p1").commands()["joints"](JointTarget(np.array([1.2, 0.4])))
     w.step(100)  # on its way: 0.2 s at 2 rad/s
-    t, steps, states, objects = replica.capture(w)
+    t, steps, states, objects = capture.capture(w)
     assert {s.id for s in states} == {"p1", "arm1"}
     w2 = SimWorld("planar_cell")
-    replica.restore(w2, WorldState(t, steps, states, objects))
+    capture.restore(w2, WorldState(t, steps, states, objects))
     p2 = w2.robot("p1")
     np.testing.assert_allclose(p2.q, w.robot("p1").q)
     np.testing.assert_allclose(p2.target, [1.2, 0.4])

@@ -1,11 +1,11 @@
-"""A world's state as a message and back (sim_peer.replica): a restored world goes on exactly as the original."""
+"""A world's state as a message and back (sim_peer.capture): a restored world goes on exactly as the original."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from fabric.codec import decode, encode
-from sim_peer import replica
+from sim_peer import capture
 from fabric.interfaces import WorldState
 from sim_peer.world import SimWorld
 
@@ -21,11 +21,11 @@ def _moving_world() -> SimWorld:
 
 def test_a_restored_world_continues_the_motions_in_progress_exactly():
     w = _moving_world()
-    t, steps, robots, objects = replica.capture(w)
+    t, steps, robots, objects = capture.capture(w)
     state = decode(encode(WorldState(t, steps, robots, objects)))
     assert state.robot("base1").path.shape[0] == 20 and state.robot("arm1").extra["scale"] == 0.3
     w2 = SimWorld("combined", seed=1)
-    replica.restore(w2, state)
+    capture.restore(w2, state)
     assert w2.time == w.time and w2.steps == w.steps
     assert np.allclose(w2.object_pose("target")[0], [3.2, 0.1, 1.0])
     for _ in range(10):
@@ -39,7 +39,7 @@ def test_a_restored_world_continues_the_motions_in_progress_exactly():
 
 def test_stream_samples_and_advance_bring_robots_to_one_time():
     w = _moving_world()
-    t, steps, robots, objects = replica.capture(w)
+    t, steps, robots, objects = capture.capture(w)
     state = WorldState(t, steps, robots, objects)
     w.step(25)  # 50 ms later the primary publishes joints...
     from fabric.interfaces import Header, JointState
@@ -48,8 +48,8 @@ def test_stream_samples_and_advance_bring_robots_to_one_time():
     js = JointState(names, q, dq, Header(stamp=w.time))
     w.step(15)  # ...and dies 30 ms after that
     w2 = SimWorld("combined", seed=1)
-    replica.restore(w2, state)
-    replica.overlay_joints(w2, "arm1", js)
-    replica.advance(w2, {"arm1": w.time - js.header.stamp, "base1": w.time - state.time})
+    capture.restore(w2, state)
+    capture.overlay_joints(w2, "arm1", js)
+    capture.advance(w2, {"arm1": w.time - js.header.stamp, "base1": w.time - state.time})
     assert np.allclose(w2.robots["arm1"].ctrl.q, w.robots["arm1"].ctrl.q, atol=1e-9)
     assert abs(w2.robots["base1"].ctrl.x - w.robots["base1"].ctrl.x) < 1e-9
