@@ -87,6 +87,7 @@ class RecorderStats:
     dropped: int = 0
     dropped_bytes: int = 0
     quota_reached: bool = False
+    queued_bytes: int = 0  # payload bytes heard and not yet written (bounded by ``max_queue_bytes``)
 
     @property
     def rate_hz(self) -> float:
@@ -253,7 +254,13 @@ class Recorder:
             dropped=self._dropped,
             dropped_bytes=self._dropped_bytes,
             quota_reached=self._quota_reached,
+            queued_bytes=self._queued_bytes,
         )
+
+    @property
+    def sink(self) -> McapSink | None:
+        """The MCAP file being written (its fences, its byte counts); None before :meth:`start`."""
+        return self._sink
 
     # ------------------------------------------------------------------ receiving (zenoh threads)
 

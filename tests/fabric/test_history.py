@@ -1,6 +1,6 @@
 """A subscription with history (fabric/history.py) loses and reorders nothing live, and gives a late joiner
-each latched key's latest value once (issue 32: zenoh's advanced subscriber dropped live samples that
-arrived out of timestamp order across one session's publishers: 1,743 of 1,820 poses on robot/**)."""
+each latched key's latest value once, even where samples arrive out of timestamp order across one session's
+publishers (zenoh's advanced subscriber dropped those: 1,743 of 1,820 poses on robot/**)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""User names, quoting and the per-key rate limiter (issue 14): pure, property-tested."""
+"""User names, quoting and the per-key rate limiter: pure, property-tested."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
 """print_table (fabric/cli_common.py): every table fits the terminal or prints its rows as blocks; no column
-is dropped and no word cut (issue 32: ``list`` at 80 columns lost its msgs and kB/s columns and broke peer
-ids mid-word). The live commands are checked at 60, 80 and 120 columns in test_introspect_cli.py."""
+is dropped and no word cut (``list`` at 80 columns keeps its msgs and kB/s columns and its peer ids whole). The live commands are checked at 60, 80 and 120 columns in test_introspect_cli.py."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The recorder is bounded (issue 14): a queue cap, a key cap and a disk quota; what is dropped is counted."""
+"""The recorder is bounded: a queue cap, a key cap and a disk quota; what is dropped is counted."""
 
 from __future__ import annotations
 
@@ -43,17 +43,17 @@ def test_queue_cap_drops_instead_of_growing(tmp_path, world, connect):
         wait_until(lambda: (pub.session.put(keys.robot_joints(world, "a"), b"x"), rec.stats.messages)[1], timeout=30,
                    what="the recorder hears the publisher")
         held = threading.Event()
-        write = rec._sink.write
+        write = rec.sink.write
 
         def slow_write(*args):  # a disk that does not keep up: the queue only fills
             held.wait(60)
             return write(*args)
 
-        rec._sink.write = slow_write
+        rec.sink.write = slow_write
         try:
             _flood(pub, lambda i: keys.robot_joints(world, "a"), 40, 100_000)
             wait_until(lambda: rec.stats.dropped >= 25, timeout=30, what="drops while the disk is held", seen=lambda: rec.stats)
-            assert rec._queued_bytes <= 1_000_000
+            assert rec.stats.queued_bytes <= 1_000_000
         finally:
             held.set()
         wait_until(lambda: rec.stats.messages + rec.stats.dropped >= 41, timeout=30, what="every sample written or dropped",

@@ -1,9 +1,9 @@
-"""What a tool shows or records is all that happened (issue 32): a native recording, a live ``--to ros2``
+"""What a tool shows or records is all that happened: a native recording, a live ``--to ros2``
 recording and ``echo`` on a wildcard of the same running sim hold the same messages, stream by stream.
 
-Before, the live recorder and ``echo`` (zenoh's advanced subscriber, for latched keys' history) dropped
-samples that arrived out of timestamp order across the sim's publishers: 2,397 of 3,000 poses in a
-minute's ROS 2 file, with a progress line saying "0 dropped". The native recorder (a plain subscriber)
+Samples arrive out of timestamp order across the sim's publishers, so none of the three may order them by
+timestamp (zenoh's advanced subscriber does, and drops the rest: once 2,397 of 3,000 poses in a minute's
+ROS 2 file, with a progress line saying "0 dropped"). The native recorder (a plain subscriber)
 is the reference: what reached this host. Messages are matched by their header's wall time, which the
 ROS 2 writer keeps as each message's publish time; the first and last second are left out (the three
 processes start and stop a few milliseconds apart).
