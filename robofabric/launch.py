@@ -363,7 +363,9 @@ class Supervisor:
             argv += ["--connect", ep]
         return argv + list(self.extra_args)
 
-    def _pump(self, name: str, stream, log_path: Path) -> None:
+    def pump(self, name: str, stream, log_path: Path) -> None:
+        """Copy peer ``name``'s output (bytes lines) into its rotating log until the stream ends; its last line is
+        kept as the peer's ``last_line``. Runs on a thread of its own per peer."""
         log = RotatingFileHandler(log_path, maxBytes=self.log_max_bytes, backupCount=self.log_backups, encoding="utf-8")
         log.setFormatter(logging.Formatter("%(message)s"))
         try:
@@ -384,7 +386,7 @@ class Supervisor:
         pp.proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, start_new_session=True)
         pp.started_at = time.monotonic()
         pp.exit_code = None
-        threading.Thread(target=self._pump, args=(pp.spec.name, pp.proc.stdout, self.out_dir / "logs" / f"{pp.spec.name}.log"), daemon=True).start()
+        threading.Thread(target=self.pump, args=(pp.spec.name, pp.proc.stdout, self.out_dir / "logs" / f"{pp.spec.name}.log"), daemon=True).start()
         self.say(f"started {pp.spec.name} (pid {pp.proc.pid}): robofabric {' '.join(argv[3:])}")
 
     def say(self, text: str) -> None:

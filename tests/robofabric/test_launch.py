@@ -141,7 +141,7 @@ def test_peer_logs_rotate(tmp_path):
     sup = Supervisor(parse_launch(GOOD, "good.toml"), out_dir=tmp_path, is_ready=lambda e: True, console=io.StringIO(),
                      log_max_bytes=2_000, log_backups=2)
     lines = b"".join(b"line %05d of a chatty peer\n" % i for i in range(1_000))  # ~27 kB
-    sup._pump("sim", io.BytesIO(lines), tmp_path / "logs" / "sim.log")
+    sup.pump("sim", io.BytesIO(lines), tmp_path / "logs" / "sim.log")
     logs = sorted(p.name for p in (tmp_path / "logs").iterdir())
     assert logs == ["sim.log", "sim.log.1", "sim.log.2"]
     assert all((tmp_path / "logs" / n).stat().st_size <= 2_000 for n in logs)
