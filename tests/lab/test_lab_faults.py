@@ -134,8 +134,25 @@ def test_owner_partition_bob_takes_over_alice_is_refused(world: World):
     msg = alice.call("try:\n    arm.move_joints(far, wait=False)\n    r = 'sent'\nexcept NotOwner as e:\n    r = str(e)\nr")
     assert "does not own" in msg and "bob" in msg, msg
     bob.call("arm.release(); None")
-    time.sleep(1.0)  # let the recorder write the last samples before reading the file (it is read unfinished)
+    # the file is read unfinished: once bob's release is on disk, so is everything the recorder heard before it
+    wait_until(lambda: _released_after(_arm_records(world), ("bob", epoch_b)), timeout=30, interval=0.5,
+               what="bob's release in the recording", seen=lambda: _arm_records(world)[-5:])
     _no_overlap(world, epoch_a, epoch_b)
+
+
+def _released_after(records: list[tuple[str, int]], held: tuple[str, int]) -> bool:
+    """Whether a record of someone else (or of nobody) follows ``held`` (owner, epoch)."""
+    return held in records and any(owner != held[0] for owner, _ in records[records.index(held) + 1:])
+
+
+def _arm_records(world: World) -> list[tuple[str, int]]:
+    """(owner, epoch) of each of arm1's ownership records in the recording so far."""
+    out = []
+    for m in iter_messages(world.recording, ["rf/demo/own/arm1"]):
+        msg = decode(m.payload)
+        if type(msg).__name__ == "OwnershipRecord":
+            out.append((msg.owner, msg.epoch))
+    return out
 
 
 def _no_overlap(world: World, epoch_a: int, epoch_b: int) -> None:
