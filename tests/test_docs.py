@@ -1,4 +1,4 @@
-"""Documentation that runs (issue 11): every ```bash, ```sh and ```python block in README.md and
+"""Documentation that runs: every ```bash, ```sh and ```python block in README.md and
 docs/**/*.md runs against one live world and must exit 0 within a limit.
 
 The convention every page follows:

@@ -1,4 +1,4 @@
-"""Replicated authority across a healed network partition (issue 16), on a LAN of namespaces.
+"""Replicated authority across a healed network partition, on a LAN of namespaces.
 
 The primary sim's cable is pulled (not SIGSTOP: the process runs on, its sockets stay open, its clock goes
 on) for longer than the transport lease: the standby takes the world over with term 2. The cable goes back

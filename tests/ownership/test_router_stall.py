@@ -1,4 +1,4 @@
-"""A stalled router is not the owners' fault (issue 30), end to end in a ``secure init`` class world.
+"""A stalled router is not the owners' fault, end to end in a ``secure init`` class world.
 
 A login declaring 20,000 subscribers and closing stalls the router for many seconds, far past the 2 s
 transport lease: the router closes its clients' links and drops their liveliness tokens, and the sim's

@@ -1,4 +1,4 @@
-"""One exit-code rule for every command, and streaming commands that end cleanly (issue 32).
+"""One exit-code rule for every command, and streaming commands that end cleanly.
 
 0: what was asked happened (a streaming command whose reader went away, ``| head -3``, or that was
 stopped with Ctrl-C, did what it was asked); 1: the world answered no or had nothing; 2: a usage

@@ -1,5 +1,5 @@
-"""Every command's ``--help`` reads as plain text (issue 32): no reStructuredText markup from docstrings
-(```ros2 topic hz``` showed its backquotes), and paragraphs wrapped by the terminal, not by the source."""
+"""Every command's ``--help`` reads as plain text: no reStructuredText markup from docstrings
+(no backquotes around ``ros2 topic hz``), and paragraphs wrapped by the terminal, not by the source."""
 
 from __future__ import annotations
 

@@ -190,8 +190,8 @@ def words(text: str) -> set[str]:
 @pytest.mark.parametrize("width", [60, 80, 120])
 def test_tables_fit_the_terminal_with_no_column_or_word_cut(peers_world, world, connect, width):
     """list, list --services, info, ps, ps -v, own list and interfaces never print a line wider than the terminal,
-    drop no column and cut no word: ids and types whole, keys whole when read down their column (issue 32:
-    list at 80 columns lost its msgs and kB/s columns and broke peer ids). In a pipe ($COLUMNS) and on a
+    drop no column and cut no word: ids and types whole, keys whole when read down their column (list
+    at 80 columns keeps its msgs and kB/s columns and its peer ids whole). In a pipe ($COLUMNS) and on a
     terminal (its size)."""
     import os
 

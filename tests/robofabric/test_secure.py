@@ -92,7 +92,7 @@ def test_rules_allow_each_user_only_keys_that_name_them():
 
 
 def test_rules_give_each_login_its_own_decode_key_and_the_staff_the_map():
-    """Decode reports go on the writer's own key (a forged reject there named alice's arm, issue 23); a student
+    """Decode reports go on the writer's own key (a forged reject there is known as its writer's, whoever it names); a student
     asks map and plan in her own name only, the staff (instructor, sim, compute) also in the staff's forms."""
     acl = access_control([Identity("alice", "user"), Identity("carol", "instructor"), Identity("sim", "sim"),
                           Identity("compute", "compute"), Identity("viewer", "viewer")])

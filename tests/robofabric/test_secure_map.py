@@ -1,4 +1,4 @@
-"""A student cannot harm the class's map (issue 30), in a ``secure init`` world: router, sim and compute peer as
+"""A student cannot harm the class's map, in a ``secure init`` world: router, sim and compute peer as
 their own processes under their own logins, bob and the instructor carol logged in as themselves, mallory as a
 lying student.
 

@@ -1,4 +1,4 @@
-"""A class of 8 students on one world (issue 21): eight student processes, each owning an arm and a base,
+"""A class of 8 students on one world: eight student processes, each owning an arm and a base,
 drive and move for 15 s through one router and one sim: everyone joins, nothing is lost, no command is
 refused, and every student's arm moves. The figures (move times, pace, CPU) come from ``robofabric bench
 class``; this checks only what must hold at any speed."""

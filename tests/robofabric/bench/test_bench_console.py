@@ -1,4 +1,4 @@
-"""Two browser pages on one console server (issue 33), each a student driving her own base by holding ←: both
+"""Two browser pages on one console server, each a student driving her own base by holding ←: both
 join, nothing is lost, nothing refused, every key press moves its base, and each page reads the age of what it
 shows. The figures (lag, key to motion, the server's CPU) come from ``robofabric bench console``; this checks
 only what must hold at any speed."""

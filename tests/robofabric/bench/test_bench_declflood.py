@@ -1,8 +1,8 @@
-"""A login declaring thousands of subscribers and closing must not cost anyone a robot (issue 23).
+"""A login declaring thousands of subscribers and closing must not cost anyone a robot.
 
-mallory's 6,000 declarations stalled the router 7-8 s when she closed: alice's and bob's leases expired in
-every run. The router cannot be told to bound declarations (zenoh 1.x has no such limit); the authority must
-not expire leases while it cannot hear anyone (issue 21's rule for a paused authority, applied to a stalled
+mallory's 6,000 declarations stall the router 7-8 s when she closes, long enough for alice's and bob's
+leases to expire. The router cannot be told to bound declarations (zenoh 1.x has no such limit); the authority must
+not expire leases while it cannot hear anyone (the rule for a paused authority, applied to a stalled
 router). Real router with ``secure init``'s config, a real sim, mallory in her own process."""
 
 from __future__ import annotations
