@@ -169,7 +169,7 @@ def test_foxglove_export_every_message_parses_against_its_schema_and_matches(rec
     assert grid.column_count == 20 and grid.row_stride == 20 and grid.cell_size.x == pytest.approx(0.05)
     assert np.array_equal(np.frombuffer(grid.data, dtype=np.uint8).reshape(12, 20), g.cells)
     assert (grid.pose.position.x, grid.pose.position.y) == (-1.0, -0.5)
-    (path,) = seen["/base1/path"]
+    (path,) = seen[f"{k}/robot/base1/path"]
     assert [p.position.y for p in path.poses] == pytest.approx(np.sin(np.linspace(0.0, 2.0, 9)).tolist())
     tfs = [t for m in seen["/tf"] for t in m.transforms]
     children = Counter(t.child_frame_id for t in tfs)

@@ -1,7 +1,7 @@
 """``export --to ros2`` read by a decoder we did not write: rosbags (its own CDR codec and ROS 2 Kilted's standard
 message definitions) decodes every message of an exported MCAP, and its values are the fabric's: joint states,
 odometry with the twist in the base's frame, a LIDAR scan with +inf for a missing echo, the sonar's ranges from
-the ring's centre, the map, the path, /tf; the schemas the file carries parse in rosbags' own msg parser."""
+the ring's centre, the map, the path, /tf, /clock (the sim's time); the schemas the file carries parse in rosbags' own msg parser."""
 
 from __future__ import annotations
 
@@ -45,7 +45,7 @@ def test_rosbags_decodes_the_ros2_export_with_the_standard_definitions_and_the_f
         for schema, channel, message in make_reader(f).iter_messages():
             get_types_from_msg(schema.data.decode(), schema.name)  # the file's schema parses in rosbags' parser
             got.setdefault(channel.topic, []).append(store.deserialize_cdr(message.data, schema.name))
-    assert {"/arm1/joint_states", "/base1/odom", "/base1/scan", "/base1/sonar", "/map", "/base1/path", "/tf"} <= set(got)
+    assert {"/arm1/joint_states", "/base1/odom", "/base1/scan", "/base1/sonar", "/map", "/base1/path", "/tf", "/clock"} <= set(got)
     src = {}
     for key, msg in source():
         src.setdefault(key, []).append(msg)
@@ -69,5 +69,7 @@ def test_rosbags_decodes_the_ros2_export_with_the_standard_definitions_and_the_f
     assert grid.info.resolution == pytest.approx(0.1) and grid.header.frame_id == "world"
     (path,) = got["/base1/path"]
     assert [(p.pose.position.x, p.pose.position.y) for p in path.poses] == [(0.0, 0.0), (1.0, 2.0)]
+    clock = [c.clock.sec * 10**9 + c.clock.nanosec for c in got["/clock"]]  # the sim's time, as the bridge's /clock
+    assert clock == [round(0.1 * i * 1e9) for i in range(1, 4)]
     frames = {t.child_frame_id: t.header.frame_id for m in got["/tf"] for t in m.transforms}
     assert frames["base1"] == "world" and frames["base1/lidar"] == "base1" and frames["arm1/joint_1"] == "arm1"

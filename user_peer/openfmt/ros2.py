@@ -11,6 +11,7 @@ OccupancyGrid      ``/map``, ``/maps/NAME``     ``nav_msgs/msg/OccupancyGrid`` (
 Path               ``/ID/path``                 ``nav_msgs/msg/Path``
 an object's Pose   ``/object/ID/pose``          ``geometry_msgs/msg/PoseStamped``
 poses and arm FK   ``/tf``                      ``tf2_msgs/msg/TFMessage``
+robot state        ``/clock``                   ``rosgraph_msgs/msg/Clock`` (the sim's time, when it moves on)
 anything else      ``/KEY``                     ``std_msgs/msg/String`` holding the JSON
 =================  ===========================  ======================================
 
@@ -46,6 +47,7 @@ from user_peer.openfmt.ros2_msgdefs import definition
 __all__ = ["Ros2Writer", "SimStamps", "odometry_fields", "ros2_message", "ros2_topic", "to_body", "sim_time_ns", "ros_topic", "scan_ranges", "sensor_range_min", "sonar_radius", "TF_TOPIC"]
 
 TF_TOPIC = "/tf"
+CLOCK_TOPIC = "/clock"
 _BAD = re.compile(r"[^A-Za-z0-9_/]")
 
 
@@ -259,7 +261,10 @@ class Ros2Writer:
 
     def write(self, key: str, msg: Any, log_time_ns: int, publish_time_ns: int | None = None) -> None:
         pub = int(publish_time_ns if publish_time_ns is not None else log_time_ns)
+        clock = self._stamps.newest
         t = self._stamps(msg)
+        if self._stamps.newest > clock and (key_owner(key) or ("",))[0] == "robot":  # /clock, as the live bridge's
+            self._put(CLOCK_TOPIC, "rosgraph_msgs/msg/Clock", {"clock": _time(self._stamps.newest)}, log_time_ns, pub)
         frames = self.frames.frames(key, msg, t)
         if frames:
             tfs = [

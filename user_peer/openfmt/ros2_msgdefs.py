@@ -1,7 +1,8 @@
 """ROS 2 message definitions (``ros2msg`` text, dependencies appended as rosbag2 writes them).
 
 The definitions are the standard ones of ``std_msgs``, ``geometry_msgs``, ``sensor_msgs``,
-``nav_msgs`` (Odometry) and ``tf2_msgs`` (comments dropped); ``builtin_interfaces/Time`` is built into the
+``nav_msgs`` (Odometry), ``rosgraph_msgs`` (Clock) and ``tf2_msgs`` (comments dropped);
+``builtin_interfaces/Time`` is built into the
 CDR codec.
 """
 
@@ -31,6 +32,7 @@ _BASE: dict[str, str] = {
     "nav_msgs/Path": "std_msgs/Header header\ngeometry_msgs/PoseStamped[] poses\n",
     "tf2_msgs/TFMessage": "geometry_msgs/TransformStamped[] transforms\n",
     "geometry_msgs/Twist": "Vector3 linear\nVector3 angular\n",
+    "rosgraph_msgs/Clock": "builtin_interfaces/Time clock\n",
     "geometry_msgs/PoseWithCovariance": "Pose pose\nfloat64[36] covariance\n",
     "geometry_msgs/TwistWithCovariance": "Twist twist\nfloat64[36] covariance\n",
     "nav_msgs/Odometry": "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist\n",
@@ -45,7 +47,9 @@ _DEPS: dict[str, tuple[str, ...]] = {
     "nav_msgs/Path": ("std_msgs/Header", "geometry_msgs/PoseStamped", "geometry_msgs/Pose", "geometry_msgs/Point", "geometry_msgs/Quaternion"),
     "tf2_msgs/TFMessage": (
         "geometry_msgs/TransformStamped", "std_msgs/Header", "geometry_msgs/Transform", "geometry_msgs/Vector3", "geometry_msgs/Quaternion",
-    ),    "nav_msgs/Odometry": (
+    ),
+    "rosgraph_msgs/Clock": (),
+    "nav_msgs/Odometry": (
         "std_msgs/Header", "geometry_msgs/PoseWithCovariance", "geometry_msgs/Pose", "geometry_msgs/Point", "geometry_msgs/Quaternion",
         "geometry_msgs/TwistWithCovariance", "geometry_msgs/Twist", "geometry_msgs/Vector3",
     ),
