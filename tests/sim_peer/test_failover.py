@@ -1,4 +1,4 @@
-"""Replicated authority over real processes (issue 16): a primary sim, a standby, users.
+"""Replicated authority over real processes: a primary sim, a standby, users.
 
 SIGKILL the primary while alice's arm moves and bob's base follows a path: the standby takes over
 with a higher term, from the last state (no reset), owners keep their robots and epochs,

@@ -72,7 +72,7 @@ def _kept(to: str = "sim-b", move: str = "m1", term: int = 2, fetched: bool = Fa
 
 
 def test_a_source_gives_a_robot_only_to_the_sim_of_the_move_that_handed_it_out():
-    """Steal, clone, phantom (issue 30): a target gets a robot only from what its source kept for it."""
+    """Steal, clone, phantom: a target gets a robot only from what its source kept for it."""
     assert ho.fetch_refusal(_kept(), "base2", "sim-b", 2, "m1") == ""
     assert "no robot base2 was handed out" in ho.fetch_refusal(None, "base2", "sim-b", 2, "m1")
     assert "to sim sim-b, not to sim sim-c" in ho.fetch_refusal(_kept(), "base2", "sim-c", 2, "m1")

@@ -1,5 +1,5 @@
-"""Moves are the staff's, and a move_in serves only what its source handed out (issue 30, "srv/state obeys any
-login"): a `secure init` class world behind a real router, two sims as shards (sim-a: base0 of alice and base2;
+"""Moves are the staff's, and a move_in serves only what its source handed out (srv/state answers
+no student): a `secure init` class world behind a real router, two sims as shards (sim-a: base0 of alice and base2;
 sim-b: base1 of bob), each with its own sim login, an instructor (carol) and a lying student (mallory).
 
 mallory tries what the issue did: `own move` with her login, and by hand on srv/state (every login may ask it)
@@ -131,7 +131,7 @@ def _unchanged(c: Class) -> None:
 
 def _forged(c: Class, fab: Fabric, kind: str, rid: str, to: str, *, source_state: RobotState | None = None, rtype: str = "reeman",
             owner: str = "", pose=(0.0, 0.0, 0.0, 0.0), term: int = 100) -> Event:
-    """The old protocol's hand-made step: a handoff in the query (what the tool carried before issue 30)."""
+    """The old protocol's hand-made step: a handoff carried in the query, which no sim accepts any more."""
     state = source_state or RobotState(rid, "mobile", np.array([pose[0], pose[1], pose[3]]), np.zeros(2), np.zeros(2))
     real = {r.object: r for ws in _states(fab, c.world) for r in ws.records}
     record = replace(real[rid], owner=owner or real[rid].owner, epoch=real[rid].epoch + 1) if rid in real else None

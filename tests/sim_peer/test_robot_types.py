@@ -1,5 +1,5 @@
-"""Robot types another peer names are installed names, never paths (issue 30: a move_in whose type was a path to
-a student's own robot.toml ran her hooks inside the sim). ``robots.installed`` looks a NAME up in the operator's
+"""Robot types another peer names are installed names, never paths (a move_in naming a path to
+a student's own robot.toml would run her hooks inside the sim). ``robots.installed`` looks a NAME up in the operator's
 folders (ROBOFABRIC_ROBOTS_PATH, the ``robofabric.robots`` entry points, the robots package); the registry imports a
 hooks file only from inside its robot's folder. The operator's own command line keeps paths (``robots.load``)."""
 

@@ -1,5 +1,5 @@
 """A second sim on a world another live sim serves is refused with one line (exit 2), instead of the two
-elections making one of them step down while its robots vanish without a word (issue 26's first report):
+elections making one of them step down while its robots vanish without a word:
 a robot id already served, or another scene. A sim of disjoint robots joins as a shard (test_shards.py)."""
 
 from __future__ import annotations
