@@ -84,7 +84,7 @@ def test_own_request_hold_renews_until_interrupted_then_releases(world, router, 
 
 
 def test_own_watch_skips_and_counts_garbage_bad_tokens_and_foreign_records(world, router, connect, procs):
-    """Issue 24: what any login may put on ownership keys or the liveliness space never crashes `own watch`."""
+    """What any login may put on ownership keys or the liveliness space never crashes `own watch`."""
     from fabric import keys
     from fabric.interfaces import OwnershipRecord
     from fabric.testing import wait_until

@@ -427,8 +427,8 @@ def _records(s: st.OwnState) -> dict:
 
 
 def test_a_token_lost_while_the_authority_is_deaf_is_held_and_nothing_changes_when_it_returns():
-    """Issue 30: a router stalled by 20,000 declarations (or paused 8 s) cut its clients' links: bob's token
-    went as it came back, and his base was released, then restored (epoch 5 -> 7). His token lost while
+    """A router stalled by 20,000 declarations (or paused 8 s) cuts its clients' links, and bob's token goes as it
+    comes back; his base is neither released nor restored (no epoch 5 -> 7). His token lost while
     nobody was heard (alice's renewals overdue too) holds him: no record changes, his lease does not run
     out while he reconnects, and his token's return changes nothing."""
     s = _owned_by_a()  # a owns arm, b owns base

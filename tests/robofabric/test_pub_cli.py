@@ -64,8 +64,8 @@ def test_pub_exit_codes_applied_refused_and_bad_keys(sim_world, world, connect):
 
 
 def test_pub_refuses_an_unknown_robot_a_wrong_type_and_bad_fields_in_words(sim_world, world):
-    """Issue 32: ``pub`` to base9 said "applied" and exited 0 while the sim logged unknown_robot; a Twist went
-    out on a JointState key; bad data showed ``Twist.__init__() missing 1 required positional argument``."""
+    """``pub`` to an unknown robot, a Twist on a JointState key and bad data are refused in words with exit 2: never
+    "applied" while the sim logs unknown_robot, never ``Twist.__init__() missing 1 required positional argument``."""
     ep = sim_world
     twist = ("-t", "Twist", "-d", '{"v": 0.2, "omega": 0}')
     wait_until(lambda: _pub(world, ep, "robot/base1/cmd/twist", *twist, "--user", "alice").returncode == 1, timeout=30,

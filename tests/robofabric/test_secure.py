@@ -202,7 +202,7 @@ def test_up_takes_the_launchers_login_from_the_command_line(tmp_path):
 
 
 def test_only_the_instructor_and_sim_logins_may_ask_for_a_move_each_in_its_own_name():
-    """Issue 30: srv/state obeyed any login's move. Moves are asked on srv/move/{sim}/by/{login}; the router lets
+    """No student asks for a move: moves are asked on srv/move/{sim}/by/{login}; the router lets
     the instructor and the sims ask there in their own names, nobody else, and only sims serve it."""
     acl = access_control([Identity("alice", "user"), Identity("carol", "instructor"), Identity("sim-a", "sim"),
                           Identity("compute", "compute"), Identity("viewer", "viewer")])

@@ -415,9 +415,9 @@ def secure_compute(secure):
 
 
 def test_forged_events_on_every_key_mallory_may_write_change_nothing(secure, alice_owns_arm):
-    """Issue 23: mallory put Event(reject, arm1, alice) on event/decode/* at 5 Hz and every move_joints(wait=True)
-    of alice raised NotOwner, bob's drive stopped. Now decode reports go on each writer's own key, clients act only
-    on events from the object's authority on keys only sims write: her forgeries are display-only."""
+    """mallory's Event(reject, arm1, alice) at 10 Hz on every event key she may write changes nothing: decode
+    reports go on each writer's own key, clients act only on events from the object's authority on keys only sims
+    write, so her forgeries are display-only; alice's moves and bob's drive go on."""
     import user_peer
     from fabric.interfaces import EventKind
 
@@ -452,10 +452,10 @@ def test_forged_events_on_every_key_mallory_may_write_change_nothing(secure, ali
         threading.Thread(target=flood, name="mallory-flood", daemon=True).start()
         forgery = lambda world: any("owned by mallory" in e.reason for e in list(world.events))  # noqa: E731
         wait_until(lambda: forgery(alice) and forgery(bob), timeout=20, what="her forgeries reaching alice and bob")
-        for i in range(6):  # issue: 17 of 17 raised NotOwner
+        for i in range(6):  # each would raise NotOwner had she believed a forgery
             arm.move_joints([0.1 + 0.05 * (i % 2)] * 6, timeout=30)
         start = base.xy_theta
-        end = base.drive(0.3, 0.0, 2.0)  # issue: raised 17 times and the base stopped
+        end = base.drive(0.3, 0.0, 2.0)  # a believed forgery would stop the base
         assert math.hypot(end[0] - start[0], end[1] - start[1]) > 0.2, (start, end)
         assert arm.record.owner == "alice" and base.record.owner == "bob"
         seen = [e for e in alice.events if e.kind == EventKind.REJECT and e.object == "arm1" and e.user == "alice"]
@@ -473,9 +473,9 @@ def test_forged_events_on_every_key_mallory_may_write_change_nothing(secure, ali
 
 
 def test_mallory_may_not_change_the_class_map_nor_plan_for_bobs_robot(secure, secure_compute):
-    """Issue 23: her map set published an all-occupied grid, reset wiped 22,703 scans, stop turned mapping off,
-    and her plan for base1 went out on robot/base1/path. Now asked in her name they are refused with the reason
-    (the plan: hers is in the reply only); the staff's forms do not even reach the compute from her login."""
+    """mallory's map set (an all-occupied grid), reset (wiping the class's scans), stop (mapping off) and her
+    plan for base1 (on robot/base1/path), asked in her name, are refused with the reason (the plan: hers is in the
+    reply only); the staff's forms do not even reach the compute from her login."""
     import user_peer
     from fabric.interfaces import MapReply, MapRequest, Path, PlanReply, PlanRequest
     from user_peer import services

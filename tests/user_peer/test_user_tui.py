@@ -124,7 +124,7 @@ async def _world_gone(auth, alice, arm, base, cmds):
 
 
 def test_an_event_its_authority_did_not_send_is_marked_display_only():
-    """Issue 23: a 'reject' any login may write (event/decode/by/*) is shown, but as her say-so."""
+    """A 'reject' any login may write (event/decode/by/*) is shown, but as its writer's say-so."""
     from fabric.interfaces import Event
     from user_peer.tui import event_line
 
@@ -134,7 +134,7 @@ def test_an_event_its_authority_did_not_send_is_marked_display_only():
 
 
 def test_names_and_events_from_the_network_are_shown_as_text_and_garbage_is_skipped(setup, world, connect):
-    """Issue 24: an owner named like markup, an event whose reason is markup with an escape sequence, garbage on an
+    """An owner named like markup, an event whose reason is markup with an escape sequence, garbage on an
     ownership key and a token that names no peer: the UI shows the text as it is, skips the garbage, keeps running."""
     asyncio.run(_hostile(*setup, world, connect))
 
@@ -165,7 +165,7 @@ async def _hostile(auth, alice, arm, base, cmds, world, connect):
 
 @pytest.mark.slow
 def test_queue_for_an_owned_robot_shows_the_place_then_owns_it(live):
-    """Issue 31: "queue for it" on a robot someone else moves, against a real sim: the place is shown, and the
+    """"Queue for it" on a robot someone else moves, against a real sim: the place is shown, and the
     controls come alive when bob lets go (a still robot would be taken over at once instead)."""
     world, port, _ = live
     with World(client_config(world, port), "bob", timeout=10.0) as bob, World(client_config(world, port), "alice", timeout=10.0) as alice:

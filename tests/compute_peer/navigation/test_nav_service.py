@@ -306,9 +306,9 @@ def test_a_user_asking_in_her_name_may_not_change_the_map_nor_publish_a_plan_for
 
 
 def test_a_users_build_makes_her_own_map_checked_and_capped(peers):
-    """Issue 30: mallory's build with threshold 0.001 on srv/map/map/by/mallory republished the class's map with every
-    seen cell occupied (every plan failed), and builds under 1,400 new names grew the compute peer for good. Now a
-    build in her name makes ``mallory.{name}``, its threshold is range-checked, and her new names are capped."""
+    """A build in mallory's name (srv/map/map/by/mallory) makes ``mallory.{name}``, never the class's map (a threshold
+    of 0.001 would make every seen cell occupied and every plan fail); its threshold is range-checked, and her new
+    names are capped (1,400 of them would grow the compute peer for good)."""
     nav, sim, user = peers
     world = user.world
     class_maps: list[OccupancyGrid] = []
