@@ -4,8 +4,8 @@
 liveliness token ``rf/{world}/peer/{kind}/{id}``, encodes and stamps what it
 publishes, and decodes what it receives. A malformed payload never reaches a
 callback: it is counted, logged and published as an event under
-``rf/{world}/event/decode/{peer}`` at most once per subscription per
-:attr:`Fabric.report_interval` (with the count of what was suppressed, quoting at
+``rf/{world}/event/decode/{peer}`` a few times per subscription per
+:data:`fabric.reports.REPORT_INTERVAL` (with the count of what was suppressed, quoting at
 most ~200 characters of what the client sent), and the peer goes on. Nothing a
 client makes up (keys, payloads) grows a peer's memory: publishers and sequence
 counters are kept for at most :data:`MAX_KEYS` keys.
@@ -13,7 +13,8 @@ counters are kept for at most :data:`MAX_KEYS` keys.
 A session's parts with a job of their own live in modules of their own, and the session holds one of
 each: ``fabric.rpc`` (services: serve, query, call; :mod:`fabric.rpc`), ``fabric.stamp`` (the term it
 stamps, its muzzle and freeze watch; :mod:`fabric.authority_stamp`), ``fabric.seqs`` (per-key sequence
-numbers; :mod:`fabric.sequences`) and the fence over what it believes (:mod:`fabric.fence_watch`).
+numbers; :mod:`fabric.sequences`), ``fabric.reports`` (events and reports of bad input, rate-limited;
+:mod:`fabric.reports`) and the fence over what it believes (:mod:`fabric.fence_watch`).
 """
 
 from __future__ import annotations
@@ -35,9 +36,9 @@ from fabric.exit import at_exit
 from fabric.fence_watch import FenceWatch
 from fabric.fencing import SimFence
 from fabric.history import LatestThenLive
-from fabric.interfaces import Event, EventKind, Header
-from fabric.limits import RateLimiter, clip
+from fabric.interfaces import Header
 from fabric.publishers import declare_publisher
+from fabric.reports import Reports
 from fabric.rpc import Rpc
 from fabric.sequences import Sequences
 
@@ -45,10 +46,6 @@ log = logging.getLogger("robofabric")
 
 MAX_KEYS = 1024
 """Publishers and per-key sequence numbers kept per session; keys beyond are published uncached."""
-REPORT_INTERVAL = 5.0
-REPORT_BURST = 5
-"""Reports (log line + event) of bad input per subscription or reason per :data:`REPORT_INTERVAL` seconds;
-the rest are counted and the next report says how many were suppressed."""
 
 __all__ = ["Fabric", "shutdown_event", "undeclare_all"]
 
@@ -83,8 +80,6 @@ class Fabric:
         self.seqs = Sequences(MAX_KEYS)
         """The next sequence number per key this session published on (:mod:`fabric.sequences`)."""
         self._lock = threading.Lock()
-        self.report_interval = REPORT_INTERVAL
-        self._limiter = RateLimiter(REPORT_INTERVAL, burst=REPORT_BURST, max_keys=256)
         self._closed = False
         self._resources: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
@@ -93,6 +88,10 @@ class Fabric:
         self.rpc = Rpc(self.session, counters=self.counters, stamp=self.stamp, header=self.header,
                        believe=self._fence_watch.believe, resources=self._resources)
         """Services: ``rpc.serve``, ``rpc.query``, ``rpc.call`` (:mod:`fabric.rpc`)."""
+        self.reports = Reports(self.world, counters=self.counters, publish=self.publish, header=self.header,
+                               reporter=config.identity() or self.peer_id)
+        """Events and reports of bad input, rate-limited: ``reports.emit``, ``reports.bad_payload``,
+        ``reports.should_report`` (:mod:`fabric.reports`)."""
         self.token = (
             self.session.liveliness().declare_token(keys.peer(self.world, kind, self.peer_id)) if token else None
         )
@@ -205,54 +204,6 @@ class Fabric:
         """Put bytes as they are (replay, tools); nothing is checked."""
         self.session.put(key, payload)
 
-    def should_report(self, key: str) -> int | None:
-        """Rate limit for reports about ``key`` (a fixed reason, never client text): ``None`` to stay
-        quiet, else the number of reports suppressed since the last one."""
-        with self._lock:
-            verdict = self._limiter.check(key, time.monotonic())
-        if not verdict.report:
-            self.counters["reports_suppressed"] += 1
-            return None
-        return verdict.suppressed
-
-    def emit(self, event: Event, *parts: str, limit: str | None = None) -> None:
-        """Publish an event on ``rf/{world}/event/{parts...}`` and log it.
-
-        ``limit``: a key (never client text) under which this kind of event is published and logged
-        at most once per :attr:`report_interval`; the next one says how many were suppressed."""
-        if limit is not None:
-            suppressed = self.should_report(limit)
-            if suppressed is None:
-                return
-            if suppressed:
-                event = Event(kind=event.kind, reason=event.reason, object=event.object, user=event.user,
-                              severity=event.severity, data={**event.data, "suppressed": suppressed}, header=event.header)
-        level = {"debug": logging.DEBUG, "info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
-        more = f" ({event.data['suppressed']} more like it suppressed)" if event.data.get("suppressed") else ""
-        log.log(level.get(event.severity, logging.INFO), "%s %s: %s%s", event.kind, event.object or "", event.reason, more)
-        try:
-            self.publish(keys.event(self.world, *(parts or (event.kind,))), event)
-        except Exception as exc:  # a closing session must not turn an event into a crash
-            log.debug("could not publish event: %s", exc)
-
-    # ------------------------------------------------------------------ receiving
-
-    def bad_payload(self, key: str, exc: Exception, *, where: str) -> None:
-        """Count a payload that could not be used; report it at most a few times per ``where`` per interval.
-
-        ``where`` is what the peer subscribed to (a fixed key expression), never the concrete key: a
-        flood on made-up keys under one wildcard is a few reports per interval, not one per key. The
-        check comes first: a suppressed report costs a counter and a lock, nothing is built for it."""
-        self.counters["decode_errors"] += 1
-        suppressed = self.should_report(f"decode:{where}")
-        if suppressed is None:
-            return
-        data = {"key": clip(key), "subscription": clip(where)}
-        if suppressed:
-            data["suppressed"] = suppressed
-        self.emit(Event(kind=EventKind.DECODE_ERROR, reason=clip(str(exc)), severity="warning", data=data, header=self.header("event")),
-                  keys.DECODE, keys.BY, self.config.identity() or self.peer_id)  # event/decode/by/{login}: its own key
-
     def subscribe(
         self,
         key_expr: str,
@@ -277,7 +228,7 @@ class Fabric:
             try:
                 msg = decode(sample.payload.to_bytes(), expected)
             except DecodeError as exc:
-                self.bad_payload(key, exc, where=key_expr)
+                self.reports.bad_payload(key, exc, where=key_expr)
                 return
             if not self._fence_watch.believe(key, msg):
                 return
@@ -310,15 +261,19 @@ class Fabric:
     def live_peers(self, kind: str = "*", *, timeout: float = 1.0) -> list[tuple[str, str]]:
         """(kind, id) of every live peer in this world, from liveliness tokens."""
         out = []
-        for rep in self.session.liveliness().get(keys.peers_all(self.world, kind), timeout=timeout):
-            if rep.ok is not None:
-                try:
-                    p = keys.parse(str(rep.ok.key_expr))
-                except ValueError:  # a token any login may declare that names no peer: not one of ours
-                    self.counters["bad_tokens"] += 1
-                    continue
-                out.append((p.subject, p.leaf))
+        for key in self.live_tokens(keys.peers_all(self.world, kind), timeout=timeout):
+            try:
+                p = keys.parse(key)
+            except ValueError:  # a token any login may declare that names no peer: not one of ours
+                self.counters["bad_tokens"] += 1
+                continue
+            out.append((p.subject, p.leaf))
         return sorted(set(out))
+
+    def live_tokens(self, key_expr: str, *, timeout: float = 1.0) -> list[str]:
+        """The keys of the liveliness tokens alive under ``key_expr`` now, as declared, parsed or not (a launcher
+        waiting for a peer's token, an audit listing made-up ones)."""
+        return [str(rep.ok.key_expr) for rep in self.session.liveliness().get(key_expr, timeout=timeout) if rep.ok is not None]
 
     def watch_peers(self, callback: Callable[[str, str, bool], None], kind: str = "*") -> zenoh.Subscriber:
         """``callback(kind, id, alive)`` on every token that appears or goes (existing ones first)."""

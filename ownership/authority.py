@@ -169,7 +169,7 @@ class Authority:
 
     def _emit(self, event: Event, *, limit: str | None = None) -> None:
         try:
-            self.fabric.emit(event, "own", event.object, limit=limit)
+            self.fabric.reports.emit(event, "own", event.object, limit=limit)
         except Exception:
             log.debug("emit failed", exc_info=True)
 
@@ -195,7 +195,7 @@ class Authority:
                 if known:
                     self._unconfirmed.add(peer_id)
                     self._confirm_by = None
-            if known and self.fabric.should_report("own:link_lost") is not None:
+            if known and self.fabric.reports.should_report("own:link_lost") is not None:
                 log.warning("user tokens went while this authority was paused or cut off (%s first); owners keep their "
                             "robots until a lease passes, with the link up, without their token", peer_id)
             return
@@ -209,7 +209,7 @@ class Authority:
         """Log (rate-limited) a token loss the state machine held: the authority could not tell it from its own deafness."""
         with self._lock:
             held = user in self._state.held
-        if held and self.fabric.should_report("own:held") is not None:
+        if held and self.fabric.reports.should_report("own:held") is not None:
             log.warning("the token of user %s went while this authority heard no one (a stalled router?): she keeps what "
                         "she owns and her queue places until it is back, or for %.0f s without it", quote(user, MAX_USER_LEN),
                         self._state.grace_s)
@@ -293,7 +293,7 @@ class Authority:
             outcome = "denied"
         if outcome == "denied":
             self.counters["denied"] = self.counters.get("denied", 0) + 1
-            if self.fabric.should_report(f"own_denied:{obj}") is not None:
+            if self.fabric.reports.should_report(f"own_denied:{obj}") is not None:
                 log.info("%s of %s by %s denied: %s", request.op, obj, user, eff.reason)
         rec = self._serve_record(obj)  # stamped now, with this authority's term
         return OwnReply(outcome, eff.reason, eff.position, rec, header=self.fabric.header(keys.own(self.fabric.world, obj)))

@@ -99,15 +99,12 @@ def _peer_of(token_key: str, world: str) -> Peer | None:
     return Peer(p.subject, p.leaf)
 
 
-def live_tokens(session: Any, world: str, *, timeout: float = 1.0) -> tuple[list[Peer], list[str]]:
-    """(peers, bad token keys) of ``world`` from its liveliness tokens; malformed tokens go to ``bad``."""
+def live_tokens(fab: Any, *, timeout: float = 1.0) -> tuple[list[Peer], list[str]]:
+    """(peers, bad token keys) of ``fab``'s world from its liveliness tokens; malformed tokens go to ``bad``."""
     peers: set[Peer] = set()
     bad: set[str] = set()
-    for rep in session.liveliness().get(keys.peers_all(world), timeout=timeout):
-        if rep.ok is None:
-            continue
-        k = str(rep.ok.key_expr)
-        p = _peer_of(k, world)
+    for k in fab.live_tokens(keys.peers_all(fab.world), timeout=timeout):
+        p = _peer_of(k, fab.world)
         if p is None:
             bad.add(k)
         else:
@@ -154,7 +151,10 @@ class Declarations:
 
 
 def read_declarations(session: Any, world: str, *, timeout: float = 1.0) -> Declarations:
-    """The subscribers, queryables and tokens on ``world``'s keys, from every reachable router's admin space."""
+    """The subscribers, queryables and tokens on ``world``'s keys, from every reachable router's admin space.
+
+    ``session`` is a raw zenoh session (a Fabric's ``session``, or shell completion's bare one): the admin space
+    (``@/...``) and the zenoh ids it answers with are zenoh's own, below anything the Fabric encodes."""
     root = keys.world_root(world)
     try:
         own = str(session.info.zid())  # this reader's own declarations are not the world's

@@ -80,7 +80,7 @@ def list_keys(
     cfg = make_config(world, connect, listen, profile, zenoh_config)
     expr = _resolve(keyexpr, cfg.world) if keyexpr else keys.world_all(cfg.world)
     with open_fabric(cfg, "tool", peer_id) as fab:
-        decl = read_declarations(fab.session, cfg.world)
+        decl = read_declarations(fab.session, cfg.world)  # zenoh's admin space: the raw session
         stats = [] if services else observe(fab, expr, duration)
     if services:
         rows = [
@@ -138,11 +138,13 @@ def key_info(
     from robofabric.declarations import read_declarations, service_types
 
     with open_fabric(cfg, "tool", peer_id) as fab:
-        decl = read_declarations(fab.session, cfg.world)
+        decl = read_declarations(fab.session, cfg.world)  # zenoh's admin space: the raw session
         stats = observe(fab, full, duration)
         subscribed = None
         if "*" not in full and "$" not in full:
             try:
+                # a plain publisher of its own, undeclared at once: the Fabric's publisher of a latched key (an
+                # advanced publisher) has no matching status to ask
                 pub = fab.session.declare_publisher(full)
                 time.sleep(0.2)  # let the routing tables tell the new publisher about subscribers
                 subscribed = bool(pub.matching_status.matching)

@@ -70,7 +70,7 @@ class _Watch:
 
     def is_ready(self, expr: str) -> bool:
         try:
-            return any(r.ok is not None for r in self.fab.session.liveliness().get(expr, timeout=0.5))
+            return bool(self.fab.live_tokens(expr, timeout=0.5))
         except Exception:
             return False
 

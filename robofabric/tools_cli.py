@@ -114,12 +114,12 @@ def ps(
     decl = None
     published: dict[str, list[str]] = {}
     with _open("tool", world, connect, listen, profile, zenoh_config, peer_id) as fab:
-        found, bad = live_tokens(fab.session, fab.world, timeout=timeout)
+        found, bad = live_tokens(fab, timeout=timeout)
         peers = [(p.kind, p.id) for p in found if p.id != fab.peer_id]
         if verbose:
             from robofabric.introspect_cli import observe
 
-            decl = read_declarations(fab.session, fab.world, timeout=timeout)
+            decl = read_declarations(fab.session, fab.world, timeout=timeout)  # zenoh's admin space: the raw session
             for s in observe(fab, keys.world_all(fab.world), duration):
                 for src in s.publishers:
                     published.setdefault(src, []).append(s.key)
@@ -365,11 +365,7 @@ def pub(
 
             fab.subscribe(keys.event(fab.world, "reject", parsed.subject), on_event, expected=Event)
             fab.subscribe(keys.event(fab.world, "reject"), on_event, expected=Event)  # ids the sim has not
-        publisher = fab.session.declare_publisher(full)  # routes to existing subscribers before the first put
-        deadline = time.monotonic() + 0.5
-        while not publisher.matching_status.matching and time.monotonic() < deadline:
-            time.sleep(0.02)
-        heard = bool(publisher.matching_status.matching)
+        heard = fab.wait_matching(full, 0.5)  # the publisher routes to existing subscribers before the first put
         sent = 0
 
         def tick(_now: float) -> None:
@@ -391,7 +387,6 @@ def pub(
                 time.sleep(0.02)
         else:
             time.sleep(0.2)
-        publisher.undeclare()
     if refusals:
         print(f"refused: {refusals[0]} ({sent} {msg_type} sent on {full})", file=sys.stderr)
         raise typer.Exit(1)

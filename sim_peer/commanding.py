@@ -101,7 +101,7 @@ class CommandPipeline:
         try:
             cmd = decode(sample.payload.to_bytes(), Command)
         except DecodeError as exc:
-            self.fabric.bad_payload(key, exc, where=keys.robot_cmd_all(self.fabric.world, rid))
+            self.fabric.reports.bad_payload(key, exc, where=keys.robot_cmd_all(self.fabric.world, rid))
             return
         admitted = self._admit(key, cmd)
         if admitted is None:

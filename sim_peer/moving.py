@@ -75,7 +75,7 @@ class MoveService:
         ev = Event(kind=EventKind.MOVE_REFUSED, reason=clip(reason, 400), object=clip(str(robot), 64), user=clip(asker, 64),
                    severity="warning", data={"step": kind}, header=f.header("event"))
         if h.role == el.PRIMARY:
-            f.emit(ev, "move", limit=f"move_refused:{kind}")  # kind: a fixed word, never client text
+            f.reports.emit(ev, "move", limit=f"move_refused:{kind}")  # kind: a fixed word, never client text
         else:
             log.warning("move refused (%s, by %s): %s", kind, asker or "?", clip(reason, 400))
         return ServiceError(reason)

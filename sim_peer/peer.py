@@ -25,7 +25,7 @@ of her pending commands in the robot's queue before anyone hears of the new owne
 new owner's first command; a base brakes within its limits, an arm holds where it is (``SimRobot.halt``), and
 a robot that was moving says why as ``Event(kind=EventKind.OWNER_STOP)`` (docs/ownership.md).
 Refusals and bad payloads are reported at most a few times per reason per interval
-(:meth:`fabric.session.Fabric.emit` with ``limit``), with the count of the rest (:mod:`sim_peer.reporting`).
+(:meth:`fabric.reports.Reports.emit` with ``limit``), with the count of the rest (:mod:`sim_peer.reporting`).
 Clamped commands are applied and reported as ``Event(kind=EventKind.CLAMP)``. A command kind a robot's
 ``commands()`` does not list is refused with reason ``unsupported``. What robots and sensors note while
 stepping (a path followed to its end, a bumper stop) goes out as events. Scene objects move on

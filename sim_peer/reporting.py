@@ -1,7 +1,7 @@
 """What a sim tells the world: events on ``event/{kind}/{robot}``, and refusals counted and reported.
 
 Refusals and bad payloads are reported at most a few times per reason per interval
-(:meth:`fabric.session.Fabric.should_report`), with the count of the rest; the counters and rate-limit keys are
+(:meth:`fabric.reports.Reports.should_report`), with the count of the rest; the counters and rate-limit keys are
 fixed words, never client text, so made-up users or ids cannot grow them.
 """
 
@@ -32,10 +32,10 @@ class Reporter:
               limit: str | None = None) -> None:
         """Publish an event on ``event/{kind}/{robot}`` (``event/{kind}`` for ids this sim does not have).
 
-        ``limit``: a rate-limit key of fixed words (fabric.session.Fabric.should_report), checked before
+        ``limit``: a rate-limit key of fixed words (fabric.reports.Reports.should_report), checked before
         anything is built, so a flood of refusals costs a counter each."""
         if limit is not None:
-            suppressed = self.fabric.should_report(limit)
+            suppressed = self.fabric.reports.should_report(limit)
             if suppressed is None:
                 return
             if suppressed:
@@ -45,7 +45,7 @@ class Reporter:
             kind=kind, reason=reason, object=robot, user=user, severity=severity, data=data or {},
             header=self.fabric.header("event", stamp=self.world.time),
         )
-        self.fabric.emit(ev, *key_parts)
+        self.fabric.reports.emit(ev, *key_parts)
 
     def reject(self, robot: str, command: str, reason: str | Callable[[], str], detail: str | Callable[[], str], user: str = "",
                *, code: str | None = None) -> None:
@@ -56,7 +56,7 @@ class Reporter:
         self.counters["rejected"] += 1
         self.counters[f"rejected:{code}"] += 1
         known = self._known(robot)
-        suppressed = self.fabric.should_report(f"reject:{robot if known else '?'}:{code}")
+        suppressed = self.fabric.reports.should_report(f"reject:{robot if known else '?'}:{code}")
         if suppressed is None:
             return
         # code: which check refused it ("refused": the ownership gate), so a client tells NotOwner from a bad command

@@ -375,7 +375,7 @@ class KinematicsService:
             self.counters["streamed"] += 1
         else:
             self.counters["stream_unreachable"] += 1
-            self.fabric.emit(
+            self.fabric.reports.emit(
                 Event(kind=EventKind.IK_UNREACHABLE, reason=step.reason, object=robot, severity="warning", header=self.fabric.header("event")),
                 "compute", robot,
             )

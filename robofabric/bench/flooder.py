@@ -20,7 +20,7 @@ def flood(world: str, port: int, load: dict) -> dict:
     sent: dict[str, int] = {}
     t0 = time.monotonic()
     with client(world, port, kind="tool", peer_id=f"flooder{os.getpid()}") as fab:
-        s = fab.session
+        s = fab.session  # raw on purpose: a flooder's junk is bytes no Fabric would encode, on keys it would not cache
         root = keys.world_root(world)
         cmd = encode(Command("mallory", 1, JointTarget(np.zeros(6))))
         for i in range(load["unique_commands"]):

@@ -110,7 +110,7 @@ def _child_pub(a: argparse.Namespace) -> None:
         from fabric.session import Fabric
 
         fab = Fabric(FabricConfig(world="bench", connect=(a.endpoint,)), kind="tool", peer_id="bench-pub")
-        pub = fab.session.declare_publisher(KEY, congestion_control=zenoh.CongestionControl.BLOCK)
+        pub = fab.session.declare_publisher(KEY, congestion_control=zenoh.CongestionControl.BLOCK)  # raw: zenoh's own path is what is measured (payload bytes as given, no Fabric encode or stamp)
         deadline = time.monotonic() + 10.0
         while time.monotonic() < deadline and not pub.matching_status.matching:
             time.sleep(0.02)

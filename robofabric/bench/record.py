@@ -49,10 +49,10 @@ def _cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "robofabric.cli", *args]
 
 
-def _wait_token(session, expr: str, timeout: float) -> None:
+def _wait_token(fab, expr: str, timeout: float) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        if any(r.ok is not None for r in session.liveliness().get(expr, timeout=0.5)):
+        if fab.live_tokens(expr, timeout=0.5):
             return
         time.sleep(0.05)
     raise RuntimeError(f"no live token on {expr} after {timeout:.0f} s")
@@ -72,7 +72,7 @@ def _throughput(router, ep: str, tmp: Path, scale: float, robots: int, duration:
     out = tmp / f"rec-{tag}.mcap"
     rec = _start_recorder(out, WORLD, ep, tmp / f"rec-{tag}.log")
     try:
-        _wait_token(router.session, f"rf/{WORLD}/peer/recorder/rec-{out.stem}", 30)
+        _wait_token(router, f"rf/{WORLD}/peer/recorder/rec-{out.stem}", 30)
         pub = subprocess.Popen(
             [sys.executable, "-m", "robofabric.bench.record", "pub", "--endpoint", ep, "--world", WORLD,
              "--robots", str(robots), "--scale", str(scale), "--duration", str(duration), "--precompute", str(precompute)],
@@ -128,7 +128,7 @@ def _replay_timing(router, ep: str, tmp: Path, source: Path, duration: float) ->
     out = tmp / "replayed.mcap"
     rec = _start_recorder(out, target, ep, tmp / "replayed.log")
     try:
-        _wait_token(router.session, f"rf/{target}/peer/recorder/rec-{out.stem}", 30)
+        _wait_token(router, f"rf/{target}/peer/recorder/rec-{out.stem}", 30)
         plan = plan_replay(source, end=duration, remap_world=target)
         rp = Replayer(router, plan, wait_for_subscribers=5.0)
         try:
@@ -257,6 +257,7 @@ def _child_pub(a: argparse.Namespace) -> None:
 
     streams = robot_streams(a.world, a.robots, scale=a.scale, precompute=a.precompute)
     with Fabric(FabricConfig(world=a.world, connect=(a.endpoint,)), kind="sim", peer_id="bench-world") as fab:
+        # raw publishers: the load is pre-encoded bytes put as fast as the recorder under test can take them
         pubs = {s.key: fab.session.declare_publisher(s.key, congestion_control=zenoh.CongestionControl.BLOCK) for s in streams}
         deadline = time.monotonic() + 20
         while not all(p.matching_status.matching for p in pubs.values()):

@@ -76,7 +76,7 @@ def _child_pub(a: argparse.Namespace) -> None:
         from fabric.session import Fabric
 
         fab = Fabric(FabricConfig(world="bench", connect=(a.endpoint,), config_file=a.zenoh_config), kind="tool", peer_id="bench-pub")
-        pub = fab.session.declare_publisher(KEY, congestion_control=zenoh.CongestionControl.BLOCK)
+        pub = fab.session.declare_publisher(KEY, congestion_control=zenoh.CongestionControl.BLOCK)  # raw: zenoh's own path is what is measured (payload bytes as given, no Fabric encode or stamp)
         time.sleep(0.5)  # route establishment before the first sample; the subscriber is already up
         sent = _pace(a.rate, a.count, a.duration, pub.put)
         time.sleep(0.3)

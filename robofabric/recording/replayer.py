@@ -211,6 +211,8 @@ class Replayer:
         if callable(target) and not isinstance(target, zenoh.Session):
             self._publish: Publish = target
         else:
+            # the raw session, not Fabric.publish: recorded bytes go out as they were (never decoded nor re-stamped),
+            # on express publishers of its own, one per recorded key however many (a Fabric caches 1024)
             self._session = getattr(target, "session", target)
             self._publish = self._zenoh_put
         self._stop = threading.Event()

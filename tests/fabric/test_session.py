@@ -134,7 +134,7 @@ def test_sessions_cap_message_size_and_an_oversized_message_is_dropped_not_the_l
 
 
 def test_a_flood_of_bad_payloads_is_counted_in_full_and_reported_a_few_times(world, connect):
-    from fabric.session import REPORT_BURST
+    from fabric.reports import REPORT_BURST
 
     sender, receiver = connect("tool", "junk"), connect("user", "carol")
     events = []

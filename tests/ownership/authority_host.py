@@ -29,7 +29,7 @@ def main() -> None:
         def on_cmd(key: str, cmd: Command) -> None:
             reason = auth.admit("arm", cmd)
             kind = "reject" if reason else "accept"
-            fab.emit(Event(kind=kind, reason=reason or "", object="arm", user=cmd.user, header=fab.header("ev")), kind, "arm")
+            fab.reports.emit(Event(kind=kind, reason=reason or "", object="arm", user=cmd.user, header=fab.header("ev")), kind, "arm")
 
         fab.subscribe(keys.robot_cmd_all(world, "arm"), on_cmd, expected=Command)
         print("ready", flush=True)

@@ -48,7 +48,7 @@ def test_a_request_naming_someone_else_is_refused(host, connect, world):
 
 def test_a_burst_of_refusals_writes_a_bounded_log(host, connect, world, caplog):
     """30 refused requests on a key naming a 20 KB user: a few short log lines, not 600 KB."""
-    from fabric.session import REPORT_BURST
+    from fabric.reports import REPORT_BURST
 
     mallory = connect("user", "mallory")
     key = f"{keys.own(world, 'arm')}/by/{'m' * 20_000}"
