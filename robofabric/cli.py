@@ -19,8 +19,10 @@ import logging
 import os
 import sys
 from importlib.metadata import entry_points
+from typing import Any
 
 import typer
+from typer.core import TyperGroup
 
 from robofabric.clash import fabric_clash
 
@@ -35,8 +37,47 @@ else:
 
 GROUP = "robofabric.commands"
 
+
+class _RootGroup(TyperGroup):
+    """The root command group: flags and counters show no type in help.
+
+    typer 0.29's help prints a type after every option, ``<bool>`` after plain flags (``--help``,
+    ``--json``) and ``<int>`` after counters (``-v``), which read as if they took a value. An empty
+    ``metavar`` is click's own way to show none (typer prints an option's metavar in place of its
+    type); the root sets it on the flags of each command it hands out, its own included, so every
+    plugin's commands look the same without each option saying so. Every other option keeps its type,
+    and parsing does not read a flag's metavar."""
+
+    def get_params(self, ctx: Any) -> list[Any]:
+        return _untyped_flags(super().get_params(ctx))
+
+    def get_command(self, ctx: Any, cmd_name: str) -> Any:
+        cmd = super().get_command(ctx, cmd_name)
+        if cmd is not None:
+            _untype_tree(cmd, ctx)
+        return cmd
+
+
+def _untyped_flags(params: list[Any]) -> list[Any]:
+    for p in params:
+        flag = getattr(p, "is_flag", False) or getattr(p, "count", False)  # typer's options are no click.Option
+        if p.param_type_name == "option" and flag and p.metavar is None:
+            p.metavar = ""
+    return params
+
+
+def _untype_tree(cmd: Any, ctx: Any) -> None:
+    """The flags of ``cmd`` and of every command under it (``own list``'s as well as ``own``'s), ``--help``
+    included (each command makes its help option once, on first ask)."""
+    help_option = cmd.get_help_option(ctx)
+    _untyped_flags([*cmd.params, *([help_option] if help_option is not None else [])])
+    for sub in getattr(cmd, "commands", {}).values():  # a group (typer's click: no click.Group)
+        _untype_tree(sub, ctx)
+
+
 app = typer.Typer(
     name="robofabric",
+    cls=_RootGroup,
     help="Multi-user robot simulation fabric over Zenoh: run routers and peers, inspect live keys, record and replay.\n\n" + EXIT_RULE,
     no_args_is_help=True,
     pretty_exceptions_enable=False,
@@ -44,26 +85,6 @@ app = typer.Typer(
 )
 
 _broken: list[tuple[str, str]] = []
-
-
-def _flags_show_no_type() -> None:
-    """typer 0.29's help prints a type after every option, ``<bool>`` after plain flags (``--help <bool>``,
-    ``--json <bool>``) and ``<int>`` after counters (``-v``), which read as if they took a value: those show
-    none. Every other option keeps its type."""
-    from typer.core import TyperOption
-
-    shown = TyperOption.display_type_rich
-    if getattr(shown, "_robofabric", False):
-        return
-
-    def display_type_rich(self: TyperOption, ctx):  # type: ignore[no-untyped-def]
-        return None if self.is_flag or self.count else shown(self, ctx)
-
-    display_type_rich._robofabric = True  # type: ignore[attr-defined]
-    TyperOption.display_type_rich = display_type_rich  # type: ignore[method-assign]
-
-
-_flags_show_no_type()
 
 
 def _resolve_annotations(typer_app: typer.Typer) -> None:

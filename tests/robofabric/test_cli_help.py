@@ -55,3 +55,24 @@ def test_no_help_shows_markup_or_source_line_breaks():
     # the paragraph reflows at 80 columns: its source line breaks (after "so" and "renews") are gone
     assert "Without --hold this command exits at once, so the lease" in " ".join(text.split())
     assert not any(line.rstrip().endswith("so") for line in text.splitlines()), text
+
+
+def _option_line(text: str, option: str) -> str:
+    (line,) = [ln for ln in text.splitlines() if f" {option} " in ln and ln.lstrip("│ *").startswith(option)]
+    return line
+
+
+@pytest.mark.parametrize(("path", "flags", "valued"), [
+    ((), {"--verbose": "<int>", "--version": "<bool>", "--help": "<bool>"}, {}),
+    (("echo",), {"--json": "<bool>", "--help": "<bool>"}, {"--count": "<int>", "--world": "<str>"}),
+    (("own", "list"), {"--json": "<bool>", "--help": "<bool>"}, {"--world": "<str>"}),  # a command of a sub-group
+])
+def test_help_shows_no_type_after_a_flag_or_counter_and_the_type_of_every_valued_option(path, flags, valued, capsys, monkeypatch):
+    """``--json <bool>`` would read as if it took a value; ``--count <int>`` does take one."""
+    monkeypatch.setenv("COLUMNS", "120")
+    assert cli.main([*path, "--help"]) == 0
+    text = capsys.readouterr().out
+    for option, type_text in flags.items():
+        assert type_text not in _option_line(text, option), (option, text)
+    for option, type_text in valued.items():
+        assert type_text in _option_line(text, option), (option, text)
