@@ -137,6 +137,7 @@ def command(
     robots: Annotated[str, typer.Option("--robots", help="Comma-separated robot counts (mobile bases with LIDAR).")] = "8",
     seconds: Annotated[float, typer.Option("--seconds", help="Measured window per count.")] = 20.0,
     out: Annotated[Optional[Path], typer.Option("--out", help="Append the markdown table to this file.")] = None,
+    convert: Annotated[bool, typer.Option("--convert", help="Only the Python cost of one message (decode, build, publish) in this process.")] = False,
 ) -> None:
     """N mobile robots at full rate through the ROS 2 bridge (robofabric ros2) to a plain rclpy node: the latency
     the bridge adds to zenoh's delivery (p50, p99), the messages lost on the way, and the bridge's CPU."""
@@ -147,6 +148,14 @@ def command(
         from user_peer.ros2.cli import MISSING_RCLPY
 
         raise UserError(MISSING_RCLPY) from None
+    if convert:
+        from robofabric.bench.ros2_convert import measure, table
+
+        text = "\n".join([f"`robofabric bench ros2 --convert` on {machine()}, load {os.getloadavg()[0]:.1f}", "",
+                           *table(measure())]) + "\n"
+        print(text)
+        append(out, text)
+        return
     counts = [int(x) for x in robots.split(",") if x.strip()]
     if not counts or min(counts) < 1 or seconds <= SETTLE_S + TAIL_S:
         raise typer.BadParameter(f"--robots needs counts >= 1 and --seconds more than {SETTLE_S + TAIL_S:g}")

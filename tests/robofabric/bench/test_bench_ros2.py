@@ -20,3 +20,12 @@ def test_bench_ros2_matches_the_bridges_messages_to_zenohs(tmp_path):
         assert math.isfinite(s["p50"]) and math.isfinite(s["p99"]), (stream, s)
     assert r["cores"] > 0 and "messages published" in r["summary"], r
     assert len(row(r)) == len(STREAMS)
+
+
+def test_bench_ros2_convert_gives_each_streams_python_cost_per_message():
+    from robofabric.bench.ros2_convert import measure, table
+
+    rows = measure(50)
+    assert [r[0] for r in rows] == ["scan", "pose (odom)", "joints"]
+    assert all(math.isfinite(v) and v > 0 for r in rows for v in r[1:]), rows
+    assert len(table(rows)) == 2 + len(rows)
