@@ -162,6 +162,11 @@ class Fabric:
             self._resources.append(pub)
         return pub
 
+    @property
+    def published_keys(self) -> tuple[str, ...]:
+        """The keys this session holds a publisher for (at most :data:`MAX_KEYS`; nothing a client sends adds one)."""
+        return tuple(self._publishers.copy())  # copy(): atomic, while a publishing thread may add one
+
     def wait_matching(self, key: str, timeout: float) -> bool:
         """Wait up to ``timeout`` s until a subscriber of ``key`` is known to this session; returns whether one is.
 
