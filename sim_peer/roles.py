@@ -21,10 +21,18 @@ from sim_peer import election as el
 if TYPE_CHECKING:
     from sim_peer.replica_host import ReplicaHost
 
-__all__ = ["Roles", "MAX_GONE"]
+__all__ = ["Roles", "MAX_GONE", "DEAF_WAIT_S"]
 
 MAX_GONE = 256
 """How many departed sims' times are remembered (made-up sim tokens must not grow the record)."""
+RECHECK_LEASES = 3
+"""Leases a sim whose link came back waits for the others' tokens before the election looks: after a router's
+restart every client reconnects on its own schedule (seconds apart), the leader's token among them."""
+OWN_TOKEN_S = 10.0
+"""How long our own token's absence, with the link up, still counts as deafness (its return is the usual end)."""
+DEAF_WAIT_S = 0.2
+"""How long after a sim's token went the election looks: when this sim is the one cut off, its own token and its
+link go at about the same moment as the others' tokens, in either order."""
 
 
 class Roles:
@@ -37,6 +45,8 @@ class Roles:
         self.gone_at: dict[str, float] = {}  # sim id -> when its token went (monotonic): was it there when we froze?
         self.settled = False  # the first complete view of the live sims is in (join)
         self.stepped_down = threading.Event()
+        self.own_gone_at = float("-inf")  # when the router last dropped our own token (monotonic)
+        self.rechecking = False  # a look at the live sims is due once this sim's own link is back (deaf_recheck)
         self.taking_over: threading.Thread | None = None
 
     @property
@@ -96,9 +106,74 @@ class Roles:
         if alive or not settled:
             return  # a token appearing (or the history repeating one) never starts a take-over; nor does
             # one going before the first view is settled (join() steps on the whole view then)
+        if peer_id == h.fabric.peer_id:
+            with h.lock:
+                self.own_gone_at = time.monotonic()
+        if peer_id == h.fabric.peer_id or self.deaf():
+            self.deaf_recheck()
+            return
+        # our own token and link go with everyone's when we are the one cut off, in either order: a moment first
+        threading.Thread(target=self.decide_after_loss, name="sim-token-gone", daemon=True).start()
+
+    def deaf(self) -> bool:
+        """Whether this sim hears no one now: its link is down, or the router no longer holds its own token."""
+        h = self.host
+        with h.lock:
+            # our own token missing counts for OWN_TOKEN_S at most: a link that is up hears the router again
+            mine = h.fabric.peer_id in self.live or time.monotonic() - self.own_gone_at > OWN_TOKEN_S
+        return not mine or not h.fabric.connected()
+
+    def decide_after_loss(self) -> None:
+        """A sim's token went: after :data:`DEAF_WAIT_S`, the election looks at the live sims, unless this sim turned
+        out to be the deaf one (then it waits for its link: :meth:`deaf_recheck`)."""
+        h = self.host
+        time.sleep(DEAF_WAIT_S)
+        if h.stopping.is_set():
+            return
+        if self.deaf():
+            self.deaf_recheck()
+            return
+        with h.lock:
+            live = frozenset(self.live)
         self.step(el.Peers(h.shards.view(live)))
         if self.role == el.PRIMARY:
             h.adoption.soon()  # it may have been the scene objects' authority
+
+    def deaf_recheck(self) -> None:
+        """Our own link went (this sim cut off, the router restarted, this process paused past the lease): every sim's
+        token went with it, and none of them need have gone. A standby that took the world over then would serve it
+        from a state that stops at the cut, and its higher term would step down the primary that served everyone
+        meanwhile (the soak saw epochs go back). So: once the link and our own token are back, and
+        :data:`RECHECK_LEASES` leases (and half a second) have passed for the live sims' tokens to come back too, the election looks at the sims then alive:
+        a leader whose token did not come back is gone."""
+        h = self.host
+        with h.lock:
+            if self.rechecking:
+                return
+            self.rechecking = True
+
+        def recheck() -> None:
+            try:
+                while not h.stopping.is_set() and self.deaf():
+                    time.sleep(0.05)
+                back = time.monotonic() + RECHECK_LEASES * h.fabric.config.lease_ms / 1000.0 + 0.5
+                while not h.stopping.is_set() and time.monotonic() < back:
+                    time.sleep(0.05)
+            finally:
+                with h.lock:
+                    self.rechecking = False
+            if h.stopping.is_set():
+                return
+            with h.lock:
+                live = frozenset(self.live)
+            if self.deaf():
+                self.deaf_recheck()  # cut off again meanwhile
+                return
+            self.step(el.Peers(h.shards.view(live)))
+            if self.role == el.PRIMARY:
+                h.adoption.soon()
+
+        threading.Thread(target=recheck, name="sim-deaf-recheck", daemon=True).start()
 
     def gone_since(self, began: float) -> set[str]:
         """The sims alive now or gone since ``began`` (monotonic; call with the lock held)."""
