@@ -87,7 +87,7 @@ app = typer.Typer(
 _broken: list[tuple[str, str]] = []
 
 
-def _resolve_annotations(typer_app: typer.Typer) -> None:
+def resolve_annotations(typer_app: typer.Typer) -> None:
     """Evaluate each command's string annotations (``from __future__ import annotations``) once.
 
     typer reads a command's signature with ``inspect.signature(eval_str=True)`` and ``get_type_hints``,
@@ -146,7 +146,7 @@ def _plain_help(typer_app: typer.Typer) -> None:
             info.help = plain_doc(text)
 
 
-def _defer_rich_extras() -> None:
+def defer_rich_extras() -> None:
     """Import ``typer.rich_utils`` without ``rich.markdown`` (markdown-it) and ``rich.traceback`` (pygments).
 
     typer imports both at the top of its help renderer, for markdown help text and pretty tracebacks,
@@ -188,7 +188,9 @@ def _defer_rich_extras() -> None:
                 del sys.modules[module]
 
 
-def _load_plugins() -> None:
+def load_plugins() -> None:
+    """Add every installed package's commands (entry points of ``robofabric.commands``) to :data:`app`; a plug-in
+    that fails to load is named in a warning at each run, never fatal."""
     for ep in sorted(entry_points(group=GROUP), key=lambda e: e.name):
         try:
             register = ep.load()
@@ -234,12 +236,12 @@ def main(argv: list[str] | None = None) -> int:
         if not warning:
             print("hint: is another package named 'fabric' on the path? (`pip show fabric`)", file=sys.stderr)
         return 2
-    _load_plugins()
-    _resolve_annotations(app)
+    load_plugins()
+    resolve_annotations(app)
     _plain_help(app)
     args = sys.argv[1:] if argv is None else argv
     if not args or "--help" in args or "-h" in args:
-        _defer_rich_extras()
+        defer_rich_extras()
     try:
         app(args=argv, prog_name="robofabric", standalone_mode=True)
     except (UserError, ConfigError) as exc:

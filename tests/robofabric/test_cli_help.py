@@ -14,7 +14,7 @@ from fabric.testing import robofabric_cmd
 
 
 def _paths() -> list[tuple[str, ...]]:
-    cli._load_plugins()
+    cli.load_plugins()
     root = typer.main.get_command(cli.app)
     out: list[tuple[str, ...]] = []
 

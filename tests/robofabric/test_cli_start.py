@@ -18,10 +18,10 @@ def _py(code: str) -> subprocess.CompletedProcess:
 _HELP = """
 import sys
 import robofabric.cli as fc
-fc._load_plugins()
+fc.load_plugins()
 if {fast}:
-    fc._resolve_annotations(fc.app)
-    fc._defer_rich_extras()
+    fc.resolve_annotations(fc.app)
+    fc.defer_rich_extras()
 try:
     fc.app(args={args!r}, prog_name="robofabric")
 except SystemExit:
@@ -42,7 +42,7 @@ def test_help_is_the_same_with_annotations_resolved_and_rich_extras_deferred(arg
 def test_deferred_classes_are_the_real_ones_on_first_use():
     out = _py(
         "import sys, robofabric.cli as fc\n"
-        "fc._defer_rich_extras()\n"
+        "fc.defer_rich_extras()\n"
         "import typer.rich_utils as r\n"
         "assert 'rich.markdown' not in sys.modules\n"
         "import rich.markdown, rich.traceback\n"
