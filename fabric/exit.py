@@ -8,9 +8,13 @@ therefore never exits: the interpreter joins those threads forever.
 
 :func:`at_exit` registers a closer that runs first, in the order a stack
 unwinds (newest first, so a user's world releases its robots before its
-session closes). It uses ``threading._register_atexit``, the hook
-``concurrent.futures`` relies on for the same reason (CPython 3.9+); where it
-is missing, plain ``atexit`` is the fallback.
+session closes). The first registration starts one idle non-daemon thread that
+waits for the main thread to finish (``threading.main_thread().join()``):
+Python marks the main thread finished before it joins the other non-daemon
+threads, so the waiter wakes then and closes what is open, after which those
+threads end and the interpreter can join them. Only public ``threading`` calls;
+when the main thread has already finished (a registration during shutdown),
+plain ``atexit`` is the fallback.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ import atexit
 import inspect
 import itertools
 import logging
+import os
 import threading
 import weakref
 from typing import Callable
@@ -50,14 +55,28 @@ def _install() -> None:
     global _installed
     if _installed:
         return
-    register = getattr(threading, "_register_atexit", None)
     try:
-        if register is None:
-            raise RuntimeError("no threading._register_atexit")
-        register(_run_closers)
-    except RuntimeError:  # missing, or the interpreter is already shutting down
+        if not threading.main_thread().is_alive():
+            raise RuntimeError("the main thread has finished")
+        threading.Thread(target=_after_main, name="robofabric-at-exit", daemon=False).start()
+    except RuntimeError:  # the interpreter is already shutting down: no new thread, nothing left to wait for
         atexit.register(_run_closers)
     _installed = True
+
+
+def _after_main() -> None:
+    """Wait for the main thread to finish, then close: it runs before Python joins the other threads."""
+    threading.main_thread().join()
+    _run_closers()
+
+
+def _forked() -> None:
+    """A forked child has none of its parent's threads: its next registration starts its own waiter."""
+    global _installed
+    _installed = False
+
+
+os.register_at_fork(after_in_child=_forked)
 
 
 def at_exit(fn: Callable[[], None]) -> Callable[[], None]:

@@ -59,3 +59,23 @@ def test_a_bound_method_is_held_weakly():
     assert alive() is None  # registering its close() did not keep it alive
     cancel()
     assert Thing.closed == 0
+
+
+@pytest.mark.slow
+def test_a_forked_child_closes_what_is_registered_in_it_before_its_threads_are_joined():
+    out = _run("""
+        import os, threading
+        from fabric.exit import at_exit
+        at_exit(lambda: print("inherited", flush=True))
+        pid = os.fork()
+        if pid == 0:
+            stop = threading.Event()
+            threading.Thread(target=stop.wait, args=(20,)).start()  # non-daemon: only a closer ends it at once (20 s at most:
+            # a child that closed nothing still ends by itself, and then has not printed its line)
+            at_exit(lambda: (print("child's own", flush=True), stop.set()))
+            raise SystemExit(0)
+        _, status = os.waitpid(pid, 0)
+        print("child exited", os.waitstatus_to_exitcode(status), flush=True)
+    """)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.splitlines() == ["child's own", "inherited", "child exited 0", "inherited"], (out.stdout, out.stderr)
