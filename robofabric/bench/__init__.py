@@ -91,8 +91,9 @@ BENCHMARKS: tuple[Benchmark, ...] = (
               full=("--runs", "5"), quick=("--runs", "1"), needs="netns"),
     Benchmark("console", "console", "N browser pages on one console server, each driving its base: view lag in the page, key to motion, server CPU",
               full=("--pages", "1,10,20", "--seconds", "30"), quick=("--pages", "2", "--seconds", "5")),
-    Benchmark("paper", "paper", "the paper's data-usage tables side by side: zenoh and MQTT at 10-600 Hz, payload and wire bytes, MB/min",
-              full=("--rates", "10,20,50,100,200,600"), quick=("--quick",)),
+    Benchmark("paper", "paper", "the paper's evaluation side by side: data usage (zenoh and MQTT at 10-600 Hz, payload and wire bytes, "
+              "MB/min), resources per application (Table 4), and 5 students' delay on robots they do not own",
+              full=("--rates", "10,20,50,100,200,600", "--resources", "--multi-user"), quick=("--quick",)),
     Benchmark("ros2", "ros2", "N mobile robots through the ROS 2 bridge to an rclpy node: added latency, loss, bridge CPU",
               full=("--robots", "8", "--seconds", "20"), quick=("--robots", "1", "--seconds", "6")),
     Benchmark("soak", "soak", "a class in the lab for M minutes under a seeded nemesis, then the checker: faults by kind, violations, peers' memory",

@@ -17,8 +17,11 @@ Payloads:
 - ``rf-240``: robofabric's own 240-ray :class:`~fabric.interfaces.Scan` (uint16 millimetres), as the sim sends.
 - ``arm-joints``: the Meca500's :class:`~fabric.interfaces.JointState` (6 names, q, dq, header).
 
-``--resources`` adds the paper's Table 4 for robofabric (:mod:`robofabric.bench.paper_resources`); the 5-user
-test is not measured yet (issue 37).
+``--resources`` adds the paper's Table 4 for robofabric (:mod:`robofabric.bench.paper_resources`), and
+``--multi-user`` its 5-user test for ``--minutes`` (:mod:`robofabric.bench.paper_multi`): each student's delay
+on the robots she does not own. ``--no-data-usage`` leaves the data-usage tables out, so the sections of one
+full run can be taken apart. The ``--json`` document: ``data_usage``, ``resources``, ``multi_user`` (each when
+run), ``paper`` (the published figures), ``machine`` and the load average at its start and end.
 """
 
 from __future__ import annotations
@@ -202,12 +205,12 @@ def _child_sub(a: argparse.Namespace) -> None:
 
 
 def _start_broker(transport: str, tmpdir: str) -> tuple[subprocess.Popen, int]:
-    from fabric.testing import free_port
+    from fabric.testing import free_port, robofabric_cmd
     from robofabric.bench.transport import _wait_listening
 
     port = free_port()
     if transport == "zenoh":
-        argv = [sys.executable, "-m", "robofabric.cli", "router", "--listen", f"tcp/127.0.0.1:{port}", "--world", "bench"]
+        argv = robofabric_cmd("router", "--listen", f"tcp/127.0.0.1:{port}", "--world", "bench")
     else:
         exe = shutil.which("mosquitto") or shutil.which("/usr/sbin/mosquitto")
         if exe is None:
@@ -358,20 +361,25 @@ def _parse_list(text: str, option: str, conv: Callable[[str], object], allowed: 
 
 
 def command(
-    quick: Annotated[bool, typer.Option("--quick", help="2 s per rate, 0.5 s windows (a smoke run); the full run is 60 s per rate, 1 s windows.")] = False,
+    quick: Annotated[bool, typer.Option("--quick", help="2 s per rate, 0.5 s windows, a 1-minute multi-user test (a smoke run); the full run is 60 s per rate, 1 s windows, 10 minutes.")] = False,
     rates: Annotated[str, typer.Option(help="Comma-separated rates in Hz.")] = ",".join(map(str, RATES)),
     payloads: Annotated[str, typer.Option(help=f"Comma-separated payloads: {', '.join(PAYLOADS)}.")] = ",".join(PAYLOADS),
     transports: Annotated[str, typer.Option(help="Comma-separated: zenoh, mqtt.")] = "zenoh,mqtt",
     duration: Annotated[Optional[float], typer.Option(help="Seconds per rate (default 60, or 2 with --quick).")] = None,
     window: Annotated[Optional[float], typer.Option(help="Seconds per MB/min sample (default 1, or 0.5 with --quick).")] = None,
-    as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"data_usage": [...], "paper": {...}, "machine": ...}.')] = False,
+    as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"data_usage", "resources", "multi_user" (each when run), "paper", "machine", "load_average"}.')] = False,
     out: Annotated[Optional[Path], typer.Option(help="Append the markdown tables to this file.")] = None,
     plot: Annotated[Optional[Path], typer.Option(help="Also draw MB/min against rate beside the paper's (SVG/PNG; needs matplotlib).")] = None,
+    data_usage: Annotated[bool, typer.Option("--data-usage/--no-data-usage", help="The data-usage tables (Tables 2-3).")] = True,
     resources: Annotated[bool, typer.Option("--resources/--no-resources", help="Also Table 4: CPU and RSS of router, sim, compute, viewer, console and the users while Test A and Test B run (about 2 min).")] = False,
+    multi_user: Annotated[bool, typer.Option("--multi-user/--no-multi-user", help="Also the paper's multi-user test: --students processes, each owning an arm and a base, for --minutes; the delay of the poses of robots each does not own.")] = False,
+    minutes: Annotated[Optional[float], typer.Option(help="Minutes of the multi-user test (default 10, or 1 with --quick).")] = None,
+    students: Annotated[int, typer.Option(help="Students in the multi-user test (the paper's: 5).")] = 5,
 ) -> None:
-    """The paper's data-usage tables side by side: zenoh and MQTT at 10-600 Hz, the paper's 135-ray JSON scan,
-    robofabric's 240-ray scan and the arm's joints; payload, stream and wire bytes per message (a counting TCP
-    proxy on the publisher's link), MB per minute (max, avg, min) and GB per hour, beside Tables 2-3."""
+    """The paper's evaluation side by side: data usage (zenoh and MQTT at 10-600 Hz, the paper's 135-ray JSON
+    scan, robofabric's 240-ray scan and the arm's joints; payload, stream and wire bytes per message from a
+    counting TCP proxy, MB per minute max/avg/min and GB per hour, beside Tables 2-3), with --resources Table 4
+    (CPU and RSS per application) and with --multi-user its 5-user test (delay on robots a user does not own)."""
     from fabric.cli_common import UserError
     from robofabric.bench.paper_figures import PAPER
 
@@ -380,16 +388,18 @@ def command(
     transport_list = _parse_list(transports, "--transports", str, ("zenoh", "mqtt"))
     duration = duration if duration is not None else (2.0 if quick else 60.0)
     window = window if window is not None else (0.5 if quick else 1.0)
+    minutes = minutes if minutes is not None else (1.0 if quick else 10.0)
     if any(r <= 0 for r in rate_list) or duration <= 0 or window <= 0 or window > duration:
         raise UserError("--rates and --duration must be positive, and --window positive and at most --duration")
-    rows = run_bench(transport_list, rate_list, payload_list, duration, window)
-    doc = {"machine": machine(), "duration_s": duration, "window_s": window, "data_usage": rows, "paper": PAPER}
-    if resources:
-        from robofabric.bench.paper_resources import measure_resources
-
-        res = measure_resources()
-        doc["resources"] = res["rows"]
-        doc["resources_run"] = {k: v for k, v in res.items() if k != "rows"}
+    if minutes <= 0 or students < 2:
+        raise UserError(f"--minutes must be positive and --students at least 2 (got {minutes:g} and {students})")
+    if not (data_usage or resources or multi_user):
+        raise UserError("nothing to run: --no-data-usage needs --resources or --multi-user")
+    if plot is not None and not data_usage:
+        raise UserError("--plot draws the data-usage tables: it needs --data-usage")
+    doc = _run_sections((transport_list, rate_list, payload_list, duration, window) if data_usage else None, resources,
+                        (minutes, students) if multi_user else None)
+    doc["paper"] = PAPER
     if plot is not None:
         from robofabric.bench.paper_plot import plot as draw
 
@@ -397,11 +407,46 @@ def command(
     if as_json:
         print(json.dumps(doc))
         return
-    table = format_table(rows)
-    if "resources" in doc:
-        table += "\n\n" + format_resources(doc["resources"])
+    table = _format_doc(doc)
     print(table)
     append(out, table)
+
+
+def _run_sections(data: tuple | None, resources: bool, multi: tuple | None) -> dict:
+    """The sections asked for, one after the other (never two at once: each would load the other's figures)."""
+    import os
+
+    doc: dict = {"machine": machine(), "load_average": {"start": round(os.getloadavg()[0], 1)}}
+    if data is not None:
+        transports, rates, payloads, duration, window = data
+        doc.update(duration_s=duration, window_s=window, data_usage=run_bench(transports, rates, payloads, duration, window))
+    if resources:
+        from robofabric.bench.paper_resources import measure_resources
+
+        res = measure_resources()
+        doc["resources"] = res["rows"]
+        doc["resources_run"] = {k: v for k, v in res.items() if k != "rows"}
+    if multi is not None:
+        from robofabric.bench.paper_multi import measure_multi_user
+
+        minutes, students = multi
+        doc["multi_user"] = measure_multi_user(minutes, students)
+    doc["load_average"]["end"] = round(os.getloadavg()[0], 1)
+    return doc
+
+
+def _format_doc(doc: dict) -> str:
+    parts = []
+    if "data_usage" in doc:
+        parts.append(format_table(doc["data_usage"]))
+    if "resources" in doc:
+        parts.append(format_resources(doc["resources"]))
+    if "multi_user" in doc:
+        from robofabric.bench.paper_multi import format_multi_user
+
+        parts.append(format_multi_user(doc["multi_user"]))
+    parts.append(f"Machine: {doc['machine']}; load average {doc['load_average']['start']} at the start, {doc['load_average']['end']} at the end")
+    return "\n\n".join(parts)
 
 
 def _main() -> None:

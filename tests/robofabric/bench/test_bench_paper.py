@@ -119,24 +119,39 @@ def test_a_quick_run_gives_one_consistent_document(tmp_path):
 
 
 @pytest.mark.slow
-def test_table_4_samples_every_application_while_both_users_run():
-    """``--resources``: one launch (router, sim, compute, viewer, console, alice's Test A, bob's Test B) that ends
-    by itself once both users finished; every application sampled, min <= max (figures go to docs)."""
-    from robofabric.bench.paper_resources import PEERS, measure_resources
+def test_one_run_through_the_cli_gives_every_section_of_the_document():
+    """``--resources --multi-user``: data usage, Table 4 from one launch (router, sim, compute, viewer, console,
+    alice's Test A, bob's Test B) that ends by itself once both users finished, and the multi-user test, in one
+    ``--json`` document beside the paper's figures; every application sampled, every student measured, and every
+    process of both worlds ended."""
+    from robofabric.bench.paper_resources import PEERS
 
-    res = measure_resources(cap_s=400)
-    assert res["up_exit"] == 0, res["up_log_tail"]  # both scenarios succeeded
-    assert [r["peer"] for r in res["rows"]] == list(PEERS)
-    for r in res["rows"]:
+    out = subprocess.run(
+        [sys.executable, "-m", "robofabric", "bench", "paper", "--quick", "--json", "--rates", "50", "--payloads", "arm-joints",
+         "--transports", "zenoh", "--duration", "1", "--resources", "--multi-user", "--minutes", "0.25", "--students", "2"],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    doc = json.loads(out.stdout)
+    assert set(doc) >= {"data_usage", "resources", "multi_user", "paper", "machine", "load_average"}
+    assert [(r["transport"], r["rate_hz"], r["payload"]) for r in doc["data_usage"]] == [("zenoh", 50, "arm-joints")]
+    assert doc["resources_run"]["up_exit"] == 0, doc["resources_run"]["up_log_tail"]  # both scenarios succeeded
+    assert [r["peer"] for r in doc["resources"]] == list(PEERS)
+    for r in doc["resources"]:
         assert r["samples"] >= 1, r
         assert 0.0 <= r["cpu_min"] <= r["cpu_max"] and 0.0 < r["rss_min_mb"] <= r["rss_max_mb"], r
+    multi = doc["multi_user"]
+    assert multi["students"] == 2 and [s["student"] for s in multi["per_student"]] == ["s0", "s1"]
+    assert set(multi["per_student"][0]["received"]) == {"arm1", "base1"} and multi["per_student"][0]["messages"] > 0
+    assert 0 < multi["delay_ms_p50"] <= multi["delay_ms_p99"] and multi["paper_reported"] == PAPER["multi_user"]
+    assert doc["paper"]["multi_user"]["delay_ms"] == 100.0
     from fabric.testing import wait_until as wait
 
-    wait(lambda: not any(_name_alive(p) for p in ("scenario", "--save")), timeout=30, what="the launch's peers to end")
+    wait(lambda: not any(_name_alive(p) for p in ("scenario", "--save", "student")), timeout=30, what="both worlds' peers to end")
 
 
 def _name_alive(word: str) -> bool:
-    """A process of a bench-paper launch (its world is paper + 6 hex digits) whose command line holds ``word``."""
+    """A process of a bench-paper world (paper or multi + 6 hex digits) whose command line holds ``word``."""
     import os
     import re
 
@@ -146,7 +161,7 @@ def _name_alive(word: str) -> bool:
                 cmd = open(f"/proc/{d}/cmdline", "rb").read().decode(errors="replace").split("\0")
             except OSError:
                 continue
-            if word in cmd and any(re.fullmatch(r"paper[0-9a-f]{6}", c) for c in cmd):
+            if word in cmd and any(re.fullmatch(r"(paper|multi)[0-9a-f]{6}", c) for c in cmd):
                 return True
     return False
 
@@ -156,6 +171,9 @@ def _name_alive(word: str) -> bool:
     (["--payloads", "scan"], "paper-135, rf-240, arm-joints"),
     (["--transports", "dds"], "zenoh, mqtt"),
     (["--duration", "1", "--window", "5"], "at most --duration"),
+    (["--no-data-usage"], "nothing to run"),
+    (["--multi-user", "--students", "1"], "--students at least 2"),
+    (["--no-data-usage", "--multi-user", "--plot", "x.svg"], "needs --data-usage"),
 ])
 def test_bad_options_are_refused_with_what_is_expected(args, says):
     out = subprocess.run([sys.executable, "-m", "robofabric", "bench", "paper", *args], capture_output=True, text=True, timeout=120)
