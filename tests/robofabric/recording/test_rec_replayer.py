@@ -1,5 +1,7 @@
 """Replay planning and scheduling, on a fake clock: what goes out, on which key, exactly when."""
 
+import threading
+
 import pytest
 
 from fabric.rate import FakeClock
@@ -22,15 +24,14 @@ def rec(tmp_path):
 def _play(plan, *, loop=False, passes=None):
     clock = FakeClock(100.0)
     sent = []
-    rp = None
+    stop = threading.Event()
 
     def publish(key, payload):
         sent.append((clock.now(), key, payload))
-        if passes is not None and rp is not None and len(sent) >= passes:
-            rp._stop.set()
+        if passes is not None and len(sent) >= passes:
+            stop.set()
 
-    rp = Replayer(publish, plan, loop=loop, clock=clock)
-    stats = rp.run()
+    stats = Replayer(publish, plan, loop=loop, clock=clock).run(stop)
     return sent, stats
 
 
