@@ -111,12 +111,12 @@ class OwnershipClient:
         self._heard_from: set[str] = set()
         self._ready = False  # a new sim's token triggers a refresh only after the first one below
         self._refreshing = self._refresh_again = False
-        fabric.watch_peers(self._on_sim, kind="sim")
+        fabric.watch_peers(self.sim_seen, kind="sim")
         try:
             self._sims.update(pid for _, pid in fabric.live_peers("sim", timeout=min(timeout, 1.0)))
         except Exception:
             pass  # the watch fills it in
-        fabric.subscribe(keys.own_all(fabric.world), self._on_record, expected=OwnershipRecord)
+        fabric.subscribe(keys.own_all(fabric.world), self.record_seen, expected=OwnershipRecord)
         self.refresh()
         with self._lock:
             self._ready = True
@@ -139,7 +139,8 @@ class OwnershipClient:
 
     # ------------------------------------------------------------------ replica
 
-    def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
+    def sim_seen(self, kind: str, peer_id: str, alive: bool) -> None:
+        """A sim's liveliness token came or went (the watch's callback): which sims may be an object's authority."""
         with self._lock:
             new = alive and peer_id not in self._sims
             if alive:
@@ -186,7 +187,7 @@ class OwnershipClient:
         try:
             for rep in self.fabric.rpc.query(keys.own_all(self.fabric.world), timeout=self.timeout,
                                          expected=OwnershipRecord, all_replies=True):
-                self._on_record(rep.key, rep.message)
+                self.record_seen(rep.key, rep.message)
         except ServiceError:
             pass  # no authority yet: the subscription fills the replica when one appears
 
@@ -213,7 +214,9 @@ class OwnershipClient:
             return "stale" if rec.epoch < (old.epoch if old else 0) else "implausible"
         return None
 
-    def _on_record(self, key: str, rec: OwnershipRecord) -> None:
+    def record_seen(self, key: str, rec: OwnershipRecord) -> None:
+        """A record as it arrives (the subscription's callback, or a query's reply): kept if it is its object's authority's
+        word (a live sim, a term not below the one believed, a plausible epoch), counted and left out otherwise."""
         now = self._clock()
         with self._lock:
             why = self._refusal(rec, now)
@@ -276,7 +279,7 @@ class OwnershipClient:
             if known and obj not in known and time.monotonic() - t0 < 0.5 * limit:  # ended at once: nobody serves it
                 raise ServiceError(f"unknown object {obj!r}: no authority serves it (known: {', '.join(sorted(known))})") from None
             raise
-        self._on_record(keys.own(self.fabric.world, obj), reply.record)
+        self.record_seen(keys.own(self.fabric.world, obj), reply.record)
         return reply
 
     def request(self, obj: str, *, wait: bool = False, timeout: float | None = None) -> Outcome:

@@ -177,10 +177,10 @@ def test_the_client_follows_one_authority_per_object(connect):
 
     alice = OwnershipClient(connect("user", "alice"), "alice")
     for sim in ("p", "s", "q"):
-        alice._on_sim("sim", sim, True)
+        alice.sim_seen("sim", sim, True)
 
     def rec(obj, authority, term, epoch, owner="alice"):
-        alice._on_record(keys.own("w", obj), OwnershipRecord(obj, owner=owner, epoch=epoch, authority=authority,
+        alice.record_seen(keys.own("w", obj), OwnershipRecord(obj, owner=owner, epoch=epoch, authority=authority,
                                                              header=Header(source=authority, term=term)))
         r = alice.record(obj)
         return None if r is None else (r.authority, r.epoch)
@@ -194,8 +194,8 @@ def test_the_client_follows_one_authority_per_object(connect):
         assert rec("base2", "p", 1, 6) == ("p", 5)  # p speaks for none of its objects below term 2 any more
         assert alice.counters["records_stale"] == 1
         assert rec("base0", "q", 1, 8) == ("q", 8)  # the other shard is not fenced
-        alice._on_sim("sim", "p", False)
-        alice._on_sim("sim", "p", True)  # p restarted: its terms start afresh
+        alice.sim_seen("sim", "p", False)
+        alice.sim_seen("sim", "p", True)  # p restarted: its terms start afresh
         assert rec("base2", "p", 1, 6) == ("p", 6)
     finally:
         alice.close()
