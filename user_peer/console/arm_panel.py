@@ -97,8 +97,14 @@ class ArmPanel:
                 self.page.say("no target yet: the arm has sent no flange pose")
                 return
             self.target = np.asarray(p.position, dtype=float)
-        self.target = self.target.copy()
-        self.target[axis] += sign * NUDGE_STEPS[self.step.value]
+        moved = self.target.copy()
+        moved[axis] += sign * NUDGE_STEPS[self.step.value]
+        self.move_target(moved)
+
+    def move_target(self, xyz: np.ndarray) -> None:
+        """The IK target to ``xyz`` (a nudge, or a drag on the view): the scene's sphere moves for every page, and
+        the IK solution for it follows."""
+        self.target = np.asarray(xyz, dtype=float).copy()
         if self.target_obj is not None:
             self.target_obj.set_pose(self.target)
         self.ik_q = None

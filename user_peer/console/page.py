@@ -10,6 +10,7 @@ while an arrow key is held (the sim's twist is a deadman). The panels are :mod:`
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from typing import TYPE_CHECKING, Any, Callable
 
@@ -32,6 +33,9 @@ __all__ = ["ConsolePage", "event_line", "KEYS_JS"]
 log = logging.getLogger("robofabric.console")
 
 REFRESH_VIEW_S = 0.2
+
+DRAG_GRAB_PX = 12.0
+"""How near the IK target (image pixels) a press must be to grab it."""
 
 KEYS_JS = """
 const rfHeld = new Set();
@@ -109,6 +113,8 @@ class ConsolePage:
         self._events_seen = 0
         self._gone_seen = 0
         self._owners: dict[str, str] = {}
+        self._drag = False  # the IK target is held by the mouse
+        self._swallow_click = False
 
     # ------------------------------------------------------------------ login
 
@@ -189,7 +195,8 @@ class ConsolePage:
             ui.label(f"robofabric console · world {w.name} · {w.user}").classes("text-h6")
             if self.console.rerun_url:
                 ui.link("Rerun web view (the rich view)", self.console.rerun_url, new_tab=True)
-        self.message = ui.label("").props('role="status" aria-live="polite"').classes("text-body1")
+        # a line high even when empty: text appearing in it must not move the view under the mouse
+        self.message = ui.label("").props('role="status" aria-live="polite"').classes("text-body1").style("min-height: 1.5rem")
         with ui.row().classes("w-full no-wrap items-start"):
             with ui.column().classes("w-1/2"):
                 self._robot_list()
@@ -199,8 +206,8 @@ class ConsolePage:
             with ui.column().classes("w-1/2"):
                 self.view = ui.interactive_image(
                     topview.data_url(topview.png_gray(np.full((self.frame.height, self.frame.width), 230, np.uint8))),
-                    content="", on_mouse=self._clicked, events=["click"], sanitize=False,
-                ).classes("w-full").props('aria-label="Live view: click to place the goal"')
+                    content="", on_mouse=self._mouse, events=["mousedown", "mouseup", "click"], sanitize=False,
+                ).classes("w-full").props('aria-label="Live view: click to place the goal, drag the IK target"')
                 ui.label("Events").classes("text-subtitle1")
                 self.log = ui.log(max_lines=200).classes("w-full h-48")
         ui.on("rf_key", self._key)
@@ -307,9 +314,24 @@ class ConsolePage:
         if self.base_panel is not None:
             await self.base_panel.keep_driving()
 
-    def _clicked(self, e: Any) -> None:
-        if self.base_panel is not None:
-            self.base_panel.clicked(e)
+    def _mouse(self, e: Any) -> None:
+        """The view's mouse: a press on the IK target and its release elsewhere drag the target there (its height
+        kept; the nudges move it up and down); any other click places the goal."""
+        target = self.arm_panel.target if self.arm_panel is not None else None
+        if e.type == "mousedown":
+            self._drag = target is not None and math.dist(self.frame.px(float(target[0]), float(target[1])),
+                                                          (e.image_x, e.image_y)) <= DRAG_GRAB_PX
+        elif e.type == "mouseup" and self._drag:
+            self._drag, self._swallow_click = False, True
+            x, y = self.frame.world(e.image_x, e.image_y)
+            self.arm_panel.move_target(np.array([x, y, float(target[2])]))
+            self.say(f"IK target dragged to ({x:.3f}, {y:.3f}, {float(target[2]):.3f})")
+            self._refresh()
+        elif e.type == "click":
+            if self._swallow_click:  # the click that ends a drag places no goal
+                self._swallow_click = False
+            elif self.base_panel is not None:
+                self.base_panel.clicked(e)
 
     # ------------------------------------------------------------------ refresh
 

@@ -19,8 +19,9 @@ from fabric.codec import DecodeError, decode
 from fabric.interfaces import Pose, yaw_from_quaternion
 from user_peer.console import topview
 from user_peer.console.topview import Frame, RobotMark
+from user_peer.urdf_chain import UrdfChain
 
-__all__ = ["RobotLine", "robot_line", "scene_layout", "view_svg"]
+__all__ = ["RobotLine", "arm_chain", "arm_links", "robot_line", "scene_layout", "view_svg"]
 
 log = logging.getLogger("robofabric.console")
 
@@ -98,7 +99,33 @@ def _pose(handles: dict, poses: dict[str, bytes], rid: str) -> Any:
         return None
 
 
-def _mark(world, entry, pose, spawn: dict, selected: set[str]) -> RobotMark | None:
+@functools.lru_cache(maxsize=16)
+def arm_chain(robot_type: str) -> UrdfChain | None:
+    """The joint chain of an arm type, from its URDF in ``robots`` (None when this install lacks the type or its
+    URDF does not read): read once per type."""
+    try:
+        import robots
+
+        urdf = robots.load(robot_type).urdf_path
+        return UrdfChain.from_file(urdf) if urdf is not None else None
+    except Exception as exc:
+        log.info("no joint chain for %r: %s", robot_type, exc)
+        return None
+
+
+def arm_links(robot_type: str, q, spawn: tuple[float, ...]) -> tuple[tuple[float, float], ...]:
+    """An arm's joint origins from above (world x, y), its base first: FK of ``q`` placed at its spawn pose
+    (x, y, z, yaw); empty when the chain is unknown or ``q`` does not fit it."""
+    chain = arm_chain(robot_type)
+    if chain is None or q is None or len(q) != chain.nq:
+        return ()
+    pts = chain.origins(q)
+    sx, sy, _, yaw = spawn
+    c, s = math.cos(yaw), math.sin(yaw)
+    return ((sx, sy), *((sx + c * float(x) - s * float(y), sy + s * float(x) + c * float(y)) for x, y, _ in pts))
+
+
+def _mark(world, entry, pose, spawn: dict, selected: set[str], joints=None) -> RobotMark | None:
     rec = world.ownership.record(entry.id)
     owner = rec.owner if rec is not None else ""
     if entry.kind == "mobile":
@@ -108,7 +135,8 @@ def _mark(world, entry, pose, spawn: dict, selected: set[str]) -> RobotMark | No
         return RobotMark(entry.id, "mobile", owner, x, y, yaw, owner == world.user, entry.id in selected)
     sx, sy, _, syaw = spawn.get(entry.id, (0.0, 0.0, 0.0, 0.0))
     flange = (float(pose.position[0]), float(pose.position[1])) if pose is not None else None
-    return RobotMark(entry.id, entry.kind or "robot", owner, sx, sy, syaw, owner == world.user, entry.id in selected, flange)
+    links = arm_links(entry.type, joints.q, spawn[entry.id]) if joints is not None and entry.id in spawn else ()
+    return RobotMark(entry.id, entry.kind or "robot", owner, sx, sy, syaw, owner == world.user, entry.id in selected, flange, links)
 
 
 def view_svg(world, entries: list, handles: dict, poses: dict[str, bytes], frame: Frame, boxes, *, base_id: str | None,
@@ -116,7 +144,9 @@ def view_svg(world, entries: list, handles: dict, poses: dict[str, bytes], frame
     """The live view's overlay: every robot with its owner, the paths and the selected base's scan of the robots
     this page follows, the IK target and the goal."""
     spawn = {r.id: tuple(float(v) for v in r.pose) for r in world.info().robots}
-    marks = [m for m in (_mark(world, e, _pose(handles, poses, e.id), spawn, selected) for e in entries) if m is not None]
+    marks = [m for m in (_mark(world, e, _pose(handles, poses, e.id), spawn, selected,
+                               handles[e.id].latest("joints") if e.id in handles and e.kind == "arm" else None)
+                         for e in entries) if m is not None]
     scan = None
     paths = []
     for r in handles.values():

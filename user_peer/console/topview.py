@@ -77,6 +77,7 @@ class RobotMark:
     mine: bool = False
     selected: bool = False
     flange: tuple[float, float] | None = None
+    links: tuple[tuple[float, float], ...] = ()  # an arm's joint origins from its base to its flange (world x, y)
 
 
 def _f(v: float) -> str:
@@ -97,7 +98,12 @@ def _robot(frame: Frame, r: RobotMark) -> list[str]:
         out.append(f'<polygon points="{" ".join(pts)}" fill="{color}"{stroke}/>')
     else:
         out.append(f'<rect x="{_f(cx - size / 2)}" y="{_f(cy - size / 2)}" width="{_f(size)}" height="{_f(size)}" fill="{color}"{stroke}/>')
-        if r.flange is not None:
+        if len(r.links) >= 2:  # the arm's links from above: its joints' origins, base to flange
+            pts = " ".join(f"{_f(a)},{_f(b)}" for a, b in (frame.px(x, y) for x, y in r.links))
+            out.append(f'<polyline class="rf-arm-links" points="{pts}" fill="none" stroke="{color}" stroke-width="4" '
+                       'stroke-linejoin="round"/>')
+            out.extend(f'<circle cx="{_f(a)}" cy="{_f(b)}" r="2" fill="#212529"/>' for a, b in (frame.px(x, y) for x, y in r.links[1:]))
+        elif r.flange is not None:
             fx, fy = frame.px(*r.flange)
             out.append(f'<line x1="{_f(cx)}" y1="{_f(cy)}" x2="{_f(fx)}" y2="{_f(fy)}" stroke="{color}" stroke-width="4"/>')
             out.append(f'<circle cx="{_f(fx)}" cy="{_f(fy)}" r="3" fill="#212529"/>')

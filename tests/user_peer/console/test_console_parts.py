@@ -49,6 +49,23 @@ def test_mine_and_others_robots_have_different_colours():
     assert topview.COLORS["mine"] in mine and topview.COLORS["other"] in other and topview.COLORS["free"] in free
 
 
+def test_an_arm_followed_in_full_is_drawn_as_its_chain_of_links_from_its_spawn():
+    from user_peer.console.state import arm_chain, arm_links
+
+    q = np.zeros(6)
+    origins = arm_chain("meca500").origins(q)
+    links = arm_links("meca500", q, (1.0, 2.0, 0.5, np.pi / 2))  # spawned at (1, 2), turned a quarter left
+    assert links[0] == (1.0, 2.0) and len(links) == len(origins) + 1
+    x, y, _ = origins[-1]
+    assert np.allclose(links[-1], (1.0 - y, 2.0 + x))  # the arm's +x is the world's +y
+    assert arm_links("meca500", np.zeros(5), (0, 0, 0, 0)) == ()  # a joint vector that does not fit: nothing drawn
+    assert arm_links("no-such-arm", q, (0, 0, 0, 0)) == ()
+    f = Frame(0, 0, 10, 10)
+    svg = topview.svg(f, [RobotMark("arm1", "arm", "", 1, 2, 0, links=links)])
+    assert 'class="rf-arm-links"' in svg and svg.count("<circle") == len(links) - 1
+    assert "rf-arm-links" not in topview.svg(f, [RobotMark("arm1", "arm", "", 1, 2, 0, flange=(1.2, 2.0))])
+
+
 def test_scan_points_leave_out_rays_that_hit_nothing():
     pts = topview.scan_points(1.0, 0.0, np.pi / 2, 0.0, np.pi / 2, np.array([2.0, 5.0]), range_max=5.0)
     assert pts.shape == (1, 2)
