@@ -178,7 +178,7 @@ def _progress(what: str, quiet: bool):
 UserOpt = Annotated[Optional[str], typer.Option("--user", "-u", help="Your user id (default: $USER); ownership is by user id.")]
 
 
-def _open_world(world, connect, profile, zenoh_config, user, timeout: float = 5.0, join_timeout: float = 30.0):
+def open_world(world, connect, profile, zenoh_config, user, timeout: float = 5.0, join_timeout: float = 30.0):
     """Join as a user, waiting up to ``join_timeout`` s for a sim to serve the world."""
     from user_peer.api import connect as _connect
     from user_peer.errors import FabricUserError
@@ -209,7 +209,7 @@ def user(
     from user_peer.errors import FabricUserError
     from user_peer.tui import UserApp
 
-    w = _open_world(world, connect, profile, zenoh_config, user_id)
+    w = open_world(world, connect, profile, zenoh_config, user_id)
     try:
         try:
             ids = w.robots()
@@ -252,7 +252,7 @@ def scenario(
 
     if name not in SCENARIOS:
         raise UserError(f"unknown scenario {name!r}; expected one of {', '.join(SCENARIOS)}")
-    w = _open_world(world, connect, profile, zenoh_config, user_id, join_timeout=wait)
+    w = open_world(world, connect, profile, zenoh_config, user_id, join_timeout=wait)
     try:
         kw = {}
         if robot:

@@ -86,7 +86,7 @@ def _orientation_options(arm: ArmModel, p: list[float], seed: list[float]) -> li
     options = [("seed", cur), ("down", down), ("horizontal", horizontal)]
     # then the tool tilted in and around the radial plane: cheap closed-form tries before the numerical solver
     for elevation, azimuth in TILTS:
-        options.append((f"tilted {elevation:+.0f}/{azimuth:+.0f} deg", _tool_frame(phi + math.radians(azimuth), math.radians(elevation))))
+        options.append((f"tilted {elevation:+.0f}/{azimuth:+.0f} deg", tool_frame(phi + math.radians(azimuth), math.radians(elevation))))
     return options
 
 
@@ -94,7 +94,7 @@ TILTS = ((-45.0, 0.0), (45.0, 0.0), (-60.0, 45.0), (-60.0, -45.0), (0.0, 60.0), 
 """(elevation, azimuth from radial) of the extra tool directions tried for position-only targets, in degrees."""
 
 
-def _tool_frame(azimuth: float, elevation: float) -> list[list[float]]:
+def tool_frame(azimuth: float, elevation: float) -> list[list[float]]:
     """A flange rotation whose z (the tool) points at ``azimuth`` / ``elevation``; x in the vertical plane."""
     ca, sa, ce, se = math.cos(azimuth), math.sin(azimuth), math.cos(elevation), math.sin(elevation)
     z = (ce * ca, ce * sa, se)

@@ -118,7 +118,8 @@ class _Bench:
         return told, serving, moved
 
 
-def _stats(xs: list[float]) -> dict[str, float]:
+def run_stats(xs: list[float]) -> dict[str, float]:
+    """Count, median, max and min of one figure over the runs (seconds)."""
     return {"n": len(xs), "median_s": statistics.median(xs), "max_s": max(xs), "min_s": min(xs)}
 
 
@@ -142,7 +143,7 @@ def run_lab_bench(runs: int = 5, *, log_dir: str | Path | None = None, progress=
             raw["sim_first_move_done"].append(m)
             progress(f"run {i + 1}/{runs}: " + ", ".join(f"{k} {v[-1]:.2f} s" for k, v in raw.items() if v)
                      + f", owner restored: {restored[-1]}")
-    return {"runs": runs, "figures": {k: _stats(v) for k, v in raw.items() if v}, "raw": raw,
+    return {"runs": runs, "figures": {k: run_stats(v) for k, v in raw.items() if v}, "raw": raw,
             "router_owner_restored": f"{sum(restored)}/{len(restored)}"}
 
 

@@ -34,11 +34,11 @@ def ros2(
         from user_peer.ros2.bridge import Ros2Bridge, spin
     except ImportError:
         raise UserError(MISSING_RCLPY) from None
-    from user_peer.cli import _open_world
+    from user_peer.cli import open_world
     from user_peer.errors import FabricUserError
 
     log = logging.getLogger("robofabric.ros2")
-    w = _open_world(world, connect, profile, zenoh_config, user_id)
+    w = open_world(world, connect, profile, zenoh_config, user_id)
     try:
         for rid in request or ():
             try:

@@ -285,10 +285,10 @@ def test_solve_returns_a_valid_solution_or_refuses(x, y, z, quat):
 def test_tilted_tool_frames_are_rotations_pointing_where_asked():
     import math
 
-    from compute_peer.kinematics.ik import TILTS, _tool_frame
+    from compute_peer.kinematics.ik import TILTS, tool_frame
 
     for elevation, azimuth in TILTS + ((90.0, 0.0), (-90.0, 30.0)):
         a, e = math.radians(azimuth), math.radians(elevation)
-        r = np.array(_tool_frame(a, e))
+        r = np.array(tool_frame(a, e))
         assert np.allclose(r.T @ r, np.eye(3), atol=1e-12) and np.isclose(np.linalg.det(r), 1.0)
         assert np.allclose(r[:, 2], [math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)])

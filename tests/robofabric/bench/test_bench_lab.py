@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from robofabric.bench.lab import _stats, to_markdown
+from robofabric.bench.lab import run_stats, to_markdown
 
 
 def test_report_has_a_row_per_figure_with_median_and_max():
     raw = {"partition_handover": [1.9, 1.8, 2.4], "router_joints_back": [0.7, 0.5, 3.25],
            "router_owner_back": [0.7, 3.2], "sim_gone_told": [0.03, 0.05, 0.02]}
-    result = {"runs": 3, "figures": {k: _stats(v) for k, v in raw.items()}, "raw": raw, "router_owner_restored": "2/3"}
+    result = {"runs": 3, "figures": {k: run_stats(v) for k, v in raw.items()}, "raw": raw, "router_owner_restored": "2/3"}
     assert result["figures"]["router_owner_back"] == {"n": 2, "median_s": (0.7 + 3.2) / 2, "max_s": 3.2, "min_s": 0.7}
     lines = to_markdown(result).splitlines()
     assert lines[:2] == ["| figure (3 runs) | median | max |", "|---|---|---|"]
