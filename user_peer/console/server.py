@@ -18,9 +18,12 @@ from user_peer.console.login import Logins
 
 __all__ = ["Console", "serve", "page_urls", "RECONNECT_S", "PING_TIMEOUT_S"]
 
-RECONNECT_S = 10.0
+RECONNECT_S = 30.0
 """How long a page whose connection dropped may come back as it was (NiceGUI's reconnect timeout): a busy
-server or a flaky Wi-Fi must not log a student out. After it the page is gone and her grace begins."""
+server, a starved browser or a flaky Wi-Fi must not log a student out. After it the page is gone and her grace
+begins. Nothing drives meanwhile: the dropped connection lets go of her keys at once, and a held key is the
+browser's own beat (``KEYS_JS``). 10 s was too short for a class on one loaded 2-core box: with 20 pages at
+load 25-38 pages came back after more than 10 s and NiceGUI had forgotten them (back at the login)."""
 
 PING_TIMEOUT_S = 20.0
 """How long the server waits for a page's answer to its websocket ping (NiceGUI's default for a 10 s reconnect
