@@ -37,6 +37,7 @@ from fabric.fence_watch import FenceWatch
 from fabric.fencing import SimFence
 from fabric.history import LatestThenLive
 from fabric.interfaces import Header
+from fabric.matching import wait_matched
 from fabric.publishers import declare_publisher
 from fabric.reports import Reports
 from fabric.rpc import Rpc
@@ -174,15 +175,9 @@ class Fabric:
         ago (a sim that has just started: its token and ``srv/world`` can reach a user before its command
         subscription does) is not known yet: a command sent then is lost without a word."""
         pub = self._publisher(key)
-        status = getattr(pub, "matching_status", None)
-        if status is None:
-            return True  # nothing to ask: put and hope, as before
-        deadline = time.monotonic() + timeout
-        while not pub.matching_status.matching:
-            if time.monotonic() >= deadline:
-                return False
-            time.sleep(0.005)
-        return True
+        if getattr(pub, "matching_status", None) is None:
+            return True  # nothing to ask (a latched key's advanced publisher): put and hope, as before
+        return wait_matched([pub], timeout)
 
     # ------------------------------------------------------------------ authority (fabric.authority_stamp)
 

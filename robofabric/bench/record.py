@@ -252,6 +252,7 @@ def _child_pub(a: argparse.Namespace) -> None:
     import zenoh
 
     from fabric.config import FabricConfig
+    from fabric.matching import wait_matched
     from robofabric.recording.load import robot_streams, run_load
     from fabric.session import Fabric
 
@@ -259,12 +260,9 @@ def _child_pub(a: argparse.Namespace) -> None:
     with Fabric(FabricConfig(world=a.world, connect=(a.endpoint,)), kind="sim", peer_id="bench-world") as fab:
         # raw publishers: the load is pre-encoded bytes put as fast as the recorder under test can take them
         pubs = {s.key: fab.session.declare_publisher(s.key, congestion_control=zenoh.CongestionControl.BLOCK) for s in streams}
-        deadline = time.monotonic() + 20
-        while not all(p.matching_status.matching for p in pubs.values()):
-            if time.monotonic() > deadline:
-                print("error: no subscriber matched the world's keys", flush=True)
-                sys.exit(1)
-            time.sleep(0.05)
+        if not wait_matched(pubs.values(), 20, every=True):
+            print("error: no subscriber matched the world's keys", flush=True)
+            sys.exit(1)
         print("go", flush=True)
         sent, elapsed = run_load(lambda k, b: pubs[k].put(b), streams, duration=a.duration)
         print(json.dumps({"sent": dict(sent), "elapsed": elapsed, "offered_hz": sum(s.hz for s in streams)}), flush=True)

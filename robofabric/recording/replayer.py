@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from array import array
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +23,7 @@ from typing import Any, Callable, Iterable
 
 import zenoh
 
+from fabric.matching import wait_matched
 from fabric.rate import Clock, MonotonicClock
 from fabric.recording.format import LIVELINESS_SCHEMA, remap_world, world_of
 from fabric.recording.reader import RecordingError, RecordingInfo, iter_messages, key_filter, read_info
@@ -175,13 +175,6 @@ class ReplayStats:
 Publish = Callable[[str, bytes], None]
 
 
-def _matching(pub: Any) -> bool:
-    """Whether a subscriber listens to ``pub`` (a MatchingStatus object is always truthy: ask ``.matching``).
-    Advanced publishers (latched keys) do not say; the plain ones beside them do."""
-    status = getattr(pub, "matching_status", None)
-    return bool(getattr(status, "matching", False))
-
-
 class Replayer:
     """Republish a :class:`ReplayPlan` through ``target``: a Fabric, a zenoh Session, or a ``publish(key, payload)``.
 
@@ -243,11 +236,8 @@ class Replayer:
             return
         for k in self.plan.keys:
             self._declare(self.plan.target(k))
-        deadline = time.monotonic() + self.wait_for_subscribers
-        while time.monotonic() < deadline and not stop.is_set():
-            if any(_matching(p) for p in self._pubs.values()):
-                break
-            stop.wait(0.01)
+        # advanced publishers (latched keys) do not say whether anyone listens; the plain ones beside them do
+        wait_matched(self._pubs.values(), self.wait_for_subscribers, stop=stop)
 
     def close(self) -> None:
         for pub in self._pubs.values():

@@ -48,14 +48,14 @@ def test_a_replayed_map_is_latched_for_a_late_joiner(tmp_path, world, connect):
 
 
 def test_the_replayer_sees_whether_anyone_listens(world, connect):
-    from robofabric.recording.replayer import _matching
+    from fabric.matching import is_matched
     from fabric.publishers import declare_publisher
 
     fab = connect("tool", "replay")
     pub = declare_publisher(fab.session, keys.robot_joints(world, "r0"))
     try:
-        assert not _matching(pub)  # nobody yet: a replay waits (up to --wait) before its first message
+        assert not is_matched(pub)  # nobody yet: a replay waits (up to --wait) before its first message
         connect("viewer", "v").subscribe(keys.world_all(world), lambda k, m: None)
-        wait_until(lambda: _matching(pub), what="the subscriber to match")
+        wait_until(lambda: is_matched(pub), what="the subscriber to match")
     finally:
         pub.undeclare()
