@@ -27,6 +27,7 @@ class StubFabric:
 
     def __init__(self) -> None:
         self.events: list[Event] = []
+        self.reports = self  # fabric.reports' should_report and emit, as the sim calls them
 
     def header(self, key: str, *, stamp: float = 0.0) -> Header:
         return Header(stamp=stamp)
