@@ -62,11 +62,15 @@ from user_peer.ros2.fill import fill, message_class
 from user_peer.ros2.tf import TfOut
 from user_peer.world import World
 
-__all__ = ["Ros2Bridge", "LATCHED", "RELIABLE"]
+__all__ = ["Ros2Bridge", "LATCHED", "RELIABLE", "STREAM"]
 
 log = logging.getLogger("robofabric.ros2")
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+STREAM = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+"""Joint states, odometry and poses: reliable, and a history of 100 (1 s of a robot's joints) rather than ROS's
+usual 10, so that a reader held up for a moment (a loaded machine) gets late messages instead of losing the
+oldest (KEEP_LAST drops what falls out of the writer's history before the reader acknowledged it)."""
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 """A map or a path: the latest is kept for late joiners (rviz2 started after the map was built), as the fabric
 latches those keys."""
@@ -75,9 +79,9 @@ FOLLOW_PERIOD_S = 1.0
 """How often the bridge looks at the world's description for robots that came or went."""
 
 _TYPES: dict[str, tuple[type, QoSProfile]] = {
-    "joint_states": (JointState, RELIABLE), "scan": (LaserScan, qos_profile_sensor_data),
-    "sonar": (LaserScan, qos_profile_sensor_data), "path": (Path, LATCHED), "odom": (Odometry, RELIABLE),
-    "pose": (PoseStamped, RELIABLE), "map": (OccupancyGrid, LATCHED),
+    "joint_states": (JointState, STREAM), "scan": (LaserScan, qos_profile_sensor_data),
+    "sonar": (LaserScan, qos_profile_sensor_data), "path": (Path, LATCHED), "odom": (Odometry, STREAM),
+    "pose": (PoseStamped, STREAM), "map": (OccupancyGrid, LATCHED),
 }
 """A topic's last name -> its ROS type and QoS (``/maps/NAME``: a map; ``/object/ID/pose``: a pose)."""
 
@@ -163,7 +167,7 @@ class Ros2Bridge:
                 self._routes[key] = None
             return None
         leaf = topic.rsplit("/", 1)[1]
-        cls, qos = _TYPES.get(leaf, (OccupancyGrid, LATCHED) if "/maps/" in topic else (PoseStamped, RELIABLE))
+        cls, qos = _TYPES.get(leaf, (OccupancyGrid, LATCHED) if "/maps/" in topic else (PoseStamped, STREAM))
         route = _Route(topic, robot, cls, qos)
         if cls is LaserScan:
             sonar = leaf == "sonar"
