@@ -360,7 +360,8 @@ class Ros2Bridge:
 
     def summary(self) -> str:
         """One line: what went out and what came in."""
-        return (f"{sum(self.published.values())} messages published on {len(self.published)} topics, "
+        return (f"{sum(self.published.values())} messages published on {len(self.published)} topics "
+                f"({self.published['/clock']} on /clock), "
                 f"{sum(self.forwarded.values())} commands forwarded, {sum(self.refused.values())} refused, "
                 f"{self.unconverted} not converted, {self.tf.sent} /tf messages")
 
