@@ -39,6 +39,9 @@ def compute(
     Several compute peers may serve one world: a query on srv/ik/ROBOT goes to the nearest one, and
     srv/ik/ROBOT/PEER_ID to one chosen peer. Arms and sensors are learnt from the sim peer's srv/world.
     """
+    from fabric.extras import require
+
+    require("compute", "compute")  # a student's install has no Pinocchio, CasADi, OMPL: one line naming the extra
     from compute_peer.peer import ComputeOptions, ComputePeer, parse_arms, parse_streams
     from fabric.session import shutdown_event
 

@@ -103,6 +103,9 @@ def sim(
     if list_:
         _print_catalog()
         return
+    from fabric.extras import require
+
+    require("sim", "sim")  # a student's install has no MuJoCo: one line naming the extra
     from fabric.session import shutdown_event
     from sim_peer.pacing import parse_speed
     from sim_peer.streams import DEFAULT_RATES
