@@ -189,8 +189,16 @@ class Roles:
         self.election = replace(self.election, term=term)
 
     def step(self, ev: el.Event) -> None:
-        """Apply one observation to the election and carry out its effects."""
+        """Apply one observation to the election and carry out its effects. A view of the live sims taken while this
+        sim is deaf, or waits after being deaf, decides nothing (whoever took it: a token's loss, a shard learnt
+        after a token came back); the wait ends with a view of its own (:meth:`deaf_recheck`)."""
         h = self.host
+        if isinstance(ev, el.Peers) and self.settled:
+            with h.lock:
+                waiting = self.rechecking
+            if waiting or self.deaf():
+                self.deaf_recheck()
+                return
         with h.lock:
             self.election, effects = el.step(self.election, ev)
         for e in effects:
