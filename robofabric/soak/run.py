@@ -38,6 +38,10 @@ from robofabric.soak.nemesis import KINDS, VICTIMS, Nemesis
 __all__ = ["SoakConfig", "SoakResult", "Soak", "run_soak"]
 
 SIMS = ("sim-a", "sim-b")
+READY = {"router": "listening", "sim-a": "Ctrl-C to stop", "sim-b": "Ctrl-C to stop", "compute": "Ctrl-C to stop",
+         "student": "joined"}
+"""What a restarted peer prints once it is up: a fault is over only then (a router restarted while a peer was still
+starting would fail its first connection, which is no fault of the peer's)."""
 HOG = "import time\ne = time.monotonic() + {secs}\nwhile time.monotonic() < e:\n    pass\n"
 
 
@@ -192,7 +196,12 @@ class Soak:
             self.expected.add(p.pid)
         code = p.kill()
         self._exited(role, p, code if code is not None else -9, expected=True)
-        self._start(role, clock_offset=clock_offset)
+        new = self._start(role, clock_offset=clock_offset)
+        ready = READY.get("student" if role not in READY else role)
+        try:
+            _wait(lambda: ready in new.output() or not new.alive(), 180, f"{role} up again")
+        except TimeoutError:
+            pass  # the monitor reports it if it ends; the run goes on
 
     def cut(self, role: str) -> None:
         with self._lock:
@@ -206,8 +215,6 @@ class Soak:
 
     def restart_router(self) -> None:
         self.kill_restart("router")
-        p = self.procs["router"]
-        _wait(lambda: "listening" in p.output(), 120, "the router listening again", lambda: p.output()[-800:])
 
     def hog(self, role: str, seconds: float) -> None:
         host = self.hosts[role]

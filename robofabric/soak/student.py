@@ -51,6 +51,7 @@ def main(world: str, endpoint: str, index: int, arms: int, seed: int) -> None:
         try:
             if w is None:
                 w = connect(world, endpoint, user=f"s{index:02d}", timeout=10.0, join_timeout=120.0)
+                print(f"student {index}: joined", flush=True)
             arm = w.robot(mine)
             _own(arm, 30.0)
             arm.move_joints(np.array(a if counts["moves"] % 2 else b), wait=True, tol=5e-3, timeout=20.0, speed_scale=SPEED)
