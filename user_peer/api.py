@@ -23,9 +23,11 @@ The rooms: :mod:`user_peer.world` (the session and the handles), behind it
 (the sims alive, failovers), :mod:`user_peer.event_log` (the events, and which may
 refuse a command), :mod:`user_peer.following` (which streams are decoded) and
 :mod:`user_peer.compute_route` (which compute peer is asked);
-:mod:`user_peer.latest` (the cache), :mod:`user_peer.robot` (a handle class per
-robot kind), :mod:`user_peer.scene_object`, :mod:`user_peer.errors`. This module
-joins them: :func:`connect`, and the public names in one place.
+:mod:`user_peer.latest` (the cache), :mod:`user_peer.robot` (what every robot handle
+offers; :mod:`user_peer.ownable` its ownership; :mod:`user_peer.arm` and
+:mod:`user_peer.mobile_base`, a class per kind), :mod:`user_peer.scene_object`,
+:mod:`user_peer.errors`. This module joins them: :func:`connect`, and the public
+names in one place.
 """
 
 from __future__ import annotations
@@ -34,7 +36,9 @@ from typing import Iterable
 
 from fabric.config import FabricConfig
 from user_peer.errors import JoinFailed, NotOwner, Rejected, Timeout, Unreachable
-from user_peer.robot import Arm, Base, Robot
+from user_peer.arm import Arm
+from user_peer.mobile_base import Base
+from user_peer.robot import Robot
 from user_peer.scene_object import SceneObject
 from user_peer.world import World
 

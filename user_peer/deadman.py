@@ -3,7 +3,7 @@
 A served base keeps a twist only ``--twist-timeout`` (0.5 s by default) without a fresh one, as ROS
 teleop expects of ``cmd_vel``: a base whose driver went quiet (a crash, a closed laptop, a lost link)
 brakes to a halt by itself. So a twist that should hold is repeated by the client while it drives:
-:meth:`user_peer.robot.Base.twist` hands its resend to the world's :class:`TwistKeeper`, which repeats
+:meth:`user_peer.mobile_base.Base.twist` hands its resend to the world's :class:`TwistKeeper`, which repeats
 it every :data:`TWIST_REFRESH_S` until the next twist, a zero twist, a stop, a reset, a path, a release,
 or the world's close; a resend that cannot go out (the robot was lost: another owner, a new epoch) ends
 the hold. The keeper lives and dies with the program: that is the point.

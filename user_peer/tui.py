@@ -223,7 +223,7 @@ class UserApp(App):
 
     def keep_driving(self) -> None:
         """The base keeps the last arrow's twist while this app runs and owns it: the world's twist keeper
-        repeats it against the sim's deadman (:meth:`user_peer.robot.Base.twist`). When the keeper gave it up
+        repeats it against the sim's deadman (:meth:`user_peer.mobile_base.Base.twist`). When the keeper gave it up
         (the base was lost, released or stopped) the command shown goes back to zero."""
         if self.base is not None and (self.v or self.omega) and not self.world.twists.holding(self.base.id):
             self.v = self.omega = 0.0

@@ -172,7 +172,7 @@ class World(contextlib.AbstractContextManager):
 
     def robot(self, robot_id: str) -> Robot:
         """The robot's handle, of the class for its kind in the world description (an
-        :class:`~user_peer.robot.Arm`, a :class:`~user_peer.robot.Base`); one handle per robot."""
+        :class:`~user_peer.arm.Arm`, a :class:`~user_peer.mobile_base.Base`); one handle per robot."""
         if robot_id not in self.robot_handles:
             entry = next((r for r in services.robot_entries(self.info()) if r.id == robot_id), None)
             if entry is None and self.description.current is not None:  # a sim that joined since the description was asked for
