@@ -106,6 +106,7 @@ class Soak:
         self.reported: set[int] = set()
         self.ending = False
         self.observer: RemotePython | None = None
+        self.nemesis: Nemesis | None = None
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self.restarts = 0
@@ -192,6 +193,8 @@ class Soak:
 
     def kill_restart(self, role: str, *, clock_offset: str | None = None) -> None:
         with self._lock:
+            if self.ending:
+                return  # the run is over (or interrupted): nothing is started again
             p = self.procs[role]
             self.expected.add(p.pid)
         code = p.kill()
@@ -278,8 +281,8 @@ class Soak:
         t0 = time.monotonic()
         end = t0 + cfg.minutes * 60.0
         warm = t0 + min(600.0, max(30.0, 0.15 * cfg.minutes * 60.0))
-        nemesis = Nemesis(self, self.writer.write, seed=cfg.seed, kinds=cfg.kinds, gap_s=cfg.gap_s,
-                          victims=cfg.victims).start()
+        nemesis = self.nemesis = Nemesis(self, self.writer.write, seed=cfg.seed, kinds=cfg.kinds, gap_s=cfg.gap_s,
+                                         victims=cfg.victims).start()
         self.writer.write(Mark(t0, "class", "every peer started; the nemesis begins"))
         warmed = False
         while time.monotonic() < end:
@@ -297,9 +300,13 @@ class Soak:
                           tuple(checker.summary(history, violations)), started, {"restarts": self.restarts})
 
     def close(self) -> None:
-        """End every peer by pid (students first, so their leaving is not the world's), then the lab."""
+        """End every peer by pid (students first, so their leaving is not the world's), then the lab. The nemesis
+        stops first (after undoing its fault under way), when the run was interrupted before its end."""
         with self._lock:
             self.ending = True
+        if self.nemesis is not None:
+            self.nemesis.stop(timeout=60.0)
+        with self._lock:
             for role in list(self.frozen):
                 self.procs[role].thaw()
             for role in list(self.cut_off):
