@@ -99,7 +99,6 @@ def sim(
     peer_id: PeerId = None,
 ) -> None:
     """Simulate a scene's robots and serve them on the fabric: joints, poses, scans out; commands in."""
-    from fabric.rate import parse_rates
     if list_:
         _print_catalog()
         return
@@ -107,24 +106,11 @@ def sim(
 
     require("sim", "sim")  # a student's install has no MuJoCo: one line naming the extra
     from fabric.session import shutdown_event
-    from sim_peer.pacing import parse_speed
-    from sim_peer.streams import DEFAULT_RATES
     from sim_peer.world import SimWorld
     from sim_peer.world import WorldError
 
-    try:
-        rates = parse_rates(rate, DEFAULT_RATES)
-        pace = parse_speed(speed)
-    except ValueError as exc:
-        raise UserError(str(exc)) from None
-    if duration is not None and not duration > 0:
-        raise UserError(f"--duration must be positive, got {duration}")
-    if noise is not None and not noise >= 0:
-        raise UserError(f"--noise must be >= 0, got {noise}")
-    try:
-        deadman = parse_twist_timeout(twist_timeout, pace)
-    except ValueError as exc:
-        raise UserError(str(exc)) from None
+    rates, pace, deadman = _parse_options(rate, speed, duration, noise, twist_timeout)
+
     def build(placements=None):
         """This sim's world; ``placements``: other robots than the command line's (a robot moved in or out)."""
         return SimWorld(
@@ -147,6 +133,29 @@ def sim(
         _run_replicated(cfg, peer_id, sim_world, build, ownership, rates, pace, stop, duration, standby, first)
         return
     _run_single(cfg, peer_id, sim_world, ownership, rates, pace, stop, duration, first)
+
+
+def _parse_options(rate: str, speed: str, duration: float | None, noise: float | None,
+                   twist_timeout: str | None) -> tuple[dict[str, float], float | None, float | None]:
+    """The stream rates, the pace and the twist deadman the options give; a bad option is a :class:`UserError`."""
+    from fabric.rate import parse_rates
+    from sim_peer.pacing import parse_speed
+    from sim_peer.streams import DEFAULT_RATES
+
+    try:
+        rates = parse_rates(rate, DEFAULT_RATES)
+        pace = parse_speed(speed)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    if duration is not None and not duration > 0:
+        raise UserError(f"--duration must be positive, got {duration}")
+    if noise is not None and not noise >= 0:
+        raise UserError(f"--noise must be >= 0, got {noise}")
+    try:
+        deadman = parse_twist_timeout(twist_timeout, pace)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    return rates, pace, deadman
 
 
 def _run_single(cfg, peer_id, sim_world, ownership, rates, pace, stop, duration, first) -> None:
