@@ -198,8 +198,8 @@ class Ros2Bridge:
             return direct.laser_scan(out.msg, route.frame, msg, ns, route.range_min, route.offset)
         if cls is Odometry and isinstance(msg, Pose):
             return direct.odometry(out.msg, route.robot or "", msg, ns)
-        if cls is PoseStamped and isinstance(msg, Pose):
-            return direct.pose_stamped(out.msg, msg, ns)
+        if cls is PoseStamped and isinstance(msg, Pose):  # a new one: objects' history and live samples may cross
+            return direct.pose_stamped(PoseStamped(), msg, ns)
         converted = ros2_message(key, msg, ns)
         if converted is None or message_class(converted[0]) is not cls:
             return None
