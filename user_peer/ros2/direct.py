@@ -4,9 +4,10 @@
 export writes its dicts); filling an rclpy message from that dict costs a dict per message, a list per array and
 a Python loop per field, which at class scale (8 robots, about 1,300 messages a second) is most of what the
 bridge spends in Python. These builders set the same fields directly: numpy arrays go into the message's
-``array.array`` fields through their buffers, the names are the fabric's tuple, and each topic keeps one
-message that is refilled for each sample (``publish`` serialises it at once, and one topic's samples come
-from one zenoh subscription, one after another). tests/user_peer/test_ros2_direct.py holds them equal to
+``array.array`` fields through their buffers, the names are the fabric's tuple, and each joint-state, scan
+and odometry topic keeps one message that is refilled for each sample (``publish`` serialises it at once, and
+one topic's samples come from one zenoh subscription, one after another; a pose of a scene object, whose latched
+history may cross its live samples, is built new). tests/user_peer/test_ros2_direct.py holds them equal to
 ``fill(ros2_message(...))`` field by field, so the live values stay the export's.
 
 The stream kinds that are rare or large in structure (the map, a path, scene objects) keep the export's dicts
