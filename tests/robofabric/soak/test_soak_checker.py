@@ -74,8 +74,13 @@ def test_joints_jumping_across_a_fail_over_is_a_violation():
 
 
 def test_joints_jumping_within_one_sim_faster_than_it_can_move_is_a_violation():
-    (v,) = only("reset", [js(1.0, A), js(1.1, B)])
+    (v,) = only("reset", [js(1.0, A), js(1.1, (0.0,) * 6)])
     assert "between two samples of one sim" in v.message
+
+
+def test_samples_the_observer_took_in_a_burst_are_judged_on_the_sims_time():
+    a, b = Joints(1.0, "arm0", A, 10.0, "sim-a", 1), Joints(1.05, "arm0", B, 10.3, "sim-a", 1)
+    assert only("reset", [a, b]) == []
 
 
 def test_joints_moving_at_speed_and_a_smooth_fail_over_are_fine():
