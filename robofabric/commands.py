@@ -6,10 +6,10 @@ import typer
 
 
 def register(app: typer.Typer) -> None:
-    from robofabric import introspect_cli, launch_cli, secure_cli, tools_cli
+    from robofabric import introspect_cli, launch_cli, secure_cli, tools
     from robofabric.lab import cli as lab_cli
 
-    tools_cli.register(app)
+    tools.register(app)
     introspect_cli.register(app)
     launch_cli.register(app)
     secure_cli.register(app)
