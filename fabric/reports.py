@@ -28,11 +28,12 @@ __all__ = ["Reports", "REPORT_INTERVAL", "REPORT_BURST"]
 
 
 class Reports:
-    """Thread-safe. ``publish(key, message)`` and ``header(key)`` are the session's; ``reporter`` names this peer
-    in the key of its decode reports (``event/decode/by/{login}``: a router lets each login write only its own)."""
+    """Thread-safe. ``publish(key, message)`` and ``header(key)`` are the session's; ``reporter()`` names this peer
+    in the key of its decode reports (``event/decode/by/{login}``: a router lets each login write only its own),
+    asked only when one goes out (it reads the login from the zenoh config file)."""
 
     def __init__(self, world: str, *, counters: Any, publish: Callable[[str, Any], Any],
-                 header: Callable[[str], Header], reporter: str) -> None:
+                 header: Callable[[str], Header], reporter: Callable[[], str]) -> None:
         self._world = world
         self._counters = counters
         self._publish = publish
@@ -86,4 +87,4 @@ class Reports:
         if suppressed:
             data["suppressed"] = suppressed
         self.emit(Event(kind=EventKind.DECODE_ERROR, reason=clip(str(exc)), severity="warning", data=data, header=self._header("event")),
-                  keys.DECODE, keys.BY, self._reporter)
+                  keys.DECODE, keys.BY, self._reporter())

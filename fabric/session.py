@@ -90,7 +90,7 @@ class Fabric:
                        believe=self._fence_watch.believe, resources=self._resources)
         """Services: ``rpc.serve``, ``rpc.query``, ``rpc.call`` (:mod:`fabric.rpc`)."""
         self.reports = Reports(self.world, counters=self.counters, publish=self.publish, header=self.header,
-                               reporter=config.identity() or self.peer_id)
+                               reporter=lambda: config.identity() or self.peer_id)
         """Events and reports of bad input, rate-limited: ``reports.emit``, ``reports.bad_payload``,
         ``reports.should_report`` (:mod:`fabric.reports`)."""
         self.token = (
