@@ -95,21 +95,43 @@ class PoseWatch:
         return sim / (wall / 1e9) if wall > 0 else float("nan")
 
 
+def _note(res: dict[str, Any], exc: Exception) -> None:
+    res["refused"] += 1
+    if len(res["errors"]) < 5:
+        res["errors"].append(f"{type(exc).__name__}: {exc}")
+
+
+def _keep(robot: Any, res: dict[str, Any]) -> bool:
+    """Own ``robot`` again if it was lost (a lease that lapsed under load), as the paper's users take a robot
+    over with a button; whether she owns it now."""
+    if robot.is_owner:
+        return True
+    try:
+        robot.request(timeout=10.0)
+        res["retaken"] += 1
+        return True
+    except Exception as exc:
+        _note(res, exc)
+        return False
+
+
 def _drive(arm: Any, base: Any, until: float, res: dict[str, Any]) -> None:
-    """Turn the base and move the arm back and forth until wall time ``until``; refusals counted, never fatal."""
+    """Turn the base and move the arm back and forth until wall time ``until``; a robot lost is taken again,
+    refusals are counted, never fatal."""
     import numpy as np
 
     k = 0
     while time.time() < until:
+        if not all([_keep(arm, res), _keep(base, res)]):  # both asked for, whatever the first answers
+            time.sleep(0.5)
+            continue
         try:
             base.twist(0.0, 0.4 if k % 2 else -0.4)
             t = time.monotonic()
             arm.move_joints(np.radians(TARGETS_DEG[k % 2]), wait=True, tol=2e-3, timeout=min(20.0, max(1.0, until - time.time() + 5)))
             res["moves"].append(time.monotonic() - t)
         except Exception as exc:  # a refusal or a timeout: counted, and the student goes on
-            res["refused"] += 1
-            if len(res["errors"]) < 5:
-                res["errors"].append(f"{type(exc).__name__}: {exc}")
+            _note(res, exc)
             time.sleep(0.2)
         k += 1
     try:
@@ -126,13 +148,14 @@ def student(world: str, endpoint: str, index: int, n: int, out: str) -> None:
 
     from user_peer.api import connect
 
-    res: dict[str, Any] = {"student": f"s{index}", "moves": [], "refused": 0, "errors": [], "lost": []}
+    res: dict[str, Any] = {"student": f"s{index}", "moves": [], "refused": 0, "retaken": 0, "errors": [], "lost": []}
     others = [f"{k}{j}" for j in range(n) if j != index for k in ("arm", "base")]
     watch = PoseWatch(others)
     ages: list[float] = []
     try:
         with connect(world, endpoint, user=f"s{index}", timeout=10.0, join_timeout=180.0) as w:
-            w.ownership.on_lost(lambda obj, rec: res["lost"].append(f"{obj}: owner {rec.owner or 'none'} epoch {rec.epoch}"))
+            w.ownership.on_lost(lambda obj, rec: res["lost"].append(
+                f"{time.strftime('%H:%M:%S')} {obj}: owner {rec.owner or 'none'} epoch {rec.epoch}"))
             arm, base = w.robot(f"arm{index}"), w.robot(f"base{index}")
             arm.request(timeout=60.0)
             base.request(timeout=60.0)
@@ -185,6 +208,7 @@ def summarise(results: list[dict[str, Any]], delays: list[Any], start: float, mi
             "student": r["student"], "delay_ms_p50": pct(d[:, 1], 50), "delay_ms_p99": pct(d[:, 1], 99),
             "age_ms_p50": pct(a, 50), "age_ms_p99": pct(a, 99), "messages": int(d.shape[0]), "received": r.get("received", {}),
             "missing": r.get("missing", 0), "moves": len(r["moves"]), "refused": r["refused"], "lost": r["lost"],
+            "retaken": r.get("retaken", 0),
             "errors": r["errors"], "rtf": r.get("rtf", float("nan")),
         })
     per_minute = []
@@ -196,6 +220,7 @@ def summarise(results: list[dict[str, Any]], delays: list[Any], start: float, mi
         "age_ms_p50": pct(ages, 50), "age_ms_p99": pct(ages, 99), "messages": int(both.shape[0]),
         "missing": sum(r.get("missing", 0) for r in results), "moves": sum(len(r["moves"]) for r in results),
         "refused": sum(r["refused"] for r in results), "lost": sum(len(r["lost"]) for r in results),
+        "retaken": sum(r.get("retaken", 0) for r in results),
         "per_student": per_student, "per_minute": per_minute,
     }
 
@@ -261,14 +286,14 @@ def format_multi_user(doc: dict[str, Any]) -> str:
              f"load average {doc['load_average'][0]} at the start, {doc['load_average'][1]} at the end; "
              f"router {doc['cpu_cores']['router']:.2f} cores, sim {doc['cpu_cores']['sim']:.2f}; RSS from start to end: "
              f"router {doc['rss_mb']['router'][0]:.0f} -> {doc['rss_mb']['router'][1]:.0f} MB, sim {doc['rss_mb']['sim'][0]:.0f} -> {doc['rss_mb']['sim'][1]:.0f} MB",
-             "", "| student | delay p50 / p99 (ms) | age p50 / p99 (ms) | poses received | missing | arm moves | refused | robots lost | real-time factor |",
+             "", "| student | delay p50 / p99 (ms) | age p50 / p99 (ms) | poses received | missing | arm moves | refused | robots lost / taken again | real-time factor |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in doc["per_student"]:
         lines.append(f"| {r['student']} | {r['delay_ms_p50']:.1f} / {r['delay_ms_p99']:.1f} | {r['age_ms_p50']:.1f} / {r['age_ms_p99']:.1f} | "
-                     f"{r['messages']} | {r['missing']} | {r['moves']} | {r['refused']} | {len(r['lost'])} | {r['rtf']:.3f} |")
+                     f"{r['messages']} | {r['missing']} | {r['moves']} | {r['refused']} | {len(r['lost'])} / {r['retaken']} | {r['rtf']:.3f} |")
     lines.append(f"| all | {doc['delay_ms_p50']:.1f} / {doc['delay_ms_p99']:.1f} (max {doc['delay_ms_max']:.0f}) | "
                  f"{doc['age_ms_p50']:.1f} / {doc['age_ms_p99']:.1f} | {doc['messages']} | {doc['missing']} | {doc['moves']} | "
-                 f"{doc['refused']} | {doc['lost']} | |")
+                 f"{doc['refused']} | {doc['lost']} / {doc['retaken']} | |")
     lines.append(f"| the paper (PUN, {paper['users']} users, {paper['hours']:g} h) | ~{paper['delay_ms']:.0f} | | | | | | | |")
     lines += ["", "Per minute, delay p50 / p99 (ms): " + "; ".join(
         f"{m['minute']}: {m['delay_ms_p50']:.1f} / {m['delay_ms_p99']:.1f}" for m in doc["per_minute"])]
