@@ -21,12 +21,12 @@ from __future__ import annotations
 import os
 import time
 from pathlib import Path
-from typing import BinaryIO
 
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType
 
 from fabric import keys
 from fabric.fencing import SimFence, fenced_scopes
+from fabric.recording.mcap_file import McapFile, mcap_writer
 from fabric.recording.format import MESSAGE_ENCODING, METADATA_NAME, PROFILE, peek, schema_data
 
 STALE = "stale"
@@ -37,7 +37,7 @@ __all__ = ["McapSink", "COMPRESSIONS", "STALE"]
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 
 
-class McapSink:
+class McapSink(McapFile):
     """Writes samples to one MCAP file. Not thread-safe: one writer thread owns it.
 
     ``close()`` finishes the file (summary, footer) and is idempotent.
@@ -55,19 +55,14 @@ class McapSink:
     ) -> None:
         if compression not in COMPRESSIONS:
             raise ValueError(f"unknown compression {compression!r}; expected one of {', '.join(COMPRESSIONS)}")
-        self.path = Path(path)
+        super().__init__(path, mcap_writer(PROFILE, compression=COMPRESSIONS[compression], chunk_size=chunk_size), fsync=fsync)
         self.flush_interval = float(flush_interval)
-        self.fsync = fsync
-        self._file: BinaryIO = open(self.path, "wb")
-        self._writer = Writer(self._file, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
-        self._writer.start(profile=PROFILE, library="robofabric")
         if metadata:
-            self._writer.add_metadata(METADATA_NAME, {str(k): str(v) for k, v in metadata.items()})
-        self._file.flush()
+            self.writer.add_metadata(METADATA_NAME, {str(k): str(v) for k, v in metadata.items()})
+        self.file.flush()
         self._schemas: dict[str, int] = {}
         self._channels: dict[tuple[str, str], int] = {}
         self._last_flush = time.monotonic()
-        self._closed = False
         self.messages = 0
         self.fences: dict[str, SimFence] = {}  # per world: its sims and its fence
         # key -> (its world, the scopes that fence it) when it is an authority key, else None; one parse per key
@@ -81,14 +76,14 @@ class McapSink:
         sid = self._schemas.get(name)
         if sid is None:
             encoding, data = schema_data(name)
-            sid = self._schemas[name] = self._writer.register_schema(name, encoding, data)
+            sid = self._schemas[name] = self.writer.register_schema(name, encoding, data)
         return sid
 
     def channel(self, key: str, schema: str) -> int:
         """The channel of (key, schema); a key whose type changes gets a second channel on the same topic."""
         cid = self._channels.get((key, schema))
         if cid is None:
-            cid = self._channels[(key, schema)] = self._writer.register_channel(
+            cid = self._channels[(key, schema)] = self.writer.register_channel(
                 key, MESSAGE_ENCODING, self._schema_id(schema)
             )
         return cid
@@ -137,7 +132,7 @@ class McapSink:
         return sum(f.resets for f in self.fences.values())
 
     def write_with(self, key: str, schema: str, payload: bytes, log_time_ns: int, publish_time_ns: int, seq: int = 0) -> None:
-        self._writer.add_message(
+        self.writer.add_message(
             self.channel(key, schema), log_time=log_time_ns, data=payload, publish_time=publish_time_ns, sequence=seq & 0xFFFFFFFF
         )
         self.messages += 1
@@ -152,30 +147,12 @@ class McapSink:
         return True
 
     def flush(self, now: float | None = None) -> None:
-        self._writer.flush()
+        self.writer.flush()
         if self.fsync:
-            os.fsync(self._file.fileno())
+            os.fsync(self.file.fileno())
         self._last_flush = time.monotonic() if now is None else now
 
     @property
     def file_bytes(self) -> int:
         """Bytes handed to the file so far (the open chunk is not counted until it is flushed)."""
-        return self._file.tell()
-
-    def close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            self._writer.finish()
-            self._file.flush()
-            if self.fsync:
-                os.fsync(self._file.fileno())
-        finally:
-            self._file.close()
-
-    def __enter__(self) -> "McapSink":
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+        return self.file.tell()

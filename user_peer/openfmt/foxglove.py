@@ -46,10 +46,9 @@ from foxglove_schemas_protobuf.SpherePrimitive_pb2 import SpherePrimitive
 from foxglove_schemas_protobuf.Vector2_pb2 import Vector2
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.timestamp_pb2 import Timestamp
-from mcap.writer import CompressionType
-from mcap.writer import Writer as McapWriter
 from mcap_protobuf.schema import register_schema
 
+from fabric.recording.mcap_file import McapFile, mcap_writer
 from fabric.interfaces import JointState, json_schema, OccupancyGrid, Path, plain_view, Pose, Scan
 from user_peer.arm_geometry import Placement, Shape
 from user_peer.catalog import RobotCatalog
@@ -95,14 +94,11 @@ def msg_time_ns(msg: Any, log_time_ns: int) -> int:
     return int(wall) if wall > 0 else int(log_time_ns)
 
 
-class FoxgloveWriter:
+class FoxgloveWriter(McapFile):
     """Write fabric messages as a Foxglove-readable MCAP file; ``close()`` finishes it."""
 
     def __init__(self, path: FsPath, *, catalog: RobotCatalog | None = None, scene: str | None = None) -> None:
-        self.path = FsPath(path)
-        self._f = open(self.path, "wb")
-        self._w = McapWriter(self._f, compression=CompressionType.ZSTD)
-        self._w.start(profile="", library="robofabric")
+        super().__init__(path, mcap_writer(""))
         self._proto_schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._json_schemas: dict[str, int] = {}
@@ -112,7 +108,6 @@ class FoxgloveWriter:
         self._static: list[SceneEntity] = []  # the scene's fixed geometry, written with the first message
         self.written = 0
         self.skipped = 0
-        self._closed = False
         if scene:
             self._static_scene(scene)
 
@@ -123,8 +118,8 @@ class FoxgloveWriter:
         if ch is None:
             name = cls.DESCRIPTOR.full_name
             if name not in self._proto_schemas:
-                self._proto_schemas[name] = register_schema(self._w, cls)
-            ch = self._channels[topic] = self._w.register_channel(topic, "protobuf", self._proto_schemas[name])
+                self._proto_schemas[name] = register_schema(self.writer, cls)
+            ch = self._channels[topic] = self.writer.register_channel(topic, "protobuf", self._proto_schemas[name])
         return ch
 
     def _json_channel(self, topic: str, type_name: str, cls: type) -> int:
@@ -132,14 +127,14 @@ class FoxgloveWriter:
         if ch is None:
             if type_name not in self._json_schemas:
                 schema = json_schema(cls, extra=JOINTS_EXTRA if cls is JointState else None)
-                self._json_schemas[type_name] = self._w.register_schema(
+                self._json_schemas[type_name] = self.writer.register_schema(
                     f"robofabric.{type_name}", "jsonschema", json.dumps(schema).encode()
                 )
-            ch = self._channels[topic] = self._w.register_channel(topic, "json", self._json_schemas[type_name])
+            ch = self._channels[topic] = self.writer.register_channel(topic, "json", self._json_schemas[type_name])
         return ch
 
     def _put(self, channel: int, data: bytes, log_time: int, publish_time: int) -> None:
-        self._w.add_message(channel, log_time=log_time, data=data, publish_time=publish_time)
+        self.writer.add_message(channel, log_time=log_time, data=data, publish_time=publish_time)
         self.written += 1
 
     def _proto(self, topic: str, m: Any, log_time: int, publish_time: int) -> None:
@@ -269,20 +264,6 @@ class FoxgloveWriter:
             for b in boxes
         ]
 
-    def close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            self._w.finish()
-        finally:
-            self._f.close()
-
-    def __enter__(self) -> "FoxgloveWriter":
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def _entity(eid: str, frame: str, shape: Shape, pl: Placement, t: int) -> SceneEntity | None:
