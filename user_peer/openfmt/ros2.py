@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 from mcap_ros2.writer import Writer as Ros2McapWriter
 
+from fabric.recording.mcap_file import McapFile
 from fabric.interfaces import JointState, OccupancyGrid, Path, plain_view, Pose, Scan, WorldInfo
 from user_peer.catalog import RobotCatalog
 from user_peer.openfmt.frames import WORLD, FrameTracker, key_owner, yaw_quat_xyzw
@@ -234,29 +235,26 @@ def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0, r
     return "std_msgs/msg/String", {"data": json.dumps(plain)}
 
 
-class Ros2Writer:
+class Ros2Writer(McapFile):
     """Write fabric messages as a ROS 2 MCAP bag; ``close()`` finishes it."""
 
     def __init__(self, path: FsPath, *, catalog: RobotCatalog | None = None, scene: str | None = None) -> None:
-        self.path = FsPath(path)
-        self._f = open(self.path, "wb")
-        self._w = Ros2McapWriter(self._f)
+        super().__init__(path, Ros2McapWriter)  # mcap_ros2's writer starts its file itself (profile ros2)
         self._schemas: dict[str, Any] = {}
         self._tf_pub = 0
         self._stamps = SimStamps()  # header stamps: the sim's time, as the live bridge's (docs/ros2.md, "Stamps")
         self.frames = FrameTracker(catalog or RobotCatalog(None, scene=scene))
         self.written = 0
         self.skipped = 0
-        self._closed = False
 
     def _schema(self, type_name: str) -> Any:
         s = self._schemas.get(type_name)
         if s is None:
-            s = self._schemas[type_name] = self._w.register_msgdef(type_name, definition(type_name))
+            s = self._schemas[type_name] = self.writer.register_msgdef(type_name, definition(type_name))
         return s
 
     def _put(self, topic: str, type_name: str, message: dict, log_time: int, pub: int) -> None:
-        self._w.write_message(topic, self._schema(type_name), message, log_time=log_time, publish_time=pub)
+        self.writer.write_message(topic, self._schema(type_name), message, log_time=log_time, publish_time=pub)
         self.written += 1
 
     def write(self, key: str, msg: Any, log_time_ns: int, publish_time_ns: int | None = None) -> None:
@@ -308,20 +306,6 @@ class Ros2Writer:
             r = float(info.sonar[3]) if info is not None and info.sonar is not None else None
         return r or 0.0
 
-    def close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            self._w.finish()
-        finally:
-            self._f.close()
-
-    def __enter__(self) -> "Ros2Writer":
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def _leaves(x: Any):
