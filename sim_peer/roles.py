@@ -21,7 +21,7 @@ from sim_peer import election as el
 if TYPE_CHECKING:
     from sim_peer.replica_host import ReplicaHost
 
-__all__ = ["Roles", "MAX_GONE", "DEAF_WAIT_S"]
+__all__ = ["Roles", "MAX_GONE"]
 
 MAX_GONE = 256
 """How many departed sims' times are remembered (made-up sim tokens must not grow the record)."""
@@ -30,9 +30,6 @@ RECHECK_LEASES = 3
 restart every client reconnects on its own schedule (seconds apart), the leader's token among them."""
 OWN_TOKEN_S = 10.0
 """How long our own token's absence, with the link up, still counts as deafness (its return is the usual end)."""
-DEAF_WAIT_S = 0.2
-"""How long after a sim's token went the election looks: when this sim is the one cut off, its own token and its
-link go at about the same moment as the others' tokens, in either order."""
 
 
 class Roles:
@@ -112,8 +109,9 @@ class Roles:
         if peer_id == h.fabric.peer_id or self.deaf():
             self.deaf_recheck()
             return
-        # our own token and link go with everyone's when we are the one cut off, in either order: a moment first
-        threading.Thread(target=self.decide_after_loss, name="sim-token-gone", daemon=True).start()
+        self.step(el.Peers(h.shards.view(live)))
+        if self.role == el.PRIMARY:
+            h.adoption.soon()  # it may have been the scene objects' authority
 
     def deaf(self) -> bool:
         """Whether this sim hears no one now: its link is down, or the router no longer holds its own token."""
@@ -122,22 +120,6 @@ class Roles:
             # our own token missing counts for OWN_TOKEN_S at most: a link that is up hears the router again
             mine = h.fabric.peer_id in self.live or time.monotonic() - self.own_gone_at > OWN_TOKEN_S
         return not mine or not h.fabric.connected()
-
-    def decide_after_loss(self) -> None:
-        """A sim's token went: after :data:`DEAF_WAIT_S`, the election looks at the live sims, unless this sim turned
-        out to be the deaf one (then it waits for its link: :meth:`deaf_recheck`)."""
-        h = self.host
-        time.sleep(DEAF_WAIT_S)
-        if h.stopping.is_set():
-            return
-        if self.deaf():
-            self.deaf_recheck()
-            return
-        with h.lock:
-            live = frozenset(self.live)
-        self.step(el.Peers(h.shards.view(live)))
-        if self.role == el.PRIMARY:
-            h.adoption.soon()  # it may have been the scene objects' authority
 
     def deaf_recheck(self) -> None:
         """Our own link went (this sim cut off, the router restarted, this process paused past the lease): every sim's
