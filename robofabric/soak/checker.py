@@ -21,7 +21,7 @@ Invariants (each a function ``(history, limits) -> violations``, named in :data:
   someone took it over;
 * ``queue``: users waiting for an object keep their order, and nobody is skipped who still waits;
 * ``unowned_motion``: a robot does not move when nobody owns it (``settle_s`` after its owner went);
-* ``resources``: after warm-up, each peer's memory grows at most ``mem_mb_per_h``, its threads and file
+* ``resources``: after warm-up (the run's, and as long again for a peer restarted during it), each peer's memory grows at most ``mem_mb_per_h``, its threads and file
   descriptors at most ``thread_slack``/``fd_slack`` above their first half's peak, its log at most
   ``log_mb_per_h`` (judged on windows of at least ``min_window_s``);
 * ``exits``: no peer ended unless the nemesis or the end of the run ended it.
@@ -57,6 +57,7 @@ class Limits:
     log_mb_per_h: float = 10.0
     min_window_s: float = 600.0
     restart_warm_s: float = 60.0
+    """The least warm-up of a peer started during the run (a restart); it gets the run's own warm-up if longer."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -296,13 +297,15 @@ def resources(h: Sequence[Record], lim: Limits) -> list[Violation]:
     warm = next((r.t for r in h if isinstance(r, Mark) and r.what == "warm"), None)
     if warm is None:
         return []
+    began = next((r.t for r in h if isinstance(r, Mark) and r.what in ("class", "start")), warm)
+    warm_s = max(lim.restart_warm_s, warm - began)  # every incarnation of a peer warms up as long as the run did
     groups: dict[tuple[str, int], list[ProcSample]] = defaultdict(list)
     for r in h:
         if isinstance(r, ProcSample):
             groups[(r.name, r.pid)].append(r)
     out = []
     for (name, pid), ss in groups.items():
-        start = max(warm, ss[0].t + lim.restart_warm_s)
+        start = max(warm, ss[0].t + warm_s)
         win = [s for s in ss if s.t >= start]
         if len(win) < 4 or win[-1].t - win[0].t < lim.min_window_s:
             continue

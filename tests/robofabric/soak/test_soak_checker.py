@@ -147,6 +147,13 @@ def test_memory_fds_and_logs_growing_after_warm_up_are_violations():
     assert any("log grew" in m for m in msgs)
 
 
+def test_a_restarted_peer_warms_up_as_long_as_the_run_did():
+    first = [ProcSample(60.0 * m, "sim-a", 7, 100.0, 20, 30, 0) for m in range(40)]
+    again = [ProcSample(60.0 * m, "sim-a", 8, 60 + (m - 40) * 2.0 if m < 45 else 70.0, 20, 30, 0) for m in range(40, 70)]
+    h = [Mark(0, "class"), Mark(300, "warm"), *first, *again]  # the restart grows 10 MB in its first 5 minutes, then flat
+    assert only("resources", h) == []
+
+
 def test_flat_resources_and_short_windows_are_fine():
     assert only("resources", [Mark(0, "warm"), *_samples("sim-a", 5)]) == []
     assert only("resources", [Mark(0, "warm"), *_samples("sim-a", 500, minutes=5)]) == []  # too short to judge
