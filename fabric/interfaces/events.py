@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from fabric.codec import Map, S, register
-from fabric.interfaces.std import HEADER, Header, _header
+from fabric.interfaces.std import HEADER, Header, new_header
 from fabric.limits import MAX_USER_LEN
 
 __all__ = ["Event", "EventKind", "REJECT_KINDS"]
@@ -73,7 +73,7 @@ class Event:
     user: str = ""
     severity: str = "info"
     data: dict = field(default_factory=dict)
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {
         "kind": S(nonempty=True),

@@ -15,7 +15,7 @@ import numpy as np
 
 from fabric.codec import Arr, F, I, Msg, S, register
 from fabric.interfaces._arrays import vector
-from fabric.interfaces.std import HEADER, Header, OccupancyGrid, Path, _header
+from fabric.interfaces.std import HEADER, Header, OccupancyGrid, Path, new_header
 
 __all__ = ["PlanRequest", "PlanReply", "MapRequest", "MapReply", "MAP_ACTIONS", "PLANNER_NAMES", "DIRECTIONS", "empty_grid"]
 
@@ -46,7 +46,7 @@ class PlanRequest:
     direction: str = "default"
     turning_radius: float = 0.0
     robot_radius: float = 0.0
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {
         "robot": S(nonempty=True, max_len=200),
@@ -82,7 +82,7 @@ class PlanReply:
     length: float
     expansions: int = 0
     map: str = "map"
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {
         "path": Msg(Path),
@@ -111,7 +111,7 @@ class MapRequest:
     threshold: float = 0.65
     file: str = ""
     grid: OccupancyGrid = field(default_factory=empty_grid)
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {
         "action": S(choices=MAP_ACTIONS),
@@ -133,7 +133,7 @@ class MapReply:
     scans: int = 0
     mapping: int = 0
     file: str = ""
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {
         "action": S(),

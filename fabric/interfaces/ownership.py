@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from fabric.codec import F, I, Msg, S, Strs, User, register
-from fabric.interfaces.std import HEADER, Header, _header
+from fabric.interfaces.std import HEADER, Header, new_header
 from fabric.limits import MAX_USER_LEN
 
 __all__ = ["MAX_QUEUE", "OwnershipRecord", "OwnRequest", "OwnReply"]
@@ -39,7 +39,7 @@ class OwnershipRecord:
     queue: tuple[str, ...] = ()
     state: str = "still"
     authority: str = ""
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {
         "object": S(nonempty=True),

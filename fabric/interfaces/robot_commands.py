@@ -14,7 +14,7 @@ import numpy as np
 
 from fabric.codec import Arr, F, I, Msg, User, register
 from fabric.interfaces._arrays import frozen
-from fabric.interfaces.std import HEADER, MAX_JOINTS, Header, Path, _header
+from fabric.interfaces.std import HEADER, MAX_JOINTS, Header, Path, new_header
 
 __all__ = ["JointTarget", "Twist", "Stop", "Reset", "Command", "CommandBody", "COMMAND_BODIES"]
 
@@ -25,7 +25,7 @@ class JointTarget:
 
     q: np.ndarray
     speed_scale: float = 1.0
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {"q": Arr(np.float64, ndim=1, max_elems=MAX_JOINTS), "speed_scale": F(lo=1e-6, hi=1.0), "header": HEADER}
 
@@ -39,21 +39,21 @@ class Twist:
 
     v: float
     omega: float
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {"v": F(), "omega": F(), "header": HEADER}
 
 
 @dataclass(frozen=True, slots=True)
 class Stop:
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {"header": HEADER}
 
 
 @dataclass(frozen=True, slots=True)
 class Reset:
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {"header": HEADER}
 
@@ -68,7 +68,7 @@ class Command:
     user: str
     epoch: int
     body: CommandBody
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {
         "user": User(),

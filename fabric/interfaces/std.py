@@ -62,7 +62,7 @@ HEADER = Msg(Header)
 """The field spec of a nested header, shared by every message class."""
 
 
-def _header() -> Header:
+def new_header() -> Header:
     return Header()
 
 
@@ -71,7 +71,7 @@ class JointState:
     names: tuple[str, ...]
     q: np.ndarray
     dq: np.ndarray
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {
         "names": Strs(max_items=MAX_JOINTS),
@@ -101,7 +101,7 @@ class Pose:
     linear: np.ndarray = field(default_factory=lambda: np.zeros(3))
     angular: np.ndarray = field(default_factory=lambda: np.zeros(3))
     frame: str = "world"
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {
         "position": Arr(np.float64, shape=(3,)),
@@ -134,7 +134,7 @@ class Scan:
     angle_increment: float
     range_max: float
     ranges_mm: np.ndarray
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {
         "angle_min": F(lo=-2 * math.pi, hi=2 * math.pi),
@@ -172,7 +172,7 @@ class Path:
     y: np.ndarray
     theta: np.ndarray
     frame: str = "world"
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     SPEC: ClassVar[dict] = {
         "x": Arr(np.float64, ndim=1, max_elems=MAX_PATH_POINTS),
@@ -201,7 +201,7 @@ class OccupancyGrid:
     resolution: float
     origin: np.ndarray
     cells: np.ndarray
-    header: Header = field(default_factory=_header)
+    header: Header = field(default_factory=new_header)
 
     UNKNOWN: ClassVar[int] = 255
     SPEC: ClassVar[dict] = {

@@ -206,7 +206,7 @@ def _child_sub(a: argparse.Namespace) -> None:
 
 def _start_broker(transport: str, tmpdir: str) -> tuple[subprocess.Popen, int]:
     from fabric.testing import free_port, robofabric_cmd
-    from robofabric.bench.transport import _wait_listening
+    from robofabric.bench.transport import wait_listening
 
     port = free_port()
     if transport == "zenoh":
@@ -220,7 +220,7 @@ def _start_broker(transport: str, tmpdir: str) -> tuple[subprocess.Popen, int]:
         argv = [exe, "-c", str(conf)]
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        _wait_listening(port, proc)
+        wait_listening(port, proc)
     except Exception:
         end_process(proc)
         raise

@@ -50,7 +50,7 @@ def spots(n: int) -> list[str]:
     return out
 
 
-class _Poses:
+class Poses:
     """Every robot's pose arrivals: (sim time, local monotonic time) per sim, for real-time factors."""
 
     def __init__(self, fab: Any, world: str) -> None:
@@ -75,7 +75,7 @@ class _Poses:
         return out
 
 
-def _command_to_motion(world: str, endpoint: str, robots: list[str], rounds: int) -> list[float]:
+def command_to_motion(world: str, endpoint: str, robots: list[str], rounds: int) -> list[float]:
     """Seconds from a twist to the first pose (arrived after it) showing the base moving, ``rounds`` per robot."""
     import math
 
@@ -157,11 +157,11 @@ def run_one(robots: int, sims: int, seconds: float, tmp: Path) -> dict[str, Any]
             started.append(p)
             wait_until(lambda: "Ctrl-C to stop" in procs.output(p), timeout=180, what=f"sim-{i}", seen=lambda: procs.output(p)[-1500:])
         with client(world, port, kind="tool", peer_id="probe") as fab:
-            poses = _Poses(fab, world)
+            poses = Poses(fab, world)
             wait_until(lambda: len(poses.by_sim) == sims, timeout=60, what="poses from every sim", seen=lambda: list(poses.by_sim))
             cpu0 = [proc_cpu_s(p.pid) for p in started]
             t0 = time.monotonic()
-            latencies = _command_to_motion(world, ep, _firsts(mine), rounds=4)
+            latencies = command_to_motion(world, ep, _firsts(mine), rounds=4)
             left = seconds - (time.monotonic() - t0)
             if left > 0:
                 time.sleep(left)  # the world runs on for the rest of the window: the figures are of its steady state
@@ -195,13 +195,13 @@ def run_lab(robots: int, sims: int, seconds: float, log_dir: Path) -> dict[str, 
             wait_until(lambda: "Ctrl-C to stop" in p.output(), timeout=180, what=f"sim-{i}", seen=lambda: p.output()[-1500:])
         py = lab.add_host("probe").python(name="probe")
         py.call("from fabric.config import FabricConfig\nfrom fabric.session import Fabric\n"
-                "from robofabric.bench.shards import _Poses, _command_to_motion\n"
+                "from robofabric.bench.shards import Poses, command_to_motion\n"
                 f"fab = Fabric(FabricConfig.resolve(world={world!r}, connect=[{ep!r}]), kind='tool', peer_id='probe')\n"
-                f"poses = _Poses(fab, {world!r}); None", timeout=120)
+                f"poses = Poses(fab, {world!r}); None", timeout=120)
         wait_until(lambda: py.call("len(poses.by_sim)") == sims, timeout=60, what="poses from every sim at the probe host")
         cpu0 = [proc_cpu_s(p.pid) for p in started]
         t0 = time.monotonic()  # one machine: every namespace reads the same monotonic clock
-        latencies = py.call(f"_command_to_motion({world!r}, {ep!r}, {_firsts(mine)!r}, rounds=4)", timeout=300)
+        latencies = py.call(f"command_to_motion({world!r}, {ep!r}, {_firsts(mine)!r}, rounds=4)", timeout=300)
         left = seconds - (time.monotonic() - t0)
         if left > 0:
             time.sleep(left)

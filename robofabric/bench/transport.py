@@ -204,7 +204,7 @@ def run_one(transport: str, endpoint: str, rate: float, duration: float, *, pub_
     return result
 
 
-def _wait_listening(port: int, proc: subprocess.Popen, timeout: float = 60.0) -> None:
+def wait_listening(port: int, proc: subprocess.Popen, timeout: float = 60.0) -> None:
     """Until the router child accepts connections on ``port`` (its start takes seconds on a loaded machine)."""
     import socket
 
@@ -231,7 +231,7 @@ def run_bench(rates: list[float], duration: float, mqtt: bool) -> list[dict]:
     broker = None
     tmp = None
     try:
-        _wait_listening(port, router)
+        wait_listening(port, router)
         for r in rates:
             results.append(run_one("zenoh", f"tcp/127.0.0.1:{port}", r, duration))
         if mqtt:

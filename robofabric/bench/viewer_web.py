@@ -164,7 +164,7 @@ def summary(result: dict[str, Any]) -> dict[str, float]:
     return {"p50": p(0.5), "p90": p(0.9), "max": vals[-1] if vals else float("nan"), "last_worst": worst_last, "missing": missing}
 
 
-_URL = re.compile(r"web viewer: open (http://\S+)")
+VIEWER_URL = re.compile(r"web viewer: open (http://\S+)")
 
 
 def run(pages: int, stalled: int, seconds: float, width: int, view_args: list[str], log: Any = print, shot: str | None = None) -> dict[str, Any]:
@@ -180,12 +180,12 @@ def run(pages: int, stalled: int, seconds: float, width: int, view_args: list[st
     with tempfile.TemporaryDirectory(prefix="bench-web-") as tmp, ProcessGroup(Path(tmp)) as procs:
         ep = f"tcp/127.0.0.1:{free_port()}"
         router = procs.start(robofabric_cmd("router", "--listen", ep, "--world", world), name="router")
-        wait_until(lambda: _accepts(ep), timeout=30, interval=0.1, what="the router to listen", seen=lambda: procs.output(router))
+        wait_until(lambda: accepts(ep), timeout=30, interval=0.1, what="the router to listen", seen=lambda: procs.output(router))
         sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep), name="sim")
         web, grpc = free_port(), free_port()
         view = procs.start(robofabric_cmd("view", "--serve-web", "--advertise", "127.0.0.1", "--web-port", str(web),
                                           "--grpc-port", str(grpc), "--world", world, "--connect", ep, *view_args), name="view")
-        url = wait_until(lambda: _URL.search(procs.output(view)), timeout=90, interval=0.2, what="the viewer's URL",
+        url = wait_until(lambda: VIEWER_URL.search(procs.output(view)), timeout=90, interval=0.2, what="the viewer's URL",
                          seen=lambda: (procs.output(router) + procs.output(sim) + procs.output(view))[-2000:]).group(1)
         result = measure(url, pages, stalled, seconds, {"width": width, "height": width * 5 // 8}, log=log, shot=shot)
         result["view_log"] = procs.output(view)
@@ -195,7 +195,7 @@ def run(pages: int, stalled: int, seconds: float, width: int, view_args: list[st
     return result
 
 
-def _accepts(ep: str) -> bool:
+def accepts(ep: str) -> bool:
     import socket
 
     host, port = ep.split("/", 1)[1].rsplit(":", 1)

@@ -36,19 +36,19 @@ def run(stalled: int, warmup: float, seconds: float, log: Any = print) -> dict[s
     from pathlib import Path
 
     from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
-    from robofabric.bench.viewer_web import _URL, _accepts
+    from robofabric.bench.viewer_web import VIEWER_URL, accepts
 
     world = f"benchrelay{uuid.uuid4().hex[:6]}"
     out: dict[str, Any] = {"stalled": stalled, "warmup_s": warmup, "seconds": seconds}
     with tempfile.TemporaryDirectory(prefix="bench-relay-") as tmp, ProcessGroup(Path(tmp)) as procs:
         ep = f"tcp/127.0.0.1:{free_port()}"
         router = procs.start(robofabric_cmd("router", "--listen", ep, "--world", world), name="router")
-        wait_until(lambda: _accepts(ep), timeout=30, interval=0.1, what="the router to listen", seen=lambda: procs.output(router))
+        wait_until(lambda: accepts(ep), timeout=30, interval=0.1, what="the router to listen", seen=lambda: procs.output(router))
         procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep), name="sim")
         web, grpc = free_port(), free_port()
         view = procs.start(robofabric_cmd("view", "--serve-web", "--advertise", "127.0.0.1", "--web-port", str(web),
                                           "--grpc-port", str(grpc), "--world", world, "--connect", ep), name="view")
-        wait_until(lambda: _URL.search(procs.output(view)), timeout=90, interval=0.2, what="the viewer's URL",
+        wait_until(lambda: VIEWER_URL.search(procs.output(view)), timeout=90, interval=0.2, what="the viewer's URL",
                    seen=lambda: procs.output(view)[-2000:])
         time.sleep(warmup)  # a benchmark's session length, not a wait on a condition
         honest = WebReader(grpc, source="127.0.0.2")
