@@ -79,7 +79,7 @@ class BasePanel:
         v, w = self.driver.twist()
         async with self._send_lock:
             try:
-                # hold=False: the browser repeats a held key (keep_driving on its beat), so the sim's deadman
+                # hold=False: the page itself repeats a held key's twist (keep_driving), so the sim's deadman
                 # stops the base when the page goes quiet, whatever the server's session does until its grace
                 base = self.base
                 await asyncio.get_running_loop().run_in_executor(TWISTS, lambda: base.twist(v, w, hold=False))
@@ -88,8 +88,8 @@ class BasePanel:
                 self.page.say(f"drive {self.base.id}: {self.page.why(exc)}")
 
     async def keep_driving(self) -> None:
-        """The browser's beat while a key is held (every ``REFRESH_S``): the twist again (the sim's twist is a
-        deadman). A beat that finds the last send still under way is dropped: the next one comes."""
+        """Every ``REFRESH_S`` while a key is held: the twist again (the sim's twist is a deadman). A tick that finds
+        the last send still under way is skipped."""
         if self.driver.driving and not self._send_lock.locked():
             await self.send_twist()
 

@@ -38,32 +38,20 @@ DRAG_GRAB_PX = 12.0
 """How near the IK target (image pixels) a press must be to grab it."""
 
 KEYS_JS = """
-const rfHeld = new Set();
-let rfTimer = null;
-function rfBeat() { emitEvent('rf_hold', {keys: [...rfHeld]}); }
-function rfLetGo() { rfHeld.clear(); if (rfTimer) { clearInterval(rfTimer); rfTimer = null; } }
 for (const type of ['keydown', 'keyup']) document.addEventListener(type, (e) => {
   const f = document.activeElement;
   const typing = f && (['INPUT', 'TEXTAREA', 'SELECT'].includes(f.tagName) || f.getAttribute('role') === 'slider');
   if (type === 'keydown' && (typing || e.repeat)) return;
-  const arrow = ['ArrowUp', 'ArrowDown', 'ArrowLeft', 'ArrowRight'].includes(e.key);
-  if (!typing && (arrow || e.key === ' ')) e.preventDefault();
-  if (arrow && type === 'keydown') { rfHeld.add(e.key); if (!rfTimer) rfTimer = setInterval(rfBeat, REFRESH_MS); }
-  if (arrow && type === 'keyup') { rfHeld.delete(e.key); if (!rfHeld.size) rfLetGo(); }
-  if (e.key === ' ' && type === 'keydown') rfLetGo();
+  if (!typing && ['ArrowUp', 'ArrowDown', 'ArrowLeft', 'ArrowRight', ' '].includes(e.key)) e.preventDefault();
   emitEvent('rf_key', {key: e.key, down: type === 'keydown', t: Date.now()});
 });
-window.addEventListener('blur', () => { rfLetGo(); emitEvent('rf_blur'); });
-""".replace("REFRESH_MS", str(round(REFRESH_S * 1000)))
+window.addEventListener('blur', () => emitEvent('rf_blur'));
+"""
 """The page's keys: a key pressed while typing in a field or on a focused slider is that control's, never the
 base's (the terminal UI turned the base when ← was meant for a slider); a release always counts, so a key
 let go anywhere stops the base; the page losing focus stops it too. NiceGUI's ``ui.keyboard`` ignores by tag
-name only, and every Quasar control is a ``div``.
-
-While an arrow is held the browser itself beats (``rf_hold``, every :data:`~user_peer.console.drive.REFRESH_S`)
-and each beat sends the twist again: the base's deadman is the browser's, so a page whose tab, machine or
-network stalls stops its base within the sim's deadman, however long the websocket takes to be declared
-lost, and the server keeps no timer per page for it."""
+name only, and every Quasar control is a ``div``. ``t`` is the press's time in the browser's clock, for the
+console's health line (key to server)."""
 
 
 def event_line(ev: Any, trusted: bool) -> str:
@@ -211,10 +199,10 @@ class ConsolePage:
                 ui.label("Events").classes("text-subtitle1")
                 self.log = ui.log(max_lines=200).classes("w-full h-48")
         ui.on("rf_key", self._key)
-        ui.on("rf_hold", self._keep_driving)
         ui.on("rf_blur", self._disconnected)
         ui.run_javascript(KEYS_JS)
         ui.timer(REFRESH_VIEW_S, self._refresh)
+        ui.timer(REFRESH_S, self._keep_driving)
         self._refresh()
 
     def _robot_list(self) -> None:
@@ -310,7 +298,7 @@ class ConsolePage:
         if self.base_panel is not None:
             await self.base_panel.key(e)
 
-    async def _keep_driving(self, _: Any = None) -> None:
+    async def _keep_driving(self) -> None:
         if self.base_panel is not None:
             await self.base_panel.keep_driving()
 

@@ -16,20 +16,18 @@ from typing import Any
 from user_peer.console.health import PERIOD_S, Health
 from user_peer.console.login import Logins
 
-__all__ = ["Console", "serve", "page_urls", "RECONNECT_S", "PING_TIMEOUT_S"]
+__all__ = ["Console", "serve", "page_urls", "RECONNECT_S", "PING_INTERVAL_S", "PING_TIMEOUT_S"]
 
 RECONNECT_S = 30.0
 """How long a page whose connection dropped may come back as it was (NiceGUI's reconnect timeout): a busy
 server, a starved browser or a flaky Wi-Fi must not log a student out. After it the page is gone and her grace
-begins. Nothing drives meanwhile: the dropped connection lets go of her keys at once, and a held key is the
-browser's own beat (``KEYS_JS``). 10 s was too short for a class on one loaded 2-core box: with 20 pages at
+begins. Nothing drives meanwhile: the dropped connection lets go of her keys at once. 10 s was too short for a class on one loaded 2-core box: with 20 pages at
 load 25-38 pages came back after more than 10 s and NiceGUI had forgotten them (back at the login)."""
 
-PING_TIMEOUT_S = 20.0
-"""How long the server waits for a page's answer to its websocket ping (NiceGUI's default for a 10 s reconnect
-window is 4 s). Twenty pages on two cores starve a page's renderer for seconds, and a page cut off for a late
-answer must reconnect within :data:`RECONNECT_S` or go back to its login. Waiting longer is safe: a held key
-is repeated by the browser itself, so a page that went silent stops its base within the sim's deadman."""
+PING_INTERVAL_S, PING_TIMEOUT_S = 8.0, 12.0
+"""The websocket's heartbeat: a ping every 8 s, answered within 12 s (NiceGUI derives 24 s and 12 s from the 30 s
+reconnect window; it was 8 s and 4 s with 10 s). A starved page's late answer is forgiven for longer, and a page
+whose network died silently, with a key down, is still let go of within 20 s (a closed tab: at once)."""
 
 log = logging.getLogger("robofabric.console")
 
@@ -124,7 +122,8 @@ def serve(console: Console, host: str, port: int) -> None:
             print(f"console: open {url}", flush=True)
 
     def started() -> None:
-        core.sio.eio.ping_timeout = PING_TIMEOUT_S  # after NiceGUI's startup set it from the reconnect window
+        # after NiceGUI's startup set them from the reconnect window
+        core.sio.eio.ping_interval, core.sio.eio.ping_timeout = PING_INTERVAL_S, PING_TIMEOUT_S
         background_tasks.create(announce(), name="console announce")
         background_tasks.create(console.health.probe(), name="console health probe")
         background_tasks.create(report(), name="console health report")

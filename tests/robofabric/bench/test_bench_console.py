@@ -17,5 +17,6 @@ pytestmark = pytest.mark.slow
 def test_two_pages_drive_their_bases_and_lose_nothing(tmp_path):
     r = run_one(2, 6.0, tmp_path)
     assert r["joined"] == 2 and r["lost"] == 0 and r["refused"] == 0, r
+    assert r["logged_out"] == 0 and r["reloads"] == 0, r  # no page went back to its login
     assert r["presses"] >= 2 and r["missed"] == 0, r  # each press moved its base
     assert math.isfinite(r["lag_p50"]) and r["lag_p50"] > 0, r  # the pages showed a pose with its stamp

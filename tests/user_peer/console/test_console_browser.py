@@ -224,8 +224,10 @@ def _svg_points(page, selector: str) -> list[tuple[float, float]]:
 
 
 def _center(page, selector: str) -> tuple[float, float]:
+    """The centre of the view's shape on the screen (the view redraws 5 times a second: a shape between two draws
+    has no box, and is far away)."""
     box = page.locator(selector).first.bounding_box()
-    return box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    return (box["x"] + box["width"] / 2, box["y"] + box["height"] / 2) if box else (math.inf, math.inf)
 
 
 def test_dragging_the_ik_target_on_the_view_moves_it_and_the_arm_is_drawn_link_by_link(browser, klass):
@@ -235,41 +237,41 @@ def test_dragging_the_ik_target_on_the_view_moves_it_and_the_arm_is_drawn_link_b
     from user_peer.console.state import scene_layout
     from user_peer.console.topview import PX_PER_M
 
-    dave = open_page(browser, klass)
-    logged_in(dave, klass, "dave")
+    bob = open_page(browser, klass)
+    logged_in(bob, klass, "bob")
     target_svg = 'svg circle[fill="#f59f00"]'
-    dave.locator(target_svg).wait_for(state="attached")
+    bob.locator(target_svg).wait_for(state="attached")
     seen = klass.carol.object("target")
-    before = target_label(dave)  # where the page has it (the scene's, or where test A left it)
-    view = dave.get_by_label(re.compile("^Live view"))
-    natural = dave.evaluate("() => document.querySelector('img').naturalWidth")
+    before = target_label(bob)  # where the page has it (the scene's, or where test A left it)
+    view = bob.get_by_label(re.compile("^Live view"))
+    natural = bob.evaluate("() => document.querySelector('img').naturalWidth")
     m_per_screen_px = natural / view.bounding_box()["width"] / PX_PER_M
-    x0, y0 = _center(dave, target_svg)
+    x0, y0 = _center(bob, target_svg)
     dx, dy = 60, -40  # screen pixels: right and up, so +x and +y in the world
-    dave.mouse.move(x0, y0)
-    dave.mouse.down()
-    dave.mouse.move(x0 + dx / 2, y0 + dy / 2)
-    dave.mouse.move(x0 + dx, y0 + dy)
-    dave.mouse.up()
+    bob.mouse.move(x0, y0)
+    bob.mouse.down()
+    bob.mouse.move(x0 + dx / 2, y0 + dy / 2)
+    bob.mouse.move(x0 + dx, y0 + dy)
+    bob.mouse.up()
     want = before + np.array([dx * m_per_screen_px, -dy * m_per_screen_px, 0.0])
     wait_until(lambda: seen.pose is not None and np.allclose(seen.pose.position, want, atol=0.01), timeout=10,
                what=f"the target dragged to {want} (read through the Python API)", seen=lambda: (before, seen.pose.position))
     assert seen.pose.position[2] == pytest.approx(before[2], abs=1e-3)  # a drag from above keeps the height
-    wait_until(lambda: math.dist(_center(dave, target_svg), (x0 + dx, y0 + dy)) <= 2.0, timeout=10,
-               what="the page drawing the target where it was dropped", seen=lambda: (_center(dave, target_svg), (x0 + dx, y0 + dy)))
-    assert "goal" not in message(dave)  # the click that ended the drag placed no goal
-    assert np.allclose(target_label(dave), seen.pose.position, atol=5e-4)
+    wait_until(lambda: math.dist(_center(bob, target_svg), (x0 + dx, y0 + dy)) <= 2.0, timeout=10,
+               what="the page drawing the target where it was dropped", seen=lambda: (_center(bob, target_svg), (x0 + dx, y0 + dy)))
+    assert "goal" not in message(bob)  # the click that ended the drag placed no goal
+    assert np.allclose(target_label(bob), seen.pose.position, atol=5e-4)
 
     frame, _ = scene_layout(klass.carol.info())
     arm = klass.carol.robot("arm1")
-    links = dave.locator("svg polyline.rf-arm-links")
+    links = bob.locator("svg polyline.rf-arm-links")
     links.first.wait_for(state="attached")
-    pts = _svg_points(dave, "svg polyline.rf-arm-links")
+    pts = _svg_points(bob, "svg polyline.rf-arm-links")
     assert len(pts) == 8  # the base, then the Meca500's six joints and its flange frame
     flange = frame.px(float(arm.flange.position[0]), float(arm.flange.position[1]))
     assert math.dist(pts[-1], flange) <= 1.0, (pts[-1], flange)  # 1 image pixel: 2.5 cm at 40 px/m
-    shot(dave, "dave-drag")
-    dave.context.close()
+    shot(bob, "bob-drag")
+    bob.context.close()
 
 
 def test_holding_up_drives_the_base_and_releasing_stops_it(browser, klass):
