@@ -34,6 +34,7 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass
 from typing import Callable, Iterable, Sequence
 
+from fabric.interfaces import EventKind
 from robofabric.soak.history import Cmd, Fault, Joints, Mark, OwnEvent, OwnRec, ProcExit, ProcSample, Record
 
 __all__ = ["Limits", "Violation", "INVARIANTS", "check", "fenced", "fmt", "summary"]
@@ -229,11 +230,11 @@ def _explained(prev: OwnRec, cur: OwnRec, events: list[OwnEvent], lim: Limits) -
     for e in events:
         if e.obj != prev.obj or not (prev.t - lim.justify_s <= e.t <= cur.t + lim.justify_s):
             continue
-        if e.kind in ("own_released", "own_expired") and e.user == a:
+        if e.kind in (EventKind.OWN_RELEASED, EventKind.OWN_EXPIRED) and e.user == a:
             return True
-        if e.kind == "own_handover" and e.reason.endswith(f" by {a}"):
+        if e.kind == EventKind.OWN_HANDOVER and e.reason.endswith(f" by {a}"):
             return True
-        if e.kind == "own_revoked" and e.user == a and "while still" in e.reason:
+        if e.kind == EventKind.OWN_REVOKED and e.user == a and "while still" in e.reason:
             return True
     return False
 

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from fabric import keys
+from fabric.interfaces import EventKind
 from fabric.codec import decode
 from fabric.interfaces import Command, Event, JointState, JointTarget, OwnershipRecord
 
@@ -104,7 +105,7 @@ def _record(t: float, parsed: Any, msg: Any) -> Any:
     if parsed.category == "event" and isinstance(msg, Event):
         if msg.kind.startswith("own_"):
             return OwnEvent(t, msg.kind, msg.object, msg.user, msg.reason, msg.header.source)
-        if msg.kind == "reject":
+        if msg.kind == EventKind.REJECT:
             return Reject(t, msg.object or parsed.leaf, msg.user, msg.reason)
         return None
     if parsed.category == "cmd" and isinstance(msg, Command):
