@@ -90,7 +90,7 @@ BENCHMARKS: tuple[Benchmark, ...] = (
     Benchmark("lab", "lab", "recovery times in a lab of network namespaces: partition, router loss, lost sim",
               full=("--runs", "5"), quick=("--runs", "1"), needs="netns"),
     Benchmark("console", "console", "N browser pages on one console server, each driving its base: view lag in the page, key to motion, server CPU",
-              full=("--pages", "1,10,20", "--seconds", "30"), quick=("--pages", "2", "--seconds", "5")),
+              full=("--pages", "1,10,20", "--seconds", "20"), quick=("--pages", "2", "--seconds", "5")),
     Benchmark("paper", "paper", "the paper's evaluation side by side: data usage (zenoh and MQTT at 10-600 Hz, payload and wire bytes, "
               "MB/min), resources per application (Table 4), and 5 students' delay on robots they do not own",
               full=("--rates", "10,20,50,100,200,600", "--resources", "--multi-user"), quick=("--quick",)),
