@@ -252,15 +252,30 @@ def handover(h: Sequence[Record], lim: Limits) -> list[Violation]:
     return out
 
 
+def _passed_on(prev: OwnRec, cur: OwnRec, events: list[OwnEvent], lim: Limits) -> bool:
+    """The authority passed ``prev``'s robot on (her release, expiry or a handover), as opposed to a take-over of
+    a still robot, which goes to whoever asked, queued or not."""
+    for e in events:
+        if e.obj != prev.obj or not (prev.t - lim.justify_s <= e.t <= cur.t + lim.justify_s):
+            continue
+        if e.kind in (EventKind.OWN_RELEASED, EventKind.OWN_EXPIRED) and e.user == prev.owner:
+            return True
+        if e.kind == EventKind.OWN_HANDOVER and e.reason.endswith(f" by {prev.owner}"):
+            return True
+    return False
+
+
 def queue(h: Sequence[Record], lim: Limits) -> list[Violation]:
     recs, _ = fenced(h)
+    events = [r for r in h if isinstance(r, OwnEvent)]
     out = []
     for obj, rs in recs.items():
         for prev, cur in zip(rs, rs[1:]):
             both = [u for u in prev.queue if u in cur.queue]
             if both != [u for u in cur.queue if u in prev.queue]:
                 out.append(Violation("queue", f"{obj}'s queue changed order: {list(prev.queue)} then {list(cur.queue)}", (prev, cur)))
-            elif cur.owner != prev.owner and cur.owner in prev.queue:
+            elif cur.owner != prev.owner and cur.owner in prev.queue and (
+                    prev.state != "still" or not prev.owner or _passed_on(prev, cur, events, lim)):
                 ahead = [u for u in prev.queue[: prev.queue.index(cur.owner)] if u in cur.queue]
                 if ahead:
                     out.append(Violation("queue", f"{obj} went to {cur.owner} ahead of {', '.join(ahead)}, who still wait",

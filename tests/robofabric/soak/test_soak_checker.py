@@ -108,8 +108,14 @@ def test_release_expiry_and_take_over_of_a_still_robot_are_fine():
 def test_a_queue_changing_order_or_skipping_a_waiting_user_is_a_violation():
     (v,) = only("queue", [rec(1, "ann", 1, queue=("bob", "cat"), state="moving"), rec(2, "ann", 1, queue=("cat", "bob"))])
     assert "changed order" in v.message
-    (w,) = only("queue", [rec(1, "ann", 1, queue=("bob", "cat")), rec(2, "cat", 2, queue=("bob",))])
+    released = OwnEvent(2, "own_handover", "arm0", "cat", "released by ann", "sim-a")
+    (w,) = only("queue", [rec(1, "ann", 1, queue=("bob", "cat")), released, rec(2, "cat", 2, queue=("bob",))])
     assert "went to cat ahead of bob" in w.message
+
+
+def test_a_still_robot_taken_over_by_a_queued_user_skips_nobody():
+    """A take-over of a still robot goes to whoever asked (the authority's rule), queued behind others or not."""
+    assert only("queue", [rec(1, "ann", 1, queue=("bob", "cat")), rec(2, "cat", 2, queue=("bob",))]) == []
 
 
 def test_a_queue_handing_over_in_order_is_fine():
