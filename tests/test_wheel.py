@@ -27,10 +27,13 @@ pytestmark = pytest.mark.slow
 
 REPO = Path(__file__).resolve().parents[1]
 CAP_S = 90
-_SKIP = shutil.ignore_patterns(
-    ".venv", ".git", "build", "dist", "out", "tests", "docs", "tools", "__pycache__", "*.egg-info",
-    ".pytest_cache", ".hypothesis", "*.mcap", "*.rrd", "*.whl",
-)
+_SKIP_ANYWHERE = shutil.ignore_patterns("__pycache__", "*.egg-info", ".pytest_cache", ".hypothesis", "*.mcap", "*.rrd", "*.whl")
+_SKIP_AT_TOP = {".venv", ".git", "build", "dist", "out", "tests", "docs", "tools"}  # the checkout's, not robofabric/tools
+
+
+def _SKIP(folder: str, names: list[str]) -> set[str]:
+    skipped = set(_SKIP_ANYWHERE(folder, names))
+    return skipped | (_SKIP_AT_TOP & set(names)) if Path(folder) == REPO else skipped
 
 
 def _run(argv: list[str], *, cwd: Path, timeout: float, env: dict | None = None) -> subprocess.CompletedProcess:
