@@ -51,3 +51,20 @@ def procs(tmp_path) -> Iterator[ProcessGroup]:
         yield group
     finally:
         group.close()
+
+
+@pytest.fixture(scope="session")
+def lab_ok() -> None:
+    """The multi-host tests (tests/lab, the soak's) need network namespaces: skipped with the reason only where
+    they cannot be made, and never on CI (``CI`` set), where that is a failure."""
+    import os
+
+    from robofabric.lab import namespaces_available, sweep_stale
+
+    ok, why = namespaces_available()
+    if not ok:
+        if os.environ.get("CI"):
+            pytest.fail(f"multi-host tests cannot run on CI (CI={os.environ['CI']!r}): {why}", pytrace=False)
+        print(f"multi-host tests skipped: {why}")
+        pytest.skip(why)
+    sweep_stale()  # namespaces of earlier runs that were killed before they could clean up

@@ -3,23 +3,11 @@ network namespaces cannot be created, and never on CI (``CI`` set): there that i
 
 from __future__ import annotations
 
-import os
 from typing import Iterator
 
 import pytest
 
-from robofabric.lab import Lab, namespaces_available, sweep_stale
-
-
-@pytest.fixture(scope="session")
-def lab_ok() -> None:
-    ok, why = namespaces_available()
-    if not ok:
-        if os.environ.get("CI"):
-            pytest.fail(f"lab tests cannot run on CI (CI={os.environ['CI']!r}): {why}", pytrace=False)
-        print(f"lab tests skipped: {why}")
-        pytest.skip(why)
-    sweep_stale()  # namespaces of earlier runs that were killed before they could clean up
+from robofabric.lab import Lab
 
 
 @pytest.fixture
