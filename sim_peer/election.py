@@ -23,6 +23,11 @@ Rules:
   each the authority of its own robots. A sim's election hears only its own robots' terms (the caller
   filters ``Heard``) and counts only the sims of its shard (:func:`shard_view`): the sims that serve or
   follow a robot of its own, and those not asked yet (one world, one shard: what every sim did before).
+- A leader still *heard* (its term on a stream or ``srv/state`` within the last moment: ``Peers.audible``) is
+  alive, whatever the liveliness view says: a sim whose own link just came back (paused past the lease, a
+  router restarted) can see the tokens late, and a standby that took over then would serve a world that stops
+  where its state does, while the leader it follows serves on (the soak saw a primary, just stepped down,
+  take the world back at once with epochs older than its leader's).
 - A primary back from a freeze longer than the lease that finds no higher term (``Resumed``) goes on
   under term + 1 (effect ``reassert``): a standby that took over and died meanwhile may have had
   consumers fence at that term. (If several did, one after the other, and all died before the old
@@ -67,6 +72,8 @@ class Peers:
     """The sim peers whose liveliness tokens are alive now (this one included or not: it is added)."""
 
     live: frozenset[str]
+    audible: frozenset[str] = frozenset()
+    """The sims heard just now (their stamped state arrived within the last moment): alive, token or not."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -132,6 +139,8 @@ def step(s: Election, ev: Event) -> tuple[Election, list[ElectionEffect]]:
             return s, []  # nothing to take over: we lead, or follow nobody yet
         if s.leader in ev.live:
             return (s if s.leader_seen else replace(s, leader_seen=True)), []
+        if s.leader in ev.audible:
+            return s, []  # its token is late, not gone: it still speaks
         standbys = set(ev.live) | {s.me}
         if candidate(standbys) != s.me:
             return s, []

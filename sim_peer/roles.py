@@ -21,13 +21,18 @@ from sim_peer import election as el
 if TYPE_CHECKING:
     from sim_peer.replica_host import ReplicaHost
 
-__all__ = ["Roles", "MAX_GONE"]
+__all__ = ["Roles", "MAX_GONE", "AUDIBLE_S"]
 
 MAX_GONE = 256
 """How many departed sims' times are remembered (made-up sim tokens must not grow the record)."""
 RECHECK_LEASES = 3
 """Leases a sim whose link came back waits for the others' tokens before the election looks: after a router's
 restart every client reconnects on its own schedule (seconds apart), the leader's token among them."""
+AUDIBLE_S = 0.5
+"""A sim heard (its term on a stream or ``srv/state``) this recently is alive, whatever its token: a leader whose
+token is missing from the view waits for this long after it was last heard before a standby takes over. A
+killed sim's token goes at once, so this is what a SIGKILL adds to a fail-over at most; its streams (tens of
+samples a second) keep a live leader well inside it."""
 OWN_TOKEN_S = 10.0
 """How long our own token's absence, with the link up, still counts as deafness (its return is the usual end)."""
 
@@ -45,6 +50,9 @@ class Roles:
         self.own_gone_at = float("-inf")  # when the router last dropped our own token (monotonic)
         self.rechecking = False  # a look at the live sims is due once this sim's own link is back (deaf_recheck)
         self.taking_over: threading.Thread | None = None
+        # when each sim was last heard (monotonic); a standby made by a step-down heard its leader just now
+        self.heard_at: dict[str, float] = {election.leader: time.monotonic()} if election.leader else {}
+        self.relooking = False  # a look at the live sims is due once a missing but audible leader goes quiet
 
     @property
     def role(self) -> str:
@@ -164,7 +172,45 @@ class Roles:
     def heard(self, source: str, term: int) -> None:
         """Authority state stamped with ``term`` came from ``source``."""
         if term > 0:
+            if source != self.host.fabric.peer_id:
+                if source not in self.heard_at and len(self.heard_at) >= MAX_GONE:
+                    self.heard_at.pop(min(self.heard_at, key=self.heard_at.__getitem__))
+                self.heard_at[source] = time.monotonic()
             self.step(el.Heard(source, term))
+
+    def audible(self) -> frozenset[str]:
+        """The sims heard within :data:`AUDIBLE_S`."""
+        now = time.monotonic()
+        return frozenset(p for p, t in list(self.heard_at.items()) if now - t < AUDIBLE_S)
+
+    def relook(self) -> None:
+        """The leader is missing from the live sims but still heard: look again once it has been quiet for
+        :data:`AUDIBLE_S` (it may be gone then: a killed sim's last samples), or sooner if it speaks no more."""
+        h = self.host
+        with h.lock:
+            if self.relooking:
+                return
+            self.relooking = True
+        h.announce(f"standby {h.fabric.peer_id}: the token of {self.election.leader} is missing, but it is still heard; "
+                   "waiting until it falls silent before taking over")
+
+        def again() -> None:
+            try:
+                while not h.stopping.is_set():
+                    quiet = time.monotonic() - self.heard_at.get(self.election.leader, float("-inf"))
+                    if quiet >= AUDIBLE_S:
+                        break
+                    h.stopping.wait(AUDIBLE_S - quiet + 0.01)
+            finally:
+                with h.lock:
+                    self.relooking = False
+            if h.stopping.is_set():
+                return
+            with h.lock:
+                live = frozenset(self.live)
+            self.step(el.Peers(h.shards.view(live)))
+
+        threading.Thread(target=again, name="sim-relook", daemon=True).start()
 
     def set_term(self, term: int) -> None:
         """Serve on under ``term`` (a move or an adoption took a new one; call with the lock held)."""
@@ -181,8 +227,15 @@ class Roles:
             if waiting or self.deaf():
                 self.deaf_recheck()
                 return
+        if isinstance(ev, el.Peers):
+            ev = replace(ev, audible=self.audible())
         with h.lock:
             self.election, effects = el.step(self.election, ev)
+            leader = self.election.leader
+            deferred = (isinstance(ev, el.Peers) and self.election.role == el.STANDBY and leader not in ev.live
+                        and leader in ev.audible)
+        if deferred:
+            self.relook()
         for e in effects:
             if e.kind == "take_over":
                 t = threading.Thread(target=h.take_over, args=(time.monotonic(),), name="take-over", daemon=True)

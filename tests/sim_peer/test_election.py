@@ -32,6 +32,16 @@ def test_standby_takes_over_when_the_primary_goes_and_steps_down_for_a_higher_te
     assert eff == [el.ElectionEffect("ignore", 1, "p")] and s.role == el.PRIMARY
 
 
+def test_a_leader_still_heard_is_alive_while_its_token_is_missing():
+    """A view without the leader's token takes nothing over while the leader is still heard (its token late after
+    this sim's link came back); once it falls silent, the same view takes over."""
+    s, _ = el.step(el.start("s", standby=True), el.Heard("p", 3))
+    s, eff = el.step(s, el.Peers(frozenset({"s"}), audible=frozenset({"p"})))
+    assert eff == [] and s.role == el.STANDBY and s.term == 3
+    s, eff = el.step(s, el.Peers(frozenset({"s"}), audible=frozenset({"q"})))  # another sim heard: no alibi
+    assert eff == [el.ElectionEffect("take_over", 4, "s")]
+
+
 def test_only_the_lowest_live_standby_takes_over():
     states = {i: el.step(el.start(i, standby=True), el.Heard("p", 3))[0] for i in ("s2", "s1", "s3")}
     states = {i: el.step(s, el.Peers(frozenset({"p", "s1", "s2", "s3"})))[0] for i, s in states.items()}
