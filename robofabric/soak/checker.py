@@ -3,6 +3,12 @@
 Pure: records in, violations out; time is the records' own ``t``. Each violation carries the shortest
 excerpt of the history that shows it (two to four records), so a reader can judge it without the rest.
 
+The observer is a client of the router like everyone else: while the router restarts it hears nothing, and an event
+the authority published before the observer's link was back is never heard (a record is published again at its next
+change; an event is not). Those stretches (:func:`blind`) are named in the summary, and an owner change across
+one is not judged by ``handover`` nor ``queue`` (whose verdicts rest on events and the robot's motion then): it is
+counted as not judged instead.
+
 The wire's view is fenced as every consumer fences it: a record or a joint sample with a lower term than
 one already seen for its object is a stale authority's (a primary that was paused or cut off and has not
 stepped down yet), which consumers drop (:mod:`fabric.fencing`); the invariants are about what they act on.
@@ -37,7 +43,7 @@ from typing import Callable, Iterable, Sequence
 from fabric.interfaces import EventKind
 from robofabric.soak.history import Cmd, Fault, Joints, Mark, OwnEvent, OwnRec, ProcExit, ProcSample, Record
 
-__all__ = ["Limits", "Violation", "INVARIANTS", "check", "fenced", "fmt", "summary"]
+__all__ = ["Limits", "Violation", "INVARIANTS", "blind", "check", "fenced", "fmt", "not_judged", "summary"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -57,6 +63,9 @@ class Limits:
     fd_slack: int = 16
     log_mb_per_h: float = 10.0
     min_window_s: float = 600.0
+    blind_margin_s: float = 0.5
+    """How long after the observer hears the wire again (a router restarted) it may still miss what a peer sends:
+    each of its subscriptions reaches the new router on its own."""
     restart_warm_s: float = 60.0
     """The least warm-up of a peer started during the run (a restart); it gets the run's own warm-up if longer."""
 
@@ -223,6 +232,30 @@ def reset(h: Sequence[Record], lim: Limits) -> list[Violation]:
     return out
 
 
+def blind(h: Sequence[Record], lim: Limits = Limits()) -> list[tuple[float, float]]:
+    """When the observer heard nothing of the wire: from each router restart until the first thing it heard after
+    the restart ended, and ``blind_margin_s`` more."""
+    heard = sorted(r.t for r in h if isinstance(r, (OwnRec, OwnEvent, Cmd, Joints)))
+    out = []
+    for f in h:
+        if isinstance(f, Fault) and f.kind == "router":
+            i = bisect.bisect_right(heard, f.until)
+            out.append((f.t, (heard[i] if i < len(heard) else float("inf")) + lim.blind_margin_s))
+    return out
+
+
+def _across(prev: OwnRec, cur: OwnRec, windows: list[tuple[float, float]]) -> bool:
+    return any(a < cur.t and b > prev.t for a, b in windows)
+
+
+def not_judged(h: Sequence[Record], lim: Limits = Limits()) -> int:
+    """How many owner changes fell in the observer's blind stretches (``handover`` and ``queue`` do not judge them)."""
+    recs, _ = fenced(h)
+    windows = blind(h, lim)
+    return sum(1 for rs in recs.values() for prev, cur in zip(rs, rs[1:])
+               if cur.owner != prev.owner and _across(prev, cur, windows))
+
+
 def _explained(prev: OwnRec, cur: OwnRec, events: list[OwnEvent], lim: Limits) -> bool:
     if prev.state == "still" and cur.owner:
         return True  # a still robot taken over
@@ -242,10 +275,11 @@ def _explained(prev: OwnRec, cur: OwnRec, events: list[OwnEvent], lim: Limits) -
 def handover(h: Sequence[Record], lim: Limits) -> list[Violation]:
     recs, _ = fenced(h)
     events = [r for r in h if isinstance(r, OwnEvent)]
+    windows = blind(h, lim)
     out = []
     for obj, rs in recs.items():
         for prev, cur in zip(rs, rs[1:]):
-            if prev.owner and cur.owner != prev.owner and not _explained(prev, cur, events, lim):
+            if prev.owner and cur.owner != prev.owner and not _explained(prev, cur, events, lim) and not _across(prev, cur, windows):
                 out.append(Violation("handover", f"{obj} left {prev.owner} for {cur.owner or 'nobody'} while "
                                                  f"{prev.state}, and the authority said no release, expiry or take-over",
                                      (prev, cur)))
@@ -268,13 +302,14 @@ def _passed_on(prev: OwnRec, cur: OwnRec, events: list[OwnEvent], lim: Limits) -
 def queue(h: Sequence[Record], lim: Limits) -> list[Violation]:
     recs, _ = fenced(h)
     events = [r for r in h if isinstance(r, OwnEvent)]
+    windows = blind(h, lim)
     out = []
     for obj, rs in recs.items():
         for prev, cur in zip(rs, rs[1:]):
             both = [u for u in prev.queue if u in cur.queue]
             if both != [u for u in cur.queue if u in prev.queue]:
                 out.append(Violation("queue", f"{obj}'s queue changed order: {list(prev.queue)} then {list(cur.queue)}", (prev, cur)))
-            elif cur.owner != prev.owner and cur.owner in prev.queue and (
+            elif cur.owner != prev.owner and cur.owner in prev.queue and not _across(prev, cur, windows) and (
                     prev.state != "still" or not prev.owner or _passed_on(prev, cur, events, lim)):
                 ahead = [u for u in prev.queue[: prev.queue.index(cur.owner)] if u in cur.queue]
                 if ahead:
@@ -362,11 +397,16 @@ def check(history: Sequence[Record], limits: Limits = Limits()) -> list[Violatio
     return out
 
 
-def summary(history: Sequence[Record], violations: Sequence[Violation]) -> list[str]:
-    """The run's last lines: ``faults: N``, ``fault kinds: K`` (with the count of each) and ``violations: V``."""
+def summary(history: Sequence[Record], violations: Sequence[Violation], limits: Limits = Limits()) -> list[str]:
+    """The run's last lines: what the observer could not see, then ``faults: N``, ``fault kinds: K`` (with the count
+    of each) and ``violations: V``."""
     kinds = Counter(r.kind for r in history if isinstance(r, Fault))
     by_inv = Counter(v.invariant for v in violations)
-    lines = [f"faults: {sum(kinds.values())}",
+    windows = blind(history, limits)
+    shut = sum(min(b, history[-1].t if history else b) - a for a, b in windows)
+    lines = [f"observer blind: {len(windows)} router restarts, {shut:.1f} s in all; owner changes not judged there: "
+             f"{not_judged(history, limits)}",
+             f"faults: {sum(kinds.values())}",
              f"fault kinds: {len(kinds)} ({', '.join(f'{k} {n}' for k, n in sorted(kinds.items()))})" if kinds else "fault kinds: 0",
              f"violations: {len(violations)}" + (f" ({', '.join(f'{k} {n}' for k, n in sorted(by_inv.items()))})" if by_inv else "")]
     return lines

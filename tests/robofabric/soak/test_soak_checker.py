@@ -7,7 +7,7 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from robofabric.soak.checker import INVARIANTS, Limits, check, summary
+from robofabric.soak.checker import INVARIANTS, Limits, blind, check, not_judged, summary
 from robofabric.soak.history import Cmd, Fault, Joints, Mark, OwnEvent, OwnRec, ProcExit, ProcSample
 
 A = (0.6, 0.3, -0.3, 0.0, 0.5, 0.1)
@@ -96,6 +96,19 @@ def test_an_owner_losing_a_moving_robot_without_a_reason_is_a_violation():
     assert "left ann for bob while moving" in v.message
 
 
+def test_an_owner_change_while_the_observer_was_blind_is_counted_not_judged():
+    """A router restart blinds the observer until it hears the wire again (and a margin): an owner change across that
+    stretch is not judged (the event that explains it may be lost), but counted; the same change in sight is judged."""
+    moving, taken = rec(1, "ann", 1, state="moving"), rec(4, "bob", 2)
+    blind_h = [moving, Fault(2, "router", "router", 3), js(3.2, A), taken]
+    assert only("handover", blind_h) == [] and only("queue", blind_h) == []
+    assert blind(blind_h) == [(2, 3.7)] and not_judged(blind_h) == 1
+    assert summary(blind_h, [])[0] == "observer blind: 1 router restarts, 1.7 s in all; owner changes not judged there: 1"
+    # both records after the observer heard the wire again: in sight, judged
+    late = [Fault(2, "router", "router", 3), js(3.2, A), rec(5, "ann", 1, state="moving"), rec(6, "bob", 2)]
+    assert [v.invariant for v in check(late)] == ["handover"] and not_judged(late) == 0
+
+
 def test_release_expiry_and_take_over_of_a_still_robot_are_fine():
     h = [rec(1, "ann", 1, state="moving"), OwnEvent(2, "own_released", "arm0", "ann", "released", "sim-a"), rec(2, "", 2),
          rec(3, "bob", 3, state="moving"), OwnEvent(4, "own_expired", "arm0", "bob", "lease expired", "sim-a"),
@@ -174,7 +187,7 @@ def test_an_exit_nobody_caused_is_a_violation_and_an_expected_one_is_not():
 def test_summary_counts_faults_by_kind_and_violations():
     h = [Fault(1, "pause", "sim-a", 2), Fault(3, "pause", "s00", 4), Fault(5, "router", "router", 6)]
     lines = summary(h, check([rec(1, "ann", 3), rec(2, "bob", 3)]))
-    assert lines == ["faults: 3", "fault kinds: 2 (pause 2, router 1)", "violations: 1 (owners 1)"]
+    assert lines[1:] == ["faults: 3", "fault kinds: 2 (pause 2, router 1)", "violations: 1 (owners 1)"]
     assert str(check([rec(1, "ann", 3), rec(2, "bob", 3)])[0]).splitlines()[1].strip().startswith("t=1.000 record arm0: owner=ann")
 
 
