@@ -8,7 +8,7 @@ from typing import Iterator
 import pytest
 
 from fabric.session import Fabric
-from fabric.testing import ProcessGroup, client, free_port, router_config
+from robofabric.testing import ProcessGroup, client, free_port, router_config
 
 
 @pytest.fixture

@@ -5,7 +5,7 @@ import subprocess
 from mcap.reader import make_reader
 import pytest
 
-from fabric.testing import free_port, robofabric_cmd
+from robofabric.testing import free_port, robofabric_cmd
 
 pytestmark = pytest.mark.slow  # every test here starts processes or runs for seconds
 

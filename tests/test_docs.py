@@ -32,7 +32,7 @@ from pathlib import Path
 import pytest
 
 from fabric.session import Fabric
-from fabric.testing import ProcessGroup, free_port, robofabric_cmd, router_config, wait_until
+from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, router_config, wait_until
 
 ROOT = Path(__file__).resolve().parent.parent
 RUN_LANGS = {"bash": "bash", "sh": "bash", "python": "python"}

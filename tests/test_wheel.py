@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from fabric.testing import free_port
+from robofabric.testing import free_port
 
 pytestmark = pytest.mark.slow
 

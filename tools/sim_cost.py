@@ -34,7 +34,7 @@ def measure(tree: Path, robots: int, seconds: float, settle: float) -> tuple[flo
     robots. The joints rate (100 Hz asked) tells a sim that kept up from one that thinned its streams."""
     from fabric import keys
     from fabric.interfaces import JointState
-    from fabric.testing import client, free_port, wait_until
+    from robofabric.testing import client, free_port, wait_until
 
     world, port = f"cost{uuid.uuid4().hex[:6]}", free_port()
     ep = f"tcp/127.0.0.1:{port}"

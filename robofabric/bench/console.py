@@ -88,7 +88,7 @@ def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
     from playwright.sync_api import sync_playwright
 
     from fabric.interfaces import Pose
-    from fabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
+    from robofabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
     from robofabric.bench.viewer_web import CHROMIUM, CHROMIUM_ARGS
     from user_peer.console.health import parse_line
 

@@ -28,7 +28,7 @@ from robofabric.bench.common import machine, write
 
 if TYPE_CHECKING:
     from fabric.session import Fabric
-    from fabric.testing import ProcessGroup
+    from robofabric.testing import ProcessGroup
     from ownership import OwnershipClient
 
 __all__ = ["command", "measure", "report"]
@@ -77,7 +77,7 @@ def measure(kills: int) -> list[dict[str, float]]:
     from fabric import keys
     from fabric.interfaces import Event
     from fabric.session import Fabric
-    from fabric.testing import ProcessGroup, client, free_port, router_config, wait_until
+    from robofabric.testing import ProcessGroup, client, free_port, router_config, wait_until
     from ownership import OwnershipClient
 
     world = f"bench{int(time.time()) % 100000}"
@@ -122,7 +122,7 @@ class _Sims:
         self.procs, self.world, self.ep = procs, world, ep
 
     def start(self, n: int, *, standby: bool = False):
-        from fabric.testing import robofabric_cmd
+        from robofabric.testing import robofabric_cmd
 
         pid = f"sim-{n:02d}"
         extra = ("--standby",) if standby else ()
@@ -135,7 +135,7 @@ def _set_moving(fab: "Fabric", own: "OwnershipClient", samples: _Samples, i: int
     the last round's motion may still be going), then let it get some way into the motion."""
     from fabric import keys
     from fabric.interfaces import Command, JointTarget
-    from fabric.testing import wait_until
+    from robofabric.testing import wait_until
 
     term = i + 1
     cmd = Command("bench", epoch, JointTarget(POSES[i % 2], speed_scale=0.05))
@@ -155,7 +155,7 @@ def _set_moving(fab: "Fabric", own: "OwnershipClient", samples: _Samples, i: int
 
 def _take_over(procs: "ProcessGroup", current, samples: _Samples, *, term: int) -> dict[str, float]:
     """SIGKILL the authority of ``term``; once the next term's joints and pose arrive, what the take-over cost."""
-    from fabric.testing import wait_until
+    from robofabric.testing import wait_until
 
     t_kill = time.monotonic()
     procs.kill(current, signal.SIGKILL)

@@ -41,7 +41,7 @@ from fabric import keys
 from fabric.interfaces import Command, JointState, JointTarget, ServiceError, Stop
 from fabric.reliable import resend_until
 from fabric.session import Fabric
-from fabric.testing import client, free_port, robofabric_cmd, wait_until
+from robofabric.testing import client, free_port, robofabric_cmd, wait_until
 from ownership.client import OwnershipClient
 from robofabric.bench.common import end_processes, pct, proc_cpu_s, proc_rss_mb
 

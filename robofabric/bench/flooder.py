@@ -13,7 +13,7 @@ import numpy as np
 from fabric import keys
 from fabric.codec import encode
 from fabric.interfaces import Command, JointState, JointTarget, OwnRequest
-from fabric.testing import client
+from robofabric.testing import client
 
 
 def flood(world: str, port: int, load: dict) -> dict:

@@ -31,7 +31,7 @@ def measure_query(n: int = 1000, seed: int = 0, warmup: int = 50) -> dict[str, d
     from fabric.interfaces import FKRequest, IKRequest
     from fabric import keys
     from fabric.session import Fabric
-    from fabric.testing import client, free_port, robofabric_cmd, router_config, wait_until
+    from robofabric.testing import client, free_port, robofabric_cmd, router_config, wait_until
 
     world = f"bench{uuid.uuid4().hex[:6]}"
     port = free_port()

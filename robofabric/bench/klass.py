@@ -168,7 +168,7 @@ def _children_cpu_s() -> float:
 def run_one(n: int, seconds: float, tmp: Path, *, extra: int = 0) -> dict[str, Any]:
     """A class of ``n`` students on a fresh world (plus ``extra`` arms and bases nobody owns, to load the sim);
     the row's figures."""
-    from fabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
+    from robofabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
 
     world = f"class{uuid.uuid4().hex[:6]}"
     port = free_port()

@@ -22,7 +22,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
+from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 from robofabric.bench.common import append, machine, proc_rss_mb
 
 

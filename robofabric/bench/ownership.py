@@ -21,7 +21,7 @@ from typing import Annotated, Optional
 import typer
 
 from fabric.session import Fabric
-from fabric.testing import client, free_port, router_config, wait_until
+from robofabric.testing import client, free_port, router_config, wait_until
 from ownership.authority import Authority
 from ownership.client import OwnershipClient
 from robofabric.bench.common import append, pct

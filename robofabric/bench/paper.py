@@ -205,7 +205,7 @@ def _child_sub(a: argparse.Namespace) -> None:
 
 
 def _start_broker(transport: str, tmpdir: str) -> tuple[subprocess.Popen, int]:
-    from fabric.testing import free_port, robofabric_cmd
+    from robofabric.testing import free_port, robofabric_cmd
     from robofabric.bench.transport import wait_listening
 
     port = free_port()

@@ -237,7 +237,7 @@ def measure_multi_user(minutes: float = 10.0, students: int = 5, logs: Path | No
 def _run(minutes: float, n: int, logs: Path, progress: Callable[[str], None]) -> dict[str, Any]:
     import numpy as np
 
-    from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
+    from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 
     world, port = f"multi{uuid.uuid4().hex[:6]}", free_port()
     ep = f"tcp/127.0.0.1:{port}"

@@ -113,7 +113,7 @@ def _name(pid: int, launcher: int) -> str | None:
 
 def measure_resources(cap_s: float = 600.0, progress=lambda s: print(s, file=sys.stderr, flush=True)) -> dict:
     """Run the launch once; ``{"rows": [{peer, cpu_min, cpu_max, rss_min_mb, rss_max_mb, samples}], ...}``."""
-    from fabric.testing import free_port
+    from robofabric.testing import free_port
 
     world = f"paper{uuid.uuid4().hex[:6]}"
     with tempfile.TemporaryDirectory(prefix="bench-paper-res-") as tmp:

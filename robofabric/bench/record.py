@@ -173,7 +173,7 @@ def run_bench(
     scales: list[float], robots: int, duration: float, replay: bool, keep: Path | None = None, fast_scales: list[float] = ()
 ) -> dict:
     from fabric.session import Fabric
-    from fabric.testing import free_port, router_config
+    from robofabric.testing import free_port, router_config
 
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"

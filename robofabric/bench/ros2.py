@@ -69,7 +69,7 @@ class _Zenoh:
 
 def run_one(robots: int, seconds: float, tmp: Path) -> dict[str, Any]:
     """One world of ``robots`` bases bridged to ROS 2 for ``seconds``; the row's figures."""
-    from fabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
+    from robofabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
     from robofabric.bench.shards import spots
 
     world = f"ros{uuid.uuid4().hex[:6]}"

@@ -30,7 +30,7 @@ from typing import Annotated, Optional
 import numpy as np
 import typer
 
-from fabric.testing import free_port, robofabric_cmd, wait_until
+from robofabric.testing import free_port, robofabric_cmd, wait_until
 from robofabric.bench.common import append, end_process
 
 MODES = ("tcp", "tcp+acl", "tls+acl")

@@ -140,7 +140,7 @@ def _firsts(mine: list[list[str]]) -> list[str]:
 
 def run_one(robots: int, sims: int, seconds: float, tmp: Path) -> dict[str, Any]:
     """``robots`` bases over ``sims`` sim processes on this machine, a fresh world; the row's figures."""
-    from fabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
+    from robofabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
 
     world = f"shards{uuid.uuid4().hex[:6]}"
     port = free_port()
@@ -179,7 +179,7 @@ def run_lab(robots: int, sims: int, seconds: float, log_dir: Path) -> dict[str, 
     """The same over the lab's network namespaces: a router host, one host per sim, and a probe host whose
     Python process watches the poses and drives the robots (the lab's hosts share this machine's clock and CPU)."""
     from robofabric.lab.lab import Lab
-    from fabric.testing import wait_until
+    from robofabric.testing import wait_until
 
     world = f"shards{uuid.uuid4().hex[:6]}"
     mine = _shares(robots, sims)

@@ -165,7 +165,7 @@ def _child_sub(a: argparse.Namespace) -> None:
 
 
 def _free_port() -> int:
-    from fabric.testing import free_port
+    from robofabric.testing import free_port
 
     return free_port()
 

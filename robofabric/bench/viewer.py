@@ -187,7 +187,7 @@ def measure_live(arms: int, bases: int, seconds: float) -> dict[str, Any]:
     import re
     import uuid
 
-    from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
+    from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
     from robofabric.bench.common import end_process, proc_cpu_s
 
     world = f"bv{uuid.uuid4().hex[:6]}"

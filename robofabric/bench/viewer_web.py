@@ -174,7 +174,7 @@ def run(pages: int, stalled: int, seconds: float, width: int, view_args: list[st
     import uuid
     from pathlib import Path
 
-    from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
+    from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 
     world = f"benchweb{uuid.uuid4().hex[:6]}"
     with tempfile.TemporaryDirectory(prefix="bench-web-") as tmp, ProcessGroup(Path(tmp)) as procs:

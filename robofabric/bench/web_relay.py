@@ -35,7 +35,7 @@ def run(stalled: int, warmup: float, seconds: float, log: Any = print) -> dict[s
     import uuid
     from pathlib import Path
 
-    from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
+    from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
     from robofabric.bench.viewer_web import VIEWER_URL, accepts
 
     world = f"benchrelay{uuid.uuid4().hex[:6]}"

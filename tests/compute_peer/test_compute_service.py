@@ -14,7 +14,7 @@ from fabric.interfaces import Event, FKRequest, IKReply, IKRequest, IKStream, Ja
 from fabric import keys
 from fabric.codec import encode
 from fabric.interfaces import ServiceError
-from fabric.testing import robofabric_cmd, wait_until
+from robofabric.testing import robofabric_cmd, wait_until
 
 BASE = (3.0, 0.5, 0.75, math.radians(30.0))  # an arm on a table, turned: exercises the world <-> base frames
 Q = np.array([0.3, 0.2, -0.4, 0.5, 0.6, -0.2])
@@ -165,7 +165,7 @@ def test_compute_cli_arm_flag_names_bad_arms():
 
 
 def test_a_user_can_pick_a_compute_peer(world, router, connect):
-    from fabric.testing import client_config
+    from robofabric.testing import client_config
     from user_peer import services
     from user_peer.api import World
 
@@ -203,7 +203,7 @@ def test_navigation_answers_on_its_own_key_too(world, connect):
 
 
 def test_a_user_can_spread_ik_over_every_compute_peer(world, router, connect):
-    from fabric.testing import client_config
+    from robofabric.testing import client_config
     from user_peer import services
     from user_peer.api import World
 

@@ -11,7 +11,7 @@ from compute_peer.world_lookup import BackgroundLookup, described_robots
 from fabric import keys
 from fabric.interfaces import NoReply, RobotInfo, WorldInfo
 from fabric.rate import FakeClock
-from fabric.testing import client, wait_until
+from robofabric.testing import client, wait_until
 
 
 def test_one_run_per_interval_and_none_after_close():

@@ -10,7 +10,7 @@ from fabric import keys
 from fabric.codec import DecodeError, decode, encode
 from fabric.fencing import WORLD_SCOPE, Fence, SimFence, authority_scopes, is_authority_key
 from fabric.interfaces import Header, JointState, OwnershipRecord
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 
 def test_a_header_of_term_zero_keeps_the_old_wire_form_and_old_payloads_decode():

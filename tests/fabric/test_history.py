@@ -11,7 +11,7 @@ import numpy as np
 
 from fabric import keys
 from fabric.interfaces import Header, Pose
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 N = 300
 

@@ -9,7 +9,7 @@ import pytest
 
 from fabric import keys
 from fabric.interfaces import JointState, OccupancyGrid, Path, Pose
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 
 @pytest.mark.parametrize(
@@ -75,7 +75,7 @@ def test_a_late_subscriber_gets_the_latest_latched_values_then_live_ones(world, 
 
 
 def test_a_user_who_joins_late_sees_the_goal_and_the_map(world, router):
-    from fabric.testing import client_config
+    from robofabric.testing import client_config
     from user_peer.api import World
 
     with World(client_config(world, router[1]), "early") as early:
@@ -93,7 +93,7 @@ def test_echo_prints_the_latest_latched_value_without_waiting_for_a_new_one(worl
     import json
     import subprocess
 
-    from fabric.testing import robofabric_cmd
+    from robofabric.testing import robofabric_cmd
 
     pub = connect("user", "setter")
     goal = keys.object_pose(world, "goal", "alice")

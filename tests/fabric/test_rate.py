@@ -62,7 +62,7 @@ def _threads(prefix: str) -> list[str]:
 
 
 def test_a_loop_runs_only_between_enter_and_exit():
-    from fabric.testing import wait_until
+    from robofabric.testing import wait_until
 
     ticks: list[float] = []
     loop = RateLoop(200, ticks.append, name="cm-test")

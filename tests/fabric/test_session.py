@@ -10,7 +10,7 @@ from fabric import keys
 from fabric.config import ConfigError, FabricConfig
 from fabric.interfaces import Event, JointState, Stop, Twist
 from fabric.interfaces import ServiceError
-from fabric.testing import robofabric_cmd, wait_until
+from robofabric.testing import robofabric_cmd, wait_until
 
 
 def test_publish_subscribe_with_headers(world, connect):

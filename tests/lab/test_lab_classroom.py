@@ -16,7 +16,7 @@ import pytest
 
 from robofabric.lab import Lab
 from robofabric.lab.spec import load_lab, start_lab
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 pytestmark = [pytest.mark.lab, pytest.mark.slow]
 

@@ -16,7 +16,7 @@ from fabric.codec import decode
 from fabric.fencing import is_authority_key
 from robofabric.lab import Lab
 from fabric.recording.reader import iter_messages
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 pytestmark = [pytest.mark.lab, pytest.mark.slow]
 

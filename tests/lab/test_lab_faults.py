@@ -17,7 +17,7 @@ import pytest
 from fabric.codec import decode
 from robofabric.lab import Lab, LabProcess, RemotePython
 from fabric.recording.reader import iter_messages
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 pytestmark = [pytest.mark.lab, pytest.mark.slow]
 

@@ -10,7 +10,7 @@ import time
 import pytest
 
 from robofabric.lab import Lab, LabError, RemoteError, faketime_library, netns_list
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 pytestmark = [pytest.mark.lab, pytest.mark.slow]
 

@@ -9,7 +9,7 @@ import pytest
 
 import time
 
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 from robofabric.lab import Lab, LabProcess
 
 pytestmark = [pytest.mark.lab, pytest.mark.slow]

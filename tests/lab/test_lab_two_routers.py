@@ -10,7 +10,7 @@ from typing import Iterator
 import pytest
 
 from robofabric.lab import Lab
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 pytestmark = [pytest.mark.lab, pytest.mark.slow]
 

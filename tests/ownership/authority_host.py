@@ -15,7 +15,7 @@ from pathlib import Path
 from fabric import keys
 from fabric.interfaces import Command, Event
 from fabric.session import shutdown_event
-from fabric.testing import client
+from robofabric.testing import client
 
 from ownership import Authority
 

@@ -12,7 +12,7 @@ import numpy as np
 from fabric import keys
 from fabric.interfaces import Command, JointTarget
 from fabric.session import shutdown_event
-from fabric.testing import client
+from robofabric.testing import client
 
 from ownership import OwnershipClient
 

@@ -9,7 +9,7 @@ import re
 
 from fabric import keys
 from fabric.interfaces import OwnReply, OwnRequest
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 from ownership import Authority, OwnershipClient
 

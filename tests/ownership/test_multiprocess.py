@@ -10,7 +10,7 @@ import pytest
 
 from fabric import keys
 from fabric.interfaces import Command, Event, JointTarget
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 from ownership import OwnershipClient
 

@@ -4,7 +4,7 @@ import subprocess
 
 import pytest
 
-from fabric.testing import robofabric_cmd
+from robofabric.testing import robofabric_cmd
 
 from ownership import Authority, OwnershipClient
 
@@ -47,7 +47,7 @@ def test_own_list_request_release(world, router, connect):
 def test_own_request_hold_renews_until_interrupted_then_releases(world, router, connect):
     import signal
 
-    from fabric.testing import wait_until
+    from robofabric.testing import wait_until
 
     port = router[1]
     auth = Authority(connect("sim", "host"), {"arm": "exclusive"}, lease_s=1.5).start()
@@ -87,7 +87,7 @@ def test_own_watch_skips_and_counts_garbage_bad_tokens_and_foreign_records(world
     """What any login may put on ownership keys or the liveliness space never crashes `own watch`."""
     from fabric import keys
     from fabric.interfaces import OwnershipRecord
-    from fabric.testing import wait_until
+    from robofabric.testing import wait_until
 
     port = router[1]
     auth = Authority(connect("sim", "host"), {"arm": "exclusive"}, lease_s=5.0).start()

@@ -20,7 +20,7 @@ import robots
 from fabric import keys
 from fabric.interfaces import Command, Event, EventKind, JointState, JointTarget, Pose, Stop, Twist
 from fabric.session import Fabric
-from fabric.testing import ProcessGroup, client, client_config, free_port, robofabric_cmd, router_config, wait_until
+from robofabric.testing import ProcessGroup, client, client_config, free_port, robofabric_cmd, router_config, wait_until
 from ownership import OwnershipClient
 from user_peer.world import World
 

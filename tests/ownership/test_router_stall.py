@@ -18,7 +18,7 @@ import pytest
 from fabric import keys
 from fabric.interfaces import OwnershipRecord
 from robofabric.secure import init
-from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
+from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 
 pytestmark = pytest.mark.slow
 

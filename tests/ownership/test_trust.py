@@ -13,7 +13,7 @@ from hypothesis import given, strategies as st
 from fabric import keys
 from fabric.interfaces import Event, OwnershipRecord, OwnReply, OwnRequest
 from fabric.interfaces import ServiceError
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 from ownership import Authority, OwnershipClient
 from ownership.client import EPOCH_SLACK, epoch_plausible
@@ -128,7 +128,7 @@ def test_records_that_came_before_their_sims_token_are_asked_for_again(router, c
     refused as foreign then, and taken from a query once the token shows up (seen once in a clean-clone
     run: a user's replica lacked arm1's record for 30 s)."""
     from fabric.session import Fabric
-    from fabric.testing import client_config
+    from robofabric.testing import client_config
 
     alice = OwnershipClient(connect("user", "alice"), "alice", renew_s=0.1, timeout=1.0).start()
     quiet = Fabric(client_config(world, router[1]), kind="sim", peer_id="host", token=False)  # no token yet

@@ -9,7 +9,7 @@ from __future__ import annotations
 import sys
 
 from fabric.session import shutdown_event
-from fabric.testing import client_config
+from robofabric.testing import client_config
 from user_peer.world import World
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ from __future__ import annotations
 import sys
 
 from fabric.session import shutdown_event
-from fabric.testing import client
+from robofabric.testing import client
 
 from ownership import OwnershipClient
 

@@ -6,7 +6,7 @@ import subprocess
 import pytest
 
 from fabric import keys
-from fabric.testing import free_port, robofabric_cmd, wait_until
+from robofabric.testing import free_port, robofabric_cmd, wait_until
 
 pytestmark = pytest.mark.slow  # every test here starts processes or runs for seconds
 

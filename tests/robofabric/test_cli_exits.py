@@ -18,7 +18,7 @@ import pytest
 from fabric import keys
 from robofabric.cli import main
 from fabric.interfaces import Header, JointState
-from fabric.testing import free_port, robofabric_cmd, wait_until
+from robofabric.testing import free_port, robofabric_cmd, wait_until
 
 
 def test_the_rule_is_in_robofabric_help(capsys):

@@ -10,7 +10,7 @@ import typer
 
 from robofabric import cli
 from fabric.cli_common import plain_doc
-from fabric.testing import robofabric_cmd
+from robofabric.testing import robofabric_cmd
 
 
 def _paths() -> list[tuple[str, ...]]:

@@ -15,7 +15,7 @@ import pytest
 from fabric import keys
 from robofabric.complete import complete_export_formats, complete_formats, complete_keys, complete_types, live_keys
 from fabric.interfaces import Header, JointState, WorldInfo
-from fabric.testing import free_port, robofabric_cmd
+from robofabric.testing import free_port, robofabric_cmd
 
 
 class _Ctx:

@@ -14,7 +14,7 @@ from fabric import keys
 from robofabric.introspect import KeyObserver, source_of
 from fabric.codec import encode
 from fabric.interfaces import Header, JointState, OccupancyGrid
-from fabric.testing import robofabric_cmd
+from robofabric.testing import robofabric_cmd
 
 NAMES = ("j1", "j2")
 

@@ -5,7 +5,7 @@ import subprocess
 import pytest
 
 from robofabric.launch import LaunchError, parse_launch
-from fabric.testing import free_port, robofabric_cmd
+from robofabric.testing import free_port, robofabric_cmd
 
 GOOD = """
 [launch]

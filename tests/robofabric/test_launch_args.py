@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from robofabric.launch import LaunchError, load_launch, parse_cli_args, parse_launch
-from fabric.testing import robofabric_cmd
+from robofabric.testing import robofabric_cmd
 
 REPO = Path(__file__).resolve().parents[2]
 

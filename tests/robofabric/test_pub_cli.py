@@ -6,7 +6,7 @@ import subprocess
 
 import pytest
 
-from fabric.testing import robofabric_cmd, wait_until
+from robofabric.testing import robofabric_cmd, wait_until
 from ownership import OwnershipClient
 
 pytestmark = pytest.mark.slow  # starts a sim process

@@ -12,7 +12,7 @@ import zenoh
 from fabric.config import ConfigError, FabricConfig
 from fabric.config import certificate_common_name
 from robofabric.secure import Identity, access_control, init, read_credentials
-from fabric.testing import robofabric_cmd
+from robofabric.testing import robofabric_cmd
 
 
 def run_cli(*args, timeout=60):

@@ -15,7 +15,7 @@ import pytest
 from fabric import keys
 from fabric.interfaces import MapReply, MapRequest, OccupancyGrid, PlanReply, PlanRequest
 from fabric.interfaces import ServiceError
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 from tests.robofabric.test_secure_world import Seen, secure, secure_compute  # noqa: F401 (fixtures)
 
 pytestmark = pytest.mark.slow

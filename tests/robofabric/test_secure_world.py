@@ -32,7 +32,7 @@ from fabric.interfaces import (Command, Event, Header, JointState, JointTarget, 
 from robofabric.secure import init
 from fabric.interfaces import ServiceError
 from fabric.session import Fabric
-from fabric.testing import ProcessGroup, client_config, free_port, robofabric_cmd, router_config, wait_until
+from robofabric.testing import ProcessGroup, client_config, free_port, robofabric_cmd, router_config, wait_until
 
 pytestmark = pytest.mark.slow
 

@@ -13,7 +13,7 @@ import pytest
 from fabric import keys
 from fabric.interfaces import JointState
 from fabric.session import Fabric
-from fabric.testing import client_config, robofabric_cmd, wait_until
+from robofabric.testing import client_config, robofabric_cmd, wait_until
 
 pytestmark = pytest.mark.slow
 

@@ -22,7 +22,7 @@ import pytest
 from fabric import keys
 from fabric.codec import DecodeError, decode
 from fabric.interfaces import Command, Event, JointTarget, OwnershipRecord, Path, WorldInfo, WorldState
-from fabric.testing import client_config, robofabric_cmd, wait_until
+from robofabric.testing import client_config, robofabric_cmd, wait_until
 
 from ownership import OwnershipClient
 from user_peer.api import World as UserWorld

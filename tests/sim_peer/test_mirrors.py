@@ -11,7 +11,7 @@ import pytest
 
 from fabric import keys
 from fabric.interfaces import JointState, Pose, RobotInfo, WorldInfo
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 from sim_peer.mirroring import MirrorFeed
 from sim_peer.world import SimWorld
 

@@ -27,7 +27,7 @@ from fabric.config import FabricConfig
 from fabric.interfaces import Event, RobotState, ServiceError, WorldInfo, WorldState
 from robofabric.secure import init
 from fabric.session import Fabric
-from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
+from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 from robots.description import SceneRobot
 from sim_peer import handoff as ho
 

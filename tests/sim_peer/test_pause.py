@@ -14,7 +14,7 @@ import pytest
 
 from fabric import keys
 from fabric.interfaces import Command, Event, JointState, JointTarget
-from fabric.testing import robofabric_cmd, wait_until
+from robofabric.testing import robofabric_cmd, wait_until
 
 from ownership import OwnershipClient
 

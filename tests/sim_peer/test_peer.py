@@ -10,7 +10,7 @@ import pytest
 
 from fabric import keys
 from fabric.interfaces import Command, Event, JointState, JointTarget, Pose, Reset, Scan, Stop, Twist, WorldInfo
-from fabric.testing import robofabric_cmd, wait_until
+from robofabric.testing import robofabric_cmd, wait_until
 from sim_peer.peer import SimPeer
 from sim_peer.world import SimWorld
 
@@ -254,7 +254,7 @@ def test_cli_mistakes_are_one_line_errors(procs):
 def test_cli_runs_for_a_duration_at_max_speed_and_exits_cleanly(world, tmp_path):
     import subprocess
 
-    from fabric.testing import free_port
+    from robofabric.testing import free_port
 
     argv = robofabric_cmd(
         "sim", "--scene", "warehouse", "--speed", "max", "--duration", "3", "--no-ownership", "--profile", "embedded",

@@ -15,7 +15,7 @@ import robots
 import sim_peer.peer
 from fabric import keys
 from fabric.interfaces import Command, Event, JointState, JointTarget, Pose, Twist, WorldInfo
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 from ownership import Authority, OwnershipClient
 from sim_peer.peer import SimPeer
 from sim_peer.robot import HOOKS, SimRobot, Stream

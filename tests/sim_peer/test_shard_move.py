@@ -14,7 +14,7 @@ import pytest
 
 from fabric import keys
 from fabric.interfaces import JointState, Pose
-from fabric.testing import client_config, robofabric_cmd, wait_until
+from robofabric.testing import client_config, robofabric_cmd, wait_until
 from user_peer.api import World
 
 from tests.sim_peer.test_shards import _parts, _two_shards

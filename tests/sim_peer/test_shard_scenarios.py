@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from fabric.testing import client_config, robofabric_cmd, wait_until
+from robofabric.testing import client_config, robofabric_cmd, wait_until
 from user_peer.api import World
 from tests.user_peer.test_scenarios import assert_b_then_a
 from user_peer.scenarios import SCENARIOS

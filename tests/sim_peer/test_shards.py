@@ -17,7 +17,7 @@ import pytest
 
 from fabric import keys
 from fabric.interfaces import WorldInfo
-from fabric.testing import client_config, robofabric_cmd, wait_until
+from robofabric.testing import client_config, robofabric_cmd, wait_until
 from user_peer.api import Base, World
 
 pytestmark = pytest.mark.slow

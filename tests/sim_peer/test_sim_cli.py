@@ -43,7 +43,7 @@ def test_without_an_authority_the_sim_warns_and_opens_the_gate(monkeypatch, caps
 def test_sim_list_shows_robot_types_and_scenes():
     import subprocess
 
-    from fabric.testing import robofabric_cmd
+    from robofabric.testing import robofabric_cmd
 
     out = subprocess.run(robofabric_cmd("sim", "--list"), capture_output=True, text=True, timeout=60)
     assert out.returncode == 0

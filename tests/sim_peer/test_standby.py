@@ -18,7 +18,7 @@ import pytest
 from fabric import keys
 from fabric.gate import OpenGate
 from fabric.interfaces import Command, JointTarget
-from fabric.testing import client, wait_until
+from robofabric.testing import client, wait_until
 from sim_peer import election as el
 from sim_peer.kept_commands import MAX_KEPT_BYTES, MAX_KEPT_COMMANDS
 from sim_peer.replica_host import ReplicaHost

@@ -8,7 +8,7 @@ import subprocess
 
 import pytest
 
-from fabric.testing import robofabric_cmd, wait_until
+from robofabric.testing import robofabric_cmd, wait_until
 
 pytestmark = pytest.mark.slow
 

@@ -8,7 +8,7 @@ from typing import Iterator
 import pytest
 
 from fabric.session import Fabric
-from fabric.testing import ProcessGroup, free_port, robofabric_cmd, router_config, wait_until
+from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, router_config, wait_until
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,7 @@ import pytest
 import user_peer
 from fabric.recording import read_info
 from fabric.session import Fabric
-from fabric.testing import ProcessGroup, free_port, robofabric_cmd, router_config, wait_until
+from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, router_config, wait_until
 from user_peer.api import World
 
 pytestmark = pytest.mark.slow
@@ -173,7 +173,7 @@ EVERYTHING = """
     import time
     from pathlib import Path
     from fabric import keys
-    from fabric.testing import client_config, router_config
+    from robofabric.testing import client_config, router_config
     from fabric.session import Fabric
     from fabric.recording import Recorder
     from robofabric.recording.live_convert import LiveConverter, open_exporter

@@ -16,7 +16,7 @@ import pytest
 import user_peer
 from fabric import keys
 from fabric.interfaces import Command, Event, Header, JointState, Path, Pose
-from fabric.testing import client_config
+from robofabric.testing import client_config
 from user_peer.api import Arm, Base, World
 from user_peer.services import RobotEntry
 

@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 from user_peer.deadman import TwistKeeper
 from user_peer.errors import NotOwner
 

@@ -10,7 +10,7 @@ import pytest
 from fabric import keys
 from fabric.codec import encode
 from fabric.interfaces import Header, JointState, OccupancyGrid, Path, Pose, Scan
-from fabric.testing import robofabric_cmd
+from robofabric.testing import robofabric_cmd
 from user_peer.export import export_mcap
 from userpeer_rrd import entities_with_data, rows_per_entity
 
@@ -99,7 +99,7 @@ def test_export_reads_a_truncated_recording(tmp_path):
 
 def test_export_of_a_live_recording(world, connect, tmp_path):
     from fabric.recording import Recorder
-    from fabric.testing import wait_until
+    from robofabric.testing import wait_until
 
     pub = connect("sim", "fake-sim")
     rec_fab = connect("recorder", "rec")

@@ -8,7 +8,7 @@ import logging
 
 import pytest
 
-from fabric.testing import client_config, robofabric_cmd, wait_until
+from robofabric.testing import client_config, robofabric_cmd, wait_until
 from user_peer.api import World
 
 pytestmark = pytest.mark.slow  # a primary sim and its standby

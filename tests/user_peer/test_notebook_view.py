@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import threading
 
-from fabric.testing import client_config, wait_until
+from robofabric.testing import client_config, wait_until
 from sim_peer.peer import SimPeer
 from sim_peer.world import SimWorld
 from user_peer import notebook

@@ -40,7 +40,7 @@ from fabric.interfaces import (
 )
 from fabric.codec import encode
 from fabric.recording import McapSink
-from fabric.testing import robofabric_cmd
+from robofabric.testing import robofabric_cmd
 from user_peer.openfmt import export_recording
 
 W = "demo"

@@ -14,7 +14,7 @@ from fabric import keys
 from fabric.codec import encode
 from fabric.interfaces import Header, JointState
 from fabric.recording import McapSink, Recorder, iter_messages
-from fabric.testing import robofabric_cmd, wait_until
+from robofabric.testing import robofabric_cmd, wait_until
 from user_peer.openfmt import export_recording
 
 pytestmark = pytest.mark.slow

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import logging
 
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 from ownership import Authority
 from user_peer.ownership_link import OwnershipLink
 

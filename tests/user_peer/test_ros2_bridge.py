@@ -23,7 +23,7 @@ pytest.importorskip("rclpy", reason="the ros2 extra (ROS 2 Kilted's wheels) is n
 import user_peer  # noqa: E402
 from fabric import keys  # noqa: E402
 from fabric.interfaces import OccupancyGrid  # noqa: E402
-from fabric.testing import robofabric_cmd, wait_until  # noqa: E402
+from robofabric.testing import robofabric_cmd, wait_until  # noqa: E402
 
 pytestmark = pytest.mark.slow
 

@@ -11,7 +11,7 @@ import uuid
 import pytest
 
 from fabric.session import Fabric
-from fabric.testing import client_config, free_port, robofabric_cmd, router_config, wait_until
+from robofabric.testing import client_config, free_port, robofabric_cmd, router_config, wait_until
 from user_peer.api import World
 from user_peer.scenarios import SCENARIOS
 

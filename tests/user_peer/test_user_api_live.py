@@ -10,7 +10,7 @@ import pytest
 
 import user_peer
 from fabric.interfaces import Path
-from fabric.testing import client_config, wait_until
+from robofabric.testing import client_config, wait_until
 from user_peer.api import Arm, Base, World
 from user_peer.catalog import RobotCatalog
 

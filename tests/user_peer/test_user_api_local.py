@@ -6,7 +6,7 @@ import pytest
 import user_peer
 from fabric import keys
 from fabric.interfaces import OwnershipRecord
-from fabric.testing import client_config, wait_until
+from robofabric.testing import client_config, wait_until
 from user_peer.api import Arm, World
 from user_peer.services import RobotEntry
 

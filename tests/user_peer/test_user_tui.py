@@ -8,7 +8,7 @@ import pytest
 
 from fabric import keys
 from fabric.interfaces import Header, JointState, OwnershipRecord, Pose, Scan
-from fabric.testing import client_config, wait_until
+from robofabric.testing import client_config, wait_until
 from user_peer.api import Arm, Base, World
 from user_peer.services import RobotEntry
 from user_peer.slider import JointSlider

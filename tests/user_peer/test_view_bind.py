@@ -10,7 +10,7 @@ import urllib.request
 
 import pytest
 
-from fabric.testing import free_port, robofabric_cmd, wait_until
+from robofabric.testing import free_port, robofabric_cmd, wait_until
 
 pytestmark = pytest.mark.slow  # a viewer process (it fetches the page from Rerun's binary at start)
 

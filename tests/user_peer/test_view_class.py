@@ -12,7 +12,7 @@ import uuid
 
 import pytest
 
-from fabric.testing import free_port, robofabric_cmd, wait_until
+from robofabric.testing import free_port, robofabric_cmd, wait_until
 
 ARMS = BASES = 8
 SECONDS = 12

@@ -11,7 +11,7 @@ import pytest
 import robots
 from fabric import keys
 from fabric.interfaces import Header, JointState, Pose
-from fabric.testing import client_config
+from robofabric.testing import client_config
 from user_peer.arm_geometry import ArmGeometry
 from user_peer.catalog import placement_xyz_yaw
 from user_peer.geometry import compose, quat_mul_xyzw
@@ -101,7 +101,7 @@ def test_a_stalled_viewer_keeps_at_most_queue_size_per_stream(world, router, tmp
 def test_view_refuses_a_window_or_lag_that_makes_no_sense(tmp_path):
     import subprocess
 
-    from fabric.testing import robofabric_cmd
+    from robofabric.testing import robofabric_cmd
 
     for bad in (("--window", "0"), ("--window", "9"), ("--max-lag", "0")):
         r = subprocess.run(robofabric_cmd("view", *bad, "--save", str(tmp_path / "v.rrd")), capture_output=True, text=True, timeout=120)

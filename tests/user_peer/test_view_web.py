@@ -25,7 +25,7 @@ from PIL import Image
 
 from urllib.parse import urlsplit
 
-from fabric.testing import free_port, robofabric_cmd, wait_until
+from robofabric.testing import free_port, robofabric_cmd, wait_until
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = [

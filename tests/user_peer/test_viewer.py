@@ -7,7 +7,7 @@ import numpy as np
 
 from fabric import keys
 from fabric.interfaces import Header, JointState, OccupancyGrid, OwnershipRecord, Path, Pose, Scan
-from fabric.testing import client_config, wait_until
+from robofabric.testing import client_config, wait_until
 from user_peer.viewer import Viewer, ViewerOptions
 from userpeer_rrd import entities_with_data, rows_per_entity
 

@@ -9,7 +9,7 @@ import threading
 
 from fabric import keys
 from fabric.interfaces import Header, OwnershipRecord
-from fabric.testing import client_config, wait_until
+from robofabric.testing import client_config, wait_until
 from user_peer.viewer import Viewer, ViewerOptions
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import http.client
 
-from fabric.testing import free_port
+from robofabric.testing import free_port
 from user_peer.web_page import NONET, REMOTE_URLS, PageServer, patch_index, patch_wasm
 
 INDEX = b"""<html><head>

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from fabric.testing import free_port, robofabric_cmd, wait_until
+from robofabric.testing import free_port, robofabric_cmd, wait_until
 
 pytestmark = pytest.mark.slow
 

@@ -19,7 +19,7 @@ import time
 import numpy as np
 import pytest
 
-from fabric.testing import free_port, wait_until
+from robofabric.testing import free_port, wait_until
 from robofabric.bench.grpc_web import HEADERS, WRITE, WebReader, arrow_payload, raw_read_request, stalled_reader
 from user_peer.web_relay import Relay, RelayLimits
 

@@ -12,7 +12,7 @@ from compute_peer.navigation.grid import UNKNOWN, dilate, make_grid
 from fabric.interfaces import MapReply, MapRequest, OccupancyGrid, Path, PlanReply, PlanRequest
 from fabric import keys
 from fabric.interfaces import ServiceError
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 from navscenes import drive_poses, pose_at, scan_at, small_room
 
 ROBOT = "base1"

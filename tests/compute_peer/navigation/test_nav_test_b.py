@@ -16,7 +16,7 @@ import pytest
 from compute_peer.navigation import path_collision, register_navigation
 from fabric.interfaces import Command, MapRequest, PlanRequest, Pose, Stop, Twist, quaternion_from_yaw, yaw_from_quaternion
 from fabric import keys
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 from sim_peer.peer import SimPeer
 from sim_peer.world import SimWorld
 

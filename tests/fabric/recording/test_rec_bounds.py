@@ -8,7 +8,7 @@ import zenoh
 
 from fabric import keys
 from fabric.recording import Recorder, read_info
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 
 def _flood(pub, key_of, n, size):

@@ -19,7 +19,7 @@ from mcap.reader import make_reader
 
 from fabric.codec import decode
 from fabric.recording.reader import iter_messages
-from fabric.testing import robofabric_cmd, wait_until
+from robofabric.testing import robofabric_cmd, wait_until
 from user_peer.openfmt.ros2 import ros2_topic
 
 pytestmark = pytest.mark.slow  # a sim and three tools for 30 s

@@ -9,7 +9,7 @@ from fabric.interfaces import Header, JointState, Path
 from fabric.recording.format import peek
 from fabric.recording.reader import iter_messages
 from fabric.recording.sink import STALE, McapSink
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 
 def _js(term: int, seq: int) -> bytes:

@@ -7,7 +7,7 @@ import subprocess
 
 import pytest
 
-from fabric.testing import robofabric_cmd
+from robofabric.testing import robofabric_cmd
 
 
 @pytest.mark.slow

@@ -13,7 +13,7 @@ import threading
 
 import pytest
 
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 from robofabric.bench.paper import PAYLOADS, count_numbers, make_payload
 from robofabric.bench.paper_figures import PAPER
 from robofabric.bench.wire import HEADER_BYTES, CountingProxy, ethernet_segments
@@ -145,7 +145,7 @@ def test_one_run_through_the_cli_gives_every_section_of_the_document():
     assert set(multi["per_student"][0]["received"]) == {"arm1", "base1"} and multi["per_student"][0]["messages"] > 0
     assert 0 < multi["delay_ms_p50"] <= multi["delay_ms_p99"] and multi["paper_reported"] == PAPER["multi_user"]
     assert doc["paper"]["multi_user"]["delay_ms"] == 100.0
-    from fabric.testing import wait_until as wait
+    from robofabric.testing import wait_until as wait
 
     wait(lambda: not any(_name_alive(p) for p in ("scenario", "--save", "student")), timeout=30, what="both worlds' peers to end")
 

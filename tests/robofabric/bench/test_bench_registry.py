@@ -11,7 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 import robofabric.bench
-from fabric.testing import robofabric_cmd
+from robofabric.testing import robofabric_cmd
 from robofabric.bench import BENCHMARKS, Benchmark, get, names
 from robofabric.bench.cli import build_app, run_all
 

@@ -6,7 +6,7 @@ import subprocess
 
 import pytest
 
-from fabric.testing import robofabric_cmd
+from robofabric.testing import robofabric_cmd
 from robofabric.bench.sim import arm_mirror_cost, rtf, scan_cost
 from sim_peer.world import SimWorld
 

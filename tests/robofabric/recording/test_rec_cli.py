@@ -8,7 +8,7 @@ import pytest
 
 from fabric import keys
 from fabric.recording import Recorder, iter_messages, read_info
-from fabric.testing import robofabric_cmd, wait_until
+from robofabric.testing import robofabric_cmd, wait_until
 
 from tests.fabric.recording.rec_helpers import synthetic, write_recording
 

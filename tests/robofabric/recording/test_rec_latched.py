@@ -10,7 +10,7 @@ from fabric import keys
 from fabric.codec import encode
 from fabric.interfaces import Header, OccupancyGrid
 from robofabric.recording import Replayer, plan_replay
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 from tests.fabric.recording.rec_helpers import joint_payload, write_recording
 

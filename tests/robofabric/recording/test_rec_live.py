@@ -20,7 +20,7 @@ import pytest
 from fabric import keys
 from fabric.recording import Recorder, iter_messages, read_info
 from robofabric.recording.load import robot_streams, run_load
-from fabric.testing import client, robofabric_cmd, wait_until
+from robofabric.testing import client, robofabric_cmd, wait_until
 
 
 def _ep(router):

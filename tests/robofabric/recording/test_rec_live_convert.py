@@ -8,7 +8,7 @@ import pytest
 from fabric import keys
 from fabric.interfaces import Header, JointState
 from robofabric.recording.live_convert import LiveConverter
-from fabric.testing import wait_until
+from robofabric.testing import wait_until
 
 
 class ListSink:

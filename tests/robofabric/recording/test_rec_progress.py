@@ -7,7 +7,7 @@ import subprocess
 import pytest
 from tests.fabric.recording.rec_helpers import synthetic, write_recording
 
-from fabric.testing import robofabric_cmd
+from robofabric.testing import robofabric_cmd
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:

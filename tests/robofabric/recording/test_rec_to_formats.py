@@ -14,7 +14,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from fabric import keys
 from fabric.interfaces import Header, JointState, OccupancyGrid, Scan
-from fabric.testing import robofabric_cmd, wait_until
+from robofabric.testing import robofabric_cmd, wait_until
 
 pytestmark = pytest.mark.slow
 

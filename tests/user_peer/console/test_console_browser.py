@@ -25,7 +25,7 @@ import zenoh
 
 from fabric import keys
 from robofabric.secure import init
-from fabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
+from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 from user_peer.console.server import RECONNECT_S
 
 pytestmark = pytest.mark.slow

@@ -9,7 +9,7 @@ import urllib.request
 import pytest
 
 from robofabric.secure import init
-from fabric.testing import free_port, robofabric_cmd, wait_until
+from robofabric.testing import free_port, robofabric_cmd, wait_until
 
 pytestmark = pytest.mark.slow
 

@@ -10,7 +10,7 @@ import zlib
 import numpy as np
 import pytest
 
-from fabric.testing import free_port, wait_until
+from robofabric.testing import free_port, wait_until
 from user_peer.console import topview
 from user_peer.console.drive import Driver, SPEEDS
 from user_peer.console.login import LoginError, Logins, login_config

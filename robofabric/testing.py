@@ -1,4 +1,6 @@
-"""Helpers for tests that run real sessions and real processes (used by every package's tests).
+"""Helpers for tests and benchmarks that run real sessions and real processes (every package's tests, the
+benchmarks in :mod:`robofabric.bench`). No peer needs them at run time, so they sit on the top floor, not in
+:mod:`fabric`.
 
 Waiting is always on a condition with a deadline (:func:`wait_until`), never a
 fixed sleep; every process started through :class:`ProcessGroup` is ended by
