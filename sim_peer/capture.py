@@ -30,7 +30,7 @@ def capture(world: SimWorld) -> tuple[float, int, tuple[RobotState, ...], tuple[
     robots = tuple(st for st in (r.snapshot() for r in world.robots.values()) if st is not None)
     objects = []
     for o in world.scene.objects:
-        pos, quat = world.object_pose(o.id)
+        pos, quat = world.objects.pose(o.id)
         objects.append(ObjectInfo(o.id, o.kind, o.policy, pos, quat))
     return world.time, world.steps, robots, tuple(objects)
 
@@ -47,7 +47,7 @@ def restore(world: SimWorld, state: WorldState) -> None:
             r.restore(s)
     for o in state.objects:
         if o.id in world.objects:
-            world.set_object_pose(o.id, o.position, o.quaternion)
+            world.objects.set_pose(o.id, o.position, o.quaternion)
     world.data.time = float(state.time)
     world.steps = int(state.steps)
     world.settle()

@@ -92,7 +92,7 @@ class SimPeer:
         self.speed = speed
         self.pacer = Pacer(world.dt, speed, clock=clock)
         self._moving = {rid: False for rid in world.robots}
-        world.take_notes()  # news from before the peer (a standby's catch-up steps) is not the world's to tell
+        world.notes.take()  # news from before the peer (a standby's catch-up steps) is not the world's to tell
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._opened = False
@@ -154,7 +154,7 @@ class SimPeer:
             with self.lock:
                 self.world.step(n)
                 changes = self._motion_changes()
-                notes = self.world.take_notes()
+                notes = self.world.notes.take()
             self.pacer.done(n)
             self.counters["steps"] += n
             for rid, moving in changes:
@@ -207,7 +207,7 @@ class SimPeer:
             robots = [replace(r.describe(), sim=self.fabric.peer_id) for r in self.world.robots.values()]
             objects = []
             for o in (self.world.scene.objects if self.objects else ()):
-                pos, quat = self.world.object_pose(o.id)
+                pos, quat = self.world.objects.pose(o.id)
                 objects.append(ObjectInfo(o.id, o.kind, o.policy, pos, quat))
             return WorldInfo(
                 world=self.fabric.world,
@@ -257,7 +257,7 @@ class SimPeer:
             return
         try:
             with self.lock:
-                self.world.set_object_pose(obj, pose.position, pose.quaternion)
+                self.world.objects.set_pose(obj, pose.position, pose.quaternion)
         except (KeyError, ValueError) as exc:
             if self.objects:
                 self.report.reject(obj, "pose", "bad_object_pose", str(exc))

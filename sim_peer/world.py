@@ -7,7 +7,12 @@ Unity simulators: each step, every robot's ``before_step`` hook advances its con
 rest of the world (free bodies a scene may add; skipped when there is none), and every robot's
 ``after_step`` writes its state into MuJoCo and runs its sensors' checks (the bumper,
 :mod:`sim_peer.bumper`). Positions are recomputed lazily, only when someone reads them (sensors, poses),
-which keeps a headless world fast.
+which keeps a headless world fast (:mod:`sim_peer.positions`).
+
+The world is the composition root of its parts, each in its own module: ``notes`` (what robots said, until
+the peer takes it: :mod:`sim_peer.notes`), ``objects`` (the scene objects' poses: :mod:`sim_peer.scene_objects`),
+``mirrors`` (other sims' robots its sensors see: :mod:`sim_peer.mirrors`) and ``readings`` (sensor reads on
+demand: :mod:`sim_peer.readings`). The world itself steps, resets and finds robots.
 
 Named ``SimWorld`` (not ``World``): the user API's :class:`user_peer.World` is a user's view of a world.
 No Zenoh here: the peer composes a SimWorld with its streams and commands.
@@ -15,24 +20,25 @@ No Zenoh here: the peer composes a SimWorld with its streams and commands.
 
 from __future__ import annotations
 
-from collections import deque
 from collections.abc import Iterable, Sequence
 from typing import Any
 
 import mujoco
 import numpy as np
 
-from fabric.interfaces import EventKind
 from robots import SceneDescription, SceneRobot
 from sim_peer.build import SensorOptions, compile_model, load_scene, resolve, scene_objects
 from sim_peer.errors import WorldError
 from sim_peer.mirrors import Mirrors, Shape
+from sim_peer.notes import NoteLog
 from sim_peer.placement import parse_robot_spec, place
+from sim_peer.positions import Positions
+from sim_peer.readings import Readings
 from sim_peer.registry import robot_class
-from sim_peer.robot import Mount, Note, Physics, SimRobot
+from sim_peer.robot import Mount, Physics, SimRobot
+from sim_peer.scene_objects import SceneObjects
 
 MAX_MIRRORS = 256  # mirror slots a world may have (each costs every ray a bounding-sphere test)
-MAX_NOTES = 1024  # notes kept until the peer takes them; a headless world that never does keeps the newest
 
 
 class SimWorld:
@@ -71,25 +77,22 @@ class SimWorld:
         self.data = mujoco.MjData(self.model)
         self.dt = float(self.model.opt.timestep)
         self.bumper = bumper
-        self.notes: deque[tuple[str, Note]] = deque(maxlen=MAX_NOTES)
+        self.notes = NoteLog()  # what robots and sensors said, until the peer takes it
         self.robots: dict[str, SimRobot] = {
-            r.id: classes[r.id](Mount(r.id, self.descriptions[r.id], self.model, r.pose, self.rng, self._report, twist_timeout, bumper))
+            r.id: classes[r.id](Mount(r.id, self.descriptions[r.id], self.model, r.pose, self.rng, self.notes.add, twist_timeout, bumper))
             for r in placed
         }
-        self.objects = scene_objects(self.model, self.scene)
+        self.positions = Positions(self.model, self.data)
+        self.objects = SceneObjects(self.data, scene_objects(self.model, self.scene), self.positions)
         self.mirrors = Mirrors(self.model, self.data)  # robots other sims of the world simulate, for the sensors
-        self.object_home = {o: (self.data.mocap_pos[i].copy(), self.data.mocap_quat[i].copy()) for o, i in self.objects.items()}
+        self.readings = Readings(self.robot, self.data, self.positions)
         robot_dofs = sum(r.kinematic_dofs for r in self.robots.values())
         # free bodies or other joints beyond the robots' own: MuJoCo steps them; else only the robots move
         self.physics = Physics(self.model, self.data, self.dt, dynamic=self.model.nv > robot_dofs)
         self._before = tuple(r.before_step for r in self.robots.values())
         self._after = tuple(r.after_step for r in self.robots.values())
         self._after_all()
-        mujoco.mj_forward(self.model, self.data)
-        self._dirty = False
-
-    def _report(self, robot_id: str, note: Note) -> None:
-        self.notes.append((robot_id, note))
+        self.positions.forward()
 
     # ------------------------------------------------------------------ stepping
 
@@ -130,49 +133,33 @@ class SimWorld:
             for hook in after:  # robots are kinematic: their controllers, not dynamics, say where they are
                 hook(physics)
         physics.stepping = False
-        self._dirty = True
+        self.positions.mark()
 
     def settle(self) -> None:
         """After robots' controllers were changed from outside (a restored state): write them into MuJoCo and
         recompute positions now."""
         self._after_all()
-        mujoco.mj_forward(self.model, self.data)
-        self._dirty = False
+        self.positions.forward()
 
     def touch(self) -> None:
         """After robots' controllers were stepped from outside: write them into MuJoCo; positions on next read."""
         self._after_all()
-        self._dirty = True
+        self.positions.mark()
 
     def sync(self) -> None:
         """Make positions (bodies, sites) match the current state; cheap when nothing changed."""
-        if self._dirty:
-            mujoco.mj_kinematics(self.model, self.data)
-            mujoco.mj_comPos(self.model, self.data)  # for Jacobians (flange velocity)
-            self._dirty = False
+        self.positions.sync()
 
     def reset(self) -> None:
         """Everything back to its initial state at time 0."""
         mujoco.mj_resetData(self.model, self.data)
         for r in self.robots.values():
             r.initialize(self.physics)
-        for o, i in self.objects.items():
-            self.data.mocap_pos[i], self.data.mocap_quat[i] = self.object_home[o]
+        self.objects.reset()
         self.physics.steps = 0
         self.settle()
 
-    def take_notes(self) -> list[tuple[str, Note]]:
-        """What robots and sensors said since the last call: (robot id, note), oldest first."""
-        out = list(self.notes)
-        self.notes.clear()
-        return out
-
-    @property
-    def collisions(self) -> list[tuple[str, float]]:
-        """(robot id, sim time) of the bumper stops not taken yet."""
-        return [(rid, n.data["t"]) for rid, n in self.notes if n.kind == EventKind.COLLISION]
-
-    # ------------------------------------------------------------------ robots and objects
+    # ------------------------------------------------------------------ robots and mirrors
 
     def robot(self, robot_id: str) -> Any:
         try:
@@ -183,26 +170,6 @@ class SimWorld:
     def moving(self) -> dict[str, bool]:
         return {rid: r.moving for rid, r in self.robots.items()}
 
-    def set_object_pose(self, obj: str, position: Sequence[float], quaternion: Sequence[float] | None = None) -> None:
-        if obj not in self.objects:
-            raise KeyError(f"unknown scene object {obj!r}; this scene has {', '.join(self.objects) or 'none'}")
-        i = self.objects[obj]
-        p = np.asarray(position, dtype=np.float64)
-        if p.shape != (3,) or not np.isfinite(p).all():
-            raise ValueError("object position must be 3 finite numbers")
-        self.data.mocap_pos[i] = p
-        if quaternion is not None:
-            q = np.asarray(quaternion, dtype=np.float64)
-            n = float(np.linalg.norm(q))
-            if q.shape != (4,) or not np.isfinite(q).all() or n < 1e-9:
-                raise ValueError("object quaternion must be 4 finite numbers, not all zero")
-            self.data.mocap_quat[i] = q / n
-        self._dirty = True
-
-    def object_pose(self, obj: str) -> tuple[np.ndarray, np.ndarray]:
-        i = self.objects[obj]
-        return self.data.mocap_pos[i].copy(), self.data.mocap_quat[i].copy()
-
     def mirror(self, robot_id: str, *, radius: float, height: float, position: Sequence[float], quaternion: Sequence[float],
                source: str = "") -> bool:
         """Show a robot that ``source``, another sim of the world, simulates, where that sim says it is, so this
@@ -211,7 +178,7 @@ class SimWorld:
         if robot_id in self.robots or self.mirrors.show(robot_id, radius, height, source) is None:
             return False
         placed = self.mirrors.place(robot_id, position, quaternion)
-        self._dirty = True
+        self.positions.mark()
         return placed
 
     def mirror_shapes(self, robot_id: str, shapes: Sequence[Shape], poses: Sequence[tuple[Sequence[float], Sequence[float]]],
@@ -221,7 +188,7 @@ class SimWorld:
         if robot_id in self.robots or self.mirrors.show_shapes(robot_id, shapes, source) is None:
             return False
         placed = self.mirrors.place_shapes(robot_id, poses)
-        self._dirty = True
+        self.positions.mark()
         return placed
 
     def unmirror(self, robot_id: str | None = None, *, source: str | None = None) -> list[str]:
@@ -229,40 +196,8 @@ class SimWorld:
         gone = ([robot_id] if robot_id is not None and self.mirrors.hide(robot_id) else []) + (
             self.mirrors.hide_from(source) if source is not None else [])
         if gone:
-            self._dirty = True
+            self.positions.mark()
         return gone
-
-    def scan(self, robot_id: str) -> np.ndarray:
-        """The robot's LIDAR ranges now (m)."""
-        lidar = getattr(self.robot(robot_id), "lidar", None)
-        if lidar is None:
-            raise KeyError(f"robot {robot_id!r} has no LIDAR")
-        self.sync()
-        return lidar.read(self.data)
-
-    def sonar(self, robot_id: str) -> np.ndarray:
-        """The robot's ultrasonic ranges now (m)."""
-        sonar = getattr(self.robot(robot_id), "sonar", None)
-        if sonar is None:
-            raise KeyError(f"robot {robot_id!r} has no ultrasonic ring")
-        self.sync()
-        return sonar.read(self.data)
-
-    def flange(self, robot_id: str) -> tuple[np.ndarray, np.ndarray]:
-        """Flange position and quaternion (w, x, y, z) of an arm, world frame."""
-        flange = getattr(self.robot(robot_id), "flange", None)
-        if flange is None:
-            raise KeyError(f"robot {robot_id!r} is not an arm")
-        self.sync()
-        return flange(self.data)
-
-    def flange_velocity(self, robot_id: str) -> tuple[np.ndarray, np.ndarray]:
-        """Flange linear and angular velocity of an arm, world frame (J(q) dq)."""
-        velocity = getattr(self.robot(robot_id), "flange_velocity", None)
-        if velocity is None:
-            raise KeyError(f"robot {robot_id!r} is not an arm")
-        self.sync()
-        return velocity(self.data)
 
     def state(self, robot_id: str) -> dict[str, Any]:
         """A robot's last known state as a small dict of plain values (for the ownership record)."""

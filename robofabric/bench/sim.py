@@ -40,9 +40,9 @@ def rtf(world, seconds: float, scan_hz: float = 20.0) -> float:
                 flips[rid] += 1
                 arm.joints(poses[flips[rid] % 2][: arm.ctrl.dof])
         for rid in mobiles:
-            world.scan(rid)
+            world.readings.scan(rid)
             if world.robot(rid).sonar is not None:
-                world.sonar(rid)
+                world.readings.sonar(rid)
     return seconds / (time.perf_counter() - t0)
 
 
@@ -89,8 +89,8 @@ def command(
     w = SimWorld("combined", seed=1)
     r = rtf(w, seconds)
     label = "combined (Meca500 sweeping + Reeman driving), LIDAR 240 rays @ 20 Hz + ultrasonic, bumper on"
-    if w.collisions:
-        label += f" ({len(w.collisions)} bumper stops!)"
+    if w.notes.collisions:
+        label += f" ({len(w.notes.collisions)} bumper stops!)"
     rows.append((label, f"{r:.0f}x", ">= 50x", "ok" if r >= 50 else "MISSED"))
     med, p99 = scan_cost(w, "base1")
     rows.append(("one 240-ray LIDAR scan (combined), median / p99", f"{med:.1f} / {p99:.1f} us", "<= 50 us", "ok" if med <= 50 else "MISSED"))

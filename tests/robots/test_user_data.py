@@ -25,5 +25,5 @@ def test_a_robot_and_a_scene_added_as_files_are_loaded_and_simulated(tmp_path, m
     assert "scout" in robots.available_robots() and "hall" in robots.available_scenes()
     w = SimWorld("hall", ["reeman:r1@-1,0"])
     w.step()
-    assert w.robot("s1").desc.name == "scout" and w.scan("s1").shape == (135,)
-    assert w.scan("r1").shape == (240,)
+    assert w.robot("s1").desc.name == "scout" and w.readings.scan("s1").shape == (135,)
+    assert w.readings.scan("r1").shape == (240,)

@@ -14,7 +14,7 @@ def _moving_world() -> SimWorld:
     w = SimWorld("combined", seed=1)
     w.robots["arm1"].joints(np.radians([60.0, 30.0, -40.0, 30.0, 50.0, -30.0]), 0.3)
     w.robots["base1"].path(np.linspace(0, 1.0, 20), np.linspace(0, 0.8, 20), np.full(20, 0.67))
-    w.set_object_pose("target", [3.2, 0.1, 1.0])
+    w.objects.set_pose("target", [3.2, 0.1, 1.0])
     w.step(400)
     return w
 
@@ -27,14 +27,14 @@ def test_a_restored_world_continues_the_motions_in_progress_exactly():
     w2 = SimWorld("combined", seed=1)
     capture.restore(w2, state)
     assert w2.time == w.time and w2.steps == w.steps
-    assert np.allclose(w2.object_pose("target")[0], [3.2, 0.1, 1.0])
+    assert np.allclose(w2.objects.pose("target")[0], [3.2, 0.1, 1.0])
     for _ in range(10):
         w.step(300), w2.step(300)
         assert np.array_equal(w.robots["arm1"].ctrl.q, w2.robots["arm1"].ctrl.q)
         a, b = w.robots["base1"].ctrl, w2.robots["base1"].ctrl
         assert (a.x, a.y, a.yaw, a.v, a.omega) == (b.x, b.y, b.yaw, b.v, b.omega)
     assert w2.robots["base1"].ctrl.paths_done == w.robots["base1"].ctrl.paths_done == 1  # both followed it to the end
-    assert np.allclose(w2.flange("arm1")[0], w.flange("arm1")[0])
+    assert np.allclose(w2.readings.flange("arm1")[0], w.readings.flange("arm1")[0])
 
 
 def test_stream_samples_and_advance_bring_robots_to_one_time():

@@ -26,7 +26,7 @@ def warehouse() -> SimWorld:
 
 
 def ahead(w: SimWorld) -> float:
-    return float(np.median(w.scan("base0")[FORWARD - 2:FORWARD + 3]))
+    return float(np.median(w.readings.scan("base0")[FORWARD - 2:FORWARD + 3]))
 
 
 def test_a_mirrored_robot_is_seen_by_the_lidar_where_its_sim_says_it_is(warehouse):
@@ -49,7 +49,7 @@ def test_the_bumper_stops_a_base_before_a_mirrored_robot(warehouse):
     base.twist(0.5, 0.0)
     for _ in range(int(4.0 / warehouse.dt)):
         warehouse.step()
-    assert warehouse.collisions and warehouse.collisions[0][0] == "base0"
+    assert warehouse.notes.collisions and warehouse.notes.collisions[0][0] == "base0"
     assert not base.moving and base.ctrl.x + 0.05 + 0.25 < 1.5 - 0.3  # stopped short of the mirror's shell
 
 

@@ -96,7 +96,7 @@ def test_a_joint_command_goes_in_and_the_joints_come_out(world, sim, user):
     # the flange pose goes out with the joints, and agrees with the world's kinematics
     pose = inbox.latest[keys.robot_pose(world, "arm1")]
     assert isinstance(pose, Pose)
-    pos, _ = peer.world.flange("arm1")
+    pos, _ = peer.world.readings.flange("arm1")
     wait_until(lambda: np.allclose(inbox.latest[keys.robot_pose(world, "arm1")].position, pos, atol=1e-9), what="flange pose")
     # the gate heard the arm start and stop moving
     wait_until(lambda: ("arm1", False) in gate.motion[1:], what="motion updates", seen=lambda: gate.motion)
@@ -198,7 +198,7 @@ def test_scene_objects_move_and_the_world_service_describes_everything(world, si
     peer, _ = sim
     fab, inbox = user
     fab.publish(keys.object_pose(world, "target", "alice"), Pose(np.array([3.2, 0.1, 1.0])))
-    wait_until(lambda: np.allclose(peer.world.object_pose("target")[0], [3.2, 0.1, 1.0]), what="target moved")
+    wait_until(lambda: np.allclose(peer.world.objects.pose("target")[0], [3.2, 0.1, 1.0]), what="target moved")
     info = fab.rpc.call(keys.srv(world, "world"), timeout=5)
     assert isinstance(info, WorldInfo) and info.scene == "combined" and info.world == world
     arm, base = info.robot("arm1"), info.robot("base1")
@@ -307,7 +307,7 @@ def test_a_shard_leaves_other_robots_to_their_sims_and_the_scene_objects_to_the_
         wait_until(lambda: (peer.counters["accepted"] >= 1 and peer.counters["object_mirrored"] >= 1) or own_command_and_poses(),
                    timeout=10, what="its own robot's command and a mirrored object pose")
         assert peer.counters["rejected"] == 0 and inbox.event("reject") is None
-        assert peer.counters["object_updates"] == 0 and np.allclose(peer.world.object_pose("target")[0], [0.3, 0.2, 0.4])
+        assert peer.counters["object_updates"] == 0 and np.allclose(peer.world.objects.pose("target")[0], [0.3, 0.2, 0.4])
         other.close()
         wait_until(lambda: not peer.other_sims, what="the other sim gone")
         send(fab, world, "base9", "twist", Twist(0.1, 0.0))

@@ -24,7 +24,7 @@ def run(w: SimWorld, seconds: float) -> None:
 def test_zero_pose_flange_is_190_0_308_mm_from_the_arm_base():
     w = SimWorld("arm_cell")
     x, y, z, _ = w.placements["arm1"].pose
-    pos, quat = w.flange("arm1")
+    pos, quat = w.readings.flange("arm1")
     np.testing.assert_allclose((pos - [x, y, z]) * 1000, [190.0, 0.0, 308.0], atol=1e-9)
     np.testing.assert_allclose(quat, [math.cos(math.pi / 4), 0, math.sin(math.pi / 4), 0], atol=1e-12)
 
@@ -215,13 +215,13 @@ def test_moving_flag_follows_motion_and_objects_move():
     assert w.moving() == {"arm1": True, "base1": False}
     run(w, 1.0)
     assert w.moving()["arm1"] is False
-    w.set_object_pose("target", [3.2, 0.1, 1.0])
+    w.objects.set_pose("target", [3.2, 0.1, 1.0])
     w.sync()
     np.testing.assert_allclose(w.data.xpos[w.model.body("target").id], [3.2, 0.1, 1.0])
     with pytest.raises(KeyError):
-        w.set_object_pose("nope", [0, 0, 0])
+        w.objects.set_pose("nope", [0, 0, 0])
     with pytest.raises(ValueError):
-        w.set_object_pose("target", [math.nan, 0, 0])
+        w.objects.set_pose("target", [math.nan, 0, 0])
     st = w.state("arm1")
     assert st["kind"] == "arm" and len(st["q"]) == 6 and st["moving"] is False
     w.reset()
@@ -235,16 +235,16 @@ def test_the_bumper_stops_a_base_before_a_wall(room):
     base = w.robot("bot")
     base.twist(1.0, 0.0)
     run(w, 4.0)
-    assert not base.moving and w.collisions and w.collisions[0][0] == "bot"
+    assert not base.moving and w.notes.collisions and w.notes.collisions[0][0] == "bot"
     front = base.ctrl.x + 0.05 + 0.25  # chassis centre 5 cm ahead of the axle, radius 0.25 m
     assert FRONT - 0.05 < front <= FRONT
     base.twist(-0.3, 0.0)  # backing away is allowed
     run(w, 1.0)
-    assert base.ctrl.x < FRONT - 0.3 - 0.2 and len(w.collisions) == 1
+    assert base.ctrl.x < FRONT - 0.3 - 0.2 and len(w.notes.collisions) == 1
     quiet = SimWorld(room, bumper=False)
     quiet.robot("bot").twist(1.0, 0.0)
     run(quiet, 4.0)
-    assert quiet.robot("bot").ctrl.x > FRONT and not quiet.collisions  # without it, walls are no obstacle
+    assert quiet.robot("bot").ctrl.x > FRONT and not quiet.notes.collisions  # without it, walls are no obstacle
 
 
 def test_free_bodies_are_simulated_while_robots_stay_kinematic(tmp_path):
