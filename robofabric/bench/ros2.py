@@ -6,6 +6,12 @@ kept on this machine. This process subscribes to the same streams over zenoh. Ea
 matched by its stamp (the sim's time, which the bridge's header stamps carry): the bridge's added latency is its ROS
 arrival minus its zenoh arrival (one clock, one machine). Lost: messages zenoh delivered within the window (its
 first ``SETTLE_S`` seconds left out, for discovery) that the ROS node never got. CPU: the bridge's, over the window.
+
+Where the added latency goes: the bridge runs with ``--trace`` and notes each message's entry into its zenoh callback
+and the return of its ``publish``, on the same clock, so each matched message's added latency splits into three
+parts that sum to it: zenoh to the bridge (the bridge's zenoh delivery, its wait for the GIL and its decode, against
+this process's delivery), in the bridge (conversion and rclpy's publish, DDS's write included) and DDS to the ROS
+node's callback (the transport and the node's executor).
 """
 
 from __future__ import annotations
@@ -79,6 +85,7 @@ def run_one(robots: int, seconds: float, tmp: Path) -> dict[str, Any]:
     env = ros_env(domain)
     ids = [f"base{i}" for i in range(robots)]
     out_file = tmp / "ros.txt"
+    trace_file = tmp / "bridge-trace.txt"
     with ProcessGroup(tmp) as procs:
         router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
         wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
@@ -86,7 +93,8 @@ def run_one(robots: int, seconds: float, tmp: Path) -> dict[str, Any]:
         sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *specs, "--world", world,
                                          "--connect", ep), name="sim")
         wait_until(lambda: "Ctrl-C to stop" in procs.output(sim), timeout=180, what="the sim", seen=lambda: procs.output(sim)[-1500:])
-        bridge = procs.start(robofabric_cmd("ros2", "--world", world, "--connect", ep, "--user", "bench"), name="bridge", env=env)
+        bridge = procs.start(robofabric_cmd("ros2", "--world", world, "--connect", ep, "--user", "bench",
+                                                "--trace", str(trace_file)), name="bridge", env=env)
         wait_until(lambda: "bridging world" in procs.output(bridge) or bridge.poll() is not None, timeout=60,
                    what="the bridge", seen=lambda: procs.output(bridge)[-1500:])
         with client(world, port, kind="tool", peer_id="probe") as fab:
@@ -115,12 +123,54 @@ def run_one(robots: int, seconds: float, tmp: Path) -> dict[str, Any]:
     out: dict[str, Any] = {"robots": robots, "seconds": seconds, "cores": (cpu1 - cpu0) / ((t1 - t0) / 1e9),
                            "listener_cores": (lcpu1 - lcpu0) / ((t1 - t0) / 1e9), "load": os.getloadavg()[0],
                            "summary": next((ln for ln in bridge_log.splitlines() if "messages published" in ln), "")}
+    bridge_at = _read_trace(trace_file)
     for stream in STREAMS:
         keys_ = [k for k in zen if k[1] == stream]
         added = [(ros[k] - zen[k]) / 1e6 for k in keys_ if k in ros]
         out[stream] = {"zenoh": len(keys_), "lost": sum(1 for k in keys_ if k not in ros),
-                       "p50": pct(added, 50), "p99": pct(added, 99), "rate": len(keys_) / max(1e-9, (t1 - t0) / 1e9 - SETTLE_S - TAIL_S)}
+                       "p50": pct(added, 50), "p99": pct(added, 99), "rate": len(keys_) / max(1e-9, (t1 - t0) / 1e9 - SETTLE_S - TAIL_S),
+                       "split": split([(zen[k], *bridge_at[k], ros[k]) for k in keys_ if k in ros and k in bridge_at])}
     return out
+
+
+def _read_trace(path: Path) -> dict[tuple[str, str, int], tuple[int, int]]:
+    """The bridge's ``--trace``: (robot, stream, stamp) -> (entry, published); empty when it wrote none."""
+    got: dict[tuple[str, str, int], tuple[int, int]] = {}
+    if not path.exists():
+        return got
+    for line in path.read_text().splitlines():
+        key, stamp, entry, published = line.split()
+        parts = key.split("/")
+        if len(parts) == 5 and parts[2] == "robot":
+            got[(parts[3], parts[4], int(stamp))] = (int(entry), int(published))
+    return got
+
+
+SPLIT = ("to bridge", "in bridge", "to ROS node")
+"""The added latency's parts (module docstring), in order."""
+
+
+def split(times: list[tuple[int, int, int, int]]) -> dict[str, Any]:
+    """Per part of the added latency, from (zenoh, bridge entry, bridge published, ROS) arrivals in ns: its p50
+    and p99 (ms) over every message, and its median over the slowest 1% (added at or above the p99), the tail."""
+    cols = [[(t[i + 1] - t[i]) / 1e6 for t in times] for i in range(len(SPLIT))]
+    added = [(t[-1] - t[0]) / 1e6 for t in times]
+    cut = pct(added, 99)
+    tail = [i for i, a in enumerate(added) if a >= cut]
+    return {"n": len(times), **{name: {"p50": pct(c, 50), "p99": pct(c, 99), "tail": pct([c[i] for i in tail], 50)}
+                                for name, c in zip(SPLIT, cols)}}
+
+
+def split_header() -> list[str]:
+    return ["| robots | stream | matched | zenoh to bridge p50 / p99 / tail (ms) | in bridge p50 / p99 / tail (ms) | DDS to ROS node p50 / p99 / tail (ms) |",
+            "|---|---|---|---|---|---|"]
+
+
+def split_row(r: dict[str, Any]) -> list[str]:
+    """Where one run's added latency went, per stream (tail: the part's median over the slowest 1%)."""
+    cell = lambda d: f"{d['p50']:.2f} / {d['p99']:.2f} / {d['tail']:.2f}"  # noqa: E731
+    return [f"| {r['robots']} | {s} | {r[s]['split']['n']} | " + " | ".join(cell(r[s]["split"][p]) for p in SPLIT) + " |"
+            for s in STREAMS]
 
 
 def header() -> list[str]:
@@ -160,15 +210,17 @@ def command(
     if not counts or min(counts) < 1 or seconds <= SETTLE_S + TAIL_S:
         raise typer.BadParameter(f"--robots needs counts >= 1 and --seconds more than {SETTLE_S + TAIL_S:g}")
     lines = [f"`robofabric bench ros2 --robots {robots} --seconds {seconds:g}` on {machine()}", "", *header()]
-    summaries = []
+    summaries: list[str] = []
+    splits = ["", "Where the added latency went (tail: each part's median over the slowest 1% of messages):", "", *split_header()]
     with tempfile.TemporaryDirectory(prefix="rf-ros2-") as tmp:
         for n in counts:
             d = Path(tmp) / f"n{n}"
             d.mkdir()
             r = run_one(n, seconds, d)
             lines.extend(row(r))
+            splits.extend(split_row(r))
             summaries.append(f"{n} robots: bridge said: {r['summary']}")
             print("\n".join(row(r)), flush=True)
-    text = "\n".join([*lines, "", *summaries]) + "\n"
+    text = "\n".join([*lines, *splits, "", *summaries]) + "\n"
     print(text)
     append(out, text)

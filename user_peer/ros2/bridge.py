@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections import Counter
 from dataclasses import dataclass
 from typing import Any
@@ -111,7 +112,8 @@ class _Out:
 class Ros2Bridge:
     """Republish ``world``'s streams on ``node`` and forward its ROS commands; ``close()`` ends it."""
 
-    def __init__(self, world: World, node: Node, *, namespace: str = "", tf_message: type | None = None) -> None:
+    def __init__(self, world: World, node: Node, *, namespace: str = "", tf_message: type | None = None,
+                 trace: bool = False) -> None:
         self.world = world
         self.node = node
         self.namespace = namespace
@@ -130,6 +132,10 @@ class Ros2Bridge:
         self.forwarded: Counter[str] = Counter()  # robot -> commands forwarded
         self.refused: Counter[str] = Counter()  # robot -> commands refused (not owned, rejected)
         self.unconverted = 0  # fabric messages with no ROS place (or failed to convert)
+        self.trace: list[tuple[str, int, int, int]] | None = [] if trace else None
+        """With ``trace``: (key, stamp, entry, published) per message published, the times ``time.time_ns()`` at
+        the zenoh callback's entry (decoded) and after ``publish`` returned; ``robofabric bench ros2`` splits the
+        added latency with them (kept in memory, written by ``write_trace``)."""
         self._event_mark = world.event_mark()
         self._subs: list[Any] = []
         self._closed = False
@@ -209,6 +215,7 @@ class Ros2Bridge:
         """A fabric message: convert it as the MCAP export does and publish it (zenoh's thread)."""
         if self._closed or not self.node.context.ok():
             return  # stopping (Ctrl-C or SIGTERM shut rclpy's context down before the world closed): nothing to publish on
+        entry = time.time_ns() if self.trace is not None else 0
         try:
             route = self._route(key)
             if route is None:
@@ -222,6 +229,8 @@ class Ros2Bridge:
                 self.unconverted += 1
                 return
             out.pub.publish(ros)
+            if self.trace is not None:
+                self.trace.append((key, ns, entry, time.time_ns()))
             self.published[route.topic] += 1
             if route.robot is not None:
                 self.tf.on_state(key, msg, ns)
@@ -357,6 +366,11 @@ class Ros2Bridge:
             self._timer.cancel()
         except Exception:
             pass
+
+    def write_trace(self, path: str) -> None:
+        """The trace (``trace=True``), one line a message: ``KEY STAMP_NS ENTRY_NS PUBLISHED_NS``."""
+        with open(path, "w") as f:
+            f.writelines(f"{k} {s} {a} {b}\n" for k, s, a, b in list(self.trace or ()))
 
     def summary(self) -> str:
         """One line: what went out and what came in."""

@@ -22,6 +22,7 @@ def ros2(
     connect: Connect = None,
     profile: Profile = None,
     zenoh_config: ZenohConfig = None,
+    trace: Annotated[Optional[str], typer.Option("--trace", hidden=True, help="Write when each message entered and left the bridge to this file at the end (robofabric bench ros2).")] = None,
 ) -> None:
     """Bridge a world to ROS 2: every robot's joint_states, scan, odom, path, the map and /clock go out as ROS 2
     topics; cmd_vel and joint_command come in for the robots this login owns (refusals on /rosout). The ROS
@@ -49,13 +50,15 @@ def ros2(
                 print(f"{w.user} does not own {rid}: {exc.reason}", flush=True)
         rclpy.init()
         node = rclpy.create_node("robofabric_" + "".join(c if c.isalnum() else "_" for c in w.user))
-        bridge = Ros2Bridge(w, node, namespace=namespace)
+        bridge = Ros2Bridge(w, node, namespace=namespace, trace=trace is not None)
         print(f"bridging world {w.name!r} as {w.user!r} to ROS 2 domain {os.environ.get('ROS_DOMAIN_ID', '0')}"
               f"{' under /' + namespace.strip('/') if namespace.strip('/') else ''}", flush=True)
         try:
             spin(bridge)
         finally:
             bridge.close()
+            if trace is not None:
+                bridge.write_trace(trace)
             print(bridge.summary(), flush=True)
             node.destroy_node()
             if rclpy.ok():

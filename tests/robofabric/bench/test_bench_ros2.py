@@ -6,7 +6,7 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ros2 extra (ROS 2 Kilted's wheels) is not installed")
 
-from robofabric.bench.ros2 import STREAMS, row, run_one  # noqa: E402
+from robofabric.bench.ros2 import SPLIT, STREAMS, row, split, split_row, run_one  # noqa: E402
 
 
 @pytest.mark.slow
@@ -18,8 +18,22 @@ def test_bench_ros2_matches_the_bridges_messages_to_zenohs(tmp_path):
         # may lose a few best-effort scans: the figure is reported, not asserted)
         assert s["zenoh"] > 10 and s["lost"] < s["zenoh"] / 2, (stream, s)
         assert math.isfinite(s["p50"]) and math.isfinite(s["p99"]), (stream, s)
+        # the bridge's trace matched the messages, so the added latency splits into its parts
+        assert s["split"]["n"] > 10 and all(math.isfinite(s["split"][p]["p50"]) for p in SPLIT), (stream, s)
     assert r["cores"] > 0 and "messages published" in r["summary"], r
-    assert len(row(r)) == len(STREAMS)
+    assert len(row(r)) == len(STREAMS) and len(split_row(r)) == len(STREAMS)
+
+
+def test_the_added_latency_splits_into_parts_that_sum_to_it_and_the_tail_names_the_slow_part():
+    # 99 messages whose 1 ms goes 0.2 to the bridge, 0.3 in it, 0.5 to the node; one 50 ms late in DDS
+    ms = 1_000_000
+    times = [(t * ms, t * ms + ms // 5, t * ms + ms // 2, (t + 1) * ms) for t in range(99)]
+    times.append((1000 * ms, 1000 * ms + ms // 5, 1000 * ms + ms // 2, 1050 * ms))
+    s = split(times)
+    assert s["n"] == 100
+    assert [round(s[p]["p50"], 6) for p in SPLIT] == [0.2, 0.3, 0.5]
+    # the slowest 1% is the late message: its time went to the node's side, not the bridge's
+    assert [round(s[p]["tail"], 6) for p in SPLIT] == [0.2, 0.3, 49.5]
 
 
 def test_bench_ros2_convert_gives_each_streams_python_cost_per_message():
