@@ -129,7 +129,7 @@ def key_info(
     key: str, *, as_json: bool, duration: float, world, connect, listen, profile, zenoh_config, peer_id
 ) -> None:
     """``robofabric info KEY``: type and its fields, publishers, rate, whether anyone subscribes."""
-    from fabric.interfaces import fields_of, message_types
+    from robofabric.interface_fields import fields_of, message_types
 
     if not duration > 0:
         raise UserError("--duration must be positive")
@@ -198,7 +198,8 @@ def interfaces(
     schema: Annotated[bool, typer.Option("--schema", help="Print the type's JSON Schema (what Foxglove exports declare).")] = False,
 ) -> None:
     """Message types and their fields (like ``ros2 interface list`` / ``show``), plugins' types included."""
-    from fabric.interfaces import fields_of, json_schema, message_types, type_doc
+    from fabric.interfaces import json_schema, type_doc
+    from robofabric.interface_fields import fields_of, message_types
 
     types = message_types()
     if type_name is None:

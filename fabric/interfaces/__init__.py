@@ -20,7 +20,8 @@ Modules, one room each:
 - :mod:`.navigation`: map and plan requests and replies
 - :mod:`.errors`: ``ServiceError``, ``Refused``, ``NoReply`` (and the codec's ``DecodeError``)
 - :mod:`.geometry`: angles and headings (``wrap_angle``, ``yaw_from_quaternion``, ``quaternion_from_yaw``)
-- :mod:`.schema`: the fields and JSON Schema of each type, read off its ``SPEC``
+- :mod:`.schema`: a message's plain JSON view and its type's JSON Schema, read off its ``SPEC`` (the
+  fields listing of ``robofabric interfaces`` is a tool's: :mod:`robofabric.interface_fields`)
 """
 
 from fabric.interfaces.std import (
@@ -63,15 +64,7 @@ from fabric.interfaces.navigation import (
 )
 from fabric.interfaces.errors import DecodeError, NoReply, Refused, ServiceError
 from fabric.interfaces.geometry import TWO_PI, quaternion_from_yaw, wrap_angle, yaw_from_quaternion
-from fabric.interfaces.schema import (
-    FieldInfo,
-    describe_spec,
-    fields_of,
-    json_schema,
-    message_types,
-    plain_view,
-    type_doc,
-)
+from fabric.interfaces.schema import json_schema, plain_view, type_doc, type_name
 
 __all__ = [
     # std
@@ -96,5 +89,5 @@ __all__ = [
     # geometry
     "TWO_PI", "quaternion_from_yaw", "wrap_angle", "yaw_from_quaternion",
     # schema
-    "FieldInfo", "describe_spec", "fields_of", "json_schema", "message_types", "plain_view", "type_doc",
+    "json_schema", "plain_view", "type_doc", "type_name",
 ]

@@ -1,4 +1,4 @@
-"""What each message type looks like from outside: its fields (for ``robofabric interfaces``) and a JSON Schema.
+"""What each message type looks like from outside, as JSON: a plain view of a message and its JSON Schema.
 
 Both are read off the classes' ``SPEC`` (the same table the decoder validates
 against), so they cannot drift from the wire format. The JSON Schema describes
@@ -9,107 +9,21 @@ so a reader (Foxglove, ``jsonschema``) can check every message.
 
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from fabric.codec import Arr, F, I, Map, Msg, Opt, S, Strs, load_plugins, registered, to_plain
+from fabric.codec import Arr, F, I, Map, Msg, Opt, S, Strs, registered, to_plain
 
-__all__ = ["FieldInfo", "fields_of", "describe_spec", "json_schema", "message_types", "type_doc", "plain_view"]
-
-
-@dataclass(frozen=True, slots=True)
-class FieldInfo:
-    """One field of a message type: name, a short type text (``float64[3]``, ``Header``) and its constraints."""
-
-    name: str
-    type: str
-    constraints: str = ""
-    default: str = ""
+__all__ = ["json_schema", "plain_view", "type_doc", "type_name"]
 
 
-def message_types() -> dict[str, type]:
-    """Every message type the codec knows, installed plugins' included, by name."""
-    load_plugins()
-    return dict(sorted(registered().items()))
-
-
-def _name_of(cls: type) -> str:
+def type_name(cls: type) -> str:
+    """The name a message class is registered under (its wire type name), or its class name."""
     for name, c in registered().items():
         if c is cls:
             return name
     return cls.__name__
-
-
-def _range(lo: Any, hi: Any) -> str:
-    if lo is None and hi is None:
-        return ""
-    return f"[{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}]"
-
-
-def describe_spec(spec: Any) -> tuple[str, str]:
-    """(type text, constraints text) of one field spec."""
-    if isinstance(spec, Opt):
-        t, c = describe_spec(spec.inner)
-        return f"{t} | None", c
-    if isinstance(spec, F):
-        return "float", _range(spec.lo, spec.hi)
-    if isinstance(spec, I):
-        return "int", _range(spec.lo, spec.hi)
-    if isinstance(spec, S):
-        parts = []
-        if spec.choices:
-            parts.append("one of " + ", ".join(spec.choices))
-        if spec.nonempty:
-            parts.append("non-empty")
-        return "string", "; ".join(parts)
-    if isinstance(spec, Strs):
-        return "string[]", ""
-    if isinstance(spec, Arr):
-        dt = np.dtype(spec.dtype).name
-        if spec.shape is not None:
-            return dt + "".join(f"[{n}]" for n in spec.shape), ""
-        return dt + "[]" * (spec.ndim or 1), ""
-    if isinstance(spec, Msg):
-        return " | ".join(_name_of(c) for c in spec.classes), ""
-    if isinstance(spec, Map):
-        return "map", "string keys; scalars or lists of scalars"
-    one = getattr(spec, "one", None)
-    if isinstance(one, Msg):
-        return f"{' | '.join(_name_of(c) for c in one.classes)}[]", ""
-    return type(spec).__name__, ""
-
-
-def _default_text(f: dataclasses.Field) -> str:
-    if f.default is not dataclasses.MISSING:
-        return repr(f.default)
-    if f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
-        try:
-            v = f.default_factory()  # type: ignore[misc]
-        except Exception:
-            return ""
-        if isinstance(v, np.ndarray):
-            return repr(v.tolist())
-        if dataclasses.is_dataclass(v):
-            return f"{type(v).__name__}()"
-        return repr(v)
-    return ""
-
-
-def fields_of(cls: type) -> list[FieldInfo]:
-    """The fields of a message class in wire order, with types, constraints and defaults."""
-    by_name = {f.name: f for f in dataclasses.fields(cls)} if dataclasses.is_dataclass(cls) else {}
-    out = []
-    for name, spec in cls.SPEC.items():
-        t, c = describe_spec(spec)
-        f = by_name.get(name)
-        out.append(FieldInfo(name, t, c, _default_text(f) if f is not None else ""))
-    return out
-
-
-# --------------------------------------------------------------------------- JSON view and its schema
 
 
 def plain_view(msg: Any) -> dict[str, Any]:
@@ -118,7 +32,7 @@ def plain_view(msg: Any) -> dict[str, Any]:
     Like :func:`fabric.codec.to_plain`, with each field in its wire form: an ``I`` field is an integer
     even where the class holds a bool, an ``F`` field a float.
     """
-    out: dict[str, Any] = {"type": _name_of(type(msg))}
+    out: dict[str, Any] = {"type": type_name(type(msg))}
     for name, spec in type(msg).SPEC.items():
         out[name] = _plain_field(spec, getattr(msg, name))
     return out
@@ -196,7 +110,7 @@ def _spec_schema(spec: Any, defs: dict[str, Any]) -> dict[str, Any]:
 
 
 def _object_schema(cls: type, defs: dict[str, Any]) -> dict[str, Any]:
-    name = _name_of(cls)
+    name = type_name(cls)
     props: dict[str, Any] = {"type": {"const": name}}
     for field, spec in cls.SPEC.items():
         props[field] = _spec_schema(spec, defs)
@@ -218,7 +132,7 @@ def type_doc(cls: type) -> str:
 
 
 def _ref(cls: type, defs: dict[str, Any]) -> dict[str, Any]:
-    name = _name_of(cls)
+    name = type_name(cls)
     if name not in defs:
         defs[name] = {}  # placeholder first: a type may (indirectly) contain itself
         defs[name] = _object_schema(cls, defs)

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from fabric.codec import DecodeError, decode, encode, messages_equal
 from fabric.interfaces import BaseInfo, LidarInfo, ObjectInfo, RobotInfo, SonarInfo, WorldInfo
-from fabric.interfaces.schema import fields_of, json_schema, plain_view
+from fabric.interfaces.schema import json_schema, plain_view
 
 ids = st.text("abcdefghijklmnopqrstuvwxyz0123456789_-", min_size=1, max_size=12)
 fl = st.floats(-1e3, 1e3, allow_nan=False)
@@ -105,11 +105,11 @@ def test_malformed_sensors_are_refused_naming_the_field():
         encode(WorldInfo("w", "s", 0.002, {}, (_mobile(sonar=SonarInfo(np.zeros(3), 0.2, 0.1, 2.0, 1.0)),)))
 
 
-def test_optional_fields_are_described_and_in_the_json_schema():
+def test_optional_fields_are_in_the_json_schema():
+    """A robot with or without its optional parts validates against WorldInfo's schema; a part of the wrong
+    shape does not."""
     import jsonschema
 
-    by_name = {f.name: f for f in fields_of(RobotInfo)}
-    assert by_name["lidar"].type == "LidarInfo | None" and by_name["lidar"].default == "None"
     schema = json_schema(WorldInfo)
     for info in (_mobile(lidar=LIDAR, base=BaseInfo(0.25, 0.4, 0.08, 1.0, 2.0, 1.0, 2.0)), _mobile()):
         jsonschema.validate(plain_view(WorldInfo("w", "s", 0.002, {}, (info,))), schema)
