@@ -29,7 +29,6 @@ def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence
     lo, hi = arm.lower, arm.upper
     target = np.asarray(position, float)
     rt = None if rotation is None else np.asarray(rotation, float)
-    rows = 3 if rt is None else 6
     q0 = default_seed(arm) if seed is None else seed
     rng = np.random.default_rng(rng_seed)
     starts = [np.clip(np.asarray(q0, float), lo, hi)]
@@ -58,17 +57,7 @@ def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence
                 if cost > 0.5 * checkpoint:
                     break  # crawling (a limit, a local minimum): a fresh start is cheaper
                 checkpoint = cost
-            jac = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)[:rows]
-            if rt is not None:
-                # e_r = log3(R_t R^T); turning the flange by w (world) changes it by -Jlog3(R_t R^T) w
-                jac = jac.copy()
-                jac[3:] = orientation_scale * (pin.Jlog3(rt @ data.oMf[fid].rotation.T) @ jac[3:])
-            grad = jac.T @ e
-            frozen = ((q <= lo + 1e-12) & (grad < 0)) | ((q >= hi - 1e-12) & (grad > 0))
-            if frozen.any():
-                jac = jac.copy()
-                jac[:, frozen] = 0.0
-                grad = jac.T @ e
+            jac, grad = _step_jacobian(arm, q, e, rt, orientation_scale)
             jtj = jac.T @ jac
             while True:
                 dq = np.linalg.solve(jtj + lam * (eye + np.diag(np.diag(jtj))), grad)
@@ -90,8 +79,33 @@ def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence
             best = (cost, q, pe, re)
     assert best is not None
     _, q, pe, re = best
+    raise _not_converged(arm, q, pe, None if rt is None else re, len(starts))
+
+
+def _step_jacobian(arm: ArmModel, q: np.ndarray, e: np.ndarray, rt: np.ndarray | None,
+                   orientation_scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """The residual's Jacobian at ``q`` and its gradient ``J^T e``, with each joint that rests on a limit the
+    error pushes further out frozen (its column zero) for this step, so the others still converge."""
+    model, data, fid, lo, hi = arm.model, arm.data, arm.frame_id, arm.lower, arm.upper
+    jac = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)[:3 if rt is None else 6]
+    if rt is not None:
+        # e_r = log3(R_t R^T); turning the flange by w (world) changes it by -Jlog3(R_t R^T) w
+        jac = jac.copy()
+        jac[3:] = orientation_scale * (pin.Jlog3(rt @ data.oMf[fid].rotation.T) @ jac[3:])
+    grad = jac.T @ e
+    frozen = ((q <= lo + 1e-12) & (grad < 0)) | ((q >= hi - 1e-12) & (grad > 0))
+    if frozen.any():
+        jac = jac.copy()
+        jac[:, frozen] = 0.0
+        grad = jac.T @ e
+    return jac, grad
+
+
+def _not_converged(arm: ArmModel, q: np.ndarray, pe: float, re: float | None, starts: int) -> NoIKSolution:
+    """The refusal: the best residual (rotation's only when one was asked) and the joints resting on a limit."""
+    lo, hi = arm.lower, arm.upper
     at = [f"J{i + 1} at its {'lower' if q[i] <= lo[i] + 1e-9 else 'upper'} limit {degrees_text(q[i])}"
           for i in range(len(q)) if q[i] <= lo[i] + 1e-9 or q[i] >= hi[i] - 1e-9]
-    what = f"{pe:.3g} m" + ("" if rt is None else f", {re:.3g} rad")
-    raise NoIKSolution(f"numerical IK did not converge from {len(starts)} starts: best residual {what}"
-                      + (f" ({', '.join(at)})" if at else ""))
+    what = f"{pe:.3g} m" + ("" if re is None else f", {re:.3g} rad")
+    return NoIKSolution(f"numerical IK did not converge from {starts} starts: best residual {what}"
+                        + (f" ({', '.join(at)})" if at else ""))
