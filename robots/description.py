@@ -281,48 +281,7 @@ def _load(path: Path) -> RobotDescription:
         raise DescriptionError(f"{where}: max_speed values must be positive")
     base = lidar = sonar = None
     if kind == "mobile":
-        b = data.get("base")
-        if not isinstance(b, dict):
-            raise DescriptionError(f"{where}: a mobile robot needs a [base] table")
-        w = f"{where} [base]"
-        base = BaseSpec(
-            radius=_num(b, "radius", w),
-            wheel_separation=_num(b, "wheel_separation", w),
-            wheel_radius=_num(b, "wheel_radius", w),
-            max_speed=_num(b, "max_speed", w),
-            max_omega=_num(b, "max_omega", w),
-            max_accel=_num(b, "max_accel", w),
-            max_alpha=_num(b, "max_alpha", w),
-            height=_num(b, "height", w, 0.0),
-        )
-        if min(base.radius, base.wheel_separation, base.wheel_radius, base.max_speed, base.max_omega, base.max_accel, base.max_alpha) <= 0:
-            raise DescriptionError(f"{w}: sizes and limits must be positive")
-        if isinstance(data.get("lidar"), dict):
-            li = data["lidar"]
-            w = f"{where} [lidar]"
-            rays = li.get("rays")
-            if not isinstance(rays, int) or not 1 <= rays <= 4096:
-                raise DescriptionError(f"{w}: rays must be an integer in 1..4096")
-            lidar = LidarSpec(
-                site=str(li.get("site", "lidar")),
-                rays=rays,
-                fov=math.radians(_num(li, "fov_deg", w)),
-                range_min=_num(li, "range_min", w, 0.0),
-                range_max=_num(li, "range_max", w),
-                noise_std=_num(li, "noise_std", w, 0.0),
-            )
-        if isinstance(data.get("ultrasonic"), dict):
-            us = data["ultrasonic"]
-            w = f"{where} [ultrasonic]"
-            sonar = UltrasonicSpec(
-                angles=tuple(math.radians(a) for a in _floats(us, "angles_deg", w)),
-                radius=_num(us, "radius", w),
-                height=_num(us, "height", w),
-                range_min=_num(us, "range_min", w, 0.0),
-                range_max=_num(us, "range_max", w),
-                noise_std=_num(us, "noise_std", w, 0.0),
-                center=_floats(us, "center", w, 2) if "center" in us else (0.0, 0.0),  # type: ignore[arg-type]
-            )
+        base, lidar, sonar = _base(data, where), _lidar(data, where), _sonar(data, where)
     base_joints = tuple(r.get("base_joints", ()))
     if kind == "mobile" and len(base_joints) != 3:
         raise DescriptionError(f"{where}: a mobile robot needs base_joints = [x, y, yaw] (slide, slide, hinge)")
@@ -346,6 +305,63 @@ def _load(path: Path) -> RobotDescription:
         ultrasonic=sonar,
         base_joints=base_joints,
         hooks=_hooks_ref(r, where),
+    )
+
+
+def _base(data: dict, where: str) -> BaseSpec:
+    """A mobile robot's ``[base]`` table: its size and its limits, all positive."""
+    b = data.get("base")
+    if not isinstance(b, dict):
+        raise DescriptionError(f"{where}: a mobile robot needs a [base] table")
+    w = f"{where} [base]"
+    base = BaseSpec(
+        radius=_num(b, "radius", w),
+        wheel_separation=_num(b, "wheel_separation", w),
+        wheel_radius=_num(b, "wheel_radius", w),
+        max_speed=_num(b, "max_speed", w),
+        max_omega=_num(b, "max_omega", w),
+        max_accel=_num(b, "max_accel", w),
+        max_alpha=_num(b, "max_alpha", w),
+        height=_num(b, "height", w, 0.0),
+    )
+    if min(base.radius, base.wheel_separation, base.wheel_radius, base.max_speed, base.max_omega, base.max_accel, base.max_alpha) <= 0:
+        raise DescriptionError(f"{w}: sizes and limits must be positive")
+    return base
+
+
+def _lidar(data: dict, where: str) -> LidarSpec | None:
+    """A mobile robot's ``[lidar]`` table, if it has one."""
+    if not isinstance(data.get("lidar"), dict):
+        return None
+    li = data["lidar"]
+    w = f"{where} [lidar]"
+    rays = li.get("rays")
+    if not isinstance(rays, int) or not 1 <= rays <= 4096:
+        raise DescriptionError(f"{w}: rays must be an integer in 1..4096")
+    return LidarSpec(
+        site=str(li.get("site", "lidar")),
+        rays=rays,
+        fov=math.radians(_num(li, "fov_deg", w)),
+        range_min=_num(li, "range_min", w, 0.0),
+        range_max=_num(li, "range_max", w),
+        noise_std=_num(li, "noise_std", w, 0.0),
+    )
+
+
+def _sonar(data: dict, where: str) -> UltrasonicSpec | None:
+    """A mobile robot's ``[ultrasonic]`` ring, if it has one."""
+    if not isinstance(data.get("ultrasonic"), dict):
+        return None
+    us = data["ultrasonic"]
+    w = f"{where} [ultrasonic]"
+    return UltrasonicSpec(
+        angles=tuple(math.radians(a) for a in _floats(us, "angles_deg", w)),
+        radius=_num(us, "radius", w),
+        height=_num(us, "height", w),
+        range_min=_num(us, "range_min", w, 0.0),
+        range_max=_num(us, "range_max", w),
+        noise_std=_num(us, "noise_std", w, 0.0),
+        center=_floats(us, "center", w, 2) if "center" in us else (0.0, 0.0),  # type: ignore[arg-type]
     )
 
 
