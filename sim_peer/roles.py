@@ -29,10 +29,10 @@ RECHECK_LEASES = 3
 """Leases a sim whose link came back waits for the others' tokens before the election looks: after a router's
 restart every client reconnects on its own schedule (seconds apart), the leader's token among them."""
 AUDIBLE_S = 0.5
-"""A sim heard (its term on a stream or ``srv/state``) this recently is alive, whatever its token: a leader whose
-token is missing from the view waits for this long after it was last heard before a standby takes over. A
-killed sim's token goes at once, so this is what a SIGKILL adds to a fail-over at most; its streams (tens of
-samples a second) keep a live leader well inside it."""
+"""A sim heard (its term on a stream or ``srv/state``) this recently is alive, whatever its token, while this host's
+view of the tokens is fresh (:meth:`Roles.audible`): a leader whose token is missing from the view then waits for
+this long after it was last heard before a standby takes over. A live leader's streams (joints at the sim's rate,
+about 100 a second, and ``srv/state`` every 50 ms) speak well inside it, even on a loaded machine."""
 OWN_TOKEN_S = 10.0
 """How long our own token's absence, with the link up, still counts as deafness (its return is the usual end)."""
 
@@ -53,6 +53,7 @@ class Roles:
         # when each sim was last heard (monotonic); a standby made by a step-down heard its leader just now
         self.heard_at: dict[str, float] = {election.leader: time.monotonic()} if election.leader else {}
         self.relooking = False  # a look at the live sims is due once a missing but audible leader goes quiet
+        self.fresh_until = float("inf")  # until when the tokens seen may still be arriving (set at join)
 
     @property
     def role(self) -> str:
@@ -76,6 +77,7 @@ class Roles:
         self.await_leader(self.election.leader)
         with h.lock:
             self.settled = True
+            self.fresh_until = time.monotonic() + RECHECK_LEASES * f.config.lease_ms / 1000.0
             live = frozenset(self.live)
         self.step(el.Peers(h.shards.view(live)))
 
@@ -179,8 +181,14 @@ class Roles:
             self.step(el.Heard(source, term))
 
     def audible(self) -> frozenset[str]:
-        """The sims heard within :data:`AUDIBLE_S`."""
+        """The sims heard within :data:`AUDIBLE_S`, while the tokens seen may still be arriving: the first
+        :data:`RECHECK_LEASES` leases of this host (a primary that just stepped down, its session back from a
+        pause past the lease, can see its leader's token seconds late), or a leader already found missing but
+        heard (:meth:`relook`). Later a token's loss is trusted at once (a killed leader's goes with its link, and
+        waiting would only delay its fail-over); a deaf sim's view is not trusted at all (:meth:`deaf_recheck`)."""
         now = time.monotonic()
+        if now > self.fresh_until and not self.relooking:
+            return frozenset()
         return frozenset(p for p, t in list(self.heard_at.items()) if now - t < AUDIBLE_S)
 
     def relook(self) -> None:
