@@ -178,8 +178,10 @@ Publish = Callable[[str, bytes], None]
 class Replayer:
     """Republish a :class:`ReplayPlan` through ``target``: a Fabric, a zenoh Session, or a ``publish(key, payload)``.
 
-    ``run(stop)`` blocks until the replay ends (or ``stop`` is set) and returns :class:`ReplayStats`;
-    ``start()``/``stop()`` run it on a thread; a context manager stops it on exit. With a zenoh
+    ``run(stop)`` blocks until the replay ends (or ``stop`` is set) and returns :class:`ReplayStats`.
+    ``start()`` (or ``with Replayer(...) as rp:``) runs it on a thread of its own, once; ``done`` says it
+    ended; ``close()`` (or leaving the ``with``) ends it, waits for it and undeclares the publishers,
+    idempotent; ``stats`` are the figures so far, or final once done. With a zenoh
     target, publishers for every selected key are declared first and the replay waits up to
     ``wait_for_subscribers`` seconds for someone to listen, so the first messages are not lost.
     """
@@ -209,6 +211,8 @@ class Replayer:
             self._session = getattr(target, "session", target)
             self._publish = self._zenoh_put
         self._stop = threading.Event()
+        self._ended = threading.Event()
+        self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._late = array("d")
         self._count = 0
@@ -239,7 +243,7 @@ class Replayer:
         # advanced publishers (latched keys) do not say whether anyone listens; the plain ones beside them do
         wait_matched(self._pubs.values(), self.wait_for_subscribers, stop=stop)
 
-    def close(self) -> None:
+    def _undeclare(self) -> None:
         for pub in self._pubs.values():
             try:
                 pub.undeclare()
@@ -290,6 +294,7 @@ class Replayer:
                 break
         finally:
             self._elapsed = self.clock.now() - t0
+            self._ended.set()
         return self.stats
 
     @property
@@ -302,29 +307,43 @@ class Replayer:
         return ReplayStats(self._count, self._bytes, self._loops, self._elapsed, p50, p99, mx)
 
     def start(self) -> "Replayer":
-        def body() -> None:
-            try:
-                self.run(self._stop)
-            except BaseException as exc:
-                self.error = exc
-
-        self._thread = threading.Thread(target=body, name="replayer", daemon=True)
-        self._thread.start()
+        """Run the replay on a daemon thread (once: a second call, or one after ``close()``, does nothing);
+        an exception it raises is kept in ``error``."""
+        with self._lock:
+            if self._thread is not None or self._stop.is_set():
+                return self
+            self._thread = threading.Thread(target=self._run_kept, name="replayer", daemon=True)
+            self._thread.start()
         return self
+
+    def _run_kept(self) -> None:
+        try:
+            self.run(self._stop)
+        except BaseException as exc:
+            self.error = exc
+            self._ended.set()
 
     @property
     def done(self) -> bool:
-        return self._thread is not None and not self._thread.is_alive()
+        """Whether the replay has ended (its last message sent, stopped, or failed: see ``error``)."""
+        return self._ended.is_set()
+
+    def close(self, timeout: float = 5.0) -> None:
+        """End the replay started by ``start()`` and wait up to ``timeout`` for it, then undeclare the
+        publishers; idempotent. A ``run(stop)`` in the caller's thread is ended by its own ``stop``."""
+        self._stop.set()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout)
+        self._undeclare()
 
     def stop(self, timeout: float = 5.0) -> ReplayStats:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout)
-        self.close()
+        """``close()``, then the stats (the CLI's progress loop; ``close`` is the lifecycle verb)."""
+        self.close(timeout)
         return self.stats
 
     def __enter__(self) -> "Replayer":
-        return self
+        return self.start()
 
     def __exit__(self, *exc: object) -> None:
-        self.stop()
+        self.close()

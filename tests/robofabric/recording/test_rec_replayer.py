@@ -93,3 +93,23 @@ def test_impossible_replays_are_refused_before_anything_is_sent(rec, kwargs, why
     with pytest.raises(RecordingError, match=why) as exc:
         plan_replay(path, **kwargs)
     assert "\n" not in str(exc.value)
+
+
+def test_the_replayer_runs_once_on_its_thread_and_close_ends_it(rec):
+    """``with`` starts the replay on one thread (a second start does nothing); leaving it ends the replay,
+    waits for the thread and marks it done; close is idempotent, and a closed replayer never starts."""
+    from robofabric.testing import wait_until
+
+    path, _ = rec
+    sent = []
+    rp = Replayer(lambda key, payload: sent.append(key), plan_replay(path), loop=True, clock=FakeClock(100.0))
+    assert not rp.done
+    with rp:
+        rp.start()
+        wait_until(lambda: len(sent) > 100, what="a looping replay", seen=lambda: len(sent))
+        assert sum(t.name == "replayer" for t in threading.enumerate()) == 1 and not rp.done
+    assert rp.done and rp.error is None and not any(t.name == "replayer" for t in threading.enumerate())
+    n = len(sent)
+    rp.close()
+    rp.start()
+    assert len(sent) == n and rp.stats.messages == n and rp.stats.loops >= 2
