@@ -337,6 +337,52 @@ def _host_of(endpoint: str) -> str:
     return host
 
 
+def _identities(*, users: Iterable[str], instructors: Iterable[str], sims: Iterable[str], computes: Iterable[str],
+                viewers: Iterable[str]) -> list[Identity]:
+    """The class's logins with their roles; ValueError for a name given twice, or a class without users."""
+    identities = ([Identity(n, "user") for n in users] + [Identity(n, "instructor") for n in instructors]
+                  + [Identity(n, "sim") for n in sims]
+                  + [Identity(n, "compute") for n in computes] + [Identity(n, "viewer") for n in viewers])
+    seen: set[str] = set()
+    for ident in identities:
+        if ident.name in seen:
+            raise ValueError(f"identity {ident.name!r} is named twice; every login needs its own name")
+        seen.add(ident.name)
+    if not any(i.role == "user" for i in identities):
+        raise ValueError("no users: name them with --users alice,bob")
+    return identities
+
+
+def _certificates(t: Path, identities: list[Identity], connect: list[str], days: int, created: list[str], kept: list[str]) -> None:
+    """The CA, the router's certificate (naming every host of ``connect``) and one per identity under ``t``;
+    those there already are kept. What was made or kept is appended to ``created`` / ``kept``."""
+    t.mkdir(exist_ok=True)
+    os.chmod(t, 0o700)
+    if not (t / "ca.pem").is_file() or not (t / "ca-key.pem").is_file():
+        _make_ca(t, days)
+        created.append("ca")
+    hosts = sorted({_host_of(ep) for ep in connect} | {"localhost", "127.0.0.1"})
+    for name in ["router", *(i.name for i in identities)]:
+        if (t / f"{name}.pem").is_file() and (t / f"{name}-key.pem").is_file():
+            kept.append(name)
+        else:
+            _make_cert(t, name, hosts if name == "router" else [], days)
+            created.append(name)
+
+
+def _passwords(cred: Path, identities: list[Identity], created: list[str], kept: list[str]) -> dict[str, str]:
+    """Every login's password: the one in ``cred`` if any, else a new random one; ``cred`` rewritten with all."""
+    passwords = read_credentials(cred)
+    for ident in identities:
+        if ident.name in passwords:
+            kept.append(ident.name)
+        else:
+            passwords[ident.name] = secrets.token_urlsafe(18)
+            created.append(ident.name)
+    _write_secret(cred, "".join(f"{n}:{p}\n" for n, p in passwords.items()))
+    return passwords
+
+
 def init(
     d: str | Path,
     *,
@@ -364,45 +410,16 @@ def init(
     for ep in [*listen, *connect]:
         if not ep.startswith(proto + "/"):
             raise ValueError(f"endpoint {ep!r} must be {proto}/HOST:PORT" + (" with --tls" if tls else " (tls/ needs --tls)"))
-    identities = ([Identity(n, "user") for n in users] + [Identity(n, "instructor") for n in instructors]
-                  + [Identity(n, "sim") for n in sims]
-                  + [Identity(n, "compute") for n in computes] + [Identity(n, "viewer") for n in viewers])
-    seen: set[str] = set()
-    for ident in identities:
-        if ident.name in seen:
-            raise ValueError(f"identity {ident.name!r} is named twice; every login needs its own name")
-        seen.add(ident.name)
-    if not any(i.role == "user" for i in identities):
-        raise ValueError("no users: name them with --users alice,bob")
+    identities = _identities(users=users, instructors=instructors, sims=sims, computes=computes, viewers=viewers)
     d.mkdir(parents=True, exist_ok=True)
     os.chmod(d, 0o700)
     created: list[str] = []
     kept: list[str] = []
     passwords: dict[str, str] = {}
     if tls:
-        t = d / TLS_DIR
-        t.mkdir(exist_ok=True)
-        os.chmod(t, 0o700)
-        if not (t / "ca.pem").is_file() or not (t / "ca-key.pem").is_file():
-            _make_ca(t, days)
-            created.append("ca")
-        hosts = sorted({_host_of(ep) for ep in connect} | {"localhost", "127.0.0.1"})
-        for name in ["router", *(i.name for i in identities)]:
-            if (t / f"{name}.pem").is_file() and (t / f"{name}-key.pem").is_file():
-                kept.append(name)
-            else:
-                _make_cert(t, name, hosts if name == "router" else [], days)
-                created.append(name)
+        _certificates(d / TLS_DIR, identities, connect, days, created, kept)
     else:
-        cred = d / CREDENTIALS
-        passwords = read_credentials(cred)
-        for ident in identities:
-            if ident.name in passwords:
-                kept.append(ident.name)
-            else:
-                passwords[ident.name] = secrets.token_urlsafe(18)
-                created.append(ident.name)
-        _write_secret(cred, "".join(f"{n}:{p}\n" for n, p in passwords.items()))
+        passwords = _passwords(d / CREDENTIALS, identities, created, kept)
     # every identity ever created stays in the rules (a second run with fewer names removes nobody)
     known = {i.name: i for i in identities}
     for path in sorted(d.glob("*.json5")):
