@@ -28,7 +28,7 @@ MAX_GONE = 256
 RECHECK_LEASES = 3
 """Leases a sim whose link came back waits for the others' tokens before the election looks: after a router's
 restart every client reconnects on its own schedule (seconds apart), the leader's token among them."""
-AUDIBLE_S = 0.5
+AUDIBLE_S = 1.0
 """A sim heard (its term on a stream or ``srv/state``) this recently is alive, whatever its token, while this host's
 view of the tokens is fresh (:meth:`Roles.audible`): a leader whose token is missing from the view then waits for
 this long after it was last heard before a standby takes over. A live leader's streams (joints at the sim's rate,
