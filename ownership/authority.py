@@ -25,6 +25,7 @@ from fabric.session import Fabric, undeclare_all
 
 from ownership import snapshot
 from ownership import state as st
+from ownership.hearing import Hearing
 
 log = logging.getLogger("robofabric.ownership")
 
@@ -66,14 +67,10 @@ class Authority:
         self._tick_s = tick_s if tick_s is not None else min(0.02, lease_s / 10)
         self._stop = threading.Event()
         self.counters = {"requests": 0, "rejected": 0, "handovers": 0}
-        self._lease_s = lease_s
         self._stop_watchers: list[Callable[[str, str, str], None]] = []
-        self._last_tick_at: float | None = None
-        self._resumed_at: float | None = None
         # users who may have left while no authority listened (a take-over) or while our link was down:
-        # confirmed by their token within a lease of hearing again, else they leave
-        self._unconfirmed: set[str] = set(self._state.live) if restored is not None else set()
-        self._confirm_by: float | None = self.clock.now() + lease_s + 1.0
+        # confirmed by their token within a lease of hearing again, else they leave (ownership.hearing)
+        self.hearing = Hearing(lease_s, self.clock.now(), unconfirmed=self._state.live if restored is not None else ())
         self._watch = fabric.watch_peers(self._on_peer, kind="user")
         self._thread: threading.Thread | None = None
         # one queryable per object, so a wildcard query (a replica joining) gets one record from each;
@@ -116,13 +113,9 @@ class Authority:
         with self._lock:
             return snapshot.export(self._state, self.clock.now())
 
-    def _forget_absent_users(self) -> None:
-        """After a take-over: users the old authority counted live whose token has not shown up here
-        within a lease (plus a second for the liveliness history) left while no authority listened;
-        they leave now (grace keeps their place). The others just carry on."""
-        with self._lock:
-            gone = sorted(self._unconfirmed)
-            self._unconfirmed.clear()
+    def _forget(self, gone: list[str]) -> None:
+        """Users whose token did not show up again once this authority could hear (after a take-over, or
+        its link back) left while nobody listened: they leave now (grace keeps their place)."""
         now = self.clock.now()
         for user in gone:
             self._apply(st.Leave(user, now))
@@ -175,32 +168,21 @@ class Authority:
 
     # ------------------------------------------------------------------ peers, ticks, service
 
-    def _deaf_now(self, now: float) -> bool:
-        """Whether a token going now may be this authority's own trouble: its link is down, or its process
-        was paused (no tick for a while, or it resumed less than a lease and a second ago)."""
-        with self._lock:
-            last, resumed = self._last_tick_at, self._resumed_at
-        deaf_s = self._lease_s / 2
-        return (not self.fabric.connected() or (last is not None and now - last > deaf_s)
-                or (resumed is not None and now < resumed + self._lease_s + 1.0))
-
     def _on_peer(self, kind: str, peer_id: str, alive: bool) -> None:
         now = self.clock.now()
-        if not alive and self._deaf_now(now):
+        if not alive and self.hearing.deaf(now, self.fabric.connected()):
             # our link died (the router dropped it while this process was paused, or the router went):
             # every user's token goes with it, and none of them left. Kept until the link is back and a
             # lease (plus a second for the liveliness history) has passed without their token
             with self._lock:
                 known = peer_id in self._state.live
                 if known:
-                    self._unconfirmed.add(peer_id)
-                    self._confirm_by = None
+                    self.hearing.suspect(peer_id)
             if known and self.fabric.reports.should_report("own:link_lost") is not None:
                 log.warning("user tokens went while this authority was paused or cut off (%s first); owners keep their "
                             "robots until a lease passes, with the link up, without their token", peer_id)
             return
-        with self._lock:
-            self._unconfirmed.discard(peer_id)
+        self.hearing.confirm(peer_id)
         self._apply(st.Join(peer_id, now) if alive else st.Leave(peer_id, now))
         if not alive:
             self._say_if_held(peer_id)
@@ -216,39 +198,15 @@ class Authority:
 
     def _run(self) -> None:
         while not self._stop.wait(self._tick_s):
-            now = self.clock.now()
-            with self._lock:
-                if self._last_tick_at is not None and now - self._last_tick_at > self._lease_s / 2:
-                    self._resumed_at = now  # this process was paused or starved: tokens that go now may be ours
-                    paused = now - self._last_tick_at
-                else:
-                    paused = 0.0
-                self._last_tick_at = now
+            paused = self.hearing.tick(self.clock.now())  # paused or starved: tokens that go now may be ours
             if paused:
                 log.warning("ownership authority did not run for %.1f s (paused or starved): leases extended", paused)
-            if self._unconfirmed:
-                self._confirm_when_connected()
+            if self.hearing.pending:
+                self._forget(self.hearing.due(self.clock.now(), self.fabric.connected()))
             try:
                 self._apply(st.Tick(self.clock.now()))
             except Exception:
                 log.exception("ownership tick failed")
-
-    def _confirm_when_connected(self) -> None:
-        """Users whose tokens went with our link: once connected again, those whose token did not come
-        back within a lease and a second left while nobody could tell; they leave now (grace keeps their
-        place). The clock for that starts when the link is back, never while it is down."""
-        now = self.clock.now()
-        if not self.fabric.connected():
-            with self._lock:
-                self._confirm_by = None
-            return
-        with self._lock:
-            if self._confirm_by is None:
-                self._confirm_by = now + self._lease_s + 1.0
-                return
-            due = now > self._confirm_by
-        if due:
-            self._forget_absent_users()
 
     def _serve_record(self, obj: str) -> OwnershipRecord:
         """``own/{obj}``: the record, whatever the query carries (requests go to the asker's own key)."""

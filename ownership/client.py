@@ -14,10 +14,8 @@ forged record cannot stop renewals or hide later real ones.
 
 from __future__ import annotations
 
-import logging
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
 from collections import Counter
 from dataclasses import dataclass
 from typing import Callable
@@ -26,9 +24,8 @@ from fabric import keys
 from fabric.limits import validate_user
 from fabric.interfaces import NoReply, OwnershipRecord, OwnReply, OwnRequest, ServiceError
 from fabric.session import Fabric
-
-
-log = logging.getLogger("robofabric.ownership")
+from ownership.refresh import Refresher
+from ownership.renewal import Renewal
 
 #: Epoch changes the authority can make per second (each is one request, release, expiry or
 #: handover it processed) and the slack on top, for :func:`epoch_plausible`. Generous: the
@@ -79,8 +76,8 @@ class Outcome:
 class OwnershipClient:
     """One user's ownership handle in one world; renews every ``renew_s`` while it owns something.
 
-    Constructing one follows the records (subscription and a first query); renewals run once it is
-    started (``start()`` or ``with OwnershipClient(...) as own:``) and stop on ``close()``.
+    Constructing one follows the records (subscription and a first query); renewals (:mod:`ownership.renewal`)
+    run once it is started (``start()`` or ``with OwnershipClient(...) as own:``) and stop on ``close()``.
     The replica of the records is written by Zenoh's callback threads: read it through :meth:`record`,
     :meth:`epoch`, :meth:`owns` or :meth:`snapshot`, which take the lock (it is private for that reason).
     ``clock`` (monotonic seconds) is only used to bound epoch jumps between records."""
@@ -96,9 +93,8 @@ class OwnershipClient:
         self._clock = clock
         self._lock = threading.Lock()
         self._callbacks: list[Callable[[OwnershipRecord], None]] = []
-        self._stop = threading.Event()
-        self._renewing: set[str] = set()  # renewals sent and not answered yet
-        self._held: set[str] = set()  # granted to us by the authority's replies; renewed until it says otherwise
+        self.renewal = Renewal(self.user, lambda obj: self._ask(obj, "renew"), self.snapshot, renew_s=renew_s,
+                               closed=lambda: fabric.closed)
         self._sims: set[str] = set()
         # per object: the sim that is its authority and the term heard from it (several sims may
         # serve one world, each the authority of its own robots with terms of its own: docs/sim.md)
@@ -109,8 +105,8 @@ class OwnershipClient:
         # authority came up after our query, and our subscription reached it after some of its first
         # publications) makes us ask it for every record, once
         self._heard_from: set[str] = set()
-        self._ready = False  # a new sim's token triggers a refresh only after the first one below
-        self._refreshing = self._refresh_again = False
+        # a new sim's token, or a first record from a sim, asks every authority again (after the first query below)
+        self._refresher = Refresher(self.refresh, name=f"own-refresh-{self.user}")
         fabric.watch_peers(self.sim_seen, kind="sim")
         try:
             self._sims.update(pid for _, pid in fabric.live_peers("sim", timeout=min(timeout, 1.0)))
@@ -118,17 +114,11 @@ class OwnershipClient:
             pass  # the watch fills it in
         fabric.subscribe(keys.own_all(fabric.world), self.record_seen, expected=OwnershipRecord)
         self.refresh()
-        with self._lock:
-            self._ready = True
-        self._renew_s = renew_s
-        self._thread: threading.Thread | None = None
+        self._refresher.enable()
 
     def start(self) -> "OwnershipClient":
         """Start renewing what this user holds, on a daemon thread (once; a second call does nothing)."""
-        with self._lock:
-            if self._thread is None:
-                self._thread = threading.Thread(target=self._renew_loop, name=f"own-renew-{self.user}", daemon=True)
-                self._thread.start()
+        self.renewal.start()
         return self
 
     def __enter__(self) -> "OwnershipClient":
@@ -149,38 +139,8 @@ class OwnershipClient:
                 self._sims.discard(peer_id)
                 self._heard_from.discard(peer_id)
                 self._replaced.pop(peer_id, None)  # a sim restarted under this id starts its terms afresh
-            if not new:
-                return
-            # its records may have come before its token and been refused as foreign: ask again
-            start = self._want_refresh()
-        if start:
-            self._start_refresh()
-
-    def _want_refresh(self) -> bool:
-        """Ask every authority for every record again, once at a time (made-up sim tokens and forged records
-        must not make a thread each); True when the caller must start the asking thread. Lock held."""
-        if not self._ready or self._stop.is_set():
-            return False
-        self._refresh_again = True
-        if self._refreshing:
-            return False
-        self._refreshing = True
-        return True
-
-    def _start_refresh(self) -> None:
-        threading.Thread(target=self._refresh_while_wanted, name=f"own-refresh-{self.user}", daemon=True).start()
-
-    def _refresh_while_wanted(self) -> None:
-        while True:
-            with self._lock:
-                if not self._refresh_again or self._stop.is_set():
-                    self._refreshing = False
-                    return
-                self._refresh_again = False
-            try:
-                self.refresh()
-            except Exception:  # a closing session
-                log.debug("refresh after a new sim failed", exc_info=True)
+        if new:  # its records may have come before its token and been refused as foreign: ask again
+            self._refresher.ask()
 
     def refresh(self) -> None:
         """Query the authority for every record (late join)."""
@@ -232,12 +192,10 @@ class OwnershipClient:
             self._records[rec.object] = rec
             self._seen_at[rec.object] = now
             callbacks = list(self._callbacks)
-            ask = False
-            if rec.authority not in self._heard_from:
-                self._heard_from.add(rec.authority)  # bounded: only live sims' records get here
-                ask = self._want_refresh()
+            ask = rec.authority not in self._heard_from
+            self._heard_from.add(rec.authority)  # bounded: only live sims' records get here
         if ask:
-            self._start_refresh()
+            self._refresher.ask()
         for cb in callbacks:
             cb(rec)
 
@@ -285,63 +243,15 @@ class OwnershipClient:
     def request(self, obj: str, *, wait: bool = False, timeout: float | None = None) -> Outcome:
         r = self._ask(obj, "request", wait, timeout)
         if r.outcome == "granted":
-            with self._lock:
-                self._held.add(obj)
+            self.renewal.hold(obj)
         return Outcome(r.outcome, r.reason, r.position, r.record.epoch, r.record)
 
     def release(self, obj: str, *, timeout: float | None = None) -> Outcome:
-        with self._lock:
-            self._held.discard(obj)
+        self.renewal.drop(obj)
         r = self._ask(obj, "release", timeout=timeout)
         return Outcome(r.outcome, r.reason, r.position, r.record.epoch, r.record)
 
-    def _to_renew(self) -> list[str]:
-        """What we hold: granted in a reply, or handed to us in a trusted record (a queue's turn).
-
-        Only the authority's answer to a renewal ends it, never a published record on its own."""
-        with self._lock:
-            for obj, rec in self._records.items():
-                if rec.owner == self.user and rec.policy == "exclusive":
-                    self._held.add(obj)
-            return sorted(self._held)
-
-    def _renew_loop(self) -> None:
-        """Every ``renew_s`` from the start of the last round, renew everything held, all at once: a slow
-        answer (a busy authority, a loaded machine) delays neither the other robots' renewals nor the
-        next round, so a lease sees a renewal every ``renew_s`` however long each round trip takes."""
-        with ThreadPoolExecutor(max_workers=8, thread_name_prefix=f"own-renew-{self.user}") as pool:
-            next_at = time.monotonic() + self._renew_s
-            while not self._stop.wait(max(0.0, next_at - time.monotonic())):
-                next_at = max(next_at + self._renew_s, time.monotonic())
-                for obj in self._to_renew():
-                    with self._lock:
-                        if obj in self._renewing:
-                            continue  # still waiting for the last answer: one renewal per robot in flight
-                        self._renewing.add(obj)
-                    pool.submit(self._renew, obj)
-
-    def _renew(self, obj: str) -> None:
-        try:
-            self._renew_once(obj)
-        finally:
-            with self._lock:
-                self._renewing.discard(obj)
-
-    def _renew_once(self, obj: str) -> None:
-        try:
-            reply = self._ask(obj, "renew")
-        except ServiceError:
-            return  # no answer this time: the next round asks again
-        except Exception:  # the session is closing
-            if not (self._stop.is_set() or self.fabric.closed):
-                log.debug("renewal of %s failed", obj, exc_info=True)
-            return
-        if reply.outcome != "renewed" and reply.record.owner != self.user:
-            with self._lock:
-                self._held.discard(obj)
-
     def close(self) -> None:
-        self._stop.set()
-        thread = self._thread
-        if thread is not None and thread is not threading.current_thread():
-            thread.join(timeout=2.0)
+        """No more renewals nor refreshes; waits (up to 2 s) for a renewal round under way."""
+        self._refresher.close()
+        self.renewal.close()

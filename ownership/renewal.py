@@ -1,0 +1,109 @@
+"""A user's lease renewals: what she holds, renewed every ``renew_s`` until the authority says otherwise.
+
+The authority expires a lease that is not renewed (:mod:`ownership.state`); :class:`Renewal` keeps the
+leases of one user alive. What she holds is what the authority granted her in a reply (``hold``), or handed
+to her in a trusted record (a queue's turn, found in ``records()``); only the authority's answer to a
+renewal ends it, never a published record on its own. Each round renews everything at once on a small
+pool, one renewal per object in flight, so a slow answer delays neither the other objects nor the next
+round.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Mapping
+from concurrent.futures import ThreadPoolExecutor
+
+from fabric.interfaces import OwnershipRecord, OwnReply, ServiceError
+
+log = logging.getLogger("robofabric.ownership")
+
+
+class Renewal:
+    """Renews ``user``'s leases: ``ask(obj)`` sends one renewal and returns the authority's reply,
+    ``records()`` gives the trusted records, ``closed()`` says the session is going (a failure then is
+    no news)."""
+
+    def __init__(self, user: str, ask: Callable[[str], OwnReply], records: Callable[[], Mapping[str, OwnershipRecord]],
+                 *, renew_s: float, closed: Callable[[], bool] = lambda: False) -> None:
+        self.user = user
+        self.renew_s = renew_s
+        self._ask = ask
+        self._records = records
+        self._closed = closed
+        self._lock = threading.Lock()
+        self._held: set[str] = set()  # granted to us; renewed until the authority says otherwise
+        self._renewing: set[str] = set()  # renewals sent and not answered yet
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def hold(self, obj: str) -> None:
+        """The authority granted ``obj``: renew it from the next round on."""
+        with self._lock:
+            self._held.add(obj)
+
+    def drop(self, obj: str) -> None:
+        """Stop renewing ``obj`` (a release on its way)."""
+        with self._lock:
+            self._held.discard(obj)
+
+    def held(self) -> list[str]:
+        """What this user holds: granted in a reply, or handed over in a trusted record (exclusive ones)."""
+        records = self._records()
+        with self._lock:
+            for obj, rec in records.items():
+                if rec.owner == self.user and rec.policy == "exclusive":
+                    self._held.add(obj)
+            return sorted(self._held)
+
+    def start(self) -> None:
+        """Start the rounds on a daemon thread (once; a second call does nothing)."""
+        with self._lock:
+            if self._thread is None and not self._stop.is_set():
+                self._thread = threading.Thread(target=self._loop, name=f"own-renew-{self.user}", daemon=True)
+                self._thread.start()
+
+    def _loop(self) -> None:
+        """Every ``renew_s`` from the start of the last round, renew everything held, all at once, so a lease
+        sees a renewal every ``renew_s`` however long each round trip takes."""
+        with ThreadPoolExecutor(max_workers=8, thread_name_prefix=f"own-renew-{self.user}") as pool:
+            next_at = time.monotonic() + self.renew_s
+            while not self._stop.wait(max(0.0, next_at - time.monotonic())):
+                next_at = max(next_at + self.renew_s, time.monotonic())
+                for obj in self.held():
+                    with self._lock:
+                        if obj in self._renewing:
+                            continue  # still waiting for the last answer: one renewal per robot in flight
+                        self._renewing.add(obj)
+                    pool.submit(self._renew, obj)
+
+    def _renew(self, obj: str) -> None:
+        try:
+            self._renew_once(obj)
+        finally:
+            with self._lock:
+                self._renewing.discard(obj)
+
+    def _renew_once(self, obj: str) -> None:
+        try:
+            reply = self._ask(obj)
+        except ServiceError:
+            return  # no answer this time: the next round asks again
+        except Exception:  # the session is closing
+            if not (self._stop.is_set() or self._closed()):
+                log.debug("renewal of %s failed", obj, exc_info=True)
+            return
+        if reply.outcome != "renewed" and reply.record.owner != self.user:
+            self.drop(obj)
+
+    def close(self) -> None:
+        """No more rounds; waits (up to 2 s) for the one under way, unless called from it."""
+        self._stop.set()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=2.0)
+
+
+__all__ = ["Renewal"]
