@@ -7,9 +7,10 @@ from typing import Annotated, Optional
 
 import typer
 
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
+from fabric.cli_common import Joining, UserError, join_flags
 
 
+@join_flags()
 def compute(
     stream: Annotated[
         Optional[list[str]],
@@ -27,12 +28,7 @@ def compute(
         Optional[Path], typer.Option("--maps-dir", help="The only folder map save/load may use (default: saving disabled).")
     ] = None,
     duration: Annotated[Optional[float], typer.Option("--duration", help="Stop after this many seconds.")] = None,
-    world: World = None,
-    connect: Connect = None,
-    listen: Listen = None,
-    profile: Profile = None,
-    zenoh_config: ZenohConfig = None,
-    peer_id: PeerId = None,
+    join: Joining = Joining(),
 ) -> None:
     """Serve kinematics (IK, FK, Jacobian, IK streaming) and navigation (mapping, Hybrid A*/OMPL plans) to a world.
 
@@ -63,9 +59,9 @@ def compute(
         raise UserError(str(exc)) from None
     if streams and not kinematics:
         raise UserError("--stream needs kinematics (drop --no-kinematics)")
-    cfg = make_config(world, connect, listen, profile, zenoh_config)
+    cfg = join.config()
     stop = shutdown_event()
-    fab = open_fabric(cfg, "compute", peer_id)
+    fab = join.open("compute", cfg)
     options = ComputeOptions(kinematics, navigation, streams, stream_rate, maps_dir, mapping, arms=arms)
     with fab, ComputePeer(fab, options) as peer:
         served_arms = peer.discover(timeout=2.0)

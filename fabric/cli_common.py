@@ -1,9 +1,9 @@
 """Options every peer command shares, and the one way CLI errors are reported.
 
-A peer package's ``cli.py`` takes these annotated types as parameters so that
-``--world``, ``--connect``, ``--listen``, ``--id``, ``--profile`` and
-``--zenoh-config`` mean the same everywhere, and raises :class:`UserError` for
-anything the user got wrong: the CLI prints one line and exits 2, no traceback.
+A command that joins a world takes the flags ``--world``, ``--connect``, ``--listen``, ``--profile``,
+``--zenoh-config`` and ``--id`` from one definition (:func:`join_flags`, as one :class:`Joining`), so they
+mean the same everywhere; a peer package's ``cli.py`` raises :class:`UserError` for anything the user got
+wrong: the CLI prints one line and exits 2, no traceback.
 
 The exit-code rule of every command (:data:`EXIT_RULE`): 0 when what was asked happened, 1 when the world
 answered no or had nothing (:class:`NothingThere`), 2 for a usage error or an unreachable router
@@ -13,12 +13,14 @@ answered no or had nothing (:class:`NothingThere`), 2 for a usage error or an un
 
 from __future__ import annotations
 
+import functools
+import inspect
 import os
-import re
 import sys
 import threading
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Collection, Optional, Sequence
+from typing import TYPE_CHECKING, Annotated, Any, Callable, Collection, Optional, Sequence
 
 import typer
 
@@ -41,12 +43,13 @@ __all__ = [
     "PeerId",
     "Profile",
     "ZenohConfig",
+    "Joining",
+    "join_flags",
     "make_config",
     "join_error",
     "open_fabric",
     "console",
     "print_table",
-    "plain_doc",
     "column_widths",
 ]
 
@@ -272,32 +275,6 @@ def print_table(title: str, columns: Sequence[str], rows: Sequence[Sequence[str]
     out.print(table)
 
 
-_ROLE = re.compile(r":[a-z]+(?::[a-z]+)?:`~?([^`<]*?)(?:\s*<[^>]*>)?`")
-_LITERAL = re.compile(r"``(.+?)``")
-
-
-def plain_doc(text: str) -> str:
-    """A docstring as a terminal shows it: reStructuredText markup gone (``x`` -> x, :class:`~a.B` -> B), and
-    each paragraph's lines joined, so the terminal wraps it at its own width (a list or an indented block
-    keeps its lines)."""
-    import inspect
-
-    text = _LITERAL.sub(r"\1", _ROLE.sub(lambda m: m.group(1).rsplit(".", 1)[-1] if "~" in m.group(0) else m.group(1), text))
-    paragraphs = []
-    for para in inspect.cleandoc(text).split("\n\n"):
-        lines = para.splitlines()
-        listed = any(line.lstrip().startswith(("- ", "* ", "\b")) or line.startswith(" ") for line in lines)
-        paragraphs.append(para if listed else " ".join(line.strip() for line in lines))
-    return "\n\n".join(paragraphs)
-
-
-def print_folded(*lines: str, stderr: bool = False) -> None:
-    """Lines wrapped to the terminal's width, a word longer than a line (a key) folded, never cut."""
-    out = console(stderr=stderr)
-    for line in lines:
-        out.print(line, overflow="fold")
-
-
 def make_config(
     world: str | None = None,
     connect: list[str] | None = None,
@@ -331,3 +308,64 @@ def open_fabric(cfg: FabricConfig, kind: str, peer_id: str | None = None) -> "Fa
         return Fabric(cfg, kind=kind, peer_id=peer_id)
     except Exception as exc:
         raise join_error(cfg, exc) from None
+
+
+@dataclass(frozen=True, slots=True)
+class Joining:
+    """Which world a command joins, and how: its flags ``--world``, ``--connect``, ``--listen``, ``--profile``,
+    ``--zenoh-config`` and ``--id`` as one value (:func:`join_flags` hands it to the command)."""
+
+    world: str | None = None
+    connect: list[str] | None = None
+    listen: list[str] | None = None
+    profile: str | None = None
+    zenoh_config: Path | None = None
+    peer_id: str | None = None
+
+    def config(self, *, world: str | None = None) -> FabricConfig:
+        """Flags + environment -> FabricConfig (:func:`make_config`); a ``world`` given here wins over
+        ``--world`` (``replay --remap-world``)."""
+        return make_config(world or self.world, self.connect, self.listen, self.profile, self.zenoh_config)
+
+    def open(self, kind: str, cfg: FabricConfig | None = None) -> "Fabric":
+        """Join the world (``cfg``, or the flags') as a peer of ``kind`` under ``--id`` (:func:`open_fabric`)."""
+        return open_fabric(cfg if cfg is not None else self.config(), kind, self.peer_id)
+
+
+JOIN_FLAGS: dict[str, Any] = {
+    "world": World, "connect": Connect, "listen": Listen, "profile": Profile, "zenoh_config": ZenohConfig, "peer_id": PeerId,
+}
+"""Each joining flag's parameter name and its option, in the order ``--help`` lists them."""
+CLIENT_FLAGS = ("world", "connect", "profile", "zenoh_config")
+"""The flags of a command that talks to a world without being one of its peers (no listener, no id of its own)."""
+
+
+def join_flags(*, client: bool = False) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """Decorate a command whose parameter ``join: Joining`` stands for the flags that say which world to join:
+    typer sees, at that parameter's place (so in ``--help`` too), ``--world``, ``--connect``, ``--listen``,
+    ``--profile``, ``--zenoh-config`` and ``--id`` (with ``client``: :data:`CLIENT_FLAGS`), and the command
+    gets them back as one :class:`Joining`.
+
+    Twenty commands declared the same six parameters and passed them on one by one; this one definition
+    keeps their names, help texts and order the same in every command. Typer reads the signature set here."""
+    names = CLIENT_FLAGS if client else tuple(JOIN_FLAGS)
+    keyword = inspect.Parameter.KEYWORD_ONLY
+
+    def decorate(command: Callable[..., Any]) -> Callable[..., Any]:
+        sig = inspect.signature(command, eval_str=True)
+        params = list(sig.parameters.values())
+        at = next((i for i, p in enumerate(params) if p.name == "join"), None)
+        if at is None:
+            raise TypeError(f"{command.__qualname__} has no parameter 'join' for join_flags to stand in for")
+        flags = [inspect.Parameter(n, keyword, default=None, annotation=JOIN_FLAGS[n]) for n in names]
+        shown = [p.replace(kind=keyword) for p in params[:at]] + flags + [p.replace(kind=keyword) for p in params[at + 1:]]
+
+        @functools.wraps(command)
+        def run(**kwargs: Any) -> Any:
+            return command(join=Joining(**{n: kwargs.pop(n, None) for n in names}), **kwargs)
+
+        run.__signature__ = sig.replace(parameters=shown)  # type: ignore[attr-defined]
+        run.__annotations__ = {p.name: p.annotation for p in shown}
+        return run
+
+    return decorate

@@ -8,9 +8,7 @@ from typing import Annotated, Optional, TYPE_CHECKING
 
 import typer
 
-from fabric.cli_common import (
-    Connect, NothingThere, Profile, UserError, World, ZenohConfig, make_config, open_fabric, print_table, say, watch_reader,
-)
+from fabric.cli_common import Joining, NothingThere, UserError, join_flags, open_fabric, print_table, say, watch_reader
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
     from fabric.interfaces import OwnershipRecord
@@ -29,9 +27,9 @@ def _user(user: str | None) -> str:
     return user or getpass.getuser()
 
 
-def _client(world, connect, profile, zenoh_config, user) -> tuple[Fabric, OwnershipClient]:
+def _client(join: Joining, user) -> tuple[Fabric, OwnershipClient]:
     from ownership.client import OwnershipClient
-    cfg = make_config(world, connect, None, profile, zenoh_config)
+    cfg = join.config()
     try:
         uid = cfg.user_id(user) or _user(None)  # with a secure config, the login is the user
     except ValueError as exc:
@@ -62,11 +60,11 @@ def record_json(rec) -> dict:
 
 
 @own_app.command("list")
-def list_cmd(world: World = None, connect: Connect = None, profile: Profile = None, zenoh_config: ZenohConfig = None,
-             user: User = None,
+@join_flags(client=True)
+def list_cmd(join: Joining = Joining(), user: User = None,
              as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"world", "records": [{object, policy, owner, epoch, queue, state, authority}]}.')] = False) -> None:
     """Every object's owner, epoch, motion state and queue (a table as wide as the terminal; --json for scripts)."""
-    fab, cl = _client(world, connect, profile, zenoh_config, user)
+    fab, cl = _client(join, user)
     with fab:
         try:
             records = cl.snapshot()  # a copy taken under the client's lock: Zenoh's threads write the replica
@@ -86,12 +84,12 @@ def list_cmd(world: World = None, connect: Connect = None, profile: Profile = No
     print_table(f"world {fab.world}: {len(rows)} object(s)", ("object", "policy", "owner", "epoch", "state", "queue"), table, numeric=("epoch",))
 
 
-def _ask(op: str, obj: str, world, connect, profile, zenoh_config, user, wait: bool = False,
+def _ask(op: str, obj: str, join: Joining, user, wait: bool = False,
          hold: bool = False, duration: float | None = None) -> None:
     from fabric.interfaces import ServiceError
     from fabric.session import shutdown_event
     stop = shutdown_event() if hold else None
-    fab, cl = _client(world, connect, profile, zenoh_config, user)
+    fab, cl = _client(join, user)
     with fab:
         try:
             try:
@@ -122,8 +120,9 @@ def _hold(cl: OwnershipClient, obj: str, stop, duration: float | None) -> None:
 
 
 @own_app.command("request")
-def request_cmd(obj: Annotated[str, typer.Argument(help="Object id (robot or scene object).")], world: World = None,
-                connect: Connect = None, profile: Profile = None, zenoh_config: ZenohConfig = None, user: User = None,
+@join_flags(client=True)
+def request_cmd(obj: Annotated[str, typer.Argument(help="Object id (robot or scene object).")], join: Joining = Joining(),
+                user: User = None,
                 wait: Annotated[bool, typer.Option("--wait", help="Queue if the robot is moving.")] = False,
                 hold: Annotated[bool, typer.Option("--hold", help="Keep holding (renewing the lease) until Ctrl-C, then release.")] = False,
                 duration: Annotated[Optional[float], typer.Option("--duration", help="With --hold: release after S seconds.")] = None) -> None:
@@ -135,19 +134,19 @@ def request_cmd(obj: Annotated[str, typer.Argument(help="Object id (robot or sce
     """
     if duration is not None and not hold:
         raise UserError("--duration needs --hold")
-    _ask("request", obj, world, connect, profile, zenoh_config, user, wait, hold, duration)
+    _ask("request", obj, join, user, wait, hold, duration)
 
 
 @own_app.command("release")
-def release_cmd(obj: Annotated[str, typer.Argument(help="Object id.")], world: World = None, connect: Connect = None,
-                profile: Profile = None, zenoh_config: ZenohConfig = None, user: User = None) -> None:
+@join_flags(client=True)
+def release_cmd(obj: Annotated[str, typer.Argument(help="Object id.")], join: Joining = Joining(), user: User = None) -> None:
     """Give OBJ up (or leave its queue); the next waiting user owns it."""
-    _ask("release", obj, world, connect, profile, zenoh_config, user)
+    _ask("release", obj, join, user)
 
 
 @own_app.command("watch")
-def watch_cmd(world: World = None, connect: Connect = None, profile: Profile = None, zenoh_config: ZenohConfig = None,
-              user: User = None,
+@join_flags(client=True)
+def watch_cmd(join: Joining = Joining(), user: User = None,
               duration: Annotated[Optional[float], typer.Option("--duration", help="Stop after S seconds (default: until Ctrl-C).")] = None) -> None:
     """Print every ownership change until Ctrl-C.
 
@@ -158,7 +157,7 @@ def watch_cmd(world: World = None, connect: Connect = None, profile: Profile = N
         raise UserError("--duration must be positive")
     stop = shutdown_event()
     watch_reader(stop)  # `own watch | head -2`: ends when head does, though nothing changes after
-    fab, cl = _client(world, connect, profile, zenoh_config, user)
+    fab, cl = _client(join, user)
     with fab:
         records = cl.snapshot()
         say(*(record_line(records[obj]) for obj in sorted(records)), stop=stop)

@@ -27,8 +27,9 @@ from typer.core import TyperGroup
 from robofabric.clash import fabric_clash
 
 try:  # our `fabric`, unless another package replaced its files: main() says so (robofabric.clash)
-    from fabric.cli_common import EXIT_RULE, NothingThere, UserError, plain_doc, reader_gone, stdout_closed
+    from fabric.cli_common import EXIT_RULE, NothingThere, UserError, reader_gone, stdout_closed
     from fabric.config import ConfigError
+    from robofabric.terminal import plain_doc
 except ImportError as exc:  # pragma: no cover - only with a broken install
     _FABRIC_BROKEN: ImportError | None = exc
     EXIT_RULE = ""
@@ -119,7 +120,7 @@ def _callbacks(t: typer.Typer):
 
 
 def _plain_help(typer_app: typer.Typer) -> None:
-    """Help texts as a terminal shows them (:func:`fabric.cli_common.plain_doc`): docstrings are written for
+    """Help texts as a terminal shows them (:func:`robofabric.terminal.plain_doc`): docstrings are written for
     the API docs, with reStructuredText quoting (``ros2 topic hz`` showed its backquotes) and lines
     wrapped at the source's width, which the help then wrapped again at the terminal's (broken lines)."""
     for fn in _callbacks(typer_app):

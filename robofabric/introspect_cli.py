@@ -18,10 +18,8 @@ import typer
 import zenoh
 
 from fabric import keys
-from fabric.cli_common import (
-    Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric, plain_doc, print_folded,
-    print_table,
-)
+from fabric.cli_common import Joining, NothingThere, UserError, join_flags, print_table
+from robofabric.terminal import plain_doc, print_folded
 from robofabric.complete import complete_keys, complete_types
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
@@ -57,6 +55,7 @@ def observe(fab, expr: str, duration: float) -> list[KeyStats]:
         return obs.snapshot()
 
 
+@join_flags()
 def list_keys(
     keyexpr: Annotated[Optional[str], typer.Argument(help="Key expression, full or world-relative (default: the whole world).", autocompletion=complete_keys)] = None,
     as_json: Annotated[bool, typer.Option("--json", help=(
@@ -65,21 +64,16 @@ def list_keys(
         'with --services: {"world", "keyexpr", "declarations_visible", "services": [{key, kind, request, reply, servers}]}.'))] = False,
     duration: Annotated[float, typer.Option(help="Seconds to watch (rates are measured over this window).")] = 2.0,
     services: Annotated[bool, typer.Option("--services", help="Services (queryables) with their request and reply types and who serves them.")] = False,
-    world: World = None,
-    connect: Connect = None,
-    listen: Listen = None,
-    profile: Profile = None,
-    zenoh_config: ZenohConfig = None,
-    peer_id: PeerId = None,
+    join: Joining = Joining(),
 ) -> None:
     """Live keys with their type, publishers, subscribers and rate (like ``ros2 topic list -v``); --services: services."""
     from robofabric.declarations import read_declarations, service_types
 
     if not duration > 0:
         raise UserError("--duration must be positive")
-    cfg = make_config(world, connect, listen, profile, zenoh_config)
+    cfg = join.config()
     expr = _resolve(keyexpr, cfg.world) if keyexpr else keys.world_all(cfg.world)
-    with open_fabric(cfg, "tool", peer_id) as fab:
+    with join.open("tool", cfg) as fab:
         decl = read_declarations(fab.session, cfg.world)  # zenoh's admin space: the raw session
         stats = [] if services else observe(fab, expr, duration)
     if services:
@@ -126,18 +120,18 @@ NUMERIC = ("rate Hz", "msgs", "kB/s", "fields")
 
 
 def key_info(
-    key: str, *, as_json: bool, duration: float, world, connect, listen, profile, zenoh_config, peer_id
+    key: str, *, as_json: bool, duration: float, join: Joining
 ) -> None:
     """``robofabric info KEY``: type and its fields, publishers, rate, whether anyone subscribes."""
     from robofabric.interface_fields import fields_of, message_types
 
     if not duration > 0:
         raise UserError("--duration must be positive")
-    cfg = make_config(world, connect, listen, profile, zenoh_config)
+    cfg = join.config()
     full = _resolve(key, cfg.world)
     from robofabric.declarations import read_declarations, service_types
 
-    with open_fabric(cfg, "tool", peer_id) as fab:
+    with join.open("tool", cfg) as fab:
         decl = read_declarations(fab.session, cfg.world)  # zenoh's admin space: the raw session
         stats = observe(fab, full, duration)
         subscribed = None

@@ -9,7 +9,7 @@ from typing import Annotated, Optional, TYPE_CHECKING
 
 import typer
 
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
+from fabric.cli_common import Joining, UserError, join_flags, open_fabric
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
     from fabric.gate import CommandGate
@@ -62,6 +62,7 @@ def parse_twist_timeout(text: str | None, speed: float | None) -> float | None:
     return value or None
 
 
+@join_flags()
 def sim(
     scene: Annotated[str, typer.Option("--scene", "-s", help="Scene name (robots/scenes/NAME.toml) or path to a scene .toml.")] = "combined",
     robot: Annotated[
@@ -91,12 +92,7 @@ def sim(
         bool, typer.Option("--standby", help="Follow the world's primary sim and take the world over (no reset) if it goes; see docs/sim.md.")
     ] = False,
     list_: Annotated[bool, typer.Option("--list", help="List the known robot types and scenes, then exit.")] = False,
-    world: World = None,
-    connect: Connect = None,
-    listen: Listen = None,
-    profile: Profile = None,
-    zenoh_config: ZenohConfig = None,
-    peer_id: PeerId = None,
+    join: Joining = Joining(),
 ) -> None:
     """Simulate a scene's robots and serve them on the fabric: joints, poses, scans out; commands in."""
     if list_:
@@ -124,15 +120,15 @@ def sim(
         raise UserError(str(exc)) from None
     if not sim_world.robots:
         raise UserError(f"scene {sim_world.scene.name!r} has no robots and none were added with --robot")
-    cfg = make_config(world, connect, listen, profile, zenoh_config)
+    cfg = join.config()
     first = True  # the world's first sim: the scene objects' authority too
     if not standby:
-        first = _check_world_free(cfg, peer_id, sim_world)
+        first = _check_world_free(cfg, join.peer_id, sim_world)
     stop = shutdown_event()
     if standby or not replicated_off():
-        _run_replicated(cfg, peer_id, sim_world, build, ownership, rates, pace, stop, duration, standby, first)
+        _run_replicated(cfg, join.peer_id, sim_world, build, ownership, rates, pace, stop, duration, standby, first)
         return
-    _run_single(cfg, peer_id, sim_world, ownership, rates, pace, stop, duration, first)
+    _run_single(cfg, join.peer_id, sim_world, ownership, rates, pace, stop, duration, first)
 
 
 def _parse_options(rate: str, speed: str, duration: float | None, noise: float | None,
@@ -287,16 +283,16 @@ def _print_catalog() -> None:
             print(f"  {name:<12} (broken: {exc})")
 
 
+@join_flags(client=True)
 def move_cmd(robot: Annotated[str, typer.Argument(help="Robot id.")],
              to: Annotated[str, typer.Option("--to", help="The sim peer (its id, as `robofabric ps` lists it) to serve the robot.")],
-             world: World = None, connect: Connect = None, profile: Profile = None, zenoh_config: ZenohConfig = None) -> None:
+             join: Joining = Joining()) -> None:
     """Hand ROBOT, its state and its ownership from its sim to sim TO (rebalancing a world of several sims).
 
     Its owner keeps it and her epoch; see docs/sim.md, "Moving a robot between sims". In a class world only the
     instructor and sim logins may move robots (docs/security.md)."""
     from sim_peer.handoff import MoveError, move
-    cfg = make_config(world, connect, None, profile, zenoh_config)
-    with open_fabric(cfg, "tool", None) as fab:
+    with join.open("tool") as fab:
         try:
             done = move(fab, robot, to)
         except MoveError as exc:

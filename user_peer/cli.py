@@ -8,7 +8,9 @@ from typing import Annotated, Optional
 
 import typer
 
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig, join_error, make_config
+from fabric.cli_common import (
+    Connect, Joining, Listen, PeerId, Profile, UserError, World, ZenohConfig, join_error, join_flags, make_config,
+)
 from fabric.completion import complete_export_formats, matching
 
 RERUN_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://", "http://", "https://")
@@ -178,13 +180,13 @@ def _progress(what: str, quiet: bool):
 UserOpt = Annotated[Optional[str], typer.Option("--user", "-u", help="Your user id (default: $USER); ownership is by user id.")]
 
 
-def open_world(world, connect, profile, zenoh_config, user, timeout: float = 5.0, join_timeout: float = 30.0):
-    """Join as a user, waiting up to ``join_timeout`` s for a sim to serve the world."""
+def open_world(join: Joining, user, timeout: float = 5.0, join_timeout: float = 30.0):
+    """Join the world the flags name as a user, waiting up to ``join_timeout`` s for a sim to serve it."""
     from user_peer.api import connect as _connect
     from user_peer.errors import FabricUserError
 
-    zenoh_eps, _ = _split_connect(connect)
-    cfg = make_config(world, zenoh_eps, None, profile, zenoh_config)
+    zenoh_eps, _ = _split_connect(join.connect)
+    cfg = make_config(join.world, zenoh_eps, None, join.profile, join.zenoh_config)
     try:
         return _connect(world=cfg.world, connect=list(cfg.connect), user=user, profile=cfg.profile,
                         zenoh_config=cfg.config_file, timeout=timeout, join_timeout=join_timeout)
@@ -196,20 +198,18 @@ def open_world(world, connect, profile, zenoh_config, user, timeout: float = 5.0
         raise join_error(cfg, exc) from None
 
 
+@join_flags(client=True)
 def user(
     arm: Annotated[Optional[str], typer.Option(help="Arm to control (default: the world's first arm).")] = None,
     base: Annotated[Optional[str], typer.Option(help="Mobile base to drive (default: the world's first base).")] = None,
     user_id: UserOpt = None,
-    world: World = None,
-    connect: Connect = None,
-    profile: Profile = None,
-    zenoh_config: ZenohConfig = None,
+    join: Joining = Joining(),
 ) -> None:
     """Terminal UI: joint sliders, arrow-key driving, ownership, live joints, scan, latency."""
     from user_peer.errors import FabricUserError
     from user_peer.tui import UserApp
 
-    w = open_world(world, connect, profile, zenoh_config, user_id)
+    w = open_world(join, user_id)
     try:
         try:
             ids = w.robots()
@@ -236,15 +236,13 @@ def complete_scenarios(incomplete: str) -> list[str]:
         return []
 
 
+@join_flags(client=True)
 def scenario(
     name: Annotated[str, typer.Argument(help="test-a (arm follows the IK target) or test-b (map, plan, follow).", autocompletion=complete_scenarios)],
     user_id: UserOpt = None,
     robot: Annotated[Optional[str], typer.Option(help="Robot to use (default arm1 for test-a, base1 for test-b).")] = None,
     wait: Annotated[float, typer.Option(help="Wait up to S seconds for the world (sim peer) to answer.")] = 30.0,
-    world: World = None,
-    connect: Connect = None,
-    profile: Profile = None,
-    zenoh_config: ZenohConfig = None,
+    join: Joining = Joining(),
 ) -> None:
     """Run one of the paper's scenarios as a scripted user; exit 0 on success."""
     from user_peer.errors import FabricUserError
@@ -252,7 +250,7 @@ def scenario(
 
     if name not in SCENARIOS:
         raise UserError(f"unknown scenario {name!r}; expected one of {', '.join(SCENARIOS)}")
-    w = open_world(world, connect, profile, zenoh_config, user_id, join_timeout=wait)
+    w = open_world(join, user_id, join_timeout=wait)
     try:
         kw = {}
         if robot:

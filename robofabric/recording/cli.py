@@ -16,7 +16,7 @@ from typing import Annotated, Any, Optional
 import typer
 
 from fabric import keys
-from fabric.cli_common import Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric, print_table
+from fabric.cli_common import Joining, NothingThere, UserError, join_flags, print_table
 from robofabric.complete import complete_formats, complete_keys, complete_keys_or_recordings
 
 __all__ = ["register", "record", "info", "replay"]
@@ -33,6 +33,7 @@ def _resolve(expr: str, world: str) -> str:
 # --------------------------------------------------------------------------- record
 
 
+@join_flags()
 def record(
     output: Annotated[Path, typer.Option("--output", "-o", help="The MCAP file to write (overwritten if it exists).")],
     keyexprs: Annotated[
@@ -52,12 +53,7 @@ def record(
     scene: Annotated[Optional[str], typer.Option(help="With --to: the scene being recorded (places the arms, draws the walls).")] = None,
     max_queue_mb: Annotated[float, typer.Option("--max-queue-mb", help="Payload waiting for the disk at most; beyond, samples are dropped and counted.")] = 256.0,
     quota_mb: Annotated[Optional[float], typer.Option("--quota-mb", help="Write at most this many MB of payload; later samples are dropped and counted.")] = None,
-    world: World = None,
-    connect: Connect = None,
-    listen: Listen = None,
-    profile: Profile = None,
-    zenoh_config: ZenohConfig = None,
-    peer_id: PeerId = None,
+    join: Joining = Joining(),
 ) -> None:
     """Record every sample on the selected keys into an MCAP file (one channel per key, zstd chunks).
 
@@ -82,14 +78,14 @@ def record(
         raise UserError(f"{output} is a directory; give a file name such as {output / 'run.mcap'}")
     if not output.parent.exists():
         raise UserError(f"directory {output.parent} does not exist")
-    cfg = make_config(world, connect, listen, profile, zenoh_config)
+    cfg = join.config()
     exprs = [_resolve(e, cfg.world) for e in keyexprs] if keyexprs else [keys.world_all(cfg.world)]
     stop = shutdown_event()
     tty = sys.stderr.isatty()
     if to is not None:
-        _record_as(to, output, exprs, duration, quiet, scene, cfg, peer_id, stop, tty)
+        _record_as(to, output, exprs, duration, quiet, scene, cfg, join, stop, tty)
         return
-    with open_fabric(cfg, "recorder", peer_id) as fab:
+    with join.open("recorder", cfg) as fab:
         try:
             rec = Recorder(
                 fab, output, exprs, liveliness=liveliness, compression=compression,
@@ -136,13 +132,13 @@ def _run_until_done(worker: Any, output: Path, duration: float | None, stop: thr
     return stats
 
 
-def _record_as(to, output, exprs, duration, quiet, scene, cfg, peer_id, stop, tty) -> None:
+def _record_as(to, output, exprs, duration, quiet, scene, cfg, join: Joining, stop, tty) -> None:
     """``record --to FORMAT``: decode live samples into another format's writer (robofabric.recording.live_convert)."""
     from robofabric.recording.live_convert import LiveConverter, open_exporter
 
     if output.suffix != ".mcap":
         raise UserError(f"--output {output}: a {to} recording is an MCAP file and must end in .mcap")
-    with open_fabric(cfg, "recorder", peer_id) as fab:
+    with join.open("recorder", cfg) as fab:
         try:
             sink = open_exporter(to, output, scene=scene)
         except KeyError as exc:
@@ -168,6 +164,7 @@ def _size(n: float) -> str:
     return f"{n:.1f} GB"
 
 
+@join_flags()
 def info(
     target: Annotated[str, typer.Argument(help="A recording (FILE.mcap) or a live key (robot/arm1/joints, rf/demo/map/map).", autocompletion=complete_keys_or_recordings)],
     as_json: Annotated[bool, typer.Option("--json", help=(
@@ -175,12 +172,7 @@ def info(
         '"services": [{key, request, reply, servers}], "keys": [{key, type, publishers, messages, rate_hz, bytes_per_s, last_bytes, latched}], '
         '"types": {TYPE: [field names]}}; a recording: its summary (path, complete, duration_s, messages, channels, ...).'))] = False,
     duration: Annotated[float, typer.Option(help="Live key: seconds to watch it.")] = 2.0,
-    world: World = None,
-    connect: Connect = None,
-    listen: Listen = None,
-    profile: Profile = None,
-    zenoh_config: ZenohConfig = None,
-    peer_id: PeerId = None,
+    join: Joining = Joining(),
 ) -> None:
     """A recording's summary (duration, keys, counts, rates, sizes, schemas, complete or not), or a live key's.
 
@@ -193,8 +185,7 @@ def info(
         return
     from robofabric.introspect_cli import key_info
 
-    key_info(target, as_json=as_json, duration=duration, world=world, connect=connect, listen=listen,
-             profile=profile, zenoh_config=zenoh_config, peer_id=peer_id)
+    key_info(target, as_json=as_json, duration=duration, join=join)
 
 
 LONG_INFO_BYTES = 20_000_000
@@ -242,6 +233,7 @@ def _recording_info(file: Path, as_json: bool) -> None:
 # --------------------------------------------------------------------------- replay
 
 
+@join_flags()
 def replay(
     file: Annotated[Path, typer.Argument(help="An MCAP recording (unfinished ones replay up to their last complete chunk).")],
     speed: Annotated[float, typer.Option(help="Time scale: 2 plays twice as fast, 0.5 at half speed.")] = 1.0,
@@ -255,12 +247,7 @@ def replay(
     remap_world: Annotated[Optional[str], typer.Option("--remap-world", help="Publish into this world instead of the recorded one.")] = None,
     wait: Annotated[float, typer.Option(help="Wait up to S seconds for a subscriber before starting.")] = 2.0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
-    world: World = None,
-    connect: Connect = None,
-    listen: Listen = None,
-    profile: Profile = None,
-    zenoh_config: ZenohConfig = None,
-    peer_id: PeerId = None,
+    join: Joining = Joining(),
 ) -> None:
     """Republish a recording's exact bytes on the recorded timeline (scaled by --speed), optionally into another world.
 
@@ -274,19 +261,19 @@ def replay(
         raise UserError("--wait must be >= 0")
     exprs = None
     if key_exprs:
-        scope = world or "*"
+        scope = join.world or "*"
         exprs = []
         for e in key_exprs:
             full = e if e.startswith(keys.PREFIX + "/") else f"{keys.PREFIX}/{scope}/{e.lstrip('/')}"
             exprs.append(_check_expr(e, full))
     try:
-        plan = plan_replay(file, speed=speed, start=start, end=end, keys=exprs, world=world, remap_world=remap_world)
+        plan = plan_replay(file, speed=speed, start=start, end=end, keys=exprs, world=join.world, remap_world=remap_world)
     except RecordingError as exc:
         raise UserError(str(exc)) from None
-    target_world = remap_world or world or (plan.worlds[0] if plan.worlds else None)
-    cfg = make_config(target_world, connect, listen, profile, zenoh_config)
+    target_world = remap_world or join.world or (plan.worlds[0] if plan.worlds else None)
+    cfg = join.config(world=target_world)
     stop = shutdown_event()
-    with open_fabric(cfg, "tool", peer_id) as fab:
+    with join.open("tool", cfg) as fab:
         into = f" into world {remap_world!r}" if remap_world else ""
         print(
             f"replaying {plan.messages} msgs on {len(plan.keys)} key(s) from {file}{into} at {speed:g}x"

@@ -9,12 +9,13 @@ from typing import Annotated, Optional
 import typer
 
 from fabric import keys
-from fabric.cli_common import Connect, Listen, PeerId, Profile, UserError, World, ZenohConfig
+from fabric.cli_common import Joining, UserError, join_flags
 from robofabric.complete import complete_keys, complete_types
 from robofabric.tools.common import open_world, resolve_key
 from robofabric.tools.message_json import message_from_json
 
 
+@join_flags()
 def call(
     key: Annotated[str, typer.Argument(help="Service key, full or world-relative: srv/world, srv/ik/arm1, srv/map/map/PEER.", autocompletion=complete_keys)],
     msg_type: Annotated[Optional[str], typer.Option("--type", "-t", help="Request type, e.g. IKRequest, FKRequest, MapRequest, PlanRequest (none: an empty query).", autocompletion=complete_types)] = None,
@@ -22,12 +23,7 @@ def call(
     all_replies: Annotated[bool, typer.Option("--all", help="Ask every peer serving the key, not only the nearest.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object per reply: {key, source, message}.")] = False,
     timeout: Annotated[float, typer.Option(help="Seconds to wait for replies.")] = 5.0,
-    world: World = None,
-    connect: Connect = None,
-    listen: Listen = None,
-    profile: Profile = None,
-    zenoh_config: ZenohConfig = None,
-    peer_id: PeerId = None,
+    join: Joining = Joining(),
 ) -> None:
     """Call a service and print its replies (like ``ros2 service call``); a refusal prints its reason, exit 1."""
     from fabric.codec import to_plain
@@ -36,7 +32,7 @@ def call(
     if timeout <= 0:
         raise UserError("--timeout must be positive")
     request = message_from_json(msg_type, data) if msg_type else None
-    with open_world("tool", world, connect, listen, profile, zenoh_config, peer_id, key=key) as fab:
+    with open_world("tool", join, key=key) as fab:
         full = resolve_key(key, fab.world)
         try:
             if full == keys.srv(fab.world, "world") and not all_replies and request is None:

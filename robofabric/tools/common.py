@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from fabric import keys
-from fabric.cli_common import UserError, make_config, open_fabric
+from fabric.cli_common import Joining, UserError
 
 if TYPE_CHECKING:
     from fabric.session import Fabric
@@ -13,12 +13,12 @@ if TYPE_CHECKING:
 __all__ = ["open_world", "resolve_key", "user_key"]
 
 
-def open_world(kind: str, world, connect, listen, profile, zenoh_config, peer_id=None, *, key: str | None = None) -> Fabric:
-    """Join the world; a key given is checked first, so a typo fails before any network wait."""
-    cfg = make_config(world, connect, listen, profile, zenoh_config)
+def open_world(kind: str, join: Joining, *, key: str | None = None) -> Fabric:
+    """Join the world the flags name; a key given is checked first, so a typo fails before any network wait."""
+    cfg = join.config()
     if key is not None:
         resolve_key(key, cfg.world)
-    return open_fabric(cfg, kind, peer_id)
+    return join.open(kind, cfg)
 
 
 def resolve_key(key: str, world: str) -> str:

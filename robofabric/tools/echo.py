@@ -10,13 +10,12 @@ from typing import Annotated, Optional
 import typer
 import zenoh
 
-from fabric.cli_common import (
-    Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, say, watch_reader,
-)
+from fabric.cli_common import Joining, NothingThere, UserError, join_flags, say, watch_reader
 from robofabric.complete import complete_keys
 from robofabric.tools.common import open_world, resolve_key
 
 
+@join_flags()
 def echo(
     key: Annotated[str, typer.Argument(help="Key expression, full (rf/demo/robot/arm1/joints) or world-relative (robot/*/pose).", autocompletion=complete_keys)],
     count: Annotated[Optional[int], typer.Option("--count", "-n", help="Exit after N messages.")] = None,
@@ -26,12 +25,7 @@ def echo(
     latest: Annotated[
         bool, typer.Option("--latest/--no-latest", help="First the latest value of latched keys (maps, paths, scene objects) set before echo started.")
     ] = True,
-    world: World = None,
-    connect: Connect = None,
-    listen: Listen = None,
-    profile: Profile = None,
-    zenoh_config: ZenohConfig = None,
-    peer_id: PeerId = None,
+    join: Joining = Joining(),
 ) -> None:
     """Print decoded messages on a key; malformed payloads are reported on stderr and skipped."""
     from fabric.codec import DecodeError, decode, to_plain
@@ -45,7 +39,7 @@ def echo(
     printed = 0
     bad = 0
     lock = threading.Lock()
-    with open_world("tool", world, connect, listen, profile, zenoh_config, peer_id, key=key) as fab:
+    with open_world("tool", join, key=key) as fab:
         full = resolve_key(key, fab.world)
 
         def on_sample(sample: zenoh.Sample) -> None:

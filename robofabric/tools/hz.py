@@ -11,22 +11,19 @@ from typing import Annotated, Optional
 import typer
 import zenoh
 
-from fabric.cli_common import Connect, Listen, NothingThere, PeerId, Profile, World, ZenohConfig, print_folded, say
+from fabric.cli_common import Joining, NothingThere, join_flags, say
+from robofabric.terminal import print_folded
 from robofabric.complete import complete_keys
 from robofabric.tools.common import open_world, resolve_key
 
 
+@join_flags()
 def hz(
     key: Annotated[str, typer.Argument(help="Key expression; each matching key is measured separately.", autocompletion=complete_keys)],
     duration: Annotated[Optional[float], typer.Option(help="Measure for S seconds, then print the summary and exit.")] = None,
     window: Annotated[int, typer.Option(help="Intervals kept per key for the running statistics.")] = 10_000,
     as_json: Annotated[bool, typer.Option("--json", help='Print only the final summary, as one JSON document: {"key", "streams": {KEY: {count, rate_hz, jitter_ms, min_ms, max_ms, bytes, bytes_per_s}}}.')] = False,
-    world: World = None,
-    connect: Connect = None,
-    listen: Listen = None,
-    profile: Profile = None,
-    zenoh_config: ZenohConfig = None,
-    peer_id: PeerId = None,
+    join: Joining = Joining(),
 ) -> None:
     """Rate, jitter and bandwidth of the keys matching KEY (like ``ros2 topic hz`` and ``bw``)."""
     from fabric.session import shutdown_event
@@ -34,7 +31,7 @@ def hz(
     stop = shutdown_event()
     stats: dict[str, StreamStats] = {}
     lock = threading.Lock()
-    with open_world("tool", world, connect, listen, profile, zenoh_config, peer_id, key=key) as fab:
+    with open_world("tool", join, key=key) as fab:
         full = resolve_key(key, fab.world)
 
         def on_sample(sample: zenoh.Sample) -> None:

@@ -10,11 +10,13 @@ from typing import Annotated, Optional
 import typer
 
 from fabric import keys
-from fabric.cli_common import Connect, Listen, NothingThere, PeerId, Profile, World, ZenohConfig, print_folded, print_table
+from fabric.cli_common import Joining, NothingThere, join_flags, print_table
+from robofabric.terminal import print_folded
 from robofabric.complete import complete_peers
 from robofabric.tools.common import open_world
 
 
+@join_flags()
 def ps(
     peer: Annotated[Optional[str], typer.Argument(help="With -v: only this peer (its id).", autocompletion=complete_peers)] = None,
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="What each peer publishes, subscribes to and serves (like ros2 node info).")] = False,
@@ -23,12 +25,7 @@ def ps(
         'with -v also "declarations_visible" and "info": {ID: {publishes, subscribes, serves}}.'))] = False,
     timeout: Annotated[float, typer.Option(help="Seconds to wait for liveliness replies.")] = 1.0,
     duration: Annotated[float, typer.Option(help="With -v: seconds to watch the world's traffic for what each peer publishes.")] = 1.5,
-    world: World = None,
-    connect: Connect = None,
-    listen: Listen = None,
-    profile: Profile = None,
-    zenoh_config: ZenohConfig = None,
-    peer_id: PeerId = None,
+    join: Joining = Joining(),
 ) -> None:
     """List the live peers of a world, by kind, from their liveliness tokens; -v: what each publishes, subscribes, serves.
 
@@ -39,7 +36,7 @@ def ps(
         verbose = True
     decl = None
     published: dict[str, list[str]] = {}
-    with open_world("tool", world, connect, listen, profile, zenoh_config, peer_id) as fab:
+    with open_world("tool", join) as fab:
         found, bad = live_tokens(fab, timeout=timeout)
         peers = [(p.kind, p.id) for p in found if p.id != fab.peer_id]
         if verbose:

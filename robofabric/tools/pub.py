@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Annotated, Optional
 import typer
 
 from fabric import keys
-from fabric.cli_common import Connect, Listen, NothingThere, PeerId, Profile, UserError, World, ZenohConfig, make_config, open_fabric
+from fabric.cli_common import Joining, NothingThere, UserError, join_flags
 from robofabric.complete import complete_keys, complete_types
 from robofabric.tools.common import resolve_key, user_key
 from robofabric.tools.message_json import message_from_json
@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from fabric.session import Fabric
 
 
+@join_flags()
 def pub(
     key: Annotated[str, typer.Argument(help="Concrete key, full or world-relative (robot/base1/cmd/twist: with --user, that user's key .../by/USER).", autocompletion=complete_keys)],
     msg_type: Annotated[str, typer.Option("--type", "-t", help="Message type, e.g. Twist, JointTarget, Pose, Stop.", autocompletion=complete_types)],
@@ -31,12 +32,7 @@ def pub(
     rate: Annotated[float, typer.Option(help="Publish at this rate in Hz (0: once).")] = 0.0,
     count: Annotated[Optional[int], typer.Option("--count", "-n", help="Number of messages (default 1, or forever with --rate).")] = None,
     wait: Annotated[float, typer.Option(help="Seconds to wait for the sim's answer to a command (0: do not wait).")] = 1.0,
-    world: World = None,
-    connect: Connect = None,
-    listen: Listen = None,
-    profile: Profile = None,
-    zenoh_config: ZenohConfig = None,
-    peer_id: PeerId = None,
+    join: Joining = Joining(),
 ) -> None:
     """Publish a message built from JSON (like ``ros2 topic pub``); checked by the codec before it leaves.
 
@@ -51,7 +47,7 @@ def pub(
     from robofabric.declarations import key_type
 
     body = message_from_json(msg_type, data)
-    cfg = make_config(world, connect, listen, profile, zenoh_config)
+    cfg = join.config()
     try:
         user = cfg.user_id(user)  # a secure login is the user
     except ValueError as exc:
@@ -72,7 +68,7 @@ def pub(
     if is_cmd and not user:
         user = parsed.user  # a key that names its writer (.../by/ann) is that user's command
     stop = shutdown_event()
-    with open_fabric(cfg, "tool", peer_id) as fab:
+    with join.open("tool", cfg) as fab:
         if is_cmd and wait > 0:
             _check_robot(fab, parsed.subject, timeout=max(wait, 1.0))
         if is_cmd and epoch is None:

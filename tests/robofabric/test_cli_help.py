@@ -9,7 +9,7 @@ import pytest
 import typer
 
 from robofabric import cli
-from fabric.cli_common import plain_doc
+from robofabric.terminal import plain_doc
 from robofabric.testing import robofabric_cmd
 
 

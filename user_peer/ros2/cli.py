@@ -6,7 +6,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from fabric.cli_common import Connect, Profile, UserError, World, ZenohConfig
+from fabric.cli_common import Joining, UserError, join_flags
 
 __all__ = ["ros2", "register", "MISSING_RCLPY"]
 
@@ -14,14 +14,12 @@ MISSING_RCLPY = ("robofabric ros2 needs rclpy: pip install 'robofabric[ros2]' (R
                  "or source a ROS 2 install (e.g. . /opt/ros/kilted/setup.bash) before running it")
 
 
+@join_flags(client=True)
 def ros2(
     namespace: Annotated[str, typer.Option("--namespace", help="A ROS namespace put before every topic but /clock (e.g. class1).")] = "",
     request: Annotated[Optional[list[str]], typer.Option("--request", help="A robot to ask to own at start (repeatable); cmd_vel and joint_command act only on robots this login owns.")] = None,
     user_id: Annotated[Optional[str], typer.Option("--user", "-u", help="The login the bridge acts as (default: $USER); ownership is by user id.")] = None,
-    world: World = None,
-    connect: Connect = None,
-    profile: Profile = None,
-    zenoh_config: ZenohConfig = None,
+    join: Joining = Joining(),
     trace: Annotated[Optional[str], typer.Option("--trace", hidden=True, help="Write when each message entered and left the bridge to this file at the end (robofabric bench ros2).")] = None,
 ) -> None:
     """Bridge a world to ROS 2: every robot's joint_states, scan, odom, path, the map and /clock go out as ROS 2
@@ -39,7 +37,7 @@ def ros2(
     from user_peer.errors import FabricUserError
 
     log = logging.getLogger("robofabric.ros2")
-    w = open_world(world, connect, profile, zenoh_config, user_id)
+    w = open_world(join, user_id)
     try:
         for rid in request or ():
             try:
