@@ -1,6 +1,7 @@
 """Helpers the benchmarks share: where tables go, the machine line, a process's CPU and memory, ending children.
 
-Pure or /proc-reading functions, and the ending of children by pid; no benchmark logic. :func:`pct` is
+Pure or /proc-reading functions, the ending of children by pid, and the ``--out`` flag every benchmark
+takes (:data:`TableOut`); no benchmark logic. :func:`pct` is
 the tables' percentile (NaN where nothing was measured); the replayer and ``robofabric hz`` summarise
 with :func:`robofabric.stats.percentiles`.
 """
@@ -13,8 +14,16 @@ import signal
 import subprocess
 import time
 from pathlib import Path
+from typing import Annotated, Optional
 
-__all__ = ["append", "write", "pct", "cpus", "machine", "proc_cpu_s", "proc_rss_mb", "end_process", "end_processes"]
+import typer
+
+__all__ = ["TableOut", "TablesOut", "append", "write", "pct", "cpus", "machine", "proc_cpu_s", "proc_rss_mb", "end_process", "end_processes"]
+
+TableOut = Annotated[Optional[Path], typer.Option("--out", help="Append the markdown table to this file.")]
+"""``--out FILE`` of a benchmark that prints one table: the one definition of the flag and its help."""
+TablesOut = Annotated[Optional[Path], typer.Option("--out", help="Append the markdown tables to this file.")]
+"""``--out FILE`` of a benchmark that prints several tables."""
 
 
 def append(out: Path | str | None, text: str) -> None:

@@ -28,12 +28,12 @@ import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
 from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
-from robofabric.bench.common import append, machine, proc_rss_mb
+from robofabric.bench.common import TableOut, append, machine, proc_rss_mb
 
 RESUME_TIMEOUT_S = 120.0
 """How long after her close the bench waits for the router to answer again."""
@@ -212,7 +212,7 @@ def table(results: list[FloodResult]) -> str:
 
 def command(
     counts: Annotated[str, typer.Option(help="Declarations per flood, comma-separated (one fresh mallory each).")] = "6000,20000",
-    out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
+    out: TableOut = None,
 ) -> None:
     """A login declaring N subscribers and closing: router stall, router memory, whether owners keep their robots."""
     ns = [int(c) for c in counts.split(",") if c.strip()]

@@ -20,13 +20,12 @@ from __future__ import annotations
 
 import math
 import time
-from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Optional
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
 
-from robofabric.bench.common import append
+from robofabric.bench.common import TablesOut, append
 
 if TYPE_CHECKING:
     from compute_peer.kinematics.model import ArmModel
@@ -137,7 +136,7 @@ def command(
     n: Annotated[int, typer.Option("--n", help="Random reachable targets per workload.")] = 2000,
     seed: Annotated[int, typer.Option(help="Seed of the targets and IK seeds.")] = 0,
     queries: Annotated[int, typer.Option(help="IK/FK queries for the round trip through a router (0: skip it).")] = 1000,
-    out: Annotated[Optional[Path], typer.Option(help="Append the markdown tables to this file.")] = None,
+    out: TablesOut = None,
 ) -> None:
     """Meca500 IK solve times (closed form full pose / position only, numerical, CasADi) and the query round trip.
 

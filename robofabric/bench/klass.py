@@ -27,7 +27,7 @@ from typing import Annotated, Any, Optional
 
 import typer
 
-from robofabric.bench.common import append, end_process, machine, pct, proc_cpu_s
+from robofabric.bench.common import TableOut, append, end_process, machine, pct, proc_cpu_s
 
 STUDENT = [sys.executable, "-m", "robofabric.bench.klass", "student"]
 TARGETS_DEG = ([25.0, 15.0, -15.0, 0.0, 20.0, 0.0], [-25.0, -10.0, 10.0, 0.0, -20.0, 0.0])
@@ -241,7 +241,7 @@ def command(
     students: Annotated[str, typer.Option("--students", help="Comma-separated class sizes (each student: one arm, one base).")] = "1,4,8,16,32",
     seconds: Annotated[float, typer.Option("--seconds", help="How long each student drives and moves (s).")] = 40.0,
     extra_robots: Annotated[int, typer.Option("--extra-robots", help="Arms and bases (as many of each) nobody owns, to load the sim.")] = 0,
-    out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
+    out: TableOut = None,
     logs: Annotated[Optional[Path], typer.Option(help="Keep every process's output and the students' JSON here.")] = None,
 ) -> None:
     """A class of N students (processes), each owning an arm and a base: join and move times, robots lost,

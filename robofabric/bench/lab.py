@@ -19,12 +19,12 @@ import json
 import statistics
 import time
 from pathlib import Path
-from typing import Annotated, Any, Optional
+from typing import Annotated, Any
 
 import typer
 
 from robofabric.lab.lab import Lab, LabProcess
-from robofabric.bench.common import append
+from robofabric.bench.common import TableOut, append
 
 __all__ = ["run_lab_bench", "to_markdown", "command"]
 
@@ -167,7 +167,7 @@ def to_markdown(result: dict[str, Any]) -> str:
 def command(
     runs: Annotated[int, typer.Option(help="Repetitions of each fault.")] = 5,
     as_json: Annotated[bool, typer.Option("--json")] = False,
-    out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
+    out: TableOut = None,
 ) -> None:
     """Recovery times in a lab of network namespaces (needs root): partition handover, router loss, lost sim."""
     from fabric.cli_common import UserError

@@ -18,12 +18,12 @@ import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
 from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
-from robofabric.bench.common import append, machine, proc_rss_mb
+from robofabric.bench.common import TableOut, append, machine, proc_rss_mb
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,7 +106,7 @@ def table(r: MapFloodResult) -> str:
 
 def command(
     builds: Annotated[int, typer.Option(help="Builds under new map names mallory asks.")] = 1400,
-    out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
+    out: TableOut = None,
 ) -> None:
     """A student building maps under new names: what the compute peer keeps, refuses and weighs."""
     with tempfile.TemporaryDirectory() as tmp:

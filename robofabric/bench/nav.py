@@ -12,8 +12,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from pathlib import Path as FsPath
-from typing import Annotated, Optional
+from typing import Annotated
 
 import numpy as np
 import typer
@@ -27,7 +26,7 @@ from compute_peer.navigation.ompl_planner import OmplConfig
 from compute_peer.navigation.planner import PlannerSettings, plan_path
 from compute_peer.navigation.scenes import office, scan_angles
 from fabric.interfaces import Header, Pose, Scan, quaternion_from_yaw
-from robofabric.bench.common import append, pct
+from robofabric.bench.common import TablesOut, append, pct
 
 RES = 0.05
 SIZE = 20.0
@@ -160,7 +159,7 @@ def command(
     fovs: Annotated[str, typer.Option(help="Comma-separated LIDAR fields of view (deg) for the map update; 240 rays each.")] = "135,360",
     seed: Annotated[int, typer.Option(help="Seed of the start/goal pairs and scan poses.")] = 2,
     as_json: Annotated[bool, typer.Option("--json", help="Print the results as JSON.")] = False,
-    out: Annotated[Optional[FsPath], typer.Option(help="Append the markdown tables to this file.")] = None,
+    out: TablesOut = None,
 ) -> None:
     """Map update per 240-ray scan on a 400x400 grid; Hybrid A* beside OMPL on a 20 m x 20 m map at 5 cm."""
     from fabric.cli_common import UserError

@@ -15,8 +15,7 @@ import sys
 import threading
 import time
 import uuid
-from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -24,7 +23,7 @@ from fabric.session import Fabric
 from robofabric.testing import client, free_port, router_config, wait_until
 from ownership.authority import Authority
 from ownership.client import OwnershipClient
-from robofabric.bench.common import append, pct
+from robofabric.bench.common import TableOut, append, pct
 
 HOLDER = [sys.executable, "-m", "robofabric.bench.ownership"]
 """The owner that is killed: a child process that requests the arm and holds it (argv WORLD PORT USER)."""
@@ -121,7 +120,7 @@ def command(
     users: Annotated[str, typer.Option("--users", help="Comma-separated user counts.")] = "10,50,100",
     lease: Annotated[float, typer.Option("--lease", help="Lease (s).")] = 0.5,
     kills: Annotated[int, typer.Option("--kills", help="Owner kills per user count.")] = 3,
-    out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
+    out: TableOut = None,
 ) -> None:
     """N users in one world hand the arm over in turn; then the owner is SIGKILLed."""
     from fabric.cli_common import UserError

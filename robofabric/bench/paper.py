@@ -40,7 +40,7 @@ from typing import Annotated, Callable, Optional
 
 import typer
 
-from robofabric.bench.common import append, end_process, machine
+from robofabric.bench.common import TablesOut, append, end_process, machine
 
 __all__ = ["PAYLOADS", "RATES", "make_payload", "run_bench", "format_table", "command"]
 
@@ -368,7 +368,7 @@ def command(
     duration: Annotated[Optional[float], typer.Option(help="Seconds per rate (default 60, or 2 with --quick).")] = None,
     window: Annotated[Optional[float], typer.Option(help="Seconds per MB/min sample (default 1, or 0.5 with --quick).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"data_usage", "resources", "multi_user" (each when run), "paper", "machine", "load_average"}.')] = False,
-    out: Annotated[Optional[Path], typer.Option(help="Append the markdown tables to this file.")] = None,
+    out: TablesOut = None,
     plot: Annotated[Optional[Path], typer.Option(help="Also draw MB/min against rate beside the paper's (SVG/PNG; needs matplotlib).")] = None,
     data_usage: Annotated[bool, typer.Option("--data-usage/--no-data-usage", help="The data-usage tables (Tables 2-3).")] = True,
     resources: Annotated[bool, typer.Option("--resources/--no-resources", help="Also Table 4: CPU and RSS of router, sim, compute, viewer, console and the users while Test A and Test B run (about 2 min).")] = False,

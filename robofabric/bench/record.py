@@ -29,7 +29,7 @@ from typing import Annotated, Optional
 import typer
 
 from robofabric.stats import percentiles
-from robofabric.bench.common import append, end_process, proc_cpu_s
+from robofabric.bench.common import TablesOut, append, end_process, proc_cpu_s
 
 WORLD = "benchrec"
 def _drained(pid: int, idle: float = 0.05, timeout: float = 20.0) -> tuple[float, float]:
@@ -223,7 +223,7 @@ def command(
     fast: Annotated[str, typer.Option(help="Extra loads whose publisher cycles pre-encoded payloads (to find the recorder's ceiling, not the publisher's); '' for none.")] = "",
     replay: Annotated[bool, typer.Option("--replay/--no-replay", help="Also measure replay timing on the x1 file.")] = True,
     as_json: Annotated[bool, typer.Option("--json")] = False,
-    out: Annotated[Optional[Path], typer.Option(help="Append the markdown tables to this file.")] = None,
+    out: TablesOut = None,
     keep: Annotated[Optional[Path], typer.Option(help="Keep the recordings in this directory.")] = None,
 ) -> None:
     """Recording throughput (msgs/s, MB/s, loss, recorder CPU) and replay timing error, in separate processes."""

@@ -25,13 +25,13 @@ import tempfile
 import time
 import uuid
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import numpy as np
 import typer
 
 from robofabric.testing import free_port, robofabric_cmd, wait_until
-from robofabric.bench.common import append, end_process
+from robofabric.bench.common import TableOut, append, end_process
 
 MODES = ("tcp", "tcp+acl", "tls+acl")
 
@@ -142,7 +142,7 @@ def command(
     rounds: Annotated[int, typer.Option(help="Rounds; each runs every mode once, in turn.")] = 2,
     duration: Annotated[float, typer.Option(help="Seconds of 1 kHz scans per mode and round.")] = 5.0,
     queries: Annotated[int, typer.Option(help="IK queries per mode and round.")] = 500,
-    out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
+    out: TableOut = None,
 ) -> None:
     """Scans at 1 kHz and IK round trips over plain TCP, TCP + access control and TLS + access control."""
     from fabric.cli_common import UserError

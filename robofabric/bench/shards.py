@@ -23,11 +23,11 @@ import threading
 import time
 import uuid
 from pathlib import Path
-from typing import Annotated, Any, Optional
+from typing import Annotated, Any
 
 import typer
 
-from robofabric.bench.common import append, end_process, machine, pct, proc_cpu_s
+from robofabric.bench.common import TableOut, append, end_process, machine, pct, proc_cpu_s
 
 __all__ = ["command", "run_one", "run_lab", "spots"]
 
@@ -238,7 +238,7 @@ def command(
     sims: Annotated[str, typer.Option("--sims", help="Comma-separated sim process counts to compare.")] = "1,2,4",
     seconds: Annotated[float, typer.Option("--seconds", help="Measured window per sim count.")] = 20.0,
     lab: Annotated[bool, typer.Option("--lab", help="Over the lab's network namespaces: one host per sim (root, Linux).")] = False,
-    out: Annotated[Optional[Path], typer.Option("--out", help="Append the markdown table to this file.")] = None,
+    out: TableOut = None,
 ) -> None:
     """One world of N mobile robots served by 1, 2 and 4 sim processes: each sim's real-time factor and CPU per
     robot, how late the mirrors of other sims' robots are, and a user's command-to-motion latency."""

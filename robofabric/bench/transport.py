@@ -20,14 +20,13 @@ import sys
 import tempfile
 import threading
 import time
-from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import numpy as np
 import typer
 
 from robofabric.stats import percentiles
-from robofabric.bench.common import append
+from robofabric.bench.common import TableOut, append
 
 KEY = "rf/bench/robot/base1/scan"
 TOPIC = "rf/bench/robot/base1/scan"
@@ -279,7 +278,7 @@ def command(
     duration: Annotated[float, typer.Option(help="Seconds per rate.")] = 5.0,
     mqtt: Annotated[bool, typer.Option("--mqtt/--no-mqtt", help="Also run through mosquitto + paho (QoS 0).")] = True,
     as_json: Annotated[bool, typer.Option("--json")] = False,
-    out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
+    out: TableOut = None,
 ) -> None:
     """240-ray scans, publisher and subscriber in separate processes through a router on loopback."""
     from fabric.cli_common import UserError

@@ -33,12 +33,12 @@ import math
 import tempfile
 import time
 from pathlib import Path
-from typing import Annotated, Any, Callable, Iterator, Optional
+from typing import Annotated, Any, Callable, Iterator
 
 import numpy as np
 import typer
 
-from robofabric.bench.common import append, machine
+from robofabric.bench.common import TableOut, append, machine
 
 __all__ = ["measure", "measure_world", "format_table", "command"]
 
@@ -245,7 +245,7 @@ def command(
     seconds: Annotated[float, typer.Option(help="World time of the class world (s).")] = 20.0,
     seed: Annotated[int, typer.Option(help="Seed of the synthetic scans and grids.")] = 0,
     live: Annotated[float, typer.Option(help="Also run the class world for real for this many seconds (a sim and a view process; 0: not).")] = 0.0,
-    out: Annotated[Optional[Path], typer.Option(help="Append the markdown table to this file.")] = None,
+    out: TableOut = None,
     pages: Annotated[int, typer.Option(help="Also open this many browser pages (headless chromium) on `view --serve-web` and read each one's lag from the page (0: not).")] = 0,
     stalled: Annotated[int, typer.Option(help="With --pages: further pages, paused once they show the world.")] = 1,
     page_seconds: Annotated[float, typer.Option(help="With --pages: how long their lag is sampled (s).")] = 60.0,
