@@ -12,13 +12,14 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Callable, Optional
+from typing import TYPE_CHECKING, Annotated, Callable, Optional
 
 import typer
-
-import click
 import typer.main
 from typer.core import TyperGroup
+
+if TYPE_CHECKING:  # annotations only: importing click costs every `robofabric` start (typer carries its own)
+    import click
 
 from robofabric.bench import BENCHMARKS, Benchmark, get, names
 
