@@ -53,7 +53,10 @@ class Roles:
         # when each sim was last heard (monotonic); a standby made by a step-down heard its leader just now
         self.heard_at: dict[str, float] = {election.leader: time.monotonic()} if election.leader else {}
         self.relooking = False  # a look at the live sims is due once a missing but audible leader goes quiet
-        self.fresh_until = float("inf")  # until when the tokens seen may still be arriving (set at join)
+        # until when the tokens seen may still be arriving: a host made by a step-down (it starts with a leader),
+        # for its first leases from join
+        self.fresh_until = float("inf") if election.leader else float("-inf")
+        self.last_tick = self.thawed_at = float("-inf")  # this process's own heartbeat (frozen: see frozen())
 
     @property
     def role(self) -> str:
@@ -75,9 +78,12 @@ class Roles:
         if len(self.live) > 1:
             h.shards.learn()
         self.await_leader(self.election.leader)
+        self.last_tick = time.monotonic()
+        threading.Thread(target=self._tick, name="sim-heartbeat", daemon=True).start()
         with h.lock:
             self.settled = True
-            self.fresh_until = time.monotonic() + RECHECK_LEASES * f.config.lease_ms / 1000.0
+            if self.fresh_until > 0:
+                self.fresh_until = time.monotonic() + RECHECK_LEASES * f.config.lease_ms / 1000.0
             live = frozenset(self.live)
         self.step(el.Peers(h.shards.view(live)))
 
@@ -123,13 +129,35 @@ class Roles:
         if self.role == el.PRIMARY:
             h.adoption.soon()  # it may have been the scene objects' authority
 
+    def _tick(self) -> None:
+        """This process's heartbeat: a gap between two ticks longer than half a lease is a freeze (SIGSTOP, a starved
+        process), after which the tokens seen are not to be trusted for a lease (:meth:`frozen`)."""
+        h = self.host
+        gap = h.fabric.config.lease_ms / 2000.0
+        while not h.stopping.wait(0.1):
+            now = time.monotonic()
+            if now - self.last_tick > gap:
+                self.thawed_at = now
+            self.last_tick = now
+
+    def frozen(self) -> bool:
+        """Whether this process was frozen just now: its heartbeat is late, or came back from a gap within the last
+        lease. A standby paused past the lease wakes with a link the router dropped and a stale state; the tokens it
+        sees go (every one of them, its session's link being dead) before its session reconnects, and it must not
+        read that as its leader's death (the soak saw a paused standby take the world back with older epochs)."""
+        if self.last_tick < 0:
+            return False  # not joined yet
+        now, lease = time.monotonic(), self.host.fabric.config.lease_ms / 1000.0
+        return now - self.last_tick > lease / 2 or now - self.thawed_at < lease
+
     def deaf(self) -> bool:
-        """Whether this sim hears no one now: its link is down, or the router no longer holds its own token."""
+        """Whether this sim hears no one now: its link is down, the router no longer holds its own token, or this
+        process was just frozen."""
         h = self.host
         with h.lock:
             # our own token missing counts for OWN_TOKEN_S at most: a link that is up hears the router again
             mine = h.fabric.peer_id in self.live or time.monotonic() - self.own_gone_at > OWN_TOKEN_S
-        return not mine or not h.fabric.connected()
+        return not mine or not h.fabric.connected() or self.frozen()
 
     def deaf_recheck(self) -> None:
         """Our own link went (this sim cut off, the router restarted, this process paused past the lease): every sim's
@@ -164,6 +192,8 @@ class Roles:
             self.step(el.Peers(h.shards.view(live)))
             if self.role == el.PRIMARY:
                 h.adoption.soon()
+            elif self.election.leader in live:
+                h.announce(f"standby {h.fabric.peer_id}: hearing again; following {self.election.leader} (term {self.election.term})")
 
         threading.Thread(target=recheck, name="sim-deaf-recheck", daemon=True).start()
 
