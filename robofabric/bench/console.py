@@ -11,6 +11,9 @@ in place, each page refreshing its twist. Then, page after page, for ``--seconds
 - **view lag, measured in the page**: ``Date.now()`` against the sim's wall stamp of the pose the page shows
   (the base panel carries it as ``data-pose-wall-ms``), read in one ``page.evaluate``;
 - **the console server's CPU** over the whole drive (cores, from /proc);
+- **the browsers' CPU per page** over the whole drive: every Chromium process this benchmark started (its
+  renderers, its GPU process, the browser itself; from /proc), summed and divided by the pages, and the
+  renderers' share alone: what one student's page costs the machine that draws it;
 - **robots lost** (a base whose record no longer names its student) and **refusals** (a page whose message
   line says a command was refused or failed): both should be 0.
 
@@ -46,6 +49,56 @@ def _until(predicate: Any, timeout: float) -> Any:
         if value or time.monotonic() > deadline:
             return value or None
         time.sleep(0.005)
+
+
+def _children() -> dict[int, list[int]]:
+    """Every process's children, from /proc (ppid is the field after the name)."""
+    kids: dict[int, list[int]] = {}
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/stat") as f:
+                    ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            kids.setdefault(ppid, []).append(int(d))
+    return kids
+
+
+def chromium_cpu_s(root: int) -> dict[str, float]:
+    """CPU seconds so far of the Chromium processes under ``root`` (this process: playwright's driver starts the
+    browser), by Chromium's ``--type`` (``renderer``, ``gpu-process``, ``utility``, ``zygote``; ``browser`` for the
+    browser process itself). A process that ended before the second reading drops out of the difference."""
+    kids, out, todo = _children(), {}, [root]
+    while todo:
+        pid = todo.pop()
+        todo.extend(kids.get(pid, []))
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                argv = f.read().replace(b"\0", b" ").split()  # a forked renderer's title is one string
+        except OSError:
+            continue
+        if not argv or b"chrom" not in argv[0]:
+            continue
+        kind = next((a.split(b"=", 1)[1].decode() for a in argv if a.startswith(b"--type=")), "browser")
+        out[f"{kind}:{pid}"] = proc_cpu_s(pid)
+    return out
+
+
+def _per_page(before: dict[str, float], after: dict[str, float], seconds: float, pages: int) -> tuple[float, float]:
+    """(all Chromium processes, renderers only) in cores per page between two :func:`chromium_cpu_s` readings."""
+    used = {k: v - before.get(k, 0.0) for k, v in after.items()}
+    total = sum(v for v in used.values() if v == v)
+    renderers = sum(v for k, v in used.items() if k.startswith("renderer:") and v == v)
+    n = max(pages, 1) * seconds
+    return total / n, renderers / n
+
+
+def _by_kind(before: dict[str, float], after: dict[str, float], seconds: float) -> str:
+    """Cores by Chromium process kind between two :func:`chromium_cpu_s` readings: where the pages' cost goes."""
+    kinds = sorted({k.split(":")[0] for k in after})
+    return ", ".join(f"{kind} {sum(v - before.get(k, 0.0) for k, v in after.items() if k.split(':')[0] == kind) / seconds:.2f}"
+                     for kind in kinds)
 
 
 def _status(page: Any) -> str | None:
@@ -120,11 +173,11 @@ def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
             wait_until(lambda: fab.live_peers("sim"), timeout=120, what="the sim", seen=lambda: procs.output(sim)[-1500:])
             fab.subscribe(f"rf/{world}/robot/*/pose", on_pose)
             browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
-            pages, joined, bases = [], [], []  # bases[k]: the base (and student) of pages[k]
+            pages, joined, join_cpu, bases = [], [], [], []  # bases[k]: the base (and student) of pages[k]
             reloads: list[str] = []  # NiceGUI's own words when a page reloads itself (connection timed out, ...)
             try:
                 for i in range(n):
-                    t = time.monotonic()
+                    t, cpu_before = time.monotonic(), chromium_cpu_s(os.getpid())
                     page = browser.new_context(viewport={"width": 1280, "height": 1350}).new_page()
                     page.on("console", lambda m, i=i: _reloads(reloads, i, m.text))
                     page.set_default_timeout(60_000)
@@ -137,12 +190,13 @@ def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
                     pages.append(page)
                     bases.append(i)
                     joined.append(time.monotonic() - t)
+                    join_cpu.append(_per_page(cpu_before, chromium_cpu_s(os.getpid()), 1.0, 1)[0])
                     print(f"  page {i}: joined in {joined[-1]:.1f} s (page {steps[0] - t:.1f}, login {steps[1] - steps[0]:.1f}, request "
-                          f"{steps[2] - steps[1]:.1f}), load {os.getloadavg()[0]:.1f}", file=sys.stderr, flush=True)
+                          f"{steps[2] - steps[1]:.1f}; browsers' CPU {join_cpu[-1]:.1f} s), load {os.getloadavg()[0]:.1f}", file=sys.stderr, flush=True)
                 lags: list[float] = []
                 presses: list[float] = []
                 missed = unstopped = 0
-                cpu0, t0 = proc_cpu_s(console.pid), time.monotonic()
+                cpu0, browsers0, t0 = proc_cpu_s(console.pid), chromium_cpu_s(os.getpid()), time.monotonic()
                 health_from = len(procs.output(console))
                 k = 0
                 while pages and time.monotonic() - t0 < seconds:
@@ -163,7 +217,11 @@ def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
                         missed += 1  # a press that did not move its base within 5 s
                     else:
                         presses.append((first - pressed) / 1e9)
-                cpu = (proc_cpu_s(console.pid) - cpu0) / (time.monotonic() - t0)
+                took = time.monotonic() - t0
+                cpu = (proc_cpu_s(console.pid) - cpu0) / took
+                browsers1 = chromium_cpu_s(os.getpid())
+                page_cpu, renderer_cpu = _per_page(browsers0, browsers1, took, len(pages))
+                print(f"  browsers while driving (cores, all pages): {_by_kind(browsers0, browsers1, took)}", file=sys.stderr, flush=True)
                 health = [h for h in map(parse_line, procs.output(console)[health_from:].splitlines()) if h is not None]
                 messages = [_status(pg) for pg in pages]
                 for pg in pages:
@@ -181,7 +239,7 @@ def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
     logged_out = sum(1 for m in messages if m is None)
     return {"n": n, "joined": len(joined), "join_max": max(joined, default=float("nan")), "lag_p50": pct(lags, 50), "lag_max": pct(lags, 100),
             "key_p50": pct(presses, 50, 1e3), "key_p99": pct(presses, 99, 1e3), "presses": len(presses), "missed": missed, "unstopped": unstopped,
-            "cpu": cpu, "lost": lost, "refused": refused, "logged_out": logged_out, "reloads": len(reloads),
+            "cpu": cpu, "page_cpu": page_cpu, "renderer_cpu": renderer_cpu, "join_cpu": pct(join_cpu, 50), "lost": lost, "refused": refused, "logged_out": logged_out, "reloads": len(reloads),
             "late_p99": max((h.late_p99 for h in health), default=float("nan")),
             "late_max": max((h.late_max for h in health), default=float("nan")),
             "to_server_p99": max((h.to_server_p99 for h in health), default=float("nan")),
@@ -190,14 +248,14 @@ def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
 
 def header() -> list[str]:
     return ["| pages | joined (slowest, s) | view lag in the page p50 / max (s) | key to motion p50 / p99 (ms), presses "
-            "| presses that moved nothing in 5 s / releases not stopped in 10 s | console server CPU (cores) | robots lost | refused "
+            "| presses that moved nothing in 5 s / releases not stopped in 10 s | console server CPU (cores) | browsers per page driving, all / renderers (cores); joining (CPU s, median) | robots lost | refused "
             "| pages back at the login (reloads) | server's event loop late p99 / max (ms) | key to server / to zenoh p99 (ms) |",
-            "|---|---|---|---|---|---|---|---|---|---|---|"]
+            "|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
 
 def row(r: dict[str, Any]) -> str:
     return (f"| {r['n']} | {r['joined']} ({r['join_max']:.1f}) | {r['lag_p50']:.2f} / {r['lag_max']:.2f} | "
-            f"{r['key_p50']:.0f} / {r['key_p99']:.0f}, {r['presses']} | {r['missed']} / {r['unstopped']} | {r['cpu']:.2f} | {r['lost']} | "
+            f"{r['key_p50']:.0f} / {r['key_p99']:.0f}, {r['presses']} | {r['missed']} / {r['unstopped']} | {r['cpu']:.2f} | {r['page_cpu']:.2f} / {r['renderer_cpu']:.2f}; {r['join_cpu']:.1f} | {r['lost']} | "
             f"{r['refused']} | {r['logged_out']} ({r['reloads']}) | {r['late_p99']:.0f} / {r['late_max']:.0f} | {r['to_server_p99']:.0f} / {r['to_sent_p99']:.0f} |")
 
 

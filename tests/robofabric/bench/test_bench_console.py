@@ -1,6 +1,6 @@
 """Two browser pages on one console server, each a student driving her own base by holding ←: both
 join, nothing is lost, nothing refused, every key press moves its base, and each page reads the age of what it
-shows. The figures (lag, key to motion, the server's CPU) come from ``robofabric bench console``; this checks
+shows. The figures (lag, key to motion, the server's CPU, the browsers' CPU per page) come from ``robofabric bench console``; this checks
 only what must hold at any speed."""
 
 from __future__ import annotations
@@ -20,3 +20,4 @@ def test_two_pages_drive_their_bases_and_lose_nothing(tmp_path):
     assert r["logged_out"] == 0 and r["reloads"] == 0, r  # no page went back to its login
     assert r["presses"] >= 2 and r["missed"] == 0, r  # each press moved its base
     assert math.isfinite(r["lag_p50"]) and r["lag_p50"] > 0, r  # the pages showed a pose with its stamp
+    assert r["page_cpu"] > 0 and r["join_cpu"] > 0, r  # the pages' own browsers were found and measured
