@@ -81,17 +81,7 @@ def pub(
         refusals: list[str] = []
         refused = threading.Event()
         if is_cmd and wait > 0:
-            from fabric.interfaces import Event, EventKind
-
-            def on_event(_key: str, ev: Event) -> None:
-                # a refusal of this user's command, or of any command for a robot the sim does not have
-                # (refused from the key alone: the sender is not known, and the event names no user)
-                if ev.kind == EventKind.REJECT and (ev.user == parsed.user or (not ev.user and ev.object == parsed.subject)):
-                    refusals.append(ev.reason)
-                    refused.set()
-
-            fab.subscribe(keys.event(fab.world, "reject", parsed.subject), on_event, expected=Event)
-            fab.subscribe(keys.event(fab.world, "reject"), on_event, expected=Event)  # ids the sim has not
+            _listen_for_refusals(fab, parsed, refusals, refused)
         heard = fab.wait_matching(full, 0.5)  # the publisher routes to existing subscribers before the first put
         sent = 0
 
@@ -111,19 +101,40 @@ def pub(
         if is_cmd and wait > 0 and heard:
             refused.wait(wait)  # the sim's refusal, if one comes
         # closing the session sends what is still queued before the link goes (zenoh drains its pipeline)
+    _say_outcome(f"{sent} {msg_type}", full, refusals, waited=wait if is_cmd else 0.0, heard=heard)
+
+
+def _listen_for_refusals(fab: "Fabric", parsed: keys.ParsedKey, refusals: list[str], refused: threading.Event) -> None:
+    """Collect the sim's refusals of this user's command into ``refusals`` and set ``refused`` at the first."""
+    from fabric.interfaces import Event, EventKind
+
+    def on_event(_key: str, ev: Event) -> None:
+        # a refusal of this user's command, or of any command for a robot the sim does not have
+        # (refused from the key alone: the sender is not known, and the event names no user)
+        if ev.kind == EventKind.REJECT and (ev.user == parsed.user or (not ev.user and ev.object == parsed.subject)):
+            refusals.append(ev.reason)
+            refused.set()
+
+    fab.subscribe(keys.event(fab.world, "reject", parsed.subject), on_event, expected=Event)
+    fab.subscribe(keys.event(fab.world, "reject"), on_event, expected=Event)  # ids the sim has not
+
+
+def _say_outcome(what: str, full: str, refusals: list[str], *, waited: float, heard: bool) -> None:
+    """The last line: exit 1 with the sim's reason when it refused, or when no sim listens on a command's
+    key (``waited`` > 0: a command whose answer was awaited); else what was published."""
     if refusals:
-        print(f"refused: {refusals[0]} ({sent} {msg_type} sent on {full})", file=sys.stderr)
+        print(f"refused: {refusals[0]} ({what} sent on {full})", file=sys.stderr)
         raise typer.Exit(1)
-    if is_cmd and wait > 0 and not heard:
-        print(f"no sim listens on {full}: {sent} {msg_type} sent, nobody took it", file=sys.stderr)
+    if waited > 0 and not heard:
+        print(f"no sim listens on {full}: {what} sent, nobody took it", file=sys.stderr)
         raise typer.Exit(1)
-    if is_cmd and wait > 0:
-        print(f"published {sent} {msg_type} on {full}; applied (not refused within {wait:g} s)")
+    if waited > 0:
+        print(f"published {what} on {full}; applied (not refused within {waited:g} s)")
     else:
-        print(f"published {sent} {msg_type} on {full}")
+        print(f"published {what} on {full}")
 
 
-def _parse_pub_key(full: str, user: str | None):
+def _parse_pub_key(full: str, user: str | None) -> keys.ParsedKey:
     """The layout ``full`` matches; a key of none, or a command without its user, is refused before sending."""
     try:
         parsed = keys.parse(full)
