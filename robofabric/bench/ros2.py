@@ -19,7 +19,6 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
-import threading
 import time
 import uuid
 from pathlib import Path
@@ -49,32 +48,38 @@ class _Zenoh:
     def __init__(self, fab: Any, world: str) -> None:
         from fabric import keys
 
-        self.got: dict[tuple[str, str, int], int] = {}
-        self._lock = threading.Lock()
-        # undecoded: the arrival is noted before this process spends anything on the sample (the reference must
-        # not be later than the bridge's own delivery for work of ours)
+        self._arrived: list[tuple[str, int, bytes]] = []  # list.append: one step under the GIL, no lock
+        self.undecodable = 0
+        # undecoded: the arrival is noted and the bytes kept, nothing more, while the window runs (the reference
+        # must not be later than the bridge's own delivery for work of ours, and this process's decoding of 1,300
+        # messages a second would take a share of the cores the bridge and the ROS node need); decoded afterwards
         self.subs = [fab.subscribe_raw(keys.robot_stream_all(world, s), self._on) for s in STREAMS]
 
     def _on(self, sample: Any) -> None:
+        now = time.time_ns()
+        self._arrived.append((str(sample.key_expr), now, sample.payload.to_bytes()))
+
+    def window(self, t0_ns: int, t1_ns: int) -> dict[tuple[str, str, int], int]:
         from fabric.codec import DecodeError, decode
         from user_peer.openfmt.ros2 import sim_time_ns
 
-        now = time.time_ns()
-        parts = str(sample.key_expr).split("/")
-        try:
-            msg = decode(sample.payload.to_bytes())
-        except DecodeError:
-            return
-        with self._lock:
-            self.got[(parts[3], parts[4], sim_time_ns(msg))] = now
+        got: dict[tuple[str, str, int], int] = {}
+        for key, now, payload in list(self._arrived):
+            if not t0_ns <= now <= t1_ns:
+                continue
+            try:
+                msg = decode(payload)
+            except DecodeError:
+                self.undecodable += 1
+                continue
+            parts = key.split("/")
+            got[(parts[3], parts[4], sim_time_ns(msg))] = now
+        return got
 
-    def window(self, t0_ns: int, t1_ns: int) -> dict[tuple[str, str, int], int]:
-        with self._lock:
-            return {k: v for k, v in self.got.items() if t0_ns <= v <= t1_ns}
 
-
-def run_one(robots: int, seconds: float, tmp: Path) -> dict[str, Any]:
-    """One world of ``robots`` bases bridged to ROS 2 for ``seconds``; the row's figures."""
+def run_one(robots: int, seconds: float, tmp: Path, take: str = "raw") -> dict[str, Any]:
+    """One world of ``robots`` bases bridged to ROS 2 for ``seconds``; the row's figures. ``take``: how the ROS
+    node takes a message (:mod:`robofabric.bench.ros2_listen`): ``raw`` bytes, timed as zenoh's are, or ``message``."""
     from robofabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
     from robofabric.bench.shards import spots
 
@@ -97,12 +102,16 @@ def run_one(robots: int, seconds: float, tmp: Path) -> dict[str, Any]:
                                                 "--trace", str(trace_file)), name="bridge", env=env)
         wait_until(lambda: "bridging world" in procs.output(bridge) or bridge.poll() is not None, timeout=60,
                    what="the bridge", seen=lambda: procs.output(bridge)[-1500:])
+        if bridge.poll() is not None:
+            raise RuntimeError(f"the bridge exited ({bridge.returncode}) before bridging: {procs.output(bridge)[-1500:]}")
         with client(world, port, kind="tool", peer_id="probe") as fab:
             z = _Zenoh(fab, world)
             listen = procs.start([sys.executable, "-m", "robofabric.bench.ros2_listen", "--robots", ",".join(ids),
-                                  "--seconds", str(seconds), "--out", str(out_file)], name="listen", env=env)
+                                  "--seconds", str(seconds), "--out", str(out_file), "--take", take], name="listen", env=env)
             wait_until(lambda: "ready" in procs.output(listen) or listen.poll() is not None, timeout=60,
                        what="the ROS node", seen=lambda: procs.output(listen)[-1500:])
+            if listen.poll() is not None:
+                raise RuntimeError(f"the ROS node exited ({listen.returncode}) before it was ready: {procs.output(listen)[-1500:]}")
             t0, cpu0, lcpu0 = time.time_ns(), proc_cpu_s(bridge.pid), proc_cpu_s(listen.pid)
             wait_until(lambda: time.time_ns() >= t0 + int(seconds * 1e9) or listen.poll() is not None, timeout=seconds + 60,
                        what="the measured window")
@@ -116,34 +125,64 @@ def run_one(robots: int, seconds: float, tmp: Path) -> dict[str, Any]:
         bridge_log = procs.output(bridge)[len(summary_out):]
     leaf_to_stream = {v: k for k, v in STREAMS.items()}
     ros: dict[tuple[str, str, int], int] = {}
+    node_gc: list[tuple[int, int, int]] = []
     for line in out_file.read_text().splitlines():
+        if line.startswith("gc "):
+            node_gc.append(tuple(int(x) for x in line.split()[1:]))  # type: ignore[arg-type]
+            continue
         topic, stamp, arrival = line.split()
         _, rid, leaf = topic.split("/")
         ros[(rid, leaf_to_stream[leaf], int(stamp))] = int(arrival)
-    out: dict[str, Any] = {"robots": robots, "seconds": seconds, "cores": (cpu1 - cpu0) / ((t1 - t0) / 1e9),
+    out: dict[str, Any] = {"robots": robots, "seconds": seconds, "take": take, "cores": (cpu1 - cpu0) / ((t1 - t0) / 1e9),
                            "listener_cores": (lcpu1 - lcpu0) / ((t1 - t0) / 1e9), "load": os.getloadavg()[0],
                            "summary": next((ln for ln in bridge_log.splitlines() if "messages published" in ln), "")}
-    bridge_at = _read_trace(trace_file)
+    bridge_at, bridge_gc = _read_trace(trace_file)
     for stream in STREAMS:
         keys_ = [k for k in zen if k[1] == stream]
         added = [(ros[k] - zen[k]) / 1e6 for k in keys_ if k in ros]
         out[stream] = {"zenoh": len(keys_), "lost": sum(1 for k in keys_ if k not in ros),
                        "p50": pct(added, 50), "p99": pct(added, 99), "rate": len(keys_) / max(1e-9, (t1 - t0) / 1e9 - SETTLE_S - TAIL_S),
-                       "split": split([(zen[k], *bridge_at[k], ros[k]) for k in keys_ if k in ros and k in bridge_at])}
+                       "split": split([(zen[k], *bridge_at[k], ros[k]) for k in keys_ if k in ros and k in bridge_at]),
+                       "in_gc": in_gc([(zen[k], ros[k]) for k in keys_ if k in ros], bridge_gc, node_gc)}
+    out["gc"] = {"bridge": gc_stats(bridge_gc, t0, t1), "node": gc_stats(node_gc, t0, t1)}
     return out
 
 
-def _read_trace(path: Path) -> dict[tuple[str, str, int], tuple[int, int]]:
-    """The bridge's ``--trace``: (robot, stream, stamp) -> (entry, published); empty when it wrote none."""
+def _read_trace(path: Path) -> tuple[dict[tuple[str, str, int], tuple[int, int]], list[tuple[int, int, int]]]:
+    """The bridge's ``--trace``: (robot, stream, stamp) -> (entry, published), and its garbage collections
+    (generation, start, end); empty when it wrote none."""
     got: dict[tuple[str, str, int], tuple[int, int]] = {}
+    pauses: list[tuple[int, int, int]] = []
     if not path.exists():
-        return got
+        return got, pauses
     for line in path.read_text().splitlines():
+        if line.startswith("gc "):
+            g, a, b = (int(x) for x in line.split()[1:])
+            pauses.append((g, a, b))
+            continue
         key, stamp, entry, published = line.split()
         parts = key.split("/")
         if len(parts) == 5 and parts[2] == "robot":
             got[(parts[3], parts[4], int(stamp))] = (int(entry), int(published))
-    return got
+    return got, pauses
+
+
+def gc_stats(pauses: list[tuple[int, int, int]], t0: int, t1: int) -> dict[str, float]:
+    """The garbage collections within [t0, t1]: how many, how many full (generation 2), the longest (ms)."""
+    inside = [p for p in pauses if t0 <= p[1] <= t1]
+    return {"n": len(inside), "full": sum(1 for p in inside if p[0] == 2),
+            "max_ms": max(((b - a) / 1e6 for _, a, b in inside), default=0.0)}
+
+
+def in_gc(spans: list[tuple[int, int]], *pauses: list[tuple[int, int, int]], over_ms: float = 1.0) -> float:
+    """The share of the slowest 1% of messages (zenoh arrival, ROS arrival) that were in flight while the bridge or
+    the node collected garbage for longer than ``over_ms`` (NaN when none was measured)."""
+    if not spans:
+        return float("nan")
+    cut = pct([(b - a) for a, b in spans], 99)
+    tail = [(a, b) for a, b in spans if b - a >= cut]
+    long_ = [(a, b) for p in pauses for _, a, b in p if b - a >= over_ms * 1e6]
+    return sum(1 for a, b in tail if any(pa <= b and pb >= a for pa, pb in long_)) / len(tail)
 
 
 SPLIT = ("to bridge", "in bridge", "to ROS node")
@@ -162,24 +201,25 @@ def split(times: list[tuple[int, int, int, int]]) -> dict[str, Any]:
 
 
 def split_header() -> list[str]:
-    return ["| robots | stream | matched | zenoh to bridge p50 / p99 / tail (ms) | in bridge p50 / p99 / tail (ms) | DDS to ROS node p50 / p99 / tail (ms) |",
-            "|---|---|---|---|---|---|"]
+    return ["| robots | ROS node takes | stream | matched | zenoh to bridge p50 / p99 / tail (ms) | in bridge p50 / p99 / tail (ms) | DDS to ROS node p50 / p99 / tail (ms) | tail in a GC pause | GCs bridge / node (full, longest ms) |",
+            "|---|---|---|---|---|---|---|---|---|"]
 
 
 def split_row(r: dict[str, Any]) -> list[str]:
     """Where one run's added latency went, per stream (tail: the part's median over the slowest 1%)."""
     cell = lambda d: f"{d['p50']:.2f} / {d['p99']:.2f} / {d['tail']:.2f}"  # noqa: E731
-    return [f"| {r['robots']} | {s} | {r[s]['split']['n']} | " + " | ".join(cell(r[s]["split"][p]) for p in SPLIT) + " |"
-            for s in STREAMS]
+    gcs = " / ".join(f"{g['n']} ({g['full']}, {g['max_ms']:.1f})" for g in (r["gc"]["bridge"], r["gc"]["node"]))
+    return [f"| {r['robots']} | {r['take']} | {s} | {r[s]['split']['n']} | " + " | ".join(cell(r[s]["split"][p]) for p in SPLIT)
+            + f" | {r[s]['in_gc']:.0%} | {gcs} |" for s in STREAMS]
 
 
 def header() -> list[str]:
-    return ["| robots | stream | msg/s (all robots) | added latency p50 / p99 (ms) | lost / delivered by zenoh | bridge CPU (cores) | ROS node CPU (cores) | load (1 min) |",
-            "|---|---|---|---|---|---|---|---|"]
+    return ["| robots | ROS node takes | stream | msg/s (all robots) | added latency p50 / p99 (ms) | lost / delivered by zenoh | bridge CPU (cores) | ROS node CPU (cores) | load (1 min) |",
+            "|---|---|---|---|---|---|---|---|---|"]
 
 
 def row(r: dict[str, Any]) -> list[str]:
-    return [f"| {r['robots']} | {s} | {r[s]['rate']:.0f} | {r[s]['p50']:.2f} / {r[s]['p99']:.2f} | "
+    return [f"| {r['robots']} | {r['take']} | {s} | {r[s]['rate']:.0f} | {r[s]['p50']:.2f} / {r[s]['p99']:.2f} | "
             f"{r[s]['lost']} / {r[s]['zenoh']} | {r['cores']:.2f} | {r['listener_cores']:.2f} | {r['load']:.1f} |" for s in STREAMS]
 
 
@@ -187,6 +227,7 @@ def command(
     robots: Annotated[str, typer.Option("--robots", help="Comma-separated robot counts (mobile bases with LIDAR).")] = "8",
     seconds: Annotated[float, typer.Option("--seconds", help="Measured window per count.")] = 20.0,
     out: Annotated[Optional[Path], typer.Option("--out", help="Append the markdown table to this file.")] = None,
+    take: Annotated[str, typer.Option("--take", help="How the ROS node takes each message: raw (bytes, timed at arrival as zenoh's are), message (rclpy's message built first), or both in turn (message, then raw) for each count.")] = "raw",
     convert: Annotated[bool, typer.Option("--convert", help="Only the Python cost of one message (decode, build, publish) in this process.")] = False,
 ) -> None:
     """N mobile robots at full rate through the ROS 2 bridge (robofabric ros2) to a plain rclpy node: the latency
@@ -209,18 +250,22 @@ def command(
     counts = [int(x) for x in robots.split(",") if x.strip()]
     if not counts or min(counts) < 1 or seconds <= SETTLE_S + TAIL_S:
         raise typer.BadParameter(f"--robots needs counts >= 1 and --seconds more than {SETTLE_S + TAIL_S:g}")
-    lines = [f"`robofabric bench ros2 --robots {robots} --seconds {seconds:g}` on {machine()}", "", *header()]
+    takes = {"raw": ["raw"], "message": ["message"], "both": ["message", "raw"]}.get(take)
+    if takes is None:
+        raise typer.BadParameter(f"--take is raw, message or both, not {take!r}")
+    lines = [f"`robofabric bench ros2 --robots {robots} --seconds {seconds:g} --take {take}` on {machine()}", "", *header()]
     summaries: list[str] = []
     splits = ["", "Where the added latency went (tail: each part's median over the slowest 1% of messages):", "", *split_header()]
     with tempfile.TemporaryDirectory(prefix="rf-ros2-") as tmp:
         for n in counts:
-            d = Path(tmp) / f"n{n}"
-            d.mkdir()
-            r = run_one(n, seconds, d)
-            lines.extend(row(r))
-            splits.extend(split_row(r))
-            summaries.append(f"{n} robots: bridge said: {r['summary']}")
-            print("\n".join(row(r)), flush=True)
+            for how in takes:
+                d = Path(tmp) / f"n{n}-{how}"
+                d.mkdir()
+                r = run_one(n, seconds, d, how)
+                lines.extend(row(r))
+                splits.extend(split_row(r))
+                summaries.append(f"{n} robots, ROS node takes {how}: bridge said: {r['summary']}")
+                print("\n".join(row(r)), flush=True)
     text = "\n".join([*lines, *splits, "", *summaries]) + "\n"
     print(text)
     append(out, text)

@@ -60,6 +60,7 @@ from user_peer.openfmt.ros2 import SimStamps, ros2_message, ros2_topic, ros_topi
 from user_peer.ros2 import direct
 from user_peer.ros2.commands import joint_targets, trajectory_targets
 from user_peer.ros2.fill import fill, message_class
+from user_peer.ros2.pauses import GcPauses
 from user_peer.ros2.tf import TfOut
 from user_peer.world import World
 
@@ -136,6 +137,7 @@ class Ros2Bridge:
         """With ``trace``: (key, stamp, entry, published) per message published, the times ``time.time_ns()`` at
         the zenoh callback's entry (decoded) and after ``publish`` returned; ``robofabric bench ros2`` splits the
         added latency with them (kept in memory, written by ``write_trace``)."""
+        self.gc_pauses = GcPauses() if trace else None
         self._event_mark = world.event_mark()
         self._subs: list[Any] = []
         self._closed = False
@@ -362,15 +364,20 @@ class Ros2Bridge:
             except Exception:
                 pass
         self._subs.clear()
+        if self.gc_pauses is not None:
+            self.gc_pauses.close()
         try:
             self._timer.cancel()
         except Exception:
             pass
 
     def write_trace(self, path: str) -> None:
-        """The trace (``trace=True``), one line a message: ``KEY STAMP_NS ENTRY_NS PUBLISHED_NS``."""
+        """The trace (``trace=True``), one line a message: ``KEY STAMP_NS ENTRY_NS PUBLISHED_NS``, and one a garbage
+        collection: ``gc GENERATION START_NS END_NS``."""
+        pauses = self.gc_pauses.pauses if self.gc_pauses is not None else []
         with open(path, "w") as f:
             f.writelines(f"{k} {s} {a} {b}\n" for k, s, a, b in list(self.trace or ()))
+            f.writelines(f"gc {g} {a} {b}\n" for g, a, b in list(pauses))
 
     def summary(self) -> str:
         """One line: what went out and what came in."""

@@ -6,7 +6,7 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ros2 extra (ROS 2 Kilted's wheels) is not installed")
 
-from robofabric.bench.ros2 import SPLIT, STREAMS, row, split, split_row, run_one  # noqa: E402
+from robofabric.bench.ros2 import SPLIT, STREAMS, gc_stats, in_gc, row, run_one, split, split_row  # noqa: E402
 
 
 @pytest.mark.slow
@@ -43,3 +43,15 @@ def test_bench_ros2_convert_gives_each_streams_python_cost_per_message():
     assert [r[0] for r in rows] == ["scan", "pose (odom)", "joints"]
     assert all(math.isfinite(v) and v > 0 for r in rows for v in r[1:]), rows
     assert len(table(rows)) == 2 + len(rows)
+
+
+def test_the_tail_in_a_gc_pause_counts_the_slowest_messages_in_flight_during_a_long_collection():
+    ms = 1_000_000
+    spans = [(t * 10 * ms, t * 10 * ms + ms) for t in range(98)] + [(5000 * ms, 5040 * ms), (6000 * ms, 6040 * ms)]
+    # the two slowest (40 ms) are at or above the p99; a 30 ms full collection overlaps the first, a 0.5 ms one the second
+    pauses = [(2, 5010 * ms, 5040 * ms), (0, 6010 * ms, 6010 * ms + ms // 2)]
+    assert in_gc(spans, pauses) == 0.5
+    assert in_gc(spans, [], pauses) == 0.5  # the bridge's or the node's, alike
+    assert in_gc(spans, []) == 0.0
+    assert gc_stats(pauses, 0, 10_000 * ms) == {"n": 2, "full": 1, "max_ms": 30.0}
+    assert gc_stats(pauses, 0, 5000 * ms)["n"] == 0
