@@ -5,8 +5,8 @@ this package: the session (:class:`Fabric`) and its configuration, the key
 layout (:mod:`fabric.keys`), the messages (:mod:`fabric.interfaces`) and their
 codec, limits and fixed-rate loops, the authority stamp and fences, the command
 gate, and the recorder library (:mod:`fabric.recording`). The tools (CLI,
-launch, lab, secure init, replay, benchmarks) live one floor above the peers,
-in :mod:`robofabric` (docs/architecture.md, "The house").
+launch, lab, secure init, replay, benchmarks, the helpers tests share) live one
+floor above the peers, in :mod:`robofabric` (docs/architecture.md, "The house").
 
 The names below are the public API. They load on first use (PEP 562): a module
 that needs only :mod:`fabric.keys` or :mod:`fabric.completion` does not pay for
