@@ -4,13 +4,12 @@ Every button calls the Python user API (``user_peer``) of the page's own world, 
 (``nicegui.run.io_bound``), so a slow answer holds up this page only. Refusals are shown with their
 reason and the robot's owner. A 5 Hz timer redraws what changed; a 10 Hz one refreshes the twist
 while an arrow key is held (the sim's twist is a deadman). The panels are :mod:`.arm_panel` and
-:mod:`.base_panel`; what the view draws is :mod:`.state` and :mod:`.topview`.
+:mod:`.base_panel`, the live view :mod:`.view`; what the view draws is :mod:`.state` and :mod:`.topview`.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import threading
 from typing import TYPE_CHECKING, Any, Callable
 
@@ -18,11 +17,12 @@ import numpy as np
 from nicegui import run, ui
 
 from fabric import keys
-from user_peer.console import state, topview
+from user_peer.console import state
 from user_peer.console.arm_panel import ArmPanel
 from user_peer.console.base_panel import BasePanel
 from user_peer.console.drive import REFRESH_S
 from user_peer.console.login import LoginError, login_config
+from user_peer.console.view import LiveView
 from user_peer.errors import FabricUserError
 
 if TYPE_CHECKING:
@@ -33,9 +33,6 @@ __all__ = ["ConsolePage", "event_line", "KEYS_JS"]
 log = logging.getLogger("robofabric.console")
 
 REFRESH_VIEW_S = 0.2
-
-DRAG_GRAB_PX = 12.0
-"""How near the IK target (image pixels) a press must be to grab it."""
 
 KEYS_JS = """
 for (const type of ['keydown', 'keyup']) document.addEventListener(type, (e) => {
@@ -91,18 +88,15 @@ class ConsolePage:
         self.user = ""
         self.entries: list = []  # every robot of the world (user_peer.services.RobotEntry)
         self.handles: dict[str, Any] = {}  # the robots this page follows in full: those she selected
-        self.poses: dict[str, bytes] = {}  # every robot's latest pose, undecoded (decoded at a redraw)
+        self.view: LiveView | None = None
         self.arm: Any = None
         self.base: Any = None
         self.arm_panel: ArmPanel | None = None
         self.base_panel: BasePanel | None = None
         self.selected: str | None = None
-        self._map_seq: int | None = None
         self._events_seen = 0
         self._gone_seen = 0
         self._owners: dict[str, str] = {}
-        self._drag = False  # the IK target is held by the mouse
-        self._swallow_click = False
 
     # ------------------------------------------------------------------ login
 
@@ -134,13 +128,14 @@ class ConsolePage:
             self.login_btn.enable()
             return
         try:
-            entries, handles, (self.frame, self.boxes) = await run.io_bound(_first_handles, world, name)
+            entries, handles, (frame, boxes) = await run.io_bound(_first_handles, world, name)
         except FabricUserError as exc:  # logged in, but the world did not answer
             self.console.logins.leave(name)
             self.login_msg.text = f"Could not join world {self.console.world}: {exc.reason}"
             self.login_btn.enable()
             return
         self.world, self.user, self.entries, self.handles = world, name, entries, handles
+        self.frame, self.view = frame, LiveView(self, frame, boxes)
         self.client.on_disconnect(self._disconnected)
         self.client.on_delete(self._gone)
         self.root.clear()
@@ -170,7 +165,7 @@ class ConsolePage:
         self.selected = (self.arm or self.base).id if self.handles else None
         # every robot's pose for the view, kept undecoded: a page of a 20-robot class decodes 5 poses a second per
         # robot, not 50 (only the robots she selected are followed in full: joints, scan, path)
-        w.fabric.subscribe_raw(keys.robot_stream_all(w.name, "pose"), self._on_pose)
+        w.fabric.subscribe_raw(keys.robot_stream_all(w.name, "pose"), self.view.on_pose)
         target = next((o for o in info.objects if o.kind == "ik_target"), None)
         goal = next((o for o in info.objects if o.kind == "goal_pointer"), None)
         if self.arm is not None:
@@ -192,18 +187,15 @@ class ConsolePage:
                     if panel is not None:
                         panel.build()
             with ui.column().classes("w-1/2"):
-                self.view = ui.interactive_image(
-                    topview.data_url(topview.png_gray(np.full((self.frame.height, self.frame.width), 230, np.uint8))),
-                    content="", on_mouse=self._mouse, events=["mousedown", "mouseup", "click"], sanitize=False,
-                ).classes("w-full").props('aria-label="Live view: click to place the goal, drag the IK target"')
+                self.view.build()
                 ui.label("Events").classes("text-subtitle1")
                 self.log = ui.log(max_lines=200).classes("w-full h-48")
         ui.on("rf_key", self._key)
         ui.on("rf_blur", self._disconnected)
         ui.run_javascript(KEYS_JS)
-        ui.timer(REFRESH_VIEW_S, self._refresh)
+        ui.timer(REFRESH_VIEW_S, self.refresh)
         ui.timer(REFRESH_S, self._keep_driving)
-        self._refresh()
+        self.refresh()
 
     def _robot_list(self) -> None:
         with ui.card().classes("w-full"):
@@ -248,13 +240,6 @@ class ConsolePage:
             reason += f" (owner: {owner})"
         return reason
 
-    def _on_pose(self, sample: Any) -> None:
-        """(zenoh's thread) keep the latest pose of every robot, undecoded."""
-        try:
-            self.poses[keys.parse(str(sample.key_expr)).subject] = sample.payload.to_bytes()
-        except Exception:  # a key that does not parse: not a robot's pose
-            pass
-
     async def _handle(self, rid: str | None) -> Any:
         """The robot's user-API handle; made (and its streams followed) the first time she selects it."""
         if rid is None:
@@ -274,7 +259,7 @@ class ConsolePage:
         elif r is not None and r.kind == "mobile" and r is not self.base and self.base_panel is not None:
             await self.base_panel.let_go()
             self.base = r
-        self._refresh()
+        self.refresh()
 
     async def _ownership(self, op: str) -> None:
         r = await self._handle(self.selected)
@@ -292,7 +277,7 @@ class ConsolePage:
             out = await self.call(f"queue for {r.id}", self.world.ownership.client.request, r.id, wait=True, timeout=self.world.timeout)
             if out is not self.FAILED:
                 self.say(f"queue for {r.id}: {out}")
-        self._refresh()
+        self.refresh()
 
     async def _key(self, e: Any) -> None:
         if self.base_panel is not None:
@@ -302,28 +287,10 @@ class ConsolePage:
         if self.base_panel is not None:
             await self.base_panel.keep_driving()
 
-    def _mouse(self, e: Any) -> None:
-        """The view's mouse: a press on the IK target and its release elsewhere drag the target there (its height
-        kept; the nudges move it up and down); any other click places the goal."""
-        target = self.arm_panel.target if self.arm_panel is not None else None
-        if e.type == "mousedown":
-            self._drag = target is not None and math.dist(self.frame.px(float(target[0]), float(target[1])),
-                                                          (e.image_x, e.image_y)) <= DRAG_GRAB_PX
-        elif e.type == "mouseup" and self._drag:
-            self._drag, self._swallow_click = False, True
-            x, y = self.frame.world(e.image_x, e.image_y)
-            self.arm_panel.move_target(np.array([x, y, float(target[2])]))
-            self.say(f"IK target dragged to ({x:.3f}, {y:.3f}, {float(target[2]):.3f})")
-            self._refresh()
-        elif e.type == "click":
-            if self._swallow_click:  # the click that ends a drag places no goal
-                self._swallow_click = False
-            elif self.base_panel is not None:
-                self.base_panel.clicked(e)
-
     # ------------------------------------------------------------------ refresh
 
-    def _refresh(self) -> None:
+    def refresh(self) -> None:
+        """Everything the page shows, from what its world holds now (the 5 Hz timer; an action's own answer)."""
         try:
             self._refresh_inner()
         except Exception:
@@ -345,21 +312,8 @@ class ConsolePage:
         for panel in (self.arm_panel, self.base_panel):
             if panel is not None:
                 panel.refresh()
-        self._refresh_view()
+        self.view.refresh()
         self._refresh_events()
-
-    def _refresh_view(self) -> None:
-        w = self.world
-        grid = w.latest.get(keys.map_key(w.name, keys.user_map("map", w.user))) or (self.base_panel.grid if self.base_panel else None) \
-            or w.latest.get(keys.map_key(w.name, "map"))
-        if grid is not None and id(grid) != self._map_seq:
-            self._map_seq = id(grid)
-            self.view.set_source(topview.data_url(topview.grid_png(grid.cells, grid.resolution, grid.origin, self.frame)))
-        target = self.arm_panel.target if self.arm_panel is not None else None
-        self.view.content = state.view_svg(
-            w, self.entries, self.handles, self.poses, self.frame, self.boxes, base_id=self.base.id if self.base else None,
-            selected={self.selected} if self.selected else set(), goal=self.base_panel.goal if self.base_panel else None,
-            target=(float(target[0]), float(target[1])) if target is not None else None)
 
     def _refresh_events(self) -> None:
         w = self.world

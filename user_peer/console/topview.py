@@ -1,7 +1,9 @@
 """The console's live view: the world from above as SVG, and the occupancy map as a PNG under it.
 
 A 2D top view rather than a 3D scene: twenty pages on a 2-core machine's software rendering
-can afford a few hundred SVG shapes each, not twenty WebGL scenes. Pure functions of what a page
+can afford a few hundred SVG shapes each, not twenty WebGL scenes. What never moves (the scene's
+walls and shelves) is drawn into the PNG with the map, once, so the overlay a page redraws holds
+only what moves. Pure functions of what a page
 holds (poses, scans, paths, a map): no session, no clock, no browser, so they are tested alone.
 
 Coordinates: :class:`Frame` maps world metres (x east, y north) to image pixels (x right, y down).
@@ -20,7 +22,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-__all__ = ["Frame", "RobotMark", "svg", "grid_png", "png_gray", "data_url", "frame_around"]
+__all__ = ["Frame", "RobotMark", "svg", "grid_png", "background_png", "png_gray", "data_url", "frame_around"]
 
 PX_PER_M = 40.0
 """Image pixels per metre: a 10 m scene is a 400-pixel picture (the browser scales it to the panel)."""
@@ -163,23 +165,52 @@ def scan_points(x: float, y: float, yaw: float, angle_min: float, angle_incremen
     return np.stack([x + r[hit] * np.cos(a[hit]), y + r[hit] * np.sin(a[hit])], axis=1)
 
 
+UNKNOWN, BOX = 230, 200
+"""Grey levels of the background: unknown or outside the map, and the scene's static boxes."""
+
+
 def grid_png(cells: np.ndarray, resolution: float, origin: Sequence[float], frame: Frame) -> bytes:
     """The occupancy grid resampled onto the frame's pixels (nearest cell) as a grey PNG: free white,
     occupied black, unknown and outside light grey. The grid's own rotation (origin theta) is honoured."""
+    return png_gray(grid_pixels(cells, resolution, origin, frame))
+
+
+def background_png(frame: Frame, boxes: Sequence[tuple[float, float, float, float, float]] = (),
+                   grid: tuple[np.ndarray, float, Sequence[float]] | None = None) -> bytes:
+    """The view's still picture: the map (``grid``: cells, resolution, origin; unknown grey without one) with the
+    scene's static boxes (cx, cy, half x, half y, yaw) in :data:`BOX` grey over it, except where the map saw
+    something darker (an occupied cell stays black). Drawn once per map, not with every redraw of the overlay."""
+    img = grid_pixels(*grid, frame) if grid is not None else np.full((frame.height, frame.width), UNKNOWN, np.uint8)
+    if boxes:
+        X, Y = _pixel_centres(frame)
+        for cx, cy, hx, hy, yaw in boxes:
+            c, s = math.cos(yaw), math.sin(yaw)
+            u, v = c * (X - cx) + s * (Y - cy), -s * (X - cx) + c * (Y - cy)
+            img[(np.abs(u) <= hx) & (np.abs(v) <= hy) & (img > BOX)] = BOX
+    return png_gray(img)
+
+
+def _pixel_centres(frame: Frame) -> tuple[np.ndarray, np.ndarray]:
+    """World (x, y) of every pixel's centre, as two H x W arrays."""
+    px = (np.arange(frame.width) + 0.5) / frame.scale + frame.xmin
+    py = frame.ymax - (np.arange(frame.height) + 0.5) / frame.scale
+    return np.meshgrid(px, py)
+
+
+def grid_pixels(cells: np.ndarray, resolution: float, origin: Sequence[float], frame: Frame) -> np.ndarray:
+    """:func:`grid_png`'s picture as an H x W uint8 array."""
     h, w = frame.height, frame.width
-    px = (np.arange(w) + 0.5) / frame.scale + frame.xmin
-    py = frame.ymax - (np.arange(h) + 0.5) / frame.scale
-    X, Y = np.meshgrid(px, py)
+    X, Y = _pixel_centres(frame)
     ox, oy, th = (float(v) for v in origin)
     c, s = math.cos(th), math.sin(th)
     u, v = c * (X - ox) + s * (Y - oy), -s * (X - ox) + c * (Y - oy)
     col, row = np.floor(u / resolution).astype(int), np.floor(v / resolution).astype(int)
     inside = (row >= 0) & (row < cells.shape[0]) & (col >= 0) & (col < cells.shape[1])
-    img = np.full((h, w), 230, dtype=np.uint8)
+    img = np.full((h, w), UNKNOWN, dtype=np.uint8)
     val = cells[np.clip(row, 0, cells.shape[0] - 1), np.clip(col, 0, cells.shape[1] - 1)]
     known = inside & (val != 255)
     img[known] = (255 - (val[known].astype(np.int32) * 255 // 100)).astype(np.uint8)
-    return png_gray(img)
+    return img
 
 
 def png_gray(img: np.ndarray) -> bytes:

@@ -102,6 +102,27 @@ def test_grid_png_puts_occupied_cells_where_the_frame_shows_them():
     assert img[5, 35] == 230  # outside the map
 
 
+def test_the_background_draws_the_scenes_boxes_once_under_the_map_s_occupied_cells():
+    """The still picture holds the static boxes (turned by their yaw), so the overlay a page redraws need not;
+    an occupied map cell inside a box stays black."""
+    f = Frame(0.0, 0.0, 4.0, 4.0, scale=10.0)
+
+    def at(img, x, y):
+        col, row = f.px(x, y)
+        return img[int(row), int(col)]
+
+    flat = _png_pixels(topview.background_png(f, [(1.0, 1.0, 0.5, 0.2, 0.0)]))
+    assert at(flat, 1.0, 1.0) == at(flat, 1.45, 1.15) == topview.BOX
+    assert at(flat, 1.0, 1.35) == topview.UNKNOWN and at(flat, 3.0, 3.0) == topview.UNKNOWN
+    turned = _png_pixels(topview.background_png(f, [(1.0, 1.0, 0.5, 0.2, np.pi / 2)]))
+    assert at(turned, 1.0, 1.35) == topview.BOX and at(turned, 1.35, 1.0) == topview.UNKNOWN
+    cells = np.zeros((40, 40), dtype=np.uint8)  # the whole frame known free, at 0.1 m
+    cells[10, 10] = 100  # x 1.0..1.1, y 1.0..1.1: inside the box
+    mapped = _png_pixels(topview.background_png(f, [(1.0, 1.0, 0.5, 0.2, 0.0)], (cells, 0.1, (0.0, 0.0, 0.0))))
+    assert at(mapped, 1.05, 1.05) == 0 and at(mapped, 0.75, 1.05) == topview.BOX and at(mapped, 3.0, 3.0) == 255
+    assert "<polygon" not in topview.svg(f, [])  # nothing still is left in the overlay unless asked for
+
+
 def test_arrows_drive_while_held_and_opposites_cancel():
     d = Driver()
     assert d.twist() == (0.0, 0.0)

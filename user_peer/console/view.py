@@ -1,0 +1,92 @@
+"""A page's live view: the world from above (:mod:`.topview`) and its mouse (drag the IK target, click the goal).
+
+Light by design, so that twenty pages fit one 2-core machine's software rendering. Each redraw costs the
+browser a paint of what changed (its GPU process rasters and composites it, in software here), so a page
+redraws only what moves, and only when it moved:
+
+- the scene's walls and shelves and her map are one PNG, drawn by the server once per map (not with every
+  redraw);
+- the SVG overlay holds the robots, the scan, the paths, the target and the goal; NiceGUI sends it only when
+  its text changed, so a still world costs the browser nothing.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from nicegui import ui
+
+from fabric import keys
+from user_peer.console import state, topview
+
+if TYPE_CHECKING:
+    from user_peer.console.page import ConsolePage
+
+__all__ = ["LiveView", "DRAG_GRAB_PX"]
+
+DRAG_GRAB_PX = 12.0
+"""How near the IK target (image pixels) a press must be to grab it."""
+
+
+class LiveView:
+    """The view of one page: its picture, every robot's latest pose, and the mouse on it."""
+
+    def __init__(self, page: "ConsolePage", frame: topview.Frame, boxes: list) -> None:
+        self.page = page
+        self.frame = frame
+        self.boxes = boxes
+        self.poses: dict[str, bytes] = {}  # every robot's latest pose, undecoded (decoded at a redraw)
+        self._map_seq: int | None = None
+        self._drag = False  # the IK target is held by the mouse
+        self._swallow_click = False
+        self.image: Any = None
+
+    def build(self) -> None:
+        self.image = ui.interactive_image(
+            topview.data_url(topview.background_png(self.frame, self.boxes)),
+            content="", on_mouse=self.mouse, events=["mousedown", "mouseup", "click"], sanitize=False,
+        ).classes("w-full").props('aria-label="Live view: click to place the goal, drag the IK target"')
+
+    def on_pose(self, sample: Any) -> None:
+        """(zenoh's thread) keep the latest pose of every robot, undecoded."""
+        try:
+            self.poses[keys.parse(str(sample.key_expr)).subject] = sample.payload.to_bytes()
+        except Exception:  # a key that does not parse: not a robot's pose
+            pass
+
+    def mouse(self, e: Any) -> None:
+        """A press on the IK target and its release elsewhere drag the target there (its height kept; the nudges
+        move it up and down); any other click places the goal."""
+        page = self.page
+        target = page.arm_panel.target if page.arm_panel is not None else None
+        if e.type == "mousedown":
+            self._drag = target is not None and math.dist(self.frame.px(float(target[0]), float(target[1])),
+                                                          (e.image_x, e.image_y)) <= DRAG_GRAB_PX
+        elif e.type == "mouseup" and self._drag:
+            self._drag, self._swallow_click = False, True
+            x, y = self.frame.world(e.image_x, e.image_y)
+            page.arm_panel.move_target(np.array([x, y, float(target[2])]))
+            page.say(f"IK target dragged to ({x:.3f}, {y:.3f}, {float(target[2]):.3f})")
+            page.refresh()
+        elif e.type == "click":
+            if self._swallow_click:  # the click that ends a drag places no goal
+                self._swallow_click = False
+            elif page.base_panel is not None:
+                page.base_panel.clicked(e)
+
+    def refresh(self) -> None:
+        """The picture again when her map changed; the overlay from what the page holds now."""
+        page, w = self.page, self.page.world
+        grid = w.latest.get(keys.map_key(w.name, keys.user_map("map", w.user))) or (page.base_panel.grid if page.base_panel else None) \
+            or w.latest.get(keys.map_key(w.name, "map"))
+        if grid is not None and id(grid) != self._map_seq:
+            self._map_seq = id(grid)
+            png = topview.background_png(self.frame, self.boxes, (grid.cells, grid.resolution, grid.origin))
+            self.image.set_source(topview.data_url(png))
+        target = page.arm_panel.target if page.arm_panel is not None else None
+        self.image.content = state.view_svg(
+            w, page.entries, page.handles, self.poses, self.frame, (), base_id=page.base.id if page.base else None,
+            selected={page.selected} if page.selected else set(), goal=page.base_panel.goal if page.base_panel else None,
+            target=(float(target[0]), float(target[1])) if target is not None else None)
