@@ -16,13 +16,19 @@ from typing import Any
 from user_peer.console.health import PERIOD_S, Health
 from user_peer.console.login import Logins
 
-__all__ = ["Console", "serve", "page_urls", "RECONNECT_S", "PING_INTERVAL_S", "PING_TIMEOUT_S"]
+__all__ = ["Console", "serve", "page_urls", "RECONNECT_S", "PRUNE_S", "PING_INTERVAL_S", "PING_TIMEOUT_S"]
 
 RECONNECT_S = 30.0
 """How long a page whose connection dropped may come back as it was (NiceGUI's reconnect timeout): a busy
 server, a starved browser or a flaky Wi-Fi must not log a student out. After it the page is gone and her grace
 begins. Nothing drives meanwhile: the dropped connection lets go of her keys at once. 10 s was too short for a class on one loaded 2-core box: with 20 pages at
 load 25-38 pages came back after more than 10 s and NiceGUI had forgotten them (back at the login)."""
+
+PRUNE_S = 180.0
+"""How long a page the server served may take to connect its websocket before NiceGUI forgets it (NiceGUI's own
+default is 60 s). On a loaded 2-core box pages took 66-137 s to load their scripts; NiceGUI had pruned them, so
+their first connection failed ('implicit handshake failed') and they reloaded to the login, starting over. A page
+that never connects costs the server its few elements for three minutes."""
 
 PING_INTERVAL_S, PING_TIMEOUT_S = 8.0, 12.0
 """The websocket's heartbeat: a ping every 8 s, answered within 12 s (NiceGUI derives 24 s and 12 s from the 30 s
@@ -92,8 +98,13 @@ def serve(console: Console, host: str, port: int) -> None:
     # a test inherits: this process is a real server either way
     os.environ.pop("PYTEST_CURRENT_TEST", None)
     import asyncio
+    import functools
 
     from nicegui import Client, app, background_tasks, core, ui
+
+    # NiceGUI's app calls Client.prune_instances() every 10 s with its 60 s default and offers no setting: the
+    # threshold is its keyword argument, bound here before ui.run starts the app (which looks the method up then)
+    Client.prune_instances = functools.partial(Client.prune_instances, client_age_threshold=PRUNE_S)
 
     from user_peer.console.page import ConsolePage
 
