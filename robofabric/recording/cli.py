@@ -295,9 +295,9 @@ def _run_with_progress(rp, total: int, loop: bool, stop, quiet: bool):
     """Run the replayer on its thread with a rich progress bar on stderr (messages sent of the recording's)."""
     rp.start()
     if quiet:
-        while not rp.done:
-            if stop.wait(0.2):
-                return rp.stop()
+        while not rp.done and not stop.wait(0.2):
+            pass
+        rp.close()  # ends it when stopped (Ctrl-C), else only undeclares
         return rp.stats
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -307,11 +307,9 @@ def _run_with_progress(rp, total: int, loop: bool, stop, quiet: bool):
         console=Console(stderr=True),
     ) as bar:
         task = bar.add_task("replay", total=None if loop else total)
-        while not rp.done:
-            if stop.wait(0.2):
-                bar.update(task, completed=rp.stats.messages)
-                return rp.stop()
+        while not rp.done and not stop.wait(0.2):
             bar.update(task, completed=rp.stats.messages)
+        rp.close()
         bar.update(task, completed=rp.stats.messages)
     return rp.stats
 

@@ -337,11 +337,6 @@ class Replayer:
             thread.join(timeout)
         self._undeclare()
 
-    def stop(self, timeout: float = 5.0) -> ReplayStats:
-        """``close()``, then the stats (the CLI's progress loop; ``close`` is the lifecycle verb)."""
-        self.close(timeout)
-        return self.stats
-
     def __enter__(self) -> "Replayer":
         return self.start()
 
