@@ -7,7 +7,8 @@ The observer is a client of the router like everyone else: while the router rest
 the authority published before the observer's link was back is never heard (a record is published again at its next
 change; an event is not). Those stretches (:func:`blind`) are named in the summary, and an owner change across
 one is not judged by ``handover`` nor ``queue`` (whose verdicts rest on events and the robot's motion then): it is
-counted as not judged instead.
+counted as not judged instead; and ``reset`` allows a robot across a fail-over the motion it could make while the
+observer was blind.
 
 The wire's view is fenced as every consumer fences it: a record or a joint sample with a lower term than
 one already seen for its object is a stale authority's (a primary that was paused or cut off and has not
@@ -219,12 +220,16 @@ def applied(h: Sequence[Record], lim: Limits) -> list[Violation]:
 
 def reset(h: Sequence[Record], lim: Limits) -> list[Violation]:
     _, joints = fenced(h)
+    windows = blind(h, lim)
     out = []
     for robot, js in joints.items():
         for a, b in zip(js, js[1:]):
             same = a.source == b.source and a.term == b.term
-            # the sim's own time between them, or the observer's when longer: a loaded observer takes samples in bursts
-            allowed = lim.joint_slack + (lim.joint_speed * max(0.0, b.t - a.t, b.s - a.s) if same else 0.0)
+            # the sim's own time between them, or the observer's when longer: a loaded observer takes samples in bursts;
+            # across a fail-over, only what the robot did while the observer was blind (the old sim's last samples and
+            # the new one's first may be lost then)
+            unseen = sum(max(0.0, min(b.t, y) - max(a.t, x)) for x, y in windows)
+            allowed = lim.joint_slack + lim.joint_speed * (max(0.0, b.t - a.t, b.s - a.s) if same else unseen)
             d = _dist(a.q, b.q)
             if d > allowed:
                 how = "between two samples of one sim" if same else f"across the change from {a.source} to {b.source}"

@@ -83,6 +83,15 @@ def test_samples_the_observer_took_in_a_burst_are_judged_on_the_sims_time():
     assert only("reset", [a, b]) == []
 
 
+def test_a_fail_over_the_observer_was_blind_to_allows_the_motion_it_missed_and_no_more():
+    """A router restart hides the old sim's last samples and the new one's first: the robot may have moved at speed
+    for the blind stretch (here 1.5 s: 3 rad/s allows 4.5 rad), and not for the time the observer could see."""
+    far = tuple(x + 1.0 for x in A)
+    assert only("reset", [js(1.0, A), Fault(2, "router", "router", 3), js(3.0, far, source="sim-b", term=2)]) == []
+    (v,) = only("reset", [js(1.0, A), Fault(9, "router", "router", 10), js(10.5, A), js(12, A), js(12.5, far, source="sim-b", term=2)])
+    assert "across the change from sim-a to sim-b" in v.message
+
+
 def test_joints_moving_at_speed_and_a_smooth_fail_over_are_fine():
     h = [js(1.0, A), js(2.0, B), js(4.0, tuple(x + 0.05 for x in B), source="sim-b", term=2)]
     assert only("reset", h) == []
