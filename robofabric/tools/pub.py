@@ -44,8 +44,6 @@ def pub(
     from fabric.interfaces import Command
     from fabric.rate import RateLoop
 
-    from robofabric.declarations import key_type
-
     body = message_from_json(msg_type, data)
     cfg = join.config()
     try:
@@ -57,13 +55,7 @@ def pub(
     n = count if count is not None else (None if rate > 0 else 1)
     # the key is checked before joining: a typo or a wrong type fails at once, and nothing is sent
     full = user_key(resolve_key(key, cfg.world), user)
-    if "*" in full or "$" in full:
-        raise UserError(f"{full!r} is a pattern; pub needs a concrete key")
-    parsed = _parse_pub_key(full, user)
-    declared = key_type(full)
-    if declared is not None and declared != msg_type:
-        what = "commands" if parsed.category == "cmd" else "messages"
-        raise UserError(f"{full} carries {declared} {what}, not {msg_type}; nothing sent")
+    parsed = _parse_pub_key(full, user, msg_type)
     is_cmd = parsed.category == "cmd"
     if is_cmd and not user:
         user = parsed.user  # a key that names its writer (.../by/ann) is that user's command
@@ -134,8 +126,13 @@ def _say_outcome(what: str, full: str, refusals: list[str], *, waited: float, he
         print(f"published {what} on {full}")
 
 
-def _parse_pub_key(full: str, user: str | None) -> keys.ParsedKey:
-    """The layout ``full`` matches; a key of none, or a command without its user, is refused before sending."""
+def _parse_pub_key(full: str, user: str | None, msg_type: str) -> keys.ParsedKey:
+    """The layout ``full`` matches; a pattern, a key of no layout, a command without its user, or a key declared
+    to carry another type than ``msg_type`` is refused before sending."""
+    from robofabric.declarations import key_type
+
+    if "*" in full or "$" in full:
+        raise UserError(f"{full!r} is a pattern; pub needs a concrete key")
     try:
         parsed = keys.parse(full)
     except ValueError as exc:
@@ -146,6 +143,10 @@ def _parse_pub_key(full: str, user: str | None) -> keys.ParsedKey:
         raise UserError(f"{exc}; nothing sent") from None
     if parsed.category == "cmd" and user and parsed.user != user:
         raise UserError(f"{full!r} is {parsed.user}'s command key, not {user}'s") from None
+    declared = key_type(full)
+    if declared is not None and declared != msg_type:
+        what = "commands" if parsed.category == "cmd" else "messages"
+        raise UserError(f"{full} carries {declared} {what}, not {msg_type}; nothing sent")
     return parsed
 
 
