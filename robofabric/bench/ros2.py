@@ -113,9 +113,11 @@ def run_one(robots: int, seconds: float, tmp: Path, take: str = "raw") -> dict[s
             if listen.poll() is not None:
                 raise RuntimeError(f"the ROS node exited ({listen.returncode}) before it was ready: {procs.output(listen)[-1500:]}")
             t0, cpu0, lcpu0 = time.time_ns(), proc_cpu_s(bridge.pid), proc_cpu_s(listen.pid)
+            rest0 = [proc_cpu_s(sim.pid), proc_cpu_s(router.pid), time.process_time()]
             wait_until(lambda: time.time_ns() >= t0 + int(seconds * 1e9) or listen.poll() is not None, timeout=seconds + 60,
                        what="the measured window")
             t1, cpu1, lcpu1 = time.time_ns(), proc_cpu_s(bridge.pid), proc_cpu_s(listen.pid)
+            rest1 = [proc_cpu_s(sim.pid), proc_cpu_s(router.pid), time.process_time()]
             listen.wait(timeout=60)
             zen = z.window(t0 + int(SETTLE_S * 1e9), t1 - int(TAIL_S * 1e9))
         summary_out = procs.output(bridge)
@@ -135,6 +137,8 @@ def run_one(robots: int, seconds: float, tmp: Path, take: str = "raw") -> dict[s
         ros[(rid, leaf_to_stream[leaf], int(stamp))] = int(arrival)
     out: dict[str, Any] = {"robots": robots, "seconds": seconds, "take": take, "cores": (cpu1 - cpu0) / ((t1 - t0) / 1e9),
                            "listener_cores": (lcpu1 - lcpu0) / ((t1 - t0) / 1e9), "load": os.getloadavg()[0],
+                           # the rest of the benchmark's own processes: what it takes of the machine's cores itself
+                           "sim_router_bench_cores": [(b - a) / ((t1 - t0) / 1e9) for a, b in zip(rest0, rest1)],
                            "summary": next((ln for ln in bridge_log.splitlines() if "messages published" in ln), "")}
     bridge_at, bridge_gc = _read_trace(trace_file)
     for stream in STREAMS:
@@ -264,7 +268,8 @@ def command(
                 r = run_one(n, seconds, d, how)
                 lines.extend(row(r))
                 splits.extend(split_row(r))
-                summaries.append(f"{n} robots, ROS node takes {how}: bridge said: {r['summary']}")
+                summaries.append(f"{n} robots, ROS node takes {how}: the sim, router and this process used "
+                             + " / ".join(f"{c:.2f}" for c in r["sim_router_bench_cores"]) + f" cores; bridge said: {r['summary']}")
                 print("\n".join(row(r)), flush=True)
     text = "\n".join([*lines, *splits, "", *summaries]) + "\n"
     print(text)

@@ -47,6 +47,7 @@ from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.type_support import check_for_type_support
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, LaserScan
 from trajectory_msgs.msg import JointTrajectory
@@ -142,6 +143,11 @@ class Ros2Bridge:
         self._subs: list[Any] = []
         self._closed = False
         self._clock_pub = node.create_publisher(Clock, "/clock", RELIABLE)
+        # each type's support is imported now, not by the first publisher of that type: that import (the first
+        # JointState publisher took 80 ms here, load 17) ran in a zenoh callback under the lock every other
+        # stream's first message waits for (a 350 ms stall of all the bridge's callbacks at its start, load 15)
+        for cls in {cls for cls, _ in _TYPES.values()}:
+            check_for_type_support(cls)
         self.tf = TfOut(node, RobotCatalog(None), namespace=namespace, message=tf_message)
         w = world.name
         fab = world.fabric
