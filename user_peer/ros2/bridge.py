@@ -30,7 +30,11 @@ stream that stops, stops the base, as a ROS user expects of ``cmd_vel``.
 
 Threads: zenoh's callbacks convert and publish (rclpy publishers may be used from any thread), with no lock
 per message (a lock guards the creation of publishers, another /clock's order when the sim time moves on);
-the rclpy executor runs the command callbacks and a 1 s timer that follows the world's robots.
+the rclpy executor runs the command callbacks and a 1 s timer that follows the world's robots. Each
+subscription's callbacks run in a Python thread of their own (zenoh's default), one per frequent stream: one
+thread for all of them was tried and fell further behind on a loaded machine, where the scheduler shares the
+cores per thread (docs/ros2.md, "Where the tail comes from"). Nothing slow runs in those callbacks: the message
+types' support is imported at start, not by a stream's first publisher.
 """
 
 from __future__ import annotations
