@@ -152,6 +152,8 @@ class ConsolePage:
         """The tab closed (or lost its connection for good): her robots stop, her world closes after the grace."""
         if self.base_panel is not None:
             self.base_panel.driver.stop()
+        if self.view is not None:
+            self.view.close()
         if self.world is not None:  # stopping her robots waits on the network: never on the pages' event loop
             threading.Thread(target=self.console.logins.leave, args=(self.user,), name=f"console-leave-{self.user}", daemon=True).start()
 

@@ -15,6 +15,7 @@ from typing import Any
 
 from user_peer.console.health import PERIOD_S, Health
 from user_peer.console.login import Logins
+from user_peer.console.pictures import ROUTE, Pictures
 
 __all__ = ["Console", "serve", "page_urls", "RECONNECT_S", "PRUNE_S", "PING_INTERVAL_S", "PING_TIMEOUT_S"]
 
@@ -50,6 +51,7 @@ class Console:
     join_timeout: float = 10.0
     logins: Logins = field(init=False)
     health: Health = field(init=False, default_factory=Health)
+    pictures: Pictures = field(init=False, default_factory=Pictures)
 
     def __post_init__(self) -> None:
         self.logins = Logins(self._open, grace=self.grace, on_leave=stop_robots)
@@ -108,9 +110,18 @@ def serve(console: Console, host: str, port: int) -> None:
 
     from user_peer.console.page import ConsolePage
 
+    from fastapi import Response
+
     @ui.page("/")
     def index(client: Any) -> None:
         ConsolePage(console, client).show()
+
+    @app.get(ROUTE + "/{token}.png")
+    def picture(token: str) -> Response:
+        png = console.pictures.get(token)
+        if png is None:
+            return Response(status_code=404)
+        return Response(png, media_type="image/png", headers={"Cache-Control": "private, max-age=3600"})
 
     async def report() -> None:
         while True:

@@ -5,7 +5,8 @@ browser a paint of what changed (its GPU process rasters and composites it, in s
 redraws only what moves, and only when it moved:
 
 - the scene's walls and shelves and her map are one PNG, drawn by the server once per map (not with every
-  redraw);
+  redraw) and fetched by URL (:mod:`.pictures`: NiceGUI resends every property of an element it updates, and a
+  data: URL would ride along with each redraw);
 - the SVG overlay holds the robots, the scan, the paths, the target and the goal; NiceGUI sends it only when
   its text changed, so a still world costs the browser nothing.
 """
@@ -42,10 +43,11 @@ class LiveView:
         self._drag = False  # the IK target is held by the mouse
         self._swallow_click = False
         self.image: Any = None
+        self.token = page.console.pictures.new_token()
 
     def build(self) -> None:
         self.image = ui.interactive_image(
-            topview.data_url(topview.background_png(self.frame, self.boxes)),
+            self.page.console.pictures.put(self.token, topview.background_png(self.frame, self.boxes)),
             content="", on_mouse=self.mouse, events=["mousedown", "mouseup", "click"], sanitize=False,
         ).classes("w-full").props('aria-label="Live view: click to place the goal, drag the IK target"')
 
@@ -76,6 +78,10 @@ class LiveView:
             elif page.base_panel is not None:
                 page.base_panel.clicked(e)
 
+    def close(self) -> None:
+        """The page went away: its picture is no longer served."""
+        self.page.console.pictures.drop(self.token)
+
     def refresh(self) -> None:
         """The picture again when her map changed; the overlay from what the page holds now."""
         page, w = self.page, self.page.world
@@ -84,7 +90,7 @@ class LiveView:
         if grid is not None and id(grid) != self._map_seq:
             self._map_seq = id(grid)
             png = topview.background_png(self.frame, self.boxes, (grid.cells, grid.resolution, grid.origin))
-            self.image.set_source(topview.data_url(png))
+            self.image.set_source(page.console.pictures.put(self.token, png))
         target = page.arm_panel.target if page.arm_panel is not None else None
         self.image.content = state.view_svg(
             w, page.entries, page.handles, self.poses, self.frame, (), base_id=page.base.id if page.base else None,

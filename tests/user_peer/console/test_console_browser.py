@@ -244,7 +244,9 @@ def test_dragging_the_ik_target_on_the_view_moves_it_and_the_arm_is_drawn_link_b
     seen = klass.carol.object("target")
     before = target_label(bob)  # where the page has it (the scene's, or where test A left it)
     view = bob.get_by_label(re.compile("^Live view"))
-    natural = bob.evaluate("() => document.querySelector('img').naturalWidth")
+    natural_js = "() => document.querySelector('img').naturalWidth"
+    wait_until(lambda: bob.evaluate(natural_js) > 0, timeout=10, what="the view's picture, fetched from the console")
+    natural = bob.evaluate(natural_js)
     m_per_screen_px = natural / view.bounding_box()["width"] / PX_PER_M
     x0, y0 = _center(bob, target_svg)
     dx, dy = 60, -40  # screen pixels: right and up, so +x and +y in the world

@@ -123,6 +123,23 @@ def test_the_background_draws_the_scenes_boxes_once_under_the_map_s_occupied_cel
     assert "<polygon" not in topview.svg(f, [])  # nothing still is left in the overlay unless asked for
 
 
+def test_pictures_are_served_by_a_new_url_for_each_picture_and_are_bounded():
+    """A page's picture has a URL a page cannot guess for another's, a new one with each new picture (the browser
+    never shows a stale map), and the store forgets the oldest page past its limit."""
+    from user_peer.console.pictures import ROUTE, Pictures
+
+    pics = Pictures(limit=2)
+    a, b = pics.new_token(), pics.new_token()
+    assert a != b and len(a) >= 16
+    first, second = pics.put(a, b"one"), pics.put(a, b"two")
+    assert first.startswith(f"{ROUTE}/{a}.png?v=") and first != second and pics.get(a) == b"two"
+    pics.put(b, b"bee")
+    pics.put("c", b"sea")  # a third page: the oldest picture (a's) goes
+    assert pics.get(a) is None and pics.get(b) == b"bee" and len(pics) == 2
+    pics.drop(b)
+    assert pics.get(b) is None
+
+
 def test_arrows_drive_while_held_and_opposites_cancel():
     d = Driver()
     assert d.twist() == (0.0, 0.0)
