@@ -19,6 +19,11 @@ in place, each page refreshing its twist. Then, page after page, for ``--seconds
 
 Pages, sim and console share this machine (and the chromium processes are the largest load): the figures are
 the whole class on one box, not the server alone.
+
+Chromium composites the pages as it chooses on this machine (no GPU: in software), since the console's page
+draws no WebGL. ``--swiftshader`` forces its compositing through SwiftShader's software GL instead (the flags the
+Rerun web viewer's benchmark needs for WebGL): every repaint then costs the GPU process ~20 ms of CPU for a
+1280 x 1350 page, whatever changed, about 0.1 core per page that changes five times a second.
 """
 
 from __future__ import annotations
@@ -136,13 +141,20 @@ def _join(page: Any, url: str, i: int) -> list[float]:
     return steps
 
 
-def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
+def browser_args(swiftshader: bool) -> list[str]:
+    """Chromium's flags: the viewer benchmark's, less its forced SwiftShader GL unless ``swiftshader``."""
+    from robofabric.bench.viewer_web import CHROMIUM_ARGS
+
+    return list(CHROMIUM_ARGS) if swiftshader else [a for a in CHROMIUM_ARGS if "swiftshader" not in a]
+
+
+def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False) -> dict[str, Any]:
     """N pages on one console; the row's figures."""
     from playwright.sync_api import sync_playwright
 
     from fabric.interfaces import Pose
     from robofabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
-    from robofabric.bench.viewer_web import CHROMIUM, CHROMIUM_ARGS
+    from robofabric.bench.viewer_web import CHROMIUM
     from user_peer.console.health import parse_line
 
     world = f"con{uuid.uuid4().hex[:6]}"
@@ -172,7 +184,7 @@ def run_one(n: int, seconds: float, tmp: Path) -> dict[str, Any]:
         with client(world, port, kind="tool", peer_id="probe") as fab, sync_playwright() as p:
             wait_until(lambda: fab.live_peers("sim"), timeout=120, what="the sim", seen=lambda: procs.output(sim)[-1500:])
             fab.subscribe(f"rf/{world}/robot/*/pose", on_pose)
-            browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+            browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=browser_args(swiftshader))
             pages, joined, join_cpu, bases = [], [], [], []  # bases[k]: the base (and student) of pages[k]
             reloads: list[str] = []  # NiceGUI's own words when a page reloads itself (connection timed out, ...)
             try:
@@ -263,6 +275,8 @@ def command(
     pages: Annotated[str, typer.Option("--pages", help="Comma-separated page counts (each page: one student, one base).")] = "1,10,20",
     seconds: Annotated[float, typer.Option("--seconds", help="How long the pages drive while measured (s).")] = 30.0,
     out: Annotated[Optional[Path], typer.Option("--out", help="Append the markdown table to this file.")] = None,
+    swiftshader: Annotated[bool, typer.Option("--swiftshader", help="Composite the pages through SwiftShader's software GL "
+                                              "(forced, as the Rerun viewer's benchmark does), not as Chromium chooses.")] = False,
 ) -> None:
     """N browser pages on one console server, each driving its own base: view lag in the page, key to motion,
     the server's CPU, robots lost."""
@@ -277,12 +291,13 @@ def command(
     if not counts or min(counts) < 1 or seconds <= 0:
         raise UserError("--pages: each count at least 1; --seconds positive")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    lines = [f"robofabric bench console --pages {pages} --seconds {seconds:g} on {machine()}, load average {load:.1f} at the start",
+    flag = " --swiftshader" if swiftshader else ""
+    lines = [f"robofabric bench console --pages {pages} --seconds {seconds:g}{flag} on {machine()}, load average {load:.1f} at the start",
              "", *header()]
     print("\n".join(lines), flush=True)
     with tempfile.TemporaryDirectory(prefix="bench-console-") as tmp:
         for n in counts:
-            line = row(run_one(n, seconds, Path(tmp)))
+            line = row(run_one(n, seconds, Path(tmp), swiftshader=swiftshader))
             print(line, flush=True)
             lines.append(line)
     append(out, "\n".join(lines))
