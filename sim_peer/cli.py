@@ -101,6 +101,9 @@ def sim(
     from fabric.extras import require
 
     require("sim", "sim")  # a student's install has no MuJoCo: one line naming the extra
+    from sim_peer.heap import limit_arenas
+
+    limit_arenas()  # before any session's threads: what they free is reused, not kept per thread (sim_peer.heap)
     from fabric.session import shutdown_event
     from sim_peer.world import SimWorld
     from sim_peer.world import WorldError

@@ -50,6 +50,7 @@ from sim_peer import capture
 from sim_peer.adoption import ObjectAdoption
 from sim_peer.following import POLL_S, Follower
 from sim_peer.freeze_guard import FreezeGuard
+from sim_peer.heap import HeapTrimmer
 from sim_peer.moving import MoveService
 from sim_peer.peer import SimPeer
 from sim_peer.roles import Roles
@@ -311,14 +312,15 @@ def run_replicated(
     term, leader = 0, ""
     last: WorldState | None = None
     host = None
-    while not stop.is_set():
-        with open_fabric() as fab:
-            host = ReplicaHost(fab, make_world(), make_gate, standby=standby, rates=rates, speed=speed, term=term, leader=leader,
-                               snapshot=last, announce=announce, objects=objects, rebuild=rebuild)
-            role = host.run(stop, duration)
-            term, leader, objects = host.election.term, host.election.leader, host.objects
-            last = host.last_state
-        if role != el.STANDBY or stop.is_set():
-            return host
-        standby = True
+    with HeapTrimmer():  # what zenoh's threads free through its hours of faults goes back (sim_peer.heap)
+        while not stop.is_set():
+            with open_fabric() as fab:
+                host = ReplicaHost(fab, make_world(), make_gate, standby=standby, rates=rates, speed=speed, term=term,
+                                   leader=leader, snapshot=last, announce=announce, objects=objects, rebuild=rebuild)
+                role = host.run(stop, duration)
+                term, leader, objects = host.election.term, host.election.leader, host.objects
+                last = host.last_state
+            if role != el.STANDBY or stop.is_set():
+                return host
+            standby = True
     return host
