@@ -46,7 +46,7 @@ def command(
     from robofabric.soak.run import SoakConfig, fault_counts, memory_series, run_soak
 
     if recheck is not None:
-        _recheck(recheck)
+        _recheck(recheck, out)
         return
     if minutes <= 0 or students < 2:
         raise UserError("--minutes must be positive and --students at least 2 (each queues for a neighbour's arm)")
@@ -96,11 +96,13 @@ def command(
         raise typer.Exit(1)
 
 
-def _recheck(folder: Path) -> None:
-    """The checker on a kept history (``wire.jsonl`` and ``soak.jsonl``): violations, then the summary lines."""
+def _recheck(folder: Path, out: Path | None = None) -> None:
+    """The checker on a kept history (``wire.jsonl`` and ``soak.jsonl``): violations, then the summary lines;
+    ``out``: the figures as a run writes them, the violations today's checker finds (what the plot's title counts)."""
     from fabric.cli_common import UserError
     from robofabric.soak import checker
-    from robofabric.soak.history import read
+    from robofabric.soak.history import Mark, read
+    from robofabric.soak.run import fault_counts, memory_series
 
     paths = [folder / "wire.jsonl", folder / "soak.jsonl"]
     if not all(p.exists() for p in paths):
@@ -113,8 +115,18 @@ def _recheck(folder: Path) -> None:
         print(f"... and {len(violations) - SHOWN} more violations", flush=True)
     for line in bad[:5]:
         print(f"unreadable history line: {line}", flush=True)
-    for line in checker.summary(history, violations):
+    summary = checker.summary(history, violations)
+    for line in summary:
         print(line, flush=True)
+    if out is not None:
+        marks = {r.what: r for r in history if isinstance(r, Mark)}
+        began, ended = marks.get("class", marks.get("start")), marks.get("end")
+        minutes = (ended.t - began.t) / 60.0 if began is not None and ended is not None else 0.0
+        out.write_text(json.dumps({
+            "minutes": round(minutes, 1), "recheck": str(folder), "start": marks["start"].detail if "start" in marks else "",
+            "faults": fault_counts(history), "violations": [str(v) for v in violations], "summary": list(summary),
+            "memory_mb": memory_series(history),
+        }, indent=1))
     if violations:
         raise typer.Exit(1)
 

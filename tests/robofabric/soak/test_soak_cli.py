@@ -3,13 +3,14 @@ each violation with its excerpt, the three summary lines, exit 1 when there is a
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from robofabric.soak.history import Fault, Mark, OwnRec, Writer
+from robofabric.soak.history import Fault, Mark, OwnRec, ProcSample, Writer
 
 pytestmark = pytest.mark.slow  # a robofabric process each
 
@@ -28,6 +29,8 @@ def _history(folder: Path, owners: tuple[str, str]) -> Path:
     with Writer(folder / "soak.jsonl") as w:
         w.write(Mark(0.5, "start"))
         w.write(Fault(1.5, "pause", "sim-b", 2.5, "1.0 s"))
+        w.write(ProcSample(1.6, "sim-a", 42, 95.0, 18, 15, 300))
+        w.write(Mark(181.5, "end", "1 faults"))
     return folder
 
 
@@ -45,6 +48,19 @@ def test_recheck_prints_the_violation_its_excerpt_and_the_summary(tmp_path):
     assert lines[0] == "VIOLATION owners: arm0 has two owners at epoch 3: ann and bob"
     assert lines[1].strip().startswith("t=1.000 record arm0: owner=ann epoch=3")
     assert lines[-3:] == ["faults: 1", "fault kinds: 1 (pause 1)", "violations: 1 (owners 1)"]
+
+
+def test_recheck_writes_the_figures_with_the_violations_it_found_now(tmp_path):
+    """--recheck --out: the document a run writes (what the plot draws), its violations today's checker's."""
+    out = tmp_path / "again.json"
+    res = soak("--recheck", str(_history(tmp_path, ("ann", "bob"))), "--out", str(out))
+    assert res.returncode == 1, res.stdout + res.stderr
+    doc = json.loads(out.read_text())
+    assert doc["violations"] == ["VIOLATION owners: arm0 has two owners at epoch 3: ann and bob\n"
+                                 + "\n".join(res.stdout.splitlines()[1:3])], doc["violations"]
+    assert doc["faults"] == {"pause": 1} and doc["minutes"] == 3.0
+    assert doc["memory_mb"] == {"sim-a": [[0.0, 95.0]]}
+    assert doc["summary"][-1] == "violations: 1 (owners 1)"
 
 
 def test_recheck_of_a_clean_history_exits_0(tmp_path):
