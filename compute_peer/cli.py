@@ -39,6 +39,7 @@ def compute(
 
     require("compute", "compute")  # a student's install has no Pinocchio, CasADi, OMPL: one line naming the extra
     from compute_peer.peer import ComputeOptions, ComputePeer, parse_arms, parse_streams
+    from fabric.heap import HeapTrimmer, limit_arenas
     from fabric.session import shutdown_event
 
     if not (kinematics or navigation):
@@ -61,6 +62,7 @@ def compute(
         raise UserError("--stream needs kinematics (drop --no-kinematics)")
     cfg = join.config()
     stop = shutdown_event()
+    limit_arenas()  # before the session's threads: what they free through hours of faults goes back (fabric.heap)
     fab = join.open("compute", cfg)
     options = ComputeOptions(kinematics, navigation, streams, stream_rate, maps_dir, mapping, arms=arms)
     with fab, ComputePeer(fab, options) as peer:
@@ -72,7 +74,8 @@ def compute(
             f"IK streams {streaming}; Ctrl-C to stop",
             flush=True,
         )
-        peer.run(stop, duration)
+        with HeapTrimmer():
+            peer.run(stop, duration)
         counts = ", ".join(f"{k} {v}" for k, v in peer.counters().items() if v)
         print(f"compute stopped: {counts or 'no requests'}", flush=True)
 

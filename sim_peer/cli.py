@@ -101,9 +101,9 @@ def sim(
     from fabric.extras import require
 
     require("sim", "sim")  # a student's install has no MuJoCo: one line naming the extra
-    from sim_peer.heap import limit_arenas
+    from fabric.heap import limit_arenas
 
-    limit_arenas()  # before any session's threads: what they free is reused, not kept per thread (sim_peer.heap)
+    limit_arenas()  # before any session's threads: what they free is reused, not kept per thread (fabric.heap)
     from fabric.session import shutdown_event
     from sim_peer.world import SimWorld
     from sim_peer.world import WorldError

@@ -41,6 +41,7 @@ from typing import Any, Callable
 
 from fabric import keys
 from fabric.gate import CommandGate
+from fabric.heap import HeapTrimmer
 from fabric.interfaces import Event, Header, ServiceError, WorldState
 from fabric.session import Fabric
 from robots.description import SceneRobot
@@ -50,7 +51,6 @@ from sim_peer import capture
 from sim_peer.adoption import ObjectAdoption
 from sim_peer.following import POLL_S, Follower
 from sim_peer.freeze_guard import FreezeGuard
-from sim_peer.heap import HeapTrimmer
 from sim_peer.moving import MoveService
 from sim_peer.peer import SimPeer
 from sim_peer.roles import Roles
@@ -312,7 +312,7 @@ def run_replicated(
     term, leader = 0, ""
     last: WorldState | None = None
     host = None
-    with HeapTrimmer():  # what zenoh's threads free through its hours of faults goes back (sim_peer.heap)
+    with HeapTrimmer():  # what zenoh's threads free through its hours of faults goes back (fabric.heap)
         while not stop.is_set():
             with open_fabric() as fab:
                 host = ReplicaHost(fab, make_world(), make_gate, standby=standby, rates=rates, speed=speed, term=term,

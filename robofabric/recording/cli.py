@@ -85,7 +85,10 @@ def record(
     if to is not None:
         _record_as(to, output, exprs, duration, quiet, scene, cfg, join, stop, tty)
         return
-    with join.open("recorder", cfg) as fab:
+    from fabric.heap import HeapTrimmer, limit_arenas
+
+    limit_arenas()  # before the session's threads: what they free through hours of recording goes back (fabric.heap)
+    with join.open("recorder", cfg) as fab, HeapTrimmer():
         try:
             rec = Recorder(
                 fab, output, exprs, liveliness=liveliness, compression=compression,

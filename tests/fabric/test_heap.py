@@ -1,10 +1,9 @@
-"""sim_peer.heap: a sim gives back to the system the native memory its threads freed.
+"""fabric.heap: a long-lived peer gives back to the system the native memory its threads freed.
 
 - ``trim()`` returns the pages of freed chunks that glibc kept in the arenas of the threads that freed them
   (a process of its own: the arenas and the resident size are the whole process's).
 - ``limit_arenas()`` sets glibc's cap.
 - A :class:`HeapTrimmer` trims every period until it is closed, and a trim that raises does not stop it.
-- A replicated sim (``run_replicated``, what ``robofabric sim`` runs) trims its heap for as long as it runs.
 """
 
 from __future__ import annotations
@@ -14,16 +13,12 @@ import subprocess
 import sys
 import threading
 
-import pytest
-
-from robofabric.testing import client, wait_until
-from sim_peer.heap import HeapTrimmer
-from sim_peer.replica_host import run_replicated
-from sim_peer.world import SimWorld
+from fabric.heap import HeapTrimmer
+from robofabric.testing import wait_until
 
 _FREED_BY_THREADS = r"""
 import json, threading
-from sim_peer import heap
+from fabric import heap
 
 def rss_mb():
     return int([l for l in open("/proc/self/status") if l.startswith("VmRSS")][0].split()[1]) / 1024
@@ -68,31 +63,5 @@ def test_the_trimmer_trims_every_period_until_closed():
     with trimmer_thread:
         wait_until(lambda: len(calls) >= 4, timeout=10, what="four trims", seen=lambda: len(calls))
     done = len(calls)
-    assert not any(t.name == "sim-heap-trim" and t.is_alive() for t in threading.enumerate())
+    assert not any(t.name == "heap-trim" and t.is_alive() for t in threading.enumerate())
     assert len(calls) == done  # closed: no trim after
-
-
-def _trimming() -> bool:
-    return any(t.name == "sim-heap-trim" and t.is_alive() for t in threading.enumerate())
-
-
-@pytest.mark.slow  # a router and a sim: seconds
-def test_a_replicated_sim_trims_its_heap_while_it_runs(world, router):
-    from fabric.gate import OpenGate
-
-    assert not _trimming()
-    stop = threading.Event()
-    hosts: list = []
-    thread = threading.Thread(
-        target=lambda: hosts.append(run_replicated(lambda: client(world, router[1], kind="sim", peer_id="sim-a"),
-                                                   lambda: SimWorld("combined", seed=1), lambda f, w, r, objects=True: OpenGate(),
-                                                   stop, standby=False)),
-        daemon=True)
-    thread.start()
-    try:
-        wait_until(_trimming, timeout=30, what="the sim's heap trimmer running")
-    finally:
-        stop.set()
-        thread.join(30)
-    assert not thread.is_alive() and hosts
-    assert not _trimming()  # stopped with the sim

@@ -1,4 +1,4 @@
-"""The sim process's native heap: give back to the system what zenoh's threads freed.
+"""A long-lived peer's native heap: give back to the system what zenoh's threads freed.
 
 The 60-minute soak saw a sim's resident memory grow 43-90 MB/h while its Python objects stayed flat
 (tracemalloc and ``gc`` counted nothing new). The growth came in steps of 1-7 MB, each at a router restart,
@@ -6,11 +6,13 @@ mostly while the sim was a standby (its 20 state queries a second and the stream
 link drops): zenoh's native threads allocate and free their buffers through glibc's malloc, and glibc keeps
 freed chunks in the arena of the thread that freed them instead of returning the pages. Nothing leaked
 (``malloc_trim`` gives the memory back), but a process that lives through a class's hours of faults must
-not look like it leaks, nor take more of a student's laptop by the hour.
+not look like it leaks, nor take more of a student's laptop by the hour. Every peer's session has those
+threads; the sims showed it most, and the compute peer and the recorder grew too (12-36 MB/h in the soaks).
 
-So a sim caps glibc's arenas (:func:`limit_arenas`: freed memory is reused by the next thread that
-allocates rather than kept per thread) and trims its heap now and then (:class:`HeapTrimmer`). Both
-are no-ops where the C library is not glibc (musl, macOS): they report that they did nothing.
+So a long-lived peer (``robofabric sim``, ``compute``, ``record``) caps glibc's arenas (:func:`limit_arenas`:
+freed memory is reused by the next thread that allocates rather than kept per thread) and trims its heap now
+and then (:class:`HeapTrimmer`). Both are no-ops where the C library is not glibc (musl, macOS): they report
+that they did nothing.
 """
 
 from __future__ import annotations
@@ -21,15 +23,15 @@ import logging
 import threading
 from typing import Callable
 
-log = logging.getLogger("robofabric.sim")
+log = logging.getLogger("robofabric")
 
 __all__ = ["ARENAS", "TRIM_EVERY_S", "HeapTrimmer", "limit_arenas", "trim"]
 
 ARENAS = 2
-"""glibc's arenas a sim may have (its default: 8 per core). Two: the main thread's and one the others share."""
+"""glibc's arenas a peer may have (its default: 8 per core). Two: the main thread's and one the others share."""
 
 TRIM_EVERY_S = 30.0
-"""How often a sim trims its heap: a trim of a ~100 MB heap takes a millisecond or two."""
+"""How often a peer trims its heap: a trim of a ~100 MB heap takes a millisecond or two."""
 
 _M_ARENA_MAX = -8  # glibc's malloc.h
 
@@ -70,7 +72,7 @@ class HeapTrimmer:
 
     def start(self) -> "HeapTrimmer":
         if self._thread is None:
-            self._thread = threading.Thread(target=self._run, name="sim-heap-trim", daemon=True)
+            self._thread = threading.Thread(target=self._run, name="heap-trim", daemon=True)
             self._thread.start()
         return self
 
@@ -79,7 +81,7 @@ class HeapTrimmer:
             try:
                 self.trimmer()
                 self.trims += 1
-            except Exception:  # a trim that fails must never take the sim down
+            except Exception:  # a trim that fails must never take the peer down
                 log.debug("heap trim failed", exc_info=True)
 
     def close(self) -> None:
