@@ -133,8 +133,12 @@ class SimPeer:
     def start(self, duration: float | None = None) -> "SimPeer":
         """Open and step physics in a daemon thread until :meth:`close` (or ``duration`` of sim time)."""
         self.open()
-        self._thread = threading.Thread(target=self.run, args=(self._stop, duration), name="sim-physics", daemon=True)
-        self._thread.start()
+        thread = threading.Thread(target=self.run, args=(self._stop, duration), name="sim-physics", daemon=True)
+        # known only once started: a thread not yet started is not alive, and a host that looked at ``finished`` in
+        # between (a take-over starting its peer under load) read a peer that had not begun as one that had ended,
+        # and stopped the sim it had just made primary (the soak's sim-b: "0 steps", exit 0)
+        thread.start()
+        self._thread = thread
         return self
 
     def run(self, stop: threading.Event | None = None, duration: float | None = None) -> None:
