@@ -1,11 +1,12 @@
 """What a sim hears of its shard's leader, and the world it restores from that when it takes over.
 
 Every sim listens to the other sims' ``joints`` and ``pose`` streams: a primary hears a rival's term there, a
-standby its leader's newest joints and poses. A standby also polls the leader's whole state on ``srv/state``
-every ``poll_s`` and keeps the commands users send (:class:`~sim_peer.kept_commands.CommandBuffer`). At a
-take-over (:meth:`Follower.catch_up`) the world is put back into the last snapshot, brought forward by the
-newer streams, its sequence numbers continued; then the commands that came after the snapshot was asked for
-are applied again (:meth:`Follower.replay`).
+standby its leader's newest joints and poses, and its newest ownership records (``own/{object}``). A standby also
+polls the leader's whole state on ``srv/state`` every ``poll_s`` and keeps the commands users send
+(:class:`~sim_peer.kept_commands.CommandBuffer`). At a take-over (:meth:`Follower.catch_up`) the world is put back
+into the last snapshot, brought forward by the newer streams, its ownership records by the newer records
+(:func:`ownership.carry.overlay`: a grant made after the snapshot keeps its epoch), its sequence numbers continued;
+then the commands that came after the snapshot was asked for are applied again (:meth:`Follower.replay`).
 
 The host (:class:`sim_peer.replica_host.ReplicaHost`) owns the lock this state is guarded by.
 """
@@ -19,8 +20,9 @@ from typing import TYPE_CHECKING, Any
 
 from fabric import keys
 from fabric.codec import DecodeError, decode
-from fabric.interfaces import Command, JointState, Pose, ServiceError, WorldState
+from fabric.interfaces import Command, JointState, OwnershipRecord, Pose, ServiceError, WorldState
 from fabric.plant import planted
+from ownership.carry import overlay
 from sim_peer import election as el
 from sim_peer import capture
 from sim_peer.kept_commands import CommandBuffer
@@ -55,6 +57,7 @@ class Follower:
         self.snapshot_asked = time.monotonic()  # when the snapshot held was asked for: what came after is replayed
         self.joints: dict[str, JointState] = {}
         self.poses: dict[str, Pose] = {}
+        self.records: dict[str, OwnershipRecord] = {}  # the leader's newest record of each of its objects
         self.commands = CommandBuffer()  # robot commands and object poses of the last seconds
         self._poller: threading.Thread | None = None
 
@@ -66,6 +69,7 @@ class Follower:
         f.subscribe(keys.robot_stream_all(w, "pose"), self.on_pose, expected=Pose, remote_only=True)
         if standby:
             f.subscribe_raw(keys.robot_cmd_all(w), self.on_command_sample)
+            f.subscribe(keys.own_all(w), self.on_record, expected=OwnershipRecord)
             for obj in h.world.objects:
                 f.subscribe(keys.object_pose_all(w, obj), self.on_object, expected=Pose)
 
@@ -117,6 +121,18 @@ class Follower:
             with h.lock:
                 self.poses[rid] = p
 
+    def on_record(self, key: str, rec: OwnershipRecord) -> None:
+        """Keep the leader's newest record of each object of this shard (epoch, then sequence number): the records it
+        published after its last snapshot are carried over at a take-over."""
+        h = self.host
+        if rec.object not in h.world.robots and rec.object not in h.world.objects:
+            return  # another shard's, or a made-up object: nothing to carry (and nothing to grow)
+        if h.role == el.STANDBY and rec.header.source == h.election.leader:
+            with h.lock:
+                held = self.records.get(rec.object)
+                if held is None or held.header.source != rec.header.source or (rec.epoch, rec.header.seq) >= (held.epoch, held.header.seq):
+                    self.records[rec.object] = rec
+
     def keep(self, key: str, msg: Any, size: int = 0) -> None:
         """Keep one command (or object pose) heard now; a serving host's peer takes them itself."""
         with self.host.lock:
@@ -137,7 +153,8 @@ class Follower:
     def catch_up(self, state: WorldState) -> tuple[Any, Any]:
         """Put the host's world into ``state`` and the newer joints and poses its source streamed since, every robot
         brought to the newest time heard, the streams' sequence numbers continued (call with the lock held);
-        the ownership records and users to restore the gate with."""
+        the ownership records and users to restore the gate with: the snapshot's, with the newer records its
+        source published since put over them (never an older epoch)."""
         h = self.host
         f, world = h.fabric, h.world
         capture.restore(world, state)
@@ -164,8 +181,13 @@ class Follower:
         for rid, p in self.poses.items():
             k = keys.robot_pose(f.world, rid)
             seqs[k] = max(seqs.get(k, 0), p.header.seq + 1)
+        heard = [r for r in self.records.values() if r.header.source == src]
+        for r in heard:
+            k = keys.own(f.world, r.object)
+            seqs[k] = max(seqs.get(k, 0), r.header.seq + 1)
         f.seqs.carry_on(seqs)
-        return state.records, state.users
+        next_seqs = {r.object: int(state.seqs.get(keys.own(f.world, r.object), 0)) for r in heard}
+        return overlay(state.records, state.users, heard, next_seqs)
 
     def replay(self, peer: "SimPeer", gate: "CommandGate") -> None:
         """Apply again what users sent after the snapshot was asked for, in arrival order, before the new
