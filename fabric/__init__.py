@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from fabric.exit import at_exit
     from fabric.gate import CommandGate, OpenGate
     from fabric.rate import Clock, MonotonicClock, RateLoop
-    from fabric.recording import Recorder, RecordingError, iter_messages, read_info
+    from fabric.recording import Recorder
     from fabric.session import Fabric, shutdown_event
 
 _HOME = {
@@ -46,9 +46,6 @@ _HOME = {
     "CommandGate": "fabric.gate",
     "OpenGate": "fabric.gate",
     "Recorder": "fabric.recording",
-    "RecordingError": "fabric.recording",
-    "read_info": "fabric.recording",
-    "iter_messages": "fabric.recording",
 }
 """Each public name and the module that defines it."""
 

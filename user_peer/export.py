@@ -56,7 +56,7 @@ def read_mcap(path: Path, counts: dict[str, int] | None = None) -> Iterator[tupl
     which stops quietly at the torn tail of a recorder killed mid-write. Samples recorded as raw
     bytes or liveliness are skipped; payloads that do not decode are counted as ``bad``.
     """
-    from fabric.recording import RecordingError, iter_messages
+    from user_peer.recordings import RecordingError, iter_messages
 
     check_mcap(path)
     load_plugins()  # the recording may hold any installed package's message types
@@ -117,7 +117,7 @@ def export_mcap(
 
 def _count(src: Path) -> int:
     """Messages in the recording per its summary (0 when unknown: an unfinished file)."""
-    from fabric.recording import RecordingError, read_info
+    from user_peer.recordings import RecordingError, read_info
 
     try:
         return read_info(src).messages

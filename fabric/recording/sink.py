@@ -6,7 +6,7 @@ that uses them), and :meth:`McapSink.maybe_flush` closes the open chunk and
 hands it to the OS at least every ``flush_interval`` seconds. A recorder
 killed with SIGKILL therefore leaves a file whose complete chunks any MCAP
 reader can stream; only the last ``flush_interval`` of data is lost, and the
-missing footer tells :func:`fabric.recording.reader.read_info` the file is
+missing footer tells :func:`user_peer.recordings.read_info` the file is
 unfinished.
 
 Fenced like a session (:mod:`fabric.fencing`): per world, authority state of a lower

@@ -66,7 +66,7 @@ def _start_recorder(out: Path, world: str, ep: str, log: Path) -> subprocess.Pop
 
 
 def _throughput(router, ep: str, tmp: Path, scale: float, robots: int, duration: float, precompute: int = 0) -> dict:
-    from fabric.recording.reader import iter_messages, read_info
+    from user_peer.recordings import iter_messages, read_info
 
     tag = f"x{scale:g}" + ("p" if precompute else "")
     out = tmp / f"rec-{tag}.mcap"
@@ -121,7 +121,7 @@ def _throughput(router, ep: str, tmp: Path, scale: float, robots: int, duration:
 
 
 def _replay_timing(router, ep: str, tmp: Path, source: Path, duration: float) -> dict:
-    from fabric.recording.reader import iter_messages
+    from user_peer.recordings import iter_messages
     from robofabric.recording.replayer import Replayer, plan_replay
 
     target = "benchreplay"

@@ -196,7 +196,7 @@ LONG_INFO_BYTES = 20_000_000
 
 
 def _recording_info(file: Path, as_json: bool) -> None:
-    from fabric.recording.reader import RecordingError, read_info
+    from user_peer.recordings import RecordingError, read_info
 
     big = not as_json and file.is_file() and file.stat().st_size > LONG_INFO_BYTES
     try:
@@ -256,7 +256,7 @@ def replay(
 
     --world selects which recorded world to replay (default: every world in the file).
     """
-    from fabric.recording.reader import RecordingError
+    from user_peer.recordings import RecordingError
     from robofabric.recording.replayer import Replayer, plan_replay
     from fabric.session import shutdown_event
 

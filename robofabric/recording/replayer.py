@@ -26,7 +26,7 @@ import zenoh
 from fabric.matching import wait_matched
 from fabric.rate import Clock, MonotonicClock
 from fabric.recording.format import LIVELINESS_SCHEMA, remap_world, world_of
-from fabric.recording.reader import RecordingError, RecordingInfo, iter_messages, key_filter, read_info
+from user_peer.recordings import RecordingError, RecordingInfo, iter_messages, key_filter, read_info
 from fabric.publishers import declare_publisher
 from robofabric.stats import percentiles
 

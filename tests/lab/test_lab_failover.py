@@ -15,7 +15,7 @@ import pytest
 from fabric.codec import decode
 from fabric.fencing import is_authority_key
 from robofabric.lab import Lab
-from fabric.recording.reader import iter_messages
+from user_peer.recordings import iter_messages
 from robofabric.testing import wait_until
 
 pytestmark = [pytest.mark.lab, pytest.mark.slow]

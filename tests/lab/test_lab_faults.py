@@ -16,7 +16,7 @@ import pytest
 
 from fabric.codec import decode
 from robofabric.lab import Lab, LabProcess, RemotePython
-from fabric.recording.reader import iter_messages
+from user_peer.recordings import iter_messages
 from robofabric.testing import wait_until
 
 pytestmark = [pytest.mark.lab, pytest.mark.slow]

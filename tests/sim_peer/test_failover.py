@@ -228,7 +228,7 @@ def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, 
     # and the recording of the whole run says the same
     procs.kill(recorder, signal.SIGTERM)
     from fabric.fencing import is_authority_key
-    from fabric.recording.reader import iter_messages
+    from user_peer.recordings import iter_messages
 
     stamped = []
     for m in iter_messages(mcap):

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import user_peer
-from fabric.recording import read_info
+from user_peer.recordings import read_info
 from fabric.session import Fabric
 from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, router_config, wait_until
 from user_peer.api import World

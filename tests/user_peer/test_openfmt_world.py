@@ -13,7 +13,8 @@ from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoders
 from fabric import keys
 from fabric.codec import encode
 from fabric.interfaces import Header, JointState
-from fabric.recording import McapSink, Recorder, iter_messages
+from fabric.recording import McapSink, Recorder
+from user_peer.recordings import iter_messages
 from robofabric.testing import robofabric_cmd, wait_until
 from user_peer.openfmt import export_recording
 

@@ -10,8 +10,8 @@ from typing import Any, Callable
 from fabric import keys
 from fabric.codec import DecodeError, decode, load_plugins
 from fabric.interfaces import WorldInfo
-from fabric.recording import RecordingError, iter_messages, read_info
 from user_peer.catalog import RobotCatalog
+from user_peer.recordings import RecordingError, iter_messages, read_info
 
 log = logging.getLogger("robofabric.user")
 

@@ -7,7 +7,8 @@ import threading
 import zenoh
 
 from fabric import keys
-from fabric.recording import Recorder, read_info
+from fabric.recording import Recorder
+from user_peer.recordings import read_info
 from robofabric.testing import wait_until
 
 

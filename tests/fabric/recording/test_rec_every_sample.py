@@ -18,7 +18,7 @@ import pytest
 from mcap.reader import make_reader
 
 from fabric.codec import decode
-from fabric.recording.reader import iter_messages
+from user_peer.recordings import iter_messages
 from robofabric.testing import robofabric_cmd, wait_until
 from user_peer.openfmt.ros2 import ros2_topic
 

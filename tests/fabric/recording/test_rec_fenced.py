@@ -7,7 +7,7 @@ from fabric import keys
 from fabric.codec import decode, encode
 from fabric.interfaces import Header, JointState, Path
 from fabric.recording.format import peek
-from fabric.recording.reader import iter_messages
+from user_peer.recordings import iter_messages
 from fabric.recording.sink import STALE, McapSink
 from robofabric.testing import wait_until
 

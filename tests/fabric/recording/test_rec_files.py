@@ -8,7 +8,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 from mcap.reader import NonSeekingReader, make_reader
 
-from fabric.recording import MESSAGE_ENCODING, RecordingError, iter_messages, read_info, read_samples
+from fabric.recording import MESSAGE_ENCODING
+from user_peer.recordings import RecordingError, iter_messages, read_info, read_samples
 
 from rec_helpers import synthetic, write_recording
 

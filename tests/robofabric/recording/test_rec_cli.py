@@ -7,7 +7,8 @@ from collections import Counter
 import pytest
 
 from fabric import keys
-from fabric.recording import Recorder, iter_messages, read_info
+from fabric.recording import Recorder
+from user_peer.recordings import iter_messages, read_info
 from robofabric.testing import robofabric_cmd, wait_until
 
 from tests.fabric.recording.rec_helpers import synthetic, write_recording

@@ -18,7 +18,8 @@ from mcap.reader import NonSeekingReader
 import pytest
 
 from fabric import keys
-from fabric.recording import Recorder, iter_messages, read_info
+from fabric.recording import Recorder
+from user_peer.recordings import iter_messages, read_info
 from robofabric.recording.load import robot_streams, run_load
 from robofabric.testing import client, robofabric_cmd, wait_until
 

@@ -33,7 +33,7 @@ def test_replay_and_export_show_progress_unless_quiet(tmp_path, world, router):
 
 
 def test_info_reports_its_progress_through_the_file(tmp_path, world):
-    from fabric.recording import read_info
+    from user_peer.recordings import read_info
 
     src = tmp_path / "info.mcap"
     write_recording(src, synthetic(world, n=1500), chunk_size=4096)

@@ -5,7 +5,7 @@ import threading
 import pytest
 
 from fabric.rate import FakeClock
-from fabric.recording import RecordingError
+from user_peer.recordings import RecordingError
 from robofabric.recording import Replayer, due_time, plan_replay
 
 from tests.fabric.recording.rec_helpers import synthetic, write_recording

@@ -1,5 +1,10 @@
 """Reading recordings back, finished or not.
 
+The fabric's recorder library (:mod:`fabric.recording`) writes; reading is a user's need, not a running
+peer's: ``robofabric export`` and the exporters here in :mod:`user_peer` read recordings, and so do the
+tools a floor above (``info``, ``replay``, the benchmarks), while no sim or compute peer ever opens one.
+So the reader lives in the lowest package that reads (docs/architecture.md, "The house").
+
 The reader walks the file record by record (mcap's record classes, chunks
 opened lazily here) instead of trusting the summary at the end, because the
 file we most need to read is the one whose recorder was killed before it
