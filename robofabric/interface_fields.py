@@ -1,9 +1,9 @@
 """The fields of each message type, as ``robofabric interfaces`` and ``info KEY`` list them.
 
 Read off the classes' ``SPEC`` (the table the decoder checks), as the JSON Schema in
-:mod:`fabric.interfaces.schema` is, so the listing cannot drift from the wire. Listing types for a
+:mod:`user_peer.message_schema` is, so the listing cannot drift from the wire. Listing types for a
 person is introspection, a tool's need: it sits on the top floor, while the JSON Schema and the plain
-view that a peer's exports write stay with the interfaces.
+view that the user peer's exports write sit with them, in :mod:`user_peer`.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from fabric.codec import Arr, F, I, Map, Msg, Opt, S, Strs, load_plugins, registered
-from fabric.interfaces.schema import type_name
+from user_peer.message_schema import type_name
 
 __all__ = ["FieldInfo", "fields_of", "describe_spec", "message_types"]
 

@@ -192,7 +192,7 @@ def interfaces(
     schema: Annotated[bool, typer.Option("--schema", help="Print the type's JSON Schema (what Foxglove exports declare).")] = False,
 ) -> None:
     """Message types and their fields (like ``ros2 interface list`` / ``show``), plugins' types included."""
-    from fabric.interfaces import json_schema, type_doc
+    from user_peer.message_schema import json_schema, type_doc
     from robofabric.interface_fields import fields_of, message_types
 
     types = message_types()

@@ -52,7 +52,7 @@ def check_mcap(path: Path) -> None:
 def read_mcap(path: Path, counts: dict[str, int] | None = None) -> Iterator[tuple[str, object, int]]:
     """(key, decoded message, log time ns) of every fabric message of a recording, in file order.
 
-    Reading goes through :func:`fabric.recording.iter_messages` (the ``mcap`` package underneath),
+    Reading goes through :func:`user_peer.recordings.iter_messages` (the ``mcap`` package underneath),
     which stops quietly at the torn tail of a recorder killed mid-write. Samples recorded as raw
     bytes or liveliness are skipped; payloads that do not decode are counted as ``bad``.
     """

@@ -64,7 +64,6 @@ from fabric.interfaces.navigation import (
 )
 from fabric.interfaces.errors import DecodeError, NoReply, Refused, ServiceError
 from fabric.interfaces.geometry import TWO_PI, quaternion_from_yaw, wrap_angle, yaw_from_quaternion
-from fabric.interfaces.schema import json_schema, plain_view, type_doc, type_name
 
 __all__ = [
     # std
@@ -88,6 +87,4 @@ __all__ = [
     "DecodeError", "NoReply", "Refused", "ServiceError",
     # geometry
     "TWO_PI", "quaternion_from_yaw", "wrap_angle", "yaw_from_quaternion",
-    # schema
-    "json_schema", "plain_view", "type_doc", "type_name",
 ]

@@ -49,9 +49,10 @@ from google.protobuf.timestamp_pb2 import Timestamp
 from mcap_protobuf.schema import register_schema
 
 from fabric.recording.mcap_file import McapFile, mcap_writer
-from fabric.interfaces import JointState, json_schema, OccupancyGrid, Path, plain_view, Pose, Scan
+from fabric.interfaces import JointState, OccupancyGrid, Path, Pose, Scan
 from user_peer.arm_geometry import Placement, Shape
 from user_peer.catalog import RobotCatalog
+from user_peer.message_schema import json_schema, plain_view
 from user_peer.openfmt.frames import WORLD, Frame, FrameTracker, key_owner, yaw_quat_xyzw
 
 __all__ = ["FoxgloveWriter", "TF_TOPIC", "SCENE_TOPIC", "JOINTS_EXTRA"]

@@ -40,8 +40,9 @@ import numpy as np
 from mcap_ros2.writer import Writer as Ros2McapWriter
 
 from fabric.recording.mcap_file import McapFile
-from fabric.interfaces import JointState, OccupancyGrid, Path, plain_view, Pose, Scan, WorldInfo
+from fabric.interfaces import JointState, OccupancyGrid, Path, Pose, Scan, WorldInfo
 from user_peer.catalog import RobotCatalog
+from user_peer.message_schema import plain_view
 from user_peer.openfmt.frames import WORLD, FrameTracker, key_owner, yaw_quat_xyzw
 from user_peer.openfmt.ros2_msgdefs import definition
 

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from fabric.codec import DecodeError, decode, encode, messages_equal
 from fabric.interfaces import BaseInfo, LidarInfo, ObjectInfo, RobotInfo, SonarInfo, WorldInfo
-from fabric.interfaces.schema import json_schema, plain_view
+from user_peer.message_schema import json_schema, plain_view
 
 ids = st.text("abcdefghijklmnopqrstuvwxyz0123456789_-", min_size=1, max_size=12)
 fl = st.floats(-1e3, 1e3, allow_nan=False)

@@ -5,6 +5,10 @@ against), so they cannot drift from the wire format. The JSON Schema describes
 :func:`plain_view` of a message (arrays as nested lists, a ``type`` member
 naming the class); exports that write JSON channels declare it
 so a reader (Foxglove, ``jsonschema``) can check every message.
+
+Not on the ground floor: no peer sends or checks JSON at run time. The exporters here in
+:mod:`user_peer.openfmt` write both, and the introspection tools a floor above
+(``robofabric interfaces``) print them, so they live in the lowest package that uses them.
 """
 
 from __future__ import annotations
