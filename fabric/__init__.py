@@ -9,8 +9,8 @@ launch, lab, secure init, replay, benchmarks, the helpers tests share) live one
 floor above the peers, in :mod:`robofabric` (docs/architecture.md, "The house").
 
 The names below are the public API. They load on first use (PEP 562): a module
-that needs only :mod:`fabric.keys` or :mod:`fabric.completion` does not pay for
-zenoh, numpy and the codec. Submodules import as usual (``from fabric import
+that needs only :mod:`fabric.keys` does not pay for zenoh, numpy and the
+codec. Submodules import as usual (``from fabric import
 keys``).
 """
 

@@ -18,7 +18,7 @@ import threading
 import time
 from typing import Any
 
-from fabric.completion import complete_export_formats, complete_formats, matching
+from user_peer.completion import complete_export_formats, complete_formats, matching
 
 __all__ = ["live_keys", "complete_keys", "complete_keys_or_recordings", "complete_peers", "complete_types", "complete_formats", "complete_export_formats", "matching"]
 

@@ -11,7 +11,7 @@ import typer
 from fabric.cli_common import (
     Connect, Joining, Listen, PeerId, Profile, UserError, World, ZenohConfig, join_error, join_flags, make_config,
 )
-from fabric.completion import complete_export_formats, matching
+from user_peer.completion import complete_export_formats, matching
 
 RERUN_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://", "http://", "https://")
 

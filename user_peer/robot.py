@@ -15,10 +15,10 @@ import numpy as np
 
 from fabric import keys
 from fabric.interfaces import Command, Event, JointState, Reset, Stop
-from fabric.reliable import resend_until
 from user_peer import services
 from user_peer.errors import NotOwner, Rejected, Timeout
 from user_peer.ownable import Ownable
+from user_peer.reliable import resend_until
 from user_peer.streams import StreamIterator, Subscription
 
 if TYPE_CHECKING:
@@ -153,7 +153,7 @@ class Robot(Ownable):
     def stop(self, *, confirm: bool = True, timeout: float = 3.0) -> bool:
         """Stop the robot where it is. Commands are dropped, not queued, when the network is congested, so
         with ``confirm`` the stop is sent again every 0.1 s until the robot's own stream shows it still
-        (:func:`fabric.reliable.resend_until`); returns whether it was seen still within ``timeout``."""
+        (:func:`user_peer.reliable.resend_until`); returns whether it was seen still within ``timeout``."""
         self.world.twists.drop(self.id)
         return self._control("stop", Stop, confirm, timeout)
 

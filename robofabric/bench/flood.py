@@ -39,11 +39,11 @@ import typer
 
 from fabric import keys
 from fabric.interfaces import Command, JointState, JointTarget, ServiceError, Stop
-from fabric.reliable import resend_until
 from fabric.session import Fabric
 from robofabric.testing import client, free_port, robofabric_cmd, wait_until
 from ownership.client import OwnershipClient
 from robofabric.bench.common import end_processes, pct, proc_cpu_s, proc_rss_mb
+from user_peer.reliable import resend_until
 
 __all__ = ["Load", "FloodResult", "run_flood", "report", "command"]
 
@@ -348,7 +348,7 @@ def run_flood(load: Load, out_dir: Path, *, flood: bool = True, stop_at: float |
     """One run: set up, warm up, flood (or not) and settle, then what was measured. Logs go to ``out_dir``.
 
     ``stop_at``: seconds after the flood began, alice stops sending targets and stops the arm with
-    :func:`fabric.reliable.resend_until` (re-sent until her joint stream shows it still), then goes on."""
+    :func:`user_peer.reliable.resend_until` (re-sent until her joint stream shows it still), then goes on."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     result = FloodResult(flooded=flood)

@@ -7,7 +7,7 @@ commands to unique robot ids, 10,000 junk payloads on each of the 8 keys the pee
 compute peer and 1,000 forged ownership requests. Pass criteria are the issue's, measured at the
 process level (/proc); see robofabric.bench.flood for how a command is known to be applied. Two seconds
 into the flood alice sets the arm off slowly towards a far target and stops it: the stop must take effect
-within 1 s, short of the target (fabric.reliable.resend_until re-sends it until the arm is seen still).
+within 1 s, short of the target (user_peer.reliable.resend_until re-sends it until the arm is seen still).
 """
 
 from __future__ import annotations

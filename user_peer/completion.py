@@ -1,8 +1,8 @@
 """Shell completion that needs no live world: prefix matching and the installed export formats.
 
-On the ground floor because a peer's CLI offers them too (``export --to``), and a peer imports no tool;
-the completers that look at a live world are a tool (:mod:`robofabric.complete`). Standard library only:
-completion runs at every Tab, so this module must not load zenoh or the codec.
+With the user peer because its CLI offers them (``export --to``), and a peer imports no tool; the
+completers that look at a live world are a tool (:mod:`robofabric.complete`), which uses these too.
+Standard library only: completion runs at every Tab, so this module must not load zenoh or the codec.
 """
 
 from __future__ import annotations

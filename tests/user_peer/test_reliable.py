@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from fabric.rate import FakeClock
-from fabric.reliable import resend_until
+from user_peer.reliable import resend_until
 
 
 def test_sends_again_until_done():

@@ -6,6 +6,9 @@ again every ``interval`` until the robot's own stream shows the effect (``done()
 up after ``timeout``. The robot's state is the acknowledgement: no new message type, and it
 works against any sim peer.
 
+A user's loop (``Robot.stop()``, ``reset()``): no sim, compute peer or authority re-sends anything, so it
+lives with the user peer, not on the ground floor.
+
 Pure loop: the clock and the sleep are passed in (tests use a fake clock).
 """
 
