@@ -9,7 +9,9 @@ zenoh's callback thread at once: they wait in a bounded per-robot :class:`~sim_p
 latest target wins, a stop or reset is never dropped) that a worker thread applies, so a flood on one key
 cannot hold up another robot. The gate is asked again when a command is applied, so a command admitted just
 before its sender lost the robot is refused rather than applied after the stop. A robot that loses its owner
-(the gate's ``watch_stops``) stops: the stop takes the place of her pending commands in the robot's queue.
+(the gate's ``watch_stops``) stops: the stop takes the place of her pending commands in the robot's queue. A sim
+that hears no one (:mod:`sim_peer.deaf_stop`) stops every robot the same way and refuses commands until it hears
+again (:meth:`CommandPipeline.hold`, :meth:`CommandPipeline.resume`).
 """
 
 from __future__ import annotations
@@ -59,6 +61,7 @@ class CommandPipeline:
         self._queues: dict[str, CommandQueue[Command | Halt]] = {rid: CommandQueue() for rid in world.robots}
         self._queued = threading.Condition(threading.Lock())
         self._worker: threading.Thread | None = None
+        self._held = ""  # why every robot holds and commands are refused ('' : they are not)
 
     def start(self) -> None:
         self._worker = threading.Thread(target=self._drain, name="sim-commands", daemon=True)
@@ -120,6 +123,26 @@ class CommandPipeline:
             queue.put("stop", Halt(user, reason))
             self._queued.notify()
 
+    @property
+    def held(self) -> str:
+        """Why the robots hold and commands are refused (:meth:`hold`); empty when they are not."""
+        return self._held
+
+    def hold(self, reason: str) -> None:
+        """Stop every robot as a release stops it (a base brakes, an arm holds where it is) and refuse every command
+        until :meth:`resume`: what a sim simulates while nobody hears it is lost when another takes the world over,
+        so it must not move its robots on meanwhile."""
+        with self._queued:
+            self._held = reason or "held"
+            for q in self._queues.values():
+                q.put("stop", Halt("", self._held))
+            self._queued.notify()
+
+    def resume(self) -> None:
+        """Accept commands again (the robots stay where :meth:`hold` stopped them until their owners send more)."""
+        with self._queued:
+            self._held = ""
+
     def apply(self, key: str, cmd: Command) -> None:
         """Admit and apply one decoded command now, in the caller's thread."""
         name = self._admit(key, cmd)
@@ -157,6 +180,9 @@ class CommandPipeline:
 
     def _still_admitted(self, rid: str, name: str, cmd: Command) -> bool:
         """Ask the gate again as the command is applied: its sender may have lost the robot since it came."""
+        if self._held:
+            self._refuse_held(rid, name, cmd)
+            return False
         refusal = self._gate_refusal(rid, cmd)
         if refusal:
             self.report.reject(rid, name, refusal, f"the gate refused {cmd.user}'s {name} command (epoch {cmd.epoch}) as it was applied",
@@ -195,12 +221,20 @@ class CommandPipeline:
         if mismatch:
             self.report.reject(rid, name, "wrong_body", mismatch, cmd.user)
             return None
+        if self._held:
+            self._refuse_held(rid, name, cmd)
+            return None
         refusal = self._gate_refusal(rid, cmd)
         if refusal:
             self.report.reject(rid, name, refusal, f"the gate refused {cmd.user}'s {name} command (epoch {cmd.epoch})", cmd.user,
                                code="refused")
             return None
         return name
+
+    def _refuse_held(self, rid: str, name: str, cmd: Command) -> None:
+        held = self._held
+        self.report.reject(rid, name, "held", lambda: f"the sim holds its robots ({held}); {cmd.user}'s {name} command is refused "
+                                                      "until it hears the fabric again", cmd.user, code="held")
 
     def _execute(self, rid: str, name: str, cmd: Command) -> None:
         try:

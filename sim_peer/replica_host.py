@@ -9,7 +9,8 @@
 - :mod:`sim_peer.shards` (:class:`~sim_peer.shards.ShardDirectory`): which live sim serves which robots;
 - :mod:`sim_peer.adoption` (:class:`~sim_peer.adoption.ObjectAdoption`): the scene objects after their sim;
 - :mod:`sim_peer.freeze_guard` (:class:`~sim_peer.freeze_guard.FreezeGuard`): a primary back from a freeze;
-- :mod:`sim_peer.moving` (:class:`~sim_peer.moving.MoveService`): moving a robot between sims.
+- :mod:`sim_peer.moving` (:class:`~sim_peer.moving.MoveService`): moving a robot between sims;
+- :mod:`sim_peer.deaf_stop` (:class:`~sim_peer.deaf_stop.DeafStop`): a primary that hears no one stops its robots.
 
 The roles:
 
@@ -49,6 +50,7 @@ from sim_peer import election as el
 from sim_peer import handoff as ho
 from sim_peer import capture
 from sim_peer.adoption import ObjectAdoption
+from sim_peer.deaf_stop import DeafStop
 from sim_peer.following import POLL_S, Follower
 from sim_peer.freeze_guard import FreezeGuard
 from sim_peer.moving import MoveService
@@ -116,6 +118,7 @@ class ReplicaHost:
         self.freeze = FreezeGuard(self, freeze_gap)
         self.adoption = ObjectAdoption(self, adopt_after_s)
         self.moves = MoveService(self)
+        self.deaf_stop = DeafStop(self)  # a primary that hears no one stops its robots
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -210,6 +213,7 @@ class ReplicaHost:
         if state is not None:
             self.follower.replay(self.peer, self.gate)
         self.peer.start(self._duration)
+        self.deaf_stop.watch()
 
     def scopes(self) -> tuple[str, ...]:
         """What this sim is the authority of: its robots, and the scene objects when it is their authority."""
