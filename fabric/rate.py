@@ -15,6 +15,7 @@ loops never need to know which clock they hold.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from dataclasses import dataclass
@@ -111,9 +112,14 @@ class RateLoop:
     ``step()`` runs at most one due tick and returns the time until the next;
     ``run(stop)`` loops until ``stop`` is set; ``start()`` (or ``with RateLoop(...) as loop:``)
     runs it in a daemon thread, which ``close()`` (or leaving the ``with``) ends.
+
+    ``start_at`` (a time of ``clock``) fixes the grid's origin: ticks at ``start_at + k / hz``, the first one
+    not before the first ``step()``. Loops given one origin and staggered offsets from it keep their ticks
+    apart for as long as they run (:func:`staggered`); without it the grid starts at the first ``step()``.
     """
 
-    def __init__(self, hz: float, callback: Callable[[float], None], *, clock: Clock | None = None, name: str = "") -> None:
+    def __init__(self, hz: float, callback: Callable[[float], None], *, clock: Clock | None = None, name: str = "",
+                 start_at: float | None = None) -> None:
         if not hz > 0:
             raise ValueError(f"rate must be positive, got {hz}")
         self.hz = float(hz)
@@ -121,6 +127,7 @@ class RateLoop:
         self.callback = callback
         self.clock = clock or MonotonicClock()
         self.name = name
+        self.start_at = start_at
         self._next: float | None = None
         self._ticks = 0
         self._overruns = 0
@@ -135,7 +142,7 @@ class RateLoop:
     def step(self) -> float:
         now = self.clock.now()
         if self._next is None:
-            self._next = now
+            self._next = now if self.start_at is None else self._first_on_grid(now)
         if now < self._next:
             return self._next - now
         self.callback(now)
@@ -148,6 +155,13 @@ class RateLoop:
             self._skipped += missed
             self._next += missed * self.period
         return max(0.0, self._next - after)
+
+    def _first_on_grid(self, now: float) -> float:
+        """The first tick of the ``start_at`` grid at or after ``now`` (a loop started late joins its grid)."""
+        start = float(self.start_at)  # type: ignore[arg-type]
+        if now <= start:
+            return start
+        return start + math.ceil((now - start) / self.period - 1e-9) * self.period
 
     def run(self, stop: threading.Event | None = None) -> None:
         stop = stop or self._stop
@@ -171,6 +185,22 @@ class RateLoop:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def staggered(rates: dict[str, float]) -> dict[str, float]:
+    """Each loop's offset (s) from a shared origin, so that loops started together never tick together.
+
+    Fastest first, loop ``i`` of ``n`` is put ``i / n`` of the fastest period after the origin. When every
+    period is a whole multiple of the fastest (a sim's 100, 50 and 20 Hz streams), every loop's ticks fall on
+    its own offset modulo the fastest period, so any two ticks of different loops are at least ``1 / n`` of
+    that period apart, forever. Loops started on one origin without offsets put every 50 Hz tick on a 100 Hz
+    one: a subscriber of both streams got both bursts at once, and the later one waited for the other.
+    """
+    if not rates:
+        return {}
+    fastest = 1.0 / max(rates.values())
+    order = sorted(rates, key=lambda name: (-rates[name], name))
+    return {name: i * fastest / len(order) for i, name in enumerate(order)}
 
 
 def parse_rates(spec: str, defaults: dict[str, float]) -> dict[str, float]:

@@ -1,9 +1,12 @@
 """A sim's robot streams: what the robots' ``streams()`` declare, grouped by rate, each group on its own loop.
 
 Each group runs on a :class:`fabric.rate.RateLoop` (wall-clock rates, independent of the physics step; headers
-carry sim time). A tick reads every stream of its group under the world's lock, then builds and publishes
-outside it. A stream on a key :mod:`fabric.keys` does not know is left out with a warning (a new stream name is a
-protocol change: ``fabric.keys.ROBOT_STREAMS``).
+carry sim time), the groups' grids staggered from one origin (:func:`fabric.rate.staggered`: 100 Hz joints at
+0, 50 Hz poses a third of 10 ms later, 20 Hz scans two thirds): each group's burst of every robot's messages
+reaches a subscriber of several streams (the ROS 2 bridge, a viewer) on its own, not on top of another's. A tick
+reads every stream of its group under the world's lock, then builds and publishes outside it. A stream on a key
+:mod:`fabric.keys` does not know is left out with a warning (a new stream name is a protocol change:
+``fabric.keys.ROBOT_STREAMS``).
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ from collections import Counter
 from typing import Any, Callable
 
 from fabric import keys
-from fabric.rate import RateLoop
+from fabric.rate import MonotonicClock, RateLoop, staggered
 from sim_peer.robot import Build, Stream
 from sim_peer.world import SimWorld
 
@@ -49,10 +52,22 @@ class StreamLoops:
             self.rates.setdefault(group, entries[0][1].hz)
         self._loops: list[RateLoop] = []
 
+    @property
+    def loops(self) -> dict[str, RateLoop]:
+        """The running loop of each group (empty before ``start()``)."""
+        return dict(zip(self.groups, self._loops))
+
+    def offsets(self) -> dict[str, float]:
+        """Each group's first tick after the loops' shared origin (s): apart, so their bursts never coincide."""
+        return staggered({group: self.rates[group] for group in self.groups})
+
     def start(self) -> None:
+        clock = MonotonicClock()
+        origin, offsets = clock.now(), self.offsets()
         for group, entries in self.groups.items():
             tick = self._guard(group, self._publisher(entries))
-            self._loops.append(RateLoop(self.rates[group], tick, name=f"sim-{group}").start())
+            self._loops.append(RateLoop(self.rates[group], tick, clock=clock, name=f"sim-{group}",
+                                        start_at=origin + offsets[group]).start())
 
     def stop(self) -> None:
         for loop in self._loops:

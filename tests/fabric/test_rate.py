@@ -1,6 +1,8 @@
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
-from fabric.rate import FakeClock, RateLoop, parse_rates
+from fabric.rate import FakeClock, RateLoop, parse_rates, staggered
 
 
 class SlowCallback:
@@ -73,3 +75,43 @@ def test_a_loop_runs_only_between_enter_and_exit():
     assert not _threads("rate-cm-test")  # leaving the with ended the thread
     after = len(ticks)
     assert loop.stats.ticks == after
+
+
+def test_start_at_is_the_grid_origin_and_a_late_loop_joins_its_grid():
+    """A loop given ``start_at`` ticks on ``start_at + k / hz`` only: before it, it waits for the origin; started
+    after it (a thread that started late), its first tick is the grid's next one, not an overrun."""
+    clock = FakeClock(100.0)
+    early = SlowCallback(clock)
+    loop = RateLoop(100, early, clock=clock, start_at=100.004)
+    while len(early.times) < 3:
+        clock.sleep(loop.step())
+    assert early.times == pytest.approx([100.004, 100.014, 100.024], abs=1e-9)
+    clock = FakeClock(100.0257)
+    late = SlowCallback(clock)
+    loop = RateLoop(100, late, clock=clock, start_at=100.0)
+    while len(late.times) < 2:
+        clock.sleep(loop.step())
+    assert late.times == pytest.approx([100.03, 100.04], abs=1e-9)
+    assert loop.stats.overruns == 0 and loop.stats.skipped == 0
+
+
+@given(fastest=st.floats(min_value=5.0, max_value=1000.0), multiples=st.lists(st.integers(1, 8), min_size=1, max_size=5),
+       delays=st.lists(st.floats(min_value=0.0, max_value=0.5), min_size=5, max_size=5))
+def test_staggered_loops_on_one_origin_never_tick_together(fastest, multiples, delays):
+    """Loops whose periods are whole multiples of the fastest, started on one origin with :func:`staggered`
+    offsets (each thread starting when it does), tick at least 1/n of the fastest period apart, forever."""
+    rates = {"fast": fastest, **{f"g{i}": fastest / m for i, m in enumerate(multiples)}}
+    offsets = staggered(rates)
+    ticks: dict[str, list[float]] = {}
+    for (name, hz), delay in zip(rates.items(), delays + [0.0]):
+        clock = FakeClock(10.0 + delay)
+        cb = SlowCallback(clock)
+        loop = RateLoop(hz, cb, clock=clock, start_at=10.0 + offsets[name])
+        while len(cb.times) < 50:
+            clock.sleep(loop.step())
+        ticks[name] = cb.times
+    gap = (1.0 / fastest) / len(rates)
+    every = sorted((t, name) for name, ts in ticks.items() for t in ts)
+    for (a, na), (b, nb) in zip(every, every[1:]):
+        if na != nb:
+            assert b - a >= gap - 1e-6, (na, a, nb, b)
