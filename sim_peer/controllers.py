@@ -278,3 +278,12 @@ class BaseController:
     @property
     def moving(self) -> bool:
         return abs(self.v) > MOVING_BASE_SPEED or abs(self.omega) > MOVING_BASE_SPEED or self.follower is not None
+
+    def pose(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Position, quaternion (w, x, y, z), linear and angular velocity of the axle midpoint, world frame
+        (what the base's ``pose`` stream carries)."""
+        pos = np.array([self.x, self.y, 0.0])
+        quat = np.array([math.cos(self.yaw / 2), 0.0, 0.0, math.sin(self.yaw / 2)])
+        lin = np.array([self.v * math.cos(self.yaw), self.v * math.sin(self.yaw), 0.0])
+        ang = np.array([0.0, 0.0, self.omega])
+        return pos, quat, lin, ang

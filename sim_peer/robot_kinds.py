@@ -40,10 +40,24 @@ def _joint_stream(robot: Any) -> Stream:
 def _pose_stream(robot: Any) -> Stream:
     """A base's pose (axle midpoint) with its velocities, from its controller."""
     def read(physics: Physics) -> Build:
-        pos, quat, lin, ang = robot.pose()
+        pos, quat, lin, ang = robot.ctrl.pose()
         return lambda header: Pose(pos, quat, lin, ang, "world", header)
 
     return Stream("pose", "pose", read)
+
+
+_NEWS = {
+    EventKind.PATH_DONE: "path followed to its end",
+    EventKind.TWIST_TIMEOUT: "no fresh twist within the timeout: stopping",
+}
+"""What a base's controller tells (``BaseController.on_news``), as the event a robot notes."""
+
+
+def _world_path(body: Any) -> tuple[Any, Any, Any]:
+    """The waypoints of a ``cmd/path`` body; a base follows paths in the world frame only."""
+    if body.frame not in ("world", ""):
+        raise CommandRejected("bad_frame", f"paths must be in the world frame, got {body.frame!r}")
+    return body.x, body.y, body.theta
 
 
 class _Driven(SimRobot):
@@ -179,7 +193,8 @@ class MobileRobot(_Driven):
         desc, model, prefix = mount.desc, mount.model, mount.prefix
         assert desc.base is not None
         x, y, _, yaw = mount.pose
-        self.ctrl = BaseController(desc.base, (x, y, yaw), twist_timeout=mount.twist_timeout, on_news=self._on_news)
+        self.ctrl = BaseController(desc.base, (x, y, yaw), twist_timeout=mount.twist_timeout,
+                                   on_news=lambda news: self.note(Note(news, _NEWS[news])))
         self.qadr, self.vadr = _joint_addresses(model, prefix, desc.base_joints)
         self._qadr3 = tuple(int(a) for a in self.qadr)
         self._vadr3 = tuple(int(a) for a in self.vadr)
@@ -200,13 +215,8 @@ class MobileRobot(_Driven):
 
     # commands ---------------------------------------------------------------
     def commands(self) -> Mapping[str, CommandHandler]:
-        return {"twist": lambda body: self.twist(body.v, body.omega), "path": self._path_command,
+        return {"twist": lambda body: self.twist(body.v, body.omega), "path": lambda body: self.path(*_world_path(body)),
                 "stop": lambda body: self.stop(), "reset": lambda body: self.reset()}
-
-    def _path_command(self, body: Any) -> None:
-        if body.frame not in ("world", ""):
-            raise CommandRejected("bad_frame", f"paths must be in the world frame, got {body.frame!r}")
-        self.path(body.x, body.y, body.theta)
 
     def twist(self, v: float, omega: float) -> Clamp | None:
         return self.ctrl.twist(v, omega)
@@ -237,12 +247,6 @@ class MobileRobot(_Driven):
 
     def before_step(self, physics: Physics) -> None:
         self.ctrl.step(physics.dt)
-
-    def _on_news(self, news: EventKind) -> None:
-        if news == EventKind.PATH_DONE:
-            self.note(Note(EventKind.PATH_DONE, "path followed to its end"))
-        else:
-            self.note(Note(EventKind.TWIST_TIMEOUT, "no fresh twist within the timeout: stopping"))
 
     def after_step(self, physics: Physics) -> None:
         c, d = self.ctrl, physics.data
@@ -318,16 +322,6 @@ class MobileRobot(_Driven):
 
     def joint_state(self):
         return self.desc.joint_names, self.ctrl.wheels.copy(), self.ctrl.wheel_speeds.copy()
-
-    def pose(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Position, quaternion (w, x, y, z), linear and angular velocity of the axle midpoint, world frame."""
-        c = self.ctrl
-        z = 0.0
-        pos = np.array([c.x, c.y, z])
-        quat = np.array([math.cos(c.yaw / 2), 0.0, 0.0, math.sin(c.yaw / 2)])
-        lin = np.array([c.v * math.cos(c.yaw), c.v * math.sin(c.yaw), 0.0])
-        ang = np.array([0.0, 0.0, c.omega])
-        return pos, quat, lin, ang
 
     def state(self, physics: Physics) -> dict[str, Any]:
         c = self.ctrl

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import robots as robots_pkg
+from fabric.interfaces import Path
 from sim_peer.controllers import CommandRejected
 from sim_peer.world import SimWorld, WorldError
 
@@ -172,6 +173,18 @@ def test_the_path_follower_drives_to_the_end_of_the_path():
     assert not base.following
     assert math.hypot(base.ctrl.x - 1.5, base.ctrl.y - 1.5) < 0.08
     assert abs(base.ctrl.yaw - math.pi / 2) < 0.05
+    assert [(r, n.kind) for r, n in w.notes.take()] == [("base1", "path_done")]
+
+
+def test_a_base_takes_paths_in_the_world_frame_only():
+    w = SimWorld("warehouse")
+    base = w.robot("base1")
+    follow = base.commands()["path"]
+    with pytest.raises(CommandRejected, match="world frame") as refused:
+        follow(Path(np.array([0.0, 1.0]), np.array([0.0, 0.0]), np.array([0.0, 0.0]), frame="base1"))
+    assert refused.value.reason == "bad_frame" and not base.following
+    follow(Path(np.array([0.0, 1.0]), np.array([0.0, 0.0]), np.array([0.0, 0.0])))
+    assert base.following
 
 
 def test_a_path_behind_the_robot_makes_it_turn_to_face_it_first():
@@ -280,6 +293,7 @@ def test_with_a_twist_timeout_a_quiet_sender_lets_the_base_stop():
     assert base.ctrl.v == pytest.approx(0.5)
     run(w, 1.5)
     assert not base.moving and base.ctrl.twists_expired == 1
+    assert [(r, n.kind) for r, n in w.notes.take()] == [("base1", "twist_timeout")]  # said once, as an event
     with pytest.raises(WorldError, match="twist timeout"):
         SimWorld("warehouse", twist_timeout=0)
 
