@@ -35,14 +35,15 @@ def command(
     seed: Annotated[int, typer.Option("--seed", help="The nemesis's and the students' seed.")] = 1,
     plant: Annotated[Optional[str], typer.Option("--plant", help=f"Plant a defect in the sims: {', '.join(PLANTS)}.")] = None,
     faults: Annotated[Optional[str], typer.Option("--faults", help="Only these fault kinds (comma-separated).")] = None,
-    victims: Annotated[Optional[str], typer.Option("--victims", help="Only these take pauses, kills, partitions: sim, compute, student.")] = None,
+    victims: Annotated[Optional[str], typer.Option("--victims", help="Only these take pauses, kills, partitions: sim, compute, student; "
+                                                                          "each with an optional weight (sim=0.25: sims picked a quarter as often).")] = None,
     out: Annotated[Optional[Path], typer.Option("--out", help="Write the figures as JSON here.")] = None,
     logs: Annotated[Optional[Path], typer.Option("--logs", help="Keep every output and the history in this folder.")] = None,
     recheck: Annotated[Optional[Path], typer.Option("--recheck", help="Run no class: check the history a run kept in this --logs folder.")] = None,
 ) -> None:
     """A class in the lab for --minutes under the nemesis; the checker reads the history: faults, violations."""
     from fabric.cli_common import UserError
-    from robofabric.soak.nemesis import KINDS, VICTIMS
+    from robofabric.soak.nemesis import KINDS, VICTIMS, parse_victims
     from robofabric.soak.run import SoakConfig, fault_counts, memory_series, run_soak
 
     if recheck is not None:
@@ -56,9 +57,11 @@ def command(
     unknown = [k for k in kinds if k not in KINDS]
     if unknown or not kinds:
         raise UserError(f"--faults {faults!r}: expected kinds among {', '.join(KINDS)}")
-    who = tuple(v.strip() for v in victims.split(",") if v.strip()) if victims else VICTIMS
-    if not who or any(v not in VICTIMS for v in who):
-        raise UserError(f"--victims {victims!r}: expected some of {', '.join(VICTIMS)}")
+    try:
+        weights = parse_victims(victims) if victims else dict.fromkeys(VICTIMS, 1.0)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    who = tuple(weights)
     tmp = None
     if logs is None:
         tmp = tempfile.mkdtemp(prefix="soak-")
@@ -69,7 +72,7 @@ def command(
     t0 = time.monotonic()
     try:
         res = run_soak(SoakConfig(minutes=minutes, log_dir=logs, students=students, seed=seed, plant=plant or "", kinds=kinds,
-                                   victims=who))
+                                   victims=who, weights=tuple(weights.items())))
     finally:
         if tmp is not None and out is None:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -25,15 +25,38 @@ from __future__ import annotations
 import random
 import threading
 import time
-from typing import Callable, Protocol, Sequence
+from typing import Callable, Mapping, Protocol, Sequence
 
 from robofabric.soak.history import Fault
 
-__all__ = ["KINDS", "VICTIMS", "Cluster", "Nemesis", "POISON"]
+__all__ = ["KINDS", "VICTIMS", "Cluster", "Nemesis", "POISON", "parse_victims"]
 
 KINDS = ("pause", "kill", "partition", "router", "skew", "hog", "replay")
 VICTIMS = ("sim", "compute", "student")
 """What pause, kill and partition may take (``--victims``; skew takes students, hog loads any host)."""
+
+
+def parse_victims(text: str) -> dict[str, float]:
+    """``--victims``: kinds among :data:`VICTIMS`, comma-separated, each with an optional weight (``sim=0.25``: a sim
+    is picked a quarter as often as a student or the compute peer, so sim incarnations live long enough for their
+    memory to be judged while fail-overs still come). Raises :class:`ValueError` naming what is expected."""
+    out: dict[str, float] = {}
+    for part in (p.strip() for p in text.split(",")):
+        if not part:
+            continue
+        name, _, weight = part.partition("=")
+        name = name.strip()
+        try:
+            w = float(weight) if weight.strip() else 1.0
+        except ValueError:
+            w = -1.0
+        if name not in VICTIMS or not 0.0 < w <= 100.0:
+            raise ValueError(f"--victims {text!r}: expected some of {', '.join(VICTIMS)}, each with an optional weight "
+                             "(sim=0.25), a number in (0, 100]")
+        out[name] = w
+    if not out:
+        raise ValueError(f"--victims {text!r}: expected some of {', '.join(VICTIMS)}")
+    return out
 SKEWS = ("-30", "-5", "+3", "+20")
 """Wall-clock offsets a skewed student runs with (libfaketime's syntax)."""
 POISON = [-0.6, 0.0, 0.0, 0.0, -0.3, 0.0]
@@ -61,7 +84,7 @@ class Nemesis:
 
     def __init__(self, cluster: Cluster, log: Callable[[Fault], None], *, seed: int, kinds: Sequence[str] = KINDS,
                  gap_s: tuple[float, float] = (2.0, 6.0), clock: Callable[[], float] = time.monotonic,
-                 victims: Sequence[str] = VICTIMS) -> None:
+                 victims: Sequence[str] = VICTIMS, weights: Mapping[str, float] | None = None) -> None:
         bad = [k for k in kinds if k not in KINDS]
         if bad or not kinds:
             raise ValueError(f"unknown fault kinds {bad} (known: {', '.join(KINDS)})" if bad else "no fault kinds")
@@ -69,6 +92,7 @@ class Nemesis:
             raise ValueError(f"victims {list(victims)}: expected some of {', '.join(VICTIMS)}")
         self.cluster, self.log, self.kinds, self.gap_s, self.clock = cluster, log, tuple(kinds), gap_s, clock
         self.victims = tuple(victims)
+        self.weights = {k: float(v) for k, v in (weights or {}).items()}  # victim kind -> weight (1 when not named)
         self.rng = random.Random(seed)
         self.count = 0
         self.errors: list[str] = []
@@ -104,10 +128,14 @@ class Nemesis:
 
     def _victim(self, kinds: Sequence[str] = VICTIMS) -> str | None:
         """A process to fault, among the kinds asked for (sims only while a standby follows the primary)."""
-        pool = [r for k in ("student", "compute") if k in kinds and k in self.victims for r in self.cluster.roles(k)]
+        pool = [(r, k) for k in ("student", "compute") if k in kinds and k in self.victims for r in self.cluster.roles(k)]
         if "sim" in kinds and "sim" in self.victims and self.cluster.sims_healthy():
-            pool += self.cluster.roles("sim")
-        return self.rng.choice(pool) if pool else None
+            pool += [(r, "sim") for r in self.cluster.roles("sim")]
+        if not pool:
+            return None
+        if all(self.weights.get(k, 1.0) == 1.0 for _, k in pool):
+            return self.rng.choice(pool)[0]  # unweighted: the schedule a seed gave before weights existed
+        return self.rng.choices(pool, weights=[self.weights.get(k, 1.0) for _, k in pool])[0][0]
 
     def _pause(self) -> tuple[str, str] | None:
         role = self._victim()

@@ -56,6 +56,7 @@ class SoakConfig:
     sample_s: float = 10.0
     gap_s: tuple[float, float] = (2.0, 6.0)
     victims: tuple[str, ...] = VICTIMS
+    weights: tuple[tuple[str, float], ...] = ()  # victim kind -> how often it is picked (--victims sim=0.25)
 
 
 @dataclass(frozen=True, slots=True)
@@ -282,7 +283,7 @@ class Soak:
         end = t0 + cfg.minutes * 60.0
         warm = t0 + min(600.0, max(30.0, 0.15 * cfg.minutes * 60.0))
         nemesis = self.nemesis = Nemesis(self, self.writer.write, seed=cfg.seed, kinds=cfg.kinds, gap_s=cfg.gap_s,
-                                         victims=cfg.victims).start()
+                                         victims=cfg.victims, weights=dict(cfg.weights)).start()
         self.writer.write(Mark(t0, "class", "every peer started; the nemesis begins"))
         warmed = False
         while time.monotonic() < end:

@@ -34,7 +34,7 @@ def _history(folder: Path, owners: tuple[str, str]) -> Path:
     return folder
 
 
-@pytest.mark.parametrize("args", [["--plant", "nope"], ["--faults", "pause,flood"], ["--victims", "router"], ["--students", "1"]])
+@pytest.mark.parametrize("args", [["--plant", "nope"], ["--faults", "pause,flood"], ["--victims", "router"], ["--victims", "sim=0"], ["--students", "1"]])
 def test_bad_options_are_refused_with_what_is_expected(args):
     res = soak(*args)
     assert res.returncode == 2, res.stdout + res.stderr

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from robofabric.soak.history import (KINDS, Cmd, Fault, Joints, Mark, OwnEvent, OwnRec, ProcExit, ProcSample, Writer, from_line,
                                      read, to_line)
-from robofabric.soak.nemesis import Nemesis
+from robofabric.soak.nemesis import Nemesis, parse_victims
 
 t = st.floats(0, 1e6, allow_nan=False)
 text = st.text(max_size=30)
@@ -69,3 +69,11 @@ def test_the_nemesis_refuses_unknown_fault_kinds_and_victims():
         Nemesis(None, print, seed=1, kinds=("pause", "flood"))  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="victims"):
         Nemesis(None, print, seed=1, victims=("router",))  # type: ignore[arg-type]
+
+
+def test_victims_take_optional_weights_and_refuse_what_is_not_a_victim_or_a_weight():
+    assert parse_victims("sim=0.25,compute, student") == {"sim": 0.25, "compute": 1.0, "student": 1.0}
+    assert parse_victims("student") == {"student": 1.0}
+    for bad in ("router", "sim=0", "sim=-1", "sim=x", "", "sim=1e9"):
+        with pytest.raises(ValueError, match="expected some of"):
+            parse_victims(bad)
