@@ -34,8 +34,8 @@ This module is the wiring: it declares the subscribers and queryables, routes
 what arrives to the parts, each in a module of its own (:mod:`.poses` the robots'
 recent poses, :mod:`.discovery` what the sims say about the robots,
 :mod:`.scan_mapping` scans into the grid, :mod:`.map_store` maps, costmaps and
-files, :mod:`.map_service` and :mod:`.plan_service` the two services' actions),
-and turns their refusals into error replies.
+files, :mod:`.map_service` and :mod:`.plan_service` the two services' actions,
+:mod:`.owners` who owns each robot), and turns their refusals into error replies.
 """
 
 from __future__ import annotations
@@ -54,6 +54,7 @@ from .errors import NavigationError
 from .map_service import MapService
 from .map_store import MapLimit, MapStore
 from .mapping import MapperConfig, OccupancyMapper
+from .owners import OwnerWatch
 from .plan_service import PlanService
 from .planner import PlannerSettings
 from .poses import MAX_ROBOTS, POSE_HISTORY, PoseHistory
@@ -78,7 +79,8 @@ class NavigationService:
 
     Its parts: ``poses`` (:class:`PoseHistory`), ``descriptions`` (:class:`RobotDescriptions`), ``scans``
     (:class:`ScanMapping`), ``store`` (:class:`MapStore`), ``map_service`` (:class:`MapService`),
-    ``plan_service`` (:class:`PlanService`).
+    ``plan_service`` (:class:`PlanService`; in-process, ``map_service.handle(req)`` and
+    ``plan_service.handle(req)`` answer a request without Zenoh), ``owners`` (:class:`OwnerWatch`).
     """
 
     def __init__(
@@ -136,28 +138,8 @@ class NavigationService:
         self._lock = threading.Lock()  # new robots: the check and the first pose together
         self._closed = False
         self._resources: list[Any] = []
-        self.ownership: Any = None  # the trusted replica of the ownership records (ownership.OwnershipClient)
-        # its first query may wait for an authority: not on the way of the services' start
-        threading.Thread(target=self._follow_ownership, name="nav-ownership", daemon=True).start()
+        self.owners = OwnerWatch(fabric)  # the trusted replica of the ownership records
         self._declare()
-
-    def _follow_ownership(self) -> None:
-        from ownership import OwnershipClient
-
-        try:
-            client = OwnershipClient(self.fabric, self.fabric.peer_id, timeout=1.0)  # never started: reads, never renews
-        except Exception:  # a session closing under it
-            return
-        with self._lock:
-            closed, self.ownership = self._closed, client
-        if closed:
-            client.close()
-
-    def owner_of(self, robot: str) -> str | None:
-        """``robot``'s owner as the authority last said (None: free, or not known yet)."""
-        client = self.ownership
-        rec = client.record(robot) if client is not None else None
-        return rec.owner if rec is not None and rec.owner else None
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -194,8 +176,7 @@ class NavigationService:
             self._closed = True
         self.descriptions.close()
         undeclare_all(self._resources)
-        if self.ownership is not None:
-            self.ownership.close()
+        self.owners.close()
 
     # ------------------------------------------------------------------ the parts, for in-process use
 
@@ -224,18 +205,6 @@ class NavigationService:
         Explicit ``sensor_offsets`` are never overridden.
         """
         return self.descriptions.discover(timeout)
-
-    def build_map(self, name: str | None = None, threshold: float = 0.65) -> OccupancyGrid:
-        """Threshold the accumulated scans into a binary map, keep it as ``name`` and publish it."""
-        return self.map_service.build(name, threshold)
-
-    def map_request(self, req: MapRequest) -> MapReply:
-        """Handle one map request (also usable in-process, without Zenoh)."""
-        return self.map_service.handle(req)
-
-    def plan_request(self, req: PlanRequest) -> PlanReply:
-        """Handle one plan request (also usable in-process, without Zenoh)."""
-        return self.plan_service.handle(req)
 
     # ------------------------------------------------------------------ inputs
 
@@ -306,7 +275,7 @@ class NavigationService:
         asker = keys.asker(parsed)
         # a user's plan is published on the robot's path key only when she owns the robot: else another
         # user's base would show, and might follow, a path it was never planned for
-        publish = not asker or self.owner_of(req.robot) == asker
+        publish = not asker or self.owners.owner_of(req.robot) == asker
         try:
             reply = self.plan_service.handle(req, publish=publish)
         except NavigationError as exc:
