@@ -20,8 +20,10 @@ Modules, one room each:
 - :mod:`.navigation`: map and plan requests and replies
 - :mod:`.errors`: ``ServiceError``, ``Refused``, ``NoReply`` (and the codec's ``DecodeError``)
 - :mod:`.geometry`: angles and headings (``wrap_angle``, ``yaw_from_quaternion``, ``quaternion_from_yaw``)
-- :mod:`.schema`: a message's plain JSON view and its type's JSON Schema, read off its ``SPEC`` (the
-  fields listing of ``robofabric interfaces`` is a tool's: :mod:`robofabric.interface_fields`)
+
+A message's plain JSON view and its type's JSON Schema, read off the same ``SPEC``, are the exporters':
+:mod:`user_peer.message_schema` (no peer sends JSON); the fields listing of ``robofabric interfaces`` is a
+tool's, :mod:`robofabric.interface_fields`.
 """
 
 from fabric.interfaces.std import (
