@@ -27,7 +27,8 @@ Invariants (each a function ``(history, limits) -> violations``, named in :data:
   authority's ``own_expired``, or a handover or release it made for her), or when the robot was still and
   someone took it over;
 * ``queue``: users waiting for an object keep their order, and nobody is skipped who still waits;
-* ``unowned_motion``: a robot does not move when nobody owns it (``settle_s`` after its owner went);
+* ``unowned_motion``: a robot does not move when nobody owns it (``settle_s`` after its owner went; a grant the
+  observer heard after the joints it caused, as its owner's command at the new epoch shows, is not "nobody");
 * ``resources``: after warm-up (the run's, and as long again for a peer restarted during it), each peer's memory grows at most ``mem_mb_per_h``, its threads and file
   descriptors at most ``thread_slack``/``fd_slack`` above their first half's peak, its log at most
   ``log_mb_per_h`` (judged on windows of at least ``min_window_s``);
@@ -69,6 +70,10 @@ class Limits:
     each of its subscriptions reaches the new router on its own."""
     restart_warm_s: float = 60.0
     """The least warm-up of a peer started during the run (a restart); it gets the run's own warm-up if longer."""
+    order_s: float = 0.5
+    """How much later than a robot's joints the observer may hear the grant that moved it (records, commands and
+    joints come by different routes and priorities: the soak heard an owner's command at her new epoch, then the
+    moving joints, then the record of her grant, in one 3 ms burst)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -150,6 +155,14 @@ class _Timeline:
             return None
         i = bisect.bisect_right(times, t) - 1
         return self.recs[obj][i] if i >= 0 else None
+
+    def next_after(self, obj: str, t: float) -> OwnRec | None:
+        """The first record of ``obj`` heard after ``t``."""
+        times = self.times.get(obj)
+        if not times:
+            return None
+        i = bisect.bisect_right(times, t)
+        return self.recs[obj][i] if i < len(times) else None
 
     def unowned_since(self, obj: str, t: float) -> float | None:
         """Since when ``obj`` has had no owner at ``t`` (None: it has one, or no record yet)."""
@@ -326,19 +339,33 @@ def queue(h: Sequence[Record], lim: Limits) -> list[Violation]:
 def unowned_motion(h: Sequence[Record], lim: Limits) -> list[Violation]:
     recs, joints = fenced(h)
     tl = _Timeline(recs)
+    cmds: dict[str, list[Cmd]] = defaultdict(list)
+    for r in h:
+        if isinstance(r, Cmd):
+            cmds[r.robot].append(r)
     out = []
     for robot, js in joints.items():
         for a, b in zip(js, js[1:]):
             if _dist(a.q, b.q) < lim.moving:
                 continue
             since = tl.unowned_since(robot, b.t)  # nobody owned it from ``since`` through the whole step
-            if since is not None and a.t - since > lim.settle_s:
+            if since is not None and a.t - since > lim.settle_s and not _grant_heard_late(tl, cmds[robot], robot, b.t, lim):
                 rec = tl.at(robot, b.t)
                 out.append(Violation("unowned_motion", f"{robot} moved {_dist(a.q, b.q):.3f} rad with no owner "
                                                        f"({a.t - since:.1f} s after its owner went)",
                                      tuple(x for x in (rec, a, b) if x is not None)))
                 break  # one per robot tells it
     return out
+
+
+def _grant_heard_late(tl: _Timeline, cmds: Sequence[Cmd], robot: str, t: float, lim: Limits) -> bool:
+    """Whether the robot had an owner at ``t`` whose grant the observer heard only after its joints: the robot's next
+    record, within ``order_s``, names an owner at a newer epoch, and a command of hers at that epoch came by ``t``
+    (a user stamps only an epoch she was granted, so the grant came first)."""
+    nxt = tl.next_after(robot, t)
+    if nxt is None or not nxt.owner or nxt.t - t > lim.order_s:
+        return False
+    return any(c.user == nxt.owner and c.epoch == nxt.epoch and c.t <= t for c in cmds)
 
 
 def _slope_per_h(pts: list[tuple[float, float]]) -> float:

@@ -160,6 +160,20 @@ def test_a_robot_moving_between_two_samples_that_span_a_new_grant_is_owned():
     assert only("unowned_motion", [rec(1, "", 2), js(2, A), js(8, A), rec(8.5, "ann", 3), js(8.7, B)]) == []
 
 
+def test_a_grant_heard_after_the_joints_it_moved_is_owned_when_her_command_at_that_epoch_came_first():
+    """The observer hears records, commands and joints by different routes: the soak heard s02's command at epoch 18,
+    the moving joints, then the record of her grant at 18. The command proves the grant came first; without it (or
+    with the record too late, or naming someone else) the motion is unowned."""
+    moved = tuple(x - 0.06 for x in B)
+    base = [rec(1, "", 17), js(5, B), js(6.0, moved)]
+    cmd = Cmd(5.99, "arm0", "s02", 18, "joints", A)
+    assert only("unowned_motion", [*base, cmd, rec(6.001, "s02", 18)]) == []
+    assert len(only("unowned_motion", [*base, rec(6.001, "s02", 18)])) == 1  # no command of hers: unowned
+    assert len(only("unowned_motion", [*base, cmd, rec(7.0, "s02", 18)])) == 1  # the record long after
+    assert len(only("unowned_motion", [*base, cmd, rec(6.001, "bob", 18)])) == 1  # another owner
+    assert len(only("unowned_motion", [*base, Cmd(5.99, "arm0", "s02", 17, "joints", A), rec(6.001, "s02", 18)])) == 1
+
+
 # ---------------------------------------------------------------------- resources and exits
 
 def _samples(name, slope_mb_h, *, minutes=20, threads=20, fd_rise=0, log_rise=0):
