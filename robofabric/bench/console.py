@@ -149,8 +149,8 @@ def browser_args(swiftshader: bool) -> list[str]:
     return list(CHROMIUM_ARGS) if swiftshader else [a for a in CHROMIUM_ARGS if "swiftshader" not in a]
 
 
-def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False) -> dict[str, Any]:
-    """N pages on one console; the row's figures."""
+def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, robots: int = 0) -> dict[str, Any]:
+    """N pages on one console, in a world of ``max(n, robots)`` bases; the row's figures."""
     from playwright.sync_api import sync_playwright
 
     from fabric.interfaces import Pose
@@ -166,8 +166,8 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False) -> 
     with ProcessGroup(logs) as procs:
         router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
         wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
-        robots = [x for i in range(n) for x in ("--robot", f"reeman:base{i}")]
-        sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *robots, "--world", world,
+        spawn = [x for i in range(max(n, robots)) for x in ("--robot", f"reeman:base{i}")]
+        sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *spawn, "--world", world,
                                          "--connect", ep, "--id", "sim"), name="sim")
         web = free_port()
         console = procs.start(robofabric_cmd("console", "--world", world, "--connect", ep, "--listen", f"127.0.0.1:{web}"), name="console")
@@ -250,7 +250,7 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False) -> 
     lost = sum(1 for i, r in records.items() if i in bases and (r is None or r.owner != f"s{i}"))
     refused = sum(1 for m in messages if m is not None and any(w in m for w in REFUSED))
     logged_out = sum(1 for m in messages if m is None)
-    return {"n": n, "joined": len(joined), "join_max": max(joined, default=float("nan")), "lag_p50": pct(lags, 50), "lag_max": pct(lags, 100),
+    return {"n": n, "robots": max(n, robots), "joined": len(joined), "join_max": max(joined, default=float("nan")), "lag_p50": pct(lags, 50), "lag_max": pct(lags, 100),
             "key_p50": pct(presses, 50, 1e3), "key_p99": pct(presses, 99, 1e3), "presses": len(presses), "missed": missed, "unstopped": unstopped,
             "cpu": cpu, "page_cpu": page_cpu, "renderer_cpu": renderer_cpu, "join_cpu": pct(join_cpu, 50), "lost": lost, "refused": refused, "logged_out": logged_out, "reloads": len(reloads),
             "late_p99": max((h.late_p99 for h in health), default=float("nan")),
@@ -267,7 +267,8 @@ def header() -> list[str]:
 
 
 def row(r: dict[str, Any]) -> str:
-    return (f"| {r['n']} | {r['joined']} ({r['join_max']:.1f}) | {r['lag_p50']:.2f} / {r['lag_max']:.2f} | "
+    pages = f"{r['n']} ({r['robots']} robots)" if r.get("robots", r["n"]) != r["n"] else f"{r['n']}"
+    return (f"| {pages} | {r['joined']} ({r['join_max']:.1f}) | {r['lag_p50']:.2f} / {r['lag_max']:.2f} | "
             f"{r['key_p50']:.0f} / {r['key_p99']:.0f}, {r['presses']} | {r['missed']} / {r['unstopped']} | {r['cpu']:.2f} | {r['page_cpu']:.2f} / {r['renderer_cpu']:.2f}; {r['join_cpu']:.1f} | {r['lost']} | "
             f"{r['refused']} | {r['logged_out']} ({r['reloads']}) | {r['late_p99']:.0f} / {r['late_max']:.0f} | {r['to_server_p99']:.0f} / {r['to_sent_p99']:.0f} |")
 
@@ -278,6 +279,8 @@ def command(
     out: Annotated[Optional[Path], typer.Option("--out", help="Append the markdown table to this file.")] = None,
     swiftshader: Annotated[bool, typer.Option("--swiftshader", help="Composite the pages through SwiftShader's software GL "
                                               "(forced, as the Rerun viewer's benchmark does), not as Chromium chooses.")] = False,
+    robots: Annotated[int, typer.Option("--robots", help="Bases in the world (at least one a page): a few pages in a "
+                                        "class-sized world measure the server's cost per page without a class of browsers.")] = 0,
 ) -> None:
     """N browser pages on one console server, each driving its own base: view lag in the page, key to motion,
     the server's CPU, robots lost."""
@@ -289,16 +292,16 @@ def command(
         counts = [int(x) for x in pages.split(",") if x.strip()]
     except ValueError:
         raise UserError(f"--pages {pages!r}: expected counts like 1,10,20") from None
-    if not counts or min(counts) < 1 or seconds <= 0:
-        raise UserError("--pages: each count at least 1; --seconds positive")
+    if not counts or min(counts) < 1 or seconds <= 0 or robots < 0:
+        raise UserError("--pages: each count at least 1; --seconds positive; --robots not negative")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    flag = " --swiftshader" if swiftshader else ""
+    flag = (" --swiftshader" if swiftshader else "") + (f" --robots {robots}" if robots else "")
     lines = [f"robofabric bench console --pages {pages} --seconds {seconds:g}{flag} on {machine()}, load average {load:.1f} at the start",
              "", *header()]
     print("\n".join(lines), flush=True)
     with tempfile.TemporaryDirectory(prefix="bench-console-") as tmp:
         for n in counts:
-            line = row(run_one(n, seconds, Path(tmp), swiftshader=swiftshader))
+            line = row(run_one(n, seconds, Path(tmp), swiftshader=swiftshader, robots=robots))
             print(line, flush=True)
             lines.append(line)
     append(out, "\n".join(lines))

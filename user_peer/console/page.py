@@ -2,7 +2,8 @@
 
 Every button calls the Python user API (``user_peer``) of the page's own world, off the event loop
 (``nicegui.run.io_bound``), so a slow answer holds up this page only. Refusals are shown with their
-reason and the robot's owner. A 5 Hz timer redraws what changed; a 10 Hz one refreshes the twist
+reason and the robot's owner. The console's one 5 Hz clock (:mod:`.ticker`) redraws what changed on every page
+at once; a 10 Hz timer refreshes the twist
 while an arrow key is held (the sim's twist is a deadman). The panels are :mod:`.arm_panel` and
 :mod:`.base_panel`, the live view :mod:`.view`; what the view draws is :mod:`.state` and :mod:`.topview`.
 """
@@ -16,7 +17,6 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 from nicegui import run, ui
 
-from fabric import keys
 from user_peer.console import state
 from user_peer.console.arm_panel import ArmPanel
 from user_peer.console.base_panel import BasePanel
@@ -31,8 +31,6 @@ if TYPE_CHECKING:
 __all__ = ["ConsolePage", "event_line", "KEYS_JS"]
 
 log = logging.getLogger("robofabric.console")
-
-REFRESH_VIEW_S = 0.2
 
 KEYS_JS = """
 for (const type of ['keydown', 'keyup']) document.addEventListener(type, (e) => {
@@ -97,6 +95,7 @@ class ConsolePage:
         self._events_seen = 0
         self._gone_seen = 0
         self._owners: dict[str, str] = {}
+        self._tick: int | None = None  # its place on the console's redraw clock
 
     # ------------------------------------------------------------------ login
 
@@ -150,6 +149,8 @@ class ConsolePage:
 
     def _gone(self) -> None:
         """The tab closed (or lost its connection for good): her robots stop, her world closes after the grace."""
+        if self._tick is not None:
+            self.console.ticker.remove(self._tick)
         if self.base_panel is not None:
             self.base_panel.driver.stop()
         if self.view is not None:
@@ -165,9 +166,9 @@ class ConsolePage:
         self.arm = next((r for r in self.handles.values() if r.kind == "arm"), None)
         self.base = next((r for r in self.handles.values() if r.kind == "mobile"), None)
         self.selected = (self.arm or self.base).id if self.handles else None
-        # every robot's pose for the view, kept undecoded: a page of a 20-robot class decodes 5 poses a second per
-        # robot, not 50 (only the robots she selected are followed in full: joints, scan, path)
-        w.fabric.subscribe_raw(keys.robot_stream_all(w.name, "pose"), self.view.on_pose)
+        # every robot's pose for the view, kept in zenoh's ring and taken at a redraw: a page of a 20-robot class
+        # reads at most 5 bursts a second, not 50 (only the robots she selected are followed in full: joints, scan, path)
+        self.view.follow_poses()
         target = next((o for o in info.objects if o.kind == "ik_target"), None)
         goal = next((o for o in info.objects if o.kind == "goal_pointer"), None)
         if self.arm is not None:
@@ -195,7 +196,7 @@ class ConsolePage:
         ui.on("rf_key", self._key)
         ui.on("rf_blur", self._disconnected)
         ui.run_javascript(KEYS_JS)
-        ui.timer(REFRESH_VIEW_S, self.refresh)
+        self._tick = self.console.ticker.add(self.refresh)  # the console's one clock: pages share its tick's work
         ui.timer(REFRESH_S, self._keep_driving)
         self.refresh()
 

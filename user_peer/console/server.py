@@ -13,11 +13,16 @@ import socket
 from dataclasses import dataclass, field
 from typing import Any
 
+from user_peer.console.feed import Decoded
 from user_peer.console.health import PERIOD_S, Health
 from user_peer.console.login import Logins
 from user_peer.console.pictures import ROUTE, Pictures
+from user_peer.console.ticker import Ticker
 
-__all__ = ["Console", "serve", "page_urls", "RECONNECT_S", "PRUNE_S", "PING_INTERVAL_S", "PING_TIMEOUT_S"]
+__all__ = ["Console", "serve", "page_urls", "RECONNECT_S", "PRUNE_S", "PING_INTERVAL_S", "PING_TIMEOUT_S", "REFRESH_VIEW_S"]
+
+REFRESH_VIEW_S = 0.2
+"""How often every page redraws (the console's one clock, :mod:`.ticker`): the view may be 0.5 s behind."""
 
 RECONNECT_S = 30.0
 """How long a page whose connection dropped may come back as it was (NiceGUI's reconnect timeout): a busy
@@ -52,6 +57,8 @@ class Console:
     logins: Logins = field(init=False)
     health: Health = field(init=False, default_factory=Health)
     pictures: Pictures = field(init=False, default_factory=Pictures)
+    ticker: Ticker = field(init=False, default_factory=lambda: Ticker(REFRESH_VIEW_S))
+    decoded: Decoded = field(init=False, default_factory=Decoded)  # every page's poses, decoded once
 
     def __post_init__(self) -> None:
         self.logins = Logins(self._open, grace=self.grace, on_leave=stop_robots)
@@ -149,6 +156,7 @@ def serve(console: Console, host: str, port: int) -> None:
         background_tasks.create(announce(), name="console announce")
         background_tasks.create(console.health.probe(), name="console health probe")
         background_tasks.create(report(), name="console health report")
+        background_tasks.create(console.ticker.run(), name="console redraw clock")
 
     def dropped() -> None:
         console.health.dropped += 1
@@ -158,7 +166,10 @@ def serve(console: Console, host: str, port: int) -> None:
     app.on_shutdown(console.logins.close)
     try:
         ui.run(host=host, port=port, title=f"robofabric console · {console.world}", reload=False, show=False,
-               show_welcome_message=False, reconnect_timeout=RECONNECT_S, favicon="🤖", uvicorn_logging_level="warning")
+               show_welcome_message=False, reconnect_timeout=RECONNECT_S, favicon="🤖", uvicorn_logging_level="warning",
+               # no per-message deflate: it cost the server (and every browser) a compression of each update, to
+               # save bytes a class LAN does not miss
+               ws_per_message_deflate=False)
     except KeyboardInterrupt:  # uvicorn shuts down, then raises the Ctrl-C it caught again: we are done
         pass
     finally:

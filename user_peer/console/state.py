@@ -86,13 +86,16 @@ def scene_layout(info) -> tuple[Frame, list[tuple[float, float, float, float, fl
     return topview.frame_around(pts, margin=0.2 if boxes else 2.0, minimum=4.0 if boxes else 10.0), boxes
 
 
-def _pose(handles: dict, poses: dict[str, bytes], rid: str) -> Any:
-    """A robot's latest pose: its handle's (followed in full), else the undecoded latest, decoded now."""
+def _pose(handles: dict, poses: dict[str, bytes], rid: str, decoder: Any = None) -> Any:
+    """A robot's latest pose: its handle's (followed in full), else the undecoded latest, decoded now (by
+    ``decoder``, the console's shared :class:`~user_peer.console.feed.Decoded`, when given)."""
     if rid in handles:
         return handles[rid].latest("pose")
     raw = poses.get(rid)
     if raw is None:
         return None
+    if decoder is not None:
+        return decoder.pose(rid, raw)
     try:
         return decode(raw, Pose)
     except DecodeError:
@@ -139,14 +142,45 @@ def _mark(world, entry, pose, spawn: dict, selected: set[str], joints=None) -> R
     return RobotMark(entry.id, entry.kind or "robot", owner, sx, sy, syaw, owner == world.user, entry.id in selected, flange, links)
 
 
+_SPAWN: dict[int, tuple[Any, dict[str, tuple[float, ...]]]] = {}  # id(description) -> (it, its robots' spawn poses)
+
+
+def _spawn(info) -> dict[str, tuple[float, ...]]:
+    """Every robot's spawn pose (x, y, z, yaw) by id, once per world description (each page's session has its
+    own; a description is not hashable, so it is kept by identity, and held so the identity stays its own)."""
+    held = _SPAWN.get(id(info))
+    if held is None or held[0] is not info:
+        if len(_SPAWN) > 256:
+            _SPAWN.clear()
+        held = _SPAWN[id(info)] = (info, {r.id: tuple(float(v) for v in r.pose) for r in info.robots})
+    return held[1]
+
+
+def _drawn(world, entry, handles: dict, poses: dict[str, bytes], frame: Frame, spawn: dict, selected: set[str], decoder: Any) -> str:
+    """One robot as the page draws it. A robot the page does not follow, whose pose came undecoded, is drawn by
+    the console's ``decoder`` once for every page that holds the same pose and draws it the same way."""
+    if decoder is not None and entry.id not in handles and entry.id in poses:
+        rec = world.ownership.record(entry.id)
+        owner = rec.owner if rec is not None else ""
+        variant = (owner, owner == world.user, entry.id in selected, frame)
+
+        def draw(pose: Any) -> str:
+            mark = _mark(world, entry, pose, spawn, selected)
+            return topview.robot_svg(frame, mark) if mark is not None else ""
+
+        return decoder.drawn(entry.id, poses[entry.id], variant, draw)
+    joints = handles[entry.id].latest("joints") if entry.id in handles and entry.kind == "arm" else None
+    mark = _mark(world, entry, _pose(handles, poses, entry.id, decoder), spawn, selected, joints)
+    return topview.robot_svg(frame, mark) if mark is not None else ""
+
+
 def view_svg(world, entries: list, handles: dict, poses: dict[str, bytes], frame: Frame, boxes, *, base_id: str | None,
-             selected: set[str], goal: tuple[float, float, float] | None, target: tuple[float, float] | None) -> str:
+             selected: set[str], goal: tuple[float, float, float] | None, target: tuple[float, float] | None,
+             decoder: Any = None) -> str:
     """The live view's overlay: every robot with its owner, the paths and the selected base's scan of the robots
-    this page follows, the IK target and the goal."""
-    spawn = {r.id: tuple(float(v) for v in r.pose) for r in world.info().robots}
-    marks = [m for m in (_mark(world, e, _pose(handles, poses, e.id), spawn, selected,
-                               handles[e.id].latest("joints") if e.id in handles and e.kind == "arm" else None)
-                         for e in entries) if m is not None]
+    this page follows, the IK target and the goal. ``decoder``: the console's shared pose decoder."""
+    spawn = _spawn(world.info())
+    drawn = [_drawn(world, e, handles, poses, frame, spawn, selected, decoder) for e in entries]
     scan = None
     paths = []
     for r in handles.values():
@@ -158,4 +192,4 @@ def view_svg(world, entries: list, handles: dict, poses: dict[str, bytes], frame
             if s is not None and p is not None:
                 scan = topview.scan_points(float(p.position[0]), float(p.position[1]), yaw_from_quaternion(p.quaternion),
                                            s.angle_min, s.angle_increment, s.ranges, s.range_max)
-    return topview.svg(frame, marks, boxes=boxes, scan=scan, paths=paths, target=target, goal=goal)
+    return topview.svg(frame, (), boxes=boxes, scan=scan, paths=paths, target=target, goal=goal, drawn=drawn)

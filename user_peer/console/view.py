@@ -8,7 +8,9 @@ redraws only what moves, and only when it moved:
   redraw) and fetched by URL (:mod:`.pictures`: NiceGUI resends every property of an element it updates, and a
   data: URL would ride along with each redraw);
 - the SVG overlay holds the robots, the scan, the paths, the target and the goal; NiceGUI sends it only when
-  its text changed, so a still world costs the browser nothing.
+  its text changed, so a still world costs the browser nothing;
+- every robot's pose comes from the page's :class:`~user_peer.console.feed.PoseFeed`, taken at the redraw
+  (not fifty times a second), decoded and drawn once per tick for every page that holds the same pose.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from nicegui import ui
 
 from fabric import keys
 from user_peer.console import state, topview
+from user_peer.console.feed import PoseFeed, ring_capacity
 
 if TYPE_CHECKING:
     from user_peer.console.page import ConsolePage
@@ -38,7 +41,7 @@ class LiveView:
         self.page = page
         self.frame = frame
         self.boxes = boxes
-        self.poses: dict[str, bytes] = {}  # every robot's latest pose, undecoded (decoded at a redraw)
+        self.feed: PoseFeed | None = None  # every robot's latest pose, undecoded (decoded at a redraw)
         self._map_seq: int | None = None
         self._drag = False  # the IK target is held by the mouse
         self._swallow_click = False
@@ -51,12 +54,10 @@ class LiveView:
             content="", on_mouse=self.mouse, events=["mousedown", "mouseup", "click"], sanitize=False,
         ).classes("w-full").props('aria-label="Live view: click to place the goal, drag the IK target"')
 
-    def on_pose(self, sample: Any) -> None:
-        """(zenoh's thread) keep the latest pose of every robot, undecoded."""
-        try:
-            self.poses[keys.parse(str(sample.key_expr)).subject] = sample.payload.to_bytes()
-        except Exception:  # a key that does not parse: not a robot's pose
-            pass
+    def follow_poses(self) -> None:
+        """Every robot's pose, through the page's own session, kept in zenoh's ring until a redraw takes it."""
+        w = self.page.world
+        self.feed = PoseFeed(w.fabric, w.name, ring_capacity(len(self.page.entries)))
 
     def mouse(self, e: Any) -> None:
         """A press on the IK target and its release elsewhere drag the target there (its height kept; the nudges
@@ -79,8 +80,10 @@ class LiveView:
                 page.base_panel.clicked(e)
 
     def close(self) -> None:
-        """The page went away: its picture is no longer served."""
+        """The page went away: its picture is no longer served, its poses no longer kept."""
         self.page.console.pictures.drop(self.token)
+        if self.feed is not None:
+            self.feed.close()
 
     def refresh(self) -> None:
         """The picture again when her map changed; the overlay from what the page holds now."""
@@ -92,7 +95,8 @@ class LiveView:
             png = topview.background_png(self.frame, self.boxes, (grid.cells, grid.resolution, grid.origin))
             self.image.set_source(page.console.pictures.put(self.token, png))
         target = page.arm_panel.target if page.arm_panel is not None else None
+        poses = self.feed.drain() if self.feed is not None else {}
         self.image.content = state.view_svg(
-            w, page.entries, page.handles, self.poses, self.frame, (), base_id=page.base.id if page.base else None,
+            w, page.entries, page.handles, poses, self.frame, (), base_id=page.base.id if page.base else None,
             selected={page.selected} if page.selected else set(), goal=page.base_panel.goal if page.base_panel else None,
-            target=(float(target[0]), float(target[1])) if target is not None else None)
+            target=(float(target[0]), float(target[1])) if target is not None else None, decoder=page.console.decoded)

@@ -1,0 +1,116 @@
+"""What the console shares between its pages: every robot's pose read at the redraw (a page's own session,
+zenoh's ring), decoded and drawn once for the pages that hold the same bytes, on one clock for all pages.
+
+A real router and real sessions on loopback; no browser (test_console_browser.py shows the whole page)."""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+
+from fabric import keys
+from fabric.codec import encode
+from fabric.interfaces import Pose
+from robofabric.testing import wait_until
+from user_peer.console import topview
+from user_peer.console.feed import Decoded, PoseFeed, ring_capacity
+from user_peer.console.ticker import Ticker
+
+
+def _pose(x: float) -> Pose:
+    return Pose(position=np.array([x, 0.0, 0.0]))
+
+
+def test_a_pages_feed_holds_every_robots_newest_pose_and_takes_no_more_than_its_ring(world, connect):
+    """Poses published faster than the page redraws stay in zenoh's ring: the redraw takes at most a ring of them
+    (not every sample), and finds the newest pose of every robot."""
+    sim, page, counter = connect("sim", "sim"), connect("user", "alice"), connect("tool", "counter")
+    robots = [f"base{i}" for i in range(3)]
+    feed = PoseFeed(page, world, ring_capacity(len(robots)))
+    heard: list[str] = []
+    counter.subscribe_raw(keys.robot_stream_all(world, "pose"), lambda s: heard.append(str(s.key_expr)))
+
+    def both_listen() -> bool:  # the subscriptions reached the router: a warm-up pose gets through to both
+        sim.publish(keys.robot_stream(world, "base0", "pose"), _pose(-1.0))
+        return "base0" in feed.drain() and bool(heard)
+
+    wait_until(both_listen, timeout=20, what="the page's feed and the counter to hear a pose")
+    heard.clear()
+    taken = feed.taken
+    bursts = 40
+    for b in range(bursts):
+        for rid in robots:
+            sim.publish(keys.robot_stream(world, rid, "pose"), _pose(float(b)))
+    wait_until(lambda: len(heard) >= bursts * len(robots), timeout=20, what="every pose at another session", seen=lambda: len(heard))
+
+    def newest() -> bool:
+        raw = feed.drain()
+        return set(raw) == set(robots) and all(Decoded().pose(r, raw[r]).position[0] == bursts - 1 for r in robots)
+
+    wait_until(newest, timeout=20, what="the newest pose of every robot in the page's feed", seen=lambda: sorted(feed.raw))
+    assert feed.taken - taken <= 2 * ring_capacity(len(robots)) < bursts * len(robots), feed.taken - taken
+    feed.close()
+    assert feed.drain() == feed.raw  # a closed feed keeps what it had and reads nothing
+
+
+def test_the_same_bytes_decode_once_and_draw_once_per_way_of_drawing():
+    d = Decoded()
+    a, b = encode(_pose(1.0)), encode(_pose(2.0))
+    assert d.pose("base1", a).position[0] == 1.0 and d.pose("base1", bytes(a)).position[0] == 1.0
+    assert d.decoded == 1  # the second page's equal bytes were not decoded again
+    assert d.pose("base1", b).position[0] == 2.0 and d.decoded == 2
+    drawn: list[tuple] = []
+
+    def draw(variant):
+        return lambda pose: drawn.append((variant, pose.position[0])) or f"<{variant}:{pose.position[0]}>"
+
+    assert d.drawn("base1", b, "mine", draw("mine")) == "<mine:2.0>"
+    assert d.drawn("base1", bytes(b), "mine", draw("mine")) == "<mine:2.0>"
+    assert d.drawn("base1", b, "other", draw("other")) == "<other:2.0>"
+    assert drawn == [("mine", 2.0), ("other", 2.0)]
+
+
+def test_bytes_that_are_no_pose_are_counted_and_draw_as_nothing():
+    d = Decoded()
+    assert d.pose("base1", b"\x00not a pose") is None and d.bad == 1
+    assert d.drawn("base1", b"\x00not a pose", "v", lambda pose: "" if pose is None else "drawn") == ""
+
+
+def test_the_clock_calls_every_page_once_a_tick_and_one_that_fails_stops_no_other():
+    t = Ticker(0.01)
+    calls: list[str] = []
+    a = t.add(lambda: calls.append("a"))
+    t.add(lambda: 1 / 0)
+    t.add(lambda: calls.append("c"))
+    t.tick()
+    assert calls == ["a", "c"] and t.failed == 1
+    t.remove(a)
+    t.tick()
+    assert calls == ["a", "c", "c"] and len(t) == 2
+
+
+def test_the_clock_runs_on_the_event_loop_until_cancelled():
+    t = Ticker(0.01)
+    seen: list[int] = []
+    t.add(lambda: seen.append(t.ticks))
+
+    async def main() -> None:
+        task = asyncio.ensure_future(t.run())
+        for _ in range(2000):
+            if len(seen) >= 3:
+                break
+            await asyncio.sleep(0.005)
+        task.cancel()
+
+    asyncio.run(main())
+    assert seen[:3] == [1, 2, 3]
+
+
+def test_a_scan_is_one_path_of_squares_one_per_pixel_hit():
+    f = topview.Frame(-5, -5, 5, 5)
+    scan = np.array([[1.0, 1.0], [1.001, 1.001], [-2.0, 0.5]])  # the first two fall in the same pixel
+    out = topview.scan_path(f, scan)
+    assert out.count("<path") == 1 and out.count("h2v2h-2z") == 2
+    x, y = f.px(1.0, 1.0)
+    assert f"M{round(x) - 1} {round(y) - 1}h2v2h-2z" in out
