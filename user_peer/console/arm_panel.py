@@ -46,20 +46,20 @@ class ArmPanel:
 
     def build(self) -> None:
         e = self.arm.entry
-        with ui.card().classes("w-full"):
+        with ui.card().classes("full-width"):
             self.title = ui.label("").classes("text-subtitle1")
             self.sliders = []
             for i, name in enumerate(e.joint_names):
                 lo = math.degrees(e.lower[i]) if i < len(e.lower) else -180.0
                 hi = math.degrees(e.upper[i]) if i < len(e.upper) else 180.0
-                with ui.row().classes("w-full items-center no-wrap"):
-                    ui.label(f"J{i + 1}").classes("w-8")
+                with ui.row().classes("full-width items-center no-wrap"):
+                    ui.label(f"J{i + 1}").style("width: 2rem")
                     s = ui.slider(min=round(lo, 1), max=round(hi, 1), step=0.5, value=0.0,
-                                  on_change=self._slider_moved).props(f'label aria-label="J{i + 1} ({name}) degrees"').classes("w-full")
+                                  on_change=self._slider_moved).props(f'label aria-label="J{i + 1} ({name}) degrees"').classes("full-width")
                     self.sliders.append(s)
-            with ui.row().classes("w-full items-center no-wrap"):
-                ui.label("Speed").classes("w-16")
-                self.speed = ui.slider(min=0.05, max=1.0, step=0.05, value=0.5).props('label aria-label="Speed scale"').classes("w-full")
+            with ui.row().classes("full-width items-center no-wrap"):
+                ui.label("Speed").style("width: 4rem")
+                self.speed = ui.slider(min=0.05, max=1.0, step=0.05, value=0.5).props('label aria-label="Speed scale"').classes("full-width")
             with ui.row():
                 stop = ui.button("Stop", color="negative", on_click=lambda: self.page.call(f"stop {self.arm.id}", self.arm.stop))
                 reset = ui.button("Reset", color="warning", on_click=self._reset)

@@ -46,7 +46,7 @@ class BasePanel:
         return self.page.base
 
     def build(self) -> None:
-        with ui.card().classes("w-full"):
+        with ui.card().classes("full-width"):
             self.title = ui.label("").classes("text-subtitle1")
             ui.label("Hold an arrow key to drive · 1-3 speed · space stops").classes("text-caption")
             self.state = ui.label("").classes("rf-base-state")  # bench console reads its data-pose-wall-ms

@@ -101,15 +101,15 @@ class ConsolePage:
 
     def show(self) -> None:
         ui.page_title(f"robofabric console · {self.console.world}")
-        self.root = ui.column().classes("w-full")
+        self.root = ui.column().classes("full-width")
         with self.root:
             self._login_form()
 
     def _login_form(self) -> None:
-        with ui.card().classes("mx-auto mt-16 w-96"):
+        with ui.card().style("margin: 4rem auto 0; width: 24rem"):
             ui.label(f"robofabric · world {self.console.world}").classes("text-h6")
-            self.name_in = ui.input("Name").props('autofocus aria-label="Name"').classes("w-full")
-            self.pw_in = ui.input("Password", password=True, password_toggle_button=False).props('aria-label="Password"').classes("w-full")
+            self.name_in = ui.input("Name").props('autofocus aria-label="Name"').classes("full-width")
+            self.pw_in = ui.input("Password", password=True, password_toggle_button=False).props('aria-label="Password"').classes("full-width")
             ui.label("In an open world (no logins) pick a name and leave the password empty.").classes("text-caption")
             self.login_btn = ui.button("Log in", on_click=self._login)
             self.pw_in.on("keydown.enter", self._login)
@@ -177,22 +177,22 @@ class ConsolePage:
         if self.base is not None:
             self.base_panel = BasePanel(self, w.object(goal.id) if goal else None)
 
-        with ui.row().classes("w-full items-center"):
+        with ui.row().classes("full-width items-center"):
             ui.label(f"robofabric console · world {w.name} · {w.user}").classes("text-h6")
             if self.console.rerun_url:
                 ui.link("Rerun web view (the rich view)", self.console.rerun_url, new_tab=True)
         # a line high even when empty: text appearing in it must not move the view under the mouse
         self.message = ui.label("").props('role="status" aria-live="polite"').classes("text-body1").style("min-height: 1.5rem")
-        with ui.row().classes("w-full no-wrap items-start"):
-            with ui.column().classes("w-1/2"):
+        with ui.row().classes("full-width no-wrap items-start"):
+            with ui.column().classes("col"):
                 self._robot_list()
                 for panel in (self.arm_panel, self.base_panel):
                     if panel is not None:
                         panel.build()
-            with ui.column().classes("w-1/2"):
+            with ui.column().classes("col"):
                 self.view.build()
                 ui.label("Events").classes("text-subtitle1")
-                self.log = ui.log(max_lines=200).classes("w-full h-48")
+                self.log = ui.log(max_lines=200).classes("full-width").style("height: 12rem")
         ui.on("rf_key", self._key)
         ui.on("rf_blur", self._disconnected)
         ui.run_javascript(KEYS_JS)
@@ -201,7 +201,7 @@ class ConsolePage:
         self.refresh()
 
     def _robot_list(self) -> None:
-        with ui.card().classes("w-full"):
+        with ui.card().classes("full-width"):
             ui.label("Robots").classes("text-subtitle1")
             self.rows: dict[str, ui.label] = {}
             for r in self.entries:

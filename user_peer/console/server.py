@@ -169,7 +169,10 @@ def serve(console: Console, host: str, port: int) -> None:
                show_welcome_message=False, reconnect_timeout=RECONNECT_S, favicon="🤖", uvicorn_logging_level="warning",
                # no per-message deflate: it cost the server (and every browser) a compression of each update, to
                # save bytes a class LAN does not miss
-               ws_per_message_deflate=False)
+               ws_per_message_deflate=False,
+               # no Tailwind: its runtime compiles CSS in every page as it loads and watches every change of the
+               # page for new classes; the page uses Quasar's own classes
+               tailwind=False)
     except KeyboardInterrupt:  # uvicorn shuts down, then raises the Ctrl-C it caught again: we are done
         pass
     finally:

@@ -52,7 +52,7 @@ class LiveView:
         self.image = ui.interactive_image(
             self.page.console.pictures.put(self.token, topview.background_png(self.frame, self.boxes)),
             content="", on_mouse=self.mouse, events=["mousedown", "mouseup", "click"], sanitize=False,
-        ).classes("w-full").props('aria-label="Live view: click to place the goal, drag the IK target"')
+        ).classes("full-width").props('aria-label="Live view: click to place the goal, drag the IK target"')
 
     def follow_poses(self) -> None:
         """Every robot's pose, through the page's own session, kept in zenoh's ring until a redraw takes it."""
