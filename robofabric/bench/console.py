@@ -18,6 +18,10 @@ in place, each page refreshing its twist. Then, page after page, for ``--seconds
 - **robots lost** (a base whose record no longer names its student) and **refusals** (a page whose message
   line says a command was refused or failed): both should be 0.
 
+The pages join one after another (each join timed and its CPU counted alone); ``--together`` asks for every page
+at once, as a class does when the teacher says go, and shares the joins' CPU out. ``--robots R`` puts the pages in
+a world of R bases: a few pages in a class-sized world give the server's cost per page without a class of browsers.
+
 Pages, sim and console share this machine (and the chromium processes are the largest load): the figures are
 the whole class on one box, not the server alone.
 
@@ -125,9 +129,11 @@ def _reloads(seen: list[str], i: int, text: str) -> None:
         print(f"  page {i}: {text}", file=sys.stderr, flush=True)
 
 
-def _join(page: Any, url: str, i: int) -> list[float]:
-    """Student ``s{i}`` logs in, selects and requests ``base{i}`` and holds ← at speed 2; the times of her steps."""
-    page.goto(url, timeout=120_000)
+def _join(page: Any, url: str, i: int, *, loaded: bool = False) -> list[float]:
+    """Student ``s{i}`` logs in, selects and requests ``base{i}`` and holds ← at speed 2; the times of her steps.
+    ``loaded``: the page was asked for already (its login form is awaited, not requested again)."""
+    if not loaded:
+        page.goto(url, timeout=120_000)
     page.get_by_label("Name").fill(f"s{i}")
     steps = [time.monotonic()]
     page.get_by_role("button", name="Log in").click()
@@ -142,6 +148,51 @@ def _join(page: Any, url: str, i: int) -> list[float]:
     return steps
 
 
+def _new_page(browser: Any, i: int, reloads: list[str]) -> Any:
+    page = browser.new_context(viewport={"width": 1280, "height": 1350}).new_page()
+    page.on("console", lambda m, i=i: _reloads(reloads, i, m.text))
+    page.set_default_timeout(60_000)
+    return page
+
+
+def _open_pages(browser: Any, url: str, n: int, reloads: list[str], *, together: bool) -> tuple[list, list[int], list[float], list[float]]:
+    """N pages logged in and driving: (pages, their bases, their join times, their joins' CPU seconds). One after
+    another (each page's join timed and its new processes' CPU counted alone), or ``together``: every page asked
+    for at once, as a class does when the teacher says go, then each logs in (a join's time counts from the
+    first request; its CPU is all the new processes' CPU shared out)."""
+    pages: list[Any] = []
+    bases: list[int] = []
+    joined: list[float] = []
+    join_cpu: list[float] = []
+    t_all, cpu_all = time.monotonic(), chromium_cpu_s(os.getpid())
+    opened = []
+    for i in range(n):
+        page = _new_page(browser, i, reloads)
+        if together:
+            page.goto(url, wait_until="commit", timeout=120_000)  # the request is out; its loading goes on meanwhile
+        opened.append((i, page))
+    for i, page in opened:
+        t, cpu_before = (t_all, cpu_all) if together else (time.monotonic(), chromium_cpu_s(os.getpid()))
+        try:
+            steps = _join(page, url, i, loaded=together)
+        except Exception as exc:  # a page that did not get in: counted, and the class goes on without it
+            print(f"  page {i}: did not join: {str(exc).splitlines()[0]} (its message line: {_status(page)!r})", file=sys.stderr, flush=True)
+            page.context.close()
+            continue
+        pages.append(page)
+        bases.append(i)
+        joined.append(time.monotonic() - t)
+        if not together:
+            join_cpu.append(sum(v for k, v in chromium_cpu_s(os.getpid()).items() if k not in cpu_before and v == v))
+        print(f"  page {i}: joined in {joined[-1]:.1f} s (page {steps[0] - t:.1f}, login {steps[1] - steps[0]:.1f}, request "
+              f"{steps[2] - steps[1]:.1f}" + ("" if together else f"; its renderer's CPU {join_cpu[-1]:.1f} s")
+              + f"), load {os.getloadavg()[0]:.1f}", file=sys.stderr, flush=True)
+    if together and pages:
+        new = sum(v for k, v in chromium_cpu_s(os.getpid()).items() if k not in cpu_all and v == v)
+        join_cpu = [new / len(pages)] * len(pages)
+    return pages, bases, joined, join_cpu
+
+
 def browser_args(swiftshader: bool) -> list[str]:
     """Chromium's flags: the viewer benchmark's, less its forced SwiftShader GL unless ``swiftshader``."""
     from robofabric.bench.viewer_web import CHROMIUM_ARGS
@@ -149,7 +200,7 @@ def browser_args(swiftshader: bool) -> list[str]:
     return list(CHROMIUM_ARGS) if swiftshader else [a for a in CHROMIUM_ARGS if "swiftshader" not in a]
 
 
-def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, robots: int = 0) -> dict[str, Any]:
+def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, robots: int = 0, together: bool = False) -> dict[str, Any]:
     """N pages on one console, in a world of ``max(n, robots)`` bases; the row's figures."""
     from playwright.sync_api import sync_playwright
 
@@ -186,26 +237,9 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
             wait_until(lambda: fab.live_peers("sim"), timeout=120, what="the sim", seen=lambda: procs.output(sim)[-1500:])
             fab.subscribe(f"rf/{world}/robot/*/pose", on_pose)
             browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=browser_args(swiftshader))
-            pages, joined, join_cpu, bases = [], [], [], []  # bases[k]: the base (and student) of pages[k]
             reloads: list[str] = []  # NiceGUI's own words when a page reloads itself (connection timed out, ...)
             try:
-                for i in range(n):
-                    t, cpu_before = time.monotonic(), chromium_cpu_s(os.getpid())
-                    page = browser.new_context(viewport={"width": 1280, "height": 1350}).new_page()
-                    page.on("console", lambda m, i=i: _reloads(reloads, i, m.text))
-                    page.set_default_timeout(60_000)
-                    try:
-                        steps = _join(page, url, i)
-                    except Exception as exc:  # a page that did not get in: counted, and the class goes on without it
-                        print(f"  page {i}: did not join: {str(exc).splitlines()[0]}", file=sys.stderr, flush=True)
-                        page.context.close()
-                        continue
-                    pages.append(page)
-                    bases.append(i)
-                    joined.append(time.monotonic() - t)
-                    join_cpu.append(sum(v for k, v in chromium_cpu_s(os.getpid()).items() if k not in cpu_before and v == v))
-                    print(f"  page {i}: joined in {joined[-1]:.1f} s (page {steps[0] - t:.1f}, login {steps[1] - steps[0]:.1f}, request "
-                          f"{steps[2] - steps[1]:.1f}; its renderer's CPU {join_cpu[-1]:.1f} s), load {os.getloadavg()[0]:.1f}", file=sys.stderr, flush=True)
+                pages, bases, joined, join_cpu = _open_pages(browser, url, n, reloads, together=together)
                 lags: list[float] = []
                 presses: list[float] = []
                 missed = unstopped = 0
@@ -281,6 +315,8 @@ def command(
                                               "(forced, as the Rerun viewer's benchmark does), not as Chromium chooses.")] = False,
     robots: Annotated[int, typer.Option("--robots", help="Bases in the world (at least one a page): a few pages in a "
                                         "class-sized world measure the server's cost per page without a class of browsers.")] = 0,
+    together: Annotated[bool, typer.Option("--together", help="Ask for every page at once, as a class does, "
+                                           "instead of one after another.")] = False,
 ) -> None:
     """N browser pages on one console server, each driving its own base: view lag in the page, key to motion,
     the server's CPU, robots lost."""
@@ -295,13 +331,13 @@ def command(
     if not counts or min(counts) < 1 or seconds <= 0 or robots < 0:
         raise UserError("--pages: each count at least 1; --seconds positive; --robots not negative")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    flag = (" --swiftshader" if swiftshader else "") + (f" --robots {robots}" if robots else "")
+    flag = (" --swiftshader" if swiftshader else "") + (f" --robots {robots}" if robots else "") + (" --together" if together else "")
     lines = [f"robofabric bench console --pages {pages} --seconds {seconds:g}{flag} on {machine()}, load average {load:.1f} at the start",
              "", *header()]
     print("\n".join(lines), flush=True)
     with tempfile.TemporaryDirectory(prefix="bench-console-") as tmp:
         for n in counts:
-            line = row(run_one(n, seconds, Path(tmp), swiftshader=swiftshader, robots=robots))
+            line = row(run_one(n, seconds, Path(tmp), swiftshader=swiftshader, robots=robots, together=together))
             print(line, flush=True)
             lines.append(line)
     append(out, "\n".join(lines))
