@@ -33,6 +33,11 @@ MAX_MESSAGE_SIZE = 4 * 1024 * 1024
 larger message is dropped on arrival and the link stays up (checked on zenoh 1.10). The largest
 message the fabric itself sends is a map of at most 2 MiB (fabric.interfaces.MAX_GRID_CELLS)."""
 ZENOH_DEFAULT_MAX_MESSAGE_SIZE = 1 << 30
+RECONNECT_RETRY = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}
+"""``connect/retry`` of every client and peer session (zenoh's default backs off to 4 s): after a router's restart
+every peer reconnects within a second of the router being back, and at about the same time, so a class resumes at
+once and a standby that waits for its leader's token after its own link came back (sim_peer.roles, three leases)
+does not wait on a leader still sleeping between two attempts. A zenoh config file that sets its own keeps it."""
 SOCKET_BUFFER = 64 * 1024
 """TCP ``so_sndbuf``/``so_rcvbuf`` of every link. With the kernel's autotuned loopback buffers (MBs),
 a flood of small junk samples piled up in the sockets between the router and the sim, ahead of an
@@ -301,6 +306,8 @@ class FabricConfig:
         if listen:
             conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
         conf.insert_json5("transport/link/tx/lease", json.dumps(self.lease_ms))
+        if mode != "router" and not (self.config_file and "retry" in _file_text(self.config_file)):
+            conf.insert_json5("connect/retry", json.dumps(RECONNECT_RETRY))
         if self.socket_buffer is not None:
             conf.insert_json5("transport/link/tcp/so_sndbuf", json.dumps(self.socket_buffer))
             conf.insert_json5("transport/link/tcp/so_rcvbuf", json.dumps(self.socket_buffer))

@@ -21,7 +21,7 @@ from sim_peer import election as el
 if TYPE_CHECKING:
     from sim_peer.replica_host import ReplicaHost
 
-__all__ = ["Roles", "MAX_GONE", "AUDIBLE_S"]
+__all__ = ["Roles", "MAX_GONE", "AUDIBLE_S", "SETTLE_S"]
 
 MAX_GONE = 256
 """How many departed sims' times are remembered (made-up sim tokens must not grow the record)."""
@@ -33,6 +33,14 @@ AUDIBLE_S = 1.0
 view of the tokens is fresh (:meth:`Roles.audible`): a leader whose token is missing from the view then waits for
 this long after it was last heard before a standby takes over. A live leader's streams (joints at the sim's rate,
 about 100 a second, and ``srv/state`` every 50 ms) speak well inside it, even on a loaded machine."""
+SETTLE_S = 0.3
+"""How long a sim's lost token waits at most, its link up all the while, before the election hears of it
+(:meth:`Roles.settle`). When this sim's own link dies (the router killed), the tokens that came through it go
+while the session still lists its router: in the lab a standby read its leader's loss on a link that seemed up
+and took the world over from no state (CI saw it too). A killed leader's fail-over waits this much longer."""
+SETTLE_POLL_S = 0.02
+TICK_S = 0.1
+"""The heartbeat's period (:meth:`Roles._tick`)."""
 OWN_TOKEN_S = 10.0
 """How long our own token's absence, with the link up, still counts as deafness (its return is the usual end)."""
 
@@ -57,6 +65,8 @@ class Roles:
         # for its first leases from join
         self.fresh_until = float("inf") if election.leader else float("-inf")
         self.last_tick = self.thawed_at = float("-inf")  # this process's own heartbeat (frozen: see frozen())
+        self.unlinked_at = float("-inf")  # when the heartbeat last found the link down (monotonic)
+        self.settling = False  # a token's loss waits to be judged (settle)
 
     @property
     def role(self) -> str:
@@ -125,20 +135,53 @@ class Roles:
         if peer_id == h.fabric.peer_id or self.deaf():
             self.deaf_recheck()
             return
-        self.step(el.Peers(h.shards.view(live)))
-        if self.role == el.PRIMARY:
-            h.adoption.soon()  # it may have been the scene objects' authority
+        self.settle(time.monotonic())
+
+    def settle(self, lost_at: float) -> None:
+        """Judge a sim's lost token once this sim's link has stayed up :data:`SETTLE_S` after it went: if the link
+        went down meanwhile (or our own token went), every token went with the link, and the look waits for the
+        link (:meth:`deaf_recheck`); else the election looks at the sims alive then (the lost one may have been the
+        scene objects' authority)."""
+        h = self.host
+        with h.lock:
+            if self.settling:
+                return  # the look under way takes this loss in too
+            self.settling = True
+
+        def judge() -> None:
+            unlinked = False
+            try:
+                while not unlinked and time.monotonic() - lost_at < SETTLE_S and not h.stopping.wait(SETTLE_POLL_S):
+                    unlinked = not h.fabric.connected() or max(self.unlinked_at, self.own_gone_at) >= lost_at - 2 * TICK_S
+            finally:
+                with h.lock:
+                    self.settling = False
+            if h.stopping.is_set():
+                return
+            if unlinked or self.deaf():
+                self.deaf_recheck(f"its link went {1000 * (time.monotonic() - lost_at):.0f} ms after a sim's token")
+                return
+            with h.lock:
+                live = frozenset(self.live)
+            self.step(el.Peers(h.shards.view(live)))
+            if self.role == el.PRIMARY:
+                h.adoption.soon()
+
+        threading.Thread(target=judge, name="sim-settle", daemon=True).start()
 
     def _tick(self) -> None:
         """This process's heartbeat: a gap between two ticks longer than half a lease is a freeze (SIGSTOP, a starved
-        process), after which the tokens seen are not to be trusted for a lease (:meth:`frozen`)."""
+        process), after which the tokens seen are not to be trusted for a lease (:meth:`frozen`); a tick that finds
+        the link down marks when (:meth:`settle`)."""
         h = self.host
         gap = h.fabric.config.lease_ms / 2000.0
-        while not h.stopping.wait(0.1):
+        while not h.stopping.wait(TICK_S):
             now = time.monotonic()
             if now - self.last_tick > gap:
                 self.thawed_at = now
             self.last_tick = now
+            if not h.fabric.connected():
+                self.unlinked_at = now
 
     def frozen(self) -> bool:
         """Whether this process was frozen just now: its heartbeat is late, or came back from a gap within the last
@@ -159,25 +202,32 @@ class Roles:
             mine = h.fabric.peer_id in self.live or time.monotonic() - self.own_gone_at > OWN_TOKEN_S
         return not mine or not h.fabric.connected() or self.frozen()
 
-    def deaf_recheck(self) -> None:
+    def deaf_recheck(self, why: str = "its link or its own token gone") -> None:
         """Our own link went (this sim cut off, the router restarted, this process paused past the lease): every sim's
         token went with it, and none of them need have gone. A standby that took the world over then would serve it
         from a state that stops at the cut, and its higher term would step down the primary that served everyone
         meanwhile (the soak saw epochs go back). So: once the link and our own token are back, and
-        :data:`RECHECK_LEASES` leases (and half a second) have passed for the live sims' tokens to come back too, the election looks at the sims then alive:
-        a leader whose token did not come back is gone."""
+        :data:`RECHECK_LEASES` leases (and half a second) have passed for the live sims' tokens to come back too, the
+        election looks at the sims then alive: a leader whose token did not come back is gone. A cut in the window
+        (a second restart of the router) starts it again once the link is back."""
         h = self.host
         with h.lock:
             if self.rechecking:
                 return
             self.rechecking = True
+        if self.role == el.STANDBY:
+            h.announce(f"standby {h.fabric.peer_id}: cut off ({why}); the live sims are looked "
+                       f"at again {RECHECK_LEASES} leases after it hears again")
 
         def recheck() -> None:
             try:
-                while not h.stopping.is_set() and self.deaf():
-                    time.sleep(0.05)
-                back = time.monotonic() + RECHECK_LEASES * h.fabric.config.lease_ms / 1000.0 + 0.5
+                window = RECHECK_LEASES * h.fabric.config.lease_ms / 1000.0 + 0.5
+                back = float("inf")
                 while not h.stopping.is_set() and time.monotonic() < back:
+                    if self.deaf() or time.monotonic() - self.unlinked_at < 2 * TICK_S:
+                        back = float("inf")  # cut off (again): the window starts once it hears
+                    elif back == float("inf"):
+                        back = time.monotonic() + window
                     time.sleep(0.05)
             finally:
                 with h.lock:
@@ -268,6 +318,7 @@ class Roles:
         if isinstance(ev, el.Peers):
             ev = replace(ev, audible=self.audible())
         with h.lock:
+            followed = self.election.leader
             self.election, effects = el.step(self.election, ev)
             leader = self.election.leader
             deferred = (isinstance(ev, el.Peers) and self.election.role == el.STANDBY and leader not in ev.live
@@ -276,6 +327,10 @@ class Roles:
             self.relook()
         for e in effects:
             if e.kind == "take_over":
+                # why, for whoever reads the log after a surprise (a take-over in a router's restart, say)
+                h.announce(f"standby {h.fabric.peer_id}: the token of {followed or 'the primary'} is gone (live sims: "
+                           f"{', '.join(sorted(ev.live)) if isinstance(ev, el.Peers) else '?'}; link "
+                           f"{'up' if h.fabric.connected() else 'down'}); taking over with term {e.term}")
                 t = threading.Thread(target=h.take_over, args=(time.monotonic(),), name="take-over", daemon=True)
                 self.taking_over = t
                 t.start()

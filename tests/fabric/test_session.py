@@ -171,3 +171,20 @@ def test_a_server_that_answers_too_late_is_no_reply_not_a_refusal(world, connect
     with pytest.raises(NoReply, match="no server answered in time") as err:
         caller.rpc.call(key, Stop(), timeout=0.3)
     assert not isinstance(err.value, Refused)
+
+
+def test_client_sessions_reconnect_within_a_second_unless_their_file_says_otherwise(tmp_path):
+    """Every client and peer retries its router at most a second apart (zenoh backs off to 4 s), so after a router's
+    restart the peers come back together; a router does not dial, and a zenoh file's own ``connect/retry`` stays."""
+    import json as _json
+
+    from fabric.config import RECONNECT_RETRY, FabricConfig
+
+    client = FabricConfig(world="w", profile="client", connect=("tcp/127.0.0.1:7447",))
+    assert _json.loads(client.zenoh_config().get_json("connect/retry")) == RECONNECT_RETRY
+    mine = tmp_path / "z.json5"
+    mine.write_text('{connect: {retry: {period_init_ms: 2000, period_max_ms: 8000, period_increase_factor: 2}}}')
+    own = FabricConfig(world="w", profile="client", connect=("tcp/127.0.0.1:7447",), config_file=str(mine))
+    assert _json.loads(own.zenoh_config().get_json("connect/retry"))["period_max_ms"] == 8000
+    router = FabricConfig(world="w", profile="embedded")
+    assert _json.loads(router.zenoh_config().get_json("connect/retry")) != RECONNECT_RETRY
