@@ -59,7 +59,7 @@ class PoseFeed:
                     self.raw[parts[3]] = sample.payload.to_bytes()
                 else:
                     self.bad += 1
-        except zenoh.ZError as exc:  # the session closed under the page
+        except Exception as exc:  # the session closed under the page (zenoh.ZError): the view keeps what it had
             log.info("console: pose feed closed: %s", exc)
             self.closed = True
         return self.raw
