@@ -19,9 +19,10 @@ from typing import TYPE_CHECKING
 from sim_peer import election as el
 
 if TYPE_CHECKING:
+    from fabric.session import Fabric
     from sim_peer.replica_host import ReplicaHost
 
-__all__ = ["Roles", "MAX_GONE", "AUDIBLE_S", "SETTLE_S"]
+__all__ = ["Roles", "MAX_GONE", "AUDIBLE_S", "SETTLE_S", "router_answers"]
 
 MAX_GONE = 256
 """How many departed sims' times are remembered (made-up sim tokens must not grow the record)."""
@@ -37,12 +38,26 @@ SETTLE_S = 0.3
 """How long a sim's lost token waits at most, its link up all the while, before the election hears of it
 (:meth:`Roles.settle`). When this sim's own link dies (the router killed), the tokens that came through it go
 while the session still lists its router: in the lab a standby read its leader's loss on a link that seemed up
-and took the world over from no state (CI saw it too). A killed leader's fail-over waits this much longer."""
+and took the world over from no state (CI saw it too). A router that answers (:func:`router_answers`) ends the wait
+at once; one that cannot be asked makes a killed leader's fail-over wait this much longer."""
 SETTLE_POLL_S = 0.02
 TICK_S = 0.1
 """The heartbeat's period (:meth:`Roles._tick`)."""
 OWN_TOKEN_S = 10.0
 """How long our own token's absence, with the link up, still counts as deafness (its return is the usual end)."""
+
+
+def router_answers(fabric: "Fabric", timeout: float) -> bool:
+    """Whether this session's router answers a query on its admin space now: a round trip (a millisecond on a
+    LAN) that a dead link cannot make. A router whose admin space is closed to this login, or not ours, answers
+    nothing: then only the time tells (:data:`SETTLE_S`)."""
+    try:
+        zid = next(iter(fabric.session.info.routers_zid()), None)
+        if zid is None:
+            return False
+        return any(r.ok is not None for r in fabric.session.get(f"@/{zid}/router", timeout=timeout))
+    except Exception:  # a closing session
+        return False
 
 
 class Roles:
@@ -138,10 +153,10 @@ class Roles:
         self.settle(time.monotonic())
 
     def settle(self, lost_at: float) -> None:
-        """Judge a sim's lost token once this sim's link has stayed up :data:`SETTLE_S` after it went: if the link
-        went down meanwhile (or our own token went), every token went with the link, and the look waits for the
-        link (:meth:`deaf_recheck`); else the election looks at the sims alive then (the lost one may have been the
-        scene objects' authority)."""
+        """Judge a sim's lost token once this sim's router answered after it (:func:`router_answers`), or its link
+        stayed up :data:`SETTLE_S`: if the link went down meanwhile (or our own token went), every token went with
+        the link, and the look waits for the link (:meth:`deaf_recheck`); else the election looks at the sims alive
+        then (the lost one may have been the scene objects' authority)."""
         h = self.host
         with h.lock:
             if self.settling:
@@ -151,8 +166,10 @@ class Roles:
         def judge() -> None:
             unlinked = False
             try:
-                while not unlinked and time.monotonic() - lost_at < SETTLE_S and not h.stopping.wait(SETTLE_POLL_S):
-                    unlinked = not h.fabric.connected() or max(self.unlinked_at, self.own_gone_at) >= lost_at - 2 * TICK_S
+                answered = router_answers(h.fabric, SETTLE_S)  # at once on a live link (a router's round trip)
+                while not unlinked and not answered and time.monotonic() - lost_at < SETTLE_S and not h.stopping.wait(SETTLE_POLL_S):
+                    unlinked = not h.fabric.connected()
+                unlinked = unlinked or not h.fabric.connected() or max(self.unlinked_at, self.own_gone_at) >= lost_at - 2 * TICK_S
             finally:
                 with h.lock:
                     self.settling = False
