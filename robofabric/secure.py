@@ -53,6 +53,7 @@ and a sim refuses a move asked there (docs/sim.md, "Moving a robot between sims"
 SHARED_SERVICES = ("map", "plan")
 """The compute peer's services whose askers are checked: a student asks on ``.../by/{user}`` only."""
 W = "rf/*"  # every world: one router can serve several worlds of the class
+ROUTER_INFO = "@/*/router"  # the router's own entry in its admin space (read-only); sims may ask it
 ADV = "@adv/**"  # where zenoh.ext keeps a latched publisher's cache and liveliness token
 ALL_MESSAGES = ("put", "delete", "declare_subscriber", "query", "declare_queryable", "reply", "liveliness_token",
                 "declare_liveliness_subscriber", "liveliness_query")
@@ -114,6 +115,7 @@ def _own_rules(ident: Identity) -> list[dict]:
         serve += [f"{W}/srv/world", f"{W}/srv/state", f"{W}/own/*", f"{W}/own/*/{BY}/*",  # srv/state: a standby follows the primary
                   f"{W}/srv/move/*/{BY}/*"]  # srv/move/{sim}/by/{login}: the staff's moves (MOVERS)
         tokens += [f"{W}/peer/sim/*", f"{W}/peer/recorder/*"]  # a recorder on the sim machine, under its login
+        ask.append(ROUTER_INFO)  # is my link up? (a standby judging a lost token: sim_peer.roles.router_answers)
     elif r == "compute":
         put += [f"{W}/robot/*/ik", f"{W}/robot/*/path", f"{W}/map/*", f"{W}/event/compute/**"]
         latched = [f"{W}/robot/*/path/{ADV}", f"{W}/map/*/{ADV}"]
@@ -141,7 +143,7 @@ def access_control(identities: Iterable[Identity], *, tls: bool = False) -> dict
         _rule("ask", ["query"], [f"{W}/own/*", f"{W}/srv/world", f"{W}/srv/state", *(f"{W}/srv/{s}/**" for s in OPEN_SERVICES),
                                  f"rf/**/{ADV}"]),
         # what the router delivers to a session: samples, queries for its queryables, replies, declarations
-        _rule("deliver", ALL_MESSAGES, ["rf/**", f"rf/**/{ADV}"], flows=("egress",)),
+        _rule("deliver", ALL_MESSAGES, ["rf/**", f"rf/**/{ADV}", ROUTER_INFO], flows=("egress",)),
     ]
     field = "cert_common_names" if tls else "usernames"
     rules = list(common)

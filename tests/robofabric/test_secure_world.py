@@ -271,6 +271,16 @@ def test_a_student_cannot_read_the_routers_admin_space(secure, tmp_path):
         router.close()
 
 
+def test_a_sim_may_ask_its_router_whether_its_link_is_up_and_a_student_may_not(secure):
+    """A standby that lost its leader's token asks its router (its admin space's own entry) whether its link is up
+    before it takes over (sim_peer.roles.router_answers): the class ACL lets sim logins ask that, and nothing
+    else of the admin space; a student's question is answered by nobody."""
+    from sim_peer.roles import router_answers
+
+    assert router_answers(secure.fabric("sim", kind="sim", peer_id="sim-probe"), 5.0)
+    assert not router_answers(secure.fabric("mallory"), 1.0)
+
+
 @pytest.mark.parametrize("case", ["no credentials", "wrong password", "unknown user"])
 def test_refused_logins_are_one_line_errors(secure, tmp_path, case):
     args = ["ps", "--world", secure.world]
