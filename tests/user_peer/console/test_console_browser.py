@@ -24,6 +24,7 @@ import pytest
 import zenoh
 
 from fabric import keys
+from fabric.interfaces import Command
 from robofabric.secure import init
 from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 from user_peer.console.server import RECONNECT_S
@@ -292,6 +293,9 @@ def test_holding_up_drives_the_base_and_releasing_stops_it(browser, klass):
     start = base.xy_theta
     poses: list = []
     sub = base.on("pose", lambda _k, p: poses.append(p))
+    twists: list = []  # (arrival, Command) of bob's twists to base1, as the wire carries them
+    cmds = klass.carol.fabric.subscribe(keys.robot_cmd(klass.world, "base1", "twist", "bob"),
+                                        lambda _k, c: twists.append((time.time_ns(), c)), expected=Command)
     bob.keyboard.down("ArrowUp")
     try:
         wait_until(lambda: speed() > 0.1, timeout=10, what="base1 moving while ↑ is held", seen=lambda: (speed(), message(bob)))
@@ -300,8 +304,13 @@ def test_holding_up_drives_the_base_and_releasing_stops_it(browser, klass):
     finally:
         released = time.time_ns()
         bob.keyboard.up("ArrowUp")
+    # the page's own stop: a zero twist on the wire after the release (the sim's twist deadman would stop the base
+    # too, with nothing sent; timing the braking cannot tell them apart on a loaded machine)
+    wait_until(lambda: any(t > released and c.body.v == 0 and c.body.omega == 0 for t, c in twists),
+               timeout=5, what="the page's zero twist after the release", seen=lambda: [(t > released, c.body) for t, c in twists[-3:]])
     wait_until(lambda: speed() < 0.02, timeout=5, what="base1 to stop after ↑ was released", seen=speed)
     sub.close()
+    cmds.undeclare()
     # when the sim saw it still (its pose's wall clock, this host's): the test process's own delays (playwright,
     # this subscription) do not count
     after = [p for p in poses if p.header.wall_ns > released]
@@ -313,10 +322,9 @@ def test_holding_up_drives_the_base_and_releasing_stops_it(browser, klass):
     moved = math.hypot(base.xy_theta[0] - start[0], base.xy_theta[1] - start[1])
     shot(bob, "bob-drove")
     assert moved > 0.2, moved
-    # the release's zero twist reached the robot within 0.3 s (the sim's twist deadman, ~0.5 s, would not have), and
-    # it came to rest at its braking limit; the rest of the 0.2-0.3 s is that braking (speed 1: 0.2 m/s), measured
-    assert braked <= 0.3, f"base1 began braking {braked:.3f} s after the key was released"
-    assert stopped <= 1.0, f"base1 took {stopped:.3f} s to stop after the key was released"
+    # how soon is the console benchmark's to measure (0.2-0.3 s on a quiet machine, 0.4-0.55 s seen at load 20-30);
+    # here only that it braked from cruise to rest once the key was up
+    assert 0 < braked <= stopped, (braked, stopped)
     bob.get_by_role("button", name="Release").click()
     wait_message(bob, r"release base1: ok")
     bob.context.close()
