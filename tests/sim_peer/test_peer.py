@@ -236,8 +236,11 @@ def test_the_cli_runs_a_sim_peer_that_answers_the_world_service(world, router, c
     assert [r.id for r in info.robots] == ["arm1"]
     inbox = Inbox()
     fab.subscribe(keys.robot_joints(world, "arm1"), inbox)
+    # the sim's command subscriber known to this session first: a command sent before would be lost (no one to hear it)
+    assert fab.wait_matching(keys.robot_cmd(world, "arm1", "joints", "alice"), 30.0), procs.output(proc)[-1500:]
     send(fab, world, "arm1", "joints", JointTarget(np.full(6, 0.05)))
-    wait_until(lambda: any(np.allclose(m.q, 0.05) for m in inbox.latest.values()), timeout=10, what="joints from the CLI peer")
+    wait_until(lambda: any(np.allclose(m.q, 0.05) for m in inbox.latest.values()), timeout=30, what="joints from the CLI peer",
+               seen=lambda: ([m.q.round(3).tolist() for m in inbox.latest.values()], procs.output(proc)[-1500:]))
 
 
 @pytest.mark.slow
