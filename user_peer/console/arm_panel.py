@@ -159,17 +159,19 @@ class ArmPanel:
         mine = arm.can_command
         rec = arm.record
         who = "you" if mine and rec is not None else (rec.owner or "nobody") if rec is not None else "?"
-        self.title.text = f"arm {arm.id} ({arm.type}) · owner: {who}" + ("" if mine else " · controls disabled")
+        live = arm.id in self.page.world.following.robots  # else its joints are what was kept when the page let go of it
+        self.title.text = f"arm {arm.id} ({arm.type}) · owner: {who}" + ("" if mine else " · controls disabled") + \
+            ("" if live else f" · click {arm.id} to follow its joints")
         for c in self.controls:
             c.set_enabled(mine)
-        js = arm.joints
+        js = arm.joints if live else None
         if js is not None and (not mine or not self.synced):
             self._set_sliders(js)  # the sliders follow the robot until you own it: a first change moves one joint
             self.synced = mine
         moved = self.target_obj.pose if self.target_obj is not None else None
         if moved is not None:  # a scene object: whoever moved it last, this page included
             self.target = np.asarray(moved.position, dtype=float)
-        elif self.target is None and arm.flange is not None:
+        elif self.target is None and live and arm.flange is not None:
             self.target = np.asarray(arm.flange.position, dtype=float)
         if self.target is not None:
             self.target_label.text = "({:.3f}, {:.3f}, {:.3f}) m".format(*self.target)

@@ -144,11 +144,13 @@ class BasePanel:
         mine = b.can_command
         rec = b.record
         who = "you" if mine and rec is not None else (rec.owner or "nobody") if rec is not None else "?"
+        live = b.id in self.page.world.following.robots  # else its pose is what was kept when the page let go of it
         self.title.text = f"base {b.id} ({b.type}) · owner: {who}" + ("" if mine else " · controls disabled")
         for c in self.controls:
             c.set_enabled(mine)
-        xy, pose = b.xy_theta, b.pose
-        text = f"pose ({xy[0]:+.2f}, {xy[1]:+.2f}, {math.degrees(xy[2]):+.0f}°)" if xy else "pose -"
+        xy, pose = (b.xy_theta, b.pose) if live else (None, None)
+        text = f"pose ({xy[0]:+.2f}, {xy[1]:+.2f}, {math.degrees(xy[2]):+.0f}°)" if xy else \
+            ("pose -" if live else f"pose: click {b.id} to follow it")
         if pose is not None:
             text += f" · v {math.hypot(pose.linear[0], pose.linear[1]):.2f} m/s"
             stamp = str(pose.header.wall_ns // 1_000_000)

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 from nicegui import run, ui
 
-from user_peer.console import state
+from user_peer.console import follow, state
 from user_peer.console.arm_panel import ArmPanel
 from user_peer.console.base_panel import BasePanel
 from user_peer.console.drive import REFRESH_S
@@ -85,7 +85,7 @@ class ConsolePage:
         self.world: Any = None
         self.user = ""
         self.entries: list = []  # every robot of the world (user_peer.services.RobotEntry)
-        self.handles: dict[str, Any] = {}  # the robots this page follows in full: those she selected
+        self.handles: dict[str, Any] = {}  # the handles made so far (a handle's robot is followed only while shown)
         self.view: LiveView | None = None
         self.arm: Any = None
         self.base: Any = None
@@ -166,8 +166,9 @@ class ConsolePage:
         self.arm = next((r for r in self.handles.values() if r.kind == "arm"), None)
         self.base = next((r for r in self.handles.values() if r.kind == "mobile"), None)
         self.selected = (self.arm or self.base).id if self.handles else None
+        self.follow_shown()
         # every robot's pose for the view, kept in zenoh's ring and taken at a redraw: a page of a 20-robot class
-        # reads at most 5 bursts a second, not 50 (only the robots she selected are followed in full: joints, scan, path)
+        # reads at most 5 bursts a second, not 50 (only the robots it shows are followed in full: follow_shown)
         self.view.follow_poses()
         target = next((o for o in info.objects if o.kind == "ik_target"), None)
         goal = next((o for o in info.objects if o.kind == "goal_pointer"), None)
@@ -262,7 +263,12 @@ class ConsolePage:
         elif r is not None and r.kind == "mobile" and r is not self.base and self.base_panel is not None:
             await self.base_panel.let_go()
             self.base = r
-        self.refresh()
+        self.refresh()  # follows the robot shown now, lets go of the one shown before
+
+    def follow_shown(self) -> None:
+        """Follow in full only the robots the page shows (:func:`.follow.shown`): the selected one, and the panels'
+        robots she owns; the others are drawn from the view's shared pose feed."""
+        follow.follow_only(self.world.following, follow.shown(self.world, self.selected, self.handles, (self.arm, self.base)))
 
     async def _ownership(self, op: str) -> None:
         r = await self._handle(self.selected)
@@ -303,6 +309,7 @@ class ConsolePage:
         w = self.world
         if w is None or w.closed:
             return
+        self.follow_shown()
         for r in self.entries:
             self.rows[r.id].text = state.robot_line(w, r.id, r.kind).text()
             rec = w.ownership.record(r.id)

@@ -22,7 +22,7 @@ import numpy as np
 from nicegui import ui
 
 from fabric import keys
-from user_peer.console import state, topview
+from user_peer.console import follow, state, topview
 from user_peer.console.feed import PoseFeed, ring_capacity
 
 if TYPE_CHECKING:
@@ -97,6 +97,6 @@ class LiveView:
         target = page.arm_panel.target if page.arm_panel is not None else None
         poses = self.feed.drain() if self.feed is not None else {}
         self.image.content = state.view_svg(
-            w, page.entries, page.handles, poses, self.frame, (), base_id=page.base.id if page.base else None,
+            w, page.entries, follow.followed(w, page.handles), poses, self.frame, (), base_id=page.base.id if page.base else None,
             selected={page.selected} if page.selected else set(), goal=page.base_panel.goal if page.base_panel else None,
             target=(float(target[0]), float(target[1])) if target is not None else None, decoder=page.console.decoded)

@@ -327,6 +327,13 @@ def test_holding_up_drives_the_base_and_releasing_stops_it(browser, klass):
     assert 0 < braked <= stopped, (braked, stopped)
     bob.get_by_role("button", name="Release").click()
     wait_message(bob, r"release base1: ok")
+    # the page follows in full only the robots it shows: the arm, not selected and not hers, was let go of; once
+    # she selects it, it is followed and the base she released, no longer selected, is let go of
+    bob.get_by_text(re.compile(r"^arm arm1 .* · click arm1 to follow its joints$")).wait_for(timeout=10_000)
+    bob.get_by_role("button", name="arm1", exact=True).click()
+    bob.get_by_text(re.compile(r"^arm arm1 .* owner: [^·]+ · controls disabled$")).wait_for(timeout=10_000)
+    bob.get_by_text(re.compile(r"^pose: click base1 to follow it")).wait_for(timeout=10_000)
+    shot(bob, "bob-follows-the-arm")
     bob.context.close()
 
 

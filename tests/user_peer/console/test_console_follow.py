@@ -1,0 +1,46 @@
+"""A page follows in full only the robots it shows: :func:`follow_only` makes a session's followed robots the
+wanted ones, and :func:`followed` gives the view the handles of those only. A real router and real sessions."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fabric import keys
+from fabric.interfaces import Pose
+from robofabric.testing import wait_until
+from user_peer.console.follow import follow_only, followed
+from user_peer.following import Following
+from user_peer.latest import Latest
+
+
+class _World:
+    """What :func:`followed` reads of a world: its following."""
+
+    def __init__(self, following: Following) -> None:
+        self.following = following
+
+
+def test_a_page_follows_the_robots_it_shows_and_lets_go_of_the_others(world, connect):
+    sim, user = connect("sim", "sim"), connect("user", "alice")
+    latest = Latest()
+    following = Following(user, world, latest)
+    follow_only(following, {"arm1", "base1"})  # the first arm and base, at login
+    assert following.robots == {"arm1", "base1"}
+    follow_only(following, {"base3"})  # she selected base3: the first two are let go of
+    assert following.robots == {"base3"}
+    handles = {"arm1": "h-arm1", "base1": "h-base1", "base3": "h-base3"}
+    assert followed(_World(following), handles) == {"base3": "h-base3"}
+
+    def pose_of(rid: str) -> float | None:
+        p = latest.get(keys.robot_stream(world, rid, "pose"))
+        return None if p is None else float(p.position[0])
+
+    def heard(x: float) -> bool:
+        for rid in ("base1", "base3"):
+            sim.publish(keys.robot_stream(world, rid, "pose"), Pose(position=np.array([x, 0.0, 0.0])))
+        return pose_of("base3") == x
+
+    wait_until(lambda: heard(1.0), timeout=20, what="base3's pose", seen=lambda: pose_of("base3"))
+    assert pose_of("base1") is None  # published with base3's, never decoded here
+    follow_only(following, set())
+    assert following.robots == frozenset() and followed(_World(following), handles) == {}
