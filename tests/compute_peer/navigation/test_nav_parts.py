@@ -115,3 +115,18 @@ def test_map_store_files_stay_inside_the_maps_folder(tmp_path):
     assert store.save("m", "m.npz") == tmp_path / "m.npz"
     grid, path = store.read("m.npz")
     assert path == tmp_path / "m.npz" and np.array_equal(grid.cells, cells)
+
+
+def test_a_pose_between_two_kept_is_the_two_interpolated():
+    """A scan between two poses is folded in where the robot was at its stamp: position and heading mixed by time
+    (the heading along the shorter arc), the header the nearest pose's with the scan's stamp."""
+    from fabric.interfaces import yaw_from_quaternion
+
+    poses = PoseHistory()
+    poses.add("r", pose_at(1.0, 0.0, 3.0, stamp=1.0, seq=1))
+    poses.add("r", pose_at(2.0, 1.0, -3.0, stamp=2.0, seq=2))  # turned through pi, not back through 0
+    mid = poses.at("r", 1.25)
+    assert mid.position[:2] == pytest.approx([1.25, 0.25])
+    assert abs(np.angle(np.exp(1j * (yaw_from_quaternion(mid.quaternion) - (3.0 + 0.25 * (2 * np.pi - 6.0)))))) < 1e-3
+    assert mid.header.seq == 1 and mid.header.stamp == 1.25
+    assert poses.at("r", 2.0).header.seq == 2 and poses.at("r", 5.0).position[0] == 2.0  # past the last: the last
