@@ -20,16 +20,9 @@ pytestmark = [pytest.mark.lab, pytest.mark.slow]
 LEASE = 2.0  # the fabric's transport lease (lease_ms default)
 
 JOIN = """
-import time, numpy as np, user_peer
-from user_peer.errors import FabricUserError
+import numpy as np, user_peer
 w = user_peer.connect(world="demo", connect=["{router}"], user="alice", timeout=10.0)
-deadline = time.monotonic() + 120
-while True:
-    try:
-        w.info(); break
-    except FabricUserError:
-        if time.monotonic() > deadline: raise
-        time.sleep(0.5)
+assert w.wait_world(timeout=120), "the world never served"
 arm = w.robot("arm1")
 arm.request(timeout=10.0)
 arm.wait_for("joints", timeout=30.0)
