@@ -9,7 +9,7 @@ import math
 
 import pytest
 
-from robofabric.bench.console import run_one
+from robofabric.bench.console import _joined_renderer, run_one
 
 pytestmark = pytest.mark.slow
 
@@ -21,3 +21,16 @@ def test_two_pages_drive_their_bases_and_lose_nothing(tmp_path):
     assert r["presses"] >= 2 and r["missed"] == 0, r  # each press moved its base
     assert math.isfinite(r["lag_p50"]) and r["lag_p50"] > 0, r  # the pages showed a pose with its stamp
     assert r["page_cpu"] > 0 and r["join_cpu"] > 0, r  # the pages' own browsers were found and measured
+
+
+def test_a_join_is_counted_on_the_renderer_that_took_the_page():
+    """Chromium's spare renderer, made before the join, takes the page: its CPU meanwhile is the join's, not
+    the 0.0 s of the renderers new since; a renderer an earlier page took is never counted again."""
+    claimed: set[str] = set()
+    before = {"renderer:10": 5.0, "renderer:11": 0.1, "gpu-process:3": 1.0}
+    after = {"renderer:10": 5.3, "renderer:11": 0.9, "gpu-process:3": 2.0, "renderer:12": 0.05}
+    assert _joined_renderer(before, after, claimed) == pytest.approx(0.8)
+    assert claimed == {"renderer:11"}
+    later = {**after, "renderer:11": 2.0, "renderer:12": 0.6}
+    assert _joined_renderer(after, later, claimed) == pytest.approx(0.55)
+    assert math.isnan(_joined_renderer({}, {"gpu-process:3": 1.0}, claimed))
