@@ -203,6 +203,32 @@ def staggered(rates: dict[str, float]) -> dict[str, float]:
     return {name: i * fastest / len(order) for i, name in enumerate(order)}
 
 
+def phases(rates: dict[str, float], members: dict[str, int]) -> dict[str, int]:
+    """How many phases each loop's members are dealt over: its loop then ticks that many times faster, each tick
+    serving one phase's members, so each member keeps its rate and a tick carries a share of the burst.
+
+    A loop whose period is ``m`` times the fastest one is split into the largest divisor of ``m`` no greater
+    than its member count: its loop's period stays a whole multiple of the fastest, so :func:`staggered`
+    offsets still keep every loop's ticks apart. A loop whose period is no whole multiple keeps one phase. A
+    sim's 20 Hz scans of 8 robots beside 100 Hz joints: 5 phases of 1-2 robots, one every 10 ms, instead of all
+    8 scans (and their sonars) in one tick, whose burst held up a subscriber of every stream (the ROS 2
+    bridge) for the joints that came next.
+    """
+    if not rates:
+        return {}
+    fastest = max(rates.values())
+    out: dict[str, int] = {}
+    for name, hz in rates.items():
+        ratio = fastest / hz
+        whole = round(ratio)
+        if whole < 1 or abs(ratio - whole) > 1e-9 * ratio:
+            out[name] = 1
+            continue
+        n = max(1, members.get(name, 1))
+        out[name] = max(d for d in range(1, min(whole, n) + 1) if whole % d == 0)
+    return out
+
+
 def parse_rates(spec: str, defaults: dict[str, float]) -> dict[str, float]:
     """Parse ``joints=100,pose=50`` into rates over ``defaults``; unknown streams or bad numbers raise ``ValueError``."""
     rates = dict(defaults)

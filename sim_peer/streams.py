@@ -3,10 +3,12 @@
 Each group runs on a :class:`fabric.rate.RateLoop` (wall-clock rates, independent of the physics step; headers
 carry sim time), the groups' grids staggered from one origin (:func:`fabric.rate.staggered`: 100 Hz joints at
 0, 50 Hz poses a third of 10 ms later, 20 Hz scans two thirds): each group's burst of every robot's messages
-reaches a subscriber of several streams (the ROS 2 bridge, a viewer) on its own, not on top of another's. A tick
-reads every stream of its group under the world's lock, then builds and publishes outside it. A stream on a key
-:mod:`fabric.keys` does not know is left out with a warning (a new stream name is a protocol change:
-``fabric.keys.ROBOT_STREAMS``).
+reaches a subscriber of several streams (the ROS 2 bridge, a viewer) on its own, not on top of another's. A
+slower group's robots are dealt over phases (:func:`fabric.rate.phases`), its loop ticking as often as the
+fastest and each tick serving one phase: 8 bases' scans go out 1-2 robots every 10 ms, each robot still at
+20 Hz, not all 8 (with their sonars) in one tick. A tick reads its streams under the world's lock, then builds
+and publishes outside it. A stream on a key :mod:`fabric.keys` does not know is left out with a warning (a new
+stream name is a protocol change: ``fabric.keys.ROBOT_STREAMS``).
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from collections import Counter
 from typing import Any, Callable
 
 from fabric import keys
-from fabric.rate import MonotonicClock, RateLoop, staggered
+from fabric.rate import MonotonicClock, RateLoop, phases, staggered
 from sim_peer.robot import Build, Stream
 from sim_peer.world import SimWorld
 
@@ -50,6 +52,9 @@ class StreamLoops:
         self.groups = gather_streams(fabric.world, world)
         for group, entries in self.groups.items():
             self.rates.setdefault(group, entries[0][1].hz)
+        self.phases = phases({g: self.rates[g] for g in self.groups},
+                             {g: len(_robots(entries)) for g, entries in self.groups.items()})
+        """Each group's phases: its loop ticks ``rate * phases`` times a second, each robot on one tick in that many."""
         self._loops: list[RateLoop] = []
 
     @property
@@ -59,14 +64,18 @@ class StreamLoops:
 
     def offsets(self) -> dict[str, float]:
         """Each group's first tick after the loops' shared origin (s): apart, so their bursts never coincide."""
-        return staggered({group: self.rates[group] for group in self.groups})
+        return staggered({group: self.loop_rate(group) for group in self.groups})
+
+    def loop_rate(self, group: str) -> float:
+        """How often ``group``'s loop ticks (Hz): its rate times its phases."""
+        return self.rates[group] * self.phases[group]
 
     def start(self) -> None:
         clock = MonotonicClock()
         origin, offsets = clock.now(), self.offsets()
         for group, entries in self.groups.items():
-            tick = self._guard(group, self._publisher(entries))
-            self._loops.append(RateLoop(self.rates[group], tick, clock=clock, name=f"sim-{group}",
+            tick = self._guard(group, self._publisher(_dealt(entries, self.phases[group])))
+            self._loops.append(RateLoop(self.loop_rate(group), tick, clock=clock, name=f"sim-{group}",
                                         start_at=origin + offsets[group]).start())
 
     def stop(self) -> None:
@@ -85,16 +94,21 @@ class StreamLoops:
 
         return tick
 
-    def _publisher(self, entries: list[tuple[str, Stream]]) -> Callable[[float], None]:
-        """One rate group's tick: read every stream under the lock, then build and publish outside it."""
-        positions = any(st.positions for _, st in entries)
+    def _publisher(self, dealt: list[list[tuple[str, Stream]]]) -> Callable[[float], None]:
+        """One rate group's tick: read the streams of the next phase's robots under the lock, then build and
+        publish outside it (a tick the loop skipped, late, leaves the phases' order as it was)."""
+        positions = [any(st.positions for _, st in entries) for entries in dealt]
+        turn = [0]
 
         def publish(now: float) -> None:
+            i = turn[0]
+            turn[0] = (i + 1) % len(dealt)
+            entries = dealt[i]
             world = self.world
             out: list[tuple[str, Build]] = []
             with self.lock:
                 stamp = world.time
-                if positions:
+                if positions[i]:
                     world.sync()
                 physics = world.physics
                 for key, st in entries:
@@ -105,3 +119,14 @@ class StreamLoops:
                 self.fabric.publish(key, build(self.fabric.header(key, stamp=stamp)))
 
         return publish
+
+
+def _robots(entries: list[tuple[str, Stream]]) -> list[str]:
+    """The robots of a group's entries, in order (a key's fourth part: ``rf/W/robot/ROBOT/STREAM``)."""
+    return list(dict.fromkeys(key.split("/")[3] for key, _ in entries))
+
+
+def _dealt(entries: list[tuple[str, Stream]], n: int) -> list[list[tuple[str, Stream]]]:
+    """``entries`` dealt over ``n`` phases robot by robot, in turn (a robot's streams stay in one phase)."""
+    phase = {rid: i % n for i, rid in enumerate(_robots(entries))}
+    return [[(key, st) for key, st in entries if phase[key.split("/")[3]] == p] for p in range(n)]

@@ -2,7 +2,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fabric.rate import FakeClock, RateLoop, parse_rates, staggered
+from fabric.rate import FakeClock, RateLoop, parse_rates, phases, staggered
 
 
 class SlowCallback:
@@ -116,3 +116,32 @@ def test_staggered_loops_on_one_origin_never_tick_together(fastest, multiples, d
     for (a, na), (b, nb) in zip(every, every[1:]):
         if na != nb:
             assert b - a >= gap - 1e-6, (na, a, nb, b)
+
+
+def test_phases_deal_a_slower_loop_over_a_whole_divisor_of_its_period():
+    """A sim's groups with 8 robots: scans over 5 phases, poses over 2; fewer robots than a whole divisor
+    allows, or a period no whole multiple of the fastest, keep one phase."""
+    rates = {"joints": 100.0, "pose": 50.0, "scan": 20.0}
+    assert phases(rates, {"joints": 8, "pose": 8, "scan": 8}) == {"joints": 1, "pose": 2, "scan": 5}
+    assert phases(rates, {"joints": 3, "pose": 3, "scan": 3}) == {"joints": 1, "pose": 2, "scan": 1}
+    assert phases(rates, {"joints": 1, "pose": 1, "scan": 1}) == {"joints": 1, "pose": 1, "scan": 1}
+    assert phases({"a": 100.0, "b": 30.0}, {"a": 9, "b": 9}) == {"a": 1, "b": 1}
+    assert phases({"a": 100.0, "b": 12.5}, {"a": 9, "b": 6}) == {"a": 1, "b": 4}
+    assert phases({}, {}) == {}
+
+
+@settings(deadline=None)
+@given(fastest=st.floats(min_value=5.0, max_value=1000.0), multiples=st.lists(st.integers(1, 12), min_size=1, max_size=5),
+       members=st.lists(st.integers(0, 20), min_size=5, max_size=5))
+def test_dealt_loops_stay_whole_multiples_of_the_fastest(fastest, multiples, members):
+    """Every loop dealt over phases still ticks on a period that is a whole multiple of the fastest (so
+    :func:`staggered` keeps the ticks apart), with no more phases than members, and each member keeps its rate."""
+    rates = {"fast": fastest, **{f"g{i}": fastest / m for i, m in enumerate(multiples)}}
+    count = {name: n for name, n in zip(rates, members + [1])}
+    got = phases(rates, count)
+    for name, hz in rates.items():
+        k = got[name]
+        assert 1 <= k <= max(1, count[name])
+        loop_hz = hz * k
+        ratio = fastest / loop_hz
+        assert abs(ratio - round(ratio)) < 1e-6 and round(ratio) >= 1

@@ -9,7 +9,8 @@ import pytest
 
 from fabric import keys
 from robofabric.testing import wait_until
-from sim_peer.streams import StreamLoops
+from robofabric.bench.shards import spots
+from sim_peer.streams import StreamLoops, _dealt
 from sim_peer.world import SimWorld
 
 
@@ -23,27 +24,49 @@ def test_the_default_groups_tick_a_third_of_the_joints_period_apart(router):
 
 
 def test_the_offsets_follow_the_rates_given(router):
-    """Rates given at start reorder the groups: the fastest starts at the origin, the others after it."""
+    """Rates given at start reorder the groups: the fastest starts at the origin, the others after it, by how
+    often their loops tick (joints at 25 Hz for 2 robots: 2 phases, a 50 Hz loop, like the scans')."""
     fab, _ = router
     loops = StreamLoops(fab, SimWorld("combined", seed=3), threading.RLock(), Counter(),
                         rates={"joints": 25.0, "pose": 200.0, "scan": 50.0})
-    assert loops.offsets() == pytest.approx({"pose": 0.0, "scan": 1 / 600, "joints": 2 / 600})
+    assert loops.phases == {"joints": 2, "pose": 1, "scan": 1}
+    assert loops.offsets() == pytest.approx({"pose": 0.0, "joints": 1 / 600, "scan": 2 / 600})
+
+
+def test_a_class_of_bases_sends_its_scans_a_few_robots_a_tick(router):
+    """8 bases: the 20 Hz scans (and sonars) are dealt over 5 phases of a 100 Hz loop, the 50 Hz poses over 2;
+    each robot is in one phase, with all its streams of the group, and keeps its rate."""
+    fab, _ = router
+    world = SimWorld("warehouse", spots(8), scene_robots=False, seed=3)
+    loops = StreamLoops(fab, world, threading.RLock(), Counter())
+    assert loops.phases == {"joints": 1, "pose": 2, "scan": 5}
+    assert {g: loops.loop_rate(g) for g in loops.groups} == {"joints": 100.0, "pose": 100.0, "scan": 100.0}
+    dealt = _dealt(loops.groups["scan"], loops.phases["scan"])
+    robots = [sorted({key.split("/")[3] for key, _ in phase}) for phase in dealt]
+    assert robots == [["base0", "base5"], ["base1", "base6"], ["base2", "base7"], ["base3"], ["base4"]]
+    streams = [sorted(key.rsplit("/", 1)[1] for key, _ in phase) for phase in dealt]
+    assert streams[3] == ["scan", "sonar"]  # a base's LIDAR and sonar ring go out in the same tick
+    assert sorted(k for phase in dealt for k, _ in phase) == sorted(k for k, _ in loops.groups["scan"])
 
 
 @pytest.mark.slow
 def test_staggered_loops_publish_every_group(world, router, connect):
-    """Started, the loops share one origin, each group's grid at its offset from it, and every group publishes."""
+    """Started, the loops share one origin, each group's grid at its offset from it, and every robot's stream
+    of every group is published, whatever phase its robot was dealt."""
     fab, _ = router
     sim_fab = connect("sim", "sim-streams")
-    loops = StreamLoops(sim_fab, SimWorld("combined", seed=3), threading.RLock(), Counter())
+    loops = StreamLoops(sim_fab, SimWorld("warehouse", spots(3), scene_robots=False, seed=3), threading.RLock(), Counter())
     got: Counter[str] = Counter()
     for stream in ("joints", "pose", "scan"):
-        fab.subscribe(keys.robot_stream_all(world, stream), lambda key, msg: got.update([key.rsplit("/", 1)[1]]))
+        fab.subscribe(keys.robot_stream_all(world, stream), lambda key, msg: got.update(["/".join(key.split("/")[3:])]))
+    expected = [key.split("/", 3)[3] for entries in loops.groups.values() for key, _ in entries
+                if key.rsplit("/", 1)[1] in ("joints", "pose", "scan")]
+    assert len(expected) >= 9 and loops.phases["pose"] == 2
     loops.start()
     try:
         origin = loops.loops["joints"].start_at
         assert {g: loop.start_at - origin for g, loop in loops.loops.items()} == pytest.approx(loops.offsets())
-        wait_until(lambda: all(got[s] >= 3 for s in ("joints", "pose", "scan")), timeout=30,
-                   what="every group's stream", seen=lambda: dict(got))
+        wait_until(lambda: all(got[k] >= 3 for k in expected), timeout=30,
+                   what="every robot's stream", seen=lambda: dict(got))
     finally:
         loops.stop()
