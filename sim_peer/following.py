@@ -47,6 +47,15 @@ target, a twist or an object pose is set to the same value; a path restarts from
 a few milliseconds along it)."""
 
 
+DRAIN_QUIET_S = 0.03
+"""At a take-over, the former leader's streams are waited for until none came for this long: samples that reached
+this process before its token's loss may still wait in their subscription's thread (zenoh hands each
+subscription's samples to a thread of its own), and a catch-up without the newest would start sim time a few
+milliseconds before what other subscribers already saw (it once went 4 ms back)."""
+DRAIN_LIMIT_S = 0.2
+"""The longest that wait lasts (a starved host): the take-over's budget is 1 s."""
+
+
 class Follower:
     """The leader's last state as this sim knows it: its snapshot, its newest streams, the commands since."""
 
@@ -59,6 +68,8 @@ class Follower:
         self.poses: dict[str, Pose] = {}
         self.records: dict[str, OwnershipRecord] = {}  # the leader's newest record of each of its objects
         self.commands = CommandBuffer()  # robot commands and object poses of the last seconds
+        self.heard_at = float("-inf")  # when the leader's last joints or pose was kept (monotonic)
+        self.former: str | None = None  # the leader a take-over is draining, whose streams are kept meanwhile
         self._poller: threading.Thread | None = None
 
     def listen(self, standby: bool) -> None:
@@ -108,18 +119,41 @@ class Follower:
         if rid not in h.shards.mine:
             return  # another shard's robot: its term is its shard's
         h.roles.heard(js.header.source, js.header.term)
-        if h.role == el.STANDBY and js.header.source == h.election.leader:
+        if self._from_leader(js.header.source):
             with h.lock:
                 self.joints[rid] = js
+                self.heard_at = time.monotonic()
 
     def on_pose(self, key: str, p: Pose) -> None:
         h = self.host
         rid = keys.parse(key).subject
         if rid not in h.shards.mine:
             return
-        if h.role == el.STANDBY and p.header.source == h.election.leader:
+        if self._from_leader(p.header.source):
             with h.lock:
                 self.poses[rid] = p
+                self.heard_at = time.monotonic()
+
+    def _from_leader(self, source: str) -> bool:
+        """Whether a stream sample from ``source`` is the followed leader's (or, while a take-over drains, the
+        former leader's)."""
+        h = self.host
+        return (h.role == el.STANDBY and source == h.election.leader) or (self.former is not None and source == self.former)
+
+    def drain(self, former: str, quiet_s: float = DRAIN_QUIET_S, limit_s: float = DRAIN_LIMIT_S) -> float:
+        """Keep ``former``'s streams until none came for ``quiet_s`` since the drain began (at most ``limit_s``),
+        so that a take-over starts from the newest state that reached this process; the seconds waited. Call
+        without the lock; the take-over ends the draining with :meth:`drained` once it caught up."""
+        t0 = time.monotonic()
+        with self.host.lock:
+            self.former = former
+        while (now := time.monotonic()) - t0 < limit_s and now - max(self.heard_at, t0) < quiet_s:
+            time.sleep(min(quiet_s, 0.005))
+        return time.monotonic() - t0
+
+    def drained(self) -> None:
+        with self.host.lock:
+            self.former = None
 
     def on_record(self, key: str, rec: OwnershipRecord) -> None:
         """Keep the leader's newest record of each object of this shard (epoch, then sequence number): the records it

@@ -219,15 +219,21 @@ class ReplicaHost:
         """What this sim is the authority of: its robots, and the scene objects when it is their authority."""
         return tuple(self.world.robots) + (tuple(self.world.objects) if self.objects else ())
 
-    def take_over(self, t0: float) -> None:
-        """Serve the world from the last state heard (the election's take-over, on a thread of its own)."""
+    def take_over(self, t0: float, former: str | None = None) -> None:
+        """Serve the world from the last state heard (the election's take-over, on a thread of its own);
+        ``former``: the leader followed until now, whose streams still on their way in are waited for."""
         if self.stopping.is_set():
             return  # closing: a world that is going away is not served again
+        if former:
+            self.follower.drain(former)
         with self.lock:
             state = self.follower.snapshot
         if state is None:
             self.announce(f"sim {self.fabric.peer_id}: took over with no state seen; the world starts from its scene")
-        self.serve(state)
+        try:
+            self.serve(state)
+        finally:
+            self.follower.drained()
         took = time.monotonic() - t0
         self.takeovers.append({"term": self.election.term, "s": took, "from": state.header.source if state else ""})
         self.announce(f"sim {self.fabric.peer_id}: took over the world with term {self.election.term} in {took * 1000:.0f} ms"

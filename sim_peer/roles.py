@@ -348,7 +348,7 @@ class Roles:
                 h.announce(f"standby {h.fabric.peer_id}: the token of {followed or 'the primary'} is gone (live sims: "
                            f"{', '.join(sorted(ev.live)) if isinstance(ev, el.Peers) else '?'}; link "
                            f"{'up' if h.fabric.connected() else 'down'}); taking over with term {e.term}")
-                t = threading.Thread(target=h.take_over, args=(time.monotonic(),), name="take-over", daemon=True)
+                t = threading.Thread(target=h.take_over, args=(time.monotonic(), followed), name="take-over", daemon=True)
                 self.taking_over = t
                 t.start()
             elif e.kind == "step_down":

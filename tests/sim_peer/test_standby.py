@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -153,3 +154,44 @@ def test_a_closed_standby_does_not_take_over(world, router):
         assert host.peer is None and not host.takeovers
     finally:
         host.fabric.close()
+
+
+def test_a_take_over_keeps_the_former_leaders_samples_still_on_their_way_in(world, router):
+    """At a take-over the election already names this sim the leader, yet samples of the former leader that
+    reached the process before its token's loss may still wait in their subscription's thread. While the take-over
+    drains, those are kept (the catch-up starts from the newest, and sim time never goes back); the drain ends
+    only once they stopped coming; outside a drain, a sample of a sim not followed is not kept."""
+    port = router[1]
+    primary = _host(world, port, "sim-a", standby=False)
+    standby = _host(world, port, "sim-b", standby=True)
+    try:
+        follower = standby.follower
+        wait_until(lambda: "arm1" in follower.joints, timeout=20, what="the leader's joints")
+        key = keys.robot_joints(world, "arm1")
+        primary.close()
+        primary.fabric.close()
+        wait_until(lambda: standby.takeovers, timeout=20, what="the take-over done")
+        last = follower.joints["arm1"]
+        assert last.header.source == "sim-a" and standby.election.leader == "sim-b"
+        late = replace(last, header=replace(last.header, stamp=last.header.stamp + 0.004))
+        follower.on_joints(key, late)  # sim-a is not followed any more, and no take-over drains it
+        assert follower.joints["arm1"] is last
+
+        done: list[float] = []
+        drain = threading.Thread(target=lambda: (follower.drain("sim-a", quiet_s=0.1, limit_s=5.0), done.append(time.monotonic())))
+        drain.start()
+        wait_until(lambda: follower.former == "sim-a", timeout=5, what="the drain begun")
+        fed: list[float] = []
+        for _ in range(30):  # sim-a's samples still coming in, one every 5 ms, for 150 ms
+            follower.on_joints(key, late)
+            fed.append(time.monotonic())
+            time.sleep(0.005)
+        drain.join(10)
+        assert follower.joints["arm1"] is late  # kept while draining
+        assert done and done[0] >= fed[-1], (done, fed[-1])  # the drain lasted until they stopped coming
+        follower.drained()
+        assert follower.former is None
+    finally:
+        for host in (standby, primary):
+            host.close()
+            host.fabric.close()
