@@ -47,6 +47,10 @@ def test_an_unfollowed_robot_is_no_longer_decoded_and_follows_again(world, conne
     assert following.unfollow("base1")
     assert not following.unfollow("base1")  # no longer followed
     assert following.robots == {"base2"}
+    # a fence: base2's marker arrives after everything published before it (one link, in order), so nothing
+    # sent before the unfollow is still on its way when the count starts (a late base2 pose once counted as one more)
+    sim.publish(keys.robot_stream(world, "base2", "pose"), _pose(1.5))  # once: its publisher's route is known by now
+    wait_until(lambda: _x(latest, world, "base2") == 1.5, timeout=20, what="base2's marker", seen=lambda: _x(latest, world, "base2"))
     decoded, bursts = user.counters["received"], published[0]
     # base2 still followed: its poses after the unfollow arrive, base1's (published with them) never do
     wait_until(lambda: publish(2.0) or _x(latest, world, "base2") == 2.0, timeout=20, what="base2's pose after base1 was unfollowed",
