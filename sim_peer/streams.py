@@ -122,11 +122,11 @@ class StreamLoops:
 
 
 def _robots(entries: list[tuple[str, Stream]]) -> list[str]:
-    """The robots of a group's entries, in order (a key's fourth part: ``rf/W/robot/ROBOT/STREAM``)."""
-    return list(dict.fromkeys(key.split("/")[3] for key, _ in entries))
+    """The robots of a group's entries, in order."""
+    return list(dict.fromkeys(keys.parse(key).subject for key, _ in entries))
 
 
 def _dealt(entries: list[tuple[str, Stream]], n: int) -> list[list[tuple[str, Stream]]]:
     """``entries`` dealt over ``n`` phases robot by robot, in turn (a robot's streams stay in one phase)."""
     phase = {rid: i % n for i, rid in enumerate(_robots(entries))}
-    return [[(key, st) for key, st in entries if phase[key.split("/")[3]] == p] for p in range(n)]
+    return [[(key, st) for key, st in entries if phase[keys.parse(key).subject] == p] for p in range(n)]
