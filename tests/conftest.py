@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import uuid
 from typing import Iterator
 
@@ -68,3 +71,40 @@ def lab_ok() -> None:
         print(f"multi-host tests skipped: {why}")
         pytest.skip(why)
     sweep_stale()  # namespaces of earlier runs that were killed before they could clean up
+
+
+# Modules that run a program at import or on a query to describe the machine (platform.processor(),
+# ctypes.util.find_library, glfw's version check when MuJoCo's viewer module loads): probes, not processes a
+# test starts.
+_PROBING_MODULES = {"platform", "ctypes.util", "glfw.library"}
+
+
+def _caller_module() -> str:
+    """The module that asked subprocess for a process (the first frame outside subprocess and this file)."""
+    frame = sys._getframe(2)
+    while frame is not None and frame.f_globals.get("__name__") in {"subprocess", __name__}:
+        frame = frame.f_back
+    return frame.f_globals.get("__name__", "?") if frame is not None else "?"
+
+
+@pytest.fixture(autouse=True)
+def _fast_tests_start_no_process(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """The fast suite (``make test-fast``) is in-process only: a test that starts a child process is slow, and
+    must say so with ``@pytest.mark.slow``. A fast test that starts one fails here, naming the program."""
+    if request.node.get_closest_marker("slow") is not None:
+        yield
+        return
+    started: list[str] = []
+    real_init = subprocess.Popen.__init__
+
+    def spy(self: subprocess.Popen, args, *rest, **kwargs) -> None:  # type: ignore[no-untyped-def]
+        if _caller_module() not in _PROBING_MODULES:
+            argv = [args] if isinstance(args, (str, bytes, os.PathLike)) else list(args)
+            started.append(" ".join(os.fsdecode(a) for a in argv)[:160])
+        real_init(self, args, *rest, **kwargs)
+
+    monkeypatch.setattr(subprocess.Popen, "__init__", spy)
+    yield
+    if started:
+        pytest.fail(f"a fast test started {len(started)} process(es), e.g. {started[0]!r}: mark it "
+                    "@pytest.mark.slow (make test-fast runs in-process tests only)", pytrace=False)

@@ -13,6 +13,8 @@ import subprocess
 import sys
 import threading
 
+import pytest
+
 from fabric.heap import HeapTrimmer
 from robofabric.testing import wait_until
 
@@ -40,6 +42,7 @@ print(json.dumps({"start": start, "freed": freed, "after": rss_mb(), "trimmed": 
 """
 
 
+@pytest.mark.slow  # runs a child interpreter, whose heap it measures
 def test_trim_gives_back_the_memory_threads_freed():
     out = subprocess.run([sys.executable, "-c", _FREED_BY_THREADS], capture_output=True, text=True, timeout=120, check=True)
     seen = json.loads(out.stdout.strip().splitlines()[-1])

@@ -7,12 +7,15 @@ import signal
 import subprocess
 import sys
 
+import pytest
+
 from robofabric.bench.common import end_processes, pct
 
 SLEEPER = [sys.executable, "-c", "import time; time.sleep(60)"]
 DEAF = [sys.executable, "-c", "import signal, sys, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); print('ready', flush=True); time.sleep(60)"]
 
 
+@pytest.mark.slow  # starts and ends child processes
 def test_end_processes_signals_all_first_then_kills_the_deaf_within_one_timeout():
     procs = [subprocess.Popen(SLEEPER), subprocess.Popen(SLEEPER), subprocess.Popen(DEAF, stdout=subprocess.PIPE, text=True)]
     try:
