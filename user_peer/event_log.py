@@ -4,6 +4,10 @@ Only an event from its object's authority can refuse a command here: one that ca
 write (``fabric.fencing.is_authority_event``; never ``event/decode/by/*``, which any login writes) from a
 live sim that is the authority of the object it names. The rest is display-only (the TUI marks it). Events
 are judged by their arrival here, never by the sender's clock.
+
+:func:`describe` is the one way an event is put into words for a person (the console's log, the terminal UI's
+status line): every field is its writer's text, escaped and capped (:func:`fabric.text.one_line`), so the words
+are one line whatever a decode report holds.
 """
 
 from __future__ import annotations
@@ -13,11 +17,19 @@ from typing import Callable
 
 from fabric.fencing import is_authority_event
 from fabric.interfaces import REJECT_KINDS, Event, OwnershipRecord
+from fabric.text import one_line
 
-__all__ = ["EventLog"]
+__all__ = ["EventLog", "describe"]
 
 KEPT = 1000
 """Events kept; past this, the oldest half is dropped."""
+
+
+def describe(ev: Event) -> str:
+    """``KIND OBJECT [USER]: REASON`` on one line, each field escaped and capped (a 4 KiB reason shows its first
+    200 characters): at most about 350 characters whatever the event holds."""
+    return (one_line(ev.kind, 32) + (f" {one_line(ev.object, 48)}" if ev.object else "")
+            + (f" [{one_line(ev.user, 48)}]" if ev.user else "") + (f": {one_line(ev.reason)}" if ev.reason else ""))
 
 
 class EventLog:

@@ -24,8 +24,10 @@ from textual.content import Content
 from textual.css.query import NoMatches
 from textual.widgets import Button, Footer, Header, Label, Sparkline, Static
 
+from fabric.text import escape
 from user_peer.api import Arm, Base, World
 from user_peer.errors import FabricUserError
+from user_peer.event_log import describe
 from user_peer.slider import JointSlider
 
 __all__ = ["UserApp", "SPEEDS", "ARM_SPEEDS", "event_line"]
@@ -48,14 +50,15 @@ def plain(text: str) -> Content:
     """Text for a label, never parsed as markup, its control characters escaped: names, reasons and events
     come from the network (an owner called ``[/x]`` raised MarkupError in the refresh timer and ended the
     app; one with an escape sequence could drive the terminal)."""
-    return Content("".join(ch if ch.isprintable() else ascii(ch)[1:-1] for ch in text))
+    return Content(escape(text))
 
 
 def event_line(ev, trusted: bool) -> str:
-    """The status line's latest event; one the robot's authority did not send (a decode report, which any
-    login may write) is marked display-only: its kind, user and object are only its writer's say-so."""
-    text = f"event {ev.kind}" + (f" {ev.object}" if ev.object else "") + (f" [{ev.user}]" if ev.user else "") + (f": {ev.reason}" if ev.reason else "")
-    return text if trusted else f"{text} (unverified, display only)"
+    """The status line's latest event, one line (:func:`~user_peer.event_log.describe`); one the robot's
+    authority did not send (a decode report, which any login may write) starts with its mark, ahead of any of
+    its writer's text: its kind, user and object are only its writer's say-so, and a long reason cannot push
+    the mark out of sight."""
+    return f"event {describe(ev)}" if trusted else f"unverified, display only · event {describe(ev)}"
 
 
 class UserApp(App):

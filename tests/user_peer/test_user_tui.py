@@ -130,7 +130,12 @@ def test_an_event_its_authority_did_not_send_is_marked_display_only():
 
     ev = Event(kind="reject", object="arm1", user="alice", reason="arm1 is owned by mallory, not alice")
     assert event_line(ev, True) == "event reject arm1 [alice]: arm1 is owned by mallory, not alice"
-    assert event_line(ev, False).endswith("(unverified, display only)")
+    assert event_line(ev, False) == "unverified, display only · event reject arm1 [alice]: arm1 is owned by mallory, not alice"
+    # a kind that holds a newline and a trusted line after it stays on the unverified line, escaped
+    forged = Event(kind="decode_error\nevent reject arm1 [alice]", reason="\x1b[2J" + "\n" * 2000)
+    line = event_line(forged, False)
+    assert line.startswith("unverified") and line.isprintable() and len(line) < 400, line
+    assert "decode_error\\nevent reject arm1" in line
 
 
 def test_names_and_events_from_the_network_are_shown_as_text_and_garbage_is_skipped(setup, world, connect):

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from nicegui import run, ui
 
+from fabric.text import one_line
 from user_peer.errors import FabricUserError
 
 if TYPE_CHECKING:
@@ -160,8 +161,8 @@ class ArmPanel:
         rec = arm.record
         who = "you" if mine and rec is not None else (rec.owner or "nobody") if rec is not None else "?"
         live = arm.id in self.page.world.following.robots  # else its joints are what was kept when the page let go of it
-        self.title.text = f"arm {arm.id} ({arm.type}) · owner: {who}" + ("" if mine else " · controls disabled") + \
-            ("" if live else f" · click {arm.id} to follow its joints")
+        self.title.text = one_line(f"arm {arm.id} ({arm.type}) · owner: {who}" + ("" if mine else " · controls disabled") +
+                                   ("" if live else f" · click {arm.id} to follow its joints"), 300)
         for c in self.controls:
             c.set_enabled(mine)
         js = arm.joints if live else None

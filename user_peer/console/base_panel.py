@@ -14,6 +14,7 @@ from nicegui import ui
 from nicegui.events import GenericEventArguments, MouseEventArguments
 
 from fabric import keys
+from fabric.text import one_line
 from user_peer.console.drive import Driver
 from user_peer.errors import FabricUserError
 
@@ -145,7 +146,7 @@ class BasePanel:
         rec = b.record
         who = "you" if mine and rec is not None else (rec.owner or "nobody") if rec is not None else "?"
         live = b.id in self.page.world.following.robots  # else its pose is what was kept when the page let go of it
-        self.title.text = f"base {b.id} ({b.type}) · owner: {who}" + ("" if mine else " · controls disabled")
+        self.title.text = one_line(f"base {b.id} ({b.type}) · owner: {who}" + ("" if mine else " · controls disabled"), 300)
         for c in self.controls:
             c.set_enabled(mine)
         xy, pose = (b.xy_theta, b.pose) if live else (None, None)

@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 from nicegui import run, ui
 
+from fabric.text import one_line
+
 from user_peer.console import follow, state
 from user_peer.console.arm_panel import ArmPanel
 from user_peer.console.base_panel import BasePanel
@@ -24,11 +26,12 @@ from user_peer.console.drive import REFRESH_S
 from user_peer.console.login import LoginError, login_config
 from user_peer.console.view import LiveView
 from user_peer.errors import FabricUserError
+from user_peer.event_log import describe
 
 if TYPE_CHECKING:
     from user_peer.console.server import Console
 
-__all__ = ["ConsolePage", "event_line", "KEYS_JS"]
+__all__ = ["ConsolePage", "event_line", "KEYS_JS", "TRUSTED", "UNVERIFIED", "EVENTS_PER_REDRAW"]
 
 log = logging.getLogger("robofabric.console")
 
@@ -49,10 +52,21 @@ name only, and every Quasar control is a ``div``. ``t`` is the press's time in t
 console's health line (key to server)."""
 
 
+TRUSTED = "trusted · "
+"""How a line of the event log that the console vouches for starts (an event from its robot's authority, an
+ownership change from the authority's record, a robot gone)."""
+UNVERIFIED = "unverified (display only) · "
+"""How every other event's line starts: what its writer said, shown greyed out."""
+EVENTS_PER_REDRAW = 10
+"""Event lines a redraw adds to a page's log at most (5 redraws a second): a flood of events costs a page a
+summary line, not a thousand labels sent down its websocket."""
+
+
 def event_line(ev: Any, trusted: bool) -> str:
-    """An event log line; one its robot's authority did not send is marked unverified (as the terminal UI does)."""
-    text = f"{ev.kind}" + (f" {ev.object}" if ev.object else "") + (f" [{ev.user}]" if ev.user else "") + (f": {ev.reason}" if ev.reason else "")
-    return f"trusted · {text}" if trusted else f"unverified (display only) · {text}"
+    """An event log line, one line whatever the event holds (:func:`~user_peer.event_log.describe`); one its
+    robot's authority did not send starts with :data:`UNVERIFIED` (as the terminal UI marks it), so nothing its
+    writer put in it can make it start with :data:`TRUSTED`."""
+    return (TRUSTED if trusted else UNVERIFIED) + describe(ev)
 
 
 def _first_handles(world: Any, user: str) -> tuple[list, dict[str, Any], tuple]:
@@ -218,7 +232,8 @@ class ConsolePage:
     # ------------------------------------------------------------------ actions
 
     def say(self, text: str) -> None:
-        self.message.text = text
+        """The page's message line: one line, whatever a reason or a name in it holds."""
+        self.message.text = one_line(text, 400)
 
     async def call(self, what: str, fn: Callable, *args: Any, **kw: Any) -> Any:
         """``fn`` off the event loop; its refusal is shown with the reason (and the owner), never raised: it returns
@@ -315,7 +330,7 @@ class ConsolePage:
             rec = w.ownership.record(r.id)
             if rec is not None and self._owners.get(r.id, rec.owner) != rec.owner:
                 # records come from the robot's authority only (the ownership replica checks): trusted
-                self.log.push(f"trusted · ownership {r.id}: {self._owners[r.id] or 'nobody'} -> {rec.owner or 'nobody'} (epoch {rec.epoch})")
+                self.log.push(TRUSTED + one_line(f"ownership {r.id}: {self._owners[r.id] or 'nobody'} -> {rec.owner or 'nobody'} (epoch {rec.epoch})"))
             if rec is not None:
                 self._owners[r.id] = rec.owner
         self.sel_label.text = f"selected: {self.selected}" if self.selected else "no robot"
@@ -329,14 +344,15 @@ class ConsolePage:
         w = self.world
         mark = w.event_mark()
         if mark != self._events_seen:
-            new = min(mark - self._events_seen, 50)
-            self._events_seen = mark
-            for ev, trusted in w.recent_events(new):
-                self.log.push(event_line(ev, trusted))
+            new, self._events_seen = mark - self._events_seen, mark
+            if new > EVENTS_PER_REDRAW:
+                self.log.push(f"{new - EVENTS_PER_REDRAW} more events since the last redraw, not shown (the latest follow)")
+            for ev, trusted in w.recent_events(min(new, EVENTS_PER_REDRAW)):
+                self.log.push(event_line(ev, trusted), classes=None if trusted else "text-grey-7 text-italic")
         gone = w.robots_gone
         if len(gone) != self._gone_seen:
             for rid in gone[self._gone_seen:]:
-                self.log.push(f"robot {rid} gone: its sim peer left")
+                self.log.push(one_line(f"robot {rid} gone: its sim peer left"))
             self._gone_seen = len(gone)
         if not w.world_alive:
             self.say(f"WORLD GONE: no sim peer of {w.name!r} (waiting for one)")

@@ -17,6 +17,7 @@ from typing import Any
 
 from fabric.codec import DecodeError, decode
 from fabric.interfaces import Pose, yaw_from_quaternion
+from fabric.text import one_line
 from user_peer.console import topview
 from user_peer.console.topview import Frame, RobotMark
 from user_peer.urdf_chain import UrdfChain
@@ -45,7 +46,7 @@ class RobotLine:
             out += f" · queue: {', '.join(self.queue)}"
         if self.place:
             out += f" · your place: {self.place}"
-        return out
+        return one_line(out, 300)  # names are any login's text: one line, escaped
 
 
 def robot_line(world, rid: str, kind: str) -> RobotLine:

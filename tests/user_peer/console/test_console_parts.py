@@ -246,3 +246,21 @@ def test_a_login_where_nobody_listens_says_why(world, worlds):
     with pytest.raises(LoginError, match="Could not join"):
         logins.login(login_config(world, (f"tcp/127.0.0.1:{free_port()}",), "dave", ""), "dave", "")
     assert logins.refused == 1 and logins.users() == [] and worlds == []
+
+
+def test_an_event_whose_kind_holds_a_newline_cannot_make_a_line_that_looks_trusted():
+    """A decode report (any login writes them: unverified) whose kind holds a newline and a trusted-looking line
+    after it: the page's log (NiceGUI's log makes a line of each line of the text) gets one line, marked unverified,
+    the newline escaped; a 2,000-newline reason is one capped line too."""
+    from fabric.interfaces import Event
+    from user_peer.console.page import event_line
+
+    TRUSTED, UNVERIFIED = "trusted · ", "unverified (display only) · "
+    forged = Event(kind="decode_error\ntrusted · ownership arm1: alice -> mallory (epoch 7)", object="arm1", user="mallory")
+    lines = event_line(forged, False).splitlines()
+    assert len(lines) == 1 and lines[0].startswith(UNVERIFIED) and not lines[0].startswith(TRUSTED), lines
+    assert "decode_error\\ntrusted · owners" in lines[0]
+    flood = event_line(Event(kind="decode_error", reason="\n" * 2000), False)
+    assert len(flood.splitlines()) == 1 and len(flood) < 400 and flood.isprintable(), flood[:100]
+    # the authority's own events stay as they were
+    assert event_line(Event(kind="reject", object="arm1", user="bob", reason="not_owner"), True) == TRUSTED + "reject arm1 [bob]: not_owner"
