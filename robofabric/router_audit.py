@@ -12,6 +12,14 @@ The audit turns that log on for these modules, takes file descriptor 1 into a pi
 drops by (login, message, key), passes every other line through, and prints a one-line summary per
 interval. TRACE also logs every *authorized* decision, so the audit costs the router CPU in
 proportion to the traffic: a diagnostic for a class, not a default (docs/security.md).
+
+zenoh writes a key as it is, and a key may hold a newline: a liveliness token's id with a newline and an
+audit-like line after it printed that line as the audit's own. Here a log record starts with its timestamp;
+a line that does not is the rest of the record before it (:data:`_RECORD`): it is never read as a decision or
+a drop, it ends the key of the refusal it continues (escaped in the summary), and anything else passed
+through is shown escaped, a continuation behind :data:`CONTINUED`. The audit's own lines start with
+``refused``, which no passed-through line can. What a counterfeit record inside a key could still do is be
+counted (the counts are the log's word, a diagnostic): it can no longer look like the audit's summary.
 """
 
 from __future__ import annotations
@@ -24,7 +32,9 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Callable, TextIO
 
-__all__ = ["Refusal", "RefusalCounter", "parse_refusal", "summary", "Audit", "LOG_FILTER"]
+from fabric.text import one_line
+
+__all__ = ["Refusal", "RefusalCounter", "parse_refusal", "summary", "shown", "Audit", "LOG_FILTER", "CONTINUED"]
 
 LOG_FILTER = "error,zenoh::net::routing::interceptor=trace"
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
@@ -35,6 +45,10 @@ _SUBJECT = re.compile(r"(?:Username|CertCommonName|CommonName)\((?P<who>[^)]*)\)
 _ACL_LINE = "zenoh::net::routing::interceptor"
 _DROPPED = "Msg intercepted!"
 _THREAD = re.compile(r"ThreadId\((\d+)\)")
+_RECORD = re.compile(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(?:\.\d+)?Z\s")
+"""How a record of zenoh's log starts (after its colours): a line that does not is the rest of the one before."""
+CONTINUED = "  ↳ "
+"""What a passed-through line that continues the record before it starts with."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -57,10 +71,23 @@ class RefusalCounter:
         self.counts: Counter[Refusal] = Counter()
         self.logins: dict[str, str] = {}  # session zid -> login, from the decisions that name both
         self._last: dict[str, Refusal] = {}
+        self.acl_record = False  # whether the record the last line belongs to is access control's
+        self._record_thread: str | None = None  # the thread of the last record, when it was a refusal's decision
 
     def feed(self, line: str) -> Refusal | None:
-        """The refusal this line completes (a drop), else None."""
-        m = _THREAD.search(line)
+        """The refusal this line completes (a drop), else None. A line that continues the record before it (a
+        key that held a newline) adds to that record's refusal's key and is read no further."""
+        text = _ANSI.sub("", line).rstrip("\r\n")
+        if not _RECORD.match(text):
+            thread = self._record_thread
+            if thread is not None and thread in self._last:
+                ref = self._last[thread]
+                if len(ref.key) < 4096:
+                    self._last[thread] = Refusal(ref.who, ref.message, ref.flow, f"{ref.key}\n{text}")
+            return None
+        self.acl_record = _ACL_LINE in text
+        self._record_thread = None
+        m = _THREAD.search(text)
         thread = m.group(1) if m else ""
         z = _ZID_WHO.search(line)
         if z is not None and len(self.logins) < 10_000:
@@ -68,6 +95,7 @@ class RefusalCounter:
         ref = parse_refusal(line, self.logins)
         if ref is not None:
             self._last[thread] = ref
+            self._record_thread = thread
             return None
         if _DROPPED in line:
             ref = self._last.get(thread, UNKNOWN)
@@ -143,8 +171,9 @@ class Audit:
                 ref = self.counter.feed(line)
                 if ref is not None:
                     self._window[ref] += 1
-            if ref is None and _ACL_LINE not in line:
-                self._out.write(line)  # anything else on fd 1 still reaches the terminal
+                passed = ref is None and not self.counter.acl_record
+            if passed:  # anything else on fd 1 still reaches the terminal, as text
+                self._out.write(shown(line) + "\n")
 
     def _tick(self) -> None:
         while not self._stop.wait(self.every):
@@ -163,10 +192,18 @@ class Audit:
 
 
 def summary(counts: Counter, *, prefix: str, top: int = 5) -> str:
-    """``refused ...: 12 (put 10, query 2); mallory put rf/w/own/arm1 x6; ...`` (the most frequent first)."""
+    """``refused ...: 12 (put 10, query 2); mallory put rf/w/own/arm1 x6; ...`` (the most frequent first), one
+    line: logins, messages and keys are escaped and capped (:func:`fabric.text.one_line`)."""
     by_msg: Counter[str] = Counter()
     for ref, n in counts.items():
         by_msg[ref.message] += n
-    kinds = ", ".join(f"{m} {n}" for m, n in by_msg.most_common())
-    worst = "; ".join(f"{r.who} {r.message} {r.key} x{n}" for r, n in counts.most_common(top))
+    kinds = ", ".join(f"{one_line(m, 40)} {n}" for m, n in by_msg.most_common())
+    worst = "; ".join(f"{one_line(r.who, 64)} {one_line(r.message, 40)} {one_line(r.key)} x{n}" for r, n in counts.most_common(top))
     return f"{prefix}: {sum(counts.values())} ({kinds}); {worst}"
+
+
+def shown(line: str) -> str:
+    """A line of fd 1 that is not the audit's, as the audit passes it on: its colours kept off, one line, escaped;
+    one that continues the record before it behind :data:`CONTINUED`."""
+    text = _ANSI.sub("", line).rstrip("\r\n")
+    return one_line(text, 2000) if _RECORD.match(text) else CONTINUED + one_line(text, 2000)

@@ -190,6 +190,19 @@ def test_the_audit_counts_dropped_messages_by_the_decision_that_dropped_them():
         == Refusal("mallory", "liveliness_token", "ingress", "rf/w/peer/sim/x")  # as the rules name it
     text = summary(Counter({ref: 3, Refusal("eve", "query", "ingress", "rf/w/own/arm1/by/bob"): 1}), prefix="refused")
     assert text.startswith("refused: 4 (put 3, query 1); mallory put rf/w/own/arm1 x3")
+    # a key that held a newline: the lines after it continue its record, are never read as a decision or a drop,
+    # and end the refusal's key, shown escaped; the lines the audit passes on are marked as continued
+    from robofabric.router_audit import CONTINUED, shown
+
+    c = RefusalCounter()
+    for text in (line(8, f"{who} is unauthorized to Put (ingress) on rf/w/x"), "refused in the last 1 s: 1; alice put k x1",
+                 "Msg intercepted!", line(8, "Msg intercepted!", module="zenoh::net::routing::interceptor")):
+        c.feed(text)
+    assert c.counts == Counter({Refusal("mallory", "put", "ingress", "rf/w/x\nrefused in the last 1 s: 1; alice put k x1\nMsg intercepted!"): 1})
+    assert "rf/w/x\\nrefused in the last" in summary(c.counts, prefix="refused")
+    assert summary(c.counts, prefix="refused").count("\n") == 0
+    assert shown("refused in the last 1 s\x1b[2J") == CONTINUED + "refused in the last 1 s\\x1b[2J"
+    assert shown(line(3, "an error")).startswith("2026-11-23T16:58:13.924332Z TRACE")  # a record: its colours off
 
 
 @pytest.mark.slow

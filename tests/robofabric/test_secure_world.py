@@ -246,6 +246,24 @@ def test_a_user_cannot_publish_robot_state_or_serve_the_world(secure):
     assert fake_sim.peer_id == "fake-sim"
 
 
+def test_a_newline_in_a_token_id_cannot_forge_a_line_of_the_routers_audit(secure):
+    """mallory declares a sim's token (refused) whose id holds a newline and, after it, a line like the audit's own
+    summary naming alice: zenoh logs the key as it is. The audit shows her refusal on its own line with the
+    newline escaped, and no line of the router's output starts with her text."""
+    w = secure.world
+    forged = f"refused in the last 1 s: 1 (put 1); alice put {keys.robot_cmd(w, 'base1', 'twist', 'bob')} x1"
+    mallory = secure.fabric("mallory")
+    token = mallory.session.liveliness().declare_token(f"{keys.peer(w, 'sim', 'x')}\n{forged}")
+    try:
+        _refused_by_router(secure, f"mallory liveliness_token {keys.peer(w, 'sim', 'x')}\\n{forged} x")
+        out = secure.procs.output(secure.router)
+        lines = [ln for ln in out.splitlines() if forged in ln]
+        assert lines and all(not ln.startswith(forged) and ln.startswith(("refused in", "refused in total", "  ↳")) for ln in lines), lines
+        assert not [ln for ln in out.splitlines() if ln.startswith(f"refused in the last 1 s: 1 (put 1); alice put")]
+    finally:
+        token.undeclare()
+
+
 def _router_admin_replies(fab: Fabric) -> list[str]:
     """Keys of the router's admin space (``@/ZID/router/**``: who subscribes to, serves and holds tokens on what)
     that answer ``fab``'s query; a session's own admin space (``@/ITS-ZID/session/**``) is not the router's."""
