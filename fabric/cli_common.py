@@ -199,6 +199,8 @@ def _console_class() -> type:
     return _CONSOLE
 
 
+CELL_CAP = 500
+"""A table cell's length at most (:func:`fabric.text.one_line`): a key of the network's is shown whole up to it."""
 BOXED = 3
 """Columns a boxed table spends per column (a border and a space each side), plus one for the last border."""
 PLAIN = 3
@@ -250,6 +252,10 @@ def print_table(title: str, columns: Sequence[str], rows: Sequence[Sequence[str]
     from rich import box
     from rich.table import Table
 
+    from fabric.text import one_line
+
+    # keys, ids and names come from the network: each cell one line, escaped (rich passes ESC on), capped
+    title, rows = one_line(title, 500), [[one_line(v, CELL_CAP) for v in r] for r in rows]
     out = console(stderr=stderr)
     boxed = True
     whole = [i for i, c in enumerate(columns) if c in numeric]  # a number and its unit on one line

@@ -52,3 +52,13 @@ def test_widths_never_go_below_a_word_nor_above_the_room():
             assert widths[2] >= len("sim-vm-6954b3") and widths[3] >= len("viewer-vm-0a1b2c") and widths[1] >= len("JointState")
     assert column_widths(COLUMNS, ROWS, 40) is None  # too narrow for the columns side by side: blocks
     assert column_widths(COLUMNS, ROWS, 200) == [max(len(c), *(len(r[i]) for r in ROWS)) for i, c in enumerate(COLUMNS)]
+
+
+def test_a_cell_from_the_network_is_one_escaped_line(monkeypatch, capsys):
+    """A peer id with a newline and an escape sequence (a token's id is any login's text): its row stays one row,
+    the terminal gets no escape sequence, the text is readable."""
+    monkeypatch.setenv("COLUMNS", "120")
+    print_table("world w: 2 peer(s)", ("kind", "id"), [("user", "x\x1b[2J\nsim  real-sim"), ("sim", "sim-1")])
+    out = capsys.readouterr().out
+    assert "\x1b" not in out and "x\\x1b[2J\\nsim  real-sim" in out, out
+    assert not [line for line in out.splitlines() if line.lstrip("│ ").startswith("sim  real-sim")], out
