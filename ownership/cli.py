@@ -9,6 +9,7 @@ from typing import Annotated, Optional, TYPE_CHECKING
 import typer
 
 from fabric.cli_common import Joining, NothingThere, UserError, join_flags, open_fabric, print_table, say, watch_reader
+from fabric.text import one_line
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
     from fabric.interfaces import OwnershipRecord
@@ -39,8 +40,8 @@ def _client(join: Joining, user) -> tuple[Fabric, OwnershipClient]:
 
 
 def _shown(text: str) -> str:
-    """A name from the network as printed: control characters escaped, so none reaches the terminal."""
-    return "".join(ch if ch.isprintable() else ascii(ch)[1:-1] for ch in text)
+    """A name from the network as printed: control characters escaped, so none reaches the terminal, and capped."""
+    return one_line(text, 64)
 
 
 def record_line(rec: OwnershipRecord) -> str:

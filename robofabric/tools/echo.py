@@ -11,6 +11,7 @@ import typer
 import zenoh
 
 from fabric.cli_common import Joining, NothingThere, UserError, join_flags, say, watch_reader
+from fabric.text import escape
 from robofabric.complete import complete_keys
 from robofabric.tools.common import open_world, resolve_key
 
@@ -59,7 +60,7 @@ def echo(
                 if as_json:
                     line = json.dumps({"key": k, "message": to_plain(msg)})
                 else:
-                    line = f"--- {k}\n{msg}"
+                    line = f"--- {escape(k)}\n{msg}"  # a key may hold a newline: escaped, never a line of its own
                 say(line, stop=stop)  # a closed pipe (`| head -3`) ends echo with 0
                 if count is not None and printed >= count:
                     stop.set()

@@ -14,6 +14,7 @@ import typer
 
 from fabric import keys
 from fabric.cli_common import Joining, NothingThere, UserError, join_flags
+from fabric.text import one_line
 from robofabric.complete import complete_keys, complete_types
 from robofabric.tools.common import resolve_key, user_key
 from robofabric.tools.message_json import message_from_json
@@ -115,7 +116,7 @@ def _say_outcome(what: str, full: str, refusals: list[str], *, waited: float, he
     """The last line: exit 1 with the sim's reason when it refused, or when no sim listens on a command's
     key (``waited`` > 0: a command whose answer was awaited); else what was published."""
     if refusals:
-        print(f"refused: {refusals[0]} ({what} sent on {full})", file=sys.stderr)
+        print(f"refused: {one_line(refusals[0])} ({what} sent on {full})", file=sys.stderr)  # the sim's words, escaped
         raise typer.Exit(1)
     if waited > 0 and not heard:
         print(f"no sim listens on {full}: {what} sent, nobody took it", file=sys.stderr)
