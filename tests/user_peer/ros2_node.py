@@ -115,7 +115,7 @@ def main() -> None:
         t = Twist()
         t.linear.x, t.angular.z = v, w
         cmd.publish(t)
-        write(topic="cmd_vel_sent", v=v, w=w)
+        write(topic="cmd_vel_sent", v=v, w=w, subscribers=cmd.get_subscription_count())
 
     node.create_timer(0.1, tick)
     write(topic="ready")

@@ -1,8 +1,9 @@
 """``robofabric ros2`` against a real ROS 2 node: a plain rclpy process (tests/user_peer/ros2_node.py, importing
 nothing from robofabric) gets joint_states, scan, odom, map and clock equal to robofabric's own streams (stamped with
 the sim's time), moves an arm through joint_command and joint_trajectory, drives a
-base through cmd_vel (a stream that stops, stops the base), and without ownership moves nothing and is told why
-on /rosout. Real router, real sim (the ``live`` fixture), real bridge and node processes on a ROS domain of
+base through cmd_vel (a stream that stops, stops the base) for the robots the bridge was told to drive
+(``--drive``), without ownership moves nothing and is told why on /rosout, and without ``--drive`` moves nothing
+at all: the bridge does not even listen (ROS 2 has no logins). Real router, real sim (the ``live`` fixture), real bridge and node processes on a ROS domain of
 their own, discovery kept on this host."""
 
 from __future__ import annotations
@@ -142,8 +143,10 @@ def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns
     cells[1, 2], cells[2, 3] = 0, 100
     w.fabric.publish(keys.map_key(world, "map"), OccupancyGrid(0.05, np.array([-1.0, -2.0, 0.0]), cells))
     domain = domain_for(1)
-    bridge = start_bridge(procs, world, port, domain, "--user", "rosbridge", "--request", "base1", "--request", "arm1")
+    bridge = start_bridge(procs, world, port, domain, "--user", "rosbridge", "--request", "base1", "--request", "arm1",
+                          "--drive", "base1", "--drive", "arm1")
     assert "rosbridge owns base1" in procs.output(bridge) and "rosbridge owns arm1" in procs.output(bridge)
+    assert "commands: taken for arm1, base1 only, from any node on this host" in procs.output(bridge)
     node, out, ctl = start_node(procs, tmp_path, domain)
     seen = lambda: {t: len(of(out, t)) for t in ("joint_states", "scan", "sonar", "odom", "clock", "map")}  # noqa: E731
     wait_until(lambda: all(n >= 5 for t, n in seen().items() if t != "map") and seen()["map"] >= 1, timeout=60,
@@ -191,6 +194,7 @@ def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns
     wait_until(lambda: math.dist(obs.latest_pose()[0][:2], start[:2]) > 0.15, timeout=20, what="base1 driven by cmd_vel",
                seen=lambda: (obs.latest_pose(), procs.output(bridge)[-1500:]))
     (ctl / "drive").unlink()
+    assert any(r["subscribers"] >= 1 for r in of(out, "cmd_vel_sent"))  # the bridge listens to base1's cmd_vel
     stopped_at = time.monotonic()
     wait_until(lambda: obs.latest_pose()[1] < 0.01, timeout=10, what="base1 stopped after cmd_vel stopped",
                seen=obs.latest_pose)
@@ -234,7 +238,7 @@ def test_without_ownership_cmd_vel_moves_nothing_and_the_refusal_is_on_rosout(li
     wait_until(lambda: obs.poses, timeout=20, what="base1's pose")
     wait_until(lambda: obs.latest_pose()[1] < 0.01, timeout=10, what="base1 still", seen=obs.latest_pose)
     domain = domain_for(2)
-    bridge = start_bridge(procs, world, port, domain, "--user", "rosguest")  # owns nothing
+    bridge = start_bridge(procs, world, port, domain, "--user", "rosguest", "--drive", "base1")  # owns nothing
     node, out, ctl = start_node(procs, tmp_path, domain)
     start, _ = obs.latest_pose()
     (ctl / "drive").write_text("0.4 0.0")
@@ -250,3 +254,31 @@ def test_without_ownership_cmd_vel_moves_nothing_and_the_refusal_is_on_rosout(li
     assert moved < 0.005, moved
     procs.close()  # SIGTERM: the bridge says what it did before it ends
     assert "refused" in procs.output(bridge) and " 0 commands forwarded" in procs.output(bridge), procs.output(bridge)[-1500:]
+
+
+def test_without_drive_a_ros2_nodes_cmd_vel_moves_nothing_though_the_bridge_owns_the_base(live, observer, procs, tmp_path):
+    """A plain rclpy node (no login: ROS 2 has none) on the bridge's domain publishes base1's cmd_vel while the
+    bridge's login owns base1: without --drive the bridge does not listen, says so at start, and base1 stays."""
+    world, port, _ = live
+    w, obs = observer
+    wait_until(lambda: obs.poses, timeout=20, what="base1's pose")
+    wait_until(lambda: obs.latest_pose()[1] < 0.01, timeout=10, what="base1 still", seen=obs.latest_pose)
+    domain = domain_for(3)
+    bridge = start_bridge(procs, world, port, domain, "--user", "rosowner", "--request", "base1")
+    text = procs.output(bridge)
+    assert "rosowner owns base1" in text, text[-1500:]
+    assert "commands: none taken (publishing only); --drive ROBOT takes cmd_vel and joint commands for it" in text, text[-1500:]
+    node, out, ctl = start_node(procs, tmp_path, domain)
+    # the node and the bridge found each other: the node has base1's odometry from it
+    wait_until(lambda: len(of(out, "odom")) >= 5, timeout=60, what="odom from the bridge", seen=lambda: procs.output(node)[-1500:])
+    start, _ = obs.latest_pose()
+    (ctl / "drive").write_text("0.4 0.0")
+    wait_until(lambda: len(of(out, "cmd_vel_sent")) >= 20, timeout=30, what="20 cmd_vel sent by the node",
+               seen=lambda: procs.output(node)[-1500:])
+    moved = max(math.dist(obs.latest_pose()[0][:2], start[:2]), obs.latest_pose()[1])
+    (ctl / "drive").unlink()
+    assert all(r["subscribers"] == 0 for r in of(out, "cmd_vel_sent")), of(out, "cmd_vel_sent")[-3:]
+    assert moved < 0.005, moved
+    assert w.robot("base1").record.owner == "rosowner"  # the bridge's own, all along
+    procs.close()
+    assert " 0 commands forwarded, 0 refused" in procs.output(bridge), procs.output(bridge)[-1500:]

@@ -13,7 +13,9 @@ Out (every robot of the world, followed as sims and robots come and go)::
     /clock                  rosgraph_msgs/Clock      the sims' time (the newest header stamp of robot state)
     /NS/tf, /NS/tf_static   tf2_msgs/TFMessage       the export's frame tree, where tf2_msgs is importable (tf.py)
 
-In (acted on only for robots this login owns, as for any user; a refusal is logged on /rosout and counted)::
+In (only for the robots named in ``drive``, the ``--drive`` option: a ROS 2 domain has no logins, so by default
+the bridge only publishes (:mod:`user_peer.ros2.trust`); and for those, acted on only while this login owns
+them, as for any user; a refusal is logged on /rosout and counted)::
 
     /NS/ROBOT/cmd_vel           geometry_msgs/Twist             -> Base.twist(linear.x, angular.z, hold=False)
     /NS/ROBOT/joint_command     sensor_msgs/JointState          -> Arm.move_joints(positions, wait=False)
@@ -44,7 +46,7 @@ import threading
 import time
 from collections import Counter
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Collection
 
 import rclpy
 from geometry_msgs.msg import PoseStamped, Twist
@@ -119,16 +121,17 @@ class Ros2Bridge:
     """Republish ``world``'s streams on ``node`` and forward its ROS commands; ``close()`` ends it."""
 
     def __init__(self, world: World, node: Node, *, namespace: str = "", tf_message: type | None = None,
-                 trace: bool = False) -> None:
+                 trace: bool = False, drive: Collection[str] = ()) -> None:
         self.world = world
         self.node = node
         self.namespace = namespace
+        self.drive = frozenset(drive)  # the robots whose command topics it subscribes to; none: it only publishes
         self._lock = threading.Lock()  # publishers' creation and removal only; never taken per message
         self._clock_lock = threading.Lock()  # /clock's order, taken when the sim time moves on
         self._outs: dict[str, _Out] = {}  # topic -> its publisher and message
         self._routes: dict[str, _Route | None] = {}  # fabric key -> route (rebuilt with each description)
         self._robot_topics: dict[str, set[str]] = {}  # robot -> its topics (destroyed when it leaves)
-        self._inputs: dict[str, list[Any]] = {}  # robot -> its command subscriptions
+        self._inputs: dict[str, list[Any]] = {}  # robot -> its command subscriptions (none unless in drive)
         self._kinds: dict[str, str] = {}  # robot -> kind ("arm", "mobile"), from the world description
         self._stamps = SimStamps()
         self._clock_ns = 0
@@ -296,6 +299,10 @@ class Ros2Bridge:
             self.node.get_logger().info(f"{rid} left world {self.world.name}: its topics are gone")
 
     def _command_inputs(self, rid: str, kind: str) -> list[Any]:
+        """The robot's command subscriptions: none for a robot not named in ``drive`` (nothing on the DDS domain
+        is heard for it, so nothing is sent in this login's name)."""
+        if rid not in self.drive:
+            return []
         topic = lambda leaf: ros_topic("/".join([self.namespace.strip("/"), rid, leaf]))  # noqa: E731
         if kind == "mobile":
             return [self.node.create_subscription(Twist, topic("cmd_vel"), lambda m, r=rid: self._on_cmd_vel(r, m), RELIABLE)]

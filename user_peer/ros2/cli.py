@@ -18,13 +18,16 @@ MISSING_RCLPY = ("robofabric ros2 needs rclpy: pip install 'robofabric[ros2]' (R
 def ros2(
     namespace: Annotated[str, typer.Option("--namespace", help="A ROS namespace put before every topic but /clock (e.g. class1).")] = "",
     request: Annotated[Optional[list[str]], typer.Option("--request", help="A robot to ask to own at start (repeatable); cmd_vel and joint_command act only on robots this login owns.")] = None,
+    drive: Annotated[Optional[list[str]], typer.Option("--drive", help="A robot whose cmd_vel and joint commands the bridge takes from ROS 2 (repeatable); without it the bridge only publishes: any node on the DDS domain could send them.")] = None,
+    discovery: Annotated[Optional[str], typer.Option("--discovery", help="How far DDS discovery reaches: localhost (the default, unless ROS_AUTOMATIC_DISCOVERY_RANGE is set), subnet, off or system_default.")] = None,
     user_id: Annotated[Optional[str], typer.Option("--user", "-u", help="The login the bridge acts as (default: $USER); ownership is by user id.")] = None,
     join: Joining = Joining(),
     trace: Annotated[Optional[str], typer.Option("--trace", hidden=True, help="Write when each message entered and left the bridge to this file at the end (robofabric bench ros2).")] = None,
 ) -> None:
     """Bridge a world to ROS 2: every robot's joint_states, scan, odom, path, the map and /clock go out as ROS 2
-    topics; cmd_vel and joint_command come in for the robots this login owns (refusals on /rosout). The ROS
-    domain is ROS_DOMAIN_ID's, as for any ROS 2 node. Ctrl-C stops it (its robots are released)."""
+    topics; cmd_vel and joint_command come in only for the robots named with --drive, while this login owns them
+    (refusals on /rosout). The ROS domain is ROS_DOMAIN_ID's; discovery stays on this host unless asked
+    otherwise. Ctrl-C stops it (its robots are released)."""
     import gc
     import logging
     import os
@@ -36,6 +39,13 @@ def ros2(
         raise UserError(MISSING_RCLPY) from None
     from user_peer.cli import open_world
     from user_peer.errors import FabricUserError
+    from user_peer.ros2.trust import boundary_lines
+    from user_peer.ros2.trust import discovery as discovery_range
+
+    try:
+        found = discovery_range(os.environ, discovery)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
 
     log = logging.getLogger("robofabric.ros2")
     w = open_world(join, user_id)
@@ -47,9 +57,12 @@ def ros2(
             except FabricUserError as exc:  # the bridge goes on: its cmd_vel for that robot will be refused, and told
                 log.warning("could not own %s: %s", rid, exc.reason)
                 print(f"{w.user} does not own {rid}: {exc.reason}", flush=True)
+        os.environ.update(found.set_env)  # read by the middleware when rclpy starts
         rclpy.init()
         node = rclpy.create_node("robofabric_" + "".join(c if c.isalnum() else "_" for c in w.user))
-        bridge = Ros2Bridge(w, node, namespace=namespace, trace=trace is not None)
+        bridge = Ros2Bridge(w, node, namespace=namespace, trace=trace is not None, drive=drive or ())
+        for line in boundary_lines(w.user, drive or (), os.environ.get("ROS_DOMAIN_ID", "0"), found):
+            print(line, flush=True)
         # what the start built (rclpy's, zenoh's, numpy's ~80,000 objects) lives as long as the bridge: frozen out
         # of the collector, a full collection walks only what came after, not a pause of tens of ms for every
         # message in flight (docs/ros2.md, Benchmark)
