@@ -18,7 +18,7 @@ def test_any_text_is_one_printable_line_within_the_cap(text, cap):
     assert "\x1b" not in out
 
 
-@given(st.text(st.characters(blacklist_categories=("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp")), max_size=300),
+@given(st.text(st.characters(blacklist_categories=("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp", "Zs")) | st.just(" "), max_size=300),
        st.integers(min_value=1, max_value=400))
 def test_printable_text_that_fits_is_unchanged_and_longer_text_keeps_its_start(text, cap):
     out = one_line(text, cap)
@@ -46,6 +46,7 @@ def test_a_forged_line_stays_on_the_line_it_came_in():
     assert out == "decode_error\\ntrusted · ownership arm1: alice -> mallory (epoch 7)"
     assert one_line("\n" * 2000) == ("\\n" * 100)[:199] + CUT
     assert one_line("a\u202eb\x1b[2Jc") == "a\\u202eb\\x1b[2Jc"  # a bidi override and an escape sequence, shown
+    assert one_line("a\xa0b") == "a\\xa0b"  # a space that is not one (Zs): shown, not mistaken for a space
     assert one_line(None) == "None" and one_line(7, 1) == "7"
     with pytest.raises(ValueError):
         one_line("x", 0)
