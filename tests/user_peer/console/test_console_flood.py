@@ -9,6 +9,7 @@ logged in, and she keeps her base. Debian's chromium through playwright, as in t
 
 from __future__ import annotations
 
+import re
 import threading
 import time
 import uuid
@@ -146,6 +147,14 @@ def test_one_logins_event_text_neither_forges_trusted_lines_nor_stalls_anothers_
     lines = _log_lines(alice)
     assert len(lines) <= 200 and [ln for ln in lines if ln.startswith("unverified (display only) · decode_error: \\n\\n")], lines[-5:]
     assert all(ln.strip() for ln in lines), "an empty line in the log: a newline was shown as layout"
+    # a burst (100 reports at once): a redraw adds at most 10 of them, and says how many it left out
+    for i in range(100):
+        dave.publish(keys.event_decode(w, "dave"), Event(kind="decode_error", reason=f"burst {i}", header=Header.now()))
+    wait_until(lambda: [ln for ln in _log_lines(alice) if re.match(r"^\d+ more events since the last redraw, not shown", ln)],
+               timeout=30, what="the count of the burst's lines not shown", seen=lambda: _log_lines(alice)[-3:])
+    wait_until(lambda: "decode_error: burst 99" in _log_lines(alice)[-1], timeout=30, what="the burst's last report shown",
+               seen=lambda: _log_lines(alice)[-3:])
+    assert len([ln for ln in _log_lines(alice) if ": burst " in ln]) < 100
     alice.get_by_role("button", name="Release").click()
     wait_message(alice, r"release base1: ok")
     alice.context.close()
