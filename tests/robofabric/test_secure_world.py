@@ -248,10 +248,11 @@ def test_a_user_cannot_publish_robot_state_or_serve_the_world(secure):
 
 def test_a_newline_in_a_token_id_cannot_forge_a_line_of_the_routers_audit(secure):
     """mallory declares a sim's token (refused) whose id holds a newline and, after it, a line like the audit's own
-    summary naming alice: zenoh logs the key as it is. The audit shows her refusal on its own line with the
-    newline escaped, and no line of the router's output starts with her text."""
+    summary naming carol (not alice or bob: the paper test below reads the honest logins' refusals anywhere in the
+    output): zenoh logs the key as it is. The audit shows her refusal on its own line with the newline escaped,
+    and no line of the router's output starts with her text."""
     w = secure.world
-    forged = f"refused in the last 1 s: 1 (put 1); alice put {keys.robot_cmd(w, 'base1', 'twist', 'bob')} x1"
+    forged = f"refused in the last 1 s: 1 (put 1); carol put {keys.robot_cmd(w, 'base1', 'twist', 'bob')} x1"
     mallory = secure.fabric("mallory")
     token = mallory.session.liveliness().declare_token(f"{keys.peer(w, 'sim', 'x')}\n{forged}")
     try:
@@ -259,7 +260,7 @@ def test_a_newline_in_a_token_id_cannot_forge_a_line_of_the_routers_audit(secure
         out = secure.procs.output(secure.router)
         lines = [ln for ln in out.splitlines() if forged in ln]
         assert lines and all(not ln.startswith(forged) and ln.startswith(("refused in", "refused in total", "  ↳")) for ln in lines), lines
-        assert not [ln for ln in out.splitlines() if ln.startswith(f"refused in the last 1 s: 1 (put 1); alice put")]
+        assert not [ln for ln in out.splitlines() if ln.startswith("refused in the last 1 s: 1 (put 1); carol put")]
     finally:
         token.undeclare()
 
