@@ -16,6 +16,24 @@ class NoIKSolution(ValueError):
     (the one class of that name: a target a user asked for cannot be reached)."""
 
 
+def arm_model(desc: robots.RobotDescription) -> pin.Model:
+    """The Pinocchio model of the description's arm: its URDF with every joint the description does not list
+    (a gripper's fingers, another branch) held at zero, so the model's coordinates are the description's joints,
+    in its order. ``ValueError`` when the URDF lacks one of them, gives one more than one coordinate, or orders
+    them otherwise."""
+    full = pin.buildModelFromUrdf(str(desc.urdf_path))
+    names = list(full.names)[1:]
+    missing = [j for j in desc.joint_names if j not in names]
+    if missing:
+        raise ValueError(f"robot {desc.name!r}: joints {', '.join(missing)} are not in {desc.urdf_path}")
+    lock = [full.getJointId(n) for n in names if n not in desc.joint_names]
+    model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
+    if tuple(model.names)[1:] != desc.joint_names or model.nq != len(desc.joint_names):
+        raise ValueError(f"robot {desc.name!r}: the URDF's joints {list(model.names)[1:]} (nq {model.nq}) are not "
+                         f"the description's {list(desc.joint_names)}, one coordinate each, in that order")
+    return model
+
+
 class ArmModel:
     """FK, geometric Jacobian (paper Eq. 3-6), Eq. 7 speeds and DLS IK for one robot type."""
 
@@ -24,15 +42,17 @@ class ArmModel:
         if desc.urdf_path is None:
             raise ValueError(f"robot {robot_type!r} has no URDF")
         self.description = desc
-        self.model = pin.buildModelFromUrdf(str(desc.urdf_path))
+        self.model = arm_model(desc)
         self.data = self.model.createData()
         frame = desc.flange_frame or self.model.frames[-1].name
         self.frame_id = self.model.getFrameId(frame)
         self.lower = np.asarray(desc.lower, float)
-        # each joint's axis in its own frame, read once from the model (constant for revolute joints)
+        # each joint's axis in its own frame, read once from the model (constant for 1-dof joints): the angular
+        # part of its column for a revolute joint, the linear part for a prismatic one
         pin.computeJointJacobians(self.model, self.data, pin.neutral(self.model))
-        self._axes = [pin.getJointJacobian(self.model, self.data, i, pin.LOCAL)[3:, i - 1].copy()
-                      for i in range(1, self.model.njoints)]
+        cols = [pin.getJointJacobian(self.model, self.data, i, pin.LOCAL)[:, i - 1].copy() for i in range(1, self.model.njoints)]
+        self._prismatic = [bool(np.linalg.norm(c[3:]) < 0.5) for c in cols]
+        self._axes = [c[:3] if p else c[3:] for c, p in zip(cols, self._prismatic)]
         self.upper = np.asarray(desc.upper, float)
 
     def fk(self, q: np.ndarray) -> pin.SE3:
@@ -41,18 +61,22 @@ class ArmModel:
         return self.data.oMf[self.frame_id].copy()
 
     def joint_frames(self, q: np.ndarray) -> list[pin.SE3]:
-        """World placements of the revolute joints (their z axes are z_{i-1} of Eq. 4-5)."""
+        """World placements of the joints (their z axes are z_{i-1} of Eq. 4-5)."""
         pin.forwardKinematics(self.model, self.data, np.asarray(q, float))
         return [self.data.oMi[i].copy() for i in range(1, self.model.njoints)]
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
-        """6xN geometric Jacobian [z x (o_n - o_i); z], written out as the paper's Eq. 4-6."""
+        """6xN geometric Jacobian, written out as the paper's Eq. 4-6 for N joints: [z x (o_n - o_i); z] for a
+        revolute joint, [z; 0] for a prismatic one."""
         o_n = self.fk(q).translation
         cols = []
         for i, m in enumerate(self.joint_frames(q), start=1):
             # z_{i-1}: the joint axis in the world (URDF axes need not be local z)
             z = m.rotation @ self._axes[i - 1]
-            cols.append(np.concatenate([np.cross(z, o_n - m.translation), z]))
+            if self._prismatic[i - 1]:
+                cols.append(np.concatenate([z, np.zeros(3)]))
+            else:
+                cols.append(np.concatenate([np.cross(z, o_n - m.translation), z]))
         return np.stack(cols, axis=1)
 
     def joint_speed_magnitudes(self, q: np.ndarray, dq: np.ndarray, *, jacobian: np.ndarray | None = None) -> np.ndarray:
