@@ -1,4 +1,4 @@
-"""Entry point of the fabric's own subcommands: router, ps, echo, hz, pub, call, list, interfaces, up, demo, secure, lab."""
+"""Entry point of the fabric's own subcommands: router, ps, echo, hz, pub, call, list, interfaces, up, demo, secure, lab, robots."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import typer
 
 
 def register(app: typer.Typer) -> None:
-    from robofabric import introspect_cli, launch_cli, secure_cli, tools
+    from robofabric import introspect_cli, launch_cli, robots_cli, secure_cli, tools
     from robofabric.lab import cli as lab_cli
 
     tools.register(app)
@@ -14,3 +14,4 @@ def register(app: typer.Typer) -> None:
     launch_cli.register(app)
     secure_cli.register(app)
     lab_cli.register(app)
+    robots_cli.register(app)

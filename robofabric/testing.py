@@ -124,3 +124,15 @@ class ProcessGroup:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def example_robot_urdf(relative: str) -> Path:
+    """A URDF of the ``example-robot-data`` distribution (the test extra: real robots' descriptions, meshes
+    included), e.g. ``"ur_description/urdf/ur5_robot.urdf"``; found through the distribution's file list, as its
+    wheel installs them under ``cmeel.prefix/share/example-robot-data/robots``."""
+    import importlib.metadata
+
+    for f in importlib.metadata.files("example-robot-data") or ():
+        if str(f).endswith("example-robot-data/robots/" + relative):
+            return Path(str(f.locate())).resolve()
+    raise FileNotFoundError(f"example-robot-data has no robots/{relative}")

@@ -55,7 +55,8 @@ class ArmPanel:
                 hi = math.degrees(e.upper[i]) if i < len(e.upper) else 180.0
                 with ui.row().classes("full-width items-center no-wrap"):
                     ui.label(f"J{i + 1}").style("width: 2rem")
-                    s = ui.slider(min=round(lo, 1), max=round(hi, 1), step=0.5, value=0.0,
+                    # the zero pose clamped into the range: a joint whose range leaves out 0 (the Panda's J4)
+                    s = ui.slider(min=round(lo, 1), max=round(hi, 1), step=0.5, value=min(max(0.0, round(lo, 1)), round(hi, 1)),
                                   on_change=self._slider_moved).props(f'label aria-label="J{i + 1} ({name}) degrees"').classes("full-width")
                     self.sliders.append(s)
             with ui.row().classes("full-width items-center no-wrap"):
