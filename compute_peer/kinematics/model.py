@@ -19,8 +19,8 @@ class NoIKSolution(ValueError):
 def arm_model(desc: robots.RobotDescription) -> pin.Model:
     """The Pinocchio model of the description's arm: its URDF with every joint the description does not list
     (a gripper's fingers, another branch) held at zero, so the model's coordinates are the description's joints,
-    in its order. ``ValueError`` when the URDF lacks one of them, gives one more than one coordinate, or orders
-    them otherwise."""
+    in its order. ``ValueError`` when the URDF lacks one of them or orders them otherwise. (A continuous joint
+    stays two coordinates here: ``robots add`` writes it revolute.)"""
     full = pin.buildModelFromUrdf(str(desc.urdf_path))
     names = list(full.names)[1:]
     missing = [j for j in desc.joint_names if j not in names]
@@ -28,9 +28,9 @@ def arm_model(desc: robots.RobotDescription) -> pin.Model:
         raise ValueError(f"robot {desc.name!r}: joints {', '.join(missing)} are not in {desc.urdf_path}")
     lock = [full.getJointId(n) for n in names if n not in desc.joint_names]
     model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
-    if tuple(model.names)[1:] != desc.joint_names or model.nq != len(desc.joint_names):
-        raise ValueError(f"robot {desc.name!r}: the URDF's joints {list(model.names)[1:]} (nq {model.nq}) are not "
-                         f"the description's {list(desc.joint_names)}, one coordinate each, in that order")
+    if tuple(model.names)[1:] != desc.joint_names:
+        raise ValueError(f"robot {desc.name!r}: the URDF's joints {list(model.names)[1:]} are not the description's "
+                         f"{list(desc.joint_names)} in that order")
     return model
 
 

@@ -11,10 +11,17 @@ from .ik_common import default_seed, degrees_text
 from .model import ArmModel, NoIKSolution
 
 
+ACCEPT_POSITION = 1e-6
+"""m: a start that stalls this close to the target is an answer (a micrometre; the solver aims at 1e-9 m)."""
+ACCEPT_ROTATION = 1e-6
+"""rad: the same for the orientation."""
+
+
 def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequence[float]] | None = None,
                     seed: Sequence[float] | None = None, *, restarts: int = 24, iters: int = 80,
                     rng_seed: int = 0, position_tol: float = 1e-9, rotation_tol: float = 1e-8,
-                    orientation_scale: float = 0.1) -> tuple[np.ndarray, float, float]:
+                    orientation_scale: float = 0.1, accept_position: float = ACCEPT_POSITION,
+                    accept_rotation: float = ACCEPT_ROTATION) -> tuple[np.ndarray, float, float]:
     """Levenberg-Marquardt IK for any arm, inside the joint limits; returns (q, position err, rotation err).
 
     Errors are the target's position minus the flange's, and log3(R_target R^T)
@@ -22,7 +29,10 @@ def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence
     Steps are clamped to the limits; a joint resting on a limit that the error
     pushes further out is frozen for that step, so the others still converge.
     When a start stalls, the solver restarts from ``restarts`` random in-limit
-    joint vectors drawn with ``rng_seed`` (deterministic). Raises
+    joint vectors drawn with ``rng_seed`` (deterministic), unless it stalled
+    within ``accept_position`` and ``accept_rotation`` (near a singularity, such
+    as the UR5's wrist at 0, the last digits come slowly): that answer is taken,
+    its residual reported as it is. Raises
     :class:`NoIKSolution` with the best residual and the joints on limits.
     """
     model, data, fid = arm.model, arm.data, arm.frame_id
@@ -73,7 +83,7 @@ def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence
                     break
             if lam > 1e6:
                 break  # stalled: a local minimum or a limit; restart
-        if pe <= position_tol and re <= rotation_tol:
+        if pe <= accept_position and re <= accept_rotation:
             return q, pe, re
         if best is None or cost < best[0]:
             best = (cost, q, pe, re)

@@ -136,9 +136,11 @@ def command(
     n: Annotated[int, typer.Option("--n", help="Random reachable targets per workload.")] = 2000,
     seed: Annotated[int, typer.Option(help="Seed of the targets and IK seeds.")] = 0,
     queries: Annotated[int, typer.Option(help="IK/FK queries for the round trip through a router (0: skip it).")] = 1000,
+    robot: Annotated[str, typer.Option("--robot", help="An installed arm type other than the Meca500 (robofabric robots list): its numerical IK, no round trip.")] = ROBOT,
     out: TablesOut = None,
 ) -> None:
-    """Meca500 IK solve times (closed form full pose / position only, numerical, CasADi) and the query round trip.
+    """Meca500 IK solve times (closed form full pose / position only, numerical, CasADi) and the query round trip;
+    with --robot, any installed arm's IK: success within 1 mm and 1 mrad, p50 and p99.
 
     The round trip runs a `robofabric compute` process behind a router hosted here, as on a LAN.
     """
@@ -149,6 +151,16 @@ def command(
 
     if n < 1:
         raise UserError("--n must be >= 1")
+    if robot != ROBOT:
+        from robofabric.bench.ik_arm import format_table as arm_table, measure_arm
+
+        try:
+            text = arm_table(measure_arm(robot, n, seed))
+        except ValueError as exc:  # an unknown type, or one the compute peer cannot model
+            raise UserError(str(exc)) from None
+        print(text)
+        append(out, text + "\n")
+        return
     result = measure_solve(n, seed)
     table = Table(title=f"IK solve, {ROBOT}, {n} targets per row, CasADi {min(n, CASADI_TARGETS)} (seed {seed})")
     for col in ("solver", "success", "median (us)", "p99 (us)"):
