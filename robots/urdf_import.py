@@ -3,10 +3,10 @@
 From one URDF it writes ``NAME/`` with everything the peers need and nothing outside it:
 
 - ``NAME.urdf``: the URDF with its meshes' ``package://`` and relative paths pointing into ``meshes/`` (the compute
-  peer's Pinocchio model, the ROS 2 bridge's ``robot_description``); a continuous joint becomes revolute over
-  ±2π (the controllers and the IK need a range);
-- ``NAME.xml``: the MJCF MuJoCo's URDF compiler makes of it (collision geometry; joints off the arm's chain, a
-  gripper's fingers, welded; a ``flange`` site at the tip link), compiled once as the dry build;
+  peer's Pinocchio model, the viewers' meshes, ROS 2's ``robot_description``); a continuous joint becomes
+  revolute over ±2π (the controllers and the IK need a range); a joint off the arm's chain becomes fixed;
+- ``NAME.xml``: the MJCF MuJoCo's URDF compiler makes of it (collision geometry; a ``flange`` site at the tip
+  link), compiled once as the dry build;
 - ``meshes/``: the meshes it names, copied;
 - ``robot.toml``: kind ``arm``, the chain's joints, their limits and speeds, the flange.
 
@@ -87,6 +87,7 @@ def install(urdf: Path, *, into: Path | None = None, name: str | None = None, ti
         doc = ET.fromstring(text)
         meshes = _copy_meshes(doc, urdf, work, list(package_dirs), notes)
         _make_revolute(doc)
+        _weld(doc, arm.locked)
         (work / f"{name}.urdf").write_text(ET.tostring(doc, encoding="unicode"))
         root_body = _write_mjcf(doc, work, name, arm, notes)
         (work / "robot.toml").write_text(_manifest(name, urdf, arm, root_body))
@@ -152,6 +153,18 @@ def _make_revolute(doc: ET.Element) -> None:
             limit.set("upper", repr(TURN))
 
 
+def _weld(doc: ET.Element, joints: Sequence[str]) -> None:
+    """The joints off the arm's chain (a gripper's fingers) become fixed at zero, as the sim welds them: every
+    reader of the URDF (the compute peer, the viewers, ROS 2's ``robot_description``) sees the joints the sim
+    streams, no more."""
+    for j in doc.findall("joint"):
+        if j.get("name") in joints:
+            j.set("type", "fixed")
+            for tag in ("limit", "mimic", "axis", "dynamics", "safety_controller", "calibration"):
+                for e in j.findall(tag):
+                    j.remove(e)
+
+
 # --------------------------------------------------------------------------- MJCF
 
 
@@ -176,20 +189,14 @@ def _mujoco_urdf(doc: ET.Element, notes: list[str]) -> str:
 
 
 def _write_mjcf(doc: ET.Element, work: Path, name: str, arm: ArmChain, notes: list[str]) -> str:
-    """Compile the URDF with MuJoCo, weld the joints off the chain, add the flange site, compile again (the dry
-    build) and write ``NAME.xml``; returns the root body's name."""
+    """Compile the URDF (its joints off the chain welded already) with MuJoCo, add the flange site, compile again
+    (the dry build) and write ``NAME.xml``; returns the root body's name."""
     import mujoco
 
     src = work / f".{name}.mujoco.urdf"
     src.write_text(_mujoco_urdf(doc, notes))
     try:
         spec = mujoco.MjSpec.from_file(str(src))
-        locked = set(arm.locked)
-        for eq in list(spec.equalities):  # a mimic joint's coupling goes with the joints it couples
-            if eq.name1 in locked or eq.name2 in locked:
-                spec.delete(eq)
-        for joint in arm.locked:
-            spec.delete(spec.joint(joint))
         tip = spec.body(arm.tip)
         if tip is None:
             raise DescriptionError(f"MuJoCo's URDF compiler merged the tip link {arm.tip!r} away: pick another --tip")

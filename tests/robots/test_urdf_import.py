@@ -142,3 +142,18 @@ def test_the_default_tip_follows_fixed_joints_past_the_last_revolute_one():
     assert urdf.default_tip(panda) == "panda_hand_tcp"  # not into the fingers: they move by prismatic joints
     arm = urdf.arm_chain(panda, "panda_link8")
     assert arm.tip == "panda_link8" and len(arm.joints) == 7 and arm.locked == ("panda_finger_joint1", "panda_finger_joint2")
+
+
+def test_every_reader_of_the_written_urdf_sees_the_joints_the_sim_streams(tmp_path):
+    """The Panda's fingers are fixed in the URDF it writes, as in its MJCF: the compute peer, the viewers' models
+    (Pinocchio's, and the console's numpy chain) and ROS 2's robot_description all see its 7 joints."""
+    import pinocchio as pin
+
+    from user_peer.urdf_chain import UrdfChain
+
+    made = install(example_robot_urdf(PANDA), into=tmp_path, name="panda")
+    written = made.directory / "panda.urdf"
+    tree = urdf.parse(written.read_text())
+    assert [j.name for j in tree.joints if j.type != "fixed"] == list(made.arm.joints)
+    assert pin.buildModelFromUrdf(str(written)).nq == 7 and UrdfChain.from_file(written).nq == 7
+    assert "<mimic" not in written.read_text()
