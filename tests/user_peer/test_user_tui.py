@@ -195,3 +195,43 @@ async def _queue(alice, bob):
         await asyncio.get_running_loop().run_in_executor(None, bob.robot("arm1").release)
         await until(pilot, lambda: not app.query(JointSlider).first().disabled, "alice owns arm1: controls enabled", timeout=15)
         assert "owner: you" in str(app.query_one("#arm-owner").render())
+
+
+PANDA = tuple(f"panda_joint{i}" for i in range(1, 8))
+PANDA_LO = (-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973)
+PANDA_HI = (2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973)
+
+
+@pytest.mark.slow
+def test_a_seven_joint_arm_gets_seven_sliders_in_its_limits_and_its_owner_moves_one(world, router, connect):
+    """An arm from a URDF (the Panda's names and limits, as `robots add` writes them): one slider per joint,
+    each within its range (J4's excludes 0), and a moved slider sends all seven joints."""
+    auth = connect("sim", "sim-test")
+    alice = World(client_config(world, router[1]), "alice", timeout=2.0)
+    try:
+        arm = Arm(alice, RobotEntry("p1", "panda", "arm", PANDA, PANDA_LO, PANDA_HI))
+        cmds = []
+        auth.subscribe(keys.robot_cmd_all(world), lambda k, m: cmds.append(m))
+        q = np.array([0.1, 0.2, 0.0, -1.5, 0.0, 1.6, 0.3])
+        auth.publish(keys.own(world, "p1"), OwnershipRecord("p1", owner="alice", epoch=3, authority="sim-test"))
+        auth.publish(keys.robot_joints(world, "p1"), JointState(PANDA, q, np.zeros(7), Header.now()))
+        wait_until(lambda: arm.record is not None and arm.joints is not None, what="replicas")
+        asyncio.run(_move_a_panda_slider(UserApp(alice, arm=arm), q, cmds))
+    finally:
+        alice.close()
+
+
+async def _move_a_panda_slider(app, q, cmds):
+    async with app.run_test(size=(120, 50)) as pilot:
+        await until(pilot, lambda: len(app.query(JointSlider)) == 7, "seven sliders")
+        sliders = list(app.query(JointSlider))
+        assert [s.joint for s in sliders] == list(PANDA)
+        assert [(s.lo, s.hi) for s in sliders] == list(zip(PANDA_LO, PANDA_HI))
+        assert all(s.lo <= s.value <= s.hi for s in sliders)
+        await until(pilot, lambda: not sliders[0].disabled and math.isclose(sliders[3].value, -1.5), "synced to the joints")
+        sliders[6].focus()
+        await pilot.press("right")
+        await until(pilot, lambda: bool(cmds), "a joint command sent")
+        sent = cmds[-1].body.q
+        assert len(sent) == 7 and math.isclose(sent[6], 0.3 + math.radians(1.0), abs_tol=1e-9)
+        np.testing.assert_allclose(sent[:6], q[:6])
