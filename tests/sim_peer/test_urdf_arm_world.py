@@ -56,6 +56,12 @@ def test_a_user_moves_the_panda_through_the_compute_peers_ik(panda_installed, wo
             assert p1.type == "panda" and p1.entry.joint_names == names  # the URDF's joint names, in its order
             js = p1.wait_for("joints", timeout=10)
             assert js.names == names and len(js.q) == 7
+            # what the ROS 2 bridge and `export --to ros2` make of it: joint_states named as in the URDF
+            from sensor_msgs.msg import JointState as RosJointState
+
+            from user_peer.ros2 import direct
+
+            assert direct.joint_state(RosJointState(), "p1", js, 1).name == list(names)
             # a reachable pose, from FK of known joints at the arm's place in this world
             placed = PlacedArm(ArmModel("panda"), sim_world.placements["p1"].pose)
             q = np.array([0.4, 0.3, -0.2, -1.6, 0.3, 1.9, 0.5])
