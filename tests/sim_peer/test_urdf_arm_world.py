@@ -82,3 +82,31 @@ def test_a_user_moves_the_panda_through_the_compute_peers_ik(panda_installed, wo
 
 def _near(pose, pos, tol: float = 2e-3):
     return pose if pose is not None and np.linalg.norm(np.asarray(pose.position) - pos) < tol else None
+
+
+@pytest.mark.slow  # a sim with its authority, a compute service and a user over a router; a scenario of seconds
+@pytest.mark.parametrize("robot", ["panda", "ur5"])
+def test_the_papers_test_a_runs_on_an_arm_from_a_urdf(robot, tmp_path, monkeypatch, world, router, connect):
+    """Test A (the target sphere on a circle, IK, apply, the sim's flange on each target) on the Panda and the
+    UR5, with the sim's ownership authority: its circle (around a point 19 cm in front of the base, 25 cm up,
+    chosen for the Meca500) is within both arms' reach."""
+    from ownership import Authority
+    from user_peer import scenarios
+
+    folder = tmp_path / "robots"
+    monkeypatch.setenv(robots.description.ENV_PATH, str(folder))
+    install(example_robot_urdf({"panda": PANDA, "ur5": "ur_description/urdf/ur5_robot.urdf"}[robot]), into=folder, name=robot)
+    sim_fab = connect("sim", "sim-urdf-a")
+    sim_world = SimWorld("combined", [f"{robot}:a2@1.5,-1.5"])
+    authority = Authority(sim_fab, objects={"a2": "exclusive", "arm1": "exclusive", "base1": "exclusive",
+                                            "target": "scene", "goal": "scene"}).start()
+    with SimPeer(sim_fab, sim_world, gate=authority, rates={"joints": 50, "pose": 50, "scan": 10}), \
+            KinematicsService(connect("compute", "compute-urdf-a")):
+        w = World(client_config(world, router[1]), "alice", timeout=10.0)
+        try:
+            res = scenarios.test_a(w, arm_id="a2", points=4, hold=0.0)
+            assert res.ok, res.lines
+            assert res.figures["targets"] == 4 and res.figures["max_error_mm"] <= 5.0
+        finally:
+            w.close()
+            authority.close()
