@@ -34,6 +34,7 @@ def _run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str]:
     return code, out.out + out.err
 
 
+@pytest.mark.slow  # the whole CLI in this process, two robots built and dry-built: seconds
 def test_add_makes_installed_types_of_the_ur5_and_the_panda_that_the_list_shows(tmp_path, monkeypatch, capsys):
     folder = _robots(tmp_path, monkeypatch)
     code, out = _run(capsys, "robots", "add", str(example_robot_urdf(UR5)), "--name", "ur5")

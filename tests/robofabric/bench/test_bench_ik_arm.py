@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 import robots
 from robofabric import cli
 from robofabric.bench.ik_arm import format_table, measure_arm
@@ -9,6 +11,7 @@ from robofabric.testing import example_robot_urdf
 from robots.urdf_import import install
 
 
+@pytest.mark.slow  # a benchmark, through the CLI: seconds
 def test_bench_ik_robot_measures_an_arm_from_a_urdf_and_refuses_an_unknown_type(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv(robots.description.ENV_PATH, str(tmp_path))
     install(example_robot_urdf("ur_description/urdf/ur5_robot.urdf"), into=tmp_path, name="ur5")
