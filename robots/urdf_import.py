@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Sequence
 
 from robots.description import ENV_PATH, DescriptionError
-from robots.urdf import TURN, ArmChain, arm_chain, parse
+from robots.urdf import DEFAULT_SPEED, TURN, ArmChain, arm_chain, parse
 
 MUJOCO_MESHES = (".stl", ".obj", ".msh")
 """Mesh formats MuJoCo reads; a collision mesh in another format (``.dae``) is left out of the MJCF, with a note."""
@@ -142,8 +142,13 @@ def _copy_meshes(doc: ET.Element, urdf: Path, work: Path, package_dirs: list[Pat
 
 
 def _make_revolute(doc: ET.Element) -> None:
-    """Continuous joints become revolute over ±2π (one coordinate each, the range the robot.toml gives)."""
+    """Continuous joints become revolute over ±2π (one coordinate each, the range the robot.toml gives); a
+    ``<limit>`` without ``effort`` or ``velocity`` gets them (0, and the speed taken), as urdfdom (Pinocchio's
+    and ROS 2's parser) refuses a limit without them."""
     for j in doc.findall("joint"):
+        for limit in j.findall("limit"):
+            limit.set("effort", limit.get("effort") or "0")
+            limit.set("velocity", limit.get("velocity") or repr(DEFAULT_SPEED))
         if j.get("type") == "continuous":
             j.set("type", "revolute")
             limit = j.find("limit")

@@ -158,3 +158,17 @@ def test_every_reader_of_the_written_urdf_sees_the_joints_the_sim_streams(tmp_pa
     assert [j.name for j in tree.joints if j.type != "fixed"] == list(made.arm.joints)
     assert pin.buildModelFromUrdf(str(written)).nq == 7 and UrdfChain.from_file(written).nq == 7
     assert "<mimic" not in written.read_text()
+
+
+def test_where_it_goes_and_what_it_is_called_are_checked_before_anything_is_written(tmp_path, monkeypatch):
+    src = tmp_path / "my arm.urdf"
+    src.write_text(_tiny(_j("a", "revolute", "base", "l1", LIMIT) + _j("b", "revolute", "l1", "l2", LIMIT)))
+    monkeypatch.delenv(robots.description.ENV_PATH, raising=False)
+    with pytest.raises(robots.DescriptionError, match="ROBOFABRIC_ROBOTS_PATH is not set"):
+        install(src)
+    with pytest.raises(robots.DescriptionError, match="type name '../up'"):
+        install(src, into=tmp_path / "robots", name="../up")
+    made = install(src, into=tmp_path / "robots")
+    assert made.name == "my_arm" and sorted(p.name for p in (tmp_path / "robots").iterdir()) == ["my_arm"]
+    monkeypatch.setenv(robots.description.ENV_PATH, str(tmp_path / "robots"))
+    assert robots.installed("my_arm").joint_names == ("a", "b")

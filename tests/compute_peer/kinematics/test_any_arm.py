@@ -83,3 +83,46 @@ def test_the_jacobian_and_eq7_speeds_take_n_joints(arms, name):
 
     ref = pin.computeFrameJacobian(arm.model, arm.data, q, arm.frame_id, pin.LOCAL_WORLD_ALIGNED)
     np.testing.assert_allclose(j, ref, atol=1e-9)
+
+
+def test_a_description_listing_fewer_joints_than_its_urdf_holds_the_others_at_zero(arms, tmp_path, monkeypatch):
+    """A hand-written robot.toml may name the original Panda URDF, fingers and all (9 coordinates): the model is
+    its 7 listed joints, the fingers held at zero, and agrees with the type `robots add` wrote."""
+    panda = robots.installed("panda")
+    folder = tmp_path / "handmade"
+    folder.mkdir()
+    manifest = panda.directory.joinpath("robot.toml").read_text()
+    manifest = manifest.replace('urdf = "panda.urdf"', f'urdf = "{example_robot_urdf(ARMS["panda"])}"')
+    manifest = manifest.replace('mjcf = "panda.xml"', f'mjcf = "{panda.mjcf_path}"')
+    (folder / "robot.toml").write_text(manifest)
+    hand = ArmModel(str(folder))
+    assert hand.model.nq == 7 and tuple(hand.model.names)[1:] == panda.joint_names
+    q = np.random.default_rng(8).uniform(hand.lower, hand.upper)
+    assert np.allclose(hand.fk(q).homogeneous, arms["panda"].fk(q).homogeneous, atol=1e-12)
+    (folder / "robot.toml").write_text(manifest.replace('"panda_joint1", "panda_joint2"', '"panda_joint2", "panda_joint1"'))
+    with pytest.raises(ValueError, match="not the description's"):
+        ArmModel(str(folder))
+
+
+def test_a_prismatic_joints_column_is_its_axis_and_no_turn(tmp_path, monkeypatch):
+    """Eq. 4-6 for a prismatic joint: [z; 0]. A lift, a turn, a telescope: the written-out Jacobian is Pinocchio's."""
+    import pinocchio as pin
+
+    def joint(name: str, kind: str, parent: str, child: str, xyz: str, axis: str, lo: float, hi: float) -> str:
+        return (f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+                f'<origin xyz="{xyz}"/><axis xyz="{axis}"/><limit lower="{lo}" upper="{hi}" velocity="1"/></joint>')
+
+    src = tmp_path / "lift.urdf"
+    src.write_text('<robot name="lift">' + "".join(f'<link name="l{i}"/>' for i in range(4))
+                   + joint("lift", "prismatic", "l0", "l1", "0 0 0.1", "0 0 1", 0.0, 0.5)
+                   + joint("turn", "revolute", "l1", "l2", "0.1 0 0", "0 1 0", -1.5, 1.5)
+                   + joint("reach", "prismatic", "l2", "l3", "0.2 0 0", "0.6 0 0.8", -0.1, 0.1) + "</robot>")
+    assert install(src, into=tmp_path / "robots").arm.joints == ("lift", "turn")  # by default a prismatic end is a finger
+    made = install(src, into=tmp_path / "robots", tip="l3", replace=True)
+    arm = ArmModel(str(made.directory))
+    assert made.arm.joints == ("lift", "turn", "reach") and arm.model.nq == 3
+    q = np.array([0.2, 0.7, 0.05])
+    ref = pin.computeFrameJacobian(arm.model, arm.data, q, arm.frame_id, pin.LOCAL_WORLD_ALIGNED)
+    j = arm.jacobian(q)
+    np.testing.assert_allclose(j, ref, atol=1e-12)
+    np.testing.assert_allclose(j[:, 0], [0, 0, 1, 0, 0, 0], atol=1e-12)
