@@ -35,6 +35,14 @@ class Placement:
     quat_xyzw: np.ndarray
 
 
+DRAWABLE_MESHES = (".stl", ".obj", ".glb", ".gltf")
+"""Mesh formats Rerun's ``Asset3D`` loads; a URDF's ``.dae`` visuals are drawn from the link's collision mesh."""
+
+
+def _unreadable(g) -> bool:
+    return bool(g.meshPath) and Path(str(g.meshPath)).suffix.lower() not in DRAWABLE_MESHES
+
+
 def _placement(se3) -> Placement:
     import pinocchio as pin
 
@@ -67,7 +75,22 @@ class ArmGeometry:
                 self.visual = pin.GeometryModel()
         self.data = self.model.createData()
         self.joint_names: tuple[str, ...] = tuple(self.model.names[1:])
-        self.shapes: list[tuple[Shape, int, object]] = [s for s in (self._shape(g) for g in self.visual.geometryObjects) if s]
+        objects = list(self.visual.geometryObjects)
+        if urdf_text is None and any(_unreadable(g) for g in objects):
+            objects = self._readable(objects, str(urdf))
+        self.shapes: list[tuple[Shape, int, object]] = [s for s in (self._shape(g) for g in objects) if s]
+
+    def _readable(self, visual: list, path: str) -> list:
+        """The visual objects Rerun can draw; a link whose visual mesh it cannot (a ``.dae``: the UR5's, the
+        Panda's) is drawn with its collision geometry instead (the STL MuJoCo simulates)."""
+        pin = self._pin
+        try:
+            collision = pin.buildGeomFromUrdf(self.model, path, pin.GeometryType.COLLISION, package_dirs=[str(Path(path).parent)])
+        except Exception:
+            return [g for g in visual if not _unreadable(g)]
+        lacking = {g.parentFrame for g in visual if _unreadable(g)}
+        return ([g for g in visual if g.parentFrame not in lacking]
+                + [g for g in collision.geometryObjects if g.parentFrame in lacking and not _unreadable(g)])
 
     def _shape(self, g) -> tuple[Shape, int, object] | None:
         geom = g.geometry

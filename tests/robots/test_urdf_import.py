@@ -157,6 +157,13 @@ def test_every_reader_of_the_written_urdf_sees_the_joints_the_sim_streams(tmp_pa
     tree = urdf.parse(written.read_text())
     assert [j.name for j in tree.joints if j.type != "fixed"] == list(made.arm.joints)
     assert pin.buildModelFromUrdf(str(written)).nq == 7 and UrdfChain.from_file(written).nq == 7
+    # the viewers' model: 7 joints, every link drawn (its .dae visuals Rerun cannot load: from its collision STL)
+    from user_peer.arm_geometry import ArmGeometry
+
+    drawn = ArmGeometry(written)
+    assert drawn.model.nq == 7 and len(drawn.shapes) >= 9
+    assert all(shape.mesh_path.endswith(".stl") and Path(shape.mesh_path).is_file() for shape, _, _ in drawn.shapes
+               if shape.kind == "mesh")
     assert "<mimic" not in written.read_text()
 
 
