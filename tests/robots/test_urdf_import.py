@@ -121,8 +121,12 @@ def test_what_cannot_be_taken_is_refused_with_the_reason():
 def test_continuous_joints_missing_speeds_and_missing_meshes_are_taken_with_a_note(tmp_path):
     mesh = '<collision><geometry><mesh filename="package://nowhere/meshes/l1.stl"/></geometry></collision>'
     box = '<collision><geometry><box size="0.02 0.02 0.1"/></geometry></collision>'
+    (tmp_path / "parts").mkdir()  # a mesh named by a path relative to the URDF
+    stl = example_robot_urdf(UR5).parents[1] / "meshes" / "ur5" / "collision" / "wrist3.stl"
+    (tmp_path / "parts" / "l1.stl").write_bytes(stl.read_bytes())
+    relative = '<collision><geometry><mesh filename="parts/l1.stl"/></geometry></collision>'
     text = _tiny(_j("a", "continuous", "base", "l1") + _j("b", "revolute", "l1", "l2", '<limit lower="-2" upper="2"/>'),
-                 meshes=mesh + box)
+                 meshes=mesh + box + relative)
     src = tmp_path / "tiny.urdf"
     src.write_text(text)
     made = install(src, into=tmp_path / "robots")
@@ -132,7 +136,9 @@ def test_continuous_joints_missing_speeds_and_missing_meshes_are_taken_with_a_no
     assert "package://nowhere/meshes/l1.stl not found" in notes and "continuous" in notes and "no velocity limit" in notes
     desc = robots.load(str(made.directory))
     model = mujoco.MjModel.from_xml_path(str(desc.mjcf_path))
-    assert model.ngeom == 1 and model.nsite == 1  # the box stayed, the missing mesh went; the flange site is there
+    # the box and the relative mesh (copied into the folder) stayed, the missing mesh went; the flange site is there
+    assert model.ngeom == 2 and model.nmesh == 1 and model.nsite == 1 and made.meshes == 1
+    assert (made.directory / "meshes" / "parts" / "l1.stl").is_file()
     assert '"revolute"' in desc.urdf_path.read_text()  # Pinocchio reads one coordinate for it
 
 
