@@ -61,6 +61,8 @@ OPEN_SERVICES = ("ik", "fk", "jacobian")
 """Compute services anyone may ask in any form: they answer the asker and change nothing."""
 CREDENTIALS = "credentials.txt"
 TLS_DIR = "tls"
+WEB_DIR = "web"
+"""Under ``TLS_DIR``: the console's HTTPS certificate and key (``console.pem``, ``console-key.pem``)."""
 _NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 
 
@@ -293,8 +295,10 @@ def _load_ca(t: Path):
     return x509.load_pem_x509_certificate((t / "ca.pem").read_bytes()), key
 
 
-def _make_cert(t: Path, name: str, hosts: list[str], days: int) -> None:
-    """A certificate for ``name`` (its common name is the identity the router's rules name), signed by the CA."""
+def _make_cert(t: Path, name: str, hosts: list[str], days: int, *, web: bool = False) -> None:
+    """A certificate for ``name`` (its common name is the identity the router's rules name), signed by the CA.
+    ``web``: the console's HTTPS certificate instead, ``t/web/NAME.pem``: its common name is no identity's and it
+    serves only (no client use), so it can never log in to the router."""
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
     from cryptography.hazmat.primitives.asymmetric import ec
@@ -304,20 +308,25 @@ def _make_cert(t: Path, name: str, hosts: list[str], days: int) -> None:
     key = ec.generate_private_key(ec.SECP256R1())
     now = dt.datetime.now(dt.timezone.utc)
     sans: list[x509.GeneralName] = []
-    for h in dict.fromkeys([name, *hosts]):
+    for h in dict.fromkeys(hosts if web else [name, *hosts]):
         try:
             sans.append(x509.IPAddress(ipaddress.ip_address(h)))
         except ValueError:
             sans.append(x509.DNSName(h))
     cert = (
-        x509.CertificateBuilder().subject_name(_name_attrs(name)).issuer_name(ca_cert.subject).public_key(key.public_key())
+        x509.CertificateBuilder().subject_name(_name_attrs(f"robofabric {name} (https)" if web else name))
+        .issuer_name(ca_cert.subject).public_key(key.public_key())
         .serial_number(x509.random_serial_number()).not_valid_before(now - dt.timedelta(minutes=5))
         .not_valid_after(now + dt.timedelta(days=days))
         .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
         .add_extension(x509.SubjectAlternativeName(sans), critical=False)
-        .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.CLIENT_AUTH, ExtendedKeyUsageOID.SERVER_AUTH]), critical=False)
+        .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH] if web else
+                                             [ExtendedKeyUsageOID.CLIENT_AUTH, ExtendedKeyUsageOID.SERVER_AUTH]), critical=False)
         .sign(ca_key, hashes.SHA256())
     )
+    if web:
+        t = t / WEB_DIR
+        t.mkdir(exist_ok=True)
     _write_secret(t / f"{name}-key.pem", key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
                                                            serialization.NoEncryption()).decode())
     (t / f"{name}.pem").write_bytes(cert.public_bytes(serialization.Encoding.PEM))
@@ -356,7 +365,8 @@ def _identities(*, users: Iterable[str], instructors: Iterable[str], sims: Itera
 
 
 def _certificates(t: Path, identities: list[Identity], connect: list[str], days: int, created: list[str], kept: list[str]) -> None:
-    """The CA, the router's certificate (naming every host of ``connect``) and one per identity under ``t``;
+    """The CA, the router's certificate (naming every host of ``connect``), the console's HTTPS one (the same hosts)
+    and one per identity under ``t``;
     those there already are kept. What was made or kept is appended to ``created`` / ``kept``."""
     t.mkdir(exist_ok=True)
     os.chmod(t, 0o700)
@@ -370,6 +380,13 @@ def _certificates(t: Path, identities: list[Identity], connect: list[str], days:
         else:
             _make_cert(t, name, hosts if name == "router" else [], days)
             created.append(name)
+    # the console's page over HTTPS, named as the router is (the console usually runs beside it): a password typed
+    # into the page never crosses the LAN in clear (``robofabric console --tls-cert tls/web/console.pem``)
+    if (t / WEB_DIR / "console.pem").is_file() and (t / WEB_DIR / "console-key.pem").is_file():
+        kept.append("console (https)")
+    else:
+        _make_cert(t, "console", hosts, days, web=True)
+        created.append("console (https)")
 
 
 def _passwords(cred: Path, identities: list[Identity], created: list[str], kept: list[str]) -> dict[str, str]:

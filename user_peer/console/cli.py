@@ -15,6 +15,8 @@ def console(
     listen: Annotated[str, typer.Option("--listen", help="HOST:PORT the page is served on (0.0.0.0: every interface).")] = "0.0.0.0:8080",
     grace: Annotated[float, typer.Option(help="Seconds a closed page's robots stay hers (stopped) before her session closes and they pass on.")] = 10.0,
     rerun_url: Annotated[Optional[str], typer.Option("--rerun-url", help="The Rerun web view to link to (robofabric view --serve-web prints it).")] = None,
+    tls_cert: Annotated[Optional[str], typer.Option("--tls-cert", help="Serve HTTPS with this certificate (PEM; secure init --tls writes tls/console.pem).")] = None,
+    tls_key: Annotated[Optional[str], typer.Option("--tls-key", help="The certificate's private key (PEM; tls/console-key.pem).")] = None,
     world: World = None,
     connect: Connect = None,
     zenoh_config: ZenohConfig = None,
@@ -35,6 +37,7 @@ def console(
         raise UserError(f"--listen {listen}: expected HOST:PORT, e.g. 0.0.0.0:8080")
     if grace < 0:
         raise UserError("--grace must be >= 0 s")
+    tls = _tls(tls_cert, tls_key)
     try:
         cfg = FabricConfig.resolve(world=world, connect=connect, config_file=zenoh_config)
         if cfg.identity() is not None:
@@ -45,7 +48,23 @@ def console(
     connect_eps, _ = cfg.endpoints()
     print(f"console for world {cfg.world!r} via {', '.join(connect_eps)}", flush=True)
     os.environ.setdefault("NICEGUI_STORAGE_PATH", os.path.join(os.path.expanduser("~"), ".cache", "robofabric", "nicegui"))
-    serve(Console(cfg.world, connect_eps, cfg.config_file, grace, rerun_url), host.strip("[]"), int(port_text))
+    serve(Console(cfg.world, connect_eps, cfg.config_file, grace, rerun_url), host.strip("[]"), int(port_text), tls)
+
+
+def _tls(cert: str | None, key: str | None) -> tuple[str, str] | None:
+    """The (certificate, key) to serve HTTPS with, both readable and matching; None for plain HTTP."""
+    if cert is None and key is None:
+        return None
+    if cert is None or key is None:
+        raise UserError("--tls-cert and --tls-key go together (the certificate and its private key)")
+    import ssl
+
+    ctx = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+    try:
+        ctx.load_cert_chain(cert, key)
+    except (OSError, ssl.SSLError) as exc:
+        raise UserError(f"--tls-cert {cert} --tls-key {key}: {exc}") from None
+    return cert, key
 
 
 def register(app: typer.Typer) -> None:

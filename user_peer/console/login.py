@@ -15,14 +15,17 @@ again with the same name and password within it and gets the same world back.
 from __future__ import annotations
 
 import hmac
+import math
 import json
 import logging
 import threading
+import time
 from dataclasses import dataclass
 from typing import Callable
 
 from fabric import keys
 from fabric.config import ConfigError, FabricConfig
+from user_peer.console.limits import LoginThrottle
 from user_peer.errors import FabricUserError
 
 __all__ = ["LoginError", "Logins", "login_config"]
@@ -62,30 +65,50 @@ class Logins:
     """The worlds of the logged-in pages, by user. Thread-safe: logins run off the page's event loop.
 
     ``open_world(config, name)`` opens a world (``user_peer.api.World``); ``on_leave(world)`` stops what
-    her page was driving when the page goes."""
+    her page was driving when the page goes. Failed logins are throttled per name and per address with a
+    growing delay (:class:`~.limits.LoginThrottle`, ``clock`` its time): a guess waits its turn without
+    reaching the router."""
 
-    def __init__(self, open_world: Callable[[FabricConfig, str], object], *, grace: float, on_leave: Callable[[object], None]) -> None:
+    def __init__(self, open_world: Callable[[FabricConfig, str], object], *, grace: float, on_leave: Callable[[object], None],
+                 throttle: LoginThrottle | None = None, clock: Callable[[], float] = time.monotonic) -> None:
         self._open = open_world
         self.grace = grace
         self._on_leave = on_leave
         self._held: dict[str, _Held] = {}
         self._lock = threading.Lock()
+        self.throttle = throttle or LoginThrottle()
+        self._clock = clock
         self.refused = 0  # logins refused (wrong password, unknown name, bad name, nobody there)
+        self.throttled = 0  # logins not tried: too many failures of that name or from that address
 
-    def login(self, config: FabricConfig, name: str, password: str):
+    def login(self, config: FabricConfig, name: str, password: str, address: str = ""):
         """Her world: a new session, or the one she already has (another tab of hers, or the page she left
         within the grace), for the same password only: the router knows one session per login, so her
-        pages share it. :class:`LoginError` if the router refuses her."""
+        pages share it. :class:`LoginError` if the router refuses her, or if ``name`` or ``address`` (the
+        page's) failed too often lately (then nothing is tried)."""
         with self._lock:
-            held = self._shared(name, password)
+            wait = self.throttle.wait(name, address, self._clock())
+            if wait > 0:
+                self.throttled += 1
+                raise LoginError(f"Too many failed logins for {name} or from this address: try again in {math.ceil(wait)} s")
+            try:
+                held = self._shared(name, password)
+            except LoginError:
+                self.throttle.failed(name, address, self._clock())
+                raise
             if held is not None:
+                self.throttle.succeeded(name, address)
                 return held
         try:
             world = self._open(config, name)
         except FabricUserError as exc:
-            self.refused += 1
+            with self._lock:
+                self.refused += 1
+                if _is_refusal(exc.reason):  # the router's no, not a router that is not there
+                    self.throttle.failed(name, address, self._clock())
             raise LoginError(_refusal(name, password, exc.reason)) from None
         with self._lock:
+            self.throttle.succeeded(name, address)
             held = self._shared(name, password)  # two of her pages logged in at once: the first session serves both
             if held is None:
                 self._held[name] = _Held(world, password)
@@ -159,8 +182,13 @@ def _close(world: object) -> None:
 
 def _refusal(name: str, password: str, reason: str) -> str:
     """The page's words for a session that did not open."""
-    if "authentication failed" in reason or "refused" in reason:
+    if _is_refusal(reason):
         if password:
             return f"Login failed for {name}: wrong password or unknown name (the router refused this login)"
         return f"Login failed for {name}: this world needs a password (the router refused a login without one)"
     return f"Could not join: {reason}"
+
+
+def _is_refusal(reason: str) -> bool:
+    """Whether the router refused the login (a wrong password or name), not that it could not be reached."""
+    return "authentication failed" in reason or "refused" in reason

@@ -135,7 +135,7 @@ class ConsolePage:
         self.login_msg.text = f"logging in as {name}..."
         try:
             cfg = login_config(self.console.world, self.console.connect, name, password, base_file=self.console.base_file)
-            world = await run.io_bound(self.console.logins.login, cfg, name, password)
+            world = await run.io_bound(self.console.logins.login, cfg, name, password, self.client.ip)
         except LoginError as exc:
             self.login_msg.text = exc.reason
             self.login_btn.enable()

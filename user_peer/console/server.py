@@ -13,6 +13,7 @@ import socket
 from dataclasses import dataclass, field
 from typing import Any
 
+from user_peer.console.doors import PRUNE_EVERY_S, Doors, DoorsMiddleware, guard_socket_events
 from user_peer.console.feed import Decoded
 from user_peer.console.health import PERIOD_S, Health
 from user_peer.console.login import Logins
@@ -34,7 +35,8 @@ PRUNE_S = 180.0
 """How long a page the server served may take to connect its websocket before NiceGUI forgets it (NiceGUI's own
 default is 60 s). On a loaded 2-core box pages took 66-137 s to load their scripts; NiceGUI had pruned them, so
 their first connection failed ('implicit handshake failed') and they reloaded to the login, starting over. A page
-that never connects costs the server its few elements for three minutes."""
+that never connects costs the server its elements (about 80 KiB) that long, so an address keeps only its newest few
+such pages, and loads are limited per address (:mod:`.doors`): a flood of loads is forgotten within a second."""
 
 PING_INTERVAL_S, PING_TIMEOUT_S = 8.0, 12.0
 """The websocket's heartbeat: a ping every 8 s, answered within 12 s (NiceGUI derives 24 s and 12 s from the 30 s
@@ -59,6 +61,7 @@ class Console:
     pictures: Pictures = field(init=False, default_factory=Pictures)
     ticker: Ticker = field(init=False, default_factory=lambda: Ticker(REFRESH_VIEW_S))
     decoded: Decoded = field(init=False, default_factory=Decoded)  # every page's poses, decoded once
+    doors: Doors = field(init=False, default_factory=Doors)  # page loads, websockets, whose socket speaks for a page
 
     def __post_init__(self) -> None:
         self.logins = Logins(self._open, grace=self.grace, on_leave=stop_robots)
@@ -88,19 +91,20 @@ def stop_robots(world: Any) -> None:
                 log.info("console: could not stop %s for %s: %s", rid, world.user, exc)
 
 
-def page_urls(host: str, port: int) -> list[str]:
+def page_urls(host: str, port: int, scheme: str = "http") -> list[str]:
     """The URLs to open: every interface's IPv4 address when listening on all of them."""
     if host not in ("0.0.0.0", "", "::"):
-        return [f"http://{host}:{port}/"]
+        return [f"{scheme}://{host}:{port}/"]
     import ifaddr
 
     addrs = sorted({ip.ip for a in ifaddr.get_adapters() for ip in a.ips if isinstance(ip.ip, str)},
                    key=lambda a: (a.startswith("127."), a))
-    return [f"http://{a}:{port}/" for a in addrs] or [f"http://{socket.gethostname()}:{port}/"]
+    return [f"{scheme}://{a}:{port}/" for a in addrs] or [f"{scheme}://{socket.gethostname()}:{port}/"]
 
 
-def serve(console: Console, host: str, port: int) -> None:
-    """Serve the console until Ctrl-C (or SIGTERM); every logged-in world is closed on the way out."""
+def serve(console: Console, host: str, port: int, tls: tuple[str, str] | None = None) -> None:
+    """Serve the console until Ctrl-C (or SIGTERM); every logged-in world is closed on the way out.
+    ``tls``: (certificate, key) PEM files to serve HTTPS (a password never crosses the LAN in clear)."""
     import os
 
     # NiceGUI serves its own test harness's port when it sees pytest's variable, which a console started by
@@ -108,12 +112,15 @@ def serve(console: Console, host: str, port: int) -> None:
     os.environ.pop("PYTEST_CURRENT_TEST", None)
     import asyncio
     import functools
+    import time
 
     from nicegui import Client, app, background_tasks, core, ui
 
     # NiceGUI's app calls Client.prune_instances() every 10 s with its 60 s default and offers no setting: the
     # threshold is its keyword argument, bound here before ui.run starts the app (which looks the method up then)
     Client.prune_instances = functools.partial(Client.prune_instances, client_age_threshold=PRUNE_S)
+    app.add_middleware(DoorsMiddleware, doors=console.doors, exempt=(ROUTE,))
+    guard_socket_events(core.sio, Client.instances, console.doors)
 
     from user_peer.console.page import ConsolePage
 
@@ -135,6 +142,14 @@ def serve(console: Console, host: str, port: int) -> None:
             await asyncio.sleep(PERIOD_S)
             pages = sum(1 for c in Client.instances.values() if c.has_socket_connection)
             print(console.health.line(console.health.take(pages)), flush=True)
+            if console.doors.waiting or console.doors.forgotten or console.doors.refused_loads or console.doors.foreign:
+                print(console.doors.line(), flush=True)
+
+    async def forget_waiting() -> None:
+        """Served pages that will not connect are forgotten within a second (:mod:`.doors`)."""
+        while True:
+            await asyncio.sleep(PRUNE_EVERY_S)
+            console.doors.prune(Client.instances, time.time(), PRUNE_S)
 
     async def announce() -> None:
         """The URLs, once the port takes connections (the startup handlers run before uvicorn listens)."""
@@ -147,7 +162,7 @@ def serve(console: Console, host: str, port: int) -> None:
                 continue
             writer.close()
             break
-        for url in page_urls(host, port):
+        for url in page_urls(host, port, "https" if tls else "http"):
             print(f"console: open {url}", flush=True)
 
     def started() -> None:
@@ -157,6 +172,7 @@ def serve(console: Console, host: str, port: int) -> None:
         background_tasks.create(console.health.probe(), name="console health probe")
         background_tasks.create(report(), name="console health report")
         background_tasks.create(console.ticker.run(), name="console redraw clock")
+        background_tasks.create(forget_waiting(), name="console forgets pages that do not connect")
 
     def dropped() -> None:
         console.health.dropped += 1
@@ -172,7 +188,7 @@ def serve(console: Console, host: str, port: int) -> None:
                ws_per_message_deflate=False,
                # no Tailwind: its runtime compiles CSS in every page as it loads and watches every change of the
                # page for new classes; the page uses Quasar's own classes
-               tailwind=False)
+               tailwind=False, **({"ssl_certfile": tls[0], "ssl_keyfile": tls[1]} if tls else {}))
     except KeyboardInterrupt:  # uvicorn shuts down, then raises the Ctrl-C it caught again: we are done
         pass
     finally:
