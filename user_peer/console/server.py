@@ -149,7 +149,10 @@ def serve(console: Console, host: str, port: int, tls: tuple[str, str] | None = 
         """Served pages that will not connect are forgotten within a second (:mod:`.doors`)."""
         while True:
             await asyncio.sleep(PRUNE_EVERY_S)
+            before = console.doors.forgotten
             console.doors.prune(Client.instances, time.time(), PRUNE_S)
+            if console.doors.forgotten != before:  # at most once a second, and only while pages are forgotten
+                print(console.doors.line(), flush=True)
 
     async def announce() -> None:
         """The URLs, once the port takes connections (the startup handlers run before uvicorn listens)."""
