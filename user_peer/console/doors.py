@@ -70,6 +70,7 @@ class Doors:
     refused_sockets: int = 0
     forgotten: int = 0  # served pages forgotten before they connected
     foreign: int = 0  # socket messages naming a page their socket does not belong to
+    max_age: float = 180.0  # how long a served page may take to connect (the console's PRUNE_S, set by install)
 
     def admit_load(self, host: str) -> tuple[int, float] | None:
         """None when a page load from ``host`` may go on, else (HTTP status, seconds to wait)."""
@@ -113,6 +114,34 @@ class Doors:
                     log.debug("console: forgetting page %s", cid, exc_info=True)
                 self.forgotten += 1
                 self.waiting -= 1
+
+    def install(self, app: Any, sio: Any, client_cls: Any, *, exempt: tuple[str, ...] = (), max_age: float) -> None:
+        """Put the doors in front of NiceGUI's ``app`` (before it starts) and guard its socket.io server ``sio``;
+        ``client_cls``: NiceGUI's ``Client``; ``exempt``: path prefixes that make no page; ``max_age``: how long a
+        served page may take to connect."""
+        import functools
+
+        self.max_age = max_age
+        # NiceGUI's app calls Client.prune_instances() every 10 s with its 60 s default and offers no setting: the
+        # threshold is its keyword argument, bound here before ui.run starts the app (which looks the method up then)
+        client_cls.prune_instances = functools.partial(client_cls.prune_instances, client_age_threshold=max_age)
+        app.add_middleware(DoorsMiddleware, doors=self, exempt=exempt)
+        guard_socket_events(sio, client_cls.instances, self)
+
+    async def forget_waiting(self, clients: dict[str, Any]) -> None:
+        """Forever: served pages that will not connect are forgotten within a second (a line when any was)."""
+        import asyncio
+
+        while True:
+            await asyncio.sleep(PRUNE_EVERY_S)
+            before = self.forgotten
+            self.prune(clients, time.time(), self.max_age)
+            if self.forgotten != before:  # at most once a second, and only while pages are forgotten
+                print(self.line(), flush=True)
+
+    def any(self) -> bool:
+        """Whether there is anything to report."""
+        return bool(self.waiting or self.forgotten or self.refused_loads or self.refused_sockets or self.foreign)
 
     def line(self) -> str:
         return (f"console: doors: {self.waiting} pages waiting to connect · {self.forgotten} forgotten · refused "

@@ -13,7 +13,7 @@ import socket
 from dataclasses import dataclass, field
 from typing import Any
 
-from user_peer.console.doors import PRUNE_EVERY_S, Doors, DoorsMiddleware, guard_socket_events
+from user_peer.console.doors import Doors
 from user_peer.console.feed import Decoded
 from user_peer.console.health import PERIOD_S, Health
 from user_peer.console.login import Logins
@@ -111,16 +111,10 @@ def serve(console: Console, host: str, port: int, tls: tuple[str, str] | None = 
     # a test inherits: this process is a real server either way
     os.environ.pop("PYTEST_CURRENT_TEST", None)
     import asyncio
-    import functools
-    import time
 
     from nicegui import Client, app, background_tasks, core, ui
 
-    # NiceGUI's app calls Client.prune_instances() every 10 s with its 60 s default and offers no setting: the
-    # threshold is its keyword argument, bound here before ui.run starts the app (which looks the method up then)
-    Client.prune_instances = functools.partial(Client.prune_instances, client_age_threshold=PRUNE_S)
-    app.add_middleware(DoorsMiddleware, doors=console.doors, exempt=(ROUTE,))
-    guard_socket_events(core.sio, Client.instances, console.doors)
+    console.doors.install(app, core.sio, Client, exempt=(ROUTE,), max_age=PRUNE_S)  # before ui.run starts the app
 
     from user_peer.console.page import ConsolePage
 
@@ -142,16 +136,7 @@ def serve(console: Console, host: str, port: int, tls: tuple[str, str] | None = 
             await asyncio.sleep(PERIOD_S)
             pages = sum(1 for c in Client.instances.values() if c.has_socket_connection)
             print(console.health.line(console.health.take(pages)), flush=True)
-            if console.doors.waiting or console.doors.forgotten or console.doors.refused_loads or console.doors.foreign:
-                print(console.doors.line(), flush=True)
-
-    async def forget_waiting() -> None:
-        """Served pages that will not connect are forgotten within a second (:mod:`.doors`)."""
-        while True:
-            await asyncio.sleep(PRUNE_EVERY_S)
-            before = console.doors.forgotten
-            console.doors.prune(Client.instances, time.time(), PRUNE_S)
-            if console.doors.forgotten != before:  # at most once a second, and only while pages are forgotten
+            if console.doors.any():
                 print(console.doors.line(), flush=True)
 
     async def announce() -> None:
@@ -175,7 +160,7 @@ def serve(console: Console, host: str, port: int, tls: tuple[str, str] | None = 
         background_tasks.create(console.health.probe(), name="console health probe")
         background_tasks.create(report(), name="console health report")
         background_tasks.create(console.ticker.run(), name="console redraw clock")
-        background_tasks.create(forget_waiting(), name="console forgets pages that do not connect")
+        background_tasks.create(console.doors.forget_waiting(Client.instances), name="console forgets pages that do not connect")
 
     def dropped() -> None:
         console.health.dropped += 1
