@@ -137,6 +137,33 @@ def _refuse_base_column(arm: ArmModel, p: list[float]) -> None:
                           f"{radius:.3f} m, {p[2]:.3f} m high < top {top:.3f} m")
 
 
+_REVOLUTE_JOINTS = ("JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned",
+                    "JointModelRUBX", "JointModelRUBY", "JointModelRUBZ", "JointModelRevoluteUnboundedUnaligned")
+
+
+def longest_reach(arm: ArmModel) -> float:
+    """A bound on how far from the base's origin the flange can ever be: the lengths of the links from the base
+    to the flange, added (a revolute joint's motion keeps each link's length); infinite when a joint of the chain
+    is not revolute (a prismatic one lengthens it)."""
+    model = arm.model
+    frame = model.frames[arm.frame_id]
+    total, j = float(np.linalg.norm(frame.placement.translation)), frame.parentJoint
+    while j > 0:
+        if model.joints[j].shortname() not in _REVOLUTE_JOINTS:
+            return math.inf
+        total += float(np.linalg.norm(model.jointPlacements[j].translation))
+        j = model.parents[j]
+    return total
+
+
+def _refuse_out_of_reach(arm: ArmModel, p: list[float]) -> None:
+    """A target beyond every link's length added is refused before any solver runs (the numerical one tried 25
+    starts at a target 1e9 m away; the closed form's reason printed a 300-digit distance for 1e300)."""
+    dist, reach = math.hypot(*p), longest_reach(arm)
+    if dist > reach * (1 + 1e-9):
+        raise NoIKSolution(f"out of reach: the target is {dist:.4g} m from the arm's base, beyond its longest reach of {reach:.4f} m")
+
+
 def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] | None = None,
           seed: Sequence[float] | None = None, *, method: str = "auto") -> IKSolution:
     """Joint angles putting ``arm``'s flange at ``position`` (and ``quaternion``, w x y z), base frame.
@@ -168,6 +195,7 @@ def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] 
     else:  # a seed is a hint (often a measured state a hair past a limit): clamp it, don't refuse it
         s = [min(hi, max(lo, v)) for v, (lo, hi, _) in zip(_vector("seed", seed, nq), arm_constants(arm).limits)]
     _refuse_base_column(arm, p)
+    _refuse_out_of_reach(arm, p)
     closed = CLOSED_FORMS.get(arm.description.name)
     if method == "closed_form" and closed is None:
         raise ValueError(f"robot type {arm.description.name!r} has no closed-form IK")

@@ -24,6 +24,11 @@ from .errors import NavigationError
 from .grid import check_grid, dilate, occupied_mask
 
 
+MAX_INFLATION_CELLS = 250
+"""The largest inflation, in cells, a costmap is built with: the inflation costs a pass per cell of radius (a 99 m
+radius on a 5 cm map asked for 2,000 passes and several GB, and failed inside numpy)."""
+
+
 @dataclass(frozen=True, eq=False)
 class Costmap:
     resolution: float
@@ -101,6 +106,9 @@ def build_costmap(
         raise NavigationError(f"robot radius must be >= 0, got {robot_radius}")
     res = float(grid.resolution)
     margin = math.sqrt(2.0) * res if margin is None else float(margin)
+    if (robot_radius + margin) / res > MAX_INFLATION_CELLS:  # checked before computing: the cost grows with it
+        raise NavigationError(f"robot radius {robot_radius:.2f} m is {robot_radius / res:.0f} cells of this map ({res:.3f} m each): "
+                              f"at most {MAX_INFLATION_CELLS} cells ({MAX_INFLATION_CELLS * res - margin:.2f} m) are planned for")
     occ = occupied_mask(grid, threshold, unknown_is_occupied=unknown_is_occupied)
     collision = dilate(occ, robot_radius / res)
     blocked = dilate(occ, (robot_radius + margin) / res)

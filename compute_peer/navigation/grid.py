@@ -93,6 +93,8 @@ def dilate(mask: np.ndarray, radius_cells: float) -> np.ndarray:
         runs.append(acc.copy())
     out = np.zeros_like(mask)
     for dr in range(-n, n + 1):
+        if abs(dr) >= h:  # a row offset past the map's edge reaches no row of it
+            continue
         half = int(math.floor(math.sqrt(max(radius_cells * radius_cells - dr * dr, 0.0)) + 1e-9))
         src = runs[half]
         if dr >= 0:
