@@ -214,7 +214,7 @@ class CasadiIK:
             centre, radius = self.reach
             dist = float(np.linalg.norm(p - centre))
             if dist > radius * (1 + 1e-9):
-                raise NoIKSolution(f"out of reach: {dist:.4f} m from the first joint > the chain's {radius:.4f} m")
+                raise NoIKSolution(f"out of reach: {dist:.4g} m from the first joint > the chain's {radius:.4f} m")
         ok, pe, re = self._check(arm, s, p, rt)
         if ok:  # the seed is on target: nothing is nearer (and IPOPT's barrier would only nudge it off)
             return s, pe, re

@@ -157,8 +157,8 @@ def longest_reach(arm: ArmModel) -> float:
 
 
 def _refuse_out_of_reach(arm: ArmModel, p: list[float]) -> None:
-    """A target beyond every link's length added is refused before any solver runs (the numerical one tried 25
-    starts at a target 1e9 m away; the closed form's reason printed a 300-digit distance for 1e300)."""
+    """A target beyond every link's length added is refused before the numerical solver runs (it tried 25 starts
+    at a target 1e9 m away)."""
     dist, reach = math.hypot(*p), longest_reach(arm)
     if dist > reach * (1 + 1e-9):
         raise NoIKSolution(f"out of reach: the target is {dist:.4g} m from the arm's base, beyond its longest reach of {reach:.4f} m")
@@ -195,7 +195,6 @@ def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] 
     else:  # a seed is a hint (often a measured state a hair past a limit): clamp it, don't refuse it
         s = [min(hi, max(lo, v)) for v, (lo, hi, _) in zip(_vector("seed", seed, nq), arm_constants(arm).limits)]
     _refuse_base_column(arm, p)
-    _refuse_out_of_reach(arm, p)
     closed = CLOSED_FORMS.get(arm.description.name)
     if method == "closed_form" and closed is None:
         raise ValueError(f"robot type {arm.description.name!r} has no closed-form IK")
@@ -205,6 +204,7 @@ def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] 
         q, pe, re = solve_casadi(arm, p, rot, s)
         return _solution(q, "casadi", pe, re, 0)
     if method == "numerical" or closed is None:
+        _refuse_out_of_reach(arm, p)  # the closed form and CasADi check their own (tighter) reach first
         q, pe, re = solve_numerical(arm, p, rot, s)
         return _solution(q, "numerical", pe, re, 0)
     if rot is not None:
@@ -219,7 +219,7 @@ def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] 
 def _solve_position_closed(arm: ArmModel, closed: ClosedForm, p: list[float], s: list[float]) -> IKSolution:
     dist = math.dist(p, closed.shoulder)
     if dist > closed.reach:
-        raise NoIKSolution(f"out of reach: distance to shoulder {dist:.4f} m > max {closed.reach:.4f} m")
+        raise NoIKSolution(f"out of reach: distance to shoulder {dist:.4g} m > max {closed.reach:.4f} m")
     reasons = []
     for name, rot in _orientation_options(arm, p, s):
         cands, reason = closed.candidates(arm, p, rot, s)
