@@ -9,7 +9,7 @@ from typing import Annotated, Optional, TYPE_CHECKING
 
 import typer
 
-from fabric.cli_common import Joining, UserError, join_flags, open_fabric
+from fabric.cli_common import Joining, NothingThere, UserError, join_flags, open_fabric
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
     from fabric.gate import CommandGate
@@ -298,8 +298,8 @@ def move_cmd(robot: Annotated[str, typer.Argument(help="Robot id.")],
     with join.open("tool") as fab:
         try:
             done = move(fab, robot, to)
-        except MoveError as exc:
-            raise UserError(f"robot {robot} not moved: {exc}") from None
+        except MoveError as exc:  # a sim refused, none answered, or none serves it: the world said no (exit 1)
+            raise NothingThere(f"robot {robot} not moved: {exc}") from None
     print(f"moved {done['robot']} from sim {done['from']} to sim {done['to']} (term {done['term']}) in {done['pause_ms']:.0f} ms", flush=True)
 
 

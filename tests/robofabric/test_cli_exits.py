@@ -103,6 +103,7 @@ def test_nothing_there_exits_1(router, world):
         (("list", "--duration", "1"), "nothing published on"),
         (("echo", "robot/**", "--timeout", "1"), "nothing on"),
         (("echo", "robot/**", "--duration", "1"), "nothing on"),
+        (("own", "move", "base1", "--to", "sim-b"), "robot base1 not moved: no sim describes world"),
     ):
         out = _cli(*args, *ep)
         assert out.returncode == 1 and says in out.stderr and "Traceback" not in out.stderr, (args, out.returncode, out.stderr)
