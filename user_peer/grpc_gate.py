@@ -15,6 +15,7 @@ The request side is parsed, never the response side: Rerun's stream flows back u
 
 from __future__ import annotations
 
+import re
 import socket
 import time
 from dataclasses import dataclass
@@ -59,35 +60,59 @@ class Request:
 def parse_head(head: bytes) -> Request:
     """Check one request head (up to and including its blank line); raises :class:`Refused` unless it is a read.
 
-    Pure: no socket, so every refusal is tested alone."""
+    Strict, since the head goes on to Rerun's own parser as received: a head two parsers could read two ways (a
+    bare LF or CR, a folded line, a space before a colon, a control character, two Content-Lengths, any
+    Transfer-Encoding) is refused, never passed on. Pure: no socket, so every refusal is tested alone."""
     try:
         text = head.decode("latin-1")
         line, *fields = text.split("\r\n")
         method, path, version = line.split(" ")
     except ValueError:
         raise Refused("not an HTTP/1.1 request", head[:40].decode("latin-1", "replace")) from None
-    if not version.startswith("HTTP/1."):
+    if version not in ("HTTP/1.1", "HTTP/1.0"):
         raise Refused(f"HTTP version {version!r}", path)
+    if _CONTROL.search(line):
+        raise Refused("a control character in the request line", path)
     headers: dict[str, str] = {}
     for f in fields:
         if f:
-            name, sep, value = f.partition(":")
-            if not sep:
-                raise Refused("a malformed header line", path)
-            headers[name.strip().lower()] = value.strip()
+            headers.update([_field(f, path, headers)])
     if path.split("?", 1)[0] not in READ_METHODS:
         raise Refused("only reading the viewer's stream is relayed", path)
     if method not in ("POST", "OPTIONS"):
         raise Refused(f"HTTP method {method}", path)
     if "transfer-encoding" in headers:
         raise Refused("chunked request bodies are not relayed", path)
-    try:
-        length = int(headers.get("content-length", "0"))
-    except ValueError:
-        raise Refused("a malformed Content-Length", path) from None
+    value = headers.get("content-length", "0")
+    if not _LENGTH.fullmatch(value):
+        raise Refused("a malformed Content-Length", path)
+    length = int(value)
     if not 0 <= length <= MAX_BODY_BYTES:
         raise Refused(f"a request body of {length} bytes (a read's is a few)", path)
     return Request(method, path, head, length)
+
+
+_CONTROL = re.compile(r"[\x00-\x08\x0a-\x1f\x7f]")  # every control character but the tab (a bare LF or CR too)
+_TOKEN = re.compile(r"[!#$%&'*+.^_`|~0-9A-Za-z-]+")  # a header name (RFC 9110's token)
+_LENGTH = re.compile(r"-?[0-9]+")
+_FRAMING = ("content-length", "transfer-encoding")
+
+
+def _field(f: str, path: str, seen: dict[str, str]) -> tuple[str, str]:
+    """One header line as (lower-case name, value); :class:`Refused` for one a strict parser would not read alike."""
+    if f[0] in " \t":
+        raise Refused("an obsolete folded header line", path)
+    if _CONTROL.search(f):
+        raise Refused("a bare LF, CR or control character in a header line", path)
+    name, sep, value = f.partition(":")
+    if not sep:
+        raise Refused("a malformed header line", path)
+    if not _TOKEN.fullmatch(name):
+        raise Refused(f"a malformed header name {name[:40]!r}", path)
+    key = name.lower()
+    if key in _FRAMING and any(k in seen for k in _FRAMING):
+        raise Refused(f"a second framing header ({name}) after {', '.join(k for k in _FRAMING if k in seen)}", path)
+    return key, value.strip(" \t")
 
 
 def read_request(sock: socket.socket, buf: bytearray, deadline: float | None = None) -> tuple[Request, bytes] | None:
