@@ -380,8 +380,18 @@ def _certificates(t: Path, identities: list[Identity], connect: list[str], days:
         else:
             _make_cert(t, name, hosts if name == "router" else [], days)
             created.append(name)
-    # the console's page over HTTPS, named as the router is (the console usually runs beside it): a password typed
-    # into the page never crosses the LAN in clear (``robofabric console --tls-cert tls/web/console.pem``)
+    _console_certificate(t, hosts, days, created, kept)
+
+
+def _console_certificate(t: Path, hosts: list[str], days: int, created: list[str], kept: list[str]) -> None:
+    """The console's page over HTTPS, named as the router is (the console usually runs beside it), signed by the
+    class's CA (made when there is none): a password typed into the page never crosses the LAN in clear
+    (``robofabric console --tls-cert tls/web/console.pem --tls-key tls/web/console-key.pem``)."""
+    t.mkdir(exist_ok=True)
+    os.chmod(t, 0o700)
+    if not (t / "ca.pem").is_file() or not (t / "ca-key.pem").is_file():
+        _make_ca(t, days)
+        created.append("ca")
     if (t / WEB_DIR / "console.pem").is_file() and (t / WEB_DIR / "console-key.pem").is_file():
         kept.append("console (https)")
     else:
@@ -414,13 +424,15 @@ def init(
     listen: list[str] | None = None,
     connect: list[str] | None = None,
     days: int = 365,
+    console_tls: bool = False,
 ) -> SecureInit:
     """Write the class's configs under ``d``; existing passwords, CA and certificates are kept.
 
     ``listen``: the router's endpoints (default ``PROTO/0.0.0.0:7447``); ``connect``: where clients
     find it (default the listen address, ``127.0.0.1`` for an unspecified one). With ``tls`` the
     router's certificate names every host of ``connect`` so clients can check it. ``instructors``: user
-    logins that may also change the class's map (docs/security.md)."""
+    logins that may also change the class's map (docs/security.md). ``console_tls``: a password class's console
+    certificate too (a class CA and ``tls/web/console.pem``; ``tls`` makes it anyway)."""
     d = Path(d).resolve()
     proto = "tls" if tls else "tcp"
     listen = list(listen or [f"{proto}/0.0.0.0:7447"])
@@ -439,6 +451,8 @@ def init(
         _certificates(d / TLS_DIR, identities, connect, days, created, kept)
     else:
         passwords = _passwords(d / CREDENTIALS, identities, created, kept)
+        if console_tls:
+            _console_certificate(d / TLS_DIR, sorted({_host_of(ep) for ep in connect} | {"localhost", "127.0.0.1"}), days, created, kept)
     # every identity ever created stays in the rules (a second run with fewer names removes nobody)
     known = {i.name: i for i in identities}
     for path in sorted(d.glob("*.json5")):

@@ -25,6 +25,7 @@ def init_cmd(
     listen: Annotated[Optional[list[str]], typer.Option("--listen", "-l", help="Router endpoint (default tcp/0.0.0.0:7447, tls/... with --tls).")] = None,
     connect: Annotated[Optional[list[str]], typer.Option("--connect", "-e", help="Where clients reach the router, e.g. tcp/10.0.0.5:7447 (default: the listen address).")] = None,
     days: Annotated[int, typer.Option(help="Certificates' validity in days (--tls).")] = 365,
+    console_tls: Annotated[bool, typer.Option("--console-tls", help="In a password class, also make the console's HTTPS certificate (tls/web/console.pem, signed by a class CA); --tls makes it anyway.")] = False,
 ) -> None:
     """Write everything a class needs: DIR/router.json5 (authentication + access control, default deny)
     and DIR/NAME.json5 per identity, for --zenoh-config. Running it again keeps existing secrets."""
@@ -32,7 +33,8 @@ def init_cmd(
 
     try:
         out = init(directory, users=parse_names(users), sims=parse_names(sims), computes=parse_names(computes),
-                   viewers=parse_names(viewers), instructors=parse_names(instructors), tls=tls, listen=listen, connect=connect, days=days)
+                   viewers=parse_names(viewers), instructors=parse_names(instructors), tls=tls, listen=listen, connect=connect, days=days,
+                   console_tls=console_tls)
     except (ValueError, OSError) as exc:
         raise UserError(str(exc)) from None
     print(f"router:  robofabric router --zenoh-config {out.router}")

@@ -264,3 +264,20 @@ def test_the_console_serves_https_with_the_certificate_secure_init_made(router, 
         httpx.get(url, timeout=30)  # without the class's CA a browser warns: the certificate is not a public one
     with pytest.raises(httpx.RemoteProtocolError):
         httpx.get(url.replace("https://", "http://"), timeout=30)  # nothing in clear
+
+
+def test_a_password_class_gets_its_consoles_certificate_on_asking(tmp_path):
+    """The console's page carries passwords: a password class (no --tls) makes its certificate with --console-tls."""
+    from cryptography import x509
+
+    d = tmp_path / "class"
+    out = init(d, users=["alice"], listen=["tcp/0.0.0.0:7447"], connect=["tcp/10.0.0.5:7447"], console_tls=True)
+    assert {"ca", "console (https)"} <= set(out.created)
+    cert = x509.load_pem_x509_certificate((d / "tls" / "web" / "console.pem").read_bytes())
+    sans = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert "10.0.0.5" in [str(ip) for ip in sans.get_values_for_type(x509.IPAddress)]
+    eku = cert.extensions.get_extension_for_class(x509.ExtendedKeyUsage).value
+    assert list(eku) == [x509.oid.ExtendedKeyUsageOID.SERVER_AUTH]  # it serves; it can never log in to the router
+    assert "console (https)" in init(d, users=["alice"], listen=["tcp/0.0.0.0:7447"], console_tls=True).kept
+    init(tmp_path / "plain", users=["alice"])
+    assert not (tmp_path / "plain" / "tls").exists()  # without asking: no CA, no certificate
