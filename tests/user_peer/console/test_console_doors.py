@@ -281,3 +281,14 @@ def test_a_password_class_gets_its_consoles_certificate_on_asking(tmp_path):
     assert "console (https)" in init(d, users=["alice"], listen=["tcp/0.0.0.0:7447"], console_tls=True).kept
     init(tmp_path / "plain", users=["alice"])
     assert not (tmp_path / "plain" / "tls").exists()  # without asking: no CA, no certificate
+
+
+@pytest.mark.slow
+def test_a_certificate_without_its_key_or_one_that_does_not_load_is_a_usage_error(tmp_path):
+    import subprocess
+
+    bad = tmp_path / "bad.pem"
+    bad.write_text("not a certificate")
+    for extra, says in ((("--tls-cert", str(bad)), "go together"), (("--tls-cert", str(bad), "--tls-key", str(bad)), "--tls-cert")):
+        out = subprocess.run(robofabric_cmd("console", "--connect", "tcp/127.0.0.1:1", *extra), capture_output=True, text=True, timeout=60)
+        assert out.returncode == 2 and says in out.stderr and "Traceback" not in out.stderr, out.stderr
