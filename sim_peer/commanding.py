@@ -11,7 +11,8 @@ cannot hold up another robot. The gate is asked again when a command is applied,
 before its sender lost the robot is refused rather than applied after the stop. A robot that loses its owner
 (the gate's ``watch_stops``) stops: the stop takes the place of her pending commands in the robot's queue. A sim
 that hears no one (:mod:`sim_peer.deaf_stop`) stops every robot the same way and refuses commands until it hears
-again (:meth:`CommandPipeline.hold`, :meth:`CommandPipeline.resume`).
+again (:meth:`CommandPipeline.hold`, :meth:`CommandPipeline.resume`). A command is applied once by its id
+(:mod:`sim_peer.command_ids`): a copy sent again by a client riding out such a hold is counted as ``duplicates``.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from fabric.codec import DecodeError, decode
 from fabric.gate import CommandGate
 from fabric.interfaces import Command, EventKind
 from fabric.limits import clip, is_valid_user, quote
+from sim_peer.command_ids import RecentIds
 from sim_peer.controllers import Clamp, CommandRejected
 from sim_peer.inbox import CommandQueue
 from sim_peer.reporting import Reporter
@@ -62,6 +64,9 @@ class CommandPipeline:
         self._queued = threading.Condition(threading.Lock())
         self._worker: threading.Thread | None = None
         self._held = ""  # why every robot holds and commands are refused ('' : they are not)
+        self._applied = {rid: RecentIds() for rid in world.robots}  # a command sent again is applied once
+        self._last_user: dict[str, str] = {}  # robot -> who sent its last admitted command
+        self._stopped: dict[str, str] = {}  # robot -> whose motion (or pending command) the hold stopped
 
     def start(self) -> None:
         self._worker = threading.Thread(target=self._drain, name="sim-commands", daemon=True)
@@ -111,6 +116,7 @@ class CommandPipeline:
             return
         with self._queued:
             self._queues[rid].put(admitted, cmd)
+            self._last_user[rid] = cmd.user
             self._queued.notify()
 
     def on_owner_lost(self, robot: str, user: str, reason: str) -> None:
@@ -134,20 +140,32 @@ class CommandPipeline:
         so it must not move its robots on meanwhile."""
         with self._queued:
             self._held = reason or "held"
-            for q in self._queues.values():
+            for rid, q in self._queues.items():
+                user = self._last_user.get(rid)
+                if user and (q or self.world.robots[rid].moving):
+                    self._stopped[rid] = user
                 q.put("stop", Halt("", self._held))
+                self._applied[rid].clear()  # what the hold stopped is to be done again when sent again
             self._queued.notify()
 
     def resume(self) -> None:
-        """Accept commands again (the robots stay where :meth:`hold` stopped them until their owners send more)."""
+        """Accept commands again (the robots stay where :meth:`hold` stopped them until their owners send more). The
+        sender of each command the hold stopped (its robot moving, or the command still queued) is told now, with a
+        ``held`` refusal, that it was not carried out: a client that awaits it sends it again (:mod:`user_peer.pause`)."""
         with self._queued:
             self._held = ""
+            stopped, self._stopped = self._stopped, {}
+        for rid, user in stopped.items():
+            self.report.reject(rid, "?", "held", "the sim held its robots and stopped this one before its command was done; "
+                                                 "it hears again: send the command again", user, code="held")
 
     def apply(self, key: str, cmd: Command) -> None:
         """Admit and apply one decoded command now, in the caller's thread."""
         name = self._admit(key, cmd)
         if name is not None:
-            self._execute(keys.parse(key).subject, name, cmd)
+            rid = keys.parse(key).subject
+            self._last_user[rid] = cmd.user
+            self._execute(rid, name, cmd)
 
     def _drain(self) -> None:
         """The command worker: apply what the queues hold, robot by robot, until the peer stops."""
@@ -237,9 +255,14 @@ class CommandPipeline:
                                                       "until it hears the fabric again", cmd.user, code="held")
 
     def _execute(self, rid: str, name: str, cmd: Command) -> None:
+        applied = self._applied[rid]
         try:
             with self.lock:
+                if applied.seen(name, cmd):  # a copy of one applied already (a client riding out a pause)
+                    self.counters["duplicates"] += 1
+                    return
                 clamp = self._apply(rid, name, cmd.body)
+                applied.add(name, cmd)
         except CommandRejected as exc:
             self.report.reject(rid, name, exc.reason, str(exc), cmd.user)
             return

@@ -80,6 +80,7 @@ class Roles:
         # for its first leases from join
         self.fresh_until = float("inf") if election.leader else float("-inf")
         self.last_tick = self.thawed_at = float("-inf")  # this process's own heartbeat (frozen: see frozen())
+        self.late_s = 0.0  # how long the heartbeat's last gap (a freeze) was
         self.unlinked_at = float("-inf")  # when the heartbeat last found the link down (monotonic)
         self.settling = False  # a token's loss waits to be judged (settle)
 
@@ -195,7 +196,7 @@ class Roles:
         while not h.stopping.wait(TICK_S):
             now = time.monotonic()
             if now - self.last_tick > gap:
-                self.thawed_at = now
+                self.thawed_at, self.late_s = now, now - self.last_tick
             self.last_tick = now
             if not h.fabric.connected():
                 self.unlinked_at = now
@@ -213,11 +214,18 @@ class Roles:
     def deaf(self) -> bool:
         """Whether this sim hears no one now: its link is down, the router no longer holds its own token, or this
         process was just frozen."""
+        return bool(self.cut()) or self.frozen()
+
+    def cut(self) -> str:
+        """Why this sim's link is gone now ('' : it is not): the link is down, or the router no longer holds its
+        own token. A freeze alone is not a cut (:meth:`frozen`; :mod:`sim_peer.deaf_stop` asks the router then)."""
         h = self.host
         with h.lock:
             # our own token missing counts for OWN_TOKEN_S at most: a link that is up hears the router again
             mine = h.fabric.peer_id in self.live or time.monotonic() - self.own_gone_at > OWN_TOKEN_S
-        return not mine or not h.fabric.connected() or self.frozen()
+        if not h.fabric.connected():
+            return "its link is down"
+        return "" if mine else "the router no longer holds its token"
 
     def deaf_recheck(self, why: str = "its link or its own token gone") -> None:
         """Our own link went (this sim cut off, the router restarted, this process paused past the lease): every sim's

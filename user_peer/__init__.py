@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from user_peer.errors import FabricUserError, JoinFailed, NotOwner, Rejected, Timeout, Unreachable
+from user_peer.errors import FabricUserError, JoinFailed, NotOwner, Paused, Rejected, Timeout, Unreachable
 
 if TYPE_CHECKING:
     from user_peer.api import Arm, Base, Robot, SceneObject, World, connect
@@ -24,6 +24,7 @@ __all__ = [
     "FabricUserError",
     "NotOwner",
     "Rejected",
+    "Paused",
     "Timeout",
     "Unreachable",
     "JoinFailed",

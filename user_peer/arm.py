@@ -12,6 +12,7 @@ from fabric import keys
 from fabric.interfaces import JointState, JointTarget, Pose, ServiceError
 from user_peer import services
 from user_peer.errors import NotOwner, Timeout, Unreachable
+from user_peer.pause import PauseRider
 from user_peer.robot import Robot
 
 __all__ = ["Arm"]
@@ -64,19 +65,20 @@ class Arm(Robot):
             )
         marks = self.world.event_mark(), self.world.latest.mark()
         key = keys.robot_cmd(self._w, self.id, "joints", self.world.user)
-        self.send("joints", JointTarget(target, speed_scale, self.world.fabric.header(key)))
+        cmd = self.send("joints", JointTarget(target, speed_scale, self.world.fabric.header(key)))
         if not wait:
             return target
-        return self._wait_joints(target, tol, timeout, marks)
+        return self._wait_joints(target, tol, timeout, marks, PauseRider(self, "joints", cmd, marks[0]))
 
-    def _wait_joints(self, target: np.ndarray, tol: float, timeout: float, marks: tuple[int, int]) -> np.ndarray:
+    def _wait_joints(self, target: np.ndarray, tol: float, timeout: float, marks: tuple[int, int], rider: PauseRider) -> np.ndarray:
         """Until joints that arrived after the command (local arrival order, never the sim's clock) are at
-        ``target`` and still; a rejection that arrived after it raises :class:`NotOwner`."""
+        ``target`` and still; a rejection that arrived after it raises (:class:`NotOwner`, :class:`Rejected`),
+        but a sim that held its robots is ridden out (:mod:`user_peer.pause`)."""
         key = keys.robot_joints(self._w, self.id)
-        events_mark, data_mark = marks
+        data_mark = marks[1]
 
         def done() -> bool:
-            self._check_rejected(events_mark)
+            rider.check()
             js = self.world.latest.get_after(key, data_mark)
             if js is None:
                 return False
@@ -85,7 +87,8 @@ class Arm(Robot):
         if not self.world.latest.wait_for(done, timeout):
             js = self.world.latest.get(key)
             err = float(np.max(np.abs(np.asarray(js.q) - target))) if js is not None else float("nan")
-            raise Timeout(f"{self.id} did not reach its joint targets within {timeout:.1f} s (max error {math.degrees(err):.2f} deg)")
+            raise Timeout(f"{self.id} did not reach its joint targets within {timeout:.1f} s (max error {math.degrees(err):.2f} deg)"
+                          + rider.note())
         return np.array(self.world.latest.get(key).q)
 
     def ik(self, xyz: Sequence[float], quaternion: Sequence[float] | None = None) -> np.ndarray:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["FabricUserError", "NotOwner", "Rejected", "Unreachable", "JoinFailed", "Timeout"]
+__all__ = ["FabricUserError", "NotOwner", "Rejected", "Paused", "Unreachable", "JoinFailed", "Timeout"]
 
 
 class FabricUserError(RuntimeError):
@@ -29,6 +29,14 @@ class Rejected(FabricUserError):
         self.robot = robot
         self.command = command
         self.code = code
+
+
+class Paused(Rejected):
+    """The sim held its robots when the command came (code ``held``): it was cut off from its world, or frozen and
+    not yet sure of its link, and took no command meanwhile. A pause, not a refusal of what was asked: a command
+    given with ``wait=True`` rides it out (sent again, the same command under the same epoch, once the sim hears
+    again, within its timeout); a caller without ``wait`` sees this error from the next call that checks the
+    robot's refusals (:meth:`user_peer.mobile_base.Base.drive`, a waited command) and may send again."""
 
 
 class Unreachable(FabricUserError):

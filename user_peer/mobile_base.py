@@ -9,6 +9,7 @@ from fabric import keys
 from fabric.interfaces import OccupancyGrid, Path, Pose, Scan, ServiceError, Twist, yaw_from_quaternion
 from user_peer import services
 from user_peer.errors import NotOwner, Timeout, Unreachable
+from user_peer.pause import PauseRider
 from user_peer.robot import Robot
 
 __all__ = ["Base"]
@@ -122,14 +123,15 @@ class Base(Robot):
         self.world.twists.drop(self.id)  # the sim's follower drives now
         key = keys.robot_cmd(self._w, self.id, "path", self.world.user)
         body = Path(path.x, path.y, path.theta, path.frame, self.world.fabric.header(key))
-        self.send("path", body)
+        cmd = self.send("path", body)
         if not wait:
             return self.xy_theta
         gx, gy = float(path.x[-1]), float(path.y[-1])
         pkey = keys.robot_pose(self._w, self.id)
+        rider = PauseRider(self, "path", cmd, events_mark)  # a sim that holds its robots is ridden out
 
         def arrived() -> bool:
-            self._check_rejected(events_mark)
+            rider.check()
             p = self.world.latest.get_after(pkey, data_mark)  # a pose that arrived after the command
             if p is None:
                 return False
@@ -140,5 +142,6 @@ class Base(Robot):
         if not self.world.latest.wait_for(arrived, timeout):
             xy = self.xy_theta
             where = f"({xy[0]:.2f}, {xy[1]:.2f})" if xy else "unknown"
-            raise Timeout(f"{self.id} did not reach the end of its path ({gx:.2f}, {gy:.2f}) within {timeout:.0f} s; it is at {where}")
+            raise Timeout(f"{self.id} did not reach the end of its path ({gx:.2f}, {gy:.2f}) within {timeout:.0f} s; it is at {where}"
+                          + rider.note())
         return self.xy_theta

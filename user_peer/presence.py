@@ -46,6 +46,7 @@ class SimPresence:
         self.failovers: list[tuple[str, str, list[str]]] = []  # (sim, the sim that took its robots, robots)
         self._closed = closed
         self._sims: set[str] = set()
+        self.arrivals = 0  # sims' tokens come (a sim back from a cut may have missed a command: user_peer.pause)
         self._seen = False
         self._cond = threading.Condition()
         self._lock = threading.Lock()  # the lists above and the callbacks
@@ -111,6 +112,7 @@ class SimPresence:
             was = bool(self._sims)
             changed = alive != (peer_id in self._sims)
             (self._sims.add if alive else self._sims.discard)(peer_id)
+            self.arrivals += alive and changed
             now = bool(self._sims)
             first, self._seen = now and not self._seen, self._seen or now
             callbacks = list(self._world_callbacks) if now != was else []

@@ -16,7 +16,7 @@ import numpy as np
 from fabric import keys
 from fabric.interfaces import Command, Event, JointState, Reset, Stop
 from user_peer import services
-from user_peer.errors import NotOwner, Rejected, Timeout
+from user_peer.errors import NotOwner, Paused, Rejected, Timeout
 from user_peer.ownable import Ownable
 from user_peer.reliable import resend_until
 from user_peer.streams import StreamIterator, Subscription
@@ -32,6 +32,10 @@ FIRST_STATE_WAIT_S = 1.0
 
 COMMAND_ROUTE_WAIT_S = 0.5
 """How long a command waits for its sim's subscription to be known before it is put anyway."""
+
+HELD = "held"
+"""The code of a sim's refusal while it holds its robots (cut off, or not yet sure of its link after a freeze):
+raised as :class:`Paused`, ridden out by waited commands (:mod:`user_peer.pause`)."""
 
 OWNERSHIP_REFUSAL = "refused"
 """The code (``Event.data["code"]``) of a sim's refusal by its ownership gate: raised as :class:`NotOwner`;
@@ -68,14 +72,16 @@ def robot_status(world: "World", entry: services.RobotEntry) -> str:
 
 def rejection_error(robot: str, ev: Event) -> NotOwner | Rejected:
     """The error for a sim's refusal of a command: :class:`NotOwner` when its ownership gate refused it (or a
-    sim too old to say which check refused), :class:`Rejected` for anything else."""
+    sim too old to say which check refused), :class:`Paused` when the sim held its robots, :class:`Rejected` for
+    anything else."""
     data = ev.data if isinstance(ev.data, dict) else {}
     code = data.get("code")
     if code is None or code == OWNERSHIP_REFUSAL:
         return NotOwner(f"{robot} refused the command: {ev.reason}")
     detail = str(data.get("detail", ""))
     reason = f"{ev.reason}: {detail}" if detail and detail != ev.reason else ev.reason
-    return Rejected(reason, robot=robot, command=str(data.get("command", "")), code=str(code))
+    kind = Paused if code == HELD else Rejected
+    return kind(reason, robot=robot, command=str(data.get("command", "")), code=str(code))
 
 
 def _still_after(msg: Any, seq: int) -> bool:
@@ -128,7 +134,7 @@ class Robot(Ownable):
 
     # ------------------------------------------------------------------ commands
 
-    def send(self, command: str, body: Any, *, epoch: int | None = None) -> None:
+    def send(self, command: str, body: Any, *, epoch: int | None = None) -> Command:
         """Send a command under this user's current epoch; :class:`NotOwner` if we know we do not own it
         (or, with ``epoch``, own it under another epoch: a repeat of a command given before it was lost).
 
@@ -148,7 +154,19 @@ class Robot(Ownable):
         # a sim that has just (re)started may not be known as a listener yet: its first command was lost
         # (the lab's clock-skew scenario, sim restarted: the sim counted 0 commands, the move timed out)
         self.world.fabric.wait_matching(key, COMMAND_ROUTE_WAIT_S)
-        self.world.fabric.publish(key, Command(self.world.user, epoch, body, self.world.fabric.header(key)))
+        cmd = Command(self.world.user, epoch, body, self.world.fabric.header(key))
+        self.world.fabric.publish(key, cmd)
+        return cmd
+
+    def resend(self, command: str, cmd: Command) -> None:
+        """Send ``cmd`` (given as a ``command`` command) again, unchanged: the same id and epoch, so the sim applies
+        it once whichever copy it takes (:mod:`sim_peer.command_ids`); :class:`NotOwner` if the robot changed hands
+        since (:mod:`user_peer.pause`)."""
+        rec = self.record
+        if rec is not None and (rec.owner != self.world.user or rec.epoch != cmd.epoch):
+            raise NotOwner(f"{self.id} changed hands since the command was given (epoch {cmd.epoch}, now {rec.epoch}, "
+                           f"owner: {rec.owner or 'nobody'})")
+        self.world.fabric.publish(keys.robot_cmd(self._w, self.id, command, self.world.user), cmd)
 
     def stop(self, *, confirm: bool = True, timeout: float = 3.0) -> bool:
         """Stop the robot where it is. Commands are dropped, not queued, when the network is congested, so

@@ -1,0 +1,84 @@
+"""A waited command rides out a sim that holds its robots: a pause, not a refusal.
+
+A sim that was cut off from its world, or that froze and is not yet sure of its link, holds its robots and refuses
+every command with code ``held`` (:mod:`sim_peer.deaf_stop`) until it hears again, usually within a second or two.
+A command given with ``wait=True`` (:meth:`user_peer.arm.Arm.move_joints`, :meth:`user_peer.mobile_base.Base.follow`)
+must not fail for that: :class:`PauseRider` watches the robot's refusals while the command is awaited, raises any
+other refusal at once, and on a hold (a refusal of the command, the sim's word, once it hears again, that the hold
+stopped the robot before the command was done, or a sim's token come back: one cut off never had what was sent
+meanwhile) sends the same command again (the same envelope: its id and its epoch,
+:meth:`user_peer.robot.Robot.resend`) until the sim takes it, all within the command's own timeout. The sim applies
+a command once by its id (:mod:`sim_peer.command_ids`), so a copy that arrives after the first was taken changes
+nothing. A hand-over meanwhile (the epoch changed) ends the ride with :class:`~user_peer.errors.NotOwner`.
+
+The sim reports its refusals a few times per second at most (:mod:`fabric.reports`), so the rider cannot count on
+one answer per copy: it sends again at growing intervals (:data:`RESEND_S` to :data:`RESEND_MAX_S`) while a hold was
+reported within :data:`QUIET_S`.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Callable
+
+from fabric.interfaces import Command
+from user_peer.errors import Paused
+from user_peer.robot import rejection_error
+
+if TYPE_CHECKING:
+    from user_peer.robot import Robot
+
+__all__ = ["PauseRider", "RESEND_S", "RESEND_MAX_S", "QUIET_S"]
+
+RESEND_S = 0.2
+"""The first resend after a hold was seen; each next one waits twice as long, up to :data:`RESEND_MAX_S`."""
+RESEND_MAX_S = 1.0
+QUIET_S = 2.0
+"""Resends stop when no hold was reported this long (the sim took the command, or a copy of it)."""
+
+
+class PauseRider:
+    """The refusals of one awaited command ``cmd`` (sent as ``command`` to ``robot`` after event mark ``since``)."""
+
+    def __init__(self, robot: "Robot", command: str, cmd: Command, since: int,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.robot, self.command, self.cmd, self.since = robot, command, cmd, since
+        self.clock = clock
+        self.seen = 0  # refusals since the mark already judged
+        self.holds = 0  # holds reported
+        self.resends = 0
+        self.last_hold = float("-inf")
+        self.sent_at = float("-inf")
+        self.interval = RESEND_S
+        self.arrivals = robot.world.presence.arrivals
+
+    def check(self) -> None:
+        """Raise any refusal but a hold (:class:`~user_peer.errors.NotOwner`, :class:`~user_peer.errors.Rejected`);
+        on a hold, send the command again when it is time. Called while the command is awaited."""
+        rej = self.robot.world.rejections(self.robot.id, self.since)
+        now = self.clock()
+        for ev in rej[self.seen:]:
+            err = rejection_error(self.robot.id, ev)
+            if not isinstance(err, Paused):
+                raise err
+            if now - self.last_hold > QUIET_S:
+                self.interval = RESEND_S  # a new pause: send at once, then at growing intervals
+                self.sent_at = float("-inf")
+            self.last_hold = now
+            self.holds += 1
+        self.seen = len(rej)
+        arrivals = self.robot.world.presence.arrivals
+        if arrivals != self.arrivals:  # a sim's token came back: it was cut off, and may never have had the command
+            self.arrivals = arrivals
+            self.interval, self.sent_at, self.last_hold = RESEND_S, float("-inf"), now
+        if now - self.last_hold <= QUIET_S and now - self.sent_at >= self.interval:
+            self.robot.resend(self.command, self.cmd)
+            self.resends += 1
+            self.sent_at = now
+            self.interval = min(2 * self.interval, RESEND_MAX_S)
+
+    def note(self) -> str:
+        """Words for a timeout's message: how the pause went ('' : there was none)."""
+        if not self.holds:
+            return ""
+        return f"; the sim held its robots (a pause) {self.holds} time(s) meanwhile and the command was sent again {self.resends} time(s)"
