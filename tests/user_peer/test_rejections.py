@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from fabric.interfaces import Event
-from user_peer.errors import NotOwner, Rejected
-from user_peer.robot import OWNERSHIP_REFUSAL, rejection_error
+from user_peer.errors import NotOwner, Paused, Rejected
+from user_peer.robot import HELD, OWNERSHIP_REFUSAL, rejection_error
 
 
 def _reject(reason: str, **data: str) -> Event:
@@ -26,7 +26,14 @@ def test_a_sim_that_does_not_say_which_check_refused_is_read_as_notowner():
                                           ("not_finite", "the path contains NaN or infinity")])
 def test_any_other_refusal_is_rejected_with_robot_command_and_code(code, detail):
     err = rejection_error("arm1", _reject(code, command="path", code=code, detail=detail))
-    assert isinstance(err, Rejected) and not isinstance(err, NotOwner)
+    assert isinstance(err, Rejected) and not isinstance(err, (NotOwner, Paused))
     assert (err.robot, err.command, err.code) == ("arm1", "path", code)
     assert err.reason == f"{code}: {detail}"
     assert str(err) == f"arm1 refused the path: {code}: {detail}"
+
+
+def test_a_sim_that_holds_its_robots_is_a_pause_a_distinct_rejected():
+    err = rejection_error("arm1", _reject("held", command="joints", code=HELD,
+                                          detail="the sim holds its robots (this sim hears no one)"))
+    assert isinstance(err, Paused) and isinstance(err, Rejected) and not isinstance(err, NotOwner)
+    assert (err.robot, err.command, err.code) == ("arm1", "joints", "held")
