@@ -21,20 +21,31 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING, Callable
 
-from fabric.interfaces import Command
+from fabric.interfaces import REJECT_KINDS, Command, Event
 from user_peer.errors import Paused
-from user_peer.robot import rejection_error
+from user_peer.robot import HELD, rejection_error
 
 if TYPE_CHECKING:
     from user_peer.robot import Robot
 
-__all__ = ["PauseRider", "RESEND_S", "RESEND_MAX_S", "QUIET_S"]
+__all__ = ["PauseRider", "RESEND_S", "RESEND_MAX_S", "QUIET_S", "is_pause", "pause_words"]
 
 RESEND_S = 0.2
 """The first resend after a hold was seen; each next one waits twice as long, up to :data:`RESEND_MAX_S`."""
 RESEND_MAX_S = 1.0
 QUIET_S = 2.0
 """Resends stop when no hold was reported this long (the sim took the command, or a copy of it)."""
+
+
+def is_pause(ev: Event) -> bool:
+    """Whether ``ev`` is a sim's ``held`` refusal: a pause, which the console and the ROS 2 bridge show as such."""
+    return ev.kind in REJECT_KINDS and isinstance(ev.data, dict) and ev.data.get("code") == HELD
+
+
+def pause_words(robot: str) -> str:
+    """What a client shows for a pause of ``robot``'s sim, instead of an error."""
+    return (f"the sim is paused: {robot} holds until its sim hears its router again (a waiting command is sent "
+            "again then; one sent without waiting may be sent again)")
 
 
 class PauseRider:

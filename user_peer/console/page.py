@@ -25,8 +25,9 @@ from user_peer.console.base_panel import BasePanel
 from user_peer.console.drive import REFRESH_S
 from user_peer.console.login import LoginError, login_config
 from user_peer.console.view import LiveView
-from user_peer.errors import FabricUserError
+from user_peer.errors import FabricUserError, Paused
 from user_peer.event_log import describe
+from user_peer.pause import is_pause, pause_words
 
 if TYPE_CHECKING:
     from user_peer.console.server import Console
@@ -65,8 +66,13 @@ summary line, not a thousand labels sent down its websocket."""
 def event_line(ev: Any, trusted: bool) -> str:
     """An event log line, one line whatever the event holds (:func:`~user_peer.event_log.describe`); one its
     robot's authority did not send starts with :data:`UNVERIFIED` (as the terminal UI marks it), so nothing its
-    writer put in it can make it start with :data:`TRUSTED`."""
-    return (TRUSTED if trusted else UNVERIFIED) + describe(ev)
+    writer put in it can make it start with :data:`TRUSTED`. A sim's ``held`` refusal reads as the pause it is
+    (:func:`user_peer.pause.pause_words`), not as an error."""
+    if is_pause(ev):
+        text = one_line(pause_words(ev.object) + (f" [{ev.user}]" if ev.user else ""), 400)
+    else:
+        text = describe(ev)
+    return (TRUSTED if trusted else UNVERIFIED) + text
 
 
 def _first_handles(world: Any, user: str) -> tuple[list, dict[str, Any], tuple]:
@@ -251,7 +257,9 @@ class ConsolePage:
         return out
 
     def why(self, exc: FabricUserError) -> str:
-        """A refusal's words, with the robot's owner when the reason does not name her."""
+        """A refusal's words, with the robot's owner when the reason does not name her; a pause is no refusal."""
+        if isinstance(exc, Paused):
+            return pause_words(exc.robot or self.selected or "the robot")
         reason = f"{type(exc).__name__}: {exc.reason}"
         rec = self.world.ownership.record(self.selected) if self.selected else None
         owner = rec.owner if rec is not None else ""

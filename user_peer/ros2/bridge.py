@@ -64,6 +64,7 @@ from fabric.interfaces import Pose, Scan
 from user_peer.catalog import RobotCatalog
 from user_peer.errors import FabricUserError
 from user_peer.openfmt.ros2 import SimStamps, ros2_message, ros2_topic, ros_topic, sensor_range_min, sim_time_ns, sonar_radius
+from user_peer.pause import is_pause, pause_words
 from user_peer.ros2 import direct
 from user_peer.ros2.commands import joint_targets, trajectory_targets
 from user_peer.ros2.fill import fill, message_class
@@ -140,6 +141,7 @@ class Ros2Bridge:
         self.published: Counter[str] = Counter()  # topic -> messages published
         self.forwarded: Counter[str] = Counter()  # robot -> commands forwarded
         self.refused: Counter[str] = Counter()  # robot -> commands refused (not owned, rejected)
+        self.paused: Counter[str] = Counter()  # robot -> commands its sim held (a pause: user_peer.pause)
         self.unconverted = 0  # fabric messages with no ROS place (or failed to convert)
         self.trace: list[tuple[str, int, int, int]] | None = [] if trace else None
         """With ``trace``: (key, stamp, entry, published) per message published, the times ``time.time_ns()`` at
@@ -365,7 +367,12 @@ class Ros2Bridge:
         mark = self.world.event_mark()
         for rid in list(self._inputs):
             for ev in self.world.rejections(rid, self._event_mark):
-                self._refuse(rid, "a command", f"the sim refused it: {ev.reason}")
+                if is_pause(ev):  # the sim held its robots: a pause, said as one (not counted as refused)
+                    self.paused[rid] += 1
+                    log.info("%s", pause_words(rid))
+                    self.node.get_logger().info(pause_words(rid), throttle_duration_sec=1.0)
+                else:
+                    self._refuse(rid, "a command", f"the sim refused it: {ev.reason}")
         self._event_mark = mark
 
     # ------------------------------------------------------------------ end
