@@ -1,7 +1,8 @@
 """Which commands a sim applied lately, by id, so that a command sent again is applied once.
 
 A client that rides out a held sim (:mod:`user_peer.pause`) sends the same command again, unchanged: the same
-envelope, so the same id, its header's ``(source, seq)`` on its key (the sending session and its per-key sequence).
+envelope, so the same id, its header's ``(source, seq, wall_ns)`` on its key (the sending session, its per-key
+sequence and when it was made).
 Copies still on their way when the first one was applied must not apply it again (a path followed twice, a reset
 repeated after the owner moved on). A command with no source (a bare envelope built by hand, a test's) has no id
 and is always applied.
@@ -25,12 +26,13 @@ KEEP = 64
 """How many applied ids a robot remembers (a resend follows its first copy within seconds: a few are enough)."""
 
 
-def command_id(name: str, cmd: Command) -> tuple[str, str, str, int] | None:
-    """The id of ``cmd`` sent as a ``name`` command (None: it has none)."""
+def command_id(name: str, cmd: Command) -> tuple[str, str, str, int, int] | None:
+    """The id of ``cmd`` sent as a ``name`` command (None: it has none). Its wall time is part of it: a session
+    whose sequence table is full numbers new keys 0 every time (:mod:`fabric.sequences`)."""
     h = cmd.header
     if not h.source:
         return None
-    return (name, cmd.user, h.source, h.seq)
+    return (name, cmd.user, h.source, h.seq, h.wall_ns)
 
 
 class RecentIds:
@@ -38,7 +40,7 @@ class RecentIds:
 
     def __init__(self, keep: int = KEEP) -> None:
         self.keep = keep
-        self._ids: OrderedDict[tuple[str, str, str, int], None] = OrderedDict()
+        self._ids: OrderedDict[tuple[str, str, str, int, int], None] = OrderedDict()
 
     def seen(self, name: str, cmd: Command) -> bool:
         """Whether this very command (by id) was applied already."""

@@ -66,7 +66,7 @@ class CommandPipeline:
         self._held = ""  # why every robot holds and commands are refused ('' : they are not)
         self._applied = {rid: RecentIds() for rid in world.robots}  # a command sent again is applied once
         self._last_user: dict[str, str] = {}  # robot -> who sent its last admitted command
-        self._stopped: dict[str, str] = {}  # robot -> whose motion (or pending command) the hold stopped
+        self._stopped: dict[str, str] = {}  # robot -> whose motion, pending or refused command the hold stopped
 
     def start(self) -> None:
         self._worker = threading.Thread(target=self._drain, name="sim-commands", daemon=True)
@@ -150,8 +150,8 @@ class CommandPipeline:
 
     def resume(self) -> None:
         """Accept commands again (the robots stay where :meth:`hold` stopped them until their owners send more). The
-        sender of each command the hold stopped (its robot moving, or the command still queued) is told now, with a
-        ``held`` refusal, that it was not carried out: a client that awaits it sends it again (:mod:`user_peer.pause`)."""
+        sender of the last command the hold stopped on each robot (its robot moving, the command queued, or refused
+        meanwhile) is told now, with a ``held`` refusal, that it was not carried out: a client that awaits it sends it again (:mod:`user_peer.pause`)."""
         with self._queued:
             self._held = ""
             stopped, self._stopped = self._stopped, {}
@@ -251,6 +251,8 @@ class CommandPipeline:
 
     def _refuse_held(self, rid: str, name: str, cmd: Command) -> None:
         held = self._held
+        with self._queued:
+            self._stopped[rid] = cmd.user  # told again when the sim hears again (resume)
         self.report.reject(rid, name, "held", lambda: f"the sim holds its robots ({held}); {cmd.user}'s {name} command is refused "
                                                       "until it hears the fabric again", cmd.user, code="held")
 

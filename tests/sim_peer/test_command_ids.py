@@ -24,6 +24,8 @@ def test_a_copy_of_an_applied_command_is_seen_and_a_new_one_is_not():
     assert not ids.seen("joints", _cmd(8))  # the next command
     assert not ids.seen("path", first)  # the same seq on another command's key
     assert not ids.seen("joints", _cmd(7, source="bob-1", user="bob"))  # another session's
+    made_later = Command("alice", 3, JointTarget(np.zeros(6)), Header(seq=7, source="alice-1", wall_ns=5))
+    assert not ids.seen("joints", made_later)  # a full sequence table numbers every new key 0: the time tells
 
 
 def test_a_command_with_no_source_has_no_id_and_is_always_applied():
