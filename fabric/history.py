@@ -14,6 +14,9 @@ got 499; a live ROS 2 recording lost 603 of 3,000 poses in a minute (issue 32).
   cache (``{key}/@adv/pub/{zid}/{eid}/_``, the queryable and token an advanced publisher with a cache
   declares): once for the publishers there at the start, and again for each one that appears later (a
   publisher that started later, or a link that came back) by its liveliness token;
+- a cache that keeps several samples of a key (the ownership records and events of
+  :func:`fabric.keys.cache_size`) gives them all, oldest first: a subscriber whose link was down gets those it
+  missed;
 - a cached value is delivered only when it is newer (its timestamp) than every value of that key
   delivered so far, so a history reply that arrives after a live sample never takes the key back; a live
   sample whose cache reply came first (the same timestamp: the same publication) is not delivered twice.
@@ -70,7 +73,7 @@ class LatestThenLive:
         """``keys.is_latched(key)``, remembered for :data:`MAX_TRACKED` keys (a parse costs ~3 µs a sample)."""
         latched = self._is_latched.get(key)
         if latched is None:
-            latched = keys.is_latched(key)
+            latched = keys.cache_size(key) > 0  # latched keys, and events kept for a link that was down
             if len(self._is_latched) < MAX_TRACKED:
                 self._is_latched[key] = latched
         return latched
@@ -118,8 +121,10 @@ class LatestThenLive:
 
     def _ask(self, selector: str) -> None:
         try:
-            # the cache replies on the publication's own key, not on the one asked: accept any
-            self._session.get(selector, self._on_reply, accept_replies=zenoh.ReplyKeyExpr.ANY, timeout=HISTORY_TIMEOUT)
+            # the cache replies on the publication's own key, not on the one asked: accept any; and every sample a
+            # cache keeps (kept events: several of one key), oldest first, not only the latest of each key
+            self._session.get(selector, self._on_reply, accept_replies=zenoh.ReplyKeyExpr.ANY, timeout=HISTORY_TIMEOUT,
+                              consolidation=zenoh.ConsolidationMode.NONE)
         except Exception:  # a closing session
             pass
 

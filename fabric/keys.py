@@ -267,6 +267,28 @@ def is_latched(key: str) -> bool:
     return p.category in ("object", "map") or (p.category == "robot" and p.leaf == "path")
 
 
+KEPT_EVENTS = 32
+"""How many of its last samples an ownership record's or an ownership or reject event's publisher keeps
+(:func:`cache_size`)."""
+KEPT_EVENT_KINDS = frozenset({"own", "reject"})
+
+
+def cache_size(key: str) -> int:
+    """How many of its last samples the publisher of ``key`` keeps for subscribers that ask for history: 1 on a
+    latched key (:func:`is_latched`), :data:`KEPT_EVENTS` on an ownership record's key (``own/{object}``) and on an
+    ownership or reject event key (``event/own/{object}``, ``event/reject/{robot}``: a subscriber whose link was down, through a router's
+    restart, gets the ones it missed when the publisher's token is back, :mod:`fabric.history`), 0 elsewhere."""
+    if is_latched(key):
+        return 1
+    try:
+        p = parse(key)
+    except ValueError:
+        return 0
+    if p.category == "own":  # the records themselves: each change bumps the epoch, so a gap shows a miss
+        return KEPT_EVENTS
+    return KEPT_EVENTS if p.category == "event" and p.subject in KEPT_EVENT_KINDS and p.leaf else 0
+
+
 def parse(key: str) -> ParsedKey:
     """Parse a concrete key; raise ``ValueError`` saying what is wrong with it."""
     parts = str(key).split("/")

@@ -3,11 +3,13 @@
 Pure: records in, violations out; time is the records' own ``t``. Each violation carries the shortest
 excerpt of the history that shows it (two to four records), so a reader can judge it without the rest.
 
-The observer is a client of the router like everyone else: while the router restarts it hears nothing, and an event
-the authority published before the observer's link was back is never heard (a record is published again at its next
-change; an event is not). Those stretches (:func:`blind`) are named in the summary, and an owner change across
-one is not judged by ``handover`` nor ``queue`` (whose verdicts rest on events and the robot's motion then): it is
-counted as not judged instead; and ``reset`` allows a robot across a fail-over the motion it could make while the
+The observer is a client of the router like everyone else: while the router restarts it hears nothing live, and
+catches up when its link is back on the ownership records and the ownership and reject events it missed (their
+publishers keep the last ones: :func:`fabric.keys.cache_size`). Those stretches (:func:`blind`) are named in the
+summary; an owner change across one is judged when its records all came (consecutive epochs: every change bumps
+the epoch), and only one whose records were missed there (the authority that kept them gone with its process) is
+not judged by ``handover`` nor ``queue`` (whose verdicts rest on events and the robot's motion then): it is counted
+as not judged instead, and the summary says so; and ``reset`` allows a robot across a fail-over the motion it could make while the
 observer was blind.
 
 The wire's view is fenced as every consumer fences it: a record or a joint sample with a lower term than
@@ -263,11 +265,15 @@ def blind(h: Sequence[Record], lim: Limits = Limits()) -> list[tuple[float, floa
 
 
 def _across(prev: OwnRec, cur: OwnRec, windows: list[tuple[float, float]]) -> bool:
-    return any(a < cur.t and b > prev.t for a, b in windows)
+    """Whether the change from ``prev`` to ``cur`` is out of sight: it spans a blind stretch and records were missed
+    there (every change bumps the epoch, so a gap of more than one shows it). The observer catches up on the
+    records and events it missed (:mod:`robofabric.soak.observer`): a change whose records all came is judged."""
+    return cur.epoch - prev.epoch > 1 and any(a < cur.t and b > prev.t for a, b in windows)
 
 
 def not_judged(h: Sequence[Record], lim: Limits = Limits()) -> int:
-    """How many owner changes fell in the observer's blind stretches (``handover`` and ``queue`` do not judge them)."""
+    """How many owner changes fell in the observer's blind stretches with records missed there (``handover`` and
+    ``queue`` do not judge them)."""
     recs, _ = fenced(h)
     windows = blind(h, lim)
     return sum(1 for rs in recs.values() for prev, cur in zip(rs, rs[1:])
@@ -436,8 +442,9 @@ def summary(history: Sequence[Record], violations: Sequence[Violation], limits: 
     by_inv = Counter(v.invariant for v in violations)
     windows = blind(history, limits)
     shut = sum(min(b, history[-1].t if history else b) - a for a, b in windows)
-    lines = [f"observer blind: {len(windows)} router restarts, {shut:.1f} s in all; owner changes not judged there: "
-             f"{not_judged(history, limits)}",
+    missed = not_judged(history, limits)
+    lines = [f"observer blind: {len(windows)} router restarts, {shut:.1f} s in all; not judged: {missed}"
+             + (" (owner changes whose records the observer missed there and did not catch up on)" if missed else ""),
              f"faults: {sum(kinds.values())}",
              f"fault kinds: {len(kinds)} ({', '.join(f'{k} {n}' for k, n in sorted(kinds.items()))})" if kinds else "fault kinds: 0",
              f"violations: {len(violations)}" + (f" ({', '.join(f'{k} {n}' for k, n in sorted(by_inv.items()))})" if by_inv else "")]

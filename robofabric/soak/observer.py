@@ -6,6 +6,11 @@ checker decides. Joints are thinned (a robot's sample is written when its sim or
 moved 0.05 rad since the last one written, or after a second), so an hour's history stays tens of MB and
 a jump between two samples is still a jump between two written ones.
 
+It hears what it missed while its own link was down (a router's restart): ownership records and ownership and
+reject events are kept by their publishers (:func:`fabric.keys.cache_size`), and a subscription with history asks
+for them when each publisher's token is back (:mod:`fabric.history`). Such a record or event is written with the
+time it arrived, after the restart.
+
 It is also the nemesis's hand on the wire: :meth:`Observer.replay` puts a command in a user's name with an
 epoch she held before (a delayed duplicate), which a sim must refuse.
 """
@@ -46,8 +51,10 @@ class Observer:
         self._records: dict[str, OwnRec] = {}
         self._lock = threading.Lock()
         self.fab = Fabric(FabricConfig.resolve(world=world, connect=[endpoint]), kind="tool", peer_id=peer_id)
-        self.fab.subscribe_raw(keys.own_all(world), self._on_sample)
-        self.fab.subscribe_raw(keys.event_all(world), self._on_sample)
+        # with history: records and ownership/reject events it missed while its link was down (a router's restart)
+        # come from their publishers' caches when the link is back (fabric.keys.cache_size, fabric.history)
+        self.fab.subscribe_raw(keys.own_all(world), self._on_sample, history=True)
+        self.fab.subscribe_raw(keys.event_all(world), self._on_sample, history=True)
         self.fab.subscribe_raw(keys.robot_cmd_all(world), self._on_sample)
         self.fab.subscribe_raw(keys.robot_stream_all(world, "joints"), self._on_sample)
 

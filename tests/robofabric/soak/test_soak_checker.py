@@ -105,14 +105,20 @@ def test_an_owner_losing_a_moving_robot_without_a_reason_is_a_violation():
     assert "left ann for bob while moving" in v.message
 
 
-def test_an_owner_change_while_the_observer_was_blind_is_counted_not_judged():
+def test_an_owner_change_while_the_observer_was_blind_is_counted_not_judged_when_records_were_missed():
     """A router restart blinds the observer until it hears the wire again (and a margin): an owner change across that
-    stretch is not judged (the event that explains it may be lost), but counted; the same change in sight is judged."""
-    moving, taken = rec(1, "ann", 1, state="moving"), rec(4, "bob", 2)
+    stretch whose records were missed there (an epoch gap) is not judged (the event that explains it may be lost),
+    but counted; one whose records all came (the observer caught up: consecutive epochs) is judged, as is the same
+    change in sight."""
+    moving, taken = rec(1, "ann", 1, state="moving"), rec(4, "bob", 3)
     blind_h = [moving, Fault(2, "router", "router", 3), js(3.2, A), taken]
     assert only("handover", blind_h) == [] and only("queue", blind_h) == []
     assert blind(blind_h) == [(2, 3.7)] and not_judged(blind_h) == 1
-    assert summary(blind_h, [])[0] == "observer blind: 1 router restarts, 1.7 s in all; owner changes not judged there: 1"
+    assert summary(blind_h, [])[0] == ("observer blind: 1 router restarts, 1.7 s in all; not judged: 1 (owner changes "
+                                       "whose records the observer missed there and did not catch up on)")
+    caught_up = [moving, Fault(2, "router", "router", 3), js(3.2, A), rec(4, "bob", 2)]
+    assert [v.invariant for v in check(caught_up)] == ["handover"] and not_judged(caught_up) == 0
+    assert summary(caught_up, [])[0] == "observer blind: 1 router restarts, 1.7 s in all; not judged: 0"
     # both records after the observer heard the wire again: in sight, judged
     late = [Fault(2, "router", "router", 3), js(3.2, A), rec(5, "ann", 1, state="moving"), rec(6, "bob", 2)]
     assert [v.invariant for v in check(late)] == ["handover"] and not_judged(late) == 0
