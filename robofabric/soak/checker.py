@@ -47,7 +47,7 @@ from typing import Callable, Iterable, Sequence
 from fabric.interfaces import EventKind
 from robofabric.soak.history import Cmd, Fault, Joints, Mark, OwnEvent, OwnRec, ProcExit, ProcSample, Record
 
-__all__ = ["Limits", "Violation", "INVARIANTS", "blind", "check", "fenced", "fmt", "not_judged", "summary"]
+__all__ = ["Limits", "Violation", "INVARIANTS", "blind", "check", "fenced", "fmt", "memory_judged", "not_judged", "summary"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -382,22 +382,42 @@ def _slope_per_h(pts: list[tuple[float, float]]) -> float:
     return 0.0 if den == 0 else sum((t - mt) * (v - mv) for t, v in pts) / den * 3600.0
 
 
-def resources(h: Sequence[Record], lim: Limits) -> list[Violation]:
+def _judged_windows(h: Sequence[Record], lim: Limits) -> dict[tuple[str, int], list[ProcSample]]:
+    """Each peer incarnation's samples after its warm-up, where they span enough to be judged (``min_window_s``)."""
     warm = next((r.t for r in h if isinstance(r, Mark) and r.what == "warm"), None)
     if warm is None:
-        return []
+        return {}
     began = next((r.t for r in h if isinstance(r, Mark) and r.what in ("class", "start")), warm)
     warm_s = max(lim.restart_warm_s, warm - began)  # every incarnation of a peer warms up as long as the run did
     groups: dict[tuple[str, int], list[ProcSample]] = defaultdict(list)
     for r in h:
         if isinstance(r, ProcSample):
             groups[(r.name, r.pid)].append(r)
-    out = []
-    for (name, pid), ss in groups.items():
+    out = {}
+    for key, ss in groups.items():
         start = max(warm, ss[0].t + warm_s)
         win = [s for s in ss if s.t >= start]
-        if len(win) < 4 or win[-1].t - win[0].t < lim.min_window_s:
-            continue
+        if len(win) >= 4 and win[-1].t - win[0].t >= lim.min_window_s:
+            out[key] = win
+    return out
+
+
+def memory_judged(h: Sequence[Record], lim: Limits = Limits()) -> list[str]:
+    """Whose memory ``resources`` judged, and on how long a window: one entry a peer (its longest-lived incarnation),
+    the others named as not judged (each incarnation too short: a peer the nemesis kills often)."""
+    wins = _judged_windows(h, lim)
+    best: dict[str, list[ProcSample]] = {}
+    for (name, _), win in wins.items():
+        if name not in best or win[-1].t - win[0].t > best[name][-1].t - best[name][0].t:
+            best[name] = win
+    names = sorted({r.name for r in h if isinstance(r, ProcSample)})
+    return [f"{n} {_slope_per_h([(s.t, s.rss_mb) for s in best[n]]):+.1f} MB/h over {(best[n][-1].t - best[n][0].t) / 60:.0f} min"
+            if n in best else f"{n} not judged (no incarnation lived past its warm-up long enough)" for n in names]
+
+
+def resources(h: Sequence[Record], lim: Limits) -> list[Violation]:
+    out = []
+    for (name, pid), win in _judged_windows(h, lim).items():
         hours = (win[-1].t - win[0].t) / 3600.0
         slope = _slope_per_h([(s.t, s.rss_mb) for s in win])
         if slope > lim.mem_mb_per_h:
@@ -436,7 +456,7 @@ def check(history: Sequence[Record], limits: Limits = Limits()) -> list[Violatio
 
 
 def summary(history: Sequence[Record], violations: Sequence[Violation], limits: Limits = Limits()) -> list[str]:
-    """The run's last lines: what the observer could not see, then ``faults: N``, ``fault kinds: K`` (with the count
+    """The run's last lines: what the observer could not see, whose memory was judged (``memory: ...``), then ``faults: N``, ``fault kinds: K`` (with the count
     of each) and ``violations: V``."""
     kinds = Counter(r.kind for r in history if isinstance(r, Fault))
     by_inv = Counter(v.invariant for v in violations)
@@ -445,6 +465,7 @@ def summary(history: Sequence[Record], violations: Sequence[Violation], limits: 
     missed = not_judged(history, limits)
     lines = [f"observer blind: {len(windows)} router restarts, {shut:.1f} s in all; not judged: {missed}"
              + (" (owner changes whose records the observer missed there and did not catch up on)" if missed else ""),
+             "memory: " + ("; ".join(memory_judged(history, limits)) or "no samples"),
              f"faults: {sum(kinds.values())}",
              f"fault kinds: {len(kinds)} ({', '.join(f'{k} {n}' for k, n in sorted(kinds.items()))})" if kinds else "fault kinds: 0",
              f"violations: {len(violations)}" + (f" ({', '.join(f'{k} {n}' for k, n in sorted(by_inv.items()))})" if by_inv else "")]

@@ -7,7 +7,7 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from robofabric.soak.checker import INVARIANTS, Limits, blind, check, not_judged, summary
+from robofabric.soak.checker import INVARIANTS, Limits, blind, check, memory_judged, not_judged, summary
 from robofabric.soak.history import Cmd, Fault, Joints, Mark, OwnEvent, OwnRec, ProcExit, ProcSample
 
 A = (0.6, 0.3, -0.3, 0.0, 0.5, 0.1)
@@ -216,7 +216,17 @@ def test_an_exit_nobody_caused_is_a_violation_and_an_expected_one_is_not():
 def test_summary_counts_faults_by_kind_and_violations():
     h = [Fault(1, "pause", "sim-a", 2), Fault(3, "pause", "s00", 4), Fault(5, "router", "router", 6)]
     lines = summary(h, check([rec(1, "ann", 3), rec(2, "bob", 3)]))
-    assert lines[1:] == ["faults: 3", "fault kinds: 2 (pause 2, router 1)", "violations: 1 (owners 1)"]
+    assert lines[1:] == ["memory: no samples", "faults: 3", "fault kinds: 2 (pause 2, router 1)", "violations: 1 (owners 1)"]
+
+
+def test_the_summary_names_whose_memory_was_judged_and_whose_was_not():
+    """A peer alive all run (the compute peer with ``--victims sim,student``) is judged; one killed too often is
+    named as not judged."""
+    short = [ProcSample(60.0 * m + 1, "compute", 10 + m, 80.0, 10, 20, 0) for m in range(20)]  # a new pid each minute
+    h = [Mark(0, "warm"), *_samples("sim-a", 1.5), *short]
+    assert memory_judged(h) == ["compute not judged (no incarnation lived past its warm-up long enough)",
+                                "sim-a +1.5 MB/h over 19 min"]  # its first minute is its warm-up
+    assert summary(h, [])[1] == "memory: compute not judged (no incarnation lived past its warm-up long enough); sim-a +1.5 MB/h over 19 min"
     assert str(check([rec(1, "ann", 3), rec(2, "bob", 3)])[0]).splitlines()[1].strip().startswith("t=1.000 record arm0: owner=ann")
 
 
