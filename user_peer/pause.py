@@ -42,8 +42,13 @@ def is_pause(ev: Event) -> bool:
     return ev.kind in REJECT_KINDS and isinstance(ev.data, dict) and ev.data.get("code") == HELD
 
 
-def pause_words(robot: str) -> str:
-    """What a client shows for a pause of ``robot``'s sim, instead of an error."""
+def pause_words(robot: str, ev: Event | None = None) -> str:
+    """What a client shows for a pause of ``robot``'s sim (the hold ``ev`` told of), instead of an error: the sim's
+    word once it hears again (its detail says so) reads as the end of the pause."""
+    detail = str(ev.data.get("detail", "")) if ev is not None and isinstance(ev.data, dict) else ""
+    if "hears again" in detail:
+        return (f"the sim was paused and hears again: {robot} stopped before its command was done (a waiting command "
+                "is sent again; one sent without waiting may be sent again)")
     return (f"the sim is paused: {robot} holds until its sim hears its router again (a waiting command is sent "
             "again then; one sent without waiting may be sent again)")
 

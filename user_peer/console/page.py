@@ -69,7 +69,7 @@ def event_line(ev: Any, trusted: bool) -> str:
     writer put in it can make it start with :data:`TRUSTED`. A sim's ``held`` refusal reads as the pause it is
     (:func:`user_peer.pause.pause_words`), not as an error."""
     if is_pause(ev):
-        text = one_line(pause_words(ev.object) + (f" [{ev.user}]" if ev.user else ""), 400)
+        text = one_line(pause_words(ev.object, ev) + (f" [{ev.user}]" if ev.user else ""), 400)
     else:
         text = describe(ev)
     return (TRUSTED if trusted else UNVERIFIED) + text

@@ -369,8 +369,8 @@ class Ros2Bridge:
             for ev in self.world.rejections(rid, self._event_mark):
                 if is_pause(ev):  # the sim held its robots: a pause, said as one (not counted as refused)
                     self.paused[rid] += 1
-                    log.info("%s", pause_words(rid))
-                    self.node.get_logger().info(pause_words(rid), throttle_duration_sec=1.0)
+                    log.info("%s", pause_words(rid, ev))
+                    self.node.get_logger().info(pause_words(rid, ev), throttle_duration_sec=1.0)
                 else:
                     self._refuse(rid, "a command", f"the sim refused it: {ev.reason}")
         self._event_mark = mark
