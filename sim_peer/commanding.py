@@ -157,7 +157,7 @@ class CommandPipeline:
             stopped, self._stopped = self._stopped, {}
         for rid, user in stopped.items():
             self.report.reject(rid, "?", "held", "the sim held its robots and stopped this one before its command was done; "
-                                                 "it hears again: send the command again", user, code="held")
+                                                 "it hears again: send the command again", user, code="resumed")
 
     def apply(self, key: str, cmd: Command) -> None:
         """Admit and apply one decoded command now, in the caller's thread."""

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Callable
 
 from fabric.interfaces import REJECT_KINDS, Command, Event
 from user_peer.errors import Paused
-from user_peer.robot import HELD, rejection_error
+from user_peer.robot import HELD, RESUMED, rejection_error
 
 if TYPE_CHECKING:
     from user_peer.robot import Robot
@@ -39,14 +39,13 @@ QUIET_S = 2.0
 
 def is_pause(ev: Event) -> bool:
     """Whether ``ev`` is a sim's ``held`` refusal: a pause, which the console and the ROS 2 bridge show as such."""
-    return ev.kind in REJECT_KINDS and isinstance(ev.data, dict) and ev.data.get("code") == HELD
+    return ev.kind in REJECT_KINDS and isinstance(ev.data, dict) and ev.data.get("code") in (HELD, RESUMED)
 
 
 def pause_words(robot: str, ev: Event | None = None) -> str:
     """What a client shows for a pause of ``robot``'s sim (the hold ``ev`` told of), instead of an error: the sim's
-    word once it hears again (its detail says so) reads as the end of the pause."""
-    detail = str(ev.data.get("detail", "")) if ev is not None and isinstance(ev.data, dict) else ""
-    if "hears again" in detail:
+    word once it hears again (code ``resumed``) reads as the end of the pause."""
+    if ev is not None and isinstance(ev.data, dict) and ev.data.get("code") == RESUMED:
         return (f"the sim was paused and hears again: {robot} stopped before its command was done (a waiting command "
                 "is sent again; one sent without waiting may be sent again)")
     return (f"the sim is paused: {robot} holds until its sim hears its router again (a waiting command is sent "

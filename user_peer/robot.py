@@ -34,6 +34,7 @@ COMMAND_ROUTE_WAIT_S = 0.5
 """How long a command waits for its sim's subscription to be known before it is put anyway."""
 
 HELD = "held"
+RESUMED = "resumed"  # the sim's word, once it hears again, that a hold stopped a command before it was done
 """The code of a sim's refusal while it holds its robots (cut off, or not yet sure of its link after a freeze):
 raised as :class:`Paused`, ridden out by waited commands (:mod:`user_peer.pause`)."""
 
@@ -80,7 +81,7 @@ def rejection_error(robot: str, ev: Event) -> NotOwner | Rejected:
         return NotOwner(f"{robot} refused the command: {ev.reason}")
     detail = str(data.get("detail", ""))
     reason = f"{ev.reason}: {detail}" if detail and detail != ev.reason else ev.reason
-    kind = Paused if code == HELD else Rejected
+    kind = Paused if code in (HELD, RESUMED) else Rejected
     return kind(reason, robot=robot, command=str(data.get("command", "")), code=str(code))
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 from fabric.interfaces import Event
 from user_peer.console.page import event_line
 from user_peer.pause import is_pause, pause_words
-from user_peer.robot import HELD, OWNERSHIP_REFUSAL
+from user_peer.robot import HELD, OWNERSHIP_REFUSAL, RESUMED
 
 
 def _reject(code: str) -> Event:
@@ -30,7 +30,7 @@ def test_the_console_says_the_sim_is_paused_not_reject():
 
 def test_the_sims_word_once_it_hears_again_reads_as_the_end_of_the_pause():
     back = Event(kind="reject", reason="held", object="arm1", user="alice",
-                 data={"command": "?", "code": HELD, "detail": "the sim held its robots and stopped this one before its "
+                 data={"command": "?", "code": RESUMED, "detail": "the sim held its robots and stopped this one before its "
                                                                "command was done; it hears again: send the command again"})
     assert is_pause(back)
     assert event_line(back, True).startswith("trusted · the sim was paused and hears again: arm1 stopped")
