@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
@@ -22,6 +23,7 @@ from fabric.interfaces import Header, OccupancyGrid, Pose, Scan, yaw_from_quater
 
 from .errors import NavigationError
 from .grid import UNKNOWN
+from .robot_cells import ROBOT_MARGIN, Footprint, footprint_indices
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,8 +73,14 @@ class OccupancyMapper:
         x: float,
         y: float,
         yaw: float,
+        *,
+        robots: np.ndarray | None = None,
     ) -> None:
-        """Add one scan taken by a sensor at (x, y) facing ``yaw``; ``angles`` are relative to the sensor."""
+        """Add one scan taken by a sensor at (x, y) facing ``yaw``; ``angles`` are relative to the sensor.
+
+        ``robots``: flat indices of the cells under the robots when the scan was taken (:mod:`.robot_cells`):
+        no end point there marks a cell occupied, and they end the scan seen free.
+        """
         c = self.config
         ranges = np.asarray(ranges, dtype=np.float64)
         angles = np.asarray(angles, dtype=np.float64)
@@ -110,6 +118,8 @@ class OccupancyMapper:
         fy = ft(sy) + k * np.repeat((sa * c.step).astype(ft), counts)
         free_idx = self._flat(fx, fy, sensor_inside)
         hit_idx = self._flat(ex[hit], ey[hit], False)
+        if robots is not None and robots.size:
+            hit_idx = hit_idx[~np.isin(hit_idx, robots)]  # a robot seen is no wall
         lo = self.logodds.reshape(-1)
         ob = self.observed.reshape(-1)
         before_hits = lo[hit_idx]
@@ -117,7 +127,16 @@ class OccupancyMapper:
         lo[hit_idx] = np.minimum(before_hits + c.l_occ, c.l_max)
         ob[free_idx] = True
         ob[hit_idx] = True
+        if robots is not None and robots.size:
+            self.clear_cells(robots)
         self.scans += 1
+
+    def clear_cells(self, idx: np.ndarray) -> None:
+        """Mark cells (flat indices) seen free, whatever earlier scans said: the floor under a robot is floor."""
+        c = self.config
+        lo = self.logodds.reshape(-1)
+        lo[idx] = np.minimum(lo[idx], c.l_free)
+        self.observed.reshape(-1)[idx] = True
 
     def _flat(self, cx: np.ndarray, cy: np.ndarray, inside_known: bool) -> np.ndarray:
         """Flat cell indices of points in cell units; points outside the grid are dropped unless known inside."""
@@ -151,19 +170,25 @@ class OccupancyMapper:
         *,
         sensor_offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
         footprint: float = 0.0,
+        robots: Sequence[Footprint] = (),
+        margin: float = ROBOT_MARGIN,
     ) -> None:
         """Add a fabric Scan taken at a fabric Pose; ``sensor_offset`` is (x, y, yaw) of the sensor on the robot.
 
         ``footprint`` > 0 also marks the robot's own disk of that radius free (the robot stands there).
+        ``robots``: where every robot of the world stood when the scan was taken: their cells (radius +
+        ``margin``) are never marked occupied by this scan, and are cleared (:mod:`.robot_cells`).
         """
         yaw = yaw_from_quaternion(pose.quaternion)
         if footprint > 0:
             self.clear_footprint(float(pose.position[0]), float(pose.position[1]), footprint)
+        c = self.config
+        under = footprint_indices((c.height, c.width), c.resolution, (c.origin_x, c.origin_y), robots, margin) if robots else None
         ox, oy, oyaw = sensor_offset
         cy, sy = math.cos(yaw), math.sin(yaw)
         x = float(pose.position[0]) + cy * ox - sy * oy
         y = float(pose.position[1]) + sy * ox + cy * oy
-        self.integrate(scan.ranges, scan.angles, scan.range_max, x, y, yaw + oyaw)
+        self.integrate(scan.ranges, scan.angles, scan.range_max, x, y, yaw + oyaw, robots=under)
 
     # ------------------------------------------------------------------ reading
 

@@ -1,7 +1,8 @@
 """The plan service (``srv/plan/{robot}``, :class:`PlanRequest`): a path from the robot's pose to the goal.
 
 The start is the robot's latest pose unless the request gives one, the goal the ``goal`` scene object's pose
-unless the request gives one; the vehicle is the settings' with the robot's radius from its description. The
+unless the request gives one; the vehicle is the settings' with the robot's radius from its description. A
+robot's own footprint is never an obstacle to a plan from where it stands. The
 path is published on ``rf/{world}/robot/{robot}/path`` and returned; following it is the user's decision (they
 send it on ``cmd/path``). Planning is CPU-bound, so plans run one at a time.
 """
@@ -15,13 +16,14 @@ from typing import TYPE_CHECKING, Callable
 from fabric import keys
 from fabric.interfaces import Path, PlanReply, PlanRequest, Pose, yaw_from_quaternion
 
-from .costmap import Costmap
+from .costmap import Costmap, build_costmap
 from .discovery import RobotDescriptions
 from .errors import NavigationError
 from .map_service import MapService
 from .model import VehicleModel
 from .planner import PlannerSettings, plan_path
 from .poses import PoseHistory
+from .robot_cells import Footprint, clear_robots
 
 if TYPE_CHECKING:
     from fabric.session import Fabric
@@ -62,13 +64,23 @@ class PlanService:
     def set_goal(self, pose: Pose) -> None:
         self.goal = pose
 
-    def costmap(self, name: str, robot_radius: float) -> Costmap:
-        """Map ``name`` inflated by ``robot_radius``; the scans' map is built first when it never was."""
+    def costmap(self, name: str, robot_radius: float, *, standing: Footprint | None = None) -> Costmap:
+        """Map ``name`` inflated by ``robot_radius``; the scans' map is built first when it never was.
+
+        ``standing``: the planning robot where it stands: its own footprint is never an obstacle to its own start
+        (cells a map holds under it, from a scan that took it for a wall, are taken as the floor they are)."""
         m = self.maps
         if name == m.map_name and m.store.get(name) is None and m.scans.scans > 0:
             m.build(name)  # navigation before an explicit build: build with the default threshold
         s = self.settings
-        return m.store.costmap(name, robot_radius, threshold=s.threshold, unknown_is_occupied=s.unknown_is_occupied)
+        cm = m.store.costmap(name, robot_radius, threshold=s.threshold, unknown_is_occupied=s.unknown_is_occupied)
+        grid = m.store.get(name)
+        if standing is None or grid is None:
+            return cm
+        cleared = clear_robots(grid, [standing], margin=0.0)
+        if cleared is grid:
+            return cm
+        return build_costmap(cleared, robot_radius, threshold=s.threshold, unknown_is_occupied=s.unknown_is_occupied)
 
     def handle(self, req: PlanRequest, *, publish: bool = True) -> PlanReply:
         """Handle one plan request (also usable in-process, without Zenoh); the path goes on the robot's
@@ -84,7 +96,9 @@ class PlanService:
             turning_radius=req.turning_radius or v.turning_radius,
             allow_reverse=v.allow_reverse if req.direction == "default" else req.direction == "both",
         )
-        costmap = self.costmap(req.map, vehicle.robot_radius)
+        own = req.start.shape[0] != 3  # from where the robot stands
+        costmap = self.costmap(req.map, vehicle.robot_radius,
+                               standing=Footprint(start[0], start[1], vehicle.robot_radius) if own else None)
         with self._plan_lock:
             result = plan_path(costmap, start, goal, planner=req.planner, settings=replace(s, vehicle=vehicle))
         key = keys.robot_path(self.world, robot)

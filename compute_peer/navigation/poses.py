@@ -1,7 +1,8 @@
 """The recent poses of each robot the navigation service follows (pure: no session, no clock).
 
-A scan is folded in at the pose nearest to it in sim time, and a plan starts from the latest pose, so each
-robot keeps its last :data:`POSE_HISTORY` poses. Thread-safe: poses arrive on Zenoh's callback threads while
+A scan is folded in at the pose nearest to it in sim time, knowing where every other robot stood then
+(:meth:`PoseHistory.during`: robots are not walls, :mod:`.robot_cells`), and a plan starts from the latest pose,
+so each robot keeps its last :data:`POSE_HISTORY` poses. Thread-safe: poses arrive on Zenoh's callback threads while
 plans read them on query threads.
 """
 
@@ -10,16 +11,22 @@ from __future__ import annotations
 import threading
 from collections import deque
 from dataclasses import replace
+from typing import Callable
 
 import numpy as np
 
 from fabric.interfaces import Header, Pose
 
-__all__ = ["MAX_ROBOTS", "POSE_HISTORY", "PoseHistory"]
+__all__ = ["MAX_ROBOTS", "MIRROR_LAG", "POSE_HISTORY", "STALE", "PoseHistory"]
 
 POSE_HISTORY = 64
 MAX_ROBOTS = 64
 """Robots whose poses are kept when no world description says which exist (a flood of made-up ids stops here)."""
+MIRROR_LAG = 0.3
+"""Seconds another sim's mirror of a robot may lag it (a pose period plus transport; p99 0.11-0.5 s on a loaded
+2-core box, docs/benchmarks.md "shards"): a scan of that sim may have seen the robot anywhere along them."""
+STALE = 2.0
+"""Seconds from a scan beyond which a robot's nearest pose says nothing about where it stood (it left)."""
 
 
 class PoseHistory:
@@ -59,18 +66,53 @@ class PoseHistory:
         A scan falls between two poses (the sim's stream loops tick apart, and the robot turns 3.6 rad/s at speed
         3): the nearest pose alone put the warehouse's far shelves cells off in the map."""
         with self._lock:
-            hist = self._poses.get(robot)
-            if not hist:
-                return None
-            if stamp <= 0.0:
-                return hist[-1]
-            nearest = min(hist, key=lambda p: abs(p.header.stamp - stamp))
-            before = max((p for p in hist if p.header.stamp <= stamp), key=lambda p: p.header.stamp, default=None)
-            after = min((p for p in hist if p.header.stamp >= stamp), key=lambda p: p.header.stamp, default=None)
-        if before is None or after is None or after.header.stamp <= before.header.stamp:
-            return nearest
-        return _between(before, after, (stamp - before.header.stamp) / (after.header.stamp - before.header.stamp),
-                        replace(nearest.header, stamp=stamp))
+            hist = list(self._poses.get(robot, ()))
+        if not hist:
+            return None
+        if stamp <= 0.0:
+            return hist[-1]
+        return _interpolated(hist, stamp, _sim_time)
+
+    def during(self, robot: str, header: Header, *, lag: float = MIRROR_LAG, stale: float = STALE) -> list[Pose]:
+        """Where ``robot`` stood when the message with ``header`` (a scan) was taken: [] when no pose of it is
+        within ``stale`` seconds of that moment (a robot that left, or none yet).
+
+        A robot of the same sim as the scan (same ``source``): its pose interpolated to the scan's sim time
+        (the latest when stamps are 0). A robot of another sim (another clock): that sim's scan saw its
+        mirror, which lags it by a stream period plus transport, so every pose of the last ``lag`` seconds
+        before the scan's wall time, and the one interpolated to it."""
+        with self._lock:
+            hist = list(self._poses.get(robot, ()))
+        if not hist:
+            return []
+        if hist[-1].header.source == header.source:
+            if header.stamp <= 0.0:
+                return [hist[-1]]
+            pose = _interpolated(hist, header.stamp, _sim_time)
+            return [pose] if min(abs(p.header.stamp - header.stamp) for p in hist) <= stale else []
+        wall = header.wall_ns * 1e-9
+        if min(abs(_wall_time(p) - wall) for p in hist) > stale:
+            return []
+        return [p for p in hist if wall - lag <= _wall_time(p) < wall] + [_interpolated(hist, wall, _wall_time)]
+
+
+def _sim_time(p: Pose) -> float:
+    return p.header.stamp
+
+
+def _wall_time(p: Pose) -> float:
+    return p.header.wall_ns * 1e-9
+
+
+def _interpolated(hist: list[Pose], t: float, when: Callable[[Pose], float]) -> Pose:
+    """The pose at time ``t`` by the clock ``when``: the two kept around it interpolated, else the nearest."""
+    nearest = min(hist, key=lambda p: abs(when(p) - t))
+    before = max((p for p in hist if when(p) <= t), key=when, default=None)
+    after = min((p for p in hist if when(p) >= t), key=when, default=None)
+    if before is None or after is None or when(after) <= when(before):
+        return nearest
+    header = replace(nearest.header, stamp=t) if when is _sim_time else nearest.header
+    return _between(before, after, (t - when(before)) / (when(after) - when(before)), header)
 
 
 def _between(a: Pose, b: Pose, f: float, header: Header) -> Pose:

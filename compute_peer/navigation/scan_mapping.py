@@ -1,7 +1,9 @@
 """Mapping mode: fold the robots' scans into one occupancy grid as they arrive (no session here).
 
 Each scan is taken at the robot pose nearest to it in sim time, from where the robot's LIDAR sits on it, and
-marks the disk the robot stands on free. A scan that cannot be placed (mapping off, no pose yet, mounting still
+marks the disk the robot stands on free. Robots are moving obstacles, not the world: the cells under every robot
+followed, where it stood when the scan was taken, are never marked occupied by it and are cleared
+(:mod:`.robot_cells`); a robot of another sim counts along the last moments its mirror may lag it. A scan that cannot be placed (mapping off, no pose yet, mounting still
 being looked up, malformed) is dropped and counted by reason, never raised: scans come from the wire. A rejected
 scan is logged at most a few times per interval (with the count suppressed since), its reason clipped: a flood
 of malformed scans must not fill the compute peer's log.
@@ -14,12 +16,13 @@ import threading
 import time
 from typing import Callable
 
-from fabric.interfaces import Header, OccupancyGrid, Scan
+from fabric.interfaces import Header, OccupancyGrid, Pose, Scan
 from fabric.limits import RateLimiter, clip, quote
 
 from .errors import NavigationError
 from .mapping import MapperConfig, OccupancyMapper
 from .poses import PoseHistory
+from .robot_cells import Footprint
 
 log = logging.getLogger("robofabric.navigation")
 
@@ -80,7 +83,8 @@ class ScanMapping:
                 self.counters["scans_waiting_for_sensor"] += 1  # the sensor's mounting is being looked up
                 return False
             try:
-                self.mapper.integrate_scan(scan, pose, sensor_offset=offset, footprint=self._radius(robot))
+                self.mapper.integrate_scan(scan, pose, sensor_offset=offset, footprint=self._radius(robot),
+                                           robots=self.footprints(robot, scan.header, pose))
             except NavigationError as exc:
                 self.counters["scans_rejected"] += 1
                 verdict = self._reports.check("scan_rejected", self._clock())  # one fixed key: robot ids come from the wire
@@ -90,6 +94,14 @@ class ScanMapping:
                 return False
             self.counters["scans"] += 1
             return True
+
+    def footprints(self, scanner: str, header: Header, pose: Pose) -> list[Footprint]:
+        """Where the robots followed stood when ``scanner``'s scan with ``header`` was taken (``pose``: its own)."""
+        out = [Footprint(float(pose.position[0]), float(pose.position[1]), self._radius(scanner))]
+        for robot in self.poses.robots() - {scanner}:
+            radius = self._radius(robot)
+            out.extend(Footprint(float(p.position[0]), float(p.position[1]), radius) for p in self.poses.during(robot, header))
+        return out
 
     def grid(self, *, threshold: float | None = None, header: Header | None = None) -> OccupancyGrid | None:
         """The map so far (binary with ``threshold``, else probabilities in percent); None before any scan."""
