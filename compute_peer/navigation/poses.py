@@ -17,7 +17,7 @@ import numpy as np
 
 from fabric.interfaces import Header, Pose
 
-__all__ = ["MAX_ROBOTS", "MIRROR_LAG", "POSE_HISTORY", "STALE", "PoseHistory"]
+__all__ = ["MAX_ROBOTS", "MIRROR_LAG", "POSE_HISTORY", "SPREAD", "STALE", "PoseHistory"]
 
 POSE_HISTORY = 64
 MAX_ROBOTS = 64
@@ -79,8 +79,10 @@ class PoseHistory:
 
         A robot of the same sim as the scan (same ``source``): its pose interpolated to the scan's sim time
         (the latest when stamps are 0). A robot of another sim (another clock): that sim's scan saw its
-        mirror, which lags it by a stream period plus transport, so every pose of the last ``lag`` seconds
-        before the scan's wall time, and the one interpolated to it."""
+        mirror, which lags it by a stream period plus transport, so the poses of the last ``lag`` seconds
+        before the scan's wall time (one a cell apart is enough: :data:`SPREAD`), and the one interpolated to it.
+        Called for every robot with every scan: it walks back from the newest pose (poses arrive in time order,
+        and a scan is recent), not over the whole history."""
         with self._lock:
             hist = list(self._poses.get(robot, ()))
         if not hist:
@@ -88,12 +90,42 @@ class PoseHistory:
         if hist[-1].header.source == header.source:
             if header.stamp <= 0.0:
                 return [hist[-1]]
-            pose = _interpolated(hist, header.stamp, _sim_time)
-            return [pose] if min(abs(p.header.stamp - header.stamp) for p in hist) <= stale else []
-        wall = header.wall_ns * 1e-9
-        if min(abs(_wall_time(p) - wall) for p in hist) > stale:
-            return []
-        return [p for p in hist if wall - lag <= _wall_time(p) < wall] + [_interpolated(hist, wall, _wall_time)]
+            at, _ = _walk_back(hist, header.stamp, _sim_time, stale, 0.0)
+            return at
+        at, window = _walk_back(hist, header.wall_ns * 1e-9, _wall_time, stale, lag)
+        return window + at if at else []
+
+
+SPREAD = 0.05
+"""Metres between two poses of a mirrored robot's lag that both count: closer ones add no cell to its footprint."""
+
+
+def _walk_back(hist: list[Pose], t: float, when: Callable[[Pose], float], stale: float, lag: float) -> tuple[list[Pose], list[Pose]]:
+    """([the pose at ``t``] or [] when the nearest is more than ``stale`` away, the poses of [t - lag, t) at least
+    :data:`SPREAD` apart), walking back from the newest of ``hist``."""
+    i = len(hist) - 1
+    while i >= 0 and when(hist[i]) > t:
+        i -= 1
+    if i == len(hist) - 1:  # after the newest
+        nearest, at = hist[-1], hist[-1]
+    elif i < 0:  # before the oldest kept
+        nearest, at = hist[0], hist[0]
+    else:
+        a, b = hist[i], hist[i + 1]
+        nearest = a if t - when(a) <= when(b) - t else b
+        header = replace(nearest.header, stamp=t) if when is _sim_time else nearest.header
+        at = _between(a, b, (t - when(a)) / (when(b) - when(a)), header) if when(b) > when(a) else nearest
+    if abs(when(nearest) - t) > stale:
+        return [], []
+    window: list[Pose] = []
+    last = at.position
+    while i >= 0 and when(hist[i]) >= t - lag:
+        p = hist[i]
+        if float(np.hypot(p.position[0] - last[0], p.position[1] - last[1])) >= SPREAD:
+            window.append(p)
+            last = p.position
+        i -= 1
+    return [at], window
 
 
 def _sim_time(p: Pose) -> float:

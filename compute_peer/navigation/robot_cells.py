@@ -59,9 +59,10 @@ def footprint_indices(shape: tuple[int, int], resolution: float, origin_xy: tupl
         c0, c1 = max(math.floor(cx - rc), 0), min(math.ceil(cx + rc) + 1, w)
         if r0 >= r1 or c0 >= c1:
             continue
-        rr, cc = np.mgrid[r0:r1, c0:c1]
-        inside = (rr + 0.5 - cy) ** 2 + (cc + 0.5 - cx) ** 2 <= rc * rc + 1e-9
-        parts.append((rr[inside] * w + cc[inside]).astype(np.intp))
+        dy2 = (np.arange(r0, r1) + 0.5 - cy) ** 2
+        dx2 = (np.arange(c0, c1) + 0.5 - cx) ** 2
+        rows, cols = np.nonzero(dy2[:, None] + dx2[None, :] <= rc * rc + 1e-9)
+        parts.append((rows + r0) * w + (cols + c0))
     if not parts:
         return np.zeros(0, dtype=np.intp)
     return np.unique(np.concatenate(parts)) if len(parts) > 1 else parts[0]

@@ -12,6 +12,7 @@ of malformed scans must not fill the compute peer's log.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from typing import Callable
@@ -28,6 +29,7 @@ log = logging.getLogger("robofabric.navigation")
 
 REPORT_INTERVAL = 5.0  # seconds: rejected scans are logged at most REPORT_BURST times per interval
 REPORT_BURST = 3
+BEYOND = 1.0  # metres past a scan's range (plus the robot's radius) within which a robot still counts for it
 
 __all__ = ["ScanMapping"]
 
@@ -84,7 +86,7 @@ class ScanMapping:
                 return False
             try:
                 self.mapper.integrate_scan(scan, pose, sensor_offset=offset, footprint=self._radius(robot),
-                                           robots=self.footprints(robot, scan.header, pose))
+                                           robots=self.footprints(robot, scan.header, pose, reach=scan.range_max))
             except NavigationError as exc:
                 self.counters["scans_rejected"] += 1
                 verdict = self._reports.check("scan_rejected", self._clock())  # one fixed key: robot ids come from the wire
@@ -95,12 +97,18 @@ class ScanMapping:
             self.counters["scans"] += 1
             return True
 
-    def footprints(self, scanner: str, header: Header, pose: Pose) -> list[Footprint]:
-        """Where the robots followed stood when ``scanner``'s scan with ``header`` was taken (``pose``: its own)."""
-        out = [Footprint(float(pose.position[0]), float(pose.position[1]), self._radius(scanner))]
+    def footprints(self, scanner: str, header: Header, pose: Pose, *, reach: float = math.inf) -> list[Footprint]:
+        """Where the robots followed stood when ``scanner``'s scan with ``header`` was taken (``pose``: its own);
+        robots farther than ``reach`` (the scan's range) + :data:`BEYOND` from it are left out: the scan cannot
+        have seen them, and their own scans clear where they stand."""
+        x, y = float(pose.position[0]), float(pose.position[1])
+        out = [Footprint(x, y, self._radius(scanner))]
         for robot in self.poses.robots() - {scanner}:
             radius = self._radius(robot)
-            out.extend(Footprint(float(p.position[0]), float(p.position[1]), radius) for p in self.poses.during(robot, header))
+            for p in self.poses.during(robot, header):
+                px, py = float(p.position[0]), float(p.position[1])
+                if math.hypot(px - x, py - y) <= reach + radius + BEYOND:
+                    out.append(Footprint(px, py, radius))
         return out
 
     def grid(self, *, threshold: float | None = None, header: Header | None = None) -> OccupancyGrid | None:
