@@ -20,6 +20,9 @@ class Base(Robot):
 
     kind = "mobile"
     data_stream = "pose"
+    plan_note = ""
+    """What the planner did to the last plan's start or goal near an obstacle ("" when nothing): an escape move
+    first, a goal moved (docs/navigation.md)."""
 
     @property
     def pose(self) -> Pose | None:
@@ -104,13 +107,16 @@ class Base(Robot):
         map_name: str = "map", timeout: float | None = None,
     ) -> Path:
         """A collision-free path from the robot's pose to (x, y, theta), or to the goal object without x, y, on
-        ``map_name`` (default: the class's map)."""
+        ``map_name`` (default: the class's map). A start or goal near an obstacle is recovered from, and
+        :attr:`plan_note` says how."""
         goal = None if x is None or y is None else (float(x), float(y), float(theta))
         try:
-            return services.plan(
+            reply = services.plan_reply(
                 self.world.fabric, self.id, goal, planner=planner, map_name=map_name, timeout=timeout or max(self.world.timeout, 15.0),
                 peer=self.world.compute_route.navigation_peer(), user=self.world.user,
             )
+            self.plan_note = reply.note
+            return reply.path
         except ServiceError as exc:
             where = "the goal object" if goal is None else f"({goal[0]:.2f}, {goal[1]:.2f}, {goal[2]:.2f})"
             raise Unreachable(f"no path for {self.id} to {where}: {exc.reason}") from None

@@ -28,7 +28,7 @@ from fabric.interfaces import (
 )
 from fabric.session import Fabric
 
-__all__ = ["RobotEntry", "robot_entries", "world_info", "ik", "map_request", "build_map", "plan"]
+__all__ = ["RobotEntry", "robot_entries", "world_info", "ik", "map_request", "build_map", "plan", "plan_reply"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,5 +106,14 @@ def plan(
 ) -> Path:
     """A path from ``robot``'s pose to ``goal`` (None: the goal object's pose) from a compute peer; asked in
     ``user``'s name, it is published on the robot's ``path`` key only if she owns the robot (else in the reply only)."""
+    return plan_reply(fab, robot, goal, planner=planner, map_name=map_name, timeout=timeout, peer=peer, user=user).path
+
+
+def plan_reply(
+    fab: Fabric, robot: str, goal: tuple[float, float, float] | None, *, planner: str = "hybrid_astar", map_name: str = "map", timeout: float = 10.0,
+    peer: str | None = None, user: str | None = None,
+) -> PlanReply:
+    """:func:`plan`'s whole reply: the path, and ``note``, what the planner did to a start or goal near an
+    obstacle (an escape move first, a goal moved; docs/navigation.md)."""
     req = PlanRequest(robot, goal=np.asarray(goal if goal is not None else (), dtype=float), planner=planner, map=map_name)
-    return fab.rpc.call(_service_key(fab, "plan", robot, peer, user), req, timeout=timeout, expected=PlanReply).path
+    return fab.rpc.call(_service_key(fab, "plan", robot, peer, user), req, timeout=timeout, expected=PlanReply)

@@ -35,7 +35,8 @@ class VehicleModel:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class PlanResult:
-    """A path (poses at most one map cell apart), who planned it, how long it took, how long it is."""
+    """A path (poses at most one map cell apart), who planned it, how long it took, how long it is; ``note``:
+    what was done to a start or goal near an obstacle (:mod:`.recovery`), "" when nothing."""
 
     x: np.ndarray
     y: np.ndarray
@@ -44,6 +45,7 @@ class PlanResult:
     seconds: float
     length: float
     expansions: int = 0
+    note: str = ""
 
 
 Pose2 = tuple[float, float, float]

@@ -108,7 +108,7 @@ class PlanService:
         self.counters["plans"] += 1
         return PlanReply(
             path, robot, result.planner, result.seconds, result.length, result.expansions, req.map,
-            self.fabric.header(keys.srv(self.world, "plan", robot)),
+            self.fabric.header(keys.srv(self.world, "plan", robot)), result.note,
         )
 
     def _ends(self, robot: str, req: PlanRequest) -> tuple[tuple[float, ...], tuple[float, ...]]:

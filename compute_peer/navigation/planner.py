@@ -4,13 +4,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from fabric.interfaces import OccupancyGrid
 
 from .costmap import Costmap, build_costmap
 from .errors import NavigationError
 from .hybrid_astar import HybridAStarConfig, plan_hybrid_astar
-from .model import PLANNERS, PlanResult, VehicleModel, as_pose
+from .model import PLANNERS, PlanResult, VehicleModel, as_pose, path_length
 from .ompl_planner import OmplConfig, plan_ompl
+from .recovery import RecoverySettings, recover
 
 
 @dataclass(frozen=True, slots=True)
@@ -22,6 +25,7 @@ class PlannerSettings:
     ompl: OmplConfig = field(default_factory=OmplConfig)
     threshold: int = 50  # map cells >= this percent are obstacles
     unknown_is_occupied: bool = True
+    recovery: RecoverySettings = field(default_factory=RecoverySettings)  # starts and goals near obstacles
 
 
 def plan_path(
@@ -50,9 +54,18 @@ def plan_path(
             threshold=settings.threshold,
             unknown_is_occupied=settings.unknown_is_occupied,
         )
+    rec = recover(costmap, s, g, settings.recovery)
     if planner == "hybrid_astar":
-        return plan_hybrid_astar(costmap, s, g, settings.vehicle, settings.hybrid)
-    ompl = settings.ompl
-    if ":" in planner:
-        ompl = replace(ompl, planner=planner.split(":", 1)[1])
-    return plan_ompl(costmap, s, g, settings.vehicle, ompl)
+        result = plan_hybrid_astar(costmap, rec.start, rec.goal, settings.vehicle, settings.hybrid)
+    else:
+        ompl = settings.ompl
+        if ":" in planner:
+            ompl = replace(ompl, planner=planner.split(":", 1)[1])
+        result = plan_ompl(costmap, rec.start, rec.goal, settings.vehicle, ompl)
+    if not rec.notes:
+        return result
+    ex, ey, et = rec.escape
+    if ex.size:  # the escape move, then the plan from where it ends
+        x, y, theta = (np.concatenate([e[:-1], r]) for e, r in ((ex, result.x), (ey, result.y), (et, result.theta)))
+        result = replace(result, x=x, y=y, theta=theta, length=path_length(x, y))
+    return replace(result, note="; ".join(rec.notes))

@@ -98,11 +98,13 @@ class ScanMapping:
             return True
 
     def footprints(self, scanner: str, header: Header, pose: Pose, *, reach: float = math.inf) -> list[Footprint]:
-        """Where the robots followed stood when ``scanner``'s scan with ``header`` was taken (``pose``: its own);
-        robots farther than ``reach`` (the scan's range) + :data:`BEYOND` from it are left out: the scan cannot
-        have seen them, and their own scans clear where they stand."""
+        """Where the other robots followed stood when ``scanner``'s scan with ``header`` was taken (``pose``: the
+        scanner's); robots farther than ``reach`` (the scan's range) + :data:`BEYOND` from it are left out: the scan
+        cannot have seen them, and their own scans clear where they stand. The scanner is not among them: no
+        LIDAR sees its own robot, and its disk (radius only, no margin: a wall beside it stays) is marked free
+        with each of its scans."""
         x, y = float(pose.position[0]), float(pose.position[1])
-        out = [Footprint(x, y, self._radius(scanner))]
+        out = []
         for robot in self.poses.robots() - {scanner}:
             radius = self._radius(robot)
             for p in self.poses.during(robot, header):

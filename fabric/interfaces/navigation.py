@@ -73,7 +73,8 @@ class PlanRequest:
 
 @dataclass(frozen=True, slots=True)
 class PlanReply:
-    """The planned path (also published on the robot's path key) and how it was obtained."""
+    """The planned path (also published on the robot's path key) and how it was obtained; ``note``: what the
+    planner did to a start or goal near an obstacle (an escape move first, a goal moved), "" when nothing."""
 
     path: Path
     robot: str
@@ -83,6 +84,7 @@ class PlanReply:
     expansions: int = 0
     map: str = "map"
     header: Header = field(default_factory=new_header)
+    note: str = ""
 
     SPEC: ClassVar[dict] = {
         "path": Msg(Path),
@@ -93,7 +95,9 @@ class PlanReply:
         "expansions": I(lo=0),
         "map": S(),
         "header": HEADER,
+        "note": S(),
     }
+    OPTIONAL_TAIL: ClassVar[int] = 1  # note: added later, left off the wire when empty
 
 
 @dataclass(frozen=True, slots=True)

@@ -130,7 +130,8 @@ class BasePanel:
         if path is not self.page.FAILED:
             self.path = path
             length = float(np.sum(np.hypot(np.diff(path.x), np.diff(path.y)))) if len(path) > 1 else 0.0
-            self.page.say(f"plan ({planner}): {len(path)} poses, {length:.2f} m")
+            note = f" ({self.base.plan_note})" if self.base.plan_note else ""
+            self.page.say(f"plan ({planner}): {len(path)} poses, {length:.2f} m{note}")
 
     async def _follow(self) -> None:
         if self.path is None:

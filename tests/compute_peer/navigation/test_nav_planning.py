@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -20,6 +21,7 @@ from compute_peer.navigation import (
 from compute_peer.navigation.costmap import densify
 from compute_peer.navigation.dubins import dubins_paths
 from compute_peer.navigation.grid import UNKNOWN, dilate, disk_offsets, make_grid
+from compute_peer.navigation.recovery import RecoverySettings
 from compute_peer.navigation.scenes import office
 from navscenes import scene_clearance
 
@@ -124,8 +126,9 @@ def test_plan_on_a_grid_builds_the_costmap(scene):
     ],
 )
 def test_bad_endpoints_are_refused_with_a_reason(costmap, planner, start, goal, match):
+    strict = replace(settings(False), recovery=RecoverySettings(escape=0.0, goal_tolerance=0.0))  # no recovery
     with pytest.raises(NavigationError, match=match):
-        plan_path(costmap, start, goal, planner=planner, settings=settings(False))
+        plan_path(costmap, start, goal, planner=planner, settings=strict)
 
 
 @pytest.mark.parametrize("planner", ["hybrid_astar", "ompl"])

@@ -245,11 +245,12 @@ def test_sensor_mounting_and_radius_come_from_the_world_description(connect):
         assert (hits & dilate(truth, 1)).sum() == hits.sum()  # every hit on a true wall: the offset was applied
         call(user, "map", "map", MapRequest("set", grid=scene.rasterize(0.05)))
         plan = call(user, "plan", "rover", PlanRequest("rover", goal=[2.0, 8.5, math.pi / 2], start=[2.0, 2.0, math.pi / 2]))
-        # radius 0.4 from the description: 0.45 m from the wall cells at y = 9.8..10 is too close
+        # radius 0.4 from the description: 0.45 m from the wall cells at y = 9.8..10 is too close, so the goal is
+        # moved to where a robot of that radius fits, and the reply says so (issue 44)
         assert plan.length > 6.0
-        assert "within the robot radius" in refused(
-            user, "plan", "rover", PlanRequest("rover", goal=[2.0, 9.4, math.pi / 2], start=[2.0, 2.0, math.pi / 2])
-        )
+        moved = call(user, "plan", "rover", PlanRequest("rover", goal=[2.0, 9.4, math.pi / 2], start=[2.0, 2.0, math.pi / 2]))
+        assert "goal moved" in moved.note and "within the robot radius (0.40 m)" in moved.note
+        assert 9.8 - moved.path.y[-1] > 0.4 + 0.05
 
 
 def test_a_key_of_no_layout_on_a_robots_keys_is_counted_never_a_traceback(connect, caplog):
