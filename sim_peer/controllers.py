@@ -175,6 +175,7 @@ class BaseController:
         self.wheels = np.zeros(2)  # left, right wheel angles (rad)
         self.wheel_speeds = np.zeros(2)
         self.follower = None  # anything with step(x, y, yaw, v, dt) -> (v, omega, done)
+        self.speed_cap = math.inf  # m/s a path follower may drive at: set by the base's way guard (sim_peer.way_guard)
         self.paths_done = 0  # paths followed to their end (not stopped or replaced)
 
     def twist(self, v: float, omega: float) -> Clamp | None:
@@ -249,6 +250,7 @@ class BaseController:
                 if self.on_news is not None:
                     self.on_news(EventKind.PATH_DONE)
                 v_d = w_d = 0.0
+            v_d = max(-self.speed_cap, min(self.speed_cap, v_d))  # something in its way: slow, or wait
             self.v_cmd, self.omega_cmd = v_d, w_d
         elif self.twist_timeout is not None and (self.v_cmd or self.omega_cmd):
             self._since_twist += dt

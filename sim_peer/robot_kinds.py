@@ -20,6 +20,7 @@ from fabric.interfaces import BaseInfo, EventKind, JointState, Pose, RobotInfo, 
 from sim_peer.bumper import Bumper
 from sim_peer.controllers import ArmController, BaseController, Clamp, CommandRejected
 from sim_peer.pure_pursuit import PurePursuit
+from sim_peer.way_guard import WayGuard
 from sim_peer.robot import Build, CommandHandler, Mount, Note, Physics, SimRobot, Stream, check_hooks
 from sim_peer.sensors import Lidar, Sensor, Ultrasonic
 
@@ -203,7 +204,8 @@ class MobileRobot(_Driven):
         )
         self.sonar = Ultrasonic(model, desc.ultrasonic, self.body_id, mount.rng) if desc.ultrasonic else None
         self.bumper = Bumper(self, float(model.opt.timestep)) if mount.bumper else None
-        self.sensors: tuple[Sensor, ...] = tuple(s for s in (self.lidar, self.sonar, self.bumper) if s is not None)
+        self.guard = WayGuard(self, float(model.opt.timestep)) if self.lidar is not None else None  # stops before robots in its way
+        self.sensors: tuple[Sensor, ...] = tuple(s for s in (self.lidar, self.sonar, self.bumper, self.guard) if s is not None)
         checked = [s for s in self.sensors if type(s).after_step is not Sensor.after_step]
         self._checks = tuple((s.after_step, s.every) for s in checked)
         self._check_every = math.gcd(*(s.every for s in checked)) if checked else 0  # steps between sensor checks

@@ -40,6 +40,9 @@ class EventKind(enum.StrEnum):
     stopped: a base brakes within its limits, an arm holds where it is; ``reason`` says how, ``user`` names her."""
     COLLISION = "collision"
     """The bumper stopped a base before an obstacle."""
+    OBSTACLE_STOP = "obstacle_stop"
+    """A base following a path and what its LIDAR sees in its way (sim_peer.way_guard): ``reason`` waiting (it
+    stopped short of it), resumed (the way cleared), blocked (it stayed closed: the path is dropped, plan again)."""
     MOVE_REFUSED = "move_refused"
     """A sim refused a step of a move (on ``event/move``): asked on a key every login may ask, no robot handed
     out in that move, a type not installed here...; ``reason`` says which, ``user`` names the login asking."""

@@ -1,0 +1,160 @@
+"""Bases that meet do not collide: a base following a path slows and stops before what its LIDAR sees in its way.
+
+A path is planned on a map, and maps hold the world, not the robots in it (docs/navigation.md): another base, or
+anything new, may stand on it. While a base follows a path, every :data:`GUARD_PERIOD` of sim time its
+:class:`WayGuard` reads the LIDAR and finds the **gap**: how far along the path the base can go before its disk
+(radius less :data:`SLACK`) would touch a LIDAR hit (:func:`way_gap`). The follower's speed is then capped so that
+the base can brake within the gap less :data:`WAY_MARGIN` at half its deceleration (:func:`way_cap`,
+v = sqrt(a d)); a base whose cap
+reaches zero waits, says so (``Event(kind=obstacle_stop, reason="waiting")``), goes on when the way clears
+(``resumed``), or, after :data:`BLOCKED_AFTER` seconds, drops the path and reports ``blocked`` so that its user
+can plan again (:func:`decide`, pure: time passed in). Two bases driving at each other both stop, apart.
+
+The LIDAR looks ahead (the Reeman's: 135 degrees): a base driving backwards is guarded by its bumper only.
+Hits on static walls never stop a base on a planned path: the planner keeps its paths a radius from the map's
+obstacles, and the check uses the radius less :data:`SLACK` (the planner's cells are 5 cm).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import mujoco
+import numpy as np
+
+from fabric.interfaces import EventKind
+from sim_peer.robot import Note, Physics
+from sim_peer.sensors import Sensor
+
+if TYPE_CHECKING:
+    from sim_peer.robot_kinds import MobileRobot
+
+__all__ = ["BLOCKED_AFTER", "GUARD_PERIOD", "SLACK", "WAY_MARGIN", "WayGuard", "WayState", "decide", "way_cap", "way_gap"]
+
+GUARD_PERIOD = 0.05
+"""Seconds of sim time between two looks (the LIDAR's own stream runs at 10-20 Hz)."""
+WAY_MARGIN = 0.15
+"""Metres a base keeps between its disk and what is in its way when it stops."""
+RESUME = 0.05
+"""Metres beyond the margin the way must clear before a waiting base goes on (no stutter at the edge)."""
+BLOCKED_AFTER = 10.0
+"""Seconds of sim time a base waits before it drops its path and reports ``blocked``."""
+SLACK = 0.05
+"""Metres taken off the radius in the check: the planner keeps paths a radius from its cells' centres, and a wall's
+face may lie up to half a cell nearer."""
+LOOK = 2.0
+"""Metres of path ahead that are checked (more than the braking distance at 1 m/s plus the margin)."""
+
+
+def way_gap(path: np.ndarray, hits: np.ndarray, radius: float) -> float:
+    """Arc length along ``path`` ((n, 2), from where the base is) before a disk of ``radius`` about it would hold
+    one of ``hits`` ((m, 2)); ``inf`` when none does. Hits within the disk where the base stands are left out: it
+    stands there already (a start that escapes from beside a wall), and a touch is the bumper's business."""
+    if path.shape[0] < 2 or hits.shape[0] == 0:
+        return math.inf
+    r2 = radius * radius
+    hits = hits[((hits - path[0]) ** 2).sum(axis=1) > r2]
+    if hits.shape[0] == 0:
+        return math.inf
+    d2 = ((path[:, None, :] - hits[None, :, :]) ** 2).sum(axis=2)
+    touching = np.flatnonzero((d2 <= r2).any(axis=1))
+    if touching.size == 0:
+        return math.inf
+    first = int(touching[0])  # >= 1: the disk at path[0] holds no hit
+    return float(np.hypot(np.diff(path[:first, 0]), np.diff(path[:first, 1])).sum())  # to the last clear point
+
+
+def way_cap(gap: float, accel: float, margin: float = WAY_MARGIN) -> float:
+    """The speed from which a base braking at half its ``accel`` stops ``margin`` short of what is ``gap`` ahead.
+
+    Half: the controller brakes at its full limit, so a base that keeps to this cap stops within half the gap,
+    which leaves the other half to a base coming the other way (both see the same gap), and some to the
+    guard's period (the cap is a look :data:`GUARD_PERIOD` old)."""
+    if math.isinf(gap):
+        return math.inf
+    return math.sqrt(accel * max(gap - margin, 0.0))
+
+
+@dataclass(frozen=True, slots=True)
+class WayState:
+    """Since when (sim time) the base has waited for its way to clear; None while it moves."""
+
+    waiting_since: float | None = None
+
+
+def decide(state: WayState, now: float, gap: float, *, margin: float = WAY_MARGIN,
+           blocked_after: float = BLOCKED_AFTER) -> tuple[WayState, str]:
+    """The next state and what to say: "" (nothing new), "waiting" (the way closed: stopped), "resumed" (it
+    cleared), "blocked" (it stayed closed ``blocked_after`` s: drop the path)."""
+    if state.waiting_since is None:
+        if gap <= margin:
+            return WayState(now), "waiting"
+        return state, ""
+    if gap > margin + RESUME:
+        return WayState(None), "resumed"
+    if now - state.waiting_since >= blocked_after:
+        return WayState(None), "blocked"
+    return state, ""
+
+
+_WORDS = {
+    "waiting": "stopped before something in its way; goes on when it clears",
+    "resumed": "the way cleared: following the path again",
+    "blocked": "its way stayed blocked: the path is dropped (plan again)",
+}
+
+
+class WayGuard(Sensor):
+    """The guard of one mobile robot with a LIDAR: caps its path follower's speed (``BaseController.speed_cap``)."""
+
+    def __init__(self, robot: "MobileRobot", dt: float, *, margin: float = WAY_MARGIN, blocked_after: float = BLOCKED_AFTER) -> None:
+        self.robot = robot
+        self.every = max(1, int(round(GUARD_PERIOD / dt)))
+        self.margin = margin
+        self.blocked_after = blocked_after
+        self.radius = max(robot.desc.base.radius if robot.desc.base is not None else robot.desc.base_radius, 0.0) - SLACK
+        self.state = WayState()
+        self.gap = math.inf  # the last gap seen (for tests and the sim's state)
+
+    def _path_ahead(self, follower) -> np.ndarray:
+        """The base's position, then the follower's path points from its progress up to :data:`LOOK` along."""
+        c = self.robot.ctrl
+        i = follower.index
+        cum = follower.cumulative
+        end = int(np.searchsorted(cum, cum[i] + LOOK, side="right"))
+        return np.vstack([[c.x, c.y], follower.points[i + 1 : max(end, i + 2)]])
+
+    def _hits(self, physics: Physics) -> np.ndarray:
+        """The LIDAR's hits in the world frame, read now: positions first made current (a world of kinematic
+        robots leaves them to the next read, and the other bases have moved since)."""
+        lidar = self.robot.lidar
+        mujoco.mj_kinematics(physics.model, physics.data)
+        ranges = lidar.read(physics.data)
+        hit = ranges < lidar.spec.range_max - 1e-6
+        site = physics.data.site_xpos[lidar.site_id]
+        rot = physics.data.site_xmat[lidar.site_id].reshape(3, 3)
+        a = lidar.angles[hit]
+        local = np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)]) * ranges[hit, None]
+        return (site + local @ rot.T)[:, :2]
+
+    def after_step(self, physics: Physics) -> None:
+        c = self.robot.ctrl
+        follower = c.follower
+        if follower is None or not hasattr(follower, "points"):
+            c.speed_cap = math.inf
+            if self.state.waiting_since is not None:
+                self.state = WayState()
+            return
+        self.gap = way_gap(self._path_ahead(follower), self._hits(physics), self.radius)
+        c.speed_cap = way_cap(self.gap, c.spec.max_accel, self.margin)
+        self.state, news = decide(self.state, physics.time, self.gap, margin=self.margin, blocked_after=self.blocked_after)
+        if not news:
+            return
+        if news == "blocked":
+            c.brake()
+            c.speed_cap = math.inf
+        detail = f"{_WORDS[news]} (gap {self.gap:.2f} m)" if math.isfinite(self.gap) else _WORDS[news]
+        self.robot.note(Note(EventKind.OBSTACLE_STOP, news, "warning" if news != "resumed" else "info",
+                             {"t": physics.time, "detail": detail}, counter=f"way_{news}"))

@@ -1,0 +1,106 @@
+"""Bases that meet do not collide: the way guard's decision (pure) and two real bases driven at each other (issue 44)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from fabric.interfaces import EventKind
+from robots import SceneRobot
+from sim_peer.way_guard import BLOCKED_AFTER, RESUME, WAY_MARGIN, WayState, decide, way_cap, way_gap
+from sim_peer.world import SimWorld
+
+
+def _line(x0: float, x1: float, n: int = 41) -> np.ndarray:
+    return np.column_stack([np.linspace(x0, x1, n), np.zeros(n)])
+
+
+def test_the_gap_is_the_path_run_before_the_disk_touches_a_hit():
+    path = _line(0.0, 4.0)  # 0.1 m apart
+    assert way_gap(path, np.array([[2.0, 0.0]]), 0.25) == pytest.approx(1.7)  # the disk about 1.8 would hold it
+    assert way_gap(path, np.array([[2.0, 0.3]]), 0.25) == math.inf  # beside the path, clear of the disk
+    assert way_gap(path, np.array([[5.0, 0.0]]), 0.25) == math.inf  # beyond the path's end
+    assert way_gap(path, np.array([[0.1, 0.1]]), 0.25) == math.inf  # within the disk where it stands: the bumper's
+    assert way_gap(path, np.zeros((0, 2)), 0.25) == math.inf
+    turn = np.column_stack([np.cos(np.linspace(-math.pi / 2, 0, 30)), 1 + np.sin(np.linspace(-math.pi / 2, 0, 30))])
+    assert way_gap(turn, np.array([[1.0, 1.0]]), 0.2) < math.inf  # on the curve, not straight ahead
+    assert way_gap(turn, np.array([[1.6, 0.0]]), 0.2) == math.inf  # straight ahead, but the path turns away
+
+
+@settings(max_examples=100, deadline=None)
+@given(gap=st.floats(0.0, 5.0), accel=st.floats(0.1, 3.0))
+def test_the_cap_brakes_to_a_stop_the_margin_short(gap, accel):
+    v = way_cap(gap, accel)
+    assert v >= 0.0
+    assert v * v / accel <= max(gap - WAY_MARGIN, 0.0) + 1e-9  # braking at half its limit fits in what is left
+    assert way_cap(math.inf, accel) == math.inf
+
+
+@settings(max_examples=200, deadline=None)
+@given(gaps=st.lists(st.tuples(st.floats(0.01, 1.0), st.floats(0.0, 2.0)), min_size=1, max_size=60))
+def test_waiting_resuming_and_blocked(gaps):
+    state, now, said = WayState(), 0.0, []
+    for dt, gap in gaps:
+        now += dt
+        before = state
+        state, news = decide(state, now, gap)
+        said.append(news)
+        if news == "waiting":
+            assert before.waiting_since is None and gap <= WAY_MARGIN and state.waiting_since == now
+        elif news == "resumed":
+            assert before.waiting_since is not None and gap > WAY_MARGIN + RESUME and state.waiting_since is None
+        elif news == "blocked":
+            assert now - before.waiting_since >= BLOCKED_AFTER and state.waiting_since is None
+        else:
+            assert state == before  # nothing new: nothing changes
+            if before.waiting_since is None:
+                assert gap > WAY_MARGIN
+    # what is said alternates: a wait ends (resumed, blocked) before another begins
+    events = [n for n in said if n]
+    assert all((a == "waiting") != (b == "waiting") for a, b in zip(events, events[1:]))
+
+
+def test_two_bases_driven_at_each_other_stop_apart_and_say_so():
+    world = SimWorld("warehouse", [SceneRobot("reeman", "base2", (2.0, 0.0, 0.0, math.pi))], seed=1)
+    b1, b2 = world.robots["base1"], world.robots["base2"]
+    b1.path(np.linspace(0.0, 2.0, 41), np.zeros(41), np.zeros(41))  # each to where the other stands
+    b2.path(np.linspace(2.0, 0.0, 41), np.zeros(41), np.full(41, math.pi))
+    notes, closest = [], math.inf
+    for _ in range(int(4.0 / world.dt / 50)):  # 4 s of sim time
+        world.step(50)
+        notes += world.notes.take()
+        closest = min(closest, math.hypot(b1.ctrl.x - b2.ctrl.x, b1.ctrl.y - b2.ctrl.y))
+    assert [n.reason for _, n in notes if n.kind == EventKind.OBSTACLE_STOP].count("waiting") == 2  # each said so
+    assert not [n for _, n in notes if n.kind == EventKind.COLLISION]  # the bumper never had to
+    assert closest > 2 * 0.25  # their chassis never met
+    assert abs(b1.ctrl.v) < 1e-6 and abs(b2.ctrl.v) < 1e-6  # both wait, paths kept
+    assert b1.ctrl.follower is not None and b2.ctrl.follower is not None
+    # the way stays closed: after BLOCKED_AFTER both drop their paths and report blocked
+    for _ in range(int((BLOCKED_AFTER + 0.5) / world.dt / 50)):
+        world.step(50)
+        notes += world.notes.take()
+    assert [n.reason for _, n in notes if n.kind == EventKind.OBSTACLE_STOP].count("blocked") == 2
+    assert b1.ctrl.follower is None and b2.ctrl.follower is None
+
+
+def test_a_base_waits_for_a_base_crossing_its_way_and_goes_on():
+    world = SimWorld("warehouse", [SceneRobot("reeman", "base2", (1.2, 0.0, 0.0, math.pi / 2))], seed=1)
+    b1 = world.robots["base1"]
+    b1.path(np.linspace(0.0, 2.0, 41), np.zeros(41), np.zeros(41))
+    notes = []
+    for _ in range(int(2.0 / world.dt / 50)):
+        world.step(50)
+        notes += world.notes.take()
+    assert [n.reason for _, n in notes if n.kind == EventKind.OBSTACLE_STOP] == ["waiting"]
+    assert b1.ctrl.x < 1.2 - 0.5  # stopped short of base2
+    world.robots["base2"].twist(0.8, 0.0)  # base2 drives off the way
+    for _ in range(int(6.0 / world.dt / 50)):
+        world.step(50)
+        notes += world.notes.take()
+        if b1.ctrl.follower is None:
+            break
+    assert [n.reason for _, n in notes if n.kind == EventKind.OBSTACLE_STOP] == ["waiting", "resumed"]
+    assert math.hypot(b1.ctrl.x - 2.0, b1.ctrl.y) < 0.1  # and reached the end of its path
