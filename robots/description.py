@@ -40,6 +40,7 @@ class BaseSpec:
     max_accel: float  # m/s^2
     max_alpha: float  # rad/s^2
     height: float = 0.0
+    reverse: bool = False  # it may drive backwards along a path: plans for it may reverse (docs/navigation.md)
 
 
 @dataclass(frozen=True, slots=True)
@@ -218,6 +219,13 @@ def _num(d: dict, key: str, where: str, default: float | None = None) -> float:
     return float(v)
 
 
+def _flag(d: dict, key: str, where: str) -> bool:
+    v = d.get(key, False)
+    if not isinstance(v, bool):
+        raise DescriptionError(f"{where}: {key} must be true or false, got {v!r}")
+    return v
+
+
 def _find_robot(name: str) -> Path:
     p = Path(name)
     if p.suffix == ".toml" and p.is_file():
@@ -323,6 +331,7 @@ def _base(data: dict, where: str) -> BaseSpec:
         max_accel=_num(b, "max_accel", w),
         max_alpha=_num(b, "max_alpha", w),
         height=_num(b, "height", w, 0.0),
+        reverse=_flag(b, "reverse", w),
     )
     if min(base.radius, base.wheel_separation, base.wheel_radius, base.max_speed, base.max_omega, base.max_accel, base.max_alpha) <= 0:
         raise DescriptionError(f"{w}: sizes and limits must be positive")

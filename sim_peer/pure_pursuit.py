@@ -1,6 +1,8 @@
 """Pure pursuit along a path, with in-place turns at cusps and where the path bends back, and a final heading.
 
-The robot faces its direction of travel (as the real Reeman does): when the
+A stretch between cusps whose headings point against its direction of travel (a reversing plan) is driven
+backwards: the same law for the base turned around. Otherwise the robot faces its direction of travel (as the
+real Reeman does): when the
 lookahead point is far off to the side it turns on the spot first, then drives.
 The path is split at its cusps (vertices where the direction changes by more
 than ``turn_in_place``); the base slows down to stop at each cusp
@@ -42,7 +44,8 @@ class PurePursuit:
             raise CommandRejected("not_finite", "the path contains NaN or infinity")
         if pts.shape[0] > 100_000:
             raise CommandRejected("path_too_long", f"the path has {pts.shape[0]} points (at most 100000)")
-        self.final_yaw = float(theta[-1]) if theta is not None and len(theta) == len(pts) else None
+        headings = np.asarray(theta, dtype=np.float64) if theta is not None and len(theta) == len(pts) else None
+        self.final_yaw = float(headings[-1]) if headings is not None else None
         keep = np.concatenate([[True], np.linalg.norm(np.diff(pts, axis=0), axis=1) > 1e-9])
         pts = pts[keep]  # repeated points have no direction
         self.points = pts
@@ -52,6 +55,13 @@ class PurePursuit:
         bend = np.abs(wrap_angle(np.diff(heading)))
         cusps = [int(i) + 1 for i in np.flatnonzero(bend > turn_in_place)]
         self.stops = [*cusps, len(pts) - 1]  # vertices to stop at: cusps, then the end
+        # a stretch is driven backwards when the path's headings point against its direction of travel (a
+        # reversing plan: the Path message has no direction field, the headings say it)
+        self.backwards = [False] * len(self.stops)
+        if headings is not None and len(pts) > 1:
+            facing = np.cos(heading - headings[keep][1:])  # each segment's travel against the heading at its end
+            starts = [0, *self.stops[:-1]]
+            self.backwards = [bool(facing[a:b].sum() < 0) if b > a else False for a, b in zip(starts, self.stops)]
         self.stretch = 0
         self.max_speed, self.max_omega, self.max_accel = max_speed, max_omega, max_accel
         self.lookahead = lookahead
@@ -86,6 +96,14 @@ class PurePursuit:
     def step(self, x: float, y: float, yaw: float, v: float, dt: float) -> tuple[float, float, bool]:
         if self.done:
             return 0.0, 0.0, True
+        if not self.arrived and self.backwards[self.stretch]:
+            # backwards: the same law for a base facing the other way (its heading turned around, its speed
+            # negated), whose twist is the real base's with the speed negated back
+            v_d, w_d, done = self._drive(x, y, wrap_angle(yaw + math.pi), -v)
+            return -v_d, w_d, done
+        return self._drive(x, y, yaw, v)
+
+    def _drive(self, x: float, y: float, yaw: float, v: float) -> tuple[float, float, bool]:
         p = np.array([x, y])
         while not self.arrived:
             stop = self.stops[self.stretch]
@@ -96,6 +114,8 @@ class PurePursuit:
                     break
                 self.stretch += 1  # a cusp: on to the next stretch (the base turns on the spot towards it)
                 self.index = stop
+                if self.backwards[self.stretch] != self.backwards[self.stretch - 1]:
+                    return 0.0, 0.0, False  # it runs the other way: the next step drives it in its own frame
                 continue
             to_stop = self.cumulative[stop] - self.cumulative[self.index] + float(np.linalg.norm(self.points[self.index] - p))
             # Lookahead: first point ahead of the progress index at least `lookahead` away, not past the stop.

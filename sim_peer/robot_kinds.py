@@ -239,6 +239,7 @@ class MobileRobot(_Driven):
         info = replace(super().describe(), base=BaseInfo(
             radius=b.radius, height=b.height, wheel_separation=b.wheel_separation, wheel_radius=b.wheel_radius,
             max_speed=b.max_speed, max_omega=b.max_omega, max_accel=b.max_accel, max_alpha=b.max_alpha,
+            reverse=int(b.reverse),
         ))
         for s in self.sensors:
             info = s.describe(info)

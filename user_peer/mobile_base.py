@@ -104,16 +104,17 @@ class Base(Robot):
 
     def plan_to(
         self, x: float | None = None, y: float | None = None, theta: float = 0.0, *, planner: str = "hybrid_astar",
-        map_name: str = "map", timeout: float | None = None,
+        map_name: str = "map", timeout: float | None = None, direction: str = "default",
     ) -> Path:
         """A collision-free path from the robot's pose to (x, y, theta), or to the goal object without x, y, on
         ``map_name`` (default: the class's map). A start or goal near an obstacle is recovered from, and
-        :attr:`plan_note` says how."""
+        :attr:`plan_note` says how. ``direction``: "default" (the base's description says whether it may reverse),
+        "forward", or "both" (the path may drive backwards; the sim's follower does)."""
         goal = None if x is None or y is None else (float(x), float(y), float(theta))
         try:
             reply = services.plan_reply(
                 self.world.fabric, self.id, goal, planner=planner, map_name=map_name, timeout=timeout or max(self.world.timeout, 15.0),
-                peer=self.world.compute_route.navigation_peer(), user=self.world.user,
+                peer=self.world.compute_route.navigation_peer(), user=self.world.user, direction=direction,
             )
             self.plan_note = reply.note
             return reply.path

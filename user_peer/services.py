@@ -111,9 +111,10 @@ def plan(
 
 def plan_reply(
     fab: Fabric, robot: str, goal: tuple[float, float, float] | None, *, planner: str = "hybrid_astar", map_name: str = "map", timeout: float = 10.0,
-    peer: str | None = None, user: str | None = None,
+    peer: str | None = None, user: str | None = None, direction: str = "default",
 ) -> PlanReply:
     """:func:`plan`'s whole reply: the path, and ``note``, what the planner did to a start or goal near an
-    obstacle (an escape move first, a goal moved; docs/navigation.md)."""
-    req = PlanRequest(robot, goal=np.asarray(goal if goal is not None else (), dtype=float), planner=planner, map=map_name)
+    obstacle (an escape move first, a goal moved; docs/navigation.md). ``direction``: "default", "forward", "both"."""
+    req = PlanRequest(robot, goal=np.asarray(goal if goal is not None else (), dtype=float), planner=planner, map=map_name,
+                      direction=direction)
     return fab.rpc.call(_service_key(fab, "plan", robot, peer, user), req, timeout=timeout, expected=PlanReply)

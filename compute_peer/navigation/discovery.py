@@ -1,6 +1,7 @@
 """What the navigation service learns about the world's mobile robots from the sim peers' ``srv/world``.
 
-Where each robot's LIDAR sits on it, (x, y, yaw) in the robot frame, and the robot's radius. A scan folded in
+Where each robot's LIDAR sits on it, (x, y, yaw) in the robot frame, the robot's radius, and whether it may drive
+backwards along a path (its plans' default direction). A scan folded in
 from the wrong mounting blurs walls (the Reeman's LIDAR is 0.22 m ahead of its axle), so a new robot's scans wait
 while its description is looked up; the lookup runs on a thread of its own, at most once a second, because it is
 a query and scans arrive on Zenoh's callback threads. Once a sim has answered, the robots it described are the
@@ -53,6 +54,7 @@ class RobotDescriptions:
         self.sensor_offset_all = sensor_offset
         self._offsets: dict[str, Offset] = dict(sensor_offsets or {})
         self._radii: dict[str, float] = {}
+        self._reverse: dict[str, bool] = {}
         self._discover = bool(discover)
         self._clock = clock or MonotonicClock()
         self._first_seen: dict[str, float] = {}
@@ -76,6 +78,11 @@ class RobotDescriptions:
         """The robot's radius from its description, else ``default``."""
         with self._lock:
             return self._radii.get(robot, default)
+
+    def reverse(self, robot: str, default: bool) -> bool:
+        """Whether the robot's description lets it drive backwards along a path (``[base] reverse``), else ``default``."""
+        with self._lock:
+            return self._reverse.get(robot, default)
 
     def learnt_offset(self, robot: str) -> Offset | None:
         """The LIDAR mounting given or learnt for ``robot`` alone (None: none), without starting a lookup."""
@@ -115,5 +122,7 @@ class RobotDescriptions:
                 radius = float(r.base_radius or (r.base.radius if r.base is not None else 0.0))
                 if radius > 0:
                     self._radii[r.id] = radius
+                if r.base is not None:
+                    self._reverse[r.id] = bool(r.base.reverse)
             self._described = known | set(self._followed())  # robots already followed stay
         return len(described)

@@ -94,7 +94,7 @@ class PlanService:
         vehicle = VehicleModel(
             robot_radius=req.robot_radius or self.descriptions.radius(robot, v.robot_radius),
             turning_radius=req.turning_radius or v.turning_radius,
-            allow_reverse=v.allow_reverse if req.direction == "default" else req.direction == "both",
+            allow_reverse=self.descriptions.reverse(robot, v.allow_reverse) if req.direction == "default" else req.direction == "both",
         )
         own = req.start.shape[0] != 3  # from where the robot stands
         costmap = self.costmap(req.map, vehicle.robot_radius,

@@ -24,7 +24,7 @@ MAX_SONARS = 64
 @dataclass(frozen=True, slots=True)
 class BaseInfo:
     """A differential-drive base: footprint ``radius`` and ``height``, wheels, and its speed and acceleration limits
-    (m/s, rad/s, m/s², rad/s²)."""
+    (m/s, rad/s, m/s², rad/s²); ``reverse`` 1 when it may drive backwards along a path (plans for it may reverse)."""
 
     radius: float
     wheel_separation: float
@@ -34,7 +34,9 @@ class BaseInfo:
     max_accel: float
     max_alpha: float
     height: float = 0.0
+    reverse: int = 0
 
+    OPTIONAL_TAIL: ClassVar[int] = 1  # reverse: added later
     SPEC: ClassVar[dict] = {
         "radius": F(lo=0.0),
         "wheel_separation": F(lo=0.0),
@@ -44,6 +46,7 @@ class BaseInfo:
         "max_accel": F(lo=0.0),
         "max_alpha": F(lo=0.0),
         "height": F(lo=0.0),
+        "reverse": I(lo=0, hi=1),
     }
 
 

@@ -55,6 +55,7 @@ class BasePanel:
                 stop = ui.button("Stop", color="negative", on_click=self._stop).props('aria-label="Stop base"')
                 build = ui.button("Build map", on_click=self._build_map)
                 self.planner = ui.radio(list(PLANNERS), value="Hybrid A*").props("inline")
+                self.reverse = ui.checkbox("may reverse", value=False)  # the plan may drive backwards (issue 44)
                 plan = ui.button("Plan", on_click=self._plan)
                 follow = ui.button("Follow", on_click=self._follow)
             self.goal_label = ui.label("goal: click on the map")
@@ -126,6 +127,7 @@ class BasePanel:
         planner = PLANNERS[self.planner.value]
         # on her own map: a student's Build map makes {user}.map (the class's map is the staff's)
         path = await self.page.call(f"plan ({planner})", self.base.plan_to, *self.goal, planner=planner,
+                                    direction="both" if self.reverse.value else "default",
                                     map_name=keys.user_map("map", self.page.world.user))
         if path is not self.page.FAILED:
             self.path = path
