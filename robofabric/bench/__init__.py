@@ -81,6 +81,8 @@ BENCHMARKS: tuple[Benchmark, ...] = (
               full=("--rounds", "3"), quick=("--rounds", "1", "--duration", "1", "--queries", "50")),
     Benchmark("class", "klass", "a class of N students (processes), each owning an arm and a base: nothing lost, move times, sim pace",
               full=("--students", "1,4,8,16,32", "--seconds", "40"), quick=("--students", "1,2", "--seconds", "8")),
+    Benchmark("class-nav", "class_nav", "N students do Test B at once in the warehouse: reached, plan times, stops, collisions, robot cells in maps",
+              full=("--bases", "4"), quick=("--bases", "2")),
     Benchmark("declflood", "declflood", "a login declaring N subscribers and closing: router stall and memory, owners keep their robots",
               full=("--counts", "6000,20000"), quick=("--counts", "2000")),
     Benchmark("mapflood", "mapflood", "a student building maps under new names: what the compute peer keeps, refuses and weighs",

@@ -1,0 +1,229 @@
+"""``robofabric bench class-nav``: N students do the paper's Test B at once, in one warehouse, each a process.
+
+A fresh world: a router, one ``robofabric sim --scene warehouse --no-scene-robots`` with N Reeman bases on a row
+across the hall (y = 0, 1 to 2 m apart), a compute peer, and N student processes (``python -m
+robofabric.bench.class_nav student ...``). Each student joins through the user API, requests ``baseI``, turns it
+on the spot a little more than once around (the other bases in view of its LIDAR, and it in theirs), builds her
+own map, plans on it to a goal across the room (an aisle behind the shelves, through the gap between two:
+:func:`goal_of`),
+follows the path, plans again when her base reports ``blocked``, and writes what she saw to a JSON file.
+
+Per student: whether the base ended within 0.1 m of the goal, each plan's round trip, the base's stops for
+something in its way (``obstacle_stop`` / ``waiting`` events), its collisions (bumper ``collision`` events), and
+the cells of her map within a robot's radius of any base's centre at the time of the build that are occupied
+(robots kept as walls; 0 when maps hold the world, not the robots in it: docs/navigation.md).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import tempfile
+import time
+import uuid
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
+
+from robofabric.bench.common import TableOut, append, end_process, machine, pct
+
+STUDENT = [sys.executable, "-m", "robofabric.bench.class_nav", "student"]
+RADIUS = 0.30  # the Reeman's, about its turn point
+REACHED = 0.1  # m from the goal that counts as reached
+ATTEMPTS = 3  # plans a student makes before she gives up
+
+
+def placements(n: int) -> list[tuple[float, float, float]]:
+    """Where the N bases start: a row across the hall at y = 0 (x within [-3.5, 3.5]), facing +x."""
+    if n == 1:
+        return [(0.0, 0.0, 0.0)]
+    span = min(7.0, 2.0 * (n - 1))
+    return [(-span / 2 + span * i / (n - 1), 0.0, 0.0) for i in range(n)]
+
+
+def goal_of(index: int, start: tuple[float, float, float], n: int) -> tuple[float, float, float]:
+    """A goal across the room, in an aisle behind the shelves, reached through the gap between two of them: x
+    mirrored and shrunk to a quarter (the paths cross in the gap, where bases meet), y in two rows 0.6 m apart
+    (goals 0.78 m apart or more). Up to 4 bases all go north; with more, odd students go south."""
+    south = n > 4 and index % 2 == 1
+    rank = index // 2 if n > 4 else index
+    y = 4.0 if rank % 2 == 0 else 3.4
+    return (-start[0] / 4.0, -y if south else y, -math.pi / 2 if south else math.pi / 2)
+
+
+# ---------------------------------------------------------------------- a student (child process)
+
+def student(world: str, endpoint: str, index: int, n: int, out: str) -> None:
+    """Join, own baseI, map by turning, build her map, plan across the room, follow; results to ``out`` (JSON)."""
+    from compute_peer.navigation.robot_cells import Footprint, robot_cells
+    from fabric import keys
+    from fabric.interfaces import Pose
+    from user_peer.api import connect
+
+    start = placements(n)[index]
+    goal = goal_of(index, start, n)
+    res: dict[str, Any] = {"index": index, "plans": [], "reached": False, "final": None, "stops": 0, "collisions": 0,
+                           "blocked": 0, "robot_cells": None, "errors": [], "notes": []}
+    try:
+        with connect(world, endpoint, user=f"s{index:02d}", timeout=10.0, join_timeout=120.0) as w:
+            poses: dict[str, Any] = {}
+            w.fabric.subscribe(keys.robot_stream_all(w.name, "pose"), lambda k, m: poses.__setitem__(keys.parse(k).subject, m),
+                               expected=Pose)
+            base = w.robot(f"base{index}")
+            base.request(timeout=30.0)
+            mark = w.event_mark()
+            base.twist(0.0, 1.2)  # a little more than once around at 1.2 rad/s
+            time.sleep(2 * math.pi / 1.2 + 1.5)
+            base.twist(0.0, 0.0)
+            time.sleep(0.5)
+            built = base.build_map()
+            at_build = {rid: (float(p.position[0]), float(p.position[1])) for rid, p in poses.items()}
+            res["robot_cells"] = robot_cells(built, [Footprint(x, y, RADIUS) for x, y in at_build.values()], margin=0.0)
+            res["robots_seen"] = len(at_build)
+            my_map = keys.user_map("map", w.user)
+            deadline = time.monotonic() + 150.0
+            for _ in range(ATTEMPTS):
+                t = time.perf_counter()
+                try:
+                    path = base.plan_to(*goal, map_name=my_map)
+                except Exception as exc:  # refused: counted, and she tries again after a moment
+                    res["errors"].append(f"plan: {exc}"[:300])
+                    time.sleep(2.0)
+                    continue
+                res["plans"].append(time.perf_counter() - t)
+                if base.plan_note:
+                    res["notes"].append(base.plan_note[:200])
+                since = w.event_mark()
+                base.follow(path, wait=False)
+                outcome = ""
+                while time.monotonic() < deadline and not outcome:
+                    time.sleep(0.1)
+                    p = base.pose
+                    if p is not None and math.hypot(p.position[0] - goal[0], p.position[1] - goal[1]) < REACHED \
+                            and math.hypot(p.linear[0], p.linear[1]) < 0.02 and abs(p.angular[2]) < 0.05:
+                        outcome = "reached"
+                    elif any(e.kind == "obstacle_stop" and e.reason == "blocked" and e.object == base.id
+                             for e in w.events[since:]):
+                        outcome = "blocked"
+                if outcome == "reached":
+                    break
+                res["blocked"] += outcome == "blocked"
+                if not outcome:
+                    break  # out of time
+            p = base.pose
+            if p is not None:
+                d = math.hypot(p.position[0] - goal[0], p.position[1] - goal[1])
+                res["final"], res["reached"] = d, d < REACHED
+            mine = [e for e in w.events[mark:] if e.object == base.id]
+            res["stops"] = sum(e.kind == "obstacle_stop" and e.reason == "waiting" for e in mine)
+            res["collisions"] = sum(e.kind == "collision" for e in mine)
+            base.stop()
+    except Exception as exc:
+        res["errors"].append(f"{type(exc).__name__}: {exc}"[:300])
+    Path(out).write_text(json.dumps(res))
+
+
+# ---------------------------------------------------------------------- one class
+
+def run_one(n: int, tmp: Path) -> dict[str, Any]:
+    """A class of ``n`` students on a fresh world; the row's figures."""
+    from robofabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
+    from fabric import keys
+    from fabric.interfaces import Pose
+
+    world = f"cnav{uuid.uuid4().hex[:6]}"
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    logs = tmp / f"n{n}"
+    logs.mkdir(parents=True, exist_ok=True)
+    with ProcessGroup(logs) as procs:
+        router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
+        wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
+        robots = [x for i, (px, py, yaw) in enumerate(placements(n))
+                  for x in ("--robot", f"reeman:base{i}@{px:g},{py:g},{math.degrees(yaw):g}")]
+        sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *robots, "--world", world,
+                                         "--connect", ep, "--id", "sim"), name="sim")
+        compute = procs.start(robofabric_cmd("compute", "--world", world, "--connect", ep, "--id", "compute"), name="compute")
+        with client(world, port, kind="tool", peer_id="probe") as fab:
+            seen: set[str] = set()
+            fab.subscribe(keys.robot_stream_all(world, "pose"), lambda k, m: seen.add(keys.parse(k).subject), expected=Pose)
+            wait_until(lambda: len(seen) >= n, timeout=180, what="every base's pose", seen=lambda: procs.output(sim)[-1500:])
+            outs = [logs / f"s{i}.json" for i in range(n)]
+            t0 = time.monotonic()
+            students = [procs.start([*STUDENT, world, ep, str(i), str(n), str(out)], name=f"s{i}") for i, out in enumerate(outs)]
+            wait_until(lambda: all(p.poll() is not None for p in students), timeout=400, interval=0.5, what="every student done",
+                       seen=lambda: [procs.output(p)[-300:] for p in students if p.poll() is None][:2])
+            seconds = time.monotonic() - t0
+        for p in (compute, sim, router):
+            end_process(p)
+        results = [json.loads(o.read_text()) if o.exists() else {"plans": [], "reached": False, "stops": 0, "collisions": 0,
+                                                                 "blocked": 0, "robot_cells": None, "errors": ["no result"],
+                                                                 "final": None, "notes": []} for o in outs]
+    plans = [t for r in results for t in r["plans"]]
+    cells = [r["robot_cells"] for r in results]
+    return {
+        "n": n, "reached": sum(bool(r["reached"]) for r in results), "plans": len(plans),
+        "plan_p50": pct(plans, 50), "plan_p99": pct(plans, 99), "stops": sum(r["stops"] for r in results),
+        "blocked": sum(r["blocked"] for r in results), "collisions": sum(r["collisions"] for r in results),
+        "cells": cells, "finals": [r["final"] for r in results], "seconds": seconds,
+        "errors": [e for r in results for e in r["errors"]][:6], "notes": [x for r in results for x in r["notes"]][:4],
+    }
+
+
+def header() -> list[str]:
+    return ["| bases | reached within 0.1 m | plans, time p50 / p99 (s) | stops for something in the way | blocked "
+            "| collisions (bumper) | robot cells in each map | final distance to goal (m) | wall time (s) |",
+            "|---|---|---|---|---|---|---|---|---|"]
+
+
+def row(r: dict[str, Any]) -> str:
+    finals = ", ".join("-" if f is None else f"{f:.3f}" for f in r["finals"])
+    cells = ", ".join("-" if c is None else str(c) for c in r["cells"])
+    return (f"| {r['n']} | {r['reached']}/{r['n']} | {r['plans']}, {r['plan_p50']:.2f} / {r['plan_p99']:.2f} | {r['stops']} | "
+            f"{r['blocked']} | {r['collisions']} | {cells} | {finals} | {r['seconds']:.0f} |")
+
+
+def command(
+    bases: Annotated[str, typer.Option("--bases", help="Comma-separated class sizes (each student: one base).")] = "4,8",
+    out: TableOut = None,
+    logs: Annotated[Optional[Path], typer.Option(help="Keep every process's output and the students' JSON here.")] = None,
+) -> None:
+    """N students (processes) do Test B at once in the warehouse: reached within 0.1 m, plan time p50/p99, stops for
+    something in the way, collisions, and the robot cells left in each student's map."""
+    from fabric.cli_common import UserError
+
+    try:
+        sizes = [int(x) for x in bases.split(",") if x.strip()]
+    except ValueError:
+        raise UserError(f"--bases {bases!r}: expected sizes like 4,8") from None
+    if not sizes or min(sizes) < 1 or max(sizes) > 8:
+        raise UserError("--bases: each size within 1..8 (a row across the warehouse holds 8)")
+    lines = [f"Command: `robofabric bench class-nav --bases {bases}`",
+             f"Machine: {machine()}; load average at start {os.getloadavg()[0]:.1f}", "", *header()]
+    print("\n".join(lines), flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in sizes:
+            r = run_one(n, logs or Path(tmp))
+            lines.append(row(r))
+            print(lines[-1], flush=True)
+            for e in r["errors"] + r["notes"]:
+                print(f"    {e}", flush=True)
+    lines.append(f"Load average at the end {os.getloadavg()[0]:.1f}.")
+    append(out, "\n".join(lines))
+
+
+def _main(argv: list[str]) -> None:
+    if argv and argv[0] == "student":
+        student(argv[1], argv[2], int(argv[3]), int(argv[4]), argv[5])
+    else:
+        raise SystemExit("usage: python -m robofabric.bench.class_nav student WORLD ENDPOINT INDEX N OUT.json")
+
+
+if __name__ == "__main__":
+    _main(sys.argv[1:])
+
+
+__all__ = ["command", "goal_of", "placements", "run_one", "student"]
