@@ -11,6 +11,7 @@ only ones followed (plus those already followed), so made-up ids on the robot ke
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from typing import TYPE_CHECKING, Callable, Iterable
 
@@ -25,6 +26,11 @@ if TYPE_CHECKING:
 log = logging.getLogger("robofabric.navigation")
 
 __all__ = ["RobotDescriptions"]
+
+UNANSWERED_S = 10.0
+"""Seconds a new robot's scans wait for the sims to answer ``srv/world`` before its LIDAR is taken to sit on its
+axle: a sim loaded enough to miss a lookup's 2 s answers a later one (4 students' class on 2 loaded cores missed
+22), and a scan folded in from the wrong mounting blurs walls, and other robots out of their footprints."""
 
 Offset = tuple[float, float, float]
 NO_OFFSET: Offset = (0.0, 0.0, 0.0)
@@ -59,6 +65,7 @@ class RobotDescriptions:
         self._clock = clock or MonotonicClock()
         self._first_seen: dict[str, float] = {}
         self._described: set[str] | None = None  # mobile robots of the world, once a sim described them
+        self._answered_at = -math.inf  # the clock time a lookup last got the sims' answer
         self._lookup = BackgroundLookup(self.discover, name="nav-discovery", clock=self._clock,
                                         on_error=lambda exc: log.debug("robot discovery failed: %s", exc))
         self._lock = threading.RLock()
@@ -100,9 +107,11 @@ class RobotDescriptions:
                 return NO_OFFSET
             now = self._clock.now()
             first = self._first_seen.setdefault(robot, now)
-            if self._lookup.ended >= first:  # asked after this robot appeared, and nobody described it
+            if self._answered_at >= first:  # the sims answered after this robot appeared, and none described it
                 return NO_OFFSET
-            self._lookup.start(1.0)
+            if self._lookup.ended >= first and now - first >= UNANSWERED_S:  # no sim answers srv/world at all
+                return NO_OFFSET
+            self._lookup.start(1.0)  # unanswered yet (a loaded sim answers late): its scans wait, it is asked again
             return None
 
     # ------------------------------------------------------------------ the lookup
@@ -114,6 +123,7 @@ class RobotDescriptions:
         except ServiceError:
             return 0
         with self._lock:
+            self._answered_at = self._clock.now()
             known = set(self._described or ())
             for r in described:
                 known.add(r.id)

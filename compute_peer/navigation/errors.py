@@ -10,3 +10,8 @@ from __future__ import annotations
 
 class NavigationError(ValueError):
     """A map or plan request cannot be satisfied; ``str(exc)`` says why."""
+
+
+class StuckAtStart(NavigationError):
+    """Hybrid A* could not take one step from the start's heading (every first arc touches an obstacle); a base
+    that turns on the spot may still leave facing another way (:func:`compute_peer.navigation.planner.plan_path`)."""

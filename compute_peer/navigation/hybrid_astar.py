@@ -29,7 +29,7 @@ import numpy as np
 
 from .costmap import Costmap
 from .dubins import dubins_paths
-from .errors import NavigationError
+from .errors import NavigationError, StuckAtStart
 from .geometry import TWO_PI, arc, wrap_angle
 from .heuristic import DistanceField
 from .model import PlanResult, Pose2, Tight, VehicleModel, check_endpoints, finish
@@ -292,7 +292,7 @@ class _Search:
         """Why the search ended with no path: stuck at the start, or every reachable bin tried."""
         start, goal, vehicle = self.start, self.goal, self.planner.vehicle
         if self.expansions <= 1:
-            return NavigationError(
+            return StuckAtStart(
                 f"the robot cannot drive away from its start ({start[0]:.2f}, {start[1]:.2f}, {start[2]:.2f} rad) "
                 f"without touching an obstacle" + ("" if vehicle.allow_reverse else " (forwards only: allow reversing?)")
             )

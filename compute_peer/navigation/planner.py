@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -9,11 +10,12 @@ import numpy as np
 from fabric.interfaces import OccupancyGrid
 
 from .costmap import Costmap, build_costmap
-from .errors import NavigationError
+from .errors import NavigationError, StuckAtStart
+from .geometry import wrap_angle
 from .hybrid_astar import HybridAStarConfig, plan_hybrid_astar
 from .model import PLANNERS, PlanResult, VehicleModel, as_pose, path_length
 from .ompl_planner import OmplConfig, plan_ompl
-from .recovery import RecoverySettings, recover
+from .recovery import Recovery, RecoverySettings, recover
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,16 +58,42 @@ def plan_path(
         )
     rec = recover(costmap, s, g, settings.recovery)
     if planner == "hybrid_astar":
-        result = plan_hybrid_astar(costmap, rec.start, rec.goal, settings.vehicle, settings.hybrid)
+        result = _hybrid(costmap, rec, settings)
     else:
         ompl = settings.ompl
         if ":" in planner:
             ompl = replace(ompl, planner=planner.split(":", 1)[1])
         result = plan_ompl(costmap, rec.start, rec.goal, settings.vehicle, ompl)
-    if not rec.notes:
+    if not rec.notes and not result.note:
         return result
     ex, ey, et = rec.escape
     if ex.size:  # the escape move, then the plan from where it ends
         x, y, theta = (np.concatenate([e[:-1], r]) for e, r in ((ex, result.x), (ey, result.y), (et, result.theta)))
         result = replace(result, x=x, y=y, theta=theta, length=path_length(x, y))
-    return replace(result, note="; ".join(rec.notes))
+    return replace(result, note="; ".join([*rec.notes, *([result.note] if result.note else [])]))
+
+
+TURNS = tuple(math.radians(a) for a in (90, -90, 135, -135, 180))
+"""Headings (from the start's) a base stuck at its start may turn to on the spot before it drives: at least 90
+degrees, so that the sim's follower turns on the spot (beyond 60 degrees) rather than swinging an arc."""
+
+
+def _hybrid(costmap: Costmap, rec: Recovery, settings: PlannerSettings) -> PlanResult:
+    """Hybrid A* from ``rec.start``; when every first arc from its heading touches an obstacle and the base turns
+    on the spot (``settings.recovery.turn_in_place``), from the same place facing another way (:data:`TURNS`),
+    the result's note saying so. The base's footprint is a disk about its turn point: turning never touches."""
+    try:
+        return plan_hybrid_astar(costmap, rec.start, rec.goal, settings.vehicle, settings.hybrid)
+    except StuckAtStart as stuck:
+        if not settings.recovery.turn_in_place:
+            raise
+        x, y, th = rec.start
+        for turn in TURNS:
+            facing = float(wrap_angle(th + turn))
+            try:
+                result = plan_hybrid_astar(costmap, (x, y, facing), rec.goal, settings.vehicle, settings.hybrid)
+            except NavigationError:
+                continue
+            return replace(result, note=f"it cannot drive away facing {math.degrees(th):.0f} deg, so it first turns on the "
+                                        f"spot to {math.degrees(facing):.0f} deg")
+        raise stuck

@@ -35,10 +35,12 @@ Pose2 = tuple[float, float, float]
 
 @dataclass(frozen=True, slots=True)
 class RecoverySettings:
-    """How far a start may escape and a goal be moved (0 turns either off: the old refusals)."""
+    """How far a start may escape and a goal be moved (0 turns either off: the old refusals), and whether a base
+    stuck at its start's heading may turn on the spot first."""
 
     escape: float = ESCAPE
     goal_tolerance: float = GOAL_TOLERANCE
+    turn_in_place: bool = True  # the base turns about its footprint's centre (a differential drive): see plan_path
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -74,6 +74,9 @@ def student(world: str, endpoint: str, index: int, n: int, out: str) -> None:
                                expected=Pose)
             base = w.robot(f"base{index}")
             base.request(timeout=30.0)
+            until = time.monotonic() + 30.0
+            while not base.can_command and time.monotonic() < until:  # the grant's record on its way here
+                time.sleep(0.1)
             mark = w.event_mark()
             base.twist(0.0, 1.2)  # a little more than once around at 1.2 rad/s
             time.sleep(2 * math.pi / 1.2 + 1.5)

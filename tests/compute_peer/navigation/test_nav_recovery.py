@@ -133,3 +133,16 @@ def test_the_plan_service_says_what_it_recovered_from_in_the_reply(connect):
         assert "first drives" in reply.note and (reply.path.x[0], reply.path.y[0]) == pytest.approx((2.3, 2.0))
         refused = ask((1.0, 1.0, 0.0), (3.0, 2.0, 0.0))
         assert isinstance(refused, ServiceError) and "no pose where the robot fits" in refused.reason
+
+
+def test_a_base_facing_a_wall_close_up_turns_on_the_spot_first(costmap):
+    start = (2.1, 2.0, 0.0)  # 0.4 m from the shelf's face, facing it: every forward arc of Hybrid A* touches it
+    assert costmap.free_xy(*start[:2])
+    strict = PlannerSettings(vehicle=SETTINGS.vehicle, recovery=RecoverySettings(turn_in_place=False))
+    with pytest.raises(NavigationError, match="cannot drive away from its start"):
+        plan_path(costmap, start, (0.6, 3.4, math.pi), settings=strict)
+    result = plan_path(costmap, start, (0.6, 3.4, math.pi), settings=SETTINGS)
+    assert (result.x[0], result.y[0]) == pytest.approx(start[:2])
+    assert abs(math.remainder(result.theta[0] - start[2], 2 * math.pi)) >= math.radians(90) - 1e-9  # turned first
+    assert "first turns on the spot" in result.note
+    assert path_collision(costmap, result.x, result.y) is None

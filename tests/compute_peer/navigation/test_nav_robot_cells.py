@@ -149,3 +149,23 @@ def test_a_robots_own_footprint_is_never_an_obstacle_to_its_own_start(connect):
         assert (reply.path.x[-1], reply.path.y[-1]) == pytest.approx((4.5, 2.0))
         with pytest.raises(NavigationError, match="start"):
             nav.plan_service.handle(PlanRequest("base1", goal=goal, start=np.array([1.15, 2.0, 0.0])), publish=False)
+
+
+def test_a_robots_scans_wait_for_its_mounting_while_no_sim_answers(connect):
+    """A loaded sim misses a lookup's answer: the robot's scans wait (its LIDAR's mounting is what keeps other
+    robots inside their footprints), until the sims answer or none has for UNANSWERED_S."""
+    from compute_peer.navigation.discovery import NO_OFFSET, UNANSWERED_S, RobotDescriptions
+    from fabric.rate import FakeClock
+    from robofabric.testing import wait_until
+
+    clock = FakeClock(100.0)
+    d = RobotDescriptions(connect("compute", "compute-1"), followed=lambda: (), clock=clock)
+    try:
+        assert d.sensor_offset("base1") is None  # a lookup starts; no sim serves srv/world here
+        wait_until(lambda: d._lookup.ended > -math.inf, timeout=10.0, what="the lookup's end")
+        clock.jump(1.5)
+        assert d.sensor_offset("base1") is None  # unanswered: still waiting, asked again
+        clock.jump(UNANSWERED_S)
+        wait_until(lambda: d.sensor_offset("base1") == NO_OFFSET, timeout=10.0, what="the fallback")
+    finally:
+        d.close()
