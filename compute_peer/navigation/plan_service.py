@@ -2,7 +2,9 @@
 
 The start is the robot's latest pose unless the request gives one, the goal the ``goal`` scene object's pose
 unless the request gives one; the vehicle is the settings' with the robot's radius from its description. A
-robot's own footprint is never an obstacle to a plan from where it stands. The
+robot's own footprint is never an obstacle to a plan from where it stands, and the other robots, where they stand
+now, are obstacles to it (the maps keep none: a student planning again after her base reported ``blocked`` gets a
+path around the base in her way). The
 path is published on ``rf/{world}/robot/{robot}/path`` and returned; following it is the user's decision (they
 send it on ``cmd/path``). Planning is CPU-bound, so plans run one at a time.
 """
@@ -23,7 +25,7 @@ from .map_service import MapService
 from .model import VehicleModel
 from .planner import PlannerSettings, plan_path
 from .poses import PoseHistory
-from .robot_cells import Footprint, clear_robots
+from .robot_cells import Footprint, clear_robots, mark_robots
 
 if TYPE_CHECKING:
     from fabric.session import Fabric
@@ -64,23 +66,37 @@ class PlanService:
     def set_goal(self, pose: Pose) -> None:
         self.goal = pose
 
-    def costmap(self, name: str, robot_radius: float, *, standing: Footprint | None = None) -> Costmap:
+    def costmap(self, name: str, robot_radius: float, *, standing: Footprint | None = None,
+                others: tuple[Footprint, ...] = ()) -> Costmap:
         """Map ``name`` inflated by ``robot_radius``; the scans' map is built first when it never was.
 
         ``standing``: the planning robot where it stands: its own footprint is never an obstacle to its own start
-        (cells a map holds under it, from a scan that took it for a wall, are taken as the floor they are)."""
+        (cells a map holds under it, from a scan that took it for a wall, are taken as the floor they are).
+        ``others``: the other robots where they stand now: obstacles for this plan only (the map keeps none)."""
         m = self.maps
         if name == m.map_name and m.store.get(name) is None and m.scans.scans > 0:
             m.build(name)  # navigation before an explicit build: build with the default threshold
         s = self.settings
         cm = m.store.costmap(name, robot_radius, threshold=s.threshold, unknown_is_occupied=s.unknown_is_occupied)
         grid = m.store.get(name)
-        if standing is None or grid is None:
+        if grid is None:
             return cm
-        cleared = clear_robots(grid, [standing], margin=0.0)
-        if cleared is grid:
+        changed = clear_robots(grid, [standing], margin=0.0) if standing is not None else grid
+        changed = mark_robots(changed, others)
+        if changed is grid:
             return cm
-        return build_costmap(cleared, robot_radius, threshold=s.threshold, unknown_is_occupied=s.unknown_is_occupied)
+        return build_costmap(changed, robot_radius, threshold=s.threshold, unknown_is_occupied=s.unknown_is_occupied)
+
+    def others(self, robot: str) -> tuple[Footprint, ...]:
+        """The other robots followed, where they stand as of ``robot``'s latest pose (none gone quiet for 2 s)."""
+        mine = self.poses.at(robot)
+        if mine is None:
+            return ()
+        out = []
+        for other in self.poses.robots() - {robot}:
+            for p in self.poses.during(other, mine.header, lag=0.0)[-1:]:
+                out.append(Footprint(float(p.position[0]), float(p.position[1]), self.descriptions.radius(other, self.settings.vehicle.robot_radius)))
+        return tuple(out)
 
     def handle(self, req: PlanRequest, *, publish: bool = True) -> PlanReply:
         """Handle one plan request (also usable in-process, without Zenoh); the path goes on the robot's
@@ -98,7 +114,8 @@ class PlanService:
         )
         own = req.start.shape[0] != 3  # from where the robot stands
         costmap = self.costmap(req.map, vehicle.robot_radius,
-                               standing=Footprint(start[0], start[1], vehicle.robot_radius) if own else None)
+                               standing=Footprint(start[0], start[1], vehicle.robot_radius) if own else None,
+                               others=self.others(robot))
         with self._plan_lock:
             result = plan_path(costmap, start, goal, planner=req.planner, settings=replace(s, vehicle=vehicle))
         key = keys.robot_path(self.world, robot)

@@ -22,7 +22,7 @@ import numpy as np
 
 from fabric.interfaces import OccupancyGrid
 
-__all__ = ["ROBOT_MARGIN", "Footprint", "clear_robots", "footprint_indices", "footprint_mask", "robot_cells"]
+__all__ = ["ROBOT_MARGIN", "Footprint", "clear_robots", "footprint_indices", "footprint_mask", "mark_robots", "robot_cells"]
 
 ROBOT_MARGIN = 0.1
 """Metres around a robot's radius whose cells count as the robot's: a hit on its surface lands in a cell up to
@@ -83,6 +83,17 @@ def clear_robots(grid: OccupancyGrid, footprints: Iterable[Footprint], margin: f
         return grid
     cells = grid.cells.copy()
     cells[mask] = 0
+    return replace(grid, cells=cells)
+
+
+def mark_robots(grid: OccupancyGrid, footprints: Iterable[Footprint], margin: float = 0.0) -> OccupancyGrid:
+    """``grid`` with the cells under the robots occupied (100): where they stand now, for one plan (the map itself
+    keeps no robot); the same object when there is none."""
+    mask = footprint_mask(grid, footprints, margin)
+    if not mask.any():
+        return grid
+    cells = grid.cells.copy()
+    cells[mask] = 100
     return replace(grid, cells=cells)
 
 

@@ -169,3 +169,27 @@ def test_a_robots_scans_wait_for_its_mounting_while_no_sim_answers(connect):
         wait_until(lambda: d.sensor_offset("base1") == NO_OFFSET, timeout=10.0, what="the fallback")
     finally:
         d.close()
+
+
+def test_a_plan_goes_around_the_robots_where_they_stand_now(connect):
+    """The maps keep no robot, but a plan does not run through one: a student planning again after her base
+    reported ``blocked`` gets a path around the base in her way."""
+    from compute_peer.navigation import PlannerSettings, VehicleModel, register_navigation
+    from fabric.interfaces import MapRequest, PlanRequest
+
+    cells = np.zeros((80, 120), dtype=np.uint8)
+    cells[:2, :] = cells[-2:, :] = cells[:, :2] = cells[:, -2:] = 100  # a 6 m x 4 m room, nothing inside
+    settings = PlannerSettings(vehicle=VehicleModel(robot_radius=0.3, turning_radius=0.5))
+    with register_navigation(connect("compute", "compute-1"), settings=settings, sensor_offset=(0.0, 0.0, 0.0),
+                             discover=False) as nav:
+        nav.map_service.handle(MapRequest("set", grid=make_grid(cells, RES)))
+        nav.poses.add("base1", _pose(1.0, 2.0, stamp=5.0))
+        goal = np.array([5.0, 2.0, 0.0])
+        alone = nav.plan_service.handle(PlanRequest("base1", goal=goal), publish=False)
+        assert alone.length == pytest.approx(4.0, abs=0.05)  # straight across
+        nav.poses.add("base2", _pose(3.0, 2.0, stamp=5.0))  # parked on that line
+        around = nav.plan_service.handle(PlanRequest("base1", goal=goal), publish=False)
+        assert np.hypot(around.path.x - 3.0, around.path.y - 2.0).min() >= 2 * 0.3  # never through base2
+        assert (around.path.x[-1], around.path.y[-1]) == pytest.approx((5.0, 2.0))
+        nav.poses.add("base1", _pose(1.0, 2.0, stamp=8.0))  # base2's pose is now 3 s older than base1's: gone
+        assert nav.plan_service.handle(PlanRequest("base1", goal=goal), publish=False).length == pytest.approx(4.0, abs=0.05)
