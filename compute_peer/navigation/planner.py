@@ -88,10 +88,12 @@ def _hybrid(costmap: Costmap, rec: Recovery, settings: PlannerSettings) -> PlanR
         if not settings.recovery.turn_in_place:
             raise
         x, y, th = rec.start
+        # the turns share one plan's time: the service plans one at a time, and others wait behind this one
+        share = replace(settings.hybrid, time_limit=settings.hybrid.time_limit / len(TURNS))
         for turn in TURNS:
             facing = float(wrap_angle(th + turn))
             try:
-                result = plan_hybrid_astar(costmap, (x, y, facing), rec.goal, settings.vehicle, settings.hybrid)
+                result = plan_hybrid_astar(costmap, (x, y, facing), rec.goal, settings.vehicle, share)
             except NavigationError:
                 continue
             return replace(result, note=f"it cannot drive away facing {math.degrees(th):.0f} deg, so it first turns on the "
