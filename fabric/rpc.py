@@ -19,6 +19,7 @@ from typing import Any, Callable
 import zenoh
 
 from fabric.authority_stamp import AuthorityStamp
+from fabric.budget import RATE_LIMITED
 from fabric.codec import DecodeError, decode, encode
 from fabric.interfaces import Event, EventKind, Header, NoReply, Refused, ServiceError
 from fabric.limits import clip
@@ -62,12 +63,18 @@ class Rpc:
         *,
         expected: type | tuple[type, ...] | None = None,
         complete: bool = False,
+        defer: Callable[[str, Any], Callable[[Callable[[], None]], bool] | None] | None = None,
     ) -> zenoh.Queryable:
         """Answer queries on ``key_expr`` with ``handler(key, request_or_None) -> message``.
 
         A handler raising :class:`ServiceError` (or ``ValueError``) sends the reason back as an error
         reply; a bad request payload is answered with the decode error. Nothing escapes to zenoh.
         While the session's stamp is muzzled, no query is answered at all.
+
+        ``defer(key, request)``, asked first in zenoh's callback thread: None answers there and then; else
+        a ``submit(job)`` (a :class:`fabric.lanes.Lane`'s, for one asker) that queues the answer elsewhere,
+        so it holds up nothing behind it, and says False when it cannot (the query is refused as
+        ``rate_limited``). ``defer`` may refuse at once by raising :class:`ServiceError` (a spent budget).
         """
 
         # zenoh 1.10 ignores a reply's priority (and warns): replies travel at the query's priority.
@@ -85,17 +92,38 @@ class Rpc:
                 request = None
                 if query.payload is not None and len(query.payload.to_bytes()) > 0:
                     request = decode(query.payload.to_bytes(), expected)
-                answer = handler(key, request)
-                if answer is not None:
-                    query.reply(own_key or key, encode(answer))
+                submit = defer(key, request) if defer is not None else None
+                if submit is None:
+                    answer(query, key, request)
+                elif not submit(lambda: answer(query, key, request)):
+                    raise ServiceError(f"{RATE_LIMITED}: too many of your asks on {key} are waiting; ask again later")
             except (DecodeError, ServiceError, ValueError) as exc:
+                refuse(query, exc)
+            except Exception as exc:
+                failed(query, key, exc)
+
+        def answer(query: zenoh.Query, key: str, request: Any) -> None:
+            try:
+                reply = handler(key, request)
+                if reply is not None:
+                    query.reply(own_key or key, encode(reply))
+            except (DecodeError, ServiceError, ValueError) as exc:
+                refuse(query, exc)
+            except Exception as exc:
+                failed(query, key, exc)
+
+        def failed(query: zenoh.Query, key: str, exc: Exception) -> None:
+            self._counters["query_errors"] += 1
+            log.exception("service %s failed", key)
+            query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=f"internal error: {clip(str(exc))}", severity="error")))
+
+        def refuse(query: zenoh.Query, exc: Exception) -> None:
+            try:
                 self._counters["query_errors"] += 1
                 reason = clip(exc.reason if isinstance(exc, ServiceError) else str(exc), 400)
                 query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=reason, severity="warning", header=self._header("srv"))))
-            except Exception as exc:
-                self._counters["query_errors"] += 1
-                log.exception("service %s failed", key)
-                query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=f"internal error: {clip(str(exc))}", severity="error")))
+            except Exception:
+                log.debug("refusal not sent", exc_info=True)  # the session is closing
 
         q = self._session.declare_queryable(key_expr, on_query, complete=complete)
         self._resources.append(q)

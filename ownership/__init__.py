@@ -12,9 +12,10 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from ownership.authority import Authority
     from ownership.client import OwnershipClient, Outcome
+    from ownership.admission import OwnBudgets
     from ownership.extrapolate import extrapolate
 
-__all__ = ["Authority", "OwnershipClient", "Outcome", "extrapolate"]
+__all__ = ["Authority", "OwnBudgets", "OwnershipClient", "Outcome", "extrapolate"]
 
 
 def __getattr__(name: str) -> Any:
@@ -24,6 +25,10 @@ def __getattr__(name: str) -> Any:
         from ownership.authority import Authority
 
         return Authority
+    if name == "OwnBudgets":
+        from ownership.admission import OwnBudgets
+
+        return OwnBudgets
     if name in ("OwnershipClient", "Outcome"):
         from ownership import client
 

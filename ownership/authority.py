@@ -11,6 +11,7 @@ stops the robot, before anyone hears of the new owner.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import replace
 import logging
 import threading
 from types import MappingProxyType
@@ -24,6 +25,7 @@ from fabric.rate import Clock, MonotonicClock
 from fabric.session import Fabric, undeclare_all
 
 from ownership import snapshot
+from ownership.admission import Admission, OwnBudgets
 from ownership import state as st
 from ownership.hearing import Hearing
 
@@ -49,9 +51,11 @@ class Authority:
         clock: Clock | None = None,
         tick_s: float | None = None,
         restored: tuple[Any, Any] | None = None,
+        budgets: OwnBudgets | None = None,
     ) -> None:
         """``restored``: ``(records, users)`` as :meth:`export_state` gave them on the authority this one
-        replaces (a standby taking over): owners, epochs, queues and leases carry on."""
+        replaces (a standby taking over): owners, epochs, queues and leases carry on. ``budgets``: each
+        login's budgets of requests, renewals and queries (:mod:`ownership.admission`; defaults there)."""
         self.fabric = fabric
         self.clock = clock or MonotonicClock()
         self._lock = threading.RLock()
@@ -66,7 +70,9 @@ class Authority:
                 self._state = dataclasses.replace(self._state, records=MappingProxyType({**self._state.records, **fresh.records}))
         self._tick_s = tick_s if tick_s is not None else min(0.02, lease_s / 10)
         self._stop = threading.Event()
-        self.counters = {"requests": 0, "rejected": 0, "handovers": 0}
+        self.counters = {"requests": 0, "rejected": 0, "handovers": 0, "rate_limited": 0}
+        self.admission = Admission(budgets or OwnBudgets(), self.clock, self.counters, fabric_counters=fabric.counters,
+                                   report=lambda ev, limit: self._emit(replace(ev, header=fabric.header("event")), limit=limit))
         self._stop_watchers: list[Callable[[str, str, str], None]] = []
         # users who may have left while no authority listened (a take-over) or while our link was down:
         # confirmed by their token within a lease of hearing again, else they leave (ownership.hearing)
@@ -76,13 +82,14 @@ class Authority:
         # one queryable per object, so a wildcard query (a replica joining) gets one record from each;
         # requests come on the asker's own key (own/{obj}/by/{user}): the user is taken from the key,
         # where a router's access control vouches for it, never from the payload alone. Served before the
-        # first records go out: a replica that hears one asks for the rest (ownership.client)
+        # first records go out: a replica that hears one asks for the rest (ownership.client). Requests are worked
+        # out on their own lane, renewals at once, each login within her budgets (ownership.admission)
         self._queryables = [
             fabric.rpc.serve(keys.own(fabric.world, obj), lambda key, req, obj=obj: self._serve_record(obj), expected=OwnRequest)
             for obj in objects
         ] + [
             fabric.rpc.serve(keys.own_request_all(fabric.world, obj), lambda key, req, obj=obj: self._serve(obj, key, req),
-                         expected=OwnRequest)
+                             expected=OwnRequest, defer=self.admission.route)
             for obj in objects
         ]
         for obj in objects:
@@ -288,6 +295,7 @@ class Authority:
         same session serves its records from a new authority); idempotent."""
         self._stop.set()
         undeclare_all([self._watch, *self._queryables])
+        self.admission.close()
         thread = self._thread
         if thread is not None and thread.is_alive() and thread is not threading.current_thread():
             thread.join(timeout=2.0)

@@ -57,6 +57,7 @@ from sim_peer.moving import MoveService
 from sim_peer.peer import SimPeer
 from sim_peer.roles import Roles
 from sim_peer.shards import SHARD_QUERY, ShardDirectory
+from sim_peer.state_answers import StateAnswers
 from sim_peer.world import SimWorld
 
 log = logging.getLogger("robofabric.sim")
@@ -119,6 +120,7 @@ class ReplicaHost:
         self.adoption = ObjectAdoption(self, adopt_after_s)
         self.moves = MoveService(self)
         self.deaf_stop = DeafStop(self)  # a primary that hears no one stops its robots
+        self.state_answers = StateAnswers(fabric.counters)  # srv/state off zenoh's callback thread (sim_peer.state_answers)
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -137,7 +139,7 @@ class ReplicaHost:
     def open(self, duration: float | None = None) -> "ReplicaHost":
         f, w = self.fabric, self.fabric.world
         self._duration = duration
-        f.rpc.serve(keys.srv(w, "state"), self._on_state_query)
+        f.rpc.serve(keys.srv(w, "state"), self._on_state_query, defer=self.state_answers.route)  # apart, bounded
         f.rpc.serve(keys.srv_move_served(w, f.peer_id), self.moves.on_query, expected=Event)
         if self.role == el.PRIMARY:
             self.serve(None)  # the world first: nothing below may delay a primary's streams and services
@@ -176,6 +178,7 @@ class ReplicaHost:
             self._closed = True
         self.stopping.set()
         self.moves.close()
+        self.state_answers.close()
         # a take-over under way finishes first: closed meanwhile, it raised from its thread and could
         # start a peer after close() had looked for one
         taking = self.roles.taking_over
@@ -261,7 +264,7 @@ class ReplicaHost:
             # every login may ask srv/state: a move asked here is refused, whoever asks (moves: srv/move, the staff's)
             raise self.moves.refused(request, "", "moves are for the instructor and sim logins: srv/state, which every login "
                                                   "may ask, moves nothing (robofabric own move asks srv/move/SIM/by/LOGIN)")
-        return self.world_state()
+        return self.state_answers.latest(self.world_state)
 
     # ------------------------------------------------------------------ rebuilding (a robot moved, the objects adopted)
 

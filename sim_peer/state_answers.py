@@ -1,0 +1,81 @@
+"""``srv/state`` answered apart: off zenoh's callback thread, a bounded few at a time, from one fresh capture.
+
+A whole-world state (every robot, every record, the sequence numbers) costs milliseconds to capture and
+encode; answered in zenoh's callback thread, a flood of ``srv/state`` queries (every login may ask it)
+held up everything behind it on the sim's link: another student's ``srv/world`` went unanswered for 16 s
+(issue 42). So, as :class:`StateAnswers` does it:
+
+- the answers are worked out on a :class:`fabric.lanes.Lane` of their own: ``srv/world``, the ownership
+  renewals and the commands that come on the same link never wait behind them;
+- at most :data:`BUDGET` answers go out a second (a burst of as many at once) and :data:`WAITING` wait
+  there; past that an ask is refused at once as ``rate_limited``, counted under ``rate_limited`` in the
+  session's counters. The key names no login (``srv/state`` carries none), so the budget is the sim's,
+  not each login's: under a flood a standby's polls (20 a second) are refused too, and it follows the
+  streams meanwhile;
+- a capture serves every ask within :data:`FRESH_S` of it, so a flood costs encodes, not captures.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Callable
+
+from fabric.budget import RATE_LIMITED, Rate, take
+from fabric.interfaces import ServiceError, WorldState
+from fabric.lanes import Lane
+
+__all__ = ["StateAnswers", "WAITING", "FRESH_S", "BUDGET"]
+
+BUDGET = Rate(50.0, 50.0)
+"""``srv/state`` answers a sim gives a second (all askers together: the key names none)."""
+
+WAITING = 8
+"""``srv/state`` answers that may wait for the lane at once."""
+
+FRESH_S = 0.02
+"""How long one capture answers every ``srv/state`` ask (a standby polls every 50 ms: it always sees a newer one)."""
+
+
+class StateAnswers:
+    """``route`` is the ``srv/state`` queryable's ``defer``; ``latest(capture)`` the answer its handler gives."""
+
+    def __init__(self, counters: Any, *, clock: Callable[[], float] = time.monotonic, budget: Rate = BUDGET) -> None:
+        self._counters = counters
+        self._budget = budget
+        self._bucket = None
+        self._clock = clock
+        self.lane = Lane("srv-state", per_asker=WAITING, total=WAITING)
+        self._lock = threading.Lock()
+        self._last: tuple[float, WorldState] | None = None
+
+    def route(self, key: str, request: Any) -> Callable[[Callable[[], None]], bool]:
+        """Every ask within the budget goes to the lane; past it, or when the lane is full, it is refused as
+        ``rate_limited`` (counted here)."""
+        with self._lock:
+            self._bucket, ok = take(self._bucket, self._budget, self._clock())
+        if not ok:
+            self._counters["rate_limited"] += 1
+            raise ServiceError(f"{RATE_LIMITED}: this sim answers srv/state at most {self._budget}; ask again later")
+
+        def submit(job: Callable[[], None]) -> bool:
+            ok = self.lane.submit("", job)
+            if not ok:
+                self._counters["rate_limited"] += 1
+            return ok
+        return submit
+
+    def latest(self, capture: Callable[[], WorldState]) -> WorldState:
+        """The last capture if it is younger than :data:`FRESH_S`, else a new one (``capture`` may raise: a standby)."""
+        now = self._clock()
+        with self._lock:
+            last = self._last
+        if last is not None and 0.0 <= now - last[0] < FRESH_S:
+            return last[1]
+        state = capture()
+        with self._lock:
+            self._last = (now, state)
+        return state
+
+    def close(self) -> None:
+        self.lane.close()
