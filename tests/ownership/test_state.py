@@ -90,6 +90,10 @@ def test_invariants_over_random_sequences(seq):
                 assert stops and stops[0].user == a.owner and stops[0].reason, f"{obj}: {a.owner} lost it without a stop"
             else:
                 assert not stops, f"{obj}: stopped while {a.owner!r} kept it: {stops}"
+        if isinstance(ev, st.Request):  # a flood of requests moves no epoch: refused, queued or already hers, none is new
+            answer = next(e for e in effects if e.user == ev.user and e.object == ev.object and e.kind in ("granted", "denied", "queued"))
+            if answer.kind != "granted" or before.records[ev.object].owner == ev.user:
+                assert s.records[ev.object].epoch == before.records[ev.object].epoch, f"{answer}: epoch moved"
         if (isinstance(ev, st.Request) and OBJECTS[ev.object] == "exclusive" and before.records[ev.object].owner not in ("", ev.user)
                 and ev.user in before.live and ev.user not in before.unproven):
             rec = before.records[ev.object]
