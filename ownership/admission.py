@@ -48,6 +48,18 @@ class OwnBudgets:
     owner: Rate = field(default_factory=lambda: Rate(200.0, 400.0))
     queries: Rate = field(default_factory=lambda: Rate(50.0, 100.0))
 
+    @classmethod
+    def parse(cls, text: str) -> "OwnBudgets":
+        """``"requests=5/10,owner=100/200,queries=20"`` (any of them; the others keep their defaults)."""
+        given: dict[str, Rate] = {}
+        for part in filter(None, (p.strip() for p in text.split(","))):
+            name, eq, value = part.partition("=")
+            name = {"renewals": "owner"}.get(name.strip(), name.strip())
+            if not eq or name not in ("requests", "owner", "queries"):
+                raise ValueError(f"a budget is requests=, owner= (renewals and releases) or queries=, then RATE[/BURST]; got {part!r}")
+            given[name] = Rate.parse(value)
+        return cls(**given)
+
 
 class Admission:
     """The budgets and the requests' lane of one authority; ``route`` is its queryables' ``defer``."""

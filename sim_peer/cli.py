@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import sys
@@ -22,11 +23,12 @@ one, an arm one per link: 8 hold one arm and one base). Unused slots are parked 
 but still cost each LIDAR scan ~1 % each (docs/sim.md)."""
 
 
-def make_gate(fabric, world, ownership: bool, restored=None, *, objects: bool = True) -> CommandGate:
+def make_gate(fabric, world, ownership: bool, restored=None, *, objects: bool = True, budgets=None) -> CommandGate:
     """The ownership Authority when asked for and installed, else an OpenGate (with a warning if asked for).
 
     ``restored``: the ownership state a standby carries over when it takes the world. ``objects``: whether this
-    sim is the scene objects' authority (their records); a shard joining a served world is its robots' only."""
+    sim is the scene objects' authority (their records); a shard joining a served world is its robots' only.
+    ``budgets``: each login's budgets at the authority (:class:`ownership.admission.OwnBudgets`; None: the defaults)."""
     from fabric.gate import OpenGate
     if not ownership:
         return OpenGate()
@@ -39,8 +41,8 @@ def make_gate(fabric, world, ownership: bool, restored=None, *, objects: bool = 
     if objects:
         owned.update({obj: "scene" for obj in world.objects})
     if restored is not None:
-        return Authority(fabric, objects=owned, restored=restored).start()
-    return Authority(fabric, objects=owned).start()
+        return Authority(fabric, objects=owned, restored=restored, budgets=budgets).start()
+    return Authority(fabric, objects=owned, budgets=budgets).start()
 
 
 def parse_twist_timeout(text: str | None, speed: float | None) -> float | None:
@@ -91,6 +93,11 @@ def sim(
     standby: Annotated[
         bool, typer.Option("--standby", help="Follow the world's primary sim and take the world over (no reset) if it goes; see docs/sim.md.")
     ] = False,
+    budget: Annotated[
+        str, typer.Option("--budget", help="Each login's budgets at the ownership authority, RATE/BURST per second: "
+                                           "requests=10/20,owner=200/400 (renewals, releases),queries=50/100; past them "
+                                           "asks are refused as rate_limited. See docs/ownership.md.")
+    ] = "",
     list_: Annotated[bool, typer.Option("--list", help="List the known robot types and scenes, then exit.")] = False,
     join: Joining = Joining(),
 ) -> None:
@@ -109,6 +116,8 @@ def sim(
     from sim_peer.world import WorldError
 
     rates, pace, deadman = _parse_options(rate, speed, duration, noise, twist_timeout)
+    budgets = _parse_budget(budget) if ownership else None
+    gate_of = functools.partial(make_gate, budgets=budgets)
 
     def build(placements=None):
         """This sim's world; ``placements``: other robots than the command line's (a robot moved in or out)."""
@@ -129,9 +138,19 @@ def sim(
         first = _check_world_free(cfg, join.peer_id, sim_world)
     stop = shutdown_event()
     if standby or not replicated_off():
-        _run_replicated(cfg, join.peer_id, sim_world, build, ownership, rates, pace, stop, duration, standby, first)
+        _run_replicated(cfg, join.peer_id, sim_world, build, ownership, rates, pace, stop, duration, standby, first, gate_of)
         return
-    _run_single(cfg, join.peer_id, sim_world, ownership, rates, pace, stop, duration, first)
+    _run_single(cfg, join.peer_id, sim_world, ownership, rates, pace, stop, duration, first, gate_of)
+
+
+def _parse_budget(text: str):
+    """``--budget``'s :class:`ownership.admission.OwnBudgets` (the defaults when empty); bad text is a :class:`UserError`."""
+    from ownership.admission import OwnBudgets
+
+    try:
+        return OwnBudgets.parse(text)
+    except ValueError as exc:
+        raise UserError(f"--budget: {exc}") from None
 
 
 def _parse_options(rate: str, speed: str, duration: float | None, noise: float | None,
@@ -157,7 +176,7 @@ def _parse_options(rate: str, speed: str, duration: float | None, noise: float |
     return rates, pace, deadman
 
 
-def _run_single(cfg, peer_id, sim_world, ownership, rates, pace, stop, duration, first) -> None:
+def _run_single(cfg, peer_id, sim_world, ownership, rates, pace, stop, duration, first, make_gate=make_gate) -> None:
     """One sim, one session, no replication layer (``ROBOFABRIC_SIM_SINGLE=1``)."""
     from sim_peer.peer import SimPeer
 
@@ -236,7 +255,8 @@ def replicated_off() -> bool:
     return os.environ.get("ROBOFABRIC_SIM_SINGLE", "") not in ("", "0")
 
 
-def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, stop, duration, standby, objects=True) -> None:
+def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, stop, duration, standby, objects=True,
+                    gate_of=make_gate) -> None:
     """Primary or standby through :func:`sim_peer.replica_host.run_replicated`."""
     from fabric.config import default_peer_id
     from sim_peer.replica_host import run_replicated
@@ -256,7 +276,7 @@ def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, st
           f"{pace_text}; Ctrl-C to stop", flush=True)
     host = run_replicated(
         lambda: open_fabric(cfg, "sim", pid), make_world,
-        lambda fab, w, restored, objects=True: make_gate(fab, w, ownership, restored, objects=objects), stop,
+        lambda fab, w, restored, objects=True: gate_of(fab, w, ownership, restored, objects=objects), stop,
         standby=standby, rates=rates, speed=pace, duration=duration, announce=announce, objects=objects, rebuild=build,
     )
     peer = host.peer if host is not None else None

@@ -13,9 +13,10 @@ from sim_peer.world import SimWorld
 
 
 class FakeAuthority:
-    def __init__(self, fabric, *, objects):
+    def __init__(self, fabric, *, objects, budgets=None):
         self.fabric = fabric
         self.objects = objects
+        self.budgets = budgets
         self.started = False
 
     def start(self):
@@ -29,6 +30,7 @@ def test_ownership_gate_is_built_with_exclusive_robots_and_scene_objects(monkeyp
     gate = make_gate("FAB", w, True)
     assert isinstance(gate, FakeAuthority) and gate.fabric == "FAB" and gate.started  # leases tick from the start
     assert gate.objects == {"arm1": "exclusive", "base1": "exclusive", "target": "scene", "goal": "scene"}
+    assert gate.budgets is None and make_gate("FAB", w, True, budgets="B").budgets == "B"  # --budget reaches the authority
 
 
 def test_without_an_authority_the_sim_warns_and_opens_the_gate(monkeypatch, capsys):
