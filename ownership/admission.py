@@ -39,12 +39,12 @@ __all__ = ["OwnBudgets", "Admission"]
 class OwnBudgets:
     """Each login's budgets at one authority (docs/ownership.md, "Budgets").
 
-    ``requests``: requests (take-overs, queue places); a person or a script that retries every 0.1 s stays
-    well inside it. ``owner``: renewals and releases, her own lane; an owner renews each robot twice a
+    ``requests``: requests (take-overs, queue places): 40 at once (a script asking for a class's robots in one
+    go), then 20 a second, far more than a person or a script retrying every 0.1 s asks. ``owner``: renewals and releases, her own lane; an owner renews each robot twice a
     lease (every 0.5 s by default), so 200/s covers a login holding 64 robots. ``queries``: record queries
     on her own key."""
 
-    requests: Rate = field(default_factory=lambda: Rate(10.0, 20.0))
+    requests: Rate = field(default_factory=lambda: Rate(20.0, 40.0))
     owner: Rate = field(default_factory=lambda: Rate(200.0, 400.0))
     queries: Rate = field(default_factory=lambda: Rate(50.0, 100.0))
 

@@ -95,7 +95,7 @@ def sim(
     ] = False,
     budget: Annotated[
         str, typer.Option("--budget", help="Each login's budgets at the ownership authority, RATE/BURST per second: "
-                                           "requests=10/20,owner=200/400 (renewals, releases),queries=50/100; past them "
+                                           "requests=20/40,owner=200/400 (renewals, releases),queries=50/100; past them "
                                            "asks are refused as rate_limited. See docs/ownership.md.")
     ] = "",
     list_: Annotated[bool, typer.Option("--list", help="List the known robot types and scenes, then exit.")] = False,
