@@ -1,6 +1,6 @@
 """``robofabric bench secure``: what security costs: plain TCP, TCP + access control, TLS + access control, side by side.
 
-    robofabric bench secure [--rounds 2] [--duration 5] [--queries 500] [--out FILE.md]
+    robofabric bench secure [--rounds 2] [--duration 5] [--queries 500] [--flood-seconds 5] [--out FILE.md]
 
 For each mode a fresh router (``robofabric router``, with ``robofabric secure init``'s
 ``router.json5`` for the secure modes) and, on it:
@@ -12,7 +12,9 @@ For each mode a fresh router (``robofabric router``, with ``robofabric secure in
   compute identity) answers ``srv/ik/arm1`` queries from a user (alice) for FK-reachable targets.
 
 Modes alternate within each round so a noisy machine hurts them alike; the table holds medians
-over rounds of each mode's percentiles.
+over rounds of each mode's percentiles. Then the flood row (:mod:`robofabric.bench.secure_flood`): an owner
+driving, quiet and while one login floods requests and ``srv/state`` at her client's fastest
+(``--flood-seconds 0`` leaves it out).
 """
 
 from __future__ import annotations
@@ -142,13 +144,20 @@ def command(
     rounds: Annotated[int, typer.Option(help="Rounds; each runs every mode once, in turn.")] = 2,
     duration: Annotated[float, typer.Option(help="Seconds of 1 kHz scans per mode and round.")] = 5.0,
     queries: Annotated[int, typer.Option(help="IK queries per mode and round.")] = 500,
+    flood_seconds: Annotated[float, typer.Option(help="Seconds of each phase of the flood row (quiet, then one login "
+                                                      "flooding requests and srv/state while an owner drives); 0: no flood row.")] = 5.0,
     out: TableOut = None,
 ) -> None:
-    """Scans at 1 kHz and IK round trips over plain TCP, TCP + access control and TLS + access control."""
+    """Scans at 1 kHz and IK round trips over plain TCP, TCP + access control and TLS + access control; an owner's
+    commands and lease beside one login's flood."""
     from fabric.cli_common import UserError
 
-    if rounds < 1 or duration <= 0 or queries < 1:
-        raise UserError("--rounds and --queries must be at least 1, --duration positive")
+    if rounds < 1 or duration <= 0 or queries < 1 or flood_seconds < 0:
+        raise UserError("--rounds and --queries must be at least 1, --duration positive, --flood-seconds at least 0")
     t = table(run(rounds, duration, queries))
+    if flood_seconds > 0:
+        from robofabric.bench import secure_flood
+
+        t += "\n\n" + secure_flood.table(secure_flood.run(flood_seconds), flood_seconds)
     print(t)
     append(out, t)
