@@ -264,7 +264,7 @@ class ReplicaHost:
             # every login may ask srv/state: a move asked here is refused, whoever asks (moves: srv/move, the staff's)
             raise self.moves.refused(request, "", "moves are for the instructor and sim logins: srv/state, which every login "
                                                   "may ask, moves nothing (robofabric own move asks srv/move/SIM/by/LOGIN)")
-        return self.state_answers.latest(self.world_state)
+        return self.world_state()
 
     # ------------------------------------------------------------------ rebuilding (a robot moved, the objects adopted)
 

@@ -1,4 +1,4 @@
-"""``srv/state`` answered apart: off zenoh's callback thread, a bounded few at a time, from one fresh capture.
+"""``srv/state`` answered apart: off zenoh's callback thread, a bounded few a second.
 
 A whole-world state (every robot, every record, the sequence numbers) costs milliseconds to capture and
 encode; answered in zenoh's callback thread, a flood of ``srv/state`` queries (every login may ask it)
@@ -11,8 +11,7 @@ held up everything behind it on the sim's link: another student's ``srv/world`` 
   there; past that an ask is refused at once as ``rate_limited``, counted under ``rate_limited`` in the
   session's counters. The key names no login (``srv/state`` carries none), so the budget is the sim's,
   not each login's: under a flood a standby's polls (20 a second) are refused too, and it follows the
-  streams meanwhile;
-- a capture serves every ask within :data:`FRESH_S` of it, so a flood costs encodes, not captures.
+  streams meanwhile.
 """
 
 from __future__ import annotations
@@ -22,10 +21,10 @@ import time
 from typing import Any, Callable
 
 from fabric.budget import RATE_LIMITED, Rate, take
-from fabric.interfaces import ServiceError, WorldState
+from fabric.interfaces import ServiceError
 from fabric.lanes import Lane
 
-__all__ = ["StateAnswers", "WAITING", "FRESH_S", "BUDGET"]
+__all__ = ["StateAnswers", "WAITING", "BUDGET"]
 
 BUDGET = Rate(50.0, 50.0)
 """``srv/state`` answers a sim gives a second (all askers together: the key names none)."""
@@ -33,12 +32,9 @@ BUDGET = Rate(50.0, 50.0)
 WAITING = 8
 """``srv/state`` answers that may wait for the lane at once."""
 
-FRESH_S = 0.02
-"""How long one capture answers every ``srv/state`` ask (a standby polls every 50 ms: it always sees a newer one)."""
-
 
 class StateAnswers:
-    """``route`` is the ``srv/state`` queryable's ``defer``; ``latest(capture)`` the answer its handler gives."""
+    """``route`` is the ``srv/state`` queryable's ``defer``: its handler then runs on this lane."""
 
     def __init__(self, counters: Any, *, clock: Callable[[], float] = time.monotonic, budget: Rate = BUDGET) -> None:
         self._counters = counters
@@ -47,11 +43,13 @@ class StateAnswers:
         self._clock = clock
         self.lane = Lane("srv-state", per_asker=WAITING, total=WAITING)
         self._lock = threading.Lock()
-        self._last: tuple[float, WorldState] | None = None
 
-    def route(self, key: str, request: Any) -> Callable[[Callable[[], None]], bool]:
-        """Every ask within the budget goes to the lane; past it, or when the lane is full, it is refused as
-        ``rate_limited`` (counted here)."""
+    def route(self, key: str, request: Any) -> Callable[[Callable[[], None]], bool] | None:
+        """An ask for the world's state within the budget goes to the lane; past it, or when the lane is full, it
+        is refused as ``rate_limited`` (counted here). An ask with a payload (a sim asking which shard another
+        serves, a move step refused) costs no capture: answered at once, as ``srv/world`` is."""
+        if request is not None:
+            return None
         with self._lock:
             self._bucket, ok = take(self._bucket, self._budget, self._clock())
         if not ok:
@@ -64,18 +62,6 @@ class StateAnswers:
                 self._counters["rate_limited"] += 1
             return ok
         return submit
-
-    def latest(self, capture: Callable[[], WorldState]) -> WorldState:
-        """The last capture if it is younger than :data:`FRESH_S`, else a new one (``capture`` may raise: a standby)."""
-        now = self._clock()
-        with self._lock:
-            last = self._last
-        if last is not None and 0.0 <= now - last[0] < FRESH_S:
-            return last[1]
-        state = capture()
-        with self._lock:
-            self._last = (now, state)
-        return state
 
     def close(self) -> None:
         self.lane.close()
