@@ -65,7 +65,9 @@ class Admission:
     """The budgets and the requests' lane of one authority; ``route`` is its queryables' ``defer``."""
 
     def __init__(self, budgets: OwnBudgets, clock: Clock, counters: dict[str, int], *,
-                 report: Callable[[Event, str], None], fabric_counters: Any = None) -> None:
+                 report: Callable[[str, Callable[[], Event]], None], fabric_counters: Any = None) -> None:
+        """``report(limit, make)``: publish the event ``make()`` builds unless too many went out under ``limit``
+        lately (a refusal in a flood must cost no event of its own)."""
         self.budgets = budgets
         self._clock = clock
         self._counters = counters
@@ -93,9 +95,9 @@ class Admission:
         self._counters["rate_limited"] = self._counters.get("rate_limited", 0) + 1
         if self._fabric_counters is not None:
             self._fabric_counters["rate_limited"] += 1
-        obj = keys.parse(key).subject
-        self._report(Event(kind=EventKind.OWN_REFUSED, reason=reason, object=obj, user=user, severity="warning"),
-                     f"rate_limited:{user}")
+        obj = keys.parse(key).subject  # one of the authority's objects: its queryables serve no other
+        self._report(f"rate_limited:{obj}",
+                     lambda: Event(kind=EventKind.OWN_REFUSED, reason=reason, object=obj, user=user, severity="warning"))
         raise ServiceError(reason)
 
     def refused(self) -> dict[str, int]:

@@ -72,7 +72,8 @@ class Authority:
         self._stop = threading.Event()
         self.counters = {"requests": 0, "rejected": 0, "handovers": 0, "rate_limited": 0}
         self.admission = Admission(budgets or OwnBudgets(), self.clock, self.counters, fabric_counters=fabric.counters,
-                                   report=lambda ev, limit: self._emit(replace(ev, header=fabric.header("event")), limit=limit))
+                                   report=lambda limit, make: fabric.reports.should_report(limit) is not None
+                                   and self._emit(replace(make(), header=fabric.header("event"))))
         self._stop_watchers: list[Callable[[str, str, str], None]] = []
         # users who may have left while no authority listened (a take-over) or while our link was down:
         # confirmed by their token within a lease of hearing again, else they leave (ownership.hearing)

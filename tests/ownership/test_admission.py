@@ -15,7 +15,7 @@ from ownership.admission import Admission, OwnBudgets
 
 def _admission(budgets: OwnBudgets):
     reported, counters, session = [], {}, Counter()
-    adm = Admission(budgets, FakeClock(), counters, report=lambda ev, limit: reported.append((ev, limit)), fabric_counters=session)
+    adm = Admission(budgets, FakeClock(), counters, report=lambda limit, make: reported.append((make(), limit)), fabric_counters=session)
     return adm, reported, counters, session
 
 
@@ -30,7 +30,7 @@ def test_requests_go_to_the_lane_renewals_are_answered_at_once_and_the_excess_is
         assert refused.value.reason.startswith(f"{RATE_LIMITED}: mallory")
         assert counters["rate_limited"] == session["rate_limited"] == 1 and adm.refused() == {"mallory": 1}
         ev, limit = reported[0]
-        assert (ev.object, ev.user, limit) == ("base1", "mallory", "rate_limited:mallory")
+        assert (ev.object, ev.user, limit) == ("base1", "mallory", "rate_limited:base1")
         # her renewals and releases are her own lane's (answered at once, apart), and bob's requests are his
         assert adm.route(mallory, OwnRequest("renew", "mallory")) is None
         assert adm.route(mallory, OwnRequest("release", "mallory")) is None
