@@ -64,6 +64,7 @@ class Rpc:
         expected: type | tuple[type, ...] | None = None,
         complete: bool = False,
         defer: Callable[[str, Any], Callable[[Callable[[], None]], bool] | None] | None = None,
+        gate: Callable[[str], bytes | None] | None = None,
     ) -> zenoh.Queryable:
         """Answer queries on ``key_expr`` with ``handler(key, request_or_None) -> message``.
 
@@ -75,6 +76,8 @@ class Rpc:
         a ``submit(job)`` (a :class:`fabric.lanes.Lane`'s, for one asker) that queues the answer elsewhere,
         so it holds up nothing behind it, and says False when it cannot (the query is refused as
         ``rate_limited``). ``defer`` may refuse at once by raising :class:`ServiceError` (a spent budget).
+        ``gate(key)``, asked before anything is decoded: None to go on, else the encoded error reply that
+        refuses the query (a flood's refusals then cost no decoding and no encoding each).
         """
 
         # zenoh 1.10 ignores a reply's priority (and warns): replies travel at the query's priority.
@@ -88,6 +91,11 @@ class Rpc:
             self._counters["queries"] += 1
             if self._stamp.muzzled:
                 return  # no answer at all: the asker times out or hears the real authority
+            refusal = gate(key) if gate is not None else None
+            if refusal is not None:
+                self._counters["query_errors"] += 1
+                query.reply_err(refusal)
+                return
             try:
                 request = None
                 if query.payload is not None and len(query.payload.to_bytes()) > 0:

@@ -13,7 +13,10 @@ the ``defer`` of :meth:`fabric.rpc.Rpc.serve`):
   at once, in the callback thread: no request waits ahead of it;
 - a **record query** on the asker's own key spends her *queries* budget, answered at once (a read).
 
-A spent budget is refused there and then as ``rate_limited`` (:data:`fabric.budget.RATE_LIMITED`),
+Before even the payload is decoded (:meth:`Admission.gate`), a login past all three budgets together gets
+her refusal, encoded once: the flood's bulk costs the sim's Python next to nothing, so its physics, streams
+and the owners' commands keep their share of the machine. A spent budget is refused there and then as
+``rate_limited`` (:data:`fabric.budget.RATE_LIMITED`),
 counted under ``rate_limited`` in the authority's and the session's counters, and reported at most a few
 times per interval; other logins' budgets are untouched.
 """
@@ -25,7 +28,8 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from fabric import keys
-from fabric.budget import Budgets, Rate
+from fabric.budget import RATE_LIMITED, Budgets, Rate
+from fabric.codec import encode
 from fabric.interfaces import Event, EventKind, ServiceError
 from fabric.lanes import Lane
 from fabric.rate import Clock
@@ -76,7 +80,26 @@ class Admission:
         self._requests = Budgets(budgets.requests)
         self._owner = Budgets(budgets.owner)
         self._queries = Budgets(budgets.queries)
+        # all three together, checked before a payload is decoded: past it a flood costs a cached refusal each
+        parts = (budgets.requests, budgets.owner, budgets.queries)
+        self._asks = Budgets(Rate(sum(r.per_s for r in parts), sum(r.burst for r in parts)))
+        self._refusals: dict[str, bytes] = {}  # login -> her encoded refusal (bounded)
         self.lane = Lane("own-requests", per_asker=4, total=256)
+
+    def gate(self, key: str) -> bytes | None:
+        """Before decoding (:meth:`fabric.rpc.Rpc.serve`'s ``gate``): None while the key's login is within all her
+        budgets together, else her refusal, encoded once."""
+        user = key.rsplit("/", 1)[-1]
+        if self._asks.allow(user, self._clock.now()):
+            return None
+        refusal = self._refusals.get(user)
+        if refusal is None:
+            reason = self._asks.refusal(user, "ownership asks (requests, renewals, queries together)")
+            refusal = encode(Event(kind=EventKind.SERVICE_ERROR, reason=reason, severity="warning"))
+            if len(self._refusals) < 256:
+                self._refusals[user] = refusal
+        self._refused(key, user, "")
+        return refusal
 
     def route(self, key: str, request: Any) -> Callable[[Callable[[], None]], bool] | None:
         """Where the ask on ``key`` is answered: None (now, here) or the lane's submit for its login; raises
@@ -92,13 +115,16 @@ class Admission:
         return None
 
     def _refused(self, key: str, user: str, reason: str) -> None:
+        """Count a refusal and report it (at most a few per interval); raise it when ``reason`` is given."""
         self._counters["rate_limited"] = self._counters.get("rate_limited", 0) + 1
         if self._fabric_counters is not None:
             self._fabric_counters["rate_limited"] += 1
-        obj = keys.parse(key).subject  # one of the authority's objects: its queryables serve no other
+        obj = key.split("/")[-3]  # own/{obj}/by/{user}: one of the authority's objects, its queryables serve no other
+        said = reason or f"{RATE_LIMITED}: {user} asked more than all her ownership budgets together"
         self._report(f"rate_limited:{obj}",
-                     lambda: Event(kind=EventKind.OWN_REFUSED, reason=reason, object=obj, user=user, severity="warning"))
-        raise ServiceError(reason)
+                     lambda: Event(kind=EventKind.OWN_REFUSED, reason=said, object=obj, user=user, severity="warning"))
+        if reason:
+            raise ServiceError(reason)
 
     def refused(self) -> dict[str, int]:
         """Refusals per login so far, every budget together."""

@@ -90,7 +90,7 @@ class Authority:
             for obj in objects
         ] + [
             fabric.rpc.serve(keys.own_request_all(fabric.world, obj), lambda key, req, obj=obj: self._serve(obj, key, req),
-                             expected=OwnRequest, defer=self.admission.route)
+                             expected=OwnRequest, defer=self.admission.route, gate=self.admission.gate)
             for obj in objects
         ]
         for obj in objects:

@@ -94,7 +94,7 @@ def _phase(owner: _Owner, renewals: _Timed, bob: _Timed, world: str, config: Pat
         "rate_limited": sum(s["answers"].get(RATE_LIMITED, 0) for s in sent.values()),
         "cmd_p50": result.pct(50) * 1e3, "cmd_p99": result.pct(99) * 1e3, "commands": result.commands,
         "not_seen": result.not_applied, "renew_p99": pct(renew, 99) * 1e3, "renew_missed": renew_missed,
-        "lapses": len(owner.lapses), "world_p50": pct(world_times, 50) * 1e3, "world_p99": pct(world_times, 99) * 1e3,
+        "lapses": len(owner.lapses), "lapse_texts": list(owner.lapses[:4]), "world_p50": pct(world_times, 50) * 1e3, "world_p99": pct(world_times, 99) * 1e3,
         "world_max": pct(world_times, 100) * 1e3, "world_missed": world_missed, "flooder": sent,
     }
 
@@ -117,9 +117,11 @@ def run(seconds: float) -> dict[str, dict[str, Any]]:
                 return fab
 
             alice = wait_until(lambda: _try(login, "alice"), timeout=60, interval=0.5, what="the router to accept alice")
+            sim_log = open(tmp / "sim.log", "wb")
             procs.append(subprocess.Popen(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config",
-                                                         str(files["sim"])), stdout=subprocess.DEVNULL,
-                                          stderr=subprocess.DEVNULL, start_new_session=True))
+                                                         str(files["sim"])), stdout=sim_log, stderr=subprocess.STDOUT,
+                                          start_new_session=True))
+            sim_log.close()
             info = wait_until(lambda: _world(alice), timeout=90, interval=0.5, what="the sim's srv/world")
             arm = next(r for r in info.robots if r.id == "arm1")
             owner = _Owner(alice, world, float(arm.max_speed[JOINT]), len(arm.joint_names))
@@ -135,6 +137,9 @@ def run(seconds: float) -> dict[str, dict[str, Any]]:
                     "flood": _phase(owner, renewals, asks, world, files["mallory"], seconds, True)}
             renewals.stop(), asks.stop()
             owner.close()
+            # why arm1 changed hands, if it did: the authority's own words (its take-overs and expiries are warnings)
+            said = [line for line in (tmp / "sim.log").read_text(errors="replace").splitlines() if "own_" in line and "arm1" in line]
+            rows["flood"]["sim_said"] = said[:6]
             return rows
         finally:
             for fab in fabs:

@@ -47,3 +47,18 @@ def test_budgets_parse_with_defaults_for_what_is_not_given():
     for bad in ("requests", "speed=3", "queries=0"):
         with pytest.raises(ValueError):
             OwnBudgets.parse(bad)
+
+
+def test_past_all_budgets_together_a_login_is_refused_before_decoding():
+    from fabric.codec import decode
+
+    adm, reported, counters, _ = _admission(OwnBudgets(requests=Rate(1.0, 1.0), owner=Rate(1.0, 1.0), queries=Rate(1.0, 1.0)))
+    try:
+        key = keys.own_request("w", "arm1", "mallory")
+        assert [adm.gate(key) for _ in range(3)] == [None] * 3
+        refusal = adm.gate(key)
+        assert decode(refusal).reason.startswith(f"{RATE_LIMITED}: mallory") and adm.gate(key) is refusal  # encoded once
+        assert adm.gate(keys.own_request("w", "arm1", "bob")) is None
+        assert counters["rate_limited"] == 2 and reported[0][1] == "rate_limited:arm1"
+    finally:
+        adm.close()
