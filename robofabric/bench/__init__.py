@@ -77,8 +77,9 @@ BENCHMARKS: tuple[Benchmark, ...] = (
               full=("--n", "1000", "--grids", "50", "--arms", "8", "--bases", "8", "--seconds", "5"), quick=("--n", "200", "--grids", "20")),
     Benchmark("flood", "flood", "an owner's command latency, peers' memory and logs while others flood the world",
               full=("--scale", "1"), quick=("--scale", "0.1", "--settle", "2"), out="dir"),
-    Benchmark("secure", "secure", "scans and IK round trips over TCP, TCP + access control, TLS + access control",
-              full=("--rounds", "3"), quick=("--rounds", "1", "--duration", "1", "--queries", "50")),
+    Benchmark("secure", "secure", "scans and IK round trips over TCP, TCP + access control, TLS + access control; "
+              "an owner driving beside one login's flood", full=("--rounds", "3"),
+              quick=("--rounds", "1", "--duration", "1", "--queries", "50", "--flood-seconds", "2")),
     Benchmark("class", "klass", "a class of N students (processes), each owning an arm and a base: nothing lost, move times, sim pace",
               full=("--students", "1,4,8,16,32", "--seconds", "40"), quick=("--students", "1,2", "--seconds", "8")),
     Benchmark("class-nav", "class_nav", "N students do Test B at once in the warehouse: reached, plan times, stops, collisions, robot cells in maps",
