@@ -66,11 +66,15 @@ class Lane:
             return job
 
     def _run(self) -> None:
-        while (job := self._next()) is not None:
+        while True:
+            job = self._next()
+            if job is None:
+                return
             try:
                 job()
             except Exception:  # one asker's trouble must not end the lane
                 log.exception("lane %s: a job failed", self.name)
+            job = None  # what it holds (a query to answer) goes now, not when the next job comes
 
     def close(self) -> None:
         """No more jobs (those waiting are dropped: their askers time out); idempotent."""

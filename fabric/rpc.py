@@ -103,12 +103,21 @@ class Rpc:
                 submit = defer(key, request) if defer is not None else None
                 if submit is None:
                     answer(query, key, request)
-                elif not submit(lambda: answer(query, key, request)):
+                elif not submit(lambda: answer_later(query, key, request)):
                     raise ServiceError(f"{RATE_LIMITED}: too many of your asks on {key} are waiting; ask again later")
             except (DecodeError, ServiceError, ValueError) as exc:
                 refuse(query, exc)
             except Exception as exc:
                 failed(query, key, exc)
+
+        def answer_later(query: zenoh.Query, key: str, request: Any) -> None:
+            # a deferred answer ends its query itself: zenoh sends a query's final message when its Query goes,
+            # and one kept alive by a worker's last job went late, past the asker's time limit, where a router
+            # with access control dropped it (counted as a refusal of whoever it last judged)
+            try:
+                answer(query, key, request)
+            finally:
+                query.drop()
 
         def answer(query: zenoh.Query, key: str, request: Any) -> None:
             try:
