@@ -102,49 +102,50 @@ class Rpc:
                     request = decode(query.payload.to_bytes(), expected)
                 submit = defer(key, request) if defer is not None else None
                 if submit is None:
-                    answer(query, key, request)
-                elif not submit(lambda: answer_later(query, key, request)):
+                    self._answer(query, key, request, handler, own_key)
+                elif not submit(lambda: self._answer_later(query, key, request, handler, own_key)):
                     raise ServiceError(f"{RATE_LIMITED}: too many of your asks on {key} are waiting; ask again later")
             except (DecodeError, ServiceError, ValueError) as exc:
-                refuse(query, exc)
+                self._refuse(query, exc)
             except Exception as exc:
-                failed(query, key, exc)
-
-        def answer_later(query: zenoh.Query, key: str, request: Any) -> None:
-            # a deferred answer ends its query itself: zenoh sends a query's final message when its Query goes,
-            # and one kept alive by a worker's last job went late, past the asker's time limit, where a router
-            # with access control dropped it (counted as a refusal of whoever it last judged)
-            try:
-                answer(query, key, request)
-            finally:
-                query.drop()
-
-        def answer(query: zenoh.Query, key: str, request: Any) -> None:
-            try:
-                reply = handler(key, request)
-                if reply is not None:
-                    query.reply(own_key or key, encode(reply))
-            except (DecodeError, ServiceError, ValueError) as exc:
-                refuse(query, exc)
-            except Exception as exc:
-                failed(query, key, exc)
-
-        def failed(query: zenoh.Query, key: str, exc: Exception) -> None:
-            self._counters["query_errors"] += 1
-            log.exception("service %s failed", key)
-            query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=f"internal error: {clip(str(exc))}", severity="error")))
-
-        def refuse(query: zenoh.Query, exc: Exception) -> None:
-            try:
-                self._counters["query_errors"] += 1
-                reason = clip(exc.reason if isinstance(exc, ServiceError) else str(exc), 400)
-                query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=reason, severity="warning", header=self._header("srv"))))
-            except Exception:
-                log.debug("refusal not sent", exc_info=True)  # the session is closing
+                self._failed(query, key, exc)
 
         q = self._session.declare_queryable(key_expr, on_query, complete=complete)
         self._resources.append(q)
         return q
+
+    def _answer_later(self, query: zenoh.Query, key: str, request: Any, handler: Callable[[str, Any], Any],
+                      own_key: str | None) -> None:
+        """A deferred answer ends its query itself: zenoh sends a query's final message when its Query goes, and
+        one kept alive by a worker's last job went late, past the asker's time limit, where a router with access
+        control dropped it (counted as a refusal of whoever it last judged)."""
+        try:
+            self._answer(query, key, request, handler, own_key)
+        finally:
+            query.drop()
+
+    def _answer(self, query: zenoh.Query, key: str, request: Any, handler: Callable[[str, Any], Any], own_key: str | None) -> None:
+        try:
+            reply = handler(key, request)
+            if reply is not None:
+                query.reply(own_key or key, encode(reply))
+        except (DecodeError, ServiceError, ValueError) as exc:
+            self._refuse(query, exc)
+        except Exception as exc:
+            self._failed(query, key, exc)
+
+    def _failed(self, query: zenoh.Query, key: str, exc: Exception) -> None:
+        self._counters["query_errors"] += 1
+        log.exception("service %s failed", key)
+        query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=f"internal error: {clip(str(exc))}", severity="error")))
+
+    def _refuse(self, query: zenoh.Query, exc: Exception) -> None:
+        try:
+            self._counters["query_errors"] += 1
+            reason = clip(exc.reason if isinstance(exc, ServiceError) else str(exc), 400)
+            query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=reason, severity="warning", header=self._header("srv"))))
+        except Exception:
+            log.debug("refusal not sent", exc_info=True)  # the session is closing
 
     def query(
         self,
