@@ -12,6 +12,7 @@ Out (every robot of the world, followed as sims and robots come and go)::
     /NS/object/ID/pose      geometry_msgs/PoseStamped from rf/W/object/ID/pose/by/*
     /clock                  rosgraph_msgs/Clock      the sims' time (the newest header stamp of robot state)
     /NS/tf, /NS/tf_static   tf2_msgs/TFMessage       the export's frame tree, where tf2_msgs is importable (tf.py)
+    /NS/ROBOT/robot_description std_msgs/String      the robot type's URDF (latched; models.py)
 
 In (only for the robots named in ``drive``, the ``--drive`` option: a ROS 2 domain has no logins, so by default
 the bridge only publishes (:mod:`user_peer.ros2.trust`); and for those, acted on only while this login owns
@@ -68,6 +69,7 @@ from user_peer.pause import is_pause, pause_words
 from user_peer.ros2 import direct
 from user_peer.ros2.commands import joint_targets, trajectory_targets
 from user_peer.ros2.fill import fill, message_class
+from user_peer.ros2.models import ModelsOut
 from user_peer.ros2.pauses import GcPauses
 from user_peer.ros2.tf import TfOut
 from user_peer.world import World
@@ -158,6 +160,7 @@ class Ros2Bridge:
         for cls in {cls for cls, _ in _TYPES.values()}:
             check_for_type_support(cls)
         self.tf = TfOut(node, RobotCatalog(None), namespace=namespace, message=tf_message)
+        self.models = ModelsOut(node, namespace)  # /NS/ROBOT/robot_description, latched
         w = world.name
         fab = world.fabric
         self.follow()  # first: the description's sensors (range_min) are known before the first scan
@@ -288,6 +291,7 @@ class Ros2Bridge:
         self._kinds.update(entries)
         self._routes = {}  # each key's route again, with this description's kinds and sensors
         self.tf.describe(info)
+        self.models.describe(info)
         for rid, kind in entries.items():
             if rid not in self._inputs:
                 self._inputs[rid] = self._command_inputs(rid, kind)

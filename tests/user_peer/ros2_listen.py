@@ -1,0 +1,97 @@
+"""A plain ROS 2 node for the bridge's model, trajectory and refusal tests: it imports nothing from robofabric.
+
+It writes one JSON line per message to ``--out``: each robot's ``robot_description`` (latched String), its
+``joint_states`` (names, positions, the wall time it came) and ``/rosout``. While ``--control/cmd_vel`` exists
+("v omega", ``nan`` allowed) it publishes that ``geometry_msgs/Twist`` on ``/BASE/cmd_vel`` at 10 Hz; when
+``--control/trajectory`` appears (JSON ``[names, [[positions, seconds], ...]]``) it publishes that
+``trajectory_msgs/JointTrajectory`` on ``/ARM/joint_trajectory`` once, writes ``trajectory_sent`` and removes the
+file. Runs until SIGTERM.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+import rclpy
+from geometry_msgs.msg import Twist
+from rcl_interfaces.msg import Log
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--control", required=True)
+    ap.add_argument("--robots", default="arm1,base1")
+    ap.add_argument("--arm", default="arm1")
+    ap.add_argument("--base", default="base1")
+    args = ap.parse_args()
+    out = open(args.out, "a", buffering=1)
+
+    def write(**fields) -> None:
+        out.write(json.dumps({"wall": time.monotonic(), **fields}) + "\n")
+
+    rclpy.init()
+    node = Node("plain_ros2_listener")
+    reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    for rid in args.robots.split(","):
+        node.create_subscription(String, f"/{rid}/robot_description",
+                                 lambda m, r=rid: write(topic="robot_description", robot=r, urdf=m.data), latched)
+        node.create_subscription(JointState, f"/{rid}/joint_states",
+                                 lambda m, r=rid: write(topic="joint_states", robot=r, name=list(m.name),
+                                                        position=list(m.position)), reliable)
+    node.create_subscription(Log, "/rosout", lambda m: write(topic="rosout", name=m.name, level=int(m.level), msg=m.msg),
+                             QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    cmd = node.create_publisher(Twist, f"/{args.base}/cmd_vel", 10)
+    trajectory = node.create_publisher(JointTrajectory, f"/{args.arm}/joint_trajectory", 10)
+    cmd_file = os.path.join(args.control, "cmd_vel")
+    trajectory_file = os.path.join(args.control, "trajectory")
+
+    def tick() -> None:
+        try:
+            with open(trajectory_file) as f:
+                names, points = json.load(f)
+            os.unlink(trajectory_file)
+            t = JointTrajectory()
+            t.joint_names = list(names)
+            for positions, seconds in points:
+                p = JointTrajectoryPoint()
+                p.positions = [float(v) for v in positions]
+                p.time_from_start.sec, p.time_from_start.nanosec = int(seconds), int(round((seconds % 1) * 1e9))
+                t.points.append(p)
+            trajectory.publish(t)
+            write(topic="trajectory_sent", subscribers=trajectory.get_subscription_count())
+        except (FileNotFoundError, ValueError):
+            pass
+        try:
+            with open(cmd_file) as f:
+                v, w = (float(x) for x in f.read().split())
+        except (FileNotFoundError, ValueError):
+            return
+        t = Twist()
+        t.linear.x, t.angular.z = v, w
+        cmd.publish(t)
+        write(topic="cmd_vel_sent", subscribers=cmd.get_subscription_count())
+
+    node.create_timer(0.1, tick)
+    write(topic="ready")
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
+        pass
+    finally:
+        out.close()
+        sys.exit(0)
+
+
+if __name__ == "__main__":
+    main()

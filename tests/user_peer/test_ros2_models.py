@@ -1,0 +1,89 @@
+"""Robot models on ROS 2 (issue 46): every robot type's URDF reads as ROS tools read it, and ``robofabric ros2``
+gives a plain rclpy node (tests/user_peer/ros2_listen.py) each robot's latched ``robot_description``, whose moving
+joints are the names its ``joint_states`` carry. Real router, sim, bridge and node processes for the live test."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pinocchio as pin
+import pytest
+
+import robots
+from robofabric.testing import robofabric_cmd, wait_until
+from user_peer.ros2.models import robot_description
+
+NODE = Path(__file__).with_name("ros2_listen.py")
+
+
+def moving_joints(urdf: str) -> set[str]:
+    return {j.get("name") for j in ET.fromstring(urdf).iter("joint") if j.get("type") != "fixed"}
+
+
+@pytest.mark.parametrize("rtype", ["meca500", "reeman"])
+def test_each_robot_types_urdf_reads_and_names_its_joints_as_its_description_does(rtype):
+    d = robots.load(rtype)
+    assert d.urdf_path is not None, f"{rtype} has no URDF"
+    text = robot_description(d.urdf_path)
+    model = pin.buildModelFromXML(text)
+    assert {model.names[i] for i in range(1, model.njoints)} == set(d.joint_names) == moving_joints(text)
+
+
+def test_a_mesh_named_relative_to_its_urdf_becomes_an_absolute_file_uri(tmp_path):
+    (tmp_path / "meshes").mkdir()
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text('<robot name="a"><link name="l"><visual><geometry><mesh filename="meshes/l.stl"/></geometry></visual>'
+                    '<visual><geometry><mesh filename="package://pkg/l.dae"/></geometry></visual></link></robot>')
+    names = [m.get("filename") for m in ET.fromstring(robot_description(urdf)).iter("mesh")]
+    assert names == [(tmp_path / "meshes" / "l.stl").as_uri(), "package://pkg/l.dae"]
+
+
+def ros_env(domain: int) -> dict[str, str]:
+    return {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "ROS_LOCALHOST_ONLY": "1"}
+
+
+def lines(path: Path, topic: str) -> list[dict]:
+    out = []
+    for line in (path.read_text().splitlines() if path.exists() else []):
+        try:
+            r = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # a line being written
+        if r["topic"] == topic:
+            out.append(r)
+    return out
+
+
+def start(procs, tmp_path: Path, world: str, port: int, domain: int, *extra: str):
+    """The bridge, then the listening node (a late joiner: the latched descriptions must still reach it)."""
+    bridge = procs.start(robofabric_cmd("ros2", "--world", world, "--connect", f"tcp/127.0.0.1:{port}", *extra),
+                         name="bridge", env=ros_env(domain))
+    wait_until(lambda: "bridging world" in procs.output(bridge) or bridge.poll() is not None, timeout=60,
+               what="the bridge up", seen=lambda: procs.output(bridge)[-2000:])
+    assert bridge.poll() is None, procs.output(bridge)[-2000:]
+    out, ctl = tmp_path / "ros.jsonl", tmp_path / "ctl"
+    ctl.mkdir()
+    node = procs.start([sys.executable, str(NODE), "--out", str(out), "--control", str(ctl)], name="rosnode",
+                       env=ros_env(domain))
+    wait_until(lambda: lines(out, "ready") or node.poll() is not None, timeout=30, what="the ROS node up",
+               seen=lambda: procs.output(node)[-2000:])
+    return bridge, node, out, ctl
+
+
+@pytest.mark.slow
+def test_every_robot_has_a_latched_robot_description_whose_joints_are_its_joint_states(live, procs, tmp_path):
+    world, port, _ = live
+    bridge, node, out, _ = start(procs, tmp_path, world, port, 1 + (os.getpid() * 7 + 46) % 100)
+    got = lambda: {r["robot"] for r in lines(out, "robot_description")} | {"js:" + r["robot"] for r in lines(out, "joint_states")}  # noqa: E731
+    wait_until(lambda: got() >= {"arm1", "base1", "js:arm1", "js:base1"}, timeout=60,
+               what="arm1's and base1's robot_description and joint_states",
+               seen=lambda: (got(), procs.output(bridge)[-1500:], procs.output(node)[-1500:]))
+    for rid in ("arm1", "base1"):
+        urdf = lines(out, "robot_description")[[r["robot"] for r in lines(out, "robot_description")].index(rid)]["urdf"]
+        model = pin.buildModelFromXML(urdf)  # parses as ROS's URDF parser (urdfdom) reads it
+        names = set(lines(out, "joint_states")[[r["robot"] for r in lines(out, "joint_states")].index(rid)]["name"])
+        assert names and names == moving_joints(urdf) == {model.names[i] for i in range(1, model.njoints)}, rid
