@@ -5,8 +5,9 @@ It listens to what ``robofabric ros2`` publishes and writes one JSON line per me
 publishes ``geometry_msgs/Twist`` on ``/BASE/cmd_vel`` at 10 Hz with the "v omega" the file holds, as a
 teleop node would, and stops publishing when the file is removed; while ``--control/joints`` exists (JSON
 ``[names, positions]``) it publishes that ``sensor_msgs/JointState`` on ``/ARM/joint_command``; while
-``--control/trajectory`` exists (JSON ``[names, [positions, ...]]``) a ``trajectory_msgs/JointTrajectory`` of
-those points, 1 s apart, on ``/ARM/joint_trajectory``. Runs until SIGTERM.
+``--control/trajectory`` appears or changes (JSON ``[names, [positions, ...]]``) it publishes once a
+``trajectory_msgs/JointTrajectory`` of those points, 1 s apart, on ``/ARM/joint_trajectory`` (a new one replaces
+the one the bridge plays). Runs until SIGTERM.
 """
 
 from __future__ import annotations
@@ -82,12 +83,18 @@ def main() -> None:
     trajectory = node.create_publisher(JointTrajectory, f"/{args.arm}/joint_trajectory", 10)
     trajectory_file = os.path.join(args.control, "trajectory")
 
+    sent = [""]  # the trajectory file's text last published: a trajectory is sent once, as a ROS client does
+
     def send_trajectory() -> None:
         try:
             with open(trajectory_file) as f:
-                names, points = json.load(f)
+                text = f.read()
+            names, points = json.loads(text)
         except (FileNotFoundError, ValueError):
             return
+        if text == sent[0]:
+            return
+        sent[0] = text
         t = JointTrajectory()
         t.joint_names = list(names)
         for i, positions in enumerate(points):

@@ -20,7 +20,7 @@ them, as for any user; a refusal is logged on /rosout and counted)::
 
     /NS/ROBOT/cmd_vel           geometry_msgs/Twist             -> Base.twist(linear.x, angular.z, hold=False)
     /NS/ROBOT/joint_command     sensor_msgs/JointState          -> Arm.move_joints(positions, wait=False)
-    /NS/ROBOT/joint_trajectory  trajectory_msgs/JointTrajectory -> Arm.move_joints(its last point, wait=False)
+    /NS/ROBOT/joint_trajectory  trajectory_msgs/JointTrajectory -> Arm.move_joints(its points at their times, 50 Hz)
 
 Topic names, frame ids, stamps and values are those of ``export --to ros2``
 (:func:`user_peer.openfmt.ros2.ros2_topic`, :class:`~user_peer.openfmt.ros2.SimStamps`,
@@ -67,11 +67,12 @@ from user_peer.errors import FabricUserError
 from user_peer.openfmt.ros2 import SimStamps, ros2_message, ros2_topic, ros_topic, sensor_range_min, sim_time_ns, sonar_radius
 from user_peer.pause import is_pause, pause_words
 from user_peer.ros2 import direct
-from user_peer.ros2.commands import joint_targets, trajectory_targets
+from user_peer.ros2.commands import joint_targets
 from user_peer.ros2.fill import fill, message_class
 from user_peer.ros2.models import ModelsOut
 from user_peer.ros2.pauses import GcPauses
 from user_peer.ros2.tf import TfOut
+from user_peer.ros2.trajectory import TrajectoryPlayer, timed_points
 from user_peer.world import World
 
 __all__ = ["Ros2Bridge", "LATCHED", "RELIABLE", "STREAM"]
@@ -161,6 +162,7 @@ class Ros2Bridge:
             check_for_type_support(cls)
         self.tf = TfOut(node, RobotCatalog(None), namespace=namespace, message=tf_message)
         self.models = ModelsOut(node, namespace)  # /NS/ROBOT/robot_description, latched
+        self.trajectories = TrajectoryPlayer()  # joint_trajectory's points sent at their times
         w = world.name
         fab = world.fabric
         self.follow()  # first: the description's sensors (range_min) are known before the first scan
@@ -351,17 +353,20 @@ class Ros2Bridge:
             self._refuse(robot, "cmd_vel", getattr(exc, "reason", str(exc)))
 
     def _on_arm(self, robot: str, what: str, msg: Any) -> None:
-        """A JointState on joint_command or a JointTrajectory on joint_trajectory (its last point): the arm's move."""
+        """A JointState on joint_command (stops a trajectory playing) or a JointTrajectory on joint_trajectory (played)."""
         arm = self._check_owner(robot, what)
         if arm is None:
             return
         names = list(arm.entry.joint_names)
         try:
-            if what == "joint_trajectory":
-                positions = trajectory_targets(robot, names, msg)
+            if what == "joint_trajectory":  # played at its points' times (trajectory.py), replacing the one playing
+                timed = timed_points(robot, names, msg, arm.entry.lower, arm.entry.upper)
+                self.trajectories.play(robot, timed, arm.joints, lambda q: arm.move_joints(q, wait=False),
+                                       lambda exc: self._refuse(robot, what, getattr(exc, "reason", str(exc))))
             else:
                 positions = joint_targets(robot, names, list(msg.name), list(msg.position))
-            arm.move_joints(positions, wait=False)
+                self.trajectories.stop(robot)
+                arm.move_joints(positions, wait=False)
             self.forwarded[robot] += 1
         except (FabricUserError, ValueError) as exc:
             self._refuse(robot, what, getattr(exc, "reason", str(exc)))
@@ -392,6 +397,7 @@ class Ros2Bridge:
             except Exception:
                 pass
         self._subs.clear()
+        self.trajectories.close()
         if self.gc_pauses is not None:
             self.gc_pauses.close()
         try:

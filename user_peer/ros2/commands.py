@@ -1,10 +1,9 @@
 """What a ROS 2 arm command asks for: joint targets in the arm's order, or why it cannot be done.
 
 ``/ROBOT/joint_command`` carries a ``sensor_msgs/JointState`` (positions, by name in any order or in the arm's
-order without names); ``/ROBOT/joint_trajectory`` a ``trajectory_msgs/JointTrajectory``, of which the bridge
-takes the last point's positions: the arm goes to where the trajectory ends, at the sim's own joint speed, and
-the points before it and their ``time_from_start`` are not followed (the fabric's arm command is a target,
-not a timed path). Two topics, because one ROS 2 topic carries one type (DDS refuses a second type on a topic
+order without names); ``/ROBOT/joint_trajectory`` a ``trajectory_msgs/JointTrajectory``, whose points the
+bridge plays at their times (:mod:`user_peer.ros2.trajectory`, each point through :func:`joint_targets`;
+:func:`trajectory_targets` gives where one ends). Two topics, because one ROS 2 topic carries one type (DDS refuses a second type on a topic
 name in one participant).
 """
 

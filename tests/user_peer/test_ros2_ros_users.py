@@ -87,3 +87,31 @@ def test_every_robot_has_a_latched_robot_description_whose_joints_are_its_joint_
         model = pin.buildModelFromXML(urdf)  # parses as ROS's URDF parser (urdfdom) reads it
         names = set(lines(out, "joint_states")[[r["robot"] for r in lines(out, "joint_states")].index(rid)]["name"])
         assert names and names == moving_joints(urdf) == {model.names[i] for i in range(1, model.njoints)}, rid
+
+
+def arm1_states(out: Path) -> list[tuple[float, list[float]]]:
+    return [(r["wall"], r["position"]) for r in lines(out, "joint_states") if r["robot"] == "arm1"]
+
+
+@pytest.mark.slow
+def test_a_3_s_joint_trajectory_takes_3_s_through_its_middle_point(live, procs, tmp_path):
+    world, port, _ = live
+    bridge, node, out, ctl = start(procs, tmp_path, world, port, 1 + (os.getpid() * 7 + 47) % 100,
+                                   "--user", "rostraj", "--request", "arm1", "--drive", "arm1")
+    wait_until(lambda: len(arm1_states(out)) > 20, timeout=60, what="arm1's joint_states",
+               seen=lambda: procs.output(bridge)[-1500:])
+    names = ["joint_1", "joint_2", "joint_3", "joint_4", "joint_5", "joint_6"]
+    start_q = arm1_states(out)[-1][1]
+    target = [0.45, 0.3, -0.3, 0.4, 0.3, 0.5]  # at most 0.5 rad in 3 s: far below the Meca500's joint speeds
+    mid = [(a + b) / 2 + 0.05 for a, b in zip(start_q, target)]  # off the straight line: the point is followed
+    (ctl / "trajectory").write_text(json.dumps([names, [[mid, 1.5], [target, 3.0]]]))
+    arrived = lambda: [t for t, q in arm1_states(out) if max(abs(a - b) for a, b in zip(q, target)) < 2e-3]  # noqa: E731
+    wait_until(arrived, timeout=30, what="arm1 at the trajectory's end",
+               seen=lambda: (arm1_states(out)[-1:], procs.output(bridge)[-1500:]))
+    states = arm1_states(out)
+    left = next(t for t, q in states if max(abs(a - b) for a, b in zip(q, start_q)) > 1e-3)
+    took = arrived()[0] - left
+    assert 2.7 <= took <= 3.3, took  # 3 s +- 10 %
+    at_mid = min(states, key=lambda s: abs(s[0] - (left + 1.5)))[1]
+    assert max(abs(a - b) for a, b in zip(at_mid, mid)) < 0.05, (at_mid, mid)
+    print(f"a 3 s trajectory took {took:.2f} s")
