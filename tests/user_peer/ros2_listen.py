@@ -2,7 +2,7 @@
 
 It writes one JSON line per message to ``--out``: each robot's ``robot_description`` (latched String), its
 ``joint_states`` (names, positions, the wall time it came) and ``/rosout``. While ``--control/cmd_vel`` exists
-("v omega", ``nan`` allowed) it publishes that ``geometry_msgs/Twist`` on ``/BASE/cmd_vel`` at 10 Hz; when
+("v omega", ``nan`` allowed) it publishes that ``geometry_msgs/Twist`` (``--stamped``: ``TwistStamped``) on ``/BASE/cmd_vel`` at 10 Hz; when
 ``--control/trajectory`` appears (JSON ``[names, [[positions, seconds], ...]]``) it publishes that
 ``trajectory_msgs/JointTrajectory`` on ``/ARM/joint_trajectory`` once, writes ``trajectory_sent`` and removes the
 file. Runs until SIGTERM.
@@ -17,7 +17,7 @@ import sys
 import time
 
 import rclpy
-from geometry_msgs.msg import Twist
+from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import Log
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -33,6 +33,7 @@ def main() -> None:
     ap.add_argument("--robots", default="arm1,base1")
     ap.add_argument("--arm", default="arm1")
     ap.add_argument("--base", default="base1")
+    ap.add_argument("--stamped", action="store_true", help="cmd_vel as geometry_msgs/TwistStamped")
     args = ap.parse_args()
     out = open(args.out, "a", buffering=1)
 
@@ -51,7 +52,7 @@ def main() -> None:
                                                         position=list(m.position)), reliable)
     node.create_subscription(Log, "/rosout", lambda m: write(topic="rosout", name=m.name, level=int(m.level), msg=m.msg),
                              QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-    cmd = node.create_publisher(Twist, f"/{args.base}/cmd_vel", 10)
+    cmd = node.create_publisher(TwistStamped if args.stamped else Twist, f"/{args.base}/cmd_vel", 10)
     trajectory = node.create_publisher(JointTrajectory, f"/{args.arm}/joint_trajectory", 10)
     cmd_file = os.path.join(args.control, "cmd_vel")
     trajectory_file = os.path.join(args.control, "trajectory")
@@ -77,8 +78,9 @@ def main() -> None:
                 v, w = (float(x) for x in f.read().split())
         except (FileNotFoundError, ValueError):
             return
-        t = Twist()
-        t.linear.x, t.angular.z = v, w
+        t = TwistStamped() if args.stamped else Twist()
+        twist = t.twist if args.stamped else t
+        twist.linear.x, twist.angular.z = v, w
         cmd.publish(t)
         write(topic="cmd_vel_sent", subscribers=cmd.get_subscription_count())
 

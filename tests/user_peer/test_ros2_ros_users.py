@@ -58,7 +58,7 @@ def lines(path: Path, topic: str) -> list[dict]:
     return out
 
 
-def start(procs, tmp_path: Path, world: str, port: int, domain: int, *extra: str):
+def start(procs, tmp_path: Path, world: str, port: int, domain: int, *extra: str, node_args: tuple[str, ...] = ()):
     """The bridge, then the listening node (a late joiner: the latched descriptions must still reach it)."""
     bridge = procs.start(robofabric_cmd("ros2", "--world", world, "--connect", f"tcp/127.0.0.1:{port}", *extra),
                          name="bridge", env=ros_env(domain))
@@ -67,7 +67,7 @@ def start(procs, tmp_path: Path, world: str, port: int, domain: int, *extra: str
     assert bridge.poll() is None, procs.output(bridge)[-2000:]
     out, ctl = tmp_path / "ros.jsonl", tmp_path / "ctl"
     ctl.mkdir()
-    node = procs.start([sys.executable, str(NODE), "--out", str(out), "--control", str(ctl)], name="rosnode",
+    node = procs.start([sys.executable, str(NODE), "--out", str(out), "--control", str(ctl), *node_args], name="rosnode",
                        env=ros_env(domain))
     wait_until(lambda: lines(out, "ready") or node.poll() is not None, timeout=30, what="the ROS node up",
                seen=lambda: procs.output(node)[-2000:])
@@ -115,3 +115,34 @@ def test_a_3_s_joint_trajectory_takes_3_s_through_its_middle_point(live, procs, 
     at_mid = min(states, key=lambda s: abs(s[0] - (left + 1.5)))[1]
     assert max(abs(a - b) for a, b in zip(at_mid, mid)) < 0.05, (at_mid, mid)
     print(f"a 3 s trajectory took {took:.2f} s")
+
+
+def bridge_warnings(out: Path) -> list[str]:
+    return [r["msg"] for r in lines(out, "rosout") if r["name"].startswith("robofabric_") and r["level"] >= 30]
+
+
+def wheels_moving(out: Path, since: float) -> bool:
+    wheels = [(t, q) for t, q in ((r["wall"], r["position"]) for r in lines(out, "joint_states") if r["robot"] == "base1") if t > since]
+    return len(wheels) > 2 and max(abs(a - b) for a, b in zip(wheels[0][1], wheels[-1][1])) > 0.05
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("stamped", [False, True], ids=["Twist", "TwistStamped"])
+def test_a_nan_cmd_vel_is_refused_on_rosout_and_a_clamp_is_told(live, procs, tmp_path, stamped):
+    world, port, _ = live
+    flags = ("--cmd-vel-stamped",) if stamped else ()
+    bridge, node, out, ctl = start(procs, tmp_path, world, port, 1 + (os.getpid() * 7 + 48 + stamped) % 100,
+                                   "--user", f"rosvel{int(stamped)}", "--request", "base1", "--drive", "base1", *flags,
+                                   node_args=("--stamped",) if stamped else ())
+    wait_until(lambda: any(r["robot"] == "base1" for r in lines(out, "joint_states")), timeout=60, what="base1's joints")
+    (ctl / "cmd_vel").write_text("nan 0.0")
+    wait_until(lambda: any("not finite" in m for m in bridge_warnings(out)), timeout=30, what="the NaN refused on /rosout",
+               seen=lambda: (lines(out, "rosout")[-3:], lines(out, "cmd_vel_sent")[-1:], procs.output(bridge)[-1500:]))
+    assert any("refused cmd_vel for base1" in m and "linear.x nan m/s" in m for m in bridge_warnings(out)), bridge_warnings(out)
+    t = lines(out, "cmd_vel_sent")[-1]["wall"]
+    assert not wheels_moving(out, t - 0.5)  # nothing was sent: the base stands
+    (ctl / "cmd_vel").write_text("2.0 0.0")  # above base1's 1 m/s: sent, the sim clamps it, the bridge tells
+    wait_until(lambda: any("linear.x 2 m/s clamped by the sim to 1 m/s" in m for m in bridge_warnings(out)), timeout=30,
+               what="the clamp told on /rosout", seen=lambda: (bridge_warnings(out)[-3:], procs.output(bridge)[-1500:]))
+    wait_until(lambda: wheels_moving(out, t), timeout=20, what="base1 driven by the clamped cmd_vel")
+    (ctl / "cmd_vel").unlink()

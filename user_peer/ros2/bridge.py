@@ -19,6 +19,7 @@ the bridge only publishes (:mod:`user_peer.ros2.trust`); and for those, acted on
 them, as for any user; a refusal is logged on /rosout and counted)::
 
     /NS/ROBOT/cmd_vel           geometry_msgs/Twist             -> Base.twist(linear.x, angular.z, hold=False)
+                                (TwistStamped with stamped_cmd_vel; not finite or absurd: refused; clamps told)
     /NS/ROBOT/joint_command     sensor_msgs/JointState          -> Arm.move_joints(positions, wait=False)
     /NS/ROBOT/joint_trajectory  trajectory_msgs/JointTrajectory -> Arm.move_joints(its points at their times, 50 Hz)
 
@@ -50,7 +51,7 @@ from dataclasses import dataclass
 from typing import Any, Collection
 
 import rclpy
-from geometry_msgs.msg import PoseStamped, Twist
+from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -73,6 +74,7 @@ from user_peer.ros2.models import ModelsOut
 from user_peer.ros2.pauses import GcPauses
 from user_peer.ros2.tf import TfOut
 from user_peer.ros2.trajectory import TrajectoryPlayer, timed_points
+from user_peer.ros2.twist import base_limits, twist_check
 from user_peer.world import World
 
 __all__ = ["Ros2Bridge", "LATCHED", "RELIABLE", "STREAM"]
@@ -125,11 +127,12 @@ class Ros2Bridge:
     """Republish ``world``'s streams on ``node`` and forward its ROS commands; ``close()`` ends it."""
 
     def __init__(self, world: World, node: Node, *, namespace: str = "", tf_message: type | None = None,
-                 trace: bool = False, drive: Collection[str] = ()) -> None:
+                 trace: bool = False, drive: Collection[str] = (), stamped_cmd_vel: bool = False) -> None:
         self.world = world
         self.node = node
         self.namespace = namespace
         self.drive = frozenset(drive)  # the robots whose command topics it subscribes to; none: it only publishes
+        self.stamped_cmd_vel = stamped_cmd_vel  # cmd_vel as geometry_msgs/TwistStamped (Nav2's, ros2_control's)
         self._lock = threading.Lock()  # publishers' creation and removal only; never taken per message
         self._clock_lock = threading.Lock()  # /clock's order, taken when the sim time moves on
         self._outs: dict[str, _Out] = {}  # topic -> its publisher and message
@@ -313,7 +316,8 @@ class Ros2Bridge:
             return []
         topic = lambda leaf: ros_topic("/".join([self.namespace.strip("/"), rid, leaf]))  # noqa: E731
         if kind == "mobile":
-            return [self.node.create_subscription(Twist, topic("cmd_vel"), lambda m, r=rid: self._on_cmd_vel(r, m), RELIABLE)]
+            cls = TwistStamped if self.stamped_cmd_vel else Twist
+            return [self.node.create_subscription(cls, topic("cmd_vel"), lambda m, r=rid: self._on_cmd_vel(r, m), RELIABLE)]
         if kind == "arm":
             return [self.node.create_subscription(JointState, topic("joint_command"),
                                                   lambda m, r=rid: self._on_arm(r, "joint_command", m), RELIABLE),
@@ -342,13 +346,19 @@ class Ros2Bridge:
             return None
         return handle
 
-    def _on_cmd_vel(self, robot: str, msg: Twist) -> None:
+    def _on_cmd_vel(self, robot: str, msg: Any) -> None:
+        """A Twist (or a TwistStamped's twist): refused when not finite or absurd, a clamp told (twist.py)."""
         base = self._check_owner(robot, "cmd_vel")
         if base is None:
             return
+        twist = getattr(msg, "twist", msg)
         try:
-            base.twist(float(msg.linear.x), float(msg.angular.z), hold=False)
+            v, omega = float(twist.linear.x), float(twist.angular.z)
+            note = twist_check(v, omega, base_limits(self._described, robot))
+            base.twist(v, omega, hold=False)
             self.forwarded[robot] += 1
+            if note:
+                self.node.get_logger().warning(f"cmd_vel for {robot}: {note}", throttle_duration_sec=1.0)
         except (FabricUserError, ValueError) as exc:
             self._refuse(robot, "cmd_vel", getattr(exc, "reason", str(exc)))
 

@@ -19,6 +19,7 @@ def ros2(
     namespace: Annotated[str, typer.Option("--namespace", help="A ROS namespace put before every topic but /clock (e.g. class1).")] = "",
     request: Annotated[Optional[list[str]], typer.Option("--request", help="A robot to ask to own at start (repeatable); cmd_vel and joint_command act only on robots this login owns.")] = None,
     drive: Annotated[Optional[list[str]], typer.Option("--drive", help="A robot whose cmd_vel and joint commands the bridge takes from ROS 2 (repeatable); without it the bridge only publishes: any node on the DDS domain could send them.")] = None,
+    cmd_vel_stamped: Annotated[bool, typer.Option("--cmd-vel-stamped", help="Take cmd_vel as geometry_msgs/TwistStamped (Nav2's enable_stamped_cmd_vel, ros2_control's diff drive) instead of Twist.")] = False,
     discovery: Annotated[Optional[str], typer.Option("--discovery", help="How far DDS discovery reaches: localhost (the default, unless ROS_AUTOMATIC_DISCOVERY_RANGE is set), subnet, off or system_default.")] = None,
     user_id: Annotated[Optional[str], typer.Option("--user", "-u", help="The login the bridge acts as (default: $USER); ownership is by user id.")] = None,
     join: Joining = Joining(),
@@ -60,7 +61,8 @@ def ros2(
         os.environ.update(found.set_env)  # read by the middleware when rclpy starts
         rclpy.init()
         node = rclpy.create_node("robofabric_" + "".join(c if c.isalnum() else "_" for c in w.user))
-        bridge = Ros2Bridge(w, node, namespace=namespace, trace=trace is not None, drive=drive or ())
+        bridge = Ros2Bridge(w, node, namespace=namespace, trace=trace is not None, drive=drive or (),
+                            stamped_cmd_vel=cmd_vel_stamped)
         for line in boundary_lines(w.user, drive or (), os.environ.get("ROS_DOMAIN_ID", "0"), found):
             print(line, flush=True)
         # what the start built (rclpy's, zenoh's, numpy's ~80,000 objects) lives as long as the bridge: frozen out
