@@ -5,7 +5,8 @@ It writes one JSON line per message to ``--out``: each robot's ``robot_descripti
 ("v omega", ``nan`` allowed) it publishes that ``geometry_msgs/Twist`` (``--stamped``: ``TwistStamped``) on ``/BASE/cmd_vel`` at 10 Hz; when
 ``--control/trajectory`` appears (JSON ``[names, [[positions, seconds], ...]]``) it publishes that
 ``trajectory_msgs/JointTrajectory`` on ``/ARM/joint_trajectory`` once, writes ``trajectory_sent`` and removes the
-file. Runs until SIGTERM.
+file; when ``--control/goal`` appears ("x y") it publishes that ``geometry_msgs/PoseStamped`` (frame ``map``) on
+``/goal_pose`` once, as RViz's 2D Goal Pose does; it writes ``BASE``'s odometry and path. Runs until SIGTERM.
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ import sys
 import time
 
 import rclpy
-from geometry_msgs.msg import Twist, TwistStamped
+from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
+from nav_msgs.msg import Odometry, Path
 from rcl_interfaces.msg import Log
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -52,12 +54,34 @@ def main() -> None:
                                                         position=list(m.position)), reliable)
     node.create_subscription(Log, "/rosout", lambda m: write(topic="rosout", name=m.name, level=int(m.level), msg=m.msg),
                              QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    node.create_subscription(Odometry, f"/{args.base}/odom",
+                             lambda m: write(topic="odom", x=m.pose.pose.position.x, y=m.pose.pose.position.y), reliable)
+    node.create_subscription(Path, f"/{args.base}/path",
+                             lambda m: write(topic="path", frame=m.header.frame_id, n=len(m.poses),
+                                             end=[m.poses[-1].pose.position.x, m.poses[-1].pose.position.y] if m.poses else None),
+                             latched)
+    goal = node.create_publisher(PoseStamped, "/goal_pose", 10)
+    goal_file = os.path.join(args.control, "goal")
     cmd = node.create_publisher(TwistStamped if args.stamped else Twist, f"/{args.base}/cmd_vel", 10)
     trajectory = node.create_publisher(JointTrajectory, f"/{args.arm}/joint_trajectory", 10)
     cmd_file = os.path.join(args.control, "cmd_vel")
     trajectory_file = os.path.join(args.control, "trajectory")
 
+    def send_goal() -> None:
+        try:
+            with open(goal_file) as f:
+                x, y = (float(v) for v in f.read().split())
+        except (FileNotFoundError, ValueError):
+            return
+        os.unlink(goal_file)
+        g = PoseStamped()
+        g.header.frame_id = "map"  # RViz's 2D Goal Pose, fixed frame map
+        g.pose.position.x, g.pose.position.y, g.pose.orientation.w = x, y, 1.0
+        goal.publish(g)
+        write(topic="goal_sent", subscribers=goal.get_subscription_count())
+
     def tick() -> None:
+        send_goal()
         try:
             with open(trajectory_file) as f:
                 names, points = json.load(f)

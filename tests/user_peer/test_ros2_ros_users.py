@@ -5,6 +5,7 @@ joints are the names its ``joint_states`` carry. Real router, sim, bridge and no
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 import xml.etree.ElementTree as ET
@@ -14,6 +15,7 @@ import pinocchio as pin
 import pytest
 
 import robots
+import user_peer
 from robofabric.testing import robofabric_cmd, wait_until
 from user_peer.ros2.models import robot_description
 
@@ -103,22 +105,24 @@ def test_a_3_s_joint_trajectory_takes_3_s_through_its_middle_point(live, procs, 
     names = ["joint_1", "joint_2", "joint_3", "joint_4", "joint_5", "joint_6"]
     start_q = arm1_states(out)[-1][1]
     target = [0.45, 0.3, -0.3, 0.4, 0.3, 0.5]  # at most 0.5 rad in 3 s: far below the Meca500's joint speeds
-    mid = [(a + b) / 2 + 0.05 for a, b in zip(start_q, target)]  # off the straight line: the point is followed
+    mid = [(a + b) / 2 + 0.15 for a, b in zip(start_q, target)]  # 0.15 rad off the straight line: followed, not cut
     (ctl / "trajectory").write_text(json.dumps([names, [[mid, 1.5], [target, 3.0]]]))
     arrived = lambda: [t for t, q in arm1_states(out) if max(abs(a - b) for a, b in zip(q, target)) < 2e-3]  # noqa: E731
     wait_until(arrived, timeout=30, what="arm1 at the trajectory's end",
                seen=lambda: (arm1_states(out)[-1:], procs.output(bridge)[-1500:]))
     states = arm1_states(out)
-    left = next(t for t, q in states if max(abs(a - b) for a, b in zip(q, start_q)) > 1e-3)
-    took = arrived()[0] - left
+    sent = lines(out, "trajectory_sent")[0]["wall"]  # as the sending node sees it: from its publish to the arrival
+    took = arrived()[0] - sent
     assert 2.7 <= took <= 3.3, took  # 3 s +- 10 %
-    at_mid = min(states, key=lambda s: abs(s[0] - (left + 1.5)))[1]
-    assert max(abs(a - b) for a, b in zip(at_mid, mid)) < 0.05, (at_mid, mid)
+    left = next(t for t, q in states if t >= sent and max(abs(a - b) for a, b in zip(q, start_q)) > 1e-3)
+    # through the middle point (when, is the node's arrival time: on a loaded machine it lags the sim's by tenths of s)
+    nearest = min(max(abs(a - b) for a, b in zip(q, mid)) for t, q in states if t >= left)
+    assert nearest < 0.05, (nearest, mid)
     print(f"a 3 s trajectory took {took:.2f} s")
 
 
-def bridge_warnings(out: Path) -> list[str]:
-    return [r["msg"] for r in lines(out, "rosout") if r["name"].startswith("robofabric_") and r["level"] >= 30]
+def bridge_warnings(out: Path, node_name: str = "robofabric_") -> list[str]:
+    return [r["msg"] for r in lines(out, "rosout") if r["name"].startswith(node_name) and r["level"] >= 30]
 
 
 def wheels_moving(out: Path, since: float) -> bool:
@@ -130,19 +134,51 @@ def wheels_moving(out: Path, since: float) -> bool:
 @pytest.mark.parametrize("stamped", [False, True], ids=["Twist", "TwistStamped"])
 def test_a_nan_cmd_vel_is_refused_on_rosout_and_a_clamp_is_told(live, procs, tmp_path, stamped):
     world, port, _ = live
-    flags = ("--cmd-vel-stamped",) if stamped else ()
+    # the stamped bridge also takes ROS arguments: its node renamed by a remap, as its /rosout lines show
+    flags = ("--cmd-vel-stamped", "--ros-args", "-r", "__node:=stamped_bridge") if stamped else ()
+    name = "stamped_bridge" if stamped else "robofabric_"
     bridge, node, out, ctl = start(procs, tmp_path, world, port, 1 + (os.getpid() * 7 + 48 + stamped) % 100,
                                    "--user", f"rosvel{int(stamped)}", "--request", "base1", "--drive", "base1", *flags,
                                    node_args=("--stamped",) if stamped else ())
     wait_until(lambda: any(r["robot"] == "base1" for r in lines(out, "joint_states")), timeout=60, what="base1's joints")
     (ctl / "cmd_vel").write_text("nan 0.0")
-    wait_until(lambda: any("not finite" in m for m in bridge_warnings(out)), timeout=30, what="the NaN refused on /rosout",
+    wait_until(lambda: any("not finite" in m for m in bridge_warnings(out, name)), timeout=30, what="the NaN refused on /rosout",
                seen=lambda: (lines(out, "rosout")[-3:], lines(out, "cmd_vel_sent")[-1:], procs.output(bridge)[-1500:]))
-    assert any("refused cmd_vel for base1" in m and "linear.x nan m/s" in m for m in bridge_warnings(out)), bridge_warnings(out)
+    assert any("refused cmd_vel for base1" in m and "linear.x nan m/s" in m for m in bridge_warnings(out, name)), bridge_warnings(out)
     t = lines(out, "cmd_vel_sent")[-1]["wall"]
     assert not wheels_moving(out, t - 0.5)  # nothing was sent: the base stands
     (ctl / "cmd_vel").write_text("2.0 0.0")  # above base1's 1 m/s: sent, the sim clamps it, the bridge tells
-    wait_until(lambda: any("linear.x 2 m/s clamped by the sim to 1 m/s" in m for m in bridge_warnings(out)), timeout=30,
+    wait_until(lambda: any("linear.x 2 m/s clamped by the sim to 1 m/s" in m for m in bridge_warnings(out, name)), timeout=30,
                what="the clamp told on /rosout", seen=lambda: (bridge_warnings(out)[-3:], procs.output(bridge)[-1500:]))
     wait_until(lambda: wheels_moving(out, t), timeout=20, what="base1 driven by the clamped cmd_vel")
     (ctl / "cmd_vel").unlink()
+
+
+@pytest.mark.slow
+def test_a_goal_pose_is_planned_on_the_logins_map_shown_on_path_and_brings_base1_within_0_2_m(live, procs, tmp_path):
+    world, port, _ = live
+    ep = f"tcp/127.0.0.1:{port}"
+    comp = procs.start(robofabric_cmd("compute", "--no-kinematics", "--world", world, "--connect", ep), name="compute")
+    wait_until(lambda: "serving" in procs.output(comp), timeout=90, what="the compute peer up", seen=lambda: procs.output(comp)[-1500:])
+    w = user_peer.connect(world=world, connect=ep, user="rosgoal")  # the student maps first, as in Test B
+    try:
+        base = w.robot("base1")
+        base.wait_for("pose")
+        base.request()
+        base.start_mapping()
+        base.drive(0.0, 0.8, 2 * math.pi / 0.8)
+        base.build_map()  # her own map, rosgoal.map: the bridge's default for goals
+        base.release()
+    finally:
+        w.close()
+    bridge, node, out, ctl = start(procs, tmp_path, world, port, 1 + (os.getpid() * 7 + 50) % 100,
+                                   "--user", "rosgoal", "--request", "base1", "--drive", "base1")
+    wait_until(lambda: lines(out, "odom"), timeout=60, what="base1's odometry")
+    goal = (1.5, 1.0)
+    (ctl / "goal").write_text(f"{goal[0]} {goal[1]}")
+    at = lambda: math.dist([lines(out, "odom")[-1]["x"], lines(out, "odom")[-1]["y"]], goal)  # noqa: E731
+    wait_until(lambda: at() < 0.2, timeout=90, what="base1 within 0.2 m of the goal",
+               seen=lambda: (at(), lines(out, "goal_sent"), lines(out, "path")[-1:], procs.output(bridge)[-1500:]))
+    paths = [p for p in lines(out, "path") if p["n"] > 1]
+    assert paths and math.dist(paths[-1]["end"], goal) < 0.1 and paths[-1]["frame"] == "world", paths[-1:]
+    assert any("planned on map 'rosgoal.map'" in r["msg"] for r in lines(out, "rosout")), lines(out, "rosout")[-5:]

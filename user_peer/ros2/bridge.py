@@ -20,6 +20,7 @@ them, as for any user; a refusal is logged on /rosout and counted)::
 
     /NS/ROBOT/cmd_vel           geometry_msgs/Twist             -> Base.twist(linear.x, angular.z, hold=False)
                                 (TwistStamped with stamped_cmd_vel; not finite or absurd: refused; clamps told)
+    /NS/ROBOT/goal_pose, /NS/goal_pose  geometry_msgs/PoseStamped -> Base.plan_to, then Base.follow (goals.py)
     /NS/ROBOT/joint_command     sensor_msgs/JointState          -> Arm.move_joints(positions, wait=False)
     /NS/ROBOT/joint_trajectory  trajectory_msgs/JointTrajectory -> Arm.move_joints(its points at their times, 50 Hz)
 
@@ -70,6 +71,7 @@ from user_peer.pause import is_pause, pause_words
 from user_peer.ros2 import direct
 from user_peer.ros2.commands import joint_targets
 from user_peer.ros2.fill import fill, message_class
+from user_peer.ros2.goals import GoalsIn
 from user_peer.ros2.models import ModelsOut
 from user_peer.ros2.pauses import GcPauses
 from user_peer.ros2.tf import TfOut
@@ -127,7 +129,8 @@ class Ros2Bridge:
     """Republish ``world``'s streams on ``node`` and forward its ROS commands; ``close()`` ends it."""
 
     def __init__(self, world: World, node: Node, *, namespace: str = "", tf_message: type | None = None,
-                 trace: bool = False, drive: Collection[str] = (), stamped_cmd_vel: bool = False) -> None:
+                 trace: bool = False, drive: Collection[str] = (), stamped_cmd_vel: bool = False,
+                 goal_map: str = "") -> None:
         self.world = world
         self.node = node
         self.namespace = namespace
@@ -166,6 +169,7 @@ class Ros2Bridge:
         self.tf = TfOut(node, RobotCatalog(None), namespace=namespace, message=tf_message)
         self.models = ModelsOut(node, namespace)  # /NS/ROBOT/robot_description, latched
         self.trajectories = TrajectoryPlayer()  # joint_trajectory's points sent at their times
+        self.goals = GoalsIn(node, namespace, RELIABLE, self._check_owner, self._refuse, goal_map)  # goal_pose
         w = world.name
         fab = world.fabric
         self.follow()  # first: the description's sensors (range_min) are known before the first scan
@@ -304,6 +308,7 @@ class Ros2Bridge:
             for sub in self._inputs.pop(rid):
                 self.node.destroy_subscription(sub)
             self._kinds.pop(rid, None)
+            self.goals.forget(rid)
             with self._lock:
                 for topic in self._robot_topics.pop(rid, set()):
                     self.node.destroy_publisher(self._outs.pop(topic).pub)
@@ -317,7 +322,8 @@ class Ros2Bridge:
         topic = lambda leaf: ros_topic("/".join([self.namespace.strip("/"), rid, leaf]))  # noqa: E731
         if kind == "mobile":
             cls = TwistStamped if self.stamped_cmd_vel else Twist
-            return [self.node.create_subscription(cls, topic("cmd_vel"), lambda m, r=rid: self._on_cmd_vel(r, m), RELIABLE)]
+            return [self.node.create_subscription(cls, topic("cmd_vel"), lambda m, r=rid: self._on_cmd_vel(r, m), RELIABLE),
+                    self.goals.subscribe(rid)]
         if kind == "arm":
             return [self.node.create_subscription(JointState, topic("joint_command"),
                                                   lambda m, r=rid: self._on_arm(r, "joint_command", m), RELIABLE),
