@@ -1,7 +1,7 @@
 """A plain ROS 2 node for the bridge's model, trajectory and refusal tests: it imports nothing from robofabric.
 
 It writes one JSON line per message to ``--out``: each robot's ``robot_description`` (latched String), its
-``joint_states`` (names, positions, the wall time it came) and ``/rosout``. While ``--control/cmd_vel`` exists
+``joint_states`` (names, positions, the wall time it came), ``/rosout`` and the ``--clocks`` topics. While ``--control/cmd_vel`` exists
 ("v omega", ``nan`` allowed) it publishes that ``geometry_msgs/Twist`` (``--stamped``: ``TwistStamped``) on ``/BASE/cmd_vel`` at 10 Hz; when
 ``--control/trajectory`` appears (JSON ``[names, [[positions, seconds], ...]]``) it publishes that
 ``trajectory_msgs/JointTrajectory`` on ``/ARM/joint_trajectory`` once, writes ``trajectory_sent`` and removes the
@@ -21,6 +21,7 @@ import rclpy
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry, Path
 from rcl_interfaces.msg import Log
+from rosgraph_msgs.msg import Clock
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -35,6 +36,7 @@ def main() -> None:
     ap.add_argument("--robots", default="arm1,base1")
     ap.add_argument("--arm", default="arm1")
     ap.add_argument("--base", default="base1")
+    ap.add_argument("--clocks", default="/clock", help="clock topics to listen to, comma-separated")
     ap.add_argument("--stamped", action="store_true", help="cmd_vel as geometry_msgs/TwistStamped")
     args = ap.parse_args()
     out = open(args.out, "a", buffering=1)
@@ -52,6 +54,10 @@ def main() -> None:
         node.create_subscription(JointState, f"/{rid}/joint_states",
                                  lambda m, r=rid: write(topic="joint_states", robot=r, name=list(m.name),
                                                         position=list(m.position)), reliable)
+    for topic in args.clocks.split(","):
+        node.create_subscription(Clock, topic, lambda m, t=topic: write(
+            topic="clock", on=t, ns=int(m.clock.sec) * 1_000_000_000 + int(m.clock.nanosec),
+            publishers=node.count_publishers(t)), QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
     node.create_subscription(Log, "/rosout", lambda m: write(topic="rosout", name=m.name, level=int(m.level), msg=m.msg),
                              QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
     node.create_subscription(Odometry, f"/{args.base}/odom",

@@ -182,3 +182,23 @@ def test_a_goal_pose_is_planned_on_the_logins_map_shown_on_path_and_brings_base1
     paths = [p for p in lines(out, "path") if p["n"] > 1]
     assert paths and math.dist(paths[-1]["end"], goal) < 0.1 and paths[-1]["frame"] == "world", paths[-1:]
     assert any("planned on map 'rosgoal.map'" in r["msg"] for r in lines(out, "rosout")), lines(out, "rosout")[-5:]
+
+
+@pytest.mark.slow
+def test_two_namespaced_bridges_give_each_its_own_clock_and_none_on_the_shared_one(live, procs, tmp_path):
+    world, port, _ = live
+    domain = 1 + (os.getpid() * 7 + 51) % 100
+    first = procs.start(robofabric_cmd("ros2", "--world", world, "--connect", f"tcp/127.0.0.1:{port}", "--user", "class1",
+                                       "--namespace", "class1"), name="bridge1", env=ros_env(domain))
+    wait_until(lambda: "bridging world" in procs.output(first), timeout=60, what="the first bridge up",
+               seen=lambda: procs.output(first)[-1500:])
+    bridge, node, out, _ = start(procs, tmp_path, world, port, domain, "--user", "class2", "--namespace", "class2",
+                                 node_args=("--clocks", "/class1/clock,/class2/clock,/clock"))
+    on = lambda t: [r for r in lines(out, "clock") if r["on"] == t]  # noqa: E731
+    wait_until(lambda: len(on("/class1/clock")) > 20 and len(on("/class2/clock")) > 20, timeout=60,
+               what="both classes' clocks", seen=lambda: ({t: len(on(t)) for t in ("/class1/clock", "/class2/clock", "/clock")},
+                                                           procs.output(bridge)[-1500:]))
+    for t in ("/class1/clock", "/class2/clock"):
+        ns = [r["ns"] for r in on(t)]
+        assert ns == sorted(ns) and {r["publishers"] for r in on(t)} == {1}, t  # one bridge each, never back
+    assert on("/clock") == []

@@ -10,7 +10,7 @@ Out (every robot of the world, followed as sims and robots come and go)::
     /NS/ROBOT/path          nav_msgs/Path            from rf/W/robot/ROBOT/path     (reliable, transient local)
     /NS/map                 nav_msgs/OccupancyGrid   from rf/W/map/map (other maps: /NS/maps/NAME; reliable, transient local)
     /NS/object/ID/pose      geometry_msgs/PoseStamped from rf/W/object/ID/pose/by/*
-    /clock                  rosgraph_msgs/Clock      the sims' time (the newest header stamp of robot state)
+    /NS/clock               rosgraph_msgs/Clock      the sims' time (the newest header stamp of robot state)
     /NS/tf, /NS/tf_static   tf2_msgs/TFMessage       the export's frame tree, where tf2_msgs is importable (tf.py)
     /NS/ROBOT/robot_description std_msgs/String      the robot type's URDF (latched; models.py)
 
@@ -160,7 +160,9 @@ class Ros2Bridge:
         self._event_mark = world.event_mark()
         self._subs: list[Any] = []
         self._closed = False
-        self._clock_pub = node.create_publisher(Clock, "/clock", RELIABLE)
+        # under a namespace, its own clock (/NS/clock): two classes' bridges on one domain would interleave two sims'
+        # times on one /clock (jumps back of minutes); a class's nodes remap theirs: -r /clock:=/NS/clock
+        self._clock_pub = node.create_publisher(Clock, ros_topic("/".join([namespace.strip("/"), "clock"])), RELIABLE)
         # each type's support is imported now, not by the first publisher of that type: that import (the first
         # JointState publisher took 80 ms here, load 17) ran in a zenoh callback under the lock every other
         # stream's first message waits for (a 350 ms stall of all the bridge's callbacks at its start, load 15)

@@ -17,7 +17,7 @@ MISSING_RCLPY = ("robofabric ros2 needs rclpy: pip install 'robofabric[ros2]' (R
 @join_flags(client=True)
 def ros2(
     ctx: typer.Context,
-    namespace: Annotated[str, typer.Option("--namespace", help="A ROS namespace put before every topic but /clock (e.g. class1).")] = "",
+    namespace: Annotated[str, typer.Option("--namespace", help="A ROS namespace put before every topic, /clock too (e.g. class1: /class1/clock).")] = "",
     request: Annotated[Optional[list[str]], typer.Option("--request", help="A robot to ask to own at start (repeatable); cmd_vel and joint_command act only on robots this login owns.")] = None,
     drive: Annotated[Optional[list[str]], typer.Option("--drive", help="A robot whose cmd_vel and joint commands the bridge takes from ROS 2 (repeatable); without it the bridge only publishes: any node on the DDS domain could send them.")] = None,
     cmd_vel_stamped: Annotated[bool, typer.Option("--cmd-vel-stamped", help="Take cmd_vel as geometry_msgs/TwistStamped (Nav2's enable_stamped_cmd_vel, ros2_control's diff drive) instead of Twist.")] = False,
