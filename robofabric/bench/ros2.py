@@ -21,6 +21,7 @@ import sys
 import tempfile
 import time
 import uuid
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, Optional
 
@@ -77,17 +78,28 @@ class _Zenoh:
         return got
 
 
-def run_one(robots: int, seconds: float, tmp: Path, take: str = "raw") -> dict[str, Any]:
+def domain_of(given: int | None, env: Mapping[str, str], pid: int) -> int:
+    """The ROS domain of a run: ``--domain``, else the caller's ``ROS_DOMAIN_ID``, else one of the run's own (from
+    its pid, 1-100: two benchmarks on one machine seldom meet)."""
+    if given is not None:
+        return given
+    if env.get("ROS_DOMAIN_ID", "").strip().isdigit():
+        return int(env["ROS_DOMAIN_ID"])
+    return 1 + (pid * 13) % 100
+
+
+def run_one(robots: int, seconds: float, tmp: Path, take: str = "raw", domain: int | None = None,
+            port: int | None = None) -> dict[str, Any]:
     """One world of ``robots`` bases bridged to ROS 2 for ``seconds``; the row's figures. ``take``: how the ROS
-    node takes a message (:mod:`robofabric.bench.ros2_listen`): ``raw`` bytes, timed as zenoh's are, or ``message``."""
+    node takes a message (:mod:`robofabric.bench.ros2_listen`): ``raw`` bytes, timed as zenoh's are, or ``message``.
+    ``domain`` (:func:`domain_of`) and ``port`` (the router's, default a free one) as the caller gives them."""
     from robofabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
     from robofabric.bench.shards import spots
 
     world = f"ros{uuid.uuid4().hex[:6]}"
-    port = free_port()
+    port = port or free_port()
     ep = f"tcp/127.0.0.1:{port}"
-    domain = 1 + (os.getpid() * 13) % 100
-    env = ros_env(domain)
+    env = ros_env(domain_of(domain, os.environ, os.getpid()))
     ids = [f"base{i}" for i in range(robots)]
     out_file = tmp / "ros.txt"
     trace_file = tmp / "bridge-trace.txt"
@@ -232,6 +244,8 @@ def command(
     seconds: Annotated[float, typer.Option("--seconds", help="Measured window per count.")] = 20.0,
     out: Annotated[Optional[Path], typer.Option("--out", help="Append the markdown table to this file.")] = None,
     take: Annotated[str, typer.Option("--take", help="How the ROS node takes each message: raw (bytes, timed at arrival as zenoh's are), message (rclpy's message built first), or both in turn (message, then raw) for each count.")] = "raw",
+    domain: Annotated[Optional[int], typer.Option("--domain", help="The ROS domain of the run (default: $ROS_DOMAIN_ID when set, else one of the run's own).")] = None,
+    port: Annotated[Optional[int], typer.Option("--port", help="The zenoh router's port on 127.0.0.1 (default: a free one).")] = None,
     convert: Annotated[bool, typer.Option("--convert", help="Only the Python cost of one message (decode, build, publish) in this process.")] = False,
 ) -> None:
     """N mobile robots at full rate through the ROS 2 bridge (robofabric ros2) to a plain rclpy node: the latency
@@ -265,7 +279,7 @@ def command(
             for how in takes:
                 d = Path(tmp) / f"n{n}-{how}"
                 d.mkdir()
-                r = run_one(n, seconds, d, how)
+                r = run_one(n, seconds, d, how, domain, port)
                 lines.extend(row(r))
                 splits.extend(split_row(r))
                 summaries.append(f"{n} robots, ROS node takes {how}: the sim, router and this process used "

@@ -55,3 +55,12 @@ def test_the_tail_in_a_gc_pause_counts_the_slowest_messages_in_flight_during_a_l
     assert in_gc(spans, []) == 0.0
     assert gc_stats(pauses, 0, 10_000 * ms) == {"n": 2, "full": 1, "max_ms": 30.0}
     assert gc_stats(pauses, 0, 5000 * ms)["n"] == 0
+
+
+def test_the_ros_domain_is_the_callers_when_given_or_set_else_the_runs_own():
+    from robofabric.bench.ros2 import domain_of
+
+    assert domain_of(42, {"ROS_DOMAIN_ID": "7"}, 1) == 42  # --domain first
+    assert domain_of(None, {"ROS_DOMAIN_ID": "7"}, 1) == 7  # then the caller's environment
+    assert domain_of(None, {}, 3) == 1 + (3 * 13) % 100 == domain_of(None, {"ROS_DOMAIN_ID": ""}, 3)
+
