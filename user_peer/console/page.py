@@ -25,6 +25,7 @@ from user_peer.console.base_panel import BasePanel
 from user_peer.console.drive import REFRESH_S
 from user_peer.console.login import LoginError, login_config
 from user_peer.console.view import LiveView
+from user_peer.console.view3d import View3D
 from user_peer.errors import FabricUserError, Paused
 from user_peer.event_log import describe
 from user_peer.pause import is_pause, pause_words
@@ -107,6 +108,7 @@ class ConsolePage:
         self.entries: list = []  # every robot of the world (user_peer.services.RobotEntry)
         self.handles: dict[str, Any] = {}  # the handles made so far (a handle's robot is followed only while shown)
         self.view: LiveView | None = None
+        self.view3d: View3D | None = None
         self.arm: Any = None
         self.base: Any = None
         self.arm_panel: ArmPanel | None = None
@@ -211,6 +213,8 @@ class ConsolePage:
                     if panel is not None:
                         panel.build()
             with ui.column().classes("col"):
+                self.view3d = View3D(self)
+                self.view3d.build()
                 self.view.build()
                 ui.label("Events").classes("text-subtitle1")
                 self.log = ui.log(max_lines=200).classes("full-width").style("height: 12rem")
@@ -346,6 +350,8 @@ class ConsolePage:
             if panel is not None:
                 panel.refresh()
         self.view.refresh()
+        if self.view3d is not None:
+            self.view3d.refresh(self.view.feed.raw if self.view.feed is not None else {})
         self._refresh_events()
 
     def _refresh_events(self) -> None:

@@ -445,3 +445,85 @@ def test_the_pages_ask_no_host_but_the_console_server(browser, klass):
     assert any(urlsplit(u).path.startswith("/_nicegui") for u in REQUESTS), REQUESTS  # its assets came from the console
     elsewhere = sorted({u for u in REQUESTS if urlsplit(u).netloc != klass.host and not u.startswith(("data:", "blob:"))})
     assert not elsewhere, f"the pages asked other hosts: {elsewhere}"
+
+
+SCENE3D_JS = """() => {
+  const s = getElement(document.querySelector('.rf-scene3d'));
+  if (!s || !s.scene) return null;
+  const m = s.scene.getObjectByName('ik-target');
+  const r = s.renderer.domElement.getBoundingClientRect();
+  const ends = [];
+  s.scene.traverse((c) => {
+    if (c.geometry && c.geometry.type === 'CylinderGeometry') {
+      for (const sign of [-1, 1]) {
+        const e = c.up.clone().set(0, sign * c.scale.y / 2, 0).applyQuaternion(c.quaternion).add(c.position);
+        ends.push([e.x, e.y, e.z]);
+      }
+    }
+  });
+  if (!m || !m.visible) return {ends};
+  const v = m.position.clone().project(s.camera);
+  return {ends, target: [m.position.x, m.position.y, m.position.z],
+          screen: [r.left + (v.x + 1) / 2 * r.width, r.top + (1 - v.y) / 2 * r.height]};
+}"""
+
+
+def test_the_3d_view_draws_the_arm_and_a_drag_in_it_moves_the_ik_target_that_apply_ik_reaches(browser, klass):
+    """The 3D view draws arm1's links at its live joints (a link ends at the flange the sim reports); the height
+    field and a real mouse drag of the orange sphere move the scene's IK target (read through the Python API), the
+    drag on the target's own plane; Apply IK then puts the flange on it."""
+    arm, seen = klass.carol.robot("arm1"), klass.carol.object("target")
+    wait_until(lambda: arm.flange is not None, timeout=30, what="arm1's flange")
+    klass.carol.object("target").set_pose(np.asarray(arm.flange.position, dtype=float))  # a target arm1 reaches
+    dave = open_page(browser, klass)
+    logged_in(dave, klass, "dave")
+    dave.get_by_role("button", name="arm1", exact=True).click()
+    dave.get_by_role("button", name="Request").click()
+    wait_message(dave, r"request arm1: you own it")
+
+    def drawn() -> dict | None:
+        out = dave.evaluate(SCENE3D_JS)
+        return out if out and out.get("target") and len(out["ends"]) >= 12 else None
+
+    scene = wait_until(drawn, timeout=30, what="the 3D view with arm1's links and the target", seen=lambda: dave.evaluate(SCENE3D_JS))
+    flange = np.asarray(arm.flange.position)
+    assert min(math.dist(e, flange) for e in scene["ends"]) <= 0.005, (scene["ends"], flange)  # drawn at its live joints
+
+    z = round(float(seen.pose.position[2]) - 0.02, 3)
+    height = dave.get_by_label("IK target height z in metres")
+    height.fill(f"{z}")
+    height.press("Enter")
+    wait_until(lambda: abs(seen.pose.position[2] - z) <= 1e-6, timeout=10, what=f"the target's height at {z}", seen=lambda: seen.pose)
+    before = np.asarray(seen.pose.position, dtype=float)
+    wait_until(lambda: (s := drawn()) and abs(s["target"][2] - z) <= 1e-4, timeout=10, what="the sphere at the new height")
+    x0, y0 = drawn()["screen"]
+    dave.mouse.move(x0, y0)
+    dave.mouse.down()
+    for k in range(1, 6):
+        dave.mouse.move(x0 + 4 * k, y0 - 2 * k)
+    dave.mouse.up()
+    wait_until(lambda: np.linalg.norm(np.asarray(seen.pose.position)[:2] - before[:2]) >= 0.005, timeout=10,
+               what="the target dragged (read through the Python API)", seen=lambda: (before, seen.pose.position))
+    target = np.asarray(seen.pose.position, dtype=float)
+    assert target[2] == pytest.approx(z, abs=1e-6)  # dragged on its own plane
+    assert np.linalg.norm(target - before) <= 0.1
+    wait_message(dave, r"IK target dragged to")
+    ik = dave.get_by_text(re.compile(r"^IK: "))
+    wait_until(lambda: ik.inner_text().startswith("IK: ["), timeout=30, what="the IK solution", seen=ik.inner_text)
+    shot(dave, "3d-view-dragged")
+    dave.get_by_role("button", name="Apply IK").click()
+    wait_message(dave, r"apply IK .*: ok")
+
+    def error() -> float | None:
+        p, js = arm.flange, arm.joint_state
+        if p is None or js is None or np.max(np.abs(js.dq)) > 1e-3:
+            return None
+        err = float(np.linalg.norm(np.asarray(p.position) - target))
+        return err if err <= 1e-3 else None
+
+    assert wait_until(error, timeout=30, what="arm1's flange at the dragged target", seen=lambda: (arm.flange, target)) <= 1e-3
+    wait_until(lambda: min(math.dist(e, target) for e in drawn()["ends"]) <= 0.005, timeout=10, what="the 3D arm drawn at the target")
+    shot(dave, "3d-view-reached")
+    dave.get_by_role("button", name="Release").click()
+    wait_message(dave, r"release arm1: ok")
+    dave.context.close()

@@ -1,0 +1,187 @@
+"""A page's 3D view (NiceGUI's ``ui.scene``, three.js): the arms at their live joints, the bases with the selected
+base's scan, the scene's walls and shelves, and the IK target, dragged in 3D.
+
+The mouse orbits (left), pans (right) and zooms (wheel); two buttons put the camera on the arm or over the whole
+world. The ground carries a grid of 1 m squares and the world's axes (x red, y green, z blue, 1 m long). The IK
+target is the orange sphere: dragged, it moves on the horizontal plane of its height (the drag's constraint), and
+the height field below the view sets that height. A dropped target goes where a nudge goes
+(:meth:`~user_peer.console.arm_panel.ArmPanel.move_target`): the scene's object for every page, and the IK solution
+follows; Apply IK reaches it.
+
+Light: the static parts are sent once; an arm's links are moved only when its joints changed, a base when its pose
+changed (NiceGUI sends an object's move only when it differs), at the pages' 5 Hz redraw.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from nicegui import ui
+
+from fabric.interfaces import yaw_from_quaternion
+from user_peer.console import state, topview
+from user_peer.console.scene3d import arm_points, scene_boxes3d, segment_pose
+
+if TYPE_CHECKING:
+    from user_peer.console.page import ConsolePage
+
+__all__ = ["View3D", "LINK_RADIUS", "TARGET_RADIUS"]
+
+LINK_RADIUS = 0.015
+"""An arm link's radius (m) as drawn: a Meca500 is 0.3 m long."""
+TARGET_RADIUS = 0.02
+"""The IK target sphere's radius (m): large enough to grab with the mouse when the camera is on the arm."""
+BASE_SIZE = (0.45, 0.35, 0.2)
+"""A mobile base as drawn: a box (m)."""
+
+
+class View3D:
+    """The 3D view of one page."""
+
+    def __init__(self, page: "ConsolePage") -> None:
+        self.page = page
+        self.scene: Any = None
+        self.links: dict[str, list[Any]] = {}  # an arm's link cylinders, made when its joints first come
+        self.bases: dict[str, Any] = {}
+        self.target: Any = None
+        self.scan: Any = None
+        self.height: Any = None
+        self._syncing = False
+        self._z: float | None = None
+
+    def build(self) -> None:
+        page = self.page
+        info = page.world.info()
+        self.spawn = {r.id: tuple(float(v) for v in r.pose) for r in info.robots}
+        ui.label("3D view").classes("text-subtitle1")
+        self.scene = ui.scene(width=560, height=400, grid=(40, 40), on_drag_end=self._dropped, background_color="#f8f9fa")
+        self.scene.classes("rf-scene3d").props('aria-label="3D view: drag to orbit, right-drag to pan, wheel to zoom; '
+                                               'drag the orange sphere to move the IK target"')
+        with self.scene:
+            for b in scene_boxes3d(info.scene):
+                self.scene.box(*b.size).move(*b.center).rotate_R([list(r) for r in b.R]).material(b.color, 0.5)
+            self.scene.axes_helper(1.0)
+            self.scene.text("1 m grid · x red, y green, z blue", "font-size: 11px; color: #495057").move(0.0, -0.3, 0.0)
+            for e in page.entries:
+                sx, sy, sz, yaw = self.spawn.get(e.id, (0.0, 0.0, 0.0, 0.0))
+                if e.kind == "mobile":
+                    self.bases[e.id] = self.scene.box(*BASE_SIZE).material(topview.COLORS["free"]).move(sx, sy, BASE_SIZE[2] / 2)
+                else:
+                    self.scene.box(0.12, 0.12, 0.02).material("#495057").move(sx, sy, sz + 0.01)
+                self.scene.text(e.id, "font-size: 12px; color: #212529").move(sx, sy, sz + 0.45)
+            self.scan = self.scene.point_cloud([], [], point_size=0.04)
+            self.target = self.scene.sphere(TARGET_RADIUS).material("#f59f00").draggable().with_name("ik-target")
+            self.target.visible(False)
+        with ui.row().classes("items-center"):
+            self.height = ui.number("IK target height z (m)", step=0.01, format="%.3f", on_change=self._height_set).props(
+                'aria-label="IK target height z in metres" dense').style("width: 12rem")
+            ui.button("View the arm", on_click=self.look_at_arm).props("flat dense no-caps")
+            ui.button("View the whole world", on_click=self.look_at_world).props("flat dense no-caps")
+        self.look_at_arm()
+
+    # ------------------------------------------------------------------ camera
+
+    def look_at_arm(self) -> None:
+        """The camera 1 m from the page's arm (or the first robot), looking at its middle from above and aside."""
+        page = self.page
+        rid = page.arm.id if page.arm is not None else (page.entries[0].id if page.entries else None)
+        sx, sy, sz, _ = self.spawn.get(rid, (0.0, 0.0, 0.0, 0.0)) if rid else (0.0, 0.0, 0.0, 0.0)
+        self.scene.move_camera(sx + 0.55, sy - 0.75, sz + 0.6, sx, sy, sz + 0.15, duration=0)
+
+    def look_at_world(self) -> None:
+        """The camera over the whole world (the 2D view's frame), looking down at it at a slant."""
+        f = self.page.frame
+        cx, cy, side = (f.xmin + f.xmax) / 2, (f.ymin + f.ymax) / 2, max(f.xmax - f.xmin, f.ymax - f.ymin)
+        self.scene.move_camera(cx, cy - 0.6 * side, 0.8 * side, cx, cy, 0.0, duration=0)
+
+    # ------------------------------------------------------------------ the target
+
+    def _dropped(self, e: Any) -> None:
+        """The target dropped at (x, y): it keeps its height (the drag is on its plane)."""
+        panel = self.page.arm_panel
+        if panel is None or e.object_name != "ik-target" or panel.target is None:
+            return
+        xyz = np.array([float(e.x), float(e.y), float(panel.target[2])])
+        panel.move_target(xyz)
+        self.page.say("IK target dragged to ({:.3f}, {:.3f}, {:.3f})".format(*xyz))
+        self.page.refresh()
+
+    def _height_set(self) -> None:
+        panel = self.page.arm_panel
+        if self._syncing or panel is None or panel.target is None or self.height.value is None:
+            return
+        z = float(self.height.value)
+        if abs(z - float(panel.target[2])) > 1e-6:
+            panel.move_target(np.array([float(panel.target[0]), float(panel.target[1]), z]))
+            self.page.say(f"IK target height set to {z:.3f} m")
+
+    def _show_target(self) -> None:
+        panel = self.page.arm_panel
+        t = panel.target if panel is not None else None
+        if t is None:
+            return
+        self.target.visible(True)
+        self.target.move(float(t[0]), float(t[1]), float(t[2]))
+        z = round(float(t[2]), 4)
+        if z != self._z:  # the drag stays on the target's height
+            self._z = z
+            self.scene._props["drag-constraints"] = f"z = {z}"
+            self.scene.update()
+            self._syncing = True
+            try:
+                self.height.value = z
+            finally:
+                self._syncing = False
+
+    # ------------------------------------------------------------------ refresh
+
+    def refresh(self, poses: dict[str, bytes]) -> None:
+        """Move what moved: the followed arms' links, the bases, the selected base's scan, the target."""
+        page, w = self.page, self.page.world
+        for e in page.entries:
+            if e.kind == "mobile":
+                self._base(e.id, state._pose(page.handles, poses, e.id, page.console.decoded))
+            elif e.id in page.handles:
+                js = page.handles[e.id].latest("joints")
+                if js is not None and e.id in self.spawn:
+                    self._arm(e.id, arm_points(e.type, js.q, self.spawn[e.id]))
+        for rid, box in self.bases.items():
+            rec = w.ownership.record(rid)
+            owner = rec.owner if rec is not None else ""
+            box.material(topview.COLORS["mine"] if owner == w.user else topview.COLORS["other"] if owner else topview.COLORS["free"])
+        self._scan()
+        self._show_target()
+
+    def _arm(self, rid: str, pts: np.ndarray) -> None:
+        if len(pts) < 2:
+            return
+        links = self.links.get(rid)
+        if links is None:
+            with self.scene:
+                links = self.links[rid] = [self.scene.cylinder(LINK_RADIUS, LINK_RADIUS, 1.0).material("#1c7ed6")
+                                           for _ in range(len(pts) - 1)]
+        for cyl, a, b in zip(links, pts[:-1], pts[1:]):
+            mid, R, n = segment_pose(a, b)
+            cyl.move(*(round(float(v), 4) for v in mid)).rotate_R([[round(float(v), 4) for v in row] for row in R])
+            cyl.scale(1.0, max(round(n, 4), 1e-4), 1.0)
+
+    def _base(self, rid: str, pose: Any) -> None:
+        if pose is None or rid not in self.bases:
+            return
+        yaw = yaw_from_quaternion(pose.quaternion)
+        self.bases[rid].move(round(float(pose.position[0]), 3), round(float(pose.position[1]), 3), BASE_SIZE[2] / 2).rotate(0.0, 0.0, round(yaw, 3))
+
+    def _scan(self) -> None:
+        base = self.page.base
+        if base is None:
+            return
+        s, p = base.latest("scan"), base.latest("pose")
+        if s is None or p is None:
+            return
+        pts = topview.scan_points(float(p.position[0]), float(p.position[1]), yaw_from_quaternion(p.quaternion),
+                                  s.angle_min, s.angle_increment, s.ranges, s.range_max)
+        key = (id(s), id(p))
+        if getattr(self, "_scan_key", None) != key:
+            self._scan_key = key
+            self.scan.set_points([[round(float(x), 3), round(float(y), 3), 0.15] for x, y in pts], [[0.94, 0.24, 0.24]] * len(pts))
