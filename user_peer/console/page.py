@@ -23,6 +23,7 @@ from user_peer.console import follow, state
 from user_peer.console.arm_panel import ArmPanel
 from user_peer.console.base_panel import BasePanel
 from user_peer.console.drive import REFRESH_S
+from user_peer.console.layout import Layout
 from user_peer.console.login import LoginError, login_config
 from user_peer.console.view import LiveView
 from user_peer.console.view3d import View3D
@@ -206,18 +207,12 @@ class ConsolePage:
                 ui.link("Rerun web view (the rich view)", self.console.rerun_url, new_tab=True)
         # a line high even when empty: text appearing in it must not move the view under the mouse
         self.message = ui.label("").props('role="status" aria-live="polite"').classes("text-body1").style("min-height: 1.5rem")
-        with ui.row().classes("full-width no-wrap items-start"):
-            with ui.column().classes("col"):
-                self._robot_list()
-                for panel in (self.arm_panel, self.base_panel):
-                    if panel is not None:
-                        panel.build()
-            with ui.column().classes("col"):
-                self.view3d = View3D(self)
-                self.view3d.build()
-                self.view.build()
-                ui.label("Events").classes("text-subtitle1")
-                self.log = ui.log(max_lines=200).classes("full-width").style("height: 12rem")
+        self._robot_list()
+        self.view3d = View3D(self)
+        self.layout = Layout(self)  # each robot's panel beside its view (user_peer/console/layout.py)
+        self.layout.build()
+        ui.label("Events").classes("text-subtitle1")
+        self.log = ui.log(max_lines=200).classes("full-width").style("height: 12rem")
         ui.on("rf_key", self._key)
         ui.on("rf_blur", self._disconnected)
         ui.run_javascript(KEYS_JS)
@@ -227,12 +222,13 @@ class ConsolePage:
 
     def _robot_list(self) -> None:
         with ui.card().classes("full-width"):
-            ui.label("Robots").classes("text-subtitle1")
             self.rows: dict[str, ui.label] = {}
-            for r in self.entries:
-                with ui.row().classes("items-center"):
-                    ui.button(r.id, on_click=lambda _, rid=r.id: self._select(rid)).props("flat dense no-caps")
-                    self.rows[r.id] = ui.label("")
+            with ui.row().classes("items-center"):  # one line for a few robots: the views stay on the screen
+                ui.label("Robots").classes("text-subtitle1")
+                for r in self.entries:
+                    with ui.row().classes("items-center no-wrap").style("gap: 0.25rem"):
+                        ui.button(r.id, on_click=lambda _, rid=r.id: self._select(rid)).props("flat dense no-caps")
+                        self.rows[r.id] = ui.label("")
             with ui.row().classes("items-center"):
                 self.sel_label = ui.label("")
                 ui.button("Request", on_click=lambda: self._ownership("request"))
@@ -349,6 +345,7 @@ class ConsolePage:
         for panel in (self.arm_panel, self.base_panel):
             if panel is not None:
                 panel.refresh()
+        self.layout.refresh()
         self.view.refresh()
         if self.view3d is not None:
             self.view3d.refresh(self.view.feed.raw if self.view.feed is not None else {})

@@ -55,7 +55,7 @@ class View3D:
         info = page.world.info()
         self.spawn = {r.id: tuple(float(v) for v in r.pose) for r in info.robots}
         ui.label("3D view").classes("text-subtitle1")
-        self.scene = ui.scene(width=560, height=400, grid=(40, 40), on_drag_end=self._dropped, background_color="#f8f9fa", fps=10)
+        self.scene = ui.scene(width=480, height=360, grid=(40, 40), on_drag_end=self._dropped, background_color="#f8f9fa", fps=10)
         self.scene.classes("rf-scene3d").props('aria-label="3D view: drag to orbit, right-drag to pan, wheel to zoom; '
                                                'drag the orange sphere to move the IK target"')
         with self.scene:

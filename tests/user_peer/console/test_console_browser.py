@@ -527,3 +527,31 @@ def test_the_3d_view_draws_the_arm_and_a_drag_in_it_moves_the_ik_target_that_app
     dave.get_by_role("button", name="Release").click()
     wait_message(dave, r"release arm1: ok")
     dave.context.close()
+
+
+def _in_viewport(box: dict | None, vp: dict) -> bool:
+    return box is not None and box["x"] >= 0 and box["y"] >= 0 and box["x"] + box["width"] <= vp["width"] + 0.5 \
+        and box["y"] + box["height"] <= vp["height"] + 0.5
+
+
+def test_the_selected_robots_panel_sits_beside_its_view_and_fits_1024x700_and_stacks_at_800x600(browser, klass):
+    """Only the selected robot's panel shows (bob selected base1: no arm panel); at 1024x700 the map and Plan are
+    both on the screen without scrolling, side by side; at 800x600 the base panel and the map stack."""
+    page = browser.new_context(viewport={"width": 1024, "height": 700}).new_page()
+    page.set_default_timeout(30_000)
+    page.goto(klass.url, timeout=60_000)
+    logged_in(page, klass, "bob")
+    page.get_by_role("button", name="base1", exact=True).click()
+    plan, live = page.get_by_role("button", name="Plan"), page.get_by_label(re.compile("^Live view"))
+    wait_until(lambda: plan.is_visible() and not page.get_by_role("slider", name=re.compile("^J1")).is_visible(), timeout=10,
+               what="base1's panel shown and no arm panel")
+    vp = page.viewport_size
+    wait_until(lambda: _in_viewport(plan.bounding_box(), vp) and _in_viewport(live.bounding_box(), vp), timeout=10,
+               what="Plan and the map both in the 1024x700 viewport", seen=lambda: (plan.bounding_box(), live.bounding_box()))
+    assert plan.bounding_box()["x"] + plan.bounding_box()["width"] <= live.bounding_box()["x"]  # beside it
+    shot(page, "layout-1024x700")
+    page.set_viewport_size({"width": 800, "height": 600})
+    wait_until(lambda: live.bounding_box()["y"] >= plan.bounding_box()["y"] + plan.bounding_box()["height"], timeout=10,
+               what="the map stacked under the base panel at 800x600", seen=lambda: (plan.bounding_box(), live.bounding_box()))
+    shot(page, "layout-800x600")
+    page.context.close()

@@ -1,0 +1,76 @@
+"""Where a page puts its parts: each robot's controls beside its view, the selected robot's first.
+
+Two rows under the robot list: the arm's panel beside the 3D view, the base's panel beside the top-down map. A
+panel shows only while its robot is the selected one or hers (bob, who selected nothing, sees no disabled arm
+panel full of stale joints); the views always show (the world at a glance). The row of the selected robot's
+kind comes first, so that at 1024x700 the map and Plan are on the screen together once she selects a base. Each
+row's two columns sit side by side from 856 px of width and stack below it (an 800x600 window, a tablet
+upright): a column is at least 420 px wide. The map is never taller than the window leaves room for.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from nicegui import ui
+
+if TYPE_CHECKING:
+    from user_peer.console.page import ConsolePage
+
+__all__ = ["Layout", "CSS", "shown_kinds"]
+
+CSS = """
+.rf-col { flex: 1 1 420px; min-width: 0; }
+.rf-map { max-width: max(18rem, calc(100vh - 17rem)); }
+"""
+"""A column takes 420 px at least and grows (two of them wrap below 856 px); the map keeps to the window's height."""
+
+
+def shown_kinds(world: Any, selected: str | None, robots: dict[str, Any]) -> set[str]:
+    """The kinds ("arm", "mobile") whose panel a page shows: its robot of that kind is the selected one or hers.
+    ``robots``: the page's robot of each kind (or None)."""
+    out = set()
+    for kind, r in robots.items():
+        if r is None:
+            continue
+        rec = world.ownership.record(r.id)
+        if r.id == selected or (rec is not None and rec.owner == world.user):
+            out.add(kind)
+    return out
+
+
+class Layout:
+    """The rows of one page, and which of them shows what."""
+
+    def __init__(self, page: "ConsolePage") -> None:
+        self.page = page
+        self.rows: dict[str, Any] = {}
+        self.panels: dict[str, Any] = {}
+        self._first: str | None = None
+
+    def build(self) -> None:
+        page = self.page
+        ui.add_css(CSS)
+        with ui.column().classes("full-width") as self.body:
+            for kind, panel, view in (("arm", page.arm_panel, page.view3d), ("mobile", page.base_panel, page.view)):
+                with ui.row().classes("full-width items-start") as row:
+                    self.rows[kind] = row
+                    if panel is not None:
+                        with ui.column().classes("rf-col") as box:
+                            panel.build()
+                        self.panels[kind] = box
+                    with ui.column().classes("rf-col"):
+                        view.build()
+        page.view.image.classes("rf-map")
+
+    def refresh(self) -> None:
+        """Show the panels of the selected robot and of hers; the selected robot's row first."""
+        page = self.page
+        kinds = shown_kinds(page.world, page.selected, {"arm": page.arm, "mobile": page.base})
+        for kind, box in self.panels.items():
+            box.set_visibility(kind in kinds)
+        sel = page.handles.get(page.selected) if page.selected else None
+        first = "mobile" if sel is not None and sel.kind == "mobile" else "arm"
+        if first != self._first:
+            self._first = first
+            self.rows[first].move(self.body, target_index=0)
