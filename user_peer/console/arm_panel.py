@@ -48,7 +48,7 @@ class ArmPanel:
     def build(self) -> None:
         e = self.arm.entry
         with ui.card().classes("full-width"):
-            self.title = ui.label("").classes("text-subtitle1")
+            self.title = ui.label("").classes("text-subtitle1").props('role="heading" aria-level="2"')
             self.sliders = []
             for i, name in enumerate(e.joint_names):
                 lo = math.degrees(e.lower[i]) if i < len(e.lower) else -180.0
@@ -57,18 +57,18 @@ class ArmPanel:
                     ui.label(f"J{i + 1}").style("width: 2rem")
                     # the zero pose clamped into the range: a joint whose range leaves out 0 (the Panda's J4)
                     s = ui.slider(min=round(lo, 1), max=round(hi, 1), step=0.5, value=min(max(0.0, round(lo, 1)), round(hi, 1)),
-                                  on_change=self._slider_moved).props(f'label aria-label="J{i + 1} ({name}) degrees"').classes("full-width")
+                                  on_change=self._slider_moved).props(f'label-always aria-label="J{i + 1} ({name}) degrees"').classes("full-width")
                     self.sliders.append(s)
             with ui.row().classes("full-width items-center no-wrap"):
                 ui.label("Speed").style("width: 4rem")
-                self.speed = ui.slider(min=0.05, max=1.0, step=0.05, value=0.5).props('label aria-label="Speed scale"').classes("full-width")
+                self.speed = ui.slider(min=0.05, max=1.0, step=0.05, value=0.5).props('label-always aria-label="Speed scale"').classes("full-width")
             with ui.row():
                 stop = ui.button("Stop", color="negative", on_click=lambda: self.page.call(f"stop {self.arm.id}", self.arm.stop))
                 reset = ui.button("Reset", color="warning", on_click=self._reset)
             with ui.row().classes("items-center"):
                 ui.label("IK target")
                 self.target_label = ui.label("")
-                self.step = ui.select(list(NUDGE_STEPS), value="1 cm").props('aria-label="Nudge step" dense')
+                self.step = ui.select(list(NUDGE_STEPS), value="1 cm", label="Nudge step").props('aria-label="Nudge step" dense')
             nudges = []
             with ui.row():
                 for axis, name in enumerate("xyz"):

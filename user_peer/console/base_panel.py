@@ -48,7 +48,7 @@ class BasePanel:
 
     def build(self) -> None:
         with ui.card().classes("full-width"):
-            self.title = ui.label("").classes("text-subtitle1")
+            self.title = ui.label("").classes("text-subtitle1").props('role="heading" aria-level="2"')
             ui.label("Hold an arrow key to drive · 1-3 speed · space stops").classes("text-caption")
             self.state = ui.label("").classes("rf-base-state")  # bench console reads its data-pose-wall-ms
             with ui.row().classes("items-center"):

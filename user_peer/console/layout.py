@@ -22,8 +22,11 @@ __all__ = ["Layout", "CSS", "shown_kinds"]
 CSS = """
 .rf-col { flex: 1 1 420px; min-width: 0; }
 .rf-map { max-width: max(18rem, calc(100vh - 17rem)); }
+.q-btn.disabled, .q-btn[disabled] { filter: grayscale(1); opacity: 0.4 !important; }
+.q-slider.disabled { filter: grayscale(1); }
 """
-"""A column takes 420 px at least and grows (two of them wrap below 856 px); the map keeps to the window's height."""
+"""A column takes 420 px at least and grows (two of them wrap below 856 px); the map keeps to the window's height;
+a disabled button or slider is grey (Quasar only dims it: a disabled Stop still looked bright red)."""
 
 
 def shown_kinds(world: Any, selected: str | None, robots: dict[str, Any]) -> set[str]:

@@ -124,6 +124,7 @@ class ConsolePage:
 
     def show(self) -> None:
         ui.page_title(f"robofabric console · {self.console.world}")
+        self.client.page.language = "en-US"  # <html lang>: a screen reader reads the page in English
         self.root = ui.column().classes("full-width")
         with self.root:
             self._login_form()
@@ -202,7 +203,7 @@ class ConsolePage:
             self.base_panel = BasePanel(self, w.object(goal.id) if goal else None)
 
         with ui.row().classes("full-width items-center"):
-            ui.label(f"robofabric console · world {w.name} · {w.user}").classes("text-h6")
+            ui.label(f"robofabric console · world {w.name} · {w.user}").classes("text-h6").props('role="heading" aria-level="1"')
             if self.console.rerun_url:
                 ui.link("Rerun web view (the rich view)", self.console.rerun_url, new_tab=True)
         # a line high even when empty: text appearing in it must not move the view under the mouse
@@ -211,7 +212,7 @@ class ConsolePage:
         self.view3d = View3D(self)
         self.layout = Layout(self)  # each robot's panel beside its view (user_peer/console/layout.py)
         self.layout.build()
-        ui.label("Events").classes("text-subtitle1")
+        ui.label("Events").classes("text-subtitle1").props('role="heading" aria-level="2"')
         self.log = ui.log(max_lines=200).classes("full-width").style("height: 12rem")
         ui.on("rf_key", self._key)
         ui.on("rf_blur", self._disconnected)
@@ -224,7 +225,7 @@ class ConsolePage:
         with ui.card().classes("full-width"):
             self.rows: dict[str, ui.label] = {}
             with ui.row().classes("items-center"):  # one line for a few robots: the views stay on the screen
-                ui.label("Robots").classes("text-subtitle1")
+                ui.label("Robots").classes("text-subtitle1").props('role="heading" aria-level="2"')
                 for r in self.entries:
                     with ui.row().classes("items-center no-wrap").style("gap: 0.25rem"):
                         ui.button(r.id, on_click=lambda _, rid=r.id: self._select(rid)).props("flat dense no-caps")

@@ -54,7 +54,7 @@ class View3D:
         page = self.page
         info = page.world.info()
         self.spawn = {r.id: tuple(float(v) for v in r.pose) for r in info.robots}
-        ui.label("3D view").classes("text-subtitle1")
+        ui.label("3D view").classes("text-subtitle1").props('role="heading" aria-level="2"')
         self.scene = ui.scene(width=480, height=360, grid=(40, 40), on_drag_end=self._dropped, background_color="#f8f9fa", fps=10)
         self.scene.classes("rf-scene3d").props('aria-label="3D view: drag to orbit, right-drag to pan, wheel to zoom; '
                                                'drag the orange sphere to move the IK target"')

@@ -555,3 +555,24 @@ def test_the_selected_robots_panel_sits_beside_its_view_and_fits_1024x700_and_st
                what="the map stacked under the base panel at 800x600", seen=lambda: (plan.bounding_box(), live.bounding_box()))
     shot(page, "layout-800x600")
     page.context.close()
+
+
+def test_the_page_has_a_language_headings_named_sliders_with_numbers_and_grey_disabled_controls(browser, klass):
+    page = open_page(browser, klass)
+    logged_in(page, klass, "bob")
+    page.get_by_role("button", name="arm1", exact=True).click()
+    page.get_by_role("slider", name=re.compile("^J1")).wait_for()
+    assert page.evaluate("() => document.documentElement.lang") == "en-US"
+    for name in ("Robots", "Events", "3D view", re.compile("^arm arm1")):
+        assert page.get_by_role("heading", name=name).count() == 1, name
+    assert page.get_by_role("heading", level=1).count() == 1
+    sliders = page.get_by_role("slider")
+    assert sliders.count() == 7  # six joints and the speed, each named, each showing its number
+    for i in range(sliders.count()):
+        assert sliders.nth(i).get_attribute("aria-label"), i
+    assert page.locator(".q-slider__pin-value-marker-text, .q-slider__text").count() >= 7
+    assert page.get_by_label("Nudge step").count() >= 1
+    stop = page.get_by_role("button", name="Stop", exact=True).first
+    wait_until(lambda: stop.is_disabled(), timeout=10, what="bob's Stop disabled (he owns nothing)")
+    assert "grayscale" in stop.evaluate("(e) => getComputedStyle(e).filter")
+    page.context.close()
