@@ -27,6 +27,7 @@ from user_peer.console.layout import Layout
 from user_peer.console.login import LoginError, login_config
 from user_peer.console.view import LiveView
 from user_peer.console.view3d import View3D
+from user_peer.console.wording import plain
 from user_peer.errors import FabricUserError, Paused
 from user_peer.event_log import describe
 from user_peer.pause import is_pause, pause_words
@@ -258,15 +259,12 @@ class ConsolePage:
         return out
 
     def why(self, exc: FabricUserError) -> str:
-        """A refusal's words, with the robot's owner when the reason does not name her; a pause is no refusal."""
+        """A refusal in plain words with what to do next, then the code's reason (:func:`.wording.plain`); a pause
+        is no refusal."""
         if isinstance(exc, Paused):
             return pause_words(exc.robot or self.selected or "the robot")
-        reason = f"{type(exc).__name__}: {exc.reason}"
         rec = self.world.ownership.record(self.selected) if self.selected else None
-        owner = rec.owner if rec is not None else ""
-        if owner and owner != self.world.user and owner not in exc.reason:
-            reason += f" (owner: {owner})"
-        return reason
+        return plain(exc, robot=self.selected or "", owner=rec.owner if rec is not None else "", me=self.world.user)
 
     async def _handle(self, rid: str | None) -> Any:
         """The robot's user-API handle; made (and its streams followed) the first time she selects it."""
