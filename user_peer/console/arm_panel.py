@@ -75,7 +75,8 @@ class ArmPanel:
                     for sign, txt in ((-1, "−"), (1, "+")):
                         nudges.append(ui.button(f"{name}{txt}", on_click=lambda _, a=axis, s=sign: self._nudge(a, s)).props(
                             f'dense aria-label="{name} {"plus" if sign > 0 else "minus"}"'))
-            self.ik_label = ui.label("IK: move the target")
+            # two lines high even when short: the map's row under this panel must not move under the mouse
+            self.ik_label = ui.label("IK: move the target").style("min-height: 2.8rem")
             apply = ui.button("Apply IK", on_click=self._apply_ik)
         self.controls = [*self.sliders, self.speed, stop, reset, apply, *nudges]
 
