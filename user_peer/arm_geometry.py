@@ -40,7 +40,9 @@ DRAWABLE_MESHES = (".stl", ".obj", ".glb", ".gltf")
 
 
 def _unreadable(g) -> bool:
-    return bool(g.meshPath) and Path(str(g.meshPath)).suffix.lower() not in DRAWABLE_MESHES
+    """A mesh file Rerun cannot load; a primitive (Pinocchio names its ``meshPath`` 'BOX', 'CYLINDER' ...) is drawn."""
+    suffix = Path(str(g.meshPath or "")).suffix.lower()
+    return bool(suffix) and suffix not in DRAWABLE_MESHES
 
 
 def _placement(se3) -> Placement:
