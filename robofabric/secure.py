@@ -114,9 +114,11 @@ def _own_rules(ident: Identity) -> list[dict]:
         ask.append(f"{W}/own/*/{BY}/{n}")
     elif r == "sim":
         put += [f"{W}/robot/*/{s}" for s in ("joints", "pose", "scan", "sonar")] + [f"{W}/own/*", f"{W}/event/**"]
+        # ownership records and events keep their last samples for an observer that missed them (fabric.history)
+        latched = [f"{W}/own/*/{ADV}", f"{W}/event/*/*/{ADV}"]
         serve += [f"{W}/srv/world", f"{W}/srv/state", f"{W}/own/*", f"{W}/own/*/{BY}/*",  # srv/state: a standby follows the primary
-                  f"{W}/srv/move/*/{BY}/*"]  # srv/move/{sim}/by/{login}: the staff's moves (MOVERS)
-        tokens += [f"{W}/peer/sim/*", f"{W}/peer/recorder/*"]  # a recorder on the sim machine, under its login
+                  f"{W}/srv/move/*/{BY}/*", *latched]  # srv/move/{sim}/by/{login}: the staff's moves (MOVERS)
+        tokens += [f"{W}/peer/sim/*", f"{W}/peer/recorder/*", *latched]  # a recorder on the sim machine, under its login
         ask.append(ROUTER_INFO)  # is my link up? (a standby judging a lost token: sim_peer.roles.router_answers)
     elif r == "compute":
         put += [f"{W}/robot/*/ik", f"{W}/robot/*/path", f"{W}/map/*", f"{W}/event/compute/**"]

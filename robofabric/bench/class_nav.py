@@ -60,7 +60,7 @@ def student(world: str, endpoint: str, index: int, n: int, out: str) -> None:
     """Join, own baseI, map by turning, build her map, plan across the room, follow; results to ``out`` (JSON)."""
     from compute_peer.navigation.robot_cells import Footprint, robot_cells
     from fabric import keys
-    from fabric.interfaces import Pose
+    from fabric.interfaces import EventKind, Pose
     from user_peer.api import connect
 
     start = placements(n)[index]
@@ -108,7 +108,7 @@ def student(world: str, endpoint: str, index: int, n: int, out: str) -> None:
                     if p is not None and math.hypot(p.position[0] - goal[0], p.position[1] - goal[1]) < REACHED \
                             and math.hypot(p.linear[0], p.linear[1]) < 0.02 and abs(p.angular[2]) < 0.05:
                         outcome = "reached"
-                    elif any(e.kind == "obstacle_stop" and e.reason == "blocked" and e.object == base.id
+                    elif any(e.kind == EventKind.OBSTACLE_STOP and e.reason == "blocked" and e.object == base.id
                              for e in w.events[since:]):
                         outcome = "blocked"
                 if outcome == "reached":
@@ -121,8 +121,8 @@ def student(world: str, endpoint: str, index: int, n: int, out: str) -> None:
                 d = math.hypot(p.position[0] - goal[0], p.position[1] - goal[1])
                 res["final"], res["reached"] = d, d < REACHED
             mine = [e for e in w.events[mark:] if e.object == base.id]
-            res["stops"] = sum(e.kind == "obstacle_stop" and e.reason == "waiting" for e in mine)
-            res["collisions"] = sum(e.kind == "collision" for e in mine)
+            res["stops"] = sum(e.kind == EventKind.OBSTACLE_STOP and e.reason == "waiting" for e in mine)
+            res["collisions"] = sum(e.kind == EventKind.COLLISION for e in mine)
             base.stop()
     except Exception as exc:
         res["errors"].append(f"{type(exc).__name__}: {exc}"[:300])
