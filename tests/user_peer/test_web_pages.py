@@ -32,6 +32,7 @@ pytestmark = pytest.mark.slow
 
 LIVE_PAGES = 3
 FROZEN_S = 75.0  # the longest the frozen page stays paused (sooner when the relay cuts it off)
+BASELINE_S = 20.0  # how long the live pages' own pace is measured before one is frozen (a window, not a wait)
 VIEWPORT = {"width": 640, "height": 400}
 
 
@@ -58,6 +59,13 @@ def test_a_frozen_page_does_not_hold_up_the_others(router, world, procs, tmp_pat
             wait_until(lambda: all(page_lag(pg) is not None for pg in pages), timeout=240, interval=2.0,
                        what="every page to show the live world", seen=lambda: [page_lag(pg) for pg in pages])
             live, frozen = pages[:LIVE_PAGES], pages[LIVE_PAGES]
+            # the pages' own pace with none frozen, side by side: what software GL on this box draws (a 2-core
+            # box's four pages have kept up with the wall clock, and have not: 0.35x with Chromium 150)
+            b0 = time.time()
+            before = [b0 - page_lag(pg) for pg in live]
+            time.sleep(BASELINE_S)
+            b1 = time.time()
+            pace = [(b1 - page_lag(pg) - s) / (b1 - b0) for pg, s in zip(live, before)]
             cdp = frozen.context.new_cdp_session(frozen)
             cdp.send("Debugger.enable")
             cdp.send("Debugger.pause")
@@ -83,9 +91,10 @@ def test_a_frozen_page_does_not_hold_up_the_others(router, world, procs, tmp_pat
     advanced = [(e - s) / (t1 - t0) for s, e in zip(start, end)]
     out = procs.output(view)
     assert "has been blocked" not in out, out[-3000:]
-    assert all(a >= 0.5 for a in advanced), (
+    # held up, a page's cursor stops (0x); not held up, it keeps at least half its own pace before the freeze
+    assert all(a >= 0.5 * min(1.0, p) and a > 0.05 for a, p in zip(advanced, pace)), (
         f"pages' time cursors advanced {advanced} x the wall clock over {t1 - t0:.0f} s with one page frozen "
-        f"({cut.group(1) if cut else 'not cut off yet'}); lags now {lags}")
+        f"({cut.group(1) if cut else 'not cut off yet'}), against {pace} before it froze; lags now {lags}")
     rgb = np.asarray(Image.open(keep).convert("RGB"))
     assert robot_pixels(rgb[WORLD_VIEW]) >= 30, f"a live page does not show the robots: {keep}"
     assert view.poll() is None, out[-3000:]
