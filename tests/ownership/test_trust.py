@@ -155,7 +155,16 @@ def test_a_robot_missing_from_a_partial_replica_is_asked_of_its_authority(connec
     alice = OwnershipClient(connect("user", "alice"), "alice").start()
     wait_until(lambda: alice.record("arm3") is not None, what="arm3 in alice's replica")
     second = Authority(connect("sim", "s2"), {"arm4": "exclusive"}, lease_s=2.0).start()
+    probe = connect("tool", "probe")
+
+    def served() -> bool:  # s2's queryables have reached the router (declarations travel in their own time)
+        try:
+            return bool(probe.rpc.query(keys.own(probe.world, "arm4"), timeout=2.0))
+        except ServiceError:
+            return False
+
     try:
+        wait_until(served, timeout=20, what="s2's ownership service routed")
         out = alice.request("arm4", timeout=5.0)  # whether s2's record reached her replica yet or not
         assert out.granted, out
         assert second.records()["arm4"].owner == "alice"

@@ -218,10 +218,13 @@ def test_writes_are_refused_and_pages_see_nothing_of_them():
         # mallory's Rerun SDK, as she logged fake events and a recursive Clear into every page
         m = s.rr.RecordingStream("robofabric", recording_id=f"relay-{s.inner}")
         m.set_sinks(s.rr.GrpcSink(f"rerun+http://127.0.0.1:{s.relay.port}/proxy"))
-        m.log("events", s.rr.TextLog("MALLORY-SDK-MARKER"))
-        m.log("world/robots", s.rr.Clear(recursive=True))
-        m.flush(timeout_sec=5)
-        m.disconnect()
+        for step in (lambda: m.log("events", s.rr.TextLog("MALLORY-SDK-MARKER")),
+                     lambda: m.log("world/robots", s.rr.Clear(recursive=True)),
+                     lambda: m.flush(timeout_sec=5), m.disconnect):
+            try:
+                step()
+            except RuntimeError as exc:  # the SDK hears of the refusal when its sink's stream ends: at any step
+                assert "permission" in str(exc), exc
         # a native gRPC client: WriteMessages and a method Rerun does not have, each answered PERMISSION_DENIED
         with grpc.insecure_channel(f"127.0.0.1:{s.relay.port}") as ch:
             with pytest.raises(grpc.RpcError) as err:

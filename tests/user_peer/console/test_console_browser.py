@@ -522,14 +522,18 @@ def test_the_3d_view_draws_the_arm_and_a_drag_in_it_moves_the_ik_target_that_app
     dave.get_by_role("button", name="Apply IK").click()
     wait_message(dave, r"apply IK .*: ok")
 
-    def error() -> float | None:
-        p, js = arm.flange, arm.joint_state
-        if p is None or js is None or np.max(np.abs(js.dq)) > 1e-3:
+    def on_target() -> tuple[float, int] | None:
+        p = arm.flange
+        if p is None:
             return None
         err = float(np.linalg.norm(np.asarray(p.position) - target))
-        return err if err <= 1e-3 else None
+        return (err, p.header.seq) if err <= 1e-3 else None
 
-    assert wait_until(error, timeout=30, what="arm1's flange at the dragged target", seen=lambda: (arm.flange, target)) <= 1e-3
+    # there, and still there 20 flange poses later: at rest on it, not passing through (a wrist joint that only
+    # turns the flange may still be settling on a loaded box: CI saw the flange on the target with |dq| > 1e-3)
+    first = wait_until(on_target, timeout=30, what="arm1's flange at the dragged target", seen=lambda: (arm.flange, target))
+    wait_until(lambda: (o := on_target()) is not None and o[1] >= first[1] + 20, timeout=30,
+               what="arm1's flange to stay at the dragged target", seen=lambda: (arm.flange, target))
     wait_until(lambda: min(math.dist(e, target) for e in drawn()["ends"]) <= 0.005, timeout=10, what="the 3D arm drawn at the target")
     shot(dave, "3d-view-reached")
     dave.get_by_role("button", name="Release").click()
