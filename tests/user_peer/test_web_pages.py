@@ -1,17 +1,19 @@
-"""Several browser pages on one ``view --serve-web``, one of them frozen: the others are not held up.
+"""A browser page on one ``view --serve-web`` frozen: the other pages are not held up.
 
 Rerun's gRPC server feeds its clients through one bounded broadcast channel whose sender waits for the
 slowest client, so without the relay (user_peer/web_relay.py) a page that stops taking data (its JavaScript
 paused here with CDP ``Debugger.pause``, as a laptop gone to sleep) stops the view for every page once that
-channel fills. The test pauses one page and keeps it paused until the viewer says the relay cut it off (its
-page took nothing for 10 s while its data waited: proof that it held data it did not take), or for 75 s at most (the browser's own
-network buffers absorb a paused page's data for 40 s to over two minutes here); meanwhile every other page's own time
-cursor (read from the page, robofabric/bench/viewer_web.py) must go on advancing at no less than half
-the wall clock's pace, and Rerun's server must never report its sender blocked.
+channel fills. The test shows one real page (Debian's chromium, software WebGL, 640x400) the live world, then
+pauses it until the viewer says the relay cut it off (it took nothing for 10 s while its data waited: proof
+that it held data it did not take), or for 75 s at most (the browser's own network buffers absorb a paused
+page's data for 40 s to over two minutes here). Meanwhile the other page, a reader that takes its data as fast
+as it comes (gRPC-web from Python: the bytes a page gets), must go on receiving at no less than half its rate
+before the freeze, and Rerun's server must never report its sender blocked.
 
-Pages: three live + one frozen, 640x400, on this 2-core machine with software WebGL (each page then
-draws at 1.5-2 frames a second, which sets how live it can be: docs/viewer.md); the viewer sends pages
-0.5 s windows thinned to 5 Hz per stream (``--window 0.5 --max-hz 5``).
+The other page is not a browser: how fast a page draws with software GL is the box's, not the relay's (four
+pages drew at 0.35x the wall clock with Chromium 150 on this 2-core box, and at about 0x on CI's Chromium 156;
+docs/viewer.md has the figures of ``bench viewer-web``). The viewer sends pages 0.5 s windows thinned to 5 Hz
+per stream (``--window 0.5 --max-hz 5``).
 """
 
 from __future__ import annotations
@@ -26,16 +28,18 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from robofabric.bench.grpc_web import WebReader
 from robofabric.testing import free_port, robofabric_cmd, wait_until
 
 pytestmark = pytest.mark.slow
 
-LIVE_PAGES = 3
+CUT = r"web relay: page \S+ cut off: (.*)"
 FROZEN_S = 75.0  # the longest the frozen page stays paused (sooner when the relay cuts it off)
-BASELINE_S = 20.0  # how long the live pages' own pace is measured before one is frozen (a window, not a wait)
+BASELINE_S = 20.0  # how long the other page's pace is measured before the freeze (a window, not a wait)
 VIEWPORT = {"width": 640, "height": 400}
 
 
+@pytest.mark.timeout(600)  # a page takes minutes to show the world with software GL on a loaded box
 def test_a_frozen_page_does_not_hold_up_the_others(router, world, procs, tmp_path):
     from playwright.sync_api import sync_playwright
 
@@ -52,49 +56,48 @@ def test_a_frozen_page_does_not_hold_up_the_others(router, world, procs, tmp_pat
     url = wait_until(lambda: re.search(r"web viewer: open (http://\S+)", procs.output(view)), timeout=60,
                      what="the viewer to print its URL", seen=lambda: procs.output(view)[-2000:]).group(1)
 
+    # the other page: it takes its data as fast as it comes (gRPC-web from Python, as a browser sends it), so the
+    # relay's contract is read in its bytes, whatever pace the box's software GL draws at. It joins first, so
+    # its share of the history is long taken when its pace is measured.
+    reader = WebReader(grpc)
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
         try:
-            pages = open_pages(browser, url, LIVE_PAGES + 1, VIEWPORT)
-            wait_until(lambda: all(page_lag(pg) is not None for pg in pages), timeout=240, interval=2.0,
-                       what="every page to show the live world", seen=lambda: [page_lag(pg) for pg in pages])
-            live, frozen = pages[:LIVE_PAGES], pages[LIVE_PAGES]
-            # the pages' own pace with none frozen, side by side: what software GL on this box draws (a 2-core
-            # box's four pages have kept up with the wall clock, and have not: 0.35x with Chromium 150)
-            b0 = time.time()
-            before = [b0 - page_lag(pg) for pg in live]
-            time.sleep(BASELINE_S)
-            b1 = time.time()
-            pace = [(b1 - page_lag(pg) - s) / (b1 - b0) for pg, s in zip(live, before)]
-            cdp = frozen.context.new_cdp_session(frozen)
+            wait_until(lambda: reader.received > 0, timeout=60, what="the reader to receive", seen=lambda: reader.ended)
+            (page,) = open_pages(browser, url, 1, VIEWPORT)
+            wait_until(lambda: page_lag(page) is not None, timeout=400, interval=2.0, what="the page to show the live world")
+            shot = tmp_path / "web-pages.png"
+            shot.write_bytes(base64.b64decode(page.context.new_cdp_session(page).send(
+                "Page.captureScreenshot", {"format": "png"})["data"]))
+            b0, got0 = time.monotonic(), reader.received
+            time.sleep(BASELINE_S)  # a window to measure the reader's pace in, not a wait
+            b1, got1 = time.monotonic(), reader.received
+            rate = (got1 - got0) / (b1 - b0)
+            cuts = len(re.findall(CUT, procs.output(view)))
+            cdp = page.context.new_cdp_session(page)
             cdp.send("Debugger.enable")
             cdp.send("Debugger.pause")
-            t0 = time.time()
-            start = [t0 - page_lag(pg) for pg in live]  # each page's time cursor (wall clock s) at the pause
-            # frozen until the relay cuts it off (it took nothing for 10 s while its data waited) or
-            # FROZEN_S, whichever first: how soon the cut comes depends on how much the browser's own network
-            # buffers absorb for a paused page (40 s to over 2 min here), so the test does not wait on it
-            deadline = time.monotonic() + FROZEN_S
-            while (cut := re.search(r"web relay: page \S+ cut off: (.*)", procs.output(view))) is None and time.monotonic() < deadline:
+            t0, got2 = time.monotonic(), reader.received
+            # frozen until the relay cuts it off (it took nothing for 10 s while its data waited) or FROZEN_S,
+            # whichever first: how soon the cut comes depends on how much the browser's own network buffers
+            # absorb for a paused page (40 s to over 2 min here), so the test does not wait on it
+            deadline = t0 + FROZEN_S
+            while len(found := re.findall(CUT, procs.output(view))) == cuts and time.monotonic() < deadline:
                 time.sleep(1.0)
-            t1 = time.time()
-            end = [t1 - page_lag(pg) for pg in live]
-            shot = tmp_path / "web-pages.png"
-            shot.write_bytes(base64.b64decode(live[0].context.new_cdp_session(live[0]).send(
-                "Page.captureScreenshot", {"format": "png"})["data"]))
-            lags = [round(page_lag(pg), 2) for pg in live]
+            t1, got3, ended = time.monotonic(), reader.received, reader.ended
         finally:
             browser.close()
+            reader.close()
     keep = Path(__file__).resolve().parents[2] / "out" / "test-web-pages.png"
     keep.parent.mkdir(exist_ok=True)
     shutil.copy(shot, keep)
-    advanced = [(e - s) / (t1 - t0) for s, e in zip(start, end)]
+    frozen_rate = (got3 - got2) / (t1 - t0)
     out = procs.output(view)
     assert "has been blocked" not in out, out[-3000:]
-    # held up, a page's cursor stops (0x); not held up, it keeps at least half its own pace before the freeze
-    assert all(a >= 0.5 * min(1.0, p) and a > 0.05 for a, p in zip(advanced, pace)), (
-        f"pages' time cursors advanced {advanced} x the wall clock over {t1 - t0:.0f} s with one page frozen "
-        f"({cut.group(1) if cut else 'not cut off yet'}), against {pace} before it froze; lags now {lags}")
+    # held up, the other page takes nothing: not held up, it goes on at no less than half its rate before
+    assert rate > 0 and frozen_rate >= 0.5 * rate and not ended, (
+        f"over {t1 - t0:.0f} s with a page frozen ({found[cuts:] or 'not cut off yet'}), the other took "
+        f"{frozen_rate:.0f} B/s against {rate:.0f} before ({ended or 'still open'})")
     rgb = np.asarray(Image.open(keep).convert("RGB"))
-    assert robot_pixels(rgb[WORLD_VIEW]) >= 30, f"a live page does not show the robots: {keep}"
+    assert robot_pixels(rgb[WORLD_VIEW]) >= 30, f"the page did not show the robots before it froze: {keep}"
     assert view.poll() is None, out[-3000:]
