@@ -49,16 +49,10 @@ class ArmPanel:
         e = self.arm.entry
         with ui.card().classes("full-width"):
             self.title = ui.label("").classes("text-subtitle1").props('role="heading" aria-level="2"')
-            self.sliders = []
-            for i, name in enumerate(e.joint_names):
-                lo = math.degrees(e.lower[i]) if i < len(e.lower) else -180.0
-                hi = math.degrees(e.upper[i]) if i < len(e.upper) else 180.0
-                with ui.row().classes("full-width items-center no-wrap"):
-                    ui.label(f"J{i + 1}").style("width: 2rem")
-                    # the zero pose clamped into the range: a joint whose range leaves out 0 (the Panda's J4)
-                    s = ui.slider(min=round(lo, 1), max=round(hi, 1), step=0.5, value=min(max(0.0, round(lo, 1)), round(hi, 1)),
-                                  on_change=self._slider_moved).props(f'label-always aria-label="J{i + 1} ({name}) degrees"').classes("full-width")
-                    self.sliders.append(s)
+            self.sliders: list[Any] = []
+            self._joints: tuple[str, ...] = ()
+            self.joints_box = ui.column().classes("full-width gap-0")
+            self._build_sliders()
             with ui.row().classes("full-width items-center no-wrap"):
                 ui.label("Speed").style("width: 4rem")
                 self.speed = ui.slider(min=0.05, max=1.0, step=0.05, value=0.5).props('label-always aria-label="Speed scale"').classes("full-width")
@@ -78,7 +72,31 @@ class ArmPanel:
             # two lines high even when short: the map's row under this panel must not move under the mouse
             self.ik_label = ui.label("IK: move the target").style("min-height: 2.8rem")
             apply = ui.button("Apply IK", on_click=self._apply_ik)
-        self.controls = [*self.sliders, self.speed, stop, reset, apply, *nudges]
+        self._buttons = [self.speed, stop, reset, apply, *nudges]
+
+    @property
+    def controls(self) -> list[Any]:
+        """What only the owner may use: the selected arm's sliders, the speed and the buttons."""
+        return [*self.sliders, *self._buttons]
+
+    def _build_sliders(self) -> None:
+        """One slider per joint of the arm shown: rebuilt when the page shows an arm of other joints (a lab's
+        7-joint Panda after the 6-joint Meca500)."""
+        e = self.arm.entry
+        self.joints_box.clear()
+        self.sliders = []
+        with self.joints_box:
+            for i, name in enumerate(e.joint_names):
+                lo = math.degrees(e.lower[i]) if i < len(e.lower) else -180.0
+                hi = math.degrees(e.upper[i]) if i < len(e.upper) else 180.0
+                with ui.row().classes("full-width items-center no-wrap"):
+                    ui.label(f"J{i + 1}").style("width: 2rem")
+                    # the zero pose clamped into the range: a joint whose range leaves out 0 (the Panda's J4)
+                    s = ui.slider(min=round(lo, 1), max=round(hi, 1), step=0.5, value=min(max(0.0, round(lo, 1)), round(hi, 1)),
+                                  on_change=self._slider_moved).props(f'label-always aria-label="J{i + 1} ({name}) degrees"').classes("full-width")
+                    self.sliders.append(s)
+        self._joints = tuple(e.joint_names)
+        self.synced = False
 
     # ------------------------------------------------------------------ actions
 
@@ -159,6 +177,8 @@ class ArmPanel:
 
     def refresh(self) -> None:
         arm = self.arm
+        if tuple(arm.entry.joint_names) != self._joints:
+            self._build_sliders()
         mine = arm.can_command
         rec = arm.record
         who = "you" if mine and rec is not None else (rec.owner or "nobody") if rec is not None else "?"

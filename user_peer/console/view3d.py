@@ -49,6 +49,7 @@ class View3D:
         self.height: Any = None
         self._syncing = False
         self._z: float | None = None
+        self._looked: str | None = None  # the arm the camera was last put on
 
     def build(self) -> None:
         page = self.page
@@ -86,6 +87,7 @@ class View3D:
         """The camera 1 m from the page's arm (or the first robot), looking at its middle from above and aside."""
         page = self.page
         rid = page.arm.id if page.arm is not None else (page.entries[0].id if page.entries else None)
+        self._looked = page.arm.id if page.arm is not None else None
         sx, sy, sz, _ = self.spawn.get(rid, (0.0, 0.0, 0.0, 0.0)) if rid else (0.0, 0.0, 0.0, 0.0)
         self.scene.move_camera(sx + 0.55, sy - 0.75, sz + 0.6, sx, sy, sz + 0.15, duration=0)
 
@@ -139,6 +141,8 @@ class View3D:
     def refresh(self, poses: dict[str, bytes]) -> None:
         """Move what moved: the followed arms' links, the bases, the selected base's scan, the target."""
         page, w = self.page, self.page.world
+        if page.arm is not None and page.arm.id != self._looked:  # another arm selected: the camera goes to it
+            self.look_at_arm()
         for e in page.entries:
             if e.kind == "mobile":
                 self._base(e.id, state._pose(page.handles, poses, e.id, page.console.decoded))
