@@ -1,6 +1,6 @@
 """How a peer reaches the others: profiles, endpoints and the zenoh config behind them.
 
-Three profiles (DESIGN.md): ``embedded`` opens this process as the router
+Three profiles (docs/design.md): ``embedded`` opens this process as the router
 (the demo, tests, a one-machine class); ``client`` connects to routers (the
 default: ``tcp/127.0.0.1:7447`` unless ``--connect`` or ``ROBOFABRIC_CONNECT``
 says otherwise); ``peer`` scouts the LAN by multicast. Values come from flags

@@ -1,6 +1,6 @@
 """The seam between a simulating peer and whoever decides who may command its robots.
 
-The sim peer is the authority for its robots (DESIGN.md): every command it
+The sim peer is the authority for its robots (docs/design.md): every command it
 receives passes through a :class:`CommandGate` before it touches the
 simulation, and the sim peer reports each robot's motion so the gate can refuse
 a takeover while the robot moves; the gate in turn tells the sim when a robot loses its owner

@@ -1,7 +1,7 @@
 """Key expressions of a robofabric world.
 
 Every key in the fabric is built here and nowhere else, so that the layout in
-DESIGN.md has one source of truth and a malformed id is refused before it ever
+docs/design.md has one source of truth and a malformed id is refused before it ever
 reaches the wire. Parsing is the inverse: tools such as ``echo`` and the
 recorder use :func:`parse` to learn what a key holds.
 """

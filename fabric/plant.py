@@ -3,7 +3,7 @@
 ``ROBOFABRIC_PLANT`` names one defect; it is read here once, at import, and nowhere else. Unset (or
 empty) every hook is inert: :func:`planted` is False for every kind. ``robofabric bench soak --plant KIND``
 sets it in the sims it starts, and the checker must then report a violation (robofabric/soak/checker.py;
-tests/robofabric/soak/test_plants.py). The hooks, one line each:
+tests/robofabric/soak/test_soak_plants.py). The hooks, one line each:
 
 * ``reset`` (sim_peer/following.py, ``catch_up``): a standby taking the world over puts its robots back at
   their spawn pose instead of where the old authority left them;

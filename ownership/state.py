@@ -4,7 +4,7 @@ No zenoh and no clock: ``now`` arrives inside the events, so the same code runs
 in the authority and in hypothesis property tests. Records are
 :class:`fabric.interfaces.OwnershipRecord` (the replicated wire record).
 
-Rules (DESIGN.md):
+Rules (docs/design.md):
 - ``exclusive`` objects have at most one owner, always a live user; ``scene``
   objects are never owned (anyone writes, last writer wins).
 - The owner's epoch (fencing token) increases on every change of owner.
@@ -110,7 +110,7 @@ Event = Join | Leave | Request | Release | Renew | Tick | Motion
 class Effect:
     """What happened: ``kind`` is granted|denied|queued|released|handover|expired|revoked|restored|renewed|stop.
 
-    ``stop``: the robot lost its owner ``user`` (``reason`` says how) and must stop (DESIGN.md: a robot
+    ``stop``: the robot lost its owner ``user`` (``reason`` says how) and must stop (docs/design.md: a robot
     moves only while a live owner drives it); it is applied by the sim, never by this module."""
 
     kind: str

@@ -1,4 +1,4 @@
-"""IK query round trip through a router: the DESIGN budget of p99 <= 2 ms on loopback.
+"""IK query round trip through a router: the budget of docs/design.md of p99 <= 2 ms on loopback.
 
 Three processes as on a LAN, squeezed onto one host: this one hosts the router
 and asks, ``robofabric compute --arm ...`` answers. Targets are FK of random
