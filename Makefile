@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 STAMP_TEST := $(VENV)/.installed-test
 
-.PHONY: demo test test-fast install clean bench
+.PHONY: demo test test-fast lint install clean bench
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -31,9 +31,14 @@ test: $(STAMP_TEST)
 test-fast: $(STAMP_TEST)
 	$(PY) -m pytest -q -m "not slow"
 
+# the linter and the type checker alone (tests/test_lint.py runs both in `make test`)
+lint: $(STAMP_TEST)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
+
 # every benchmark, shortened (`robofabric bench all` without --quick for the figures in docs/benchmarks.md)
 bench: $(STAMP)
 	$(VENV)/bin/robofabric bench all --quick
 
 clean:
-	rm -rf $(VENV) out .pytest_cache .hypothesis
+	rm -rf $(VENV) out .pytest_cache .hypothesis .mypy_cache .ruff_cache

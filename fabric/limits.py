@@ -20,6 +20,7 @@ import queue
 import re
 from collections import OrderedDict
 from dataclasses import dataclass
+from typing import Any
 
 __all__ = ["MAX_USER_LEN", "QUOTE_LEN", "USER_PATTERN", "validate_user", "is_valid_user", "quote", "clip", "RateLimiter", "ReportVerdict", "put_dropping_oldest"]
 
@@ -88,7 +89,7 @@ class RateLimiter:
         self.interval = float(interval)
         self.burst = int(burst)
         self.max_keys = int(max_keys)
-        self._windows: OrderedDict[str, list] = OrderedDict()  # key -> [window start, reported, suppressed]
+        self._windows: OrderedDict[str, list[Any]] = OrderedDict()  # key -> [window start, reported, suppressed]
 
     def __len__(self) -> int:
         return len(self._windows)
@@ -118,7 +119,7 @@ class RateLimiter:
         return {k: w[2] for k, w in self._windows.items() if w[2]}
 
 
-def put_dropping_oldest(q: "queue.Queue", item: object) -> int:
+def put_dropping_oldest(q: "queue.Queue[Any]", item: object) -> int:
     """Put ``item`` on a bounded queue, dropping the oldest entries to make room, and return how many were
     dropped: a slow consumer loses old samples and never blocks the producer (zenoh's callback thread)."""
     dropped = 0

@@ -83,7 +83,7 @@ class Reports:
         suppressed = self.should_report(f"decode:{where}")
         if suppressed is None:
             return
-        data = {"key": clip(key), "subscription": clip(where)}
+        data: dict[str, Any] = {"key": clip(key), "subscription": clip(where)}
         if suppressed:
             data["suppressed"] = suppressed
         self.emit(Event(kind=EventKind.DECODE_ERROR, reason=clip(str(exc)), severity="warning", data=data, header=self._header("event")),

@@ -136,7 +136,7 @@ class Rpc:
 
     def _failed(self, query: zenoh.Query, key: str, exc: Exception) -> None:
         self._counters["query_errors"] += 1
-        log.exception("service %s failed", key)
+        log.error("service %s failed", key, exc_info=exc)
         query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=f"internal error: {clip(str(exc))}", severity="error")))
 
     def _refuse(self, query: zenoh.Query, exc: Exception) -> None:

@@ -231,7 +231,7 @@ class OwnershipClient:
         limit = timeout or self.timeout
         t0 = time.monotonic()
         try:
-            reply = self.fabric.rpc.call(key, req, timeout=limit, expected=OwnReply)
+            reply: OwnReply = self.fabric.rpc.call(key, req, timeout=limit, expected=OwnReply)
         except NoReply:
             known = self.snapshot()
             if known and obj not in known and time.monotonic() - t0 < 0.5 * limit:  # ended at once: nobody serves it

@@ -44,7 +44,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
-from typing import Mapping
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any
 
 from fabric.interfaces import MAX_QUEUE, OwnershipRecord
 from fabric.plant import planted
@@ -161,11 +162,11 @@ def initial(objects: Mapping[str, str], *, lease_s: float = 2.0, grace_s: float 
 
 # ---------------------------------------------------------------------- helpers
 
-def _sorted_queue(s: OwnState, users) -> tuple[str, ...]:
+def _sorted_queue(s: OwnState, users: Iterable[str]) -> tuple[str, ...]:
     return tuple(sorted(set(users), key=lambda u: (s.rank.get(u, 1 << 60), u)))
 
 
-def _with(s: OwnState, recs: dict, **kw) -> OwnState:
+def _with(s: OwnState, recs: dict[str, OwnershipRecord], **kw: Any) -> OwnState:
     out = replace(s, records=MappingProxyType(recs), **kw)
     return _forfeit_taken(out, s.records) if out.away else out
 
@@ -195,7 +196,7 @@ def _join(s: OwnState, user: str) -> OwnState:
     return replace(s, rank=MappingProxyType(rank), live=s.live | {user}, next_rank=nxt)
 
 
-def _pass_on(s: OwnState, rec: OwnershipRecord, now: float, effects: list, why: str) -> OwnershipRecord:
+def _pass_on(s: OwnState, rec: OwnershipRecord, now: float, effects: list[Effect], why: str) -> OwnershipRecord:
     """The owner goes (``why``): the head of the live queue owns next, else the object is free; the robot stops."""
     queue = [u for u in rec.queue if u in s.live]
     if queue:
@@ -219,7 +220,7 @@ def _stop_reason(owner: str, why: str) -> str:
     return f"{owner}: {why}" if owner not in why else why
 
 
-def _drop_unproven(s: OwnState, recs: dict, user: str, now: float, effects: list) -> OwnState:
+def _drop_unproven(s: OwnState, recs: dict[str, OwnershipRecord], user: str, now: float, effects: list[Effect]) -> OwnState:
     """``user`` requested without a liveliness token and none came within grace: it leaves everything
     (no grace to come back: it never was there), and nothing is kept about it."""
     for obj, rec in list(recs.items()):
@@ -479,5 +480,5 @@ def _on_renew(s: OwnState, ev: Renew, effects: list[Effect]) -> OwnState:
     return s
 
 
-_HANDLERS = {Join: _on_join, Leave: _on_leave, Tick: _on_tick, Motion: _on_motion,
+_HANDLERS: dict[type, Callable[[OwnState, Any, list[Effect]], OwnState]] = {Join: _on_join, Leave: _on_leave, Tick: _on_tick, Motion: _on_motion,
              Request: _on_request, Release: _on_release, Renew: _on_renew}

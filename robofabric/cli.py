@@ -134,8 +134,7 @@ def _plain_help(typer_app: typer.Typer) -> None:
 
     def infos(t: typer.Typer):
         yield t.info
-        for c in t.registered_commands:
-            yield c
+        yield from t.registered_commands
         for g in t.registered_groups:
             yield g
             if g.typer_instance is not None:

@@ -141,7 +141,7 @@ def complete_keys_or_recordings(ctx: Any, incomplete: str) -> list[str]:
         import os
 
         paths = [p + "/" if os.path.isdir(p) else p for p in glob.glob(os.path.expanduser(incomplete) + "*")]
-        paths = [p for p in paths if p.endswith("/") or p.endswith(".mcap")]
+        paths = [p for p in paths if p.endswith(("/", ".mcap"))]
         if incomplete.startswith(("/", ".", "~")) or "." in incomplete:
             return sorted(paths)
         return sorted(paths) + [k for k in complete_keys(ctx, incomplete) if k not in paths]

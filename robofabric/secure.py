@@ -272,7 +272,7 @@ def _make_ca(t: Path, days: int):
     from cryptography.hazmat.primitives.asymmetric import ec
 
     key = ec.generate_private_key(ec.SECP256R1())
-    now = dt.datetime.now(dt.timezone.utc)
+    now = dt.datetime.now(dt.UTC)
     name = _name_attrs("robofabric class CA")
     cert = (
         x509.CertificateBuilder().subject_name(name).issuer_name(name).public_key(key.public_key())
@@ -308,7 +308,7 @@ def _make_cert(t: Path, name: str, hosts: list[str], days: int, *, web: bool = F
 
     ca_cert, ca_key = _load_ca(t)
     key = ec.generate_private_key(ec.SECP256R1())
-    now = dt.datetime.now(dt.timezone.utc)
+    now = dt.datetime.now(dt.UTC)
     sans: list[x509.GeneralName] = []
     for h in dict.fromkeys(hosts if web else [name, *hosts]):
         try:

@@ -138,7 +138,6 @@ class Roles:
                 self.gone_at[peer_id] = time.monotonic()
                 if len(self.gone_at) > MAX_GONE:
                     self.gone_at.pop(min(self.gone_at, key=self.gone_at.__getitem__))
-            live = frozenset(self.live)
             settled = self.settled
         if alive:
             h.shards.learn_soon()  # which shard it is (a standby of ours, or another shard's sim)

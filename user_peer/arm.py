@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 from typing import Any, Sequence
 
 import numpy as np
@@ -11,7 +10,7 @@ import numpy as np
 from fabric import keys
 from fabric.interfaces import JointState, JointTarget, Pose, ServiceError
 from user_peer import services
-from user_peer.errors import NotOwner, Timeout, Unreachable
+from user_peer.errors import Timeout, Unreachable
 from user_peer.pause import PauseRider
 from user_peer.robot import Robot
 

@@ -152,7 +152,7 @@ def _recv(sock: socket.socket, deadline: float | None) -> bytes:
     if deadline is not None:
         left = deadline - time.monotonic()
         if left <= 0:
-            raise socket.timeout("the request did not come in time")
+            raise TimeoutError("the request did not come in time")
         sock.settimeout(left)
     return sock.recv(65536)
 

@@ -133,7 +133,7 @@ class Relay:
             self._sweep()
             try:
                 down, addr = self._sock.accept()
-            except socket.timeout:
+            except TimeoutError:
                 continue
             except OSError:
                 return
@@ -210,7 +210,7 @@ class Relay:
                     link.down.sendall(http1_refusal(exc.reason))
                 except OSError:
                     pass
-        except socket.timeout:
+        except TimeoutError:
             if link.up is None:
                 self._refuse_connection(link.down, link.peer, f"no request within {self.limits.header_timeout_s:g} s")
         except OSError:

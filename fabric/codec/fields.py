@@ -46,7 +46,7 @@ class F:
 
 
 @dataclass(frozen=True, slots=True)
-class I:
+class I:  # noqa: E742 (the codec's one-letter spec names: F, I, S)
     """An integer, optionally bounded."""
 
     lo: int | None = None

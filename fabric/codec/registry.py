@@ -116,4 +116,4 @@ def messages_equal(a: Any, b: Any) -> bool:
         return len(a) == len(b) and all(messages_equal(x, y) for x, y in zip(a, b))
     if isinstance(a, dict):
         return a.keys() == b.keys() and all(messages_equal(a[k], b[k]) for k in a)
-    return a == b
+    return bool(a == b)

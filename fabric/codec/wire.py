@@ -82,7 +82,7 @@ def _ext_default(obj: Any) -> Any:
     raise TypeError(f"cannot encode {type(obj).__name__}")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _optional_tail(cls: type) -> tuple[tuple[str, Any], ...]:
     """The trailing fields a class marks as added later (``OPTIONAL_TAIL``), with their defaults.
 

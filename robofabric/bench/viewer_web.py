@@ -160,7 +160,9 @@ def summary(result: dict[str, Any]) -> dict[str, float]:
     missing = sum(v is None for s in result["lags"] for v in s)
     worst_last = max((s[-1] for s in result["lags"] if s and s[-1] is not None), default=float("nan"))
     vals.sort()
-    p = (lambda q: vals[min(len(vals) - 1, int(q * len(vals)))] if vals else float("nan"))
+    def p(q: float) -> float:
+        return vals[min(len(vals) - 1, int(q * len(vals)))] if vals else float("nan")
+
     return {"p50": p(0.5), "p90": p(0.9), "max": vals[-1] if vals else float("nan"), "last_worst": worst_last, "missing": missing}
 
 

@@ -417,7 +417,7 @@ def memory_judged(h: Sequence[Record], lim: Limits = Limits()) -> list[str]:
 
 def resources(h: Sequence[Record], lim: Limits) -> list[Violation]:
     out = []
-    for (name, pid), win in _judged_windows(h, lim).items():
+    for (name, _pid), win in _judged_windows(h, lim).items():
         hours = (win[-1].t - win[0].t) / 3600.0
         slope = _slope_per_h([(s.t, s.rss_mb) for s in win])
         if slope > lim.mem_mb_per_h:

@@ -1,5 +1,6 @@
 """Codec: exact round trips, and nothing but DecodeError out of hostile bytes."""
 
+import dataclasses
 import math
 
 import msgpack
@@ -207,9 +208,9 @@ def test_expected_type_is_enforced_and_plain_view_is_json_ready():
 
 def test_messages_are_frozen_values():
     js = JointState(["a"], [1.0], [0.0])
-    with pytest.raises(Exception):
+    with pytest.raises(ValueError, match="read-only"):
         js.q[0] = 2.0
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         js.names = ("b",)
 
 

@@ -76,7 +76,6 @@ def test_rate_limiter_bounds(events, burst):
     """Per key: at most ``burst`` reports per window, every check is reported or counted, memory bounded."""
     rl = RateLimiter(1.0, burst=burst, max_keys=4)
     now, reports, suppressed_told, checks = 0.0, 0, 0, 0
-    per_window: dict[tuple[str, int], int] = {}
     for key, dt in events:
         now += dt
         v = rl.check(key, now)

@@ -8,7 +8,6 @@ The same checks run first with no skew, as the reference, in the same lab.
 from __future__ import annotations
 
 import re
-import time
 from typing import Iterator
 
 import pytest

@@ -126,7 +126,7 @@ def test_owner_partition_bob_takes_over_alice_is_refused(world: World):
     alice.call(
         "from fabric import keys\nfrom fabric.interfaces import Command, JointTarget\n"
         "k = keys.robot_cmd(w.name, 'arm1', 'joints', 'alice')\n"
-        "w.fabric.publish(k, Command('alice', %d, JointTarget(far, 1.0), w.fabric.header(k))); None" % epoch_a
+        f"w.fabric.publish(k, Command('alice', {epoch_a}, JointTarget(far, 1.0), w.fabric.header(k))); None"
     )
     wait_until(lambda: alice.call("any(e.user == 'alice' and e.object == 'arm1' and e.kind == 'reject' for e in w.events)"),
                timeout=20, what="alice's stale command refused", seen=lambda: alice.call("[repr(e) for e in w.events[-5:]]"))

@@ -52,16 +52,16 @@ def test_a_peer_without_its_extra_says_which_to_install(tmp_path, command, extra
     assert "Traceback" not in out.stderr, out.stderr
 
 
-STUDENT_SURFACE = """
+STUDENT_SURFACE = f"""
 import user_peer, user_peer.world, user_peer.robot, user_peer.tui, user_peer.console.server, user_peer.console.page
 import user_peer.console.state, user_peer.urdf_chain, ownership.client, fabric.session, robots, robofabric.cli
 import numpy as np, sys
 from user_peer.console.state import arm_links
 links = arm_links("meca500", np.zeros(6), (0.0, 0.0, 0.0, 0.0))  # the console draws an arm without Pinocchio
 assert len(links) == 8, links
-heavy = sorted(m for m in sys.modules if m.split('.')[0] in {heavy!r})
+heavy = sorted(m for m in sys.modules if m.split('.')[0] in {HEAVY!r})
 print("heavy:", heavy)
-""".format(heavy=HEAVY)
+"""
 
 
 def test_the_student_surface_imports_without_the_sim_and_compute_stacks(tmp_path):

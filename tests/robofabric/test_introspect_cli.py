@@ -138,7 +138,7 @@ def test_ps_list_and_info_name_publishers_subscribers_and_services_and_skip_bad_
     ps = _cli("ps", "--world", world, "--connect", ep)
     assert ps.returncode == 0, ps.stderr
     assert "sim-x" in ps.stdout and "compute-x" in ps.stdout and "Traceback" not in ps.stderr
-    assert "'rf/%s/peer/viewer/with space'" % world in ps.stderr, ps.stderr
+    assert f"'rf/{world}/peer/viewer/with space'" in ps.stderr, ps.stderr
     doc = json.loads(_cli("ps", "--json", "--world", world, "--connect", ep).stdout)
     assert doc["peers"]["sim"] == ["sim-x"] and len(doc["bad_tokens"]) == 2, doc  # peer/viewer/a/b is not a peer/KIND/ID key at all
 

@@ -407,7 +407,7 @@ def _expire_certificate(d, name: str) -> None:
     ca_key = serialization.load_pem_private_key((d / "ca-key.pem").read_bytes(), password=None)
     key = serialization.load_pem_private_key((d / f"{name}-key.pem").read_bytes(), password=None)
     old = x509.load_pem_x509_certificate((d / f"{name}.pem").read_bytes())
-    now = dt.datetime.now(dt.timezone.utc)
+    now = dt.datetime.now(dt.UTC)
     builder = (x509.CertificateBuilder().subject_name(old.subject).issuer_name(ca.subject).public_key(key.public_key())
                .serial_number(x509.random_serial_number()).not_valid_before(now - dt.timedelta(days=10))
                .not_valid_after(now - dt.timedelta(days=1)))

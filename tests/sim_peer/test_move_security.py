@@ -184,7 +184,7 @@ def test_a_students_hand_made_moves_on_srv_state_are_refused_counted_and_publish
 def test_a_student_may_not_ask_for_a_move_in_her_name_nor_in_the_instructors(cls):
     """srv/move/{sim}/by/{login}: the router lets no student ask there, in any name (it drops the query: no answer)."""
     mallory = cls.fabric("mallory", peer_id="mallory-tool2")
-    for name, ev in _attacks(cls, mallory).items():  # each to sim-b: base1's sim, and every move_in's target
+    for ev in _attacks(cls, mallory).values():  # each to sim-b: base1's sim, and every move_in's target
         for login in ("mallory", "carol"):
             with pytest.raises(ho.NoAnswer):
                 ho.ask(mallory, "sim-b", login, ev, 1.0)

@@ -229,7 +229,7 @@ def test_ros2_export_every_message_decodes_with_the_ros_types_and_values(recordi
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         assert reader.get_header().profile == "ros2"
         n = 0
-        for schema, channel, message, decoded in reader.iter_decoded_messages():
+        for schema, channel, _message, decoded in reader.iter_decoded_messages():
             n += 1
             assert channel.message_encoding == "cdr" and schema.encoding == "ros2msg"
             types[channel.topic] = schema.name

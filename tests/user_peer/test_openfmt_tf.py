@@ -80,7 +80,7 @@ def _transforms(path: Path, fmt: str) -> tuple[list[tuple[str, str, int, tuple, 
     decoders = [ProtobufDecoders()] if fmt == "foxglove" else [Ros2Decoders()]
     tfs, pubs = [], []
     with open(path, "rb") as f:
-        for _schema, channel, message, m in make_reader(f, decoder_factories=decoders).iter_decoded_messages(topics=["/tf"]):
+        for _schema, _channel, message, m in make_reader(f, decoder_factories=decoders).iter_decoded_messages(topics=["/tf"]):
             pubs.append(message.publish_time)
             for t in m.transforms:
                 if fmt == "foxglove":

@@ -2,7 +2,6 @@
 
 import gc
 
-import pytest
 
 import rclpy  # noqa: E402,F401  (the test extra installs ROS 2 Kilted's wheels: missing, these tests fail)
 

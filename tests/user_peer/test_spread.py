@@ -22,7 +22,7 @@ def test_turns_go_round_every_peer():
 
 
 def test_no_peer_known_means_the_nearest():
-    assert RoundRobin(lambda: [], clock=Clock()).next() is None
+    assert RoundRobin(list, clock=Clock()).next() is None
 
 
 def test_the_list_is_read_again_after_refresh_and_neither_repeats_nor_skips():

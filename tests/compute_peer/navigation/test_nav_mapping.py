@@ -17,7 +17,7 @@ RES = 0.05
 def mapped_room():
     scene = small_room()
     mapper = OccupancyMapper(MapperConfig(resolution=RES, width=200, height=200, origin_x=0.0, origin_y=0.0))
-    for k, (x, y, yaw) in enumerate(drive_poses(scene)):
+    for x, y, yaw in drive_poses(scene):
         mapper.integrate_scan(scan_at(scene, x, y, yaw), pose_at(x, y, yaw))
     return scene, mapper
 

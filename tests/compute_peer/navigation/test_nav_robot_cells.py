@@ -12,7 +12,7 @@ from hypothesis import given, settings, strategies as st
 from compute_peer.navigation import MapperConfig, OccupancyMapper
 from compute_peer.navigation.grid import UNKNOWN, make_grid
 from compute_peer.navigation.poses import PoseHistory
-from compute_peer.navigation.robot_cells import ROBOT_MARGIN, Footprint, clear_robots, footprint_mask, robot_cells
+from compute_peer.navigation.robot_cells import Footprint, clear_robots, footprint_mask, robot_cells
 from compute_peer.navigation.scan_mapping import ScanMapping
 from compute_peer.navigation.scenes import Scene, room
 from fabric.interfaces import Header, Pose, quaternion_from_yaw

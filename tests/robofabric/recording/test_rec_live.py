@@ -132,7 +132,7 @@ def test_a_sigkilled_recorder_leaves_a_readable_unfinished_file(tmp_path, world,
     n = 0
     topics, schemas, encodings = set(), set(), set()
     try:
-        for schema, channel, message in NonSeekingReader(io.BytesIO(data)).iter_messages(log_time_order=False):
+        for schema, channel, _message in NonSeekingReader(io.BytesIO(data)).iter_messages(log_time_order=False):
             n += 1
             topics.add(channel.topic)
             schemas.add(schema.name)

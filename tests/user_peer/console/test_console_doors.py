@@ -63,7 +63,7 @@ def test_the_delay_grows_with_each_failure_after_the_free_ones_up_to_a_cap():
 
 def test_the_throttle_holds_a_name_from_anywhere_and_an_address_for_any_name():
     t = LoginThrottle(name_free=3, address_free=10, base=1.0, cap=60.0, forget_s=900.0)
-    for i in range(3):
+    for _ in range(3):
         assert t.wait("alice", "10.0.0.9", 0.0) == 0.0
         t.failed("alice", "10.0.0.9", 0.0)
     assert t.wait("alice", "10.0.0.9", 0.0) == 1.0

@@ -9,7 +9,6 @@ import rerun as rr
 from fabric.interfaces import JointState, OccupancyGrid, Pose
 from user_peer.drawing.canvas import Canvas
 from user_peer.drawing.intake import Intake, RateMeter, message_times
-from user_peer.drawing.robots import RobotDrawing
 from user_peer.rerun_log import WorldLogger
 
 
