@@ -1,9 +1,10 @@
 """Planted defects, for proving the soak's checker is not vacuous. TEST-ONLY: never set in a real world.
 
-``ROBOFABRIC_PLANT`` names one defect; it is read here once, at import, and nowhere else. Unset (or
-empty) every hook is inert: :func:`planted` is False for every kind. ``robofabric bench soak --plant KIND``
-sets it in the sims it starts, and the checker must then report a violation (robofabric/soak/checker.py;
-tests/robofabric/soak/test_soak_plants.py). The hooks, one line each:
+A defect is passed in, never read from the environment: ``robofabric bench soak --plant KIND`` starts its sims
+with ``robofabric sim --plant KIND`` (a hidden option), which hands it to the ownership authority
+(``Authority(plant=)``, which puts it in the state machine's ``OwnState.plant``) and to the replica host
+(``ReplicaHost(plant=)``). The checker must then report a violation (robofabric/soak/checker.py;
+tests/robofabric/soak/test_soak_plants.py). Every default is ``""``: no defect. The hooks, one line each:
 
 * ``reset`` (sim_peer/following.py, ``catch_up``): a standby taking the world over puts its robots back at
   their spawn pose instead of where the old authority left them;
@@ -15,14 +16,13 @@ tests/robofabric/soak/test_soak_plants.py). The hooks, one line each:
 
 from __future__ import annotations
 
-import os
-
-__all__ = ["KINDS", "PLANT", "planted"]
+__all__ = ["KINDS", "check"]
 
 KINDS = ("reset", "double-owner", "stale-command")
-PLANT = os.environ.get("ROBOFABRIC_PLANT", "")
 
 
-def planted(kind: str) -> bool:
-    """Whether the defect ``kind`` is planted in this process (False unless ROBOFABRIC_PLANT names it)."""
-    return bool(PLANT) and PLANT == kind
+def check(plant: str) -> str:
+    """``plant`` itself when it is ``""`` (no defect) or one of :data:`KINDS`; ``ValueError`` naming them else."""
+    if plant and plant not in KINDS:
+        raise ValueError(f"unknown planted defect {plant!r}: expected one of {', '.join(KINDS)}")
+    return plant

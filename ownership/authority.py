@@ -20,7 +20,7 @@ from typing import Any, Callable
 from fabric import keys
 from fabric.interfaces import Command, Event, EventKind, OwnershipRecord, OwnReply, OwnRequest, ServiceError
 from fabric.limits import MAX_USER_LEN, is_valid_user, quote
-from fabric.plant import planted
+from fabric.plant import check as check_plant
 from fabric.rate import Clock, MonotonicClock
 from fabric.session import Fabric, undeclare_all
 
@@ -52,10 +52,12 @@ class Authority:
         tick_s: float | None = None,
         restored: tuple[Any, Any] | None = None,
         budgets: OwnBudgets | None = None,
+        plant: str = "",
     ) -> None:
         """``restored``: ``(records, users)`` as :meth:`export_state` gave them on the authority this one
         replaces (a standby taking over): owners, epochs, queues and leases carry on. ``budgets``: each
-        login's budgets of requests, renewals and queries (:mod:`ownership.admission`; defaults there)."""
+        login's budgets of requests, renewals and queries (:mod:`ownership.admission`; defaults there).
+        ``plant``: a test-only defect for the soak's checker (:mod:`fabric.plant`; "" in every real world)."""
         self.fabric = fabric
         self.clock = clock or MonotonicClock()
         self._lock = threading.RLock()
@@ -68,6 +70,8 @@ class Authority:
             if missing:
                 fresh = st.initial(missing, lease_s=lease_s, grace_s=grace_s, authority=fabric.peer_id)
                 self._state = dataclasses.replace(self._state, records=MappingProxyType({**self._state.records, **fresh.records}))
+        self._plant = check_plant(plant)
+        self._state = dataclasses.replace(self._state, plant=self._plant)
         self._tick_s = tick_s if tick_s is not None else min(0.02, lease_s / 10)
         self._stop = threading.Event()
         self.counters = {"requests": 0, "rejected": 0, "handovers": 0, "rate_limited": 0}
@@ -278,7 +282,7 @@ class Authority:
             reason = f"{robot} is not owned; request it first"
         elif command.user != rec.owner:
             reason = f"{robot} is owned by {rec.owner}, not {command.user}"
-        elif command.epoch != rec.epoch and not planted("stale-command"):  # test-only defect (fabric/plant.py)
+        elif command.epoch != rec.epoch and self._plant != "stale-command":  # test-only defect (fabric/plant.py)
             reason = f"stale epoch {command.epoch} for {robot} (current {rec.epoch})"
         if reason:
             self.counters["rejected"] += 1

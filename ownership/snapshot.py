@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from types import MappingProxyType
-from typing import Any, Mapping
+from typing import Any, Mapping, TypedDict
 
 from fabric.interfaces import OwnershipRecord
 
@@ -97,12 +97,17 @@ def restore(
     )
 
 
-def _clock(value: Any, now: float) -> dict[str, float]:
+class _Clock(TypedDict):
+    heard: float
+    hearing_since: float
+    last_tick: float
+    regained: float
+
+
+def _clock(value: Any, now: float) -> _Clock:
     """``heard``, ``hearing_since``, ``last_tick`` and ``regained`` on this clock, from :func:`export`'s relative
     times; an export without them (an older authority) leaves them unknown, as a fresh authority has them."""
     vals = list(value) if isinstance(value, (list, tuple)) and len(value) in (3, 4) else []
     vals += [None] * (4 - len(vals))
-    out = {}
-    for name, v in zip(("heard", "hearing_since", "last_tick", "regained"), vals):
-        out[name] = float("-inf") if v is None else now + float(v)
-    return out
+    t = [float("-inf") if v is None else now + float(v) for v in vals]
+    return _Clock(heard=t[0], hearing_since=t[1], last_tick=t[2], regained=t[3])

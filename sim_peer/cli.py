@@ -11,6 +11,7 @@ from typing import Annotated, Optional, TYPE_CHECKING
 import typer
 
 from fabric.cli_common import Joining, NothingThere, UserError, join_flags, open_fabric
+from fabric.plant import check as check_plant
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
     from fabric.gate import CommandGate
@@ -23,12 +24,13 @@ one, an arm one per link: 8 hold one arm and one base). Unused slots are parked 
 but still cost each LIDAR scan ~1 % each (docs/sim.md)."""
 
 
-def make_gate(fabric, world, ownership: bool, restored=None, *, objects: bool = True, budgets=None) -> CommandGate:
+def make_gate(fabric, world, ownership: bool, restored=None, *, objects: bool = True, budgets=None, plant: str = "") -> CommandGate:
     """The ownership Authority when asked for and installed, else an OpenGate (with a warning if asked for).
 
     ``restored``: the ownership state a standby carries over when it takes the world. ``objects``: whether this
     sim is the scene objects' authority (their records); a shard joining a served world is its robots' only.
-    ``budgets``: each login's budgets at the authority (:class:`ownership.admission.OwnBudgets`; None: the defaults)."""
+    ``budgets``: each login's budgets at the authority (:class:`ownership.admission.OwnBudgets`; None: the defaults).
+    ``plant``: a test-only defect for the soak's checker (:mod:`fabric.plant`)."""
     from fabric.gate import OpenGate
     if not ownership:
         return OpenGate()
@@ -41,8 +43,8 @@ def make_gate(fabric, world, ownership: bool, restored=None, *, objects: bool = 
     if objects:
         owned.update({obj: "scene" for obj in world.objects})
     if restored is not None:
-        return Authority(fabric, objects=owned, restored=restored, budgets=budgets).start()
-    return Authority(fabric, objects=owned, budgets=budgets).start()
+        return Authority(fabric, objects=owned, restored=restored, budgets=budgets, plant=plant).start()
+    return Authority(fabric, objects=owned, budgets=budgets, plant=plant).start()
 
 
 def parse_twist_timeout(text: str | None, speed: float | None) -> float | None:
@@ -99,6 +101,7 @@ def sim(
                                            "asks are refused as rate_limited. See docs/ownership.md.")
     ] = "",
     list_: Annotated[bool, typer.Option("--list", help="List the known robot types and scenes, then exit.")] = False,
+    plant: Annotated[str, typer.Option("--plant", hidden=True, help="TEST-ONLY: a defect for the soak's checker (fabric/plant.py).")] = "",
     join: Joining = Joining(),
 ) -> None:
     """Simulate a scene's robots and serve them on the fabric: joints, poses, scans out; commands in."""
@@ -117,7 +120,11 @@ def sim(
 
     rates, pace, deadman = _parse_options(rate, speed, duration, noise, twist_timeout)
     budgets = _parse_budget(budget) if ownership else None
-    gate_of = functools.partial(make_gate, budgets=budgets)
+    try:
+        plant = check_plant(plant)  # test-only: the soak's launcher plants a defect this way (fabric/plant.py)
+    except ValueError as exc:
+        raise UserError(f"--plant: {exc}") from None
+    gate_of = functools.partial(make_gate, budgets=budgets, plant=plant)
 
     def build(placements=None):
         """This sim's world; ``placements``: other robots than the command line's (a robot moved in or out)."""
@@ -138,7 +145,8 @@ def sim(
         first = _check_world_free(cfg, join.peer_id, sim_world)
     stop = shutdown_event()
     if standby or not replicated_off():
-        _run_replicated(cfg, join.peer_id, sim_world, build, ownership, rates, pace, stop, duration, standby, first, gate_of)
+        _run_replicated(cfg, join.peer_id, sim_world, build, ownership, rates, pace, stop, duration, standby, first, gate_of,
+                        plant=plant)
         return
     _run_single(cfg, join.peer_id, sim_world, ownership, rates, pace, stop, duration, first, gate_of)
 
@@ -256,7 +264,7 @@ def replicated_off() -> bool:
 
 
 def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, stop, duration, standby, objects=True,
-                    gate_of=make_gate) -> None:
+                    gate_of=make_gate, plant: str = "") -> None:
     """Primary or standby through :func:`sim_peer.replica_host.run_replicated`."""
     from fabric.config import default_peer_id
     from sim_peer.replica_host import run_replicated
@@ -278,6 +286,7 @@ def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, st
         lambda: open_fabric(cfg, "sim", pid), make_world,
         lambda fab, w, restored, objects=True: gate_of(fab, w, ownership, restored, objects=objects), stop,
         standby=standby, rates=rates, speed=pace, duration=duration, announce=announce, objects=objects, rebuild=build,
+        plant=plant,
     )
     peer = host.peer if host is not None else None
     if peer is None:

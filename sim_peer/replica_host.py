@@ -91,8 +91,10 @@ class ReplicaHost:
         objects: bool = True,
         rebuild: Callable[[list[SceneRobot]], SimWorld] | None = None,
         adopt_after_s: float | None = None,
+        plant: str = "",
     ) -> None:
         self.fabric = fabric
+        self.plant = plant  # a test-only defect for the soak's checker (fabric/plant.py); "" in every real world
         # builds this sim's world again with other robots (the same scene and options): a robot moved in or out
         self.rebuild = rebuild
         # the scene objects' authority: the world's first sim (a shard joining a served world is not); a standby
@@ -318,10 +320,12 @@ def run_replicated(
     announce: Callable[[str], None] | None = None,
     objects: bool = True,
     rebuild: Callable[[list[SceneRobot]], SimWorld] | None = None,
+    plant: str = "",
 ) -> "ReplicaHost | None":
     """Run a sim peer until ``stop``: as primary or standby, a fresh session and world after each step-down.
     ``objects``: whether this sim is the scene objects' authority (the world's first sim; a shard that joins a
-    served world is not). Returns the last host (its ``peer`` holds the counters when it served)."""
+    served world is not). ``plant``: a test-only defect (fabric/plant.py). Returns the last host (its ``peer``
+    holds the counters when it served)."""
     term, leader = 0, ""
     last: WorldState | None = None
     host = None
@@ -329,7 +333,8 @@ def run_replicated(
         while not stop.is_set():
             with open_fabric() as fab:
                 host = ReplicaHost(fab, make_world(), make_gate, standby=standby, rates=rates, speed=speed, term=term,
-                                   leader=leader, snapshot=last, announce=announce, objects=objects, rebuild=rebuild)
+                                   leader=leader, snapshot=last, announce=announce, objects=objects, rebuild=rebuild,
+                                   plant=plant)
                 role = host.run(stop, duration)
                 term, leader, objects = host.election.term, host.election.leader, host.objects
                 last = host.last_state

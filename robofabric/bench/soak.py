@@ -19,12 +19,13 @@ from typing import Annotated, Optional
 
 import typer
 
+from fabric.plant import KINDS
 from robofabric.bench.common import machine
 
 __all__ = ["command", "PLANTS"]
 
-PLANTS = ("reset", "double-owner", "stale-command")
-"""Defects ``--plant`` can put in the sims (``ROBOFABRIC_PLANT``, fabric/plant.py)."""
+PLANTS = KINDS
+"""Defects ``--plant`` can put in the sims (each started with ``robofabric sim --plant KIND``, fabric/plant.py)."""
 SHOWN = 20
 """Violations printed in full; the rest are counted."""
 

@@ -14,7 +14,7 @@ memory, threads, fds and log from /proc (and restarts, after logging it, a peer 
 At the end everything is ended by pid, both halves of the history are read, and
 :func:`robofabric.soak.checker.check` judges them.
 
-``plant``: a defect planted in the sims for this run (``ROBOFABRIC_PLANT``, :mod:`fabric.plant`), to show
+``plant``: a defect planted in the sims for this run (their hidden ``--plant``, :mod:`fabric.plant`), to show
 the checker catches it.
 """
 
@@ -120,9 +120,9 @@ class Soak:
             p = host.start(["router", "--world", world, "--listen", ep], name="router")
         elif role in SIMS:
             robots = [x for i in range(self.cfg.students) for x in ("--robot", f"meca500:arm{i}")]
-            env = {"ROBOFABRIC_PLANT": self.cfg.plant} if self.cfg.plant else None
+            plant = ["--plant", self.cfg.plant] if self.cfg.plant else []  # a test-only defect (fabric/plant.py)
             p = host.start(["sim", "--scene", "warehouse", "--no-scene-robots", *robots, "--world", world, "--connect", ep,
-                            "--id", role, *(["--standby"] if standby else [])], name=role, env=env)
+                            "--id", role, *(["--standby"] if standby else []), *plant], name=role)
         elif role == "compute":
             p = host.start(["compute", "--world", world, "--connect", ep, "--id", "compute"], name="compute")
         elif role == "recorder":
