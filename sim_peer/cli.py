@@ -120,10 +120,7 @@ def sim(
 
     rates, pace, deadman = _parse_options(rate, speed, duration, noise, twist_timeout)
     budgets = _parse_budget(budget) if ownership else None
-    try:
-        plant = check_plant(plant)  # test-only: the soak's launcher plants a defect this way (fabric/plant.py)
-    except ValueError as exc:
-        raise UserError(f"--plant: {exc}") from None
+    plant = _parse_plant(plant)
     gate_of = functools.partial(make_gate, budgets=budgets, plant=plant)
 
     def build(placements=None):
@@ -149,6 +146,15 @@ def sim(
                         plant=plant)
         return
     _run_single(cfg, join.peer_id, sim_world, ownership, rates, pace, stop, duration, first, gate_of)
+
+
+def _parse_plant(text: str) -> str:
+    """``--plant`` (test-only: the soak's launcher plants a defect this way, fabric/plant.py); an unknown one is a
+    :class:`UserError` naming the known ones."""
+    try:
+        return check_plant(text)
+    except ValueError as exc:
+        raise UserError(f"--plant: {exc}") from None
 
 
 def _parse_budget(text: str):
