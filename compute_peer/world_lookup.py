@@ -23,14 +23,14 @@ if TYPE_CHECKING:
 __all__ = ["BackgroundLookup", "described_robots"]
 
 
-def described_robots(fabric: "Fabric", kind: str, *, timeout: float = 2.0) -> list[RobotInfo]:
-    """The robots of ``kind`` (``arm``, ``mobile``) every sim peer of the fabric's world describes.
+def described_robots(fabric: "Fabric", kind: str | None, *, timeout: float = 2.0) -> list[RobotInfo]:
+    """The robots of ``kind`` (``arm``, ``mobile``; None: of every kind) every sim peer of the fabric's world describes.
 
     Raises :class:`~fabric.interfaces.ServiceError` when no sim answered (nobody serves ``srv/world``, or
     every answer was a refusal); an empty list means the sims answered and have no such robot.
     """
     replies = fabric.rpc.query(keys.srv(fabric.world, "world"), timeout=timeout, all_replies=True, expected=WorldInfo)
-    return [r for rep in replies for r in rep.message.robots if r.kind == kind]
+    return [r for rep in replies for r in rep.message.robots if kind is None or r.kind == kind]
 
 
 class BackgroundLookup:

@@ -50,6 +50,7 @@ class ArmDirectory:
         self._lock = threading.RLock()
         self._models: dict[str, ArmModel] = {}
         self._arms: dict[str, PlacedArm] = {}
+        self._not_arms: set[str] = set()  # the world's other robots (bases): their joints are not an IK's seed
         self._lookup = BackgroundLookup(self.discover, name="kinematics-discovery", clock=clock,
                                         on_error=lambda exc: self._failed(f"{type(exc).__name__}: {exc}"))
         self._last_error = ""
@@ -78,6 +79,11 @@ class ArmDirectory:
         with self._lock:
             return self._arms.get(robot)
 
+    def not_an_arm(self, robot: str) -> bool:
+        """Whether a sim described ``robot`` as a robot of another kind (a base publishes joints too: its wheels)."""
+        with self._lock:
+            return robot in self._not_arms and robot not in self._arms
+
     def find(self, robot: str) -> PlacedArm:
         """The arm ``robot``, looked up first when unknown; :class:`ServiceError` naming the known ones otherwise."""
         arm = self.get(robot)
@@ -93,7 +99,7 @@ class ArmDirectory:
         with self._lock:
             generation = self._sims_changed
         try:
-            described = described_robots(self.fabric, "arm", timeout=timeout)
+            described = described_robots(self.fabric, None, timeout=timeout)
         except NoReply as exc:
             # no sim yet: normal when the compute starts first (`robofabric up`); its token brings a lookup
             self._failed(str(exc), quiet="nobody serves it" in str(exc))
@@ -103,8 +109,9 @@ class ArmDirectory:
             return len(self.names)
         with self._lock:
             self._answered_at = generation
+            self._not_arms |= {r.id for r in described if r.kind != "arm"}  # a sim late to answer loses none
         for r in described:
-            if self.get(r.id) is not None:
+            if r.kind != "arm" or self.get(r.id) is not None:
                 continue
             try:
                 self.add(r.id, ArmPlacement(r.type, tuple(float(v) for v in r.pose)))

@@ -217,11 +217,17 @@ class KinematicsService:
 
     def _on_joints(self, key: str, msg: JointState) -> None:
         """Keep the latest joints of the arms this peer serves, and of nothing else (a flood of
-        made-up robot ids must not grow it: 16 fake 23 MB states once took this peer to 1 GB)."""
+        made-up robot ids must not grow it: 16 fake 23 MB states once took this peer to 1 GB).
+
+        A base's wheels are joints too (100 Hz each): a robot the sims described as another kind is passed
+        over quietly. Only an id no sim described counts as ``unknown_robot`` and sets a lookup off (every
+        base's joints did both: thousands a minute in a class, and a ``srv/world`` query every second)."""
         robot = self._robot_of(key)
         if self.directory.get(robot) is not None:
             with self._lock:
                 self.joints[robot] = msg
+            return
+        if self.directory.not_an_arm(robot):
             return
         self.counters["unknown_robot"] = self.counters.get("unknown_robot", 0) + 1
         if self.directory.discovering:

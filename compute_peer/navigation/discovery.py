@@ -65,6 +65,7 @@ class RobotDescriptions:
         self._clock = clock or MonotonicClock()
         self._first_seen: dict[str, float] = {}
         self._described: set[str] | None = None  # mobile robots of the world, once a sim described them
+        self._not_mobile: set[str] = set()  # the world's other robots (an arm publishes its flange's pose)
         self._answered_at = -math.inf  # the clock time a lookup last got the sims' answer
         self._lookup = BackgroundLookup(self.discover, name="nav-discovery", clock=self._clock,
                                         on_error=lambda exc: log.debug("robot discovery failed: %s", exc))
@@ -80,6 +81,11 @@ class RobotDescriptions:
         """False for a robot the world's sims described without it (True before any sim answered)."""
         with self._lock:
             return self._described is None or robot in self._described
+
+    def not_mobile(self, robot: str) -> bool:
+        """Whether a sim described ``robot`` as a robot of another kind (an arm's flange pose is on ``robot/*/pose``)."""
+        with self._lock:
+            return robot in self._not_mobile and (self._described is None or robot not in self._described)
 
     def radius(self, robot: str, default: float) -> float:
         """The robot's radius from its description, else ``default``."""
@@ -119,11 +125,13 @@ class RobotDescriptions:
     def discover(self, timeout: float = 2.0) -> int:
         """Ask the sim peers' ``srv/world`` now and learn their mobile robots; returns how many were described."""
         try:
-            described = described_robots(self.fabric, "mobile", timeout=timeout)
+            every = described_robots(self.fabric, None, timeout=timeout)
         except ServiceError:
             return 0
+        described = [r for r in every if r.kind == "mobile"]
         with self._lock:
             self._answered_at = self._clock.now()
+            self._not_mobile |= {r.id for r in every if r.kind != "mobile"}
             known = set(self._described or ())
             for r in described:
                 known.add(r.id)

@@ -223,6 +223,8 @@ class NavigationService:
         if parsed.category != "robot" or (self.robots is not None and robot not in self.robots):
             return
         if robot not in self.poses:  # nothing is kept for robots the world does not have
+            if self.descriptions.not_mobile(robot):  # an arm's flange pose, 100 Hz: not a robot to map or plan for
+                return
             if not self.descriptions.admits(robot) or len(self.poses) >= MAX_ROBOTS:
                 self.counters["unknown_robot"] = self.counters.get("unknown_robot", 0) + 1
                 return

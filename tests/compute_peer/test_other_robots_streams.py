@@ -1,0 +1,67 @@
+"""A world's robots of one kind on the keys another service hears: a base's wheel joints reach kinematics (they
+are on ``robot/*/joints``), an arm's flange pose reaches navigation (``robot/*/pose``). Neither is an unknown
+robot: each service passes them over quietly and counts ``unknown_robot`` only for an id no sim described
+(every base's joints counted, 100 a second each: thousands a minute in a class of bases, issue 44)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from compute_peer.kinematics.service import KinematicsService
+from compute_peer.navigation import register_navigation
+from fabric import keys
+from fabric.interfaces import JointState, Pose, RobotInfo, WorldInfo
+from robofabric.testing import wait_until
+
+SIX = np.zeros(6)
+BURST = 40
+
+
+def _serve_world(sim, world: str) -> list[int]:
+    """A sim describing one arm and one base; returns a list that grows by one per ``srv/world`` query."""
+    robots = (RobotInfo("arm1", "meca500", "arm", np.zeros(4), tuple(f"j{i}" for i in range(6)), SIX - 3, SIX + 3, SIX + 1),
+              RobotInfo("base1", "reeman", "mobile", np.zeros(4), ("left", "right"), np.zeros(2), np.zeros(2), np.zeros(2)))
+    asked: list[int] = []
+
+    def answer(key: str, req: object) -> WorldInfo:
+        asked.append(1)
+        return WorldInfo(world, "test", 0.002, {}, robots)
+
+    sim.rpc.serve(keys.srv(world, "world"), answer)
+    return asked
+
+
+def test_kinematics_passes_a_bases_wheel_joints_over_and_counts_an_undescribed_id(world, connect):
+    sim = connect("sim")
+    _serve_world(sim, world)
+    svc = KinematicsService(connect("compute"), discover=True).start()
+    try:
+        wait_until(lambda: svc.arms == ["arm1"] or svc.discover(1.0) < 0, timeout=20.0, what="the arm learnt")
+        user = connect("user")
+        wheels = JointState(("left", "right"), np.zeros(2), np.zeros(2))
+        for _ in range(BURST):
+            user.publish(keys.robot_joints(world, "base1"), wheels)
+        user.publish(keys.robot_joints(world, "ghost9"), wheels)
+        user.publish(keys.robot_joints(world, "arm1"), JointState(tuple(f"j{i}" for i in range(6)), SIX, SIX))
+        wait_until(lambda: "arm1" in svc.joints and svc.counters.get("unknown_robot", 0) >= 1, timeout=20.0,
+                   what="the arm's joints and the made-up id", seen=lambda: svc.counters)
+        assert svc.counters["unknown_robot"] == 1, svc.counters  # ghost9 only, never base1
+        assert set(svc.joints) == {"arm1"}
+    finally:
+        svc.close()
+
+
+def test_navigation_passes_an_arms_flange_pose_over_and_counts_an_undescribed_id(world, connect):
+    sim = connect("sim")
+    _serve_world(sim, world)
+    with register_navigation(connect("compute"), discover=True) as nav:
+        wait_until(lambda: nav.discover_robots(1.0) == 1, timeout=20.0, what="the base learnt")
+        user = connect("user")
+        for _ in range(BURST):
+            user.publish(keys.robot_pose(world, "arm1"), Pose([0.2, 0.0, 0.9]))
+        user.publish(keys.robot_pose(world, "ghost9"), Pose([0.0, 0.0, 0.0]))
+        user.publish(keys.robot_pose(world, "base1"), Pose([1.0, 0.0, 0.0]))
+        wait_until(lambda: "base1" in nav.poses and nav.counters.get("unknown_robot", 0) >= 1, timeout=20.0,
+                   what="the base's pose and the made-up id", seen=lambda: nav.counters)
+        assert nav.counters["unknown_robot"] == 1, nav.counters  # ghost9 only, never arm1
+        assert "arm1" not in nav.poses
