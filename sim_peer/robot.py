@@ -66,7 +66,8 @@ class Physics:
 @dataclass(frozen=True, slots=True)
 class Mount:
     """Where a robot was put: its id, description, the compiled model (its names carry the prefix ``{id}/``),
-    its spawn pose (x, y, z, yaw), the world's noise generator, the world's options, and the sink for its notes."""
+    its spawn pose (x, y, z, yaw), the world's noise generator, the world's options, the sink for its notes, and
+    the board its bases' way guards share (:class:`sim_peer.traffic.Traffic`; None: a board of its own)."""
 
     id: str
     desc: RobotDescription
@@ -76,6 +77,7 @@ class Mount:
     report: Callable[[str, "Note"], None]
     twist_timeout: float | None = None
     bumper: bool = True
+    traffic: Any = None
 
     @property
     def prefix(self) -> str:

@@ -204,7 +204,7 @@ class MobileRobot(_Driven):
         )
         self.sonar = Ultrasonic(model, desc.ultrasonic, self.body_id, mount.rng) if desc.ultrasonic else None
         self.bumper = Bumper(self, float(model.opt.timestep)) if mount.bumper else None
-        self.guard = WayGuard(self, float(model.opt.timestep)) if self.lidar is not None else None  # stops before robots in its way
+        self.guard = WayGuard(self, float(model.opt.timestep), traffic=mount.traffic) if self.lidar is not None else None  # stops before robots in its way
         self.sensors: tuple[Sensor, ...] = tuple(s for s in (self.lidar, self.sonar, self.bumper, self.guard) if s is not None)
         checked = [s for s in self.sensors if type(s).after_step is not Sensor.after_step]
         self._checks = tuple((s.after_step, s.every) for s in checked)

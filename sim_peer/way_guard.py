@@ -10,7 +10,11 @@ reaches zero waits, says so (``Event(kind=obstacle_stop, reason="waiting")``), g
 (``resumed``), or, after :data:`BLOCKED_AFTER` seconds, drops the path and reports ``blocked`` so that its user
 can plan again (:func:`decide`, pure: time passed in). Two bases driving at each other both stop, apart.
 
-The LIDAR looks ahead (the Reeman's: 135 degrees): a base driving backwards is guarded by its bumper only.
+The bases of one sim share a board (:mod:`sim_peer.traffic`): each guard also checks the other bases' disks where
+they stand, all around, and names the base in its way. The LIDAR looks ahead (the Reeman's: 135 degrees): what it
+cannot see, other than the sim's own bases, is left to the bumper (a base driving backwards, a robot of another sim
+coming from the side). Bases that wait for each other do not wait for ever: after
+:data:`~sim_peer.traffic.GIVE_WAY_AFTER` one of them gives way (it reports ``blocked`` at once, naming the other).
 Hits on static walls never stop a base on a planned path: the planner keeps its paths a radius from the map's
 obstacles, and the check uses the radius less :data:`SLACK` (the planner's cells are 5 cm).
 """
@@ -27,6 +31,7 @@ import numpy as np
 from fabric.interfaces import EventKind
 from sim_peer.robot import Note, Physics
 from sim_peer.sensors import Sensor
+from sim_peer.traffic import Spot, Traffic, Waiter, gives_way
 
 if TYPE_CHECKING:
     from sim_peer.robot_kinds import MobileRobot
@@ -104,19 +109,25 @@ _WORDS = {
     "resumed": "the way cleared: following the path again",
     "blocked": "its way stayed blocked: the path is dropped (plan again)",
 }
+BLAME = 0.2
+"""Metres: a base whose disk closes the way this near the LIDAR's gap is named as what is in the way."""
 
 
 class WayGuard(Sensor):
     """The guard of one mobile robot with a LIDAR: caps its path follower's speed (``BaseController.speed_cap``)."""
 
-    def __init__(self, robot: "MobileRobot", dt: float, *, margin: float = WAY_MARGIN, blocked_after: float = BLOCKED_AFTER) -> None:
+    def __init__(self, robot: "MobileRobot", dt: float, *, margin: float = WAY_MARGIN, blocked_after: float = BLOCKED_AFTER,
+                 traffic: Traffic | None = None) -> None:
         self.robot = robot
+        self.traffic = traffic if traffic is not None else Traffic()
         self.every = max(1, int(round(GUARD_PERIOD / dt)))
         self.margin = margin
         self.blocked_after = blocked_after
         self.radius = max(robot.desc.base.radius if robot.desc.base is not None else robot.desc.base_radius, 0.0) - SLACK
         self.state = WayState()
         self.gap = math.inf  # the last gap seen (for tests and the sim's state)
+        self.blocker: str | None = None  # the base in its way at the last look, if a base is
+        self.full_radius = self.radius + SLACK
 
     def _path_ahead(self, follower) -> np.ndarray:
         """The base's position, then the follower's path points from its progress up to :data:`LOOK` along."""
@@ -139,22 +150,43 @@ class WayGuard(Sensor):
         local = np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)]) * ranges[hit, None]
         return (site + local @ rot.T)[:, :2]
 
+    def _gap(self, path: np.ndarray, physics: Physics) -> tuple[float, str | None]:
+        """The gap ahead (the LIDAR's, or the sim's other bases' disks where they stand) and the base that closes
+        it, if a base does."""
+        gap = way_gap(path, self._hits(physics), self.radius)
+        nearest, blocker = math.inf, None
+        for rid, spot in self.traffic.others(self.robot.id).items():
+            g = way_gap(path, np.array([[spot.x, spot.y]]), self.radius + spot.radius)
+            if g < nearest:
+                nearest, blocker = g, rid
+        return min(gap, nearest), (blocker if nearest <= gap + BLAME else None)
+
     def after_step(self, physics: Physics) -> None:
-        c = self.robot.ctrl
+        c, rid = self.robot.ctrl, self.robot.id
+        self.traffic.stand(rid, Spot(c.x, c.y, self.full_radius))
         follower = c.follower
         if follower is None or not hasattr(follower, "points"):
             c.speed_cap = math.inf
+            self.traffic.wait(rid, None)
             if self.state.waiting_since is not None:
                 self.state = WayState()
             return
-        self.gap = way_gap(self._path_ahead(follower), self._hits(physics), self.radius)
+        self.gap, self.blocker = self._gap(self._path_ahead(follower), physics)
         c.speed_cap = way_cap(self.gap, c.spec.max_accel, self.margin)
         self.state, news = decide(self.state, physics.time, self.gap, margin=self.margin, blocked_after=self.blocked_after)
+        since = self.state.waiting_since
+        self.traffic.wait(rid, None if since is None else Waiter(since, self.blocker))
+        to = gives_way(self.traffic.waiters, rid, physics.time) if since is not None else None
+        if to is not None:  # it and the bases it waits for wait for each other: this one gives way
+            self.state, news = WayState(), "blocked"
+            self.traffic.wait(rid, None)
         if not news:
             return
         if news == "blocked":
             c.brake()
             c.speed_cap = math.inf
-        detail = f"{_WORDS[news]} (gap {self.gap:.2f} m)" if math.isfinite(self.gap) else _WORDS[news]
-        self.robot.note(Note(EventKind.OBSTACLE_STOP, news, "warning" if news != "resumed" else "info",
-                             {"t": physics.time, "detail": detail}, counter=f"way_{news}"))
+        words = f"gave way to {to}, which waits for it: the path is dropped (plan again)" if to else _WORDS[news]
+        detail = f"{words} (gap {self.gap:.2f} m)" if math.isfinite(self.gap) else words
+        data = {"t": physics.time, "detail": detail, **({"gave_way_to": to} if to else {})}
+        self.robot.note(Note(EventKind.OBSTACLE_STOP, news, "warning" if news != "resumed" else "info", data,
+                             counter="way_gave_way" if to else f"way_{news}"))

@@ -37,6 +37,7 @@ from sim_peer.readings import Readings
 from sim_peer.registry import robot_class
 from sim_peer.robot import Mount, Physics, SimRobot
 from sim_peer.scene_objects import SceneObjects
+from sim_peer.traffic import Traffic
 
 MAX_MIRRORS = 256  # mirror slots a world may have (each costs every ray a bounding-sphere test)
 
@@ -78,8 +79,10 @@ class SimWorld:
         self.dt = float(self.model.opt.timestep)
         self.bumper = bumper
         self.notes = NoteLog()  # what robots and sensors said, until the peer takes it
+        self.traffic = Traffic()  # where the bases stand and who waits for whom: their way guards' board
         self.robots: dict[str, SimRobot] = {
-            r.id: classes[r.id](Mount(r.id, self.descriptions[r.id], self.model, r.pose, self.rng, self.notes.add, twist_timeout, bumper))
+            r.id: classes[r.id](Mount(r.id, self.descriptions[r.id], self.model, r.pose, self.rng, self.notes.add, twist_timeout, bumper,
+                                      self.traffic))
             for r in placed
         }
         self.positions = Positions(self.model, self.data)

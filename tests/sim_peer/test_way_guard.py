@@ -10,6 +10,7 @@ from hypothesis import given, settings, strategies as st
 
 from fabric.interfaces import EventKind
 from robots import SceneRobot
+from sim_peer.traffic import GIVE_WAY_AFTER
 from sim_peer.way_guard import BLOCKED_AFTER, RESUME, WAY_MARGIN, WayState, decide, way_cap, way_gap
 from sim_peer.world import SimWorld
 
@@ -63,27 +64,42 @@ def test_waiting_resuming_and_blocked(gaps):
     assert all((a == "waiting") != (b == "waiting") for a, b in zip(events, events[1:]))
 
 
-def test_two_bases_driven_at_each_other_stop_apart_and_say_so():
+def test_two_bases_driven_at_each_other_stop_apart_say_so_and_one_gives_way():
     world = SimWorld("warehouse", [SceneRobot("reeman", "base2", (2.0, 0.0, 0.0, math.pi))], seed=1)
     b1, b2 = world.robots["base1"], world.robots["base2"]
     b1.path(np.linspace(0.0, 2.0, 41), np.zeros(41), np.zeros(41))  # each to where the other stands
     b2.path(np.linspace(2.0, 0.0, 41), np.zeros(41), np.full(41, math.pi))
     notes, closest = [], math.inf
-    for _ in range(int(4.0 / world.dt / 50)):  # 4 s of sim time
-        world.step(50)
-        notes += world.notes.take()
-        closest = min(closest, math.hypot(b1.ctrl.x - b2.ctrl.x, b1.ctrl.y - b2.ctrl.y))
-    assert [n.reason for _, n in notes if n.kind == EventKind.OBSTACLE_STOP].count("waiting") == 2  # each said so
+
+    def run(seconds: float) -> None:
+        nonlocal notes, closest
+        for _ in range(int(seconds / world.dt / 50)):
+            world.step(50)
+            notes += world.notes.take()
+            closest = min(closest, math.hypot(b1.ctrl.x - b2.ctrl.x, b1.ctrl.y - b2.ctrl.y))
+
+    def stops() -> list[tuple[str, str]]:
+        return [(rid, n.reason) for rid, n in notes if n.kind == EventKind.OBSTACLE_STOP]
+
+    run(2.0)  # they stop within 1.5 s
+    assert sorted(stops()) == [("base1", "waiting"), ("base2", "waiting")]  # each said so
     assert not [n for _, n in notes if n.kind == EventKind.COLLISION]  # the bumper never had to
     assert closest > 2 * 0.25  # their chassis never met
     assert abs(b1.ctrl.v) < 1e-6 and abs(b2.ctrl.v) < 1e-6  # both wait, paths kept
     assert b1.ctrl.follower is not None and b2.ctrl.follower is not None
-    # the way stays closed: after BLOCKED_AFTER both drop their paths and report blocked
-    for _ in range(int((BLOCKED_AFTER + 0.5) / world.dt / 50)):
-        world.step(50)
-        notes += world.notes.take()
-    assert [n.reason for _, n in notes if n.kind == EventKind.OBSTACLE_STOP].count("blocked") == 2
-    assert b1.ctrl.follower is None and b2.ctrl.follower is None
+    assert b1.guard.blocker == "base2" and b2.guard.blocker == "base1"  # each names the other
+    # they wait for each other: after GIVE_WAY_AFTER one of them (the later waiter, or base2 on a tie) gives way
+    run(GIVE_WAY_AFTER)
+    gave = [(rid, n.data) for rid, n in notes if n.kind == EventKind.OBSTACLE_STOP and n.reason == "blocked"]
+    assert [(rid, data["gave_way_to"]) for rid, data in gave] == [("base2", "base1")], stops()
+    assert "gave way to base1" in gave[0][1]["detail"]
+    assert b2.ctrl.follower is None and b1.ctrl.follower is not None  # base1 keeps its path
+    assert not world.traffic.waiters.get("base2")
+    # base2 stands where it stopped (its user plans again): base1's way stays closed, and after BLOCKED_AFTER it
+    # drops its path and reports blocked as before
+    run(BLOCKED_AFTER)
+    assert [r for r in stops() if r[1] == "blocked"] == [("base2", "blocked"), ("base1", "blocked")]
+    assert b1.ctrl.follower is None and not [n for _, n in notes if n.kind == EventKind.COLLISION]
 
 
 def test_a_base_waits_for_a_base_crossing_its_way_and_goes_on():
