@@ -79,6 +79,12 @@ class ArmDirectory:
         with self._lock:
             return self._arms.get(robot)
 
+    @property
+    def answered(self) -> bool:
+        """Whether the sims there are now have answered ``srv/world`` (before that, no id is known to be unknown)."""
+        with self._lock:
+            return self._answered_at == self._sims_changed
+
     def not_an_arm(self, robot: str) -> bool:
         """Whether a sim described ``robot`` as a robot of another kind (a base publishes joints too: its wheels)."""
         with self._lock:

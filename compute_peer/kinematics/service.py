@@ -220,8 +220,9 @@ class KinematicsService:
         made-up robot ids must not grow it: 16 fake 23 MB states once took this peer to 1 GB).
 
         A base's wheels are joints too (100 Hz each): a robot the sims described as another kind is passed
-        over quietly. Only an id no sim described counts as ``unknown_robot`` and sets a lookup off (every
-        base's joints did both: thousands a minute in a class, and a ``srv/world`` query every second)."""
+        over quietly. Only an id no sim described, once the sims have answered, counts as ``unknown_robot``; an
+        id not described yet sets a lookup off (every base's joints did both: thousands a minute in a class,
+        and a ``srv/world`` query every second)."""
         robot = self._robot_of(key)
         if self.directory.get(robot) is not None:
             with self._lock:
@@ -229,7 +230,8 @@ class KinematicsService:
             return
         if self.directory.not_an_arm(robot):
             return
-        self.counters["unknown_robot"] = self.counters.get("unknown_robot", 0) + 1
+        if self.directory.answered or not self.directory.discovering:  # not merely a robot the world names late
+            self.counters["unknown_robot"] = self.counters.get("unknown_robot", 0) + 1
         if self.directory.discovering:
             self.directory.look_soon()
 

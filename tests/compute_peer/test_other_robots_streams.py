@@ -14,7 +14,7 @@ from fabric.interfaces import JointState, Pose, RobotInfo, WorldInfo
 from robofabric.testing import wait_until
 
 SIX = np.zeros(6)
-BURST = 40
+BURST = 200
 
 
 def _serve_world(sim, world: str) -> list[int]:
@@ -36,16 +36,24 @@ def test_kinematics_passes_a_bases_wheel_joints_over_and_counts_an_undescribed_i
     _serve_world(sim, world)
     svc = KinematicsService(connect("compute"), discover=True).start()
     try:
-        wait_until(lambda: svc.arms == ["arm1"] or svc.discover(1.0) < 0, timeout=20.0, what="the arm learnt")
+        wait_until(lambda: svc.arms == ["arm1"], timeout=20.0, what="the world answered")
         user = connect("user")
         wheels = JointState(("left", "right"), np.zeros(2), np.zeros(2))
         for _ in range(BURST):
             user.publish(keys.robot_joints(world, "base1"), wheels)
-        user.publish(keys.robot_joints(world, "ghost9"), wheels)
-        user.publish(keys.robot_joints(world, "arm1"), JointState(tuple(f"j{i}" for i in range(6)), SIX, SIX))
-        wait_until(lambda: "arm1" in svc.joints and svc.counters.get("unknown_robot", 0) >= 1, timeout=20.0,
-                   what="the arm's joints and the made-up id", seen=lambda: svc.counters)
-        assert svc.counters["unknown_robot"] == 1, svc.counters  # ghost9 only, never base1
+        ghosts = 0
+
+        def counted() -> bool:  # a made-up id is counted once the world has answered since it appeared
+            nonlocal ghosts
+            if svc.counters.get("unknown_robot", 0) >= 1 and "arm1" in svc.joints:
+                return True
+            user.publish(keys.robot_joints(world, "ghost9"), wheels)
+            user.publish(keys.robot_joints(world, "arm1"), JointState(tuple(f"j{i}" for i in range(6)), SIX, SIX))
+            ghosts += 1
+            return False
+
+        wait_until(counted, timeout=20.0, interval=0.2, what="the arm's joints and the made-up id", seen=lambda: svc.counters)
+        assert 1 <= svc.counters["unknown_robot"] <= ghosts, (ghosts, svc.counters)  # ghost9's only, never base1's
         assert set(svc.joints) == {"arm1"}
     finally:
         svc.close()
