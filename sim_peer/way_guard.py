@@ -155,7 +155,10 @@ class WayGuard(Sensor):
         it, if a base does."""
         gap = way_gap(path, self._hits(physics), self.radius)
         nearest, blocker = math.inf, None
+        x, y = path[0]
         for rid, spot in self.traffic.others(self.robot.id).items():
+            if math.hypot(spot.x - x, spot.y - y) > LOOK + self.radius + spot.radius:
+                continue  # beyond the path looked at
             g = way_gap(path, np.array([[spot.x, spot.y]]), self.radius + spot.radius)
             if g < nearest:
                 nearest, blocker = g, rid
@@ -186,7 +189,10 @@ class WayGuard(Sensor):
             c.brake()
             c.speed_cap = math.inf
         words = f"gave way to {to}, which waits for it: the path is dropped (plan again)" if to else _WORDS[news]
-        detail = f"{words} (gap {self.gap:.2f} m)" if math.isfinite(self.gap) else words
-        data = {"t": physics.time, "detail": detail, **({"gave_way_to": to} if to else {})}
+        if news == "waiting" and self.blocker is not None:
+            words = f"stopped before {self.blocker} in its way; goes on when it clears"
+        detail = f"{words} (gap {self.gap:.2f} m at ({c.x:.2f}, {c.y:.2f}))" if math.isfinite(self.gap) else words
+        data = {"t": physics.time, "detail": detail, **({"gave_way_to": to} if to else {}),
+                **({"blocker": self.blocker} if self.blocker and news == "waiting" else {})}
         self.robot.note(Note(EventKind.OBSTACLE_STOP, news, "warning" if news != "resumed" else "info", data,
                              counter="way_gave_way" if to else f"way_{news}"))

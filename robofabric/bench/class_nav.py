@@ -122,6 +122,8 @@ def student(world: str, endpoint: str, index: int, n: int, out: str) -> None:
                 res["final"], res["reached"] = d, d < REACHED
             mine = [e for e in w.events[mark:] if e.object == base.id]
             res["stops"] = sum(e.kind == EventKind.OBSTACLE_STOP and e.reason == "waiting" for e in mine)
+            res["said"] = [f"{base.id} {e.reason}: {e.data.get('detail', '')}"[:200]
+                           for e in mine if e.kind == EventKind.OBSTACLE_STOP][:8]
             res["collisions"] = sum(e.kind == EventKind.COLLISION for e in mine)
             base.stop()
     except Exception as exc:
@@ -173,6 +175,7 @@ def run_one(n: int, tmp: Path) -> dict[str, Any]:
         "blocked": sum(r["blocked"] for r in results), "collisions": sum(r["collisions"] for r in results),
         "cells": cells, "finals": [r["final"] for r in results], "seconds": seconds,
         "errors": [e for r in results for e in r["errors"]][:6], "notes": [x for r in results for x in r["notes"]][:4],
+        "said": [x for r in results for x in r.get("said", ())],
     }
 
 
@@ -212,7 +215,7 @@ def command(
             r = run_one(n, logs or Path(tmp))
             lines.append(row(r))
             print(lines[-1], flush=True)
-            for e in r["errors"] + r["notes"]:
+            for e in r["errors"] + r["notes"] + r["said"]:
                 print(f"    {e}", flush=True)
     lines.append(f"Load average at the end {os.getloadavg()[0]:.1f}.")
     append(out, "\n".join(lines))
