@@ -245,9 +245,10 @@ class BaseController:
         if self.follower is not None:
             v_d, w_d, done = self.follower.step(self.x, self.y, self.yaw, self.v, dt)
             if done:
+                quiet = getattr(self.follower, "quiet", False)  # a way guard's own move (backing off): not the user's path
                 self.follower = None
-                self.paths_done += 1
-                if self.on_news is not None:
+                self.paths_done += not quiet
+                if self.on_news is not None and not quiet:
                     self.on_news(EventKind.PATH_DONE)
                 v_d = w_d = 0.0
             v_d = max(-self.speed_cap, min(self.speed_cap, v_d))  # something in its way: slow, or wait

@@ -29,6 +29,7 @@ import mujoco
 import numpy as np
 
 from fabric.interfaces import EventKind
+from sim_peer.pure_pursuit import PurePursuit
 from sim_peer.robot import Note, Physics
 from sim_peer.sensors import Sensor
 from sim_peer.traffic import Spot, Traffic, Waiter, gives_way
@@ -36,7 +37,8 @@ from sim_peer.traffic import Spot, Traffic, Waiter, gives_way
 if TYPE_CHECKING:
     from sim_peer.robot_kinds import MobileRobot
 
-__all__ = ["BLOCKED_AFTER", "GUARD_PERIOD", "SLACK", "WAY_MARGIN", "WayGuard", "WayState", "decide", "way_cap", "way_gap"]
+__all__ = ["BACK_OFF", "BLOCKED_AFTER", "GUARD_PERIOD", "SLACK", "WAY_MARGIN", "WayGuard", "WayState", "decide",
+           "facing_forwards", "trail_back", "way_cap", "way_gap"]
 
 GUARD_PERIOD = 0.05
 """Seconds of sim time between two looks (the LIDAR's own stream runs at 10-20 Hz)."""
@@ -51,6 +53,35 @@ SLACK = 0.05
 face may lie up to half a cell nearer."""
 LOOK = 2.0
 """Metres of path ahead that are checked (more than the braking distance at 1 m/s plus the margin)."""
+BACK_OFF = 0.4
+"""Metres a base whose way stayed blocked, or that gives way, backs off along the way it came before it says
+``blocked``: room to turn for the plan its user makes next (stopped 0.15 m short, facing what is in its way, a base
+that drives forwards only has no first move)."""
+BACK_SPEED = 0.2
+"""m/s of a back-off (driven backwards: what is behind is where it came from, and the sim's other bases)."""
+
+
+def trail_back(points: np.ndarray, index: int, here: np.ndarray, length: float = BACK_OFF) -> np.ndarray | None:
+    """The way a base came along its path ``points`` ((n, 2), progress ``index``): from ``here`` back ``length``
+    metres through the points before its progress; None when that is under a tenth of ``length``."""
+    behind = points[:index][::-1]
+    behind = behind[np.hypot(*(behind - here).T) > 0.02] if behind.shape[0] else behind
+    trail = np.vstack([here, behind])
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(trail, axis=0).T))])
+    if cum[-1] < 0.1 * length:
+        return None
+    end = int(np.searchsorted(cum, length))
+    if end >= trail.shape[0]:
+        return trail
+    t = (length - cum[end - 1]) / (cum[end] - cum[end - 1])
+    return np.vstack([trail[:end], trail[end - 1] + t * (trail[end] - trail[end - 1])])
+
+
+def facing_forwards(trail: np.ndarray, yaw: float) -> np.ndarray:
+    """Headings along a trail driven backwards: at each point the way the path ran (from it to the point before),
+    ``yaw`` at the first; what makes :class:`~sim_peer.pure_pursuit.PurePursuit` drive it backwards."""
+    d = trail[:-1] - trail[1:]
+    return np.concatenate([[yaw], np.arctan2(d[:, 1], d[:, 0])])
 
 
 def way_gap(path: np.ndarray, hits: np.ndarray, radius: float) -> float:
@@ -128,6 +159,7 @@ class WayGuard(Sensor):
         self.gap = math.inf  # the last gap seen (for tests and the sim's state)
         self.blocker: str | None = None  # the base in its way at the last look, if a base is
         self.full_radius = self.radius + SLACK
+        self._backing: tuple[object, str | None] | None = None  # the back-off under way, and whom it gave way to
 
     def _path_ahead(self, follower) -> np.ndarray:
         """The base's position, then the follower's path points from its progress up to :data:`LOOK` along."""
@@ -168,6 +200,9 @@ class WayGuard(Sensor):
         c, rid = self.robot.ctrl, self.robot.id
         self.traffic.stand(rid, Spot(c.x, c.y, self.full_radius))
         follower = c.follower
+        if self._backing is not None:
+            self._back_off(physics)
+            return
         if follower is None or not hasattr(follower, "points"):
             c.speed_cap = math.inf
             self.traffic.wait(rid, None)
@@ -182,15 +217,44 @@ class WayGuard(Sensor):
         to = gives_way(self.traffic.waiters, rid, physics.time) if since is not None else None
         if to is not None:  # it and the bases it waits for wait for each other: this one gives way
             self.state, news = WayState(), "blocked"
-            self.traffic.wait(rid, None)
-        if not news:
-            return
         if news == "blocked":
+            self.traffic.wait(rid, None)
             c.brake()
             c.speed_cap = math.inf
+            trail = trail_back(follower.points, follower.index, np.array([c.x, c.y]))
+            if trail is not None:  # first back off, then say it
+                b = self.robot.desc.base
+                back = PurePursuit(trail[:, 0], trail[:, 1], facing_forwards(trail, c.yaw), max_speed=min(BACK_SPEED, b.max_speed),
+                                   max_omega=b.max_omega, max_accel=b.max_accel)
+                back.quiet = True  # type: ignore[attr-defined]  # its end is no path of the user's done
+                c.follow(back)
+                self._backing = (back, to)
+                return
+        if news:
+            self._say(news, physics, to)
+
+    def _back_off(self, physics: Physics) -> None:
+        """A back-off under way: it goes on while its way is clear; once done, closed, or replaced by a command,
+        the base says ``blocked``."""
+        c = self.robot.ctrl
+        back, to = self._backing  # type: ignore[misc]
+        if c.follower is back:
+            gap, _ = self._gap(self._path_ahead(back), physics)
+            c.speed_cap = way_cap(gap, c.spec.max_accel, self.margin)
+            if gap > self.margin:
+                return
+            c.brake()
+            c.speed_cap = math.inf
+        self._backing = None
+        self._say("blocked", physics, to, backed=True)
+
+    def _say(self, news: str, physics: Physics, to: str | None, *, backed: bool = False) -> None:
+        c = self.robot.ctrl
         words = f"gave way to {to}, which waits for it: the path is dropped (plan again)" if to else _WORDS[news]
         if news == "waiting" and self.blocker is not None:
             words = f"stopped before {self.blocker} in its way; goes on when it clears"
+        if backed:
+            words += "; backed off along the way it came"
         detail = f"{words} (gap {self.gap:.2f} m at ({c.x:.2f}, {c.y:.2f}))" if math.isfinite(self.gap) else words
         data = {"t": physics.time, "detail": detail, **({"gave_way_to": to} if to else {}),
                 **({"blocker": self.blocker} if self.blocker and news == "waiting" else {})}

@@ -11,7 +11,8 @@ from hypothesis import given, settings, strategies as st
 from fabric.interfaces import EventKind
 from robots import SceneRobot
 from sim_peer.traffic import GIVE_WAY_AFTER
-from sim_peer.way_guard import BLOCKED_AFTER, RESUME, WAY_MARGIN, WayState, decide, way_cap, way_gap
+from sim_peer.way_guard import (BACK_OFF, BACK_SPEED, BLOCKED_AFTER, RESUME, WAY_MARGIN, WayState, decide, facing_forwards,
+                                trail_back, way_cap, way_gap)
 from sim_peer.world import SimWorld
 
 
@@ -88,18 +89,35 @@ def test_two_bases_driven_at_each_other_stop_apart_say_so_and_one_gives_way():
     assert abs(b1.ctrl.v) < 1e-6 and abs(b2.ctrl.v) < 1e-6  # both wait, paths kept
     assert b1.ctrl.follower is not None and b2.ctrl.follower is not None
     assert b1.guard.blocker == "base2" and b2.guard.blocker == "base1"  # each names the other
-    # they wait for each other: after GIVE_WAY_AFTER one of them (the later waiter, or base2 on a tie) gives way
-    run(GIVE_WAY_AFTER)
+    # they wait for each other: after GIVE_WAY_AFTER one of them (the later waiter, or base2 on a tie) gives way: it
+    # backs off along the way it came (BACK_OFF at BACK_SPEED), then says blocked
+    stood = b2.ctrl.x
+    run(GIVE_WAY_AFTER + BACK_OFF / BACK_SPEED + 1.0)
     gave = [(rid, n.data) for rid, n in notes if n.kind == EventKind.OBSTACLE_STOP and n.reason == "blocked"]
     assert [(rid, data["gave_way_to"]) for rid, data in gave] == [("base2", "base1")], stops()
-    assert "gave way to base1" in gave[0][1]["detail"]
+    assert "gave way to base1" in gave[0][1]["detail"] and "backed off" in gave[0][1]["detail"]
+    assert b2.ctrl.x - stood > 0.75 * BACK_OFF  # backwards, the way it came
     assert b2.ctrl.follower is None and b1.ctrl.follower is not None  # base1 keeps its path
-    assert not world.traffic.waiters.get("base2")
-    # base2 stands where it stopped (its user plans again): base1's way stays closed, and after BLOCKED_AFTER it
-    # drops its path and reports blocked as before
-    run(BLOCKED_AFTER)
+    assert b2.ctrl.paths_done == 0 and not [n for _, n in notes if n.kind == EventKind.PATH_DONE]  # no path of its user's done
+    assert "base2" not in world.traffic.waiters
+    # base2 stands where it backed off to (its user plans again): base1 comes on and stops before it again, and after
+    # BLOCKED_AFTER drops its path and reports blocked as before
+    run(BLOCKED_AFTER + 2.0)
     assert [r for r in stops() if r[1] == "blocked"] == [("base2", "blocked"), ("base1", "blocked")]
     assert b1.ctrl.follower is None and not [n for _, n in notes if n.kind == EventKind.COLLISION]
+    assert closest > 2 * 0.25
+
+
+def test_the_way_back_is_the_way_it_came_driven_backwards():
+    points = np.column_stack([np.linspace(0.0, 2.0, 21), np.zeros(21)])  # 0.1 m apart, along +x
+    trail = trail_back(points, 10, np.array([1.02, 0.0]), 0.4)
+    assert trail is not None and trail[0].tolist() == [1.02, 0.0] and trail[-1] == pytest.approx([0.62, 0.0])
+    assert (np.diff(trail[:, 0]) < 0).all()  # back along -x
+    headings = facing_forwards(trail, 0.0)
+    assert np.allclose(headings, 0.0)  # facing the way the path ran: a backwards stretch for the follower
+    assert trail_back(points, 0, np.array([0.0, 0.0]), 0.4) is None  # no way behind it
+    short = trail_back(points, 2, np.array([0.2, 0.0]), 0.4)
+    assert short is not None and short[-1].tolist() == [0.0, 0.0]  # what there is of it
 
 
 def test_a_base_waits_for_a_base_crossing_its_way_and_goes_on():
