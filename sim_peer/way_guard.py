@@ -189,9 +189,9 @@ class WayGuard(Sensor):
         nearest, blocker = math.inf, None
         x, y = path[0]
         for rid, spot in self.traffic.others(self.robot.id).items():
-            if math.hypot(spot.x - x, spot.y - y) > LOOK + self.radius + spot.radius:
+            if math.hypot(spot.x - x, spot.y - y) > LOOK + self.full_radius + spot.radius:
                 continue  # beyond the path looked at
-            g = way_gap(path, np.array([[spot.x, spot.y]]), self.radius + spot.radius)
+            g = way_gap(path, np.array([[spot.x, spot.y]]), self.full_radius + spot.radius)  # no cells: no slack
             if g < nearest:
                 nearest, blocker = g, rid
         return min(gap, nearest), (blocker if nearest <= gap + BLAME else None)

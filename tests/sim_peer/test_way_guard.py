@@ -89,22 +89,27 @@ def test_two_bases_driven_at_each_other_stop_apart_say_so_and_one_gives_way():
     assert abs(b1.ctrl.v) < 1e-6 and abs(b2.ctrl.v) < 1e-6  # both wait, paths kept
     assert b1.ctrl.follower is not None and b2.ctrl.follower is not None
     assert b1.guard.blocker == "base2" and b2.guard.blocker == "base1"  # each names the other
-    # they wait for each other: after GIVE_WAY_AFTER one of them (the later waiter, or base2 on a tie) gives way: it
-    # backs off along the way it came (BACK_OFF at BACK_SPEED), then says blocked
-    stood = b2.ctrl.x
+    # they wait for each other: after GIVE_WAY_AFTER one of them, the later waiter (the greater id on a tie), gives
+    # way: it backs off along the way it came (BACK_OFF at BACK_SPEED), then says blocked
+    began = {rid: (n.data["t"], rid) for rid, n in notes if n.kind == EventKind.OBSTACLE_STOP and n.reason == "waiting"}
+    yielder = max(began, key=began.__getitem__)
+    keeper = "base1" if yielder == "base2" else "base2"
+    y, k = world.robots[yielder], world.robots[keeper]
+    stood = y.ctrl.x
     run(GIVE_WAY_AFTER + BACK_OFF / BACK_SPEED + 1.0)
     gave = [(rid, n.data) for rid, n in notes if n.kind == EventKind.OBSTACLE_STOP and n.reason == "blocked"]
-    assert [(rid, data["gave_way_to"]) for rid, data in gave] == [("base2", "base1")], stops()
-    assert "gave way to base1" in gave[0][1]["detail"] and "backed off" in gave[0][1]["detail"]
-    assert b2.ctrl.x - stood > 0.75 * BACK_OFF  # backwards, the way it came
-    assert b2.ctrl.follower is None and b1.ctrl.follower is not None  # base1 keeps its path
-    assert b2.ctrl.paths_done == 0 and not [n for _, n in notes if n.kind == EventKind.PATH_DONE]  # no path of its user's done
-    assert "base2" not in world.traffic.waiters
-    # base2 stands where it backed off to (its user plans again): base1 comes on and stops before it again, and after
+    assert [(rid, data["gave_way_to"]) for rid, data in gave] == [(yielder, keeper)], stops()
+    assert f"gave way to {keeper}" in gave[0][1]["detail"] and "backed off" in gave[0][1]["detail"]
+    away = 1.0 if yielder == "base2" else -1.0  # base2 came from +x, base1 from -x
+    assert away * (y.ctrl.x - stood) > 0.75 * BACK_OFF  # backwards, the way it came
+    assert y.ctrl.follower is None and k.ctrl.follower is not None  # the other keeps its path
+    assert y.ctrl.paths_done == 0 and not [n for _, n in notes if n.kind == EventKind.PATH_DONE]  # no path of its user's done
+    assert yielder not in world.traffic.waiters
+    # it stands where it backed off to (its user plans again): the other comes on and stops before it again, and after
     # BLOCKED_AFTER drops its path and reports blocked as before
     run(BLOCKED_AFTER + 2.0)
-    assert [r for r in stops() if r[1] == "blocked"] == [("base2", "blocked"), ("base1", "blocked")]
-    assert b1.ctrl.follower is None and not [n for _, n in notes if n.kind == EventKind.COLLISION]
+    assert [r for r in stops() if r[1] == "blocked"] == [(yielder, "blocked"), (keeper, "blocked")]
+    assert k.ctrl.follower is None and not [n for _, n in notes if n.kind == EventKind.COLLISION]
     assert closest > 2 * 0.25
 
 
