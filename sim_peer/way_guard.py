@@ -7,8 +7,9 @@ anything new, may stand on it. While a base follows a path, every :data:`GUARD_P
 the base can brake within the gap less :data:`WAY_MARGIN` at half its deceleration (:func:`way_cap`,
 v = sqrt(a d)); a base whose cap
 reaches zero waits, says so (``Event(kind=obstacle_stop, reason="waiting")``), goes on when the way clears
-(``resumed``), or, after :data:`BLOCKED_AFTER` seconds, drops the path and reports ``blocked`` so that its user
-can plan again (:func:`decide`, pure: time passed in). Two bases driving at each other both stop, apart.
+(``resumed``), or, after :data:`BLOCKED_AFTER` seconds, drops the path, backs off :data:`BACK_OFF` along the way it
+came (:func:`trail_back`) and reports ``blocked`` so that its user can plan again (:func:`decide`, pure: time
+passed in). Two bases driving at each other both stop, apart.
 
 The bases of one sim share a board (:mod:`sim_peer.traffic`): each guard also checks the other bases' disks where
 they stand, all around, and names the base in its way. The LIDAR looks ahead (the Reeman's: 135 degrees): what it
