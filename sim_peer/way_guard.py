@@ -190,9 +190,10 @@ class WayGuard(Sensor):
         nearest, blocker = math.inf, None
         x, y = path[0]
         for rid, spot in self.traffic.others(self.robot.id).items():
-            if math.hypot(spot.x - x, spot.y - y) > LOOK + self.full_radius + spot.radius:
+            if math.hypot(spot.x - x, spot.y - y) > LOOK + self.radius + spot.radius:
                 continue  # beyond the path looked at
-            g = way_gap(path, np.array([[spot.x, spot.y]]), self.full_radius + spot.radius)  # no cells: no slack
+            # the radius less SLACK, as for the LIDAR's hits on its shell: plans keep other robots about that far
+            g = way_gap(path, np.array([[spot.x, spot.y]]), self.radius + spot.radius)
             if g < nearest:
                 nearest, blocker = g, rid
         return min(gap, nearest), (blocker if nearest <= gap + BLAME else None)
