@@ -46,7 +46,6 @@ class ArmPanel:
         return self.page.arm
 
     def build(self) -> None:
-        e = self.arm.entry
         with ui.card().classes("full-width"):
             self.title = ui.label("").classes("text-subtitle1").props('role="heading" aria-level="2"')
             self.sliders: list[Any] = []
