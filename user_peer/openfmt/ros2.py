@@ -46,7 +46,7 @@ from user_peer.message_schema import plain_view
 from user_peer.openfmt.frames import WORLD, FrameTracker, key_owner, yaw_quat_xyzw
 from user_peer.openfmt.ros2_msgdefs import definition
 
-__all__ = ["Ros2Writer", "SimStamps", "odometry_fields", "ros2_message", "ros2_topic", "to_body", "sim_time_ns", "ros_topic", "scan_ranges", "sensor_range_min", "sonar_radius", "TF_TOPIC"]
+__all__ = ["Ros2Writer", "SimStamps", "ODOM_COVARIANCE", "odometry_fields", "scan_period", "ros2_message", "ros2_topic", "to_body", "sim_time_ns", "ros_topic", "scan_ranges", "sensor_range_min", "sonar_radius", "TF_TOPIC"]
 
 TF_TOPIC = "/tf"
 CLOCK_TOPIC = "/clock"
@@ -102,6 +102,26 @@ def grid_data(cells: np.ndarray) -> list[int]:
     """Fabric cells (0..100, 255 unknown) as ROS occupancy values (0..100, -1 unknown), row-major."""
     a = np.asarray(cells, dtype=np.int16).ravel()
     return np.where(a == 255, -1, a).astype(np.int8).tolist()
+
+
+ODOM_VARIANCE = 1e-6
+"""The variance on each axis of a base's odometry (pose and twist): the sim's pose and velocities are its physics'
+own state, with no noise (the sim adds noise to ranges only, ``LidarInfo``/``SonarInfo.noise_std``), so this is a
+floor, 1 mm (1 mrad) standard deviation, not a model of error: never zero, which robot_localization replaces and
+other tools read as "not set"."""
+ODOM_COVARIANCE: tuple[float, ...] = tuple(ODOM_VARIANCE if i % 7 == 0 else 0.0 for i in range(36))
+"""A 6x6 row-major covariance (x, y, z, roll, pitch, yaw), diagonal: an Odometry's pose and twist covariance."""
+
+
+def scan_period(world_info: WorldInfo | None) -> float:
+    """A LaserScan's ``scan_time``: the seconds between two scans of one sensor, 1 / the world's scan rate
+    (``WorldInfo.rates["scan"]``, which the LIDAR and the sonar ring share); 0.0 (ROS's "not known") when the
+    description does not say."""
+    rate = (world_info.rates or {}).get("scan") if world_info is not None else None
+    try:
+        return 1.0 / float(rate) if rate and float(rate) > 0 else 0.0
+    except (TypeError, ValueError):
+        return 0.0
 
 
 MISS_TOLERANCE_M = 5e-4
@@ -179,19 +199,21 @@ def odometry_fields(robot: str, msg: Pose, stamp_ns: int) -> dict:
     v, w = to_body(q, msg.linear), to_body(q, msg.angular)
     vec = lambda a: {"x": a[0], "y": a[1], "z": a[2]}  # noqa: E731
     return {"header": _header(stamp_ns, msg.frame or WORLD), "child_frame_id": robot,
-            "pose": {"pose": _pose(msg.position, (q[1], q[2], q[3], q[0])), "covariance": [0.0] * 36},
-            "twist": {"twist": {"linear": vec(v), "angular": vec(w)}, "covariance": [0.0] * 36}}
+            "pose": {"pose": _pose(msg.position, (q[1], q[2], q[3], q[0])), "covariance": list(ODOM_COVARIANCE)},
+            "twist": {"twist": {"linear": vec(v), "angular": vec(w)}, "covariance": list(ODOM_COVARIANCE)}}
 
 
 def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0, range_offset: float = 0.0,
-                 kind: str | None = None) -> tuple[str, dict] | None:
+                 kind: str | None = None, scan_time: float = 0.0) -> tuple[str, dict] | None:
     """(ROS 2 type name, the message as a dict of its fields) for fabric ``msg`` on ``key``, stamped
     ``stamp_ns``; None for a message ROS 2 has no place for. The one conversion of the MCAP export and the
     live bridge (:mod:`user_peer.ros2`), so that both give the same frames, stamps and values. ``range_min``:
     a scan's sensor's (:func:`sensor_range_min`), which the fabric's Scan does not carry; ``range_offset``: added
     to every range and to the limits, so that a sonar's ranges, measured from the ring's rim, are true in its
     frame ``ID/sonar`` at the ring's centre (the ring's radius, :func:`sonar_radius`); ``kind``: the robot's
-    ("mobile": its pose is Odometry, :func:`odometry_fields`)."""
+    ("mobile": its pose is Odometry, :func:`odometry_fields`); ``scan_time``: a scan's, :func:`scan_period`. A
+    scan's ``time_increment`` is 0: the sim casts all of a scan's rays at one instant of its time (the header's
+    stamp), so a node that projects it (laser_geometry) has no motion between rays to undo."""
     t = stamp_ns
     owner = key_owner(key)
     rid = owner[1] if owner else WORLD
@@ -205,7 +227,7 @@ def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0, r
         return ("sensor_msgs/msg/LaserScan",
                 {"header": _header(t, frame), "angle_min": float(msg.angle_min),
                  "angle_max": float(msg.angle_min + msg.angle_increment * max(n - 1, 0)),
-                 "angle_increment": float(msg.angle_increment), "time_increment": 0.0, "scan_time": 0.0,
+                 "angle_increment": float(msg.angle_increment), "time_increment": 0.0, "scan_time": float(scan_time),
                  "range_min": float(range_min) + range_offset, "range_max": float(msg.range_max) + range_offset,
                  "ranges": scan_ranges(msg, range_offset),
                  "intensities": []})
@@ -282,7 +304,8 @@ class Ros2Writer(McapFile):
         scan = isinstance(msg, Scan)
         kind = self._kind(key, msg)
         converted = ros2_message(key, msg, t, range_min=self._range_min(key) if scan else 0.0,
-                                 range_offset=self._sonar_radius(key) if scan else 0.0, kind=kind)
+                                 range_offset=self._sonar_radius(key) if scan else 0.0, kind=kind,
+                                 scan_time=scan_period(self.frames.catalog.world_info) if scan else 0.0)
         if converted is None:
             self.skipped += 1
             return

@@ -66,13 +66,15 @@ from fabric.interfaces import JointState as FabricJointState
 from fabric.interfaces import Pose, Scan
 from user_peer.catalog import RobotCatalog
 from user_peer.errors import FabricUserError
-from user_peer.openfmt.ros2 import SimStamps, ros2_message, ros2_topic, ros_topic, sensor_range_min, sim_time_ns, sonar_radius
+from user_peer.openfmt.ros2 import (SimStamps, ros2_message, ros2_topic, ros_topic, scan_period, sensor_range_min, sim_time_ns,
+                                    sonar_radius)
 from user_peer.pause import is_pause, pause_words
 from user_peer.ros2 import direct
 from user_peer.ros2.commands import joint_targets
 from user_peer.ros2.fill import fill, message_class
 from user_peer.ros2.goals import GoalsIn
 from user_peer.ros2.models import ModelsOut
+from user_peer.ros2.names import frame_prefix, prefix_headers
 from user_peer.ros2.pauses import GcPauses
 from user_peer.ros2.tf import TfOut
 from user_peer.ros2.trajectory import TrajectoryPlayer, timed_points
@@ -111,9 +113,10 @@ class _Route:
     robot: str | None
     cls: type
     qos: QoSProfile
-    frame: str = ""  # a scan's frame
+    frame: str = ""  # a scan's or a joint state's frame (under the namespace's prefix)
     range_min: float = 0.0  # a scan's sensor's, from the world description
     offset: float = 0.0  # a sonar ring's radius (its ranges measured from the rim, given from the centre)
+    scan_time: float = 0.0  # a scan's period, 1 / the world's scan rate
 
 
 class _Out:
@@ -134,6 +137,7 @@ class Ros2Bridge:
         self.world = world
         self.node = node
         self.namespace = namespace
+        self.prefix = frame_prefix(namespace)  # every frame id under the namespace (names.py)
         self.drive = frozenset(drive)  # the robots whose command topics it subscribes to; none: it only publishes
         self.stamped_cmd_vel = stamped_cmd_vel  # cmd_vel as geometry_msgs/TwistStamped (Nav2's, ros2_control's)
         self._lock = threading.Lock()  # publishers' creation and removal only; never taken per message
@@ -205,11 +209,12 @@ class Ros2Bridge:
             return None
         leaf = topic.rsplit("/", 1)[1]
         cls, qos = _TYPES.get(leaf, (OccupancyGrid, LATCHED) if "/maps/" in topic else (PoseStamped, STREAM))
-        route = _Route(topic, robot, cls, qos)
+        route = _Route(topic, robot, cls, qos, self.prefix + (robot or ""))
         if cls is LaserScan:
             sonar = leaf == "sonar"
-            route = _Route(topic, robot, cls, qos, f"{robot}/{'sonar' if sonar else 'lidar'}",
-                           sensor_range_min(self._described, key), (sonar_radius(self._described, key) or 0.0) if sonar else 0.0)
+            route = _Route(topic, robot, cls, qos, f"{self.prefix}{robot}/{'sonar' if sonar else 'lidar'}",
+                           sensor_range_min(self._described, key), (sonar_radius(self._described, key) or 0.0) if sonar else 0.0,
+                           scan_period(self._described))
         self._routes[key] = route
         return route
 
@@ -230,17 +235,17 @@ class Ros2Bridge:
         filled from the export's dict; None when ``msg`` is not what the topic carries."""
         cls = route.cls
         if cls is JointState and isinstance(msg, FabricJointState):
-            return direct.joint_state(out.msg, route.robot or "", msg, ns)
+            return direct.joint_state(out.msg, route.frame, msg, ns)
         if cls is LaserScan and isinstance(msg, Scan):
-            return direct.laser_scan(out.msg, route.frame, msg, ns, route.range_min, route.offset)
+            return direct.laser_scan(out.msg, route.frame, msg, ns, route.range_min, route.offset, route.scan_time)
         if cls is Odometry and isinstance(msg, Pose):
-            return direct.odometry(out.msg, route.robot or "", msg, ns)
+            return direct.odometry(out.msg, route.robot or "", msg, ns, self.prefix)
         if cls is PoseStamped and isinstance(msg, Pose):  # a new one: objects' history and live samples may cross
-            return direct.pose_stamped(PoseStamped(), msg, ns)
+            return direct.pose_stamped(PoseStamped(), msg, ns, self.prefix)
         converted = ros2_message(key, msg, ns)
         if converted is None or message_class(converted[0]) is not cls:
             return None
-        return fill(cls(), converted[1])
+        return prefix_headers(fill(cls(), converted[1]), self.prefix)
 
     def _on_state(self, key: str, msg: Any) -> None:
         """A fabric message: convert it as the MCAP export does and publish it (zenoh's thread)."""

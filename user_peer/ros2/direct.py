@@ -26,12 +26,13 @@ from sensor_msgs.msg import JointState, LaserScan
 
 from fabric.interfaces import JointState as FabricJointState
 from fabric.interfaces import Pose, Scan
-from user_peer.openfmt.ros2 import MISS_TOLERANCE_M, to_body
+from user_peer.openfmt.ros2 import MISS_TOLERANCE_M, ODOM_COVARIANCE, to_body
 
 __all__ = ["stamp", "joint_state", "laser_scan", "odometry", "pose_stamped"]
 
 _EMPTY_D = array.array("d")
 _EMPTY_F = array.array("f")
+_COVARIANCE = np.array(ODOM_COVARIANCE, dtype=np.float64)
 
 
 def stamp(header: Any, ns: int, frame: str) -> None:
@@ -55,9 +56,11 @@ def joint_state(out: JointState, robot: str, msg: FabricJointState, ns: int) -> 
     return out
 
 
-def laser_scan(out: LaserScan, frame: str, msg: Scan, ns: int, range_min: float, offset: float) -> LaserScan:
+def laser_scan(out: LaserScan, frame: str, msg: Scan, ns: int, range_min: float, offset: float,
+               scan_time: float = 0.0) -> LaserScan:
     """``out`` refilled with ``msg``: a missing echo (the fabric's ``range_max``) is +inf, REP 117; ``offset``
-    added to the other ranges and to the limits (a sonar's rim-to-centre radius), as the export does."""
+    added to the other ranges and to the limits (a sonar's rim-to-centre radius), as the export does; ``scan_time``
+    the sensor's period (``time_increment`` 0: the sim casts a scan's rays at one instant)."""
     stamp(out.header, ns, frame)
     n = int(msg.ranges_mm.shape[0])
     r = np.asarray(msg.ranges, dtype=np.float64)  # metres as the export reads them (float64), then float32 once
@@ -66,7 +69,7 @@ def laser_scan(out: LaserScan, frame: str, msg: Scan, ns: int, range_min: float,
     out.angle_max = float(msg.angle_min + msg.angle_increment * max(n - 1, 0))
     out.angle_increment = float(msg.angle_increment)
     out.time_increment = 0.0
-    out.scan_time = 0.0
+    out.scan_time = float(scan_time)
     out.range_min = float(range_min) + offset
     out.range_max = float(msg.range_max) + offset
     out.ranges = array.array("f", ranges.tobytes())
@@ -80,19 +83,21 @@ def _pose(out: Any, position: np.ndarray, q_wxyz: np.ndarray) -> None:
     o.w, o.x, o.y, o.z = q_wxyz.tolist()
 
 
-def pose_stamped(out: PoseStamped, msg: Pose, ns: int) -> PoseStamped:
-    """``out`` refilled with ``msg`` (an arm's flange, a scene object) in its own frame (``world`` by default)."""
-    stamp(out.header, ns, msg.frame or "world")
+def pose_stamped(out: PoseStamped, msg: Pose, ns: int, prefix: str = "") -> PoseStamped:
+    """``out`` refilled with ``msg`` (an arm's flange, a scene object) in its own frame (``world`` by default),
+    under ``prefix`` (a namespace's, :mod:`user_peer.ros2.names`)."""
+    stamp(out.header, ns, prefix + (msg.frame or "world"))
     _pose(out.pose, msg.position, msg.quaternion)
     return out
 
 
-def odometry(out: Odometry, robot: str, msg: Pose, ns: int) -> Odometry:
-    """``out`` refilled with a base's pose (frame ``world``, child the base's id) and its twist turned from the
-    world frame (the sim's velocities) into the base's, as REP 105 asks."""
-    stamp(out.header, ns, msg.frame or "world")
-    out.child_frame_id = robot
+def odometry(out: Odometry, robot: str, msg: Pose, ns: int, prefix: str = "") -> Odometry:
+    """``out`` refilled with a base's pose (frame ``world``, child the base's id, both under ``prefix``) and its
+    twist turned from the world frame (the sim's velocities) into the base's, as REP 105 asks."""
+    stamp(out.header, ns, prefix + (msg.frame or "world"))
+    out.child_frame_id = prefix + robot
     _pose(out.pose.pose, msg.position, msg.quaternion)
+    out.pose.covariance = out.twist.covariance = _COVARIANCE  # copied by the setter: the constant stays as it is
     lin, ang = out.twist.twist.linear, out.twist.twist.angular
     lin.x, lin.y, lin.z = to_body(msg.quaternion, msg.linear)
     ang.x, ang.y, ang.z = to_body(msg.quaternion, msg.angular)

@@ -24,6 +24,7 @@ from fabric.interfaces.geometry import yaw_from_quaternion
 from user_peer.errors import FabricUserError
 from user_peer.openfmt.ros2 import ros_topic
 from user_peer.ros2.commands import CommandError
+from user_peer.ros2.names import frame_prefix
 
 __all__ = ["GOAL_FRAMES", "GoalsIn", "goal_of"]
 
@@ -32,11 +33,13 @@ GOAL_FRAMES = ("", "world", "map")
 the fabric's maps are in world coordinates), or none."""
 
 
-def goal_of(msg: Any) -> tuple[float, float, float]:
-    """(x, y, yaw) of a ``PoseStamped`` in the world's frame; :class:`CommandError` for another frame."""
+def goal_of(msg: Any, prefix: str = "") -> tuple[float, float, float]:
+    """(x, y, yaw) of a ``PoseStamped`` in the world's frame (under a namespace's ``prefix``, ``class1/world``, or
+    not); :class:`CommandError` for another frame."""
     frame = msg.header.frame_id.strip("/")
-    if frame not in GOAL_FRAMES:
-        raise CommandError(f"goal_pose in frame {frame!r}: give it in 'world' (or 'map'), the bridge's fixed frame")
+    if frame not in GOAL_FRAMES and not (prefix and frame.startswith(prefix) and frame[len(prefix):] in GOAL_FRAMES[1:]):
+        raise CommandError(f"goal_pose in frame {frame!r}: give it in '{prefix}world' (or '{prefix}map'), "
+                           "the bridge's fixed frame")
     o = msg.pose.orientation
     return float(msg.pose.position.x), float(msg.pose.position.y), yaw_from_quaternion((o.w, o.x, o.y, o.z))
 
@@ -47,6 +50,7 @@ class GoalsIn:
     def __init__(self, node: Node, namespace: str, qos: Any, check_owner: Callable[[str, str], Any],
                  refuse: Callable[[str, str, str], None], map_name: str = "") -> None:
         self.node, self.namespace, self.qos = node, namespace.strip("/"), qos
+        self.prefix = frame_prefix(namespace)
         self.check_owner, self.refuse = check_owner, refuse
         self.map_name = map_name
         self._bases: set[str] = set()
@@ -77,7 +81,7 @@ class GoalsIn:
         if base is None:
             return
         try:
-            goal = goal_of(msg)
+            goal = goal_of(msg, self.prefix)
         except CommandError as exc:
             self.refuse(rid, "goal_pose", str(exc))
             return

@@ -21,6 +21,7 @@ from fabric.interfaces import WorldInfo
 from user_peer.catalog import RobotCatalog
 from user_peer.openfmt.frames import Frame, FrameTracker
 from user_peer.ros2.direct import stamp
+from user_peer.ros2.names import frame_prefix
 
 __all__ = ["TfOut", "tf_message_class", "transform", "TF_QOS", "TF_STATIC_QOS"]
 
@@ -40,11 +41,12 @@ def tf_message_class() -> type | None:
     return TFMessage
 
 
-def transform(f: Frame, ns: int) -> TransformStamped:
-    """One frame as a ``geometry_msgs/TransformStamped``: ``f.child`` in ``f.parent``, stamped ``ns``."""
+def transform(f: Frame, ns: int, prefix: str = "") -> TransformStamped:
+    """One frame as a ``geometry_msgs/TransformStamped``: ``f.child`` in ``f.parent``, stamped ``ns``, both frames
+    under ``prefix`` (a namespace's, :mod:`user_peer.ros2.names`)."""
     t = TransformStamped()
-    stamp(t.header, ns, f.parent)
-    t.child_frame_id = f.child
+    stamp(t.header, ns, prefix + f.parent)
+    t.child_frame_id = prefix + f.child
     tr, rot = t.transform.translation, t.transform.rotation
     tr.x, tr.y, tr.z = (float(v) for v in f.translation)
     rot.x, rot.y, rot.z, rot.w = (float(v) for v in f.rotation)
@@ -63,6 +65,7 @@ class TfOut:
         self._static: dict[str, Frame] = {}  # child -> the mount last sent on /tf_static
         self.sent = 0
         ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
+        self.prefix = frame_prefix(namespace)
         self.topics = (f"{ns}/tf", f"{ns}/tf_static")
         self._pub = self._static_pub = None
         if self.available:
@@ -80,9 +83,9 @@ class TfOut:
         frames = self.frames.frames(key, msg, ns)
         if not frames:
             return
-        self._pub.publish(self.message(transforms=[transform(f, ns) for f in frames]))
+        self._pub.publish(self.message(transforms=[transform(f, ns, self.prefix) for f in frames]))
         self.sent += 1
         mounts = [f for f in frames if f.child.endswith(_MOUNTS) and self._static.get(f.child) != f]
         if mounts:
             self._static.update((f.child, f) for f in mounts)
-            self._static_pub.publish(self.message(transforms=[transform(f, ns) for f in self._static.values()]))
+            self._static_pub.publish(self.message(transforms=[transform(f, ns, self.prefix) for f in self._static.values()]))
