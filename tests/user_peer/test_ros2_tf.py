@@ -91,3 +91,21 @@ def test_tf_is_published_only_where_tf2_msgs_is_importable():
     if not tf.available:  # nothing to publish on: robot state goes by without error
         tf.on_state("rf/w/robot/base1/pose", Pose(np.zeros(3), header=Header(1.0)), 10**9)
         assert tf.sent == 0
+
+
+def test_each_sonar_transducers_frame_goes_once_on_tf_static_under_the_namespace():
+    from fabric.interfaces import RobotInfo, SonarInfo, WorldInfo
+
+    sent: dict[str, Sent] = {}
+    tf = TfOut(None, RobotCatalog(None), namespace="class1", message=TFMessage,
+               publisher=lambda topic, qos: sent.setdefault(topic, Sent()))
+    sonar = SonarInfo(np.radians([0.0, 90.0, 180.0]), 0.26, 0.12, 0.02, 3.0)
+    info = WorldInfo("w", "s", 0.002, {}, (RobotInfo("base1", "reeman", "mobile", np.zeros(4), (), np.zeros(0), np.zeros(0),
+                                                     np.zeros(0), sonar=sonar),))
+    tf.describe(info)
+    tf.describe(info)  # the same description again: nothing more
+    assert len(sent["/class1/tf_static"].msgs) == 1
+    rows = {(t.header.frame_id, t.child_frame_id): (t.transform.translation.x, t.transform.translation.y)
+            for t in sent["/class1/tf_static"].msgs[0].transforms}
+    assert set(rows) == {("class1/base1/sonar", f"class1/base1/sonar_{i}") for i in range(3)}
+    assert rows[("class1/base1/sonar", "class1/base1/sonar_1")] == pytest.approx((0.0, 0.26), abs=1e-12)

@@ -5,6 +5,7 @@ Out (every robot of the world, followed as sims and robots come and go)::
     /NS/ROBOT/joint_states  sensor_msgs/JointState   from rf/W/robot/ROBOT/joints
     /NS/ROBOT/scan          sensor_msgs/LaserScan    from rf/W/robot/ROBOT/scan     (sensor-data QoS: best effort)
     /NS/ROBOT/sonar         sensor_msgs/LaserScan    from rf/W/robot/ROBOT/sonar    (ranges from the ring's centre)
+    /NS/ROBOT/sonar_I       sensor_msgs/Range        each transducer of the ring, while a node listens (ranges.py)
     /NS/ROBOT/odom          nav_msgs/Odometry        from a mobile base's rf/W/robot/ROBOT/pose
     /NS/ROBOT/pose          geometry_msgs/PoseStamped from an arm's pose (its flange)
     /NS/ROBOT/path          nav_msgs/Path            from rf/W/robot/ROBOT/path     (reliable, transient local)
@@ -76,6 +77,7 @@ from user_peer.ros2.goals import GoalsIn
 from user_peer.ros2.models import ModelsOut
 from user_peer.ros2.names import frame_prefix, prefix_headers
 from user_peer.ros2.pauses import GcPauses
+from user_peer.ros2.ranges import RangesOut
 from user_peer.ros2.tf import TfOut
 from user_peer.ros2.trajectory import TrajectoryPlayer, timed_points
 from user_peer.ros2.twist import base_limits, twist_check
@@ -174,6 +176,7 @@ class Ros2Bridge:
             check_for_type_support(cls)
         self.tf = TfOut(node, RobotCatalog(None), namespace=namespace, message=tf_message)
         self.models = ModelsOut(node, namespace)  # /NS/ROBOT/robot_description, latched
+        self.ranges = RangesOut(node, namespace, self.prefix)  # /NS/ROBOT/sonar_I, a Range per transducer
         self.trajectories = TrajectoryPlayer()  # joint_trajectory's points sent at their times
         self.goals = GoalsIn(node, namespace, RELIABLE, self._check_owner, self._refuse, goal_map)  # goal_pose
         w = world.name
@@ -270,6 +273,8 @@ class Ros2Bridge:
             self.published[route.topic] += 1
             if route.robot is not None:
                 self.tf.on_state(key, msg, ns)
+                if route.cls is LaserScan:
+                    self.ranges.on_scan(route.robot, key, msg, ns)
                 self._tick_clock(sim_time_ns(msg))
         except Exception:  # a message that does not fit must not end the bridge's subscription
             self.unconverted += 1
@@ -308,6 +313,7 @@ class Ros2Bridge:
         self._routes = {}  # each key's route again, with this description's kinds and sensors
         self.tf.describe(info)
         self.models.describe(info)
+        self.ranges.describe(info)
         for rid, kind in entries.items():
             if rid not in self._inputs:
                 self._inputs[rid] = self._command_inputs(rid, kind)

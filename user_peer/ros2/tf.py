@@ -22,6 +22,7 @@ from user_peer.catalog import RobotCatalog
 from user_peer.openfmt.frames import Frame, FrameTracker
 from user_peer.ros2.direct import stamp
 from user_peer.ros2.names import frame_prefix
+from user_peer.ros2.ranges import transducer_frames
 
 __all__ = ["TfOut", "tf_message_class", "transform", "TF_QOS", "TF_STATIC_QOS"]
 
@@ -73,8 +74,16 @@ class TfOut:
             self._pub, self._static_pub = make(self.topics[0], TF_QOS), make(self.topics[1], TF_STATIC_QOS)
 
     def describe(self, info: WorldInfo) -> None:
-        """The world's description: where arms stand, what each robot is."""
+        """The world's description: where arms stand, what each robot is; each sonar transducer's frame on
+        /tf_static (:func:`user_peer.ros2.ranges.transducer_frames`), once, and again when it changes."""
         self.frames.catalog.world_info = info
+        if not self.available:
+            return
+        new = [f for r in info.robots if r.sonar is not None for f in transducer_frames(r.id, r.sonar)
+               if self._static.get(f.child) != f]
+        if new:
+            self._static.update((f.child, f) for f in new)
+            self._static_pub.publish(self.message(transforms=[transform(f, 0, self.prefix) for f in self._static.values()]))
 
     def on_state(self, key: str, msg: Any, ns: int) -> None:
         """A robot's state: its frames, stamped ``ns`` (robot state comes one message at a time per key)."""
