@@ -86,6 +86,13 @@ class EventLog:
                 if trusted and n > since and e.object == robot and e.user == self.user and e.kind in REJECT_KINDS
             ]
 
+    def authority_events(self, since: int, until: int, kinds: frozenset[str]) -> list[Event]:
+        """Events of ``kinds`` from their object's authority that arrived after mark ``since`` and up to mark
+        ``until`` (two :meth:`mark` calls: each event read once by one who reads from mark to mark), whoever they
+        concern (a bumper stop names no user)."""
+        with self._lock:
+            return [e for n, e, trusted in self._log if trusted and since < n <= until and e.kind in kinds]
+
     def recent(self, limit: int = 20) -> list[tuple[Event, bool]]:
         """The latest ``limit`` events, oldest first, each with whether it came from its object's authority."""
         with self._lock:

@@ -6,7 +6,9 @@ It writes one JSON line per message to ``--out``: each robot's ``robot_descripti
 ``--control/trajectory`` appears (JSON ``[names, [[positions, seconds], ...]]``) it publishes that
 ``trajectory_msgs/JointTrajectory`` on ``/ARM/joint_trajectory`` once, writes ``trajectory_sent`` and removes the
 file; when ``--control/goal`` appears ("x y") it publishes that ``geometry_msgs/PoseStamped`` (frame ``map``) on
-``/goal_pose`` once, as RViz's 2D Goal Pose does; it writes ``BASE``'s odometry and path. Runs until SIGTERM.
+``/goal_pose`` once, as RViz's 2D Goal Pose does; it writes ``BASE``'s odometry (frames, covariance) and path, its
+scan's frame and timing, its sonar transducer 2 (``sensor_msgs/Range``) and each robot's latched ``owner``.
+``--ns NS`` puts the robots' topics (and goal_pose) under ``/NS``. Runs until SIGTERM.
 """
 
 from __future__ import annotations
@@ -23,8 +25,8 @@ from nav_msgs.msg import Odometry, Path
 from rcl_interfaces.msg import Log
 from rosgraph_msgs.msg import Clock
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import JointState
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import JointState, LaserScan, Range
 from std_msgs.msg import String
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -38,21 +40,27 @@ def main() -> None:
     ap.add_argument("--base", default="base1")
     ap.add_argument("--clocks", default="/clock", help="clock topics to listen to, comma-separated")
     ap.add_argument("--stamped", action="store_true", help="cmd_vel as geometry_msgs/TwistStamped")
+    ap.add_argument("--ns", default="", help="the bridge's --namespace")
     args = ap.parse_args()
     out = open(args.out, "a", buffering=1)
 
     def write(**fields) -> None:
         out.write(json.dumps({"wall": time.monotonic(), **fields}) + "\n")
 
+    def under(name: str) -> str:
+        return f"/{args.ns}/{name}" if args.ns else f"/{name}"
+
     rclpy.init()
     node = Node("plain_ros2_listener")
     reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
     latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     for rid in args.robots.split(","):
-        node.create_subscription(String, f"/{rid}/robot_description",
+        node.create_subscription(String, under(f"{rid}/owner"),
+                                 lambda m, r=rid: write(topic="owner", robot=r, owner=m.data), latched)
+        node.create_subscription(String, under(f"{rid}/robot_description"),
                                  lambda m, r=rid: write(topic="robot_description", robot=r, urdf=m.data), latched)
-        node.create_subscription(JointState, f"/{rid}/joint_states",
-                                 lambda m, r=rid: write(topic="joint_states", robot=r, name=list(m.name),
+        node.create_subscription(JointState, under(f"{rid}/joint_states"),
+                                 lambda m, r=rid: write(topic="joint_states", robot=r, frame=m.header.frame_id, name=list(m.name),
                                                         position=list(m.position)), reliable)
     for topic in args.clocks.split(","):
         node.create_subscription(Clock, topic, lambda m, t=topic: write(
@@ -60,16 +68,25 @@ def main() -> None:
             publishers=node.count_publishers(t)), QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
     node.create_subscription(Log, "/rosout", lambda m: write(topic="rosout", name=m.name, level=int(m.level), msg=m.msg),
                              QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-    node.create_subscription(Odometry, f"/{args.base}/odom",
-                             lambda m: write(topic="odom", x=m.pose.pose.position.x, y=m.pose.pose.position.y), reliable)
-    node.create_subscription(Path, f"/{args.base}/path",
+    node.create_subscription(Odometry, under(f"{args.base}/odom"),
+                             lambda m: write(topic="odom", x=m.pose.pose.position.x, y=m.pose.pose.position.y,
+                                             frame=m.header.frame_id, child=m.child_frame_id,
+                                             pose_cov=list(m.pose.covariance), twist_cov=list(m.twist.covariance)), reliable)
+    node.create_subscription(LaserScan, under(f"{args.base}/scan"),
+                             lambda m: write(topic="scan", frame=m.header.frame_id, scan_time=m.scan_time,
+                                             time_increment=m.time_increment), qos_profile_sensor_data)
+    node.create_subscription(Range, under(f"{args.base}/sonar_2"),
+                             lambda m: write(topic="range", frame=m.header.frame_id, range=m.range, fov=m.field_of_view,
+                                             kind=int(m.radiation_type), min=m.min_range, max=m.max_range),
+                             qos_profile_sensor_data)
+    node.create_subscription(Path, under(f"{args.base}/path"),
                              lambda m: write(topic="path", frame=m.header.frame_id, n=len(m.poses),
                                              end=[m.poses[-1].pose.position.x, m.poses[-1].pose.position.y] if m.poses else None),
                              latched)
-    goal = node.create_publisher(PoseStamped, "/goal_pose", 10)
+    goal = node.create_publisher(PoseStamped, under("goal_pose"), 10)
     goal_file = os.path.join(args.control, "goal")
-    cmd = node.create_publisher(TwistStamped if args.stamped else Twist, f"/{args.base}/cmd_vel", 10)
-    trajectory = node.create_publisher(JointTrajectory, f"/{args.arm}/joint_trajectory", 10)
+    cmd = node.create_publisher(TwistStamped if args.stamped else Twist, under(f"{args.base}/cmd_vel"), 10)
+    trajectory = node.create_publisher(JointTrajectory, under(f"{args.arm}/joint_trajectory"), 10)
     cmd_file = os.path.join(args.control, "cmd_vel")
     trajectory_file = os.path.join(args.control, "trajectory")
 

@@ -52,3 +52,19 @@ def test_the_log_is_bounded_and_keeps_counting():
         log.receive(key, Event(kind="clamp", object="arm1", reason=str(i), header=Header(source="sim-a")))
     assert len(log.events) == KEPT + 1 - KEPT // 2 and log.events[-1].reason == str(KEPT)
     assert log.mark() == KEPT + 1 and [e.reason for e, _ in log.recent(2)] == [str(KEPT - 1), str(KEPT)]
+
+
+def test_authority_events_of_a_kind_are_read_once_from_mark_to_mark_and_never_forged():
+    log, _ = _log({"base1": OwnershipRecord("base1", owner="bob", epoch=1, authority="sim-a")})
+    bump = lambda src: Event(kind="collision", object="base1", reason="bumper", header=Header(source=src))  # noqa: E731
+    key = keys.event(W, "collision", "base1")
+    first = log.mark()
+    log.receive(key, bump("sim-a"))  # no user named: a bumper stop concerns whoever watches
+    log.receive(key, bump("sim-b"))  # not base1's authority
+    log.receive(keys.event_decode(W, "mallory"), bump("sim-a"))  # any login may write this key
+    log.receive(keys.event(W, "clamp", "base1"), Event(kind="clamp", object="base1", header=Header(source="sim-a")))
+    second = log.mark()
+    log.receive(key, bump("sim-a"))  # after the second mark: the next reading's
+    assert [e.kind for e in log.authority_events(first, second, frozenset({"collision"}))] == ["collision"]
+    assert len(log.authority_events(second, log.mark(), frozenset({"collision"}))) == 1
+    assert [e.kind for e in log.authority_events(first, log.mark(), frozenset({"clamp", "collision"}))] == ["collision", "clamp", "collision"]

@@ -202,3 +202,42 @@ def test_two_namespaced_bridges_give_each_its_own_clock_and_none_on_the_shared_o
         ns = [r["ns"] for r in on(t)]
         assert ns == sorted(ns) and {r["publishers"] for r in on(t)} == {1}, t  # one bridge each, never back
     assert on("/clock") == []
+
+
+@pytest.mark.slow
+def test_a_namespaced_bridge_names_frames_times_scans_sets_covariance_gives_ranges_owners_and_bumper_stops(live, procs, tmp_path):
+    """Under --namespace class3 a plain rclpy node sees every frame id under class3/, a scan's scan_time = 1 / the
+    world's scan rate, odometry with a covariance, each sonar transducer as a Range, base1's owner on a latched
+    topic, and a bumper stop of the base it drives on /rosout."""
+    world, port, _ = live
+    w = user_peer.connect(world=world, connect=f"tcp/127.0.0.1:{port}", user="rosnsreader")
+    try:
+        rate = float(w.info().rates["scan"])
+    finally:
+        w.close()
+    bridge, node, out, ctl = start(procs, tmp_path, world, port, 1 + (os.getpid() * 7 + 52) % 100, "--user", "rosns",
+                                   "--namespace", "class3", "--request", "base1", "--drive", "base1",
+                                   node_args=("--ns", "class3"))
+    got = lambda: {t for t in ("scan", "odom", "range") if lines(out, t)} | {"owner:" + r["robot"] for r in lines(out, "owner")} \
+        | {"js:" + r["robot"] for r in lines(out, "joint_states")}  # noqa: E731
+    wait_until(lambda: got() >= {"scan", "odom", "range", "owner:base1", "js:arm1"}, timeout=60,
+               what="scan, odom, a Range, base1's owner and arm1's joints under /class3",
+               seen=lambda: (got(), procs.output(bridge)[-1500:], procs.output(node)[-1500:]))
+    scan = lines(out, "scan")[-1]
+    assert scan["frame"] == "class3/base1/lidar" and scan["time_increment"] == 0.0
+    assert math.isclose(scan["scan_time"], 1.0 / rate, rel_tol=1e-6), (scan, rate)
+    odom = lines(out, "odom")[-1]
+    assert (odom["frame"], odom["child"]) == ("class3/world", "class3/base1")
+    diag = [odom["pose_cov"][i * 7] for i in range(6)]
+    assert all(v > 0 for v in diag) and sum(map(abs, odom["pose_cov"])) == sum(diag) and odom["twist_cov"] == odom["pose_cov"]
+    assert {r["frame"] for r in lines(out, "joint_states") if r["robot"] == "arm1"} == {"class3/arm1"}
+    rng = lines(out, "range")[-1]
+    assert rng["frame"] == "class3/base1/sonar_2" and rng["kind"] == 0 and math.isclose(rng["fov"], math.radians(30), rel_tol=1e-6)
+    assert math.isinf(rng["range"]) or rng["min"] <= rng["range"] <= rng["max"], rng
+    assert [r["owner"] for r in lines(out, "owner") if r["robot"] == "base1"][-1] == "rosns"
+    # straight on until something is in the way (a wall of the 10 m room at the latest): the bumper stops base1
+    (ctl / "cmd_vel").write_text("0.8 0.0")
+    wait_until(lambda: any(m.startswith("bumper stop: base1") for m in bridge_warnings(out)), timeout=90,
+               what="base1's bumper stop on /rosout", seen=lambda: (lines(out, "odom")[-1:], bridge_warnings(out)[-3:],
+                                                                     procs.output(bridge)[-1500:]))
+    (ctl / "cmd_vel").unlink()

@@ -14,6 +14,7 @@ Out (every robot of the world, followed as sims and robots come and go)::
     /NS/clock               rosgraph_msgs/Clock      the sims' time (the newest header stamp of robot state)
     /NS/tf, /NS/tf_static   tf2_msgs/TFMessage       the export's frame tree, where tf2_msgs is importable (tf.py)
     /NS/ROBOT/robot_description std_msgs/String      the robot type's URDF (latched; models.py)
+    /NS/ROBOT/owner         std_msgs/String          the login that owns the robot, "" when free (latched; owners.py)
 
 In (only for the robots named in ``drive``, the ``--drive`` option: a ROS 2 domain has no logins, so by default
 the bridge only publishes (:mod:`user_peer.ros2.trust`); and for those, acted on only while this login owns
@@ -71,11 +72,13 @@ from user_peer.openfmt.ros2 import (SimStamps, ros2_message, ros2_topic, ros_top
                                     sonar_radius)
 from user_peer.pause import is_pause, pause_words
 from user_peer.ros2 import direct
+from user_peer.ros2.bumps import BUMP_KINDS, bump_lines
 from user_peer.ros2.commands import joint_targets
 from user_peer.ros2.fill import fill, message_class
 from user_peer.ros2.goals import GoalsIn
 from user_peer.ros2.models import ModelsOut
 from user_peer.ros2.names import frame_prefix, prefix_headers
+from user_peer.ros2.owners import OwnersOut
 from user_peer.ros2.pauses import GcPauses
 from user_peer.ros2.ranges import RangesOut
 from user_peer.ros2.tf import TfOut
@@ -177,11 +180,13 @@ class Ros2Bridge:
         self.tf = TfOut(node, RobotCatalog(None), namespace=namespace, message=tf_message)
         self.models = ModelsOut(node, namespace)  # /NS/ROBOT/robot_description, latched
         self.ranges = RangesOut(node, namespace, self.prefix)  # /NS/ROBOT/sonar_I, a Range per transducer
+        self.owners = OwnersOut(node, namespace)  # /NS/ROBOT/owner, latched
         self.trajectories = TrajectoryPlayer()  # joint_trajectory's points sent at their times
         self.goals = GoalsIn(node, namespace, RELIABLE, self._check_owner, self._refuse, goal_map)  # goal_pose
         w = world.name
         fab = world.fabric
         self.follow()  # first: the description's sensors (range_min) are known before the first scan
+        self.owners.update(list(self._kinds), self.world.ownership.record)
         self._subs = [
             fab.subscribe(keys.robot_stream_all(w, "joints"), self._on_state),
             fab.subscribe(keys.robot_stream_all(w, "scan"), self._on_state),
@@ -297,6 +302,7 @@ class Ros2Bridge:
     def _tick(self) -> None:
         try:
             self.follow()
+            self.owners.update(list(self._kinds), self.world.ownership.record)
             self._report_rejections()
         except Exception:
             log.exception("following the world failed")
@@ -401,8 +407,13 @@ class Ros2Bridge:
             self._refuse(robot, what, getattr(exc, "reason", str(exc)))
 
     def _report_rejections(self) -> None:
-        """The sims' refusals of what this login sent (a lease lost between our look and the sim's) on /rosout."""
+        """The sims' refusals of what this login sent (a lease lost between our look and the sim's) and the bumper
+        stops of the world's bases (bumps.py) on /rosout."""
         mark = self.world.event_mark()
+        for warn, text in bump_lines(self.world.event_log.authority_events(self._event_mark, mark, BUMP_KINDS), self.drive):
+            log.log(logging.WARNING if warn else logging.INFO, "%s", text)
+            ros = self.node.get_logger()
+            (ros.warning if warn else ros.info)(text)
         for rid in list(self._inputs):
             for ev in self.world.rejections(rid, self._event_mark):
                 if is_pause(ev):  # the sim held its robots: a pause, said as one (not counted as refused)
