@@ -241,3 +241,17 @@ def test_a_namespaced_bridge_names_frames_times_scans_sets_covariance_gives_rang
                what="base1's bumper stop on /rosout", seen=lambda: (lines(out, "odom")[-1:], bridge_warnings(out)[-3:],
                                                                      procs.output(bridge)[-1500:]))
     (ctl / "cmd_vel").unlink()
+
+
+@pytest.mark.slow
+def test_a_topic_map_renames_the_bridges_topics_for_a_plain_node(live, procs, tmp_path):
+    world, port, _ = live
+    (tmp_path / "map.yaml").write_text("rename:\n  /base1/odom: /renamed/base1/odom\n  /base1/owner: /renamed/base1/owner\n"
+                                       "deny: [/arm1/*]\n")
+    bridge, node, out, _ = start(procs, tmp_path, world, port, 1 + (os.getpid() * 7 + 53) % 100, "--user", "rosmap",
+                                 "--topic-map", str(tmp_path / "map.yaml"), node_args=("--ns", "renamed"))
+    assert "map.yaml: 2 renamed, QoS set for 0, never /arm1/*" in procs.output(bridge), procs.output(bridge)[-1500:]
+    wait_until(lambda: lines(out, "odom") and any(r["robot"] == "base1" for r in lines(out, "owner")), timeout=60,
+               what="base1's odometry and owner under their new names",
+               seen=lambda: (procs.output(bridge)[-1500:], procs.output(node)[-1500:]))
+    assert lines(out, "odom")[-1]["child"] == "base1"  # a rename changes the name, not the frames

@@ -81,6 +81,7 @@ from user_peer.ros2.names import frame_prefix, prefix_headers
 from user_peer.ros2.owners import OwnersOut
 from user_peer.ros2.pauses import GcPauses
 from user_peer.ros2.ranges import RangesOut
+from user_peer.ros2.topic_map import MappedNode, TopicMap, is_off
 from user_peer.ros2.tf import TfOut
 from user_peer.ros2.trajectory import TrajectoryPlayer, timed_points
 from user_peer.ros2.twist import base_limits, twist_check
@@ -138,9 +139,10 @@ class Ros2Bridge:
 
     def __init__(self, world: World, node: Node, *, namespace: str = "", tf_message: type | None = None,
                  trace: bool = False, drive: Collection[str] = (), stamped_cmd_vel: bool = False,
-                 goal_map: str = "") -> None:
+                 goal_map: str = "", topic_map: TopicMap | None = None) -> None:
         self.world = world
-        self.node = node
+        self.rcl_node = node  # what rclpy spins
+        self.node = node = MappedNode(node, topic_map) if topic_map is not None else node  # --topic-map (topic_map.py)
         self.namespace = namespace
         self.prefix = frame_prefix(namespace)  # every frame id under the namespace (names.py)
         self.drive = frozenset(drive)  # the robots whose command topics it subscribes to; none: it only publishes
@@ -233,7 +235,8 @@ class Ros2Bridge:
         with self._lock:
             out = self._outs.get(route.topic)
             if out is None and not self._closed:
-                out = self._outs[route.topic] = _Out(self.node.create_publisher(route.cls, route.topic, route.qos), route.cls())
+                pub = self.node.create_publisher(route.cls, route.topic, route.qos)
+                out = self._outs[route.topic] = _Out(pub, None if is_off(pub) else route.cls())
                 if route.robot is not None:
                     self._robot_topics.setdefault(route.robot, set()).add(route.topic)
             return out
@@ -257,7 +260,7 @@ class Ros2Bridge:
 
     def _on_state(self, key: str, msg: Any) -> None:
         """A fabric message: convert it as the MCAP export does and publish it (zenoh's thread)."""
-        if self._closed or not self.node.context.ok():
+        if self._closed or not self.rcl_node.context.ok():
             return  # stopping (Ctrl-C or SIGTERM shut rclpy's context down before the world closed): nothing to publish on
         entry = time.time_ns() if self.trace is not None else 0
         try:
@@ -268,14 +271,15 @@ class Ros2Bridge:
             if out is None:
                 return
             ns = self._stamps(msg)
-            ros = self._convert(out, route, key, msg, ns)
-            if ros is None:
-                self.unconverted += 1
-                return
-            out.pub.publish(ros)
-            if self.trace is not None:
-                self.trace.append((key, ns, entry, time.time_ns()))
-            self.published[route.topic] += 1
+            if out.msg is not None:  # None: a topic the --topic-map keeps off ROS (nothing built for it)
+                ros = self._convert(out, route, key, msg, ns)
+                if ros is None:
+                    self.unconverted += 1
+                    return
+                out.pub.publish(ros)
+                if self.trace is not None:
+                    self.trace.append((key, ns, entry, time.time_ns()))
+                self.published[route.topic] += 1
             if route.robot is not None:
                 self.tf.on_state(key, msg, ns)
                 if route.cls is LaserScan:
@@ -464,6 +468,6 @@ class Ros2Bridge:
 def spin(bridge: Ros2Bridge) -> None:
     """Run the node until Ctrl-C or SIGTERM (rclpy's signal handlers shut its context down)."""
     try:
-        rclpy.spin(bridge.node)
+        rclpy.spin(bridge.rcl_node)
     except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
         pass

@@ -21,6 +21,7 @@ def ros2(
     request: Annotated[Optional[list[str]], typer.Option("--request", help="A robot to ask to own at start (repeatable); cmd_vel and joint_command act only on robots this login owns.")] = None,
     drive: Annotated[Optional[list[str]], typer.Option("--drive", help="A robot whose cmd_vel and joint commands the bridge takes from ROS 2 (repeatable); without it the bridge only publishes: any node on the DDS domain could send them.")] = None,
     cmd_vel_stamped: Annotated[bool, typer.Option("--cmd-vel-stamped", help="Take cmd_vel as geometry_msgs/TwistStamped (Nav2's enable_stamped_cmd_vel, ros2_control's diff drive) instead of Twist.")] = False,
+    topic_map: Annotated[Optional[str], typer.Option("--topic-map", help="A YAML file that renames topics, sets their QoS and allows or denies them (docs/ros2.md, 'Topic map').")] = None,
     goal_map: Annotated[str, typer.Option("--goal-map", help="The map a goal_pose is planned on (default: this login's own map, the one Base.build_map builds; 'map' for the class's).")] = "",
     discovery: Annotated[Optional[str], typer.Option("--discovery", help="How far DDS discovery reaches: localhost (the default, unless ROS_AUTOMATIC_DISCOVERY_RANGE is set), subnet, off or system_default.")] = None,
     user_id: Annotated[Optional[str], typer.Option("--user", "-u", help="The login the bridge acts as (default: $USER); ownership is by user id.")] = None,
@@ -46,9 +47,12 @@ def ros2(
     from user_peer.ros2.trust import boundary_lines
     from user_peer.ros2.trust import discovery as discovery_range
 
+    from user_peer.ros2.topic_map import load_topic_map
+
     extra = ros_args(list(ctx.args))
     try:
         found = discovery_range(os.environ, discovery)
+        mapped = load_topic_map(topic_map) if topic_map else None  # TopicMapError: a ValueError saying what is wrong
     except ValueError as exc:
         raise UserError(str(exc)) from None
 
@@ -66,7 +70,9 @@ def ros2(
         rclpy.init(args=["robofabric", *extra])
         node = rclpy.create_node("robofabric_" + "".join(c if c.isalnum() else "_" for c in w.user))
         bridge = Ros2Bridge(w, node, namespace=namespace, trace=trace is not None, drive=drive or (),
-                            stamped_cmd_vel=cmd_vel_stamped, goal_map=goal_map)
+                            stamped_cmd_vel=cmd_vel_stamped, goal_map=goal_map, topic_map=mapped)
+        if mapped is not None:
+            print(f"topic map {topic_map}: {mapped.summary()}", flush=True)
         for line in boundary_lines(w.user, drive or (), os.environ.get("ROS_DOMAIN_ID", "0"), found):
             print(line, flush=True)
         # what the start built (rclpy's, zenoh's, numpy's ~80,000 objects) lives as long as the bridge: frozen out
