@@ -61,6 +61,7 @@ def main() -> None:
                                  lambda m, r=rid: write(topic="robot_description", robot=r, urdf=m.data), latched)
         node.create_subscription(JointState, under(f"{rid}/joint_states"),
                                  lambda m, r=rid: write(topic="joint_states", robot=r, frame=m.header.frame_id, name=list(m.name),
+                                                        stamp=m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec,
                                                         position=list(m.position)), reliable)
     for topic in args.clocks.split(","):
         node.create_subscription(Clock, topic, lambda m, t=topic: write(

@@ -183,7 +183,9 @@ class Ros2Bridge:
         self.models = ModelsOut(node, namespace)  # /NS/ROBOT/robot_description, latched
         self.ranges = RangesOut(node, namespace, self.prefix)  # /NS/ROBOT/sonar_I, a Range per transducer
         self.owners = OwnersOut(node, namespace)  # /NS/ROBOT/owner, latched
-        self.trajectories = TrajectoryPlayer()  # joint_trajectory's points sent at their times
+        # joint_trajectory's points sent at their times, in the sim's time (/clock's): a sim slower than the wall
+        # clock (a loaded machine) or paused stretches a trajectory as it does a ROS controller's with use_sim_time
+        self.trajectories = TrajectoryPlayer(clock=lambda: self._clock_ns / 1e9)
         self.goals = GoalsIn(node, namespace, RELIABLE, self._check_owner, self._refuse, goal_map)  # goal_pose
         w = world.name
         fab = world.fabric

@@ -7,7 +7,10 @@ trajectory's position, interpolated linearly between its points, every ``PERIOD_
 until the last point's time, then the last point. A target 20 ms ahead is one the controller reaches within the
 tick, so the arm follows the points at their times (as long as they ask for no more than its joint speed: the
 sim clamps a faster one, and the arm arrives late). A new trajectory for the arm replaces the one it plays, as
-a ROS joint trajectory controller does. Timing is the bridge's wall clock (the sim runs in real time).
+a ROS joint trajectory controller does. Timing is the clock the player is given: the bridge gives it the sim's
+time (what /clock carries), as a ROS controller with ``use_sim_time`` follows /clock, so a sim slower than the
+wall clock (a loaded machine) or paused stretches the trajectory instead of cutting its corners; the thread wakes
+every ``PERIOD_S`` of wall clock to send the target for the sim's now.
 
 Pure parts (:func:`timed_points`, :func:`sample`) apart from the player's thread (:class:`TrajectoryPlayer`).
 """
