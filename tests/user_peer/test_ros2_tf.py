@@ -10,6 +10,7 @@ import importlib.util
 from dataclasses import dataclass, field
 
 import numpy as np
+import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
