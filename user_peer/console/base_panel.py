@@ -1,5 +1,5 @@
 """The base panel of a page: arrow keys to drive (a deadman the page refreshes), Stop, Build map, the goal
-clicked on the view, Hybrid A* or OMPL, Plan, Follow, the distance to the goal."""
+clicked on the view or typed in metres (:mod:`.goal`), Hybrid A* or OMPL, Plan, Follow, the distance to the goal."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ from nicegui.events import GenericEventArguments, MouseEventArguments
 from fabric import keys
 from fabric.text import one_line
 from user_peer.console.drive import Driver
+from user_peer.console.goal import typed_goal
 from user_peer.errors import FabricUserError
 
 if TYPE_CHECKING:
@@ -58,7 +59,14 @@ class BasePanel:
                 self.reverse = ui.checkbox("may reverse", value=False)  # the plan may drive backwards (issue 44)
                 plan = ui.button("Plan", on_click=self._plan)
                 follow = ui.button("Follow", on_click=self._follow)
-            self.goal_label = ui.label("goal: click on the map")
+            with ui.row().classes("items-center no-wrap").style("gap: 0.5rem"):
+                # the goal typed instead of clicked (a student who knows it in metres, or who does not use a mouse)
+                self.goal_x = ui.input("Goal x (m)").props('dense aria-label="Goal x in metres"').style("width: 7rem")
+                self.goal_y = ui.input("Goal y (m)").props('dense aria-label="Goal y in metres"').style("width: 7rem")
+                ui.button("Set goal", on_click=self._typed).props("no-caps")
+                for f in (self.goal_x, self.goal_y):
+                    f.on("keydown.enter", self._typed)
+            self.goal_label = ui.label("goal: click on the map or type x and y")
         self.controls = [stop, build, plan, follow]
 
     # ------------------------------------------------------------------ driving
@@ -111,8 +119,26 @@ class BasePanel:
             self.page.say(f"build map: {grid.cells.shape[1]} x {grid.cells.shape[0]} cells at {grid.resolution:.2f} m")
 
     def clicked(self, e: MouseEventArguments) -> None:
-        """A click on the view: the goal, facing away from the base."""
-        x, y = self.page.frame.world(e.image_x, e.image_y)
+        """A click on the view (on the part of the map it shows): the goal, facing away from the base."""
+        x, y = self.page.view.frame.world(e.image_x, e.image_y)
+        self.goal_x.value, self.goal_y.value = f"{x:.2f}", f"{y:.2f}"
+        self._set_goal(x, y)
+
+    def _typed(self) -> None:
+        """The goal from the x and y fields; a field that does not read as a point of the map says why, on the
+        field and in the page's status line, and the goal stays where it was."""
+        typed = typed_goal(self.goal_x.value or "", self.goal_y.value or "", self.page.view.whole)
+        bad = dict(typed.errors)
+        for name, f in (("x", self.goal_x), ("y", self.goal_y)):
+            f.props["error"] = name in bad
+            f.props["error-message"] = bad.get(name, "")
+            f.update()
+        if typed.xy is None:
+            self.page.say(f"Set goal: {typed.message()}")
+            return
+        self._set_goal(*typed.xy)
+
+    def _set_goal(self, x: float, y: float) -> None:
         xy = self.base.xy_theta
         yaw = math.atan2(y - xy[1], x - xy[0]) if xy else 0.0
         self.goal = (x, y, yaw)
@@ -122,7 +148,7 @@ class BasePanel:
 
     async def _plan(self) -> None:
         if self.goal is None:
-            self.page.say("Plan: click on the map to place the goal first")
+            self.page.say("Plan: place the goal first: click on the map, or type its x and y and press Set goal")
             return
         planner = PLANNERS[self.planner.value]
         # on her own map: a student's Build map makes {user}.map (the class's map is the staff's)
