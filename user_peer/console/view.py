@@ -22,7 +22,7 @@ import numpy as np
 from nicegui import ui
 
 from fabric import keys
-from user_peer.console import follow, state, topview
+from user_peer.console import follow, mapframe, state, topview
 from user_peer.console.feed import PoseFeed, ring_capacity
 
 if TYPE_CHECKING:
@@ -39,7 +39,10 @@ class LiveView:
 
     def __init__(self, page: "ConsolePage", frame: topview.Frame, boxes: list) -> None:
         self.page = page
-        self.frame = frame
+        self.whole = frame  # the whole map
+        self.frame = frame  # the part shown: the whole, or a zoomed part of it (mapframe.zoomed)
+        self.zoom = 1
+        self._grid: Any = None  # the map drawn in the picture now
         self.boxes = boxes
         self.feed: PoseFeed | None = None  # every robot's latest pose, undecoded (decoded at a redraw)
         self._map_seq: int | None = None
@@ -53,6 +56,53 @@ class LiveView:
             self.page.console.pictures.put(self.token, topview.background_png(self.frame, self.boxes)),
             content="", on_mouse=self.mouse, events=["mousedown", "mouseup", "click"], sanitize=False,
         ).classes("full-width").props('aria-label="Live view: click to place the goal, drag the IK target"')
+        with self.image:  # over the map's top-right corner: the map's row keeps its height
+            with ui.row().classes("absolute-top-right q-ma-xs items-center").style("gap: 0.25rem"):
+                self.zoom_label = ui.label("").classes("text-caption").style("background: #ffffffd9; padding: 0 0.25rem")
+                for name, words, fn in (("zoom_in", "Zoom in", self.zoom_in), ("zoom_out", "Zoom out", self.zoom_out),
+                                        ("fit", "Whole map", self.whole_map)):
+                    ui.button(words, on_click=fn).props("dense no-caps unelevated color=white text-color=dark")
+        ui.html(mapframe.legend_html(), sanitize=False)
+        self._show_zoom()
+
+    # ------------------------------------------------------------------ zoom
+
+    def _centre(self) -> tuple[float, float]:
+        """Where a zoom centres: the page's base when its pose is known, else the middle of what is shown."""
+        base = self.page.base
+        xy = base.xy_theta if base is not None and base.id in self.page.world.following.robots else None
+        f = self.frame
+        return (xy[0], xy[1]) if xy else ((f.xmin + f.xmax) / 2, (f.ymin + f.ymax) / 2)
+
+    def set_zoom(self, level: int) -> None:
+        """Show the map ``level`` times larger (one of :data:`.mapframe.ZOOMS`), around the page's base."""
+        self.zoom = level
+        self.frame = mapframe.zoomed(self.whole, level, self._centre())
+        self._picture(self._grid)
+        self._show_zoom()
+        f, base = self.frame, self.page.base
+        around = f"around {base.id}" if level > 1 and base is not None and base.id in self.page.world.following.robots else "whole"
+        self.page.say(f"zoom x{level}: the map {around}, {f.xmax - f.xmin:.1f} m wide")
+        self.page.refresh()
+
+    def zoom_in(self) -> None:
+        self.set_zoom(next((z for z in mapframe.ZOOMS if z > self.zoom), mapframe.ZOOMS[-1]))
+
+    def zoom_out(self) -> None:
+        self.set_zoom(next((z for z in reversed(mapframe.ZOOMS) if z < self.zoom), 1))
+
+    def whole_map(self) -> None:
+        self.set_zoom(1)
+
+    def _show_zoom(self) -> None:
+        f = self.frame
+        self.zoom_label.text = f"zoom x{self.zoom} · {f.xmax - f.xmin:.1f} m wide"
+
+    def _picture(self, grid: Any) -> None:
+        """The still picture of the part shown: her map (if any) and the scene's walls."""
+        self._grid = grid
+        png = topview.background_png(self.frame, self.boxes, (grid.cells, grid.resolution, grid.origin) if grid is not None else None)
+        self.image.set_source(self.page.console.pictures.put(self.token, png))
 
     def follow_poses(self) -> None:
         """Every robot's pose, through the page's own session, kept in zenoh's ring until a redraw takes it."""
@@ -92,11 +142,11 @@ class LiveView:
             or w.latest.get(keys.map_key(w.name, "map"))
         if grid is not None and id(grid) != self._map_seq:
             self._map_seq = id(grid)
-            png = topview.background_png(self.frame, self.boxes, (grid.cells, grid.resolution, grid.origin))
-            self.image.set_source(page.console.pictures.put(self.token, png))
+            self._picture(grid)
         target = page.arm_panel.target if page.arm_panel is not None else None
         poses = self.feed.drain() if self.feed is not None else {}
         self.image.content = state.view_svg(
             w, page.entries, follow.followed(w, page.handles), poses, self.frame, (), base_id=page.base.id if page.base else None,
             selected={page.selected} if page.selected else set(), goal=page.base_panel.goal if page.base_panel else None,
-            target=(float(target[0]), float(target[1])) if target is not None else None, decoder=page.console.decoded)
+            target=(float(target[0]), float(target[1])) if target is not None else None, decoder=page.console.decoded) \
+            + mapframe.scale_bar_svg(self.frame)

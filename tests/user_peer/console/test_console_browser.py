@@ -588,3 +588,76 @@ def test_the_page_has_a_language_headings_named_sliders_with_numbers_and_grey_di
     wait_until(lambda: stop.is_disabled(), timeout=10, what="bob's Stop disabled (he owns nothing)")
     assert "grayscale" in stop.evaluate("(e) => getComputedStyle(e).filter")
     page.context.close()
+
+
+def _scale_px_per_m(page) -> float:
+    """The scale bar's screen pixels per metre (0 while the overlay is between two draws)."""
+    bar = page.locator(".rf-scale-bar").first
+    box = page.locator(".rf-scale-bar-line").first.bounding_box()
+    return box["width"] / float(bar.get_attribute("data-metres")) if box else 0.0
+
+
+def test_a_goal_typed_in_metres_is_placed_a_bad_one_is_refused_in_plain_words_and_the_map_zooms_with_its_scale_bar(browser, klass):
+    """The goal's x and y fields: a word is refused with what to type (the goal stays), numbers place the goal (the
+    scene's goal pointer, read through the Python API, and the ring on the map). The legend names the map's marks;
+    the scale bar's length on the screen matches the map's own scale, and twice it after Zoom in; a click on the
+    zoomed map lands where it is drawn."""
+    from user_peer.console.state import scene_layout
+
+    info = klass.carol.info()
+    goal_obj = klass.carol.object(next(o.id for o in info.objects if o.kind == "goal_pointer"))
+    base = klass.carol.robot("base1")
+    wait_until(lambda: base.xy_theta is not None, timeout=30, what="base1's pose")
+    bx, by, _ = base.xy_theta
+    d = math.hypot(bx, by)
+    ux, uy = (-bx / d, -by / d) if d > 0.1 else (1.0, 0.0)
+    want = (round(bx + 0.6 * ux, 2), round(by + 0.6 * uy, 2))  # 0.6 m from base1 towards the middle
+    dave = open_page(browser, klass)
+    logged_in(dave, klass, "dave")
+    dave.get_by_role("button", name="base1", exact=True).click()
+    gx, gy = dave.get_by_label("Goal x in metres"), dave.get_by_label("Goal y in metres")
+    gx.fill("two")
+    gy.fill(f"{want[1]}")
+    before = goal_obj.pose
+    dave.get_by_role("button", name="Set goal").click()
+    text = wait_message(dave, r"^Set goal: Goal x 'two' is not a number: type metres with a point")
+    assert "Goal y" not in text, text
+    assert goal_obj.pose == before  # nothing moved
+    gx.fill(f"{want[0]}".replace(".", ","))  # a decimal comma reads as the point
+    gx.press("Enter")
+    wait_message(dave, re.escape(f"goal at ({want[0]:.2f}, {want[1]:.2f})"))
+    wait_until(lambda: goal_obj.pose is not None and np.allclose(goal_obj.pose.position[:2], want, atol=1e-6), timeout=10,
+               what=f"the goal pointer at {want} (read through the Python API)", seen=lambda: goal_obj.pose)
+    ring = dave.locator('svg circle[r="6"][stroke="#2f9e44"]')
+    ring.wait_for(state="attached")
+    legend = dave.get_by_label("Map legend")
+    assert legend.is_visible() and "LIDAR hits" in legend.inner_text() and "your robot" in legend.inner_text()
+
+    whole, _ = scene_layout(info)
+    live = dave.get_by_label(re.compile("^Live view"))
+    live.scroll_into_view_if_needed()
+    screen = live.bounding_box()["width"] / (whole.xmax - whole.xmin)  # the map's screen pixels per metre
+    wait_until(lambda: abs(_scale_px_per_m(dave) / screen - 1) <= 0.02, timeout=10, what="the scale bar at the map's scale",
+               seen=lambda: (_scale_px_per_m(dave), screen))
+    shot(dave, "goal-typed")
+    dave.get_by_role("button", name="Zoom in").click()
+    wait_message(dave, r"^zoom x2: the map around base1, ")  # said in the status line, for a screen reader too
+    wait_until(lambda: abs(_scale_px_per_m(dave) / (2 * screen) - 1) <= 0.02, timeout=10, what="the scale bar twice as long a metre",
+               seen=lambda: (_scale_px_per_m(dave), 2 * screen))
+    # the goal ring redrawn on the zoomed map; a click on its middle places the goal there again
+    wait_until(lambda: (b := ring.bounding_box()) is not None and b["width"] > 0, timeout=10, what="the goal ring on the zoomed map")
+    box = live.locator("img").first.bounding_box()
+    cx, cy = _center(dave, 'svg circle[r="6"][stroke="#2f9e44"]')
+    live.locator("img").first.click(position={"x": cx - box["x"], "y": cy - box["y"]})
+    wait_message(dave, r"^goal at ")
+    assert _clicked_near(message(dave), want), message(dave)
+    shot(dave, "map-zoomed")
+    dave.get_by_role("button", name="Whole map").click()
+    dave.get_by_text(re.compile(r"^zoom x1 · ")).wait_for()
+    dave.context.close()
+
+
+def _clicked_near(text: str, want: tuple[float, float]) -> bool:
+    """The page's message names a goal within 3 cm of ``want`` (a screen pixel at zoom x2 is about 1.3 cm here)."""
+    m = re.search(r"goal at \((-?[0-9.]+), (-?[0-9.]+)\)", text)
+    return m is not None and math.dist((float(m.group(1)), float(m.group(2))), want) <= 0.03
