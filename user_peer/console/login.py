@@ -10,17 +10,26 @@ Her pages (two tabs, a reload) share her session: the router knows one session p
 last page goes away its world is not closed at once: her robots are stopped, and the world is
 closed (her robots released to the next in the queue) after ``grace`` seconds, unless she logs in
 again with the same name and password within it and gets the same world back.
+
+A reload keeps her session: a login hands her tab a :class:`Ticket` (a random token the tab keeps in its
+``sessionStorage``, the server only its SHA-256), and the reloaded tab presents it to get her world back
+without her password, with what the tab's event log held and the robot she had selected. A ticket is good
+while her world is held (her pages, then the grace) and ends when she logs out (:meth:`Logins.logout`: her
+robots stop and her session closes at once, in every tab of hers).
 """
 
 from __future__ import annotations
 
+import hashlib
 import hmac
 import math
 import json
 import logging
+import secrets
 import threading
 import time
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 from typing import Callable
 
 from fabric import keys
@@ -28,7 +37,10 @@ from fabric.config import ConfigError, FabricConfig
 from user_peer.console.limits import LoginThrottle
 from user_peer.errors import FabricUserError
 
-__all__ = ["LoginError", "Logins", "login_config"]
+__all__ = ["LoginError", "Logins", "Ticket", "login_config", "LOG_LINES"]
+
+LOG_LINES = 200
+"""The event log lines a tab keeps (its ``ui.log``'s) and gets back after a reload."""
 
 log = logging.getLogger("robofabric.console")
 
@@ -53,12 +65,30 @@ def login_config(world: str, connect: tuple[str, ...], name: str, password: str,
         raise LoginError(str(exc)) from None
 
 
+@dataclass(eq=False)
+class Ticket:
+    """What one tab of hers keeps across a reload: her name, its event log's lines (text, classes), the events
+    and owners it had seen (so nothing is logged twice or lost), the robot she had selected."""
+
+    name: str
+    lines: deque = field(default_factory=lambda: deque(maxlen=LOG_LINES))
+    events_seen: int = 0
+    owners: dict[str, str] = field(default_factory=dict)
+    selected: str | None = None
+    holder: object = None  # the page that writes to it now (the one before a reload lingers a while)
+
+
+def _digest(token: str) -> str:
+    return hashlib.sha256(token.encode()).hexdigest()
+
+
 @dataclass
 class _Held:
     world: object  # user_peer.World
     password: str
     pages: int = 1
     closer: threading.Timer | None = None
+    tickets: dict[str, Ticket] = field(default_factory=dict)  # by the SHA-256 of their tokens
 
 
 class Logins:
@@ -134,11 +164,56 @@ class Logins:
         held.pages += 1
         return held.world
 
-    def leave(self, name: str) -> None:
-        """Her page went away: stop her robots now, close her world after the grace."""
+    def ticket(self, name: str) -> tuple[str, Ticket]:
+        """A new tab's ticket (its token, and what it keeps) for her held world: a reload of that tab presents the
+        token to :meth:`resume`."""
+        token = secrets.token_urlsafe(32)
+        t = Ticket(name)
         with self._lock:
             held = self._held.get(name)
             if held is None:
+                raise LoginError(f"{name} is not logged in")
+            held.tickets[_digest(token)] = t
+        return token, t
+
+    def resume(self, token: str):
+        """Her world and the tab's :class:`Ticket` for a token a reloaded tab presents, counted as one more
+        page of hers (and back within the grace); None when the token is unknown, or her session ended."""
+        d = _digest(token or "")
+        with self._lock:
+            for name, held in self._held.items():
+                t = held.tickets.get(d)
+                if t is not None:
+                    if held.closer is not None:
+                        held.closer.cancel()
+                        held.closer = None
+                        log.info("console: %s is back within the grace (a reload)", name)
+                    held.pages += 1
+                    return held.world, t
+        return None
+
+    def logout(self, name: str, world: object) -> None:
+        """She logged out: her tickets end, her robots stop and her session closes now (every tab of hers)."""
+        with self._lock:
+            held = self._held.get(name)
+            if held is None or held.world is not world:
+                return
+            del self._held[name]
+            if held.closer is not None:
+                held.closer.cancel()
+        try:
+            self._on_leave(world)
+        except Exception:
+            log.exception("console: stopping %s's robots failed", name)
+        log.info("console: %s logged out", name)
+        _close(world)
+
+    def leave(self, name: str, world: object | None = None) -> None:
+        """Her page went away: stop her robots now, close her world after the grace. ``world``: the page's, when
+        it had one (a page of a session she logged out of, then logged in anew, leaves nothing of the new one)."""
+        with self._lock:
+            held = self._held.get(name)
+            if held is None or (world is not None and held.world is not world):
                 return
             held.pages -= 1
             if held.pages > 0:

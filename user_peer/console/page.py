@@ -24,7 +24,8 @@ from user_peer.console.arm_panel import ArmPanel
 from user_peer.console.base_panel import BasePanel
 from user_peer.console.drive import REFRESH_S
 from user_peer.console.layout import Layout
-from user_peer.console.login import LoginError, login_config
+from user_peer.console.login import Ticket
+from user_peer.console.login_card import LoginCard
 from user_peer.console.view import LiveView
 from user_peer.console.view3d import View3D
 from user_peer.console.wording import plain
@@ -78,10 +79,10 @@ def event_line(ev: Any, trusted: bool) -> str:
     return (TRUSTED if trusted else UNVERIFIED) + text
 
 
-def _first_handles(world: Any, user: str) -> tuple[list, dict[str, Any], tuple]:
-    """The world's robots, handles for the arm and the base a page shows first (hers if she owns one, after a
-    reload; else the first of each kind) and the view's layout: all of it waits on the network or reads the
-    scene file, so off the pages' event loop."""
+def _first_handles(world: Any, user: str, selected: str | None = None) -> tuple[list, dict[str, Any], tuple]:
+    """The world's robots, handles for the arm and the base a page shows first (the one she had selected before
+    a reload, else hers if she owns one, else the first of each kind) and the view's layout: all of it waits on
+    the network or reads the scene file, so off the pages' event loop."""
     from user_peer import services
 
     info = world.info()
@@ -90,7 +91,7 @@ def _first_handles(world: Any, user: str) -> tuple[list, dict[str, Any], tuple]:
     handles = {}
     for kind in ("arm", "mobile"):
         mine = [e for e in entries if e.kind == kind and (rec := world.ownership.record(e.id)) is not None and rec.owner == user]
-        first = mine or [e for e in entries if e.kind == kind]
+        first = [e for e in entries if e.kind == kind and e.id == selected] or mine or [e for e in entries if e.kind == kind]
         if first:
             handles[first[0].id] = world.robot(first[0].id)
     return entries, handles, layout
@@ -120,6 +121,8 @@ class ConsolePage:
         self._gone_seen = 0
         self._owners: dict[str, str] = {}
         self._tick: int | None = None  # its place on the console's redraw clock
+        self.ticket: Ticket | None = None  # what the tab keeps across a reload
+        self._ended = False
 
     # ------------------------------------------------------------------ login
 
@@ -127,44 +130,32 @@ class ConsolePage:
         ui.page_title(f"robofabric console · {self.console.world}")
         self.client.page.language = "en-US"  # <html lang>: a screen reader reads the page in English
         self.root = ui.column().classes("full-width")
+        self.card = LoginCard(self)  # the login, a reload's way back in, Log out (user_peer/console/login_card.py)
         with self.root:
-            self._login_form()
+            self.card.build()
 
-    def _login_form(self) -> None:
-        with ui.card().style("margin: 4rem auto 0; width: 24rem"):
-            ui.label(f"robofabric · world {self.console.world}").classes("text-h6")
-            self.name_in = ui.input("Name").props('autofocus aria-label="Name"').classes("full-width")
-            self.pw_in = ui.input("Password", password=True, password_toggle_button=False).props('aria-label="Password"').classes("full-width")
-            ui.label("In an open world (no logins) pick a name and leave the password empty.").classes("text-caption")
-            self.login_btn = ui.button("Log in", on_click=self._login)
-            self.pw_in.on("keydown.enter", self._login)
-            self.login_msg = ui.label("").props('role="alert"').classes("text-negative")
-
-    async def _login(self) -> None:
-        name, password = (self.name_in.value or "").strip(), self.pw_in.value or ""
-        self.login_btn.disable()
-        self.login_msg.text = f"logging in as {name}..."
+    async def enter(self, world: Any, name: str, ticket: Ticket) -> bool:
+        """Her page, once she logged in (or came back with the tab's ticket): the robot she had selected, the
+        tab's event log as it was. False (the reason on the login card) when the world did not answer."""
         try:
-            cfg = login_config(self.console.world, self.console.connect, name, password, base_file=self.console.base_file)
-            world = await run.io_bound(self.console.logins.login, cfg, name, password, self.client.ip)
-        except LoginError as exc:
-            self.login_msg.text = exc.reason
-            self.login_btn.enable()
-            return
-        try:
-            entries, handles, (frame, boxes) = await run.io_bound(_first_handles, world, name)
+            entries, handles, (frame, boxes) = await run.io_bound(_first_handles, world, name, ticket.selected)
         except FabricUserError as exc:  # logged in, but the world did not answer
-            self.console.logins.leave(name)
-            self.login_msg.text = f"Could not join world {self.console.world}: {exc.reason}"
-            self.login_btn.enable()
-            return
-        self.world, self.user, self.entries, self.handles = world, name, entries, handles
+            self.console.logins.leave(name, world)
+            self.card.refused(f"Could not join world {self.console.world}: {exc.reason}")
+            return False
+        self.world, self.user, self.entries, self.handles, self.ticket = world, name, entries, handles, ticket
+        ticket.holder = self  # the tab's log is this page's now (the page before a reload lingers a while)
+        self._events_seen = ticket.events_seen
+        self._owners = ticket.owners = dict(ticket.owners)  # this page's from now on
         self.frame, self.view = frame, LiveView(self, frame, boxes)
         self.client.on_disconnect(self._disconnected)
-        self.client.on_delete(self._gone)
+        self.client.on_delete(self.end)
         self.root.clear()
         with self.root:
             self._main()
+        for text, classes in list(ticket.lines):
+            self.log.push(text, classes=classes)
+        return True
 
     async def _disconnected(self) -> None:
         """The connection dropped (the tab closed, the network went): a held key is let go at once, since its
@@ -172,8 +163,12 @@ class ConsolePage:
         if self.base_panel is not None:
             await self.base_panel.let_go()
 
-    def _gone(self) -> None:
-        """The tab closed (or lost its connection for good): her robots stop, her world closes after the grace."""
+    def end(self) -> None:
+        """The tab closed (or lost its connection for good): her robots stop, her world closes after the grace
+        (a page she logged out of has no world: nothing to leave). Once."""
+        if self._ended:
+            return
+        self._ended = True
         if self._tick is not None:
             self.console.ticker.remove(self._tick)
         if self.base_panel is not None:
@@ -181,7 +176,8 @@ class ConsolePage:
         if self.view is not None:
             self.view.close()
         if self.world is not None:  # stopping her robots waits on the network: never on the pages' event loop
-            threading.Thread(target=self.console.logins.leave, args=(self.user,), name=f"console-leave-{self.user}", daemon=True).start()
+            threading.Thread(target=self.console.logins.leave, args=(self.user, self.world), name=f"console-leave-{self.user}",
+                             daemon=True).start()
 
     # ------------------------------------------------------------------ layout
 
@@ -190,7 +186,8 @@ class ConsolePage:
         info = w.info()
         self.arm = next((r for r in self.handles.values() if r.kind == "arm"), None)
         self.base = next((r for r in self.handles.values() if r.kind == "mobile"), None)
-        self.selected = (self.arm or self.base).id if self.handles else None
+        had = self.ticket.selected if self.ticket is not None else None
+        self.selected = had if had in self.handles else (self.arm or self.base).id if self.handles else None
         self.follow_shown()
         # every robot's pose for the view, kept in zenoh's ring and taken at a redraw: a page of a 20-robot class
         # reads at most 5 bursts a second, not 50 (only the robots it shows are followed in full: follow_shown)
@@ -207,6 +204,7 @@ class ConsolePage:
             ui.label(f"robofabric console · world {w.name} · {w.user}").classes("text-h6").props('role="heading" aria-level="1"')
             if self.console.rerun_url:
                 ui.link("Rerun web view (the rich view)", self.console.rerun_url, new_tab=True)
+            ui.button("Log out", on_click=self.card.logout).props("flat no-caps")
         # a line high even when empty: text appearing in it must not move the view under the mouse
         self.message = ui.label("").props('role="status" aria-live="polite"').classes("text-body1").style("min-height: 1.5rem")
         self._robot_list()
@@ -279,6 +277,8 @@ class ConsolePage:
 
     async def _select(self, rid: str) -> None:
         self.selected = rid
+        if self.ticket is not None:
+            self.ticket.selected = rid
         r = await self._handle(rid)
         if r is not None and r.kind == "arm" and r is not self.arm and self.arm_panel is not None:
             self.arm, self.arm_panel.synced = r, False
@@ -329,7 +329,10 @@ class ConsolePage:
 
     def _refresh_inner(self) -> None:
         w = self.world
-        if w is None or w.closed:
+        if w is None:
+            return
+        if w.closed:  # she logged out in another tab of hers
+            self.say("Your session has ended (you logged out): reload the page to log in again")
             return
         self.follow_shown()
         for r in self.entries:
@@ -337,7 +340,7 @@ class ConsolePage:
             rec = w.ownership.record(r.id)
             if rec is not None and self._owners.get(r.id, rec.owner) != rec.owner:
                 # records come from the robot's authority only (the ownership replica checks): trusted
-                self.log.push(TRUSTED + one_line(f"ownership {r.id}: {self._owners[r.id] or 'nobody'} -> {rec.owner or 'nobody'} (epoch {rec.epoch})"))
+                self._push(TRUSTED + one_line(f"ownership {r.id}: {self._owners[r.id] or 'nobody'} -> {rec.owner or 'nobody'} (epoch {rec.epoch})"))
             if rec is not None:
                 self._owners[r.id] = rec.owner
         self.sel_label.text = f"selected: {self.selected}" if self.selected else "no robot"
@@ -350,19 +353,27 @@ class ConsolePage:
             self.view3d.refresh(self.view.feed.raw if self.view.feed is not None else {})
         self._refresh_events()
 
+    def _push(self, text: str, classes: str | None = None) -> None:
+        """A line of the event log, kept with the tab's ticket too (a reload shows it again)."""
+        self.log.push(text, classes=classes)
+        if self.ticket is not None and self.ticket.holder is self:
+            self.ticket.lines.append((text, classes))
+
     def _refresh_events(self) -> None:
         w = self.world
         mark = w.event_mark()
         if mark != self._events_seen:
             new, self._events_seen = mark - self._events_seen, mark
+            if self.ticket is not None and self.ticket.holder is self:
+                self.ticket.events_seen = mark
             if new > EVENTS_PER_REDRAW:
-                self.log.push(f"{new - EVENTS_PER_REDRAW} more events since the last redraw, not shown (the latest follow)")
+                self._push(f"{new - EVENTS_PER_REDRAW} more events since the last redraw, not shown (the latest follow)")
             for ev, trusted in w.recent_events(min(new, EVENTS_PER_REDRAW)):
-                self.log.push(event_line(ev, trusted), classes=None if trusted else "text-grey-7 text-italic")
+                self._push(event_line(ev, trusted), classes=None if trusted else "text-grey-7 text-italic")
         gone = w.robots_gone
         if len(gone) != self._gone_seen:
             for rid in gone[self._gone_seen:]:
-                self.log.push(one_line(f"robot {rid} gone: its sim peer left"))
+                self._push(one_line(f"robot {rid} gone: its sim peer left"))
             self._gone_seen = len(gone)
         if not w.world_alive:
             self.say(f"WORLD GONE: no sim peer of {w.name!r} (waiting for one)")

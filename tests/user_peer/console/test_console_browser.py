@@ -661,3 +661,37 @@ def _clicked_near(text: str, want: tuple[float, float]) -> bool:
     """The page's message names a goal within 3 cm of ``want`` (a screen pixel at zoom x2 is about 1.3 cm here)."""
     m = re.search(r"goal at \((-?[0-9.]+), (-?[0-9.]+)\)", text)
     return m is not None and math.dist((float(m.group(1)), float(m.group(2))), want) <= 0.03
+
+
+def _events(page) -> str:
+    return page.locator(".nicegui-log").first.inner_text()
+
+
+def test_a_reload_keeps_her_session_her_robot_and_her_event_log_until_she_logs_out(browser, klass):
+    """alice owns base1 and reloads her tab: the page comes back as she left it, without her password (base1
+    selected and hers, read through the Python API, her event log's lines there); Log out ends her session at
+    once (base1 released) and a reload after it stays at the login."""
+    base = klass.carol.robot("base1")
+    alice = open_page(browser, klass)
+    logged_in(alice, klass, "alice")
+    alice.get_by_role("button", name="base1", exact=True).click()
+    alice.get_by_role("button", name="Request").click()
+    wait_message(alice, r"request base1: you own it")
+    line = "ownership base1: nobody -> alice"
+    wait_until(lambda: line in _events(alice), timeout=10, what="the ownership line in her event log", seen=lambda: _events(alice))
+    assert alice.evaluate("() => sessionStorage.getItem('rf-console-session')")  # the tab's ticket
+    alice.reload(timeout=60_000)
+    alice.get_by_text(f"world {klass.world} · alice").wait_for(timeout=60_000)  # nothing typed
+    alice.get_by_text(re.compile(r"^base base1 .* owner: you")).wait_for()  # base1 selected again, still hers
+    assert base.record.owner == "alice"
+    wait_until(lambda: line in _events(alice), timeout=10, what="her event log back after the reload", seen=lambda: _events(alice))
+    shot(alice, "reloaded")
+    alice.get_by_role("button", name="Log out").click()
+    alice.get_by_role("button", name="Log in").wait_for(timeout=60_000)
+    wait_until(lambda: base.record.owner != "alice", timeout=30, what="base1 released at the logout", seen=lambda: base.record)
+    assert alice.evaluate("() => sessionStorage.getItem('rf-console-session')") is None
+    alice.reload(timeout=60_000)
+    alice.get_by_role("button", name="Log in").wait_for(timeout=60_000)
+    alice.get_by_label("Name").fill("alice")  # a page that came back would have left the login card by now
+    assert alice.get_by_text(f"world {klass.world} · alice").count() == 0
+    alice.context.close()
