@@ -19,12 +19,19 @@ $(STAMP_TEST): pyproject.toml | $(PY)
 	$(PY) -m pip install -q -e ".[test]"
 	touch $@ $(STAMP)
 
+# axe-core (npm), which the console's accessibility test runs in Chromium; pinned by tests/a11y/package-lock.json
+AXE := tests/a11y/node_modules/axe-core/axe.min.js
+$(AXE): tests/a11y/package.json tests/a11y/package-lock.json
+	@if command -v npm >/dev/null 2>&1; then (npm ci --prefix tests/a11y --no-audit --no-fund --loglevel=error && touch $@) \
+	  || echo "warning: npm ci of tests/a11y failed: the console's axe-core test will try again, then fail" >&2; \
+	else echo "warning: no npm (apt-get install npm): the console's axe-core test will fail" >&2; fi
+
 install: $(STAMP)
 
 demo: $(STAMP)
 	$(VENV)/bin/robofabric demo --out out/demo
 
-test: $(STAMP_TEST)
+test: $(STAMP_TEST) $(AXE)
 	$(PY) -m pytest -q
 
 # the fast suite: no process-spawning or multi-second tests (those are marked slow)

@@ -695,3 +695,64 @@ def test_a_reload_keeps_her_session_her_robot_and_her_event_log_until_she_logs_o
     alice.get_by_label("Name").fill("alice")  # a page that came back would have left the login card by now
     assert alice.get_by_text(f"world {klass.world} · alice").count() == 0
     alice.context.close()
+
+
+A11Y = Path(__file__).resolve().parents[2] / "a11y"  # tests/a11y: package.json and its lock pin axe-core
+
+
+def axe_js() -> Path:
+    """axe-core's ``axe.min.js``: $RF_AXE_JS, else tests/a11y's (``make test`` runs ``npm ci`` there; a test run
+    without it runs ``npm ci`` itself, from the npm registry or npm's cache), else npm's global one."""
+    import os
+    import subprocess
+
+    def found() -> Path | None:
+        for p in (os.environ.get("RF_AXE_JS"), A11Y / "node_modules/axe-core/axe.min.js"):
+            if p and Path(p).is_file():
+                return Path(p)
+        if shutil.which("npm"):
+            root = subprocess.run(["npm", "root", "-g"], capture_output=True, text=True, timeout=60).stdout.strip()
+            if root and (Path(root) / "axe-core/axe.min.js").is_file():
+                return Path(root) / "axe-core/axe.min.js"
+        return None
+
+    path = found()
+    if path is None and shutil.which("npm"):
+        out = subprocess.run(["npm", "ci", "--prefix", str(A11Y), "--no-audit", "--no-fund", "--loglevel=error"],
+                             capture_output=True, text=True, timeout=300)
+        path = found()
+        assert path is not None, f"npm ci in {A11Y} did not install axe-core: {out.stderr[-2000:]}"
+    assert path is not None, "axe-core is not installed and there is no npm to install it (apt-get install npm; make test)"
+    return path
+
+
+AXE_RUN = """async () => {
+  const r = await axe.run(document, {resultTypes: ['violations']});
+  return r.violations.map((v) => ({id: v.id, impact: v.impact, help: v.help,
+                                   nodes: v.nodes.slice(0, 5).map((n) => n.target.join(' ') + ': ' + n.failureSummary)}));
+}"""
+
+
+def axe_violations(page) -> list[dict]:
+    """axe-core's serious and critical violations of the page as it is now (every rule axe runs by default)."""
+    page.add_script_tag(content=axe_js().read_text(encoding="utf-8"))  # inline: the page asks no other host
+    return [v for v in page.evaluate(AXE_RUN) if v["impact"] in ("serious", "critical")]
+
+
+def test_axe_core_finds_no_serious_or_critical_violation_on_the_login_card_and_the_students_page(browser, klass):
+    """axe-core (npm) in Chromium: the login card, then bob's page with the arm selected (its panel and the 3D
+    view, the base's map) and with base1 selected (the base panel, the goal fields, the map's zoom and legend)."""
+    page = open_page(browser, klass)
+    page.get_by_role("button", name="Log in").wait_for()
+    found = {"login": axe_violations(page)}
+    logged_in(page, klass, "bob")
+    page.get_by_role("button", name="arm1", exact=True).click()
+    page.get_by_role("slider", name=re.compile("^J1")).wait_for()
+    page.locator(".rf-scale-bar").first.wait_for(state="attached")
+    found["arm selected"] = axe_violations(page)
+    page.get_by_role("button", name="base1", exact=True).click()
+    page.get_by_role("button", name="Set goal").wait_for()
+    found["base selected"] = axe_violations(page)
+    shot(page, "axe")
+    page.context.close()
+    assert not any(found.values()), json.dumps(found, indent=1)
