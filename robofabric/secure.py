@@ -28,6 +28,7 @@ rules of their own.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import ipaddress
 import json
@@ -40,6 +41,7 @@ from typing import Iterable
 
 from fabric.config import MAX_MESSAGE_SIZE
 from fabric.keys import BY, validate_id
+from robofabric.login_cards import PEOPLE, console_url, typable_password, write_cards
 
 __all__ = ["Identity", "ROLES", "SecureInit", "access_control", "router_config", "client_config", "init", "parse_names"]
 
@@ -342,6 +344,7 @@ class SecureInit:
     clients: dict[str, Path]
     created: tuple[str, ...]
     kept: tuple[str, ...]
+    cards: dict[str, Path] = dataclasses.field(default_factory=dict)  # each person's login card (a password class)
 
 
 def _host_of(endpoint: str) -> str:
@@ -408,7 +411,8 @@ def _passwords(cred: Path, identities: list[Identity], created: list[str], kept:
         if ident.name in passwords:
             kept.append(ident.name)
         else:
-            passwords[ident.name] = secrets.token_urlsafe(18)
+            # a person types hers into the console's login (robofabric/login_cards.py); a peer's is a long token
+            passwords[ident.name] = typable_password() if ident.role in PEOPLE else secrets.token_urlsafe(18)
             created.append(ident.name)
     _write_secret(cred, "".join(f"{n}:{p}\n" for n, p in passwords.items()))
     return passwords
@@ -427,6 +431,7 @@ def init(
     connect: list[str] | None = None,
     days: int = 365,
     console_tls: bool = False,
+    console: str | None = None,
 ) -> SecureInit:
     """Write the class's configs under ``d``; existing passwords, CA and certificates are kept.
 
@@ -434,7 +439,8 @@ def init(
     find it (default the listen address, ``127.0.0.1`` for an unspecified one). With ``tls`` the
     router's certificate names every host of ``connect`` so clients can check it. ``instructors``: user
     logins that may also change the class's map (docs/security.md). ``console_tls``: a password class's console
-    certificate too (a class CA and ``tls/web/console.pem``; ``tls`` makes it anyway)."""
+    certificate too (a class CA and ``tls/web/console.pem``; ``tls`` makes it anyway). ``console``: the console's
+    URL on the login cards (default :func:`~robofabric.login_cards.console_url`)."""
     d = Path(d).resolve()
     proto = "tls" if tls else "tcp"
     listen = list(listen or [f"{proto}/0.0.0.0:7447"])
@@ -471,7 +477,9 @@ def init(
         cfg = client_config(d, ident, connect=connect, password=passwords.get(ident.name), tls=tls)
         _write_secret(path, _json5(cfg, f"robofabric identity {ident.name} (role: {ident.role})"))
         clients[ident.name] = path
-    return SecureInit(router, clients, tuple(created), tuple(kept))
+    url = console or console_url(connect, https=console_tls or tls)
+    cards = write_cards(d, ((i.name, i.role) for i in known.values() if i.role in PEOPLE), passwords, url)
+    return SecureInit(router, clients, tuple(created), tuple(kept), cards)
 
 
 _ROLE_LINE = re.compile(r"^// robofabric identity (\S+) \(role: (\w+)\)")

@@ -11,6 +11,7 @@ import zenoh
 
 from fabric.config import ConfigError, FabricConfig
 from fabric.config import certificate_common_name
+from robofabric.login_cards import TYPABLE, is_typable, typable_password
 from robofabric.secure import Identity, access_control, init, read_credentials
 from robofabric.testing import robofabric_cmd
 
@@ -33,7 +34,9 @@ def test_init_writes_router_and_one_config_per_identity_private_and_loadable(tmp
             zenoh.Config.from_file(str(path))  # zenoh itself accepts it
     assert _mode(d) == 0o700
     creds = read_credentials(d / "credentials.txt")
-    assert set(creds) == set(out.clients) and len(set(creds.values())) == 5 and all(len(p) >= 20 for p in creds.values())
+    assert set(creds) == set(out.clients) and len(set(creds.values())) == 5
+    assert all(len(creds[p]) >= 20 for p in ("sim", "compute", "viewer"))  # peers: long random tokens
+    assert all(is_typable(creds[p]) and len(creds[p]) == 14 for p in ("alice", "bob"))  # people type theirs
     cfg = FabricConfig(config_file=str(out.clients["alice"]))
     assert cfg.identity() == "alice" and cfg.endpoints()[0] == ("tcp/127.0.0.1:7999",)
     assert FabricConfig(config_file=str(out.router), profile="embedded").endpoints()[1] == ("tcp/127.0.0.1:7999",)
@@ -228,3 +231,33 @@ def test_only_the_instructor_and_sim_logins_may_ask_for_a_move_each_in_its_own_n
     assert "rf/*/srv/state" in rules["ask"]["key_exprs"]  # which is why a sim refuses a move asked there
     servers = [r["id"] for r in acl["rules"] if any("/srv/move" in ke for ke in r["key_exprs"]) and "reply" in r["messages"]]
     assert servers == ["sim-a-serve"] and "rf/*/srv/move/*/by/*" in rules["sim-a-serve"]["key_exprs"]
+
+
+def test_a_password_class_writes_each_person_a_private_login_card_with_the_password_of_her_config(tmp_path):
+    d = tmp_path / "class"
+    out = init(d, users=["alice", "bob"], instructors=["carol"], listen=["tcp/0.0.0.0:7447"], connect=["tcp/10.0.0.5:7447"])
+    assert set(out.cards) == {"alice", "bob", "carol"}  # people only: no card for the sim, compute or viewer
+    creds = read_credentials(d / "credentials.txt")
+    for name, card in out.cards.items():
+        text = card.read_text()
+        assert _mode(card) == 0o600 and f"  Name      {name}\n" in text and "  Console   http://10.0.0.5:8080/\n" in text
+        password = text.split("  Password  ")[1].split("\n")[0]
+        assert password == creds[name]  # what the router takes: the password of her NAME.json5
+        assert json.loads(zenoh.Config.from_file(str(out.clients[name])).get_json("transport/auth/usrpwd/password")) == password
+    html = (d / "cards" / "cards.html").read_text()
+    assert _mode(d / "cards") == 0o700 and _mode(d / "cards" / "cards.html") == 0o600
+    assert html.count('<section class="card">') == 3 and "(instructor)" in html and creds["bob"] in html
+    again = init(d, users=["alice"], console="https://console.example:8443/")  # a second run: the same passwords
+    assert again.cards["alice"].read_text().count(creds["alice"]) == 1 and "https://console.example:8443/" in again.cards["bob"].read_text()
+
+
+def test_a_tls_class_has_no_passwords_and_no_cards(tmp_path):
+    out = init(tmp_path / "t", users=["alice"], tls=True, listen=["tls/127.0.0.1:7448"])
+    assert out.cards == {} and not (tmp_path / "t" / "cards").exists()
+
+
+def test_a_typable_password_is_three_groups_of_four_without_look_alikes():
+    pw = {typable_password() for _ in range(200)}
+    assert len(pw) == 200 and all(is_typable(p) and len(p) == 14 and p.count("-") == 2 for p in pw)
+    assert not set("0o1li") & set(TYPABLE) and len(TYPABLE) ** 12 > 2 ** 59
+    assert not is_typable("Zw7qQY8izxNoIqTkJC4XKnvO") and not is_typable("ab-cd")

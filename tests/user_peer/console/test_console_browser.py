@@ -49,6 +49,7 @@ class Klass:
     carol: object  # user_peer.World of the instructor: reads what the pages did
     procs: ProcessGroup
     console: object
+    cards: dict  # each person's login card (robofabric/login_cards.py)
 
 
 def _password(path: Path) -> str:
@@ -63,7 +64,8 @@ def klass(tmp_path_factory):
     world = f"c{uuid.uuid4().hex[:8]}"
     ep = f"tcp/127.0.0.1:{free_port()}"
     d = tmp / "class"
-    files = init(d, users=["alice", "bob", "dave"], instructors=["carol"], listen=[ep]).clients
+    made = init(d, users=["alice", "bob", "dave"], instructors=["carol"], listen=[ep])
+    files = made.clients
     with ProcessGroup(tmp) as procs:
         router = procs.start(robofabric_cmd("router", "--zenoh-config", str(d / "router.json5")), name="router")
         wait_until(lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router))
@@ -78,7 +80,8 @@ def klass(tmp_path_factory):
         carol = user_peer.connect(world=world, zenoh_config=str(files["carol"]), join_timeout=120)
         try:
             wait_until(lambda: carol.fabric.live_peers("compute"), timeout=120, what="the compute peer", seen=lambda: procs.output(sim)[-2000:])
-            yield Klass(world, url, f"127.0.0.1:{web}", {n: _password(files[n]) for n in ("alice", "bob", "dave")}, carol, procs, console)
+            yield Klass(world, url, f"127.0.0.1:{web}", {n: _password(files[n]) for n in ("alice", "bob", "dave")}, carol, procs, console,
+                        made.cards)
         finally:
             carol.close()
 
@@ -668,12 +671,14 @@ def _events(page) -> str:
 
 
 def test_a_reload_keeps_her_session_her_robot_and_her_event_log_until_she_logs_out(browser, klass):
-    """alice owns base1 and reloads her tab: the page comes back as she left it, without her password (base1
+    """alice logs in with her login card's typable password (``secure init``) and owns base1 and reloads her tab: the page comes back as she left it, without her password (base1
     selected and hers, read through the Python API, her event log's lines there); Log out ends her session at
     once (base1 released) and a reload after it stays at the login."""
     base = klass.carol.robot("base1")
     alice = open_page(browser, klass)
-    logged_in(alice, klass, "alice")
+    card = klass.cards["alice"].read_text()  # she logs in with what her login card says
+    log_in(alice, "alice", re.search(r"  Password  (\S+)\n", card).group(1))
+    alice.get_by_text(f"world {klass.world} · alice").wait_for(timeout=60_000)
     alice.get_by_role("button", name="base1", exact=True).click()
     alice.get_by_role("button", name="Request").click()
     wait_message(alice, r"request base1: you own it")
