@@ -100,10 +100,31 @@ def browser():
 
 
 REQUESTS: list[str] = []  # every request any page of this module made
+CONTEXTS: list = []  # the browser contexts the running test opened
+
+
+@pytest.fixture(autouse=True)
+def _pages_close_after_each_test():
+    """Every page a test opened closes when it ends, passed or failed: a page left open by a failed test drew on
+    in the browser's one GPU process (its 3D view at 10 fps in software GL) and starved the next tests' pages, so
+    on a loaded box one failure became a row of them (playwright waiting for a Log in button to be 'stable')."""
+    yield
+    while CONTEXTS:
+        ctx = CONTEXTS.pop()
+        try:
+            ctx.close()
+        except Exception:  # closed by the test already, or the browser went
+            pass
+
+
+def new_context(browser, **kw):
+    ctx = browser.new_context(**kw)
+    CONTEXTS.append(ctx)
+    return ctx
 
 
 def open_page(browser, klass: Klass):
-    page = browser.new_context(viewport=VIEWPORT).new_page()
+    page = new_context(browser, viewport=VIEWPORT).new_page()
     page.on("request", lambda r: REQUESTS.append(r.url))
     page.set_default_timeout(30_000)
     page.goto(klass.url, timeout=60_000)
@@ -552,7 +573,7 @@ def _in_viewport(box: dict | None, vp: dict) -> bool:
 def test_the_selected_robots_panel_sits_beside_its_view_and_fits_1024x700_and_stacks_at_800x600(browser, klass):
     """Only the selected robot's panel shows (bob selected base1: no arm panel); at 1024x700 the map and Plan are
     both on the screen without scrolling, side by side; at 800x600 the base panel and the map stack."""
-    page = browser.new_context(viewport={"width": 1024, "height": 700}).new_page()
+    page = new_context(browser, viewport={"width": 1024, "height": 700}).new_page()
     page.set_default_timeout(30_000)
     page.goto(klass.url, timeout=60_000)
     logged_in(page, klass, "bob")
