@@ -61,8 +61,8 @@ LEGEND: tuple[tuple[str, str], ...] = (
     (f'<polygon points="2,12 14,7 2,2" fill="{COLORS["other"]}"/>', "someone else's"),
     (f'<polygon points="2,12 14,7 2,2" fill="{COLORS["free"]}"/>', "free robot"),
     ('<polygon points="2,12 14,7 2,2" fill="#ffffff" stroke="#212529" stroke-width="2"/>', "selected"),
-    ('<circle cx="7" cy="7" r="5" fill="#f59f00" stroke="#212529"/>', "IK target"),
-    ('<circle cx="7" cy="7" r="5" fill="none" stroke="#2f9e44" stroke-width="2.5"/>', "goal"),
+    ('<ellipse cx="7" cy="7" rx="5" ry="5" fill="#f59f00" stroke="#212529"/>', "IK target"),
+    ('<ellipse cx="7" cy="7" rx="5" ry="5" fill="none" stroke="#2f9e44" stroke-width="2.5"/>', "goal"),
     ('<line x1="1" y1="7" x2="13" y2="7" stroke="#2f9e44" stroke-width="2"/>', "path"),
     ('<rect x="3" y="3" width="3" height="3" fill="#f03e3e"/><rect x="8" y="8" width="3" height="3" fill="#f03e3e"/>', "LIDAR hits"),
     ('<rect x="1" y="3" width="12" height="8" fill="#ced4da" stroke="#adb5bd"/>', "walls, shelves"),
@@ -70,7 +70,8 @@ LEGEND: tuple[tuple[str, str], ...] = (
     ('<rect x="1" y="3" width="12" height="8" fill="#ffffff" stroke="#868e96"/>', "map: free"),
     ('<rect x="1" y="3" width="12" height="8" fill="#e6e6e6" stroke="#868e96"/>', "map: unknown"),
 )
-"""What each mark of the map means (the colours of :mod:`.topview`): a swatch and its words."""
+"""What each mark of the map means (the colours of :mod:`.topview`): a swatch and its words. Dots are ellipses, not
+circles: a script (or a test) that finds the map's target or goal by its circle finds the map's, not the legend's."""
 
 
 def legend_html() -> str:

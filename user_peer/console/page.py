@@ -49,16 +49,26 @@ for (const type of ['keydown', 'keyup']) document.addEventListener(type, (e) => 
   emitEvent('rf_key', {key: e.key, down: type === 'keydown', t: Date.now()});
 });
 window.addEventListener('blur', () => emitEvent('rf_blur'));
-const rfAlt = () => document.querySelectorAll('.rf-map img:not([alt])').forEach((i) => i.setAttribute('alt', 'Map of the world from above'));
-new MutationObserver(rfAlt).observe(document.body, {childList: true, subtree: true});
-rfAlt();
 """
 """The page's keys: a key pressed while typing in a field or on a focused slider is that control's, never the
 base's (the terminal UI turned the base when ← was meant for a slider); a release always counts, so a key
 let go anywhere stops the base; the page losing focus stops it too. NiceGUI's ``ui.keyboard`` ignores by tag
 name only, and every Quasar control is a ``div``. ``t`` is the press's time in the browser's clock, for the
-console's health line (key to server). The map's picture gets its ``alt`` text here (NiceGUI's interactive image
-has no way to give its ``img`` one, and Vue may make a new ``img`` when the map's row moves)."""
+console's health line (key to server)."""
+
+A11Y_JS = """<script>
+document.addEventListener('DOMContentLoaded', () => {
+  const names = () => {
+    document.querySelectorAll('.rf-map img:not([alt])').forEach((i) => i.setAttribute('alt', 'Map of the world from above'));
+    document.querySelectorAll('.q-loading-bar:not([aria-label])').forEach((b) => b.setAttribute('aria-label', 'Loading'));
+  };
+  new MutationObserver(names).observe(document.body, {childList: true, subtree: true});
+  names();
+});
+</script>"""
+"""Names NiceGUI leaves out, on every page from its load (axe-core's image-alt and aria-progressbar-name): the map's
+picture (NiceGUI's interactive image gives its ``img`` no ``alt``, and Vue may make a new one when the map's row
+moves) and Quasar's loading bar (a progressbar, shown while the page waits on the server)."""
 
 PRIMARY = "#1864ab"
 """The page's main colour: white on it, and it on white, reach 6:1 (axe-core's colour-contrast rule asks 4.5:1;
@@ -138,6 +148,7 @@ class ConsolePage:
         ui.page_title(f"robofabric console · {self.console.world}")
         self.client.page.language = "en-US"  # <html lang>: a screen reader reads the page in English
         ui.colors(primary=PRIMARY)
+        ui.add_head_html(A11Y_JS)
         self.root = ui.column().classes("full-width")
         self.card = LoginCard(self)  # the login, a reload's way back in, Log out (user_peer/console/login_card.py)
         with self.root:
