@@ -59,8 +59,7 @@ class LiveView:
         with self.image:  # over the map's top-right corner: the map's row keeps its height
             with ui.row().classes("absolute-top-right q-ma-xs items-center").style("gap: 0.25rem"):
                 self.zoom_label = ui.label("").classes("text-caption").style("background: #ffffffd9; padding: 0 0.25rem")
-                for name, words, fn in (("zoom_in", "Zoom in", self.zoom_in), ("zoom_out", "Zoom out", self.zoom_out),
-                                        ("fit", "Whole map", self.whole_map)):
+                for words, fn in (("Zoom in", self.zoom_in), ("Zoom out", self.zoom_out), ("Whole map", self.whole_map)):
                     ui.button(words, on_click=fn).props("dense no-caps unelevated color=white text-color=dark")
         ui.html(mapframe.legend_html(), sanitize=False)
         self._show_zoom()
