@@ -10,9 +10,10 @@ import pytest
 
 import fabric.plant
 from fabric import keys
-from fabric.interfaces import Command, OwnReply, OwnRequest, Stop
+from fabric.interfaces import Command, NoReply, OwnReply, OwnRequest, Stop
 from ownership import Authority
 from ownership import state as st
+from robofabric.testing import wait_until
 
 
 def _still_take_over(s: st.OwnState) -> tuple[int, int]:
@@ -56,7 +57,14 @@ def test_the_authority_admits_a_stale_command_only_when_built_with_that_defect(c
     auth = Authority(connect("sim", "host"), {"arm": "exclusive"}, plant=plant).start()
     alice = connect("user", "alice")
     try:
-        reply = alice.rpc.call(keys.own_request(world, "arm", "alice"), OwnRequest("request", "alice"), expected=OwnReply)
+
+        def ask() -> OwnReply | None:  # the authority's queryable reaches the router in its own time
+            try:
+                return alice.rpc.call(keys.own_request(world, "arm", "alice"), OwnRequest("request", "alice"), expected=OwnReply)
+            except NoReply:
+                return None
+
+        reply = wait_until(ask, timeout=20, what="the authority's answer")
         assert reply.outcome == "granted"
         epoch = reply.record.epoch
         assert auth.admit("arm", Command("alice", epoch, Stop())) is None
