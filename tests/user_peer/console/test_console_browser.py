@@ -29,6 +29,8 @@ from robofabric.secure import init
 from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 from user_peer.console.server import RECONNECT_S
 
+from tests.user_peer.console.scene3d_probe import SCENE3D_JS
+
 pytestmark = pytest.mark.slow
 
 CHROMIUM = "/usr/bin/chromium"
@@ -477,25 +479,7 @@ def test_the_pages_ask_no_host_but_the_console_server(browser, klass):
     assert not elsewhere, f"the pages asked other hosts: {elsewhere}"
 
 
-SCENE3D_JS = """() => {
-  const s = getElement(document.querySelector('.rf-scene3d'));
-  if (!s || !s.scene) return null;
-  const m = s.scene.getObjectByName('ik-target');
-  const r = s.renderer.domElement.getBoundingClientRect();
-  const ends = [];
-  s.scene.traverse((c) => {
-    if (c.geometry && c.geometry.type === 'CylinderGeometry') {
-      for (const sign of [-1, 1]) {
-        const e = c.up.clone().set(0, sign * c.scale.y / 2, 0).applyQuaternion(c.quaternion).add(c.position);
-        ends.push([e.x, e.y, e.z]);
-      }
-    }
-  });
-  if (!m || !m.visible) return {ends};
-  const v = m.position.clone().project(s.camera);
-  return {ends, target: [m.position.x, m.position.y, m.position.z],
-          screen: [r.left + (v.x + 1) / 2 * r.width, r.top + (1 - v.y) / 2 * r.height]};
-}"""
+
 
 
 def test_the_3d_view_draws_the_arm_and_a_drag_in_it_moves_the_ik_target_that_apply_ik_reaches(browser, klass):

@@ -17,6 +17,8 @@ import robots
 from robofabric.testing import example_robot_urdf, free_port, robofabric_cmd, wait_until
 from robots.urdf_import import install
 
+from tests.user_peer.console.scene3d_probe import SCENE3D_JS
+
 pytestmark = pytest.mark.slow
 
 CHROMIUM = "/usr/bin/chromium"
@@ -24,27 +26,6 @@ CHROMIUM_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no
 OUT = Path(__file__).resolve().parents[3] / "out"
 PANDA = "panda_description/urdf/panda.urdf"
 PLACE = (1.5, -1.5)
-
-# the 3D view's drawn links (cylinders: both ends) and the IK target's sphere, with its place on the screen
-SCENE3D_JS = """() => {
-  const s = getElement(document.querySelector('.rf-scene3d'));
-  if (!s || !s.scene) return null;
-  const m = s.scene.getObjectByName('ik-target');
-  const r = s.renderer.domElement.getBoundingClientRect();
-  const ends = [];
-  s.scene.traverse((c) => {
-    if (c.geometry && c.geometry.type === 'CylinderGeometry') {
-      for (const sign of [-1, 1]) {
-        const e = c.up.clone().set(0, sign * c.scale.y / 2, 0).applyQuaternion(c.quaternion).add(c.position);
-        ends.push([e.x, e.y, e.z]);
-      }
-    }
-  });
-  if (!m) return {ends: ends, target: null};
-  const p = m.position.clone().project(s.camera);
-  return {ends: ends, target: [m.position.x, m.position.y, m.position.z],
-          screen: [r.left + (p.x + 1) / 2 * r.width, r.top + (1 - p.y) / 2 * r.height]};
-}"""
 
 
 def _message(page) -> str:

@@ -1,0 +1,22 @@
+"""What the console's 3D view drew, read from the page (three.js through NiceGUI's ``getElement``), for the
+browser tests: each link's cylinder ends in the world, the IK target's sphere and its place on the screen."""
+
+SCENE3D_JS = """() => {
+  const s = getElement(document.querySelector('.rf-scene3d'));
+  if (!s || !s.scene) return null;
+  const m = s.scene.getObjectByName('ik-target');
+  const r = s.renderer.domElement.getBoundingClientRect();
+  const ends = [];
+  s.scene.traverse((c) => {
+    if (c.geometry && c.geometry.type === 'CylinderGeometry') {
+      for (const sign of [-1, 1]) {
+        const e = c.up.clone().set(0, sign * c.scale.y / 2, 0).applyQuaternion(c.quaternion).add(c.position);
+        ends.push([e.x, e.y, e.z]);
+      }
+    }
+  });
+  if (!m || !m.visible) return {ends};
+  const v = m.position.clone().project(s.camera);
+  return {ends, target: [m.position.x, m.position.y, m.position.z],
+          screen: [r.left + (v.x + 1) / 2 * r.width, r.top + (1 - v.y) / 2 * r.height]};
+}"""
