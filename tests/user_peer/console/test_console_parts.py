@@ -205,14 +205,6 @@ def _opener(made: list):
     return open_world
 
 
-@pytest.fixture
-def worlds():
-    made: list = []
-    yield made
-    for w in made:
-        w.close()
-
-
 def test_a_page_that_goes_stops_her_robots_and_her_world_closes_after_the_grace(world, router, worlds):
     stopped: list = []
     logins = Logins(_opener(worlds), grace=0.2, on_leave=stopped.append)

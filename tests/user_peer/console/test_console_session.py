@@ -8,14 +8,6 @@ from robofabric.testing import wait_until
 from user_peer.console.login import LOG_LINES, LoginError, Logins, login_config
 
 
-@pytest.fixture
-def worlds():
-    made: list = []
-    yield made
-    for w in made:
-        w.close()
-
-
 def _logins(worlds: list, grace: float, stopped: list) -> Logins:
     from user_peer.world import World
 
