@@ -56,8 +56,11 @@ def goal_of(index: int, start: tuple[float, float, float], n: int) -> tuple[floa
 
 # ---------------------------------------------------------------------- a student (child process)
 
-def student(world: str, endpoint: str, index: int, n: int, out: str) -> None:
-    """Join, own baseI, map by turning, build her map, plan across the room, follow; results to ``out`` (JSON)."""
+def student(world: str, endpoint: str, index: int, n: int, out: str, reverse_when_asked: bool = True) -> None:
+    """Join, own baseI, map by turning, build her map, plan across the room, follow; results to ``out`` (JSON).
+
+    ``reverse_when_asked``: a refusal that asks "allow reversing?" (a forward-only base with no first move forwards,
+    beside another base) is answered as a student does in the console, by ticking "reverse" and planning again."""
     from compute_peer.navigation.robot_cells import Footprint, robot_cells
     from fabric import keys
     from fabric.interfaces import EventKind, Pose
@@ -88,12 +91,16 @@ def student(world: str, endpoint: str, index: int, n: int, out: str) -> None:
             res["robots_seen"] = len(at_build)
             my_map = keys.user_map("map", w.user)
             deadline = time.monotonic() + 150.0
+            direction = "default"
             for _ in range(ATTEMPTS):
                 t = time.perf_counter()
                 try:
-                    path = base.plan_to(*goal, map_name=my_map)
+                    path = base.plan_to(*goal, map_name=my_map, direction=direction)
                 except Exception as exc:  # refused: counted, and she tries again after a moment
                     res["errors"].append(f"plan: {exc}"[:300])
+                    if reverse_when_asked and "allow reversing?" in str(exc) and direction != "both":
+                        direction = "both"
+                        res["notes"].append(f"base{index}: planning again with reversing allowed")
                     time.sleep(2.0)
                     continue
                 res["plans"].append(time.perf_counter() - t)
@@ -133,7 +140,7 @@ def student(world: str, endpoint: str, index: int, n: int, out: str) -> None:
 
 # ---------------------------------------------------------------------- one class
 
-def run_one(n: int, tmp: Path) -> dict[str, Any]:
+def run_one(n: int, tmp: Path, reverse_when_asked: bool = True) -> dict[str, Any]:
     """A class of ``n`` students on a fresh world; the row's figures."""
     from robofabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
     from fabric import keys
@@ -158,7 +165,8 @@ def run_one(n: int, tmp: Path) -> dict[str, Any]:
             wait_until(lambda: len(seen) >= n, timeout=180, what="every base's pose", seen=lambda: procs.output(sim)[-1500:])
             outs = [logs / f"s{i}.json" for i in range(n)]
             t0 = time.monotonic()
-            students = [procs.start([*STUDENT, world, ep, str(i), str(n), str(out)], name=f"s{i}") for i, out in enumerate(outs)]
+            policy = "reverse-when-asked" if reverse_when_asked else "forward-only"
+            students = [procs.start([*STUDENT, world, ep, str(i), str(n), str(out), policy], name=f"s{i}") for i, out in enumerate(outs)]
             wait_until(lambda: all(p.poll() is not None for p in students), timeout=400, interval=0.5, what="every student done",
                        seen=lambda: [procs.output(p)[-300:] for p in students if p.poll() is None][:2])
             seconds = time.monotonic() - t0
@@ -196,6 +204,9 @@ def command(
     bases: Annotated[str, typer.Option("--bases", help="Comma-separated class sizes (each student: one base).")] = "4,8",
     out: TableOut = None,
     logs: Annotated[Optional[Path], typer.Option(help="Keep every process's output and the students' JSON here.")] = None,
+    reverse_when_asked: Annotated[bool, typer.Option(
+        help="A student whose plan is refused with 'allow reversing?' plans again with reversing allowed, as the "
+             "console's reverse box lets her; --no-reverse-when-asked keeps her forwards only.")] = True,
 ) -> None:
     """N students (processes) do Test B at once in the warehouse: reached within 0.1 m, plan time p50/p99, stops for
     something in the way, collisions, and the robot cells left in each student's map."""
@@ -207,12 +218,13 @@ def command(
         raise UserError(f"--bases {bases!r}: expected sizes like 4,8") from None
     if not sizes or min(sizes) < 1 or max(sizes) > 8:
         raise UserError("--bases: each size within 1..8 (a row across the warehouse holds 8)")
-    lines = [f"Command: `robofabric bench class-nav --bases {bases}`",
+    flag = "" if reverse_when_asked else " --no-reverse-when-asked"
+    lines = [f"Command: `robofabric bench class-nav --bases {bases}{flag}`",
              f"Machine: {machine()}; load average at start {os.getloadavg()[0]:.1f}", "", *header()]
     print("\n".join(lines), flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         for n in sizes:
-            r = run_one(n, logs or Path(tmp))
+            r = run_one(n, logs or Path(tmp), reverse_when_asked)
             lines.append(row(r))
             print(lines[-1], flush=True)
             for e in r["errors"] + r["notes"] + r["said"]:
@@ -223,9 +235,9 @@ def command(
 
 def _main(argv: list[str]) -> None:
     if argv and argv[0] == "student":
-        student(argv[1], argv[2], int(argv[3]), int(argv[4]), argv[5])
+        student(argv[1], argv[2], int(argv[3]), int(argv[4]), argv[5], argv[6:7] != ["forward-only"])
     else:
-        raise SystemExit("usage: python -m robofabric.bench.class_nav student WORLD ENDPOINT INDEX N OUT.json")
+        raise SystemExit("usage: python -m robofabric.bench.class_nav student WORLD ENDPOINT INDEX N OUT.json [reverse-when-asked|forward-only]")
 
 
 if __name__ == "__main__":
