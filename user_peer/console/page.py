@@ -61,6 +61,11 @@ document.addEventListener('DOMContentLoaded', () => {
   const names = () => {
     document.querySelectorAll('.rf-map img:not([alt])').forEach((i) => i.setAttribute('alt', 'Map of the world from above'));
     document.querySelectorAll('.q-loading-bar:not([aria-label])').forEach((b) => b.setAttribute('aria-label', 'Loading'));
+    document.querySelectorAll('.q-scrollarea__container:not([tabindex])').forEach((c) => {
+      c.setAttribute('tabindex', '0');
+      c.setAttribute('role', 'region');
+      c.setAttribute('aria-label', c.closest('.nicegui-log') ? 'Event log' : 'Scrollable list');
+    });
   };
   new MutationObserver(names).observe(document.body, {childList: true, subtree: true});
   names();
@@ -68,7 +73,9 @@ document.addEventListener('DOMContentLoaded', () => {
 </script>"""
 """Names NiceGUI leaves out, on every page from its load (axe-core's image-alt and aria-progressbar-name): the map's
 picture (NiceGUI's interactive image gives its ``img`` no ``alt``, and Vue may make a new one when the map's row
-moves) and Quasar's loading bar (a progressbar, shown while the page waits on the server)."""
+moves) and Quasar's loading bar (a progressbar, shown while the page waits on the server); and the keyboard's way
+into a scroll area (axe-core's scrollable-region-focusable, once the event log overflows): ``ui.log``'s
+``q-scroll-area`` holds only text, so its container takes the focus itself, as a named region."""
 
 PRIMARY = "#1864ab"
 """The page's main colour: white on it, and it on white, reach 6:1 (axe-core's colour-contrast rule asks 4.5:1;

@@ -15,7 +15,7 @@ import re
 import shutil
 import time
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -51,7 +51,7 @@ class Klass:
     carol: object  # user_peer.World of the instructor: reads what the pages did
     procs: ProcessGroup
     console: object
-    cards: dict  # each person's login card (robofabric/login_cards.py)
+    cards: dict = field(default_factory=dict)  # each person's login card (robofabric/login_cards.py)
 
 
 def _password(path: Path) -> str:
