@@ -67,7 +67,7 @@ class Arm(Robot):
         cmd = self.send("joints", JointTarget(target, speed_scale, self.world.fabric.header(key)))
         if not wait:
             return target
-        return self._wait_joints(target, tol, timeout, marks, PauseRider(self, "joints", cmd, marks[0]))
+        return self._wait_joints(target, tol, timeout, marks, PauseRider(self, "joints", cmd, marks[0], resend_on_takeover=True))
 
     def _wait_joints(self, target: np.ndarray, tol: float, timeout: float, marks: tuple[int, int], rider: PauseRider) -> np.ndarray:
         """Until joints that arrived after the command (local arrival order, never the sim's clock) are at

@@ -56,9 +56,14 @@ class PauseRider:
     """The refusals of one awaited command ``cmd`` (sent as ``command`` to ``robot`` after event mark ``since``)."""
 
     def __init__(self, robot: "Robot", command: str, cmd: Command, since: int,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, *, resend_on_takeover: bool = False) -> None:
         self.robot, self.command, self.cmd, self.since = robot, command, cmd, since
         self.clock = clock
+        # a command that ends where it ends however often it is taken (joint targets, not a path to drive from its
+        # start) is sent again when a standby takes the robot over (a higher term in its joints): the sim that died
+        # may have had it, unmirrored, when it went (the two-SIGKILL failover test lost a target so)
+        self.resend_on_takeover = resend_on_takeover
+        self.term = self._term()
         self.seen = 0  # refusals since the mark already judged
         self.holds = 0  # holds reported
         self.resends = 0
@@ -86,11 +91,20 @@ class PauseRider:
         if arrivals != self.arrivals:  # a sim's token came back: it was cut off, and may never have had the command
             self.arrivals = arrivals
             self.interval, self.sent_at, self.last_hold = RESEND_S, float("-inf"), now
+        term = self._term() if self.resend_on_takeover else self.term
+        if term > self.term:  # a standby took the robot over: it may never have had the command
+            self.term = term
+            self.interval, self.sent_at, self.last_hold = RESEND_S, float("-inf"), now
         if now - self.last_hold <= QUIET_S and now - self.sent_at >= self.interval:
             self.robot.resend(self.command, self.cmd)
             self.resends += 1
             self.sent_at = now
             self.interval = min(2 * self.interval, RESEND_MAX_S)
+
+    def _term(self) -> int:
+        js = self.robot.latest("joints")
+        header = getattr(js, "header", None)
+        return int(getattr(header, "term", 0) or 0)
 
     def note(self) -> str:
         """Words for a timeout's message: how the pause went ('' : there was none)."""
