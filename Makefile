@@ -36,7 +36,7 @@ test: $(STAMP_TEST) $(AXE)
 
 # the fast suite: no process-spawning or multi-second tests (those are marked slow)
 test-fast: $(STAMP_TEST)
-	$(PY) -m pytest -q -m "not slow"
+	$(PY) -m pytest -q -m "not slow" -n 2
 
 # the linter and the type checker alone (tests/test_lint.py runs both in `make test`)
 lint: $(STAMP_TEST)
