@@ -1,5 +1,8 @@
 """What the console's 3D view drew, read from the page (three.js through NiceGUI's ``getElement``), for the
-browser tests: each link's cylinder ends in the world, the IK target's sphere and its place on the screen."""
+browser tests: each link's cylinder ends in the world, the IK target's sphere and its place on the screen; and a
+real mouse drag of that sphere."""
+
+from __future__ import annotations
 
 SCENE3D_JS = """() => {
   const s = getElement(document.querySelector('.rf-scene3d'));
@@ -20,3 +23,13 @@ SCENE3D_JS = """() => {
   return {ends, target: [m.position.x, m.position.y, m.position.z],
           screen: [r.left + (v.x + 1) / 2 * r.width, r.top + (1 - v.y) / 2 * r.height]};
 }"""
+
+
+def drag_sphere(page, screen: tuple[float, float]) -> None:
+    """A real mouse drag from the sphere's place on the screen, 20 px right and 10 px up in five moves."""
+    x0, y0 = screen
+    page.mouse.move(x0, y0)
+    page.mouse.down()
+    for k in range(1, 6):
+        page.mouse.move(x0 + 4 * k, y0 - 2 * k)
+    page.mouse.up()

@@ -29,7 +29,7 @@ from robofabric.secure import init
 from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 from user_peer.console.server import RECONNECT_S
 
-from tests.user_peer.console.scene3d_probe import SCENE3D_JS
+from tests.user_peer.console.scene3d_probe import SCENE3D_JS, drag_sphere
 
 pytestmark = pytest.mark.slow
 
@@ -512,12 +512,7 @@ def test_the_3d_view_draws_the_arm_and_a_drag_in_it_moves_the_ik_target_that_app
     wait_until(lambda: abs(seen.pose.position[2] - z) <= 1e-6, timeout=10, what=f"the target's height at {z}", seen=lambda: seen.pose)
     before = np.asarray(seen.pose.position, dtype=float)
     wait_until(lambda: (s := drawn()) and abs(s["target"][2] - z) <= 1e-4, timeout=10, what="the sphere at the new height")
-    x0, y0 = drawn()["screen"]
-    dave.mouse.move(x0, y0)
-    dave.mouse.down()
-    for k in range(1, 6):
-        dave.mouse.move(x0 + 4 * k, y0 - 2 * k)
-    dave.mouse.up()
+    drag_sphere(dave, drawn()["screen"])
     wait_until(lambda: np.linalg.norm(np.asarray(seen.pose.position)[:2] - before[:2]) >= 0.005, timeout=10,
                what="the target dragged (read through the Python API)", seen=lambda: (before, seen.pose.position))
     target = np.asarray(seen.pose.position, dtype=float)

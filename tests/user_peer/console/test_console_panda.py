@@ -17,7 +17,7 @@ import robots
 from robofabric.testing import example_robot_urdf, free_port, robofabric_cmd, wait_until
 from robots.urdf_import import install
 
-from tests.user_peer.console.scene3d_probe import SCENE3D_JS
+from tests.user_peer.console.scene3d_probe import SCENE3D_JS, drag_sphere
 
 pytestmark = pytest.mark.slow
 
@@ -112,12 +112,7 @@ def test_a_student_drives_the_panda_from_the_console_slider_3d_drag_and_apply_ik
                 before = np.asarray(seen.pose.position, dtype=float)
                 wait_until(lambda: (s := drawn()) and math.dist(s["target"], before) <= 1e-4, timeout=20,
                            what="the sphere at the target")
-                x0, y0 = drawn()["screen"]
-                page.mouse.move(x0, y0)
-                page.mouse.down()
-                for k in range(1, 6):
-                    page.mouse.move(x0 + 4 * k, y0 - 2 * k)
-                page.mouse.up()
+                drag_sphere(page, drawn()["screen"])
                 wait_until(lambda: np.linalg.norm(np.asarray(seen.pose.position)[:2] - before[:2]) >= 0.005, timeout=20,
                            what="the target dragged (read through the Python API)", seen=lambda: (before, seen.pose.position))
                 target = np.asarray(seen.pose.position, dtype=float)
