@@ -99,7 +99,10 @@ def test_a_robot_handed_between_sims_keeps_its_pose_joints_owner_and_epoch(world
         b2.stop(timeout=10)
         assert len(from_("sim-a", "pose")) + len(from_("sim-a", "joints")) == n_a
         assert b2.pose.header.source == "sim-b"
-        assert "handed base2 out to sim-b (term 2)" in procs.output(sim_a) and "took base2 in from sim-a (term 2)" in procs.output(sim_b)
+        # each line is printed just after its sim serves the change: wait for it rather than race the print
+        wait_until(lambda: "handed base2 out to sim-b (term 2)" in procs.output(sim_a)
+                   and "took base2 in from sim-a (term 2)" in procs.output(sim_b), timeout=20, what="both sims saying the move",
+                   seen=lambda: (procs.output(sim_a)[-600:], procs.output(sim_b)[-600:]))
         assert sim_a.poll() is None and sim_b.poll() is None
         assert "stepping down" not in procs.output(sim_a) + procs.output(sim_b)
     finally:

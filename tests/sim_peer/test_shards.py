@@ -230,7 +230,10 @@ def test_when_the_scene_objects_sim_dies_another_shard_adopts_them_where_they_we
         procs.kill(sim_a)
         wait_until(lambda: _goal_at(probe, world, "sim-b", (2.0, 1.0)), timeout=30, what="sim-b serving the goal where it was",
                    seen=lambda: (_parts(probe, world), procs.output(sim_b)[-800:]))
-        assert "no sim serves the scene objects any more; serving goal, target with my robots (term 2)" in procs.output(sim_b)
+        # the line is printed just after sim-b starts serving, so a query can see the goal before the line is out
+        wait_until(lambda: "no sim serves the scene objects any more; serving goal, target with my robots (term 2)"
+                   in procs.output(sim_b), timeout=20, what="sim-b saying it adopted the scene objects",
+                   seen=lambda: procs.output(sim_b)[-800:])
         r = subprocess.run(robofabric_cmd("own", "list", "--json", *common), capture_output=True, text=True, timeout=120)
         assert r.returncode == 0, r.stderr[-800:]
         auth = {rec["object"]: rec["authority"] for rec in json.loads(r.stdout)["records"]}
