@@ -213,8 +213,41 @@ def browser_args(swiftshader: bool) -> list[str]:
     return list(CHROMIUM_ARGS) if swiftshader else [a for a in CHROMIUM_ARGS if "swiftshader" not in a]
 
 
-def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, robots: int = 0, together: bool = False) -> dict[str, Any]:
-    """N pages on one console, in a world of ``max(n, robots)`` bases; the row's figures."""
+def _start_class(procs: Any, url: str, first: int, clients: int, seconds: float) -> Any:
+    """The emulated students (:mod:`robofabric.bench.console_client`, one process of their own so that their
+    CPU is neither the server's nor the measuring pages'): ``c{first}``.. on ``base{first}``.., all in."""
+    from robofabric.testing import wait_until
+
+    proc = procs.start([sys.executable, "-m", "robofabric.bench.console_client", url, "--first", str(first),
+                        "--count", str(clients), "--seconds", str(seconds)], name="clients")
+    wait_until(lambda: f"of {clients} joined" in procs.output(proc) or proc.poll() is not None, timeout=60 + 5 * clients,
+               what=f"{clients} emulated students in", seen=lambda: procs.output(proc)[-1500:])
+    line = procs.output(proc).split("clients: ", 1)[-1].split("\n", 1)[0]
+    print(f"  emulated students: {line}, load {os.getloadavg()[0]:.1f}", file=sys.stderr, flush=True)
+    return proc
+
+
+def _end_class(procs: Any, proc: Any) -> dict[str, Any]:
+    """Stop the emulated students (SIGTERM: each lets go of ← and reads her page once more); their report."""
+    import json
+    import signal
+
+    proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(timeout=60)
+    except Exception:
+        proc.kill()
+    for ln in reversed(procs.output(proc).splitlines()):
+        if ln.startswith("{"):
+            return dict(json.loads(ln))
+    return {"clients": 0, "joined": 0, "join_s": [], "keys": 0, "back_at_login": 0, "disconnected": 0, "refused": 0,
+            "errors": [f"no report: {procs.output(proc)[-300:]}"]}
+
+
+def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, robots: int = 0, together: bool = False,
+            clients: int = 0) -> dict[str, Any]:
+    """N pages on one console (and ``clients`` emulated students beside them), in a world of
+    ``max(n + clients, robots)`` bases; the row's figures."""
     from playwright.sync_api import sync_playwright
 
     from fabric.interfaces import Pose
@@ -230,7 +263,7 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
     with ProcessGroup(logs) as procs:
         router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
         wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
-        spawn = [x for i in range(max(n, robots)) for x in ("--robot", f"reeman:base{i}")]
+        spawn = [x for i in range(max(n + clients, robots)) for x in ("--robot", f"reeman:base{i}")]
         sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *spawn, "--world", world,
                                          "--connect", ep, "--id", "sim"), name="sim")
         web = free_port()
@@ -238,12 +271,12 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
         url = f"http://127.0.0.1:{web}/"
         wait_until(lambda: f"console: open {url}" in procs.output(console), timeout=60, what="the console",
                    seen=lambda: procs.output(console)[-1500:])
-        turning: dict[int, list[int]] = {i: [] for i in range(n)}  # sim wall stamps (ns) of poses that turn
+        turning: dict[int, list[int]] = {i: [] for i in range(n + clients)}  # sim wall stamps (ns) of poses that turn
 
         def on_pose(key: str, msg: Any) -> None:
             if isinstance(msg, Pose) and abs(float(msg.angular[2])) > 0.05:
                 rid = key.split("/")[3]
-                if rid.startswith("base") and rid[4:].isdigit() and int(rid[4:]) < n:
+                if rid.startswith("base") and rid[4:].isdigit() and int(rid[4:]) < n + clients:
                     turning[int(rid[4:])].append(msg.header.wall_ns)
 
         with client(world, port, kind="tool", peer_id="probe") as fab, sync_playwright() as p:
@@ -251,6 +284,8 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
             fab.subscribe(f"rf/{world}/robot/*/pose", on_pose)
             browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=browser_args(swiftshader))
             reloads: list[str] = []  # NiceGUI's own words when a page reloads itself (connection timed out, ...)
+            klass = _start_class(procs, url, n, clients, 10 * seconds + 600) if clients else None
+            klass_t0 = time.monotonic()
             try:
                 pages, bases, joined, join_cpu = _open_pages(browser, url, n, reloads, together=together)
                 lags: list[float] = []
@@ -288,16 +323,26 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
                     pg.keyboard.up("ArrowLeft")
             finally:
                 browser.close()
+                # the emulated students' own process, joins included: what the class's emulation costs this box
+                klass_cpu = proc_cpu_s(klass.pid) / max(time.monotonic() - klass_t0, 1e-9) if klass is not None else 0.0
+                emulated = _end_class(procs, klass) if klass is not None else None
             from ownership.client import OwnershipClient
 
             own = OwnershipClient(fab, "probe")  # a replica of the records (the probe owns nothing)
             own.refresh()
-            records = {i: own.record(f"base{i}") for i in range(n)}
+            records = {i: own.record(f"base{i}") for i in range(n + clients)}
             own.close()
     lost = sum(1 for i, r in records.items() if i in bases and (r is None or r.owner != f"s{i}"))
+    if emulated is not None:  # a student of the class who got in and whose base no longer names her
+        lost += sum(1 for i in range(n, n + clients) if f"c{i}" in emulated.get("owners", ()) and
+                    (records[i] is None or records[i].owner != f"c{i}"))
     refused = sum(1 for m in messages if m is not None and any(w in m for w in REFUSED))
     logged_out = sum(1 for m in messages if m is None)
-    return {"n": n, "robots": max(n, robots), "joined": len(joined), "join_max": max(joined, default=float("nan")), "lag_p50": pct(lags, 50), "lag_max": pct(lags, 100),
+    em = emulated or {}
+    return {"n": n, "clients": clients, "c_joined": em.get("joined", 0), "c_join_max": max(em.get("join_s") or [float("nan")]),
+            "c_back": em.get("back_at_login", 0), "c_dropped": em.get("disconnected", 0), "c_refused": em.get("refused", 0),
+            "c_keys": em.get("keys", 0), "c_cpu": klass_cpu, "c_turned": sum(1 for i in range(n, n + clients) if turning[i]), "c_errors": em.get("errors", []),
+            "robots": max(n + clients, robots), "joined": len(joined), "join_max": max(joined, default=float("nan")), "lag_p50": pct(lags, 50), "lag_max": pct(lags, 100),
             "key_p50": pct(presses, 50, 1e3), "key_p99": pct(presses, 99, 1e3), "presses": len(presses), "missed": missed, "unstopped": unstopped,
             "cpu": cpu, "page_cpu": page_cpu, "renderer_cpu": renderer_cpu, "join_cpu": pct([x for x in join_cpu if x == x], 50), "lost": lost, "refused": refused, "logged_out": logged_out, "reloads": len(reloads),
             "late_p99": max((h.late_p99 for h in health), default=float("nan")),
@@ -309,15 +354,18 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
 def header() -> list[str]:
     return ["| pages | joined (slowest, s) | view lag in the page p50 / max (s) | key to motion p50 / p99 (ms), presses "
             "| presses that moved nothing in 5 s / releases not stopped in 10 s | console server CPU (cores) | browsers per page driving, all / renderers (cores); a page's join, its renderer (CPU s, median) | robots lost | refused "
-            "| pages back at the login (reloads) | server's event loop late p99 / max (ms) | key to server / to zenoh p99 (ms) |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+            "| pages back at the login (reloads) | server's event loop late p99 / max (ms) | key to server / to zenoh p99 (ms) "
+            "| emulated students: joined (slowest, s), back at the login / dropped / refused, keys; their process (cores) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
 
 def row(r: dict[str, Any]) -> str:
-    pages = f"{r['n']} ({r['robots']} robots)" if r.get("robots", r["n"]) != r["n"] else f"{r['n']}"
+    pages = f"{r['n']} ({r['robots']} robots)" if r.get("robots", r["n"]) != r["n"] + r.get("clients", 0) else f"{r['n']}"
     return (f"| {pages} | {r['joined']} ({r['join_max']:.1f}) | {r['lag_p50']:.2f} / {r['lag_max']:.2f} | "
             f"{r['key_p50']:.0f} / {r['key_p99']:.0f}, {r['presses']} | {r['missed']} / {r['unstopped']} | {r['cpu']:.2f} | {r['page_cpu']:.2f} / {r['renderer_cpu']:.2f}; {r['join_cpu']:.1f} | {r['lost']} | "
-            f"{r['refused']} | {r['logged_out']} ({r['reloads']}) | {r['late_p99']:.0f} / {r['late_max']:.0f} | {r['to_server_p99']:.0f} / {r['to_sent_p99']:.0f} |")
+            f"{r['refused']} | {r['logged_out']} ({r['reloads']}) | {r['late_p99']:.0f} / {r['late_max']:.0f} | {r['to_server_p99']:.0f} / {r['to_sent_p99']:.0f} | "
+            + (f"{r['c_joined']} of {r['clients']} ({r['c_join_max']:.1f}), {r['c_back']} / {r['c_dropped']} / {r['c_refused']}, "
+               f"{r['c_keys']}; {r['c_cpu']:.2f} |" if r.get("clients") else "none |"))
 
 
 def command(
@@ -330,6 +378,9 @@ def command(
                                         "class-sized world measure the server's cost per page without a class of browsers.")] = 0,
     together: Annotated[bool, typer.Option("--together", help="Ask for every page at once, as a class does, "
                                            "instead of one after another.")] = False,
+    clients: Annotated[int, typer.Option("--clients", help="Emulated students beside the pages: each speaks the page's "
+                                         "own socket protocol with no browser, logs in, requests her base and steers it "
+                                         "(python -m robofabric.bench.console_client).")] = 0,
 ) -> None:
     """N browser pages on one console server, each driving its own base: view lag in the page, key to motion,
     the server's CPU, robots lost."""
@@ -341,16 +392,19 @@ def command(
         counts = [int(x) for x in pages.split(",") if x.strip()]
     except ValueError:
         raise UserError(f"--pages {pages!r}: expected counts like 1,10,20") from None
-    if not counts or min(counts) < 1 or seconds <= 0 or robots < 0:
-        raise UserError("--pages: each count at least 1; --seconds positive; --robots not negative")
+    if not counts or min(counts) < 1 or seconds <= 0 or robots < 0 or clients < 0:
+        raise UserError("--pages: each count at least 1; --seconds positive; --robots and --clients not negative")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    flag = (" --swiftshader" if swiftshader else "") + (f" --robots {robots}" if robots else "") + (" --together" if together else "")
+    flag = (" --swiftshader" if swiftshader else "") + (f" --robots {robots}" if robots else "") + (" --together" if together else "") + (f" --clients {clients}" if clients else "")
     lines = [f"robofabric bench console --pages {pages} --seconds {seconds:g}{flag} on {machine()}, load average {load:.1f} at the start",
              "", *header()]
     print("\n".join(lines), flush=True)
     with tempfile.TemporaryDirectory(prefix="bench-console-") as tmp:
         for n in counts:
-            line = row(run_one(n, seconds, Path(tmp), swiftshader=swiftshader, robots=robots, together=together))
+            result = run_one(n, seconds, Path(tmp), swiftshader=swiftshader, robots=robots, together=together, clients=clients)
+            for err in result.get("c_errors", [])[:5]:
+                print(f"  {err}", file=sys.stderr, flush=True)
+            line = row(result)
             print(line, flush=True)
             lines.append(line)
     append(out, "\n".join(lines))

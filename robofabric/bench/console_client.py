@@ -1,0 +1,319 @@
+"""A student's console page without a browser: NiceGUI's own socket protocol, as the page's JavaScript speaks it.
+
+``bench console --clients N`` needs a class of pages on one box, and 20 real Chromium pages do not fit on two
+cores (their drawing, not the console's serving, takes the box). What the server feels of a page is its
+socket: the page's first request, the socket.io connection with the page's client id, the element tree the
+server sends as ``update`` messages, the events the page sends back (a field's ``update:value``, a button's
+``click``, the console's own ``rf_key`` on element 0), the answers to ``run_javascript`` and the ``ack`` of
+every message it got. :class:`EmulatedPage` does exactly that, so the server does for it what it does for a
+browser's page: builds her page, owns her robot, drives her base and pushes every update.
+
+The element tree is kept as the page keeps it (``update`` replaces or deletes elements by id) and looked up
+the way a person reads a page: a button by its label, a field by its label, a line by its text.
+
+Run as a program (``python -m robofabric.bench.console_client URL --first K --count N``), it puts N students
+(``c{K}``..) on their bases (``base{K}``..), each holding ← with speed 2 and letting go now and then as a
+student steering does, until SIGTERM or ``--seconds``; then it prints one JSON line of what happened.
+"""
+
+from __future__ import annotations
+
+import ast
+import asyncio
+import contextlib
+import json
+import re
+import signal
+import sys
+import time
+import uuid
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["EmulatedPage", "PageGone", "parse_page", "ClientReport", "main"]
+
+_ELEMENTS = re.compile(r"parseElements\(String\.raw`(.*?)`\)", re.S)
+_QUERY = re.compile(r"query: (\{.*?\}),\s*\n")
+_UNESCAPE = (("&#36;", "$"), ("&#96;", "`"), ("&gt;", ">"), ("&lt;", "<"), ("&amp;", "&"))  # nicegui.js's parseElements
+
+
+class PageGone(RuntimeError):
+    """The server dropped the page, or an element a student needs is not on it within the time allowed."""
+
+
+def parse_page(html: str) -> tuple[dict[str, dict[str, Any]], dict[str, Any]]:
+    """(elements by id, the socket's query) from a NiceGUI page's HTML: the two things its script starts from.
+    The query is written as a Python literal (``True``), which is why it is read with ``ast.literal_eval``."""
+    m, q = _ELEMENTS.search(html), _QUERY.search(html)
+    if m is None or q is None:
+        raise PageGone("not a NiceGUI page: no element tree or socket query in it")
+    raw = m.group(1)
+    for a, b in _UNESCAPE:
+        raw = raw.replace(a, b)
+    return {str(k): v for k, v in json.loads(raw).items()}, dict(ast.literal_eval(q.group(1)))
+
+
+def _label(el: dict[str, Any]) -> str:
+    props = el.get("props") or {}
+    return str(props.get("label") or props.get("aria-label") or el.get("text") or "")
+
+
+@dataclass
+class EmulatedPage:
+    """One page: ``open`` it, then act on it by labels as a student would."""
+
+    url: str
+    elements: dict[str, dict[str, Any]] = field(default_factory=dict)
+    sent: int = 0
+    updates: int = 0
+    js_answered: int = 0
+    _query: dict[str, Any] = field(default_factory=dict)
+    _next_id: int = 0
+    _sio: Any = None
+    _changed: asyncio.Event | None = None
+    _acker: asyncio.Task | None = None
+
+    async def open(self, http: Any, timeout: float = 60.0) -> None:
+        """Ask for the page and connect its socket (the implicit handshake of a page's first connection)."""
+        import socketio
+
+        async with http.get(self.url, timeout=timeout) as r:
+            if r.status != 200:
+                raise PageGone(f"{self.url} answered {r.status}")
+            self.elements, self._query = parse_page(await r.text())
+        self._next_id = int(self._query.get("next_message_id", 0))
+        self._changed = asyncio.Event()
+        sio = socketio.AsyncClient(reconnection=False)
+        for name in ("update", "run_javascript", "load_js_components", "notify", "open", "download"):
+            sio.on(name, self._handler(name))
+        query = {**self._query, "document_id": str(uuid.uuid4()), "tab_id": str(uuid.uuid4()),
+                 "implicit_handshake": "true", "next_message_id": str(self._next_id)}
+        base = self.url.rstrip("/")
+        qs = "&".join(f"{k}={v}" for k, v in query.items())
+        await sio.connect(f"{base}/?{qs}", socketio_path="/_nicegui_ws/socket.io", transports=["websocket"],
+                          wait_timeout=timeout)
+        self._sio = sio
+        self._acker = asyncio.create_task(self._ack_every(3.0))
+
+    def _handler(self, name: str) -> Any:
+        async def on(msg: Any = None) -> None:
+            if isinstance(msg, dict) and "_id" in msg:
+                mid = msg.pop("_id")
+                if mid < self._next_id:
+                    return  # already had it (a resend after a reconnect)
+                self._next_id = mid + 1
+            if name == "update" and isinstance(msg, dict):
+                self.updates += 1
+                for eid, el in msg.items():
+                    if el is None:
+                        self.elements.pop(str(eid), None)
+                    else:
+                        self.elements[str(eid)] = el
+            elif name == "run_javascript" and isinstance(msg, dict) and msg.get("request_id") is not None:
+                # a page without a browser has no storage and no DOM: every answer is null, as a fresh tab's
+                await self._emit("javascript_response", {"request_id": msg["request_id"], "result": None})
+                self.js_answered += 1
+            if self._changed is not None:
+                self._changed.set()
+        return on
+
+    async def _emit(self, event: str, data: dict[str, Any]) -> None:
+        if self._sio is None or not self._sio.connected:
+            raise PageGone("the page's socket is closed")
+        await self._sio.emit(event, {**data, "client_id": self._query["client_id"]})
+        self.sent += 1
+
+    async def _ack_every(self, period: float) -> None:
+        while self._sio is not None and self._sio.connected:
+            await asyncio.sleep(period)
+            try:
+                await self._emit("ack", {"next_message_id": self._next_id})
+            except Exception:
+                return
+
+    @property
+    def connected(self) -> bool:
+        return self._sio is not None and self._sio.connected
+
+    def find(self, label: str, *, tag: str | None = None, exact: bool = True) -> str | None:
+        """The id of the element a person would call ``label`` (its label, aria-label or text)."""
+        for eid, el in self.elements.items():
+            got = _label(el)
+            if (got == label if exact else label in got) and (tag is None or el.get("tag") == tag):
+                return eid
+        return None
+
+    def text(self) -> str:
+        """Every label and text on the page, a line each: what a person could read."""
+        return "\n".join(t for t in map(_label, self.elements.values()) if t)
+
+    async def wait_for(self, label: str, *, tag: str | None = None, exact: bool = True, timeout: float = 30.0) -> str:
+        """Wait until an element called ``label`` is on the page; its id."""
+        assert self._changed is not None
+        deadline = time.monotonic() + timeout
+        while (eid := self.find(label, tag=tag, exact=exact)) is None:
+            left = deadline - time.monotonic()
+            if left <= 0 or not self.connected:
+                raise PageGone(f"no {label!r} on the page within {timeout:g} s")
+            self._changed.clear()
+            try:
+                await asyncio.wait_for(self._changed.wait(), timeout=min(left, 1.0))
+            except TimeoutError:
+                pass
+        return eid
+
+    async def _fire(self, eid: str, kind: str, args: list[Any]) -> None:
+        el = self.elements.get(eid) or {}
+        listener = next((e["listener_id"] for e in el.get("events", []) if e.get("type") == kind), None)
+        if listener is None:
+            raise PageGone(f"{_label(el) or eid!r} takes no {kind!r}")
+        await self._emit("event", {"id": int(eid), "listener_id": listener, "args": [json.dumps(a) for a in args]})
+
+    async def fill(self, label: str, value: str, timeout: float = 30.0) -> None:
+        await self._fire(await self.wait_for(label, timeout=timeout), "update:value", [value])
+
+    async def click(self, label: str, timeout: float = 30.0) -> None:
+        await self._fire(await self.wait_for(label, tag="q-btn", timeout=timeout), "click", [])
+
+    async def key(self, key: str, down: bool) -> None:
+        """The page's key line (the console's ``rf_key`` on element 0, as its KEYS_JS sends it)."""
+        await self._fire("0", "rf_key", [{"key": key, "down": down, "t": int(time.time() * 1000)}])
+
+    async def close(self) -> None:
+        if self._acker is not None:
+            self._acker.cancel()
+        if self._sio is not None:
+            await self._sio.disconnect()
+
+
+@dataclass
+class ClientReport:
+    """What the emulated class did: how many got in, how long that took, and what went wrong on the way."""
+
+    clients: int = 0
+    joined: int = 0
+    owners: list[str] = field(default_factory=list)
+    join_s: list[float] = field(default_factory=list)
+    keys: int = 0
+    back_at_login: int = 0
+    disconnected: int = 0
+    refused: int = 0
+    errors: list[str] = field(default_factory=list)
+
+
+REFUSED = ("NotOwner", "Rejected", "Timeout", "Unreachable", "Error")
+
+
+async def _student(url: str, i: int, http: Any, report: ClientReport, stop: asyncio.Event, period: float) -> EmulatedPage | None:
+    """Student ``c{i}`` logs in, selects and requests ``base{i}``, then steers: ← held, let go every ``period``."""
+    page = EmulatedPage(url)
+    t0 = time.monotonic()
+
+    async def join() -> None:
+        await page.open(http)
+        await page.fill("Name", f"c{i}")
+        await page.click("Log in")
+        await page.click(f"base{i}")
+        await page.click("Request")
+        await page.wait_for(f"request base{i}: you own it", exact=False, timeout=60)
+        await page.key("2", True)  # speed 2, as the pages drive
+        await page.key("2", False)
+
+    joining, stopping = asyncio.create_task(join()), asyncio.create_task(stop.wait())
+    await asyncio.wait({joining, stopping}, return_when=asyncio.FIRST_COMPLETED)
+    stopping.cancel()
+    if not joining.done():
+        joining.cancel()
+        with contextlib.suppress(BaseException):
+            await joining
+    why = "stopped first" if joining.cancelled() else joining.exception()
+    if why is not None:
+        report.errors.append(f"c{i}: did not join: {why}")
+        await page.close()
+        return None
+    report.joined += 1
+    report.owners.append(f"c{i}")
+    report.join_s.append(time.monotonic() - t0)
+    down = False
+    while not stop.is_set() and page.connected:
+        down = not down
+        try:
+            await page.key("ArrowLeft", down)
+            report.keys += 1
+        except PageGone:
+            break
+        try:
+            await asyncio.wait_for(stop.wait(), timeout=period * (1.0 if down else 0.25))
+        except TimeoutError:
+            pass
+    if page.connected:
+        try:
+            await page.key("ArrowLeft", False)
+        except PageGone:
+            pass
+    return page
+
+
+async def run_class(url: str, first: int, count: int, seconds: float, period: float = 1.0,
+                    started: Any = None) -> ClientReport:
+    """``count`` students at once on the console at ``url``; until ``seconds`` pass (or SIGTERM/SIGINT)."""
+    import aiohttp
+
+    report = ClientReport(clients=count)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        try:
+            loop.add_signal_handler(sig, stop.set)
+        except (NotImplementedError, RuntimeError):
+            pass
+    async with aiohttp.ClientSession() as http:
+        tasks = [asyncio.create_task(_student(url, first + k, http, report, stop, period)) for k in range(count)]
+
+        async def said_joined() -> None:
+            while report.joined + len(report.errors) < count:
+                await asyncio.sleep(0.05)
+            if started is not None:
+                started(report)
+
+        watcher = asyncio.create_task(said_joined())
+        try:
+            await asyncio.wait_for(stop.wait(), timeout=seconds)
+        except TimeoutError:
+            pass
+        stop.set()
+        pages = [p for p in await asyncio.gather(*tasks) if p is not None]
+        watcher.cancel()
+        for p in pages:
+            words = p.text()
+            if not p.connected:
+                report.disconnected += 1
+            elif p.find("Log in", tag="q-btn") is not None:
+                report.back_at_login += 1
+            elif any(w in words for w in REFUSED):
+                report.refused += 1
+            await p.close()
+    return report
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m robofabric.bench.console_client", description=__doc__.split("\n\n")[0])
+    ap.add_argument("url")
+    ap.add_argument("--first", type=int, default=0, help="the first student's number (c{first} drives base{first})")
+    ap.add_argument("--count", type=int, default=1, help="how many students")
+    ap.add_argument("--seconds", type=float, default=60.0, help="how long they drive at most (SIGTERM ends sooner)")
+    ap.add_argument("--period", type=float, default=1.0, help="how long ← is held before it is let go (s)")
+    a = ap.parse_args(argv)
+
+    def joined(r: ClientReport) -> None:
+        print(f"clients: {r.joined} of {r.clients} joined", flush=True)
+
+    report = asyncio.run(run_class(a.url, a.first, a.count, a.seconds, a.period, started=joined))
+    print(json.dumps(report.__dict__), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
