@@ -213,18 +213,46 @@ def browser_args(swiftshader: bool) -> list[str]:
     return list(CHROMIUM_ARGS) if swiftshader else [a for a in CHROMIUM_ARGS if "swiftshader" not in a]
 
 
-def _start_class(procs: Any, url: str, first: int, clients: int, seconds: float) -> Any:
+def _start_class(procs: Any, url: str, first: int, clients: int, seconds: float, arms: int = 0, targets: str = "") -> Any:
     """The emulated students (:mod:`robofabric.bench.console_client`, one process of their own so that their
     CPU is neither the server's nor the measuring pages'): ``c{first}``.. on ``base{first}``.., all in."""
     from robofabric.testing import wait_until
 
     proc = procs.start([sys.executable, "-m", "robofabric.bench.console_client", url, "--first", str(first),
-                        "--count", str(clients), "--seconds", str(seconds)], name="clients")
+                        "--count", str(clients), "--seconds", str(seconds), "--arms", str(arms), f"--targets={targets}"], name="clients")
     wait_until(lambda: f"of {clients} joined" in procs.output(proc) or proc.poll() is not None, timeout=60 + 5 * clients,
                what=f"{clients} emulated students in", seen=lambda: procs.output(proc)[-1500:])
+    if proc.poll() is not None:
+        raise RuntimeError(f"the emulated students' process ended with {proc.returncode}: {procs.output(proc)[-800:]}")
     line = procs.output(proc).split("clients: ", 1)[-1].split("\n", 1)[0]
     print(f"  emulated students: {line}, load {os.getloadavg()[0]:.1f}", file=sys.stderr, flush=True)
     return proc
+
+
+def _arm_targets(fab: Any, world: str, arms: int) -> str:
+    """Each arm's first IK target for its student: 0.2 m ahead of its base and 0.3 m up (the arms are placed by
+    the sim, so their spawn poses are read from ``srv/world``), as ``x,y,z;...`` in arm order."""
+    import math
+
+    from fabric import keys
+    from fabric.interfaces import WorldInfo
+    from robofabric.testing import wait_until
+
+    if not arms:
+        return ""
+    poses: dict[str, Any] = {}
+
+    def ask() -> bool:
+        for r in fab.rpc.query(keys.srv(world, "world"), timeout=5.0, expected=WorldInfo, all_replies=True):
+            poses.update({x.id: x.pose for x in r.message.robots if x.kind == "arm"})
+        return all(f"arm{k}" in poses for k in range(arms))
+
+    wait_until(ask, timeout=60, what="the arms' spawn poses", seen=lambda: sorted(poses))
+    out = []
+    for k in range(arms):
+        x, y, z, yaw = (float(v) for v in poses[f"arm{k}"][:4])
+        out.append(f"{x + 0.2 * math.cos(yaw):.3f},{y + 0.2 * math.sin(yaw):.3f},{z + 0.3:.3f}")
+    return ";".join(out)
 
 
 def _end_class(procs: Any, proc: Any) -> dict[str, Any]:
@@ -245,12 +273,14 @@ def _end_class(procs: Any, proc: Any) -> dict[str, Any]:
 
 
 def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, robots: int = 0, together: bool = False,
-            clients: int = 0) -> dict[str, Any]:
+            clients: int = 0, arms: int = 0) -> dict[str, Any]:
     """N pages on one console (and ``clients`` emulated students beside them), in a world of
     ``max(n + clients, robots)`` bases; the row's figures."""
     from playwright.sync_api import sync_playwright
 
-    from fabric.interfaces import Pose
+    import numpy as np
+
+    from fabric.interfaces import JointState, Pose
     from robofabric.testing import ProcessGroup, client, free_port, robofabric_cmd, wait_until
     from robofabric.bench.viewer_web import CHROMIUM
     from user_peer.console.health import parse_line
@@ -264,8 +294,11 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
         router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
         wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
         spawn = [x for i in range(max(n + clients, robots)) for x in ("--robot", f"reeman:base{i}")]
+        spawn += [x for j in range(arms) for x in ("--robot", f"meca500:arm{j}")]
         sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *spawn, "--world", world,
                                          "--connect", ep, "--id", "sim"), name="sim")
+        if arms:  # the arms' students apply IK: the compute peer solves it
+            compute = procs.start(robofabric_cmd("compute", "--world", world, "--connect", ep), name="compute")
         web = free_port()
         console = procs.start(robofabric_cmd("console", "--world", world, "--connect", ep, "--listen", f"127.0.0.1:{web}"), name="console")
         url = f"http://127.0.0.1:{web}/"
@@ -281,10 +314,22 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
 
         with client(world, port, kind="tool", peer_id="probe") as fab, sync_playwright() as p:
             wait_until(lambda: fab.live_peers("sim"), timeout=120, what="the sim", seen=lambda: procs.output(sim)[-1500:])
+            if arms:
+                wait_until(lambda: fab.live_peers("compute"), timeout=120, what="the compute peer",
+                           seen=lambda: procs.output(compute)[-1500:])
             fab.subscribe(f"rf/{world}/robot/*/pose", on_pose)
+            arm_q: dict[str, list[Any]] = {}  # each arm's first and latest joint positions
+
+            def on_joints(key: str, msg: Any) -> None:
+                seen = arm_q.setdefault(key.split("/")[3], [None, None])
+                seen[0] = msg.q if seen[0] is None else seen[0]
+                seen[1] = msg.q
+
+            if arms:
+                fab.subscribe(f"rf/{world}/robot/arm$*/joints", on_joints, expected=JointState)
             browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=browser_args(swiftshader))
             reloads: list[str] = []  # NiceGUI's own words when a page reloads itself (connection timed out, ...)
-            klass = _start_class(procs, url, n, clients, 10 * seconds + 600) if clients else None
+            klass = _start_class(procs, url, n, clients, 10 * seconds + 600, arms, _arm_targets(fab, world, arms)) if clients else None
             klass_t0 = time.monotonic()
             try:
                 pages, bases, joined, join_cpu = _open_pages(browser, url, n, reloads, together=together)
@@ -331,17 +376,21 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
             own = OwnershipClient(fab, "probe")  # a replica of the records (the probe owns nothing)
             own.refresh()
             records = {i: own.record(f"base{i}") for i in range(n + clients)}
+            arm_owners = {f"arm{k}": (own.record(f"arm{k}").owner if own.record(f"arm{k}") is not None else None) for k in range(arms)}
             own.close()
     lost = sum(1 for i, r in records.items() if i in bases and (r is None or r.owner != f"s{i}"))
     if emulated is not None:  # a student of the class who got in and whose base no longer names her
         lost += sum(1 for i in range(n, n + clients) if f"c{i}" in emulated.get("owners", ()) and
                     (records[i] is None or records[i].owner != f"c{i}"))
+        lost += sum(1 for k in range(arms) if f"arm{k}" in emulated.get("arms", ()) and arm_owners[f"arm{k}"] != f"c{n + k}")
     refused = sum(1 for m in messages if m is not None and any(w in m for w in REFUSED))
     logged_out = sum(1 for m in messages if m is None)
     em = emulated or {}
     return {"n": n, "clients": clients, "c_joined": em.get("joined", 0), "c_join_max": max(em.get("join_s") or [float("nan")]),
             "c_back": em.get("back_at_login", 0), "c_dropped": em.get("disconnected", 0), "c_refused": em.get("refused", 0),
-            "c_keys": em.get("keys", 0), "c_cpu": klass_cpu, "c_turned": sum(1 for i in range(n, n + clients) if turning[i]), "c_errors": em.get("errors", []),
+            "c_keys": em.get("keys", 0), "c_cpu": klass_cpu, "c_turned": sum(1 for i in range(n, n + clients) if turning[i]),
+            "arms": arms, "c_arms": len(em.get("arms", [])), "c_ik": em.get("ik_applied", 0), "c_ik_unsolved": em.get("ik_unsolved", 0),
+            "arms_moved": sum(1 for a, b in arm_q.values() if a is not None and float(np.max(np.abs(np.asarray(b) - np.asarray(a)))) > 1e-3), "c_errors": em.get("errors", []),
             "robots": max(n + clients, robots), "joined": len(joined), "join_max": max(joined, default=float("nan")), "lag_p50": pct(lags, 50), "lag_max": pct(lags, 100),
             "key_p50": pct(presses, 50, 1e3), "key_p99": pct(presses, 99, 1e3), "presses": len(presses), "missed": missed, "unstopped": unstopped,
             "cpu": cpu, "page_cpu": page_cpu, "renderer_cpu": renderer_cpu, "join_cpu": pct([x for x in join_cpu if x == x], 50), "lost": lost, "refused": refused, "logged_out": logged_out, "reloads": len(reloads),
@@ -365,7 +414,8 @@ def row(r: dict[str, Any]) -> str:
             f"{r['key_p50']:.0f} / {r['key_p99']:.0f}, {r['presses']} | {r['missed']} / {r['unstopped']} | {r['cpu']:.2f} | {r['page_cpu']:.2f} / {r['renderer_cpu']:.2f}; {r['join_cpu']:.1f} | {r['lost']} | "
             f"{r['refused']} | {r['logged_out']} ({r['reloads']}) | {r['late_p99']:.0f} / {r['late_max']:.0f} | {r['to_server_p99']:.0f} / {r['to_sent_p99']:.0f} | "
             + (f"{r['c_joined']} of {r['clients']} ({r['c_join_max']:.1f}), {r['c_back']} / {r['c_dropped']} / {r['c_refused']}, "
-               f"{r['c_keys']}; {r['c_cpu']:.2f} |" if r.get("clients") else "none |"))
+               f"{r['c_keys']}" + (f", IK applied {r['c_ik']}, unsolved {r['c_ik_unsolved']} (arms moved {r['arms_moved']} of {r['arms']})" if r.get("arms") else "")
+               + f"; {r['c_cpu']:.2f} |" if r.get("clients") else "none |"))
 
 
 def command(
@@ -381,6 +431,8 @@ def command(
     clients: Annotated[int, typer.Option("--clients", help="Emulated students beside the pages: each speaks the page's "
                                          "own socket protocol with no browser, logs in, requests her base and steers it "
                                          "(python -m robofabric.bench.console_client).")] = 0,
+    arms: Annotated[int, typer.Option("--arms", help="Meca500 arms in the world (and a compute peer for their IK): the "
+                                      "first ARMS emulated students also own one and nudge its target and apply IK.")] = 0,
 ) -> None:
     """N browser pages on one console server, each driving its own base: view lag in the page, key to motion,
     the server's CPU, robots lost."""
@@ -392,16 +444,17 @@ def command(
         counts = [int(x) for x in pages.split(",") if x.strip()]
     except ValueError:
         raise UserError(f"--pages {pages!r}: expected counts like 1,10,20") from None
-    if not counts or min(counts) < 1 or seconds <= 0 or robots < 0 or clients < 0:
-        raise UserError("--pages: each count at least 1; --seconds positive; --robots and --clients not negative")
+    if not counts or min(counts) < 1 or seconds <= 0 or robots < 0 or clients < 0 or not 0 <= arms <= clients:
+        raise UserError("--pages: each count at least 1; --seconds positive; --robots and --clients not negative; "
+                        "--arms from 0 to --clients (each arm is an emulated student's)")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    flag = (" --swiftshader" if swiftshader else "") + (f" --robots {robots}" if robots else "") + (" --together" if together else "") + (f" --clients {clients}" if clients else "")
+    flag = (" --swiftshader" if swiftshader else "") + (f" --robots {robots}" if robots else "") + (" --together" if together else "") + (f" --clients {clients}" if clients else "") + (f" --arms {arms}" if arms else "")
     lines = [f"robofabric bench console --pages {pages} --seconds {seconds:g}{flag} on {machine()}, load average {load:.1f} at the start",
              "", *header()]
     print("\n".join(lines), flush=True)
     with tempfile.TemporaryDirectory(prefix="bench-console-") as tmp:
         for n in counts:
-            result = run_one(n, seconds, Path(tmp), swiftshader=swiftshader, robots=robots, together=together, clients=clients)
+            result = run_one(n, seconds, Path(tmp), swiftshader=swiftshader, robots=robots, together=together, clients=clients, arms=arms)
             for err in result.get("c_errors", [])[:5]:
                 print(f"  {err}", file=sys.stderr, flush=True)
             line = row(result)

@@ -13,7 +13,8 @@ the way a person reads a page: a button by its label, a field by its label, a li
 
 Run as a program (``python -m robofabric.bench.console_client URL --first K --count N``), it puts N students
 (``c{K}``..) on their bases (``base{K}``..), each holding ← with speed 2 and letting go now and then as a
-student steering does, until SIGTERM or ``--seconds``; then it prints one JSON line of what happened.
+student steering does (the first ``--arms`` of them also own ``arm0``.. and apply IK), until SIGTERM or
+``--seconds``; then it prints one JSON line of what happened.
 """
 
 from __future__ import annotations
@@ -56,6 +57,12 @@ def parse_page(html: str) -> tuple[dict[str, dict[str, Any]], dict[str, Any]]:
 def _label(el: dict[str, Any]) -> str:
     props = el.get("props") or {}
     return str(props.get("label") or props.get("aria-label") or el.get("text") or "")
+
+
+def _names(el: dict[str, Any]) -> tuple[str, ...]:
+    """Every name a person (or a screen reader) has for an element: its label, its aria-label, its text."""
+    props = el.get("props") or {}
+    return tuple(str(n) for n in (props.get("label"), props.get("aria-label"), el.get("text")) if n)
 
 
 @dataclass
@@ -138,8 +145,9 @@ class EmulatedPage:
     def find(self, label: str, *, tag: str | None = None, exact: bool = True) -> str | None:
         """The id of the element a person would call ``label`` (its label, aria-label or text)."""
         for eid, el in self.elements.items():
-            got = _label(el)
-            if (got == label if exact else label in got) and (tag is None or el.get("tag") == tag):
+            if tag is not None and el.get("tag") != tag:
+                continue
+            if any(n == label if exact else label in n for n in _names(el)):
                 return eid
         return None
 
@@ -162,6 +170,21 @@ class EmulatedPage:
                 pass
         return eid
 
+    async def wait_text(self, pred: Any, timeout: float) -> bool:
+        """Wait until ``pred(self.text())`` holds; whether it did within ``timeout``."""
+        assert self._changed is not None
+        deadline = time.monotonic() + timeout
+        while not pred(self.text()):
+            left = deadline - time.monotonic()
+            if left <= 0 or not self.connected:
+                return False
+            self._changed.clear()
+            try:
+                await asyncio.wait_for(self._changed.wait(), timeout=min(left, 0.5))
+            except TimeoutError:
+                pass
+        return True
+
     async def _fire(self, eid: str, kind: str, args: list[Any]) -> None:
         el = self.elements.get(eid) or {}
         listener = next((e["listener_id"] for e in el.get("events", []) if e.get("type") == kind), None)
@@ -174,6 +197,16 @@ class EmulatedPage:
 
     async def click(self, label: str, timeout: float = 30.0) -> None:
         await self._fire(await self.wait_for(label, tag="q-btn", timeout=timeout), "click", [])
+
+    async def type_number(self, label: str, value: float, timeout: float = 30.0) -> None:
+        """A number typed into a Quasar field (its ``update:modelValue``, as the field sends it)."""
+        await self._fire(await self.wait_for(label, timeout=timeout), "update:modelValue", [value])
+
+    async def drop(self, view: str, name: str, xyz: tuple[float, float, float], timeout: float = 30.0) -> None:
+        """A 3D object called ``name`` dragged in the view ``view`` and dropped at ``xyz`` (ui.scene's ``dragend``)."""
+        x, y, z = xyz
+        await self._fire(await self.wait_for(view, exact=False, timeout=timeout), "dragend",
+                         [{"type": "dragend", "object_id": "", "object_name": name, "x": x, "y": y, "z": z}])
 
     async def key(self, key: str, down: bool) -> None:
         """The page's key line (the console's ``rf_key`` on element 0, as its KEYS_JS sends it)."""
@@ -195,6 +228,9 @@ class ClientReport:
     owners: list[str] = field(default_factory=list)
     join_s: list[float] = field(default_factory=list)
     keys: int = 0
+    arms: list[str] = field(default_factory=list)
+    ik_applied: int = 0
+    ik_unsolved: int = 0
     back_at_login: int = 0
     disconnected: int = 0
     refused: int = 0
@@ -204,8 +240,11 @@ class ClientReport:
 REFUSED = ("NotOwner", "Rejected", "Timeout", "Unreachable", "Error")
 
 
-async def _student(url: str, i: int, http: Any, report: ClientReport, stop: asyncio.Event, period: float) -> EmulatedPage | None:
-    """Student ``c{i}`` logs in, selects and requests ``base{i}``, then steers: ← held, let go every ``period``."""
+async def _student(url: str, i: int, http: Any, report: ClientReport, stop: asyncio.Event, period: float,
+                   arm: str | None = None, target: tuple[float, float, float] | None = None) -> EmulatedPage | None:
+    """Student ``c{i}`` logs in, selects and requests ``base{i}``, then steers: ← held, let go every ``period``.
+    With an ``arm``, she requests it too, sets its IK target's height and drops the target at ``target`` in the
+    3D view, and every fourth turn nudges the target 1 cm and applies IK, as the paper's Test A does by hand."""
     page = EmulatedPage(url)
     t0 = time.monotonic()
 
@@ -218,6 +257,13 @@ async def _student(url: str, i: int, http: Any, report: ClientReport, stop: asyn
         await page.wait_for(f"request base{i}: you own it", exact=False, timeout=60)
         await page.key("2", True)  # speed 2, as the pages drive
         await page.key("2", False)
+        if arm is not None:
+            await page.click(arm)
+            await page.click("Request")
+            await page.wait_for(f"request {arm}: you own it", exact=False, timeout=60)
+            if target is not None:
+                await page.type_number("IK target height z (m)", target[2])
+                await page.drop("drag the orange sphere", "ik-target", target)
 
     joining, stopping = asyncio.create_task(join()), asyncio.create_task(stop.wait())
     await asyncio.wait({joining, stopping}, return_when=asyncio.FIRST_COMPLETED)
@@ -233,13 +279,26 @@ async def _student(url: str, i: int, http: Any, report: ClientReport, stop: asyn
         return None
     report.joined += 1
     report.owners.append(f"c{i}")
+    if arm is not None:
+        report.arms.append(arm)
     report.join_s.append(time.monotonic() - t0)
-    down = False
+    down, turns = False, 0
     while not stop.is_set() and page.connected:
         down = not down
+        turns += 1
         try:
             await page.key("ArrowLeft", down)
             report.keys += 1
+            if arm is not None and turns % 8 == 0:  # every fourth press: the target 1 cm out or back, then IK
+                await page.click("x plus" if turns % 16 else "x minus", timeout=5)
+                # as a person does: see the line say it is solving, then read the answer before applying it
+                await page.wait_text(lambda t: "IK: solving..." in t, 2.0)
+                await page.wait_text(lambda t: "IK: solving..." not in t, 10.0)
+                if "IK: [" in page.text():
+                    await page.click("Apply IK", timeout=5)
+                    report.ik_applied += 1
+                else:
+                    report.ik_unsolved += 1
         except PageGone:
             break
         try:
@@ -255,8 +314,10 @@ async def _student(url: str, i: int, http: Any, report: ClientReport, stop: asyn
 
 
 async def run_class(url: str, first: int, count: int, seconds: float, period: float = 1.0,
-                    started: Any = None) -> ClientReport:
-    """``count`` students at once on the console at ``url``; until ``seconds`` pass (or SIGTERM/SIGINT)."""
+                    started: Any = None, arms: int = 0,
+                    targets: list[tuple[float, float, float]] | None = None) -> ClientReport:
+    """``count`` students at once on the console at ``url``; until ``seconds`` pass (or SIGTERM/SIGINT). The
+    first ``arms`` of them also own ``arm0``.. and apply IK now and then, from ``targets[k]`` (world frame)."""
     import aiohttp
 
     report = ClientReport(clients=count)
@@ -268,7 +329,10 @@ async def run_class(url: str, first: int, count: int, seconds: float, period: fl
         except (NotImplementedError, RuntimeError):
             pass
     async with aiohttp.ClientSession() as http:
-        tasks = [asyncio.create_task(_student(url, first + k, http, report, stop, period)) for k in range(count)]
+        aims = list(targets or [])
+        tasks = [asyncio.create_task(_student(url, first + k, http, report, stop, period, f"arm{k}" if k < arms else None,
+                                              aims[k] if k < min(arms, len(aims)) else None))
+                 for k in range(count)]
 
         async def said_joined() -> None:
             while report.joined + len(report.errors) < count:
@@ -305,12 +369,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--count", type=int, default=1, help="how many students")
     ap.add_argument("--seconds", type=float, default=60.0, help="how long they drive at most (SIGTERM ends sooner)")
     ap.add_argument("--period", type=float, default=1.0, help="how long ← is held before it is let go (s)")
+    ap.add_argument("--arms", type=int, default=0, help="the first ARMS students also own arm0.. and apply IK")
+    ap.add_argument("--targets", default="", help="each arm's first IK target in the world frame: x,y,z;x,y,z;...")
     a = ap.parse_args(argv)
+    targets = [tuple(float(v) for v in t.split(",")) for t in a.targets.split(";") if t.strip()]
 
     def joined(r: ClientReport) -> None:
         print(f"clients: {r.joined} of {r.clients} joined", flush=True)
 
-    report = asyncio.run(run_class(a.url, a.first, a.count, a.seconds, a.period, started=joined))
+    report = asyncio.run(run_class(a.url, a.first, a.count, a.seconds, a.period, started=joined, arms=a.arms, targets=targets))  # type: ignore[arg-type]
     print(json.dumps(report.__dict__), flush=True)
     return 0
 
