@@ -164,6 +164,21 @@ def own_request_all(world: str, obj: str = "*") -> str:
     return f"{world_root(world)}/own/{o}/{BY}/*"
 
 
+STAFF = "staff"
+
+
+def own_staff(world: str, obj: str, login: str) -> str:
+    """Where instructor ``login`` asks the authority for a staff action on ``obj`` (``fabric.interfaces.STAFF_OPS``):
+    ``own/{obj}/staff/by/{login}``. A class's router lets the instructor logins alone ask there (robofabric.secure)."""
+    return f"{world_root(world)}/own/{validate_id(obj, what='object id')}/{STAFF}/{_by(login)}"
+
+
+def own_staff_all(world: str, obj: str = "*") -> str:
+    """Every login's staff actions on ``obj`` (default: every object): what the authority serves."""
+    o = obj if obj == "*" else validate_id(obj, what="object id")
+    return f"{world_root(world)}/own/{o}/{STAFF}/{BY}/*"
+
+
 def srv(world: str, service: str, *rest: str) -> str:
     """A service key: ``srv(w, "ik", "arm1")`` -> ``rf/w/srv/ik/arm1``."""
     base = f"{world_root(world)}/srv/{_choice(service, SERVICES, 'service')}"
@@ -310,6 +325,8 @@ def parse(key: str) -> ParsedKey:
         return ParsedKey(world, "own", tail[0])
     if kind == "own" and len(tail) == 3 and tail[1] == BY:
         return ParsedKey(world, "own_request", tail[0], user=tail[2])
+    if kind == "own" and len(tail) == 4 and tail[1] == STAFF and tail[2] == BY:
+        return ParsedKey(world, "own_staff", tail[0], user=tail[3])
     if kind == "srv" and len(tail) >= 1 and tail[0] in SERVICES:
         return ParsedKey(world, "srv", tail[0], "/".join(tail[1:]), tuple(tail[1:]))
     if kind == "peer" and len(tail) == 2 and tail[0] in PEER_KINDS:

@@ -26,6 +26,7 @@ from fabric.session import Fabric, undeclare_all
 
 from ownership import snapshot
 from ownership.admission import Admission, OwnBudgets
+from ownership import staff
 from ownership import state as st
 from ownership.hearing import Hearing
 
@@ -79,6 +80,7 @@ class Authority:
                                    report=lambda limit, make: fabric.reports.should_report(limit) is not None
                                    and self._emit(replace(make(), header=fabric.header("event"))))
         self._stop_watchers: list[Callable[[str, str, str], None]] = []
+        self._reset_watchers: list[Callable[[str, str, str], None]] = []
         # users who may have left while no authority listened (a take-over) or while our link was down:
         # confirmed by their token within a lease of hearing again, else they leave (ownership.hearing)
         self.hearing = Hearing(lease_s, self.clock.now(), unconfirmed=self._state.live if restored is not None else ())
@@ -95,6 +97,10 @@ class Authority:
         ] + [
             fabric.rpc.serve(keys.own_request_all(fabric.world, obj), lambda key, req, obj=obj: self._serve(obj, key, req),
                              expected=OwnRequest, defer=self.admission.route, gate=self.admission.gate)
+            for obj in objects
+        ] + [
+            fabric.rpc.serve(keys.own_staff_all(fabric.world, obj), lambda key, req, obj=obj: self._serve_staff(obj, key, req),
+                             expected=OwnRequest)
             for obj in objects
         ]
         for obj in objects:
@@ -141,13 +147,19 @@ class Authority:
         with self._lock:
             self._stop_watchers.append(callback)
 
-    def _apply(self, ev: st.Event) -> list[st.Effect]:
+    def watch_resets(self, callback: Callable[[str, str, str], None]) -> None:
+        """``callback(robot, owner, reason)`` when an instructor resets a robot (:mod:`ownership.staff`); as
+        :meth:`watch_stops`, called under the authority's lock."""
+        with self._lock:
+            self._reset_watchers.append(callback)
+
+    def _apply(self, ev: st.Event | staff.Staff) -> list[st.Effect]:
         with self._lock:
             before = self._state.records
-            self._state, effects = st.step(self._state, ev)
+            self._state, effects = staff.step(self._state, ev)
             for eff in effects:
-                if eff.kind == "stop":
-                    for watch in self._stop_watchers:
+                if eff.kind in ("stop", "reset"):
+                    for watch in self._stop_watchers if eff.kind == "stop" else self._reset_watchers:
                         try:
                             watch(eff.object, eff.user, eff.reason)
                         except Exception:  # the sim's trouble must not break the state machine
@@ -163,6 +175,10 @@ class Authority:
                     self.counters["handovers"] += 1
                 self._emit(Event(kind=EventKind.ownership(eff.kind), reason=eff.reason, object=eff.object, user=eff.user,
                                  severity="warning" if _unasked(eff) else "info", header=self.fabric.header("event")))
+            elif eff.kind == "done":  # an instructor's action: the class's event log says who did what
+                log.info("%s", eff.reason)
+                self._emit(Event(kind=EventKind.OWN_STAFF, reason=eff.reason, object=eff.object, user=eff.user,
+                                 severity="warning", header=self.fabric.header("event")))
         return effects
 
     def _publish(self, rec: OwnershipRecord) -> None:
@@ -253,8 +269,10 @@ class Authority:
             ev: st.Event = st.Request(user, obj, now, request.wait)
         elif request.op == "release":
             ev = st.Release(user, obj, now)
-        else:
+        elif request.op == "renew":
             ev = st.Renew(user, obj, now)
+        else:  # a staff action asked on a user's key: the staff's key is the router's to open (ownership.staff)
+            raise ServiceError(f"refused: {request.op} is a staff action, asked on own/{obj}/staff/by/LOGIN")
         effects = self._apply(ev)
         mine = [e for e in effects if e.user == user and e.object == obj and e.kind not in ("revoked", "stop")]
         eff = mine[0] if mine else st.Effect("denied", obj, user, "no effect")
@@ -267,6 +285,24 @@ class Authority:
                 log.info("%s of %s by %s denied: %s", request.op, obj, user, eff.reason)
         rec = self._serve_record(obj)  # stamped now, with this authority's term
         return OwnReply(outcome, eff.reason, eff.position, rec, header=self.fabric.header(keys.own(self.fabric.world, obj)))
+
+    def _serve_staff(self, obj: str, key: str, request: Any) -> OwnReply:
+        """``own/{obj}/staff/by/{login}``: an instructor's action (:mod:`ownership.staff`), in the key's login's name.
+        Whoever reaches this key is staff: a class's router opens it to the instructor logins alone."""
+        login = keys.parse(key).user
+        if request is None or request.user != login or request.op not in staff.STAFF_OPS:
+            self.counters["rejected"] += 1
+            raise ServiceError(f"refused: a staff action names its op (one of {', '.join(staff.STAFF_OPS)}) and the login "
+                               f"of its key ({quote(login, MAX_USER_LEN)})")
+        effects = self._apply(staff.Staff(login, obj, request.op, self.clock.now(), request.to))
+        said = [e for e in effects if e.kind in ("done", "denied") and e.user == login]
+        eff = said[-1] if said else st.Effect("denied", obj, login, "no effect")
+        self.counters[f"staff_{eff.kind}"] = self.counters.get(f"staff_{eff.kind}", 0) + 1
+        with self._lock:
+            rec = self._state.records.get(obj)
+        if rec is None:
+            raise ServiceError(eff.reason)
+        return OwnReply(eff.kind, eff.reason, 0, self._serve_record(obj), header=self.fabric.header(keys.own(self.fabric.world, obj)))
 
     # ------------------------------------------------------------------ CommandGate
 

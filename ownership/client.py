@@ -251,6 +251,16 @@ class OwnershipClient:
         r = self._ask(obj, "release", timeout=timeout)
         return Outcome(r.outcome, r.reason, r.position, r.record.epoch, r.record)
 
+    def staff(self, obj: str, op: str, *, to: str = "", timeout: float | None = None) -> Outcome:
+        """An instructor's action on ``obj`` (:data:`fabric.interfaces.STAFF_OPS`, :mod:`ownership.staff`) in this
+        client's login: ``done`` or ``denied`` with the reason. A class's router passes it from instructor logins
+        only; from anyone else it is dropped and :class:`~fabric.interfaces.NoReply` comes after ``timeout``."""
+        req = OwnRequest(op, self.user, header=self.fabric.header("own-staff"), to=to)
+        r: OwnReply = self.fabric.rpc.call(keys.own_staff(self.fabric.world, obj, self.user), req,
+                                           timeout=timeout or self.timeout, expected=OwnReply)
+        self.record_seen(keys.own(self.fabric.world, obj), r.record)
+        return Outcome(r.outcome, r.reason, r.position, r.record.epoch, r.record)
+
     def close(self) -> None:
         """No more renewals nor refreshes; waits (up to 2 s) for a renewal round under way."""
         self._refresher.close()

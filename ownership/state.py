@@ -306,7 +306,7 @@ def _on_join(s: OwnState, ev: Join, effects: list[Effect]) -> OwnState:
     recs = dict(s.records)
     for obj in sorted(was_away.owned | was_away.queued):
         rec = recs[obj]
-        if not rec.owner and obj in was_away.owned:
+        if not rec.owner and obj in was_away.owned and not rec.locked:
             recs[obj] = replace(rec, owner=ev.user, epoch=rec.epoch + 1, lease_expiry=ev.now + s.lease_s)
             effects.append(Effect("restored", obj, ev.user, "owner again"))
         elif rec.owner and rec.owner != ev.user:  # behind whoever owns it now (a free robot she may request)
@@ -405,6 +405,9 @@ def _on_request(s: OwnState, ev: Request, effects: list[Effect]) -> OwnState:
     if rec.policy == "scene":
         effects.append(Effect("granted", rec.object, ev.user, "scene object: anyone writes"))
         return s
+    if rec.locked:  # an instructor locked it (ownership.staff)
+        effects.append(Effect("denied", rec.object, ev.user, f"locked by instructor {rec.locked}: ask them to unlock it"))
+        return s
     if rec.owner == ev.user:
         recs[rec.object] = replace(rec, lease_expiry=ev.now + s.lease_s)
         effects.append(Effect("granted", rec.object, ev.user, "already owner"))
@@ -465,7 +468,7 @@ def _on_renew(s: OwnState, ev: Renew, effects: list[Effect]) -> OwnState:
         effects.append(Effect("renewed", rec.object, ev.user))
         return _with(s, {**s.records, rec.object: replace(rec, lease_expiry=ev.now + s.lease_s)})
     away = s.away.get(ev.user)
-    if (not rec.owner and away is not None and rec.object in away.owned and ev.now <= away.deadline
+    if (not rec.owner and not rec.locked and away is not None and rec.object in away.owned and ev.now <= away.deadline
             and len(s.unproven) < MAX_UNPROVEN):
         # Her token went (a router restart closes every link) and her renewal is back before it: the
         # renewal proves she is there, as a request does, so she gets back what she held, as her

@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Iterable
 
 from fabric.config import MAX_MESSAGE_SIZE
-from fabric.keys import BY, validate_id
+from fabric.keys import BY, STAFF as STAFF_KEY, validate_id
 from robofabric.login_cards import PEOPLE, console_url, typable_password, write_cards
 
 __all__ = ["Identity", "ROLES", "SecureInit", "access_control", "router_config", "client_config", "init", "parse_names"]
@@ -114,11 +114,14 @@ def _own_rules(ident: Identity) -> list[dict]:
         serve += latched + mine[1:]
         tokens += [f"{W}/peer/user/{n}", f"{W}/peer/viewer/*", f"{W}/peer/recorder/*", *latched]
         ask.append(f"{W}/own/*/{BY}/{n}")
+        if r == "instructor":  # the staff's actions on robots (ownership.staff): take back, give, lock, stop, reset
+            ask.append(f"{W}/own/*/{STAFF_KEY}/{BY}/{n}")
     elif r == "sim":
         put += [f"{W}/robot/*/{s}" for s in ("joints", "pose", "scan", "sonar")] + [f"{W}/own/*", f"{W}/event/**"]
         # ownership records and events keep their last samples for an observer that missed them (fabric.history)
         latched = [f"{W}/own/*/{ADV}", f"{W}/event/*/*/{ADV}"]  # (a cache replies on the key itself: event/*/* below)
-        serve += [f"{W}/srv/world", f"{W}/srv/state", f"{W}/own/*", f"{W}/own/*/{BY}/*",  # srv/state: a standby follows the primary
+        serve += [f"{W}/srv/world", f"{W}/srv/state", f"{W}/own/*", f"{W}/own/*/{BY}/*", f"{W}/own/*/{STAFF_KEY}/{BY}/*",
+                  # srv/state: a standby follows the primary
                   f"{W}/srv/move/*/{BY}/*", *latched, f"{W}/event/*/*"]  # srv/move/{sim}/by/{login}: the staff's moves
         tokens += [f"{W}/peer/sim/*", f"{W}/peer/recorder/*", *latched]  # a recorder on the sim machine, under its login
         ask.append(ROUTER_INFO)  # is my link up? (a standby judging a lost token: sim_peer.roles.router_answers)

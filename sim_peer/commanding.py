@@ -48,6 +48,7 @@ class Halt:
 
     user: str
     reason: str
+    reset: bool = False  # an instructor's reset (ownership.staff): back to the start rather than a stop
 
 
 class CommandPipeline:
@@ -129,6 +130,16 @@ class CommandPipeline:
             queue.put("stop", Halt(user, reason))
             self._queued.notify()
 
+    def on_reset(self, robot: str, user: str, reason: str) -> None:
+        """The gate's word that an instructor reset ``robot``: it goes back to its start (its own ``reset`` command),
+        superseding whatever is pending; its owner keeps it."""
+        queue = self._queues.get(robot)
+        if queue is None or self._stop.is_set():
+            return
+        with self._queued:
+            queue.put("reset", Halt(user, reason, reset=True))
+            self._queued.notify()
+
     @property
     def held(self) -> str:
         """Why the robots hold and commands are refused (:meth:`hold`); empty when they are not."""
@@ -191,8 +202,11 @@ class CommandPipeline:
         with self.lock:
             robot = self.world.robots[rid]
             moving = robot.moving
-            robot.halt()
-        self.counters["owner_stops"] += 1
+            if halt.reset:
+                self._apply(rid, "reset", None)
+            else:
+                robot.halt()
+        self.counters["staff_resets" if halt.reset else "owner_stops"] += 1
         if moving:
             self.report.event(EventKind.OWNER_STOP, rid, halt.reason, user=halt.user, severity="info")
 

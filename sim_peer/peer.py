@@ -118,6 +118,9 @@ class SimPeer:
         watch_stops = getattr(self.gate, "watch_stops", None)  # a gate of before the rule may lack it
         if watch_stops is not None:
             watch_stops(self.commands.on_owner_lost)
+        watch_resets = getattr(self.gate, "watch_resets", None)  # an instructor's reset (ownership.staff)
+        if watch_resets is not None:
+            watch_resets(self.commands.on_reset)
         d.append(f.subscribe_raw(keys.robot_cmd_all(w), self.commands.on_sample))
         for obj in self.world.objects:
             # no history here: the authority's start must not wait on other peers' caches (with

@@ -39,7 +39,7 @@ from fabric.interfaces.std import (
     Scan,
 )
 from fabric.interfaces.robot_commands import COMMAND_BODIES, Command, CommandBody, JointTarget, Reset, Stop, Twist
-from fabric.interfaces.ownership import MAX_QUEUE, OwnershipRecord, OwnReply, OwnRequest
+from fabric.interfaces.ownership import MAX_QUEUE, STAFF_OPS, OwnershipRecord, OwnReply, OwnRequest
 from fabric.interfaces.events import REJECT_KINDS, Event, EventKind
 from fabric.interfaces.sensors import BaseInfo, LidarInfo, SonarInfo
 from fabric.interfaces.world import ObjectInfo, RobotInfo, RobotState, WorldInfo, WorldState
@@ -74,7 +74,7 @@ __all__ = [
     # commands
     "COMMAND_BODIES", "Command", "CommandBody", "JointTarget", "Reset", "Stop", "Twist",
     # ownership
-    "MAX_QUEUE", "OwnershipRecord", "OwnReply", "OwnRequest",
+    "MAX_QUEUE", "STAFF_OPS", "OwnershipRecord", "OwnReply", "OwnRequest",
     # events
     "REJECT_KINDS", "Event", "EventKind",
     # sensors, world

@@ -55,6 +55,9 @@ class EventKind(enum.StrEnum):
     OWN_EXPIRED = "own_expired"
     OWN_RESTORED = "own_restored"
     OWN_RELEASED = "own_released"
+    OWN_STAFF = "own_staff"
+    """An instructor's action on an object (ownership.staff: taken back, given, locked, unlocked, stopped, reset);
+    ``reason`` says what it did, ``user`` names the instructor."""
 
     @classmethod
     def ownership(cls, effect: str) -> "EventKind":

@@ -15,10 +15,14 @@ from fabric.codec import F, I, Msg, S, Strs, User, register
 from fabric.interfaces.std import HEADER, Header, new_header
 from fabric.limits import MAX_USER_LEN
 
-__all__ = ["MAX_QUEUE", "OwnershipRecord", "OwnRequest", "OwnReply"]
+__all__ = ["MAX_QUEUE", "OwnershipRecord", "OwnRequest", "OwnReply", "STAFF_OPS"]
 
 MAX_QUEUE = 64
 """Users waiting for one object (ownership.state refuses the 65th)."""
+STAFF_OPS = ("take_back", "give", "lock", "unlock", "stop", "reset")
+"""An instructor's actions on one object (:mod:`ownership.staff`), asked on ``own/{object}/staff/by/{login}``,
+which a class's router opens to the instructor logins alone: take it back from its owner (the next in the
+queue gets it), give it to a logged-in user, lock it (nobody may request it) and unlock it, stop it, reset it."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,6 +44,9 @@ class OwnershipRecord:
     state: str = "still"
     authority: str = ""
     header: Header = field(default_factory=new_header)
+    locked: str = ""
+    """The instructor who locked the object (:data:`STAFF_OPS` ``lock``): nobody may request it until it is
+    unlocked; empty when it is not locked."""
 
     SPEC: ClassVar[dict] = {
         "object": S(nonempty=True),
@@ -51,7 +58,9 @@ class OwnershipRecord:
         "state": S(choices=("still", "moving")),
         "authority": S(),
         "header": HEADER,
+        "locked": S(max_len=MAX_USER_LEN),
     }
+    OPTIONAL_TAIL: ClassVar[int] = 1  # locked: added later, left off the wire when empty
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "queue", tuple(self.queue))
@@ -59,19 +68,24 @@ class OwnershipRecord:
 
 @dataclass(frozen=True, slots=True)
 class OwnRequest:
-    """``op`` is request|release|renew; ``wait`` asks to be queued when the robot moves."""
+    """``op`` is request|release|renew on the user's own key, or one of :data:`STAFF_OPS` on the staff's key
+    (``own/{object}/staff/by/{login}``); ``wait`` asks to be queued when the robot moves; ``to``: whom a
+    ``give`` hands the object to."""
 
     op: str
     user: str
     wait: bool = False
     header: Header = field(default_factory=Header)
+    to: str = ""
 
     SPEC: ClassVar[dict] = {
-        "op": S(choices=("request", "release", "renew")),
+        "op": S(choices=("request", "release", "renew", *STAFF_OPS)),
         "user": User(),
         "wait": I(lo=0, hi=1),
         "header": HEADER,
+        "to": S(max_len=MAX_USER_LEN),
     }
+    OPTIONAL_TAIL: ClassVar[int] = 1  # to: added later, left off the wire when empty
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "wait", bool(self.wait))
@@ -79,7 +93,8 @@ class OwnRequest:
 
 @dataclass(frozen=True, slots=True)
 class OwnReply:
-    """``outcome`` is granted|denied|queued|released|renewed; ``position`` counts from 1 when queued."""
+    """``outcome`` is granted|denied|queued|released|renewed (``done``: a staff action carried out); ``position``
+    counts from 1 when queued."""
 
     outcome: str
     reason: str
@@ -88,7 +103,7 @@ class OwnReply:
     header: Header = field(default_factory=Header)
 
     SPEC: ClassVar[dict] = {
-        "outcome": S(choices=("granted", "denied", "queued", "released", "renewed")),
+        "outcome": S(choices=("granted", "denied", "queued", "released", "renewed", "done")),
         "reason": S(),
         "position": I(lo=0),
         "record": Msg(OwnershipRecord),
