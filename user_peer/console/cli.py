@@ -17,6 +17,7 @@ def console(
     rerun_url: Annotated[Optional[str], typer.Option("--rerun-url", help="The Rerun web view to link to (robofabric view --serve-web prints it).")] = None,
     tls_cert: Annotated[Optional[str], typer.Option("--tls-cert", help="Serve HTTPS with this certificate (PEM; secure init --tls writes tls/web/console.pem).")] = None,
     tls_key: Annotated[Optional[str], typer.Option("--tls-key", help="The certificate's private key (PEM; tls/web/console-key.pem).")] = None,
+    instructors: Annotated[str, typer.Option("--instructors", help="Comma-separated instructor logins that may open the teacher's page (/teacher).")] = "",
     world: World = None,
     connect: Connect = None,
     zenoh_config: ZenohConfig = None,
@@ -29,6 +30,7 @@ def console(
     """
     import os
 
+    from fabric import keys
     from fabric.config import ConfigError, FabricConfig
     from user_peer.console.server import Console, serve
 
@@ -48,7 +50,13 @@ def console(
     connect_eps, _ = cfg.endpoints()
     print(f"console for world {cfg.world!r} via {', '.join(connect_eps)}", flush=True)
     os.environ.setdefault("NICEGUI_STORAGE_PATH", os.path.join(os.path.expanduser("~"), ".cache", "robofabric", "nicegui"))
-    serve(Console(cfg.world, connect_eps, cfg.config_file, grace, rerun_url), host.strip("[]"), int(port_text), tls)
+    names = tuple(n.strip() for n in instructors.split(",") if n.strip())
+    for n in names:
+        try:
+            keys.validate_id(n, what="instructor login")
+        except ValueError as exc:
+            raise UserError(f"--instructors: {exc}") from None
+    serve(Console(cfg.world, connect_eps, cfg.config_file, grace, rerun_url, instructors=names), host.strip("[]"), int(port_text), tls)
 
 
 def _tls(cert: str | None, key: str | None) -> tuple[str, str] | None:

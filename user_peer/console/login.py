@@ -238,6 +238,11 @@ class Logins:
         with self._lock:
             return sorted(self._held)
 
+    def pages(self) -> dict[str, int]:
+        """Each logged-in user's open pages on this console (0 while her grace runs)."""
+        with self._lock:
+            return {name: max(0, h.pages) if h.closer is None else 0 for name, h in self._held.items()}
+
     def close(self) -> None:
         """Close every world (the console stops)."""
         with self._lock:

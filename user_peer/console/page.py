@@ -368,6 +368,9 @@ class ConsolePage:
             if rec is not None and self._owners.get(r.id, rec.owner) != rec.owner:
                 # records come from the robot's authority only (the ownership replica checks): trusted
                 self._push(TRUSTED + one_line(f"ownership {r.id}: {self._owners[r.id] or 'nobody'} -> {rec.owner or 'nobody'} (epoch {rec.epoch})"))
+                if self._owners[r.id] == w.user:  # hers no more (a handover, her lease, an instructor): the status says so
+                    self.say(f"{r.id} is no longer yours: " + (f"{rec.owner} owns it now" if rec.owner else "it is free now")
+                             + " (the event log says why)")
             if rec is not None:
                 self._owners[r.id] = rec.owner
         self.sel_label.text = f"selected: {self.selected}" if self.selected else "no robot"

@@ -56,6 +56,7 @@ class Console:
     grace: float = 10.0
     rerun_url: str | None = None
     join_timeout: float = 10.0
+    instructors: tuple[str, ...] = ()  # the logins that may open the teacher's page (user_peer/console/teacher.py)
     logins: Logins = field(init=False)
     health: Health = field(init=False, default_factory=Health)
     pictures: Pictures = field(init=False, default_factory=Pictures)
@@ -124,6 +125,13 @@ def serve(console: Console, host: str, port: int, tls: tuple[str, str] | None = 
     def index(client: Any) -> None:
         ConsolePage(console, client).show()
 
+    from user_peer.console.teacher import ROUTE as TEACHER
+    from user_peer.console.teacher_page import TeacherPage
+
+    @ui.page(TEACHER)
+    def teacher(client: Any) -> None:
+        TeacherPage(console, client).show()
+
     @app.get(ROUTE + "/{token}.png")
     def picture(token: str) -> Response:
         png = console.pictures.get(token)
@@ -152,6 +160,8 @@ def serve(console: Console, host: str, port: int, tls: tuple[str, str] | None = 
             break
         for url in page_urls(host, port, "https" if tls else "http"):
             print(f"console: open {url}", flush=True)
+        if console.instructors:
+            print(f"console: the teacher's page is {TEACHER} ({', '.join(console.instructors)})", flush=True)
 
     def started() -> None:
         # after NiceGUI's startup set them from the reconnect window

@@ -74,15 +74,15 @@ def klass(tmp_path_factory):
         sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config", str(files["sim"])), name="sim")
         procs.start(robofabric_cmd("compute", "--world", world, "--zenoh-config", str(files["compute"])), name="compute")
         web = free_port()
-        console = procs.start(robofabric_cmd("console", "--world", world, "--connect", ep, "--listen", f"127.0.0.1:{web}", "--grace", "3"),
-                              name="console")
+        console = procs.start(robofabric_cmd("console", "--world", world, "--connect", ep, "--listen", f"127.0.0.1:{web}", "--grace", "3",
+                                             "--instructors", "carol"), name="console")
         url = f"http://127.0.0.1:{web}/"
         wait_until(lambda: f"console: open {url}" in procs.output(console), timeout=60, what="the console's URL",
                    seen=lambda: procs.output(console)[-2000:])
         carol = user_peer.connect(world=world, zenoh_config=str(files["carol"]), join_timeout=120)
         try:
             wait_until(lambda: carol.fabric.live_peers("compute"), timeout=120, what="the compute peer", seen=lambda: procs.output(sim)[-2000:])
-            yield Klass(world, url, f"127.0.0.1:{web}", {n: _password(files[n]) for n in ("alice", "bob", "dave")}, carol, procs, console,
+            yield Klass(world, url, f"127.0.0.1:{web}", {n: _password(files[n]) for n in ("alice", "bob", "dave", "carol")}, carol, procs, console,
                         made.cards)
         finally:
             carol.close()
@@ -759,3 +759,50 @@ def test_axe_core_finds_no_serious_or_critical_violation_on_the_login_card_and_t
     shot(page, "axe")
     page.context.close()
     assert not any(found.values()), json.dumps(found, indent=1)
+
+
+def open_teacher(browser, klass: Klass, name: str):
+    """The teacher's page, logged in as ``name`` (the login card's name and password)."""
+    page = new_context(browser, viewport=VIEWPORT).new_page()
+    page.on("request", lambda r: REQUESTS.append(r.url))
+    page.set_default_timeout(30_000)
+    page.goto(klass.url + "teacher", timeout=60_000)
+    log_in(page, name, klass.passwords[name])
+    return page
+
+
+def test_the_teacher_releases_a_robot_a_student_holds_and_a_student_cannot_open_the_teachers_page(browser, klass):
+    """alice owns arm1 from her page; carol (an instructor) sees it on the teacher's page and releases it: the
+    authority takes it back (read through the Python API), alice's page shows it free, and the class's event log
+    says who did it. bob, a student, is refused the teacher's page before any session of his opens. axe-core finds
+    no serious or critical violation on the teacher's page."""
+    arm = klass.carol.robot("arm1")
+    alice = open_page(browser, klass)
+    logged_in(alice, klass, "alice")
+    alice.get_by_role("button", name="arm1", exact=True).click()
+    alice.get_by_role("button", name="Request").click()
+    wait_message(alice, r"request arm1: you own it")
+
+    bob = open_teacher(browser, klass, "bob")
+    bob.get_by_text("Refused: the teacher's page is for instructors: bob is not one of this console's").wait_for(timeout=60_000)
+    assert bob.get_by_role("button", name="Stop all").count() == 0
+
+    carol = open_teacher(browser, klass, "carol")
+    carol.get_by_text(f"teacher's page · world {klass.world} · carol").wait_for(timeout=60_000)
+    release = carol.get_by_role("button", name="Release arm1")
+    release.wait_for(timeout=30_000)  # shown once the class's table says someone owns arm1
+    carol.get_by_role("cell", name="alice", exact=True).first.wait_for()  # the class table: alice, her page
+    shot(carol, "teacher")
+    release.click()
+    wait_until(lambda: "arm1 taken back from alice by instructor carol" in message(carol), timeout=30,
+               what="the teacher's page to say what it did", seen=lambda: message(carol))
+    wait_until(lambda: arm.record is not None and arm.record.owner == "", timeout=30, what="arm1 free (read through the Python API)",
+               seen=lambda: arm.record)
+    alice.get_by_text(re.compile(r"^arm arm1 .* owner: nobody")).wait_for(timeout=30_000)
+    wait_message(alice, r"arm1 is no longer yours: it is free now")
+    wait_until(lambda: "ownership arm1: alice -> nobody" in _events(alice) and "taken back from alice by instructor carol" in _events(alice),
+               timeout=30, what="alice's event log to say it was taken back, and by whom", seen=lambda: _events(alice))
+    shot(alice, "alice-released-by-teacher")
+    found = axe_violations(carol)
+    shot(carol, "teacher-after")
+    assert not found, json.dumps(found, indent=1)
