@@ -99,7 +99,7 @@ class Authority:
                              expected=OwnRequest, defer=self.admission.route, gate=self.admission.gate)
             for obj in objects
         ] + [
-            fabric.rpc.serve(keys.own_staff_all(fabric.world, obj), lambda key, req, obj=obj: self._serve_staff(obj, key, req),
+            fabric.rpc.serve(keys.own_staff_all(fabric.world, obj), lambda key, req, obj=obj: _serve_staff(self, obj, key, req),
                              expected=OwnRequest)
             for obj in objects
         ]
@@ -286,24 +286,6 @@ class Authority:
         rec = self._serve_record(obj)  # stamped now, with this authority's term
         return OwnReply(outcome, eff.reason, eff.position, rec, header=self.fabric.header(keys.own(self.fabric.world, obj)))
 
-    def _serve_staff(self, obj: str, key: str, request: Any) -> OwnReply:
-        """``own/{obj}/staff/by/{login}``: an instructor's action (:mod:`ownership.staff`), in the key's login's name.
-        Whoever reaches this key is staff: a class's router opens it to the instructor logins alone."""
-        login = keys.parse(key).user
-        if request is None or request.user != login or request.op not in staff.STAFF_OPS:
-            self.counters["rejected"] += 1
-            raise ServiceError(f"refused: a staff action names its op (one of {', '.join(staff.STAFF_OPS)}) and the login "
-                               f"of its key ({quote(login, MAX_USER_LEN)})")
-        effects = self._apply(staff.Staff(login, obj, request.op, self.clock.now(), request.to))
-        said = [e for e in effects if e.kind in ("done", "denied") and e.user == login]
-        eff = said[-1] if said else st.Effect("denied", obj, login, "no effect")
-        self.counters[f"staff_{eff.kind}"] = self.counters.get(f"staff_{eff.kind}", 0) + 1
-        with self._lock:
-            rec = self._state.records.get(obj)
-        if rec is None:
-            raise ServiceError(eff.reason)
-        return OwnReply(eff.kind, eff.reason, 0, self._serve_record(obj), header=self.fabric.header(keys.own(self.fabric.world, obj)))
-
     # ------------------------------------------------------------------ CommandGate
 
     def admit(self, robot: str, command: Command) -> str | None:
@@ -340,6 +322,26 @@ class Authority:
         thread = self._thread
         if thread is not None and thread.is_alive() and thread is not threading.current_thread():
             thread.join(timeout=2.0)
+
+
+def _serve_staff(auth: Authority, obj: str, key: str, request: Any) -> OwnReply:
+    """``own/{obj}/staff/by/{login}``: an instructor's action (:mod:`ownership.staff`), in the key's login's name.
+    Whoever reaches this key is staff: a class's router opens it to the instructor logins alone. (A function of the
+    module, not a method: the authority's class holds enough.)"""
+    login = keys.parse(key).user
+    if request is None or request.user != login or request.op not in staff.STAFF_OPS:
+        auth.counters["rejected"] += 1
+        raise ServiceError(f"refused: a staff action names its op (one of {', '.join(staff.STAFF_OPS)}) and the login "
+                           f"of its key ({quote(login, MAX_USER_LEN)})")
+    effects = auth._apply(staff.Staff(login, obj, request.op, auth.clock.now(), request.to))
+    said = [e for e in effects if e.kind in ("done", "denied") and e.user == login]
+    eff = said[-1] if said else st.Effect("denied", obj, login, "no effect")
+    auth.counters[f"staff_{eff.kind}"] = auth.counters.get(f"staff_{eff.kind}", 0) + 1
+    with auth._lock:
+        rec = auth._state.records.get(obj)
+    if rec is None:
+        raise ServiceError(eff.reason)
+    return OwnReply(eff.kind, eff.reason, 0, auth._serve_record(obj), header=auth.fabric.header(keys.own(auth.fabric.world, obj)))
 
 
 def _unasked(eff: st.Effect) -> bool:

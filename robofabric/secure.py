@@ -120,9 +120,8 @@ def _own_rules(ident: Identity) -> list[dict]:
         put += [f"{W}/robot/*/{s}" for s in ("joints", "pose", "scan", "sonar")] + [f"{W}/own/*", f"{W}/event/**"]
         # ownership records and events keep their last samples for an observer that missed them (fabric.history)
         latched = [f"{W}/own/*/{ADV}", f"{W}/event/*/*/{ADV}"]  # (a cache replies on the key itself: event/*/* below)
-        serve += [f"{W}/srv/world", f"{W}/srv/state", f"{W}/own/*", f"{W}/own/*/{BY}/*", f"{W}/own/*/{STAFF_KEY}/{BY}/*",
-                  # srv/state: a standby follows the primary
-                  f"{W}/srv/move/*/{BY}/*", *latched, f"{W}/event/*/*"]  # srv/move/{sim}/by/{login}: the staff's moves
+        serve += [f"{W}/srv/world", f"{W}/srv/state", f"{W}/own/*", f"{W}/own/*/{BY}/*", f"{W}/own/*/{STAFF_KEY}/{BY}/*",  # srv/state:
+                  f"{W}/srv/move/*/{BY}/*", *latched, f"{W}/event/*/*"]  # a standby follows the primary; srv/move: the staff's moves
         tokens += [f"{W}/peer/sim/*", f"{W}/peer/recorder/*", *latched]  # a recorder on the sim machine, under its login
         ask.append(ROUTER_INFO)  # is my link up? (a standby judging a lost token: sim_peer.roles.router_answers)
     elif r == "compute":

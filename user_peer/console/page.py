@@ -145,6 +145,7 @@ class ConsolePage:
         self._events_seen = 0
         self._gone_seen = 0
         self._owners: dict[str, str] = {}
+        self._letting_go: dict[str, int] = {}  # robot -> the epoch at which she released it herself
         self._tick: int | None = None  # its place on the console's redraw clock
         self.ticket: Ticket | None = None  # what the tab keeps across a reload
         self._ended = False
@@ -330,6 +331,9 @@ class ConsolePage:
         elif op == "release":
             if r is self.base and self.base_panel is not None:
                 await self.base_panel.let_go()
+            rec = self.world.ownership.record(r.id)
+            if rec is not None:
+                self._letting_go[r.id] = rec.epoch  # her own release: the status says "release: ok", not that she lost it
             await self.call(f"release {r.id}", r.release)
         else:  # a place in the queue (granted at once when the robot is still): the client renews a turn that comes
             out = await self.call(f"queue for {r.id}", self.world.ownership.client.request, r.id, wait=True, timeout=self.world.timeout)
@@ -368,7 +372,8 @@ class ConsolePage:
             if rec is not None and self._owners.get(r.id, rec.owner) != rec.owner:
                 # records come from the robot's authority only (the ownership replica checks): trusted
                 self._push(TRUSTED + one_line(f"ownership {r.id}: {self._owners[r.id] or 'nobody'} -> {rec.owner or 'nobody'} (epoch {rec.epoch})"))
-                if self._owners[r.id] == w.user:  # hers no more (a handover, her lease, an instructor): the status says so
+                mine = self._owners[r.id] == w.user and self._letting_go.pop(r.id, -1) + 1 != rec.epoch  # not her own release
+                if mine:  # hers no more (a handover, her lease, an instructor): the status says so
                     self.say(f"{r.id} is no longer yours: " + (f"{rec.owner} owns it now" if rec.owner else "it is free now")
                              + " (the event log says why)")
             if rec is not None:

@@ -18,6 +18,7 @@ from user_peer.console.feed import Decoded
 from user_peer.console.health import PERIOD_S, Health
 from user_peer.console.login import Logins
 from user_peer.console.pictures import ROUTE, Pictures
+from user_peer.console.teacher import ROUTE as TEACHER
 from user_peer.console.ticker import Ticker
 
 __all__ = ["Console", "serve", "page_urls", "RECONNECT_S", "PRUNE_S", "PING_INTERVAL_S", "PING_TIMEOUT_S", "REFRESH_VIEW_S"]
@@ -103,6 +104,30 @@ def page_urls(host: str, port: int, scheme: str = "http") -> list[str]:
     return [f"{scheme}://{a}:{port}/" for a in addrs] or [f"{scheme}://{socket.gethostname()}:{port}/"]
 
 
+def _routes(console: Console) -> None:
+    """The student's page (``/``), the teacher's (:data:`~.teacher.ROUTE`) and the view's pictures."""
+    from fastapi import Response
+    from nicegui import app, ui
+
+    from user_peer.console.page import ConsolePage
+    from user_peer.console.teacher_page import TeacherPage
+
+    @ui.page("/")
+    def index(client: Any) -> None:
+        ConsolePage(console, client).show()
+
+    @ui.page(TEACHER)
+    def teacher(client: Any) -> None:
+        TeacherPage(console, client).show()
+
+    @app.get(ROUTE + "/{token}.png")
+    def picture(token: str) -> Response:
+        png = console.pictures.get(token)
+        if png is None:
+            return Response(status_code=404)
+        return Response(png, media_type="image/png", headers={"Cache-Control": "private, max-age=3600"})
+
+
 def serve(console: Console, host: str, port: int, tls: tuple[str, str] | None = None) -> None:
     """Serve the console until Ctrl-C (or SIGTERM); every logged-in world is closed on the way out.
     ``tls``: (certificate, key) PEM files to serve HTTPS (a password never crosses the LAN in clear)."""
@@ -117,27 +142,7 @@ def serve(console: Console, host: str, port: int, tls: tuple[str, str] | None = 
 
     console.doors.install(app, core.sio, Client, exempt=(ROUTE,), max_age=PRUNE_S)  # before ui.run starts the app
 
-    from user_peer.console.page import ConsolePage
-
-    from fastapi import Response
-
-    @ui.page("/")
-    def index(client: Any) -> None:
-        ConsolePage(console, client).show()
-
-    from user_peer.console.teacher import ROUTE as TEACHER
-    from user_peer.console.teacher_page import TeacherPage
-
-    @ui.page(TEACHER)
-    def teacher(client: Any) -> None:
-        TeacherPage(console, client).show()
-
-    @app.get(ROUTE + "/{token}.png")
-    def picture(token: str) -> Response:
-        png = console.pictures.get(token)
-        if png is None:
-            return Response(status_code=404)
-        return Response(png, media_type="image/png", headers={"Cache-Control": "private, max-age=3600"})
+    _routes(console)
 
     async def report() -> None:
         while True:

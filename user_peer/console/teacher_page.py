@@ -129,7 +129,7 @@ class TeacherPage:
         row: dict[str, Any] = {"robot": ui.label(f"{rid} ({self.kinds[rid]})")}
         for f in ("owner", "queue", "state", "locked"):
             row[f] = ui.label("")
-        row["to"] = ui.select([], label=f"Give {rid} to").props(f'dense outlined aria-label="Give {rid} to"').style("min-width: 8rem")
+        row["to"] = ui.select([], label=f"Give {rid} to").props(f'dense outlined aria-label="Give {rid} to"').style("min-width: 10rem")
         with ui.row().classes("items-center no-wrap").style("gap: 0.25rem"):
             for op, label in teacher.LABELS.items():
                 row[op] = ui.button(label, on_click=lambda _, rid=rid, op=op: self.act(rid, op)).props(
