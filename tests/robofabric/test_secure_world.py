@@ -213,6 +213,22 @@ def test_mallory_cannot_release_alices_arm(secure, alice_owns_arm):
     assert alice.ownership.record("arm1").owner == "alice"
 
 
+def test_only_the_instructor_may_ask_the_staffs_key(secure, alice_owns_arm):
+    """mallory's staff action on arm1 is dropped by the router (and counted by its audit); carol, the instructor,
+    is answered by the authority: her stop is done and alice keeps arm1."""
+    alice, arm = alice_owns_arm
+    w = secure.world
+    mallory = secure.fabric("mallory")
+    with pytest.raises(ServiceError, match="no reply"):
+        mallory.rpc.call(keys.own_staff(w, "arm1", "mallory"), OwnRequest("take_back", "mallory"), timeout=2.0, expected=OwnReply)
+    _refused_by_router(secure, f"mallory query {keys.own_staff(w, 'arm1', 'mallory')}")
+    assert alice.ownership.record("arm1").owner == "alice"
+    carol = secure.fabric("carol")
+    reply = carol.rpc.call(keys.own_staff(w, "arm1", "carol"), OwnRequest("stop", "carol"), timeout=10.0, expected=OwnReply)
+    assert reply.outcome == "done" and "arm1 stopped by instructor carol" in reply.reason
+    assert reply.record.owner == "alice"
+
+
 def test_a_user_cannot_publish_robot_state_or_serve_the_world(secure):
     w = secure.world
     watcher = secure.fabric("viewer", kind="viewer", peer_id="watch3")
