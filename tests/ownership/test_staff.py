@@ -160,3 +160,48 @@ def test_the_authority_serves_the_staff_key_and_logs_each_action(connect, world)
         for c in (alice, bob, teacher):
             c.close()
         auth.close()
+
+
+@pytest.mark.slow
+def test_the_instructors_stop_and_reset_reach_the_sims_robot_and_her_lock_refuses_the_owner(world, router, connect, procs):
+    """A real sim: alice moves arm1 away from zero; the instructor's stop holds it where it is, her reset takes it
+    back to zero while alice keeps it, and her lock takes it from alice, whose next command is refused."""
+    from fabric.interfaces import Command, JointState, JointTarget
+    from robofabric.testing import robofabric_cmd
+
+    import numpy as np
+
+    ep = f"tcp/127.0.0.1:{router[1]}"
+    sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep), name="sim")
+    fa = connect("user", "alice")
+    wait_until(lambda: fa.live_peers("sim"), timeout=60, what="the sim peer", seen=lambda: procs.output(sim)[-2000:])
+    joints: list[JointState] = []
+    fa.subscribe(keys.robot_joints(world, "arm1"), lambda k, m: joints.append(m), expected=JointState)
+    events: list[Event] = []
+    fa.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
+    alice = OwnershipClient(fa, "alice", renew_s=0.2, timeout=10.0).start()
+    teacher = OwnershipClient(connect("user", "teacher"), "teacher", renew_s=0.2, timeout=10.0).start()
+    try:
+        wait_until(lambda: alice.record("arm1") is not None and joints, timeout=30, what="arm1's record and joints")
+        assert alice.request("arm1").granted
+        fa.publish(keys.robot_cmd(world, "arm1", "joints", "alice"),
+                   Command("alice", alice.epoch("arm1"), JointTarget(np.radians([60.0, 30.0, -40.0, 30.0, 50.0, -30.0]), speed_scale=0.2)))
+        wait_until(lambda: np.linalg.norm(joints[-1].q) > 0.2, timeout=30, what="arm1 on its way", seen=lambda: joints[-1].q)
+        assert teacher.staff("arm1", "stop").outcome == "done"
+        wait_until(lambda: np.max(np.abs(joints[-1].dq)) < 1e-3, timeout=30, what="arm1 held", seen=lambda: joints[-1].dq)
+        held = np.asarray(joints[-1].q).copy()
+        assert np.linalg.norm(held) > 0.2 and alice.owns("arm1")
+        assert teacher.staff("arm1", "reset").outcome == "done"
+        wait_until(lambda: np.linalg.norm(joints[-1].q) < 1e-3, timeout=60, what="arm1 back at zero", seen=lambda: joints[-1].q)
+        assert alice.owns("arm1")
+        out = teacher.staff("arm1", "lock")
+        assert out.outcome == "done" and out.record.locked == "teacher" and out.record.owner == ""
+        denied = alice.request("arm1")
+        assert denied.outcome == "denied" and "locked by instructor teacher" in denied.reason
+        fa.publish(keys.robot_cmd(world, "arm1", "joints", "alice"), Command("alice", alice.epoch("arm1"), JointTarget(held)))
+        wait_until(lambda: any(e.kind == "reject" and e.user == "alice" and e.object == "arm1" for e in events), timeout=30,
+                   what="alice's command after the lock refused", seen=lambda: events[-5:])
+        assert any(e.kind == "own_staff" and "locked by instructor teacher (taken from alice)" in e.reason for e in events)
+    finally:
+        alice.close()
+        teacher.close()
