@@ -6,6 +6,8 @@ of four lower-case letters and digits, without the look-alikes 0 o 1 l i: about 
 online guesser gets through the router and the console's login throttle), the peers keep their long random
 tokens. Each person's card (``cards/NAME.txt``) and one printable page of all of them (``cards/cards.html``) say
 her name, her password and the console's address; the same password is in her ``NAME.json5`` for her scripts.
+The printable page carries a QR code of the console's address on every card (:func:`qr_svg`, made with segno), so
+a phone or a tablet opens the console without typing the address; ``cards/console-qr.svg`` is the code alone.
 A class with mutual TLS (``--tls``) has no passwords: its people log in with certificates, and no card is written.
 """
 
@@ -17,13 +19,15 @@ from html import escape
 from pathlib import Path
 from typing import Iterable
 
-__all__ = ["TYPABLE", "typable_password", "is_typable", "card_text", "write_cards", "console_url", "PEOPLE"]
+__all__ = ["TYPABLE", "typable_password", "is_typable", "card_text", "write_cards", "console_url", "qr_svg", "PEOPLE", "QR_QUIET"]
 
 TYPABLE = "abcdefghjkmnpqrstuvwxyz23456789"
 """The letters a typable password is made of: lower case and digits, without 0 o 1 l i (read alike on a card)."""
 PEOPLE = ("user", "instructor")
 """The roles whose logins a person types (the others are peers' configs)."""
 CARDS_DIR = "cards"
+QR_QUIET = 4
+"""The light margin around a QR code, in modules (the standard's quiet zone)."""
 
 
 def typable_password(groups: int = 3, size: int = 4) -> str:
@@ -58,17 +62,33 @@ def card_text(name: str, password: str, url: str, role: str = "user") -> str:
             f"Scripts and the terminal UI log in with {name}.json5 (the same password), from your teacher.\n")
 
 
-def _card_html(name: str, password: str, url: str, role: str) -> str:
+def qr_svg(url: str) -> str:
+    """A QR code of ``url`` as an SVG element: one 1x1 ``rect`` per dark module of segno's matrix (error correction M),
+    inside a quiet zone of :data:`QR_QUIET` modules, named for a screen reader."""
+    import segno
+
+    qr = segno.make(url, error="m", micro=False)
+    n = len(qr.matrix)
+    size = n + 2 * QR_QUIET
+    dark = "".join(f'<rect x="{x + QR_QUIET}" y="{y + QR_QUIET}" width="1" height="1"/>'
+                   for y, row in enumerate(qr.matrix) for x, v in enumerate(row) if v)
+    return (f'<svg class="qr" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {size} {size}" role="img" '
+            f'aria-label="QR code of {escape(url)}" shape-rendering="crispEdges"><rect width="{size}" height="{size}" fill="#fff"/>'
+            f'<g fill="#000">{dark}</g></svg>')
+
+
+def _card_html(name: str, password: str, url: str, role: str, qr: str) -> str:
     who = "instructor" if role == "instructor" else "student"
-    return (f'<section class="card"><h2>robofabric login card <small>({who})</small></h2><dl>'
+    return (f'<section class="card">{qr}<h2>robofabric login card <small>({who})</small></h2><dl>'
             f"<dt>Console</dt><dd>{escape(url)}</dd><dt>Name</dt><dd>{escape(name)}</dd>"
             f"<dt>Password</dt><dd class=\"pw\">{escape(password)}</dd></dl>"
-            "<p>Open the console's address in a browser, type your name and password, press <b>Log in</b>.</p></section>")
+            "<p>Open the console's address in a browser (or scan the code), type your name and password, press "
+            "<b>Log in</b>.</p></section>")
 
 
 CSS = """body{font-family:sans-serif;margin:1cm}.card{border:1px dashed #555;padding:0.5cm;margin:0 0 0.5cm;width:12cm;
 break-inside:avoid}h2{font-size:1.1rem;margin:0 0 0.3cm}dl{display:grid;grid-template-columns:6em auto;margin:0}dd{margin:0;
-font-family:monospace;font-size:1.2rem}.pw{letter-spacing:0.1em}"""
+font-family:monospace;font-size:1.2rem}.pw{letter-spacing:0.1em}.qr{float:right;width:3cm;height:3cm;margin:0 0 0.2cm 0.3cm}"""
 
 
 def write_cards(d: Path, people: Iterable[tuple[str, str]], passwords: dict[str, str], url: str) -> dict[str, Path]:
@@ -77,6 +97,7 @@ def write_cards(d: Path, people: Iterable[tuple[str, str]], passwords: dict[str,
     out: dict[str, Path] = {}
     folder = d / CARDS_DIR
     html = []
+    qr = qr_svg(url)
     for name, role in people:
         if name not in passwords:
             continue
@@ -85,8 +106,9 @@ def write_cards(d: Path, people: Iterable[tuple[str, str]], passwords: dict[str,
         path = folder / f"{name}.txt"
         _private(path, card_text(name, passwords[name], url, role))
         out[name] = path
-        html.append(_card_html(name, passwords[name], url, role))
+        html.append(_card_html(name, passwords[name], url, role, qr))
     if out:
+        _private(folder / "console-qr.svg", qr + "\n")
         _private(folder / "cards.html", f'<!doctype html><html lang="en"><head><meta charset="utf-8"><title>robofabric login cards</title>'
                  f"<style>{CSS}</style></head><body>{''.join(html)}</body></html>\n")
     return out

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import stat
 import subprocess
 
@@ -11,7 +12,7 @@ import zenoh
 
 from fabric.config import ConfigError, FabricConfig
 from fabric.config import certificate_common_name
-from robofabric.login_cards import TYPABLE, is_typable, typable_password
+from robofabric.login_cards import QR_QUIET, TYPABLE, is_typable, typable_password
 from robofabric.secure import Identity, access_control, init, read_credentials
 from robofabric.testing import robofabric_cmd
 
@@ -249,6 +250,37 @@ def test_a_password_class_writes_each_person_a_private_login_card_with_the_passw
     assert html.count('<section class="card">') == 3 and "(instructor)" in html and creds["bob"] in html
     again = init(d, users=["alice"], console="https://console.example:8443/")  # a second run: the same passwords
     assert again.cards["alice"].read_text().count(creds["alice"]) == 1 and "https://console.example:8443/" in again.cards["bob"].read_text()
+
+
+def _qr_modules(svg: str) -> tuple[int, set[tuple[int, int]]]:
+    """The dark modules an SVG of the cards draws (its 1x1 rects, the quiet zone taken off) and the code's size."""
+    size = int(re.search(r'viewBox="0 0 (\d+) \1"', svg).group(1))
+    dark = {(int(x) - QR_QUIET, int(y) - QR_QUIET) for x, y in re.findall(r'<rect x="(\d+)" y="(\d+)" width="1" height="1"/>', svg)}
+    return size - 2 * QR_QUIET, dark
+
+
+@pytest.mark.parametrize("console", [None, "https://console.example:8443/"])
+def test_every_printed_card_carries_a_qr_code_of_the_consoles_address(tmp_path, console):
+    """cards.html draws, on each card, the modules of segno's QR code of the address the card says (and
+    cards/console-qr.svg is that code alone): what a phone's camera reads is the console's address."""
+    import segno
+
+    d = tmp_path / "class"
+    init(d, users=["alice", "bob"], instructors=["carol"], listen=["tcp/0.0.0.0:7447"], connect=["tcp/10.0.0.5:7447"], console=console)
+    url = console or "http://10.0.0.5:8080/"
+    want = segno.make(url, error="m", micro=False).matrix
+    want_dark = {(x, y) for y, row in enumerate(want) for x, v in enumerate(row) if v}
+    html = (d / "cards" / "cards.html").read_text()
+    svgs = re.findall(r"<svg class=\"qr\".*?</svg>", html)
+    assert len(svgs) == 3 and html.count('<section class="card">') == 3
+    alone = (d / "cards" / "console-qr.svg").read_text()
+    for svg in svgs + [alone]:
+        n, dark = _qr_modules(svg)
+        assert n == len(want) and dark == want_dark
+        assert f'aria-label="QR code of {url}"' in svg
+    assert _mode(d / "cards" / "console-qr.svg") == 0o600
+    other = segno.make("http://10.0.0.6:8080/", error="m", micro=False).matrix  # a code of another address differs
+    assert {(x, y) for y, row in enumerate(other) for x, v in enumerate(row) if v} != want_dark
 
 
 def test_a_tls_class_has_no_passwords_and_no_cards(tmp_path):
