@@ -51,13 +51,19 @@ def console_url(connect: Iterable[str], *, https: bool, port: int = 8080) -> str
     return f"{'https' if https else 'http'}://{host}:{port}/"
 
 
+def teacher_url(url: str) -> str:
+    """The teacher's page of the console at ``url`` (user_peer.console.teacher.ROUTE), on an instructor's card."""
+    return url.rstrip("/") + "/teacher"
+
+
 def card_text(name: str, password: str, url: str, role: str = "user") -> str:
     """One person's card, as plain text."""
     who = "instructor" if role == "instructor" else "student"
     return (f"robofabric login card ({who})\n\n"
             f"  Console   {url}\n"
             f"  Name      {name}\n"
-            f"  Password  {password}\n\n"
+            f"  Password  {password}\n"
+            + (f"  Teacher   {teacher_url(url)}  (the teacher's page)\n" if role == "instructor" else "") + "\n"
             f"Open the console's address in a browser, type your name and password, press Log in.\n"
             f"Scripts and the terminal UI log in with {name}.json5 (the same password), from your teacher.\n")
 
@@ -81,7 +87,8 @@ def _card_html(name: str, password: str, url: str, role: str, qr: str) -> str:
     who = "instructor" if role == "instructor" else "student"
     return (f'<section class="card">{qr}<h2>robofabric login card <small>({who})</small></h2><dl>'
             f"<dt>Console</dt><dd>{escape(url)}</dd><dt>Name</dt><dd>{escape(name)}</dd>"
-            f"<dt>Password</dt><dd class=\"pw\">{escape(password)}</dd></dl>"
+            f"<dt>Password</dt><dd class=\"pw\">{escape(password)}</dd>"
+            + (f"<dt>Teacher</dt><dd>{escape(teacher_url(url))}</dd>" if role == "instructor" else "") + "</dl>"
             "<p>Open the console's address in a browser (or scan the code), type your name and password, press "
             "<b>Log in</b>.</p></section>")
 

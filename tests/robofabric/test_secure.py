@@ -248,6 +248,7 @@ def test_a_password_class_writes_each_person_a_private_login_card_with_the_passw
     html = (d / "cards" / "cards.html").read_text()
     assert _mode(d / "cards") == 0o700 and _mode(d / "cards" / "cards.html") == 0o600
     assert html.count('<section class="card">') == 3 and "(instructor)" in html and creds["bob"] in html
+    assert "  Teacher   http://10.0.0.5:8080/teacher" in out.cards["carol"].read_text() and "Teacher" not in out.cards["bob"].read_text()
     again = init(d, users=["alice"], console="https://console.example:8443/")  # a second run: the same passwords
     assert again.cards["alice"].read_text().count(creds["alice"]) == 1 and "https://console.example:8443/" in again.cards["bob"].read_text()
 

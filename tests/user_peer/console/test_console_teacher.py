@@ -66,3 +66,10 @@ def test_every_owner_and_waiter_has_a_row_that_says_so(spec):
         acts = teacher.robot_actions(rec)
         assert ("unlock" in acts) == bool(rec.locked) and ("lock" in acts) != bool(rec.locked)
         assert ("take_back" in acts) == bool(rec.owner)
+
+
+def test_an_instructors_login_card_names_the_page_where_the_console_serves_it():
+    from robofabric.login_cards import teacher_url
+
+    assert teacher_url("http://10.0.0.5:8080/") == "http://10.0.0.5:8080" + teacher.ROUTE
+    assert teacher_url("https://console.example:8443") == "https://console.example:8443" + teacher.ROUTE
