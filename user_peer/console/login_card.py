@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 from nicegui import run, ui
 
 from user_peer.console.login import LoginError, login_config
+from user_peer.console.world_kind import login_caption
 
 if TYPE_CHECKING:
     from user_peer.console.page import ConsolePage
@@ -49,9 +50,8 @@ class LoginCard:
             ui.label(f"robofabric · world {world}").classes("text-h6").props('role="heading" aria-level="1"')
             self.name_in = ui.input("Name").props('autofocus aria-label="Name"').classes("full-width")
             self.pw_in = ui.input("Password", password=True, password_toggle_button=False).props('aria-label="Password"').classes("full-width")
-            # first what a class's student has (secure init's card), then the open world's way (no logins)
-            ui.label("Type the name and password of your login card. In an open world (no logins), pick a name and "
-                     "leave the password empty.").classes("text-caption")
+            # what applies: a class's login card, or a name of her choice in an open world (both while not known)
+            ui.label(login_caption(self.page.console.logins_required)).classes("text-caption")
             self.button = ui.button("Log in", on_click=self.login)
             self.pw_in.on("keydown.enter", self.login)
             self.msg = ui.label("").props('role="alert"').classes("text-negative")

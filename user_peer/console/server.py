@@ -58,6 +58,7 @@ class Console:
     rerun_url: str | None = None
     join_timeout: float = 10.0
     instructors: tuple[str, ...] = ()  # the logins that may open the teacher's page (user_peer/console/teacher.py)
+    logins_required: bool | None = None  # whether the router refuses a session without a login (.world_kind); None: not known yet
     logins: Logins = field(init=False)
     health: Health = field(init=False, default_factory=Health)
     pictures: Pictures = field(init=False, default_factory=Pictures)
@@ -128,6 +129,20 @@ def _routes(console: Console) -> None:
         return Response(png, media_type="image/png", headers={"Cache-Control": "private, max-age=3600"})
 
 
+async def _probe(console: Console) -> None:
+    """Whether the world asks for logins (the login card's caption: .world_kind), asked until a router answers."""
+    import asyncio
+
+    from nicegui import run
+
+    from user_peer.console.world_kind import probe_logins
+
+    while console.logins_required is None:
+        console.logins_required = await run.io_bound(probe_logins, console.world, console.connect, console.base_file)
+        if console.logins_required is None:
+            await asyncio.sleep(5.0)
+
+
 def serve(console: Console, host: str, port: int, tls: tuple[str, str] | None = None) -> None:
     """Serve the console until Ctrl-C (or SIGTERM); every logged-in world is closed on the way out.
     ``tls``: (certificate, key) PEM files to serve HTTPS (a password never crosses the LAN in clear)."""
@@ -172,6 +187,7 @@ def serve(console: Console, host: str, port: int, tls: tuple[str, str] | None = 
         # after NiceGUI's startup set them from the reconnect window
         core.sio.eio.ping_interval, core.sio.eio.ping_timeout = PING_INTERVAL_S, PING_TIMEOUT_S
         background_tasks.create(announce(), name="console announce")
+        background_tasks.create(_probe(console), name="console asks whether the world asks for logins")
         background_tasks.create(console.health.probe(), name="console health probe")
         background_tasks.create(report(), name="console health report")
         background_tasks.create(console.ticker.run(), name="console redraw clock")

@@ -28,6 +28,7 @@ from fabric.interfaces import Command
 from robofabric.secure import init
 from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 from user_peer.console.server import RECONNECT_S
+from user_peer.console.world_kind import login_caption
 
 from tests.user_peer.console.scene3d_probe import SCENE3D_JS, drag_sphere
 
@@ -772,12 +773,14 @@ def open_teacher(browser, klass: Klass, name: str):
 
 
 def test_the_teacher_releases_a_robot_a_student_holds_and_a_student_cannot_open_the_teachers_page(browser, klass):
-    """alice owns arm1 from her page; carol (an instructor) sees it on the teacher's page and releases it: the
+    """alice's login card asks for her login card's name and password (the console found that the router asks for
+    logins); she owns arm1 from her page; carol (an instructor) sees it on the teacher's page and releases it: the
     authority takes it back (read through the Python API), alice's page shows it free, and the class's event log
     says who did it. bob, a student, is refused the teacher's page before any session of his opens. axe-core finds
     no serious or critical violation on the teacher's page."""
     arm = klass.carol.robot("arm1")
     alice = open_page(browser, klass)
+    alice.get_by_text(login_caption(True), exact=True).wait_for()  # a class's world: the card asks for her login card's
     logged_in(alice, klass, "alice")
     alice.get_by_role("button", name="arm1", exact=True).click()
     alice.get_by_role("button", name="Request").click()
