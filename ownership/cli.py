@@ -1,4 +1,4 @@
-"""``robofabric own list|request|release|watch`` (its benchmarks: robofabric/bench/ownership.py and flood.py)."""
+"""``robofabric own list|request|release|watch|staff`` (its benchmarks: robofabric/bench/ownership.py and flood.py)."""
 
 from __future__ import annotations
 
@@ -51,19 +51,20 @@ def record_line(rec: OwnershipRecord) -> str:
         return f"{obj:16} scene      anyone writes"
     owner = _shown(rec.owner) or "(free)"
     queue = ", ".join(_shown(u) for u in rec.queue) or "-"
-    return f"{obj:16} exclusive  owner {owner:12} epoch {rec.epoch:<5} {rec.state:7} queue {queue}"
+    locked = f"  locked by {_shown(rec.locked)}" if rec.locked else ""
+    return f"{obj:16} exclusive  owner {owner:12} epoch {rec.epoch:<5} {rec.state:7} queue {queue}{locked}"
 
 
 def record_json(rec) -> dict:
     """One ownership record as ``own list --json`` writes it (stable field names)."""
     return {"object": rec.object, "policy": rec.policy, "owner": rec.owner, "epoch": rec.epoch,
-            "queue": list(rec.queue), "state": rec.state, "authority": rec.authority}
+            "queue": list(rec.queue), "state": rec.state, "authority": rec.authority, "locked": rec.locked}
 
 
 @own_app.command("list")
 @join_flags(client=True)
 def list_cmd(join: Joining = Joining(), user: User = None,
-             as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"world", "records": [{object, policy, owner, epoch, queue, state, authority}]}.')] = False) -> None:
+             as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"world", "records": [{object, policy, owner, epoch, queue, state, authority, locked}]}.')] = False) -> None:
     """Every object's owner, epoch, motion state and queue (a table as wide as the terminal; --json for scripts)."""
     fab, cl = _client(join, user)
     with fab:
@@ -79,7 +80,8 @@ def list_cmd(join: Joining = Joining(), user: User = None,
         return
     table = [
         (_shown(r.object), "scene", "anyone writes", "-", "-", "-") if r.policy == "scene" else
-        (_shown(r.object), "exclusive", _shown(r.owner) or "(free)", str(r.epoch), r.state, ", ".join(_shown(u) for u in r.queue) or "-")
+        (_shown(r.object), "exclusive", _shown(r.owner) or "(free)", str(r.epoch),
+         r.state + (f", locked by {_shown(r.locked)}" if r.locked else ""), ", ".join(_shown(u) for u in r.queue) or "-")
         for r in rows
     ]
     print_table(f"world {fab.world}: {len(rows)} object(s)", ("object", "policy", "owner", "epoch", "state", "queue"), table, numeric=("epoch",))
@@ -143,6 +145,34 @@ def request_cmd(obj: Annotated[str, typer.Argument(help="Object id (robot or sce
 def release_cmd(obj: Annotated[str, typer.Argument(help="Object id.")], join: Joining = Joining(), user: User = None) -> None:
     """Give OBJ up (or leave its queue); the next waiting user owns it."""
     _ask("release", obj, join, user)
+
+
+@own_app.command("staff")
+@join_flags(client=True)
+def staff_cmd(op: Annotated[str, typer.Argument(help="take_back, give, lock, unlock, stop or reset.")],
+              obj: Annotated[str, typer.Argument(help="Robot id.")], join: Joining = Joining(), user: User = None,
+              to: Annotated[Optional[str], typer.Option("--to", help="With give: the user who gets the robot (logged in now).")] = None) -> None:
+    """An instructor's action on OBJ, through the authority's rules (the teacher's page does the same): take it
+    back from its owner, give it to a user, lock or unlock it, stop or reset it. A class's router passes it from
+    instructor logins only (secure init --instructors); refused: exit 1 with the reason."""
+    from fabric.interfaces import STAFF_OPS, ServiceError
+    if op not in STAFF_OPS:
+        raise UserError(f"unknown staff action {op!r}: one of {', '.join(STAFF_OPS)}")
+    if (op == "give") != bool(to):
+        raise UserError("--to USER goes with give, and only with it")
+    fab, cl = _client(join, user)
+    with fab:
+        try:
+            try:
+                out = cl.staff(obj, op, to=to or "")
+            except ServiceError as exc:  # no answer: the router passed it to no authority, or none runs
+                raise NothingThere(f"{op} {obj}: {exc.reason} (a class's router passes staff actions from instructor "
+                                   "logins only)") from None
+            print(f"{obj}: {out.outcome}: {_shown(out.reason)}", flush=True)
+            if out.outcome != "done":
+                raise typer.Exit(1)
+        finally:
+            cl.close()
 
 
 @own_app.command("watch")

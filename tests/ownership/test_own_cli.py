@@ -107,3 +107,32 @@ def test_own_watch_skips_and_counts_garbage_bad_tokens_and_foreign_records(world
         token.undeclare()
     finally:
         auth.close()
+
+
+def test_own_staff_takes_back_gives_and_locks_and_says_why_it_refuses(world, router, connect):
+    port = router[1]
+    auth = Authority(connect("sim", "host"), {"arm": "exclusive"}, lease_s=5.0).start()
+    ann = OwnershipClient(connect("user", "ann"), "ann").start()
+    ben = OwnershipClient(connect("user", "ben"), "ben").start()
+    try:
+        from robofabric.testing import wait_until
+
+        wait_until(lambda: {"ann", "ben"} <= set(auth._state.live), timeout=30, what="ann and ben live")
+        assert ann.request("arm").granted
+        r = _own(world, port, "staff", "take_back", "arm", "--user", "teacher")
+        assert r.returncode == 0 and "arm: done: arm taken back from ann by instructor teacher: now free" in r.stdout, r.stdout + r.stderr
+        r = _own(world, port, "staff", "take_back", "arm", "--user", "teacher")
+        assert r.returncode == 1 and "arm: denied: arm is free: nobody to take it back from" in r.stdout, r.stdout + r.stderr
+        r = _own(world, port, "staff", "give", "arm", "--to", "ben", "--user", "teacher")
+        assert r.returncode == 0 and "given to ben by instructor teacher" in r.stdout and auth.records()["arm"].owner == "ben", r.stdout + r.stderr
+        r = _own(world, port, "staff", "lock", "arm", "--user", "teacher")
+        assert r.returncode == 0 and auth.records()["arm"].locked == "teacher", r.stdout + r.stderr
+        r = _own(world, port, "list")
+        assert "locked by teacher" in r.stdout, r.stdout
+        for bad in (("staff", "fly", "arm"), ("staff", "give", "arm"), ("staff", "stop", "arm", "--to", "ben")):
+            r = _own(world, port, *bad, "--user", "teacher")
+            assert r.returncode == 2 and r.stderr.strip().count("\n") == 0, r.stdout + r.stderr
+    finally:
+        ann.close()
+        ben.close()
+        auth.close()
