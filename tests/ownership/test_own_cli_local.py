@@ -54,7 +54,7 @@ def client(monkeypatch):
 def test_list_prints_every_record_of_one_snapshot(client, capsys):
     cli.list_cmd(as_json=True)
     doc = json.loads(capsys.readouterr().out)  # one JSON document
-    assert doc["world"] == "w" and set(doc["records"][0]) == {"object", "policy", "owner", "epoch", "queue", "state", "authority"}
+    assert doc["world"] == "w" and set(doc["records"][0]) == {"object", "policy", "owner", "epoch", "queue", "state", "authority", "locked"}
     assert [(r["object"], r["owner"], r["epoch"]) for r in doc["records"]] == [("arm", "ann", 3), ("ball", "", 0)]
     assert client.snapshots == 1 and client.closed
 
