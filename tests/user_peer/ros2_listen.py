@@ -7,8 +7,9 @@ It writes one JSON line per message to ``--out``: each robot's ``robot_descripti
 ``trajectory_msgs/JointTrajectory`` on ``/ARM/joint_trajectory`` once, writes ``trajectory_sent`` and removes the
 file; when ``--control/goal`` appears ("x y") it publishes that ``geometry_msgs/PoseStamped`` (frame ``map``) on
 ``/goal_pose`` once, as RViz's 2D Goal Pose does; it writes ``BASE``'s odometry (frames, covariance) and path, its
-scan's frame and timing, its sonar transducer 2 (``sensor_msgs/Range``) and each robot's latched ``owner``.
-``--ns NS`` puts the robots' topics (and goal_pose) under ``/NS``. Runs until SIGTERM.
+scan's frame, stamp and timing, its sonar transducer 2 (``sensor_msgs/Range``) and each robot's latched ``owner``.
+``--ns NS`` puts the robots' topics (and goal_pose) under ``/NS``. ``--tf`` reads ``/tf`` and ``/tf_static`` as
+``tf2_msgs/msg/TFMessage`` and writes each transform's parent, child and stamp. Runs until SIGTERM.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ def main() -> None:
     ap.add_argument("--clocks", default="/clock", help="clock topics to listen to, comma-separated")
     ap.add_argument("--stamped", action="store_true", help="cmd_vel as geometry_msgs/TwistStamped")
     ap.add_argument("--ns", default="", help="the bridge's --namespace")
+    ap.add_argument("--tf", action="store_true", help="read /tf and /tf_static (tf2_msgs/msg/TFMessage)")
     args = ap.parse_args()
     out = open(args.out, "a", buffering=1)
 
@@ -75,6 +77,7 @@ def main() -> None:
                                              pose_cov=list(m.pose.covariance), twist_cov=list(m.twist.covariance)), reliable)
     node.create_subscription(LaserScan, under(f"{args.base}/scan"),
                              lambda m: write(topic="scan", frame=m.header.frame_id, scan_time=m.scan_time,
+                                             stamp=m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec,
                                              time_increment=m.time_increment), qos_profile_sensor_data)
     node.create_subscription(Range, under(f"{args.base}/sonar_2"),
                              lambda m: write(topic="range", frame=m.header.frame_id, range=m.range, fov=m.field_of_view,
@@ -84,6 +87,17 @@ def main() -> None:
                              lambda m: write(topic="path", frame=m.header.frame_id, n=len(m.poses),
                                              end=[m.poses[-1].pose.position.x, m.poses[-1].pose.position.y] if m.poses else None),
                              latched)
+    if args.tf:
+        from tf2_msgs.msg import TFMessage  # as any ROS 2 node reads it; missing, this node fails at start
+
+        def transforms(m: TFMessage, static: bool) -> None:
+            write(topic="tf", static=static, transforms=[
+                [t.header.frame_id, t.child_frame_id, t.header.stamp.sec * 1_000_000_000 + t.header.stamp.nanosec]
+                for t in m.transforms])
+
+        node.create_subscription(TFMessage, under("tf"), lambda m: transforms(m, False),
+                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        node.create_subscription(TFMessage, under("tf_static"), lambda m: transforms(m, True), latched)
     goal = node.create_publisher(PoseStamped, under("goal_pose"), 10)
     goal_file = os.path.join(args.control, "goal")
     cmd = node.create_publisher(TwistStamped if args.stamped else Twist, under(f"{args.base}/cmd_vel"), 10)

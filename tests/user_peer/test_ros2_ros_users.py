@@ -265,3 +265,68 @@ def test_a_topic_map_renames_the_bridges_topics_for_a_plain_node(live, procs, tm
                what="base1's odometry and owner under their new names",
                seen=lambda: (procs.output(bridge)[-1500:], procs.output(node)[-1500:]))
     assert lines(out, "odom")[-1]["child"] == "base1"  # a rename changes the name, not the frames
+
+
+BUILD_TF2 = ("tf2_msgs is not importable: it is not among ROS 2 Kilted's wheels; build it into this environment with "
+             "`python -m user_peer.ros2.msgbuild` (make test does; it needs g++ and Python's headers)")
+
+
+def tf_tree(out: Path) -> tuple[dict[str, set[str]], dict[str, list[int]], set[str]]:
+    """What the node read on /tf and /tf_static: each child's parents, the stamps of each child's /tf transforms,
+    and the children sent on /tf_static (timeless, as tf2 holds them)."""
+    parents: dict[str, set[str]] = {}
+    stamps: dict[str, list[int]] = {}
+    static: set[str] = set()
+    for r in lines(out, "tf"):
+        for parent, child, ns in r["transforms"]:
+            parents.setdefault(child, set()).add(parent)
+            if r["static"]:
+                static.add(child)
+            else:
+                stamps.setdefault(child, []).append(ns)
+    return parents, stamps, static
+
+
+def resolves_to_map(out: Path, scan: dict) -> list[str] | None:
+    """The chain from the scan's frame up to ``map``, where every moving link has a transform at or before the
+    scan's stamp and one at or after it (tf2 interpolates between them); None while it does not."""
+    parents, stamps, static = tf_tree(out)
+    chain, frame = [scan["frame"]], scan["frame"]
+    while frame != "map":
+        if len(parents.get(frame, ())) != 1 or len(chain) > 20:
+            return None
+        if frame not in static:
+            seen = stamps.get(frame, [])
+            if not (any(s <= scan["stamp"] for s in seen) and any(s >= scan["stamp"] for s in seen)):
+                return None
+        frame = next(iter(parents[frame]))
+        chain.append(frame)
+    return chain
+
+
+@pytest.mark.slow
+def test_tf_is_one_tree_read_as_tf2_msgs_in_which_the_scans_frame_resolves_to_map_at_its_stamp(live, procs, tmp_path):
+    """A plain rclpy node reads /tf and /tf_static as tf2_msgs/msg/TFMessage (the package msgbuild.py builds): one
+    tree rooted at map, each frame with one parent, and base1's scan frame resolves to map at the scan's stamp."""
+    import importlib.util
+
+    assert importlib.util.find_spec("tf2_msgs") is not None, BUILD_TF2
+    world, port, _ = live
+    bridge, node, out, _ = start(procs, tmp_path, world, port, 1 + (os.getpid() * 7 + 54) % 100, "--user", "rostf",
+                                 node_args=("--tf",))
+    assert "no /tf" not in procs.output(bridge)
+    found: list[list[str]] = []
+
+    def some_scan_resolves() -> bool:
+        found[:] = [c for c in (resolves_to_map(out, s) for s in lines(out, "scan")[-40:]) if c]
+        return bool(found)
+
+    wait_until(some_scan_resolves, timeout=60, what="a scan whose frame resolves to map on /tf",
+               seen=lambda: (lines(out, "scan")[-1:], {c: sorted(p) for c, p in tf_tree(out)[0].items()},
+                             procs.output(bridge)[-1500:], procs.output(node)[-1500:]))
+    assert found[-1] == ["base1/lidar", "base1", "world", "map"], found[-1]
+    parents, _, static = tf_tree(out)
+    assert all(len(p) == 1 for p in parents.values()), {c: p for c, p in parents.items() if len(p) != 1}
+    roots = {p for ps in parents.values() for p in ps} - set(parents)
+    assert roots == {"map"} and {"world", "base1/lidar"} <= static, (roots, static)
+    assert {"arm1", "arm1/joint_6"} <= set(parents)  # the arm hangs in the same tree

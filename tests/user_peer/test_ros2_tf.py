@@ -1,12 +1,13 @@
 """The bridge's /tf is the export's frame tree: for the same robot state, the transforms it publishes equal the
 ``/tf`` of ``export --to ros2`` (decoded by mcap-ros2-support), stamped with the sim's time; the sensor mounts
-go once more on /tf_static. ``tf2_msgs`` is not among ROS 2 Kilted's wheels, so here the message class and the
-publishers are stand-ins for what a ROS 2 install provides; the bridge publishes /tf only where it is
-importable, and says whether it is."""
+go once more on /tf_static, with the ``map -> world`` root. The message class and the publishers are stand-ins
+here, to see each message as sent (test_ros2_tf_live.py reads the real ``tf2_msgs`` over DDS); the bridge
+publishes /tf only where ``tf2_msgs`` is importable, and says whether it is."""
 
 from __future__ import annotations
 
 import importlib.util
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,11 +25,13 @@ from user_peer.openfmt.ros2 import Ros2Writer  # noqa: E402
 from user_peer.ros2.tf import TfOut, tf_message_class  # noqa: E402
 
 T0 = 1_760_000_000_000_000_000
+BUILD_IT = ("tf2_msgs is not importable: it is not among ROS 2 Kilted's wheels; build it into this environment with "
+            "`python -m user_peer.ros2.msgbuild` (make test does; it needs g++ and Python's headers)")
 
 
 @dataclass
 class TFMessage:
-    """tf2_msgs/TFMessage's one field (the package is not installable here: no machine of ours has it)."""
+    """tf2_msgs/TFMessage's one field."""
 
     transforms: list = field(default_factory=list)
 
@@ -81,17 +84,24 @@ def test_the_bridges_tf_is_the_exports_frame_tree_stamped_with_sim_time(tmp_path
     children = {r[1] for r in live}
     assert {"base1", "base1/lidar", "base1/sonar", "arm1", "arm1/joint_6"} <= children, children
     assert {r[2] for r in live} == {int(round(0.05 * i * 1e9)) for i in range(1, 6)}  # the sim's time
-    static = [t.child_frame_id for m in sent["/tf_static"].msgs for t in m.transforms]
-    assert sorted(static) == ["base1/lidar", "base1/sonar"]  # the mounts, once (they never move)
+    static = [sorted((t.header.frame_id, t.child_frame_id) for t in m.transforms) for m in sent["/tf_static"].msgs]
+    assert static == [[("map", "world")],  # the root at once, then with the mounts, once (they never move)
+                      [("base1", "base1/lidar"), ("base1", "base1/sonar"), ("map", "world")]]
     assert tf.sent == len(sent["/tf"].msgs)
 
 
-def test_tf_is_published_only_where_tf2_msgs_is_importable():
-    tf = TfOut(None, RobotCatalog(None))
-    assert tf.available == (importlib.util.find_spec("tf2_msgs") is not None) == (tf_message_class() is not None)
-    if not tf.available:  # nothing to publish on: robot state goes by without error
-        tf.on_state("rf/w/robot/base1/pose", Pose(np.zeros(3), header=Header(1.0)), 10**9)
-        assert tf.sent == 0
+def test_tf_is_published_where_tf2_msgs_is_importable_and_make_test_builds_it():
+    assert importlib.util.find_spec("tf2_msgs") is not None, BUILD_IT
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=1 + (os.getpid() % 100))
+    try:
+        node = rclpy.create_node("tf_gate", context=context)
+        tf = TfOut(node, RobotCatalog(None))
+        assert tf.available and tf_message_class() is not None
+        assert {name for name, _ in node.get_publisher_names_and_types_by_node("tf_gate", "/")} >= {"/tf", "/tf_static"}
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
 
 
 def test_each_sonar_transducers_frame_goes_once_on_tf_static_under_the_namespace():
@@ -105,8 +115,8 @@ def test_each_sonar_transducers_frame_goes_once_on_tf_static_under_the_namespace
                                                      np.zeros(0), sonar=sonar),))
     tf.describe(info)
     tf.describe(info)  # the same description again: nothing more
-    assert len(sent["/class1/tf_static"].msgs) == 1
+    assert len(sent["/class1/tf_static"].msgs) == 2  # the map root at start, then with the transducers
     rows = {(t.header.frame_id, t.child_frame_id): (t.transform.translation.x, t.transform.translation.y)
-            for t in sent["/class1/tf_static"].msgs[0].transforms}
-    assert set(rows) == {("class1/base1/sonar", f"class1/base1/sonar_{i}") for i in range(3)}
+            for t in sent["/class1/tf_static"].msgs[1].transforms}
+    assert set(rows) == {("class1/base1/sonar", f"class1/base1/sonar_{i}") for i in range(3)} | {("class1/map", "class1/world")}
     assert rows[("class1/base1/sonar", "class1/base1/sonar_1")] == pytest.approx((0.0, 0.26), abs=1e-12)

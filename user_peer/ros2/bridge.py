@@ -12,7 +12,7 @@ Out (every robot of the world, followed as sims and robots come and go)::
     /NS/map                 nav_msgs/OccupancyGrid   from rf/W/map/map (other maps: /NS/maps/NAME; reliable, transient local)
     /NS/object/ID/pose      geometry_msgs/PoseStamped from rf/W/object/ID/pose/by/*
     /NS/clock               rosgraph_msgs/Clock      the sims' time (the newest header stamp of robot state)
-    /NS/tf, /NS/tf_static   tf2_msgs/TFMessage       the export's frame tree, where tf2_msgs is importable (tf.py)
+    /NS/tf, /NS/tf_static   tf2_msgs/TFMessage       the export's frame tree under map (tf.py; tf2_msgs: msgbuild.py)
     /NS/ROBOT/robot_description std_msgs/String      the robot type's URDF (latched; models.py)
     /NS/ROBOT/owner         std_msgs/String          the login that owns the robot, "" when free (latched; owners.py)
 
@@ -203,7 +203,7 @@ class Ros2Bridge:
         self._timer = node.create_timer(FOLLOW_PERIOD_S, self._tick)
         if not self.tf.available:
             log.warning("no /tf or /tf_static: tf2_msgs is not importable (it is not among the ROS 2 wheels; "
-                        "source a ROS 2 install that has it)")
+                        "build it with: python -m user_peer.ros2.msgbuild)")
 
     # ------------------------------------------------------------------ out
     def _route(self, key: str) -> _Route | None:

@@ -1,13 +1,17 @@
-"""/tf and /tf_static from the bridge: the frame tree of ``export --to ros2``, where ``tf2_msgs`` is importable.
+"""/tf and /tf_static from the bridge: the frame tree of ``export --to ros2`` under a ``map`` root.
 
-The frames are :class:`user_peer.openfmt.frames.FrameTracker`'s, the export's: ``world`` the root, a base
+The frames are :class:`user_peer.openfmt.frames.FrameTracker`'s, the export's: ``world`` (its root), a base
 ``ROBOT`` from its pose (with ``ROBOT/lidar`` and ``ROBOT/sonar`` on it), an arm's base bolted to ``world``, its
 joints ``ROBOT/JOINT`` by forward kinematics from its JointState, its flange ``ROBOT/flange``; each frame's stamps
 never go back. Every transform goes on ``/tf`` as the export writes it; the sensor mounts, which never move,
-also go once on ``/tf_static`` (transient local), so a node that starts later has them at once.
+also go once on ``/tf_static`` (transient local), so a node that starts later has them at once. ``/tf_static``
+also holds ``map -> world``, the identity: REP 105's fixed frame is ``map``, which RViz, Nav2 and a ``/goal_pose``
+name, and the world's maps (the ``map`` topics) are drawn in the world's coordinates; the sim's poses do not
+drift, so there is no ``odom`` frame between (the REP 105 names of the base's own frames are not made here).
 
-``tf2_msgs`` is not among ROS 2 Kilted's wheels on PyPI (a ROS 2 install from apt has it): without it, nothing
-is published here and ``available`` is False (the bridge says so once at start).
+``tf2_msgs`` is not among ROS 2 Kilted's wheels on PyPI: :mod:`user_peer.ros2.msgbuild` builds it into the
+environment (``make test`` does; a ROS 2 install from apt has it). Without it nothing is published here and
+``available`` is False (the bridge says so once at start, with the command that builds it).
 """
 
 from __future__ import annotations
@@ -19,12 +23,12 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from fabric.interfaces import WorldInfo
 from user_peer.catalog import RobotCatalog
-from user_peer.openfmt.frames import Frame, FrameTracker
+from user_peer.openfmt.frames import WORLD, Frame, FrameTracker
 from user_peer.ros2.direct import stamp
 from user_peer.ros2.names import frame_prefix
 from user_peer.ros2.ranges import transducer_frames
 
-__all__ = ["TfOut", "tf_message_class", "transform", "TF_QOS", "TF_STATIC_QOS"]
+__all__ = ["TfOut", "tf_message_class", "transform", "TF_QOS", "TF_STATIC_QOS", "MAP", "MAP_ROOT"]
 
 TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 TF_STATIC_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -32,9 +36,14 @@ TF_STATIC_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, dura
 
 _MOUNTS = ("/lidar", "/sonar")
 
+MAP = "map"
+MAP_ROOT = Frame(MAP, WORLD, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+"""``map -> world``: the world's frame is REP 105's fixed ``map`` frame (the same coordinates)."""
+
 
 def tf_message_class() -> type | None:
-    """``tf2_msgs.msg.TFMessage`` where a ROS 2 install provides it, else None."""
+    """``tf2_msgs.msg.TFMessage`` where it is importable (built by :mod:`user_peer.ros2.msgbuild`, or a ROS 2
+    install's), else None."""
     try:
         from tf2_msgs.msg import TFMessage
     except ImportError:
@@ -63,7 +72,7 @@ class TfOut:
         self.message = message if message is not None else tf_message_class()
         self.available = self.message is not None
         self.frames = FrameTracker(catalog)
-        self._static: dict[str, Frame] = {}  # child -> the mount last sent on /tf_static
+        self._static: dict[str, Frame] = {WORLD: MAP_ROOT}  # child -> the static frame last sent on /tf_static
         self.sent = 0
         ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
         self.prefix = frame_prefix(namespace)
@@ -72,6 +81,11 @@ class TfOut:
         if self.available:
             make = publisher or (lambda topic, qos: node.create_publisher(self.message, topic, qos))
             self._pub, self._static_pub = make(self.topics[0], TF_QOS), make(self.topics[1], TF_STATIC_QOS)
+            self._send_static(0)  # the map root at once: a scan's frame resolves to map before any mount is known
+
+    def _send_static(self, ns: int) -> None:
+        """Every static frame in one message: /tf_static keeps only the last (depth 1), as tf2's broadcaster does."""
+        self._static_pub.publish(self.message(transforms=[transform(f, ns, self.prefix) for f in self._static.values()]))
 
     def describe(self, info: WorldInfo) -> None:
         """The world's description: where arms stand, what each robot is; each sonar transducer's frame on
@@ -83,7 +97,7 @@ class TfOut:
                if self._static.get(f.child) != f]
         if new:
             self._static.update((f.child, f) for f in new)
-            self._static_pub.publish(self.message(transforms=[transform(f, 0, self.prefix) for f in self._static.values()]))
+            self._send_static(0)
 
     def on_state(self, key: str, msg: Any, ns: int) -> None:
         """A robot's state: its frames, stamped ``ns`` (robot state comes one message at a time per key)."""
@@ -97,4 +111,4 @@ class TfOut:
         mounts = [f for f in frames if f.child.endswith(_MOUNTS) and self._static.get(f.child) != f]
         if mounts:
             self._static.update((f.child, f) for f in mounts)
-            self._static_pub.publish(self.message(transforms=[transform(f, ns, self.prefix) for f in self._static.values()]))
+            self._send_static(ns)
