@@ -9,7 +9,9 @@ file; when ``--control/goal`` appears ("x y") it publishes that ``geometry_msgs/
 ``/goal_pose`` once, as RViz's 2D Goal Pose does; it writes ``BASE``'s odometry (frames, covariance) and path, its
 scan's frame, stamp and timing, its sonar transducer 2 (``sensor_msgs/Range``) and each robot's latched ``owner``.
 ``--ns NS`` puts the robots' topics (and goal_pose) under ``/NS``. ``--tf`` reads ``/tf`` and ``/tf_static`` as
-``tf2_msgs/msg/TFMessage`` and writes each transform's parent, child and stamp. Runs until SIGTERM.
+``tf2_msgs/msg/TFMessage`` and writes each transform's parent, child and stamp. When ``--control/call`` appears
+(a service name) it calls that ``std_srvs/Trigger`` service once it is there and writes the response. Runs until
+SIGTERM.
 """
 
 from __future__ import annotations
@@ -104,6 +106,25 @@ def main() -> None:
     trajectory = node.create_publisher(JointTrajectory, under(f"{args.arm}/joint_trajectory"), 10)
     cmd_file = os.path.join(args.control, "cmd_vel")
     trajectory_file = os.path.join(args.control, "trajectory")
+    call_file = os.path.join(args.control, "call")
+    clients: dict = {}
+
+    def call() -> None:
+        try:
+            with open(call_file) as f:
+                name = f.read().strip()
+        except FileNotFoundError:
+            return
+        if not name:
+            return  # being written
+        from std_srvs.srv import Trigger  # as any ROS 2 node calls it; missing, this node fails here
+
+        client = clients.get(name) or clients.setdefault(name, node.create_client(Trigger, name))
+        if not client.service_is_ready():
+            return  # not discovered yet: again at the next tick
+        os.unlink(call_file)
+        client.call_async(Trigger.Request()).add_done_callback(
+            lambda f: write(topic="call", service=name, success=f.result().success, message=f.result().message))
 
     def send_goal() -> None:
         try:
@@ -120,6 +141,7 @@ def main() -> None:
 
     def tick() -> None:
         send_goal()
+        call()
         try:
             with open(trajectory_file) as f:
                 names, points = json.load(f)

@@ -330,3 +330,41 @@ def test_tf_is_one_tree_read_as_tf2_msgs_in_which_the_scans_frame_resolves_to_ma
     roots = {p for ps in parents.values() for p in ps} - set(parents)
     assert roots == {"map"} and {"world", "base1/lidar"} <= static, (roots, static)
     assert {"arm1", "arm1/joint_6"} <= set(parents)  # the arm hangs in the same tree
+
+
+def call(out: Path, ctl: Path, service: str, timeout: float = 60) -> dict:
+    """The node calls ``service`` (std_srvs/Trigger); its response."""
+    before = len(lines(out, "call"))
+    (ctl / "call").write_text(service)
+    wait_until(lambda: len(lines(out, "call")) > before, timeout=timeout, what=f"the response of {service}")
+    return lines(out, "call")[-1]
+
+
+@pytest.mark.slow
+def test_ownership_is_asked_for_and_given_up_through_trigger_services_from_a_plain_node(live, procs, tmp_path):
+    """A plain rclpy client calls the bridge's std_srvs/Trigger services (the package msgbuild.py builds): a release
+    refused with the owner's name while another login holds base1, a request granted once it is free, a release;
+    the latched owner topic follows each step."""
+    import importlib.util
+
+    assert importlib.util.find_spec("std_srvs") is not None, BUILD_TF2.replace("tf2_msgs", "std_srvs")
+    world, port, _ = live
+    other = user_peer.connect(world=world, connect=f"tcp/127.0.0.1:{port}", user="rossrvother")
+    try:
+        other.robot("base1").request()
+        bridge, node, out, ctl = start(procs, tmp_path, world, port, 1 + (os.getpid() * 7 + 55) % 100, "--user", "rossrv",
+                                       "--drive", "base1")
+        owner = lambda: [r["owner"] for r in lines(out, "owner") if r["robot"] == "base1"][-1:]  # noqa: E731
+        refused = call(out, ctl, "/base1/release_ownership")  # not this login's to give up
+        assert not refused["success"] and refused["message"].startswith("base1: ") and "rossrvother" in refused["message"], refused
+        assert owner() == ["rossrvother"]
+        other.robot("base1").release()
+    finally:
+        other.close()
+    granted = call(out, ctl, "/base1/request_ownership")
+    assert granted["success"] and granted["message"].startswith("rossrv owns base1"), granted
+    wait_until(lambda: owner() == ["rossrv"], timeout=30, what="base1's owner topic naming rossrv", seen=lambda: lines(out, "owner"))
+    released = call(out, ctl, "/base1/release_ownership")
+    assert released == {**released, "success": True, "message": "base1 released by rossrv"}, released
+    wait_until(lambda: owner() == [""], timeout=30, what="base1's owner topic empty", seen=lambda: lines(out, "owner"))
+    assert "no request_ownership" not in procs.output(bridge)

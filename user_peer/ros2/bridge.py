@@ -15,6 +15,7 @@ Out (every robot of the world, followed as sims and robots come and go)::
     /NS/tf, /NS/tf_static   tf2_msgs/TFMessage       the export's frame tree under map (tf.py; tf2_msgs: msgbuild.py)
     /NS/ROBOT/robot_description std_msgs/String      the robot type's URDF (latched; models.py)
     /NS/ROBOT/owner         std_msgs/String          the login that owns the robot, "" when free (latched; owners.py)
+    /NS/ROBOT/request_ownership, release_ownership   std_srvs/Trigger services, --drive robots (ownership_services.py)
 
 In (only for the robots named in ``drive``, the ``--drive`` option: a ROS 2 domain has no logins, so by default
 the bridge only publishes (:mod:`user_peer.ros2.trust`); and for those, acted on only while this login owns
@@ -79,6 +80,7 @@ from user_peer.ros2.goals import GoalsIn
 from user_peer.ros2.models import ModelsOut
 from user_peer.ros2.names import frame_prefix, prefix_headers
 from user_peer.ros2.owners import OwnersOut
+from user_peer.ros2.ownership_services import OwnershipServices
 from user_peer.ros2.pauses import GcPauses
 from user_peer.ros2.ranges import RangesOut
 from user_peer.ros2.topic_map import MappedNode, TopicMap, is_off
@@ -183,6 +185,7 @@ class Ros2Bridge:
         self.models = ModelsOut(node, namespace)  # /NS/ROBOT/robot_description, latched
         self.ranges = RangesOut(node, namespace, self.prefix)  # /NS/ROBOT/sonar_I, a Range per transducer
         self.owners = OwnersOut(node, namespace)  # /NS/ROBOT/owner, latched
+        self.asking = OwnershipServices(node, namespace, world.robot, world.user)  # request/release_ownership
         # joint_trajectory's points sent at their times, in the sim's time (/clock's): a sim slower than the wall
         # clock (a loaded machine) or paused stretches a trajectory as it does a ROS controller's with use_sim_time
         self.trajectories = TrajectoryPlayer(clock=lambda: self._clock_ns / 1e9)
@@ -204,6 +207,9 @@ class Ros2Bridge:
         if not self.tf.available:
             log.warning("no /tf or /tf_static: tf2_msgs is not importable (it is not among the ROS 2 wheels; "
                         "build it with: python -m user_peer.ros2.msgbuild)")
+        if not self.asking.available and self.drive:
+            log.warning("no request_ownership/release_ownership services: std_srvs is not importable "
+                        "(build it with: python -m user_peer.ros2.msgbuild)")
 
     # ------------------------------------------------------------------ out
     def _route(self, key: str) -> _Route | None:
@@ -329,11 +335,14 @@ class Ros2Bridge:
         for rid, kind in entries.items():
             if rid not in self._inputs:
                 self._inputs[rid] = self._command_inputs(rid, kind)
+                if rid in self.drive:
+                    self.asking.add(rid)
         for rid in [r for r in list(self._inputs) if r not in entries]:
             for sub in self._inputs.pop(rid):
                 self.node.destroy_subscription(sub)
             self._kinds.pop(rid, None)
             self.goals.forget(rid)
+            self.asking.forget(rid)
             with self._lock:
                 for topic in self._robot_topics.pop(rid, set()):
                     self.node.destroy_publisher(self._outs.pop(topic).pub)
