@@ -91,3 +91,38 @@ def test_a_ros_node_gets_each_transducer_as_a_range_and_an_unread_one_is_not_sen
         ex.shutdown()
         node.destroy_node()
         ctx.try_shutdown()
+
+
+def test_export_to_ros2_writes_each_transducer_as_the_bridge_does_its_frames_once_on_tf_static(tmp_path):
+    """``export --to ros2``: the same topics, frames, field of view, limits and misses as the live Ranges above,
+    and the transducers' frames (the live /tf_static's, transducer_frames) once on /tf_static under the map root."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from user_peer.catalog import RobotCatalog
+    from user_peer.openfmt.ros2 import Ros2Writer
+
+    catalog = RobotCatalog(None)
+    catalog.world_info = _world(SONAR)
+    ranges = [0.5, 1.25, 0.75, 3.0, 3.0, 2.0, 0.3, 1.0]
+    with Ros2Writer(tmp_path / "r.mcap", catalog=catalog) as w:
+        for stamp in (12.5, 12.55):
+            w.write("rf/w/robot/base1/sonar", Scan.from_ranges(ranges, angle_min=0.0, angle_increment=math.radians(45),
+                                                              range_max=3.0, header=Header(stamp=stamp)), 0)
+    got: dict[str, list] = {}
+    with open(tmp_path / "r.mcap", "rb") as f:
+        for _s, channel, _m, m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            got.setdefault(channel.topic, []).append(m)
+    for i, r in enumerate(ranges):
+        msgs = got[f"/base1/sonar_{i}"]
+        assert [(m.header.stamp.sec, m.header.stamp.nanosec) for m in msgs] == [(12, 500_000_000), (12, 550_000_000)]
+        for m in msgs:
+            assert m.header.frame_id == f"base1/sonar_{i}" and m.radiation_type == Range.ULTRASOUND
+            assert (m.field_of_view, m.min_range, m.max_range) == pytest.approx((math.radians(30), 0.02, 3.0))
+            assert m.range == (math.inf if r == 3.0 else pytest.approx(r))
+    (static,) = got["/tf_static"]  # once: the ring did not change
+    sent = {t.child_frame_id: (t.header.frame_id, (t.transform.translation.x, t.transform.translation.y),
+                               (t.transform.rotation.z, t.transform.rotation.w)) for t in static.transforms}
+    assert sent.pop("world")[0] == "map"
+    assert sent == {f.child: (f.parent, pytest.approx(f.translation[:2]), pytest.approx(f.rotation[2:]))
+                    for f in transducer_frames("base1", SONAR)}

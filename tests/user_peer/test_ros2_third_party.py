@@ -45,7 +45,8 @@ def test_rosbags_decodes_the_ros2_export_with_the_standard_definitions_and_the_f
         for schema, channel, message in make_reader(f).iter_messages():
             get_types_from_msg(schema.data.decode(), schema.name)  # the file's schema parses in rosbags' parser
             got.setdefault(channel.topic, []).append(store.deserialize_cdr(message.data, schema.name))
-    assert {"/arm1/joint_states", "/base1/odom", "/base1/scan", "/base1/sonar", "/map", "/base1/path", "/tf", "/clock"} <= set(got)
+    assert {"/arm1/joint_states", "/base1/odom", "/base1/scan", "/base1/sonar", "/map", "/base1/path", "/tf", "/clock",
+            "/tf_static", "/base1/sonar_0", "/base1/sonar_1"} <= set(got)
     src = {}
     for key, msg in source():
         src.setdefault(key, []).append(msg)
@@ -71,5 +72,12 @@ def test_rosbags_decodes_the_ros2_export_with_the_standard_definitions_and_the_f
     assert [(p.pose.position.x, p.pose.position.y) for p in path.poses] == [(0.0, 0.0), (1.0, 2.0)]
     clock = [c.clock.sec * 10**9 + c.clock.nanosec for c in got["/clock"]]  # the sim's time, as the bridge's /clock
     assert clock == [round(0.1 * i * 1e9) for i in range(1, 4)]
+    # each transducer a Range in its frame on the rim (no description: the scan's angles 0 and 0.5 rad)
+    assert [(r.header.frame_id, r.range, r.radiation_type) for r in got["/base1/sonar_0"]] == [("base1/sonar_0", pytest.approx(0.4), 0)] * 3
+    assert all(math.isinf(r.range) and r.field_of_view == pytest.approx(math.radians(30)) for r in got["/base1/sonar_1"])
+    static = {t.child_frame_id: t for m in got["/tf_static"] for t in m.transforms}
+    assert static["world"].header.frame_id == "map" and static["base1/sonar_1"].header.frame_id == "base1/sonar"
+    rim = static["base1/sonar_1"].transform.translation
+    assert (rim.x, rim.y) == pytest.approx((0.26 * math.cos(0.5), 0.26 * math.sin(0.5)))
     frames = {t.child_frame_id: t.header.frame_id for m in got["/tf"] for t in m.transforms}
     assert frames["base1"] == "world" and frames["base1/lidar"] == "base1" and frames["arm1/joint_1"] == "arm1"

@@ -30,9 +30,10 @@ from user_peer.catalog import RobotCatalog
 from user_peer.geometry import quat_xyzw
 from user_peer.rerun_log import RobotDrawing
 
-__all__ = ["Frame", "FrameTracker", "WORLD", "key_owner", "yaw_quat_xyzw"]
+__all__ = ["Frame", "FrameTracker", "WORLD", "MAP", "MAP_ROOT", "key_owner", "yaw_quat_xyzw"]
 
 WORLD = "world"
+MAP = "map"
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,6 +44,11 @@ class Frame:
     child: str
     translation: tuple[float, float, float]
     rotation: tuple[float, float, float, float]
+
+
+MAP_ROOT = Frame(MAP, WORLD, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+"""``map -> world``, the identity, for ROS 2's trees (the bridge's and ``export --to ros2``'s ``/tf_static``): the
+world's frame is REP 105's fixed ``map`` frame, in the same coordinates (the world's maps are drawn in them)."""
 
 
 def yaw_quat_xyzw(yaw: float) -> tuple[float, float, float, float]:

@@ -11,6 +11,8 @@ OccupancyGrid      ``/map``, ``/maps/NAME``     ``nav_msgs/msg/OccupancyGrid`` (
 Path               ``/ID/path``                 ``nav_msgs/msg/Path``
 an object's Pose   ``/object/ID/pose``          ``geometry_msgs/msg/PoseStamped``
 poses and arm FK   ``/tf``                      ``tf2_msgs/msg/TFMessage``
+fixed frames       ``/tf_static``               ``tf2_msgs/msg/TFMessage`` (``map -> world``, the transducers)
+a sonar's Scan     ``/ID/sonar_I``              ``sensor_msgs/msg/Range`` per transducer (``ID/sonar_I``)
 robot state        ``/clock``                   ``rosgraph_msgs/msg/Clock`` (the sim's time, when it moves on)
 anything else      ``/KEY``                     ``std_msgs/msg/String`` holding the JSON
 =================  ===========================  ======================================
@@ -24,6 +26,8 @@ A LaserScan's ``range_min`` is its sensor's in the world description (0.0 in a r
 missing echo (the fabric's ``range_max``) is +inf, as REP 117 says. The sonar ring's ranges are measured from
 the ring's rim and its frame ``ID/sonar`` is at the ring's centre: the ring's radius is added to the ranges and
 the limits (from the world description, else the robot's own), so that every range is true in that frame.
+Each transducer is also a ``Range`` in its own frame on the rim (:mod:`user_peer.openfmt.ros2_ranges`, the
+live bridge's), its angle the world description's (else the scan's), the frames on ``/tf_static`` once each.
 
 Written with ``mcap-ros2-support``'s writer.
 """
@@ -43,8 +47,9 @@ from fabric.recording.mcap_file import McapFile
 from fabric.interfaces import JointState, OccupancyGrid, Path, Pose, Scan, WorldInfo
 from user_peer.catalog import RobotCatalog
 from user_peer.message_schema import plain_view
-from user_peer.openfmt.frames import WORLD, FrameTracker, key_owner, yaw_quat_xyzw
+from user_peer.openfmt.frames import MAP_ROOT, WORLD, Frame, FrameTracker, key_owner, yaw_quat_xyzw
 from user_peer.openfmt.ros2_msgdefs import definition
+from user_peer.openfmt.ros2_ranges import BEAM_HALF_WIDTH, ULTRASOUND, range_value, transducer_frames, transducer_name
 
 __all__ = ["Ros2Writer", "SimStamps", "ODOM_COVARIANCE", "odometry_fields", "scan_period", "ros2_message", "ros2_topic", "to_body", "sim_time_ns", "ros_topic", "scan_ranges", "sensor_range_min", "sonar_radius", "TF_TOPIC"]
 
@@ -267,6 +272,7 @@ class Ros2Writer(McapFile):
         self._tf_pub = 0
         self._stamps = SimStamps()  # header stamps: the sim's time, as the live bridge's (docs/ros2.md, "Stamps")
         self.frames = FrameTracker(catalog or RobotCatalog(None, scene=scene))
+        self._static: dict[str, Frame] = {}  # /tf_static's frames by child: the map root, each ring's transducers
         self.written = 0
         self.skipped = 0
 
@@ -301,6 +307,7 @@ class Ros2Writer(McapFile):
             ]
             self._tf_pub = max(self._tf_pub, pub)  # /tf's publish times never go back (it merges every robot's keys)
             self._put(TF_TOPIC, "tf2_msgs/msg/TFMessage", {"transforms": tfs}, log_time_ns, self._tf_pub)
+            self._put_static([], t, log_time_ns)
         scan = isinstance(msg, Scan)
         kind = self._kind(key, msg)
         converted = ros2_message(key, msg, t, range_min=self._range_min(key) if scan else 0.0,
@@ -310,6 +317,38 @@ class Ros2Writer(McapFile):
             self.skipped += 1
             return
         self._put(ros2_topic(key, kind) or ros_topic(key), converted[0], converted[1], log_time_ns, pub)
+        if scan and key.endswith("/sonar") and (key_owner(key) or ("",))[0] == "robot":
+            self._ranges(key, msg, t, log_time_ns, pub)
+
+    def _put_static(self, frames: list[Frame], t: int, log_time: int) -> None:
+        """``/tf_static`` again, all its frames in one message (as tf2's broadcaster sends them), when ``frames``
+        holds one it has not sent; the map root with the first."""
+        new = [f for f in (MAP_ROOT, *frames) if self._static.get(f.child) != f]
+        if not new:
+            return
+        self._static.update((f.child, f) for f in new)
+        tfs = [{"header": _header(t, f.parent), "child_frame_id": f.child,
+                "transform": {"translation": dict(zip("xyz", f.translation)), "rotation": dict(zip("xyzw", f.rotation))}}
+               for f in self._static.values()]
+        self._put("/tf_static", "tf2_msgs/msg/TFMessage", {"transforms": tfs}, log_time, log_time)
+
+    def _ranges(self, key: str, msg: Scan, t: int, log_time: int, pub: int) -> None:
+        """A ring's Scan as one ``sensor_msgs/Range`` per transducer, their frames on /tf_static (the live bridge's)."""
+        rid = key.split("/")[3]
+        info = self.frames.catalog.world_info
+        robot = None if info is None else next((r for r in info.robots if r.id == rid), None)
+        sonar = None if robot is None else robot.sonar
+        ranges = np.asarray(msg.ranges, dtype=np.float64).tolist()
+        angles = (sonar.angles if sonar is not None and len(sonar.angles) == len(ranges)
+                  else [msg.angle_min + i * msg.angle_increment for i in range(len(ranges))])
+        self._put_static(transducer_frames(rid, angles, self._sonar_radius(key)), t, log_time)
+        miss = float(msg.range_max) - MISS_TOLERANCE_M
+        lo = float(sonar.range_min) if sonar is not None else 0.0
+        for i, r in enumerate(ranges):
+            self._put(ros_topic(f"{rid}/{transducer_name(i)}"), "sensor_msgs/msg/Range",
+                      {"header": _header(t, f"{rid}/{transducer_name(i)}"), "radiation_type": ULTRASOUND,
+                       "field_of_view": 2 * BEAM_HALF_WIDTH, "min_range": lo, "max_range": float(msg.range_max),
+                       "range": range_value(r, miss), "variance": 0.0}, log_time, pub)
 
     def _kind(self, key: str, msg: Any) -> str | None:
         """A robot's kind ("arm", "mobile") as the frame tree knows it (a pose alone: a mobile base), else None."""

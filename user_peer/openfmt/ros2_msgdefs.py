@@ -1,7 +1,8 @@
 """ROS 2 message definitions (``ros2msg`` text, dependencies appended as rosbag2 writes them).
 
 The definitions are the standard ones of ``std_msgs``, ``geometry_msgs``, ``sensor_msgs``,
-``nav_msgs`` (Odometry), ``rosgraph_msgs`` (Clock) and ``tf2_msgs`` (comments dropped);
+``nav_msgs`` (Odometry), ``rosgraph_msgs`` (Clock) and ``tf2_msgs`` (comments dropped; Kilted's, whose
+``sensor_msgs/Range`` has a ``variance``);
 ``builtin_interfaces/Time`` is built into the
 CDR codec.
 """
@@ -33,6 +34,10 @@ _BASE: dict[str, str] = {
     "tf2_msgs/TFMessage": "geometry_msgs/TransformStamped[] transforms\n",
     "geometry_msgs/Twist": "Vector3 linear\nVector3 angular\n",
     "rosgraph_msgs/Clock": "builtin_interfaces/Time clock\n",
+    "sensor_msgs/Range": (
+        "uint8 ULTRASOUND=0\nuint8 INFRARED=1\nstd_msgs/Header header\nuint8 radiation_type\nfloat32 field_of_view\n"
+        "float32 min_range\nfloat32 max_range\nfloat32 range\nfloat32 variance\n"
+    ),
     "geometry_msgs/PoseWithCovariance": "Pose pose\nfloat64[36] covariance\n",
     "geometry_msgs/TwistWithCovariance": "Twist twist\nfloat64[36] covariance\n",
     "nav_msgs/Odometry": "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist\n",
@@ -49,6 +54,7 @@ _DEPS: dict[str, tuple[str, ...]] = {
         "geometry_msgs/TransformStamped", "std_msgs/Header", "geometry_msgs/Transform", "geometry_msgs/Vector3", "geometry_msgs/Quaternion",
     ),
     "rosgraph_msgs/Clock": (),
+    "sensor_msgs/Range": ("std_msgs/Header",),
     "nav_msgs/Odometry": (
         "std_msgs/Header", "geometry_msgs/PoseWithCovariance", "geometry_msgs/Pose", "geometry_msgs/Point", "geometry_msgs/Quaternion",
         "geometry_msgs/TwistWithCovariance", "geometry_msgs/Twist", "geometry_msgs/Vector3",

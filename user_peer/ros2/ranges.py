@@ -2,12 +2,9 @@
 
 The fabric sends a base's ring as one Scan on ``robot/ID/sonar`` (the bridge's ``/ID/sonar`` LaserScan, kept):
 range ``i`` is the transducer at ``SonarInfo.angles[i]``, measured from the ring's rim. Here each transducer is
-also a ``Range`` on ``/NS/ID/sonar_I`` (a ROS name token may not start with a digit, so not ``sonar/I``), in its
-own frame ``NS/ID/sonar_I``: on the rim at its angle, x pointing out along its beam, so that the range is true
-from that frame's origin as ROS defines it. ``/tf_static`` places those frames under ``ID/sonar`` (the ring's
-centre), where ``tf2_msgs`` is importable (:mod:`user_peer.ros2.tf`). ``field_of_view`` is the sim's beam: a fan of
-three rays 15 degrees either side of the transducer's axis (``sim_peer.sensors.Ultrasonic.BEAM``, which the test
-holds this to), the nearest echo of the three; a missing echo is +inf (REP 117), as in the LaserScan.
+also a ``Range`` on ``/NS/ID/sonar_I`` in its own frame ``NS/ID/sonar_I``, as ``export --to ros2`` writes it
+(names, frames, field of view and misses: :mod:`user_peer.openfmt.ros2_ranges`). ``/tf_static`` places those
+frames under ``ID/sonar`` (the ring's centre), where ``tf2_msgs`` is importable (:mod:`user_peer.ros2.tf`).
 
 A transducer's message is published only while a node subscribes to its topic: eight more messages per ring at
 the scan rate would cost a class of eight bases about 1,300 publishes a second that nobody reads (the bridge's
@@ -16,7 +13,6 @@ CPU budget, docs/ros2.md "Benchmark"); asking a publisher for its subscribers ta
 
 from __future__ import annotations
 
-import math
 from typing import Any, Callable
 
 import numpy as np
@@ -24,26 +20,17 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Range
 
 from fabric.interfaces import Scan, SonarInfo, WorldInfo
-from user_peer.openfmt.frames import Frame, yaw_quat_xyzw
+from user_peer.openfmt.frames import Frame
 from user_peer.openfmt.ros2 import MISS_TOLERANCE_M, ros_topic
+from user_peer.openfmt.ros2_ranges import BEAM_HALF_WIDTH, range_value, transducer_name
+from user_peer.openfmt.ros2_ranges import transducer_frames as _frames
 from user_peer.ros2.direct import stamp
 
 __all__ = ["BEAM_HALF_WIDTH", "RangesOut", "transducer_frames", "transducer_name"]
 
-BEAM_HALF_WIDTH = math.radians(15.0)
-"""Half the field of view of one transducer: the sim's fan (``sim_peer.sensors.Ultrasonic.BEAM``)."""
-
-
-def transducer_name(i: int) -> str:
-    """The last part of transducer ``i``'s topic and frame: ``sonar_3``."""
-    return f"sonar_{i}"
-
-
 def transducer_frames(rid: str, sonar: SonarInfo) -> list[Frame]:
     """Each transducer's frame in ``rid/sonar`` (the ring's centre, at its height): on the rim at its angle, x out."""
-    r = float(sonar.radius)
-    return [Frame(f"{rid}/sonar", f"{rid}/{transducer_name(i)}", (r * math.cos(a), r * math.sin(a), 0.0), yaw_quat_xyzw(a))
-            for i, a in enumerate(float(v) for v in sonar.angles)]
+    return _frames(rid, sonar.angles, sonar.radius)
 
 
 def _shape(s: SonarInfo) -> tuple:
@@ -102,7 +89,7 @@ class RangesOut:
             if pub.get_subscription_count() == 0:
                 continue
             stamp(msg.header, ns, msg.header.frame_id)
-            msg.range = math.inf if r >= miss else float(r)
+            msg.range = range_value(r, miss)
             pub.publish(msg)
             self.sent += 1
 

@@ -23,7 +23,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from fabric.interfaces import WorldInfo
 from user_peer.catalog import RobotCatalog
-from user_peer.openfmt.frames import WORLD, Frame, FrameTracker
+from user_peer.openfmt.frames import MAP, MAP_ROOT, WORLD, Frame, FrameTracker
 from user_peer.ros2.direct import stamp
 from user_peer.ros2.names import frame_prefix
 from user_peer.ros2.ranges import transducer_frames
@@ -35,10 +35,6 @@ TF_STATIC_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, dura
 """tf2's own QoS: /tf reliable and deep, /tf_static latched for late joiners."""
 
 _MOUNTS = ("/lidar", "/sonar")
-
-MAP = "map"
-MAP_ROOT = Frame(MAP, WORLD, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
-"""``map -> world``: the world's frame is REP 105's fixed ``map`` frame (the same coordinates)."""
 
 
 def tf_message_class() -> type | None:
