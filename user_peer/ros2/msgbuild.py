@@ -211,7 +211,7 @@ def main(argv: list[str] | None = None) -> int:
         start = time.monotonic()
         try:
             where = build(package)
-        except MsgBuildError as exc:
+        except (MsgBuildError, OSError) as exc:  # OSError: an environment this user may not write to
             print(f"could not build {package}: {exc}", file=sys.stderr)
             return 1
         print(f"built {package} into {where} in {time.monotonic() - start:.1f} s", flush=True)
