@@ -62,8 +62,21 @@ class Bumper(Sensor):
                 physics.model, physics.data, origin, vec, SENSED_GROUPS, 1, self.robot.body_id,
                 self._gid, self._dist, None, len(self._gid), reach,
             )
-            if ((self._dist >= 0) & (self._dist < reach)).any():
+            near = (self._dist >= 0) & (self._dist < reach)
+            if near.any():
                 c.stop()
-                self.robot.note(Note(EventKind.COLLISION, "bumper", "warning", {"t": physics.time, "detail": "stopped before an obstacle ahead"},
-                                     counter="collisions"))
+                what = hit_owner(physics.model, int(self._gid[int(np.argmax(near))]))
+                detail = f"stopped before {what} ahead at ({c.x:.2f}, {c.y:.2f})"
+                self.robot.note(Note(EventKind.COLLISION, "bumper", "warning",
+                                     {"t": physics.time, "detail": detail, "what": what}, counter="collisions"))
                 break
+
+
+def hit_owner(model: mujoco.MjModel, geom: int) -> str:
+    """What a ray hit, for the event: the robot that holds the geom (its id: the prefix of its bodies' names,
+    ``"{id}/"``), or the scene's body name; a collision that names a base tells two bases that met from a shelf."""
+    if geom < 0:
+        return "the scene"
+    body = int(model.geom_bodyid[geom])
+    name = model.body(body).name if body else model.geom(geom).name  # the world's own geoms: the wall's name
+    return name.split("/", 1)[0] if "/" in name else (name or "the scene")

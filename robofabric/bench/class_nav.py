@@ -130,7 +130,7 @@ def student(world: str, endpoint: str, index: int, n: int, out: str, reverse_whe
             mine = [e for e in w.events[mark:] if e.object == base.id]
             res["stops"] = sum(e.kind == EventKind.OBSTACLE_STOP and e.reason == "waiting" for e in mine)
             res["said"] = [f"{base.id} {e.reason}: {e.data.get('detail', '')}"[:200]
-                           for e in mine if e.kind == EventKind.OBSTACLE_STOP][:8]
+                           for e in mine if e.kind in (EventKind.OBSTACLE_STOP, EventKind.COLLISION)][:8]
             res["collisions"] = sum(e.kind == EventKind.COLLISION for e in mine)
             base.stop()
     except Exception as exc:

@@ -143,3 +143,13 @@ def test_a_base_waits_for_a_base_crossing_its_way_and_goes_on():
             break
     assert [n.reason for _, n in notes if n.kind == EventKind.OBSTACLE_STOP] == ["waiting", "resumed"]
     assert math.hypot(b1.ctrl.x - 2.0, b1.ctrl.y) < 0.1  # and reached the end of its path
+
+
+def test_a_bumper_stop_names_the_base_it_stopped_before():
+    world = SimWorld("warehouse", [SceneRobot("reeman", "base2", (1.0, 0.0, 0.0, math.pi))], seed=1)
+    world.robots["base1"].twist(0.5, 0.0)  # driven by hand at a parked base: no path, no guard, only the bumper
+    for _ in range(40):
+        world.step(50)
+    said = [(rid, n.data) for rid, n in world.notes.take() if n.kind == EventKind.COLLISION]
+    assert said and said[0][0] == "base1" and said[0][1]["what"] == "base2"
+    assert said[0][1]["detail"].startswith("stopped before base2 ahead at (")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import robots as robots_pkg
-from fabric.interfaces import Path
+from fabric.interfaces import EventKind, Path
 from sim_peer.controllers import CommandRejected
 from sim_peer.world import SimWorld, WorldError
 
@@ -249,6 +249,8 @@ def test_the_bumper_stops_a_base_before_a_wall(room):
     base.twist(1.0, 0.0)
     run(w, 4.0)
     assert not base.moving and w.notes.collisions and w.notes.collisions[0][0] == "bot"
+    said = [n for _, n in w.notes if n.kind == EventKind.COLLISION][0]
+    assert said.data["what"] == "front" and said.data["detail"].startswith("stopped before front ahead at (")
     front = base.ctrl.x + 0.05 + 0.25  # chassis centre 5 cm ahead of the axle, radius 0.25 m
     assert FRONT - 0.05 < front <= FRONT
     base.twist(-0.3, 0.0)  # backing away is allowed
