@@ -11,8 +11,10 @@ reaches zero waits, says so (``Event(kind=obstacle_stop, reason="waiting")``), g
 came (:func:`trail_back`) and reports ``blocked`` so that its user can plan again (:func:`decide`, pure: time
 passed in). Two bases driving at each other both stop, apart.
 
-The bases of one sim share a board (:mod:`sim_peer.traffic`): each guard also checks the other bases' disks where
-they stand, all around, and names the base in its way. The LIDAR looks ahead (the Reeman's: 135 degrees): what it
+The bases of one sim share a board (:mod:`sim_peer.traffic`): each guard also checks the other bases all around,
+where they stand (:func:`base_gap`: never nearer than their radii plus :data:`BASE_CLEARANCE`) and where they go
+(:func:`~sim_peer.traffic.crossing`: of two bases whose ways meet, the one further from the meeting waits short of
+the other's way), and names the base in its way. The LIDAR looks ahead (the Reeman's: 135 degrees): what it
 cannot see, other than the sim's own bases, is left to the bumper (a base driving backwards, a robot of another sim
 coming from the side). Bases that wait for each other do not wait for ever: after
 :data:`~sim_peer.traffic.GIVE_WAY_AFTER` one of them gives way (it reports ``blocked`` at once, naming the other).
@@ -33,13 +35,13 @@ from fabric.interfaces import EventKind
 from sim_peer.pure_pursuit import PurePursuit
 from sim_peer.robot import Note, Physics
 from sim_peer.sensors import Sensor
-from sim_peer.traffic import Spot, Traffic, Waiter, gives_way
+from sim_peer.traffic import Spot, Traffic, Waiter, crossing, gives_way, yields
 
 if TYPE_CHECKING:
     from sim_peer.robot_kinds import MobileRobot
 
-__all__ = ["BACK_OFF", "BLOCKED_AFTER", "GUARD_PERIOD", "SLACK", "WAY_MARGIN", "WayGuard", "WayState", "decide",
-           "facing_forwards", "trail_back", "way_cap", "way_gap"]
+__all__ = ["BACK_OFF", "BASE_CLEARANCE", "BLOCKED_AFTER", "GUARD_PERIOD", "SLACK", "WAY_MARGIN", "WayGuard", "WayState", "decide",
+           "base_gap", "facing_forwards", "trail_back", "way_cap", "way_gap"]
 
 GUARD_PERIOD = 0.05
 """Seconds of sim time between two looks (the LIDAR's own stream runs at 10-20 Hz)."""
@@ -52,6 +54,11 @@ BLOCKED_AFTER = 10.0
 SLACK = 0.05
 """Metres taken off the radius in the check: the planner keeps paths a radius from its cells' centres, and a wall's
 face may lie up to half a cell nearer."""
+BASE_CLEARANCE = 0.05
+"""Metres kept between two bases' disks (their radii about the turn point) on top of the radii: a bumper looks up to
+4 cm beyond the disk ahead (its shell, 1 cm, and a period's travel), so bases kept only their radii apart met on
+the bumper. Plans mark other robots 0.1 m beyond their radius (``compute_peer.navigation.plan_service``), so a
+path planned past a base standing still is clear of this."""
 LOOK = 2.0
 """Metres of path ahead that are checked (more than the braking distance at 1 m/s plus the margin)."""
 BACK_OFF = 0.4
@@ -101,6 +108,24 @@ def way_gap(path: np.ndarray, hits: np.ndarray, radius: float) -> float:
         return math.inf
     first = int(touching[0])  # >= 1: the disk at path[0] holds no hit
     return float(np.hypot(np.diff(path[:first, 0]), np.diff(path[:first, 1])).sum())  # to the last clear point
+
+
+def base_gap(path: np.ndarray, centre: tuple[float, float], radius: float) -> float:
+    """Arc length along ``path`` ((n, 2), from where the base is) before it comes nearer than ``radius`` to another
+    base's ``centre``, or, where it stands nearer already, nearer than it stands; ``inf`` when it never does.
+
+    Unlike a LIDAR hit (:func:`way_gap`), another base within the radius is not left to the bumper: it may have
+    come from the side, unseen by the path's disks ahead until it was within them (two bases crossing in the gap
+    both stopped 0.10 m short by the path and bumped, centres 0.59 m apart). A base that stands that near may move
+    away from it, never towards it. Pure: the board's spot in, metres out."""
+    if path.shape[0] < 2:
+        return math.inf
+    d = np.hypot(path[:, 0] - centre[0], path[:, 1] - centre[1])
+    closer = np.flatnonzero(d[1:] < min(radius, d[0] - 1e-9)) + 1
+    if closer.size == 0:
+        return math.inf
+    first = int(closer[0])
+    return float(np.hypot(np.diff(path[:first, 0]), np.diff(path[:first, 1])).sum())  # to the last point not nearer
 
 
 def way_cap(gap: float, accel: float, margin: float = WAY_MARGIN) -> float:
@@ -190,18 +215,23 @@ class WayGuard(Sensor):
         nearest, blocker = math.inf, None
         x, y = path[0]
         for rid, spot in self.traffic.others(self.robot.id).items():
-            if math.hypot(spot.x - x, spot.y - y) > LOOK + self.radius + spot.radius:
-                continue  # beyond the path looked at
-            # the radius less SLACK, as for the LIDAR's hits on its shell: plans keep other robots about that far
-            g = way_gap(path, np.array([[spot.x, spot.y]]), self.radius + spot.radius)
+            reach = self.full_radius + spot.radius + BASE_CLEARANCE  # no map cells: no slack, and the bumper's reach
+            if math.hypot(spot.x - x, spot.y - y) > 2 * LOOK + reach:
+                continue  # beyond both ways looked at
+            g = base_gap(path, (spot.x, spot.y), reach)
+            meet = crossing(path, np.array(spot.way), reach) if spot.way else None
+            if meet is not None and yields(self.robot.id, meet[0], rid, meet[1]):
+                g = min(g, meet[0])  # both head for one place and it gets there first: wait short of its way
             if g < nearest:
                 nearest, blocker = g, rid
         return min(gap, nearest), (blocker if nearest <= gap + BLAME else None)
 
     def after_step(self, physics: Physics) -> None:
         c, rid = self.robot.ctrl, self.robot.id
-        self.traffic.stand(rid, Spot(c.x, c.y, self.full_radius))
         follower = c.follower
+        ahead = self._path_ahead(follower) if follower is not None and hasattr(follower, "points") else None
+        way = tuple(map(tuple, ahead.tolist())) if ahead is not None else ()
+        self.traffic.stand(rid, Spot(c.x, c.y, self.full_radius, way))
         if self._backing is not None:
             self._back_off(physics)
             return
@@ -211,7 +241,7 @@ class WayGuard(Sensor):
             if self.state.waiting_since is not None:
                 self.state = WayState()
             return
-        self.gap, self.blocker = self._gap(self._path_ahead(follower), physics)
+        self.gap, self.blocker = self._gap(ahead, physics)
         c.speed_cap = way_cap(self.gap, c.spec.max_accel, self.margin)
         self.state, news = decide(self.state, physics.time, self.gap, margin=self.margin, blocked_after=self.blocked_after)
         since = self.state.waiting_since

@@ -3,7 +3,7 @@
 The start is the robot's latest pose unless the request gives one, the goal the ``goal`` scene object's pose
 unless the request gives one; the vehicle is the settings' with the robot's radius from its description. A
 robot's own footprint is never an obstacle to a plan from where it stands, and the other robots, where they stand
-now, are obstacles to it (the maps keep none: a student planning again after her base reported ``blocked`` gets a
+now, are obstacles to it, :data:`OTHERS_MARGIN` beyond their radius (the maps keep none: a student planning again after her base reported ``blocked`` gets a
 path around the base in her way). The
 path is published on ``rf/{world}/robot/{robot}/path`` and returned; following it is the user's decision (they
 send it on ``cmd/path``). Planning is CPU-bound, so plans run one at a time.
@@ -26,6 +26,12 @@ from .model import VehicleModel
 from .planner import PlannerSettings, plan_path
 from .poses import PoseHistory
 from .robot_cells import Footprint, clear_robots, mark_robots
+
+OTHERS_MARGIN = 0.1
+"""Metres the other robots are marked beyond their radius for a plan: a base's way guard keeps other bases their
+radii plus 5 cm away (``sim_peer.way_guard.BASE_CLEARANCE``: a bumper looks beyond the radius ahead), and its
+follower cuts a curve by up to 7 cm, so a path planned past a base standing still must pass it further than its
+radius (at their radii, bases passing each other stopped, or met on the bumper)."""
 
 if TYPE_CHECKING:
     from fabric.session import Fabric
@@ -82,7 +88,7 @@ class PlanService:
         if grid is None:
             return cm
         changed = clear_robots(grid, [standing], margin=0.0) if standing is not None else grid
-        changed = mark_robots(changed, others)
+        changed = mark_robots(changed, others, margin=OTHERS_MARGIN)
         if changed is grid:
             return cm
         return build_costmap(changed, robot_radius, threshold=s.threshold, unknown_is_occupied=s.unknown_is_occupied)

@@ -33,7 +33,7 @@ from robofabric.bench.common import TableOut, append, end_process, machine, pct
 STUDENT = [sys.executable, "-m", "robofabric.bench.class_nav", "student"]
 RADIUS = 0.30  # the Reeman's, about its turn point
 REACHED = 0.1  # m from the goal that counts as reached
-ATTEMPTS = 3  # plans a student makes before she gives up
+ATTEMPTS = 5  # plans a student makes before she gives up
 
 
 def placements(n: int) -> list[tuple[float, float, float]]:
@@ -44,14 +44,29 @@ def placements(n: int) -> list[tuple[float, float, float]]:
     return [(-span / 2 + span * i / (n - 1), 0.0, 0.0) for i in range(n)]
 
 
+GOAL_Y = 4.3
+"""The aisle behind the shelves (y 2.8 to 5.0 north; mirrored south): goals 0.7 m from its wall, so that a base
+parked at its goal leaves a lane between it and the shelves (0.53 m for the turn point) to the bases going on."""
+SLOTS = (1.75, 3.5)
+"""|x| of the goals along the aisle, clear of the gap's exit (the gap is |x| < 1): a base parked there is in nobody's
+way out of the gap (goals at the exit, x within 0.75 m, kept every later base waiting behind the first)."""
+
+
 def goal_of(index: int, start: tuple[float, float, float], n: int) -> tuple[float, float, float]:
-    """A goal across the room, in an aisle behind the shelves, reached through the gap between two of them: x
-    mirrored and shrunk to a quarter (the paths cross in the gap, where bases meet), y in two rows 0.6 m apart
-    (goals 0.78 m apart or more). Up to 4 bases all go north; with more, odd students go south."""
+    """A goal across the room, in an aisle behind the shelves, reached through the gap between two of them.
+
+    Up to 4 bases all go north; with more, odd students go south. In each aisle the western half of its bases
+    (by where they start) go east and the others west, so that the paths cross in the gap, where bases meet. Each
+    side's goals are slots along the aisle (:data:`SLOTS`): the first base through the gap takes the slot further
+    on, so that none passes a base parked at its goal (the westmost of those going east starts furthest from the
+    gap, and gets the nearer slot). Goals face the way the base goes, 1.75 m apart or more. ``start`` is the
+    base's own (:func:`placements`), asked for its place in the row."""
     south = n > 4 and index % 2 == 1
-    rank = index // 2 if n > 4 else index
-    y = 4.0 if rank % 2 == 0 else 3.4
-    return (-start[0] / 4.0, -y if south else y, -math.pi / 2 if south else math.pi / 2)
+    group = sorted((i for i in range(n) if (n > 4 and i % 2 == 1) == south), key=lambda i: placements(n)[i][0])
+    east = group[: len(group) // 2]  # west to east
+    west = group[len(group) // 2 :][::-1]  # east to west
+    x = SLOTS[east.index(index)] if index in east else -SLOTS[west.index(index)]
+    return (x, -GOAL_Y if south else GOAL_Y, 0.0 if x > 0 else math.pi)
 
 
 # ---------------------------------------------------------------------- a student (child process)

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from sim_peer.traffic import GIVE_WAY_AFTER, Spot, Traffic, Waiter, cycle_of, gives_way
+from sim_peer.traffic import GIVE_WAY_AFTER, Spot, Traffic, Waiter, crossing, cycle_of, gives_way, yields
 
 IDS = ("base0", "base1", "base2", "base3", "base4")
 
@@ -59,3 +62,36 @@ def test_the_board_holds_spots_and_waiters():
     board.wait("a", None)
     board.wait("b", None)  # not waiting: nothing to forget
     assert board.waiters == {}
+
+
+def _way(a: tuple[float, float], b: tuple[float, float], n: int = 21) -> np.ndarray:
+    return np.column_stack([np.linspace(a[0], b[0], n), np.linspace(a[1], b[1], n)])
+
+
+def test_two_ways_that_cross_meet_where_either_first_comes_within_reach_of_the_other():
+    mine, theirs = _way((-1.0, 0.0), (1.0, 0.0)), _way((0.0, -1.5), (0.0, 0.5))  # 0.1 m apart; they cross at 0, 0
+    a, b = crossing(mine, theirs, 0.65)
+    assert math.isclose(a, 0.3)  # x = -0.7 is clear, -0.6 within 0.65 of (0, 0)
+    assert math.isclose(b, 0.8)  # y = -0.7 clear, -0.6 within 0.65 of (0, 0)
+    assert crossing(theirs, mine, 0.65) == (b, a)
+    assert crossing(mine, _way((-1.0, 1.0), (1.0, 1.0)), 0.65) is None  # side by side, 1 m apart
+    assert crossing(mine, mine[:1], 0.65) is None  # a base that follows no path has no way
+
+
+@settings(max_examples=200, deadline=None)
+@given(pts=st.lists(st.tuples(st.floats(-3, 3), st.floats(-3, 3)), min_size=4, max_size=24), cut=st.integers(2, 20),
+       reach=st.floats(0.1, 1.5))
+def test_both_guards_weigh_the_same_two_numbers_and_exactly_one_base_yields(pts, cut, reach):
+    a = np.array(pts[: max(2, min(cut, len(pts) - 2))])
+    b = np.array(pts[len(a):])
+    ab, ba = crossing(a, b, reach), crossing(b, a, reach)
+    assert (ab is None) == (ba is None)
+    if ab is None:
+        return
+    assert ba == (ab[1], ab[0])  # symmetric: each guard computes the other's view
+    assert yields("base1", ab[0], "base2", ab[1]) != yields("base2", ab[1], "base1", ab[0])  # one, not both or none
+    # the one that goes first is the one nearer the meeting; up to it, the yielder's way is clear of the other's
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(a, axis=0).T))])
+    clear = a[arc <= ab[0] + 1e-9][1:] if ab[0] > 0 else a[:0]
+    d = np.hypot(clear[:, None, 0] - b[None, :, 0], clear[:, None, 1] - b[None, :, 1])
+    assert (d >= reach).all()

@@ -11,8 +11,8 @@ from hypothesis import given, settings, strategies as st
 from fabric.interfaces import EventKind
 from robots import SceneRobot
 from sim_peer.traffic import GIVE_WAY_AFTER
-from sim_peer.way_guard import (BACK_OFF, BACK_SPEED, BLOCKED_AFTER, RESUME, WAY_MARGIN, WayState, decide, facing_forwards,
-                                trail_back, way_cap, way_gap)
+from sim_peer.way_guard import (BACK_OFF, BACK_SPEED, BASE_CLEARANCE, BLOCKED_AFTER, RESUME, WAY_MARGIN, WayState, base_gap,
+                                decide, facing_forwards, trail_back, way_cap, way_gap)
 from sim_peer.world import SimWorld
 
 
@@ -82,8 +82,11 @@ def test_two_bases_driven_at_each_other_stop_apart_say_so_and_one_gives_way():
     def stops() -> list[tuple[str, str]]:
         return [(rid, n.reason) for rid, n in notes if n.kind == EventKind.OBSTACLE_STOP]
 
-    run(2.0)  # they stop within 1.5 s
+    run(3.0)  # their ways meet at once: one lets the other through first (base2: a tie, the greater id) and waits
+    # short of its way; the other comes on and stops before it, both within 3 s
     assert sorted(stops()) == [("base1", "waiting"), ("base2", "waiting")]  # each said so
+    first = [rid for rid, n in notes if n.kind == EventKind.OBSTACLE_STOP]
+    assert first[0] == "base2" and abs(b2.ctrl.x - 2.0) < 0.2  # it yielded where it stood
     assert not [n for _, n in notes if n.kind == EventKind.COLLISION]  # the bumper never had to
     assert closest > 2 * 0.25  # their chassis never met
     assert abs(b1.ctrl.v) < 1e-6 and abs(b2.ctrl.v) < 1e-6  # both wait, paths kept
@@ -153,3 +156,52 @@ def test_a_bumper_stop_names_the_base_it_stopped_before():
     said = [(rid, n.data) for rid, n in world.notes.take() if n.kind == EventKind.COLLISION]
     assert said and said[0][0] == "base1" and said[0][1]["what"] == "base2"
     assert said[0][1]["detail"].startswith("stopped before base2 ahead at (")
+
+
+def test_another_base_within_reach_may_be_left_never_neared():
+    path = _line(0.0, 4.0)
+    assert base_gap(path, (2.0, 0.0), 0.65) == pytest.approx(1.3)  # up to x = 1.3, 0.7 from it
+    assert base_gap(path, (2.0, 0.7), 0.65) == math.inf  # the path passes it 0.7 off
+    assert base_gap(path, (0.3, 0.3), 0.65) == 0.0  # beside it already, and the path leads nearer: no way on
+    assert base_gap(path, (-0.3, 0.0), 0.65) == math.inf  # behind it: the path leads away
+
+
+@settings(max_examples=200, deadline=None)
+@given(pts=st.lists(st.tuples(st.floats(-2, 2), st.floats(-2, 2)), min_size=2, max_size=20),
+       centre=st.tuples(st.floats(-2, 2), st.floats(-2, 2)), radius=st.floats(0.1, 1.5))
+def test_up_to_the_gap_a_base_never_comes_nearer_another_than_its_reach_or_than_it_stands(pts, centre, radius):
+    path = np.array(pts)
+    gap = base_gap(path, centre, radius)
+    d = np.hypot(path[:, 0] - centre[0], path[:, 1] - centre[1])
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
+    before = d[1:][arc[1:] <= gap] if math.isfinite(gap) else d[1:]
+    assert (before >= min(radius, d[0]) - 1e-9).all()
+    if math.isfinite(gap):  # and the point after it does
+        assert (d[1:][arc[1:] > gap] < min(radius, d[0])).any()
+
+
+@pytest.mark.parametrize("later", [0.0, 0.4])
+def test_two_bases_crossing_stop_apart_and_both_get_through(later):
+    """Two paths that cross at an angle (as in the warehouse's gap): each base sees the other come from the side too
+    late for the check of where it stands (before: both stopped 0.1 m short and met on the bumper, centres 0.59 m
+    apart); the one further from the meeting lets the other through first."""
+    a0, a1, b0, b1 = (-1.5, 0.0), (1.5, 1.8), (1.5, 0.0), (-1.5, 1.8)
+    world = SimWorld("warehouse", [SceneRobot("reeman", "base2", (*b0, 0.0, math.atan2(1.8, -3.0)))], seed=1)
+    r1, r2 = world.robots["base1"], world.robots["base2"]
+    r1.ctrl.x, r1.ctrl.y, r1.ctrl.yaw = *a0, math.atan2(1.8, 3.0)
+
+    def line(a, b):
+        return np.linspace(a[0], b[0], 61), np.linspace(a[1], b[1], 61), np.full(61, math.atan2(b[1] - a[1], b[0] - a[0]))
+
+    r1.path(*line(a0, a1))
+    notes, closest, started = [], math.inf, False
+    while world.time < 12.0 and not (started and r1.ctrl.follower is None and r2.ctrl.follower is None):
+        world.step(25)
+        if not started and world.time >= later:
+            r2.path(*line(b0, b1))
+            started = True
+        notes += world.notes.take()
+        closest = min(closest, math.hypot(r1.ctrl.x - r2.ctrl.x, r1.ctrl.y - r2.ctrl.y))
+    assert not [(rid, n.data) for rid, n in notes if n.kind == EventKind.COLLISION]
+    assert closest > 2 * 0.3 + BASE_CLEARANCE  # their disks never came within the clearance
+    assert sorted(rid for rid, n in notes if n.kind == EventKind.PATH_DONE) == ["base1", "base2"]  # both got through
