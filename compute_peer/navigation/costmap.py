@@ -24,6 +24,12 @@ from .errors import NavigationError
 from .grid import check_grid, dilate, occupied_mask
 
 
+NEAR = 0.15
+"""Metres beyond ``blocked`` where Hybrid A* charges extra (``HybridAStarConfig.near_penalty``), as Nav2's inflation
+cost does: a path at the bare radius leaves a base's bumper no room (the Reeman's looks 4 cm past its radius ahead,
+a wall's face lies up to half a cell nearer than its cell's centre, and the follower cuts a curve by up to 7 cm),
+so two bases crossing in the shelves' gap each hugged a shelf's corner and met it on the bumper."""
+
 MAX_INFLATION_CELLS = 250
 """The largest inflation, in cells, a costmap is built with: the inflation costs a pass per cell of radius (a 99 m
 radius on a 5 cm map asked for 2,000 passes and several GB, and failed inside numpy)."""
@@ -40,6 +46,14 @@ class Costmap:
     collision: np.ndarray  # (H, W) bool, inflated by robot_radius
     blocked: np.ndarray  # (H, W) bool, inflated by robot_radius + margin
     blocked_flat: bytes = field(repr=False, default=b"")  # one byte per cell, for scalar checks in callbacks
+    near: np.ndarray | None = field(repr=False, default=None)  # (H, W) bool, within NEAR beyond ``blocked``
+
+    def near_xy(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Per point: within :data:`NEAR` of ``blocked`` (free to drive, but where a planner had better not linger)."""
+        if self.near is None:
+            return np.zeros(np.shape(x), dtype=bool)
+        r, c, inside = self.cells(np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64))
+        return inside & self.near[r, c]
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -122,6 +136,7 @@ def build_costmap(
         collision=collision,
         blocked=blocked,
         blocked_flat=blocked.astype(np.uint8).tobytes(),
+        near=dilate(occ, min((robot_radius + margin + NEAR) / res, MAX_INFLATION_CELLS)) & ~blocked,
     )
 
 
