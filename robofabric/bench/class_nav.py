@@ -71,6 +71,31 @@ def goal_of(index: int, start: tuple[float, float, float], n: int) -> tuple[floa
 
 # ---------------------------------------------------------------------- a student (child process)
 
+def _at(p: Any, goal: tuple[float, float, float]) -> bool:
+    """Her base stands within 0.1 m of its goal, stopped."""
+    return p is not None and math.hypot(p.position[0] - goal[0], p.position[1] - goal[1]) < REACHED \
+        and math.hypot(p.linear[0], p.linear[1]) < 0.02 and abs(p.angular[2]) < 0.05
+
+
+def _stopped(events: list[Any], robot: str) -> str:
+    """Why her base stopped short of its goal, from the events since she sent the path: "blocked" (its way guard
+    dropped the path), "bumped" (the bumper stopped it: a collision, counted as one, and the path is gone), "done"
+    (the path ended, not within 0.1 m: a goal moved off an obstacle), or "" (still going). Each is what a student
+    in the console sees, and each makes her plan again."""
+    from fabric.interfaces import EventKind
+
+    for e in events:
+        if e.object != robot:
+            continue
+        if e.kind == EventKind.OBSTACLE_STOP and e.reason == "blocked":
+            return "blocked"
+        if e.kind == EventKind.COLLISION:
+            return "bumped"
+        if e.kind == EventKind.PATH_DONE:
+            return "done"
+    return ""
+
+
 def student(world: str, endpoint: str, index: int, n: int, out: str, reverse_when_asked: bool = True) -> None:
     """Join, own baseI, map by turning, build her map, plan across the room, follow; results to ``out`` (JSON).
 
@@ -126,18 +151,18 @@ def student(world: str, endpoint: str, index: int, n: int, out: str, reverse_whe
                 outcome = ""
                 while time.monotonic() < deadline and not outcome:
                     time.sleep(0.1)
-                    p = base.pose
-                    if p is not None and math.hypot(p.position[0] - goal[0], p.position[1] - goal[1]) < REACHED \
-                            and math.hypot(p.linear[0], p.linear[1]) < 0.02 and abs(p.angular[2]) < 0.05:
+                    if _at(base.pose, goal):
                         outcome = "reached"
-                    elif any(e.kind == EventKind.OBSTACLE_STOP and e.reason == "blocked" and e.object == base.id
-                             for e in w.events[since:]):
-                        outcome = "blocked"
+                    else:
+                        outcome = _stopped(w.events[since:], base.id)
                 if outcome == "reached":
                     break
                 res["blocked"] += outcome == "blocked"
                 if not outcome:
                     break  # out of time
+                time.sleep(1.0)  # she reads what it said (and its pose catches up), then plans again from where it stands
+                if _at(base.pose, goal):
+                    break
             p = base.pose
             if p is not None:
                 d = math.hypot(p.position[0] - goal[0], p.position[1] - goal[1])
@@ -187,9 +212,17 @@ def run_one(n: int, tmp: Path, reverse_when_asked: bool = True) -> dict[str, Any
             seconds = time.monotonic() - t0
         for p in (compute, sim, router):
             end_process(p)
-        results = [json.loads(o.read_text()) if o.exists() else {"plans": [], "reached": False, "stops": 0, "collisions": 0,
-                                                                 "blocked": 0, "robot_cells": None, "errors": ["no result"],
-                                                                 "final": None, "notes": []} for o in outs]
+        results = [json.loads(o.read_text()) if o.exists() else dict(NO_RESULT) for o in outs]
+    return summary(n, results, seconds)
+
+
+NO_RESULT: dict[str, Any] = {"plans": [], "reached": False, "stops": 0, "collisions": 0, "blocked": 0, "robot_cells": None,
+                             "errors": ["no result"], "final": None, "notes": []}
+"""What a student who wrote nothing counts for: not reached, her map's cells unknown."""
+
+
+def summary(n: int, results: list[dict[str, Any]], seconds: float) -> dict[str, Any]:
+    """A class's row from its ``n`` students' results (pure: the students' JSON in, the figures out)."""
     plans = [t for r in results for t in r["plans"]]
     cells = [r["robot_cells"] for r in results]
     return {
@@ -200,6 +233,19 @@ def run_one(n: int, tmp: Path, reverse_when_asked: bool = True) -> dict[str, Any
         "errors": [e for r in results for e in r["errors"]][:6], "notes": [x for r in results for x in r["notes"]][:4],
         "said": [x for r in results for x in r.get("said", ())],
     }
+
+
+def verdict(r: dict[str, Any]) -> str:
+    """The budget line: "met" when every base reached its goal, none bumped and no map holds a robot's cell;
+    otherwise what missed it. A map not measured (its student wrote nothing) is no pass."""
+    missed = []
+    if r["reached"] < r["n"]:
+        missed.append(f"{r['n'] - r['reached']} of {r['n']} short of their goals")
+    if r["collisions"]:
+        missed.append(f"{r['collisions']} collisions")
+    if any(c is None or c > 0 for c in r["cells"]):
+        missed.append("robot cells in a map (or a map not measured)")
+    return f"{r['n']} bases: budget " + ("met" if not missed else "not met: " + ", ".join(missed))
 
 
 def header() -> list[str]:
@@ -237,6 +283,7 @@ def command(
     lines = [f"Command: `robofabric bench class-nav --bases {bases}{flag}`",
              f"Machine: {machine()}; load average at start {os.getloadavg()[0]:.1f}", "", *header()]
     print("\n".join(lines), flush=True)
+    verdicts: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
         for n in sizes:
             r = run_one(n, logs or Path(tmp), reverse_when_asked)
@@ -244,6 +291,9 @@ def command(
             print(lines[-1], flush=True)
             for e in r["errors"] + r["notes"] + r["said"]:
                 print(f"    {e}", flush=True)
+            verdicts.append(verdict(r))
+    lines += ["", *verdicts]
+    print("\n".join(verdicts), flush=True)
     lines.append(f"Load average at the end {os.getloadavg()[0]:.1f}.")
     append(out, "\n".join(lines))
 
@@ -259,4 +309,4 @@ if __name__ == "__main__":
     _main(sys.argv[1:])
 
 
-__all__ = ["command", "goal_of", "placements", "run_one", "student"]
+__all__ = ["command", "goal_of", "placements", "row", "run_one", "student", "summary", "verdict"]
