@@ -44,28 +44,34 @@ def placements(n: int) -> list[tuple[float, float, float]]:
     return [(-span / 2 + span * i / (n - 1), 0.0, 0.0) for i in range(n)]
 
 
-GOAL_Y = 4.3
-"""The aisle behind the shelves (y 2.8 to 5.0 north; mirrored south): goals 0.7 m from its wall, so that a base
-parked at its goal leaves a lane between it and the shelves (0.53 m for the turn point) to the bases going on."""
-SLOTS = (1.75, 3.5)
-"""|x| of the goals along the aisle, clear of the gap's exit (the gap is |x| < 1): a base parked there is in nobody's
-way out of the gap (goals at the exit, x within 0.75 m, kept every later base waiting behind the first)."""
+GOAL_Y = 4.5
+"""The aisle behind the shelves (y 2.8 to 5.0 north; mirrored south): goals 0.5 m from its wall, so that a base
+parked at its goal leaves a lane between it and the shelves (y 3.2 to 3.7 for the turn point) to the bases going on."""
+SLOTS = (1.2, 2.5)
+"""|x| of the goals along the aisle. A student maps the hall from her start, so she knows the aisle only through
+the gap between the shelves (|x| < 1): the goal, and the floor around it, must lie in that cone (goals at |x| 3.5
+lay in unknown space, planned for as an obstacle). From (+-1, 0) the cone at y 4.5 reaches |x| 2.2 on the far side,
+from (+-3, 0) |x| 0.2 to 3.4."""
 
 
 def goal_of(index: int, start: tuple[float, float, float], n: int) -> tuple[float, float, float]:
     """A goal across the room, in an aisle behind the shelves, reached through the gap between two of them.
 
-    Up to 4 bases all go north; with more, odd students go south. In each aisle the western half of its bases
-    (by where they start) go east and the others west, so that the paths cross in the gap, where bases meet. Each
-    side's goals are slots along the aisle (:data:`SLOTS`): the first base through the gap takes the slot further
-    on, so that none passes a base parked at its goal (the westmost of those going east starts furthest from the
-    gap, and gets the nearer slot). Goals face the way the base goes, 1.75 m apart or more. ``start`` is the
-    base's own (:func:`placements`), asked for its place in the row."""
+    Up to 4 bases all go north; with more, odd students go south. A base starting west of the hall's middle goes
+    east, the others west, so that the paths cross in the gap, where bases meet. Each side's goals are slots
+    along the aisle (:data:`SLOTS`): of two bases going one way, the one starting further out takes the further
+    slot (the nearer one takes the nearer: the further lies outside what it saw through the gap); a base alone
+    takes the slot nearest its start mirrored through the gap's middle. Goals face the way the base goes, 1.3 m
+    apart or more, and off the lane from the gap along the aisle. ``start`` is the base's own
+    (:func:`placements`)."""
     south = n > 4 and index % 2 == 1
-    group = sorted((i for i in range(n) if (n > 4 and i % 2 == 1) == south), key=lambda i: placements(n)[i][0])
-    east = group[: len(group) // 2]  # west to east
-    west = group[len(group) // 2 :][::-1]  # east to west
-    x = SLOTS[east.index(index)] if index in east else -SLOTS[west.index(index)]
+    x0 = start[0]
+    side = [placements(n)[i][0] for i in range(n) if (n > 4 and i % 2 == 1) == south and (placements(n)[i][0] < 0) == (x0 < 0)]
+    if len(side) > 1:
+        slot = SLOTS[1] if abs(x0) == max(abs(v) for v in side) else SLOTS[0]
+    else:
+        slot = min(SLOTS, key=lambda s: abs(s - 0.8 * abs(x0)))
+    x = slot if x0 < 0 else -slot
     return (x, -GOAL_Y if south else GOAL_Y, 0.0 if x > 0 else math.pi)
 
 
@@ -101,6 +107,8 @@ def student(world: str, endpoint: str, index: int, n: int, out: str, reverse_whe
 
     ``reverse_when_asked``: a refusal that asks "allow reversing?" (a forward-only base with no first move forwards,
     beside another base) is answered as a student does in the console, by ticking "reverse" and planning again."""
+    import numpy as np
+
     from compute_peer.navigation.robot_cells import Footprint, robot_cells
     from fabric import keys
     from fabric.interfaces import EventKind, Pose
@@ -129,6 +137,9 @@ def student(world: str, endpoint: str, index: int, n: int, out: str, reverse_whe
             at_build = {rid: (float(p.position[0]), float(p.position[1])) for rid, p in poses.items()}
             res["robot_cells"] = robot_cells(built, [Footprint(x, y, RADIUS) for x, y in at_build.values()], margin=0.0)
             res["robots_seen"] = len(at_build)
+            res["map"] = {"resolution": float(built.resolution), "origin": [float(v) for v in built.origin[:2]],
+                          "shape": list(built.cells.shape)}
+            np.save(Path(out).with_suffix(".map.npy"), np.asarray(built.cells))  # beside her results, to look at
             my_map = keys.user_map("map", w.user)
             deadline = time.monotonic() + 150.0
             direction = "default"
