@@ -58,7 +58,8 @@ class ScanMapping:
         self._sensor_offset = sensor_offset
         self._radius = radius
         self.counters = counters
-        for name in ("scans", "scans_ignored", "scans_without_pose", "scans_waiting_for_sensor", "scans_rejected"):
+        for name in ("scans", "scans_ignored", "scans_without_pose", "scans_out_of_step", "scans_waiting_for_sensor",
+                     "scans_rejected"):
             counters.setdefault(name, 0)
         self._lock = threading.Lock()
         self._clock = clock
@@ -76,9 +77,10 @@ class ScanMapping:
             if not self.on:
                 self.counters["scans_ignored"] += 1  # arrived while mapping was off
                 return False
-            pose = self.poses.at(robot, scan.header.stamp)
+            pose = self.poses.known_at(robot, scan.header.stamp)
             if pose is None:
-                self.counters["scans_without_pose"] += 1
+                # no pose at all, or none near enough its stamp: folded in at a moving robot's nearest pose, it smears the map
+                self.counters["scans_without_pose" if robot not in self.poses else "scans_out_of_step"] += 1
                 return False
             offset = self._sensor_offset(robot)
             if offset is None:

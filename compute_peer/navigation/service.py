@@ -109,6 +109,7 @@ class NavigationService:
             "scans": 0,  # folded into the map
             "scans_ignored": 0,  # arrived while mapping was off
             "scans_without_pose": 0,
+            "scans_out_of_step": 0,  # its stamp beyond the robot's poses kept, which it moved too fast to guess across
             "scans_waiting_for_sensor": 0,  # dropped while the sensor's mounting is being looked up
             "scans_rejected": 0,
             "plans": 0,

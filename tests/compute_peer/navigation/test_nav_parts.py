@@ -29,6 +29,34 @@ def test_pose_history_nearest_in_sim_time_latest_without_stamp_and_bounded():
     assert poses.robots() == {"r"} and len(poses) == 1
 
 
+def test_a_scan_beyond_the_poses_kept_is_known_only_where_the_robot_moved_too_little_to_matter():
+    import dataclasses
+
+    poses = PoseHistory()
+    still = pose_at(1.0, 0.0, 0.0, stamp=2.0)
+    poses.add("parked", still)
+    assert poses.known_at("parked", 2.5) is not None  # standing still: known at any time near its poses
+    turning = dataclasses.replace(pose_at(1.0, 0.0, 0.0, stamp=2.0), angular=np.array([0.0, 0.0, 1.2]))
+    poses.add("spinning", dataclasses.replace(turning, header=dataclasses.replace(turning.header, stamp=1.9)))
+    poses.add("spinning", turning)
+    assert poses.known_at("spinning", 1.95) is not None  # between two poses: interpolated
+    assert poses.known_at("spinning", 2.01) is not None  # 10 ms on at 1.2 rad/s: 0.012 rad
+    assert poses.known_at("spinning", 2.1) is None  # 0.1 s on: 0.12 rad, 7 degrees: not guessed
+    assert poses.known_at("spinning", 1.8) is None  # before the oldest kept, alike
+    assert poses.known_at("nobody", 2.0) is None
+
+
+def test_scan_mapping_drops_a_scan_its_robot_turned_too_far_since_its_last_pose():
+    import dataclasses
+
+    scene = small_room()
+    m, poses, counters = _mapping({"r": (0.0, 0.0, 0.0)})
+    turning = dataclasses.replace(pose_at(2.0, 2.0, 0.0, stamp=1.0), angular=np.array([0.0, 0.0, 1.2]))
+    poses.add("r", turning)
+    assert not m.integrate("r", scan_at(scene, 2.0, 2.0, 0.3, stamp=1.25)) and counters["scans_out_of_step"] == 1
+    assert m.integrate("r", scan_at(scene, 2.0, 2.0, 0.0, stamp=1.0)) and counters["scans"] == 1
+
+
 def _mapping(offsets: dict[str, tuple[float, float, float] | None], on: bool = True) -> tuple[ScanMapping, PoseHistory, dict]:
     poses = PoseHistory()
     counters: dict[str, int] = {}
