@@ -129,17 +129,33 @@ def student(world: str, endpoint: str, index: int, n: int, out: str, reverse_whe
             while not base.can_command and time.monotonic() < until:  # the grant's record on its way here
                 time.sleep(0.1)
             mark = w.event_mark()
-            base.twist(0.0, 1.2)  # a little more than once around at 1.2 rad/s
-            time.sleep(2 * math.pi / 1.2 + 1.5)
-            base.twist(0.0, 0.0)
-            time.sleep(0.5)
-            built = base.build_map()
-            at_build = {rid: (float(p.position[0]), float(p.position[1])) for rid, p in poses.items()}
-            res["robot_cells"] = robot_cells(built, [Footprint(x, y, RADIUS) for x, y in at_build.values()], margin=0.0)
-            res["robots_seen"] = len(at_build)
-            res["map"] = {"resolution": float(built.resolution), "origin": [float(v) for v in built.origin[:2]],
-                          "shape": list(built.cells.shape)}
-            np.save(Path(out).with_suffix(".map.npy"), np.asarray(built.cells))  # beside her results, to look at
+
+            def look_around() -> None:
+                """Turn a little more than once around at 1.2 rad/s, then press Build map (again, after a failure
+                to answer, up to 3 times): the robot cells of every map she builds are counted, the most kept."""
+                base.twist(0.0, 1.2)
+                time.sleep(2 * math.pi / 1.2 + 1.5)
+                base.twist(0.0, 0.0)
+                time.sleep(0.5)
+                for attempt in range(3):
+                    try:
+                        built = base.build_map()
+                        break
+                    except Exception as exc:  # a loaded compute peer that did not answer: she presses it again
+                        res["errors"].append(f"build: {exc}"[:300])
+                        if attempt == 2:
+                            raise
+                        time.sleep(2.0)
+                at_build = {rid: (float(p.position[0]), float(p.position[1])) for rid, p in poses.items()}
+                cells = robot_cells(built, [Footprint(x, y, RADIUS) for x, y in at_build.values()], margin=0.0)
+                res["robot_cells"] = max(cells, res["robot_cells"] or 0)
+                res["robots_seen"] = len(at_build)
+                res["builds"] = res.get("builds", 0) + 1
+                res["map"] = {"resolution": float(built.resolution), "origin": [float(v) for v in built.origin[:2]],
+                              "shape": list(built.cells.shape)}
+                np.save(Path(out).with_suffix(".map.npy"), np.asarray(built.cells))  # beside her results, to look at
+
+            look_around()
             my_map = keys.user_map("map", w.user)
             deadline = time.monotonic() + 150.0
             direction = "default"
@@ -152,6 +168,9 @@ def student(world: str, endpoint: str, index: int, n: int, out: str, reverse_whe
                     if reverse_when_asked and "allow reversing?" in str(exc) and direction != "both":
                         direction = "both"
                         res["notes"].append(f"base{index}: planning again with reversing allowed")
+                    elif "cannot drive away" in str(exc) or "unknown space" in str(exc):
+                        res["notes"].append(f"base{index}: her map holds no way out: looking around and building it again")
+                        look_around()  # what she sees in the console: her map has walls or unknown all around her
                     time.sleep(2.0)
                     continue
                 res["plans"].append(time.perf_counter() - t)
