@@ -25,7 +25,7 @@ def _student(**over) -> dict:
 def test_every_goal_is_free_apart_off_the_lane_and_seen_from_its_start_through_the_gap(n):
     starts = placements(n)
     goals = [goal_of(i, s, n) for i, s in enumerate(starts)]
-    for (x, y, yaw), (sx, sy, _) in zip(goals, starts):
+    for (x, y, yaw), (sx, _, _) in zip(goals, starts):
         assert abs(x) in SLOTS and yaw == (0.0 if x > 0 else math.pi)
         assert 5.0 - abs(y) >= 0.5 and abs(y) - 2.8 >= 1.5  # the wall 0.5 m off; a lane to the shelves
         assert min(math.hypot(max(abs(x - cx) - hx, 0), max(abs(y - cy) - hy, 0)) for cx, cy, hx, hy in SHELVES) > 0.6
