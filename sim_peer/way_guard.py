@@ -245,6 +245,8 @@ class WayGuard(Sensor):
         c.speed_cap = way_cap(self.gap, c.spec.max_accel, self.margin)
         self.state, news = decide(self.state, physics.time, self.gap, margin=self.margin, blocked_after=self.blocked_after)
         since = self.state.waiting_since
+        if since is not None:  # a waiting base holds (it may turn on the spot) until it says resumed: no creeping
+            c.speed_cap = 0.0  # within the resume band (two waiting bases crept 0.1 m each into the bumper's reach)
         self.traffic.wait(rid, None if since is None else Waiter(since, self.blocker))
         to = gives_way(self.traffic.waiters, rid, physics.time) if since is not None else None
         if to is not None:  # it and the bases it waits for wait for each other: this one gives way

@@ -205,3 +205,29 @@ def test_two_bases_crossing_stop_apart_and_both_get_through(later):
     assert not [(rid, n.data) for rid, n in notes if n.kind == EventKind.COLLISION]
     assert closest > 2 * 0.3 + BASE_CLEARANCE  # their disks never came within the clearance
     assert sorted(rid for rid, n in notes if n.kind == EventKind.PATH_DONE) == ["base1", "base2"]  # both got through
+
+
+def test_a_waiting_base_holds_until_it_says_resumed():
+    """Its way opening within the resume band lets it go on no more than its words do (two waiting bases crept 0.1 m
+    each, unsaid, into each other's bumper)."""
+    world = SimWorld("warehouse", [SceneRobot("reeman", "base2", (2.0, 0.0, 0.0, 0.0))], seed=1)
+    b1, b2 = world.robots["base1"], world.robots["base2"]
+    b1.path(np.linspace(0.0, 3.0, 301), np.zeros(301), np.zeros(301))  # 1 cm apart: the gap to the centimetre
+    notes = []
+    for _ in range(60):
+        world.step(25)
+        notes += world.notes.take()
+    assert [n.reason for _, n in notes if n.kind == EventKind.OBSTACLE_STOP] == ["waiting"]
+    stood = b1.ctrl.x
+    b2.ctrl.x += WAY_MARGIN + RESUME / 2 - b1.guard.gap  # the gap opens to within the band, not beyond it
+    world.step(25)  # the board has base2's new spot from this step on
+    for _ in range(40):
+        world.step(25)
+        notes += world.notes.take()
+        assert WAY_MARGIN < b1.guard.gap <= WAY_MARGIN + RESUME
+    assert b1.ctrl.x == pytest.approx(stood, abs=1e-3) and "resumed" not in [n.reason for _, n in notes]
+    b2.ctrl.x += 1.0  # now it clears
+    for _ in range(40):
+        world.step(25)
+        notes += world.notes.take()
+    assert "resumed" in [n.reason for _, n in notes] and b1.ctrl.x > stood + 0.2
