@@ -73,10 +73,19 @@ def _arc(points: np.ndarray, k: int) -> float:
     return float(np.hypot(*np.diff(points[: k + 1], axis=0).T).sum()) if k > 0 else 0.0
 
 
-def yields(me: str, mine: float, them: str, theirs: float) -> bool:
+def yields(me: str, mine: float, them: str, theirs: float, yielding: Mapping[str, str] | None = None) -> bool:
     """Whether base ``me``, ``mine`` metres from where its way meets base ``them``'s, lets it through first: the
     base further from the meeting goes second (the other gets there first), the greater id on a tie. One of two
-    bases yields, the same one whichever asks."""
+    bases yields, the same one whichever asks.
+
+    ``yielding`` (the board's: who yields to whom now) keeps a choice made until their ways part: two bases as far
+    from the meeting (mirrored starts, one map) swapped who yielded from one look to the next, each braking and going
+    by turns, and met on the bumper."""
+    if yielding is not None:
+        if yielding.get(them) == me:
+            return False
+        if yielding.get(me) == them:
+            return True
     return mine > theirs or (mine == theirs and me > them)
 
 
@@ -111,6 +120,7 @@ class Traffic:
     def __init__(self) -> None:
         self.spots: dict[str, Spot] = {}
         self.waiters: dict[str, Waiter] = {}
+        self.yielding: dict[str, str] = {}  # base -> the base it lets through first, while their ways meet
 
     def stand(self, robot: str, spot: Spot) -> None:
         """``robot`` stands at ``spot`` now."""

@@ -214,13 +214,17 @@ class WayGuard(Sensor):
         gap = way_gap(path, self._hits(physics), self.radius)
         nearest, blocker = math.inf, None
         x, y = path[0]
+        me, board = self.robot.id, self.traffic.yielding
+        before = board.pop(me, None)  # the base it let through at the last look: chosen again while their ways meet
         for rid, spot in self.traffic.others(self.robot.id).items():
             reach = self.full_radius + spot.radius + BASE_CLEARANCE  # no map cells: no slack, and the bumper's reach
             if math.hypot(spot.x - x, spot.y - y) > 2 * LOOK + reach:
                 continue  # beyond both ways looked at
             g = base_gap(path, (spot.x, spot.y), reach)
             meet = crossing(path, np.array(spot.way), reach) if spot.way else None
-            if meet is not None and yields(self.robot.id, meet[0], rid, meet[1]):
+            held = {k: v for k, v in ((rid, board.get(rid)), (me, before)) if v is not None}
+            if meet is not None and yields(me, meet[0], rid, meet[1], held):
+                board[me] = rid
                 g = min(g, meet[0])  # both head for one place and it gets there first: wait short of its way
             if g < nearest:
                 nearest, blocker = g, rid
@@ -238,6 +242,7 @@ class WayGuard(Sensor):
         if follower is None or not hasattr(follower, "points"):
             c.speed_cap = math.inf
             self.traffic.wait(rid, None)
+            self.traffic.yielding.pop(rid, None)  # no way: it lets nobody through
             if self.state.waiting_since is not None:
                 self.state = WayState()
             return

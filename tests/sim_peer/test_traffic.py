@@ -95,3 +95,14 @@ def test_both_guards_weigh_the_same_two_numbers_and_exactly_one_base_yields(pts,
     clear = a[arc <= ab[0] + 1e-9][1:] if ab[0] > 0 else a[:0]
     d = np.hypot(clear[:, None, 0] - b[None, :, 0], clear[:, None, 1] - b[None, :, 1])
     assert (d >= reach).all()
+
+
+@settings(max_examples=200, deadline=None)
+@given(mine=st.floats(0.0, 3.0), theirs=st.floats(0.0, 3.0), held=st.sampled_from([None, "base1", "base2"]))
+def test_a_base_that_yields_keeps_yielding_while_their_ways_meet_and_still_exactly_one_does(mine, theirs, held):
+    board = {} if held is None else {held: "base2" if held == "base1" else "base1"}
+    one = yields("base1", mine, "base2", theirs, board)
+    two = yields("base2", theirs, "base1", mine, board)
+    assert one != two
+    if held is not None:
+        assert (one if held == "base1" else two)  # the choice made stands, whatever the arcs say now
