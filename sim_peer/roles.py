@@ -204,11 +204,14 @@ class Roles:
         """Whether this process was frozen just now: its heartbeat is late, or came back from a gap within the last
         lease. A standby paused past the lease wakes with a link the router dropped and a stale state; the tokens it
         sees go (every one of them, its session's link being dead) before its session reconnects, and it must not
-        read that as its leader's death (the soak saw a paused standby take the world back with older epochs)."""
+        read that as its leader's death (the soak saw a paused standby take the world back with older epochs).
+        The distrust lasts a lease and as long again as the freeze was (up to five leases): a session that slept
+        through the router dropping it reads its link's news late (a standby paused 4 s read its leader's token gone
+        more than a lease after it woke, link up, and took the world over from no state)."""
         if self.last_tick < 0:
             return False  # not joined yet
         now, lease = time.monotonic(), self.host.fabric.config.lease_ms / 1000.0
-        return now - self.last_tick > lease / 2 or now - self.thawed_at < lease
+        return now - self.last_tick > lease / 2 or now - self.thawed_at < lease + min(self.late_s, 5 * lease)
 
     def deaf(self) -> bool:
         """Whether this sim hears no one now: its link is down, the router no longer holds its own token, or this
