@@ -37,13 +37,17 @@ class TwistKeeper:
         self.interval = interval
         self._held: dict[str, Callable[[], None]] = {}
         self._lock = threading.Lock()
+        # held while a resend goes out: a drop or a new hold waits for it, so that a resend of the old twist read
+        # before the drop can never land after the caller's own next command (the full suite saw a stop's zero
+        # twist followed by the old twist's resend: the base drove on until the sim's deadman)
+        self._sending = threading.RLock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.resent = 0
         self.ended: dict[str, str] = {}  # robot -> why its last hold ended by itself (a failed resend)
 
     def hold(self, robot: str, send: Callable[[], None]) -> None:
-        with self._lock:
+        with self._sending, self._lock:
             if self._stop.is_set():
                 return
             self._held[robot] = send
@@ -53,7 +57,8 @@ class TwistKeeper:
                 self._thread.start()
 
     def drop(self, robot: str) -> None:
-        with self._lock:
+        """End ``robot``'s hold; once this returns, no resend of it goes out (one under way has gone)."""
+        with self._sending, self._lock:
             self._held.pop(robot, None)
 
     def holding(self, robot: str) -> bool:
@@ -74,12 +79,16 @@ class TwistKeeper:
             with self._lock:
                 items = list(self._held.items())
             for robot, send in items:
-                try:
-                    send()
-                    self.resent += 1
-                except Exception as exc:  # lost the robot, or the session closed: the hold ends, the base stops
+                with self._sending:
                     with self._lock:
-                        if self._held.get(robot) is send:
-                            del self._held[robot]
-                            self.ended[robot] = str(exc)
-                    log.info("stopped repeating the twist of %s: %s", robot, exc)
+                        if self._held.get(robot) is not send:
+                            continue  # dropped or replaced since the copy: its twist is not the robot's any more
+                    try:
+                        send()
+                        self.resent += 1
+                    except Exception as exc:  # lost the robot, or the session closed: the hold ends, the base stops
+                        with self._lock:
+                            if self._held.get(robot) is send:
+                                del self._held[robot]
+                                self.ended[robot] = str(exc)
+                        log.info("stopped repeating the twist of %s: %s", robot, exc)

@@ -51,12 +51,11 @@ class Base(Robot):
         there (a browser page's key held down, a bridge forwarding ROS ``cmd_vel``), so that its own silence
         stops the base within the deadman."""
         v, omega = float(v), float(omega)
+        self.world.twists.drop(self.id)  # first: no resend of the twist before this one may land after it
         self._send_twist(v, omega)
         if (v or omega) and hold:
             epoch = self.record.epoch if self.record is not None else None
             self.world.twists.hold(self.id, lambda: self._send_twist(v, omega, epoch))
-        else:
-            self.world.twists.drop(self.id)
 
     def _send_twist(self, v: float, omega: float, epoch: int | None = None) -> None:
         key = keys.robot_cmd(self._w, self.id, "twist", self.world.user)

@@ -36,7 +36,7 @@ def test_a_held_twist_is_repeated_until_dropped_and_a_refused_one_ends_its_hold(
         keeper.hold("base2", sender("c"))  # another robot's repeats go on: base1's stopped
         wait_until(lambda: sent.count("c") >= 3, what="base2 repeated")
         with lock:
-            assert sent.count("a") == n_a and len([s for s in sent[n:] if s != "c"]) <= 1  # one in flight at the drop
+            assert sent.count("a") == n_a and [s for s in sent[n:] if s != "c"] == []  # none after the drop returned
 
         def lost() -> None:
             raise NotOwner("base3 changed hands since the command was given (epoch 4, now 5)")
@@ -54,3 +54,35 @@ def test_a_held_twist_is_repeated_until_dropped_and_a_refused_one_ends_its_hold(
 def test_the_interval_must_be_positive():
     with pytest.raises(ValueError, match="positive"):
         TwistKeeper(interval=0)
+
+
+def test_a_drop_returns_only_after_a_resend_under_way_went_so_none_lands_after_the_next_command():
+    """The full suite saw a stop's zero twist followed by the old twist's resend, read before the drop: the base
+    drove on until the sim's deadman. A drop now waits for the resend under way, and nothing of the old hold
+    goes out after it."""
+    keeper = TwistKeeper(interval=0.01)
+    order: list[str] = []
+    entered, release, dropped = threading.Event(), threading.Event(), threading.Event()
+
+    def slow_send() -> None:
+        entered.set()
+        release.wait(10)
+        order.append("resent")
+
+    try:
+        keeper.hold("base1", slow_send)
+        assert entered.wait(10), "no resend began"
+
+        def drop() -> None:
+            keeper.drop("base1")
+            order.append("dropped")
+            dropped.set()
+
+        threading.Thread(target=drop, daemon=True).start()
+        assert not dropped.wait(0.3), "the drop returned while the old twist's resend was still under way"
+        release.set()
+        assert dropped.wait(10)
+        assert order == ["resent", "dropped"] and not keeper.holding("base1")
+    finally:
+        release.set()
+        keeper.close()
