@@ -22,11 +22,11 @@ settings.load_profile("robofabric")
 
 
 # Where pytest-xdist runs the suite on several workers (`-n N --dist loadgroup`), the tests that load the whole box
-# run one after another on one worker: Chromium drawing in software GL, soaks and namespace labs, CPU hogs beside
-# paused processes. Two of them at once judge each other's pace, not the code's; the rest share the other workers.
+# run one after another on one worker: Chromium drawing in software GL and the console's class worlds (a module
+# each: three at once took the box to load 37), soaks and namespace labs, CPU hogs beside paused processes. Two of
+# them at once judge each other's pace, not the code's; the rest share the other workers.
 HEAVY = (
-    "tests/user_peer/console/test_console_browser.py", "tests/user_peer/console/test_console_flood.py",
-    "tests/user_peer/console/test_console_panda.py", "tests/user_peer/test_view_web.py", "tests/user_peer/test_web_pages.py",
+    "tests/user_peer/console/", "tests/user_peer/test_view_web.py", "tests/user_peer/test_web_pages.py",
     "tests/robofabric/bench/test_bench_console.py", "tests/robofabric/soak/", "tests/lab/", "tests/user_peer/test_pause_ride_out.py",
     "tests/sim_peer/test_pause.py", "tests/sim_peer/test_paused_standby.py", "tests/ownership/test_router_stall.py",
 )
