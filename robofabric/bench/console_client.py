@@ -155,35 +155,32 @@ class EmulatedPage:
         """Every label and text on the page, a line each: what a person could read."""
         return "\n".join(t for t in map(_label, self.elements.values()) if t)
 
-    async def wait_for(self, label: str, *, tag: str | None = None, exact: bool = True, timeout: float = 30.0) -> str:
-        """Wait until an element called ``label`` is on the page; its id."""
+    async def _until(self, check: Any, timeout: float) -> Any:
+        """``check()``'s first truthy value, looked at after each message from the server, within ``timeout``
+        (None if it never held, or the socket closed)."""
         assert self._changed is not None
         deadline = time.monotonic() + timeout
-        while (eid := self.find(label, tag=tag, exact=exact)) is None:
+        while not (got := check()):
             left = deadline - time.monotonic()
             if left <= 0 or not self.connected:
-                raise PageGone(f"no {label!r} on the page within {timeout:g} s")
-            self._changed.clear()
-            try:
-                await asyncio.wait_for(self._changed.wait(), timeout=min(left, 1.0))
-            except TimeoutError:
-                pass
-        return eid
-
-    async def wait_text(self, pred: Any, timeout: float) -> bool:
-        """Wait until ``pred(self.text())`` holds; whether it did within ``timeout``."""
-        assert self._changed is not None
-        deadline = time.monotonic() + timeout
-        while not pred(self.text()):
-            left = deadline - time.monotonic()
-            if left <= 0 or not self.connected:
-                return False
+                return None
             self._changed.clear()
             try:
                 await asyncio.wait_for(self._changed.wait(), timeout=min(left, 0.5))
             except TimeoutError:
                 pass
-        return True
+        return got
+
+    async def wait_for(self, label: str, *, tag: str | None = None, exact: bool = True, timeout: float = 30.0) -> str:
+        """Wait until an element called ``label`` is on the page; its id."""
+        eid = await self._until(lambda: self.find(label, tag=tag, exact=exact), timeout)
+        if eid is None:
+            raise PageGone(f"no {label!r} on the page within {timeout:g} s")
+        return str(eid)
+
+    async def wait_text(self, pred: Any, timeout: float) -> bool:
+        """Wait until ``pred(self.text())`` holds; whether it did within ``timeout``."""
+        return bool(await self._until(lambda: pred(self.text()), timeout))
 
     async def _fire(self, eid: str, kind: str, args: list[Any]) -> None:
         el = self.elements.get(eid) or {}
