@@ -109,6 +109,7 @@ class NavigationService:
             "scans": 0,  # folded into the map
             "scans_ignored": 0,  # arrived while mapping was off
             "scans_without_pose": 0,
+            "scans_held": 0,  # stamped after its moving robot's newest pose: held for the pose after it (then folded or dropped)
             "scans_out_of_step": 0,  # its stamp beyond the robot's poses kept, which it moved too fast to guess across
             "scans_waiting_for_sensor": 0,  # dropped while the sensor's mounting is being looked up
             "scans_rejected": 0,
@@ -234,6 +235,7 @@ class NavigationService:
                 if robot not in self.poses:
                     self.descriptions.sensor_offset(robot)  # a new robot: look its sensor up before its scans come
                 self.poses.add(robot, msg)
+            self.scans.pose_added(robot)  # the scans held ahead of it
         elif isinstance(msg, Scan) and parsed.leaf == "scan":
             if self._closed:
                 self.counters["scans_ignored"] += 1

@@ -46,15 +46,46 @@ def test_a_scan_beyond_the_poses_kept_is_known_only_where_the_robot_moved_too_li
     assert poses.known_at("nobody", 2.0) is None
 
 
-def test_scan_mapping_drops_a_scan_its_robot_turned_too_far_since_its_last_pose():
+def test_scan_mapping_holds_a_scan_its_robot_turned_too_far_since_its_last_pose():
     import dataclasses
 
     scene = small_room()
     m, poses, counters = _mapping({"r": (0.0, 0.0, 0.0)})
     turning = dataclasses.replace(pose_at(2.0, 2.0, 0.0, stamp=1.0), angular=np.array([0.0, 0.0, 1.2]))
     poses.add("r", turning)
-    assert not m.integrate("r", scan_at(scene, 2.0, 2.0, 0.3, stamp=1.25)) and counters["scans_out_of_step"] == 1
+    assert not m.integrate("r", scan_at(scene, 2.0, 2.0, 0.3, stamp=1.25)) and counters["scans_held"] == 1
     assert m.integrate("r", scan_at(scene, 2.0, 2.0, 0.0, stamp=1.0)) and counters["scans"] == 1
+
+
+def test_a_scan_ahead_of_its_turning_robots_poses_waits_for_the_pose_after_it_then_is_folded_or_dropped():
+    import dataclasses
+
+    scene = small_room()
+    now = [0.0]
+    poses = PoseHistory()
+    counters: dict[str, int] = {}
+    m = ScanMapping(poses, sensor_offset=lambda r: (0.0, 0.0, 0.0), radius=lambda r: 0.2, counters=counters,
+                    config=ROOM, clock=lambda: now[0])
+
+    def turning(yaw: float, stamp: float):
+        return dataclasses.replace(pose_at(2.0, 2.0, yaw, stamp=stamp), angular=np.array([0.0, 0.0, 1.2]))
+
+    poses.add("r", turning(0.0, 1.0))
+    assert not m.integrate("r", scan_at(scene, 2.0, 2.0, 0.06, stamp=1.05))  # 50 ms on at 1.2 rad/s: held
+    assert counters["scans_held"] == 1 and counters["scans"] == 0 and counters["scans_out_of_step"] == 0
+    poses.add("r", turning(0.03, 1.025))
+    assert m.pose_added("r") == 0 and counters["scans"] == 0  # not there yet: it waits on
+    poses.add("r", turning(0.12, 1.1))
+    assert m.pose_added("r") == 1 and counters["scans"] == 1 and m.scans == 1  # interpolated between 1.025 and 1.1
+    assert not m.integrate("r", scan_at(scene, 2.0, 2.0, 0.3, stamp=1.3))
+    now[0] = 0.6  # its pose never came within the hold
+    poses.add("r", turning(0.13, 1.11))
+    assert m.pose_added("r") == 0 and counters["scans_out_of_step"] == 1 and counters["scans"] == 1
+    for k in range(20):  # held scans are bounded per robot: the oldest goes
+        m.integrate("r", scan_at(scene, 2.0, 2.0, 0.3, stamp=2.0 + k))
+    assert counters["scans_out_of_step"] == 1 + 20 - 16
+    assert not m.integrate("r", scan_at(scene, 2.0, 2.0, 0.0, stamp=0.5))  # behind the poses kept: dropped at once
+    assert counters["scans_out_of_step"] == 6
 
 
 def _mapping(offsets: dict[str, tuple[float, float, float] | None], on: bool = True) -> tuple[ScanMapping, PoseHistory, dict]:
