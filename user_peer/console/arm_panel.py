@@ -8,7 +8,8 @@ import math
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from nicegui import run, ui
+from nicegui import ui
+from user_peer.console.workers import CALLS, off_loop
 
 from fabric.text import one_line
 from user_peer.errors import FabricUserError
@@ -138,7 +139,7 @@ class ArmPanel:
         while True:
             goal = self.target.copy()
             try:
-                q, why = await run.io_bound(self.arm.ik, goal), ""
+                q, why = await off_loop(CALLS, self.arm.ik, goal), ""
             except FabricUserError as exc:
                 q, why = None, exc.reason
             if not np.array_equal(goal, self.target):

@@ -6,7 +6,6 @@ from __future__ import annotations
 import asyncio
 import math
 import time
-from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -17,6 +16,7 @@ from fabric import keys
 from fabric.text import one_line
 from user_peer.console.drive import Driver
 from user_peer.console.goal import typed_goal
+from user_peer.console.workers import TWISTS, off_loop
 from user_peer.errors import FabricUserError
 
 if TYPE_CHECKING:
@@ -26,9 +26,6 @@ __all__ = ["BasePanel", "PLANNERS"]
 
 PLANNERS = {"Hybrid A*": "hybrid_astar", "OMPL": "ompl"}
 
-TWISTS = ThreadPoolExecutor(max_workers=4, thread_name_prefix="console-twist")
-"""The twists' own threads: a key never waits behind a login, a plan or a map build (each may take seconds
-in NiceGUI's shared pool, six threads on a 2-core machine). A twist is a put: four serve a class."""
 
 
 class BasePanel:
@@ -92,7 +89,7 @@ class BasePanel:
                 # hold=False: the page itself repeats a held key's twist (keep_driving), so the sim's deadman
                 # stops the base when the page goes quiet, whatever the server's session does until its grace
                 base = self.base
-                await asyncio.get_running_loop().run_in_executor(TWISTS, lambda: base.twist(v, w, hold=False))
+                await off_loop(TWISTS, base.twist, v, w, hold=False)
             except FabricUserError as exc:
                 self.driver.stop()
                 self.page.say(f"drive {self.base.id}: {self.page.why(exc)}")

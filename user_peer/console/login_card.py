@@ -13,10 +13,11 @@ import json
 import logging
 from typing import TYPE_CHECKING
 
-from nicegui import run, ui
+from nicegui import ui
 
 from user_peer.console.login import LoginError, login_config
 from user_peer.console.world_kind import login_caption
+from user_peer.console.workers import LOGINS, off_loop
 
 if TYPE_CHECKING:
     from user_peer.console.page import ConsolePage
@@ -68,7 +69,7 @@ class LoginCard:
         self.msg.text = f"logging in as {name}..."
         try:
             cfg = login_config(page.console.world, page.console.connect, name, password, base_file=page.console.base_file)
-            world = await run.io_bound(self.logins.login, cfg, name, password, page.client.ip)
+            world = await off_loop(LOGINS, self.logins.login, cfg, name, password, page.client.ip)
             token, ticket = self.logins.ticket(name)
         except LoginError as exc:
             self.refused(exc.reason)
@@ -110,5 +111,5 @@ class LoginCard:
         page.client.run_javascript(f"sessionStorage.removeItem({json.dumps(STORAGE_KEY)})")
         world, page.world = page.world, None  # the page's own leave (when it goes) leaves nothing
         page.end()
-        await run.io_bound(self.logins.logout, page.user, world)
+        await off_loop(LOGINS, self.logins.logout, page.user, world)
         ui.navigate.reload()

@@ -1,7 +1,7 @@
 """One student's page: the login, then the paper's window (robot list, arm panel, base panel, live view, events).
 
 Every button calls the Python user API (``user_peer``) of the page's own world, off the event loop
-(``nicegui.run.io_bound``), so a slow answer holds up this page only. Refusals are shown with their
+(:mod:`.workers`), so a slow answer holds up this page only. Refusals are shown with their
 reason and the robot's owner. The console's one 5 Hz clock (:mod:`.ticker`) redraws what changed on every page
 at once; a 10 Hz timer refreshes the twist
 while an arrow key is held (the sim's twist is a deadman). The panels are :mod:`.arm_panel` and
@@ -15,7 +15,7 @@ import threading
 from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
-from nicegui import run, ui
+from nicegui import ui
 
 from fabric.text import one_line
 
@@ -29,6 +29,7 @@ from user_peer.console.login_card import LoginCard
 from user_peer.console.view import LiveView
 from user_peer.console.view3d import View3D
 from user_peer.console.wording import plain
+from user_peer.console.workers import CALLS, LOGINS, off_loop
 from user_peer.errors import FabricUserError, Paused
 from user_peer.event_log import describe
 from user_peer.pause import is_pause, pause_words
@@ -166,7 +167,7 @@ class ConsolePage:
         """Her page, once she logged in (or came back with the tab's ticket): the robot she had selected, the
         tab's event log as it was. False (the reason on the login card) when the world did not answer."""
         try:
-            entries, handles, (frame, boxes) = await run.io_bound(_first_handles, world, name, ticket.selected)
+            entries, handles, (frame, boxes) = await off_loop(LOGINS, _first_handles, world, name, ticket.selected)
         except FabricUserError as exc:  # logged in, but the world did not answer
             self.console.logins.leave(name, world)
             self.card.refused(f"Could not join world {self.console.world}: {exc.reason}")
@@ -273,7 +274,7 @@ class ConsolePage:
         """``fn`` off the event loop; its refusal is shown with the reason (and the owner), never raised: it returns
         :attr:`FAILED` then."""
         try:
-            out = await run.io_bound(fn, *args, **kw)
+            out = await off_loop(CALLS, fn, *args, **kw)
         except FabricUserError as exc:
             self.say(f"{what}: {self.why(exc)}")
             return self.FAILED

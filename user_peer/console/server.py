@@ -133,12 +133,12 @@ async def _probe(console: Console) -> None:
     """Whether the world asks for logins (the login card's caption: .world_kind), asked until a router answers."""
     import asyncio
 
-    from nicegui import run
+    from user_peer.console.workers import LOGINS, off_loop
 
     from user_peer.console.world_kind import probe_logins
 
     while console.logins_required is None:
-        console.logins_required = await run.io_bound(probe_logins, console.world, console.connect, console.base_file)
+        console.logins_required = await off_loop(LOGINS, probe_logins, console.world, console.connect, console.base_file)
         if console.logins_required is None:
             await asyncio.sleep(5.0)
 

@@ -15,12 +15,13 @@ import logging
 import threading
 from typing import TYPE_CHECKING, Any
 
-from nicegui import run, ui
+from nicegui import ui
 
 from fabric.interfaces import NoReply, ServiceError
 from fabric.text import one_line
 from user_peer.console import teacher
 from user_peer.console.login import LoginError, login_config
+from user_peer.console.workers import CALLS, LOGINS, off_loop
 from user_peer.errors import FabricUserError
 
 if TYPE_CHECKING:
@@ -79,8 +80,8 @@ class TeacherPage:
         self.msg.text = f"logging in as {name}..."
         try:
             cfg = login_config(self.console.world, self.console.connect, name, password, base_file=self.console.base_file)
-            world = await run.io_bound(self.console.logins.login, cfg, name, password, self.client.ip)
-            self.kinds = await run.io_bound(_kinds, world)
+            world = await off_loop(LOGINS, self.console.logins.login, cfg, name, password, self.client.ip)
+            self.kinds = await off_loop(LOGINS, _kinds, world)
         except LoginError as exc:
             self._refused(exc.reason)
             return
@@ -155,12 +156,12 @@ class TeacherPage:
         if op == "give" and not to:
             self.say(f"Give {rid}: choose a student first")
             return
-        self.say(await run.io_bound(self._staff, rid, op, to))
+        self.say(await off_loop(CALLS, self._staff, rid, op, to))
         await self.refresh()
 
     async def act_all(self, op: str) -> None:
         """Stop all / reset the world: the staff action on every robot of the class, in turn."""
-        said = [await run.io_bound(self._staff, rid, op, "") for rid in sorted(self.kinds)]
+        said = [await off_loop(CALLS, self._staff, rid, op, "") for rid in sorted(self.kinds)]
         refused = [s for s in said if not s.startswith("done")]
         what = "stop all" if op == "stop" else "reset world"
         self.say(f"{what}: {len(said) - len(refused)} of {len(said)} robots" + (f"; {'; '.join(refused)}" if refused else ""))
@@ -187,7 +188,7 @@ class TeacherPage:
             return
         self._busy = True
         try:
-            records, live = await run.io_bound(_read, self.world)
+            records, live = await off_loop(LOGINS, _read, self.world)
             self._show(records, live)
         except Exception:
             log.exception("console: the teacher's page's refresh failed")

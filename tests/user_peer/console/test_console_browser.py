@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 import zenoh
 
+from fabric.text import one_line
 from fabric import keys
 from fabric.interfaces import Command
 from robofabric.secure import init
@@ -141,8 +142,14 @@ def log_in(page, name: str, password: str) -> None:
 
 
 def logged_in(page, klass: Klass, name: str) -> None:
+    from playwright.sync_api import TimeoutError as PlaywrightTimeoutError
+
     log_in(page, name, klass.passwords[name])
-    page.get_by_text(f"world {klass.world} · {name}").wait_for(timeout=60_000)
+    try:
+        page.get_by_text(f"world {klass.world} · {name}").wait_for(timeout=60_000)
+    except PlaywrightTimeoutError:
+        raise AssertionError(f"{name}'s page never showed her world in 60 s; it says: "
+                             f"{one_line(page.locator('body').inner_text(), 600)!r}") from None
 
 
 def shot(page, name: str) -> Path:
