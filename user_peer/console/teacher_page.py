@@ -6,11 +6,14 @@ it, and Stop all / Reset world. The page logs in as the instructor (her own name
 the console holds no credential), and a login that is not one of the console's ``--instructors`` is refused
 before any session opens; each action checks again (:func:`.teacher.require_staff`). The actions are the
 authority's staff actions (:mod:`ownership.staff`), each logged as an ``own_staff`` event in every page's log.
-What the tables show is worked out by :mod:`.teacher` (pure).
+What the tables show is worked out by :mod:`.teacher` (pure). A reload keeps her session as a student's page does
+(:mod:`.login_card`): the tab keeps a ticket in its ``sessionStorage`` (a key of its own, so a student's tab and the
+teacher's never take each other's), and Log out ends the session.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 from typing import TYPE_CHECKING, Any
@@ -31,6 +34,8 @@ __all__ = ["TeacherPage", "REFRESH_S"]
 
 log = logging.getLogger("robofabric.console")
 
+STORAGE_KEY = "rf-teacher-session"
+"""The tab's ``sessionStorage`` key of its ticket (a student's page keeps hers under another)."""
 REFRESH_S = 1.0
 """How often the tables are read again (the records, the console's logins, the world's live users)."""
 
@@ -68,6 +73,7 @@ class TeacherPage:
             self.button = ui.button("Log in", on_click=self.login)
             self.pw_in.on("keydown.enter", self.login)
             self.msg = ui.label("").props('role="alert"').classes("text-negative")
+        self.client.on_connect(self.resume)
 
     async def login(self) -> None:
         name, password = (self.name_in.value or "").strip(), self.pw_in.value or ""
@@ -89,12 +95,54 @@ class TeacherPage:
             self.console.logins.leave(name, None)
             self._refused(f"Could not join world {self.console.world}: {exc.reason}")
             return
+        token, ticket = self.console.logins.ticket(name)
+        self.client.run_javascript(f"sessionStorage.setItem({json.dumps(STORAGE_KEY)}, {json.dumps(token)})")
+        await self._enter(world, name)
+
+    async def resume(self) -> None:
+        """A reloaded tab's ticket, while her session is held (her pages, then the grace), opens the page again
+        with no login; the login card stays otherwise. The ticket's name is checked as a login's is."""
+        if self.world is not None:
+            return
+        from user_peer.console.login_card import READ_TIMEOUT_S
+
+        try:
+            token = await self.client.run_javascript(f"sessionStorage.getItem({json.dumps(STORAGE_KEY)})", timeout=READ_TIMEOUT_S)
+        except Exception as exc:  # a tab that never answered keeps its login card
+            log.info("console: a teacher's page did not say whether it holds a ticket: %s", exc)
+            return
+        if not isinstance(token, str) or not token or self.world is not None:
+            return
+        got = self.console.logins.resume(token)
+        if got is None:
+            self.client.run_javascript(f"sessionStorage.removeItem({json.dumps(STORAGE_KEY)})")
+            self.msg.text = "Your session ended: log in again"
+            return
+        world, ticket = got
+        try:
+            teacher.require_staff(ticket.name, self.console.instructors)
+            self.kinds = await off_loop(LOGINS, _kinds, world)
+        except (teacher.NotStaff, FabricUserError) as exc:
+            self.console.logins.leave(ticket.name, world)
+            self._refused(f"Refused: {getattr(exc, 'reason', exc)}")
+            return
+        await self._enter(world, ticket.name)
+
+    async def _enter(self, world: Any, name: str) -> None:
         self.world, self.user = world, name
         self.client.on_delete(self.end)
         self.root.clear()
         with self.root:
             self._main()
         await self.refresh()
+
+    async def logout(self) -> None:
+        """Her session ends now, in every tab of hers; this one goes back to its login card."""
+        self.client.run_javascript(f"sessionStorage.removeItem({json.dumps(STORAGE_KEY)})")
+        world, self.world = self.world, None
+        self._ended = True
+        await off_loop(LOGINS, self.console.logins.logout, self.user, world)
+        ui.navigate.reload()
 
     def _refused(self, text: str) -> None:
         self.msg.text = text
@@ -116,6 +164,7 @@ class TeacherPage:
         with ui.row().classes("items-center"):
             ui.button("Stop all", on_click=lambda: self.act_all("stop")).props("color=negative")
             ui.button("Reset world", on_click=self._confirm_reset)
+            ui.button("Log out", on_click=self.logout).props("flat")
         ui.label("Robots").classes("text-subtitle1").props('role="heading" aria-level="2"')
         with ui.grid(columns="repeat(6, auto) 1fr").classes("items-center full-width").style("gap: 0.25rem 1rem"):
             for head in ("Robot", "Owner", "Queue", "State", "Locked", "Give to", "Actions"):

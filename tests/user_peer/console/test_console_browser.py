@@ -779,7 +779,7 @@ def open_teacher(browser, klass: Klass, name: str):
     return page
 
 
-def test_the_teacher_releases_a_robot_a_student_holds_and_a_student_cannot_open_the_teachers_page(browser, klass):
+def test_the_teacher_releases_a_robot_a_student_holds_a_reload_keeps_her_in_and_a_student_cannot_open_the_teachers_page(browser, klass):
     """alice's login card asks for her login card's name and password (the console found that the router asks for
     logins); she owns arm1 from her page; carol (an instructor) sees it on the teacher's page and releases it: the
     authority takes it back (read through the Python API), alice's page shows it free, and the class's event log
@@ -816,3 +816,13 @@ def test_the_teacher_releases_a_robot_a_student_holds_and_a_student_cannot_open_
     found = axe_violations(carol)
     shot(carol, "teacher-after")
     assert not found, json.dumps(found, indent=1)
+    # a reload keeps her session, with no password typed; Log out ends it and the tab is back at its login card
+    assert carol.evaluate("() => sessionStorage.getItem('rf-teacher-session')")
+    carol.reload(timeout=60_000)
+    carol.get_by_text(f"teacher's page · world {klass.world} · carol").wait_for(timeout=60_000)
+    carol.get_by_role("button", name="Lock arm1").wait_for(timeout=30_000)  # the robots table is back
+    carol.get_by_role("button", name="Log out").click()
+    carol.get_by_role("button", name="Log in").wait_for(timeout=60_000)
+    assert carol.evaluate("() => sessionStorage.getItem('rf-teacher-session')") is None
+    carol.reload(timeout=60_000)
+    carol.get_by_role("button", name="Log in").wait_for(timeout=60_000)  # no ticket: the login card
