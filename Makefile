@@ -39,7 +39,7 @@ demo: $(STAMP)
 	$(VENV)/bin/robofabric demo --out out/demo
 
 test: $(STAMP_TEST) $(AXE) $(ROS_MSGS)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=25
 
 # the fast suite: no process-spawning or multi-second tests (those are marked slow)
 test-fast: $(STAMP_TEST) $(ROS_MSGS)
