@@ -77,6 +77,13 @@ class ArmGeometry:
                 self.visual = pin.GeometryModel()
         self.data = self.model.createData()
         self.joint_names: tuple[str, ...] = tuple(self.model.names[1:])
+        self._link_frames = [i for i, f in enumerate(self.model.frames) if f.type == self._pin.FrameType.BODY]
+        self.links = _links(self.model)
+        self.root_link = self.links[0][0] if self.links else "base_link"
+        self.joint_links: tuple[str, ...] = tuple(
+            next((name for name, _p, j, moved in self.links if j == i and (moved or i == 0)), self.model.names[i])
+            for i in range(self.model.njoints))
+        """The link each joint frame of ``fk`` is (the root link first): a URDF link's frame is its joint's."""
         objects = list(self.visual.geometryObjects)
         if urdf_text is None and any(_unreadable(g) for g in objects):
             objects = self._readable(objects, str(urdf))
@@ -121,6 +128,12 @@ class ArmGeometry:
         pin.forwardKinematics(self.model, self.data, q)
         return [_placement(m) for m in self.data.oMi]
 
+    def link_placements(self, q: Sequence[float]) -> list[Placement]:
+        """Placement of every link of ``links`` (same order), in the arm's base frame."""
+        self.fk(q)
+        self._pin.updateFramePlacements(self.model, self.data)
+        return [_placement(self.data.oMf[f]) for f in self._link_frames]
+
     def shape_placements(self, q: Sequence[float]) -> list[tuple[Shape, Placement]]:
         """Each visual shape with its placement in the base frame (FK must be current: call after ``fk``)."""
         self.fk(q)
@@ -128,3 +141,21 @@ class ArmGeometry:
         for shape, joint, local in self.shapes:
             out.append((shape, _placement(self.data.oMi[joint] * local)))
         return out
+
+
+def _links(model) -> tuple[tuple[str, str, int, bool], ...]:
+    """The URDF's links as Pinocchio keeps them, in its frame order: (name, parent link ("" for the root), the joint
+    that moves it, whether a moving joint is its own parent joint), as robot_state_publisher names its frames."""
+    import pinocchio as pin
+
+    frames = model.frames
+    out = []
+    for f in frames:
+        if f.type != pin.FrameType.BODY:
+            continue
+        joint = frames[f.parentFrame]  # the link's joint frame (moving or fixed); the root's is the universe
+        parent = frames[joint.parentFrame] if f.parentFrame != 0 else None
+        moved = joint.type == pin.FrameType.JOINT
+        out.append((str(f.name), str(parent.name) if parent is not None and parent.type == pin.FrameType.BODY else "",
+                    int(f.parentJoint), moved))
+    return tuple(out)

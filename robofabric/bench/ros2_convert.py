@@ -50,7 +50,7 @@ def measure(n: int = 2000) -> list[tuple[str, float, float, float, float]]:
     pose = Pose(np.array([1.0, 2.0, 0.0]), quaternion_from_yaw(0.7), np.array([0.3, 0.1, 0.0]), np.array([0.0, 0.0, 0.2]), header=h)
     joints = JointState(tuple(f"joint_{i}" for i in range(1, 7)), rng.random(6), rng.random(6), h)
     cases = [
-        ("scan", "rf/w/robot/base1/scan", scan, LaserScan, lambda o: direct.laser_scan(o, "base1/lidar", scan, 5, 0.05, 0.0), {"range_min": 0.05}),
+        ("scan", "rf/w/robot/base1/scan", scan, LaserScan, lambda o: direct.laser_scan(o, "base1/laser", scan, 5, 0.05, 0.0), {"range_min": 0.05}),
         ("pose (odom)", "rf/w/robot/base1/pose", pose, Odometry, lambda o: direct.odometry(o, "base1", pose, 5), {"kind": "mobile"}),
         ("joints", "rf/w/robot/arm1/joints", joints, RosJointState, lambda o: direct.joint_state(o, "arm1", joints, 5), {}),
     ]

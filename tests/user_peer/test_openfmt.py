@@ -162,7 +162,7 @@ def test_foxglove_export_every_message_parses_against_its_schema_and_matches(rec
     for doc, msg in zip(joints, src[f"rf/{W}/robot/arm1/joints"]):
         assert doc["q"] == pytest.approx(msg.q.tolist()) and doc["by_name"]["joint_4"]["position"] == pytest.approx(msg.q[3])
     for scan, msg in zip(seen[f"{k}/robot/base1/scan"], src[f"rf/{W}/robot/base1/scan"], strict=True):
-        assert scan.frame_id == "base1/lidar" and list(scan.ranges) == pytest.approx(msg.ranges.tolist())
+        assert scan.frame_id == "base1/laser" and list(scan.ranges) == pytest.approx(msg.ranges.tolist())
         assert scan.start_angle == pytest.approx(-math.pi) and scan.end_angle == pytest.approx(-math.pi + 239 * 2 * math.pi / 240)
     (grid,) = seen[f"{k}/map/map"]
     g = _grid()
@@ -173,13 +173,14 @@ def test_foxglove_export_every_message_parses_against_its_schema_and_matches(rec
     assert [p.position.y for p in path.poses] == pytest.approx(np.sin(np.linspace(0.0, 2.0, 9)).tolist())
     tfs = [t for m in seen["/tf"] for t in m.transforms]
     children = Counter(t.child_frame_id for t in tfs)
-    assert children["base1"] == N and children["arm1"] == N and children["arm1/joint_6"] == N and children["object/target"] == 3
-    last_base = [t for t in tfs if t.child_frame_id == "base1"][-1]
+    assert children["base1/base_link"] == N and children["arm1/base_link"] == N and children["arm1/link_6"] == N
+    assert children["object/target"] == 3
+    last_base = [t for t in tfs if t.child_frame_id == "base1/base_link"][-1]
     assert (last_base.translation.x, last_base.translation.y) == pytest.approx((0.05 * (N - 1), -0.02 * (N - 1)))
-    arm_base = [t for t in tfs if t.child_frame_id == "arm1"][0]
+    arm_base = [t for t in tfs if t.child_frame_id == "arm1/base_link"][0]
     assert (arm_base.translation.x, arm_base.translation.z) == pytest.approx((3.0, 0.75))
     drawn = {e.frame_id for u in seen["/scene"] for e in u.entities}
-    assert {"base1", "object/target", "world"} <= drawn and any(f.startswith("arm1/joint_") for f in drawn), drawn
+    assert {"base1/base_link", "object/target", "map"} <= drawn and any(f.startswith("arm1/link_") for f in drawn), drawn
 
 
 def _strict_json(data: bytes) -> object:
@@ -252,14 +253,14 @@ def test_ros2_export_every_message_decodes_with_the_ros_types_and_values(recordi
         # stamped with the sim's time (what /clock carries for use_sim_time), as the live bridge stamps
         assert js.header.stamp.sec * 10**9 + js.header.stamp.nanosec == round(msg.header.stamp * 1e9)
     for scan, msg in zip(seen["/base1/scan"], src[f"rf/{W}/robot/base1/scan"], strict=True):
-        assert scan.header.frame_id == "base1/lidar" and scan.range_max == pytest.approx(8.0)
+        assert scan.header.frame_id == "base1/laser" and scan.range_max == pytest.approx(8.0)
         missing = msg.ranges >= 8.0 - 5e-4  # REP 117: no echo is +inf, never range_max
         assert missing.any() and (~missing).any()
         assert list(scan.ranges) == pytest.approx(np.where(missing, np.inf, msg.ranges).tolist(), abs=1e-6)
         assert scan.range_min == 0.0  # no world description in this recording: no sensor to ask
         assert scan.angle_increment == pytest.approx(2 * math.pi / 240)
     for od, msg in zip(seen["/base1/odom"], src[f"rf/{W}/robot/base1/pose"], strict=True):
-        assert (od.header.frame_id, od.child_frame_id) == ("world", "base1")
+        assert (od.header.frame_id, od.child_frame_id) == ("base1/odom", "base1/base_link")
         assert (od.pose.pose.position.x, od.pose.pose.position.y) == pytest.approx((msg.position[0], msg.position[1]))
         assert (od.pose.pose.orientation.w, od.pose.pose.orientation.z) == pytest.approx((msg.quaternion[0], msg.quaternion[3]))
     (grid,) = seen["/map"]
@@ -270,7 +271,8 @@ def test_ros2_export_every_message_decodes_with_the_ros_types_and_values(recordi
     (path,) = seen["/base1/path"]
     assert [p.pose.position.x for p in path.poses] == pytest.approx(np.linspace(0.0, 2.0, 9).tolist())
     tfs = [t for m in seen["/tf"] for t in m.transforms]
-    assert {"base1", "arm1", "arm1/joint_1", "base1/lidar", "object/target"} <= {t.child_frame_id for t in tfs}
+    assert {"base1/odom", "base1/base_link", "arm1/base_link", "arm1/link_1", "base1/laser", "object/target"} <= {
+        t.child_frame_id for t in tfs}
     own = [json.loads(s.data) for s in seen[f"{k}/own/arm1"]]
     assert [o["epoch"] for o in own] == [m.epoch for m in src[f"rf/{W}/own/arm1"]] and own[0]["queue"] == ["bob"]
 

@@ -1,10 +1,12 @@
 """One transform tree in the Foxglove and ROS 2 exports, read back with the third-party decoders.
 
 A world's arm publishes its joints and, with them, its flange as a world pose on ``robot/ID/pose``;
-a mobile base publishes its pose. The exports must give every frame one parent and one source
-(the flange is ``ID/flange``, never the arm's base ``ID``), keep the arm's base bolted down (the
-same transform every time), and never let a frame's stamps go back (a late sample, 7 ms older than
-the last one, is dropped rather than written after the newer one). Decoded with
+a mobile base publishes its pose. The exports must give every frame one parent and one source, by REP 105's
+names rooted at ``map`` (``map -> base1/odom -> base1/base_link``; the arm's URDF links under ``arm1/``, each in
+its parent link's frame, robot_state_publisher's tree, the flange the URDF's link from the joints, never a
+second source from the pose), keep the arm's base bolted down (the same transform every time), and never let
+a frame's stamps go back (a late sample, 7 ms older than the last one, is dropped rather than written after
+the newer one). Decoded with
 ``mcap-protobuf-support``'s and ``mcap-ros2-support``'s decoders, not with the writers' classes.
 """
 
@@ -15,6 +17,7 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoders
@@ -108,31 +111,42 @@ def test_export_has_one_transform_tree_a_bolted_base_and_monotonic_stamps(record
         stamps[child].append(stamp)
         by_child[child].append((tr, rot))
     assert {c: p for c, p in parents.items() if len(p) != 1} == {}, "a frame with more than one parent"
-    for child in parents:  # every chain ends at world, without a cycle
+    for child in parents:  # every chain ends at map, without a cycle
         seen, f = set(), child
-        while f != "world":
+        while f != "map":
             assert f not in seen and f in parents, (child, f)
             seen.add(f)
             (f,) = parents[f]
-    assert parents["arm1"] == {"world"} and parents["arm1/flange"] == {"arm1"} and parents["base1"] == {"world"}
-    assert parents["arm1/joint_6"] == {"arm1"}
+    assert parents["arm1/base_link"] == {"map"} and parents["arm1/flange"] == {"arm1/link_6"}
+    assert parents["base1/odom"] == {"map"} and parents["base1/base_link"] == {"base1/odom"}
+    assert parents["arm1/link_6"] == {"arm1/link_5"} and parents["arm1/link_1"] == {"arm1/base_link"}
     for child, st in stamps.items():
         assert st == sorted(st), f"{child}'s stamps go back"
     assert pubs == sorted(pubs), "/tf's publish times go back"
 
     # The arm's base never moves: the scene's placement, every time, and never the flange.
-    base = by_child["arm1"]
+    base = by_child["arm1/base_link"]
     assert len(base) == N and len(set(base)) == 1, set(base)
     (tr, rot) = base[0]
     assert tr == pytest.approx((3.0, 0.0, 0.75)) and rot == pytest.approx((0.0, 0.0, 0.0, 1.0))
     # The late samples were dropped, not written after newer ones.
-    assert len(by_child["arm1/flange"]) == N and len(by_child["base1"]) == N and len(by_child["arm1/joint_1"]) == N
-    assert all(t[0] > -1.0 for t, _r in by_child["base1"])
+    assert len(by_child["arm1/flange"]) == N and len(by_child["base1/base_link"]) == N and len(by_child["arm1/link_1"]) == N
+    assert all(t[0] > -1.0 for t, _r in by_child["base1/base_link"])
 
-    # The flange, put back in the world through its base, is where the sim said it was.
-    src = [m for k, _t, m in _messages() if k.endswith("arm1/pose") and m.position[0] > 3.0]  # not the late one
-    rb, tb = _rot(*base[0][1]), np.array(base[0][0])
-    for (t, r), msg in zip(by_child["arm1/flange"], src, strict=True):
-        assert rb @ np.array(t) + tb == pytest.approx(msg.position, abs=1e-9)
-        w, x, y, z = msg.quaternion
-        assert rb @ _rot(*r) == pytest.approx(_rot(x, y, z, w), abs=1e-9)
+    # The flange, composed link by link up to map, is where the URDF's kinematics put it for those joints.
+    model = pin.buildModelFromUrdf(str(robots.load("meca500").urdf_path))
+    data, flange = model.createData(), model.getFrameId("flange")
+    src = [m for k, _t, m in _messages() if k.endswith("arm1/joints") and m.q[1] == -0.2]  # not the late one
+    chain = ["arm1/flange"]
+    while chain[-1] != "map":
+        chain.append(next(iter(parents[chain[-1]])))
+    for i, msg in enumerate(src):
+        r, t = np.eye(3), np.zeros(3)
+        for child in chain[:-1]:  # world <- ... <- flange: T = T_parent(child) * T
+            tr, rot = by_child[child][i if len(by_child[child]) == N else 0]
+            t = _rot(*rot) @ t + np.array(tr)
+            r = _rot(*rot) @ r
+        pin.framesForwardKinematics(model, data, np.asarray(msg.q, dtype=float))
+        rb, tb = _rot(*base[0][1]), np.array(base[0][0])
+        assert t == pytest.approx(rb @ data.oMf[flange].translation + tb, abs=1e-9)
+        assert r == pytest.approx(rb @ data.oMf[flange].rotation, abs=1e-9)

@@ -26,7 +26,7 @@ def _arm_base(path) -> set[tuple[float, float, float]]:
     with open(path, "rb") as f:
         for _s, _c, _m, msg in make_reader(f, decoder_factories=[ProtobufDecoders()]).iter_decoded_messages(topics=["/tf"]):
             for t in msg.transforms:
-                if t.child_frame_id == "arm1":
+                if t.child_frame_id == "arm1/base_link":  # the URDF's root link, bolted to map
                     out.add((round(t.translation.x, 6), round(t.translation.y, 6), round(t.translation.z, 6)))
     return out
 

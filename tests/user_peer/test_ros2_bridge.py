@@ -160,11 +160,11 @@ def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns
     js = [r for r in of(out, "joint_states") if r["stamp"] in joints]
     assert len(js) >= 3, (len(of(out, "joint_states")), len(joints))
     for r in js:
-        assert r["frame"] == "arm1" and r["position"] == joints[r["stamp"]]  # float64 both ways: exact
+        assert r["frame"] == "arm1/base_link" and r["position"] == joints[r["stamp"]]  # float64 both ways: exact
     sc = [r for r in of(out, "scan") if r["stamp"] in scans]
     assert len(sc) >= 3, (len(of(out, "scan")), len(scans))
     for r in sc:
-        assert r["frame"] == "base1/lidar" and len(r["ranges"]) == len(scans[r["stamp"]])
+        assert r["frame"] == "base1/laser" and len(r["ranges"]) == len(scans[r["stamp"]])
         assert math.isclose(r["range_min"], 0.05, rel_tol=1e-6)  # the LIDAR's, from the world description
         mine = scans[r["stamp"]]
         missing = mine >= r["range_max"] - 5e-4  # no echo: robofabric's range_max, ROS's +inf (REP 117)
@@ -181,11 +181,11 @@ def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns
     od = [r for r in of(out, "odom") if r["stamp"] in poses]
     assert len(od) >= 3
     for r in od:
-        assert (r["frame"], r["child"]) == ("world", "base1") and r["position"] == poses[r["stamp"]][0]
+        assert (r["frame"], r["child"]) == ("base1/odom", "base1/base_link") and r["position"] == poses[r["stamp"]][0]
     clocks = [r["ns"] for r in of(out, "clock")]
     assert clocks == sorted(clocks) and set(clocks) & sim_stamps, (clocks[:5], sorted(sim_stamps)[:5])
     grid = of(out, "map")[-1]
-    assert (grid["frame"], grid["width"], grid["height"]) == ("world", 6, 4) and math.isclose(grid["resolution"], 0.05, rel_tol=1e-6)
+    assert (grid["frame"], grid["width"], grid["height"]) == ("map", 6, 4) and math.isclose(grid["resolution"], 0.05, rel_tol=1e-6)
     assert grid["data"][1 * 6 + 2] == 0 and grid["data"][2 * 6 + 3] == 100 and grid["data"].count(-1) == 22
 
     # drive: the node's cmd_vel stream moves the base; when the stream stops, the base stops (the sim's deadman)

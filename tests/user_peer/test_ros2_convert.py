@@ -30,12 +30,12 @@ def ros(key: str, msg, **kw) -> object:
 def test_the_exports_conversion_fills_live_messages_with_the_same_frames_stamps_and_values():
     needs_rclpy()
     js = ros("rf/w/robot/arm1/joints", JointState(("j1", "j2"), np.array([0.25, -1.5]), np.array([0.0, 0.1])))
-    assert type(js).__name__ == "JointState" and js.header.frame_id == "arm1"
+    assert type(js).__name__ == "JointState" and js.header.frame_id == "arm1/base_link"
     assert (js.header.stamp.sec, js.header.stamp.nanosec) == (1_764_000_000, 123_456_789)
     assert list(js.name) == ["j1", "j2"] and list(js.position) == [0.25, -1.5] and list(js.velocity) == [0.0, 0.1]
     scan = Scan(-1.0, 0.5, 8.0, np.array([1000, 2500, 8000], dtype=np.uint16))
     ls = ros("rf/w/robot/base1/scan", scan, range_min=0.05)
-    assert ls.header.frame_id == "base1/lidar" and ls.range_max == 8.0 and ls.angle_max == pytest.approx(0.0)
+    assert ls.header.frame_id == "base1/laser" and ls.range_max == 8.0 and ls.angle_max == pytest.approx(0.0)
     assert ls.range_min == pytest.approx(0.05)  # the sensor's, which the caller reads from the world description
     assert [float(r) for r in ls.ranges] == [1.0, 2.5, np.inf]  # no echo (range_max in the fabric): +inf, REP 117
     sonar = ros("rf/w/robot/base1/sonar", Scan(0.0, 0.5, 3.0, np.array([400, 3000], dtype=np.uint16)),
@@ -43,13 +43,13 @@ def test_the_exports_conversion_fills_live_messages_with_the_same_frames_stamps_
     assert sonar.header.frame_id == "base1/sonar" and sonar.range_min == pytest.approx(0.28)
     assert sonar.range_max == pytest.approx(3.26) and list(sonar.ranges) == pytest.approx([0.66, np.inf])
     path = ros("rf/w/robot/base1/path", Path(np.array([0.0, 1.0]), np.array([0.0, 2.0]), np.array([0.0, np.pi / 2])))
-    assert len(path.poses) == 2 and path.poses[1].header.frame_id == "world"
+    assert len(path.poses) == 2 and path.poses[1].header.frame_id == "map"
     assert (path.poses[1].pose.position.x, path.poses[1].pose.position.y) == (1.0, 2.0)
     assert path.poses[1].pose.orientation.z == pytest.approx(np.sqrt(0.5))
     cells = np.array([[0, 100, 255]], dtype=np.uint8)
     grid = ros("rf/w/map/map", OccupancyGrid(0.1, np.array([1.0, 2.0, 0.0]), cells))
     assert list(grid.data) == [0, 100, -1] and (grid.info.width, grid.info.height) == (3, 1)
-    assert grid.info.origin.position.x == 1.0 and grid.header.frame_id == "world"
+    assert grid.info.origin.position.x == 1.0 and grid.header.frame_id == "map"
 
 
 def test_a_bases_odometry_gives_its_twist_in_its_own_frame():
@@ -63,7 +63,7 @@ def test_a_bases_odometry_gives_its_twist_in_its_own_frame():
                 header=Header(wall_ns=STAMP))
     odom = direct.odometry(Odometry(), "base1", pose, STAMP)
     assert odom == ros("rf/w/robot/base1/pose", pose, kind="mobile")  # the export's Odometry, live
-    assert (odom.header.frame_id, odom.child_frame_id) == ("world", "base1")
+    assert (odom.header.frame_id, odom.child_frame_id) == ("base1/odom", "base1/base_link")
     assert (odom.pose.pose.position.x, odom.pose.pose.position.y) == (1.0, 2.0)
     assert odom.twist.twist.linear.x == pytest.approx(0.4) and odom.twist.twist.linear.y == pytest.approx(0.0, abs=1e-12)
     assert odom.twist.twist.angular.z == pytest.approx(0.3)

@@ -37,7 +37,7 @@ def test_a_joint_state_built_in_place_is_the_exports(joints, ns, ns2):
     js = JointState(tuple(j[0] for j in joints), np.array([j[1] for j in joints]), np.array([j[2] for j in joints]))
     out = RosJointState()
     direct.joint_state(out, "base", JointState(("old",), np.ones(1), np.ones(1)), ns2)  # a previous sample, overwritten
-    assert direct.joint_state(out, "arm1", js, ns) == exported("rf/w/robot/arm1/joints", js, ns)
+    assert direct.joint_state(out, "arm1/base_link", js, ns) == exported("rf/w/robot/arm1/joints", js, ns)
 
 
 @settings(max_examples=60, deadline=None)
@@ -48,7 +48,7 @@ def test_a_scan_built_in_place_is_the_exports(mm, angle_min, inc, range_max, ran
 
     scan = Scan(angle_min, inc, range_max, np.array(mm, dtype=np.uint16))
     offset = 0.26 if leaf == "sonar" else 0.0
-    mine = direct.laser_scan(LaserScan(), f"base1/{'sonar' if leaf == 'sonar' else 'lidar'}", scan, ns, range_min, offset, scan_time)
+    mine = direct.laser_scan(LaserScan(), f"base1/{'sonar' if leaf == 'sonar' else 'laser'}", scan, ns, range_min, offset, scan_time)
     theirs = exported(f"rf/w/robot/base1/{leaf}", scan, ns, range_min=range_min, range_offset=offset, scan_time=scan_time)
     assert mine == theirs and mine.scan_time == pytest.approx(scan_time) and mine.time_increment == 0.0
     assert all(math.isinf(r) for r, m in zip(mine.ranges, scan.ranges) if m >= range_max - 5e-4)

@@ -190,7 +190,7 @@ def test_a_goal_pose_is_planned_on_the_logins_map_shown_on_path_and_brings_base1
     wait_until(lambda: at() < 0.2, timeout=90, what="base1 within 0.2 m of the goal",
                seen=lambda: (at(), lines(out, "goal_sent"), lines(out, "path")[-1:], procs.output(bridge)[-1500:]))
     paths = [p for p in lines(out, "path") if p["n"] > 1]
-    assert paths and math.dist(paths[-1]["end"], goal) < 0.1 and paths[-1]["frame"] == "world", paths[-1:]
+    assert paths and math.dist(paths[-1]["end"], goal) < 0.1 and paths[-1]["frame"] == "map", paths[-1:]
     assert any("planned on map 'rosgoal.map'" in r["msg"] for r in lines(out, "rosout")), lines(out, "rosout")[-5:]
 
 
@@ -234,13 +234,13 @@ def test_a_namespaced_bridge_names_frames_times_scans_sets_covariance_gives_rang
                what="scan, odom, a Range, base1's owner and arm1's joints under /class3",
                seen=lambda: (got(), procs.output(bridge)[-1500:], procs.output(node)[-1500:]))
     scan = lines(out, "scan")[-1]
-    assert scan["frame"] == "class3/base1/lidar" and scan["time_increment"] == 0.0
+    assert scan["frame"] == "class3/base1/laser" and scan["time_increment"] == 0.0
     assert math.isclose(scan["scan_time"], 1.0 / rate, rel_tol=1e-6), (scan, rate)
     odom = lines(out, "odom")[-1]
-    assert (odom["frame"], odom["child"]) == ("class3/world", "class3/base1")
+    assert (odom["frame"], odom["child"]) == ("class3/base1/odom", "class3/base1/base_link")
     diag = [odom["pose_cov"][i * 7] for i in range(6)]
     assert all(v > 0 for v in diag) and sum(map(abs, odom["pose_cov"])) == sum(diag) and odom["twist_cov"] == odom["pose_cov"]
-    assert {r["frame"] for r in lines(out, "joint_states") if r["robot"] == "arm1"} == {"class3/arm1"}
+    assert {r["frame"] for r in lines(out, "joint_states") if r["robot"] == "arm1"} == {"class3/arm1/base_link"}
     rng = lines(out, "range")[-1]
     assert rng["frame"] == "class3/base1/sonar_2" and rng["kind"] == 0 and math.isclose(rng["fov"], math.radians(30), rel_tol=1e-6)
     assert math.isinf(rng["range"]) or rng["min"] <= rng["range"] <= rng["max"], rng
@@ -264,7 +264,7 @@ def test_a_topic_map_renames_the_bridges_topics_for_a_plain_node(live, procs, tm
     wait_until(lambda: lines(out, "odom") and any(r["robot"] == "base1" for r in lines(out, "owner")), timeout=60,
                what="base1's odometry and owner under their new names",
                seen=lambda: (procs.output(bridge)[-1500:], procs.output(node)[-1500:]))
-    assert lines(out, "odom")[-1]["child"] == "base1"  # a rename changes the name, not the frames
+    assert lines(out, "odom")[-1]["child"] == "base1/base_link"  # a rename changes the name, not the frames
 
 
 BUILD_TF2 = ("tf2_msgs is not importable: it is not among ROS 2 Kilted's wheels; build it into this environment with "
@@ -307,7 +307,9 @@ def resolves_to_map(out: Path, scan: dict) -> list[str] | None:
 @pytest.mark.slow
 def test_tf_is_one_tree_read_as_tf2_msgs_in_which_the_scans_frame_resolves_to_map_at_its_stamp(live, procs, tmp_path):
     """A plain rclpy node reads /tf and /tf_static as tf2_msgs/msg/TFMessage (the package msgbuild.py builds): one
-    tree rooted at map, each frame with one parent, and base1's scan frame resolves to map at the scan's stamp."""
+    tree rooted at map, each frame with one parent, REP 105's names (base1's scan frame base1/laser resolves to
+    map through base1/base_link and base1/odom at the scan's stamp), and every link of each robot's
+    robot_description under its id, as RViz's RobotModel with that TF prefix looks for them."""
     import importlib.util
 
     assert importlib.util.find_spec("tf2_msgs") is not None, BUILD_TF2
@@ -320,17 +322,21 @@ def test_tf_is_one_tree_read_as_tf2_msgs_in_which_the_scans_frame_resolves_to_ma
     def some_scan_resolves() -> bool:
         found[:] = [c for c in (resolves_to_map(out, s) for s in lines(out, "scan")[-40:]) if c]
         # and /tf_static read with the mounts: it is another topic, whose message may come after /tf's
-        return bool(found) and {"world", "base1/lidar"} <= tf_tree(out)[2]
+        return bool(found) and {"base1/odom", "base1/laser"} <= tf_tree(out)[2]
 
     wait_until(some_scan_resolves, timeout=60, what="a scan whose frame resolves to map on /tf, the mounts on /tf_static",
                seen=lambda: (lines(out, "scan")[-1:], {c: sorted(p) for c, p in tf_tree(out)[0].items()},
                              procs.output(bridge)[-1500:], procs.output(node)[-1500:]))
-    assert found[-1] == ["base1/lidar", "base1", "world", "map"], found[-1]
+    assert found[-1] == ["base1/laser", "base1/base_link", "base1/odom", "map"], found[-1]
+    links = lambda rid: {f"{rid}/{link.get('name')}" for link in ET.fromstring(  # noqa: E731
+        next(r["urdf"] for r in lines(out, "robot_description") if r["robot"] == rid)).iter("link")}
+    wait_until(lambda: links("arm1") | links("base1") <= set(tf_tree(out)[0]) | {"arm1/base_link"}, timeout=30,
+               what="every URDF link a frame", seen=lambda: sorted(links("arm1") | links("base1") - set(tf_tree(out)[0])))
     parents, _, static = tf_tree(out)
     assert all(len(p) == 1 for p in parents.values()), {c: p for c, p in parents.items() if len(p) != 1}
     roots = {p for ps in parents.values() for p in ps} - set(parents)
     assert roots == {"map"}, (roots, static)
-    assert {"arm1", "arm1/joint_6"} <= set(parents)  # the arm hangs in the same tree
+    assert parents["arm1/base_link"] == {"map"} and parents["arm1/flange"] == {"arm1/link_6"}  # the arm in the same tree
 
 
 def call(out: Path, ctl: Path, service: str, timeout: float = 60) -> dict:

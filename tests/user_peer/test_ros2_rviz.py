@@ -1,6 +1,6 @@
 """docs/ros2/robofabric.rviz shows what the bridge and the export publish: every display's topic is a name
 ``ros2_topic`` gives the demo's robots (base1, a mobile base; arm1, an arm), with the QoS the bridge offers
-(best effort for scans, transient local for the map and a path), in the fixed frame ``world``. rviz2 itself is not
+(best effort for scans, transient local for the map and a path), in the fixed frame ``map`` (REP 105's, the tree's root). rviz2 itself is not
 installable here (no wheel): this checks the file against the topic table, not rviz2's rendering."""
 
 from __future__ import annotations
@@ -23,10 +23,10 @@ PUBLISHED = {
 }
 
 
-def test_the_rviz2_configuration_shows_the_bridges_topics_with_its_qos_in_the_world_frame():
+def test_the_rviz2_configuration_shows_the_bridges_topics_with_its_qos_in_the_map_frame():
     doc = yaml.safe_load(RVIZ.read_text())
     manager = doc["Visualization Manager"]
-    assert manager["Global Options"]["Fixed Frame"] == "world"
+    assert manager["Global Options"]["Fixed Frame"] == "map"
     shown = {}
     for display in manager["Displays"]:
         topic = display.get("Topic")

@@ -1,6 +1,7 @@
 """The bridge's /tf is the export's frame tree: for the same robot state, the transforms it publishes equal the
 ``/tf`` of ``export --to ros2`` (decoded by mcap-ros2-support), stamped with the sim's time; the sensor mounts
-go once more on /tf_static, with the ``map -> world`` root. The message class and the publishers are stand-ins
+go once more on /tf_static (REP 105's names: ``map -> ID/odom -> ID/base_link -> ID/laser``; an arm's URDF links,
+each in its parent link's frame, as robot_state_publisher sends them). The message class and the publishers are stand-ins
 here, to see each message as sent (test_ros2_tf_live.py reads the real ``tf2_msgs`` over DDS); the bridge
 publishes /tf only where ``tf2_msgs`` is importable, and says whether it is."""
 
@@ -20,6 +21,7 @@ import rclpy  # noqa: E402,F401  (the test extra installs ROS 2 Kilted's wheels:
 import robots  # noqa: E402
 from fabric.interfaces import Header, JointState, Pose  # noqa: E402
 from fabric.interfaces.geometry import quaternion_from_yaw  # noqa: E402
+from robots.urdf import parse as read_urdf  # noqa: E402
 from user_peer.catalog import RobotCatalog  # noqa: E402
 from user_peer.openfmt.ros2 import Ros2Writer  # noqa: E402
 from user_peer.ros2.tf import TfOut, tf_message_class  # noqa: E402
@@ -81,12 +83,16 @@ def test_the_bridges_tf_is_the_exports_frame_tree_stamped_with_sim_time(tmp_path
                              (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z, t.transform.rotation.w))
                          for t in m.transforms]
     assert live == exported and len(live) > 10
-    children = {r[1] for r in live}
-    assert {"base1", "base1/lidar", "base1/sonar", "arm1", "arm1/joint_6"} <= children, children
+    parents = {r[1]: r[0] for r in live}
+    assert {c: p for c, p in parents.items() if c.startswith("base1/")} == {
+        "base1/odom": "map", "base1/base_link": "base1/odom", "base1/laser": "base1/base_link", "base1/sonar": "base1/base_link"}
+    urdf = read_urdf(robots.load("meca500").urdf_path.read_text())  # robot_state_publisher's tree: parent link -> child
+    assert {c: p for c, p in parents.items() if c.startswith("arm1/")} == {
+        "arm1/" + urdf.root: "map", **{f"arm1/{j.child}": f"arm1/{j.parent}" for j in urdf.joints}}
+    assert {"arm1/base_link", "arm1/link_6", "arm1/flange"} <= set(parents)
     assert {r[2] for r in live} == {int(round(0.05 * i * 1e9)) for i in range(1, 6)}  # the sim's time
     static = [sorted((t.header.frame_id, t.child_frame_id) for t in m.transforms) for m in sent["/tf_static"].msgs]
-    assert static == [[("map", "world")],  # the root at once, then with the mounts, once (they never move)
-                      [("base1", "base1/lidar"), ("base1", "base1/sonar"), ("map", "world")]]
+    assert static == [[("base1/base_link", "base1/laser"), ("base1/base_link", "base1/sonar"), ("map", "base1/odom")]]  # once
     assert tf.sent == len(sent["/tf"].msgs)
 
 
@@ -115,8 +121,8 @@ def test_each_sonar_transducers_frame_goes_once_on_tf_static_under_the_namespace
                                                      np.zeros(0), sonar=sonar),))
     tf.describe(info)
     tf.describe(info)  # the same description again: nothing more
-    assert len(sent["/class1/tf_static"].msgs) == 2  # the map root at start, then with the transducers
+    assert len(sent["/class1/tf_static"].msgs) == 1  # the transducers, once
     rows = {(t.header.frame_id, t.child_frame_id): (t.transform.translation.x, t.transform.translation.y)
-            for t in sent["/class1/tf_static"].msgs[1].transforms}
-    assert set(rows) == {("class1/base1/sonar", f"class1/base1/sonar_{i}") for i in range(3)} | {("class1/map", "class1/world")}
+            for t in sent["/class1/tf_static"].msgs[0].transforms}
+    assert set(rows) == {("class1/base1/sonar", f"class1/base1/sonar_{i}") for i in range(3)}
     assert rows[("class1/base1/sonar", "class1/base1/sonar_1")] == pytest.approx((0.0, 0.26), abs=1e-12)

@@ -53,21 +53,21 @@ def test_rosbags_decodes_the_ros2_export_with_the_standard_definitions_and_the_f
 
     for ros, msg in zip(got["/arm1/joint_states"], src["rf/w/robot/arm1/joints"], strict=True):
         assert list(ros.name) == list(msg.names) and np.array_equal(ros.position, msg.q)
-        assert (ros.header.frame_id, ros.header.stamp.sec * 10**9 + ros.header.stamp.nanosec) == ("arm1", round(msg.header.stamp * 1e9))
+        assert (ros.header.frame_id, ros.header.stamp.sec * 10**9 + ros.header.stamp.nanosec) == ("arm1/base_link", round(msg.header.stamp * 1e9))
     for ros, msg in zip(got["/base1/odom"], src["rf/w/robot/base1/pose"], strict=True):
-        assert (ros.header.frame_id, ros.child_frame_id) == ("world", "base1")
+        assert (ros.header.frame_id, ros.child_frame_id) == ("base1/odom", "base1/base_link")
         assert ros.pose.pose.position.y == msg.position[1]
         # facing +y at 0.3 m/s in the world: 0.3 m/s forward in the base's own frame (REP 105)
         assert ros.twist.twist.linear.x == pytest.approx(0.3) and ros.twist.twist.linear.y == pytest.approx(0.0, abs=1e-12)
         assert ros.twist.twist.angular.z == pytest.approx(0.2)
     for ros, msg in zip(got["/base1/scan"], src["rf/w/robot/base1/scan"], strict=True):
-        assert ros.header.frame_id == "base1/lidar" and ros.range_max == pytest.approx(8.0)
+        assert ros.header.frame_id == "base1/laser" and ros.range_max == pytest.approx(8.0)
         assert ros.ranges.tolist() == pytest.approx([1.0, math.inf, msg.ranges[2]])  # no echo: +inf (REP 117)
     for ros in got["/base1/sonar"]:  # measured from the rim of the reeman's ring (0.26 m): given from its centre
         assert ros.header.frame_id == "base1/sonar" and ros.ranges.tolist() == pytest.approx([0.66, math.inf])
     (grid,) = got["/map"]
     assert grid.data.tolist() == [0, 100, -1] and (grid.info.width, grid.info.height) == (3, 1)
-    assert grid.info.resolution == pytest.approx(0.1) and grid.header.frame_id == "world"
+    assert grid.info.resolution == pytest.approx(0.1) and grid.header.frame_id == "map"
     (path,) = got["/base1/path"]
     assert [(p.pose.position.x, p.pose.position.y) for p in path.poses] == [(0.0, 0.0), (1.0, 2.0)]
     clock = [c.clock.sec * 10**9 + c.clock.nanosec for c in got["/clock"]]  # the sim's time, as the bridge's /clock
@@ -76,8 +76,9 @@ def test_rosbags_decodes_the_ros2_export_with_the_standard_definitions_and_the_f
     assert [(r.header.frame_id, r.range, r.radiation_type) for r in got["/base1/sonar_0"]] == [("base1/sonar_0", pytest.approx(0.4), 0)] * 3
     assert all(math.isinf(r.range) and r.field_of_view == pytest.approx(math.radians(30)) for r in got["/base1/sonar_1"])
     static = {t.child_frame_id: t for m in got["/tf_static"] for t in m.transforms}
-    assert static["world"].header.frame_id == "map" and static["base1/sonar_1"].header.frame_id == "base1/sonar"
+    assert static["base1/sonar_1"].header.frame_id == "base1/sonar"
     rim = static["base1/sonar_1"].transform.translation
     assert (rim.x, rim.y) == pytest.approx((0.26 * math.cos(0.5), 0.26 * math.sin(0.5)))
     frames = {t.child_frame_id: t.header.frame_id for m in got["/tf"] for t in m.transforms}
-    assert frames["base1"] == "world" and frames["base1/lidar"] == "base1" and frames["arm1/joint_1"] == "arm1"
+    assert frames["base1/odom"] == "map" and frames["base1/base_link"] == "base1/odom" and frames["base1/laser"] == "base1/base_link"
+    assert frames["arm1/link_1"] == "arm1/base_link" and frames["arm1/flange"] == "arm1/link_6"

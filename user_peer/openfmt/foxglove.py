@@ -5,7 +5,7 @@ fabric                 Foxglove topic                    schema
 =====================  ================================  =========================================
 robot poses, arm FK    ``/tf``                           ``foxglove.FrameTransforms``
 robot / object shapes  ``/scene``                        ``foxglove.SceneUpdate`` (when first seen)
-Scan (LIDAR, sonar)    ``/KEY`` (the fabric key)         ``foxglove.LaserScan`` in ``ID/lidar``
+Scan (LIDAR, sonar)    ``/KEY`` (the fabric key)         ``foxglove.LaserScan`` in ``ID/laser``
 OccupancyGrid          ``/KEY``                          ``foxglove.Grid`` (uint8 ``occupancy``)
 Path                   ``/KEY``                          ``foxglove.PosesInFrame``
 Pose of an object      ``/KEY``                          ``foxglove.PoseInFrame``
@@ -53,7 +53,7 @@ from fabric.interfaces import JointState, OccupancyGrid, Path, Pose, Scan
 from user_peer.arm_geometry import Placement, Shape
 from user_peer.catalog import RobotCatalog
 from user_peer.message_schema import json_schema, plain_view
-from user_peer.openfmt.frames import WORLD, Frame, FrameTracker, key_owner, yaw_quat_xyzw
+from user_peer.openfmt.frames import MAP, Frame, FrameTracker, key_owner, ros_frame, scan_frame, yaw_quat_xyzw
 
 __all__ = ["FoxgloveWriter", "TF_TOPIC", "SCENE_TOPIC", "JOINTS_EXTRA"]
 
@@ -158,8 +158,7 @@ class FoxgloveWriter(McapFile):
             self._draw_new(key, t, log_time_ns, pub)
         if isinstance(msg, Scan):
             owner = key_owner(key)
-            rid = owner[1] if owner else WORLD
-            frame = f"{rid}/{'sonar' if key.endswith('/sonar') else 'lidar'}"
+            frame = scan_frame(owner[1] if owner else MAP, key)
             n = int(msg.ranges_mm.shape[0])
             self._proto(
                 topic,
@@ -176,7 +175,7 @@ class FoxgloveWriter(McapFile):
             self._proto(
                 topic,
                 Grid(
-                    timestamp=_stamp(t), frame_id=WORLD, pose=_pose((ox, oy, 0.0), yaw_quat_xyzw(oth)), column_count=int(w),
+                    timestamp=_stamp(t), frame_id=MAP, pose=_pose((ox, oy, 0.0), yaw_quat_xyzw(oth)), column_count=int(w),
                     cell_size=Vector2(x=float(msg.resolution), y=float(msg.resolution)), row_stride=int(w), cell_stride=1,
                     fields=[PackedElementField(name="occupancy", offset=0, type=PackedElementField.UINT8)],
                     data=np.ascontiguousarray(msg.cells, dtype=np.uint8).tobytes(),
@@ -184,14 +183,14 @@ class FoxgloveWriter(McapFile):
                 log_time_ns, pub,
             )
         elif isinstance(msg, Path):
-            frame = msg.frame or WORLD
+            frame = ros_frame(msg.frame)
             poses = [_pose((float(x), float(y), 0.0), yaw_quat_xyzw(float(th))) for x, y, th in zip(msg.x, msg.y, msg.theta)]
             self._proto(topic, PosesInFrame(timestamp=_stamp(t), frame_id=frame, poses=poses), log_time_ns, pub)
         elif isinstance(msg, Pose):
             q = msg.quaternion
             self._proto(
                 topic,
-                PoseInFrame(timestamp=_stamp(t), frame_id=msg.frame or WORLD, pose=_pose(msg.position, (q[1], q[2], q[3], q[0]))),
+                PoseInFrame(timestamp=_stamp(t), frame_id=ros_frame(msg.frame), pose=_pose(msg.position, (q[1], q[2], q[3], q[0]))),
                 log_time_ns, pub,
             )
         else:
@@ -259,7 +258,7 @@ class FoxgloveWriter(McapFile):
             return
         self._static = [
             SceneEntity(
-                frame_id=WORLD, id=f"scene/{b.name}",
+                frame_id=MAP, id=f"scene/{b.name}",
                 cubes=[CubePrimitive(pose=_pose(b.center, b.quat_xyzw), size=Vector3(x=2 * float(b.half_size[0]), y=2 * float(b.half_size[1]), z=2 * float(b.half_size[2])), color=_color(b.rgba))],
             )
             for b in boxes

@@ -1,23 +1,29 @@
 """Where every robot part is: coordinate frames from fabric messages, for Foxglove's and ROS 2's transform trees.
 
-Frame names: ``world`` is the root; a robot's base is its id (``arm1``, ``base1``); an arm's joint
-frames are ``ID/JOINT`` (placed by forward kinematics from its JointState, relative to the base);
-an arm's flange (the sim's ``robot/ID/pose``, a world pose) is ``ID/flange``, a child of the base
-``ID``; a mobile robot's LIDAR and sonar ring are ``ID/lidar`` and ``ID/sonar``; scene objects are
-``object/ID`` (whoever moved it: its key is ``rf/W/object/ID/pose/by/USER``). What a robot is (arm or
-mobile base, its URDF, where an arm stands) comes from the same robot descriptions the live viewer
-uses (:class:`user_peer.catalog.RobotCatalog`).
+Frame names follow ROS's REP 105 and robot_state_publisher, so that RViz, tf2, Nav2 and a RobotModel display with
+``tf_prefix ID/`` take them as they are: ``map`` is the root, the world's frame (the world's maps are drawn in its
+coordinates; a fabric message's ``world`` frame is ``map`` here, :func:`ros_frame`). A mobile base is
+``map -> ID/odom -> ID/base_link`` (``map -> ID/odom`` the identity: the sim's poses do not drift; ``ID/odom ->
+ID/base_link`` its pose), its LIDAR ``ID/laser`` and its sonar ring's centre ``ID/sonar`` on ``ID/base_link``
+(the Reeman URDF's links), its wheels (the URDF's moving links) from its JointState. An arm's frames are its URDF's links under ``ID/``: the root link (``ID/base_link``
+on the Meca500) bolted to ``map`` where the arm stands, and each link in its parent link's frame, placed by
+forward kinematics from its JointState (fixed links, the flange, too), as robot_state_publisher gives them; its
+flange pose (the sim's ``robot/ID/pose``) is the URDF's flange link, so it adds no frame of its own (an arm
+whose URDF is not known here gets ``map -> ID/flange`` from it; one whose placement is not known, its links
+without ``map -> ID/ROOT``). Scene objects are ``object/ID`` (whoever moved
+it: its key is ``rf/W/object/ID/pose/by/USER``). What a robot is (arm or mobile base, its URDF, where an arm
+stands) comes from the same robot descriptions the live viewer uses (:class:`user_peer.catalog.RobotCatalog`).
 
-One transform tree, as tf2 and Foxglove require: every frame has one parent and one source (an
-arm's base and joints come from its JointState, its flange from its pose, a mobile base from its
-pose), and each frame's stamps never go back: a transform older than the last one written for the
-same frame (two sims' clocks during a failover, a late sample) is dropped (counted in ``stale``).
-An arm's base is bolted down: the same transform from ``world`` every time.
+One transform tree, as tf2 and Foxglove require: every frame has one parent and one source (an arm's links come
+from its JointState, a mobile base's frames from its pose), and each frame's stamps never go back: a transform
+older than the last one written for the same frame (two sims' clocks during a failover, a late sample) is dropped
+(counted in ``stale``). An arm's base is bolted down: the same transform from ``map`` every time.
 """
 
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,12 +34,31 @@ from fabric.interfaces.geometry import quaternion_from_yaw
 from user_peer.arm_geometry import Placement, Shape
 from user_peer.catalog import RobotCatalog
 from user_peer.geometry import quat_xyzw
+from user_peer.openfmt.urdf_joints import MovingJoint, joint_transform, moving_joints
 from user_peer.rerun_log import RobotDrawing
 
-__all__ = ["Frame", "FrameTracker", "WORLD", "MAP", "MAP_ROOT", "key_owner", "yaw_quat_xyzw"]
+__all__ = ["Frame", "FrameTracker", "MAP", "FIXED", "base_frame", "key_owner", "ros_frame", "scan_frame", "yaw_quat_xyzw"]
 
-WORLD = "world"
 MAP = "map"
+FIXED = ("/odom", "/laser", "/sonar")
+"""The suffixes of a base's frames that never move in their parent: ``map -> ID/odom`` and the sensor mounts
+(the live bridge sends them on ``/tf_static`` too)."""
+_IDENTITY = (0.0, 0.0, 0.0, 1.0)
+
+
+def ros_frame(frame: str) -> str:
+    """A fabric message's frame as the trees name it: the world's (``world``, or none) is ``map``."""
+    return MAP if frame in ("", "world") else frame
+
+
+def base_frame(rid: str) -> str:
+    """A robot's REP 105 base frame, ``ID/base_link`` (a JointState's and an odometry's child frame)."""
+    return f"{rid}/base_link"
+
+
+def scan_frame(rid: str, key: str) -> str:
+    """The frame of a robot's Scan on ``key``: ``ID/sonar`` (the ring's centre) for ``.../sonar``, else ``ID/laser``."""
+    return f"{rid}/{'sonar' if key.endswith('/sonar') else 'laser'}"
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,11 +69,6 @@ class Frame:
     child: str
     translation: tuple[float, float, float]
     rotation: tuple[float, float, float, float]
-
-
-MAP_ROOT = Frame(MAP, WORLD, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
-"""``map -> world``, the identity, for ROS 2's trees (the bridge's and ``export --to ros2``'s ``/tf_static``): the
-world's frame is REP 105's fixed ``map`` frame, in the same coordinates (the world's maps are drawn in them)."""
 
 
 def yaw_quat_xyzw(yaw: float) -> tuple[float, float, float, float]:
@@ -79,6 +99,7 @@ class FrameTracker:
         self.robots: dict[str, RobotDrawing] = {}
         self._stamps: dict[str, int] = {}  # child frame -> the newest stamp written for it
         self.stale = 0  # transforms dropped because their frame already had a newer one
+        self._urdf_joints: dict[str, dict[str, MovingJoint]] = {}  # a mobile base's type -> its URDF's moving joints
 
     def robot(self, rid: str, hint: dict) -> RobotDrawing:
         info = self.robots.get(rid)
@@ -110,31 +131,47 @@ class FrameTracker:
         if isinstance(msg, Pose) and leaf == "pose":
             p = Placement(np.asarray(msg.position, dtype=float), _xyzw(msg.quaternion))
             if what == "object":
-                return [_frame(WORLD, f"object/{oid}", p)]
+                return [_frame(MAP, f"object/{oid}", p)]
             info = self.robot(oid, {"mobile": True})
-            if info.kind == "arm":  # the flange: its own frame under the base, never the base itself
-                if info.base is None:
-                    return [_frame(WORLD, f"{oid}/flange", p)]
-                return [_frame(oid, f"{oid}/flange", _relative(info.base, p))]
-            out = [_frame(WORLD, oid, p)]
+            if info.kind == "arm":  # the flange is the URDF's link, from the joints; a pose only where that is unknown
+                return [_frame(MAP, f"{oid}/flange", p)] if info.arm is None else []
+            base = base_frame(oid)
+            out = [Frame(MAP, f"{oid}/odom", (0.0, 0.0, 0.0), _IDENTITY), _frame(f"{oid}/odom", base, p)]
             if info.kind == "mobile":
-                out.append(Frame(oid, f"{oid}/lidar", tuple(float(v) for v in info.lidar_offset), (0.0, 0.0, 0.0, 1.0)))  # type: ignore[arg-type]
+                out.append(Frame(base, f"{oid}/laser", tuple(float(v) for v in info.lidar_offset), _IDENTITY))  # type: ignore[arg-type]
                 if info.sonar is not None:
                     cx, cy, h, _r = info.sonar
-                    out.append(Frame(oid, f"{oid}/sonar", (cx, cy, h), (0.0, 0.0, 0.0, 1.0)))
+                    out.append(Frame(base, f"{oid}/sonar", (cx, cy, h), _IDENTITY))
             return out
         if isinstance(msg, JointState) and leaf == "joints" and what == "robot":
             info = self.robot(oid, {"joint_names": msg.names})
-            if info.kind != "arm" or info.arm is None or len(msg.names) != len(info.arm.joint_names):
+            arm = info.arm
+            if info.kind == "mobile":
+                return self._wheels(oid, info.type, msg)
+            if info.kind != "arm" or arm is None or len(msg.names) != len(arm.joint_names):
                 return []
-            placements = info.arm.fk(np.asarray(msg.q, dtype=float))
-            out = []
-            if info.base is not None:
-                out.append(_frame(WORLD, oid, info.base))
-            for name, pl in zip(info.arm.joint_names, placements[1:]):
-                out.append(_frame(oid, f"{oid}/{name}", pl))
+            placements = arm.link_placements(np.asarray(msg.q, dtype=float))
+            at = {name: pl for (name, *_), pl in zip(arm.links, placements)}
+            out = [] if info.base is None else [_frame(MAP, f"{oid}/{arm.root_link}", info.base)]
+            for (name, parent, _j, _moved), pl in zip(arm.links, placements):
+                if parent:  # each link in its parent link's frame, as robot_state_publisher sends it
+                    out.append(_frame(f"{oid}/{parent}", f"{oid}/{name}", _relative(at[parent], pl)))
             return out
         return []
+
+    def _wheels(self, rid: str, rtype: str, msg: JointState) -> list[Frame]:
+        """A mobile base's moving links (its wheels) by its URDF, each in its parent link's frame, as
+        robot_state_publisher places them from the JointState (the URDF's fixed links are the pose's mounts)."""
+        if rtype not in self._urdf_joints:
+            self._urdf_joints[rtype] = _type_joints(self.catalog, rtype)
+        joints = self._urdf_joints[rtype]
+        out = []
+        for name, q in zip(msg.names, np.asarray(msg.q, dtype=float)):
+            j = joints.get(name)
+            if j is not None:
+                t, r = joint_transform(j, float(q))
+                out.append(Frame(f"{rid}/{j.parent}", f"{rid}/{j.child}", t, r))
+        return out
 
     def shapes(self, rid: str) -> list[tuple[str, Shape, Placement]]:
         """(frame, shape, placement in that frame) of a known robot's visual parts."""
@@ -142,16 +179,25 @@ class FrameTracker:
         if info is None:
             return []
         if info.kind == "arm" and info.arm is not None:
-            frames = [rid, *(f"{rid}/{n}" for n in info.arm.joint_names)]
+            frames = [f"{rid}/{n}" for n in info.arm.joint_links]
             out = []
             for shape, joint, local in info.arm.shapes:
                 pl = Placement(np.array(local.translation, dtype=float), _xyzw_from_matrix(np.array(local.rotation)))
-                out.append((frames[joint] if joint < len(frames) else rid, shape, pl))
+                out.append((frames[joint] if joint < len(frames) else frames[0], shape, pl))
             return out
         if info.kind == "mobile":
             body = Shape(f"{rid}_body", "cylinder", (info.radius, info.height), color=(*info.color, 255))
-            return [(rid, body, Placement(np.array([0.0, 0.0, info.height / 2.0]), np.array([0.0, 0.0, 0.0, 1.0])))]
+            return [(base_frame(rid), body, Placement(np.array([0.0, 0.0, info.height / 2.0]), np.array([0.0, 0.0, 0.0, 1.0])))]
         return []
+
+
+def _type_joints(catalog: RobotCatalog, rtype: str) -> dict[str, MovingJoint]:
+    """The moving joints of robot type ``rtype``'s URDF; none where the type or its URDF is not known here."""
+    d = catalog.descriptions().get(rtype)
+    try:
+        return moving_joints(d.urdf_path.read_text()) if d is not None and d.urdf_path is not None else {}
+    except (ET.ParseError, OSError, ValueError):
+        return {}
 
 
 def _relative(base: Placement, p: Placement) -> Placement:

@@ -3,15 +3,15 @@
 =================  ===========================  ======================================
 fabric             ROS 2 topic                  type
 =================  ===========================  ======================================
-JointState         ``/ID/joint_states``         ``sensor_msgs/msg/JointState`` (frame ``ID``)
-Scan               ``/ID/scan``, ``/ID/sonar``  ``sensor_msgs/msg/LaserScan`` (``ID/lidar``, ``ID/sonar``)
-a base's Pose      ``/ID/odom``                 ``nav_msgs/msg/Odometry`` (child ``ID``, twist in ``ID``)
+JointState         ``/ID/joint_states``         ``sensor_msgs/msg/JointState`` (frame ``ID/base_link``)
+Scan               ``/ID/scan``, ``/ID/sonar``  ``sensor_msgs/msg/LaserScan`` (``ID/laser``, ``ID/sonar``)
+a base's Pose      ``/ID/odom``                 ``nav_msgs/msg/Odometry`` (``ID/odom``, child ``ID/base_link``)
 an arm's Pose      ``/ID/pose``                 ``geometry_msgs/msg/PoseStamped`` (the flange)
 OccupancyGrid      ``/map``, ``/maps/NAME``     ``nav_msgs/msg/OccupancyGrid`` (255 -> -1)
 Path               ``/ID/path``                 ``nav_msgs/msg/Path``
 an object's Pose   ``/object/ID/pose``          ``geometry_msgs/msg/PoseStamped``
 poses and arm FK   ``/tf``                      ``tf2_msgs/msg/TFMessage``
-fixed frames       ``/tf_static``               ``tf2_msgs/msg/TFMessage`` (``map -> world``, the transducers)
+fixed frames       ``/tf_static``               ``tf2_msgs/msg/TFMessage`` (the sonar transducers)
 a sonar's Scan     ``/ID/sonar_I``              ``sensor_msgs/msg/Range`` per transducer (``ID/sonar_I``)
 robot state        ``/clock``                   ``rosgraph_msgs/msg/Clock`` (the sim's time, when it moves on)
 anything else      ``/KEY``                     ``std_msgs/msg/String`` holding the JSON
@@ -47,7 +47,7 @@ from fabric.recording.mcap_file import McapFile
 from fabric.interfaces import JointState, OccupancyGrid, Path, Pose, Scan, WorldInfo
 from user_peer.catalog import RobotCatalog
 from user_peer.message_schema import plain_view
-from user_peer.openfmt.frames import MAP_ROOT, WORLD, Frame, FrameTracker, key_owner, yaw_quat_xyzw
+from user_peer.openfmt.frames import MAP, Frame, FrameTracker, base_frame, key_owner, ros_frame, scan_frame, yaw_quat_xyzw
 from user_peer.openfmt.ros2_msgdefs import definition
 from user_peer.openfmt.ros2_ranges import BEAM_HALF_WIDTH, ULTRASOUND, range_value, transducer_frames, transducer_name
 
@@ -198,12 +198,13 @@ def to_body(q_wxyz: Any, v: Any) -> tuple[float, float, float]:
 
 
 def odometry_fields(robot: str, msg: Pose, stamp_ns: int) -> dict:
-    """A mobile base's pose as ``nav_msgs/Odometry``: the pose in its frame (``world``), child frame the base's id,
-    the twist turned from the world frame (the sim's velocities) into the base's, as REP 105 asks."""
+    """A mobile base's pose as ``nav_msgs/Odometry``, as REP 105 names it: the pose in ``ID/odom`` (the world's
+    coordinates: ``map -> ID/odom`` is the identity), child frame ``ID/base_link``, the twist turned from the world
+    frame (the sim's velocities) into the base's."""
     q = msg.quaternion
     v, w = to_body(q, msg.linear), to_body(q, msg.angular)
     vec = lambda a: {"x": a[0], "y": a[1], "z": a[2]}  # noqa: E731
-    return {"header": _header(stamp_ns, msg.frame or WORLD), "child_frame_id": robot,
+    return {"header": _header(stamp_ns, f"{robot}/odom"), "child_frame_id": base_frame(robot),
             "pose": {"pose": _pose(msg.position, (q[1], q[2], q[3], q[0])), "covariance": list(ODOM_COVARIANCE)},
             "twist": {"twist": {"linear": vec(v), "angular": vec(w)}, "covariance": list(ODOM_COVARIANCE)}}
 
@@ -221,14 +222,14 @@ def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0, r
     stamp), so a node that projects it (laser_geometry) has no motion between rays to undo."""
     t = stamp_ns
     owner = key_owner(key)
-    rid = owner[1] if owner else WORLD
+    rid = owner[1] if owner else MAP
     if isinstance(msg, JointState):
         return ("sensor_msgs/msg/JointState",
-                {"header": _header(t, rid), "name": list(msg.names), "position": [float(v) for v in msg.q],
+                {"header": _header(t, base_frame(rid)), "name": list(msg.names), "position": [float(v) for v in msg.q],
                  "velocity": [float(v) for v in msg.dq], "effort": []})
     if isinstance(msg, Scan):
         n = int(msg.ranges_mm.shape[0])
-        frame = f"{rid}/{'sonar' if key.endswith('/sonar') else 'lidar'}"
+        frame = scan_frame(rid, key)
         return ("sensor_msgs/msg/LaserScan",
                 {"header": _header(t, frame), "angle_min": float(msg.angle_min),
                  "angle_max": float(msg.angle_min + msg.angle_increment * max(n - 1, 0)),
@@ -240,12 +241,12 @@ def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0, r
         h, w = msg.cells.shape
         ox, oy, oth = (float(v) for v in msg.origin)
         return ("nav_msgs/msg/OccupancyGrid",
-                {"header": _header(t, WORLD),
+                {"header": _header(t, MAP),
                  "info": {"map_load_time": _time(t), "resolution": float(msg.resolution), "width": int(w), "height": int(h),
                           "origin": _pose((ox, oy, 0.0), yaw_quat_xyzw(oth))},
                  "data": grid_data(msg.cells)})
     if isinstance(msg, Path):
-        frame = msg.frame or WORLD
+        frame = ros_frame(msg.frame)
         poses = [
             {"header": _header(t, frame), "pose": _pose((float(x), float(y), 0.0), yaw_quat_xyzw(float(th)))}
             for x, y, th in zip(msg.x, msg.y, msg.theta)
@@ -256,7 +257,7 @@ def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0, r
     if isinstance(msg, Pose):
         q = msg.quaternion
         return ("geometry_msgs/msg/PoseStamped",
-                {"header": _header(t, msg.frame or WORLD), "pose": _pose(msg.position, (q[1], q[2], q[3], q[0]))})
+                {"header": _header(t, ros_frame(msg.frame)), "pose": _pose(msg.position, (q[1], q[2], q[3], q[0]))})
     plain = plain_view(msg) if hasattr(type(msg), "SPEC") else None
     if plain is None or not all(_finite(v) for v in _leaves(plain)):
         return None
@@ -322,8 +323,8 @@ class Ros2Writer(McapFile):
 
     def _put_static(self, frames: list[Frame], t: int, log_time: int) -> None:
         """``/tf_static`` again, all its frames in one message (as tf2's broadcaster sends them), when ``frames``
-        holds one it has not sent; the map root with the first."""
-        new = [f for f in (MAP_ROOT, *frames) if self._static.get(f.child) != f]
+        holds one it has not sent."""
+        new = [f for f in frames if self._static.get(f.child) != f]
         if not new:
             return
         self._static.update((f.child, f) for f in new)

@@ -12,7 +12,7 @@ Out (every robot of the world, followed as sims and robots come and go)::
     /NS/map                 nav_msgs/OccupancyGrid   from rf/W/map/map (other maps: /NS/maps/NAME; reliable, transient local)
     /NS/object/ID/pose      geometry_msgs/PoseStamped from rf/W/object/ID/pose/by/*
     /NS/clock               rosgraph_msgs/Clock      the sims' time (the newest header stamp of robot state)
-    /NS/tf, /NS/tf_static   tf2_msgs/TFMessage       the export's frame tree under map (tf.py; tf2_msgs: msgbuild.py)
+    /NS/tf, /NS/tf_static   tf2_msgs/TFMessage       REP 105's tree under map, the export's (tf.py; tf2_msgs: msgbuild.py)
     /NS/ROBOT/robot_description std_msgs/String      the robot type's URDF (latched; models.py)
     /NS/ROBOT/owner         std_msgs/String          the login that owns the robot, "" when free (latched; owners.py)
     /NS/ROBOT/request_ownership, release_ownership   std_srvs/Trigger services, --drive robots (ownership_services.py)
@@ -69,6 +69,7 @@ from fabric.interfaces import JointState as FabricJointState
 from fabric.interfaces import Pose, Scan
 from user_peer.catalog import RobotCatalog
 from user_peer.errors import FabricUserError
+from user_peer.openfmt.frames import base_frame, scan_frame
 from user_peer.openfmt.ros2 import (SimStamps, ros2_message, ros2_topic, ros_topic, scan_period, sensor_range_min, sim_time_ns,
                                     sonar_radius)
 from user_peer.pause import is_pause, pause_words
@@ -227,10 +228,10 @@ class Ros2Bridge:
             return None
         leaf = topic.rsplit("/", 1)[1]
         cls, qos = _TYPES.get(leaf, (OccupancyGrid, LATCHED) if "/maps/" in topic else (PoseStamped, STREAM))
-        route = _Route(topic, robot, cls, qos, self.prefix + (robot or ""))
+        route = _Route(topic, robot, cls, qos, self.prefix + base_frame(robot) if robot else self.prefix)
         if cls is LaserScan:
             sonar = leaf == "sonar"
-            route = _Route(topic, robot, cls, qos, f"{self.prefix}{robot}/{'sonar' if sonar else 'lidar'}",
+            route = _Route(topic, robot, cls, qos, self.prefix + scan_frame(robot or "", key),
                            sensor_range_min(self._described, key), (sonar_radius(self._described, key) or 0.0) if sonar else 0.0,
                            scan_period(self._described))
         self._routes[key] = route

@@ -27,6 +27,7 @@ from sensor_msgs.msg import JointState, LaserScan
 from fabric.interfaces import JointState as FabricJointState
 from fabric.interfaces import Pose, Scan
 from user_peer.openfmt.ros2 import MISS_TOLERANCE_M, ODOM_COVARIANCE, to_body
+from user_peer.openfmt.frames import base_frame, ros_frame
 
 __all__ = ["stamp", "joint_state", "laser_scan", "odometry", "pose_stamped"]
 
@@ -47,7 +48,8 @@ def _doubles(a: np.ndarray) -> array.array:
 
 
 def joint_state(out: JointState, robot: str, msg: FabricJointState, ns: int) -> JointState:
-    """``out`` refilled with ``msg``: frame the robot's id, names, positions and velocities, no efforts."""
+    """``out`` refilled with ``msg``: frame ``robot`` (the route's, ``ID/base_link``), names, positions and
+    velocities, no efforts."""
     stamp(out.header, ns, robot)
     out.name = list(msg.names)
     out.position = _doubles(msg.q)
@@ -84,18 +86,18 @@ def _pose(out: Any, position: np.ndarray, q_wxyz: np.ndarray) -> None:
 
 
 def pose_stamped(out: PoseStamped, msg: Pose, ns: int, prefix: str = "") -> PoseStamped:
-    """``out`` refilled with ``msg`` (an arm's flange, a scene object) in its own frame (``world`` by default),
+    """``out`` refilled with ``msg`` (an arm's flange, a scene object) in its own frame (the world's is ``map``),
     under ``prefix`` (a namespace's, :mod:`user_peer.ros2.names`)."""
-    stamp(out.header, ns, prefix + (msg.frame or "world"))
+    stamp(out.header, ns, prefix + ros_frame(msg.frame))
     _pose(out.pose, msg.position, msg.quaternion)
     return out
 
 
 def odometry(out: Odometry, robot: str, msg: Pose, ns: int, prefix: str = "") -> Odometry:
-    """``out`` refilled with a base's pose (frame ``world``, child the base's id, both under ``prefix``) and its
-    twist turned from the world frame (the sim's velocities) into the base's, as REP 105 asks."""
-    stamp(out.header, ns, prefix + (msg.frame or "world"))
-    out.child_frame_id = prefix + robot
+    """``out`` refilled with a base's pose (frame ``ID/odom``, child ``ID/base_link``, REP 105's, both under
+    ``prefix``) and its twist turned from the world frame (the sim's velocities) into the base's, as REP 105 asks."""
+    stamp(out.header, ns, f"{prefix}{robot}/odom")
+    out.child_frame_id = prefix + base_frame(robot)
     _pose(out.pose.pose, msg.position, msg.quaternion)
     out.pose.covariance = out.twist.covariance = _COVARIANCE  # copied by the setter: the constant stays as it is
     lin, ang = out.twist.twist.linear, out.twist.twist.angular

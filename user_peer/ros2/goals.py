@@ -28,17 +28,17 @@ from user_peer.ros2.names import frame_prefix
 
 __all__ = ["GOAL_FRAMES", "GoalsIn", "goal_of"]
 
-GOAL_FRAMES = ("", "world", "map")
-"""Frames a goal may be given in: the bridge's root frame ``world`` (RViz's fixed frame), ``map`` (the same plane:
-the fabric's maps are in world coordinates), or none."""
+GOAL_FRAMES = ("", "map", "world")
+"""Frames a goal may be given in: the bridge's root frame ``map`` (RViz's fixed frame, REP 105's; the fabric's maps
+are in the world's coordinates), ``world`` (the fabric's name for the same plane), or none."""
 
 
 def goal_of(msg: Any, prefix: str = "") -> tuple[float, float, float]:
-    """(x, y, yaw) of a ``PoseStamped`` in the world's frame (under a namespace's ``prefix``, ``class1/world``, or
+    """(x, y, yaw) of a ``PoseStamped`` in the world's frame (under a namespace's ``prefix``, ``class1/map``, or
     not); :class:`CommandError` for another frame."""
     frame = msg.header.frame_id.strip("/")
     if frame not in GOAL_FRAMES and not (prefix and frame.startswith(prefix) and frame[len(prefix):] in GOAL_FRAMES[1:]):
-        raise CommandError(f"goal_pose in frame {frame!r}: give it in '{prefix}world' (or '{prefix}map'), "
+        raise CommandError(f"goal_pose in frame {frame!r}: give it in '{prefix}map' (or '{prefix}world'), "
                            "the bridge's fixed frame")
     o = msg.pose.orientation
     return float(msg.pose.position.x), float(msg.pose.position.y), yaw_from_quaternion((o.w, o.x, o.y, o.z))

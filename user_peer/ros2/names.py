@@ -1,9 +1,9 @@
-"""Frame ids under a namespace: ``--namespace class1`` makes ``base1/lidar`` ``class1/base1/lidar``.
+"""Frame ids under a namespace: ``--namespace class1`` makes ``base1/laser`` ``class1/base1/laser``.
 
 ROS users with several robots (or, here, several classes' worlds on one DDS domain) expect each namespace's frames
 to carry its prefix, as robot_state_publisher's ``frame_prefix`` and Nav2's multi-robot launch give them: two
-bridges' trees then never share a frame, where two worlds' ``base1`` (or ``world``) would otherwise be one frame in
-tf2 and jump between two places. Every frame is prefixed, the root ``world`` too (two classes' worlds are two
+bridges' trees then never share a frame, where two worlds' ``base1/base_link`` (or ``map``) would otherwise be one
+frame in tf2 and jump between two places. Every frame is prefixed, the root ``map`` too (two classes' worlds are two
 unrelated trees); without a namespace the frames are the export's, unchanged.
 """
 

@@ -1,13 +1,13 @@
-"""/tf and /tf_static from the bridge: the frame tree of ``export --to ros2`` under a ``map`` root.
+"""/tf and /tf_static from the bridge: the frame tree of ``export --to ros2``, REP 105's, rooted at ``map``.
 
-The frames are :class:`user_peer.openfmt.frames.FrameTracker`'s, the export's: ``world`` (its root), a base
-``ROBOT`` from its pose (with ``ROBOT/lidar`` and ``ROBOT/sonar`` on it), an arm's base bolted to ``world``, its
-joints ``ROBOT/JOINT`` by forward kinematics from its JointState, its flange ``ROBOT/flange``; each frame's stamps
-never go back. Every transform goes on ``/tf`` as the export writes it; the sensor mounts, which never move,
-also go once on ``/tf_static`` (transient local), so a node that starts later has them at once. ``/tf_static``
-also holds ``map -> world``, the identity: REP 105's fixed frame is ``map``, which RViz, Nav2 and a ``/goal_pose``
-name, and the world's maps (the ``map`` topics) are drawn in the world's coordinates; the sim's poses do not
-drift, so there is no ``odom`` frame between (the REP 105 names of the base's own frames are not made here).
+The frames are :class:`user_peer.openfmt.frames.FrameTracker`'s, the export's: per base ``map -> ID/odom ->
+ID/base_link`` (the identity, then its pose) with ``ID/laser`` and ``ID/sonar`` on ``ID/base_link``; per arm its
+URDF's links under ``ID/`` (the root link bolted to ``map``, each link in its parent link's frame by forward
+kinematics from its JointState, as robot_state_publisher sends them, so RViz's RobotModel with ``tf_prefix ID/``
+places the ``/ID/robot_description`` links); each frame's stamps never go back. Every transform goes on ``/tf``
+as the export writes it; the frames that never move (``ID/odom`` and the sensor mounts, ``frames.FIXED``) also
+go once on ``/tf_static`` (transient local), so a node that starts later has them at once, with each sonar
+transducer's ``ID/sonar_I`` under ``ID/sonar``.
 
 ``tf2_msgs`` is not among ROS 2 Kilted's wheels on PyPI: :mod:`user_peer.ros2.msgbuild` builds it into the
 environment (``make test`` does; a ROS 2 install from apt has it). Without it nothing is published here and
@@ -23,18 +23,16 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from fabric.interfaces import WorldInfo
 from user_peer.catalog import RobotCatalog
-from user_peer.openfmt.frames import MAP, MAP_ROOT, WORLD, Frame, FrameTracker
+from user_peer.openfmt.frames import FIXED, MAP, Frame, FrameTracker
 from user_peer.ros2.direct import stamp
 from user_peer.ros2.names import frame_prefix
 from user_peer.ros2.ranges import transducer_frames
 
-__all__ = ["TfOut", "tf_message_class", "transform", "TF_QOS", "TF_STATIC_QOS", "MAP", "MAP_ROOT"]
+__all__ = ["TfOut", "tf_message_class", "transform", "TF_QOS", "TF_STATIC_QOS", "MAP"]
 
 TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 TF_STATIC_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 """tf2's own QoS: /tf reliable and deep, /tf_static latched for late joiners."""
-
-_MOUNTS = ("/lidar", "/sonar")
 
 
 def tf_message_class() -> type | None:
@@ -68,7 +66,7 @@ class TfOut:
         self.message = message if message is not None else tf_message_class()
         self.available = self.message is not None
         self.frames = FrameTracker(catalog)
-        self._static: dict[str, Frame] = {WORLD: MAP_ROOT}  # child -> the static frame last sent on /tf_static
+        self._static: dict[str, Frame] = {}  # child -> the static frame last sent on /tf_static
         self.sent = 0
         ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
         self.prefix = frame_prefix(namespace)
@@ -77,7 +75,6 @@ class TfOut:
         if self.available:
             make = publisher or (lambda topic, qos: node.create_publisher(self.message, topic, qos))
             self._pub, self._static_pub = make(self.topics[0], TF_QOS), make(self.topics[1], TF_STATIC_QOS)
-            self._send_static(0)  # the map root at once: a scan's frame resolves to map before any mount is known
 
     def _send_static(self, ns: int) -> None:
         """Every static frame in one message: /tf_static keeps only the last (depth 1), as tf2's broadcaster does."""
@@ -104,7 +101,7 @@ class TfOut:
             return
         self._pub.publish(self.message(transforms=[transform(f, ns, self.prefix) for f in frames]))
         self.sent += 1
-        mounts = [f for f in frames if f.child.endswith(_MOUNTS) and self._static.get(f.child) != f]
+        mounts = [f for f in frames if f.child.endswith(FIXED) and self._static.get(f.child) != f]
         if mounts:
             self._static.update((f.child, f) for f in mounts)
             self._send_static(ns)
