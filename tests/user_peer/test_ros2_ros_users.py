@@ -328,10 +328,14 @@ def test_tf_is_one_tree_read_as_tf2_msgs_in_which_the_scans_frame_resolves_to_ma
                seen=lambda: (lines(out, "scan")[-1:], {c: sorted(p) for c, p in tf_tree(out)[0].items()},
                              procs.output(bridge)[-1500:], procs.output(node)[-1500:]))
     assert found[-1] == ["base1/laser", "base1/base_link", "base1/odom", "map"], found[-1]
-    links = lambda rid: {f"{rid}/{link.get('name')}" for link in ET.fromstring(  # noqa: E731
-        next(r["urdf"] for r in lines(out, "robot_description") if r["robot"] == rid)).iter("link")}
-    wait_until(lambda: links("arm1") | links("base1") <= set(tf_tree(out)[0]) | {"arm1/base_link"}, timeout=30,
-               what="every URDF link a frame", seen=lambda: sorted(links("arm1") | links("base1") - set(tf_tree(out)[0])))
+    def missing() -> set[str] | None:  # the links of both robot_descriptions that are no frame yet (None: no model yet)
+        urdfs = {r["robot"]: r["urdf"] for r in lines(out, "robot_description")}
+        if not {"arm1", "base1"} <= set(urdfs):
+            return None
+        return {f"{rid}/{link.get('name')}" for rid in ("arm1", "base1") for link in ET.fromstring(urdfs[rid]).iter("link")} \
+            - set(tf_tree(out)[0])
+
+    wait_until(lambda: missing() == set(), timeout=30, what="every URDF link a frame", seen=missing)
     parents, _, static = tf_tree(out)
     assert all(len(p) == 1 for p in parents.values()), {c: p for c, p in parents.items() if len(p) != 1}
     roots = {p for ps in parents.values() for p in ps} - set(parents)
