@@ -4,10 +4,12 @@ joints are the names its ``joint_states`` carry. Real router, sim, bridge and no
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 import os
 import sys
+import threading
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -165,7 +167,9 @@ def test_a_nan_cmd_vel_is_refused_on_rosout_and_a_clamp_is_told(live, procs, tmp
 
 
 @pytest.mark.slow
-def test_a_goal_pose_is_planned_on_the_logins_map_shown_on_path_and_brings_base1_within_0_2_m(live, procs, tmp_path):
+def test_a_goal_pose_is_planned_on_the_logins_map_shown_on_path_and_brings_base1_within_0_2_m(live, procs, tmp_path,
+                                                                                              monkeypatch):
+    """And the same through Nav2's NavigateToPose action, from an rclpy ActionClient in this process."""
     world, port, _ = live
     ep = f"tcp/127.0.0.1:{port}"
     comp = procs.start(robofabric_cmd("compute", "--no-kinematics", "--world", world, "--connect", ep), name="compute")
@@ -181,9 +185,11 @@ def test_a_goal_pose_is_planned_on_the_logins_map_shown_on_path_and_brings_base1
         base.release()
     finally:
         w.close()
-    bridge, node, out, ctl = start(procs, tmp_path, world, port, 1 + (os.getpid() * 7 + 50) % 100,
+    domain = 1 + (os.getpid() * 7 + 50) % 100
+    bridge, node, out, ctl = start(procs, tmp_path, world, port, domain,
                                    "--user", "rosgoal", "--request", "base1", "--drive", "base1")
     wait_until(lambda: lines(out, "odom"), timeout=60, what="base1's odometry")
+    home = (lines(out, "odom")[0]["x"], lines(out, "odom")[0]["y"])
     goal = (1.5, 1.0)
     (ctl / "goal").write_text(f"{goal[0]} {goal[1]}")
     at = lambda: math.dist([lines(out, "odom")[-1]["x"], lines(out, "odom")[-1]["y"]], goal)  # noqa: E731
@@ -192,6 +198,48 @@ def test_a_goal_pose_is_planned_on_the_logins_map_shown_on_path_and_brings_base1
     paths = [p for p in lines(out, "path") if p["n"] > 1]
     assert paths and math.dist(paths[-1]["end"], goal) < 0.1 and paths[-1]["frame"] == "map", paths[-1:]
     assert any("planned on map 'rosgoal.map'" in r["msg"] for r in lines(out, "rosout")), lines(out, "rosout")[-5:]
+
+    # back home through the action: accepted, feedback while base1 moves (the distance left shrinking), a result
+    assert importlib.util.find_spec("nav2_msgs") is not None, BUILD_TF2.replace("tf2_msgs", "nav2_msgs")
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    accepted, result, feedback = navigate(domain, "/base1/navigate_to_pose", home, seen=lambda: procs.output(bridge)[-1500:])
+    assert accepted and result.error_code == 0 and result.error_msg == "", (result, procs.output(bridge)[-1500:])
+    assert len(feedback) >= 3 and feedback[0].distance_remaining > 0.5 and feedback[-1].distance_remaining <= 0.25
+    last = feedback[-1].current_pose
+    assert last.header.frame_id == "map" and math.dist((last.pose.position.x, last.pose.position.y), home) <= 0.25
+
+
+def navigate(domain: int, action: str, goal: tuple[float, float], *, seen) -> tuple[bool, object, list]:
+    """A NavigateToPose goal (frame ``map``) sent by an rclpy ActionClient: (accepted, the result, the feedback)."""
+    import rclpy
+    from nav2_msgs.action import NavigateToPose
+    from rclpy.action import ActionClient
+    from rclpy.executors import SingleThreadedExecutor
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        n = rclpy.create_node("navigate_test", context=context)
+        executor.add_node(n)
+        client = ActionClient(n, NavigateToPose, action)
+        spin = threading.Thread(target=executor.spin, daemon=True)
+        spin.start()
+        assert client.wait_for_server(timeout_sec=30), f"no {action} server"
+        g = NavigateToPose.Goal()
+        g.pose.header.frame_id, g.pose.pose.position.x, g.pose.pose.position.y = "map", float(goal[0]), float(goal[1])
+        g.pose.pose.orientation.w = 1.0
+        feedback: list = []
+        sent = client.send_goal_async(g, feedback_callback=lambda m: feedback.append(m.feedback))
+        handle = wait_until(lambda: sent.done() and sent.result(), timeout=30, what="the goal answered", seen=seen)
+        if not handle.accepted:
+            return False, None, feedback
+        got = handle.get_result_async()
+        wait_until(got.done, timeout=120, what="the action's result", seen=lambda: (feedback[-1:], seen()))
+        return True, got.result().result, feedback
+    finally:
+        executor.shutdown(timeout_sec=2.0)
+        rclpy.shutdown(context=context)
 
 
 @pytest.mark.slow

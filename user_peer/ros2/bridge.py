@@ -24,6 +24,7 @@ them, as for any user; a refusal is logged on /rosout and counted)::
     /NS/ROBOT/cmd_vel           geometry_msgs/Twist             -> Base.twist(linear.x, angular.z, hold=False)
                                 (TwistStamped with stamped_cmd_vel; not finite or absurd: refused; clamps told)
     /NS/ROBOT/goal_pose, /NS/goal_pose  geometry_msgs/PoseStamped -> Base.plan_to, then Base.follow (goals.py)
+    /NS/ROBOT/navigate_to_pose  nav2_msgs/action/NavigateToPose -> the same, with feedback and a result (navigate.py)
     /NS/ROBOT/joint_command     sensor_msgs/JointState          -> Arm.move_joints(positions, wait=False)
     /NS/ROBOT/joint_trajectory  trajectory_msgs/JointTrajectory -> Arm.move_joints(its points at their times, 50 Hz)
 
@@ -208,6 +209,8 @@ class Ros2Bridge:
         if not self.tf.available:
             log.warning("no /tf or /tf_static: tf2_msgs is not importable (it is not among the ROS 2 wheels; "
                         "build it with: python -m user_peer.ros2.msgbuild)")
+        if not self.goals.actions.available and self.drive:
+            log.warning("no navigate_to_pose actions: nav2_msgs is not importable (build it with: python -m user_peer.ros2.msgbuild)")
         if not self.asking.available and self.drive:
             log.warning("no request_ownership/release_ownership services: std_srvs is not importable "
                         "(build it with: python -m user_peer.ros2.msgbuild)")
@@ -454,6 +457,7 @@ class Ros2Bridge:
                 pass
         self._subs.clear()
         self.trajectories.close()
+        self.goals.close()
         if self.gc_pauses is not None:
             self.gc_pauses.close()
         try:

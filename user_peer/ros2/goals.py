@@ -25,6 +25,7 @@ from user_peer.errors import FabricUserError
 from user_peer.openfmt.ros2 import ros_topic
 from user_peer.ros2.commands import CommandError
 from user_peer.ros2.names import frame_prefix
+from user_peer.ros2.navigate import NavigateActions
 
 __all__ = ["GOAL_FRAMES", "GoalsIn", "goal_of"]
 
@@ -53,6 +54,7 @@ class GoalsIn:
         self.prefix = frame_prefix(namespace)
         self.check_owner, self.refuse = check_owner, refuse
         self.map_name = map_name
+        self.actions = NavigateActions(node, namespace, self.prefix, check_owner, refuse, goal_of, map_name)  # navigate_to_pose
         self._bases: set[str] = set()
         self._shared: Any = None  # /NS/goal_pose, while exactly one base is driven
         self.followed = 0  # goals planned and handed to the follower
@@ -60,6 +62,7 @@ class GoalsIn:
     def subscribe(self, rid: str) -> Any:
         """``rid``'s goal_pose subscription (the caller keeps it with the robot's command inputs)."""
         self._bases.add(rid)
+        self.actions.serve(rid)
         if self._shared is None:
             self._shared = self.node.create_subscription(PoseStamped, ros_topic("/".join([self.namespace, "goal_pose"])),
                                                          self._on_shared, self.qos)
@@ -68,6 +71,10 @@ class GoalsIn:
 
     def forget(self, rid: str) -> None:
         self._bases.discard(rid)
+        self.actions.forget(rid)
+
+    def close(self) -> None:
+        self.actions.close()
 
     def _on_shared(self, msg: Any) -> None:
         if len(self._bases) != 1:

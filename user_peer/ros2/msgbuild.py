@@ -1,9 +1,10 @@
-"""The ROS 2 interface packages Kilted's wheels lack, built into this Python environment: ``tf2_msgs`` (for /tf)
-and ``std_srvs`` (for the ownership services).
+"""The ROS 2 interface packages Kilted's wheels lack, built into this Python environment: ``tf2_msgs`` (for /tf),
+``std_srvs`` (for the ownership services) and ``nav2_msgs``' NavigateToPose action (for the bridge's action server).
 
-PyPI's Kilted wheels ship rclpy, most message packages and the whole rosidl tool chain (the generators for C
-and Python, the C type supports, their headers and libraries, under the environment's ``include/``, ``lib/``
-and ``share/``), but neither ``tf2_msgs`` nor ``std_srvs``. This module does what colcon would do for them,
+PyPI's Kilted wheels ship rclpy, most message packages (``action_msgs`` and ``unique_identifier_msgs``, which
+rclpy's actions need, among them) and the whole rosidl tool chain (the generators for C and Python, the C type
+supports, their headers and libraries, under the environment's ``include/``, ``lib/`` and ``share/``), but not
+``tf2_msgs``, ``std_srvs`` or ``nav2_msgs``. This module does what colcon would do for them,
 without CMake or ament: it writes each interface as IDL (the text ``rosidl_adapter`` would make from the
 ``.msg``/``.srv``; the adapter itself needs catkin_pkg, which the wheels do not bring), runs the generators through
 their ``rosidl_cli`` extensions (the ``rosidl`` command itself refuses the wheels' duplicated entry points),
@@ -64,12 +65,53 @@ module std_srvs {
 };
 """,
     },
-}
-"""Each package's interfaces as ``rosidl_adapter`` writes them from upstream's ``.msg``/``.srv`` (comments aside,
-which do not enter the type hash): ``tf2_msgs/TFMessage`` and ``std_srvs/Trigger`` only, what the bridge uses."""
+    "nav2_msgs": {
+        # navigation2's nav2_msgs/action/NavigateToPose.action (main, 2025), the action RViz's Nav2 panel and
+        # Nav2's clients send; Kilted's wheels have no nav2_msgs
+        "action/NavigateToPose.idl": """\
+#include "builtin_interfaces/msg/Duration.idl"
+#include "geometry_msgs/msg/PoseStamped.idl"
 
-_DEPS = ("geometry_msgs", "std_msgs", "builtin_interfaces", "service_msgs")
-"""The interface packages the interfaces above refer to (a service's event message holds ``service_msgs``')."""
+module nav2_msgs {
+  module action {
+    struct NavigateToPose_Goal {
+      geometry_msgs::msg::PoseStamped pose;
+      string behavior_tree;
+    };
+    module NavigateToPose_Result_Constants {
+      const uint16 NONE = 0;
+      const uint16 GOAL_REJECTED = 1;
+      const uint16 SEND_GOAL_FAILURE = 2;
+      const uint16 UNKNOWN = 9000;
+      const uint16 FAILED_TO_LOAD_BEHAVIOR_TREE = 9001;
+      const uint16 TF_ERROR = 9002;
+      const uint16 TIMEOUT = 9003;
+    };
+    struct NavigateToPose_Result {
+      uint16 error_code;
+      string error_msg;
+    };
+    struct NavigateToPose_Feedback {
+      geometry_msgs::msg::PoseStamped current_pose;
+      builtin_interfaces::msg::Duration navigation_time;
+      builtin_interfaces::msg::Duration estimated_time_remaining;
+      int16 number_of_recoveries;
+      float distance_remaining;
+      float position_tracking_error;
+      float heading_tracking_error;
+    };
+  };
+};
+""",
+    },
+}
+"""Each package's interfaces as ``rosidl_adapter`` writes them from upstream's ``.msg``/``.srv``/``.action``
+(comments aside, which do not enter the type hash): ``tf2_msgs/TFMessage``, ``std_srvs/Trigger`` and
+``nav2_msgs/action/NavigateToPose`` only, what the bridge uses."""
+
+_DEPS = ("geometry_msgs", "std_msgs", "builtin_interfaces", "service_msgs", "action_msgs", "unique_identifier_msgs")
+"""The interface packages the interfaces above refer to (a service's event message holds ``service_msgs``', an
+action's goal and result services ``action_msgs``' and ``unique_identifier_msgs``')."""
 
 _RUNTIME = ("rosidl_runtime_c", "rcutils", "rosidl_typesupport_c", "rcpputils", "rosidl_typesupport_fastrtps_c",
             "rosidl_typesupport_fastrtps_cpp", "fastcdr", "rosidl_typesupport_introspection_c")
