@@ -15,7 +15,7 @@ from user_peer.ros2 import msgbuild
 TF_MESSAGE_HASH = "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087"
 """tf2_msgs/msg/TFMessage's hash in ROS 2 (Jazzy on): tf2_msgs' own test of its golden hashes."""
 
-BUILD_IT = ("tf2_msgs and std_srvs are not importable: build them into this environment with "
+BUILD_IT = ("tf2_msgs, std_srvs or nav2_msgs is not importable: build them into this environment with "
             "`python -m user_peer.ros2.msgbuild` (make test does; it needs g++ and Python's headers)")
 
 
@@ -38,12 +38,12 @@ def test_the_built_tf_message_has_upstreams_type_hash_on_the_wire():
 def test_a_built_package_says_so_and_a_second_run_builds_nothing(capsys):
     assert msgbuild.missing() == [], BUILD_IT
     assert msgbuild.main([]) == 0
-    assert capsys.readouterr().out == "already importable: tf2_msgs, std_srvs\n"
+    assert capsys.readouterr().out == "already importable: tf2_msgs, std_srvs, nav2_msgs\n"
 
 
 def test_what_cannot_be_built_is_said(monkeypatch, capsys):
-    assert msgbuild.main(["nav2_msgs"]) == 2
-    assert "unknown package nav2_msgs: this builds tf2_msgs, std_srvs" in capsys.readouterr().err
+    assert msgbuild.main(["control_msgs"]) == 2
+    assert "unknown package control_msgs: this builds tf2_msgs, std_srvs, nav2_msgs" in capsys.readouterr().err
     monkeypatch.setenv("CXX", "no-such-compiler-here")
     with pytest.raises(msgbuild.MsgBuildError, match="no g\\+\\+ on PATH: install a C and C\\+\\+ compiler"):
         msgbuild._compiler("g++")
