@@ -48,14 +48,15 @@ class NavigateActions:
                  refuse: Callable[[str, str, str], None], goal_of: Callable[[Any, str], tuple[float, float, float]],
                  map_name: str = "", *, tol: float = 0.25,
                  timeout: float = 120.0, period: float = 0.1) -> None:
-        self.action = navigate_action_class()
+        self.action: Any = navigate_action_class()
         self.available = self.action is not None
         self.namespace, self.prefix = namespace.strip("/"), prefix
         self.check_owner, self.refuse, self.goal_of, self.map_name = check_owner, refuse, goal_of, map_name
         self.tol, self.timeout, self.period = tol, timeout, period
         self._servers: dict[str, Any] = {}
         self.succeeded = 0
-        self.node = self._executor = None
+        self.node: Any = None
+        self._executor: Any = None
         if self.available:
             import rclpy
             from rclpy.executors import MultiThreadedExecutor
