@@ -4,7 +4,12 @@ built with ``stale-command``, and ``ROBOFABRIC_PLANT`` in the environment change
 
 from __future__ import annotations
 
+import ast
 import importlib
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -75,3 +80,58 @@ def test_the_authority_admits_a_stale_command_only_when_built_with_that_defect(c
             assert reason is not None and "stale epoch" in reason, reason
     finally:
         auth.close()
+
+
+PURE_AND_HOOKED = ("ownership/state.py", "ownership/authority.py", "sim_peer/following.py", "sim_peer/replica_host.py",
+                   "fabric/plant.py")
+"""The state machine and the modules that hold a defect's hook: none of them reads the environment."""
+
+
+def test_no_module_that_holds_a_defect_reads_the_environment():
+    """Their source names neither ``os.environ`` nor ``getenv`` (nor imports ``os``): a defect reaches them only as a
+    parameter, set by the sim's command line (``robofabric sim --plant``)."""
+    root = Path(__file__).resolve().parents[2]
+    for rel in PURE_AND_HOOKED:
+        tree = ast.parse((root / rel).read_text(), rel)
+        names = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)} | {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)}
+        imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        imported |= {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+        assert not names & {"environ", "getenv", "environb"}, f"{rel} reads the environment"
+        assert "os" not in imported, f"{rel} imports os"
+
+
+TRIPWIRE = """
+import os
+import fabric.interfaces  # the state machine's dependencies read what settings they like, before the wire is up
+
+
+class Tripwire(dict):
+    def __getitem__(self, key):
+        raise AssertionError(f"the environment read: {key}")
+
+    def get(self, key, default=None):
+        raise AssertionError(f"the environment read: {key}")
+
+    def __contains__(self, key):
+        raise AssertionError(f"the environment read: {key}")
+
+
+os.environ = Tripwire()
+os.getenv = lambda key, default=None: Tripwire()[key]
+from ownership import state as st
+
+s = st.initial({"arm": "exclusive"})
+for ev in (st.Request("a", "arm", 0.0), st.Join("b", 0.2), st.Request("b", "arm", 0.5), st.Tick(9.0)):
+    s, _ = st.step(s, ev)
+print("epoch", s.records["arm"].epoch)
+"""
+
+
+@pytest.mark.slow  # a fresh interpreter
+def test_the_state_machine_reads_no_environment_at_import_or_call_time():
+    """Imported and stepped in a fresh interpreter whose ``os.environ`` and ``os.getenv`` raise on any read (with
+    ``ROBOFABRIC_PLANT`` set before it started): the pure core never looks, and the take-over bumps the epoch."""
+    env = dict(os.environ, ROBOFABRIC_PLANT="double-owner")
+    out = subprocess.run([sys.executable, "-c", TRIPWIRE], capture_output=True, text=True, timeout=120, env=env)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["epoch", "2"], out.stdout
