@@ -235,6 +235,27 @@ def peers_all(world: str, kind: str = "*") -> str:
     return f"{world_root(world)}/peer/{k}/*"
 
 
+SIM_ROLES = ("primary", "standby")
+"""What a sim publishes it is (:func:`sim_role`): its shard's authority, or a standby following one."""
+
+
+def sim_role(world: str, sim: str, role: str, term: int, leader: str) -> str:
+    """The liveliness token a sim holds while it is ``role`` under ``term``, ``leader`` leading its shard (itself when
+    primary): ``peer/sim/{sim}/{role}/{term}/{leader}`` beside its own ``peer/sim/{sim}``. Tests, the soak and tools
+    learn a sim's role from it, never from its log; nothing decides on it (the election reads the sims' own tokens
+    and the terms it hears)."""
+    if isinstance(term, bool) or not isinstance(term, int) or term < 0:
+        raise ValueError(f"a sim's term is a non-negative integer, not {term!r}")
+    return (f"{peer(world, 'sim', sim)}/{_choice(role, SIM_ROLES, 'sim role')}/{term}/"
+            f"{validate_id(leader, what='leader id')}")
+
+
+def sim_roles_all(world: str, sim: str = "*") -> str:
+    """Every sim's role token (:func:`sim_role`), or ``sim``'s."""
+    s = sim if sim == "*" else validate_id(sim, what="peer id")
+    return f"{world_root(world)}/peer/sim/{s}/*/*/*"
+
+
 def event(world: str, *parts: str) -> str:
     if not parts:
         raise ValueError("an event key needs at least one part, e.g. event(world, 'reject', robot)")
@@ -257,7 +278,7 @@ def event_decode(world: str, writer: str) -> str:
 
 @dataclass(frozen=True, slots=True)
 class ParsedKey:
-    """What a concrete key names. ``category`` is robot, cmd, object, map, own, srv, peer or event."""
+    """What a concrete key names. ``category`` is robot, cmd, object, map, own, srv, peer, sim_role or event."""
 
     world: str
     category: str
@@ -331,6 +352,8 @@ def parse(key: str) -> ParsedKey:
         return ParsedKey(world, "srv", tail[0], "/".join(tail[1:]), tuple(tail[1:]))
     if kind == "peer" and len(tail) == 2 and tail[0] in PEER_KINDS:
         return ParsedKey(world, "peer", tail[0], tail[1])
+    if kind == "peer" and len(tail) == 5 and tail[0] == "sim" and tail[2] in SIM_ROLES and tail[3].isdigit():
+        return ParsedKey(world, "sim_role", tail[1], tail[2], (tail[3], tail[4]))  # sim, role, (term, leader)
     if kind == "event" and len(tail) >= 1:
         return ParsedKey(world, "event", tail[0], "/".join(tail[1:]), tuple(tail))
     raise ValueError(f"key {key!r} does not match any robofabric key layout")

@@ -14,10 +14,13 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+from fabric import keys
 from fabric.config import FabricConfig
 from fabric.session import Fabric
 
@@ -136,3 +139,70 @@ def example_robot_urdf(relative: str) -> Path:
         if str(f).endswith("example-robot-data/robots/" + relative):
             return Path(str(f.locate())).resolve()
     raise FileNotFoundError(f"example-robot-data has no robots/{relative}")
+
+
+@dataclass(frozen=True, slots=True)
+class SimRole:
+    """A role a sim shows on the fabric (its token ``peer/sim/{id}/{role}/{term}/{leader}``, :mod:`sim_peer.role_token`)."""
+
+    sim: str
+    role: str  # primary | standby
+    term: int
+    leader: str  # who leads its shard: itself when primary, the sim it follows when standby
+
+
+class SimRoles:
+    """The roles a world's sims show, as one session sees their tokens: what each shows now, and every role any of
+    them showed since this watch began (``shown``, in order). Tests and the soak read a sim's role here, never in
+    its log. A sim killed, cut off or paused past the lease shows none (its tokens go with its session)."""
+
+    def __init__(self, fab: Fabric) -> None:
+        self._lock = threading.Lock()
+        self._live: dict[str, list[SimRole]] = {}  # sim -> its tokens alive now, oldest first (two, for a moment)
+        self.shown: list[SimRole] = []
+        fab.watch_tokens(keys.sim_roles_all(fab.world), self._on_token)
+
+    def _on_token(self, key: str, alive: bool) -> None:
+        try:
+            p = keys.parse(key)
+        except ValueError:
+            return  # a made-up token under peer/sim/: nobody's role
+        if p.category != "sim_role":
+            return
+        r = SimRole(p.subject, p.leaf, int(p.rest[0]), p.rest[1])
+        with self._lock:
+            now = self._live.setdefault(r.sim, [])
+            if r in now:
+                now.remove(r)
+            if alive:
+                now.append(r)
+                self.shown.append(r)
+
+    def now(self, sim: str) -> SimRole | None:
+        """What ``sim`` shows now (its newest token), None when it shows no role."""
+        with self._lock:
+            now = self._live.get(sim)
+            return now[-1] if now else None
+
+    def role(self, sim: str) -> str:
+        """``primary``, ``standby``, or ``""`` when ``sim`` shows no role now."""
+        r = self.now(sim)
+        return r.role if r else ""
+
+    def ever(self, sim: str, role: str, term: int | None = None) -> bool:
+        """Whether ``sim`` showed ``role`` (under ``term``, if given) since this watch began."""
+        with self._lock:
+            return any(r.sim == sim and r.role == role and term in (None, r.term) for r in self.shown)
+
+    def wait(self, sim: str, role: str, *, term: int | None = None, leader: str | None = None, timeout: float = 60.0,
+             seen: Callable[[], Any] | None = None) -> SimRole:
+        """Wait until ``sim`` shows ``role`` (under ``term``, following ``leader``, if given); what it shows then."""
+
+        def showing() -> SimRole | None:
+            r = self.now(sim)
+            ok = r is not None and r.role == role and term in (None, r.term) and leader in (None, r.leader)
+            return r if ok else None
+
+        what = f"{sim} showing {role}" + (f" (term {term})" if term is not None else "") + (f" of {leader}" if leader else "")
+        return wait_until(showing, timeout=timeout, interval=0.05, what=what,
+                          seen=lambda: (self.now(sim), seen() if seen is not None else None))

@@ -10,7 +10,9 @@
 - :mod:`sim_peer.adoption` (:class:`~sim_peer.adoption.ObjectAdoption`): the scene objects after their sim;
 - :mod:`sim_peer.freeze_guard` (:class:`~sim_peer.freeze_guard.FreezeGuard`): a primary back from a freeze;
 - :mod:`sim_peer.moving` (:class:`~sim_peer.moving.MoveService`): moving a robot between sims;
-- :mod:`sim_peer.deaf_stop` (:class:`~sim_peer.deaf_stop.DeafStop`): a primary that hears no one stops its robots.
+- :mod:`sim_peer.deaf_stop` (:class:`~sim_peer.deaf_stop.DeafStop`): a primary that hears no one stops its robots;
+- :mod:`sim_peer.role_token` (:class:`~sim_peer.role_token.RoleToken`): the role it shows on the fabric, which tests
+  and the soak read (``peer/sim/{id}/{role}/{term}/{leader}``).
 
 The roles:
 
@@ -55,6 +57,7 @@ from sim_peer.following import POLL_S, Follower
 from sim_peer.freeze_guard import FreezeGuard
 from sim_peer.moving import MoveService
 from sim_peer.peer import SimPeer
+from sim_peer.role_token import RoleToken
 from sim_peer.roles import Roles
 from sim_peer.shards import SHARD_QUERY, ShardDirectory
 from sim_peer.state_answers import StateAnswers
@@ -115,6 +118,7 @@ class ReplicaHost:
         self.gate: CommandGate | None = None
         self.takeovers: list[dict[str, Any]] = []
         self.last_state: WorldState | None = None
+        self.role_token = RoleToken(fabric)  # the role shown on the fabric (sim_peer.role_token)
         self.roles = Roles(self, election)
         self.shards = ShardDirectory(self, world.robots)  # this shard: the robots this sim serves, or would at a take-over
         self.follower = Follower(self, snapshot, poll_s)
@@ -151,6 +155,7 @@ class ReplicaHost:
         if self.role != el.PRIMARY:
             self.follower.start_polling()
             self.announce(f"standby {f.peer_id}: following {self.election.leader or 'the primary'} (term {self.election.term})")
+        self.role_token.show(self.election, self.peer is not None)
         return self
 
     def run(self, stop: threading.Event, duration: float | None = None) -> str:
@@ -179,6 +184,7 @@ class ReplicaHost:
                 return
             self._closed = True
         self.stopping.set()
+        self.role_token.close()
         self.moves.close()
         self.state_answers.close()
         # a take-over under way finishes first: closed meanwhile, it raised from its thread and could
@@ -243,6 +249,7 @@ class ReplicaHost:
         self.takeovers.append({"term": self.election.term, "s": took, "from": state.header.source if state else ""})
         self.announce(f"sim {self.fabric.peer_id}: took over the world with term {self.election.term} in {took * 1000:.0f} ms"
                       + (f" from the state of {state.header.source} at t={state.time:.3f} s" if state else ""))
+        self.role_token.show(self.election, self.peer is not None)
 
     def world_state(self, *, force: bool = False) -> WorldState:
         """The whole world's state as this sim serves it (``force``: a standby that served until now, too)."""
@@ -292,6 +299,7 @@ class ReplicaHost:
         self.roles.set_term(term)
         self.fabric.seqs.carry_on(seqs)
         self.serve(replace(state, header=replace(state.header, term=term)))
+        self.role_token.show(self.election, True)  # serving again, under the new term
         self.shards.learn_soon()
 
     def serve_again(self, placements: dict[str, SceneRobot], state: WorldState, term: int) -> None:

@@ -330,6 +330,7 @@ class Roles:
     def set_term(self, term: int) -> None:
         """Serve on under ``term`` (a move or an adoption took a new one; call with the lock held)."""
         self.election = replace(self.election, term=term)
+        self.host.role_token.show(self.election, self.host.peer is not None)
 
     def step(self, ev: el.Event) -> None:
         """Apply one observation to the election and carry out its effects. A view of the live sims taken while this
@@ -370,3 +371,4 @@ class Roles:
                     h.fabric.assume_term(e.term, h.scopes())
             elif e.kind == "follow" and self.role == el.STANDBY:
                 h.announce(f"standby {h.fabric.peer_id}: following {e.leader} (term {e.term})")
+        h.role_token.show(self.election, h.peer is not None)  # a take-over shows once it serves (ReplicaHost.take_over)
