@@ -77,7 +77,7 @@ def measure(kills: int) -> list[dict[str, float]]:
     from fabric import keys
     from fabric.interfaces import Event
     from fabric.session import Fabric
-    from robofabric.testing import ProcessGroup, client, free_port, router_config, wait_until
+    from robofabric.testing import ProcessGroup, SimRoles, client, free_port, router_config, wait_until
     from ownership import OwnershipClient
 
     world = f"bench{int(time.time()) % 100000}"
@@ -91,6 +91,7 @@ def measure(kills: int) -> list[dict[str, float]]:
             fab.subscribe_raw(keys.robot_stream_all(world, stream), samples.on_sample)
         events: list = []
         fab.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
+        roles = SimRoles(fab)  # the role each sim shows (its role token), not its log
         sims = _Sims(procs, world, f"tcp/127.0.0.1:{port}")
         current, standby = sims.start(0), sims.start(1, standby=True)
         own = OwnershipClient(fab, "bench", renew_s=0.2, timeout=10.0).start()
@@ -100,8 +101,8 @@ def measure(kills: int) -> list[dict[str, float]]:
                 raise typer.Exit(f"could not own arm1: {own.record('arm1')}")
             epoch = own.epoch("arm1")
             for i in range(kills):
-                wait_until(lambda: f"following sim-{i:02d} (term {i + 1})" in procs.output(standby), timeout=120,
-                           what=f"standby {i + 1} following", seen=lambda: procs.output(standby)[-800:])
+                roles.wait(f"sim-{i + 1:02d}", "standby", term=i + 1, leader=f"sim-{i:02d}", timeout=120,
+                           seen=lambda: procs.output(standby)[-800:])
                 _set_moving(fab, own, samples, i, epoch, seen=lambda: ([(e.kind, e.reason, e.header.source) for e in events[-4:]],
                                                                  procs.output(current)[-600:]))
                 rows.append(_take_over(procs, current, samples, term=i + 1))

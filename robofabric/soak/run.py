@@ -78,17 +78,6 @@ def _wait(pred: Any, timeout: float, what: str, seen: Any = None) -> None:
         time.sleep(0.2)
 
 
-def sim_role(output: str) -> str:
-    """``primary`` or ``standby``: what a sim's output says it is now (its last line that says either)."""
-    role = "starting"
-    for line in output.splitlines():
-        if "took over the world" in line or ("Ctrl-C to stop" in line and "(standby)" not in line):
-            role = "primary"
-        elif "following " in line or "stepping down" in line:
-            role = "standby"
-    return role
-
-
 class Soak:
     """The class in the lab, and what the nemesis may do to it (:class:`robofabric.soak.nemesis.Cluster`)."""
 
@@ -137,23 +126,26 @@ class Soak:
         return p
 
     def build(self) -> None:
-        """Every host and peer, each waited for; the observer last, so the history starts with a served world."""
+        """Every host and peer, each waited for; the observer's history last, so it starts with a served world (its process
+        first: it watches the roles the sims show)."""
         self.hosts["router"] = self.lab.add_host("router")
         for role, host in (("sim-a", "sa"), ("sim-b", "sb"), ("compute", "cp"), ("recorder", "obs")):
             self.hosts[role] = self.lab.hosts.get(host) or self.lab.add_host(host)
         router = self._start("router")
         _wait(lambda: "listening" in router.output(), 120, "the router listening", lambda: router.output()[-800:])
+        # the observer's process first: it watches the roles the sims show (their role tokens) from the start
+        self.observer = self.hosts["recorder"].python(name="observer")
+        self.observer.call("from robofabric.soak.observer import Observer, watch_roles\n"
+                           f"roles = watch_roles({self.world!r}, {self.hosts['router'].endpoint()!r}); None", timeout=120)
+        self.procs["observer"] = self.observer.proc
         primary = self._start("sim-a", standby=False)
-        _wait(lambda: sim_role(primary.output()) == "primary", 240, "the primary sim", lambda: primary.output()[-1500:])
+        _wait(lambda: self.sim_roles()["sim-a"] == "primary", 240, "the primary sim", lambda: primary.output()[-1500:])
         standby = self._start("sim-b")
-        _wait(lambda: sim_role(standby.output()) == "standby", 240, "the standby following", lambda: standby.output()[-1500:])
+        _wait(lambda: self.sim_roles()["sim-b"] == "standby", 240, "the standby following", lambda: standby.output()[-1500:])
         self._start("compute")
         self._start("recorder")
-        self.observer = self.hosts["recorder"].python(name="observer")
-        self.observer.call("from robofabric.soak.observer import Observer\n"
-                           f"ob = Observer({self.world!r}, {self.hosts['router'].endpoint()!r}, {str(self.wire_path)!r}); None",
+        self.observer.call(f"ob = Observer({self.world!r}, {self.hosts['router'].endpoint()!r}, {str(self.wire_path)!r}); None",
                            timeout=120)
-        self.procs["observer"] = self.observer.proc
         for i in range(self.cfg.students):
             role = f"s{i:02d}"
             self.hosts[role] = self.lab.add_host(role)
@@ -161,10 +153,21 @@ class Soak:
 
     # ------------------------------------------------------------------ the Cluster protocol
 
+    def sim_roles(self) -> dict[str, str]:
+        """The role each sim shows now on the fabric, as the observer's session sees its role token
+        (:class:`robofabric.testing.SimRoles`): ``primary``, ``standby``, or ``""`` (none: starting, killed, cut off,
+        paused past the lease, or the observer's own link down)."""
+        assert self.observer is not None
+        try:
+            return self.observer.call(f"{{s: roles.role(s) for s in {SIMS!r}}}", timeout=30)
+        except Exception:  # the observer busy or ending: nothing is known
+            return {s: "" for s in SIMS}
+
     def roles(self, kind: str) -> list[str]:
+        if kind == "sim":
+            shown = self.sim_roles()
+            return sorted(SIMS, key=lambda r: shown[r] != "primary")
         with self._lock:
-            if kind == "sim":
-                return sorted(SIMS, key=lambda r: sim_role(self.procs[r].output()) != "primary")
             if kind == "compute":
                 return ["compute"]
             return sorted(r for r in self.procs if r.startswith("s") and r[1:].isdigit())
@@ -173,7 +176,7 @@ class Soak:
         with self._lock:
             if any(r in self.frozen or r in self.cut_off or not self.procs[r].alive() for r in SIMS):
                 return False
-            return sorted(sim_role(self.procs[r].output()) for r in SIMS) == ["primary", "standby"]
+        return sorted(self.sim_roles().values()) == ["primary", "standby"]
 
     def wait_sims_healthy(self, timeout: float) -> bool:
         try:
