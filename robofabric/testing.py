@@ -194,14 +194,18 @@ class SimRoles:
         with self._lock:
             return any(r.sim == sim and r.role == role and term in (None, r.term) for r in self.shown)
 
+    def shows(self, sim: str, role: str, *, term: int | None = None, leader: str | None = None) -> SimRole | None:
+        """What ``sim`` shows now if it is ``role`` (under ``term``, led by ``leader``, if given), else None."""
+        r = self.now(sim)
+        ok = r is not None and r.role == role and term in (None, r.term) and leader in (None, r.leader)
+        return r if ok else None
+
     def wait(self, sim: str, role: str, *, term: int | None = None, leader: str | None = None, timeout: float = 60.0,
              seen: Callable[[], Any] | None = None) -> SimRole:
         """Wait until ``sim`` shows ``role`` (under ``term``, following ``leader``, if given); what it shows then."""
 
         def showing() -> SimRole | None:
-            r = self.now(sim)
-            ok = r is not None and r.role == role and term in (None, r.term) and leader in (None, r.leader)
-            return r if ok else None
+            return self.shows(sim, role, term=term, leader=leader)
 
         what = f"{sim} showing {role}" + (f" (term {term})" if term is not None else "") + (f" of {leader}" if leader else "")
         return wait_until(showing, timeout=timeout, interval=0.05, what=what,

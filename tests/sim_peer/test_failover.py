@@ -22,7 +22,7 @@ import pytest
 from fabric import keys
 from fabric.codec import DecodeError, decode
 from fabric.interfaces import Command, Event, JointTarget, OwnershipRecord, Path, WorldInfo, WorldState
-from robofabric.testing import client_config, robofabric_cmd, wait_until
+from robofabric.testing import SimRoles, client_config, robofabric_cmd, wait_until
 
 from ownership import OwnershipClient
 from user_peer.api import World as UserWorld
@@ -82,18 +82,19 @@ def _start(procs, world, ep, pid, *extra):
     return procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep, "--id", pid, *extra), name=pid)
 
 
-def _pair(procs, world, port):
+def _pair(procs, world, port, roles: SimRoles):
     ep = f"tcp/127.0.0.1:{port}"
     primary = _start(procs, world, ep, "sim-a")
     standby = _start(procs, world, ep, "sim-b", "--standby")
-    wait_until(lambda: "following sim-a (term 1)" in procs.output(standby), timeout=90, what="standby following the primary",
+    roles.wait("sim-b", "standby", term=1, leader="sim-a", timeout=90,
                seen=lambda: (procs.output(primary)[-1500:], procs.output(standby)[-1500:]))
     return primary, standby
 
 
 def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, connect, procs):
     port = router[1]
-    primary, standby = _pair(procs, world, port)
+    roles = SimRoles(connect("tool", "roles"))  # the roles the sims show (their role tokens)
+    primary, standby = _pair(procs, world, port, roles)
     fa, fb = connect("user", "alice"), connect("user", "bob")
     tape = Tape(fb, world)
     events: list[Event] = []
@@ -121,10 +122,10 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
 
     procs.kill(primary)  # SIGKILL
     t_kill = time.monotonic()
-    # the standby announces the take-over after its peer has started streaming: wait for both
+    # the standby shows itself primary after its peer has started streaming: wait for both
     streams = (("arm1", "joints"), ("arm1", "pose"), ("base1", "pose"), ("base1", "scan"))
-    wait_until(lambda: all(tape.of(r, s, 2) for r, s in streams) and "took over the world with term 2" in procs.output(standby),
-               timeout=20, what="state from the new authority and its announcement",
+    wait_until(lambda: all(tape.of(r, s, 2) for r, s in streams) and roles.shows("sim-b", "primary", term=2),
+               timeout=20, what="state from the new authority and its role",
                seen=lambda: ([(r, s, len(tape.of(r, s, 2))) for r, s in streams], procs.output(standby)[-1500:]))
     # every stream resumes from the new authority within 1 s of the kill, and of the old one's last sample
     for r, s in streams:
@@ -179,7 +180,8 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
 
 def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, procs, tmp_path):
     port = router[1]
-    primary, standby = _pair(procs, world, port)
+    roles = SimRoles(connect("tool", "roles"))
+    primary, standby = _pair(procs, world, port, roles)
     mcap = tmp_path / "run.mcap"
     recorder = procs.start(robofabric_cmd("record", "-o", str(mcap), "-q", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"),
                            name="recorder")
@@ -210,8 +212,7 @@ def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, 
     finally:
         cont_ns = time.time_ns()
         os.kill(primary.pid, signal.SIGCONT)
-    wait_until(lambda: "stepping down" in procs.output(primary) and "standby sim-a: following sim-b (term 2)" in procs.output(primary),
-               timeout=60, what="the old primary steps down and follows", seen=lambda: procs.output(primary)[-1500:])
+    roles.wait("sim-a", "standby", term=2, leader="sim-b", timeout=60, seen=lambda: procs.output(primary)[-1500:])  # stepped down
     t_down = time.monotonic()
     n = len(tape.of("arm1", "joints", 2))
     wait_until(lambda: len(tape.of("arm1", "joints", 2)) > n + 50, timeout=20, what="term-2 joints go on")
@@ -285,19 +286,17 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
     bob's base follows its planned path: sim-c takes over with term 3. Both scenarios still succeed."""
     port = router[1]
     ep = f"tcp/127.0.0.1:{port}"
+    roles = SimRoles(connect("tool", "roles"))  # the roles the sims show (their role tokens)
     sims = {"sim-a": _start(procs, world, ep, "sim-a")}
-    wait_until(lambda: "world" in procs.output(sims["sim-a"]) and router[0].live_peers("sim"), timeout=90, what="the primary",
-               seen=lambda: procs.output(sims["sim-a"])[-1500:])
+    roles.wait("sim-a", "primary", term=1, timeout=90, seen=lambda: procs.output(sims["sim-a"])[-1500:])
     # the higher id first, following before the other starts: the one that takes over is chosen by id,
     # not by who came first
     sims["sim-c"] = _start(procs, world, ep, "sim-c", "--standby")
     comp = procs.start(robofabric_cmd("compute", "--world", world, "--connect", ep), name="compute")
-    wait_until(lambda: "following sim-a (term 1)" in procs.output(sims["sim-c"]), timeout=90, what="sim-c following sim-a",
-               seen=lambda: procs.output(sims["sim-c"])[-1500:])
+    roles.wait("sim-c", "standby", term=1, leader="sim-a", timeout=90, seen=lambda: procs.output(sims["sim-c"])[-1500:])
     sims["sim-b"] = _start(procs, world, ep, "sim-b", "--standby")
     for sid in ("sim-b", "sim-c"):
-        wait_until(lambda: "following sim-a (term 1)" in procs.output(sims[sid]), timeout=90, what=f"{sid} following sim-a",
-                   seen=lambda: procs.output(sims[sid])[-1500:])
+        roles.wait(sid, "standby", term=1, leader="sim-a", timeout=90, seen=lambda: procs.output(sims[sid])[-1500:])
     wait_until(lambda: "arms arm1" in procs.output(comp), timeout=90, what="compute peer serving arm1",
                seen=lambda: procs.output(comp)[-1500:])
 
@@ -331,8 +330,8 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
         wait_until(lambda: dead in kills or not any(t.is_alive() for t in threads), timeout=180, what=f"the moment to kill {dead}",
                    seen=lambda: (results, len(path_sent)))
         assert dead in kills, (f"the scenarios ended before {dead} was killed", results)
-        wait_until(lambda: all(tape.of(r, s, term) for r, s in streams)
-                   and f"took over the world with term {term}" in procs.output(sims[heir]), timeout=20,
+        wait_until(lambda: all(tape.of(r, s, term) for r, s in streams) and roles.shows(heir, "primary", term=term),
+                   timeout=20,
                    what=f"{heir} serving term {term}", seen=lambda: procs.output(sims[heir])[-1500:])
         for r, s in streams:  # streams resume within 1 s, from the heir
             first = tape.of(r, s, term)[0]
@@ -342,9 +341,8 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
         if other is not None:
             # the other standby follows the heir and is no authority: nothing on the wire from it, and its
             # srv/state is a refusal (only the heir's answer comes back)
-            wait_until(lambda: f"following {heir} (term {term})" in procs.output(sims[other]), timeout=20,
-                       what=f"{other} following {heir}", seen=lambda: procs.output(sims[other])[-1500:])
-            assert "took over" not in procs.output(sims[other])
+            roles.wait(other, "standby", term=term, leader=heir, timeout=20, seen=lambda: procs.output(sims[other])[-1500:])
+            assert not roles.ever(other, "primary")
             states = obs.rpc.query(keys.srv(world, "state"), timeout=5.0, expected=WorldState, all_replies=True)
             assert [(r.message.header.source, r.message.header.term) for r in states] == [(heir, term)]
             assert not tape.by(other)

@@ -12,20 +12,19 @@ import pytest
 
 from fabric import keys
 from fabric.interfaces import JointState
-from robofabric.testing import robofabric_cmd, wait_until
+from robofabric.testing import SimRoles, robofabric_cmd, wait_until
 
 pytestmark = pytest.mark.slow
 
 
 def test_a_standby_paused_past_the_lease_follows_again_and_takes_nothing_over(world, router, connect, procs):
     ep = f"tcp/127.0.0.1:{router[1]}"
+    roles = SimRoles(connect("tool", "roles"))  # the roles the sims show (their role tokens), from the start
     primary = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep, "--id", "sim-a"), name="sim-a")
-    wait_until(lambda: "world" in procs.output(primary) and router[0].live_peers("sim"), timeout=90, what="the primary",
-               seen=lambda: procs.output(primary)[-1500:])
+    roles.wait("sim-a", "primary", term=1, timeout=90, seen=lambda: procs.output(primary)[-1500:])
     standby = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep, "--id", "sim-b", "--standby"),
                           name="sim-b")
-    wait_until(lambda: "following sim-a (term 1)" in procs.output(standby), timeout=90, what="the standby following",
-               seen=lambda: procs.output(standby)[-1500:])
+    roles.wait("sim-b", "standby", term=1, leader="sim-a", timeout=90, seen=lambda: procs.output(standby)[-1500:])
     watch = connect("tool", "watch")
     joints: list[JointState] = []
     watch.subscribe(keys.robot_joints(world, "arm1"), lambda k, m: joints.append(m), expected=JointState)
@@ -42,8 +41,9 @@ def test_a_standby_paused_past_the_lease_follows_again_and_takes_nothing_over(wo
     # its link, then the tokens come back; three leases and more of the primary serving on (a take-over would come
     # within the first of them: the loss of the tokens is read at once)
     n = len(joints)
-    wait_until(lambda: "took over" in procs.output(standby) or len(joints) > n + int(100 * 4 * lease), timeout=60,
+    wait_until(lambda: roles.ever("sim-b", "primary") or len(joints) > n + int(100 * 4 * lease), timeout=60,
                what="four leases of the primary's joints after SIGCONT", seen=lambda: procs.output(standby)[-1500:])
-    assert "took over" not in procs.output(standby), procs.output(standby)[-1500:]
+    assert not roles.ever("sim-b", "primary"), procs.output(standby)[-1500:]
+    roles.wait("sim-b", "standby", term=1, leader="sim-a", timeout=30, seen=lambda: procs.output(standby)[-1500:])  # back
     assert {(m.header.source, m.header.term) for m in joints[n:]} == {("sim-a", 1)}
     assert standby.poll() is None, procs.output(standby)[-1500:]

@@ -17,7 +17,7 @@ import pytest
 
 from fabric import keys
 from fabric.interfaces import WorldInfo
-from robofabric.testing import client_config, robofabric_cmd, wait_until
+from robofabric.testing import SimRoles, client_config, robofabric_cmd, wait_until
 from user_peer.api import Base, World
 
 pytestmark = pytest.mark.slow
@@ -113,9 +113,9 @@ def test_a_shards_standby_takes_its_robots_over_and_the_other_shard_is_not_fence
     has the lowest id of the live sims; base0 goes on at term 1, believed beside base1's term 2; alice keeps
     both robots with their epochs."""
     common, probe, sim_a, sim_b = _two_shards(world, router, connect, procs)
+    roles = SimRoles(probe)  # the roles the sims show (their role tokens)
     sim_b2 = procs.start(robofabric_cmd("sim", *BASE1, *common, "--id", "sim-b2", "--standby"), name="sim-b2")
-    wait_until(lambda: "following sim-b" in procs.output(sim_b2), timeout=60, what="sim-b2 following sim-b",
-               seen=lambda: procs.output(sim_b2)[-800:])
+    roles.wait("sim-b2", "standby", term=1, leader="sim-b", timeout=60, seen=lambda: procs.output(sim_b2)[-800:])
     w = World(client_config(world, router[1]), "alice", timeout=10.0)
     try:
         b0, b1 = w.robot("base0"), w.robot("base1")
@@ -133,8 +133,7 @@ def test_a_shards_standby_takes_its_robots_over_and_the_other_shard_is_not_fence
         b1.stop(timeout=10)
 
         procs.kill(sim_b)
-        wait_until(lambda: "took over the world with term 2" in procs.output(sim_b2), timeout=30, what="sim-b2 taking base1 over",
-                   seen=lambda: procs.output(sim_b2)[-800:])
+        roles.wait("sim-b2", "primary", term=2, timeout=30, seen=lambda: procs.output(sim_b2)[-800:])  # base1 taken over
         assert "from the state of sim-b" in procs.output(sim_b2)
         assert gone == [("sim-b", ["base1"])]
         wait_until(lambda: b1.pose is not None and b1.pose.header.source == "sim-b2" and b1.pose.header.term == 2, timeout=20,
@@ -153,7 +152,7 @@ def test_a_shards_standby_takes_its_robots_over_and_the_other_shard_is_not_fence
         b1.twist(0.3, 0.0)
         wait_until(lambda: b1.xy_theta[0] < x - 0.1, timeout=20, what="base1 driving under sim-b2")
         b1.stop(timeout=10)
-        assert sim_a.poll() is None and "stepping down" not in procs.output(sim_a) and "took over" not in procs.output(sim_a)
+        assert sim_a.poll() is None and {(r.role, r.term) for r in roles.shown if r.sim == "sim-a"} == {("primary", 1)}
     finally:
         w.close()
 

@@ -8,7 +8,7 @@ import subprocess
 
 import pytest
 
-from robofabric.testing import robofabric_cmd, wait_until
+from robofabric.testing import SimRoles, robofabric_cmd, wait_until
 
 pytestmark = pytest.mark.slow
 
@@ -37,8 +37,7 @@ def test_a_second_sim_on_a_served_world_is_refused_with_one_line(world, router, 
     # a standby is the one exception: it follows sim-a
     standby = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", "--robot", "reeman:base0@0,0",
                                          *common, "--id", "sim-c", "--standby"), name="sim-c")
-    wait_until(lambda: "following sim-a" in procs.output(standby), timeout=60, what="the standby following sim-a",
-               seen=lambda: procs.output(standby)[-800:])
+    SimRoles(probe).wait("sim-c", "standby", leader="sim-a", timeout=60, seen=lambda: procs.output(standby)[-800:])
 
 
 def _answers(fab, world: str) -> bool:

@@ -8,7 +8,7 @@ import logging
 
 import pytest
 
-from robofabric.testing import client_config, robofabric_cmd, wait_until
+from robofabric.testing import SimRoles, client, client_config, robofabric_cmd, wait_until
 from user_peer.api import World
 
 pytestmark = pytest.mark.slow  # a primary sim and its standby
@@ -19,8 +19,9 @@ def test_a_standby_taking_over_is_told_as_a_failover(world, router, procs, caplo
     common = ("--scene", "combined", "--world", world, "--connect", ep)
     primary = procs.start(robofabric_cmd("sim", *common, "--id", "sim-a"), name="sim-a")
     standby = procs.start(robofabric_cmd("sim", *common, "--id", "sim-b", "--standby"), name="sim-b")
-    wait_until(lambda: "following sim-a (term 1)" in procs.output(standby), timeout=90, what="the standby following sim-a",
-               seen=lambda: (procs.output(primary)[-1000:], procs.output(standby)[-1000:]))
+    with client(world, router[1], peer_id="roles") as fab:
+        SimRoles(fab).wait("sim-b", "standby", term=1, leader="sim-a", timeout=90,
+                           seen=lambda: (procs.output(primary)[-1000:], procs.output(standby)[-1000:]))
     caplog.set_level(logging.INFO, logger="robofabric.user")
     w = World(client_config(world, router[1]), "alice", timeout=10.0)
     try:
