@@ -210,3 +210,34 @@ class SimRoles:
         what = f"{sim} showing {role}" + (f" (term {term})" if term is not None else "") + (f" of {leader}" if leader else "")
         return wait_until(showing, timeout=timeout, interval=0.05, what=what,
                           seen=lambda: (self.now(sim), seen() if seen is not None else None))
+
+
+class RemoteRoles:
+    """:class:`SimRoles` in another process: a Python a lab host runs (:class:`robofabric.lab.RemotePython`), for
+    tests and the soak whose sims live in the lab's network, where this process has no route. Each question is one
+    call into that process."""
+
+    def __init__(self, py: Any, world: str, endpoint: str, *, peer_id: str = "roles") -> None:
+        self.py = py
+        py.call("from fabric.config import FabricConfig\nfrom fabric.session import Fabric\n"
+                "from robofabric.testing import SimRoles\n"
+                f"roles = SimRoles(Fabric(FabricConfig.resolve(world={world!r}, connect=[{endpoint!r}]), kind='tool', "
+                f"peer_id={peer_id!r})); None", timeout=120)
+
+    def role(self, sim: str, *, timeout: float = 30.0) -> str:
+        return self.py.call(f"roles.role({sim!r})", timeout=timeout)
+
+    def roles(self, sims: Any, *, timeout: float = 30.0) -> dict[str, str]:
+        """The role each of ``sims`` shows now (``""``: none), in one call."""
+        return self.py.call(f"{{s: roles.role(s) for s in {tuple(sims)!r}}}", timeout=timeout)
+
+    def ever(self, sim: str, role: str, term: int | None = None) -> bool:
+        return self.py.call(f"roles.ever({sim!r}, {role!r}, {term!r})")
+
+    def wait(self, sim: str, role: str, *, term: int | None = None, leader: str | None = None, timeout: float = 60.0,
+             seen: Callable[[], Any] | None = None) -> None:
+        """Wait until ``sim`` shows ``role`` (under ``term``, following ``leader``, if given)."""
+        ask = f"roles.shows({sim!r}, {role!r}, term={term!r}, leader={leader!r}) is not None"
+        what = f"{sim} showing {role}" + (f" (term {term})" if term is not None else "") + (f" of {leader}" if leader else "")
+        wait_until(lambda: self.py.call(ask), timeout=timeout, interval=0.2, what=what,
+                   seen=lambda: (self.role(sim), seen() if seen is not None else None))

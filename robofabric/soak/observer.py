@@ -29,7 +29,7 @@ from fabric.interfaces import Command, Event, JointState, JointTarget, Ownership
 
 from robofabric.soak.history import Cmd, Joints, OwnEvent, OwnRec, Reject, Writer
 
-__all__ = ["Observer", "watch_roles", "JOINT_STEP", "JOINT_EVERY_S"]
+__all__ = ["Observer", "JOINT_STEP", "JOINT_EVERY_S"]
 
 JOINT_STEP = 0.05
 """A robot's joints are written again once some joint moved this far (rad) since the last written sample."""
@@ -102,16 +102,6 @@ class Observer:
     def close(self) -> None:
         self.fab.close()
         self.writer.close()
-
-
-def watch_roles(world: str, endpoint: str, *, peer_id: str = "roles") -> Any:
-    """A session of its own watching the roles the world's sims show (:class:`robofabric.testing.SimRoles`), for the
-    soak to ask which sim is the primary and whether a standby follows it; it starts before the sims do."""
-    from fabric.config import FabricConfig
-    from fabric.session import Fabric
-    from robofabric.testing import SimRoles
-
-    return SimRoles(Fabric(FabricConfig.resolve(world=world, connect=[endpoint]), kind="tool", peer_id=peer_id))
 
 
 def _record(t: float, parsed: Any, msg: Any) -> Any:

@@ -34,6 +34,7 @@ from robofabric.lab import Host, Lab, LabError, LabProcess, RemotePython
 from robofabric.soak import checker, procs
 from robofabric.soak.history import Fault, Mark, ProcExit, Record, Writer, read
 from robofabric.soak.nemesis import KINDS, VICTIMS, Nemesis
+from robofabric.testing import RemoteRoles
 
 __all__ = ["SoakConfig", "SoakResult", "Soak", "run_soak"]
 
@@ -96,6 +97,7 @@ class Soak:
         self.reported: set[int] = set()
         self.ending = False
         self.observer: RemotePython | None = None
+        self.sim_watch: RemoteRoles | None = None  # the roles the sims show, watched from the observer's process
         self.nemesis: Nemesis | None = None
         self._lock = threading.RLock()
         self._stop = threading.Event()
@@ -135,16 +137,16 @@ class Soak:
         _wait(lambda: "listening" in router.output(), 120, "the router listening", lambda: router.output()[-800:])
         # the observer's process first: it watches the roles the sims show (their role tokens) from the start
         self.observer = self.hosts["recorder"].python(name="observer")
-        self.observer.call("from robofabric.soak.observer import Observer, watch_roles\n"
-                           f"roles = watch_roles({self.world!r}, {self.hosts['router'].endpoint()!r}); None", timeout=120)
         self.procs["observer"] = self.observer.proc
+        self.sim_watch = RemoteRoles(self.observer, self.world, self.hosts["router"].endpoint())
         primary = self._start("sim-a", standby=False)
         _wait(lambda: self.sim_roles()["sim-a"] == "primary", 240, "the primary sim", lambda: primary.output()[-1500:])
         standby = self._start("sim-b")
         _wait(lambda: self.sim_roles()["sim-b"] == "standby", 240, "the standby following", lambda: standby.output()[-1500:])
         self._start("compute")
         self._start("recorder")
-        self.observer.call(f"ob = Observer({self.world!r}, {self.hosts['router'].endpoint()!r}, {str(self.wire_path)!r}); None",
+        self.observer.call("from robofabric.soak.observer import Observer\n"
+                           f"ob = Observer({self.world!r}, {self.hosts['router'].endpoint()!r}, {str(self.wire_path)!r}); None",
                            timeout=120)
         for i in range(self.cfg.students):
             role = f"s{i:02d}"
@@ -157,9 +159,9 @@ class Soak:
         """The role each sim shows now on the fabric, as the observer's session sees its role token
         (:class:`robofabric.testing.SimRoles`): ``primary``, ``standby``, or ``""`` (none: starting, killed, cut off,
         paused past the lease, or the observer's own link down)."""
-        assert self.observer is not None
+        assert self.sim_watch is not None
         try:
-            return self.observer.call(f"{{s: roles.role(s) for s in {SIMS!r}}}", timeout=30)
+            return self.sim_watch.roles(SIMS)
         except Exception:  # the observer busy or ending: nothing is known
             return {s: "" for s in SIMS}
 

@@ -16,7 +16,7 @@ from fabric.codec import decode
 from fabric.fencing import is_authority_key
 from robofabric.lab import Lab
 from user_peer.recordings import iter_messages
-from robofabric.testing import wait_until
+from robofabric.testing import RemoteRoles, wait_until
 
 pytestmark = [pytest.mark.lab, pytest.mark.slow]
 
@@ -28,13 +28,12 @@ def test_a_primary_cut_off_past_the_lease_steps_down_when_the_partition_heals(la
     ep = router_host.endpoint()
     router = router_host.start(["router", "--listen", ep], name="router")
     wait_until(lambda: "listening" in router.output() or not router.alive(), timeout=120, what="router listening")
+    roles = RemoteRoles(obs.python(name="roles"), "demo", ep)  # the roles the sims show, seen from the observer's host
     sim = ["sim", "--scene", "combined", "--world", "demo", "--connect", ep]
     primary = sa.start([*sim, "--id", "sim-a"], name="sim-a")
-    wait_until(lambda: "Ctrl-C to stop" in primary.output() or not primary.alive(), timeout=120, what="the primary",
-               seen=lambda: primary.output()[-800:])
+    roles.wait("sim-a", "primary", term=1, timeout=120, seen=lambda: primary.output()[-800:])
     standby = sb.start([*sim, "--id", "sim-b", "--standby"], name="sim-b")
-    wait_until(lambda: "following sim-a (term 1)" in standby.output(), timeout=120, what="the standby following",
-               seen=lambda: standby.output()[-800:])
+    roles.wait("sim-b", "standby", term=1, leader="sim-a", timeout=120, seen=lambda: standby.output()[-800:])
     recording = lab.log_dir / "failover.mcap"
     rec = obs.start(["record", "-o", str(recording), "-q", "--world", "demo", "--connect", ep], name="record")
     wait_until(lambda: recording.exists() and recording.stat().st_size > 2000, timeout=120, what="the recorder writing term 1",
@@ -42,15 +41,13 @@ def test_a_primary_cut_off_past_the_lease_steps_down_when_the_partition_heals(la
 
     lab.cut(sa)
     try:
-        wait_until(lambda: "took over the world with term 2" in standby.output(), timeout=LEASE + 20, what="the take-over",
-                   seen=lambda: standby.output()[-800:])
+        roles.wait("sim-b", "primary", term=2, timeout=LEASE + 20, seen=lambda: standby.output()[-800:])  # the take-over
         assert primary.alive() and "stepping down" not in primary.output()  # cut off, it has heard nobody yet
         size = recording.stat().st_size
         wait_until(lambda: recording.stat().st_size > size + 2000, timeout=30, what="the recorder writing term 2")
     finally:
         lab.restore(sa)
-    wait_until(lambda: "following sim-b (term 2)" in primary.output(), timeout=30, what="the old primary stepping down",
-               seen=lambda: primary.output()[-1500:])
+    roles.wait("sim-a", "standby", term=2, leader="sim-b", timeout=30, seen=lambda: primary.output()[-1500:])  # stepped down
     assert "sim-b holds term 2; stepping down" in primary.output()
     assert "took over" not in primary.output() and "still the authority" not in primary.output()
     size = recording.stat().st_size

@@ -9,7 +9,7 @@ import pytest
 
 import time
 
-from robofabric.testing import wait_until
+from robofabric.testing import RemoteRoles, wait_until
 from robofabric.lab import Lab, LabProcess
 
 pytestmark = [pytest.mark.lab, pytest.mark.slow]
@@ -20,13 +20,13 @@ def _world(lab: Lab):
     ep = router_host.endpoint()
     router = router_host.start(["router", "--listen", ep], name="router")
     wait_until(lambda: "listening" in router.output() or not router.alive(), timeout=120, what="router listening")
+    # the roles the sims show, watched from the router's host (a cut takes neither it nor its link)
+    roles = RemoteRoles(router_host.python(name="roles"), "demo", ep)
     sim = ["sim", "--scene", "arm_cell", "--world", "demo", "--connect", ep]
     primary = sa.start([*sim, "--id", "sim-a"], name="sim-a")
-    wait_until(lambda: "Ctrl-C to stop" in primary.output() or not primary.alive(), timeout=120, what="the primary",
-               seen=lambda: primary.output()[-800:])
+    roles.wait("sim-a", "primary", term=1, timeout=120, seen=lambda: primary.output()[-800:])
     standby = sb.start([*sim, "--id", "sim-b", "--standby"], name="sim-b")
-    wait_until(lambda: "following sim-a (term 1)" in standby.output(), timeout=120, what="the standby following",
-               seen=lambda: standby.output()[-800:])
+    roles.wait("sim-b", "standby", term=1, leader="sim-a", timeout=120, seen=lambda: standby.output()[-800:])
     return router_host, router, primary, standby
 
 

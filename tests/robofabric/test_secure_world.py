@@ -32,7 +32,7 @@ from fabric.interfaces import (Command, Event, Header, JointState, JointTarget, 
 from robofabric.secure import init
 from fabric.interfaces import ServiceError
 from fabric.session import Fabric
-from robofabric.testing import ProcessGroup, client_config, free_port, robofabric_cmd, router_config, wait_until
+from robofabric.testing import ProcessGroup, SimRoles, client_config, free_port, robofabric_cmd, router_config, wait_until
 
 pytestmark = pytest.mark.slow
 
@@ -314,6 +314,14 @@ def test_a_sim_may_ask_its_router_whether_its_link_is_up_and_a_student_may_not(s
 
     assert router_answers(secure.fabric("sim", kind="sim", peer_id="sim-probe"), 5.0)
     assert not router_answers(secure.fabric("mallory"), 1.0)
+
+
+def test_a_sim_shows_its_role_through_the_class_acl(secure):
+    """The class ACL lets a sim declare the token of its role (``peer/sim/{id}/{role}/{term}/{leader}``,
+    sim_peer.role_token): a viewer sees the class's only sim as its primary, under term 1."""
+    watcher = secure.fabric("viewer", kind="viewer", peer_id="roles")
+    sim = wait_until(lambda: watcher.live_peers("sim"), timeout=30, what="the sim's token")[0][1]
+    assert SimRoles(watcher).wait(sim, "primary", term=1, timeout=30).leader == sim
 
 
 @pytest.mark.parametrize("case", ["no credentials", "wrong password", "unknown user"])
