@@ -84,6 +84,7 @@ class ObjectAdoption:
             term = h.election.term + 1
             h.roles.set_term(term)
             h.serve(replace(state, header=replace(state.header, term=term)))
+            h.role_token.show(h.election, True)  # serving again, under the new term
         h.announce(f"sim {me}: no sim serves the scene objects any more; serving {', '.join(h.world.objects)} "
                    f"with my robots (term {term}) in {(time.monotonic() - t0) * 1000:.0f} ms")
         return True

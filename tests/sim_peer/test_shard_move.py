@@ -14,7 +14,7 @@ import pytest
 
 from fabric import keys
 from fabric.interfaces import JointState, Pose
-from robofabric.testing import client_config, robofabric_cmd, wait_until
+from robofabric.testing import SimRoles, client_config, robofabric_cmd, wait_until
 from user_peer.api import World
 
 from tests.sim_peer.test_shards import _parts, _two_shards
@@ -28,6 +28,7 @@ V = 0.3  # m/s: base2 drives through the move
 
 def test_a_robot_handed_between_sims_keeps_its_pose_joints_owner_and_epoch(world, router, connect, procs):
     common, probe, sim_a, sim_b = _two_shards(world, router, connect, procs, SIM_A, SIM_B)
+    roles = SimRoles(probe)  # the roles the sims show (their role tokens)
     lock = threading.Lock()
     seen: list[tuple[str, object]] = []  # (stream, message) of base2, in arrival order
 
@@ -104,6 +105,7 @@ def test_a_robot_handed_between_sims_keeps_its_pose_joints_owner_and_epoch(world
                    and "took base2 in from sim-a (term 2)" in procs.output(sim_b), timeout=20, what="both sims saying the move",
                    seen=lambda: (procs.output(sim_a)[-600:], procs.output(sim_b)[-600:]))
         assert sim_a.poll() is None and sim_b.poll() is None
-        assert "stepping down" not in procs.output(sim_a) + procs.output(sim_b)
+        roles.wait("sim-b", "primary", term=2, timeout=20)  # it serves base2 under the move's term
+        assert not roles.ever("sim-a", "standby") and not roles.ever("sim-b", "standby")  # nobody stepped down
     finally:
         w.close()

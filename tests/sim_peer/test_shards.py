@@ -50,6 +50,7 @@ def _two_shards(world, router, connect, procs, a=BASE0, b=BASE1):
 
 def test_two_sims_serve_one_world_and_one_sims_loss_takes_its_robots_only(world, router, connect, procs):
     common, probe, sim_a, sim_b = _two_shards(world, router, connect, procs)
+    roles = SimRoles(probe)  # the roles the sims show (their role tokens)
     assert "as a shard beside sim-a (base0)" in procs.output(sim_b)
     parts = _parts(probe, world)
     assert [r.id for r in parts["sim-a"].robots] == ["base0"] and [r.id for r in parts["sim-b"].robots] == ["base1"]
@@ -102,7 +103,7 @@ def test_two_sims_serve_one_world_and_one_sims_loss_takes_its_robots_only(world,
         b0.stop(timeout=10)
         rec = w.ownership.record("base0")
         assert (rec.owner, rec.epoch, rec.authority) == ("alice", epoch0, "sim-a")
-        assert sim_a.poll() is None and "stepping down" not in procs.output(sim_a)
+        assert sim_a.poll() is None and not roles.ever("sim-a", "standby")  # it never stepped down
     finally:
         w.close()
 
@@ -162,6 +163,7 @@ def test_a_paused_shard_stalls_its_robots_only_and_comes_back_with_its_owners(wo
     throughout; when sim-b resumes, it rejoins the world as base1's sim, base1 streams again, and bob still owns it
     with the same epoch and drives it (no standby, no restart)."""
     common, probe, sim_a, sim_b = _two_shards(world, router, connect, procs)
+    roles = SimRoles(probe)  # the roles the sims show (their role tokens)
     alice = World(client_config(world, router[1]), "alice", timeout=10.0)
     bob = World(client_config(world, router[1]), "bob", timeout=10.0)
     resumed = False
@@ -202,7 +204,7 @@ def test_a_paused_shard_stalls_its_robots_only_and_comes_back_with_its_owners(wo
         assert gone == [("sim-b", ["base1"])], gone
         wait_until(lambda: sorted(alice.robots()) == ["base0", "base1"], timeout=20, what="base1 back in alice's world",
                    seen=alice.sims)
-        assert "stepping down" not in procs.output(sim_a) + procs.output(sim_b)
+        assert {(r.sim, r.role) for r in roles.shown} == {("sim-a", "primary"), ("sim-b", "primary")}  # nobody stepped down
     finally:
         if not resumed:
             os.kill(sim_b.pid, signal.SIGCONT)  # a paused process cannot be ended by SIGTERM
@@ -215,6 +217,7 @@ def test_when_the_scene_objects_sim_dies_another_shard_adopts_them_where_they_we
     pointer's moves, serves the objects one term up, with the goal where alice last put it (no jump back to the
     scene's default); alice keeps base1 with its epoch and moves the goal again at sim-b."""
     common, probe, sim_a, sim_b = _two_shards(world, router, connect, procs)
+    roles = SimRoles(probe)  # the roles the sims show (their role tokens)
     w = World(client_config(world, router[1]), "alice", timeout=10.0)
     try:
         b1 = w.robot("base1")
@@ -233,6 +236,7 @@ def test_when_the_scene_objects_sim_dies_another_shard_adopts_them_where_they_we
         wait_until(lambda: "no sim serves the scene objects any more; serving goal, target with my robots (term 2)"
                    in procs.output(sim_b), timeout=20, what="sim-b saying it adopted the scene objects",
                    seen=lambda: procs.output(sim_b)[-800:])
+        roles.wait("sim-b", "primary", term=2, timeout=20)  # its role shows the adoption's term
         r = subprocess.run(robofabric_cmd("own", "list", "--json", *common), capture_output=True, text=True, timeout=120)
         assert r.returncode == 0, r.stderr[-800:]
         auth = {rec["object"]: rec["authority"] for rec in json.loads(r.stdout)["records"]}
