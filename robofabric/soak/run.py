@@ -79,6 +79,17 @@ def _wait(pred: Any, timeout: float, what: str, seen: Any = None) -> None:
         time.sleep(0.2)
 
 
+def _sim_roles(watch: RemoteRoles | None) -> dict[str, str]:
+    """The role each sim shows now on the fabric, as the observer's session sees its role token
+    (:class:`robofabric.testing.SimRoles`): ``primary``, ``standby``, or ``""`` (none: starting, killed, cut off,
+    paused past the lease, or the observer's own link down)."""
+    try:
+        assert watch is not None
+        return watch.roles(SIMS)
+    except Exception:  # the observer busy or ending: nothing is known
+        return {s: "" for s in SIMS}
+
+
 class Soak:
     """The class in the lab, and what the nemesis may do to it (:class:`robofabric.soak.nemesis.Cluster`)."""
 
@@ -140,9 +151,9 @@ class Soak:
         self.procs["observer"] = self.observer.proc
         self.sim_watch = RemoteRoles(self.observer, self.world, self.hosts["router"].endpoint())
         primary = self._start("sim-a", standby=False)
-        _wait(lambda: self.sim_roles()["sim-a"] == "primary", 240, "the primary sim", lambda: primary.output()[-1500:])
+        _wait(lambda: _sim_roles(self.sim_watch)["sim-a"] == "primary", 240, "the primary sim", lambda: primary.output()[-1500:])
         standby = self._start("sim-b")
-        _wait(lambda: self.sim_roles()["sim-b"] == "standby", 240, "the standby following", lambda: standby.output()[-1500:])
+        _wait(lambda: _sim_roles(self.sim_watch)["sim-b"] == "standby", 240, "the standby following", lambda: standby.output()[-1500:])
         self._start("compute")
         self._start("recorder")
         self.observer.call("from robofabric.soak.observer import Observer\n"
@@ -155,19 +166,9 @@ class Soak:
 
     # ------------------------------------------------------------------ the Cluster protocol
 
-    def sim_roles(self) -> dict[str, str]:
-        """The role each sim shows now on the fabric, as the observer's session sees its role token
-        (:class:`robofabric.testing.SimRoles`): ``primary``, ``standby``, or ``""`` (none: starting, killed, cut off,
-        paused past the lease, or the observer's own link down)."""
-        assert self.sim_watch is not None
-        try:
-            return self.sim_watch.roles(SIMS)
-        except Exception:  # the observer busy or ending: nothing is known
-            return {s: "" for s in SIMS}
-
     def roles(self, kind: str) -> list[str]:
         if kind == "sim":
-            shown = self.sim_roles()
+            shown = _sim_roles(self.sim_watch)
             return sorted(SIMS, key=lambda r: shown[r] != "primary")
         with self._lock:
             if kind == "compute":
@@ -178,7 +179,7 @@ class Soak:
         with self._lock:
             if any(r in self.frozen or r in self.cut_off or not self.procs[r].alive() for r in SIMS):
                 return False
-        return sorted(self.sim_roles().values()) == ["primary", "standby"]
+        return sorted(_sim_roles(self.sim_watch).values()) == ["primary", "standby"]
 
     def wait_sims_healthy(self, timeout: float) -> bool:
         try:
