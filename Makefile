@@ -26,12 +26,12 @@ $(AXE): tests/a11y/package.json tests/a11y/package-lock.json
 	  || echo "warning: npm ci of tests/a11y failed: the console's axe-core test will try again, then fail" >&2; \
 	else echo "warning: no npm (apt-get install npm): the console's axe-core test will fail" >&2; fi
 
-# tf2_msgs, std_srvs and nav2_msgs (NavigateToPose), which ROS 2 Kilted's wheels lack, generated and compiled into .venv with the wheels' rosidl
+# tf2_msgs, std_srvs, nav2_msgs (NavigateToPose) and control_msgs (FollowJointTrajectory), which ROS 2 Kilted's wheels lack, generated and compiled into .venv with the wheels' rosidl
 # tools and g++ (user_peer/ros2/msgbuild.py, ~10 s); a failure is said here and the ROS 2 tests that need them fail
 ROS_MSGS := $(VENV)/.ros-msgs
 $(ROS_MSGS): user_peer/ros2/msgbuild.py $(STAMP_TEST)
 	@($(PY) -m user_peer.ros2.msgbuild --force && touch $@) \
-	  || echo "warning: tf2_msgs/std_srvs/nav2_msgs not built (above): the ROS 2 bridge's TF, ownership service and action tests will fail" >&2
+	  || echo "warning: tf2_msgs/std_srvs/nav2_msgs/control_msgs not built (above): the ROS 2 bridge's TF, ownership service and action tests will fail" >&2
 
 install: $(STAMP)
 

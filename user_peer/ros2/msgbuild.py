@@ -1,10 +1,11 @@
 """The ROS 2 interface packages Kilted's wheels lack, built into this Python environment: ``tf2_msgs`` (for /tf),
-``std_srvs`` (for the ownership services) and ``nav2_msgs``' NavigateToPose action (for the bridge's action server).
+``std_srvs`` (for the ownership services), ``nav2_msgs``' NavigateToPose action and ``control_msgs``'
+FollowJointTrajectory action (for the bridge's action servers).
 
 PyPI's Kilted wheels ship rclpy, most message packages (``action_msgs`` and ``unique_identifier_msgs``, which
 rclpy's actions need, among them) and the whole rosidl tool chain (the generators for C and Python, the C type
 supports, their headers and libraries, under the environment's ``include/``, ``lib/`` and ``share/``), but not
-``tf2_msgs``, ``std_srvs`` or ``nav2_msgs``. This module does what colcon would do for them,
+``tf2_msgs``, ``std_srvs``, ``nav2_msgs`` or ``control_msgs``. This module does what colcon would do for them,
 without CMake or ament: it writes each interface as IDL (the text ``rosidl_adapter`` would make from the
 ``.msg``/``.srv``; the adapter itself needs catkin_pkg, which the wheels do not bring), runs the generators through
 their ``rosidl_cli`` extensions (the ``rosidl`` command itself refuses the wheels' duplicated entry points),
@@ -23,6 +24,7 @@ A package that is importable already (a sourced ROS 2 install, an earlier build)
 from __future__ import annotations
 
 import importlib.util
+import json
 import logging
 import os
 import shutil
@@ -34,7 +36,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-__all__ = ["INTERFACES", "MsgBuildError", "missing", "build", "main"]
+__all__ = ["INTERFACES", "MsgBuildError", "missing", "build", "main", "type_hashes"]
 
 INTERFACES: dict[str, dict[str, str]] = {
     "tf2_msgs": {
@@ -104,12 +106,98 @@ module nav2_msgs {
 };
 """,
     },
+    "control_msgs": {
+        # ros-controls/control_msgs master (6.3.0 on, June 2025: the branch Kilted and Rolling are released from),
+        # the action MoveIt's and ros2_control's trajectory clients send; Jazzy's lacks the feedback's two indices
+        "msg/JointTolerance.idl": """\
+module control_msgs {
+  module msg {
+    struct JointTolerance {
+      string name;
+      double position;
+      double velocity;
+      double acceleration;
+    };
+  };
+};
+""",
+        "msg/JointComponentTolerance.idl": """\
+module control_msgs {
+  module msg {
+    module JointComponentTolerance_Constants {
+      const uint16 X_AXIS = 1;
+      const uint16 Y_AXIS = 2;
+      const uint16 Z_AXIS = 3;
+      const uint16 TRANSLATION = 4;
+      const uint16 ROTATION = 5;
+    };
+    struct JointComponentTolerance {
+      string joint_name;
+      uint16 component;
+      double position;
+      double velocity;
+      double acceleration;
+    };
+  };
+};
+""",
+        "action/FollowJointTrajectory.idl": """\
+#include "builtin_interfaces/msg/Duration.idl"
+#include "control_msgs/msg/JointComponentTolerance.idl"
+#include "control_msgs/msg/JointTolerance.idl"
+#include "std_msgs/msg/Header.idl"
+#include "trajectory_msgs/msg/JointTrajectory.idl"
+#include "trajectory_msgs/msg/JointTrajectoryPoint.idl"
+#include "trajectory_msgs/msg/MultiDOFJointTrajectory.idl"
+#include "trajectory_msgs/msg/MultiDOFJointTrajectoryPoint.idl"
+
+module control_msgs {
+  module action {
+    struct FollowJointTrajectory_Goal {
+      trajectory_msgs::msg::JointTrajectory trajectory;
+      trajectory_msgs::msg::MultiDOFJointTrajectory multi_dof_trajectory;
+      sequence<control_msgs::msg::JointTolerance> path_tolerance;
+      sequence<control_msgs::msg::JointComponentTolerance> component_path_tolerance;
+      sequence<control_msgs::msg::JointTolerance> goal_tolerance;
+      sequence<control_msgs::msg::JointComponentTolerance> component_goal_tolerance;
+      builtin_interfaces::msg::Duration goal_time_tolerance;
+    };
+    module FollowJointTrajectory_Result_Constants {
+      const int32 SUCCESSFUL = 0;
+      const int32 INVALID_GOAL = -1;
+      const int32 INVALID_JOINTS = -2;
+      const int32 OLD_HEADER_TIMESTAMP = -3;
+      const int32 PATH_TOLERANCE_VIOLATED = -4;
+      const int32 GOAL_TOLERANCE_VIOLATED = -5;
+    };
+    struct FollowJointTrajectory_Result {
+      int32 error_code;
+      string error_string;
+    };
+    struct FollowJointTrajectory_Feedback {
+      std_msgs::msg::Header header;
+      sequence<string> joint_names;
+      trajectory_msgs::msg::JointTrajectoryPoint desired;
+      trajectory_msgs::msg::JointTrajectoryPoint actual;
+      trajectory_msgs::msg::JointTrajectoryPoint error;
+      int32 index;
+      sequence<string> multi_dof_joint_names;
+      trajectory_msgs::msg::MultiDOFJointTrajectoryPoint multi_dof_desired;
+      trajectory_msgs::msg::MultiDOFJointTrajectoryPoint multi_dof_actual;
+      trajectory_msgs::msg::MultiDOFJointTrajectoryPoint multi_dof_error;
+      int32 multi_dof_index;
+    };
+  };
+};
+""",
+    },
 }
 """Each package's interfaces as ``rosidl_adapter`` writes them from upstream's ``.msg``/``.srv``/``.action``
-(comments aside, which do not enter the type hash): ``tf2_msgs/TFMessage``, ``std_srvs/Trigger`` and
-``nav2_msgs/action/NavigateToPose`` only, what the bridge uses."""
+(comments aside, which do not enter the type hash): ``tf2_msgs/TFMessage``, ``std_srvs/Trigger``,
+``nav2_msgs/action/NavigateToPose`` and ``control_msgs/action/FollowJointTrajectory`` (with the two tolerance
+messages it holds) only, what the bridge uses."""
 
-_DEPS = ("geometry_msgs", "std_msgs", "builtin_interfaces", "service_msgs", "action_msgs", "unique_identifier_msgs")
+_DEPS = ("geometry_msgs", "trajectory_msgs", "std_msgs", "builtin_interfaces", "service_msgs", "action_msgs", "unique_identifier_msgs")
 """The interface packages the interfaces above refer to (a service's event message holds ``service_msgs``', an
 action's goal and result services ``action_msgs``' and ``unique_identifier_msgs``')."""
 
@@ -146,6 +234,25 @@ def _generate(package: str, src: Path, out: Path) -> None:
                       ("fastrtps_c", GenerateFastRTPSCTypesupport("fastrtps_c")),
                       ("introspection_c", GenerateIntrospectionCTypesupport("introspection_c"))):
         ext.generate(package, files, include, output_path=out / kind / package)
+
+
+def type_hashes(package: str, interfaces: dict[str, str] | None = None) -> dict[str, str]:
+    """Type name -> RIHS01 hash of each type ``interfaces`` (relative path -> IDL text; default: ``package``'s in
+    :data:`INTERFACES`) defines or refers to, as rosidl's type description generator computes them for the built
+    libraries; nothing is compiled. Tests compare them with upstream's published hashes."""
+    os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
+    logging.getLogger("rosidl_cli").setLevel(logging.ERROR)
+    from rosidl_generator_type_description.cli import HashTypeDescription
+
+    interfaces = INTERFACES[package] if interfaces is None else interfaces
+    with tempfile.TemporaryDirectory(prefix=f"robofabric-{package}-hash-") as tmp:
+        src = Path(tmp) / "src"
+        for rel, text in interfaces.items():
+            (src / rel).parent.mkdir(parents=True, exist_ok=True)
+            (src / rel).write_text(text, encoding="utf-8")
+        files = HashTypeDescription("type_description").generate_type_hashes(
+            package, [f"{src}:{rel}" for rel in interfaces], [str(Path(sys.prefix) / "share")], Path(tmp) / "out")
+        return {h["type_name"]: h["hash_string"] for f in files for h in json.loads(Path(f).read_text())["type_hashes"]}
 
 
 def _include_flags(out: Path) -> list[str]:
