@@ -27,6 +27,7 @@ them, as for any user; a refusal is logged on /rosout and counted)::
     /NS/ROBOT/navigate_to_pose  nav2_msgs/action/NavigateToPose -> the same, with feedback and a result (navigate.py)
     /NS/ROBOT/joint_command     sensor_msgs/JointState          -> Arm.move_joints(positions, wait=False)
     /NS/ROBOT/joint_trajectory  trajectory_msgs/JointTrajectory -> Arm.move_joints(its points at their times, 50 Hz)
+    /NS/ROBOT/follow_joint_trajectory  control_msgs/action/FollowJointTrajectory -> the same, feedback, a result
 
 Topic names, frame ids, stamps and values are those of ``export --to ros2``
 (:func:`user_peer.openfmt.ros2.ros2_topic`, :class:`~user_peer.openfmt.ros2.SimStamps`,
@@ -53,7 +54,7 @@ import threading
 import time
 from collections import Counter
 from dataclasses import dataclass
-from typing import Any, Collection
+from typing import Any, Callable, Collection
 
 import rclpy
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
@@ -78,6 +79,7 @@ from user_peer.ros2 import direct
 from user_peer.ros2.bumps import BUMP_KINDS, bump_lines
 from user_peer.ros2.commands import joint_targets
 from user_peer.ros2.fill import fill, message_class
+from user_peer.ros2.follow_trajectory import FollowTrajectoryActions
 from user_peer.ros2.goals import GoalsIn
 from user_peer.ros2.models import ModelsOut
 from user_peer.ros2.names import frame_prefix, prefix_headers
@@ -191,6 +193,7 @@ class Ros2Bridge:
         # joint_trajectory's points sent at their times, in the sim's time (/clock's): a sim slower than the wall
         # clock (a loaded machine) or paused stretches a trajectory as it does a ROS controller's with use_sim_time
         self.trajectories = TrajectoryPlayer(clock=lambda: self._clock_ns / 1e9)
+        self.arm_actions = FollowTrajectoryActions(self.rcl_node, namespace, self.trajectories, self._check_owner, self._refuse)
         self.goals = GoalsIn(node, namespace, RELIABLE, self._check_owner, self._refuse, goal_map)  # goal_pose
         w = world.name
         fab = world.fabric
@@ -211,6 +214,8 @@ class Ros2Bridge:
                         "build it with: python -m user_peer.ros2.msgbuild)")
         if not self.goals.actions.available and self.drive:
             log.warning("no navigate_to_pose actions: nav2_msgs is not importable (build it with: python -m user_peer.ros2.msgbuild)")
+        if not self.arm_actions.available and self.drive:
+            log.warning("no follow_joint_trajectory actions: control_msgs is not importable (build it with: python -m user_peer.ros2.msgbuild)")
         if not self.asking.available and self.drive:
             log.warning("no request_ownership/release_ownership services: std_srvs is not importable "
                         "(build it with: python -m user_peer.ros2.msgbuild)")
@@ -346,6 +351,7 @@ class Ros2Bridge:
                 self.node.destroy_subscription(sub)
             self._kinds.pop(rid, None)
             self.goals.forget(rid)
+            self.arm_actions.forget(rid)
             self.asking.forget(rid)
             with self._lock:
                 for topic in self._robot_topics.pop(rid, set()):
@@ -363,6 +369,7 @@ class Ros2Bridge:
             return [self.node.create_subscription(cls, topic("cmd_vel"), lambda m, r=rid: self._on_cmd_vel(r, m), RELIABLE),
                     self.goals.subscribe(rid)]
         if kind == "arm":
+            self.arm_actions.serve(rid)  # follow_joint_trajectory
             return [self.node.create_subscription(JointState, topic("joint_command"),
                                                   lambda m, r=rid: self._on_arm(r, "joint_command", m), RELIABLE),
                     self.node.create_subscription(JointTrajectory, topic("joint_trajectory"),
@@ -377,16 +384,18 @@ class Ros2Bridge:
         log.warning("%s", text)
         self.node.get_logger().warning(text, throttle_duration_sec=1.0)
 
-    def _check_owner(self, robot: str, what: str) -> Any:
-        """The robot's handle when this login may command it; else None, the refusal told."""
+    def _check_owner(self, robot: str, what: str, told: Callable[[str], Any] | None = None) -> Any:
+        """The robot's handle when this login may command it; else None, the refusal told (and given to ``told``)."""
         try:
             handle = self.world.robot(robot)
+            why = "" if handle.can_command else (f"{self.world.user} does not own {robot} (owner: {handle.owner or 'nobody'}); "
+                                                 f"start the bridge with --request {robot}, or release it to this login")
         except FabricUserError as exc:
-            self._refuse(robot, what, exc.reason)
-            return None
-        if not handle.can_command:
-            self._refuse(robot, what, f"{self.world.user} does not own {robot} (owner: {handle.owner or 'nobody'}); "
-                                      f"start the bridge with --request {robot}, or release it to this login")
+            why = exc.reason
+        if why:
+            self._refuse(robot, what, why)
+            if told is not None:
+                told(why)
             return None
         return handle
 
@@ -457,6 +466,7 @@ class Ros2Bridge:
                 pass
         self._subs.clear()
         self.trajectories.close()
+        self.arm_actions.close()
         self.goals.close()
         if self.gc_pauses is not None:
             self.gc_pauses.close()

@@ -110,17 +110,24 @@ class TrajectoryPlayer:
         self._thread: threading.Thread | None = None
 
     def play(self, robot: str, traj: Timed, start: Sequence[float] | None, send: Callable[[tuple[float, ...]], None],
-             failed: Callable[[Exception], None]) -> None:
-        """Follow ``traj`` on ``robot`` from now, replacing what it plays."""
+             failed: Callable[[Exception], None]) -> _Playing | None:
+        """Follow ``traj`` on ``robot`` from now, replacing what it plays; what plays (None once closed), which
+        :meth:`current` returns until it is over, failed, stopped or replaced."""
         with self._lock:
             if self._closed:
-                return
-            self._playing[robot] = _Playing(traj, None if start is None else tuple(float(v) for v in start),
-                                            self.clock(), send, failed)
+                return None
+            p = self._playing[robot] = _Playing(traj, None if start is None else tuple(float(v) for v in start),
+                                                self.clock(), send, failed)
             if self._thread is None and self._threaded:
                 self._thread = threading.Thread(target=self._run, name="ros2-trajectories", daemon=True)
                 self._thread.start()
         self._wake.set()
+        return p
+
+    def current(self, robot: str) -> _Playing | None:
+        """What ``robot`` plays now (the FollowJointTrajectory action watches its goal's with it)."""
+        with self._lock:
+            return self._playing.get(robot)
 
     def stop(self, robot: str) -> None:
         """Stop what ``robot`` plays (a joint_command took over)."""

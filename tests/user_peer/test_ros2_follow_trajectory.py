@@ -1,0 +1,124 @@
+"""The FollowJointTrajectory action server (user_peer.ros2.follow_trajectory) with a real rclpy ActionClient: under a
+namespace its name is ``/NS/ARM/follow_joint_trajectory``; a goal for an arm this login may not command is aborted
+with ``INVALID_GOAL`` and the reason, and one whose ``joint_names`` are not the arm's with ``INVALID_JOINTS`` and
+what is wrong, told as a refusal (the bridge's ``/rosout`` line); and the tolerance rules control_msgs defines. A
+goal followed to its end is tests/user_peer/test_ros2_ros_users.py's (slow: a world with an arm)."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import os
+import threading
+from types import SimpleNamespace
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+
+from robofabric.testing import wait_until
+from user_peer.ros2.follow_trajectory import (FollowTrajectoryActions, joint_names_error, tolerance_miss,
+                                              tolerances)
+from user_peer.ros2.trajectory import TrajectoryPlayer
+
+BUILD_IT = ("control_msgs is not importable: it is not among ROS 2 Kilted's wheels; build it into this environment "
+            "with `python -m user_peer.ros2.msgbuild` (make test does; it needs g++ and Python's headers)")
+JOINTS = ("joint_1", "joint_2", "joint_3", "joint_4", "joint_5", "joint_6")
+
+
+def test_joint_names_must_be_the_arms_each_once_in_any_order():
+    assert joint_names_error("arm1", JOINTS, list(reversed(JOINTS))) is None
+    assert joint_names_error("arm1", JOINTS, ["joint_1", "elbow"]) == (
+        f"joint_names ['joint_1', 'elbow'] are not arm1's joints {list(JOINTS)}: unknown ['elbow'], "
+        "missing ['joint_2', 'joint_3', 'joint_4', 'joint_5', 'joint_6']")
+    assert "a joint named twice" in joint_names_error("arm1", ("a", "b"), ["a", "b", "a"])
+    assert "missing ['a', 'b']" in joint_names_error("arm1", ("a", "b"), [])
+
+
+def test_tolerances_follow_control_msgs_zero_default_and_minus_one_erased():
+    tol = lambda name, v: SimpleNamespace(name=name, position=v)  # noqa: E731 (a JointTolerance's two fields read)
+    got = tolerances(("a", "b", "c", "d"), [tol("b", 0.2), tol("c", -1.0), tol("d", 0.0)], 0.01)
+    assert got == (0.01, 0.2, math.inf, 0.01)
+    assert tolerance_miss(("a", "b"), [0.005, -0.3], (0.01, 0.2)) == "b is 0.3000 rad from where it should be (tolerance 0.2000 rad)"
+    assert tolerance_miss(("a", "b"), [0.005, -0.3], (0.01, math.inf)) is None
+
+
+def _client(context, node_name: str):
+    executor = SingleThreadedExecutor(context=context)
+    node = rclpy.create_node(node_name, context=context)
+    executor.add_node(node)
+    threading.Thread(target=executor.spin, daemon=True).start()
+    return executor, node
+
+
+def _result(client, goal):
+    sent = client.send_goal_async(goal)
+    handle = wait_until(lambda: sent.done() and sent.result(), timeout=30, what="the goal answered")
+    assert handle.accepted  # taken, then aborted: the owner is checked when it runs, as a joint_trajectory's
+    got = handle.get_result_async()
+    wait_until(got.done, timeout=30, what="the result")
+    return got.result()
+
+
+def test_a_goal_for_an_arm_not_commandable_or_with_wrong_joints_is_aborted_with_the_reason():
+    assert importlib.util.find_spec("control_msgs") is not None, BUILD_IT
+    from control_msgs.action import FollowJointTrajectory
+    from builtin_interfaces.msg import Duration
+    from rclpy.action import ActionClient
+    from trajectory_msgs.msg import JointTrajectoryPoint
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=1 + (os.getpid() * 13 + 46) % 100)
+    refused: list[tuple[str, str, str]] = []
+    # arm2 may not be commanded (the bridge's check tells why); arm1 may: a handle with its joint names, never moved
+    arm1 = SimpleNamespace(entry=SimpleNamespace(joint_names=JOINTS, lower=(), upper=()), joints=None)
+
+    def check_owner(rid: str, what: str, told) -> object:
+        if rid == "arm1":
+            return arm1
+        why = f"rosuser does not own {rid} (owner: someone)"
+        refused.append((rid, what, why))
+        told(why)
+        return None
+
+    player = TrajectoryPlayer(thread=False)
+    actions = executor = None
+    try:
+        node = rclpy.create_node("follow_server_test", context=context)
+        actions = FollowTrajectoryActions(node, "class1", player, check_owner,
+                                          lambda rid, what, why: refused.append((rid, what, why)))
+        assert actions.available
+        actions.serve("arm1")
+        actions.serve("arm2")
+        executor, client_node = _client(context, "follow_client_test")
+        goal = FollowJointTrajectory.Goal()
+        goal.trajectory.joint_names = ["joint_1", "elbow"]
+
+        client = ActionClient(client_node, FollowJointTrajectory, "/class1/arm2/follow_joint_trajectory")
+        assert client.wait_for_server(timeout_sec=30)
+        result = _result(client, goal)
+        assert result.status == 6  # action_msgs/GoalStatus.STATUS_ABORTED
+        assert result.result.error_code == FollowJointTrajectory.Result.INVALID_GOAL
+        assert result.result.error_string == "rosuser does not own arm2 (owner: someone)"
+        assert refused == [("arm2", "follow_joint_trajectory", result.result.error_string)]
+
+        client = ActionClient(client_node, FollowJointTrajectory, "/class1/arm1/follow_joint_trajectory")
+        assert client.wait_for_server(timeout_sec=30)
+        result = _result(client, goal)
+        assert result.status == 6
+        assert result.result.error_code == FollowJointTrajectory.Result.INVALID_JOINTS
+        assert result.result.error_string.startswith("joint_names ['joint_1', 'elbow'] are not arm1's joints")
+        assert refused[1:] == [("arm1", "follow_joint_trajectory", result.result.error_string)]
+
+        goal.trajectory.joint_names = list(JOINTS)
+        goal.trajectory.points = [JointTrajectoryPoint(positions=[0.1] * 6, time_from_start=Duration(sec=2)),
+                                  JointTrajectoryPoint(positions=[0.2] * 6, time_from_start=Duration(sec=1))]
+        result = _result(client, goal)
+        assert result.result.error_code == FollowJointTrajectory.Result.INVALID_GOAL
+        assert result.result.error_string == "point 1's time_from_start 1.000 s goes back (times must not decrease)"
+        assert player.playing() == set()  # nothing played for a refused goal
+    finally:
+        if actions is not None:
+            actions.close()
+        if executor is not None:
+            executor.shutdown(timeout_sec=2.0)
+        rclpy.shutdown(context=context)
