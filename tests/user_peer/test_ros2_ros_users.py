@@ -10,6 +10,7 @@ import math
 import os
 import sys
 import threading
+import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -97,11 +98,32 @@ def arm1_states(out: Path) -> list[tuple[float, list[float]]]:
     return [(r["wall"], r["position"]) for r in lines(out, "joint_states") if r["robot"] == "arm1"]
 
 
+def trajectory_took(out: Path, sent: float, from_q: list[float], to_q: list[float]) -> tuple[float, float, list]:
+    """(earliest, latest) the arm can have taken from leaving ``from_q`` to reaching ``to_q``, and the states between.
+
+    In the sim's time (the joint states' stamps), as a use_sim_time node measures; the wall clock would count the sim
+    running behind on a loaded box. A loaded node also reads only some of the states (here 109 of 500 in 5 s at load
+    20), so each moment is known between two samples."""
+    states = [(r["stamp"], r["position"]) for r in lines(out, "joint_states") if r["robot"] == "arm1" and r["wall"] >= sent]
+    i = next(i for i, (t, q) in enumerate(states) if max(abs(a - b) for a, b in zip(q, from_q)) > 1e-3)
+    j = next(j for j, (t, q) in enumerate(states) if max(abs(a - b) for a, b in zip(q, to_q)) < 2e-3)
+    assert i > 0 and j > i, (i, j)
+    left_after, left_by = states[i - 1][0], states[i][0]  # it left in (left_after, left_by]
+    came_after, came_by = states[j - 1][0], states[j][0]  # it came in (came_after, came_by]
+    return (came_after - left_by) / 1e9, (came_by - left_after) / 1e9, [q for _, q in states[i - 1:j + 1]]
+
+
+def through(seen: list, mid: list[float]) -> float:
+    """How near the states ``seen`` came to ``mid``, the path between two samples read as straight."""
+    return min(max(abs(a + (b - a) * k / 50 - m) for a, b, m in zip(p, q, mid)) for p, q in zip(seen, seen[1:]) for k in range(51))
+
+
 @pytest.mark.slow
-def test_a_3_s_joint_trajectory_takes_3_s_through_its_middle_point(live, procs, tmp_path):
+def test_a_3_s_joint_trajectory_takes_3_s_through_its_middle_point(live, procs, tmp_path, monkeypatch):
+    """On joint_trajectory, then back through the FollowJointTrajectory action, which ends SUCCESSFUL."""
     world, port, _ = live
-    bridge, node, out, ctl = start(procs, tmp_path, world, port, 1 + (os.getpid() * 7 + 47) % 100,
-                                   "--user", "rostraj", "--request", "arm1", "--drive", "arm1")
+    domain = 1 + (os.getpid() * 7 + 47) % 100
+    bridge, node, out, ctl = start(procs, tmp_path, world, port, domain, "--user", "rostraj", "--request", "arm1", "--drive", "arm1")
     wait_until(lambda: len(arm1_states(out)) > 20, timeout=60, what="arm1's joint_states",
                seen=lambda: procs.output(bridge)[-1500:])
     names = ["joint_1", "joint_2", "joint_3", "joint_4", "joint_5", "joint_6"]
@@ -112,25 +134,67 @@ def test_a_3_s_joint_trajectory_takes_3_s_through_its_middle_point(live, procs, 
     arrived = lambda: [t for t, q in arm1_states(out) if max(abs(a - b) for a, b in zip(q, target)) < 2e-3]  # noqa: E731
     wait_until(arrived, timeout=60, what="arm1 at the trajectory's end",
                seen=lambda: (arm1_states(out)[-1:], procs.output(bridge)[-1500:]))
-    sent = lines(out, "trajectory_sent")[0]["wall"]
-    # in the sim's time (the joint states' stamps), as a use_sim_time node measures, from leaving the start to reaching
-    # the last point; the wall clock would count the sim running behind on a loaded box. A loaded node also reads
-    # only some of the states (here 109 of 500 in 5 s at load 20), so each moment is known between two samples:
     # the arm must not have been at the end before 2.7 s, nor still away from it after 3.3 s (3 s +- 10 %)
-    states = [(r["stamp"], r["position"]) for r in lines(out, "joint_states") if r["robot"] == "arm1" and r["wall"] >= sent]
-    i = next(i for i, (t, q) in enumerate(states) if max(abs(a - b) for a, b in zip(q, start_q)) > 1e-3)
-    j = next(j for j, (t, q) in enumerate(states) if max(abs(a - b) for a, b in zip(q, target)) < 2e-3)
-    assert i > 0 and j > i, (i, j)
-    left_after, left_by = states[i - 1][0], states[i][0]  # it left in (left_after, left_by]
-    came_after, came_by = states[j - 1][0], states[j][0]  # it came in (came_after, came_by]
-    earliest, latest = (came_after - left_by) / 1e9, (came_by - left_after) / 1e9
+    earliest, latest, seen = trajectory_took(out, lines(out, "trajectory_sent")[0]["wall"], start_q, target)
     assert earliest < 3.3 and latest > 2.7, (earliest, latest)  # (earliest, latest] meets [2.7, 3.3]
-    # through the middle point (0.15 rad off the straight line): the path between two samples read as straight
-    seen = [q for _, q in states[i - 1:j + 1]]
-    nearest = min(max(abs(a + (b - a) * k / 50 - m) for a, b, m in zip(p, q, mid)) for p, q in zip(seen, seen[1:]) for k in range(51))
-    assert nearest < 0.05, (nearest, mid)
-    took = f"{earliest:.2f}-{latest:.2f}"
-    print(f"a 3 s trajectory took {took} s of sim time")
+    assert through(seen, mid) < 0.05, (through(seen, mid), mid)  # through the middle point, 0.15 rad off the line
+    print(f"a 3 s trajectory took {earliest:.2f}-{latest:.2f} s of sim time")
+
+    # back to the start through the action (as MoveIt sends it): wrong joints refused, then 3 s, feedback, SUCCESSFUL
+    assert importlib.util.find_spec("control_msgs") is not None, BUILD_TF2.replace("tf2_msgs", "control_msgs")
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    back_mid = [(a + b) / 2 - 0.15 for a, b in zip(start_q, target)]
+    sent = time.monotonic()
+    results, feedback = follow(domain, "/arm1/follow_joint_trajectory", [names[:5] + ["elbow"], names],
+                               [[back_mid, 1.5], [start_q, 3.0]], seen=lambda: procs.output(bridge)[-1500:])
+    (wrong, wrong_why), (code, why) = results
+    assert wrong == -2 and "unknown ['elbow'], missing ['joint_6']" in wrong_why, results  # INVALID_JOINTS, said
+    assert code == 0 and why == "", (results, procs.output(bridge)[-1500:])  # SUCCESSFUL
+    earliest, latest, seen = trajectory_took(out, sent, target, start_q)
+    assert earliest < 3.3 and latest > 2.7, (earliest, latest)
+    assert through(seen, back_mid) < 0.05, (through(seen, back_mid), back_mid)
+    assert len(feedback) >= 5 and list(feedback[0].joint_names) == names
+    assert max(abs(e) for e in feedback[len(feedback) // 2].error.positions) < 0.1  # following the desired point
+    assert [f.index for f in feedback][-1] == 1 and feedback[-1].desired.positions.tolist() == pytest.approx(start_q)
+    print(f"through the action: {earliest:.2f}-{latest:.2f} s of sim time, {len(feedback)} feedback messages")
+
+
+def follow(domain: int, action: str, names: list[list[str]], points: list, *, seen) -> tuple[list, list]:
+    """FollowJointTrajectory goals, one per list of joint names, each with ``points`` ([positions, seconds]) from an
+    rclpy ActionClient, one after the other: ([(error_code, error_string)], the last goal's feedback)."""
+    import rclpy
+    from builtin_interfaces.msg import Duration
+    from control_msgs.action import FollowJointTrajectory
+    from rclpy.action import ActionClient
+    from rclpy.executors import SingleThreadedExecutor
+    from trajectory_msgs.msg import JointTrajectoryPoint
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        n = rclpy.create_node("follow_test", context=context)
+        executor.add_node(n)
+        client = ActionClient(n, FollowJointTrajectory, action)
+        threading.Thread(target=executor.spin, daemon=True).start()
+        assert client.wait_for_server(timeout_sec=30), f"no {action} server"
+        results, feedback = [], []
+        for joint_names in names:
+            g = FollowJointTrajectory.Goal()
+            g.trajectory.joint_names = joint_names
+            g.trajectory.points = [JointTrajectoryPoint(positions=[float(v) for v in q], time_from_start=Duration(
+                sec=int(t), nanosec=int(t % 1 * 1e9))) for q, t in points]
+            feedback = []
+            sent = client.send_goal_async(g, feedback_callback=lambda m: feedback.append(m.feedback))
+            handle = wait_until(lambda: sent.done() and sent.result(), timeout=30, what="the goal answered", seen=seen)
+            assert handle.accepted
+            got = handle.get_result_async()
+            wait_until(got.done, timeout=60, what="the action's result", seen=lambda: (feedback[-1:], seen()))
+            results.append((got.result().result.error_code, got.result().result.error_string))
+        return results, feedback
+    finally:
+        executor.shutdown(timeout_sec=2.0)
+        rclpy.shutdown(context=context)
 
 
 def bridge_warnings(out: Path, node_name: str = "robofabric_") -> list[str]:
