@@ -2,6 +2,7 @@
 namespace its name is ``/NS/ARM/follow_joint_trajectory``; a goal for an arm this login may not command is aborted
 with ``INVALID_GOAL`` and the reason, and one whose ``joint_names`` are not the arm's with ``INVALID_JOINTS`` and
 what is wrong, told as a refusal (the bridge's ``/rosout`` line); and the tolerance rules control_msgs defines. A
+cancel stops the trajectory and the arm. A
 goal followed to its end is tests/user_peer/test_ros2_ros_users.py's (slow: a world with an arm)."""
 
 from __future__ import annotations
@@ -116,6 +117,50 @@ def test_a_goal_for_an_arm_not_commandable_or_with_wrong_joints_is_aborted_with_
         assert result.result.error_code == FollowJointTrajectory.Result.INVALID_GOAL
         assert result.result.error_string == "point 1's time_from_start 1.000 s goes back (times must not decrease)"
         assert player.playing() == set()  # nothing played for a refused goal
+    finally:
+        if actions is not None:
+            actions.close()
+        if executor is not None:
+            executor.shutdown(timeout_sec=2.0)
+        rclpy.shutdown(context=context)
+
+
+def test_a_canceled_goal_stops_the_trajectory_and_the_arm():
+    assert importlib.util.find_spec("control_msgs") is not None, BUILD_IT
+    from builtin_interfaces.msg import Duration
+    from control_msgs.action import FollowJointTrajectory
+    from rclpy.action import ActionClient
+    from trajectory_msgs.msg import JointTrajectoryPoint
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=1 + (os.getpid() * 13 + 47) % 100)
+    stops: list[bool] = []
+    # arm1's joints and its stop, what the server reads and calls; the player plays no targets (thread=False)
+    arm1 = SimpleNamespace(entry=SimpleNamespace(joint_names=JOINTS, lower=(), upper=()), joints=[0.0] * 6,
+                           move_joints=lambda q, wait: None, stop=lambda confirm: stops.append(confirm))
+    player = TrajectoryPlayer(thread=False)
+    actions = executor = None
+    try:
+        node = rclpy.create_node("follow_cancel_test", context=context)
+        actions = FollowTrajectoryActions(node, "", player, lambda rid, what, told: arm1, lambda rid, what, why: None)
+        actions.serve("arm1")
+        executor, client_node = _client(context, "follow_cancel_client")
+        client = ActionClient(client_node, FollowJointTrajectory, "/arm1/follow_joint_trajectory")
+        assert client.wait_for_server(timeout_sec=30)
+        goal = FollowJointTrajectory.Goal()
+        goal.trajectory.joint_names = list(JOINTS)
+        goal.trajectory.points = [JointTrajectoryPoint(positions=[0.3] * 6, time_from_start=Duration(sec=60))]
+        feedback: list = []
+        sent = client.send_goal_async(goal, feedback_callback=lambda m: feedback.append(m.feedback))
+        handle = wait_until(lambda: sent.done() and sent.result(), timeout=30, what="the goal answered")
+        wait_until(lambda: feedback and player.playing() == {"arm1"}, timeout=30, what="the goal playing, with feedback")
+        assert list(feedback[0].joint_names) == list(JOINTS) and feedback[0].index == 0
+        canceling = handle.cancel_goal_async()
+        wait_until(canceling.done, timeout=30, what="the cancel answered")
+        got = handle.get_result_async()
+        wait_until(got.done, timeout=30, what="the result")
+        assert got.result().status == 5  # action_msgs/GoalStatus.STATUS_CANCELED
+        assert player.playing() == set() and stops == [False]  # the trajectory dropped, the arm told to stop
     finally:
         if actions is not None:
             actions.close()
