@@ -23,13 +23,14 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass
 
-from fabric import keys
+from fabric import keys, streams
 
 __all__ = ["AUTHORITY_STREAMS", "Fence", "FenceVerdict", "SimFence", "MAX_DEPARTED_SIMS", "MAX_SCOPES", "WORLD_SCOPE",
            "authority_scopes", "fenced_scopes", "is_authority_event", "is_authority_key"]
 
-AUTHORITY_STREAMS = frozenset({"joints", "pose", "scan", "sonar"})
-"""Robot streams only a sim authority writes (paths and IK results come from compute and users)."""
+AUTHORITY_STREAMS = frozenset(s.name for s in streams.STREAMS if s.fenced)
+"""Robot streams only a sim authority writes (:attr:`fabric.streams.RobotStream.fenced`; paths and IK results come
+from compute peers)."""
 
 MAX_DEPARTED_SIMS = 256
 """Ids of sims whose token went, kept so their late samples cannot re-raise a reset fence (bounded:

@@ -10,9 +10,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from fabric import streams
+
 PREFIX = "rf"
 
-ROBOT_STREAMS = ("joints", "pose", "scan", "sonar", "path", "ik")
+ROBOT_STREAMS = streams.NAMES
+"""Every robot stream's name (``robot/{id}/{name}``), from the one table, :data:`fabric.streams.STREAMS`."""
+LATCHED_STREAMS = frozenset(s.name for s in streams.STREAMS if s.latched)
+"""The robot streams whose latest a late joiner gets at once (:func:`is_latched`): a planned path."""
 COMMANDS = ("joints", "twist", "path", "stop", "reset")
 SERVICES = ("ik", "fk", "jacobian", "plan", "map", "world", "state", "move")
 PEER_KINDS = ("sim", "compute", "user", "viewer", "recorder", "router", "tool")
@@ -300,7 +305,7 @@ def is_latched(key: str) -> bool:
         p = parse(key)
     except ValueError:
         return False
-    return p.category in ("object", "map") or (p.category == "robot" and p.leaf == "path")
+    return p.category in ("object", "map") or (p.category == "robot" and p.leaf in LATCHED_STREAMS)
 
 
 KEPT_EVENTS = 32

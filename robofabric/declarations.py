@@ -20,7 +20,7 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Any
 
-from fabric import keys
+from fabric import keys, streams
 
 __all__ = ["Peer", "Declarations", "live_tokens", "read_declarations", "SERVICE_TYPES", "service_types", "quoted", "STREAM_TYPES", "key_type"]
 
@@ -37,10 +37,8 @@ SERVICE_TYPES: dict[str, tuple[str, str]] = {
 }
 
 
-STREAM_TYPES: dict[str, str] = {
-    "joints": "JointState", "pose": "Pose", "scan": "Scan", "sonar": "Scan", "path": "Path", "ik": "IKStream",
-}
-"""The message type each robot stream ``rf/W/robot/ID/{stream}`` carries."""
+STREAM_TYPES: dict[str, str] = {s.name: s.message for s in streams.STREAMS}
+"""The message type each robot stream ``rf/W/robot/ID/{stream}`` carries (:data:`fabric.streams.STREAMS`)."""
 
 
 def key_type(key: str) -> str | None:

@@ -41,6 +41,7 @@ from typing import Iterable
 
 from fabric.config import MAX_MESSAGE_SIZE
 from fabric.keys import BY, STAFF as STAFF_KEY, validate_id
+from fabric.streams import COMPUTE, SIM, STREAMS, RobotStream
 from robofabric.login_cards import PEOPLE, console_url, typable_password, write_cards
 
 __all__ = ["Identity", "ROLES", "SecureInit", "access_control", "router_config", "client_config", "init", "parse_names"]
@@ -94,6 +95,12 @@ def _rule(rule_id: str, messages: Iterable[str], key_exprs: Iterable[str], flows
     return {"id": rule_id, "permission": "allow", "flows": list(flows), "messages": list(messages), "key_exprs": list(key_exprs)}
 
 
+def _written_by(role: str) -> list[RobotStream]:
+    """The robot streams ``role``'s logins write (fabric.streams), by name: the rules read the same whatever the
+    table's order."""
+    return sorted((s for s in STREAMS if s.writer == role), key=lambda s: s.name)
+
+
 def _own_rules(ident: Identity) -> list[dict]:
     """What this identity alone may do, beyond what every identity may (reading)."""
     n, r = ident.name, ident.role
@@ -117,7 +124,7 @@ def _own_rules(ident: Identity) -> list[dict]:
         if r == "instructor":  # the staff's actions on robots (ownership.staff): take back, give, lock, stop, reset
             ask.append(f"{W}/own/*/{STAFF_KEY}/{BY}/{n}")
     elif r == "sim":
-        put += [f"{W}/robot/*/{s}" for s in ("joints", "pose", "scan", "sonar")] + [f"{W}/own/*", f"{W}/event/**"]
+        put += [f"{W}/{s.access}" for s in _written_by(SIM)] + [f"{W}/own/*", f"{W}/event/**"]
         # ownership records and events keep their last samples for an observer that missed them (fabric.history)
         latched = [f"{W}/own/*/{ADV}", f"{W}/event/*/*/{ADV}"]  # (a cache replies on the key itself: event/*/* below)
         serve += [f"{W}/srv/world", f"{W}/srv/state", f"{W}/own/*", f"{W}/own/*/{BY}/*", f"{W}/own/*/{STAFF_KEY}/{BY}/*",  # srv/state:
@@ -125,9 +132,11 @@ def _own_rules(ident: Identity) -> list[dict]:
         tokens += [f"{W}/peer/sim/*", f"{W}/peer/sim/*/*/*/*", f"{W}/peer/recorder/*", *latched]  # its role (keys.sim_role); a recorder on its machine
         ask.append(ROUTER_INFO)  # is my link up? (a standby judging a lost token: sim_peer.roles.router_answers)
     elif r == "compute":
-        put += [f"{W}/robot/*/ik", f"{W}/robot/*/path", f"{W}/map/*", f"{W}/event/compute/**"]
-        latched = [f"{W}/robot/*/path/{ADV}", f"{W}/map/*/{ADV}"]
-        serve += [f"{W}/srv/{s}/**" for s in ("ik", "fk", "jacobian", "plan", "map")] + latched + [f"{W}/robot/*/path", f"{W}/map/*"]
+        streams = _written_by(COMPUTE)
+        kept = [f"{W}/{s.access}" for s in streams if s.latched]  # a latched stream's cache replies on its key
+        put += [f"{W}/{s.access}" for s in streams] + [f"{W}/map/*", f"{W}/event/compute/**"]
+        latched = [f"{k}/{ADV}" for k in kept] + [f"{W}/map/*/{ADV}"]
+        serve += [f"{W}/srv/{s}/**" for s in ("ik", "fk", "jacobian", "plan", "map")] + latched + kept + [f"{W}/map/*"]
         tokens += [f"{W}/peer/compute/*", *latched]
     else:  # viewer
         tokens += [f"{W}/peer/viewer/*", f"{W}/peer/recorder/*"]

@@ -8,7 +8,7 @@ slower group's robots are dealt over phases (:func:`fabric.rate.phases`), its lo
 fastest and each tick serving one phase: 8 bases' scans go out 1-2 robots every 10 ms, each robot still at
 20 Hz, not all 8 (with their sonars) in one tick. A tick reads its streams under the world's lock, then builds
 and publishes outside it. A stream on a key :mod:`fabric.keys` does not know is left out with a warning (a new
-stream name is a protocol change: ``fabric.keys.ROBOT_STREAMS``).
+stream name is a protocol change: a row of ``fabric.streams.STREAMS``).
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from typing import Any, Callable
 
 from fabric import keys
 from fabric.rate import MonotonicClock, RateLoop, phases, staggered
+from fabric.streams import default_rates
 from sim_peer.robot import Build, Stream
 from sim_peer.world import SimWorld
 
@@ -27,7 +28,8 @@ log = logging.getLogger("robofabric.sim")
 
 __all__ = ["DEFAULT_RATES", "StreamLoops", "gather_streams"]
 
-DEFAULT_RATES = {"joints": 100.0, "pose": 50.0, "scan": 20.0}
+DEFAULT_RATES = default_rates()
+"""Each rate group's default rate (Hz), from :data:`fabric.streams.STREAMS`: joints 100, pose 50, scan 20."""
 
 
 def gather_streams(world_name: str, world: SimWorld) -> dict[str, list[tuple[str, Stream]]]:

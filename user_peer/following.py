@@ -12,14 +12,14 @@ from __future__ import annotations
 import threading
 from typing import Any
 
-from fabric import keys
+from fabric import keys, streams
 from fabric.session import Fabric
 from user_peer.latest import Latest
 
 __all__ = ["FOLLOWED_STREAMS", "Following"]
 
-FOLLOWED_STREAMS = ("joints", "pose", "scan", "path", "ik")
-"""The streams a robot handle keeps the latest of (:meth:`World.robot`)."""
+FOLLOWED_STREAMS = tuple(s.name for s in streams.STREAMS if s.followed)
+"""The streams a robot handle keeps the latest of (:meth:`World.robot`; :attr:`fabric.streams.RobotStream.followed`)."""
 
 
 class Following:
@@ -49,7 +49,7 @@ class Following:
             if robot_id in self._subs:
                 return False
             self._subs[robot_id] = [
-                self.fabric.subscribe(keys.robot_stream(self.world, robot_id, stream), self.latest.put, history=stream == "path")
+                self.fabric.subscribe(keys.robot_stream(self.world, robot_id, stream), self.latest.put, history=stream in keys.LATCHED_STREAMS)
                 for stream in FOLLOWED_STREAMS
             ]
         return True

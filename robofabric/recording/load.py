@@ -21,10 +21,12 @@ import numpy as np
 from fabric import keys
 from fabric.codec import encode
 from fabric.interfaces import Header, JointState, Pose, Scan
+from fabric.streams import default_rates
 
 __all__ = ["LoadStream", "robot_streams", "run_load", "DEFAULT_RATES"]
 
-DEFAULT_RATES = {"joints": 100.0, "pose": 50.0, "scan": 20.0}
+DEFAULT_RATES = default_rates()
+"""The sim's default rate of each stream group (:func:`fabric.streams.default_rates`), the load's streams."""
 _JOINTS = tuple(f"joint{i}" for i in range(1, 7))
 
 

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 from mcap_ros2.writer import Writer as Ros2McapWriter
 
+from fabric import streams
 from fabric.recording.mcap_file import McapFile
 from fabric.interfaces import JointState, OccupancyGrid, Path, Pose, Scan, WorldInfo
 from user_peer.catalog import RobotCatalog
@@ -65,22 +66,18 @@ def ros_topic(key: str) -> str:
     return "/" + "/".join(parts)
 
 
-_STREAM_TOPICS = {"joints": "joint_states", "scan": "scan", "sonar": "sonar", "path": "path"}
-_POSE_TOPICS = {"mobile": "odom", "arm": "pose"}
-
-
 def ros2_topic(key: str, kind: str | None = None, namespace: str = "") -> str | None:
     """The ROS 2 topic of fabric ``key``, the same in the live bridge and in ``export --to ros2``, so that one
     rviz2 configuration serves both: ``/ROBOT/joint_states``, ``/ROBOT/scan``, ``/ROBOT/sonar``,
     ``/ROBOT/path``, a pose as ``/ROBOT/odom`` (``kind`` "mobile": Odometry) or ``/ROBOT/pose`` (an arm's
-    flange), ``/map`` (other maps ``/maps/NAME``), ``/object/ID/pose``; under ``/NAMESPACE`` when given. None for
-    a key with no such place (a pose of a robot of unknown kind; the export names the others after the key)."""
+    flange), ``/map`` (other maps ``/maps/NAME``), ``/object/ID/pose``; under ``/NAMESPACE`` when given (a robot
+    stream's topic: :func:`fabric.streams.ros2_topic`). None for a key with no such place (a pose of a robot of
+    unknown kind; the export names the others after the key)."""
     ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
     parts = key.split("/")  # rf/W/robot/ID/stream, rf/W/map/NAME, rf/W/object/ID/pose/by/USER
     if len(parts) == 5 and parts[2] == "robot":
-        stream = parts[4]
-        leaf = _POSE_TOPICS.get(kind or "") if stream == "pose" else _STREAM_TOPICS.get(stream)
-        return ros_topic(f"{ns}/{parts[3]}/{leaf}") if leaf else None
+        topic = streams.ros2_topic(parts[4], kind)
+        return ros_topic(f"{ns}/{parts[3]}/{topic.name}") if topic is not None else None
     if len(parts) == 4 and parts[2] == "map":
         return ros_topic(f"{ns}/map" if parts[3] == "map" else f"{ns}/maps/{parts[3]}")
     if len(parts) >= 5 and parts[2] == "object" and parts[4] == "pose":

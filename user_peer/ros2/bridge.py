@@ -58,7 +58,7 @@ from typing import Any, Callable, Collection
 
 import rclpy
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
-from nav_msgs.msg import OccupancyGrid, Odometry, Path
+from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.type_support import check_for_type_support
@@ -69,6 +69,7 @@ from trajectory_msgs.msg import JointTrajectory
 from fabric import keys
 from fabric.interfaces import JointState as FabricJointState
 from fabric.interfaces import Pose, Scan
+from fabric.streams import STREAMS
 from user_peer.catalog import RobotCatalog
 from user_peer.errors import FabricUserError
 from user_peer.openfmt.frames import base_frame, scan_frame
@@ -109,12 +110,13 @@ latches those keys."""
 FOLLOW_PERIOD_S = 1.0
 """How often the bridge looks at the world's description for robots that came or went."""
 
+_QOS = {"stream": STREAM, "sensor_data": qos_profile_sensor_data, "latched": LATCHED}
+"""The profile of each QoS name of :data:`fabric.streams.ROS2_QOS`."""
 _TYPES: dict[str, tuple[type, QoSProfile]] = {
-    "joint_states": (JointState, STREAM), "scan": (LaserScan, qos_profile_sensor_data),
-    "sonar": (LaserScan, qos_profile_sensor_data), "path": (Path, LATCHED), "odom": (Odometry, STREAM),
-    "pose": (PoseStamped, STREAM), "map": (OccupancyGrid, LATCHED),
+    **{t.name: (message_class(t.type), _QOS[t.qos]) for s in STREAMS for t in s.ros2}, "map": (OccupancyGrid, LATCHED),
 }
-"""A topic's last name -> its ROS type and QoS (``/maps/NAME``: a map; ``/object/ID/pose``: a pose)."""
+"""A topic's last name -> its ROS type and QoS: the robot streams' (fabric.streams.STREAMS) and the map's
+(``/maps/NAME``: a map; ``/object/ID/pose``: a pose)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -199,12 +201,8 @@ class Ros2Bridge:
         fab = world.fabric
         self.follow()  # first: the description's sensors (range_min) are known before the first scan
         self.owners.update(list(self._kinds), self.world.ownership.record)
-        self._subs = [
-            fab.subscribe(keys.robot_stream_all(w, "joints"), self._on_state),
-            fab.subscribe(keys.robot_stream_all(w, "scan"), self._on_state),
-            fab.subscribe(keys.robot_stream_all(w, "sonar"), self._on_state),
-            fab.subscribe(keys.robot_stream_all(w, "pose"), self._on_state),
-            fab.subscribe(keys.robot_stream_all(w, "path"), self._on_state, history=True),
+        self._subs = [  # every robot stream with a ROS 2 topic (fabric.streams), a latched one's latest at once
+            *(fab.subscribe(keys.robot_stream_all(w, s.name), self._on_state, history=s.latched) for s in STREAMS if s.ros2),
             fab.subscribe(f"{keys.world_root(w)}/map/*", self._on_state, history=True),
             fab.subscribe(keys.object_pose_all(w), self._on_state, history=True),
         ]
