@@ -5,7 +5,7 @@ Each row says what a stream carries, who writes it, how it travels and where ROS
 (:func:`fabric.keys.is_latched`), the router's access rules (``robofabric.secure``), the declared message types
 (``robofabric.declarations.STREAM_TYPES``), the sim's default rates, a user's robot handle, the ROS 2 export
 (``user_peer.openfmt.ros2``) and the live bridge (``user_peer.ros2.bridge``) all read it; a new sensor stream is
-one row here (docs/howto.md, "A new sensor stream"), and ``tests/fabric/test_streams.py`` fails when another
+one row here (docs/howto.md, "A new sensor stream"), and ``tests/fabric/test_stream_table.py`` fails when another
 module lists stream names of its own. Pure: no zenoh, no ROS (ROS names are strings).
 """
 
@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["SIM", "COMPUTE", "WRITERS", "ROS2_QOS", "Ros2Topic", "RobotStream", "STREAMS", "NAMES", "stream", "ros2_topic",
-           "default_rates"]
+__all__ = ["SIM", "COMPUTE", "WRITERS", "ROS2_QOS", "Ros2Topic", "RobotStream", "STREAMS", "NAMES", "stream",
+           "ros2_topic", "default_rates"]
 
 SIM = "sim"
 """A stream the sim peer that is its robot's authority writes: robot state, stamped with the authority's term."""
@@ -41,7 +41,8 @@ class Ros2Topic:
 
     def __post_init__(self) -> None:
         if self.qos not in ROS2_QOS:
-            raise ValueError(f"ROS 2 topic {self.name!r}: unknown QoS {self.qos!r}; expected one of {', '.join(ROS2_QOS)}")
+            raise ValueError(f"ROS 2 topic {self.name!r}: unknown QoS {self.qos!r}; "
+                             f"expected one of {', '.join(ROS2_QOS)}")
         if self.type.count("/") != 2:
             raise ValueError(f"ROS 2 topic {self.name!r}: type {self.type!r} is not 'package/msg/Name'")
 
@@ -69,7 +70,8 @@ class RobotStream:
 
     def __post_init__(self) -> None:
         if self.writer not in WRITERS:
-            raise ValueError(f"stream {self.name!r}: unknown writer {self.writer!r}; expected one of {', '.join(WRITERS)}")
+            raise ValueError(f"stream {self.name!r}: unknown writer {self.writer!r}; "
+                             f"expected one of {', '.join(WRITERS)}")
         if (self.rate_group is None) != (self.hz is None):
             raise ValueError(f"stream {self.name!r}: a rate group needs its rate, and a rate its group")
 
@@ -119,7 +121,8 @@ def ros2_topic(name: str, kind: str | None = None) -> Ros2Topic | None:
         return None
     own = [t for t in row.ros2 if t.kind and t.kind == kind]
     common = [t for t in row.ros2 if not t.kind]
-    return (own or common or [None])[0]
+    found = own or common
+    return found[0] if found else None
 
 
 def default_rates() -> dict[str, float]:

@@ -34,7 +34,8 @@ def test_the_key_layout_and_latching():
 
 def test_fencing_applies_to_the_sim_authority_streams():
     assert fencing.AUTHORITY_STREAMS == frozenset({"joints", "pose", "scan", "sonar"})
-    assert [fencing.is_authority_key(keys.robot_stream("w", "r1", s)) for s in keys.ROBOT_STREAMS] == [True] * 4 + [False] * 2
+    fenced = [fencing.is_authority_key(keys.robot_stream("w", "r1", s)) for s in keys.ROBOT_STREAMS]
+    assert fenced == [True] * 4 + [False] * 2
 
 
 def test_declared_message_types():
@@ -51,14 +52,15 @@ def test_the_routers_put_and_serve_rules_of_sims_and_compute_peers():
     from robofabric.secure import Identity, _own_rules
 
     rules = {r["id"]: r["key_exprs"] for role in ("sim", "compute") for r in _own_rules(Identity(role, role))}
-    assert rules["sim-put"] == ["rf/*/event/decode/by/sim", "rf/*/robot/*/joints", "rf/*/robot/*/pose", "rf/*/robot/*/scan",
-                                "rf/*/robot/*/sonar", "rf/*/own/*", "rf/*/event/**"]
-    assert rules["compute-put"] == ["rf/*/event/decode/by/compute", "rf/*/robot/*/ik", "rf/*/robot/*/path", "rf/*/map/*",
-                                    "rf/*/event/compute/**"]
+    assert rules["sim-put"] == ["rf/*/event/decode/by/sim", "rf/*/robot/*/joints", "rf/*/robot/*/pose",
+                                "rf/*/robot/*/scan", "rf/*/robot/*/sonar", "rf/*/own/*", "rf/*/event/**"]
+    assert rules["compute-put"] == ["rf/*/event/decode/by/compute", "rf/*/robot/*/ik", "rf/*/robot/*/path",
+                                    "rf/*/map/*", "rf/*/event/compute/**"]
     assert rules["compute-serve"] == ["rf/*/srv/ik/**", "rf/*/srv/fk/**", "rf/*/srv/jacobian/**", "rf/*/srv/plan/**",
-                                      "rf/*/srv/map/**", "rf/*/robot/*/path/@adv/**", "rf/*/map/*/@adv/**", "rf/*/robot/*/path",
-                                      "rf/*/map/*"]
-    assert rules["compute-tokens"] == ["rf/*/peer/tool/*", "rf/*/peer/compute/*", "rf/*/robot/*/path/@adv/**", "rf/*/map/*/@adv/**"]
+                                      "rf/*/srv/map/**", "rf/*/robot/*/path/@adv/**", "rf/*/map/*/@adv/**",
+                                      "rf/*/robot/*/path", "rf/*/map/*"]
+    assert rules["compute-tokens"] == ["rf/*/peer/tool/*", "rf/*/peer/compute/*", "rf/*/robot/*/path/@adv/**",
+                                       "rf/*/map/*/@adv/**"]
 
 
 def test_the_sims_and_the_loads_default_rates_and_what_a_handle_follows():
@@ -115,7 +117,8 @@ def test_the_table_refuses_what_no_consumer_could_follow():
 
 def test_a_kind_specific_topic_is_found_before_the_common_one():
     assert streams.ros2_topic("pose", "mobile") == Ros2Topic("odom", "nav_msgs/msg/Odometry", "stream", kind="mobile")
-    assert streams.ros2_topic("pose", None) is None and streams.ros2_topic("ik") is None and streams.ros2_topic("x") is None
+    assert streams.ros2_topic("pose", None) is None and streams.ros2_topic("pose", "drone") is None
+    assert streams.ros2_topic("ik") is None and streams.ros2_topic("x") is None
     assert streams.ros2_topic("joints", "mobile") == streams.ros2_topic("joints") == STREAMS[0].ros2[0]
     assert [s.access for s in STREAMS] == [f"robot/*/{n}" for n in streams.NAMES]
 
@@ -130,7 +133,7 @@ EXCEPTIONS: dict[tuple[str, str], str] = {
     ("load.py", "makers"): "the load generator's message builder of each stream it fakes: code per stream",
     ("failover.py", "measure"): "the benchmark's choice of the streams whose gap a take-over leaves",
     ("ros2.py", "STREAMS"): "the ROS 2 benchmark's columns: the streams it times, and their topics",
-    ("viewer.py", "RATES"): "the viewer benchmark's synthetic streams (flange, wheels, grid among them), at rates of its own",
+    ("viewer.py", "RATES"): "the viewer benchmark's synthetic streams (flange, wheels, grid among them), at its rates",
     ("viewer.py", "measure_world"): "the streams of the viewer benchmark's class world",
 }
 """Literals that hold two or more stream names and are no list of streams, by (file name, the name they are
@@ -151,7 +154,8 @@ def _owner(node: ast.AST, parents: dict[ast.AST, ast.AST]) -> str:
 
 
 def stream_lists(source: str, names: frozenset[str]) -> list[tuple[int, str, list[str]]]:
-    """(line, owner, names) of each tuple, list or set literal, and each dict's keys, holding two or more of ``names``."""
+    """(line, owner, names) of each tuple, list or set literal, and each dict's keys, holding two or more of
+    ``names``."""
     if sum(f'"{n}"' in source or f"'{n}'" in source for n in names) < 2:
         return []  # no literal can hold two of them (most modules: their parse is the scan's time)
     tree = ast.parse(source)
