@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 __all__ = ["SIM", "COMPUTE", "WRITERS", "ROS2_QOS", "Ros2Topic", "RobotStream", "STREAMS", "NAMES", "stream",
-           "ros2_topic", "default_rates"]
+           "access", "ros2_topic", "default_rates"]
 
 SIM = "sim"
 """A stream the sim peer that is its robot's authority writes: robot state, stamped with the authority's term."""
@@ -111,6 +111,12 @@ if len(_BY_NAME) != len(STREAMS):
 def stream(name: str) -> RobotStream | None:
     """The row of stream ``name``; None for a name that is no robot stream."""
     return _BY_NAME.get(name)
+
+
+def access(writer: str, *, latched: bool = False) -> list[str]:
+    """The key expressions, below a world, that ``writer``'s logins put (with ``latched``, the latched streams'
+    only), sorted: the router's rules (``robofabric.secure``) read the same whatever the table's order."""
+    return sorted(s.access for s in STREAMS if s.writer == writer and (s.latched or not latched))
 
 
 def ros2_topic(name: str, kind: str | None = None) -> Ros2Topic | None:

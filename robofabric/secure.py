@@ -21,9 +21,8 @@ Identities are zenoh usernames (``transport/auth/usrpwd``) or, with TLS, certifi
 :mod:`secrets`; certificates are made with ``cryptography``. Files holding a secret are 0600, and
 running :func:`init` again keeps every existing secret and only adds what is missing.
 
-zenoh's ``**`` does not match a chunk that starts with ``@`` (a verbatim chunk), so the caches and
-liveliness tokens of latched publishers (``KEY/@adv/...``, fabric.publishers.declare_publisher) need
-rules of their own.
+zenoh's ``**`` does not match a chunk that starts with ``@`` (a verbatim chunk), so the caches and liveliness
+tokens of latched publishers (``KEY/@adv/...``, fabric.publishers.declare_publisher) need rules of their own.
 """
 
 from __future__ import annotations
@@ -41,7 +40,7 @@ from typing import Iterable
 
 from fabric.config import MAX_MESSAGE_SIZE
 from fabric.keys import BY, STAFF as STAFF_KEY, validate_id
-from fabric.streams import COMPUTE, SIM, STREAMS, RobotStream
+from fabric.streams import access
 from robofabric.login_cards import PEOPLE, console_url, typable_password, write_cards
 
 __all__ = ["Identity", "ROLES", "SecureInit", "access_control", "router_config", "client_config", "init", "parse_names"]
@@ -95,12 +94,6 @@ def _rule(rule_id: str, messages: Iterable[str], key_exprs: Iterable[str], flows
     return {"id": rule_id, "permission": "allow", "flows": list(flows), "messages": list(messages), "key_exprs": list(key_exprs)}
 
 
-def _written_by(role: str) -> list[RobotStream]:
-    """The robot streams ``role``'s logins write (fabric.streams), by name: the rules read the same whatever the
-    table's order."""
-    return sorted((s for s in STREAMS if s.writer == role), key=lambda s: s.name)
-
-
 def _own_rules(ident: Identity) -> list[dict]:
     """What this identity alone may do, beyond what every identity may (reading)."""
     n, r = ident.name, ident.role
@@ -124,7 +117,7 @@ def _own_rules(ident: Identity) -> list[dict]:
         if r == "instructor":  # the staff's actions on robots (ownership.staff): take back, give, lock, stop, reset
             ask.append(f"{W}/own/*/{STAFF_KEY}/{BY}/{n}")
     elif r == "sim":
-        put += [f"{W}/{s.access}" for s in _written_by(SIM)] + [f"{W}/own/*", f"{W}/event/**"]
+        put += [f"{W}/{k}" for k in access(r)] + [f"{W}/own/*", f"{W}/event/**"]  # fabric.streams
         # ownership records and events keep their last samples for an observer that missed them (fabric.history)
         latched = [f"{W}/own/*/{ADV}", f"{W}/event/*/*/{ADV}"]  # (a cache replies on the key itself: event/*/* below)
         serve += [f"{W}/srv/world", f"{W}/srv/state", f"{W}/own/*", f"{W}/own/*/{BY}/*", f"{W}/own/*/{STAFF_KEY}/{BY}/*",  # srv/state:
@@ -132,11 +125,10 @@ def _own_rules(ident: Identity) -> list[dict]:
         tokens += [f"{W}/peer/sim/*", f"{W}/peer/sim/*/*/*/*", f"{W}/peer/recorder/*", *latched]  # its role (keys.sim_role); a recorder on its machine
         ask.append(ROUTER_INFO)  # is my link up? (a standby judging a lost token: sim_peer.roles.router_answers)
     elif r == "compute":
-        streams = _written_by(COMPUTE)
-        kept = [f"{W}/{s.access}" for s in streams if s.latched]  # a latched stream's cache replies on its key
-        put += [f"{W}/{s.access}" for s in streams] + [f"{W}/map/*", f"{W}/event/compute/**"]
-        latched = [f"{k}/{ADV}" for k in kept] + [f"{W}/map/*/{ADV}"]
-        serve += [f"{W}/srv/{s}/**" for s in ("ik", "fk", "jacobian", "plan", "map")] + latched + kept + [f"{W}/map/*"]
+        put += [f"{W}/{k}" for k in access(r)] + [f"{W}/map/*", f"{W}/event/compute/**"]
+        kept = [f"{W}/{k}" for k in access(r, latched=True)] + [f"{W}/map/*"]  # latched: a cache replies on its key
+        latched = [f"{k}/{ADV}" for k in kept]
+        serve += [f"{W}/srv/{s}/**" for s in ("ik", "fk", "jacobian", "plan", "map")] + latched + kept
         tokens += [f"{W}/peer/compute/*", *latched]
     else:  # viewer
         tokens += [f"{W}/peer/viewer/*", f"{W}/peer/recorder/*"]
@@ -164,8 +156,7 @@ def access_control(identities: Iterable[Identity], *, tls: bool = False) -> dict
     ]
     field = "cert_common_names" if tls else "usernames"
     rules = list(common)
-    subjects = []
-    policies = []
+    subjects, policies = [], []
     for ident in idents:
         own = _own_rules(ident)
         rules += own

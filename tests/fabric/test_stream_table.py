@@ -121,6 +121,8 @@ def test_a_kind_specific_topic_is_found_before_the_common_one():
     assert streams.ros2_topic("ik") is None and streams.ros2_topic("x") is None
     assert streams.ros2_topic("joints", "mobile") == streams.ros2_topic("joints") == STREAMS[0].ros2[0]
     assert [s.access for s in STREAMS] == [f"robot/*/{n}" for n in streams.NAMES]
+    assert streams.access("compute") == ["robot/*/ik", "robot/*/path"]  # sorted: the router's rules keep their order
+    assert streams.access("compute", latched=True) == ["robot/*/path"] and streams.access("sim", latched=True) == []
 
 
 # ---------------------------------------------------------------- (b) nobody else lists streams
