@@ -90,6 +90,9 @@ def test_a_built_package_says_so_and_a_second_run_builds_nothing(capsys):
 def test_what_cannot_be_built_is_said(monkeypatch, capsys):
     assert msgbuild.main(["moveit_msgs"]) == 2
     assert "unknown package moveit_msgs: this builds tf2_msgs, std_srvs, nav2_msgs, control_msgs" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as out:  # --help explains, and is no package's name
+        msgbuild.main(["--help"])
+    assert out.value.code == 0 and "--force" in capsys.readouterr().out
     monkeypatch.setenv("CXX", "no-such-compiler-here")
     with pytest.raises(msgbuild.MsgBuildError, match="no g\\+\\+ on PATH: install a C and C\\+\\+ compiler"):
         msgbuild._compiler("g++")

@@ -347,10 +347,19 @@ def build(package: str, *, lib: Path | None = None, site: Path | None = None) ->
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m user_peer.ros2.msgbuild [--force] [PACKAGE...]``: build the missing packages (all of them
-    with --force); 0 when all are importable afterwards, 1 with the reason otherwise."""
-    args = list(sys.argv[1:] if argv is None else argv)
-    force = "--force" in args
-    named = tuple(a for a in args if a != "--force") or tuple(INTERFACES)
+    with --force); 0 when all are importable afterwards, 1 with the reason otherwise, 2 for a wrong argument."""
+    import argparse
+
+    ap = argparse.ArgumentParser(
+        prog="python -m user_peer.ros2.msgbuild",
+        description="Build the ROS 2 interfaces the bridge uses and no Kilted wheel ships (type support and Python "
+                    "package, compiled with the wheels' own rosidl generators and g++), into this environment.",
+        epilog="`make test` runs it once per virtual environment. Needs g++ and Python's headers.")
+    ap.add_argument("packages", nargs="*", metavar="PACKAGE", help=f"what to build (default: all of {', '.join(INTERFACES)})")
+    ap.add_argument("--force", action="store_true", help="build again even when the package is importable")
+    a = ap.parse_args(argv)
+    force = a.force
+    named = tuple(a.packages) or tuple(INTERFACES)
     unknown = [p for p in named if p not in INTERFACES]
     if unknown:
         print(f"unknown package {', '.join(unknown)}: this builds {', '.join(INTERFACES)}", file=sys.stderr)
