@@ -22,21 +22,19 @@ multi-DOF joints): a goal that has points in it is ``INVALID_JOINTS``.
 
 ``control_msgs`` is not among ROS 2 Kilted's wheels: :mod:`user_peer.ros2.msgbuild` builds it into the environment
 (``make test`` does). Without it there is no action server and ``available`` is False (said at start). The servers
-live on a node of their own, ``<bridge's node>_trajectory``, spun by a multi-threaded executor on its own thread, for
-the reason :mod:`user_peer.ros2.navigate` gives (an execute callback runs until its goal ends).
+live on a node of their own, ``<bridge's node>_trajectory`` (:mod:`user_peer.ros2.action_host` says why).
 """
 
 from __future__ import annotations
 
 import bisect
 import math
-import threading
 import time
 from collections.abc import Sequence
 from typing import Any, Callable
 
 from user_peer.errors import FabricUserError
-from user_peer.openfmt.ros2 import ros_topic
+from user_peer.ros2.action_host import ActionHost
 from user_peer.ros2.commands import CommandError
 from user_peer.ros2.trajectory import TrajectoryPlayer, sample, timed_points
 
@@ -93,60 +91,15 @@ def _seconds(d: Any) -> float:
     return float(d.sec) + float(d.nanosec) * 1e-9
 
 
-class FollowTrajectoryActions:
+class FollowTrajectoryActions(ActionHost):
     """One FollowJointTrajectory action server per driven arm, on a node of its own; goals played by ``player``."""
 
     def __init__(self, node: Any, namespace: str, player: TrajectoryPlayer, check_owner: Callable[..., Any],
                  refuse: Callable[[str, str, str], None], *, period: float = 0.05) -> None:
-        self.action: Any = follow_action_class()
-        self.available = self.action is not None
-        self.namespace, self.player, self.period = namespace.strip("/"), player, period
+        super().__init__(node, namespace, follow_action_class(), "follow_joint_trajectory", "trajectory")
+        self.player, self.period = player, period
         self.check_owner, self.refuse = check_owner, refuse
-        self._servers: dict[str, Any] = {}
         self.succeeded = 0
-        self.node: Any = None
-        self._executor: Any = None
-        if self.available:
-            import rclpy
-            from rclpy.executors import MultiThreadedExecutor
-
-            self.node = rclpy.create_node(node.get_name() + "_trajectory", context=node.context, use_global_arguments=False)
-            self._executor = MultiThreadedExecutor(context=node.context)
-            self._executor.add_node(self.node)
-            threading.Thread(target=self._spin, name="ros2-follow-trajectory", daemon=True).start()
-
-    def _spin(self) -> None:
-        try:
-            self._executor.spin()
-        except Exception:  # the context shut down (Ctrl-C): the thread ends with it
-            pass
-
-    def serve(self, rid: str) -> None:
-        """``rid``'s action server (an arm the bridge drives)."""
-        if not self.available or rid in self._servers:
-            return
-        from rclpy.action import ActionServer, CancelResponse
-
-        self._servers[rid] = ActionServer(self.node, self.action, ros_topic("/".join([self.namespace, rid, "follow_joint_trajectory"])),
-                                          lambda handle, r=rid: self._execute(r, handle),
-                                          cancel_callback=lambda _request: CancelResponse.ACCEPT)
-
-    def forget(self, rid: str) -> None:
-        server = self._servers.pop(rid, None)
-        if server is not None:
-            server.destroy()
-
-    def close(self) -> None:
-        """The servers, the executor and the node gone (idempotent; after Ctrl-C the context is down already)."""
-        try:
-            for rid in list(self._servers):
-                self.forget(rid)
-            if self._executor is not None:
-                self._executor.shutdown(timeout_sec=1.0)
-                self.node.destroy_node()
-        except Exception:  # rclpy refuses to destroy entities of a context that has shut down: nothing left to free
-            pass
-        self._executor = None
 
     def _end(self, rid: str, handle: Any, code: int, why: str, *, told: bool = True) -> Any:
         """Abort the goal with ``why`` (a refusal told on /rosout with ``told``)."""

@@ -9,23 +9,19 @@ stops the base. ``behavior_tree`` is ignored (there is no Nav2 behaviour tree he
 
 ``nav2_msgs`` is not among ROS 2 Kilted's wheels: :mod:`user_peer.ros2.msgbuild` builds its NavigateToPose into the
 environment (``make test`` does). Without it there is no action server and ``available`` is False (said at start).
-An action's execute callback runs until the goal ends, and rclpy's single-threaded executor, which spins the bridge's
-node, would resume a waiting coroutine on every turn (a busy loop) or block every other callback behind a waiting
-function: so the action servers live on a node of their own, ``<bridge's node>_navigate``, spun by a
-multi-threaded executor on its own thread (it takes no ``--ros-args``: a ``__node:=`` remap would give both nodes
-one name).
+The servers live on a node of their own, ``<bridge's node>_navigate`` (:mod:`.action_host` says why).
 """
 
 from __future__ import annotations
 
 import math
-import threading
 import time
 from typing import Any, Callable
 
 from fabric import keys
 from user_peer.errors import FabricUserError
-from user_peer.openfmt.ros2 import ros_topic, sim_time_ns
+from user_peer.openfmt.ros2 import sim_time_ns
+from user_peer.ros2.action_host import ActionHost
 from user_peer.ros2.commands import CommandError
 from user_peer.ros2.direct import pose_stamped
 
@@ -41,63 +37,18 @@ def navigate_action_class() -> type | None:
     return NavigateToPose
 
 
-class NavigateActions:
+class NavigateActions(ActionHost):
     """One NavigateToPose action server per driven base, on the bridge's action node."""
 
     def __init__(self, node: Any, namespace: str, prefix: str, check_owner: Callable[[str, str], Any],
                  refuse: Callable[[str, str, str], None], goal_of: Callable[[Any, str], tuple[float, float, float]],
                  map_name: str = "", *, tol: float = 0.25,
                  timeout: float = 120.0, period: float = 0.1) -> None:
-        self.action: Any = navigate_action_class()
-        self.available = self.action is not None
-        self.namespace, self.prefix = namespace.strip("/"), prefix
+        super().__init__(node, namespace, navigate_action_class(), "navigate_to_pose", "navigate")
+        self.prefix = prefix
         self.check_owner, self.refuse, self.goal_of, self.map_name = check_owner, refuse, goal_of, map_name
         self.tol, self.timeout, self.period = tol, timeout, period
-        self._servers: dict[str, Any] = {}
         self.succeeded = 0
-        self.node: Any = None
-        self._executor: Any = None
-        if self.available:
-            import rclpy
-            from rclpy.executors import MultiThreadedExecutor
-
-            self.node = rclpy.create_node(node.get_name() + "_navigate", context=node.context, use_global_arguments=False)
-            self._executor = MultiThreadedExecutor(context=node.context)
-            self._executor.add_node(self.node)
-            threading.Thread(target=self._spin, name="ros2-navigate", daemon=True).start()
-
-    def _spin(self) -> None:
-        try:
-            self._executor.spin()
-        except Exception:  # the context shut down (Ctrl-C): the thread ends with it
-            pass
-
-    def serve(self, rid: str) -> None:
-        """``rid``'s action server (a base the bridge drives)."""
-        if not self.available or rid in self._servers:
-            return
-        from rclpy.action import ActionServer, CancelResponse
-
-        self._servers[rid] = ActionServer(self.node, self.action, ros_topic("/".join([self.namespace, rid, "navigate_to_pose"])),
-                                          lambda handle, r=rid: self._execute(r, handle),
-                                          cancel_callback=lambda _request: CancelResponse.ACCEPT)
-
-    def forget(self, rid: str) -> None:
-        server = self._servers.pop(rid, None)
-        if server is not None:
-            server.destroy()
-
-    def close(self) -> None:
-        """The servers, the executor and the node gone (idempotent; after Ctrl-C the context is down already)."""
-        try:
-            for rid in list(self._servers):
-                self.forget(rid)
-            if self._executor is not None:
-                self._executor.shutdown(timeout_sec=1.0)
-                self.node.destroy_node()
-        except Exception:  # rclpy refuses to destroy entities of a context that has shut down: nothing left to free
-            pass
-        self._executor = None
 
     def _end(self, rid: str, handle: Any, code: int, why: str) -> Any:
         """Abort the goal with ``why`` (told on /rosout as a refusal)."""
