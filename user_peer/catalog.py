@@ -85,6 +85,10 @@ class RobotCatalog:
                 return r.type, placement_xyz_yaw(*(float(v) for v in r.pose))
         return None
 
+    def describes(self, rid: str) -> bool:
+        """Whether the sim's world description names ``rid``: a drawing guessed before it came is made again."""
+        return self._world_entry(rid) is not None
+
     def drawing(self, rid: str, hint: dict) -> RobotDrawing:
         """RobotDrawing for ``rid``: world description, then scenes, then joint names."""
         rtype, base = "", None

@@ -56,3 +56,21 @@ def test_every_urdf_link_is_a_frame_under_its_urdf_parent(rid, rtype):
         assert parents[f"{rid}/{j.child}"] == f"{rid}/{j.parent}", j
     root = parents[f"{rid}/{urdf.root}"]
     assert root == "map" if rtype == "meca500" else root == f"{rid}/odom" and parents[root] == "map"
+
+
+def test_a_base_guessed_from_poses_before_the_world_description_gets_its_sonar_frame_once_it_comes():
+    """A bridge hears a base's poses before the sim's world description: its guess (a mobile base of no type)
+    gives way to the description when it comes, so the sonar ring's frame appears; it was kept from the guess,
+    and RViz never got ``base7/sonar`` (the live TF test saw it missing once in four runs)."""
+    from fabric.interfaces import RobotInfo, SonarInfo, WorldInfo
+
+    catalog = RobotCatalog(None)  # base7 is in no scene: only the description names it
+    tracker = FrameTracker(catalog)
+    pose = Pose(np.array([1.0, 2.0, 0.0]), quaternion_from_yaw(0.4), header=Header(1.0, 0, 1, "sim"))
+    assert "base7/sonar" not in {f.child for f in tracker.frames("rf/w/robot/base7/pose", pose)}
+    sonar = SonarInfo(np.radians(np.arange(0.0, 360.0, 45.0)), 0.26, 0.12, 0.02, 3.0, center=np.array([0.05, 0.0]))
+    robot = RobotInfo("base7", "reeman", "mobile", np.zeros(4), ("wheel_left", "wheel_right"), np.zeros(2), np.zeros(2),
+                      np.zeros(2), sonar=sonar)
+    catalog.world_info = WorldInfo("w", "combined", 0.002, {"scan": 20.0}, (robot,))
+    parents = {f.child: f.parent for f in tracker.frames("rf/w/robot/base7/pose", pose)}
+    assert parents["base7/sonar"] == "base7/base_link" and parents["base7/laser"] == "base7/base_link"

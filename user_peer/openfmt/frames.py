@@ -103,8 +103,9 @@ class FrameTracker:
 
     def robot(self, rid: str, hint: dict) -> RobotDrawing:
         info = self.robots.get(rid)
-        # a guess from a pose alone (no type: "mobile" by hint) gives way to joint names that name the type
-        if info is None or (not info.kind and hint) or (not info.type and hint.get("joint_names")):
+        # a guess from a pose alone (no type: "mobile" by hint) gives way to joint names that name the type, and to
+        # the world description once it came (a base's first poses before it had no sonar ring, and kept none)
+        if info is None or (not info.kind and hint) or (not info.type and (hint.get("joint_names") or self.catalog.describes(rid))):
             info = self.robots[rid] = self.catalog.drawing(rid, hint)
         return info
 
