@@ -13,7 +13,11 @@ nothing. A hand-over meanwhile (the epoch changed) ends the ride with :class:`~u
 
 The sim reports its refusals a few times per second at most (:mod:`fabric.reports`), so the rider cannot count on
 one answer per copy: it sends again at growing intervals (:data:`RESEND_S` to :data:`RESEND_MAX_S`) while a hold was
-reported within :data:`QUIET_S`.
+reported within :data:`QUIET_S`, and then every :data:`RESEND_MAX_S` until the command's wait ends. A copy the sim
+refused while it held may be the last one it reported for seconds (its limit of refusals per interval was spent on
+earlier copies), and its word that it hears again may arrive before its token does (an event from a sim not yet
+back is no authority's): a rider that stopped at the last report it trusted lost the command (CI, a 3 s pause).
+A copy after the first was taken costs one message a second and changes nothing (the sim's ids).
 """
 
 from __future__ import annotations
@@ -95,7 +99,9 @@ class PauseRider:
         if term > self.term:  # a standby took the robot over: it may never have had the command
             self.term = term
             self.interval, self.sent_at, self.last_hold = RESEND_S, float("-inf"), now
-        if now - self.last_hold <= QUIET_S and now - self.sent_at >= self.interval:
+        paused = now - self.last_hold <= QUIET_S  # a hold reported lately: copies at growing intervals
+        after = self.last_hold > float("-inf")  # a pause met this command: a copy every RESEND_MAX_S till it is done
+        if (paused and now - self.sent_at >= self.interval) or (after and now - self.sent_at >= RESEND_MAX_S):
             self.robot.resend(self.command, self.cmd)
             self.resends += 1
             self.sent_at = now

@@ -68,6 +68,7 @@ class World(WorldPresence, contextlib.AbstractContextManager):
         self.closed = False
         self._close_lock = threading.Lock()
         self.robot_handles: dict[str, Robot] = {}  # the handles made so far, one per robot
+        self._handles_lock = threading.Lock()  # two threads asking for a new robot at once get one handle
         self._objects: dict[str, SceneObject] = {}
         self.description = WorldDescription(self.fabric, self.name, live_sims=lambda: self.presence.ids(),
                                              timeout=timeout, join_timeout=self.join_timeout)
@@ -141,7 +142,12 @@ class World(WorldPresence, contextlib.AbstractContextManager):
 
     def robot(self, robot_id: str) -> Robot:
         """The robot's handle, of the class for its kind in the world description (an
-        :class:`~user_peer.arm.Arm`, a :class:`~user_peer.mobile_base.Base`); one handle per robot."""
+        :class:`~user_peer.arm.Arm`, a :class:`~user_peer.mobile_base.Base`); one handle per robot, also when two
+        threads ask at once (the console's select and request, each off its event loop)."""
+        with self._handles_lock:
+            return self._robot(robot_id)
+
+    def _robot(self, robot_id: str) -> Robot:
         if robot_id not in self.robot_handles:
             entry = next((r for r in services.robot_entries(self.info()) if r.id == robot_id), None)
             if entry is None and self.description.current is not None:  # a sim that joined since the description was asked for

@@ -175,7 +175,8 @@ class EmulatedPage:
         """Wait until an element called ``label`` is on the page; its id."""
         eid = await self._until(lambda: self.find(label, tag=tag, exact=exact), timeout)
         if eid is None:
-            raise PageGone(f"no {label!r} on the page within {timeout:g} s")
+            said = [t for t in self.text().splitlines() if ":" in t][-3:]  # the page's last words, to say why
+            raise PageGone(f"no {label!r} on the page within {timeout:g} s (the page says: {' | '.join(said)[-400:]})")
         return str(eid)
 
     async def wait_text(self, pred: Any, timeout: float) -> bool:

@@ -1,0 +1,94 @@
+"""The rider of a waited command (user_peer.pause.PauseRider), alone, on a clock passed in: it sends the command again
+while its sim holds, and keeps doing so (once a second) after the sim's reports stop, since the last copy it had
+reported refused may not be the last one it refused (its reports are rate-limited) and its word that it hears again
+may come before its token (untrusted). A robot that never met a pause is never sent a copy."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+
+from fabric.interfaces import Command, Event
+from user_peer.errors import NotOwner
+from user_peer.pause import QUIET_S, RESEND_MAX_S, PauseRider
+from user_peer.robot import HELD
+
+
+CMD = Command(user="alice", epoch=3, body={"q": [0.0] * 6})
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+class Robot:
+    """What the rider reads of a robot: its refusals (appended by the test), its sim's arrivals, its joints."""
+
+    def __init__(self) -> None:
+        self.id = "arm1"
+        self.refusals: list[Event] = []
+        self.sent: list[float] = []
+        self.clock = FakeClock()
+        self.world = SimpleNamespace(rejections=lambda rid, since: list(self.refusals), presence=SimpleNamespace(arrivals=0))
+
+    def resend(self, command: str, cmd: Any) -> None:
+        self.sent.append(self.clock.t)
+
+    def latest(self, stream: str) -> Any:
+        return None
+
+
+def _refusal(code: str) -> Event:
+    return Event(kind="reject", reason=code, object="arm1", user="alice", data={"command": "joints", "code": code})
+
+
+def _run(robot: Robot, rider: PauseRider, until: float, step: float = 0.05) -> None:
+    while robot.clock.t < until:
+        rider.check()
+        robot.clock.t = round(robot.clock.t + step, 6)
+
+
+@pytest.fixture
+def robot() -> Robot:
+    return Robot()
+
+
+def test_no_pause_no_copy(robot):
+    rider = PauseRider(robot, "joints", CMD, 0, clock=robot.clock)  # type: ignore[arg-type]
+    _run(robot, rider, 30.0)
+    assert robot.sent == [] and rider.note() == ""
+
+
+def test_copies_go_on_once_a_second_after_the_sims_reports_stop(robot):
+    rider = PauseRider(robot, "joints", CMD, 0, clock=robot.clock)  # type: ignore[arg-type]
+    robot.refusals.append(_refusal(HELD))  # one hold reported, then nothing more (its reports spent)
+    _run(robot, rider, 12.0)
+    assert robot.sent[0] == 0.0  # at once
+    late = [t for t in robot.sent if t > QUIET_S + RESEND_MAX_S]
+    assert len(late) >= 8, robot.sent  # still sent, once a second, long after the last report
+    gaps = [b - a for a, b in zip(robot.sent, robot.sent[1:])]
+    assert max(gaps) <= RESEND_MAX_S + 0.06 and min(gaps) >= 0.19, gaps  # growing intervals, then one a second
+    assert "held its robots (a pause) 1 time(s)" in rider.note()
+
+
+def test_a_sim_back_after_a_cut_is_sent_the_command_with_no_report_at_all(robot):
+    rider = PauseRider(robot, "joints", CMD, 0, clock=robot.clock)  # type: ignore[arg-type]
+    _run(robot, rider, 3.0)
+    assert robot.sent == []
+    robot.world.presence.arrivals += 1  # its token came back: it may never have had the command
+    _run(robot, rider, 10.0)
+    assert robot.sent[0] == pytest.approx(3.0) and robot.sent[-1] > 9.0, robot.sent
+
+
+def test_any_other_refusal_is_raised(robot):
+    rider = PauseRider(robot, "joints", CMD, 0, clock=robot.clock)  # type: ignore[arg-type]
+    robot.refusals.append(Event(kind="reject", reason="not granted", object="arm1", user="alice",
+                                data={"command": "joints", "code": "refused"}))
+    with pytest.raises(NotOwner):
+        rider.check()
