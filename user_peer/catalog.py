@@ -11,6 +11,7 @@ robot types. Either way the geometry comes from the same robot descriptions
 from __future__ import annotations
 
 import logging
+import threading
 
 import numpy as np
 
@@ -32,7 +33,11 @@ def placement_xyz_yaw(x: float, y: float, z: float, yaw: float) -> Placement:
 
 
 class RobotCatalog:
-    """Builds :class:`RobotDrawing` for robot ids; caches descriptions and arm geometries per type."""
+    """Builds :class:`RobotDrawing` for robot ids; caches descriptions and arm geometries per type.
+
+    Safe from several threads (the ROS 2 bridge draws from zenoh's callbacks): each cache is filled under one lock
+    and seen only whole; a thread that read a half-filled one drew a Meca500 as a mobile base of no size and a
+    Reeman without its sonar ring, and kept those drawings (issue 46)."""
 
     def __init__(self, world_info: WorldInfo | None = None, *, scene: str | None = None) -> None:
         self.world_info: WorldInfo | None = world_info
@@ -40,19 +45,26 @@ class RobotCatalog:
         self._models: dict[str, ArmGeometry | None] = {}
         self._descs: dict[str, robots.RobotDescription] | None = None
         self._scene_robots: list[robots.SceneRobot] | None = None
+        self._lock = threading.RLock()  # the caches' loads: one thread loads, the others wait for the whole
 
     def descriptions(self) -> dict[str, robots.RobotDescription]:
-        if self._descs is None:
-            self._descs = {}
-            for name in robots.available_robots():
-                try:
-                    self._descs[name] = robots.load(name)
-                except robots.DescriptionError as exc:
-                    log.warning("skipping robot type %s: %s", name, exc)
-        return self._descs
+        with self._lock:
+            if self._descs is None:
+                descs = {}
+                for name in robots.available_robots():
+                    try:
+                        descs[name] = robots.load(name)
+                    except robots.DescriptionError as exc:
+                        log.warning("skipping robot type %s: %s", name, exc)
+                self._descs = descs
+            return self._descs
 
     def scene_robots(self) -> list[robots.SceneRobot]:
         """Robots placed by the named scene, or by every known scene (first placement of an id wins)."""
+        with self._lock:
+            return self._load_scene_robots()
+
+    def _load_scene_robots(self) -> list[robots.SceneRobot]:
         if self._scene_robots is None:
             names = [self.scene_name] if self.scene_name else robots.available_scenes()
             out: list[robots.SceneRobot] = []
@@ -65,6 +77,10 @@ class RobotCatalog:
         return self._scene_robots
 
     def arm_geometry(self, rtype: str) -> ArmGeometry | None:
+        with self._lock:
+            return self._arm_geometry(rtype)
+
+    def _arm_geometry(self, rtype: str) -> ArmGeometry | None:
         if rtype not in self._models:
             model = None
             d = self.descriptions().get(rtype)

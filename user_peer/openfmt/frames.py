@@ -23,6 +23,7 @@ older than the last one written for the same frame (two sims' clocks during a fa
 from __future__ import annotations
 
 import math
+import threading
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from typing import Any
@@ -100,14 +101,53 @@ class FrameTracker:
         self._stamps: dict[str, int] = {}  # child frame -> the newest stamp written for it
         self.stale = 0  # transforms dropped because their frame already had a newer one
         self._urdf_joints: dict[str, dict[str, MovingJoint]] = {}  # a mobile base's type -> its URDF's moving joints
+        self._described: set[str] = set()  # robots drawn from the world description (the others are guesses)
+        self._lock = threading.Lock()  # robot state comes on several threads (the bridge's zenoh callbacks)
 
     def robot(self, rid: str, hint: dict) -> RobotDrawing:
+        """``rid``'s drawing. A guess (its poses or joints before the world description named it: a scene's, a
+        joint-name match, or "mobile" by a pose's hint) gives way to joint names that name the type, and to the
+        description once it names ``rid`` (:meth:`describe` says which drawings that changed)."""
+        with self._lock:
+            info = self.robots.get(rid)
+            if info is None or (not info.kind and hint) or (not info.type and hint.get("joint_names")) \
+                    or (rid not in self._described and self.catalog.describes(rid)):
+                info = self.robots[rid] = self.catalog.drawing(rid, hint)
+                if self.catalog.describes(rid):
+                    self._described.add(rid)
+            return info
+
+    def describe(self, info: Any) -> list[str]:
+        """The world description (a ``WorldInfo``) from now on: the robots drawn from a guess that it names are
+        drawn again from it; the ids whose drawing that changed (their static frames, :meth:`mounts`, may too)."""
+        self.catalog.world_info = info
+        changed = []
+        for rid, old in list(self.robots.items()):
+            new = self.robot(rid, {})
+            if (new.kind, new.type, new.sonar, tuple(new.lidar_offset)) != (old.kind, old.type, old.sonar, tuple(old.lidar_offset)):
+                changed.append(rid)
+        return changed
+
+    def mounts(self, rid: str) -> list[Frame]:
+        """The frames of ``rid`` that never move in their parent (``frames.FIXED``: a base's ``map -> ID/odom``
+        and sensor mounts), as its drawing has them now; none for an arm or a robot not seen."""
         info = self.robots.get(rid)
-        # a guess from a pose alone (no type: "mobile" by hint) gives way to joint names that name the type, and to
-        # the world description once it came (a base's first poses before it had no sonar ring, and kept none)
-        if info is None or (not info.kind and hint) or (not info.type and (hint.get("joint_names") or self.catalog.describes(rid))):
-            info = self.robots[rid] = self.catalog.drawing(rid, hint)
-        return info
+        if info is None or info.kind == "arm":
+            return []
+        return [f for f in self._base(rid, info, None) if f.child.endswith(FIXED)]
+
+    def _base(self, oid: str, info: RobotDrawing, p: Placement | None) -> list[Frame]:
+        """A mobile base's (or a robot of unknown kind with a pose) frames; ``p`` its pose (None: the mounts only)."""
+        base = base_frame(oid)
+        out = [Frame(MAP, f"{oid}/odom", (0.0, 0.0, 0.0), _IDENTITY)]
+        if p is not None:
+            out.append(_frame(f"{oid}/odom", base, p))
+        if info.kind == "mobile":
+            out.append(Frame(base, f"{oid}/laser", tuple(float(v) for v in info.lidar_offset), _IDENTITY))  # type: ignore[arg-type]
+            if info.sonar is not None:
+                cx, cy, h, _r = info.sonar
+                out.append(Frame(base, f"{oid}/sonar", (cx, cy, h), _IDENTITY))
+        return out
 
     def frames(self, key: str, msg: Any, stamp_ns: int | None = None) -> list[Frame]:
         """The transforms ``msg`` on ``key`` gives; with ``stamp_ns``, only those not older than their frame's last."""
@@ -136,14 +176,7 @@ class FrameTracker:
             info = self.robot(oid, {"mobile": True})
             if info.kind == "arm":  # the flange is the URDF's link, from the joints; a pose only where that is unknown
                 return [_frame(MAP, f"{oid}/flange", p)] if info.arm is None else []
-            base = base_frame(oid)
-            out = [Frame(MAP, f"{oid}/odom", (0.0, 0.0, 0.0), _IDENTITY), _frame(f"{oid}/odom", base, p)]
-            if info.kind == "mobile":
-                out.append(Frame(base, f"{oid}/laser", tuple(float(v) for v in info.lidar_offset), _IDENTITY))  # type: ignore[arg-type]
-                if info.sonar is not None:
-                    cx, cy, h, _r = info.sonar
-                    out.append(Frame(base, f"{oid}/sonar", (cx, cy, h), _IDENTITY))
-            return out
+            return self._base(oid, info, p)
         if isinstance(msg, JointState) and leaf == "joints" and what == "robot":
             info = self.robot(oid, {"joint_names": msg.names})
             arm = info.arm

@@ -7,7 +7,10 @@ kinematics from its JointState, as robot_state_publisher sends them, so RViz's R
 places the ``/ID/robot_description`` links); each frame's stamps never go back. Every transform goes on ``/tf``
 as the export writes it; the frames that never move (``ID/odom`` and the sensor mounts, ``frames.FIXED``) also
 go once on ``/tf_static`` (transient local), so a node that starts later has them at once, with each sonar
-transducer's ``ID/sonar_I`` under ``ID/sonar``.
+transducer's ``ID/sonar_I`` under ``ID/sonar``. ``/tf_static`` keeps one message, the whole set: when the world
+description draws a robot again (its poses came first and it was drawn from a guess: a mobile base where it is an
+arm, a base without its sonar), its mounts are set again from the new drawing and the whole set sent again, so
+the latched set never keeps a frame the described robot does not have.
 
 ``tf2_msgs`` is not among ROS 2 Kilted's wheels on PyPI: :mod:`user_peer.ros2.msgbuild` builds it into the
 environment (``make test`` does; a ROS 2 install from apt has it). Without it nothing is published here and
@@ -16,6 +19,7 @@ environment (``make test`` does; a ROS 2 install from apt has it). Without it no
 
 from __future__ import annotations
 
+import threading
 from typing import Any, Callable
 
 from geometry_msgs.msg import TransformStamped
@@ -23,7 +27,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from fabric.interfaces import WorldInfo
 from user_peer.catalog import RobotCatalog
-from user_peer.openfmt.frames import FIXED, MAP, Frame, FrameTracker
+from user_peer.openfmt.frames import FIXED, MAP, Frame, FrameTracker, key_owner
 from user_peer.ros2.direct import stamp
 from user_peer.ros2.names import frame_prefix
 from user_peer.ros2.ranges import transducer_frames
@@ -67,6 +71,7 @@ class TfOut:
         self.available = self.message is not None
         self.frames = FrameTracker(catalog)
         self._static: dict[str, Frame] = {}  # child -> the static frame last sent on /tf_static
+        self._static_lock = threading.Lock()  # robot state's threads and the description's share the set
         self.sent = 0
         ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
         self.prefix = frame_prefix(namespace)
@@ -83,14 +88,18 @@ class TfOut:
     def describe(self, info: WorldInfo) -> None:
         """The world's description: where arms stand, what each robot is; each sonar transducer's frame on
         /tf_static (:func:`user_peer.ros2.ranges.transducer_frames`), once, and again when it changes."""
-        self.frames.catalog.world_info = info
+        redrawn = self.frames.describe(info)
         if not self.available:
             return
-        new = [f for r in info.robots if r.sonar is not None for f in transducer_frames(r.id, r.sonar)
-               if self._static.get(f.child) != f]
-        if new:
-            self._static.update((f.child, f) for f in new)
-            self._send_static(0)
+        with self._static_lock:
+            before = dict(self._static)
+            for rid in redrawn:  # a guessed drawing's mounts give way to the described robot's
+                for child in [c for c in self._static if c.startswith(f"{rid}/") and c.endswith(FIXED)]:
+                    del self._static[child]
+                self._static.update((f.child, f) for f in self.frames.mounts(rid))
+            self._static.update((f.child, f) for r in info.robots if r.sonar is not None for f in transducer_frames(r.id, r.sonar))
+            if self._static != before:
+                self._send_static(0)
 
     def on_state(self, key: str, msg: Any, ns: int) -> None:
         """A robot's state: its frames, stamped ``ns`` (robot state comes one message at a time per key)."""
@@ -101,7 +110,11 @@ class TfOut:
             return
         self._pub.publish(self.message(transforms=[transform(f, ns, self.prefix) for f in frames]))
         self.sent += 1
-        mounts = [f for f in frames if f.child.endswith(FIXED) and self._static.get(f.child) != f]
-        if mounts:
-            self._static.update((f.child, f) for f in mounts)
-            self._send_static(ns)
+        owner = key_owner(key)
+        if owner is None or not any(f.child.endswith(FIXED) for f in frames):
+            return
+        with self._static_lock:  # the drawing's mounts now: a description may have drawn it again since ``frames``
+            mounts = [f for f in self.frames.mounts(owner[1]) if self._static.get(f.child) != f]
+            if mounts:
+                self._static.update((f.child, f) for f in mounts)
+                self._send_static(ns)
