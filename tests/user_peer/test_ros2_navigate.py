@@ -58,3 +58,29 @@ def test_a_goal_for_a_robot_this_login_may_not_command_is_rejected_with_the_reas
             actions.close()
         executor.shutdown(timeout_sec=2.0)
         rclpy.shutdown(context=context)
+
+
+def test_the_action_node_takes_the_bridges_ros_args_under_a_name_of_its_own():
+    """``robofabric ros2 ... --ros-args`` reaches the action servers' node as it does the bridge's: a remap renames
+    the action, a parameter is set on it; its name is the bridge's remapped name with its suffix, not the
+    bridge's own (a global ``__node:=`` would have given both nodes one name)."""
+    assert importlib.util.find_spec("nav2_msgs") is not None, BUILD_IT
+    from rclpy.action import get_action_server_names_and_types_by_node
+
+    context = rclpy.Context()
+    rclpy.init(args=["robofabric", "--ros-args", "-r", "__node:=bridge9", "-r", "/class1/base1/navigate_to_pose:=/class1/base1/go",
+                     "-p", "use_sim_time:=true"], context=context, domain_id=1 + (os.getpid() * 11 + 47) % 100)
+    actions = None
+    try:
+        node = rclpy.create_node("robofabric_rosargs", context=context)
+        actions = NavigateActions(node, "class1", "class1/", lambda rid, what: None, lambda rid, what, why: None, goal_of)
+        actions.serve("base1")
+        assert (node.get_name(), actions.node.get_name()) == ("bridge9", "bridge9_navigate")
+        assert actions.node.get_parameter("use_sim_time").value is True
+        served = lambda: get_action_server_names_and_types_by_node(node, "bridge9_navigate", "/")  # noqa: E731
+        wait_until(lambda: served(), timeout=30, what="the action server in the graph", seen=served)
+        assert served() == [("/class1/base1/go", ["nav2_msgs/action/NavigateToPose"])]
+    finally:
+        if actions is not None:
+            actions.close()
+        rclpy.shutdown(context=context)

@@ -3,7 +3,10 @@
 An action's execute callback runs until its goal ends, and rclpy's single-threaded executor, which spins the
 bridge's node, would resume a waiting coroutine on every turn (a busy loop) or block every other callback behind a
 waiting function. So each kind of action (:mod:`.navigate`, :mod:`.follow_trajectory`) serves from a node of its
-own, ``<bridge's node>_<suffix>``; it takes no ``--ros-args`` (a ``__node:=`` remap would give both nodes one name).
+own, ``<bridge's node>_<suffix>``. It takes the bridge's ``--ros-args`` as the bridge's node does (rclpy's global
+arguments: remaps of the action names, ``-p``/``--params-file`` parameters such as ``use_sim_time``, the log level)
+but its own name: a node's local ``__node:=`` remap comes before the global one, which would give both nodes the
+bridge's name.
 """
 
 from __future__ import annotations
@@ -31,7 +34,8 @@ class ActionHost:
             import rclpy
             from rclpy.executors import MultiThreadedExecutor
 
-            self.node = rclpy.create_node(f"{node.get_name()}_{suffix}", context=node.context, use_global_arguments=False)
+            own = f"{node.get_name()}_{suffix}"  # the bridge's name after its --ros-args
+            self.node = rclpy.create_node(own, context=node.context, cli_args=["--ros-args", "-r", f"__node:={own}"])
             self._executor = MultiThreadedExecutor(context=node.context)
             self._executor.add_node(self.node)
             threading.Thread(target=self._spin, name=f"ros2-{suffix}", daemon=True).start()
