@@ -11,6 +11,11 @@ browser's page: builds her page, owns her robot, drives her base and pushes ever
 The element tree is kept as the page keeps it (``update`` replaces or deletes elements by id) and looked up
 the way a person reads a page: a button by its label, a field by its label, a line by its text.
 
+Each student comes from an address of her own, as a class's machines do: ``127.0.0.2``, ``127.0.0.3``.. (all of
+127/8 is this machine's loopback on Linux), her page's load and its websocket both, through one HTTP session of
+hers; the console's per-address limits (:mod:`user_peer.console.doors`) then see 32 students, not one address
+loading 32 pages. ``--one-address`` puts the whole class on ``127.0.0.1``, as a class behind one NAT looks.
+
 Run as a program (``python -m robofabric.bench.console_client URL --first K --count N``), it puts N students
 (``c{K}``..) on their bases (``base{K}``..), each holding ← with speed 2 and letting go now and then as a
 student steering does (the first ``--arms`` of them also own ``arm0``.. and apply IK), until SIGTERM or
@@ -31,11 +36,24 @@ import uuid
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["EmulatedPage", "PageGone", "parse_page", "ClientReport", "main"]
+__all__ = ["EmulatedPage", "PageGone", "parse_page", "ClientReport", "student_address", "main"]
 
 _ELEMENTS = re.compile(r"parseElements\(String\.raw`(.*?)`\)", re.S)
 _QUERY = re.compile(r"query: (\{.*?\}),\s*\n")
 _UNESCAPE = (("&#36;", "$"), ("&#96;", "`"), ("&gt;", ">"), ("&lt;", "<"), ("&amp;", "&"))  # nicegui.js's parseElements
+
+
+JOIN_WAIT_S = 120.0
+"""How long a student waits for each step of her join (her page, its answer to Log in, her request's): a person
+waits that long for a console a whole class is joining at once."""
+
+
+def student_address(k: int) -> str:
+    """The loopback address the ``k``-th student (from 0) comes from: ``127.0.0.2``.. (``127.0.0.1`` is the
+    console's own and the pages'); at most 253 students, the addresses of 127.0.0.0/24 past .1."""
+    if not 0 <= k <= 252:
+        raise ValueError(f"student {k}: one loopback address each, 127.0.0.2 to 127.0.0.254 (at most 253 students)")
+    return f"127.0.0.{2 + k}"
 
 
 class PageGone(RuntimeError):
@@ -81,7 +99,8 @@ class EmulatedPage:
     _acker: asyncio.Task | None = None
 
     async def open(self, http: Any, timeout: float = 60.0) -> None:
-        """Ask for the page and connect its socket (the implicit handshake of a page's first connection)."""
+        """Ask for the page and connect its socket (the implicit handshake of a page's first connection), both
+        through ``http`` (an ``aiohttp.ClientSession``): the socket comes from the address the page was loaded from."""
         import socketio
 
         async with http.get(self.url, timeout=timeout) as r:
@@ -90,7 +109,7 @@ class EmulatedPage:
             self.elements, self._query = parse_page(await r.text())
         self._next_id = int(self._query.get("next_message_id", 0))
         self._changed = asyncio.Event()
-        sio = socketio.AsyncClient(reconnection=False)
+        sio = socketio.AsyncClient(reconnection=False, http_session=http)
         for name in ("update", "run_javascript", "load_js_components", "notify", "open", "download"):
             sio.on(name, self._handler(name))
         query = {**self._query, "document_id": str(uuid.uuid4()), "tab_id": str(uuid.uuid4()),
@@ -247,18 +266,18 @@ async def _student(url: str, i: int, http: Any, report: ClientReport, stop: asyn
     t0 = time.monotonic()
 
     async def join() -> None:
-        await page.open(http)
-        await page.fill("Name", f"c{i}")
-        await page.click("Log in")
-        await page.click(f"base{i}")
-        await page.click("Request")
-        await page.wait_for(f"request base{i}: you own it", exact=False, timeout=60)
+        await page.open(http, timeout=JOIN_WAIT_S)
+        await page.fill("Name", f"c{i}", timeout=JOIN_WAIT_S)
+        await page.click("Log in", timeout=JOIN_WAIT_S)
+        await page.click(f"base{i}", timeout=JOIN_WAIT_S)
+        await page.click("Request", timeout=JOIN_WAIT_S)
+        await page.wait_for(f"request base{i}: you own it", exact=False, timeout=JOIN_WAIT_S)
         await page.key("2", True)  # speed 2, as the pages drive
         await page.key("2", False)
         if arm is not None:
-            await page.click(arm)
-            await page.click("Request")
-            await page.wait_for(f"request {arm}: you own it", exact=False, timeout=60)
+            await page.click(arm, timeout=JOIN_WAIT_S)
+            await page.click("Request", timeout=JOIN_WAIT_S)
+            await page.wait_for(f"request {arm}: you own it", exact=False, timeout=JOIN_WAIT_S)
             if target is not None:
                 await page.type_number("IK target height z (m)", target[2])
                 await page.drop("drag the orange sphere", "ik-target", target)
@@ -313,9 +332,10 @@ async def _student(url: str, i: int, http: Any, report: ClientReport, stop: asyn
 
 async def run_class(url: str, first: int, count: int, seconds: float, period: float = 1.0,
                     started: Any = None, arms: int = 0,
-                    targets: list[tuple[float, float, float]] | None = None) -> ClientReport:
+                    targets: list[tuple[float, float, float]] | None = None, one_address: bool = False) -> ClientReport:
     """``count`` students at once on the console at ``url``; until ``seconds`` pass (or SIGTERM/SIGINT). The
-    first ``arms`` of them also own ``arm0``.. and apply IK now and then, from ``targets[k]`` (world frame)."""
+    first ``arms`` of them also own ``arm0``.. and apply IK now and then, from ``targets[k]`` (world frame). Each
+    comes from her own loopback address (:func:`student_address`), or all from 127.0.0.1 with ``one_address``."""
     import aiohttp
 
     report = ClientReport(clients=count)
@@ -326,9 +346,12 @@ async def run_class(url: str, first: int, count: int, seconds: float, period: fl
             loop.add_signal_handler(sig, stop.set)
         except (NotImplementedError, RuntimeError):
             pass
-    async with aiohttp.ClientSession() as http:
+    # one session (connection pool, cookie jar) a student, bound to her address: her page and its socket share it
+    sessions = [aiohttp.ClientSession(connector=None if one_address else
+                                      aiohttp.TCPConnector(local_addr=(student_address(k), 0))) for k in range(count)]
+    try:
         aims = list(targets or [])
-        tasks = [asyncio.create_task(_student(url, first + k, http, report, stop, period, f"arm{k}" if k < arms else None,
+        tasks = [asyncio.create_task(_student(url, first + k, sessions[k], report, stop, period, f"arm{k}" if k < arms else None,
                                               aims[k] if k < min(arms, len(aims)) else None))
                  for k in range(count)]
 
@@ -355,6 +378,9 @@ async def run_class(url: str, first: int, count: int, seconds: float, period: fl
             elif any(w in words for w in REFUSED):
                 report.refused += 1
             await p.close()
+    finally:
+        for http in sessions:
+            await http.close()
     return report
 
 
@@ -369,13 +395,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--period", type=float, default=1.0, help="how long ← is held before it is let go (s)")
     ap.add_argument("--arms", type=int, default=0, help="the first ARMS students also own arm0.. and apply IK")
     ap.add_argument("--targets", default="", help="each arm's first IK target in the world frame: x,y,z;x,y,z;...")
+    ap.add_argument("--one-address", action="store_true",
+                    help="every student from 127.0.0.1 (a class behind one NAT), not each from her own 127.0.0.N")
     a = ap.parse_args(argv)
     targets = [tuple(float(v) for v in t.split(",")) for t in a.targets.split(";") if t.strip()]
 
     def joined(r: ClientReport) -> None:
         print(f"clients: {r.joined} of {r.clients} joined", flush=True)
 
-    report = asyncio.run(run_class(a.url, a.first, a.count, a.seconds, a.period, started=joined, arms=a.arms, targets=targets))  # type: ignore[arg-type]
+    report = asyncio.run(run_class(a.url, a.first, a.count, a.seconds, a.period, started=joined, arms=a.arms, targets=targets,
+                               one_address=a.one_address))  # type: ignore[arg-type]
     print(json.dumps(report.__dict__), flush=True)
     return 0
 

@@ -37,8 +37,11 @@ LOADS_BURST, LOADS_PER_S = 40, 1.0
 """Page loads per address: 40 at once (a student's tabs and reloads; a few pages side by side from one machine),
 then one a second."""
 
-WAITING_PER_ADDRESS = 20
-"""Served pages an address may hold that have not connected yet; the older ones are forgotten."""
+WAITING_PER_ADDRESS = 32
+"""Served pages an address may hold at one moment that have not connected yet; the older ones are forgotten. A
+class of 32 behind one NAT address, every page loaded when the teacher says go, is all waiting at once while
+the server is slow to take their websockets; below the class, its first students' pages would be forgotten
+(docs/security.md). Still below :data:`LOADS_BURST`, so a flood's burst is cut to it."""
 
 WAITING_MAX = 400
 """Served pages waiting for their websocket, from every address together (about 32 MB), before a load gets 503."""
