@@ -213,13 +213,15 @@ def browser_args(swiftshader: bool) -> list[str]:
     return list(CHROMIUM_ARGS) if swiftshader else [a for a in CHROMIUM_ARGS if "swiftshader" not in a]
 
 
-def _start_class(procs: Any, url: str, first: int, clients: int, seconds: float, arms: int = 0, targets: str = "") -> Any:
+def _start_class(procs: Any, url: str, first: int, clients: int, seconds: float, arms: int = 0, targets: str = "",
+                 one_address: bool = False) -> Any:
     """The emulated students (:mod:`robofabric.bench.console_client`, one process of their own so that their
-    CPU is neither the server's nor the measuring pages'): ``c{first}``.. on ``base{first}``.., all in."""
+    CPU is neither the server's nor the measuring pages'): ``c{first}``.. on ``base{first}``.., all in; each from
+    her own loopback address, or all from 127.0.0.1 (``one_address``: a class behind one NAT)."""
     from robofabric.testing import wait_until
 
     proc = procs.start([sys.executable, "-m", "robofabric.bench.console_client", url, "--first", str(first),
-                        "--count", str(clients), "--seconds", str(seconds), "--arms", str(arms), f"--targets={targets}"], name="clients")
+                        "--count", str(clients), "--seconds", str(seconds), "--arms", str(arms), f"--targets={targets}"] + (["--one-address"] if one_address else []), name="clients")
     wait_until(lambda: f"of {clients} joined" in procs.output(proc) or proc.poll() is not None, timeout=60 + 5 * clients,
                what=f"{clients} emulated students in", seen=lambda: procs.output(proc)[-1500:])
     if proc.poll() is not None:
@@ -273,7 +275,7 @@ def _end_class(procs: Any, proc: Any) -> dict[str, Any]:
 
 
 def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, robots: int = 0, together: bool = False,
-            clients: int = 0, arms: int = 0) -> dict[str, Any]:
+            clients: int = 0, arms: int = 0, one_address: bool = False) -> dict[str, Any]:
     """N pages on one console (and ``clients`` emulated students beside them), in a world of
     ``max(n + clients, robots)`` bases; the row's figures."""
     from playwright.sync_api import sync_playwright
@@ -329,7 +331,8 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
                 fab.subscribe(f"rf/{world}/robot/arm$*/joints", on_joints, expected=JointState)
             browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=browser_args(swiftshader))
             reloads: list[str] = []  # NiceGUI's own words when a page reloads itself (connection timed out, ...)
-            klass = _start_class(procs, url, n, clients, 10 * seconds + 600, arms, _arm_targets(fab, world, arms)) if clients else None
+            klass = _start_class(procs, url, n, clients, 10 * seconds + 600, arms, _arm_targets(fab, world, arms),
+                                 one_address) if clients else None
             klass_t0 = time.monotonic()
             try:
                 pages, bases, joined, join_cpu = _open_pages(browser, url, n, reloads, together=together)
@@ -433,6 +436,8 @@ def command(
                                          "(python -m robofabric.bench.console_client).")] = 0,
     arms: Annotated[int, typer.Option("--arms", help="Meca500 arms in the world (and a compute peer for their IK): the "
                                       "first ARMS emulated students also own one and nudge its target and apply IK.")] = 0,
+    one_address: Annotated[bool, typer.Option("--one-address", help="Every emulated student from 127.0.0.1, as a class "
+                                              "behind one NAT, instead of each from her own 127.0.0.N.")] = False,
 ) -> None:
     """N browser pages on one console server, each driving its own base: view lag in the page, key to motion,
     the server's CPU, robots lost."""
@@ -448,13 +453,14 @@ def command(
         raise UserError("--pages: each count at least 1; --seconds positive; --robots and --clients not negative; "
                         "--arms from 0 to --clients (each arm is an emulated student's)")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    flag = (" --swiftshader" if swiftshader else "") + (f" --robots {robots}" if robots else "") + (" --together" if together else "") + (f" --clients {clients}" if clients else "") + (f" --arms {arms}" if arms else "")
+    flag = (" --swiftshader" if swiftshader else "") + (f" --robots {robots}" if robots else "") + (" --together" if together else "") + (f" --clients {clients}" if clients else "") + (f" --arms {arms}" if arms else "") + (" --one-address" if one_address else "")
     lines = [f"robofabric bench console --pages {pages} --seconds {seconds:g}{flag} on {machine()}, load average {load:.1f} at the start",
              "", *header()]
     print("\n".join(lines), flush=True)
     with tempfile.TemporaryDirectory(prefix="bench-console-") as tmp:
         for n in counts:
-            result = run_one(n, seconds, Path(tmp), swiftshader=swiftshader, robots=robots, together=together, clients=clients, arms=arms)
+            result = run_one(n, seconds, Path(tmp), swiftshader=swiftshader, robots=robots, together=together, clients=clients, arms=arms,
+                             one_address=one_address)
             for err in result.get("c_errors", [])[:5]:
                 print(f"  {err}", file=sys.stderr, flush=True)
             line = row(result)

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from robofabric.bench.console_client import EmulatedPage, PageGone, parse_page
+from robofabric.bench.console_client import EmulatedPage, PageGone, parse_page, student_address
 
 ESC = (("&", "&amp;"), ("<", "&lt;"), (">", "&gt;"), ("`", "&#96;"), ("$", "&#36;"))  # nicegui's, & first
 
@@ -44,3 +44,56 @@ def test_controls_are_found_by_label_aria_label_or_text_and_by_tag():
 def test_a_page_that_is_not_niceguis_is_refused_with_why():
     with pytest.raises(PageGone, match="not a NiceGUI page"):
         parse_page("<html><body>404</body></html>")
+
+
+def test_each_student_has_a_loopback_address_of_her_own_past_the_consoles():
+    addresses = [student_address(k) for k in range(253)]
+    assert addresses[0] == "127.0.0.2" and addresses[-1] == "127.0.0.254" and len(set(addresses)) == 253
+    for k in (-1, 253):
+        with pytest.raises(ValueError, match="at most 253 students"):
+            student_address(k)
+
+
+def test_a_students_page_and_its_socket_both_come_from_her_address():
+    """A real HTTP and socket.io server on 127.0.0.1 (the console's listening address): the page's load and its
+    websocket (socket.io's own transport, which makes its own connection) each arrive from 127.0.0.5, the address
+    of student 3's session, not from 127.0.0.1."""
+    import asyncio
+
+    import aiohttp
+    import socketio
+    from aiohttp import web
+
+    from robofabric.testing import free_port
+
+    seen: dict[str, str] = {}
+    sio = socketio.AsyncServer(async_mode="aiohttp")
+    app = web.Application()
+    sio.attach(app, socketio_path="/_nicegui_ws/socket.io")
+
+    async def page(request: web.Request) -> web.Response:
+        seen["page"] = str(request.remote)
+        return web.Response(text=_page({"0": {"tag": "q-layout"}}, "{'client_id': 'c-1', 'next_message_id': 0}"),
+                            content_type="text/html")
+
+    @sio.event
+    async def connect(sid, environ, auth=None):
+        seen["socket"] = str(environ["aiohttp.request"].remote)
+
+    app.router.add_get("/", page)
+
+    async def run() -> None:
+        runner = web.AppRunner(app)
+        await runner.setup()
+        port = free_port()
+        await web.TCPSite(runner, "127.0.0.1", port).start()
+        try:
+            async with aiohttp.ClientSession(connector=aiohttp.TCPConnector(local_addr=(student_address(3), 0))) as http:
+                p = EmulatedPage(f"http://127.0.0.1:{port}/")
+                await p.open(http, timeout=20)
+                await p.close()
+        finally:
+            await runner.cleanup()
+
+    asyncio.run(run())
+    assert seen == {"page": "127.0.0.5", "socket": "127.0.0.5"}

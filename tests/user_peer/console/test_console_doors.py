@@ -56,6 +56,17 @@ def test_an_address_keeps_its_newest_waiting_pages_and_none_older_than_the_windo
     assert pages_to_forget([], 0.0, per_address=3, max_age=1.0) == []
 
 
+def test_a_class_of_32_behind_one_nat_keeps_its_pages_while_they_wait_but_a_burst_is_still_cut():
+    """A class of 32 whose pages were all served when the teacher said go, none connected yet (the server is slow
+    to take their websockets then): all 32 are kept. The limit stays below the loads' burst, so an address that
+    loads a burst and never connects still loses all but its newest."""
+    klass = [Waiting(f"s{i}", "10.1.2.3", 100.0 + i / 10) for i in range(32)]
+    assert pages_to_forget(klass, 110.0, per_address=WAITING_PER_ADDRESS, max_age=180.0) == []
+    burst = [Waiting(f"f{i}", "10.6.6.6", 100.0 + i / 100) for i in range(LOADS_BURST)]
+    forgotten = pages_to_forget(klass + burst, 110.0, per_address=WAITING_PER_ADDRESS, max_age=180.0)
+    assert forgotten == [f"f{i}" for i in range(LOADS_BURST - WAITING_PER_ADDRESS)]  # the burst's oldest, no student
+
+
 def test_the_delay_grows_with_each_failure_after_the_free_ones_up_to_a_cap():
     assert [delay_after(n, free=3, base=1.0, cap=60.0) for n in range(10)] == [0, 0, 0, 1, 2, 4, 8, 16, 32, 60]
     assert delay_after(10_000, free=3, base=1.0, cap=60.0) == 60.0
