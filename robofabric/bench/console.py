@@ -218,11 +218,13 @@ def _start_class(procs: Any, url: str, first: int, clients: int, seconds: float,
     """The emulated students (:mod:`robofabric.bench.console_client`, one process of their own so that their
     CPU is neither the server's nor the measuring pages'): ``c{first}``.. on ``base{first}``.., all in; each from
     her own loopback address, or all from 127.0.0.1 (``one_address``: a class behind one NAT)."""
+    from robofabric.bench.console_client import JOIN_WAIT_S
     from robofabric.testing import wait_until
 
     proc = procs.start([sys.executable, "-m", "robofabric.bench.console_client", url, "--first", str(first),
                         "--count", str(clients), "--seconds", str(seconds), "--arms", str(arms), f"--targets={targets}"] + (["--one-address"] if one_address else []), name="clients")
-    wait_until(lambda: f"of {clients} joined" in procs.output(proc) or proc.poll() is not None, timeout=60 + 5 * clients,
+    # each student gives up on her own (JOIN_WAIT_S a step, at most 10 steps with an arm): this is only a backstop
+    wait_until(lambda: f"of {clients} joined" in procs.output(proc) or proc.poll() is not None, timeout=60 + 10 * JOIN_WAIT_S,
                what=f"{clients} emulated students in", seen=lambda: procs.output(proc)[-1500:])
     if proc.poll() is not None:
         raise RuntimeError(f"the emulated students' process ended with {proc.returncode}: {procs.output(proc)[-800:]}")
