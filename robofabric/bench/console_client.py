@@ -43,6 +43,9 @@ _QUERY = re.compile(r"query: (\{.*?\}),\s*\n")
 _UNESCAPE = (("&#36;", "$"), ("&#96;", "`"), ("&gt;", ">"), ("&lt;", "<"), ("&amp;", "&"))  # nicegui.js's parseElements
 
 
+RECONNECT_TRIES, RECONNECT_WAIT_S = 10, 30.0
+"""A dropped socket's tries to reconnect (1 s apart, then up to 5 s), and how long an action waits for it."""
+
 JOIN_WAIT_S = 120.0
 """How long a student waits for each step of her join (her page, its answer to Log in, her request's): a person
 waits that long for a console a whole class is joining at once."""
@@ -97,6 +100,22 @@ class EmulatedPage:
     _sio: Any = None
     _changed: asyncio.Event | None = None
     _acker: asyncio.Task | None = None
+    _opened: float = 0.0
+    _final: bool = False  # the socket closed for good: her own close, or no reconnection within its tries
+    dropped_after: float | None = None  # seconds from the socket's connect to its first drop
+    drops: int = 0  # times the socket dropped (each then reconnected, as a browser's page does, or was final)
+
+    async def _on_disconnect(self, reason: Any = None) -> None:
+        self.drops += 1
+        if self.dropped_after is None:
+            self.dropped_after = time.monotonic() - self._opened
+        if self._changed is not None:
+            self._changed.set()
+
+    async def _on_final(self, *_: Any) -> None:
+        self._final = True
+        if self._changed is not None:
+            self._changed.set()
 
     async def open(self, http: Any, timeout: float = 60.0) -> None:
         """Ask for the page and connect its socket (the implicit handshake of a page's first connection), both
@@ -109,16 +128,24 @@ class EmulatedPage:
             self.elements, self._query = parse_page(await r.text())
         self._next_id = int(self._query.get("next_message_id", 0))
         self._changed = asyncio.Event()
-        sio = socketio.AsyncClient(reconnection=False, http_session=http)
+        # a dropped socket reconnects to the same page, as NiceGUI's page script does (a server that stalled past
+        # its ping timeout drops it), asking for the messages from the last one it has (the page keeps the others
+        # for its reconnect window); the URL is read again at each try for that
+        sio = socketio.AsyncClient(reconnection=True, reconnection_attempts=RECONNECT_TRIES, reconnection_delay=1.0,
+                                   reconnection_delay_max=5.0, http_session=http)
         for name in ("update", "run_javascript", "load_js_components", "notify", "open", "download"):
             sio.on(name, self._handler(name))
-        query = {**self._query, "document_id": str(uuid.uuid4()), "tab_id": str(uuid.uuid4()),
-                 "implicit_handshake": "true", "next_message_id": str(self._next_id)}
+        sio.on("disconnect", self._on_disconnect)
+        sio.on("__disconnect_final", self._on_final)
+        query = {**self._query, "document_id": str(uuid.uuid4()), "tab_id": str(uuid.uuid4()), "implicit_handshake": "true"}
         base = self.url.rstrip("/")
-        qs = "&".join(f"{k}={v}" for k, v in query.items())
-        await sio.connect(f"{base}/?{qs}", socketio_path="/_nicegui_ws/socket.io", transports=["websocket"],
-                          wait_timeout=timeout)
+
+        def url() -> str:
+            return f"{base}/?" + "&".join(f"{k}={v}" for k, v in {**query, "next_message_id": str(self._next_id)}.items())
+
+        await sio.connect(url, socketio_path="/_nicegui_ws/socket.io", transports=["websocket"], wait_timeout=timeout)
         self._sio = sio
+        self._opened = time.monotonic()
         self._acker = asyncio.create_task(self._ack_every(3.0))
 
     def _handler(self, name: str) -> Any:
@@ -144,13 +171,16 @@ class EmulatedPage:
         return on
 
     async def _emit(self, event: str, data: dict[str, Any]) -> None:
+        deadline = time.monotonic() + RECONNECT_WAIT_S
+        while self._sio is not None and not self._sio.connected and not self._final and time.monotonic() < deadline:
+            await asyncio.sleep(0.1)  # reconnecting: what she does waits for it, as a page's clicks do
         if self._sio is None or not self._sio.connected:
             raise PageGone("the page's socket is closed")
         await self._sio.emit(event, {**data, "client_id": self._query["client_id"]})
         self.sent += 1
 
     async def _ack_every(self, period: float) -> None:
-        while self._sio is not None and self._sio.connected:
+        while self.connected:
             await asyncio.sleep(period)
             try:
                 await self._emit("ack", {"next_message_id": self._next_id})
@@ -159,7 +189,8 @@ class EmulatedPage:
 
     @property
     def connected(self) -> bool:
-        return self._sio is not None and self._sio.connected
+        """Whether the page is still there: its socket open, or reconnecting."""
+        return self._sio is not None and not self._final
 
     def find(self, label: str, *, tag: str | None = None, exact: bool = True) -> str | None:
         """The id of the element a person would call ``label`` (its label, aria-label or text)."""
@@ -195,7 +226,9 @@ class EmulatedPage:
         eid = await self._until(lambda: self.find(label, tag=tag, exact=exact), timeout)
         if eid is None:
             said = [t for t in self.text().splitlines() if ":" in t][-3:]  # the page's last words, to say why
-            raise PageGone(f"no {label!r} on the page within {timeout:g} s (the page says: {' | '.join(said)[-400:]})")
+            gone = (f"; its socket dropped {self.drops} time(s), first {self.dropped_after:.1f} s after it opened"
+                    + ("" if self.connected else ", and did not come back") if self.dropped_after is not None else "")
+            raise PageGone(f"no {label!r} on the page within {timeout:g} s (the page says: {' | '.join(said)[-400:]}{gone})")
         return str(eid)
 
     async def wait_text(self, pred: Any, timeout: float) -> bool:
@@ -230,6 +263,8 @@ class EmulatedPage:
         await self._fire("0", "rf_key", [{"key": key, "down": down, "t": int(time.time() * 1000)}])
 
     async def close(self) -> None:
+        self.drops -= 1 if self._sio is not None and self._sio.connected else 0  # her own close is no drop
+        self._final = True
         if self._acker is not None:
             self._acker.cancel()
         if self._sio is not None:
@@ -250,6 +285,7 @@ class ClientReport:
     ik_unsolved: int = 0
     back_at_login: int = 0
     disconnected: int = 0
+    drops: int = 0  # sockets of joined pages that dropped (each reconnected, or counted in ``disconnected``)
     refused: int = 0
     errors: list[str] = field(default_factory=list)
 
@@ -370,6 +406,7 @@ async def run_class(url: str, first: int, count: int, seconds: float, period: fl
         pages = [p for p in await asyncio.gather(*tasks) if p is not None]
         watcher.cancel()
         for p in pages:
+            report.drops += p.drops
             words = p.text()
             if not p.connected:
                 report.disconnected += 1
