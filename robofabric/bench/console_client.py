@@ -228,7 +228,8 @@ class EmulatedPage:
             said = [t for t in self.text().splitlines() if ":" in t][-3:]  # the page's last words, to say why
             gone = (f"; its socket dropped {self.drops} time(s), first {self.dropped_after:.1f} s after it opened"
                     + ("" if self.connected else ", and did not come back") if self.dropped_after is not None else "")
-            raise PageGone(f"no {label!r} on the page within {timeout:g} s (the page says: {' | '.join(said)[-400:]}{gone})")
+            raise PageGone(f"no {label!r} on the page within {timeout:g} s (the page says: {' | '.join(said)[-400:]}{gone}; "
+                           f"{self.updates} updates, {self.js_answered} JavaScript calls answered, next message {self._next_id})")
         return str(eid)
 
     async def wait_text(self, pred: Any, timeout: float) -> bool:
