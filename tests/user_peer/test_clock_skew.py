@@ -2,7 +2,9 @@
 freshness is judged by arrival here, never by comparing the sim's header wall_ns with ours.
 
 The "sim" is a real Zenoh peer on the test's router whose headers are stamped with a shifted clock; it
-answers joint and path commands the way the sim peer does (state at the target, or a reject event)."""
+answers joint and path commands the way the sim peer does (state at the target, or a reject event). Like a
+live sim, it sends each robot's first state once a handle listens for it (a handle waits up to a second for
+one: a sim that never sent it made each test wait that second out, twice)."""
 
 from __future__ import annotations
 
@@ -33,6 +35,20 @@ class SkewedSim:
         self._seq = 0
         self._lock = threading.Lock()
         fab.subscribe(keys.robot_cmd_all(fab.world), self._on_command, expected=Command)
+
+    def send_first_states(self, timeout: float = 10.0) -> threading.Thread:
+        """Once a subscriber of each robot's state is known, its first state (at rest, at the origin): the
+        state a live sim streams, and a handle waits for when it is made. Returns the thread that sends them."""
+        def send() -> None:
+            w = self.fab.world
+            if self.fab.wait_matching(keys.robot_joints(w, "arm1"), timeout):
+                self.fab.publish(keys.robot_joints(w, "arm1"), JointState(JOINTS, np.zeros(6), np.zeros(6), self.header()))
+            if self.fab.wait_matching(keys.robot_pose(w, "base1"), timeout):
+                self.fab.publish(keys.robot_pose(w, "base1"), Pose([0.0, 0.0, 0.0], header=self.header()))
+
+        thread = threading.Thread(target=send, name="skewed-sim-first-states", daemon=True)
+        thread.start()
+        return thread
 
     def _on_command(self, key: str, cmd: Command) -> None:
         p = keys.parse(key)
@@ -68,9 +84,11 @@ class SkewedSim:
 def skewed(request, world, router, connect):
     sim = SkewedSim(connect("sim", "skewed-sim"), request.param)
     w = World(client_config(world, router[1]), "alice", timeout=2.0)
+    first = sim.send_first_states()
     lim = (-3.0,) * 6, (3.0,) * 6
     arm = Arm(w, RobotEntry("arm1", "meca500", "arm", JOINTS, *lim, (1.0,) * 6))
     base = Base(w, RobotEntry("base1", "reeman", "mobile"))
+    first.join(timeout=10.0)
     try:
         yield sim, w, arm, base
     finally:
