@@ -38,12 +38,14 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/robofabric demo --out out/demo
 
+# Both keep bytecode (PYTHONDONTWRITEBYTECODE emptied, where a shell sets it): with none, every run compiled each
+# module again and pytest rewrote each test module's asserts again, half of the fast suite's collection (docs/testing.md)
 test: $(STAMP_TEST) $(AXE) $(ROS_MSGS)
-	$(PY) -m pytest -q --durations=25
+	PYTHONDONTWRITEBYTECODE= $(PY) -m pytest -q --durations=25
 
 # the fast suite: no process-spawning or multi-second tests (those are marked slow)
 test-fast: $(STAMP_TEST) $(ROS_MSGS)
-	$(PY) -m pytest -q -m "not slow" -n 2
+	PYTHONDONTWRITEBYTECODE= $(PY) -m pytest -q -m "not slow" -n 2
 
 # the linter and the type checker alone (tests/test_lint.py runs both in `make test`)
 lint: $(STAMP_TEST)
