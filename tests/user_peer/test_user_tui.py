@@ -2,6 +2,7 @@
 
 import asyncio
 import math
+import threading
 
 import numpy as np
 import pytest
@@ -27,19 +28,35 @@ async def until(pilot, predicate, what, timeout=10.0):
         await pilot.pause(0.05)
 
 
+def publish_once_heard(fab, items, timeout=10.0) -> threading.Thread:
+    """Publish each (key, message) once a subscriber of its key is known, as a live sim's stream reaches a handle
+    within a period (a handle waits up to a second for its robot's first state: it was waited out, twice)."""
+    def run():
+        for key, msg in items:
+            if fab.wait_matching(key, timeout):
+                fab.publish(key, msg)
+
+    thread = threading.Thread(target=run, name="first-states", daemon=True)
+    thread.start()
+    return thread
+
+
 @pytest.fixture
 def setup(world, router, connect):
     auth = connect("sim", "sim-test")
     alice = World(client_config(world, router[1]), "alice", timeout=2.0)
+    first = publish_once_heard(auth, [
+        (keys.robot_joints(world, "arm1"), JointState(NAMES, np.full(6, 0.1), np.zeros(6), Header.now())),
+        (keys.robot_pose(world, "base1"), Pose([1.0, 2.0, 0.0], header=Header.now())),
+    ])
     arm = Arm(alice, RobotEntry("arm1", "meca500", "arm", NAMES, (-1.0,) * 6, (1.0,) * 6))
     base = Base(alice, RobotEntry("base1", "reeman", "mobile", ("wheel_left", "wheel_right")))
+    first.join(timeout=10.0)
     cmds = []
     auth.subscribe(keys.robot_cmd_all(world), lambda k, m: cmds.append((k, m)))
     h = Header(wall_ns=1)
     auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="bob", epoch=1, queue=("carol",), authority="sim-test"))
     auth.publish(keys.own(world, "base1"), OwnershipRecord("base1", owner="", epoch=1, authority="sim-test"))
-    auth.publish(keys.robot_joints(world, "arm1"), JointState(NAMES, np.full(6, 0.1), np.zeros(6), Header.now()))
-    auth.publish(keys.robot_pose(world, "base1"), Pose([1.0, 2.0, 0.0], header=Header.now()))
     auth.publish(keys.robot_scan(world, "base1"), Scan.from_ranges(np.linspace(1, 4, 240), angle_min=-1.17, angle_increment=0.01, range_max=12, header=h))
     wait_until(lambda: arm.record is not None and base.record is not None and base.scan is not None and arm.joints is not None, what="replicas")
     yield auth, alice, arm, base, cmds
