@@ -66,6 +66,9 @@ def test_record_replay_into_another_world_and_record_again(tmp_path, world, rout
 
     sim = connect("sim", "sim1")
     streams = robot_streams(world, 2, rates={"joints": 50.0, "pose": 25.0, "scan": 10.0})
+    # the recorder's token comes with its session, its subscription a moment later; a put this session sends
+    # before it knows of that subscription is dropped (Fabric.wait_matching): under load the first sample was
+    wait_until(lambda: all(sim.wait_matching(s.key, 1.0) for s in streams), timeout=30, what="the recorder's subscription")
     sent, _ = run_load(sim.put_raw, streams, duration=3.0)
     total = sum(sent.values())
     wait_until(lambda: _count(first) >= total, timeout=20, what="every sample in the growing file",
@@ -82,7 +85,7 @@ def test_record_replay_into_another_world_and_record_again(tmp_path, world, rout
     with client(other, router[1]) as watcher2:
         _wait_token(watcher2, "recorder", "rec2")
     rp = subprocess.run(
-        robofabric_cmd("replay", str(first), "--remap-world", other, "--connect", _ep(router)),
+        robofabric_cmd("replay", str(first), "--remap-world", other, "--connect", _ep(router), "--wait", "30"),  # rec2 listens
         capture_output=True, text=True, timeout=60,
     )
     assert rp.returncode == 0, rp.stderr
