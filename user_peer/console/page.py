@@ -179,9 +179,17 @@ class ConsolePage:
         self.frame, self.view = frame, LiveView(self, frame, boxes)
         self.client.on_disconnect(self._disconnected)
         self.client.on_delete(self.end)
-        self.root.clear()
-        with self.root:
-            self._main()
+
+        def build() -> bool:  # her page in place of the login card; not when the tab went away meanwhile
+            if self._ended:
+                return False
+            self.root.clear()
+            with self.root:
+                self._main()
+            return True
+
+        if not await self.console.builds.run(build):  # one build per turn of the loop (.ticker.OnePerTurn)
+            return False
         for text, classes in list(ticket.lines):
             self.log.push(text, classes=classes)
         return True

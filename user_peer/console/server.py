@@ -19,7 +19,7 @@ from user_peer.console.health import PERIOD_S, Health
 from user_peer.console.login import Logins
 from user_peer.console.pictures import ROUTE, Pictures
 from user_peer.console.teacher import ROUTE as TEACHER
-from user_peer.console.ticker import Ticker
+from user_peer.console.ticker import OnePerTurn, Ticker
 
 __all__ = ["Console", "serve", "page_urls", "RECONNECT_S", "PRUNE_S", "PING_INTERVAL_S", "PING_TIMEOUT_S", "REFRESH_VIEW_S"]
 
@@ -65,6 +65,7 @@ class Console:
     ticker: Ticker = field(init=False, default_factory=lambda: Ticker(REFRESH_VIEW_S))
     decoded: Decoded = field(init=False, default_factory=Decoded)  # every page's poses, decoded once
     doors: Doors = field(init=False, default_factory=Doors)  # page loads, websockets, whose socket speaks for a page
+    builds: OnePerTurn = field(init=False, default_factory=OnePerTurn)  # the pages' builds, one per turn of the loop
 
     def __post_init__(self) -> None:
         self.logins = Logins(self._open, grace=self.grace, on_leave=stop_robots)

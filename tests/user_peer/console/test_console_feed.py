@@ -15,7 +15,7 @@ from fabric.interfaces import Pose
 from robofabric.testing import wait_until
 from user_peer.console import topview
 from user_peer.console.feed import Decoded, PoseFeed, ring_capacity
-from user_peer.console.ticker import Ticker
+from user_peer.console.ticker import OnePerTurn, Ticker
 
 
 def _pose(x: float) -> Pose:
@@ -105,6 +105,59 @@ def test_the_clock_runs_on_the_event_loop_until_cancelled():
 
     asyncio.run(main())
     assert seen[:3] == [1, 2, 3]
+
+
+def test_the_clocks_pass_lets_the_event_loop_turn_between_two_pages_and_skips_one_that_left():
+    """A pass over a class took seconds as one call of the loop: every socket's ping and key waited for it."""
+    t = Ticker(0.01)
+    order: list[str] = []
+    handles: dict[str, int] = {}
+    handles["a"] = t.add(lambda: order.append("a"))
+    handles["b"] = t.add(lambda: (order.append("b"), t.remove(handles["c"])))  # c's page leaves during the pass
+    handles["c"] = t.add(lambda: order.append("c"))
+    handles["d"] = t.add(lambda: order.append("d"))
+
+    async def other() -> None:
+        for _ in range(3):
+            order.append("loop")
+            await asyncio.sleep(0)
+
+    async def main() -> None:
+        await asyncio.gather(t.turn(), other())
+
+    asyncio.run(main())
+    pages = [x for x in order if x != "loop"]
+    assert pages == ["a", "b", "d"] and t.ticks == 1
+    assert order.index("loop", order.index("a")) < order.index("b") < order.index("loop", order.index("b")) < order.index("d")
+
+
+def test_pages_ready_to_build_in_the_same_turn_build_one_per_turn_of_the_event_loop():
+    """32 logins answered together were 32 builds run back to back in one turn: the loop stood still 17-43 s."""
+    builds = OnePerTurn()
+    order: list[str] = []
+
+    async def build(name: str) -> str:
+        return await builds.run(lambda: order.append(name) or name)
+
+    async def other() -> None:
+        for _ in range(8):
+            order.append("loop")
+            await asyncio.sleep(0)
+
+    async def main() -> list:
+        return await asyncio.gather(build("a"), build("b"), build("c"), other())
+
+    assert asyncio.run(main())[:3] == ["a", "b", "c"]
+    at = [i for i, x in enumerate(order) if x != "loop"]
+    assert [order[i] for i in at] == ["a", "b", "c"]
+    assert all("loop" in order[i + 1:j] for i, j in zip(at, at[1:]))  # the loop turned between two builds
+
+
+def test_every_page_starts_on_the_same_picture_of_the_scene_drawn_once():
+    f = topview.Frame(0.0, 0.0, 4.0, 4.0, 10.0)
+    first = topview.background_png(f, [(1.0, 1.0, 0.5, 0.2, 0.0)])
+    assert topview.background_png(f, [(1.0, 1.0, 0.5, 0.2, 0.0)]) is first  # the same bytes, not drawn again
+    assert topview.background_png(f, [(1.0, 1.0, 0.5, 0.2, 0.5)]) != first  # another scene is its own picture
 
 
 def test_a_scan_is_one_path_of_squares_one_per_pixel_hit():
