@@ -125,10 +125,11 @@ def _by_kind(before: dict[str, float], after: dict[str, float], seconds: float) 
 
 def _status(page: Any) -> str | None:
     """A page's message line; None when the page has none any more (it lost its connection for longer than the
-    console's reconnect window and went back to the login)."""
+    console's reconnect window and went back to the login). A page whose renderer is starved (load 30 beside the
+    run) answers slowly, not never: 5 s once counted such a page as back at its login, so it is given 30 s."""
     status = page.get_by_role("status")
     try:
-        return status.inner_text(timeout=5_000)
+        return status.inner_text(timeout=30_000)
     except Exception:
         return None
 
