@@ -143,7 +143,11 @@ class World(WorldPresence, contextlib.AbstractContextManager):
     def robot(self, robot_id: str) -> Robot:
         """The robot's handle, of the class for its kind in the world description (an
         :class:`~user_peer.arm.Arm`, a :class:`~user_peer.mobile_base.Base`); one handle per robot, also when two
-        threads ask at once (the console's select and request, each off its event loop)."""
+        threads ask at once (the console's select and request, each off its event loop). A handle already made is
+        returned without the lock: only a new one waits, and may ask the world's description."""
+        made = self.robot_handles.get(robot_id)
+        if made is not None:
+            return made
         with self._handles_lock:
             return self._robot(robot_id)
 
