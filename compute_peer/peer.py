@@ -114,6 +114,7 @@ def parse_arms(specs: Iterable[str]) -> dict[str, Any]:
     import math
 
     import robots
+    from robots.kinds import robot_kind
     from compute_peer.kinematics.service import ArmPlacement
     from fabric import keys
 
@@ -128,7 +129,7 @@ def parse_arms(specs: Iterable[str]) -> dict[str, Any]:
             desc = robots.load(rtype)
         except Exception as exc:
             raise ValueError(f"--arm {spec!r}: {exc}") from None
-        if desc.kind != "arm":
+        if not robot_kind(desc.kind).chain:
             raise ValueError(f"--arm {spec!r}: {rtype} is a {desc.kind} robot, not an arm")
         pose = [0.0, 0.0, 0.0, 0.0]
         if where:

@@ -19,9 +19,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from robots.kinds import NAMES, robot_kind
+
 HERE = Path(__file__).resolve().parent
 ENV_PATH = "ROBOFABRIC_ROBOTS_PATH"
-KINDS = ("arm", "mobile")
+KINDS = NAMES
+"""The kinds a ``[robot] kind`` may name: the rows of :data:`robots.kinds.KINDS`."""
 
 
 class DescriptionError(ValueError):
@@ -288,10 +291,11 @@ def _load(path: Path) -> RobotDescription:
     if any(s <= 0 for s in speed):
         raise DescriptionError(f"{where}: max_speed values must be positive")
     base = lidar = sonar = None
-    if kind == "mobile":
+    mobile = robot_kind(kind).base
+    if mobile:
         base, lidar, sonar = _base(data, where), _lidar(data, where), _sonar(data, where)
     base_joints = tuple(r.get("base_joints", ()))
-    if kind == "mobile" and len(base_joints) != 3:
+    if mobile and len(base_joints) != 3:
         raise DescriptionError(f"{where}: a mobile robot needs base_joints = [x, y, yaw] (slide, slide, hinge)")
     return RobotDescription(
         name=str(r.get("name", d.name)),

@@ -27,6 +27,7 @@ from typing import Any, Callable
 
 from fabric import keys
 from fabric.interfaces import JointState, Pose, RobotInfo, ServiceError, WorldInfo
+from robots.kinds import facts
 from sim_peer.arm_mirror import ArmShape, arm_shape
 from sim_peer.world import SimWorld
 
@@ -100,7 +101,7 @@ class MirrorFeed:
         follow: dict[str, ArmShape] = {}
         if info is not None:
             for r in info.robots:
-                if r.kind != "arm" or r.id in self.world.robots or r.id in self._shapes or len(self._shapes) + len(follow) >= MAX_ARMS:
+                if not facts(r.kind).chain or r.id in self.world.robots or r.id in self._shapes or len(self._shapes) + len(follow) >= MAX_ARMS:
                     continue
                 try:
                     follow[r.id] = arm_shape(r)
@@ -111,7 +112,7 @@ class MirrorFeed:
             self._asking = False
             if info is not None:
                 self._bases = {r.id: r for r in info.robots if r.base is not None and r.id not in self.world.robots}
-                self._arms = {r.id: r for r in info.robots if r.kind == "arm" and r.id not in self.world.robots}
+                self._arms = {r.id: r for r in info.robots if facts(r.kind).chain and r.id not in self.world.robots}
             if self._closed:
                 return
             self._shapes.update(follow)

@@ -16,6 +16,7 @@ import numpy as np
 
 from fabric.keys import validate_id
 from robots import RobotDescription, SceneRobot
+from robots.kinds import robot_kind
 from sim_peer.errors import WorldError
 from sim_peer.sensors import SENSED_GROUPS
 
@@ -64,7 +65,7 @@ def place(scene_mjcf: Path, robots: Sequence[SceneRobot], descriptions: Mapping[
         return descriptions[r.id].base_radius or DEFAULT_RADIUS
 
     taken = [(r.pose[0], r.pose[1], radius(r)) for r in robots if not unplaced(r)]
-    mobile = [r for r in robots if not unplaced(r) and descriptions[r.id].kind == "mobile"]
+    mobile = [r for r in robots if not unplaced(r) and robot_kind(descriptions[r.id].kind).base]
     ox, oy = (mobile[0].pose[0], mobile[0].pose[1]) if mobile else (0.0, 0.0)
     dirs = np.array([[math.cos(a), math.sin(a), 0.0] for a in np.linspace(0, 2 * math.pi, 24, endpoint=False)]).reshape(-1)
     gid, dist = np.zeros(24, np.int32), np.zeros(24)

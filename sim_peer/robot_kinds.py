@@ -147,7 +147,7 @@ class ArmRobot(_Driven):
 
     def restore(self, state: RobotState) -> None:
         c = self.ctrl
-        if state.kind != "arm" or state.q.shape != c.q.shape:
+        if state.kind != self.kind or state.q.shape != c.q.shape:
             raise ValueError(f"robot {state.id}: state of a {state.kind} with {state.q.shape[0]} joints for an arm with {c.dof}")
         c.restore(state.q, state.dq, state.target, float(state.extra.get("scale", 1.0)))
 
@@ -286,7 +286,7 @@ class MobileRobot(_Driven):
 
     def restore(self, state: RobotState) -> None:
         c = self.ctrl
-        if state.kind != "mobile" or state.q.shape != (3,):
+        if state.kind != self.kind or state.q.shape != (3,):
             raise ValueError(f"robot {state.id}: state of a {state.kind} for a mobile base")
         c.x, c.y, c.yaw = (float(v) for v in state.q)
         c.v, c.omega = (float(v) for v in state.dq)

@@ -18,6 +18,7 @@ import numpy as np
 import robots
 from fabric.interfaces import WorldInfo
 from fabric.interfaces.geometry import quaternion_from_yaw
+from robots.kinds import facts
 from user_peer.arm_geometry import ArmGeometry, Placement
 from user_peer.geometry import quat_xyzw
 from user_peer.rerun_log import RobotDrawing
@@ -123,7 +124,7 @@ class RobotCatalog:
         d = self.descriptions().get(rtype)
         kind = d.kind if d is not None else ("mobile" if hint.get("mobile") else "")
         info = RobotDrawing(rid, rtype, kind)
-        if kind == "arm":
+        if facts(kind).chain:
             info.arm = self.arm_geometry(rtype)
             info.base = base
         elif d is not None and d.base is not None:

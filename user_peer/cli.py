@@ -206,6 +206,7 @@ def user(
     join: Joining = Joining(),
 ) -> None:
     """Terminal UI: joint sliders, arrow-key driving, ownership, live joints, scan, latency."""
+    from robots.kinds import facts
     from user_peer.errors import FabricUserError
     from user_peer.tui import UserApp
 
@@ -216,11 +217,11 @@ def user(
             kinds = {rid: w.robot(rid).kind for rid in ids}
         except FabricUserError as exc:
             raise UserError(exc.reason) from None
-        arm_id = arm or next((r for r in ids if kinds[r] == "arm"), None)
-        base_id = base or next((r for r in ids if kinds[r] == "mobile"), None)
-        for rid, kind in ((arm, "arm"), (base, "mobile")):
-            if rid is not None and kinds.get(rid) != kind:
-                raise UserError(f"{rid!r} is not a{'n' if kind == 'arm' else ''} {kind} robot in world {w.name!r}; robots: {', '.join(ids)}")
+        arm_id = arm or next((r for r in ids if facts(kinds[r]).chain), None)
+        base_id = base or next((r for r in ids if facts(kinds[r]).base), None)
+        for rid, fits, what in ((arm, lambda k: k.chain, "an arm"), (base, lambda k: k.base, "a mobile")):
+            if rid is not None and not fits(facts(kinds.get(rid, ""))):
+                raise UserError(f"{rid!r} is not {what} robot in world {w.name!r}; robots: {', '.join(ids)}")
         UserApp(w, arm=w.robot(arm_id) if arm_id else None, base=w.robot(base_id) if base_id else None).run()
     finally:
         w.close()

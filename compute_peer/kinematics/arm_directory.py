@@ -20,6 +20,7 @@ from fabric.interfaces import NoReply, ServiceError
 from fabric.limits import quote
 from fabric.rate import Clock
 from fabric.session import Fabric
+from robots.kinds import facts
 
 from ..world_lookup import BackgroundLookup, described_robots
 from .arm import PlacedArm
@@ -115,9 +116,9 @@ class ArmDirectory:
             return len(self.names)
         with self._lock:
             self._answered_at = generation
-            self._not_arms |= {r.id for r in described if r.kind != "arm"}  # a sim late to answer loses none
+            self._not_arms |= {r.id for r in described if not facts(r.kind).chain}  # a sim late to answer loses none
         for r in described:
-            if r.kind != "arm" or self.get(r.id) is not None:
+            if not facts(r.kind).chain or self.get(r.id) is not None:
                 continue
             try:
                 self.add(r.id, ArmPlacement(r.type, tuple(float(v) for v in r.pose)))

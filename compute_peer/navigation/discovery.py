@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Callable, Iterable
 
 from fabric.interfaces import ServiceError
 from fabric.rate import Clock, MonotonicClock
+from robots.kinds import facts
 
 from ..world_lookup import BackgroundLookup, described_robots
 
@@ -128,10 +129,10 @@ class RobotDescriptions:
             every = described_robots(self.fabric, None, timeout=timeout)
         except ServiceError:
             return 0
-        described = [r for r in every if r.kind == "mobile"]
+        described = [r for r in every if facts(r.kind).base]
         with self._lock:
             self._answered_at = self._clock.now()
-            self._not_mobile |= {r.id for r in every if r.kind != "mobile"}
+            self._not_mobile |= {r.id for r in every if not facts(r.kind).base}
             known = set(self._described or ())
             for r in described:
                 known.add(r.id)

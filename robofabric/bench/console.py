@@ -43,6 +43,7 @@ from typing import Annotated, Any, Optional
 import typer
 
 from robofabric.bench.common import append, machine, pct, proc_cpu_s
+from robots.kinds import facts
 
 __all__ = ["command", "run_one"]
 
@@ -249,7 +250,7 @@ def _arm_targets(fab: Any, world: str, arms: int) -> str:
 
     def ask() -> bool:
         for r in fab.rpc.query(keys.srv(world, "world"), timeout=5.0, expected=WorldInfo, all_replies=True):
-            poses.update({x.id: x.pose for x in r.message.robots if x.kind == "arm"})
+            poses.update({x.id: x.pose for x in r.message.robots if facts(x.kind).chain})
         return all(f"arm{k}" in poses for k in range(arms))
 
     wait_until(ask, timeout=60, what="the arms' spawn poses", seen=lambda: sorted(poses))

@@ -14,6 +14,7 @@ import numpy as np
 import typer
 
 from robofabric.bench.common import machine, write
+from robots.kinds import facts
 
 
 def rtf(world, seconds: float, scan_hz: float = 20.0) -> float:
@@ -23,7 +24,7 @@ def rtf(world, seconds: float, scan_hz: float = 20.0) -> float:
     mobiles = [rid for rid, r in world.robots.items() if isinstance(r, MobileRobot) and r.lidar is not None]
     for rid in mobiles:  # keep them driving in 1 m circles so the scans see a changing world
         world.robot(rid).twist(0.3, 0.3)
-    arms = [rid for rid, r in world.robots.items() if r.kind == "arm"]
+    arms = [rid for rid, r in world.robots.items() if facts(r.kind).chain]
     poses = [np.array([0.8, 0.4, -0.6, 0.5, 0.6, 1.0]), np.array([-0.8, -0.2, 0.3, -0.5, -0.6, -1.0])]
     flips = dict.fromkeys(arms, 0)
     per_scan = max(1, int(round(1.0 / (scan_hz * world.dt))))

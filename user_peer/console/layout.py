@@ -14,6 +14,8 @@ from typing import TYPE_CHECKING, Any
 
 from nicegui import ui
 
+from robots.kinds import facts
+
 if TYPE_CHECKING:
     from user_peer.console.page import ConsolePage
 
@@ -73,7 +75,7 @@ class Layout:
         for kind, box in self.panels.items():
             box.set_visibility(kind in kinds)
         sel = page.handles.get(page.selected) if page.selected else None
-        first = "mobile" if sel is not None and sel.kind == "mobile" else "arm"
+        first = "mobile" if sel is not None and facts(sel.kind).base else "arm"
         if first != self._first:
             self._first = first
             self.rows[first].move(self.body, target_index=0)

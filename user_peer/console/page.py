@@ -18,6 +18,7 @@ import numpy as np
 from nicegui import ui
 
 from fabric.text import one_line
+from robots.kinds import NAMES, facts
 
 from user_peer.console import follow, state
 from user_peer.console.arm_panel import ArmPanel
@@ -115,7 +116,7 @@ def _first_handles(world: Any, user: str, selected: str | None = None) -> tuple[
     layout = state.scene_layout(info)
     entries = services.robot_entries(info)
     handles = {}
-    for kind in ("arm", "mobile"):
+    for kind in NAMES:
         mine = [e for e in entries if e.kind == kind and (rec := world.ownership.record(e.id)) is not None and rec.owner == user]
         first = [e for e in entries if e.kind == kind and e.id == selected] or mine or [e for e in entries if e.kind == kind]
         if first:
@@ -221,8 +222,8 @@ class ConsolePage:
     def _main(self) -> None:
         w = self.world
         info = w.info()
-        self.arm = next((r for r in self.handles.values() if r.kind == "arm"), None)
-        self.base = next((r for r in self.handles.values() if r.kind == "mobile"), None)
+        self.arm = next((r for r in self.handles.values() if facts(r.kind).chain), None)
+        self.base = next((r for r in self.handles.values() if facts(r.kind).base), None)
         had = self.ticket.selected if self.ticket is not None else None
         self.selected = had if had in self.handles else (self.arm or self.base).id if self.handles else None
         self.follow_shown()
@@ -317,9 +318,9 @@ class ConsolePage:
         if self.ticket is not None:
             self.ticket.selected = rid
         r = await self._handle(rid)
-        if r is not None and r.kind == "arm" and r is not self.arm and self.arm_panel is not None:
+        if r is not None and facts(r.kind).chain and r is not self.arm and self.arm_panel is not None:
             self.arm, self.arm_panel.synced = r, False
-        elif r is not None and r.kind == "mobile" and r is not self.base and self.base_panel is not None:
+        elif r is not None and facts(r.kind).base and r is not self.base and self.base_panel is not None:
             await self.base_panel.let_go()
             self.base = r
         self.refresh()  # follows the robot shown now, lets go of the one shown before

@@ -13,6 +13,7 @@ import socket
 from dataclasses import dataclass, field
 from typing import Any
 
+from robots.kinds import facts
 from user_peer.console.doors import Doors
 from user_peer.console.feed import Decoded
 from user_peer.console.health import PERIOD_S, Health
@@ -88,7 +89,7 @@ def stop_robots(world: Any) -> None:
         r = world.robot(rid)
         if r.is_owner:
             try:
-                if r.kind == "mobile":
+                if facts(r.kind).base:
                     r.twist(0.0, 0.0)
                 r.stop(confirm=False)
             except Exception as exc:

@@ -18,6 +18,7 @@ from typing import Any
 from fabric.codec import DecodeError, decode
 from fabric.interfaces import Pose, yaw_from_quaternion
 from fabric.text import one_line
+from robots.kinds import facts
 from user_peer.console import topview
 from user_peer.console.topview import Frame, RobotMark
 from user_peer.urdf_chain import UrdfChain
@@ -132,7 +133,7 @@ def arm_links(robot_type: str, q, spawn: tuple[float, ...]) -> tuple[tuple[float
 def _mark(world, entry, pose, spawn: dict, selected: set[str], joints=None) -> RobotMark | None:
     rec = world.ownership.record(entry.id)
     owner = rec.owner if rec is not None else ""
-    if entry.kind == "mobile":
+    if facts(entry.kind).base:
         if pose is None:
             return None
         x, y, yaw = float(pose.position[0]), float(pose.position[1]), yaw_from_quaternion(pose.quaternion)
@@ -170,7 +171,7 @@ def _drawn(world, entry, handles: dict, poses: dict[str, bytes], frame: Frame, s
             return topview.robot_svg(frame, mark) if mark is not None else ""
 
         return decoder.drawn(entry.id, poses[entry.id], variant, draw)
-    joints = handles[entry.id].latest("joints") if entry.id in handles and entry.kind == "arm" else None
+    joints = handles[entry.id].latest("joints") if entry.id in handles and facts(entry.kind).chain else None
     mark = _mark(world, entry, _pose(handles, poses, entry.id, decoder), spawn, selected, joints)
     return topview.robot_svg(frame, mark) if mark is not None else ""
 

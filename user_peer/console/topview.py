@@ -23,6 +23,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from robots.kinds import facts
+
 __all__ = ["Frame", "RobotMark", "svg", "robot_svg", "scan_path", "grid_png", "background_png", "png_gray", "data_url", "frame_around"]
 
 PX_PER_M = 40.0
@@ -93,7 +95,7 @@ def _robot(frame: Frame, r: RobotMark) -> list[str]:
     size = 0.3 * frame.scale
     stroke = ' stroke="#212529" stroke-width="3"' if r.selected else ""
     out = []
-    if r.kind == "mobile":
+    if facts(r.kind).base:
         # a triangle pointing where the base faces
         pts = []
         for a, d in ((0.0, size), (2.5, size * 0.8), (-2.5, size * 0.8)):

@@ -20,6 +20,7 @@ import numpy as np
 from nicegui import ui
 
 from fabric.interfaces import yaw_from_quaternion
+from robots.kinds import facts
 from user_peer.console import state, topview
 from user_peer.console.scene3d import arm_points, scene_boxes3d, segment_pose
 
@@ -66,7 +67,7 @@ class View3D:
             self.scene.text("1 m grid · x red, y green, z blue", "font-size: 11px; color: #495057").move(0.0, -0.3, 0.0)
             for e in page.entries:
                 sx, sy, sz, yaw = self.spawn.get(e.id, (0.0, 0.0, 0.0, 0.0))
-                if e.kind == "mobile":
+                if facts(e.kind).base:
                     self.bases[e.id] = self.scene.box(*BASE_SIZE).material(topview.COLORS["free"]).move(sx, sy, BASE_SIZE[2] / 2)
                 else:
                     self.scene.box(0.12, 0.12, 0.02).material("#495057").move(sx, sy, sz + 0.01)
@@ -144,7 +145,7 @@ class View3D:
         if page.arm is not None and page.arm.id != self._looked:  # another arm selected: the camera goes to it
             self.look_at_arm()
         for e in page.entries:
-            if e.kind == "mobile":
+            if facts(e.kind).base:
                 self._base(e.id, state._pose(page.handles, poses, e.id, page.console.decoded))
             elif e.id in page.handles:
                 js = page.handles[e.id].latest("joints")

@@ -9,6 +9,7 @@ import numpy as np
 import rerun as rr
 
 from fabric.interfaces import OccupancyGrid, Pose, Scan
+from robots.kinds import facts
 from user_peer.drawing.canvas import Canvas, Rows
 from user_peer.drawing.labels import OwnershipDrawer
 from user_peer.drawing.robots import RobotDrawing
@@ -39,7 +40,7 @@ class BaseDrawer:
 
     def static(self, rid: str, info: RobotDrawing) -> None:
         """What never moves: the body, its heading, the scans' styles, the speed plot's names, the label."""
-        if info.kind != "mobile" or not self.canvas.once(f"{rid}/base"):
+        if not facts(info.kind).base or not self.canvas.once(f"{rid}/base"):
             return
         rec, root = self.canvas.rec, f"world/robots/{rid}"
         path = f"{root}/base"

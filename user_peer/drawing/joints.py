@@ -7,6 +7,7 @@ import numpy as np
 import rerun as rr
 
 from fabric.interfaces import JointState
+from robots.kinds import facts
 from user_peer.drawing.arm import ArmDrawer
 from user_peer.drawing.canvas import Canvas, Rows
 from user_peer.drawing.robots import RobotDrawing
@@ -43,7 +44,7 @@ class JointDrawer:
         names = rows.items[0][0]
         q = np.array([it[1] for it in rows.items], dtype=float)
         times = rows.times()
-        if info.kind == "mobile":
+        if facts(info.kind).base:
             self._plot(f"plots/wheels/{rid}", names, times, q)
         else:
             self._plot(f"plots/joints/{rid}", names, times, q)

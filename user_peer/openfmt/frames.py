@@ -32,6 +32,7 @@ import numpy as np
 
 from fabric.interfaces import JointState, Pose
 from fabric.interfaces.geometry import quaternion_from_yaw
+from robots.kinds import facts
 from user_peer.arm_geometry import Placement, Shape
 from user_peer.catalog import RobotCatalog
 from user_peer.geometry import quat_xyzw
@@ -132,7 +133,7 @@ class FrameTracker:
         """The frames of ``rid`` that never move in their parent (``frames.FIXED``: a base's ``map -> ID/odom``
         and sensor mounts), as its drawing has them now; none for an arm or a robot not seen."""
         info = self.robots.get(rid)
-        if info is None or info.kind == "arm":
+        if info is None or facts(info.kind).chain:
             return []
         return [f for f in self._base(rid, info, None) if f.child.endswith(FIXED)]
 
@@ -142,7 +143,7 @@ class FrameTracker:
         out = [Frame(MAP, f"{oid}/odom", (0.0, 0.0, 0.0), _IDENTITY)]
         if p is not None:
             out.append(_frame(f"{oid}/odom", base, p))
-        if info.kind == "mobile":
+        if facts(info.kind).base:
             out.append(Frame(base, f"{oid}/laser", tuple(float(v) for v in info.lidar_offset), _IDENTITY))  # type: ignore[arg-type]
             if info.sonar is not None:
                 cx, cy, h, _r = info.sonar
@@ -174,15 +175,15 @@ class FrameTracker:
             if what == "object":
                 return [_frame(MAP, f"object/{oid}", p)]
             info = self.robot(oid, {"mobile": True})
-            if info.kind == "arm":  # the flange is the URDF's link, from the joints; a pose only where that is unknown
+            if facts(info.kind).chain:  # the flange is the URDF's link, from the joints; a pose only where that is unknown
                 return [_frame(MAP, f"{oid}/flange", p)] if info.arm is None else []
             return self._base(oid, info, p)
         if isinstance(msg, JointState) and leaf == "joints" and what == "robot":
             info = self.robot(oid, {"joint_names": msg.names})
             arm = info.arm
-            if info.kind == "mobile":
+            if facts(info.kind).base:
                 return self._wheels(oid, info.type, msg)
-            if info.kind != "arm" or arm is None or len(msg.names) != len(arm.joint_names):
+            if not facts(info.kind).chain or arm is None or len(msg.names) != len(arm.joint_names):
                 return []
             placements = arm.link_placements(np.asarray(msg.q, dtype=float))
             at = {name: pl for (name, *_), pl in zip(arm.links, placements)}
@@ -212,14 +213,14 @@ class FrameTracker:
         info = self.robots.get(rid)
         if info is None:
             return []
-        if info.kind == "arm" and info.arm is not None:
+        if facts(info.kind).chain and info.arm is not None:
             frames = [f"{rid}/{n}" for n in info.arm.joint_links]
             out = []
             for shape, joint, local in info.arm.shapes:
                 pl = Placement(np.array(local.translation, dtype=float), _xyzw_from_matrix(np.array(local.rotation)))
                 out.append((frames[joint] if joint < len(frames) else frames[0], shape, pl))
             return out
-        if info.kind == "mobile":
+        if facts(info.kind).base:
             body = Shape(f"{rid}_body", "cylinder", (info.radius, info.height), color=(*info.color, 255))
             return [(base_frame(rid), body, Placement(np.array([0.0, 0.0, info.height / 2.0]), np.array([0.0, 0.0, 0.0, 1.0])))]
         return []

@@ -46,6 +46,7 @@ from mcap_ros2.writer import Writer as Ros2McapWriter
 from fabric import streams
 from fabric.recording.mcap_file import McapFile
 from fabric.interfaces import JointState, OccupancyGrid, Path, Pose, Scan, WorldInfo
+from robots.kinds import facts
 from user_peer.catalog import RobotCatalog
 from user_peer.message_schema import plain_view
 from user_peer.openfmt.frames import MAP, Frame, FrameTracker, base_frame, key_owner, ros_frame, scan_frame, yaw_quat_xyzw
@@ -249,7 +250,7 @@ def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0, r
             for x, y, th in zip(msg.x, msg.y, msg.theta)
         ]
         return "nav_msgs/msg/Path", {"header": _header(t, frame), "poses": poses}
-    if isinstance(msg, Pose) and kind == "mobile" and owner is not None and owner[0] == "robot":
+    if isinstance(msg, Pose) and facts(kind).base and owner is not None and owner[0] == "robot":
         return "nav_msgs/msg/Odometry", odometry_fields(rid, msg, t)
     if isinstance(msg, Pose):
         q = msg.quaternion

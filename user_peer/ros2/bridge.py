@@ -70,6 +70,7 @@ from fabric import keys
 from fabric.interfaces import JointState as FabricJointState
 from fabric.interfaces import Pose, Scan
 from fabric.streams import STREAMS
+from robots.kinds import facts
 from user_peer.catalog import RobotCatalog
 from user_peer.errors import FabricUserError
 from user_peer.openfmt.frames import base_frame, scan_frame
@@ -362,11 +363,11 @@ class Ros2Bridge:
         if rid not in self.drive:
             return []
         topic = lambda leaf: ros_topic("/".join([self.namespace.strip("/"), rid, leaf]))  # noqa: E731
-        if kind == "mobile":
+        if facts(kind).base:
             cls = TwistStamped if self.stamped_cmd_vel else Twist
             return [self.node.create_subscription(cls, topic("cmd_vel"), lambda m, r=rid: self._on_cmd_vel(r, m), RELIABLE),
                     self.goals.subscribe(rid)]
-        if kind == "arm":
+        if facts(kind).chain:
             self.arm_actions.serve(rid)  # follow_joint_trajectory
             return [self.node.create_subscription(JointState, topic("joint_command"),
                                                   lambda m, r=rid: self._on_arm(r, "joint_command", m), RELIABLE),
