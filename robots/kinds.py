@@ -3,11 +3,12 @@
 A kind is part of the protocol (the description's ``[robot] kind``, the wire's ``RobotInfo.kind``): every peer
 that shows, drives, plans for or mirrors robots reads it. Code does not compare a kind with a literal name
 (``kind == "arm"``); it asks the kind's facts here (``facts(kind).chain``: does it have an arm's joints and a
-flange?), so that a new kind is a row of :data:`KINDS` and the classes its row names, not a hunt through the
-peers (docs/howto.md, "A new robot kind"; tests/robots/test_kinds.py fails on a comparison outside this table).
+flange?), so that a new kind is a row of :data:`KINDS` and its classes in the layers' registries, not a hunt
+through the peers (docs/howto.md, "A new robot kind"; tests/robots/test_kinds.py fails on a comparison outside this table).
 
-Layer-specific behaviour is registered by each layer, keyed by kind: the sim's class (:attr:`RobotKind.sim_class`,
-resolved by ``sim_peer.registry``), the user API's handle (``user_peer.robot.Robot`` subclasses, by their ``kind``).
+What a kind does in one layer is registered in that layer, keyed by the kind's name: the sim's built-in class
+(``sim_peer.registry.BUILTIN``), the user API's handle (a ``user_peer.robot.Robot`` subclass with its ``kind``,
+found by ``Robot.for_kind``); the rest of each layer reads the facts.
 This module is pure data: it imports nothing of the project, so every layer above ``fabric`` may read it.
 """
 
@@ -31,21 +32,19 @@ class RobotKind:
     ``base``: a planar mobile base: driven by twists, its ``pose`` is its place on the map (odometry), it plans
     paths, carries range sensors (scans, sonar), its joints are its wheels, its description needs ``[base]``
     and ``base_joints``. ``data_stream``: the stream that shows where it is and whether it is still.
-    ``sim_class``: the sim's built-in class for a description without ``hooks`` ("" for none).
     """
 
     name: str
     data_stream: str
     chain: bool = False
     base: bool = False
-    sim_class: str = ""
 
 
 KINDS: dict[str, RobotKind] = {
     k.name: k
     for k in (
-        RobotKind("arm", data_stream="joints", chain=True, sim_class="sim_peer.robot_kinds:ArmRobot"),
-        RobotKind("mobile", data_stream="pose", base=True, sim_class="sim_peer.robot_kinds:MobileRobot"),
+        RobotKind("arm", data_stream="joints", chain=True),
+        RobotKind("mobile", data_stream="pose", base=True),
     )
 }
 """Every robot kind, by name, in the order peers list them (a console shows an arm's row before a base's)."""

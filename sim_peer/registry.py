@@ -5,9 +5,9 @@ module, e.g. in an installed package) or ``"file.py:Class"`` (a Python file in t
 from there: a robot folder dropped on ``ROBOFABRIC_ROBOTS_PATH`` brings its MJCF, its description and its hooks).
 Only descriptions the operator installed get here: a type another peer names is looked up by name
 (:func:`robots.installed`), never read from a path it sends, so nothing a query carries is imported.
-A description without ``hooks`` gets the built-in class of its ``kind``: the ``sim_class`` of its row in
-:data:`robots.kinds.KINDS` (``arm``: :class:`ArmRobot`, ``mobile``: :class:`MobileRobot`). Classes are checked once (a :class:`SimRobot` subclass, no misspelt hook)
-and kept per reference.
+A description without ``hooks`` gets the built-in class of its ``kind`` (:data:`BUILTIN`, the sim's registry
+keyed by the kinds of :data:`robots.kinds.KINDS`: ``arm``: :class:`ArmRobot`, ``mobile``: :class:`MobileRobot`).
+Classes are checked once (a :class:`SimRobot` subclass, no misspelt hook) and kept per reference.
 """
 
 from __future__ import annotations
@@ -19,12 +19,12 @@ import threading
 from pathlib import Path
 
 from robots import RobotDescription
-from robots.kinds import KINDS
 from sim_peer.errors import WorldError
 from sim_peer.robot import SimRobot, check_hooks
 
-BUILTIN = {k.name: k.sim_class for k in KINDS.values() if k.sim_class}
-"""The built-in class of each kind that has one, from the kinds' table."""
+BUILTIN = {"arm": "sim_peer.robot_kinds:ArmRobot", "mobile": "sim_peer.robot_kinds:MobileRobot"}
+"""The built-in class of each kind, keyed by its name in :data:`robots.kinds.KINDS` (a kind without one here
+needs ``hooks`` in every description of it)."""
 
 _cache: dict[tuple[str, str], type[SimRobot]] = {}
 _lock = threading.Lock()
