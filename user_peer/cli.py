@@ -198,6 +198,18 @@ def open_world(join: Joining, user, timeout: float = 5.0, join_timeout: float = 
         raise join_error(cfg, exc) from None
 
 
+def tui_robots(kinds: dict[str, str], arm: str | None, base: str | None, world: str) -> tuple[str | None, str | None]:
+    """The arm and the base the terminal UI shows: those named, else the world's first of each (``kinds``: each
+    robot's kind, in the world's order); :class:`UserError` for a named robot that is not of that kind."""
+    from robots.kinds import facts
+
+    for rid, fits, what in ((arm, lambda k: k.chain, "an arm"), (base, lambda k: k.base, "a mobile")):
+        if rid is not None and not fits(facts(kinds.get(rid, ""))):
+            raise UserError(f"{rid!r} is not {what} robot in world {world!r}; robots: {', '.join(kinds)}")
+    return (arm or next((r for r, k in kinds.items() if facts(k).chain), None),
+            base or next((r for r, k in kinds.items() if facts(k).base), None))
+
+
 @join_flags(client=True)
 def user(
     arm: Annotated[Optional[str], typer.Option(help="Arm to control (default: the world's first arm).")] = None,
@@ -206,7 +218,6 @@ def user(
     join: Joining = Joining(),
 ) -> None:
     """Terminal UI: joint sliders, arrow-key driving, ownership, live joints, scan, latency."""
-    from robots.kinds import facts
     from user_peer.errors import FabricUserError
     from user_peer.tui import UserApp
 
@@ -217,11 +228,7 @@ def user(
             kinds = {rid: w.robot(rid).kind for rid in ids}
         except FabricUserError as exc:
             raise UserError(exc.reason) from None
-        arm_id = arm or next((r for r in ids if facts(kinds[r]).chain), None)
-        base_id = base or next((r for r in ids if facts(kinds[r]).base), None)
-        for rid, fits, what in ((arm, lambda k: k.chain, "an arm"), (base, lambda k: k.base, "a mobile")):
-            if rid is not None and not fits(facts(kinds.get(rid, ""))):
-                raise UserError(f"{rid!r} is not {what} robot in world {w.name!r}; robots: {', '.join(ids)}")
+        arm_id, base_id = tui_robots(kinds, arm, base, w.name)
         UserApp(w, arm=w.robot(arm_id) if arm_id else None, base=w.robot(base_id) if base_id else None).run()
     finally:
         w.close()

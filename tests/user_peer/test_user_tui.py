@@ -252,3 +252,20 @@ async def _move_a_panda_slider(app, q, cmds):
         sent = cmds[-1].body.q
         assert len(sent) == 7 and math.isclose(sent[6], 0.3 + math.radians(1.0), abs_tol=1e-9)
         np.testing.assert_allclose(sent[:6], q[:6])
+
+
+def test_the_tui_shows_the_first_arm_and_base_or_the_named_ones_of_their_kind():
+    """``robofabric user`` picks its robots by their kinds' facts; a named robot of another kind is refused by name."""
+    from fabric.cli_common import UserError
+    from user_peer.cli import tui_robots
+
+    kinds = {"base1": "mobile", "arm1": "arm", "odd": "", "arm2": "arm", "base2": "mobile"}
+    assert tui_robots(kinds, None, None, "w") == ("arm1", "base1")
+    assert tui_robots(kinds, "arm2", "base2", "w") == ("arm2", "base2")
+    assert tui_robots({"base1": "mobile"}, None, None, "w") == (None, "base1")
+    for arm, base, words in (("base1", None, "'base1' is not an arm robot in world 'w'"),
+                             (None, "arm1", "'arm1' is not a mobile robot in world 'w'"),
+                             ("odd", None, "'odd' is not an arm robot"), (None, "nope", "'nope' is not a mobile robot")):
+        with pytest.raises(UserError, match=words) as e:
+            tui_robots(kinds, arm, base, "w")
+        assert "robots: base1, arm1, odd, arm2, base2" in str(e.value)
