@@ -78,6 +78,17 @@ def test_the_wire_takes_the_tables_kinds():
 
 # ---------------------------------------------------------------- the layers' registries, keyed by kind
 
+def test_the_stream_tables_per_kind_ros2_topics_name_kinds_of_the_table():
+    """fabric.streams (below robots) keys a stream's ROS 2 topic by kind where its type depends on it: each such
+    key is a kind here, and a base's pose is odometry, an arm's a stamped pose."""
+    from fabric.streams import STREAMS, ros2_topic
+
+    keyed = {t.kind for s in STREAMS for t in s.ros2 if t.kind}
+    assert keyed and keyed <= set(NAMES), keyed
+    types = {name: getattr(ros2_topic("pose", name), "type", None) for name in NAMES}
+    assert types == {"arm": "geometry_msgs/msg/PoseStamped", "mobile": "nav_msgs/msg/Odometry"}
+
+
 def test_every_kind_has_its_sim_class():
     from sim_peer.registry import BUILTIN, robot_class
 
