@@ -21,10 +21,10 @@ settings.register_profile("robofabric", deadline=None, suppress_health_check=[He
 settings.load_profile("robofabric")
 
 
-# Where pytest-xdist runs the suite on several workers (`-n N --dist loadgroup`), the tests that load the whole box
-# run one after another on one worker: Chromium drawing in software GL and the console's class worlds (a module
-# each: three at once took the box to load 37), soaks and namespace labs, CPU hogs beside paused processes. Two of
-# them at once judge each other's pace, not the code's; the rest share the other workers.
+# Where pytest-xdist runs the whole suite on several workers (`-n N --dist loadgroup`, `make test`), the tests that
+# load the whole box run one after another on one worker: Chromium drawing in software GL and the console's class
+# worlds (a module each: three at once took the box to load 37), soaks and namespace labs, CPU hogs beside paused
+# processes. Two of them at once judge each other's pace, not the code's; the rest share the other workers.
 HEAVY = (
     "tests/user_peer/console/", "tests/user_peer/test_view_web.py", "tests/user_peer/test_web_pages.py",
     "tests/robofabric/bench/test_bench_console.py", "tests/robofabric/soak/", "tests/lab/", "tests/user_peer/test_pause_ride_out.py",
@@ -32,10 +32,27 @@ HEAVY = (
 )
 
 
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    for item in items:
-        if item.nodeid.startswith(HEAVY):
-            item.add_marker(pytest.mark.xdist_group("heavy"))
+def work_unit(nodeid: str) -> str:
+    """The unit of work a test goes in under ``--dist loadgroup``: every heavy test in one (``heavy``), any other test
+    with the rest of its module, so that a module's shared world (a module fixture) is built by one worker only."""
+    return "heavy" if nodeid.startswith(HEAVY) else nodeid.split("::", 1)[0]
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
+    """``--dist loadgroup`` with the units of :func:`work_unit`, decided on the controller from each test's path.
+
+    Not xdist's ``xdist_group`` mark: its worker appends the group to the node id, which pytest 9.2's structured
+    node ids ignore (pytest-xdist issue 1386), so every worker ran the console's class worlds at once."""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ByWorkUnit(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return work_unit(nodeid)
+
+    return ByWorkUnit(config, log)  # type: ignore[arg-type]
 
 
 @pytest.fixture

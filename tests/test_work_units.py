@@ -1,0 +1,22 @@
+"""The units ``--dist loadgroup`` deals out to xdist's workers (tests/conftest.py): the box's heavy tests in one, any
+other test with its module. A heavy entry that names nothing would let its tests run beside each other unseen."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from conftest import HEAVY, work_unit
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_every_heavy_entry_names_a_test_file_or_folder_of_the_tree() -> None:
+    missing = [entry for entry in HEAVY if not (ROOT / entry).exists()]
+    assert not missing, f"HEAVY names what the tree does not hold: {missing}"
+
+
+def test_the_heavy_tests_share_one_unit_and_the_others_go_with_their_module() -> None:
+    assert work_unit("tests/user_peer/console/test_console_browser.py::test_a") == "heavy"
+    assert work_unit("tests/lab/test_lab_faults.py::test_b[x]") == "heavy"
+    assert work_unit("tests/fabric/test_keys.py::test_c") == work_unit("tests/fabric/test_keys.py::test_d[1@2]")
+    assert work_unit("tests/fabric/test_keys.py::test_c") != work_unit("tests/fabric/test_rate.py::test_c")
