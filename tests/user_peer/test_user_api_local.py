@@ -39,6 +39,17 @@ def test_scene_object_pose_reaches_other_peers_and_iterators(alice, connect, wor
 def test_commands_follow_the_ownership_replica(alice, connect, world):
     arm = Arm(alice, RobotEntry("arm1", "meca500", "arm", tuple(f"joint_{i}" for i in range(1, 7)), (-1.0,) * 6, (1.0,) * 6))
     auth = connect("sim", "sim-test")
+    # A stand-in authority does what the real one does (ownership/authority.py): it publishes each record and answers
+    # a replica that asks for it. A record that reaches alice before sim-test's token is no authority's word yet
+    # (refused as foreign); once the token comes, her replica asks again (ownership.client: sim_seen), and the answer
+    # is what it keeps. With a record published only, that order decided the test (1 run in 50 at load 20).
+    records: list[OwnershipRecord] = []
+    auth.rpc.serve(keys.own(world, "arm1"), lambda key, req: records[-1] if records else None)
+
+    def publish(rec: OwnershipRecord) -> None:
+        records.append(rec)
+        auth.publish(keys.own(world, "arm1"), rec)
+
     sent = []
     auth.subscribe(keys.robot_cmd(world, "arm1", "joints", "alice"), lambda k, m: sent.append(m))
     # No record at all (a world without ownership): the command goes out with epoch 0, the sim decides.
@@ -46,14 +57,15 @@ def test_commands_follow_the_ownership_replica(alice, connect, world):
     assert sent[0].epoch == 0 and arm.can_command
     sent.clear()
     # The replica follows the authority's records: owned by bob, refused locally, and the reason says who.
-    auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="bob", epoch=3, authority="sim-test"))
-    wait_until(lambda: arm.owner == "bob", what="replica of bob's record")
+    publish(OwnershipRecord("arm1", owner="bob", epoch=3, authority="sim-test"))
+    counters = alice.ownership.client.counters
+    wait_until(lambda: arm.owner == "bob", what="replica of bob's record", seen=lambda: (arm.owner, dict(counters)))
     with pytest.raises(user_peer.NotOwner, match="owner: bob"):
         arm.move_joints(np.zeros(6), wait=False)
     assert not arm.can_command
     # Once the record names alice, the command goes out with her epoch.
-    auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="alice", epoch=4, authority="sim-test"))
-    wait_until(lambda: arm.is_owner, what="alice owns arm1")
+    publish(OwnershipRecord("arm1", owner="alice", epoch=4, authority="sim-test"))
+    wait_until(lambda: arm.is_owner, what="alice owns arm1", seen=lambda: (arm.owner, dict(counters)))
     mine = lambda: [m for m in sent if m.epoch == 4]  # noqa: E731
     wait_until(lambda: (arm.move_joints([0.1] * 6, wait=False), mine())[1], what="command at the authority")
     assert mine()[0].user == "alice" and np.allclose(mine()[0].body.q, 0.1)
