@@ -44,6 +44,12 @@ def publish_once_heard(fab, items, timeout=10.0) -> threading.Thread:
 @pytest.fixture
 def setup(world, router, connect):
     auth = connect("sim", "sim-test")
+    # as the real authority, sim-test answers a replica that asks: a record that reached alice before its token was
+    # refused as foreign, and her replica asks again once the token comes (tests/user_peer/test_user_api_local.py)
+    records = {rec.object: rec for rec in (OwnershipRecord("arm1", owner="bob", epoch=1, queue=("carol",), authority="sim-test"),
+                                            OwnershipRecord("base1", owner="", epoch=1, authority="sim-test"))}
+    for obj, rec in records.items():
+        auth.rpc.serve(keys.own(world, obj), lambda key, req, rec=rec: rec)
     alice = World(client_config(world, router[1]), "alice", timeout=2.0)
     first = publish_once_heard(auth, [
         (keys.robot_joints(world, "arm1"), JointState(NAMES, np.full(6, 0.1), np.zeros(6), Header.now())),
@@ -55,8 +61,8 @@ def setup(world, router, connect):
     cmds = []
     auth.subscribe(keys.robot_cmd_all(world), lambda k, m: cmds.append((k, m)))
     h = Header(wall_ns=1)
-    auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="bob", epoch=1, queue=("carol",), authority="sim-test"))
-    auth.publish(keys.own(world, "base1"), OwnershipRecord("base1", owner="", epoch=1, authority="sim-test"))
+    for obj, rec in records.items():
+        auth.publish(keys.own(world, obj), rec)
     auth.publish(keys.robot_scan(world, "base1"), Scan.from_ranges(np.linspace(1, 4, 240), angle_min=-1.17, angle_increment=0.01, range_max=12, header=h))
     wait_until(lambda: arm.record is not None and base.record is not None and base.scan is not None and arm.joints is not None, what="replicas")
     yield auth, alice, arm, base, cmds
