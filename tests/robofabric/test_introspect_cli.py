@@ -6,6 +6,7 @@ import json
 import re
 import subprocess
 import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -14,13 +15,27 @@ from fabric import keys
 from robofabric.introspect import KeyObserver, source_of
 from fabric.codec import encode
 from fabric.interfaces import Header, JointState, OccupancyGrid
-from robofabric.testing import robofabric_cmd
+from robofabric.testing import robofabric_cmd, wait_until
 
 NAMES = ("j1", "j2")
 
 
-def _cli(*args: str, timeout: float = 90) -> subprocess.CompletedProcess:
-    return subprocess.run(robofabric_cmd(*args), capture_output=True, text=True, timeout=timeout)
+AT_ONCE = 3
+"""Commands run at the same time: each spends most of its wall waiting (start-up, its ``--duration``), but the box
+has two cores, and more at once would load it for the other tests beside this one."""
+
+
+def _cli_at_once(*commands: tuple[str, ...], env: dict[str, str] | None = None, timeout: float = 90) -> list[subprocess.CompletedProcess]:
+    """Run ``robofabric`` commands, :data:`AT_ONCE` at a time, each its own process; what each printed, in order.
+
+    Each only reads the live world (none changes what another sees) and spends most of its wall waiting: a second
+    or more of start-up, then its ``--duration`` of listening. One after another they took ~40 s of this file's ~50.
+    ``subprocess.run`` ends a process that runs past ``timeout``; the pool waits for every one."""
+    def run(args: tuple[str, ...]) -> subprocess.CompletedProcess:
+        return subprocess.run(robofabric_cmd(*args), capture_output=True, text=True, timeout=timeout, env=env)
+
+    with ThreadPoolExecutor(max_workers=AT_ONCE) as pool:
+        return list(pool.map(run, commands))
 
 
 def test_observer_counts_rates_types_and_publishers_from_the_payload():
@@ -72,7 +87,12 @@ def live_world(router, connect, world):
 @pytest.mark.slow
 def test_list_info_and_interfaces_against_a_live_world(live_world, world):
     ep = live_world
-    out = _cli("list", "--json", "--duration", "2", "--world", world, "--connect", ep)
+    live = ("--world", world, "--connect", ep)
+    # at once: each list/info shows the others' subscriptions, and nothing here asserts on subscribers
+    out, only, info, info_map, types_out, scan_out, bad = _cli_at_once(
+        ("list", "--json", "--duration", "2", *live), ("list", "robot/**", "--json", "--duration", "1", *live),
+        ("info", "robot/arm1/joints", "--duration", "1.5", *live), ("info", "map/map", "--json", "--duration", "1", *live),
+        ("interfaces", "--json"), ("interfaces", "Scan", "--json"), ("interfaces", "Nope"))
     assert out.returncode == 0, out.stderr
     doc = json.loads(out.stdout)
     by_key = {k["key"]: k for k in doc["keys"]}
@@ -81,22 +101,20 @@ def test_list_info_and_interfaces_against_a_live_world(live_world, world):
     m = by_key[keys.map_key(world, "map")]
     assert m["type"] == "OccupancyGrid" and m["latched"]  # published before list started: the latched value
 
-    only = json.loads(_cli("list", "robot/**", "--json", "--duration", "1", "--world", world, "--connect", ep).stdout)
+    only = json.loads(only.stdout)
     assert [k["key"] for k in only["keys"]] == [keys.robot_joints(world, "arm1")]
 
-    info = _cli("info", "robot/arm1/joints", "--duration", "1.5", "--world", world, "--connect", ep)
     assert info.returncode == 0, info.stderr
     assert "type JointState" in info.stdout and "publishers sim-test" in info.stdout and "names: string[]" in info.stdout, info.stdout
-    info_json = json.loads(_cli("info", "map/map", "--json", "--duration", "1", "--world", world, "--connect", ep).stdout)
+    info_json = json.loads(info_map.stdout)
     assert info_json["latched"] is True and info_json["types"]["OccupancyGrid"][:3] == ["resolution", "origin", "cells"]
 
-    types = json.loads(_cli("interfaces", "--json").stdout)["types"]
+    types = json.loads(types_out.stdout)["types"]
     names = {t["name"] for t in types}
     assert {"JointState", "Scan", "OccupancyGrid", "WorldInfo", "IKRequest", "PlanRequest"} <= names  # plugins' types too
-    scan = json.loads(_cli("interfaces", "Scan", "--json").stdout)
+    scan = json.loads(scan_out.stdout)
     assert [f["name"] for f in scan["fields"]] == ["angle_min", "angle_increment", "range_max", "ranges_mm", "header"]
     assert scan["fields"][3]["type"] == "uint16[]"
-    bad = _cli("interfaces", "Nope")
     assert bad.returncode == 2 and "unknown message type 'Nope'" in bad.stderr
 
 
@@ -134,32 +152,36 @@ def peers_world(router, connect, world):
 
 @pytest.mark.slow
 def test_ps_list_and_info_name_publishers_subscribers_and_services_and_skip_bad_tokens(peers_world, world):
-    ep = peers_world
-    ps = _cli("ps", "--world", world, "--connect", ep)
+    live = ("--world", world, "--connect", peers_world)
+    # ps only asks (tokens, the router's admin space): those run at once. list and info subscribe, and a subscriber
+    # is what they show: each of those runs alone, as a user would run it
+    ps, ps_json, ps_v, text, srv = _cli_at_once(
+        ("ps", *live), ("ps", "--json", *live), ("ps", "-v", "sim-x", "--json", *live), ("ps", "-v", "compute-x", *live),
+        ("list", "--services", "--json", *live))
+    (lst,), (w,), (cmd,) = (_cli_at_once(args) for args in (
+        ("list", "robot/**", "--json", "--duration", "1", *live), ("info", "srv/world", "--duration", "0.5", *live),
+        ("info", "robot/arm1/cmd/joints/by/alice", "--json", "--duration", "0.5", *live)))
     assert ps.returncode == 0, ps.stderr
     assert "sim-x" in ps.stdout and "compute-x" in ps.stdout and "Traceback" not in ps.stderr
     assert f"'rf/{world}/peer/viewer/with space'" in ps.stderr, ps.stderr
-    doc = json.loads(_cli("ps", "--json", "--world", world, "--connect", ep).stdout)
+    doc = json.loads(ps_json.stdout)
     assert doc["peers"]["sim"] == ["sim-x"] and len(doc["bad_tokens"]) == 2, doc  # peer/viewer/a/b is not a peer/KIND/ID key at all
 
-    v = json.loads(_cli("ps", "-v", "sim-x", "--json", "--world", world, "--connect", ep).stdout)
+    v = json.loads(ps_v.stdout)
     assert v["declarations_visible"] and list(v["info"]) == ["sim-x"], v
     info = v["info"]["sim-x"]
     assert info["publishes"] == [keys.robot_joints(world, "arm1")]
     assert keys.robot_cmd_all(world, "arm1") in info["subscribes"] and info["serves"] == [keys.srv(world, "world")], info
-    text = _cli("ps", "-v", "compute-x", "--world", world, "--connect", ep)
     assert text.returncode == 0 and f"rf/{world}/srv/ik/*  (IKRequest -> IKReply)" in text.stdout, text.stdout + text.stderr
 
-    lst = json.loads(_cli("list", "robot/**", "--json", "--duration", "1", "--world", world, "--connect", ep).stdout)
-    (j,) = lst["keys"]
+    (j,) = json.loads(lst.stdout)["keys"]
     assert j["publishers"] == ["sim-x"] and j["subscribers"] == [], j
-    srv = json.loads(_cli("list", "--services", "--json", "--world", world, "--connect", ep).stdout)
+    srv = json.loads(srv.stdout)
     assert {(s["key"], s["request"], s["reply"], tuple(s["servers"])) for s in srv["services"]} == {
         (keys.srv(world, "world"), "-", "WorldInfo", ("sim-x",)), (f"rf/{world}/srv/ik/*", "IKRequest", "IKReply", ("compute-x",)),
     }
-    w = _cli("info", "srv/world", "--duration", "0.5", "--world", world, "--connect", ep)
     assert w.returncode == 0 and "reply WorldInfo; served by sim-x" in w.stdout and "no message" not in w.stdout, w.stdout
-    cmd = json.loads(_cli("info", "robot/arm1/cmd/joints/by/alice", "--json", "--duration", "0.5", "--world", world, "--connect", ep).stdout)
+    cmd = json.loads(cmd.stdout)
     assert cmd["subscribed_by"] == ["sim-x"], cmd
 
 
@@ -209,41 +231,49 @@ def test_tables_fit_the_terminal_with_no_column_or_word_cut(peers_world, world, 
     ep = peers_world
     env = {**os.environ, "COLUMNS": str(width)}
 
-    def shown(*args: str, live: bool = True) -> str:
-        argv = robofabric_cmd(*args, *(("--world", world, "--connect", ep) if live else ()))
-        out = subprocess.run(argv, capture_output=True, text=True, timeout=90, env=env)
+    live = ("--world", world, "--connect", ep)
+
+    def shown(out: subprocess.CompletedProcess) -> str:
         assert out.returncode == 0, out.stderr
         wide = [line for line in (out.stdout + out.stderr).splitlines() if len(line) > width]
         assert not wide, wide
         return out.stdout
 
     try:
-        table = shown("list", "--duration", "1")
+        # what the commands below show is there before the first starts (run one after another, the first one's
+        # second of listening gave the publisher that time)
+        wait_until(lambda: pub.counters["published"] and ("sim", "sim-long") in pub.live_peers("sim"), what="sim-long's token and joints")
+        # what only asks (ps, services, types) runs at once; list and info subscribe, which is what they show: alone
+        asking = [("ps", *live), ("ps", "-v", "sim-long", *live), ("list", "--services", *live), ("interfaces",)]
+        docs = [("ps", "--json", *live), ("ps", "-v", "--json", *live)] if width == 60 else []
+        outs = _cli_at_once(*asking, *docs, env=env)
+        ps, ps_v, services, types = (shown(out) for out in outs[:len(asking)])
+        table, info = (shown(*_cli_at_once(args, env=env)) for args in (("list", "--duration", "1", *live),
+                                                                         ("info", f"robot/{LONG}/joints", "--duration", "1", *live)))
+        if width == 60:
+            docs += [("list", "--json", "--duration", "1", *live), ("info", f"robot/{LONG}/joints", "--json", "--duration", "1", *live)]
+            outs += [out for args in docs[-2:] for out in _cli_at_once(args, env=env)]
         for head in ("type", "publishers", "subscribers", "rate", "Hz", "msgs", "kB/s"):  # the key is each row's first line
             assert head in words(table) or f"{head}:" in words(table), (head, table)
         assert {"sim-long", "sim-x", "JointState"} <= words(table), table
         assert keys.robot_joints(world, LONG) in read_down(table), table
-        assert LONG in "".join(shown("info", f"robot/{LONG}/joints", "--duration", "1").split())
-        assert {"sim-x", "sim-long"} <= words(shown("ps"))
-        assert keys.robot_joints(world, LONG) in "".join(shown("ps", "-v", "sim-long").split())
-        services = shown("list", "--services")
+        assert LONG in "".join(info.split())
+        assert {"sim-x", "sim-long"} <= words(ps)
+        assert keys.robot_joints(world, LONG) in "".join(ps_v.split())
         assert keys.srv(world, "world") in read_down(services) and {"WorldInfo", "IKRequest", "IKReply"} <= words(services), services
-        types = shown("interfaces", live=False)
         assert {"JointState", "fabric.interfaces.std", "OccupancyGrid"} <= words(types), types
         # a description is whole (it was cut at 90 characters): its last words are there (BaseInfo's ends "(plans for it may reverse).")
         assert "reverse)." in words(types) and "``" not in types, types
         if width == 80:  # on a terminal of that size, no $COLUMNS: the same
-            term = _on_a_terminal(robofabric_cmd("list", "--duration", "1", "--world", world, "--connect", ep), cols=width)
+            term = _on_a_terminal(robofabric_cmd("list", "--duration", "1", *live), cols=width)
             assert max(len(line) for line in term.splitlines()) <= width, term
             assert {"sim-long", "sim-x", "msgs", "kB/s"} <= words(term), term
         if width == 60:
-            for args in (("list", "--json", "--duration", "1"), ("ps", "--json"), ("ps", "-v", "--json"), ("info", f"robot/{LONG}/joints", "--json", "--duration", "1")):
-                out = subprocess.run(robofabric_cmd(*args, "--world", world, "--connect", ep), capture_output=True, text=True, timeout=90, env=env)
+            for args, out in zip(docs, outs[len(asking):], strict=True):
                 doc = json.loads(out.stdout)  # one document, whatever the width: no folding, no markup
                 assert isinstance(doc, dict) and "\x1b" not in out.stdout, args
-            lst = json.loads(subprocess.run(robofabric_cmd("list", "--json", "--duration", "1", "--world", world, "--connect", ep),
-                                            capture_output=True, text=True, timeout=90).stdout)
-            long_key = next(k for k in lst["keys"] if k["key"] == keys.robot_joints(world, LONG))
+            (lst,) = _cli_at_once(("list", "--json", "--duration", "1", *live))  # no $COLUMNS at all
+            long_key = next(k for k in json.loads(lst.stdout)["keys"] if k["key"] == keys.robot_joints(world, LONG))
             assert set(long_key) == {"key", "type", "publishers", "subscribers", "messages", "rate_hz", "bytes_per_s", "last_bytes", "latched"}
             assert long_key["publishers"] == ["sim-long"]
     finally:
