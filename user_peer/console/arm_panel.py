@@ -12,12 +12,13 @@ from nicegui import ui
 from user_peer.console.workers import CALLS, off_loop
 
 from fabric.text import one_line
+from user_peer.console.panel import PanelHooks
 from user_peer.errors import FabricUserError
 
 if TYPE_CHECKING:
     from user_peer.console.page import ConsolePage
 
-__all__ = ["ArmPanel", "NUDGE_STEPS", "synchronised_speeds"]
+__all__ = ["ArmPanel", "NUDGE_STEPS", "make", "synchronised_speeds"]
 
 NUDGE_STEPS = {"1 mm": 0.001, "1 cm": 0.01, "5 cm": 0.05}
 
@@ -30,8 +31,16 @@ def synchronised_speeds(q_from: np.ndarray, q_to: np.ndarray, max_speed: np.ndar
     return (d / t if t > 0 else np.zeros_like(d)), t
 
 
-class ArmPanel:
-    """One card of the page, for the arm ``page.arm``."""
+def make(page: "ConsolePage", info: Any) -> "ArmPanel":
+    """The page's arm panel, with the world's IK target sphere when its scene has one (``info``: the world's
+    description)."""
+    target = next((o for o in info.objects if o.kind == "ik_target"), None)
+    return ArmPanel(page, page.world.object(target.id) if target else None,
+                    np.asarray(target.position, dtype=float) if target else None)
+
+
+class ArmPanel(PanelHooks):
+    """One card of the page, for its arm ``page.robots["arm"]`` (a :class:`~.panel.Panel`)."""
 
     def __init__(self, page: "ConsolePage", target_obj: Any, target: np.ndarray | None) -> None:
         self.page = page
@@ -44,7 +53,11 @@ class ArmPanel:
 
     @property
     def arm(self) -> Any:
-        return self.page.arm
+        return self.page.robots["arm"]
+
+    async def switch(self, robot: Any) -> None:
+        """Another arm shown: the sliders take its joints."""
+        self.synced = False
 
     def build(self) -> None:
         with ui.card().classes("full-width"):

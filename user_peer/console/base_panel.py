@@ -16,20 +16,28 @@ from fabric import keys
 from fabric.text import one_line
 from user_peer.console.drive import Driver
 from user_peer.console.goal import typed_goal
+from user_peer.console.panel import PanelHooks
 from user_peer.console.workers import TWISTS, off_loop
 from user_peer.errors import FabricUserError
 
 if TYPE_CHECKING:
     from user_peer.console.page import ConsolePage
 
-__all__ = ["BasePanel", "PLANNERS"]
+__all__ = ["BasePanel", "PLANNERS", "make"]
 
 PLANNERS = {"Hybrid A*": "hybrid_astar", "OMPL": "ompl"}
 
 
+def make(page: "ConsolePage", info: Any) -> "BasePanel":
+    """The page's base panel, with the world's goal pointer when its scene has one (``info``: the world's
+    description)."""
+    goal = next((o for o in info.objects if o.kind == "goal_pointer"), None)
+    return BasePanel(page, page.world.object(goal.id) if goal else None)
 
-class BasePanel:
-    """One card of the page, for the base ``page.base``; its keys come from the page's listener."""
+
+class BasePanel(PanelHooks):
+    """One card of the page, for its base ``page.robots["mobile"]`` (a :class:`~.panel.Panel`); its keys come from
+    the page's listener."""
 
     def __init__(self, page: "ConsolePage", goal_obj: Any) -> None:
         self.page = page
@@ -42,7 +50,15 @@ class BasePanel:
 
     @property
     def base(self) -> Any:
-        return self.page.base
+        return self.page.robots["mobile"]
+
+    async def switch(self, robot: Any) -> None:
+        """Another base shown: a key held for this one drives it no more."""
+        await self.let_go()
+
+    def end(self) -> None:
+        """The page closed: no key is held any more (the sim's deadman stops the base)."""
+        self.driver.stop()
 
     def build(self) -> None:
         with ui.card().classes("full-width"):
@@ -86,7 +102,7 @@ class BasePanel:
         v, w = self.driver.twist()
         async with self._send_lock:
             try:
-                # hold=False: the page itself repeats a held key's twist (keep_driving), so the sim's deadman
+                # hold=False: the page itself repeats a held key's twist (tick), so the sim's deadman
                 # stops the base when the page goes quiet, whatever the server's session does until its grace
                 base = self.base
                 await off_loop(TWISTS, base.twist, v, w, hold=False)
@@ -94,7 +110,7 @@ class BasePanel:
                 self.driver.stop()
                 self.page.say(f"drive {self.base.id}: {self.page.why(exc)}")
 
-    async def keep_driving(self) -> None:
+    async def tick(self) -> None:
         """Every ``REFRESH_S`` while a key is held: the twist again (the sim's twist is a deadman). A tick that finds
         the last send still under way is skipped."""
         if self.driver.driving and not self._send_lock.locked():

@@ -1,9 +1,10 @@
 """Where a page puts its parts: each robot's controls beside its view, the selected robot's first.
 
-Two rows under the robot list: the arm's panel beside the 3D view, the base's panel beside the top-down map. A
-panel shows only while its robot is the selected one or hers (bob, who selected nothing, sees no disabled arm
+Two rows under the robot list, one per view (:data:`.panels.VIEWS`): the 3D view, the top-down map, each with the
+panels of :data:`.panels.PANELS` that sit beside it before it (the arm's beside the 3D view, the base's beside
+the map). A panel shows only while its robot is the selected one or hers (bob, who selected nothing, sees no disabled arm
 panel full of stale joints); the views always show (the world at a glance). The row of the selected robot's
-kind comes first, so that at 1024x700 the map and Plan are on the screen together once she selects a base. Each
+kind's panel comes first, so that at 1024x700 the map and Plan are on the screen together once she selects a base. Each
 row's two columns sit side by side from 856 px of width and stack below it (an 800x600 window, a tablet
 upright): a column is at least 420 px wide. The map is never taller than the window leaves room for.
 """
@@ -14,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from nicegui import ui
 
-from robots.kinds import facts
+from user_peer.console.panels import VIEWS
 
 if TYPE_CHECKING:
     from user_peer.console.page import ConsolePage
@@ -51,16 +52,18 @@ class Layout:
         self.page = page
         self.rows: dict[str, Any] = {}
         self.panels: dict[str, Any] = {}
+        self._row_of: dict[str, str] = {}  # a panel's kind -> the view whose row holds it
         self._first: str | None = None
 
     def build(self) -> None:
         page = self.page
         ui.add_css(CSS)
         with ui.column().classes("full-width") as self.body:
-            for kind, panel, view in (("arm", page.arm_panel, page.view3d), ("mobile", page.base_panel, page.view)):
+            for name, view in zip(VIEWS, (page.view3d, page.view)):
                 with ui.row().classes("full-width items-start") as row:
-                    self.rows[kind] = row
-                    if panel is not None:
+                    self.rows[name] = row
+                    for kind, panel in page.panels.beside(name):
+                        self._row_of[kind] = name
                         with ui.column().classes("rf-col") as box:
                             panel.build()
                         self.panels[kind] = box
@@ -71,11 +74,11 @@ class Layout:
     def refresh(self) -> None:
         """Show the panels of the selected robot and of hers; the selected robot's row first."""
         page = self.page
-        kinds = shown_kinds(page.world, page.selected, {"arm": page.arm, "mobile": page.base})
+        kinds = shown_kinds(page.world, page.selected, page.robots)
         for kind, box in self.panels.items():
             box.set_visibility(kind in kinds)
         sel = page.handles.get(page.selected) if page.selected else None
-        first = "mobile" if sel is not None and facts(sel.kind).base else "arm"
+        first = self._row_of.get(sel.kind, VIEWS[0]) if sel is not None else VIEWS[0]
         if first != self._first:
             self._first = first
             self.rows[first].move(self.body, target_index=0)

@@ -4,8 +4,9 @@ Every button calls the Python user API (``user_peer``) of the page's own world, 
 (:mod:`.workers`), so a slow answer holds up this page only. Refusals are shown with their
 reason and the robot's owner. The console's one 5 Hz clock (:mod:`.ticker`) redraws what changed on every page
 at once; a 10 Hz timer refreshes the twist
-while an arrow key is held (the sim's twist is a deadman). The panels are :mod:`.arm_panel` and
-:mod:`.base_panel`, the live view :mod:`.view`; what the view draws is :mod:`.state` and :mod:`.topview`.
+while an arrow key is held (the sim's twist is a deadman). The robot panels are those of :data:`.panels.PANELS`
+(:mod:`.arm_panel`, :mod:`.base_panel`), each called through :class:`.panel.Panel`; the live view is :mod:`.view`;
+what the view draws is :mod:`.state` and :mod:`.topview`.
 """
 
 from __future__ import annotations
@@ -14,19 +15,16 @@ import logging
 import threading
 from typing import TYPE_CHECKING, Any, Callable
 
-import numpy as np
 from nicegui import ui
 
 from fabric.text import one_line
-from robots.kinds import NAMES, facts
 
 from user_peer.console import follow, state
-from user_peer.console.arm_panel import ArmPanel
-from user_peer.console.base_panel import BasePanel
 from user_peer.console.drive import REFRESH_S
 from user_peer.console.layout import Layout
 from user_peer.console.login import Ticket
 from user_peer.console.login_card import LoginCard
+from user_peer.console.panels import PANELS, Panels
 from user_peer.console.view import LiveView
 from user_peer.console.view3d import View3D
 from user_peer.console.wording import plain
@@ -107,16 +105,16 @@ def event_line(ev: Any, trusted: bool) -> str:
 
 
 def _first_handles(world: Any, user: str, selected: str | None = None) -> tuple[list, dict[str, Any], tuple]:
-    """The world's robots, handles for the arm and the base a page shows first (the one she had selected before
-    a reload, else hers if she owns one, else the first of each kind) and the view's layout: all of it waits on
-    the network or reads the scene file, so off the pages' event loop."""
+    """The world's robots, handles for the robot of each panel's kind (:data:`.panels.PANELS`) a page shows first
+    (the one she had selected before a reload, else hers if she owns one, else the first of the kind) and the
+    view's layout: all of it waits on the network or reads the scene file, so off the pages' event loop."""
     from user_peer import services
 
     info = world.info()
     layout = state.scene_layout(info)
     entries = services.robot_entries(info)
     handles = {}
-    for kind in NAMES:
+    for kind in dict.fromkeys(e.kind for e in PANELS):
         mine = [e for e in entries if e.kind == kind and (rec := world.ownership.record(e.id)) is not None and rec.owner == user]
         first = [e for e in entries if e.kind == kind and e.id == selected] or mine or [e for e in entries if e.kind == kind]
         if first:
@@ -139,10 +137,8 @@ class ConsolePage:
         self.handles: dict[str, Any] = {}  # the handles made so far (a handle's robot is followed only while shown)
         self.view: LiveView | None = None
         self.view3d: View3D | None = None
-        self.arm: Any = None
-        self.base: Any = None
-        self.arm_panel: ArmPanel | None = None
-        self.base_panel: BasePanel | None = None
+        self.robots: dict[str, Any] = {}  # kind -> the robot of that kind the page shows (its panel's)
+        self.panels = Panels(self)  # the panels of .panels.PANELS the page has a robot for
         self.selected: str | None = None
         self._events_seen = 0
         self._gone_seen = 0
@@ -198,8 +194,7 @@ class ConsolePage:
     async def _disconnected(self) -> None:
         """The connection dropped (the tab closed, the network went): a held key is let go at once, since its
         release may never come."""
-        if self.base_panel is not None:
-            await self.base_panel.let_go()
+        await self.panels.let_go()
 
     def end(self) -> None:
         """The tab closed (or lost its connection for good): her robots stop, her world closes after the grace
@@ -209,8 +204,7 @@ class ConsolePage:
         self._ended = True
         if self._tick is not None:
             self.console.ticker.remove(self._tick)
-        if self.base_panel is not None:
-            self.base_panel.driver.stop()
+        self.panels.end()
         if self.view is not None:
             self.view.close()
         if self.world is not None:  # stopping her robots waits on the network: never on the pages' event loop
@@ -222,21 +216,16 @@ class ConsolePage:
     def _main(self) -> None:
         w = self.world
         info = w.info()
-        self.arm = next((r for r in self.handles.values() if facts(r.kind).chain), None)
-        self.base = next((r for r in self.handles.values() if facts(r.kind).base), None)
+        for r in self.handles.values():
+            self.robots.setdefault(r.kind, r)
         had = self.ticket.selected if self.ticket is not None else None
-        self.selected = had if had in self.handles else (self.arm or self.base).id if self.handles else None
+        first = next(iter(self.robots.values()), None)  # the first panel's robot
+        self.selected = had if had in self.handles else first.id if first is not None else None
         self.follow_shown()
         # every robot's pose for the view, kept in zenoh's ring and taken at a redraw: a page of a 20-robot class
         # reads at most 5 bursts a second, not 50 (only the robots it shows are followed in full: follow_shown)
         self.view.follow_poses()
-        target = next((o for o in info.objects if o.kind == "ik_target"), None)
-        goal = next((o for o in info.objects if o.kind == "goal_pointer"), None)
-        if self.arm is not None:
-            self.arm_panel = ArmPanel(self, w.object(target.id) if target else None,
-                                      np.asarray(target.position, dtype=float) if target else None)
-        if self.base is not None:
-            self.base_panel = BasePanel(self, w.object(goal.id) if goal else None)
+        self.panels.make(info)
 
         with ui.row().classes("full-width items-center"):
             ui.label(f"robofabric console · world {w.name} · {w.user}").classes("text-h6").props('role="heading" aria-level="1"')
@@ -251,11 +240,11 @@ class ConsolePage:
         self.layout.build()
         ui.label("Events").classes("text-subtitle1").props('role="heading" aria-level="2"')
         self.log = ui.log(max_lines=200).classes("full-width").style("height: 12rem")
-        ui.on("rf_key", self._key)
+        ui.on("rf_key", self.panels.key)
         ui.on("rf_blur", self._disconnected)
         ui.run_javascript(KEYS_JS)
         self._tick = self.console.ticker.add(self.refresh)  # the console's one clock: pages share its tick's work
-        ui.timer(REFRESH_S, self._keep_driving)
+        ui.timer(REFRESH_S, self.panels.tick)
         self.refresh()
 
     def _robot_list(self) -> None:
@@ -318,17 +307,14 @@ class ConsolePage:
         if self.ticket is not None:
             self.ticket.selected = rid
         r = await self._handle(rid)
-        if r is not None and facts(r.kind).chain and r is not self.arm and self.arm_panel is not None:
-            self.arm, self.arm_panel.synced = r, False
-        elif r is not None and facts(r.kind).base and r is not self.base and self.base_panel is not None:
-            await self.base_panel.let_go()
-            self.base = r
+        if r is not None:
+            await self.panels.switch(r)  # her panel of its kind shows it now
         self.refresh()  # follows the robot shown now, lets go of the one shown before
 
     def follow_shown(self) -> None:
         """Follow in full only the robots the page shows (:func:`.follow.shown`): the selected one, and the panels'
         robots she owns; the others are drawn from the view's shared pose feed."""
-        follow.follow_only(self.world.following, follow.shown(self.world, self.selected, self.handles, (self.arm, self.base)))
+        follow.follow_only(self.world.following, follow.shown(self.world, self.selected, self.handles, self.robots.values()))
 
     async def _ownership(self, op: str) -> None:
         r = await self._handle(self.selected)
@@ -339,8 +325,7 @@ class ConsolePage:
             if epoch is not self.FAILED:
                 self.say(f"request {r.id}: you own it (epoch {epoch})")
         elif op == "release":
-            if r is self.base and self.base_panel is not None:
-                await self.base_panel.let_go()
+            await self.panels.let_go(r)  # a key held for it lets go first
             rec = self.world.ownership.record(r.id)
             if rec is not None:
                 self._letting_go[r.id] = rec.epoch  # her own release: the status says "release: ok", not that she lost it
@@ -350,14 +335,6 @@ class ConsolePage:
             if out is not self.FAILED:
                 self.say(f"queue for {r.id}: {out}")
         self.refresh()
-
-    async def _key(self, e: Any) -> None:
-        if self.base_panel is not None:
-            await self.base_panel.key(e)
-
-    async def _keep_driving(self) -> None:
-        if self.base_panel is not None:
-            await self.base_panel.keep_driving()
 
     # ------------------------------------------------------------------ refresh
 
@@ -389,9 +366,7 @@ class ConsolePage:
             if rec is not None:
                 self._owners[r.id] = rec.owner
         self.sel_label.text = f"selected: {self.selected}" if self.selected else "no robot"
-        for panel in (self.arm_panel, self.base_panel):
-            if panel is not None:
-                panel.refresh()
+        self.panels.refresh()
         self.layout.refresh()
         self.view.refresh()
         if self.view3d is not None:

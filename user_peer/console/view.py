@@ -68,7 +68,7 @@ class LiveView:
 
     def _centre(self) -> tuple[float, float]:
         """Where a zoom centres: the page's base when its pose is known, else the middle of what is shown."""
-        base = self.page.base
+        base = self.page.robots.get("mobile")
         xy = base.xy_theta if base is not None and base.id in self.page.world.following.robots else None
         f = self.frame
         return (xy[0], xy[1]) if xy else ((f.xmin + f.xmax) / 2, (f.ymin + f.ymax) / 2)
@@ -79,7 +79,7 @@ class LiveView:
         self.frame = mapframe.zoomed(self.whole, level, self._centre())
         self._picture(self._grid)
         self._show_zoom()
-        f, base = self.frame, self.page.base
+        f, base = self.frame, self.page.robots.get("mobile")
         around = f"around {base.id}" if level > 1 and base is not None and base.id in self.page.world.following.robots else "whole"
         self.page.say(f"zoom x{level}: the map {around}, {f.xmax - f.xmin:.1f} m wide")
         self.page.refresh()
@@ -111,22 +111,22 @@ class LiveView:
     def mouse(self, e: Any) -> None:
         """A press on the IK target and its release elsewhere drag the target there (its height kept; the nudges
         move it up and down); any other click places the goal."""
-        page = self.page
-        target = page.arm_panel.target if page.arm_panel is not None else None
+        page, arm_panel = self.page, self.page.panels.get("arm")
+        target = arm_panel.target if arm_panel is not None else None
         if e.type == "mousedown":
             self._drag = target is not None and math.dist(self.frame.px(float(target[0]), float(target[1])),
                                                           (e.image_x, e.image_y)) <= DRAG_GRAB_PX
         elif e.type == "mouseup" and self._drag:
             self._drag, self._swallow_click = False, True
             x, y = self.frame.world(e.image_x, e.image_y)
-            page.arm_panel.move_target(np.array([x, y, float(target[2])]))
+            arm_panel.move_target(np.array([x, y, float(target[2])]))
             page.say(f"IK target dragged to ({x:.3f}, {y:.3f}, {float(target[2]):.3f})")
             page.refresh()
         elif e.type == "click":
             if self._swallow_click:  # the click that ends a drag places no goal
                 self._swallow_click = False
-            elif page.base_panel is not None:
-                page.base_panel.clicked(e)
+            elif page.panels.get("mobile") is not None:
+                page.panels.get("mobile").clicked(e)
 
     def close(self) -> None:
         """The page went away: its picture is no longer served, its poses no longer kept."""
@@ -137,15 +137,16 @@ class LiveView:
     def refresh(self) -> None:
         """The picture again when her map changed; the overlay from what the page holds now."""
         page, w = self.page, self.page.world
-        grid = w.latest.get(keys.map_key(w.name, keys.user_map("map", w.user))) or (page.base_panel.grid if page.base_panel else None) \
+        arm_panel, base_panel, base = page.panels.get("arm"), page.panels.get("mobile"), page.robots.get("mobile")
+        grid = w.latest.get(keys.map_key(w.name, keys.user_map("map", w.user))) or (base_panel.grid if base_panel else None) \
             or w.latest.get(keys.map_key(w.name, "map"))
         if grid is not None and id(grid) != self._map_seq:
             self._map_seq = id(grid)
             self._picture(grid)
-        target = page.arm_panel.target if page.arm_panel is not None else None
+        target = arm_panel.target if arm_panel is not None else None
         poses = self.feed.drain() if self.feed is not None else {}
         self.image.content = state.view_svg(
-            w, page.entries, follow.followed(w, page.handles), poses, self.frame, (), base_id=page.base.id if page.base else None,
-            selected={page.selected} if page.selected else set(), goal=page.base_panel.goal if page.base_panel else None,
+            w, page.entries, follow.followed(w, page.handles), poses, self.frame, (), base_id=base.id if base else None,
+            selected={page.selected} if page.selected else set(), goal=base_panel.goal if base_panel else None,
             target=(float(target[0]), float(target[1])) if target is not None else None, decoder=page.console.decoded) \
             + mapframe.scale_bar_svg(self.frame)

@@ -86,9 +86,9 @@ class View3D:
 
     def look_at_arm(self) -> None:
         """The camera 1 m from the page's arm (or the first robot), looking at its middle from above and aside."""
-        page = self.page
-        rid = page.arm.id if page.arm is not None else (page.entries[0].id if page.entries else None)
-        self._looked = page.arm.id if page.arm is not None else None
+        page, arm = self.page, self.page.robots.get("arm")
+        rid = arm.id if arm is not None else (page.entries[0].id if page.entries else None)
+        self._looked = arm.id if arm is not None else None
         sx, sy, sz, _ = self.spawn.get(rid, (0.0, 0.0, 0.0, 0.0)) if rid else (0.0, 0.0, 0.0, 0.0)
         self.scene.move_camera(sx + 0.55, sy - 0.75, sz + 0.6, sx, sy, sz + 0.15, duration=0)
 
@@ -102,7 +102,7 @@ class View3D:
 
     def _dropped(self, e: Any) -> None:
         """The target dropped at (x, y): it keeps its height (the drag is on its plane)."""
-        panel = self.page.arm_panel
+        panel = self.page.panels.get("arm")
         if panel is None or e.object_name != "ik-target" or panel.target is None:
             return
         xyz = np.array([float(e.x), float(e.y), float(panel.target[2])])
@@ -111,7 +111,7 @@ class View3D:
         self.page.refresh()
 
     def _height_set(self) -> None:
-        panel = self.page.arm_panel
+        panel = self.page.panels.get("arm")
         if self._syncing or panel is None or panel.target is None or self.height.value is None:
             return
         z = float(self.height.value)
@@ -120,7 +120,7 @@ class View3D:
             self.page.say(f"IK target height set to {z:.3f} m")
 
     def _show_target(self) -> None:
-        panel = self.page.arm_panel
+        panel = self.page.panels.get("arm")
         t = panel.target if panel is not None else None
         if t is None:
             return
@@ -141,8 +141,8 @@ class View3D:
 
     def refresh(self, poses: dict[str, bytes]) -> None:
         """Move what moved: the followed arms' links, the bases, the selected base's scan, the target."""
-        page, w = self.page, self.page.world
-        if page.arm is not None and page.arm.id != self._looked:  # another arm selected: the camera goes to it
+        page, w, arm = self.page, self.page.world, self.page.robots.get("arm")
+        if arm is not None and arm.id != self._looked:  # another arm selected: the camera goes to it
             self.look_at_arm()
         for e in page.entries:
             if facts(e.kind).base:
@@ -178,7 +178,7 @@ class View3D:
         self.bases[rid].move(round(float(pose.position[0]), 3), round(float(pose.position[1]), 3), BASE_SIZE[2] / 2).rotate(0.0, 0.0, round(yaw, 3))
 
     def _scan(self) -> None:
-        base = self.page.base
+        base = self.page.robots.get("mobile")
         if base is None:
             return
         s, p = base.latest("scan"), base.latest("pose")
