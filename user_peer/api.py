@@ -24,7 +24,7 @@ The rooms: :mod:`user_peer.world` (the session and the handles), behind it
 refuse a command), :mod:`user_peer.following` (which streams are decoded) and
 :mod:`user_peer.compute_route` (which compute peer is asked);
 :mod:`user_peer.latest` (the cache), :mod:`user_peer.robot` (what every robot handle
-offers; :mod:`user_peer.ownable` its ownership; :mod:`user_peer.arm` and
+offers, its ownership included; :mod:`user_peer.arm` and
 :mod:`user_peer.mobile_base`, a class per kind), :mod:`user_peer.scene_object`,
 :mod:`user_peer.errors`. This module joins them: :func:`connect`, and the public
 names in one place.

@@ -20,7 +20,7 @@ from user_peer.errors import Timeout
 
 log = logging.getLogger("robofabric.user")
 
-__all__ = ["FAILOVER_WAIT_S", "SimPresence", "WorldPresence"]
+__all__ = ["FAILOVER_WAIT_S", "SimPresence"]
 
 FAILOVER_WAIT_S = 15.0
 """How long after a sim left :meth:`SimPresence.on_failover` waits for another sim (its standby) to serve its
@@ -178,41 +178,3 @@ class SimPresence:
         log.warning("sim %s failed over to %s: robots %s go on in world %s", sim, to, ", ".join(robots), self.world)
         _tell(callbacks, "failover", sim, to, list(robots))
 
-
-class WorldPresence:
-    """Whether a user's world is there, as :class:`~user_peer.world.World` documents it: each call reads or
-    asks ``self.presence`` (a :class:`SimPresence`). A mixin of ``World``, so that the world's handles,
-    streams and events and its presence are two concerns, and the calls stay where a script finds them."""
-
-    presence: SimPresence
-
-    @property
-    def world_alive(self) -> bool:
-        """True while at least one sim peer of this world is alive (its liveliness token is there)."""
-        return self.presence.alive
-
-    def sims(self) -> list[str]:
-        """Ids of the live sim peers of this world."""
-        return self.presence.ids()
-
-    def on_world(self, callback: Callable[[bool, str], None]) -> None:
-        """``callback(alive, why)`` each time the world goes (its last sim peer left) or comes back."""
-        self.presence.on_world(callback)
-
-    def wait_world(self, *, alive: bool = True, timeout: float | None = None) -> bool:
-        """Block until the world is there (``alive``) or gone; False if that did not happen within ``timeout``.
-
-        There means serving: a restarted sim's token arrives before its services (the world description,
-        ownership), and a request sent in between finds nobody to answer it; so this also waits for the
-        world description, which the sim serves once its ownership authority is up."""
-        return self.presence.wait(alive=alive, timeout=timeout)
-
-    def on_failover(self, callback: Callable[[str, str, list[str]], None]) -> None:
-        """``callback(sim, standby, robots)`` when the robots of a sim that left are served again by another (its
-        standby took them over): told after :meth:`on_robots_gone`, within :data:`FAILOVER_WAIT_S` of the loss."""
-        self.presence.on_failover(callback)
-
-    def on_robots_gone(self, callback: Callable[[str, list[str]], None]) -> None:
-        """``callback(sim, robots)`` when a sim of a world that stays alive leaves, with the robots it served (a
-        world served by several sims: the others' robots go on; a standby of that sim may take them over)."""
-        self.presence.on_robots_gone(callback)

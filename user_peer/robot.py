@@ -2,7 +2,7 @@
 
 A class per robot kind (:class:`~user_peer.arm.Arm`, :class:`~user_peer.mobile_base.Base`, each in its own
 module), chosen by the kind in the sim's world description (:meth:`Robot.for_kind`); what all kinds share
-(commands, stop/reset, streams) is :class:`Robot`, its ownership :class:`~user_peer.ownable.Ownable`. A handle
+(ownership, commands, stop/reset, streams) is :class:`Robot`. A handle
 reads the world's cache (:class:`~user_peer.latest.Latest`) and never keeps state of its own, so two handles of
 one robot always agree.
 """
@@ -14,10 +14,9 @@ from typing import TYPE_CHECKING, Any, Callable, ClassVar
 import numpy as np
 
 from fabric import keys
-from fabric.interfaces import Command, Event, JointState, Reset, Stop
+from fabric.interfaces import Command, Event, JointState, OwnershipRecord, Reset, Stop
 from user_peer import services
 from user_peer.errors import NotOwner, Paused, Rejected, Timeout
-from user_peer.ownable import Ownable
 from user_peer.reliable import resend_until
 from user_peer.streams import StreamIterator, Subscription
 
@@ -94,7 +93,7 @@ def _still_after(msg: Any, seq: int) -> bool:
     return float(np.linalg.norm(msg.linear)) < 1e-3 and float(np.linalg.norm(msg.angular)) < 1e-3
 
 
-class Robot(Ownable):
+class Robot:
     """What every robot offers: ownership, stop, reset, its streams. Subclasses name their ``kind`` (the
     world description's word for it) and are found by it (:meth:`for_kind`)."""
 
@@ -132,6 +131,59 @@ class Robot(Ownable):
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.status()}>"
+
+    # ------------------------------------------------------------------ ownership (from the user's replica)
+
+    @property
+    def record(self) -> OwnershipRecord | None:
+        """The robot's ownership record as the user's replica (:class:`~user_peer.ownership_link.OwnershipLink`)
+        holds it; None when the world runs without ownership."""
+        return self.world.ownership.record(self.id)
+
+    @property
+    def owner(self) -> str:
+        """Who owns the robot ("" for nobody)."""
+        rec = self.record
+        return rec.owner if rec else ""
+
+    @property
+    def is_owner(self) -> bool:
+        """Whether this user owns the robot."""
+        return self.owner == self.world.user
+
+    @property
+    def can_command(self) -> bool:
+        """True when this user owns the robot, or the world runs without ownership (no record at all)."""
+        rec = self.record
+        return rec is None or rec.owner == self.world.user
+
+    def request(self, *, timeout: float | None = None, wait: bool = False) -> int:
+        """Ask to own the robot; returns the epoch (the fencing token the commands carry).
+
+        Without ``wait`` a refusal raises :class:`NotOwner` with the authority's reason (in motion, owned
+        by X). With ``wait`` the user takes a place in the queue and this call returns the epoch when that
+        place becomes ownership, or raises :class:`Timeout` after ``timeout`` s, leaving the queue.
+        """
+        return self.world.ownership.request(self.id, timeout=timeout or self.world.timeout, wait=wait)
+
+    def release(self) -> None:
+        """Give the robot up (the next in its queue owns it). The sim stops it: a base brakes, an arm holds."""
+        self.world.twists.drop(self.id)
+        self.world.ownership.release(self.id, timeout=self.world.timeout)
+
+    def queue(self, *, timeout: float | None = None) -> int:
+        """Take a place in the robot's queue without waiting for it (a UI's "queue for it"); returns the
+        place (1: next), or 0 when the robot was granted at once (free, or still). :class:`NotOwner` when
+        refused (the queue is full). The place and the grant show in :attr:`record` as they come."""
+        return self.world.ownership.enqueue(self.id, timeout=timeout or self.world.timeout)
+
+    @property
+    def queue_place(self) -> int | None:
+        """This user's place in the robot's queue (1: next), or None when not waiting for it."""
+        rec = self.record
+        if rec is None or self.world.user not in rec.queue:
+            return None
+        return rec.queue.index(self.world.user) + 1
 
     # ------------------------------------------------------------------ commands
 

@@ -32,7 +32,7 @@ from user_peer.event_log import EventLog
 from user_peer.following import FOLLOWED_STREAMS, Following
 from user_peer.latest import Latest
 from user_peer.ownership_link import OwnershipLink
-from user_peer.presence import FAILOVER_WAIT_S, SimPresence, WorldPresence
+from user_peer.presence import FAILOVER_WAIT_S, SimPresence
 from user_peer.robot import Robot, robot_status
 from user_peer.scene_object import SceneObject
 from user_peer.streams import StreamIterator, Subscription
@@ -40,13 +40,13 @@ from user_peer.streams import StreamIterator, Subscription
 __all__ = ["World", "FOLLOWED_STREAMS", "FAILOVER_WAIT_S", "REDESCRIBE_S"]
 
 
-class World(WorldPresence, contextlib.AbstractContextManager):
+class World(contextlib.AbstractContextManager):
     """A user's handle on one world. A context manager; ``close()`` is idempotent, ``closed`` says it ran.
 
     ``presence`` (the sims alive, ``robots_gone``, ``failovers``), ``event_log``, ``following`` and
     ``compute_route`` are the objects behind the methods; robot handles reach them directly. Whether the
     world is there (``world_alive``, ``sims()``, ``wait_world()``, ``on_world()``, ``on_robots_gone()``,
-    ``on_failover()``) comes from :class:`~user_peer.presence.WorldPresence`."""
+    ``on_failover()``) is asked of ``presence``."""
 
     def __init__(
         self, config: FabricConfig, user: str, *, timeout: float = 5.0, compute: str | None = None,
@@ -121,6 +121,39 @@ class World(WorldPresence, contextlib.AbstractContextManager):
             return f"<World {self.name!r} as {self.user!r}, world not seen yet>"
         robots = "; ".join(robot_status(self, entry) for entry in services.robot_entries(info))
         return f"<World {self.name!r} as {self.user!r}" + (f": {robots}>" if robots else ">")
+
+    # ------------------------------------------------------------------ is the world there (self.presence)
+
+    @property
+    def world_alive(self) -> bool:
+        """True while at least one sim peer of this world is alive (its liveliness token is there)."""
+        return self.presence.alive
+
+    def sims(self) -> list[str]:
+        """Ids of the live sim peers of this world."""
+        return self.presence.ids()
+
+    def on_world(self, callback: Callable[[bool, str], None]) -> None:
+        """``callback(alive, why)`` each time the world goes (its last sim peer left) or comes back."""
+        self.presence.on_world(callback)
+
+    def wait_world(self, *, alive: bool = True, timeout: float | None = None) -> bool:
+        """Block until the world is there (``alive``) or gone; False if that did not happen within ``timeout``.
+
+        There means serving: a restarted sim's token arrives before its services (the world description,
+        ownership), and a request sent in between finds nobody to answer it; so this also waits for the
+        world description, which the sim serves once its ownership authority is up."""
+        return self.presence.wait(alive=alive, timeout=timeout)
+
+    def on_failover(self, callback: Callable[[str, str, list[str]], None]) -> None:
+        """``callback(sim, standby, robots)`` when the robots of a sim that left are served again by another (its
+        standby took them over): told after :meth:`on_robots_gone`, within :data:`FAILOVER_WAIT_S` of the loss."""
+        self.presence.on_failover(callback)
+
+    def on_robots_gone(self, callback: Callable[[str, list[str]], None]) -> None:
+        """``callback(sim, robots)`` when a sim of a world that stays alive leaves, with the robots it served (a
+        world served by several sims: the others' robots go on; a standby of that sim may take them over)."""
+        self.presence.on_robots_gone(callback)
 
     # ------------------------------------------------------------------ what is there
 
