@@ -53,17 +53,16 @@ def _imported(module: str, tree: ast.Module) -> dict[str, tuple[str, str]]:
     return out
 
 
-def _classes(root: Path, packages: tuple[str, ...]) -> dict[tuple[str, str], tuple[ast.ClassDef, dict[str, tuple[str, str]]]]:
-    """Every class of ``packages`` as (module, name) -> (its node, its module's imported names)."""
+def _classes(trees: dict[str, ast.Module]) -> dict[tuple[str, str], tuple[ast.ClassDef, dict[str, tuple[str, str]]]]:
+    """Every class of the modules ``trees`` (path -> tree) as (module, name) -> (its node, its module's
+    imported names)."""
     out = {}
-    for pkg in packages:
-        for path in sorted((root / pkg).rglob("*.py")):
-            module = _module_name(path.relative_to(root).as_posix())
-            tree = ast.parse(path.read_text(encoding="utf-8"))
-            imported = _imported(module, tree)
-            for node in ast.walk(tree):
-                if isinstance(node, ast.ClassDef):
-                    out[(module, node.name)] = (node, imported)
+    for rel, tree in trees.items():
+        module = _module_name(rel)
+        imported = _imported(module, tree)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ClassDef):
+                out[(module, node.name)] = (node, imported)
     return out
 
 
@@ -96,26 +95,27 @@ def offered(key: tuple[str, str], classes: dict) -> set[str]:
 def offenders(root: Path, packages: tuple[str, ...] = PACKAGES, benchmarks: tuple[str, ...] = BENCHMARKS) -> list[str]:
     """Every module, class and function of ``packages`` under ``root`` past the rules, as ``path[:line] what``."""
     out = []
-    classes = _classes(root, packages)
+    sources: dict[str, str] = {}
     for pkg in packages:
         modules = sorted((root / pkg).rglob("*.py"))
         assert modules, f"no package {pkg} under {root}"  # a check of nothing would pass
-        for path in modules:
-            rel = path.relative_to(root).as_posix()
-            src = path.read_text(encoding="utf-8")
-            lines = len(src.splitlines())
-            if lines > MAX_MODULE_LINES:
-                out.append(f"{rel} module of {lines} lines")
-            in_bench = any(rel == b or rel.startswith(b + "/") for b in benchmarks)
-            for node in ast.walk(ast.parse(src, rel)):
-                if isinstance(node, ast.ClassDef) and not _frozen_value(node):
-                    methods = len(offered((_module_name(rel), node.name), classes))
-                    if methods > MAX_METHODS:
-                        out.append(f"{rel}:{node.lineno} class {node.name} offers {methods} methods")
-                elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and not in_bench:
-                    n = node.end_lineno - node.lineno + 1
-                    if n > MAX_FUNCTION_LINES:
-                        out.append(f"{rel}:{node.lineno} function {node.name} of {n} lines")
+        sources.update((path.relative_to(root).as_posix(), path.read_text(encoding="utf-8")) for path in modules)
+    trees = {rel: ast.parse(src, rel) for rel, src in sources.items()}
+    classes = _classes(trees)
+    for rel, src in sources.items():
+        lines = len(src.splitlines())
+        if lines > MAX_MODULE_LINES:
+            out.append(f"{rel} module of {lines} lines")
+        in_bench = any(rel == b or rel.startswith(b + "/") for b in benchmarks)
+        for node in ast.walk(trees[rel]):
+            if isinstance(node, ast.ClassDef) and not _frozen_value(node):
+                methods = len(offered((_module_name(rel), node.name), classes))
+                if methods > MAX_METHODS:
+                    out.append(f"{rel}:{node.lineno} class {node.name} offers {methods} methods")
+            elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and not in_bench:
+                n = node.end_lineno - node.lineno + 1
+                if n > MAX_FUNCTION_LINES:
+                    out.append(f"{rel}:{node.lineno} function {node.name} of {n} lines")
     return out
 
 
