@@ -47,7 +47,9 @@ def _imported(module: str, tree: ast.Module) -> dict[str, tuple[str, str]]:
     package = module.split(".")
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom):
-            base = ".".join(package[: len(package) - node.level] + ([node.module] if node.module else [])) if node.level else node.module
+            base = node.module
+            if node.level:  # relative: from the module's package up
+                base = ".".join(package[: len(package) - node.level] + ([node.module] if node.module else []))
             for a in node.names:
                 out[a.asname or a.name] = (base or "", a.name)
     return out

@@ -2,11 +2,12 @@
 
 Two rows under the robot list, one per view (:data:`.panels.VIEWS`): the 3D view, the top-down map, each with the
 panels of :data:`.panels.PANELS` that sit beside it before it (the arm's beside the 3D view, the base's beside
-the map). A panel shows only while its robot is the selected one or hers (bob, who selected nothing, sees no disabled arm
-panel full of stale joints); the views always show (the world at a glance). The row of the selected robot's
-kind's panel comes first, so that at 1024x700 the map and Plan are on the screen together once she selects a base. Each
-row's two columns sit side by side from 856 px of width and stack below it (an 800x600 window, a tablet
-upright): a column is at least 420 px wide. The map is never taller than the window leaves room for.
+the map). A panel shows only while its robot is the selected one or hers (bob, who selected nothing, sees no
+disabled arm panel full of stale joints); the views always show (the world at a glance). The row of the selected
+robot's kind's panel comes first, so that at 1024x700 the map and Plan are on the screen together once she
+selects a base. Each row's two columns sit side by side from 856 px of width and stack below it (an 800x600
+window, a tablet upright): a column is at least 420 px wide. The map is never taller than the window leaves room
+for.
 """
 
 from __future__ import annotations

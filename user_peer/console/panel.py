@@ -1,4 +1,5 @@
-"""What a page calls on a robot panel (:class:`Panel`), and the empty hooks a simple panel inherits (:class:`PanelHooks`).
+"""What a page calls on a robot panel (:class:`Panel`), and the empty hooks a simple panel inherits
+(:class:`PanelHooks`).
 
 The page holds its panels in :class:`~.panels.Panels`, made from the one list :data:`~.panels.PANELS`.
 """

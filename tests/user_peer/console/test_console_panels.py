@@ -66,7 +66,8 @@ class StandInView:
 def _page(robots: dict[str, Any], selected: str | None = None) -> SimpleNamespace:
     """What the layout and the panels read of a page; its world runs without ownership (no records)."""
     world = SimpleNamespace(user="alice", ownership=SimpleNamespace(record=lambda rid: None))
-    return SimpleNamespace(robots=dict(robots), selected=selected, handles={r.id: r for r in robots.values()}, world=world,
+    return SimpleNamespace(robots=dict(robots), selected=selected, handles={r.id: r for r in robots.values()},
+                           world=world,
                            view3d=StandInView("the 3D view"), view=StandInView("the map"))
 
 
@@ -75,7 +76,11 @@ def _drone(rid: str) -> SimpleNamespace:
 
 
 def _entries(calls: list, beside: str = "map") -> tuple[PanelEntry, ...]:
-    return (*PANELS, PanelEntry("drone", lambda page, info: calls.append(("make", info)) or DummyPanel(page, calls), beside))
+    def make(page: Any, info: Any) -> DummyPanel:
+        calls.append(("make", info))
+        return DummyPanel(page, calls)
+
+    return (*PANELS, PanelEntry("drone", make, beside))
 
 
 def test_a_registered_panel_is_made_built_beside_its_view_and_refreshed():
@@ -144,6 +149,7 @@ def test_every_registered_panel_offers_the_whole_protocol():
     assert wanted == {"build", "refresh", "switch", "let_go", "key", "tick", "end"}
     assert [e.kind for e in PANELS] == ["arm", "mobile"] and {e.beside for e in PANELS} <= set(VIEWS)
     for e in PANELS:
-        cls = getattr(sys.modules[e.make.__module__], e.make.__annotations__["return"].strip("'\""))  # the class it makes
+        made = e.make.__annotations__["return"].strip("'\"")  # the name of the class it makes
+        cls = getattr(sys.modules[e.make.__module__], made)
         missing = {n for n in wanted if not callable(getattr(cls, n, None))}
         assert not missing, f"{cls.__name__} lacks {missing}"
