@@ -27,6 +27,8 @@ import typer
 from fabric.config import ConfigError, FabricConfig
 
 if TYPE_CHECKING:
+    from rich.console import Console
+
     from fabric.session import Fabric
 
 __all__ = [
@@ -173,17 +175,17 @@ ZenohConfig = Annotated[
 ]
 
 
-def console(*, stderr: bool = False):
+def console(*, stderr: bool = False) -> Console:
     """The rich console every table and long line of the CLI goes through: as wide as the terminal
     (``$COLUMNS`` when set, 80 when the output is not a terminal), folding what does not fit rather than
     cutting it; no markup, highlighting or emoji, so keys and ids from the network print as they are."""
     return _console_class()(stderr=stderr, markup=False, highlight=False, emoji=False)
 
 
-_CONSOLE: type | None = None
+_CONSOLE: type[Console] | None = None
 
 
-def _console_class() -> type:
+def _console_class() -> type[Console]:
     """rich's Console, but a closed stdout ends the command with 0 (rich's own exits 1), as :func:`say` does."""
     global _CONSOLE
     if _CONSOLE is None:

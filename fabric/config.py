@@ -16,6 +16,7 @@ import socket
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Mapping
 
 import zenoh
 
@@ -119,6 +120,8 @@ def _certificate_names(host: str, port: int, timeout: float) -> list[str]:
     try:
         with socket.create_connection((host, port), timeout=timeout) as sock, ctx.wrap_socket(sock) as tls:
             der = tls.getpeercert(binary_form=True)
+        if der is None:  # no certificate: nothing to name
+            return []
         sans = x509.load_der_x509_certificate(der).extensions.get_extension_for_class(x509.SubjectAlternativeName).value
     except Exception:  # only for a message: nothing to add
         return []
@@ -184,7 +187,7 @@ class FabricConfig:
         listen: list[str] | tuple[str, ...] | None = None,
         config_file: str | None = None,
         lease_ms: int | None = None,
-        env: dict[str, str] | None = None,
+        env: Mapping[str, str] | None = None,
     ) -> "FabricConfig":
         """Flags win over the environment, which wins over defaults."""
         env = os.environ if env is None else env

@@ -32,7 +32,7 @@ log = logging.getLogger("robofabric")
 
 __all__ = ["at_exit"]
 
-_closers: dict[int, Callable[[], None]] = {}
+_closers: dict[int, Callable[[], object]] = {}
 _ids = itertools.count()
 _lock = threading.Lock()
 _installed = False
@@ -79,21 +79,22 @@ def _forked() -> None:
 os.register_at_fork(after_in_child=_forked)
 
 
-def at_exit(fn: Callable[[], None]) -> Callable[[], None]:
+def at_exit(fn: Callable[[], object]) -> Callable[[], None]:
     """Call ``fn`` when the interpreter exits, before non-daemon threads are joined; returns a
     function that cancels it (call it from an explicit ``close()``, so nothing is closed twice).
 
     A bound method is held weakly: registering ``obj.close`` does not keep ``obj`` alive, so an object
     nobody refers to any more is collected as it was before (and is simply not closed again at exit)."""
+    call: Callable[[], object] = fn
     if inspect.ismethod(fn):
         ref = weakref.WeakMethod(fn)
 
-        def call() -> None:
+        def weak_call() -> None:
             method = ref()
             if method is not None:
                 method()
-    else:
-        call = fn
+
+        call = weak_call
     with _lock:
         _install()
         key = next(_ids)

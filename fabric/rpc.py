@@ -65,7 +65,7 @@ class Rpc:
         complete: bool = False,
         defer: Callable[[str, Any], Callable[[Callable[[], None]], bool] | None] | None = None,
         gate: Callable[[str], bytes | None] | None = None,
-    ) -> zenoh.Queryable:
+    ) -> zenoh.Queryable[None]:
         """Answer queries on ``key_expr`` with ``handler(key, request_or_None) -> message``.
 
         A handler raising :class:`ServiceError` (or ``ValueError``) sends the reason back as an error

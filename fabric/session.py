@@ -241,8 +241,9 @@ class Fabric:
         return self.subscribe_raw(key_expr, on_sample, history=history, remote_only=remote_only)
 
     def subscribe_raw(self, key_expr: str, callback: Callable[[zenoh.Sample], None], *, history: bool = False,
-                      remote_only: bool = False) -> Any:
+                      remote_only: bool = False) -> zenoh.Subscriber[None] | LatestThenLive:
         """``callback(sample)`` for every sample, undecoded; ``history`` and ``remote_only`` as in :meth:`subscribe`."""
+        sub: zenoh.Subscriber[None] | LatestThenLive
         if remote_only:
             if history:
                 raise ValueError("remote_only subscriptions have no history")
@@ -275,7 +276,7 @@ class Fabric:
         waiting for a peer's token, an audit listing made-up ones)."""
         return [str(rep.ok.key_expr) for rep in self.session.liveliness().get(key_expr, timeout=timeout) if rep.ok is not None]
 
-    def watch_peers(self, callback: Callable[[str, str, bool], None], kind: str = "*") -> zenoh.Subscriber:
+    def watch_peers(self, callback: Callable[[str, str, bool], None], kind: str = "*") -> zenoh.Subscriber[None]:
         """``callback(kind, id, alive)`` on every token that appears or goes (existing ones first)."""
 
         def on_token(key: str, alive: bool) -> None:
@@ -287,7 +288,7 @@ class Fabric:
 
         return self.watch_tokens(keys.peers_all(self.world, kind), on_token)
 
-    def watch_tokens(self, key_expr: str, callback: Callable[[str, bool], None]) -> zenoh.Subscriber:
+    def watch_tokens(self, key_expr: str, callback: Callable[[str, bool], None]) -> zenoh.Subscriber[None]:
         """``callback(key, alive)`` on every liveliness token under ``key_expr`` that appears or goes (existing ones
         first), its key as declared, parsed or not (a recorder keeps every token it hears, a made-up one too)."""
 

@@ -10,10 +10,13 @@ tools never need to know which sim runs a robot.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Iterable
+from typing import TYPE_CHECKING, Iterable
 
 from fabric import keys
-from fabric.interfaces import WorldInfo
+from fabric.interfaces import RobotInfo, WorldInfo
+
+if TYPE_CHECKING:
+    from fabric.session import Fabric
 
 __all__ = ["union", "describe"]
 
@@ -26,7 +29,7 @@ def union(parts: Iterable[tuple[str, WorldInfo]]) -> WorldInfo:
     parts = sorted(((src or p.header.source, p) for src, p in parts), key=lambda sp: sp[0])
     if not parts:
         raise ValueError("no world description to join")
-    robots: dict[str, tuple[int, object]] = {}
+    robots: dict[str, tuple[int, RobotInfo]] = {}
     for src, p in parts:
         for r in p.robots:
             term = p.header.term
@@ -38,7 +41,7 @@ def union(parts: Iterable[tuple[str, WorldInfo]]) -> WorldInfo:
     return replace(base, robots=tuple(r for _, (_, r) in sorted(robots.items())))
 
 
-def describe(fab, *, timeout: float = 2.0) -> WorldInfo:
+def describe(fab: Fabric, *, timeout: float = 2.0) -> WorldInfo:
     """Every sim's part of ``fab``'s world, joined (:func:`union`). Raises the query's ``ServiceError`` when no
     sim answers (``NoReply``) or every one refuses (``Refused``)."""
     replies = fab.rpc.query(keys.srv(fab.world, "world"), timeout=timeout, expected=WorldInfo, all_replies=True)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import replace
+import functools
 import logging
 import threading
 from types import MappingProxyType
@@ -76,9 +77,13 @@ class Authority:
         self._tick_s = tick_s if tick_s is not None else min(0.02, lease_s / 10)
         self._stop = threading.Event()
         self.counters = {"requests": 0, "rejected": 0, "handovers": 0, "rate_limited": 0}
+
+        def report(limit: str, make: Callable[[], Event]) -> None:
+            if fabric.reports.should_report(limit) is not None:
+                self._emit(replace(make(), header=fabric.header("event")))
+
         self.admission = Admission(budgets or OwnBudgets(), self.clock, self.counters, fabric_counters=fabric.counters,
-                                   report=lambda limit, make: fabric.reports.should_report(limit) is not None
-                                   and self._emit(replace(make(), header=fabric.header("event"))))
+                                   report=report)
         self._stop_watchers: list[Callable[[str, str, str], None]] = []
         self._reset_watchers: list[Callable[[str, str, str], None]] = []
         # users who may have left while no authority listened (a take-over) or while our link was down:
@@ -92,14 +97,14 @@ class Authority:
         # first records go out: a replica that hears one asks for the rest (ownership.client). Requests are worked
         # out on their own lane, renewals at once, each login within her budgets (ownership.admission)
         self._queryables = [
-            fabric.rpc.serve(keys.own(fabric.world, obj), lambda key, req, obj=obj: self._serve_record(obj), expected=OwnRequest)
+            fabric.rpc.serve(keys.own(fabric.world, obj), functools.partial(_answer_record, self, obj), expected=OwnRequest)
             for obj in objects
         ] + [
-            fabric.rpc.serve(keys.own_request_all(fabric.world, obj), lambda key, req, obj=obj: self._serve(obj, key, req),
+            fabric.rpc.serve(keys.own_request_all(fabric.world, obj), functools.partial(self._serve, obj),
                              expected=OwnRequest, defer=self.admission.route, gate=self.admission.gate)
             for obj in objects
         ] + [
-            fabric.rpc.serve(keys.own_staff_all(fabric.world, obj), lambda key, req, obj=obj: _serve_staff(self, obj, key, req),
+            fabric.rpc.serve(keys.own_staff_all(fabric.world, obj), functools.partial(_serve_staff, self, obj),
                              expected=OwnRequest)
             for obj in objects
         ]
@@ -324,6 +329,11 @@ class Authority:
             thread.join(timeout=2.0)
 
 
+def _answer_record(auth: Authority, obj: str, key: str, request: object) -> OwnershipRecord:
+    """A query on ``obj``'s record key (a replica joining, a late viewer): the record as it is now."""
+    return auth._serve_record(obj)
+
+
 def _serve_staff(auth: Authority, obj: str, key: str, request: Any) -> OwnReply:
     """``own/{obj}/staff/by/{login}``: an instructor's action (:mod:`ownership.staff`), in the key's login's name.
     Whoever reaches this key is staff: a class's router opens it to the instructor logins alone. (A function of the
@@ -358,5 +368,5 @@ def _lease_only(old: OwnershipRecord | None, new: OwnershipRecord) -> bool:
     return old is not None and dataclasses.replace(old, lease_expiry=new.lease_expiry) == new
 
 
-def _fields(rec: OwnershipRecord) -> dict:
+def _fields(rec: OwnershipRecord) -> dict[str, Any]:
     return {f.name: getattr(rec, f.name) for f in dataclasses.fields(rec)}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
-from typing import Annotated, Optional, TYPE_CHECKING
+from typing import TYPE_CHECKING, Annotated, Any, Optional
 
 import typer
 
@@ -12,6 +12,8 @@ from fabric.cli_common import Joining, NothingThere, UserError, join_flags, open
 from fabric.text import one_line
 
 if TYPE_CHECKING:  # imported where used: `robofabric --help` must not load numpy
+    import threading
+
     from fabric.interfaces import OwnershipRecord
     from fabric.session import Fabric
     from ownership.client import OwnershipClient
@@ -28,7 +30,7 @@ def _user(user: str | None) -> str:
     return user or getpass.getuser()
 
 
-def _client(join: Joining, user) -> tuple[Fabric, OwnershipClient]:
+def _client(join: Joining, user: str | None) -> tuple[Fabric, OwnershipClient]:
     from ownership.client import OwnershipClient
     cfg = join.config()
     try:
@@ -55,7 +57,7 @@ def record_line(rec: OwnershipRecord) -> str:
     return f"{obj:16} exclusive  owner {owner:12} epoch {rec.epoch:<5} {rec.state:7} queue {queue}{locked}"
 
 
-def record_json(rec) -> dict:
+def record_json(rec: OwnershipRecord) -> dict[str, Any]:
     """One ownership record as ``own list --json`` writes it (stable field names)."""
     return {"object": rec.object, "policy": rec.policy, "owner": rec.owner, "epoch": rec.epoch,
             "queue": list(rec.queue), "state": rec.state, "authority": rec.authority, "locked": rec.locked}
@@ -87,7 +89,7 @@ def list_cmd(join: Joining = Joining(), user: User = None,
     print_table(f"world {fab.world}: {len(rows)} object(s)", ("object", "policy", "owner", "epoch", "state", "queue"), table, numeric=("epoch",))
 
 
-def _ask(op: str, obj: str, join: Joining, user, wait: bool = False,
+def _ask(op: str, obj: str, join: Joining, user: str | None, wait: bool = False,
          hold: bool = False, duration: float | None = None) -> None:
     from fabric.interfaces import ServiceError
     from fabric.session import shutdown_event
@@ -108,7 +110,7 @@ def _ask(op: str, obj: str, join: Joining, user, wait: bool = False,
             cl.close()
 
 
-def _hold(cl: OwnershipClient, obj: str, stop, duration: float | None) -> None:
+def _hold(cl: OwnershipClient, obj: str, stop: threading.Event, duration: float | None) -> None:
     """Keep the lease (token + renewals) until Ctrl-C / SIGTERM / ``duration``, then give the object up.
 
     Prints each change of the object's record, so a queued user sees the moment it is granted."""
@@ -200,9 +202,9 @@ def watch_cmd(join: Joining = Joining(), user: User = None,
         print(f"skipped {skipped}", file=sys.stderr, flush=True)
 
 
-def _skipped(fab, cl) -> str:
+def _skipped(fab: object, cl: object) -> str:
     """'2 undecodable payload(s), 1 record(s) from no live authority' ("" when nothing was skipped)."""
-    def count(counters, name: str) -> int:
+    def count(counters: Any, name: str) -> int:
         try:
             return int(counters.get(name, 0))
         except Exception:

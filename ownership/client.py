@@ -92,7 +92,7 @@ class OwnershipClient:
         self._seen_at: dict[str, float] = {}
         self._clock = clock
         self._lock = threading.Lock()
-        self._callbacks: list[Callable[[OwnershipRecord], None]] = []
+        self._callbacks: list[Callable[[OwnershipRecord], object]] = []
         self.renewal = Renewal(self.user, lambda obj: self._ask(obj, "renew"), self.snapshot, renew_s=renew_s,
                                closed=lambda: fabric.closed)
         self._sims: set[str] = set()
@@ -199,7 +199,7 @@ class OwnershipClient:
         for cb in callbacks:
             cb(rec)
 
-    def on_change(self, callback: Callable[[OwnershipRecord], None]) -> None:
+    def on_change(self, callback: Callable[[OwnershipRecord], object]) -> None:
         with self._lock:
             self._callbacks.append(callback)
 

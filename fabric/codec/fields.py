@@ -11,17 +11,31 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from fabric.codec.wire import DecodeError, from_list, to_list
 from fabric.limits import quote, validate_user
 
-__all__ = ["F", "I", "S", "Strs", "User", "Arr", "Msg", "Msgs", "Opt", "Map", "MAX_ITEMS"]
+__all__ = ["Field", "Spec", "F", "I", "S", "Strs", "User", "Arr", "Msg", "Msgs", "Opt", "Map", "MAX_ITEMS"]
 
 MAX_ITEMS = 256
 """Default cap on a list of strings (joint names, a queue) and on a free-form map's entries."""
+
+
+class Field(Protocol):
+    """What every field spec offers: the codec calls nothing else, so a new spec is any class with these two."""
+
+    def check(self, v: Any, where: str) -> Any:
+        """The value to keep for wire value ``v``, or :class:`DecodeError` naming ``where`` and what was wrong."""
+
+    def dump(self, v: Any) -> Any:
+        """What msgpack writes for field value ``v``."""
+
+
+Spec = dict[str, Field]
+"""A message class's ``SPEC``: each field's name to its spec, in wire order."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -34,12 +48,12 @@ class F:
     def check(self, v: Any, where: str) -> float:
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise DecodeError(f"{where}: expected a number, got {type(v).__name__}")
-        v = float(v)
-        if not math.isfinite(v):
-            raise DecodeError(f"{where}: must be finite, got {v}")
-        if self.lo is not None and v < self.lo or self.hi is not None and v > self.hi:
-            raise DecodeError(f"{where}: {v} is outside [{self.lo}, {self.hi}]")
-        return v
+        x = float(v)
+        if not math.isfinite(x):
+            raise DecodeError(f"{where}: must be finite, got {x}")
+        if self.lo is not None and x < self.lo or self.hi is not None and x > self.hi:
+            raise DecodeError(f"{where}: {x} is outside [{self.lo}, {self.hi}]")
+        return x
 
     def dump(self, v: Any) -> Any:
         return float(v)
@@ -189,7 +203,7 @@ class Msgs:
         self.one = Msg(*classes)
         self.max_items = max_items
 
-    def check(self, v: Any, where: str) -> tuple:
+    def check(self, v: Any, where: str) -> tuple[Any, ...]:
         if not isinstance(v, list):
             raise DecodeError(f"{where}: expected a list of messages, got {type(v).__name__}")
         if len(v) > self.max_items:
@@ -204,7 +218,7 @@ class Msgs:
 class Opt:
     """``inner`` or nothing: None travels as msgpack nil (a robot without a LIDAR has no ``lidar``)."""
 
-    inner: Any
+    inner: Field
 
     def check(self, v: Any, where: str) -> Any:
         return None if v is None else self.inner.check(v, where)
@@ -223,7 +237,7 @@ class Map:
     max_items: int = MAX_ITEMS
     max_list: int = 4096
 
-    def check(self, v: Any, where: str) -> dict:
+    def check(self, v: Any, where: str) -> dict[str, Any]:
         if not isinstance(v, dict):
             raise DecodeError(f"{where}: expected a map, got {type(v).__name__}")
         if len(v) > self.max_items:

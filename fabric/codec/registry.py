@@ -9,17 +9,30 @@ depend on the wire: :func:`to_plain` (JSON-ready) and :func:`messages_equal`.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, TypeVar
 
 import numpy as np
 
-__all__ = ["register", "registered", "class_named", "name_of", "ensure_core", "load_plugins", "to_plain", "messages_equal"]
+if TYPE_CHECKING:
+    from fabric.codec.fields import Spec
 
-_BY_NAME: dict[str, type] = {}
+__all__ = ["Message", "register", "registered", "class_named", "name_of", "ensure_core", "load_plugins", "to_plain", "messages_equal"]
+
+
+
+class Message(Protocol):
+    """A message class as the codec sees it: a dataclass whose ``SPEC`` gives each field's spec, in wire order."""
+
+    SPEC: ClassVar[Spec]
+
+
+_M = TypeVar("_M", bound=Message)
+
+_BY_NAME: dict[str, type[Message]] = {}
 _NAME_OF: dict[type, str] = {}
 
 
-def register(cls: type, name: str | None = None) -> type:
+def register(cls: type[_M], name: str | None = None) -> type[_M]:
     """Make a message class known to the codec under ``name`` (default: its class name).
 
     The class must be a dataclass with a ``SPEC`` mapping each field to a spec.
@@ -40,12 +53,12 @@ def register(cls: type, name: str | None = None) -> type:
     return cls
 
 
-def registered() -> dict[str, type]:
+def registered() -> dict[str, type[Message]]:
     ensure_core()
     return dict(_BY_NAME)
 
 
-def class_named(name: str) -> type | None:
+def class_named(name: str) -> type[Message] | None:
     """The message class registered under ``name``, or None."""
     return _BY_NAME.get(name)
 

@@ -14,12 +14,12 @@ from __future__ import annotations
 import dataclasses
 import functools
 import struct
-from typing import Any
+from typing import Any, TypeVar, overload
 
 import msgpack
 import numpy as np
 
-from fabric.codec.registry import class_named, ensure_core, name_of
+from fabric.codec.registry import Message, class_named, ensure_core, name_of
 from fabric.limits import quote
 
 __all__ = ["DecodeError", "encode", "decode", "to_list", "from_list", "array_ext", "EXT_NDARRAY", "MAX_ARRAY_BYTES", "MAX_DIMS"]
@@ -96,9 +96,9 @@ def _optional_tail(cls: type) -> tuple[tuple[str, Any], ...]:
     return tuple((f.name, f.default) for f in fields)
 
 
-def to_list(msg: Any) -> list:
+def to_list(msg: Any) -> list[Any]:
     """A registered message as its wire array ``[TYPE, *fields]`` (nested messages as arrays, before msgpack)."""
-    cls = type(msg)
+    cls: type[Message] = type(msg)
     name = name_of(cls)
     if name is None:
         raise TypeError(f"{cls.__name__} is not a registered message type")
@@ -116,7 +116,8 @@ def encode(msg: Any) -> bytes:
     check = getattr(msg, "check", None)
     if check is not None:
         check()
-    return msgpack.packb(to_list(msg), default=_ext_default, use_bin_type=True)
+    wire: bytes = msgpack.packb(to_list(msg), default=_ext_default, use_bin_type=True)
+    return wire
 
 
 def _ext_hook(code: int, data: bytes) -> Any:
@@ -146,7 +147,7 @@ def _ext_hook(code: int, data: bytes) -> Any:
     return arr
 
 
-def from_list(m: list, where: str) -> Any:
+def from_list(m: list[Any], where: str) -> Any:
     """The message a wire array stands for, every field checked by its spec; ``where`` names it in errors."""
     if not m or not isinstance(m[0], str):
         raise DecodeError(f"{where}: missing message type tag")
@@ -154,7 +155,7 @@ def from_list(m: list, where: str) -> Any:
     cls = class_named(name)
     if cls is None:
         raise DecodeError(f"{where}: unknown message type {quote(name, 64)}")
-    spec: dict = cls.SPEC
+    spec = cls.SPEC
     optional = _optional_tail(cls)
     if not len(spec) - len(optional) <= len(m) - 1 <= len(spec):
         want = f"{len(spec)}" if not optional else f"{len(spec) - len(optional)} to {len(spec)}"
@@ -172,6 +173,17 @@ def from_list(m: list, where: str) -> Any:
     except (ValueError, TypeError) as exc:
         raise DecodeError(f"{name}: {exc}") from None
     return obj
+
+
+_T = TypeVar("_T")
+
+
+@overload
+def decode(payload: bytes | bytearray | memoryview, expected: type[_T]) -> _T: ...
+
+
+@overload
+def decode(payload: bytes | bytearray | memoryview, expected: tuple[type, ...] | None = None) -> Any: ...
 
 
 def decode(payload: bytes | bytearray | memoryview, expected: type | tuple[type, ...] | None = None) -> Any:

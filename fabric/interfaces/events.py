@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar
 
-from fabric.codec import Map, S, register
+from fabric.codec import Map, S, Spec, register
 from fabric.interfaces.std import HEADER, Header, new_header
 from fabric.limits import MAX_USER_LEN
 
@@ -78,10 +78,10 @@ class Event:
     object: str = ""
     user: str = ""
     severity: str = "info"
-    data: dict = field(default_factory=dict)
+    data: dict[str, Any] = field(default_factory=dict)
     header: Header = field(default_factory=new_header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "kind": S(nonempty=True),
         "reason": S(),
         "object": S(),

@@ -17,7 +17,7 @@ from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
-from fabric.codec import Arr, F, I, S, register
+from fabric.codec import Arr, F, I, S, Spec, register
 from fabric.interfaces._arrays import frozen, vector
 from fabric.interfaces.std import HEADER, Header
 
@@ -58,7 +58,7 @@ class IKRequest:
     method: str = "auto"
     header: Header = field(default_factory=Header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "position": Arr(np.float64, shape=(3,)),
         "quaternion": Arr(np.float64, ndim=1),
         "seed": Arr(np.float64, ndim=1),
@@ -101,7 +101,7 @@ class IKReply:
     solve_us: float
     header: Header = field(default_factory=Header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "robot": S(),
         "q": Arr(np.float64, ndim=1),
         "solver": S(),
@@ -124,7 +124,7 @@ class FKRequest:
     frame: str = "world"
     header: Header = field(default_factory=Header)
 
-    SPEC: ClassVar[dict] = {"q": Arr(np.float64, ndim=1), "frame": S(choices=FRAMES), "header": HEADER}
+    SPEC: ClassVar[Spec] = {"q": Arr(np.float64, ndim=1), "frame": S(choices=FRAMES), "header": HEADER}
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "q", vector(self.q))
@@ -140,7 +140,7 @@ class FKReply:
     frame: str
     header: Header = field(default_factory=Header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "robot": S(),
         "position": Arr(np.float64, shape=(3,)),
         "quaternion": Arr(np.float64, shape=(4,)),
@@ -162,7 +162,7 @@ class JacobianRequest:
     frame: str = "world"
     header: Header = field(default_factory=Header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "q": Arr(np.float64, ndim=1),
         "dq": Arr(np.float64, ndim=1),
         "frame": S(choices=FRAMES),
@@ -189,7 +189,7 @@ class JacobianReply:
     frame: str
     header: Header = field(default_factory=Header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "robot": S(),
         "jacobian": Arr(np.float64, ndim=2),
         "twist": Arr(np.float64, ndim=1),
@@ -225,7 +225,7 @@ class IKStream:
     seconds: float
     header: Header = field(default_factory=Header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "robot": S(),
         "target": S(),
         "position": Arr(np.float64, shape=(3,)),

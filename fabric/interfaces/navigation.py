@@ -13,7 +13,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from fabric.codec import Arr, F, I, Msg, S, register
+from fabric.codec import Arr, F, I, Msg, S, Spec, register
 from fabric.interfaces._arrays import vector
 from fabric.interfaces.std import HEADER, Header, OccupancyGrid, Path, new_header
 
@@ -48,7 +48,7 @@ class PlanRequest:
     robot_radius: float = 0.0
     header: Header = field(default_factory=new_header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "robot": S(nonempty=True, max_len=200),
         "goal": Arr(np.float64, ndim=1),
         "start": Arr(np.float64, ndim=1),
@@ -86,7 +86,7 @@ class PlanReply:
     header: Header = field(default_factory=new_header)
     note: str = ""
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "path": Msg(Path),
         "robot": S(),
         "planner": S(),
@@ -117,7 +117,7 @@ class MapRequest:
     grid: OccupancyGrid = field(default_factory=empty_grid)
     header: Header = field(default_factory=new_header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "action": S(choices=MAP_ACTIONS),
         "name": S(nonempty=True, max_len=200),
         "threshold": F(lo=0.0, hi=1.0),
@@ -139,7 +139,7 @@ class MapReply:
     file: str = ""
     header: Header = field(default_factory=new_header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "action": S(),
         "name": S(),
         "grid": Msg(OccupancyGrid),

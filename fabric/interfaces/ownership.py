@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-from fabric.codec import F, I, Msg, S, Strs, User, register
+from fabric.codec import F, I, Msg, S, Strs, User, Spec, register
 from fabric.interfaces.std import HEADER, Header, new_header
 from fabric.limits import MAX_USER_LEN
 
@@ -48,7 +48,7 @@ class OwnershipRecord:
     """The instructor who locked the object (:data:`STAFF_OPS` ``lock``): nobody may request it until it is
     unlocked; empty when it is not locked."""
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "object": S(nonempty=True),
         "policy": S(choices=("scene", "exclusive")),
         "owner": S(max_len=MAX_USER_LEN),
@@ -78,7 +78,7 @@ class OwnRequest:
     header: Header = field(default_factory=Header)
     to: str = ""
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "op": S(choices=("request", "release", "renew", *STAFF_OPS)),
         "user": User(),
         "wait": I(lo=0, hi=1),
@@ -102,7 +102,7 @@ class OwnReply:
     record: OwnershipRecord
     header: Header = field(default_factory=Header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "outcome": S(choices=("granted", "denied", "queued", "released", "renewed", "done")),
         "reason": S(),
         "position": I(lo=0),

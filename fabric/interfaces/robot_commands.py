@@ -12,7 +12,7 @@ from typing import ClassVar, Union
 
 import numpy as np
 
-from fabric.codec import Arr, F, I, Msg, User, register
+from fabric.codec import Arr, F, I, Msg, User, Spec, register
 from fabric.interfaces._arrays import frozen
 from fabric.interfaces.std import HEADER, MAX_JOINTS, Header, Path, new_header
 
@@ -27,7 +27,7 @@ class JointTarget:
     speed_scale: float = 1.0
     header: Header = field(default_factory=new_header)
 
-    SPEC: ClassVar[dict] = {"q": Arr(np.float64, ndim=1, max_elems=MAX_JOINTS), "speed_scale": F(lo=1e-6, hi=1.0), "header": HEADER}
+    SPEC: ClassVar[Spec] = {"q": Arr(np.float64, ndim=1, max_elems=MAX_JOINTS), "speed_scale": F(lo=1e-6, hi=1.0), "header": HEADER}
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "q", frozen(self.q, np.float64))
@@ -41,21 +41,21 @@ class Twist:
     omega: float
     header: Header = field(default_factory=new_header)
 
-    SPEC: ClassVar[dict] = {"v": F(), "omega": F(), "header": HEADER}
+    SPEC: ClassVar[Spec] = {"v": F(), "omega": F(), "header": HEADER}
 
 
 @dataclass(frozen=True, slots=True)
 class Stop:
     header: Header = field(default_factory=new_header)
 
-    SPEC: ClassVar[dict] = {"header": HEADER}
+    SPEC: ClassVar[Spec] = {"header": HEADER}
 
 
 @dataclass(frozen=True, slots=True)
 class Reset:
     header: Header = field(default_factory=new_header)
 
-    SPEC: ClassVar[dict] = {"header": HEADER}
+    SPEC: ClassVar[Spec] = {"header": HEADER}
 
 
 CommandBody = Union[JointTarget, Twist, Path, Stop, Reset]
@@ -70,7 +70,7 @@ class Command:
     body: CommandBody
     header: Header = field(default_factory=new_header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "user": User(),
         "epoch": I(lo=0),
         "body": Msg(JointTarget, Twist, Path, Stop, Reset),

@@ -13,7 +13,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from fabric.codec import Arr, F, I, S, register
+from fabric.codec import Arr, F, I, S, Spec, register
 from fabric.interfaces._arrays import frozen
 
 __all__ = ["BaseInfo", "LidarInfo", "SonarInfo"]
@@ -37,7 +37,7 @@ class BaseInfo:
     reverse: int = 0
 
     OPTIONAL_TAIL: ClassVar[int] = 1  # reverse: added later
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "radius": F(lo=0.0),
         "wheel_separation": F(lo=0.0),
         "wheel_radius": F(lo=0.0),
@@ -66,7 +66,7 @@ class LidarInfo:
     noise_std: float = 0.0
     offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "site": S(),
         "rays": I(lo=1, hi=8192),
         "fov": F(lo=0.0, hi=2 * np.pi),
@@ -99,7 +99,7 @@ class SonarInfo:
     noise_std: float = 0.0
     center: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "angles": Arr(np.float64, ndim=1, max_elems=MAX_SONARS),
         "radius": F(lo=0.0),
         "height": F(),

@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from fabric.codec import Arr, F, I, Msg, S, Strs, register
+from fabric.codec import Arr, F, I, Msg, S, Strs, Spec, register
 from fabric.interfaces._arrays import frozen
 
 __all__ = [
@@ -48,7 +48,7 @@ class Header:
     source: str = ""
     term: int = 0
 
-    SPEC: ClassVar[dict] = {"stamp": F(), "wall_ns": I(lo=0), "seq": I(lo=0), "source": S(), "term": I(lo=0)}
+    SPEC: ClassVar[Spec] = {"stamp": F(), "wall_ns": I(lo=0), "seq": I(lo=0), "source": S(), "term": I(lo=0)}
     OPTIONAL_TAIL: ClassVar[int] = 1
 
     @classmethod
@@ -73,7 +73,7 @@ class JointState:
     dq: np.ndarray
     header: Header = field(default_factory=new_header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "names": Strs(max_items=MAX_JOINTS),
         "q": Arr(np.float64, ndim=1, max_elems=MAX_JOINTS),
         "dq": Arr(np.float64, ndim=1, max_elems=MAX_JOINTS),
@@ -103,7 +103,7 @@ class Pose:
     frame: str = "world"
     header: Header = field(default_factory=new_header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "position": Arr(np.float64, shape=(3,)),
         "quaternion": Arr(np.float64, shape=(4,)),
         "linear": Arr(np.float64, shape=(3,)),
@@ -136,7 +136,7 @@ class Scan:
     ranges_mm: np.ndarray
     header: Header = field(default_factory=new_header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "angle_min": F(lo=-2 * math.pi, hi=2 * math.pi),
         "angle_increment": F(lo=-math.pi, hi=math.pi),
         "range_max": F(lo=0.0, hi=65.535),
@@ -174,7 +174,7 @@ class Path:
     frame: str = "world"
     header: Header = field(default_factory=new_header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "x": Arr(np.float64, ndim=1, max_elems=MAX_PATH_POINTS),
         "y": Arr(np.float64, ndim=1, max_elems=MAX_PATH_POINTS),
         "theta": Arr(np.float64, ndim=1, max_elems=MAX_PATH_POINTS),
@@ -204,7 +204,7 @@ class OccupancyGrid:
     header: Header = field(default_factory=new_header)
 
     UNKNOWN: ClassVar[int] = 255
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "resolution": F(lo=1e-4, hi=100.0),
         "origin": Arr(np.float64, shape=(3,)),
         "cells": Arr(np.uint8, ndim=2, max_elems=MAX_GRID_CELLS),

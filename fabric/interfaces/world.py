@@ -9,11 +9,11 @@ sensors, and the scene objects. :class:`WorldState` is the whole state a standby
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
-from fabric.codec import Arr, F, I, Map, Msg, Msgs, Opt, S, Strs, register
+from fabric.codec import Arr, F, I, Map, Msg, Msgs, Opt, S, Strs, Spec, register
 from fabric.interfaces._arrays import frozen
 from fabric.interfaces.ownership import OwnershipRecord
 from fabric.interfaces.sensors import BaseInfo, LidarInfo, SonarInfo
@@ -48,7 +48,7 @@ class RobotInfo:
     """The sim peer that is the robot's authority (its ``srv/world`` part; "" in recordings from before shards)."""
 
     OPTIONAL_TAIL: ClassVar[int] = 1
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "id": S(nonempty=True),
         "type": S(nonempty=True),
         "kind": S(choices=("arm", "mobile")),
@@ -90,7 +90,7 @@ class ObjectInfo:
     position: np.ndarray
     quaternion: np.ndarray
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "id": S(nonempty=True),
         "kind": S(),
         "policy": S(choices=("scene", "exclusive")),
@@ -110,12 +110,12 @@ class WorldInfo:
     world: str
     scene: str
     timestep: float
-    rates: dict
+    rates: dict[str, float]
     robots: tuple[RobotInfo, ...]
     objects: tuple[ObjectInfo, ...] = ()
     header: Header = field(default_factory=Header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "world": S(nonempty=True),
         "scene": S(),
         "timestep": F(lo=1e-6, hi=1.0),
@@ -157,9 +157,9 @@ class RobotState:
     dq: np.ndarray
     target: np.ndarray
     path: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
-    extra: dict = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "id": S(nonempty=True),
         "kind": S(choices=("arm", "mobile")),
         "q": Arr(np.float64, ndim=1, max_elems=256),
@@ -187,11 +187,11 @@ class WorldState:
     robots: tuple[RobotState, ...]
     objects: tuple[ObjectInfo, ...]
     records: tuple[OwnershipRecord, ...] = ()
-    users: dict = field(default_factory=dict)
-    seqs: dict = field(default_factory=dict)
+    users: dict[str, Any] = field(default_factory=dict)
+    seqs: dict[str, int] = field(default_factory=dict)
     header: Header = field(default_factory=Header)
 
-    SPEC: ClassVar[dict] = {
+    SPEC: ClassVar[Spec] = {
         "time": F(lo=0.0),
         "steps": I(lo=0),
         "robots": Msgs(RobotState),

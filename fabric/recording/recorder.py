@@ -15,6 +15,7 @@ an unbounded recorder from 163 to 712 MB of memory and wrote 629 MB in 2 s.
 
 from __future__ import annotations
 
+import functools
 import logging
 import queue
 import threading
@@ -22,7 +23,7 @@ import time
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
 import msgpack
 import zenoh
@@ -40,7 +41,6 @@ log = logging.getLogger("robofabric.recording")
 
 __all__ = ["Recorder", "RecorderStats"]
 
-_STOP = object()
 _SIMS_OF_EVERY_WORLD = f"{keys.PREFIX}/*/peer/sim/*"
 
 
@@ -52,6 +52,10 @@ class _SimToken:
     world: str
     peer_id: str
     alive: bool
+
+
+_Sample = tuple[str, bytes, int, "str | None"]
+"""A queued sample: key, payload, wall-clock ns, and its schema (None: the key's message type; else ``liveliness``)."""
 
 
 def _sim_token_exprs(exprs: Iterable[str]) -> list[str]:
@@ -157,7 +161,8 @@ class Recorder:
             zenoh.KeyExpr(e)  # raises on an invalid expression before anything is opened
         self.keyexprs = tuple(exprs)
         self.liveliness = liveliness
-        self._sink_args = dict(compression=compression, chunk_size=chunk_size, flush_interval=flush_interval)
+        self._open_sink = functools.partial(McapSink, compression=compression, chunk_size=chunk_size,
+                                            flush_interval=flush_interval)
         self._metadata = {
             "world": fabric.world,
             "keyexprs": ",".join(self.keyexprs),
@@ -166,7 +171,7 @@ class Recorder:
             "liveliness": str(bool(liveliness)).lower(),
             **(metadata or {}),
         }
-        self._q: queue.SimpleQueue = queue.SimpleQueue()
+        self._q: queue.SimpleQueue[_Sample | _SimToken | None] = queue.SimpleQueue()  # None: stop
         self._lock = threading.Lock()
         self._subs: list[Any] = []
         self._thread: threading.Thread | None = None
@@ -189,7 +194,7 @@ class Recorder:
         """World descriptions recorded (``srv/world`` answers, one each time a sim came)."""
         self._started = False
         self._stopped = False
-        self._cancel_exit: Any = None
+        self._cancel_exit: Callable[[], None] | None = None
         self.error: BaseException | None = None
 
     # ------------------------------------------------------------------ lifecycle
@@ -205,7 +210,7 @@ class Recorder:
             return self
         self._started = True
         self._metadata["started_ns"] = str(time.time_ns())
-        self._sink = McapSink(self.path, metadata=self._metadata, **self._sink_args)
+        self._sink = self._open_sink(self.path, metadata=self._metadata)
         # before the session's own closer (newest first): the file gets its footer at exit
         self._cancel_exit = at_exit(self.close)
         self._t0 = time.monotonic()
@@ -229,7 +234,7 @@ class Recorder:
         undeclare_all(self._subs)
         self._subs.clear()
         self._t_end = time.monotonic()
-        self._q.put(_STOP)
+        self._q.put(None)
         if self._thread is not None:
             self._thread.join()
         assert self._sink is not None
@@ -290,7 +295,7 @@ class Recorder:
         self._queued += 1
         return True
 
-    def _on_sample_for(self, i: int):
+    def _on_sample_for(self, i: int) -> Callable[[zenoh.Sample], None]:
         def on_sample(sample: zenoh.Sample) -> None:
             if sample.kind != zenoh.SampleKind.PUT:
                 return
@@ -304,7 +309,7 @@ class Recorder:
 
         return on_sample
 
-    def _on_token_for(self, i: int):
+    def _on_token_for(self, i: int) -> Callable[[str, bool], None]:
         def on_token(key: str, alive: bool) -> None:
             if not self._owns(i, key):
                 return
@@ -367,7 +372,7 @@ class Recorder:
                 except queue.Empty:
                     sink.maybe_flush()
                     continue
-                if item is _STOP:
+                if item is None:
                     break
                 self._write(sink, item)
                 # drain what is already queued before looking at the clock again
@@ -376,14 +381,14 @@ class Recorder:
                         item = q.get_nowait()
                     except queue.Empty:
                         break
-                    if item is _STOP:
+                    if item is None:
                         return
                     self._write(sink, item)
                 sink.maybe_flush()
         except BaseException as exc:  # a full disk must not pass silently
             self.error = exc
 
-    def _write(self, sink: McapSink, item: tuple | _SimToken) -> None:
+    def _write(self, sink: McapSink, item: _Sample | _SimToken) -> None:
         if isinstance(item, _SimToken):
             (sink.sim_seen if item.alive else sink.sim_left)(item.world, item.peer_id)
             return
