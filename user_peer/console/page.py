@@ -35,6 +35,8 @@ from user_peer.pause import is_pause, pause_words
 
 if TYPE_CHECKING:
     from user_peer.console.server import Console
+    from user_peer.robot import Robot
+    from user_peer.world import World
 
 __all__ = ["ConsolePage", "event_line", "KEYS_JS", "TRUSTED", "UNVERIFIED", "EVENTS_PER_REDRAW"]
 
@@ -131,13 +133,13 @@ class ConsolePage:
     def __init__(self, console: "Console", client: Any) -> None:
         self.console = console
         self.client = client
-        self.world: Any = None
+        self.world: World | None = None
         self.user = ""
         self.entries: list = []  # every robot of the world (user_peer.services.RobotEntry)
-        self.handles: dict[str, Any] = {}  # the handles made so far (a handle's robot is followed only while shown)
+        self.handles: dict[str, Robot] = {}  # the handles made so far (a handle's robot is followed only while shown)
         self.view: LiveView | None = None
         self.view3d: View3D | None = None
-        self.robots: dict[str, Any] = {}  # kind -> the robot of that kind the page shows (its panel's)
+        self.robots: dict[str, Robot] = {}  # kind -> the robot of that kind the page shows (its panel's)
         self.panels = Panels(self)  # the panels of .panels.PANELS the page has a robot for
         self.selected: str | None = None
         self._events_seen = 0
@@ -160,7 +162,7 @@ class ConsolePage:
         with self.root:
             self.card.build()
 
-    async def enter(self, world: Any, name: str, ticket: Ticket) -> bool:
+    async def enter(self, world: World, name: str, ticket: Ticket) -> bool:
         """Her page, once she logged in (or came back with the tab's ticket): the robot she had selected, the
         tab's event log as it was. False (the reason on the login card) when the world did not answer."""
         try:
