@@ -17,7 +17,7 @@ Pure: no threads and no zenoh; :class:`sim_peer.peer.SimPeer` drains the queues 
 from __future__ import annotations
 
 from collections import deque
-from typing import Any, Generic, TypeVar
+from typing import Generic, TypeVar
 
 __all__ = ["CommandQueue", "TARGETS", "CONTROLS"]
 
@@ -69,5 +69,5 @@ class CommandQueue(Generic[T]):
         self._items.clear()
         return out
 
-    def peek(self) -> list[tuple[str, Any]]:
+    def peek(self) -> list[tuple[str, T]]:
         return list(self._items)

@@ -13,10 +13,15 @@ from __future__ import annotations
 
 import logging
 import threading
-from typing import Any
+from typing import TYPE_CHECKING
 
 from fabric import keys
 from sim_peer import election as el
+
+if TYPE_CHECKING:
+    import zenoh
+
+    from fabric.session import Fabric
 
 log = logging.getLogger("robofabric.sim")
 
@@ -35,11 +40,11 @@ class RoleToken:
     """The one role token of one sim session: :meth:`show` declares the new one before it undeclares the old one
     (a watcher never sees the sim with no role between two), and does nothing when nothing changed."""
 
-    def __init__(self, fabric: Any) -> None:
+    def __init__(self, fabric: Fabric) -> None:
         self._fabric = fabric
         self._lock = threading.Lock()
         self._shown: tuple[str, int, str] | None = None
-        self._token: Any = None
+        self._token: zenoh.LivelinessToken | None = None
         self._closed = False
 
     @property
@@ -70,7 +75,7 @@ class RoleToken:
         _undeclare(old)
 
 
-def _undeclare(token: Any) -> None:
+def _undeclare(token: zenoh.LivelinessToken | None) -> None:
     if token is None:
         return
     try:

@@ -43,7 +43,7 @@ def test_ruff_names_an_unused_import_and_a_blind_exception_assert(tmp_path):
 
 
 def test_mypy_passes_on_the_strict_modules():
-    """``mypy`` with ``[tool.mypy]`` (its ``files``: fabric, ownership, sim_peer/election.py, robots/kinds.py) finds nothing."""
+    """``mypy`` with ``[tool.mypy]`` (its ``files``: fabric, ownership, robots/kinds.py and the sim's pure modules) finds nothing."""
     out = _run("mypy")
     assert out.returncode == 0, out.stdout + out.stderr
     assert "Success" in out.stdout, out.stdout

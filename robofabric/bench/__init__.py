@@ -6,7 +6,7 @@ options are the benchmark's flags and whose docstring is its ``--help``. It is r
 ``robofabric bench list``, ``robofabric bench all`` and ``tools/bench_all.sh`` are all built from this
 table. Each entry also says how the figures in docs/benchmarks.md were measured (``full``) and what a
 smoke-sized run is (``quick``), so the documented command lines and the runnable ones cannot drift
-(tests/robofabric/bench/test_registry.py checks both).
+(tests/robofabric/bench/test_bench_registry.py checks both).
 
 This package sits at the top of the import layers (interfaces, fabric, ownership, peers, then
 ``robofabric``), so a benchmark may use any peer package; nothing below imports it.

@@ -2,7 +2,7 @@
 ``/tf`` of ``export --to ros2`` (decoded by mcap-ros2-support), stamped with the sim's time; the sensor mounts
 go once more on /tf_static (REP 105's names: ``map -> ID/odom -> ID/base_link -> ID/laser``; an arm's URDF links,
 each in its parent link's frame, as robot_state_publisher sends them). The message class and the publishers are stand-ins
-here, to see each message as sent (test_ros2_tf_live.py reads the real ``tf2_msgs`` over DDS); the bridge
+here, to see each message as sent (test_ros2_ros_users.py reads the real ``tf2_msgs`` over DDS); the bridge
 publishes /tf only where ``tf2_msgs`` is importable, and says whether it is."""
 
 from __future__ import annotations
