@@ -18,7 +18,9 @@ freeze, or a cut, needs a new one); while the heartbeat is late right now, for :
 The log says which case it was: "hears no one" with the cause (the link down, its token gone, or a freeze its
 router did not answer after), "was late" when a freeze ended with the router answering.
 
-A look every :data:`POLL_S` on a thread of its own, started when the host first serves.
+A look every :data:`POLL_S` on a thread of its own, started when the host first serves. The decisions are the pure
+core :mod:`sim_peer.deaf_rule`'s; this shell gathers each look, asks the router when the core says so, and carries
+out the effects (hold, resume, say it was late).
 """
 
 from __future__ import annotations
@@ -26,9 +28,12 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import TYPE_CHECKING
+from dataclasses import replace
+from typing import TYPE_CHECKING, Callable
 
+from sim_peer import deaf_rule as dr
 from sim_peer import election as el
+from sim_peer.deaf_rule import PROOF_S
 from sim_peer.roles import router_answers
 
 if TYPE_CHECKING:
@@ -40,8 +45,6 @@ __all__ = ["DeafStop", "POLL_S", "PROOF_S", "ASK_S", "REASON"]
 
 POLL_S = 0.05
 """How often a serving host looks whether it hears anyone."""
-PROOF_S = 0.5
-"""How long a router's answer proves the link while the heartbeat is late right now (a starved process)."""
 ASK_S = 1.0
 """How long the router is given to answer (a round trip: a millisecond on a LAN, more on a starved machine)."""
 REASON = "this sim hears no one"
@@ -50,12 +53,10 @@ REASON = "this sim hears no one"
 class DeafStop:
     """Holds the robots of ``host``'s peer while the host is a primary cut off from its world."""
 
-    def __init__(self, host: "ReplicaHost") -> None:
+    def __init__(self, host: "ReplicaHost", clock: Callable[[], float] = time.monotonic) -> None:
         self.host = host
-        self.holds = 0  # how many times it held the robots
-        self.lates = 0  # how many freezes ended with the router answering (nothing held)
-        self.proven_at = float("-inf")  # when the router last answered (monotonic)
-        self._told_thaw = float("-inf")  # the freeze (Roles.thawed_at) the log last told of
+        self.clock = clock
+        self.state = dr.DeafState()  # what the core remembers: holds, lates (counted), the router's last answer
         self._thread: threading.Thread | None = None
 
     def watch(self) -> None:
@@ -71,28 +72,15 @@ class DeafStop:
             except Exception:  # a closing session or peer: the next look, or the host's end
                 log.debug("deaf stop look failed", exc_info=True)
 
-    def why(self) -> str:
-        """Why this primary hears no one now ('' : it hears): cut off, or late and its router does not answer."""
-        roles = self.host.roles
-        cut = roles.cut()
-        if cut:
-            return cut
-        if not roles.frozen() or self._proven():
-            return ""
-        if self.host.fabric.config.profile == "embedded" or router_answers(self.host.fabric, ASK_S):
-            self.proven_at = time.monotonic()  # the router holds it: nobody took the world meanwhile
-            return ""
-        return f"frozen or starved {roles.late_s:.1f} s, and its router does not answer"
-
-    def _proven(self) -> bool:
-        """Whether the router answered since the last freeze and the last cut (within :data:`PROOF_S` while the
-        heartbeat is late right now)."""
-        roles = self.host.roles
-        now = time.monotonic()
-        since = max(roles.thawed_at, roles.unlinked_at, roles.own_gone_at)
-        if now - roles.last_tick > self.host.fabric.config.lease_ms / 2000.0:
-            since = max(since, now - PROOF_S)
-        return self.proven_at > since
+    def _seen(self, held: bool) -> dr.Look:
+        """What the core needs of the host now, the router asked if the core says so."""
+        h = self.host
+        roles = h.roles
+        seen = dr.Look(now=self.clock(), held=held, cut=roles.cut(), frozen=roles.frozen(), beat=roles.beat,
+                       own_gone_at=roles.own_gone_at, lease=h.fabric.config.lease_ms / 1000.0)
+        if dr.must_ask(self.state, seen) and (h.fabric.config.profile == "embedded" or router_answers(h.fabric, ASK_S)):
+            seen = replace(seen, answered_at=self.clock())
+        return seen
 
     def look(self) -> None:
         """Hold the serving peer's robots if this primary is cut off now, let them go once it hears again; say so
@@ -101,20 +89,16 @@ class DeafStop:
         peer = h.peer
         if peer is None or h.role != el.PRIMARY:
             return
-        why = self.why()
-        held = bool(peer.commands.held)
-        if why and not held:
-            peer.commands.hold(REASON)
-            self.holds += 1
-            h.announce(f"sim {h.fabric.peer_id}: hears no one ({why}); its robots stop (bases brake, arms hold) and "
-                       "commands are refused until it hears again")
-        elif held and not why:
-            peer.commands.resume()
-            self._told_thaw = h.roles.thawed_at
-            h.announce(f"sim {h.fabric.peer_id}: hears again (its router answers); commands are accepted (its robots "
-                       "stay where they stopped)")
-        elif not why and h.roles.thawed_at > self._told_thaw and self.proven_at > h.roles.thawed_at:
-            self._told_thaw = h.roles.thawed_at
-            self.lates += 1
-            h.announce(f"sim {h.fabric.peer_id}: was late ({h.roles.late_s:.1f} s frozen or starved), not cut off: its "
-                       "router answers; commands are served on")
+        self.state, effects = dr.step(self.state, self._seen(bool(peer.commands.held)))
+        for e in effects:
+            if isinstance(e, dr.Hold):
+                peer.commands.hold(REASON)
+                h.announce(f"sim {h.fabric.peer_id}: hears no one ({e.why}); its robots stop (bases brake, arms hold) "
+                           "and commands are refused until it hears again")
+            elif isinstance(e, dr.Resume):
+                peer.commands.resume()
+                h.announce(f"sim {h.fabric.peer_id}: hears again (its router answers); commands are accepted (its "
+                           "robots stay where they stopped)")
+            else:
+                h.announce(f"sim {h.fabric.peer_id}: was late ({e.late_s:.1f} s frozen or starved), not cut off: its "
+                           "router answers; commands are served on")

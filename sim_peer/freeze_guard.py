@@ -2,17 +2,20 @@
 
 The fabric's freeze watch (:mod:`fabric.authority_stamp`) calls back when the gap between two publications is longer
 than ``gap`` (half the transport lease by default: a freeze long enough for the others to drop our token is
-always caught, with margin; a false alarm, a starved process, costs one query, muzzled).
+always caught, with margin; a false alarm, a starved process, costs one query, muzzled). What it does then is the
+pure core :mod:`sim_peer.freeze_rule`'s plan; this shell gathers the sims that could have taken over, listens, asks
+``srv/state`` and publishes again.
 """
 
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from fabric import keys
 from fabric.interfaces import ServiceError, WorldState
 from sim_peer import election as el
+from sim_peer import freeze_rule as fr
 
 if TYPE_CHECKING:
     from sim_peer.replica_host import ReplicaHost
@@ -23,9 +26,10 @@ __all__ = ["FreezeGuard"]
 class FreezeGuard:
     """What a primary does after a gap in its own publications longer than ``gap`` seconds."""
 
-    def __init__(self, host: "ReplicaHost", gap: float | None = None) -> None:
+    def __init__(self, host: "ReplicaHost", gap: float | None = None, clock: Callable[[], float] = time.monotonic) -> None:
         self.host = host
-        self.gap = gap if gap is not None else host.fabric.config.lease_ms / 2000.0
+        self.clock = clock
+        self.gap = gap if gap is not None else fr.watch_gap(host.fabric.config.lease_ms / 1000.0)
 
     def watch(self) -> None:
         """Ask the fabric to call :meth:`on_freeze` after a gap (a primary's, from when it serves)."""
@@ -38,22 +42,22 @@ class FreezeGuard:
         once. Otherwise, after a gap longer than the lease (the others dropped our token, and our session
         may not even know yet that its link died), listen muzzled for a lease: a new authority's streams
         reach us once the session is back, and hearing its higher term steps us down before anything goes
-        out; then ask ``srv/state``, step down if a higher term answers, carry on otherwise."""
+        out; then ask ``srv/state``, step down if a higher term answers, carry on otherwise (:func:`freeze_rule.plan`)."""
         h = self.host
         f = h.fabric
         lease = f.config.lease_ms / 1000.0
-        began = time.monotonic() - gap
         with h.lock:
-            rivals = {p for p in h.roles.gone_since(began) if p != f.peer_id and h.shards.same_shard(p)}
-        if not rivals:
+            seen = frozenset(h.roles.gone_since(fr.began(self.clock(), gap)))
+        todo = fr.plan(gap, lease, fr.rivals(h.shards.view(seen), f.peer_id))
+        if todo.publish_now:
             f.stamp.unmuzzle()
             h.announce(f"sim {f.peer_id}: paused {gap:.1f} s with no other sim in the world; publishing again (term {f.stamp.term})")
             return
-        if gap > lease:
-            h.stopping.wait(lease + 0.5)
+        if todo.listen_s:
+            h.stopping.wait(todo.listen_s)
         self._ask_who_leads()
         if h.role == el.PRIMARY:
-            if gap > lease:
+            if todo.reassert:
                 h.roles.step(el.Resumed())
             f.stamp.unmuzzle()
             h.announce(f"sim {f.peer_id}: frozen {gap:.1f} s, still the authority (term {f.stamp.term})")
@@ -62,8 +66,8 @@ class FreezeGuard:
         """Once connected again, ask ``srv/state`` who holds this shard now; a higher term heard steps us down."""
         h = self.host
         f = h.fabric
-        deadline = time.monotonic() + max(30.0, 10 * self.gap)
-        while time.monotonic() < deadline and not h.stopping.is_set() and h.role == el.PRIMARY:
+        deadline = self.clock() + fr.ask_for(self.gap)
+        while self.clock() < deadline and not h.stopping.is_set() and h.role == el.PRIMARY:
             if not f.connected():
                 time.sleep(0.1)  # not connected yet: nobody to ask, nobody to tell
                 continue

@@ -17,23 +17,17 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from sim_peer import election as el
+from sim_peer import hearing_rule as hr
+from sim_peer.hearing_rule import AUDIBLE_S, RECHECK_LEASES, TICK_S
 
 if TYPE_CHECKING:
     from fabric.session import Fabric
     from sim_peer.replica_host import ReplicaHost
 
-__all__ = ["Roles", "MAX_GONE", "AUDIBLE_S", "SETTLE_S", "router_answers"]
+__all__ = ["Roles", "MAX_GONE", "AUDIBLE_S", "SETTLE_S", "TICK_S", "router_answers"]
 
 MAX_GONE = 256
 """How many departed sims' times are remembered (made-up sim tokens must not grow the record)."""
-RECHECK_LEASES = 3
-"""Leases a sim whose link came back waits for the others' tokens before the election looks: after a router's
-restart every client reconnects on its own schedule (seconds apart), the leader's token among them."""
-AUDIBLE_S = 1.0
-"""A sim heard (its term on a stream or ``srv/state``) this recently is alive, whatever its token, while this host's
-view of the tokens is fresh (:meth:`Roles.audible`): a leader whose token is missing from the view then waits for
-this long after it was last heard before a standby takes over. A live leader's streams (joints at the sim's rate,
-about 100 a second, and ``srv/state`` every 50 ms) speak well inside it, even on a loaded machine."""
 SETTLE_S = 0.3
 """How long a sim's lost token waits at most, its link up all the while, before the election hears of it
 (:meth:`Roles.settle`). When this sim's own link dies (the router killed), the tokens that came through it go
@@ -41,10 +35,6 @@ while the session still lists its router: in the lab a standby read its leader's
 and took the world over from no state (CI saw it too). A router that answers (:func:`router_answers`) ends the wait
 at once; one that cannot be asked makes a killed leader's fail-over wait this much longer."""
 SETTLE_POLL_S = 0.02
-TICK_S = 0.1
-"""The heartbeat's period (:meth:`Roles._tick`)."""
-OWN_TOKEN_S = 10.0
-"""How long our own token's absence, with the link up, still counts as deafness (its return is the usual end)."""
 
 
 def router_answers(fabric: "Fabric", timeout: float) -> bool:
@@ -79,9 +69,7 @@ class Roles:
         # until when the tokens seen may still be arriving: a host made by a step-down (it starts with a leader),
         # for its first leases from join
         self.fresh_until = float("inf") if election.leader else float("-inf")
-        self.last_tick = self.thawed_at = float("-inf")  # this process's own heartbeat (frozen: see frozen())
-        self.late_s = 0.0  # how long the heartbeat's last gap (a freeze) was
-        self.unlinked_at = float("-inf")  # when the heartbeat last found the link down (monotonic)
+        self.beat = hr.Heartbeat()  # this process's own heartbeat (frozen: see frozen()), replaced by each tick
         self.settling = False  # a token's loss waits to be judged (settle)
 
     @property
@@ -104,7 +92,7 @@ class Roles:
         if len(self.live) > 1:
             h.shards.learn()
         self.await_leader(self.election.leader)
-        self.last_tick = time.monotonic()
+        self.beat = hr.Heartbeat(last_tick=time.monotonic())
         threading.Thread(target=self._tick, name="sim-heartbeat", daemon=True).start()
         with h.lock:
             self.settled = True
@@ -169,7 +157,7 @@ class Roles:
                 answered = router_answers(h.fabric, SETTLE_S)  # at once on a live link (a router's round trip)
                 while not unlinked and not answered and time.monotonic() - lost_at < SETTLE_S and not h.stopping.wait(SETTLE_POLL_S):
                     unlinked = not h.fabric.connected()
-                unlinked = unlinked or not h.fabric.connected() or max(self.unlinked_at, self.own_gone_at) >= lost_at - 2 * TICK_S
+                unlinked = unlinked or not h.fabric.connected() or hr.unlinked_since(self.beat, self.own_gone_at, lost_at)
             finally:
                 with h.lock:
                     self.settling = False
@@ -193,12 +181,7 @@ class Roles:
         h = self.host
         gap = h.fabric.config.lease_ms / 2000.0
         while not h.stopping.wait(TICK_S):
-            now = time.monotonic()
-            if now - self.last_tick > gap:
-                self.thawed_at, self.late_s = now, now - self.last_tick
-            self.last_tick = now
-            if not h.fabric.connected():
-                self.unlinked_at = now
+            self.beat = hr.tick(self.beat, time.monotonic(), gap=gap, connected=h.fabric.connected())
 
     def frozen(self) -> bool:
         """Whether this process was frozen just now: its heartbeat is late, or came back from a gap within the last
@@ -207,11 +190,8 @@ class Roles:
         read that as its leader's death (the soak saw a paused standby take the world back with older epochs).
         The distrust lasts a lease and as long again as the freeze was (up to five leases): a session that slept
         through the router dropping it reads its link's news late (a standby paused 4 s read its leader's token gone
-        more than a lease after it woke, link up, and took the world over from no state)."""
-        if self.last_tick < 0:
-            return False  # not joined yet
-        now, lease = time.monotonic(), self.host.fabric.config.lease_ms / 1000.0
-        return now - self.last_tick > lease / 2 or now - self.thawed_at < lease + min(self.late_s, 5 * lease)
+        more than a lease after it woke, link up, and took the world over from no state) (:func:`hearing_rule.frozen`)."""
+        return hr.frozen(self.beat, time.monotonic(), self.host.fabric.config.lease_ms / 1000.0)
 
     def deaf(self) -> bool:
         """Whether this sim hears no one now: its link is down, the router no longer holds its own token, or this
@@ -223,11 +203,8 @@ class Roles:
         own token. A freeze alone is not a cut (:meth:`frozen`; :mod:`sim_peer.deaf_stop` asks the router then)."""
         h = self.host
         with h.lock:
-            # our own token missing counts for OWN_TOKEN_S at most: a link that is up hears the router again
-            mine = h.fabric.peer_id in self.live or time.monotonic() - self.own_gone_at > OWN_TOKEN_S
-        if not h.fabric.connected():
-            return "its link is down"
-        return "" if mine else "the router no longer holds its token"
+            seen, gone_at = h.fabric.peer_id in self.live, self.own_gone_at
+        return hr.cut(connected=h.fabric.connected(), own_token_seen=seen, own_gone_at=gone_at, now=time.monotonic())
 
     def deaf_recheck(self, why: str = "its link or its own token gone") -> None:
         """Our own link went (this sim cut off, the router restarted, this process paused past the lease): every sim's
@@ -248,13 +225,12 @@ class Roles:
 
         def recheck() -> None:
             try:
-                window = RECHECK_LEASES * h.fabric.config.lease_ms / 1000.0 + 0.5
-                back = float("inf")
+                window = hr.recheck_window(h.fabric.config.lease_ms / 1000.0)
+                back = hr.NOT_YET
                 while not h.stopping.is_set() and time.monotonic() < back:
-                    if self.deaf() or time.monotonic() - self.unlinked_at < 2 * TICK_S:
-                        back = float("inf")  # cut off (again): the window starts once it hears
-                    elif back == float("inf"):
-                        back = time.monotonic() + window
+                    # cut off (again): the window starts once it hears
+                    now = time.monotonic()
+                    back = hr.recheck(back, now, deaf=self.deaf() or hr.recently_unlinked(self.beat, now), window=window)
                     time.sleep(0.05)
             finally:
                 with h.lock:
@@ -276,7 +252,7 @@ class Roles:
 
     def gone_since(self, began: float) -> set[str]:
         """The sims alive now or gone since ``began`` (monotonic; call with the lock held)."""
-        return self.live | {p for p, t in self.gone_at.items() if t >= began}
+        return set(hr.gone_since(self.live, self.gone_at, began))
 
     def heard(self, source: str, term: int) -> None:
         """Authority state stamped with ``term`` came from ``source``."""
@@ -293,10 +269,7 @@ class Roles:
         pause past the lease, can see its leader's token seconds late), or a leader already found missing but
         heard (:meth:`relook`). Later a token's loss is trusted at once (a killed leader's goes with its link, and
         waiting would only delay its fail-over); a deaf sim's view is not trusted at all (:meth:`deaf_recheck`)."""
-        now = time.monotonic()
-        if now > self.fresh_until and not self.relooking:
-            return frozenset()
-        return frozenset(p for p, t in list(self.heard_at.items()) if now - t < AUDIBLE_S)
+        return hr.audible(dict(self.heard_at), time.monotonic(), fresh_until=self.fresh_until, relooking=self.relooking)
 
     def relook(self) -> None:
         """The leader is missing from the live sims but still heard: look again once it has been quiet for

@@ -50,7 +50,7 @@ def test_contracts_hold(monkeypatch, capsys):
     assert code == 0, out.out + out.err
     assert "0 broken" in out.out
     for contract in ("Layers", "fabric.interfaces imports nothing", "fabric.codec and fabric.limits", "fabric, the ground floor",
-                     "No peer, nor ownership or robots, imports robofabric's tools"):
+                     "No peer, nor ownership or robots, imports robofabric's tools", "The sim's pure decision cores"):
         assert contract in out.out, out.out
 
 
@@ -73,6 +73,11 @@ MODULES = [
     "robofabric/launch.py",
     "sim_peer/__init__.py",
     "sim_peer/peer.py",
+    "sim_peer/roles.py",
+    "sim_peer/election.py",
+    "sim_peer/hearing_rule.py",
+    "sim_peer/deaf_rule.py",
+    "sim_peer/freeze_rule.py",
     "compute_peer/__init__.py",
     "compute_peer/service.py",
     "user_peer/__init__.py",
@@ -101,7 +106,9 @@ ALLOWED = {
     "fabric/interfaces/std.py": "from fabric.codec import encode\nimport fabric.limits\n",
     "fabric/session.py": "import fabric.interfaces\nimport fabric.keys\n",
     "ownership/client.py": "import fabric.session\nimport fabric.interfaces\n",
-    "sim_peer/peer.py": "import ownership.client\nimport robots\nimport fabric.interfaces\n",
+    "sim_peer/peer.py": "import ownership.client\nimport robots\nimport fabric.interfaces\nimport zenoh\n",
+    "sim_peer/roles.py": "import sim_peer.election\nimport sim_peer.hearing_rule\nimport fabric.session\n",
+    "sim_peer/deaf_rule.py": "import sim_peer.hearing_rule\n",
     "compute_peer/service.py": "import robots\nimport fabric.interfaces.std\n",
     "user_peer/api.py": "import ownership.client\nimport fabric.session\n",
     "robofabric/__init__.py": "import sim_peer.peer\nimport user_peer.api\n",
@@ -152,6 +159,10 @@ def test_skeleton_without_bad_imports_keeps_every_contract(tmp_path):
         ("user_peer/api.py", "from robofabric import launch\n", "tools"),
         ("ownership/client.py", "import robofabric\n", "tools"),
         ("robots/__init__.py", "import robofabric.launch\n", "tools"),
+        ("sim_peer/deaf_rule.py", "import zenoh\n", "pure-cores"),  # a pure core opening sessions
+        ("sim_peer/freeze_rule.py", "def later():\n    import fabric.session\n", "pure-cores"),
+        ("sim_peer/hearing_rule.py", "from sim_peer import roles\n", "pure-cores"),  # a core reaching into its shell
+        ("sim_peer/election.py", "import sim_peer.peer\n", "pure-cores"),  # zenoh through the peer
     ],
 )
 def test_a_bad_import_breaks_its_contract(tmp_path, where, line, contract):
