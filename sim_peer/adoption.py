@@ -3,7 +3,8 @@
 In a world served by several shards, the scene objects have one authority, the world's first sim. When a sim
 leaves and no standby of its shard has taken the objects over within ``after_s``, the serving primary with the
 lowest id adopts them: it serves its robots and the objects again, one term up, with the objects where it
-mirrored them (every sim moves them on the users' poses).
+mirrored them (every sim moves them on the users' poses). When to look and who adopts are the pure core
+:mod:`sim_peer.adoption_rule`'s decisions; this shell waits, asks ``srv/world`` and serves again.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from typing import TYPE_CHECKING
 
 from fabric import keys
 from fabric.interfaces import ServiceError, WorldInfo
+from sim_peer import adoption_rule as ar
 from sim_peer import election as el
 
 if TYPE_CHECKING:
@@ -33,33 +35,29 @@ class ObjectAdoption:
         self.host = host
         # after a sim leaves, how long a shard waits for the objects' standby (a take-over takes well under a
         # lease) before asking whether the scene objects still have an authority
-        self.after_s = after_s if after_s is not None else 2.0 * host.fabric.config.lease_ms / 1000.0 + 1.0
-        self._adopting = self._again = False
+        self.after_s = after_s if after_s is not None else ar.wait_s(host.fabric.config.lease_ms / 1000.0)
+        self._watch = ar.Watch()  # a wait under way, a departure since its last look (adoption_rule)
 
     def soon(self) -> None:
         """A sim left: after ``after_s``, see whether the scene objects went with it (one thread at a time)."""
         h = self.host
         with h.lock:
-            if h.objects or h.closed:
-                return
-            self._again = True
-            if self._adopting:
-                return
-            self._adopting = True
+            self._watch, start = ar.departed(self._watch, serves_objects=h.objects or h.closed)
+        if not start:
+            return
 
         def run() -> None:
             while not h.stopping.wait(self.after_s):
                 with h.lock:
-                    again, self._again = self._again, False
-                    if not again or h.objects or h.closed:
-                        self._adopting = False
-                        return
+                    self._watch, look = ar.waited(self._watch, serves_objects=h.objects or h.closed)
+                if not look:
+                    return
                 try:
                     self.adopt_if_orphaned()
                 except Exception:  # a closing session; the next departure asks again
                     log.debug("adopting the scene objects failed", exc_info=True)
             with h.lock:
-                self._adopting = False
+                self._watch = ar.stopped(self._watch)
 
         threading.Thread(target=run, name="sim-adopt-objects", daemon=True).start()
 
@@ -72,8 +70,8 @@ class ObjectAdoption:
             replies = f.rpc.query(keys.srv(f.world, "world"), timeout=2.0, expected=WorldInfo, all_replies=True)
         except ServiceError:
             return False
-        parts = {r.source: r.message for r in replies if r.source}
-        if not h.world.objects or any(p.objects for p in parts.values()) or me not in parts or min(parts) != me:
+        parts = {r.source: bool(r.message.objects) for r in replies if r.source}
+        if not ar.adopter(parts, me, has_objects=bool(h.world.objects)):
             return False
         with h.lock:
             if h.role != el.PRIMARY or h.peer is None or h.objects or h.closed:
