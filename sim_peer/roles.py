@@ -14,7 +14,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from sim_peer import election as el
 from sim_peer import hearing_rule as hr
@@ -53,8 +53,9 @@ def router_answers(fabric: "Fabric", timeout: float) -> bool:
 class Roles:
     """The election state of one host, the live sims it sees and when others went."""
 
-    def __init__(self, host: "ReplicaHost", election: el.Election) -> None:
+    def __init__(self, host: "ReplicaHost", election: el.Election, clock: Callable[[], float] = time.monotonic) -> None:
         self.host = host
+        self.clock = clock  # monotonic seconds: every time this shell reads, and passes to the cores
         self.election = election
         self.live: set[str] = set()
         self.gone_at: dict[str, float] = {}  # sim id -> when its token went (monotonic): was it there when we froze?
@@ -64,7 +65,7 @@ class Roles:
         self.rechecking = False  # a look at the live sims is due once this sim's own link is back (deaf_recheck)
         self.taking_over: threading.Thread | None = None
         # when each sim was last heard (monotonic); a standby made by a step-down heard its leader just now
-        self.heard_at: dict[str, float] = {election.leader: time.monotonic()} if election.leader else {}
+        self.heard_at: dict[str, float] = {election.leader: self.clock()} if election.leader else {}
         self.relooking = False  # a look at the live sims is due once a missing but audible leader goes quiet
         # until when the tokens seen may still be arriving: a host made by a step-down (it starts with a leader),
         # for its first leases from join
@@ -92,12 +93,12 @@ class Roles:
         if len(self.live) > 1:
             h.shards.learn()
         self.await_leader(self.election.leader)
-        self.beat = hr.Heartbeat(last_tick=time.monotonic())
+        self.beat = hr.Heartbeat(last_tick=self.clock())
         threading.Thread(target=self._tick, name="sim-heartbeat", daemon=True).start()
         with h.lock:
             self.settled = True
             if self.fresh_until > 0:
-                self.fresh_until = time.monotonic() + RECHECK_LEASES * f.config.lease_ms / 1000.0
+                self.fresh_until = self.clock() + RECHECK_LEASES * f.config.lease_ms / 1000.0
             live = frozenset(self.live)
         self.step(el.Peers(h.shards.view(live)))
 
@@ -110,8 +111,8 @@ class Roles:
         h = self.host
         if self.role != el.STANDBY or not leader or leader == h.fabric.peer_id:
             return
-        deadline = time.monotonic() + h.fabric.config.lease_ms / 1000.0
-        while time.monotonic() < deadline and not h.stopping.is_set():
+        deadline = self.clock() + h.fabric.config.lease_ms / 1000.0
+        while self.clock() < deadline and not h.stopping.is_set():
             with h.lock:
                 if leader in self.live:
                     return
@@ -123,7 +124,7 @@ class Roles:
         with h.lock:
             (self.live.add if alive else self.live.discard)(peer_id)
             if not alive:
-                self.gone_at[peer_id] = time.monotonic()
+                self.gone_at[peer_id] = self.clock()
                 if len(self.gone_at) > MAX_GONE:
                     self.gone_at.pop(min(self.gone_at, key=self.gone_at.__getitem__))
             settled = self.settled
@@ -134,11 +135,11 @@ class Roles:
             # one going before the first view is settled (join() steps on the whole view then)
         if peer_id == h.fabric.peer_id:
             with h.lock:
-                self.own_gone_at = time.monotonic()
+                self.own_gone_at = self.clock()
         if peer_id == h.fabric.peer_id or self.deaf():
             self.deaf_recheck()
             return
-        self.settle(time.monotonic())
+        self.settle(self.clock())
 
     def settle(self, lost_at: float) -> None:
         """Judge a sim's lost token once this sim's router answered after it (:func:`router_answers`), or its link
@@ -155,7 +156,7 @@ class Roles:
             unlinked = False
             try:
                 answered = router_answers(h.fabric, SETTLE_S)  # at once on a live link (a router's round trip)
-                while not unlinked and not answered and time.monotonic() - lost_at < SETTLE_S and not h.stopping.wait(SETTLE_POLL_S):
+                while not unlinked and not answered and self.clock() - lost_at < SETTLE_S and not h.stopping.wait(SETTLE_POLL_S):
                     unlinked = not h.fabric.connected()
                 unlinked = unlinked or not h.fabric.connected() or hr.unlinked_since(self.beat, self.own_gone_at, lost_at)
             finally:
@@ -164,7 +165,7 @@ class Roles:
             if h.stopping.is_set():
                 return
             if unlinked or self.deaf():
-                self.deaf_recheck(f"its link went {1000 * (time.monotonic() - lost_at):.0f} ms after a sim's token")
+                self.deaf_recheck(f"its link went {1000 * (self.clock() - lost_at):.0f} ms after a sim's token")
                 return
             with h.lock:
                 live = frozenset(self.live)
@@ -181,7 +182,7 @@ class Roles:
         h = self.host
         gap = h.fabric.config.lease_ms / 2000.0
         while not h.stopping.wait(TICK_S):
-            self.beat = hr.tick(self.beat, time.monotonic(), gap=gap, connected=h.fabric.connected())
+            self.beat = hr.tick(self.beat, self.clock(), gap=gap, connected=h.fabric.connected())
 
     def frozen(self) -> bool:
         """Whether this process was frozen just now: its heartbeat is late, or came back from a gap within the last
@@ -191,7 +192,7 @@ class Roles:
         The distrust lasts a lease and as long again as the freeze was (up to five leases): a session that slept
         through the router dropping it reads its link's news late (a standby paused 4 s read its leader's token gone
         more than a lease after it woke, link up, and took the world over from no state) (:func:`hearing_rule.frozen`)."""
-        return hr.frozen(self.beat, time.monotonic(), self.host.fabric.config.lease_ms / 1000.0)
+        return hr.frozen(self.beat, self.clock(), self.host.fabric.config.lease_ms / 1000.0)
 
     def deaf(self) -> bool:
         """Whether this sim hears no one now: its link is down, the router no longer holds its own token, or this
@@ -204,7 +205,7 @@ class Roles:
         h = self.host
         with h.lock:
             seen, gone_at = h.fabric.peer_id in self.live, self.own_gone_at
-        return hr.cut(connected=h.fabric.connected(), own_token_seen=seen, own_gone_at=gone_at, now=time.monotonic())
+        return hr.cut(connected=h.fabric.connected(), own_token_seen=seen, own_gone_at=gone_at, now=self.clock())
 
     def deaf_recheck(self, why: str = "its link or its own token gone") -> None:
         """Our own link went (this sim cut off, the router restarted, this process paused past the lease): every sim's
@@ -227,9 +228,9 @@ class Roles:
             try:
                 window = hr.recheck_window(h.fabric.config.lease_ms / 1000.0)
                 back = hr.NOT_YET
-                while not h.stopping.is_set() and time.monotonic() < back:
+                while not h.stopping.is_set() and self.clock() < back:
                     # cut off (again): the window starts once it hears
-                    now = time.monotonic()
+                    now = self.clock()
                     back = hr.recheck(back, now, deaf=self.deaf() or hr.recently_unlinked(self.beat, now), window=window)
                     time.sleep(0.05)
             finally:
@@ -260,7 +261,7 @@ class Roles:
             if source != self.host.fabric.peer_id:
                 if source not in self.heard_at and len(self.heard_at) >= MAX_GONE:
                     self.heard_at.pop(min(self.heard_at, key=self.heard_at.__getitem__))
-                self.heard_at[source] = time.monotonic()
+                self.heard_at[source] = self.clock()
             self.step(el.Heard(source, term))
 
     def audible(self) -> frozenset[str]:
@@ -269,7 +270,7 @@ class Roles:
         pause past the lease, can see its leader's token seconds late), or a leader already found missing but
         heard (:meth:`relook`). Later a token's loss is trusted at once (a killed leader's goes with its link, and
         waiting would only delay its fail-over); a deaf sim's view is not trusted at all (:meth:`deaf_recheck`)."""
-        return hr.audible(dict(self.heard_at), time.monotonic(), fresh_until=self.fresh_until, relooking=self.relooking)
+        return hr.audible(dict(self.heard_at), self.clock(), fresh_until=self.fresh_until, relooking=self.relooking)
 
     def relook(self) -> None:
         """The leader is missing from the live sims but still heard: look again once it has been quiet for
@@ -285,7 +286,7 @@ class Roles:
         def again() -> None:
             try:
                 while not h.stopping.is_set():
-                    quiet = time.monotonic() - self.heard_at.get(self.election.leader, float("-inf"))
+                    quiet = self.clock() - self.heard_at.get(self.election.leader, float("-inf"))
                     if quiet >= AUDIBLE_S:
                         break
                     h.stopping.wait(AUDIBLE_S - quiet + 0.01)
@@ -332,7 +333,7 @@ class Roles:
                 h.announce(f"standby {h.fabric.peer_id}: the token of {followed or 'the primary'} is gone (live sims: "
                            f"{', '.join(sorted(ev.live)) if isinstance(ev, el.Peers) else '?'}; link "
                            f"{'up' if h.fabric.connected() else 'down'}); taking over with term {e.term}")
-                t = threading.Thread(target=h.take_over, args=(time.monotonic(), followed), name="take-over", daemon=True)
+                t = threading.Thread(target=h.take_over, args=(self.clock(), followed), name="take-over", daemon=True)
                 self.taking_over = t
                 t.start()
             elif e.kind == "step_down":
