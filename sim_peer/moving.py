@@ -4,7 +4,8 @@ The protocol and its pure helpers are :mod:`sim_peer.handoff`. A move is two reb
 (:meth:`sim_peer.replica_host.ReplicaHost.serve_rebuilt`): the source stops serving the robot and keeps it
 (:class:`~sim_peer.handoff.HandedOut`) until its target fetched it and serves it, or it takes it back; a target
 serves only what it fetched from the source. ``srv/move`` is the staff's key; a move asked on ``srv/state``,
-which every login may ask, is refused (:meth:`MoveService.refused`).
+which every login may ask, is refused (:meth:`MoveService.refused`). Whether a step may be taken now is the pure
+core :mod:`sim_peer.move_rule`'s decision; this shell gathers what the host holds, asks, rebuilds and serves.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from fabric.limits import clip
 from robots.description import DescriptionError, SceneRobot
 from sim_peer import election as el
 from sim_peer import handoff as ho
+from sim_peer import move_rule as mr
 from sim_peer.errors import WorldError
 from sim_peer.registry import robot_class
 
@@ -86,7 +88,7 @@ class MoveService:
             return
         with self.host.lock:
             kept = self.handed_out.get(rid)
-            if kept is not None and kept.to == sim and term >= kept.handoff.term:
+            if kept is not None and mr.served_there(kept.to, kept.handoff.term, sim, term):
                 del self.handed_out[rid]
 
     def _step(self, request: Event, asker: str) -> Event | None:
@@ -116,14 +118,10 @@ class MoveService:
     def _check_mover(self) -> None:
         """Raise unless this sim may move robots in or out now (call with the lock held)."""
         h = self.host
-        me = h.fabric.peer_id
-        if h.role != el.PRIMARY or h.peer is None:
-            raise ServiceError(f"sim {me} is not serving (a standby, or taking over)")
-        if h.rebuild is None:
-            raise ServiceError(f"sim {me} cannot rebuild its world (a sim of robofabric sim moves robots)")
-        standbys = h.shards.standbys(h.roles.live)
-        if standbys:
-            raise ServiceError(f"sim {me} has standbys ({', '.join(standbys)}): moving a robot of a replicated shard is not supported")
+        why = mr.mover_refusal(h.fabric.peer_id, serving=h.role == el.PRIMARY and h.peer is not None,
+                               can_rebuild=h.rebuild is not None, standbys=h.shards.standbys(h.roles.live))
+        if why:
+            raise ServiceError(why)
 
     def _ask_sim(self, sim: str, request: Event) -> Event:
         """Ask another sim one step of a move in this sim's login (a sim login may ask ``srv/move``)."""
@@ -137,14 +135,10 @@ class MoveService:
         me = h.fabric.peer_id
         with h.lock:
             self._check_mover()
-            if rid not in h.world.robots:
-                raise ho.MoveError(f"sim {me} does not serve robot {rid}")
-            if rid in self.handed_out:
-                raise ho.MoveError(f"robot {rid} is being moved already")
-            if len(h.world.robots) < 2:
-                raise ho.MoveError(f"robot {rid} is sim {me}'s last robot: stop that sim and start {rid} on another instead")
-            if to == me or to not in h.roles.live:
-                raise ho.MoveError(f"sim {to} is not another live sim of world {h.fabric.world!r}: {rid} stays with sim {me}")
+            why = mr.move_out_refusal(rid, to, me, robots=h.world.robots, handed_out=self.handed_out, live=h.roles.live,
+                                      world=h.fabric.world)
+            if why:
+                raise ho.MoveError(why)
             my_term, rtype = h.election.term, h.world.robots[rid].desc.name
         # outside the lock: the target's answer takes a round trip, and this sim keeps serving meanwhile
         answer = self._ask_sim(to, ho.step(ho.MOVE_PREPARE, rid, to=to, source=me, term=term, rtype=rtype, asker=me))
@@ -157,7 +151,8 @@ class MoveService:
                                f"and sim {to}'s {theirs}): ask again")
         with h.lock:
             self._check_mover()
-            if h.election.term != my_term or rid not in h.world.robots or rid in self.handed_out:
+            if not mr.unchanged(rid, term=h.election.term, asked_at_term=my_term, robots=h.world.robots,
+                                handed_out=self.handed_out):
                 raise ho.MoveError(f"sim {me} changed while sim {to} was asked: ask again")
             return self._hand_out(rid, to, term, asker)
 
@@ -231,10 +226,9 @@ class MoveService:
         me = h.fabric.peer_id
         with h.lock:
             self._check_mover()
-            if rid in h.world.robots:
-                raise ho.MoveError(f"sim {me} already serves {rid}")
-            if term < h.election.term:
-                raise ho.MoveError(f"move term {term} is below sim {me}'s term {h.election.term}: ask again")
+            why = mr.move_in_refusal(rid, me, term=term, my_term=h.election.term, robots=h.world.robots)
+            if why:
+                raise ho.MoveError(why)
         handoff = ho.from_event(self._ask_sim(source, ho.step(ho.MOVE_FETCH, rid, to=me, source=source, term=term,
                                                               move_id=move_id, asker=me)))
         try:
@@ -301,7 +295,8 @@ class MoveService:
         h = self.host
         with h.lock:
             kept = self.handed_out.get(rid)
-            if h.closed or kept is None or kept.move != move_id or kept.fetched:
+            if not mr.unclaimed(closed=h.closed, kept_move=kept.move if kept is not None else None, move_id=move_id,
+                                fetched=kept is not None and kept.fetched):
                 return
         try:
             self._take_back(rid, None, "")

@@ -79,6 +79,7 @@ MODULES = [
     "sim_peer/deaf_rule.py",
     "sim_peer/freeze_rule.py",
     "sim_peer/adoption_rule.py",
+    "sim_peer/move_rule.py",
     "compute_peer/__init__.py",
     "compute_peer/service.py",
     "user_peer/__init__.py",
@@ -165,6 +166,7 @@ def test_skeleton_without_bad_imports_keeps_every_contract(tmp_path):
         ("sim_peer/hearing_rule.py", "from sim_peer import roles\n", "pure-cores"),  # a core reaching into its shell
         ("sim_peer/election.py", "import sim_peer.peer\n", "pure-cores"),  # zenoh through the peer
         ("sim_peer/adoption_rule.py", "from fabric import session\n", "pure-cores"),
+        ("sim_peer/move_rule.py", "import zenoh\n", "pure-cores"),
     ],
 )
 def test_a_bad_import_breaks_its_contract(tmp_path, where, line, contract):
