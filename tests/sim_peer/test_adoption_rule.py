@@ -44,7 +44,7 @@ def test_the_lowest_id_sim_adopts_when_no_part_describes_objects():
     assert ar.wait_s(2.0) == 5.0
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(hs.lists(hs.tuples(hs.sampled_from(["departed", "waited", "stopped"]), hs.booleans()), max_size=60))
 def test_property_one_wait_at_a_time_and_no_departure_lost(events):
     """Random departures, waits ending and closes, the sim serving the objects or not: at most one wait runs; a
@@ -68,7 +68,7 @@ def test_property_one_wait_at_a_time_and_no_departure_lost(events):
         assert w.again == pending
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(hs.dictionaries(hs.sampled_from(["sim-a", "sim-b", "sim-c", "sim-d"]), hs.booleans()), hs.booleans())
 def test_property_exactly_one_shard_adopts_an_orphaned_world_and_none_a_served_one(parts, has_objects):
     adopters = [me for me in parts if ar.adopter(parts, me, has_objects=has_objects)]

@@ -57,7 +57,7 @@ def test_what_a_source_kept_goes_once_its_target_serves_it_and_comes_back_when_n
     assert not mr.unclaimed(closed=True, kept_move="m1", move_id="m1", fetched=False)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(hs.sampled_from(ROBOTS), hs.sampled_from(SIMS), hs.sets(hs.sampled_from(ROBOTS)), hs.sets(hs.sampled_from(ROBOTS)),
        hs.sets(hs.sampled_from(SIMS)))
 def test_property_a_robot_handed_out_leaves_a_sim_that_keeps_one_for_a_live_other(rid, to, robots, handed_out, live):
@@ -71,7 +71,7 @@ def test_property_a_robot_handed_out_leaves_a_sim_that_keeps_one_for_a_live_othe
         assert rid in why or to in why
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(hs.sampled_from(ROBOTS), hs.integers(0, 9), hs.integers(0, 9), hs.sets(hs.sampled_from(ROBOTS)))
 def test_property_a_robot_taken_in_is_new_to_the_target_and_never_at_an_older_term(rid, term, my_term, robots):
     why = mr.move_in_refusal(rid, "sim-b", term=term, my_term=my_term, robots=robots)
