@@ -279,7 +279,7 @@ def _end_class(procs: Any, proc: Any) -> dict[str, Any]:
 
 
 def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, robots: int = 0, together: bool = False,
-            clients: int = 0, arms: int = 0, one_address: bool = False) -> dict[str, Any]:
+            clients: int = 0, arms: int = 0, one_address: bool = False, no_3d: bool = False) -> dict[str, Any]:
     """N pages on one console (and ``clients`` emulated students beside them), in a world of
     ``max(n + clients, robots)`` bases; the row's figures."""
     from playwright.sync_api import sync_playwright
@@ -306,7 +306,8 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
         if arms:  # the arms' students apply IK: the compute peer solves it
             compute = procs.start(robofabric_cmd("compute", "--world", world, "--connect", ep), name="compute")
         web = free_port()
-        console = procs.start(robofabric_cmd("console", "--world", world, "--connect", ep, "--listen", f"127.0.0.1:{web}"), name="console")
+        console = procs.start(robofabric_cmd("console", "--world", world, "--connect", ep, "--listen", f"127.0.0.1:{web}",
+                                             *(["--no-3d"] if no_3d else [])), name="console")
         url = f"http://127.0.0.1:{web}/"
         wait_until(lambda: f"console: open {url}" in procs.output(console), timeout=60, what="the console",
                    seen=lambda: procs.output(console)[-1500:])
@@ -442,6 +443,8 @@ def command(
                                       "first ARMS emulated students also own one and nudge its target and apply IK.")] = 0,
     one_address: Annotated[bool, typer.Option("--one-address", help="Every emulated student from 127.0.0.1, as a class "
                                               "behind one NAT, instead of each from her own 127.0.0.N.")] = False,
+    no_3d: Annotated[bool, typer.Option("--no-3d", help="The console's pages without their 3D view (console --no-3d): "
+                                        "the 2D page, beside the same run with it.")] = False,
 ) -> None:
     """N browser pages on one console server, each driving its own base: view lag in the page, key to motion,
     the server's CPU, robots lost."""
@@ -457,14 +460,14 @@ def command(
         raise UserError("--pages: each count at least 1; --seconds positive; --robots and --clients not negative; "
                         "--arms from 0 to --clients (each arm is an emulated student's)")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    flag = (" --swiftshader" if swiftshader else "") + (f" --robots {robots}" if robots else "") + (" --together" if together else "") + (f" --clients {clients}" if clients else "") + (f" --arms {arms}" if arms else "") + (" --one-address" if one_address else "")
+    flag = (" --swiftshader" if swiftshader else "") + (f" --robots {robots}" if robots else "") + (" --together" if together else "") + (f" --clients {clients}" if clients else "") + (f" --arms {arms}" if arms else "") + (" --one-address" if one_address else "") + (" --no-3d" if no_3d else "")
     lines = [f"robofabric bench console --pages {pages} --seconds {seconds:g}{flag} on {machine()}, load average {load:.1f} at the start",
              "", *header()]
     print("\n".join(lines), flush=True)
     with tempfile.TemporaryDirectory(prefix="bench-console-") as tmp:
         for n in counts:
             result = run_one(n, seconds, Path(tmp), swiftshader=swiftshader, robots=robots, together=together, clients=clients, arms=arms,
-                             one_address=one_address)
+                             one_address=one_address, no_3d=no_3d)
             for err in result.get("c_errors", [])[:5]:
                 print(f"  {err}", file=sys.stderr, flush=True)
             line = row(result)

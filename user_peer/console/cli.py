@@ -18,6 +18,7 @@ def console(
     tls_cert: Annotated[Optional[str], typer.Option("--tls-cert", help="Serve HTTPS with this certificate (PEM; secure init --tls writes tls/web/console.pem).")] = None,
     tls_key: Annotated[Optional[str], typer.Option("--tls-key", help="The certificate's private key (PEM; tls/web/console-key.pem).")] = None,
     instructors: Annotated[str, typer.Option("--instructors", help="Comma-separated instructor logins that may open the teacher's page (/teacher).")] = "",
+    no_3d: Annotated[bool, typer.Option("--no-3d", help="Pages without the 3D view: the top-down map alone, as before the 3D view (lighter for the server and the browsers).")] = False,
     world: World = None,
     connect: Connect = None,
     zenoh_config: ZenohConfig = None,
@@ -56,7 +57,7 @@ def console(
             keys.validate_id(n, what="instructor login")
         except ValueError as exc:
             raise UserError(f"--instructors: {exc}") from None
-    serve(Console(cfg.world, connect_eps, cfg.config_file, grace, rerun_url, instructors=names), host.strip("[]"), int(port_text), tls)
+    serve(Console(cfg.world, connect_eps, cfg.config_file, grace, rerun_url, instructors=names, view3d=not no_3d), host.strip("[]"), int(port_text), tls)
 
 
 def _tls(cert: str | None, key: str | None) -> tuple[str, str] | None:

@@ -68,8 +68,9 @@ class Layout:
                         with ui.column().classes("rf-col") as box:
                             panel.build()
                         self.panels[kind] = box
-                    with ui.column().classes("rf-col"):
-                        view.build()
+                    if view is not None:  # no 3D view (console --no-3d): the arm's panel alone
+                        with ui.column().classes("rf-col"):
+                            view.build()
         page.view.image.classes("rf-map")
 
     def refresh(self) -> None:

@@ -237,7 +237,7 @@ class ConsolePage:
         # a line high even when empty: text appearing in it must not move the view under the mouse
         self.message = ui.label("").props('role="status" aria-live="polite"').classes("text-body1").style("min-height: 1.5rem")
         self._robot_list()
-        self.view3d = View3D(self)
+        self.view3d = View3D(self) if self.console.view3d else None  # console --no-3d: the map alone
         self.layout = Layout(self)  # each robot's panel beside its view (user_peer/console/layout.py)
         self.layout.build()
         ui.label("Events").classes("text-subtitle1").props('role="heading" aria-level="2"')

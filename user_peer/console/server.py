@@ -59,6 +59,7 @@ class Console:
     rerun_url: str | None = None
     join_timeout: float = 10.0
     instructors: tuple[str, ...] = ()  # the logins that may open the teacher's page (user_peer/console/teacher.py)
+    view3d: bool = True  # each page has the 3D view (console --no-3d: the top-down map alone)
     logins_required: bool | None = None  # whether the router refuses a session without a login (.world_kind); None: not known yet
     logins: Logins = field(init=False)
     health: Health = field(init=False, default_factory=Health)
