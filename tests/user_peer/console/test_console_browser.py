@@ -826,3 +826,29 @@ def test_the_teacher_releases_a_robot_a_student_holds_a_reload_keeps_her_in_and_
     assert carol.evaluate("() => sessionStorage.getItem('rf-teacher-session')") is None
     carol.reload(timeout=60_000)
     carol.get_by_role("button", name="Log in").wait_for(timeout=60_000)  # no ticket: the login card
+
+
+def test_a_console_without_its_3d_view_serves_the_map_and_the_panels_alone(browser, klass):
+    """``console --no-3d``: the 2D page (the map beside the base's panel, the arm's panel alone), for a small server
+    or to run the class's bench beside the 3D page."""
+    import signal
+
+    args = list(klass.console.args)
+    ep = args[args.index("--connect") + 1]
+    web = free_port()
+    flat = klass.procs.start(robofabric_cmd("console", "--world", klass.world, "--connect", ep, "--listen", f"127.0.0.1:{web}",
+                                            "--no-3d"), name="console-2d")
+    try:
+        url = f"http://127.0.0.1:{web}/"
+        wait_until(lambda: f"console: open {url}" in klass.procs.output(flat), timeout=60, what="the 2D console's URL",
+                   seen=lambda: klass.procs.output(flat)[-2000:])
+        page = new_context(browser, viewport=VIEWPORT).new_page()
+        page.set_default_timeout(30_000)
+        page.goto(url, timeout=60_000)
+        logged_in(page, klass, "dave")
+        page.locator(".rf-map").wait_for()
+        page.get_by_role("button", name="Apply IK").wait_for()  # the arm's panel, without the 3D view beside it
+        assert page.locator(".rf-scene3d").count() == 0
+        shot(page, "dave-2d")
+    finally:
+        klass.procs.kill(flat, signal.SIGTERM)
