@@ -4,18 +4,29 @@ other test with its module. A heavy entry that names nothing would let its tests
 from __future__ import annotations
 
 from pathlib import Path
+from types import ModuleType
 
-from conftest import HEAVY, work_unit
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_every_heavy_entry_names_a_test_file_or_folder_of_the_tree() -> None:
-    missing = [entry for entry in HEAVY if not (ROOT / entry).exists()]
+@pytest.fixture
+def units(request: pytest.FixtureRequest) -> ModuleType:
+    """tests/conftest.py as pytest loaded it: ``import conftest`` may give another folder's conftest."""
+    mine = ROOT / "tests" / "conftest.py"
+    found = [p for p in request.config.pluginmanager.get_plugins() if Path(getattr(p, "__file__", "") or "") == mine]
+    assert found, "tests/conftest.py is not among pytest's plugins"
+    return found[0]
+
+
+def test_every_heavy_entry_names_a_test_file_or_folder_of_the_tree(units: ModuleType) -> None:
+    missing = [entry for entry in units.HEAVY if not (ROOT / entry).exists()]
     assert not missing, f"HEAVY names what the tree does not hold: {missing}"
 
 
-def test_the_heavy_tests_share_one_unit_and_the_others_go_with_their_module() -> None:
+def test_the_heavy_tests_share_one_unit_and_the_others_go_with_their_module(units: ModuleType) -> None:
+    work_unit = units.work_unit
     assert work_unit("tests/user_peer/console/test_console_browser.py::test_a") == "heavy"
     assert work_unit("tests/lab/test_lab_faults.py::test_b[x]") == "heavy"
     assert work_unit("tests/fabric/test_keys.py::test_c") == work_unit("tests/fabric/test_keys.py::test_d[1@2]")
