@@ -1,8 +1,8 @@
 """What a session stamps on and withholds from the world when its peer is an authority (a sim).
 
 The writing side of replicated authority, kept in one place (the reading side, which state to believe, is
-:mod:`fabric.fencing`; who holds the world, :mod:`sim_peer.election`; the host that runs a sim as primary
-or standby, :mod:`sim_peer.replica_host`):
+:mod:`fabric.fencing`; who holds the world, :mod:`sim_peer.replica.election`; the host that runs a sim as primary
+or standby, :mod:`sim_peer.replica.replica_host`):
 
 - the **term** stamped on every header (0 for every peer that is no authority);
 - the **muzzle**: while set, nothing is published and no query is answered (an authority unsure it still

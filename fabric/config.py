@@ -37,7 +37,7 @@ ZENOH_DEFAULT_MAX_MESSAGE_SIZE = 1 << 30
 RECONNECT_RETRY = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}
 """``connect/retry`` of every client and peer session (zenoh's default backs off to 4 s): after a router's restart
 every peer reconnects within a second of the router being back, and at about the same time, so a class resumes at
-once and a standby that waits for its leader's token after its own link came back (sim_peer.roles, three leases)
+once and a standby that waits for its leader's token after its own link came back (sim_peer.replica.roles, three leases)
 does not wait on a leader still sleeping between two attempts. A zenoh config file that sets its own keeps it."""
 SOCKET_BUFFER = 64 * 1024
 """TCP ``so_sndbuf``/``so_rcvbuf`` of every link. With the kernel's autotuned loopback buffers (MBs),

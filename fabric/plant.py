@@ -6,7 +6,7 @@ with ``robofabric sim --plant KIND`` (a hidden option), which hands it to the ow
 (``ReplicaHost(plant=)``). The checker must then report a violation (robofabric/soak/checker.py;
 tests/robofabric/soak/test_soak_plants.py). Every default is ``""``: no defect. The hooks, one line each:
 
-* ``reset`` (sim_peer/following.py, ``catch_up``): a standby taking the world over puts its robots back at
+* ``reset`` (sim_peer/replica/following.py, ``catch_up``): a standby taking the world over puts its robots back at
   their spawn pose instead of where the old authority left them;
 * ``double-owner`` (ownership/state.py, a take-over of a still robot): the new owner gets the old owner's
   epoch, so two owners hold one epoch;

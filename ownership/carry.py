@@ -1,7 +1,7 @@
 """Carrying ownership records forward at a take-over: a snapshot's records overlaid with the newer ones heard since.
 
 A standby restores the ownership state from its leader's last ``srv/state`` snapshot, asked for every poll period
-(:mod:`sim_peer.following`). A grant, a release or a queue change the leader made after that snapshot was published
+(:mod:`sim_peer.replica.following`). A grant, a release or a queue change the leader made after that snapshot was published
 on ``own/{object}`` but is not in it: restoring the snapshot alone would lose it, and the new authority would
 publish an older epoch than the one owners and replicas already hold (the soak saw arm1's epoch go back 516 ->
 515 when the primary's cable was cut 36 ms after a grant). So the standby keeps the newest record of each object

@@ -1,7 +1,7 @@
 """The dry build of a robot type: does the sim take it, and do the sim and the compute peer agree on its arm?
 
 ``robofabric robots add`` runs it on the type it just wrote, before anyone starts a world with it: the type's
-MJCF attached in a world as the sim attaches it (:func:`sim_peer.build.compile_model`), and, where Pinocchio is
+MJCF attached in a world as the sim attaches it (:func:`sim_peer.physics.build.compile_model`), and, where Pinocchio is
 installed, the compute peer's model of its URDF (:class:`compute_peer.kinematics.ArmModel`) asked for the flange
 at random joints within the limits, against MuJoCo's ``flange`` site. Two compilers of one URDF that disagree
 would give IK solutions the sim puts elsewhere: that is refused here, not found in class.
@@ -36,8 +36,8 @@ def dry_build(directory: Path, *, samples: int = 20, rng_seed: int = 0) -> DryBu
     saying what failed."""
     import mujoco
 
-    from sim_peer.build import compile_model
-    from sim_peer.errors import WorldError
+    from sim_peer.physics.build import compile_model
+    from sim_peer.physics.errors import WorldError
 
     desc = robots.load(str(directory))
     scene = robots.scene("arm_cell")

@@ -123,7 +123,7 @@ def _own_rules(ident: Identity) -> list[dict]:
         serve += [f"{W}/srv/world", f"{W}/srv/state", f"{W}/own/*", f"{W}/own/*/{BY}/*", f"{W}/own/*/{STAFF_KEY}/{BY}/*",  # srv/state:
                   f"{W}/srv/move/*/{BY}/*", *latched, f"{W}/event/*/*"]  # a standby follows the primary; srv/move: the staff's moves
         tokens += [f"{W}/peer/sim/*", f"{W}/peer/sim/*/*/*/*", f"{W}/peer/recorder/*", *latched]  # its role (keys.sim_role); a recorder on its machine
-        ask.append(ROUTER_INFO)  # is my link up? (a standby judging a lost token: sim_peer.roles.router_answers)
+        ask.append(ROUTER_INFO)  # is my link up? (a standby judging a lost token: sim_peer.replica.roles.router_answers)
     elif r == "compute":
         put += [f"{W}/{k}" for k in access(r)] + [f"{W}/map/*", f"{W}/event/compute/**"]
         kept = [f"{W}/{k}" for k in access(r, latched=True)] + [f"{W}/map/*"]  # latched: a cache replies on its key

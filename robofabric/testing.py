@@ -143,7 +143,7 @@ def example_robot_urdf(relative: str) -> Path:
 
 @dataclass(frozen=True, slots=True)
 class SimRole:
-    """A role a sim shows on the fabric (its token ``peer/sim/{id}/{role}/{term}/{leader}``, :mod:`sim_peer.role_token`)."""
+    """A role a sim shows on the fabric (its token ``peer/sim/{id}/{role}/{term}/{leader}``, :mod:`sim_peer.replica.role_token`)."""
 
     sim: str
     role: str  # primary | standby

@@ -5,7 +5,7 @@ URDF); a scene is a ``NAME.toml`` next to its MJCF. Both are data: a user adds
 a robot or a scene by dropping files in a folder listed in
 ``ROBOFABRIC_ROBOTS_PATH`` (or passing a path). A robot type the sim's built-in
 arm and mobile base do not cover names its own simulation hooks (``hooks``,
-resolved by ``sim_peer.registry``; docs/robots.md); this package only reads the name.
+resolved by ``sim_peer.physics.registry``; docs/robots.md); this package only reads the name.
 """
 
 from __future__ import annotations
@@ -379,7 +379,7 @@ def _sonar(data: dict, where: str) -> UltrasonicSpec | None:
 
 
 def _hooks_ref(r: dict, where: str) -> str:
-    """``[robot] hooks``: where the sim finds this type's plug-in (resolved by sim_peer.registry, not here)."""
+    """``[robot] hooks``: where the sim finds this type's plug-in (resolved by sim_peer.physics.registry, not here)."""
     ref = r.get("hooks", "")
     if not isinstance(ref, str) or (ref and ref.count(":") != 1):
         raise DescriptionError(f"{where}: hooks must be \"package.module:Class\" or \"file.py:Class\", got {ref!r}")

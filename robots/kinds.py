@@ -7,7 +7,7 @@ flange?), so that a new kind is a row of :data:`KINDS` and its classes in the la
 through the peers (docs/howto.md, "A new robot kind"; tests/robots/test_kinds.py fails on a comparison outside this table).
 
 What a kind does in one layer is registered in that layer, keyed by the kind's name: the sim's built-in class
-(``sim_peer.registry.BUILTIN``), the user API's handle (a ``user_peer.robot.Robot`` subclass with its ``kind``,
+(``sim_peer.physics.registry.BUILTIN``), the user API's handle (a ``user_peer.robot.Robot`` subclass with its ``kind``,
 found by ``Robot.for_kind``); the rest of each layer reads the facts.
 This module is pure data: it imports nothing of the project, so every layer above ``fabric`` may read it.
 """

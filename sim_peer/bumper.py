@@ -19,7 +19,7 @@ from sim_peer.robot import Note, Physics
 from sim_peer.sensors import SENSED_GROUPS, Sensor
 
 if TYPE_CHECKING:
-    from sim_peer.robot_kinds import MobileRobot
+    from sim_peer.physics.robot_kinds import MobileRobot
 
 BUMPER_PERIOD = 0.02  # s of sim time between bumper checks
 BUMPER_HEIGHTS = (0.1, 0.4)  # m above the base: low obstacles and table tops

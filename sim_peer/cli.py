@@ -115,8 +115,8 @@ def sim(
 
     limit_arenas()  # before any session's threads: what they free is reused, not kept per thread (fabric.heap)
     from fabric.session import shutdown_event
-    from sim_peer.world import SimWorld
-    from sim_peer.world import WorldError
+    from sim_peer.physics.world import SimWorld
+    from sim_peer.physics.world import WorldError
 
     rates, pace, deadman = _parse_options(rate, speed, duration, noise, twist_timeout)
     budgets = _parse_budget(budget) if ownership else None
@@ -171,8 +171,8 @@ def _parse_options(rate: str, speed: str, duration: float | None, noise: float |
                    twist_timeout: str | None) -> tuple[dict[str, float], float | None, float | None]:
     """The stream rates, the pace and the twist deadman the options give; a bad option is a :class:`UserError`."""
     from fabric.rate import parse_rates
-    from sim_peer.pacing import parse_speed
-    from sim_peer.streams import DEFAULT_RATES
+    from sim_peer.physics.pacing import parse_speed
+    from sim_peer.serving.streams import DEFAULT_RATES
 
     try:
         rates = parse_rates(rate, DEFAULT_RATES)
@@ -192,7 +192,7 @@ def _parse_options(rate: str, speed: str, duration: float | None, noise: float |
 
 def _run_single(cfg, peer_id, sim_world, ownership, rates, pace, stop, duration, first, make_gate=make_gate) -> None:
     """One sim, one session, no replication layer (``ROBOFABRIC_SIM_SINGLE=1``)."""
-    from sim_peer.peer import SimPeer
+    from sim_peer.serving.peer import SimPeer
 
     fab = open_fabric(cfg, "sim", peer_id)
     with fab:
@@ -271,9 +271,9 @@ def replicated_off() -> bool:
 
 def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, stop, duration, standby, objects=True,
                     gate_of=make_gate, plant: str = "") -> None:
-    """Primary or standby through :func:`sim_peer.replica_host.run_replicated`."""
+    """Primary or standby through :func:`sim_peer.replica.replica_host.run_replicated`."""
     from fabric.config import default_peer_id
-    from sim_peer.replica_host import run_replicated
+    from sim_peer.replica.replica_host import run_replicated
 
     pid = peer_id or default_peer_id("sim")  # one id across sessions: a primary that steps down stays itself
     worlds = [first_world]
@@ -329,7 +329,7 @@ def move_cmd(robot: Annotated[str, typer.Argument(help="Robot id.")],
 
     Its owner keeps it and her epoch; see docs/sim.md, "Moving a robot between sims". In a class world only the
     instructor and sim logins may move robots (docs/security.md)."""
-    from sim_peer.handoff import MoveError, move
+    from sim_peer.shards.handoff import MoveError, move
     with join.open("tool") as fab:
         try:
             done = move(fab, robot, to)

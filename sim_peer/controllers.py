@@ -175,7 +175,7 @@ class BaseController:
         self.wheels = np.zeros(2)  # left, right wheel angles (rad)
         self.wheel_speeds = np.zeros(2)
         self.follower = None  # anything with step(x, y, yaw, v, dt) -> (v, omega, done)
-        self.speed_cap = math.inf  # m/s a path follower may drive at: set by the base's way guard (sim_peer.way_guard)
+        self.speed_cap = math.inf  # m/s a path follower may drive at: set by the base's way guard (sim_peer.physics.way_guard)
         self.paths_done = 0  # paths followed to their end (not stopped or replaced)
 
     def twist(self, v: float, omega: float) -> Clamp | None:

@@ -1,6 +1,6 @@
 """What a robot type plugs into the sim: hooks with empty defaults, in the spirit of dm_control's composer.
 
-A robot type is a :class:`SimRobot` subclass found from its description (:mod:`sim_peer.registry`). The world
+A robot type is a :class:`SimRobot` subclass found from its description (:mod:`sim_peer.physics.registry`). The world
 calls its hooks; the peer loops over them and never asks what kind of robot it holds:
 
 * ``describe()`` - what the robot is, as the :class:`RobotInfo` the world description carries;
@@ -67,7 +67,7 @@ class Physics:
 class Mount:
     """Where a robot was put: its id, description, the compiled model (its names carry the prefix ``{id}/``),
     its spawn pose (x, y, z, yaw), the world's noise generator, the world's options, the sink for its notes, and
-    the board its bases' way guards share (:class:`sim_peer.traffic.Traffic`; None: a board of its own)."""
+    the board its bases' way guards share (:class:`sim_peer.physics.traffic.Traffic`; None: a board of its own)."""
 
     id: str
     desc: RobotDescription
@@ -116,7 +116,7 @@ class SimRobot:
 
     ``kind`` is what other peers make of the robot (``arm``: joints and a flange; ``mobile``: a base pose
     and range sensors), carried in its :class:`RobotInfo`; the sim itself never looks at it. Named for the
-    side it lives on, like :class:`~sim_peer.world.SimWorld`: ``user_peer.robot.Robot`` is a user's handle on a
+    side it lives on, like :class:`~sim_peer.physics.world.SimWorld`: ``user_peer.robot.Robot`` is a user's handle on a
     robot of the world.
     """
 
@@ -174,7 +174,7 @@ class SimRobot:
         """The last known state as a small dict of plain values (the ownership record's ``state``)."""
         return {"type": self.desc.name, "kind": self.desc.kind, "moving": self.moving}
 
-    # a standby's take-over (sim_peer/capture.py, docs/sim.md) -------------------
+    # a standby's take-over (sim_peer/physics/capture.py, docs/sim.md) -------------------
     def snapshot(self) -> RobotState | None:
         """The controllers' whole state, for a standby to carry the robot on; None: not carried over."""
         return None

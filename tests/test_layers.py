@@ -72,14 +72,24 @@ MODULES = [
     "robofabric/__init__.py",
     "robofabric/launch.py",
     "sim_peer/__init__.py",
-    "sim_peer/peer.py",
-    "sim_peer/roles.py",
-    "sim_peer/election.py",
-    "sim_peer/hearing_rule.py",
-    "sim_peer/deaf_rule.py",
-    "sim_peer/freeze_rule.py",
-    "sim_peer/adoption_rule.py",
-    "sim_peer/move_rule.py",
+    "sim_peer/robot.py",
+    "sim_peer/controllers.py",
+    "sim_peer/sensors.py",
+    "sim_peer/bumper.py",
+    "sim_peer/physics/__init__.py",
+    "sim_peer/physics/world.py",
+    "sim_peer/physics/placement.py",
+    "sim_peer/serving/__init__.py",
+    "sim_peer/serving/peer.py",
+    "sim_peer/replica/__init__.py",
+    "sim_peer/replica/roles.py",
+    "sim_peer/replica/election.py",
+    "sim_peer/replica/hearing_rule.py",
+    "sim_peer/replica/deaf_rule.py",
+    "sim_peer/replica/freeze_rule.py",
+    "sim_peer/replica/adoption_rule.py",
+    "sim_peer/shards/__init__.py",
+    "sim_peer/shards/move_rule.py",
     "compute_peer/__init__.py",
     "compute_peer/service.py",
     "user_peer/__init__.py",
@@ -94,6 +104,10 @@ MODULES = [
     "fabric/codec/registry.py",
     "fabric/codec/wire.py",
     "fabric/session.py",
+    "fabric/rpc.py",
+    "fabric/publishers.py",
+    "fabric/fence_watch.py",
+    "fabric/recording/__init__.py",
     "fabric/keys.py",
     "fabric/interfaces/__init__.py",
     "fabric/interfaces/std.py",
@@ -108,13 +122,17 @@ ALLOWED = {
     "fabric/interfaces/std.py": "from fabric.codec import encode\nimport fabric.limits\n",
     "fabric/session.py": "import fabric.interfaces\nimport fabric.keys\n",
     "ownership/client.py": "import fabric.session\nimport fabric.interfaces\n",
-    "sim_peer/peer.py": "import ownership.client\nimport robots\nimport fabric.interfaces\nimport zenoh\n",
-    "sim_peer/roles.py": "import sim_peer.election\nimport sim_peer.hearing_rule\nimport fabric.session\n",
-    "sim_peer/deaf_rule.py": "import sim_peer.hearing_rule\n",
+    "sim_peer/serving/peer.py": "import ownership.client\nimport robots\nimport fabric.interfaces\nimport zenoh\n",
+    "sim_peer/replica/roles.py": "import sim_peer.replica.election\nimport sim_peer.replica.hearing_rule\nimport fabric.session\n",
+    "sim_peer/replica/deaf_rule.py": "import sim_peer.replica.hearing_rule\n",
     "compute_peer/service.py": "import robots\nimport fabric.interfaces.std\n",
     "user_peer/api.py": "import ownership.client\nimport fabric.session\n",
-    "robofabric/__init__.py": "import sim_peer.peer\nimport user_peer.api\n",
+    "robofabric/__init__.py": "import sim_peer.serving.peer\nimport user_peer.api\n",
     "robofabric/launch.py": "import fabric.session\nimport fabric.keys\n",
+    "sim_peer/physics/world.py": "import sim_peer.physics.placement\nimport sim_peer.robot\nimport fabric.interfaces\n",
+    "sim_peer/physics/placement.py": "import fabric.keys\n",
+    "sim_peer/robot.py": "import sim_peer.controllers\nimport sim_peer.sensors\nimport fabric.interfaces\n",
+    "fabric/keys.py": "def valid(expr):\n    import zenoh\n",
 }
 
 
@@ -143,9 +161,9 @@ def test_skeleton_without_bad_imports_keeps_every_contract(tmp_path):
 @pytest.mark.parametrize(
     "where, line, contract",
     [
-        ("compute_peer/service.py", "import sim_peer.peer\n", "layers"),  # a peer importing another peer
+        ("compute_peer/service.py", "import sim_peer.serving.peer\n", "layers"),  # a peer importing another peer
         ("user_peer/api.py", "from compute_peer import service\n", "layers"),
-        ("sim_peer/peer.py", "import user_peer\n", "layers"),
+        ("sim_peer/serving/peer.py", "import user_peer\n", "layers"),
         ("ownership/client.py", "import sim_peer\n", "layers"),  # the library importing a peer
         ("fabric/session.py", "import user_peer.api\n", "layers"),  # the ground floor importing upwards
         ("robots/__init__.py", "import ownership\n", "layers"),
@@ -157,16 +175,20 @@ def test_skeleton_without_bad_imports_keeps_every_contract(tmp_path):
         ("fabric/limits.py", "import fabric.keys\n", "codec"),
         ("fabric/session.py", "from robofabric import launch\n", "ground-floor"),  # the core leaning on a tool
         ("fabric/keys.py", "def later():\n    import robofabric.launch\n", "ground-floor"),  # even inside a function
-        ("sim_peer/peer.py", "import robofabric.launch\n", "tools"),  # a peer importing a tool
+        ("sim_peer/serving/peer.py", "import robofabric.launch\n", "tools"),  # a peer importing a tool
         ("user_peer/api.py", "from robofabric import launch\n", "tools"),
         ("ownership/client.py", "import robofabric\n", "tools"),
         ("robots/__init__.py", "import robofabric.launch\n", "tools"),
-        ("sim_peer/deaf_rule.py", "import zenoh\n", "pure-cores"),  # a pure core opening sessions
-        ("sim_peer/freeze_rule.py", "def later():\n    import fabric.session\n", "pure-cores"),
-        ("sim_peer/hearing_rule.py", "from sim_peer import roles\n", "pure-cores"),  # a core reaching into its shell
-        ("sim_peer/election.py", "import sim_peer.peer\n", "pure-cores"),  # zenoh through the peer
-        ("sim_peer/adoption_rule.py", "from fabric import session\n", "pure-cores"),
-        ("sim_peer/move_rule.py", "import zenoh\n", "pure-cores"),
+        ("sim_peer/replica/deaf_rule.py", "import zenoh\n", "pure-cores"),  # a pure core opening sessions
+        ("sim_peer/replica/freeze_rule.py", "def later():\n    import fabric.session\n", "pure-cores"),
+        ("sim_peer/replica/hearing_rule.py", "from sim_peer.replica import roles\n", "pure-cores"),  # a core reaching into its shell
+        ("sim_peer/replica/election.py", "import sim_peer.serving.peer\n", "pure-cores"),  # zenoh through the peer
+        ("sim_peer/replica/adoption_rule.py", "from fabric import session\n", "pure-cores"),
+        ("sim_peer/shards/move_rule.py", "import zenoh\n", "pure-cores"),
+        ("sim_peer/physics/world.py", "import zenoh\n", "sim-physics"),  # the MuJoCo world opening sessions
+        ("sim_peer/physics/placement.py", "from fabric import session\n", "sim-physics"),
+        ("sim_peer/robot.py", "import sim_peer.serving.peer\n", "sim-physics"),  # the plug-in surface leaning on the peer
+        ("sim_peer/sensors.py", "import sim_peer.replica.roles\n", "sim-physics"),
     ],
 )
 def test_a_bad_import_breaks_its_contract(tmp_path, where, line, contract):

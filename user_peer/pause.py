@@ -1,14 +1,14 @@
 """A waited command rides out a sim that holds its robots: a pause, not a refusal.
 
 A sim that was cut off from its world, or that froze and is not yet sure of its link, holds its robots and refuses
-every command with code ``held`` (:mod:`sim_peer.deaf_stop`) until it hears again, usually within a second or two.
+every command with code ``held`` (:mod:`sim_peer.replica.deaf_stop`) until it hears again, usually within a second or two.
 A command given with ``wait=True`` (:meth:`user_peer.arm.Arm.move_joints`, :meth:`user_peer.mobile_base.Base.follow`)
 must not fail for that: :class:`PauseRider` watches the robot's refusals while the command is awaited, raises any
 other refusal at once, and on a hold (a refusal of the command, the sim's word, once it hears again, that the hold
 stopped the robot before the command was done, or a sim's token come back: one cut off never had what was sent
 meanwhile) sends the same command again (the same envelope: its id and its epoch,
 :meth:`user_peer.robot.Robot.resend`) until the sim takes it, all within the command's own timeout. The sim applies
-a command once by its id (:mod:`sim_peer.command_ids`), so a copy that arrives after the first was taken changes
+a command once by its id (:mod:`sim_peer.serving.command_ids`), so a copy that arrives after the first was taken changes
 nothing. A hand-over meanwhile (the epoch changed) ends the ride with :class:`~user_peer.errors.NotOwner`.
 
 The sim reports its refusals a few times per second at most (:mod:`fabric.reports`), so the rider cannot count on

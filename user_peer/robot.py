@@ -213,7 +213,7 @@ class Robot:
 
     def resend(self, command: str, cmd: Command) -> None:
         """Send ``cmd`` (given as a ``command`` command) again, unchanged: the same id and epoch, so the sim applies
-        it once whichever copy it takes (:mod:`sim_peer.command_ids`); :class:`NotOwner` if the robot changed hands
+        it once whichever copy it takes (:mod:`sim_peer.serving.command_ids`); :class:`NotOwner` if the robot changed hands
         since (:mod:`user_peer.pause`)."""
         rec = self.record
         if rec is not None and (rec.owner != self.world.user or rec.epoch != cmd.epoch):

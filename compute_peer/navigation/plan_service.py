@@ -29,7 +29,7 @@ from .robot_cells import Footprint, clear_robots, mark_robots
 
 OTHERS_MARGIN = 0.1
 """Metres the other robots are marked beyond their radius for a plan: a base's way guard keeps other bases their
-radii plus 5 cm away (``sim_peer.way_guard.BASE_CLEARANCE``: a bumper looks beyond the radius ahead), and its
+radii plus 5 cm away (``sim_peer.physics.way_guard.BASE_CLEARANCE``: a bumper looks beyond the radius ahead), and its
 follower cuts a curve by up to 7 cm, so a path planned past a base standing still must pass it further than its
 radius (at their radii, bases passing each other stopped, or met on the bumper)."""
 

@@ -27,7 +27,7 @@ class EventKind(enum.StrEnum):
     """A payload that did not decode (on ``event/decode/{peer}``)."""
     SERVICE_ERROR = "service_error"
     """A service's refusal: the payload of an error reply, not published."""
-    # the sim (sim_peer.peer), on event/{kind}/{robot}
+    # the sim (sim_peer.serving.peer), on event/{kind}/{robot}
     REJECT = "reject"
     """A command the sim refused; ``reason``: not_owner, stale_epoch, unknown_robot, user_mismatch, wrong_body, ..."""
     CLAMP = "clamp"
@@ -41,7 +41,7 @@ class EventKind(enum.StrEnum):
     COLLISION = "collision"
     """The bumper stopped a base before an obstacle."""
     OBSTACLE_STOP = "obstacle_stop"
-    """A base following a path and what its LIDAR sees in its way (sim_peer.way_guard): ``reason`` waiting (it
+    """A base following a path and what its LIDAR sees in its way (sim_peer.physics.way_guard): ``reason`` waiting (it
     stopped short of it), resumed (the way cleared), blocked (it stayed closed: the path is dropped, plan again)."""
     MOVE_REFUSED = "move_refused"
     """A sim refused a step of a move (on ``event/move``): asked on a key every login may ask, no robot handed

@@ -40,7 +40,7 @@ MIRROR_LINE = re.compile(r"mirrors: (\d+) shown.*?p50 ([\d.]+|nan) ms, p99 ([\d.
 
 def spots(n: int) -> list[str]:
     """``reeman:baseI@X,Y,YAW`` for N bases, at the free spots one sim would choose for all of them."""
-    from sim_peer.world import SimWorld
+    from sim_peer.physics.world import SimWorld
 
     w = SimWorld("warehouse", [f"reeman:base{i}" for i in range(n)], scene_robots=False)
     out = []

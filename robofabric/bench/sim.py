@@ -19,7 +19,7 @@ from robots.kinds import facts
 
 def rtf(world, seconds: float, scan_hz: float = 20.0) -> float:
     """Sim seconds per wall second over ``seconds`` of sim time, scanning every robot at ``scan_hz``."""
-    from sim_peer.robot_kinds import MobileRobot
+    from sim_peer.physics.robot_kinds import MobileRobot
 
     mobiles = [rid for rid, r in world.robots.items() if isinstance(r, MobileRobot) and r.lidar is not None]
     for rid in mobiles:  # keep them driving in 1 m circles so the scans see a changing world
@@ -62,8 +62,8 @@ def scan_cost(world, robot_id: str, n: int = 2000) -> tuple[float, float]:
 def arm_mirror_cost(n: int = 2000) -> tuple[float, float]:
     """Median and p99 wall time (us) of one arm mirror update: the forward kinematics of another sim's Meca500 at
     new joint angles, and its seven link geoms placed in this sim's world (what each joint message costs)."""
-    from sim_peer.arm_mirror import arm_shape
-    from sim_peer.world import SimWorld
+    from sim_peer.physics.arm_mirror import arm_shape
+    from sim_peer.physics.world import SimWorld
 
     other = SimWorld("warehouse", ["meca500:arm9@1,0,0,0"], scene_robots=False)
     shape = arm_shape(other.robot("arm9").describe())
@@ -84,7 +84,7 @@ def command(
     out: Annotated[Optional[Path], typer.Option(help="Write the markdown table to this file.")] = None,
 ) -> None:
     """Real-time factor of `combined` with LIDAR at 20 Hz, one 240-ray scan's cost, RTF with N mobile robots."""
-    from sim_peer.world import SimWorld
+    from sim_peer.physics.world import SimWorld
 
     rows = []
     w = SimWorld("combined", seed=1)

@@ -65,7 +65,7 @@ def test_the_routers_put_and_serve_rules_of_sims_and_compute_peers():
 
 def test_the_sims_and_the_loads_default_rates_and_what_a_handle_follows():
     from robofabric.recording.load import DEFAULT_RATES as LOAD_RATES
-    from sim_peer.streams import DEFAULT_RATES
+    from sim_peer.serving.streams import DEFAULT_RATES
     from user_peer.following import FOLLOWED_STREAMS
 
     assert DEFAULT_RATES == LOAD_RATES == {"joints": 100.0, "pose": 50.0, "scan": 20.0}

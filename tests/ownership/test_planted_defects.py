@@ -82,7 +82,7 @@ def test_the_authority_admits_a_stale_command_only_when_built_with_that_defect(c
         auth.close()
 
 
-PURE_AND_HOOKED = ("ownership/state.py", "ownership/authority.py", "sim_peer/following.py", "sim_peer/replica_host.py",
+PURE_AND_HOOKED = ("ownership/state.py", "ownership/authority.py", "sim_peer/replica/following.py", "sim_peer/replica/replica_host.py",
                    "fabric/plant.py")
 """The state machine and the modules that hold a defect's hook: none of them reads the environment."""
 

@@ -309,9 +309,9 @@ def test_a_student_cannot_read_the_routers_admin_space(secure, tmp_path):
 
 def test_a_sim_may_ask_its_router_whether_its_link_is_up_and_a_student_may_not(secure):
     """A standby that lost its leader's token asks its router (its admin space's own entry) whether its link is up
-    before it takes over (sim_peer.roles.router_answers): the class ACL lets sim logins ask that, and nothing
+    before it takes over (sim_peer.replica.roles.router_answers): the class ACL lets sim logins ask that, and nothing
     else of the admin space; a student's question is answered by nobody."""
-    from sim_peer.roles import router_answers
+    from sim_peer.replica.roles import router_answers
 
     assert router_answers(secure.fabric("sim", kind="sim", peer_id="sim-probe"), 5.0)
     assert not router_answers(secure.fabric("mallory"), 1.0)
@@ -319,7 +319,7 @@ def test_a_sim_may_ask_its_router_whether_its_link_is_up_and_a_student_may_not(s
 
 def test_a_sim_shows_its_role_through_the_class_acl(secure):
     """The class ACL lets a sim declare the token of its role (``peer/sim/{id}/{role}/{term}/{leader}``,
-    sim_peer.role_token): a viewer sees the class's only sim as its primary, under term 1."""
+    sim_peer.replica.role_token): a viewer sees the class's only sim as its primary, under term 1."""
     watcher = secure.fabric("viewer", kind="viewer", peer_id="roles")
     roles = SimRoles(watcher)
     # the class's sim, not another test's probe session of kind sim (it shows no role: it is no sim peer)

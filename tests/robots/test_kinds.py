@@ -90,7 +90,7 @@ def test_the_stream_tables_per_kind_ros2_topics_name_kinds_of_the_table():
 
 
 def test_every_kind_has_its_sim_class():
-    from sim_peer.registry import BUILTIN, robot_class
+    from sim_peer.physics.registry import BUILTIN, robot_class
 
     assert set(BUILTIN) == set(NAMES)
     for name in NAMES:

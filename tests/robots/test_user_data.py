@@ -5,7 +5,7 @@ from __future__ import annotations
 import shutil
 
 import robots
-from sim_peer.world import SimWorld
+from sim_peer.physics.world import SimWorld
 
 
 def test_a_robot_and_a_scene_added_as_files_are_loaded_and_simulated(tmp_path, monkeypatch):

@@ -1,4 +1,4 @@
-"""The pure core of the scene objects' adoption (sim_peer.adoption_rule): one wait at a time after sims leave, no
+"""The pure core of the scene objects' adoption (sim_peer.replica.adoption_rule): one wait at a time after sims leave, no
 departure lost, and exactly one adopter among the shards. Unit tests, then property tests over random departures
 and random worlds."""
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from hypothesis import given, settings, strategies as hs
 
-from sim_peer import adoption_rule as ar
+from sim_peer.replica import adoption_rule as ar
 
 
 def test_a_departure_starts_one_wait_and_a_second_joins_it():

@@ -1,13 +1,13 @@
-"""A world's state as a message and back (sim_peer.capture): a restored world goes on exactly as the original."""
+"""A world's state as a message and back (sim_peer.physics.capture): a restored world goes on exactly as the original."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from fabric.codec import decode, encode
-from sim_peer import capture
+from sim_peer.physics import capture
 from fabric.interfaces import WorldState
-from sim_peer.world import SimWorld
+from sim_peer.physics.world import SimWorld
 
 
 def _moving_world() -> SimWorld:

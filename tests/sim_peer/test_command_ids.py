@@ -1,4 +1,4 @@
-"""A command is applied once by its id: what the sim remembers of the ids it applied (sim_peer.command_ids)."""
+"""A command is applied once by its id: what the sim remembers of the ids it applied (sim_peer.serving.command_ids)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from fabric.interfaces import Command, Header, JointTarget
-from sim_peer.command_ids import KEEP, RecentIds
+from sim_peer.serving.command_ids import KEEP, RecentIds
 
 
 def _cmd(seq: int, source: str = "alice-1", user: str = "alice") -> Command:

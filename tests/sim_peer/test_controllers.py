@@ -56,7 +56,7 @@ def test_base_respects_speed_and_acceleration_limits(v, w):
 
 
 def test_a_resumed_twist_clock_times_out_when_the_original_would():
-    """A standby carries the twist timeout's count on (sim_peer.robot_kinds restore), through the public method."""
+    """A standby carries the twist timeout's count on (sim_peer.physics.robot_kinds restore), through the public method."""
     dt, n = 0.01, 30
     first = BaseController(BASE, twist_timeout=0.5)
     first.twist(0.2, 0.0)

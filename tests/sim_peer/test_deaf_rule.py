@@ -1,4 +1,4 @@
-"""The pure core of the deaf stop (sim_peer.deaf_rule): a primary cut off holds its robots and resumes once it hears
+"""The pure core of the deaf stop (sim_peer.replica.deaf_rule): a primary cut off holds its robots and resumes once it hears
 again; one only late holds them only if its router does not answer, and says once that it was late. Unit tests
 with the time passed in, then a property test over random looks, with the robots' hold driven by the effects as
 the shell drives it."""
@@ -9,8 +9,8 @@ import math
 
 from hypothesis import given, settings, strategies as hs
 
-from sim_peer import deaf_rule as dr
-from sim_peer import hearing_rule as hr
+from sim_peer.replica import deaf_rule as dr
+from sim_peer.replica import hearing_rule as hr
 
 LEASE = 2.0
 CUT = "its link is down"

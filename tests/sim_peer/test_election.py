@@ -1,11 +1,11 @@
-"""Property tests of the pure election and fencing core (sim_peer.election) over random histories:
+"""Property tests of the pure election and fencing core (sim_peer.replica.election) over random histories:
 peers die, freeze and come back, heartbeats and liveliness views arrive late or not at all."""
 
 from __future__ import annotations
 
 from hypothesis import example, given, settings, strategies as hs
 
-from sim_peer import election as el
+from sim_peer.replica import election as el
 
 IDS = ["sim-a", "sim-b", "sim-c", "sim-d"]
 

@@ -1,4 +1,4 @@
-"""The pure core of what a primary does after a freeze (sim_peer.freeze_rule): publish again at once when nobody
+"""The pure core of what a primary does after a freeze (sim_peer.replica.freeze_rule): publish again at once when nobody
 could have taken over, else ask who holds the shard, after listening for a lease when the freeze outlasted it, and
 then go on under a new term. Unit tests, then a property test over random freezes."""
 
@@ -6,9 +6,9 @@ from __future__ import annotations
 
 from hypothesis import given, settings, strategies as hs
 
-from sim_peer import election as el
-from sim_peer import freeze_rule as fr
-from sim_peer import hearing_rule as hr
+from sim_peer.replica import election as el
+from sim_peer.replica import freeze_rule as fr
+from sim_peer.replica import hearing_rule as hr
 
 LEASE = 2.0
 

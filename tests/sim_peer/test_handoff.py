@@ -1,4 +1,4 @@
-"""The pure parts of moving a robot between sims (sim_peer/handoff.py): the term, the records and users merged,
+"""The pure parts of moving a robot between sims (sim_peer/shards/handoff.py): the term, the records and users merged,
 the handoff as it travels in an event."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import pytest
 from fabric.codec import decode, encode
 from fabric.interfaces import Event, OwnershipRecord, RobotState
 from robots.description import SceneRobot
-from sim_peer import handoff as ho
+from sim_peer.shards import handoff as ho
 
 
 def _rec(obj: str, owner: str = "", epoch: int = 0, queue: tuple[str, ...] = ()) -> OwnershipRecord:

@@ -1,4 +1,4 @@
-"""The pure core of whether a sim hears its world (sim_peer.hearing_rule): its heartbeat's freezes and the distrust
+"""The pure core of whether a sim hears its world (sim_peer.replica.hearing_rule): its heartbeat's freezes and the distrust
 after them, a cut, the wait after deafness and the audible sims, with the time passed in; then property tests over
 random heartbeats."""
 
@@ -8,7 +8,7 @@ import math
 
 from hypothesis import given, settings, strategies as hs
 
-from sim_peer import hearing_rule as hr
+from sim_peer.replica import hearing_rule as hr
 
 LEASE = 2.0
 GAP = LEASE / 2

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from hypothesis import given, settings, strategies as hs
 
-from sim_peer.inbox import CONTROLS, TARGETS, CommandQueue
+from sim_peer.serving.inbox import CONTROLS, TARGETS, CommandQueue
 
 NAMES = TARGETS + CONTROLS
 

@@ -1,4 +1,4 @@
-"""sim_peer.kept_commands.CommandBuffer: what a standby keeps of the last seconds, on a clock passed in.
+"""sim_peer.replica.kept_commands.CommandBuffer: what a standby keeps of the last seconds, on a clock passed in.
 
 - It keeps at most ``max_count`` messages and ``max_bytes`` in all, within ``keep_s`` of the newest, and drops
   the oldest first: whatever is kept is the newest suffix of what was heard.
@@ -10,7 +10,7 @@ from __future__ import annotations
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sim_peer.kept_commands import CommandBuffer
+from sim_peer.replica.kept_commands import CommandBuffer
 
 
 class Clock:

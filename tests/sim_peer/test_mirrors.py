@@ -1,4 +1,4 @@
-"""Mirrors: a robot another sim simulates, as a body this sim's sensors see (sim_peer/mirrors.py)."""
+"""Mirrors: a robot another sim simulates, as a body this sim's sensors see (sim_peer/physics/mirrors.py)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import pytest
 from fabric import keys
 from fabric.interfaces import JointState, Pose, RobotInfo, WorldInfo
 from robofabric.testing import wait_until
-from sim_peer.mirroring import MirrorFeed
-from sim_peer.world import SimWorld
+from sim_peer.shards.mirroring import MirrorFeed
+from sim_peer.physics.world import SimWorld
 
 FORWARD = 120  # the ray straight ahead of a 240-ray LIDAR (reeman: 240 rays over 360 deg, -x first)
 
@@ -139,7 +139,7 @@ def arm_elsewhere(q=None, at="1,0.5,30,0") -> tuple[SimWorld, RobotInfo]:
 def test_an_arm_mirror_puts_each_link_where_the_arms_own_sim_has_it():
     import mujoco
 
-    from sim_peer.arm_mirror import arm_shape
+    from sim_peer.physics.arm_mirror import arm_shape
 
     q = [0.4, -0.7, 0.9, 1.1, -0.5, 2.0]
     other, info = arm_elsewhere(q)
@@ -157,7 +157,7 @@ def test_an_arm_mirror_puts_each_link_where_the_arms_own_sim_has_it():
 
 
 def test_the_lidar_sees_a_mirrored_arm_and_sees_its_links_move():
-    from sim_peer.arm_mirror import arm_shape
+    from sim_peer.physics.arm_mirror import arm_shape
 
     w = SimWorld("warehouse", ["reeman:base0@0,0"], scene_robots=False, mirrors=8)
     w.step(10)

@@ -1,4 +1,4 @@
-"""The pure core of whether a sim may take a step of a robot's move (sim_peer.move_rule): who may move robots, what
+"""The pure core of whether a sim may take a step of a robot's move (sim_peer.shards.move_rule): who may move robots, what
 a source may hand out and to whom, what a target may take in, and how long a source keeps what it handed out. Unit
 tests, then property tests over random hosts."""
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from hypothesis import given, settings, strategies as hs
 
-from sim_peer import move_rule as mr
+from sim_peer.shards import move_rule as mr
 
 SIMS = ["sim-a", "sim-b", "sim-c"]
 ROBOTS = ["arm0", "base0", "base1"]

@@ -29,7 +29,7 @@ from robofabric.secure import init
 from fabric.session import Fabric
 from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 from robots.description import SceneRobot
-from sim_peer import handoff as ho
+from sim_peer.shards import handoff as ho
 
 pytestmark = pytest.mark.slow
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from fabric.interfaces import EventKind
-from sim_peer.notes import NoteLog
+from sim_peer.physics.notes import NoteLog
 from sim_peer.robot import Note
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from fabric.rate import FakeClock
-from sim_peer.pacing import Pacer, parse_speed
+from sim_peer.physics.pacing import Pacer, parse_speed
 
 
 def test_parse_speed():

@@ -11,8 +11,8 @@ import pytest
 from fabric import keys
 from fabric.interfaces import Command, Event, JointState, JointTarget, Pose, Reset, Scan, Stop, Twist, WorldInfo
 from robofabric.testing import robofabric_cmd, wait_until
-from sim_peer.peer import SimPeer
-from sim_peer.world import SimWorld
+from sim_peer.serving.peer import SimPeer
+from sim_peer.physics.world import SimWorld
 
 
 class Inbox:

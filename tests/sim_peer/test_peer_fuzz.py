@@ -15,8 +15,8 @@ import pytest
 
 from fabric import keys
 from fabric.interfaces import Command, Event, Header, JointTarget, Path, Reset, Stop, Twist
-from sim_peer.peer import SimPeer
-from sim_peer.world import SimWorld
+from sim_peer.serving.peer import SimPeer
+from sim_peer.physics.world import SimWorld
 
 WORLD = SimWorld("combined")
 

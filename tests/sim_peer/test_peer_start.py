@@ -11,8 +11,8 @@ import threading
 import pytest
 
 from robofabric.testing import wait_until
-from sim_peer.peer import SimPeer
-from sim_peer.world import SimWorld
+from sim_peer.serving.peer import SimPeer
+from sim_peer.physics.world import SimWorld
 
 pytestmark = pytest.mark.slow  # a router and a sim session
 

@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 
 import robots
-import sim_peer.peer
+import sim_peer.serving.peer
 from fabric import keys
 from fabric.interfaces import Command, Event, JointState, JointTarget, Pose, Twist, WorldInfo
 from robofabric.testing import wait_until
 from ownership import Authority, OwnershipClient
-from sim_peer.peer import SimPeer
+from sim_peer.serving.peer import SimPeer
 from sim_peer.robot import HOOKS, SimRobot, Stream
-from sim_peer.world import SimWorld, WorldError
+from sim_peer.physics.world import SimWorld, WorldError
 
 PLUGINS = Path(__file__).parent / "plugin_robots"
 L1, L2, BASE_Z = 0.30, 0.25, 0.75 + 0.05  # link lengths; the shoulder sits 5 cm above the spawn height
@@ -55,7 +55,7 @@ def test_the_world_builds_and_steps_a_robot_type_from_its_description_and_hooks(
 
 
 def test_a_standby_carries_the_new_type_on_through_its_snapshot_and_restore_hooks(plugin_path):
-    from sim_peer import capture
+    from sim_peer.physics import capture
     from fabric.interfaces import WorldState
 
     w = SimWorld("planar_cell")
@@ -95,7 +95,7 @@ def test_a_bad_hooks_reference_is_a_world_error_naming_the_type(plugin_path, tmp
 def test_the_peer_tests_no_robot_kind():
     """Kinds are the robots' business (their hooks); the peer loops over hooks. (It may tell its own
     commands apart, as the owner-lost ``Halt`` from a user's, but never a robot's class or kind.)"""
-    src = Path(sim_peer.peer.__file__).read_text()
+    src = Path(sim_peer.serving.peer.__file__).read_text()
     assert not re.search(r"isinstance\([^,]*robot|kind ==|ArmRobot|MobileRobot", src)
     assert HOOKS == ("describe", "initialize", "before_step", "after_step", "streams", "commands")
     assert Stream("joints", "joints", lambda physics: None).positions is False

@@ -11,7 +11,7 @@ import pytest
 
 import robots
 from sim_peer.controllers import BaseController
-from sim_peer.pure_pursuit import PurePursuit
+from sim_peer.physics.pure_pursuit import PurePursuit
 
 BASE = robots.load("reeman").base
 

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from sim_peer.world import SimWorld
+from sim_peer.physics.world import SimWorld
 
 
 def test_readings_name_what_a_robot_lacks():

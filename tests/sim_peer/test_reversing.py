@@ -11,8 +11,8 @@ import pytest
 from compute_peer.navigation import PlannerSettings, VehicleModel, plan_path
 from compute_peer.navigation.grid import make_grid
 import robots
-from sim_peer.pure_pursuit import PurePursuit
-from sim_peer.world import SimWorld
+from sim_peer.physics.pure_pursuit import PurePursuit
+from sim_peer.physics.world import SimWorld
 
 
 def test_a_stretch_whose_headings_point_against_its_travel_is_driven_backwards():

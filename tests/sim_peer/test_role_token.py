@@ -1,4 +1,4 @@
-"""A sim's role is published (sim_peer.role_token): the token ``peer/sim/{id}/{role}/{term}/{leader}``, which tests and
+"""A sim's role is published (sim_peer.replica.role_token): the token ``peer/sim/{id}/{role}/{term}/{leader}``, which tests and
 the soak read through :class:`robofabric.testing.SimRoles` instead of the sim's log lines."""
 
 from __future__ import annotations
@@ -8,10 +8,10 @@ import pytest
 from fabric import keys
 from fabric.gate import OpenGate
 from robofabric.testing import SimRole, SimRoles, client
-from sim_peer import election as el
-from sim_peer.replica_host import ReplicaHost
-from sim_peer.role_token import shown
-from sim_peer.world import SimWorld
+from sim_peer.replica import election as el
+from sim_peer.replica.replica_host import ReplicaHost
+from sim_peer.replica.role_token import shown
+from sim_peer.physics.world import SimWorld
 
 
 def test_a_role_key_names_the_sim_its_role_term_and_leader_and_parses_back():

@@ -7,7 +7,7 @@ import pytest
 
 from fabric.session import Fabric
 from robofabric.testing import client, free_port, router_config, wait_until
-from sim_peer.roles import router_answers
+from sim_peer.replica.roles import router_answers
 
 pytestmark = pytest.mark.slow
 

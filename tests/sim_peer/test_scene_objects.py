@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim_peer.world import SimWorld
+from sim_peer.physics.world import SimWorld
 
 
 def test_a_bad_object_pose_moves_nothing_and_reset_puts_objects_home():

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fabric.interfaces import Scan
-from sim_peer.world import SimWorld
+from sim_peer.physics.world import SimWorld
 from tests.sim_peer.conftest import FRONT, LEFT, RIGHT
 
 QUANTUM = 0.0005  # Scan carries millimetres: rounding error is at most half of one

@@ -1,7 +1,7 @@
 """Sensors see across sims: base0's LIDAR, simulated by sim-a, sees base1, simulated by sim-b, and sees it move.
 
 Each sim mirrors the other sims' robots as kinematic bodies from their pose and joint streams
-(sim_peer/mirrors.py, sim_peer/mirroring.py); when sim-b goes, sim-a's mirror of base1 goes with it."""
+(sim_peer/physics/mirrors.py, sim_peer/shards/mirroring.py); when sim-b goes, sim-a's mirror of base1 goes with it."""
 
 from __future__ import annotations
 

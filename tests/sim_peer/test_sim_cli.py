@@ -9,7 +9,7 @@ import pytest
 
 from fabric.gate import OpenGate
 from sim_peer.cli import make_gate
-from sim_peer.world import SimWorld
+from sim_peer.physics.world import SimWorld
 
 
 class FakeAuthority:

@@ -8,8 +8,8 @@ import threading
 import pytest
 
 from robofabric.testing import client, wait_until
-from sim_peer.replica_host import run_replicated
-from sim_peer.world import SimWorld
+from sim_peer.replica.replica_host import run_replicated
+from sim_peer.physics.world import SimWorld
 
 
 def _trimming() -> bool:

@@ -1,4 +1,4 @@
-"""sim_peer.replica_host.ReplicaHost in-process on a real router.
+"""sim_peer.replica.replica_host.ReplicaHost in-process on a real router.
 
 - A standby applies again, at its take-over, the commands sent after its last snapshot: its polling is
   held after one snapshot, so that a joint target sent afterwards is certainly not in it; the arm it set
@@ -20,10 +20,10 @@ from fabric import keys
 from fabric.gate import OpenGate
 from fabric.interfaces import Command, JointTarget
 from robofabric.testing import client, wait_until
-from sim_peer import election as el
-from sim_peer.kept_commands import MAX_KEPT_BYTES, MAX_KEPT_COMMANDS
-from sim_peer.replica_host import ReplicaHost
-from sim_peer.world import SimWorld
+from sim_peer.replica import election as el
+from sim_peer.replica.kept_commands import MAX_KEPT_BYTES, MAX_KEPT_COMMANDS
+from sim_peer.replica.replica_host import ReplicaHost
+from sim_peer.physics.world import SimWorld
 
 pytestmark = pytest.mark.slow  # two sim hosts and a router: seconds
 

@@ -1,6 +1,6 @@
 """A standby carries over the ownership records its leader published after its last snapshot.
 
-Two :class:`~sim_peer.replica_host.ReplicaHost` in-process on a real router, each with the real ownership
+Two :class:`~sim_peer.replica.replica_host.ReplicaHost` in-process on a real router, each with the real ownership
 authority as its gate. The standby's polling is held after one snapshot; a user is then granted arm1 (a new epoch,
 published on ``own/arm1``); the primary goes. The new authority must serve arm1 to the same owner at the same epoch,
 never the snapshot's older one (the soak saw arm1's epoch go back 516 -> 515 across a fail-over on a cut).
@@ -13,8 +13,8 @@ import pytest
 from ownership import OwnershipClient
 from robofabric.testing import client, wait_until
 from sim_peer.cli import make_gate
-from sim_peer.replica_host import ReplicaHost
-from sim_peer.world import SimWorld
+from sim_peer.replica.replica_host import ReplicaHost
+from sim_peer.physics.world import SimWorld
 
 pytestmark = pytest.mark.slow  # two sim hosts, a user and a router: seconds
 

@@ -1,4 +1,4 @@
-"""srv/state answered apart (sim_peer.state_answers): a sim-wide budget, a bounded lane, payload asks at once."""
+"""srv/state answered apart (sim_peer.serving.state_answers): a sim-wide budget, a bounded lane, payload asks at once."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from fabric.budget import RATE_LIMITED, Rate
 from fabric.interfaces import Event, ServiceError
 from fabric.rate import FakeClock
 from robofabric.testing import wait_until
-from sim_peer.state_answers import WAITING, StateAnswers
+from sim_peer.serving.state_answers import WAITING, StateAnswers
 
 
 def test_state_asks_spend_the_sims_budget_and_wait_on_a_bounded_lane():

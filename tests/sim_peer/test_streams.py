@@ -10,8 +10,8 @@ import pytest
 from fabric import keys
 from robofabric.testing import wait_until
 from robofabric.bench.shards import spots
-from sim_peer.streams import StreamLoops, _dealt
-from sim_peer.world import SimWorld
+from sim_peer.serving.streams import StreamLoops, _dealt
+from sim_peer.physics.world import SimWorld
 
 
 def test_the_default_groups_tick_a_third_of_the_joints_period_apart(router):

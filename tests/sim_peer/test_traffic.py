@@ -7,7 +7,7 @@ import math
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from sim_peer.traffic import GIVE_WAY_AFTER, Spot, Traffic, Waiter, crossing, cycle_of, gives_way, yields
+from sim_peer.physics.traffic import GIVE_WAY_AFTER, Spot, Traffic, Waiter, crossing, cycle_of, gives_way, yields
 
 IDS = ("base0", "base1", "base2", "base3", "base4")
 

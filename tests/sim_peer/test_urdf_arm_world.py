@@ -16,8 +16,8 @@ from compute_peer.kinematics.service import KinematicsService
 from robofabric.testing import client_config, example_robot_urdf, wait_until
 from robots.urdf import parse
 from robots.urdf_import import install
-from sim_peer.peer import SimPeer
-from sim_peer.world import SimWorld
+from sim_peer.serving.peer import SimPeer
+from sim_peer.physics.world import SimWorld
 from user_peer.api import World
 
 PANDA = "panda_description/urdf/panda.urdf"

@@ -10,10 +10,10 @@ from hypothesis import given, settings, strategies as st
 
 from fabric.interfaces import EventKind
 from robots import SceneRobot
-from sim_peer.traffic import GIVE_WAY_AFTER
-from sim_peer.way_guard import (BACK_OFF, BACK_SPEED, BASE_CLEARANCE, BLOCKED_AFTER, RESUME, WAY_MARGIN, WayState, base_gap,
+from sim_peer.physics.traffic import GIVE_WAY_AFTER
+from sim_peer.physics.way_guard import (BACK_OFF, BACK_SPEED, BASE_CLEARANCE, BLOCKED_AFTER, RESUME, WAY_MARGIN, WayState, base_gap,
                                 decide, facing_forwards, trail_back, way_cap, way_gap)
-from sim_peer.world import SimWorld
+from sim_peer.physics.world import SimWorld
 
 
 def _line(x0: float, x1: float, n: int = 41) -> np.ndarray:

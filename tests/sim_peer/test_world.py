@@ -10,7 +10,7 @@ import pytest
 import robots as robots_pkg
 from fabric.interfaces import EventKind, Path
 from sim_peer.controllers import CommandRejected
-from sim_peer.world import SimWorld, WorldError
+from sim_peer.physics.world import SimWorld, WorldError
 
 
 @pytest.fixture(scope="module")
@@ -305,6 +305,6 @@ def test_the_sim_core_does_not_import_zenoh():
     import subprocess
     import sys
 
-    code = "import sys, sim_peer, sim_peer.world, sim_peer.pacing, robots; print('zenoh' in sys.modules)"
+    code = "import sys, sim_peer, sim_peer.physics.world, sim_peer.physics.pacing, robots; print('zenoh' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.stdout.strip() == "False", out.stderr

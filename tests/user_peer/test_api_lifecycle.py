@@ -178,8 +178,8 @@ EVERYTHING = """
     from fabric.recording import Recorder
     from robofabric.recording.live_convert import LiveConverter, open_exporter
     from sim_peer.cli import make_gate
-    from sim_peer.peer import SimPeer
-    from sim_peer.world import SimWorld
+    from sim_peer.serving.peer import SimPeer
+    from sim_peer.physics.world import SimWorld
     from compute_peer.peer import ComputeOptions, ComputePeer
     from user_peer.api import World
     from user_peer.viewer import Viewer, ViewerOptions

@@ -6,8 +6,8 @@ from __future__ import annotations
 import threading
 
 from robofabric.testing import client_config, wait_until
-from sim_peer.peer import SimPeer
-from sim_peer.world import SimWorld
+from sim_peer.serving.peer import SimPeer
+from sim_peer.physics.world import SimWorld
 from user_peer import notebook
 from user_peer.api import World
 

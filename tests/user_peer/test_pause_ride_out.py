@@ -5,7 +5,7 @@ process) beside the sim, so that it is starved as well as paused.
 The sim (a real ``robofabric sim`` process, alone in its world) was late, not cut off: it proves its link (its
 router answers) and takes commands again at once, and a command that met it holding its robots is ridden out by
 the client (sent again, the same command id under the same epoch) within its timeout (:mod:`user_peer.pause`,
-:mod:`sim_peer.deaf_stop`)."""
+:mod:`sim_peer.replica.deaf_stop`)."""
 
 from __future__ import annotations
 

@@ -8,7 +8,7 @@ from dataclasses import replace
 from fabric import keys
 from fabric.interfaces import OwnershipRecord, WorldInfo
 from robofabric.testing import client_config, wait_until
-from sim_peer.world import SimWorld
+from sim_peer.physics.world import SimWorld
 from user_peer.viewer import Viewer, ViewerOptions
 
 

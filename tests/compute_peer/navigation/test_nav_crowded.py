@@ -19,8 +19,8 @@ from fabric import keys
 from fabric.interfaces import Command, MapRequest, PlanRequest, Pose, Scan, Stop, Twist, quaternion_from_yaw, yaw_from_quaternion
 from robofabric.testing import wait_until
 from robots import SceneRobot
-from sim_peer.peer import SimPeer
-from sim_peer.world import SimWorld
+from sim_peer.serving.peer import SimPeer
+from sim_peer.physics.world import SimWorld
 
 pytestmark = pytest.mark.slow
 

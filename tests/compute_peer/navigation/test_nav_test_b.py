@@ -17,8 +17,8 @@ from compute_peer.navigation import path_collision, register_navigation
 from fabric.interfaces import Command, MapRequest, PlanRequest, Pose, Stop, Twist, quaternion_from_yaw, yaw_from_quaternion
 from fabric import keys
 from robofabric.testing import wait_until
-from sim_peer.peer import SimPeer
-from sim_peer.world import SimWorld
+from sim_peer.serving.peer import SimPeer
+from sim_peer.physics.world import SimWorld
 
 pytestmark = pytest.mark.slow
 

@@ -8,7 +8,7 @@ import pytest
 
 from robofabric.testing import robofabric_cmd
 from robofabric.bench.sim import arm_mirror_cost, rtf, scan_cost
-from sim_peer.world import SimWorld
+from sim_peer.physics.world import SimWorld
 
 
 def test_benchmark_helpers_measure_something():

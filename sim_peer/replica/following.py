@@ -1,0 +1,238 @@
+"""What a sim hears of its shard's leader, and the world it restores from that when it takes over.
+
+Every sim listens to the other sims' ``joints`` and ``pose`` streams: a primary hears a rival's term there, a
+standby its leader's newest joints and poses, and its newest ownership records (``own/{object}``). A standby also
+polls the leader's whole state on ``srv/state`` every ``poll_s`` and keeps the commands users send
+(:class:`~sim_peer.replica.kept_commands.CommandBuffer`). At a take-over (:meth:`Follower.catch_up`) the world is put back
+into the last snapshot, brought forward by the newer streams, its ownership records by the newer records
+(:func:`ownership.carry.overlay`: a grant made after the snapshot keeps its epoch), its sequence numbers continued;
+then the commands that came after the snapshot was asked for are applied again (:meth:`Follower.replay`).
+
+The host (:class:`sim_peer.replica.replica_host.ReplicaHost`) owns the lock this state is guarded by.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import TYPE_CHECKING, Any
+
+from fabric import keys
+from fabric.codec import DecodeError, decode
+from fabric.interfaces import Command, JointState, OwnershipRecord, Pose, ServiceError, WorldState
+from ownership.carry import overlay
+from sim_peer.replica import election as el
+from sim_peer.physics import capture
+from sim_peer.replica.kept_commands import CommandBuffer
+
+if TYPE_CHECKING:
+    from fabric.gate import CommandGate
+    from sim_peer.serving.peer import SimPeer
+    from sim_peer.replica.replica_host import ReplicaHost
+
+log = logging.getLogger("robofabric.sim")
+
+__all__ = ["Follower", "POLL_S", "REPLAY_MARGIN_S"]
+
+POLL_S = 0.05
+"""How often a standby asks the primary for the whole state (the streams fill in between)."""
+
+REPLAY_MARGIN_S = 0.05
+"""At a take-over, the commands heard from this long before the last snapshot was asked for are applied
+again: a command reaches the standby and the primary by different routes, so one heard a little before
+the query may have reached the primary after it answered. Applying one twice is harmless (a joint
+target, a twist or an object pose is set to the same value; a path restarts from where the base is,
+a few milliseconds along it)."""
+
+
+DRAIN_QUIET_S = 0.03
+"""At a take-over, the former leader's streams are waited for until none came for this long: samples that reached
+this process before its token's loss may still wait in their subscription's thread (zenoh hands each
+subscription's samples to a thread of its own), and a catch-up without the newest would start sim time a few
+milliseconds before what other subscribers already saw (it once went 4 ms back)."""
+DRAIN_LIMIT_S = 0.2
+"""The longest that wait lasts (a starved host): the take-over's budget is 1 s."""
+
+
+class Follower:
+    """The leader's last state as this sim knows it: its snapshot, its newest streams, the commands since."""
+
+    def __init__(self, host: "ReplicaHost", snapshot: WorldState | None = None, poll_s: float = POLL_S) -> None:
+        self.host = host
+        self.poll_s = poll_s
+        self.snapshot: WorldState | None = snapshot  # a primary that stepped down starts from its own last state
+        self.snapshot_asked = time.monotonic()  # when the snapshot held was asked for: what came after is replayed
+        self.joints: dict[str, JointState] = {}
+        self.poses: dict[str, Pose] = {}
+        self.records: dict[str, OwnershipRecord] = {}  # the leader's newest record of each of its objects
+        self.commands = CommandBuffer()  # robot commands and object poses of the last seconds
+        self.heard_at = float("-inf")  # when the leader's last joints or pose was kept (monotonic)
+        self.former: str | None = None  # the leader a take-over is draining, whose streams are kept meanwhile
+        self._poller: threading.Thread | None = None
+
+    def listen(self, standby: bool) -> None:
+        """Subscribe to the other sims' streams, and as a standby to what users send."""
+        h = self.host
+        f, w = h.fabric, h.fabric.world
+        f.subscribe(keys.robot_stream_all(w, "joints"), self.on_joints, expected=JointState, remote_only=True)
+        f.subscribe(keys.robot_stream_all(w, "pose"), self.on_pose, expected=Pose, remote_only=True)
+        if standby:
+            f.subscribe_raw(keys.robot_cmd_all(w), self.on_command_sample)
+            f.subscribe(keys.own_all(w), self.on_record, expected=OwnershipRecord)
+            for obj in h.world.objects:
+                f.subscribe(keys.object_pose_all(w, obj), self.on_object, expected=Pose)
+
+    def start_polling(self) -> None:
+        self._poller = threading.Thread(target=self._poll, name="standby-poll", daemon=True)
+        self._poller.start()
+
+    def join(self, timeout: float) -> None:
+        """Wait for the poll loop to see the host stopping."""
+        if self._poller is not None:
+            self._poller.join(timeout)
+
+    def _poll(self) -> None:
+        h = self.host
+        f = h.fabric
+        while not h.stopping.wait(self.poll_s):
+            if h.role != el.STANDBY:
+                return
+            asked = time.monotonic()
+            try:
+                replies = f.rpc.query(keys.srv(f.world, "state"), timeout=1.0, expected=WorldState, all_replies=True)
+            except ServiceError:
+                continue
+            best = max((r.message for r in replies if h.shards.about_mine(r.message)), key=lambda m: m.header.term, default=None)
+            if best is None:
+                continue
+            h.roles.heard(best.header.source, best.header.term)
+            with h.lock:
+                if best.header.source == h.election.leader:
+                    self.snapshot, self.snapshot_asked = best, asked
+
+    def on_joints(self, key: str, js: JointState) -> None:
+        h = self.host
+        rid = keys.parse(key).subject
+        h.moves.seen_serving(rid, js.header.source, js.header.term)
+        if rid not in h.shards.mine:
+            return  # another shard's robot: its term is its shard's
+        h.roles.heard(js.header.source, js.header.term)
+        if self._from_leader(js.header.source):
+            with h.lock:
+                self.joints[rid] = js
+                self.heard_at = time.monotonic()
+
+    def on_pose(self, key: str, p: Pose) -> None:
+        h = self.host
+        rid = keys.parse(key).subject
+        if rid not in h.shards.mine:
+            return
+        if self._from_leader(p.header.source):
+            with h.lock:
+                self.poses[rid] = p
+                self.heard_at = time.monotonic()
+
+    def _from_leader(self, source: str) -> bool:
+        """Whether a stream sample from ``source`` is the followed leader's (or, while a take-over drains, the
+        former leader's)."""
+        h = self.host
+        return (h.role == el.STANDBY and source == h.election.leader) or (self.former is not None and source == self.former)
+
+    def drain(self, former: str, quiet_s: float = DRAIN_QUIET_S, limit_s: float = DRAIN_LIMIT_S) -> float:
+        """Keep ``former``'s streams until none came for ``quiet_s`` since the drain began (at most ``limit_s``),
+        so that a take-over starts from the newest state that reached this process; the seconds waited. Call
+        without the lock; the take-over ends the draining with :meth:`drained` once it caught up."""
+        t0 = time.monotonic()
+        with self.host.lock:
+            self.former = former
+        while (now := time.monotonic()) - t0 < limit_s and now - max(self.heard_at, t0) < quiet_s:
+            time.sleep(min(quiet_s, 0.005))
+        return time.monotonic() - t0
+
+    def drained(self) -> None:
+        with self.host.lock:
+            self.former = None
+
+    def on_record(self, key: str, rec: OwnershipRecord) -> None:
+        """Keep the leader's newest record of each object of this shard (epoch, then sequence number): the records it
+        published after its last snapshot are carried over at a take-over."""
+        h = self.host
+        if rec.object not in h.world.robots and rec.object not in h.world.objects:
+            return  # another shard's, or a made-up object: nothing to carry (and nothing to grow)
+        if h.role == el.STANDBY and rec.header.source == h.election.leader:
+            with h.lock:
+                held = self.records.get(rec.object)
+                if held is None or held.header.source != rec.header.source or (rec.epoch, rec.header.seq) >= (held.epoch, held.header.seq):
+                    self.records[rec.object] = rec
+
+    def keep(self, key: str, msg: Any, size: int = 0) -> None:
+        """Keep one command (or object pose) heard now; a serving host's peer takes them itself."""
+        with self.host.lock:
+            if self.host.peer is not None:
+                return  # serving: the peer takes commands itself (until it subscribes, they wait here)
+            self.commands.keep(key, msg, size)
+
+    def on_command_sample(self, sample: Any) -> None:
+        try:
+            payload = sample.payload.to_bytes()
+            self.keep(str(sample.key_expr), decode(payload, Command), len(payload))
+        except DecodeError:
+            pass  # the authority reports it; a standby keeps only what it could apply
+
+    def on_object(self, key: str, pose: Pose) -> None:
+        self.keep(key, pose, 256)  # a pose is small and fixed in size (the codec caps its frame)
+
+    def catch_up(self, state: WorldState) -> tuple[Any, Any]:
+        """Put the host's world into ``state`` and the newer joints and poses its source streamed since, every robot
+        brought to the newest time heard, the streams' sequence numbers continued (call with the lock held);
+        the ownership records and users to restore the gate with: the snapshot's, with the newer records its
+        source published since put over them (never an older epoch)."""
+        h = self.host
+        f, world = h.fabric, h.world
+        capture.restore(world, state)
+        src = state.header.source
+        at = {rid: state.time for rid in world.robots}
+        for rid, js in self.joints.items():
+            if js.header.stamp >= state.time and js.header.source == src and rid in at:
+                capture.overlay_joints(world, rid, js)
+                at[rid] = js.header.stamp
+        for rid, p in self.poses.items():
+            if p.header.stamp >= state.time and p.header.source == src and rid in at:
+                capture.overlay_pose(world, rid, p)
+                at[rid] = p.header.stamp
+        newest = max([state.time, *at.values()])
+        capture.advance(world, {rid: newest - t for rid, t in at.items()})
+        world.data.time = newest  # sim time goes on from the newest state heard, never back
+        if self.host.plant == "reset":  # test-only defect (fabric/plant.py): robots start again from their spawn pose
+            for r in world.robots.values():
+                r.initialize(world.physics)
+        seqs = {str(k): int(v) for k, v in state.seqs.items()}
+        for rid, js in self.joints.items():
+            k = keys.robot_joints(f.world, rid)
+            seqs[k] = max(seqs.get(k, 0), js.header.seq + 1)
+        for rid, p in self.poses.items():
+            k = keys.robot_pose(f.world, rid)
+            seqs[k] = max(seqs.get(k, 0), p.header.seq + 1)
+        heard = [r for r in self.records.values() if r.header.source == src]
+        for r in heard:
+            k = keys.own(f.world, r.object)
+            seqs[k] = max(seqs.get(k, 0), r.header.seq + 1)
+        f.seqs.carry_on(seqs)
+        next_seqs = {r.object: int(state.seqs.get(keys.own(f.world, r.object), 0)) for r in heard}
+        return overlay(state.records, state.users, heard, next_seqs)
+
+    def replay(self, peer: "SimPeer", gate: "CommandGate") -> None:
+        """Apply again what users sent after the snapshot was asked for, in arrival order, before the new
+        authority steps: the commands its restored ownership admits (the others the old authority
+        refused, or would have; refusing them again would only repeat its events)."""
+        with self.host.lock:
+            todo = self.commands.take_since(self.snapshot_asked - REPLAY_MARGIN_S)
+        for key, msg in todo:
+            try:
+                if not isinstance(msg, Command):
+                    peer.apply_object_pose(key, msg)
+                elif gate.admit(keys.parse(key).subject, msg) is None:
+                    peer.apply_command(key, msg)
+            except Exception:
+                log.exception("replaying %s at take-over failed", key)

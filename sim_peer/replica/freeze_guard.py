@@ -1,0 +1,84 @@
+"""A primary that may have been frozen: muzzled until it knows whether another sim holds its world now.
+
+The fabric's freeze watch (:mod:`fabric.authority_stamp`) calls back when the gap between two publications is longer
+than ``gap`` (half the transport lease by default: a freeze long enough for the others to drop our token is
+always caught, with margin; a false alarm, a starved process, costs one query, muzzled). What it does then is the
+pure core :mod:`sim_peer.replica.freeze_rule`'s plan; this shell gathers the sims that could have taken over, listens, asks
+``srv/state`` and publishes again.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Callable
+
+from fabric import keys
+from fabric.interfaces import ServiceError, WorldState
+from sim_peer.replica import election as el
+from sim_peer.replica import freeze_rule as fr
+
+if TYPE_CHECKING:
+    from sim_peer.replica.replica_host import ReplicaHost
+
+__all__ = ["FreezeGuard"]
+
+
+class FreezeGuard:
+    """What a primary does after a gap in its own publications longer than ``gap`` seconds."""
+
+    def __init__(self, host: "ReplicaHost", gap: float | None = None, clock: Callable[[], float] = time.monotonic) -> None:
+        self.host = host
+        self.clock = clock
+        self.gap = gap if gap is not None else fr.watch_gap(host.fabric.config.lease_ms / 1000.0)
+
+    def watch(self) -> None:
+        """Ask the fabric to call :meth:`on_freeze` after a gap (a primary's, from when it serves)."""
+        self.host.fabric.stamp.watch_freeze(self.gap, self.on_freeze)
+
+    def on_freeze(self, gap: float) -> None:
+        """Frozen for ``gap`` s: muzzled until it is known whether another sim may hold the world now.
+
+        With no other sim alive when the freeze began (nothing could have taken over), publish again at
+        once. Otherwise, after a gap longer than the lease (the others dropped our token, and our session
+        may not even know yet that its link died), listen muzzled for a lease: a new authority's streams
+        reach us once the session is back, and hearing its higher term steps us down before anything goes
+        out; then ask ``srv/state``, step down if a higher term answers, carry on otherwise (:func:`freeze_rule.plan`)."""
+        h = self.host
+        f = h.fabric
+        lease = f.config.lease_ms / 1000.0
+        with h.lock:
+            seen = frozenset(h.roles.gone_since(fr.began(self.clock(), gap)))
+        todo = fr.plan(gap, lease, fr.rivals(h.shards.view(seen), f.peer_id))
+        if todo.publish_now:
+            f.stamp.unmuzzle()
+            h.announce(f"sim {f.peer_id}: paused {gap:.1f} s with no other sim in the world; publishing again (term {f.stamp.term})")
+            return
+        if todo.listen_s:
+            h.stopping.wait(todo.listen_s)
+        self._ask_who_leads()
+        if h.role == el.PRIMARY:
+            if todo.reassert:
+                h.roles.step(el.Resumed())
+            f.stamp.unmuzzle()
+            h.announce(f"sim {f.peer_id}: frozen {gap:.1f} s, still the authority (term {f.stamp.term})")
+
+    def _ask_who_leads(self) -> None:
+        """Once connected again, ask ``srv/state`` who holds this shard now; a higher term heard steps us down."""
+        h = self.host
+        f = h.fabric
+        deadline = self.clock() + fr.ask_for(self.gap)
+        while self.clock() < deadline and not h.stopping.is_set() and h.role == el.PRIMARY:
+            if not f.connected():
+                time.sleep(0.1)  # not connected yet: nobody to ask, nobody to tell
+                continue
+            others = [pid for _, pid in f.live_peers("sim", timeout=1.0) if pid != f.peer_id]
+            replies = []
+            if others:
+                try:
+                    replies = f.rpc.query(keys.srv(f.world, "state"), timeout=1.0, expected=WorldState, all_replies=True)
+                except ServiceError:
+                    replies = []  # standbys answer with a refusal: no other authority
+            for rep in replies:
+                if h.shards.about_mine(rep.message):
+                    h.roles.heard(rep.message.header.source, rep.message.header.term)
+            return
