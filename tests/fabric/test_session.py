@@ -90,13 +90,16 @@ def test_liveliness_tracks_a_process_that_exits_and_one_that_is_killed(world, ro
     watcher.watch_peers(lambda kind, pid, alive: seen.__setitem__(pid, alive))
     argv = robofabric_cmd("echo", "robot/**", "--world", world, "--connect", f"tcp/127.0.0.1:{port}")
     p_exit = procs.start(argv, name="echo1")
-    wait_until(lambda: any(v for k, v in seen.items() if k.startswith("tool-")), what="echo peer token", seen=lambda: seen)
+    # a child's start (its imports) is not what is judged: at load 37 it took over 10 s
+    wait_until(lambda: any(v for k, v in seen.items() if k.startswith("tool-")), timeout=60, what="echo peer token",
+               seen=lambda: seen)
     first = next(k for k, v in seen.items() if v and k.startswith("tool-"))
     procs.kill(p_exit, sig=15)  # SIGTERM: clean exit
     assert p_exit.returncode == 0, procs.output(p_exit)
     wait_until(lambda: seen.get(first) is False, timeout=5, what="token gone after exit", seen=lambda: seen)
     p_kill = procs.start(argv, name="echo2")
-    wait_until(lambda: any(v for k, v in seen.items() if k.startswith("tool-") and k != first), what="second token")
+    wait_until(lambda: any(v for k, v in seen.items() if k.startswith("tool-") and k != first), timeout=60,
+               what="second token", seen=lambda: seen)
     second = next(k for k, v in seen.items() if v and k.startswith("tool-") and k != first)
     procs.kill(p_kill)  # SIGKILL: the OS closes the socket
     wait_until(lambda: seen.get(second) is False, timeout=5, what="token gone after SIGKILL", seen=lambda: seen)
