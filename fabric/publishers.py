@@ -20,9 +20,16 @@ def priority_for(key: str) -> zenoh.Priority | None:
     """zenoh priority of what travels on ``key``: robot commands and ownership (records, requests,
     renewals, their replies) go ahead of data, so that a flood of data on any key (junk included:
     a flooder's samples carry the default priority) cannot queue an owner's command or renewal
-    behind it in a router's per-priority queues. None for everything else (zenoh's default)."""
+    behind it in a router's per-priority queues. So do the events that explain ownership and refusals
+    (``event/own/...``, ``event/reject/...``, the kept kinds of :func:`fabric.keys.cache_size`): at the
+    default priority, a slow subscriber's queue full of scans dropped them while the record they explain,
+    ahead in its own queue, arrived (a console told of no lease's end; the soak's checker saw a release
+    nobody announced). They are few: one per ownership change, refusals at most a burst per interval
+    (:mod:`fabric.reports`). None for everything else (zenoh's default)."""
     parts = key.split("/")
     if len(parts) >= 4 and (parts[2] == "own" or (parts[2] == "robot" and len(parts) >= 5 and parts[4] == "cmd")):
+        return zenoh.Priority.INTERACTIVE_HIGH
+    if len(parts) >= 4 and parts[2] == "event" and parts[3] in keys.KEPT_EVENT_KINDS:
         return zenoh.Priority.INTERACTIVE_HIGH
     return None
 
