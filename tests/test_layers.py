@@ -50,7 +50,8 @@ def test_contracts_hold(monkeypatch, capsys):
     assert code == 0, out.out + out.err
     assert "0 broken" in out.out
     for contract in ("Layers", "fabric.interfaces imports nothing", "fabric.codec and fabric.limits", "fabric, the ground floor",
-                     "No peer, nor ownership or robots, imports robofabric's tools", "The sim's pure decision cores"):
+                     "No peer, nor ownership or robots, imports robofabric's tools", "The sim's pure decision cores",
+                     "The sim's rooms", "The user side's rooms", "robofabric's tool rooms"):
         assert contract in out.out, out.out
 
 
@@ -71,7 +72,11 @@ def _importlinter_section() -> str:
 MODULES = [
     "robofabric/__init__.py",
     "robofabric/launch.py",
+    "robofabric/bench/__init__.py",
+    "robofabric/soak/__init__.py",
+    "robofabric/lab/__init__.py",
     "sim_peer/__init__.py",
+    "sim_peer/cli.py",
     "sim_peer/robot.py",
     "sim_peer/controllers.py",
     "sim_peer/sensors.py",
@@ -79,10 +84,12 @@ MODULES = [
     "sim_peer/physics/__init__.py",
     "sim_peer/physics/world.py",
     "sim_peer/physics/placement.py",
+    "sim_peer/physics/robot_kinds.py",
     "sim_peer/serving/__init__.py",
     "sim_peer/serving/peer.py",
     "sim_peer/replica/__init__.py",
     "sim_peer/replica/roles.py",
+    "sim_peer/replica/replica_host.py",
     "sim_peer/replica/election.py",
     "sim_peer/replica/hearing_rule.py",
     "sim_peer/replica/deaf_rule.py",
@@ -90,10 +97,19 @@ MODULES = [
     "sim_peer/replica/adoption_rule.py",
     "sim_peer/shards/__init__.py",
     "sim_peer/shards/move_rule.py",
+    "sim_peer/shards/directory.py",
+    "sim_peer/shards/mirroring.py",
     "compute_peer/__init__.py",
     "compute_peer/service.py",
     "user_peer/__init__.py",
     "user_peer/api.py",
+    "user_peer/cli.py",
+    "user_peer/console/__init__.py",
+    "user_peer/console/page.py",
+    "user_peer/ros2/__init__.py",
+    "user_peer/ros2/cli.py",
+    "user_peer/openfmt/__init__.py",
+    "user_peer/drawing/__init__.py",
     "ownership/__init__.py",
     "ownership/client.py",
     "robots/__init__.py",
@@ -122,7 +138,23 @@ ALLOWED = {
     "fabric/interfaces/std.py": "from fabric.codec import encode\nimport fabric.limits\n",
     "fabric/session.py": "import fabric.interfaces\nimport fabric.keys\n",
     "ownership/client.py": "import fabric.session\nimport fabric.interfaces\n",
-    "sim_peer/serving/peer.py": "import ownership.client\nimport robots\nimport fabric.interfaces\nimport zenoh\n",
+    "sim_peer/serving/peer.py": "import ownership.client\nimport robots\nimport fabric.interfaces\nimport zenoh\n"
+                                "import sim_peer.physics.world\nimport sim_peer.shards.mirroring\n",
+    "sim_peer/cli.py": "def main():\n    import sim_peer.replica.replica_host\n    import sim_peer.serving.peer\n",
+    "sim_peer/replica/replica_host.py": "import sim_peer.shards.directory\nimport sim_peer.serving.peer\nimport sim_peer.replica.roles\n",
+    "sim_peer/shards/directory.py": "from typing import TYPE_CHECKING\nimport sim_peer.replica.election\n"
+                                    "if TYPE_CHECKING:\n    import sim_peer.replica.replica_host\n",
+    "sim_peer/shards/mirroring.py": "import sim_peer.physics.world\nimport fabric.keys\n",
+    "sim_peer/physics/robot_kinds.py": "import sim_peer.bumper\nimport sim_peer.controllers\nimport sim_peer.sensors\n",
+    "sim_peer/bumper.py": "from typing import TYPE_CHECKING\nimport sim_peer.robot\nimport sim_peer.sensors\n"
+                          "if TYPE_CHECKING:\n    import sim_peer.physics.robot_kinds\n",
+    "sim_peer/sensors.py": "import sim_peer.robot\n",
+    "user_peer/cli.py": "import user_peer.openfmt\ndef register(app):\n    from user_peer.console import page\n",
+    "user_peer/ros2/cli.py": "import user_peer.openfmt\ndef main():\n    from user_peer.cli import open_world\n",
+    "user_peer/openfmt/__init__.py": "import user_peer.drawing\n",
+    "user_peer/console/page.py": "import user_peer.api\n",
+    "robofabric/bench/__init__.py": "import robofabric.soak\nimport robofabric.lab\nimport user_peer.console\n",
+    "robofabric/soak/__init__.py": "import robofabric.lab\n",
     "sim_peer/replica/roles.py": "import sim_peer.replica.election\nimport sim_peer.replica.hearing_rule\nimport fabric.session\n",
     "sim_peer/replica/deaf_rule.py": "import sim_peer.replica.hearing_rule\n",
     "compute_peer/service.py": "import robots\nimport fabric.interfaces.std\n",
@@ -131,14 +163,16 @@ ALLOWED = {
     "robofabric/launch.py": "import fabric.session\nimport fabric.keys\n",
     "sim_peer/physics/world.py": "import sim_peer.physics.placement\nimport sim_peer.robot\nimport fabric.interfaces\n",
     "sim_peer/physics/placement.py": "import fabric.keys\n",
-    "sim_peer/robot.py": "import sim_peer.controllers\nimport sim_peer.sensors\nimport fabric.interfaces\n",
+    "sim_peer/robot.py": "import sim_peer.controllers\nimport fabric.interfaces\n",  # sensors import the robot, not back
     "fabric/keys.py": "def valid(expr):\n    import zenoh\n",
 }
 
 
 def _skeleton(tmp_path: Path, bad: tuple[str, str] | None) -> Path:
+    """The skeleton under ``tmp_path/src``, with ``bad`` = (module, line) appended (a module not in MODULES is
+    added with that line)."""
     src = tmp_path / "src"
-    for rel in MODULES:
+    for rel in MODULES + ([bad[0]] if bad is not None and bad[0] not in MODULES else []):
         f = src / rel
         f.parent.mkdir(parents=True, exist_ok=True)
         text = ALLOWED.get(rel, "")
@@ -189,6 +223,20 @@ def test_skeleton_without_bad_imports_keeps_every_contract(tmp_path):
         ("sim_peer/physics/placement.py", "from fabric import session\n", "sim-physics"),
         ("sim_peer/robot.py", "import sim_peer.serving.peer\n", "sim-physics"),  # the plug-in surface leaning on the peer
         ("sim_peer/sensors.py", "import sim_peer.replica.roles\n", "sim-physics"),
+        ("sim_peer/serving/peer.py", "import sim_peer.replica.roles\n", "sim-rooms"),  # serving leaning on the replica
+        ("sim_peer/serving/peer.py", "from sim_peer.shards import directory\n", "sim-rooms"),  # shards past the mirrors
+        ("sim_peer/shards/mirroring.py", "def later():\n    import sim_peer.cli\n", "sim-rooms"),  # a room on the CLI
+        ("sim_peer/physics/placement.py", "import sim_peer.serving\n", "sim-rooms"),
+        ("sim_peer/controllers.py", "import sim_peer.robot\n", "sim-rooms"),  # the plug-in surface's own order
+        ("sim_peer/sensors.py", "import sim_peer.physics.placement\n", "sim-rooms"),  # the surface on the world
+        ("sim_peer/stray.py", "import sim_peer.robot\n", "sim-rooms"),  # a module in no room (exhaustive)
+        ("user_peer/console/page.py", "import user_peer.cli\n", "user-rooms"),  # the console on the CLI above it
+        ("user_peer/console/page.py", "from user_peer import openfmt\n", "user-rooms"),  # independent rooms
+        ("user_peer/openfmt/__init__.py", "def later():\n    import user_peer.console.page\n", "user-rooms"),
+        ("user_peer/cli.py", "import user_peer.ros2.cli\n", "user-rooms"),  # the CLI on the bridge above it
+        ("user_peer/drawing/__init__.py", "import user_peer.openfmt\n", "user-rooms"),
+        ("robofabric/lab/__init__.py", "import robofabric.soak\n", "tool-rooms"),  # the lab on its user
+        ("robofabric/soak/__init__.py", "from robofabric import bench\n", "tool-rooms"),
     ],
 )
 def test_a_bad_import_breaks_its_contract(tmp_path, where, line, contract):
