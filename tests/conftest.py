@@ -28,7 +28,7 @@ settings.load_profile("robofabric")
 HEAVY = (
     "tests/user_peer/console/", "tests/user_peer/test_view_web.py", "tests/user_peer/test_web_pages.py",
     "tests/robofabric/bench/test_bench_console.py", "tests/robofabric/soak/", "tests/lab/", "tests/user_peer/test_pause_ride_out.py",
-    "tests/sim_peer/test_pause.py", "tests/sim_peer/test_paused_standby.py", "tests/ownership/test_router_stall.py",
+    "tests/sim_peer/replica/test_pause.py", "tests/sim_peer/replica/test_paused_standby.py", "tests/ownership/test_router_stall.py",
     # a pace at full rate and 0.3 s leases: at load 37 beside Chromium the first logged 0.36x of its full rate and
     # the second's starved authority waited out its deaf guard (the grouped run of 2026-11-29)
     "tests/user_peer/test_view_class.py", "tests/robofabric/bench/test_bench_ownership.py",

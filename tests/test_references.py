@@ -2,7 +2,7 @@
 reference behind.
 
 A reference is a path under one of the tree's top folders (``fabric/session.py``, ``docs/sim.md``,
-``tests/sim_peer/test_election.py``) or a test module's bare name (``test_election.py``), anywhere in the docs
+``tests/sim_peer/replica/test_election.py``) or a test module's bare name (``test_election.py``), anywhere in the docs
 (``docs/**/*.md``, ``README.md``) and in the Python files (docstrings, comments, strings). CHANGELOG.md is left out:
 history names files as they were; so is this module, whose examples are made up. Placeholders (``robofabric/bench/NAME.py``) are no reference. A pure scan of
 the text, about 0.2 s.

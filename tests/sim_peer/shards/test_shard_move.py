@@ -17,7 +17,7 @@ from fabric.interfaces import JointState, Pose
 from robofabric.testing import SimRoles, client_config, robofabric_cmd, wait_until
 from user_peer.api import World
 
-from tests.sim_peer.test_shards import _parts, _two_shards
+from tests.sim_peer.shards.test_shards import _parts, _two_shards
 
 pytestmark = pytest.mark.slow
 

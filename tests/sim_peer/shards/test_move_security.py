@@ -35,7 +35,7 @@ pytestmark = pytest.mark.slow
 
 SIM_A = ("--scene", "warehouse", "--no-scene-robots", "--robot", "reeman:base0@0,0", "--robot", "reeman:base2@0,1")
 SIM_B = ("--scene", "warehouse", "--no-scene-robots", "--robot", "reeman:base1@1.5,0,180")
-PLANAR2 = Path(__file__).parent / "plugin_robots" / "planar2"
+PLANAR2 = Path(__file__).parents[1] / "plugin_robots" / "planar2"
 STAFF_ONLY = "moves are for the instructor and sim logins"
 
 

@@ -16,7 +16,7 @@ from robots.description import ENTRY_POINTS, plugin_dirs
 from sim_peer.physics.errors import WorldError
 from sim_peer.physics.registry import robot_class
 
-PLANAR2 = Path(__file__).parent / "plugin_robots" / "planar2"
+PLANAR2 = Path(__file__).parents[1] / "plugin_robots" / "planar2"
 EVIL_HOOKS = "from pathlib import Path\nPath({marker!r}).write_text('ran')\nfrom sim_peer import ArmRobot as Evil\n"
 
 
