@@ -1,5 +1,10 @@
 """The checker is not vacuous: each defect ``--plant`` puts in the sims (fabric/plant.py) is caught by the
-invariant it breaks, in a short soak in the lab with the fault that brings it out."""
+invariant it breaks, in a short soak in the lab with the fault that brings it out.
+
+Each soak lasts about three times the longest it took the checker to catch its plant (seconds after the class
+began, in the histories of four runs each, docs/testing.md), or a minute where that is less: a reset 6-9 s (the
+first kill comes at about 6 s), so half a minute; two owners 15-24 s and a stale command 10-40 s (a replay needs
+an arm at its second epoch), so a minute each, as before."""
 
 from __future__ import annotations
 
@@ -10,14 +15,13 @@ from robofabric.soak.run import SoakConfig, run_soak
 pytestmark = [pytest.mark.lab, pytest.mark.slow]
 
 
-@pytest.mark.parametrize(("plant", "faults", "victims", "invariant"), [
-    ("reset", ("kill",), ("sim",), "reset"),  # a fail-over puts the arms back at their spawn pose
-    ("double-owner", ("hog",), ("student",), "owners"),  # students take each other's still arms over
-    ("stale-command", ("replay",), ("student",), "applied"),  # an owner's command under an epoch she no longer holds
+@pytest.mark.parametrize(("plant", "faults", "victims", "invariant", "minutes"), [
+    ("reset", ("kill",), ("sim",), "reset", 0.5),  # a fail-over puts the arms back at their spawn pose
+    ("double-owner", ("hog",), ("student",), "owners", 1.0),  # students take each other's still arms over
+    ("stale-command", ("replay",), ("student",), "applied", 1.0),  # an owner's command under an epoch she no longer holds
 ])
-def test_a_planted_defect_is_caught(lab_ok, tmp_path, plant, faults, victims, invariant):
-    res = run_soak(SoakConfig(minutes=1.0, log_dir=tmp_path, students=2, seed=2, plant=plant, kinds=faults, victims=victims))
+def test_a_planted_defect_is_caught(lab_ok, tmp_path, plant, faults, victims, invariant, minutes):
+    res = run_soak(SoakConfig(minutes=minutes, log_dir=tmp_path, students=2, seed=2, plant=plant, kinds=faults, victims=victims))
     caught = {v.invariant for v in res.violations}
     assert invariant in caught, f"plant {plant}: {res.summary}; violations: {[str(v) for v in res.violations[:3]]}"
     assert any(line.startswith("faults: ") and line != "faults: 0" for line in res.summary), res.summary
-
