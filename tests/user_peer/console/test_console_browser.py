@@ -428,6 +428,14 @@ def test_b_from_the_page_map_goal_plan_follow(browser, klass):
 
 def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_grace(browser, klass):
     base = klass.carol.robot("base1")
+    # from its spawn (the origin, facing +x: 5 m of floor behind it), whatever the tests before did: Test B leaves
+    # it at its goal with the plan's heading, and backing up from there it once met something ("collision base1:
+    # bumper"), stood still, and bob's Queue took it over instead of queueing
+    base.request(timeout=10)
+    base.reset(timeout=10)
+    wait_until(lambda: (p := base.xy_theta) is not None and np.allclose(p, (0.0, 0.0, 0.0), atol=0.01), timeout=10,
+               what="base1 back at its spawn", seen=lambda: base.xy_theta)
+    base.release()
     alice = open_page(browser, klass)
     logged_in(alice, klass, "alice")
     alice.get_by_role("button", name="base1", exact=True).click()
@@ -437,7 +445,7 @@ def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_g
     logged_in(bob, klass, "bob")
     bob.get_by_role("button", name="base1", exact=True).click()
     alice.locator("body").click(position={"x": 5, "y": 5})
-    alice.keyboard.down("ArrowDown")  # backwards: room behind it wherever Test B left it
+    alice.keyboard.down("ArrowDown")  # backwards, towards the west wall
     wait_until(lambda: base.record.state == "moving", timeout=10, what="base1 moving", seen=lambda: base.record)
     bob.get_by_role("button", name="Queue").click()  # moving: bob takes a place in the queue
     wait_message(bob, r"queue for base1: queued at position 1")
