@@ -120,7 +120,9 @@ class ReplicaHost:
         self.last_state: WorldState | None = None
         self.role_token = RoleToken(fabric)  # the role shown on the fabric (sim_peer.replica.role_token)
         self.roles = Roles(self, election)
-        self.shards = ShardDirectory(self, world.robots)  # this shard: the robots this sim serves, or would at a take-over
+        # this shard: the robots this sim serves, or would at a take-over
+        self.shards = ShardDirectory(fabric, world.robots, live=self.roles.live_sims, stopping=self.stopping,
+                                     on_learnt=self.roles.shards_learnt)
         self.follower = Follower(self, snapshot, poll_s)
         self.freeze = FreezeGuard(self, freeze_gap)
         self.adoption = ObjectAdoption(self, adopt_after_s)

@@ -251,6 +251,17 @@ class Roles:
 
         threading.Thread(target=recheck, name="sim-deaf-recheck", daemon=True).start()
 
+    def live_sims(self) -> frozenset[str]:
+        """The sims whose tokens are live now (this one's too)."""
+        with self.host.lock:
+            return frozenset(self.live)
+
+    def shards_learnt(self, view: frozenset[str]) -> None:
+        """The shard directory learnt which sims share this shard (``view``: its live ones): once the first view
+        is settled, the election counts them again."""
+        if self.settled:
+            self.step(el.Peers(view))
+
     def gone_since(self, began: float) -> set[str]:
         """The sims alive now or gone since ``began`` (monotonic; call with the lock held)."""
         return set(hr.gone_since(self.live, self.gone_at, began))
