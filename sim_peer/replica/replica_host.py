@@ -73,11 +73,11 @@ GateFactory = Callable[[Fabric, SimWorld, Any], Any]
 class ReplicaHost:
     """One session of one sim peer in one role; ``run`` returns when stopped or after stepping down.
 
-    It owns the one ``clock`` its parts read and composes them. The shard directory (``shards``) and the objects'
-    adoption (``adoption``) get only their collaborators and guard their own state with their own locks; the others
-    (``roles``, ``follower``, ``freeze``, ``moves``, ``deaf_stop``) still reach into it and share its ``lock``,
-    which also guards what it serves (``peer``, ``gate``, ``world``, ``objects``); ``stopping`` is set when it
-    closes."""
+    It owns the one ``clock`` its parts read and composes them. The shard directory (``shards``), the objects'
+    adoption (``adoption``) and the follower (``follower``) get only their collaborators and guard their own state
+    with their own locks; the others (``roles``, ``freeze``, ``moves``, ``deaf_stop``) still reach into it and share
+    its ``lock``, which guards what it serves (``peer``, ``gate``, ``world``, ``objects``; the follower keeps its
+    commands under it, passed in as ``serving_lock``); ``stopping`` is set when it closes."""
 
     def __init__(
         self,
@@ -128,7 +128,10 @@ class ReplicaHost:
         # this shard: the robots this sim serves, or would at a take-over
         self.shards = ShardDirectory(fabric, world.robots, live=self.roles.live_sims, stopping=self.stopping,
                                      on_learnt=self.roles.shards_learnt)
-        self.follower = Follower(self, snapshot, poll_s)
+        self.follower = Follower(fabric, world=lambda: self.world, election=lambda: self.roles.election, shard=self.shards,
+                                 heard=self.roles.heard, seen_serving=lambda *seen: self.moves.seen_serving(*seen),
+                                 serving=lambda: self.peer is not None, serving_lock=self.lock, stopping=self.stopping,
+                                 clock=clock, snapshot=snapshot, poll_s=poll_s, plant=plant)
         self.freeze = FreezeGuard(self, freeze_gap, clock)
         self.adoption = ObjectAdoption(fabric, self, stopping=self.stopping, announce=self.announce, clock=self.clock,
                                        after_s=adopt_after_s)
