@@ -74,10 +74,11 @@ class ReplicaHost:
     """One session of one sim peer in one role; ``run`` returns when stopped or after stepping down.
 
     It owns the one ``clock`` its parts read and composes them. The shard directory (``shards``), the objects'
-    adoption (``adoption``) and the follower (``follower``) get only their collaborators and guard their own state
-    with their own locks; the others (``roles``, ``freeze``, ``moves``, ``deaf_stop``) still reach into it and share
-    its ``lock``, which guards what it serves (``peer``, ``gate``, ``world``, ``objects``; the follower keeps its
-    commands under it, passed in as ``serving_lock``); ``stopping`` is set when it closes."""
+    adoption (``adoption``), the follower (``follower``) and the moves (``moves``) get only their collaborators and
+    guard their own state with their own locks; the others (``roles``, ``freeze``, ``deaf_stop``) still reach into it.
+    Its ``lock`` guards what it serves (``peer``, ``gate``, ``world``, ``objects``); the follower's kept commands and
+    the robots the moves handed out change with that, so they get it too, as ``serving_lock``; ``stopping`` is set
+    when it closes."""
 
     def __init__(
         self,
@@ -130,12 +131,13 @@ class ReplicaHost:
                                      on_learnt=self.roles.shards_learnt)
         self.follower = Follower(fabric, world=lambda: self.world, election=lambda: self.roles.election, shard=self.shards,
                                  heard=self.roles.heard, seen_serving=lambda *seen: self.moves.seen_serving(*seen),
-                                 serving=lambda: self.peer is not None, serving_lock=self.lock, stopping=self.stopping,
+                                 serving=lambda: self.serving, serving_lock=self.lock, stopping=self.stopping,
                                  clock=clock, snapshot=snapshot, poll_s=poll_s, plant=plant)
         self.freeze = FreezeGuard(self, freeze_gap, clock)
         self.adoption = ObjectAdoption(fabric, self, stopping=self.stopping, announce=self.announce, clock=self.clock,
                                        after_s=adopt_after_s)
-        self.moves = MoveService(self)
+        self.moves = MoveService(fabric, self, serving_lock=self.lock, election=lambda: self.roles.election,
+                                 live=self.roles.live_sims, standbys=self.shards.standbys, announce=self.announce, clock=clock)
         self.deaf_stop = DeafStop(self, clock)  # a primary that hears no one stops its robots
         self.state_answers = StateAnswers(fabric.counters)  # srv/state off zenoh's callback thread (sim_peer.serving.state_answers)
 
@@ -152,6 +154,11 @@ class ReplicaHost:
     @property
     def closed(self) -> bool:
         return self._closed
+
+    @property
+    def serving(self) -> bool:
+        """Whether its peer serves the world now (a primary between two rebuilds does not)."""
+        return self.peer is not None
 
     def open(self, duration: float | None = None) -> "ReplicaHost":
         f, w = self.fabric, self.fabric.world
