@@ -73,12 +73,12 @@ GateFactory = Callable[[Fabric, SimWorld, Any], Any]
 class ReplicaHost:
     """One session of one sim peer in one role; ``run`` returns when stopped or after stepping down.
 
-    It owns the one ``clock`` its parts read and composes them. The shard directory (``shards``), the objects'
-    adoption (``adoption``), the follower (``follower``) and the moves (``moves``) get only their collaborators and
-    guard their own state with their own locks; the others (``roles``, ``freeze``, ``deaf_stop``) still reach into it.
-    Its ``lock`` guards what it serves (``peer``, ``gate``, ``world``, ``objects``); the follower's kept commands and
-    the robots the moves handed out change with that, so they get it too, as ``serving_lock``; ``stopping`` is set
-    when it closes."""
+    It owns the one ``clock`` its parts read and composes them. The election's shell (``roles``), the shard
+    directory (``shards``), the objects' adoption (``adoption``), the follower (``follower``) and the moves
+    (``moves``) get only their collaborators and guard their own state with their own locks; ``freeze`` and
+    ``deaf_stop`` still reach into it. Its ``lock`` guards what it serves (``peer``, ``gate``, ``world``,
+    ``objects``); the election, the follower's kept commands and the robots the moves handed out change with that,
+    so those parts get it too, as ``serving_lock``; ``stopping`` is set when it closes."""
 
     def __init__(
         self,
@@ -125,10 +125,13 @@ class ReplicaHost:
         self.takeovers: list[dict[str, Any]] = []
         self.last_state: WorldState | None = None
         self.role_token = RoleToken(fabric)  # the role shown on the fabric (sim_peer.replica.role_token)
-        self.roles = Roles(self, election, clock)
         # this shard: the robots this sim serves, or would at a take-over
-        self.shards = ShardDirectory(fabric, world.robots, live=self.roles.live_sims, stopping=self.stopping,
-                                     on_learnt=self.roles.shards_learnt)
+        self.shards = ShardDirectory(fabric, world.robots, live=lambda: self.roles.live_sims(), stopping=self.stopping,
+                                     on_learnt=lambda view: self.roles.shards_learnt(view))
+        self.roles = Roles(fabric, election, shard=self.shards, serving_lock=self.lock, stopping=self.stopping,
+                           announce=self.announce, take_over=self.take_over, reassert=self._reassert,
+                           show_role=lambda shown: self.role_token.show(shown, self.peer is not None),
+                           adopt_soon=lambda: self.adoption.soon(), clock=clock)
         self.follower = Follower(fabric, world=lambda: self.world, election=lambda: self.roles.election, shard=self.shards,
                                  heard=self.roles.heard, seen_serving=lambda *seen: self.moves.seen_serving(*seen),
                                  serving=lambda: self.serving, serving_lock=self.lock, stopping=self.stopping,
@@ -243,6 +246,11 @@ class ReplicaHost:
             self.follower.replay(self.peer, self.gate)
         self.peer.start(self._duration)
         self.deaf_stop.watch()
+
+    def _reassert(self, term: int) -> None:
+        """Assert ``term`` again over what this sim serves (the election's effect after a freeze)."""
+        with self.lock:
+            self.fabric.assume_term(term, self.scopes())
 
     def scopes(self) -> tuple[str, ...]:
         """What this sim is the authority of: its robots, and the scene objects when it is their authority."""

@@ -12,10 +12,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 ROOMS = ("sim_peer/replica", "sim_peer/shards")
 COMPOSER = "sim_peer/replica/replica_host.py"
-TAKES_HOST = {
-    "sim_peer/replica/deaf_stop.py", "sim_peer/replica/freeze_guard.py",
-    "sim_peer/replica/roles.py",
-}
+TAKES_HOST = {"sim_peer/replica/deaf_stop.py", "sim_peer/replica/freeze_guard.py"}
 """Shells not narrowed yet (they still reach into the host and share its lock)."""
 
 
