@@ -73,12 +73,11 @@ GateFactory = Callable[[Fabric, SimWorld, Any], Any]
 class ReplicaHost:
     """One session of one sim peer in one role; ``run`` returns when stopped or after stepping down.
 
-    It owns the one ``clock`` its parts read and composes them. The election's shell (``roles``), the shard
-    directory (``shards``), the objects' adoption (``adoption``), the follower (``follower``) and the moves
-    (``moves``) get only their collaborators and guard their own state with their own locks; ``freeze`` and
-    ``deaf_stop`` still reach into it. Its ``lock`` guards what it serves (``peer``, ``gate``, ``world``,
-    ``objects``); the election, the follower's kept commands and the robots the moves handed out change with that,
-    so those parts get it too, as ``serving_lock``; ``stopping`` is set when it closes."""
+    It owns the one ``clock`` its parts read and composes them: ``roles``, ``shards``, ``follower``, ``freeze``,
+    ``adoption``, ``moves`` and ``deaf_stop`` each get only their collaborators (docs/sim.md, "How the parts talk")
+    and guard their own state with their own locks. Its ``lock`` guards what it serves (``peer``, ``gate``,
+    ``world``, ``objects``); the election, the follower's kept commands and the robots the moves handed out change
+    with that, so those parts get it too, as ``serving_lock``; ``stopping`` is set when it closes."""
 
     def __init__(
         self,
@@ -136,12 +135,15 @@ class ReplicaHost:
                                  heard=self.roles.heard, seen_serving=lambda *seen: self.moves.seen_serving(*seen),
                                  serving=lambda: self.serving, serving_lock=self.lock, stopping=self.stopping,
                                  clock=clock, snapshot=snapshot, poll_s=poll_s, plant=plant)
-        self.freeze = FreezeGuard(self, freeze_gap, clock)
+        self.freeze = FreezeGuard(fabric, roles=self.roles, shard=self.shards, stopping=self.stopping,
+                                  announce=self.announce, gap=freeze_gap, clock=clock)
         self.adoption = ObjectAdoption(fabric, self, stopping=self.stopping, announce=self.announce, clock=self.clock,
                                        after_s=adopt_after_s)
         self.moves = MoveService(fabric, self, serving_lock=self.lock, election=lambda: self.roles.election,
                                  live=self.roles.live_sims, standbys=self.shards.standbys, announce=self.announce, clock=clock)
-        self.deaf_stop = DeafStop(self, clock)  # a primary that hears no one stops its robots
+        # a primary that hears no one stops its robots
+        self.deaf_stop = DeafStop(fabric, hearing=self.roles, serving=lambda: self.peer if self.role == el.PRIMARY else None,
+                                  stopping=self.stopping, announce=self.announce, clock=clock)
         self.state_answers = StateAnswers(fabric.counters)  # srv/state off zenoh's callback thread (sim_peer.serving.state_answers)
 
     # ------------------------------------------------------------------ lifecycle

@@ -1,8 +1,8 @@
 """The replica's and shards' shells talk through narrow interfaces: none takes the ReplicaHost whole.
 
 A shell gets what it uses in its constructor (the fabric, a stop flag, callables, a small Protocol) and a clock;
-only ``replica_host.py`` composes them. The modules that still take the host are listed in :data:`TAKES_HOST`,
-a list that only shrinks: a module listed that no longer takes it fails too, so it leaves the list."""
+only ``replica_host.py`` composes them. A module that takes the host would have to be listed in :data:`TAKES_HOST`,
+which is empty and may only stay so."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 ROOMS = ("sim_peer/replica", "sim_peer/shards")
 COMPOSER = "sim_peer/replica/replica_host.py"
-TAKES_HOST = {"sim_peer/replica/deaf_stop.py", "sim_peer/replica/freeze_guard.py"}
-"""Shells not narrowed yet (they still reach into the host and share its lock)."""
+TAKES_HOST: set[str] = set()
+"""Shells that still reach into the host: none."""
 
 
 def host_uses(source: str) -> list[str]:
@@ -54,7 +54,7 @@ def shells_taking_the_host(root: Path) -> dict[str, list[str]]:
     return found
 
 
-def test_no_narrowed_shell_takes_the_host_and_the_list_of_those_that_do_only_shrinks():
+def test_no_shell_but_the_composer_takes_the_host():
     found = shells_taking_the_host(ROOT)
     assert {m: u for m, u in found.items() if m not in TAKES_HOST} == {}, "a shell takes the ReplicaHost again"
     assert TAKES_HOST - set(found) == set(), "narrowed: take it off TAKES_HOST"
