@@ -12,6 +12,7 @@ The follower talks to the rest of the sim through what its constructor names (th
 the election's view, the shard's robots, whom to tell what it heard), never the host. Its own lock guards what it
 heard; the commands it keeps are guarded by the lock of what the host serves (``serving_lock``), passed in: a
 command is either kept before a take-over takes the kept ones, or the new peer, already there, takes it itself.
+The election changes under that lock too, so a polled snapshot is kept only if its source still leads then.
 """
 
 from __future__ import annotations
@@ -140,9 +141,10 @@ class Follower:
             if best is None:
                 continue
             self._heard(best.header.source, best.header.term)
-            if best.header.source == self._election().leader:
-                with self._lock:
-                    self.snapshot, self.snapshot_asked = best, asked
+            with self._serving_lock:  # the election changes under it: no take-over between the look and the keep
+                if best.header.source == self._election().leader:
+                    with self._lock:
+                        self.snapshot, self.snapshot_asked = best, asked
 
     def on_joints(self, key: str, js: JointState) -> None:
         rid = keys.parse(key).subject
