@@ -72,6 +72,8 @@ def test_a_primary_frozen_past_the_lease_asks_who_holds_its_shard_and_reasserts(
                     lambda key, request: WorldState(0.0, 0, (arm,), (), header=Header(source="sim-b", term=1)))
     wait_until(lambda: any(pid == "sim-b" for _, pid in fab.live_peers("sim", timeout=1.0)), timeout=30,
                what="the rival's token")
+    wait_until(lambda: fab.rpc.query(keys.srv(fab.world, "state"), timeout=1.0, expected=WorldState, all_replies=True),
+               timeout=30, what="the rival's srv/state at the router")
     said: list[str] = []
     roles = Electing({"sim-a", "sim-b"})
     fab.stamp.muzzle()
