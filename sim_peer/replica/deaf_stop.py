@@ -106,19 +106,19 @@ class DeafStop:
     def look(self) -> None:
         """Hold the serving peer's robots if this primary is cut off now, let them go once it hears again; say so
         when it was only late."""
-        peer = self._serving()
+        peer, me = self._serving(), self.fabric.peer_id
         if peer is None:
             return
         self.state, effects = dr.step(self.state, self._seen(bool(peer.commands.held)))
         for e in effects:
             if isinstance(e, dr.Hold):
                 peer.commands.hold(REASON)
-                self.announce(f"sim {self.fabric.peer_id}: hears no one ({e.why}); its robots stop (bases brake, arms hold) "
+                self.announce(f"sim {me}: hears no one ({e.why}); its robots stop (bases brake, arms hold) "
                            "and commands are refused until it hears again")
             elif isinstance(e, dr.Resume):
                 peer.commands.resume()
-                self.announce(f"sim {self.fabric.peer_id}: hears again (its router answers); commands are accepted (its "
+                self.announce(f"sim {me}: hears again (its router answers); commands are accepted (its "
                            "robots stay where they stopped)")
             else:
-                self.announce(f"sim {self.fabric.peer_id}: was late ({e.late_s:.1f} s frozen or starved), not cut off: its "
+                self.announce(f"sim {me}: was late ({e.late_s:.1f} s frozen or starved), not cut off: its "
                            "router answers; commands are served on")

@@ -170,7 +170,8 @@ class Follower:
         """Whether a stream sample from ``source`` is the followed leader's (or, while a take-over drains, the
         former leader's)."""
         election = self._election()
-        return (election.role == el.STANDBY and source == election.leader) or (self.former is not None and source == self.former)
+        return ((election.role == el.STANDBY and source == election.leader)
+                or (self.former is not None and source == self.former))
 
     def drain(self, former: str, quiet_s: float = DRAIN_QUIET_S, limit_s: float = DRAIN_LIMIT_S) -> float:
         """Keep ``former``'s streams until none came for ``quiet_s`` since the drain began (at most ``limit_s``),

@@ -131,18 +131,20 @@ class ReplicaHost:
                            announce=self.announce, take_over=self.take_over, reassert=self._reassert,
                            show_role=lambda shown: self.role_token.show(shown, self.peer is not None),
                            adopt_soon=lambda: self.adoption.soon(), clock=clock)
-        self.follower = Follower(fabric, world=lambda: self.world, election=lambda: self.roles.election, shard=self.shards,
-                                 heard=self.roles.heard, seen_serving=lambda *seen: self.moves.seen_serving(*seen),
-                                 serving=lambda: self.serving, serving_lock=self.lock, stopping=self.stopping,
-                                 clock=clock, snapshot=snapshot, poll_s=poll_s, plant=plant)
+        self.follower = Follower(fabric, world=lambda: self.world, election=lambda: self.roles.election,
+                                 shard=self.shards, heard=self.roles.heard,
+                                 seen_serving=lambda *seen: self.moves.seen_serving(*seen), serving=lambda: self.serving,
+                                 serving_lock=self.lock, stopping=self.stopping, clock=clock, snapshot=snapshot, poll_s=poll_s, plant=plant)
         self.freeze = FreezeGuard(fabric, roles=self.roles, shard=self.shards, stopping=self.stopping,
                                   announce=self.announce, gap=freeze_gap, clock=clock)
         self.adoption = ObjectAdoption(fabric, self, stopping=self.stopping, announce=self.announce, clock=self.clock,
                                        after_s=adopt_after_s)
         self.moves = MoveService(fabric, self, serving_lock=self.lock, election=lambda: self.roles.election,
-                                 live=self.roles.live_sims, standbys=self.shards.standbys, announce=self.announce, clock=clock)
+                                 live=self.roles.live_sims, standbys=self.shards.standbys, announce=self.announce,
+                                 clock=clock)
         # a primary that hears no one stops its robots
-        self.deaf_stop = DeafStop(fabric, hearing=self.roles, serving=lambda: self.peer if self.role == el.PRIMARY else None,
+        self.deaf_stop = DeafStop(fabric, hearing=self.roles,
+                                  serving=lambda: self.peer if self.role == el.PRIMARY else None,
                                   stopping=self.stopping, announce=self.announce, clock=clock)
         self.state_answers = StateAnswers(fabric.counters)  # srv/state off zenoh's callback thread (sim_peer.serving.state_answers)
 

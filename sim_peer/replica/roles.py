@@ -2,9 +2,9 @@
 
 The pure core (:mod:`sim_peer.replica.election`) decides; this part feeds it what the session observes (the sims'
 liveliness tokens, the terms heard on streams and ``srv/state``) and carries out its effects through what its
-constructor names, never the host: a take-over on a thread of its own (``take_over``), a step-down (muzzled at once, then the host's ``run`` returns), a term asserted again after a
-freeze (``reassert``), a new leader announced, the role shown (``show_role``), the scene objects looked after
-(``adopt_soon``).
+constructor names, never the host: a take-over on a thread of its own (``take_over``), a step-down (muzzled at
+once, then the host's ``run`` returns), a term asserted again after a freeze (``reassert``), a new leader
+announced, the role shown (``show_role``), the scene objects looked after (``adopt_soon``).
 
 The first complete view of the live sims comes before any change counts (:meth:`Roles.join`): the election
 reads a leader missing from a view as gone, so the view must not be a history still arriving.

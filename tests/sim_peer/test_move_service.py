@@ -27,7 +27,10 @@ class WorldServer:
 
     def __init__(self, fab, robots: list[str], *, role: str = el.PRIMARY, can_rebuild: bool = True) -> None:
         self.world = SimWorld("warehouse", robots, scene_robots=False, seed=1)
-        self.rebuild = (lambda placements: SimWorld("warehouse", placements, scene_robots=False, seed=1)) if can_rebuild else None
+        def build(placements: list) -> SimWorld:
+            return SimWorld("warehouse", placements, scene_robots=False, seed=1)
+
+        self.rebuild = build if can_rebuild else None
         self.closed, self.serving = False, True
         self.election = el.Election(fab.peer_id, role, 1 if role == el.PRIMARY else 0, fab.peer_id)
         self.lock, self.said, self.now = threading.RLock(), [], 5.0

@@ -70,7 +70,8 @@ def test_the_scan_bites_on_each_way_of_taking_the_host(tmp_path):
     (tmp_path / "sim_peer/shards/param.py").write_text("class Part:\n    def __init__(self, host):\n        pass\n")
     (tmp_path / "sim_peer/replica/attr.py").write_text("def f(part):\n    return part.host.lock\n")
     (tmp_path / "sim_peer/replica/typed.py").write_text(
-        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from sim_peer.replica.replica_host import ReplicaHost\n"
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
+        "    from sim_peer.replica.replica_host import ReplicaHost\n"
         "def f(h: 'ReplicaHost'):\n    pass\n")
     found = shells_taking_the_host(tmp_path)
     assert set(found) == {"sim_peer/shards/param.py", "sim_peer/replica/attr.py", "sim_peer/replica/typed.py"}

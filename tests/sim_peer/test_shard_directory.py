@@ -76,7 +76,8 @@ def test_the_answer_and_about_mine_read_this_shards_robots(connect):
         SHARD_QUERY, "primary", {"robots": ["arm1", "arm2"]}, "sim-a")
 
     def state(*robots: str) -> WorldState:
-        return WorldState(0.0, 0, tuple(RobotState(r, "arm", np.zeros(1), np.zeros(1), np.zeros(1)) for r in robots), ())
+        zero = np.zeros(1)
+        return WorldState(0.0, 0, tuple(RobotState(r, "arm", zero, zero, zero) for r in robots), ())
 
     assert mine.about_mine(state("base1", "arm2"))
     assert not mine.about_mine(state("base1"))
