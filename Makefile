@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 STAMP_TEST := $(VENV)/.installed-test
 
-.PHONY: demo test test-fast lint install clean bench
+.PHONY: demo test test-fast lint format install clean bench
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -47,10 +47,15 @@ test: $(STAMP_TEST) $(AXE) $(ROS_MSGS)
 test-fast: $(STAMP_TEST) $(ROS_MSGS)
 	PYTHONDONTWRITEBYTECODE= $(PY) -m pytest -q -m "not slow" -n 2
 
-# the linter and the type checker alone (tests/test_lint.py runs both in `make test`)
+# the linter, the formatter's check and the type checker alone (tests/test_lint.py runs both in `make test`)
 lint: $(STAMP_TEST)
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/mypy
+
+# the formatter, as the check above wants the tree
+format: $(STAMP_TEST)
+	$(VENV)/bin/ruff format .
 
 # every benchmark, shortened (`robofabric bench all` without --quick for the figures in docs/benchmarks.md)
 bench: $(STAMP)

@@ -14,18 +14,31 @@ from fabric.cli_common import Joining, UserError, join_flags
 def compute(
     stream: Annotated[
         Optional[list[str]],
-        typer.Option("--stream", help="Stream IK for ROBOT:OBJECT (the arm follows the object's pose; repeatable), e.g. arm1:target."),
+        typer.Option(
+            "--stream",
+            help="Stream IK for ROBOT:OBJECT (the arm follows the object's pose; repeatable), e.g. arm1:target.",
+        ),
     ] = None,
     arm: Annotated[
         Optional[list[str]],
-        typer.Option("--arm", help="Serve an arm without asking a sim: ID:TYPE[@X,Y,Z[,YAW_DEG]] (repeatable), e.g. arm1:meca500@3,0,0.75."),
+        typer.Option(
+            "--arm",
+            help="Serve an arm without asking a sim: ID:TYPE[@X,Y,Z[,YAW_DEG]] (repeatable), e.g. arm1:meca500@3,0,0.75.",
+        ),
     ] = None,
     stream_rate: Annotated[float, typer.Option("--stream-rate", help="IK streaming rate in Hz.")] = 20.0,
-    kinematics: Annotated[bool, typer.Option("--kinematics/--no-kinematics", help="Serve srv/ik, srv/fk, srv/jacobian.")] = True,
-    navigation: Annotated[bool, typer.Option("--navigation/--no-navigation", help="Serve srv/map and srv/plan; map from scans.")] = True,
-    mapping: Annotated[bool, typer.Option("--mapping/--no-mapping", help="Accumulate scans from the start (else on srv/map start).")] = True,
+    kinematics: Annotated[
+        bool, typer.Option("--kinematics/--no-kinematics", help="Serve srv/ik, srv/fk, srv/jacobian.")
+    ] = True,
+    navigation: Annotated[
+        bool, typer.Option("--navigation/--no-navigation", help="Serve srv/map and srv/plan; map from scans.")
+    ] = True,
+    mapping: Annotated[
+        bool, typer.Option("--mapping/--no-mapping", help="Accumulate scans from the start (else on srv/map start).")
+    ] = True,
     maps_dir: Annotated[
-        Optional[Path], typer.Option("--maps-dir", help="The only folder map save/load may use (default: saving disabled).")
+        Optional[Path],
+        typer.Option("--maps-dir", help="The only folder map save/load may use (default: saving disabled)."),
     ] = None,
     duration: Annotated[Optional[float], typer.Option("--duration", help="Stop after this many seconds.")] = None,
     join: Joining = Joining(),

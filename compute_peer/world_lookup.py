@@ -41,8 +41,14 @@ class BackgroundLookup:
     An exception from ``lookup`` goes to ``on_error`` (a session closing under it, say) and ends that run only.
     """
 
-    def __init__(self, lookup: Callable[[float], object], *, name: str, on_error: Callable[[Exception], None],
-                 clock: Clock | None = None) -> None:
+    def __init__(
+        self,
+        lookup: Callable[[float], object],
+        *,
+        name: str,
+        on_error: Callable[[Exception], None],
+        clock: Clock | None = None,
+    ) -> None:
         self._lookup = lookup
         self._name = name
         self._on_error = on_error

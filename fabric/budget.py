@@ -29,7 +29,9 @@ class Rate:
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.per_s) and self.per_s > 0 and math.isfinite(self.burst) and self.burst >= 1):
-            raise ValueError(f"a budget needs a positive rate and a burst of at least 1, got {self.per_s}/s, burst {self.burst}")
+            raise ValueError(
+                f"a budget needs a positive rate and a burst of at least 1, got {self.per_s}/s, burst {self.burst}"
+            )
 
     @classmethod
     def parse(cls, text: str) -> "Rate":
@@ -40,7 +42,9 @@ class Rate:
             burst = float(tail) if tail else max(1.0, 2 * per_s)
             return cls(per_s, burst)
         except ValueError:
-            raise ValueError(f"a budget is RATE or RATE/BURST (asks a second / at once, e.g. 5/10), got {text!r}") from None
+            raise ValueError(
+                f"a budget is RATE or RATE/BURST (asks a second / at once, e.g. 5/10), got {text!r}"
+            ) from None
 
     def __str__(self) -> str:
         return f"{self.per_s:g}/s (burst {self.burst:g})"
@@ -104,5 +108,7 @@ class Budgets:
 
     def refusal(self, login: str, what: str) -> str:
         """The reason a refused ``login`` reads: the word, her budget, and what to do."""
-        return (f"{RATE_LIMITED}: {login} asked more {what} than her budget of {self.rate}; "
-                f"the rest are refused until she slows down")
+        return (
+            f"{RATE_LIMITED}: {login} asked more {what} than her budget of {self.rate}; "
+            f"the rest are refused until she slows down"
+        )

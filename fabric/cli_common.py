@@ -171,7 +171,9 @@ Profile = Annotated[
 ]
 ZenohConfig = Annotated[
     Optional[Path],
-    typer.Option("--zenoh-config", help="A zenoh json5 config file (TLS, auth, access control...); flags override its endpoints."),
+    typer.Option(
+        "--zenoh-config", help="A zenoh json5 config file (TLS, auth, access control...); flags override its endpoints."
+    ),
 ]
 
 
@@ -209,8 +211,15 @@ PLAIN = 3
 """Columns a borderless table spends between two columns, and none at its edges."""
 
 
-def column_widths(columns: Sequence[str], rows: Sequence[Sequence[str]], width: int, *, boxed: bool = True,
-                  fold_first: bool = True, whole: Collection[int] = ()) -> list[int] | None:
+def column_widths(
+    columns: Sequence[str],
+    rows: Sequence[Sequence[str]],
+    width: int,
+    *,
+    boxed: bool = True,
+    fold_first: bool = True,
+    whole: Collection[int] = (),
+) -> list[int] | None:
     """Widths (without padding) for a table of ``columns`` and ``rows`` to fit ``width`` with no word cut,
     or None when it cannot.
 
@@ -242,8 +251,15 @@ def column_widths(columns: Sequence[str], rows: Sequence[Sequence[str]], width: 
     return widths
 
 
-def print_table(title: str, columns: Sequence[str], rows: Sequence[Sequence[str]], *, numeric: Collection[str] = (),
-                fold_first: bool = True, stderr: bool = False) -> None:
+def print_table(
+    title: str,
+    columns: Sequence[str],
+    rows: Sequence[Sequence[str]],
+    *,
+    numeric: Collection[str] = (),
+    fold_first: bool = True,
+    stderr: bool = False,
+) -> None:
     """The one way the CLI prints a table: as wide as the terminal at most, every cell whole.
 
     Cells wrap between words and no word is cut (:func:`column_widths`); a key in the first column folds
@@ -341,7 +357,12 @@ class Joining:
 
 
 JOIN_FLAGS: dict[str, Any] = {
-    "world": World, "connect": Connect, "listen": Listen, "profile": Profile, "zenoh_config": ZenohConfig, "peer_id": PeerId,
+    "world": World,
+    "connect": Connect,
+    "listen": Listen,
+    "profile": Profile,
+    "zenoh_config": ZenohConfig,
+    "peer_id": PeerId,
 }
 """Each joining flag's parameter name and its option, in the order ``--help`` lists them."""
 CLIENT_FLAGS = ("world", "connect", "profile", "zenoh_config")
@@ -366,7 +387,9 @@ def join_flags(*, client: bool = False) -> Callable[[Callable[..., Any]], Callab
         if at is None:
             raise TypeError(f"{command.__qualname__} has no parameter 'join' for join_flags to stand in for")
         flags = [inspect.Parameter(n, keyword, default=None, annotation=JOIN_FLAGS[n]) for n in names]
-        shown = [p.replace(kind=keyword) for p in params[:at]] + flags + [p.replace(kind=keyword) for p in params[at + 1:]]
+        shown = (
+            [p.replace(kind=keyword) for p in params[:at]] + flags + [p.replace(kind=keyword) for p in params[at + 1 :]]
+        )
 
         @functools.wraps(command)
         def run(**kwargs: Any) -> Any:

@@ -96,13 +96,19 @@ def _tls_refusal(endpoint: str, ca: object, cert: object, key: object, timeout: 
     except (OSError, ssl.SSLError, ValueError):
         return None
     try:
-        with socket.create_connection((host, port), timeout=timeout) as sock, ctx.wrap_socket(sock, server_hostname=host):
+        with (
+            socket.create_connection((host, port), timeout=timeout) as sock,
+            ctx.wrap_socket(sock, server_hostname=host),
+        ):
             return None
     except ssl.SSLCertVerificationError as exc:
         if exc.verify_code == 62 or "mismatch" in str(exc.verify_message).lower():  # X509_V_ERR_HOSTNAME_MISMATCH
             names = _certificate_names(host, port, timeout)
-            return f"the router's certificate does not name {host}" + (f" (it names {', '.join(names)})" if names else "") + \
-                " (connect to a name it has, or re-run secure init with --connect naming this host)"
+            return (
+                f"the router's certificate does not name {host}"
+                + (f" (it names {', '.join(names)})" if names else "")
+                + " (connect to a name it has, or re-run secure init with --connect naming this host)"
+            )
         return f"this client does not trust the router's certificate ({exc.verify_message}: is this login from the router's class?)"
     except (OSError, ssl.SSLError):
         return None
@@ -265,9 +271,12 @@ class FabricConfig:
                     who = self.identity()
                 except ValueError:
                     who = None
-                tls = _tls_refusal(up[0], self.file_value("transport/link/tls/root_ca_certificate"),
-                                   self.file_value("transport/link/tls/connect_certificate"),
-                                   self.file_value("transport/link/tls/connect_private_key"))
+                tls = _tls_refusal(
+                    up[0],
+                    self.file_value("transport/link/tls/root_ca_certificate"),
+                    self.file_value("transport/link/tls/connect_certificate"),
+                    self.file_value("transport/link/tls/connect_private_key"),
+                )
                 if tls is not None:
                     return JoinFailure(up[0], tls, f"cannot join world {self.world!r} at {up[0]}: {tls}")
                 if who is not None:
@@ -278,7 +287,11 @@ class FabricConfig:
             if connect:
                 # in robofabric's words (zenoh's "Unable to connect to any of [Single(tcp/...)]!" says less)
                 cause = "no router answers there (is it running, and is this its address?)"
-                return JoinFailure(where, cause, f"cannot join world {self.world!r}: no router answers at {where} (is it running, and is this its address?)")
+                return JoinFailure(
+                    where,
+                    cause,
+                    f"cannot join world {self.world!r}: no router answers at {where} (is it running, and is this its address?)",
+                )
         return JoinFailure(where, reason, f"cannot join world {self.world!r} via {where}: {reason}")
 
     def user_id(self, user: str | None) -> str | None:
@@ -322,10 +335,14 @@ class FabricConfig:
         # A router answers read-only queries on its admin space (``@/ZID/router/{subscriber,queryable,token}/KEY``):
         # who subscribes to and serves what, for ``robofabric ps -v``, ``list`` and ``info`` (robofabric/declarations.py).
         # Never writable; a config file that sets the admin space keeps its choice; ACLs still decide who may ask.
-        if mode == "router" and not json.loads(conf.get_json("adminspace/enabled")) and not (
-            self.config_file and "adminspace" in _file_text(self.config_file)
+        if (
+            mode == "router"
+            and not json.loads(conf.get_json("adminspace/enabled"))
+            and not (self.config_file and "adminspace" in _file_text(self.config_file))
         ):
-            conf.insert_json5("adminspace", json.dumps({"enabled": True, "permissions": {"read": True, "write": False}}))
+            conf.insert_json5(
+                "adminspace", json.dumps({"enabled": True, "permissions": {"read": True, "write": False}})
+            )
         # Timestamps let advanced subscribers ask publishers' caches for history.
         conf.insert_json5("timestamping/enabled", json.dumps({"router": True, "peer": True, "client": True}))
         for key, value in self.extra:

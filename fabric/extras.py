@@ -33,5 +33,6 @@ def require(extra: str, command: str) -> None:
     if gone:
         from fabric.cli_common import UserError
 
-        raise UserError(f"robofabric {command} needs {', '.join(gone)}, which this install lacks: "
-                        f"pip install 'robofabric[{extra}]'")
+        raise UserError(
+            f"robofabric {command} needs {', '.join(gone)}, which this install lacks: pip install 'robofabric[{extra}]'"
+        )

@@ -23,7 +23,9 @@ class FenceWatch:
     """``believe(key, message)`` for one session; what it declares goes into ``resources``, which the session
     undeclares when it closes. Counts ``stale_authority`` and ``fence_resets`` in ``counters``."""
 
-    def __init__(self, session: zenoh.Session, world: str, fence: SimFence, *, counters: Any, resources: list[Any]) -> None:
+    def __init__(
+        self, session: zenoh.Session, world: str, fence: SimFence, *, counters: Any, resources: list[Any]
+    ) -> None:
         self._session = session
         self._world = world
         self.fence = fence
@@ -64,7 +66,9 @@ class FenceWatch:
                 self._counters["fence_resets"] += 1
 
         try:
-            sub = self._session.liveliness().declare_subscriber(keys.peers_all(self._world, "sim"), on_token, history=True)
+            sub = self._session.liveliness().declare_subscriber(
+                keys.peers_all(self._world, "sim"), on_token, history=True
+            )
         except Exception:  # a closing session
             return
         self._resources.append(sub)

@@ -25,8 +25,19 @@ from dataclasses import dataclass
 
 from fabric import keys, streams
 
-__all__ = ["AUTHORITY_STREAMS", "Fence", "FenceVerdict", "SimFence", "MAX_DEPARTED_SIMS", "MAX_SCOPES", "WORLD_SCOPE",
-           "authority_scopes", "fenced_scopes", "is_authority_event", "is_authority_key"]
+__all__ = [
+    "AUTHORITY_STREAMS",
+    "Fence",
+    "FenceVerdict",
+    "SimFence",
+    "MAX_DEPARTED_SIMS",
+    "MAX_SCOPES",
+    "WORLD_SCOPE",
+    "authority_scopes",
+    "fenced_scopes",
+    "is_authority_event",
+    "is_authority_key",
+]
 
 AUTHORITY_STREAMS = frozenset(s.name for s in streams.STREAMS if s.fenced)
 """Robot streams only a sim authority writes (:attr:`fabric.streams.RobotStream.fenced`; paths and IK results come

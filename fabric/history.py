@@ -123,8 +123,13 @@ class LatestThenLive:
         try:
             # the cache replies on the publication's own key, not on the one asked: accept any; and every sample a
             # cache keeps (kept events: several of one key), oldest first, not only the latest of each key
-            self._session.get(selector, self._on_reply, accept_replies=zenoh.ReplyKeyExpr.ANY, timeout=HISTORY_TIMEOUT,
-                              consolidation=zenoh.ConsolidationMode.NONE)
+            self._session.get(
+                selector,
+                self._on_reply,
+                accept_replies=zenoh.ReplyKeyExpr.ANY,
+                timeout=HISTORY_TIMEOUT,
+                consolidation=zenoh.ConsolidationMode.NONE,
+            )
         except Exception:  # a closing session
             pass
 

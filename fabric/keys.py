@@ -251,8 +251,10 @@ def sim_role(world: str, sim: str, role: str, term: int, leader: str) -> str:
     and the terms it hears)."""
     if isinstance(term, bool) or not isinstance(term, int) or term < 0:
         raise ValueError(f"a sim's term is a non-negative integer, not {term!r}")
-    return (f"{peer(world, 'sim', sim)}/{_choice(role, SIM_ROLES, 'sim role')}/{term}/"
-            f"{validate_id(leader, what='leader id')}")
+    return (
+        f"{peer(world, 'sim', sim)}/{_choice(role, SIM_ROLES, 'sim role')}/{term}/"
+        f"{validate_id(leader, what='leader id')}"
+    )
 
 
 def sim_roles_all(world: str, sim: str = "*") -> str:

@@ -22,7 +22,18 @@ from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["MAX_USER_LEN", "QUOTE_LEN", "USER_PATTERN", "validate_user", "is_valid_user", "quote", "clip", "RateLimiter", "ReportVerdict", "put_dropping_oldest"]
+__all__ = [
+    "MAX_USER_LEN",
+    "QUOTE_LEN",
+    "USER_PATTERN",
+    "validate_user",
+    "is_valid_user",
+    "quote",
+    "clip",
+    "RateLimiter",
+    "ReportVerdict",
+    "put_dropping_oldest",
+]
 
 MAX_USER_LEN = 64
 QUOTE_LEN = 200

@@ -26,7 +26,11 @@ def is_matched(publisher: Any) -> bool:
 
 
 def wait_matched(
-    publishers: Iterable[Any], timeout: float, *, every: bool = False, stop: threading.Event | None = None,
+    publishers: Iterable[Any],
+    timeout: float,
+    *,
+    every: bool = False,
+    stop: threading.Event | None = None,
 ) -> bool:
     """Wait up to ``timeout`` s until a subscriber matches any of ``publishers`` (each of them with
     ``every``); returns whether it did. ``stop`` ends the wait early (False)."""
@@ -39,8 +43,11 @@ def wait_matched(
     if matched():
         return True
     changed = threading.Event()
-    listeners = [p.declare_matching_listener(lambda _status: changed.set())
-                 for p in pubs if hasattr(p, "declare_matching_listener")]
+    listeners = [
+        p.declare_matching_listener(lambda _status: changed.set())
+        for p in pubs
+        if hasattr(p, "declare_matching_listener")
+    ]
     try:
         deadline = time.monotonic() + timeout
         while True:

@@ -45,14 +45,22 @@ def declare_publisher(session: zenoh.Session, key: str, **options: Any) -> Any:
         return session.declare_publisher(key, **options)
     if not keys.is_latched(key):  # events kept for a subscriber whose link was down (fabric.keys.cache_size)
         return zenoh.ext.declare_advanced_publisher(
-            session, key, cache=zenoh.ext.CacheConfig(max_samples=kept), publisher_detection=True,
-            sample_miss_detection=zenoh.ext.MissDetectionConfig(heartbeat=None, sporadic_heartbeat=None), **options,
+            session,
+            key,
+            cache=zenoh.ext.CacheConfig(max_samples=kept),
+            publisher_detection=True,
+            sample_miss_detection=zenoh.ext.MissDetectionConfig(heartbeat=None, sporadic_heartbeat=None),
+            **options,
         )
     # the cache and token are what fabric/history.py asks a late joiner's latest value of; the sequence
     # numbers let a zenoh advanced subscriber elsewhere (not ours) track each publisher on its own
     # state, not a stream: a full queue waits rather than dropping it (a dropped map is never resent)
     options.setdefault("congestion_control", zenoh.CongestionControl.BLOCK)
     return zenoh.ext.declare_advanced_publisher(
-        session, key, cache=zenoh.ext.CacheConfig(max_samples=1), publisher_detection=True,
-        sample_miss_detection=zenoh.ext.MissDetectionConfig(heartbeat=None, sporadic_heartbeat=None), **options,
+        session,
+        key,
+        cache=zenoh.ext.CacheConfig(max_samples=1),
+        publisher_detection=True,
+        sample_miss_detection=zenoh.ext.MissDetectionConfig(heartbeat=None, sporadic_heartbeat=None),
+        **options,
     )

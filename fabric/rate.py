@@ -118,8 +118,15 @@ class RateLoop:
     apart for as long as they run (:func:`staggered`); without it the grid starts at the first ``step()``.
     """
 
-    def __init__(self, hz: float, callback: Callable[[float], None], *, clock: Clock | None = None, name: str = "",
-                 start_at: float | None = None) -> None:
+    def __init__(
+        self,
+        hz: float,
+        callback: Callable[[float], None],
+        *,
+        clock: Clock | None = None,
+        name: str = "",
+        start_at: float | None = None,
+    ) -> None:
         if not hz > 0:
             raise ValueError(f"rate must be positive, got {hz}")
         self.hz = float(hz)

@@ -32,8 +32,15 @@ class Reports:
     in the key of its decode reports (``event/decode/by/{login}``: a router lets each login write only its own),
     asked only when one goes out (it reads the login from the zenoh config file)."""
 
-    def __init__(self, world: str, *, counters: Any, publish: Callable[[str, Any], Any],
-                 header: Callable[[str], Header], reporter: Callable[[], str]) -> None:
+    def __init__(
+        self,
+        world: str,
+        *,
+        counters: Any,
+        publish: Callable[[str, Any], Any],
+        header: Callable[[str], Header],
+        reporter: Callable[[], str],
+    ) -> None:
         self._world = world
         self._counters = counters
         self._publish = publish
@@ -63,11 +70,20 @@ class Reports:
             if suppressed is None:
                 return
             if suppressed:
-                event = Event(kind=event.kind, reason=event.reason, object=event.object, user=event.user,
-                              severity=event.severity, data={**event.data, "suppressed": suppressed}, header=event.header)
+                event = Event(
+                    kind=event.kind,
+                    reason=event.reason,
+                    object=event.object,
+                    user=event.user,
+                    severity=event.severity,
+                    data={**event.data, "suppressed": suppressed},
+                    header=event.header,
+                )
         level = {"debug": logging.DEBUG, "info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
         more = f" ({event.data['suppressed']} more like it suppressed)" if event.data.get("suppressed") else ""
-        log.log(level.get(event.severity, logging.INFO), "%s %s: %s%s", event.kind, event.object or "", event.reason, more)
+        log.log(
+            level.get(event.severity, logging.INFO), "%s %s: %s%s", event.kind, event.object or "", event.reason, more
+        )
         try:
             self._publish(keys.event(self._world, *(parts or (event.kind,))), event)
         except Exception as exc:  # a closing session must not turn an event into a crash
@@ -86,5 +102,15 @@ class Reports:
         data: dict[str, Any] = {"key": clip(key), "subscription": clip(where)}
         if suppressed:
             data["suppressed"] = suppressed
-        self.emit(Event(kind=EventKind.DECODE_ERROR, reason=clip(str(exc)), severity="warning", data=data, header=self._header("event")),
-                  keys.DECODE, keys.BY, self._reporter())
+        self.emit(
+            Event(
+                kind=EventKind.DECODE_ERROR,
+                reason=clip(str(exc)),
+                severity="warning",
+                data=data,
+                header=self._header("event"),
+            ),
+            keys.DECODE,
+            keys.BY,
+            self._reporter(),
+        )

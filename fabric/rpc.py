@@ -47,8 +47,16 @@ class Rpc:
     """Serve and query on one session. What it declares goes into ``resources``, which the session
     undeclares when it closes; ``believe(key, message)`` drops replies stamped below a term already heard."""
 
-    def __init__(self, session: zenoh.Session, *, counters: Any, stamp: AuthorityStamp,
-                 header: Callable[[str], Header], believe: Callable[[str, Any], bool], resources: list[Any]) -> None:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        *,
+        counters: Any,
+        stamp: AuthorityStamp,
+        header: Callable[[str], Header],
+        believe: Callable[[str, Any], bool],
+        resources: list[Any],
+    ) -> None:
         self._session = session
         self._counters = counters
         self._stamp = stamp
@@ -114,8 +122,9 @@ class Rpc:
         self._resources.append(q)
         return q
 
-    def _answer_later(self, query: zenoh.Query, key: str, request: Any, handler: Callable[[str, Any], Any],
-                      own_key: str | None) -> None:
+    def _answer_later(
+        self, query: zenoh.Query, key: str, request: Any, handler: Callable[[str, Any], Any], own_key: str | None
+    ) -> None:
         """A deferred answer ends its query itself: zenoh sends a query's final message when its Query goes, and
         one kept alive by a worker's last job went late, past the asker's time limit, where a router with access
         control dropped it (counted as a refusal of whoever it last judged)."""
@@ -124,7 +133,9 @@ class Rpc:
         finally:
             query.drop()
 
-    def _answer(self, query: zenoh.Query, key: str, request: Any, handler: Callable[[str, Any], Any], own_key: str | None) -> None:
+    def _answer(
+        self, query: zenoh.Query, key: str, request: Any, handler: Callable[[str, Any], Any], own_key: str | None
+    ) -> None:
         try:
             reply = handler(key, request)
             if reply is not None:
@@ -137,13 +148,19 @@ class Rpc:
     def _failed(self, query: zenoh.Query, key: str, exc: Exception) -> None:
         self._counters["query_errors"] += 1
         log.error("service %s failed", key, exc_info=exc)
-        query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=f"internal error: {clip(str(exc))}", severity="error")))
+        query.reply_err(
+            encode(Event(kind=EventKind.SERVICE_ERROR, reason=f"internal error: {clip(str(exc))}", severity="error"))
+        )
 
     def _refuse(self, query: zenoh.Query, exc: Exception) -> None:
         try:
             self._counters["query_errors"] += 1
             reason = clip(exc.reason if isinstance(exc, ServiceError) else str(exc), 400)
-            query.reply_err(encode(Event(kind=EventKind.SERVICE_ERROR, reason=reason, severity="warning", header=self._header("srv"))))
+            query.reply_err(
+                encode(
+                    Event(kind=EventKind.SERVICE_ERROR, reason=reason, severity="warning", header=self._header("srv"))
+                )
+            )
         except Exception:
             log.debug("refusal not sent", exc_info=True)  # the session is closing
 
@@ -191,8 +208,14 @@ class Rpc:
         """One query, one answer: the first reply's message."""
         return self.query(selector, request, timeout=timeout, expected=expected)[0].message
 
-    def first(self, selector: str, request: Any = None, *, timeout: float = 2.0,
-              expected: type | tuple[type, ...] | None = None) -> Any:
+    def first(
+        self,
+        selector: str,
+        request: Any = None,
+        *,
+        timeout: float = 2.0,
+        expected: type | tuple[type, ...] | None = None,
+    ) -> Any:
         """Ask every server of ``selector`` and return the first answer as soon as it comes, without waiting
         for the others (a step of a robot's move between sims). Refusals and silence as in :meth:`query`;
         a reply that does not decode counts as a refusal, and replies are not fenced."""

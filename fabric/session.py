@@ -85,12 +85,25 @@ class Fabric:
         self._resources: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
         self.session = zenoh.open(config.zenoh_config())
-        self._fence_watch = FenceWatch(self.session, self.world, self.sim_fence, counters=self.counters, resources=self._resources)
-        self.rpc = Rpc(self.session, counters=self.counters, stamp=self.stamp, header=self.header,
-                       believe=self._fence_watch.believe, resources=self._resources)
+        self._fence_watch = FenceWatch(
+            self.session, self.world, self.sim_fence, counters=self.counters, resources=self._resources
+        )
+        self.rpc = Rpc(
+            self.session,
+            counters=self.counters,
+            stamp=self.stamp,
+            header=self.header,
+            believe=self._fence_watch.believe,
+            resources=self._resources,
+        )
         """Services: ``rpc.serve``, ``rpc.query``, ``rpc.call`` (:mod:`fabric.rpc`)."""
-        self.reports = Reports(self.world, counters=self.counters, publish=self.publish, header=self.header,
-                               reporter=lambda: config.identity() or self.peer_id)
+        self.reports = Reports(
+            self.world,
+            counters=self.counters,
+            publish=self.publish,
+            header=self.header,
+            reporter=lambda: config.identity() or self.peer_id,
+        )
         """Events and reports of bad input, rate-limited: ``reports.emit``, ``reports.bad_payload``,
         ``reports.should_report`` (:mod:`fabric.reports`)."""
         self.token = (
@@ -129,8 +142,13 @@ class Fabric:
 
     def header(self, key: str, *, stamp: float = 0.0) -> Header:
         """A header for the next message on ``key``: per-key sequence, wall time now, this peer as source."""
-        return Header(stamp=float(stamp), wall_ns=time.time_ns(), seq=self.seqs.take(key), source=self.peer_id,
-                      term=self.stamp.term)
+        return Header(
+            stamp=float(stamp),
+            wall_ns=time.time_ns(),
+            seq=self.seqs.take(key),
+            source=self.peer_id,
+            term=self.stamp.term,
+        )
 
     def publish(self, key: str, msg: Any) -> int:
         """Encode and put ``msg`` on ``key``; returns the payload size in bytes.
@@ -240,8 +258,14 @@ class Fabric:
 
         return self.subscribe_raw(key_expr, on_sample, history=history, remote_only=remote_only)
 
-    def subscribe_raw(self, key_expr: str, callback: Callable[[zenoh.Sample], None], *, history: bool = False,
-                      remote_only: bool = False) -> zenoh.Subscriber[None] | LatestThenLive:
+    def subscribe_raw(
+        self,
+        key_expr: str,
+        callback: Callable[[zenoh.Sample], None],
+        *,
+        history: bool = False,
+        remote_only: bool = False,
+    ) -> zenoh.Subscriber[None] | LatestThenLive:
         """``callback(sample)`` for every sample, undecoded; ``history`` and ``remote_only`` as in :meth:`subscribe`."""
         sub: zenoh.Subscriber[None] | LatestThenLive
         if remote_only:
@@ -274,7 +298,11 @@ class Fabric:
     def live_tokens(self, key_expr: str, *, timeout: float = 1.0) -> list[str]:
         """The keys of the liveliness tokens alive under ``key_expr`` now, as declared, parsed or not (a launcher
         waiting for a peer's token, an audit listing made-up ones)."""
-        return [str(rep.ok.key_expr) for rep in self.session.liveliness().get(key_expr, timeout=timeout) if rep.ok is not None]
+        return [
+            str(rep.ok.key_expr)
+            for rep in self.session.liveliness().get(key_expr, timeout=timeout)
+            if rep.ok is not None
+        ]
 
     def watch_peers(self, callback: Callable[[str, str, bool], None], kind: str = "*") -> zenoh.Subscriber[None]:
         """``callback(kind, id, alive)`` on every token that appears or goes (existing ones first)."""

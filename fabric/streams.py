@@ -13,8 +13,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["SIM", "COMPUTE", "WRITERS", "ROS2_QOS", "Ros2Topic", "RobotStream", "STREAMS", "NAMES", "stream",
-           "access", "ros2_topic", "default_rates"]
+__all__ = [
+    "SIM",
+    "COMPUTE",
+    "WRITERS",
+    "ROS2_QOS",
+    "Ros2Topic",
+    "RobotStream",
+    "STREAMS",
+    "NAMES",
+    "stream",
+    "access",
+    "ros2_topic",
+    "default_rates",
+]
 
 SIM = "sim"
 """A stream the sim peer that is its robot's authority writes: robot state, stamped with the authority's term."""
@@ -41,8 +53,9 @@ class Ros2Topic:
 
     def __post_init__(self) -> None:
         if self.qos not in ROS2_QOS:
-            raise ValueError(f"ROS 2 topic {self.name!r}: unknown QoS {self.qos!r}; "
-                             f"expected one of {', '.join(ROS2_QOS)}")
+            raise ValueError(
+                f"ROS 2 topic {self.name!r}: unknown QoS {self.qos!r}; expected one of {', '.join(ROS2_QOS)}"
+            )
         if self.type.count("/") != 2:
             raise ValueError(f"ROS 2 topic {self.name!r}: type {self.type!r} is not 'package/msg/Name'")
 
@@ -70,8 +83,9 @@ class RobotStream:
 
     def __post_init__(self) -> None:
         if self.writer not in WRITERS:
-            raise ValueError(f"stream {self.name!r}: unknown writer {self.writer!r}; "
-                             f"expected one of {', '.join(WRITERS)}")
+            raise ValueError(
+                f"stream {self.name!r}: unknown writer {self.writer!r}; expected one of {', '.join(WRITERS)}"
+            )
         if (self.rate_group is None) != (self.hz is None):
             raise ValueError(f"stream {self.name!r}: a rate group needs its rate, and a rate its group")
 
@@ -89,14 +103,35 @@ class RobotStream:
 _SCAN = "sensor_msgs/msg/LaserScan"
 
 STREAMS: tuple[RobotStream, ...] = (
-    RobotStream("joints", "JointState", SIM, "joints", 100.0,
-                ros2=(Ros2Topic("joint_states", "sensor_msgs/msg/JointState", "stream"),)),
-    RobotStream("pose", "Pose", SIM, "pose", 50.0,  # a base's pose and velocities; an arm's flange (in its joints loop)
-                ros2=(Ros2Topic("odom", "nav_msgs/msg/Odometry", "stream", kind="mobile"),
-                      Ros2Topic("pose", "geometry_msgs/msg/PoseStamped", "stream", kind="arm"))),
+    RobotStream(
+        "joints",
+        "JointState",
+        SIM,
+        "joints",
+        100.0,
+        ros2=(Ros2Topic("joint_states", "sensor_msgs/msg/JointState", "stream"),),
+    ),
+    RobotStream(
+        "pose",
+        "Pose",
+        SIM,
+        "pose",
+        50.0,  # a base's pose and velocities; an arm's flange (in its joints loop)
+        ros2=(
+            Ros2Topic("odom", "nav_msgs/msg/Odometry", "stream", kind="mobile"),
+            Ros2Topic("pose", "geometry_msgs/msg/PoseStamped", "stream", kind="arm"),
+        ),
+    ),
     RobotStream("scan", "Scan", SIM, "scan", 20.0, ros2=(Ros2Topic("scan", _SCAN, "sensor_data"),)),
-    RobotStream("sonar", "Scan", SIM, "scan", 20.0, followed=False,  # the ring shares the LIDAR's loop
-                ros2=(Ros2Topic("sonar", _SCAN, "sensor_data"),)),
+    RobotStream(
+        "sonar",
+        "Scan",
+        SIM,
+        "scan",
+        20.0,
+        followed=False,  # the ring shares the LIDAR's loop
+        ros2=(Ros2Topic("sonar", _SCAN, "sensor_data"),),
+    ),
     RobotStream("path", "Path", COMPUTE, latched=True, ros2=(Ros2Topic("path", "nav_msgs/msg/Path", "latched"),)),
     RobotStream("ik", "IKStream", COMPUTE),
 )

@@ -60,7 +60,9 @@ class OwnBudgets:
             name, eq, value = part.partition("=")
             name = {"renewals": "owner"}.get(name.strip(), name.strip())
             if not eq or name not in ("requests", "owner", "queries"):
-                raise ValueError(f"a budget is requests=, owner= (renewals and releases) or queries=, then RATE[/BURST]; got {part!r}")
+                raise ValueError(
+                    f"a budget is requests=, owner= (renewals and releases) or queries=, then RATE[/BURST]; got {part!r}"
+                )
             given[name] = Rate.parse(value)
         return cls(**given)
 
@@ -68,8 +70,15 @@ class OwnBudgets:
 class Admission:
     """The budgets and the requests' lane of one authority; ``route`` is its queryables' ``defer``."""
 
-    def __init__(self, budgets: OwnBudgets, clock: Clock, counters: dict[str, int], *,
-                 report: Callable[[str, Callable[[], Event]], None], fabric_counters: Any = None) -> None:
+    def __init__(
+        self,
+        budgets: OwnBudgets,
+        clock: Clock,
+        counters: dict[str, int],
+        *,
+        report: Callable[[str, Callable[[], Event]], None],
+        fabric_counters: Any = None,
+    ) -> None:
         """``report(limit, make)``: publish the event ``make()`` builds unless too many went out under ``limit``
         lately (a refusal in a flood must cost no event of its own)."""
         self.budgets = budgets
@@ -106,8 +115,10 @@ class Admission:
         :class:`~fabric.interfaces.ServiceError` (``rate_limited: ...``) when her budget for it is spent."""
         user = keys.parse(key).user
         op = getattr(request, "op", None) if request is not None else None
-        budgets, what = {"request": (self._requests, "ownership requests"), None: (self._queries, "record queries")}.get(
-            op, (self._owner, "renewals and releases"))
+        budgets, what = {
+            "request": (self._requests, "ownership requests"),
+            None: (self._queries, "record queries"),
+        }.get(op, (self._owner, "renewals and releases"))
         if not budgets.allow(user, self._clock.now()):
             self._refused(key, user, budgets.refusal(user, what))
         if op == "request":
@@ -121,8 +132,10 @@ class Admission:
             self._fabric_counters["rate_limited"] += 1
         obj = key.split("/")[-3]  # own/{obj}/by/{user}: one of the authority's objects, its queryables serve no other
         said = reason or f"{RATE_LIMITED}: {user} asked more than all her ownership budgets together"
-        self._report(f"rate_limited:{obj}",
-                     lambda: Event(kind=EventKind.OWN_REFUSED, reason=said, object=obj, user=user, severity="warning"))
+        self._report(
+            f"rate_limited:{obj}",
+            lambda: Event(kind=EventKind.OWN_REFUSED, reason=said, object=obj, user=user, severity="warning"),
+        )
         if reason:
             raise ServiceError(reason)
 

@@ -66,12 +66,15 @@ class Authority:
         if restored is None:
             self._state = st.initial(objects, lease_s=lease_s, grace_s=grace_s, authority=fabric.peer_id)
         else:
-            self._state = snapshot.restore(restored[0], restored[1], self.clock.now(), lease_s=lease_s, grace_s=grace_s,
-                                          authority=fabric.peer_id)
+            self._state = snapshot.restore(
+                restored[0], restored[1], self.clock.now(), lease_s=lease_s, grace_s=grace_s, authority=fabric.peer_id
+            )
             missing = {o: p for o, p in objects.items() if o not in self._state.records}
             if missing:
                 fresh = st.initial(missing, lease_s=lease_s, grace_s=grace_s, authority=fabric.peer_id)
-                self._state = dataclasses.replace(self._state, records=MappingProxyType({**self._state.records, **fresh.records}))
+                self._state = dataclasses.replace(
+                    self._state, records=MappingProxyType({**self._state.records, **fresh.records})
+                )
         self._plant = check_plant(plant)
         self._state = dataclasses.replace(self._state, plant=self._plant)
         self._tick_s = tick_s if tick_s is not None else min(0.02, lease_s / 10)
@@ -82,8 +85,9 @@ class Authority:
             if fabric.reports.should_report(limit) is not None:
                 self._emit(replace(make(), header=fabric.header("event")))
 
-        self.admission = Admission(budgets or OwnBudgets(), self.clock, self.counters, fabric_counters=fabric.counters,
-                                   report=report)
+        self.admission = Admission(
+            budgets or OwnBudgets(), self.clock, self.counters, fabric_counters=fabric.counters, report=report
+        )
         self._stop_watchers: list[Callable[[str, str, str], None]] = []
         self._reset_watchers: list[Callable[[str, str, str], None]] = []
         # users who may have left while no authority listened (a take-over) or while our link was down:
@@ -96,18 +100,32 @@ class Authority:
         # where a router's access control vouches for it, never from the payload alone. Served before the
         # first records go out: a replica that hears one asks for the rest (ownership.client). Requests are worked
         # out on their own lane, renewals at once, each login within her budgets (ownership.admission)
-        self._queryables = [
-            fabric.rpc.serve(keys.own(fabric.world, obj), functools.partial(_answer_record, self, obj), expected=OwnRequest)
-            for obj in objects
-        ] + [
-            fabric.rpc.serve(keys.own_request_all(fabric.world, obj), functools.partial(self._serve, obj),
-                             expected=OwnRequest, defer=self.admission.route, gate=self.admission.gate)
-            for obj in objects
-        ] + [
-            fabric.rpc.serve(keys.own_staff_all(fabric.world, obj), functools.partial(_serve_staff, self, obj),
-                             expected=OwnRequest)
-            for obj in objects
-        ]
+        self._queryables = (
+            [
+                fabric.rpc.serve(
+                    keys.own(fabric.world, obj), functools.partial(_answer_record, self, obj), expected=OwnRequest
+                )
+                for obj in objects
+            ]
+            + [
+                fabric.rpc.serve(
+                    keys.own_request_all(fabric.world, obj),
+                    functools.partial(self._serve, obj),
+                    expected=OwnRequest,
+                    defer=self.admission.route,
+                    gate=self.admission.gate,
+                )
+                for obj in objects
+            ]
+            + [
+                fabric.rpc.serve(
+                    keys.own_staff_all(fabric.world, obj),
+                    functools.partial(_serve_staff, self, obj),
+                    expected=OwnRequest,
+                )
+                for obj in objects
+            ]
+        )
         for obj in objects:
             self._publish(self._state.records[obj])
 
@@ -171,19 +189,39 @@ class Authority:
                             log.exception("stop of %s failed", eff.object)
             # a renewal moves only the lease's end (on the authority's clock, which means nothing elsewhere):
             # the renewer has it in the reply, and nobody else needs a record 64 times a second for a class
-            changed = [r for o, r in self._state.records.items() if r is not before.get(o) and not _lease_only(before.get(o), r)]
+            changed = [
+                r
+                for o, r in self._state.records.items()
+                if r is not before.get(o) and not _lease_only(before.get(o), r)
+            ]
             for rec in changed:
                 self._publish(rec)
         for eff in effects:
             if eff.kind in ("handover", "revoked", "expired", "restored", "released"):
                 if eff.kind == "handover":
                     self.counters["handovers"] += 1
-                self._emit(Event(kind=EventKind.ownership(eff.kind), reason=eff.reason, object=eff.object, user=eff.user,
-                                 severity="warning" if _unasked(eff) else "info", header=self.fabric.header("event")))
+                self._emit(
+                    Event(
+                        kind=EventKind.ownership(eff.kind),
+                        reason=eff.reason,
+                        object=eff.object,
+                        user=eff.user,
+                        severity="warning" if _unasked(eff) else "info",
+                        header=self.fabric.header("event"),
+                    )
+                )
             elif eff.kind == "done":  # an instructor's action: the class's event log says who did what
                 log.info("%s", eff.reason)
-                self._emit(Event(kind=EventKind.OWN_STAFF, reason=eff.reason, object=eff.object, user=eff.user,
-                                 severity="warning", header=self.fabric.header("event")))
+                self._emit(
+                    Event(
+                        kind=EventKind.OWN_STAFF,
+                        reason=eff.reason,
+                        object=eff.object,
+                        user=eff.user,
+                        severity="warning",
+                        header=self.fabric.header("event"),
+                    )
+                )
         return effects
 
     def _publish(self, rec: OwnershipRecord) -> None:
@@ -212,8 +250,11 @@ class Authority:
                 if known:
                     self.hearing.suspect(peer_id)
             if known and self.fabric.reports.should_report("own:link_lost") is not None:
-                log.warning("user tokens went while this authority was paused or cut off (%s first); owners keep their "
-                            "robots until a lease passes, with the link up, without their token", peer_id)
+                log.warning(
+                    "user tokens went while this authority was paused or cut off (%s first); owners keep their "
+                    "robots until a lease passes, with the link up, without their token",
+                    peer_id,
+                )
             return
         self.hearing.confirm(peer_id)
         self._apply(st.Join(peer_id, now) if alive else st.Leave(peer_id, now))
@@ -225,9 +266,12 @@ class Authority:
         with self._lock:
             held = user in self._state.held
         if held and self.fabric.reports.should_report("own:held") is not None:
-            log.warning("the token of user %s went while this authority heard no one (a stalled router?): she keeps what "
-                        "she owns and her queue places until it is back, or for %.0f s without it", quote(user, MAX_USER_LEN),
-                        self._state.grace_s)
+            log.warning(
+                "the token of user %s went while this authority heard no one (a stalled router?): she keeps what "
+                "she owns and her queue places until it is back, or for %.0f s without it",
+                quote(user, MAX_USER_LEN),
+                self._state.grace_s,
+            )
 
     def _run(self) -> None:
         while not self._stop.wait(self._tick_s):
@@ -260,9 +304,17 @@ class Authority:
             # control): quoted short, and logged and published at most a few times per interval
             self.counters["rejected"] += 1
             named, sender = quote(request.user, MAX_USER_LEN), quote(user, MAX_USER_LEN)
-            self._emit(Event(kind=EventKind.OWN_REFUSED, reason=f"request names {named} but comes from {sender}",
-                             object=obj, user=user if is_valid_user(user) else "", severity="warning",
-                             header=self.fabric.header("event")), limit=f"own_refused:{obj}")
+            self._emit(
+                Event(
+                    kind=EventKind.OWN_REFUSED,
+                    reason=f"request names {named} but comes from {sender}",
+                    object=obj,
+                    user=user if is_valid_user(user) else "",
+                    severity="warning",
+                    header=self.fabric.header("event"),
+                ),
+                limit=f"own_refused:{obj}",
+            )
             raise ServiceError(f"refused: the request names {named} but was sent by {sender}")
         with self._lock:
             known = obj in self._state.records
@@ -289,7 +341,9 @@ class Authority:
             if self.fabric.reports.should_report(f"own_denied:{obj}") is not None:
                 log.info("%s of %s by %s denied: %s", request.op, obj, user, eff.reason)
         rec = self._serve_record(obj)  # stamped now, with this authority's term
-        return OwnReply(outcome, eff.reason, eff.position, rec, header=self.fabric.header(keys.own(self.fabric.world, obj)))
+        return OwnReply(
+            outcome, eff.reason, eff.position, rec, header=self.fabric.header(keys.own(self.fabric.world, obj))
+        )
 
     # ------------------------------------------------------------------ CommandGate
 
@@ -341,8 +395,10 @@ def _serve_staff(auth: Authority, obj: str, key: str, request: Any) -> OwnReply:
     login = keys.parse(key).user
     if request is None or request.user != login or request.op not in staff.STAFF_OPS:
         auth.counters["rejected"] += 1
-        raise ServiceError(f"refused: a staff action names its op (one of {', '.join(staff.STAFF_OPS)}) and the login "
-                           f"of its key ({quote(login, MAX_USER_LEN)})")
+        raise ServiceError(
+            f"refused: a staff action names its op (one of {', '.join(staff.STAFF_OPS)}) and the login "
+            f"of its key ({quote(login, MAX_USER_LEN)})"
+        )
     effects = auth._apply(staff.Staff(login, obj, request.op, auth.clock.now(), request.to))
     said = [e for e in effects if e.kind in ("done", "denied") and e.user == login]
     eff = said[-1] if said else st.Effect("denied", obj, login, "no effect")
@@ -351,7 +407,9 @@ def _serve_staff(auth: Authority, obj: str, key: str, request: Any) -> OwnReply:
         rec = auth._state.records.get(obj)
     if rec is None:
         raise ServiceError(eff.reason)
-    return OwnReply(eff.kind, eff.reason, 0, auth._serve_record(obj), header=auth.fabric.header(keys.own(auth.fabric.world, obj)))
+    return OwnReply(
+        eff.kind, eff.reason, 0, auth._serve_record(obj), header=auth.fabric.header(keys.own(auth.fabric.world, obj))
+    )
 
 
 def _unasked(eff: st.Effect) -> bool:

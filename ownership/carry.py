@@ -31,8 +31,12 @@ def newer(heard: OwnershipRecord, snapshot: OwnershipRecord | None, next_seq: in
     return heard.header.seq >= next_seq
 
 
-def overlay(records: Iterable[OwnershipRecord], users: Mapping[str, Any], heard: Iterable[OwnershipRecord],
-            next_seqs: Mapping[str, int] | None = None) -> tuple[tuple[OwnershipRecord, ...], dict[str, Any]]:
+def overlay(
+    records: Iterable[OwnershipRecord],
+    users: Mapping[str, Any],
+    heard: Iterable[OwnershipRecord],
+    next_seqs: Mapping[str, int] | None = None,
+) -> tuple[tuple[OwnershipRecord, ...], dict[str, Any]]:
     """The snapshot's ``records`` and ``users`` (as :func:`ownership.snapshot.export` wrote them) with every ``heard``
     record that is :func:`newer` put in its object's place. ``next_seqs``: object -> the snapshot's next sequence number
     on its record's key (none known: 0, any record of the same epoch is taken).
@@ -44,7 +48,11 @@ def overlay(records: Iterable[OwnershipRecord], users: Mapping[str, Any], heard:
     seqs = next_seqs or {}
     out = {r.object: r for r in records}
     new_users = dict(users)
-    rank = int(new_users.get("next_rank", 1 + max((int(v) for k, v in users.items() if str(k).startswith("rank:")), default=-1)))
+    rank = int(
+        new_users.get(
+            "next_rank", 1 + max((int(v) for k, v in users.items() if str(k).startswith("rank:")), default=-1)
+        )
+    )
     for rec in sorted(heard, key=lambda r: r.object):
         if not newer(rec, out.get(rec.object), int(seqs.get(rec.object, 0))):
             continue

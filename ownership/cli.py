@@ -32,6 +32,7 @@ def _user(user: str | None) -> str:
 
 def _client(join: Joining, user: str | None) -> tuple[Fabric, OwnershipClient]:
     from ownership.client import OwnershipClient
+
     cfg = join.config()
     try:
         uid = cfg.user_id(user) or _user(None)  # with a secure config, the login is the user
@@ -59,14 +60,31 @@ def record_line(rec: OwnershipRecord) -> str:
 
 def record_json(rec: OwnershipRecord) -> dict[str, Any]:
     """One ownership record as ``own list --json`` writes it (stable field names)."""
-    return {"object": rec.object, "policy": rec.policy, "owner": rec.owner, "epoch": rec.epoch,
-            "queue": list(rec.queue), "state": rec.state, "authority": rec.authority, "locked": rec.locked}
+    return {
+        "object": rec.object,
+        "policy": rec.policy,
+        "owner": rec.owner,
+        "epoch": rec.epoch,
+        "queue": list(rec.queue),
+        "state": rec.state,
+        "authority": rec.authority,
+        "locked": rec.locked,
+    }
 
 
 @own_app.command("list")
 @join_flags(client=True)
-def list_cmd(join: Joining = Joining(), user: User = None,
-             as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"world", "records": [{object, policy, owner, epoch, queue, state, authority, locked}]}.')] = False) -> None:
+def list_cmd(
+    join: Joining = Joining(),
+    user: User = None,
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help='One JSON document: {"world", "records": [{object, policy, owner, epoch, queue, state, authority, locked}]}.',
+        ),
+    ] = False,
+) -> None:
     """Every object's owner, epoch, motion state and queue (a table as wide as the terminal; --json for scripts)."""
     fab, cl = _client(join, user)
     with fab:
@@ -81,18 +99,38 @@ def list_cmd(join: Joining = Joining(), user: User = None,
         print(json.dumps({"world": fab.world, "records": [record_json(r) for r in rows]}))
         return
     table = [
-        (_shown(r.object), "scene", "anyone writes", "-", "-", "-") if r.policy == "scene" else
-        (_shown(r.object), "exclusive", _shown(r.owner) or "(free)", str(r.epoch),
-         r.state + (f", locked by {_shown(r.locked)}" if r.locked else ""), ", ".join(_shown(u) for u in r.queue) or "-")
+        (_shown(r.object), "scene", "anyone writes", "-", "-", "-")
+        if r.policy == "scene"
+        else (
+            _shown(r.object),
+            "exclusive",
+            _shown(r.owner) or "(free)",
+            str(r.epoch),
+            r.state + (f", locked by {_shown(r.locked)}" if r.locked else ""),
+            ", ".join(_shown(u) for u in r.queue) or "-",
+        )
         for r in rows
     ]
-    print_table(f"world {fab.world}: {len(rows)} object(s)", ("object", "policy", "owner", "epoch", "state", "queue"), table, numeric=("epoch",))
+    print_table(
+        f"world {fab.world}: {len(rows)} object(s)",
+        ("object", "policy", "owner", "epoch", "state", "queue"),
+        table,
+        numeric=("epoch",),
+    )
 
 
-def _ask(op: str, obj: str, join: Joining, user: str | None, wait: bool = False,
-         hold: bool = False, duration: float | None = None) -> None:
+def _ask(
+    op: str,
+    obj: str,
+    join: Joining,
+    user: str | None,
+    wait: bool = False,
+    hold: bool = False,
+    duration: float | None = None,
+) -> None:
     from fabric.interfaces import ServiceError
     from fabric.session import shutdown_event
+
     stop = shutdown_event() if hold else None
     fab, cl = _client(join, user)
     with fab:
@@ -115,6 +153,7 @@ def _hold(cl: OwnershipClient, obj: str, stop: threading.Event, duration: float 
 
     Prints each change of the object's record, so a queued user sees the moment it is granted."""
     from fabric.interfaces import ServiceError
+
     cl.on_change(lambda rec: say(record_line(rec), stop=stop) if rec.object == obj else None)
     say(f"holding {obj} as {cl.user} (Ctrl-C releases it)", stop=stop)
     stop.wait(duration)
@@ -126,11 +165,18 @@ def _hold(cl: OwnershipClient, obj: str, stop: threading.Event, duration: float 
 
 @own_app.command("request")
 @join_flags(client=True)
-def request_cmd(obj: Annotated[str, typer.Argument(help="Object id (robot or scene object).")], join: Joining = Joining(),
-                user: User = None,
-                wait: Annotated[bool, typer.Option("--wait", help="Queue if the robot is moving.")] = False,
-                hold: Annotated[bool, typer.Option("--hold", help="Keep holding (renewing the lease) until Ctrl-C, then release.")] = False,
-                duration: Annotated[Optional[float], typer.Option("--duration", help="With --hold: release after S seconds.")] = None) -> None:
+def request_cmd(
+    obj: Annotated[str, typer.Argument(help="Object id (robot or scene object).")],
+    join: Joining = Joining(),
+    user: User = None,
+    wait: Annotated[bool, typer.Option("--wait", help="Queue if the robot is moving.")] = False,
+    hold: Annotated[
+        bool, typer.Option("--hold", help="Keep holding (renewing the lease) until Ctrl-C, then release.")
+    ] = False,
+    duration: Annotated[
+        Optional[float], typer.Option("--duration", help="With --hold: release after S seconds.")
+    ] = None,
+) -> None:
     """Ask for OBJ: granted, denied (in motion / owned by X) or queued at position N.
 
     Ownership lasts while a renewing peer holds it. Without --hold this command exits at once, so
@@ -144,20 +190,29 @@ def request_cmd(obj: Annotated[str, typer.Argument(help="Object id (robot or sce
 
 @own_app.command("release")
 @join_flags(client=True)
-def release_cmd(obj: Annotated[str, typer.Argument(help="Object id.")], join: Joining = Joining(), user: User = None) -> None:
+def release_cmd(
+    obj: Annotated[str, typer.Argument(help="Object id.")], join: Joining = Joining(), user: User = None
+) -> None:
     """Give OBJ up (or leave its queue); the next waiting user owns it."""
     _ask("release", obj, join, user)
 
 
 @own_app.command("staff")
 @join_flags(client=True)
-def staff_cmd(op: Annotated[str, typer.Argument(help="take_back, give, lock, unlock, stop or reset.")],
-              obj: Annotated[str, typer.Argument(help="Robot id.")], join: Joining = Joining(), user: User = None,
-              to: Annotated[Optional[str], typer.Option("--to", help="With give: the user who gets the robot (logged in now).")] = None) -> None:
+def staff_cmd(
+    op: Annotated[str, typer.Argument(help="take_back, give, lock, unlock, stop or reset.")],
+    obj: Annotated[str, typer.Argument(help="Robot id.")],
+    join: Joining = Joining(),
+    user: User = None,
+    to: Annotated[
+        Optional[str], typer.Option("--to", help="With give: the user who gets the robot (logged in now).")
+    ] = None,
+) -> None:
     """An instructor's action on OBJ, through the authority's rules (the teacher's page does the same): take it
     back from its owner, give it to a user, lock or unlock it, stop or reset it. A class's router passes it from
     instructor logins only (secure init --instructors); refused: exit 1 with the reason."""
     from fabric.interfaces import STAFF_OPS, ServiceError
+
     if op not in STAFF_OPS:
         raise UserError(f"unknown staff action {op!r}: one of {', '.join(STAFF_OPS)}")
     if (op == "give") != bool(to):
@@ -168,8 +223,9 @@ def staff_cmd(op: Annotated[str, typer.Argument(help="take_back, give, lock, unl
             try:
                 out = cl.staff(obj, op, to=to or "")
             except ServiceError as exc:  # no answer: the router passed it to no authority, or none runs
-                raise NothingThere(f"{op} {obj}: {exc.reason} (a class's router passes staff actions from instructor "
-                                   "logins only)") from None
+                raise NothingThere(
+                    f"{op} {obj}: {exc.reason} (a class's router passes staff actions from instructor logins only)"
+                ) from None
             print(f"{obj}: {out.outcome}: {_shown(out.reason)}", flush=True)
             if out.outcome != "done":
                 raise typer.Exit(1)
@@ -179,13 +235,19 @@ def staff_cmd(op: Annotated[str, typer.Argument(help="take_back, give, lock, unl
 
 @own_app.command("watch")
 @join_flags(client=True)
-def watch_cmd(join: Joining = Joining(), user: User = None,
-              duration: Annotated[Optional[float], typer.Option("--duration", help="Stop after S seconds (default: until Ctrl-C).")] = None) -> None:
+def watch_cmd(
+    join: Joining = Joining(),
+    user: User = None,
+    duration: Annotated[
+        Optional[float], typer.Option("--duration", help="Stop after S seconds (default: until Ctrl-C).")
+    ] = None,
+) -> None:
     """Print every ownership change until Ctrl-C.
 
     What cannot be believed is skipped and counted, never printed: payloads that do not decode, and records
     from no live authority (a made-up sim, a stale term); the counts go to stderr at the end."""
     from fabric.session import shutdown_event
+
     if duration is not None and not duration > 0:
         raise UserError("--duration must be positive")
     stop = shutdown_event()
@@ -204,6 +266,7 @@ def watch_cmd(join: Joining = Joining(), user: User = None,
 
 def _skipped(fab: object, cl: object) -> str:
     """'2 undecodable payload(s), 1 record(s) from no live authority' ("" when nothing was skipped)."""
+
     def count(counters: Any, name: str) -> int:
         try:
             return int(counters.get(name, 0))
@@ -213,7 +276,9 @@ def _skipped(fab: object, cl: object) -> str:
     counters = getattr(cl, "counters", {})
     undecodable = count(getattr(fab, "counters", {}), "decode_errors")
     refused = sum(count(counters, f"records_{why}") for why in ("foreign", "stale", "implausible"))
-    parts = [f"{undecodable} undecodable payload(s)"] * bool(undecodable) + [f"{refused} record(s) from no live authority"] * bool(refused)
+    parts = [f"{undecodable} undecodable payload(s)"] * bool(undecodable) + [
+        f"{refused} record(s) from no live authority"
+    ] * bool(refused)
     return ", ".join(parts)
 
 

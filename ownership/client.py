@@ -34,8 +34,9 @@ MAX_EPOCH_RATE = 10_000.0
 EPOCH_SLACK = 1_000
 
 
-def epoch_plausible(old: int | None, new: int, elapsed_s: float, *, rate: float = MAX_EPOCH_RATE,
-                    slack: int = EPOCH_SLACK) -> str | None:
+def epoch_plausible(
+    old: int | None, new: int, elapsed_s: float, *, rate: float = MAX_EPOCH_RATE, slack: int = EPOCH_SLACK
+) -> str | None:
     """None when the authority could have moved an object's epoch from ``old`` to ``new`` in
     ``elapsed_s`` seconds, else why not (backwards, or a jump beyond ``slack + rate * elapsed``)."""
     if old is None:
@@ -82,8 +83,15 @@ class OwnershipClient:
     :meth:`epoch`, :meth:`owns` or :meth:`snapshot`, which take the lock (it is private for that reason).
     ``clock`` (monotonic seconds) is only used to bound epoch jumps between records."""
 
-    def __init__(self, fabric: Fabric, user: str, *, renew_s: float = 0.5, timeout: float = 2.0,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        fabric: Fabric,
+        user: str,
+        *,
+        renew_s: float = 0.5,
+        timeout: float = 2.0,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.fabric = fabric
         self.user = validate_user(user)  # refused here, not by the authority's decoder after a timeout
         self.timeout = timeout
@@ -93,8 +101,9 @@ class OwnershipClient:
         self._clock = clock
         self._lock = threading.Lock()
         self._callbacks: list[Callable[[OwnershipRecord], object]] = []
-        self.renewal = Renewal(self.user, lambda obj: self._ask(obj, "renew"), self.snapshot, renew_s=renew_s,
-                               closed=lambda: fabric.closed)
+        self.renewal = Renewal(
+            self.user, lambda obj: self._ask(obj, "renew"), self.snapshot, renew_s=renew_s, closed=lambda: fabric.closed
+        )
         self._sims: set[str] = set()
         # per object: the sim that is its authority and the term heard from it (several sims may
         # serve one world, each the authority of its own robots with terms of its own: docs/sim.md)
@@ -145,8 +154,9 @@ class OwnershipClient:
     def refresh(self) -> None:
         """Query the authority for every record (late join)."""
         try:
-            for rep in self.fabric.rpc.query(keys.own_all(self.fabric.world), timeout=self.timeout,
-                                         expected=OwnershipRecord, all_replies=True):
+            for rep in self.fabric.rpc.query(
+                keys.own_all(self.fabric.world), timeout=self.timeout, expected=OwnershipRecord, all_replies=True
+            ):
                 self.record_seen(rep.key, rep.message)
         except ServiceError:
             pass  # no authority yet: the subscription fills the replica when one appears
@@ -235,7 +245,9 @@ class OwnershipClient:
         except NoReply:
             known = self.snapshot()
             if known and obj not in known and time.monotonic() - t0 < 0.5 * limit:  # ended at once: nobody serves it
-                raise ServiceError(f"unknown object {obj!r}: no authority serves it (known: {', '.join(sorted(known))})") from None
+                raise ServiceError(
+                    f"unknown object {obj!r}: no authority serves it (known: {', '.join(sorted(known))})"
+                ) from None
             raise
         self.record_seen(keys.own(self.fabric.world, obj), reply.record)
         return reply
@@ -256,8 +268,9 @@ class OwnershipClient:
         client's login: ``done`` or ``denied`` with the reason. A class's router passes it from instructor logins
         only; from anyone else it is dropped and :class:`~fabric.interfaces.NoReply` comes after ``timeout``."""
         req = OwnRequest(op, self.user, header=self.fabric.header("own-staff"), to=to)
-        r: OwnReply = self.fabric.rpc.call(keys.own_staff(self.fabric.world, obj, self.user), req,
-                                           timeout=timeout or self.timeout, expected=OwnReply)
+        r: OwnReply = self.fabric.rpc.call(
+            keys.own_staff(self.fabric.world, obj, self.user), req, timeout=timeout or self.timeout, expected=OwnReply
+        )
         self.record_seen(keys.own(self.fabric.world, obj), r.record)
         return Outcome(r.outcome, r.reason, r.position, r.record.epoch, r.record)
 

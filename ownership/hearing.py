@@ -43,8 +43,11 @@ class Hearing:
         """Whether a token going at ``now`` may be the authority's own trouble."""
         with self._lock:
             last, resumed = self._last_tick_at, self._resumed_at
-        return (not connected or (last is not None and now - last > self.lease_s / 2)
-                or (resumed is not None and now < resumed + self.lease_s + CONFIRM_SLACK_S))
+        return (
+            not connected
+            or (last is not None and now - last > self.lease_s / 2)
+            or (resumed is not None and now < resumed + self.lease_s + CONFIRM_SLACK_S)
+        )
 
     def suspect(self, user: str) -> None:
         """``user``'s token went while the authority was deaf: she must show up again once it hears."""

@@ -26,8 +26,15 @@ class Renewal:
     ``records()`` gives the trusted records, ``closed()`` says the session is going (a failure then is
     no news)."""
 
-    def __init__(self, user: str, ask: Callable[[str], OwnReply], records: Callable[[], Mapping[str, OwnershipRecord]],
-                 *, renew_s: float, closed: Callable[[], bool] = lambda: False) -> None:
+    def __init__(
+        self,
+        user: str,
+        ask: Callable[[str], OwnReply],
+        records: Callable[[], Mapping[str, OwnershipRecord]],
+        *,
+        renew_s: float,
+        closed: Callable[[], bool] = lambda: False,
+    ) -> None:
         self.user = user
         self.renew_s = renew_s
         self._ask = ask

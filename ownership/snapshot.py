@@ -28,7 +28,8 @@ __all__ = ["export", "restore"]
 def export(s: st.OwnState, now: float) -> tuple[tuple[OwnershipRecord, ...], dict[str, Any]]:
     """Records (``lease_expiry`` as seconds remaining) and the users' state as a flat map of plain values."""
     recs = tuple(
-        replace(r, lease_expiry=max(0.0, r.lease_expiry - now) if r.owner else 0.0) for _, r in sorted(s.records.items())
+        replace(r, lease_expiry=max(0.0, r.lease_expiry - now) if r.owner else 0.0)
+        for _, r in sorted(s.records.items())
     )
     users: dict[str, Any] = {"next_rank": s.next_rank}
     for u, rank in s.rank.items():
@@ -36,14 +37,20 @@ def export(s: st.OwnState, now: float) -> tuple[tuple[OwnershipRecord, ...], dic
     for u in s.live:
         users[f"live:{u}"] = True
     for u, a in s.away.items():
-        users[f"away:{u}"] = [a.deadline - now, *(f"o:{o}" for o in sorted(a.owned)), *(f"q:{o}" for o in sorted(a.queued))]
+        users[f"away:{u}"] = [
+            a.deadline - now,
+            *(f"o:{o}" for o in sorted(a.owned)),
+            *(f"q:{o}" for o in sorted(a.queued)),
+        ]
     for u, d in s.unproven.items():
         users[f"unproven:{u}"] = d - now  # may be past: the next tick drops it, as it would have
     for u, t in s.held.items():
         users[f"held:{u}"] = t - now  # her token went while hearing was in doubt: grace counts from then
     # what the lease rule knows of the authority's hearing and its own pauses (never heard / never ticked: None),
     # so the restored authority judges a lease exactly as the old one would have
-    users["clock"] = [None if t == float("-inf") else t - now for t in (s.heard, s.hearing_since, s.last_tick, s.regained)]
+    users["clock"] = [
+        None if t == float("-inf") else t - now for t in (s.heard, s.hearing_since, s.last_tick, s.regained)
+    ]
     return recs, users
 
 

@@ -57,8 +57,10 @@ def step(s: st.OwnState, ev: Staff | st.Event) -> tuple[st.OwnState, list[st.Eff
             effects.append(st.Effect("stop", rec.object, rec.owner, f"stopped by {by}"))
         return s, effects + [st.Effect("done", rec.object, ev.staff, f"{rec.object} stopped by {by}")]
     if ev.op == "reset":
-        return s, [st.Effect("reset", rec.object, rec.owner, f"reset by {by}"),
-                   st.Effect("done", rec.object, ev.staff, f"{rec.object} reset by {by}")]
+        return s, [
+            st.Effect("reset", rec.object, rec.owner, f"reset by {by}"),
+            st.Effect("done", rec.object, ev.staff, f"{rec.object} reset by {by}"),
+        ]
     if ev.op == "give":
         new = _give(s, rec, ev, by, effects)
     elif ev.op == "take_back":
@@ -95,8 +97,9 @@ def _refusal(s: st.OwnState, rec: OwnershipRecord | None, ev: Staff) -> str:
     return ""
 
 
-def _pass(s: st.OwnState, rec: OwnershipRecord, now: float, effects: list[st.Effect], why: str,
-          *, nobody: bool = False) -> OwnershipRecord:
+def _pass(
+    s: st.OwnState, rec: OwnershipRecord, now: float, effects: list[st.Effect], why: str, *, nobody: bool = False
+) -> OwnershipRecord:
     """The owner (if any) loses ``rec``, which stops; the head of the live queue owns it next (unless ``nobody``:
     a lock keeps the queue, to be served at the unlock), else it is free. The epoch moves on."""
     queue = [u for u in rec.queue if u in s.live]
@@ -109,7 +112,9 @@ def _pass(s: st.OwnState, rec: OwnershipRecord, now: float, effects: list[st.Eff
         return replace(rec, owner=nxt, epoch=rec.epoch + 1, lease_expiry=now + s.lease_s, queue=tuple(queue))
     if rec.owner:
         effects.append(st.Effect("released", rec.object, rec.owner, why))
-    return replace(rec, owner="", epoch=rec.epoch + 1, lease_expiry=0.0, queue=tuple(queue) if not nobody else rec.queue)
+    return replace(
+        rec, owner="", epoch=rec.epoch + 1, lease_expiry=0.0, queue=tuple(queue) if not nobody else rec.queue
+    )
 
 
 def _give(s: st.OwnState, rec: OwnershipRecord, ev: Staff, by: str, effects: list[st.Effect]) -> OwnershipRecord:

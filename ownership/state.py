@@ -50,8 +50,20 @@ from typing import Any
 from fabric.interfaces import MAX_QUEUE, OwnershipRecord
 
 __all__ = [
-    "Effect", "OwnState", "Join", "Leave", "Request", "Release", "Renew", "Tick", "Motion",
-    "initial", "step", "may_expire", "hearing_in_doubt", "MAX_UNPROVEN",
+    "Effect",
+    "OwnState",
+    "Join",
+    "Leave",
+    "Request",
+    "Release",
+    "Renew",
+    "Tick",
+    "Motion",
+    "initial",
+    "step",
+    "may_expire",
+    "hearing_in_doubt",
+    "MAX_UNPROVEN",
 ]
 
 MAX_UNPROVEN = 256
@@ -136,7 +148,9 @@ class OwnState:
     live: frozenset[str] = frozenset()
     away: Mapping[str, Away] = field(default_factory=dict)
     next_rank: int = 0
-    unproven: Mapping[str, float] = field(default_factory=dict)  # user -> deadline for its token (requested without one)
+    unproven: Mapping[str, float] = field(
+        default_factory=dict
+    )  # user -> deadline for its token (requested without one)
     lease_s: float = 2.0
     grace_s: float = 10.0
     authority: str = ""
@@ -144,23 +158,39 @@ class OwnState:
     heard: float = float("-inf")  # when the last request, release, renewal or token reached the authority
     hearing_since: float = float("-inf")  # when it last started hearing again after a silence or its own pause
     last_tick: float = float("-inf")
-    regained: float = float("-inf")  # when it last heard again after a silence of deaf_s or its own pause (not the first time)
+    regained: float = float(
+        "-inf"
+    )  # when it last heard again after a silence of deaf_s or its own pause (not the first time)
     held: Mapping[str, float] = field(default_factory=dict)  # user -> when her token went while hearing was in doubt
     plant: str = ""  # a defect planted for the soak's checker (fabric/plant.py); "" in every real world
 
 
-def initial(objects: Mapping[str, str], *, lease_s: float = 2.0, grace_s: float = 10.0, authority: str = "",
-            deaf_s: float | None = None, plant: str = "") -> OwnState:
+def initial(
+    objects: Mapping[str, str],
+    *,
+    lease_s: float = 2.0,
+    grace_s: float = 10.0,
+    authority: str = "",
+    deaf_s: float | None = None,
+    plant: str = "",
+) -> OwnState:
     recs = {}
     for obj, policy in objects.items():
         if policy not in ("scene", "exclusive"):
             raise ValueError(f"object {obj!r}: policy must be scene or exclusive, not {policy!r}")
         recs[obj] = OwnershipRecord(object=obj, policy=policy, authority=authority)
-    return OwnState(records=MappingProxyType(recs), lease_s=lease_s, grace_s=grace_s, authority=authority,
-                    deaf_s=deaf_s if deaf_s is not None else lease_s / 2, plant=plant)
+    return OwnState(
+        records=MappingProxyType(recs),
+        lease_s=lease_s,
+        grace_s=grace_s,
+        authority=authority,
+        deaf_s=deaf_s if deaf_s is not None else lease_s / 2,
+        plant=plant,
+    )
 
 
 # ---------------------------------------------------------------------- helpers
+
 
 def _sorted_queue(s: OwnState, users: Iterable[str]) -> tuple[str, ...]:
     return tuple(sorted(set(users), key=lambda u: (s.rank.get(u, 1 << 60), u)))
@@ -175,7 +205,11 @@ def _forfeit_taken(s: OwnState, before: Mapping[str, OwnershipRecord]) -> OwnSta
     """An object someone else came to own while its former owner was away is no longer hers to get back:
     she was not there while another user moved it, so her program must hear that she lost it (a record
     naming the other owner, or a free one of a newer epoch) rather than find herself owner again."""
-    taken = {obj for obj, rec in s.records.items() if rec.owner and (before.get(obj) is None or before[obj].owner != rec.owner)}
+    taken = {
+        obj
+        for obj, rec in s.records.items()
+        if rec.owner and (before.get(obj) is None or before[obj].owner != rec.owner)
+    }
     if not taken:
         return s
     away = {}
@@ -220,7 +254,9 @@ def _stop_reason(owner: str, why: str) -> str:
     return f"{owner}: {why}" if owner not in why else why
 
 
-def _drop_unproven(s: OwnState, recs: dict[str, OwnershipRecord], user: str, now: float, effects: list[Effect]) -> OwnState:
+def _drop_unproven(
+    s: OwnState, recs: dict[str, OwnershipRecord], user: str, now: float, effects: list[Effect]
+) -> OwnState:
     """``user`` requested without a liveliness token and none came within grace: it leaves everything
     (no grace to come back: it never was there), and nothing is kept about it."""
     for obj, rec in list(recs.items()):
@@ -240,6 +276,7 @@ def _drop_unproven(s: OwnState, recs: dict[str, OwnershipRecord], user: str, now
 
 # ---------------------------------------------------------------------- hearing
 
+
 def _hear(s: OwnState, now: float) -> OwnState:
     """Something from a user reached the authority at ``now`` (a request, release, renewal or token):
     after a silence longer than ``deaf_s`` the authority starts hearing again from ``now``."""
@@ -252,7 +289,9 @@ def _hear(s: OwnState, now: float) -> OwnState:
 
 def _overdue(s: OwnState, now: float, but: str = "") -> bool:
     """Whether an owner other than ``but`` has not been heard for ``deaf_s`` (owners renew several times a lease)."""
-    return any(rec.owner and rec.owner != but and now - (rec.lease_expiry - s.lease_s) > s.deaf_s for rec in s.records.values())
+    return any(
+        rec.owner and rec.owner != but and now - (rec.lease_expiry - s.lease_s) > s.deaf_s for rec in s.records.values()
+    )
 
 
 def hearing_in_doubt(s: OwnState, now: float, user: str = "") -> bool:
@@ -270,11 +309,17 @@ def may_expire(s: OwnState, rec: OwnershipRecord, now: float) -> bool:
     (nothing from anyone for ``deaf_s`` means the authority, or its router, is the deaf one), and the
     owner had a whole lease to renew since the authority hears again (after its own pause or a backlog,
     renewals sent meanwhile are still on their way)."""
-    return (bool(rec.owner) and now > rec.lease_expiry and now - s.heard <= s.deaf_s
-            and now > s.hearing_since + s.lease_s and rec.owner not in s.held)
+    return (
+        bool(rec.owner)
+        and now > rec.lease_expiry
+        and now - s.heard <= s.deaf_s
+        and now > s.hearing_since + s.lease_s
+        and rec.owner not in s.held
+    )
 
 
 # ---------------------------------------------------------------------- step
+
 
 def step(s: OwnState, ev: Event) -> tuple[OwnState, list[Effect]]:
     """Apply one event; never raises for a well-typed event on a known object."""
@@ -329,8 +374,12 @@ def _on_leave(s: OwnState, ev: Leave, effects: list[Effect]) -> OwnState:
 def _leave(s: OwnState, user: str, now: float, effects: list[Effect]) -> OwnState:
     """``user`` is gone: what she owned passes on, her queue places go; grace keeps them for her return."""
     ev = Leave(user, now)
-    s = replace(s, live=s.live - {ev.user}, unproven=MappingProxyType({k: v for k, v in s.unproven.items() if k != ev.user}),
-                held=MappingProxyType({k: v for k, v in s.held.items() if k != ev.user}))
+    s = replace(
+        s,
+        live=s.live - {ev.user},
+        unproven=MappingProxyType({k: v for k, v in s.unproven.items() if k != ev.user}),
+        held=MappingProxyType({k: v for k, v in s.held.items() if k != ev.user}),
+    )
     recs = dict(s.records)
     owned, queued = set(), set()
     for obj, rec in list(recs.items()):
@@ -395,8 +444,15 @@ def _on_request(s: OwnState, ev: Request, effects: list[Effect]) -> OwnState:
         return s
     rec = s.records[ev.object]
     if ev.user not in s.live and len(s.unproven) >= MAX_UNPROVEN:  # checked before anything is copied
-        effects.append(Effect("denied", rec.object, ev.user, f"too many requesters without a liveliness token "
-                              f"({MAX_UNPROVEN}); connect with a fabric session and ask again"))
+        effects.append(
+            Effect(
+                "denied",
+                rec.object,
+                ev.user,
+                f"too many requesters without a liveliness token "
+                f"({MAX_UNPROVEN}); connect with a fabric session and ask again",
+            )
+        )
         return s
     if ev.user not in s.live:  # a request proves the user is there, until grace runs out without its token
         s = replace(s, unproven=MappingProxyType({**s.unproven, ev.user: ev.now + s.grace_s}))
@@ -406,7 +462,9 @@ def _on_request(s: OwnState, ev: Request, effects: list[Effect]) -> OwnState:
         effects.append(Effect("granted", rec.object, ev.user, "scene object: anyone writes"))
         return s
     if rec.locked:  # an instructor locked it (ownership.staff)
-        effects.append(Effect("denied", rec.object, ev.user, f"locked by instructor {rec.locked}: ask them to unlock it"))
+        effects.append(
+            Effect("denied", rec.object, ev.user, f"locked by instructor {rec.locked}: ask them to unlock it")
+        )
         return s
     if rec.owner == ev.user:
         recs[rec.object] = replace(rec, lease_expiry=ev.now + s.lease_s)
@@ -416,18 +474,33 @@ def _on_request(s: OwnState, ev: Request, effects: list[Effect]) -> OwnState:
         if ev.wait and ev.user not in rec.queue and len(rec.queue) < MAX_QUEUE:
             q = _sorted_queue(s, rec.queue + (ev.user,))
             recs[rec.object] = replace(rec, queue=q)
-            effects.append(Effect("queued", rec.object, ev.user, f"owned by {rec.owner}; no liveliness token seen yet",
-                                  q.index(ev.user) + 1))
+            effects.append(
+                Effect(
+                    "queued",
+                    rec.object,
+                    ev.user,
+                    f"owned by {rec.owner}; no liveliness token seen yet",
+                    q.index(ev.user) + 1,
+                )
+            )
             return _with(s, recs)
         full = ev.wait and ev.user not in rec.queue
-        why = f"the queue is full ({MAX_QUEUE} waiting)" if full else f"owned by {rec.owner}; no liveliness token seen yet"
+        why = (
+            f"the queue is full ({MAX_QUEUE} waiting)"
+            if full
+            else f"owned by {rec.owner}; no liveliness token seen yet"
+        )
         effects.append(Effect("denied", rec.object, ev.user, why))
         return s
     if not rec.owner or rec.state == "still":
         prev = rec.owner
         queue = tuple(u for u in rec.queue if u != ev.user)
-        bump = 0 if prev and s.plant == "double-owner" else 1  # test-only defect (fabric/plant.py); 1 in every real world
-        recs[rec.object] = replace(rec, owner=ev.user, epoch=rec.epoch + bump, lease_expiry=ev.now + s.lease_s, queue=queue)
+        bump = (
+            0 if prev and s.plant == "double-owner" else 1
+        )  # test-only defect (fabric/plant.py); 1 in every real world
+        recs[rec.object] = replace(
+            rec, owner=ev.user, epoch=rec.epoch + bump, lease_expiry=ev.now + s.lease_s, queue=queue
+        )
         effects.append(Effect("granted", rec.object, ev.user, f"taken over from {prev} (still)" if prev else "free"))
         if prev:
             effects.append(Effect("revoked", rec.object, prev, f"handed over to {ev.user} while still"))
@@ -468,20 +541,38 @@ def _on_renew(s: OwnState, ev: Renew, effects: list[Effect]) -> OwnState:
         effects.append(Effect("renewed", rec.object, ev.user))
         return _with(s, {**s.records, rec.object: replace(rec, lease_expiry=ev.now + s.lease_s)})
     away = s.away.get(ev.user)
-    if (not rec.owner and not rec.locked and away is not None and rec.object in away.owned and ev.now <= away.deadline
-            and len(s.unproven) < MAX_UNPROVEN):
+    if (
+        not rec.owner
+        and not rec.locked
+        and away is not None
+        and rec.object in away.owned
+        and ev.now <= away.deadline
+        and len(s.unproven) < MAX_UNPROVEN
+    ):
         # Her token went (a router restart closes every link) and her renewal is back before it: the
         # renewal proves she is there, as a request does, so she gets back what she held, as her
         # token's return would give it; denied, her client would stop renewing and lose the robot.
         s = replace(s, unproven=MappingProxyType({**s.unproven, ev.user: ev.now + s.grace_s}))
         s = _join(s, ev.user)
-        back = replace(rec, owner=ev.user, epoch=rec.epoch + 1, lease_expiry=ev.now + s.lease_s,
-                       queue=tuple(u for u in rec.queue if u != ev.user))
+        back = replace(
+            rec,
+            owner=ev.user,
+            epoch=rec.epoch + 1,
+            lease_expiry=ev.now + s.lease_s,
+            queue=tuple(u for u in rec.queue if u != ev.user),
+        )
         effects.append(Effect("restored", rec.object, ev.user, "owner again: renewed within grace"))
         return _with(s, {**s.records, rec.object: back})
     effects.append(Effect("denied", rec.object, ev.user, f"not the owner ({rec.owner or 'free'})"))
     return s
 
 
-_HANDLERS: dict[type, Callable[[OwnState, Any, list[Effect]], OwnState]] = {Join: _on_join, Leave: _on_leave, Tick: _on_tick, Motion: _on_motion,
-             Request: _on_request, Release: _on_release, Renew: _on_renew}
+_HANDLERS: dict[type, Callable[[OwnState, Any, list[Effect]], OwnState]] = {
+    Join: _on_join,
+    Leave: _on_leave,
+    Tick: _on_tick,
+    Motion: _on_motion,
+    Request: _on_request,
+    Release: _on_release,
+    Renew: _on_renew,
+}

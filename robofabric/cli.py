@@ -79,7 +79,8 @@ def _untype_tree(cmd: Any, ctx: Any) -> None:
 app = typer.Typer(
     name="robofabric",
     cls=_RootGroup,
-    help="Multi-user robot simulation fabric over Zenoh: run routers and peers, inspect live keys, record and replay.\n\n" + EXIT_RULE,
+    help="Multi-user robot simulation fabric over Zenoh: run routers and peers, inspect live keys, record and replay.\n\n"
+    + EXIT_RULE,
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=True,  # --install-completion / --show-completion (bash, zsh, fish, PowerShell)
@@ -168,7 +169,11 @@ def defer_rich_extras() -> None:
         def real():
             return getattr(importlib.import_module(module), name)
 
-        return _Later(name, (), {"__new__": lambda _cls, *a, **k: real()(*a, **k), "_real": staticmethod(real), "__module__": module})
+        return _Later(
+            name,
+            (),
+            {"__new__": lambda _cls, *a, **k: real()(*a, **k), "_real": staticmethod(real), "__module__": module},
+        )
 
     import types
 
@@ -218,10 +223,15 @@ def _print_version(value: bool) -> None:
 @app.callback()
 def _root(
     verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="More logging (-v info, -vv debug)."),
-    version: bool = typer.Option(False, "--version", help="Print the version and exit.", callback=_print_version, is_eager=True),
+    version: bool = typer.Option(
+        False, "--version", help="Print the version and exit.", callback=_print_version, is_eager=True
+    ),
 ) -> None:
     level = logging.WARNING - 10 * min(verbose, 2)
-    logging.basicConfig(level=int(os.environ.get("ROBOFABRIC_LOG_LEVEL", level)), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=int(os.environ.get("ROBOFABRIC_LOG_LEVEL", level)),
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
     for name, why in _broken:
         print(f"warning: plugin {name!r} could not be loaded: {why}", file=sys.stderr)
 

@@ -20,7 +20,16 @@ from typing import Any
 
 from user_peer.completion import complete_export_formats, complete_formats, matching
 
-__all__ = ["live_keys", "complete_keys", "complete_keys_or_recordings", "complete_peers", "complete_types", "complete_formats", "complete_export_formats", "matching"]
+__all__ = [
+    "live_keys",
+    "complete_keys",
+    "complete_keys_or_recordings",
+    "complete_peers",
+    "complete_types",
+    "complete_formats",
+    "complete_export_formats",
+    "matching",
+]
 
 CONNECT_TIMEOUT_MS = 600
 """How long completion waits for a router before it offers nothing."""
@@ -31,8 +40,12 @@ QUERY_TIMEOUT_S = 0.3
 
 
 def live_keys(
-    world: str | None = None, connect: list[str] | None = None, profile: str | None = None, zenoh_config: Any = None,
-    *, look_s: float = KEY_LOOK_S,
+    world: str | None = None,
+    connect: list[str] | None = None,
+    profile: str | None = None,
+    zenoh_config: Any = None,
+    *,
+    look_s: float = KEY_LOOK_S,
 ) -> list[str]:
     """The keys and key expressions live in ``world``, full (``rf/W/...``); [] when no router answers.
 
@@ -106,7 +119,9 @@ def complete_keys(ctx: Any, incomplete: str) -> list[str]:
     try:
         from fabric.keys import world_root
 
-        full = live_keys(_param(ctx, "world"), _param(ctx, "connect"), _param(ctx, "profile"), _param(ctx, "zenoh_config"))
+        full = live_keys(
+            _param(ctx, "world"), _param(ctx, "connect"), _param(ctx, "profile"), _param(ctx, "zenoh_config")
+        )
         if not full:
             return []
         if incomplete.startswith("rf/"):
@@ -114,7 +129,7 @@ def complete_keys(ctx: Any, incomplete: str) -> list[str]:
         from fabric.cli_common import make_config
 
         root = world_root(make_config(_param(ctx, "world")).world) + "/"
-        return matching((k[len(root):] for k in full if k.startswith(root)), incomplete.lstrip("/"))
+        return matching((k[len(root) :] for k in full if k.startswith(root)), incomplete.lstrip("/"))
     except Exception:
         return []
 
@@ -126,8 +141,16 @@ def complete_peers(ctx: Any, incomplete: str) -> list[str]:
         from fabric.keys import world_root
 
         prefix = world_root(make_config(_param(ctx, "world")).world) + "/peer/"
-        full = live_keys(_param(ctx, "world"), _param(ctx, "connect"), _param(ctx, "profile"), _param(ctx, "zenoh_config"), look_s=0.0)
-        ids = [k[len(prefix):].split("/", 1)[1] for k in full if k.startswith(prefix) and k[len(prefix):].count("/") == 1]
+        full = live_keys(
+            _param(ctx, "world"),
+            _param(ctx, "connect"),
+            _param(ctx, "profile"),
+            _param(ctx, "zenoh_config"),
+            look_s=0.0,
+        )
+        ids = [
+            k[len(prefix) :].split("/", 1)[1] for k in full if k.startswith(prefix) and k[len(prefix) :].count("/") == 1
+        ]
         return matching(ids, incomplete)
     except Exception:
         return []

@@ -22,7 +22,17 @@ from typing import Any
 
 from fabric import keys, streams
 
-__all__ = ["Peer", "Declarations", "live_tokens", "read_declarations", "SERVICE_TYPES", "service_types", "quoted", "STREAM_TYPES", "key_type"]
+__all__ = [
+    "Peer",
+    "Declarations",
+    "live_tokens",
+    "read_declarations",
+    "SERVICE_TYPES",
+    "service_types",
+    "quoted",
+    "STREAM_TYPES",
+    "key_type",
+]
 
 # The request and reply types of each service (``-`` for a query without a payload).
 SERVICE_TYPES: dict[str, tuple[str, str]] = {
@@ -166,7 +176,9 @@ def read_declarations(session: Any, world: str, *, timeout: float = 1.0) -> Decl
             import zenoh
 
             replies = session.get(
-                f"@/*/router/{what}/{root}/**", timeout=timeout, target=zenoh.QueryTarget.ALL,
+                f"@/*/router/{what}/{root}/**",
+                timeout=timeout,
+                target=zenoh.QueryTarget.ALL,
                 consolidation=zenoh.ConsolidationMode.NONE,
             )
             for rep in replies:

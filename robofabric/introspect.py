@@ -51,9 +51,14 @@ class KeyStats:
 
     def to_json(self) -> dict[str, Any]:
         return {
-            "key": self.key, "type": self.types[0] if len(self.types) == 1 else list(self.types),
-            "publishers": list(self.publishers), "messages": self.messages, "rate_hz": round(self.rate_hz, 3),
-            "bytes_per_s": round(self.bytes_per_s, 1), "last_bytes": self.last_bytes, "latched": self.latched,
+            "key": self.key,
+            "type": self.types[0] if len(self.types) == 1 else list(self.types),
+            "publishers": list(self.publishers),
+            "messages": self.messages,
+            "rate_hz": round(self.rate_hz, 3),
+            "bytes_per_s": round(self.bytes_per_s, 1),
+            "last_bytes": self.last_bytes,
+            "latched": self.latched,
         }
 
 
@@ -95,5 +100,7 @@ class KeyObserver:
             span = a.last - a.first
             rate = (a.n - 1) / span if a.n > 1 and span > 0 else 0.0
             bw = (a.nbytes - a.last_bytes) / span if a.n > 1 and span > 0 else 0.0
-            out.append(KeyStats(key, tuple(a.types), tuple(a.sources), a.n, rate, bw, a.last_bytes, keys.is_latched(key)))
+            out.append(
+                KeyStats(key, tuple(a.types), tuple(a.sources), a.n, rate, bw, a.last_bytes, keys.is_latched(key))
+            )
         return out

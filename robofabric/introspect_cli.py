@@ -38,6 +38,7 @@ def _resolve(expr: str, world: str) -> str:
 def observe(fab, expr: str, duration: float) -> list[KeyStats]:
     """Watch ``expr`` for ``duration`` s (latched keys' latest values included) and summarise per key."""
     from robofabric.introspect import KeyObserver
+
     obs = KeyObserver()
     lock = threading.Lock()
 
@@ -57,13 +58,30 @@ def observe(fab, expr: str, duration: float) -> list[KeyStats]:
 
 @join_flags()
 def list_keys(
-    keyexpr: Annotated[Optional[str], typer.Argument(help="Key expression, full or world-relative (default: the whole world).", autocompletion=complete_keys)] = None,
-    as_json: Annotated[bool, typer.Option("--json", help=(
-        'One JSON document instead of a table: {"world", "keyexpr", "duration_s", "declarations_visible", '
-        '"keys": [{key, type, publishers, subscribers, messages, rate_hz, bytes_per_s, last_bytes, latched}]}; '
-        'with --services: {"world", "keyexpr", "declarations_visible", "services": [{key, kind, request, reply, servers}]}.'))] = False,
+    keyexpr: Annotated[
+        Optional[str],
+        typer.Argument(
+            help="Key expression, full or world-relative (default: the whole world).", autocompletion=complete_keys
+        ),
+    ] = None,
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help=(
+                'One JSON document instead of a table: {"world", "keyexpr", "duration_s", "declarations_visible", '
+                '"keys": [{key, type, publishers, subscribers, messages, rate_hz, bytes_per_s, last_bytes, latched}]}; '
+                'with --services: {"world", "keyexpr", "declarations_visible", "services": [{key, kind, request, reply, servers}]}.'
+            ),
+        ),
+    ] = False,
     duration: Annotated[float, typer.Option(help="Seconds to watch (rates are measured over this window).")] = 2.0,
-    services: Annotated[bool, typer.Option("--services", help="Services (queryables) with their request and reply types and who serves them.")] = False,
+    services: Annotated[
+        bool,
+        typer.Option(
+            "--services", help="Services (queryables) with their request and reply types and who serves them."
+        ),
+    ] = False,
     join: Joining = Joining(),
 ) -> None:
     """Live keys with their type, publishers, subscribers and rate (like ``ros2 topic list -v``); --services: services."""
@@ -79,33 +97,63 @@ def list_keys(
     if services:
         rows = [
             {"key": k, "kind": "service", "request": service_types(k)[0], "reply": service_types(k)[1], "servers": who}
-            for k, who in decl.queryables.items() if _intersects(k, expr)
+            for k, who in decl.queryables.items()
+            if _intersects(k, expr)
         ]
         if as_json:
-            print(json.dumps({"world": cfg.world, "keyexpr": expr, "declarations_visible": decl.available, "services": rows}))
+            print(
+                json.dumps(
+                    {"world": cfg.world, "keyexpr": expr, "declarations_visible": decl.available, "services": rows}
+                )
+            )
             return
-        print_table(f"{expr}: {len(rows)} service(s)", ("key", "request", "reply", "served by"),
-                    [(r["key"], r["request"], r["reply"], ", ".join(r["servers"])) for r in rows])
+        print_table(
+            f"{expr}: {len(rows)} service(s)",
+            ("key", "request", "reply", "served by"),
+            [(r["key"], r["request"], r["reply"], ", ".join(r["servers"])) for r in rows],
+        )
         if not decl.available:
             print("the router does not show its admin space: services unknown", file=sys.stderr)
         return
     subs = {s.key: decl.matching(decl.subscribers, s.key) for s in stats}
     if as_json:
         docs = [{**s.to_json(), "subscribers": subs[s.key]} for s in stats]
-        print(json.dumps({"world": cfg.world, "keyexpr": expr, "duration_s": duration, "declarations_visible": decl.available, "keys": docs}))
+        print(
+            json.dumps(
+                {
+                    "world": cfg.world,
+                    "keyexpr": expr,
+                    "duration_s": duration,
+                    "declarations_visible": decl.available,
+                    "keys": docs,
+                }
+            )
+        )
         if not stats:
             raise NothingThere(f"nothing published on {expr} in {duration:g} s (world {cfg.world!r})")
         return
     rows = [
-        (s.key + (" (latched)" if s.latched else ""), ", ".join(s.types), ", ".join(s.publishers) or "-",
-         (", ".join(subs[s.key]) or "-") if decl.available else "?",
-         f"{s.rate_hz:.1f}", str(s.messages), f"{s.bytes_per_s / 1000:.1f}")
+        (
+            s.key + (" (latched)" if s.latched else ""),
+            ", ".join(s.types),
+            ", ".join(s.publishers) or "-",
+            (", ".join(subs[s.key]) or "-") if decl.available else "?",
+            f"{s.rate_hz:.1f}",
+            str(s.messages),
+            f"{s.bytes_per_s / 1000:.1f}",
+        )
         for s in stats
     ]
-    print_table(f"{expr}: {len(stats)} key(s) in {duration:g} s", ("key", "type", "publishers", "subscribers", "rate Hz", "msgs", "kB/s"),
-                rows, numeric=NUMERIC)
+    print_table(
+        f"{expr}: {len(stats)} key(s) in {duration:g} s",
+        ("key", "type", "publishers", "subscribers", "rate Hz", "msgs", "kB/s"),
+        rows,
+        numeric=NUMERIC,
+    )
     if not stats:
-        raise NothingThere(f"nothing published on {expr} in {duration:g} s (world {cfg.world!r}); services: robofabric list --services")
+        raise NothingThere(
+            f"nothing published on {expr} in {duration:g} s (world {cfg.world!r}); services: robofabric list --services"
+        )
 
 
 def _intersects(a: str, b: str) -> bool:
@@ -119,9 +167,7 @@ NUMERIC = ("rate Hz", "msgs", "kB/s", "fields")
 """Columns shown right-aligned."""
 
 
-def key_info(
-    key: str, *, as_json: bool, duration: float, join: Joining
-) -> None:
+def key_info(key: str, *, as_json: bool, duration: float, join: Joining) -> None:
     """``robofabric info KEY``: type and its fields, publishers, rate, whether anyone subscribes."""
     from robofabric.interface_fields import fields_of, message_types
 
@@ -151,9 +197,15 @@ def key_info(
     servers = {k: who for k, who in decl.queryables.items() if _intersects(k, full)}
     if as_json:
         doc = {
-            "key": full, "latched": keys.is_latched(full) if "*" not in full else None, "subscribers": subscribed,
-            "subscribed_by": subscriber_names, "declarations_visible": decl.available,
-            "services": [{"key": k, "request": service_types(k)[0], "reply": service_types(k)[1], "servers": who} for k, who in servers.items()],
+            "key": full,
+            "latched": keys.is_latched(full) if "*" not in full else None,
+            "subscribers": subscribed,
+            "subscribed_by": subscriber_names,
+            "declarations_visible": decl.available,
+            "services": [
+                {"key": k, "request": service_types(k)[0], "reply": service_types(k)[1], "servers": who}
+                for k, who in servers.items()
+            ],
             "keys": [s.to_json() for s in stats],
             "types": {t: [f.__getattribute__("name") for f in fields_of(types[t])] for t in seen_types if t in types},
         }
@@ -169,9 +221,11 @@ def key_info(
     if nothing:
         lines.append(f"no message on {full} in {duration:g} s")
     for s in stats:
-        lines.append(f"  {s.key}: type {', '.join(s.types)}; publishers {', '.join(s.publishers) or '-'}; "
-                     f"{s.rate_hz:.1f} Hz, {s.bytes_per_s / 1000:.1f} kB/s, last {s.last_bytes} B, {s.messages} msgs in {duration:g} s"
-                     + ("; latched (late joiners get the latest value)" if s.latched else ""))
+        lines.append(
+            f"  {s.key}: type {', '.join(s.types)}; publishers {', '.join(s.publishers) or '-'}; "
+            f"{s.rate_hz:.1f} Hz, {s.bytes_per_s / 1000:.1f} kB/s, last {s.last_bytes} B, {s.messages} msgs in {duration:g} s"
+            + ("; latched (late joiners get the latest value)" if s.latched else "")
+        )
     if decl.available and not servers:
         lines.append(f"subscribers: {', '.join(subscriber_names) or 'none'}")
     elif subscribed is not None and not servers:
@@ -187,9 +241,22 @@ def key_info(
 
 
 def interfaces(
-    type_name: Annotated[Optional[str], typer.Argument(help="A message type, e.g. JointState (default: list every type).", autocompletion=complete_types)] = None,
-    as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"types": [{name, module, fields, doc}]}, or with TYPE {"name", "module", "doc", "fields": [{name, type, constraints, default}]}.')] = False,
-    schema: Annotated[bool, typer.Option("--schema", help="Print the type's JSON Schema (what Foxglove exports declare).")] = False,
+    type_name: Annotated[
+        Optional[str],
+        typer.Argument(
+            help="A message type, e.g. JointState (default: list every type).", autocompletion=complete_types
+        ),
+    ] = None,
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help='One JSON document: {"types": [{name, module, fields, doc}]}, or with TYPE {"name", "module", "doc", "fields": [{name, type, constraints, default}]}.',
+        ),
+    ] = False,
+    schema: Annotated[
+        bool, typer.Option("--schema", help="Print the type's JSON Schema (what Foxglove exports declare).")
+    ] = False,
 ) -> None:
     """Message types and their fields (like ``ros2 interface list`` / ``show``), plugins' types included."""
     from user_peer.message_schema import json_schema, type_doc
@@ -204,8 +271,13 @@ def interfaces(
             print(json.dumps({"types": [{"name": n, "module": m, "fields": k, "doc": d} for n, m, k, d in rows]}))
             return
         # the whole description, as plain text: it wraps in its column (it was cut at 90 characters)
-        print_table(f"{len(rows)} message types", ("type", "module", "fields", "what"),
-                    [(n, m, str(k), plain_doc(d)) for n, m, k, d in rows], numeric=NUMERIC, fold_first=False)
+        print_table(
+            f"{len(rows)} message types",
+            ("type", "module", "fields", "what"),
+            [(n, m, str(k), plain_doc(d)) for n, m, k, d in rows],
+            numeric=NUMERIC,
+            fold_first=False,
+        )
         return
     cls = types.get(type_name)
     if cls is None:
@@ -215,10 +287,19 @@ def interfaces(
         return
     fields = fields_of(cls)
     if as_json:
-        print(json.dumps({
-            "name": type_name, "module": cls.__module__, "doc": type_doc(cls),
-            "fields": [{"name": f.name, "type": f.type, "constraints": f.constraints, "default": f.default} for f in fields],
-        }))
+        print(
+            json.dumps(
+                {
+                    "name": type_name,
+                    "module": cls.__module__,
+                    "doc": type_doc(cls),
+                    "fields": [
+                        {"name": f.name, "type": f.type, "constraints": f.constraints, "default": f.default}
+                        for f in fields
+                    ],
+                }
+            )
+        )
         return
     print_folded(f"{type_name} ({cls.__module__})" + (f": {plain_doc(type_doc(cls))}" if type_doc(cls) else ""))
     width = max(len(f.name) for f in fields) if fields else 0

@@ -57,7 +57,12 @@ BUILTIN_ARGS = ("world", "router", "connect")
 _ARG_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _PLACEHOLDER = re.compile(r"\{([A-Za-z_][A-Za-z0-9_]*)\}")
 RESTARTS = ("no", "on-failure", "always")
-_DEFAULT_READY = {"sim": "peer/sim/*", "compute": "peer/compute/*", "view": "peer/viewer/*", "record": "peer/recorder/*"}
+_DEFAULT_READY = {
+    "sim": "peer/sim/*",
+    "compute": "peer/compute/*",
+    "view": "peer/viewer/*",
+    "record": "peer/recorder/*",
+}
 
 
 class LaunchError(ValueError):
@@ -104,7 +109,9 @@ def parse_cli_args(items: list[str] | tuple[str, ...]) -> dict[str, str]:
     for item in items:
         name, eq, value = item.partition("=")
         if not eq or not _ARG_NAME.match(name):
-            raise LaunchError(f"launch argument {item!r} is not NAME=VALUE (e.g. connect=tcp/10.0.0.5:7447, world=lab2)")
+            raise LaunchError(
+                f"launch argument {item!r} is not NAME=VALUE (e.g. connect=tcp/10.0.0.5:7447, world=lab2)"
+            )
         out[name] = value
     return out
 
@@ -156,8 +163,13 @@ def parse_launch(
     head = _parse_head(data.get("launch", {}), overrides, path)
     peers = _parse_peers(data.get("peer", []), _peer_lines(text), head.world, path)
     return LaunchSpec(
-        path=path, world=head.world, router=head.router, connect=head.connect, peers=peers,
-        args=tuple(sorted(values.items())), zenoh_config=head.zenoh_config,
+        path=path,
+        world=head.world,
+        router=head.router,
+        connect=head.connect,
+        peers=peers,
+        args=tuple(sorted(values.items())),
+        zenoh_config=head.zenoh_config,
     )
 
 
@@ -169,7 +181,9 @@ def _load_toml(text: str, path: str) -> dict[str, Any]:
         raise LaunchError(f"{path}: {exc}") from None
     unknown = set(data) - {"launch", "peer", "args"}
     if unknown:
-        raise LaunchError(f"{path}: unknown section(s) {', '.join(sorted(unknown))} (expected [args], [launch] and [[peer]])")
+        raise LaunchError(
+            f"{path}: unknown section(s) {', '.join(sorted(unknown))} (expected [args], [launch] and [[peer]])"
+        )
     return data
 
 
@@ -249,21 +263,28 @@ def _parse_peer(p: dict[str, Any], earlier: set[str], world: str, where: str) ->
         raise LaunchError(f"{where}: peer name {name!r} is used twice")
     args = p.get("args")
     if not isinstance(args, list) or not args or not all(isinstance(a, str) for a in args):
-        raise LaunchError(f"{where}: peer {name!r} needs args = [\"SUBCOMMAND\", ...] (a non-empty list of strings)")
+        raise LaunchError(f'{where}: peer {name!r} needs args = ["SUBCOMMAND", ...] (a non-empty list of strings)')
     role, restart, max_restarts = _parse_policy(p, name, where)
     after = p.get("after", [])
     if isinstance(after, str):
         after = [after]
     missing = [a for a in after if a not in earlier]
     if missing:
-        raise LaunchError(f"{where}: peer {name!r} starts after {', '.join(missing)}, which no earlier [[peer]] defines")
+        raise LaunchError(
+            f"{where}: peer {name!r} starts after {', '.join(missing)}, which no earlier [[peer]] defines"
+        )
     env = p.get("env", {})
     if not isinstance(env, dict):
         raise LaunchError(f"{where}: peer {name!r} env must be a table of strings")
     return PeerSpec(
-        name=name, args=tuple(args), role=role, restart=restart, after=tuple(after),
+        name=name,
+        args=tuple(args),
+        role=role,
+        restart=restart,
+        after=tuple(after),
         ready=_parse_ready(p.get("ready", _DEFAULT_READY.get(args[0])), name, world, where),
-        max_restarts=max_restarts, env=tuple((str(k), str(v)) for k, v in env.items()),
+        max_restarts=max_restarts,
+        env=tuple((str(k), str(v)) for k, v in env.items()),
     )
 
 
@@ -295,7 +316,9 @@ def _parse_ready(ready: Any, name: str, world: str, where: str) -> str | None:
     return ready
 
 
-def load_launch(path: str | Path, *, args: dict[str, str] | None = None, env: dict[str, str] | None = None) -> LaunchSpec:
+def load_launch(
+    path: str | Path, *, args: dict[str, str] | None = None, env: dict[str, str] | None = None
+) -> LaunchSpec:
     p = Path(path)
     if not p.is_file():
         raise LaunchError(f"{path}: no such launch file")
@@ -383,10 +406,16 @@ class Supervisor:
     def _spawn(self, pp: PeerProcess) -> None:
         argv = self._argv(pp.spec)
         env = {**os.environ, "PYTHONUNBUFFERED": "1", **dict(pp.spec.env)}
-        pp.proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, start_new_session=True)
+        pp.proc = subprocess.Popen(
+            argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, start_new_session=True
+        )
         pp.started_at = time.monotonic()
         pp.exit_code = None
-        threading.Thread(target=self.pump, args=(pp.spec.name, pp.proc.stdout, self.out_dir / "logs" / f"{pp.spec.name}.log"), daemon=True).start()
+        threading.Thread(
+            target=self.pump,
+            args=(pp.spec.name, pp.proc.stdout, self.out_dir / "logs" / f"{pp.spec.name}.log"),
+            daemon=True,
+        ).start()
         self.say(f"started {pp.spec.name} (pid {pp.proc.pid}): robofabric {' '.join(argv[3:])}")
 
     def say(self, text: str) -> None:

@@ -77,12 +77,15 @@ class _Watch:
 
 def _open_launcher(spec: LaunchSpec, router: str | None) -> Fabric:
     from fabric.session import Fabric
+
     ep = router or spec.router
     try:
         if ep:
             cfg = FabricConfig(world=spec.world, profile="embedded", listen=(ep,), config_file=spec.zenoh_config)
         else:
-            cfg = FabricConfig(world=spec.world, profile="client", connect=spec.child_connect(), config_file=spec.zenoh_config)
+            cfg = FabricConfig(
+                world=spec.world, profile="client", connect=spec.child_connect(), config_file=spec.zenoh_config
+            )
     except ValueError as exc:  # a zenoh_config that is not there: say which
         raise UserError(f"{spec.path}: {exc}") from None
     try:
@@ -91,12 +94,15 @@ def _open_launcher(spec: LaunchSpec, router: str | None) -> Fabric:
         said = cfg.join_failure(exc)  # the one line every command gives: a refused login names the identity
         if not ep or said.startswith("authentication failed"):
             raise UserError(said) from None  # joining another router: no router of ours, no port of ours
-        raise UserError(f"cannot start the launch's router on {ep}: {exc} (is another router using that port?)") from None
+        raise UserError(
+            f"cannot start the launch's router on {ep}: {exc} (is another router using that port?)"
+        ) from None
 
 
 def _run(spec: LaunchSpec, *, out: Path, duration: float | None, router: str | None, demo: bool) -> int:
     from robofabric.launch import Supervisor
     from fabric.session import shutdown_event
+
     out.mkdir(parents=True, exist_ok=True)
     stop = shutdown_event()
     if router:
@@ -174,7 +180,9 @@ def _summary(sup: Supervisor, watch: _Watch, elapsed: float, out: Path, demo: bo
 
 
 def up(
-    file: Annotated[Path, typer.Argument(help="Launch file (TOML): [args], [launch] world/router/connect and [[peer]] entries.")],
+    file: Annotated[
+        Path, typer.Argument(help="Launch file (TOML): [args], [launch] world/router/connect and [[peer]] entries.")
+    ],
     args: Annotated[
         Optional[list[str]],
         typer.Argument(
@@ -183,11 +191,18 @@ def up(
         ),
     ] = None,
     out: Annotated[Path, typer.Option(help="Directory for peers' output and logs.")] = Path("out/launch"),
-    duration: Annotated[Optional[float], typer.Option(help="Stop everything after S seconds (default: until Ctrl-C).")] = None,
-    router: Annotated[Optional[str], typer.Option(help="Host the router on this endpoint instead of the file's.")] = None,
+    duration: Annotated[
+        Optional[float], typer.Option(help="Stop everything after S seconds (default: until Ctrl-C).")
+    ] = None,
+    router: Annotated[
+        Optional[str], typer.Option(help="Host the router on this endpoint instead of the file's.")
+    ] = None,
     zenoh_config: Annotated[
         Optional[Path],
-        typer.Option("--zenoh-config", help="This launcher's own zenoh config (the router's where it hosts one), instead of [launch] zenoh_config."),
+        typer.Option(
+            "--zenoh-config",
+            help="This launcher's own zenoh config (the router's where it hosts one), instead of [launch] zenoh_config.",
+        ),
     ] = None,
 ) -> None:
     """Start the peers a launch file lists on this machine; restart per policy; Ctrl-C stops them all.
@@ -212,10 +227,13 @@ def demo(
     duration: Annotated[float, typer.Option(help="Upper bound on the demo's length in seconds.")] = 180.0,
     out: Annotated[Path, typer.Option(help="Output directory (demo.rrd, demo.mcap, logs).")] = Path("out/demo"),
     launch: Annotated[Optional[Path], typer.Option(help="Launch file to run instead of the built-in demo.")] = None,
-    router: Annotated[Optional[str], typer.Option(help="Router endpoint (default from the launch file, tcp/127.0.0.1:7447).")] = None,
+    router: Annotated[
+        Optional[str], typer.Option(help="Router endpoint (default from the launch file, tcp/127.0.0.1:7447).")
+    ] = None,
 ) -> None:
     """Run the embedded default: router, sim peer with both robots, compute peer and scripted users."""
     from robofabric.launch import LaunchError, load_launch
+
     try:
         spec = load_launch(launch) if launch is not None else load_demo_spec()
     except LaunchError as exc:

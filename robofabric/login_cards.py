@@ -19,7 +19,17 @@ from html import escape
 from pathlib import Path
 from typing import Iterable
 
-__all__ = ["TYPABLE", "typable_password", "is_typable", "card_text", "write_cards", "console_url", "qr_svg", "PEOPLE", "QR_QUIET"]
+__all__ = [
+    "TYPABLE",
+    "typable_password",
+    "is_typable",
+    "card_text",
+    "write_cards",
+    "console_url",
+    "qr_svg",
+    "PEOPLE",
+    "QR_QUIET",
+]
 
 TYPABLE = "abcdefghjkmnpqrstuvwxyz23456789"
 """The letters a typable password is made of: lower case and digits, without 0 o 1 l i (read alike on a card)."""
@@ -59,13 +69,16 @@ def teacher_url(url: str) -> str:
 def card_text(name: str, password: str, url: str, role: str = "user") -> str:
     """One person's card, as plain text."""
     who = "instructor" if role == "instructor" else "student"
-    return (f"robofabric login card ({who})\n\n"
-            f"  Console   {url}\n"
-            f"  Name      {name}\n"
-            f"  Password  {password}\n"
-            + (f"  Teacher   {teacher_url(url)}  (the teacher's page)\n" if role == "instructor" else "") + "\n"
-            f"Open the console's address in a browser, type your name and password, press Log in.\n"
-            f"Scripts and the terminal UI log in with {name}.json5 (the same password), from your teacher.\n")
+    return (
+        f"robofabric login card ({who})\n\n"
+        f"  Console   {url}\n"
+        f"  Name      {name}\n"
+        f"  Password  {password}\n"
+        + (f"  Teacher   {teacher_url(url)}  (the teacher's page)\n" if role == "instructor" else "")
+        + "\n"
+        f"Open the console's address in a browser, type your name and password, press Log in.\n"
+        f"Scripts and the terminal UI log in with {name}.json5 (the same password), from your teacher.\n"
+    )
 
 
 def qr_svg(url: str) -> str:
@@ -76,21 +89,30 @@ def qr_svg(url: str) -> str:
     qr = segno.make(url, error="m", micro=False)
     n = len(qr.matrix)
     size = n + 2 * QR_QUIET
-    dark = "".join(f'<rect x="{x + QR_QUIET}" y="{y + QR_QUIET}" width="1" height="1"/>'
-                   for y, row in enumerate(qr.matrix) for x, v in enumerate(row) if v)
-    return (f'<svg class="qr" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {size} {size}" role="img" '
-            f'aria-label="QR code of {escape(url)}" shape-rendering="crispEdges"><rect width="{size}" height="{size}" fill="#fff"/>'
-            f'<g fill="#000">{dark}</g></svg>')
+    dark = "".join(
+        f'<rect x="{x + QR_QUIET}" y="{y + QR_QUIET}" width="1" height="1"/>'
+        for y, row in enumerate(qr.matrix)
+        for x, v in enumerate(row)
+        if v
+    )
+    return (
+        f'<svg class="qr" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {size} {size}" role="img" '
+        f'aria-label="QR code of {escape(url)}" shape-rendering="crispEdges"><rect width="{size}" height="{size}" fill="#fff"/>'
+        f'<g fill="#000">{dark}</g></svg>'
+    )
 
 
 def _card_html(name: str, password: str, url: str, role: str, qr: str) -> str:
     who = "instructor" if role == "instructor" else "student"
-    return (f'<section class="card">{qr}<h2>robofabric login card <small>({who})</small></h2><dl>'
-            f"<dt>Console</dt><dd>{escape(url)}</dd><dt>Name</dt><dd>{escape(name)}</dd>"
-            f"<dt>Password</dt><dd class=\"pw\">{escape(password)}</dd>"
-            + (f"<dt>Teacher</dt><dd>{escape(teacher_url(url))}</dd>" if role == "instructor" else "") + "</dl>"
-            "<p>Open the console's address in a browser (or scan the code), type your name and password, press "
-            "<b>Log in</b>.</p></section>")
+    return (
+        f'<section class="card">{qr}<h2>robofabric login card <small>({who})</small></h2><dl>'
+        f"<dt>Console</dt><dd>{escape(url)}</dd><dt>Name</dt><dd>{escape(name)}</dd>"
+        f'<dt>Password</dt><dd class="pw">{escape(password)}</dd>'
+        + (f"<dt>Teacher</dt><dd>{escape(teacher_url(url))}</dd>" if role == "instructor" else "")
+        + "</dl>"
+        "<p>Open the console's address in a browser (or scan the code), type your name and password, press "
+        "<b>Log in</b>.</p></section>"
+    )
 
 
 CSS = """body{font-family:sans-serif;margin:1cm}.card{border:1px dashed #555;padding:0.5cm;margin:0 0 0.5cm;width:12cm;
@@ -116,8 +138,11 @@ def write_cards(d: Path, people: Iterable[tuple[str, str]], passwords: dict[str,
         html.append(_card_html(name, passwords[name], url, role, qr))
     if out:
         _private(folder / "console-qr.svg", qr + "\n")
-        _private(folder / "cards.html", f'<!doctype html><html lang="en"><head><meta charset="utf-8"><title>robofabric login cards</title>'
-                 f"<style>{CSS}</style></head><body>{''.join(html)}</body></html>\n")
+        _private(
+            folder / "cards.html",
+            f'<!doctype html><html lang="en"><head><meta charset="utf-8"><title>robofabric login cards</title>'
+            f"<style>{CSS}</style></head><body>{''.join(html)}</body></html>\n",
+        )
     return out
 
 

@@ -65,11 +65,16 @@ def dry_build(directory: Path, *, samples: int = 20, rng_seed: int = 0) -> DryBu
             data.qpos[model.joint(f"dry/{name}").qposadr[0]] = v
         mujoco.mj_kinematics(model, data)
         m = arm.fk(q)
-        gap = max(gap, float(np.linalg.norm(data.site_xpos[site] - m.translation)),
-                  rotation_error(data.site_xmat[site].reshape(3, 3), m.rotation))
+        gap = max(
+            gap,
+            float(np.linalg.norm(data.site_xpos[site] - m.translation)),
+            rotation_error(data.site_xmat[site].reshape(3, 3), m.rotation),
+        )
     if gap > AGREE:
-        raise robots.DescriptionError(f"the sim's flange and the compute peer's FK of {desc.name} differ by {gap:.3g} "
-                                      f"(m or rad, > {AGREE:g}): the MJCF and the URDF disagree")
+        raise robots.DescriptionError(
+            f"the sim's flange and the compute peer's FK of {desc.name} differ by {gap:.3g} "
+            f"(m or rad, > {AGREE:g}): the MJCF and the URDF disagree"
+        )
     return DryBuild(model.nq, gap, samples)
 
 

@@ -20,11 +20,25 @@ robots_app = typer.Typer(help="Robot types: add one from a URDF, list the instal
 
 @robots_app.command("add")
 def add_cmd(
-    urdf: Annotated[Path, typer.Argument(help="The robot's URDF; its meshes are found from package:// and relative paths.")],
+    urdf: Annotated[
+        Path, typer.Argument(help="The robot's URDF; its meshes are found from package:// and relative paths.")
+    ],
     name: Annotated[Optional[str], typer.Option("--name", help="The type's name (default: the file's name).")] = None,
-    tip: Annotated[Optional[str], typer.Option("--tip", help="The flange link (default: past the last revolute joint, along fixed joints).")] = None,
-    into: Annotated[Optional[Path], typer.Option("--into", help="Folder to write the type into (default: the first of ROBOFABRIC_ROBOTS_PATH).")] = None,
-    package_path: Annotated[Optional[list[Path]], typer.Option("--package-path", help="A folder holding ROS packages, for package:// meshes (repeatable; ROS_PACKAGE_PATH too).")] = None,
+    tip: Annotated[
+        Optional[str],
+        typer.Option("--tip", help="The flange link (default: past the last revolute joint, along fixed joints)."),
+    ] = None,
+    into: Annotated[
+        Optional[Path],
+        typer.Option("--into", help="Folder to write the type into (default: the first of ROBOFABRIC_ROBOTS_PATH)."),
+    ] = None,
+    package_path: Annotated[
+        Optional[list[Path]],
+        typer.Option(
+            "--package-path",
+            help="A folder holding ROS packages, for package:// meshes (repeatable; ROS_PACKAGE_PATH too).",
+        ),
+    ] = None,
     replace: Annotated[bool, typer.Option("--replace", help="Write the type again when it exists.")] = False,
 ) -> None:
     """Make an installed arm type from a URDF: its MJCF by MuJoCo's URDF compiler, its meshes copied, its joint
@@ -44,10 +58,15 @@ def add_cmd(
         shutil.rmtree(made.directory, ignore_errors=True)
         raise UserError(f"{exc}; {made.name} was not installed") from None
     arm = made.arm
-    print(f"installed {made.name} in {made.directory}: {len(arm.joints)} joints ({', '.join(arm.joints)}), "
-          f"flange {arm.tip}, root body {made.root_body}, {made.meshes} meshes")
-    fk = ("no Pinocchio here: the compute peer's FK is not checked" if check.fk_gap is None
-          else f"the compute peer's FK agrees with the sim's within {check.fk_gap:.1g} m/rad ({check.samples} random poses)")
+    print(
+        f"installed {made.name} in {made.directory}: {len(arm.joints)} joints ({', '.join(arm.joints)}), "
+        f"flange {arm.tip}, root body {made.root_body}, {made.meshes} meshes"
+    )
+    fk = (
+        "no Pinocchio here: the compute peer's FK is not checked"
+        if check.fk_gap is None
+        else f"the compute peer's FK agrees with the sim's within {check.fk_gap:.1g} m/rad ({check.samples} random poses)"
+    )
     print(f"dry build: the sim builds a world with it; {fk}")
     for note in made.notes:
         print(f"not taken as is: {note}")

@@ -152,7 +152,9 @@ class Audit:
         os.close(w)
         sys.stdout = self._out  # Python's own prints skip the pipe
         self.say = say or (lambda text: print(text, flush=True))
-        self._reader = threading.Thread(target=self._read, args=(os.fdopen(r, "r", errors="replace"),), name="acl-audit", daemon=True)
+        self._reader = threading.Thread(
+            target=self._read, args=(os.fdopen(r, "r", errors="replace"),), name="acl-audit", daemon=True
+        )
         self._reader.start()
         self._ticker = threading.Thread(target=self._tick, name="acl-audit-summary", daemon=True)
         self._ticker.start()
@@ -198,7 +200,9 @@ def summary(counts: Counter, *, prefix: str, top: int = 5) -> str:
     for ref, n in counts.items():
         by_msg[ref.message] += n
     kinds = ", ".join(f"{one_line(m, 40)} {n}" for m, n in by_msg.most_common())
-    worst = "; ".join(f"{one_line(r.who, 64)} {one_line(r.message, 40)} {one_line(r.key)} x{n}" for r, n in counts.most_common(top))
+    worst = "; ".join(
+        f"{one_line(r.who, 64)} {one_line(r.message, 40)} {one_line(r.key)} x{n}" for r, n in counts.most_common(top)
+    )
     return f"{prefix}: {sum(counts.values())} ({kinds}); {worst}"
 
 

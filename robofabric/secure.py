@@ -57,8 +57,17 @@ SHARED_SERVICES = ("map", "plan")
 W = "rf/*"  # every world: one router can serve several worlds of the class
 ROUTER_INFO = "@/*/router"  # the router's own entry in its admin space (read-only); sims may ask it
 ADV = "@adv/**"  # where zenoh.ext keeps a latched publisher's cache and liveliness token
-ALL_MESSAGES = ("put", "delete", "declare_subscriber", "query", "declare_queryable", "reply", "liveliness_token",
-                "declare_liveliness_subscriber", "liveliness_query")
+ALL_MESSAGES = (
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "declare_queryable",
+    "reply",
+    "liveliness_token",
+    "declare_liveliness_subscriber",
+    "liveliness_query",
+)
 OPEN_SERVICES = ("ik", "fk", "jacobian")
 """Compute services anyone may ask in any form: they answer the asker and change nothing."""
 CREDENTIALS = "credentials.txt"
@@ -91,7 +100,13 @@ def parse_names(text: str | None) -> list[str]:
 
 
 def _rule(rule_id: str, messages: Iterable[str], key_exprs: Iterable[str], flows: Iterable[str] = ("ingress",)) -> dict:
-    return {"id": rule_id, "permission": "allow", "flows": list(flows), "messages": list(messages), "key_exprs": list(key_exprs)}
+    return {
+        "id": rule_id,
+        "permission": "allow",
+        "flows": list(flows),
+        "messages": list(messages),
+        "key_exprs": list(key_exprs),
+    }
 
 
 def _own_rules(ident: Identity) -> list[dict]:
@@ -120,10 +135,25 @@ def _own_rules(ident: Identity) -> list[dict]:
         put += [f"{W}/{k}" for k in access(r)] + [f"{W}/own/*", f"{W}/event/**"]  # fabric.streams
         # ownership records and events keep their last samples for an observer that missed them (fabric.history)
         latched = [f"{W}/own/*/{ADV}", f"{W}/event/*/*/{ADV}"]  # (a cache replies on the key itself: event/*/* below)
-        serve += [f"{W}/srv/world", f"{W}/srv/state", f"{W}/own/*", f"{W}/own/*/{BY}/*", f"{W}/own/*/{STAFF_KEY}/{BY}/*",  # srv/state:
-                  f"{W}/srv/move/*/{BY}/*", *latched, f"{W}/event/*/*"]  # a standby follows the primary; srv/move: the staff's moves
-        tokens += [f"{W}/peer/sim/*", f"{W}/peer/sim/*/*/*/*", f"{W}/peer/recorder/*", *latched]  # its role (keys.sim_role); a recorder on its machine
-        ask.append(ROUTER_INFO)  # is my link up? (a standby judging a lost token: sim_peer.replica.roles.router_answers)
+        serve += [
+            f"{W}/srv/world",
+            f"{W}/srv/state",
+            f"{W}/own/*",
+            f"{W}/own/*/{BY}/*",
+            f"{W}/own/*/{STAFF_KEY}/{BY}/*",  # srv/state:
+            f"{W}/srv/move/*/{BY}/*",
+            *latched,
+            f"{W}/event/*/*",
+        ]  # a standby follows the primary; srv/move: the staff's moves
+        tokens += [
+            f"{W}/peer/sim/*",
+            f"{W}/peer/sim/*/*/*/*",
+            f"{W}/peer/recorder/*",
+            *latched,
+        ]  # its role (keys.sim_role); a recorder on its machine
+        ask.append(
+            ROUTER_INFO
+        )  # is my link up? (a standby judging a lost token: sim_peer.replica.roles.router_answers)
     elif r == "compute":
         put += [f"{W}/{k}" for k in access(r)] + [f"{W}/map/*", f"{W}/event/compute/**"]
         kept = [f"{W}/{k}" for k in access(r, latched=True)] + [f"{W}/map/*"]  # latched: a cache replies on its key
@@ -147,10 +177,23 @@ def access_control(identities: Iterable[Identity], *, tls: bool = False) -> dict
     idents = list(identities)
     common = [
         # reading: subscribe to anything, watch liveliness, ask services, records and latched caches
-        _rule("read", ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"], ["rf/**", f"rf/**/{ADV}"]),
+        _rule(
+            "read",
+            ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
+            ["rf/**", f"rf/**/{ADV}"],
+        ),
         # (srv/map and srv/plan: each login in its own name, _own_rules)
-        _rule("ask", ["query"], [f"{W}/own/*", f"{W}/srv/world", f"{W}/srv/state", *(f"{W}/srv/{s}/**" for s in OPEN_SERVICES),
-                                 f"rf/**/{ADV}"]),
+        _rule(
+            "ask",
+            ["query"],
+            [
+                f"{W}/own/*",
+                f"{W}/srv/world",
+                f"{W}/srv/state",
+                *(f"{W}/srv/{s}/**" for s in OPEN_SERVICES),
+                f"rf/**/{ADV}",
+            ],
+        ),
         # what the router delivers to a session: samples, queries for its queryables, replies, declarations
         _rule("deliver", ALL_MESSAGES, ["rf/**", f"rf/**/{ADV}", ROUTER_INFO], flows=("egress",)),
     ]
@@ -267,7 +310,12 @@ def _name_attrs(name: str):
     from cryptography.x509.oid import NameOID
     from cryptography import x509
 
-    return x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name), x509.NameAttribute(NameOID.ORGANIZATION_NAME, "robofabric class")])
+    return x509.Name(
+        [
+            x509.NameAttribute(NameOID.COMMON_NAME, name),
+            x509.NameAttribute(NameOID.ORGANIZATION_NAME, "robofabric class"),
+        ]
+    )
 
 
 def _make_ca(t: Path, days: int):
@@ -279,17 +327,36 @@ def _make_ca(t: Path, days: int):
     now = dt.datetime.now(dt.UTC)
     name = _name_attrs("robofabric class CA")
     cert = (
-        x509.CertificateBuilder().subject_name(name).issuer_name(name).public_key(key.public_key())
-        .serial_number(x509.random_serial_number()).not_valid_before(now - dt.timedelta(minutes=5))
+        x509.CertificateBuilder()
+        .subject_name(name)
+        .issuer_name(name)
+        .public_key(key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now - dt.timedelta(minutes=5))
         .not_valid_after(now + dt.timedelta(days=days))
         .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
-        .add_extension(x509.KeyUsage(digital_signature=True, key_cert_sign=True, crl_sign=True, content_commitment=False,
-                                     key_encipherment=False, data_encipherment=False, key_agreement=False,
-                                     encipher_only=False, decipher_only=False), critical=True)
+        .add_extension(
+            x509.KeyUsage(
+                digital_signature=True,
+                key_cert_sign=True,
+                crl_sign=True,
+                content_commitment=False,
+                key_encipherment=False,
+                data_encipherment=False,
+                key_agreement=False,
+                encipher_only=False,
+                decipher_only=False,
+            ),
+            critical=True,
+        )
         .sign(key, hashes.SHA256())
     )
-    _write_secret(t / "ca-key.pem", key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
-                                                      serialization.NoEncryption()).decode())
+    _write_secret(
+        t / "ca-key.pem",
+        key.private_bytes(
+            serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
+        ).decode(),
+    )
     (t / "ca.pem").write_bytes(cert.public_bytes(serialization.Encoding.PEM))
 
 
@@ -320,21 +387,34 @@ def _make_cert(t: Path, name: str, hosts: list[str], days: int, *, web: bool = F
         except ValueError:
             sans.append(x509.DNSName(h))
     cert = (
-        x509.CertificateBuilder().subject_name(_name_attrs(f"robofabric {name} (https)" if web else name))
-        .issuer_name(ca_cert.subject).public_key(key.public_key())
-        .serial_number(x509.random_serial_number()).not_valid_before(now - dt.timedelta(minutes=5))
+        x509.CertificateBuilder()
+        .subject_name(_name_attrs(f"robofabric {name} (https)" if web else name))
+        .issuer_name(ca_cert.subject)
+        .public_key(key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now - dt.timedelta(minutes=5))
         .not_valid_after(now + dt.timedelta(days=days))
         .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
         .add_extension(x509.SubjectAlternativeName(sans), critical=False)
-        .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH] if web else
-                                             [ExtendedKeyUsageOID.CLIENT_AUTH, ExtendedKeyUsageOID.SERVER_AUTH]), critical=False)
+        .add_extension(
+            x509.ExtendedKeyUsage(
+                [ExtendedKeyUsageOID.SERVER_AUTH]
+                if web
+                else [ExtendedKeyUsageOID.CLIENT_AUTH, ExtendedKeyUsageOID.SERVER_AUTH]
+            ),
+            critical=False,
+        )
         .sign(ca_key, hashes.SHA256())
     )
     if web:
         t = t / WEB_DIR
         t.mkdir(exist_ok=True)
-    _write_secret(t / f"{name}-key.pem", key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
-                                                           serialization.NoEncryption()).decode())
+    _write_secret(
+        t / f"{name}-key.pem",
+        key.private_bytes(
+            serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
+        ).decode(),
+    )
     (t / f"{name}.pem").write_bytes(cert.public_bytes(serialization.Encoding.PEM))
 
 
@@ -355,12 +435,22 @@ def _host_of(endpoint: str) -> str:
     return host
 
 
-def _identities(*, users: Iterable[str], instructors: Iterable[str], sims: Iterable[str], computes: Iterable[str],
-                viewers: Iterable[str]) -> list[Identity]:
+def _identities(
+    *,
+    users: Iterable[str],
+    instructors: Iterable[str],
+    sims: Iterable[str],
+    computes: Iterable[str],
+    viewers: Iterable[str],
+) -> list[Identity]:
     """The class's logins with their roles; ValueError for a name given twice, or a class without users."""
-    identities = ([Identity(n, "user") for n in users] + [Identity(n, "instructor") for n in instructors]
-                  + [Identity(n, "sim") for n in sims]
-                  + [Identity(n, "compute") for n in computes] + [Identity(n, "viewer") for n in viewers])
+    identities = (
+        [Identity(n, "user") for n in users]
+        + [Identity(n, "instructor") for n in instructors]
+        + [Identity(n, "sim") for n in sims]
+        + [Identity(n, "compute") for n in computes]
+        + [Identity(n, "viewer") for n in viewers]
+    )
     seen: set[str] = set()
     for ident in identities:
         if ident.name in seen:
@@ -371,7 +461,9 @@ def _identities(*, users: Iterable[str], instructors: Iterable[str], sims: Itera
     return identities
 
 
-def _certificates(t: Path, identities: list[Identity], connect: list[str], days: int, created: list[str], kept: list[str]) -> None:
+def _certificates(
+    t: Path, identities: list[Identity], connect: list[str], days: int, created: list[str], kept: list[str]
+) -> None:
     """The CA, the router's certificate (naming every host of ``connect``), the console's HTTPS one (the same hosts)
     and one per identity under ``t``;
     those there already are kept. What was made or kept is appended to ``created`` / ``kept``."""
@@ -450,7 +542,9 @@ def init(
         connect = [ep.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:") for ep in listen]
     for ep in [*listen, *connect]:
         if not ep.startswith(proto + "/"):
-            raise ValueError(f"endpoint {ep!r} must be {proto}/HOST:PORT" + (" with --tls" if tls else " (tls/ needs --tls)"))
+            raise ValueError(
+                f"endpoint {ep!r} must be {proto}/HOST:PORT" + (" with --tls" if tls else " (tls/ needs --tls)")
+            )
     identities = _identities(users=users, instructors=instructors, sims=sims, computes=computes, viewers=viewers)
     d.mkdir(parents=True, exist_ok=True)
     os.chmod(d, 0o700)
@@ -462,7 +556,9 @@ def init(
     else:
         passwords = _passwords(d / CREDENTIALS, identities, created, kept)
         if console_tls:
-            _console_certificate(d / TLS_DIR, sorted({_host_of(ep) for ep in connect} | {"localhost", "127.0.0.1"}), days, created, kept)
+            _console_certificate(
+                d / TLS_DIR, sorted({_host_of(ep) for ep in connect} | {"localhost", "127.0.0.1"}), days, created, kept
+            )
     # every identity ever created stays in the rules (a second run with fewer names removes nobody)
     known = {i.name: i for i in identities}
     for path in sorted(d.glob("*.json5")):
@@ -472,7 +568,13 @@ def init(
         if path.stem not in known and role is not None:
             known[path.stem] = Identity(path.stem, role)
     router = d / "router.json5"
-    _write_secret(router, _json5(router_config(d, known.values(), listen=listen, tls=tls), f"router of a robofabric class ({len(known)} identities)"))
+    _write_secret(
+        router,
+        _json5(
+            router_config(d, known.values(), listen=listen, tls=tls),
+            f"router of a robofabric class ({len(known)} identities)",
+        ),
+    )
     clients = {}
     for ident in known.values():
         path = d / f"{ident.name}.json5"
@@ -497,4 +599,8 @@ def _role_of(path: Path) -> str | None:
 
 
 def _json5(cfg: dict, title: str) -> str:
-    return f"// {title}\n// written by `robofabric secure init`; keep it private (it holds a secret or points at one)\n" + json.dumps(cfg, indent=2) + "\n"
+    return (
+        f"// {title}\n// written by `robofabric secure init`; keep it private (it holds a secret or points at one)\n"
+        + json.dumps(cfg, indent=2)
+        + "\n"
+    )

@@ -23,7 +23,9 @@ def plain_doc(text: str) -> str:
     keeps its lines)."""
     import inspect
 
-    text = _LITERAL.sub(r"\1", _ROLE.sub(lambda m: m.group(1).rsplit(".", 1)[-1] if "~" in m.group(0) else m.group(1), text))
+    text = _LITERAL.sub(
+        r"\1", _ROLE.sub(lambda m: m.group(1).rsplit(".", 1)[-1] if "~" in m.group(0) else m.group(1), text)
+    )
     paragraphs = []
     for para in inspect.cleandoc(text).split("\n\n"):
         lines = para.splitlines()

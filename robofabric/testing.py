@@ -33,7 +33,11 @@ def free_port() -> int:
 
 
 def wait_until(
-    predicate: Callable[[], Any], *, timeout: float = 10.0, interval: float = 0.02, what: str = "condition",
+    predicate: Callable[[], Any],
+    *,
+    timeout: float = 10.0,
+    interval: float = 0.02,
+    what: str = "condition",
     seen: Callable[[], Any] | None = None,
 ) -> Any:
     """Poll ``predicate`` until it returns something truthy; on timeout fail saying what was seen."""
@@ -200,16 +204,33 @@ class SimRoles:
         ok = r is not None and r.role == role and term in (None, r.term) and leader in (None, r.leader)
         return r if ok else None
 
-    def wait(self, sim: str, role: str, *, term: int | None = None, leader: str | None = None, timeout: float = 60.0,
-             seen: Callable[[], Any] | None = None) -> SimRole:
+    def wait(
+        self,
+        sim: str,
+        role: str,
+        *,
+        term: int | None = None,
+        leader: str | None = None,
+        timeout: float = 60.0,
+        seen: Callable[[], Any] | None = None,
+    ) -> SimRole:
         """Wait until ``sim`` shows ``role`` (under ``term``, following ``leader``, if given); what it shows then."""
 
         def showing() -> SimRole | None:
             return self.shows(sim, role, term=term, leader=leader)
 
-        what = f"{sim} showing {role}" + (f" (term {term})" if term is not None else "") + (f" of {leader}" if leader else "")
-        return wait_until(showing, timeout=timeout, interval=0.05, what=what,
-                          seen=lambda: (self.now(sim), seen() if seen is not None else None))
+        what = (
+            f"{sim} showing {role}"
+            + (f" (term {term})" if term is not None else "")
+            + (f" of {leader}" if leader else "")
+        )
+        return wait_until(
+            showing,
+            timeout=timeout,
+            interval=0.05,
+            what=what,
+            seen=lambda: (self.now(sim), seen() if seen is not None else None),
+        )
 
 
 class RemoteRoles:
@@ -219,10 +240,13 @@ class RemoteRoles:
 
     def __init__(self, py: Any, world: str, endpoint: str, *, peer_id: str = "roles") -> None:
         self.py = py
-        py.call("from fabric.config import FabricConfig\nfrom fabric.session import Fabric\n"
-                "from robofabric.testing import SimRoles\n"
-                f"roles = SimRoles(Fabric(FabricConfig.resolve(world={world!r}, connect=[{endpoint!r}]), kind='tool', "
-                f"peer_id={peer_id!r})); None", timeout=120)
+        py.call(
+            "from fabric.config import FabricConfig\nfrom fabric.session import Fabric\n"
+            "from robofabric.testing import SimRoles\n"
+            f"roles = SimRoles(Fabric(FabricConfig.resolve(world={world!r}, connect=[{endpoint!r}]), kind='tool', "
+            f"peer_id={peer_id!r})); None",
+            timeout=120,
+        )
 
     def role(self, sim: str, *, timeout: float = 30.0) -> str:
         return self.py.call(f"roles.role({sim!r})", timeout=timeout)
@@ -234,10 +258,27 @@ class RemoteRoles:
     def ever(self, sim: str, role: str, term: int | None = None) -> bool:
         return self.py.call(f"roles.ever({sim!r}, {role!r}, {term!r})")
 
-    def wait(self, sim: str, role: str, *, term: int | None = None, leader: str | None = None, timeout: float = 60.0,
-             seen: Callable[[], Any] | None = None) -> None:
+    def wait(
+        self,
+        sim: str,
+        role: str,
+        *,
+        term: int | None = None,
+        leader: str | None = None,
+        timeout: float = 60.0,
+        seen: Callable[[], Any] | None = None,
+    ) -> None:
         """Wait until ``sim`` shows ``role`` (under ``term``, following ``leader``, if given)."""
         ask = f"roles.shows({sim!r}, {role!r}, term={term!r}, leader={leader!r}) is not None"
-        what = f"{sim} showing {role}" + (f" (term {term})" if term is not None else "") + (f" of {leader}" if leader else "")
-        wait_until(lambda: self.py.call(ask), timeout=timeout, interval=0.2, what=what,
-                   seen=lambda: (self.role(sim), seen() if seen is not None else None))
+        what = (
+            f"{sim} showing {role}"
+            + (f" (term {term})" if term is not None else "")
+            + (f" of {leader}" if leader else "")
+        )
+        wait_until(
+            lambda: self.py.call(ask),
+            timeout=timeout,
+            interval=0.2,
+            what=what,
+            seen=lambda: (self.role(sim), seen() if seen is not None else None),
+        )

@@ -101,7 +101,9 @@ class RobotDescription:
     lidar: LidarSpec | None = None
     ultrasonic: UltrasonicSpec | None = None
     base_joints: tuple[str, ...] = ()  # mobile: planar x, y, yaw joints of the root body
-    hooks: str = ""  # the sim's plug-in for this type: "package.module:Class" or "file.py:Class" beside robot.toml; "" = by kind
+    hooks: str = (
+        ""  # the sim's plug-in for this type: "package.module:Class" or "file.py:Class" beside robot.toml; "" = by kind
+    )
 
     @property
     def dof(self) -> int:
@@ -254,13 +256,17 @@ def installed(name: str) -> RobotDescription:
     :data:`ENTRY_POINTS` packages, this package), never a path nor the working directory. What another peer
     names (a robot moved in, another sim's arm to mirror) is read from there, so its hooks are the operator's."""
     if not isinstance(name, str) or not _TYPE_NAME.match(name):
-        raise DescriptionError(f"robot type {str(name)[:80]!r} is not a type name (1-64 letters, digits, '-', '_'): a type "
-                               f"named by another peer is looked up among the installed robots, never read from a path")
+        raise DescriptionError(
+            f"robot type {str(name)[:80]!r} is not a type name (1-64 letters, digits, '-', '_'): a type "
+            f"named by another peer is looked up among the installed robots, never read from a path"
+        )
     for d in search_path():
         cand = d / name / "robot.toml"
         if cand.is_file():
             return _load(cand)
-    raise DescriptionError(f"robot type {name!r} is not installed here; installed: {', '.join(available_robots()) or 'none'}")
+    raise DescriptionError(
+        f"robot type {name!r} is not installed here; installed: {', '.join(available_robots()) or 'none'}"
+    )
 
 
 def _load(path: Path) -> RobotDescription:
@@ -337,7 +343,18 @@ def _base(data: dict, where: str) -> BaseSpec:
         height=_num(b, "height", w, 0.0),
         reverse=_flag(b, "reverse", w),
     )
-    if min(base.radius, base.wheel_separation, base.wheel_radius, base.max_speed, base.max_omega, base.max_accel, base.max_alpha) <= 0:
+    if (
+        min(
+            base.radius,
+            base.wheel_separation,
+            base.wheel_radius,
+            base.max_speed,
+            base.max_omega,
+            base.max_accel,
+            base.max_alpha,
+        )
+        <= 0
+    ):
         raise DescriptionError(f"{w}: sizes and limits must be positive")
     return base
 
@@ -382,7 +399,7 @@ def _hooks_ref(r: dict, where: str) -> str:
     """``[robot] hooks``: where the sim finds this type's plug-in (resolved by sim_peer.physics.registry, not here)."""
     ref = r.get("hooks", "")
     if not isinstance(ref, str) or (ref and ref.count(":") != 1):
-        raise DescriptionError(f"{where}: hooks must be \"package.module:Class\" or \"file.py:Class\", got {ref!r}")
+        raise DescriptionError(f'{where}: hooks must be "package.module:Class" or "file.py:Class", got {ref!r}')
     return ref
 
 
@@ -421,7 +438,9 @@ def scene(name: str) -> SceneDescription:
     for i, o in enumerate(data.get("object", [])):
         if not isinstance(o, dict) or not isinstance(o.get("id"), str):
             raise DescriptionError(f"{where}: object #{i} needs an id")
-        objects.append(SceneObject(o["id"], str(o.get("body", o["id"])), str(o.get("kind", "")), str(o.get("policy", "scene"))))
+        objects.append(
+            SceneObject(o["id"], str(o.get("body", o["id"])), str(o.get("kind", "")), str(o.get("policy", "scene")))
+        )
     return SceneDescription(
         name=str(s.get("name", path.stem)),
         mjcf_path=mjcf,

@@ -89,8 +89,10 @@ def parse(text: str, where: str = "URDF") -> UrdfTree:
     closed = {link: names for link, names in parents.items() if len(names) > 1}
     if closed:
         link, names = next(iter(closed.items()))
-        raise DescriptionError(f"{where}: link {link!r} is the child of joints {', '.join(names)}: a closed chain "
-                               f"(parallel mechanisms are not supported)")
+        raise DescriptionError(
+            f"{where}: link {link!r} is the child of joints {', '.join(names)}: a closed chain "
+            f"(parallel mechanisms are not supported)"
+        )
     roots = [link for link in links if link not in parents]
     if len(roots) != 1:
         raise DescriptionError(f"{where}: expected one root link, found {len(roots)}: {', '.join(roots) or 'none'}")
@@ -112,9 +114,16 @@ def _joint(e: ET.Element, where: str) -> UrdfJoint:
             raise DescriptionError(f"{where}: joint {name!r}: limit {key}={limit.get(key)!r} is not a number") from None
         return v if math.isfinite(v) else None
 
-    return UrdfJoint(name, str(e.get("type", "")), str(parent.get("link", "")), str(child.get("link", "")),
-                     number("lower"), number("upper"), number("velocity"),
-                     "" if mimic is None else str(mimic.get("joint", "")))
+    return UrdfJoint(
+        name,
+        str(e.get("type", "")),
+        str(parent.get("link", "")),
+        str(child.get("link", "")),
+        number("lower"),
+        number("upper"),
+        number("velocity"),
+        "" if mimic is None else str(mimic.get("joint", "")),
+    )
 
 
 def default_tip(tree: UrdfTree) -> str:
@@ -122,6 +131,7 @@ def default_tip(tree: UrdfTree) -> str:
     joints go (the UR5's ``tool0``, the Panda's ``panda_hand_tcp``; a gripper's fingers are not followed).
 
     Ties go to the link defined last in the file."""
+
     def revolute_depth(link: str) -> int:
         return sum(j.type in ("revolute", "continuous") for j in tree.chain(link))
 
@@ -165,13 +175,19 @@ def arm_chain(tree: UrdfTree, tip: str | None = None) -> ArmChain:
     notes: list[str] = []
     for j in chain:
         if j.type not in MOVING:
-            raise DescriptionError(f"joint {j.name!r} on the chain to {tip!r} is {j.type or 'untyped'}: only revolute, "
-                                   f"continuous and prismatic joints are supported (mobile bases from URDF are not yet)")
+            raise DescriptionError(
+                f"joint {j.name!r} on the chain to {tip!r} is {j.type or 'untyped'}: only revolute, "
+                f"continuous and prismatic joints are supported (mobile bases from URDF are not yet)"
+            )
         if j.mimic:
-            raise DescriptionError(f"joint {j.name!r} on the chain to {tip!r} mimics {j.mimic!r}: mimic joints are "
-                                   f"not supported on an arm's chain")
+            raise DescriptionError(
+                f"joint {j.name!r} on the chain to {tip!r} mimics {j.mimic!r}: mimic joints are "
+                f"not supported on an arm's chain"
+            )
     if not chain:
-        raise DescriptionError(f"no joint moves the link {tip!r}: pick another tip (--tip); links: {', '.join(tree.links)}")
+        raise DescriptionError(
+            f"no joint moves the link {tip!r}: pick another tip (--tip); links: {', '.join(tree.links)}"
+        )
     lower, upper, speed = [], [], []
     for j in chain:
         lo, hi = _limits(j, notes)
@@ -196,8 +212,9 @@ def _limits(j: UrdfJoint, notes: list[str]) -> tuple[float, float]:
         notes.append(f"joint {j.name}: continuous, given the range ±{TURN:.4f} rad")
         return -TURN, TURN
     if j.lower is None or j.upper is None or j.lower >= j.upper:
-        raise DescriptionError(f"joint {j.name!r} ({j.type}) has no usable <limit lower upper>: an arm's joints need "
-                               f"their range")
+        raise DescriptionError(
+            f"joint {j.name!r} ({j.type}) has no usable <limit lower upper>: an arm's joints need their range"
+        )
     return j.lower, j.upper
 
 

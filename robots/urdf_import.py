@@ -63,8 +63,15 @@ def type_name(urdf: Path, name: str | None) -> str:
     return out
 
 
-def install(urdf: Path, *, into: Path | None = None, name: str | None = None, tip: str | None = None,
-            package_dirs: Sequence[Path] = (), replace: bool = False) -> Imported:
+def install(
+    urdf: Path,
+    *,
+    into: Path | None = None,
+    name: str | None = None,
+    tip: str | None = None,
+    package_dirs: Sequence[Path] = (),
+    replace: bool = False,
+) -> Imported:
     """Write the robot type made from ``urdf`` into ``into/NAME`` (default :func:`default_folder`); the folder is
     written whole or not at all (made aside, then moved in place)."""
     urdf = Path(urdf).resolve()
@@ -105,12 +112,12 @@ def resolve_mesh(filename: str, urdf: Path, package_dirs: Sequence[Path] = ()) -
     ``package_dirs``, ``ROS_PACKAGE_PATH`` and the URDF's own parent folders; ``file://`` and plain paths relative
     to the URDF. ``None`` when there is no such file."""
     if filename.startswith("package://"):
-        pkg, _, rest = filename[len("package://"):].partition("/")
+        pkg, _, rest = filename[len("package://") :].partition("/")
         roots = [*package_dirs, *(Path(p) for p in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if p)]
         cands = [d / pkg / rest for d in roots] + [d / rest for d in roots if d.name == pkg]
         cands += [d / rest for d in urdf.parents if d.name == pkg]
         return next((c for c in cands if c.is_file()), None)
-    path = Path(filename[len("file://"):] if filename.startswith("file://") else filename)
+    path = Path(filename[len("file://") :] if filename.startswith("file://") else filename)
     path = path if path.is_absolute() else urdf.parent / path
     return path if path.is_file() else None
 
@@ -183,12 +190,21 @@ def _mujoco_urdf(doc: ET.Element, notes: list[str]) -> str:
         for part in link.findall("collision"):
             mesh = part.find("geometry/mesh")
             if mesh is not None and Path(str(mesh.get("filename", ""))).suffix.lower() not in MUJOCO_MESHES:
-                notes.append(f"link {link.get('name')}: collision mesh {mesh.get('filename')} is not a format MuJoCo "
-                             f"reads ({', '.join(MUJOCO_MESHES)}): left out of the simulation")
+                notes.append(
+                    f"link {link.get('name')}: collision mesh {mesh.get('filename')} is not a format MuJoCo "
+                    f"reads ({', '.join(MUJOCO_MESHES)}): left out of the simulation"
+                )
                 link.remove(part)
     ext = ET.Element("mujoco")
-    ET.SubElement(ext, "compiler", strippath="false", discardvisual="true", fusestatic="false",
-                  boundmass="1e-4", boundinertia="1e-8")
+    ET.SubElement(
+        ext,
+        "compiler",
+        strippath="false",
+        discardvisual="true",
+        fusestatic="false",
+        boundmass="1e-4",
+        boundinertia="1e-8",
+    )
     doc.insert(0, ext)
     return ET.tostring(doc, encoding="unicode")
 
@@ -223,23 +239,25 @@ def _toml_list(values: Sequence[object]) -> str:
 
 
 def _manifest(name: str, urdf: Path, arm: ArmChain, root_body: str) -> str:
-    return "\n".join([
-        f"# written by `robofabric robots add {urdf.name}`; edit freely, or add the URDF again with --replace",
-        "[robot]",
-        f'name = "{name}"',
-        'kind = "arm"',
-        f'description = "{name}, from {urdf.name} ({len(arm.joints)} joints)"',
-        f'urdf = "{name}.urdf"',
-        f'mjcf = "{name}.xml"',
-        f'root_body = "{root_body}"',
-        f'flange_site = "{FLANGE_SITE}"',
-        f'flange_frame = "{arm.tip}"',
-        f"joints = {_toml_list(arm.joints)}",
-        f"lower = {_toml_list(arm.lower)}",
-        f"upper = {_toml_list(arm.upper)}",
-        f"max_speed = {_toml_list(arm.max_speed)}",
-        "",
-    ])
+    return "\n".join(
+        [
+            f"# written by `robofabric robots add {urdf.name}`; edit freely, or add the URDF again with --replace",
+            "[robot]",
+            f'name = "{name}"',
+            'kind = "arm"',
+            f'description = "{name}, from {urdf.name} ({len(arm.joints)} joints)"',
+            f'urdf = "{name}.urdf"',
+            f'mjcf = "{name}.xml"',
+            f'root_body = "{root_body}"',
+            f'flange_site = "{FLANGE_SITE}"',
+            f'flange_frame = "{arm.tip}"',
+            f"joints = {_toml_list(arm.joints)}",
+            f"lower = {_toml_list(arm.lower)}",
+            f"upper = {_toml_list(arm.upper)}",
+            f"max_speed = {_toml_list(arm.max_speed)}",
+            "",
+        ]
+    )
 
 
 __all__ = ["FLANGE_SITE", "Imported", "MUJOCO_MESHES", "default_folder", "install", "resolve_mesh", "type_name"]

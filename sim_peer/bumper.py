@@ -59,16 +59,33 @@ class Bumper(Sensor):
         for h in BUMPER_HEIGHTS:
             origin[2] = h
             mujoco.mj_multiRay(
-                physics.model, physics.data, origin, vec, SENSED_GROUPS, 1, self.robot.body_id,
-                self._gid, self._dist, None, len(self._gid), reach,
+                physics.model,
+                physics.data,
+                origin,
+                vec,
+                SENSED_GROUPS,
+                1,
+                self.robot.body_id,
+                self._gid,
+                self._dist,
+                None,
+                len(self._gid),
+                reach,
             )
             near = (self._dist >= 0) & (self._dist < reach)
             if near.any():
                 c.stop()
                 what = hit_owner(physics.model, int(self._gid[int(np.argmax(near))]))
                 detail = f"stopped before {what} ahead at ({c.x:.2f}, {c.y:.2f})"
-                self.robot.note(Note(EventKind.COLLISION, "bumper", "warning",
-                                     {"t": physics.time, "detail": detail, "what": what}, counter="collisions"))
+                self.robot.note(
+                    Note(
+                        EventKind.COLLISION,
+                        "bumper",
+                        "warning",
+                        {"t": physics.time, "detail": detail, "what": what},
+                        counter="collisions",
+                    )
+                )
                 break
 
 

@@ -24,7 +24,9 @@ one, an arm one per link: 8 hold one arm and one base). Unused slots are parked 
 but still cost each LIDAR scan ~1 % each (docs/sim.md)."""
 
 
-def make_gate(fabric, world, ownership: bool, restored=None, *, objects: bool = True, budgets=None, plant: str = "") -> CommandGate:
+def make_gate(
+    fabric, world, ownership: bool, restored=None, *, objects: bool = True, budgets=None, plant: str = ""
+) -> CommandGate:
     """The ownership Authority when asked for and installed, else an OpenGate (with a warning if asked for).
 
     ``restored``: the ownership state a standby carries over when it takes the world. ``objects``: whether this
@@ -32,6 +34,7 @@ def make_gate(fabric, world, ownership: bool, restored=None, *, objects: bool = 
     ``budgets``: each login's budgets at the authority (:class:`ownership.admission.OwnBudgets`; None: the defaults).
     ``plant``: a test-only defect for the soak's checker (:mod:`fabric.plant`)."""
     from fabric.gate import OpenGate
+
     if not ownership:
         return OpenGate()
     try:
@@ -68,40 +71,75 @@ def parse_twist_timeout(text: str | None, speed: float | None) -> float | None:
 
 @join_flags()
 def sim(
-    scene: Annotated[str, typer.Option("--scene", "-s", help="Scene name (robots/scenes/NAME.toml) or path to a scene .toml.")] = "combined",
+    scene: Annotated[
+        str, typer.Option("--scene", "-s", help="Scene name (robots/scenes/NAME.toml) or path to a scene .toml.")
+    ] = "combined",
     robot: Annotated[
         Optional[list[str]],
         typer.Option("--robot", "-r", help="Add a robot: TYPE:ID or TYPE:ID@X,Y[,YAW_DEG[,Z]] (repeatable)."),
     ] = None,
-    scene_robots: Annotated[bool, typer.Option("--scene-robots/--no-scene-robots", help="Include the robots the scene places.")] = True,
+    scene_robots: Annotated[
+        bool, typer.Option("--scene-robots/--no-scene-robots", help="Include the robots the scene places.")
+    ] = True,
     rate: Annotated[str, typer.Option("--rate", help="Stream rates in Hz, e.g. joints=100,pose=50,scan=20.")] = "",
-    speed: Annotated[str, typer.Option("--speed", help="1 = real time, X = X times real time, max = as fast as possible.")] = "1",
-    duration: Annotated[Optional[float], typer.Option("--duration", help="Stop after this many seconds of sim time.")] = None,
+    speed: Annotated[
+        str, typer.Option("--speed", help="1 = real time, X = X times real time, max = as fast as possible.")
+    ] = "1",
+    duration: Annotated[
+        Optional[float], typer.Option("--duration", help="Stop after this many seconds of sim time.")
+    ] = None,
     seed: Annotated[Optional[int], typer.Option("--seed", help="Seed of the sensor noise.")] = None,
-    noise: Annotated[Optional[float], typer.Option("--noise", help="Gaussian range noise std (m) for LIDAR and ultrasonic.")] = None,
-    lidar_rays: Annotated[Optional[int], typer.Option("--lidar-rays", help="LIDAR ray count (default from the robot, 240).")] = None,
-    lidar_fov: Annotated[Optional[float], typer.Option("--lidar-fov", help="LIDAR field of view in degrees (default 135).")] = None,
+    noise: Annotated[
+        Optional[float], typer.Option("--noise", help="Gaussian range noise std (m) for LIDAR and ultrasonic.")
+    ] = None,
+    lidar_rays: Annotated[
+        Optional[int], typer.Option("--lidar-rays", help="LIDAR ray count (default from the robot, 240).")
+    ] = None,
+    lidar_fov: Annotated[
+        Optional[float], typer.Option("--lidar-fov", help="LIDAR field of view in degrees (default 135).")
+    ] = None,
     twist_timeout: Annotated[
-        Optional[str], typer.Option("--twist-timeout", help="The twist deadman: a base brakes to a halt when no fresh twist came for this "
-                                                           "long (s of sim time); default 0.5 s of real time (0.5 x --speed; off with "
-                                                           "--speed max); 0 or none: twists hold until the next command. See docs/sim.md.")
+        Optional[str],
+        typer.Option(
+            "--twist-timeout",
+            help="The twist deadman: a base brakes to a halt when no fresh twist came for this "
+            "long (s of sim time); default 0.5 s of real time (0.5 x --speed; off with "
+            "--speed max); 0 or none: twists hold until the next command. See docs/sim.md.",
+        ),
     ] = None,
     bumper: Annotated[bool, typer.Option("--bumper/--no-bumper", help="Stop bases before obstacles ahead.")] = True,
     mirrors: Annotated[
-        int, typer.Option("--mirrors", help="Mirror slots for robots of other sims of the world, so this sim's sensors see them: "
-                                            "a base takes 1, an arm 1 per link (7); each costs every LIDAR ray ~1 %; 0: none. See docs/sim.md.")
+        int,
+        typer.Option(
+            "--mirrors",
+            help="Mirror slots for robots of other sims of the world, so this sim's sensors see them: "
+            "a base takes 1, an arm 1 per link (7); each costs every LIDAR ray ~1 %; 0: none. See docs/sim.md.",
+        ),
     ] = DEFAULT_MIRRORS,
-    ownership: Annotated[bool, typer.Option("--ownership/--no-ownership", help="Gate commands by ownership (needs the ownership package).")] = True,
+    ownership: Annotated[
+        bool,
+        typer.Option("--ownership/--no-ownership", help="Gate commands by ownership (needs the ownership package)."),
+    ] = True,
     standby: Annotated[
-        bool, typer.Option("--standby", help="Follow the world's primary sim and take the world over (no reset) if it goes; see docs/sim.md.")
+        bool,
+        typer.Option(
+            "--standby",
+            help="Follow the world's primary sim and take the world over (no reset) if it goes; see docs/sim.md.",
+        ),
     ] = False,
     budget: Annotated[
-        str, typer.Option("--budget", help="Each login's budgets at the ownership authority, RATE/BURST per second: "
-                                           "requests=20/40,owner=200/400 (renewals, releases),queries=50/100; past them "
-                                           "asks are refused as rate_limited. See docs/ownership.md.")
+        str,
+        typer.Option(
+            "--budget",
+            help="Each login's budgets at the ownership authority, RATE/BURST per second: "
+            "requests=20/40,owner=200/400 (renewals, releases),queries=50/100; past them "
+            "asks are refused as rate_limited. See docs/ownership.md.",
+        ),
     ] = "",
     list_: Annotated[bool, typer.Option("--list", help="List the known robot types and scenes, then exit.")] = False,
-    plant: Annotated[str, typer.Option("--plant", hidden=True, help="TEST-ONLY: a defect for the soak's checker (fabric/plant.py).")] = "",
+    plant: Annotated[
+        str, typer.Option("--plant", hidden=True, help="TEST-ONLY: a defect for the soak's checker (fabric/plant.py).")
+    ] = "",
     join: Joining = Joining(),
 ) -> None:
     """Simulate a scene's robots and serve them on the fabric: joints, poses, scans out; commands in."""
@@ -126,8 +164,16 @@ def sim(
     def build(placements=None):
         """This sim's world; ``placements``: other robots than the command line's (a robot moved in or out)."""
         return SimWorld(
-            scene, (robot or []) if placements is None else placements, scene_robots=scene_robots and placements is None, seed=seed, noise_std=noise, lidar_rays=lidar_rays, lidar_fov_deg=lidar_fov,
-            bumper=bumper, twist_timeout=deadman, mirrors=mirrors,
+            scene,
+            (robot or []) if placements is None else placements,
+            scene_robots=scene_robots and placements is None,
+            seed=seed,
+            noise_std=noise,
+            lidar_rays=lidar_rays,
+            lidar_fov_deg=lidar_fov,
+            bumper=bumper,
+            twist_timeout=deadman,
+            mirrors=mirrors,
         )
 
     try:
@@ -142,8 +188,21 @@ def sim(
         first = _check_world_free(cfg, join.peer_id, sim_world)
     stop = shutdown_event()
     if standby or not replicated_off():
-        _run_replicated(cfg, join.peer_id, sim_world, build, ownership, rates, pace, stop, duration, standby, first, gate_of,
-                        plant=plant)
+        _run_replicated(
+            cfg,
+            join.peer_id,
+            sim_world,
+            build,
+            ownership,
+            rates,
+            pace,
+            stop,
+            duration,
+            standby,
+            first,
+            gate_of,
+            plant=plant,
+        )
         return
     _run_single(cfg, join.peer_id, sim_world, ownership, rates, pace, stop, duration, first, gate_of)
 
@@ -167,8 +226,9 @@ def _parse_budget(text: str):
         raise UserError(f"--budget: {exc}") from None
 
 
-def _parse_options(rate: str, speed: str, duration: float | None, noise: float | None,
-                   twist_timeout: str | None) -> tuple[dict[str, float], float | None, float | None]:
+def _parse_options(
+    rate: str, speed: str, duration: float | None, noise: float | None, twist_timeout: str | None
+) -> tuple[dict[str, float], float | None, float | None]:
     """The stream rates, the pace and the twist deadman the options give; a bad option is a :class:`UserError`."""
     from fabric.rate import parse_rates
     from sim_peer.physics.pacing import parse_speed
@@ -200,7 +260,10 @@ def _run_single(cfg, peer_id, sim_world, ownership, rates, pace, stop, duration,
         peer = SimPeer(fab, sim_world, gate=gate, rates=rates, speed=pace, objects=first)
         listing = ", ".join(f"{rid} ({r.desc.name})" for rid, r in sim_world.robots.items())
         pace_text = "max speed" if pace is None else ("real time" if pace == 1 else f"{pace:g}x real time")
-        print(f"sim {fab.peer_id}: scene {sim_world.scene.name}, robots {listing}; world {fab.world}, {pace_text}; Ctrl-C to stop", flush=True)
+        print(
+            f"sim {fab.peer_id}: scene {sim_world.scene.name}, robots {listing}; world {fab.world}, {pace_text}; Ctrl-C to stop",
+            flush=True,
+        )
         try:
             peer.run(stop, duration)
         finally:
@@ -247,18 +310,29 @@ def _check_world_free(cfg, peer_id, sim_world) -> bool:
         info, who = rep.message, rep.source or "another sim"
         same = sorted(mine & {r.id for r in info.robots})
         if same:
-            raise UserError(f"robot {', '.join(same)} is already served by sim {who} in world {cfg.world!r}; give it another "
-                            f"id, or run this sim with --standby to follow {who}")
+            raise UserError(
+                f"robot {', '.join(same)} is already served by sim {who} in world {cfg.world!r}; give it another "
+                f"id, or run this sim with --standby to follow {who}"
+            )
         if info.scene != sim_world.scene.name:
-            raise UserError(f"world {cfg.world!r} runs scene {info.scene!r} (sim {who}), not {sim_world.scene.name!r}: every "
-                            f"sim of a world loads the same scene")
+            raise UserError(
+                f"world {cfg.world!r} runs scene {info.scene!r} (sim {who}), not {sim_world.scene.name!r}: every "
+                f"sim of a world loads the same scene"
+            )
     if replies:
         served = ", ".join(f"{r.source} ({', '.join(x.id for x in r.message.robots)})" for r in replies)
-        print(f"sim {peer_id or 'this sim'}: joining world {cfg.world!r} as a shard beside {served}; the scene objects stay "
-              f"with the first sim", file=sys.stderr, flush=True)
+        print(
+            f"sim {peer_id or 'this sim'}: joining world {cfg.world!r} as a shard beside {served}; the scene objects stay "
+            f"with the first sim",
+            file=sys.stderr,
+            flush=True,
+        )
         return False
-    print(f"warning: sim {', '.join(others)} is live in world {cfg.world!r} but did not describe it (a standby alone, "
-          f"or access control): starting anyway", file=sys.stderr)
+    print(
+        f"warning: sim {', '.join(others)} is live in world {cfg.world!r} but did not describe it (a standby alone, "
+        f"or access control): starting anyway",
+        file=sys.stderr,
+    )
     return True
 
 
@@ -269,8 +343,21 @@ def replicated_off() -> bool:
     return os.environ.get("ROBOFABRIC_SIM_SINGLE", "") not in ("", "0")
 
 
-def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, stop, duration, standby, objects=True,
-                    gate_of=make_gate, plant: str = "") -> None:
+def _run_replicated(
+    cfg,
+    peer_id,
+    first_world,
+    build,
+    ownership,
+    rates,
+    pace,
+    stop,
+    duration,
+    standby,
+    objects=True,
+    gate_of=make_gate,
+    plant: str = "",
+) -> None:
     """Primary or standby through :func:`sim_peer.replica.replica_host.run_replicated`."""
     from fabric.config import default_peer_id
     from sim_peer.replica.replica_host import run_replicated
@@ -286,12 +373,23 @@ def _run_replicated(cfg, peer_id, first_world, build, ownership, rates, pace, st
 
     robots = ", ".join(f"{rid} ({r.desc.name})" for rid, r in first_world.robots.items())
     pace_text = "max speed" if pace is None else ("real time" if pace == 1 else f"{pace:g}x real time")
-    print(f"sim {pid}{' (standby)' if standby else ''}: scene {first_world.scene.name}, robots {robots}; world {cfg.world}, "
-          f"{pace_text}; Ctrl-C to stop", flush=True)
+    print(
+        f"sim {pid}{' (standby)' if standby else ''}: scene {first_world.scene.name}, robots {robots}; world {cfg.world}, "
+        f"{pace_text}; Ctrl-C to stop",
+        flush=True,
+    )
     host = run_replicated(
-        lambda: open_fabric(cfg, "sim", pid), make_world,
-        lambda fab, w, restored, objects=True: gate_of(fab, w, ownership, restored, objects=objects), stop,
-        standby=standby, rates=rates, speed=pace, duration=duration, announce=announce, objects=objects, rebuild=build,
+        lambda: open_fabric(cfg, "sim", pid),
+        make_world,
+        lambda fab, w, restored, objects=True: gate_of(fab, w, ownership, restored, objects=objects),
+        stop,
+        standby=standby,
+        rates=rates,
+        speed=pace,
+        duration=duration,
+        announce=announce,
+        objects=objects,
+        rebuild=build,
         plant=plant,
     )
     peer = host.peer if host is not None else None
@@ -322,24 +420,34 @@ def _print_catalog() -> None:
 
 
 @join_flags(client=True)
-def move_cmd(robot: Annotated[str, typer.Argument(help="Robot id.")],
-             to: Annotated[str, typer.Option("--to", help="The sim peer (its id, as `robofabric ps` lists it) to serve the robot.")],
-             join: Joining = Joining()) -> None:
+def move_cmd(
+    robot: Annotated[str, typer.Argument(help="Robot id.")],
+    to: Annotated[
+        str, typer.Option("--to", help="The sim peer (its id, as `robofabric ps` lists it) to serve the robot.")
+    ],
+    join: Joining = Joining(),
+) -> None:
     """Hand ROBOT, its state and its ownership from its sim to sim TO (rebalancing a world of several sims).
 
     Its owner keeps it and her epoch; see docs/sim.md, "Moving a robot between sims". In a class world only the
     instructor and sim logins may move robots (docs/security.md)."""
     from sim_peer.shards.handoff import MoveError, move
+
     with join.open("tool") as fab:
         try:
             done = move(fab, robot, to)
         except MoveError as exc:  # a sim refused, none answered, or none serves it: the world said no (exit 1)
             raise NothingThere(f"robot {robot} not moved: {exc}") from None
-    print(f"moved {done['robot']} from sim {done['from']} to sim {done['to']} (term {done['term']}) in {done['pause_ms']:.0f} ms", flush=True)
+    print(
+        f"moved {done['robot']} from sim {done['from']} to sim {done['to']} (term {done['term']}) in {done['pause_ms']:.0f} ms",
+        flush=True,
+    )
 
 
 def register(app: typer.Typer) -> None:
     from ownership.cli import own_app
 
     app.command("sim")(sim)
-    own_app.command("move")(move_cmd)  # moving a robot hands its ownership over: an `own` subcommand, served by the sims
+    own_app.command("move")(
+        move_cmd
+    )  # moving a robot hands its ownership over: an `own` subcommand, served by the sims

@@ -94,7 +94,9 @@ class ArmController:
         bad = np.flatnonzero(applied != q)
         if bad.size == 0:
             return None
-        return Clamp(tuple(self.names[i] for i in bad), tuple(float(q[i]) for i in bad), tuple(float(applied[i]) for i in bad))
+        return Clamp(
+            tuple(self.names[i] for i in bad), tuple(float(q[i]) for i in bad), tuple(float(applied[i]) for i in bad)
+        )
 
     def stop(self) -> None:
         """Hold where the joints are now."""
@@ -158,12 +160,18 @@ class BaseController:
     """
 
     def __init__(
-        self, spec: BaseSpec, pose: tuple[float, float, float] = (0.0, 0.0, 0.0), *, twist_timeout: float | None = None,
+        self,
+        spec: BaseSpec,
+        pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        *,
+        twist_timeout: float | None = None,
         on_news: Callable[[EventKind], None] | None = None,
     ) -> None:
         self.spec = spec
         self.on_news = on_news  # told EventKind.PATH_DONE or TWIST_TIMEOUT when they happen (no cost per step)
-        self.twist_timeout = twist_timeout  # s of sim time a twist holds without a fresh one (None: until told otherwise)
+        self.twist_timeout = (
+            twist_timeout  # s of sim time a twist holds without a fresh one (None: until told otherwise)
+        )
         self._since_twist = 0.0
         self.twists_expired = 0
         self.home = tuple(float(p) for p in pose)
@@ -175,7 +183,9 @@ class BaseController:
         self.wheels = np.zeros(2)  # left, right wheel angles (rad)
         self.wheel_speeds = np.zeros(2)
         self.follower = None  # anything with step(x, y, yaw, v, dt) -> (v, omega, done)
-        self.speed_cap = math.inf  # m/s a path follower may drive at: set by the base's way guard (sim_peer.physics.way_guard)
+        self.speed_cap = (
+            math.inf
+        )  # m/s a path follower may drive at: set by the base's way guard (sim_peer.physics.way_guard)
         self.paths_done = 0  # paths followed to their end (not stopped or replaced)
 
     def twist(self, v: float, omega: float) -> Clamp | None:
@@ -245,7 +255,9 @@ class BaseController:
         if self.follower is not None:
             v_d, w_d, done = self.follower.step(self.x, self.y, self.yaw, self.v, dt)
             if done:
-                quiet = getattr(self.follower, "quiet", False)  # a way guard's own move (backing off): not the user's path
+                quiet = getattr(
+                    self.follower, "quiet", False
+                )  # a way guard's own move (backing off): not the user's path
                 self.follower = None
                 self.paths_done += not quiet
                 if self.on_news is not None and not quiet:

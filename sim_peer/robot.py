@@ -140,9 +140,17 @@ class SimRobot:
     def describe(self) -> RobotInfo:
         d = self.desc
         return RobotInfo(
-            id=self.id, type=d.name, kind=d.kind, pose=np.array(self.mount.pose), joint_names=d.joint_names,
-            lower=np.array(d.lower), upper=np.array(d.upper), max_speed=np.array(d.max_speed), flange_site=d.flange_site,
-            flange_frame=d.flange_frame, base_radius=d.base_radius,
+            id=self.id,
+            type=d.name,
+            kind=d.kind,
+            pose=np.array(self.mount.pose),
+            joint_names=d.joint_names,
+            lower=np.array(d.lower),
+            upper=np.array(d.upper),
+            max_speed=np.array(d.max_speed),
+            flange_site=d.flange_site,
+            flange_frame=d.flange_frame,
+            base_radius=d.base_radius,
         )
 
     def initialize(self, physics: Physics) -> None:
@@ -219,4 +227,15 @@ def check_hooks(cls: type) -> type:
     return cls
 
 
-__all__ = ["Build", "CommandHandler", "HOOKS", "Mount", "Note", "Physics", "SimRobot", "Stream", "body_mismatch", "check_hooks"]
+__all__ = [
+    "Build",
+    "CommandHandler",
+    "HOOKS",
+    "Mount",
+    "Note",
+    "Physics",
+    "SimRobot",
+    "Stream",
+    "body_mismatch",
+    "check_hooks",
+]

@@ -50,7 +50,9 @@ class Sensor:
 class Lidar(Sensor):
     """A planar LIDAR on a site: ``read(data)`` gives ranges (m) for rays from angle_min by angle_increment."""
 
-    def __init__(self, model: mujoco.MjModel, spec: LidarSpec, site_id: int, body_id: int, rng: np.random.Generator | None = None) -> None:
+    def __init__(
+        self, model: mujoco.MjModel, spec: LidarSpec, site_id: int, body_id: int, rng: np.random.Generator | None = None
+    ) -> None:
         self.model = model
         self.spec = spec
         self.site_id = site_id
@@ -68,18 +70,37 @@ class Lidar(Sensor):
         rot = data.site_xmat[self.site_id].reshape(3, 3)
         self._vec[:] = (self._local @ rot.T).reshape(-1)
         mujoco.mj_multiRay(
-            self.model, data, data.site_xpos[self.site_id], self._vec, SENSED_GROUPS, 1, self.body_id,
-            self._geomid, self._dist, None, s.rays, s.range_max,
+            self.model,
+            data,
+            data.site_xpos[self.site_id],
+            self._vec,
+            SENSED_GROUPS,
+            1,
+            self.body_id,
+            self._geomid,
+            self._dist,
+            None,
+            s.rays,
+            s.range_max,
         )
         return _finish(self._dist, s.range_min, s.range_max, s.noise_std, self.rng)
 
     def describe(self, info: RobotInfo) -> RobotInfo:
         li = self.spec
-        return replace(info, lidar=LidarInfo(
-            site=li.site, rays=li.rays, fov=li.fov, angle_min=li.angle_min, angle_increment=li.angle_increment,
-            range_min=li.range_min, range_max=li.range_max, noise_std=li.noise_std,
-            offset=np.array(self.model.site_pos[self.site_id], dtype=np.float64),  # in the robot frame
-        ))
+        return replace(
+            info,
+            lidar=LidarInfo(
+                site=li.site,
+                rays=li.rays,
+                fov=li.fov,
+                angle_min=li.angle_min,
+                angle_increment=li.angle_increment,
+                range_min=li.range_min,
+                range_max=li.range_max,
+                noise_std=li.noise_std,
+                offset=np.array(self.model.site_pos[self.site_id], dtype=np.float64),  # in the robot frame
+            ),
+        )
 
     def streams(self) -> tuple[Stream, ...]:
         return (Stream("scan", "scan", self._sample, positions=True),)
@@ -97,7 +118,9 @@ class Ultrasonic(Sensor):
 
     BEAM = math.radians(15.0)  # half-width of each sensor's fan of three rays
 
-    def __init__(self, model: mujoco.MjModel, spec: UltrasonicSpec, body_id: int, rng: np.random.Generator | None = None) -> None:
+    def __init__(
+        self, model: mujoco.MjModel, spec: UltrasonicSpec, body_id: int, rng: np.random.Generator | None = None
+    ) -> None:
         self.model = model
         self.spec = spec
         self.body_id = body_id
@@ -118,7 +141,18 @@ class Ultrasonic(Sensor):
         self._vec[:] = (self._local @ rot.T).reshape(-1)
         cutoff = s.range_max + s.radius
         mujoco.mj_multiRay(
-            self.model, data, origin, self._vec, SENSED_GROUPS, 1, self.body_id, self._geomid, self._dist, None, self._n, cutoff
+            self.model,
+            data,
+            origin,
+            self._vec,
+            SENSED_GROUPS,
+            1,
+            self.body_id,
+            self._geomid,
+            self._dist,
+            None,
+            self._n,
+            cutoff,
         )
         d = np.where(self._dist >= 0, self._dist - s.radius, -1.0)
         d = d.reshape(3, -1)
@@ -128,10 +162,18 @@ class Ultrasonic(Sensor):
 
     def describe(self, info: RobotInfo) -> RobotInfo:
         us = self.spec
-        return replace(info, sonar=SonarInfo(
-            angles=np.array(us.angles, dtype=np.float64), radius=us.radius, height=us.height, range_min=us.range_min,
-            range_max=us.range_max, noise_std=us.noise_std, center=np.array(us.center, dtype=np.float64),
-        ))
+        return replace(
+            info,
+            sonar=SonarInfo(
+                angles=np.array(us.angles, dtype=np.float64),
+                radius=us.radius,
+                height=us.height,
+                range_min=us.range_min,
+                range_max=us.range_max,
+                noise_std=us.noise_std,
+                center=np.array(us.center, dtype=np.float64),
+            ),
+        )
 
     def streams(self) -> tuple[Stream, ...]:
         """The ring on its own key (``sonar``), published with the LIDAR's rate group."""
@@ -141,10 +183,14 @@ class Ultrasonic(Sensor):
         ranges = self.read(physics.data)
         s = self.spec
         inc = (s.angles[1] - s.angles[0]) if len(s.angles) > 1 else 0.0
-        return lambda header: Scan.from_ranges(ranges, angle_min=s.angles[0], angle_increment=inc, range_max=s.range_max, header=header)
+        return lambda header: Scan.from_ranges(
+            ranges, angle_min=s.angles[0], angle_increment=inc, range_max=s.range_max, header=header
+        )
 
 
-def _finish(dist: np.ndarray, range_min: float, range_max: float, noise_std: float, rng: np.random.Generator | None) -> np.ndarray:
+def _finish(
+    dist: np.ndarray, range_min: float, range_max: float, noise_std: float, rng: np.random.Generator | None
+) -> np.ndarray:
     miss = (dist < 0) | (dist > range_max)
     r = np.where(miss, range_max, dist)
     if noise_std > 0 and rng is not None:

@@ -26,12 +26,20 @@ settings.load_profile("robofabric")
 # worlds (a module each: three at once took the box to load 37), soaks and namespace labs, CPU hogs beside paused
 # processes. Two of them at once judge each other's pace, not the code's; the rest share the other workers.
 HEAVY = (
-    "tests/user_peer/console/", "tests/user_peer/test_view_web.py", "tests/user_peer/test_web_pages.py",
-    "tests/robofabric/bench/test_bench_console.py", "tests/robofabric/soak/", "tests/lab/", "tests/user_peer/test_pause_ride_out.py",
-    "tests/sim_peer/replica/test_pause.py", "tests/sim_peer/replica/test_paused_standby.py", "tests/ownership/test_router_stall.py",
+    "tests/user_peer/console/",
+    "tests/user_peer/test_view_web.py",
+    "tests/user_peer/test_web_pages.py",
+    "tests/robofabric/bench/test_bench_console.py",
+    "tests/robofabric/soak/",
+    "tests/lab/",
+    "tests/user_peer/test_pause_ride_out.py",
+    "tests/sim_peer/replica/test_pause.py",
+    "tests/sim_peer/replica/test_paused_standby.py",
+    "tests/ownership/test_router_stall.py",
     # a pace at full rate and 0.3 s leases: at load 37 beside Chromium the first logged 0.36x of its full rate and
     # the second's starved authority waited out its deaf guard (the grouped run of 2026-11-29)
-    "tests/user_peer/test_view_class.py", "tests/robofabric/bench/test_bench_ownership.py",
+    "tests/user_peer/test_view_class.py",
+    "tests/robofabric/bench/test_bench_ownership.py",
 )
 
 
@@ -150,5 +158,8 @@ def _fast_tests_start_no_process(request: pytest.FixtureRequest, monkeypatch: py
     monkeypatch.setattr(subprocess.Popen, "__init__", spy)
     yield
     if started:
-        pytest.fail(f"a fast test started {len(started)} process(es), e.g. {started[0]!r}: mark it "
-                    "@pytest.mark.slow (make test-fast runs in-process tests only)", pytrace=False)
+        pytest.fail(
+            f"a fast test started {len(started)} process(es), e.g. {started[0]!r}: mark it "
+            "@pytest.mark.slow (make test-fast runs in-process tests only)",
+            pytrace=False,
+        )

@@ -86,11 +86,13 @@ def extract(text: str, path: str = "<text>") -> list[Block]:
         fence, lang = f.group("fence"), f.group("info").strip().split(" ")[0].lower()
         start = i
         if not lang:  # a bare fence hides commands from the runner: every block says what it holds
-            raise DocFormatError(f"{path}:{start + 1}: fence without a language (```bash or ```python to run, ```text for output)")
+            raise DocFormatError(
+                f"{path}:{start + 1}: fence without a language (```bash or ```python to run, ```text for output)"
+            )
         body: list[str] = []
         i += 1
         while i < len(lines) and not re.match(rf"^\s*{re.escape(fence[0])}{{{len(fence)},}}\s*$", lines[i]):
-            body.append(lines[i][len(f.group("indent")):] if lines[i].startswith(f.group("indent")) else lines[i])
+            body.append(lines[i][len(f.group("indent")) :] if lines[i].startswith(f.group("indent")) else lines[i])
             i += 1
         if i >= len(lines):
             raise DocFormatError(f"{path}:{start + 1}: fence never closed")
@@ -130,14 +132,31 @@ def lan_addresses(code: str) -> list[str]:
 
 
 def test_extract_follows_the_convention():
-    page = "\n".join([
-        "# T", "```bash", "robofabric ps", "```",
-        "<!-- not-run: needs a LAN -->", "```python", "import x", "```",
-        "```text", "out", "```", "````sh", "echo '```'", "````", "",
-    ])
+    page = "\n".join(
+        [
+            "# T",
+            "```bash",
+            "robofabric ps",
+            "```",
+            "<!-- not-run: needs a LAN -->",
+            "```python",
+            "import x",
+            "```",
+            "```text",
+            "out",
+            "```",
+            "````sh",
+            "echo '```'",
+            "````",
+            "",
+        ]
+    )
     b = extract(page)
     assert [(x.line, x.lang, x.runs, x.not_run) for x in b] == [
-        (2, "bash", True, ""), (6, "python", False, "needs a LAN"), (9, "text", False, ""), (12, "sh", True, ""),
+        (2, "bash", True, ""),
+        (6, "python", False, "needs a LAN"),
+        (9, "text", False, ""),
+        (12, "sh", True, ""),
     ]
     assert b[3].code == "echo '```'\n"
     with pytest.raises(DocFormatError, match="immediately before a fence"):
@@ -156,7 +175,10 @@ def test_every_page_follows_the_convention_and_runs_no_lan_address():
     blocks = all_blocks()  # raises DocFormatError with file:line
     assert any(b.runs for b in blocks), "no runnable block found: is the extractor broken?"
     bad = [f"{b.id}: {', '.join(lan_addresses(b.code))}" for b in blocks if b.runs and lan_addresses(b.code)]
-    assert not bad, "runnable blocks name LAN addresses (mark them <!-- not-run: ... --> or read $ROBOFABRIC_CONNECT): " + "; ".join(bad)
+    assert not bad, (
+        "runnable blocks name LAN addresses (mark them <!-- not-run: ... --> or read $ROBOFABRIC_CONNECT): "
+        + "; ".join(bad)
+    )
 
 
 # ---------------------------------------------------------------------------- running them (slow)
@@ -177,9 +199,18 @@ def docs_world(tmp_path_factory):
     procs = ProcessGroup(logs)
     try:
         sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep), name="sim")
-        wait_until(lambda: router.live_peers("sim"), timeout=90, what="sim peer", seen=lambda: procs.output(sim)[-2000:])
-        comp = procs.start(robofabric_cmd("compute", "--stream", "arm1:target", "--world", world, "--connect", ep), name="compute")
-        wait_until(lambda: router.live_peers("compute"), timeout=90, what="compute peer", seen=lambda: procs.output(comp)[-2000:])
+        wait_until(
+            lambda: router.live_peers("sim"), timeout=90, what="sim peer", seen=lambda: procs.output(sim)[-2000:]
+        )
+        comp = procs.start(
+            robofabric_cmd("compute", "--stream", "arm1:target", "--world", world, "--connect", ep), name="compute"
+        )
+        wait_until(
+            lambda: router.live_peers("compute"),
+            timeout=90,
+            what="compute peer",
+            seen=lambda: procs.output(comp)[-2000:],
+        )
         bindir = str(Path(sys.executable).parent)
         env = {
             **os.environ,
@@ -208,8 +239,12 @@ def test_doc_block_runs(block: Block, docs_world):
     name = re.sub(r"[^A-Za-z0-9]+", "_", block.id)
     src = scratch / f"block_{name}.{'py' if RUN_LANGS[block.lang] == 'python' else 'sh'}"
     src.write_text(block.code, encoding="utf-8")
-    argv = [sys.executable, str(src)] if RUN_LANGS[block.lang] == "python" else ["bash", "-e", "-o", "pipefail", str(src)]
-    proc = subprocess.Popen(argv, cwd=scratch, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+    argv = (
+        [sys.executable, str(src)] if RUN_LANGS[block.lang] == "python" else ["bash", "-e", "-o", "pipefail", str(src)]
+    )
+    proc = subprocess.Popen(
+        argv, cwd=scratch, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True
+    )
     try:
         out, _ = proc.communicate(timeout=LIMIT_S)
     except subprocess.TimeoutExpired:
@@ -239,7 +274,9 @@ def test_classroom_notebook_runs(docs_world, monkeypatch):
     monkeypatch.delenv("MPLBACKEND", raising=False)  # the kernel's inline backend draws into the outputs
     nb = nbformat.read(ROOT / "examples" / "classroom.ipynb", as_version=4)
     assert not any(c.get("outputs") for c in nb.cells if c.cell_type == "code"), "commit the notebook without outputs"
-    NotebookClient(nb, timeout=int(LIMIT_S), kernel_name="python3", resources={"metadata": {"path": str(scratch)}}).execute()
+    NotebookClient(
+        nb, timeout=int(LIMIT_S), kernel_name="python3", resources={"metadata": {"path": str(scratch)}}
+    ).execute()
     outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs]
     assert not [o for o in outputs if o.output_type == "error"]
     images = [o for o in outputs if "image/png" in o.get("data", {})]

@@ -42,7 +42,10 @@ def _frozen_value(cls: ast.ClassDef) -> bool:
     """A ``@dataclass(frozen=True)`` (or ``@dataclasses.dataclass(frozen=True, ...)``)."""
     for d in cls.decorator_list:
         if isinstance(d, ast.Call) and getattr(d.func, "id", getattr(d.func, "attr", "")) == "dataclass":
-            if any(kw.arg == "frozen" and isinstance(kw.value, ast.Constant) and kw.value.value is True for kw in d.keywords):
+            if any(
+                kw.arg == "frozen" and isinstance(kw.value, ast.Constant) and kw.value.value is True
+                for kw in d.keywords
+            ):
                 return True
     return False
 
@@ -136,7 +139,9 @@ def report(root: Path, packages: tuple[str, ...] = PACKAGES, benchmarks: tuple[s
     """``offenders`` of ``root``, each also warned as a ``HouseSizeWarning``; never raises for a size."""
     found = offenders(root, packages, benchmarks)
     for what in found:
-        warnings.warn(HouseSizeWarning(f"{what}: does it hold more than one concern? (docs/architecture.md)"), stacklevel=2)
+        warnings.warn(
+            HouseSizeWarning(f"{what}: does it hold more than one concern? (docs/architecture.md)"), stacklevel=2
+        )
     return found
 
 
@@ -157,17 +162,30 @@ def test_the_check_bites(tmp_path):
     (tmp_path / "pkg" / "bench").mkdir(parents=True)
     (tmp_path / "pkg" / "big.py").write_text("x = 1\n" * 501)
     (tmp_path / "pkg" / "classes.py").write_text(
-        "from dataclasses import dataclass\n\n\nclass Wide:\n" + _methods(21)
-        + "\nclass Twenty:\n" + _methods(20)
-        + "\n@dataclass(frozen=True)\nclass Value:\n" + _methods(25))
+        "from dataclasses import dataclass\n\n\nclass Wide:\n"
+        + _methods(21)
+        + "\nclass Twenty:\n"
+        + _methods(20)
+        + "\n@dataclass(frozen=True)\nclass Value:\n"
+        + _methods(25)
+    )
     # a mixin's methods are its host's, through an import too; a base class with an __init__ is counted alone
     (tmp_path / "pkg" / "mixin.py").write_text("class Forwards:\n" + _methods(8, "f"))
     (tmp_path / "pkg" / "hosts.py").write_text(
-        "from pkg.mixin import Forwards\n\n\nclass Host(Forwards):\n" + _methods(13)
-        + "\nclass Fits(Forwards):\n" + _methods(12) + _methods(30, "_helper")
-        + "\nclass Base:\n    def __init__(self) -> None:\n        pass\n\n" + _methods(15, "b")
-        + "\nclass Kind(Base):\n" + _methods(15)
-        + "\nclass Middle(Base):\n" + _methods(10, "i") + "\nclass Leaf(Middle):\n" + _methods(15))
+        "from pkg.mixin import Forwards\n\n\nclass Host(Forwards):\n"
+        + _methods(13)
+        + "\nclass Fits(Forwards):\n"
+        + _methods(12)
+        + _methods(30, "_helper")
+        + "\nclass Base:\n    def __init__(self) -> None:\n        pass\n\n"
+        + _methods(15, "b")
+        + "\nclass Kind(Base):\n"
+        + _methods(15)
+        + "\nclass Middle(Base):\n"
+        + _methods(10, "i")
+        + "\nclass Leaf(Middle):\n"
+        + _methods(15)
+    )
     (tmp_path / "pkg" / "funcs.py").write_text(_function("long", 81) + _function("fits", 80))
     (tmp_path / "pkg" / "bench" / "run.py").write_text(_function("script", 120) + "class Wide:\n" + _methods(21))
     with pytest.warns(HouseSizeWarning) as caught:

@@ -19,15 +19,20 @@ ROOT = Path(__file__).resolve().parents[1]
 LINT = Path(sys.executable).with_name("lint-imports")
 
 
-
-def _run(config: Path, cwd: Path, extra_path: Path | None = None, contract: str | None = None) -> subprocess.CompletedProcess:
+def _run(
+    config: Path, cwd: Path, extra_path: Path | None = None, contract: str | None = None
+) -> subprocess.CompletedProcess:
     env = dict(os.environ)
     if extra_path is not None:
         env["PYTHONPATH"] = str(extra_path)
     only = ["--contract", contract] if contract else []
     return subprocess.run(
         [str(LINT), "--config", str(config), "--no-cache", *only],
-        cwd=cwd, env=env, capture_output=True, text=True, timeout=120,
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
 
 
@@ -49,9 +54,17 @@ def test_contracts_hold(monkeypatch, capsys):
     out = capsys.readouterr()
     assert code == 0, out.out + out.err
     assert "0 broken" in out.out
-    for contract in ("Layers", "fabric.interfaces imports nothing", "fabric.codec and fabric.limits", "fabric, the ground floor",
-                     "No peer, nor ownership or robots, imports robofabric's tools", "The sim's pure decision cores",
-                     "The sim's rooms", "The user side's rooms", "robofabric's tool rooms"):
+    for contract in (
+        "Layers",
+        "fabric.interfaces imports nothing",
+        "fabric.codec and fabric.limits",
+        "fabric, the ground floor",
+        "No peer, nor ownership or robots, imports robofabric's tools",
+        "The sim's pure decision cores",
+        "The sim's rooms",
+        "The user side's rooms",
+        "robofabric's tool rooms",
+    ):
         assert contract in out.out, out.out
 
 
@@ -139,15 +152,15 @@ ALLOWED = {
     "fabric/session.py": "import fabric.interfaces\nimport fabric.keys\n",
     "ownership/client.py": "import fabric.session\nimport fabric.interfaces\n",
     "sim_peer/serving/peer.py": "import ownership.client\nimport robots\nimport fabric.interfaces\nimport zenoh\n"
-                                "import sim_peer.physics.world\nimport sim_peer.shards.mirroring\n",
+    "import sim_peer.physics.world\nimport sim_peer.shards.mirroring\n",
     "sim_peer/cli.py": "def main():\n    import sim_peer.replica.replica_host\n    import sim_peer.serving.peer\n",
     "sim_peer/replica/replica_host.py": "import sim_peer.shards.directory\nimport sim_peer.serving.peer\nimport sim_peer.replica.roles\n",
     "sim_peer/shards/directory.py": "from typing import TYPE_CHECKING\nimport sim_peer.replica.election\n"
-                                    "if TYPE_CHECKING:\n    import sim_peer.replica.replica_host\n",
+    "if TYPE_CHECKING:\n    import sim_peer.replica.replica_host\n",
     "sim_peer/shards/mirroring.py": "import sim_peer.physics.world\nimport fabric.keys\n",
     "sim_peer/physics/robot_kinds.py": "import sim_peer.bumper\nimport sim_peer.controllers\nimport sim_peer.sensors\n",
     "sim_peer/bumper.py": "from typing import TYPE_CHECKING\nimport sim_peer.robot\nimport sim_peer.sensors\n"
-                          "if TYPE_CHECKING:\n    import sim_peer.physics.robot_kinds\n",
+    "if TYPE_CHECKING:\n    import sim_peer.physics.robot_kinds\n",
     "sim_peer/sensors.py": "import sim_peer.robot\n",
     "user_peer/cli.py": "import user_peer.openfmt\ndef register(app):\n    from user_peer.console import page\n",
     "user_peer/ros2/cli.py": "import user_peer.openfmt\ndef main():\n    from user_peer.cli import open_world\n",
@@ -215,13 +228,21 @@ def test_skeleton_without_bad_imports_keeps_every_contract(tmp_path):
         ("robots/__init__.py", "import robofabric.launch\n", "tools"),
         ("sim_peer/replica/deaf_rule.py", "import zenoh\n", "pure-cores"),  # a pure core opening sessions
         ("sim_peer/replica/freeze_rule.py", "def later():\n    import fabric.session\n", "pure-cores"),
-        ("sim_peer/replica/hearing_rule.py", "from sim_peer.replica import roles\n", "pure-cores"),  # a core reaching into its shell
+        (
+            "sim_peer/replica/hearing_rule.py",
+            "from sim_peer.replica import roles\n",
+            "pure-cores",
+        ),  # a core reaching into its shell
         ("sim_peer/replica/election.py", "import sim_peer.serving.peer\n", "pure-cores"),  # zenoh through the peer
         ("sim_peer/replica/adoption_rule.py", "from fabric import session\n", "pure-cores"),
         ("sim_peer/shards/move_rule.py", "import zenoh\n", "pure-cores"),
         ("sim_peer/physics/world.py", "import zenoh\n", "sim-physics"),  # the MuJoCo world opening sessions
         ("sim_peer/physics/placement.py", "from fabric import session\n", "sim-physics"),
-        ("sim_peer/robot.py", "import sim_peer.serving.peer\n", "sim-physics"),  # the plug-in surface leaning on the peer
+        (
+            "sim_peer/robot.py",
+            "import sim_peer.serving.peer\n",
+            "sim-physics",
+        ),  # the plug-in surface leaning on the peer
         ("sim_peer/sensors.py", "import sim_peer.replica.roles\n", "sim-physics"),
         ("sim_peer/serving/peer.py", "import sim_peer.replica.roles\n", "sim-rooms"),  # serving leaning on the replica
         ("sim_peer/serving/peer.py", "from sim_peer.shards import directory\n", "sim-rooms"),  # shards past the mirrors

@@ -14,7 +14,18 @@ import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-TOPS = ("fabric", "ownership", "sim_peer", "compute_peer", "user_peer", "robofabric", "robots", "tests", "docs", "tools")
+TOPS = (
+    "fabric",
+    "ownership",
+    "sim_peer",
+    "compute_peer",
+    "user_peer",
+    "robofabric",
+    "robots",
+    "tests",
+    "docs",
+    "tools",
+)
 _SKIP_DIRS = {"node_modules", "__pycache__", ".venv", "build", "dist", ".git", ".mypy_cache", ".ruff_cache"}
 REFERENCE = re.compile(rf"(?<![\w/.-])((?:{'|'.join(TOPS)})/(?:[\w-]+/)*[\w-]+\.(?:py|md)|test_\w+\.py)\b")
 
@@ -22,8 +33,14 @@ _SELF = "tests/test_references.py"
 """This module: its examples name made-up files."""
 
 NOT_REFERENCES = {
-    ("tests/test_layers.py", "compute_peer/service.py"),  # a module of the made-up tree the layer contracts are tried on
-    ("tests/test_layers.py", "sim_peer/stray.py"),  # the made-up tree's module in no room of the sim (exhaustive layers)
+    (
+        "tests/test_layers.py",
+        "compute_peer/service.py",
+    ),  # a module of the made-up tree the layer contracts are tried on
+    (
+        "tests/test_layers.py",
+        "sim_peer/stray.py",
+    ),  # the made-up tree's module in no room of the sim (exhaustive layers)
 }
 """(file, what it names) pairs that name no file of this tree on purpose."""
 
@@ -33,8 +50,12 @@ def _files(root: Path) -> list[Path]:
     out = [p for p in (root / "README.md",) if p.exists()]
     for top in TOPS:
         for p in sorted((root / top).rglob("*")):
-            if p.suffix in (".py", ".md") and p.is_file() and not _SKIP_DIRS & set(p.relative_to(root).parts) \
-                    and p.relative_to(root).as_posix() != _SELF:
+            if (
+                p.suffix in (".py", ".md")
+                and p.is_file()
+                and not _SKIP_DIRS & set(p.relative_to(root).parts)
+                and p.relative_to(root).as_posix() != _SELF
+            ):
                 out.append(p)
     return out
 

@@ -27,8 +27,19 @@ pytestmark = pytest.mark.slow
 
 REPO = Path(__file__).resolve().parents[1]
 CAP_S = 90
-_SKIP_ANYWHERE = shutil.ignore_patterns("__pycache__", "*.egg-info", ".pytest_cache", ".hypothesis", "*.mcap", "*.rrd", "*.whl")
-_SKIP_AT_TOP = {".venv", ".git", "build", "dist", "out", "tests", "docs", "tools"}  # the checkout's, not robofabric/tools
+_SKIP_ANYWHERE = shutil.ignore_patterns(
+    "__pycache__", "*.egg-info", ".pytest_cache", ".hypothesis", "*.mcap", "*.rrd", "*.whl"
+)
+_SKIP_AT_TOP = {
+    ".venv",
+    ".git",
+    "build",
+    "dist",
+    "out",
+    "tests",
+    "docs",
+    "tools",
+}  # the checkout's, not robofabric/tools
 
 
 def _SKIP(folder: str, names: list[str]) -> set[str]:
@@ -38,7 +49,9 @@ def _SKIP(folder: str, names: list[str]) -> set[str]:
 
 def _run(argv: list[str], *, cwd: Path, timeout: float, env: dict | None = None) -> subprocess.CompletedProcess:
     out = subprocess.run(argv, cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env)
-    assert out.returncode == 0, f"{' '.join(map(str, argv))} exited {out.returncode}:\n{(out.stdout + out.stderr)[-5000:]}"
+    assert out.returncode == 0, (
+        f"{' '.join(map(str, argv))} exited {out.returncode}:\n{(out.stdout + out.stderr)[-5000:]}"
+    )
     return out
 
 
@@ -46,26 +59,42 @@ def test_wheel_installs_into_a_fresh_venv_and_runs_the_demo(tmp_path: Path) -> N
     src = tmp_path / "src"
     shutil.copytree(REPO, src, ignore=_SKIP, symlinks=True)
     dist = tmp_path / "dist"
-    _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(dist), str(src)], cwd=tmp_path, timeout=300)
+    _run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(dist), str(src)], cwd=tmp_path, timeout=300
+    )
     wheels = sorted(dist.glob("robofabric-*.whl"))
     assert len(wheels) == 1, wheels
 
     venv = tmp_path / "venv"
     _run([sys.executable, "-m", "venv", "--without-pip", str(venv)], cwd=tmp_path, timeout=120)
     py = venv / "bin" / "python"
-    fresh_site = Path(_run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], cwd=tmp_path, timeout=60).stdout.strip())
+    fresh_site = Path(
+        _run(
+            [str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], cwd=tmp_path, timeout=60
+        ).stdout.strip()
+    )
     deps_site = Path(sysconfig.get_paths()["purelib"])
     (fresh_site / "00-robofabric-test-deps.pth").write_text(f"{deps_site}\n")
     for pth in deps_site.glob("*.pth"):  # e.g. cmeel.pth, which puts Pinocchio's prefix on the path
         if not pth.name.startswith("__editable__"):
             shutil.copy(pth, fresh_site / pth.name)
-    _run([sys.executable, "-m", "pip", "--python", str(py), "install", "-q", "--no-deps", "--no-index", str(wheels[0])], cwd=tmp_path, timeout=300)
+    _run(
+        [sys.executable, "-m", "pip", "--python", str(py), "install", "-q", "--no-deps", "--no-index", str(wheels[0])],
+        cwd=tmp_path,
+        timeout=300,
+    )
 
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
     env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}"
     where = _run(
-        [str(py), "-c", "import fabric, robots, robofabric; print(fabric.__file__); print(robots.__file__); print(robofabric.__version__)"],
-        cwd=tmp_path, timeout=60, env=env,
+        [
+            str(py),
+            "-c",
+            "import fabric, robots, robofabric; print(fabric.__file__); print(robots.__file__); print(robofabric.__version__)",
+        ],
+        cwd=tmp_path,
+        timeout=60,
+        env=env,
     ).stdout.split()
     assert all(p.startswith(str(fresh_site)) for p in where[:2]), where  # the wheel's code, not this checkout's
     # Every requirement the wheel declares is installed at a version it accepts.
@@ -91,7 +120,11 @@ def test_wheel_installs_into_a_fresh_venv_and_runs_the_demo(tmp_path: Path) -> N
     port = free_port()
     run = subprocess.run(
         [str(robofabric), "demo", "--duration", str(CAP_S), "--out", str(out), "--router", f"tcp/127.0.0.1:{port}"],
-        cwd=tmp_path, capture_output=True, text=True, timeout=CAP_S + 120, env=env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=CAP_S + 120,
+        env=env,
     )
     text = run.stdout + run.stderr
     assert run.returncode == 0, text[-5000:]

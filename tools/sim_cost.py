@@ -40,15 +40,37 @@ def measure(tree: Path, robots: int, seconds: float, settle: float) -> tuple[flo
     ep = f"tcp/127.0.0.1:{port}"
     env = {**os.environ, "PYTHONPATH": str(tree)}
     cli = [sys.executable, "-m", "robofabric.cli"]
-    router = subprocess.Popen([*cli, "router", "--world", world, "--listen", ep], cwd=tree, env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    router = subprocess.Popen(
+        [*cli, "router", "--world", world, "--listen", ep],
+        cwd=tree,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     specs = [x for i in range(robots // 2) for x in ("--robot", f"meca500:arm{i}", "--robot", f"reeman:base{i}")]
     sim = None
     try:
         time.sleep(1.5)  # the router binding its port (a child: nothing to poll but the port)
-        sim = subprocess.Popen([*cli, "sim", "--scene", "warehouse", "--no-scene-robots", *specs, "--world", world,
-                                "--connect", ep, "--id", "sim"], cwd=tree, env=env, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.DEVNULL)
+        sim = subprocess.Popen(
+            [
+                *cli,
+                "sim",
+                "--scene",
+                "warehouse",
+                "--no-scene-robots",
+                *specs,
+                "--world",
+                world,
+                "--connect",
+                ep,
+                "--id",
+                "sim",
+            ],
+            cwd=tree,
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         stamps: list[tuple[float, float]] = []
         lock = threading.Lock()
 
@@ -91,11 +113,16 @@ def main() -> None:
         for t in trees:
             cores, rtf, hz = measure(t, args.robots, args.seconds, args.settle)
             res[t].append((cores, rtf, hz))
-            print(f"round {r + 1} {t}: sim {cores:.2f} cores, real-time factor {rtf:.3f}, arm0 joints {hz:.0f} Hz "
-                  f"(load average {os.getloadavg()[0]:.1f})", flush=True)
+            print(
+                f"round {r + 1} {t}: sim {cores:.2f} cores, real-time factor {rtf:.3f}, arm0 joints {hz:.0f} Hz "
+                f"(load average {os.getloadavg()[0]:.1f})",
+                flush=True,
+            )
     ref = None
-    print(f"\n| tree | sim CPU (cores) | real-time factor | arm0 joints (Hz) | CPU per robot per sim second (ms) | vs {trees[0].name} |"
-          "\n|---|---|---|---|---|---|")
+    print(
+        f"\n| tree | sim CPU (cores) | real-time factor | arm0 joints (Hz) | CPU per robot per sim second (ms) | vs {trees[0].name} |"
+        "\n|---|---|---|---|---|---|"
+    )
     for t in trees:
         cores = statistics.median(c for c, _, _ in res[t])
         rtf = statistics.median(x for _, x, _ in res[t])

@@ -42,8 +42,19 @@ from user_peer.robot import Robot
 from user_peer.scene_object import SceneObject
 from user_peer.world import World
 
-__all__ = ["connect", "World", "Robot", "Arm", "Base", "SceneObject", "NotOwner", "Rejected", "Timeout", "Unreachable",
-           "JoinFailed"]
+__all__ = [
+    "connect",
+    "World",
+    "Robot",
+    "Arm",
+    "Base",
+    "SceneObject",
+    "NotOwner",
+    "Rejected",
+    "Timeout",
+    "Unreachable",
+    "JoinFailed",
+]
 
 
 def connect(

@@ -46,7 +46,13 @@ class Arm(Robot):
         return np.clip(np.zeros(len(e.lower)), np.asarray(e.lower), np.asarray(e.upper))
 
     def move_joints(
-        self, q: Sequence[float], *, wait: bool = True, tol: float = 1e-3, timeout: float = 20.0, speed_scale: float = 1.0
+        self,
+        q: Sequence[float],
+        *,
+        wait: bool = True,
+        tol: float = 1e-3,
+        timeout: float = 20.0,
+        speed_scale: float = 1.0,
     ) -> np.ndarray:
         """Command joint targets (rad). With ``wait``, block until within ``tol`` of them and still."""
         target = np.asarray(q, dtype=float)
@@ -67,9 +73,13 @@ class Arm(Robot):
         cmd = self.send("joints", JointTarget(target, speed_scale, self.world.fabric.header(key)))
         if not wait:
             return target
-        return self._wait_joints(target, tol, timeout, marks, PauseRider(self, "joints", cmd, marks[0], resend_on_takeover=True))
+        return self._wait_joints(
+            target, tol, timeout, marks, PauseRider(self, "joints", cmd, marks[0], resend_on_takeover=True)
+        )
 
-    def _wait_joints(self, target: np.ndarray, tol: float, timeout: float, marks: tuple[int, int], rider: PauseRider) -> np.ndarray:
+    def _wait_joints(
+        self, target: np.ndarray, tol: float, timeout: float, marks: tuple[int, int], rider: PauseRider
+    ) -> np.ndarray:
         """Until joints that arrived after the command (local arrival order, never the sim's clock) are at
         ``target`` and still; a rejection that arrived after it raises (:class:`NotOwner`, :class:`Rejected`),
         but a sim that held its robots is ridden out (:mod:`user_peer.pause`)."""
@@ -86,8 +96,10 @@ class Arm(Robot):
         if not self.world.latest.wait_for(done, timeout):
             js = self.world.latest.get(key)
             err = float(np.max(np.abs(np.asarray(js.q) - target))) if js is not None else float("nan")
-            raise Timeout(f"{self.id} did not reach its joint targets within {timeout:.1f} s (max error {math.degrees(err):.2f} deg)"
-                          + rider.note())
+            raise Timeout(
+                f"{self.id} did not reach its joint targets within {timeout:.1f} s (max error {math.degrees(err):.2f} deg)"
+                + rider.note()
+            )
         return np.array(self.world.latest.get(key).q)
 
     def ik(self, xyz: Sequence[float], quaternion: Sequence[float] | None = None) -> np.ndarray:
@@ -97,7 +109,9 @@ class Arm(Robot):
         """
         try:
             return self.world.compute_route.ask(
-                lambda peer: services.ik(self.world.fabric, self.id, xyz, quaternion, self.joints, timeout=self.world.timeout, peer=peer)
+                lambda peer: services.ik(
+                    self.world.fabric, self.id, xyz, quaternion, self.joints, timeout=self.world.timeout, peer=peer
+                )
             )
         except ServiceError as exc:
             if exc.reason.startswith("no reply"):
@@ -127,11 +141,19 @@ class Arm(Robot):
         wait = self.world.timeout if timeout is None else timeout
         msg = self.world.latest.wait_for(match, wait)
         if msg is None:
-            raise Timeout(f"no streamed IK for {self.id} at {goal.tolist()} within {wait:.1f} s (is a compute peer streaming it?)")
+            raise Timeout(
+                f"no streamed IK for {self.id} at {goal.tolist()} within {wait:.1f} s (is a compute peer streaming it?)"
+            )
         return msg
 
     def move_to(
-        self, xyz: Sequence[float], quaternion: Sequence[float] | None = None, *, wait: bool = True, tol: float = 1e-3, timeout: float = 20.0
+        self,
+        xyz: Sequence[float],
+        quaternion: Sequence[float] | None = None,
+        *,
+        wait: bool = True,
+        tol: float = 1e-3,
+        timeout: float = 20.0,
     ) -> np.ndarray:
         """Move the flange to ``xyz`` (world frame, m) through IK; :class:`Unreachable` if IK refuses.
 

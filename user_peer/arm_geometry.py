@@ -72,7 +72,9 @@ class ArmGeometry:
             path = str(urdf)
             self.model = pin.buildModelFromUrdf(path)
             try:
-                self.visual = pin.buildGeomFromUrdf(self.model, path, pin.GeometryType.VISUAL, package_dirs=[str(Path(path).parent)])
+                self.visual = pin.buildGeomFromUrdf(
+                    self.model, path, pin.GeometryType.VISUAL, package_dirs=[str(Path(path).parent)]
+                )
             except Exception:
                 self.visual = pin.GeometryModel()
         self.data = self.model.createData()
@@ -82,7 +84,8 @@ class ArmGeometry:
         self.root_link = self.links[0][0] if self.links else "base_link"
         self.joint_links: tuple[str, ...] = tuple(
             next((name for name, _p, j, moved in self.links if j == i and (moved or i == 0)), self.model.names[i])
-            for i in range(self.model.njoints))
+            for i in range(self.model.njoints)
+        )
         """The link each joint frame of ``fk`` is (the root link first): a URDF link's frame is its joint's."""
         objects = list(self.visual.geometryObjects)
         if urdf_text is None and any(_unreadable(g) for g in objects):
@@ -94,12 +97,15 @@ class ArmGeometry:
         Panda's) is drawn with its collision geometry instead (the STL MuJoCo simulates)."""
         pin = self._pin
         try:
-            collision = pin.buildGeomFromUrdf(self.model, path, pin.GeometryType.COLLISION, package_dirs=[str(Path(path).parent)])
+            collision = pin.buildGeomFromUrdf(
+                self.model, path, pin.GeometryType.COLLISION, package_dirs=[str(Path(path).parent)]
+            )
         except Exception:
             return [g for g in visual if not _unreadable(g)]
         lacking = {g.parentFrame for g in visual if _unreadable(g)}
-        return ([g for g in visual if g.parentFrame not in lacking]
-                + [g for g in collision.geometryObjects if g.parentFrame in lacking and not _unreadable(g)])
+        return [g for g in visual if g.parentFrame not in lacking] + [
+            g for g in collision.geometryObjects if g.parentFrame in lacking and not _unreadable(g)
+        ]
 
     def _shape(self, g) -> tuple[Shape, int, object] | None:
         geom = g.geometry
@@ -117,7 +123,11 @@ class ArmGeometry:
             kind, size = "mesh", ()
         else:
             return None
-        return Shape(g.name, "mesh" if kind == "mesh" else kind, size, str(g.meshPath or ""), color), int(g.parentJoint), g.placement
+        return (
+            Shape(g.name, "mesh" if kind == "mesh" else kind, size, str(g.meshPath or ""), color),
+            int(g.parentJoint),
+            g.placement,
+        )
 
     def fk(self, q: Sequence[float]) -> list[Placement]:
         """Placement of every joint frame (base first: the universe), in the arm's base frame."""
@@ -156,6 +166,12 @@ def _links(model) -> tuple[tuple[str, str, int, bool], ...]:
         joint = frames[f.parentFrame]  # the link's joint frame (moving or fixed); the root's is the universe
         parent = frames[joint.parentFrame] if f.parentFrame != 0 else None
         moved = joint.type == pin.FrameType.JOINT
-        out.append((str(f.name), str(parent.name) if parent is not None and parent.type == pin.FrameType.BODY else "",
-                    int(f.parentJoint), moved))
+        out.append(
+            (
+                str(f.name),
+                str(parent.name) if parent is not None and parent.type == pin.FrameType.BODY else "",
+                int(f.parentJoint),
+                moved,
+            )
+        )
     return tuple(out)

@@ -9,7 +9,17 @@ from typing import Annotated, Optional
 import typer
 
 from fabric.cli_common import (
-    Connect, Joining, Listen, PeerId, Profile, UserError, World, ZenohConfig, join_error, join_flags, make_config,
+    Connect,
+    Joining,
+    Listen,
+    PeerId,
+    Profile,
+    UserError,
+    World,
+    ZenohConfig,
+    join_error,
+    join_flags,
+    make_config,
 )
 from user_peer.completion import complete_export_formats, matching
 
@@ -26,21 +36,42 @@ def _split_connect(connect: list[str] | None) -> tuple[list[str], list[str]]:
 
 def view(
     spawn: Annotated[bool, typer.Option("--spawn", help="Start a local Rerun viewer and stream to it.")] = False,
-    serve_web: Annotated[bool, typer.Option("--serve-web", help="Serve a web viewer; prints the URL to open from any machine.")] = False,
+    serve_web: Annotated[
+        bool, typer.Option("--serve-web", help="Serve a web viewer; prints the URL to open from any machine.")
+    ] = False,
     advertise: Annotated[
         Optional[str],
-        typer.Option("--advertise", help="With --serve-web: this machine's name or address as other machines reach it (default: its host name)."),
+        typer.Option(
+            "--advertise",
+            help="With --serve-web: this machine's name or address as other machines reach it (default: its host name).",
+        ),
     ] = None,
     save: Annotated[Optional[Path], typer.Option("--save", help="Write the view to FILE.rrd.")] = None,
-    duration: Annotated[Optional[float], typer.Option("--duration", help="Stop after S seconds (default: until Ctrl-C).")] = None,
+    duration: Annotated[
+        Optional[float], typer.Option("--duration", help="Stop after S seconds (default: until Ctrl-C).")
+    ] = None,
     web_port: Annotated[int, typer.Option(help="Port of the web viewer (--serve-web).")] = 9090,
     bind: Annotated[
-        str, typer.Option("--bind", help="With --serve-web: the IPv4 address the page and data ports listen on (default: every interface).")
+        str,
+        typer.Option(
+            "--bind",
+            help="With --serve-web: the IPv4 address the page and data ports listen on (default: every interface).",
+        ),
     ] = "0.0.0.0",
     grpc_port: Annotated[int, typer.Option(help="Port of the Rerun gRPC server (--spawn, --serve-web).")] = 9876,
     max_hz: Annotated[float, typer.Option(help="Thin 3D and plot updates to this rate per stream (0: all).")] = 30.0,
-    window: Annotated[float, typer.Option(help="Draw what arrived every this many seconds, as one chunk per entity (longer: less work for slow browsers, a less live view).")] = 0.1,
-    max_lag: Annotated[float, typer.Option(help="Drop samples that waited longer than this (s) when drawn, oldest first per stream; never a stream's newest.")] = 0.5,
+    window: Annotated[
+        float,
+        typer.Option(
+            help="Draw what arrived every this many seconds, as one chunk per entity (longer: less work for slow browsers, a less live view)."
+        ),
+    ] = 0.1,
+    max_lag: Annotated[
+        float,
+        typer.Option(
+            help="Drop samples that waited longer than this (s) when drawn, oldest first per stream; never a stream's newest."
+        ),
+    ] = 0.5,
     world: World = None,
     connect: Connect = None,
     listen: Listen = None,
@@ -62,8 +93,17 @@ def view(
     if save is not None and save.suffix != ".rrd":
         raise UserError(f"--save {save}: the file must end in .rrd")
     opts = ViewerOptions(
-        spawn=spawn, connect_url=rerun_urls[0] if rerun_urls else None, serve_web=serve_web,
-        web_port=web_port, bind=bind, grpc_port=grpc_port, save=save, max_hz=max_hz, advertise=advertise, window_s=window, max_lag_s=max_lag,
+        spawn=spawn,
+        connect_url=rerun_urls[0] if rerun_urls else None,
+        serve_web=serve_web,
+        web_port=web_port,
+        bind=bind,
+        grpc_port=grpc_port,
+        save=save,
+        max_hz=max_hz,
+        advertise=advertise,
+        window_s=window,
+        max_lag_s=max_lag,
     )
     if not (0 < window <= 5) or max_lag <= 0:
         raise UserError("--window must be in (0, 5] s and --max-lag positive")
@@ -77,9 +117,13 @@ def view(
         try:
             ipaddress.IPv4Address(bind)
         except ValueError:
-            raise UserError(f"--bind {bind}: expected an IPv4 address of this machine, e.g. 10.0.0.7 or 127.0.0.1") from None
+            raise UserError(
+                f"--bind {bind}: expected an IPv4 address of this machine, e.g. 10.0.0.7 or 127.0.0.1"
+            ) from None
     if not (spawn or serve_web or save or rerun_urls):
-        raise UserError("nowhere to show the world: give --spawn, --connect rerun+http://HOST:PORT/proxy, --serve-web or --save FILE.rrd")
+        raise UserError(
+            "nowhere to show the world: give --spawn, --connect rerun+http://HOST:PORT/proxy, --serve-web or --save FILE.rrd"
+        )
     cfg = make_config(world, zenoh_eps, listen, profile, zenoh_config)
     stop = shutdown_event()
     try:
@@ -93,13 +137,21 @@ def view(
         if serve_web:
             from user_peer.viewer import default_advertise, web_urls
 
-            page, grpc = web_urls(advertise or (bind if bind != "0.0.0.0" else default_advertise()), web_port, grpc_port)
+            page, grpc = web_urls(
+                advertise or (bind if bind != "0.0.0.0" else default_advertise()), web_port, grpc_port
+            )
             print(f"web viewer: open {page}", flush=True)
-            print(f"  (from any machine that reaches this one; TCP ports {web_port} (page) and {grpc_port} (data {grpc}) must be open)", flush=True)
+            print(
+                f"  (from any machine that reaches this one; TCP ports {web_port} (page) and {grpc_port} (data {grpc}) must be open)",
+                flush=True,
+            )
         n = viewer.run(stop, duration)
     lag = viewer.lag_summary()
-    print(f"viewer: {n} messages logged, {viewer.dropped} dropped, {viewer.logger.skipped} thinned"
-          f"{'; ' + lag if lag else ''}; robots: {', '.join(sorted(viewer.logger.robots)) or 'none'}", flush=True)
+    print(
+        f"viewer: {n} messages logged, {viewer.dropped} dropped, {viewer.logger.skipped} thinned"
+        f"{'; ' + lag if lag else ''}; robots: {', '.join(sorted(viewer.logger.robots)) or 'none'}",
+        flush=True,
+    )
 
 
 def export(
@@ -107,10 +159,19 @@ def export(
     out: Annotated[Path, typer.Option("-o", "--out", help="The file to write: .rrd (Rerun) or .mcap (with --to).")],
     to: Annotated[
         Optional[str],
-        typer.Option("--to", help="rrd (Rerun), foxglove (Foxglove's schemas, JSON for the rest) or ros2 (CDR, ROS 2 types). Default: from -o's suffix.", autocompletion=complete_export_formats),
+        typer.Option(
+            "--to",
+            help="rrd (Rerun), foxglove (Foxglove's schemas, JSON for the rest) or ros2 (CDR, ROS 2 types). Default: from -o's suffix.",
+            autocompletion=complete_export_formats,
+        ),
     ] = None,
-    max_hz: Annotated[float, typer.Option(help="Rerun only: thin 3D and plot updates to this rate per stream (0: all).")] = 0.0,
-    scene: Annotated[Optional[str], typer.Option(help="Scene the recording was made in (places the arms, draws the walls), e.g. combined.")] = None,
+    max_hz: Annotated[
+        float, typer.Option(help="Rerun only: thin 3D and plot updates to this rate per stream (0: all).")
+    ] = 0.0,
+    scene: Annotated[
+        Optional[str],
+        typer.Option(help="Scene the recording was made in (places the arms, draws the walls), e.g. combined."),
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
     """Turn a recording into a Rerun .rrd (the live viewer's views), or an MCAP that Foxglove or ROS 2 opens."""
@@ -118,7 +179,9 @@ def export(
 
     fmt = to or ("rrd" if out.suffix == ".rrd" else None)
     if fmt is None:
-        raise UserError(f"-o {out}: say which format with --to rrd|{'|'.join(FORMATS)} (an .mcap needs --to foxglove or --to ros2)")
+        raise UserError(
+            f"-o {out}: say which format with --to rrd|{'|'.join(FORMATS)} (an .mcap needs --to foxglove or --to ros2)"
+        )
     if fmt not in ("rrd", *FORMATS):
         raise UserError(f"--to {fmt}: expected rrd, {', '.join(FORMATS)}")
     if fmt == "rrd" and out.suffix != ".rrd":
@@ -163,11 +226,23 @@ def _progress(what: str, quiet: bool):
         yield lambda done, total: None
         return
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     with Progress(
-        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
-        console=Console(stderr=True), transient=False,
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=Console(stderr=True),
+        transient=False,
     ) as bar:
         task = bar.add_task(what, total=None)
 
@@ -177,7 +252,9 @@ def _progress(what: str, quiet: bool):
         yield update
 
 
-UserOpt = Annotated[Optional[str], typer.Option("--user", "-u", help="Your user id (default: $USER); ownership is by user id.")]
+UserOpt = Annotated[
+    Optional[str], typer.Option("--user", "-u", help="Your user id (default: $USER); ownership is by user id.")
+]
 
 
 def open_world(join: Joining, user, timeout: float = 5.0, join_timeout: float = 30.0):
@@ -188,8 +265,15 @@ def open_world(join: Joining, user, timeout: float = 5.0, join_timeout: float = 
     zenoh_eps, _ = _split_connect(join.connect)
     cfg = make_config(join.world, zenoh_eps, None, join.profile, join.zenoh_config)
     try:
-        return _connect(world=cfg.world, connect=list(cfg.connect), user=user, profile=cfg.profile,
-                        zenoh_config=cfg.config_file, timeout=timeout, join_timeout=join_timeout)
+        return _connect(
+            world=cfg.world,
+            connect=list(cfg.connect),
+            user=user,
+            profile=cfg.profile,
+            zenoh_config=cfg.config_file,
+            timeout=timeout,
+            join_timeout=join_timeout,
+        )
     except FabricUserError as exc:  # the router answered, the world did not: say that, not "no router"
         raise UserError(exc.reason) from None
     except ValueError as exc:
@@ -206,8 +290,10 @@ def tui_robots(kinds: dict[str, str], arm: str | None, base: str | None, world: 
     for rid, fits, what in ((arm, lambda k: k.chain, "an arm"), (base, lambda k: k.base, "a mobile")):
         if rid is not None and not fits(facts(kinds.get(rid, ""))):
             raise UserError(f"{rid!r} is not {what} robot in world {world!r}; robots: {', '.join(kinds)}")
-    return (arm or next((r for r, k in kinds.items() if facts(k).chain), None),
-            base or next((r for r, k in kinds.items() if facts(k).base), None))
+    return (
+        arm or next((r for r, k in kinds.items() if facts(k).chain), None),
+        base or next((r for r, k in kinds.items() if facts(k).base), None),
+    )
 
 
 @join_flags(client=True)
@@ -246,9 +332,16 @@ def complete_scenarios(incomplete: str) -> list[str]:
 
 @join_flags(client=True)
 def scenario(
-    name: Annotated[str, typer.Argument(help="test-a (arm follows the IK target) or test-b (map, plan, follow).", autocompletion=complete_scenarios)],
+    name: Annotated[
+        str,
+        typer.Argument(
+            help="test-a (arm follows the IK target) or test-b (map, plan, follow).", autocompletion=complete_scenarios
+        ),
+    ],
     user_id: UserOpt = None,
-    robot: Annotated[Optional[str], typer.Option(help="Robot to use (default arm1 for test-a, base1 for test-b).")] = None,
+    robot: Annotated[
+        Optional[str], typer.Option(help="Robot to use (default arm1 for test-a, base1 for test-b).")
+    ] = None,
     wait: Annotated[float, typer.Option(help="Wait up to S seconds for the world (sim peer) to answer.")] = 30.0,
     join: Joining = Joining(),
 ) -> None:

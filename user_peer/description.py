@@ -27,8 +27,9 @@ class WorldDescription:
     """``current``: the description in use, None until asked or after :meth:`forget`; ``known``: the last one
     seen (which robots a departed sim served). ``live_sims()``: the ids of the sims alive now."""
 
-    def __init__(self, fabric: Fabric, world: str, *, live_sims: Callable[[], list[str]], timeout: float,
-                 join_timeout: float) -> None:
+    def __init__(
+        self, fabric: Fabric, world: str, *, live_sims: Callable[[], list[str]], timeout: float, join_timeout: float
+    ) -> None:
         self.fabric = fabric
         self.world = world
         self.timeout = timeout
@@ -46,7 +47,9 @@ class WorldDescription:
         """The description; the first call waits up to ``timeout`` (default ``join_timeout``) for a sim to serve it."""
         if self.current is None or refresh:
             self.current = self.fetch(self.join_timeout if timeout is None else timeout)
-        elif time.monotonic() - self._asked_at > REDESCRIBE_S and set(self._live_sims()) - {r.sim for r in self.current.robots}:
+        elif time.monotonic() - self._asked_at > REDESCRIBE_S and set(self._live_sims()) - {
+            r.sim for r in self.current.robots
+        }:
             self._asked_at = time.monotonic()
             try:
                 self.current = self.fetch(min(1.0, self.timeout))
@@ -71,7 +74,9 @@ class WorldDescription:
                 return info
             except ServiceError as exc:
                 if not exc.reason.startswith("no reply"):
-                    raise Unreachable(f"the sim of world {self.world!r} refused its description: {exc.reason}") from None
+                    raise Unreachable(
+                        f"the sim of world {self.world!r} refused its description: {exc.reason}"
+                    ) from None
                 last = exc.reason
             left = deadline - time.monotonic()
             if left <= 0:

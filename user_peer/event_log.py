@@ -28,16 +28,26 @@ KEPT = 1000
 def describe(ev: Event) -> str:
     """``KIND OBJECT [USER]: REASON`` on one line, each field escaped and capped (a 4 KiB reason shows its first
     200 characters): at most about 350 characters whatever the event holds."""
-    return (one_line(ev.kind, 32) + (f" {one_line(ev.object, 48)}" if ev.object else "")
-            + (f" [{one_line(ev.user, 48)}]" if ev.user else "") + (f": {one_line(ev.reason)}" if ev.reason else ""))
+    return (
+        one_line(ev.kind, 32)
+        + (f" {one_line(ev.object, 48)}" if ev.object else "")
+        + (f" [{one_line(ev.user, 48)}]" if ev.user else "")
+        + (f": {one_line(ev.reason)}" if ev.reason else "")
+    )
 
 
 class EventLog:
     """``live_sim(peer)``: whether that sim peer is alive now; ``record(object)``: the object's ownership record
     as this user knows it (None if unknown); ``then(key, event)``: called for each event after it is logged."""
 
-    def __init__(self, user: str, *, live_sim: Callable[[str], bool], record: Callable[[str], OwnershipRecord | None],
-                 then: Callable[[str, Event], None]) -> None:
+    def __init__(
+        self,
+        user: str,
+        *,
+        live_sim: Callable[[str], bool],
+        record: Callable[[str], OwnershipRecord | None],
+        then: Callable[[str, Event], None],
+    ) -> None:
         self.user = user
         self.events: list[Event] = []
         self.untrusted = 0  # events acted on by nothing: any login may write their keys, or not the authority's
@@ -82,7 +92,8 @@ class EventLog:
         (a :meth:`mark`)."""
         with self._lock:
             return [
-                e for n, e, trusted in self._log
+                e
+                for n, e, trusted in self._log
                 if trusted and n > since and e.object == robot and e.user == self.user and e.kind in REJECT_KINDS
             ]
 

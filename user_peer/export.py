@@ -76,7 +76,12 @@ def read_mcap(path: Path, counts: dict[str, int] | None = None) -> Iterator[tupl
 
 
 def export_mcap(
-    src: Path, dst: Path, *, max_hz: float = 0.0, scene: str | None = None, progress: Callable[[int, int], None] | None = None
+    src: Path,
+    dst: Path,
+    *,
+    max_hz: float = 0.0,
+    scene: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> RerunExportStats:
     """Write ``dst`` (.rrd) from the recording ``src``; every message is drawn unless ``max_hz`` thins it.
 
@@ -89,8 +94,11 @@ def export_mcap(
     rec.save(str(dst), default_blueprint=blueprint())
     info = recorded_world(src)
     if info is None and scene is None:
-        log.warning("%s carries no world description: robots are placed by the scene that names them first; pass "
-                    "--scene NAME to place them by yours", src)
+        log.warning(
+            "%s carries no world description: robots are placed by the scene that names them first; pass "
+            "--scene NAME to place them by yours",
+            src,
+        )
     scene = scene or (info.scene if info is not None else None)
     catalog = RobotCatalog(info, scene=scene)
     logger = WorldLogger(rec, drawing=catalog.drawing, max_hz=max_hz)

@@ -49,7 +49,11 @@ class Following:
             if robot_id in self._subs:
                 return False
             self._subs[robot_id] = [
-                self.fabric.subscribe(keys.robot_stream(self.world, robot_id, stream), self.latest.put, history=stream in keys.LATCHED_STREAMS)
+                self.fabric.subscribe(
+                    keys.robot_stream(self.world, robot_id, stream),
+                    self.latest.put,
+                    history=stream in keys.LATCHED_STREAMS,
+                )
                 for stream in FOLLOWED_STREAMS
             ]
         return True

@@ -51,7 +51,9 @@ def shown_position(pose: Pose, received_ns: int, now_ns: int) -> tuple[np.ndarra
     return extrapolate(pose.position, pose.linear, age, cap_s=EXTRAPOLATION_CAP_S), age
 
 
-def scan_world_points(scan: Scan, pose: Pose | None, lidar_offset: tuple[float, float, float] = (0.0, 0.0, 0.3)) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def scan_world_points(
+    scan: Scan, pose: Pose | None, lidar_offset: tuple[float, float, float] = (0.0, 0.0, 0.3)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(origin (3,), hit points (n, 3), hit mask (n,)) of a planar scan in the world frame.
 
     Rays that read ``range_max`` hit nothing; they are returned but masked out of the hits.

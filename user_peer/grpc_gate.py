@@ -22,8 +22,17 @@ from dataclasses import dataclass
 from typing import Callable
 from urllib.parse import quote
 
-__all__ = ["READ_METHODS", "H2_PREFACE", "Request", "Refused", "Http2", "parse_head", "read_request", "http1_refusal",
-           "refuse_http2"]
+__all__ = [
+    "READ_METHODS",
+    "H2_PREFACE",
+    "Request",
+    "Refused",
+    "Http2",
+    "parse_head",
+    "read_request",
+    "http1_refusal",
+    "refuse_http2",
+]
 
 SERVICE = "/rerun.sdk_comms.v1alpha1.MessageProxyService/"
 READ_METHODS = frozenset({SERVICE + "ReadMessages", SERVICE + "ReadTables"})
@@ -121,7 +130,7 @@ def read_request(sock: socket.socket, buf: bytearray, deadline: float | None = N
     then (a client sending a byte now and then does not hold a connection open). Raises :class:`Refused`, :class:`Http2` (the connection opened
     with HTTP/2's preface: what was received stays in ``buf``), and OSError (a timeout included)."""
     while True:
-        start = bytes(buf[:len(H2_PREFACE)])
+        start = bytes(buf[: len(H2_PREFACE)])
         if start == H2_PREFACE:
             raise Http2()
         if not H2_PREFACE.startswith(start):  # not (the beginning of) HTTP/2's preface, whose text has a blank line
@@ -136,15 +145,15 @@ def read_request(sock: socket.socket, buf: bytearray, deadline: float | None = N
                 raise Refused("the connection closed inside a request head")
             return None
         buf += data
-    req = parse_head(bytes(buf[:end + 4]))
-    del buf[:end + 4]
+    req = parse_head(bytes(buf[: end + 4]))
+    del buf[: end + 4]
     while len(buf) < req.body_length:
         data = _recv(sock, deadline)
         if not data:
             raise Refused("the connection closed inside a request body", req.path)
         buf += data
-    body = bytes(buf[:req.body_length])
-    del buf[:req.body_length]
+    body = bytes(buf[: req.body_length])
+    del buf[: req.body_length]
     return req, body
 
 
@@ -161,8 +170,10 @@ def http1_refusal(reason: str) -> bytes:
     """A gRPC-web error response (trailers-only: the status in the headers), ``PERMISSION_DENIED``; the
     connection closes after it."""
     msg = quote(f"robofabric relay: {reason}", safe=" /:'(),.")
-    return (f"HTTP/1.1 200 OK\r\ncontent-type: application/grpc-web+proto\r\ngrpc-status: {PERMISSION_DENIED}\r\n"
-            f"grpc-message: {msg}\r\ncontent-length: 0\r\nconnection: close\r\n\r\n").encode("latin-1")
+    return (
+        f"HTTP/1.1 200 OK\r\ncontent-type: application/grpc-web+proto\r\ngrpc-status: {PERMISSION_DENIED}\r\n"
+        f"grpc-message: {msg}\r\ncontent-length: 0\r\nconnection: close\r\n\r\n"
+    ).encode("latin-1")
 
 
 def refuse_http2(sock: socket.socket, received: bytes, on_refused: Callable[[str], None], *, timeout_s: float) -> None:
@@ -185,10 +196,20 @@ def refuse_http2(sock: socket.socket, received: bytes, on_refused: Callable[[str
                     path = dict(ev.headers).get(":path", "?")
                     on_refused(path)
                     refused += 1
-                    msg = quote(f"robofabric relay: only reading the viewer's stream (gRPC-web) is relayed; {path} refused", safe=" /:'(),.;")
-                    conn.send_headers(ev.stream_id, [(":status", "200"), ("content-type", "application/grpc"),
-                                                     ("grpc-status", str(PERMISSION_DENIED)), ("grpc-message", msg)],
-                                      end_stream=True)
+                    msg = quote(
+                        f"robofabric relay: only reading the viewer's stream (gRPC-web) is relayed; {path} refused",
+                        safe=" /:'(),.;",
+                    )
+                    conn.send_headers(
+                        ev.stream_id,
+                        [
+                            (":status", "200"),
+                            ("content-type", "application/grpc"),
+                            ("grpc-status", str(PERMISSION_DENIED)),
+                            ("grpc-message", msg),
+                        ],
+                        end_stream=True,
+                    )
                     try:  # the caller may still be streaming its request: that half ends here too
                         conn.reset_stream(ev.stream_id, error_code=0)
                     except h2.exceptions.H2Error:

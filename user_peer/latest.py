@@ -30,8 +30,13 @@ class Latest:
     (``robot/fakeN/scan``, 4 MiB each) cannot grow a user's memory without bound.
     """
 
-    def __init__(self, clock: Callable[[], int] = time.monotonic_ns, *, world_info: Callable[[], WorldInfo | None] | None = None,
-                 max_other: int = 64) -> None:
+    def __init__(
+        self,
+        clock: Callable[[], int] = time.monotonic_ns,
+        *,
+        world_info: Callable[[], WorldInfo | None] | None = None,
+        max_other: int = 64,
+    ) -> None:
         self._values: dict[str, tuple[Any, int, int]] = {}
         self._other: OrderedDict[str, None] = OrderedDict()  # keys outside the description, oldest update first
         self._cond = threading.Condition()

@@ -64,6 +64,7 @@ def _plain_field(spec: Any, v: Any) -> Any:
         return [plain_view(x) for x in v]
     return to_plain(v)
 
+
 _SCALAR = {"type": ["string", "number", "integer", "boolean", "null"]}
 
 

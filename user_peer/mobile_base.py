@@ -61,7 +61,9 @@ class Base(Robot):
         key = keys.robot_cmd(self._w, self.id, "twist", self.world.user)
         self.send("twist", Twist(v, omega, self.world.fabric.header(key)), epoch=epoch)
 
-    def drive(self, v: float, omega: float, duration: float, *, rate: float = 10.0) -> tuple[float, float, float] | None:
+    def drive(
+        self, v: float, omega: float, duration: float, *, rate: float = 10.0
+    ) -> tuple[float, float, float] | None:
         """Drive at (v, omega) for ``duration`` seconds (repeating the twist at ``rate`` Hz: keep it above the
         sim's deadman, 2 Hz by default), then a zero twist (the base brakes within its limits)."""
         since = self.world.event_mark()
@@ -84,8 +86,14 @@ class Base(Robot):
     def start_mapping(self, *, name: str = "map") -> None:
         """Ask the compute peer to fold this world's scans into map ``name`` (it may already be on)."""
         try:
-            services.map_request(self.world.fabric, "start", name=name, timeout=self.world.timeout, peer=self.world.compute_route.navigation_peer(),
-                                 user=self.world.user)
+            services.map_request(
+                self.world.fabric,
+                "start",
+                name=name,
+                timeout=self.world.timeout,
+                peer=self.world.compute_route.navigation_peer(),
+                user=self.world.user,
+            )
         except ServiceError as exc:
             raise Unreachable(f"mapping for {self.id}: {exc.reason}") from None
 
@@ -95,15 +103,26 @@ class Base(Robot):
         ``plan_to(..., map_name=keys.user_map(name, world.user))``."""
         try:
             return services.build_map(
-                self.world.fabric, name=name, threshold=threshold, timeout=timeout or max(self.world.timeout, 10.0), peer=self.world.compute_route.navigation_peer(),
+                self.world.fabric,
+                name=name,
+                threshold=threshold,
+                timeout=timeout or max(self.world.timeout, 10.0),
+                peer=self.world.compute_route.navigation_peer(),
                 user=self.world.user,
             )
         except ServiceError as exc:
             raise Unreachable(f"map for {self.id}: {exc.reason}") from None
 
     def plan_to(
-        self, x: float | None = None, y: float | None = None, theta: float = 0.0, *, planner: str = "hybrid_astar",
-        map_name: str = "map", timeout: float | None = None, direction: str = "default",
+        self,
+        x: float | None = None,
+        y: float | None = None,
+        theta: float = 0.0,
+        *,
+        planner: str = "hybrid_astar",
+        map_name: str = "map",
+        timeout: float | None = None,
+        direction: str = "default",
     ) -> Path:
         """A collision-free path from the robot's pose to (x, y, theta), or to the goal object without x, y, on
         ``map_name`` (default: the class's map). A start or goal near an obstacle is recovered from, and
@@ -112,8 +131,15 @@ class Base(Robot):
         goal = None if x is None or y is None else (float(x), float(y), float(theta))
         try:
             reply = services.plan_reply(
-                self.world.fabric, self.id, goal, planner=planner, map_name=map_name, timeout=timeout or max(self.world.timeout, 15.0),
-                peer=self.world.compute_route.navigation_peer(), user=self.world.user, direction=direction,
+                self.world.fabric,
+                self.id,
+                goal,
+                planner=planner,
+                map_name=map_name,
+                timeout=timeout or max(self.world.timeout, 15.0),
+                peer=self.world.compute_route.navigation_peer(),
+                user=self.world.user,
+                direction=direction,
             )
             self.plan_note = reply.note
             return reply.path
@@ -121,7 +147,9 @@ class Base(Robot):
             where = "the goal object" if goal is None else f"({goal[0]:.2f}, {goal[1]:.2f}, {goal[2]:.2f})"
             raise Unreachable(f"no path for {self.id} to {where}: {exc.reason}") from None
 
-    def follow(self, path: Path, *, wait: bool = True, tol: float = 0.25, timeout: float = 120.0) -> tuple[float, float, float] | None:
+    def follow(
+        self, path: Path, *, wait: bool = True, tol: float = 0.25, timeout: float = 120.0
+    ) -> tuple[float, float, float] | None:
         """Send ``path`` to the sim's follower; with ``wait``, block until the base stops near its end."""
         if len(path) == 0:
             raise ValueError("cannot follow an empty path")
@@ -148,6 +176,8 @@ class Base(Robot):
         if not self.world.latest.wait_for(arrived, timeout):
             xy = self.xy_theta
             where = f"({xy[0]:.2f}, {xy[1]:.2f})" if xy else "unknown"
-            raise Timeout(f"{self.id} did not reach the end of its path ({gx:.2f}, {gy:.2f}) within {timeout:.0f} s; it is at {where}"
-                          + rider.note())
+            raise Timeout(
+                f"{self.id} did not reach the end of its path ({gx:.2f}, {gy:.2f}) within {timeout:.0f} s; it is at {where}"
+                + rider.note()
+            )
         return self.xy_theta

@@ -97,10 +97,16 @@ class OwnershipLink:
         """One request to the authority; its silence is :class:`Timeout`, its refusal :class:`NotOwner`."""
         client = self.client
         try:
-            out = client.request(obj, timeout=timeout, wait=wait) if op == "request" else client.release(obj, timeout=timeout)
+            out = (
+                client.request(obj, timeout=timeout, wait=wait)
+                if op == "request"
+                else client.release(obj, timeout=timeout)
+            )
         except ServiceError as exc:
             if exc.reason.startswith("no reply"):
-                raise Timeout(f"no ownership answer for {obj}: {exc.reason} (is the sim peer, its authority, running?)") from None
+                raise Timeout(
+                    f"no ownership answer for {obj}: {exc.reason} (is the sim peer, its authority, running?)"
+                ) from None
             raise NotOwner(f"{obj}: {exc.reason}") from None
         return out
 
@@ -142,9 +148,15 @@ class OwnershipLink:
             self._ask("release", obj, min(timeout, 2.0))  # leave the queue (or give back a grant that just came)
         except (NotOwner, Timeout) as exc:
             log.info("could not leave the queue of %s: %s", obj, exc)
-        where = f"queued at position {rec.queue.index(self.user) + 1}" if rec is not None and self.user in rec.queue else "queued"
+        where = (
+            f"queued at position {rec.queue.index(self.user) + 1}"
+            if rec is not None and self.user in rec.queue
+            else "queued"
+        )
         owner = f"owner {rec.owner}, {rec.state}" if rec is not None and rec.owner else "no owner"
-        raise Timeout(f"{obj} not granted to {self.user} after {waited:.1f} s of waiting ({where}; {owner}); left the queue")
+        raise Timeout(
+            f"{obj} not granted to {self.user} after {waited:.1f} s of waiting ({where}; {owner}); left the queue"
+        )
 
     def enqueue(self, obj: str, *, timeout: float) -> int:
         """Ask for ``obj`` willing to wait, without waiting: the queue place (1: next), or 0 when granted

@@ -50,17 +50,29 @@ def pause_words(robot: str, ev: Event | None = None) -> str:
     """What a client shows for a pause of ``robot``'s sim (the hold ``ev`` told of), instead of an error: the sim's
     word once it hears again (code ``resumed``) reads as the end of the pause."""
     if ev is not None and isinstance(ev.data, dict) and ev.data.get("code") == RESUMED:
-        return (f"the sim was paused and hears again: {robot} stopped before its command was done (a waiting command "
-                "is sent again; one sent without waiting may be sent again)")
-    return (f"the sim is paused: {robot} holds until its sim hears its router again (a waiting command is sent "
-            "again then; one sent without waiting may be sent again)")
+        return (
+            f"the sim was paused and hears again: {robot} stopped before its command was done (a waiting command "
+            "is sent again; one sent without waiting may be sent again)"
+        )
+    return (
+        f"the sim is paused: {robot} holds until its sim hears its router again (a waiting command is sent "
+        "again then; one sent without waiting may be sent again)"
+    )
 
 
 class PauseRider:
     """The refusals of one awaited command ``cmd`` (sent as ``command`` to ``robot`` after event mark ``since``)."""
 
-    def __init__(self, robot: "Robot", command: str, cmd: Command, since: int,
-                 clock: Callable[[], float] = time.monotonic, *, resend_on_takeover: bool = False) -> None:
+    def __init__(
+        self,
+        robot: "Robot",
+        command: str,
+        cmd: Command,
+        since: int,
+        clock: Callable[[], float] = time.monotonic,
+        *,
+        resend_on_takeover: bool = False,
+    ) -> None:
         self.robot, self.command, self.cmd, self.since = robot, command, cmd, since
         self.clock = clock
         # a command that ends where it ends however often it is taken (joint targets, not a path to drive from its
@@ -81,7 +93,7 @@ class PauseRider:
         on a hold, send the command again when it is time. Called while the command is awaited."""
         rej = self.robot.world.rejections(self.robot.id, self.since)
         now = self.clock()
-        for ev in rej[self.seen:]:
+        for ev in rej[self.seen :]:
             err = rejection_error(self.robot.id, ev)
             if not isinstance(err, Paused):
                 raise err

@@ -38,7 +38,9 @@ def _tell(callbacks: list[Callable[..., None]], what: str, *args: Any) -> None:
 class SimPresence:
     """The live sims of one world. ``closed()``: whether the user's world was closed (a failover watch ends)."""
 
-    def __init__(self, fabric: Fabric, world: str, description: WorldDescription, *, closed: Callable[[], bool]) -> None:
+    def __init__(
+        self, fabric: Fabric, world: str, description: WorldDescription, *, closed: Callable[[], bool]
+    ) -> None:
         self.fabric = fabric
         self.world = world
         self.description = description
@@ -122,8 +124,13 @@ class SimPresence:
         if now == was:
             return
         # "is back" only after the world was there and went: at a start, the first sim is simply there
-        why = (f"sim peer {peer_id} serves world {self.world!r}" if first else f"sim peer {peer_id} is back" if now
-               else f"world {self.world!r} gone: its sim peer {peer_id} left (died, or cut off)")
+        why = (
+            f"sim peer {peer_id} serves world {self.world!r}"
+            if first
+            else f"sim peer {peer_id} is back"
+            if now
+            else f"world {self.world!r} gone: its sim peer {peer_id} left (died, or cut off)"
+        )
         if now:
             self.description.forget()  # a restarted sim may describe a different world: ask again
             log.info("world %s: %s", self.world, why)
@@ -144,8 +151,12 @@ class SimPresence:
         with self._lock:
             self.robots_gone.extend(gone)
             callbacks = list(self._gone_callbacks)
-        log.warning("robots %s gone from world %s: their sim peer %s left (died, or cut off); the other sims' robots go on",
-                    ", ".join(gone), self.world, peer_id)
+        log.warning(
+            "robots %s gone from world %s: their sim peer %s left (died, or cut off); the other sims' robots go on",
+            ", ".join(gone),
+            self.world,
+            peer_id,
+        )
         _tell(callbacks, "robots-gone", peer_id, gone)
         # a standby of that sim (a live sim serving nothing yet) takes them over within its lease: say so when it does
         threading.Thread(target=self._watch_failover, args=(peer_id, gone), name="world-failover", daemon=True).start()
@@ -177,4 +188,3 @@ class SimPresence:
             callbacks = list(self._failover_callbacks)
         log.warning("sim %s failed over to %s: robots %s go on in world %s", sim, to, ", ".join(robots), self.world)
         _tell(callbacks, "failover", sim, to, list(robots))
-

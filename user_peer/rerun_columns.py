@@ -26,7 +26,18 @@ import rerun as rr
 
 from user_peer.arm_geometry import ArmGeometry, Placement
 
-__all__ = ["ArmChain", "column", "quat_mul", "quat_rotate", "scalars", "send", "strips", "time_columns", "transforms", "vectors"]
+__all__ = [
+    "ArmChain",
+    "column",
+    "quat_mul",
+    "quat_rotate",
+    "scalars",
+    "send",
+    "strips",
+    "time_columns",
+    "transforms",
+    "vectors",
+]
 
 
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -61,6 +72,7 @@ def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- columns built straight in Arrow
+
 
 class _Batch:
     """An Arrow array as a component batch (what ``rr.ComponentColumn`` partitions into rows)."""
@@ -171,8 +183,17 @@ class ArmChain:
                 axis, prismatic = np.zeros(3), False
             pl = m.jointPlacements[i]
             q = pin.Quaternion(pl.rotation)
-            self.joints.append(_Joint(m.names[i], int(m.parents[i]) - 1, int(m.joints[i].idx_q), axis, prismatic,
-                                      np.array(pl.translation, dtype=float), np.array([q.x, q.y, q.z, q.w])))
+            self.joints.append(
+                _Joint(
+                    m.names[i],
+                    int(m.parents[i]) - 1,
+                    int(m.joints[i].idx_q),
+                    axis,
+                    prismatic,
+                    np.array(pl.translation, dtype=float),
+                    np.array([q.x, q.y, q.z, q.w]),
+                )
+            )
             if m.joints[i].nq != 1:
                 self.supported = False
         self.nq = int(m.nq)
@@ -190,7 +211,9 @@ class ArmChain:
         out = []
         for shape, joint, local in self.geometry.shapes:
             q = pin.Quaternion(local.rotation)
-            out.append((shape, joint, Placement(np.array(local.translation, dtype=float), np.array([q.x, q.y, q.z, q.w]))))
+            out.append(
+                (shape, joint, Placement(np.array(local.translation, dtype=float), np.array([q.x, q.y, q.z, q.w])))
+            )
         return out
 
     def path(self, root: str, joint: int) -> str:
@@ -217,7 +240,9 @@ class ArmChain:
             ts = ts + quat_rotate(self._quats, slide)
         return np.ascontiguousarray(ts), qs
 
-    def origins(self, q: np.ndarray, base: Placement | None = None, local: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    def origins(
+        self, q: np.ndarray, base: Placement | None = None, local: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> np.ndarray:
         """Joint origins in the world (n, joints + 1, 3), the arm's base first: Pinocchio's FK, vectorised
         (``local``: :meth:`local` of the same ``q``, when the caller has it)."""
         ts, qs = local if local is not None else self.local(q)

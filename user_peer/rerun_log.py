@@ -31,7 +31,14 @@ from user_peer.drawing.layout import PLOT_WINDOW_S, TIMELINE_SIM, TIMELINE_WALL,
 from user_peer.drawing.maps import MapDrawer
 from user_peer.drawing.objects import ObjectDrawer
 from user_peer.drawing.robots import ROBOT_COLORS, RobotDrawing
-from user_peer.geometry import EXTRAPOLATION_CAP_S, grid_rgb, scan_world_points, shown_position, world_to_map_pixels, yaw_of
+from user_peer.geometry import (
+    EXTRAPOLATION_CAP_S,
+    grid_rgb,
+    scan_world_points,
+    shown_position,
+    world_to_map_pixels,
+    yaw_of,
+)
 
 __all__ = [
     "RobotDrawing",
@@ -91,7 +98,12 @@ class WorldLogger:
         self.joints = JointDrawer(self.canvas, self.arm)
         self.bases = BaseDrawer(self.canvas, self.labels, self.maps.grids, clock)
         # what drawing keeps, by name: the latest base poses, maps, paths and ownership records
-        self.poses, self.grids, self.paths, self.owners = self.bases.poses, self.maps.grids, self.maps.paths, self.labels.owners
+        self.poses, self.grids, self.paths, self.owners = (
+            self.bases.poses,
+            self.maps.grids,
+            self.maps.paths,
+            self.labels.owners,
+        )
 
     @property
     def skipped(self) -> int:
@@ -153,7 +165,9 @@ class WorldLogger:
             return self.log_ownership(msg)
         elif p.category == "event" and isinstance(msg, Event):
             self.canvas.set_time()
-            return self.log_event("/".join((p.subject, *p.rest[1:])) if p.rest else p.subject, msg, any_login=p.subject == keys.DECODE)
+            return self.log_event(
+                "/".join((p.subject, *p.rest[1:])) if p.rest else p.subject, msg, any_login=p.subject == keys.DECODE
+            )
         return False
 
     def _robot(self, rid: str, hint: dict) -> RobotDrawing:

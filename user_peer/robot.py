@@ -217,8 +217,10 @@ class Robot:
         since (:mod:`user_peer.pause`)."""
         rec = self.record
         if rec is not None and (rec.owner != self.world.user or rec.epoch != cmd.epoch):
-            raise NotOwner(f"{self.id} changed hands since the command was given (epoch {cmd.epoch}, now {rec.epoch}, "
-                           f"owner: {rec.owner or 'nobody'})")
+            raise NotOwner(
+                f"{self.id} changed hands since the command was given (epoch {cmd.epoch}, now {rec.epoch}, "
+                f"owner: {rec.owner or 'nobody'})"
+            )
         self.world.fabric.publish(keys.robot_cmd(self._w, self.id, command, self.world.user), cmd)
 
     def stop(self, *, confirm: bool = True, timeout: float = 3.0) -> bool:
@@ -291,5 +293,7 @@ class Robot:
         key = keys.robot_stream(self._w, self.id, stream)
         msg = self.world.latest.wait_for(lambda: self.world.latest.get(key), timeout or self.world.timeout)
         if msg is None:
-            raise Timeout(f"no {stream} from {self.id} within {timeout or self.world.timeout:.1f} s (is the sim running?)")
+            raise Timeout(
+                f"no {stream} from {self.id} within {timeout or self.world.timeout:.1f} s (is the sim running?)"
+            )
         return msg

@@ -100,7 +100,9 @@ def _flange_error(arm: Arm, target: np.ndarray, after: int, timeout: float = 3.0
     raise FabricUserError(f"no flange pose from {arm.id} after the move")
 
 
-def test_a(world: World, *, arm_id: str = "arm1", points: int = 8, radius: float = 0.05, tol: float = 0.005, hold: float = 0.5) -> ScenarioResult:
+def test_a(
+    world: World, *, arm_id: str = "arm1", points: int = 8, radius: float = 0.05, tol: float = 0.005, hold: float = 0.5
+) -> ScenarioResult:
     """Move the target sphere around a circle; IK each target; apply; check the flange reaches it."""
     res = ScenarioResult("test-a", world.user)
     arm = world.robot(arm_id)
@@ -133,8 +135,11 @@ def test_a(world: World, *, arm_id: str = "arm1", points: int = 8, radius: float
         except FabricUserError as exc:
             res.say(f"release failed: {exc.reason}")
     res.figures.update(
-        targets=len(errors), streamed=streamed[0], queried=streamed[1],
-        max_error_mm=max(errors) * 1000 if errors else float("nan"), seconds=time.monotonic() - t0,
+        targets=len(errors),
+        streamed=streamed[0],
+        queried=streamed[1],
+        max_error_mm=max(errors) * 1000 if errors else float("nan"),
+        seconds=time.monotonic() - t0,
     )
     res.ok = len(errors) == points and max(errors) <= tol
     res.say(
@@ -184,11 +189,15 @@ def test_b(
         base.start_mapping()
         omega = 0.8
         end = base.drive(0.0, omega, turn / omega)
-        res.say(f"drove while mapping: turned {math.degrees(turn):.0f} deg in place, now at ({end[0]:.2f}, {end[1]:.2f})")
+        res.say(
+            f"drove while mapping: turned {math.degrees(turn):.0f} deg in place, now at ({end[0]:.2f}, {end[1]:.2f})"
+        )
         grid = base.build_map()
         mine = keys.user_map("map", world.user)  # a user's build makes her own map; the class's map is the staff's
         known = float(np.mean(grid.cells != 255))
-        res.say(f"map built as {mine!r}: {grid.cells.shape[1]}x{grid.cells.shape[0]} cells at {grid.resolution:.2f} m, {known:.0%} known, {int(np.sum((grid.cells >= 50) & (grid.cells != 255)))} occupied")
+        res.say(
+            f"map built as {mine!r}: {grid.cells.shape[1]}x{grid.cells.shape[0]} cells at {grid.resolution:.2f} m, {known:.0%} known, {int(np.sum((grid.cells >= 50) & (grid.cells != 255)))} occupied"
+        )
         world.object("goal").set_pose([goal[0], goal[1], 0.0], yaw=goal[2])
         res.say(f"goal set at ({goal[0]:.2f}, {goal[1]:.2f}, {math.degrees(goal[2]):.0f} deg)")
         tp = time.monotonic()
@@ -211,7 +220,9 @@ def test_b(
         handed = _take_turn_on_arm(world, arm_id, res)
     res.figures["seconds"] = time.monotonic() - t0
     res.ok = reached and handed
-    res.say(f"{'reached the goal' if reached else 'FAILED to reach the goal'}{'' if handed else '; arm handover FAILED'} in {res.figures['seconds']:.1f} s")
+    res.say(
+        f"{'reached the goal' if reached else 'FAILED to reach the goal'}{'' if handed else '; arm handover FAILED'} in {res.figures['seconds']:.1f} s"
+    )
     return res
 
 

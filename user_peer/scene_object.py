@@ -36,11 +36,17 @@ class SceneObject:
     def pose(self) -> Pose | None:
         return self.world.latest.get(self.any_key)
 
-    def set_pose(self, position: Sequence[float], quaternion: Sequence[float] = (1.0, 0.0, 0.0, 0.0), *, yaw: float | None = None) -> Pose:
+    def set_pose(
+        self, position: Sequence[float], quaternion: Sequence[float] = (1.0, 0.0, 0.0, 0.0), *, yaw: float | None = None
+    ) -> Pose:
         """Move the object to ``position`` (m, world frame); ``yaw`` (rad) overrides ``quaternion``."""
         if yaw is not None:
             quaternion = quaternion_from_yaw(yaw)
-        pose = Pose(np.asarray(position, dtype=float), np.asarray(quaternion, dtype=float), header=self.world.fabric.header(self.key))
+        pose = Pose(
+            np.asarray(position, dtype=float),
+            np.asarray(quaternion, dtype=float),
+            header=self.world.fabric.header(self.key),
+        )
         self.world.fabric.publish(self.key, pose)
         self.world.latest.put(self.any_key, pose)
         return pose

@@ -49,8 +49,14 @@ def robot_entries(info: WorldInfo) -> list[RobotEntry]:
     """Robots of a world description."""
     return [
         RobotEntry(
-            r.id, r.type, r.kind, tuple(r.joint_names),
-            tuple(float(v) for v in r.lower), tuple(float(v) for v in r.upper), tuple(float(v) for v in r.max_speed), r.sim,
+            r.id,
+            r.type,
+            r.kind,
+            tuple(r.joint_names),
+            tuple(float(v) for v in r.lower),
+            tuple(float(v) for v in r.upper),
+            tuple(float(v) for v in r.max_speed),
+            r.sim,
         )
         for r in info.robots
     ]
@@ -71,7 +77,14 @@ def _service_key(fab: Fabric, service: str, subject: str, peer: str | None, user
 
 
 def ik(
-    fab: Fabric, robot: str, xyz: Sequence[float], quaternion: Sequence[float] | None, seed: Any, *, timeout: float = 5.0, peer: str | None = None
+    fab: Fabric,
+    robot: str,
+    xyz: Sequence[float],
+    quaternion: Sequence[float] | None,
+    seed: Any,
+    *,
+    timeout: float = 5.0,
+    peer: str | None = None,
 ) -> np.ndarray:
     """Joint angles for a flange position (world frame) from a compute peer (``peer``: a chosen one)."""
     req = IKRequest.make(xyz, quaternion, seed)
@@ -80,7 +93,13 @@ def ik(
 
 
 def map_request(
-    fab: Fabric, action: str, *, name: str = "map", threshold: float = 0.65, timeout: float = 10.0, peer: str | None = None,
+    fab: Fabric,
+    action: str,
+    *,
+    name: str = "map",
+    threshold: float = 0.65,
+    timeout: float = 10.0,
+    peer: str | None = None,
     user: str | None = None,
 ) -> MapReply:
     """One request to the mapping service on ``rf/{world}/srv/map/{name}`` (``.../by/{user}`` in ``user``'s
@@ -89,8 +108,15 @@ def map_request(
     return fab.rpc.call(_service_key(fab, "map", name, peer, user), req, timeout=timeout, expected=MapReply)
 
 
-def build_map(fab: Fabric, *, name: str = "map", threshold: float = 0.65, timeout: float = 10.0, peer: str | None = None,
-              user: str | None = None) -> OccupancyGrid:
+def build_map(
+    fab: Fabric,
+    *,
+    name: str = "map",
+    threshold: float = 0.65,
+    timeout: float = 10.0,
+    peer: str | None = None,
+    user: str | None = None,
+) -> OccupancyGrid:
     """Threshold the scans a compute peer accumulated into map ``name`` (also published on ``map/{name}``); asked
     in ``user``'s name it is her own map, ``{user}.{name}`` (:func:`fabric.keys.user_map`)."""
     reply = map_request(fab, "build", name=name, threshold=threshold, timeout=timeout, peer=peer, user=user)
@@ -101,8 +127,15 @@ def build_map(fab: Fabric, *, name: str = "map", threshold: float = 0.65, timeou
 
 
 def plan(
-    fab: Fabric, robot: str, goal: tuple[float, float, float] | None, *, planner: str = "hybrid_astar", map_name: str = "map", timeout: float = 10.0,
-    peer: str | None = None, user: str | None = None,
+    fab: Fabric,
+    robot: str,
+    goal: tuple[float, float, float] | None,
+    *,
+    planner: str = "hybrid_astar",
+    map_name: str = "map",
+    timeout: float = 10.0,
+    peer: str | None = None,
+    user: str | None = None,
 ) -> Path:
     """A path from ``robot``'s pose to ``goal`` (None: the goal object's pose) from a compute peer; asked in
     ``user``'s name, it is published on the robot's ``path`` key only if she owns the robot (else in the reply only)."""
@@ -110,11 +143,24 @@ def plan(
 
 
 def plan_reply(
-    fab: Fabric, robot: str, goal: tuple[float, float, float] | None, *, planner: str = "hybrid_astar", map_name: str = "map", timeout: float = 10.0,
-    peer: str | None = None, user: str | None = None, direction: str = "default",
+    fab: Fabric,
+    robot: str,
+    goal: tuple[float, float, float] | None,
+    *,
+    planner: str = "hybrid_astar",
+    map_name: str = "map",
+    timeout: float = 10.0,
+    peer: str | None = None,
+    user: str | None = None,
+    direction: str = "default",
 ) -> PlanReply:
     """:func:`plan`'s whole reply: the path, and ``note``, what the planner did to a start or goal near an
     obstacle (an escape move first, a goal moved; docs/navigation.md). ``direction``: "default", "forward", "both"."""
-    req = PlanRequest(robot, goal=np.asarray(goal if goal is not None else (), dtype=float), planner=planner, map=map_name,
-                      direction=direction)
+    req = PlanRequest(
+        robot,
+        goal=np.asarray(goal if goal is not None else (), dtype=float),
+        planner=planner,
+        map=map_name,
+        direction=direction,
+    )
     return fab.rpc.call(_service_key(fab, "plan", robot, peer, user), req, timeout=timeout, expected=PlanReply)

@@ -49,7 +49,16 @@ class JointSlider(Widget, can_focus=True):
         def control(self) -> "JointSlider":
             return self.slider
 
-    def __init__(self, name: str, lo: float, hi: float, *, value: float = 0.0, step: float = math.radians(1.0), id: str | None = None) -> None:
+    def __init__(
+        self,
+        name: str,
+        lo: float,
+        hi: float,
+        *,
+        value: float = 0.0,
+        step: float = math.radians(1.0),
+        id: str | None = None,
+    ) -> None:
         super().__init__(id=id)
         self.joint = name
         self.lo, self.hi, self.step_size = float(lo), float(hi), float(step)

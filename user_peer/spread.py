@@ -22,7 +22,9 @@ SPREAD = "spread"  # the ``compute=`` value that asks for round robin instead of
 class RoundRobin:
     """The next live compute peer, in turn; ``None`` when none is known (then the nearest answers)."""
 
-    def __init__(self, peers: Callable[[], list[str]], *, refresh_s: float = 2.0, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self, peers: Callable[[], list[str]], *, refresh_s: float = 2.0, clock: Callable[[], float] = time.monotonic
+    ) -> None:
         self._peers = peers
         self._refresh_s = refresh_s
         self._clock = clock

@@ -63,7 +63,9 @@ class StreamIterator:
     (None: wait forever) or after ``limit`` messages.
     """
 
-    def __init__(self, fab: Fabric, key_expr: str, *, maxsize: int = 1000, timeout: float | None = None, limit: int | None = None) -> None:
+    def __init__(
+        self, fab: Fabric, key_expr: str, *, maxsize: int = 1000, timeout: float | None = None, limit: int | None = None
+    ) -> None:
         self._q: queue.Queue[Sample] = queue.Queue(maxsize=maxsize)
         self.timeout = timeout
         self.limit = limit

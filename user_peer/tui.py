@@ -88,7 +88,9 @@ class UserApp(App):
         Binding("q", "quit", "quit"),
     ]
 
-    def __init__(self, world: World, *, arm: Arm | None = None, base: Base | None = None, refresh_hz: float = 10.0) -> None:
+    def __init__(
+        self, world: World, *, arm: Arm | None = None, base: Base | None = None, refresh_hz: float = 10.0
+    ) -> None:
         super().__init__()
         self.world = world
         self.arm = arm
@@ -125,7 +127,10 @@ class UserApp(App):
                     yield Button("Reset", id="arm-reset", variant="warning")
         if self.base is not None:
             with Vertical(classes="panel", id="base-panel"):
-                yield Label(plain(f"base {self.base.id} ({self.base.type}): arrows drive, 1-3 speed, space stops"), id="base-title")
+                yield Label(
+                    plain(f"base {self.base.id} ({self.base.type}): arrows drive, 1-3 speed, space stops"),
+                    id="base-title",
+                )
                 yield Label("", id="base-owner", classes="owner")
                 yield Label("", id="base-state")
                 yield Sparkline([0.0], id="scan")
@@ -184,8 +189,16 @@ class UserApp(App):
         if self.arm is None:
             return
         q = np.array([s.value for s in self.query(JointSlider)])
-        if self._try(f"{event.slider.joint} -> {math.degrees(event.value):.1f} deg", self.arm.move_joints, q, wait=False,
-                     speed_scale=self.arm_speed) is not None:
+        if (
+            self._try(
+                f"{event.slider.joint} -> {math.degrees(event.value):.1f} deg",
+                self.arm.move_joints,
+                q,
+                wait=False,
+                speed_scale=self.arm_speed,
+            )
+            is not None
+        ):
             self.sent += 1
 
     def action_arm_speed(self, step: int) -> None:
@@ -221,7 +234,10 @@ class UserApp(App):
             self._send_twist()
 
     def _send_twist(self) -> None:
-        if self.base is not None and self._try(f"drive v={self.v:+.2f} w={self.omega:+.2f}", self.base.twist, self.v, self.omega) is not None:
+        if (
+            self.base is not None
+            and self._try(f"drive v={self.v:+.2f} w={self.omega:+.2f}", self.base.twist, self.v, self.omega) is not None
+        ):
             self.sent += 1
 
     def keep_driving(self) -> None:

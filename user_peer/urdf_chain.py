@@ -40,17 +40,25 @@ class ChainJoint:
 def _rpy(r: float, p: float, y: float) -> np.ndarray:
     """URDF's fixed-axis roll, pitch, yaw: Rz(y) Ry(p) Rx(r)."""
     cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
 
 
 def _axis_angle(axis: np.ndarray, a: float) -> np.ndarray:
     x, y, z = axis
     c, s, t = math.cos(a), math.sin(a), 1 - math.cos(a)
-    return np.array([[t * x * x + c, t * x * y - s * z, t * x * z + s * y],
-                     [t * x * y + s * z, t * y * y + c, t * y * z - s * x],
-                     [t * x * z - s * y, t * y * z + s * x, t * z * z + c]])
+    return np.array(
+        [
+            [t * x * x + c, t * x * y - s * z, t * x * z + s * y],
+            [t * x * y + s * z, t * y * y + c, t * y * z - s * x],
+            [t * x * z - s * y, t * y * z + s * x, t * z * z + c],
+        ]
+    )
 
 
 def _floats(text: str | None, default: tuple[float, float, float], what: str) -> tuple[float, float, float]:
@@ -80,11 +88,25 @@ class UrdfChain:
                 raise UrdfError(f"joint {j.get('name')!r} has no parent or child")
             origin = j.find("origin")
             axis = j.find("axis")
-            joints.append(ChainJoint(
-                j.get("name", ""), j.get("type", "fixed"), parent.get("link", ""), child.get("link", ""),
-                _floats(origin.get("xyz") if origin is not None else None, (0.0, 0.0, 0.0), f"joint {j.get('name')} origin"),
-                _floats(origin.get("rpy") if origin is not None else None, (0.0, 0.0, 0.0), f"joint {j.get('name')} rpy"),
-                _floats(axis.get("xyz") if axis is not None else None, (1.0, 0.0, 0.0), f"joint {j.get('name')} axis")))
+            joints.append(
+                ChainJoint(
+                    j.get("name", ""),
+                    j.get("type", "fixed"),
+                    parent.get("link", ""),
+                    child.get("link", ""),
+                    _floats(
+                        origin.get("xyz") if origin is not None else None,
+                        (0.0, 0.0, 0.0),
+                        f"joint {j.get('name')} origin",
+                    ),
+                    _floats(
+                        origin.get("rpy") if origin is not None else None, (0.0, 0.0, 0.0), f"joint {j.get('name')} rpy"
+                    ),
+                    _floats(
+                        axis.get("xyz") if axis is not None else None, (1.0, 0.0, 0.0), f"joint {j.get('name')} axis"
+                    ),
+                )
+            )
         if not joints:
             raise UrdfError("no joints")
         by_parent: dict[str, list[ChainJoint]] = {}
@@ -101,7 +123,9 @@ class UrdfChain:
             self.joints.append(j)
             stack.extend(reversed(by_parent.get(j.child, [])))
         self.moving = [j.name for j in self.joints if j.kind in MOVING]
-        self._parent_index = [next((k for k, p in enumerate(self.joints) if p.child == j.parent), -1) for j in self.joints]
+        self._parent_index = [
+            next((k for k, p in enumerate(self.joints) if p.child == j.parent), -1) for j in self.joints
+        ]
 
     @classmethod
     def from_file(cls, path: str | Path) -> "UrdfChain":

@@ -36,7 +36,15 @@ from user_peer.rerun_log import WorldLogger, blueprint, framing
 
 log = logging.getLogger("robofabric.viewer")
 
-__all__ = ["ViewerOptions", "Viewer", "make_recording", "query_world_info", "log_scene", "web_urls", "default_advertise"]
+__all__ = [
+    "ViewerOptions",
+    "Viewer",
+    "make_recording",
+    "query_world_info",
+    "log_scene",
+    "web_urls",
+    "default_advertise",
+]
 
 APP_ID = "robofabric"
 
@@ -83,7 +91,9 @@ def web_urls(host: str, web_port: int, grpc_port: int) -> tuple[str, str]:
     return f"http://{h}:{web_port}/?url={quote(grpc, safe='')}", grpc
 
 
-def make_recording(opts: ViewerOptions, *, recording_id: str | None = None, grpc_server_port: int | None = None) -> rr.RecordingStream:
+def make_recording(
+    opts: ViewerOptions, *, recording_id: str | None = None, grpc_server_port: int | None = None
+) -> rr.RecordingStream:
     """A recording stream with the requested sinks and the default blueprint.
 
     ``grpc_server_port``: with ``serve_web``, Rerun's gRPC server listens there on loopback only, behind
@@ -106,7 +116,8 @@ def make_recording(opts: ViewerOptions, *, recording_id: str | None = None, grpc
             port=opts.grpc_port if grpc_server_port is None else grpc_server_port,
             # a page that joins gets the live feed first and the history behind it: it shows now at once
             # instead of ingesting the whole session first (at a software-rendered page's pace, minutes)
-            newest_first=True, server_memory_limit=f"{opts.web_history}B",
+            newest_first=True,
+            server_memory_limit=f"{opts.web_history}B",
             cors_allow_origin=[f"http://*:{opts.web_port}", f"https://*:{opts.web_port}"],
         )
         sinks.append(server)
@@ -141,7 +152,9 @@ def query_world_info(fab: Fabric, timeout: float = 2.0) -> WorldInfo | None:
 class Viewer:
     """A viewer peer on one world. ``run(stop, duration)`` blocks; ``close()`` flushes the sinks."""
 
-    def __init__(self, config: FabricConfig, opts: ViewerOptions, *, peer_id: str | None = None, queue_size: int = 5000) -> None:
+    def __init__(
+        self, config: FabricConfig, opts: ViewerOptions, *, peer_id: str | None = None, queue_size: int = 5000
+    ) -> None:
         self.opts = opts
         self.fab = Fabric(config, kind="viewer", peer_id=peer_id)
         self.page = None
@@ -230,7 +243,9 @@ class Viewer:
         frame = framing([tuple(float(v) for v in r.pose[:3]) for r in info.robots]) if info is not None else None
         if frame is not None:  # the first view shows every robot, not the scene's bounds (shelves and walls)
             self.rec.send_blueprint(blueprint(frame), make_active=True, make_default=True)
-        self.fab.subscribe(keys.world_all(self.fab.world), self.receive, history=True)  # maps, paths, objects set before we joined
+        self.fab.subscribe(
+            keys.world_all(self.fab.world), self.receive, history=True
+        )  # maps, paths, objects set before we joined
         self.fab.watch_peers(self._on_sim, kind="sim")  # "world gone" when the last sim peer leaves
         self._ask_records()
 
@@ -256,9 +271,13 @@ class Viewer:
             threading.Thread(target=self._learn_world, args=(peer_id,), name="viewer-world", daemon=True).start()
         if now == was:
             return
-        text = (f"world {self.fab.world!r}: served by sim peer {peer_id}" if first
-                else f"world {self.fab.world!r} is back: sim peer {peer_id}" if now
-                else f"world {self.fab.world!r} gone: its sim peer {peer_id} left (died, or cut off)")
+        text = (
+            f"world {self.fab.world!r}: served by sim peer {peer_id}"
+            if first
+            else f"world {self.fab.world!r} is back: sim peer {peer_id}"
+            if now
+            else f"world {self.fab.world!r} gone: its sim peer {peer_id} left (died, or cut off)"
+        )
         print(f"viewer: {text}", flush=True)
         try:
             self.rec.log("events", rr.TextLog(text, level="INFO" if now else "WARN"))
@@ -315,9 +334,14 @@ class Viewer:
             self.rec.log("plots/viewer/dropped", rr.Scalars(float(self.dropped)))
             if dropped_now and now - self._warned_ns > 5e9:
                 self._warned_ns = now
-                self.rec.log("events", rr.TextLog(
-                    f"viewer behind: dropped {self.dropped} samples so far that waited over {self.opts.max_lag_s:g} s "
-                    "(the oldest of each stream; every robot's latest state is drawn)", level="WARN"))
+                self.rec.log(
+                    "events",
+                    rr.TextLog(
+                        f"viewer behind: dropped {self.dropped} samples so far that waited over {self.opts.max_lag_s:g} s "
+                        "(the oldest of each stream; every robot's latest state is drawn)",
+                        level="WARN",
+                    ),
+                )
         except Exception:
             log.debug("could not log the viewer's health", exc_info=True)
 
@@ -365,9 +389,12 @@ class Viewer:
         if self.relay is not None:
             self.relay.close()
             k = self.relay.counters()
-            print(f"web relay: {k.refused_requests} requests refused (only reads are relayed), {k.refused_connections} "
-                  f"connections refused, {k.cut} pages cut off; at most {k.peak_queued_bytes / 1e6:.1f} MB queued "
-                  f"for every page together (budget {self.relay.limits.max_total_bytes / 1e6:.0f} MB)", flush=True)
+            print(
+                f"web relay: {k.refused_requests} requests refused (only reads are relayed), {k.refused_connections} "
+                f"connections refused, {k.cut} pages cut off; at most {k.peak_queued_bytes / 1e6:.1f} MB queued "
+                f"for every page together (budget {self.relay.limits.max_total_bytes / 1e6:.0f} MB)",
+                flush=True,
+            )
 
     def __enter__(self) -> "Viewer":
         return self

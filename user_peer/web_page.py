@@ -35,7 +35,16 @@ from urllib.parse import parse_qs, quote, urlsplit
 
 log = logging.getLogger("robofabric.viewer")
 
-__all__ = ["NONET", "REMOTE_URLS", "PageServer", "fetch_assets", "free_loopback_port", "patch_index", "patch_wasm", "serve"]
+__all__ = [
+    "NONET",
+    "REMOTE_URLS",
+    "PageServer",
+    "fetch_assets",
+    "free_loopback_port",
+    "patch_index",
+    "patch_wasm",
+    "serve",
+]
 
 NONET = "/_nonet/"  # 8 characters, as "https://": a remote URL becomes a local path of the same length
 REMOTE_URLS = (
@@ -76,7 +85,15 @@ def _server_argv(port: int) -> list[str]:
     except ImportError:
         exe = None
     if exe is not None and exe.is_file():
-        return [str(exe), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(port), "rerun+http://127.0.0.1:1/proxy"]
+        return [
+            str(exe),
+            "--serve-web",
+            "--bind",
+            "127.0.0.1",
+            "--web-viewer-port",
+            str(port),
+            "rerun+http://127.0.0.1:1/proxy",
+        ]
     code = "import sys, time, rerun as rr; rr.serve_web_viewer(web_port=int(sys.argv[1]), open_browser=False); time.sleep(3600)"
     return [sys.executable, "-c", code, str(port)]
 
@@ -116,8 +133,10 @@ def patch_index(html: bytes) -> bytes:
     text = re.sub(r"<link\b[^>]*?fonts\.(?:googleapis|gstatic)\.com[^>]*?>\s*", "", text, flags=re.S)
     text = text.replace("https://fifteen-thirtyeight.rerun.io/script.js", f"{NONET}script.js")
     # the viewer's handle where a test or a benchmark reads the page's own state (its time cursor: how live it is)
-    text = text.replace("let handle = new wasm_bindgen.WebHandle(options);",
-                        "let handle = new wasm_bindgen.WebHandle(options); window.rerun_handle = handle;")
+    text = text.replace(
+        "let handle = new wasm_bindgen.WebHandle(options);",
+        "let handle = new wasm_bindgen.WebHandle(options); window.rerun_handle = handle;",
+    )
     return text.encode("utf-8")
 
 
@@ -126,7 +145,7 @@ def patch_wasm(wasm: bytes) -> tuple[bytes, dict[str, int]]:
     new bytes and how often each URL was replaced (0: this Rerun does not have it)."""
     counts = {}
     for url in REMOTE_URLS:
-        local = NONET + url[len("https://"):]
+        local = NONET + url[len("https://") :]
         assert len(local) == len(url)
         counts[url] = wasm.count(url.encode())
         wasm = wasm.replace(url.encode(), local.encode())
@@ -181,7 +200,9 @@ def _handler(server: PageServer) -> type[BaseHTTPRequestHandler]:
         def log_message(self, format: str, *args: object) -> None:  # noqa: A002 - the base class's name
             log.debug("web page: " + format, *args)
 
-        def _send(self, code: int, body: bytes = b"", ctype: str = "text/plain", headers: dict[str, str] | None = None) -> None:
+        def _send(
+            self, code: int, body: bytes = b"", ctype: str = "text/plain", headers: dict[str, str] | None = None
+        ) -> None:
             self.send_response(code)
             self.send_header("Content-Type", ctype)
             self.send_header("Content-Length", str(len(body)))

@@ -105,8 +105,9 @@ class Relay:
     """Listen on ``(bind, port)``; every accepted connection's read requests are relayed to ``upstream``
     (host, port) with its own queue. ``close()`` stops listening and closes every link."""
 
-    def __init__(self, upstream: tuple[str, int], port: int, *, bind: str = "0.0.0.0",
-                 limits: RelayLimits = RelayLimits()) -> None:
+    def __init__(
+        self, upstream: tuple[str, int], port: int, *, bind: str = "0.0.0.0", limits: RelayLimits = RelayLimits()
+    ) -> None:
         self.upstream = upstream
         self.limits = limits
         self.links: list[PageLink] = []
@@ -145,7 +146,9 @@ class Relay:
             # what a page has not taken waits in its queue, where it is counted, not in a kernel buffer that
             # grows to megabytes on its own (a LAN's round trip needs far less)
             down.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SNDBUF)
-            link = PageLink(peer=f"{addr[0]}:{addr[1]}", address=addr[0], down=down, cond=threading.Condition(self._lock))
+            link = PageLink(
+                peer=f"{addr[0]}:{addr[1]}", address=addr[0], down=down, cond=threading.Condition(self._lock)
+            )
             with self._lock:
                 self.links.append(link)
             threading.Thread(target=self._serve_requests, args=(link,), daemon=True, name="web-relay-req").start()
@@ -181,8 +184,11 @@ class Relay:
         for lk in links:
             stalled = lk.stalled_for(now)
             if not lk.closed and stalled > self.limits.max_stall_s:
-                self._finish(lk, f"not taking its data (took nothing for {stalled:.1f} s while "
-                                 f"{lk.queued_bytes / 1e6:.1f} MB waited)")
+                self._finish(
+                    lk,
+                    f"not taking its data (took nothing for {stalled:.1f} s while "
+                    f"{lk.queued_bytes / 1e6:.1f} MB waited)",
+                )
 
     # -- one connection ----------------------------------------------------------------------------------
 
@@ -201,8 +207,12 @@ class Relay:
                     link.down.settimeout(None)  # a page's stream stays open for as long as it shows the world
                 link.up.sendall(req.head + body)
         except Http2:
-            refuse_http2(link.down, bytes(buf), lambda path: self._count_refusal(link, path, "HTTP/2 (native gRPC)"),
-                         timeout_s=self.limits.header_timeout_s)
+            refuse_http2(
+                link.down,
+                bytes(buf),
+                lambda path: self._count_refusal(link, path, "HTTP/2 (native gRPC)"),
+                timeout_s=self.limits.header_timeout_s,
+            )
         except Refused as exc:
             self._count_refusal(link, exc.method, exc.reason)
             if link.up is None:  # nothing relayed yet on this connection: the caller gets the status
@@ -222,8 +232,13 @@ class Relay:
             self.refused_requests += 1
             n = self.refused_requests
         if n <= LOG_FIRST or n % LOG_EVERY == 0:
-            log.warning("web relay: refused %s from %s: %s (%d requests refused so far)",
-                        method.rsplit("/", 1)[-1] or "a request", link.peer, reason, n)
+            log.warning(
+                "web relay: refused %s from %s: %s (%d requests refused so far)",
+                method.rsplit("/", 1)[-1] or "a request",
+                link.peer,
+                reason,
+                n,
+            )
 
     def _open_upstream(self, link: PageLink) -> None:
         try:
@@ -257,14 +272,20 @@ class Relay:
                     if link.closed:
                         return
                     if link.queued_bytes + n > self.limits.max_queue_bytes:
-                        self._close_locked(link, f"not taking its data ({(link.queued_bytes + n) / 1e6:.1f} MB to queue, "
-                                                 f"max_queue_bytes {self.limits.max_queue_bytes / 1e6:.0f} MB)")
+                        self._close_locked(
+                            link,
+                            f"not taking its data ({(link.queued_bytes + n) / 1e6:.1f} MB to queue, "
+                            f"max_queue_bytes {self.limits.max_queue_bytes / 1e6:.0f} MB)",
+                        )
                     while not link.closed and self.queued_total + n > self.limits.max_total_bytes:
                         victim = self._victim(now, link)
                         stalled = victim.stalled_for(now)
-                        self._close_locked(victim, f"the relay's budget is full ({self.limits.max_total_bytes / 1e6:.0f} MB "
-                                                   f"queued for every page) and this page holds {victim.queued_bytes / 1e6:.1f} MB"
-                                                   + (f", taking nothing for {stalled:.1f} s" if stalled >= 1.0 else ""))
+                        self._close_locked(
+                            victim,
+                            f"the relay's budget is full ({self.limits.max_total_bytes / 1e6:.0f} MB "
+                            f"queued for every page) and this page holds {victim.queued_bytes / 1e6:.1f} MB"
+                            + (f", taking nothing for {stalled:.1f} s" if stalled >= 1.0 else ""),
+                        )
                         closed.append(victim)
                     if not link.closed:
                         if not link.queued:
@@ -361,17 +382,32 @@ class Relay:
 
     def counters(self) -> RelayCounters:
         with self._lock:
-            return RelayCounters(links=sum(not lk.closed for lk in self.links), queued_bytes=self.queued_total,
-                                 peak_queued_bytes=self.peak_queued, refused_requests=self.refused_requests,
-                                 refused_connections=self.refused_connections, cut=self.cut)
+            return RelayCounters(
+                links=sum(not lk.closed for lk in self.links),
+                queued_bytes=self.queued_total,
+                peak_queued_bytes=self.peak_queued,
+                refused_requests=self.refused_requests,
+                refused_connections=self.refused_connections,
+                cut=self.cut,
+            )
 
     def stats(self) -> list[dict]:
         """Per link still listed: peer, bytes read from Rerun and sent to the page, queued, stalled, cut."""
         now = time.monotonic()
         with self._lock:
             links = list(self.links)
-        return [{"peer": lk.peer, "read": lk.read_bytes, "sent": lk.sent_bytes, "queued": lk.queued_bytes,
-                 "stalled_s": round(lk.stalled_for(now), 2), "closed": lk.closed, "cut": lk.cut_reason} for lk in links]
+        return [
+            {
+                "peer": lk.peer,
+                "read": lk.read_bytes,
+                "sent": lk.sent_bytes,
+                "queued": lk.queued_bytes,
+                "stalled_s": round(lk.stalled_for(now), 2),
+                "closed": lk.closed,
+                "cut": lk.cut_reason,
+            }
+            for lk in links
+        ]
 
     def close(self) -> None:
         """Stop listening and close every link (idempotent)."""

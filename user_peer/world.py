@@ -49,7 +49,12 @@ class World(contextlib.AbstractContextManager):
     ``on_failover()``) is asked of ``presence``."""
 
     def __init__(
-        self, config: FabricConfig, user: str, *, timeout: float = 5.0, compute: str | None = None,
+        self,
+        config: FabricConfig,
+        user: str,
+        *,
+        timeout: float = 5.0,
+        compute: str | None = None,
         join_timeout: float | None = None,
     ) -> None:
         self.user = keys.validate_id(config.user_id(user) or user, what="user id")  # a secure login is the user
@@ -70,8 +75,13 @@ class World(contextlib.AbstractContextManager):
         self.robot_handles: dict[str, Robot] = {}  # the handles made so far, one per robot
         self._handles_lock = threading.Lock()  # two threads asking for a new robot at once get one handle
         self._objects: dict[str, SceneObject] = {}
-        self.description = WorldDescription(self.fabric, self.name, live_sims=lambda: self.presence.ids(),
-                                             timeout=timeout, join_timeout=self.join_timeout)
+        self.description = WorldDescription(
+            self.fabric,
+            self.name,
+            live_sims=lambda: self.presence.ids(),
+            timeout=timeout,
+            join_timeout=self.join_timeout,
+        )
         self.presence = SimPresence(self.fabric, self.name, self.description, closed=lambda: self.closed)
         self.robots_gone, self.failovers = self.presence.robots_gone, self.presence.failovers
         self.latest = Latest(world_info=lambda: self.description.current)  # keeps the robots of the description only
@@ -80,8 +90,12 @@ class World(contextlib.AbstractContextManager):
         # the latest of every scene object and map (latched: what was set before this user joined comes at
         # once); a robot's streams from its first handle on (robot())
         self.following = Following(self.fabric, self.name, self.latest)
-        self.event_log = EventLog(self.user, live_sim=self.presence.serves, record=lambda obj: self.ownership.record(obj),
-                                  then=self.latest.put)
+        self.event_log = EventLog(
+            self.user,
+            live_sim=self.presence.serves,
+            record=lambda obj: self.ownership.record(obj),
+            then=self.latest.put,
+        )
         self.events: list[Event] = self.event_log.events
         self.ownership = OwnershipLink(self.fabric, self.user, on_record=self.latest.put)
         self.fabric.subscribe(keys.event_all(self.name), self.event_log.receive, expected=Event)
@@ -187,10 +201,14 @@ class World(contextlib.AbstractContextManager):
     def _robot(self, robot_id: str) -> Robot:
         if robot_id not in self.robot_handles:
             entry = next((r for r in services.robot_entries(self.info()) if r.id == robot_id), None)
-            if entry is None and self.description.current is not None:  # a sim that joined since the description was asked for
+            if (
+                entry is None and self.description.current is not None
+            ):  # a sim that joined since the description was asked for
                 entry = next((r for r in services.robot_entries(self.info(refresh=True)) if r.id == robot_id), None)
             if entry is None:
-                raise Unreachable(f"no robot {robot_id!r} in world {self.name!r}; robots: {', '.join(self.robots()) or 'none'}")
+                raise Unreachable(
+                    f"no robot {robot_id!r} in world {self.name!r}; robots: {', '.join(self.robots()) or 'none'}"
+                )
             self.robot_handles[robot_id] = Robot.for_kind(entry.kind)(self, entry)
         return self.robot_handles[robot_id]
 

@@ -57,7 +57,9 @@ class StreamStep:
 class PlacedArm:
     """An :class:`ArmModel` whose base sits at ``pose`` = (x, y, z, yaw) in the world."""
 
-    def __init__(self, model: ArmModel, pose: Sequence[float] = (0.0, 0.0, 0.0, 0.0), max_speed: Sequence[float] | None = None) -> None:
+    def __init__(
+        self, model: ArmModel, pose: Sequence[float] = (0.0, 0.0, 0.0, 0.0), max_speed: Sequence[float] | None = None
+    ) -> None:
         self.model = model
         x, y, z, yaw = (float(v) for v in finite_vector(pose, 4, "base pose"))
         c, s = math.cos(yaw), math.sin(yaw)
@@ -69,7 +71,9 @@ class PlacedArm:
 
     # ------------------------------------------------------------------ frames
 
-    def to_base(self, position: np.ndarray, quaternion: np.ndarray | None, frame: str) -> tuple[np.ndarray, np.ndarray | None]:
+    def to_base(
+        self, position: np.ndarray, quaternion: np.ndarray | None, frame: str
+    ) -> tuple[np.ndarray, np.ndarray | None]:
         """A world (or base) target expressed in the base frame; quaternion None stays None."""
         p = finite_vector(position, 3, "position")
         rot = None if quaternion is None else _rot_wxyz(quaternion)
@@ -84,8 +88,13 @@ class PlacedArm:
     # ------------------------------------------------------------------ services
 
     def ik(
-        self, position: Sequence[float], quaternion: Sequence[float] | None = None, seed: Sequence[float] | None = None, *,
-        frame: str = "world", method: str = "auto",
+        self,
+        position: Sequence[float],
+        quaternion: Sequence[float] | None = None,
+        seed: Sequence[float] | None = None,
+        *,
+        frame: str = "world",
+        method: str = "auto",
     ) -> IKSolution:
         """Joints for a flange target in ``frame``; :class:`~.model.NoIKSolution` with the reason when none."""
         quat = None if quaternion is None or len(quaternion) == 0 else finite_vector(quaternion, 4, "quaternion")
@@ -102,7 +111,9 @@ class PlacedArm:
             return m.translation.copy(), _quat_wxyz(m.rotation)
         return self.rotation @ m.translation + self.origin, _quat_wxyz(self.rotation @ m.rotation)
 
-    def jacobian(self, q: Sequence[float], dq: Sequence[float] | None = None, frame: str = "world") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def jacobian(
+        self, q: Sequence[float], dq: Sequence[float] | None = None, frame: str = "world"
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(J, twist, Eq. 7 speeds); the last two empty without ``dq``. World frame rotates both halves of J."""
         qv = self._q(q)
         j = self.model.jacobian(qv)

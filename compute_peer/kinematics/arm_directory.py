@@ -52,8 +52,12 @@ class ArmDirectory:
         self._models: dict[str, ArmModel] = {}
         self._arms: dict[str, PlacedArm] = {}
         self._not_arms: set[str] = set()  # the world's other robots (bases): their joints are not an IK's seed
-        self._lookup = BackgroundLookup(self.discover, name="kinematics-discovery", clock=clock,
-                                        on_error=lambda exc: self._failed(f"{type(exc).__name__}: {exc}"))
+        self._lookup = BackgroundLookup(
+            self.discover,
+            name="kinematics-discovery",
+            clock=clock,
+            on_error=lambda exc: self._failed(f"{type(exc).__name__}: {exc}"),
+        )
         self._last_error = ""
         self._sims_changed = 0  # bumped when a sim peer comes or goes: the world's arms may have changed
         self._answered_at = -1  # the value of _sims_changed when srv/world last answered
@@ -98,7 +102,9 @@ class ArmDirectory:
             self._look_now()
             arm = self.get(robot)
         if arm is None:
-            raise ServiceError(f"unknown arm {quote(robot, 64)}: this compute peer serves {', '.join(self.names) or 'no arms yet'}")
+            raise ServiceError(
+                f"unknown arm {quote(robot, 64)}: this compute peer serves {', '.join(self.names) or 'no arms yet'}"
+            )
         return arm
 
     def discover(self, timeout: float = 2.0) -> int:

@@ -84,8 +84,10 @@ def _joint_motion(model, i: int, q: ca.SX) -> tuple[ca.SX, ca.SX]:
     jm = model.joints[i]
     kind = jm.shortname()
     if jm.nq != 1:
-        raise ValueError(f"casadi IK: joint {model.names[i]!r} is a {kind} ({jm.nq} configuration values); "
-                         "only 1-dof revolute and prismatic joints are supported")
+        raise ValueError(
+            f"casadi IK: joint {model.names[i]!r} is a {kind} ({jm.nq} configuration values); "
+            "only 1-dof revolute and prismatic joints are supported"
+        )
     v = q[jm.idx_q]
     if kind in _REVOLUTE or kind == "JointModelRevoluteUnaligned":
         axis = _REVOLUTE.get(kind) or jm.extract().axis
@@ -93,8 +95,10 @@ def _joint_motion(model, i: int, q: ca.SX) -> tuple[ca.SX, ca.SX]:
     if kind in _PRISMATIC or kind == "JointModelPrismaticUnaligned":
         axis = _PRISMATIC.get(kind) or jm.extract().axis
         return ca.SX.eye(3), ca.DM([float(a) for a in axis]) * v
-    raise ValueError(f"casadi IK: joint {model.names[i]!r} is a {kind}; "
-                     "only revolute (RX/RY/RZ/unaligned) and prismatic joints are supported")
+    raise ValueError(
+        f"casadi IK: joint {model.names[i]!r} is a {kind}; "
+        "only revolute (RX/RY/RZ/unaligned) and prismatic joints are supported"
+    )
 
 
 def symbolic_fk(arm: ArmModel) -> ca.Function:
@@ -125,8 +129,7 @@ class CasadiIK:
         model = arm.model
         self.fk = symbolic_fk(arm)  # first: it names a joint type it cannot handle
         if model.nq != len(arm.lower) or model.nq != len(arm.upper):
-            raise ValueError(f"casadi IK: the model has {model.nq} joints, the description's limits "
-                             f"{len(arm.lower)}")
+            raise ValueError(f"casadi IK: the model has {model.nq} joints, the description's limits {len(arm.lower)}")
         self.name = arm.description.name
         self.nq = model.nq
         self.lower = np.asarray(arm.lower, float)
@@ -144,8 +147,10 @@ class CasadiIK:
     def _reach_bound(arm: ArmModel) -> tuple[np.ndarray, float] | None:
         """(centre, radius): every flange position of an all-revolute chain lies in this ball; None otherwise."""
         model = arm.model
-        if any(model.joints[i].shortname() not in (*_REVOLUTE, "JointModelRevoluteUnaligned")
-               for i in range(1, model.njoints)):
+        if any(
+            model.joints[i].shortname() not in (*_REVOLUTE, "JointModelRevoluteUnaligned")
+            for i in range(1, model.njoints)
+        ):
             return None
         frame = model.frames[arm.frame_id]
         chain, j = [], frame.parentJoint
@@ -187,16 +192,30 @@ class CasadiIK:
             params.append(ca.vec(rt))  # column-major, as numpy's reshape(order="F")
         p = ca.vertcat(*params)
         kind = "pose" if with_rotation else "position"
-        feasible = ca.nlpsol(f"ik_{self.name}_{kind}_feasible", "ipopt", {"x": q, "p": p, "f": residual},
-                             IPOPT_OPTIONS | FEASIBILITY_OPTIONS)
-        nearest = ca.nlpsol(f"ik_{self.name}_{kind}", "ipopt",
-                            {"x": q, "p": p, "f": ca.dot(ca.DM(self.weights) * d, d), "g": ca.vertcat(*g)},
-                            IPOPT_OPTIONS)
+        feasible = ca.nlpsol(
+            f"ik_{self.name}_{kind}_feasible",
+            "ipopt",
+            {"x": q, "p": p, "f": residual},
+            IPOPT_OPTIONS | FEASIBILITY_OPTIONS,
+        )
+        nearest = ca.nlpsol(
+            f"ik_{self.name}_{kind}",
+            "ipopt",
+            {"x": q, "p": p, "f": ca.dot(ca.DM(self.weights) * d, d), "g": ca.vertcat(*g)},
+            IPOPT_OPTIONS,
+        )
         return feasible, nearest
 
-    def solve(self, arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequence[float]] | None,
-              seed: Sequence[float], *, restarts: int = RESTARTS, rng_seed: int = 0
-              ) -> tuple[np.ndarray, float, float]:
+    def solve(
+        self,
+        arm: ArmModel,
+        position: Sequence[float],
+        rotation: Sequence[Sequence[float]] | None,
+        seed: Sequence[float],
+        *,
+        restarts: int = RESTARTS,
+        rng_seed: int = 0,
+    ) -> tuple[np.ndarray, float, float]:
         """(q, position error m, rotation error rad) near ``seed``; every answer checked by ``arm``'s FK.
 
         Each start (the seed, then ``restarts`` random in-limit joint vectors
@@ -246,11 +265,16 @@ class CasadiIK:
                 best = (score, q1, pe, re, status)
         assert best is not None
         _, q, pe, re, status = best
-        at = [f"J{i + 1} at its {'lower' if q[i] <= self.lower[i] + 1e-6 else 'upper'} limit {degrees_text(q[i])}"
-              for i in range(self.nq) if q[i] <= self.lower[i] + 1e-6 or q[i] >= self.upper[i] - 1e-6]
+        at = [
+            f"J{i + 1} at its {'lower' if q[i] <= self.lower[i] + 1e-6 else 'upper'} limit {degrees_text(q[i])}"
+            for i in range(self.nq)
+            if q[i] <= self.lower[i] + 1e-6 or q[i] >= self.upper[i] - 1e-6
+        ]
         what = f"{pe:.3g} m" + ("" if rt is None else f", {re:.3g} rad")
-        raise NoIKSolution(f"casadi IK found no solution within limits from {tries} starts (IPOPT {status}); "
-                          f"best residual {what}" + (f" ({', '.join(at)})" if at else ""))
+        raise NoIKSolution(
+            f"casadi IK found no solution within limits from {tries} starts (IPOPT {status}); "
+            f"best residual {what}" + (f" ({', '.join(at)})" if at else "")
+        )
 
     def _check(self, arm: ArmModel, q: np.ndarray, p: np.ndarray, rt: np.ndarray | None) -> tuple[bool, float, float]:
         """(within limits and on target, position error, rotation error) by Pinocchio's FK."""
@@ -281,7 +305,8 @@ def casadi_ik(arm: ArmModel) -> CasadiIK:
         return c
 
 
-def solve_casadi(arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequence[float]] | None,
-                 seed: Sequence[float], **kw) -> tuple[np.ndarray, float, float]:
+def solve_casadi(
+    arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequence[float]] | None, seed: Sequence[float], **kw
+) -> tuple[np.ndarray, float, float]:
     """:meth:`CasadiIK.solve` on the arm's cached programs: (q, position error, rotation error)."""
     return casadi_ik(arm).solve(arm, position, rotation, seed, **kw)

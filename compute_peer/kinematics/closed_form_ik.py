@@ -106,8 +106,9 @@ Limits = tuple[tuple[float, float, bool], ...]
 """Per joint (lower, upper, wide): wide when its range holds a 2 pi twin of some angles."""
 
 
-def _meca500_branches(p: Sequence[float], rot: Sequence[Sequence[float]], seed: Sequence[float], lims: Limits
-                      ) -> tuple[list[list[float]], list[tuple[int, float]], int, str]:
+def _meca500_branches(
+    p: Sequence[float], rot: Sequence[Sequence[float]], seed: Sequence[float], lims: Limits
+) -> tuple[list[list[float]], list[tuple[int, float]], int, str]:
     """The in-limit joint vectors among the (up to 8) branches for the flange pose.
 
     Returns (inside, bad, branches, reason): ``bad`` holds, per rejected branch,
@@ -163,8 +164,10 @@ def _meca500_branches(p: Sequence[float], rot: Sequence[Sequence[float]], seed: 
 def _link6_rotation(rot: Sequence[Sequence[float]]) -> list[tuple[float, float, float]]:
     """R6 = R Rf^T (row i, column j = sum_k R[i][k] Rf[j][k]), unrolled."""
     (f00, f01, f02), (f10, f11, f12), (f20, f21, f22) = _MECA.flange
-    return [(a0 * f00 + a1 * f01 + a2 * f02, a0 * f10 + a1 * f11 + a2 * f12, a0 * f20 + a1 * f21 + a2 * f22)
-            for a0, a1, a2 in rot]
+    return [
+        (a0 * f00 + a1 * f01 + a2 * f02, a0 * f10 + a1 * f11 + a2 * f12, a0 * f20 + a1 * f21 + a2 * f22)
+        for a0, a1, a2 in rot
+    ]
 
 
 def _wrist_centre(p: Sequence[float], r6: list[tuple[float, float, float]]) -> tuple[float, float, float, float]:
@@ -208,12 +211,16 @@ def _after_j1(r6: list[tuple[float, float, float]], q1: float) -> tuple[tuple[fl
     """Link 6's rotation seen after J1, Rz(-q1) R6, by rows."""
     c1, s1 = math.cos(q1), math.sin(q1)
     (x0, x1, x2), (y0, y1, y2) = r6[0], r6[1]
-    return ((c1 * x0 + s1 * y0, c1 * x1 + s1 * y1, c1 * x2 + s1 * y2),
-            (c1 * y0 - s1 * x0, c1 * y1 - s1 * x1, c1 * y2 - s1 * x2),
-            r6[2])
+    return (
+        (c1 * x0 + s1 * y0, c1 * x1 + s1 * y1, c1 * x2 + s1 * y2),
+        (c1 * y0 - s1 * x0, c1 * y1 - s1 * x1, c1 * y2 - s1 * x2),
+        r6[2],
+    )
 
 
-def _upper_arm(q3r: float, h: float, u: float, lims: Limits, bad: list[tuple[int, float]]) -> tuple[float, float] | None:
+def _upper_arm(
+    q3r: float, h: float, u: float, lims: Limits, bad: list[tuple[int, float]]
+) -> tuple[float, float] | None:
     """(q2, q3) in limits for the elbow ``q3r`` and the wrist centre at (u, h) in J1's plane; None, and the
     first joint outside its limits added to ``bad``, otherwise."""
     g = _MECA
@@ -234,7 +241,9 @@ def _upper_arm(q3r: float, h: float, u: float, lims: Limits, bad: list[tuple[int
     return q2, q3
 
 
-def _wrists(after_j1: tuple[tuple[float, ...], ...], th: float, seed_q4: float) -> tuple[tuple[float, float, float], ...]:
+def _wrists(
+    after_j1: tuple[tuple[float, ...], ...], th: float, seed_q4: float
+) -> tuple[tuple[float, float, float], ...]:
     """(q4, q5, q6) of both wrist branches (flip), from the X-Y-X angles of M = Ry(q2 + q3)^T Rz(-q1) R6;
     one branch at the wrist singularity, where J4 keeps the seed's angle."""
     m10, m11, m12 = after_j1
@@ -258,8 +267,9 @@ def _wrists(after_j1: tuple[tuple[float, ...], ...], th: float, seed_q4: float) 
     return ((q4, q5, q6), (wrap_angle(q4 + math.pi, include_pi=True), -q5, wrap_angle(q6 + math.pi, include_pi=True)))
 
 
-def _wrists_in_limits(wrists: tuple[tuple[float, float, float], ...], lims: Limits,
-                      bad: list[tuple[int, float]]) -> list[tuple[float, float, float]]:
+def _wrists_in_limits(
+    wrists: tuple[tuple[float, float, float], ...], lims: Limits, bad: list[tuple[int, float]]
+) -> list[tuple[float, float, float]]:
     """The wrist branches inside J4-J6's limits (fitted onto them); each other one's first joint outside goes to ``bad``."""
     l4, l5, l6 = lims[3], lims[4], lims[5]
     out = []
@@ -283,8 +293,12 @@ def _wrists_in_limits(wrists: tuple[tuple[float, float, float], ...], lims: Limi
 def _twins(q: list[float], lims: Limits, wide: list[int]) -> list[list[float]]:
     """The 2 pi twins of ``q`` its ``wide`` joints' ranges allow (rare: J6 at exactly +-180 deg, or a joint
     spanning more than a turn)."""
-    twins = [(i, min(lims[i][1], max(lims[i][0], t2))) for i in wide for t2 in (q[i] - TWO_PI, q[i] + TWO_PI)
-             if lims[i][0] - LIMIT_SLACK <= t2 <= lims[i][1] + LIMIT_SLACK]
+    twins = [
+        (i, min(lims[i][1], max(lims[i][0], t2)))
+        for i in wide
+        for t2 in (q[i] - TWO_PI, q[i] + TWO_PI)
+        if lims[i][0] - LIMIT_SLACK <= t2 <= lims[i][1] + LIMIT_SLACK
+    ]
     return _twin_combinations(q, twins) if twins else []
 
 
@@ -292,22 +306,25 @@ def _twin_combinations(q: list[float], twins: list[tuple[int, float]]) -> list[l
     """Every q with some of its joints replaced by their 2 pi twins (q itself excluded)."""
     combos = [q]
     for i, t in twins:
-        combos += [c[:i] + [t] + c[i + 1:] for c in combos if c[i] == q[i]]
+        combos += [c[:i] + [t] + c[i + 1 :] for c in combos if c[i] == q[i]]
     return combos[1:]
 
 
 def _limit_reason(arm: ArmModel, n: int, bad: list[tuple[int, float]]) -> str:
     names = []
     for i, v in bad:
-        s = (f"J{i + 1} at {degrees_text(wrap_angle(v, include_pi=True))} (limits {math.degrees(arm.lower[i]):.0f}.."
-             f"{math.degrees(arm.upper[i]):.0f}\N{DEGREE SIGN})")
+        s = (
+            f"J{i + 1} at {degrees_text(wrap_angle(v, include_pi=True))} (limits {math.degrees(arm.lower[i]):.0f}.."
+            f"{math.degrees(arm.upper[i]):.0f}\N{DEGREE SIGN})"
+        )
         if s not in names:
             names.append(s)
     return f"all {n} solutions violate joint limits: " + ", ".join(names[:4]) + (" ..." if len(names) > 4 else "")
 
 
-def _meca500_candidates(arm: ArmModel, p: Sequence[float], rot: Sequence[Sequence[float]],
-                        seed: Sequence[float]) -> tuple[list[_Candidate], str]:
+def _meca500_candidates(
+    arm: ArmModel, p: Sequence[float], rot: Sequence[Sequence[float]], seed: Sequence[float]
+) -> tuple[list[_Candidate], str]:
     inside, bad, n, reason = _meca500_branches(p, rot, seed, arm_constants(arm).limits)
     if reason:
         return [], reason
@@ -326,8 +343,9 @@ def _meca500_candidates(arm: ArmModel, p: Sequence[float], rot: Sequence[Sequenc
     return out, ""
 
 
-def meca500_ik(arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequence[float]],
-               seed: Sequence[float] | None = None) -> list[np.ndarray]:
+def meca500_ik(
+    arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequence[float]], seed: Sequence[float] | None = None
+) -> list[np.ndarray]:
     """Every in-limit Meca500 joint vector putting the flange at ``position`` with ``rotation`` (base frame).
 
     Nearest to ``seed`` (weighted joint distance, see :func:`joint_distance`)
@@ -351,8 +369,9 @@ def meca500_ik(arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequ
 class ClosedForm:
     """A robot type's closed-form IK, and what position-only solving needs to know about the arm."""
 
-    candidates: Callable[[ArmModel, Sequence[float], Sequence[Sequence[float]], Sequence[float]],
-                         tuple[list[_Candidate], str]]
+    candidates: Callable[
+        [ArmModel, Sequence[float], Sequence[Sequence[float]], Sequence[float]], tuple[list[_Candidate], str]
+    ]
     """(arm, position, rotation, seed) -> FK-checked in-limit candidates, or [] and the reason."""
     shoulder: tuple[float, float, float]
     """Every reachable flange position lies within ``reach`` of this point (base frame)."""
@@ -363,7 +382,8 @@ class ClosedForm:
 
 
 CLOSED_FORMS: dict[str, ClosedForm] = {
-    _geo.NAME: ClosedForm(_meca500_candidates, (0.0, 0.0, _MECA.shoulder_z),
-                          _MECA.reach_max + _MECA.wrist_to_flange, roll_joint=5),
+    _geo.NAME: ClosedForm(
+        _meca500_candidates, (0.0, 0.0, _MECA.shoulder_z), _MECA.reach_max + _MECA.wrist_to_flange, roll_joint=5
+    ),
 }
 """Robot type -> closed-form solver; :func:`~compute_peer.kinematics.ik.solve` uses it for method "auto" and "closed_form"."""

@@ -47,13 +47,27 @@ from .model import ArmModel, NoIKSolution
 from .numerical_ik import solve_numerical
 
 __all__ = [
-    "CLOSED_FORMS", "LIMIT_SLACK", "METHODS", "POSITION_CHECK", "ROTATION_CHECK", "SHOULDER_SINGULAR", "TILTS",
-    "TWO_PI", "WRIST_SINGULAR", "ClosedForm", "IKSolution", "in_base_column", "joint_distance", "meca500_ik",
-    "nearest", "quaternion_to_matrix", "solve", "solve_numerical",
+    "CLOSED_FORMS",
+    "LIMIT_SLACK",
+    "METHODS",
+    "POSITION_CHECK",
+    "ROTATION_CHECK",
+    "SHOULDER_SINGULAR",
+    "TILTS",
+    "TWO_PI",
+    "WRIST_SINGULAR",
+    "ClosedForm",
+    "IKSolution",
+    "in_base_column",
+    "joint_distance",
+    "meca500_ik",
+    "nearest",
+    "quaternion_to_matrix",
+    "solve",
+    "solve_numerical",
 ]
 
 METHODS = ("auto", "closed_form", "numerical", "casadi")
-
 
 
 def _vector(name: str, value: object, n: int) -> list[float]:
@@ -86,7 +100,12 @@ def _orientation_options(arm: ArmModel, p: list[float], seed: list[float]) -> li
     options = [("seed", cur), ("down", down), ("horizontal", horizontal)]
     # then the tool tilted in and around the radial plane: cheap closed-form tries before the numerical solver
     for elevation, azimuth in TILTS:
-        options.append((f"tilted {elevation:+.0f}/{azimuth:+.0f} deg", tool_frame(phi + math.radians(azimuth), math.radians(elevation))))
+        options.append(
+            (
+                f"tilted {elevation:+.0f}/{azimuth:+.0f} deg",
+                tool_frame(phi + math.radians(azimuth), math.radians(elevation)),
+            )
+        )
     return options
 
 
@@ -103,12 +122,13 @@ def tool_frame(azimuth: float, elevation: float) -> list[list[float]]:
     return [[x[0], y[0], z[0]], [x[1], y[1], z[1]], [x[2], y[2], z[2]]]
 
 
-def _keep_roll(arm: ArmModel, q: tuple[float, ...], joint: int | None, seed: list[float],
-               p: list[float]) -> tuple[tuple[float, ...], float] | None:
+def _keep_roll(
+    arm: ArmModel, q: tuple[float, ...], joint: int | None, seed: list[float], p: list[float]
+) -> tuple[tuple[float, ...], float] | None:
     """``q`` with the roll joint at the seed's angle, and its position error (FK); None if FK disagrees."""
     if joint is not None:
         v = min(arm.upper[joint], max(arm.lower[joint], seed[joint]))
-        q = q[:joint] + (float(v),) + q[joint + 1:]
+        q = q[:joint] + (float(v),) + q[joint + 1 :]
     pe, _ = pose_errors(arm, q, p, None)
     return (q, pe) if pe <= POSITION_CHECK else None
 
@@ -133,12 +153,22 @@ def _refuse_base_column(arm: ArmModel, p: list[float]) -> None:
     """
     if in_base_column(arm, p):
         radius, top = _base_column(arm)
-        raise NoIKSolution(f"inside the base column: {math.hypot(p[0], p[1]):.3f} m from its axis < radius "
-                          f"{radius:.3f} m, {p[2]:.3f} m high < top {top:.3f} m")
+        raise NoIKSolution(
+            f"inside the base column: {math.hypot(p[0], p[1]):.3f} m from its axis < radius "
+            f"{radius:.3f} m, {p[2]:.3f} m high < top {top:.3f} m"
+        )
 
 
-_REVOLUTE_JOINTS = ("JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned",
-                    "JointModelRUBX", "JointModelRUBY", "JointModelRUBZ", "JointModelRevoluteUnboundedUnaligned")
+_REVOLUTE_JOINTS = (
+    "JointModelRX",
+    "JointModelRY",
+    "JointModelRZ",
+    "JointModelRevoluteUnaligned",
+    "JointModelRUBX",
+    "JointModelRUBY",
+    "JointModelRUBZ",
+    "JointModelRevoluteUnboundedUnaligned",
+)
 
 
 def longest_reach(arm: ArmModel) -> float:
@@ -161,11 +191,19 @@ def _refuse_out_of_reach(arm: ArmModel, p: list[float]) -> None:
     at a target 1e9 m away)."""
     dist, reach = math.hypot(*p), longest_reach(arm)
     if dist > reach * (1 + 1e-9):
-        raise NoIKSolution(f"out of reach: the target is {dist:.4g} m from the arm's base, beyond its longest reach of {reach:.4f} m")
+        raise NoIKSolution(
+            f"out of reach: the target is {dist:.4g} m from the arm's base, beyond its longest reach of {reach:.4f} m"
+        )
 
 
-def solve(arm: ArmModel, position: Sequence[float], quaternion: Sequence[float] | None = None,
-          seed: Sequence[float] | None = None, *, method: str = "auto") -> IKSolution:
+def solve(
+    arm: ArmModel,
+    position: Sequence[float],
+    quaternion: Sequence[float] | None = None,
+    seed: Sequence[float] | None = None,
+    *,
+    method: str = "auto",
+) -> IKSolution:
     """Joint angles putting ``arm``'s flange at ``position`` (and ``quaternion``, w x y z), base frame.
 
     ``method``: "auto" (the robot type's closed form if it has one, else

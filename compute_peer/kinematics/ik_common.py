@@ -83,8 +83,9 @@ def joint_distance(arm: ArmModel, q: Sequence[float], seed: Sequence[float]) -> 
     return sum((w * (a - b)) ** 2 for w, a, b in zip(arm_constants(arm).weights, q, seed))
 
 
-def pose_errors(arm: ArmModel, q: Sequence[float], p: Sequence[float],
-                 rot: Sequence[Sequence[float]] | None) -> tuple[float, float]:
+def pose_errors(
+    arm: ArmModel, q: Sequence[float], p: Sequence[float], rot: Sequence[Sequence[float]] | None
+) -> tuple[float, float]:
     """FK of ``q`` through the arm's Pinocchio model (what :meth:`ArmModel.fk` does, minus the copy)."""
     pin.framesForwardKinematics(arm.model, arm.data, np.array(q, dtype=float))
     m = arm.data.oMf[arm.frame_id]
@@ -94,8 +95,17 @@ def pose_errors(arm: ArmModel, q: Sequence[float], p: Sequence[float],
         return pe, 0.0
     (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = m.rotation.tolist()
     (x0, x1, x2), (y0, y1, y2), (z0, z1, z2) = rot
-    s = ((a0 - x0) ** 2 + (a1 - x1) ** 2 + (a2 - x2) ** 2 + (b0 - y0) ** 2 + (b1 - y1) ** 2
-         + (b2 - y2) ** 2 + (c0 - z0) ** 2 + (c1 - z1) ** 2 + (c2 - z2) ** 2)
+    s = (
+        (a0 - x0) ** 2
+        + (a1 - x1) ** 2
+        + (a2 - x2) ** 2
+        + (b0 - y0) ** 2
+        + (b1 - y1) ** 2
+        + (b2 - y2) ** 2
+        + (c0 - z0) ** 2
+        + (c1 - z1) ** 2
+        + (c2 - z2) ** 2
+    )
     return pe, angle_from_frobenius(math.sqrt(s))
 
 

@@ -29,8 +29,14 @@ class IKStreams:
     """The streamed pairs of one service; ``tick(now)`` is its rate loop's callback. ``joints(robot)`` is the
     arm's latest joint state (the seed), ``counters`` the service's (``streamed``, ``stream_unreachable``)."""
 
-    def __init__(self, fabric: Fabric, pairs: Iterable[tuple[str, str]], arms: ArmDirectory,
-                 joints: Callable[[str], JointState | None], counters: dict[str, int]) -> None:
+    def __init__(
+        self,
+        fabric: Fabric,
+        pairs: Iterable[tuple[str, str]],
+        arms: ArmDirectory,
+        joints: Callable[[str], JointState | None],
+        counters: dict[str, int],
+    ) -> None:
         self.fabric = fabric
         self.pairs = [(keys.validate_id(r, what="robot id"), keys.validate_id(o, what="object id")) for r, o in pairs]
         self.arms = arms
@@ -72,15 +78,33 @@ class IKStreams:
         """Solve one streamed target and publish it on ``robot/{robot}/ik``."""
         step = arm.stream_step(position, q_now)
         key = keys.robot_stream(self.fabric.world, robot, "ik")
-        msg = IKStream(robot, obj, position, step.ok, step.reason, step.q, step.dq, step.speeds, step.seconds, self.fabric.header(key))
+        msg = IKStream(
+            robot,
+            obj,
+            position,
+            step.ok,
+            step.reason,
+            step.q,
+            step.dq,
+            step.speeds,
+            step.seconds,
+            self.fabric.header(key),
+        )
         self.fabric.publish(key, msg)
         if step.ok:
             self.counters["streamed"] += 1
         else:
             self.counters["stream_unreachable"] += 1
             self.fabric.reports.emit(
-                Event(kind=EventKind.IK_UNREACHABLE, reason=step.reason, object=robot, severity="warning", header=self.fabric.header("event")),
-                "compute", robot,
+                Event(
+                    kind=EventKind.IK_UNREACHABLE,
+                    reason=step.reason,
+                    object=robot,
+                    severity="warning",
+                    header=self.fabric.header("event"),
+                ),
+                "compute",
+                robot,
             )
         return msg
 

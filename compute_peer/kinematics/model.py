@@ -29,8 +29,10 @@ def arm_model(desc: robots.RobotDescription) -> pin.Model:
     lock = [full.getJointId(n) for n in names if n not in desc.joint_names]
     model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
     if tuple(model.names)[1:] != desc.joint_names:
-        raise ValueError(f"robot {desc.name!r}: the URDF's joints {list(model.names)[1:]} are not the description's "
-                         f"{list(desc.joint_names)} in that order")
+        raise ValueError(
+            f"robot {desc.name!r}: the URDF's joints {list(model.names)[1:]} are not the description's "
+            f"{list(desc.joint_names)} in that order"
+        )
     return model
 
 
@@ -50,7 +52,10 @@ class ArmModel:
         # each joint's axis in its own frame, read once from the model (constant for 1-dof joints): the angular
         # part of its column for a revolute joint, the linear part for a prismatic one
         pin.computeJointJacobians(self.model, self.data, pin.neutral(self.model))
-        cols = [pin.getJointJacobian(self.model, self.data, i, pin.LOCAL)[:, i - 1].copy() for i in range(1, self.model.njoints)]
+        cols = [
+            pin.getJointJacobian(self.model, self.data, i, pin.LOCAL)[:, i - 1].copy()
+            for i in range(1, self.model.njoints)
+        ]
         self._prismatic = [bool(np.linalg.norm(c[3:]) < 0.5) for c in cols]
         self._axes = [c[:3] if p else c[3:] for c, p in zip(cols, self._prismatic)]
         self.upper = np.asarray(desc.upper, float)
@@ -79,7 +84,9 @@ class ArmModel:
                 cols.append(np.concatenate([np.cross(z, o_n - m.translation), z]))
         return np.stack(cols, axis=1)
 
-    def joint_speed_magnitudes(self, q: np.ndarray, dq: np.ndarray, *, jacobian: np.ndarray | None = None) -> np.ndarray:
+    def joint_speed_magnitudes(
+        self, q: np.ndarray, dq: np.ndarray, *, jacobian: np.ndarray | None = None
+    ) -> np.ndarray:
         """Eq. 7: per joint, the norm of its column's linear+angular contribution times its rate.
 
         ``jacobian`` is J(q) when the caller has it already, in any frame: a rotation of both halves of a
@@ -88,8 +95,9 @@ class ArmModel:
         j = self.jacobian(q) if jacobian is None else jacobian
         return np.linalg.norm(j, axis=0) * np.abs(np.asarray(dq, float))
 
-    def ik_position(self, target: np.ndarray, q0: np.ndarray, *, tol: float = 1e-9,
-                    iters: int = 200, damping: float = 1e-4) -> np.ndarray:
+    def ik_position(
+        self, target: np.ndarray, q0: np.ndarray, *, tol: float = 1e-9, iters: int = 200, damping: float = 1e-4
+    ) -> np.ndarray:
         """Damped least squares on the position, clamped to limits; raises NoIKSolution on failure."""
         target = np.asarray(target, float)
         if not np.all(np.isfinite(target)):
@@ -102,5 +110,6 @@ class ArmModel:
             jv = self.jacobian(q)[:3]
             dq = jv.T @ np.linalg.solve(jv @ jv.T + damping * np.eye(3), err)
             q = np.clip(q + dq, self.lower, self.upper)
-        raise NoIKSolution(f"no joint solution within limits for {target.tolist()} "
-                          f"(residual {np.linalg.norm(err):.3g} m)")
+        raise NoIKSolution(
+            f"no joint solution within limits for {target.tolist()} (residual {np.linalg.norm(err):.3g} m)"
+        )

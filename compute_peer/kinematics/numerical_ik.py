@@ -17,11 +17,21 @@ ACCEPT_ROTATION = 1e-6
 """rad: the same for the orientation."""
 
 
-def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence[Sequence[float]] | None = None,
-                    seed: Sequence[float] | None = None, *, restarts: int = 24, iters: int = 80,
-                    rng_seed: int = 0, position_tol: float = 1e-9, rotation_tol: float = 1e-8,
-                    orientation_scale: float = 0.1, accept_position: float = ACCEPT_POSITION,
-                    accept_rotation: float = ACCEPT_ROTATION) -> tuple[np.ndarray, float, float]:
+def solve_numerical(
+    arm: ArmModel,
+    position: Sequence[float],
+    rotation: Sequence[Sequence[float]] | None = None,
+    seed: Sequence[float] | None = None,
+    *,
+    restarts: int = 24,
+    iters: int = 80,
+    rng_seed: int = 0,
+    position_tol: float = 1e-9,
+    rotation_tol: float = 1e-8,
+    orientation_scale: float = 0.1,
+    accept_position: float = ACCEPT_POSITION,
+    accept_rotation: float = ACCEPT_ROTATION,
+) -> tuple[np.ndarray, float, float]:
     """Levenberg-Marquardt IK for any arm, inside the joint limits; returns (q, position err, rotation err).
 
     Errors are the target's position minus the flange's, and log3(R_target R^T)
@@ -92,12 +102,13 @@ def solve_numerical(arm: ArmModel, position: Sequence[float], rotation: Sequence
     raise _not_converged(arm, q, pe, None if rt is None else re, len(starts))
 
 
-def _step_jacobian(arm: ArmModel, q: np.ndarray, e: np.ndarray, rt: np.ndarray | None,
-                   orientation_scale: float) -> tuple[np.ndarray, np.ndarray]:
+def _step_jacobian(
+    arm: ArmModel, q: np.ndarray, e: np.ndarray, rt: np.ndarray | None, orientation_scale: float
+) -> tuple[np.ndarray, np.ndarray]:
     """The residual's Jacobian at ``q`` and its gradient ``J^T e``, with each joint that rests on a limit the
     error pushes further out frozen (its column zero) for this step, so the others still converge."""
     model, data, fid, lo, hi = arm.model, arm.data, arm.frame_id, arm.lower, arm.upper
-    jac = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)[:3 if rt is None else 6]
+    jac = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)[: 3 if rt is None else 6]
     if rt is not None:
         # e_r = log3(R_t R^T); turning the flange by w (world) changes it by -Jlog3(R_t R^T) w
         jac = jac.copy()
@@ -114,8 +125,13 @@ def _step_jacobian(arm: ArmModel, q: np.ndarray, e: np.ndarray, rt: np.ndarray |
 def _not_converged(arm: ArmModel, q: np.ndarray, pe: float, re: float | None, starts: int) -> NoIKSolution:
     """The refusal: the best residual (rotation's only when one was asked) and the joints resting on a limit."""
     lo, hi = arm.lower, arm.upper
-    at = [f"J{i + 1} at its {'lower' if q[i] <= lo[i] + 1e-9 else 'upper'} limit {degrees_text(q[i])}"
-          for i in range(len(q)) if q[i] <= lo[i] + 1e-9 or q[i] >= hi[i] - 1e-9]
+    at = [
+        f"J{i + 1} at its {'lower' if q[i] <= lo[i] + 1e-9 else 'upper'} limit {degrees_text(q[i])}"
+        for i in range(len(q))
+        if q[i] <= lo[i] + 1e-9 or q[i] >= hi[i] - 1e-9
+    ]
     what = f"{pe:.3g} m" + ("" if re is None else f", {re:.3g} rad")
-    return NoIKSolution(f"numerical IK did not converge from {starts} starts: best residual {what}"
-                        + (f" ({', '.join(at)})" if at else ""))
+    return NoIKSolution(
+        f"numerical IK did not converge from {starts} starts: best residual {what}"
+        + (f" ({', '.join(at)})" if at else "")
+    )

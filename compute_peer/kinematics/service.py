@@ -81,7 +81,14 @@ class KinematicsService:
         self.joints: dict[str, JointState] = {}  # the latest joint state of each arm, the seed of its IK
         self._lock = threading.RLock()
         self._closed = False
-        self.counters: dict[str, int] = {"ik": 0, "fk": 0, "jacobian": 0, "refusals": 0, "streamed": 0, "stream_unreachable": 0}
+        self.counters: dict[str, int] = {
+            "ik": 0,
+            "fk": 0,
+            "jacobian": 0,
+            "refusals": 0,
+            "streamed": 0,
+            "stream_unreachable": 0,
+        }
         self.directory = ArmDirectory(fabric, discover=discover, clock=self._clock, counters=self.counters)
         for rid, placement in (arms or {}).items():
             self.directory.add(rid, placement)
@@ -97,13 +104,19 @@ class KinematicsService:
 
     def _declare(self) -> None:
         f, w = self.fabric, self.world
-        handlers = {"ik": (self._on_ik, IKRequest), "fk": (self._on_fk, FKRequest), "jacobian": (self._on_jacobian, JacobianRequest)}
+        handlers = {
+            "ik": (self._on_ik, IKRequest),
+            "fk": (self._on_fk, FKRequest),
+            "jacobian": (self._on_jacobian, JacobianRequest),
+        }
         for name, (handler, expected) in handlers.items():
             self._resources.append(f.rpc.serve(keys.srv_per_subject(w, name), handler, expected=expected))
             self._resources.append(f.rpc.serve(keys.srv_per_subject(w, name, f.peer_id), handler, expected=expected))
         self._resources.append(f.subscribe(keys.robot_stream_all(w, "joints"), self._on_joints, expected=JointState))
         for _, obj in self.streams:
-            self._resources.append(f.subscribe(keys.object_pose_all(w, obj), self.ik_streams.target_seen, expected=Pose, history=True))
+            self._resources.append(
+                f.subscribe(keys.object_pose_all(w, obj), self.ik_streams.target_seen, expected=Pose, history=True)
+            )
         if self.directory.discovering:
             self._resources.append(f.watch_peers(self.directory.sim_seen, kind="sim"))
 
@@ -115,7 +128,9 @@ class KinematicsService:
                 return self
             self._started = True
             if self.streams:
-                self._loop = RateLoop(self._stream_rate, self.ik_streams.tick, clock=self._clock, name="ik-stream").start()
+                self._loop = RateLoop(
+                    self._stream_rate, self.ik_streams.tick, clock=self._clock, name="ik-stream"
+                ).start()
         self.directory.start()
         return self
 
@@ -211,7 +226,9 @@ class KinematicsService:
         except (ValueError, ServiceError) as exc:
             raise self._refuse(exc) from None
         self.counters["jacobian"] += 1
-        return JacobianReply(robot, j, twist, speeds, req.frame, self.fabric.header(keys.srv(self.world, "jacobian", robot)))
+        return JacobianReply(
+            robot, j, twist, speeds, req.frame, self.fabric.header(keys.srv(self.world, "jacobian", robot))
+        )
 
     # ------------------------------------------------------------------ joints (the IK's seeds)
 

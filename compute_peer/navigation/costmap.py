@@ -121,8 +121,10 @@ def build_costmap(
     res = float(grid.resolution)
     margin = math.sqrt(2.0) * res if margin is None else float(margin)
     if (robot_radius + margin) / res > MAX_INFLATION_CELLS:  # checked before computing: the cost grows with it
-        raise NavigationError(f"robot radius {robot_radius:.2f} m is {robot_radius / res:.0f} cells of this map ({res:.3f} m each): "
-                              f"at most {MAX_INFLATION_CELLS} cells ({MAX_INFLATION_CELLS * res - margin:.2f} m) are planned for")
+        raise NavigationError(
+            f"robot radius {robot_radius:.2f} m is {robot_radius / res:.0f} cells of this map ({res:.3f} m each): "
+            f"at most {MAX_INFLATION_CELLS} cells ({MAX_INFLATION_CELLS * res - margin:.2f} m) are planned for"
+        )
     occ = occupied_mask(grid, threshold, unknown_is_occupied=unknown_is_occupied)
     collision = dilate(occ, robot_radius / res)
     blocked = dilate(occ, (robot_radius + margin) / res)

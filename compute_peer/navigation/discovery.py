@@ -68,8 +68,12 @@ class RobotDescriptions:
         self._described: set[str] | None = None  # mobile robots of the world, once a sim described them
         self._not_mobile: set[str] = set()  # the world's other robots (an arm publishes its flange's pose)
         self._answered_at = -math.inf  # the clock time a lookup last got the sims' answer
-        self._lookup = BackgroundLookup(self.discover, name="nav-discovery", clock=self._clock,
-                                        on_error=lambda exc: log.debug("robot discovery failed: %s", exc))
+        self._lookup = BackgroundLookup(
+            self.discover,
+            name="nav-discovery",
+            clock=self._clock,
+            on_error=lambda exc: log.debug("robot discovery failed: %s", exc),
+        )
         self._lock = threading.RLock()
 
     def close(self) -> None:

@@ -97,7 +97,9 @@ def _words(d: float, a: float, b: float) -> list[tuple[str, float, float, float]
     return out
 
 
-def dubins_paths(start: tuple[float, float, float], goal: tuple[float, float, float], radius: float) -> list[DubinsPath]:
+def dubins_paths(
+    start: tuple[float, float, float], goal: tuple[float, float, float], radius: float
+) -> list[DubinsPath]:
     """All valid Dubins paths from ``start`` to ``goal``, shortest first."""
     x0, y0, t0 = start
     x1, y1, t1 = goal

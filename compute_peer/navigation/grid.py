@@ -20,8 +20,15 @@ from .errors import NavigationError
 UNKNOWN = OccupancyGrid.UNKNOWN
 
 
-def make_grid(cells: np.ndarray, resolution: float, origin_xy: tuple[float, float] = (0.0, 0.0), *, header: Header | None = None) -> OccupancyGrid:
-    return OccupancyGrid(float(resolution), np.array([origin_xy[0], origin_xy[1], 0.0]), np.asarray(cells, dtype=np.uint8), header or Header())
+def make_grid(
+    cells: np.ndarray, resolution: float, origin_xy: tuple[float, float] = (0.0, 0.0), *, header: Header | None = None
+) -> OccupancyGrid:
+    return OccupancyGrid(
+        float(resolution),
+        np.array([origin_xy[0], origin_xy[1], 0.0]),
+        np.asarray(cells, dtype=np.uint8),
+        header or Header(),
+    )
 
 
 def check_grid(grid: OccupancyGrid) -> None:

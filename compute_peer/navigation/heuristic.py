@@ -20,7 +20,14 @@ _NEIGHBOURS = [(dr, dc, math.hypot(dr, dc)) for dr in (-1, 0, 1) for dc in (-1, 
 class DistanceField:
     """Distances (m) from every coarse cell's centre to the goal's coarse cell, around obstacles."""
 
-    def __init__(self, blocked: np.ndarray, resolution: float, origin: tuple[float, float], factor: int, goal_xy: tuple[float, float]) -> None:
+    def __init__(
+        self,
+        blocked: np.ndarray,
+        resolution: float,
+        origin: tuple[float, float],
+        factor: int,
+        goal_xy: tuple[float, float],
+    ) -> None:
         h, w = blocked.shape
         self.factor = max(1, int(factor))
         self.cell = resolution * self.factor

@@ -53,8 +53,15 @@ class HybridAStarConfig:
     time_limit: float = 5.0  # seconds
 
     def __post_init__(self) -> None:
-        if self.xy_resolution <= 0 or self.heading_bins < 8 or self.steering_levels < 1 or self.steering_levels % 2 == 0:
-            raise NavigationError("Hybrid A* needs xy_resolution > 0, heading_bins >= 8 and an odd number of steering levels")
+        if (
+            self.xy_resolution <= 0
+            or self.heading_bins < 8
+            or self.steering_levels < 1
+            or self.steering_levels % 2 == 0
+        ):
+            raise NavigationError(
+                "Hybrid A* needs xy_resolution > 0, heading_bins >= 8 and an odd number of steering levels"
+            )
         if self.heuristic_weight < 1.0 or self.max_expansions < 1 or self.time_limit <= 0:
             raise NavigationError("Hybrid A* needs heuristic_weight >= 1, max_expansions >= 1 and time_limit > 0")
 
@@ -170,7 +177,9 @@ class _Search:
         self.planner, self.start, self.goal = planner, start, goal
         cm, cfg, vehicle = planner.costmap, planner.config, planner.vehicle
         self.tight = check_endpoints(cm, start, goal)
-        self.field = DistanceField(cm.collision, cm.resolution, (cm.origin_x, cm.origin_y), planner.factor, (goal[0], goal[1]))
+        self.field = DistanceField(
+            cm.collision, cm.resolution, (cm.origin_x, cm.origin_y), planner.factor, (goal[0], goal[1])
+        )
         h0 = float(self.field.lookup(np.array([start[0]]), np.array([start[1]]))[0])
         if not math.isfinite(h0):
             raise NavigationError(
@@ -184,7 +193,8 @@ class _Search:
         self.best_g: dict[tuple[int, int, int], float] = {planner._key(*start): 0.0}
         self.closed: set[tuple[int, int, int]] = set()
         self.heap: list[tuple[float, int]] = [
-            (cfg.heuristic_weight * max(h0, math.hypot(goal[0] - start[0], goal[1] - start[1])), 0)]
+            (cfg.heuristic_weight * max(h0, math.hypot(goal[0] - start[0], goal[1] - start[1])), 0)
+        ]
         self.expansions = 0
 
     def pop(self) -> int | None:
@@ -297,7 +307,8 @@ class _Search:
         if self.expansions <= 1:
             return StuckAtStart(
                 f"the robot cannot drive away from its start ({start[0]:.2f}, {start[1]:.2f}, {start[2]:.2f} rad) "
-                f"without touching an obstacle" + ("" if vehicle.allow_reverse else " (forwards only: allow reversing?)")
+                f"without touching an obstacle"
+                + ("" if vehicle.allow_reverse else " (forwards only: allow reversing?)")
             )
         return NavigationError(
             f"no path from ({start[0]:.2f}, {start[1]:.2f}) to ({goal[0]:.2f}, {goal[1]:.2f}): the search space is exhausted "
@@ -306,6 +317,10 @@ class _Search:
 
 
 def plan_hybrid_astar(
-    costmap: Costmap, start: Pose2, goal: Pose2, vehicle: VehicleModel | None = None, config: HybridAStarConfig | None = None
+    costmap: Costmap,
+    start: Pose2,
+    goal: Pose2,
+    vehicle: VehicleModel | None = None,
+    config: HybridAStarConfig | None = None,
 ) -> PlanResult:
     return HybridAStar(costmap, vehicle or VehicleModel(), config).plan(start, goal)

@@ -61,11 +61,15 @@ class MapService:
         name = self.built_name(name or self.map_name, user)
         lo, hi = BUILD_THRESHOLD
         if not lo <= threshold <= hi:
-            raise NavigationError(f"threshold {threshold:g} is outside [{lo:g}, {hi:g}]: a cell is occupied when its probability "
-                                  f"is above it, and below {lo:g} cells seen free count as obstacles (the default is 0.65)")
+            raise NavigationError(
+                f"threshold {threshold:g} is outside [{lo:g}, {hi:g}]: a cell is occupied when its probability "
+                f"is above it, and below {lo:g} cells seen free count as obstacles (the default is 0.65)"
+            )
         grid = self.scans.grid(threshold=threshold)
         if grid is None:
-            raise NavigationError("no scans accumulated yet: is mapping on and are the robots publishing scan and pose?")
+            raise NavigationError(
+                "no scans accumulated yet: is mapping on and are the robots publishing scan and pose?"
+            )
         return self.publish(name, grid, user=user)
 
     @staticmethod
@@ -111,7 +115,13 @@ class MapService:
         elif a != "status":
             raise NavigationError(f"unknown map action {a!r}")
         return MapReply(
-            a, name, grid, self.scans.scans, int(self.scans.on), file, self.fabric.header(keys.srv(self.world, "map", name))
+            a,
+            name,
+            grid,
+            self.scans.scans,
+            int(self.scans.on),
+            file,
+            self.fabric.header(keys.srv(self.world, "map", name)),
         )
 
     def _get(self, name: str) -> OccupancyGrid:

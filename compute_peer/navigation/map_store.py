@@ -42,8 +42,13 @@ class MapLimit(NavigationError):
 class MapStore:
     """Maps by name, their costmaps, and the maps folder (None: saving and loading are disabled)."""
 
-    def __init__(self, maps_dir: str | FsPath | None = None, *, per_user: int = MAX_MAPS_PER_USER,
-                 users_total: int = MAX_USER_MAPS) -> None:
+    def __init__(
+        self,
+        maps_dir: str | FsPath | None = None,
+        *,
+        per_user: int = MAX_MAPS_PER_USER,
+        users_total: int = MAX_USER_MAPS,
+    ) -> None:
         self.maps_dir = FsPath(maps_dir) if maps_dir is not None else None
         self.maps: dict[str, OccupancyGrid] = {}
         self.per_user = per_user
@@ -87,11 +92,15 @@ class MapStore:
         """Under the lock: refuse a new map of ``user`` past a cap."""
         mine = sorted(n for n, u in self._owners.items() if u == user)
         if len(mine) >= self.per_user:
-            raise MapLimit(f"{user} holds {len(mine)} maps, the most one user may ({', '.join(mine)}): "
-                           f"build one of them again rather than a new name {name!r}")
+            raise MapLimit(
+                f"{user} holds {len(mine)} maps, the most one user may ({', '.join(mine)}): "
+                f"build one of them again rather than a new name {name!r}"
+            )
         if len(self._owners) >= self.users_total:
-            raise MapLimit(f"the users hold {len(self._owners)} maps, the most this compute peer keeps: "
-                           f"build one of yours again, or ask an instructor")
+            raise MapLimit(
+                f"the users hold {len(self._owners)} maps, the most this compute peer keeps: "
+                f"build one of yours again, or ask an instructor"
+            )
 
     def costmaps_cached(self) -> int:
         """How many inflated maps are cached (at most ``COSTMAP_CACHE``)."""

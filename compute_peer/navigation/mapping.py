@@ -43,7 +43,9 @@ class MapperConfig:
 
     def __post_init__(self) -> None:
         if not (self.resolution > 0 and self.width > 0 and self.height > 0):
-            raise NavigationError(f"map geometry must be positive, got {self.width}x{self.height} at {self.resolution} m")
+            raise NavigationError(
+                f"map geometry must be positive, got {self.width}x{self.height} at {self.resolution} m"
+            )
         if not (self.l_occ > 0 > self.l_free and self.l_min < 0 < self.l_max and 0 < self.step <= 1):
             raise NavigationError("sensor model needs l_occ > 0 > l_free, l_min < 0 < l_max and 0 < step <= 1")
 
@@ -183,7 +185,11 @@ class OccupancyMapper:
         if footprint > 0:
             self.clear_footprint(float(pose.position[0]), float(pose.position[1]), footprint)
         c = self.config
-        under = footprint_indices((c.height, c.width), c.resolution, (c.origin_x, c.origin_y), robots, margin) if robots else None
+        under = (
+            footprint_indices((c.height, c.width), c.resolution, (c.origin_x, c.origin_y), robots, margin)
+            if robots
+            else None
+        )
         ox, oy, oyaw = sensor_offset
         cy, sy = math.cos(yaw), math.sin(yaw)
         x = float(pose.position[0]) + cy * ox - sy * oy

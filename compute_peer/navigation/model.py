@@ -70,7 +70,9 @@ def check_endpoints(costmap: Costmap, start: Pose2, goal: Pose2) -> "Tight":
     wall) is accepted; the returned :class:`Tight` tells the planners to check motions near it densely.
     """
     if not costmap.blocked.size or costmap.collision.all():
-        raise NavigationError("the map has no free space for the robot (empty map, or everything within the robot radius of an obstacle)")
+        raise NavigationError(
+            "the map has no free space for the robot (empty map, or everything within the robot radius of an obstacle)"
+        )
     for pose, what in ((goal, "goal"), (start, "start")):
         reason = costmap.clearance_reason(pose[0], pose[1], what, tight_ok=True)
         if reason is not None:
@@ -100,8 +102,11 @@ class Tight:
 
     def motion_ok(self, x: np.ndarray, y: np.ndarray) -> bool:
         """Dense check of a polyline that starts and ends near a tight endpoint."""
-        return bool(self.points) and self.near(float(x[0]), float(y[0])) and self.near(float(x[-1]), float(y[-1])) and (
-            path_collision(self.costmap, x, y) is None
+        return (
+            bool(self.points)
+            and self.near(float(x[0]), float(y[0]))
+            and self.near(float(x[-1]), float(y[-1]))
+            and (path_collision(self.costmap, x, y) is None)
         )
 
     def state_ok(self, x: float, y: float) -> bool:

@@ -61,13 +61,19 @@ class OmplConfig:
             raise NavigationError("OMPL needs time_limit > 0, refine_time >= 0 and simplify_time >= 0")
 
 
-def plan_ompl(costmap: Costmap, start: Pose2, goal: Pose2, vehicle: VehicleModel | None = None, config: OmplConfig | None = None) -> PlanResult:
+def plan_ompl(
+    costmap: Costmap, start: Pose2, goal: Pose2, vehicle: VehicleModel | None = None, config: OmplConfig | None = None
+) -> PlanResult:
     vehicle = vehicle or VehicleModel()
     cfg = config or OmplConfig()
     t0 = time.perf_counter()
     tight = check_endpoints(costmap, start, goal)
     ob, og = _ompl()
-    space = ob.ReedsSheppStateSpace(vehicle.turning_radius) if vehicle.allow_reverse else ob.DubinsStateSpace(vehicle.turning_radius)
+    space = (
+        ob.ReedsSheppStateSpace(vehicle.turning_radius)
+        if vehicle.allow_reverse
+        else ob.DubinsStateSpace(vehicle.turning_radius)
+    )
     x0, y0, x1, y1 = costmap.bounds
     bounds = ob.RealVectorBounds(2)
     bounds.setLow(0, x0)

@@ -31,7 +31,9 @@ class OwnerWatch:
         from ownership import OwnershipClient
 
         try:
-            client = OwnershipClient(self.fabric, self.fabric.peer_id, timeout=1.0)  # never started: reads, never renews
+            client = OwnershipClient(
+                self.fabric, self.fabric.peer_id, timeout=1.0
+            )  # never started: reads, never renews
         except Exception:  # a session closing under it
             return
         with self._lock:

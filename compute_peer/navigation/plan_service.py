@@ -72,8 +72,9 @@ class PlanService:
     def set_goal(self, pose: Pose) -> None:
         self.goal = pose
 
-    def costmap(self, name: str, robot_radius: float, *, standing: Footprint | None = None,
-                others: tuple[Footprint, ...] = ()) -> Costmap:
+    def costmap(
+        self, name: str, robot_radius: float, *, standing: Footprint | None = None, others: tuple[Footprint, ...] = ()
+    ) -> Costmap:
         """Map ``name`` inflated by ``robot_radius``; the scans' map is built first when it never was.
 
         ``standing``: the planning robot where it stands: its own footprint is never an obstacle to its own start
@@ -101,7 +102,13 @@ class PlanService:
         out = []
         for other in self.poses.robots() - {robot}:
             for p in self.poses.during(other, mine.header, lag=0.0)[-1:]:
-                out.append(Footprint(float(p.position[0]), float(p.position[1]), self.descriptions.radius(other, self.settings.vehicle.robot_radius)))
+                out.append(
+                    Footprint(
+                        float(p.position[0]),
+                        float(p.position[1]),
+                        self.descriptions.radius(other, self.settings.vehicle.robot_radius),
+                    )
+                )
         return tuple(out)
 
     def handle(self, req: PlanRequest, *, publish: bool = True) -> PlanReply:
@@ -116,12 +123,17 @@ class PlanService:
         vehicle = VehicleModel(
             robot_radius=req.robot_radius or self.descriptions.radius(robot, v.robot_radius),
             turning_radius=req.turning_radius or v.turning_radius,
-            allow_reverse=self.descriptions.reverse(robot, v.allow_reverse) if req.direction == "default" else req.direction == "both",
+            allow_reverse=self.descriptions.reverse(robot, v.allow_reverse)
+            if req.direction == "default"
+            else req.direction == "both",
         )
         own = req.start.shape[0] != 3  # from where the robot stands
-        costmap = self.costmap(req.map, vehicle.robot_radius,
-                               standing=Footprint(start[0], start[1], vehicle.robot_radius) if own else None,
-                               others=self.others(robot))
+        costmap = self.costmap(
+            req.map,
+            vehicle.robot_radius,
+            standing=Footprint(start[0], start[1], vehicle.robot_radius) if own else None,
+            others=self.others(robot),
+        )
         with self._plan_lock:
             result = plan_path(costmap, start, goal, planner=req.planner, settings=replace(s, vehicle=vehicle))
         key = keys.robot_path(self.world, robot)
@@ -130,8 +142,15 @@ class PlanService:
             self.fabric.publish(key, path)
         self.counters["plans"] += 1
         return PlanReply(
-            path, robot, result.planner, result.seconds, result.length, result.expansions, req.map,
-            self.fabric.header(keys.srv(self.world, "plan", robot)), result.note,
+            path,
+            robot,
+            result.planner,
+            result.seconds,
+            result.length,
+            result.expansions,
+            req.map,
+            self.fabric.header(keys.srv(self.world, "plan", robot)),
+            result.note,
         )
 
     def _ends(self, robot: str, req: PlanRequest) -> tuple[tuple[float, ...], tuple[float, ...]]:

@@ -96,6 +96,9 @@ def _hybrid(costmap: Costmap, rec: Recovery, settings: PlannerSettings) -> PlanR
                 result = plan_hybrid_astar(costmap, (x, y, facing), rec.goal, settings.vehicle, share)
             except NavigationError:
                 continue
-            return replace(result, note=f"it cannot drive away facing {math.degrees(th):.0f} deg, so it first turns on the "
-                                        f"spot to {math.degrees(facing):.0f} deg")
+            return replace(
+                result,
+                note=f"it cannot drive away facing {math.degrees(th):.0f} deg, so it first turns on the "
+                f"spot to {math.degrees(facing):.0f} deg",
+            )
         raise stuck

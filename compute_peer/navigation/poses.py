@@ -77,7 +77,9 @@ class PoseHistory:
             return hist[-1]
         return _interpolated(hist, stamp, _sim_time)
 
-    def known_at(self, robot: str, stamp: float, *, angle: float = FOLD_ANGLE, distance: float = FOLD_DISTANCE) -> Pose | None:
+    def known_at(
+        self, robot: str, stamp: float, *, angle: float = FOLD_ANGLE, distance: float = FOLD_DISTANCE
+    ) -> Pose | None:
         """The pose at sim time ``stamp`` (:meth:`at`), or None when ``stamp`` lies beyond the poses kept by more
         than the robot's motion there allows: its speed at the nearest end times the time beyond it would turn it
         more than ``angle`` rad or move it more than ``distance`` m. A scan folded in at such a pose smears the map:
@@ -123,7 +125,9 @@ SPREAD = 0.05
 """Metres between two poses of a mirrored robot's lag that both count: closer ones add no cell to its footprint."""
 
 
-def _walk_back(hist: list[Pose], t: float, when: Callable[[Pose], float], stale: float, lag: float) -> tuple[list[Pose], list[Pose]]:
+def _walk_back(
+    hist: list[Pose], t: float, when: Callable[[Pose], float], stale: float, lag: float
+) -> tuple[list[Pose], list[Pose]]:
     """([the pose at ``t``] or [] when the nearest is more than ``stale`` away, the poses of [t - lag, t) at least
     :data:`SPREAD` apart), walking back from the newest of ``hist``."""
     i = len(hist) - 1
@@ -175,5 +179,11 @@ def _between(a: Pose, b: Pose, f: float, header: Header) -> Pose:
     arc (normalised linear mix: the poses are a sim step or two apart)."""
     qb = b.quaternion if float(np.dot(a.quaternion, b.quaternion)) >= 0.0 else -b.quaternion
     q = (1.0 - f) * a.quaternion + f * qb
-    return replace(a, position=(1.0 - f) * a.position + f * b.position, quaternion=q / np.linalg.norm(q),
-                   linear=(1.0 - f) * a.linear + f * b.linear, angular=(1.0 - f) * a.angular + f * b.angular, header=header)
+    return replace(
+        a,
+        position=(1.0 - f) * a.position + f * b.position,
+        quaternion=q / np.linalg.norm(q),
+        linear=(1.0 - f) * a.linear + f * b.linear,
+        angular=(1.0 - f) * a.angular + f * b.angular,
+        header=header,
+    )

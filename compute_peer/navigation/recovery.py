@@ -50,7 +50,9 @@ class Recovery:
 
     start: Pose2
     goal: Pose2
-    escape: tuple[np.ndarray, np.ndarray, np.ndarray] = field(default_factory=lambda: (np.zeros(0), np.zeros(0), np.zeros(0)))
+    escape: tuple[np.ndarray, np.ndarray, np.ndarray] = field(
+        default_factory=lambda: (np.zeros(0), np.zeros(0), np.zeros(0))
+    )
     notes: tuple[str, ...] = ()
 
 
@@ -61,7 +63,10 @@ def nearest_obstacle(costmap: Costmap, x: float, y: float, within: float) -> tup
     res = costmap.resolution
     h, w = costmap.shape
     c0, r0 = math.floor((x - within - costmap.origin_x) / res), math.floor((y - within - costmap.origin_y) / res)
-    c1, r1 = math.floor((x + within - costmap.origin_x) / res) + 1, math.floor((y + within - costmap.origin_y) / res) + 1
+    c1, r1 = (
+        math.floor((x + within - costmap.origin_x) / res) + 1,
+        math.floor((y + within - costmap.origin_y) / res) + 1,
+    )
     c0, r0, c1, r1 = max(c0, 0), max(r0, 0), min(c1, w), min(r1, h)
     if c0 >= c1 or r0 >= r1:
         return None
@@ -98,7 +103,11 @@ def _escape(costmap: Costmap, start: Pose2, escape: float) -> tuple[np.ndarray, 
     best: tuple[np.ndarray, np.ndarray, float] | None = None
     for phi in np.linspace(-math.pi, math.pi, DIRECTIONS, endpoint=False):
         xs, ys = x + ks * math.cos(phi), y + ks * math.sin(phi)
-        clear = np.hypot(xs[:, None] - ox[None, :], ys[:, None] - oy[None, :]).min(axis=1) if ox.size else np.full(ks.size, math.inf)
+        clear = (
+            np.hypot(xs[:, None] - ox[None, :], ys[:, None] - oy[None, :]).min(axis=1)
+            if ox.size
+            else np.full(ks.size, math.inf)
+        )
         nearer = np.flatnonzero(clear < here - 1e-9)
         free = np.flatnonzero(costmap.free(xs, ys))
         if free.size == 0:
@@ -149,16 +158,23 @@ def recover(costmap: Costmap, start: Pose2, goal: Pose2, settings: RecoverySetti
     notes: list[str] = []
     escape = (np.zeros(0), np.zeros(0), np.zeros(0))
     new_goal = goal
-    if costmap.inside(goal[0], goal[1]) and costmap.clearance_reason(goal[0], goal[1], "goal", tight_ok=True) is not None:
+    if (
+        costmap.inside(goal[0], goal[1])
+        and costmap.clearance_reason(goal[0], goal[1], "goal", tight_ok=True) is not None
+    ):
         why = costmap.clearance_reason(goal[0], goal[1], "goal", tight_ok=True)
         moved = _free_goal(costmap, goal, s.goal_tolerance) if s.goal_tolerance > 0 else None
         if moved is None:
             which = "" if "inside" in why else f" ({_obstacle_words(costmap, goal[0], goal[1])})"
-            raise NavigationError(f"{why}{which}, and no pose where the robot fits lies within {s.goal_tolerance:.2f} m "
-                                  f"of it: pick a goal in open floor")
+            raise NavigationError(
+                f"{why}{which}, and no pose where the robot fits lies within {s.goal_tolerance:.2f} m "
+                f"of it: pick a goal in open floor"
+            )
         new_goal = (moved[0], moved[1], goal[2])
-        notes.append(f"goal moved {math.hypot(moved[0] - goal[0], moved[1] - goal[1]):.2f} m from ({goal[0]:.2f}, "
-                     f"{goal[1]:.2f}) to ({moved[0]:.2f}, {moved[1]:.2f}): it was {why.split(') is ', 1)[-1]}")
+        notes.append(
+            f"goal moved {math.hypot(moved[0] - goal[0], moved[1] - goal[1]):.2f} m from ({goal[0]:.2f}, "
+            f"{goal[1]:.2f}) to ({moved[0]:.2f}, {moved[1]:.2f}): it was {why.split(') is ', 1)[-1]}"
+        )
     new_start = start
     sx, sy = start[0], start[1]
     if costmap.inside(sx, sy):
@@ -169,10 +185,13 @@ def recover(costmap: Costmap, start: Pose2, goal: Pose2, settings: RecoverySetti
                 raise NavigationError(
                     f"start ({sx:.2f}, {sy:.2f}) is within the robot radius ({costmap.robot_radius:.2f} m) of "
                     f"{_obstacle_words(costmap, sx, sy)}, and no straight move of up to {s.escape:.2f} m gets the "
-                    f"robot clear without coming nearer to it: drive it clear first")
+                    f"robot clear without coming nearer to it: drive it clear first"
+                )
             xs, ys, phi = found
             escape = (xs, ys, np.full(xs.size, phi))
             new_start = (float(xs[-1]), float(ys[-1]), phi)
-            notes.append(f"start ({sx:.2f}, {sy:.2f}) is within the robot radius of {_obstacle_words(costmap, sx, sy)}: "
-                         f"the path first drives {math.hypot(xs[-1] - sx, ys[-1] - sy):.2f} m straight away from it")
+            notes.append(
+                f"start ({sx:.2f}, {sy:.2f}) is within the robot radius of {_obstacle_words(costmap, sx, sy)}: "
+                f"the path first drives {math.hypot(xs[-1] - sx, ys[-1] - sy):.2f} m straight away from it"
+            )
     return Recovery(new_start, new_goal, escape, tuple(notes))

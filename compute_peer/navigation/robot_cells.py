@@ -22,7 +22,15 @@ import numpy as np
 
 from fabric.interfaces import OccupancyGrid
 
-__all__ = ["ROBOT_MARGIN", "Footprint", "clear_robots", "footprint_indices", "footprint_mask", "mark_robots", "robot_cells"]
+__all__ = [
+    "ROBOT_MARGIN",
+    "Footprint",
+    "clear_robots",
+    "footprint_indices",
+    "footprint_mask",
+    "mark_robots",
+    "robot_cells",
+]
 
 ROBOT_MARGIN = 0.1
 """Metres around a robot's radius whose cells count as the robot's: a hit on its surface lands in a cell up to
@@ -42,8 +50,13 @@ class Footprint:
             raise ValueError(f"a footprint needs a finite position and a radius >= 0, got {self}")
 
 
-def footprint_indices(shape: tuple[int, int], resolution: float, origin_xy: tuple[float, float],
-                      footprints: Iterable[Footprint], margin: float = ROBOT_MARGIN) -> np.ndarray:
+def footprint_indices(
+    shape: tuple[int, int],
+    resolution: float,
+    origin_xy: tuple[float, float],
+    footprints: Iterable[Footprint],
+    margin: float = ROBOT_MARGIN,
+) -> np.ndarray:
     """Flat (row-major) indices of the cells whose centre lies within a footprint's radius + ``margin``.
 
     Each footprint costs only its bounding box; cells off the grid are left out; an index appears once.
@@ -71,7 +84,9 @@ def footprint_indices(shape: tuple[int, int], resolution: float, origin_xy: tupl
 def footprint_mask(grid: OccupancyGrid, footprints: Iterable[Footprint], margin: float = ROBOT_MARGIN) -> np.ndarray:
     """The cells of ``grid`` under the robots (radius + ``margin``), as a boolean array of the grid's shape."""
     mask = np.zeros(grid.cells.shape, dtype=bool)
-    idx = footprint_indices(grid.cells.shape, grid.resolution, (float(grid.origin[0]), float(grid.origin[1])), footprints, margin)
+    idx = footprint_indices(
+        grid.cells.shape, grid.resolution, (float(grid.origin[0]), float(grid.origin[1])), footprints, margin
+    )
     mask.reshape(-1)[idx] = True
     return mask
 
@@ -97,8 +112,9 @@ def mark_robots(grid: OccupancyGrid, footprints: Iterable[Footprint], margin: fl
     return replace(grid, cells=cells)
 
 
-def robot_cells(grid: OccupancyGrid, footprints: Iterable[Footprint], margin: float = ROBOT_MARGIN, *,
-                threshold: int = 50) -> int:
+def robot_cells(
+    grid: OccupancyGrid, footprints: Iterable[Footprint], margin: float = ROBOT_MARGIN, *, threshold: int = 50
+) -> int:
     """How many cells under the robots ``grid`` holds as occupied (>= ``threshold`` percent, unknown aside)."""
     cells = grid.cells[footprint_mask(grid, footprints, margin)]
     return int(((cells >= threshold) & (cells != OccupancyGrid.UNKNOWN)).sum())

@@ -64,8 +64,15 @@ class ScanMapping:
         self._sensor_offset = sensor_offset
         self._radius = radius
         self.counters = counters
-        for name in ("scans", "scans_ignored", "scans_without_pose", "scans_held", "scans_out_of_step",
-                     "scans_waiting_for_sensor", "scans_rejected"):
+        for name in (
+            "scans",
+            "scans_ignored",
+            "scans_without_pose",
+            "scans_held",
+            "scans_out_of_step",
+            "scans_waiting_for_sensor",
+            "scans_rejected",
+        ):
             counters.setdefault(name, 0)
         self._lock = threading.Lock()
         self._clock = clock
@@ -108,7 +115,11 @@ class ScanMapping:
             folded = 0
             while held:
                 since, scan = held[0]
-                pose = None if latest is None or scan.header.stamp > latest.header.stamp else self.poses.known_at(robot, scan.header.stamp)
+                pose = (
+                    None
+                    if latest is None or scan.header.stamp > latest.header.stamp
+                    else self.poses.known_at(robot, scan.header.stamp)
+                )
                 if pose is None and now - since <= HOLD_SECONDS:
                     break  # still ahead of the poses (they come in order: so are the scans after it)
                 held.popleft()
@@ -136,8 +147,13 @@ class ScanMapping:
             self.counters["scans_waiting_for_sensor"] += 1  # the sensor's mounting is being looked up
             return False
         try:
-            self.mapper.integrate_scan(scan, pose, sensor_offset=offset, footprint=self._radius(robot),
-                                       robots=self.footprints(robot, scan.header, pose, reach=scan.range_max))
+            self.mapper.integrate_scan(
+                scan,
+                pose,
+                sensor_offset=offset,
+                footprint=self._radius(robot),
+                robots=self.footprints(robot, scan.header, pose, reach=scan.range_max),
+            )
         except NavigationError as exc:
             self.counters["scans_rejected"] += 1
             verdict = self._reports.check("scan_rejected", self._clock())  # one fixed key: robot ids come from the wire

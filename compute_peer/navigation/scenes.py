@@ -68,7 +68,12 @@ class Scene:
 
 def room(size: float = 20.0, wall: float = 0.2) -> list[Box]:
     """The four walls of a square room from (0, 0) to (size, size)."""
-    return [(0.0, 0.0, size, wall), (0.0, size - wall, size, size), (0.0, 0.0, wall, size), (size - wall, 0.0, size, size)]
+    return [
+        (0.0, 0.0, size, wall),
+        (0.0, size - wall, size, size),
+        (0.0, 0.0, wall, size),
+        (size - wall, 0.0, size, size),
+    ]
 
 
 def office(size: float = 20.0) -> Scene:

@@ -121,21 +121,35 @@ class NavigationService:
         }
         self.poses = PoseHistory(POSE_HISTORY)
         self.descriptions = RobotDescriptions(
-            fabric, followed=self.poses.robots, sensor_offset=sensor_offset, sensor_offsets=sensor_offsets,
-            discover=discover, clock=clock,
+            fabric,
+            followed=self.poses.robots,
+            sensor_offset=sensor_offset,
+            sensor_offsets=sensor_offsets,
+            discover=discover,
+            clock=clock,
         )
         vehicle_radius = self.settings.vehicle.robot_radius
         self.scans = ScanMapping(
-            self.poses, sensor_offset=self.descriptions.sensor_offset,
+            self.poses,
+            sensor_offset=self.descriptions.sensor_offset,
             radius=lambda robot: self.descriptions.radius(robot, vehicle_radius),
-            counters=self.counters, config=mapper_config, on=mapping,
+            counters=self.counters,
+            config=mapper_config,
+            on=mapping,
         )
         self.store = MapStore(maps_dir)
         self.map_service = MapService(fabric, self.store, self.scans, map_name=self.map_name)
         which = "configured for this peer" if self.robots is not None else "seen on this world (no pose received)"
         self.plan_service = PlanService(
-            fabric, self.map_service, self.poses, self.descriptions, known=self._known, unknown_reason=which,
-            settings=self.settings, goal_object=self.goal_object, counters=self.counters,
+            fabric,
+            self.map_service,
+            self.poses,
+            self.descriptions,
+            known=self._known,
+            unknown_reason=which,
+            settings=self.settings,
+            goal_object=self.goal_object,
+            counters=self.counters,
         )
         self._lock = threading.Lock()  # new robots: the check and the first pose together
         self._closed = False
@@ -150,19 +164,29 @@ class NavigationService:
         if self.robots is None:
             # poses and scans only: a class's arms publish joints and flange poses at 100 Hz each, which this
             # service never uses (robot/** made a compute peer decode the whole world, 0.3 cores for 32 robots)
-            self._resources.append(f.subscribe(keys.robot_stream_all(self.world, "pose"), self._on_robot, expected=Pose))
-            self._resources.append(f.subscribe(keys.robot_stream_all(self.world, "scan"), self._on_robot, expected=Scan))
+            self._resources.append(
+                f.subscribe(keys.robot_stream_all(self.world, "pose"), self._on_robot, expected=Pose)
+            )
+            self._resources.append(
+                f.subscribe(keys.robot_stream_all(self.world, "scan"), self._on_robot, expected=Scan)
+            )
         else:
             for r in self.robots:
                 self._resources.append(f.subscribe(keys.robot_pose(self.world, r), self._on_robot, expected=Pose))
                 self._resources.append(f.subscribe(keys.robot_scan(self.world, r), self._on_robot, expected=Scan))
-        self._resources.append(f.subscribe(keys.object_pose_all(self.world, self.goal_object), self._on_goal, expected=Pose, history=True))
+        self._resources.append(
+            f.subscribe(keys.object_pose_all(self.world, self.goal_object), self._on_goal, expected=Pose, history=True)
+        )
         # srv/{map,plan}/{name}: the nearest compute peer; srv/{map,plan}/{name}/{peer_id}: this one (docs/compute.md)
         # and each with .../by/{user}: a user asking in her own name (keys.srv_asked)
         for peer in (None, f.peer_id):
             for service, handler, expected in (("map", self._on_map, MapRequest), ("plan", self._on_plan, PlanRequest)):
-                self._resources.append(f.rpc.serve(keys.srv_per_subject(self.world, service, peer), handler, expected=expected))
-                self._resources.append(f.rpc.serve(keys.srv_asked_all(self.world, service, peer), handler, expected=expected))
+                self._resources.append(
+                    f.rpc.serve(keys.srv_per_subject(self.world, service, peer), handler, expected=expected)
+                )
+                self._resources.append(
+                    f.rpc.serve(keys.srv_asked_all(self.world, service, peer), handler, expected=expected)
+                )
 
     def __enter__(self) -> "NavigationService":
         return self
@@ -255,8 +279,11 @@ class NavigationService:
         if asker and req.action in STAFF_MAP_ACTIONS:
             self.counters["refusals"] += 1
             self.counters["refused_staff_only"] += 1
-            raise ServiceError(f"map {req.action!r} changes the map everyone plans on: an instructor's, not {asker}'s "
-                               f"(start, status, build and get are open)", key=key)
+            raise ServiceError(
+                f"map {req.action!r} changes the map everyone plans on: an instructor's, not {asker}'s "
+                f"(start, status, build and get are open)",
+                key=key,
+            )
         try:
             return self.map_service.handle(req, user=asker)
         except MapLimit as exc:

@@ -16,8 +16,17 @@ import numpy as np
 if TYPE_CHECKING:
     from fabric.codec.fields import Spec
 
-__all__ = ["Message", "register", "registered", "class_named", "name_of", "ensure_core", "load_plugins", "to_plain", "messages_equal"]
-
+__all__ = [
+    "Message",
+    "register",
+    "registered",
+    "class_named",
+    "name_of",
+    "ensure_core",
+    "load_plugins",
+    "to_plain",
+    "messages_equal",
+]
 
 
 class Message(Protocol):

@@ -22,7 +22,17 @@ import numpy as np
 from fabric.codec.registry import Message, class_named, ensure_core, name_of
 from fabric.limits import quote
 
-__all__ = ["DecodeError", "encode", "decode", "to_list", "from_list", "array_ext", "EXT_NDARRAY", "MAX_ARRAY_BYTES", "MAX_DIMS"]
+__all__ = [
+    "DecodeError",
+    "encode",
+    "decode",
+    "to_list",
+    "from_list",
+    "array_ext",
+    "EXT_NDARRAY",
+    "MAX_ARRAY_BYTES",
+    "MAX_DIMS",
+]
 
 EXT_NDARRAY = 1
 MAX_ARRAY_BYTES = 16 * 1024 * 1024

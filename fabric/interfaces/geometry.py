@@ -37,7 +37,9 @@ def wrap_angle(a: Any, *, include_pi: bool = False) -> Any:
         elif a <= -math.pi:
             a += TWO_PI
         return a
-    return (np.asarray(a) + math.pi) % TWO_PI - math.pi if isinstance(a, np.ndarray) else (a + math.pi) % TWO_PI - math.pi
+    return (
+        (np.asarray(a) + math.pi) % TWO_PI - math.pi if isinstance(a, np.ndarray) else (a + math.pi) % TWO_PI - math.pi
+    )
 
 
 def yaw_from_quaternion(q: Any) -> float:

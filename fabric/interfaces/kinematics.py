@@ -82,7 +82,11 @@ class IKRequest:
 
     @classmethod
     def make(
-        cls, position: Sequence[float], quaternion: Sequence[float] | None = None, seed: Sequence[float] | None = None, **kw: Any
+        cls,
+        position: Sequence[float],
+        quaternion: Sequence[float] | None = None,
+        seed: Sequence[float] | None = None,
+        **kw: Any,
     ) -> "IKRequest":
         """Build from plain sequences (None for absent), as the user API holds them."""
         return cls(vector(position), vector(quaternion), vector(seed), **kw)

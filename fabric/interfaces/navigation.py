@@ -17,11 +17,21 @@ from fabric.codec import Arr, F, I, Msg, S, Spec, register
 from fabric.interfaces._arrays import vector
 from fabric.interfaces.std import HEADER, Header, OccupancyGrid, Path, new_header
 
-__all__ = ["PlanRequest", "PlanReply", "MapRequest", "MapReply", "MAP_ACTIONS", "PLANNER_NAMES", "DIRECTIONS", "empty_grid"]
+__all__ = [
+    "PlanRequest",
+    "PlanReply",
+    "MapRequest",
+    "MapReply",
+    "MAP_ACTIONS",
+    "PLANNER_NAMES",
+    "DIRECTIONS",
+    "empty_grid",
+]
 
 PLANNER_NAMES = ("hybrid_astar", "ompl", "ompl:rrtstar", "ompl:bitstar")
 DIRECTIONS = ("default", "forward", "both")
 MAP_ACTIONS = ("start", "stop", "build", "get", "reset", "save", "load", "set", "status")
+
 
 def empty_grid() -> OccupancyGrid:
     """The "no grid" value of MapRequest.grid / MapReply.grid: zero cells."""

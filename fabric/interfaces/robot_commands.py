@@ -27,7 +27,11 @@ class JointTarget:
     speed_scale: float = 1.0
     header: Header = field(default_factory=new_header)
 
-    SPEC: ClassVar[Spec] = {"q": Arr(np.float64, ndim=1, max_elems=MAX_JOINTS), "speed_scale": F(lo=1e-6, hi=1.0), "header": HEADER}
+    SPEC: ClassVar[Spec] = {
+        "q": Arr(np.float64, ndim=1, max_elems=MAX_JOINTS),
+        "speed_scale": F(lo=1e-6, hi=1.0),
+        "header": HEADER,
+    }
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "q", frozen(self.q, np.float64))

@@ -20,8 +20,17 @@ from fabric.codec import Arr, F, I, Msg, S, Strs, Spec, register
 from fabric.interfaces._arrays import frozen
 
 __all__ = [
-    "MAX_JOINTS", "MAX_RAYS", "MAX_PATH_POINTS", "MAX_GRID_CELLS",
-    "Header", "JointState", "Pose", "Scan", "Path", "OccupancyGrid", "HEADER",
+    "MAX_JOINTS",
+    "MAX_RAYS",
+    "MAX_PATH_POINTS",
+    "MAX_GRID_CELLS",
+    "Header",
+    "JointState",
+    "Pose",
+    "Scan",
+    "Path",
+    "OccupancyGrid",
+    "HEADER",
 ]
 
 MAX_JOINTS = 256
@@ -188,7 +197,9 @@ class Path:
 
     def check(self) -> None:
         if not (self.x.shape == self.y.shape == self.theta.shape):
-            raise ValueError(f"Path arrays differ in length: x {self.x.shape}, y {self.y.shape}, theta {self.theta.shape}")
+            raise ValueError(
+                f"Path arrays differ in length: x {self.x.shape}, y {self.y.shape}, theta {self.theta.shape}"
+            )
 
     def __len__(self) -> int:
         return int(self.x.shape[0])

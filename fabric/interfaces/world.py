@@ -145,6 +145,7 @@ class WorldInfo:
 
 # ---------------------------------------------------------------------- replicated authority
 
+
 @dataclass(frozen=True, slots=True)
 class RobotState:
     """One robot's controller state. Arm: ``q``/``dq``/``target`` are joints. Base: ``q`` is (x, y, yaw),

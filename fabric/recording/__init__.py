@@ -19,7 +19,15 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from fabric.recording.format import LIVELINESS_SCHEMA, MESSAGE_ENCODING, RAW_SCHEMA, Peek, peek, remap_world, world_of
+    from fabric.recording.format import (
+        LIVELINESS_SCHEMA,
+        MESSAGE_ENCODING,
+        RAW_SCHEMA,
+        Peek,
+        peek,
+        remap_world,
+        world_of,
+    )
     from fabric.recording.recorder import Recorder, RecorderStats
     from fabric.recording.sink import McapSink
 

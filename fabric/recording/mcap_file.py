@@ -17,7 +17,9 @@ from mcap.writer import CompressionType, Writer
 __all__ = ["McapFile", "mcap_writer"]
 
 
-def mcap_writer(profile: str, *, compression: CompressionType = CompressionType.ZSTD, **options: Any) -> Callable[[BinaryIO], Writer]:
+def mcap_writer(
+    profile: str, *, compression: CompressionType = CompressionType.ZSTD, **options: Any
+) -> Callable[[BinaryIO], Writer]:
     """A ``make_writer`` for :class:`McapFile`: mcap's own writer, started with ``profile`` (``options``:
     ``chunk_size`` and the rest of :class:`mcap.writer.Writer`'s)."""
 

@@ -161,8 +161,9 @@ class Recorder:
             zenoh.KeyExpr(e)  # raises on an invalid expression before anything is opened
         self.keyexprs = tuple(exprs)
         self.liveliness = liveliness
-        self._open_sink = functools.partial(McapSink, compression=compression, chunk_size=chunk_size,
-                                            flush_interval=flush_interval)
+        self._open_sink = functools.partial(
+            McapSink, compression=compression, chunk_size=chunk_size, flush_interval=flush_interval
+        )
         self._metadata = {
             "world": fabric.world,
             "keyexprs": ",".join(self.keyexprs),
@@ -250,7 +251,9 @@ class Recorder:
         return RecorderStats(
             messages=self._written,
             payload_bytes=sink.payload_bytes if sink else 0,
-            file_bytes=sink.file_bytes if sink and not self._stopped else (self.path.stat().st_size if self.path.exists() else 0),
+            file_bytes=sink.file_bytes
+            if sink and not self._stopped
+            else (self.path.stat().st_size if self.path.exists() else 0),
             keys=len(self._keys),
             elapsed_s=(end - self._t0) if self._started else 0.0,
             queued=max(0, self._queued - self._written),
@@ -395,7 +398,11 @@ class Recorder:
         key, payload, t_ns, schema = item
         with self._lock:
             self._queued_bytes -= len(payload)
-            if self.quota_bytes is not None and not self._quota_reached and sink.payload_bytes + len(payload) > self.quota_bytes:
+            if (
+                self.quota_bytes is not None
+                and not self._quota_reached
+                and sink.payload_bytes + len(payload) > self.quota_bytes
+            ):
                 self._quota_reached = True
             if self._quota_reached:
                 self._dropped += 1

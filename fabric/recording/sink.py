@@ -55,7 +55,9 @@ class McapSink(McapFile):
     ) -> None:
         if compression not in COMPRESSIONS:
             raise ValueError(f"unknown compression {compression!r}; expected one of {', '.join(COMPRESSIONS)}")
-        super().__init__(path, mcap_writer(PROFILE, compression=COMPRESSIONS[compression], chunk_size=chunk_size), fsync=fsync)
+        super().__init__(
+            path, mcap_writer(PROFILE, compression=COMPRESSIONS[compression], chunk_size=chunk_size), fsync=fsync
+        )
         self.flush_interval = float(flush_interval)
         if metadata:
             self.writer.add_metadata(METADATA_NAME, {str(k): str(v) for k, v in metadata.items()})
@@ -96,7 +98,9 @@ class McapSink(McapFile):
         if (p.term or self.fences) and not self._believe(key, p.term, p.source):
             self.stale += 1
             return STALE
-        self.write_with(key, p.schema, payload, log_time_ns, p.wall_ns if p.wall_ns is not None else log_time_ns, p.seq or 0)
+        self.write_with(
+            key, p.schema, payload, log_time_ns, p.wall_ns if p.wall_ns is not None else log_time_ns, p.seq or 0
+        )
         return p.schema
 
     def _believe(self, key: str, term: int, source: str) -> bool:
@@ -131,9 +135,15 @@ class McapSink(McapFile):
         """How often a world's fence was reset (its last sim left)."""
         return sum(f.resets for f in self.fences.values())
 
-    def write_with(self, key: str, schema: str, payload: bytes, log_time_ns: int, publish_time_ns: int, seq: int = 0) -> None:
+    def write_with(
+        self, key: str, schema: str, payload: bytes, log_time_ns: int, publish_time_ns: int, seq: int = 0
+    ) -> None:
         self.writer.add_message(
-            self.channel(key, schema), log_time=log_time_ns, data=payload, publish_time=publish_time_ns, sequence=seq & 0xFFFFFFFF
+            self.channel(key, schema),
+            log_time=log_time_ns,
+            data=payload,
+            publish_time=publish_time_ns,
+            sequence=seq & 0xFFFFFFFF,
         )
         self.messages += 1
         self.payload_bytes += len(payload)

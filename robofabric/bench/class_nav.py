@@ -66,7 +66,11 @@ def goal_of(index: int, start: tuple[float, float, float], n: int) -> tuple[floa
     (:func:`placements`)."""
     south = n > 4 and index % 2 == 1
     x0 = start[0]
-    side = [placements(n)[i][0] for i in range(n) if (n > 4 and i % 2 == 1) == south and (placements(n)[i][0] < 0) == (x0 < 0)]
+    side = [
+        placements(n)[i][0]
+        for i in range(n)
+        if (n > 4 and i % 2 == 1) == south and (placements(n)[i][0] < 0) == (x0 < 0)
+    ]
     if len(side) > 1:
         slot = SLOTS[1] if abs(x0) == max(abs(v) for v in side) else SLOTS[0]
     else:
@@ -77,10 +81,15 @@ def goal_of(index: int, start: tuple[float, float, float], n: int) -> tuple[floa
 
 # ---------------------------------------------------------------------- a student (child process)
 
+
 def _at(p: Any, goal: tuple[float, float, float]) -> bool:
     """Her base stands within 0.1 m of its goal, stopped."""
-    return p is not None and math.hypot(p.position[0] - goal[0], p.position[1] - goal[1]) < REACHED \
-        and math.hypot(p.linear[0], p.linear[1]) < 0.02 and abs(p.angular[2]) < 0.05
+    return (
+        p is not None
+        and math.hypot(p.position[0] - goal[0], p.position[1] - goal[1]) < REACHED
+        and math.hypot(p.linear[0], p.linear[1]) < 0.02
+        and abs(p.angular[2]) < 0.05
+    )
 
 
 def _stopped(events: list[Any], robot: str) -> str:
@@ -116,13 +125,26 @@ def student(world: str, endpoint: str, index: int, n: int, out: str, reverse_whe
 
     start = placements(n)[index]
     goal = goal_of(index, start, n)
-    res: dict[str, Any] = {"index": index, "plans": [], "reached": False, "final": None, "stops": 0, "collisions": 0,
-                           "blocked": 0, "robot_cells": None, "errors": [], "notes": []}
+    res: dict[str, Any] = {
+        "index": index,
+        "plans": [],
+        "reached": False,
+        "final": None,
+        "stops": 0,
+        "collisions": 0,
+        "blocked": 0,
+        "robot_cells": None,
+        "errors": [],
+        "notes": [],
+    }
     try:
         with connect(world, endpoint, user=f"s{index:02d}", timeout=10.0, join_timeout=120.0) as w:
             poses: dict[str, Any] = {}
-            w.fabric.subscribe(keys.robot_stream_all(w.name, "pose"), lambda k, m: poses.__setitem__(keys.parse(k).subject, m),
-                               expected=Pose)
+            w.fabric.subscribe(
+                keys.robot_stream_all(w.name, "pose"),
+                lambda k, m: poses.__setitem__(keys.parse(k).subject, m),
+                expected=Pose,
+            )
             base = w.robot(f"base{index}")
             base.request(timeout=30.0)
             until = time.monotonic() + 30.0
@@ -151,8 +173,11 @@ def student(world: str, endpoint: str, index: int, n: int, out: str, reverse_whe
                 res["robot_cells"] = max(cells, res["robot_cells"] or 0)
                 res["robots_seen"] = len(at_build)
                 res["builds"] = res.get("builds", 0) + 1
-                res["map"] = {"resolution": float(built.resolution), "origin": [float(v) for v in built.origin[:2]],
-                              "shape": list(built.cells.shape)}
+                res["map"] = {
+                    "resolution": float(built.resolution),
+                    "origin": [float(v) for v in built.origin[:2]],
+                    "shape": list(built.cells.shape),
+                }
                 np.save(Path(out).with_suffix(".map.npy"), np.asarray(built.cells))  # beside her results, to look at
 
             look_around()
@@ -169,7 +194,9 @@ def student(world: str, endpoint: str, index: int, n: int, out: str, reverse_whe
                         direction = "both"
                         res["notes"].append(f"base{index}: planning again with reversing allowed")
                     elif "cannot drive away" in str(exc) or "unknown space" in str(exc):
-                        res["notes"].append(f"base{index}: her map holds no way out: looking around and building it again")
+                        res["notes"].append(
+                            f"base{index}: her map holds no way out: looking around and building it again"
+                        )
                         look_around()  # what she sees in the console: her map has walls or unknown all around her
                     time.sleep(2.0)
                     continue
@@ -190,7 +217,9 @@ def student(world: str, endpoint: str, index: int, n: int, out: str, reverse_whe
                 res["blocked"] += outcome == "blocked"
                 if not outcome:
                     break  # out of time
-                time.sleep(1.0)  # she reads what it said (and its pose catches up), then plans again from where it stands
+                time.sleep(
+                    1.0
+                )  # she reads what it said (and its pose catches up), then plans again from where it stands
                 if _at(base.pose, goal):
                     break
             p = base.pose
@@ -199,8 +228,11 @@ def student(world: str, endpoint: str, index: int, n: int, out: str, reverse_whe
                 res["final"], res["reached"] = d, d < REACHED
             mine = [e for e in w.events[mark:] if e.object == base.id]
             res["stops"] = sum(e.kind == EventKind.OBSTACLE_STOP and e.reason == "waiting" for e in mine)
-            res["said"] = [f"{base.id} {e.reason}: {e.data.get('detail', '')}"[:200]
-                           for e in mine if e.kind in (EventKind.OBSTACLE_STOP, EventKind.COLLISION)][:8]
+            res["said"] = [
+                f"{base.id} {e.reason}: {e.data.get('detail', '')}"[:200]
+                for e in mine
+                if e.kind in (EventKind.OBSTACLE_STOP, EventKind.COLLISION)
+            ][:8]
             res["collisions"] = sum(e.kind == EventKind.COLLISION for e in mine)
             base.stop()
     except Exception as exc:
@@ -209,6 +241,7 @@ def student(world: str, endpoint: str, index: int, n: int, out: str, reverse_whe
 
 
 # ---------------------------------------------------------------------- one class
+
 
 def run_one(n: int, tmp: Path, reverse_when_asked: bool = True) -> dict[str, Any]:
     """A class of ``n`` students on a fresh world; the row's figures."""
@@ -223,22 +256,58 @@ def run_one(n: int, tmp: Path, reverse_when_asked: bool = True) -> dict[str, Any
     logs.mkdir(parents=True, exist_ok=True)
     with ProcessGroup(logs) as procs:
         router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
-        robots = [x for i, (px, py, yaw) in enumerate(placements(n))
-                  for x in ("--robot", f"reeman:base{i}@{px:g},{py:g},{math.degrees(yaw):g}")]
-        sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *robots, "--world", world,
-                                         "--connect", ep, "--id", "sim"), name="sim")
-        compute = procs.start(robofabric_cmd("compute", "--world", world, "--connect", ep, "--id", "compute"), name="compute")
+        wait_until(
+            lambda: "listening" in procs.output(router),
+            timeout=60,
+            what="the router",
+            seen=lambda: procs.output(router),
+        )
+        robots = [
+            x
+            for i, (px, py, yaw) in enumerate(placements(n))
+            for x in ("--robot", f"reeman:base{i}@{px:g},{py:g},{math.degrees(yaw):g}")
+        ]
+        sim = procs.start(
+            robofabric_cmd(
+                "sim",
+                "--scene",
+                "warehouse",
+                "--no-scene-robots",
+                *robots,
+                "--world",
+                world,
+                "--connect",
+                ep,
+                "--id",
+                "sim",
+            ),
+            name="sim",
+        )
+        compute = procs.start(
+            robofabric_cmd("compute", "--world", world, "--connect", ep, "--id", "compute"), name="compute"
+        )
         with client(world, port, kind="tool", peer_id="probe") as fab:
             seen: set[str] = set()
-            fab.subscribe(keys.robot_stream_all(world, "pose"), lambda k, m: seen.add(keys.parse(k).subject), expected=Pose)
-            wait_until(lambda: len(seen) >= n, timeout=180, what="every base's pose", seen=lambda: procs.output(sim)[-1500:])
+            fab.subscribe(
+                keys.robot_stream_all(world, "pose"), lambda k, m: seen.add(keys.parse(k).subject), expected=Pose
+            )
+            wait_until(
+                lambda: len(seen) >= n, timeout=180, what="every base's pose", seen=lambda: procs.output(sim)[-1500:]
+            )
             outs = [logs / f"s{i}.json" for i in range(n)]
             t0 = time.monotonic()
             policy = "reverse-when-asked" if reverse_when_asked else "forward-only"
-            students = [procs.start([*STUDENT, world, ep, str(i), str(n), str(out), policy], name=f"s{i}") for i, out in enumerate(outs)]
-            wait_until(lambda: all(p.poll() is not None for p in students), timeout=400, interval=0.5, what="every student done",
-                       seen=lambda: [procs.output(p)[-300:] for p in students if p.poll() is None][:2])
+            students = [
+                procs.start([*STUDENT, world, ep, str(i), str(n), str(out), policy], name=f"s{i}")
+                for i, out in enumerate(outs)
+            ]
+            wait_until(
+                lambda: all(p.poll() is not None for p in students),
+                timeout=400,
+                interval=0.5,
+                what="every student done",
+                seen=lambda: [procs.output(p)[-300:] for p in students if p.poll() is None][:2],
+            )
             seconds = time.monotonic() - t0
         for p in (compute, sim, router):
             end_process(p)
@@ -246,8 +315,17 @@ def run_one(n: int, tmp: Path, reverse_when_asked: bool = True) -> dict[str, Any
     return summary(n, results, seconds)
 
 
-NO_RESULT: dict[str, Any] = {"plans": [], "reached": False, "stops": 0, "collisions": 0, "blocked": 0, "robot_cells": None,
-                             "errors": ["no result"], "final": None, "notes": []}
+NO_RESULT: dict[str, Any] = {
+    "plans": [],
+    "reached": False,
+    "stops": 0,
+    "collisions": 0,
+    "blocked": 0,
+    "robot_cells": None,
+    "errors": ["no result"],
+    "final": None,
+    "notes": [],
+}
 """What a student who wrote nothing counts for: not reached, her map's cells unknown."""
 
 
@@ -256,11 +334,19 @@ def summary(n: int, results: list[dict[str, Any]], seconds: float) -> dict[str, 
     plans = [t for r in results for t in r["plans"]]
     cells = [r["robot_cells"] for r in results]
     return {
-        "n": n, "reached": sum(bool(r["reached"]) for r in results), "plans": len(plans),
-        "plan_p50": pct(plans, 50), "plan_p99": pct(plans, 99), "stops": sum(r["stops"] for r in results),
-        "blocked": sum(r["blocked"] for r in results), "collisions": sum(r["collisions"] for r in results),
-        "cells": cells, "finals": [r["final"] for r in results], "seconds": seconds,
-        "errors": [e for r in results for e in r["errors"]][:6], "notes": [x for r in results for x in r["notes"]][:4],
+        "n": n,
+        "reached": sum(bool(r["reached"]) for r in results),
+        "plans": len(plans),
+        "plan_p50": pct(plans, 50),
+        "plan_p99": pct(plans, 99),
+        "stops": sum(r["stops"] for r in results),
+        "blocked": sum(r["blocked"] for r in results),
+        "collisions": sum(r["collisions"] for r in results),
+        "cells": cells,
+        "finals": [r["final"] for r in results],
+        "seconds": seconds,
+        "errors": [e for r in results for e in r["errors"]][:6],
+        "notes": [x for r in results for x in r["notes"]][:4],
         "said": [x for r in results for x in r.get("said", ())],
     }
 
@@ -279,25 +365,37 @@ def verdict(r: dict[str, Any]) -> str:
 
 
 def header() -> list[str]:
-    return ["| bases | reached within 0.1 m | plans, time p50 / p99 (s) | stops for something in the way | blocked "
-            "| collisions (bumper) | robot cells in each map | final distance to goal (m) | wall time (s) |",
-            "|---|---|---|---|---|---|---|---|---|"]
+    return [
+        "| bases | reached within 0.1 m | plans, time p50 / p99 (s) | stops for something in the way | blocked "
+        "| collisions (bumper) | robot cells in each map | final distance to goal (m) | wall time (s) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
 
 
 def row(r: dict[str, Any]) -> str:
     finals = ", ".join("-" if f is None else f"{f:.3f}" for f in r["finals"])
     cells = ", ".join("-" if c is None else str(c) for c in r["cells"])
-    return (f"| {r['n']} | {r['reached']}/{r['n']} | {r['plans']}, {r['plan_p50']:.2f} / {r['plan_p99']:.2f} | {r['stops']} | "
-            f"{r['blocked']} | {r['collisions']} | {cells} | {finals} | {r['seconds']:.0f} |")
+    return (
+        f"| {r['n']} | {r['reached']}/{r['n']} | {r['plans']}, {r['plan_p50']:.2f} / {r['plan_p99']:.2f} | {r['stops']} | "
+        f"{r['blocked']} | {r['collisions']} | {cells} | {finals} | {r['seconds']:.0f} |"
+    )
 
 
 def command(
-    bases: Annotated[str, typer.Option("--bases", help="Comma-separated class sizes (each student: one base).")] = "4,8",
+    bases: Annotated[
+        str, typer.Option("--bases", help="Comma-separated class sizes (each student: one base).")
+    ] = "4,8",
     out: TableOut = None,
-    logs: Annotated[Optional[Path], typer.Option(help="Keep every process's output and the students' JSON here.")] = None,
-    reverse_when_asked: Annotated[bool, typer.Option(
-        help="A student whose plan is refused with 'allow reversing?' plans again with reversing allowed, as the "
-             "console's reverse box lets her; --no-reverse-when-asked keeps her forwards only.")] = True,
+    logs: Annotated[
+        Optional[Path], typer.Option(help="Keep every process's output and the students' JSON here.")
+    ] = None,
+    reverse_when_asked: Annotated[
+        bool,
+        typer.Option(
+            help="A student whose plan is refused with 'allow reversing?' plans again with reversing allowed, as the "
+            "console's reverse box lets her; --no-reverse-when-asked keeps her forwards only."
+        ),
+    ] = True,
 ) -> None:
     """N students (processes) do Test B at once in the warehouse: reached within 0.1 m, plan time p50/p99, stops for
     something in the way, collisions, and the robot cells left in each student's map."""
@@ -310,8 +408,12 @@ def command(
     if not sizes or min(sizes) < 1 or max(sizes) > 8:
         raise UserError("--bases: each size within 1..8 (a row across the warehouse holds 8)")
     flag = "" if reverse_when_asked else " --no-reverse-when-asked"
-    lines = [f"Command: `robofabric bench class-nav --bases {bases}{flag}`",
-             f"Machine: {machine()}; load average at start {os.getloadavg()[0]:.1f}", "", *header()]
+    lines = [
+        f"Command: `robofabric bench class-nav --bases {bases}{flag}`",
+        f"Machine: {machine()}; load average at start {os.getloadavg()[0]:.1f}",
+        "",
+        *header(),
+    ]
     print("\n".join(lines), flush=True)
     verdicts: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -332,7 +434,9 @@ def _main(argv: list[str]) -> None:
     if argv and argv[0] == "student":
         student(argv[1], argv[2], int(argv[3]), int(argv[4]), argv[5], argv[6:7] != ["forward-only"])
     else:
-        raise SystemExit("usage: python -m robofabric.bench.class_nav student WORLD ENDPOINT INDEX N OUT.json [reverse-when-asked|forward-only]")
+        raise SystemExit(
+            "usage: python -m robofabric.bench.class_nav student WORLD ENDPOINT INDEX N OUT.json [reverse-when-asked|forward-only]"
+        )
 
 
 if __name__ == "__main__":

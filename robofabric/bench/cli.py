@@ -53,7 +53,9 @@ def build_app() -> typer.Typer:
     """A ``bench`` group with every registered benchmark (loaded when named), ``list`` and ``all``."""
     app = typer.Typer(help=HELP, no_args_is_help=True, cls=_LazyBenchGroup)
     app.command("list", short_help="The registered benchmarks and the command lines of docs/benchmarks.md.")(list_cmd)
-    app.command("all", short_help="Run every benchmark (or --only some), one process each, tables in one file.")(all_cmd)
+    app.command("all", short_help="Run every benchmark (or --only some), one process each, tables in one file.")(
+        all_cmd
+    )
     return app
 
 
@@ -63,14 +65,31 @@ def register(app: typer.Typer) -> None:
 
 
 def list_cmd(
-    quick: Annotated[bool, typer.Option("--quick", help="Show the smoke-sized arguments instead of the documented ones.")] = False,
-    as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"benchmarks": [{name, measures, needs, argv}]} (argv: the command line after robofabric).')] = False,
+    quick: Annotated[
+        bool, typer.Option("--quick", help="Show the smoke-sized arguments instead of the documented ones.")
+    ] = False,
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help='One JSON document: {"benchmarks": [{name, measures, needs, argv}]} (argv: the command line after robofabric).',
+        ),
+    ] = False,
 ) -> None:
     """The registered benchmarks: name, what it measures, and the command line of its figures (or its quick run)."""
     if as_json:
         import json
 
-        print(json.dumps({"benchmarks": [{"name": b.name, "measures": b.measures, "needs": b.needs, "argv": b.argv(quick=quick)} for b in BENCHMARKS]}))
+        print(
+            json.dumps(
+                {
+                    "benchmarks": [
+                        {"name": b.name, "measures": b.measures, "needs": b.needs, "argv": b.argv(quick=quick)}
+                        for b in BENCHMARKS
+                    ]
+                }
+            )
+        )
         return
     width = max(len(n) for n in names())
     for b in BENCHMARKS:
@@ -128,14 +147,20 @@ def _header() -> str:
     from robofabric.bench.common import machine
 
     try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=10).stdout.strip()
+        rev = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=10
+        ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         rev = ""
-    return (f"# robofabric benchmarks, {time.strftime('%Y-%m-%dT%H:%MZ', time.gmtime())}\n\n"
-            f"Machine: {machine()}; git {rev or '?'}\n")
+    return (
+        f"# robofabric benchmarks, {time.strftime('%Y-%m-%dT%H:%MZ', time.gmtime())}\n\n"
+        f"Machine: {machine()}; git {rev or '?'}\n"
+    )
 
 
-def run_all(selected: list[Benchmark], *, quick: bool, out: Path, progress: Callable[[str], None] = print) -> list[BenchOutcome]:
+def run_all(
+    selected: list[Benchmark], *, quick: bool, out: Path, progress: Callable[[str], None] = print
+) -> list[BenchOutcome]:
     """Run each benchmark in its own process (``python -m robofabric bench NAME ...``), one after the other,
     and write its table (from its ``--out`` file, else its output) under a heading in ``out``."""
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -172,10 +197,15 @@ def run_all(selected: list[Benchmark], *, quick: bool, out: Path, progress: Call
 
 
 def all_cmd(
-    quick: Annotated[bool, typer.Option("--quick", help="Smoke-sized runs (seconds to a minute each) instead of the documented ones.")] = False,
+    quick: Annotated[
+        bool,
+        typer.Option("--quick", help="Smoke-sized runs (seconds to a minute each) instead of the documented ones."),
+    ] = False,
     only: Annotated[str, typer.Option("--only", help="Comma-separated names to run (default: all).")] = "",
     skip: Annotated[str, typer.Option("--skip", help="Comma-separated names not to run.")] = "",
-    out: Annotated[Path, typer.Option("--out", help="The markdown file that collects the tables (replaced).")] = Path("out/bench/all.md"),
+    out: Annotated[Path, typer.Option("--out", help="The markdown file that collects the tables (replaced).")] = Path(
+        "out/bench/all.md"
+    ),
 ) -> None:
     """Run every registered benchmark with the arguments of docs/benchmarks.md, one process each, side by side on
     this machine, and collect the tables in one markdown file. Exit 1 if any failed; ones this machine cannot run
@@ -184,8 +214,11 @@ def all_cmd(
     outcomes = run_all(selected, quick=quick, out=out)
     print(f"\nwrote {out}")
     for o in outcomes:
-        state = f"skipped ({o.reason})" if o.returncode is None else ("ok" if o.returncode == 0 else f"FAILED (exit {o.returncode})")
+        state = (
+            f"skipped ({o.reason})"
+            if o.returncode is None
+            else ("ok" if o.returncode == 0 else f"FAILED (exit {o.returncode})")
+        )
         print(f"  {o.name:<10} {state:<40} {o.seconds:6.0f} s")
     if any(o.returncode not in (0, None) for o in outcomes):
         raise typer.Exit(1)
-

@@ -18,7 +18,19 @@ from typing import Annotated, Optional
 
 import typer
 
-__all__ = ["TableOut", "TablesOut", "append", "write", "pct", "cpus", "machine", "proc_cpu_s", "proc_rss_mb", "end_process", "end_processes"]
+__all__ = [
+    "TableOut",
+    "TablesOut",
+    "append",
+    "write",
+    "pct",
+    "cpus",
+    "machine",
+    "proc_cpu_s",
+    "proc_rss_mb",
+    "end_process",
+    "end_processes",
+]
 
 TableOut = Annotated[Optional[Path], typer.Option("--out", help="Append the markdown table to this file.")]
 """``--out FILE`` of a benchmark that prints one table: the one definition of the flag and its help."""

@@ -47,8 +47,10 @@ from robots.kinds import facts
 
 __all__ = ["command", "run_one"]
 
-LAG_JS = ("() => { const e = document.querySelector('.rf-base-state'); "
-          "return [Date.now(), e ? Number(e.dataset.poseWallMs || 0) : 0]; }")
+LAG_JS = (
+    "() => { const e = document.querySelector('.rf-base-state'); "
+    "return [Date.now(), e ? Number(e.dataset.poseWallMs || 0) : 0]; }"
+)
 REFUSED = ("NotOwner", "Rejected", "Timeout", "Unreachable", "Error")
 
 
@@ -100,7 +102,9 @@ def _joined_renderer(before: dict[str, float], after: dict[str, float], claimed:
     """The CPU seconds a page's join cost its renderer: of the renderers no earlier page holds, the one that
     worked most meanwhile (Chromium keeps a spare renderer ready, so a page's renderer may predate its join;
     the processes new since ``before`` alone read 0.0 s when the spare took the page). Claimed for that page."""
-    grew = {k: v - before.get(k, 0.0) for k, v in after.items() if k.startswith("renderer:") and k not in claimed and v == v}
+    grew = {
+        k: v - before.get(k, 0.0) for k, v in after.items() if k.startswith("renderer:") and k not in claimed and v == v
+    }
     if not grew:
         return float("nan")
     key = max(grew, key=lambda k: grew[k])
@@ -120,8 +124,10 @@ def _per_page(before: dict[str, float], after: dict[str, float], seconds: float,
 def _by_kind(before: dict[str, float], after: dict[str, float], seconds: float) -> str:
     """Cores by Chromium process kind between two :func:`chromium_cpu_s` readings: where the pages' cost goes."""
     kinds = sorted({k.split(":")[0] for k in after})
-    return ", ".join(f"{kind} {sum(v - before.get(k, 0.0) for k, v in after.items() if k.split(':')[0] == kind) / seconds:.2f}"
-                     for kind in kinds)
+    return ", ".join(
+        f"{kind} {sum(v - before.get(k, 0.0) for k, v in after.items() if k.split(':')[0] == kind) / seconds:.2f}"
+        for kind in kinds
+    )
 
 
 def _status(page: Any) -> str | None:
@@ -169,7 +175,9 @@ def _new_page(browser: Any, i: int, reloads: list[str]) -> Any:
     return page
 
 
-def _open_pages(browser: Any, url: str, n: int, reloads: list[str], *, together: bool) -> tuple[list, list[int], list[float], list[float]]:
+def _open_pages(
+    browser: Any, url: str, n: int, reloads: list[str], *, together: bool
+) -> tuple[list, list[int], list[float], list[float]]:
     """N pages logged in and driving: (pages, their bases, their join times, their joins' CPU seconds). One after
     another (each page's join timed and its new processes' CPU counted alone), or ``together``: every page asked
     for at once, as a class does when the teacher says go, then each logs in (a join's time counts from the
@@ -191,7 +199,11 @@ def _open_pages(browser: Any, url: str, n: int, reloads: list[str], *, together:
         try:
             steps = _join(page, url, i, loaded=together)
         except Exception as exc:  # a page that did not get in: counted, and the class goes on without it
-            print(f"  page {i}: did not join: {str(exc).splitlines()[0]} (its message line: {_status(page)!r})", file=sys.stderr, flush=True)
+            print(
+                f"  page {i}: did not join: {str(exc).splitlines()[0]} (its message line: {_status(page)!r})",
+                file=sys.stderr,
+                flush=True,
+            )
             page.context.close()
             continue
         pages.append(page)
@@ -199,9 +211,14 @@ def _open_pages(browser: Any, url: str, n: int, reloads: list[str], *, together:
         joined.append(time.monotonic() - t)
         if not together:
             join_cpu.append(_joined_renderer(cpu_before, chromium_cpu_s(os.getpid()), claimed))
-        print(f"  page {i}: joined in {joined[-1]:.1f} s (page {steps[0] - t:.1f}, login {steps[1] - steps[0]:.1f}, request "
-              f"{steps[2] - steps[1]:.1f}" + ("" if together else f"; its renderer's CPU {join_cpu[-1]:.1f} s")
-              + f"), load {os.getloadavg()[0]:.1f}", file=sys.stderr, flush=True)
+        print(
+            f"  page {i}: joined in {joined[-1]:.1f} s (page {steps[0] - t:.1f}, login {steps[1] - steps[0]:.1f}, request "
+            f"{steps[2] - steps[1]:.1f}"
+            + ("" if together else f"; its renderer's CPU {join_cpu[-1]:.1f} s")
+            + f"), load {os.getloadavg()[0]:.1f}",
+            file=sys.stderr,
+            flush=True,
+        )
     if together and pages:
         new = sum(v for k, v in chromium_cpu_s(os.getpid()).items() if k not in cpu_all and v == v)
         join_cpu = [new / len(pages)] * len(pages)
@@ -215,19 +232,48 @@ def browser_args(swiftshader: bool) -> list[str]:
     return list(CHROMIUM_ARGS) if swiftshader else [a for a in CHROMIUM_ARGS if "swiftshader" not in a]
 
 
-def _start_class(procs: Any, url: str, first: int, clients: int, seconds: float, arms: int = 0, targets: str = "",
-                 one_address: bool = False) -> Any:
+def _start_class(
+    procs: Any,
+    url: str,
+    first: int,
+    clients: int,
+    seconds: float,
+    arms: int = 0,
+    targets: str = "",
+    one_address: bool = False,
+) -> Any:
     """The emulated students (:mod:`robofabric.bench.console_client`, one process of their own so that their
     CPU is neither the server's nor the measuring pages'): ``c{first}``.. on ``base{first}``.., all in; each from
     her own loopback address, or all from 127.0.0.1 (``one_address``: a class behind one NAT)."""
     from robofabric.bench.console_client import JOIN_WAIT_S
     from robofabric.testing import wait_until
 
-    proc = procs.start([sys.executable, "-m", "robofabric.bench.console_client", url, "--first", str(first),
-                        "--count", str(clients), "--seconds", str(seconds), "--arms", str(arms), f"--targets={targets}"] + (["--one-address"] if one_address else []), name="clients")
+    proc = procs.start(
+        [
+            sys.executable,
+            "-m",
+            "robofabric.bench.console_client",
+            url,
+            "--first",
+            str(first),
+            "--count",
+            str(clients),
+            "--seconds",
+            str(seconds),
+            "--arms",
+            str(arms),
+            f"--targets={targets}",
+        ]
+        + (["--one-address"] if one_address else []),
+        name="clients",
+    )
     # each student gives up on her own (JOIN_WAIT_S a step, at most 10 steps with an arm): this is only a backstop
-    wait_until(lambda: f"of {clients} joined" in procs.output(proc) or proc.poll() is not None, timeout=60 + 10 * JOIN_WAIT_S,
-               what=f"{clients} emulated students in", seen=lambda: procs.output(proc)[-1500:])
+    wait_until(
+        lambda: f"of {clients} joined" in procs.output(proc) or proc.poll() is not None,
+        timeout=60 + 10 * JOIN_WAIT_S,
+        what=f"{clients} emulated students in",
+        seen=lambda: procs.output(proc)[-1500:],
+    )
     if proc.poll() is not None:
         raise RuntimeError(f"the emulated students' process ended with {proc.returncode}: {procs.output(proc)[-800:]}")
     line = procs.output(proc).split("clients: ", 1)[-1].split("\n", 1)[0]
@@ -274,12 +320,31 @@ def _end_class(procs: Any, proc: Any) -> dict[str, Any]:
     for ln in reversed(procs.output(proc).splitlines()):
         if ln.startswith("{"):
             return dict(json.loads(ln))
-    return {"clients": 0, "joined": 0, "join_s": [], "keys": 0, "back_at_login": 0, "disconnected": 0, "refused": 0,
-            "errors": [f"no report: {procs.output(proc)[-300:]}"]}
+    return {
+        "clients": 0,
+        "joined": 0,
+        "join_s": [],
+        "keys": 0,
+        "back_at_login": 0,
+        "disconnected": 0,
+        "refused": 0,
+        "errors": [f"no report: {procs.output(proc)[-300:]}"],
+    }
 
 
-def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, robots: int = 0, together: bool = False,
-            clients: int = 0, arms: int = 0, one_address: bool = False, no_3d: bool = False) -> dict[str, Any]:
+def run_one(
+    n: int,
+    seconds: float,
+    tmp: Path,
+    *,
+    swiftshader: bool = False,
+    robots: int = 0,
+    together: bool = False,
+    clients: int = 0,
+    arms: int = 0,
+    one_address: bool = False,
+    no_3d: bool = False,
+) -> dict[str, Any]:
     """N pages on one console (and ``clients`` emulated students beside them), in a world of
     ``max(n + clients, robots)`` bases; the row's figures."""
     from playwright.sync_api import sync_playwright
@@ -298,19 +363,53 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
     logs.mkdir(parents=True, exist_ok=True)
     with ProcessGroup(logs) as procs:
         router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
+        wait_until(
+            lambda: "listening" in procs.output(router),
+            timeout=60,
+            what="the router",
+            seen=lambda: procs.output(router),
+        )
         spawn = [x for i in range(max(n + clients, robots)) for x in ("--robot", f"reeman:base{i}")]
         spawn += [x for j in range(arms) for x in ("--robot", f"meca500:arm{j}")]
-        sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *spawn, "--world", world,
-                                         "--connect", ep, "--id", "sim"), name="sim")
+        sim = procs.start(
+            robofabric_cmd(
+                "sim",
+                "--scene",
+                "warehouse",
+                "--no-scene-robots",
+                *spawn,
+                "--world",
+                world,
+                "--connect",
+                ep,
+                "--id",
+                "sim",
+            ),
+            name="sim",
+        )
         if arms:  # the arms' students apply IK: the compute peer solves it
             compute = procs.start(robofabric_cmd("compute", "--world", world, "--connect", ep), name="compute")
         web = free_port()
-        console = procs.start(robofabric_cmd("console", "--world", world, "--connect", ep, "--listen", f"127.0.0.1:{web}",
-                                             *(["--no-3d"] if no_3d else [])), name="console")
+        console = procs.start(
+            robofabric_cmd(
+                "console",
+                "--world",
+                world,
+                "--connect",
+                ep,
+                "--listen",
+                f"127.0.0.1:{web}",
+                *(["--no-3d"] if no_3d else []),
+            ),
+            name="console",
+        )
         url = f"http://127.0.0.1:{web}/"
-        wait_until(lambda: f"console: open {url}" in procs.output(console), timeout=60, what="the console",
-                   seen=lambda: procs.output(console)[-1500:])
+        wait_until(
+            lambda: f"console: open {url}" in procs.output(console),
+            timeout=60,
+            what="the console",
+            seen=lambda: procs.output(console)[-1500:],
+        )
         turning: dict[int, list[int]] = {i: [] for i in range(n + clients)}  # sim wall stamps (ns) of poses that turn
 
         def on_pose(key: str, msg: Any) -> None:
@@ -320,10 +419,16 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
                     turning[int(rid[4:])].append(msg.header.wall_ns)
 
         with client(world, port, kind="tool", peer_id="probe") as fab, sync_playwright() as p:
-            wait_until(lambda: fab.live_peers("sim"), timeout=120, what="the sim", seen=lambda: procs.output(sim)[-1500:])
+            wait_until(
+                lambda: fab.live_peers("sim"), timeout=120, what="the sim", seen=lambda: procs.output(sim)[-1500:]
+            )
             if arms:
-                wait_until(lambda: fab.live_peers("compute"), timeout=120, what="the compute peer",
-                           seen=lambda: procs.output(compute)[-1500:])
+                wait_until(
+                    lambda: fab.live_peers("compute"),
+                    timeout=120,
+                    what="the compute peer",
+                    seen=lambda: procs.output(compute)[-1500:],
+                )
             fab.subscribe(f"rf/{world}/robot/*/pose", on_pose)
             arm_q: dict[str, list[Any]] = {}  # each arm's first and latest joint positions
 
@@ -336,8 +441,13 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
                 fab.subscribe(f"rf/{world}/robot/arm$*/joints", on_joints, expected=JointState)
             browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=browser_args(swiftshader))
             reloads: list[str] = []  # NiceGUI's own words when a page reloads itself (connection timed out, ...)
-            klass = _start_class(procs, url, n, clients, 10 * seconds + 600, arms, _arm_targets(fab, world, arms),
-                                 one_address) if clients else None
+            klass = (
+                _start_class(
+                    procs, url, n, clients, 10 * seconds + 600, arms, _arm_targets(fab, world, arms), one_address
+                )
+                if clients
+                else None
+            )
             klass_t0 = time.monotonic()
             try:
                 pages, bases, joined, join_cpu = _open_pages(browser, url, n, reloads, together=together)
@@ -356,7 +466,9 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
                     page.keyboard.up("ArrowLeft")
                     let_go = time.time_ns()
                     # still: no turning pose for 0.3 s (a base still turning after 10 s is counted, and pressed anyway)
-                    if not _until(lambda: time.time_ns() - max(turning[i][-1] if turning[i] else 0, let_go) > 300_000_000, 10.0):
+                    if not _until(
+                        lambda: time.time_ns() - max(turning[i][-1] if turning[i] else 0, let_go) > 300_000_000, 10.0
+                    ):
                         unstopped += 1
                     pressed = time.time_ns()
                     page.keyboard.down("ArrowLeft")
@@ -369,7 +481,11 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
                 cpu = (proc_cpu_s(console.pid) - cpu0) / took
                 browsers1 = chromium_cpu_s(os.getpid())
                 page_cpu, renderer_cpu = _per_page(browsers0, browsers1, took, len(pages))
-                print(f"  browsers while driving (cores, all pages): {_by_kind(browsers0, browsers1, took)}", file=sys.stderr, flush=True)
+                print(
+                    f"  browsers while driving (cores, all pages): {_by_kind(browsers0, browsers1, took)}",
+                    file=sys.stderr,
+                    flush=True,
+                )
                 health = [h for h in map(parse_line, procs.output(console)[health_from:].splitlines()) if h is not None]
                 messages = [_status(pg) for pg in pages]
                 for pg in pages:
@@ -384,67 +500,162 @@ def run_one(n: int, seconds: float, tmp: Path, *, swiftshader: bool = False, rob
             own = OwnershipClient(fab, "probe")  # a replica of the records (the probe owns nothing)
             own.refresh()
             records = {i: own.record(f"base{i}") for i in range(n + clients)}
-            arm_owners = {f"arm{k}": (own.record(f"arm{k}").owner if own.record(f"arm{k}") is not None else None) for k in range(arms)}
+            arm_owners = {
+                f"arm{k}": (own.record(f"arm{k}").owner if own.record(f"arm{k}") is not None else None)
+                for k in range(arms)
+            }
             own.close()
     lost = sum(1 for i, r in records.items() if i in bases and (r is None or r.owner != f"s{i}"))
     if emulated is not None:  # a student of the class who got in and whose base no longer names her
-        lost += sum(1 for i in range(n, n + clients) if f"c{i}" in emulated.get("owners", ()) and
-                    (records[i] is None or records[i].owner != f"c{i}"))
-        lost += sum(1 for k in range(arms) if f"arm{k}" in emulated.get("arms", ()) and arm_owners[f"arm{k}"] != f"c{n + k}")
+        lost += sum(
+            1
+            for i in range(n, n + clients)
+            if f"c{i}" in emulated.get("owners", ()) and (records[i] is None or records[i].owner != f"c{i}")
+        )
+        lost += sum(
+            1 for k in range(arms) if f"arm{k}" in emulated.get("arms", ()) and arm_owners[f"arm{k}"] != f"c{n + k}"
+        )
     refused = sum(1 for m in messages if m is not None and any(w in m for w in REFUSED))
     logged_out = sum(1 for m in messages if m is None)
     em = emulated or {}
-    return {"n": n, "clients": clients, "c_joined": em.get("joined", 0), "c_join_max": max(em.get("join_s") or [float("nan")]),
-            "c_back": em.get("back_at_login", 0), "c_dropped": em.get("disconnected", 0), "c_refused": em.get("refused", 0),
-            "c_keys": em.get("keys", 0), "c_cpu": klass_cpu, "c_turned": sum(1 for i in range(n, n + clients) if turning[i]),
-            "arms": arms, "c_arms": len(em.get("arms", [])), "c_ik": em.get("ik_applied", 0), "c_ik_unsolved": em.get("ik_unsolved", 0),
-            "arms_moved": sum(1 for a, b in arm_q.values() if a is not None and float(np.max(np.abs(np.asarray(b) - np.asarray(a)))) > 1e-3), "c_errors": em.get("errors", []),
-            "robots": max(n + clients, robots), "joined": len(joined), "join_max": max(joined, default=float("nan")), "lag_p50": pct(lags, 50), "lag_max": pct(lags, 100),
-            "key_p50": pct(presses, 50, 1e3), "key_p99": pct(presses, 99, 1e3), "presses": len(presses), "missed": missed, "unstopped": unstopped,
-            "cpu": cpu, "page_cpu": page_cpu, "renderer_cpu": renderer_cpu, "join_cpu": pct([x for x in join_cpu if x == x], 50), "lost": lost, "refused": refused, "logged_out": logged_out, "reloads": len(reloads),
-            "late_p99": max((h.late_p99 for h in health), default=float("nan")),
-            "late_max": max((h.late_max for h in health), default=float("nan")),
-            "to_server_p99": max((h.to_server_p99 for h in health), default=float("nan")),
-            "to_sent_p99": max((h.to_sent_p99 for h in health), default=float("nan"))}
+    return {
+        "n": n,
+        "clients": clients,
+        "c_joined": em.get("joined", 0),
+        "c_join_max": max(em.get("join_s") or [float("nan")]),
+        "c_back": em.get("back_at_login", 0),
+        "c_dropped": em.get("disconnected", 0),
+        "c_refused": em.get("refused", 0),
+        "c_keys": em.get("keys", 0),
+        "c_cpu": klass_cpu,
+        "c_turned": sum(1 for i in range(n, n + clients) if turning[i]),
+        "arms": arms,
+        "c_arms": len(em.get("arms", [])),
+        "c_ik": em.get("ik_applied", 0),
+        "c_ik_unsolved": em.get("ik_unsolved", 0),
+        "arms_moved": sum(
+            1
+            for a, b in arm_q.values()
+            if a is not None and float(np.max(np.abs(np.asarray(b) - np.asarray(a)))) > 1e-3
+        ),
+        "c_errors": em.get("errors", []),
+        "robots": max(n + clients, robots),
+        "joined": len(joined),
+        "join_max": max(joined, default=float("nan")),
+        "lag_p50": pct(lags, 50),
+        "lag_max": pct(lags, 100),
+        "key_p50": pct(presses, 50, 1e3),
+        "key_p99": pct(presses, 99, 1e3),
+        "presses": len(presses),
+        "missed": missed,
+        "unstopped": unstopped,
+        "cpu": cpu,
+        "page_cpu": page_cpu,
+        "renderer_cpu": renderer_cpu,
+        "join_cpu": pct([x for x in join_cpu if x == x], 50),
+        "lost": lost,
+        "refused": refused,
+        "logged_out": logged_out,
+        "reloads": len(reloads),
+        "late_p99": max((h.late_p99 for h in health), default=float("nan")),
+        "late_max": max((h.late_max for h in health), default=float("nan")),
+        "to_server_p99": max((h.to_server_p99 for h in health), default=float("nan")),
+        "to_sent_p99": max((h.to_sent_p99 for h in health), default=float("nan")),
+    }
 
 
 def header() -> list[str]:
-    return ["| pages | joined (slowest, s) | view lag in the page p50 / max (s) | key to motion p50 / p99 (ms), presses "
-            "| presses that moved nothing in 5 s / releases not stopped in 10 s | console server CPU (cores) | browsers per page driving, all / renderers (cores); a page's join, its renderer (CPU s, median) | robots lost | refused "
-            "| pages back at the login (reloads) | server's event loop late p99 / max (ms) | key to server / to zenoh p99 (ms) "
-            "| emulated students: joined (slowest, s), back at the login / dropped / refused, keys; their process (cores) |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    return [
+        "| pages | joined (slowest, s) | view lag in the page p50 / max (s) | key to motion p50 / p99 (ms), presses "
+        "| presses that moved nothing in 5 s / releases not stopped in 10 s | console server CPU (cores) | browsers per page driving, all / renderers (cores); a page's join, its renderer (CPU s, median) | robots lost | refused "
+        "| pages back at the login (reloads) | server's event loop late p99 / max (ms) | key to server / to zenoh p99 (ms) "
+        "| emulated students: joined (slowest, s), back at the login / dropped / refused, keys; their process (cores) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
 
 
 def row(r: dict[str, Any]) -> str:
-    pages = f"{r['n']} ({r['robots']} robots)" if r.get("robots", r["n"]) != r["n"] + r.get("clients", 0) else f"{r['n']}"
-    return (f"| {pages} | {r['joined']} ({r['join_max']:.1f}) | {r['lag_p50']:.2f} / {r['lag_max']:.2f} | "
-            f"{r['key_p50']:.0f} / {r['key_p99']:.0f}, {r['presses']} | {r['missed']} / {r['unstopped']} | {r['cpu']:.2f} | {r['page_cpu']:.2f} / {r['renderer_cpu']:.2f}; {r['join_cpu']:.1f} | {r['lost']} | "
-            f"{r['refused']} | {r['logged_out']} ({r['reloads']}) | {r['late_p99']:.0f} / {r['late_max']:.0f} | {r['to_server_p99']:.0f} / {r['to_sent_p99']:.0f} | "
-            + (f"{r['c_joined']} of {r['clients']} ({r['c_join_max']:.1f}), {r['c_back']} / {r['c_dropped']} / {r['c_refused']}, "
-               f"{r['c_keys']}" + (f", IK applied {r['c_ik']}, unsolved {r['c_ik_unsolved']} (arms moved {r['arms_moved']} of {r['arms']})" if r.get("arms") else "")
-               + f"; {r['c_cpu']:.2f} |" if r.get("clients") else "none |"))
+    pages = (
+        f"{r['n']} ({r['robots']} robots)" if r.get("robots", r["n"]) != r["n"] + r.get("clients", 0) else f"{r['n']}"
+    )
+    return (
+        f"| {pages} | {r['joined']} ({r['join_max']:.1f}) | {r['lag_p50']:.2f} / {r['lag_max']:.2f} | "
+        f"{r['key_p50']:.0f} / {r['key_p99']:.0f}, {r['presses']} | {r['missed']} / {r['unstopped']} | {r['cpu']:.2f} | {r['page_cpu']:.2f} / {r['renderer_cpu']:.2f}; {r['join_cpu']:.1f} | {r['lost']} | "
+        f"{r['refused']} | {r['logged_out']} ({r['reloads']}) | {r['late_p99']:.0f} / {r['late_max']:.0f} | {r['to_server_p99']:.0f} / {r['to_sent_p99']:.0f} | "
+        + (
+            f"{r['c_joined']} of {r['clients']} ({r['c_join_max']:.1f}), {r['c_back']} / {r['c_dropped']} / {r['c_refused']}, "
+            f"{r['c_keys']}"
+            + (
+                f", IK applied {r['c_ik']}, unsolved {r['c_ik_unsolved']} (arms moved {r['arms_moved']} of {r['arms']})"
+                if r.get("arms")
+                else ""
+            )
+            + f"; {r['c_cpu']:.2f} |"
+            if r.get("clients")
+            else "none |"
+        )
+    )
 
 
 def command(
-    pages: Annotated[str, typer.Option("--pages", help="Comma-separated page counts (each page: one student, one base).")] = "1,10,20",
+    pages: Annotated[
+        str, typer.Option("--pages", help="Comma-separated page counts (each page: one student, one base).")
+    ] = "1,10,20",
     seconds: Annotated[float, typer.Option("--seconds", help="How long the pages drive while measured (s).")] = 30.0,
     out: Annotated[Optional[Path], typer.Option("--out", help="Append the markdown table to this file.")] = None,
-    swiftshader: Annotated[bool, typer.Option("--swiftshader", help="Composite the pages through SwiftShader's software GL "
-                                              "(forced, as the Rerun viewer's benchmark does), not as Chromium chooses.")] = False,
-    robots: Annotated[int, typer.Option("--robots", help="Bases in the world (at least one a page): a few pages in a "
-                                        "class-sized world measure the server's cost per page without a class of browsers.")] = 0,
-    together: Annotated[bool, typer.Option("--together", help="Ask for every page at once, as a class does, "
-                                           "instead of one after another.")] = False,
-    clients: Annotated[int, typer.Option("--clients", help="Emulated students beside the pages: each speaks the page's "
-                                         "own socket protocol with no browser, logs in, requests her base and steers it "
-                                         "(python -m robofabric.bench.console_client).")] = 0,
-    arms: Annotated[int, typer.Option("--arms", help="Meca500 arms in the world (and a compute peer for their IK): the "
-                                      "first ARMS emulated students also own one and nudge its target and apply IK.")] = 0,
-    one_address: Annotated[bool, typer.Option("--one-address", help="Every emulated student from 127.0.0.1, as a class "
-                                              "behind one NAT, instead of each from her own 127.0.0.N.")] = False,
-    no_3d: Annotated[bool, typer.Option("--no-3d", help="The console's pages without their 3D view (console --no-3d): "
-                                        "the 2D page, beside the same run with it.")] = False,
+    swiftshader: Annotated[
+        bool,
+        typer.Option(
+            "--swiftshader",
+            help="Composite the pages through SwiftShader's software GL "
+            "(forced, as the Rerun viewer's benchmark does), not as Chromium chooses.",
+        ),
+    ] = False,
+    robots: Annotated[
+        int,
+        typer.Option(
+            "--robots",
+            help="Bases in the world (at least one a page): a few pages in a "
+            "class-sized world measure the server's cost per page without a class of browsers.",
+        ),
+    ] = 0,
+    together: Annotated[
+        bool,
+        typer.Option("--together", help="Ask for every page at once, as a class does, instead of one after another."),
+    ] = False,
+    clients: Annotated[
+        int,
+        typer.Option(
+            "--clients",
+            help="Emulated students beside the pages: each speaks the page's "
+            "own socket protocol with no browser, logs in, requests her base and steers it "
+            "(python -m robofabric.bench.console_client).",
+        ),
+    ] = 0,
+    arms: Annotated[
+        int,
+        typer.Option(
+            "--arms",
+            help="Meca500 arms in the world (and a compute peer for their IK): the "
+            "first ARMS emulated students also own one and nudge its target and apply IK.",
+        ),
+    ] = 0,
+    one_address: Annotated[
+        bool,
+        typer.Option(
+            "--one-address",
+            help="Every emulated student from 127.0.0.1, as a class "
+            "behind one NAT, instead of each from her own 127.0.0.N.",
+        ),
+    ] = False,
+    no_3d: Annotated[
+        bool,
+        typer.Option(
+            "--no-3d",
+            help="The console's pages without their 3D view (console --no-3d): "
+            "the 2D page, beside the same run with it.",
+        ),
+    ] = False,
 ) -> None:
     """N browser pages on one console server, each driving its own base: view lag in the page, key to motion,
     the server's CPU, robots lost."""
@@ -457,17 +668,40 @@ def command(
     except ValueError:
         raise UserError(f"--pages {pages!r}: expected counts like 1,10,20") from None
     if not counts or min(counts) < 1 or seconds <= 0 or robots < 0 or clients < 0 or not 0 <= arms <= clients:
-        raise UserError("--pages: each count at least 1; --seconds positive; --robots and --clients not negative; "
-                        "--arms from 0 to --clients (each arm is an emulated student's)")
+        raise UserError(
+            "--pages: each count at least 1; --seconds positive; --robots and --clients not negative; "
+            "--arms from 0 to --clients (each arm is an emulated student's)"
+        )
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    flag = (" --swiftshader" if swiftshader else "") + (f" --robots {robots}" if robots else "") + (" --together" if together else "") + (f" --clients {clients}" if clients else "") + (f" --arms {arms}" if arms else "") + (" --one-address" if one_address else "") + (" --no-3d" if no_3d else "")
-    lines = [f"robofabric bench console --pages {pages} --seconds {seconds:g}{flag} on {machine()}, load average {load:.1f} at the start",
-             "", *header()]
+    flag = (
+        (" --swiftshader" if swiftshader else "")
+        + (f" --robots {robots}" if robots else "")
+        + (" --together" if together else "")
+        + (f" --clients {clients}" if clients else "")
+        + (f" --arms {arms}" if arms else "")
+        + (" --one-address" if one_address else "")
+        + (" --no-3d" if no_3d else "")
+    )
+    lines = [
+        f"robofabric bench console --pages {pages} --seconds {seconds:g}{flag} on {machine()}, load average {load:.1f} at the start",
+        "",
+        *header(),
+    ]
     print("\n".join(lines), flush=True)
     with tempfile.TemporaryDirectory(prefix="bench-console-") as tmp:
         for n in counts:
-            result = run_one(n, seconds, Path(tmp), swiftshader=swiftshader, robots=robots, together=together, clients=clients, arms=arms,
-                             one_address=one_address, no_3d=no_3d)
+            result = run_one(
+                n,
+                seconds,
+                Path(tmp),
+                swiftshader=swiftshader,
+                robots=robots,
+                together=together,
+                clients=clients,
+                arms=arms,
+                one_address=one_address,
+                no_3d=no_3d,
+            )
             for err in result.get("c_errors", [])[:5]:
                 print(f"  {err}", file=sys.stderr, flush=True)
             line = row(result)

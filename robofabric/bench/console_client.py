@@ -131,17 +131,29 @@ class EmulatedPage:
         # a dropped socket reconnects to the same page, as NiceGUI's page script does (a server that stalled past
         # its ping timeout drops it), asking for the messages from the last one it has (the page keeps the others
         # for its reconnect window); the URL is read again at each try for that
-        sio = socketio.AsyncClient(reconnection=True, reconnection_attempts=RECONNECT_TRIES, reconnection_delay=1.0,
-                                   reconnection_delay_max=5.0, http_session=http)
+        sio = socketio.AsyncClient(
+            reconnection=True,
+            reconnection_attempts=RECONNECT_TRIES,
+            reconnection_delay=1.0,
+            reconnection_delay_max=5.0,
+            http_session=http,
+        )
         for name in ("update", "run_javascript", "load_js_components", "notify", "open", "download"):
             sio.on(name, self._handler(name))
         sio.on("disconnect", self._on_disconnect)
         sio.on("__disconnect_final", self._on_final)
-        query = {**self._query, "document_id": str(uuid.uuid4()), "tab_id": str(uuid.uuid4()), "implicit_handshake": "true"}
+        query = {
+            **self._query,
+            "document_id": str(uuid.uuid4()),
+            "tab_id": str(uuid.uuid4()),
+            "implicit_handshake": "true",
+        }
         base = self.url.rstrip("/")
 
         def url() -> str:
-            return f"{base}/?" + "&".join(f"{k}={v}" for k, v in {**query, "next_message_id": str(self._next_id)}.items())
+            return f"{base}/?" + "&".join(
+                f"{k}={v}" for k, v in {**query, "next_message_id": str(self._next_id)}.items()
+            )
 
         await sio.connect(url, socketio_path="/_nicegui_ws/socket.io", transports=["websocket"], wait_timeout=timeout)
         self._sio = sio
@@ -168,6 +180,7 @@ class EmulatedPage:
                 self.js_answered += 1
             if self._changed is not None:
                 self._changed.set()
+
         return on
 
     async def _emit(self, event: str, data: dict[str, Any]) -> None:
@@ -226,10 +239,16 @@ class EmulatedPage:
         eid = await self._until(lambda: self.find(label, tag=tag, exact=exact), timeout)
         if eid is None:
             said = [t for t in self.text().splitlines() if ":" in t][-3:]  # the page's last words, to say why
-            gone = (f"; its socket dropped {self.drops} time(s), first {self.dropped_after:.1f} s after it opened"
-                    + ("" if self.connected else ", and did not come back") if self.dropped_after is not None else "")
-            raise PageGone(f"no {label!r} on the page within {timeout:g} s (the page says: {' | '.join(said)[-400:]}{gone}; "
-                           f"{self.updates} updates, {self.js_answered} JavaScript calls answered, next message {self._next_id})")
+            gone = (
+                f"; its socket dropped {self.drops} time(s), first {self.dropped_after:.1f} s after it opened"
+                + ("" if self.connected else ", and did not come back")
+                if self.dropped_after is not None
+                else ""
+            )
+            raise PageGone(
+                f"no {label!r} on the page within {timeout:g} s (the page says: {' | '.join(said)[-400:]}{gone}; "
+                f"{self.updates} updates, {self.js_answered} JavaScript calls answered, next message {self._next_id})"
+            )
         return str(eid)
 
     async def wait_text(self, pred: Any, timeout: float) -> bool:
@@ -256,8 +275,11 @@ class EmulatedPage:
     async def drop(self, view: str, name: str, xyz: tuple[float, float, float], timeout: float = 30.0) -> None:
         """A 3D object called ``name`` dragged in the view ``view`` and dropped at ``xyz`` (ui.scene's ``dragend``)."""
         x, y, z = xyz
-        await self._fire(await self.wait_for(view, exact=False, timeout=timeout), "dragend",
-                         [{"type": "dragend", "object_id": "", "object_name": name, "x": x, "y": y, "z": z}])
+        await self._fire(
+            await self.wait_for(view, exact=False, timeout=timeout),
+            "dragend",
+            [{"type": "dragend", "object_id": "", "object_name": name, "x": x, "y": y, "z": z}],
+        )
 
     async def key(self, key: str, down: bool) -> None:
         """The page's key line (the console's ``rf_key`` on element 0, as its KEYS_JS sends it)."""
@@ -294,8 +316,16 @@ class ClientReport:
 REFUSED = ("NotOwner", "Rejected", "Timeout", "Unreachable", "Error")
 
 
-async def _student(url: str, i: int, http: Any, report: ClientReport, stop: asyncio.Event, period: float,
-                   arm: str | None = None, target: tuple[float, float, float] | None = None) -> EmulatedPage | None:
+async def _student(
+    url: str,
+    i: int,
+    http: Any,
+    report: ClientReport,
+    stop: asyncio.Event,
+    period: float,
+    arm: str | None = None,
+    target: tuple[float, float, float] | None = None,
+) -> EmulatedPage | None:
     """Student ``c{i}`` logs in, selects and requests ``base{i}``, then steers: ← held, let go every ``period``.
     With an ``arm``, she requests it too, sets its IK target's height and drops the target at ``target`` in the
     3D view, and every fourth turn nudges the target 1 cm and applies IK, as the paper's Test A does by hand."""
@@ -367,9 +397,17 @@ async def _student(url: str, i: int, http: Any, report: ClientReport, stop: asyn
     return page
 
 
-async def run_class(url: str, first: int, count: int, seconds: float, period: float = 1.0,
-                    started: Any = None, arms: int = 0,
-                    targets: list[tuple[float, float, float]] | None = None, one_address: bool = False) -> ClientReport:
+async def run_class(
+    url: str,
+    first: int,
+    count: int,
+    seconds: float,
+    period: float = 1.0,
+    started: Any = None,
+    arms: int = 0,
+    targets: list[tuple[float, float, float]] | None = None,
+    one_address: bool = False,
+) -> ClientReport:
     """``count`` students at once on the console at ``url``; until ``seconds`` pass (or SIGTERM/SIGINT). The
     first ``arms`` of them also own ``arm0``.. and apply IK now and then, from ``targets[k]`` (world frame). Each
     comes from her own loopback address (:func:`student_address`), or all from 127.0.0.1 with ``one_address``."""
@@ -384,13 +422,29 @@ async def run_class(url: str, first: int, count: int, seconds: float, period: fl
         except (NotImplementedError, RuntimeError):
             pass
     # one session (connection pool, cookie jar) a student, bound to her address: her page and its socket share it
-    sessions = [aiohttp.ClientSession(connector=None if one_address else
-                                      aiohttp.TCPConnector(local_addr=(student_address(k), 0))) for k in range(count)]
+    sessions = [
+        aiohttp.ClientSession(
+            connector=None if one_address else aiohttp.TCPConnector(local_addr=(student_address(k), 0))
+        )
+        for k in range(count)
+    ]
     try:
         aims = list(targets or [])
-        tasks = [asyncio.create_task(_student(url, first + k, sessions[k], report, stop, period, f"arm{k}" if k < arms else None,
-                                              aims[k] if k < min(arms, len(aims)) else None))
-                 for k in range(count)]
+        tasks = [
+            asyncio.create_task(
+                _student(
+                    url,
+                    first + k,
+                    sessions[k],
+                    report,
+                    stop,
+                    period,
+                    f"arm{k}" if k < arms else None,
+                    aims[k] if k < min(arms, len(aims)) else None,
+                )
+            )
+            for k in range(count)
+        ]
 
         async def said_joined() -> None:
             while report.joined + len(report.errors) < count:
@@ -433,16 +487,30 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--period", type=float, default=1.0, help="how long ← is held before it is let go (s)")
     ap.add_argument("--arms", type=int, default=0, help="the first ARMS students also own arm0.. and apply IK")
     ap.add_argument("--targets", default="", help="each arm's first IK target in the world frame: x,y,z;x,y,z;...")
-    ap.add_argument("--one-address", action="store_true",
-                    help="every student from 127.0.0.1 (a class behind one NAT), not each from her own 127.0.0.N")
+    ap.add_argument(
+        "--one-address",
+        action="store_true",
+        help="every student from 127.0.0.1 (a class behind one NAT), not each from her own 127.0.0.N",
+    )
     a = ap.parse_args(argv)
     targets = [tuple(float(v) for v in t.split(",")) for t in a.targets.split(";") if t.strip()]
 
     def joined(r: ClientReport) -> None:
         print(f"clients: {r.joined} of {r.clients} joined", flush=True)
 
-    report = asyncio.run(run_class(a.url, a.first, a.count, a.seconds, a.period, started=joined, arms=a.arms, targets=targets,
-                               one_address=a.one_address))  # type: ignore[arg-type]
+    report = asyncio.run(
+        run_class(
+            a.url,
+            a.first,
+            a.count,
+            a.seconds,
+            a.period,
+            started=joined,
+            arms=a.arms,
+            targets=targets,
+            one_address=a.one_address,
+        )
+    )  # type: ignore[arg-type]
     print(json.dumps(report.__dict__), flush=True)
     return 0
 

@@ -146,8 +146,13 @@ def run_flood(counts: list[int], tmp: Path, *, settle: float = 5.0) -> list[Floo
     results = []
     with ProcessGroup(tmp) as procs:
         router = procs.start(robofabric_cmd("router", "--zenoh-config", str(made.router)), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router))
-        sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config", str(files["sim"])), name="sim")
+        wait_until(
+            lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router)
+        )
+        sim = procs.start(
+            robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config", str(files["sim"])),
+            name="sim",
+        )
         alice = user_peer.connect(world=world, zenoh_config=str(files["alice"]), timeout=10.0, join_timeout=90.0)
         bob = user_peer.connect(world=world, zenoh_config=str(files["bob"]), timeout=10.0)
         losses: list[str] = []
@@ -164,8 +169,13 @@ def run_flood(counts: list[int], tmp: Path, *, settle: float = 5.0) -> list[Floo
                 lost_before, changed_before = len(losses), len(changes)
                 held.update({r.id: (r.record.owner, r.record.epoch) for r in (arm, base)})
                 rss0 = proc_rss_mb(router.pid)
-                mallory = subprocess.Popen([sys.executable, "-c", _MALLORY, str(files["mallory"]), world, str(n)],
-                                           stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, start_new_session=True)
+                mallory = subprocess.Popen(
+                    [sys.executable, "-c", _MALLORY, str(files["mallory"]), world, str(n)],
+                    stdin=subprocess.PIPE,
+                    stdout=subprocess.PIPE,
+                    text=True,
+                    start_new_session=True,
+                )
                 try:
                     with _Prober(bob.fabric) as probe:
                         t0 = time.monotonic()
@@ -188,11 +198,22 @@ def run_flood(counts: list[int], tmp: Path, *, settle: float = 5.0) -> list[Floo
                         mallory.wait(timeout=10)
                 time.sleep(settle)
                 rss2 = proc_rss_mb(router.pid)
-                results.append(FloodResult(
-                    n, float(declared[2]) if len(declared) == 3 else float("nan"), float(closed[1]) if len(closed) == 2 else float("nan"),
-                    stall, misses, rss0, rss1, rss2, arm.record is not None and arm.record.owner == "alice",
-                    base.record is not None and base.record.owner == "bob", len(losses) - lost_before, len(changes) - changed_before,
-                ))
+                results.append(
+                    FloodResult(
+                        n,
+                        float(declared[2]) if len(declared) == 3 else float("nan"),
+                        float(closed[1]) if len(closed) == 2 else float("nan"),
+                        stall,
+                        misses,
+                        rss0,
+                        rss1,
+                        rss2,
+                        arm.record is not None and arm.record.owner == "alice",
+                        base.record is not None and base.record.owner == "bob",
+                        len(losses) - lost_before,
+                        len(changes) - changed_before,
+                    )
+                )
             watch.undeclare()
         finally:
             alice.close()
@@ -202,16 +223,23 @@ def run_flood(counts: list[int], tmp: Path, *, settle: float = 5.0) -> list[Floo
 
 
 def table(results: list[FloodResult]) -> str:
-    head = ("| declarations | declare s | close s | longest srv/world gap s | queries unanswered | router RSS before / declared / "
-            "after MB | alice owns | bob owns | ownership losses | records changed |\n|---|---|---|---|---|---|---|---|---|---|")
-    rows = [f"| {r.n} | {r.declare_s:.2f} | {r.close_s:.2f} | {r.stall_s:.2f} | {r.unanswered} | {r.rss_before_mb:.0f} / "
-            f"{r.rss_declared_mb:.0f} / {r.rss_after_mb:.0f} | {'yes' if r.alice_owns else 'NO'} | {'yes' if r.bob_owns else 'NO'} | "
-            f"{r.losses} | {r.changes} |" for r in results]
+    head = (
+        "| declarations | declare s | close s | longest srv/world gap s | queries unanswered | router RSS before / declared / "
+        "after MB | alice owns | bob owns | ownership losses | records changed |\n|---|---|---|---|---|---|---|---|---|---|"
+    )
+    rows = [
+        f"| {r.n} | {r.declare_s:.2f} | {r.close_s:.2f} | {r.stall_s:.2f} | {r.unanswered} | {r.rss_before_mb:.0f} / "
+        f"{r.rss_declared_mb:.0f} / {r.rss_after_mb:.0f} | {'yes' if r.alice_owns else 'NO'} | {'yes' if r.bob_owns else 'NO'} | "
+        f"{r.losses} | {r.changes} |"
+        for r in results
+    ]
     return "\n".join([head, *rows])
 
 
 def command(
-    counts: Annotated[str, typer.Option(help="Declarations per flood, comma-separated (one fresh mallory each).")] = "6000,20000",
+    counts: Annotated[
+        str, typer.Option(help="Declarations per flood, comma-separated (one fresh mallory each).")
+    ] = "6000,20000",
     out: TableOut = None,
 ) -> None:
     """A login declaring N subscribers and closing: router stall, router memory, whether owners keep their robots."""

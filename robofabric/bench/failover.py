@@ -84,9 +84,12 @@ def measure(kills: int) -> list[dict[str, float]]:
     port = free_port()
     samples = _Samples()
     rows: list[dict[str, float]] = []
-    with tempfile.TemporaryDirectory() as tmp, ProcessGroup(Path(tmp)) as procs, \
-            Fabric(router_config(world, port), kind="router", peer_id="router"), \
-            client(world, port, kind="user", peer_id="bench") as fab:
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        ProcessGroup(Path(tmp)) as procs,
+        Fabric(router_config(world, port), kind="router", peer_id="router"),
+        client(world, port, kind="user", peer_id="bench") as fab,
+    ):
         for stream in ("joints", "pose"):
             fab.subscribe_raw(keys.robot_stream_all(world, stream), samples.on_sample)
         events: list = []
@@ -96,15 +99,34 @@ def measure(kills: int) -> list[dict[str, float]]:
         current, standby = sims.start(0), sims.start(1, standby=True)
         own = OwnershipClient(fab, "bench", renew_s=0.2, timeout=10.0).start()
         try:
-            wait_until(lambda: own.record("arm1") is not None and samples.of("joints", 1), timeout=120, what="the primary's joints")
+            wait_until(
+                lambda: own.record("arm1") is not None and samples.of("joints", 1),
+                timeout=120,
+                what="the primary's joints",
+            )
             if not own.request("arm1", timeout=10).granted:
                 raise typer.Exit(f"could not own arm1: {own.record('arm1')}")
             epoch = own.epoch("arm1")
             for i in range(kills):
-                roles.wait(f"sim-{i + 1:02d}", "standby", term=i + 1, leader=f"sim-{i:02d}", timeout=120,
-                           seen=lambda: procs.output(standby)[-800:])
-                _set_moving(fab, own, samples, i, epoch, seen=lambda: ([(e.kind, e.reason, e.header.source) for e in events[-4:]],
-                                                                 procs.output(current)[-600:]))
+                roles.wait(
+                    f"sim-{i + 1:02d}",
+                    "standby",
+                    term=i + 1,
+                    leader=f"sim-{i:02d}",
+                    timeout=120,
+                    seen=lambda: procs.output(standby)[-800:],
+                )
+                _set_moving(
+                    fab,
+                    own,
+                    samples,
+                    i,
+                    epoch,
+                    seen=lambda: (
+                        [(e.kind, e.reason, e.header.source) for e in events[-4:]],
+                        procs.output(current)[-600:],
+                    ),
+                )
                 rows.append(_take_over(procs, current, samples, term=i + 1))
                 _print_row(i, rows[-1])
                 current, standby = standby, sims.start(i + 2, standby=True)
@@ -127,8 +149,12 @@ class _Sims:
 
         pid = f"sim-{n:02d}"
         extra = ("--standby",) if standby else ()
-        return self.procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", self.world, "--connect", self.ep,
-                                               "--id", pid, *extra), name=pid)
+        return self.procs.start(
+            robofabric_cmd(
+                "sim", "--scene", "combined", "--world", self.world, "--connect", self.ep, "--id", pid, *extra
+            ),
+            name=pid,
+        )
 
 
 def _set_moving(fab: "Fabric", own: "OwnershipClient", samples: _Samples, i: int, epoch: int, *, seen) -> None:
@@ -144,8 +170,11 @@ def _set_moving(fab: "Fabric", own: "OwnershipClient", samples: _Samples, i: int
 
     def moving() -> bool:
         js = [m for t, m in samples.of("joints", term) if t > t_cmd + 0.05]
-        if len(js) >= 2 and np.abs(js[-1].dq).max() > 0.01 and \
-                np.abs(js[-1].q - cmd.body.q).max() < np.abs(js[0].q - cmd.body.q).max():
+        if (
+            len(js) >= 2
+            and np.abs(js[-1].dq).max() > 0.01
+            and np.abs(js[-1].q - cmd.body.q).max() < np.abs(js[0].q - cmd.body.q).max()
+        ):
             return True
         fab.publish(keys.robot_cmd(fab.world, "arm1", "joints", "bench"), cmd)
         return False
@@ -160,19 +189,31 @@ def _take_over(procs: "ProcessGroup", current, samples: _Samples, *, term: int) 
 
     t_kill = time.monotonic()
     procs.kill(current, signal.SIGKILL)
-    wait_until(lambda: samples.of("joints", term + 1) and samples.of("pose", term + 1), timeout=30, what=f"term {term + 1} state")
+    wait_until(
+        lambda: samples.of("joints", term + 1) and samples.of("pose", term + 1),
+        timeout=30,
+        what=f"term {term + 1} state",
+    )
     (t_old, old), (t_new, new) = samples.of("joints", term)[-1], samples.of("joints", term + 1)[0]
     dt = new.header.stamp - old.header.stamp
     err_q = float(np.abs(new.q - (old.q + old.dq * dt)).max())
     (_, po), (_, pn) = samples.of("pose", term)[-1], samples.of("pose", term + 1)[0]
     err_mm = 1000 * float(np.linalg.norm(pn.position - (po.position + po.linear * (pn.header.stamp - po.header.stamp))))
-    return {"takeover_ms": 1000 * (t_new - t_kill), "gap_ms": 1000 * (t_new - t_old), "err_rad": err_q, "err_mm": err_mm,
-            "sim_dt_ms": 1000 * dt}
+    return {
+        "takeover_ms": 1000 * (t_new - t_kill),
+        "gap_ms": 1000 * (t_new - t_old),
+        "err_rad": err_q,
+        "err_mm": err_mm,
+        "sim_dt_ms": 1000 * dt,
+    }
 
 
 def _print_row(i: int, r: dict[str, float]) -> None:
-    print(f"kill {i + 1}: take-over {r['takeover_ms']:.0f} ms, stream gap {r['gap_ms']:.0f} ms, "
-          f"error {r['err_rad']:.5f} rad / {r['err_mm']:.3f} mm", flush=True)
+    print(
+        f"kill {i + 1}: take-over {r['takeover_ms']:.0f} ms, stream gap {r['gap_ms']:.0f} ms, "
+        f"error {r['err_rad']:.5f} rad / {r['err_mm']:.3f} mm",
+        flush=True,
+    )
 
 
 def report(rows: list[dict[str, float]], kills: int) -> str:
@@ -184,8 +225,7 @@ def report(rows: list[dict[str, float]], kills: int) -> str:
 
     lines = [
         f"Command: `robofabric bench failover --kills {kills}`",
-        f"Machine: {machine()}; "
-        "processes on loopback through one router, lease 2 s",
+        f"Machine: {machine()}; processes on loopback through one router, lease 2 s",
         "",
         "| measurement (median / max) | result |",
         "|---|---|",

@@ -70,8 +70,17 @@ class Load:
     def scaled(self, factor: float) -> "Load":
         """The same load times ``factor`` (counts only)."""
         f = float(factor)
-        return Load(int(self.unique_commands * f), int(self.junk_per_key * f), int(self.big_payloads * f), self.big_bytes,
-                    int(self.fake_joint_streams * f), int(self.forged_requests * f), self.warm_s, self.settle_s, self.period_s)
+        return Load(
+            int(self.unique_commands * f),
+            int(self.junk_per_key * f),
+            int(self.big_payloads * f),
+            self.big_bytes,
+            int(self.fake_joint_streams * f),
+            int(self.forged_requests * f),
+            self.warm_s,
+            self.settle_s,
+            self.period_s,
+        )
 
 
 @dataclass
@@ -91,7 +100,9 @@ class FloodResult:
     phase_s: float = 0.0
     flooder: dict[str, Any] = field(default_factory=dict)
     slowest: list[tuple[float, float]] = field(default_factory=list)  # (sent at, s after the flood began; latency s)
-    stop: dict[str, Any] = field(default_factory=dict)  # the mid-flood stop: moving, done, sends, seconds, effect_s, short_by
+    stop: dict[str, Any] = field(
+        default_factory=dict
+    )  # the mid-flood stop: moving, done, sends, seconds, effect_s, short_by
     sim_counts: dict[str, int] = field(default_factory=dict)  # the sim's own count of commands received and rejected
 
     def pct(self, q: float) -> float:
@@ -109,8 +120,12 @@ class FloodResult:
     def summary(self) -> dict[str, Any]:
         out = asdict(self)
         out.pop("latencies")
-        out.update(p50_ms=self.pct(50) * 1e3, p99_ms=self.pct(99) * 1e3, not_applied=self.not_applied,
-                   growth_mb={k: round(self.growth(k), 1) for k in self.rss_peak})
+        out.update(
+            p50_ms=self.pct(50) * 1e3,
+            p99_ms=self.pct(99) * 1e3,
+            not_applied=self.not_applied,
+            growth_mb={k: round(self.growth(k), 1) for k in self.rss_peak},
+        )
         return out
 
 
@@ -136,7 +151,9 @@ class _Owner:
         self._thread: threading.Thread | None = None
 
     def take(self) -> None:
-        wait_until(lambda: self.own.request("arm1").granted or self.own.owns("arm1"), timeout=30, what="alice owns arm1")
+        wait_until(
+            lambda: self.own.request("arm1").granted or self.own.owns("arm1"), timeout=30, what="alice owns arm1"
+        )
 
     def _on_record(self, rec) -> None:
         if rec.object == "arm1" and rec.owner != "alice" and not self._stop.is_set() and self._thread is not None:
@@ -187,7 +204,9 @@ class _Owner:
             self.sent[k] = (time.monotonic(), sign, time.time())
         q = np.zeros(self.dof)
         q[JOINT] = sign * AMPLITUDE
-        self.fab.publish(self._key, Command("alice", self.own.epoch("arm1"), JointTarget(q, 0.1 + 0.015 * (k % SCALES))))
+        self.fab.publish(
+            self._key, Command("alice", self.own.epoch("arm1"), JointTarget(q, 0.1 + 0.015 * (k % SCALES)))
+        )
 
     def start(self, period: float) -> None:
         def loop() -> None:
@@ -239,9 +258,15 @@ class _Owner:
         r = resend_until(send, still, interval=0.1, timeout=timeout)
         with self._lock:
             stamp, at = self.still_at
-        return {"moving": went.done, "done": r.done, "sends": r.sends, "seconds": round(r.seconds, 3),
-                "effect_s": round(stamp - wall0, 3) if r.done else None, "target": target,
-                "short_by": round(abs(target - at), 3) if r.done else None}
+        return {
+            "moving": went.done,
+            "done": r.done,
+            "sends": r.sends,
+            "seconds": round(r.seconds, 3),
+            "effect_s": round(stamp - wall0, 3) if r.done else None,
+            "target": target,
+            "short_by": round(abs(target - at), 3) if r.done else None,
+        }
 
     def score(self, result: FloodResult, *, since: float, t0: float) -> None:
         """Fill ``result`` with the commands sent from ``since`` (monotonic) to a second before the last one
@@ -272,8 +297,13 @@ def _start(argv: list[str], log_path: Path) -> subprocess.Popen:
     """A ``robofabric`` child in a session of its own, its output in ``log_path`` (the log sizes are measured)."""
     out = open(log_path, "wb")
     try:
-        return subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
-                                env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        return subprocess.Popen(
+            argv,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
     finally:
         out.close()
 
@@ -303,10 +333,16 @@ class _Rig:
         sim and compute peers; alice owns arm1 when it returns."""
         w, ep = self.world, self.ep
         self.start("router", robofabric_cmd("router", "--listen", ep, "--world", w))
-        fab = self.fab = wait_until(lambda: _try_client(w, self.port), timeout=90, interval=0.5, what="the router to accept alice")
+        fab = self.fab = wait_until(
+            lambda: _try_client(w, self.port), timeout=90, interval=0.5, what="the router to accept alice"
+        )
         self.peers = {
-            "sim": self.start("sim", robofabric_cmd("sim", "--scene", "combined", "--world", w, "--connect", ep, "--id", "sim-flood")),
-            "compute": self.start("compute", robofabric_cmd("compute", "--world", w, "--connect", ep, "--id", "compute-flood")),
+            "sim": self.start(
+                "sim", robofabric_cmd("sim", "--scene", "combined", "--world", w, "--connect", ep, "--id", "sim-flood")
+            ),
+            "compute": self.start(
+                "compute", robofabric_cmd("compute", "--world", w, "--connect", ep, "--id", "compute-flood")
+            ),
         }
         info = wait_until(lambda: _world_info(fab, w), timeout=90, interval=0.5, what="the sim's srv/world")
         arm = next(r for r in info.robots if r.id == "arm1")
@@ -316,7 +352,10 @@ class _Rig:
         return self.owner
 
     def start_flooder(self, load: Load) -> subprocess.Popen:
-        return self.start("flooder", [sys.executable, "-m", "robofabric.bench.flooder", self.world, str(self.port), json.dumps(asdict(load))])
+        return self.start(
+            "flooder",
+            [sys.executable, "-m", "robofabric.bench.flooder", self.world, str(self.port), json.dumps(asdict(load))],
+        )
 
     def memory(self) -> dict[str, float]:
         """Each peer's resident memory now, MB: ``sim`` (VmRSS) and its parts (``sim:RssAnon``, ...)."""
@@ -379,7 +418,10 @@ def _flood_phase(rig: _Rig, load: Load, result: FloodResult, *, flood: bool, sto
     stopped = stop_at is None
     while True:
         if not stopped and time.monotonic() - t0 >= stop_at:
-            result.stop = {**owner.stop_robot(timeout=10.0), "flooder_running": flooder is not None and flooder.poll() is None}
+            result.stop = {
+                **owner.stop_robot(timeout=10.0),
+                "flooder_running": flooder is not None and flooder.poll() is None,
+            }
             owner.paused.clear()
             stopped = True
         peak = {k: max(peak.get(k, 0.0), v) for k, v in rig.memory().items()}
@@ -409,12 +451,18 @@ def _flooder_report(log: Path) -> dict[str, Any]:
 
 def _read_logs(out_dir: Path, result: FloodResult) -> None:
     """The peers' log sizes and the sim's own command counts, once they have stopped."""
-    result.log_bytes = {n: (out_dir / f"{n}.log").stat().st_size for n in ("sim", "compute") if (out_dir / f"{n}.log").exists()}
-    result.sim_counts = sim_counts((out_dir / "sim.log").read_text(errors="replace") if (out_dir / "sim.log").exists() else "")
+    result.log_bytes = {
+        n: (out_dir / f"{n}.log").stat().st_size for n in ("sim", "compute") if (out_dir / f"{n}.log").exists()
+    }
+    result.sim_counts = sim_counts(
+        (out_dir / "sim.log").read_text(errors="replace") if (out_dir / "sim.log").exists() else ""
+    )
 
 
-_SIM_STOPPED = re.compile(r"sim stopped at .*: (?P<steps>\d+) steps, (?P<commands>\d+) commands \((?P<accepted>\d+) accepted, "
-                          r"(?P<rejected>\d+) rejected")
+_SIM_STOPPED = re.compile(
+    r"sim stopped at .*: (?P<steps>\d+) steps, (?P<commands>\d+) commands \((?P<accepted>\d+) accepted, "
+    r"(?P<rejected>\d+) rejected"
+)
 
 
 def sim_counts(log_text: str) -> dict[str, int]:
@@ -438,7 +486,13 @@ def _world_info(fab: Fabric, world: str) -> Any:
 
 
 def command(
-    scale: Annotated[float, typer.Option("--scale", help="Times the issue's flood (20k unique-id commands, 10k junk per key, 100 x 5 MB, 1k fake streams, 1k forged requests).")] = 2.0,
+    scale: Annotated[
+        float,
+        typer.Option(
+            "--scale",
+            help="Times the issue's flood (20k unique-id commands, 10k junk per key, 100 x 5 MB, 1k fake streams, 1k forged requests).",
+        ),
+    ] = 2.0,
     out: Annotated[Path, typer.Option("--out", help="Folder for the peers' logs.")] = Path("out/bench-flood"),
     settle: Annotated[float, typer.Option("--settle", help="Seconds alice goes on after the flood.")] = 5.0,
 ) -> None:
@@ -447,7 +501,10 @@ def command(
     import dataclasses
 
     load = dataclasses.replace(Load().scaled(scale), settle_s=settle)
-    rows = [("no flood", run_flood(load, out / "quiet", flood=False)), (f"flood x{scale:g}", run_flood(load, out / "flood", flood=True))]
+    rows = [
+        ("no flood", run_flood(load, out / "quiet", flood=False)),
+        (f"flood x{scale:g}", run_flood(load, out / "flood", flood=True)),
+    ]
     print(report(rows))
 
 
@@ -463,7 +520,8 @@ def report(rows: list[tuple[str, FloodResult]]) -> str:
         lines.append(
             f"| {name} | {r.pct(50) * 1e3:.1f} / {r.pct(99) * 1e3:.1f} | {r.commands} ({r.not_applied}) | {len(r.lapses)} "
             f"| {r.rss_before['sim']:.0f} -> {r.rss_peak['sim']:.0f} | {r.rss_before['compute']:.0f} -> {r.rss_peak['compute']:.0f} "
-            f"| {r.cpu_s['sim']:.1f} / {r.cpu_s['compute']:.1f} | {r.phase_s:.1f} | {r.log_bytes.get('sim', 0)} / {r.log_bytes.get('compute', 0)} |")
+            f"| {r.cpu_s['sim']:.1f} / {r.cpu_s['compute']:.1f} | {r.phase_s:.1f} | {r.log_bytes.get('sim', 0)} / {r.log_bytes.get('compute', 0)} |"
+        )
     for name, r in rows:
         if r.lapses:
             lines.append(f"{name}: lease lapses: {'; '.join(r.lapses[:5])}")
@@ -472,8 +530,11 @@ def report(rows: list[tuple[str, FloodResult]]) -> str:
             f"{name}: a stop 2 s in (the last joint slowly on its way to {st.get('target')} rad), resent every 0.1 s: "
             f"{'seen still' if st.get('done') else 'NOT seen still'} after {st.get('sends')} send(s), {st.get('seconds')} s; "
             f"took effect {st.get('effect_s')} s after the first send, {st.get('short_by')} rad short of the target "
-            f"(flooder {'running' if st.get('flooder_running') else 'idle'})")
-        lines.append(f"{name}: the sim counted {r.sim_counts.get('commands', '?')} commands, {r.sim_counts.get('rejected', '?')} rejected")
+            f"(flooder {'running' if st.get('flooder_running') else 'idle'})"
+        )
+        lines.append(
+            f"{name}: the sim counted {r.sim_counts.get('commands', '?')} commands, {r.sim_counts.get('rejected', '?')} rejected"
+        )
     flooder = rows[-1][1].flooder
     lines.append("flooder sent: " + ", ".join(f"{k}={v}" for k, v in flooder.items() if not k.startswith("t_")))
     return "\n".join(lines)

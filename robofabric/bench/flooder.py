@@ -28,10 +28,14 @@ def flood(world: str, port: int, load: dict) -> dict:
         sent["unique_commands"] = load["unique_commands"]
         sent["t_unique_commands"] = round(time.monotonic() - t0, 3)
         junk_keys = [
-            keys.robot_cmd(world, "arm1", "joints", "mallory"), keys.robot_cmd(world, "arm1", "stop", "mallory"),
+            keys.robot_cmd(world, "arm1", "joints", "mallory"),
+            keys.robot_cmd(world, "arm1", "stop", "mallory"),
             keys.robot_cmd(world, "base1", "twist", "mallory"),
-            keys.object_pose(world, "target", "mallory"), keys.object_pose(world, "goal", "mallory"),
-            keys.robot_joints(world, "arm1"), keys.robot_pose(world, "base1"), keys.robot_scan(world, "base1"),
+            keys.object_pose(world, "target", "mallory"),
+            keys.object_pose(world, "goal", "mallory"),
+            keys.robot_joints(world, "arm1"),
+            keys.robot_pose(world, "base1"),
+            keys.robot_scan(world, "base1"),
         ]
         pubs = [s.declare_publisher(k) for k in junk_keys]
         rng = np.random.default_rng(7)
@@ -59,8 +63,12 @@ def flood(world: str, port: int, load: dict) -> dict:
         sent["fake_joint_streams"] = load["fake_joint_streams"]
         sent["t_fake_joint_streams"] = round(time.monotonic() - t0, 3)
         for i in range(load["forged_requests"]):
-            s.get(keys.own_request(world, "arm1", f"forged{i}"), lambda r: None, payload=encode(OwnRequest("request", f"forged{i}", True)),
-                  timeout=5.0)
+            s.get(
+                keys.own_request(world, "arm1", f"forged{i}"),
+                lambda r: None,
+                payload=encode(OwnRequest("request", f"forged{i}", True)),
+                timeout=5.0,
+            )
         sent["forged_requests"] = load["forged_requests"]
         sent["t_forged_requests"] = round(time.monotonic() - t0, 3)
         time.sleep(1.0)  # let the last puts leave before the session closes

@@ -23,8 +23,10 @@ LZ4 = 2  # rerun.common.v1alpha1.Compression.COMPRESSION_LZ4
 
 def raw_read_request(host: str = "127.0.0.1") -> bytes:
     """The bytes of a page's ReadMessages request, for clients that send it and never read."""
-    return (f"POST {READ} HTTP/1.1\r\nhost: {host}\r\ncontent-type: application/grpc-web+proto\r\n"
-            f"x-grpc-web: 1\r\ncontent-length: {len(EMPTY_FRAME)}\r\n\r\n").encode() + EMPTY_FRAME
+    return (
+        f"POST {READ} HTTP/1.1\r\nhost: {host}\r\ncontent-type: application/grpc-web+proto\r\n"
+        f"x-grpc-web: 1\r\ncontent-length: {len(EMPTY_FRAME)}\r\n\r\n"
+    ).encode() + EMPTY_FRAME
 
 
 def stalled_reader(port: int, source: str = "127.0.0.1") -> socket.socket:
@@ -59,11 +61,11 @@ def _fields(buf: bytes) -> dict[int, list]:
             v, i = _varint(buf, i)
         elif wt == 2:
             n, i = _varint(buf, i)
-            v, i = buf[i:i + n], i + n
+            v, i = buf[i : i + n], i + n
         elif wt == 1:
-            v, i = buf[i:i + 8], i + 8
+            v, i = buf[i : i + 8], i + 8
         elif wt == 5:
-            v, i = buf[i:i + 4], i + 4
+            v, i = buf[i : i + 4], i + 4
         else:
             raise ValueError(f"wire type {wt}")
         out.setdefault(key >> 3, []).append(v)
@@ -119,7 +121,12 @@ class WebReader:
                     ahead = self.received / self.rate - (time.monotonic() - t0)
                     if ahead > 0:
                         self._stop.wait(ahead)
-        except (OSError, http.client.HTTPException, AttributeError, ValueError) as exc:  # AttributeError: closed under it
+        except (
+            OSError,
+            http.client.HTTPException,
+            AttributeError,
+            ValueError,
+        ) as exc:  # AttributeError: closed under it
             self.ended = self.ended or f"{type(exc).__name__}: {exc}"
 
     def _split(self) -> None:
@@ -128,8 +135,8 @@ class WebReader:
             if len(self._buf) < 5 + n:
                 return
             if self._buf[0] == 0:  # a data frame (0x80: trailers)
-                self.frames.append(bytes(self._buf[5:5 + n]))
-            del self._buf[:5 + n]
+                self.frames.append(bytes(self._buf[5 : 5 + n]))
+            del self._buf[: 5 + n]
 
     def saw(self, marker: bytes) -> bool:
         """Whether any Arrow payload read so far holds ``marker``."""

@@ -45,7 +45,9 @@ def _stats(times: list[float], ok: int, n: int) -> dict:
     }
 
 
-def reachable_targets(arm: ArmModel, n: int, rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray, list[float]]]:
+def reachable_targets(
+    arm: ArmModel, n: int, rng: np.random.Generator
+) -> list[tuple[np.ndarray, np.ndarray, list[float]]]:
     """``n`` reachable flange targets: (joint vector, position, quaternion w x y z)."""
     import pinocchio as pin
 
@@ -100,8 +102,10 @@ def measure_solve(n: int = 2000, seed: int = 0) -> dict:
     result["closed_form_position"] = _stats(times, len(sols), n) | {"numerical_fallback": fallback}
 
     # half the starts near the answer (a tracking seed), half anywhere in the limits
-    starts = [np.clip(q + rng.normal(0.0, 0.3, q.shape), arm.lower, arm.upper) if i % 2 == 0 else s
-              for i, ((q, _, _), s) in enumerate(zip(targets, seeds))]
+    starts = [
+        np.clip(q + rng.normal(0.0, 0.3, q.shape), arm.lower, arm.upper) if i % 2 == 0 else s
+        for i, ((q, _, _), s) in enumerate(zip(targets, seeds))
+    ]
     times, sols = _timed(arm, [(p, quat, st) for (_, p, quat), st in zip(targets, starts)], "numerical")
     result["numerical"] = _stats(times, len(sols), n)
 
@@ -128,15 +132,25 @@ def format_table(result: dict) -> str:
     for key, label in ROWS:
         r = result[key]
         extra = f" ({r['numerical_fallback']} via numerical)" if "numerical_fallback" in r else ""
-        lines.append(f"| {label} | {r['n']} | {100 * r['success']:.2f}%{extra} | {r['median_us']:.1f} | {r['p99_us']:.1f} |")
+        lines.append(
+            f"| {label} | {r['n']} | {100 * r['success']:.2f}%{extra} | {r['median_us']:.1f} | {r['p99_us']:.1f} |"
+        )
     return "\n".join(lines)
 
 
 def command(
     n: Annotated[int, typer.Option("--n", help="Random reachable targets per workload.")] = 2000,
     seed: Annotated[int, typer.Option(help="Seed of the targets and IK seeds.")] = 0,
-    queries: Annotated[int, typer.Option(help="IK/FK queries for the round trip through a router (0: skip it).")] = 1000,
-    robot: Annotated[str, typer.Option("--robot", help="An installed arm type other than the Meca500 (robofabric robots list): its numerical IK, no round trip.")] = ROBOT,
+    queries: Annotated[
+        int, typer.Option(help="IK/FK queries for the round trip through a router (0: skip it).")
+    ] = 1000,
+    robot: Annotated[
+        str,
+        typer.Option(
+            "--robot",
+            help="An installed arm type other than the Meca500 (robofabric robots list): its numerical IK, no round trip.",
+        ),
+    ] = ROBOT,
     out: TablesOut = None,
 ) -> None:
     """Meca500 IK solve times (closed form full pose / position only, numerical, CasADi) and the query round trip;
@@ -170,8 +184,11 @@ def command(
         extra = f" ({r['numerical_fallback']} numerical)" if "numerical_fallback" in r else ""
         table.add_row(label, f"{100 * r['success']:.2f}%{extra}", f"{r['median_us']:.1f}", f"{r['p99_us']:.1f}")
     Console().print(table)
-    md = [f"IK solve, {ROBOT}, {n} targets per row, CasADi {min(n, CASADI_TARGETS)} (seed {seed}):", "",
-          format_table(result)]
+    md = [
+        f"IK solve, {ROBOT}, {n} targets per row, CasADi {min(n, CASADI_TARGETS)} (seed {seed}):",
+        "",
+        format_table(result),
+    ]
     if queries > 0:
         from robofabric.bench.ik_query import measure_query
 

@@ -64,9 +64,13 @@ def measure_arm(robot: str, n: int = 200, seed: int = 0) -> dict:
 
 def format_table(result: dict) -> str:
     """The result as a markdown table (for docs/benchmarks.md)."""
-    lines = [f"IK solve, {result['robot']} ({result['joints']} joints), {result['n']} reachable targets per row "
-             f"(seed {result['seed']}), solved = within 1 mm and 1 mrad:", "",
-             "| workload | success | p50 (us) | p99 (us) |", "|---|---|---|---|"]
+    lines = [
+        f"IK solve, {result['robot']} ({result['joints']} joints), {result['n']} reachable targets per row "
+        f"(seed {result['seed']}), solved = within 1 mm and 1 mrad:",
+        "",
+        "| workload | success | p50 (us) | p99 (us) |",
+        "|---|---|---|---|",
+    ]
     for key, label in ROWS:
         r = result[key]
         lines.append(f"| {label} | {100 * r['success']:.1f}% | {r['median_us']:.0f} | {r['p99_us']:.0f} |")

@@ -37,7 +37,9 @@ def measure_query(n: int = 1000, seed: int = 0, warmup: int = 50) -> dict[str, d
     port = free_port()
     rng = np.random.default_rng(seed)
     targets = reachable_targets(ArmModel("meca500"), n + warmup, rng)
-    argv = robofabric_cmd("compute", "--no-navigation", "--arm", "arm1:meca500", "--world", world, "--connect", f"tcp/127.0.0.1:{port}")
+    argv = robofabric_cmd(
+        "compute", "--no-navigation", "--arm", "arm1:meca500", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"
+    )
     with Fabric(router_config(world, port), kind="router", peer_id="router") as router:
         proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
         try:

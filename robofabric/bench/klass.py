@@ -36,6 +36,7 @@ TARGETS_DEG = ([25.0, 15.0, -15.0, 0.0, 20.0, 0.0], [-25.0, -10.0, 10.0, 0.0, -2
 
 # ---------------------------------------------------------------------- a student (child process)
 
+
 def student(world: str, endpoint: str, index: int, seconds: float, out: str) -> None:
     """Join, own armI and baseI, drive and move for ``seconds``, write the results to ``out`` (JSON)."""
     import numpy as np
@@ -77,6 +78,7 @@ def student(world: str, endpoint: str, index: int, seconds: float, out: str) -> 
 
 
 # ---------------------------------------------------------------------- the probe (this process)
+
 
 class Probe:
     """What this process measures of the world while the class runs (see the module docstring)."""
@@ -157,6 +159,7 @@ class Probe:
 
 # ---------------------------------------------------------------------- one class size
 
+
 def _children_cpu_s() -> float:
     """CPU seconds of this process's children that have ended and been waited for."""
     import resource
@@ -177,72 +180,141 @@ def run_one(n: int, seconds: float, tmp: Path, *, extra: int = 0) -> dict[str, A
     logs.mkdir(parents=True, exist_ok=True)
     with ProcessGroup(logs) as procs:
         router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
+        wait_until(
+            lambda: "listening" in procs.output(router),
+            timeout=60,
+            what="the router",
+            seen=lambda: procs.output(router),
+        )
         robots = [x for i in range(n + extra) for x in ("--robot", f"meca500:arm{i}", "--robot", f"reeman:base{i}")]
-        sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *robots, "--world", world,
-                                         "--connect", ep, "--id", "sim"), name="sim")
-        compute = procs.start(robofabric_cmd("compute", "--world", world, "--connect", ep, "--id", "compute"), name="compute")
-        with client(world, port, kind="tool", peer_id="probe") as fab, client(world, port, kind="tool", peer_id="echo") as echo:
+        sim = procs.start(
+            robofabric_cmd(
+                "sim",
+                "--scene",
+                "warehouse",
+                "--no-scene-robots",
+                *robots,
+                "--world",
+                world,
+                "--connect",
+                ep,
+                "--id",
+                "sim",
+            ),
+            name="sim",
+        )
+        compute = procs.start(
+            robofabric_cmd("compute", "--world", world, "--connect", ep, "--id", "compute"), name="compute"
+        )
+        with (
+            client(world, port, kind="tool", peer_id="probe") as fab,
+            client(world, port, kind="tool", peer_id="echo") as echo,
+        ):
             probe = Probe(fab, echo, world)
-            wait_until(lambda: len(probe.stamps) > 50, timeout=180, what="the sim's joints",
-                       seen=lambda: procs.output(sim)[-1500:])
+            wait_until(
+                lambda: len(probe.stamps) > 50,
+                timeout=180,
+                what="the sim's joints",
+                seen=lambda: procs.output(sim)[-1500:],
+            )
             probe.start()
             outs = [logs / f"s{i}.json" for i in range(n)]
             cpu0 = {name: proc_cpu_s(p.pid) for name, p in (("router", router), ("sim", sim), ("compute", compute))}
             kids0 = _children_cpu_s()
             t0 = time.monotonic()
-            students = [procs.start([*STUDENT, world, ep, str(i), str(seconds), str(out)], name=f"s{i}")
-                        for i, out in enumerate(outs)]
-            wait_until(lambda: time.monotonic() > t0 + min(20.0, seconds / 2), timeout=seconds + 60, interval=0.5,
-                       what="the middle of the class")
+            students = [
+                procs.start([*STUDENT, world, ep, str(i), str(seconds), str(out)], name=f"s{i}")
+                for i, out in enumerate(outs)
+            ]
+            wait_until(
+                lambda: time.monotonic() > t0 + min(20.0, seconds / 2),
+                timeout=seconds + 60,
+                interval=0.5,
+                what="the middle of the class",
+            )
             msgs = probe.count_messages(3.0)
-            wait_until(lambda: all(p.poll() is not None for p in students), timeout=seconds + 240, interval=0.5,
-                       what="every student done", seen=lambda: [procs.output(p)[-300:] for p in students if p.poll() is None][:2])
+            wait_until(
+                lambda: all(p.poll() is not None for p in students),
+                timeout=seconds + 240,
+                interval=0.5,
+                what="every student done",
+                seen=lambda: [procs.output(p)[-300:] for p in students if p.poll() is None][:2],
+            )
             t1 = time.monotonic()
             cpu1 = {name: proc_cpu_s(p.pid) for name, p in (("router", router), ("sim", sim), ("compute", compute))}
-            cpu1["students"], cpu0["students"] = _children_cpu_s(), kids0  # the students, reaped by now: the others are not
+            cpu1["students"], cpu0["students"] = (
+                _children_cpu_s(),
+                kids0,
+            )  # the students, reaped by now: the others are not
             probe.close()
             rtf = probe.real_time_factor(t0 + 5.0, t1 - 1.0)
             own_ms, echo_ms = list(probe.own_ms), list(probe.echo_ms)
         for p in (compute, sim, router):
             end_process(p)
-        results = [json.loads(o.read_text()) if o.exists() else {"moves": [], "refused": 0, "lost": [], "errors": ["no result"],
-                                                                 "join_s": None} for o in outs]
+        results = [
+            json.loads(o.read_text())
+            if o.exists()
+            else {"moves": [], "refused": 0, "lost": [], "errors": ["no result"], "join_s": None}
+            for o in outs
+        ]
     moves = [m for r in results for m in r["moves"]]
     joins = [r["join_s"] for r in results if r["join_s"] is not None]
     return {
-        "n": n, "robots": 2 * (n + extra), "joined": len(joins), "join_p50": pct(joins, 50), "join_max": pct(joins, 100),
-        "move_p50": pct(moves, 50), "move_p95": pct(moves, 95), "moves": len(moves),
+        "n": n,
+        "robots": 2 * (n + extra),
+        "joined": len(joins),
+        "join_p50": pct(joins, 50),
+        "join_max": pct(joins, 100),
+        "move_p50": pct(moves, 50),
+        "move_p95": pct(moves, 95),
+        "moves": len(moves),
         "fewest_moves": min((len(r["moves"]) for r in results), default=0),
-        "lost": sum(len(r["lost"]) for r in results), "refused": sum(r["refused"] for r in results),
-        "errors": [e for r in results for e in r["errors"]][:5], "lost_detail": [x for r in results for x in r["lost"]][:5],
-        "rtf": rtf, "own_p50": pct(own_ms, 50), "own_p99": pct(own_ms, 99), "own_n": len(own_ms),
-        "echo_p50": pct(echo_ms, 50), "echo_p99": pct(echo_ms, 99),
-        "cpu": {k: (cpu1[k] - cpu0[k]) / (t1 - t0) for k in cpu0}, "msgs": msgs,
+        "lost": sum(len(r["lost"]) for r in results),
+        "refused": sum(r["refused"] for r in results),
+        "errors": [e for r in results for e in r["errors"]][:5],
+        "lost_detail": [x for r in results for x in r["lost"]][:5],
+        "rtf": rtf,
+        "own_p50": pct(own_ms, 50),
+        "own_p99": pct(own_ms, 99),
+        "own_n": len(own_ms),
+        "echo_p50": pct(echo_ms, 50),
+        "echo_p99": pct(echo_ms, 99),
+        "cpu": {k: (cpu1[k] - cpu0[k]) / (t1 - t0) for k in cpu0},
+        "msgs": msgs,
     }
 
 
 def header() -> list[str]:
-    return ["| students (robots) | joined, p50 / max (s) | move p50 / p95 (s) | vs 1 student | robots lost | refused commands "
-            "| sim real-time factor | ownership answer p50 / p99 (ms) | idle echo p50 / p99 (ms) | CPU router / sim / compute / all "
-            "students (cores) | messages/s |",
-            "|---|---|---|---|---|---|---|---|---|---|---|"]
+    return [
+        "| students (robots) | joined, p50 / max (s) | move p50 / p95 (s) | vs 1 student | robots lost | refused commands "
+        "| sim real-time factor | ownership answer p50 / p99 (ms) | idle echo p50 / p99 (ms) | CPU router / sim / compute / all "
+        "students (cores) | messages/s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
 
 
 def row(r: dict[str, Any], base: float) -> str:
     ratio = r["move_p50"] / base if base and base == base else float("nan")
     c = r["cpu"]
-    return (f"| {r['n']} ({r['robots']}) | {r['joined']}/{r['n']}, {r['join_p50']:.1f} / {r['join_max']:.1f} | "
-            f"{r['move_p50']:.3f} / {r['move_p95']:.3f} | {ratio:.2f}x | {r['lost']} | {r['refused']} | {r['rtf']:.2f} | "
-            f"{r['own_p50']:.1f} / {r['own_p99']:.1f} | {r['echo_p50']:.1f} / {r['echo_p99']:.1f} | {c['router']:.2f} / {c['sim']:.2f} / {c['compute']:.2f} / {c['students']:.2f} | {r['msgs']:.0f} |")
+    return (
+        f"| {r['n']} ({r['robots']}) | {r['joined']}/{r['n']}, {r['join_p50']:.1f} / {r['join_max']:.1f} | "
+        f"{r['move_p50']:.3f} / {r['move_p95']:.3f} | {ratio:.2f}x | {r['lost']} | {r['refused']} | {r['rtf']:.2f} | "
+        f"{r['own_p50']:.1f} / {r['own_p99']:.1f} | {r['echo_p50']:.1f} / {r['echo_p99']:.1f} | {c['router']:.2f} / {c['sim']:.2f} / {c['compute']:.2f} / {c['students']:.2f} | {r['msgs']:.0f} |"
+    )
 
 
 def command(
-    students: Annotated[str, typer.Option("--students", help="Comma-separated class sizes (each student: one arm, one base).")] = "1,4,8,16,32",
+    students: Annotated[
+        str, typer.Option("--students", help="Comma-separated class sizes (each student: one arm, one base).")
+    ] = "1,4,8,16,32",
     seconds: Annotated[float, typer.Option("--seconds", help="How long each student drives and moves (s).")] = 40.0,
-    extra_robots: Annotated[int, typer.Option("--extra-robots", help="Arms and bases (as many of each) nobody owns, to load the sim.")] = 0,
+    extra_robots: Annotated[
+        int, typer.Option("--extra-robots", help="Arms and bases (as many of each) nobody owns, to load the sim.")
+    ] = 0,
     out: TableOut = None,
-    logs: Annotated[Optional[Path], typer.Option(help="Keep every process's output and the students' JSON here.")] = None,
+    logs: Annotated[
+        Optional[Path], typer.Option(help="Keep every process's output and the students' JSON here.")
+    ] = None,
 ) -> None:
     """A class of N students (processes), each owning an arm and a base: join and move times, robots lost,
     refused commands, the sim's real-time factor, ownership answer times, CPU and message rates."""
@@ -256,8 +328,12 @@ def command(
         raise UserError("--students: each size at least 1; --seconds positive; --extra-robots at least 0")
     rows: list[dict[str, Any]] = []
     more = f" --extra-robots {extra_robots}" if extra_robots else ""
-    lines = [f"Command: `robofabric bench class --students {students} --seconds {seconds:g}{more}`",
-             f"Machine: {machine()}; load average at start {os.getloadavg()[0]:.1f}", "", *header()]
+    lines = [
+        f"Command: `robofabric bench class --students {students} --seconds {seconds:g}{more}`",
+        f"Machine: {machine()}; load average at start {os.getloadavg()[0]:.1f}",
+        "",
+        *header(),
+    ]
     print("\n".join(lines), flush=True)
     base = float("nan")
     with tempfile.TemporaryDirectory() as tmp:
@@ -274,8 +350,11 @@ def command(
     if per:
         big = max(per, key=lambda r: r["n"])
         cost = big["cpu"]["sim"] / (2 * big["n"]) / max(big["rtf"], 1e-9)
-        lines += ["", f"Sim CPU per robot per second of sim time at {big['n']} students: {cost * 1e3:.1f} ms "
-                      f"(sim {big['cpu']['sim']:.2f} cores at real-time factor {big['rtf']:.2f} for {2 * big['n']} robots)."]
+        lines += [
+            "",
+            f"Sim CPU per robot per second of sim time at {big['n']} students: {cost * 1e3:.1f} ms "
+            f"(sim {big['cpu']['sim']:.2f} cores at real-time factor {big['rtf']:.2f} for {2 * big['n']} robots).",
+        ]
         print(lines[-1], flush=True)
     append(out, "\n".join(lines))
 

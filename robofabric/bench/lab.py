@@ -71,7 +71,11 @@ class _Bench:
     def partition(self) -> float:
         a, b = self.alice, self.bob
         held = a.call("e = arm.request(); arm.move_joints(np.full(6, 0.8), wait=False, speed_scale=0.05); e")
-        _wait(lambda: b.call("r = arm.record; r is not None and r.state == 'moving' and r.owner == 'alice'"), 20, "arm moving")
+        _wait(
+            lambda: b.call("r = arm.record; r is not None and r.state == 'moving' and r.owner == 'alice'"),
+            20,
+            "arm moving",
+        )
         granted = b.submit("arm.request(wait=True, timeout=60); time.monotonic()")
         _wait(lambda: b.call("'bob' in tuple(arm.record.queue)"), 20, "bob queued")
         t_cut = time.monotonic()
@@ -82,7 +86,11 @@ class _Bench:
         # alice's view catches up with what happened while she was cut off: a newer epoch than hers, whether the
         # arm is free (bob released it before her token came back) or hers again (she came back while bob held
         # it: queued first, as an ex-owner within grace, she owns it after his release)
-        _wait(lambda: a.call(f"arm.record.epoch > {held}"), 30, "alice's view of the arm catching up (a newer epoch than hers)")
+        _wait(
+            lambda: a.call(f"arm.record.epoch > {held}"),
+            30,
+            "alice's view of the arm catching up (a newer epoch than hers)",
+        )
         a.call("w.wait_world(timeout=60); None", timeout=90)
         return handover
 
@@ -92,12 +100,19 @@ class _Bench:
         self.router.kill()
         self.router = self.start_router()
         t_back = time.monotonic()
-        _wait(lambda: a.call("x = arm.age('joints'); x is not None and x < 0.2"), 60, "joints after the router's restart")
+        _wait(
+            lambda: a.call("x = arm.age('joints'); x is not None and x < 0.2"), 60, "joints after the router's restart"
+        )
         joints = time.monotonic() - t_back
         # the authority's word on the arm after the restart: alice's under the same epoch (the authority kept
         # her while its own link was down), or a newer record (passed on, restored or freed)
-        _wait(lambda: a.call(f"r = w.ownership.fetch('arm1', timeout=2.0)\nr is not None and (r.owner == 'alice' or r.epoch > {epoch})"),
-              60, "the authority's record of the arm at alice")
+        _wait(
+            lambda: a.call(
+                f"r = w.ownership.fetch('arm1', timeout=2.0)\nr is not None and (r.owner == 'alice' or r.epoch > {epoch})"
+            ),
+            60,
+            "the authority's record of the arm at alice",
+        )
         owned = time.monotonic() - t_back
         restored = bool(a.call("arm.is_owner"))
         a.call("arm.release() if arm.is_owner else None; None")
@@ -108,7 +123,10 @@ class _Bench:
         a.call("gone.clear(); None")
         t_kill = time.monotonic()
         self.sim.kill()
-        told = _wait(lambda: a.call("[t for t, alive in gone if not alive][:1]"), 30, "alice told the world is gone")[0] - t_kill
+        told = (
+            _wait(lambda: a.call("[t for t, alive in gone if not alive][:1]"), 30, "alice told the world is gone")[0]
+            - t_kill
+        )
         self.sim = self.start_sim()
         t_start = time.monotonic()
         a.call("assert w.wait_world(timeout=120); None", timeout=150)
@@ -125,8 +143,17 @@ def run_stats(xs: list[float]) -> dict[str, float]:
 
 def run_lab_bench(runs: int = 5, *, log_dir: str | Path | None = None, progress=print) -> dict[str, Any]:
     """Build one lab, repeat each fault ``runs`` times, return {figure: {n, median_s, max_s, min_s}}."""
-    raw: dict[str, list[float]] = {k: [] for k in (
-        "partition_handover", "router_joints_back", "router_owner_back", "sim_gone_told", "sim_world_serving", "sim_first_move_done")}
+    raw: dict[str, list[float]] = {
+        k: []
+        for k in (
+            "partition_handover",
+            "router_joints_back",
+            "router_owner_back",
+            "sim_gone_told",
+            "sim_world_serving",
+            "sim_first_move_done",
+        )
+    }
     restored: list[bool] = []
     with Lab(log_dir=log_dir) as lab:
         bench = _Bench(lab)
@@ -141,10 +168,17 @@ def run_lab_bench(runs: int = 5, *, log_dir: str | Path | None = None, progress=
             raw["sim_gone_told"].append(t)
             raw["sim_world_serving"].append(s)
             raw["sim_first_move_done"].append(m)
-            progress(f"run {i + 1}/{runs}: " + ", ".join(f"{k} {v[-1]:.2f} s" for k, v in raw.items() if v)
-                     + f", owner restored: {restored[-1]}")
-    return {"runs": runs, "figures": {k: run_stats(v) for k, v in raw.items() if v}, "raw": raw,
-            "router_owner_restored": f"{sum(restored)}/{len(restored)}"}
+            progress(
+                f"run {i + 1}/{runs}: "
+                + ", ".join(f"{k} {v[-1]:.2f} s" for k, v in raw.items() if v)
+                + f", owner restored: {restored[-1]}"
+            )
+    return {
+        "runs": runs,
+        "figures": {k: run_stats(v) for k, v in raw.items() if v},
+        "raw": raw,
+        "router_owner_restored": f"{sum(restored)}/{len(restored)}",
+    }
 
 
 def to_markdown(result: dict[str, Any]) -> str:
@@ -159,8 +193,10 @@ def to_markdown(result: dict[str, Any]) -> str:
     lines = [f"| figure ({result['runs']} runs) | median | max |", "|---|---|---|"]
     for k, s in result["figures"].items():
         lines.append(f"| {labels[k]} | {s['median_s']:.2f} s | {s['max_s']:.2f} s |")
-    lines.append(f"\nAfter the router's restart the owner was restored in {result['router_owner_restored']} runs "
-                 "(otherwise the lease had expired first and the arm was free).")
+    lines.append(
+        f"\nAfter the router's restart the owner was restored in {result['router_owner_restored']} runs "
+        "(otherwise the lease had expired first and the arm was free)."
+    )
     return "\n".join(lines)
 
 

@@ -55,11 +55,25 @@ def run_mapflood(builds: int, tmp: Path) -> MapFloodResult:
     files = made.clients
     with ProcessGroup(tmp) as procs:
         router = procs.start(robofabric_cmd("router", "--zenoh-config", str(made.router)), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router))
-        sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config", str(files["sim"])), name="sim")
-        compute = procs.start(robofabric_cmd("compute", "--world", world, "--zenoh-config", str(files["compute"])), name="compute")
-        wait_until(lambda: "serving" in procs.output(compute), timeout=90, what="the compute peer", seen=lambda: procs.output(compute)[-1500:])
-        with Fabric(FabricConfig(world=world, config_file=str(files["mallory"])), kind="user", peer_id="mallory") as mallory:
+        wait_until(
+            lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router)
+        )
+        sim = procs.start(
+            robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config", str(files["sim"])),
+            name="sim",
+        )
+        compute = procs.start(
+            robofabric_cmd("compute", "--world", world, "--zenoh-config", str(files["compute"])), name="compute"
+        )
+        wait_until(
+            lambda: "serving" in procs.output(compute),
+            timeout=90,
+            what="the compute peer",
+            seen=lambda: procs.output(compute)[-1500:],
+        )
+        with Fabric(
+            FabricConfig(world=world, config_file=str(files["mallory"])), kind="user", peer_id="mallory"
+        ) as mallory:
             published: list[str] = []
             mallory.subscribe(keys.map_key(world, "map"), lambda k, m: published.append(k), expected=OccupancyGrid)
             status = keys.srv_asked(world, "map", "map", "mallory")
@@ -77,8 +91,12 @@ def run_mapflood(builds: int, tmp: Path) -> MapFloodResult:
             t0 = time.perf_counter()
             for i in range(builds):
                 try:
-                    mallory.rpc.call(keys.srv_asked(world, "map", f"m{i}", "mallory"), MapRequest("build", name=f"m{i}"),
-                                 timeout=10.0, expected=MapReply)
+                    mallory.rpc.call(
+                        keys.srv_asked(world, "map", f"m{i}", "mallory"),
+                        MapRequest("build", name=f"m{i}"),
+                        timeout=10.0,
+                        expected=MapReply,
+                    )
                     kept += 1
                 except ServiceError as exc:
                     reasons.append(exc.reason)
@@ -92,14 +110,20 @@ def run_mapflood(builds: int, tmp: Path) -> MapFloodResult:
             rss1 = proc_rss_mb(compute.pid)
         procs.kill(compute, sig=15)
         procs.kill(sim, sig=15)
-    return MapFloodResult(builds, kept, len(reasons), reasons[0] if reasons else "", per, rss0, rss1, len(published), low)
+    return MapFloodResult(
+        builds, kept, len(reasons), reasons[0] if reasons else "", per, rss0, rss1, len(published), low
+    )
 
 
 def table(r: MapFloodResult) -> str:
-    head = ("| new names asked | kept | refused | s per build | compute RSS before / after MB | class map published | "
-            "threshold 0.001 |\n|---|---|---|---|---|---|---|")
-    row = (f"| {r.builds} | {r.kept} | {r.refused} | {r.seconds_per_build:.3f} | {r.rss_before_mb:.0f} / {r.rss_after_mb:.0f} | "
-           f"{r.class_map_published} | {r.low_threshold} |")
+    head = (
+        "| new names asked | kept | refused | s per build | compute RSS before / after MB | class map published | "
+        "threshold 0.001 |\n|---|---|---|---|---|---|---|"
+    )
+    row = (
+        f"| {r.builds} | {r.kept} | {r.refused} | {r.seconds_per_build:.3f} | {r.rss_before_mb:.0f} / {r.rss_after_mb:.0f} | "
+        f"{r.class_map_published} | {r.low_threshold} |"
+    )
     why = f"\n\nfirst refusal: {r.reason}" if r.reason else ""
     return f"{head}\n{row}{why}"
 

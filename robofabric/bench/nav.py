@@ -32,7 +32,9 @@ RES = 0.05
 SIZE = 20.0
 
 
-def bench_mapping(scans: int = 200, rays: int = 240, fov_deg: float = 135.0, range_max: float = 12.0, seed: int = 1) -> dict:
+def bench_mapping(
+    scans: int = 200, rays: int = 240, fov_deg: float = 135.0, range_max: float = 12.0, seed: int = 1
+) -> dict:
     """Time ``integrate_scan`` of ``rays``-ray scans on a 400 x 400 grid."""
     scene = office(SIZE)
     cells = int(round(SIZE / RES))
@@ -44,7 +46,12 @@ def bench_mapping(scans: int = 200, rays: int = 240, fov_deg: float = 135.0, ran
     data = []
     for x, y, th in poses:
         r = scene.raycast(x, y, rel + th, range_max)
-        data.append((Scan.from_ranges(r, angle_min=amin, angle_increment=ainc, range_max=range_max), Pose(np.array([x, y, 0.0]), quaternion_from_yaw(th), header=Header())))
+        data.append(
+            (
+                Scan.from_ranges(r, angle_min=amin, angle_increment=ainc, range_max=range_max),
+                Pose(np.array([x, y, 0.0]), quaternion_from_yaw(th), header=Header()),
+            )
+        )
     times = []
     for scan, pose in data:
         t0 = time.perf_counter()
@@ -146,7 +153,9 @@ def format_tables(mapping: dict | list[dict], planning: list[dict]) -> str:
         )
     if planning:
         lines.append("")
-        lines.append(f"Costmap inflation (400x400, robot radius + margin): {planning[0]['inflate_ms']:.2f} ms, once per map.")
+        lines.append(
+            f"Costmap inflation (400x400, robot radius + margin): {planning[0]['inflate_ms']:.2f} ms, once per map."
+        )
     return "\n".join(lines)
 
 
@@ -155,8 +164,12 @@ def command(
     queries: Annotated[int, typer.Option(help="Random start/goal pairs per planner and motion model.")] = 20,
     turning_radius: Annotated[float, typer.Option(help="Minimum turning radius (m).")] = 0.6,
     robot_radius: Annotated[float, typer.Option(help="Robot radius for inflation (m).")] = 0.25,
-    planners: Annotated[str, typer.Option(help="Comma-separated: hybrid_astar, ompl:rrtstar, ompl:bitstar.")] = "hybrid_astar,ompl:rrtstar,ompl:bitstar",
-    fovs: Annotated[str, typer.Option(help="Comma-separated LIDAR fields of view (deg) for the map update; 240 rays each.")] = "135,360",
+    planners: Annotated[
+        str, typer.Option(help="Comma-separated: hybrid_astar, ompl:rrtstar, ompl:bitstar.")
+    ] = "hybrid_astar,ompl:rrtstar,ompl:bitstar",
+    fovs: Annotated[
+        str, typer.Option(help="Comma-separated LIDAR fields of view (deg) for the map update; 240 rays each.")
+    ] = "135,360",
     seed: Annotated[int, typer.Option(help="Seed of the start/goal pairs and scan poses.")] = 2,
     as_json: Annotated[bool, typer.Option("--json", help="Print the results as JSON.")] = False,
     out: TablesOut = None,
@@ -167,7 +180,9 @@ def command(
     names = tuple(p.strip() for p in planners.split(",") if p.strip())
     bad = [p for p in names if p not in ("hybrid_astar", "ompl", "ompl:rrtstar", "ompl:bitstar")]
     if bad or not names:
-        raise UserError(f"--planners: unknown planner(s) {', '.join(bad) or '(none)'}; use hybrid_astar, ompl:rrtstar, ompl:bitstar")
+        raise UserError(
+            f"--planners: unknown planner(s) {', '.join(bad) or '(none)'}; use hybrid_astar, ompl:rrtstar, ompl:bitstar"
+        )
     if scans < 1 or queries < 1 or turning_radius <= 0 or robot_radius < 0:
         raise UserError("--scans and --queries must be >= 1, --turning-radius > 0, --robot-radius >= 0")
     try:

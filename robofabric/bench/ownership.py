@@ -57,8 +57,12 @@ def run_one(n: int, *, lease_s: float, kills: int) -> dict:
         last.release("arm")
         for k in range(kills):
             owner_id = f"k{k}"
-            proc = subprocess.Popen([*HOLDER, world, str(port), owner_id],
-                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+            proc = subprocess.Popen(
+                [*HOLDER, world, str(port), owner_id],
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
             wait_until(lambda: last.record("arm").owner == owner_id, timeout=30, what="killable owner")
             last.request("arm", wait=True)
             t0 = time.perf_counter()
@@ -70,8 +74,12 @@ def run_one(n: int, *, lease_s: float, kills: int) -> dict:
         frozen = []
         for k in range(kills):  # SIGSTOP: the token stays (connection open), so only the lease can end it
             owner_id = f"f{k}"
-            proc = subprocess.Popen([*HOLDER, world, str(port), owner_id],
-                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+            proc = subprocess.Popen(
+                [*HOLDER, world, str(port), owner_id],
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
             wait_until(lambda: last.record("arm").owner == owner_id, timeout=30, what="freezable owner")
             last.request("arm", wait=True)
             t0 = time.perf_counter()
@@ -81,8 +89,16 @@ def run_one(n: int, *, lease_s: float, kills: int) -> dict:
             os.kill(proc.pid, signal.SIGKILL)
             proc.wait(timeout=10)
             last.release("arm")
-        return {"n": n, "frozen_p50": _pct(frozen, 50), "frozen_max": _pct(frozen, 100), "handover_p50": _pct(handovers, 50), "handover_p99": _pct(handovers, 99),
-                "recovery_p50": _pct(recoveries, 50), "recovery_max": _pct(recoveries, 100), "handovers": len(handovers)}
+        return {
+            "n": n,
+            "frozen_p50": _pct(frozen, 50),
+            "frozen_max": _pct(frozen, 100),
+            "handover_p50": _pct(handovers, 50),
+            "handover_p99": _pct(handovers, 99),
+            "recovery_p50": _pct(recoveries, 50),
+            "recovery_max": _pct(recoveries, 100),
+            "handovers": len(handovers),
+        }
     finally:
         for u in users:
             u.close()
@@ -95,14 +111,18 @@ def run_one(n: int, *, lease_s: float, kills: int) -> dict:
 
 def header(lease_s: float) -> list[str]:
     """The markdown table's head (the lease is part of a column's name)."""
-    return [f"| users | handovers | handover p50 (ms) | handover p99 (ms) | recovery after SIGKILL p50 / max (ms) | recovery after SIGSTOP (lease {lease_s*1e3:.0f} ms) p50 / max (ms) |",
-            "|---|---|---|---|---|---|"]
+    return [
+        f"| users | handovers | handover p50 (ms) | handover p99 (ms) | recovery after SIGKILL p50 / max (ms) | recovery after SIGSTOP (lease {lease_s * 1e3:.0f} ms) p50 / max (ms) |",
+        "|---|---|---|---|---|---|",
+    ]
 
 
 def format_row(r: dict) -> str:
     """One row of the table from :func:`run_one`'s result."""
-    return (f"| {r['n']} | {r['handovers']} | {r['handover_p50']:.1f} | {r['handover_p99']:.1f} | "
-            f"{r['recovery_p50']:.1f} / {r['recovery_max']:.1f} | {r['frozen_p50']:.1f} / {r['frozen_max']:.1f} |")
+    return (
+        f"| {r['n']} | {r['handovers']} | {r['handover_p50']:.1f} | {r['handover_p99']:.1f} | "
+        f"{r['recovery_p50']:.1f} / {r['recovery_max']:.1f} | {r['frozen_p50']:.1f} / {r['frozen_max']:.1f} |"
+    )
 
 
 def run_bench(counts: list[int], *, lease_s: float, kills: int) -> list[dict]:

@@ -73,7 +73,15 @@ def _rf_scan(seq: int, variant: int) -> bytes:
     from fabric.interfaces import Header, Scan
 
     ranges = (np.random.default_rng(variant).random(240) * 12000).astype(np.uint16)
-    return encode(Scan(-1.178, 2.356 / 239, 12.0, ranges, Header(stamp=seq * 0.05, wall_ns=time.time_ns(), seq=seq, source="bench-pub")))
+    return encode(
+        Scan(
+            -1.178,
+            2.356 / 239,
+            12.0,
+            ranges,
+            Header(stamp=seq * 0.05, wall_ns=time.time_ns(), seq=seq, source="bench-pub"),
+        )
+    )
 
 
 def _arm_joints(seq: int, variant: int) -> bytes:
@@ -83,11 +91,21 @@ def _arm_joints(seq: int, variant: int) -> bytes:
     from fabric.interfaces import Header, JointState
 
     rng = np.random.default_rng(variant)
-    return encode(JointState(tuple(f"j{i}" for i in range(1, 7)), rng.uniform(-2, 2, 6), rng.uniform(-1, 1, 6),
-                             Header(stamp=seq * 0.05, wall_ns=time.time_ns(), seq=seq, source="bench-pub")))
+    return encode(
+        JointState(
+            tuple(f"j{i}" for i in range(1, 7)),
+            rng.uniform(-2, 2, 6),
+            rng.uniform(-1, 1, 6),
+            Header(stamp=seq * 0.05, wall_ns=time.time_ns(), seq=seq, source="bench-pub"),
+        )
+    )
 
 
-_MAKERS: dict[str, Callable[[int, int], bytes]] = {"paper-135": _paper_json, "rf-240": _rf_scan, "arm-joints": _arm_joints}
+_MAKERS: dict[str, Callable[[int, int], bytes]] = {
+    "paper-135": _paper_json,
+    "rf-240": _rf_scan,
+    "arm-joints": _arm_joints,
+}
 
 
 def make_payload(name: str, seq: int = 0) -> bytes:
@@ -113,7 +131,9 @@ def _child_pub(a: argparse.Namespace) -> None:
         from fabric.session import Fabric
 
         fab = Fabric(FabricConfig(world="bench", connect=(a.endpoint,)), kind="tool", peer_id="bench-pub")
-        pub = fab.session.declare_publisher(KEY, congestion_control=zenoh.CongestionControl.BLOCK)  # raw: zenoh's own path is what is measured (payload bytes as given, no Fabric encode or stamp)
+        pub = fab.session.declare_publisher(
+            KEY, congestion_control=zenoh.CongestionControl.BLOCK
+        )  # raw: zenoh's own path is what is measured (payload bytes as given, no Fabric encode or stamp)
         deadline = time.monotonic() + 10.0
         while time.monotonic() < deadline and not pub.matching_status.matching:
             time.sleep(0.02)
@@ -241,16 +261,24 @@ def run_one(transport: str, broker_port: int, rate: float, payload: str, duratio
     me = [sys.executable, "-m", "robofabric.bench.paper"]
     endpoint = (lambda p: f"tcp/127.0.0.1:{p}") if transport == "zenoh" else (lambda p: f"127.0.0.1:{p}")
     common = ["--transport", transport, "--payload", payload, "--rate", str(rate), "--duration", str(duration)]
-    sub = subprocess.Popen(me + ["sub", *common, "--endpoint", endpoint(broker_port)], stdin=subprocess.PIPE,
-                           stdout=subprocess.PIPE, text=True)
+    sub = subprocess.Popen(
+        me + ["sub", *common, "--endpoint", endpoint(broker_port)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     proxy = CountingProxy(("127.0.0.1", broker_port))
     pub: subprocess.Popen | None = None
     try:
         assert sub.stdout is not None and sub.stdin is not None
         if sub.stdout.readline().strip() != "ready":
             raise RuntimeError(f"the {transport} subscriber did not start")
-        pub = subprocess.Popen(me + ["pub", *common, "--endpoint", endpoint(proxy.port)], stdin=subprocess.PIPE,
-                               stdout=subprocess.PIPE, text=True)
+        pub = subprocess.Popen(
+            me + ["pub", *common, "--endpoint", endpoint(proxy.port)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
         assert pub.stdout is not None and pub.stdin is not None
         if pub.stdout.readline().strip() != "ready":
             raise RuntimeError(f"the {transport} publisher did not start")
@@ -302,8 +330,14 @@ def run_one(transport: str, broker_port: int, rate: float, payload: str, duratio
     }
 
 
-def run_bench(transports: list[str], rates: list[float], payloads: list[str], duration: float, window: float,
-              progress: Callable[[str], None] = lambda s: print(s, file=sys.stderr, flush=True)) -> list[dict]:
+def run_bench(
+    transports: list[str],
+    rates: list[float],
+    payloads: list[str],
+    duration: float,
+    window: float,
+    progress: Callable[[str], None] = lambda s: print(s, file=sys.stderr, flush=True),
+) -> list[dict]:
     """Every (transport, rate, payload) row, one broker per transport."""
     rows: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="bench-paper-") as tmp:
@@ -332,19 +366,31 @@ def format_table(rows: list[dict]) -> str:
             f"{r['stream_bytes_per_msg']:.0f} | {r['wire_bytes_per_msg']:.0f} | {r['mb_per_min_max']:.3f} | "
             f"{r['mb_per_min_avg']:.3f} | {r['mb_per_min_min']:.3f} | {r['gb_per_hour']:.4f} |"
         )
-    lines += ["", "The paper's published figures (Firebase REST; MB = 10^6 bytes; B/msg implied = avg / (rate x 60)):", "",
-              "| source | rate (Hz) | payload | B/msg implied | MB/min max | avg | min | GB/h |", "|---|---|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        "The paper's published figures (Firebase REST; MB = 10^6 bytes; B/msg implied = avg / (rate x 60)):",
+        "",
+        "| source | rate (Hz) | payload | B/msg implied | MB/min max | avg | min | GB/h |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for p in paper_rows():
-        lines.append(f"| {p['source']} | {p['rate_hz']} | {p['payload']} | {p['bytes_per_msg_implied']} | {p['mb_per_min_max']} | "
-                     f"{p['mb_per_min_avg']} | {p['mb_per_min_min']} | {p['gb_per_hour']} |")
+        lines.append(
+            f"| {p['source']} | {p['rate_hz']} | {p['payload']} | {p['bytes_per_msg_implied']} | {p['mb_per_min_max']} | "
+            f"{p['mb_per_min_avg']} | {p['mb_per_min_min']} | {p['gb_per_hour']} |"
+        )
     return "\n".join(lines)
 
 
 def format_resources(rows: list[dict]) -> str:
     """Table 4's shape: each application's CPU (% of one core) and RSS, min and max while Test A and B ran."""
-    lines = ["| application | CPU min % | CPU max % | RSS min (MB) | RSS max (MB) | seconds sampled |", "|---|---|---|---|---|---|"]
+    lines = [
+        "| application | CPU min % | CPU max % | RSS min (MB) | RSS max (MB) | seconds sampled |",
+        "|---|---|---|---|---|---|",
+    ]
     for r in rows:
-        lines.append(f"| {r['peer']} | {r['cpu_min']:.1f} | {r['cpu_max']:.1f} | {r['rss_min_mb']:.0f} | {r['rss_max_mb']:.0f} | {r['samples']} |")
+        lines.append(
+            f"| {r['peer']} | {r['cpu_min']:.1f} | {r['cpu_max']:.1f} | {r['rss_min_mb']:.0f} | {r['rss_max_mb']:.0f} | {r['samples']} |"
+        )
     return "\n".join(lines)
 
 
@@ -361,19 +407,54 @@ def _parse_list(text: str, option: str, conv: Callable[[str], object], allowed: 
 
 
 def command(
-    quick: Annotated[bool, typer.Option("--quick", help="2 s per rate, 0.5 s windows, a 1-minute multi-user test (a smoke run); the full run is 60 s per rate, 1 s windows, 10 minutes.")] = False,
+    quick: Annotated[
+        bool,
+        typer.Option(
+            "--quick",
+            help="2 s per rate, 0.5 s windows, a 1-minute multi-user test (a smoke run); the full run is 60 s per rate, 1 s windows, 10 minutes.",
+        ),
+    ] = False,
     rates: Annotated[str, typer.Option(help="Comma-separated rates in Hz.")] = ",".join(map(str, RATES)),
-    payloads: Annotated[str, typer.Option(help=f"Comma-separated payloads: {', '.join(PAYLOADS)}.")] = ",".join(PAYLOADS),
+    payloads: Annotated[str, typer.Option(help=f"Comma-separated payloads: {', '.join(PAYLOADS)}.")] = ",".join(
+        PAYLOADS
+    ),
     transports: Annotated[str, typer.Option(help="Comma-separated: zenoh, mqtt.")] = "zenoh,mqtt",
     duration: Annotated[Optional[float], typer.Option(help="Seconds per rate (default 60, or 2 with --quick).")] = None,
-    window: Annotated[Optional[float], typer.Option(help="Seconds per MB/min sample (default 1, or 0.5 with --quick).")] = None,
-    as_json: Annotated[bool, typer.Option("--json", help='One JSON document: {"data_usage", "resources", "multi_user" (each when run), "paper", "machine", "load_average"}.')] = False,
+    window: Annotated[
+        Optional[float], typer.Option(help="Seconds per MB/min sample (default 1, or 0.5 with --quick).")
+    ] = None,
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help='One JSON document: {"data_usage", "resources", "multi_user" (each when run), "paper", "machine", "load_average"}.',
+        ),
+    ] = False,
     out: TablesOut = None,
-    plot: Annotated[Optional[Path], typer.Option(help="Also draw MB/min against rate beside the paper's (SVG/PNG; needs matplotlib).")] = None,
-    data_usage: Annotated[bool, typer.Option("--data-usage/--no-data-usage", help="The data-usage tables (Tables 2-3).")] = True,
-    resources: Annotated[bool, typer.Option("--resources/--no-resources", help="Also Table 4: CPU and RSS of router, sim, compute, viewer, console and the users while Test A and Test B run (about 2 min).")] = False,
-    multi_user: Annotated[bool, typer.Option("--multi-user/--no-multi-user", help="Also the paper's multi-user test: --students processes, each owning an arm and a base, for --minutes; the delay of the poses of robots each does not own.")] = False,
-    minutes: Annotated[Optional[float], typer.Option(help="Minutes of the multi-user test (default 10, or 1 with --quick).")] = None,
+    plot: Annotated[
+        Optional[Path],
+        typer.Option(help="Also draw MB/min against rate beside the paper's (SVG/PNG; needs matplotlib)."),
+    ] = None,
+    data_usage: Annotated[
+        bool, typer.Option("--data-usage/--no-data-usage", help="The data-usage tables (Tables 2-3).")
+    ] = True,
+    resources: Annotated[
+        bool,
+        typer.Option(
+            "--resources/--no-resources",
+            help="Also Table 4: CPU and RSS of router, sim, compute, viewer, console and the users while Test A and Test B run (about 2 min).",
+        ),
+    ] = False,
+    multi_user: Annotated[
+        bool,
+        typer.Option(
+            "--multi-user/--no-multi-user",
+            help="Also the paper's multi-user test: --students processes, each owning an arm and a base, for --minutes; the delay of the poses of robots each does not own.",
+        ),
+    ] = False,
+    minutes: Annotated[
+        Optional[float], typer.Option(help="Minutes of the multi-user test (default 10, or 1 with --quick).")
+    ] = None,
     students: Annotated[int, typer.Option(help="Students in the multi-user test (the paper's: 5).")] = 5,
 ) -> None:
     """The paper's evaluation side by side: data usage (zenoh and MQTT at 10-600 Hz, the paper's 135-ray JSON
@@ -397,8 +478,11 @@ def command(
         raise UserError("nothing to run: --no-data-usage needs --resources or --multi-user")
     if plot is not None and not data_usage:
         raise UserError("--plot draws the data-usage tables: it needs --data-usage")
-    doc = _run_sections((transport_list, rate_list, payload_list, duration, window) if data_usage else None, resources,
-                        (minutes, students) if multi_user else None)
+    doc = _run_sections(
+        (transport_list, rate_list, payload_list, duration, window) if data_usage else None,
+        resources,
+        (minutes, students) if multi_user else None,
+    )
     doc["paper"] = PAPER
     if plot is not None:
         from robofabric.bench.paper_plot import plot as draw
@@ -419,7 +503,9 @@ def _run_sections(data: tuple | None, resources: bool, multi: tuple | None) -> d
     doc: dict = {"machine": machine(), "load_average": {"start": round(os.getloadavg()[0], 1)}}
     if data is not None:
         transports, rates, payloads, duration, window = data
-        doc.update(duration_s=duration, window_s=window, data_usage=run_bench(transports, rates, payloads, duration, window))
+        doc.update(
+            duration_s=duration, window_s=window, data_usage=run_bench(transports, rates, payloads, duration, window)
+        )
     if resources:
         from robofabric.bench.paper_resources import measure_resources
 
@@ -445,7 +531,9 @@ def _format_doc(doc: dict) -> str:
         from robofabric.bench.paper_multi import format_multi_user
 
         parts.append(format_multi_user(doc["multi_user"]))
-    parts.append(f"Machine: {doc['machine']}; load average {doc['load_average']['start']} at the start, {doc['load_average']['end']} at the end")
+    parts.append(
+        f"Machine: {doc['machine']}; load average {doc['load_average']['start']} at the start, {doc['load_average']['end']} at the end"
+    )
     return "\n\n".join(parts)
 
 

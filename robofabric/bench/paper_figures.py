@@ -13,8 +13,10 @@ from __future__ import annotations
 
 __all__ = ["PAPER", "PAPER_MULTI_USER", "paper_rows", "paper_resources"]
 
-PAPER_SOURCE = ("Unity-MATLAB multi-user robotic simulation framework (the paper in /work/shared/reference), "
-                "Firebase REST API, statistics per minute over a 2-hour trial per rate")
+PAPER_SOURCE = (
+    "Unity-MATLAB multi-user robotic simulation framework (the paper in /work/shared/reference), "
+    "Firebase REST API, statistics per minute over a 2-hour trial per rate"
+)
 
 # rate -> (max MB/min, avg MB/min, min MB/min, GB in 1 h), Table 3 columns; 600 Hz from Table 2 (GB: 5.936 for
 # "the time interval", Fig. 11's hour).
@@ -32,23 +34,33 @@ def paper_rows() -> list[dict]:
     """One row per rate the paper published, with its source (table, column) and the payload it streamed."""
     rows: list[dict] = []
     for rate, (mx, avg, mn, gb) in _TABLE3.items():
-        rows.append({
-            "source": f"Table 3, {rate} Hz column",
-            "transport": "firebase (REST)",
-            "rate_hz": rate,
-            "payload": "135 rays, 415 data points",
-            "mb_per_min_max": mx, "mb_per_min_avg": avg, "mb_per_min_min": mn, "gb_per_hour": gb,
-            "bytes_per_msg_implied": round(avg * 1e6 / (rate * 60)),
-        })
+        rows.append(
+            {
+                "source": f"Table 3, {rate} Hz column",
+                "transport": "firebase (REST)",
+                "rate_hz": rate,
+                "payload": "135 rays, 415 data points",
+                "mb_per_min_max": mx,
+                "mb_per_min_avg": avg,
+                "mb_per_min_min": mn,
+                "gb_per_hour": gb,
+                "bytes_per_msg_implied": round(avg * 1e6 / (rate * 60)),
+            }
+        )
     mx, avg, mn, gb = _TABLE2
-    rows.append({
-        "source": "Table 2 (600 Hz; the text: a variable 600-800 Hz)",
-        "transport": "firebase (REST)",
-        "rate_hz": 600,
-        "payload": "240 rays, 726 data points",
-        "mb_per_min_max": mx, "mb_per_min_avg": avg, "mb_per_min_min": mn, "gb_per_hour": gb,
-        "bytes_per_msg_implied": round(avg * 1e6 / (600 * 60)),
-    })
+    rows.append(
+        {
+            "source": "Table 2 (600 Hz; the text: a variable 600-800 Hz)",
+            "transport": "firebase (REST)",
+            "rate_hz": 600,
+            "payload": "240 rays, 726 data points",
+            "mb_per_min_max": mx,
+            "mb_per_min_avg": avg,
+            "mb_per_min_min": mn,
+            "gb_per_hour": gb,
+            "bytes_per_msg_implied": round(avg * 1e6 / (600 * 60)),
+        }
+    )
     return rows
 
 
@@ -68,17 +80,34 @@ _TABLE4 = {
 def paper_resources() -> list[dict]:
     """Table 4 as printed, one row per application and computer (its CPU is presumably a share of the whole machine,
     16 or 8 cores, as Windows reports it; the paper does not say)."""
-    return [{"source": f"Table 4, {app}, {pc}-grade computer", "application": app, "computer": pc,
-             "cpu_min": a, "cpu_max": b, "rss_min_mb": c, "rss_max_mb": d} for (app, pc), (a, b, c, d) in _TABLE4.items()]
+    return [
+        {
+            "source": f"Table 4, {app}, {pc}-grade computer",
+            "application": app,
+            "computer": pc,
+            "cpu_min": a,
+            "cpu_max": b,
+            "rss_min_mb": c,
+            "rss_max_mb": d,
+        }
+        for (app, pc), (a, b, c, d) in _TABLE4.items()
+    ]
 
 
 PAPER_MULTI_USER: dict = {
     "source": "Section 3.3: 5 of the PUN server's 20 concurrent users for 2 h; 'all users had a 100 ms delay when "
-              "interacting with non-owned network objects' (how it was measured is not said)",
-    "users": 5, "hours": 2.0, "delay_ms": 100.0,
+    "interacting with non-owned network objects' (how it was measured is not said)",
+    "users": 5,
+    "hours": 2.0,
+    "delay_ms": 100.0,
 }
 """The paper's multi-user test as published: the ``paper_reported`` member of ``multi_user``."""
 
-PAPER: dict = {"source": PAPER_SOURCE, "mb": "10^6 bytes", "data_usage": paper_rows(), "resources": paper_resources(),
-               "multi_user": PAPER_MULTI_USER}
+PAPER: dict = {
+    "source": PAPER_SOURCE,
+    "mb": "10^6 bytes",
+    "data_usage": paper_rows(),
+    "resources": paper_resources(),
+    "multi_user": PAPER_MULTI_USER,
+}
 """The ``paper`` member of ``bench paper --json``."""

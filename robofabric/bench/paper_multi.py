@@ -45,6 +45,7 @@ AGE_PERIOD_S = 0.1
 
 # ---------------------------------------------------------------------- a student (child process)
 
+
 class PoseWatch:
     """The poses of the robots a student does not own: each message's delay, the newest stamp, sequence gaps."""
 
@@ -78,7 +79,7 @@ class PoseWatch:
                 self.delays.append((now / 1e9, (now - h.wall_ns) / 1e6))
                 self.count[robot] += 1
                 st = self.stamps[robot]
-                st[min(len(st), 1):] = [(h.wall_ns, h.stamp)]  # [first] then [first, newest]
+                st[min(len(st), 1) :] = [(h.wall_ns, h.stamp)]  # [first] then [first, newest]
 
         return on
 
@@ -128,7 +129,12 @@ def _drive(arm: Any, base: Any, until: float, res: dict[str, Any]) -> None:
         try:
             base.twist(0.0, 0.4 if k % 2 else -0.4)
             t = time.monotonic()
-            arm.move_joints(np.radians(TARGETS_DEG[k % 2]), wait=True, tol=2e-3, timeout=min(20.0, max(1.0, until - time.time() + 5)))
+            arm.move_joints(
+                np.radians(TARGETS_DEG[k % 2]),
+                wait=True,
+                tol=2e-3,
+                timeout=min(20.0, max(1.0, until - time.time() + 5)),
+            )
             res["moves"].append(time.monotonic() - t)
         except Exception as exc:  # a refusal or a timeout: counted, and the student goes on
             _note(res, exc)
@@ -154,8 +160,11 @@ def student(world: str, endpoint: str, index: int, n: int, out: str) -> None:
     ages: list[float] = []
     try:
         with connect(world, endpoint, user=f"s{index}", timeout=10.0, join_timeout=180.0) as w:
-            w.ownership.on_lost(lambda obj, rec: res["lost"].append(
-                f"{time.strftime('%H:%M:%S')} {obj}: owner {rec.owner or 'none'} epoch {rec.epoch}"))
+            w.ownership.on_lost(
+                lambda obj, rec: res["lost"].append(
+                    f"{time.strftime('%H:%M:%S')} {obj}: owner {rec.owner or 'none'} epoch {rec.epoch}"
+                )
+            )
             arm, base = w.robot(f"arm{index}"), w.robot(f"base{index}")
             arm.request(timeout=60.0)
             base.request(timeout=60.0)
@@ -195,6 +204,7 @@ def _sample_ages(watch: PoseWatch, start: float, end: float, into: list[float]) 
 
 # ---------------------------------------------------------------------- the orchestrator (this process)
 
+
 def summarise(results: list[dict[str, Any]], delays: list[Any], start: float, minutes: float) -> dict[str, Any]:
     """Overall, per-student and per-minute delay and age percentiles (ms) from the students' files."""
     import numpy as np
@@ -204,29 +214,53 @@ def summarise(results: list[dict[str, Any]], delays: list[Any], start: float, mi
     per_student = []
     for r, d in zip(results, delays):
         a = r.get("ages_ms", [])
-        per_student.append({
-            "student": r["student"], "delay_ms_p50": pct(d[:, 1], 50), "delay_ms_p99": pct(d[:, 1], 99),
-            "age_ms_p50": pct(a, 50), "age_ms_p99": pct(a, 99), "messages": int(d.shape[0]), "received": r.get("received", {}),
-            "missing": r.get("missing", 0), "moves": len(r["moves"]), "refused": r["refused"], "lost": r["lost"],
-            "retaken": r.get("retaken", 0),
-            "errors": r["errors"], "rtf": r.get("rtf", float("nan")),
-        })
+        per_student.append(
+            {
+                "student": r["student"],
+                "delay_ms_p50": pct(d[:, 1], 50),
+                "delay_ms_p99": pct(d[:, 1], 99),
+                "age_ms_p50": pct(a, 50),
+                "age_ms_p99": pct(a, 99),
+                "messages": int(d.shape[0]),
+                "received": r.get("received", {}),
+                "missing": r.get("missing", 0),
+                "moves": len(r["moves"]),
+                "refused": r["refused"],
+                "lost": r["lost"],
+                "retaken": r.get("retaken", 0),
+                "errors": r["errors"],
+                "rtf": r.get("rtf", float("nan")),
+            }
+        )
     per_minute = []
     for k in range(max(1, math.ceil(minutes - 1e-9))):
         sel = both[(both[:, 0] >= start + 60 * k) & (both[:, 0] < start + 60 * (k + 1))][:, 1]
-        per_minute.append({"minute": k + 1, "delay_ms_p50": pct(sel, 50), "delay_ms_p99": pct(sel, 99), "messages": int(sel.size)})
+        per_minute.append(
+            {"minute": k + 1, "delay_ms_p50": pct(sel, 50), "delay_ms_p99": pct(sel, 99), "messages": int(sel.size)}
+        )
     return {
-        "delay_ms_p50": pct(both[:, 1], 50), "delay_ms_p99": pct(both[:, 1], 99), "delay_ms_max": pct(both[:, 1], 100),
-        "age_ms_p50": pct(ages, 50), "age_ms_p99": pct(ages, 99), "messages": int(both.shape[0]),
-        "missing": sum(r.get("missing", 0) for r in results), "moves": sum(len(r["moves"]) for r in results),
-        "refused": sum(r["refused"] for r in results), "lost": sum(len(r["lost"]) for r in results),
+        "delay_ms_p50": pct(both[:, 1], 50),
+        "delay_ms_p99": pct(both[:, 1], 99),
+        "delay_ms_max": pct(both[:, 1], 100),
+        "age_ms_p50": pct(ages, 50),
+        "age_ms_p99": pct(ages, 99),
+        "messages": int(both.shape[0]),
+        "missing": sum(r.get("missing", 0) for r in results),
+        "moves": sum(len(r["moves"]) for r in results),
+        "refused": sum(r["refused"] for r in results),
+        "lost": sum(len(r["lost"]) for r in results),
         "retaken": sum(r.get("retaken", 0) for r in results),
-        "per_student": per_student, "per_minute": per_minute,
+        "per_student": per_student,
+        "per_minute": per_minute,
     }
 
 
-def measure_multi_user(minutes: float = 10.0, students: int = 5, logs: Path | None = None,
-                       progress: Callable[[str], None] = lambda s: print(s, file=sys.stderr, flush=True)) -> dict[str, Any]:
+def measure_multi_user(
+    minutes: float = 10.0,
+    students: int = 5,
+    logs: Path | None = None,
+    progress: Callable[[str], None] = lambda s: print(s, file=sys.stderr, flush=True),
+) -> dict[str, Any]:
     """One world, ``students`` student processes for ``minutes``; the ``multi_user`` member of ``bench paper --json``."""
     import tempfile
 
@@ -245,14 +279,38 @@ def _run(minutes: float, n: int, logs: Path, progress: Callable[[str], None]) ->
     outs = [str(logs / f"s{i}.json") for i in range(n)]
     with ProcessGroup(logs) as procs:
         router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=120, what="the router", seen=lambda: procs.output(router)[-500:])
+        wait_until(
+            lambda: "listening" in procs.output(router),
+            timeout=120,
+            what="the router",
+            seen=lambda: procs.output(router)[-500:],
+        )
         robots = [x for i in range(n) for x in ("--robot", f"meca500:arm{i}", "--robot", f"reeman:base{i}")]
-        sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *robots, "--world", world,
-                                         "--connect", ep, "--id", "sim"), name="sim")
+        sim = procs.start(
+            robofabric_cmd(
+                "sim",
+                "--scene",
+                "warehouse",
+                "--no-scene-robots",
+                *robots,
+                "--world",
+                world,
+                "--connect",
+                ep,
+                "--id",
+                "sim",
+            ),
+            name="sim",
+        )
         kids = [procs.start([*STUDENT, world, ep, str(i), str(n), out], name=f"s{i}") for i, out in enumerate(outs)]
         progress(f"multi-user: {n} students joining {world}")
-        wait_until(lambda: all(Path(o + ".ready").exists() for o in outs), timeout=400, interval=0.5, what="every student owning her robots",
-                   seen=lambda: [procs.output(k)[-300:] for k in kids if k.poll() is not None][:2] or procs.output(sim)[-500:])
+        wait_until(
+            lambda: all(Path(o + ".ready").exists() for o in outs),
+            timeout=400,
+            interval=0.5,
+            what="every student owning her robots",
+            seen=lambda: [procs.output(k)[-300:] for k in kids if k.poll() is not None][:2] or procs.output(sim)[-500:],
+        )
         start = time.time() + 1.0
         end = start + 60.0 * minutes
         for o in outs:
@@ -265,38 +323,67 @@ def _run(minutes: float, n: int, logs: Path, progress: Callable[[str], None]) ->
         cpu1 = {name: proc_cpu_s(p.pid) for name, p in (("router", router), ("sim", sim))}
         rss1 = {name: proc_rss_mb(p.pid) for name, p in (("router", router), ("sim", sim))}
         load1 = os.getloadavg()
-        wait_until(lambda: all(k.poll() is not None for k in kids), timeout=180, interval=0.5, what="every student done",
-                   seen=lambda: [procs.output(k)[-300:] for k in kids if k.poll() is None][:2])
-        results = [json.loads(Path(o).read_text()) if Path(o).exists() else
-                   {"student": f"s{i}", "moves": [], "refused": 0, "lost": [], "errors": ["no result"]} for i, o in enumerate(outs)]
+        wait_until(
+            lambda: all(k.poll() is not None for k in kids),
+            timeout=180,
+            interval=0.5,
+            what="every student done",
+            seen=lambda: [procs.output(k)[-300:] for k in kids if k.poll() is None][:2],
+        )
+        results = [
+            json.loads(Path(o).read_text())
+            if Path(o).exists()
+            else {"student": f"s{i}", "moves": [], "refused": 0, "lost": [], "errors": ["no result"]}
+            for i, o in enumerate(outs)
+        ]
         delays = [np.load(o + ".npy") if Path(o + ".npy").exists() else np.zeros((0, 2)) for o in outs]
     doc = summarise(results, delays, start, minutes)
-    doc.update(students=n, minutes=minutes, robots=2 * n, scene="warehouse", world=world,
-               streams="flange pose 100 Hz (arms), pose 50 Hz (bases)", age_period_s=AGE_PERIOD_S,
-               cpu_cores={k: (cpu1[k] - cpu0[k]) / (end - start) for k in cpu0},
-               rss_mb={k: [round(rss0[k], 1), round(rss1[k], 1)] for k in rss0},  # start, end: growth over the run
-               load_average=[round(load0[0], 1), round(load1[0], 1)], paper_reported=PAPER_MULTI_USER)
+    doc.update(
+        students=n,
+        minutes=minutes,
+        robots=2 * n,
+        scene="warehouse",
+        world=world,
+        streams="flange pose 100 Hz (arms), pose 50 Hz (bases)",
+        age_period_s=AGE_PERIOD_S,
+        cpu_cores={k: (cpu1[k] - cpu0[k]) / (end - start) for k in cpu0},
+        rss_mb={k: [round(rss0[k], 1), round(rss1[k], 1)] for k in rss0},  # start, end: growth over the run
+        load_average=[round(load0[0], 1), round(load1[0], 1)],
+        paper_reported=PAPER_MULTI_USER,
+    )
     return doc
 
 
 def format_multi_user(doc: dict[str, Any]) -> str:
     """The multi-user test as markdown: one row per student and the whole class, beside the paper's figure."""
     paper = doc["paper_reported"]
-    lines = [f"Multi-user test: {doc['students']} students, {doc['minutes']:g} min, {doc['robots']} robots ({doc['scene']}); "
-             f"load average {doc['load_average'][0]} at the start, {doc['load_average'][1]} at the end; "
-             f"router {doc['cpu_cores']['router']:.2f} cores, sim {doc['cpu_cores']['sim']:.2f}; RSS from start to end: "
-             f"router {doc['rss_mb']['router'][0]:.0f} -> {doc['rss_mb']['router'][1]:.0f} MB, sim {doc['rss_mb']['sim'][0]:.0f} -> {doc['rss_mb']['sim'][1]:.0f} MB",
-             "", "| student | delay p50 / p99 (ms) | age p50 / p99 (ms) | poses received | missing | arm moves | refused | robots lost / taken again | real-time factor |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"Multi-user test: {doc['students']} students, {doc['minutes']:g} min, {doc['robots']} robots ({doc['scene']}); "
+        f"load average {doc['load_average'][0]} at the start, {doc['load_average'][1]} at the end; "
+        f"router {doc['cpu_cores']['router']:.2f} cores, sim {doc['cpu_cores']['sim']:.2f}; RSS from start to end: "
+        f"router {doc['rss_mb']['router'][0]:.0f} -> {doc['rss_mb']['router'][1]:.0f} MB, sim {doc['rss_mb']['sim'][0]:.0f} -> {doc['rss_mb']['sim'][1]:.0f} MB",
+        "",
+        "| student | delay p50 / p99 (ms) | age p50 / p99 (ms) | poses received | missing | arm moves | refused | robots lost / taken again | real-time factor |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in doc["per_student"]:
-        lines.append(f"| {r['student']} | {r['delay_ms_p50']:.1f} / {r['delay_ms_p99']:.1f} | {r['age_ms_p50']:.1f} / {r['age_ms_p99']:.1f} | "
-                     f"{r['messages']} | {r['missing']} | {r['moves']} | {r['refused']} | {len(r['lost'])} / {r['retaken']} | {r['rtf']:.3f} |")
-    lines.append(f"| all | {doc['delay_ms_p50']:.1f} / {doc['delay_ms_p99']:.1f} (max {doc['delay_ms_max']:.0f}) | "
-                 f"{doc['age_ms_p50']:.1f} / {doc['age_ms_p99']:.1f} | {doc['messages']} | {doc['missing']} | {doc['moves']} | "
-                 f"{doc['refused']} | {doc['lost']} / {doc['retaken']} | |")
-    lines.append(f"| the paper (PUN, {paper['users']} users, {paper['hours']:g} h) | ~{paper['delay_ms']:.0f} | | | | | | | |")
-    lines += ["", "Per minute, delay p50 / p99 (ms): " + "; ".join(
-        f"{m['minute']}: {m['delay_ms_p50']:.1f} / {m['delay_ms_p99']:.1f}" for m in doc["per_minute"])]
+        lines.append(
+            f"| {r['student']} | {r['delay_ms_p50']:.1f} / {r['delay_ms_p99']:.1f} | {r['age_ms_p50']:.1f} / {r['age_ms_p99']:.1f} | "
+            f"{r['messages']} | {r['missing']} | {r['moves']} | {r['refused']} | {len(r['lost'])} / {r['retaken']} | {r['rtf']:.3f} |"
+        )
+    lines.append(
+        f"| all | {doc['delay_ms_p50']:.1f} / {doc['delay_ms_p99']:.1f} (max {doc['delay_ms_max']:.0f}) | "
+        f"{doc['age_ms_p50']:.1f} / {doc['age_ms_p99']:.1f} | {doc['messages']} | {doc['missing']} | {doc['moves']} | "
+        f"{doc['refused']} | {doc['lost']} / {doc['retaken']} | |"
+    )
+    lines.append(
+        f"| the paper (PUN, {paper['users']} users, {paper['hours']:g} h) | ~{paper['delay_ms']:.0f} | | | | | | | |"
+    )
+    lines += [
+        "",
+        "Per minute, delay p50 / p99 (ms): "
+        + "; ".join(f"{m['minute']}: {m['delay_ms_p50']:.1f} / {m['delay_ms_p99']:.1f}" for m in doc["per_minute"]),
+    ]
     return "\n".join(lines)
 
 

@@ -37,12 +37,27 @@ def plot(doc: dict, out: Path | str) -> None:
         rows = sorted(rows, key=lambda r: r["rate_hz"])
         x = [r["rate_hz"] for r in rows]
         y = [r["mb_per_min_avg"] for r in rows]
-        err = [[r["mb_per_min_avg"] - r["mb_per_min_min"] for r in rows], [r["mb_per_min_max"] - r["mb_per_min_avg"] for r in rows]]
-        ax.errorbar(x, y, yerr=err, linestyle=_STYLE.get(transport, ":"), marker=_MARK.get(payload, "x"), capsize=2,
-                    label=f"{transport}, {payload}")
+        err = [
+            [r["mb_per_min_avg"] - r["mb_per_min_min"] for r in rows],
+            [r["mb_per_min_max"] - r["mb_per_min_avg"] for r in rows],
+        ]
+        ax.errorbar(
+            x,
+            y,
+            yerr=err,
+            linestyle=_STYLE.get(transport, ":"),
+            marker=_MARK.get(payload, "x"),
+            capsize=2,
+            label=f"{transport}, {payload}",
+        )
     paper = doc["paper"]["data_usage"]
-    ax.plot([p["rate_hz"] for p in paper], [p["mb_per_min_avg"] for p in paper], "k*", markersize=10,
-            label="paper, Firebase REST (Tables 2-3)")
+    ax.plot(
+        [p["rate_hz"] for p in paper],
+        [p["mb_per_min_avg"] for p in paper],
+        "k*",
+        markersize=10,
+        label="paper, Firebase REST (Tables 2-3)",
+    )
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("rate (Hz)")

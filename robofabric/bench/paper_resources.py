@@ -120,8 +120,12 @@ def measure_resources(cap_s: float = 600.0, progress=lambda s: print(s, file=sys
         launch = Path(tmp) / "paper.toml"
         launch.write_text(_launch_file(world, free_port(), free_port()))
         log = open(Path(tmp) / "up.log", "wb")
-        proc = subprocess.Popen([sys.executable, "-m", "robofabric", "up", str(launch), "--out", str(Path(tmp) / "out")],
-                                stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "robofabric", "up", str(launch), "--out", str(Path(tmp) / "out")],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
         log.close()
         samples: dict[str, list[tuple[float, float]]] = {p: [] for p in PEERS}
         last: dict[int, tuple[float, float]] = {}
@@ -163,13 +167,14 @@ def measure_resources(cap_s: float = 600.0, progress=lambda s: print(s, file=sys
     rows = []
     for peer in PEERS:
         s = samples[peer]
-        rows.append({
-            "peer": peer,
-            "cpu_min": min((c for c, _ in s), default=float("nan")),
-            "cpu_max": max((c for c, _ in s), default=float("nan")),
-            "rss_min_mb": min((r for _, r in s), default=float("nan")),
-            "rss_max_mb": max((r for _, r in s), default=float("nan")),
-            "samples": len(s),
-        })
+        rows.append(
+            {
+                "peer": peer,
+                "cpu_min": min((c for c, _ in s), default=float("nan")),
+                "cpu_max": max((c for c, _ in s), default=float("nan")),
+                "rss_min_mb": min((r for _, r in s), default=float("nan")),
+                "rss_max_mb": max((r for _, r in s), default=float("nan")),
+                "samples": len(s),
+            }
+        )
     return {"rows": rows, "seconds": time.monotonic() - t0, "up_exit": code, "up_log_tail": up_log if code else ""}
-

@@ -32,6 +32,8 @@ from robofabric.stats import percentiles
 from robofabric.bench.common import TablesOut, append, end_process, proc_cpu_s
 
 WORLD = "benchrec"
+
+
 def _drained(pid: int, idle: float = 0.05, timeout: float = 20.0) -> tuple[float, float]:
     """Wait until a process uses under ``idle`` of a core over 0.3 s; return (its CPU s, the time)."""
     deadline = time.monotonic() + timeout
@@ -61,7 +63,9 @@ def _wait_token(fab, expr: str, timeout: float) -> None:
 def _start_recorder(out: Path, world: str, ep: str, log: Path) -> subprocess.Popen:
     return subprocess.Popen(
         _cli("record", "-o", str(out), "-q", "--world", world, "--connect", ep, "--id", f"rec-{out.stem}"),
-        stdout=open(log, "wb"), stderr=subprocess.STDOUT, start_new_session=True,
+        stdout=open(log, "wb"),
+        stderr=subprocess.STDOUT,
+        start_new_session=True,
     )
 
 
@@ -74,9 +78,27 @@ def _throughput(router, ep: str, tmp: Path, scale: float, robots: int, duration:
     try:
         _wait_token(router, f"rf/{WORLD}/peer/recorder/rec-{out.stem}", 30)
         pub = subprocess.Popen(
-            [sys.executable, "-m", "robofabric.bench.record", "pub", "--endpoint", ep, "--world", WORLD,
-             "--robots", str(robots), "--scale", str(scale), "--duration", str(duration), "--precompute", str(precompute)],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
+            [
+                sys.executable,
+                "-m",
+                "robofabric.bench.record",
+                "pub",
+                "--endpoint",
+                ep,
+                "--world",
+                WORLD,
+                "--robots",
+                str(robots),
+                "--scale",
+                str(scale),
+                "--duration",
+                str(duration),
+                "--precompute",
+                str(precompute),
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            start_new_session=True,
         )
         # The publisher waits for the recorder's subscription, then prints "go" and starts.
         line = pub.stdout.readline().decode().strip()
@@ -170,7 +192,12 @@ def _replay_timing(router, ep: str, tmp: Path, source: Path, duration: float) ->
 
 
 def run_bench(
-    scales: list[float], robots: int, duration: float, replay: bool, keep: Path | None = None, fast_scales: list[float] = ()
+    scales: list[float],
+    robots: int,
+    duration: float,
+    replay: bool,
+    keep: Path | None = None,
+    fast_scales: list[float] = (),
 ) -> dict:
     from fabric.session import Fabric
     from robofabric.testing import free_port, router_config
@@ -187,7 +214,10 @@ def run_bench(
             for s in fast_scales:
                 results["throughput"].append(_throughput(router, ep, tmp, s, robots, duration, precompute=200))
             if replay:
-                src = next((Path(r["file"]) for r in results["throughput"] if r["scale"] == 1.0), Path(results["throughput"][0]["file"]))
+                src = next(
+                    (Path(r["file"]) for r in results["throughput"] if r["scale"] == 1.0),
+                    Path(results["throughput"][0]["file"]),
+                )
                 results["replay"] = _replay_timing(router, ep, tmp, src, duration)
     return results
 
@@ -217,11 +247,20 @@ def format_tables(res: dict) -> str:
 
 
 def command(
-    scales: Annotated[str, typer.Option(help="Comma-separated load multiples of the default rates (1 = 10 robots at 100/50/20 Hz).")] = "1,4",
+    scales: Annotated[
+        str, typer.Option(help="Comma-separated load multiples of the default rates (1 = 10 robots at 100/50/20 Hz).")
+    ] = "1,4",
     robots: Annotated[int, typer.Option(help="Robots in the synthetic world.")] = 10,
     duration: Annotated[float, typer.Option(help="Seconds of publishing per load.")] = 10.0,
-    fast: Annotated[str, typer.Option(help="Extra loads whose publisher cycles pre-encoded payloads (to find the recorder's ceiling, not the publisher's); '' for none.")] = "",
-    replay: Annotated[bool, typer.Option("--replay/--no-replay", help="Also measure replay timing on the x1 file.")] = True,
+    fast: Annotated[
+        str,
+        typer.Option(
+            help="Extra loads whose publisher cycles pre-encoded payloads (to find the recorder's ceiling, not the publisher's); '' for none."
+        ),
+    ] = "",
+    replay: Annotated[
+        bool, typer.Option("--replay/--no-replay", help="Also measure replay timing on the x1 file.")
+    ] = True,
     as_json: Annotated[bool, typer.Option("--json")] = False,
     out: TablesOut = None,
     keep: Annotated[Optional[Path], typer.Option(help="Keep the recordings in this directory.")] = None,
@@ -259,13 +298,18 @@ def _child_pub(a: argparse.Namespace) -> None:
     streams = robot_streams(a.world, a.robots, scale=a.scale, precompute=a.precompute)
     with Fabric(FabricConfig(world=a.world, connect=(a.endpoint,)), kind="sim", peer_id="bench-world") as fab:
         # raw publishers: the load is pre-encoded bytes put as fast as the recorder under test can take them
-        pubs = {s.key: fab.session.declare_publisher(s.key, congestion_control=zenoh.CongestionControl.BLOCK) for s in streams}
+        pubs = {
+            s.key: fab.session.declare_publisher(s.key, congestion_control=zenoh.CongestionControl.BLOCK)
+            for s in streams
+        }
         if not wait_matched(pubs.values(), 20, every=True):
             print("error: no subscriber matched the world's keys", flush=True)
             sys.exit(1)
         print("go", flush=True)
         sent, elapsed = run_load(lambda k, b: pubs[k].put(b), streams, duration=a.duration)
-        print(json.dumps({"sent": dict(sent), "elapsed": elapsed, "offered_hz": sum(s.hz for s in streams)}), flush=True)
+        print(
+            json.dumps({"sent": dict(sent), "elapsed": elapsed, "offered_hz": sum(s.hz for s in streams)}), flush=True
+        )
 
 
 def _main() -> None:

@@ -88,8 +88,9 @@ def domain_of(given: int | None, env: Mapping[str, str], pid: int) -> int:
     return 1 + (pid * 13) % 100
 
 
-def run_one(robots: int, seconds: float, tmp: Path, take: str = "raw", domain: int | None = None,
-            port: int | None = None) -> dict[str, Any]:
+def run_one(
+    robots: int, seconds: float, tmp: Path, take: str = "raw", domain: int | None = None, port: int | None = None
+) -> dict[str, Any]:
     """One world of ``robots`` bases bridged to ROS 2 for ``seconds``; the row's figures. ``take``: how the ROS
     node takes a message (:mod:`robofabric.bench.ros2_listen`): ``raw`` bytes, timed as zenoh's are, or ``message``.
     ``domain`` (:func:`domain_of`) and ``port`` (the router's, default a free one) as the caller gives them."""
@@ -105,29 +106,76 @@ def run_one(robots: int, seconds: float, tmp: Path, take: str = "raw", domain: i
     trace_file = tmp / "bridge-trace.txt"
     with ProcessGroup(tmp) as procs:
         router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
+        wait_until(
+            lambda: "listening" in procs.output(router),
+            timeout=60,
+            what="the router",
+            seen=lambda: procs.output(router),
+        )
         specs = [x for s in spots(robots) for x in ("--robot", s)]
-        sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *specs, "--world", world,
-                                         "--connect", ep), name="sim")
-        wait_until(lambda: "Ctrl-C to stop" in procs.output(sim), timeout=180, what="the sim", seen=lambda: procs.output(sim)[-1500:])
-        bridge = procs.start(robofabric_cmd("ros2", "--world", world, "--connect", ep, "--user", "bench",
-                                                "--trace", str(trace_file)), name="bridge", env=env)
-        wait_until(lambda: "bridging world" in procs.output(bridge) or bridge.poll() is not None, timeout=60,
-                   what="the bridge", seen=lambda: procs.output(bridge)[-1500:])
+        sim = procs.start(
+            robofabric_cmd(
+                "sim", "--scene", "warehouse", "--no-scene-robots", *specs, "--world", world, "--connect", ep
+            ),
+            name="sim",
+        )
+        wait_until(
+            lambda: "Ctrl-C to stop" in procs.output(sim),
+            timeout=180,
+            what="the sim",
+            seen=lambda: procs.output(sim)[-1500:],
+        )
+        bridge = procs.start(
+            robofabric_cmd("ros2", "--world", world, "--connect", ep, "--user", "bench", "--trace", str(trace_file)),
+            name="bridge",
+            env=env,
+        )
+        wait_until(
+            lambda: "bridging world" in procs.output(bridge) or bridge.poll() is not None,
+            timeout=60,
+            what="the bridge",
+            seen=lambda: procs.output(bridge)[-1500:],
+        )
         if bridge.poll() is not None:
-            raise RuntimeError(f"the bridge exited ({bridge.returncode}) before bridging: {procs.output(bridge)[-1500:]}")
+            raise RuntimeError(
+                f"the bridge exited ({bridge.returncode}) before bridging: {procs.output(bridge)[-1500:]}"
+            )
         with client(world, port, kind="tool", peer_id="probe") as fab:
             z = _Zenoh(fab, world)
-            listen = procs.start([sys.executable, "-m", "robofabric.bench.ros2_listen", "--robots", ",".join(ids),
-                                  "--seconds", str(seconds), "--out", str(out_file), "--take", take], name="listen", env=env)
-            wait_until(lambda: "ready" in procs.output(listen) or listen.poll() is not None, timeout=60,
-                       what="the ROS node", seen=lambda: procs.output(listen)[-1500:])
+            listen = procs.start(
+                [
+                    sys.executable,
+                    "-m",
+                    "robofabric.bench.ros2_listen",
+                    "--robots",
+                    ",".join(ids),
+                    "--seconds",
+                    str(seconds),
+                    "--out",
+                    str(out_file),
+                    "--take",
+                    take,
+                ],
+                name="listen",
+                env=env,
+            )
+            wait_until(
+                lambda: "ready" in procs.output(listen) or listen.poll() is not None,
+                timeout=60,
+                what="the ROS node",
+                seen=lambda: procs.output(listen)[-1500:],
+            )
             if listen.poll() is not None:
-                raise RuntimeError(f"the ROS node exited ({listen.returncode}) before it was ready: {procs.output(listen)[-1500:]}")
+                raise RuntimeError(
+                    f"the ROS node exited ({listen.returncode}) before it was ready: {procs.output(listen)[-1500:]}"
+                )
             t0, cpu0, lcpu0 = time.time_ns(), proc_cpu_s(bridge.pid), proc_cpu_s(listen.pid)
             rest0 = [proc_cpu_s(sim.pid), proc_cpu_s(router.pid), time.process_time()]
-            wait_until(lambda: time.time_ns() >= t0 + int(seconds * 1e9) or listen.poll() is not None, timeout=seconds + 60,
-                       what="the measured window")
+            wait_until(
+                lambda: time.time_ns() >= t0 + int(seconds * 1e9) or listen.poll() is not None,
+                timeout=seconds + 60,
+                what="the measured window",
+            )
             t1, cpu1, lcpu1 = time.time_ns(), proc_cpu_s(bridge.pid), proc_cpu_s(listen.pid)
             rest1 = [proc_cpu_s(sim.pid), proc_cpu_s(router.pid), time.process_time()]
             listen.wait(timeout=60)
@@ -136,7 +184,7 @@ def run_one(robots: int, seconds: float, tmp: Path, take: str = "raw", domain: i
         end_process(bridge)
         end_process(sim)
         end_process(router)
-        bridge_log = procs.output(bridge)[len(summary_out):]
+        bridge_log = procs.output(bridge)[len(summary_out) :]
     leaf_to_stream = {v: k for k, v in STREAMS.items()}
     ros: dict[tuple[str, str, int], int] = {}
     node_gc: list[tuple[int, int, int]] = []
@@ -147,19 +195,30 @@ def run_one(robots: int, seconds: float, tmp: Path, take: str = "raw", domain: i
         topic, stamp, arrival = line.split()
         _, rid, leaf = topic.split("/")
         ros[(rid, leaf_to_stream[leaf], int(stamp))] = int(arrival)
-    out: dict[str, Any] = {"robots": robots, "seconds": seconds, "take": take, "cores": (cpu1 - cpu0) / ((t1 - t0) / 1e9),
-                           "listener_cores": (lcpu1 - lcpu0) / ((t1 - t0) / 1e9), "load": os.getloadavg()[0],
-                           # the rest of the benchmark's own processes: what it takes of the machine's cores itself
-                           "sim_router_bench_cores": [(b - a) / ((t1 - t0) / 1e9) for a, b in zip(rest0, rest1)],
-                           "summary": next((ln for ln in bridge_log.splitlines() if "messages published" in ln), "")}
+    out: dict[str, Any] = {
+        "robots": robots,
+        "seconds": seconds,
+        "take": take,
+        "cores": (cpu1 - cpu0) / ((t1 - t0) / 1e9),
+        "listener_cores": (lcpu1 - lcpu0) / ((t1 - t0) / 1e9),
+        "load": os.getloadavg()[0],
+        # the rest of the benchmark's own processes: what it takes of the machine's cores itself
+        "sim_router_bench_cores": [(b - a) / ((t1 - t0) / 1e9) for a, b in zip(rest0, rest1)],
+        "summary": next((ln for ln in bridge_log.splitlines() if "messages published" in ln), ""),
+    }
     bridge_at, bridge_gc = _read_trace(trace_file)
     for stream in STREAMS:
         keys_ = [k for k in zen if k[1] == stream]
         added = [(ros[k] - zen[k]) / 1e6 for k in keys_ if k in ros]
-        out[stream] = {"zenoh": len(keys_), "lost": sum(1 for k in keys_ if k not in ros),
-                       "p50": pct(added, 50), "p99": pct(added, 99), "rate": len(keys_) / max(1e-9, (t1 - t0) / 1e9 - SETTLE_S - TAIL_S),
-                       "split": split([(zen[k], *bridge_at[k], ros[k]) for k in keys_ if k in ros and k in bridge_at]),
-                       "in_gc": in_gc([(zen[k], ros[k]) for k in keys_ if k in ros], bridge_gc, node_gc)}
+        out[stream] = {
+            "zenoh": len(keys_),
+            "lost": sum(1 for k in keys_ if k not in ros),
+            "p50": pct(added, 50),
+            "p99": pct(added, 99),
+            "rate": len(keys_) / max(1e-9, (t1 - t0) / 1e9 - SETTLE_S - TAIL_S),
+            "split": split([(zen[k], *bridge_at[k], ros[k]) for k in keys_ if k in ros and k in bridge_at]),
+            "in_gc": in_gc([(zen[k], ros[k]) for k in keys_ if k in ros], bridge_gc, node_gc),
+        }
     out["gc"] = {"bridge": gc_stats(bridge_gc, t0, t1), "node": gc_stats(node_gc, t0, t1)}
     return out
 
@@ -186,8 +245,11 @@ def _read_trace(path: Path) -> tuple[dict[tuple[str, str, int], tuple[int, int]]
 def gc_stats(pauses: list[tuple[int, int, int]], t0: int, t1: int) -> dict[str, float]:
     """The garbage collections within [t0, t1]: how many, how many full (generation 2), the longest (ms)."""
     inside = [p for p in pauses if t0 <= p[1] <= t1]
-    return {"n": len(inside), "full": sum(1 for p in inside if p[0] == 2),
-            "max_ms": max(((b - a) / 1e6 for _, a, b in inside), default=0.0)}
+    return {
+        "n": len(inside),
+        "full": sum(1 for p in inside if p[0] == 2),
+        "max_ms": max(((b - a) / 1e6 for _, a, b in inside), default=0.0),
+    }
 
 
 def in_gc(spans: list[tuple[int, int]], *pauses: list[tuple[int, int, int]], over_ms: float = 1.0) -> float:
@@ -212,41 +274,75 @@ def split(times: list[tuple[int, int, int, int]]) -> dict[str, Any]:
     added = [(t[-1] - t[0]) / 1e6 for t in times]
     cut = pct(added, 99)
     tail = [i for i, a in enumerate(added) if a >= cut]
-    return {"n": len(times), **{name: {"p50": pct(c, 50), "p99": pct(c, 99), "tail": pct([c[i] for i in tail], 50)}
-                                for name, c in zip(SPLIT, cols)}}
+    return {
+        "n": len(times),
+        **{
+            name: {"p50": pct(c, 50), "p99": pct(c, 99), "tail": pct([c[i] for i in tail], 50)}
+            for name, c in zip(SPLIT, cols)
+        },
+    }
 
 
 def split_header() -> list[str]:
-    return ["| robots | ROS node takes | stream | matched | zenoh to bridge p50 / p99 / tail (ms) | in bridge p50 / p99 / tail (ms) | DDS to ROS node p50 / p99 / tail (ms) | tail in a GC pause | GCs bridge / node (full, longest ms) |",
-            "|---|---|---|---|---|---|---|---|---|"]
+    return [
+        "| robots | ROS node takes | stream | matched | zenoh to bridge p50 / p99 / tail (ms) | in bridge p50 / p99 / tail (ms) | DDS to ROS node p50 / p99 / tail (ms) | tail in a GC pause | GCs bridge / node (full, longest ms) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
 
 
 def split_row(r: dict[str, Any]) -> list[str]:
     """Where one run's added latency went, per stream (tail: the part's median over the slowest 1%)."""
     cell = lambda d: f"{d['p50']:.2f} / {d['p99']:.2f} / {d['tail']:.2f}"  # noqa: E731
     gcs = " / ".join(f"{g['n']} ({g['full']}, {g['max_ms']:.1f})" for g in (r["gc"]["bridge"], r["gc"]["node"]))
-    return [f"| {r['robots']} | {r['take']} | {s} | {r[s]['split']['n']} | " + " | ".join(cell(r[s]["split"][p]) for p in SPLIT)
-            + f" | {r[s]['in_gc']:.0%} | {gcs} |" for s in STREAMS]
+    return [
+        f"| {r['robots']} | {r['take']} | {s} | {r[s]['split']['n']} | "
+        + " | ".join(cell(r[s]["split"][p]) for p in SPLIT)
+        + f" | {r[s]['in_gc']:.0%} | {gcs} |"
+        for s in STREAMS
+    ]
 
 
 def header() -> list[str]:
-    return ["| robots | ROS node takes | stream | msg/s (all robots) | added latency p50 / p99 (ms) | lost / delivered by zenoh | bridge CPU (cores) | ROS node CPU (cores) | load (1 min) |",
-            "|---|---|---|---|---|---|---|---|---|"]
+    return [
+        "| robots | ROS node takes | stream | msg/s (all robots) | added latency p50 / p99 (ms) | lost / delivered by zenoh | bridge CPU (cores) | ROS node CPU (cores) | load (1 min) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
 
 
 def row(r: dict[str, Any]) -> list[str]:
-    return [f"| {r['robots']} | {r['take']} | {s} | {r[s]['rate']:.0f} | {r[s]['p50']:.2f} / {r[s]['p99']:.2f} | "
-            f"{r[s]['lost']} / {r[s]['zenoh']} | {r['cores']:.2f} | {r['listener_cores']:.2f} | {r['load']:.1f} |" for s in STREAMS]
+    return [
+        f"| {r['robots']} | {r['take']} | {s} | {r[s]['rate']:.0f} | {r[s]['p50']:.2f} / {r[s]['p99']:.2f} | "
+        f"{r[s]['lost']} / {r[s]['zenoh']} | {r['cores']:.2f} | {r['listener_cores']:.2f} | {r['load']:.1f} |"
+        for s in STREAMS
+    ]
 
 
 def command(
-    robots: Annotated[str, typer.Option("--robots", help="Comma-separated robot counts (mobile bases with LIDAR).")] = "8",
+    robots: Annotated[
+        str, typer.Option("--robots", help="Comma-separated robot counts (mobile bases with LIDAR).")
+    ] = "8",
     seconds: Annotated[float, typer.Option("--seconds", help="Measured window per count.")] = 20.0,
     out: Annotated[Optional[Path], typer.Option("--out", help="Append the markdown table to this file.")] = None,
-    take: Annotated[str, typer.Option("--take", help="How the ROS node takes each message: raw (bytes, timed at arrival as zenoh's are), message (rclpy's message built first), or both in turn (message, then raw) for each count.")] = "raw",
-    domain: Annotated[Optional[int], typer.Option("--domain", help="The ROS domain of the run (default: $ROS_DOMAIN_ID when set, else one of the run's own).")] = None,
-    port: Annotated[Optional[int], typer.Option("--port", help="The zenoh router's port on 127.0.0.1 (default: a free one).")] = None,
-    convert: Annotated[bool, typer.Option("--convert", help="Only the Python cost of one message (decode, build, publish) in this process.")] = False,
+    take: Annotated[
+        str,
+        typer.Option(
+            "--take",
+            help="How the ROS node takes each message: raw (bytes, timed at arrival as zenoh's are), message (rclpy's message built first), or both in turn (message, then raw) for each count.",
+        ),
+    ] = "raw",
+    domain: Annotated[
+        Optional[int],
+        typer.Option(
+            "--domain", help="The ROS domain of the run (default: $ROS_DOMAIN_ID when set, else one of the run's own)."
+        ),
+    ] = None,
+    port: Annotated[
+        Optional[int], typer.Option("--port", help="The zenoh router's port on 127.0.0.1 (default: a free one).")
+    ] = None,
+    convert: Annotated[
+        bool,
+        typer.Option("--convert", help="Only the Python cost of one message (decode, build, publish) in this process."),
+    ] = False,
 ) -> None:
     """N mobile robots at full rate through the ROS 2 bridge (robofabric ros2) to a plain rclpy node: the latency
     the bridge adds to zenoh's delivery (p50, p99), the messages lost on the way, and the bridge's CPU."""
@@ -260,8 +356,16 @@ def command(
     if convert:
         from robofabric.bench.ros2_convert import measure, table
 
-        text = "\n".join([f"`robofabric bench ros2 --convert` on {machine()}, load {os.getloadavg()[0]:.1f}", "",
-                           *table(measure())]) + "\n"
+        text = (
+            "\n".join(
+                [
+                    f"`robofabric bench ros2 --convert` on {machine()}, load {os.getloadavg()[0]:.1f}",
+                    "",
+                    *table(measure()),
+                ]
+            )
+            + "\n"
+        )
         print(text)
         append(out, text)
         return
@@ -271,9 +375,18 @@ def command(
     takes = {"raw": ["raw"], "message": ["message"], "both": ["message", "raw"]}.get(take)
     if takes is None:
         raise typer.BadParameter(f"--take is raw, message or both, not {take!r}")
-    lines = [f"`robofabric bench ros2 --robots {robots} --seconds {seconds:g} --take {take}` on {machine()}", "", *header()]
+    lines = [
+        f"`robofabric bench ros2 --robots {robots} --seconds {seconds:g} --take {take}` on {machine()}",
+        "",
+        *header(),
+    ]
     summaries: list[str] = []
-    splits = ["", "Where the added latency went (tail: each part's median over the slowest 1% of messages):", "", *split_header()]
+    splits = [
+        "",
+        "Where the added latency went (tail: each part's median over the slowest 1% of messages):",
+        "",
+        *split_header(),
+    ]
     with tempfile.TemporaryDirectory(prefix="rf-ros2-") as tmp:
         for n in counts:
             for how in takes:
@@ -282,8 +395,11 @@ def command(
                 r = run_one(n, seconds, d, how, domain, port)
                 lines.extend(row(r))
                 splits.extend(split_row(r))
-                summaries.append(f"{n} robots, ROS node takes {how}: the sim, router and this process used "
-                             + " / ".join(f"{c:.2f}" for c in r["sim_router_bench_cores"]) + f" cores; bridge said: {r['summary']}")
+                summaries.append(
+                    f"{n} robots, ROS node takes {how}: the sim, router and this process used "
+                    + " / ".join(f"{c:.2f}" for c in r["sim_router_bench_cores"])
+                    + f" cores; bridge said: {r['summary']}"
+                )
                 print("\n".join(row(r)), flush=True)
     text = "\n".join([*lines, *splits, "", *summaries]) + "\n"
     print(text)

@@ -47,12 +47,39 @@ def measure(n: int = 2000) -> list[tuple[str, float, float, float, float]]:
     rng = np.random.default_rng(1)
     h = Header(12.5, time.time_ns(), 7, "sim")
     scan = Scan(-np.pi, 2 * np.pi / 360, 8.0, (rng.random(360) * 8000).astype(np.uint16), h)
-    pose = Pose(np.array([1.0, 2.0, 0.0]), quaternion_from_yaw(0.7), np.array([0.3, 0.1, 0.0]), np.array([0.0, 0.0, 0.2]), header=h)
+    pose = Pose(
+        np.array([1.0, 2.0, 0.0]),
+        quaternion_from_yaw(0.7),
+        np.array([0.3, 0.1, 0.0]),
+        np.array([0.0, 0.0, 0.2]),
+        header=h,
+    )
     joints = JointState(tuple(f"joint_{i}" for i in range(1, 7)), rng.random(6), rng.random(6), h)
     cases = [
-        ("scan", "rf/w/robot/base1/scan", scan, LaserScan, lambda o: direct.laser_scan(o, "base1/laser", scan, 5, 0.05, 0.0), {"range_min": 0.05}),
-        ("pose (odom)", "rf/w/robot/base1/pose", pose, Odometry, lambda o: direct.odometry(o, "base1", pose, 5), {"kind": "mobile"}),
-        ("joints", "rf/w/robot/arm1/joints", joints, RosJointState, lambda o: direct.joint_state(o, "arm1", joints, 5), {}),
+        (
+            "scan",
+            "rf/w/robot/base1/scan",
+            scan,
+            LaserScan,
+            lambda o: direct.laser_scan(o, "base1/laser", scan, 5, 0.05, 0.0),
+            {"range_min": 0.05},
+        ),
+        (
+            "pose (odom)",
+            "rf/w/robot/base1/pose",
+            pose,
+            Odometry,
+            lambda o: direct.odometry(o, "base1", pose, 5),
+            {"kind": "mobile"},
+        ),
+        (
+            "joints",
+            "rf/w/robot/arm1/joints",
+            joints,
+            RosJointState,
+            lambda o: direct.joint_state(o, "arm1", joints, 5),
+            {},
+        ),
     ]
     own_context = not rclpy.ok()
     if own_context:
@@ -62,8 +89,15 @@ def measure(n: int = 2000) -> list[tuple[str, float, float, float, float]]:
     try:
         for name, key, msg, cls, build, kw in cases:
             raw, reused, pub = encode(msg), cls(), node.create_publisher(cls, f"/bench_convert/{name.split()[0]}", 10)
-            out.append((name, _us(lambda: decode(raw), n), _us(lambda: build(reused), n),
-                        _us(lambda: fill(cls(), ros2_message(key, msg, 5, **kw)[1]), n), _us(lambda: pub.publish(reused), n)))
+            out.append(
+                (
+                    name,
+                    _us(lambda: decode(raw), n),
+                    _us(lambda: build(reused), n),
+                    _us(lambda: fill(cls(), ros2_message(key, msg, 5, **kw)[1]), n),
+                    _us(lambda: pub.publish(reused), n),
+                )
+            )
     finally:
         node.destroy_node()
         if own_context:
@@ -72,7 +106,9 @@ def measure(n: int = 2000) -> list[tuple[str, float, float, float, float]]:
 
 
 def table(rows: list[tuple[str, float, float, float, float]]) -> list[str]:
-    lines = ["| stream (CPU per message) | decode (µs) | build in place (µs) | build via the export's dict (µs) | publish (µs) |",
-             "|---|---|---|---|---|"]
+    lines = [
+        "| stream (CPU per message) | decode (µs) | build in place (µs) | build via the export's dict (µs) | publish (µs) |",
+        "|---|---|---|---|---|",
+    ]
     lines += [f"| {s} | {d:.1f} | {b:.1f} | {x:.1f} | {p:.1f} |" for s, d, b, x, p in rows]
     return lines

@@ -49,16 +49,24 @@ def main() -> None:
 
     def note(topic: str) -> Any:
         if raw:
+
             def on_raw(data: bytes) -> None:
                 now = time.time_ns()
                 sec, nsec = _STAMPS[data[1] & 1].unpack_from(data, 4)
                 got.append((topic, sec * 1_000_000_000 + nsec, now))
+
             return on_raw
-        return lambda m: got.append((topic, m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, time.time_ns()))
+        return lambda m: got.append(
+            (topic, m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, time.time_ns())
+        )
+
     reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
     for rid in args.robots.split(","):
-        for leaf, cls, qos in (("scan", LaserScan, qos_profile_sensor_data), ("odom", Odometry, reliable),
-                               ("joint_states", JointState, reliable)):
+        for leaf, cls, qos in (
+            ("scan", LaserScan, qos_profile_sensor_data),
+            ("odom", Odometry, reliable),
+            ("joint_states", JointState, reliable),
+        ):
             topic = f"/{rid}/{leaf}"
             node.create_subscription(cls, topic, note(topic), qos, raw=raw)
     if args.executor == "events":

@@ -49,9 +49,17 @@ def _mode_setup(mode: str, tmp: Path) -> tuple[str, list[str], dict[str, str | N
     proto = "tls" if mode == "tls+acl" else "tcp"
     ep = f"{proto}/127.0.0.1:{free_port()}"
     if mode == "tcp":
-        return ep, robofabric_cmd("router", "--listen", ep, "--world", "bench"), {n: None for n in ("sim", "viewer", "compute", "alice")}
+        return (
+            ep,
+            robofabric_cmd("router", "--listen", ep, "--world", "bench"),
+            {n: None for n in ("sim", "viewer", "compute", "alice")},
+        )
     out = init(tmp / mode.replace("+", "-"), users=["alice"], tls=mode == "tls+acl", listen=[ep])
-    return ep, robofabric_cmd("router", "--zenoh-config", str(out.router), "--world", "bench"), {n: str(p) for n, p in out.clients.items()}
+    return (
+        ep,
+        robofabric_cmd("router", "--zenoh-config", str(out.router), "--world", "bench"),
+        {n: str(p) for n, p in out.clients.items()},
+    )
 
 
 def _ik_round_trips(ep: str, configs: dict[str, str | None], n: int, warmup: int = 30) -> list[float]:
@@ -112,14 +120,25 @@ def run(rounds: int, duration: float, queries: int) -> dict[str, list[dict]]:
                     line = router.stdout.readline()
                     if "listening" not in line:
                         raise RuntimeError(f"router for {mode} did not start: {line.strip()}")
-                    scans = run_one("zenoh", ep, 1000.0, duration, pub_config=configs["sim"], sub_config=configs["viewer"])
+                    scans = run_one(
+                        "zenoh", ep, 1000.0, duration, pub_config=configs["sim"], sub_config=configs["viewer"]
+                    )
                     ik = _ik_round_trips(ep, configs, queries)
                 finally:
                     end_process(router)
-                row = {"delivered_pct": scans["delivered_pct"], "scan_p50": scans["p50"], "scan_p99": scans["p99"],
-                       "ik_p50": float(np.median(ik)), "ik_p99": float(np.percentile(ik, 99))}
+                row = {
+                    "delivered_pct": scans["delivered_pct"],
+                    "scan_p50": scans["p50"],
+                    "scan_p99": scans["p99"],
+                    "ik_p50": float(np.median(ik)),
+                    "ik_p99": float(np.percentile(ik, 99)),
+                }
                 results[mode].append(row)
-                print(f"round {r + 1} {mode}: {json.dumps({k: round(v, 3) for k, v in row.items()})}", file=sys.stderr, flush=True)
+                print(
+                    f"round {r + 1} {mode}: {json.dumps({k: round(v, 3) for k, v in row.items()})}",
+                    file=sys.stderr,
+                    flush=True,
+                )
     return results
 
 
@@ -144,8 +163,13 @@ def command(
     rounds: Annotated[int, typer.Option(help="Rounds; each runs every mode once, in turn.")] = 2,
     duration: Annotated[float, typer.Option(help="Seconds of 1 kHz scans per mode and round.")] = 5.0,
     queries: Annotated[int, typer.Option(help="IK queries per mode and round.")] = 500,
-    flood_seconds: Annotated[float, typer.Option(help="Seconds of each phase of the flood row (quiet, then one login "
-                                                      "flooding requests and srv/state while an owner drives); 0: no flood row.")] = 5.0,
+    flood_seconds: Annotated[
+        float,
+        typer.Option(
+            help="Seconds of each phase of the flood row (quiet, then one login "
+            "flooding requests and srv/state while an owner drives); 0: no flood row."
+        ),
+    ] = 5.0,
     out: TableOut = None,
 ) -> None:
     """Scans at 1 kHz and IK round trips over plain TCP, TCP + access control and TLS + access control; an owner's

@@ -69,11 +69,15 @@ class _Timed:
 
 def _flooders(world: str, config: Path, seconds: float) -> list[subprocess.Popen]:
     base = [sys.executable, "-m", "robofabric.bench.login_flood", world, str(config), "mallory"]
-    return [subprocess.Popen(base + what + [str(seconds)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-            for what in (["request", "arm1"], ["state"])]
+    return [
+        subprocess.Popen(base + what + [str(seconds)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        for what in (["request", "arm1"], ["state"])
+    ]
 
 
-def _phase(owner: _Owner, renewals: _Timed, bob: _Timed, world: str, config: Path, seconds: float, flood: bool) -> dict[str, Any]:
+def _phase(
+    owner: _Owner, renewals: _Timed, bob: _Timed, world: str, config: Path, seconds: float, flood: bool
+) -> dict[str, Any]:
     since = time.monotonic()
     renewals.take(), bob.take()
     sent: dict[str, Any] = {}
@@ -92,10 +96,19 @@ def _phase(owner: _Owner, renewals: _Timed, bob: _Timed, world: str, config: Pat
     return {
         "mallory_sent": sum(s["sent"] for s in sent.values()),
         "rate_limited": sum(s["answers"].get(RATE_LIMITED, 0) for s in sent.values()),
-        "cmd_p50": result.pct(50) * 1e3, "cmd_p99": result.pct(99) * 1e3, "commands": result.commands,
-        "not_seen": result.not_applied, "renew_p99": pct(renew, 99) * 1e3, "renew_missed": renew_missed,
-        "lapses": len(owner.lapses), "lapse_texts": list(owner.lapses[:4]), "world_p50": pct(world_times, 50) * 1e3, "world_p99": pct(world_times, 99) * 1e3,
-        "world_max": pct(world_times, 100) * 1e3, "world_missed": world_missed, "flooder": sent,
+        "cmd_p50": result.pct(50) * 1e3,
+        "cmd_p99": result.pct(99) * 1e3,
+        "commands": result.commands,
+        "not_seen": result.not_applied,
+        "renew_p99": pct(renew, 99) * 1e3,
+        "renew_missed": renew_missed,
+        "lapses": len(owner.lapses),
+        "lapse_texts": list(owner.lapses[:4]),
+        "world_p50": pct(world_times, 50) * 1e3,
+        "world_p99": pct(world_times, 99) * 1e3,
+        "world_max": pct(world_times, 100) * 1e3,
+        "world_missed": world_missed,
+        "flooder": sent,
     }
 
 
@@ -107,20 +120,34 @@ def run(seconds: float) -> dict[str, dict[str, Any]]:
         tmp = Path(tmpdir)
         world, ep = f"f{uuid.uuid4().hex[:6]}", f"tcp/127.0.0.1:{free_port()}"
         files = init(tmp / "class", users=["alice", "bob", "mallory"], listen=[ep]).clients
-        procs = [subprocess.Popen(robofabric_cmd("router", "--zenoh-config", str(tmp / "class" / "router.json5")),
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)]
+        procs = [
+            subprocess.Popen(
+                robofabric_cmd("router", "--zenoh-config", str(tmp / "class" / "router.json5")),
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                start_new_session=True,
+            )
+        ]
         fabs: list[Fabric] = []
         try:
+
             def login(name: str) -> Fabric:
                 fab = Fabric(FabricConfig(world=world, config_file=str(files[name])), kind="user", peer_id=name)
                 fabs.append(fab)
                 return fab
 
-            alice = wait_until(lambda: _try(login, "alice"), timeout=60, interval=0.5, what="the router to accept alice")
+            alice = wait_until(
+                lambda: _try(login, "alice"), timeout=60, interval=0.5, what="the router to accept alice"
+            )
             sim_log = open(tmp / "sim.log", "wb")
-            procs.append(subprocess.Popen(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config",
-                                                         str(files["sim"])), stdout=sim_log, stderr=subprocess.STDOUT,
-                                          start_new_session=True))
+            procs.append(
+                subprocess.Popen(
+                    robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config", str(files["sim"])),
+                    stdout=sim_log,
+                    stderr=subprocess.STDOUT,
+                    start_new_session=True,
+                )
+            )
             sim_log.close()
             info = wait_until(lambda: _world(alice), timeout=90, interval=0.5, what="the sim's srv/world")
             arm = next(r for r in info.robots if r.id == "arm1")
@@ -129,16 +156,29 @@ def run(seconds: float) -> dict[str, dict[str, Any]]:
             owner.start(0.05)
             bob = login("bob")
             renew_key = keys.own_request(world, "arm1", "alice")
-            renewals = _Timed(lambda: alice.rpc.call(renew_key, OwnRequest("renew", "alice", header=alice.header("own-req")),
-                                                     timeout=2.0, expected=OwnReply), 0.1)
+            renewals = _Timed(
+                lambda: alice.rpc.call(
+                    renew_key,
+                    OwnRequest("renew", "alice", header=alice.header("own-req")),
+                    timeout=2.0,
+                    expected=OwnReply,
+                ),
+                0.1,
+            )
             asks = _Timed(lambda: bob.rpc.call(keys.srv(world, "world"), timeout=5.0, expected=WorldInfo), 0.05)
             time.sleep(2.0)  # warm
-            rows = {"quiet": _phase(owner, renewals, asks, world, files["mallory"], seconds, False),
-                    "flood": _phase(owner, renewals, asks, world, files["mallory"], seconds, True)}
+            rows = {
+                "quiet": _phase(owner, renewals, asks, world, files["mallory"], seconds, False),
+                "flood": _phase(owner, renewals, asks, world, files["mallory"], seconds, True),
+            }
             renewals.stop(), asks.stop()
             owner.close()
             # why arm1 changed hands, if it did: the authority's own words (its take-overs and expiries are warnings)
-            said = [line for line in (tmp / "sim.log").read_text(errors="replace").splitlines() if "own_" in line and "arm1" in line]
+            said = [
+                line
+                for line in (tmp / "sim.log").read_text(errors="replace").splitlines()
+                if "own_" in line and "arm1" in line
+            ]
             rows["flood"]["sim_said"] = said[:6]
             return rows
         finally:
@@ -172,5 +212,6 @@ def table(rows: dict[str, dict[str, Any]], seconds: float) -> str:
         lines.append(
             f"| {'quiet' if name == 'quiet' else 'mallory floods requests + srv/state'} | {r['mallory_sent']} ({r['rate_limited']}) | "
             f"{r['cmd_p50']:.1f} / {r['cmd_p99']:.1f} | {r['not_seen']} of {r['commands']} | {r['renew_p99']:.1f} ({r['renew_missed']}) | "
-            f"{r['lapses']} | {r['world_p50']:.1f} / {r['world_p99']:.1f} / {r['world_max']:.1f} ({r['world_missed']}) |")
+            f"{r['lapses']} | {r['world_p50']:.1f} / {r['world_p99']:.1f} / {r['world_max']:.1f} ({r['world_missed']}) |"
+        )
     return "\n".join(lines)

@@ -93,8 +93,13 @@ def command_to_motion(world: str, endpoint: str, robots: list[str], rounds: int)
                 mark = w.latest.mark()
                 t0 = time.monotonic()
                 base.twist(0.3 if k % 2 == 0 else -0.3, 0.0)
-                moving = w.latest.wait_for(lambda: (p := w.latest.get_after(key, mark)) is not None
-                                           and math.hypot(p.linear[0], p.linear[1]) > MOVING_MS, 10.0)
+                moving = w.latest.wait_for(
+                    lambda: (
+                        (p := w.latest.get_after(key, mark)) is not None
+                        and math.hypot(p.linear[0], p.linear[1]) > MOVING_MS
+                    ),
+                    10.0,
+                )
                 if moving:
                     out.append(time.monotonic() - t0)
                 base.stop(timeout=10.0)
@@ -110,12 +115,33 @@ def _shares(robots: int, sims: int) -> list[list[str]]:
 
 def _sim_args(specs: list[str], robots: int, world: str, ep: str, i: int) -> list[str]:
     args = [x for s in specs for x in ("--robot", s)]
-    return ["-v", "sim", "--scene", "warehouse", "--no-scene-robots", *args, "--mirrors", str(robots - len(specs)),
-            "--world", world, "--connect", ep, "--id", f"sim-{i}"]
+    return [
+        "-v",
+        "sim",
+        "--scene",
+        "warehouse",
+        "--no-scene-robots",
+        *args,
+        "--mirrors",
+        str(robots - len(specs)),
+        "--world",
+        world,
+        "--connect",
+        ep,
+        "--id",
+        f"sim-{i}",
+    ]
 
 
-def _figures(robots: int, mine: list[list[str]], rtf: dict[str, float], cpu_s: list[float], window_s: float,
-             outputs: list[str], latencies: list[float]) -> dict[str, Any]:
+def _figures(
+    robots: int,
+    mine: list[list[str]],
+    rtf: dict[str, float],
+    cpu_s: list[float],
+    window_s: float,
+    outputs: list[str],
+    latencies: list[float],
+) -> dict[str, Any]:
     """The row: per sim its real-time factor, cores and CPU per robot, its mirror summary; the command latencies."""
     sims = len(mine)
     rtfs = [rtf.get(f"sim-{i}", float("nan")) for i in range(sims)]
@@ -123,13 +149,20 @@ def _figures(robots: int, mine: list[list[str]], rtf: dict[str, float], cpu_s: l
     lag50 = [float(m.group(2)) for m in mirror if m and m.group(2) != "nan"]
     lag99 = [float(m.group(3)) for m in mirror if m and m.group(3) != "nan"]
     return {
-        "robots": robots, "sims": sims, "rtf": rtfs, "rtf_min": min(rtfs),
-        "cpu_per_robot_ms": [1e3 * c / (len(specs) * max(1e-9, window_s * r)) for c, specs, r in zip(cpu_s, mine, rtfs) if r == r],
+        "robots": robots,
+        "sims": sims,
+        "rtf": rtfs,
+        "rtf_min": min(rtfs),
+        "cpu_per_robot_ms": [
+            1e3 * c / (len(specs) * max(1e-9, window_s * r)) for c, specs, r in zip(cpu_s, mine, rtfs) if r == r
+        ],
         "sim_cores": [c / window_s for c in cpu_s],
         "mirrored": [int(m.group(1)) if m else 0 for m in mirror],
         "mirror_p50": statistics.median(lag50) if lag50 else float("nan"),
         "mirror_p99": max(lag99) if lag99 else float("nan"),
-        "cmd_p50": pct(latencies, 50, 1e3), "cmd_p99": pct(latencies, 99, 1e3), "cmd_n": len(latencies),
+        "cmd_p50": pct(latencies, 50, 1e3),
+        "cmd_p99": pct(latencies, 99, 1e3),
+        "cmd_n": len(latencies),
     }
 
 
@@ -150,15 +183,30 @@ def run_one(robots: int, sims: int, seconds: float, tmp: Path) -> dict[str, Any]
     mine = _shares(robots, sims)
     with ProcessGroup(logs) as procs:
         router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
+        wait_until(
+            lambda: "listening" in procs.output(router),
+            timeout=60,
+            what="the router",
+            seen=lambda: procs.output(router),
+        )
         started = []
         for i, specs in enumerate(mine):
             p = procs.start(robofabric_cmd(*_sim_args(specs, robots, world, ep, i)), name=f"sim-{i}")
             started.append(p)
-            wait_until(lambda: "Ctrl-C to stop" in procs.output(p), timeout=180, what=f"sim-{i}", seen=lambda: procs.output(p)[-1500:])
+            wait_until(
+                lambda: "Ctrl-C to stop" in procs.output(p),
+                timeout=180,
+                what=f"sim-{i}",
+                seen=lambda: procs.output(p)[-1500:],
+            )
         with client(world, port, kind="tool", peer_id="probe") as fab:
             poses = Poses(fab, world)
-            wait_until(lambda: len(poses.by_sim) == sims, timeout=60, what="poses from every sim", seen=lambda: list(poses.by_sim))
+            wait_until(
+                lambda: len(poses.by_sim) == sims,
+                timeout=60,
+                what="poses from every sim",
+                seen=lambda: list(poses.by_sim),
+            )
             cpu0 = [proc_cpu_s(p.pid) for p in started]
             t0 = time.monotonic()
             latencies = command_to_motion(world, ep, _firsts(mine), rounds=4)
@@ -187,18 +235,30 @@ def run_lab(robots: int, sims: int, seconds: float, log_dir: Path) -> dict[str, 
         rh = lab.add_host("router")
         ep = rh.endpoint()
         router = rh.start(["router", "--world", world, "--listen", ep], name="router")
-        wait_until(lambda: "listening" in router.output(), timeout=120, what="the lab's router", seen=lambda: router.output()[-1500:])
+        wait_until(
+            lambda: "listening" in router.output(),
+            timeout=120,
+            what="the lab's router",
+            seen=lambda: router.output()[-1500:],
+        )
         started = []
         for i, specs in enumerate(mine):
             p = lab.add_host(f"sim{i}").start(_sim_args(specs, robots, world, ep, i), name=f"sim-{i}")
             started.append(p)
-            wait_until(lambda: "Ctrl-C to stop" in p.output(), timeout=180, what=f"sim-{i}", seen=lambda: p.output()[-1500:])
+            wait_until(
+                lambda: "Ctrl-C to stop" in p.output(), timeout=180, what=f"sim-{i}", seen=lambda: p.output()[-1500:]
+            )
         py = lab.add_host("probe").python(name="probe")
-        py.call("from fabric.config import FabricConfig\nfrom fabric.session import Fabric\n"
-                "from robofabric.bench.shards import Poses, command_to_motion\n"
-                f"fab = Fabric(FabricConfig.resolve(world={world!r}, connect=[{ep!r}]), kind='tool', peer_id='probe')\n"
-                f"poses = Poses(fab, {world!r}); None", timeout=120)
-        wait_until(lambda: py.call("len(poses.by_sim)") == sims, timeout=60, what="poses from every sim at the probe host")
+        py.call(
+            "from fabric.config import FabricConfig\nfrom fabric.session import Fabric\n"
+            "from robofabric.bench.shards import Poses, command_to_motion\n"
+            f"fab = Fabric(FabricConfig.resolve(world={world!r}, connect=[{ep!r}]), kind='tool', peer_id='probe')\n"
+            f"poses = Poses(fab, {world!r}); None",
+            timeout=120,
+        )
+        wait_until(
+            lambda: py.call("len(poses.by_sim)") == sims, timeout=60, what="poses from every sim at the probe host"
+        )
         cpu0 = [proc_cpu_s(p.pid) for p in started]
         t0 = time.monotonic()  # one machine: every namespace reads the same monotonic clock
         latencies = py.call(f"command_to_motion({world!r}, {ep!r}, {_firsts(mine)!r}, rounds=4)", timeout=300)
@@ -217,9 +277,11 @@ def run_lab(robots: int, sims: int, seconds: float, log_dir: Path) -> dict[str, 
 
 
 def header() -> list[str]:
-    return ["| sims | robots per sim | real-time factor per sim | sim CPU, cores per sim | CPU per robot per sim-second (ms) | "
-            "robots mirrored per sim | mirror lag p50 / p99 (ms) | command to motion p50 / p99 (ms) |",
-            "|---|---|---|---|---|---|---|---|"]
+    return [
+        "| sims | robots per sim | real-time factor per sim | sim CPU, cores per sim | CPU per robot per sim-second (ms) | "
+        "robots mirrored per sim | mirror lag p50 / p99 (ms) | command to motion p50 / p99 (ms) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
 
 
 def row(r: dict[str, Any]) -> str:
@@ -228,16 +290,20 @@ def row(r: dict[str, Any]) -> str:
 
     cpr = statistics.median(r["cpu_per_robot_ms"]) if r["cpu_per_robot_ms"] else float("nan")
     lag = "-" if r["mirror_p50"] != r["mirror_p50"] else f"{r['mirror_p50']:.1f} / {r['mirror_p99']:.1f}"
-    return (f"| {r['sims']} | {r['robots'] // r['sims']} | {nums(r['rtf'])} | {nums(r['sim_cores'])} | {cpr:.1f} | "
-            f"{' / '.join(map(str, r['mirrored']))} | {lag} | "
-            f"{r['cmd_p50']:.0f} / {r['cmd_p99']:.0f} ({r['cmd_n']}) |")
+    return (
+        f"| {r['sims']} | {r['robots'] // r['sims']} | {nums(r['rtf'])} | {nums(r['sim_cores'])} | {cpr:.1f} | "
+        f"{' / '.join(map(str, r['mirrored']))} | {lag} | "
+        f"{r['cmd_p50']:.0f} / {r['cmd_p99']:.0f} ({r['cmd_n']}) |"
+    )
 
 
 def command(
     robots: Annotated[int, typer.Option("--robots", help="Mobile robots with LIDAR in the world.")] = 32,
     sims: Annotated[str, typer.Option("--sims", help="Comma-separated sim process counts to compare.")] = "1,2,4",
     seconds: Annotated[float, typer.Option("--seconds", help="Measured window per sim count.")] = 20.0,
-    lab: Annotated[bool, typer.Option("--lab", help="Over the lab's network namespaces: one host per sim (root, Linux).")] = False,
+    lab: Annotated[
+        bool, typer.Option("--lab", help="Over the lab's network namespaces: one host per sim (root, Linux).")
+    ] = False,
     out: TableOut = None,
 ) -> None:
     """One world of N mobile robots served by 1, 2 and 4 sim processes: each sim's real-time factor and CPU per
@@ -248,7 +314,11 @@ def command(
     if any(c < 1 or robots % c for c in counts):
         raise typer.BadParameter(f"every sim count must divide --robots {robots}: {counts}")
     where = " --lab" if lab else ""
-    lines = [f"`robofabric bench shards --robots {robots} --sims {sims} --seconds {seconds:g}{where}` on {machine()}", "", *header()]
+    lines = [
+        f"`robofabric bench shards --robots {robots} --sims {sims} --seconds {seconds:g}{where}` on {machine()}",
+        "",
+        *header(),
+    ]
     with tempfile.TemporaryDirectory(prefix="rf-shards-") as tmp:
         for c in counts:
             r = run_lab(robots, c, seconds, Path(tmp) / f"lab{c}") if lab else run_one(robots, c, seconds, Path(tmp))

@@ -94,13 +94,28 @@ def command(
         label += f" ({len(w.notes.collisions)} bumper stops!)"
     rows.append((label, f"{r:.0f}x", ">= 50x", "ok" if r >= 50 else "MISSED"))
     med, p99 = scan_cost(w, "base1")
-    rows.append(("one 240-ray LIDAR scan (combined), median / p99", f"{med:.1f} / {p99:.1f} us", "<= 50 us", "ok" if med <= 50 else "MISSED"))
+    rows.append(
+        (
+            "one 240-ray LIDAR scan (combined), median / p99",
+            f"{med:.1f} / {p99:.1f} us",
+            "<= 50 us",
+            "ok" if med <= 50 else "MISSED",
+        )
+    )
     med, p99 = arm_mirror_cost()
-    rows.append(("one arm mirror update (another sim's Meca500: FK, 7 link geoms placed), median / p99",
-                 f"{med:.1f} / {p99:.1f} us", "", ""))
+    rows.append(
+        (
+            "one arm mirror update (another sim's Meca500: FK, 7 link geoms placed), median / p99",
+            f"{med:.1f} / {p99:.1f} us",
+            "",
+            "",
+        )
+    )
     for n in [int(c) for c in counts.split(",") if c.strip()]:
         extra = [f"reeman:m{i}" for i in range(n)]
-        wn = SimWorld("warehouse", extra, scene_robots=False, seed=1, bumper=False)  # 0.8 m apart, 1 m circles: they cross
+        wn = SimWorld(
+            "warehouse", extra, scene_robots=False, seed=1, bumper=False
+        )  # 0.8 m apart, 1 m circles: they cross
         secs = max(1.0, seconds / max(1, n / 5))
         r = rtf(wn, secs)
         rows.append((f"warehouse, {n} mobile robots, each LIDAR @ 20 Hz + ultrasonic, bumper off", f"{r:.1f}x", "", ""))

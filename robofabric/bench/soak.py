@@ -34,13 +34,26 @@ def command(
     minutes: Annotated[float, typer.Option("--minutes", help="How long the class runs under the nemesis.")] = 2.0,
     students: Annotated[int, typer.Option("--students", help="Students, each on her own host with her own arm.")] = 3,
     seed: Annotated[int, typer.Option("--seed", help="The nemesis's and the students' seed.")] = 1,
-    plant: Annotated[Optional[str], typer.Option("--plant", help=f"Plant a defect in the sims: {', '.join(PLANTS)}.")] = None,
+    plant: Annotated[
+        Optional[str], typer.Option("--plant", help=f"Plant a defect in the sims: {', '.join(PLANTS)}.")
+    ] = None,
     faults: Annotated[Optional[str], typer.Option("--faults", help="Only these fault kinds (comma-separated).")] = None,
-    victims: Annotated[Optional[str], typer.Option("--victims", help="Only these take pauses, kills, partitions: sim, compute, student; "
-                                                                          "each with an optional weight (sim=0.25: sims picked a quarter as often).")] = None,
+    victims: Annotated[
+        Optional[str],
+        typer.Option(
+            "--victims",
+            help="Only these take pauses, kills, partitions: sim, compute, student; "
+            "each with an optional weight (sim=0.25: sims picked a quarter as often).",
+        ),
+    ] = None,
     out: Annotated[Optional[Path], typer.Option("--out", help="Write the figures as JSON here.")] = None,
-    logs: Annotated[Optional[Path], typer.Option("--logs", help="Keep every output and the history in this folder.")] = None,
-    recheck: Annotated[Optional[Path], typer.Option("--recheck", help="Run no class: check the history a run kept in this --logs folder.")] = None,
+    logs: Annotated[
+        Optional[Path], typer.Option("--logs", help="Keep every output and the history in this folder.")
+    ] = None,
+    recheck: Annotated[
+        Optional[Path],
+        typer.Option("--recheck", help="Run no class: check the history a run kept in this --logs folder."),
+    ] = None,
 ) -> None:
     """A class in the lab for --minutes under the nemesis; the checker reads the history: faults, violations."""
     from fabric.cli_common import UserError
@@ -67,13 +80,28 @@ def command(
     if logs is None:
         tmp = tempfile.mkdtemp(prefix="soak-")
         logs = Path(tmp)
-    print(f"Command: robofabric bench soak --minutes {minutes:g} --students {students} --seed {seed}"
-          + (f" --plant {plant}" if plant else "") + (f" --faults {faults}" if faults else "") + (f" --victims {victims}" if victims else ""), flush=True)
+    print(
+        f"Command: robofabric bench soak --minutes {minutes:g} --students {students} --seed {seed}"
+        + (f" --plant {plant}" if plant else "")
+        + (f" --faults {faults}" if faults else "")
+        + (f" --victims {victims}" if victims else ""),
+        flush=True,
+    )
     print(f"Machine: {machine()}; load average at start {os.getloadavg()[0]:.1f}; logs in {logs}", flush=True)
     t0 = time.monotonic()
     try:
-        res = run_soak(SoakConfig(minutes=minutes, log_dir=logs, students=students, seed=seed, plant=plant or "", kinds=kinds,
-                                   victims=who, weights=tuple(weights.items())))
+        res = run_soak(
+            SoakConfig(
+                minutes=minutes,
+                log_dir=logs,
+                students=students,
+                seed=seed,
+                plant=plant or "",
+                kinds=kinds,
+                victims=who,
+                weights=tuple(weights.items()),
+            )
+        )
     finally:
         if tmp is not None and out is None:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -85,17 +113,32 @@ def command(
         print(f"unreadable history line: {line}", flush=True)
     for err in res.nemesis_errors[:10]:
         print(f"nemesis: a fault could not be made: {err}", flush=True)
-    print(f"took {(time.monotonic() - t0) / 60:.1f} min; load average at end {os.getloadavg()[0]:.1f}; "
-          f"history {len(res.history)} records; peers restarted after an unexpected exit: {res.extra.get('restarts', 0)}", flush=True)
+    print(
+        f"took {(time.monotonic() - t0) / 60:.1f} min; load average at end {os.getloadavg()[0]:.1f}; "
+        f"history {len(res.history)} records; peers restarted after an unexpected exit: {res.extra.get('restarts', 0)}",
+        flush=True,
+    )
     for line in res.summary:
         print(line, flush=True)
     if out is not None:
-        out.write_text(json.dumps({
-            "minutes": minutes, "students": students, "seed": seed, "plant": plant, "machine": machine(),
-            "faults": fault_counts(res.history), "violations": [str(v) for v in res.violations],
-            "summary": list(res.summary), "memory_mb": memory_series(res.history), "nemesis_errors": list(res.nemesis_errors),
-            "logs": str(logs),
-        }, indent=1))
+        out.write_text(
+            json.dumps(
+                {
+                    "minutes": minutes,
+                    "students": students,
+                    "seed": seed,
+                    "plant": plant,
+                    "machine": machine(),
+                    "faults": fault_counts(res.history),
+                    "violations": [str(v) for v in res.violations],
+                    "summary": list(res.summary),
+                    "memory_mb": memory_series(res.history),
+                    "nemesis_errors": list(res.nemesis_errors),
+                    "logs": str(logs),
+                },
+                indent=1,
+            )
+        )
     if res.violations:
         raise typer.Exit(1)
 
@@ -126,11 +169,20 @@ def _recheck(folder: Path, out: Path | None = None) -> None:
         marks = {r.what: r for r in history if isinstance(r, Mark)}
         began, ended = marks.get("class", marks.get("start")), marks.get("end")
         minutes = (ended.t - began.t) / 60.0 if began is not None and ended is not None else 0.0
-        out.write_text(json.dumps({
-            "minutes": round(minutes, 1), "recheck": str(folder), "start": marks["start"].detail if "start" in marks else "",
-            "faults": fault_counts(history), "violations": [str(v) for v in violations], "summary": list(summary),
-            "memory_mb": memory_series(history),
-        }, indent=1))
+        out.write_text(
+            json.dumps(
+                {
+                    "minutes": round(minutes, 1),
+                    "recheck": str(folder),
+                    "start": marks["start"].detail if "start" in marks else "",
+                    "faults": fault_counts(history),
+                    "violations": [str(v) for v in violations],
+                    "summary": list(summary),
+                    "memory_mb": memory_series(history),
+                },
+                indent=1,
+            )
+        )
     if violations:
         raise typer.Exit(1)
 

@@ -74,8 +74,14 @@ def _child_pub(a: argparse.Namespace) -> None:
         from fabric.config import FabricConfig
         from fabric.session import Fabric
 
-        fab = Fabric(FabricConfig(world="bench", connect=(a.endpoint,), config_file=a.zenoh_config), kind="tool", peer_id="bench-pub")
-        pub = fab.session.declare_publisher(KEY, congestion_control=zenoh.CongestionControl.BLOCK)  # raw: zenoh's own path is what is measured (payload bytes as given, no Fabric encode or stamp)
+        fab = Fabric(
+            FabricConfig(world="bench", connect=(a.endpoint,), config_file=a.zenoh_config),
+            kind="tool",
+            peer_id="bench-pub",
+        )
+        pub = fab.session.declare_publisher(
+            KEY, congestion_control=zenoh.CongestionControl.BLOCK
+        )  # raw: zenoh's own path is what is measured (payload bytes as given, no Fabric encode or stamp)
         time.sleep(0.5)  # route establishment before the first sample; the subscriber is already up
         sent = _pace(a.rate, a.count, a.duration, pub.put)
         time.sleep(0.3)
@@ -119,7 +125,11 @@ def _child_sub(a: argparse.Namespace) -> None:
         from fabric.config import FabricConfig
         from fabric.session import Fabric
 
-        fab = Fabric(FabricConfig(world="bench", connect=(a.endpoint,), config_file=a.zenoh_config), kind="tool", peer_id="bench-sub")
+        fab = Fabric(
+            FabricConfig(world="bench", connect=(a.endpoint,), config_file=a.zenoh_config),
+            kind="tool",
+            peer_id="bench-sub",
+        )
         fab.subscribe_raw(KEY, lambda s: on_payload(s.payload.to_bytes()))
         closer = fab.close
     else:
@@ -169,8 +179,15 @@ def _free_port() -> int:
     return free_port()
 
 
-def run_one(transport: str, endpoint: str, rate: float, duration: float, *, pub_config: str | None = None,
-             sub_config: str | None = None) -> dict:
+def run_one(
+    transport: str,
+    endpoint: str,
+    rate: float,
+    duration: float,
+    *,
+    pub_config: str | None = None,
+    sub_config: str | None = None,
+) -> dict:
     """One publisher/subscriber pair; ``pub_config``/``sub_config``: zenoh configs (credentials, TLS)."""
     count = int(rate * duration) if rate > 0 else 0
     me = [sys.executable, "-m", "robofabric.bench.transport"]
@@ -214,7 +231,9 @@ def wait_listening(port: int, proc: subprocess.Popen, timeout: float = 60.0) -> 
                 return
         except OSError:
             if proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"the benchmark router did not listen on port {port} within {timeout:.0f} s") from None
+                raise RuntimeError(
+                    f"the benchmark router did not listen on port {port} within {timeout:.0f} s"
+                ) from None
             time.sleep(0.1)
 
 
@@ -234,7 +253,9 @@ def run_bench(rates: list[float], duration: float, mqtt: bool) -> list[dict]:
         for r in rates:
             results.append(run_one("zenoh", f"tcp/127.0.0.1:{port}", r, duration))
         if mqtt:
-            exe = shutil.which("mosquitto") or ("/usr/sbin/mosquitto" if os.path.exists("/usr/sbin/mosquitto") else None)
+            exe = shutil.which("mosquitto") or (
+                "/usr/sbin/mosquitto" if os.path.exists("/usr/sbin/mosquitto") else None
+            )
             if exe is None:
                 print("mosquitto not found on PATH: MQTT comparison skipped", file=sys.stderr)
             else:

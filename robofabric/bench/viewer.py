@@ -71,18 +71,27 @@ class _Streams:
         if kind == "flange":
             return keys.robot_pose(WORLD, rid), Pose(np.array([0.2, 0.1 * math.sin(i / 30), 0.3]), header=h)
         if kind == "wheels":
-            return keys.robot_joints(WORLD, rid), JointState(self.wheels, np.array([i * 0.05, i * 0.06]), np.array([5.0, 6.0]), h)
+            return keys.robot_joints(WORLD, rid), JointState(
+                self.wheels, np.array([i * 0.05, i * 0.06]), np.array([5.0, 6.0]), h
+            )
         if kind == "pose":
             yaw = i * 0.01 + phase
             return keys.robot_pose(WORLD, rid), Pose(
-                np.array([math.cos(yaw), math.sin(yaw), 0.0]), np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]),
-                np.array([0.3, 0.0, 0.0]), np.array([0.0, 0.0, 0.3]), header=h)
+                np.array([math.cos(yaw), math.sin(yaw), 0.0]),
+                np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]),
+                np.array([0.3, 0.0, 0.0]),
+                np.array([0.0, 0.0, 0.3]),
+                header=h,
+            )
         if kind == "scan":
             ranges = self.rng.uniform(0.2, 14.0, 240)  # some beyond 12 m: misses, as in a real room
-            return keys.robot_scan(WORLD, rid), Scan.from_ranges(ranges, angle_min=-1.178, angle_increment=2.356 / 239, range_max=12.0, header=h)
+            return keys.robot_scan(WORLD, rid), Scan.from_ranges(
+                ranges, angle_min=-1.178, angle_increment=2.356 / 239, range_max=12.0, header=h
+            )
         if kind == "sonar":
-            return keys.robot_stream(WORLD, rid, "sonar"), Scan.from_ranges(self.rng.uniform(0.1, 3.5, 8), angle_min=0.0,
-                                                                          angle_increment=math.pi / 4, range_max=3.0, header=h)
+            return keys.robot_stream(WORLD, rid, "sonar"), Scan.from_ranges(
+                self.rng.uniform(0.1, 3.5, 8), angle_min=0.0, angle_increment=math.pi / 4, range_max=3.0, header=h
+            )
         if kind == "grid":
             cells = np.full((400, 400), 255, np.uint8)
             cells[: 40 + i % 300, :] = 0
@@ -102,8 +111,9 @@ def _schedule(streams: list[tuple[str, str]], seconds: float) -> Iterator[tuple[
     return iter(events)
 
 
-def _run(streams: list[tuple[str, str]], seconds: float, seed: int, tmp: Path,
-         clock: Callable[[], float] = time.process_time) -> dict[str, Any]:
+def _run(
+    streams: list[tuple[str, str]], seconds: float, seed: int, tmp: Path, clock: Callable[[], float] = time.process_time
+) -> dict[str, Any]:
     """Draw every message of ``streams`` for ``seconds`` of world time; CPU seconds of log calls and flushes."""
     import rerun as rr
 
@@ -146,14 +156,24 @@ def _run(streams: list[tuple[str, str]], seconds: float, seed: int, tmp: Path,
         flush()
     rec.flush()  # Rerun's own threads (batching, encoding, the file) count too
     cost = clock() - c0
-    return {"n": n, "cpu_s": cost, "us_per_msg": cost / max(n, 1) * 1e6, "per_s": n / cost if cost > 0 else float("inf")}
+    return {
+        "n": n,
+        "cpu_s": cost,
+        "us_per_msg": cost / max(n, 1) * 1e6,
+        "per_s": n / cost if cost > 0 else float("inf"),
+    }
 
 
 def measure(n: int = 2000, grids: int = 200, seed: int = 0) -> dict[str, dict]:
     """Per message type, each stream alone at its rate: messages drawn, mean cost (us, log + share of the
     flushes), messages per CPU second."""
-    kinds = {"JointState": [("joints", "arm1")], "Pose": [("pose", "base1")], "wheels": [("wheels", "base1")],
-             "Scan": [("scan", "base1")], "OccupancyGrid": [("grid", "map")]}
+    kinds = {
+        "JointState": [("joints", "arm1")],
+        "Pose": [("pose", "base1")],
+        "wheels": [("wheels", "base1")],
+        "Scan": [("scan", "base1")],
+        "OccupancyGrid": [("grid", "map")],
+    }
     result: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(prefix="bench-viewer-") as tmp:
         for name, streams in kinds.items():
@@ -196,13 +216,56 @@ def measure_live(arms: int, bases: int, seconds: float) -> dict[str, Any]:
     robots += [x for i in range(bases) for x in ("--robot", f"reeman:base{i}")]
     with tempfile.TemporaryDirectory(prefix="bench-viewer-live-") as tmp, ProcessGroup(Path(tmp)) as procs:
         router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
-        sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *robots, "--world", world,
-                                         "--connect", ep, "--id", "sim"), name="sim")
-        wait_until(lambda: "Ctrl-C to stop" in procs.output(sim), timeout=180, what="the sim", seen=lambda: procs.output(sim)[-1500:])
-        view = procs.start(robofabric_cmd("view", "--save", str(Path(tmp) / "live.rrd"), "--max-hz", "0", "--duration", str(seconds),
-                                          "--world", world, "--connect", ep), name="view")
-        wait_until(lambda: "viewer on world" in procs.output(view), timeout=120, what="the viewer", seen=lambda: procs.output(view)[-1500:])
+        wait_until(
+            lambda: "listening" in procs.output(router),
+            timeout=60,
+            what="the router",
+            seen=lambda: procs.output(router),
+        )
+        sim = procs.start(
+            robofabric_cmd(
+                "sim",
+                "--scene",
+                "warehouse",
+                "--no-scene-robots",
+                *robots,
+                "--world",
+                world,
+                "--connect",
+                ep,
+                "--id",
+                "sim",
+            ),
+            name="sim",
+        )
+        wait_until(
+            lambda: "Ctrl-C to stop" in procs.output(sim),
+            timeout=180,
+            what="the sim",
+            seen=lambda: procs.output(sim)[-1500:],
+        )
+        view = procs.start(
+            robofabric_cmd(
+                "view",
+                "--save",
+                str(Path(tmp) / "live.rrd"),
+                "--max-hz",
+                "0",
+                "--duration",
+                str(seconds),
+                "--world",
+                world,
+                "--connect",
+                ep,
+            ),
+            name="view",
+        )
+        wait_until(
+            lambda: "viewer on world" in procs.output(view),
+            timeout=120,
+            what="the viewer",
+            seen=lambda: procs.output(view)[-1500:],
+        )
         cpu0, t0 = proc_cpu_s(view.pid), time.monotonic()
         cpu1, t1 = cpu0, t0
         while view.poll() is None and time.monotonic() < t0 + seconds + 120:
@@ -212,28 +275,50 @@ def measure_live(arms: int, bases: int, seconds: float) -> dict[str, Any]:
         out = procs.output(view)
         for p in (view, sim, router):
             end_process(p)
-    m = re.search(r"viewer: (\d+) messages logged, (\d+) dropped, (\d+) thinned(?:; lag p50 (\d+) ms, max (\d+) ms)?", out)
+    m = re.search(
+        r"viewer: (\d+) messages logged, (\d+) dropped, (\d+) thinned(?:; lag p50 (\d+) ms, max (\d+) ms)?", out
+    )
     if m is None:
         raise RuntimeError(f"the viewer said no summary: {out[-1500:]}")
     logged, dropped = int(m.group(1)), int(m.group(2))
-    return {"arms": arms, "bases": bases, "seconds": seconds, "logged": logged, "dropped": dropped, "rate": logged / seconds,
-            "lag_p50": float(m.group(4) or "nan"), "lag_max": float(m.group(5) or "nan"), "core": (cpu1 - cpu0) / max(t1 - t0, 1e-9)}
+    return {
+        "arms": arms,
+        "bases": bases,
+        "seconds": seconds,
+        "logged": logged,
+        "dropped": dropped,
+        "rate": logged / seconds,
+        "lag_p50": float(m.group(4) or "nan"),
+        "lag_max": float(m.group(5) or "nan"),
+        "core": (cpu1 - cpu0) / max(t1 - t0, 1e-9),
+    }
 
 
-def format_table(result: dict[str, dict], world: dict[str, Any] | None = None, live: dict[str, Any] | None = None) -> str:
-    lines = ["| message | drawn | mean cost (us of process CPU per message) | throughput (msg per CPU s) |", "|---|---|---|---|"]
+def format_table(
+    result: dict[str, dict], world: dict[str, Any] | None = None, live: dict[str, Any] | None = None
+) -> str:
+    lines = [
+        "| message | drawn | mean cost (us of process CPU per message) | throughput (msg per CPU s) |",
+        "|---|---|---|---|",
+    ]
     for kind, r in result.items():
         lines.append(f"| {LABELS[kind]} | {r['n']} | {r['us_per_msg']:.0f} | {r['per_s']:.0f} |")
     if world is not None:
         w = world
-        lines += ["", f"Class world, {w['arms']} arms + {w['bases']} bases at full rate ({w['rate']:.0f} msg/s) for {w['seconds']:g} s "
-                      f"of world time: {w['n']} messages drawn in {w['cpu_s']:.2f} CPU s: **{w['us_per_msg']:.0f} us per message, "
-                      f"{w['core'] * 100:.0f} % of one core**."]
+        lines += [
+            "",
+            f"Class world, {w['arms']} arms + {w['bases']} bases at full rate ({w['rate']:.0f} msg/s) for {w['seconds']:g} s "
+            f"of world time: {w['n']} messages drawn in {w['cpu_s']:.2f} CPU s: **{w['us_per_msg']:.0f} us per message, "
+            f"{w['core'] * 100:.0f} % of one core**.",
+        ]
     if live is not None:
         v = live
-        lines += ["", f"Live: `robofabric sim` with {v['arms']} arms + {v['bases']} bases, `robofabric view --save --max-hz 0` for "
-                      f"{v['seconds']:g} s: **{v['logged']} messages logged ({v['rate']:.0f}/s), {v['dropped']} dropped**, viewer lag "
-                      f"p50 {v['lag_p50']:.0f} ms, max {v['lag_max']:.0f} ms, viewer process {v['core'] * 100:.0f} % of one core."]
+        lines += [
+            "",
+            f"Live: `robofabric sim` with {v['arms']} arms + {v['bases']} bases, `robofabric view --save --max-hz 0` for "
+            f"{v['seconds']:g} s: **{v['logged']} messages logged ({v['rate']:.0f}/s), {v['dropped']} dropped**, viewer lag "
+            f"p50 {v['lag_p50']:.0f} ms, max {v['lag_max']:.0f} ms, viewer process {v['core'] * 100:.0f} % of one core.",
+        ]
     return "\n".join(lines)
 
 
@@ -244,9 +329,19 @@ def command(
     bases: Annotated[int, typer.Option(help="Mobile bases in the class world.")] = 8,
     seconds: Annotated[float, typer.Option(help="World time of the class world (s).")] = 20.0,
     seed: Annotated[int, typer.Option(help="Seed of the synthetic scans and grids.")] = 0,
-    live: Annotated[float, typer.Option(help="Also run the class world for real for this many seconds (a sim and a view process; 0: not).")] = 0.0,
+    live: Annotated[
+        float,
+        typer.Option(
+            help="Also run the class world for real for this many seconds (a sim and a view process; 0: not)."
+        ),
+    ] = 0.0,
     out: TableOut = None,
-    pages: Annotated[int, typer.Option(help="Also open this many browser pages (headless chromium) on `view --serve-web` and read each one's lag from the page (0: not).")] = 0,
+    pages: Annotated[
+        int,
+        typer.Option(
+            help="Also open this many browser pages (headless chromium) on `view --serve-web` and read each one's lag from the page (0: not)."
+        ),
+    ] = 0,
     stalled: Annotated[int, typer.Option(help="With --pages: further pages, paused once they show the world.")] = 1,
     page_seconds: Annotated[float, typer.Option(help="With --pages: how long their lag is sampled (s).")] = 60.0,
     page_width: Annotated[int, typer.Option(help="With --pages: page width in pixels (height 5/8 of it).")] = 640,
@@ -266,13 +361,21 @@ def command(
     if pages > 0:  # browsers on one served viewer (robofabric/bench/viewer_web.py)
         from robofabric.bench import viewer_web
 
-        r = viewer_web.run(pages, stalled, page_seconds, page_width,
-                           ["--window", f"{page_window:g}", "--max-hz", f"{page_max_hz:g}"], log=lambda *a: None)
+        r = viewer_web.run(
+            pages,
+            stalled,
+            page_seconds,
+            page_width,
+            ["--window", f"{page_window:g}", "--max-hz", f"{page_max_hz:g}"],
+            log=lambda *a: None,
+        )
         s = viewer_web.summary(r)
-        table += (f"\n\nBrowsers: {pages} live pages + {stalled} paused on one `view --serve-web --window {page_window:g} "
-                  f"--max-hz {page_max_hz:g}`, {page_width}x{page_width * 5 // 8}: all showing the world after {r['ready_s']:.0f} s; "
-                  f"lag read from each page over {page_seconds:g} s: p50 {s['p50']:.1f} s, p90 {s['p90']:.1f} s, max {s['max']:.1f} s; "
-                  f"{min(r['fps']):.1f}-{max(r['fps']):.1f} frames/s per page; paused pages cut off by the relay: {len(r['cut'])}; "
-                  f"'sender blocked' reports: {r['blocked']}.")
+        table += (
+            f"\n\nBrowsers: {pages} live pages + {stalled} paused on one `view --serve-web --window {page_window:g} "
+            f"--max-hz {page_max_hz:g}`, {page_width}x{page_width * 5 // 8}: all showing the world after {r['ready_s']:.0f} s; "
+            f"lag read from each page over {page_seconds:g} s: p50 {s['p50']:.1f} s, p90 {s['p90']:.1f} s, max {s['max']:.1f} s; "
+            f"{min(r['fps']):.1f}-{max(r['fps']):.1f} frames/s per page; paused pages cut off by the relay: {len(r['cut'])}; "
+            f"'sender blocked' reports: {r['blocked']}."
+        )
     print(table)
     append(out, table)

@@ -20,12 +20,22 @@ from typing import Any
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = [
-    "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox", "--headless",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
-    "--disable-background-timer-throttling", "--disable-renderer-backgrounding", "--disable-backgrounding-occluded-windows",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--no-sandbox",
+    "--headless",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    "--disable-background-timer-throttling",
+    "--disable-renderer-backgrounding",
+    "--disable-backgrounding-occluded-windows",
 ]
-STATE_JS = "() => { const h = window.rerun_handle; if (!h) return [Date.now(), null]; " \
-           "try { return [Date.now(), Array.from(h.viewer_state())]; } catch (e) { return [Date.now(), null]; } }"
+STATE_JS = (
+    "() => { const h = window.rerun_handle; if (!h) return [Date.now(), null]; "
+    "try { return [Date.now(), Array.from(h.viewer_state())]; } catch (e) { return [Date.now(), null]; } }"
+)
 
 __all__ = ["CHROMIUM", "CHROMIUM_ARGS", "page_lag", "varints_ns", "open_pages", "measure"]
 
@@ -46,14 +56,14 @@ def _fields(buf: bytes, depth: int = 0):
         elif wt == 1:
             if i + 8 > n:
                 return
-            yield int.from_bytes(buf[i:i + 8], "little", signed=True)
+            yield int.from_bytes(buf[i : i + 8], "little", signed=True)
             i += 8
         elif wt == 2:
             ln, i = _varint(buf, i)
             if ln is None or i + ln > n:
                 return
             if depth < 8:
-                yield from _fields(buf[i:i + ln], depth + 1)
+                yield from _fields(buf[i : i + ln], depth + 1)
             i += ln
         elif wt == 5:
             i += 4
@@ -94,9 +104,12 @@ def page_lag(page: Any) -> float | None:
 
 def page_fps(page: Any, seconds: float = 3.0) -> float:
     """The page's animation frames per second over ``seconds`` (the pace its viewer draws, and takes in data, at)."""
-    return page.evaluate("""(ms) => new Promise(done => { let n = 0; const t0 = performance.now();
+    return page.evaluate(
+        """(ms) => new Promise(done => { let n = 0; const t0 = performance.now();
         function tick(t) { n++; if (t - t0 < ms) requestAnimationFrame(tick); else done(n * 1000 / (t - t0)); }
-        requestAnimationFrame(tick); })""", seconds * 1000)
+        requestAnimationFrame(tick); })""",
+        seconds * 1000,
+    )
 
 
 def open_pages(browser: Any, url: str, n: int, viewport: dict[str, int]) -> list[Any]:
@@ -109,8 +122,17 @@ def open_pages(browser: Any, url: str, n: int, viewport: dict[str, int]) -> list
     return pages
 
 
-def measure(url: str, pages: int, stalled: int = 0, seconds: float = 60.0, viewport: dict[str, int] | None = None,
-            warmup_s: float = 180.0, every_s: float = 2.0, log: Any = print, shot: str | None = None) -> dict[str, Any]:
+def measure(
+    url: str,
+    pages: int,
+    stalled: int = 0,
+    seconds: float = 60.0,
+    viewport: dict[str, int] | None = None,
+    warmup_s: float = 180.0,
+    every_s: float = 2.0,
+    log: Any = print,
+    shot: str | None = None,
+) -> dict[str, Any]:
     """Open ``pages`` + ``stalled`` pages on ``url``; once every page shows the live world, pause the
     ``stalled`` ones and sample every live page's lag for ``seconds``. Returns per page lists of lags (s)."""
     from playwright.sync_api import sync_playwright
@@ -127,7 +149,9 @@ def measure(url: str, pages: int, stalled: int = 0, seconds: float = 60.0, viewp
                     break
                 all_pages[0].wait_for_timeout(1000)
             ready = time.monotonic() - (deadline - warmup_s)
-            log(f"pages showing the world after {ready:.0f} s: {sum(lag is not None for lag in lags)}/{len(lags)}; lags {lags}")
+            log(
+                f"pages showing the world after {ready:.0f} s: {sum(lag is not None for lag in lags)}/{len(lags)}; lags {lags}"
+            )
             frozen = all_pages[pages:]
             for pg in frozen:
                 cdp = pg.context.new_cdp_session(pg)
@@ -150,7 +174,14 @@ def measure(url: str, pages: int, stalled: int = 0, seconds: float = 60.0, viewp
                 log(f"screenshot {shot}: page lag {lag if lag is None else round(lag, 2)} s")
             fps = [page_fps(pg) for pg in live]
             log(f"frames per second per live page: {[round(f, 1) for f in fps]}")
-            return {"pages": pages, "stalled": stalled, "seconds": seconds, "ready_s": ready, "lags": series, "fps": fps}
+            return {
+                "pages": pages,
+                "stalled": stalled,
+                "seconds": seconds,
+                "ready_s": ready,
+                "lags": series,
+                "fps": fps,
+            }
         finally:
             browser.close()
 
@@ -160,16 +191,31 @@ def summary(result: dict[str, Any]) -> dict[str, float]:
     missing = sum(v is None for s in result["lags"] for v in s)
     worst_last = max((s[-1] for s in result["lags"] if s and s[-1] is not None), default=float("nan"))
     vals.sort()
+
     def p(q: float) -> float:
         return vals[min(len(vals) - 1, int(q * len(vals)))] if vals else float("nan")
 
-    return {"p50": p(0.5), "p90": p(0.9), "max": vals[-1] if vals else float("nan"), "last_worst": worst_last, "missing": missing}
+    return {
+        "p50": p(0.5),
+        "p90": p(0.9),
+        "max": vals[-1] if vals else float("nan"),
+        "last_worst": worst_last,
+        "missing": missing,
+    }
 
 
 VIEWER_URL = re.compile(r"web viewer: open (http://\S+)")
 
 
-def run(pages: int, stalled: int, seconds: float, width: int, view_args: list[str], log: Any = print, shot: str | None = None) -> dict[str, Any]:
+def run(
+    pages: int,
+    stalled: int,
+    seconds: float,
+    width: int,
+    view_args: list[str],
+    log: Any = print,
+    shot: str | None = None,
+) -> dict[str, Any]:
     """A router, ``robofabric sim --scene combined`` and ``robofabric view --serve-web VIEW_ARGS`` as child
     processes, then :func:`measure`; every child ended by pid. Adds the viewer's last lines (relay cuts)."""
     import tempfile
@@ -182,13 +228,40 @@ def run(pages: int, stalled: int, seconds: float, width: int, view_args: list[st
     with tempfile.TemporaryDirectory(prefix="bench-web-") as tmp, ProcessGroup(Path(tmp)) as procs:
         ep = f"tcp/127.0.0.1:{free_port()}"
         router = procs.start(robofabric_cmd("router", "--listen", ep, "--world", world), name="router")
-        wait_until(lambda: accepts(ep), timeout=30, interval=0.1, what="the router to listen", seen=lambda: procs.output(router))
+        wait_until(
+            lambda: accepts(ep),
+            timeout=30,
+            interval=0.1,
+            what="the router to listen",
+            seen=lambda: procs.output(router),
+        )
         sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep), name="sim")
         web, grpc = free_port(), free_port()
-        view = procs.start(robofabric_cmd("view", "--serve-web", "--advertise", "127.0.0.1", "--web-port", str(web),
-                                          "--grpc-port", str(grpc), "--world", world, "--connect", ep, *view_args), name="view")
-        url = wait_until(lambda: VIEWER_URL.search(procs.output(view)), timeout=90, interval=0.2, what="the viewer's URL",
-                         seen=lambda: (procs.output(router) + procs.output(sim) + procs.output(view))[-2000:]).group(1)
+        view = procs.start(
+            robofabric_cmd(
+                "view",
+                "--serve-web",
+                "--advertise",
+                "127.0.0.1",
+                "--web-port",
+                str(web),
+                "--grpc-port",
+                str(grpc),
+                "--world",
+                world,
+                "--connect",
+                ep,
+                *view_args,
+            ),
+            name="view",
+        )
+        url = wait_until(
+            lambda: VIEWER_URL.search(procs.output(view)),
+            timeout=90,
+            interval=0.2,
+            what="the viewer's URL",
+            seen=lambda: (procs.output(router) + procs.output(sim) + procs.output(view))[-2000:],
+        ).group(1)
         result = measure(url, pages, stalled, seconds, {"width": width, "height": width * 5 // 8}, log=log, shot=shot)
         result["view_log"] = procs.output(view)
         result["cut"] = re.findall(r"web relay: page \S+ cut off: (.*)", result["view_log"])
@@ -225,11 +298,13 @@ def main(argv: list[str] | None = None) -> None:
     r = run(a.pages, a.stalled, a.seconds, a.width, a.view_args, shot=a.shot)
     s = summary(r)
     print(machine())
-    print(f"{a.pages} live pages + {a.stalled} paused, {a.width}x{a.width * 5 // 8}, view {' '.join(a.view_args) or '(defaults)'}: "
-          f"all showing the world after {r['ready_s']:.0f} s; lag over {a.seconds:g} s: p50 {s['p50']:.1f} s, p90 {s['p90']:.1f} s, "
-          f"max {s['max']:.1f} s, worst page at the end {s['last_worst']:.1f} s; frames/s per page "
-          f"{min(r['fps']):.1f}-{max(r['fps']):.1f}; paused pages cut off: {len(r['cut'])} ({'; '.join(r['cut'])}); "
-          f"'sender blocked' reports: {r['blocked']}")
+    print(
+        f"{a.pages} live pages + {a.stalled} paused, {a.width}x{a.width * 5 // 8}, view {' '.join(a.view_args) or '(defaults)'}: "
+        f"all showing the world after {r['ready_s']:.0f} s; lag over {a.seconds:g} s: p50 {s['p50']:.1f} s, p90 {s['p90']:.1f} s, "
+        f"max {s['max']:.1f} s, worst page at the end {s['last_worst']:.1f} s; frames/s per page "
+        f"{min(r['fps']):.1f}-{max(r['fps']):.1f}; paused pages cut off: {len(r['cut'])} ({'; '.join(r['cut'])}); "
+        f"'sender blocked' reports: {r['blocked']}"
+    )
 
 
 if __name__ == "__main__":

@@ -43,13 +43,39 @@ def run(stalled: int, warmup: float, seconds: float, log: Any = print) -> dict[s
     with tempfile.TemporaryDirectory(prefix="bench-relay-") as tmp, ProcessGroup(Path(tmp)) as procs:
         ep = f"tcp/127.0.0.1:{free_port()}"
         router = procs.start(robofabric_cmd("router", "--listen", ep, "--world", world), name="router")
-        wait_until(lambda: accepts(ep), timeout=30, interval=0.1, what="the router to listen", seen=lambda: procs.output(router))
+        wait_until(
+            lambda: accepts(ep),
+            timeout=30,
+            interval=0.1,
+            what="the router to listen",
+            seen=lambda: procs.output(router),
+        )
         procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep), name="sim")
         web, grpc = free_port(), free_port()
-        view = procs.start(robofabric_cmd("view", "--serve-web", "--advertise", "127.0.0.1", "--web-port", str(web),
-                                          "--grpc-port", str(grpc), "--world", world, "--connect", ep), name="view")
-        wait_until(lambda: VIEWER_URL.search(procs.output(view)), timeout=90, interval=0.2, what="the viewer's URL",
-                   seen=lambda: procs.output(view)[-2000:])
+        view = procs.start(
+            robofabric_cmd(
+                "view",
+                "--serve-web",
+                "--advertise",
+                "127.0.0.1",
+                "--web-port",
+                str(web),
+                "--grpc-port",
+                str(grpc),
+                "--world",
+                world,
+                "--connect",
+                ep,
+            ),
+            name="view",
+        )
+        wait_until(
+            lambda: VIEWER_URL.search(procs.output(view)),
+            timeout=90,
+            interval=0.2,
+            what="the viewer's URL",
+            seen=lambda: procs.output(view)[-2000:],
+        )
         time.sleep(warmup)  # a benchmark's session length, not a wait on a condition
         honest = WebReader(grpc, source="127.0.0.2")
         conns: list[socket.socket] = []
@@ -109,10 +135,12 @@ def main(argv: list[str] | None = None) -> None:
     a = ap.parse_args(argv)
     r = run(a.stalled, a.warmup, a.seconds)
     print(machine())
-    print(f"{a.stalled} stalled readers after a {a.warmup:g} s session, held {a.seconds:g} s: viewer RSS "
-          f"{r['rss_before_mb']:.0f} MB -> peak {r['rss_peak_mb']:.0f} MB; honest reader got {r['honest_mb']:.1f} MB, "
-          f"longest gap {r['honest_longest_gap_s']:.1f} s, cut: {r['honest_cut']}; pages cut {r['cut']}; "
-          f"{r['relay_line'] or '(no relay line)'}")
+    print(
+        f"{a.stalled} stalled readers after a {a.warmup:g} s session, held {a.seconds:g} s: viewer RSS "
+        f"{r['rss_before_mb']:.0f} MB -> peak {r['rss_peak_mb']:.0f} MB; honest reader got {r['honest_mb']:.1f} MB, "
+        f"longest gap {r['honest_longest_gap_s']:.1f} s, cut: {r['honest_cut']}; pages cut {r['cut']}; "
+        f"{r['relay_line'] or '(no relay line)'}"
+    )
 
 
 if __name__ == "__main__":

@@ -124,7 +124,9 @@ class CountingProxy:
             with self._lock:
                 self._open.append(client)
             for src, dst, counted in ((client, up, True), (up, client, False)):
-                t = threading.Thread(target=self._pump, args=(src, dst, counted, client), daemon=True, name="proxy-pump")
+                t = threading.Thread(
+                    target=self._pump, args=(src, dst, counted, client), daemon=True, name="proxy-pump"
+                )
                 t.start()
                 self._threads.append(t)
 

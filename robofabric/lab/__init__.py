@@ -16,8 +16,10 @@ if TYPE_CHECKING:
     from robofabric.lab.netns import LabError, namespaces_available, netns_list, sweep_stale
 
 _HOME = {
-    **dict.fromkeys(("DEFAULT_SUBNET", "Host", "Lab", "LabProcess", "RemoteError", "RemotePython", "faketime_library"),
-                    "robofabric.lab.lab"),
+    **dict.fromkeys(
+        ("DEFAULT_SUBNET", "Host", "Lab", "LabProcess", "RemoteError", "RemotePython", "faketime_library"),
+        "robofabric.lab.lab",
+    ),
     **dict.fromkeys(("LabError", "namespaces_available", "netns_list", "sweep_stale"), "robofabric.lab.netns"),
 }
 """Each public name and the module that defines it."""

@@ -43,7 +43,9 @@ def _run(rid: int, code: str, ns: dict) -> None:
         tree = ast.parse(code, f"<lab snippet {rid}>")
         last = tree.body.pop() if tree.body and isinstance(tree.body[-1], ast.Expr) else None
         exec(compile(tree, f"<lab snippet {rid}>", "exec"), ns)
-        value = eval(compile(ast.Expression(last.value), f"<lab snippet {rid}>", "eval"), ns) if last is not None else None
+        value = (
+            eval(compile(ast.Expression(last.value), f"<lab snippet {rid}>", "eval"), ns) if last is not None else None
+        )
         _reply({"id": rid, "ok": True, "value": _plain(value)})
     except BaseException:
         _reply({"id": rid, "ok": False, "error": traceback.format_exc()})

@@ -9,14 +9,18 @@ import typer
 
 from fabric.cli_common import UserError
 
-lab_app = typer.Typer(help="A multi-host LAN of network namespaces on this machine (needs root): docs/lan.md.", no_args_is_help=True)
+lab_app = typer.Typer(
+    help="A multi-host LAN of network namespaces on this machine (needs root): docs/lan.md.", no_args_is_help=True
+)
 
 
 @lab_app.command("up")
 def up(
     file: Annotated[Path, typer.Argument(help="A lab file (see robofabric/lab/spec.py, examples/lab/classroom.toml).")],
     duration: Annotated[Optional[float], typer.Option(help="Tear down after S seconds (default: Ctrl-C).")] = None,
-    logs: Annotated[Optional[Path], typer.Option(help="Directory for the processes' output (default: a fresh one in /tmp).")] = None,
+    logs: Annotated[
+        Optional[Path], typer.Option(help="Directory for the processes' output (default: a fresh one in /tmp).")
+    ] = None,
 ) -> None:
     """Build the lab, start each host's commands, print how to reach the hosts; remove it all on Ctrl-C."""
     from robofabric.lab import Lab, LabError, namespaces_available
@@ -39,8 +43,11 @@ def up(
                 host = lab.host(h.name)
                 cmds = "; ".join(" ".join(a) for a in h.run) or "-"
                 pids = ", ".join(str(p.pid) for p in started[h.name])
-                print(f"  {h.name:<10} {host.ip:<13} {('clock ' + h.clock) if h.clock else '':<9} "
-                      f"ip netns exec {host.ns} bash   # robofabric {cmds} (pid {pids or '-'})", flush=True)
+                print(
+                    f"  {h.name:<10} {host.ip:<13} {('clock ' + h.clock) if h.clock else '':<9} "
+                    f"ip netns exec {host.ns} bash   # robofabric {cmds} (pid {pids or '-'})",
+                    flush=True,
+                )
             stop.wait(duration)
             print("lab: tearing down", flush=True)
     except LabError as exc:

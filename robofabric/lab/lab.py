@@ -49,8 +49,12 @@ _LIVE_LOCK = threading.Lock()
 
 def faketime_library() -> str | None:
     """Path of Debian's libfaketime (multi-threaded variant), or None when the package is missing."""
-    for pattern in ("/usr/lib/*/faketime/libfaketimeMT.so.1", "/usr/lib/faketime/libfaketimeMT.so.1",
-                    "/usr/lib/*/faketime/libfaketime.so.1", "/usr/local/lib/faketime/libfaketimeMT.so.1"):
+    for pattern in (
+        "/usr/lib/*/faketime/libfaketimeMT.so.1",
+        "/usr/lib/faketime/libfaketimeMT.so.1",
+        "/usr/lib/*/faketime/libfaketime.so.1",
+        "/usr/local/lib/faketime/libfaketimeMT.so.1",
+    ):
         found = sorted(glob.glob(pattern))
         if found:
             return found[0]
@@ -169,8 +173,15 @@ class Host:
                 argv[1:2] = ["-m", "robofabric.lab.skewed"]  # works around libfaketime's time.sleep (see skewed.py)
         return ["ip", "netns", "exec", self.ns, *argv], env
 
-    def spawn(self, argv: Sequence[str], *, name: str | None = None, env: dict[str, str] | None = None,
-              clock_offset: str | None = None, stdin: Any = subprocess.DEVNULL) -> LabProcess:
+    def spawn(
+        self,
+        argv: Sequence[str],
+        *,
+        name: str | None = None,
+        env: dict[str, str] | None = None,
+        clock_offset: str | None = None,
+        stdin: Any = subprocess.DEVNULL,
+    ) -> LabProcess:
         """Start any program in this host (its own session; output to the lab's log directory)."""
         self.lab.ensure_open()
         full, fenv = self._argv(argv, clock_offset)
@@ -178,7 +189,11 @@ class Host:
         log_path = self.lab.log_dir / f"{self.name}.{name}.{len(self.processes)}.log"
         with open(log_path, "wb") as out:
             popen = subprocess.Popen(
-                full, stdout=out, stderr=subprocess.STDOUT, stdin=stdin, start_new_session=True,
+                full,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                stdin=stdin,
+                start_new_session=True,
                 env={**os.environ, "PYTHONUNBUFFERED": "1", **fenv, **(env or {})},
             )
         proc = LabProcess(popen, self, name, log_path)
@@ -186,27 +201,53 @@ class Host:
         self.lab.processes.append(proc)
         return proc
 
-    def start(self, args: Sequence[str], *, name: str | None = None, env: dict[str, str] | None = None,
-              clock_offset: str | None = None) -> LabProcess:
+    def start(
+        self,
+        args: Sequence[str],
+        *,
+        name: str | None = None,
+        env: dict[str, str] | None = None,
+        clock_offset: str | None = None,
+    ) -> LabProcess:
         """Start ``robofabric ARGS`` in this host (with this interpreter: no reliance on PATH)."""
-        return self.spawn([sys.executable, "-m", "robofabric.cli", *args], name=name or args[0], env=env, clock_offset=clock_offset)
+        return self.spawn(
+            [sys.executable, "-m", "robofabric.cli", *args], name=name or args[0], env=env, clock_offset=clock_offset
+        )
 
-    def run(self, argv: Sequence[str], *, timeout: float = 60.0, clock_offset: str | None = None,
-            env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    def run(
+        self,
+        argv: Sequence[str],
+        *,
+        timeout: float = 60.0,
+        clock_offset: str | None = None,
+        env: dict[str, str] | None = None,
+    ) -> subprocess.CompletedProcess:
         """Run a program in this host to completion; returns its output (never raises on a non-zero exit)."""
         self.lab.ensure_open()
         full, fenv = self._argv(argv, clock_offset)
-        return subprocess.run(full, capture_output=True, text=True, timeout=timeout,
-                              env={**os.environ, "PYTHONUNBUFFERED": "1", **fenv, **(env or {})})
+        return subprocess.run(
+            full,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            env={**os.environ, "PYTHONUNBUFFERED": "1", **fenv, **(env or {})},
+        )
 
     def robofabric(self, *args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
         """Run ``robofabric ARGS`` in this host to completion (``ps``, ``own list``, ``call``...)."""
         return self.run([sys.executable, "-m", "robofabric.cli", *args], timeout=timeout)
 
-    def python(self, *, name: str = "py", clock_offset: str | None = None, env: dict[str, str] | None = None) -> "RemotePython":
+    def python(
+        self, *, name: str = "py", clock_offset: str | None = None, env: dict[str, str] | None = None
+    ) -> "RemotePython":
         """A Python interpreter in this host that runs snippets on request (see :class:`RemotePython`)."""
-        proc = self.spawn([sys.executable, "-m", "robofabric.lab.agent"], name=name, env=env, clock_offset=clock_offset,
-                          stdin=subprocess.PIPE)
+        proc = self.spawn(
+            [sys.executable, "-m", "robofabric.lab.agent"],
+            name=name,
+            env=env,
+            clock_offset=clock_offset,
+            stdin=subprocess.PIPE,
+        )
         return RemotePython(proc)
 
 
@@ -237,8 +278,10 @@ class RemotePython:
                 self.proc.popen.stdin.write(line.encode())
                 self.proc.popen.stdin.flush()
             except (BrokenPipeError, ValueError):
-                raise LabError(f"{self.proc.name} on {self.proc.host.name} has ended (exit {self.proc.popen.poll()}); "
-                               f"its output:\n{self.proc.output()[-3000:]}") from None
+                raise LabError(
+                    f"{self.proc.name} on {self.proc.host.name} has ended (exit {self.proc.popen.poll()}); "
+                    f"its output:\n{self.proc.output()[-3000:]}"
+                ) from None
 
         def wait(timeout: float = 60.0) -> Any:
             deadline = time.monotonic() + timeout
@@ -254,11 +297,15 @@ class RemotePython:
                         if rid in self._replies:
                             reply = self._replies.pop(rid)
                             break
-                    raise LabError(f"{self.proc.name} on {self.proc.host.name} ended (exit {self.proc.popen.returncode}) "
-                                   f"before answering; its output:\n{self.proc.output()[-3000:]}")
+                    raise LabError(
+                        f"{self.proc.name} on {self.proc.host.name} ended (exit {self.proc.popen.returncode}) "
+                        f"before answering; its output:\n{self.proc.output()[-3000:]}"
+                    )
                 if time.monotonic() > deadline:
-                    raise TimeoutError(f"{self.proc.name} on {self.proc.host.name}: no answer within {timeout:.0f} s to\n{code}\n"
-                                       f"its output:\n{self.proc.output()[-3000:]}")
+                    raise TimeoutError(
+                        f"{self.proc.name} on {self.proc.host.name}: no answer within {timeout:.0f} s to\n{code}\n"
+                        f"its output:\n{self.proc.output()[-3000:]}"
+                    )
                 time.sleep(0.02)
             if not reply["ok"]:
                 raise RemoteError(reply["error"])
@@ -283,7 +330,7 @@ class RemotePython:
             self._pos += end
             for line in data[:end].splitlines():
                 if line.startswith(marker):
-                    reply = json.loads(line[len(marker):])
+                    reply = json.loads(line[len(marker) :])
                     self._replies[reply["id"]] = reply
 
     def close(self) -> None:
@@ -302,7 +349,9 @@ class RemoteError(Exception):
 class Lab:
     """A LAN of namespaces with a bridge; a context manager whose ``close()`` removes all it made."""
 
-    def __init__(self, *, subnet: str = DEFAULT_SUBNET, log_dir: str | Path | None = None, name: str | None = None) -> None:
+    def __init__(
+        self, *, subnet: str = DEFAULT_SUBNET, log_dir: str | Path | None = None, name: str | None = None
+    ) -> None:
         self.name = name or f"rflab{os.getpid()}x{next(_COUNTER)}"
         self.net = ipaddress.ip_network(subnet)
         if not self.net.is_private or self.net.prefixlen != 24:

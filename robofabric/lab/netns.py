@@ -27,7 +27,9 @@ def ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
         raise LabError("the `ip` command (iproute2) is not installed")
     proc = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
     if check and proc.returncode != 0:
-        raise LabError(f"ip {' '.join(args)}: {proc.stderr.strip() or proc.stdout.strip() or f'exit {proc.returncode}'}")
+        raise LabError(
+            f"ip {' '.join(args)}: {proc.stderr.strip() or proc.stdout.strip() or f'exit {proc.returncode}'}"
+        )
     return proc
 
 
@@ -55,7 +57,10 @@ def namespaces_available() -> tuple[bool, str]:
     name = f"rfprobe-{os.getpid()}-{uuid.uuid4().hex[:6]}"
     proc = subprocess.run(["ip", "netns", "add", name], capture_output=True, text=True, timeout=30)
     if proc.returncode != 0:
-        return False, f"cannot create a network namespace here (ip netns add: {proc.stderr.strip()}); the lab needs root or CAP_SYS_ADMIN"
+        return (
+            False,
+            f"cannot create a network namespace here (ip netns add: {proc.stderr.strip()}); the lab needs root or CAP_SYS_ADMIN",
+        )
     subprocess.run(["ip", "netns", "del", name], capture_output=True, timeout=30)
     return True, ""
 
@@ -72,7 +77,7 @@ def sweep_stale(prefix: str = "rflab", *, timeout: float = 10.0) -> list[str]:
     for ns in netns_list():
         if not ns.startswith(prefix):
             continue
-        pid_part = ns[len(prefix):].split("x", 1)[0]
+        pid_part = ns[len(prefix) :].split("x", 1)[0]
         if pid_part.isdigit() and not os.path.exists(f"/proc/{pid_part}"):
             stale.append(ns)
     for ns in stale:

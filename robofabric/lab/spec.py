@@ -65,11 +65,13 @@ def parse_lab(data: dict, *, source: str = "<lab>") -> LabSpec:
             raise LabError(f"{where}: needs a unique string 'name'")
         names.add(name)
         run = h.get("run", [])
-        if not isinstance(run, list) or not all(isinstance(a, list) and a and all(isinstance(x, str) for x in a) for a in run):
+        if not isinstance(run, list) or not all(
+            isinstance(a, list) and a and all(isinstance(x, str) for x in a) for a in run
+        ):
             raise LabError(f"{where} ({name}): 'run' must be a list of argument lists, e.g. [[\"router\"]]")
         clock = h.get("clock")
         if clock is not None and not isinstance(clock, str):
-            raise LabError(f"{where} ({name}): 'clock' must be a string such as \"-5\" or \"+5\"")
+            raise LabError(f'{where} ({name}): \'clock\' must be a string such as "-5" or "+5"')
         ready = h.get("ready")
         if ready is not None and (not isinstance(ready, str) or not run):
             raise LabError(f"{where} ({name}): 'ready' must be a string and needs a command in 'run'")
@@ -108,7 +110,9 @@ def start_lab(spec: LabSpec, lab: Lab, *, ready_timeout: float = 120.0) -> dict[
     for h in spec.hosts:
         host = lab.host(h.name)
         started[h.name] = [
-            host.start([a.format_map({**addresses, "ip": host.ip, "logs": str(lab.log_dir)}) for a in argv], name=argv[0])
+            host.start(
+                [a.format_map({**addresses, "ip": host.ip, "logs": str(lab.log_dir)}) for a in argv], name=argv[0]
+            )
             for argv in h.run
         ]
         if h.ready:
@@ -116,8 +120,10 @@ def start_lab(spec: LabSpec, lab: Lab, *, ready_timeout: float = 120.0) -> dict[
             deadline = time.monotonic() + ready_timeout
             while h.ready not in first.output():
                 if not first.alive() or time.monotonic() > deadline:
-                    raise LabError(f"host {h.name}: {' '.join(h.run[0])} did not print {h.ready!r} "
-                                   f"({'it ended' if not first.alive() else f'within {ready_timeout:.0f} s'}); "
-                                   f"its output:\n{first.output()[-2000:]}")
+                    raise LabError(
+                        f"host {h.name}: {' '.join(h.run[0])} did not print {h.ready!r} "
+                        f"({'it ended' if not first.alive() else f'within {ready_timeout:.0f} s'}); "
+                        f"its output:\n{first.output()[-2000:]}"
+                    )
                 time.sleep(0.05)
     return started

@@ -38,21 +38,47 @@ def record(
     output: Annotated[Path, typer.Option("--output", "-o", help="The MCAP file to write (overwritten if it exists).")],
     keyexprs: Annotated[
         Optional[list[str]],
-        typer.Argument(help="Key expressions to record, full or world-relative (default: the whole world, rf/WORLD/**).", autocompletion=complete_keys),
+        typer.Argument(
+            help="Key expressions to record, full or world-relative (default: the whole world, rf/WORLD/**).",
+            autocompletion=complete_keys,
+        ),
     ] = None,
-    duration: Annotated[Optional[float], typer.Option(help="Stop after S seconds (default: until Ctrl-C / SIGTERM).")] = None,
-    liveliness: Annotated[bool, typer.Option("--liveliness", help="Also record peers' liveliness tokens appearing and going.")] = False,
+    duration: Annotated[
+        Optional[float], typer.Option(help="Stop after S seconds (default: until Ctrl-C / SIGTERM).")
+    ] = None,
+    liveliness: Annotated[
+        bool, typer.Option("--liveliness", help="Also record peers' liveliness tokens appearing and going.")
+    ] = False,
     compression: Annotated[str, typer.Option(help="Chunk compression: zstd, lz4 or none.")] = "zstd",
     chunk_size: Annotated[int, typer.Option(help="Close a chunk once it holds this many bytes.")] = 1 << 20,
-    flush_interval: Annotated[float, typer.Option(help="Close the open chunk and hand it to the OS at least this often (s): what a crash can lose.")] = 0.5,
+    flush_interval: Annotated[
+        float,
+        typer.Option(help="Close the open chunk and hand it to the OS at least this often (s): what a crash can lose."),
+    ] = 0.5,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress line.")] = False,
     to: Annotated[
         Optional[str],
-        typer.Option("--to", help="Write another format live instead of the fabric's own: foxglove or ros2 (see `robofabric export`).", autocompletion=complete_formats),
+        typer.Option(
+            "--to",
+            help="Write another format live instead of the fabric's own: foxglove or ros2 (see `robofabric export`).",
+            autocompletion=complete_formats,
+        ),
     ] = None,
-    scene: Annotated[Optional[str], typer.Option(help="With --to: the scene being recorded (places the arms, draws the walls).")] = None,
-    max_queue_mb: Annotated[float, typer.Option("--max-queue-mb", help="Payload waiting for the disk at most; beyond, samples are dropped and counted.")] = 256.0,
-    quota_mb: Annotated[Optional[float], typer.Option("--quota-mb", help="Write at most this many MB of payload; later samples are dropped and counted.")] = None,
+    scene: Annotated[
+        Optional[str], typer.Option(help="With --to: the scene being recorded (places the arms, draws the walls).")
+    ] = None,
+    max_queue_mb: Annotated[
+        float,
+        typer.Option(
+            "--max-queue-mb", help="Payload waiting for the disk at most; beyond, samples are dropped and counted."
+        ),
+    ] = 256.0,
+    quota_mb: Annotated[
+        Optional[float],
+        typer.Option(
+            "--quota-mb", help="Write at most this many MB of payload; later samples are dropped and counted."
+        ),
+    ] = None,
     join: Joining = Joining(),
 ) -> None:
     """Record every sample on the selected keys into an MCAP file (one channel per key, zstd chunks).
@@ -91,8 +117,14 @@ def record(
     with join.open("recorder", cfg) as fab, HeapTrimmer():
         try:
             rec = Recorder(
-                fab, output, exprs, liveliness=liveliness, compression=compression,
-                chunk_size=chunk_size, flush_interval=flush_interval, max_queue_bytes=int(max_queue_mb * 1e6),
+                fab,
+                output,
+                exprs,
+                liveliness=liveliness,
+                compression=compression,
+                chunk_size=chunk_size,
+                flush_interval=flush_interval,
+                max_queue_bytes=int(max_queue_mb * 1e6),
                 quota_bytes=None if quota_mb is None else int(quota_mb * 1e6),
             )
             rec.start()
@@ -103,14 +135,20 @@ def record(
     print(f"recorded {stats.line()} -> {output}", file=sys.stderr, flush=True)
     if stats.dropped:
         why = "the disk quota was reached" if stats.quota_reached else "the queue to the disk was full or too many keys"
-        print(f"warning: {stats.dropped} samples ({stats.dropped_bytes} bytes) were not recorded: {why}", file=sys.stderr, flush=True)
+        print(
+            f"warning: {stats.dropped} samples ({stats.dropped_bytes} bytes) were not recorded: {why}",
+            file=sys.stderr,
+            flush=True,
+        )
     if stats.messages == 0:  # exit 1: the world had nothing there
         raise NothingThere(
             f"nothing was recorded on {', '.join(exprs)} (unknown world or no publisher?); {output} is an empty recording"
         )
 
 
-def _run_until_done(worker: Any, output: Path, duration: float | None, stop: threading.Event, quiet: bool, tty: bool) -> Any:
+def _run_until_done(
+    worker: Any, output: Path, duration: float | None, stop: threading.Event, quiet: bool, tty: bool
+) -> Any:
     """Run a recorder or live converter until ``duration``, Ctrl-C or its error, showing its progress line
     (in place on a terminal, every 5 s otherwise); returns its final stats."""
     t0 = last_line = time.monotonic()
@@ -153,7 +191,9 @@ def _record_as(to, output, exprs, duration, quiet, scene, cfg, join: Joining, st
         stats = _run_until_done(conv, output, duration, stop, quiet, tty)
     print(f"recorded {stats.line()} -> {output} ({to})", file=sys.stderr, flush=True)
     if stats.written == 0:
-        raise NothingThere(f"nothing was recorded on {', '.join(exprs)} (unknown world or no publisher?); {output} is empty")
+        raise NothingThere(
+            f"nothing was recorded on {', '.join(exprs)} (unknown world or no publisher?); {output} is empty"
+        )
 
 
 # --------------------------------------------------------------------------- info
@@ -169,11 +209,24 @@ def _size(n: float) -> str:
 
 @join_flags()
 def info(
-    target: Annotated[str, typer.Argument(help="A recording (FILE.mcap) or a live key (robot/arm1/joints, rf/demo/map/map).", autocompletion=complete_keys_or_recordings)],
-    as_json: Annotated[bool, typer.Option("--json", help=(
-        'One JSON document instead of tables. A live key: {"key", "latched", "subscribers", "subscribed_by", "declarations_visible", '
-        '"services": [{key, request, reply, servers}], "keys": [{key, type, publishers, messages, rate_hz, bytes_per_s, last_bytes, latched}], '
-        '"types": {TYPE: [field names]}}; a recording: its summary (path, complete, duration_s, messages, channels, ...).'))] = False,
+    target: Annotated[
+        str,
+        typer.Argument(
+            help="A recording (FILE.mcap) or a live key (robot/arm1/joints, rf/demo/map/map).",
+            autocompletion=complete_keys_or_recordings,
+        ),
+    ],
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help=(
+                'One JSON document instead of tables. A live key: {"key", "latched", "subscribers", "subscribed_by", "declarations_visible", '
+                '"services": [{key, request, reply, servers}], "keys": [{key, type, publishers, messages, rate_hz, bytes_per_s, last_bytes, latched}], '
+                '"types": {TYPE: [field names]}}; a recording: its summary (path, complete, duration_s, messages, channels, ...).'
+            ),
+        ),
+    ] = False,
     duration: Annotated[float, typer.Option(help="Live key: seconds to watch it.")] = 2.0,
     join: Joining = Joining(),
 ) -> None:
@@ -204,7 +257,14 @@ def _recording_info(file: Path, as_json: bool) -> None:
             from rich.console import Console
             from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
 
-            with Progress(TextColumn("reading"), BarColumn(), DownloadColumn(), TimeRemainingColumn(), console=Console(stderr=True), transient=True) as bar:
+            with Progress(
+                TextColumn("reading"),
+                BarColumn(),
+                DownloadColumn(),
+                TimeRemainingColumn(),
+                console=Console(stderr=True),
+                transient=True,
+            ) as bar:
                 task = bar.add_task("info", total=file.stat().st_size)
                 inf = read_info(file, progress=lambda done, total: bar.update(task, completed=done, total=total))
         else:
@@ -228,9 +288,15 @@ def _recording_info(file: Path, as_json: bool) -> None:
     con.print(f"worlds: {', '.join(inf.worlds) or '-'}   schemas: {', '.join(inf.schemas) or '-'}")
     if inf.metadata:
         con.print("recorded by " + ", ".join(f"{k}={v}" for k, v in sorted(inf.metadata.items()) if v))
-    print_table(f"{len(inf.channels)} channel(s)", ("key", "schema", "messages", "rate Hz", "bytes", "avg B"),
-                [(c.key, c.schema, str(c.messages), f"{c.rate_hz:.1f}", _size(c.bytes), f"{c.bytes / c.messages:.0f}") for c in inf.channels],
-                numeric=("messages", "rate Hz", "bytes", "avg B"))
+    print_table(
+        f"{len(inf.channels)} channel(s)",
+        ("key", "schema", "messages", "rate Hz", "bytes", "avg B"),
+        [
+            (c.key, c.schema, str(c.messages), f"{c.rate_hz:.1f}", _size(c.bytes), f"{c.bytes / c.messages:.0f}")
+            for c in inf.channels
+        ],
+        numeric=("messages", "rate Hz", "bytes", "avg B"),
+    )
 
 
 # --------------------------------------------------------------------------- replay
@@ -238,7 +304,9 @@ def _recording_info(file: Path, as_json: bool) -> None:
 
 @join_flags()
 def replay(
-    file: Annotated[Path, typer.Argument(help="An MCAP recording (unfinished ones replay up to their last complete chunk).")],
+    file: Annotated[
+        Path, typer.Argument(help="An MCAP recording (unfinished ones replay up to their last complete chunk).")
+    ],
     speed: Annotated[float, typer.Option(help="Time scale: 2 plays twice as fast, 0.5 at half speed.")] = 1.0,
     loop: Annotated[bool, typer.Option("--loop", help="Start again at the end, until Ctrl-C.")] = False,
     start: Annotated[Optional[float], typer.Option(help="Begin S seconds into the recording.")] = None,
@@ -247,7 +315,9 @@ def replay(
         Optional[list[str]],
         typer.Option("--keys", "-k", help="Only keys matching this expression, full or world-relative (repeatable)."),
     ] = None,
-    remap_world: Annotated[Optional[str], typer.Option("--remap-world", help="Publish into this world instead of the recorded one.")] = None,
+    remap_world: Annotated[
+        Optional[str], typer.Option("--remap-world", help="Publish into this world instead of the recorded one.")
+    ] = None,
     wait: Annotated[float, typer.Option(help="Wait up to S seconds for a subscriber before starting.")] = 2.0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
     join: Joining = Joining(),
@@ -270,7 +340,9 @@ def replay(
             full = e if e.startswith(keys.PREFIX + "/") else f"{keys.PREFIX}/{scope}/{e.lstrip('/')}"
             exprs.append(_check_expr(e, full))
     try:
-        plan = plan_replay(file, speed=speed, start=start, end=end, keys=exprs, world=join.world, remap_world=remap_world)
+        plan = plan_replay(
+            file, speed=speed, start=start, end=end, keys=exprs, world=join.world, remap_world=remap_world
+        )
     except RecordingError as exc:
         raise UserError(str(exc)) from None
     target_world = remap_world or join.world or (plan.worlds[0] if plan.worlds else None)
@@ -303,10 +375,21 @@ def _run_with_progress(rp, total: int, loop: bool, stop, quiet: bool):
         rp.close()  # ends it when stopped (Ctrl-C), else only undeclares
         return rp.stats
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     with Progress(
-        TextColumn("replay"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
+        TextColumn("replay"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
         console=Console(stderr=True),
     ) as bar:
         task = bar.add_task("replay", total=None if loop else total)

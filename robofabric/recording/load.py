@@ -48,7 +48,13 @@ def _joints(source: str) -> Callable[[int, float], bytes]:
 def _pose(source: str) -> Callable[[int, float], bytes]:
     def make(seq: int, t: float) -> bytes:
         c, s = math.cos(t / 2), math.sin(t / 2)
-        return encode(Pose(np.array([math.cos(t), math.sin(t), 0.0]), np.array([c, 0.0, 0.0, s]), header=Header(t, time.time_ns(), seq, source)))
+        return encode(
+            Pose(
+                np.array([math.cos(t), math.sin(t), 0.0]),
+                np.array([c, 0.0, 0.0, s]),
+                header=Header(t, time.time_ns(), seq, source),
+            )
+        )
 
     return make
 
@@ -59,7 +65,15 @@ def _scan(source: str) -> Callable[[int, float], bytes]:
 
     def make(seq: int, t: float) -> bytes:
         r = base + 0.05 * math.sin(t)
-        return encode(Scan.from_ranges(r, angle_min=-math.pi, angle_increment=2 * math.pi / 240, range_max=12.0, header=Header(t, time.time_ns(), seq, source)))
+        return encode(
+            Scan.from_ranges(
+                r,
+                angle_min=-math.pi,
+                angle_increment=2 * math.pi / 240,
+                range_max=12.0,
+                header=Header(t, time.time_ns(), seq, source),
+            )
+        )
 
     return make
 
@@ -70,7 +84,13 @@ def _cycled(make: Callable[[int, float], bytes], n: int) -> Callable[[int, float
 
 
 def robot_streams(
-    world: str, robots: int, *, scale: float = 1.0, rates: dict[str, float] | None = None, prefix: str = "r", precompute: int = 0
+    world: str,
+    robots: int,
+    *,
+    scale: float = 1.0,
+    rates: dict[str, float] | None = None,
+    prefix: str = "r",
+    precompute: int = 0,
 ) -> list[LoadStream]:
     """``robots`` robots x (joints, pose, scan) at ``rates`` (default rates) times ``scale``.
 
@@ -84,7 +104,13 @@ def robot_streams(
         rid = f"{prefix}{i}"
         for stream, hz in rates.items():
             make = makers[stream](rid)
-            out.append(LoadStream(keys.robot_stream(world, rid, stream), hz * scale, _cycled(make, precompute) if precompute > 0 else make))
+            out.append(
+                LoadStream(
+                    keys.robot_stream(world, rid, stream),
+                    hz * scale,
+                    _cycled(make, precompute) if precompute > 0 else make,
+                )
+            )
     return out
 
 

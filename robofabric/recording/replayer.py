@@ -33,7 +33,9 @@ from robofabric.stats import percentiles
 __all__ = ["Replayer", "ReplayPlan", "ReplayStats", "plan_replay", "due_time"]
 
 
-def due_time(log_time_ns: int, base_ns: int, speed: float, t0: float, loop_index: int = 0, loop_len: float = 0.0) -> float:
+def due_time(
+    log_time_ns: int, base_ns: int, speed: float, t0: float, loop_index: int = 0, loop_len: float = 0.0
+) -> float:
     """When (on the replayer's clock) a message recorded at ``log_time_ns`` must go out."""
     return t0 + loop_index * loop_len + (log_time_ns - base_ns) / 1e9 / speed
 
@@ -105,7 +107,10 @@ def plan_replay(
     chans = [
         c
         for c in info.channels
-        if c.schema != LIVELINESS_SCHEMA and match(c.key) and (world is None or world_of(c.key) == world) and _valid(c.key)
+        if c.schema != LIVELINESS_SCHEMA
+        and match(c.key)
+        and (world is None or world_of(c.key) == world)
+        and _valid(c.key)
     ]
     if not chans:
         what = ", ".join(exprs) if exprs else "any key"

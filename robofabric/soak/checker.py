@@ -47,7 +47,18 @@ from typing import Callable, Iterable, Sequence
 from fabric.interfaces import EventKind
 from robofabric.soak.history import Cmd, Fault, Joints, Mark, OwnEvent, OwnRec, ProcExit, ProcSample, Record
 
-__all__ = ["Limits", "Violation", "INVARIANTS", "blind", "check", "fenced", "fmt", "memory_judged", "not_judged", "summary"]
+__all__ = [
+    "Limits",
+    "Violation",
+    "INVARIANTS",
+    "blind",
+    "check",
+    "fenced",
+    "fmt",
+    "memory_judged",
+    "not_judged",
+    "summary",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,7 +118,9 @@ def fmt(r: Record) -> str:
     if isinstance(r, ProcSample):
         return f"t={r.t:.3f} {r.name} pid {r.pid}: {r.rss_mb:.1f} MB, {r.threads} threads, {r.fds} fds, log {r.log_bytes} B"
     if isinstance(r, ProcExit):
-        return f"t={r.t:.3f} {r.name} pid {r.pid} exited {r.code}{' (expected)' if r.expected else ''} {r.tail[-200:]!r}"
+        return (
+            f"t={r.t:.3f} {r.name} pid {r.pid} exited {r.code}{' (expected)' if r.expected else ''} {r.tail[-200:]!r}"
+        )
     if isinstance(r, Mark):
         return f"t={r.t:.3f} mark {r.what} {r.detail}".rstrip()
     return f"t={r.t:.3f} {r!r}"
@@ -124,6 +137,7 @@ def _dist(a: Sequence[float], b: Sequence[float]) -> float:
 
 
 # ---------------------------------------------------------------------- the fenced view
+
 
 def fenced(history: Iterable[Record]) -> tuple[dict[str, list[OwnRec]], dict[str, list[Joints]]]:
     """The records and joints a fenced consumer acts on, per object and per robot, in time order."""
@@ -181,6 +195,7 @@ class _Timeline:
 
 # ---------------------------------------------------------------------- invariants
 
+
 def owners(h: Sequence[Record], lim: Limits) -> list[Violation]:
     recs, _ = fenced(h)
     out = []
@@ -196,7 +211,11 @@ def owners(h: Sequence[Record], lim: Limits) -> list[Violation]:
             if first is None or not first.owner:
                 at_epoch[r.epoch] = r
             elif r.owner and r.owner != first.owner:
-                out.append(Violation("owners", f"{obj} has two owners at epoch {r.epoch}: {first.owner} and {r.owner}", (first, r)))
+                out.append(
+                    Violation(
+                        "owners", f"{obj} has two owners at epoch {r.epoch}: {first.owner} and {r.owner}", (first, r)
+                    )
+                )
     return out
 
 
@@ -227,8 +246,14 @@ def applied(h: Sequence[Record], lim: Limits) -> list[Violation]:
             if _dist(j.q, c.q) < lim.poison_reach:
                 who = f"owner {rec.owner or 'nobody'} epoch {rec.epoch}" if rec else "no record yet"
                 ex = tuple(x for x in (rec, c, before, j) if x is not None)
-                out.append(Violation("applied", f"{c.robot} reached the target of {c.user}'s command at epoch {c.epoch} "
-                                                f"while the record said {who}: the sim applied it", ex))
+                out.append(
+                    Violation(
+                        "applied",
+                        f"{c.robot} reached the target of {c.user}'s command at epoch {c.epoch} "
+                        f"while the record said {who}: the sim applied it",
+                        ex,
+                    )
+                )
                 break
     return out
 
@@ -248,7 +273,9 @@ def reset(h: Sequence[Record], lim: Limits) -> list[Violation]:
             d = _dist(a.q, b.q)
             if d > allowed:
                 how = "between two samples of one sim" if same else f"across the change from {a.source} to {b.source}"
-                out.append(Violation("reset", f"{robot}'s joints jumped {d:.3f} rad {how} (at most {allowed:.3f})", (a, b)))
+                out.append(
+                    Violation("reset", f"{robot}'s joints jumped {d:.3f} rad {how} (at most {allowed:.3f})", (a, b))
+                )
     return out
 
 
@@ -276,8 +303,12 @@ def not_judged(h: Sequence[Record], lim: Limits = Limits()) -> int:
     ``queue`` do not judge them)."""
     recs, _ = fenced(h)
     windows = blind(h, lim)
-    return sum(1 for rs in recs.values() for prev, cur in zip(rs, rs[1:])
-               if cur.owner != prev.owner and _across(prev, cur, windows))
+    return sum(
+        1
+        for rs in recs.values()
+        for prev, cur in zip(rs, rs[1:])
+        if cur.owner != prev.owner and _across(prev, cur, windows)
+    )
 
 
 def _explained(prev: OwnRec, cur: OwnRec, events: list[OwnEvent], lim: Limits) -> bool:
@@ -303,10 +334,20 @@ def handover(h: Sequence[Record], lim: Limits) -> list[Violation]:
     out = []
     for obj, rs in recs.items():
         for prev, cur in zip(rs, rs[1:]):
-            if prev.owner and cur.owner != prev.owner and not _explained(prev, cur, events, lim) and not _across(prev, cur, windows):
-                out.append(Violation("handover", f"{obj} left {prev.owner} for {cur.owner or 'nobody'} while "
-                                                 f"{prev.state}, and the authority said no release, expiry or take-over",
-                                     (prev, cur)))
+            if (
+                prev.owner
+                and cur.owner != prev.owner
+                and not _explained(prev, cur, events, lim)
+                and not _across(prev, cur, windows)
+            ):
+                out.append(
+                    Violation(
+                        "handover",
+                        f"{obj} left {prev.owner} for {cur.owner or 'nobody'} while "
+                        f"{prev.state}, and the authority said no release, expiry or take-over",
+                        (prev, cur),
+                    )
+                )
     return out
 
 
@@ -332,13 +373,26 @@ def queue(h: Sequence[Record], lim: Limits) -> list[Violation]:
         for prev, cur in zip(rs, rs[1:]):
             both = [u for u in prev.queue if u in cur.queue]
             if both != [u for u in cur.queue if u in prev.queue]:
-                out.append(Violation("queue", f"{obj}'s queue changed order: {list(prev.queue)} then {list(cur.queue)}", (prev, cur)))
-            elif cur.owner != prev.owner and cur.owner in prev.queue and not _across(prev, cur, windows) and (
-                    prev.state != "still" or not prev.owner or _passed_on(prev, cur, events, lim)):
+                out.append(
+                    Violation(
+                        "queue", f"{obj}'s queue changed order: {list(prev.queue)} then {list(cur.queue)}", (prev, cur)
+                    )
+                )
+            elif (
+                cur.owner != prev.owner
+                and cur.owner in prev.queue
+                and not _across(prev, cur, windows)
+                and (prev.state != "still" or not prev.owner or _passed_on(prev, cur, events, lim))
+            ):
                 ahead = [u for u in prev.queue[: prev.queue.index(cur.owner)] if u in cur.queue]
                 if ahead:
-                    out.append(Violation("queue", f"{obj} went to {cur.owner} ahead of {', '.join(ahead)}, who still wait",
-                                         (prev, cur)))
+                    out.append(
+                        Violation(
+                            "queue",
+                            f"{obj} went to {cur.owner} ahead of {', '.join(ahead)}, who still wait",
+                            (prev, cur),
+                        )
+                    )
     return out
 
 
@@ -355,11 +409,20 @@ def unowned_motion(h: Sequence[Record], lim: Limits) -> list[Violation]:
             if _dist(a.q, b.q) < lim.moving:
                 continue
             since = tl.unowned_since(robot, b.t)  # nobody owned it from ``since`` through the whole step
-            if since is not None and a.t - since > lim.settle_s and not _grant_heard_late(tl, cmds[robot], robot, b.t, lim):
+            if (
+                since is not None
+                and a.t - since > lim.settle_s
+                and not _grant_heard_late(tl, cmds[robot], robot, b.t, lim)
+            ):
                 rec = tl.at(robot, b.t)
-                out.append(Violation("unowned_motion", f"{robot} moved {_dist(a.q, b.q):.3f} rad with no owner "
-                                                       f"({a.t - since:.1f} s after its owner went)",
-                                     tuple(x for x in (rec, a, b) if x is not None)))
+                out.append(
+                    Violation(
+                        "unowned_motion",
+                        f"{robot} moved {_dist(a.q, b.q):.3f} rad with no owner "
+                        f"({a.t - since:.1f} s after its owner went)",
+                        tuple(x for x in (rec, a, b) if x is not None),
+                    )
+                )
                 break  # one per robot tells it
     return out
 
@@ -411,8 +474,12 @@ def memory_judged(h: Sequence[Record], lim: Limits = Limits()) -> list[str]:
         if name not in best or win[-1].t - win[0].t > best[name][-1].t - best[name][0].t:
             best[name] = win
     names = sorted({r.name for r in h if isinstance(r, ProcSample)})
-    return [f"{n} {_slope_per_h([(s.t, s.rss_mb) for s in best[n]]):+.1f} MB/h over {(best[n][-1].t - best[n][0].t) / 60:.0f} min"
-            if n in best else f"{n} not judged (no incarnation lived past its warm-up long enough)" for n in names]
+    return [
+        f"{n} {_slope_per_h([(s.t, s.rss_mb) for s in best[n]]):+.1f} MB/h over {(best[n][-1].t - best[n][0].t) / 60:.0f} min"
+        if n in best
+        else f"{n} not judged (no incarnation lived past its warm-up long enough)"
+        for n in names
+    ]
 
 
 def resources(h: Sequence[Record], lim: Limits) -> list[Violation]:
@@ -421,29 +488,53 @@ def resources(h: Sequence[Record], lim: Limits) -> list[Violation]:
         hours = (win[-1].t - win[0].t) / 3600.0
         slope = _slope_per_h([(s.t, s.rss_mb) for s in win])
         if slope > lim.mem_mb_per_h:
-            out.append(Violation("resources", f"{name}'s memory grew {slope:.1f} MB/h after warm-up (at most "
-                                              f"{lim.mem_mb_per_h:g})", (win[0], max(win, key=lambda s: s.rss_mb), win[-1])))
+            out.append(
+                Violation(
+                    "resources",
+                    f"{name}'s memory grew {slope:.1f} MB/h after warm-up (at most {lim.mem_mb_per_h:g})",
+                    (win[0], max(win, key=lambda s: s.rss_mb), win[-1]),
+                )
+            )
         half = len(win) // 2
         for what, slack in (("threads", lim.thread_slack), ("fds", lim.fd_slack)):
             first = max(win[:half], key=lambda s: getattr(s, what))
             last = max(win[half:], key=lambda s: getattr(s, what))
             if getattr(last, what) > getattr(first, what) + slack:
-                out.append(Violation("resources", f"{name}'s {what} rose from {getattr(first, what)} to {getattr(last, what)} "
-                                                  f"(at most {slack} more)", (first, last)))
+                out.append(
+                    Violation(
+                        "resources",
+                        f"{name}'s {what} rose from {getattr(first, what)} to {getattr(last, what)} "
+                        f"(at most {slack} more)",
+                        (first, last),
+                    )
+                )
         grew = (win[-1].log_bytes - win[0].log_bytes) / 1e6 / hours
         if grew > lim.log_mb_per_h:
-            out.append(Violation("resources", f"{name}'s log grew {grew:.1f} MB/h (at most {lim.log_mb_per_h:g})", (win[0], win[-1])))
+            out.append(
+                Violation(
+                    "resources", f"{name}'s log grew {grew:.1f} MB/h (at most {lim.log_mb_per_h:g})", (win[0], win[-1])
+                )
+            )
     return out
 
 
 def exits(h: Sequence[Record], lim: Limits) -> list[Violation]:
-    return [Violation("exits", f"{r.name} (pid {r.pid}) ended with {r.code} and nobody ended it", (r,))
-            for r in h if isinstance(r, ProcExit) and not r.expected]
+    return [
+        Violation("exits", f"{r.name} (pid {r.pid}) ended with {r.code} and nobody ended it", (r,))
+        for r in h
+        if isinstance(r, ProcExit) and not r.expected
+    ]
 
 
 INVARIANTS: dict[str, Callable[[Sequence[Record], Limits], list[Violation]]] = {
-    "owners": owners, "applied": applied, "reset": reset, "handover": handover, "queue": queue,
-    "unowned_motion": unowned_motion, "resources": resources, "exits": exits,
+    "owners": owners,
+    "applied": applied,
+    "reset": reset,
+    "handover": handover,
+    "queue": queue,
+    "unowned_motion": unowned_motion,
+    "resources": resources,
+    "exits": exits,
 }
 
 
@@ -463,10 +554,15 @@ def summary(history: Sequence[Record], violations: Sequence[Violation], limits: 
     windows = blind(history, limits)
     shut = sum(min(b, history[-1].t if history else b) - a for a, b in windows)
     missed = not_judged(history, limits)
-    lines = [f"observer blind: {len(windows)} router restarts, {shut:.1f} s in all; not judged: {missed}"
-             + (" (owner changes whose records the observer missed there and did not catch up on)" if missed else ""),
-             "memory: " + ("; ".join(memory_judged(history, limits)) or "no samples"),
-             f"faults: {sum(kinds.values())}",
-             f"fault kinds: {len(kinds)} ({', '.join(f'{k} {n}' for k, n in sorted(kinds.items()))})" if kinds else "fault kinds: 0",
-             f"violations: {len(violations)}" + (f" ({', '.join(f'{k} {n}' for k, n in sorted(by_inv.items()))})" if by_inv else "")]
+    lines = [
+        f"observer blind: {len(windows)} router restarts, {shut:.1f} s in all; not judged: {missed}"
+        + (" (owner changes whose records the observer missed there and did not catch up on)" if missed else ""),
+        "memory: " + ("; ".join(memory_judged(history, limits)) or "no samples"),
+        f"faults: {sum(kinds.values())}",
+        f"fault kinds: {len(kinds)} ({', '.join(f'{k} {n}' for k, n in sorted(kinds.items()))})"
+        if kinds
+        else "fault kinds: 0",
+        f"violations: {len(violations)}"
+        + (f" ({', '.join(f'{k} {n}' for k, n in sorted(by_inv.items()))})" if by_inv else ""),
+    ]
     return lines

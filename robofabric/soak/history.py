@@ -20,8 +20,21 @@ from pathlib import Path
 from typing import IO, Iterable, Union
 
 __all__ = [
-    "OwnRec", "OwnEvent", "Cmd", "Reject", "Joints", "Fault", "ProcSample", "ProcExit", "Mark", "Record",
-    "to_line", "from_line", "read", "Writer", "KINDS",
+    "OwnRec",
+    "OwnEvent",
+    "Cmd",
+    "Reject",
+    "Joints",
+    "Fault",
+    "ProcSample",
+    "ProcExit",
+    "Mark",
+    "Record",
+    "to_line",
+    "from_line",
+    "read",
+    "Writer",
+    "KINDS",
 ]
 
 
@@ -135,8 +148,15 @@ class Mark:
 Record = Union[OwnRec, OwnEvent, Cmd, Reject, Joints, Fault, ProcSample, ProcExit, Mark]
 
 KINDS: dict[str, type] = {
-    "own": OwnRec, "ev": OwnEvent, "cmd": Cmd, "rej": Reject, "joints": Joints, "fault": Fault,
-    "proc": ProcSample, "exit": ProcExit, "mark": Mark,
+    "own": OwnRec,
+    "ev": OwnEvent,
+    "cmd": Cmd,
+    "rej": Reject,
+    "joints": Joints,
+    "fault": Fault,
+    "proc": ProcSample,
+    "exit": ProcExit,
+    "mark": Mark,
 }
 _NAMES = {cls: name for name, cls in KINDS.items()}
 _TUPLES = {"queue", "q"}

@@ -51,12 +51,16 @@ def parse_victims(text: str) -> dict[str, float]:
         except ValueError:
             w = -1.0
         if name not in VICTIMS or not 0.0 < w <= 100.0:
-            raise ValueError(f"--victims {text!r}: expected some of {', '.join(VICTIMS)}, each with an optional weight "
-                             "(sim=0.25), a number in (0, 100]")
+            raise ValueError(
+                f"--victims {text!r}: expected some of {', '.join(VICTIMS)}, each with an optional weight "
+                "(sim=0.25), a number in (0, 100]"
+            )
         out[name] = w
     if not out:
         raise ValueError(f"--victims {text!r}: expected some of {', '.join(VICTIMS)}")
     return out
+
+
 SKEWS = ("-30", "-5", "+3", "+20")
 """Wall-clock offsets a skewed student runs with (libfaketime's syntax)."""
 POISON = [-0.6, 0.0, 0.0, 0.0, -0.3, 0.0]
@@ -82,9 +86,18 @@ class Cluster(Protocol):
 class Nemesis:
     """Runs faults on a daemon thread until :meth:`stop`; each one is handed to ``log`` as a :class:`Fault`."""
 
-    def __init__(self, cluster: Cluster, log: Callable[[Fault], None], *, seed: int, kinds: Sequence[str] = KINDS,
-                 gap_s: tuple[float, float] = (2.0, 6.0), clock: Callable[[], float] = time.monotonic,
-                 victims: Sequence[str] = VICTIMS, weights: Mapping[str, float] | None = None) -> None:
+    def __init__(
+        self,
+        cluster: Cluster,
+        log: Callable[[Fault], None],
+        *,
+        seed: int,
+        kinds: Sequence[str] = KINDS,
+        gap_s: tuple[float, float] = (2.0, 6.0),
+        clock: Callable[[], float] = time.monotonic,
+        victims: Sequence[str] = VICTIMS,
+        weights: Mapping[str, float] | None = None,
+    ) -> None:
         bad = [k for k in kinds if k not in KINDS]
         if bad or not kinds:
             raise ValueError(f"unknown fault kinds {bad} (known: {', '.join(KINDS)})" if bad else "no fault kinds")
@@ -128,7 +141,9 @@ class Nemesis:
 
     def _victim(self, kinds: Sequence[str] = VICTIMS) -> str | None:
         """A process to fault, among the kinds asked for (sims only while a standby follows the primary)."""
-        pool = [(r, k) for k in ("student", "compute") if k in kinds and k in self.victims for r in self.cluster.roles(k)]
+        pool = [
+            (r, k) for k in ("student", "compute") if k in kinds and k in self.victims for r in self.cluster.roles(k)
+        ]
         if "sim" in kinds and "sim" in self.victims and self.cluster.sims_healthy():
             pool += [(r, "sim") for r in self.cluster.roles("sim")]
         if not pool:

@@ -83,8 +83,14 @@ class Observer:
     def _worth_writing(self, j: Joints) -> bool:
         with self._lock:
             last = self._last.get(j.robot)
-            if (last is not None and last.source == j.source and last.term == j.term and j.t - last.t < JOINT_EVERY_S
-                    and len(last.q) == len(j.q) and max((abs(a - b) for a, b in zip(last.q, j.q)), default=0.0) < JOINT_STEP):
+            if (
+                last is not None
+                and last.source == j.source
+                and last.term == j.term
+                and j.t - last.t < JOINT_EVERY_S
+                and len(last.q) == len(j.q)
+                and max((abs(a - b) for a, b in zip(last.q, j.q)), default=0.0) < JOINT_STEP
+            ):
                 return False
             self._last[j.robot] = j
             return True

@@ -30,8 +30,11 @@ def plot(doc: dict, out: Path | str) -> None:
         if pts:
             ax.plot([p[0] for p in pts], [p[1] for p in pts], label=name, linewidth=1.2)
     faults = sum(doc["faults"].values())
-    ax.set_title(f"robofabric bench soak --minutes {doc['minutes']:g}: {faults} faults of {len(doc['faults'])} kinds, "
-                 f"{len(doc['violations'])} violations", fontsize=10)
+    ax.set_title(
+        f"robofabric bench soak --minutes {doc['minutes']:g}: {faults} faults of {len(doc['faults'])} kinds, "
+        f"{len(doc['violations'])} violations",
+        fontsize=10,
+    )
     ax.set_xlabel("minute of the run")
     ax.set_ylabel("resident memory (MB)")
     ax.grid(True, alpha=0.3)

@@ -39,8 +39,13 @@ from robofabric.testing import RemoteRoles
 __all__ = ["SoakConfig", "SoakResult", "Soak", "run_soak"]
 
 SIMS = ("sim-a", "sim-b")
-READY = {"router": "listening", "sim-a": "Ctrl-C to stop", "sim-b": "Ctrl-C to stop", "compute": "Ctrl-C to stop",
-         "student": "joined"}
+READY = {
+    "router": "listening",
+    "sim-a": "Ctrl-C to stop",
+    "sim-b": "Ctrl-C to stop",
+    "compute": "Ctrl-C to stop",
+    "student": "joined",
+}
 """What a restarted peer prints once it is up: a fault is over only then (a router restarted while a peer was still
 starting would fail its first connection, which is no fault of the peer's)."""
 HOG = "import time\ne = time.monotonic() + {secs}\nwhile time.monotonic() < e:\n    pass\n"
@@ -75,7 +80,9 @@ def _wait(pred: Any, timeout: float, what: str, seen: Any = None) -> None:
     deadline = time.monotonic() + timeout
     while not pred():
         if time.monotonic() > deadline:
-            raise TimeoutError(f"soak: {what} did not happen within {timeout:.0f} s" + (f"; seen:\n{seen()}" if seen else ""))
+            raise TimeoutError(
+                f"soak: {what} did not happen within {timeout:.0f} s" + (f"; seen:\n{seen()}" if seen else "")
+            )
         time.sleep(0.2)
 
 
@@ -123,17 +130,47 @@ class Soak:
         elif role in SIMS:
             robots = [x for i in range(self.cfg.students) for x in ("--robot", f"meca500:arm{i}")]
             plant = ["--plant", self.cfg.plant] if self.cfg.plant else []  # a test-only defect (fabric/plant.py)
-            p = host.start(["sim", "--scene", "warehouse", "--no-scene-robots", *robots, "--world", world, "--connect", ep,
-                            "--id", role, *(["--standby"] if standby else []), *plant], name=role)
+            p = host.start(
+                [
+                    "sim",
+                    "--scene",
+                    "warehouse",
+                    "--no-scene-robots",
+                    *robots,
+                    "--world",
+                    world,
+                    "--connect",
+                    ep,
+                    "--id",
+                    role,
+                    *(["--standby"] if standby else []),
+                    *plant,
+                ],
+                name=role,
+            )
         elif role == "compute":
             p = host.start(["compute", "--world", world, "--connect", ep, "--id", "compute"], name="compute")
         elif role == "recorder":
-            p = host.start(["record", "-o", str(self.cfg.log_dir / "soak.mcap"), "-q", "--world", world, "--connect", ep],
-                           name="recorder")
+            p = host.start(
+                ["record", "-o", str(self.cfg.log_dir / "soak.mcap"), "-q", "--world", world, "--connect", ep],
+                name="recorder",
+            )
         else:
             index = int(role[1:])
-            p = host.spawn([sys.executable, "-m", "robofabric.soak.student", world, ep, str(index), str(self.cfg.students),
-                            str(self.cfg.seed)], name=role, clock_offset=clock_offset)
+            p = host.spawn(
+                [
+                    sys.executable,
+                    "-m",
+                    "robofabric.soak.student",
+                    world,
+                    ep,
+                    str(index),
+                    str(self.cfg.students),
+                    str(self.cfg.seed),
+                ],
+                name=role,
+                clock_offset=clock_offset,
+            )
         with self._lock:
             self.procs[role] = p
         return p
@@ -151,14 +188,26 @@ class Soak:
         self.procs["observer"] = self.observer.proc
         self.sim_watch = RemoteRoles(self.observer, self.world, self.hosts["router"].endpoint())
         primary = self._start("sim-a", standby=False)
-        _wait(lambda: _sim_roles(self.sim_watch)["sim-a"] == "primary", 240, "the primary sim", lambda: primary.output()[-1500:])
+        _wait(
+            lambda: _sim_roles(self.sim_watch)["sim-a"] == "primary",
+            240,
+            "the primary sim",
+            lambda: primary.output()[-1500:],
+        )
         standby = self._start("sim-b")
-        _wait(lambda: _sim_roles(self.sim_watch)["sim-b"] == "standby", 240, "the standby following", lambda: standby.output()[-1500:])
+        _wait(
+            lambda: _sim_roles(self.sim_watch)["sim-b"] == "standby",
+            240,
+            "the standby following",
+            lambda: standby.output()[-1500:],
+        )
         self._start("compute")
         self._start("recorder")
-        self.observer.call("from robofabric.soak.observer import Observer\n"
-                           f"ob = Observer({self.world!r}, {self.hosts['router'].endpoint()!r}, {str(self.wire_path)!r}); None",
-                           timeout=120)
+        self.observer.call(
+            "from robofabric.soak.observer import Observer\n"
+            f"ob = Observer({self.world!r}, {self.hosts['router'].endpoint()!r}, {str(self.wire_path)!r}); None",
+            timeout=120,
+        )
         for i in range(self.cfg.students):
             role = f"s{i:02d}"
             self.hosts[role] = self.lab.add_host(role)
@@ -280,16 +329,29 @@ class Soak:
     def run(self) -> SoakResult:
         cfg = self.cfg
         started = time.monotonic()
-        self.writer.write(Mark(started, "start", f"world {self.world}, {cfg.students} students, seed {cfg.seed}"
-                                                 + (f", plant {cfg.plant}" if cfg.plant else "")))
+        self.writer.write(
+            Mark(
+                started,
+                "start",
+                f"world {self.world}, {cfg.students} students, seed {cfg.seed}"
+                + (f", plant {cfg.plant}" if cfg.plant else ""),
+            )
+        )
         self.build()
         monitor = threading.Thread(target=self._monitor, name="soak-monitor", daemon=True)
         monitor.start()
         t0 = time.monotonic()
         end = t0 + cfg.minutes * 60.0
         warm = t0 + min(600.0, max(30.0, 0.15 * cfg.minutes * 60.0))
-        nemesis = self.nemesis = Nemesis(self, self.writer.write, seed=cfg.seed, kinds=cfg.kinds, gap_s=cfg.gap_s,
-                                         victims=cfg.victims, weights=dict(cfg.weights)).start()
+        nemesis = self.nemesis = Nemesis(
+            self,
+            self.writer.write,
+            seed=cfg.seed,
+            kinds=cfg.kinds,
+            gap_s=cfg.gap_s,
+            victims=cfg.victims,
+            weights=dict(cfg.weights),
+        ).start()
         self.writer.write(Mark(t0, "class", "every peer started; the nemesis begins"))
         warmed = False
         while time.monotonic() < end:
@@ -303,8 +365,15 @@ class Soak:
         monitor.join(timeout=30)
         history, bad = read([self.wire_path, cfg.log_dir / "soak.jsonl"])
         violations = checker.check(history)
-        return SoakResult(tuple(history), tuple(violations), tuple(bad), tuple(nemesis.errors),
-                          tuple(checker.summary(history, violations)), started, {"restarts": self.restarts})
+        return SoakResult(
+            tuple(history),
+            tuple(violations),
+            tuple(bad),
+            tuple(nemesis.errors),
+            tuple(checker.summary(history, violations)),
+            started,
+            {"restarts": self.restarts},
+        )
 
     def close(self) -> None:
         """End every peer by pid (students first, so their leaving is not the world's), then the lab. The nemesis
@@ -386,4 +455,3 @@ def fault_counts(history: Sequence[Record]) -> dict[str, int]:
         if isinstance(r, Fault):
             counts[r.kind] = counts.get(r.kind, 0) + 1
     return dict(sorted(counts.items()))
-

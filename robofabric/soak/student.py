@@ -54,7 +54,9 @@ def main(world: str, endpoint: str, index: int, arms: int, seed: int) -> None:
                 print(f"student {index}: joined", flush=True)
             arm = w.robot(mine)
             _own(arm, 30.0)
-            arm.move_joints(np.array(a if counts["moves"] % 2 else b), wait=True, tol=5e-3, timeout=20.0, speed_scale=SPEED)
+            arm.move_joints(
+                np.array(a if counts["moves"] % 2 else b), wait=True, tol=5e-3, timeout=20.0, speed_scale=SPEED
+            )
             counts["moves"] += 1
             roll = rng.random()
             if roll < 0.12:

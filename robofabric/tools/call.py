@@ -17,10 +17,28 @@ from robofabric.tools.message_json import message_from_json
 
 @join_flags()
 def call(
-    key: Annotated[str, typer.Argument(help="Service key, full or world-relative: srv/world, srv/ik/arm1, srv/map/map/PEER.", autocompletion=complete_keys)],
-    msg_type: Annotated[Optional[str], typer.Option("--type", "-t", help="Request type, e.g. IKRequest, FKRequest, MapRequest, PlanRequest (none: an empty query).", autocompletion=complete_types)] = None,
-    data: Annotated[str, typer.Option("--data", "-d", help='Request fields as JSON, e.g. \'{"q": [0, 0, 0, 0, 0, 0]}\'.')] = "{}",
-    all_replies: Annotated[bool, typer.Option("--all", help="Ask every peer serving the key, not only the nearest.")] = False,
+    key: Annotated[
+        str,
+        typer.Argument(
+            help="Service key, full or world-relative: srv/world, srv/ik/arm1, srv/map/map/PEER.",
+            autocompletion=complete_keys,
+        ),
+    ],
+    msg_type: Annotated[
+        Optional[str],
+        typer.Option(
+            "--type",
+            "-t",
+            help="Request type, e.g. IKRequest, FKRequest, MapRequest, PlanRequest (none: an empty query).",
+            autocompletion=complete_types,
+        ),
+    ] = None,
+    data: Annotated[
+        str, typer.Option("--data", "-d", help="Request fields as JSON, e.g. '{\"q\": [0, 0, 0, 0, 0, 0]}'.")
+    ] = "{}",
+    all_replies: Annotated[
+        bool, typer.Option("--all", help="Ask every peer serving the key, not only the nearest.")
+    ] = False,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object per reply: {key, source, message}.")] = False,
     timeout: Annotated[float, typer.Option(help="Seconds to wait for replies.")] = 5.0,
     join: Joining = Joining(),
@@ -40,7 +58,9 @@ def call(
                 from fabric.worldview import describe
 
                 info = describe(fab, timeout=timeout)  # one world: every sim's part (--all: each part)
-                replies = [Reply(full, info, ",".join(sorted({r.sim for r in info.robots if r.sim})) or info.header.source)]
+                replies = [
+                    Reply(full, info, ",".join(sorted({r.sim for r in info.robots if r.sim})) or info.header.source)
+                ]
             else:
                 replies = fab.rpc.query(full, request, timeout=timeout, all_replies=all_replies)
         except ServiceError as exc:

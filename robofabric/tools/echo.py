@@ -18,19 +18,32 @@ from robofabric.tools.common import open_world, resolve_key
 
 @join_flags()
 def echo(
-    key: Annotated[str, typer.Argument(help="Key expression, full (rf/demo/robot/arm1/joints) or world-relative (robot/*/pose).", autocompletion=complete_keys)],
+    key: Annotated[
+        str,
+        typer.Argument(
+            help="Key expression, full (rf/demo/robot/arm1/joints) or world-relative (robot/*/pose).",
+            autocompletion=complete_keys,
+        ),
+    ],
     count: Annotated[Optional[int], typer.Option("--count", "-n", help="Exit after N messages.")] = None,
     duration: Annotated[Optional[float], typer.Option(help="Exit after S seconds (exit 1 if nothing came).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object per line: {key, message}.")] = False,
-    timeout: Annotated[Optional[float], typer.Option(help="Exit 1 with 'nothing on KEY in S s' when no message came within S seconds.")] = None,
+    timeout: Annotated[
+        Optional[float], typer.Option(help="Exit 1 with 'nothing on KEY in S s' when no message came within S seconds.")
+    ] = None,
     latest: Annotated[
-        bool, typer.Option("--latest/--no-latest", help="First the latest value of latched keys (maps, paths, scene objects) set before echo started.")
+        bool,
+        typer.Option(
+            "--latest/--no-latest",
+            help="First the latest value of latched keys (maps, paths, scene objects) set before echo started.",
+        ),
     ] = True,
     join: Joining = Joining(),
 ) -> None:
     """Print decoded messages on a key; malformed payloads are reported on stderr and skipped."""
     from fabric.codec import DecodeError, decode, to_plain
     from fabric.session import shutdown_event
+
     if count is not None and count <= 0:
         raise UserError("--count must be positive")
     if timeout is not None and not timeout > 0:

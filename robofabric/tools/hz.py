@@ -19,15 +19,27 @@ from robofabric.tools.common import open_world, resolve_key
 
 @join_flags()
 def hz(
-    key: Annotated[str, typer.Argument(help="Key expression; each matching key is measured separately.", autocompletion=complete_keys)],
-    duration: Annotated[Optional[float], typer.Option(help="Measure for S seconds, then print the summary and exit.")] = None,
+    key: Annotated[
+        str,
+        typer.Argument(help="Key expression; each matching key is measured separately.", autocompletion=complete_keys),
+    ],
+    duration: Annotated[
+        Optional[float], typer.Option(help="Measure for S seconds, then print the summary and exit.")
+    ] = None,
     window: Annotated[int, typer.Option(help="Intervals kept per key for the running statistics.")] = 10_000,
-    as_json: Annotated[bool, typer.Option("--json", help='Print only the final summary, as one JSON document: {"key", "streams": {KEY: {count, rate_hz, jitter_ms, min_ms, max_ms, bytes, bytes_per_s}}}.')] = False,
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help='Print only the final summary, as one JSON document: {"key", "streams": {KEY: {count, rate_hz, jitter_ms, min_ms, max_ms, bytes, bytes_per_s}}}.',
+        ),
+    ] = False,
     join: Joining = Joining(),
 ) -> None:
     """Rate, jitter and bandwidth of the keys matching KEY (like ``ros2 topic hz`` and ``bw``)."""
     from fabric.session import shutdown_event
     from robofabric.stats import StreamStats
+
     stop = shutdown_event()
     stats: dict[str, StreamStats] = {}
     lock = threading.Lock()

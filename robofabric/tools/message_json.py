@@ -60,7 +60,9 @@ def _fields_words(cls) -> str:
     import dataclasses
 
     spec = getattr(cls, "SPEC", {})
-    return ", ".join(f"{f.name}: {_spec_words(spec.get(f.name))}" for f in dataclasses.fields(cls) if f.name != "header")
+    return ", ".join(
+        f"{f.name}: {_spec_words(spec.get(f.name))}" for f in dataclasses.fields(cls) if f.name != "header"
+    )
 
 
 def _checked_fields(cls, fields: dict) -> dict:

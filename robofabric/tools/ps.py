@@ -18,13 +18,29 @@ from robofabric.tools.common import open_world
 
 @join_flags()
 def ps(
-    peer: Annotated[Optional[str], typer.Argument(help="With -v: only this peer (its id).", autocompletion=complete_peers)] = None,
-    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="What each peer publishes, subscribes to and serves (like ros2 node info).")] = False,
-    as_json: Annotated[bool, typer.Option("--json", help=(
-        'One JSON document instead of a table: {"world", "peers": {KIND: [ID]}, "count", "bad_tokens"}; '
-        'with -v also "declarations_visible" and "info": {ID: {publishes, subscribes, serves}}.'))] = False,
+    peer: Annotated[
+        Optional[str], typer.Argument(help="With -v: only this peer (its id).", autocompletion=complete_peers)
+    ] = None,
+    verbose: Annotated[
+        bool,
+        typer.Option(
+            "--verbose", "-v", help="What each peer publishes, subscribes to and serves (like ros2 node info)."
+        ),
+    ] = False,
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help=(
+                'One JSON document instead of a table: {"world", "peers": {KIND: [ID]}, "count", "bad_tokens"}; '
+                'with -v also "declarations_visible" and "info": {ID: {publishes, subscribes, serves}}.'
+            ),
+        ),
+    ] = False,
     timeout: Annotated[float, typer.Option(help="Seconds to wait for liveliness replies.")] = 1.0,
-    duration: Annotated[float, typer.Option(help="With -v: seconds to watch the world's traffic for what each peer publishes.")] = 1.5,
+    duration: Annotated[
+        float, typer.Option(help="With -v: seconds to watch the world's traffic for what each peer publishes.")
+    ] = 1.5,
     join: Joining = Joining(),
 ) -> None:
     """List the live peers of a world, by kind, from their liveliness tokens; -v: what each publishes, subscribes, serves.

@@ -25,14 +25,41 @@ if TYPE_CHECKING:
 
 @join_flags()
 def pub(
-    key: Annotated[str, typer.Argument(help="Concrete key, full or world-relative (robot/base1/cmd/twist: with --user, that user's key .../by/USER).", autocompletion=complete_keys)],
-    msg_type: Annotated[str, typer.Option("--type", "-t", help="Message type, e.g. Twist, JointTarget, Pose, Stop.", autocompletion=complete_types)],
-    data: Annotated[str, typer.Option("--data", "-d", help='Fields as JSON, e.g. \'{"v": 0.3, "omega": 0.1}\'.')] = "{}",
-    user: Annotated[Optional[str], typer.Option(help="Wrap in a Command from this user (required for cmd/* keys unless the login names the user).")] = None,
-    epoch: Annotated[Optional[int], typer.Option(help="Ownership epoch stamped on the Command (default: the user's current one, read from own/ROBOT).")] = None,
+    key: Annotated[
+        str,
+        typer.Argument(
+            help="Concrete key, full or world-relative (robot/base1/cmd/twist: with --user, that user's key .../by/USER).",
+            autocompletion=complete_keys,
+        ),
+    ],
+    msg_type: Annotated[
+        str,
+        typer.Option(
+            "--type", "-t", help="Message type, e.g. Twist, JointTarget, Pose, Stop.", autocompletion=complete_types
+        ),
+    ],
+    data: Annotated[
+        str, typer.Option("--data", "-d", help='Fields as JSON, e.g. \'{"v": 0.3, "omega": 0.1}\'.')
+    ] = "{}",
+    user: Annotated[
+        Optional[str],
+        typer.Option(
+            help="Wrap in a Command from this user (required for cmd/* keys unless the login names the user)."
+        ),
+    ] = None,
+    epoch: Annotated[
+        Optional[int],
+        typer.Option(
+            help="Ownership epoch stamped on the Command (default: the user's current one, read from own/ROBOT)."
+        ),
+    ] = None,
     rate: Annotated[float, typer.Option(help="Publish at this rate in Hz (0: once).")] = 0.0,
-    count: Annotated[Optional[int], typer.Option("--count", "-n", help="Number of messages (default 1, or forever with --rate).")] = None,
-    wait: Annotated[float, typer.Option(help="Seconds to wait for the sim's answer to a command (0: do not wait).")] = 1.0,
+    count: Annotated[
+        Optional[int], typer.Option("--count", "-n", help="Number of messages (default 1, or forever with --rate).")
+    ] = None,
+    wait: Annotated[
+        float, typer.Option(help="Seconds to wait for the sim's answer to a command (0: do not wait).")
+    ] = 1.0,
     join: Joining = Joining(),
 ) -> None:
     """Publish a message built from JSON (like ``ros2 topic pub``); checked by the codec before it leaves.
@@ -139,8 +166,10 @@ def _parse_pub_key(full: str, user: str | None, msg_type: str) -> keys.ParsedKey
     except ValueError as exc:
         parts = full.split("/")
         if len(parts) == 6 and parts[2] == "robot" and parts[4] == "cmd" and not user:
-            raise UserError(f"{full!r} is a command key: a command needs its user (--user NAME, or a login that names it); "
-                            "the sim takes the sender from the key .../by/USER") from None
+            raise UserError(
+                f"{full!r} is a command key: a command needs its user (--user NAME, or a login that names it); "
+                "the sim takes the sender from the key .../by/USER"
+            ) from None
         raise UserError(f"{exc}; nothing sent") from None
     if parsed.category == "cmd" and user and parsed.user != user:
         raise UserError(f"{full!r} is {parsed.user}'s command key, not {user}'s") from None
@@ -166,7 +195,9 @@ def _check_robot(fab: Fabric, robot: str, *, timeout: float) -> None:
         return
     ids = sorted(r.id for r in info.robots)
     if robot not in ids:
-        raise NothingThere(f"refused: unknown_robot: no robot {robot!r} in world {fab.world!r} (robots: {', '.join(ids) or 'none'}); nothing sent")
+        raise NothingThere(
+            f"refused: unknown_robot: no robot {robot!r} in world {fab.world!r} (robots: {', '.join(ids) or 'none'}); nothing sent"
+        )
 
 
 def _current_epoch(fab: Fabric, robot: str, user: str) -> int:

@@ -16,11 +16,18 @@ def router(
     world: World = None,
     zenoh_config: ZenohConfig = None,
     peer_id: PeerId = None,
-    audit: Annotated[bool, typer.Option("--audit", help="Count what access control refuses (by login, message and key) and print a summary per interval; costs CPU with traffic.")] = False,
+    audit: Annotated[
+        bool,
+        typer.Option(
+            "--audit",
+            help="Count what access control refuses (by login, message and key) and print a summary per interval; costs CPU with traffic.",
+        ),
+    ] = False,
     audit_every: Annotated[float, typer.Option(help="Seconds between --audit summaries.")] = 10.0,
 ) -> None:
     """Run a zenoh router for the fabric (any standard zenohd works in its place)."""
     from fabric.session import Fabric, shutdown_event
+
     cfg = make_config(world, connect, listen, "embedded", zenoh_config)
     if not listen and not cfg.file_value("listen/endpoints"):
         cfg = replace(cfg, listen=("tcp/0.0.0.0:7447",))
@@ -37,7 +44,10 @@ def router(
     except Exception as exc:
         raise UserError(f"cannot start router on {', '.join(cfg.endpoints()[1])}: {exc}") from None
     with fab:
-        print(f"router {fab.peer_id} listening on {', '.join(cfg.endpoints()[1])} (world {cfg.world}); Ctrl-C to stop", flush=True)
+        print(
+            f"router {fab.peer_id} listening on {', '.join(cfg.endpoints()[1])} (world {cfg.world}); Ctrl-C to stop",
+            flush=True,
+        )
         while not stop.wait(0.5):
             pass
     if auditor is not None:

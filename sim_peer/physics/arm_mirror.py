@@ -35,12 +35,16 @@ class ArmShape:
         spec = mujoco.MjSpec.from_file(str(desc.mjcf_path))
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
-        self._geoms = [g for g in range(self.model.ngeom)
-                       if self.model.geom_group[g] == MIRROR_GROUP and int(self.model.geom_type[g]) in PRIMITIVES]
+        self._geoms = [
+            g
+            for g in range(self.model.ngeom)
+            if self.model.geom_group[g] == MIRROR_GROUP and int(self.model.geom_type[g]) in PRIMITIVES
+        ]
         if not self._geoms:
             raise ValueError(f"robot type {desc.name}: no primitive geom in the robots' group {MIRROR_GROUP} to mirror")
         self.shapes: tuple[Shape, ...] = tuple(
-            (int(self.model.geom_type[g]), tuple(float(x) for x in self.model.geom_size[g])) for g in self._geoms)
+            (int(self.model.geom_type[g]), tuple(float(x) for x in self.model.geom_size[g])) for g in self._geoms
+        )
         # the stream's joints (by the world description's names) -> this model's qpos addresses
         qadr = {}
         for j in range(self.model.njnt):
@@ -96,7 +100,9 @@ def arm_shape(info: RobotInfo) -> ArmShape:
         desc = _cache.get(info.type)
         if desc is None:
             try:
-                desc = robots_pkg.installed(info.type)  # a name another sim sent: never a path (nothing it names runs here)
+                desc = robots_pkg.installed(
+                    info.type
+                )  # a name another sim sent: never a path (nothing it names runs here)
             except robots_pkg.DescriptionError as exc:
                 raise ValueError(f"{info.id}: robot type {info.type!r} is not installed here: {exc}") from None
             _cache[info.type] = desc

@@ -88,8 +88,13 @@ def with_options(desc: RobotDescription, options: SensorOptions) -> RobotDescrip
     return desc
 
 
-def compile_model(scene: SceneDescription, placed: Sequence[SceneRobot], descriptions: Mapping[str, RobotDescription],
-                  *, mirrors: int = 0) -> mujoco.MjModel:
+def compile_model(
+    scene: SceneDescription,
+    placed: Sequence[SceneRobot],
+    descriptions: Mapping[str, RobotDescription],
+    *,
+    mirrors: int = 0,
+) -> mujoco.MjModel:
     """The scene's MJCF with every robot's MJCF attached under ``"{id}/"``, and ``mirrors`` parked mirror slots
     for robots other sims simulate (:mod:`sim_peer.physics.mirrors`), compiled."""
     spec = mujoco.MjSpec.from_file(str(scene.mjcf_path))

@@ -43,16 +43,26 @@ def add_slots(spec: mujoco.MjSpec, slots: int) -> None:
     for i in range(slots):
         body = spec.worldbody.add_body(name=f"{MIRROR_PREFIX}{i}", pos=[0.0, 0.0, PARKED_Z], mocap=True)
         body.add_geom(
-            name=f"{MIRROR_PREFIX}{i}", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.01, 0.01, 0.0],
-            contype=0, conaffinity=0, group=PARKED_GROUP, rgba=[0.55, 0.6, 0.7, 0.6],
+            name=f"{MIRROR_PREFIX}{i}",
+            type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+            size=[0.01, 0.01, 0.0],
+            contype=0,
+            conaffinity=0,
+            group=PARKED_GROUP,
+            rgba=[0.55, 0.6, 0.7, 0.6],
         )
 
 
 Shape = tuple[int, tuple[float, float, float]]
 """One slot's geom: its MuJoCo type (``mjtGeom``: a primitive, never a mesh) and its size."""
 
-PRIMITIVES = {int(mujoco.mjtGeom.mjGEOM_SPHERE), int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_CYLINDER),
-               int(mujoco.mjtGeom.mjGEOM_BOX), int(mujoco.mjtGeom.mjGEOM_ELLIPSOID)}
+PRIMITIVES = {
+    int(mujoco.mjtGeom.mjGEOM_SPHERE),
+    int(mujoco.mjtGeom.mjGEOM_CAPSULE),
+    int(mujoco.mjtGeom.mjGEOM_CYLINDER),
+    int(mujoco.mjtGeom.mjGEOM_BOX),
+    int(mujoco.mjtGeom.mjGEOM_ELLIPSOID),
+}
 
 
 def footprint(radius: float, height: float) -> Shape:
@@ -136,7 +146,9 @@ class Mirrors:
             return m  # as it is (an arm's every joint message): nothing to resize
         shapes = tuple((int(k), tuple(float(x) for x in size)) for k, size in shapes)
         if not shapes or any(k not in PRIMITIVES for k, _ in shapes):
-            raise ValueError(f"mirror of {robot}: one or more primitive geoms needed, got types {[k for k, _ in shapes]}")
+            raise ValueError(
+                f"mirror of {robot}: one or more primitive geoms needed, got types {[k for k, _ in shapes]}"
+            )
         if m is not None and len(m.slots) != len(shapes):
             self.hide(robot)
             m = None
@@ -144,7 +156,7 @@ class Mirrors:
             if len(self._free) < len(shapes):
                 self.refused += 1
                 return None
-            slots, self._free = tuple(self._free[:len(shapes)]), self._free[len(shapes):]
+            slots, self._free = tuple(self._free[: len(shapes)]), self._free[len(shapes) :]
             m = Mirror(robot, slots, (), source)
         for slot, shape, old in zip(m.slots, shapes, m.shapes or (None,) * len(shapes)):
             g = self._geom[slot]
@@ -165,7 +177,9 @@ class Mirrors:
         m = self._held.get(robot)
         if m is None:
             return False
-        return self.place_shapes(robot, [(np.asarray(position, dtype=np.float64) + [0.0, 0.0, m.height / 2.0], quaternion)])
+        return self.place_shapes(
+            robot, [(np.asarray(position, dtype=np.float64) + [0.0, 0.0, m.height / 2.0], quaternion)]
+        )
 
     def place_shapes(self, robot: str, poses: Sequence[tuple[Sequence[float], Sequence[float]]]) -> bool:
         """Put each of ``robot``'s slots at its pose (centre, quaternion), in slot order; False (nothing moved)
@@ -178,7 +192,11 @@ class Mirrors:
             q = np.asarray([quat for _, quat in poses], dtype=np.float64)
         except ValueError:  # ragged
             return False
-        if p.shape != (len(m.slots), 3) or q.shape != (len(m.slots), 4) or not (np.isfinite(p).all() and np.isfinite(q).all()):
+        if (
+            p.shape != (len(m.slots), 3)
+            or q.shape != (len(m.slots), 4)
+            or not (np.isfinite(p).all() and np.isfinite(q).all())
+        ):
             return False
         n = np.linalg.norm(q, axis=1)
         if (n < 1e-9).any():

@@ -31,7 +31,15 @@ def parse_speed(text: str | float | None) -> float | None:
 
 
 class Pacer:
-    def __init__(self, dt: float, speed: float | None = 1.0, *, clock: Clock | None = None, chunk: int = 50, max_lag: float = 0.25) -> None:
+    def __init__(
+        self,
+        dt: float,
+        speed: float | None = 1.0,
+        *,
+        clock: Clock | None = None,
+        chunk: int = 50,
+        max_lag: float = 0.25,
+    ) -> None:
         self.dt = dt
         self.speed = speed
         self.clock = clock or MonotonicClock()

@@ -53,7 +53,9 @@ def unplaced(r: SceneRobot) -> bool:
     return math.isnan(r.pose[0])
 
 
-def place(scene_mjcf: Path, robots: Sequence[SceneRobot], descriptions: Mapping[str, RobotDescription]) -> list[SceneRobot]:
+def place(
+    scene_mjcf: Path, robots: Sequence[SceneRobot], descriptions: Mapping[str, RobotDescription]
+) -> list[SceneRobot]:
     """``robots`` with a free spot for each one given without a pose (the others as they are)."""
     if not any(unplaced(r) for r in robots):
         return list(robots)
@@ -67,7 +69,9 @@ def place(scene_mjcf: Path, robots: Sequence[SceneRobot], descriptions: Mapping[
     taken = [(r.pose[0], r.pose[1], radius(r)) for r in robots if not unplaced(r)]
     mobile = [r for r in robots if not unplaced(r) and robot_kind(descriptions[r.id].kind).base]
     ox, oy = (mobile[0].pose[0], mobile[0].pose[1]) if mobile else (0.0, 0.0)
-    dirs = np.array([[math.cos(a), math.sin(a), 0.0] for a in np.linspace(0, 2 * math.pi, 24, endpoint=False)]).reshape(-1)
+    dirs = np.array([[math.cos(a), math.sin(a), 0.0] for a in np.linspace(0, 2 * math.pi, 24, endpoint=False)]).reshape(
+        -1
+    )
     gid, dist = np.zeros(24, np.int32), np.zeros(24)
     cells = spiral(400)
     out = []
@@ -82,7 +86,9 @@ def place(scene_mjcf: Path, robots: Sequence[SceneRobot], descriptions: Mapping[
                 continue
             free = True
             for h in PROBE_HEIGHTS:
-                mujoco.mj_multiRay(probe, pd, np.array([x, y, h]), dirs, SENSED_GROUPS, 1, -1, gid, dist, None, 24, rad + 0.1)
+                mujoco.mj_multiRay(
+                    probe, pd, np.array([x, y, h]), dirs, SENSED_GROUPS, 1, -1, gid, dist, None, 24, rad + 0.1
+                )
                 if ((dist >= 0) & (dist < rad + 0.1)).any():  # cutoff is only a bounding-sphere filter
                     free = False
                     break

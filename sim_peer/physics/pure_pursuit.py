@@ -76,7 +76,7 @@ class PurePursuit:
         """Move the progress index to the nearest point within the next stretch of arc length, not past ``stop``."""
         reach = self.cumulative[self.index] + max(self.lookahead, 0.3)
         end = min(stop + 1, max(self.index + 1, int(np.searchsorted(self.cumulative, reach, side="right"))))
-        d = np.linalg.norm(self.points[self.index:end] - p, axis=1)
+        d = np.linalg.norm(self.points[self.index : end] - p, axis=1)
         self.index += int(np.argmin(d))
 
     def _reached(self, p: np.ndarray, stop: int, yaw: float, v: float) -> bool:
@@ -117,9 +117,11 @@ class PurePursuit:
                 if self.backwards[self.stretch] != self.backwards[self.stretch - 1]:
                     return 0.0, 0.0, False  # it runs the other way: the next step drives it in its own frame
                 continue
-            to_stop = self.cumulative[stop] - self.cumulative[self.index] + float(np.linalg.norm(self.points[self.index] - p))
+            to_stop = (
+                self.cumulative[stop] - self.cumulative[self.index] + float(np.linalg.norm(self.points[self.index] - p))
+            )
             # Lookahead: first point ahead of the progress index at least `lookahead` away, not past the stop.
-            d = np.linalg.norm(self.points[self.index:stop + 1] - p, axis=1)
+            d = np.linalg.norm(self.points[self.index : stop + 1] - p, axis=1)
             ahead = np.flatnonzero(d >= self.lookahead)
             target = self.points[self.index + int(ahead[0])] if ahead.size else self.points[stop]
             dx, dy = target - p

@@ -48,7 +48,11 @@ def robot_class(desc: RobotDescription) -> type[SimRobot]:
 def _load(desc: RobotDescription, module: str, name: str) -> type[SimRobot]:
     where = f"robot type {desc.name} (hooks {module}:{name})"
     try:
-        mod = _import_file(_inside(desc, module), desc.name) if module.endswith(".py") else importlib.import_module(module)
+        mod = (
+            _import_file(_inside(desc, module), desc.name)
+            if module.endswith(".py")
+            else importlib.import_module(module)
+        )
     except WorldError:
         raise
     except Exception as exc:  # the plug-in's own import error, whatever it is, named with the robot type

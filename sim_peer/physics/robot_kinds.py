@@ -24,6 +24,7 @@ from sim_peer.physics.way_guard import WayGuard
 from sim_peer.robot import Build, CommandHandler, Mount, Note, Physics, SimRobot, Stream, check_hooks
 from sim_peer.sensors import Lidar, Sensor, Ultrasonic
 
+
 def _joint_addresses(model: mujoco.MjModel, prefix: str, names) -> tuple[np.ndarray, np.ndarray]:
     qadr = np.array([model.joint(prefix + j).qposadr[0] for j in names], dtype=np.int64)
     vadr = np.array([model.joint(prefix + j).dofadr[0] for j in names], dtype=np.int64)
@@ -40,6 +41,7 @@ def _joint_stream(robot: Any) -> Stream:
 
 def _pose_stream(robot: Any) -> Stream:
     """A base's pose (axle midpoint) with its velocities, from its controller."""
+
     def read(physics: Physics) -> Build:
         pos, quat, lin, ang = robot.ctrl.pose()
         return lambda header: Pose(pos, quat, lin, ang, "world", header)
@@ -148,7 +150,9 @@ class ArmRobot(_Driven):
     def restore(self, state: RobotState) -> None:
         c = self.ctrl
         if state.kind != self.kind or state.q.shape != c.q.shape:
-            raise ValueError(f"robot {state.id}: state of a {state.kind} with {state.q.shape[0]} joints for an arm with {c.dof}")
+            raise ValueError(
+                f"robot {state.id}: state of a {state.kind} with {state.q.shape[0]} joints for an arm with {c.dof}"
+            )
         c.restore(state.q, state.dq, state.target, float(state.extra.get("scale", 1.0)))
 
     def overlay(self, stream: str, message: Any) -> None:
@@ -194,18 +198,28 @@ class MobileRobot(_Driven):
         desc, model, prefix = mount.desc, mount.model, mount.prefix
         assert desc.base is not None
         x, y, _, yaw = mount.pose
-        self.ctrl = BaseController(desc.base, (x, y, yaw), twist_timeout=mount.twist_timeout,
-                                   on_news=lambda news: self.note(Note(news, _NEWS[news])))
+        self.ctrl = BaseController(
+            desc.base,
+            (x, y, yaw),
+            twist_timeout=mount.twist_timeout,
+            on_news=lambda news: self.note(Note(news, _NEWS[news])),
+        )
         self.qadr, self.vadr = _joint_addresses(model, prefix, desc.base_joints)
         self._qadr3 = tuple(int(a) for a in self.qadr)
         self._vadr3 = tuple(int(a) for a in self.vadr)
         self.lidar = (
-            Lidar(model, desc.lidar, model.site(prefix + desc.lidar.site).id, self.body_id, mount.rng) if desc.lidar else None
+            Lidar(model, desc.lidar, model.site(prefix + desc.lidar.site).id, self.body_id, mount.rng)
+            if desc.lidar
+            else None
         )
         self.sonar = Ultrasonic(model, desc.ultrasonic, self.body_id, mount.rng) if desc.ultrasonic else None
         self.bumper = Bumper(self, float(model.opt.timestep)) if mount.bumper else None
-        self.guard = WayGuard(self, float(model.opt.timestep), traffic=mount.traffic) if self.lidar is not None else None  # stops before robots in its way
-        self.sensors: tuple[Sensor, ...] = tuple(s for s in (self.lidar, self.sonar, self.bumper, self.guard) if s is not None)
+        self.guard = (
+            WayGuard(self, float(model.opt.timestep), traffic=mount.traffic) if self.lidar is not None else None
+        )  # stops before robots in its way
+        self.sensors: tuple[Sensor, ...] = tuple(
+            s for s in (self.lidar, self.sonar, self.bumper, self.guard) if s is not None
+        )
         checked = [s for s in self.sensors if type(s).after_step is not Sensor.after_step]
         self._checks = tuple((s.after_step, s.every) for s in checked)
         self._check_every = math.gcd(*(s.every for s in checked)) if checked else 0  # steps between sensor checks
@@ -217,8 +231,12 @@ class MobileRobot(_Driven):
 
     # commands ---------------------------------------------------------------
     def commands(self) -> Mapping[str, CommandHandler]:
-        return {"twist": lambda body: self.twist(body.v, body.omega), "path": lambda body: self.path(*_world_path(body)),
-                "stop": lambda body: self.stop(), "reset": lambda body: self.reset()}
+        return {
+            "twist": lambda body: self.twist(body.v, body.omega),
+            "path": lambda body: self.path(*_world_path(body)),
+            "stop": lambda body: self.stop(),
+            "reset": lambda body: self.reset(),
+        }
 
     def twist(self, v: float, omega: float) -> Clamp | None:
         return self.ctrl.twist(v, omega)
@@ -236,11 +254,20 @@ class MobileRobot(_Driven):
     def describe(self) -> RobotInfo:
         b = self.desc.base
         assert b is not None
-        info = replace(super().describe(), base=BaseInfo(
-            radius=b.radius, height=b.height, wheel_separation=b.wheel_separation, wheel_radius=b.wheel_radius,
-            max_speed=b.max_speed, max_omega=b.max_omega, max_accel=b.max_accel, max_alpha=b.max_alpha,
-            reverse=int(b.reverse),
-        ))
+        info = replace(
+            super().describe(),
+            base=BaseInfo(
+                radius=b.radius,
+                height=b.height,
+                wheel_separation=b.wheel_separation,
+                wheel_radius=b.wheel_radius,
+                max_speed=b.max_speed,
+                max_omega=b.max_omega,
+                max_accel=b.max_accel,
+                max_alpha=b.max_alpha,
+                reverse=int(b.reverse),
+            ),
+        )
         for s in self.sensors:
             info = s.describe(info)
         return info
@@ -272,8 +299,11 @@ class MobileRobot(_Driven):
     def snapshot(self) -> RobotState:
         c = self.ctrl
         extra: dict[str, Any] = {
-            "wheels": [float(w) for w in c.wheels], "wheel_speeds": [float(w) for w in c.wheel_speeds],
-            "since_twist": c.since_twist, "twists_expired": c.twists_expired, "paths_done": c.paths_done,
+            "wheels": [float(w) for w in c.wheels],
+            "wheel_speeds": [float(w) for w in c.wheel_speeds],
+            "since_twist": c.since_twist,
+            "twists_expired": c.twists_expired,
+            "paths_done": c.paths_done,
         }
         path = np.zeros((0, 2))
         f = c.follower
@@ -301,7 +331,14 @@ class MobileRobot(_Driven):
         if state.path.shape[0]:
             b = self.desc.base
             assert b is not None
-            f = PurePursuit(state.path[:, 0], state.path[:, 1], None, max_speed=b.max_speed, max_omega=b.max_omega, max_accel=b.max_accel)
+            f = PurePursuit(
+                state.path[:, 0],
+                state.path[:, 1],
+                None,
+                max_speed=b.max_speed,
+                max_omega=b.max_omega,
+                max_accel=b.max_accel,
+            )
             f.final_yaw = float(e["final_yaw"]) if "final_yaw" in e else None
             f.index = min(int(e.get("index", 0)), f.points.shape[0] - 1)
             f.stretch = min(int(e.get("stretch", 0)), len(f.stops) - 1)

@@ -40,8 +40,22 @@ from sim_peer.physics.traffic import Spot, Traffic, Waiter, crossing, gives_way,
 if TYPE_CHECKING:
     from sim_peer.physics.robot_kinds import MobileRobot
 
-__all__ = ["BACK_OFF", "BASE_CLEARANCE", "BLOCKED_AFTER", "GUARD_PERIOD", "SLACK", "WAY_MARGIN", "WayGuard", "WayState", "decide",
-           "base_gap", "facing_forwards", "trail_back", "way_cap", "way_gap"]
+__all__ = [
+    "BACK_OFF",
+    "BASE_CLEARANCE",
+    "BLOCKED_AFTER",
+    "GUARD_PERIOD",
+    "SLACK",
+    "WAY_MARGIN",
+    "WayGuard",
+    "WayState",
+    "decide",
+    "base_gap",
+    "facing_forwards",
+    "trail_back",
+    "way_cap",
+    "way_gap",
+]
 
 GUARD_PERIOD = 0.05
 """Seconds of sim time between two looks (the LIDAR's own stream runs at 10-20 Hz)."""
@@ -146,8 +160,9 @@ class WayState:
     waiting_since: float | None = None
 
 
-def decide(state: WayState, now: float, gap: float, *, margin: float = WAY_MARGIN,
-           blocked_after: float = BLOCKED_AFTER) -> tuple[WayState, str]:
+def decide(
+    state: WayState, now: float, gap: float, *, margin: float = WAY_MARGIN, blocked_after: float = BLOCKED_AFTER
+) -> tuple[WayState, str]:
     """The next state and what to say: "" (nothing new), "waiting" (the way closed: stopped), "resumed" (it
     cleared), "blocked" (it stayed closed ``blocked_after`` s: drop the path)."""
     if state.waiting_since is None:
@@ -173,14 +188,23 @@ BLAME = 0.2
 class WayGuard(Sensor):
     """The guard of one mobile robot with a LIDAR: caps its path follower's speed (``BaseController.speed_cap``)."""
 
-    def __init__(self, robot: "MobileRobot", dt: float, *, margin: float = WAY_MARGIN, blocked_after: float = BLOCKED_AFTER,
-                 traffic: Traffic | None = None) -> None:
+    def __init__(
+        self,
+        robot: "MobileRobot",
+        dt: float,
+        *,
+        margin: float = WAY_MARGIN,
+        blocked_after: float = BLOCKED_AFTER,
+        traffic: Traffic | None = None,
+    ) -> None:
         self.robot = robot
         self.traffic = traffic if traffic is not None else Traffic()
         self.every = max(1, int(round(GUARD_PERIOD / dt)))
         self.margin = margin
         self.blocked_after = blocked_after
-        self.radius = max(robot.desc.base.radius if robot.desc.base is not None else robot.desc.base_radius, 0.0) - SLACK
+        self.radius = (
+            max(robot.desc.base.radius if robot.desc.base is not None else robot.desc.base_radius, 0.0) - SLACK
+        )
         self.state = WayState()
         self.gap = math.inf  # the last gap seen (for tests and the sim's state)
         self.blocker: str | None = None  # the base in its way at the last look, if a base is
@@ -248,7 +272,9 @@ class WayGuard(Sensor):
             return
         self.gap, self.blocker = self._gap(ahead, physics)
         c.speed_cap = way_cap(self.gap, c.spec.max_accel, self.margin)
-        self.state, news = decide(self.state, physics.time, self.gap, margin=self.margin, blocked_after=self.blocked_after)
+        self.state, news = decide(
+            self.state, physics.time, self.gap, margin=self.margin, blocked_after=self.blocked_after
+        )
         since = self.state.waiting_since
         if since is not None:  # a waiting base holds (it may turn on the spot) until it says resumed: no creeping
             c.speed_cap = 0.0  # within the resume band (two waiting bases crept 0.1 m each into the bumper's reach)
@@ -263,8 +289,14 @@ class WayGuard(Sensor):
             trail = trail_back(follower.points, follower.index, np.array([c.x, c.y]))
             if trail is not None:  # first back off, then say it
                 b = self.robot.desc.base
-                back = PurePursuit(trail[:, 0], trail[:, 1], facing_forwards(trail, c.yaw), max_speed=min(BACK_SPEED, b.max_speed),
-                                   max_omega=b.max_omega, max_accel=b.max_accel)
+                back = PurePursuit(
+                    trail[:, 0],
+                    trail[:, 1],
+                    facing_forwards(trail, c.yaw),
+                    max_speed=min(BACK_SPEED, b.max_speed),
+                    max_omega=b.max_omega,
+                    max_accel=b.max_accel,
+                )
                 back.quiet = True  # type: ignore[attr-defined]  # its end is no path of the user's done
                 c.follow(back)
                 self._backing = (back, to)
@@ -295,7 +327,18 @@ class WayGuard(Sensor):
         if backed:
             words += "; backed off along the way it came"
         detail = f"{words} (gap {self.gap:.2f} m at ({c.x:.2f}, {c.y:.2f}))" if math.isfinite(self.gap) else words
-        data = {"t": physics.time, "detail": detail, **({"gave_way_to": to} if to else {}),
-                **({"blocker": self.blocker} if self.blocker and news == "waiting" else {})}
-        self.robot.note(Note(EventKind.OBSTACLE_STOP, news, "warning" if news != "resumed" else "info", data,
-                             counter="way_gave_way" if to else f"way_{news}"))
+        data = {
+            "t": physics.time,
+            "detail": detail,
+            **({"gave_way_to": to} if to else {}),
+            **({"blocker": self.blocker} if self.blocker and news == "waiting" else {}),
+        }
+        self.robot.note(
+            Note(
+                EventKind.OBSTACLE_STOP,
+                news,
+                "warning" if news != "resumed" else "info",
+                data,
+                counter="way_gave_way" if to else f"way_{news}",
+            )
+        )

@@ -81,8 +81,19 @@ class SimWorld:
         self.notes = NoteLog()  # what robots and sensors said, until the peer takes it
         self.traffic = Traffic()  # where the bases stand and who waits for whom: their way guards' board
         self.robots: dict[str, SimRobot] = {
-            r.id: classes[r.id](Mount(r.id, self.descriptions[r.id], self.model, r.pose, self.rng, self.notes.add, twist_timeout, bumper,
-                                      self.traffic))
+            r.id: classes[r.id](
+                Mount(
+                    r.id,
+                    self.descriptions[r.id],
+                    self.model,
+                    r.pose,
+                    self.rng,
+                    self.notes.add,
+                    twist_timeout,
+                    bumper,
+                    self.traffic,
+                )
+            )
             for r in placed
         }
         self.positions = Positions(self.model, self.data)
@@ -173,8 +184,16 @@ class SimWorld:
     def moving(self) -> dict[str, bool]:
         return {rid: r.moving for rid, r in self.robots.items()}
 
-    def mirror(self, robot_id: str, *, radius: float, height: float, position: Sequence[float], quaternion: Sequence[float],
-               source: str = "") -> bool:
+    def mirror(
+        self,
+        robot_id: str,
+        *,
+        radius: float,
+        height: float,
+        position: Sequence[float],
+        quaternion: Sequence[float],
+        source: str = "",
+    ) -> bool:
         """Show a robot that ``source``, another sim of the world, simulates, where that sim says it is, so this
         sim's sensors see it (:mod:`sim_peer.physics.mirrors`); False when no slot is free, the pose is not finite, or
         the robot is one of this world's own."""
@@ -184,8 +203,14 @@ class SimWorld:
         self.positions.mark()
         return placed
 
-    def mirror_shapes(self, robot_id: str, shapes: Sequence[Shape], poses: Sequence[tuple[Sequence[float], Sequence[float]]],
-                      *, source: str = "") -> bool:
+    def mirror_shapes(
+        self,
+        robot_id: str,
+        shapes: Sequence[Shape],
+        poses: Sequence[tuple[Sequence[float], Sequence[float]]],
+        *,
+        source: str = "",
+    ) -> bool:
         """Show a robot of another sim as several geoms (an arm's links: :mod:`sim_peer.physics.arm_mirror`), each at
         its pose; False when too few slots are free, a pose is not finite, or the robot is this world's own."""
         if robot_id in self.robots or self.mirrors.show_shapes(robot_id, shapes, source) is None:
@@ -197,7 +222,8 @@ class SimWorld:
     def unmirror(self, robot_id: str | None = None, *, source: str | None = None) -> list[str]:
         """Hide one mirrored robot, or every robot ``source`` simulated (that sim left); the ids hidden."""
         gone = ([robot_id] if robot_id is not None and self.mirrors.hide(robot_id) else []) + (
-            self.mirrors.hide_from(source) if source is not None else [])
+            self.mirrors.hide_from(source) if source is not None else []
+        )
         if gone:
             self.positions.mark()
         return gone

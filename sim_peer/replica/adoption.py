@@ -50,9 +50,16 @@ class ObjectAdoption:
     and ``clock`` (monotonic seconds). Its own lock guards the wait's state (:class:`adoption_rule.Watch`); it calls
     no collaborator while holding it."""
 
-    def __init__(self, fabric: Fabric, server: ObjectsServer, *, stopping: threading.Event,
-                 announce: Callable[[str], None], clock: Callable[[], float] = time.monotonic,
-                 after_s: float | None = None) -> None:
+    def __init__(
+        self,
+        fabric: Fabric,
+        server: ObjectsServer,
+        *,
+        stopping: threading.Event,
+        announce: Callable[[str], None],
+        clock: Callable[[], float] = time.monotonic,
+        after_s: float | None = None,
+    ) -> None:
         self.fabric = fabric
         self.server = server
         self.stopping = stopping
@@ -104,6 +111,8 @@ class ObjectAdoption:
         term = self.server.adopt_objects()
         if term is None:
             return False
-        self.announce(f"sim {me}: no sim serves the scene objects any more; serving {', '.join(objects)} "
-                      f"with my robots (term {term}) in {(self.clock() - t0) * 1000:.0f} ms")
+        self.announce(
+            f"sim {me}: no sim serves the scene objects any more; serving {', '.join(objects)} "
+            f"with my robots (term {term}) in {(self.clock() - t0) * 1000:.0f} ms"
+        )
         return True

@@ -23,8 +23,19 @@ from dataclasses import dataclass, replace
 
 from sim_peer.replica.hearing_rule import Heartbeat
 
-__all__ = ["DeafState", "Look", "Hold", "Resume", "WasLate", "DeafEffect", "PROOF_S", "proven", "must_ask", "why",
-           "step"]
+__all__ = [
+    "DeafState",
+    "Look",
+    "Hold",
+    "Resume",
+    "WasLate",
+    "DeafEffect",
+    "PROOF_S",
+    "proven",
+    "must_ask",
+    "why",
+    "step",
+]
 
 PROOF_S = 0.5
 """How long a router's answer proves the link while the heartbeat is late right now (a starved process)."""

@@ -72,9 +72,16 @@ class DeafStop:
     Its collaborators: ``fabric``; ``hearing`` (:class:`Hearing`); ``serving`` (the peer this sim serves as its
     primary now, None otherwise); ``stopping``; ``announce``; ``clock``. Its state is the look thread's alone."""
 
-    def __init__(self, fabric: Fabric, *, hearing: Hearing, serving: "Callable[[], SimPeer | None]",
-                 stopping: threading.Event, announce: Callable[[str], None],
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        fabric: Fabric,
+        *,
+        hearing: Hearing,
+        serving: "Callable[[], SimPeer | None]",
+        stopping: threading.Event,
+        announce: Callable[[str], None],
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.fabric = fabric
         self._hearing, self._serving, self._stopping, self.announce = hearing, serving, stopping, announce
         self.clock = clock
@@ -97,8 +104,15 @@ class DeafStop:
     def _seen(self, held: bool) -> dr.Look:
         """What the core needs to know now, the router asked if the core says so."""
         f, hearing = self.fabric, self._hearing
-        seen = dr.Look(now=self.clock(), held=held, cut=hearing.cut(), frozen=hearing.frozen(), beat=hearing.beat,
-                       own_gone_at=hearing.own_gone_at, lease=f.config.lease_ms / 1000.0)
+        seen = dr.Look(
+            now=self.clock(),
+            held=held,
+            cut=hearing.cut(),
+            frozen=hearing.frozen(),
+            beat=hearing.beat,
+            own_gone_at=hearing.own_gone_at,
+            lease=f.config.lease_ms / 1000.0,
+        )
         if dr.must_ask(self.state, seen) and (f.config.profile == "embedded" or router_answers(f, ASK_S)):
             seen = replace(seen, answered_at=self.clock())
         return seen
@@ -113,12 +127,18 @@ class DeafStop:
         for e in effects:
             if isinstance(e, dr.Hold):
                 peer.commands.hold(REASON)
-                self.announce(f"sim {me}: hears no one ({e.why}); its robots stop (bases brake, arms hold) "
-                           "and commands are refused until it hears again")
+                self.announce(
+                    f"sim {me}: hears no one ({e.why}); its robots stop (bases brake, arms hold) "
+                    "and commands are refused until it hears again"
+                )
             elif isinstance(e, dr.Resume):
                 peer.commands.resume()
-                self.announce(f"sim {me}: hears again (its router answers); commands are accepted (its "
-                           "robots stay where they stopped)")
+                self.announce(
+                    f"sim {me}: hears again (its router answers); commands are accepted (its "
+                    "robots stay where they stopped)"
+                )
             else:
-                self.announce(f"sim {me}: was late ({e.late_s:.1f} s frozen or starved), not cut off: its "
-                           "router answers; commands are served on")
+                self.announce(
+                    f"sim {me}: was late ({e.late_s:.1f} s frozen or starved), not cut off: its "
+                    "router answers; commands are served on"
+                )

@@ -39,8 +39,20 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Iterable
 
-__all__ = ["Role", "Election", "Heard", "Peers", "Resumed", "ElectionEffect", "candidate", "shard_view", "start", "step", "PRIMARY",
-           "STANDBY"]
+__all__ = [
+    "Role",
+    "Election",
+    "Heard",
+    "Peers",
+    "Resumed",
+    "ElectionEffect",
+    "candidate",
+    "shard_view",
+    "start",
+    "step",
+    "PRIMARY",
+    "STANDBY",
+]
 
 PRIMARY = "primary"
 STANDBY = "standby"

@@ -82,11 +82,23 @@ class Follower:
     moves); ``serving`` (whether the host's peer serves now) and ``serving_lock`` (what the host serves, see the
     module); ``stopping``; ``clock`` (monotonic seconds); ``plant`` (a test-only defect, fabric/plant.py)."""
 
-    def __init__(self, fabric: "Fabric", *, world: Callable[[], "SimWorld"], election: Callable[[], el.Election],
-                 shard: Shard, heard: Callable[[str, int], None], seen_serving: Callable[[str, str, int], None],
-                 serving: Callable[[], bool], serving_lock: threading.RLock, stopping: threading.Event,
-                 clock: Callable[[], float] = time.monotonic, snapshot: WorldState | None = None,
-                 poll_s: float = POLL_S, plant: str = "") -> None:
+    def __init__(
+        self,
+        fabric: "Fabric",
+        *,
+        world: Callable[[], "SimWorld"],
+        election: Callable[[], el.Election],
+        shard: Shard,
+        heard: Callable[[str, int], None],
+        seen_serving: Callable[[str, str, int], None],
+        serving: Callable[[], bool],
+        serving_lock: threading.RLock,
+        stopping: threading.Event,
+        clock: Callable[[], float] = time.monotonic,
+        snapshot: WorldState | None = None,
+        poll_s: float = POLL_S,
+        plant: str = "",
+    ) -> None:
         self.fabric = fabric
         self._world, self._election, self._shard = world, election, shard
         self._heard, self._seen_serving = heard, seen_serving
@@ -136,8 +148,11 @@ class Follower:
                 replies = f.rpc.query(keys.srv(f.world, "state"), timeout=1.0, expected=WorldState, all_replies=True)
             except ServiceError:
                 continue
-            best = max((r.message for r in replies if self._shard.about_mine(r.message)), key=lambda m: m.header.term,
-                       default=None)
+            best = max(
+                (r.message for r in replies if self._shard.about_mine(r.message)),
+                key=lambda m: m.header.term,
+                default=None,
+            )
             if best is None:
                 continue
             self._heard(best.header.source, best.header.term)
@@ -170,8 +185,9 @@ class Follower:
         """Whether a stream sample from ``source`` is the followed leader's (or, while a take-over drains, the
         former leader's)."""
         election = self._election()
-        return ((election.role == el.STANDBY and source == election.leader)
-                or (self.former is not None and source == self.former))
+        return (election.role == el.STANDBY and source == election.leader) or (
+            self.former is not None and source == self.former
+        )
 
     def drain(self, former: str, quiet_s: float = DRAIN_QUIET_S, limit_s: float = DRAIN_LIMIT_S) -> float:
         """Keep ``former``'s streams until none came for ``quiet_s`` since the drain began (at most ``limit_s``),
@@ -197,7 +213,11 @@ class Follower:
         if election.role == el.STANDBY and rec.header.source == election.leader:
             with self._lock:
                 held = self.records.get(rec.object)
-                if held is None or held.header.source != rec.header.source or (rec.epoch, rec.header.seq) >= (held.epoch, held.header.seq):
+                if (
+                    held is None
+                    or held.header.source != rec.header.source
+                    or (rec.epoch, rec.header.seq) >= (held.epoch, held.header.seq)
+                ):
                     self.records[rec.object] = rec
 
     def keep(self, key: str, msg: Any, size: int = 0) -> None:

@@ -61,9 +61,17 @@ class FreezeGuard:
     Its collaborators: ``fabric``; ``roles`` (:class:`Electing`); ``shard`` (:class:`ShardOf`); ``stopping``;
     ``announce``; ``clock``. It keeps no state that changes."""
 
-    def __init__(self, fabric: Fabric, *, roles: Electing, shard: ShardOf, stopping: threading.Event,
-                 announce: Callable[[str], None], gap: float | None = None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        fabric: Fabric,
+        *,
+        roles: Electing,
+        shard: ShardOf,
+        stopping: threading.Event,
+        announce: Callable[[str], None],
+        gap: float | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.fabric = fabric
         self._roles, self._shard, self._stopping, self.announce = roles, shard, stopping, announce
         self.clock = clock
@@ -87,7 +95,9 @@ class FreezeGuard:
         todo = fr.plan(gap, lease, fr.rivals(self._shard.view(seen), f.peer_id))
         if todo.publish_now:
             f.stamp.unmuzzle()
-            self.announce(f"sim {f.peer_id}: paused {gap:.1f} s with no other sim in the world; publishing again (term {f.stamp.term})")
+            self.announce(
+                f"sim {f.peer_id}: paused {gap:.1f} s with no other sim in the world; publishing again (term {f.stamp.term})"
+            )
             return
         if todo.listen_s:
             self._stopping.wait(todo.listen_s)
@@ -110,7 +120,9 @@ class FreezeGuard:
             replies = []
             if others:
                 try:
-                    replies = f.rpc.query(keys.srv(f.world, "state"), timeout=1.0, expected=WorldState, all_replies=True)
+                    replies = f.rpc.query(
+                        keys.srv(f.world, "state"), timeout=1.0, expected=WorldState, all_replies=True
+                    )
                 except ServiceError:
                     replies = []  # standbys answer with a refusal: no other authority
             for rep in replies:

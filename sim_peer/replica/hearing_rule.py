@@ -28,8 +28,23 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 
-__all__ = ["Heartbeat", "tick", "frozen", "cut", "unlinked_since", "recently_unlinked", "recheck", "recheck_window",
-           "audible", "gone_since", "AUDIBLE_S", "RECHECK_LEASES", "OWN_TOKEN_S", "TICK_S", "NOT_YET"]
+__all__ = [
+    "Heartbeat",
+    "tick",
+    "frozen",
+    "cut",
+    "unlinked_since",
+    "recently_unlinked",
+    "recheck",
+    "recheck_window",
+    "audible",
+    "gone_since",
+    "AUDIBLE_S",
+    "RECHECK_LEASES",
+    "OWN_TOKEN_S",
+    "TICK_S",
+    "NOT_YET",
+]
 
 AUDIBLE_S = 1.0
 """How recently a sim was heard (its term on a stream or ``srv/state``) for it to count as alive, whatever its

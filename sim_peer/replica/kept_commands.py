@@ -38,8 +38,14 @@ class Kept(NamedTuple):
 class CommandBuffer:
     """The last ``keep_s`` seconds of commands, at most ``max_count`` of them and ``max_bytes`` in all."""
 
-    def __init__(self, *, keep_s: float = KEEP_COMMANDS_S, max_count: int = MAX_KEPT_COMMANDS, max_bytes: int = MAX_KEPT_BYTES,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        *,
+        keep_s: float = KEEP_COMMANDS_S,
+        max_count: int = MAX_KEPT_COMMANDS,
+        max_bytes: int = MAX_KEPT_BYTES,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.keep_s, self.max_count, self.max_bytes = keep_s, max_count, max_bytes
         self.clock = clock
         self._kept: deque[Kept] = deque()
@@ -62,7 +68,9 @@ class CommandBuffer:
         self._kept.append(Kept(now, key, message, size))
         self._bytes += size
         while self._kept and (
-            self._kept[0].arrival < now - self.keep_s or len(self._kept) > self.max_count or self._bytes > self.max_bytes
+            self._kept[0].arrival < now - self.keep_s
+            or len(self._kept) > self.max_count
+            or self._bytes > self.max_bytes
         ):
             self._bytes -= self._kept.popleft().size
 

@@ -125,28 +125,75 @@ class ReplicaHost:
         self.last_state: WorldState | None = None
         self.role_token = RoleToken(fabric)  # the role shown on the fabric (sim_peer.replica.role_token)
         # this shard: the robots this sim serves, or would at a take-over
-        self.shards = ShardDirectory(fabric, world.robots, live=lambda: self.roles.live_sims(), stopping=self.stopping,
-                                     on_learnt=lambda view: self.roles.shards_learnt(view))
-        self.roles = Roles(fabric, election, shard=self.shards, serving_lock=self.lock, stopping=self.stopping,
-                           announce=self.announce, take_over=self.take_over, reassert=self._reassert,
-                           show_role=lambda shown: self.role_token.show(shown, self.peer is not None),
-                           adopt_soon=lambda: self.adoption.soon(), clock=clock)
-        self.follower = Follower(fabric, world=lambda: self.world, election=lambda: self.roles.election,
-                                 shard=self.shards, heard=self.roles.heard,
-                                 seen_serving=lambda *seen: self.moves.seen_serving(*seen), serving=lambda: self.serving,
-                                 serving_lock=self.lock, stopping=self.stopping, clock=clock, snapshot=snapshot, poll_s=poll_s, plant=plant)
-        self.freeze = FreezeGuard(fabric, roles=self.roles, shard=self.shards, stopping=self.stopping,
-                                  announce=self.announce, gap=freeze_gap, clock=clock)
-        self.adoption = ObjectAdoption(fabric, self, stopping=self.stopping, announce=self.announce, clock=self.clock,
-                                       after_s=adopt_after_s)
-        self.moves = MoveService(fabric, self, serving_lock=self.lock, election=lambda: self.roles.election,
-                                 live=self.roles.live_sims, standbys=self.shards.standbys, announce=self.announce,
-                                 clock=clock)
+        self.shards = ShardDirectory(
+            fabric,
+            world.robots,
+            live=lambda: self.roles.live_sims(),
+            stopping=self.stopping,
+            on_learnt=lambda view: self.roles.shards_learnt(view),
+        )
+        self.roles = Roles(
+            fabric,
+            election,
+            shard=self.shards,
+            serving_lock=self.lock,
+            stopping=self.stopping,
+            announce=self.announce,
+            take_over=self.take_over,
+            reassert=self._reassert,
+            show_role=lambda shown: self.role_token.show(shown, self.peer is not None),
+            adopt_soon=lambda: self.adoption.soon(),
+            clock=clock,
+        )
+        self.follower = Follower(
+            fabric,
+            world=lambda: self.world,
+            election=lambda: self.roles.election,
+            shard=self.shards,
+            heard=self.roles.heard,
+            seen_serving=lambda *seen: self.moves.seen_serving(*seen),
+            serving=lambda: self.serving,
+            serving_lock=self.lock,
+            stopping=self.stopping,
+            clock=clock,
+            snapshot=snapshot,
+            poll_s=poll_s,
+            plant=plant,
+        )
+        self.freeze = FreezeGuard(
+            fabric,
+            roles=self.roles,
+            shard=self.shards,
+            stopping=self.stopping,
+            announce=self.announce,
+            gap=freeze_gap,
+            clock=clock,
+        )
+        self.adoption = ObjectAdoption(
+            fabric, self, stopping=self.stopping, announce=self.announce, clock=self.clock, after_s=adopt_after_s
+        )
+        self.moves = MoveService(
+            fabric,
+            self,
+            serving_lock=self.lock,
+            election=lambda: self.roles.election,
+            live=self.roles.live_sims,
+            standbys=self.shards.standbys,
+            announce=self.announce,
+            clock=clock,
+        )
         # a primary that hears no one stops its robots
-        self.deaf_stop = DeafStop(fabric, hearing=self.roles,
-                                  serving=lambda: self.peer if self.role == el.PRIMARY else None,
-                                  stopping=self.stopping, announce=self.announce, clock=clock)
-        self.state_answers = StateAnswers(fabric.counters)  # srv/state off zenoh's callback thread (sim_peer.serving.state_answers)
+        self.deaf_stop = DeafStop(
+            fabric,
+            hearing=self.roles,
+            serving=lambda: self.peer if self.role == el.PRIMARY else None,
+            stopping=self.stopping,
+            announce=self.announce,
+            clock=clock,
+        )
+        self.state_answers = StateAnswers(
+            fabric.counters
+        )  # srv/state off zenoh's callback thread (sim_peer.serving.state_answers)
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -179,7 +226,9 @@ class ReplicaHost:
         self.roles.join()
         if self.role != el.PRIMARY:
             self.follower.start_polling()
-            self.announce(f"standby {f.peer_id}: following {self.election.leader or 'the primary'} (term {self.election.term})")
+            self.announce(
+                f"standby {f.peer_id}: following {self.election.leader or 'the primary'} (term {self.election.term})"
+            )
         self.role_token.show(self.election, self.peer is not None)
         return self
 
@@ -277,8 +326,10 @@ class ReplicaHost:
             self.follower.drained()
         took = self.clock() - t0
         self.takeovers.append({"term": self.election.term, "s": took, "from": state.header.source if state else ""})
-        self.announce(f"sim {self.fabric.peer_id}: took over the world with term {self.election.term} in {took * 1000:.0f} ms"
-                      + (f" from the state of {state.header.source} at t={state.time:.3f} s" if state else ""))
+        self.announce(
+            f"sim {self.fabric.peer_id}: took over the world with term {self.election.term} in {took * 1000:.0f} ms"
+            + (f" from the state of {state.header.source} at t={state.time:.3f} s" if state else "")
+        )
         self.role_token.show(self.election, self.peer is not None)
 
     def world_state(self, *, force: bool = False) -> WorldState:
@@ -292,8 +343,16 @@ class ReplicaHost:
         if not self.objects:
             objects = ()  # the objects' authority is another shard: its standby must not become it
         seqs = self.fabric.seqs.under(keys.world_root(self.fabric.world))
-        return WorldState(t, steps, robots, objects, tuple(records), dict(users), seqs,
-                          header=self.fabric.header(keys.srv(self.fabric.world, "state"), stamp=t))
+        return WorldState(
+            t,
+            steps,
+            robots,
+            objects,
+            tuple(records),
+            dict(users),
+            seqs,
+            header=self.fabric.header(keys.srv(self.fabric.world, "state"), stamp=t),
+        )
 
     def _on_state_query(self, key: str, request: Any) -> WorldState | Event:
         if isinstance(request, Event) and request.kind == SHARD_QUERY:
@@ -301,8 +360,12 @@ class ReplicaHost:
             return self.shards.answer(self.role)
         if isinstance(request, Event) and request.kind in ho.STEPS:
             # every login may ask srv/state: a move asked here is refused, whoever asks (moves: srv/move, the staff's)
-            raise self.moves.refused(request, "", "moves are for the instructor and sim logins: srv/state, which every login "
-                                                  "may ask, moves nothing (robofabric own move asks srv/move/SIM/by/LOGIN)")
+            raise self.moves.refused(
+                request,
+                "",
+                "moves are for the instructor and sim logins: srv/state, which every login "
+                "may ask, moves nothing (robofabric own move asks srv/move/SIM/by/LOGIN)",
+            )
         return self.world_state()
 
     # ------------------------------------------------------------------ rebuilding (a robot moved, the objects adopted)
@@ -316,8 +379,16 @@ class ReplicaHost:
         self.gate.close()
         with peer.lock:
             t, steps, robots, objects = capture.capture(self.world)
-        state = WorldState(t, steps, robots, objects if self.objects else (), tuple(records), dict(users), {},
-                           header=Header(wall_ns=time.time_ns(), source=f.peer_id))
+        state = WorldState(
+            t,
+            steps,
+            robots,
+            objects if self.objects else (),
+            tuple(records),
+            dict(users),
+            {},
+            header=Header(wall_ns=time.time_ns(), source=f.peer_id),
+        )
         self.peer = self.gate = None
         return state, dict(self.world.placements)
 
@@ -393,9 +464,21 @@ def run_replicated(
     with HeapTrimmer():  # what zenoh's threads free through its hours of faults goes back (fabric.heap)
         while not stop.is_set():
             with open_fabric() as fab:
-                host = ReplicaHost(fab, make_world(), make_gate, standby=standby, rates=rates, speed=speed, term=term,
-                                   leader=leader, snapshot=last, announce=announce, objects=objects, rebuild=rebuild,
-                                   plant=plant)
+                host = ReplicaHost(
+                    fab,
+                    make_world(),
+                    make_gate,
+                    standby=standby,
+                    rates=rates,
+                    speed=speed,
+                    term=term,
+                    leader=leader,
+                    snapshot=last,
+                    announce=announce,
+                    objects=objects,
+                    rebuild=rebuild,
+                    plant=plant,
+                )
                 role = host.run(stop, duration)
                 term, leader, objects = host.election.term, host.election.leader, host.objects
                 last = host.last_state

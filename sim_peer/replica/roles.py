@@ -72,11 +72,21 @@ class Roles:
     the lock of what the host serves (``serving_lock``, passed in): a rebuild reads the term and serves under a new
     one (:meth:`set_term`) with no step-down between. It calls no collaborator while holding either lock."""
 
-    def __init__(self, fabric: Fabric, election: el.Election, *, shard: ShardView, serving_lock: threading.RLock,
-                 stopping: threading.Event, announce: Callable[[str], None],
-                 take_over: Callable[[float, str | None], None], reassert: Callable[[int], None],
-                 show_role: Callable[[el.Election], None], adopt_soon: Callable[[], None],
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        fabric: Fabric,
+        election: el.Election,
+        *,
+        shard: ShardView,
+        serving_lock: threading.RLock,
+        stopping: threading.Event,
+        announce: Callable[[str], None],
+        take_over: Callable[[float, str | None], None],
+        reassert: Callable[[int], None],
+        show_role: Callable[[el.Election], None],
+        adopt_soon: Callable[[], None],
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.fabric = fabric
         self._shard, self._serving_lock, self._stopping = shard, serving_lock, stopping
         self._announce, self._take_over, self._reassert = announce, take_over, reassert
@@ -179,9 +189,16 @@ class Roles:
             unlinked = False
             try:
                 answered = router_answers(self.fabric, SETTLE_S)  # at once on a live link (a router's round trip)
-                while not unlinked and not answered and self.clock() - lost_at < SETTLE_S and not self._stopping.wait(SETTLE_POLL_S):
+                while (
+                    not unlinked
+                    and not answered
+                    and self.clock() - lost_at < SETTLE_S
+                    and not self._stopping.wait(SETTLE_POLL_S)
+                ):
                     unlinked = not self.fabric.connected()
-                unlinked = unlinked or not self.fabric.connected() or hr.unlinked_since(self.beat, self.own_gone_at, lost_at)
+                unlinked = (
+                    unlinked or not self.fabric.connected() or hr.unlinked_since(self.beat, self.own_gone_at, lost_at)
+                )
             finally:
                 with self._lock:
                     self.settling = False
@@ -241,8 +258,10 @@ class Roles:
                 return
             self.rechecking = True
         if self.role == el.STANDBY:
-            self._announce(f"standby {self.fabric.peer_id}: cut off ({why}); the live sims are looked "
-                       f"at again {RECHECK_LEASES} leases after it hears again")
+            self._announce(
+                f"standby {self.fabric.peer_id}: cut off ({why}); the live sims are looked "
+                f"at again {RECHECK_LEASES} leases after it hears again"
+            )
 
         def recheck() -> None:
             try:
@@ -251,7 +270,9 @@ class Roles:
                 while not self._stopping.is_set() and self.clock() < back:
                     # cut off (again): the window starts once it hears
                     now = self.clock()
-                    back = hr.recheck(back, now, deaf=self.deaf() or hr.recently_unlinked(self.beat, now), window=window)
+                    back = hr.recheck(
+                        back, now, deaf=self.deaf() or hr.recently_unlinked(self.beat, now), window=window
+                    )
                     time.sleep(0.05)
             finally:
                 with self._lock:
@@ -267,7 +288,9 @@ class Roles:
             if self.role == el.PRIMARY:
                 self._adopt_soon()
             elif self.election.leader in live:
-                self._announce(f"standby {self.fabric.peer_id}: hearing again; following {self.election.leader} (term {self.election.term})")
+                self._announce(
+                    f"standby {self.fabric.peer_id}: hearing again; following {self.election.leader} (term {self.election.term})"
+                )
 
         threading.Thread(target=recheck, name="sim-deaf-recheck", daemon=True).start()
 
@@ -311,8 +334,10 @@ class Roles:
             if self.relooking:
                 return
             self.relooking = True
-        self._announce(f"standby {self.fabric.peer_id}: the token of {self.election.leader} is missing, but it is still heard; "
-                   "waiting until it falls silent before taking over")
+        self._announce(
+            f"standby {self.fabric.peer_id}: the token of {self.election.leader} is missing, but it is still heard; "
+            "waiting until it falls silent before taking over"
+        )
 
         def again() -> None:
             try:
@@ -354,17 +379,25 @@ class Roles:
             followed = self.election.leader
             self.election, effects = el.step(self.election, ev)
             leader = self.election.leader
-            deferred = (isinstance(ev, el.Peers) and self.election.role == el.STANDBY and leader not in ev.live
-                        and leader in ev.audible)
+            deferred = (
+                isinstance(ev, el.Peers)
+                and self.election.role == el.STANDBY
+                and leader not in ev.live
+                and leader in ev.audible
+            )
         if deferred:
             self.relook()
         for e in effects:
             if e.kind == "take_over":
                 # why, for whoever reads the log after a surprise (a take-over in a router's restart, say)
-                self._announce(f"standby {self.fabric.peer_id}: the token of {followed or 'the primary'} is gone (live sims: "
-                           f"{', '.join(sorted(ev.live)) if isinstance(ev, el.Peers) else '?'}; link "
-                           f"{'up' if self.fabric.connected() else 'down'}); taking over with term {e.term}")
-                t = threading.Thread(target=self._take_over, args=(self.clock(), followed), name="take-over", daemon=True)
+                self._announce(
+                    f"standby {self.fabric.peer_id}: the token of {followed or 'the primary'} is gone (live sims: "
+                    f"{', '.join(sorted(ev.live)) if isinstance(ev, el.Peers) else '?'}; link "
+                    f"{'up' if self.fabric.connected() else 'down'}); taking over with term {e.term}"
+                )
+                t = threading.Thread(
+                    target=self._take_over, args=(self.clock(), followed), name="take-over", daemon=True
+                )
                 self.taking_over = t
                 t.start()
             elif e.kind == "step_down":

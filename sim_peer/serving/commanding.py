@@ -54,13 +54,25 @@ class Halt:
 class CommandPipeline:
     """Admit and apply the commands of ``world``'s robots under ``lock``; a worker thread drains the queues."""
 
-    def __init__(self, fabric: Any, world: SimWorld, lock: threading.RLock, gate: CommandGate, report: Reporter,
-                 *, counters: Counter[str], stop: threading.Event, others: Callable[[], bool]) -> None:
+    def __init__(
+        self,
+        fabric: Any,
+        world: SimWorld,
+        lock: threading.RLock,
+        gate: CommandGate,
+        report: Reporter,
+        *,
+        counters: Counter[str],
+        stop: threading.Event,
+        others: Callable[[], bool],
+    ) -> None:
         self.fabric, self.world, self.lock, self.gate, self.report = fabric, world, lock, gate, report
         self.counters = counters
         self._stop = stop  # the peer's: set when it closes
         self._others = others  # whether other sims share the world (a command for a robot none of ours may be theirs)
-        self._handlers: dict[str, dict[str, CommandHandler]] = {rid: dict(r.commands()) for rid, r in world.robots.items()}
+        self._handlers: dict[str, dict[str, CommandHandler]] = {
+            rid: dict(r.commands()) for rid, r in world.robots.items()
+        }
         self._queues: dict[str, CommandQueue[Command | Halt]] = {rid: CommandQueue() for rid in world.robots}
         self._queued = threading.Condition(threading.Lock())
         self._worker: threading.Thread | None = None
@@ -105,7 +117,12 @@ class CommandPipeline:
                 self.counters["not_mine"] += 1
                 return
             self.counters["commands"] += 1
-            self.report.reject(rid, parsed.leaf, "unknown_robot", lambda: f"no robot {quote(rid, 64)} here; robots: {', '.join(self.world.robots)}")
+            self.report.reject(
+                rid,
+                parsed.leaf,
+                "unknown_robot",
+                lambda: f"no robot {quote(rid, 64)} here; robots: {', '.join(self.world.robots)}",
+            )
             return
         try:
             cmd = decode(sample.payload.to_bytes(), Command)
@@ -167,8 +184,15 @@ class CommandPipeline:
             self._held = ""
             stopped, self._stopped = self._stopped, {}
         for rid, user in stopped.items():
-            self.report.reject(rid, "?", "held", "the sim held its robots and stopped this one before its command was done; "
-                                                 "it hears again: send the command again", user, code="resumed")
+            self.report.reject(
+                rid,
+                "?",
+                "held",
+                "the sim held its robots and stopped this one before its command was done; "
+                "it hears again: send the command again",
+                user,
+                code="resumed",
+            )
 
     def apply(self, key: str, cmd: Command) -> None:
         """Admit and apply one decoded command now, in the caller's thread."""
@@ -217,8 +241,14 @@ class CommandPipeline:
             return False
         refusal = self._gate_refusal(rid, cmd)
         if refusal:
-            self.report.reject(rid, name, refusal, f"the gate refused {cmd.user}'s {name} command (epoch {cmd.epoch}) as it was applied",
-                               cmd.user, code="refused")
+            self.report.reject(
+                rid,
+                name,
+                refusal,
+                f"the gate refused {cmd.user}'s {name} command (epoch {cmd.epoch}) as it was applied",
+                cmd.user,
+                code="refused",
+            )
             return False
         return True
 
@@ -240,14 +270,24 @@ class CommandPipeline:
             return None
         rid, name, sender = parsed.subject, parsed.leaf, parsed.user
         if rid not in self.world.robots:
-            self.report.reject(rid, name, "unknown_robot", lambda: f"no robot {quote(rid, 64)} here; robots: {', '.join(self.world.robots)}",
-                               cmd.user)
+            self.report.reject(
+                rid,
+                name,
+                "unknown_robot",
+                lambda: f"no robot {quote(rid, 64)} here; robots: {', '.join(self.world.robots)}",
+                cmd.user,
+            )
             return None
         if cmd.user != sender:
             # the key names the sender (a router's access control vouches for it); a payload claiming
             # someone else is a forgery or a bug, never a command
-            self.report.reject(rid, name, "user_mismatch", f"the command names {quote(cmd.user, 64)} but was sent on {quote(sender, 64)}'s key",
-                               sender if is_valid_user(sender) else "")
+            self.report.reject(
+                rid,
+                name,
+                "user_mismatch",
+                f"the command names {quote(cmd.user, 64)} but was sent on {quote(sender, 64)}'s key",
+                sender if is_valid_user(sender) else "",
+            )
             return None
         mismatch = body_mismatch(name, cmd.body)
         if mismatch:
@@ -258,8 +298,14 @@ class CommandPipeline:
             return None
         refusal = self._gate_refusal(rid, cmd)
         if refusal:
-            self.report.reject(rid, name, refusal, f"the gate refused {cmd.user}'s {name} command (epoch {cmd.epoch})", cmd.user,
-                               code="refused")
+            self.report.reject(
+                rid,
+                name,
+                refusal,
+                f"the gate refused {cmd.user}'s {name} command (epoch {cmd.epoch})",
+                cmd.user,
+                code="refused",
+            )
             return None
         return name
 
@@ -267,8 +313,17 @@ class CommandPipeline:
         held = self._held
         with self._queued:
             self._stopped[rid] = cmd.user  # told again when the sim hears again (resume)
-        self.report.reject(rid, name, "held", lambda: f"the sim holds its robots ({held}); {cmd.user}'s {name} command is refused "
-                                                      "until it hears the fabric again", cmd.user, code="held")
+        self.report.reject(
+            rid,
+            name,
+            "held",
+            lambda: (
+                f"the sim holds its robots ({held}); {cmd.user}'s {name} command is refused "
+                "until it hears the fabric again"
+            ),
+            cmd.user,
+            code="held",
+        )
 
     def _execute(self, rid: str, name: str, cmd: Command) -> None:
         applied = self._applied[rid]
@@ -286,8 +341,16 @@ class CommandPipeline:
         if clamp is not None:
             self.counters["clamped"] += 1
             self.report.event(
-                EventKind.CLAMP, rid, "out_of_range" if name == "joints" else "over_limit", user=cmd.user,
-                data={"command": name, "what": list(clamp.what), "requested": list(clamp.requested), "applied": list(clamp.applied)},
+                EventKind.CLAMP,
+                rid,
+                "out_of_range" if name == "joints" else "over_limit",
+                user=cmd.user,
+                data={
+                    "command": name,
+                    "what": list(clamp.what),
+                    "requested": list(clamp.requested),
+                    "applied": list(clamp.applied),
+                },
                 limit=f"clamp:{rid}",
             )
 
@@ -295,6 +358,9 @@ class CommandPipeline:
         handler = self._handlers[rid].get(name)
         if handler is None:
             robot = self.world.robots[rid]
-            raise CommandRejected("unsupported", f"robot {rid} ({robot.desc.name}) does not take {name} commands; "
-                                                 f"it takes {', '.join(self._handlers[rid]) or 'none'}")
+            raise CommandRejected(
+                "unsupported",
+                f"robot {rid} ({robot.desc.name}) does not take {name} commands; "
+                f"it takes {', '.join(self._handlers[rid]) or 'none'}",
+            )
         return handler(body)

@@ -98,8 +98,16 @@ class SimPeer:
         self._opened = False
         self._closed = False
         self.report = Reporter(fabric, world, self.counters)
-        self.commands = CommandPipeline(fabric, world, self.lock, self.gate, self.report, counters=self.counters, stop=self._stop,
-                                        others=lambda: bool(self.other_sims))
+        self.commands = CommandPipeline(
+            fabric,
+            world,
+            self.lock,
+            self.gate,
+            self.report,
+            counters=self.counters,
+            stop=self._stop,
+            others=lambda: bool(self.other_sims),
+        )
         self.mirror_feed: MirrorFeed | None = None  # the other sims' robots in this world, once open (mirror slots)
         self._declared: list[Any] = []  # what open() declared on the shared session: close() takes it away
 
@@ -213,7 +221,7 @@ class SimPeer:
         with self.lock:
             robots = [replace(r.describe(), sim=self.fabric.peer_id) for r in self.world.robots.values()]
             objects = []
-            for o in (self.world.scene.objects if self.objects else ()):
+            for o in self.world.scene.objects if self.objects else ():
                 pos, quat = self.world.objects.pose(o.id)
                 objects.append(ObjectInfo(o.id, o.kind, o.policy, pos, quat))
             return WorldInfo(
@@ -259,8 +267,12 @@ class SimPeer:
         obj = keys.parse(key).subject  # one subscription per scene object: never a made-up id
         if pose.frame not in ("world", ""):
             if self.objects:  # the objects' authority reports; a sim mirroring them drops it without a word
-                frame = pose.frame  # client text (up to the codec's string limit): quoted short, built only when reported
-                self.report.reject(obj, "pose", "bad_frame", lambda: f"object poses must be in the world frame, got {quote(frame)}")
+                frame = (
+                    pose.frame
+                )  # client text (up to the codec's string limit): quoted short, built only when reported
+                self.report.reject(
+                    obj, "pose", "bad_frame", lambda: f"object poses must be in the world frame, got {quote(frame)}"
+                )
             return
         try:
             with self.lock:

@@ -28,8 +28,17 @@ class Reporter:
     def _known(self, robot: str) -> bool:
         return robot in self.world.robots or robot in self.world.objects
 
-    def event(self, kind: str, robot: str, reason: str, *, user: str = "", severity: str = "warning", data: dict | None = None,
-              limit: str | None = None) -> None:
+    def event(
+        self,
+        kind: str,
+        robot: str,
+        reason: str,
+        *,
+        user: str = "",
+        severity: str = "warning",
+        data: dict | None = None,
+        limit: str | None = None,
+    ) -> None:
         """Publish an event on ``event/{kind}/{robot}`` (``event/{kind}`` for ids this sim does not have).
 
         ``limit``: a rate-limit key of fixed words (fabric.reports.Reports.should_report), checked before
@@ -42,13 +51,26 @@ class Reporter:
                 data = {**(data or {}), "suppressed": suppressed}
         key_parts = (kind, robot) if self._known(robot) else (kind,)
         ev = Event(
-            kind=kind, reason=reason, object=robot, user=user, severity=severity, data=data or {},
+            kind=kind,
+            reason=reason,
+            object=robot,
+            user=user,
+            severity=severity,
+            data=data or {},
             header=self.fabric.header("event", stamp=self.world.time),
         )
         self.fabric.reports.emit(ev, *key_parts)
 
-    def reject(self, robot: str, command: str, reason: str | Callable[[], str], detail: str | Callable[[], str], user: str = "",
-               *, code: str | None = None) -> None:
+    def reject(
+        self,
+        robot: str,
+        command: str,
+        reason: str | Callable[[], str],
+        detail: str | Callable[[], str],
+        user: str = "",
+        *,
+        code: str | None = None,
+    ) -> None:
         """Count and report a refusal. ``code`` (default ``reason``) is the counter and rate-limit name:
         a fixed word, never client text, so made-up users or ids cannot grow the counters. ``reason``
         and ``detail`` may be callables, built only when the refusal is reported."""
@@ -63,4 +85,10 @@ class Reporter:
         data = {"command": command, "code": code, "detail": detail() if callable(detail) else detail}
         if suppressed:
             data["suppressed"] = suppressed
-        self.event(EventKind.REJECT, robot if known else clip(robot, 64), reason() if callable(reason) else reason, user=user, data=data)
+        self.event(
+            EventKind.REJECT,
+            robot if known else clip(robot, 64),
+            reason() if callable(reason) else reason,
+            user=user,
+            data=data,
+        )

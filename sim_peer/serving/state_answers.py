@@ -61,6 +61,7 @@ class StateAnswers:
             if not ok:
                 self._counters["rate_limited"] += 1
             return ok
+
         return submit
 
     def close(self) -> None:

@@ -47,15 +47,22 @@ def gather_streams(world_name: str, world: SimWorld) -> dict[str, list[tuple[str
 class StreamLoops:
     """The stream groups of ``world`` and their rates (``rates`` over the defaults, then each group's own)."""
 
-    def __init__(self, fabric: Any, world: SimWorld, lock: threading.RLock, counters: Counter[str],
-                 rates: dict[str, float] | None = None) -> None:
+    def __init__(
+        self,
+        fabric: Any,
+        world: SimWorld,
+        lock: threading.RLock,
+        counters: Counter[str],
+        rates: dict[str, float] | None = None,
+    ) -> None:
         self.fabric, self.world, self.lock, self.counters = fabric, world, lock, counters
         self.rates = {**DEFAULT_RATES, **(rates or {})}
         self.groups = gather_streams(fabric.world, world)
         for group, entries in self.groups.items():
             self.rates.setdefault(group, entries[0][1].hz)
-        self.phases = phases({g: self.rates[g] for g in self.groups},
-                             {g: len(_robots(entries)) for g, entries in self.groups.items()})
+        self.phases = phases(
+            {g: self.rates[g] for g in self.groups}, {g: len(_robots(entries)) for g, entries in self.groups.items()}
+        )
         """Each group's phases: its loop ticks ``rate * phases`` times a second, each robot on one tick in that many."""
         self._loops: list[RateLoop] = []
 
@@ -77,8 +84,11 @@ class StreamLoops:
         origin, offsets = clock.now(), self.offsets()
         for group, entries in self.groups.items():
             tick = self._guard(group, self._publisher(_dealt(entries, self.phases[group])))
-            self._loops.append(RateLoop(self.loop_rate(group), tick, clock=clock, name=f"sim-{group}",
-                                        start_at=origin + offsets[group]).start())
+            self._loops.append(
+                RateLoop(
+                    self.loop_rate(group), tick, clock=clock, name=f"sim-{group}", start_at=origin + offsets[group]
+                ).start()
+            )
 
     def stop(self) -> None:
         for loop in self._loops:

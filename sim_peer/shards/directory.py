@@ -33,8 +33,15 @@ class ShardDirectory:
     Its own lock guards the shards learnt and the learning flags; it calls none of those collaborators while holding
     it, so a caller holding its own lock may call in. ``mine`` is replaced whole (a frozenset), never changed."""
 
-    def __init__(self, fabric: Fabric, mine: Iterable[str], *, live: Callable[[], frozenset[str]],
-                 stopping: threading.Event, on_learnt: Callable[[frozenset[str]], None]) -> None:
+    def __init__(
+        self,
+        fabric: Fabric,
+        mine: Iterable[str],
+        *,
+        live: Callable[[], frozenset[str]],
+        stopping: threading.Event,
+        on_learnt: Callable[[frozenset[str]], None],
+    ) -> None:
         self.fabric = fabric
         self.mine = frozenset(mine)
         self._live = live
@@ -70,15 +77,25 @@ class ShardDirectory:
 
     def answer(self, role: str) -> Event:
         """This sim's answer to a shard query, primary or standby: its robots."""
-        return Event(kind=SHARD_QUERY, reason=role, object="", data={"robots": sorted(self.mine)},
-                     header=Header(wall_ns=time.time_ns(), source=self.fabric.peer_id))
+        return Event(
+            kind=SHARD_QUERY,
+            reason=role,
+            object="",
+            data={"robots": sorted(self.mine)},
+            header=Header(wall_ns=time.time_ns(), source=self.fabric.peer_id),
+        )
 
     def learn(self) -> None:
         """Ask every live sim which robots it serves (``srv/state`` with a shard query; standbys answer too)."""
         f = self.fabric
         try:
-            replies = f.rpc.query(keys.srv(f.world, "state"), Event(kind=SHARD_QUERY, reason="ask"), timeout=1.0, expected=Event,
-                              all_replies=True)
+            replies = f.rpc.query(
+                keys.srv(f.world, "state"),
+                Event(kind=SHARD_QUERY, reason="ask"),
+                timeout=1.0,
+                expected=Event,
+                all_replies=True,
+            )
         except Exception:
             return  # nobody else (or closing): unknown sims count as ours
         live = self._live()  # before taking our lock: the election's shell guards its live sims with its own

@@ -35,9 +35,28 @@ from fabric.codec import decode, encode
 from fabric.interfaces import Event, Header, OwnershipRecord, RobotState, WorldState
 from robots.description import SceneRobot
 
-__all__ = ["MOVE_OUT", "MOVE_IN", "MOVE_CHECK", "MOVE_PREPARE", "MOVE_FETCH", "Handoff", "HandedOut", "MoveError",
-           "move_term", "merge_records", "merge_users", "to_event", "from_event", "check_handoff", "fetch_refusal",
-           "take_back_refusal", "step", "ask", "NoAnswer", "move"]
+__all__ = [
+    "MOVE_OUT",
+    "MOVE_IN",
+    "MOVE_CHECK",
+    "MOVE_PREPARE",
+    "MOVE_FETCH",
+    "Handoff",
+    "HandedOut",
+    "MoveError",
+    "move_term",
+    "merge_records",
+    "merge_users",
+    "to_event",
+    "from_event",
+    "check_handoff",
+    "fetch_refusal",
+    "take_back_refusal",
+    "step",
+    "ask",
+    "NoAnswer",
+    "move",
+]
 
 MOVE_OUT = "move_out"
 """``Event.kind`` of a ``srv/move`` query asking the robot's sim to stop serving it and keep it for the target."""
@@ -137,8 +156,18 @@ def check_handoff(h: Handoff, robot: str, source: str, term: int) -> None:
         raise MoveError(f"robot {robot} was handed out at term {h.term}, not at the move's term {term}")
 
 
-def step(kind: str, robot: str, *, to: str = "", source: str = "", term: int = 0, move_id: str = "", rtype: str = "",
-         asker: str = "", decline: bool = False) -> Event:
+def step(
+    kind: str,
+    robot: str,
+    *,
+    to: str = "",
+    source: str = "",
+    term: int = 0,
+    move_id: str = "",
+    rtype: str = "",
+    asker: str = "",
+    decline: bool = False,
+) -> Event:
     """One step of a move as a ``srv/move`` query or answer (no handoff in it: see :func:`to_event`)."""
     data: dict[str, Any] = {"to": to, "from": source, "term": int(term), "move": move_id}
     if rtype:
@@ -154,7 +183,9 @@ def move_term(source_term: int, target_term: int) -> int:
     return max(int(source_term), int(target_term)) + 1
 
 
-def merge_records(records: tuple[OwnershipRecord, ...], add: OwnershipRecord | None = None, drop: str = "") -> tuple[OwnershipRecord, ...]:
+def merge_records(
+    records: tuple[OwnershipRecord, ...], add: OwnershipRecord | None = None, drop: str = ""
+) -> tuple[OwnershipRecord, ...]:
     """A sim's exported records with ``drop``'s left out and ``add`` put in (replacing one of its object)."""
     out = [r for r in records if r.object != drop and (add is None or r.object != add.object)]
     if add is not None:
@@ -175,29 +206,47 @@ def merge_users(users: Mapping[str, Any], moved: Mapping[str, Any]) -> dict[str,
     own (join order is each authority's), its liveness and absence as the source knew them."""
     out = dict(users)
     nxt = int(out.get("next_rank", 0))
-    for key in sorted(moved, key=lambda k: (not str(k).startswith("rank:"), moved[k] if str(k).startswith("rank:") else 0, str(k))):
+    for key in sorted(
+        moved, key=lambda k: (not str(k).startswith("rank:"), moved[k] if str(k).startswith("rank:") else 0, str(k))
+    ):
         kind, _, user = str(key).partition(":")
         if kind == "rank":
             if f"rank:{user}" not in out:
                 out[f"rank:{user}"] = nxt
                 nxt += 1
-        elif key not in out and not (kind == "away" and f"live:{user}" in out) and not (kind == "live" and f"away:{user}" in out):
+        elif (
+            key not in out
+            and not (kind == "away" and f"live:{user}" in out)
+            and not (kind == "live" and f"away:{user}" in out)
+        ):
             out[key] = moved[key]
     out["next_rank"] = nxt
     return out
 
 
-def to_event(kind: str, robot: str, to: str, handoff: Handoff | None = None, *, term: int = 0, source: str = "") -> Event:
+def to_event(
+    kind: str, robot: str, to: str, handoff: Handoff | None = None, *, term: int = 0, source: str = ""
+) -> Event:
     """The ``srv/state`` query (or answer) of one step of a move. A handoff travels as a one-robot
     :class:`~fabric.interfaces.WorldState` (its state, its record, its users, its sequence numbers), encoded in
     ``data["handoff"]`` (an event's data holds scalars only), its placement beside it."""
     data: dict[str, Any] = {"to": to, "term": int(term)}
     if handoff is not None:
-        ws = WorldState(0.0, 0, (handoff.state,), (), (handoff.record,) if handoff.record is not None else (), dict(handoff.users),
-                        {str(k): int(v) for k, v in handoff.seqs.items()}, header=Header(source=handoff.source, term=int(handoff.term)))
+        ws = WorldState(
+            0.0,
+            0,
+            (handoff.state,),
+            (),
+            (handoff.record,) if handoff.record is not None else (),
+            dict(handoff.users),
+            {str(k): int(v) for k, v in handoff.seqs.items()},
+            header=Header(source=handoff.source, term=int(handoff.term)),
+        )
         p = handoff.placement
         data.update(handoff=base64.b64encode(encode(ws)).decode("ascii"), type=p.type, pose=[float(v) for v in p.pose])
-    return Event(kind=kind, reason="move", object=robot, data=data, header=Header(wall_ns=time.time_ns(), source=source))
+    return Event(
+        kind=kind, reason="move", object=robot, data=data, header=Header(wall_ns=time.time_ns(), source=source)
+    )
 
 
 def from_event(ev: Event) -> Handoff:
@@ -208,10 +257,22 @@ def from_event(ev: Event) -> Handoff:
         (state,) = ws.robots
         record = ws.records[0] if ws.records else None
         pose = tuple(float(v) for v in d["pose"])
-        if state.id != ev.object or (record is not None and record.object != ev.object) or len(ws.records) > 1 or len(pose) != 4:
+        if (
+            state.id != ev.object
+            or (record is not None and record.object != ev.object)
+            or len(ws.records) > 1
+            or len(pose) != 4
+        ):
             raise ValueError("the robot's state, record and id disagree")
-        return Handoff(state, SceneRobot(str(d["type"]), ev.object, pose), record, dict(ws.users), dict(ws.seqs), ws.header.term,
-                       ws.header.source)
+        return Handoff(
+            state,
+            SceneRobot(str(d["type"]), ev.object, pose),
+            record,
+            dict(ws.users),
+            dict(ws.seqs),
+            ws.header.term,
+            ws.header.source,
+        )
     except Exception as exc:
         raise MoveError(f"no robot handed out in this move: {exc}") from None
 
@@ -227,7 +288,9 @@ def ask(fabric: Any, sim: str, login: str, request: Event, timeout: float) -> Ev
     except Refused as exc:
         raise MoveError(exc.reason) from None
     except NoReply:
-        raise NoAnswer(f"sim {sim} did not answer the {request.kind} step of {request.object} within {timeout:.0f} s") from None
+        raise NoAnswer(
+            f"sim {sim} did not answer the {request.kind} step of {request.object} within {timeout:.0f} s"
+        ) from None
 
 
 def move(fabric: Any, robot: str, to: str, *, timeout: float = 10.0) -> dict[str, Any]:
@@ -259,9 +322,11 @@ def move(fabric: Any, robot: str, to: str, *, timeout: float = 10.0) -> dict[str
     try:
         ask_(source, step(MOVE_CHECK, robot, to=to, source=source, term=term, asker=fabric.peer_id), CHECK_TIMEOUT_S)
     except NoAnswer:
-        raise MoveError(f"sim {source} did not answer on srv/move/{source}/by/{login} within {CHECK_TIMEOUT_S:.0f} s: moving "
-                        f"robots is for the instructor and sim logins (a class's router refuses login {login!r} there), or "
-                        f"sim {source} is older than this tool") from None
+        raise MoveError(
+            f"sim {source} did not answer on srv/move/{source}/by/{login} within {CHECK_TIMEOUT_S:.0f} s: moving "
+            f"robots is for the instructor and sim logins (a class's router refuses login {login!r} there), or "
+            f"sim {source} is older than this tool"
+        ) from None
     t0 = time.monotonic()
     out = ask_(source, step(MOVE_OUT, robot, to=to, source=source, term=term, asker=fabric.peer_id), timeout)
     move_id = str(out.data.get("move", "")) if isinstance(out.data, dict) else ""
@@ -269,9 +334,15 @@ def move(fabric: Any, robot: str, to: str, *, timeout: float = 10.0) -> dict[str
         ask_(to, step(MOVE_IN, robot, to=to, source=source, term=term, move_id=move_id, asker=fabric.peer_id), timeout)
     except MoveError as exc:
         try:  # the source takes it back, as it kept it
-            ask_(source, step(MOVE_IN, robot, to=source, source=source, term=term, move_id=move_id, asker=fabric.peer_id), timeout)
+            ask_(
+                source,
+                step(MOVE_IN, robot, to=source, source=source, term=term, move_id=move_id, asker=fabric.peer_id),
+                timeout,
+            )
         except MoveError as back:
-            raise MoveError(f"sim {to} refused {robot} ({exc}) and sim {source} did not take it back ({back}); sim {source} "
-                            f"takes it back by itself within {RETURN_AFTER_S:.0f} s if sim {to} never fetched it") from None
+            raise MoveError(
+                f"sim {to} refused {robot} ({exc}) and sim {source} did not take it back ({back}); sim {source} "
+                f"takes it back by itself within {RETURN_AFTER_S:.0f} s if sim {to} never fetched it"
+            ) from None
         raise MoveError(f"sim {to} refused {robot}: {exc}; it stays with sim {source}") from None
     return {"robot": robot, "from": source, "to": to, "term": term, "pause_ms": (time.monotonic() - t0) * 1000.0}

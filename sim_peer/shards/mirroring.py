@@ -56,8 +56,16 @@ class MirrorFeed:
     ``describe()`` answers the world's description (the union of every sim's part); ``lock`` is the lock the
     sim steps its world under; ``clock`` is monotonic seconds (tests pass their own)."""
 
-    def __init__(self, fab: Any, world: SimWorld, lock: threading.RLock, *, describe: Callable[[], WorldInfo] | None = None,
-                 stale_s: float = STALE_S, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        fab: Any,
+        world: SimWorld,
+        lock: threading.RLock,
+        *,
+        describe: Callable[[], WorldInfo] | None = None,
+        stale_s: float = STALE_S,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.fab, self.world, self.lock = fab, world, lock
         self.stale_s = stale_s
         self._clock = clock
@@ -71,10 +79,20 @@ class MirrorFeed:
         self._seen: dict[str, float] = {}  # robot -> when its last pose arrived here
         self._asked_at = float("-inf")
         self._asking = False
-        self._departed: set[str] = set()  # sims whose token went: their poses still in flight must not show a mirror again
+        self._departed: set[str] = (
+            set()
+        )  # sims whose token went: their poses still in flight must not show a mirror again
         self._state = threading.Lock()
         self.lag_ms: deque[float] = deque(maxlen=MAX_LAGS)  # a pose's age on arrival, by the sender's clock
-        self.counters = {"poses": 0, "joints": 0, "unknown": 0, "shown": 0, "hidden": 0, "unmirrorable": 0, "unslotted": 0}
+        self.counters = {
+            "poses": 0,
+            "joints": 0,
+            "unknown": 0,
+            "shown": 0,
+            "hidden": 0,
+            "unmirrorable": 0,
+            "unslotted": 0,
+        }
         self._closed = False
         self._stop = threading.Event()
         self._subs = [
@@ -101,7 +119,12 @@ class MirrorFeed:
         follow: dict[str, ArmShape] = {}
         if info is not None:
             for r in info.robots:
-                if not facts(r.kind).chain or r.id in self.world.robots or r.id in self._shapes or len(self._shapes) + len(follow) >= MAX_ARMS:
+                if (
+                    not facts(r.kind).chain
+                    or r.id in self.world.robots
+                    or r.id in self._shapes
+                    or len(self._shapes) + len(follow) >= MAX_ARMS
+                ):
                     continue
                 try:
                     follow[r.id] = arm_shape(r)
@@ -117,8 +140,9 @@ class MirrorFeed:
                 return
             self._shapes.update(follow)
         for rid in follow:  # declared here, in this thread: never from a subscriber callback
-            sub = self.fab.subscribe(keys.robot_joints(self.fab.world, rid), self._on_joints, expected=JointState,
-                                     remote_only=True)
+            sub = self.fab.subscribe(
+                keys.robot_joints(self.fab.world, rid), self._on_joints, expected=JointState, remote_only=True
+            )
             with self._state:
                 closed = self._closed
                 if not closed:
@@ -154,8 +178,14 @@ class MirrorFeed:
                 if pose.header.source in self._departed:  # sent just before its sim left, arriving just after
                     return
             was = self.world.mirrors.holds(robot)
-            shown = self.world.mirror(robot, radius=info.base.radius, height=info.base.height or 0.3,
-                                      position=pose.position, quaternion=pose.quaternion, source=pose.header.source or info.sim)
+            shown = self.world.mirror(
+                robot,
+                radius=info.base.radius,
+                height=info.base.height or 0.3,
+                position=pose.position,
+                quaternion=pose.quaternion,
+                source=pose.header.source or info.sim,
+            )
         if shown:
             with self._state:
                 self._seen[robot] = self._clock()
@@ -208,9 +238,16 @@ class MirrorFeed:
                 return
             self._unslotted.add(robot)
         self.counters["unslotted"] += 1
-        log.warning("cannot mirror %s (simulated by %s): it needs %d mirror slot%s and %d of %d are free; this sim's "
-                    "sensors do not see it. Start the sim with a larger --mirrors (docs/sim.md)", robot, source or "another sim",
-                    needed, "" if needed == 1 else "s", mirrors.free, mirrors.slots)
+        log.warning(
+            "cannot mirror %s (simulated by %s): it needs %d mirror slot%s and %d of %d are free; this sim's "
+            "sensors do not see it. Start the sim with a larger --mirrors (docs/sim.md)",
+            robot,
+            source or "another sim",
+            needed,
+            "" if needed == 1 else "s",
+            mirrors.free,
+            mirrors.slots,
+        )
 
     def _on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
         if alive:
@@ -261,8 +298,10 @@ class MirrorFeed:
             return lags[min(len(lags) - 1, int(round(p / 100 * (len(lags) - 1))))] if lags else float("nan")
 
         c = self.counters
-        return (f"mirrors: {c['shown']} shown, {c['hidden']} hidden, {self.world.mirrors.refused} without a slot; pose age on arrival "
-                f"p50 {q(50):.1f} ms, p99 {q(99):.1f} ms over {len(lags)} poses")
+        return (
+            f"mirrors: {c['shown']} shown, {c['hidden']} hidden, {self.world.mirrors.refused} without a slot; pose age on arrival "
+            f"p50 {q(50):.1f} ms, p99 {q(99):.1f} ms over {len(lags)} poses"
+        )
 
     def close(self) -> None:
         if self._closed:

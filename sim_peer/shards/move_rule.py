@@ -34,8 +34,16 @@ def mover_refusal(me: str, *, serving: bool, can_rebuild: bool, standbys: Sequen
     return ""
 
 
-def move_out_refusal(rid: str, to: str, me: str, *, robots: Collection[str], handed_out: Collection[str],
-                     live: Collection[str], world: str) -> str:
+def move_out_refusal(
+    rid: str,
+    to: str,
+    me: str,
+    *,
+    robots: Collection[str],
+    handed_out: Collection[str],
+    live: Collection[str],
+    world: str,
+) -> str:
     """Why source ``me`` may not hand ``rid`` out to ``to`` ('' : it may ask ``to``)."""
     if rid not in robots:
         return f"sim {me} does not serve robot {rid}"

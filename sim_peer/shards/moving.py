@@ -77,10 +77,18 @@ class Rebuilder(Protocol):
 class MoveService:
     """The steps of a move as one sim answers them, and the robots it handed out and keeps."""
 
-    def __init__(self, fabric: "Fabric", server: Rebuilder, *, serving_lock: threading.RLock,
-                 election: Callable[[], el.Election], live: Callable[[], frozenset[str]],
-                 standbys: Callable[[Iterable[str]], list[str]], announce: Callable[[str], None],
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        fabric: "Fabric",
+        server: Rebuilder,
+        *,
+        serving_lock: threading.RLock,
+        election: Callable[[], el.Election],
+        live: Callable[[], frozenset[str]],
+        standbys: Callable[[Iterable[str]], list[str]],
+        announce: Callable[[str], None],
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.fabric = fabric
         self.server = server
         self.lock = serving_lock  # the server's: what it serves and the robots handed out change together
@@ -116,8 +124,15 @@ class MoveService:
         f.counters["moves_refused"] += 1
         kind = request.kind if isinstance(request, Event) and request.kind in ho.STEPS else "other"
         robot = request.object if isinstance(request, Event) else ""
-        ev = Event(kind=EventKind.MOVE_REFUSED, reason=clip(reason, 400), object=clip(str(robot), 64), user=clip(asker, 64),
-                   severity="warning", data={"step": kind}, header=f.header("event"))
+        ev = Event(
+            kind=EventKind.MOVE_REFUSED,
+            reason=clip(reason, 400),
+            object=clip(str(robot), 64),
+            user=clip(asker, 64),
+            severity="warning",
+            data={"step": kind},
+            header=f.header("event"),
+        )
         if self._election().role == el.PRIMARY:
             f.reports.emit(ev, "move", limit=f"move_refused:{kind}")  # kind: a fixed word, never client text
         else:
@@ -158,8 +173,12 @@ class MoveService:
 
     def _check_mover(self) -> None:
         """Raise unless this sim may move robots in or out now (call with the lock held)."""
-        why = mr.mover_refusal(self.fabric.peer_id, serving=self._election().role == el.PRIMARY and self.server.serving,
-                               can_rebuild=self.server.rebuild is not None, standbys=self._standbys(self._live()))
+        why = mr.mover_refusal(
+            self.fabric.peer_id,
+            serving=self._election().role == el.PRIMARY and self.server.serving,
+            can_rebuild=self.server.rebuild is not None,
+            standbys=self._standbys(self._live()),
+        )
         if why:
             raise ServiceError(why)
 
@@ -181,8 +200,15 @@ class MoveService:
         me = self.fabric.peer_id
         with self.lock:
             self._check_mover()
-            why = mr.move_out_refusal(rid, to, me, robots=self.server.world.robots, handed_out=self.handed_out, live=self._live(),
-                                      world=self.fabric.world)
+            why = mr.move_out_refusal(
+                rid,
+                to,
+                me,
+                robots=self.server.world.robots,
+                handed_out=self.handed_out,
+                live=self._live(),
+                world=self.fabric.world,
+            )
             if why:
                 raise ho.MoveError(why)
             my_term, rtype = self._election().term, self.server.world.robots[rid].desc.name
@@ -193,12 +219,19 @@ class MoveService:
             raise ho.MoveError(f"sim {to} did not say its term")
         want = ho.move_term(my_term, theirs)
         if term != want:
-            raise ho.MoveError(f"move term {term} is not the one the election gives ({want}: above sim {me}'s term {my_term} "
-                               f"and sim {to}'s {theirs}): ask again")
+            raise ho.MoveError(
+                f"move term {term} is not the one the election gives ({want}: above sim {me}'s term {my_term} "
+                f"and sim {to}'s {theirs}): ask again"
+            )
         with self.lock:
             self._check_mover()
-            if not mr.unchanged(rid, term=self._election().term, asked_at_term=my_term, robots=self.server.world.robots,
-                                handed_out=self.handed_out):
+            if not mr.unchanged(
+                rid,
+                term=self._election().term,
+                asked_at_term=my_term,
+                robots=self.server.world.robots,
+                handed_out=self.handed_out,
+            ):
                 raise ho.MoveError(f"sim {me} changed while sim {to} was asked: ask again")
             return self._hand_out(rid, to, term, asker)
 
@@ -242,10 +275,18 @@ class MoveService:
         robot = next(r for r in state.robots if r.id == rid)
         record = next((r for r in state.records if r.object == rid), None)
         seqs = self.fabric.seqs.under(keys.world_root(self.fabric.world) + f"/robot/{rid}/")
-        handoff = ho.Handoff(robot, replace(placements[rid], type=rtype), record, ho.named_users(state.users, record), seqs, term, me)
-        rest = replace(state, robots=tuple(r for r in state.robots if r.id != rid), records=ho.merge_records(state.records, drop=rid))
+        handoff = ho.Handoff(
+            robot, replace(placements[rid], type=rtype), record, ho.named_users(state.users, record), seqs, term, me
+        )
+        rest = replace(
+            state,
+            robots=tuple(r for r in state.robots if r.id != rid),
+            records=ho.merge_records(state.records, drop=rid),
+        )
         try:
-            ho.from_event(decode(encode(ho.to_event(ho.MOVE_FETCH, rid, to, handoff, term=term, source=me)), Event))  # it can travel
+            ho.from_event(
+                decode(encode(ho.to_event(ho.MOVE_FETCH, rid, to, handoff, term=term, source=me)), Event)
+            )  # it can travel
             self.server.serve_rebuilt(rest_world, rest, term, {})
         except Exception as exc:
             log.exception("handing %s out failed", rid)
@@ -257,8 +298,10 @@ class MoveService:
         timer.daemon = True
         timer.start()
         self._timers.append(timer)
-        self.announce(f"sim {me}: handed {rid} out to {to} (term {term}) in {(self.clock() - t0) * 1000:.0f} ms"
-                   + (f", asked by {asker}" if asker else ""))
+        self.announce(
+            f"sim {me}: handed {rid} out to {to} (term {term}) in {(self.clock() - t0) * 1000:.0f} ms"
+            + (f", asked by {asker}" if asker else "")
+        )
         return ho.step(ho.MOVE_OUT, rid, to=to, source=me, term=term, move_id=move_id, asker=me)
 
     def _move_in(self, rid: str, source: str, term: int, move_id: str, asker: str) -> Event:
@@ -272,8 +315,11 @@ class MoveService:
             why = mr.move_in_refusal(rid, me, term=term, my_term=self._election().term, robots=self.server.world.robots)
             if why:
                 raise ho.MoveError(why)
-        handoff = ho.from_event(self._ask_sim(source, ho.step(ho.MOVE_FETCH, rid, to=me, source=source, term=term,
-                                                              move_id=move_id, asker=me)))
+        handoff = ho.from_event(
+            self._ask_sim(
+                source, ho.step(ho.MOVE_FETCH, rid, to=me, source=source, term=term, move_id=move_id, asker=me)
+            )
+        )
         try:
             ho.check_handoff(handoff, rid, source, term)
             desc = robots.installed(handoff.placement.type)  # a name: the operator's installed robot, never a path
@@ -291,8 +337,10 @@ class MoveService:
     def _give_back(self, source: str, rid: str, term: int, move_id: str) -> None:
         me = self.fabric.peer_id
         try:
-            self._ask_sim(source, ho.step(ho.MOVE_FETCH, rid, to=me, source=source, term=term, move_id=move_id, asker=me,
-                                          decline=True))
+            self._ask_sim(
+                source,
+                ho.step(ho.MOVE_FETCH, rid, to=me, source=source, term=term, move_id=move_id, asker=me, decline=True),
+            )
         except ho.MoveError as exc:
             log.warning("could not give %s back to sim %s: %s", rid, source, exc)
 
@@ -303,16 +351,22 @@ class MoveService:
         rid = handoff.state.id
         world = self._rebuild([*self.server.world.placements.values(), placement])
         state, placements = self.server.stop_serving()
-        full = replace(state, robots=(*state.robots, handoff.state), records=ho.merge_records(state.records, add=handoff.record),
-                       users=ho.merge_users(state.users, handoff.users))
+        full = replace(
+            state,
+            robots=(*state.robots, handoff.state),
+            records=ho.merge_records(state.records, add=handoff.record),
+            users=ho.merge_users(state.users, handoff.users),
+        )
         try:
             self.server.serve_rebuilt(world, full, term, dict(handoff.seqs))
         except Exception as exc:
             log.exception("taking %s in failed", rid)
             self.server.serve_again(placements, state, self._election().term)
             raise ServiceError(f"sim {me} could not serve {rid} ({exc}); it serves what it served") from None
-        self.announce(f"sim {me}: took {rid} in from {handoff.source or 'another sim'} (term {term}) in "
-                   f"{(self.clock() - t0) * 1000:.0f} ms" + (f", asked by {asker}" if asker else ""))
+        self.announce(
+            f"sim {me}: took {rid} in from {handoff.source or 'another sim'} (term {term}) in "
+            f"{(self.clock() - t0) * 1000:.0f} ms" + (f", asked by {asker}" if asker else "")
+        )
 
     def _take_back(self, rid: str, move_id: str | None, asker: str) -> Event:
         """The source serves a robot it handed out again, as it kept it (``move_id`` None: its own timer)."""
@@ -335,12 +389,18 @@ class MoveService:
         died between its steps) is served here again."""
         with self.lock:
             kept = self.handed_out.get(rid)
-            if not mr.unclaimed(closed=self.server.closed, kept_move=kept.move if kept is not None else None, move_id=move_id,
-                                fetched=kept is not None and kept.fetched):
+            if not mr.unclaimed(
+                closed=self.server.closed,
+                kept_move=kept.move if kept is not None else None,
+                move_id=move_id,
+                fetched=kept is not None and kept.fetched,
+            ):
                 return
         try:
             self._take_back(rid, None, "")
         except (ServiceError, ho.MoveError) as exc:
             log.warning("could not serve %s again after its move: %s", rid, exc)
             return
-        self.announce(f"sim {self.fabric.peer_id}: no sim took {rid} within {ho.RETURN_AFTER_S:.0f} s; serving it again")
+        self.announce(
+            f"sim {self.fabric.peer_id}: no sim took {rid} within {ho.RETURN_AFTER_S:.0f} s; serving it again"
+        )

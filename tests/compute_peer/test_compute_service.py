@@ -23,7 +23,9 @@ Q = np.array([0.3, 0.2, -0.4, 0.5, 0.6, -0.2])
 @pytest.fixture
 def served(world, connect):
     comp = connect("compute", "c1")
-    with KinematicsService(comp, arms={"arm1": ArmPlacement("meca500", BASE)}, streams=[("arm1", "target")], discover=False) as svc:
+    with KinematicsService(
+        comp, arms={"arm1": ArmPlacement("meca500", BASE)}, streams=[("arm1", "target")], discover=False
+    ) as svc:
         user = connect("user", "alice")
         yield svc, comp, user
 
@@ -107,9 +109,14 @@ def test_a_chosen_peer_answers_on_its_own_key(world, connect):
     ]
     user = connect("user", "bob")
     try:
-        wait_until(lambda: all(_answers(user, keys.srv(world, "fk", "arm1", pid), FKRequest(Q)) for pid in ("c1", "c2")), what="both peers")
+        wait_until(
+            lambda: all(_answers(user, keys.srv(world, "fk", "arm1", pid), FKRequest(Q)) for pid in ("c1", "c2")),
+            what="both peers",
+        )
         fk = user.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
-        everyone = user.rpc.query(keys.srv(world, "ik", "arm1"), IKRequest.make(fk.position, fk.quaternion, Q), all_replies=True, timeout=5.0)
+        everyone = user.rpc.query(
+            keys.srv(world, "ik", "arm1"), IKRequest.make(fk.position, fk.quaternion, Q), all_replies=True, timeout=5.0
+        )
         assert sorted(r.source for r in everyone) == ["c1", "c2"]
         for pid in ("c1", "c2"):
             rep = user.rpc.call(keys.srv(world, "ik", "arm1", pid), IKRequest.make(fk.position, fk.quaternion, Q))
@@ -126,7 +133,9 @@ def test_ik_streaming_follows_the_target(served, world):
     user.subscribe(keys.robot_stream(world, "arm1", "ik"), lambda k, m: got.append(m))
     user.subscribe(keys.event_all(world), lambda k, m: events.append(m), expected=Event)
     q_now = np.array([0.1, 0.1, -0.2, 0.0, 0.3, 0.0])
-    user.publish(keys.robot_joints(world, "arm1"), JointState(tuple(f"joint_{i}" for i in range(1, 7)), q_now, np.zeros(6)))
+    user.publish(
+        keys.robot_joints(world, "arm1"), JointState(tuple(f"joint_{i}" for i in range(1, 7)), q_now, np.zeros(6))
+    )
     wait_until(lambda: "arm1" in svc.joints, what="joints seen by the service")
     goal = user.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q)).position
     user.publish(keys.object_pose(world, "target", "alice"), Pose(goal))
@@ -159,7 +168,12 @@ def test_compute_cli_refuses_bad_flags():
 
 @pytest.mark.slow
 def test_compute_cli_arm_flag_names_bad_arms():
-    for spec, words in (("arm1", "ID:TYPE"), ("arm1:reeman", "not an arm"), ("arm1:meca500@1,2", "3 or 4"), ("arm1:nope", "unknown robot type")):
+    for spec, words in (
+        ("arm1", "ID:TYPE"),
+        ("arm1:reeman", "not an arm"),
+        ("arm1:meca500@1,2", "3 or 4"),
+        ("arm1:nope", "unknown robot type"),
+    ):
         r = subprocess.run(robofabric_cmd("compute", "--arm", spec), capture_output=True, text=True, timeout=60)
         assert r.returncode == 2 and words in r.stderr, (spec, r.stderr)
 
@@ -169,10 +183,15 @@ def test_a_user_can_pick_a_compute_peer(world, router, connect):
     from user_peer import services
     from user_peer.api import World
 
-    svcs = {pid: KinematicsService(connect("compute", pid), arms={"arm1": ArmPlacement("meca500", BASE)}, discover=False) for pid in ("c1", "c2")}
+    svcs = {
+        pid: KinematicsService(connect("compute", pid), arms={"arm1": ArmPlacement("meca500", BASE)}, discover=False)
+        for pid in ("c1", "c2")
+    }
     try:
         with World(client_config(world, router[1]), "carol", compute="c2") as w:
-            wait_until(lambda: w.compute_peers() == ["c1", "c2"], what="both compute peers' tokens", seen=w.compute_peers)
+            wait_until(
+                lambda: w.compute_peers() == ["c1", "c2"], what="both compute peers' tokens", seen=w.compute_peers
+            )
             wait_until(lambda: _answers(w.fabric, keys.srv(world, "fk", "arm1", "c2"), FKRequest(Q)), what="c2 serving")
             fk = w.fabric.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
             for _ in range(3):
@@ -191,7 +210,12 @@ def test_navigation_answers_on_its_own_key_too(world, connect):
     navs = [NavigationService(connect("compute", pid), discover=False) for pid in ("n1", "n2")]
     user = connect("user", "dave")
     try:
-        wait_until(lambda: all(_answers(user, keys.srv(world, "map", "map", pid), MapRequest("status")) for pid in ("n1", "n2")), what="both peers")
+        wait_until(
+            lambda: all(
+                _answers(user, keys.srv(world, "map", "map", pid), MapRequest("status")) for pid in ("n1", "n2")
+            ),
+            what="both peers",
+        )
         for pid in ("n1", "n2"):
             rep = user.rpc.call(keys.srv(world, "map", "map", pid), MapRequest("status"), timeout=5.0)
             assert isinstance(rep, MapReply) and rep.header.source == pid
@@ -207,20 +231,32 @@ def test_a_user_can_spread_ik_over_every_compute_peer(world, router, connect):
     from user_peer import services
     from user_peer.api import World
 
-    svcs = {pid: KinematicsService(connect("compute", pid), arms={"arm1": ArmPlacement("meca500", BASE)}, discover=False) for pid in ("c1", "c2")}
+    svcs = {
+        pid: KinematicsService(connect("compute", pid), arms={"arm1": ArmPlacement("meca500", BASE)}, discover=False)
+        for pid in ("c1", "c2")
+    }
     try:
         with World(client_config(world, router[1]), "erin", compute="spread") as w:
-            wait_until(lambda: w.compute_peers() == ["c1", "c2"], what="both compute peers' tokens", seen=w.compute_peers)
-            wait_until(lambda: all(_answers(w.fabric, keys.srv(world, "fk", "arm1", p), FKRequest(Q)) for p in ("c1", "c2")), what="both serving")
+            wait_until(
+                lambda: w.compute_peers() == ["c1", "c2"], what="both compute peers' tokens", seen=w.compute_peers
+            )
+            wait_until(
+                lambda: all(_answers(w.fabric, keys.srv(world, "fk", "arm1", p), FKRequest(Q)) for p in ("c1", "c2")),
+                what="both serving",
+            )
             fk = w.fabric.rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q))
             for _ in range(4):
-                q = w.compute_route.ask(lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer))
+                q = w.compute_route.ask(
+                    lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer)
+                )
                 assert np.allclose(q, Q, atol=1e-9)
             assert svcs["c1"].counters["ik"] == 2 and svcs["c2"].counters["ik"] == 2
             assert w.compute_route.navigation_peer() is None  # maps are not spread: the nearest peer holds one
             svcs.pop("c2").close()  # c2 stops serving; its token stays with its session until the list is read again
             for _ in range(2):
-                q = w.compute_route.ask(lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer))
+                q = w.compute_route.ask(
+                    lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer)
+                )
                 assert np.allclose(q, Q, atol=1e-9)
             assert svcs["c1"].counters["ik"] == 4
     finally:
@@ -235,7 +271,9 @@ def test_robofabric_call_asks_a_service_from_the_command_line(served, world, rou
     ep = f"tcp/127.0.0.1:{router[1]}"
 
     def call(*args):
-        return subprocess.run(robofabric_cmd("call", *args, "--world", world, "--connect", ep), capture_output=True, text=True, timeout=60)
+        return subprocess.run(
+            robofabric_cmd("call", *args, "--world", world, "--connect", ep), capture_output=True, text=True, timeout=60
+        )
 
     out = call("srv/fk/arm1", "-t", "FKRequest", "-d", '{"q": [0, 0, 0, 0, 0, 0], "frame": "base"}', "--json")
     assert out.returncode == 0, out.stdout + out.stderr
@@ -262,7 +300,24 @@ def test_an_arm_asked_for_before_its_joints_arrive_is_looked_up_not_refused(worl
     try:
         sim = connect("sim")
         six = np.zeros(6)
-        info = WorldInfo(world, "test", 0.002, {}, (RobotInfo("arm1", "meca500", "arm", np.array(BASE), tuple(f"j{i}" for i in range(6)), six - 3, six + 3, six + 1),))
+        info = WorldInfo(
+            world,
+            "test",
+            0.002,
+            {},
+            (
+                RobotInfo(
+                    "arm1",
+                    "meca500",
+                    "arm",
+                    np.array(BASE),
+                    tuple(f"j{i}" for i in range(6)),
+                    six - 3,
+                    six + 3,
+                    six + 1,
+                ),
+            ),
+        )
         sim.rpc.serve(keys.srv(world, "world"), lambda key, req: info)
         user = connect("user")
         wait_until(lambda: user.rpc.call(keys.srv(world, "world"), timeout=1.0), timeout=10.0, what="the world served")
@@ -283,13 +338,17 @@ def test_the_service_starts_its_threads_on_start_not_on_construction(world, conn
     """Declared on construction (it answers at once); streaming and background lookups only once started."""
     sim = connect("sim")  # a sim's token (no srv/world): seen while declaring, it would set a lookup off
     streams = len(_threads("rate-ik-stream"))
-    svc = KinematicsService(connect("compute", "c9"), arms={"arm1": ArmPlacement("meca500", BASE)}, streams=[("arm1", "target")])
+    svc = KinematicsService(
+        connect("compute", "c9"), arms={"arm1": ArmPlacement("meca500", BASE)}, streams=[("arm1", "target")]
+    )
     try:
         wait_until(lambda: ("sim", sim.peer_id) in svc.fabric.live_peers("sim"), what="the sim's token")
         assert len(_threads("rate-ik-stream")) == streams
         # a lookup thread lives until its lookup has failed and been counted: neither means none ran
         assert not _threads("kinematics-discovery") and "discovery_failed" not in svc.counters, svc.counters
-        assert connect("user").rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q)).position.shape == (3,)  # serving already
+        assert connect("user").rpc.call(keys.srv(world, "fk", "arm1"), FKRequest(Q)).position.shape == (
+            3,
+        )  # serving already
         with svc as same:
             assert same is svc and len(_threads("rate-ik-stream")) == streams + 1
             wait_until(lambda: svc.counters.get("discovery_failed", 0) >= 1, what="the first lookup, in the background")

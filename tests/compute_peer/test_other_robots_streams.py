@@ -19,8 +19,10 @@ BURST = 200
 
 def _serve_world(sim, world: str) -> list[int]:
     """A sim describing one arm and one base; returns a list that grows by one per ``srv/world`` query."""
-    robots = (RobotInfo("arm1", "meca500", "arm", np.zeros(4), tuple(f"j{i}" for i in range(6)), SIX - 3, SIX + 3, SIX + 1),
-              RobotInfo("base1", "reeman", "mobile", np.zeros(4), ("left", "right"), np.zeros(2), np.zeros(2), np.zeros(2)))
+    robots = (
+        RobotInfo("arm1", "meca500", "arm", np.zeros(4), tuple(f"j{i}" for i in range(6)), SIX - 3, SIX + 3, SIX + 1),
+        RobotInfo("base1", "reeman", "mobile", np.zeros(4), ("left", "right"), np.zeros(2), np.zeros(2), np.zeros(2)),
+    )
     asked: list[int] = []
 
     def answer(key: str, req: object) -> WorldInfo:
@@ -52,7 +54,9 @@ def test_kinematics_passes_a_bases_wheel_joints_over_and_counts_an_undescribed_i
             ghosts += 1
             return False
 
-        wait_until(counted, timeout=20.0, interval=0.2, what="the arm's joints and the made-up id", seen=lambda: svc.counters)
+        wait_until(
+            counted, timeout=20.0, interval=0.2, what="the arm's joints and the made-up id", seen=lambda: svc.counters
+        )
         assert 1 <= svc.counters["unknown_robot"] <= ghosts, (ghosts, svc.counters)  # ghost9's only, never base1's
         assert set(svc.joints) == {"arm1"}
     finally:
@@ -69,7 +73,11 @@ def test_navigation_passes_an_arms_flange_pose_over_and_counts_an_undescribed_id
             user.publish(keys.robot_pose(world, "arm1"), Pose([0.2, 0.0, 0.9]))
         user.publish(keys.robot_pose(world, "ghost9"), Pose([0.0, 0.0, 0.0]))
         user.publish(keys.robot_pose(world, "base1"), Pose([1.0, 0.0, 0.0]))
-        wait_until(lambda: "base1" in nav.poses and nav.counters.get("unknown_robot", 0) >= 1, timeout=20.0,
-                   what="the base's pose and the made-up id", seen=lambda: nav.counters)
+        wait_until(
+            lambda: "base1" in nav.poses and nav.counters.get("unknown_robot", 0) >= 1,
+            timeout=20.0,
+            what="the base's pose and the made-up id",
+            seen=lambda: nav.counters,
+        )
         assert nav.counters["unknown_robot"] == 1, nav.counters  # ghost9 only, never arm1
         assert "arm1" not in nav.poses

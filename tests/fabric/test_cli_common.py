@@ -25,16 +25,44 @@ def test_the_flags_stand_at_the_join_parameter_and_come_back_as_one_joining():
     got: list[tuple[str, Joining, bool]] = []
 
     @join_flags()
-    def cmd(key: Annotated[str, typer.Argument()], join: Joining = Joining(),
-            loud: Annotated[bool, typer.Option("--loud")] = False) -> None:
+    def cmd(
+        key: Annotated[str, typer.Argument()],
+        join: Joining = Joining(),
+        loud: Annotated[bool, typer.Option("--loud")] = False,
+    ) -> None:
         got.append((key, join, loud))
 
-    result = CliRunner().invoke(_app(cmd), ["cmd", "robot/arm1/joints", "-w", "lab", "-e", "tcp/10.0.0.5:7447",
-                                            "-e", "tcp/10.0.0.6:7447", "--id", "tool-1", "--profile", "peer", "--loud"])
+    result = CliRunner().invoke(
+        _app(cmd),
+        [
+            "cmd",
+            "robot/arm1/joints",
+            "-w",
+            "lab",
+            "-e",
+            "tcp/10.0.0.5:7447",
+            "-e",
+            "tcp/10.0.0.6:7447",
+            "--id",
+            "tool-1",
+            "--profile",
+            "peer",
+            "--loud",
+        ],
+    )
     assert result.exit_code == 0, result.output
-    assert got == [("robot/arm1/joints", Joining("lab", ["tcp/10.0.0.5:7447", "tcp/10.0.0.6:7447"], None, "peer", None, "tool-1"), True)]
+    assert got == [
+        (
+            "robot/arm1/joints",
+            Joining("lab", ["tcp/10.0.0.5:7447", "tcp/10.0.0.6:7447"], None, "peer", None, "tool-1"),
+            True,
+        )
+    ]
     help_text = CliRunner().invoke(_app(cmd), ["cmd", "--help"], env={"COLUMNS": "200"}).output
-    order = [help_text.index(flag) for flag in ("--world", "--connect", "--listen", "--profile", "--zenoh-config", "--id", "--loud")]
+    order = [
+        help_text.index(flag)
+        for flag in ("--world", "--connect", "--listen", "--profile", "--zenoh-config", "--id", "--loud")
+    ]
     assert order == sorted(order), help_text
 
 

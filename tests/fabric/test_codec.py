@@ -99,7 +99,9 @@ events = st.builds(
 messages = st.one_of(joint_states(), poses, scans, paths, grids, commands, records, events)
 
 
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])  # no timing: CI shares its cores
+@settings(
+    max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow]
+)  # no timing: CI shares its cores
 @given(messages)
 def test_round_trip_is_exact(msg):
     back = decode(encode(msg))
@@ -116,7 +118,9 @@ def test_random_bytes_raise_only_decode_error(data):
         pass
 
 
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])  # no timing: CI shares its cores
+@settings(
+    max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow]
+)  # no timing: CI shares its cores
 @given(messages, st.data())
 def test_truncated_or_corrupted_payloads_raise_only_decode_error(msg, data):
     payload = bytearray(encode(msg))
@@ -134,7 +138,10 @@ def test_truncated_or_corrupted_payloads_raise_only_decode_error(msg, data):
 def test_scan_of_240_rays_fits_600_bytes():
     rng = np.random.default_rng(0)
     scan = Scan.from_ranges(
-        rng.random(240) * 12, angle_min=-1.178, angle_increment=0.00985, range_max=12.0,
+        rng.random(240) * 12,
+        angle_min=-1.178,
+        angle_increment=0.00985,
+        range_max=12.0,
         header=Header.now(stamp=12345.678, seq=2**31, source="sim-host-abcdef"),
     )
     assert len(encode(scan)) <= 600

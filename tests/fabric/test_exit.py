@@ -78,4 +78,7 @@ def test_a_forked_child_closes_what_is_registered_in_it_before_its_threads_are_j
         print("child exited", os.waitstatus_to_exitcode(status), flush=True)
     """)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.splitlines() == ["child's own", "inherited", "child exited 0", "inherited"], (out.stdout, out.stderr)
+    assert out.stdout.splitlines() == ["child's own", "inherited", "child exited 0", "inherited"], (
+        out.stdout,
+        out.stderr,
+    )

@@ -34,12 +34,22 @@ def test_term_round_trips_in_nested_records(term, source, seq):
     assert decode(encode(rec)).header.term == term
 
 
-@pytest.mark.parametrize("key,auth", [
-    ("rf/w/robot/arm1/joints", True), ("rf/w/robot/base1/scan", True), ("rf/w/robot/base1/path", False),
-    ("rf/w/own/arm1", True), ("rf/w/own/arm1/by/alice", False), ("rf/w/srv/world", True), ("rf/w/srv/state", True),
-    ("rf/w/srv/ik", False), ("rf/w/robot/arm1/cmd/joints/by/alice", False), ("rf/w/object/ball/pose/by/bob", False),
-    ("nonsense", False),
-])
+@pytest.mark.parametrize(
+    "key,auth",
+    [
+        ("rf/w/robot/arm1/joints", True),
+        ("rf/w/robot/base1/scan", True),
+        ("rf/w/robot/base1/path", False),
+        ("rf/w/own/arm1", True),
+        ("rf/w/own/arm1/by/alice", False),
+        ("rf/w/srv/world", True),
+        ("rf/w/srv/state", True),
+        ("rf/w/srv/ik", False),
+        ("rf/w/robot/arm1/cmd/joints/by/alice", False),
+        ("rf/w/object/ball/pose/by/bob", False),
+        ("nonsense", False),
+    ],
+)
 def test_authority_keys(key, auth):
     assert is_authority_key(key) is auth
 
@@ -120,7 +130,9 @@ def test_subscribers_drop_authority_state_of_a_lower_term(world, connect):
 
     sub.subscribe(ck, lambda k, m: cmds.append(m), expected=Path)
     user = connect("user", "alice")
-    wait_until(lambda: user.publish(ck, Path([0.0], [0.0], [0.0], header=user.header(ck))) and cmds, timeout=20, what="a path")
+    wait_until(
+        lambda: user.publish(ck, Path([0.0], [0.0], [0.0], header=user.header(ck))) and cmds, timeout=20, what="a path"
+    )
 
 
 def _put(fab, key, term):
@@ -137,13 +149,26 @@ def test_the_fence_resets_when_the_worlds_last_sim_leaves(world, connect):
     old = connect("sim", "sim-old")
     old.assume_term(2)
     wait_until(lambda: _put(old, key, 2) or any(m.header.term == 2 for m in got), timeout=20, what="term 2 heard")
-    wait_until(lambda: watcher.counters["fence_resets"] == 0 and watcher.sim_fence.sims == {"sim-old"}, timeout=20,
-               what="the watcher follows the sim tokens", seen=lambda: watcher.sim_fence.sims)
+    wait_until(
+        lambda: watcher.counters["fence_resets"] == 0 and watcher.sim_fence.sims == {"sim-old"},
+        timeout=20,
+        what="the watcher follows the sim tokens",
+        seen=lambda: watcher.sim_fence.sims,
+    )
     old.close()
-    wait_until(lambda: watcher.counters["fence_resets"] >= 1, timeout=20, what="the fence reset", seen=lambda: watcher.sim_fence.sims)
+    wait_until(
+        lambda: watcher.counters["fence_resets"] >= 1,
+        timeout=20,
+        what="the fence reset",
+        seen=lambda: watcher.sim_fence.sims,
+    )
     new = connect("sim", "sim-new")
     new.assume_term(1)
-    wait_until(lambda: _put(new, key, 1) or any(m.header.source == "sim-new" for m in got), timeout=20, what="term 1 believed again")
+    wait_until(
+        lambda: _put(new, key, 1) or any(m.header.source == "sim-new" for m in got),
+        timeout=20,
+        what="term 1 believed again",
+    )
     assert watcher.sim_fence.term("arm1") == 1
 
 
@@ -157,25 +182,50 @@ def test_a_departed_sims_late_samples_do_not_fence_out_a_new_sim(world, connect)
     old = connect("sim", "sim-old")
     old.assume_term(2)
     wait_until(lambda: _put(old, key, 2) or any(m.header.term == 2 for m in got), timeout=20, what="term 2 heard")
-    wait_until(lambda: watcher.sim_fence.sims == {"sim-old"}, timeout=20, what="the sim's token", seen=lambda: watcher.sim_fence.sims)
+    wait_until(
+        lambda: watcher.sim_fence.sims == {"sim-old"},
+        timeout=20,
+        what="the sim's token",
+        seen=lambda: watcher.sim_fence.sims,
+    )
     old.close()
-    wait_until(lambda: watcher.counters["fence_resets"] >= 1, timeout=20, what="the fence reset", seen=lambda: watcher.sim_fence.sims)
+    wait_until(
+        lambda: watcher.counters["fence_resets"] >= 1,
+        timeout=20,
+        what="the fence reset",
+        seen=lambda: watcher.sim_fence.sims,
+    )
     late = connect("tool", "sim-old")  # the departed sim's id and term, as a late sample carries them
     late.assume_term(2)
     stale = watcher.counters["stale_authority"]
-    wait_until(lambda: _put(late, key, 2) or watcher.counters["stale_authority"] > stale, timeout=20, what="the late sample dropped")
+    wait_until(
+        lambda: _put(late, key, 2) or watcher.counters["stale_authority"] > stale,
+        timeout=20,
+        what="the late sample dropped",
+    )
     assert watcher.sim_fence.term("arm1") == 0
     new = connect("sim", "sim-new")
     new.assume_term(1)
-    wait_until(lambda: _put(new, key, 1) or any(m.header.source == "sim-new" for m in got), timeout=20, what="term 1 believed again")
+    wait_until(
+        lambda: _put(new, key, 1) or any(m.header.source == "sim-new" for m in got),
+        timeout=20,
+        what="term 1 believed again",
+    )
     assert watcher.sim_fence.term("arm1") == 1
 
 
 def test_fenced_scopes_are_the_authority_scopes_of_authority_keys_and_none_for_others():
     from fabric.fencing import fenced_scopes
 
-    for key in ("rf/w/robot/arm1/joints", "rf/w/own/arm1", "rf/w/srv/world", "rf/w/robot/arm1/path", "rf/w/own/arm1/by/alice",
-                "rf/w/event/reject/arm1", "not a key"):
+    for key in (
+        "rf/w/robot/arm1/joints",
+        "rf/w/own/arm1",
+        "rf/w/srv/world",
+        "rf/w/robot/arm1/path",
+        "rf/w/own/arm1/by/alice",
+        "rf/w/event/reject/arm1",
+        "not a key",
+    ):
         expected = authority_scopes(key) if is_authority_key(key) else None
         assert fenced_scopes(key) == expected, key
     assert fenced_scopes("rf/w/robot/arm1/joints") == ("arm1",) and fenced_scopes("rf/w/robot/arm1/path") is None
@@ -188,8 +238,12 @@ def test_a_wildcard_query_hears_each_answer_on_its_own_key_fenced_by_its_scopes(
     asker = connect("tool", "asker")
     for fab, obj, term in ((new, "arm1", 2), (old, "base1", 1)):
         key = keys.own(world, obj)
-        fab.rpc.serve(key, lambda k, req, fab=fab, obj=obj, key=key, term=term:
-                  OwnershipRecord(obj, authority=fab.peer_id, header=Header(wall_ns=1, source=fab.peer_id, term=term)))
+        fab.rpc.serve(
+            key,
+            lambda k, req, fab=fab, obj=obj, key=key, term=term: OwnershipRecord(
+                obj, authority=fab.peer_id, header=Header(wall_ns=1, source=fab.peer_id, term=term)
+            ),
+        )
 
     def answered() -> int:  # both queryables reach the asker through the router in their own time
         try:

@@ -44,7 +44,9 @@ print(json.dumps({"start": start, "freed": freed, "after": rss_mb(), "trimmed": 
 
 @pytest.mark.slow  # runs a child interpreter, whose heap it measures
 def test_trim_gives_back_the_memory_threads_freed():
-    out = subprocess.run([sys.executable, "-c", _FREED_BY_THREADS], capture_output=True, text=True, timeout=120, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", _FREED_BY_THREADS], capture_output=True, text=True, timeout=120, check=True
+    )
     seen = json.loads(out.stdout.strip().splitlines()[-1])
     held = seen["freed"] - seen["start"]
     assert held > 64, seen  # glibc kept most of the ~128 MB the threads freed: the retention the soak saw

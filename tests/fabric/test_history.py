@@ -52,7 +52,12 @@ def test_history_delivers_every_live_sample_of_every_publisher_and_each_latest_v
         t.start()
     for t in threads:
         t.join(timeout=60)
-    wait_until(lambda: all(len(got[k]) >= N for k in streams), timeout=30, what="every pose", seen=lambda: {k: len(v) for k, v in got.items()})
+    wait_until(
+        lambda: all(len(got[k]) >= N for k in streams),
+        timeout=30,
+        what="every pose",
+        seen=lambda: {k: len(v) for k, v in got.items()},
+    )
     for key in streams:
         assert got[key] == list(range(N)), (key, len(got[key]))  # all of them, in the order sent
     assert goals == [3.0]  # the latest value, once

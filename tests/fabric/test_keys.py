@@ -59,8 +59,20 @@ def test_parse_inverts_builders(key, expected):
     assert (p.category, p.subject, p.leaf) == expected
 
 
-@pytest.mark.parametrize("bad", ["ros/x/y", "rf", "rf/w/robot/arm1", "rf/w/robot/arm1/cmd/fly/by/a", "rf/w/robot/arm1/cmd/twist",
-                                 "rf/w/robot/arm1/cmd/twist/to/alice", "rf/w/object/goal/pose", "rf/w/nope/x", "rf/w/robot/*/pose"])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        "ros/x/y",
+        "rf",
+        "rf/w/robot/arm1",
+        "rf/w/robot/arm1/cmd/fly/by/a",
+        "rf/w/robot/arm1/cmd/twist",
+        "rf/w/robot/arm1/cmd/twist/to/alice",
+        "rf/w/object/goal/pose",
+        "rf/w/nope/x",
+        "rf/w/robot/*/pose",
+    ],
+)
 def test_parse_rejects_foreign_or_malformed_keys(bad):
     with pytest.raises(ValueError):
         keys.parse(bad)

@@ -46,8 +46,12 @@ class Inbox:
 
 def test_a_late_subscriber_gets_the_latest_latched_values_then_live_ones(world, connect):
     pub = connect("user", "setter")
-    goal, grid, path, joints = (keys.object_pose(world, "goal", "alice"), keys.map_key(world, "map"),
-                                keys.robot_path(world, "base1"), keys.robot_joints(world, "arm1"))
+    goal, grid, path, joints = (
+        keys.object_pose(world, "goal", "alice"),
+        keys.map_key(world, "map"),
+        keys.robot_path(world, "base1"),
+        keys.robot_joints(world, "arm1"),
+    )
     # a witness of the first joints sample: once it has it, the router has routed that sample, and the late
     # subscriber below cannot get it as a live one (on a busy machine it arrived after the late subscription)
     witness = Inbox()
@@ -71,7 +75,11 @@ def test_a_late_subscriber_gets_the_latest_latched_values_then_live_ones(world, 
     assert plain.keys() == []  # a plain subscriber only hears what comes after it
 
     pub.publish(joints, JointState(["j1"], np.ones(1), np.zeros(1), header=pub.header(joints)))
-    wait_until(lambda: joints in hist.keys() and joints in plain.keys(), what="a live sample on both", seen=lambda: (hist.keys(), plain.keys()))
+    wait_until(
+        lambda: joints in hist.keys() and joints in plain.keys(),
+        what="a live sample on both",
+        seen=lambda: (hist.keys(), plain.keys()),
+    )
 
 
 def test_a_user_who_joins_late_sees_the_goal_and_the_map(world, router):
@@ -81,7 +89,10 @@ def test_a_user_who_joins_late_sees_the_goal_and_the_map(world, router):
     with World(client_config(world, router[1]), "early") as early:
         early.object("goal").set_pose([1.5, -0.5, 0.0], yaw=0.3)
         grid_key = keys.map_key(world, "map")
-        early.fabric.publish(grid_key, OccupancyGrid(0.1, np.zeros(3), np.full((5, 5), 100, np.uint8), header=early.fabric.header(grid_key)))
+        early.fabric.publish(
+            grid_key,
+            OccupancyGrid(0.1, np.zeros(3), np.full((5, 5), 100, np.uint8), header=early.fabric.header(grid_key)),
+        )
         with World(client_config(world, router[1]), "late") as late:
             got = wait_until(lambda: late.object("goal").pose, what="the goal set before joining")
             assert np.allclose(got.position, [1.5, -0.5, 0.0])
@@ -99,13 +110,24 @@ def test_echo_prints_the_latest_latched_value_without_waiting_for_a_new_one(worl
     goal = keys.object_pose(world, "goal", "alice")
     pub.publish(goal, Pose(np.array([4.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0, 0.0]), header=pub.header(goal)))
     out = subprocess.run(
-        robofabric_cmd("echo", "object/goal/pose/by/*", "--json", "--count", "1", "--world", world, "--connect", f"tcp/127.0.0.1:{router[1]}"),
-        capture_output=True, text=True, timeout=60,
+        robofabric_cmd(
+            "echo",
+            "object/goal/pose/by/*",
+            "--json",
+            "--count",
+            "1",
+            "--world",
+            world,
+            "--connect",
+            f"tcp/127.0.0.1:{router[1]}",
+        ),
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert out.returncode == 0, out.stdout + out.stderr
     line = json.loads(out.stdout.splitlines()[0])
     assert line["key"] == goal and line["message"]["position"] == [4.0, 1.0, 0.0]
-
 
 
 def test_latched_values_block_streams_and_commands_drop(world, connect):
@@ -118,7 +140,10 @@ def test_latched_values_block_streams_and_commands_drop(world, connect):
     for key, want in (
         (keys.map_key(world, "map"), block),  # published once: a dropped map is never resent
         (keys.object_pose(world, "goal", "alice"), block),
-        (keys.robot_cmd(world, "base1", "path", "alice"), drop),  # see docs/architecture.md: blocking commands stalled peers
+        (
+            keys.robot_cmd(world, "base1", "path", "alice"),
+            drop,
+        ),  # see docs/architecture.md: blocking commands stalled peers
         (keys.robot_joints(world, "arm1"), drop),  # the next sample replaces a lost one
     ):
         pub = declare_publisher(fab.session, key)

@@ -17,8 +17,16 @@ def test_good_user_names(name):
 
 @pytest.mark.parametrize(
     "name, why",
-    [("", "empty"), ("x" * (MAX_USER_LEN + 1), "too long"), ("a/b", "may hold only"), ("@alice", "may hold only"),
-     ("-x", "may hold only"), ("al ice", "may hold only"), ("é", "may hold only"), (3, "must be a string")],
+    [
+        ("", "empty"),
+        ("x" * (MAX_USER_LEN + 1), "too long"),
+        ("a/b", "may hold only"),
+        ("@alice", "may hold only"),
+        ("-x", "may hold only"),
+        ("al ice", "may hold only"),
+        ("é", "may hold only"),
+        (3, "must be a string"),
+    ],
 )
 def test_bad_user_names(name, why):
     with pytest.raises(ValueError, match=why):
@@ -31,7 +39,9 @@ def test_the_codec_refuses_bad_user_names_and_quotes_little():
     with pytest.raises(DecodeError, match="may hold only") as err:
         decode(encode(Command("alice", 0, Stop())).replace(b"alice", b"al/ce"))
     assert "al/ce" in str(err.value)
-    payload = encode(Command("alice", 0, Stop())).replace(b"\xa5alice", b"\xdb" + len(huge).to_bytes(4, "big") + huge.encode())
+    payload = encode(Command("alice", 0, Stop())).replace(
+        b"\xa5alice", b"\xdb" + len(huge).to_bytes(4, "big") + huge.encode()
+    )
     with pytest.raises(DecodeError, match="too long") as err:
         decode(payload)
     assert len(str(err.value)) < 300

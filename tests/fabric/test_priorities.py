@@ -52,8 +52,12 @@ def test_every_ownership_event_reaches_a_subscriber_that_a_scan_flood_overwhelms
     finally:
         stop.set()
         thread.join(timeout=10)
-    wait_until(lambda: set(range(n)) <= set(got), timeout=30, what="every ownership event",
-               seen=lambda: f"{len(set(got) & set(range(n)))} of {n}")
+    wait_until(
+        lambda: set(range(n)) <= set(got),
+        timeout=30,
+        what="every ownership event",
+        seen=lambda: f"{len(set(got) & set(range(n)))} of {n}",
+    )
 
 
 def _event(n: int) -> Event:

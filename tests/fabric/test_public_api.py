@@ -29,7 +29,13 @@ def test_an_unknown_name_is_an_attribute_error():
 def test_importing_fabric_loads_no_session_library():
     """A child interpreter: this process has long imported zenoh and numpy."""
     out = subprocess.run(
-        [sys.executable, "-c", "import sys, fabric, fabric.keys; print(sorted(m for m in ('zenoh', 'numpy', 'msgpack', 'fabric.session') if m in sys.modules))"],
-        capture_output=True, text=True, timeout=60,
+        [
+            sys.executable,
+            "-c",
+            "import sys, fabric, fabric.keys; print(sorted(m for m in ('zenoh', 'numpy', 'msgpack', 'fabric.session') if m in sys.modules))",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr

@@ -96,8 +96,11 @@ def test_start_at_is_the_grid_origin_and_a_late_loop_joins_its_grid():
 
 
 @settings(deadline=None)  # a fake clock: the example's cost is its loop count, and a loaded CI host once took 0.3 s
-@given(fastest=st.floats(min_value=5.0, max_value=1000.0), multiples=st.lists(st.integers(1, 8), min_size=1, max_size=5),
-       delays=st.lists(st.floats(min_value=0.0, max_value=0.5), min_size=5, max_size=5))
+@given(
+    fastest=st.floats(min_value=5.0, max_value=1000.0),
+    multiples=st.lists(st.integers(1, 8), min_size=1, max_size=5),
+    delays=st.lists(st.floats(min_value=0.0, max_value=0.5), min_size=5, max_size=5),
+)
 def test_staggered_loops_on_one_origin_never_tick_together(fastest, multiples, delays):
     """Loops whose periods are whole multiples of the fastest, started on one origin with :func:`staggered`
     offsets (each thread starting when it does), tick at least 1/n of the fastest period apart, forever."""
@@ -131,8 +134,11 @@ def test_phases_deal_a_slower_loop_over_a_whole_divisor_of_its_period():
 
 
 @settings(deadline=None)
-@given(fastest=st.floats(min_value=5.0, max_value=1000.0), multiples=st.lists(st.integers(1, 12), min_size=1, max_size=5),
-       members=st.lists(st.integers(0, 20), min_size=5, max_size=5))
+@given(
+    fastest=st.floats(min_value=5.0, max_value=1000.0),
+    multiples=st.lists(st.integers(1, 12), min_size=1, max_size=5),
+    members=st.lists(st.integers(0, 20), min_size=5, max_size=5),
+)
 def test_dealt_loops_stay_whole_multiples_of_the_fastest(fastest, multiples, members):
     """Every loop dealt over phases still ticks on a period that is a whole multiple of the fastest (so
     :func:`staggered` keeps the ticks apart), with no more phases than members, and each member keeps its rate."""

@@ -40,7 +40,9 @@ def test_bad_payload_is_counted_reported_and_subscriber_keeps_working(world, con
     k, ev = events[0]
     assert k == keys.event_decode(world, "bob")  # its own key: a router lets each login write only its own
     assert ev.kind == "decode_error" and ev.data["key"] == key and "not a msgpack message" in ev.reason
-    wait_until(lambda: (sim.publish(key, JointState(["a"], [1.0], [0.0])), got)[1], what="valid message after a bad one")
+    wait_until(
+        lambda: (sim.publish(key, JointState(["a"], [1.0], [0.0])), got)[1], what="valid message after a bad one"
+    )
 
 
 def test_service_replies_and_refusals(world, connect):
@@ -91,26 +93,36 @@ def test_liveliness_tracks_a_process_that_exits_and_one_that_is_killed(world, ro
     argv = robofabric_cmd("echo", "robot/**", "--world", world, "--connect", f"tcp/127.0.0.1:{port}")
     p_exit = procs.start(argv, name="echo1")
     # a child's start (its imports) is not what is judged: at load 37 it took over 10 s
-    wait_until(lambda: any(v for k, v in seen.items() if k.startswith("tool-")), timeout=60, what="echo peer token",
-               seen=lambda: seen)
+    wait_until(
+        lambda: any(v for k, v in seen.items() if k.startswith("tool-")),
+        timeout=60,
+        what="echo peer token",
+        seen=lambda: seen,
+    )
     first = next(k for k, v in seen.items() if v and k.startswith("tool-"))
     procs.kill(p_exit, sig=15)  # SIGTERM: clean exit
     assert p_exit.returncode == 0, procs.output(p_exit)
     wait_until(lambda: seen.get(first) is False, timeout=5, what="token gone after exit", seen=lambda: seen)
     p_kill = procs.start(argv, name="echo2")
-    wait_until(lambda: any(v for k, v in seen.items() if k.startswith("tool-") and k != first), timeout=60,
-               what="second token", seen=lambda: seen)
+    wait_until(
+        lambda: any(v for k, v in seen.items() if k.startswith("tool-") and k != first),
+        timeout=60,
+        what="second token",
+        seen=lambda: seen,
+    )
     second = next(k for k, v in seen.items() if v and k.startswith("tool-") and k != first)
     procs.kill(p_kill)  # SIGKILL: the OS closes the socket
     wait_until(lambda: seen.get(second) is False, timeout=5, what="token gone after SIGKILL", seen=lambda: seen)
 
 
 def test_config_profiles_and_env():
-    cfg = FabricConfig.resolve(env={"ROBOFABRIC_CONNECT": "tcp/10.0.0.5:7447, tcp/10.0.0.6:7447", "ROBOFABRIC_WORLD": "lab"})
-    assert cfg.world == "lab" and cfg.connect == ("tcp/10.0.0.5:7447", "tcp/10.0.0.6:7447")
-    assert FabricConfig.resolve(world="w", connect=["tcp/1.2.3.4:1"], env={"ROBOFABRIC_CONNECT": "tcp/9.9.9.9:9"}).connect == (
-        "tcp/1.2.3.4:1",
+    cfg = FabricConfig.resolve(
+        env={"ROBOFABRIC_CONNECT": "tcp/10.0.0.5:7447, tcp/10.0.0.6:7447", "ROBOFABRIC_WORLD": "lab"}
     )
+    assert cfg.world == "lab" and cfg.connect == ("tcp/10.0.0.5:7447", "tcp/10.0.0.6:7447")
+    assert FabricConfig.resolve(
+        world="w", connect=["tcp/1.2.3.4:1"], env={"ROBOFABRIC_CONNECT": "tcp/9.9.9.9:9"}
+    ).connect == ("tcp/1.2.3.4:1",)
     assert FabricConfig(profile="embedded").endpoints() == ((), ("tcp/127.0.0.1:7447",))
     assert FabricConfig().endpoints() == (("tcp/127.0.0.1:7447",), ())
     conf = json.loads(str(FabricConfig(profile="peer").zenoh_config().get_json("scouting/multicast/enabled")))
@@ -131,8 +143,12 @@ def test_sessions_cap_message_size_and_an_oversized_message_is_dropped_not_the_l
     receiver.subscribe_raw(key, lambda s: got.append(len(s.payload.to_bytes())))
     wait_until(lambda: (sender.put_raw(key, b"warm"), got)[1], what="link up")
     sender.put_raw(key, b"x" * (3 * MAX_MESSAGE_SIZE))
-    wait_until(lambda: (sender.put_raw(key, b"after"), 5 in got)[1], timeout=30, what="a message after the oversized one",
-               seen=lambda: got)
+    wait_until(
+        lambda: (sender.put_raw(key, b"after"), 5 in got)[1],
+        timeout=30,
+        what="a message after the oversized one",
+        seen=lambda: got,
+    )
     assert 3 * MAX_MESSAGE_SIZE not in got
 
 
@@ -144,11 +160,19 @@ def test_a_flood_of_bad_payloads_is_counted_in_full_and_reported_a_few_times(wor
     key = keys.robot_joints(world, "arm1")
     receiver.subscribe(keys.robot_stream_all(world, "joints"), lambda k, m: None)
     sender.subscribe(keys.event_all(world), lambda k, m: events.append(m), expected=Event)
-    wait_until(lambda: (sender.put_raw(key, b"\x93junk"), receiver.counters["decode_errors"])[1], what="first decode error")
+    wait_until(
+        lambda: (sender.put_raw(key, b"\x93junk"), receiver.counters["decode_errors"])[1], what="first decode error"
+    )
     for i in range(500):  # a new robot id each time: still one subscription, one report key
         # BLOCK: zenoh drops none of them on the way, so every one must be counted
-        sender.session.put(keys.robot_joints(world, f"r{i}"), b"\x93junk" * 1000, congestion_control=zenoh.CongestionControl.BLOCK)
-    wait_until(lambda: receiver.counters["decode_errors"] >= 501, what="every bad payload counted", seen=lambda: receiver.counters)
+        sender.session.put(
+            keys.robot_joints(world, f"r{i}"), b"\x93junk" * 1000, congestion_control=zenoh.CongestionControl.BLOCK
+        )
+    wait_until(
+        lambda: receiver.counters["decode_errors"] >= 501,
+        what="every bad payload counted",
+        seen=lambda: receiver.counters,
+    )
     wait_until(lambda: events, what="a decode event")
     assert len(events) <= REPORT_BURST
     assert receiver.counters["reports_suppressed"] >= 501 - REPORT_BURST
@@ -186,7 +210,7 @@ def test_client_sessions_reconnect_within_a_second_unless_their_file_says_otherw
     client = FabricConfig(world="w", profile="client", connect=("tcp/127.0.0.1:7447",))
     assert _json.loads(client.zenoh_config().get_json("connect/retry")) == RECONNECT_RETRY
     mine = tmp_path / "z.json5"
-    mine.write_text('{connect: {retry: {period_init_ms: 2000, period_max_ms: 8000, period_increase_factor: 2}}}')
+    mine.write_text("{connect: {retry: {period_init_ms: 2000, period_max_ms: 8000, period_increase_factor: 2}}}")
     own = FabricConfig(world="w", profile="client", connect=("tcp/127.0.0.1:7447",), config_file=str(mine))
     assert _json.loads(own.zenoh_config().get_json("connect/retry"))["period_max_ms"] == 8000
     router = FabricConfig(world="w", profile="embedded")

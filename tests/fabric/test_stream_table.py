@@ -24,6 +24,7 @@ TABLE = "fabric/streams.py"
 
 # ---------------------------------------------------------------- (a) every consumer's values, pinned
 
+
 def test_the_key_layout_and_latching():
     assert keys.ROBOT_STREAMS == ("joints", "pose", "scan", "sonar", "path", "ik")
     assert keys.LATCHED_STREAMS == frozenset({"path"})
@@ -41,8 +42,14 @@ def test_fencing_applies_to_the_sim_authority_streams():
 def test_declared_message_types():
     from robofabric.declarations import STREAM_TYPES, key_type
 
-    assert STREAM_TYPES == {"joints": "JointState", "pose": "Pose", "scan": "Scan", "sonar": "Scan", "path": "Path",
-                            "ik": "IKStream"}
+    assert STREAM_TYPES == {
+        "joints": "JointState",
+        "pose": "Pose",
+        "scan": "Scan",
+        "sonar": "Scan",
+        "path": "Path",
+        "ik": "IKStream",
+    }
     assert key_type("rf/w/robot/base1/sonar") == "Scan"
     for s in STREAMS:  # each names a message type the fabric has
         assert isinstance(getattr(interfaces, s.message), type), s
@@ -52,15 +59,39 @@ def test_the_routers_put_and_serve_rules_of_sims_and_compute_peers():
     from robofabric.secure import Identity, _own_rules
 
     rules = {r["id"]: r["key_exprs"] for role in ("sim", "compute") for r in _own_rules(Identity(role, role))}
-    assert rules["sim-put"] == ["rf/*/event/decode/by/sim", "rf/*/robot/*/joints", "rf/*/robot/*/pose",
-                                "rf/*/robot/*/scan", "rf/*/robot/*/sonar", "rf/*/own/*", "rf/*/event/**"]
-    assert rules["compute-put"] == ["rf/*/event/decode/by/compute", "rf/*/robot/*/ik", "rf/*/robot/*/path",
-                                    "rf/*/map/*", "rf/*/event/compute/**"]
-    assert rules["compute-serve"] == ["rf/*/srv/ik/**", "rf/*/srv/fk/**", "rf/*/srv/jacobian/**", "rf/*/srv/plan/**",
-                                      "rf/*/srv/map/**", "rf/*/robot/*/path/@adv/**", "rf/*/map/*/@adv/**",
-                                      "rf/*/robot/*/path", "rf/*/map/*"]
-    assert rules["compute-tokens"] == ["rf/*/peer/tool/*", "rf/*/peer/compute/*", "rf/*/robot/*/path/@adv/**",
-                                       "rf/*/map/*/@adv/**"]
+    assert rules["sim-put"] == [
+        "rf/*/event/decode/by/sim",
+        "rf/*/robot/*/joints",
+        "rf/*/robot/*/pose",
+        "rf/*/robot/*/scan",
+        "rf/*/robot/*/sonar",
+        "rf/*/own/*",
+        "rf/*/event/**",
+    ]
+    assert rules["compute-put"] == [
+        "rf/*/event/decode/by/compute",
+        "rf/*/robot/*/ik",
+        "rf/*/robot/*/path",
+        "rf/*/map/*",
+        "rf/*/event/compute/**",
+    ]
+    assert rules["compute-serve"] == [
+        "rf/*/srv/ik/**",
+        "rf/*/srv/fk/**",
+        "rf/*/srv/jacobian/**",
+        "rf/*/srv/plan/**",
+        "rf/*/srv/map/**",
+        "rf/*/robot/*/path/@adv/**",
+        "rf/*/map/*/@adv/**",
+        "rf/*/robot/*/path",
+        "rf/*/map/*",
+    ]
+    assert rules["compute-tokens"] == [
+        "rf/*/peer/tool/*",
+        "rf/*/peer/compute/*",
+        "rf/*/robot/*/path/@adv/**",
+        "rf/*/map/*/@adv/**",
+    ]
 
 
 def test_the_sims_and_the_loads_default_rates_and_what_a_handle_follows():
@@ -77,8 +108,13 @@ def test_the_sims_and_the_loads_default_rates_and_what_a_handle_follows():
 def test_the_ros2_exports_topics(kind):
     from user_peer.openfmt.ros2 import ros2_topic
 
-    leaves = {"joints": "joint_states", "scan": "scan", "sonar": "sonar", "path": "path",
-              "pose": {"mobile": "odom", "arm": "pose"}.get(kind or "")}
+    leaves = {
+        "joints": "joint_states",
+        "scan": "scan",
+        "sonar": "sonar",
+        "path": "path",
+        "pose": {"mobile": "odom", "arm": "pose"}.get(kind or ""),
+    }
     for s in (*keys.ROBOT_STREAMS, "radar"):
         leaf = leaves.get(s)
         assert ros2_topic(f"rf/w/robot/r1/{s}", kind, "ns") == (f"/ns/r1/{leaf}" if leaf else None), (s, kind)
@@ -93,9 +129,13 @@ def test_the_bridges_topics_types_and_qos():
     from user_peer.ros2.bridge import _TYPES, LATCHED, STREAM
 
     pinned = {
-        "joint_states": (JointState, STREAM), "scan": (LaserScan, qos_profile_sensor_data),
-        "sonar": (LaserScan, qos_profile_sensor_data), "path": (Path, LATCHED), "odom": (Odometry, STREAM),
-        "pose": (PoseStamped, STREAM), "map": (OccupancyGrid, LATCHED),
+        "joint_states": (JointState, STREAM),
+        "scan": (LaserScan, qos_profile_sensor_data),
+        "sonar": (LaserScan, qos_profile_sensor_data),
+        "path": (Path, LATCHED),
+        "odom": (Odometry, STREAM),
+        "pose": (PoseStamped, STREAM),
+        "map": (OccupancyGrid, LATCHED),
     }
     assert set(_TYPES) == set(pinned)
     for name, (cls, qos) in _TYPES.items():  # the very classes and profiles (== on QoSProfile compares fields)
@@ -103,6 +143,7 @@ def test_the_bridges_topics_types_and_qos():
 
 
 # ---------------------------------------------------------------- the table itself
+
 
 def test_the_table_refuses_what_no_consumer_could_follow():
     with pytest.raises(ValueError, match="unknown writer"):
@@ -178,8 +219,10 @@ def stream_lists(source: str, names: frozenset[str]) -> list[tuple[int, str, lis
 
 def test_the_scan_bites():
     names = frozenset(streams.NAMES)
-    src = ('A = ("joints", "pose")\nB: dict[str, int] = {"scan": 1, "sonar": 2}\n'
-           'def f():\n    for s in ["path", "ik"]:\n        pass\n    return {"joints"}, ("pose", "radar")\n')
+    src = (
+        'A = ("joints", "pose")\nB: dict[str, int] = {"scan": 1, "sonar": 2}\n'
+        'def f():\n    for s in ["path", "ik"]:\n        pass\n    return {"joints"}, ("pose", "radar")\n'
+    )
     assert [(line, owner) for line, owner, _ in stream_lists(src, names)] == [(1, "A"), (2, "B"), (4, "f")]
 
 
@@ -196,7 +239,8 @@ def test_no_module_but_the_table_lists_stream_names():
             for line, owner, hits in stream_lists(path.read_text(encoding="utf-8"), names):
                 found.setdefault((path.name, owner), f"{rel}:{line} {owner or '(module)'}: {hits}")
     extra = [where for key, where in sorted(found.items()) if key not in EXCEPTIONS]
-    assert not extra, ("derive these from fabric.streams.STREAMS (or list them in EXCEPTIONS with a reason):\n"
-                       + "\n".join(extra))
+    assert not extra, (
+        "derive these from fabric.streams.STREAMS (or list them in EXCEPTIONS with a reason):\n" + "\n".join(extra)
+    )
     stale = sorted(set(EXCEPTIONS) - set(found))
     assert not stale, f"exceptions that list no stream names any more; take them out: {stale}"

@@ -11,7 +11,15 @@ from fabric.cli_common import column_widths, print_table
 
 COLUMNS = ("key", "type", "publishers", "subscribers", "rate Hz", "msgs", "kB/s")
 ROWS = [
-    ("rf/demo/robot/arm1/joints", "JointState", "sim-vm-6954b3", "sim-vm-6954b3, viewer-vm-0a1b2c", "98.6", "99", "21.3"),
+    (
+        "rf/demo/robot/arm1/joints",
+        "JointState",
+        "sim-vm-6954b3",
+        "sim-vm-6954b3, viewer-vm-0a1b2c",
+        "98.6",
+        "99",
+        "21.3",
+    ),
     ("rf/demo/robot/base1/scan", "Scan", "sim-vm-6954b3", "-", "20.2", "20", "11.5"),
 ]
 WORDS = {"JointState", "Scan", "sim-vm-6954b3", "viewer-vm-0a1b2c", "98.6", "99", "21.3", "20.2", "11.5"}
@@ -37,8 +45,8 @@ def _column0(text: str) -> str:
         return "".join(c[1].strip() for line in lines if len(c := line.split("│")) > 2)
     rule = next(i for i, line in enumerate(lines) if set(line.strip()) == {"─"})
     header = lines[rule - 1]
-    width = len(header) - len(header[len(header.split()[0]):].lstrip()) - 3
-    return "".join(line[:width].strip() for line in lines[rule + 1:])
+    width = len(header) - len(header[len(header.split()[0]) :].lstrip()) - 3
+    return "".join(line[:width].strip() for line in lines[rule + 1 :])
 
 
 def test_widths_never_go_below_a_word_nor_above_the_room():
@@ -49,7 +57,11 @@ def test_widths_never_go_below_a_word_nor_above_the_room():
                 continue
             spent = sum(widths) + (3 * len(COLUMNS) + 1 if boxed else 3 * (len(COLUMNS) - 1))
             assert spent <= width, (width, boxed, widths)
-            assert widths[2] >= len("sim-vm-6954b3") and widths[3] >= len("viewer-vm-0a1b2c") and widths[1] >= len("JointState")
+            assert (
+                widths[2] >= len("sim-vm-6954b3")
+                and widths[3] >= len("viewer-vm-0a1b2c")
+                and widths[1] >= len("JointState")
+            )
     assert column_widths(COLUMNS, ROWS, 40) is None  # too narrow for the columns side by side: blocks
     assert column_widths(COLUMNS, ROWS, 200) == [max(len(c), *(len(r[i]) for r in ROWS)) for i, c in enumerate(COLUMNS)]
 

@@ -18,8 +18,13 @@ def test_any_text_is_one_printable_line_within_the_cap(text, cap):
     assert "\x1b" not in out
 
 
-@given(st.text(st.characters(blacklist_categories=("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp", "Zs")) | st.just(" "), max_size=300),
-       st.integers(min_value=1, max_value=400))
+@given(
+    st.text(
+        st.characters(blacklist_categories=("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp", "Zs")) | st.just(" "),
+        max_size=300,
+    ),
+    st.integers(min_value=1, max_value=400),
+)
 def test_printable_text_that_fits_is_unchanged_and_longer_text_keeps_its_start(text, cap):
     out = one_line(text, cap)
     if len(text) <= cap:

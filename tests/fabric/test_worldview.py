@@ -16,15 +16,27 @@ def _robot(rid: str, sim: str = "") -> RobotInfo:
 
 
 def _part(src: str, robots, *, objects=(), term: int = 1, rates=None) -> WorldInfo:
-    return WorldInfo("w", "warehouse", 0.002, rates or {"pose": 50.0}, tuple(_robot(r) for r in robots), objects,
-                     header=Header(source=src, term=term))
+    return WorldInfo(
+        "w",
+        "warehouse",
+        0.002,
+        rates or {"pose": 50.0},
+        tuple(_robot(r) for r in robots),
+        objects,
+        header=Header(source=src, term=term),
+    )
 
 
 GOAL = ObjectInfo("goal", "goal_pointer", "scene", np.zeros(3), np.array([1.0, 0, 0, 0]))
 
 
 def test_the_union_has_every_robot_once_with_its_sim_and_the_objects_of_the_first_sim():
-    info = union([("sim-b", _part("sim-b", ["base1"], rates={"pose": 20.0})), ("sim-a", _part("sim-a", ["base0"], objects=(GOAL,)))])
+    info = union(
+        [
+            ("sim-b", _part("sim-b", ["base1"], rates={"pose": 20.0})),
+            ("sim-a", _part("sim-a", ["base0"], objects=(GOAL,))),
+        ]
+    )
     assert [(r.id, r.sim) for r in info.robots] == [("base0", "sim-a"), ("base1", "sim-b")]
     assert [o.id for o in info.objects] == ["goal"] and info.rates == {"pose": 50.0}
     back = decode(encode(info))
@@ -33,7 +45,13 @@ def test_the_union_has_every_robot_once_with_its_sim_and_the_objects_of_the_firs
 
 def test_a_robot_two_sims_describe_is_the_higher_terms():
     """A primary that lost its shard and has not noticed yet still answers: its part loses to the new one's."""
-    info = union([("old", _part("old", ["base1"], term=1)), ("new", _part("new", ["base1"], term=2)), ("a", _part("a", ["base0"]))])
+    info = union(
+        [
+            ("old", _part("old", ["base1"], term=1)),
+            ("new", _part("new", ["base1"], term=2)),
+            ("a", _part("a", ["base0"])),
+        ]
+    )
     assert [(r.id, r.sim) for r in info.robots] == [("base0", "a"), ("base1", "new")]
 
 

@@ -14,8 +14,13 @@ pytestmark = pytest.mark.slow
 def test_one_run_of_the_lab_bench_completes_every_figure(lab_ok, tmp_path):
     result = run_lab_bench(1, log_dir=tmp_path / "lab", progress=lambda line: None)
     figures = result["figures"]
-    assert set(figures) >= {"partition_handover", "router_joints_back", "sim_gone_told", "sim_world_serving",
-                            "sim_first_move_done"}, figures
+    assert set(figures) >= {
+        "partition_handover",
+        "router_joints_back",
+        "sim_gone_told",
+        "sim_world_serving",
+        "sim_first_move_done",
+    }, figures
     assert all(f["n"] == 1 for f in figures.values()), figures
 
 

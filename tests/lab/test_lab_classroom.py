@@ -41,7 +41,9 @@ def test_classroom_six_hosts_test_a_and_b_pass(lab: Lab):
     spec = load_lab(CLASSROOM)
     users = {"alice", "bob"}
     assert users <= {h.name for h in spec.hosts}
-    spec = dataclasses.replace(spec, hosts=tuple(dataclasses.replace(h, run=()) if h.name in users else h for h in spec.hosts))
+    spec = dataclasses.replace(
+        spec, hosts=tuple(dataclasses.replace(h, run=()) if h.name in users else h for h in spec.hosts)
+    )
     started = start_lab(spec, lab)
     router = lab.host("router").endpoint()
     alice, bob = lab.host("alice").python(name="alice"), lab.host("bob").python(name="bob")
@@ -68,6 +70,8 @@ def test_classroom_six_hosts_test_a_and_b_pass(lab: Lab):
         seen.update(listing())
         return want <= set(seen) and users <= set(seen.get("user", []))
 
-    wait_until(everyone, timeout=120, interval=1.0, what="robofabric ps on alice's host listing every peer", seen=lambda: seen)
+    wait_until(
+        everyone, timeout=120, interval=1.0, what="robofabric ps on alice's host listing every peer", seen=lambda: seen
+    )
     for name in want:  # every service host is still up: nothing crashed under the LAN's traffic
         assert started[name][0].alive(), f"{name} ended:\n{started[name][0].output()[-2000:]}"

@@ -89,7 +89,9 @@ class Classroom:
             self.sim.kill()
             for py in self.users.values():
                 assert py.call("w.wait_world(alive=False, timeout=30)", timeout=60)
-        self.sim = self.sim_host.start(["sim", "--scene", "combined", "--connect", self.router_ep], name="sim", clock_offset=offset)
+        self.sim = self.sim_host.start(
+            ["sim", "--scene", "combined", "--connect", self.router_ep], name="sim", clock_offset=offset
+        )
         self.offset = offset
 
 
@@ -110,21 +112,29 @@ def test_sim_clock_skew_changes_nothing(room: Classroom, offset):
     alice, bob = room.users["alice"], room.users["bob"]
     skew = room.sim_host.run(["python3", "-c", "import time; print(time.time())"], clock_offset=offset).stdout
     assert skew.strip(), "could not read the sim host's clock"
-    viewer = room.viewer_host.start(["view", "--save", str(room.lab.log_dir / f"view{offset}.rrd"), "--duration", "8",
-                                     "--connect", room.router_ep], name="view")
+    viewer = room.viewer_host.start(
+        ["view", "--save", str(room.lab.log_dir / f"view{offset}.rrd"), "--duration", "8", "--connect", room.router_ep],
+        name="view",
+    )
     try:
         figures = alice.call(CHECKS, timeout=240)
     except Exception as exc:  # say what the other hosts' peers said: a CI run failed here with no trace of why
-        raise AssertionError(f"{exc}\n--- compute:\n{room.compute.output()[-3000:]}\n--- sim:\n{room.sim.output()[-3000:]}") from exc
+        raise AssertionError(
+            f"{exc}\n--- compute:\n{room.compute.output()[-3000:]}\n--- sim:\n{room.sim.output()[-3000:]}"
+        ) from exc
     wait_until(lambda: bob.call("w.world_alive"), timeout=30, what="bob sees the sim")
     refused_after, reasons = bob.call(REFUSE, timeout=60)
     alice.call("arm.release(); None")
     viewer.popen.wait(timeout=120)
     view_out = viewer.output()
-    print(f"clock {offset or '0'}: {figures}; bob refused after {refused_after:.2f} s; viewer: {view_out.strip().splitlines()[-1]}")
+    print(
+        f"clock {offset or '0'}: {figures}; bob refused after {refused_after:.2f} s; viewer: {view_out.strip().splitlines()[-1]}"
+    )
 
     want = float(offset or 0)
-    assert abs(figures["sim_clock_ahead_s"] - want) < 1.0, f"the sim's clock is {figures['sim_clock_ahead_s']:.2f} s off ours, not {want}"
+    assert abs(figures["sim_clock_ahead_s"] - want) < 1.0, (
+        f"the sim's clock is {figures['sim_clock_ahead_s']:.2f} s off ours, not {want}"
+    )
     assert figures["joint_error"] <= 1e-3, figures  # the state that ended the wait really was at the target
     assert figures["flange_error_mm"] <= 5.0, figures
     assert figures["follow_error_m"] <= 0.25, figures
@@ -132,7 +142,9 @@ def test_sim_clock_skew_changes_nothing(room: Classroom, offset):
     assert reasons and refused_after < 5.0, (refused_after, reasons)
     assert viewer.popen.returncode == 0, view_out[-2000:]
     m = re.search(r"viewer: (\d+) messages logged.*robots: ([\w, ]+)", view_out)
-    assert m and int(m.group(1)) > 0 and {"arm1", "base1"} <= set(m.group(2).replace(" ", "").split(",")), view_out[-1000:]
+    assert m and int(m.group(1)) > 0 and {"arm1", "base1"} <= set(m.group(2).replace(" ", "").split(",")), view_out[
+        -1000:
+    ]
     if offset is None:
         REFERENCE.update(figures)
         return

@@ -40,8 +40,12 @@ def test_a_primary_cut_off_stops_its_robots_and_takes_commands_again_when_it_hea
     router = router_host.start(["router", "--listen", ep], name="router")
     wait_until(lambda: "listening" in router.output() or not router.alive(), timeout=120, what="router listening")
     sim = sa.start(["sim", "--scene", "arm_cell", "--world", "demo", "--connect", ep, "--id", "sim-a"], name="sim-a")
-    wait_until(lambda: "Ctrl-C to stop" in sim.output() or not sim.alive(), timeout=120, what="the sim",
-               seen=lambda: sim.output()[-800:])
+    wait_until(
+        lambda: "Ctrl-C to stop" in sim.output() or not sim.alive(),
+        timeout=120,
+        what="the sim",
+        seen=lambda: sim.output()[-800:],
+    )
     alice = ah.python(name="alice")
     alice.call(JOIN.format(router=ep), timeout=240)
     state: list = []
@@ -54,11 +58,20 @@ def test_a_primary_cut_off_stops_its_robots_and_takes_commands_again_when_it_hea
 
     lab.cut(sa)
     try:
-        wait_until(lambda: "hears no one" in sim.output(), timeout=LEASE + 30, what="the cut-off sim stopping its robots",
-                   seen=lambda: sim.output()[-1500:])
+        wait_until(
+            lambda: "hears no one" in sim.output(),
+            timeout=LEASE + 30,
+            what="the cut-off sim stopping its robots",
+            seen=lambda: sim.output()[-1500:],
+        )
     finally:
         lab.restore(sa)
-    wait_until(lambda: "hears again" in sim.output(), timeout=60, what="the sim hearing again", seen=lambda: sim.output()[-1500:])
+    wait_until(
+        lambda: "hears again" in sim.output(),
+        timeout=60,
+        what="the sim hearing again",
+        seen=lambda: sim.output()[-1500:],
+    )
 
     def fresh_and_still() -> bool:
         state[:] = alice.call(STATE)

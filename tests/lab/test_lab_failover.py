@@ -36,18 +36,26 @@ def test_a_primary_cut_off_past_the_lease_steps_down_when_the_partition_heals(la
     roles.wait("sim-b", "standby", term=1, leader="sim-a", timeout=120, seen=lambda: standby.output()[-800:])
     recording = lab.log_dir / "failover.mcap"
     rec = obs.start(["record", "-o", str(recording), "-q", "--world", "demo", "--connect", ep], name="record")
-    wait_until(lambda: recording.exists() and recording.stat().st_size > 2000, timeout=120, what="the recorder writing term 1",
-               seen=lambda: rec.output()[-500:])
+    wait_until(
+        lambda: recording.exists() and recording.stat().st_size > 2000,
+        timeout=120,
+        what="the recorder writing term 1",
+        seen=lambda: rec.output()[-500:],
+    )
 
     lab.cut(sa)
     try:
-        roles.wait("sim-b", "primary", term=2, timeout=LEASE + 20, seen=lambda: standby.output()[-800:])  # the take-over
+        roles.wait(
+            "sim-b", "primary", term=2, timeout=LEASE + 20, seen=lambda: standby.output()[-800:]
+        )  # the take-over
         assert primary.alive() and "stepping down" not in primary.output()  # cut off, it has heard nobody yet
         size = recording.stat().st_size
         wait_until(lambda: recording.stat().st_size > size + 2000, timeout=30, what="the recorder writing term 2")
     finally:
         lab.restore(sa)
-    roles.wait("sim-a", "standby", term=2, leader="sim-b", timeout=30, seen=lambda: primary.output()[-1500:])  # stepped down
+    roles.wait(
+        "sim-a", "standby", term=2, leader="sim-b", timeout=30, seen=lambda: primary.output()[-1500:]
+    )  # stepped down
     assert "sim-b holds term 2; stepping down" in primary.output()
     assert "took over" not in primary.output() and "still the authority" not in primary.output()
     size = recording.stat().st_size
@@ -60,7 +68,9 @@ def test_a_primary_cut_off_past_the_lease_steps_down_when_the_partition_heals(la
         if is_authority_key(m.key):
             h = decode(m.payload).header
             stamped.append((h.wall_ns, h.term, h.source))
-    assert {(t, src) for _, t, src in stamped} == {(1, "sim-a"), (2, "sim-b")}, sorted({(t, src) for _, t, src in stamped})
+    assert {(t, src) for _, t, src in stamped} == {(1, "sim-a"), (2, "sim-b")}, sorted(
+        {(t, src) for _, t, src in stamped}
+    )
     first2 = min(w for w, t, _ in stamped if t == 2)
     assert not [(w - first2) / 1e9 for w, t, _ in stamped if t == 1 and w > first2]  # one epoch at any instant
     assert primary.alive() and standby.alive()

@@ -48,10 +48,18 @@ class World:
         self.router = self.start_router()
         self.sim = self.start_sim()
         self.recording = lab.log_dir / "faults.mcap"
-        self.recorder = self.obs_host.start(["record", "-o", str(self.recording), "-q", "--connect", self.router_ep], name="record")
-        wait_until(lambda: "Ctrl-C to stop" in self.recorder.output() or not self.recorder.alive(), timeout=120,
-                   what="the recorder subscribed", seen=lambda: self.recorder.output()[-500:])
-        self.viewer = self.obs_host.start(["view", "--save", str(lab.log_dir / "faults.rrd"), "--connect", self.router_ep], name="view")
+        self.recorder = self.obs_host.start(
+            ["record", "-o", str(self.recording), "-q", "--connect", self.router_ep], name="record"
+        )
+        wait_until(
+            lambda: "Ctrl-C to stop" in self.recorder.output() or not self.recorder.alive(),
+            timeout=120,
+            what="the recorder subscribed",
+            seen=lambda: self.recorder.output()[-500:],
+        )
+        self.viewer = self.obs_host.start(
+            ["view", "--save", str(lab.log_dir / "faults.rrd"), "--connect", self.router_ep], name="view"
+        )
         self.users: dict[str, RemotePython] = {}
         for name in ("alice", "bob"):
             py = lab.add_host(name).python(name=name)
@@ -60,8 +68,12 @@ class World:
         for join in joins:
             join(timeout=240)
         # the viewer imports Rerun first: a fault before it has joined would only test its start-up
-        wait_until(lambda: self.users["bob"].call("bool(w.fabric.live_peers('viewer'))") or not self.viewer.alive(), timeout=120,
-                   what="the viewer joined", seen=lambda: self.viewer.output()[-500:])
+        wait_until(
+            lambda: self.users["bob"].call("bool(w.fabric.live_peers('viewer'))") or not self.viewer.alive(),
+            timeout=120,
+            what="the viewer joined",
+            seen=lambda: self.viewer.output()[-500:],
+        )
         assert self.viewer.alive(), self.viewer.output()[-2000:]
 
     def start_router(self) -> LabProcess:
@@ -95,12 +107,22 @@ def test_owner_partition_bob_takes_over_alice_is_refused(world: World):
     alice, bob = world.users["alice"], world.users["bob"]
     epoch_a = alice.call("arm.request()")
     # a slow move keeps the arm in motion, so bob's request queues instead of taking a still arm over
-    alice.call("lo = np.asarray(arm.entry.lower); hi = np.asarray(arm.entry.upper); far = np.clip(np.full(len(lo), 1.2), lo, hi) * 0.8\n"
-               "arm.move_joints(far, wait=False, speed_scale=0.05); None")
-    wait_until(lambda: bob.call("r = arm.record; r is not None and r.state == 'moving'"), timeout=20, what="bob sees the arm moving")
+    alice.call(
+        "lo = np.asarray(arm.entry.lower); hi = np.asarray(arm.entry.upper); far = np.clip(np.full(len(lo), 1.2), lo, hi) * 0.8\n"
+        "arm.move_joints(far, wait=False, speed_scale=0.05); None"
+    )
+    wait_until(
+        lambda: bob.call("r = arm.record; r is not None and r.state == 'moving'"),
+        timeout=20,
+        what="bob sees the arm moving",
+    )
     granted = bob.submit("arm.request(wait=True, timeout=60); time.monotonic()")
-    wait_until(lambda: bob.call("r = arm.record; 'bob' in tuple(r.queue)"), timeout=20, what="bob queued",
-               seen=lambda: bob.call("repr(arm.record)"))
+    wait_until(
+        lambda: bob.call("r = arm.record; 'bob' in tuple(r.queue)"),
+        timeout=20,
+        what="bob queued",
+        seen=lambda: bob.call("repr(arm.record)"),
+    )
     t_cut = time.monotonic()
     world.lab.cut("alice")
     t_granted = granted(timeout=60)
@@ -110,39 +132,60 @@ def test_owner_partition_bob_takes_over_alice_is_refused(world: World):
     assert epoch_b > epoch_a
     bob.call("arm.move_joints(np.zeros(len(arm.entry.joint_names)), wait=False); None")
     # alice, cut off, still believes she owns it and keeps commanding: her packets go nowhere
-    alice.call("arm.send('joints', __import__('fabric.interfaces', fromlist=['JointTarget']).JointTarget(far, 1.0)) if arm.is_owner else None")
+    alice.call(
+        "arm.send('joints', __import__('fabric.interfaces', fromlist=['JointTarget']).JointTarget(far, 1.0)) if arm.is_owner else None"
+    )
     assert alice.call("lost") == [], "alice was told she lost the arm while cut off from everyone"
     alice.call("lost.clear(); None")
     world.lab.restore("alice")
     # she is told: her replica follows the authority's record again (renewal refused, record received), and
     # the API says so itself: a warning and the on_lost callbacks, naming the new owner and epoch
-    wait_until(lambda: alice.call("arm.owner") == "bob", timeout=30, what="alice's replica shows bob as owner",
-               seen=lambda: alice.call("repr(arm.record)"))
+    wait_until(
+        lambda: alice.call("arm.owner") == "bob",
+        timeout=30,
+        what="alice's replica shows bob as owner",
+        seen=lambda: alice.call("repr(arm.record)"),
+    )
     assert alice.call("arm.is_owner") is False
-    told = wait_until(lambda: alice.call("[(o, u, e) for _, o, u, e in lost]"), timeout=10, what="alice told she lost the arm")
+    told = wait_until(
+        lambda: alice.call("[(o, u, e) for _, o, u, e in lost]"), timeout=10, what="alice told she lost the arm"
+    )
     assert told == [["arm1", "bob", epoch_b]], told
-    assert f"lost ownership of arm1: now owned by bob (epoch {epoch_b}" in alice.proc.output(), alice.proc.output()[-2000:]
+    assert f"lost ownership of arm1: now owned by bob (epoch {epoch_b}" in alice.proc.output(), alice.proc.output()[
+        -2000:
+    ]
     # a command stamped with her old epoch (sent raw, as a stale client would) is refused by the authority
     alice.call(
         "from fabric import keys\nfrom fabric.interfaces import Command, JointTarget\n"
         "k = keys.robot_cmd(w.name, 'arm1', 'joints', 'alice')\n"
         f"w.fabric.publish(k, Command('alice', {epoch_a}, JointTarget(far, 1.0), w.fabric.header(k))); None"
     )
-    wait_until(lambda: alice.call("any(e.user == 'alice' and e.object == 'arm1' and e.kind == 'reject' for e in w.events)"),
-               timeout=20, what="alice's stale command refused", seen=lambda: alice.call("[repr(e) for e in w.events[-5:]]"))
+    wait_until(
+        lambda: alice.call("any(e.user == 'alice' and e.object == 'arm1' and e.kind == 'reject' for e in w.events)"),
+        timeout=20,
+        what="alice's stale command refused",
+        seen=lambda: alice.call("[repr(e) for e in w.events[-5:]]"),
+    )
     # the API refuses before sending, and says why
-    msg = alice.call("try:\n    arm.move_joints(far, wait=False)\n    r = 'sent'\nexcept NotOwner as e:\n    r = str(e)\nr")
+    msg = alice.call(
+        "try:\n    arm.move_joints(far, wait=False)\n    r = 'sent'\nexcept NotOwner as e:\n    r = str(e)\nr"
+    )
     assert "does not own" in msg and "bob" in msg, msg
     bob.call("arm.release(); None")
     # the file is read unfinished: once bob's release is on disk, so is everything the recorder heard before it
-    wait_until(lambda: _released_after(_arm_records(world), ("bob", epoch_b)), timeout=30, interval=0.5,
-               what="bob's release in the recording", seen=lambda: _arm_records(world)[-5:])
+    wait_until(
+        lambda: _released_after(_arm_records(world), ("bob", epoch_b)),
+        timeout=30,
+        interval=0.5,
+        what="bob's release in the recording",
+        seen=lambda: _arm_records(world)[-5:],
+    )
     _no_overlap(world, epoch_a, epoch_b)
 
 
 def _released_after(records: list[tuple[str, int]], held: tuple[str, int]) -> bool:
     """Whether a record of someone else (or of nobody) follows ``held`` (owner, epoch)."""
-    return held in records and any(owner != held[0] for owner, _ in records[records.index(held) + 1:])
+    return held in records and any(owner != held[0] for owner, _ in records[records.index(held) + 1 :])
 
 
 def _arm_records(world: World) -> list[tuple[str, int]]:
@@ -196,15 +239,28 @@ def test_sim_lost_and_restarted(world: World):
         py.call("gone.clear(); None")
     # bob's terminal UI (not run: its status line is read from the same World the running UI refreshes from)
     assert bob.call("from user_peer.tui import UserApp\ntui = UserApp(w, arm=arm)\ntui.world_status()") is None
-    tui_gone = bob.submit("while tui.world_status() is None:\n    time.sleep(0.01)\n[time.monotonic(), tui.world_status()]")
+    tui_gone = bob.submit(
+        "while tui.world_status() is None:\n    time.sleep(0.01)\n[time.monotonic(), tui.world_status()]"
+    )
     t_kill = time.monotonic()
     world.sim.kill()
     try:
-        told = {name: wait_until(lambda py=py: py.call("[t for t, alive, _ in gone if not alive][:1]"), timeout=30,
-                                 what=f"{name} told the world is gone")[0] - t_kill for name, py in world.users.items()}
+        told = {
+            name: wait_until(
+                lambda py=py: py.call("[t for t, alive, _ in gone if not alive][:1]"),
+                timeout=30,
+                what=f"{name} told the world is gone",
+            )[0]
+            - t_kill
+            for name, py in world.users.items()
+        }
         t_tui, status = tui_gone(timeout=30)
-        wait_until(lambda: "world 'demo' gone" in world.viewer.output(), timeout=LEASE + 10, what="the viewer saying the world is gone",
-                   seen=lambda: world.viewer.output()[-500:])
+        wait_until(
+            lambda: "world 'demo' gone" in world.viewer.output(),
+            timeout=LEASE + 10,
+            what="the viewer saying the world is gone",
+            seen=lambda: world.viewer.output()[-500:],
+        )
         viewer_told = time.monotonic() - t_kill
     finally:
         world.sim = world.start_sim()  # the next test needs a world, whatever happened here
@@ -222,10 +278,16 @@ def test_sim_lost_and_restarted(world: World):
     alice.call("arm.release(); None")
     assert bob.call("w.wait_world(timeout=30)", timeout=60)  # bob carries on too, and his UI says so
     assert bob.call("tui.world_status()") is None
-    wait_until(lambda: bob.call("a = arm.age('joints'); a is not None and a < 0.5"), timeout=30, what="fresh joints at bob")
-    wait_until(lambda: "world 'demo' is back" in world.viewer.output(), timeout=30, what="the viewer saying the world is back")
-    print(f"sim lost: told alice {told['alice']:.2f} s, bob {told['bob']:.2f} s, bob's UI {t_tui - t_kill:.2f} s, "
-          f"the viewer {viewer_told:.2f} s after; carried on {time.monotonic() - t_start:.1f} s after the restart")
+    wait_until(
+        lambda: bob.call("a = arm.age('joints'); a is not None and a < 0.5"), timeout=30, what="fresh joints at bob"
+    )
+    wait_until(
+        lambda: "world 'demo' is back" in world.viewer.output(), timeout=30, what="the viewer saying the world is back"
+    )
+    print(
+        f"sim lost: told alice {told['alice']:.2f} s, bob {told['bob']:.2f} s, bob's UI {t_tui - t_kill:.2f} s, "
+        f"the viewer {viewer_told:.2f} s after; carried on {time.monotonic() - t_start:.1f} s after the restart"
+    )
 
 
 PEERS = {"router": None, "sim": None, "recorder": None, "viewer": None, "user": ["alice", "bob"]}
@@ -265,8 +327,12 @@ def test_router_lost_and_restarted(world: World):
     gap = t_back - t_kill
     # streams resume: a joint state received after the router came back, at both users
     for name, py in world.users.items():
-        wait_until(lambda py=py: py.call("a = arm.age('joints'); a is not None and a < 0.5"), timeout=30,
-                   what=f"fresh joints at {name} after the router's restart", seen=lambda py=py: py.call("arm.age('joints')"))
+        wait_until(
+            lambda py=py: py.call("a = arm.age('joints'); a is not None and a < 0.5"),
+            timeout=30,
+            what=f"fresh joints at {name} after the router's restart",
+            seen=lambda py=py: py.call("arm.age('joints')"),
+        )
         resumed = time.monotonic() - t_back
         assert resumed <= 5.0, f"joints resumed at {name} {resumed:.1f} s after the router was back"
     # every peer reconnects: the router lists them all again (robofabric ps on its own host)
@@ -278,7 +344,13 @@ def test_router_lost_and_restarted(world: World):
         seen.update(json.loads(out.stdout)["peers"] if out.returncode == 0 else {"error": out.stderr[-500:]})
         return all(k in seen and (ids is None or set(ids) <= set(seen[k])) for k, ids in PEERS.items())
 
-    wait_until(everyone, timeout=30, interval=0.5, what="robofabric ps at the router listing every peer again", seen=lambda: seen)
+    wait_until(
+        everyone,
+        timeout=30,
+        interval=0.5,
+        what="robofabric ps at the router listing every peer again",
+        seen=lambda: seen,
+    )
     reconnected = time.monotonic() - t_back
     assert len(seen["sim"]) == 1, seen  # the same sim, not a second one
     # nothing declared twice: each liveliness token answers once (counted raw, duplicates kept), one world
@@ -288,13 +360,21 @@ def test_router_lost_and_restarted(world: World):
     tokens = json.loads(counted.stdout.strip().splitlines()[-1])
     assert tokens and all(n == 1 for n in tokens.values()), sorted(tokens.items())
     assert {k.split("/")[3] for k in tokens} >= set(PEERS), tokens
-    replies = bob.call("from fabric import keys\nlen(w.fabric.rpc.query(keys.srv(w.name, 'world'), timeout=2.0, all_replies=True))")
+    replies = bob.call(
+        "from fabric import keys\nlen(w.fabric.rpc.query(keys.srv(w.name, 'world'), timeout=2.0, all_replies=True))"
+    )
     assert replies == 1, replies
     # the owner keeps the arm where the lease and grace allow: the authority's record says so, or a newer one
     # (a change of owner) reaches her
-    wait_until(lambda: alice.call(f"r = w.ownership.fetch('arm1', timeout=2.0)\nr is not None and (r.owner == 'alice' or "
-                                  f"r.epoch > {epoch_before})"), timeout=30,
-               what="the authority's record of the arm at alice after the restart", seen=lambda: alice.call("repr(arm.record)"))
+    wait_until(
+        lambda: alice.call(
+            f"r = w.ownership.fetch('arm1', timeout=2.0)\nr is not None and (r.owner == 'alice' or "
+            f"r.epoch > {epoch_before})"
+        ),
+        timeout=30,
+        what="the authority's record of the arm at alice after the restart",
+        seen=lambda: alice.call("repr(arm.record)"),
+    )
     owned_again = time.monotonic() - t_back
     assert gap < 10.0, f"the router took {gap:.1f} s to come back, longer than the grace period: this test cannot tell"
     restored = alice.call("arm.is_owner")
@@ -302,12 +382,16 @@ def test_router_lost_and_restarted(world: World):
         assert alice.call("lost") == [], "alice was told she lost an arm she got back"
     else:  # her lease ran out first (docs/lan.md, known limits): the arm is free, and she was told
         assert alice.call("arm.owner") is None, alice.call("repr(arm.record)")
-        told = wait_until(lambda: alice.call("[(o, u) for _, o, u, e in lost]"), timeout=10, what="alice told she lost the arm")
+        told = wait_until(
+            lambda: alice.call("[(o, u) for _, o, u, e in lost]"), timeout=10, what="alice told she lost the arm"
+        )
         assert told == [["arm1", None]], told
         alice.call("arm.request(timeout=10); None")
     assert bob.call("arm.owner") == "alice"
     alice.call("arm.move_joints(np.full(len(arm.entry.joint_names), -0.1), timeout=30); None", timeout=60)
     alice.call("arm.release(); None")
-    print(f"router lost for {gap:.1f} s; joints resumed at both users {resumed:.2f} s after it was back; every peer "
-          f"listed again {reconnected:.2f} s after; the arm was "
-          f"{'restored to alice' if restored else 'free (lease expired first): alice was told and asked again'} {owned_again:.2f} s after")
+    print(
+        f"router lost for {gap:.1f} s; joints resumed at both users {resumed:.2f} s after it was back; every peer "
+        f"listed again {reconnected:.2f} s after; the arm was "
+        f"{'restored to alice' if restored else 'free (lease expired first): alice was told and asked again'} {owned_again:.2f} s after"
+    )

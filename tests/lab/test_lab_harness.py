@@ -45,7 +45,8 @@ def test_two_hosts_talk_over_the_bridge_and_reach_nothing_else(lab: Lab):
     # the only route is the lab's /24: no default route, an outside address is unreachable at once
     routes = a.run(["ip", "-4", "route"]).stdout.strip().splitlines()
     assert routes == [f"10.77.0.0/24 dev eth0 proto kernel scope link src {a.ip} "] or [r.strip() for r in routes] == [
-        f"10.77.0.0/24 dev eth0 proto kernel scope link src {a.ip}"], routes
+        f"10.77.0.0/24 dev eth0 proto kernel scope link src {a.ip}"
+    ], routes
     outside = pa.call("fetch('192.0.2.1', 80)")  # TEST-NET-1: not on the lab's LAN
     assert "unreachable" in outside.lower(), outside
     # the host sees only its own lo and eth0
@@ -64,7 +65,9 @@ def test_cut_and_restore_a_link(lab: Lab):
     assert pa.call(f"fetch({b.ip!r}, timeout=0.5)").startswith("error"), "b still reachable with its cable cut"
     lab.restore(b)
     assert lab.link_up(b)
-    wait_until(lambda: pa.call(f"fetch({b.ip!r}, timeout=0.5)").startswith("hello"), timeout=20, what="b reachable again")
+    wait_until(
+        lambda: pa.call(f"fetch({b.ip!r}, timeout=0.5)").startswith("hello"), timeout=20, what="b reachable again"
+    )
 
 
 def test_freeze_thaw_kill_and_a_shifted_clock(lab: Lab):
@@ -145,7 +148,9 @@ def test_a_killed_runs_namespaces_and_processes_are_swept(lab_ok, tmp_path):
     )
     with Lab(log_dir=tmp_path / "live") as live:  # a live run's lab, with a process: left alone
         bystander = live.add_host("h").spawn(["sleep", "300"], name="bystander")
-        proc = subprocess.run([os.sys.executable, "-c", script, str(tmp_path)], capture_output=True, text=True, timeout=60)
+        proc = subprocess.run(
+            [os.sys.executable, "-c", script, str(tmp_path)], capture_output=True, text=True, timeout=60
+        )
         left, *pids = proc.stdout.split()
         prefix = left.rsplit("-", 1)[0]
         assert left in netns_list()

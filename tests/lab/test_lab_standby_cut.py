@@ -39,8 +39,12 @@ def _never(pred, seconds: float, what: str, seen) -> None:
 
 
 def _no_take_over(primary: LabProcess, standby: LabProcess, seconds: float) -> None:
-    _never(lambda: "took over" in standby.output() or "stepping down" in primary.output(), seconds,
-           "a take-over", lambda: standby.output() + primary.output())
+    _never(
+        lambda: "took over" in standby.output() or "stepping down" in primary.output(),
+        seconds,
+        "a take-over",
+        lambda: standby.output() + primary.output(),
+    )
 
 
 def test_a_standby_cut_off_past_the_lease_does_not_take_over(lab: Lab):

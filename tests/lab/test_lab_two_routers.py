@@ -44,8 +44,11 @@ def test_users_behind_router_b_drive_lose_and_regain_the_world(two_routers):
     # users on B see and drive everything behind A
     assert alice.call("w.robots()") == ["arm1"]
     alice.call("arm.request(); arm.move_joints(np.full(6, 0.2), timeout=30); None", timeout=60)
-    wait_until(lambda: bob.call("q = arm.joints; q is not None and bool(np.max(np.abs(q - 0.2)) < 1e-3)"), timeout=20,
-               what="bob sees alice's move")
+    wait_until(
+        lambda: bob.call("q = arm.joints; q is not None and bool(np.max(np.abs(q - 0.2)) < 1e-3)"),
+        timeout=20,
+        what="bob sees alice's move",
+    )
     assert bob.call("arm.owner") == "alice"
     peers = two_routers["b"].robofabric("ps", "--json", "--connect", two_routers["b"].endpoint(), timeout=90)
     assert '"sim"' in peers.stdout and "alice" in peers.stdout, peers.stdout + peers.stderr
@@ -54,8 +57,11 @@ def test_users_behind_router_b_drive_lose_and_regain_the_world(two_routers):
     t_cut = time.monotonic()
     lab.cut("site-a")
     for name, py in users.items():
-        told = wait_until(lambda py=py: py.call("[t for t, alive, _ in events if not alive][-1:]"), timeout=30,
-                          what=f"{name} told the world is gone")[0]
+        told = wait_until(
+            lambda py=py: py.call("[t for t, alive, _ in events if not alive][-1:]"),
+            timeout=30,
+            what=f"{name} told the world is gone",
+        )[0]
         assert told - t_cut <= LEASE + 1.5, f"{name} was told {told - t_cut:.2f} s after the link dropped"
         assert py.call("w.world_alive") is False
     gone_after = told - t_cut
@@ -67,6 +73,9 @@ def test_users_behind_router_b_drive_lose_and_regain_the_world(two_routers):
         assert py.call("w.wait_world(timeout=60)", timeout=90), f"{name} did not see the world come back"
     back_after = time.monotonic() - t_heal
     alice.call("arm.request(timeout=10); arm.move_joints(np.zeros(6), timeout=30); None", timeout=90)
-    wait_until(lambda: bob.call("q = arm.joints; q is not None and bool(np.max(np.abs(q)) < 1e-3)"), timeout=20,
-               what="bob sees alice's move after the heal")
+    wait_until(
+        lambda: bob.call("q = arm.joints; q is not None and bool(np.max(np.abs(q)) < 1e-3)"),
+        timeout=20,
+        what="bob sees alice's move after the heal",
+    )
     print(f"two routers: world gone {gone_after:.2f} s after the cut; back {back_after:.2f} s after the heal")

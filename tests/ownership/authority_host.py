@@ -21,7 +21,13 @@ from ownership import Authority
 
 
 def main() -> None:
-    world, port, motion_file, lease_s, grace_s = sys.argv[1], int(sys.argv[2]), Path(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])
+    world, port, motion_file, lease_s, grace_s = (
+        sys.argv[1],
+        int(sys.argv[2]),
+        Path(sys.argv[3]),
+        float(sys.argv[4]),
+        float(sys.argv[5]),
+    )
     stop = shutdown_event()
     with client(world, port, kind="sim", peer_id="host") as fab:
         auth = Authority(fab, {"arm": "exclusive", "ball": "scene"}, lease_s=lease_s, grace_s=grace_s).start()
@@ -29,7 +35,9 @@ def main() -> None:
         def on_cmd(key: str, cmd: Command) -> None:
             reason = auth.admit("arm", cmd)
             kind = "reject" if reason else "accept"
-            fab.reports.emit(Event(kind=kind, reason=reason or "", object="arm", user=cmd.user, header=fab.header("ev")), kind, "arm")
+            fab.reports.emit(
+                Event(kind=kind, reason=reason or "", object="arm", user=cmd.user, header=fab.header("ev")), kind, "arm"
+            )
 
         fab.subscribe(keys.robot_cmd_all(world, "arm"), on_cmd, expected=Command)
         print("ready", flush=True)

@@ -24,7 +24,9 @@ if __name__ == "__main__":
         own = OwnershipClient(fab, user, renew_s=0.1, timeout=10.0).start()
         out = own.request(robot)
         print("outcome", out, flush=True)
-        fab.publish(keys.robot_cmd(world, robot, "joints", user), Command(user, out.epoch, JointTarget(q, speed_scale=0.1)))
+        fab.publish(
+            keys.robot_cmd(world, robot, "joints", user), Command(user, out.epoch, JointTarget(q, speed_scale=0.1))
+        )
         print("sent", flush=True)
         stop.wait()
         own.close()

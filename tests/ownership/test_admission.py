@@ -15,7 +15,13 @@ from ownership.admission import Admission, OwnBudgets
 
 def _admission(budgets: OwnBudgets):
     reported, counters, session = [], {}, Counter()
-    adm = Admission(budgets, FakeClock(), counters, report=lambda limit, make: reported.append((make(), limit)), fabric_counters=session)
+    adm = Admission(
+        budgets,
+        FakeClock(),
+        counters,
+        report=lambda limit, make: reported.append((make(), limit)),
+        fabric_counters=session,
+    )
     return adm, reported, counters, session
 
 
@@ -52,12 +58,16 @@ def test_budgets_parse_with_defaults_for_what_is_not_given():
 def test_past_all_budgets_together_a_login_is_refused_before_decoding():
     from fabric.codec import decode
 
-    adm, reported, counters, _ = _admission(OwnBudgets(requests=Rate(1.0, 1.0), owner=Rate(1.0, 1.0), queries=Rate(1.0, 1.0)))
+    adm, reported, counters, _ = _admission(
+        OwnBudgets(requests=Rate(1.0, 1.0), owner=Rate(1.0, 1.0), queries=Rate(1.0, 1.0))
+    )
     try:
         key = keys.own_request("w", "arm1", "mallory")
         assert [adm.gate(key) for _ in range(3)] == [None] * 3
         refusal = adm.gate(key)
-        assert decode(refusal).reason.startswith(f"{RATE_LIMITED}: mallory") and adm.gate(key) is refusal  # encoded once
+        assert (
+            decode(refusal).reason.startswith(f"{RATE_LIMITED}: mallory") and adm.gate(key) is refusal
+        )  # encoded once
         assert adm.gate(keys.own_request("w", "arm1", "bob")) is None
         assert counters["rate_limited"] == 2 and reported[0][1] == "rate_limited:arm1"
     finally:

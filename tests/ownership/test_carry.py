@@ -17,8 +17,14 @@ from ownership.carry import newer, overlay
 
 
 def _rec(obj: str, owner: str = "", epoch: int = 0, seq: int = 0, queue: tuple[str, ...] = ()) -> OwnershipRecord:
-    return OwnershipRecord(obj, owner=owner, epoch=epoch, queue=queue, lease_expiry=1.5 if owner else 0.0,
-                           header=Header(seq=seq, source="sim-a", term=3))
+    return OwnershipRecord(
+        obj,
+        owner=owner,
+        epoch=epoch,
+        queue=queue,
+        lease_expiry=1.5 if owner else 0.0,
+        header=Header(seq=seq, source="sim-a", term=3),
+    )
 
 
 def test_a_grant_after_the_snapshot_is_carried_with_its_epoch_and_its_owner():
@@ -56,7 +62,9 @@ _objs = stf.sampled_from(["arm0", "arm1", "base0"])
 
 @given(
     snap_epochs=stf.dictionaries(_objs, stf.integers(0, 50), min_size=1),
-    heard=stf.lists(stf.tuples(_objs, stf.integers(0, 60), stf.integers(0, 20), stf.sampled_from(["", "a", "b"])), max_size=8),
+    heard=stf.lists(
+        stf.tuples(_objs, stf.integers(0, 60), stf.integers(0, 20), stf.sampled_from(["", "a", "b"])), max_size=8
+    ),
     seq=stf.integers(0, 20),
 )
 def test_no_epoch_ever_goes_below_the_snapshot_or_the_newest_heard(snap_epochs, heard, seq):

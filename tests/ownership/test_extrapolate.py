@@ -8,7 +8,9 @@ from ownership.extrapolate import age_s, extrapolate
 fl = hs.floats(-100, 100)
 
 
-@given(hs.lists(fl, min_size=3, max_size=3), hs.lists(fl, min_size=3, max_size=3), hs.floats(-5, 5), hs.floats(0.01, 1.0))
+@given(
+    hs.lists(fl, min_size=3, max_size=3), hs.lists(fl, min_size=3, max_size=3), hs.floats(-5, 5), hs.floats(0.01, 1.0)
+)
 def test_extrapolate_moves_by_velocity_times_clamped_age(p, v, age, cap):
     out = extrapolate(p, v, age, cap_s=cap)
     a = min(max(age, 0.0), cap)

@@ -44,18 +44,35 @@ class ClassWorld:
         ep = f"tcp/127.0.0.1:{free_port()}"
         self.files = init(tmp / "class", users=["alice", "bob", "mallory"], listen=[ep]).clients
         self.procs = procs
-        router = procs.start(robofabric_cmd("router", "--zenoh-config", str(tmp / "class" / "router.json5")), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router))
-        self.sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", self.world, "--zenoh-config",
-                                              str(self.files["sim"])), name="sim")
+        router = procs.start(
+            robofabric_cmd("router", "--zenoh-config", str(tmp / "class" / "router.json5")), name="router"
+        )
+        wait_until(
+            lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router)
+        )
+        self.sim = procs.start(
+            robofabric_cmd(
+                "sim", "--scene", "combined", "--world", self.world, "--zenoh-config", str(self.files["sim"])
+            ),
+            name="sim",
+        )
 
     def fabric(self, login: str) -> Fabric:
         return Fabric(FabricConfig(world=self.world, config_file=str(self.files[login])), kind="user", peer_id=login)
 
     def flood(self, what: str, *args: str) -> dict:
         """mallory's flood, in her own process; what it was answered."""
-        argv = [sys.executable, "-m", "robofabric.bench.login_flood", self.world, str(self.files["mallory"]), "mallory", what,
-                *args, str(FLOOD_S)]
+        argv = [
+            sys.executable,
+            "-m",
+            "robofabric.bench.login_flood",
+            self.world,
+            str(self.files["mallory"]),
+            "mallory",
+            what,
+            *args,
+            str(FLOOD_S),
+        ]
         out = subprocess.run(argv, capture_output=True, text=True, timeout=FLOOD_S + 60)
         assert out.returncode == 0, out.stderr[-2000:]
         return json.loads(out.stdout.strip().splitlines()[-1])
@@ -95,8 +112,14 @@ class Asker:
 
 def _summary(latencies: list[float | None]) -> str:
     got = [x for x in latencies if x is not None]
-    return (f"{len(got)}/{len(latencies)} answered, p50 {np.percentile(got, 50) * 1e3:.0f} ms, "
-            f"p99 {np.percentile(got, 99) * 1e3:.0f} ms, max {max(got) * 1e3:.0f} ms") if got else "none answered"
+    return (
+        (
+            f"{len(got)}/{len(latencies)} answered, p50 {np.percentile(got, 50) * 1e3:.0f} ms, "
+            f"p99 {np.percentile(got, 99) * 1e3:.0f} ms, max {max(got) * 1e3:.0f} ms"
+        )
+        if got
+        else "none answered"
+    )
 
 
 def test_a_request_flood_leaves_alice_her_driven_base_and_the_still_rule(klass):
@@ -116,8 +139,10 @@ def test_a_request_flood_leaves_alice_her_driven_base_and_the_still_rule(klass):
         world_answers = Asker(bob, keys.srv(klass.world, "world"), WorldInfo)
         record_answers = Asker(bob, keys.own(klass.world, "base1"), OwnershipRecord)
         flood = klass.flood("request", "base1")
-        print(f"mallory's requests: {flood}; bob's srv/world: {_summary(world_answers.stop())}; "
-              f"bob's own/base1: {_summary(record_answers.stop())}")
+        print(
+            f"mallory's requests: {flood}; bob's srv/world: {_summary(world_answers.stop())}; "
+            f"bob's own/base1: {_summary(record_answers.stop())}"
+        )
         answers = flood["answers"]
         # alice kept it all along: no record of base1 changed owner or epoch, and her lease is still being renewed
         assert [(r.owner, r.epoch) for r in changes if (r.owner, r.epoch) != ("alice", epoch)] == []
@@ -135,9 +160,12 @@ def test_a_request_flood_leaves_alice_her_driven_base_and_the_still_rule(klass):
         wait_until(lambda: base.record.state == "still", timeout=20, what="base1 still")
         time.sleep(OwnBudgets().requests.burst / OwnBudgets().requests.per_s)  # her bucket fills up again
         with klass.fabric("mallory") as mallory:
-            reply = mallory.rpc.call(keys.own_request(klass.world, "base1", "mallory"),
-                                     OwnRequest("request", "mallory", False, header=mallory.header("own-req")), timeout=5.0,
-                                     expected=OwnReply)
+            reply = mallory.rpc.call(
+                keys.own_request(klass.world, "base1", "mallory"),
+                OwnRequest("request", "mallory", False, header=mallory.header("own-req")),
+                timeout=5.0,
+                expected=OwnReply,
+            )
         assert (reply.outcome, reply.record.owner, reply.record.epoch) == ("granted", "mallory", epoch + 1), reply
     finally:
         alice.close()
@@ -152,7 +180,9 @@ def test_a_state_flood_leaves_bob_his_world_answers(klass):
         flood = klass.flood("state")
         latencies = world_answers.stop()
         print(f"mallory's srv/state: {flood}; bob's srv/world: {_summary(latencies)}")
-        assert latencies and all(x is not None for x in latencies), f"bob's srv/world went unanswered: {_summary(latencies)}"
+        assert latencies and all(x is not None for x in latencies), (
+            f"bob's srv/world went unanswered: {_summary(latencies)}"
+        )
         assert flood["answers"].get(RATE_LIMITED, 0) > 0, flood  # past the sim's srv/state budget: refused at once
     finally:
         bob.close()

@@ -22,8 +22,13 @@ LEASE, GRACE = 0.5, 10.0
 
 def _start_host(procs, world, port, motion: Path):
     motion.write_text("still")
-    host = procs.start([sys.executable, str(HERE / "authority_host.py"), world, str(port), str(motion), str(LEASE), str(GRACE)], name="host")
-    wait_until(lambda: "ready" in procs.output(host), timeout=20, what="authority host ready", seen=lambda: procs.output(host))
+    host = procs.start(
+        [sys.executable, str(HERE / "authority_host.py"), world, str(port), str(motion), str(LEASE), str(GRACE)],
+        name="host",
+    )
+    wait_until(
+        lambda: "ready" in procs.output(host), timeout=20, what="authority host ready", seen=lambda: procs.output(host)
+    )
     return host
 
 
@@ -40,15 +45,20 @@ def test_handover_enforcement_kill_and_reconnect(world, router, connect, procs, 
     _start_host(procs, world, port, motion)
     events: list[Event] = []
     watcher = connect("tool", "watcher")
-    watcher.subscribe(keys.event_all(world), lambda k, e: events.append(e) if e.object == "arm" else None, expected=Event)
+    watcher.subscribe(
+        keys.event_all(world), lambda k, e: events.append(e) if e.object == "arm" else None, expected=Event
+    )
 
     a = _user(procs, world, port, "alice")
     assert "granted" in procs.output(a)
 
     fb = connect("user", "bob")
     bob = OwnershipClient(fb, "bob", renew_s=0.1).start()
-    wait_until(lambda: bob.record("arm") and bob.record("arm").owner == "alice", what="bob's replica sees alice",
-               seen=bob.snapshot)
+    wait_until(
+        lambda: bob.record("arm") and bob.record("arm").owner == "alice",
+        what="bob's replica sees alice",
+        seen=bob.snapshot,
+    )
 
     # moving: denied, then queued
     motion.write_text("moving")
@@ -63,27 +73,42 @@ def test_handover_enforcement_kill_and_reconnect(world, router, connect, procs, 
         fb.publish(keys.robot_cmd(world, "arm", "joints", user), Command(user, epoch, JointTarget(np.zeros(3))))
 
     send("bob", bob.epoch("arm"))
-    wait_until(lambda: any(e.kind == "reject" and e.user == "bob" and "owned by alice" in e.reason for e in events),
-               what="bob's command rejected", seen=lambda: events)
+    wait_until(
+        lambda: any(e.kind == "reject" and e.user == "bob" and "owned by alice" in e.reason for e in events),
+        what="bob's command rejected",
+        seen=lambda: events,
+    )
 
     # alice SIGKILLed: bob owns the arm (the arm is still moving: nothing reset)
     epoch_alice = bob.epoch("arm")
     procs.kill(a)
-    wait_until(lambda: bob.record("arm").owner == "bob", timeout=LEASE + 3.0, what="bob owns after alice's death",
-               seen=bob.snapshot)
+    wait_until(
+        lambda: bob.record("arm").owner == "bob",
+        timeout=LEASE + 3.0,
+        what="bob owns after alice's death",
+        seen=bob.snapshot,
+    )
     assert bob.record("arm").epoch > epoch_alice
     assert bob.record("arm").state == "moving"
 
     # stale epoch rejected, current epoch accepted
     send("bob", epoch_alice)
-    wait_until(lambda: any(e.kind == "reject" and "stale epoch" in e.reason for e in events), what="stale epoch rejected",
-               seen=lambda: events)
+    wait_until(
+        lambda: any(e.kind == "reject" and "stale epoch" in e.reason for e in events),
+        what="stale epoch rejected",
+        seen=lambda: events,
+    )
     send("bob", bob.epoch("arm"))
-    wait_until(lambda: any(e.kind == "accept" and e.user == "bob" for e in events), what="bob's command accepted",
-               seen=lambda: events)
+    wait_until(
+        lambda: any(e.kind == "accept" and e.user == "bob" for e in events),
+        what="bob's command accepted",
+        seen=lambda: events,
+    )
 
     # alice comes back within grace: queued at her old (first) place, bob keeps the arm past several leases
-    a2 = procs.start([sys.executable, str(HERE / "user_proc.py"), world, str(port), "alice", "arm", "wait"], name="alice2")
+    a2 = procs.start(
+        [sys.executable, str(HERE / "user_proc.py"), world, str(port), "alice", "arm", "wait"], name="alice2"
+    )
     wait_until(lambda: bob.record("arm").queue == ("alice",), timeout=20, what="alice queued again", seen=bob.snapshot)
     wait_until(lambda: "outcome" in procs.output(a2), timeout=20, what="alice2 outcome", seen=lambda: procs.output(a2))
     assert "queued at position 1" in procs.output(a2)

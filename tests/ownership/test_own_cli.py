@@ -12,8 +12,12 @@ pytestmark = pytest.mark.slow  # every test here starts processes or runs for se
 
 
 def _own(world, port, *args):
-    return subprocess.run(robofabric_cmd("own", *args, "--world", world, "--connect", f"tcp/127.0.0.1:{port}"),
-                          capture_output=True, text=True, timeout=60)
+    return subprocess.run(
+        robofabric_cmd("own", *args, "--world", world, "--connect", f"tcp/127.0.0.1:{port}"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
 
 
 def test_own_list_request_release(world, router, connect):
@@ -22,7 +26,9 @@ def test_own_list_request_release(world, router, connect):
     try:
         r = _own(world, port, "request", "ball", "--user", "ann")
         assert r.returncode == 0 and "ball: granted" in r.stdout and "anyone writes" in r.stdout, r.stdout + r.stderr
-        ann = OwnershipClient(connect("user", "ann"), "ann").start()  # a holder that stays (a CLI request ends with its process)
+        ann = OwnershipClient(
+            connect("user", "ann"), "ann"
+        ).start()  # a holder that stays (a CLI request ends with its process)
         assert ann.request("arm").outcome == "granted"
         auth.update_motion("arm", True)
         r = _own(world, port, "request", "arm", "--user", "ben")
@@ -56,21 +62,45 @@ def test_own_request_hold_renews_until_interrupted_then_releases(world, router, 
     try:
         assert ann.request("arm").outcome == "granted"
         auth.update_motion("arm", True)
-        argv = robofabric_cmd("own", "request", "arm", "--wait", "--hold", "--user", "dee", "--world", world, "--connect", f"tcp/127.0.0.1:{port}")
+        argv = robofabric_cmd(
+            "own",
+            "request",
+            "arm",
+            "--wait",
+            "--hold",
+            "--user",
+            "dee",
+            "--world",
+            world,
+            "--connect",
+            f"tcp/127.0.0.1:{port}",
+        )
         dee = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         procs.append(dee)
         owner = lambda: auth.records()["arm"].owner  # noqa: E731
-        wait_until(lambda: auth.records()["arm"].queue == ("dee",), what="dee queued", seen=lambda: auth.records()["arm"])
+        wait_until(
+            lambda: auth.records()["arm"].queue == ("dee",), what="dee queued", seen=lambda: auth.records()["arm"]
+        )
         auth.update_motion("arm", False)
         ann.release("arm")  # the queued holder is next
         wait_until(lambda: owner() == "dee", what="dee granted from the queue", seen=lambda: auth.records()["arm"])
         n0 = auth.counters["requests"]
-        wait_until(lambda: auth.counters["requests"] >= n0 + 6, timeout=30, what="renewals over two leases", seen=lambda: auth.counters)
+        wait_until(
+            lambda: auth.counters["requests"] >= n0 + 6,
+            timeout=30,
+            what="renewals over two leases",
+            seen=lambda: auth.counters,
+        )
         assert owner() == "dee", auth.records()["arm"]  # renewed past the 1.5 s lease
         dee.send_signal(signal.SIGINT)
         out, _ = dee.communicate(timeout=30)
         assert dee.returncode == 0, out
-        assert "queued at position 1" in out and "holding arm as dee" in out and "owner dee" in out and "arm: released" in out, out
+        assert (
+            "queued at position 1" in out
+            and "holding arm as dee" in out
+            and "owner dee" in out
+            and "arm: released" in out
+        ), out
         assert owner() == "", auth.records()["arm"]  # free
         r = _own(world, port, "request", "arm", "--duration", "1", "--user", "eve")
         assert r.returncode == 2 and "--duration needs --hold" in r.stderr, r.stdout + r.stderr
@@ -92,9 +122,27 @@ def test_own_watch_skips_and_counts_garbage_bad_tokens_and_foreign_records(world
     port = router[1]
     auth = Authority(connect("sim", "host"), {"arm": "exclusive"}, lease_s=5.0).start()
     try:
-        watch = procs.start(robofabric_cmd("own", "watch", "--duration", "3", "--user", "wat", "--world", world,
-                                           "--connect", f"tcp/127.0.0.1:{port}"), name="watch")
-        wait_until(lambda: "arm" in procs.output(watch), timeout=30, what="watch's first snapshot", seen=lambda: procs.output(watch))
+        watch = procs.start(
+            robofabric_cmd(
+                "own",
+                "watch",
+                "--duration",
+                "3",
+                "--user",
+                "wat",
+                "--world",
+                world,
+                "--connect",
+                f"tcp/127.0.0.1:{port}",
+            ),
+            name="watch",
+        )
+        wait_until(
+            lambda: "arm" in procs.output(watch),
+            timeout=30,
+            what="watch's first snapshot",
+            seen=lambda: procs.output(watch),
+        )
         mallory = connect("tool", "mallory")
         token = mallory.session.liveliness().declare_token(f"rf/{world}/peer/sim/with space")
         mallory.session.put(keys.own(world, "arm"), b"\x00not msgpack")
@@ -120,11 +168,19 @@ def test_own_staff_takes_back_gives_and_locks_and_says_why_it_refuses(world, rou
         wait_until(lambda: {"ann", "ben"} <= set(auth._state.live), timeout=30, what="ann and ben live")
         assert ann.request("arm").granted
         r = _own(world, port, "staff", "take_back", "arm", "--user", "teacher")
-        assert r.returncode == 0 and "arm: done: arm taken back from ann by instructor teacher: now free" in r.stdout, r.stdout + r.stderr
+        assert r.returncode == 0 and "arm: done: arm taken back from ann by instructor teacher: now free" in r.stdout, (
+            r.stdout + r.stderr
+        )
         r = _own(world, port, "staff", "take_back", "arm", "--user", "teacher")
-        assert r.returncode == 1 and "arm: denied: arm is free: nobody to take it back from" in r.stdout, r.stdout + r.stderr
+        assert r.returncode == 1 and "arm: denied: arm is free: nobody to take it back from" in r.stdout, (
+            r.stdout + r.stderr
+        )
         r = _own(world, port, "staff", "give", "arm", "--to", "ben", "--user", "teacher")
-        assert r.returncode == 0 and "given to ben by instructor teacher" in r.stdout and auth.records()["arm"].owner == "ben", r.stdout + r.stderr
+        assert (
+            r.returncode == 0
+            and "given to ben by instructor teacher" in r.stdout
+            and auth.records()["arm"].owner == "ben"
+        ), r.stdout + r.stderr
         r = _own(world, port, "staff", "lock", "arm", "--user", "teacher")
         assert r.returncode == 0 and auth.records()["arm"].locked == "teacher", r.stdout + r.stderr
         r = _own(world, port, "list")

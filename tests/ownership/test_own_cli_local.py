@@ -54,7 +54,16 @@ def client(monkeypatch):
 def test_list_prints_every_record_of_one_snapshot(client, capsys):
     cli.list_cmd(as_json=True)
     doc = json.loads(capsys.readouterr().out)  # one JSON document
-    assert doc["world"] == "w" and set(doc["records"][0]) == {"object", "policy", "owner", "epoch", "queue", "state", "authority", "locked"}
+    assert doc["world"] == "w" and set(doc["records"][0]) == {
+        "object",
+        "policy",
+        "owner",
+        "epoch",
+        "queue",
+        "state",
+        "authority",
+        "locked",
+    }
     assert [(r["object"], r["owner"], r["epoch"]) for r in doc["records"]] == [("arm", "ann", 3), ("ball", "", 0)]
     assert client.snapshots == 1 and client.closed
 
@@ -83,7 +92,6 @@ def test_list_without_records_says_no_authority_answered(monkeypatch):
     monkeypatch.setattr(cli, "_client", lambda *a: (_Fabric(), _Client({})))
     with pytest.raises(cli.NothingThere, match="no ownership authority answered"):  # exit 1: the world had nothing
         cli.list_cmd()
-
 
 
 def test_names_from_the_network_reach_the_terminal_escaped():

@@ -14,8 +14,14 @@ def test_request_round_trip(op, user, wait):
     assert decode(encode(OwnRequest(op, user, wait)), OwnRequest) == OwnRequest(op, user, wait)
 
 
-@given(hs.sampled_from(["granted", "denied", "queued", "released", "renewed"]), hs.text(max_size=20),
-       hs.integers(0, 100), ids, hs.integers(0, 10**6), hs.lists(ids, max_size=4))
+@given(
+    hs.sampled_from(["granted", "denied", "queued", "released", "renewed"]),
+    hs.text(max_size=20),
+    hs.integers(0, 100),
+    ids,
+    hs.integers(0, 10**6),
+    hs.lists(ids, max_size=4),
+)
 def test_reply_round_trip(outcome, reason, pos, owner, epoch, queue):
     rep = OwnReply(outcome, reason, pos, OwnershipRecord(object="arm", owner=owner, epoch=epoch, queue=tuple(queue)))
     assert decode(encode(rep), OwnReply) == rep

@@ -74,8 +74,21 @@ class Watch:
 
 
 def _sim(procs: ProcessGroup, world: str, port: int, *args: str, router: Fabric):
-    sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", f"tcp/127.0.0.1:{port}",
-                                     "--rate", "pose=50,joints=50,scan=5", *args), name="sim")
+    sim = procs.start(
+        robofabric_cmd(
+            "sim",
+            "--scene",
+            "combined",
+            "--world",
+            world,
+            "--connect",
+            f"tcp/127.0.0.1:{port}",
+            "--rate",
+            "pose=50,joints=50,scan=5",
+            *args,
+        ),
+        name="sim",
+    )
     wait_until(lambda: router.live_peers("sim"), timeout=60, what="sim peer", seen=lambda: procs.output(sim)[-2000:])
     return sim
 
@@ -90,10 +103,24 @@ def held(tmp_path_factory) -> Iterator[tuple[str, int, ProcessGroup, Watch]]:
     procs = ProcessGroup(tmp_path_factory.mktemp("held"))
     watcher = client(world, port, kind="tool", peer_id="watch")
     try:
-        _sim(procs, world, port, "--twist-timeout", "none", "--robot", "reeman:base2@-2,2", "--robot", "reeman:base3@-2,-2",
-             router=router)
+        _sim(
+            procs,
+            world,
+            port,
+            "--twist-timeout",
+            "none",
+            "--robot",
+            "reeman:base2@-2,2",
+            "--robot",
+            "reeman:base3@-2,-2",
+            router=router,
+        )
         watch = Watch(watcher, world)
-        wait_until(lambda: all(watch.pose(b) for b in ("base1", "base2", "base3")) and watch.joints, timeout=30, what="first poses")
+        wait_until(
+            lambda: all(watch.pose(b) for b in ("base1", "base2", "base3")) and watch.joints,
+            timeout=30,
+            what="first poses",
+        )
         yield world, port, procs, watch
     finally:
         procs.close()
@@ -106,7 +133,12 @@ def _braked_within_limits(poses: list[Pose], since: float) -> list[float]:
     after = [p for p in poses if p.header.stamp >= since - 0.05]
     for a, b in zip(after, after[1:]):
         dt = b.header.stamp - a.header.stamp
-        assert abs(b.angular[2] - a.angular[2]) <= ALPHA * dt + 1e-6, (a.header.stamp, a.angular[2], b.header.stamp, b.angular[2])
+        assert abs(b.angular[2] - a.angular[2]) <= ALPHA * dt + 1e-6, (
+            a.header.stamp,
+            a.angular[2],
+            b.header.stamp,
+            b.angular[2],
+        )
     return [float(p.angular[2]) for p in after]
 
 
@@ -118,13 +150,21 @@ def test_a_base_turning_on_one_twist_stops_within_the_deadman(world, router, con
     watch = Watch(fab, world)
     alice = OwnershipClient(fab, "alice", renew_s=0.1, timeout=10.0).start()
     try:
-        wait_until(lambda: alice.record("base1") is not None and watch.pose("base1"), timeout=30, what="base1's record and pose")
+        wait_until(
+            lambda: alice.record("base1") is not None and watch.pose("base1"),
+            timeout=30,
+            what="base1's record and pose",
+        )
         epoch = alice.request("base1").epoch
         fab.wait_matching(keys.robot_cmd(world, "base1", "twist", "alice"), 5.0)
         fab.publish(keys.robot_cmd(world, "base1", "twist", "alice"), Command("alice", epoch, Twist(0.0, OMEGA)))
-        wait_until(lambda: watch.turning("base1"), timeout=10, what="base1 turning", seen=lambda: watch.pose("base1")[-1:])
+        wait_until(
+            lambda: watch.turning("base1"), timeout=10, what="base1 turning", seen=lambda: watch.pose("base1")[-1:]
+        )
         first = next(p for p in watch.pose("base1") if abs(p.angular[2]) > STILL)  # within a step of the twist
-        still = wait_until(lambda: watch.still_after("base1", first.header.stamp), timeout=10, what="base1 stopped by the deadman")
+        still = wait_until(
+            lambda: watch.still_after("base1", first.header.stamp), timeout=10, what="base1 stopped by the deadman"
+        )
         held_s = still.header.stamp - first.header.stamp
         # the twist held for the deadman, then the base braked within its limits: 0.5 + 0.27 s, give a pose period
         assert 0.5 <= held_s <= 0.5 + BRAKE_S + 0.05, held_s
@@ -160,8 +200,15 @@ def test_a_base_stops_within_half_a_second_of_its_owners_release(held):
 
 def test_a_base_whose_owner_is_killed_while_refreshing_stops_within_the_lease(held):
     world, port, procs, watch = held
-    alice = procs.start([sys.executable, str(HERE / "twist_user.py"), world, str(port), "alice", "base3", str(OMEGA)], name="alice")
-    wait_until(lambda: "driving" in procs.output(alice), timeout=60, what="alice driving", seen=lambda: procs.output(alice)[-2000:])
+    alice = procs.start(
+        [sys.executable, str(HERE / "twist_user.py"), world, str(port), "alice", "base3", str(OMEGA)], name="alice"
+    )
+    wait_until(
+        lambda: "driving" in procs.output(alice),
+        timeout=60,
+        what="alice driving",
+        seen=lambda: procs.output(alice)[-2000:],
+    )
     wait_until(lambda: watch.turning("base3"), timeout=10, what="base3 turning")
     procs.kill(alice)
     t_kill = watch.pose("base3")[-1].header.stamp
@@ -177,11 +224,16 @@ def test_a_still_base_taken_over_and_at_once_driven_keeps_the_new_owners_twist(h
     """The take-over's stop (of the former owner) lands before the new owner's first twist, never on it: one twist,
     never repeated, in a sim whose twists hold, must keep the base turning."""
     world, port, _, watch = held
-    with client(world, port, kind="user", peer_id="carol") as fa, client(world, port, kind="user", peer_id="dave") as fb:
+    with (
+        client(world, port, kind="user", peer_id="carol") as fa,
+        client(world, port, kind="user", peer_id="dave") as fb,
+    ):
         carol = OwnershipClient(fa, "carol", renew_s=0.1, timeout=10.0).start()
         dave = OwnershipClient(fb, "dave", renew_s=0.1, timeout=10.0).start()
         try:
-            wait_until(lambda: carol.record("base1") is not None and dave.record("base1") is not None, what="base1's record")
+            wait_until(
+                lambda: carol.record("base1") is not None and dave.record("base1") is not None, what="base1's record"
+            )
             assert carol.request("base1").granted
             key = keys.robot_cmd(world, "base1", "twist", "dave")
             fb.wait_matching(key, 5.0)
@@ -190,8 +242,12 @@ def test_a_still_base_taken_over_and_at_once_driven_keeps_the_new_owners_twist(h
             out = wait_until(lambda: (o := dave.request("base1")).granted and o, what="dave takes base1 over")
             assert "taken over from carol" in out.reason, out
             fb.publish(key, Command("dave", out.epoch, Twist(0.0, 0.6)))  # at once, and once
-            wait_until(lambda: watch.turning("base1", 0.6), timeout=10, what="base1 turning at dave's 0.6 rad/s",
-                       seen=lambda: watch.pose("base1")[-1:])
+            wait_until(
+                lambda: watch.turning("base1", 0.6),
+                timeout=10,
+                what="base1 turning at dave's 0.6 rad/s",
+                seen=lambda: watch.pose("base1")[-1:],
+            )
             t = watch.pose("base1")[-1].header.stamp
             wait_until(lambda: watch.pose("base1")[-1].header.stamp > t + 1.0, timeout=10, what="a second of sim time")
             assert all(abs(p.angular[2] - 0.6) < 1e-6 for p in watch.pose("base1") if p.header.stamp >= t)
@@ -215,7 +271,9 @@ def test_an_arm_moving_when_its_owner_releases_holds_where_it_was(held):
             key = keys.robot_cmd(world, "arm1", "joints", "erin")
             fab.wait_matching(key, 5.0)
             fab.publish(key, Command("erin", epoch, JointTarget(target, speed_scale=scale)))
-            wait_until(lambda: watch.joints and np.abs(watch.joints[-1].dq).max() > 1e-3, timeout=10, what="arm1 moving")
+            wait_until(
+                lambda: watch.joints and np.abs(watch.joints[-1].dq).max() > 1e-3, timeout=10, what="arm1 moving"
+            )
             assert erin.release("arm1").outcome == "released"
             ev = wait_until(lambda: watch.event(EventKind.OWNER_STOP, "arm1"), timeout=10, what="the owner_stop event")
             assert (ev.user, ev.reason) == ("erin", "released by erin")
@@ -229,7 +287,11 @@ def test_an_arm_moving_when_its_owner_releases_holds_where_it_was(held):
     # read after the stop (a state stamped at the event's very sim time may have been read just before it)
     after = [j for j in js if j.header.stamp > ev.header.stamp]
     held_q = np.asarray(after[0].q)
-    moved = [(j.header.stamp, np.asarray(j.q) - held_q, j.dq) for j in after if not np.allclose(j.q, held_q, atol=1e-12) or np.any(j.dq)]
+    moved = [
+        (j.header.stamp, np.asarray(j.q) - held_q, j.dq)
+        for j in after
+        if not np.allclose(j.q, held_q, atol=1e-12) or np.any(j.dq)
+    ]
     assert not moved, f"the arm moved after its owner let go (stop at {ev.header.stamp}): {moved[:3]}"
     assert np.abs(held_q - target).max() > 0.1  # stopped on its way, not at erin's target
     # no jump: between any two joint states no joint went faster than its speed limit at erin's scale

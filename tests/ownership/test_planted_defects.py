@@ -65,7 +65,9 @@ def test_the_authority_admits_a_stale_command_only_when_built_with_that_defect(c
 
         def ask() -> OwnReply | None:  # the authority's queryable reaches the router in its own time
             try:
-                return alice.rpc.call(keys.own_request(world, "arm", "alice"), OwnRequest("request", "alice"), expected=OwnReply)
+                return alice.rpc.call(
+                    keys.own_request(world, "arm", "alice"), OwnRequest("request", "alice"), expected=OwnReply
+                )
             except NoReply:
                 return None
 
@@ -82,8 +84,13 @@ def test_the_authority_admits_a_stale_command_only_when_built_with_that_defect(c
         auth.close()
 
 
-PURE_AND_HOOKED = ("ownership/state.py", "ownership/authority.py", "sim_peer/replica/following.py", "sim_peer/replica/replica_host.py",
-                   "fabric/plant.py")
+PURE_AND_HOOKED = (
+    "ownership/state.py",
+    "ownership/authority.py",
+    "sim_peer/replica/following.py",
+    "sim_peer/replica/replica_host.py",
+    "fabric/plant.py",
+)
 """The state machine and the modules that hold a defect's hook: none of them reads the environment."""
 
 
@@ -93,7 +100,9 @@ def test_no_module_that_holds_a_defect_reads_the_environment():
     root = Path(__file__).resolve().parents[2]
     for rel in PURE_AND_HOOKED:
         tree = ast.parse((root / rel).read_text(), rel)
-        names = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)} | {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)}
+        names = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)} | {
+            n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)
+        }
         imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
         imported |= {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
         assert not names & {"environ", "getenv", "environb"}, f"{rel} reads the environment"

@@ -34,9 +34,13 @@ def test_a_router_paused_8_s_releases_and_restores_no_robot(tmp_path):
     files = made.clients
     with ProcessGroup(tmp_path) as procs:
         router = procs.start(robofabric_cmd("router", "--zenoh-config", str(made.router)), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router))
-        sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config", str(files["sim"])),
-                          name="sim")
+        wait_until(
+            lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router)
+        )
+        sim = procs.start(
+            robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config", str(files["sim"])),
+            name="sim",
+        )
         alice = user_peer.connect(world=world, zenoh_config=str(files["alice"]), timeout=10.0, join_timeout=90.0)
         bob = user_peer.connect(world=world, zenoh_config=str(files["bob"]), timeout=10.0)
         try:
@@ -58,14 +62,21 @@ def test_a_router_paused_8_s_releases_and_restores_no_robot(tmp_path):
                 os.kill(router.pid, signal.SIGCONT)
             resumed = time.monotonic()
             # every link the router cut comes back: both users' tokens are seen again
-            wait_until(lambda: {("user", "alice"), ("user", "bob")} <= set(bob.fabric.live_peers("user")), timeout=60,
-                       what="alice's and bob's tokens after the stall", seen=lambda: bob.fabric.live_peers("user"))
+            wait_until(
+                lambda: {("user", "alice"), ("user", "bob")} <= set(bob.fabric.live_peers("user")),
+                timeout=60,
+                what="alice's and bob's tokens after the stall",
+                seen=lambda: bob.fabric.live_peers("user"),
+            )
             # a held owner whose token did not come back would leave after grace: watch past it for any change
             while time.monotonic() < resumed + GRACE_S + 2.0:
                 assert not changes, changes
                 time.sleep(0.2)
             assert not changes, changes
-            assert (arm.record.owner, arm.record.epoch) == held["arm1"] and (base.record.owner, base.record.epoch) == held["base1"]
+            assert (arm.record.owner, arm.record.epoch) == held["arm1"] and (
+                base.record.owner,
+                base.record.epoch,
+            ) == held["base1"]
             start = base.xy_theta
             end = base.drive(0.2, 0.0, 1.0)  # bob still drives his base with the epoch he had
             assert abs(end[0] - start[0]) + abs(end[1] - start[1]) > 0.05, (start, end)

@@ -31,20 +31,43 @@ def test_arm_continues_after_owner_is_killed(world, router, connect, procs):
     events: list[Event] = []
     fb.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
     bob = OwnershipClient(fb, "bob", renew_s=0.1, timeout=10.0).start()
-    wait_until(lambda: bob.record("arm1") is not None and joints, timeout=30, what="arm1 record and joints", seen=bob.snapshot)
+    wait_until(
+        lambda: bob.record("arm1") is not None and joints, timeout=30, what="arm1 record and joints", seen=bob.snapshot
+    )
 
     target = np.radians([60.0, 30.0, -40.0, 30.0, 50.0, -30.0])
-    alice = procs.start([sys.executable, str(HERE / "sim_user.py"), world, str(port), "alice", "arm1",
-                         ",".join(str(x) for x in target)], name="alice")
-    wait_until(lambda: "sent" in procs.output(alice), timeout=30, what="alice's command", seen=lambda: procs.output(alice))
-    wait_until(lambda: bob.record("arm1").owner == "alice" and bob.record("arm1").state == "moving", timeout=20,
-               what="alice owns a moving arm", seen=lambda: (bob.record("arm1"), procs.output(alice)))
+    alice = procs.start(
+        [
+            sys.executable,
+            str(HERE / "sim_user.py"),
+            world,
+            str(port),
+            "alice",
+            "arm1",
+            ",".join(str(x) for x in target),
+        ],
+        name="alice",
+    )
+    wait_until(
+        lambda: "sent" in procs.output(alice), timeout=30, what="alice's command", seen=lambda: procs.output(alice)
+    )
+    wait_until(
+        lambda: bob.record("arm1").owner == "alice" and bob.record("arm1").state == "moving",
+        timeout=20,
+        what="alice owns a moving arm",
+        seen=lambda: (bob.record("arm1"), procs.output(alice)),
+    )
     out = bob.request("arm1")
     assert out.outcome == "denied" and "in motion" in out.reason, out
     assert bob.request("arm1", wait=True).outcome == "queued"
-    fb.publish(keys.robot_cmd(world, "arm1", "joints", "bob"), Command("bob", bob.epoch("arm1"), JointTarget(np.zeros(6))))
-    wait_until(lambda: any(e.kind == "reject" and e.user == "bob" for e in events), what="bob's command rejected",
-               seen=lambda: events[-5:])
+    fb.publish(
+        keys.robot_cmd(world, "arm1", "joints", "bob"), Command("bob", bob.epoch("arm1"), JointTarget(np.zeros(6)))
+    )
+    wait_until(
+        lambda: any(e.kind == "reject" and e.user == "bob" for e in events),
+        what="bob's command rejected",
+        seen=lambda: events[-5:],
+    )
 
     procs.kill(alice)
     q_kill = np.asarray(joints[-1].q).copy()

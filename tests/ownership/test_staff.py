@@ -39,7 +39,9 @@ def test_take_back_stops_the_owners_robot_and_hands_it_to_the_queue():
     s2, eff = staff.step(s, staff.Staff("teacher", "arm", "take_back", 6.0))
     rec = s2.records["arm"]
     assert rec.owner == "bob" and rec.epoch == s.records["arm"].epoch + 1 and rec.queue == ()
-    assert ("stop", "alice") in _kinds(eff) and ("revoked", "alice") in _kinds(eff) and ("handover", "bob") in _kinds(eff)
+    assert (
+        ("stop", "alice") in _kinds(eff) and ("revoked", "alice") in _kinds(eff) and ("handover", "bob") in _kinds(eff)
+    )
     done = [e for e in eff if e.kind == "done"]
     assert done and done[0].user == "teacher" and "taken back from alice by instructor teacher" in done[0].reason
 
@@ -79,15 +81,26 @@ def test_stop_and_reset_leave_the_owner_her_robot():
 
 def test_refusals_say_why():
     s = _world("alice")
-    for ev, words in ((staff.Staff("t", "arm", "take_back", 1.0), "is free"), (staff.Staff("t", "ball", "lock", 1.0), "scene object"),
-                      (staff.Staff("t", "nope", "stop", 1.0), "unknown object"), (staff.Staff("t", "arm", "unlock", 1.0), "not locked"),
-                      (staff.Staff("t", "arm", "fly", 1.0), "not a staff action")):
+    for ev, words in (
+        (staff.Staff("t", "arm", "take_back", 1.0), "is free"),
+        (staff.Staff("t", "ball", "lock", 1.0), "scene object"),
+        (staff.Staff("t", "nope", "stop", 1.0), "unknown object"),
+        (staff.Staff("t", "arm", "unlock", 1.0), "not locked"),
+        (staff.Staff("t", "arm", "fly", 1.0), "not a staff action"),
+    ):
         s2, eff = staff.step(s, ev)
         assert s2 is s and _kinds(eff) == [("denied", "t")] and words in eff[0].reason
 
 
-@given(hs.lists(hs.tuples(hs.sampled_from(STAFF_OPS + ("request", "release", "leave", "join")),
-                          hs.sampled_from(("alice", "bob", "carol"))), max_size=30))
+@given(
+    hs.lists(
+        hs.tuples(
+            hs.sampled_from(STAFF_OPS + ("request", "release", "leave", "join")),
+            hs.sampled_from(("alice", "bob", "carol")),
+        ),
+        max_size=30,
+    )
+)
 def test_any_mix_keeps_one_live_owner_at_most_and_nobody_owns_a_locked_robot(steps):
     s = _world("alice", "bob")
     now = 10.0
@@ -113,7 +126,9 @@ def test_any_mix_keeps_one_live_owner_at_most_and_nobody_owns_a_locked_robot(ste
 
 def test_the_records_new_field_keeps_the_old_wire_form():
     rec = OwnershipRecord("arm", owner="alice")
-    assert decode(encode(rec), OwnershipRecord) == rec and len(encode(rec)) == len(encode(OwnershipRecord("arm", owner="alice")))
+    assert decode(encode(rec), OwnershipRecord) == rec and len(encode(rec)) == len(
+        encode(OwnershipRecord("arm", owner="alice"))
+    )
     locked = OwnershipRecord("arm", locked="teacher")
     assert decode(encode(locked), OwnershipRecord).locked == "teacher"
     assert decode(encode(OwnRequest("give", "t", to="bob")), OwnRequest).to == "bob"
@@ -131,13 +146,14 @@ def test_the_authority_serves_the_staff_key_and_logs_each_action(connect, world)
     auth.watch_resets(lambda *a: resets.append(a))
     events: list[Event] = []
     watcher = connect("tool", "watcher")
-    watcher.subscribe(keys.event_all(world),
-                      lambda key, ev: events.append(ev), expected=Event)
+    watcher.subscribe(keys.event_all(world), lambda key, ev: events.append(ev), expected=Event)
     alice = OwnershipClient(connect("user", "alice"), "alice", renew_s=0.2).start()
     bob = OwnershipClient(connect("user", "bob"), "bob", renew_s=0.2).start()
     teacher = OwnershipClient(connect("user", "teacher"), "teacher", renew_s=0.2).start()
     try:
-        wait_until(lambda: {"alice", "bob", "teacher"} <= set(auth._state.live), timeout=30, what="the three logins live")
+        wait_until(
+            lambda: {"alice", "bob", "teacher"} <= set(auth._state.live), timeout=30, what="the three logins live"
+        )
         assert alice.request("arm").granted
         with pytest.raises(ServiceError, match="staff action"):
             alice.fabric.rpc.call(keys.own_request(world, "arm", "alice"), OwnRequest("take_back", "alice"))
@@ -147,7 +163,9 @@ def test_the_authority_serves_the_staff_key_and_logs_each_action(connect, world)
         assert teacher.staff("arm", "give", to="bob").outcome == "done"
         wait_until(lambda: bob.owns("arm"), timeout=10, what="bob's replica to name him owner")
         # bob never asked, yet his client renews what he was given: still his after several leases
-        wait_until(lambda: auth.records()["arm"].epoch and bob.renewal.held() == ["arm"], timeout=10, what="bob renewing")
+        wait_until(
+            lambda: auth.records()["arm"].epoch and bob.renewal.held() == ["arm"], timeout=10, what="bob renewing"
+        )
         t0 = auth.clock.now()
         wait_until(lambda: auth.clock.now() - t0 > 3.0, timeout=30, what="three leases to pass")
         assert auth.records()["arm"].owner == "bob"
@@ -163,7 +181,9 @@ def test_the_authority_serves_the_staff_key_and_logs_each_action(connect, world)
 
 
 @pytest.mark.slow
-def test_the_instructors_stop_and_reset_reach_the_sims_robot_and_her_lock_refuses_the_owner(world, router, connect, procs):
+def test_the_instructors_stop_and_reset_reach_the_sims_robot_and_her_lock_refuses_the_owner(
+    world, router, connect, procs
+):
     """A real sim: alice moves arm1 away from zero; the instructor's stop holds it where it is, her reset takes it
     back to zero while alice keeps it, and her lock takes it from alice, whose next command is refused."""
     from fabric.interfaces import Command, JointState, JointTarget
@@ -184,24 +204,44 @@ def test_the_instructors_stop_and_reset_reach_the_sims_robot_and_her_lock_refuse
     try:
         wait_until(lambda: alice.record("arm1") is not None and joints, timeout=30, what="arm1's record and joints")
         assert alice.request("arm1").granted
-        fa.publish(keys.robot_cmd(world, "arm1", "joints", "alice"),
-                   Command("alice", alice.epoch("arm1"), JointTarget(np.radians([60.0, 30.0, -40.0, 30.0, 50.0, -30.0]), speed_scale=0.2)))
-        wait_until(lambda: np.linalg.norm(joints[-1].q) > 0.2, timeout=30, what="arm1 on its way", seen=lambda: joints[-1].q)
+        fa.publish(
+            keys.robot_cmd(world, "arm1", "joints", "alice"),
+            Command(
+                "alice",
+                alice.epoch("arm1"),
+                JointTarget(np.radians([60.0, 30.0, -40.0, 30.0, 50.0, -30.0]), speed_scale=0.2),
+            ),
+        )
+        wait_until(
+            lambda: np.linalg.norm(joints[-1].q) > 0.2, timeout=30, what="arm1 on its way", seen=lambda: joints[-1].q
+        )
         assert teacher.staff("arm1", "stop").outcome == "done"
-        wait_until(lambda: np.max(np.abs(joints[-1].dq)) < 1e-3, timeout=30, what="arm1 held", seen=lambda: joints[-1].dq)
+        wait_until(
+            lambda: np.max(np.abs(joints[-1].dq)) < 1e-3, timeout=30, what="arm1 held", seen=lambda: joints[-1].dq
+        )
         held = np.asarray(joints[-1].q).copy()
         assert np.linalg.norm(held) > 0.2 and alice.owns("arm1")
         assert teacher.staff("arm1", "reset").outcome == "done"
-        wait_until(lambda: np.linalg.norm(joints[-1].q) < 1e-3, timeout=60, what="arm1 back at zero", seen=lambda: joints[-1].q)
+        wait_until(
+            lambda: np.linalg.norm(joints[-1].q) < 1e-3, timeout=60, what="arm1 back at zero", seen=lambda: joints[-1].q
+        )
         assert alice.owns("arm1")
         out = teacher.staff("arm1", "lock")
         assert out.outcome == "done" and out.record.locked == "teacher" and out.record.owner == ""
         denied = alice.request("arm1")
         assert denied.outcome == "denied" and "locked by instructor teacher" in denied.reason
-        fa.publish(keys.robot_cmd(world, "arm1", "joints", "alice"), Command("alice", alice.epoch("arm1"), JointTarget(held)))
-        wait_until(lambda: any(e.kind == "reject" and e.user == "alice" and e.object == "arm1" for e in events), timeout=30,
-                   what="alice's command after the lock refused", seen=lambda: events[-5:])
-        assert any(e.kind == "own_staff" and "locked by instructor teacher (taken from alice)" in e.reason for e in events)
+        fa.publish(
+            keys.robot_cmd(world, "arm1", "joints", "alice"), Command("alice", alice.epoch("arm1"), JointTarget(held))
+        )
+        wait_until(
+            lambda: any(e.kind == "reject" and e.user == "alice" and e.object == "arm1" for e in events),
+            timeout=30,
+            what="alice's command after the lock refused",
+            seen=lambda: events[-5:],
+        )
+        assert any(
+            e.kind == "own_staff" and "locked by instructor teacher (taken from alice)" in e.reason for e in events
+        )
     finally:
         alice.close()
         teacher.close()

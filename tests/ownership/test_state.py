@@ -48,7 +48,9 @@ def build(raw, now):
 
 
 def check_invariants(s: st.OwnState) -> None:
-    assert set(s.held) <= s.live, f"held users {set(s.held) - s.live} are not live"  # held: her token's loss not taken yet
+    assert set(s.held) <= s.live, (
+        f"held users {set(s.held) - s.live} are not live"
+    )  # held: her token's loss not taken yet
     for obj, rec in s.records.items():
         if rec.policy == "scene":
             assert rec.owner == "" and rec.queue == ()
@@ -64,12 +66,32 @@ def check_invariants(s: st.OwnState) -> None:
 
 @settings(max_examples=300, deadline=None)
 @given(events())
-@example([("join", "c", 0.0), ("leave", "c", 0.0), ("tick", 1.0), ("join", "a", 3.0), ("join", "a", 3.0),
-          ("join", "a", 3.0), ("request", "a", "arm", False, 0.0), ("request", "c", "arm", False, 0.0),
-          ("tick", 1.0), ("request", "c", "arm", True, 0.0)])  # asked while away: her rank outlived her grace
-@example([("request", "c", "arm", False, 0.0), ("join", "a", 2.0), ("join", "a", 3.0), ("join", "a", 3.0),
-          ("request", "a", "arm", False, 0.0), ("request", "c", "arm", True, 1.0), ("join", "a", 1.0),
-          ("tick", 1.0)])  # one tick: a's lease ends, the arm passes to c, c's tokenless grace ends too
+@example(
+    [
+        ("join", "c", 0.0),
+        ("leave", "c", 0.0),
+        ("tick", 1.0),
+        ("join", "a", 3.0),
+        ("join", "a", 3.0),
+        ("join", "a", 3.0),
+        ("request", "a", "arm", False, 0.0),
+        ("request", "c", "arm", False, 0.0),
+        ("tick", 1.0),
+        ("request", "c", "arm", True, 0.0),
+    ]
+)  # asked while away: her rank outlived her grace
+@example(
+    [
+        ("request", "c", "arm", False, 0.0),
+        ("join", "a", 2.0),
+        ("join", "a", 3.0),
+        ("join", "a", 3.0),
+        ("request", "a", "arm", False, 0.0),
+        ("request", "c", "arm", True, 1.0),
+        ("join", "a", 1.0),
+        ("tick", 1.0),
+    ]
+)  # one tick: a's lease ends, the arm passes to c, c's tokenless grace ends too
 def test_invariants_over_random_sequences(seq):
     s = st.initial(OBJECTS, lease_s=LEASE, grace_s=GRACE)
     now = 0.0
@@ -87,15 +109,28 @@ def test_invariants_over_random_sequences(seq):
             # a robot moves only while a live owner drives it: losing its owner stops it, and nothing else does
             stops = [e for e in effects if e.kind == "stop" and e.object == obj]
             if a.owner and a.owner != b.owner:  # (one step may also hand it on and take it back: a stop each)
-                assert stops and stops[0].user == a.owner and stops[0].reason, f"{obj}: {a.owner} lost it without a stop"
+                assert stops and stops[0].user == a.owner and stops[0].reason, (
+                    f"{obj}: {a.owner} lost it without a stop"
+                )
             else:
                 assert not stops, f"{obj}: stopped while {a.owner!r} kept it: {stops}"
-        if isinstance(ev, st.Request):  # a flood of requests moves no epoch: refused, queued or already hers, none is new
-            answer = next(e for e in effects if e.user == ev.user and e.object == ev.object and e.kind in ("granted", "denied", "queued"))
+        if isinstance(
+            ev, st.Request
+        ):  # a flood of requests moves no epoch: refused, queued or already hers, none is new
+            answer = next(
+                e
+                for e in effects
+                if e.user == ev.user and e.object == ev.object and e.kind in ("granted", "denied", "queued")
+            )
             if answer.kind != "granted" or before.records[ev.object].owner == ev.user:
                 assert s.records[ev.object].epoch == before.records[ev.object].epoch, f"{answer}: epoch moved"
-        if (isinstance(ev, st.Request) and OBJECTS[ev.object] == "exclusive" and before.records[ev.object].owner not in ("", ev.user)
-                and ev.user in before.live and ev.user not in before.unproven):
+        if (
+            isinstance(ev, st.Request)
+            and OBJECTS[ev.object] == "exclusive"
+            and before.records[ev.object].owner not in ("", ev.user)
+            and ev.user in before.live
+            and ev.user not in before.unproven
+        ):
             rec = before.records[ev.object]
             if rec.state == "moving":
                 assert s.records[ev.object].owner == rec.owner, "a moving robot was handed over on request"
@@ -158,7 +193,9 @@ def test_lease_expiry_passes_to_next_in_join_order():
     assert s.records["arm"].owner == "a"
     s, eff = st.step(s, st.Tick(1.6))
     assert s.records["arm"].owner == "c" and s.records["arm"].queue == ("b",)
-    assert ("expired", "a", "lease of arm (a) expired: no renewal for 1.1 s") in [(e.kind, e.user, e.reason) for e in eff]
+    assert ("expired", "a", "lease of arm (a) expired: no renewal for 1.1 s") in [
+        (e.kind, e.user, e.reason) for e in eff
+    ]
 
 
 def _owned_by_a(lease: float = 2.0) -> st.OwnState:
@@ -212,7 +249,11 @@ def test_an_owner_who_stops_renewing_while_others_are_heard_loses_the_robot():
         s, eff = st.step(s, st.Tick(i * 0.1))
         if eff:
             break
-    assert [(e.kind, e.user) for e in eff] == [("released", "a"), ("stop", "a"), ("expired", "a")] and 2.0 < i * 0.1 <= 2.2
+    assert [(e.kind, e.user) for e in eff] == [
+        ("released", "a"),
+        ("stop", "a"),
+        ("expired", "a"),
+    ] and 2.0 < i * 0.1 <= 2.2
 
 
 @settings(max_examples=300, deadline=None)
@@ -339,7 +380,11 @@ def test_tokenless_requesters_are_capped_and_one_more_costs_no_copy():
         before = s
         s, eff = st.step(s, st.Request(f"fake{i}", "arm", 1.0, wait=i % 2 == 0))
         if i >= st.MAX_UNPROVEN:
-            assert s is before and eff[0].kind == "denied" and "too many requesters without a liveliness token" in eff[0].reason
+            assert (
+                s is before
+                and eff[0].kind == "denied"
+                and "too many requesters without a liveliness token" in eff[0].reason
+            )
     assert len(s.unproven) == st.MAX_UNPROVEN
     assert len(s.rank) == len(s.live) == st.MAX_UNPROVEN + 1  # rank: live users and away ones, never more
     assert s.records["arm"].owner == "alice"
@@ -471,7 +516,10 @@ def test_a_held_user_whose_token_does_not_return_within_grace_leaves():
         t += 0.1
         s, _ = st.step(s, st.Renew("a", "arm", t))
         s, eff = st.step(s, st.Tick(t))
-    assert t > 9.0 + GRACE and [(e.kind, e.object, e.user) for e in eff][:2] == [("released", "base", "b"), ("stop", "base", "b")]
+    assert t > 9.0 + GRACE and [(e.kind, e.object, e.user) for e in eff][:2] == [
+        ("released", "base", "b"),
+        ("stop", "base", "b"),
+    ]
     assert eff[0].reason == "left" and not s.held and "b" not in s.live and s.records["arm"].owner == "a"
 
 

@@ -38,7 +38,9 @@ def test_a_request_naming_someone_else_is_refused(host, connect, world):
     wait_until(lambda: any(e.kind == "own_refused" and e.user == "mallory" for e in events), what="refusal event")
     assert host.records()["arm"].owner == "alice"
     # on her own key as herself: an honest release of what she does not own changes nothing
-    rep = mallory.rpc.call(keys.own_request(world, "arm", "mallory"), OwnRequest("release", "mallory"), expected=OwnReply)
+    rep = mallory.rpc.call(
+        keys.own_request(world, "arm", "mallory"), OwnRequest("release", "mallory"), expected=OwnReply
+    )
     assert rep.outcome != "released" and host.records()["arm"].owner == "alice"
     # a query on the record key is answered with the record, whatever it carries
     rec = mallory.rpc.call(keys.own(world, "arm"), OwnRequest("release", "alice"), expected=OwnershipRecord)
@@ -70,16 +72,27 @@ def test_forged_records_never_stop_renewal(host, connect, world):
     real_epoch = alice.epoch("arm")
     forger = connect("tool", "mallory")  # not a sim peer
     fake_sim = connect("sim", "fake")  # a sim peer, but not the authority alice follows
-    for fab, authority, epoch in ((forger, "host", 2**40), (forger, "mallory", real_epoch + 1),
-                                  (fake_sim, "fake", real_epoch + 1), (fake_sim, "host", 2**40), (fake_sim, "host", 0)):
+    for fab, authority, epoch in (
+        (forger, "host", 2**40),
+        (forger, "mallory", real_epoch + 1),
+        (fake_sim, "fake", real_epoch + 1),
+        (fake_sim, "host", 2**40),
+        (fake_sim, "host", 0),
+    ):
         fab.publish(keys.own(world, "arm"), OwnershipRecord("arm", owner="mallory", epoch=epoch, authority=authority))
-    wait_until(lambda: sum(alice.counters.values()) >= 5, what="five forged records refused", seen=lambda: alice.counters)
+    wait_until(
+        lambda: sum(alice.counters.values()) >= 5, what="five forged records refused", seen=lambda: alice.counters
+    )
     assert alice.counters["records_foreign"] >= 2 and alice.counters["records_implausible"] >= 1, alice.counters
     assert alice.record("arm").owner == "alice" and alice.epoch("arm") == real_epoch
     # three lease periods later alice still holds the arm: she kept renewing
     deadline_owner = []
-    wait_until(lambda: (deadline_owner.append(host.records()["arm"].owner), len(deadline_owner) > 18)[1], timeout=10,
-               interval=0.1, what="lease periods to pass")
+    wait_until(
+        lambda: (deadline_owner.append(host.records()["arm"].owner), len(deadline_owner) > 18)[1],
+        timeout=10,
+        interval=0.1,
+        what="lease periods to pass",
+    )
     assert set(deadline_owner) == {"alice"}, deadline_owner
     # and later real records still arrive: alice releases, the replica follows
     assert alice.release("arm").outcome == "released"
@@ -122,7 +135,6 @@ def test_authority_and_client_start_their_threads_on_enter_not_on_construction(c
     assert len(_threads("ownership-tick")) == before
 
 
-
 def test_records_that_came_before_their_sims_token_are_asked_for_again(router, connect, world):
     """A record can arrive before its authority's liveliness token (two paths through the router): it is
     refused as foreign then, and taken from a query once the token shows up (seen once in a clean-clone
@@ -134,11 +146,19 @@ def test_records_that_came_before_their_sims_token_are_asked_for_again(router, c
     quiet = Fabric(client_config(world, router[1]), kind="sim", peer_id="host", token=False)  # no token yet
     auth = Authority(quiet, {"arm": "exclusive"}, lease_s=0.6, grace_s=5.0).start()
     try:
-        wait_until(lambda: alice.counters["records_foreign"] >= 1, what="the record refused (no token yet)",
-                   seen=lambda: alice.counters)
+        wait_until(
+            lambda: alice.counters["records_foreign"] >= 1,
+            what="the record refused (no token yet)",
+            seen=lambda: alice.counters,
+        )
         assert alice.record("arm") is None
         token = quiet.session.liveliness().declare_token(keys.peer(world, "sim", "host"))
-        wait_until(lambda: alice.record("arm") is not None, timeout=10, what="the record asked for again", seen=lambda: alice.counters)
+        wait_until(
+            lambda: alice.record("arm") is not None,
+            timeout=10,
+            what="the record asked for again",
+            seen=lambda: alice.counters,
+        )
         assert alice.record("arm").authority == "host"
         token.undeclare()
     finally:
@@ -189,8 +209,12 @@ def test_the_client_follows_one_authority_per_object(connect):
         alice.sim_seen("sim", sim, True)
 
     def rec(obj, authority, term, epoch, owner="alice"):
-        alice.record_seen(keys.own("w", obj), OwnershipRecord(obj, owner=owner, epoch=epoch, authority=authority,
-                                                             header=Header(source=authority, term=term)))
+        alice.record_seen(
+            keys.own("w", obj),
+            OwnershipRecord(
+                obj, owner=owner, epoch=epoch, authority=authority, header=Header(source=authority, term=term)
+            ),
+        )
         r = alice.record(obj)
         return None if r is None else (r.authority, r.epoch)
 
@@ -222,8 +246,12 @@ def test_a_replica_that_missed_the_first_records_asks_for_the_rest(connect):
         sim.stamp.unmuzzle()
         bob = OwnershipClient(connect("user", "bob"), "bob", renew_s=0.1)
         assert bob.request("base").granted  # one record published: the only one alice hears of herself
-        wait_until(lambda: set(alice.snapshot()) == {"arm", "base", "target"}, timeout=10,
-                   what="every record at alice", seen=alice.snapshot)
+        wait_until(
+            lambda: set(alice.snapshot()) == {"arm", "base", "target"},
+            timeout=10,
+            what="every record at alice",
+            seen=alice.snapshot,
+        )
         assert alice.record("base").owner == "bob"
         bob.close()
     finally:

@@ -19,7 +19,9 @@ from fabric.extras import EXTRAS
 pytestmark = pytest.mark.slow  # each test starts a Python process
 
 REPO = Path(__file__).resolve().parents[2]
-HEAVY = sorted({m for mods in EXTRAS.values() for m in mods} | {"mujoco", "pinocchio", "casadi", "ompl", "hppfcl", "coal"})
+HEAVY = sorted(
+    {m for mods in EXTRAS.values() for m in mods} | {"mujoco", "pinocchio", "casadi", "ompl", "hppfcl", "coal"}
+)
 
 BLOCKER = f"""
 import importlib.abc, sys
@@ -35,7 +37,9 @@ sys.meta_path.insert(0, _NotInstalled())
 def _student(tmp_path: Path, *argv: str, timeout: float = 120) -> subprocess.CompletedProcess:
     (tmp_path / "sitecustomize.py").write_text(BLOCKER)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(REPO)])}
-    return subprocess.run([sys.executable, *argv], capture_output=True, text=True, timeout=timeout, env=env, cwd=tmp_path)
+    return subprocess.run(
+        [sys.executable, *argv], capture_output=True, text=True, timeout=timeout, env=env, cwd=tmp_path
+    )
 
 
 def test_the_blocker_blocks(tmp_path):
@@ -43,7 +47,9 @@ def test_the_blocker_blocks(tmp_path):
     assert out.returncode != 0 and "No module named 'mujoco'" in out.stderr
 
 
-@pytest.mark.parametrize("command, extra, names", [("sim", "sim", "mujoco"), ("compute", "compute", "pinocchio, casadi, ompl")])
+@pytest.mark.parametrize(
+    "command, extra, names", [("sim", "sim", "mujoco"), ("compute", "compute", "pinocchio, casadi, ompl")]
+)
 def test_a_peer_without_its_extra_says_which_to_install(tmp_path, command, extra, names):
     out = _student(tmp_path, "-m", "robofabric.cli", command, "--world", "w", "--connect", "tcp/127.0.0.1:9")
     assert out.returncode == 2, out.stdout + out.stderr

@@ -18,7 +18,11 @@ REPO = Path(__file__).resolve().parents[2]
 
 def _robofabric(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "robofabric", *args], capture_output=True, text=True, timeout=60, env={**os.environ, **(env or {})}
+        [sys.executable, "-m", "robofabric", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, **(env or {})},
     )
 
 
@@ -59,7 +63,9 @@ def test_clash_with_the_ssh_library_fabric_is_detected(tmp_path):
     _dist_info(tmp_path / "clash", "robofabric", "0.1.0")
     _dist_info(tmp_path / "clash", "fabric", "3.2.2")
     warning = fabric_clash([str(tmp_path / "clash")])
-    assert warning is not None and "'fabric' 3.2.2" in warning and "SSH" in warning and "pip uninstall fabric" in warning
+    assert (
+        warning is not None and "'fabric' 3.2.2" in warning and "SSH" in warning and "pip uninstall fabric" in warning
+    )
 
 
 @pytest.mark.slow

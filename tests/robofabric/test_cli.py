@@ -21,21 +21,39 @@ def cli_router(procs, world):
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
     proc = procs.start(robofabric_cmd("router", "--listen", ep, "--world", world), name="router")
-    wait_until(lambda: "listening" in procs.output(proc), timeout=20, what="router to listen", seen=lambda: procs.output(proc))
+    wait_until(
+        lambda: "listening" in procs.output(proc), timeout=20, what="router to listen", seen=lambda: procs.output(proc)
+    )
     return ep
 
 
 def test_two_processes_talk_through_the_router(cli_router, world, procs):
     key = keys.robot_cmd(world, "base1", "twist", "alice")
     echo = procs.start(
-        robofabric_cmd("echo", "robot/*/cmd/*/by/*", "--json", "--count", "3", "--world", world, "--connect", cli_router),
+        robofabric_cmd(
+            "echo", "robot/*/cmd/*/by/*", "--json", "--count", "3", "--world", world, "--connect", cli_router
+        ),
         name="echo",
     )
     wait_until(lambda: _live(world, cli_router, "tool"), timeout=20, what="echo to join")
     pub = procs.start(
         robofabric_cmd(
-            "pub", "robot/base1/cmd/twist", "-t", "Twist", "-d", '{"v": 0.3, "omega": -0.1}', "--user", "alice",
-            "--epoch", "4", "--rate", "20", "--world", world, "--connect", cli_router,
+            "pub",
+            "robot/base1/cmd/twist",
+            "-t",
+            "Twist",
+            "-d",
+            '{"v": 0.3, "omega": -0.1}',
+            "--user",
+            "alice",
+            "--epoch",
+            "4",
+            "--rate",
+            "20",
+            "--world",
+            world,
+            "--connect",
+            cli_router,
         ),
         name="pub",
     )
@@ -57,13 +75,25 @@ def _live(world, ep, kind):
 def test_ps_and_hz_see_a_live_publisher(cli_router, world, procs):
     pub = procs.start(
         robofabric_cmd(
-            "pub", "robot/arm1/cmd/stop/by/ann", "-t", "Stop", "--rate", "50", "--world", world, "--connect", cli_router,
-            "--id", "stopper",
+            "pub",
+            "robot/arm1/cmd/stop/by/ann",
+            "-t",
+            "Stop",
+            "--rate",
+            "50",
+            "--world",
+            world,
+            "--connect",
+            cli_router,
+            "--id",
+            "stopper",
         ),
         name="pub",
     )
     wait_until(lambda: "stopper" in (_live(world, cli_router, "tool") or []), timeout=20, what="publisher in ps")
-    out = run_cli("hz", "robot/arm1/cmd/stop/by/ann", "--duration", "3", "--json", "--world", world, "--connect", cli_router)
+    out = run_cli(
+        "hz", "robot/arm1/cmd/stop/by/ann", "--duration", "3", "--json", "--world", world, "--connect", cli_router
+    )
     assert out.returncode == 0, out.stderr
     stream = json.loads(out.stdout)["streams"][keys.robot_cmd(world, "arm1", "stop", "ann")]
     assert 30 < stream["rate_hz"] < 70, stream
@@ -75,7 +105,9 @@ def test_ps_and_hz_see_a_live_publisher(cli_router, world, procs):
 
 def test_echo_reports_garbage_and_keeps_going(cli_router, world, procs, router):
     echo = procs.start(
-        robofabric_cmd("echo", "robot/arm1/joints", "--json", "--count", "1", "--world", world, "--connect", cli_router),
+        robofabric_cmd(
+            "echo", "robot/arm1/joints", "--json", "--count", "1", "--world", world, "--connect", cli_router
+        ),
         name="echo",
     )
     from fabric.config import FabricConfig
@@ -99,7 +131,10 @@ def test_echo_reports_garbage_and_keeps_going(cli_router, world, procs, router):
 @pytest.mark.parametrize(
     "args,needle",
     [
-        (("echo", "rf/demo/**/$#bad", "--connect", "tcp/127.0.0.1:1", "--duration", "0.1"), "not a valid key expression"),
+        (
+            ("echo", "rf/demo/**/$#bad", "--connect", "tcp/127.0.0.1:1", "--duration", "0.1"),
+            "not a valid key expression",
+        ),
         (("ps", "--connect", "192.168.1.1"), "is not of the form PROTO/ADDRESS:PORT"),
         (("ps", "--world", "a/b"), "world 'a/b' contains forbidden"),
         (("pub", "robot/a/cmd/twist", "-t", "Warp"), "unknown message type 'Warp'"),
@@ -127,4 +162,6 @@ def test_every_command_has_help():
 def test_echo_timeout_on_a_silent_key_exits_1_saying_so(router, world):
     ep = f"tcp/127.0.0.1:{router[1]}"
     out = run_cli("echo", "robot/arm9/joints", "--timeout", "0.5", "--world", world, "--connect", ep)
-    assert out.returncode == 1 and f"nothing on rf/{world}/robot/arm9/joints in 0.5 s" in out.stderr, out.stdout + out.stderr
+    assert out.returncode == 1 and f"nothing on rf/{world}/robot/arm9/joints in 0.5 s" in out.stderr, (
+        out.stdout + out.stderr
+    )

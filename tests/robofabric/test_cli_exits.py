@@ -41,7 +41,10 @@ def joints_world(router, connect, world):
     def run() -> None:
         i = 0
         while not stop.wait(0.01):
-            pub.publish(keys.robot_joints(world, "arm1"), JointState(("j1",), np.zeros(1), np.zeros(1), Header.now(seq=i, source="sim-test")))
+            pub.publish(
+                keys.robot_joints(world, "arm1"),
+                JointState(("j1",), np.zeros(1), np.zeros(1), Header.now(seq=i, source="sim-test")),
+            )
             i += 1
 
     t = threading.Thread(target=run, daemon=True)
@@ -71,7 +74,12 @@ def test_a_streaming_command_ends_with_0_when_its_reader_goes(joints_world, worl
 
 def _interrupt(procs, argv: list[str], ready: str) -> tuple[int, str]:
     proc = procs.start(argv, name=argv[3])
-    wait_until(lambda: ready in procs.output(proc), timeout=60, what=f"{ready!r} printed", seen=lambda: procs.output(proc)[-2000:])
+    wait_until(
+        lambda: ready in procs.output(proc),
+        timeout=60,
+        what=f"{ready!r} printed",
+        seen=lambda: procs.output(proc)[-2000:],
+    )
     os.kill(proc.pid, signal.SIGINT)
     return proc.wait(timeout=60), procs.output(proc)
 
@@ -106,7 +114,11 @@ def test_nothing_there_exits_1(router, world):
         (("own", "move", "base1", "--to", "sim-b"), "robot base1 not moved: no sim describes world"),
     ):
         out = _cli(*args, *ep)
-        assert out.returncode == 1 and says in out.stderr and "Traceback" not in out.stderr, (args, out.returncode, out.stderr)
+        assert out.returncode == 1 and says in out.stderr and "Traceback" not in out.stderr, (
+            args,
+            out.returncode,
+            out.stderr,
+        )
 
 
 @pytest.mark.slow
@@ -114,7 +126,10 @@ def test_an_unreachable_router_exits_2_in_robofabrics_words():
     ep = f"tcp/127.0.0.1:{free_port()}"  # nobody listens there
     out = _cli("ps", "--connect", ep)
     assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
-    assert out.stderr.strip() == f"error: cannot join world 'demo': no router answers at {ep} (is it running, and is this its address?)"
+    assert (
+        out.stderr.strip()
+        == f"error: cannot join world 'demo': no router answers at {ep} (is it running, and is this its address?)"
+    )
 
 
 @pytest.mark.slow
@@ -122,7 +137,11 @@ def test_own_watch_ends_with_0_on_a_closed_pipe_and_on_ctrl_c(router, world, pro
     ep = f"tcp/127.0.0.1:{router[1]}"
     sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep), name="sim")
     wait_until(lambda: router[0].live_peers("sim"), timeout=60, what="sim peer", seen=lambda: procs.output(sim)[-2000:])
-    wait_until(lambda: _cli("own", "list", "--world", world, "--connect", ep).returncode == 0, timeout=30, what="the records served")
+    wait_until(
+        lambda: _cli("own", "list", "--world", world, "--connect", ep).returncode == 0,
+        timeout=30,
+        what="the records served",
+    )
     rc, err = _head(procs, robofabric_cmd("own", "watch", "--world", world, "--connect", ep), 2)
     assert rc == 0 and "Traceback" not in err, (rc, err)
     rc, out = _interrupt(procs, robofabric_cmd("own", "watch", "--world", world, "--connect", ep), "exclusive")

@@ -36,7 +36,10 @@ def test_plain_doc_drops_markup_and_joins_a_paragraphs_lines():
     - one
     - two
     """
-    assert plain_doc(doc) == "Rate of the keys (like ros2 topic hz).\n\nUses Fabric and fabric.keys.parse, a line wrapped in the source.\n\n- one\n- two"
+    assert (
+        plain_doc(doc)
+        == "Rate of the keys (like ros2 topic hz).\n\nUses Fabric and fabric.keys.parse, a line wrapped in the source.\n\n- one\n- two"
+    )
 
 
 @pytest.mark.slow  # one process per command
@@ -51,7 +54,9 @@ def test_no_help_shows_markup_or_source_line_breaks():
         assert out.returncode == 0, (path, out.stderr)
         assert "``" not in out.stdout and ":class:" not in out.stdout and ":func:" not in out.stdout, (path, out.stdout)
         assert max(len(line) for line in out.stdout.splitlines()) <= 80, (path, out.stdout)
-    text = subprocess.run(robofabric_cmd("own", "request", "--help"), capture_output=True, text=True, timeout=60, env=env).stdout
+    text = subprocess.run(
+        robofabric_cmd("own", "request", "--help"), capture_output=True, text=True, timeout=60, env=env
+    ).stdout
     # the paragraph reflows at 80 columns: its source line breaks (after "so" and "renews") are gone
     assert "Without --hold this command exits at once, so the lease" in " ".join(text.split())
     assert not any(line.rstrip().endswith("so") for line in text.splitlines()), text
@@ -62,12 +67,17 @@ def _option_line(text: str, option: str) -> str:
     return line
 
 
-@pytest.mark.parametrize(("path", "flags", "valued"), [
-    ((), {"--verbose": "<int>", "--version": "<bool>", "--help": "<bool>"}, {}),
-    (("echo",), {"--json": "<bool>", "--help": "<bool>"}, {"--count": "<int>", "--world": "<str>"}),
-    (("own", "list"), {"--json": "<bool>", "--help": "<bool>"}, {"--world": "<str>"}),  # a command of a sub-group
-])
-def test_help_shows_no_type_after_a_flag_or_counter_and_the_type_of_every_valued_option(path, flags, valued, capsys, monkeypatch):
+@pytest.mark.parametrize(
+    ("path", "flags", "valued"),
+    [
+        ((), {"--verbose": "<int>", "--version": "<bool>", "--help": "<bool>"}, {}),
+        (("echo",), {"--json": "<bool>", "--help": "<bool>"}, {"--count": "<int>", "--world": "<str>"}),
+        (("own", "list"), {"--json": "<bool>", "--help": "<bool>"}, {"--world": "<str>"}),  # a command of a sub-group
+    ],
+)
+def test_help_shows_no_type_after_a_flag_or_counter_and_the_type_of_every_valued_option(
+    path, flags, valued, capsys, monkeypatch
+):
     """``--json <bool>`` would read as if it took a value; ``--count <int>`` does take one."""
     monkeypatch.setenv("COLUMNS", "120")
     assert cli.main([*path, "--help"]) == 0

@@ -27,7 +27,9 @@ class _Ctx:
 
 
 def test_types_and_formats_complete_from_what_is_installed():
-    assert {"JointState", "JointTarget"} <= set(complete_types("Joint")) and all(t.startswith("Joint") for t in complete_types("Joint"))
+    assert {"JointState", "JointTarget"} <= set(complete_types("Joint")) and all(
+        t.startswith("Joint") for t in complete_types("Joint")
+    )
     assert complete_types("Nope") == []
     assert complete_formats("") == ["foxglove", "ros2"] and complete_formats("f") == ["foxglove"]
     assert complete_export_formats("r") == ["ros2", "rrd"]
@@ -48,7 +50,10 @@ def test_keys_of_a_live_world_complete_world_relative_or_full(router, connect, w
     def run() -> None:
         i = 0
         while not stop.wait(0.02):
-            sim.publish(keys.robot_joints(world, "arm1"), JointState(("j1",), np.zeros(1), np.zeros(1), Header.now(seq=i, source="sim-c")))
+            sim.publish(
+                keys.robot_joints(world, "arm1"),
+                JointState(("j1",), np.zeros(1), np.zeros(1), Header.now(seq=i, source="sim-c")),
+            )
             i += 1
 
     t = threading.Thread(target=run, daemon=True)
@@ -57,7 +62,12 @@ def test_keys_of_a_live_world_complete_world_relative_or_full(router, connect, w
         ctx = _Ctx({"world": world, "connect": [f"tcp/127.0.0.1:{router[1]}"]})
         # what the router knows of a peer just joined (its token, its queryable, its subscriber) reaches a new
         # session in its own time on a loaded box: completion is asked again until it lists them, with a deadline
-        want = {"robot/arm1/joints", "srv/world", "peer/sim/sim-c", keys.robot_cmd_all(world, "arm1").removeprefix(f"rf/{world}/")}
+        want = {
+            "robot/arm1/joints",
+            "srv/world",
+            "peer/sim/sim-c",
+            keys.robot_cmd_all(world, "arm1").removeprefix(f"rf/{world}/"),
+        }
         seen: list[list[str]] = [[]]
 
         def complete_all() -> bool:
@@ -88,20 +98,36 @@ def test_keys_complete_to_nothing_without_a_router_and_do_not_hang():
 
 @pytest.mark.slow
 def test_the_completion_module_imports_no_session_library():
-    out = subprocess.run([sys.executable, "-c", "import sys, robofabric.complete; print('zenoh' in sys.modules, 'numpy' in sys.modules)"],
-                         capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import sys, robofabric.complete; print('zenoh' in sys.modules, 'numpy' in sys.modules)",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 0 and out.stdout.split() == ["False", "False"], out.stdout + out.stderr
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("words", "expected"), [
-    (["export", "a.mcap", "-o", "b.mcap", "--to", "r"], ["ros2", "rrd"]),
-    (["record", "-o", "x.mcap", "--to", ""], ["foxglove", "ros2"]),
-    (["scenario", "test"], ["test-a", "test-b"]),
-])
+@pytest.mark.parametrize(
+    ("words", "expected"),
+    [
+        (["export", "a.mcap", "-o", "b.mcap", "--to", "r"], ["ros2", "rrd"]),
+        (["record", "-o", "x.mcap", "--to", ""], ["foxglove", "ros2"]),
+        (["scenario", "test"], ["test-a", "test-b"]),
+    ],
+)
 def test_bash_completion_through_typer(words, expected):
     line = ["robofabric", *words]
-    env = {**os.environ, "_ROBOFABRIC_COMPLETE": "complete_bash", "COMP_WORDS": " ".join(line), "COMP_CWORD": str(len(line) - 1)}
+    env = {
+        **os.environ,
+        "_ROBOFABRIC_COMPLETE": "complete_bash",
+        "COMP_WORDS": " ".join(line),
+        "COMP_CWORD": str(len(line) - 1),
+    }
     out = subprocess.run(robofabric_cmd(), capture_output=True, text=True, timeout=60, env=env)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == expected, out.stdout

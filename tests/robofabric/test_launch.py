@@ -37,15 +37,24 @@ def test_parse_good_file():
     "text,needle",
     [
         ("[launch]\nworld = \n", "bad.toml: "),
-        ('[[peer]]\nname = "a"\nargs = ["sim"]\n\n[[peer]]\nname = "b"\nargs = ["x"]\nrole = "daemon"\n', "bad.toml:5: peer 'b' has role 'daemon'"),
+        (
+            '[[peer]]\nname = "a"\nargs = ["sim"]\n\n[[peer]]\nname = "b"\nargs = ["x"]\nrole = "daemon"\n',
+            "bad.toml:5: peer 'b' has role 'daemon'",
+        ),
         ('[[peer]]\nname = "a"\nargs = []\n', "bad.toml:1: peer 'a' needs args"),
         ('[[peer]]\nname = "a"\nargs = ["sim"]\nafter = ["ghost"]\n', "starts after ghost"),
-        ('[[peer]]\nname = "a"\nargs = ["sim"]\n[[peer]]\nname = "a"\nargs = ["sim"]\n', "bad.toml:4: peer name 'a' is used twice"),
+        (
+            '[[peer]]\nname = "a"\nargs = ["sim"]\n[[peer]]\nname = "a"\nargs = ["sim"]\n',
+            "bad.toml:4: peer name 'a' is used twice",
+        ),
         ('[launch]\nworld = "a b"\n', "world 'a b' contains forbidden"),
-        ('[robots]\nx = 1\n', "unknown section(s) robots"),
+        ("[robots]\nx = 1\n", "unknown section(s) robots"),
         ('[[peer]]\nname = "a"\nargs = ["sim"]\ncolour = "red"\n', "unknown key(s) colour"),
         # a ready expression zenoh refuses, or no string at all, is named with its line before anything starts
-        ('[[peer]]\nname = "a"\nargs = ["sim"]\nready = "peer/**/**"\n', "bad.toml:1: peer 'a' ready: 'peer/**/**' is not a valid key expression"),
+        (
+            '[[peer]]\nname = "a"\nargs = ["sim"]\nready = "peer/**/**"\n',
+            "bad.toml:1: peer 'a' ready: 'peer/**/**' is not a valid key expression",
+        ),
         ('[[peer]]\nname = "a"\nargs = ["sim"]\nready = 3\n', "bad.toml:1: peer 'a' ready must be a key expression"),
     ],
 )
@@ -138,8 +147,14 @@ def test_peer_logs_rotate(tmp_path):
 
     from robofabric.launch import Supervisor
 
-    sup = Supervisor(parse_launch(GOOD, "good.toml"), out_dir=tmp_path, is_ready=lambda e: True, console=io.StringIO(),
-                     log_max_bytes=2_000, log_backups=2)
+    sup = Supervisor(
+        parse_launch(GOOD, "good.toml"),
+        out_dir=tmp_path,
+        is_ready=lambda e: True,
+        console=io.StringIO(),
+        log_max_bytes=2_000,
+        log_backups=2,
+    )
     lines = b"".join(b"line %05d of a chatty peer\n" % i for i in range(1_000))  # ~27 kB
     sup.pump("sim", io.BytesIO(lines), tmp_path / "logs" / "sim.log")
     logs = sorted(p.name for p in (tmp_path / "logs").iterdir())

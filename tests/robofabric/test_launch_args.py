@@ -75,7 +75,9 @@ def test_cli_args_must_be_name_value():
 
 def test_shipped_lan_files_take_the_router_address_as_an_argument():
     for name in ("sim", "compute", "users", "viewer"):
-        spec = load_launch(REPO / "examples" / "lan" / f"{name}.toml", args={"connect": "tcp/192.0.2.1:7447", "world": "lab2"})
+        spec = load_launch(
+            REPO / "examples" / "lan" / f"{name}.toml", args={"connect": "tcp/192.0.2.1:7447", "world": "lab2"}
+        )
         assert spec.connect == ("tcp/192.0.2.1:7447",) and spec.world == "lab2", name
     spec = load_launch(REPO / "examples" / "lan" / "router.toml", env={"ROBOFABRIC_ROUTER": "tcp/0.0.0.0:7448"})
     assert spec.router == "tcp/0.0.0.0:7448"
@@ -83,5 +85,12 @@ def test_shipped_lan_files_take_the_router_address_as_an_argument():
 
 @pytest.mark.slow
 def test_up_reports_a_bad_argument_in_one_line(tmp_path):
-    out = subprocess.run(robofabric_cmd("up", str(REPO / "examples" / "lan" / "sim.toml"), "conect=tcp/x:1"), capture_output=True, text=True, timeout=60)
-    assert out.returncode == 2 and "unknown launch argument(s) conect" in out.stderr and "Traceback" not in out.stderr, out.stderr
+    out = subprocess.run(
+        robofabric_cmd("up", str(REPO / "examples" / "lan" / "sim.toml"), "conect=tcp/x:1"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert (
+        out.returncode == 2 and "unknown launch argument(s) conect" in out.stderr and "Traceback" not in out.stderr
+    ), out.stderr

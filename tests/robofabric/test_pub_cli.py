@@ -56,7 +56,11 @@ def test_pub_exit_codes_applied_refused_and_bad_keys(sim_world, world, connect):
     nouser = _pub(world, ep, "robot/base1/cmd/twist", *twist)
     assert nouser.returncode == 2 and "needs its user" in nouser.stderr, nouser.stdout + nouser.stderr
     nolayout = _pub(world, ep, "robot/base1/warp/drive", *twist)
-    assert nolayout.returncode == 2 and "does not match any robofabric key layout" in nolayout.stderr and "nothing sent" in nolayout.stderr
+    assert (
+        nolayout.returncode == 2
+        and "does not match any robofabric key layout" in nolayout.stderr
+        and "nothing sent" in nolayout.stderr
+    )
     badcmd = _pub(world, ep, "robot/base1/cmd/warp", *twist, "--user", "alice")
     assert badcmd.returncode == 2, badcmd.stdout + badcmd.stderr
     for out in (ok, bob, free, nouser, nolayout, badcmd):
@@ -68,20 +72,29 @@ def test_pub_refuses_an_unknown_robot_a_wrong_type_and_bad_fields_in_words(sim_w
     "applied" while the sim logs unknown_robot, never ``Twist.__init__() missing 1 required positional argument``."""
     ep = sim_world
     twist = ("-t", "Twist", "-d", '{"v": 0.2, "omega": 0}')
-    wait_until(lambda: _pub(world, ep, "robot/base1/cmd/twist", *twist, "--user", "alice").returncode == 1, timeout=30,
-               what="the sim serving its world (alice owns nothing: refused)")
+    wait_until(
+        lambda: _pub(world, ep, "robot/base1/cmd/twist", *twist, "--user", "alice").returncode == 1,
+        timeout=30,
+        what="the sim serving its world (alice owns nothing: refused)",
+    )
     nobody = _pub(world, ep, "robot/base9/cmd/twist", *twist, "--user", "alice")
-    assert nobody.returncode == 1 and "unknown_robot" in nobody.stderr and "base1" in nobody.stderr, nobody.stdout + nobody.stderr
+    assert nobody.returncode == 1 and "unknown_robot" in nobody.stderr and "base1" in nobody.stderr, (
+        nobody.stdout + nobody.stderr
+    )
     assert "applied" not in nobody.stdout
     wrong = _pub(world, ep, "robot/base1/joints", *twist)
-    assert wrong.returncode == 2 and "carries JointState" in wrong.stderr and "nothing sent" in wrong.stderr, wrong.stderr
+    assert wrong.returncode == 2 and "carries JointState" in wrong.stderr and "nothing sent" in wrong.stderr, (
+        wrong.stderr
+    )
     body = _pub(world, ep, "robot/arm1/cmd/joints", *twist, "--user", "alice")
     assert body.returncode == 2 and "carries JointTarget" in body.stderr, body.stderr
     missing = _pub(world, ep, "robot/base1/cmd/twist", "-t", "Twist", "-d", '{"v": 0.2}', "--user", "alice")
     assert missing.returncode == 2 and "Twist needs field 'omega' (a number)" in missing.stderr, missing.stderr
     bad = _pub(world, ep, "robot/base1/cmd/twist", "-t", "Twist", "-d", '{"v": "fast", "omega": 0}', "--user", "alice")
     assert bad.returncode == 2 and "Twist.v: expected a number, got str" in bad.stderr, bad.stderr
-    extra = _pub(world, ep, "robot/arm1/cmd/joints", "-t", "JointTarget", "-d", '{"q": [0, 0], "speed": 1}', "--user", "alice")
+    extra = _pub(
+        world, ep, "robot/arm1/cmd/joints", "-t", "JointTarget", "-d", '{"q": [0, 0], "speed": 1}', "--user", "alice"
+    )
     assert extra.returncode == 2 and "JointTarget has no field 'speed'" in extra.stderr, extra.stderr
     for out in (nobody, wrong, body, missing, bad, extra):
         assert "Traceback" not in out.stderr and "__init__" not in out.stderr, out.stderr

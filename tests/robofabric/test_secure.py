@@ -90,7 +90,11 @@ def test_rules_allow_each_user_only_keys_that_name_them():
     assert acl["default_permission"] == "deny"
     assert rules["alice-put"]["key_exprs"][1:] == ["rf/*/robot/*/cmd/*/by/alice", "rf/*/object/*/pose/by/alice"]
     assert "rf/*/own/*" in rules["sim-put"]["key_exprs"] and "rf/*/own/*" not in rules["alice-put"]["key_exprs"]
-    assert rules["alice-ask"]["key_exprs"] == ["rf/*/srv/map/**/by/alice", "rf/*/srv/plan/**/by/alice", "rf/*/own/*/by/alice"]
+    assert rules["alice-ask"]["key_exprs"] == [
+        "rf/*/srv/map/**/by/alice",
+        "rf/*/srv/plan/**/by/alice",
+        "rf/*/own/*/by/alice",
+    ]
     policy = {p["id"]: p["rules"] for p in acl["policies"]}
     assert "sim-serve" not in policy["alice"] and "alice-put" not in policy["sim"]
 
@@ -98,8 +102,15 @@ def test_rules_allow_each_user_only_keys_that_name_them():
 def test_rules_give_each_login_its_own_decode_key_and_the_staff_the_map():
     """Decode reports go on the writer's own key (a forged reject there is known as its writer's, whoever it names); a student
     asks map and plan in her own name only, the staff (instructor, sim, compute) also in the staff's forms."""
-    acl = access_control([Identity("alice", "user"), Identity("carol", "instructor"), Identity("sim", "sim"),
-                          Identity("compute", "compute"), Identity("viewer", "viewer")])
+    acl = access_control(
+        [
+            Identity("alice", "user"),
+            Identity("carol", "instructor"),
+            Identity("sim", "sim"),
+            Identity("compute", "compute"),
+            Identity("viewer", "viewer"),
+        ]
+    )
     rules = {r["id"]: r for r in acl["rules"]}
     for name in ("alice", "carol", "sim", "compute", "viewer"):
         assert rules[f"{name}-put"]["key_exprs"][0] == f"rf/*/event/decode/by/{name}"
@@ -129,12 +140,15 @@ def test_the_router_config_sets_the_limits_zenoh_offers(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("args, message", [
-    (["--users", ""], "no users"),
-    (["--users", "alice,alice"], "named twice"),
-    (["--users", "a/b"], "letters, digits"),
-    (["--users", "alice", "--listen", "tls/0.0.0.0:7447"], "tcp/HOST:PORT"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--users", ""], "no users"),
+        (["--users", "alice,alice"], "named twice"),
+        (["--users", "a/b"], "letters, digits"),
+        (["--users", "alice", "--listen", "tls/0.0.0.0:7447"], "tcp/HOST:PORT"),
+    ],
+)
 def test_init_mistakes_are_one_line_errors(tmp_path, args, message):
     out = run_cli("secure", "init", str(tmp_path / "c"), *args)
     assert out.returncode == 2 and message in out.stderr and "Traceback" not in out.stderr, out.stderr
@@ -164,18 +178,29 @@ def test_the_audit_counts_dropped_messages_by_the_decision_that_dropped_them():
     from robofabric.router_audit import UNKNOWN, Refusal, RefusalCounter, parse_refusal, summary
 
     def line(thread, text, module="zenoh::net::routing::interceptor::access_control"):
-        return (f"\x1b[2m2026-11-23T16:58:13.924332Z\x1b[0m \x1b[35mTRACE\x1b[0m rx-1 ThreadId({thread}) "
-                f"\x1b[2m{module}\x1b[0m\x1b[2m:\x1b[0m {text}")
+        return (
+            f"\x1b[2m2026-11-23T16:58:13.924332Z\x1b[0m \x1b[35mTRACE\x1b[0m rx-1 ThreadId({thread}) "
+            f"\x1b[2m{module}\x1b[0m\x1b[2m:\x1b[0m {text}"
+        )
 
-    denied = line(9, "7acdde4b4ac85c54 on Interface(lo)+Username(mallory)+Transport(Tcp)+7acdde4b4ac85c54 is unauthorized to Put (ingress) on rf/w/own/arm1")
+    denied = line(
+        9,
+        "7acdde4b4ac85c54 on Interface(lo)+Username(mallory)+Transport(Tcp)+7acdde4b4ac85c54 is unauthorized to Put (ingress) on rf/w/own/arm1",
+    )
     assert parse_refusal(denied) == Refusal("mallory", "put", "ingress", "rf/w/own/arm1")
     assert parse_refusal(denied.replace("is unauthorized", "is authorized")) is None
     dropped = line(9, "Msg intercepted!", module="zenoh::net::routing::interceptor")
     cached = line(8, "Using cached result: 7acdde4b4ac85c54 is unauthorized to Put (ingress) on rf/w/own/arm1")
     c = RefusalCounter()
-    for text in (denied, dropped, cached, line(8, "Msg intercepted!", module="zenoh::net::routing::interceptor"),
-                 line(4, "Msg intercepted!", module="zenoh::net::routing::interceptor"),
-                 denied.replace("is unauthorized", "is authorized"), "some other line"):
+    for text in (
+        denied,
+        dropped,
+        cached,
+        line(8, "Msg intercepted!", module="zenoh::net::routing::interceptor"),
+        line(4, "Msg intercepted!", module="zenoh::net::routing::interceptor"),
+        denied.replace("is unauthorized", "is authorized"),
+        "some other line",
+    ):
         c.feed(text)
     ref = Refusal("mallory", "put", "ingress", "rf/w/own/arm1")
     assert c.counts == Counter({ref: 2, UNKNOWN: 1})  # a decision is logged once per key; each drop counts
@@ -184,14 +209,18 @@ def test_the_audit_counts_dropped_messages_by_the_decision_that_dropped_them():
     # one-word decision before it ("Delete"), the multi-word ones not being read
     who = "57948cd3 on Interface(lo)+Username(mallory)+Transport(Tcp)+57948cd3"
     c = RefusalCounter()
-    for text in [line(8, f"{who} is unauthorized to {m} (ingress) on rf/w/srv/world")
-                 for m in ("Reply", "Put", "Delete", "Declare/Undeclare Queryable", "Declare/Undeclare Liveliness Token")] + [
-            line(8, "Using cached result: 57948cd3 is unauthorized to Declare Queryable (ingress) on rf/w/srv/world"),
-            line(8, "Msg intercepted!", module="zenoh::net::routing::interceptor")]:
+    for text in [
+        line(8, f"{who} is unauthorized to {m} (ingress) on rf/w/srv/world")
+        for m in ("Reply", "Put", "Delete", "Declare/Undeclare Queryable", "Declare/Undeclare Liveliness Token")
+    ] + [
+        line(8, "Using cached result: 57948cd3 is unauthorized to Declare Queryable (ingress) on rf/w/srv/world"),
+        line(8, "Msg intercepted!", module="zenoh::net::routing::interceptor"),
+    ]:
         c.feed(text)
     assert c.counts == Counter({Refusal("mallory", "declare_queryable", "ingress", "rf/w/srv/world"): 1})
-    assert parse_refusal(line(8, f"{who} is unauthorized to Declare/Undeclare Liveliness Token (ingress) on rf/w/peer/sim/x")) \
-        == Refusal("mallory", "liveliness_token", "ingress", "rf/w/peer/sim/x")  # as the rules name it
+    assert parse_refusal(
+        line(8, f"{who} is unauthorized to Declare/Undeclare Liveliness Token (ingress) on rf/w/peer/sim/x")
+    ) == Refusal("mallory", "liveliness_token", "ingress", "rf/w/peer/sim/x")  # as the rules name it
     text = summary(Counter({ref: 3, Refusal("eve", "query", "ingress", "rf/w/own/arm1/by/bob"): 1}), prefix="refused")
     assert text.startswith("refused: 4 (put 3, query 1); mallory put rf/w/own/arm1 x3")
     # a key that held a newline: the lines after it continue its record, are never read as a decision or a drop,
@@ -199,10 +228,20 @@ def test_the_audit_counts_dropped_messages_by_the_decision_that_dropped_them():
     from robofabric.router_audit import CONTINUED, shown
 
     c = RefusalCounter()
-    for text in (line(8, f"{who} is unauthorized to Put (ingress) on rf/w/x"), "refused in the last 1 s: 1; alice put k x1",
-                 "Msg intercepted!", line(8, "Msg intercepted!", module="zenoh::net::routing::interceptor")):
+    for text in (
+        line(8, f"{who} is unauthorized to Put (ingress) on rf/w/x"),
+        "refused in the last 1 s: 1; alice put k x1",
+        "Msg intercepted!",
+        line(8, "Msg intercepted!", module="zenoh::net::routing::interceptor"),
+    ):
         c.feed(text)
-    assert c.counts == Counter({Refusal("mallory", "put", "ingress", "rf/w/x\nrefused in the last 1 s: 1; alice put k x1\nMsg intercepted!"): 1})
+    assert c.counts == Counter(
+        {
+            Refusal(
+                "mallory", "put", "ingress", "rf/w/x\nrefused in the last 1 s: 1; alice put k x1\nMsg intercepted!"
+            ): 1
+        }
+    )
     assert "rf/w/x\\nrefused in the last" in summary(c.counts, prefix="refused")
     assert summary(c.counts, prefix="refused").count("\n") == 0
     assert shown("refused in the last 1 s\x1b[2J") == CONTINUED + "refused in the last 1 s\\x1b[2J"
@@ -215,48 +254,82 @@ def test_up_takes_the_launchers_login_from_the_command_line(tmp_path):
 
     router_toml = Path(__file__).resolve().parents[2] / "examples" / "secure" / "router.toml"
     out = run_cli("up", str(router_toml), "--zenoh-config", str(tmp_path / "missing.json5"), "--duration", "1")
-    assert out.returncode == 2 and "missing.json5' does not exist" in out.stderr and "Traceback" not in out.stderr, out.stderr
+    assert out.returncode == 2 and "missing.json5' does not exist" in out.stderr and "Traceback" not in out.stderr, (
+        out.stderr
+    )
 
 
 def test_only_the_instructor_and_sim_logins_may_ask_for_a_move_each_in_its_own_name():
     """No student asks for a move: moves are asked on srv/move/{sim}/by/{login}; the router lets
     the instructor and the sims ask there in their own names, nobody else, and only sims serve it."""
-    acl = access_control([Identity("alice", "user"), Identity("carol", "instructor"), Identity("sim-a", "sim"),
-                          Identity("compute", "compute"), Identity("viewer", "viewer")])
+    acl = access_control(
+        [
+            Identity("alice", "user"),
+            Identity("carol", "instructor"),
+            Identity("sim-a", "sim"),
+            Identity("compute", "compute"),
+            Identity("viewer", "viewer"),
+        ]
+    )
     rules = {r["id"]: r for r in acl["rules"]}
-    asks = {name: [ke for ke in rules.get(f"{name}-ask", {"key_exprs": []})["key_exprs"] if "/srv/move" in ke]
-            for name in ("alice", "carol", "sim-a", "compute", "viewer")}
-    assert asks == {"alice": [], "carol": ["rf/*/srv/move/*/by/carol"], "sim-a": ["rf/*/srv/move/*/by/sim-a"], "compute": [],
-                    "viewer": []}
+    asks = {
+        name: [ke for ke in rules.get(f"{name}-ask", {"key_exprs": []})["key_exprs"] if "/srv/move" in ke]
+        for name in ("alice", "carol", "sim-a", "compute", "viewer")
+    }
+    assert asks == {
+        "alice": [],
+        "carol": ["rf/*/srv/move/*/by/carol"],
+        "sim-a": ["rf/*/srv/move/*/by/sim-a"],
+        "compute": [],
+        "viewer": [],
+    }
     assert not [ke for ke in rules["ask"]["key_exprs"] if "/srv/move" in ke]  # not among what everyone may ask
     assert "rf/*/srv/state" in rules["ask"]["key_exprs"]  # which is why a sim refuses a move asked there
-    servers = [r["id"] for r in acl["rules"] if any("/srv/move" in ke for ke in r["key_exprs"]) and "reply" in r["messages"]]
+    servers = [
+        r["id"] for r in acl["rules"] if any("/srv/move" in ke for ke in r["key_exprs"]) and "reply" in r["messages"]
+    ]
     assert servers == ["sim-a-serve"] and "rf/*/srv/move/*/by/*" in rules["sim-a-serve"]["key_exprs"]
 
 
 def test_a_password_class_writes_each_person_a_private_login_card_with_the_password_of_her_config(tmp_path):
     d = tmp_path / "class"
-    out = init(d, users=["alice", "bob"], instructors=["carol"], listen=["tcp/0.0.0.0:7447"], connect=["tcp/10.0.0.5:7447"])
+    out = init(
+        d, users=["alice", "bob"], instructors=["carol"], listen=["tcp/0.0.0.0:7447"], connect=["tcp/10.0.0.5:7447"]
+    )
     assert set(out.cards) == {"alice", "bob", "carol"}  # people only: no card for the sim, compute or viewer
     creds = read_credentials(d / "credentials.txt")
     for name, card in out.cards.items():
         text = card.read_text()
-        assert _mode(card) == 0o600 and f"  Name      {name}\n" in text and "  Console   http://10.0.0.5:8080/\n" in text
+        assert (
+            _mode(card) == 0o600 and f"  Name      {name}\n" in text and "  Console   http://10.0.0.5:8080/\n" in text
+        )
         password = text.split("  Password  ")[1].split("\n")[0]
         assert password == creds[name]  # what the router takes: the password of her NAME.json5
-        assert json.loads(zenoh.Config.from_file(str(out.clients[name])).get_json("transport/auth/usrpwd/password")) == password
+        assert (
+            json.loads(zenoh.Config.from_file(str(out.clients[name])).get_json("transport/auth/usrpwd/password"))
+            == password
+        )
     html = (d / "cards" / "cards.html").read_text()
     assert _mode(d / "cards") == 0o700 and _mode(d / "cards" / "cards.html") == 0o600
     assert html.count('<section class="card">') == 3 and "(instructor)" in html and creds["bob"] in html
-    assert "  Teacher   http://10.0.0.5:8080/teacher" in out.cards["carol"].read_text() and "Teacher" not in out.cards["bob"].read_text()
+    assert (
+        "  Teacher   http://10.0.0.5:8080/teacher" in out.cards["carol"].read_text()
+        and "Teacher" not in out.cards["bob"].read_text()
+    )
     again = init(d, users=["alice"], console="https://console.example:8443/")  # a second run: the same passwords
-    assert again.cards["alice"].read_text().count(creds["alice"]) == 1 and "https://console.example:8443/" in again.cards["bob"].read_text()
+    assert (
+        again.cards["alice"].read_text().count(creds["alice"]) == 1
+        and "https://console.example:8443/" in again.cards["bob"].read_text()
+    )
 
 
 def _qr_modules(svg: str) -> tuple[int, set[tuple[int, int]]]:
     """The dark modules an SVG of the cards draws (its 1x1 rects, the quiet zone taken off) and the code's size."""
     size = int(re.search(r'viewBox="0 0 (\d+) \1"', svg).group(1))
-    dark = {(int(x) - QR_QUIET, int(y) - QR_QUIET) for x, y in re.findall(r'<rect x="(\d+)" y="(\d+)" width="1" height="1"/>', svg)}
+    dark = {
+        (int(x) - QR_QUIET, int(y) - QR_QUIET)
+        for x, y in re.findall(r'<rect x="(\d+)" y="(\d+)" width="1" height="1"/>', svg)
+    }
     return size - 2 * QR_QUIET, dark
 
 
@@ -267,7 +340,14 @@ def test_every_printed_card_carries_a_qr_code_of_the_consoles_address(tmp_path, 
     import segno
 
     d = tmp_path / "class"
-    init(d, users=["alice", "bob"], instructors=["carol"], listen=["tcp/0.0.0.0:7447"], connect=["tcp/10.0.0.5:7447"], console=console)
+    init(
+        d,
+        users=["alice", "bob"],
+        instructors=["carol"],
+        listen=["tcp/0.0.0.0:7447"],
+        connect=["tcp/10.0.0.5:7447"],
+        console=console,
+    )
     url = console or "http://10.0.0.5:8080/"
     want = segno.make(url, error="m", micro=False).matrix
     want_dark = {(x, y) for y, row in enumerate(want) for x, v in enumerate(row) if v}
@@ -292,5 +372,5 @@ def test_a_tls_class_has_no_passwords_and_no_cards(tmp_path):
 def test_a_typable_password_is_three_groups_of_four_without_look_alikes():
     pw = {typable_password() for _ in range(200)}
     assert len(pw) == 200 and all(is_typable(p) and len(p) == 14 and p.count("-") == 2 for p in pw)
-    assert not set("0o1li") & set(TYPABLE) and len(TYPABLE) ** 12 > 2 ** 59
+    assert not set("0o1li") & set(TYPABLE) and len(TYPABLE) ** 12 > 2**59
     assert not is_typable("Zw7qQY8izxNoIqTkJC4XKnvO") and not is_typable("ab-cd")

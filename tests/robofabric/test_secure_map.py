@@ -43,14 +43,19 @@ def test_mallory_builds_only_maps_of_her_own_checked_and_capped(secure, secure_c
         built = carol.rpc.call(keys.srv(w, "map", "map"), MapRequest("build"), timeout=10.0, expected=MapReply)
         assert built.name == "map" and (built.grid.cells == 0).any()
         plan = PlanRequest("base1", goal=np.array([-2.5, 0.5, np.pi]), direction="both")  # Test B's goal
-        assert bob.fabric.rpc.call(keys.srv_asked(w, "plan", "base1", "bob"), plan, timeout=30.0, expected=PlanReply).map == "map"
+        assert (
+            bob.fabric.rpc.call(keys.srv_asked(w, "plan", "base1", "bob"), plan, timeout=30.0, expected=PlanReply).map
+            == "map"
+        )
         wait_until(lambda: published.messages(), timeout=20, what="the class's map published")
 
         asked = keys.srv_asked(w, "map", "map", "mallory")
         # her issue-30 build: refused with the reason, and so are the other bad parameters
-        for req, reason in ((MapRequest("build", threshold=0.001), r"threshold 0.001 is outside \[0.5, 0.99\]"),
-                            (MapRequest("build", threshold=1.0), r"threshold 1 is outside \[0.5, 0.99\]"),
-                            (MapRequest("build", name="m" * 80), "characters long; at most 64")):
+        for req, reason in (
+            (MapRequest("build", threshold=0.001), r"threshold 0.001 is outside \[0.5, 0.99\]"),
+            (MapRequest("build", threshold=1.0), r"threshold 1 is outside \[0.5, 0.99\]"),
+            (MapRequest("build", name="m" * 80), "characters long; at most 64"),
+        ):
             with pytest.raises(ServiceError, match=reason):
                 mallory.rpc.call(asked, req, timeout=10.0, expected=MapReply)
         # a build she may make is hers: map/mallory.map, and the class's map stays as the instructor built it
@@ -60,19 +65,26 @@ def test_mallory_builds_only_maps_of_her_own_checked_and_capped(secure, secure_c
         refused = 0
         for i in range(3 * MAX_MAPS_PER_USER):
             try:
-                mallory.rpc.call(asked, MapRequest("build", name=f"m{i}", threshold=0.5), timeout=10.0, expected=MapReply)
+                mallory.rpc.call(
+                    asked, MapRequest("build", name=f"m{i}", threshold=0.5), timeout=10.0, expected=MapReply
+                )
             except ServiceError as exc:
                 assert f"mallory holds {MAX_MAPS_PER_USER} maps, the most one user may" in exc.reason, exc.reason
                 refused += 1
         assert refused == 2 * MAX_MAPS_PER_USER + 1
-        wait_until(lambda: f"{keys.world_root(w)}/map/mallory.map" in {k for k, _ in published.items}, timeout=20,
-                   what="her map published")
+        wait_until(
+            lambda: f"{keys.world_root(w)}/map/mallory.map" in {k for k, _ in published.items},
+            timeout=20,
+            what="her map published",
+        )
         theirs = sorted({k.rsplit("/", 1)[1] for k, _ in published.items})
         assert theirs == ["mallory.m0", "mallory.m1", "mallory.m2", "mallory.map", "map"], theirs
         with pytest.raises(ServiceError, match="no map named 'mallory.m5'"):
             mallory.rpc.call(asked, MapRequest("get", name="mallory.m5"), timeout=10.0, expected=MapReply)
         # the class's map is the one the instructor built, published once, and bob still plans on it
-        got = bob.fabric.rpc.call(keys.srv_asked(w, "map", "map", "bob"), MapRequest("get"), timeout=10.0, expected=MapReply)
+        got = bob.fabric.rpc.call(
+            keys.srv_asked(w, "map", "map", "bob"), MapRequest("get"), timeout=10.0, expected=MapReply
+        )
         assert np.array_equal(got.grid.cells, built.grid.cells)
         assert len([k for k, _ in published.items if k.endswith("/map/map")]) == 1
         again = bob.fabric.rpc.call(keys.srv_asked(w, "plan", "base1", "bob"), plan, timeout=30.0, expected=PlanReply)

@@ -27,12 +27,31 @@ import pytest
 from fabric import keys
 from fabric.codec import encode
 from fabric.config import FabricConfig
-from fabric.interfaces import (Command, Event, Header, JointState, JointTarget, OccupancyGrid, OwnershipRecord, OwnReply, OwnRequest,
-                               Stop, WorldInfo)
+from fabric.interfaces import (
+    Command,
+    Event,
+    Header,
+    JointState,
+    JointTarget,
+    OccupancyGrid,
+    OwnershipRecord,
+    OwnReply,
+    OwnRequest,
+    Stop,
+    WorldInfo,
+)
 from robofabric.secure import init
 from fabric.interfaces import ServiceError
 from fabric.session import Fabric
-from robofabric.testing import ProcessGroup, SimRoles, client_config, free_port, robofabric_cmd, router_config, wait_until
+from robofabric.testing import (
+    ProcessGroup,
+    SimRoles,
+    client_config,
+    free_port,
+    robofabric_cmd,
+    router_config,
+    wait_until,
+)
 
 pytestmark = pytest.mark.slow
 
@@ -49,9 +68,16 @@ class SecureWorld:
         self.dir = tmp / "class"
         self.files = init(self.dir, users=["alice", "bob", "mallory"], instructors=["carol"], listen=[self.ep]).clients
         self.procs = procs
-        self.router = procs.start(robofabric_cmd("router", "--zenoh-config", str(self.dir / "router.json5"), "--audit",
-                                                 "--audit-every", "1"), name="router")
-        wait_until(lambda: "listening" in procs.output(self.router), timeout=30, what="router", seen=lambda: procs.output(self.router))
+        self.router = procs.start(
+            robofabric_cmd("router", "--zenoh-config", str(self.dir / "router.json5"), "--audit", "--audit-every", "1"),
+            name="router",
+        )
+        wait_until(
+            lambda: "listening" in procs.output(self.router),
+            timeout=30,
+            what="router",
+            seen=lambda: procs.output(self.router),
+        )
         self.fabrics: list[Fabric] = []
 
     def config(self, name: str) -> FabricConfig:
@@ -63,7 +89,9 @@ class SecureWorld:
         return fab
 
     def start(self, name: str, *args: str):
-        return self.procs.start(robofabric_cmd(*args, "--world", self.world, "--zenoh-config", str(self.files[name])), name=name)
+        return self.procs.start(
+            robofabric_cmd(*args, "--world", self.world, "--zenoh-config", str(self.files[name])), name=name
+        )
 
     def close(self) -> None:
         for fab in self.fabrics:
@@ -77,7 +105,9 @@ def secure(tmp_path_factory):
         w = SecureWorld(tmp, procs)
         sim = w.start("sim", "sim", "--scene", "combined")
         viewer = w.fabric("viewer", kind="viewer", peer_id="watcher")
-        wait_until(lambda: viewer.live_peers("sim"), timeout=90, what="the sim peer", seen=lambda: procs.output(sim)[-2000:])
+        wait_until(
+            lambda: viewer.live_peers("sim"), timeout=90, what="the sim peer", seen=lambda: procs.output(sim)[-2000:]
+        )
         w.sim = sim
         w.sim_id = viewer.live_peers("sim")[0][1]  # the only sim yet: tests open probe sessions of kind sim later
         try:
@@ -117,8 +147,11 @@ def _send(fab: Fabric, key: str, msg: object) -> None:
 def _marker(mallory: Fabric, seen_events: Seen, world: str, tag: str) -> None:
     """mallory sends what she may send (a decode report); once it arrived, everything before it did."""
     _send(mallory, keys.event_decode(world, "mallory"), Event(kind="marker", reason=tag, header=mallory.header("m")))
-    wait_until(lambda: any(getattr(e, "reason", "") == tag for e in seen_events.messages()), timeout=20,
-               what=f"mallory's marker {tag}")
+    wait_until(
+        lambda: any(getattr(e, "reason", "") == tag for e in seen_events.messages()),
+        timeout=20,
+        what=f"mallory's marker {tag}",
+    )
 
 
 def _forged_header(real: Header) -> Header:
@@ -128,8 +161,12 @@ def _forged_header(real: Header) -> Header:
 
 def _refused_by_router(secure: SecureWorld, text: str) -> None:
     """The router's --audit summaries (robofabric/router_audit.py) name the refused login, message and key."""
-    wait_until(lambda: text in secure.procs.output(secure.router), timeout=20, what=f"the router's count of {text!r}",
-               seen=lambda: secure.procs.output(secure.router)[-1500:])
+    wait_until(
+        lambda: text in secure.procs.output(secure.router),
+        timeout=20,
+        what=f"the router's count of {text!r}",
+        seen=lambda: secure.procs.output(secure.router)[-1500:],
+    )
 
 
 @pytest.fixture(scope="module")
@@ -154,10 +191,18 @@ def test_mallory_cannot_command_alices_arm(secure, alice_owns_arm):
     mallory = secure.fabric("mallory")
     epoch = alice.ownership.record("arm1").epoch
     bad = JointTarget(np.full(6, 0.5))
-    _send(mallory, keys.robot_cmd(w, "arm1", "joints", "alice"), Command("alice", epoch, bad))  # alice's key: the router refuses
-    _send(mallory, keys.robot_cmd(w, "arm1", "joints", "mallory"), Command("alice", epoch, bad))  # her key, alice's name
-    ev = wait_until(lambda: [e for e in events.messages() if e.kind == "reject" and e.reason == "user_mismatch"], timeout=20,
-                    what="the sim refusing the payload's name", seen=events.messages)[0]
+    _send(
+        mallory, keys.robot_cmd(w, "arm1", "joints", "alice"), Command("alice", epoch, bad)
+    )  # alice's key: the router refuses
+    _send(
+        mallory, keys.robot_cmd(w, "arm1", "joints", "mallory"), Command("alice", epoch, bad)
+    )  # her key, alice's name
+    ev = wait_until(
+        lambda: [e for e in events.messages() if e.kind == "reject" and e.reason == "user_mismatch"],
+        timeout=20,
+        what="the sim refusing the payload's name",
+        seen=events.messages,
+    )[0]
     assert ev.user == "mallory" and ev.object == "arm1"
     # the forgery on alice's key went first on the same session: had the router passed it, the sim had it by now
     assert not [e for e in events.messages() if e.kind == "reject" and e.user == "alice"]
@@ -166,8 +211,12 @@ def test_mallory_cannot_command_alices_arm(secure, alice_owns_arm):
     assert all(np.allclose(js.q, 0.1, atol=1e-3) for js in joints.messages()[n:]), "the arm moved"
     # the router counted the refusal (robofabric router --audit), naming the login and the key
     refused = f"mallory put {keys.robot_cmd(w, 'arm1', 'joints', 'alice')}"
-    wait_until(lambda: refused in secure.procs.output(secure.router), timeout=20, what="the router's count of the refusal",
-               seen=lambda: secure.procs.output(secure.router)[-1500:])
+    wait_until(
+        lambda: refused in secure.procs.output(secure.router),
+        timeout=20,
+        what="the router's count of the refusal",
+        seen=lambda: secure.procs.output(secure.router)[-1500:],
+    )
 
 
 def test_a_fake_ownership_record_is_refused_and_alice_keeps_renewing(secure, alice_owns_arm):
@@ -180,8 +229,14 @@ def test_a_fake_ownership_record_is_refused_and_alice_keeps_renewing(secure, ali
     assert rec.header.term >= 1  # the clients' fence is up: a forgery must carry the term to get past it
     # plausible in every way a client can check: the authority's name, source and term, the next epoch;
     # only the router's access control stands between these and alice's client
-    forged = OwnershipRecord("arm1", owner="mallory", epoch=rec.epoch + 1, lease_expiry=rec.lease_expiry + 10.0,
-                             authority=rec.authority, header=_forged_header(rec.header))
+    forged = OwnershipRecord(
+        "arm1",
+        owner="mallory",
+        epoch=rec.epoch + 1,
+        lease_expiry=rec.lease_expiry + 10.0,
+        authority=rec.authority,
+        header=_forged_header(rec.header),
+    )
     _send(mallory, keys.own(w, "arm1"), forged)
     _send(mallory, keys.own(w, "arm1"), replace(forged, epoch=2**40, header=_forged_header(rec.header)))
     _marker(mallory, events, w, "after-records")
@@ -204,10 +259,16 @@ def test_mallory_cannot_release_alices_arm(secure, alice_owns_arm):
     w = secure.world
     mallory = secure.fabric("mallory")
     with pytest.raises(ServiceError, match="no reply"):  # alice's key: the router does not pass the query
-        mallory.rpc.call(keys.own_request(w, "arm1", "alice"), OwnRequest("release", "alice"), timeout=2.0, expected=OwnReply)
+        mallory.rpc.call(
+            keys.own_request(w, "arm1", "alice"), OwnRequest("release", "alice"), timeout=2.0, expected=OwnReply
+        )
     with pytest.raises(ServiceError, match="names 'alice' but was sent by 'mallory'"):
-        mallory.rpc.call(keys.own_request(w, "arm1", "mallory"), OwnRequest("release", "alice"), timeout=10.0, expected=OwnReply)
-    honest = mallory.rpc.call(keys.own_request(w, "arm1", "mallory"), OwnRequest("release", "mallory"), timeout=10.0, expected=OwnReply)
+        mallory.rpc.call(
+            keys.own_request(w, "arm1", "mallory"), OwnRequest("release", "alice"), timeout=10.0, expected=OwnReply
+        )
+    honest = mallory.rpc.call(
+        keys.own_request(w, "arm1", "mallory"), OwnRequest("release", "mallory"), timeout=10.0, expected=OwnReply
+    )
     assert honest.outcome != "released" and honest.record.owner == "alice"
     rec = mallory.rpc.call(keys.own(w, "arm1"), OwnRequest("release", "alice"), timeout=10.0, expected=OwnershipRecord)
     assert rec.owner == "alice"  # the record key only ever answers with the record
@@ -221,11 +282,15 @@ def test_only_the_instructor_may_ask_the_staffs_key(secure, alice_owns_arm):
     w = secure.world
     mallory = secure.fabric("mallory")
     with pytest.raises(ServiceError, match="no reply"):
-        mallory.rpc.call(keys.own_staff(w, "arm1", "mallory"), OwnRequest("take_back", "mallory"), timeout=2.0, expected=OwnReply)
+        mallory.rpc.call(
+            keys.own_staff(w, "arm1", "mallory"), OwnRequest("take_back", "mallory"), timeout=2.0, expected=OwnReply
+        )
     _refused_by_router(secure, f"mallory query {keys.own_staff(w, 'arm1', 'mallory')}")
     assert alice.ownership.record("arm1").owner == "alice"
     carol = secure.fabric("carol")
-    reply = carol.rpc.call(keys.own_staff(w, "arm1", "carol"), OwnRequest("stop", "carol"), timeout=10.0, expected=OwnReply)
+    reply = carol.rpc.call(
+        keys.own_staff(w, "arm1", "carol"), OwnRequest("stop", "carol"), timeout=10.0, expected=OwnReply
+    )
     assert reply.outcome == "done" and "arm1 stopped by instructor carol" in reply.reason
     assert reply.record.owner == "alice"
 
@@ -244,9 +309,16 @@ def test_a_user_cannot_publish_robot_state_or_serve_the_world(secure):
     assert real_js.header.term >= 1 and real_world.header.term >= 1 and real_rec.header.term >= 1
     marker_q = np.full(len(real_js.q), 1.2345)
     _send(mallory, keys.robot_joints(w, "arm1"), replace(real_js, q=marker_q, header=_forged_header(real_js.header)))
-    mallory.rpc.serve(keys.srv(w, "world"), lambda key, req: replace(real_world, scene="mallory's", header=_forged_header(real_world.header)))
-    mallory.rpc.serve(keys.own(w, "arm1"), lambda key, req: replace(real_rec, owner="mallory", epoch=real_rec.epoch + 1,
-                                                                  header=_forged_header(real_rec.header)))
+    mallory.rpc.serve(
+        keys.srv(w, "world"),
+        lambda key, req: replace(real_world, scene="mallory's", header=_forged_header(real_world.header)),
+    )
+    mallory.rpc.serve(
+        keys.own(w, "arm1"),
+        lambda key, req: replace(
+            real_rec, owner="mallory", epoch=real_rec.epoch + 1, header=_forged_header(real_rec.header)
+        ),
+    )
     _marker(mallory, events, w, "after-state")
     assert not [js for js in joints.messages() if np.allclose(js.q, 1.2345)]
     answers = watcher.rpc.query(keys.srv(w, "world"), timeout=5.0, all_replies=True)
@@ -256,7 +328,11 @@ def test_a_user_cannot_publish_robot_state_or_serve_the_world(secure):
     _refused_by_router(secure, f"mallory put {keys.robot_joints(w, 'arm1')}")
     # nor a compute's services: an IK "answer" of hers would steer whoever asks into her joints
     mallory.rpc.serve(keys.srv(w, "ik", "arm1"), lambda key, req: Event(kind="forged", reason="mallory's IK"))
-    for key in (keys.srv(w, "world"), keys.own(w, "arm1"), keys.srv(w, "ik", "arm1")):  # her queryables: refused when declared
+    for key in (
+        keys.srv(w, "world"),
+        keys.own(w, "arm1"),
+        keys.srv(w, "ik", "arm1"),
+    ):  # her queryables: refused when declared
         _refused_by_router(secure, f"mallory declare_queryable {key} x")
     _refused_by_router(secure, f"mallory liveliness_token {keys.peer(w, 'sim', 'fake-sim')} x")  # her sim token
     assert ("sim", "fake-sim") not in watcher.live_peers("sim")
@@ -276,7 +352,9 @@ def test_a_newline_in_a_token_id_cannot_forge_a_line_of_the_routers_audit(secure
         _refused_by_router(secure, f"mallory liveliness_token {keys.peer(w, 'sim', 'x')}\\n{forged} x")
         out = secure.procs.output(secure.router)
         lines = [ln for ln in out.splitlines() if forged in ln]
-        assert lines and all(not ln.startswith(forged) and ln.startswith(("refused in", "refused in total", "  ↳")) for ln in lines), lines
+        assert lines and all(
+            not ln.startswith(forged) and ln.startswith(("refused in", "refused in total", "  ↳")) for ln in lines
+        ), lines
         assert not [ln for ln in out.splitlines() if ln.startswith("refused in the last 1 s: 1 (put 1); carol put")]
     finally:
         token.undeclare()
@@ -299,8 +377,11 @@ def test_a_student_cannot_read_the_routers_admin_space(secure, tmp_path):
     try:
         anyone = Fabric(client_config(world, port), kind="user", peer_id="anyone")
         try:
-            assert wait_until(lambda: [k for k in _router_admin_replies(anyone) if f"rf/{world}/" in k], timeout=20,
-                              what="the open router's admin space answering")
+            assert wait_until(
+                lambda: [k for k in _router_admin_replies(anyone) if f"rf/{world}/" in k],
+                timeout=20,
+                what="the open router's admin space answering",
+            )
         finally:
             anyone.close()
     finally:
@@ -323,9 +404,12 @@ def test_a_sim_shows_its_role_through_the_class_acl(secure):
     watcher = secure.fabric("viewer", kind="viewer", peer_id="roles")
     roles = SimRoles(watcher)
     # the class's sim, not another test's probe session of kind sim (it shows no role: it is no sim peer)
-    shown = wait_until(lambda: [(sim, r) for _, sim in watcher.live_peers("sim") if (r := roles.shows(sim, "primary", term=1))],
-                       timeout=30, what="a sim showing primary (term 1)",
-                       seen=lambda: [(sim, roles.now(sim)) for _, sim in watcher.live_peers("sim")])
+    shown = wait_until(
+        lambda: [(sim, r) for _, sim in watcher.live_peers("sim") if (r := roles.shows(sim, "primary", term=1))],
+        timeout=30,
+        what="a sim showing primary (term 1)",
+        seen=lambda: [(sim, roles.now(sim)) for _, sim in watcher.live_peers("sim")],
+    )
     assert [(sim, r.leader) for sim, r in shown] == [(secure.sim_id, secure.sim_id)], shown
 
 
@@ -361,12 +445,16 @@ def test_up_with_a_refused_login_says_so_in_one_line(secure, tmp_path):
     bad = tmp_path / "bad.json5"
     bad.write_text(json.dumps(cfg))
     launch = tmp_path / "up.toml"
-    launch.write_text(f'[launch]\nworld = "{secure.world}"\nconnect = ["{secure.ep}"]\nzenoh_config = "{bad}"\n\n'
-                      '[[peer]]\nname = "ps"\nargs = ["ps"]\nrole = "task"\n')
+    launch.write_text(
+        f'[launch]\nworld = "{secure.world}"\nconnect = ["{secure.ep}"]\nzenoh_config = "{bad}"\n\n'
+        '[[peer]]\nname = "ps"\nargs = ["ps"]\nrole = "task"\n'
+    )
     out = _cli("up", str(launch), "--out", str(tmp_path / "out"))
     lines = out.stderr.strip().splitlines()
     assert out.returncode == 2 and len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
-    assert lines[0].startswith(f"error: authentication failed for mallory at {secure.ep}: the router refused this login"), lines
+    assert lines[0].startswith(
+        f"error: authentication failed for mallory at {secure.ep}: the router refused this login"
+    ), lines
 
 
 def test_tls_refuses_a_certificate_from_another_ca(tmp_path):
@@ -375,12 +463,19 @@ def test_tls_refuses_a_certificate_from_another_ca(tmp_path):
     other = init(tmp_path / "other", users=["alice"], tls=True, listen=[ep])
     with ProcessGroup(tmp_path) as procs:
         router = procs.start(robofabric_cmd("router", "--zenoh-config", str(mine.router)), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=30, what="TLS router", seen=lambda: procs.output(router))
+        wait_until(
+            lambda: "listening" in procs.output(router),
+            timeout=30,
+            what="TLS router",
+            seen=lambda: procs.output(router),
+        )
         out = _cli("ps", "--zenoh-config", str(other.clients["alice"]))
         lines = out.stderr.strip().splitlines()
         assert out.returncode == 2 and len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
         # her login trusts another CA: this side refuses the router first (the router would refuse her too)
-        assert lines[0].startswith(f"error: cannot join world 'demo' at {ep}: this client does not trust the router's certificate ("), lines
+        assert lines[0].startswith(
+            f"error: cannot join world 'demo' at {ep}: this client does not trust the router's certificate ("
+        ), lines
         good = _cli("ps", "--json", "--zenoh-config", str(mine.clients["alice"]))
         assert good.returncode == 0 and json.loads(good.stdout)["peers"].get("router"), good.stderr
         # identities by certificate common name: alice may not publish robot state even over TLS
@@ -407,21 +502,34 @@ def test_a_router_certificate_that_does_not_name_the_host_is_said_so(tmp_path):
     import user_peer
 
     port = free_port()
-    made = init(tmp_path / "class", users=["alice"], tls=True, listen=[f"tls/0.0.0.0:{port}"], connect=[f"tls/127.0.0.1:{port}"])
-    elsewhere = f"tls/127.0.0.2:{port}"  # the router listens there too, but its certificate names 127.0.0.1 and localhost
+    made = init(
+        tmp_path / "class", users=["alice"], tls=True, listen=[f"tls/0.0.0.0:{port}"], connect=[f"tls/127.0.0.1:{port}"]
+    )
+    elsewhere = (
+        f"tls/127.0.0.2:{port}"  # the router listens there too, but its certificate names 127.0.0.1 and localhost
+    )
     with ProcessGroup(tmp_path) as procs:
         router = procs.start(robofabric_cmd("router", "--zenoh-config", str(made.router)), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=30, what="TLS router", seen=lambda: procs.output(router))
+        wait_until(
+            lambda: "listening" in procs.output(router),
+            timeout=30,
+            what="TLS router",
+            seen=lambda: procs.output(router),
+        )
         assert _cli("ps", "--zenoh-config", str(made.clients["alice"])).returncode == 0
         out = _cli("ps", "--zenoh-config", str(made.clients["alice"]), "--connect", elsewhere)
         lines = out.stderr.strip().splitlines()
         assert out.returncode == 2 and len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
-        assert lines[0].startswith(f"error: cannot join world 'demo' at {elsewhere}: the router's certificate does not name 127.0.0.2 "
-                                   "(it names "), lines
+        assert lines[0].startswith(
+            f"error: cannot join world 'demo' at {elsewhere}: the router's certificate does not name 127.0.0.2 "
+            "(it names "
+        ), lines
         assert "refused this login" not in lines[0]
         with pytest.raises(user_peer.JoinFailed) as info:
             user_peer.connect(zenoh_config=str(made.clients["alice"]), connect=elsewhere, wait=False)
-        assert info.value.endpoint == elsewhere and info.value.cause.startswith("the router's certificate does not name 127.0.0.2")
+        assert info.value.endpoint == elsewhere and info.value.cause.startswith(
+            "the router's certificate does not name 127.0.0.2"
+        )
         assert info.traceback[-1].name == "connect"  # the script's own call is where it ends, no internal frames below
 
 
@@ -437,9 +545,15 @@ def _expire_certificate(d, name: str) -> None:
     key = serialization.load_pem_private_key((d / f"{name}-key.pem").read_bytes(), password=None)
     old = x509.load_pem_x509_certificate((d / f"{name}.pem").read_bytes())
     now = dt.datetime.now(dt.UTC)
-    builder = (x509.CertificateBuilder().subject_name(old.subject).issuer_name(ca.subject).public_key(key.public_key())
-               .serial_number(x509.random_serial_number()).not_valid_before(now - dt.timedelta(days=10))
-               .not_valid_after(now - dt.timedelta(days=1)))
+    builder = (
+        x509.CertificateBuilder()
+        .subject_name(old.subject)
+        .issuer_name(ca.subject)
+        .public_key(key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now - dt.timedelta(days=10))
+        .not_valid_after(now - dt.timedelta(days=1))
+    )
     for ext in old.extensions:
         builder = builder.add_extension(ext.value, critical=ext.critical)
     (d / f"{name}.pem").write_bytes(builder.sign(ca_key, hashes.SHA256()).public_bytes(serialization.Encoding.PEM))
@@ -453,22 +567,33 @@ def test_tls_refuses_an_expired_certificate(tmp_path):
     _expire_certificate(tmp_path / "class" / TLS_DIR, "alice")
     with ProcessGroup(tmp_path) as procs:
         router = procs.start(robofabric_cmd("router", "--zenoh-config", str(made.router)), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=30, what="TLS router", seen=lambda: procs.output(router))
+        wait_until(
+            lambda: "listening" in procs.output(router),
+            timeout=30,
+            what="TLS router",
+            seen=lambda: procs.output(router),
+        )
         good = _cli("ps", "--json", "--zenoh-config", str(made.clients["bob"]))  # the router is there for a valid one
         assert good.returncode == 0, good.stderr
         out = _cli("ps", "--zenoh-config", str(made.clients["alice"]))
         lines = out.stderr.strip().splitlines()
         assert out.returncode == 2 and len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
-        assert lines[0] == f"error: authentication failed for alice at {ep}: the router refused this login " \
-                           "(wrong password, unknown user, or a certificate it does not trust)"
+        assert (
+            lines[0] == f"error: authentication failed for alice at {ep}: the router refused this login "
+            "(wrong password, unknown user, or a certificate it does not trust)"
+        )
 
 
 @pytest.fixture(scope="module")
 def secure_compute(secure):
     """The class's compute peer under its own login (streaming IK for arm1, mapping and planning)."""
     compute = secure.start("compute", "compute", "--stream", "arm1:target")
-    wait_until(lambda: "serving" in secure.procs.output(compute), timeout=90, what="the compute peer",
-               seen=lambda: secure.procs.output(compute)[-1500:])
+    wait_until(
+        lambda: "serving" in secure.procs.output(compute),
+        timeout=90,
+        what="the compute peer",
+        seen=lambda: secure.procs.output(compute)[-1500:],
+    )
     return compute
 
 
@@ -489,14 +614,30 @@ def test_forged_events_on_every_key_mallory_may_write_change_nothing(secure, ali
         base.wait_for("pose", timeout=30)
         base.request(timeout=10)
         sim_id = arm.record.authority  # the authority's own id: forgeries carry it as their source
-        forged = [Event(kind=kind, object=obj, user=user, reason=f"{obj} is owned by mallory, not {user}", header=mallory.header("e"))
-                  for obj, user in (("arm1", "alice"), ("base1", "bob"))
-                  for kind in (EventKind.REJECT, EventKind.OWN_REVOKED, EventKind.OWN_EXPIRED, EventKind.OWN_HANDOVER)]
+        forged = [
+            Event(
+                kind=kind,
+                object=obj,
+                user=user,
+                reason=f"{obj} is owned by mallory, not {user}",
+                header=mallory.header("e"),
+            )
+            for obj, user in (("arm1", "alice"), ("base1", "bob"))
+            for kind in (EventKind.REJECT, EventKind.OWN_REVOKED, EventKind.OWN_EXPIRED, EventKind.OWN_HANDOVER)
+        ]
         forged = [replace(e, header=replace(e.header, source=sim_id, term=arm.record.header.term)) for e in forged]
         # every event key she may write (her own decode key), and those she may not (the router drops them)
         mine = keys.event_decode(w, "mallory")
-        pubs = [mallory.session.declare_publisher(k) for k in (mine, keys.event_decode(w, "alice"), keys.event(w, "decode", "mallory"),
-                                                              keys.event(w, "reject", "arm1"), keys.event(w, "own", "base1"))]
+        pubs = [
+            mallory.session.declare_publisher(k)
+            for k in (
+                mine,
+                keys.event_decode(w, "alice"),
+                keys.event(w, "decode", "mallory"),
+                keys.event(w, "reject", "arm1"),
+                keys.event(w, "own", "base1"),
+            )
+        ]
         sent = []
 
         def flood() -> None:
@@ -519,7 +660,9 @@ def test_forged_events_on_every_key_mallory_may_write_change_nothing(secure, ali
         seen = [e for e in alice.events if e.kind == EventKind.REJECT and e.object == "arm1" and e.user == "alice"]
         assert seen, "her forged rejects never arrived: the test would prove nothing"
         assert not alice.rejections("arm1", 0) and not bob.rejections("base1", 0)
-        assert all(not trusted for e, trusted in alice.recent_events(1000) if "owned by mallory" in e.reason)  # display-only
+        assert all(
+            not trusted for e, trusted in alice.recent_events(1000) if "owned by mallory" in e.reason
+        )  # display-only
         assert alice.event_log.untrusted >= 8 and bob.event_log.untrusted >= 8
     finally:
         stop.set()
@@ -549,10 +692,20 @@ def test_mallory_may_not_change_the_class_map_nor_plan_for_bobs_robot(secure, se
         base.wait_for("pose", timeout=30)
         base.request(timeout=10)
         status = lambda: services.map_request(bob.fabric, "status", user="bob", timeout=10.0)  # noqa: E731
-        before = wait_until(lambda: (lambda r: r if r.scans > 20 else None)(status()), timeout=60, what="scans in the class map")
+        before = wait_until(
+            lambda: (lambda r: r if r.scans > 20 else None)(status()), timeout=60, what="scans in the class map"
+        )
         full = OccupancyGrid(0.1, np.zeros(3), np.full((50, 50), 100, np.uint8))
-        for req in (MapRequest("set", grid=full), MapRequest("reset"), MapRequest("stop"), MapRequest("save", file="x.yaml")):
-            with pytest.raises(ServiceError, match=f"map '{req.action}' changes the map everyone plans on: an instructor's, not mallory's"):
+        for req in (
+            MapRequest("set", grid=full),
+            MapRequest("reset"),
+            MapRequest("stop"),
+            MapRequest("save", file="x.yaml"),
+        ):
+            with pytest.raises(
+                ServiceError,
+                match=f"map '{req.action}' changes the map everyone plans on: an instructor's, not mallory's",
+            ):
                 mallory.rpc.call(keys.srv_asked(w, "map", "map", "mallory"), req, timeout=10.0, expected=MapReply)
             with pytest.raises(ServiceError, match="no reply"):  # the staff's form: her query never passes the router
                 mallory.rpc.call(keys.srv(w, "map", "map"), req, timeout=2.0, expected=MapReply)
@@ -563,14 +716,25 @@ def test_mallory_may_not_change_the_class_map_nor_plan_for_bobs_robot(secure, se
         # an instructor may: a free room of her own, for the plans below (the class map stays as it is)
         carol = secure.fabric("carol")
         room = OccupancyGrid(0.1, np.array([-5.0, -5.0, 0.0]), np.zeros((100, 100), np.uint8))
-        assert carol.rpc.call(keys.srv(w, "map", "room"), MapRequest("set", name="room", grid=room), timeout=10.0, expected=MapReply).action == "set"
-        plan = PlanRequest("base1", goal=np.array([2.0, 1.0, 0.0]), start=np.array([0.0, 0.0, 0.0]), map="room", direction="both")
+        assert (
+            carol.rpc.call(
+                keys.srv(w, "map", "room"), MapRequest("set", name="room", grid=room), timeout=10.0, expected=MapReply
+            ).action
+            == "set"
+        )
+        plan = PlanRequest(
+            "base1", goal=np.array([2.0, 1.0, 0.0]), start=np.array([0.0, 0.0, 0.0]), map="room", direction="both"
+        )
         theirs = mallory.rpc.call(keys.srv_asked(w, "plan", "base1", "mallory"), plan, timeout=30.0, expected=PlanReply)
         assert len(theirs.path) > 1  # she gets her path, in the reply
         with pytest.raises(ServiceError, match="no reply"):
             mallory.rpc.call(keys.srv(w, "plan", "base1"), plan, timeout=2.0, expected=PlanReply)
-        own = bob.fabric.rpc.call(keys.srv_asked(w, "plan", "base1", "bob"), replace(plan, goal=np.array([1.5, -1.0, 0.0])),
-                              timeout=30.0, expected=PlanReply)
+        own = bob.fabric.rpc.call(
+            keys.srv_asked(w, "plan", "base1", "bob"),
+            replace(plan, goal=np.array([1.5, -1.0, 0.0])),
+            timeout=30.0,
+            expected=PlanReply,
+        )
         got = wait_until(lambda: paths.messages(), timeout=20, what="bob's plan on robot/base1/path")
         # hers was asked (and answered) first: published, it would have come first on the same path key
         assert len(got) == 1 and np.allclose(got[0].y, own.path.y), [p.y[-1] for p in got]
@@ -591,8 +755,12 @@ def test_paper_tests_a_and_b_in_a_secure_world(secure, alice_owns_arm, secure_co
     viewer = secure.start("viewer", "view", "--save", str(rrd))
     watcher = secure.fabric("viewer", kind="viewer", peer_id="watch4")
     # the compute peer's token comes before its services: its "serving" line says they are declared
-    wait_until(lambda: "serving" in procs.output(compute) and watcher.live_peers("viewer"), timeout=90, what="compute and viewer",
-               seen=lambda: (procs.output(compute)[-1500:], procs.output(viewer)[-1500:]))
+    wait_until(
+        lambda: "serving" in procs.output(compute) and watcher.live_peers("viewer"),
+        timeout=90,
+        what="compute and viewer",
+        seen=lambda: (procs.output(compute)[-1500:], procs.output(viewer)[-1500:]),
+    )
     bob = user_peer.connect(world=secure.world, zenoh_config=str(secure.files["bob"]), timeout=10.0)
     results = {}
     try:
@@ -617,15 +785,23 @@ def test_paper_tests_a_and_b_in_a_secure_world(secure, alice_owns_arm, secure_co
     late.subscribe(keys.object_pose_all(secure.world), lambda k, m: got.setdefault(k, m), history=True)
     bobs_map = keys.map_key(secure.world, keys.user_map("map", "bob"))  # Test B builds and plans on bob's own map
     late.subscribe(bobs_map, lambda k, m: got.setdefault(k, m), history=True)
-    wait_until(lambda: keys.object_pose(secure.world, "target", "alice") in got and bobs_map in got,
-               timeout=20, what="latched values for a late joiner", seen=lambda: sorted(got))
+    wait_until(
+        lambda: keys.object_pose(secure.world, "target", "alice") in got and bobs_map in got,
+        timeout=20,
+        what="latched values for a late joiner",
+        seen=lambda: sorted(got),
+    )
     # and the router refused nothing of what the honest logins said (its --audit summaries name every refusal):
     # a refusal after all of theirs (mallory's put on a sim's key) is counted in the same summary or a later one
     before = len(procs.output(secure.router))
     canary = keys.robot_joints(secure.world, "arm1")
     secure.fabric("mallory", peer_id="mallory4").session.put(canary, b"canary")
-    wait_until(lambda: f"mallory put {canary}" in procs.output(secure.router)[before:], timeout=20,
-               what="the router's count of a refusal after the scenarios", seen=lambda: procs.output(secure.router)[-1500:])
+    wait_until(
+        lambda: f"mallory put {canary}" in procs.output(secure.router)[before:],
+        timeout=20,
+        what="the router's count of a refusal after the scenarios",
+        seen=lambda: procs.output(secure.router)[-1500:],
+    )
     honest = re.findall(r"\b(alice|bob|sim|compute|viewer) (\w+) (rf/\S+) x\d+", procs.output(secure.router))
     assert not honest, honest
 
@@ -639,7 +815,9 @@ def test_the_python_api_says_who_was_refused_and_keeps_the_login_as_the_user(sec
     cfg["transport"]["auth"]["usrpwd"]["password"] = "guess"
     bad = tmp_path / "bob-bad.json5"
     bad.write_text(json.dumps(cfg))
-    with pytest.raises(Unreachable, match=f"^authentication failed for bob at {secure.ep}: the router refused this login") as info:
+    with pytest.raises(
+        Unreachable, match=f"^authentication failed for bob at {secure.ep}: the router refused this login"
+    ) as info:
         user_peer.connect(world=secure.world, zenoh_config=str(bad), wait=False)
     assert isinstance(info.value, user_peer.JoinFailed) and info.value.endpoint == secure.ep  # one type, where and why
     assert info.value.cause.startswith("the router refused this login")

@@ -34,6 +34,7 @@ ROBOT = '[robot]\nkind = "{kind}"\nmjcf = "m.xml"\njoints = []\nlower = []\nuppe
 
 # ---------------------------------------------------------------- the table and its lookups
 
+
 def test_the_kinds_and_their_facts():
     assert NAMES == tuple(KINDS) == ("arm", "mobile")
     assert all(isinstance(k, RobotKind) and k.name == name for name, k in KINDS.items())
@@ -78,6 +79,7 @@ def test_the_wire_takes_the_tables_kinds():
 
 # ---------------------------------------------------------------- the layers' registries, keyed by kind
 
+
 def test_the_stream_tables_per_kind_ros2_topics_name_kinds_of_the_table():
     """fabric.streams (below robots) keys a stream's ROS 2 topic by kind where its type depends on it: each such
     key is a kind here, and a base's pose is odometry, an arm's a stamped pose."""
@@ -111,6 +113,7 @@ def test_every_kind_has_its_handle_class():
 
 # ---------------------------------------------------------------- nothing else branches on a kind's name
 
+
 def _kind(node: ast.AST) -> bool:
     return isinstance(node, ast.Constant) and node.value in KINDS
 
@@ -132,26 +135,32 @@ def kind_branches(source: str) -> list[str]:
     return out
 
 
-@pytest.mark.parametrize("source", [
-    'if r.kind == "arm": pass',
-    'x = "mobile" != kinds[r]',
-    'ok = k in ("arm", "tracked")',
-    'ok = k not in {"mobile"}',
-    'match k:\n    case "arm": pass',
-    'for kind in ("arm", "mobile"): pass',
-    'KINDS = ["mobile", "arm"]',
-])
+@pytest.mark.parametrize(
+    "source",
+    [
+        'if r.kind == "arm": pass',
+        'x = "mobile" != kinds[r]',
+        'ok = k in ("arm", "tracked")',
+        'ok = k not in {"mobile"}',
+        'match k:\n    case "arm": pass',
+        'for kind in ("arm", "mobile"): pass',
+        'KINDS = ["mobile", "arm"]',
+    ],
+)
 def test_the_scan_sees_a_branch_on_a_kind(source):
     assert len(kind_branches(source)) == 1, source
 
 
-@pytest.mark.parametrize("source", [
-    'if facts(r.kind).chain: pass',
-    'same = r.kind == other.kind',
-    'rows = {"arm": a, "mobile": b}',  # a layer's registry, keyed by kind
-    'stream = "joints" if x == "pose" else "scan"',
-    'prefixes = ("arm", "base")',
-])
+@pytest.mark.parametrize(
+    "source",
+    [
+        "if facts(r.kind).chain: pass",
+        "same = r.kind == other.kind",
+        'rows = {"arm": a, "mobile": b}',  # a layer's registry, keyed by kind
+        'stream = "joints" if x == "pose" else "scan"',
+        'prefixes = ("arm", "base")',
+    ],
+)
 def test_the_scan_leaves_the_rest(source):
     assert kind_branches(source) == [], source
 
@@ -162,11 +171,15 @@ def test_nothing_outside_the_table_branches_on_a_kinds_name():
         for path in sorted((ROOT / package).rglob("*.py")):
             rel = path.relative_to(ROOT).as_posix()
             text = path.read_text()
-            quoted = any(f"{q}{k}{q}" in text for k in KINDS for q in "'\"")  # no kind's name in quotes: nothing to parse
+            quoted = any(
+                f"{q}{k}{q}" in text for k in KINDS for q in "'\""
+            )  # no kind's name in quotes: nothing to parse
             if rel != TABLE and quoted and (hits := kind_branches(text)):
                 found[rel] = hits
     stray = {rel: hits for rel, hits in found.items() if len(hits) != ALLOWED.get(rel)}
-    assert not stray, ("branches on a kind's name outside robots/kinds.py: ask robots.kinds.facts(kind) instead "
-                       f"(docs/howto.md, 'A new robot kind'): {stray}")
+    assert not stray, (
+        "branches on a kind's name outside robots/kinds.py: ask robots.kinds.facts(kind) instead "
+        f"(docs/howto.md, 'A new robot kind'): {stray}"
+    )
     stale = sorted(set(ALLOWED) - set(found))
     assert not stale, f"ALLOWED names modules that no longer spell out kinds: {stale}"

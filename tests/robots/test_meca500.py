@@ -27,7 +27,12 @@ def dh_fk(q: np.ndarray) -> np.ndarray:
         th, al = qi + math.radians(off), math.radians(alpha)
         ct, st_, ca, sa = math.cos(th), math.sin(th), math.cos(al), math.sin(al)
         T = T @ np.array(
-            [[ct, -st_ * ca, st_ * sa, a / 1000 * ct], [st_, ct * ca, -ct * sa, a / 1000 * st_], [0, sa, ca, d / 1000], [0, 0, 0, 1]]
+            [
+                [ct, -st_ * ca, st_ * sa, a / 1000 * ct],
+                [st_, ct * ca, -ct * sa, a / 1000 * st_],
+                [0, sa, ca, d / 1000],
+                [0, 0, 0, 1],
+            ]
         )
     return T
 
@@ -57,7 +62,9 @@ def pinocchio_fk(q: np.ndarray) -> np.ndarray:
 def test_committed_files_are_what_the_geometry_generates(tmp_path):
     assert generate.main([str(tmp_path)]) == 0
     for name in generate.FILES:
-        assert (tmp_path / name).read_text() == (ARM.directory / name).read_text(), f"{name} is stale: run python -m robots.meca500.generate"
+        assert (tmp_path / name).read_text() == (ARM.directory / name).read_text(), (
+            f"{name} is stale: run python -m robots.meca500.generate"
+        )
 
 
 def test_zero_pose_flange_at_190_0_308_mm_in_every_model():

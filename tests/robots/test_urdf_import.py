@@ -46,8 +46,14 @@ def test_add_makes_installed_types_of_the_ur5_and_the_panda_that_the_list_shows(
     assert "panda_finger_joint1 (prismatic" in out and "panda_finger_joint2 (mimics panda_finger_joint1)" in out
     ur5, panda = robots.installed("ur5"), robots.installed("panda")
     assert ur5.directory == folder / "ur5" and ur5.kind == "arm" and ur5.dof == 6
-    assert ur5.joint_names == ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
-                               "wrist_2_joint", "wrist_3_joint")
+    assert ur5.joint_names == (
+        "shoulder_pan_joint",
+        "shoulder_lift_joint",
+        "elbow_joint",
+        "wrist_1_joint",
+        "wrist_2_joint",
+        "wrist_3_joint",
+    )
     assert ur5.max_speed == (3.15, 3.15, 3.15, 3.2, 3.2, 3.2) and ur5.upper[2] == pytest.approx(math.pi)
     assert panda.dof == 7 and panda.flange_frame == "panda_hand_tcp" and panda.lower[3] == -3.0718
     # the folder carries its meshes: the MJCF compiles from anywhere, without the package it came from
@@ -86,13 +92,16 @@ def test_the_sim_flange_and_the_compute_fk_agree_at_random_joints(tmp_path, monk
 
 
 def _tiny(joints: str, links: str = "", meshes: str = "") -> str:
-    return (f'<robot name="tiny"><link name="base"/><link name="l1">{meshes}</link><link name="l2"/>{links}'
-            f"{joints}</robot>")
+    return (
+        f'<robot name="tiny"><link name="base"/><link name="l1">{meshes}</link><link name="l2"/>{links}{joints}</robot>'
+    )
 
 
 def _j(name: str, kind: str, parent: str, child: str, extra: str = "") -> str:
-    return (f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
-            f'<axis xyz="0 0 1"/><origin xyz="0 0 0.1"/>{extra}</joint>')
+    return (
+        f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+        f'<axis xyz="0 0 1"/><origin xyz="0 0 0.1"/>{extra}</joint>'
+    )
 
 
 LIMIT = '<limit lower="-1" upper="1" velocity="2" effort="1"/>'
@@ -125,15 +134,19 @@ def test_continuous_joints_missing_speeds_and_missing_meshes_are_taken_with_a_no
     stl = example_robot_urdf(UR5).parents[1] / "meshes" / "ur5" / "collision" / "wrist3.stl"
     (tmp_path / "parts" / "l1.stl").write_bytes(stl.read_bytes())
     relative = '<collision><geometry><mesh filename="parts/l1.stl"/></geometry></collision>'
-    text = _tiny(_j("a", "continuous", "base", "l1") + _j("b", "revolute", "l1", "l2", '<limit lower="-2" upper="2"/>'),
-                 meshes=mesh + box + relative)
+    text = _tiny(
+        _j("a", "continuous", "base", "l1") + _j("b", "revolute", "l1", "l2", '<limit lower="-2" upper="2"/>'),
+        meshes=mesh + box + relative,
+    )
     src = tmp_path / "tiny.urdf"
     src.write_text(text)
     made = install(src, into=tmp_path / "robots")
     assert made.name == "tiny" and made.arm.joints == ("a", "b") and made.arm.tip == "l2"
     assert made.arm.lower == (-2 * math.pi, -2.0) and made.arm.max_speed == (urdf.DEFAULT_SPEED, urdf.DEFAULT_SPEED)
     notes = "\n".join(made.notes)
-    assert "package://nowhere/meshes/l1.stl not found" in notes and "continuous" in notes and "no velocity limit" in notes
+    assert (
+        "package://nowhere/meshes/l1.stl not found" in notes and "continuous" in notes and "no velocity limit" in notes
+    )
     desc = robots.load(str(made.directory))
     model = mujoco.MjModel.from_xml_path(str(desc.mjcf_path))
     # the box and the relative mesh (copied into the folder) stayed, the missing mesh went; the flange site is there
@@ -148,7 +161,11 @@ def test_the_default_tip_follows_fixed_joints_past_the_last_revolute_one():
     assert urdf.default_tip(ur5) == "tool0"
     assert urdf.default_tip(panda) == "panda_hand_tcp"  # not into the fingers: they move by prismatic joints
     arm = urdf.arm_chain(panda, "panda_link8")
-    assert arm.tip == "panda_link8" and len(arm.joints) == 7 and arm.locked == ("panda_finger_joint1", "panda_finger_joint2")
+    assert (
+        arm.tip == "panda_link8"
+        and len(arm.joints) == 7
+        and arm.locked == ("panda_finger_joint1", "panda_finger_joint2")
+    )
 
 
 def test_every_reader_of_the_written_urdf_sees_the_joints_the_sim_streams(tmp_path):
@@ -168,8 +185,11 @@ def test_every_reader_of_the_written_urdf_sees_the_joints_the_sim_streams(tmp_pa
 
     drawn = ArmGeometry(written)
     assert drawn.model.nq == 7 and len(drawn.shapes) >= 9
-    assert all(shape.mesh_path.endswith(".stl") and Path(shape.mesh_path).is_file() for shape, _, _ in drawn.shapes
-               if shape.kind == "mesh")
+    assert all(
+        shape.mesh_path.endswith(".stl") and Path(shape.mesh_path).is_file()
+        for shape, _, _ in drawn.shapes
+        if shape.kind == "mesh"
+    )
     assert "<mimic" not in written.read_text()
 
 

@@ -11,7 +11,12 @@ from sim_peer.physics.world import SimWorld
 def test_a_robot_and_a_scene_added_as_files_are_loaded_and_simulated(tmp_path, monkeypatch):
     bot = tmp_path / "scout"
     shutil.copytree(robots.load("reeman").directory, bot)
-    manifest = (bot / "robot.toml").read_text().replace('name = "reeman"', 'name = "scout"').replace("rays = 240", "rays = 135")
+    manifest = (
+        (bot / "robot.toml")
+        .read_text()
+        .replace('name = "reeman"', 'name = "scout"')
+        .replace("rays = 240", "rays = 135")
+    )
     (bot / "robot.toml").write_text(manifest.replace("fov_deg = 135.0", "fov_deg = 134.0"))
     scenes = tmp_path / "scenes"
     scenes.mkdir()

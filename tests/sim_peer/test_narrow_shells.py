@@ -66,13 +66,15 @@ def test_the_scan_bites_on_each_way_of_taking_the_host(tmp_path):
     (tmp_path / COMPOSER).write_text("class ReplicaHost:\n    pass\n")  # the composer may
     (tmp_path / "sim_peer/shards/clean.py").write_text(
         '"""Names the ReplicaHost in a docstring: that is no seam."""\n\n\nclass Part:\n'
-        "    def __init__(self, fabric, clock):\n        self.fabric, self.clock = fabric, clock\n")
+        "    def __init__(self, fabric, clock):\n        self.fabric, self.clock = fabric, clock\n"
+    )
     (tmp_path / "sim_peer/shards/param.py").write_text("class Part:\n    def __init__(self, host):\n        pass\n")
     (tmp_path / "sim_peer/replica/attr.py").write_text("def f(part):\n    return part.host.lock\n")
     (tmp_path / "sim_peer/replica/typed.py").write_text(
         "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
         "    from sim_peer.replica.replica_host import ReplicaHost\n"
-        "def f(h: 'ReplicaHost'):\n    pass\n")
+        "def f(h: 'ReplicaHost'):\n    pass\n"
+    )
     found = shells_taking_the_host(tmp_path)
     assert set(found) == {"sim_peer/shards/param.py", "sim_peer/replica/attr.py", "sim_peer/replica/typed.py"}
     assert found["sim_peer/shards/param.py"] == ["line 2: parameter host"]

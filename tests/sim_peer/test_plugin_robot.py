@@ -32,7 +32,9 @@ def plugin_path(monkeypatch):
 
 
 def tip(q1: float, q2: float, x0: float = 0.0, y0: float = 0.0) -> np.ndarray:
-    return np.array([x0 + L1 * math.cos(q1) + L2 * math.cos(q1 + q2), y0 + L1 * math.sin(q1) + L2 * math.sin(q1 + q2), BASE_Z])
+    return np.array(
+        [x0 + L1 * math.cos(q1) + L2 * math.cos(q1 + q2), y0 + L1 * math.sin(q1) + L2 * math.sin(q1 + q2), BASE_Z]
+    )
 
 
 def test_the_world_builds_and_steps_a_robot_type_from_its_description_and_hooks(plugin_path):
@@ -85,7 +87,9 @@ def test_a_bad_hooks_reference_is_a_world_error_naming_the_type(plugin_path, tmp
     monkeypatch.setenv(robots.description.ENV_PATH, f"{tmp_path}")
     with pytest.raises(WorldError, match="broken.*not a sim_peer.robot.SimRobot subclass"):
         SimWorld("combined", ["broken:b1@-2,0"])
-    (bad / "hooks.py").write_text("from sim_peer.robot import SimRobot\nclass Nope(SimRobot):\n    def after_substep(self, physics):\n        pass\n")
+    (bad / "hooks.py").write_text(
+        "from sim_peer.robot import SimRobot\nclass Nope(SimRobot):\n    def after_substep(self, physics):\n        pass\n"
+    )
     (bad / "robot.toml").write_text(toml.replace("hooks.py:Planar2Arm", "hooks2.py:Nope"))
     (bad / "hooks2.py").write_text((bad / "hooks.py").read_text())
     with pytest.raises(WorldError, match="after_substep looks like a hook"):
@@ -128,29 +132,47 @@ def test_the_third_robot_type_is_described_streamed_and_commanded_by_its_owner(p
         wait_until(lambda: latest.get("pose"), timeout=10, what="p1 tip pose")
 
         # a command from someone who does not own it is refused by the authority
-        fab.publish(keys.robot_cmd(world, "p1", "joints", "alice"), Command("alice", 1, JointTarget(np.array([0.5, 0.5]))))
-        wait_until(lambda: any(e.kind == "reject" and e.object == "p1" for e in events), timeout=10, what="non-owner refused",
-                   seen=lambda: events[-5:])
+        fab.publish(
+            keys.robot_cmd(world, "p1", "joints", "alice"), Command("alice", 1, JointTarget(np.array([0.5, 0.5])))
+        )
+        wait_until(
+            lambda: any(e.kind == "reject" and e.object == "p1" for e in events),
+            timeout=10,
+            what="non-owner refused",
+            seen=lambda: events[-5:],
+        )
         assert peer.last_state("p1")["target"] == [0.0, 0.0]
 
         # its owner's joint command moves it
-        wait_until(lambda: alice.record("p1") is not None, timeout=20, what="p1's ownership record", seen=alice.snapshot)
+        wait_until(
+            lambda: alice.record("p1") is not None, timeout=20, what="p1's ownership record", seen=alice.snapshot
+        )
         out = alice.request("p1")
         assert out.outcome == "granted", out
         goal = np.array([0.7, -1.1])
-        fab.publish(keys.robot_cmd(world, "p1", "joints", "alice"), Command("alice", alice.epoch("p1"), JointTarget(goal)))
+        fab.publish(
+            keys.robot_cmd(world, "p1", "joints", "alice"), Command("alice", alice.epoch("p1"), JointTarget(goal))
+        )
 
         def arrived() -> bool:
             m = latest.get("joints")
             return isinstance(m, JointState) and np.allclose(m.q, goal, atol=1e-9) and not m.dq.any()
 
         wait_until(arrived, timeout=15, what="p1 at its target", seen=lambda: (latest.get("joints"), events[-3:]))
-        wait_until(lambda: np.allclose(latest["pose"].position, tip(*goal), atol=1e-9), timeout=10, what="p1 tip pose at the target",
-                   seen=lambda: latest.get("pose"))
+        wait_until(
+            lambda: np.allclose(latest["pose"].position, tip(*goal), atol=1e-9),
+            timeout=10,
+            what="p1 tip pose at the target",
+            seen=lambda: latest.get("pose"),
+        )
         # a command kind its hooks do not list is refused as unsupported
         fab.publish(keys.robot_cmd(world, "p1", "twist", "alice"), Command("alice", alice.epoch("p1"), Twist(0.1, 0.0)))
-        ev = wait_until(lambda: next((e for e in events if e.reason == "unsupported" and e.object == "p1"), None), timeout=10,
-                        what="unsupported twist", seen=lambda: events[-5:])
+        ev = wait_until(
+            lambda: next((e for e in events if e.reason == "unsupported" and e.object == "p1"), None),
+            timeout=10,
+            what="unsupported twist",
+            seen=lambda: events[-5:],
+        )
         assert ev.user == "alice" and "joints" in ev.data["detail"]
     finally:
         alice.close()

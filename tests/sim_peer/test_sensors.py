@@ -38,7 +38,9 @@ def test_lidar_ranges_match_the_walls_to_the_quantisation_step(room, pose):
     w.step()
     spec = bot.desc.lidar
     ranges = w.readings.scan("bot")
-    scan = Scan.from_ranges(ranges, angle_min=spec.angle_min, angle_increment=spec.angle_increment, range_max=spec.range_max)
+    scan = Scan.from_ranges(
+        ranges, angle_min=spec.angle_min, angle_increment=spec.angle_increment, range_max=spec.range_max
+    )
     x, y, yaw = pose
     lx, ly = 0.22, 0.0  # lidar site in the robot frame (robots/reeman/reeman.xml)
     px, py = x + lx * math.cos(yaw) - ly * math.sin(yaw), y + lx * math.sin(yaw) + ly * math.cos(yaw)

@@ -31,7 +31,9 @@ def test_ownership_gate_is_built_with_exclusive_robots_and_scene_objects(monkeyp
     gate = make_gate("FAB", w, True)
     assert isinstance(gate, FakeAuthority) and gate.fabric == "FAB" and gate.started  # leases tick from the start
     assert gate.objects == {"arm1": "exclusive", "base1": "exclusive", "target": "scene", "goal": "scene"}
-    assert gate.budgets is None and make_gate("FAB", w, True, budgets="B").budgets == "B"  # --budget reaches the authority
+    assert (
+        gate.budgets is None and make_gate("FAB", w, True, budgets="B").budgets == "B"
+    )  # --budget reaches the authority
     assert gate.plant == "" and make_gate("FAB", w, True, plant="stale-command").plant == "stale-command"  # the soak's
 
 

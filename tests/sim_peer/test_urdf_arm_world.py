@@ -44,11 +44,16 @@ def test_the_sim_builds_a_world_with_the_meca500_the_panda_and_a_base(panda_inst
 
 @pytest.mark.slow  # a sim, a compute service and a user over a router, for seconds
 def test_a_user_moves_the_panda_through_the_compute_peers_ik(panda_installed, world, router, connect):
-    names = tuple(j.name for j in parse(panda_installed.directory.joinpath("panda.urdf").read_text()).joints
-                  if j.type == "revolute")
+    names = tuple(
+        j.name
+        for j in parse(panda_installed.directory.joinpath("panda.urdf").read_text()).joints
+        if j.type == "revolute"
+    )
     sim_world = SimWorld("combined", ["panda:p1@1.5,-1.5"])
-    with SimPeer(connect("sim", "sim-urdf"), sim_world, rates={"joints": 50, "pose": 50, "scan": 10}), \
-            KinematicsService(connect("compute", "compute-urdf")) as svc:
+    with (
+        SimPeer(connect("sim", "sim-urdf"), sim_world, rates={"joints": 50, "pose": 50, "scan": 10}),
+        KinematicsService(connect("compute", "compute-urdf")) as svc,
+    ):
         w = World(client_config(world, router[1]), "alice", timeout=10.0)
         try:
             assert {"arm1", "base1", "p1"} <= set(w.robots())  # info() waits for the sim's description
@@ -71,8 +76,9 @@ def test_a_user_moves_the_panda_through_the_compute_peers_ik(panda_installed, wo
             np.testing.assert_allclose(placed.fk(sol)[0], pos, atol=1e-6)
             p1.move_joints(sol, tol=1e-3, timeout=20)
             # the sim (MuJoCo, its own compile of the URDF) puts the flange where the compute peer (Pinocchio) said
-            flange = wait_until(lambda: _near(p1.flange, pos), timeout=10, what="the sim's flange at the target",
-                                seen=lambda: p1.flange)
+            flange = wait_until(
+                lambda: _near(p1.flange, pos), timeout=10, what="the sim's flange at the target", seen=lambda: p1.flange
+            )
             got = pin.Quaternion(float(flange.quaternion[0]), *map(float, flange.quaternion[1:])).toRotationMatrix()
             want = pin.Quaternion(float(quat[0]), *map(float, quat[1:])).toRotationMatrix()
             assert np.linalg.norm(pin.log3(got.T @ want)) < 1e-2
@@ -95,13 +101,21 @@ def test_the_papers_test_a_runs_on_an_arm_from_a_urdf(robot, tmp_path, monkeypat
 
     folder = tmp_path / "robots"
     monkeypatch.setenv(robots.description.ENV_PATH, str(folder))
-    install(example_robot_urdf({"panda": PANDA, "ur5": "ur_description/urdf/ur5_robot.urdf"}[robot]), into=folder, name=robot)
+    install(
+        example_robot_urdf({"panda": PANDA, "ur5": "ur_description/urdf/ur5_robot.urdf"}[robot]),
+        into=folder,
+        name=robot,
+    )
     sim_fab = connect("sim", "sim-urdf-a")
     sim_world = SimWorld("combined", [f"{robot}:a2@1.5,-1.5"])
-    authority = Authority(sim_fab, objects={"a2": "exclusive", "arm1": "exclusive", "base1": "exclusive",
-                                            "target": "scene", "goal": "scene"}).start()
-    with SimPeer(sim_fab, sim_world, gate=authority, rates={"joints": 50, "pose": 50, "scan": 10}), \
-            KinematicsService(connect("compute", "compute-urdf-a")):
+    authority = Authority(
+        sim_fab,
+        objects={"a2": "exclusive", "arm1": "exclusive", "base1": "exclusive", "target": "scene", "goal": "scene"},
+    ).start()
+    with (
+        SimPeer(sim_fab, sim_world, gate=authority, rates={"joints": 50, "pose": 50, "scan": 10}),
+        KinematicsService(connect("compute", "compute-urdf-a")),
+    ):
         w = World(client_config(world, router[1]), "alice", timeout=10.0)
         try:
             res = scenarios.test_a(w, arm_id="a2", points=4, hold=0.0)

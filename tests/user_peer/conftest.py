@@ -21,9 +21,13 @@ def live(tmp_path_factory) -> Iterator[tuple[str, int, ProcessGroup]]:
     port = free_port()
     router = Fabric(router_config(world, port), kind="router", peer_id="router")
     procs = ProcessGroup(tmp_path_factory.mktemp("live"))
-    sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"), name="sim")
+    sim = procs.start(
+        robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"), name="sim"
+    )
     try:
-        wait_until(lambda: router.live_peers("sim"), timeout=60, what="sim peer", seen=lambda: procs.output(sim)[-2000:])
+        wait_until(
+            lambda: router.live_peers("sim"), timeout=60, what="sim peer", seen=lambda: procs.output(sim)[-2000:]
+        )
         yield world, port, procs
     finally:
         procs.close()

@@ -59,46 +59,116 @@ def main() -> None:
     reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
     latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     for rid in args.robots.split(","):
-        node.create_subscription(String, under(f"{rid}/owner"),
-                                 lambda m, r=rid: write(topic="owner", robot=r, owner=m.data), latched)
-        node.create_subscription(String, under(f"{rid}/robot_description"),
-                                 lambda m, r=rid: write(topic="robot_description", robot=r, urdf=m.data), latched)
-        node.create_subscription(JointState, under(f"{rid}/joint_states"),
-                                 lambda m, r=rid: write(topic="joint_states", robot=r, frame=m.header.frame_id, name=list(m.name),
-                                                        stamp=m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec,
-                                                        position=list(m.position)), reliable)
+        node.create_subscription(
+            String, under(f"{rid}/owner"), lambda m, r=rid: write(topic="owner", robot=r, owner=m.data), latched
+        )
+        node.create_subscription(
+            String,
+            under(f"{rid}/robot_description"),
+            lambda m, r=rid: write(topic="robot_description", robot=r, urdf=m.data),
+            latched,
+        )
+        node.create_subscription(
+            JointState,
+            under(f"{rid}/joint_states"),
+            lambda m, r=rid: write(
+                topic="joint_states",
+                robot=r,
+                frame=m.header.frame_id,
+                name=list(m.name),
+                stamp=m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec,
+                position=list(m.position),
+            ),
+            reliable,
+        )
     for topic in args.clocks.split(","):
-        node.create_subscription(Clock, topic, lambda m, t=topic: write(
-            topic="clock", on=t, ns=int(m.clock.sec) * 1_000_000_000 + int(m.clock.nanosec),
-            publishers=node.count_publishers(t)), QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
-    node.create_subscription(Log, "/rosout", lambda m: write(topic="rosout", name=m.name, level=int(m.level), msg=m.msg),
-                             QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-    node.create_subscription(Odometry, under(f"{args.base}/odom"),
-                             lambda m: write(topic="odom", x=m.pose.pose.position.x, y=m.pose.pose.position.y,
-                                             frame=m.header.frame_id, child=m.child_frame_id,
-                                             pose_cov=list(m.pose.covariance), twist_cov=list(m.twist.covariance)), reliable)
-    node.create_subscription(LaserScan, under(f"{args.base}/scan"),
-                             lambda m: write(topic="scan", frame=m.header.frame_id, scan_time=m.scan_time,
-                                             stamp=m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec,
-                                             time_increment=m.time_increment), qos_profile_sensor_data)
-    node.create_subscription(Range, under(f"{args.base}/sonar_2"),
-                             lambda m: write(topic="range", frame=m.header.frame_id, range=m.range, fov=m.field_of_view,
-                                             kind=int(m.radiation_type), min=m.min_range, max=m.max_range),
-                             qos_profile_sensor_data)
-    node.create_subscription(Path, under(f"{args.base}/path"),
-                             lambda m: write(topic="path", frame=m.header.frame_id, n=len(m.poses),
-                                             end=[m.poses[-1].pose.position.x, m.poses[-1].pose.position.y] if m.poses else None),
-                             latched)
+        node.create_subscription(
+            Clock,
+            topic,
+            lambda m, t=topic: write(
+                topic="clock",
+                on=t,
+                ns=int(m.clock.sec) * 1_000_000_000 + int(m.clock.nanosec),
+                publishers=node.count_publishers(t),
+            ),
+            QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE),
+        )
+    node.create_subscription(
+        Log,
+        "/rosout",
+        lambda m: write(topic="rosout", name=m.name, level=int(m.level), msg=m.msg),
+        QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE),
+    )
+    node.create_subscription(
+        Odometry,
+        under(f"{args.base}/odom"),
+        lambda m: write(
+            topic="odom",
+            x=m.pose.pose.position.x,
+            y=m.pose.pose.position.y,
+            frame=m.header.frame_id,
+            child=m.child_frame_id,
+            pose_cov=list(m.pose.covariance),
+            twist_cov=list(m.twist.covariance),
+        ),
+        reliable,
+    )
+    node.create_subscription(
+        LaserScan,
+        under(f"{args.base}/scan"),
+        lambda m: write(
+            topic="scan",
+            frame=m.header.frame_id,
+            scan_time=m.scan_time,
+            stamp=m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec,
+            time_increment=m.time_increment,
+        ),
+        qos_profile_sensor_data,
+    )
+    node.create_subscription(
+        Range,
+        under(f"{args.base}/sonar_2"),
+        lambda m: write(
+            topic="range",
+            frame=m.header.frame_id,
+            range=m.range,
+            fov=m.field_of_view,
+            kind=int(m.radiation_type),
+            min=m.min_range,
+            max=m.max_range,
+        ),
+        qos_profile_sensor_data,
+    )
+    node.create_subscription(
+        Path,
+        under(f"{args.base}/path"),
+        lambda m: write(
+            topic="path",
+            frame=m.header.frame_id,
+            n=len(m.poses),
+            end=[m.poses[-1].pose.position.x, m.poses[-1].pose.position.y] if m.poses else None,
+        ),
+        latched,
+    )
     if args.tf:
         from tf2_msgs.msg import TFMessage  # as any ROS 2 node reads it; missing, this node fails at start
 
         def transforms(m: TFMessage, static: bool) -> None:
-            write(topic="tf", static=static, transforms=[
-                [t.header.frame_id, t.child_frame_id, t.header.stamp.sec * 1_000_000_000 + t.header.stamp.nanosec]
-                for t in m.transforms])
+            write(
+                topic="tf",
+                static=static,
+                transforms=[
+                    [t.header.frame_id, t.child_frame_id, t.header.stamp.sec * 1_000_000_000 + t.header.stamp.nanosec]
+                    for t in m.transforms
+                ],
+            )
 
-        node.create_subscription(TFMessage, under("tf"), lambda m: transforms(m, False),
-                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        node.create_subscription(
+            TFMessage,
+            under("tf"),
+            lambda m: transforms(m, False),
+            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE),
+        )
         node.create_subscription(TFMessage, under("tf_static"), lambda m: transforms(m, True), latched)
     goal = node.create_publisher(PoseStamped, under("goal_pose"), 10)
     goal_file = os.path.join(args.control, "goal")
@@ -124,7 +194,8 @@ def main() -> None:
             return  # not discovered yet: again at the next tick
         os.unlink(call_file)
         client.call_async(Trigger.Request()).add_done_callback(
-            lambda f: write(topic="call", service=name, success=f.result().success, message=f.result().message))
+            lambda f: write(topic="call", service=name, success=f.result().success, message=f.result().message)
+        )
 
     def send_goal() -> None:
         try:

@@ -49,33 +49,80 @@ def main() -> None:
     reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
     latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     node.create_subscription(
-        JointState, f"/{args.arm}/joint_states",
-        lambda m: write(topic="joint_states", stamp=stamp_ns(m.header), frame=m.header.frame_id, name=list(m.name),
-                        position=list(m.position)), reliable)
+        JointState,
+        f"/{args.arm}/joint_states",
+        lambda m: write(
+            topic="joint_states",
+            stamp=stamp_ns(m.header),
+            frame=m.header.frame_id,
+            name=list(m.name),
+            position=list(m.position),
+        ),
+        reliable,
+    )
     node.create_subscription(
-        LaserScan, f"/{args.base}/scan",
-        lambda m: write(topic="scan", stamp=stamp_ns(m.header), frame=m.header.frame_id, angle_min=m.angle_min,
-                        angle_increment=m.angle_increment, range_min=m.range_min, range_max=m.range_max, ranges=[float(r) for r in m.ranges]),
-        qos_profile_sensor_data)
+        LaserScan,
+        f"/{args.base}/scan",
+        lambda m: write(
+            topic="scan",
+            stamp=stamp_ns(m.header),
+            frame=m.header.frame_id,
+            angle_min=m.angle_min,
+            angle_increment=m.angle_increment,
+            range_min=m.range_min,
+            range_max=m.range_max,
+            ranges=[float(r) for r in m.ranges],
+        ),
+        qos_profile_sensor_data,
+    )
     node.create_subscription(
-        LaserScan, f"/{args.base}/sonar",
-        lambda m: write(topic="sonar", stamp=stamp_ns(m.header), frame=m.header.frame_id, range_min=m.range_min,
-                        range_max=m.range_max, ranges=[float(r) for r in m.ranges]),
-        qos_profile_sensor_data)
+        LaserScan,
+        f"/{args.base}/sonar",
+        lambda m: write(
+            topic="sonar",
+            stamp=stamp_ns(m.header),
+            frame=m.header.frame_id,
+            range_min=m.range_min,
+            range_max=m.range_max,
+            ranges=[float(r) for r in m.ranges],
+        ),
+        qos_profile_sensor_data,
+    )
     node.create_subscription(
-        Odometry, f"/{args.base}/odom",
-        lambda m: write(topic="odom", stamp=stamp_ns(m.header), frame=m.header.frame_id, child=m.child_frame_id,
-                        position=[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z],
-                        v=m.twist.twist.linear.x), reliable)
+        Odometry,
+        f"/{args.base}/odom",
+        lambda m: write(
+            topic="odom",
+            stamp=stamp_ns(m.header),
+            frame=m.header.frame_id,
+            child=m.child_frame_id,
+            position=[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z],
+            v=m.twist.twist.linear.x,
+        ),
+        reliable,
+    )
     node.create_subscription(
-        Clock, "/clock", lambda m: write(topic="clock", ns=int(m.clock.sec) * 1_000_000_000 + int(m.clock.nanosec)),
-        QoSProfile(depth=50, reliability=ReliabilityPolicy.BEST_EFFORT))
+        Clock,
+        "/clock",
+        lambda m: write(topic="clock", ns=int(m.clock.sec) * 1_000_000_000 + int(m.clock.nanosec)),
+        QoSProfile(depth=50, reliability=ReliabilityPolicy.BEST_EFFORT),
+    )
     node.create_subscription(
-        OccupancyGrid, "/map",
-        lambda m: write(topic="map", frame=m.header.frame_id, resolution=m.info.resolution, width=m.info.width,
-                        height=m.info.height, data=[int(v) for v in m.data]), latched)
+        OccupancyGrid,
+        "/map",
+        lambda m: write(
+            topic="map",
+            frame=m.header.frame_id,
+            resolution=m.info.resolution,
+            width=m.info.width,
+            height=m.info.height,
+            data=[int(v) for v in m.data],
+        ),
+        latched,
+    )
     node.create_subscription(
-        Log, "/rosout", lambda m: write(topic="rosout", name=m.name, level=int(m.level), msg=m.msg), reliable)
+        Log, "/rosout", lambda m: write(topic="rosout", name=m.name, level=int(m.level), msg=m.msg), reliable
+    )
     cmd = node.create_publisher(Twist, f"/{args.base}/cmd_vel", 10)
     joint_cmd = node.create_publisher(JointState, f"/{args.arm}/joint_command", 10)
     drive_file = os.path.join(args.control, "drive")

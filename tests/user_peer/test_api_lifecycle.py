@@ -27,7 +27,9 @@ def user(live):
     made: list[World] = []
 
     def make(name: str) -> World:
-        w = user_peer.connect(world=live[0], connect=f"tcp/127.0.0.1:{live[1]}", user=name, timeout=10.0, join_timeout=60.0)
+        w = user_peer.connect(
+            world=live[0], connect=f"tcp/127.0.0.1:{live[1]}", user=name, timeout=10.0, join_timeout=60.0
+        )
         made.append(w)
         return w
 
@@ -42,8 +44,12 @@ def script(procs: ProcessGroup, name: str, body: str) -> subprocess.Popen:
 
 
 def printed(procs: ProcessGroup, proc: subprocess.Popen, marker: str, timeout: float = 90.0) -> None:
-    wait_until(lambda: marker in procs.output(proc) or proc.poll() is not None, timeout=timeout,
-               what=f"{marker!r} from {proc.name}", seen=lambda: procs.output(proc)[-2000:])
+    wait_until(
+        lambda: marker in procs.output(proc) or proc.poll() is not None,
+        timeout=timeout,
+        what=f"{marker!r} from {proc.name}",
+        seen=lambda: procs.output(proc)[-2000:],
+    )
     assert marker in procs.output(proc), procs.output(proc)[-2000:]
 
 
@@ -52,13 +58,17 @@ def test_script_that_never_closes_exits_and_releases_its_robot(live, user):
     bob = user("bob")
     events: list = []
     bob.on("event/own/arm1", lambda k, ev: events.append(ev))
-    carol = script(procs, "carol", f"""
+    carol = script(
+        procs,
+        "carol",
+        f"""
         import user_peer
         w = user_peer.connect(world={world!r}, connect=["tcp/127.0.0.1:{port}"], user="carol")
         arm = w.robot("arm1")
         arm.request()
         print("owned", flush=True)
-    """)
+    """,
+    )
     printed(procs, carol, "owned")
     t_owned = time.monotonic()
     carol.wait(timeout=30)  # the issue: without the fix it never exits
@@ -66,8 +76,12 @@ def test_script_that_never_closes_exits_and_releases_its_robot(live, user):
     assert carol.returncode == 0, procs.output(carol)[-2000:]
     assert exited_after < 5.0, f"the script took {exited_after:.1f} s to exit after its last line"
     # the release is explicit (reason "released"), not the token loss ("left") or a lease expiry
-    wait_until(lambda: any(e.kind == "own_released" and e.user == "carol" for e in events), timeout=10,
-               what="carol's release", seen=lambda: [(e.kind, e.user, e.reason) for e in events])
+    wait_until(
+        lambda: any(e.kind == "own_released" and e.user == "carol" for e in events),
+        timeout=10,
+        what="carol's release",
+        seen=lambda: [(e.kind, e.user, e.reason) for e in events],
+    )
     rel = [e for e in events if e.kind == "own_released" and e.user == "carol"]
     assert rel[0].reason == "released", [(e.kind, e.user, e.reason) for e in events]
     assert not any(e.kind == "own_expired" for e in events)
@@ -79,17 +93,24 @@ def test_joining_waits_for_a_sim_that_starts_later(tmp_path):
     world = f"t{uuid.uuid4().hex[:8]}"
     port = free_port()
     with Fabric(router_config(world, port), kind="router", peer_id="router"), ProcessGroup(tmp_path) as procs:
-        early = script(procs, "early", f"""
+        early = script(
+            procs,
+            "early",
+            f"""
             import time, user_peer
             print("joining", flush=True)
             t0 = time.monotonic()
             w = user_peer.connect(world={world!r}, connect="tcp/127.0.0.1:{port}", user="early", join_timeout=90)
             print("joined after", round(time.monotonic() - t0, 2), "s", flush=True)
             print("robots", w.robots(), flush=True)
-        """)
+        """,
+        )
         printed(procs, early, "joining")
         time.sleep(1.0)  # the scenario itself: the sim starts one second after the script began to join
-        procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"), name="sim")
+        procs.start(
+            robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"),
+            name="sim",
+        )
         early.wait(timeout=120)
         out = procs.output(early)
         assert early.returncode == 0, out[-2000:]
@@ -135,8 +156,12 @@ def test_queued_request_waits_for_the_owner_to_leave(live, user):
     arm = bob.robot("arm1")
     dave = script(procs, "dave", MOVER.format(world=world, port=port, seconds=12))
     printed(procs, dave, "moving moving")
-    wait_until(lambda: arm.owner == "dave" and arm.record.state == "moving", timeout=10, what="bob's replica: dave, moving",
-               seen=lambda: arm.record)
+    wait_until(
+        lambda: arm.owner == "dave" and arm.record.state == "moving",
+        timeout=10,
+        what="bob's replica: dave, moving",
+        seen=lambda: arm.record,
+    )
     # a non-owner's command is refused at once, naming the owner (not after the move's timeout)
     t0 = time.monotonic()
     with pytest.raises(user_peer.NotOwner, match="owner: dave"):
@@ -164,8 +189,12 @@ def test_queued_request_times_out_and_leaves_the_queue(live, user):
     with pytest.raises(user_peer.Timeout, match=r"not granted to erin after [0-9.]+ s of waiting .*left the queue"):
         arm.request(wait=True, timeout=1.5)
     assert time.monotonic() - t0 >= 1.5
-    wait_until(lambda: "erin" not in erin.ownership.fetch("arm1", timeout=2.0).queue, timeout=10, what="erin out of the queue",
-               seen=lambda: arm.record)
+    wait_until(
+        lambda: "erin" not in erin.ownership.fetch("arm1", timeout=2.0).queue,
+        timeout=10,
+        what="erin out of the queue",
+        seen=lambda: arm.record,
+    )
     procs.kill(dave)
 
 

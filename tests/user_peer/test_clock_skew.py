@@ -39,10 +39,13 @@ class SkewedSim:
     def send_first_states(self, timeout: float = 10.0) -> threading.Thread:
         """Once a subscriber of each robot's state is known, its first state (at rest, at the origin): the
         state a live sim streams, and a handle waits for when it is made. Returns the thread that sends them."""
+
         def send() -> None:
             w = self.fab.world
             if self.fab.wait_matching(keys.robot_joints(w, "arm1"), timeout):
-                self.fab.publish(keys.robot_joints(w, "arm1"), JointState(JOINTS, np.zeros(6), np.zeros(6), self.header()))
+                self.fab.publish(
+                    keys.robot_joints(w, "arm1"), JointState(JOINTS, np.zeros(6), np.zeros(6), self.header())
+                )
             if self.fab.wait_matching(keys.robot_pose(w, "base1"), timeout):
                 self.fab.publish(keys.robot_pose(w, "base1"), Pose([0.0, 0.0, 0.0], header=self.header()))
 
@@ -63,8 +66,14 @@ class SkewedSim:
             return Header(stamp=0.0, wall_ns=time.time_ns() + self.skew_ns, seq=self._seq, source="skewed-sim")
 
     def _refuse(self, robot: str, cmd: Command) -> None:
-        ev = Event(kind="reject", reason=f"{robot} is owned by zoe, not {cmd.user}", object=robot, user=cmd.user,
-                   severity="warning", header=self.header())
+        ev = Event(
+            kind="reject",
+            reason=f"{robot} is owned by zoe, not {cmd.user}",
+            object=robot,
+            user=cmd.user,
+            severity="warning",
+            header=self.header(),
+        )
         self.fab.publish(keys.event(self.fab.world, "reject", robot), ev)
 
     def _on_joints(self, key: str, cmd: Command) -> None:

@@ -20,6 +20,7 @@ def test_a_held_twist_is_repeated_until_dropped_and_a_refused_one_ends_its_hold(
         def send() -> None:
             with lock:
                 sent.append(name)
+
         return send
 
     try:

@@ -12,7 +12,9 @@ W = "w"
 
 def _log(records: dict[str, OwnershipRecord], live=("sim-a", "sim-b")):
     seen: list[str] = []
-    log = EventLog("alice", live_sim=lambda peer: peer in live, record=records.get, then=lambda key, ev: seen.append(key))
+    log = EventLog(
+        "alice", live_sim=lambda peer: peer in live, record=records.get, then=lambda key, ev: seen.append(key)
+    )
     return log, seen
 
 
@@ -67,4 +69,8 @@ def test_authority_events_of_a_kind_are_read_once_from_mark_to_mark_and_never_fo
     log.receive(key, bump("sim-a"))  # after the second mark: the next reading's
     assert [e.kind for e in log.authority_events(first, second, frozenset({"collision"}))] == ["collision"]
     assert len(log.authority_events(second, log.mark(), frozenset({"collision"}))) == 1
-    assert [e.kind for e in log.authority_events(first, log.mark(), frozenset({"clamp", "collision"}))] == ["collision", "clamp", "collision"]
+    assert [e.kind for e in log.authority_events(first, log.mark(), frozenset({"clamp", "collision"}))] == [
+        "collision",
+        "clamp",
+        "collision",
+    ]

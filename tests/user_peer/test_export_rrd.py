@@ -38,8 +38,18 @@ def write_recording(path, world="demo", n=40, truncate=False):
             h = Header(stamp=i * 0.05, wall_ns=t, seq=i, source="sim")
             put(keys.robot_joints(world, "arm1"), JointState(ARM_JOINTS, np.full(6, 0.02 * i), np.full(6, 0.4), h), t)
             yaw = 0.05 * i
-            put(keys.robot_pose(world, "base1"), Pose([0.05 * i, 0, 0], [math.cos(yaw / 2), 0, 0, math.sin(yaw / 2)], header=h), t)
-            put(keys.robot_scan(world, "base1"), Scan.from_ranges(np.full(240, 2.5), angle_min=-1.178, angle_increment=2.356 / 239, range_max=12.0, header=h), t)
+            put(
+                keys.robot_pose(world, "base1"),
+                Pose([0.05 * i, 0, 0], [math.cos(yaw / 2), 0, 0, math.sin(yaw / 2)], header=h),
+                t,
+            )
+            put(
+                keys.robot_scan(world, "base1"),
+                Scan.from_ranges(
+                    np.full(240, 2.5), angle_min=-1.178, angle_increment=2.356 / 239, range_max=12.0, header=h
+                ),
+                t,
+            )
         put(keys.map_key(world, "base1"), OccupancyGrid(0.05, [-5, -5, 0], np.zeros((100, 100), np.uint8)), t0)
         put(keys.robot_path(world, "base1"), Path([0, 1, 2], [0, 1, 1], [0, 0.5, 0]), t0)
         w.add_message(channels[keys.robot_pose(world, "base1")], log_time=t0, publish_time=t0, data=b"garbage")
@@ -75,14 +85,21 @@ def test_export_draws_robots_scans_maps_and_paths(tmp_path):
 def test_export_cli_and_bad_files(tmp_path):
     src, dst = tmp_path / "rec.mcap", tmp_path / "out.rrd"
     write_recording(src, n=5)
-    ok = subprocess.run(robofabric_cmd("export", str(src), "-o", str(dst), "--scene", "combined"), capture_output=True, text=True, timeout=120)
+    ok = subprocess.run(
+        robofabric_cmd("export", str(src), "-o", str(dst), "--scene", "combined"),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert ok.returncode == 0, ok.stderr
     assert "exported 17 messages" in ok.stdout and "arm1" in ok.stdout
     assert rows_per_entity(dst)["/world/robots/base1/scan"] == 6  # 5 scans and their style
     junk = tmp_path / "junk.mcap"
     junk.write_bytes(b"not an mcap file at all")
     for bad in (junk, tmp_path / "missing.mcap"):
-        r = subprocess.run(robofabric_cmd("export", str(bad), "-o", str(dst)), capture_output=True, text=True, timeout=120)
+        r = subprocess.run(
+            robofabric_cmd("export", str(bad), "-o", str(dst)), capture_output=True, text=True, timeout=120
+        )
         assert r.returncode == 2 and r.stderr.count("\n") <= 6, r.stderr
         assert "error:" in r.stderr
 
@@ -111,7 +128,12 @@ def test_export_of_a_live_recording(world, connect, tmp_path):
             nonlocal i
             h = Header(stamp=i * 0.05, wall_ns=0, seq=i)
             pub.publish(keys.robot_pose(world, "base1"), Pose([0.1 * i, 0, 0], header=h))
-            pub.publish(keys.robot_scan(world, "base1"), Scan.from_ranges(np.full(240, 3.0), angle_min=-1.178, angle_increment=0.00986, range_max=12.0, header=h))
+            pub.publish(
+                keys.robot_scan(world, "base1"),
+                Scan.from_ranges(
+                    np.full(240, 3.0), angle_min=-1.178, angle_increment=0.00986, range_max=12.0, header=h
+                ),
+            )
             i += 1
             return rec.stats.messages >= 20
 

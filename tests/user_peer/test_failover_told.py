@@ -20,8 +20,14 @@ def test_a_standby_taking_over_is_told_as_a_failover(world, router, procs, caplo
     primary = procs.start(robofabric_cmd("sim", *common, "--id", "sim-a"), name="sim-a")
     standby = procs.start(robofabric_cmd("sim", *common, "--id", "sim-b", "--standby"), name="sim-b")
     with client(world, router[1], peer_id="roles") as fab:
-        SimRoles(fab).wait("sim-b", "standby", term=1, leader="sim-a", timeout=90,
-                           seen=lambda: (procs.output(primary)[-1000:], procs.output(standby)[-1000:]))
+        SimRoles(fab).wait(
+            "sim-b",
+            "standby",
+            term=1,
+            leader="sim-a",
+            timeout=90,
+            seen=lambda: (procs.output(primary)[-1000:], procs.output(standby)[-1000:]),
+        )
     caplog.set_level(logging.INFO, logger="robofabric.user")
     w = World(client_config(world, router[1]), "alice", timeout=10.0)
     try:
@@ -32,11 +38,19 @@ def test_a_standby_taking_over_is_told_as_a_failover(world, router, procs, caplo
         wait_until(lambda: sorted(w.robots()) == ["arm1", "base1"], timeout=30, what="the world's robots")
         assert not any("is back" in r.getMessage() for r in caplog.records), [r.getMessage() for r in caplog.records]
         procs.kill(primary)  # SIGKILL, by pid
-        wait_until(lambda: told, timeout=40, what="the failover told", seen=lambda: (w.robots_gone, procs.output(standby)[-800:]))
+        wait_until(
+            lambda: told,
+            timeout=40,
+            what="the failover told",
+            seen=lambda: (w.robots_gone, procs.output(standby)[-800:]),
+        )
         assert told == [("sim-a", "sim-b", ["arm1", "base1"])] and w.failovers == told
         assert sorted(w.robots_gone) == ["arm1", "base1"]  # told first, as before
         said = [r.getMessage() for r in caplog.records]
         assert any("sim sim-a failed over to sim-b" in m for m in said), said
-        assert not any("is back" in m for m in said) and not [y for y in whys if "serves" not in y], (said, whys)  # the world never went (its first sim's "serves" may come after on_world was set)
+        assert not any("is back" in m for m in said) and not [y for y in whys if "serves" not in y], (
+            said,
+            whys,
+        )  # the world never went (its first sim's "serves" may come after on_world was set)
     finally:
         w.close()

@@ -42,36 +42,68 @@ def test_an_unfollowed_robot_is_no_longer_decoded_and_follows_again(world, conne
         publish(x)
         return _x(latest, world, "base1") == x and _x(latest, world, "base2") == x
 
-    wait_until(lambda: both_at(1.0), timeout=20, what="both robots' poses", seen=lambda: (_x(latest, world, "base1"), _x(latest, world, "base2")))
+    wait_until(
+        lambda: both_at(1.0),
+        timeout=20,
+        what="both robots' poses",
+        seen=lambda: (_x(latest, world, "base1"), _x(latest, world, "base2")),
+    )
     # Fences, one per subscription: each subscription's callback runs on a thread of its own (zenoh-python's callbacks
     # are indirect), fed in order, but the two threads not in step with each other. A marker kept says that its
     # subscription has decoded everything sent before it. Without base1's, a base1 pose queued before the unfollow
     # was decoded after base2's marker and counted as one more (the whole suite once counted 23 of 22).
     sim.publish(keys.robot_stream(world, "base1", "pose"), _pose(1.25))  # once: its publisher's route is known by now
-    wait_until(lambda: _x(latest, world, "base1") == 1.25, timeout=20, what="base1's marker", seen=lambda: _x(latest, world, "base1"))
+    wait_until(
+        lambda: _x(latest, world, "base1") == 1.25,
+        timeout=20,
+        what="base1's marker",
+        seen=lambda: _x(latest, world, "base1"),
+    )
 
     assert following.unfollow("base1")
     assert not following.unfollow("base1")  # no longer followed
     assert following.robots == {"base2"}
     sim.publish(keys.robot_stream(world, "base2", "pose"), _pose(1.5))
-    wait_until(lambda: _x(latest, world, "base2") == 1.5, timeout=20, what="base2's marker", seen=lambda: _x(latest, world, "base2"))
+    wait_until(
+        lambda: _x(latest, world, "base2") == 1.5,
+        timeout=20,
+        what="base2's marker",
+        seen=lambda: _x(latest, world, "base2"),
+    )
     decoded, bursts = user.counters["received"], published[0]
     # base2 still followed: its poses after the unfollow arrive, base1's (published with them) never do
-    wait_until(lambda: publish(2.0) or _x(latest, world, "base2") == 2.0, timeout=20, what="base2's pose after base1 was unfollowed",
-               seen=lambda: _x(latest, world, "base2"))
+    wait_until(
+        lambda: publish(2.0) or _x(latest, world, "base2") == 2.0,
+        timeout=20,
+        what="base2's pose after base1 was unfollowed",
+        seen=lambda: _x(latest, world, "base2"),
+    )
     for _ in range(20):
         publish(2.0)
     sent = published[0] - bursts
-    wait_until(lambda: user.counters["received"] - decoded >= sent, timeout=20, what="base2's poses decoded",
-               seen=lambda: (user.counters["received"] - decoded, sent))
+    wait_until(
+        lambda: user.counters["received"] - decoded >= sent,
+        timeout=20,
+        what="base2's poses decoded",
+        seen=lambda: (user.counters["received"] - decoded, sent),
+    )
     assert _x(latest, world, "base1") == 1.25  # what was kept stays; nothing newer was decoded
     assert user.counters["received"] - decoded == sent  # base2's poses only, none of base1's sent with them
 
     # a path planned while unfollowed comes at once (latched) when it is followed again; then its poses too
-    sim.publish(keys.robot_stream(world, "base1", "path"), Path(x=np.array([0.0, 1.0]), y=np.array([0.0, 0.5]),
-                                                                  theta=np.array([0.0, 0.0])))
+    sim.publish(
+        keys.robot_stream(world, "base1", "path"),
+        Path(x=np.array([0.0, 1.0]), y=np.array([0.0, 0.5]), theta=np.array([0.0, 0.0])),
+    )
     assert following.robot("base1") and following.robots == {"base1", "base2"}
-    wait_until(lambda: latest.get(keys.robot_stream(world, "base1", "path")) is not None, timeout=20,
-               what="base1's latched path once followed again")
-    wait_until(lambda: publish(3.0) or _x(latest, world, "base1") == 3.0, timeout=20, what="base1's pose once followed again",
-               seen=lambda: _x(latest, world, "base1"))
+    wait_until(
+        lambda: latest.get(keys.robot_stream(world, "base1", "path")) is not None,
+        timeout=20,
+        what="base1's latched path once followed again",
+    )
+    wait_until(
+        lambda: publish(3.0) or _x(latest, world, "base1") == 3.0,
+        timeout=20,
+        what="base1's pose once followed again",
+        seen=lambda: _x(latest, world, "base1"),
+    )

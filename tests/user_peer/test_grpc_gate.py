@@ -23,21 +23,24 @@ def test_a_read_and_its_preflight_pass_whole(method):
     assert SVC + method in READ_METHODS
 
 
-@pytest.mark.parametrize("raw, why", [
-    (head(f"POST {SVC}WriteMessages HTTP/1.1", "content-length: 5"), "only reading"),
-    (head(f"POST {SVC}WriteTable HTTP/1.1", "content-length: 5"), "only reading"),
-    (head("POST /rerun.cloud.v1alpha1.RerunCloudService/DeleteEntry HTTP/1.1"), "only reading"),
-    (head("POST /proxy HTTP/1.1"), "only reading"),
-    (head("GET / HTTP/1.1"), "only reading"),
-    (head(f"GET {SVC}ReadMessages HTTP/1.1"), "HTTP method GET"),
-    (head(f"POST {SVC}ReadMessages HTTP/1.1", "transfer-encoding: chunked"), "chunked"),
-    (head(f"POST {SVC}ReadMessages HTTP/1.1", "content-length: 10000000"), "request body of 10000000"),
-    (head(f"POST {SVC}ReadMessages HTTP/1.1", "content-length: -1"), "request body of -1"),
-    (head(f"POST {SVC}ReadMessages HTTP/1.1", "content-length: lots"), "Content-Length"),
-    (head(f"POST {SVC}ReadMessages HTTP/1.1", "no colon here"), "malformed header"),
-    (head(f"POST {SVC}ReadMessages HTTP/2.0"), "HTTP version"),
-    (b"\x16\x03\x01\x02\x00garbage\r\n\r\n", "not an HTTP/1.1 request"),
-])
+@pytest.mark.parametrize(
+    "raw, why",
+    [
+        (head(f"POST {SVC}WriteMessages HTTP/1.1", "content-length: 5"), "only reading"),
+        (head(f"POST {SVC}WriteTable HTTP/1.1", "content-length: 5"), "only reading"),
+        (head("POST /rerun.cloud.v1alpha1.RerunCloudService/DeleteEntry HTTP/1.1"), "only reading"),
+        (head("POST /proxy HTTP/1.1"), "only reading"),
+        (head("GET / HTTP/1.1"), "only reading"),
+        (head(f"GET {SVC}ReadMessages HTTP/1.1"), "HTTP method GET"),
+        (head(f"POST {SVC}ReadMessages HTTP/1.1", "transfer-encoding: chunked"), "chunked"),
+        (head(f"POST {SVC}ReadMessages HTTP/1.1", "content-length: 10000000"), "request body of 10000000"),
+        (head(f"POST {SVC}ReadMessages HTTP/1.1", "content-length: -1"), "request body of -1"),
+        (head(f"POST {SVC}ReadMessages HTTP/1.1", "content-length: lots"), "Content-Length"),
+        (head(f"POST {SVC}ReadMessages HTTP/1.1", "no colon here"), "malformed header"),
+        (head(f"POST {SVC}ReadMessages HTTP/2.0"), "HTTP version"),
+        (b"\x16\x03\x01\x02\x00garbage\r\n\r\n", "not an HTTP/1.1 request"),
+    ],
+)
 def test_everything_else_is_refused_with_its_reason(raw, why):
     with pytest.raises(Refused) as err:
         parse_head(raw)

@@ -21,24 +21,30 @@ def head(*fields: str, line: str = READ) -> bytes:
     return ("\r\n".join([line, "host: lab-pc:9876", *fields]) + "\r\n\r\n").encode("latin-1")
 
 
-@pytest.mark.parametrize("raw, why", [
-    (head("x-note: a\ntransfer-encoding: chunked", "content-length: 5"), "bare LF"),
-    (head("x-note: a\rtransfer-encoding: chunked", "content-length: 5"), "bare LF, CR"),
-    (head("content-length: 5", " chunked"), "folded"),
-    (head("content-length: 5", "\tx"), "folded"),
-    (head("content-length: 5", "content-length: 5"), "second framing header (content-length) after content-length"),
-    (head("content-length: 5", "content-length: 7"), "second framing header"),
-    (head("content-length: 5", "transfer-encoding: chunked"), "second framing header (transfer-encoding)"),
-    (head("transfer-encoding: chunked", "content-length: 5"), "second framing header (content-length) after transfer-encoding"),
-    (head("content-length : 5"), "malformed header name"),
-    (head("content length: 5"), "malformed header name"),
-    (head("content-length: +5"), "malformed Content-Length"),
-    (head("content-length: 1_0"), "malformed Content-Length"),
-    (head("content-length: 5 5"), "malformed Content-Length"),
-    (head("x-note: a\x00b", "content-length: 5"), "control character"),
-    (head("content-length: 5", line=READ + "x"), "HTTP version"),
-    (head("content-length: 5", line=READ.replace("POST", "POST\x0b")), "control character in the request line"),
-])
+@pytest.mark.parametrize(
+    "raw, why",
+    [
+        (head("x-note: a\ntransfer-encoding: chunked", "content-length: 5"), "bare LF"),
+        (head("x-note: a\rtransfer-encoding: chunked", "content-length: 5"), "bare LF, CR"),
+        (head("content-length: 5", " chunked"), "folded"),
+        (head("content-length: 5", "\tx"), "folded"),
+        (head("content-length: 5", "content-length: 5"), "second framing header (content-length) after content-length"),
+        (head("content-length: 5", "content-length: 7"), "second framing header"),
+        (head("content-length: 5", "transfer-encoding: chunked"), "second framing header (transfer-encoding)"),
+        (
+            head("transfer-encoding: chunked", "content-length: 5"),
+            "second framing header (content-length) after transfer-encoding",
+        ),
+        (head("content-length : 5"), "malformed header name"),
+        (head("content length: 5"), "malformed header name"),
+        (head("content-length: +5"), "malformed Content-Length"),
+        (head("content-length: 1_0"), "malformed Content-Length"),
+        (head("content-length: 5 5"), "malformed Content-Length"),
+        (head("x-note: a\x00b", "content-length: 5"), "control character"),
+        (head("content-length: 5", line=READ + "x"), "HTTP version"),
+        (head("content-length: 5", line=READ.replace("POST", "POST\x0b")), "control character in the request line"),
+    ],
+)
 def test_a_head_two_parsers_could_read_two_ways_is_refused(raw, why):
     with pytest.raises(Refused) as err:
         parse_head(raw)

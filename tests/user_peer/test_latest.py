@@ -8,7 +8,9 @@ from fabric import keys
 from user_peer.latest import Latest
 
 W = "w"
-INFO = SimpleNamespace(robots=[SimpleNamespace(id="arm1"), SimpleNamespace(id="base1")], objects=[SimpleNamespace(id="target")])
+INFO = SimpleNamespace(
+    robots=[SimpleNamespace(id="arm1"), SimpleNamespace(id="base1")], objects=[SimpleNamespace(id="target")]
+)
 
 
 def test_keys_of_robots_the_world_does_not_have_are_not_kept():

@@ -17,9 +17,16 @@ def test_notebook_view_draws_the_world_and_keeps_no_thread_alive(world, router, 
         w = World(client_config(world, router[1]), "nb", timeout=5.0)
         try:
             view = notebook.NotebookView(w, max_hz=0)
-            wait_until(lambda: view.logger.counts["JointState"] >= 3 and view.logger.counts["Pose"] >= 3
-                       and view.logger.counts["Scan"] >= 1, timeout=30, what="the view drawing joints, poses and scans",
-                       seen=lambda: dict(view.logger.counts))
+            wait_until(
+                lambda: (
+                    view.logger.counts["JointState"] >= 3
+                    and view.logger.counts["Pose"] >= 3
+                    and view.logger.counts["Scan"] >= 1
+                ),
+                timeout=30,
+                what="the view drawing joints, poses and scans",
+                seen=lambda: dict(view.logger.counts),
+            )
             assert view.logger.robots.keys() >= {"arm1", "base1"}
             drawing = [t for t in threading.enumerate() if t.name == "notebook-view"]
             assert drawing and all(t.daemon for t in drawing)  # a kernel or script never waits for it

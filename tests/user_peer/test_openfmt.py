@@ -70,19 +70,51 @@ def source_messages() -> list[tuple[str, int, object]]:
         if i % 3 == 0:
             ranges = np.linspace(0.2, 7.5, 240) + 0.01 * i
             ranges[::17] = np.inf  # misses read range_max
-            out.append((f"rf/{W}/robot/base1/scan", t + 2, Scan.from_ranges(ranges, angle_min=-math.pi, angle_increment=2 * math.pi / 240, range_max=8.0, header=h)))
+            out.append(
+                (
+                    f"rf/{W}/robot/base1/scan",
+                    t + 2,
+                    Scan.from_ranges(
+                        ranges, angle_min=-math.pi, angle_increment=2 * math.pi / 240, range_max=8.0, header=h
+                    ),
+                )
+            )
         if i % 10 == 0:
             out.append((keys.object_pose(W, "target", "alice"), t + 3, Pose(np.array([3.1, 0.1 * i, 1.0]), header=h)))
-            out.append((f"rf/{W}/own/arm1", t + 4, OwnershipRecord("arm1", owner="alice", epoch=i + 1, queue=("bob",), authority="sim-1", header=h)))
-            out.append((f"rf/{W}/event/ownership/arm1", t + 5, Event("granted", reason="free", object="arm1", user="alice", data={"epoch": i + 1, "queue": ["bob"]}, header=h)))
+            out.append(
+                (
+                    f"rf/{W}/own/arm1",
+                    t + 4,
+                    OwnershipRecord("arm1", owner="alice", epoch=i + 1, queue=("bob",), authority="sim-1", header=h),
+                )
+            )
+            out.append(
+                (
+                    f"rf/{W}/event/ownership/arm1",
+                    t + 5,
+                    Event(
+                        "granted",
+                        reason="free",
+                        object="arm1",
+                        user="alice",
+                        data={"epoch": i + 1, "queue": ["bob"]},
+                        header=h,
+                    ),
+                )
+            )
             out.append((keys.robot_cmd(W, "base1", "twist", "bob"), t + 6, Command("bob", 3, Twist(0.2, -0.1, h), h)))
-            out.append((
-                f"rf/{W}/robot/arm1/ik", t + 7,
-                IKStream("arm1", "target", np.array([3.1, 0.0, 1.0]), True, "", q, q * 0.1, np.abs(q), 1.5, h),
-            ))
+            out.append(
+                (
+                    f"rf/{W}/robot/arm1/ik",
+                    t + 7,
+                    IKStream("arm1", "target", np.array([3.1, 0.0, 1.0]), True, "", q, q * 0.1, np.abs(q), 1.5, h),
+                )
+            )
     out.append((f"rf/{W}/map/map", T0 + 5, _grid()))
     x = np.linspace(0.0, 2.0, 9)
-    out.append((f"rf/{W}/robot/base1/path", T0 + 6, FPath(x, np.sin(x), np.cos(x), header=Header(0.0, T0, 0, "compute-1"))))
+    out.append(
+        (f"rf/{W}/robot/base1/path", T0 + 6, FPath(x, np.sin(x), np.cos(x), header=Header(0.0, T0, 0, "compute-1")))
+    )
     return out
 
 
@@ -117,7 +149,10 @@ def _proto_class(schema) -> type:
 def test_foxglove_export_every_message_parses_against_its_schema_and_matches(recording, tmp_path):
     out = tmp_path / "fox.mcap"
     stats = export_recording(recording, out, "foxglove", scene="combined")
-    assert (stats.messages, stats.bad, stats.skipped) == (len(source_messages()), 0, 0) and set(stats.robots) == {"arm1", "base1"}, stats
+    assert (stats.messages, stats.bad, stats.skipped) == (len(source_messages()), 0, 0) and set(stats.robots) == {
+        "arm1",
+        "base1",
+    }, stats
     src = _by_topic()
     seen: dict[str, list] = defaultdict(list)
     schemas: dict[str, str] = {}
@@ -153,17 +188,27 @@ def test_foxglove_export_every_message_parses_against_its_schema_and_matches(rec
     assert schemas[f"{k}/robot/base1/path"] == "foxglove.PosesInFrame"
     assert schemas["/tf"] == "foxglove.FrameTransforms" and schemas["/scene"] == "foxglove.SceneUpdate"
     assert schemas[f"{k}/object/target/pose/by/alice"] == "foxglove.PoseInFrame"
-    for topic in ("robot/arm1/joints", "own/arm1", "event/ownership/arm1", "robot/base1/cmd/twist/by/bob", "robot/arm1/ik"):
+    for topic in (
+        "robot/arm1/joints",
+        "own/arm1",
+        "event/ownership/arm1",
+        "robot/base1/cmd/twist/by/bob",
+        "robot/arm1/ik",
+    ):
         assert schemas[f"{k}/{topic}"].startswith("robofabric."), (topic, schemas[f"{k}/{topic}"])
 
     # Values: joints (plottable by name), scans, map cells, path, transforms of both robots.
     joints = seen[f"{k}/robot/arm1/joints"]
     assert len(joints) == N
     for doc, msg in zip(joints, src[f"rf/{W}/robot/arm1/joints"]):
-        assert doc["q"] == pytest.approx(msg.q.tolist()) and doc["by_name"]["joint_4"]["position"] == pytest.approx(msg.q[3])
+        assert doc["q"] == pytest.approx(msg.q.tolist()) and doc["by_name"]["joint_4"]["position"] == pytest.approx(
+            msg.q[3]
+        )
     for scan, msg in zip(seen[f"{k}/robot/base1/scan"], src[f"rf/{W}/robot/base1/scan"], strict=True):
         assert scan.frame_id == "base1/laser" and list(scan.ranges) == pytest.approx(msg.ranges.tolist())
-        assert scan.start_angle == pytest.approx(-math.pi) and scan.end_angle == pytest.approx(-math.pi + 239 * 2 * math.pi / 240)
+        assert scan.start_angle == pytest.approx(-math.pi) and scan.end_angle == pytest.approx(
+            -math.pi + 239 * 2 * math.pi / 240
+        )
     (grid,) = seen[f"{k}/map/map"]
     g = _grid()
     assert grid.column_count == 20 and grid.row_stride == 20 and grid.cell_size.x == pytest.approx(0.05)
@@ -180,7 +225,9 @@ def test_foxglove_export_every_message_parses_against_its_schema_and_matches(rec
     arm_base = [t for t in tfs if t.child_frame_id == "arm1/base_link"][0]
     assert (arm_base.translation.x, arm_base.translation.z) == pytest.approx((3.0, 0.75))
     drawn = {e.frame_id for u in seen["/scene"] for e in u.entities}
-    assert {"base1/base_link", "object/target", "map"} <= drawn and any(f.startswith("arm1/link_") for f in drawn), drawn
+    assert {"base1/base_link", "object/target", "map"} <= drawn and any(f.startswith("arm1/link_") for f in drawn), (
+        drawn
+    )
 
 
 def _strict_json(data: bytes) -> object:
@@ -262,7 +309,9 @@ def test_ros2_export_every_message_decodes_with_the_ros_types_and_values(recordi
     for od, msg in zip(seen["/base1/odom"], src[f"rf/{W}/robot/base1/pose"], strict=True):
         assert (od.header.frame_id, od.child_frame_id) == ("base1/odom", "base1/base_link")
         assert (od.pose.pose.position.x, od.pose.pose.position.y) == pytest.approx((msg.position[0], msg.position[1]))
-        assert (od.pose.pose.orientation.w, od.pose.pose.orientation.z) == pytest.approx((msg.quaternion[0], msg.quaternion[3]))
+        assert (od.pose.pose.orientation.w, od.pose.pose.orientation.z) == pytest.approx(
+            (msg.quaternion[0], msg.quaternion[3])
+        )
     (grid,) = seen["/map"]
     g = _grid()
     assert (grid.info.width, grid.info.height) == (20, 12) and grid.info.resolution == pytest.approx(0.05)
@@ -272,7 +321,8 @@ def test_ros2_export_every_message_decodes_with_the_ros_types_and_values(recordi
     assert [p.pose.position.x for p in path.poses] == pytest.approx(np.linspace(0.0, 2.0, 9).tolist())
     tfs = [t for m in seen["/tf"] for t in m.transforms]
     assert {"base1/odom", "base1/base_link", "arm1/base_link", "arm1/link_1", "base1/laser", "object/target"} <= {
-        t.child_frame_id for t in tfs}
+        t.child_frame_id for t in tfs
+    }
     own = [json.loads(s.data) for s in seen[f"{k}/own/arm1"]]
     assert [o["epoch"] for o in own] == [m.epoch for m in src[f"rf/{W}/own/arm1"]] and own[0]["queue"] == ["bob"]
 
@@ -284,14 +334,26 @@ def test_ros2_export_every_message_decodes_with_the_ros_types_and_values(recordi
 def test_export_command_writes_each_format_and_refuses_mistakes(recording, tmp_path):
     for to in ("foxglove", "ros2"):
         out = subprocess.run(
-            robofabric_cmd("export", str(recording), "-o", str(tmp_path / f"{to}.mcap"), "--to", to, "--scene", "combined"),
-            capture_output=True, text=True, timeout=120,
+            robofabric_cmd(
+                "export", str(recording), "-o", str(tmp_path / f"{to}.mcap"), "--to", to, "--scene", "combined"
+            ),
+            capture_output=True,
+            text=True,
+            timeout=120,
         )
         assert out.returncode == 0, out.stdout + out.stderr
         assert f"to {tmp_path / f'{to}.mcap'}" in out.stdout and (tmp_path / f"{to}.mcap").stat().st_size > 1000
-    bad = subprocess.run(robofabric_cmd("export", str(recording), "-o", str(tmp_path / "x.mcap")), capture_output=True, text=True, timeout=60)
+    bad = subprocess.run(
+        robofabric_cmd("export", str(recording), "-o", str(tmp_path / "x.mcap")),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert bad.returncode == 2 and "--to" in bad.stderr, bad.stderr
     wrong = subprocess.run(
-        robofabric_cmd("export", str(recording), "-o", str(tmp_path / "x.mcap"), "--to", "ros1"), capture_output=True, text=True, timeout=60
+        robofabric_cmd("export", str(recording), "-o", str(tmp_path / "x.mcap"), "--to", "ros1"),
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert wrong.returncode == 2 and "foxglove" in wrong.stderr, wrong.stderr

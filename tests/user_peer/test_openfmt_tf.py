@@ -50,7 +50,13 @@ def _messages() -> list[tuple[str, int, object]]:
         h = Header(i * 0.01, t, i, "sim-1")
         q = np.array([0.05 * i, -0.2, 0.3, 0.0, 0.5, -0.6])
         # the flange pose goes out with the joints; the recorder may log it first
-        out.append((f"rf/{W}/robot/arm1/pose", t + 1, Pose(FLANGE + [0.0, 0.001 * i, 0.0], _quat_wxyz(0.02 * i, 0.3), header=h)))
+        out.append(
+            (
+                f"rf/{W}/robot/arm1/pose",
+                t + 1,
+                Pose(FLANGE + [0.0, 0.001 * i, 0.0], _quat_wxyz(0.02 * i, 0.3), header=h),
+            )
+        )
         out.append((f"rf/{W}/robot/arm1/joints", t + 2, JointState(names, q, q * 0.0, h)))
         out.append((f"rf/{W}/robot/base1/pose", t + 3, Pose(np.array([0.01 * i, 0.0, 0.0]), header=h)))
         if i == N // 2:  # late samples: stamped 7 ms before the last ones written for these frames (both clocks)
@@ -71,11 +77,13 @@ def recording(tmp_path_factory) -> Path:
 
 
 def _rot(x: float, y: float, z: float, w: float) -> np.ndarray:
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _transforms(path: Path, fmt: str) -> tuple[list[tuple[str, str, int, tuple, tuple]], list[int]]:
@@ -83,11 +91,17 @@ def _transforms(path: Path, fmt: str) -> tuple[list[tuple[str, str, int, tuple, 
     decoders = [ProtobufDecoders()] if fmt == "foxglove" else [Ros2Decoders()]
     tfs, pubs = [], []
     with open(path, "rb") as f:
-        for _schema, _channel, message, m in make_reader(f, decoder_factories=decoders).iter_decoded_messages(topics=["/tf"]):
+        for _schema, _channel, message, m in make_reader(f, decoder_factories=decoders).iter_decoded_messages(
+            topics=["/tf"]
+        ):
             pubs.append(message.publish_time)
             for t in m.transforms:
                 if fmt == "foxglove":
-                    parent, child, stamp = t.parent_frame_id, t.child_frame_id, t.timestamp.seconds * 10**9 + t.timestamp.nanos
+                    parent, child, stamp = (
+                        t.parent_frame_id,
+                        t.child_frame_id,
+                        t.timestamp.seconds * 10**9 + t.timestamp.nanos,
+                    )
                     tr, rot = t.translation, t.rotation
                 else:
                     parent, child = t.header.frame_id, t.child_frame_id
@@ -130,7 +144,11 @@ def test_export_has_one_transform_tree_a_bolted_base_and_monotonic_stamps(record
     (tr, rot) = base[0]
     assert tr == pytest.approx((3.0, 0.0, 0.75)) and rot == pytest.approx((0.0, 0.0, 0.0, 1.0))
     # The late samples were dropped, not written after newer ones.
-    assert len(by_child["arm1/flange"]) == N and len(by_child["base1/base_link"]) == N and len(by_child["arm1/link_1"]) == N
+    assert (
+        len(by_child["arm1/flange"]) == N
+        and len(by_child["base1/base_link"]) == N
+        and len(by_child["arm1/link_1"]) == N
+    )
     assert all(t[0] > -1.0 for t, _r in by_child["base1/base_link"])
 
     # The flange, composed link by link up to map, is where the URDF's kinematics put it for those joints.

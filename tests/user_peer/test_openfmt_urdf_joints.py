@@ -21,9 +21,11 @@ from user_peer.openfmt.urdf_joints import joint_transform, moving_joints
 def _matrix(t, q) -> np.ndarray:
     x, y, z, w = q
     m = np.eye(4)
-    m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                 [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                 [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    m[:3, :3] = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ]
     m[:3, 3] = t
     return m
 
@@ -38,7 +40,9 @@ def test_each_urdf_joints_transform_is_pinocchios_for_the_meca500():
     for i, name in enumerate(robots.load("meca500").joint_names):
         j = joints[name]
         parent, child = data.oMf[model.getFrameId(j.parent)], data.oMf[model.getFrameId(j.child)]
-        assert _matrix(*joint_transform(j, float(q[i]))) == pytest.approx((parent.inverse() * child).homogeneous, abs=1e-12), name
+        assert _matrix(*joint_transform(j, float(q[i]))) == pytest.approx(
+            (parent.inverse() * child).homogeneous, abs=1e-12
+        ), name
 
 
 @pytest.mark.parametrize("rid,rtype", [("arm1", "meca500"), ("base1", "reeman")])
@@ -47,9 +51,13 @@ def test_every_urdf_link_is_a_frame_under_its_urdf_parent(rid, rtype):
     urdf = read_urdf(d.urdf_path.read_text())
     tracker = FrameTracker(RobotCatalog(None, scene="combined"))
     h = Header(1.0, 0, 1, "sim")
-    frames = tracker.frames(f"rf/w/robot/{rid}/pose", Pose(np.array([1.0, 2.0, 0.0]), quaternion_from_yaw(0.4), header=h))
-    frames += tracker.frames(f"rf/w/robot/{rid}/joints", JointState(d.joint_names, np.full(len(d.joint_names), 0.2),
-                                                                   np.zeros(len(d.joint_names)), h))
+    frames = tracker.frames(
+        f"rf/w/robot/{rid}/pose", Pose(np.array([1.0, 2.0, 0.0]), quaternion_from_yaw(0.4), header=h)
+    )
+    frames += tracker.frames(
+        f"rf/w/robot/{rid}/joints",
+        JointState(d.joint_names, np.full(len(d.joint_names), 0.2), np.zeros(len(d.joint_names)), h),
+    )
     parents = {f.child: f.parent for f in frames}
     assert {f"{rid}/{link}" for link in urdf.links} <= set(parents) | {f"{rid}/{urdf.root}"}
     for j in urdf.joints:
@@ -69,8 +77,17 @@ def test_a_base_guessed_from_poses_before_the_world_description_gets_its_sonar_f
     pose = Pose(np.array([1.0, 2.0, 0.0]), quaternion_from_yaw(0.4), header=Header(1.0, 0, 1, "sim"))
     assert "base7/sonar" not in {f.child for f in tracker.frames("rf/w/robot/base7/pose", pose)}
     sonar = SonarInfo(np.radians(np.arange(0.0, 360.0, 45.0)), 0.26, 0.12, 0.02, 3.0, center=np.array([0.05, 0.0]))
-    robot = RobotInfo("base7", "reeman", "mobile", np.zeros(4), ("wheel_left", "wheel_right"), np.zeros(2), np.zeros(2),
-                      np.zeros(2), sonar=sonar)
+    robot = RobotInfo(
+        "base7",
+        "reeman",
+        "mobile",
+        np.zeros(4),
+        ("wheel_left", "wheel_right"),
+        np.zeros(2),
+        np.zeros(2),
+        np.zeros(2),
+        sonar=sonar,
+    )
     catalog.world_info = WorldInfo("w", "combined", 0.002, {"scan": 20.0}, (robot,))
     parents = {f.child: f.parent for f in tracker.frames("rf/w/robot/base7/pose", pose)}
     assert parents["base7/sonar"] == "base7/base_link" and parents["base7/laser"] == "base7/base_link"

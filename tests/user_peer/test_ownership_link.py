@@ -26,8 +26,11 @@ def test_a_taken_object_is_announced_and_a_release_is_not(connect, caplog):
             assert lost == [("arm", "bob", epoch_b)]
             assert f"lost ownership of arm: now owned by bob (epoch {epoch_b}" in caplog.text
             bob.release("arm", timeout=5.0)  # his own release: no notice
-            wait_until(lambda: alice.record("arm").epoch > epoch_b and bob.record("arm").epoch > epoch_b, timeout=5.0,
-                       what="the release's record at both")
+            wait_until(
+                lambda: alice.record("arm").epoch > epoch_b and bob.record("arm").epoch > epoch_b,
+                timeout=5.0,
+                what="the release's record at both",
+            )
             assert lost == [("arm", "bob", epoch_b)], lost
             assert caplog.text.count("lost ownership") == 1, caplog.text
     finally:

@@ -64,16 +64,34 @@ class Student:
 
 def _run(world: str, router, procs, *, hog: bool) -> None:
     ep = f"tcp/127.0.0.1:{router[1]}"
-    sim = procs.start(robofabric_cmd("sim", "--scene", "arm_cell", "--robot", "meca500:arm2@1.0,0.0", "--world", world,
-                                     "--connect", ep, "--id", "sim-a"), name="sim")
+    sim = procs.start(
+        robofabric_cmd(
+            "sim",
+            "--scene",
+            "arm_cell",
+            "--robot",
+            "meca500:arm2@1.0,0.0",
+            "--world",
+            world,
+            "--connect",
+            ep,
+            "--id",
+            "sim-a",
+        ),
+        name="sim",
+    )
     if hog:  # a busy loop beside the sim (bounded: ended by pid at the test's end)
         procs.start([sys.executable, "-c", "while True: pass"], name="hog")
     worlds = [World(client_config(world, router[1]), u, timeout=10.0, join_timeout=120.0) for u in ("alice", "bob")]
     students: list[Student] = []
     try:
         students = [Student(worlds[0], "arm1").start(), Student(worlds[1], "arm2").start()]
-        wait_until(lambda: all(s.moves >= 2 for s in students), timeout=120, what="two moves each before the pauses",
-                   seen=lambda: [(s.moves, s.failures[-1:]) for s in students])
+        wait_until(
+            lambda: all(s.moves >= 2 for s in students),
+            timeout=120,
+            what="two moves each before the pauses",
+            seen=lambda: [(s.moves, s.failures[-1:]) for s in students],
+        )
         for pause in (PAUSE_S,) * PAUSES + (LATE_S,):
             os.kill(sim.pid, signal.SIGSTOP)
             try:
@@ -81,9 +99,12 @@ def _run(world: str, router, procs, *, hog: bool) -> None:
             finally:
                 os.kill(sim.pid, signal.SIGCONT)
             done = [s.moves for s in students]
-            wait_until(lambda: all(s.moves >= d + 2 for s, d in zip(students, done)), timeout=90,
-                       what="two more moves each after the pause",
-                       seen=lambda: ([(s.moves, s.failures[-1:]) for s in students], procs.output(sim)[-1500:]))
+            wait_until(
+                lambda: all(s.moves >= d + 2 for s, d in zip(students, done)),
+                timeout=90,
+                what="two more moves each after the pause",
+                seen=lambda: ([(s.moves, s.failures[-1:]) for s in students], procs.output(sim)[-1500:]),
+            )
     finally:
         for s in students:
             s.end()

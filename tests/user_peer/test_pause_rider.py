@@ -35,7 +35,9 @@ class Robot:
         self.refusals: list[Event] = []
         self.sent: list[float] = []
         self.clock = FakeClock()
-        self.world = SimpleNamespace(rejections=lambda rid, since: list(self.refusals), presence=SimpleNamespace(arrivals=0))
+        self.world = SimpleNamespace(
+            rejections=lambda rid, since: list(self.refusals), presence=SimpleNamespace(arrivals=0)
+        )
 
     def resend(self, command: str, cmd: Any) -> None:
         self.sent.append(self.clock.t)
@@ -88,7 +90,14 @@ def test_a_sim_back_after_a_cut_is_sent_the_command_with_no_report_at_all(robot)
 
 def test_any_other_refusal_is_raised(robot):
     rider = PauseRider(robot, "joints", CMD, 0, clock=robot.clock)  # type: ignore[arg-type]
-    robot.refusals.append(Event(kind="reject", reason="not granted", object="arm1", user="alice",
-                                data={"command": "joints", "code": "refused"}))
+    robot.refusals.append(
+        Event(
+            kind="reject",
+            reason="not granted",
+            object="arm1",
+            user="alice",
+            data={"command": "joints", "code": "refused"},
+        )
+    )
     with pytest.raises(NotOwner):
         rider.check()

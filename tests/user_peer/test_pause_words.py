@@ -25,12 +25,23 @@ def test_the_console_says_the_sim_is_paused_not_reject():
     assert line.startswith("trusted · the sim is paused: arm1") and "[alice]" in line
     assert "reject" not in line
     assert event_line(_reject("wrong_body"), True) == "trusted · reject arm1 [alice]: wrong_body"
-    assert pause_words("arm1") in event_line(_reject(HELD), False) and event_line(_reject(HELD), False).startswith("unverified")
+    assert pause_words("arm1") in event_line(_reject(HELD), False) and event_line(_reject(HELD), False).startswith(
+        "unverified"
+    )
 
 
 def test_the_sims_word_once_it_hears_again_reads_as_the_end_of_the_pause():
-    back = Event(kind="reject", reason="held", object="arm1", user="alice",
-                 data={"command": "?", "code": RESUMED, "detail": "the sim held its robots and stopped this one before its "
-                                                               "command was done; it hears again: send the command again"})
+    back = Event(
+        kind="reject",
+        reason="held",
+        object="arm1",
+        user="alice",
+        data={
+            "command": "?",
+            "code": RESUMED,
+            "detail": "the sim held its robots and stopped this one before its "
+            "command was done; it hears again: send the command again",
+        },
+    )
     assert is_pause(back)
     assert event_line(back, True).startswith("trusted · the sim was paused and hears again: arm1 stopped")

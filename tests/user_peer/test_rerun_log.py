@@ -69,7 +69,9 @@ def test_bases_are_drawn_where_they_are_by_now_eq8(skew_s):
     at, age = shown_position(pose, t, t + 40_000_000)  # drawn 40 ms after it arrived
     assert math.isclose(age, 0.04) and np.allclose(at, [1.02, 1.992, 0.0])
     late, age = shown_position(pose, t, t + 5_000_000_000)  # 5 s stale: moved on by the cap only
-    assert age == EXTRAPOLATION_CAP_S and np.allclose(late, [1.0 + 0.5 * EXTRAPOLATION_CAP_S, 2.0 - 0.2 * EXTRAPOLATION_CAP_S, 0.0])
+    assert age == EXTRAPOLATION_CAP_S and np.allclose(
+        late, [1.0 + 0.5 * EXTRAPOLATION_CAP_S, 2.0 - 0.2 * EXTRAPOLATION_CAP_S, 0.0]
+    )
     at_once, age = shown_position(pose, t, t)
     assert age == 0.0 and np.allclose(at_once, pose.position)
     assert shown_position(pose, 0, t)[1] is None  # arrival unknown (a recording): no guess
@@ -117,6 +119,8 @@ def test_every_plot_shows_the_last_window_on_both_timelines():
     walk(blueprint().root_container)
     assert len(plots) == 6
     for view in plots:
-        ranges = {r["timeline"]: r["range"] for r in view.properties["VisibleTimeRanges"].ranges.as_arrow_array().to_pylist()}
+        ranges = {
+            r["timeline"]: r["range"] for r in view.properties["VisibleTimeRanges"].ranges.as_arrow_array().to_pylist()
+        }
         assert set(ranges) == {TIMELINE_WALL, TIMELINE_SIM}, view.name
         assert all(r == {"start": -int(PLOT_WINDOW_S * 1e9), "end": 0} for r in ranges.values()), ranges

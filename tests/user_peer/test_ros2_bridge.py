@@ -71,9 +71,12 @@ class Observed:
         self.sonars: dict[int, np.ndarray] = {}
         self.poses: dict[int, tuple[list[float], float]] = {}  # stamp -> (position, speed)
         self.sim_stamps: set[int] = set()
-        self.subs = [world.on("robot/arm1/joints", self._joints), world.on("robot/base1/scan", self._scan),
-                     world.on("robot/base1/sonar", self._sonar),
-                     world.on("robot/base1/pose", self._pose)]
+        self.subs = [
+            world.on("robot/arm1/joints", self._joints),
+            world.on("robot/base1/scan", self._scan),
+            world.on("robot/base1/sonar", self._sonar),
+            world.on("robot/base1/pose", self._pose),
+        ]
 
     def _joints(self, key, msg) -> None:
         with self.lock:
@@ -116,10 +119,17 @@ def observer(live):
 
 
 def start_bridge(procs, world: str, port: int, domain: int, *extra: str):
-    bridge = procs.start(robofabric_cmd("ros2", "--world", world, "--connect", f"tcp/127.0.0.1:{port}", *extra),
-                         name="bridge", env=ros_env(domain))
-    wait_until(lambda: "bridging world" in procs.output(bridge) or bridge.poll() is not None, timeout=60,
-               what="the bridge up", seen=lambda: procs.output(bridge)[-2000:])
+    bridge = procs.start(
+        robofabric_cmd("ros2", "--world", world, "--connect", f"tcp/127.0.0.1:{port}", *extra),
+        name="bridge",
+        env=ros_env(domain),
+    )
+    wait_until(
+        lambda: "bridging world" in procs.output(bridge) or bridge.poll() is not None,
+        timeout=60,
+        what="the bridge up",
+        seen=lambda: procs.output(bridge)[-2000:],
+    )
     assert bridge.poll() is None, procs.output(bridge)[-2000:]
     return bridge
 
@@ -127,10 +137,15 @@ def start_bridge(procs, world: str, port: int, domain: int, *extra: str):
 def start_node(procs, tmp_path: Path, domain: int):
     out, ctl = tmp_path / "ros.jsonl", tmp_path / "ctl"
     ctl.mkdir()
-    node = procs.start([sys.executable, str(NODE), "--out", str(out), "--control", str(ctl)], name="rosnode",
-                       env=ros_env(domain))
-    wait_until(lambda: of(out, "ready") or node.poll() is not None, timeout=30, what="the ROS node up",
-               seen=lambda: procs.output(node)[-2000:])
+    node = procs.start(
+        [sys.executable, str(NODE), "--out", str(out), "--control", str(ctl)], name="rosnode", env=ros_env(domain)
+    )
+    wait_until(
+        lambda: of(out, "ready") or node.poll() is not None,
+        timeout=30,
+        what="the ROS node up",
+        seen=lambda: procs.output(node)[-2000:],
+    )
     assert node.poll() is None, procs.output(node)[-2000:]
     return node, out, ctl
 
@@ -143,15 +158,32 @@ def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns
     cells[1, 2], cells[2, 3] = 0, 100
     w.fabric.publish(keys.map_key(world, "map"), OccupancyGrid(0.05, np.array([-1.0, -2.0, 0.0]), cells))
     domain = domain_for(1)
-    bridge = start_bridge(procs, world, port, domain, "--user", "rosbridge", "--request", "base1", "--request", "arm1",
-                          "--drive", "base1", "--drive", "arm1")
+    bridge = start_bridge(
+        procs,
+        world,
+        port,
+        domain,
+        "--user",
+        "rosbridge",
+        "--request",
+        "base1",
+        "--request",
+        "arm1",
+        "--drive",
+        "base1",
+        "--drive",
+        "arm1",
+    )
     assert "rosbridge owns base1" in procs.output(bridge) and "rosbridge owns arm1" in procs.output(bridge)
     assert "commands: taken for arm1, base1 only, from any node on this host" in procs.output(bridge)
     node, out, ctl = start_node(procs, tmp_path, domain)
     seen = lambda: {t: len(of(out, t)) for t in ("joint_states", "scan", "sonar", "odom", "clock", "map")}  # noqa: E731
-    wait_until(lambda: all(n >= 5 for t, n in seen().items() if t != "map") and seen()["map"] >= 1, timeout=60,
-               what="joint_states, scan, odom, clock and map on ROS 2",
-               seen=lambda: (seen(), procs.output(bridge)[-1500:], procs.output(node)[-1500:]))
+    wait_until(
+        lambda: all(n >= 5 for t, n in seen().items() if t != "map") and seen()["map"] >= 1,
+        timeout=60,
+        what="joint_states, scan, odom, clock and map on ROS 2",
+        seen=lambda: (seen(), procs.output(bridge)[-1500:], procs.output(node)[-1500:]),
+    )
 
     # the values are robofabric's: matched by stamp (the sim's time, which /clock carries, as in export --to ros2)
     with obs.lock:
@@ -185,19 +217,29 @@ def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns
     clocks = [r["ns"] for r in of(out, "clock")]
     assert clocks == sorted(clocks) and set(clocks) & sim_stamps, (clocks[:5], sorted(sim_stamps)[:5])
     grid = of(out, "map")[-1]
-    assert (grid["frame"], grid["width"], grid["height"]) == ("map", 6, 4) and math.isclose(grid["resolution"], 0.05, rel_tol=1e-6)
+    assert (grid["frame"], grid["width"], grid["height"]) == ("map", 6, 4) and math.isclose(
+        grid["resolution"], 0.05, rel_tol=1e-6
+    )
     assert grid["data"][1 * 6 + 2] == 0 and grid["data"][2 * 6 + 3] == 100 and grid["data"].count(-1) == 22
 
     # drive: the node's cmd_vel stream moves the base; when the stream stops, the base stops (the sim's deadman)
     start, _ = obs.latest_pose()
     (ctl / "drive").write_text("0.4 0.0")
-    wait_until(lambda: math.dist(obs.latest_pose()[0][:2], start[:2]) > 0.15, timeout=20, what="base1 driven by cmd_vel",
-               seen=lambda: (obs.latest_pose(), procs.output(bridge)[-1500:]))
+    wait_until(
+        lambda: math.dist(obs.latest_pose()[0][:2], start[:2]) > 0.15,
+        timeout=20,
+        what="base1 driven by cmd_vel",
+        seen=lambda: (obs.latest_pose(), procs.output(bridge)[-1500:]),
+    )
     (ctl / "drive").unlink()
     assert any(r["subscribers"] >= 1 for r in of(out, "cmd_vel_sent"))  # the bridge listens to base1's cmd_vel
     stopped_at = time.monotonic()
-    wait_until(lambda: obs.latest_pose()[1] < 0.01, timeout=10, what="base1 stopped after cmd_vel stopped",
-               seen=obs.latest_pose)
+    wait_until(
+        lambda: obs.latest_pose()[1] < 0.01,
+        timeout=10,
+        what="base1 stopped after cmd_vel stopped",
+        seen=obs.latest_pose,
+    )
     braked_in = time.monotonic() - stopped_at
     there, _ = obs.latest_pose()
     moved_after = 0.0
@@ -219,16 +261,24 @@ def test_a_ros2_node_sees_the_world_as_robofabric_does_and_drives_a_base_it_owns
             q = obs.joints[max(obs.joints)]
         return bool(np.allclose(q, target, atol=2e-3))
 
-    wait_until(at_target, timeout=30, what="arm1 at the joint_command's target",
-               seen=lambda: (obs.joints[max(obs.joints)], procs.output(bridge)[-1500:]))
+    wait_until(
+        at_target,
+        timeout=30,
+        what="arm1 at the joint_command's target",
+        seen=lambda: (obs.joints[max(obs.joints)], procs.output(bridge)[-1500:]),
+    )
     (ctl / "joints").unlink()
 
     # joint_trajectory: a JointTrajectory (names in another order) takes the arm to its last point (at_target
     # reads this new target)
     via, target = [-0.4, 0.3, 0.0, 0.2, 0.0, 0.1][: len(names)], [-0.2, 0.15, 0.2, 0.0, -0.25, 0.3][: len(names)]
     (ctl / "trajectory").write_text(json.dumps([names[::-1], [via[::-1], target[::-1]]]))
-    wait_until(at_target, timeout=30, what="arm1 at the JointTrajectory's last point",
-               seen=lambda: (obs.joints[max(obs.joints)], procs.output(bridge)[-1500:]))
+    wait_until(
+        at_target,
+        timeout=30,
+        what="arm1 at the JointTrajectory's last point",
+        seen=lambda: (obs.joints[max(obs.joints)], procs.output(bridge)[-1500:]),
+    )
     (ctl / "trajectory").unlink()
 
 
@@ -243,9 +293,12 @@ def test_without_ownership_cmd_vel_moves_nothing_and_the_refusal_is_on_rosout(li
     start, _ = obs.latest_pose()
     (ctl / "drive").write_text("0.4 0.0")
     refusals = lambda: [r for r in of(out, "rosout") if "refused cmd_vel for base1" in r["msg"]]  # noqa: E731
-    wait_until(lambda: refusals() and len(of(out, "cmd_vel_sent")) >= 10, timeout=30,
-               what="the refusal on /rosout after 10 cmd_vel",
-               seen=lambda: (of(out, "rosout")[-3:], len(of(out, "cmd_vel_sent")), procs.output(bridge)[-1500:]))
+    wait_until(
+        lambda: refusals() and len(of(out, "cmd_vel_sent")) >= 10,
+        timeout=30,
+        what="the refusal on /rosout after 10 cmd_vel",
+        seen=lambda: (of(out, "rosout")[-3:], len(of(out, "cmd_vel_sent")), procs.output(bridge)[-1500:]),
+    )
     moved = math.dist(obs.latest_pose()[0][:2], start[:2])
     (ctl / "drive").unlink()
     r = refusals()[0]
@@ -253,10 +306,14 @@ def test_without_ownership_cmd_vel_moves_nothing_and_the_refusal_is_on_rosout(li
     assert "rosguest does not own base1" in r["msg"] and "--request base1" in r["msg"]
     assert moved < 0.005, moved
     procs.close()  # SIGTERM: the bridge says what it did before it ends
-    assert "refused" in procs.output(bridge) and " 0 commands forwarded" in procs.output(bridge), procs.output(bridge)[-1500:]
+    assert "refused" in procs.output(bridge) and " 0 commands forwarded" in procs.output(bridge), procs.output(bridge)[
+        -1500:
+    ]
 
 
-def test_without_drive_a_ros2_nodes_cmd_vel_moves_nothing_though_the_bridge_owns_the_base(live, observer, procs, tmp_path):
+def test_without_drive_a_ros2_nodes_cmd_vel_moves_nothing_though_the_bridge_owns_the_base(
+    live, observer, procs, tmp_path
+):
     """A plain rclpy node (no login: ROS 2 has none) on the bridge's domain publishes base1's cmd_vel while the
     bridge's login owns base1: without --drive the bridge does not listen, says so at start, and base1 stays."""
     world, port, _ = live
@@ -267,14 +324,25 @@ def test_without_drive_a_ros2_nodes_cmd_vel_moves_nothing_though_the_bridge_owns
     bridge = start_bridge(procs, world, port, domain, "--user", "rosowner", "--request", "base1")
     text = procs.output(bridge)
     assert "rosowner owns base1" in text, text[-1500:]
-    assert "commands: none taken (publishing only); --drive ROBOT takes cmd_vel and joint commands for it" in text, text[-1500:]
+    assert "commands: none taken (publishing only); --drive ROBOT takes cmd_vel and joint commands for it" in text, (
+        text[-1500:]
+    )
     node, out, ctl = start_node(procs, tmp_path, domain)
     # the node and the bridge found each other: the node has base1's odometry from it
-    wait_until(lambda: len(of(out, "odom")) >= 5, timeout=60, what="odom from the bridge", seen=lambda: procs.output(node)[-1500:])
+    wait_until(
+        lambda: len(of(out, "odom")) >= 5,
+        timeout=60,
+        what="odom from the bridge",
+        seen=lambda: procs.output(node)[-1500:],
+    )
     start, _ = obs.latest_pose()
     (ctl / "drive").write_text("0.4 0.0")
-    wait_until(lambda: len(of(out, "cmd_vel_sent")) >= 20, timeout=30, what="20 cmd_vel sent by the node",
-               seen=lambda: procs.output(node)[-1500:])
+    wait_until(
+        lambda: len(of(out, "cmd_vel_sent")) >= 20,
+        timeout=30,
+        what="20 cmd_vel sent by the node",
+        seen=lambda: procs.output(node)[-1500:],
+    )
     moved = max(math.dist(obs.latest_pose()[0][:2], start[:2]), obs.latest_pose()[1])
     (ctl / "drive").unlink()
     assert all(r["subscribers"] == 0 for r in of(out, "cmd_vel_sent")), of(out, "cmd_vel_sent")[-3:]

@@ -26,9 +26,14 @@ def test_without_names_the_positions_are_the_arms_order_and_their_count_is_check
         joint_targets("arm1", ARM, [], [0.1, 0.2])
 
 
-@pytest.mark.parametrize("names, positions", [(["joint_1", "joint_2", "elbow"], [0, 0, 0]),
-                                              (["joint_1", "joint_2"], [0, 0]),
-                                              (["joint_1", "joint_2", "joint_3"], [0, 0])])
+@pytest.mark.parametrize(
+    "names, positions",
+    [
+        (["joint_1", "joint_2", "elbow"], [0, 0, 0]),
+        (["joint_1", "joint_2"], [0, 0]),
+        (["joint_1", "joint_2", "joint_3"], [0, 0]),
+    ],
+)
 def test_names_that_are_not_the_arms_joints_or_a_short_list_are_refused(names, positions):
     with pytest.raises(CommandError, match="are not arm1's joints"):
         joint_targets("arm1", ARM, names, positions)

@@ -38,8 +38,12 @@ def test_the_exports_conversion_fills_live_messages_with_the_same_frames_stamps_
     assert ls.header.frame_id == "base1/laser" and ls.range_max == 8.0 and ls.angle_max == pytest.approx(0.0)
     assert ls.range_min == pytest.approx(0.05)  # the sensor's, which the caller reads from the world description
     assert [float(r) for r in ls.ranges] == [1.0, 2.5, np.inf]  # no echo (range_max in the fabric): +inf, REP 117
-    sonar = ros("rf/w/robot/base1/sonar", Scan(0.0, 0.5, 3.0, np.array([400, 3000], dtype=np.uint16)),
-                range_min=0.02, range_offset=0.26)  # measured from a rim of radius 0.26: true from the centre
+    sonar = ros(
+        "rf/w/robot/base1/sonar",
+        Scan(0.0, 0.5, 3.0, np.array([400, 3000], dtype=np.uint16)),
+        range_min=0.02,
+        range_offset=0.26,
+    )  # measured from a rim of radius 0.26: true from the centre
     assert sonar.header.frame_id == "base1/sonar" and sonar.range_min == pytest.approx(0.28)
     assert sonar.range_max == pytest.approx(3.26) and list(sonar.ranges) == pytest.approx([0.66, np.inf])
     path = ros("rf/w/robot/base1/path", Path(np.array([0.0, 1.0]), np.array([0.0, 2.0]), np.array([0.0, np.pi / 2])))
@@ -59,13 +63,20 @@ def test_a_bases_odometry_gives_its_twist_in_its_own_frame():
     from user_peer.ros2 import direct
 
     yaw = np.pi / 2  # facing +y, driving forward at 0.4 m/s: the sim's world velocity is (0, 0.4)
-    pose = Pose(np.array([1.0, 2.0, 0.0]), quaternion_from_yaw(yaw), np.array([0.0, 0.4, 0.0]), np.array([0.0, 0.0, 0.3]),
-                header=Header(wall_ns=STAMP))
+    pose = Pose(
+        np.array([1.0, 2.0, 0.0]),
+        quaternion_from_yaw(yaw),
+        np.array([0.0, 0.4, 0.0]),
+        np.array([0.0, 0.0, 0.3]),
+        header=Header(wall_ns=STAMP),
+    )
     odom = direct.odometry(Odometry(), "base1", pose, STAMP)
     assert odom == ros("rf/w/robot/base1/pose", pose, kind="mobile")  # the export's Odometry, live
     assert (odom.header.frame_id, odom.child_frame_id) == ("base1/odom", "base1/base_link")
     assert (odom.pose.pose.position.x, odom.pose.pose.position.y) == (1.0, 2.0)
-    assert odom.twist.twist.linear.x == pytest.approx(0.4) and odom.twist.twist.linear.y == pytest.approx(0.0, abs=1e-12)
+    assert odom.twist.twist.linear.x == pytest.approx(0.4) and odom.twist.twist.linear.y == pytest.approx(
+        0.0, abs=1e-12
+    )
     assert odom.twist.twist.angular.z == pytest.approx(0.3)
 
 

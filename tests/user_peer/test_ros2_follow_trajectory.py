@@ -17,12 +17,13 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
 from robofabric.testing import wait_until
-from user_peer.ros2.follow_trajectory import (FollowTrajectoryActions, joint_names_error, tolerance_miss,
-                                              tolerances)
+from user_peer.ros2.follow_trajectory import FollowTrajectoryActions, joint_names_error, tolerance_miss, tolerances
 from user_peer.ros2.trajectory import TrajectoryPlayer
 
-BUILD_IT = ("control_msgs is not importable: it is not among ROS 2 Kilted's wheels; build it into this environment "
-            "with `python -m user_peer.ros2.msgbuild` (make test does; it needs g++ and Python's headers)")
+BUILD_IT = (
+    "control_msgs is not importable: it is not among ROS 2 Kilted's wheels; build it into this environment "
+    "with `python -m user_peer.ros2.msgbuild` (make test does; it needs g++ and Python's headers)"
+)
 JOINTS = ("joint_1", "joint_2", "joint_3", "joint_4", "joint_5", "joint_6")
 
 
@@ -30,7 +31,8 @@ def test_joint_names_must_be_the_arms_each_once_in_any_order():
     assert joint_names_error("arm1", JOINTS, list(reversed(JOINTS))) is None
     assert joint_names_error("arm1", JOINTS, ["joint_1", "elbow"]) == (
         f"joint_names ['joint_1', 'elbow'] are not arm1's joints {list(JOINTS)}: unknown ['elbow'], "
-        "missing ['joint_2', 'joint_3', 'joint_4', 'joint_5', 'joint_6']")
+        "missing ['joint_2', 'joint_3', 'joint_4', 'joint_5', 'joint_6']"
+    )
     assert "a joint named twice" in joint_names_error("arm1", ("a", "b"), ["a", "b", "a"])
     assert "missing ['a', 'b']" in joint_names_error("arm1", ("a", "b"), [])
 
@@ -39,7 +41,10 @@ def test_tolerances_follow_control_msgs_zero_default_and_minus_one_erased():
     tol = lambda name, v: SimpleNamespace(name=name, position=v)  # noqa: E731 (a JointTolerance's two fields read)
     got = tolerances(("a", "b", "c", "d"), [tol("b", 0.2), tol("c", -1.0), tol("d", 0.0)], 0.01)
     assert got == (0.01, 0.2, math.inf, 0.01)
-    assert tolerance_miss(("a", "b"), [0.005, -0.3], (0.01, 0.2)) == "b is 0.3000 rad from where it should be (tolerance 0.2000 rad)"
+    assert (
+        tolerance_miss(("a", "b"), [0.005, -0.3], (0.01, 0.2))
+        == "b is 0.3000 rad from where it should be (tolerance 0.2000 rad)"
+    )
     assert tolerance_miss(("a", "b"), [0.005, -0.3], (0.01, math.inf)) is None
 
 
@@ -85,8 +90,9 @@ def test_a_goal_for_an_arm_not_commandable_or_with_wrong_joints_is_aborted_with_
     actions = executor = None
     try:
         node = rclpy.create_node("follow_server_test", context=context)
-        actions = FollowTrajectoryActions(node, "class1", player, check_owner,
-                                          lambda rid, what, why: refused.append((rid, what, why)))
+        actions = FollowTrajectoryActions(
+            node, "class1", player, check_owner, lambda rid, what, why: refused.append((rid, what, why))
+        )
         assert actions.available
         actions.serve("arm1")
         actions.serve("arm2")
@@ -111,8 +117,10 @@ def test_a_goal_for_an_arm_not_commandable_or_with_wrong_joints_is_aborted_with_
         assert refused[1:] == [("arm1", "follow_joint_trajectory", result.result.error_string)]
 
         goal.trajectory.joint_names = list(JOINTS)
-        goal.trajectory.points = [JointTrajectoryPoint(positions=[0.1] * 6, time_from_start=Duration(sec=2)),
-                                  JointTrajectoryPoint(positions=[0.2] * 6, time_from_start=Duration(sec=1))]
+        goal.trajectory.points = [
+            JointTrajectoryPoint(positions=[0.1] * 6, time_from_start=Duration(sec=2)),
+            JointTrajectoryPoint(positions=[0.2] * 6, time_from_start=Duration(sec=1)),
+        ]
         result = _result(client, goal)
         assert result.result.error_code == FollowJointTrajectory.Result.INVALID_GOAL
         assert result.result.error_string == "point 1's time_from_start 1.000 s goes back (times must not decrease)"
@@ -136,8 +144,12 @@ def test_a_canceled_goal_stops_the_trajectory_and_the_arm():
     rclpy.init(context=context, domain_id=1 + (os.getpid() * 13 + 47) % 100)
     stops: list[bool] = []
     # arm1's joints and its stop, what the server reads and calls; the player plays no targets (thread=False)
-    arm1 = SimpleNamespace(entry=SimpleNamespace(joint_names=JOINTS, lower=(), upper=()), joints=[0.0] * 6,
-                           move_joints=lambda q, wait: None, stop=lambda confirm: stops.append(confirm))
+    arm1 = SimpleNamespace(
+        entry=SimpleNamespace(joint_names=JOINTS, lower=(), upper=()),
+        joints=[0.0] * 6,
+        move_joints=lambda q, wait: None,
+        stop=lambda confirm: stops.append(confirm),
+    )
     player = TrajectoryPlayer(thread=False)
     actions = executor = None
     try:
@@ -153,7 +165,9 @@ def test_a_canceled_goal_stops_the_trajectory_and_the_arm():
         feedback: list = []
         sent = client.send_goal_async(goal, feedback_callback=lambda m: feedback.append(m.feedback))
         handle = wait_until(lambda: sent.done() and sent.result(), timeout=30, what="the goal answered")
-        wait_until(lambda: feedback and player.playing() == {"arm1"}, timeout=30, what="the goal playing, with feedback")
+        wait_until(
+            lambda: feedback and player.playing() == {"arm1"}, timeout=30, what="the goal playing, with feedback"
+        )
         assert list(feedback[0].joint_names) == list(JOINTS) and feedback[0].index == 0
         canceling = handle.cancel_goal_async()
         wait_until(canceling.done, timeout=30, what="the cancel answered")

@@ -24,13 +24,17 @@ CONTROL_MSGS_HASHES = {
 }
 """Hashes in control_msgs' generated C headers (rosidl_generator_c's ``*__TYPE_HASH``): these types are the same in
 Jazzy and in Kilted/Rolling (control_msgs master, what msgbuild builds)."""
-JAZZY_FEEDBACK = ("RIHS01_3fd0aaecf71725121ae1ff7f01098a5e0da581e672be18a6b2c286cb43d96b49",
-                  "RIHS01_738ebcb7a2d7cfa42f9f1001cc99ce3a4383d1cfe508015d9be8485e4b1c66f6")
+JAZZY_FEEDBACK = (
+    "RIHS01_3fd0aaecf71725121ae1ff7f01098a5e0da581e672be18a6b2c286cb43d96b49",
+    "RIHS01_738ebcb7a2d7cfa42f9f1001cc99ce3a4383d1cfe508015d9be8485e4b1c66f6",
+)
 """FollowJointTrajectory_Feedback's and the action's hashes before control_msgs 6.3.0 added the feedback's ``index``
 and ``multi_dof_index`` (Jazzy's): the same headers."""
 
-BUILD_IT = ("tf2_msgs, std_srvs, nav2_msgs or control_msgs is not importable: build them into this environment with "
-            "`python -m user_peer.ros2.msgbuild` (make test does; it needs g++ and Python's headers)")
+BUILD_IT = (
+    "tf2_msgs, std_srvs, nav2_msgs or control_msgs is not importable: build them into this environment with "
+    "`python -m user_peer.ros2.msgbuild` (make test does; it needs g++ and Python's headers)"
+)
 
 
 def test_the_built_tf_message_has_upstreams_type_hash_on_the_wire():
@@ -59,7 +63,10 @@ def test_control_msgs_types_have_upstreams_hashes():
     jazzy[action] = jazzy[action].replace("      int32 index;\n", "").replace("      int32 multi_dof_index;\n", "")
     assert jazzy[action] != msgbuild.INTERFACES["control_msgs"][action]
     old = msgbuild.type_hashes("control_msgs", jazzy)
-    assert (old["control_msgs/action/FollowJointTrajectory_Feedback"], old["control_msgs/action/FollowJointTrajectory"]) == JAZZY_FEEDBACK
+    assert (
+        old["control_msgs/action/FollowJointTrajectory_Feedback"],
+        old["control_msgs/action/FollowJointTrajectory"],
+    ) == JAZZY_FEEDBACK
     assert hashes["control_msgs/action/FollowJointTrajectory_Feedback"] != JAZZY_FEEDBACK[0]
 
 
@@ -89,7 +96,10 @@ def test_a_built_package_says_so_and_a_second_run_builds_nothing(capsys):
 
 def test_what_cannot_be_built_is_said(monkeypatch, capsys):
     assert msgbuild.main(["moveit_msgs"]) == 2
-    assert "unknown package moveit_msgs: this builds tf2_msgs, std_srvs, nav2_msgs, control_msgs" in capsys.readouterr().err
+    assert (
+        "unknown package moveit_msgs: this builds tf2_msgs, std_srvs, nav2_msgs, control_msgs"
+        in capsys.readouterr().err
+    )
     with pytest.raises(SystemExit) as out:  # --help explains, and is no package's name
         msgbuild.main(["--help"])
     assert out.value.code == 0 and "--force" in capsys.readouterr().out

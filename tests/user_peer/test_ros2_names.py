@@ -42,11 +42,21 @@ def test_odometry_poses_paths_and_transforms_carry_the_prefix():
     assert (t.header.frame_id, t.child_frame_id) == ("class1/base1/base_link", "class1/base1/laser")
 
 
-@pytest.mark.parametrize("frame,prefix,ok", [
-    ("world", "", True), ("map", "", True), ("", "", True), ("class1/world", "", False),
-    ("class1/world", "class1/", True), ("class1/map", "class1/", True), ("world", "class1/", True),
-    ("class2/world", "class1/", False), ("class1/base1", "class1/", False), ("class1/", "class1/", False),
-])
+@pytest.mark.parametrize(
+    "frame,prefix,ok",
+    [
+        ("world", "", True),
+        ("map", "", True),
+        ("", "", True),
+        ("class1/world", "", False),
+        ("class1/world", "class1/", True),
+        ("class1/map", "class1/", True),
+        ("world", "class1/", True),
+        ("class2/world", "class1/", False),
+        ("class1/base1", "class1/", False),
+        ("class1/", "class1/", False),
+    ],
+)
 def test_a_goal_is_taken_in_the_namespaces_fixed_frame(frame, prefix, ok):
     g = PoseStamped()
     g.header.frame_id, g.pose.position.x, g.pose.orientation.w = frame, 1.5, 1.0

@@ -16,8 +16,10 @@ from robofabric.testing import wait_until
 from user_peer.ros2.goals import goal_of
 from user_peer.ros2.navigate import NavigateActions
 
-BUILD_IT = ("nav2_msgs is not importable: it is not among ROS 2 Kilted's wheels; build it into this environment with "
-            "`python -m user_peer.ros2.msgbuild` (make test does; it needs g++ and Python's headers)")
+BUILD_IT = (
+    "nav2_msgs is not importable: it is not among ROS 2 Kilted's wheels; build it into this environment with "
+    "`python -m user_peer.ros2.msgbuild` (make test does; it needs g++ and Python's headers)"
+)
 
 
 def test_a_goal_for_a_robot_this_login_may_not_command_is_rejected_with_the_reason():
@@ -32,8 +34,14 @@ def test_a_goal_for_a_robot_this_login_may_not_command_is_rejected_with_the_reas
     actions = None
     try:
         node = rclpy.create_node("navigate_server_test", context=context)
-        actions = NavigateActions(node, "class1", "class1/", lambda rid, what: None,
-                                  lambda rid, what, why: refused.append((rid, what, why)), goal_of)
+        actions = NavigateActions(
+            node,
+            "class1",
+            "class1/",
+            lambda rid, what: None,
+            lambda rid, what, why: refused.append((rid, what, why)),
+            goal_of,
+        )
         assert actions.available
         actions.serve("base1")
         client_node = rclpy.create_node("navigate_client_test", context=context)
@@ -68,12 +76,26 @@ def test_the_action_node_takes_the_bridges_ros_args_under_a_name_of_its_own():
     from rclpy.action import get_action_server_names_and_types_by_node
 
     context = rclpy.Context()
-    rclpy.init(args=["robofabric", "--ros-args", "-r", "__node:=bridge9", "-r", "/class1/base1/navigate_to_pose:=/class1/base1/go",
-                     "-p", "use_sim_time:=true"], context=context, domain_id=1 + (os.getpid() * 11 + 47) % 100)
+    rclpy.init(
+        args=[
+            "robofabric",
+            "--ros-args",
+            "-r",
+            "__node:=bridge9",
+            "-r",
+            "/class1/base1/navigate_to_pose:=/class1/base1/go",
+            "-p",
+            "use_sim_time:=true",
+        ],
+        context=context,
+        domain_id=1 + (os.getpid() * 11 + 47) % 100,
+    )
     actions = None
     try:
         node = rclpy.create_node("robofabric_rosargs", context=context)
-        actions = NavigateActions(node, "class1", "class1/", lambda rid, what: None, lambda rid, what, why: None, goal_of)
+        actions = NavigateActions(
+            node, "class1", "class1/", lambda rid, what: None, lambda rid, what, why: None, goal_of
+        )
         actions.serve("base1")
         assert (node.get_name(), actions.node.get_name()) == ("bridge9", "bridge9_navigate")
         assert actions.node.get_parameter("use_sim_time").value is True

@@ -34,7 +34,9 @@ def test_a_late_subscriber_gets_the_current_owner_and_each_change_once(monkeypat
         out.update(["base1", "arm1"], records.get)
         out.update(["base1", "arm1"], records.get)  # nothing changed: nothing more sent
         assert out.sent == 2
-        node.create_subscription(String, "/class1/base1/owner", lambda m: got.append(m.data), OWNER_QOS)  # after: latched
+        node.create_subscription(
+            String, "/class1/base1/owner", lambda m: got.append(m.data), OWNER_QOS
+        )  # after: latched
 
         def spun(cond):
             ex.spin_once(timeout_sec=0.1)

@@ -15,8 +15,10 @@ from rclpy.executors import SingleThreadedExecutor
 from user_peer.errors import FabricUserError
 from user_peer.ros2.ownership_services import OwnershipServices, trigger_class
 
-BUILD_IT = ("std_srvs is not importable: it is not among ROS 2 Kilted's wheels; build it into this environment with "
-            "`python -m user_peer.ros2.msgbuild` (make test does; it needs g++ and Python's headers)")
+BUILD_IT = (
+    "std_srvs is not importable: it is not among ROS 2 Kilted's wheels; build it into this environment with "
+    "`python -m user_peer.ros2.msgbuild` (make test does; it needs g++ and Python's headers)"
+)
 
 
 @pytest.fixture
@@ -43,7 +45,9 @@ def test_each_driven_robot_has_its_two_services_under_the_namespace_until_it_lea
     asking.add("base1")
     asking.add("base1")  # once
     asking.add("arm1")
-    assert services(node) == {f"/class1/{r}/{s}" for r in ("base1", "arm1") for s in ("request_ownership", "release_ownership")}
+    assert services(node) == {
+        f"/class1/{r}/{s}" for r in ("base1", "arm1") for s in ("request_ownership", "release_ownership")
+    }
     asking.forget("arm1")
     assert services(node) == {"/class1/base1/request_ownership", "/class1/base1/release_ownership"}
 

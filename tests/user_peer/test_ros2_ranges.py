@@ -36,7 +36,9 @@ def test_the_field_of_view_is_the_sims_fan():
 @pytest.mark.parametrize("r", [0.0, 0.4, 2.5])
 def test_a_transducers_range_lands_where_the_rings_scan_puts_its_echo(r):
     frames = transducer_frames("base1", SONAR)
-    assert [f.child for f in frames] == [f"base1/sonar_{i}" for i in range(8)] and {f.parent for f in frames} == {"base1/sonar"}
+    assert [f.child for f in frames] == [f"base1/sonar_{i}" for i in range(8)] and {f.parent for f in frames} == {
+        "base1/sonar"
+    }
     for f, a in zip(frames, ANGLES):
         yaw = _yaw(f.rotation)
         tip = np.array(f.translation[:2]) + r * np.array([math.cos(yaw), math.sin(yaw)])
@@ -45,8 +47,17 @@ def test_a_transducers_range_lands_where_the_rings_scan_puts_its_echo(r):
 
 
 def _world(sonar: SonarInfo | None) -> WorldInfo:
-    robot = RobotInfo("base1", "reeman", "mobile", np.zeros(4), ("wheel_left", "wheel_right"), np.zeros(2), np.zeros(2),
-                      np.zeros(2), sonar=sonar)
+    robot = RobotInfo(
+        "base1",
+        "reeman",
+        "mobile",
+        np.zeros(4),
+        ("wheel_left", "wheel_right"),
+        np.zeros(2),
+        np.zeros(2),
+        np.zeros(2),
+        sonar=sonar,
+    )
     return WorldInfo("w", "combined", 0.002, {"scan": 20.0}, (robot,))
 
 
@@ -63,8 +74,9 @@ def test_a_ros_node_gets_each_transducer_as_a_range_and_an_unread_one_is_not_sen
         out.describe(_world(SONAR))
         node.create_subscription(Range, "/class1/base1/sonar_2", got.append, qos_profile_sensor_data)
         ranges = [0.5, 1.25, 0.75, 3.0, 3.0, 2.0, 0.3, 1.0]  # 3.0: the sonar's range_max, no echo
-        scan = Scan.from_ranges(ranges, angle_min=0.0, angle_increment=math.radians(45), range_max=3.0,
-                                header=Header(stamp=12.5))
+        scan = Scan.from_ranges(
+            ranges, angle_min=0.0, angle_increment=math.radians(45), range_max=3.0, header=Header(stamp=12.5)
+        )
 
         def sent() -> bool:
             out.on_scan("base1", "rf/w/robot/base1/sonar", scan, 12_500_000_000)
@@ -73,7 +85,11 @@ def test_a_ros_node_gets_each_transducer_as_a_range_and_an_unread_one_is_not_sen
 
         wait_until(sent, timeout=30, what="sonar_2's Range on the subscriber")
         m = got[-1]
-        assert (m.header.frame_id, m.header.stamp.sec, m.header.stamp.nanosec) == ("class1/base1/sonar_2", 12, 500_000_000)
+        assert (m.header.frame_id, m.header.stamp.sec, m.header.stamp.nanosec) == (
+            "class1/base1/sonar_2",
+            12,
+            500_000_000,
+        )
         assert m.radiation_type == Range.ULTRASOUND and m.field_of_view == pytest.approx(math.radians(30))
         assert (m.min_range, m.max_range, m.range) == pytest.approx((0.02, 3.0, 0.75))
         before = out.sent
@@ -81,8 +97,11 @@ def test_a_ros_node_gets_each_transducer_as_a_range_and_an_unread_one_is_not_sen
         assert out.sent - before == 1  # only sonar_2 has a reader: the seven others are not published
         # no echo: +inf (REP 117); the subscriber's transducer 3 would read it
         node.create_subscription(Range, "/class1/base1/sonar_3", got.append, qos_profile_sensor_data)
-        wait_until(lambda: sent() and any(g.header.frame_id.endswith("sonar_3") for g in got), timeout=30,
-                   what="sonar_3's Range")
+        wait_until(
+            lambda: sent() and any(g.header.frame_id.endswith("sonar_3") for g in got),
+            timeout=30,
+            what="sonar_3's Range",
+        )
         assert all(math.isinf(g.range) for g in got if g.header.frame_id.endswith("sonar_3"))
         # the robot loses its ring (a new description): its topics go
         out.describe(_world(None))
@@ -107,8 +126,13 @@ def test_export_to_ros2_writes_each_transducer_as_the_bridge_does_its_frames_onc
     ranges = [0.5, 1.25, 0.75, 3.0, 3.0, 2.0, 0.3, 1.0]
     with Ros2Writer(tmp_path / "r.mcap", catalog=catalog) as w:
         for stamp in (12.5, 12.55):
-            w.write("rf/w/robot/base1/sonar", Scan.from_ranges(ranges, angle_min=0.0, angle_increment=math.radians(45),
-                                                              range_max=3.0, header=Header(stamp=stamp)), 0)
+            w.write(
+                "rf/w/robot/base1/sonar",
+                Scan.from_ranges(
+                    ranges, angle_min=0.0, angle_increment=math.radians(45), range_max=3.0, header=Header(stamp=stamp)
+                ),
+                0,
+            )
     got: dict[str, list] = {}
     with open(tmp_path / "r.mcap", "rb") as f:
         for _s, channel, _m, m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
@@ -121,7 +145,15 @@ def test_export_to_ros2_writes_each_transducer_as_the_bridge_does_its_frames_onc
             assert (m.field_of_view, m.min_range, m.max_range) == pytest.approx((math.radians(30), 0.02, 3.0))
             assert m.range == (math.inf if r == 3.0 else pytest.approx(r))
     (static,) = got["/tf_static"]  # once: the ring did not change
-    sent = {t.child_frame_id: (t.header.frame_id, (t.transform.translation.x, t.transform.translation.y),
-                               (t.transform.rotation.z, t.transform.rotation.w)) for t in static.transforms}
-    assert sent == {f.child: (f.parent, pytest.approx(f.translation[:2]), pytest.approx(f.rotation[2:]))
-                    for f in transducer_frames("base1", SONAR)}
+    sent = {
+        t.child_frame_id: (
+            t.header.frame_id,
+            (t.transform.translation.x, t.transform.translation.y),
+            (t.transform.rotation.z, t.transform.rotation.w),
+        )
+        for t in static.transforms
+    }
+    assert sent == {
+        f.child: (f.parent, pytest.approx(f.translation[:2]), pytest.approx(f.rotation[2:]))
+        for f in transducer_frames("base1", SONAR)
+    }

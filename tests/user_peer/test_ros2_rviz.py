@@ -41,9 +41,16 @@ def test_the_rviz2_configuration_shows_the_bridges_topics_with_its_qos_in_the_ma
             assert qos["Reliability Policy"] == "Reliable" and qos["Durability Policy"] == policy, name
     assert any(d["Class"] == "rviz_default_plugins/TF" for d in manager["Displays"])
     # each robot's model from its latched robot_description (user_peer.ros2.models), with the same QoS
-    models = {d["Description Topic"]["Value"]: d for d in manager["Displays"] if d["Class"] == "rviz_default_plugins/RobotModel"}
+    models = {
+        d["Description Topic"]["Value"]: d
+        for d in manager["Displays"]
+        if d["Class"] == "rviz_default_plugins/RobotModel"
+    }
     assert set(models) == {"/arm1/robot_description", "/base1/robot_description"}, sorted(models)
     for name, d in models.items():
         q = d["Description Topic"]
-        assert d["Description Source"] == "Topic" and (q["Reliability Policy"], q["Durability Policy"]) == ("Reliable", "Transient Local")
+        assert d["Description Source"] == "Topic" and (q["Reliability Policy"], q["Durability Policy"]) == (
+            "Reliable",
+            "Transient Local",
+        )
         assert d["TF Prefix"] == name.split("/")[1]  # the robot's frames are under its id

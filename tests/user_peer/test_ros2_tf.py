@@ -28,8 +28,10 @@ from user_peer.openfmt.ros2 import Ros2Writer  # noqa: E402
 from user_peer.ros2.tf import TfOut, tf_message_class  # noqa: E402
 
 T0 = 1_760_000_000_000_000_000
-BUILD_IT = ("tf2_msgs is not importable: it is not among ROS 2 Kilted's wheels; build it into this environment with "
-            "`python -m user_peer.ros2.msgbuild` (make test does; it needs g++ and Python's headers)")
+BUILD_IT = (
+    "tf2_msgs is not importable: it is not among ROS 2 Kilted's wheels; build it into this environment with "
+    "`python -m user_peer.ros2.msgbuild` (make test does; it needs g++ and Python's headers)"
+)
 
 
 @dataclass
@@ -54,7 +56,9 @@ def state() -> list[tuple[str, object]]:
     out: list[tuple[str, object]] = []
     for i in range(1, 6):
         h = Header(0.05 * i, T0 + i, i, "sim-1")
-        out.append(("rf/w/robot/base1/pose", Pose(np.array([0.1 * i, 0.2, 0.0]), quaternion_from_yaw(0.3 * i), header=h)))
+        out.append(
+            ("rf/w/robot/base1/pose", Pose(np.array([0.1 * i, 0.2, 0.0]), quaternion_from_yaw(0.3 * i), header=h))
+        )
         out.append(("rf/w/robot/arm1/joints", JointState(names, np.full(6, 0.1 * i), np.zeros(6), h)))
     return out
 
@@ -65,35 +69,60 @@ def row(parent: str, child: str, ns: int, tr, rot) -> tuple:
 
 def test_the_bridges_tf_is_the_exports_frame_tree_stamped_with_sim_time(tmp_path):
     sent: dict[str, Sent] = {}
-    tf = TfOut(None, RobotCatalog(None, scene="combined"), message=TFMessage,
-               publisher=lambda topic, qos: sent.setdefault(topic, Sent()))
+    tf = TfOut(
+        None,
+        RobotCatalog(None, scene="combined"),
+        message=TFMessage,
+        publisher=lambda topic, qos: sent.setdefault(topic, Sent()),
+    )
     with Ros2Writer(tmp_path / "e.mcap", scene="combined") as w:
         for key, msg in state():
             ns = int(round(msg.header.stamp * 1e9))
             tf.on_state(key, msg, ns)
             w.write(key, msg, T0)
-    live = [row(t.header.frame_id, t.child_frame_id, t.header.stamp.sec * 10**9 + t.header.stamp.nanosec,
-                (t.transform.translation.x, t.transform.translation.y, t.transform.translation.z),
-                (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z, t.transform.rotation.w))
-            for m in sent["/tf"].msgs for t in m.transforms]
+    live = [
+        row(
+            t.header.frame_id,
+            t.child_frame_id,
+            t.header.stamp.sec * 10**9 + t.header.stamp.nanosec,
+            (t.transform.translation.x, t.transform.translation.y, t.transform.translation.z),
+            (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z, t.transform.rotation.w),
+        )
+        for m in sent["/tf"].msgs
+        for t in m.transforms
+    ]
     exported = []
     with open(tmp_path / "e.mcap", "rb") as f:
         for _s, _c, _m, m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=["/tf"]):
-            exported += [row(t.header.frame_id, t.child_frame_id, t.header.stamp.sec * 10**9 + t.header.stamp.nanosec,
-                             (t.transform.translation.x, t.transform.translation.y, t.transform.translation.z),
-                             (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z, t.transform.rotation.w))
-                         for t in m.transforms]
+            exported += [
+                row(
+                    t.header.frame_id,
+                    t.child_frame_id,
+                    t.header.stamp.sec * 10**9 + t.header.stamp.nanosec,
+                    (t.transform.translation.x, t.transform.translation.y, t.transform.translation.z),
+                    (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z, t.transform.rotation.w),
+                )
+                for t in m.transforms
+            ]
     assert live == exported and len(live) > 10
     parents = {r[1]: r[0] for r in live}
     assert {c: p for c, p in parents.items() if c.startswith("base1/")} == {
-        "base1/odom": "map", "base1/base_link": "base1/odom", "base1/laser": "base1/base_link", "base1/sonar": "base1/base_link"}
+        "base1/odom": "map",
+        "base1/base_link": "base1/odom",
+        "base1/laser": "base1/base_link",
+        "base1/sonar": "base1/base_link",
+    }
     urdf = read_urdf(robots.load("meca500").urdf_path.read_text())  # robot_state_publisher's tree: parent link -> child
     assert {c: p for c, p in parents.items() if c.startswith("arm1/")} == {
-        "arm1/" + urdf.root: "map", **{f"arm1/{j.child}": f"arm1/{j.parent}" for j in urdf.joints}}
+        "arm1/" + urdf.root: "map",
+        **{f"arm1/{j.child}": f"arm1/{j.parent}" for j in urdf.joints},
+    }
     assert {"arm1/base_link", "arm1/link_6", "arm1/flange"} <= set(parents)
     assert {r[2] for r in live} == {int(round(0.05 * i * 1e9)) for i in range(1, 6)}  # the sim's time
     static = [sorted((t.header.frame_id, t.child_frame_id) for t in m.transforms) for m in sent["/tf_static"].msgs]
-    assert static == [[("base1/base_link", "base1/laser"), ("base1/base_link", "base1/sonar"), ("map", "base1/odom")]]  # once
+    assert static == [
+        [("base1/base_link", "base1/laser"), ("base1/base_link", "base1/sonar"), ("map", "base1/odom")]
+    ]  # once
     assert tf.sent == len(sent["/tf"].msgs)
 
 
@@ -115,16 +144,28 @@ def test_each_sonar_transducers_frame_goes_once_on_tf_static_under_the_namespace
     from fabric.interfaces import RobotInfo, SonarInfo, WorldInfo
 
     sent: dict[str, Sent] = {}
-    tf = TfOut(None, RobotCatalog(None), namespace="class1", message=TFMessage,
-               publisher=lambda topic, qos: sent.setdefault(topic, Sent()))
+    tf = TfOut(
+        None,
+        RobotCatalog(None),
+        namespace="class1",
+        message=TFMessage,
+        publisher=lambda topic, qos: sent.setdefault(topic, Sent()),
+    )
     sonar = SonarInfo(np.radians([0.0, 90.0, 180.0]), 0.26, 0.12, 0.02, 3.0)
-    info = WorldInfo("w", "s", 0.002, {}, (RobotInfo("base1", "reeman", "mobile", np.zeros(4), (), np.zeros(0), np.zeros(0),
-                                                     np.zeros(0), sonar=sonar),))
+    info = WorldInfo(
+        "w",
+        "s",
+        0.002,
+        {},
+        (RobotInfo("base1", "reeman", "mobile", np.zeros(4), (), np.zeros(0), np.zeros(0), np.zeros(0), sonar=sonar),),
+    )
     tf.describe(info)
     tf.describe(info)  # the same description again: nothing more
     assert len(sent["/class1/tf_static"].msgs) == 1  # the transducers, once
-    rows = {(t.header.frame_id, t.child_frame_id): (t.transform.translation.x, t.transform.translation.y)
-            for t in sent["/class1/tf_static"].msgs[0].transforms}
+    rows = {
+        (t.header.frame_id, t.child_frame_id): (t.transform.translation.x, t.transform.translation.y)
+        for t in sent["/class1/tf_static"].msgs[0].transforms
+    }
     assert set(rows) == {("class1/base1/sonar", f"class1/base1/sonar_{i}") for i in range(3)}
     assert rows[("class1/base1/sonar", "class1/base1/sonar_1")] == pytest.approx((0.0, 0.26), abs=1e-12)
 
@@ -134,10 +175,26 @@ def described_world(*entries: tuple[str, str]):
     from fabric.interfaces import RobotInfo, SonarInfo, WorldInfo
 
     sonar = SonarInfo(np.radians(np.arange(0.0, 360.0, 45.0)), 0.26, 0.12, 0.02, 3.0, center=np.array([0.05, 0.0]))
-    return WorldInfo("w", "s", 0.002, {"scan": 20.0}, tuple(
-        RobotInfo(rid, rtype, robots.load(rtype).kind, np.array([3.0, 0.0, 0.75, 0.0]), robots.load(rtype).joint_names,
-                  np.zeros(6), np.zeros(6), np.zeros(6), sonar=sonar if rtype == "reeman" else None)
-        for rid, rtype in entries))
+    return WorldInfo(
+        "w",
+        "s",
+        0.002,
+        {"scan": 20.0},
+        tuple(
+            RobotInfo(
+                rid,
+                rtype,
+                robots.load(rtype).kind,
+                np.array([3.0, 0.0, 0.75, 0.0]),
+                robots.load(rtype).joint_names,
+                np.zeros(6),
+                np.zeros(6),
+                np.zeros(6),
+                sonar=sonar if rtype == "reeman" else None,
+            )
+            for rid, rtype in entries
+        ),
+    )
 
 
 def tree(transforms) -> tuple[dict[str, set[str]], set[str]]:
@@ -162,7 +219,9 @@ def test_robots_heard_before_the_world_description_end_with_the_described_static
     for i in (1, 2):  # before the description
         tf.on_state("rf/w/robot/arm7/pose", pose(i), T0 + i)
         tf.on_state("rf/w/robot/base7/pose", pose(i), T0 + i)
-    assert {"arm7/odom", "arm7/laser"} <= {t.child_frame_id for t in sent["/tf_static"].msgs[-1].transforms}  # the guess
+    assert {"arm7/odom", "arm7/laser"} <= {
+        t.child_frame_id for t in sent["/tf_static"].msgs[-1].transforms
+    }  # the guess
     tf.describe(described_world(("arm7", "meca500"), ("base7", "reeman")))
     first_tf = len(sent["/tf"].msgs)
     for i in (3, 4):  # after it
@@ -170,7 +229,12 @@ def test_robots_heard_before_the_world_description_end_with_the_described_static
         tf.on_state("rf/w/robot/arm7/joints", JointState(names, np.full(6, 0.1 * i), np.zeros(6), h(i)), T0 + i)
         tf.on_state("rf/w/robot/base7/pose", pose(i), T0 + i)
     static = [(t.header.frame_id, t.child_frame_id) for t in sent["/tf_static"].msgs[-1].transforms]
-    assert {c for _, c in static} == {"base7/odom", "base7/laser", "base7/sonar", *(f"base7/sonar_{i}" for i in range(8))}
+    assert {c for _, c in static} == {
+        "base7/odom",
+        "base7/laser",
+        "base7/sonar",
+        *(f"base7/sonar_{i}" for i in range(8)),
+    }
     live = [(t.header.frame_id, t.child_frame_id) for m in sent["/tf"].msgs[first_tf:] for t in m.transforms]
     parents, roots = tree(static + live)
     assert all(len(p) == 1 for p in parents.values()), {c: p for c, p in parents.items() if len(p) != 1}
@@ -200,4 +264,8 @@ def test_robots_drawn_at_once_on_several_threads_are_each_drawn_from_the_whole_c
         for t in threads:
             t.join(timeout=120)
         assert (drawn["arm1"].kind, drawn["arm1"].type) == ("arm", "meca500")
-        assert (drawn["base1"].kind, drawn["base1"].type, drawn["base1"].sonar is not None) == ("mobile", "reeman", True)
+        assert (drawn["base1"].kind, drawn["base1"].type, drawn["base1"].sonar is not None) == (
+            "mobile",
+            "reeman",
+            True,
+        )

@@ -40,18 +40,21 @@ def test_the_file_renames_sets_qos_and_allows_and_denies(tmp_path):
     assert m.summary() == "1 renamed, QoS set for 1, only /base1/*, /map, never /base1/sonar*"
 
 
-@pytest.mark.parametrize("text,says", [
-    ("- /a\n", "not a mapping"),
-    ("remap: {}\n", "unknown section 'remap'"),
-    ("rename: {/a: b}\n", "'b' is not an absolute topic name"),
-    ("rename: {/a: /1b}\n", "'/1b' is not a ROS topic name"),
-    ("rename: {/a: /c, /b: /c}\n", "gives '/c' to two topics"),
-    ("qos: {/a: {reliability: sometimes}}\n", "reliability 'sometimes' is not one of reliable, best_effort"),
-    ("qos: {/a: {depth: 0}}\n", "depth 0 is not a whole number"),
-    ("qos: {/a: {lifespan: 3}}\n", "unknown QoS field 'lifespan'"),
-    ("deny: [scan]\n", "deny: give a list of absolute topic names"),
-    ("rename: [/a\n", "not YAML"),
-])
+@pytest.mark.parametrize(
+    "text,says",
+    [
+        ("- /a\n", "not a mapping"),
+        ("remap: {}\n", "unknown section 'remap'"),
+        ("rename: {/a: b}\n", "'b' is not an absolute topic name"),
+        ("rename: {/a: /1b}\n", "'/1b' is not a ROS topic name"),
+        ("rename: {/a: /c, /b: /c}\n", "gives '/c' to two topics"),
+        ("qos: {/a: {reliability: sometimes}}\n", "reliability 'sometimes' is not one of reliable, best_effort"),
+        ("qos: {/a: {depth: 0}}\n", "depth 0 is not a whole number"),
+        ("qos: {/a: {lifespan: 3}}\n", "unknown QoS field 'lifespan'"),
+        ("deny: [scan]\n", "deny: give a list of absolute topic names"),
+        ("rename: [/a\n", "not YAML"),
+    ],
+)
 def test_a_map_that_cannot_be_used_is_refused_saying_what_is_wrong(tmp_path, text, says):
     (tmp_path / "m.yaml").write_text(text)
     with pytest.raises(TopicMapError, match="topic map .*m.yaml") as e:
@@ -62,8 +65,12 @@ def test_a_map_that_cannot_be_used_is_refused_saying_what_is_wrong(tmp_path, tex
 @pytest.mark.slow
 def test_the_bridge_refuses_a_bad_map_at_start_with_exit_2(tmp_path):
     (tmp_path / "m.yaml").write_text("rename: {/base1/scan: scan}\n")
-    r = subprocess.run(robofabric_cmd("ros2", "--world", "nowhere", "--topic-map", str(tmp_path / "m.yaml")),
-                       capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        robofabric_cmd("ros2", "--world", "nowhere", "--topic-map", str(tmp_path / "m.yaml")),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert r.returncode == 2 and "'scan' is not an absolute topic name" in r.stderr, (r.returncode, r.stderr[-1500:])
 
 
@@ -73,9 +80,16 @@ def test_a_node_through_the_map_publishes_renamed_with_the_maps_qos_and_nothing_
     ctx.init(domain_id=1 + (os.getpid() * 7 + 62) % 100)
     node = rclpy.create_node("topic_map_test", context=ctx)
     try:
-        mapped = MappedNode(node, parse_topic_map(
-            {"rename": {"/base1/scan": "/scan"}, "qos": {"/base1/scan": {"reliability": "reliable", "durability": "transient_local"}},
-             "deny": ["/object/*"]}))
+        mapped = MappedNode(
+            node,
+            parse_topic_map(
+                {
+                    "rename": {"/base1/scan": "/scan"},
+                    "qos": {"/base1/scan": {"reliability": "reliable", "durability": "transient_local"}},
+                    "deny": ["/object/*"],
+                }
+            ),
+        )
         pub = mapped.create_publisher(LaserScan, "/base1/scan", qos_profile_sensor_data)
         off = mapped.create_publisher(String, "/object/goal/pose", QoSProfile(depth=10))
         sub = mapped.create_subscription(String, "/object/goal/cmd", lambda m: None, 10)

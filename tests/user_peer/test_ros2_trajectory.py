@@ -33,12 +33,15 @@ def test_points_come_in_the_arms_order_with_their_times():
     assert t == Timed((0.5, 3.25), ((1.0, 2.0), (0.1, 0.2)))
 
 
-@pytest.mark.parametrize("points, why", [
-    ([], "without points"),
-    ([([0.0, 0.0], 2.0), ([0.1, 0.1], 1.0)], "goes back"),
-    ([([math.nan, 0.0], 1.0)], "not finite"),
-    ([([0.0, 5.0], 1.0)], "outside its limits"),
-])
+@pytest.mark.parametrize(
+    "points, why",
+    [
+        ([], "without points"),
+        ([([0.0, 0.0], 2.0), ([0.1, 0.1], 1.0)], "goes back"),
+        ([([math.nan, 0.0], 1.0)], "not finite"),
+        ([([0.0, 5.0], 1.0)], "outside its limits"),
+    ],
+)
 def test_a_trajectory_the_arm_cannot_follow_is_refused_with_its_reason(points, why):
     with pytest.raises(CommandError, match=why):
         timed_points("arm1", ARM, traj(ARM, points), lower=[-3.0, -3.0], upper=[3.0, 3.0])

@@ -23,10 +23,14 @@ def test_discovery_stays_on_this_host_unless_the_user_set_it_or_asks():
 
 def test_the_bridge_says_whom_it_takes_commands_from():
     only_publish = boundary_lines("ros", (), "42", discovery({}, None))
-    assert only_publish == ["DDS discovery: this host only (the bridge's default; --discovery subnet opens it); ROS domain 42",
-                            "commands: none taken (publishing only); --drive ROBOT takes cmd_vel and joint commands for it"]
+    assert only_publish == [
+        "DDS discovery: this host only (the bridge's default; --discovery subnet opens it); ROS domain 42",
+        "commands: none taken (publishing only); --drive ROBOT takes cmd_vel and joint commands for it",
+    ]
     lan = boundary_lines("ros", ("base1", "arm1"), "42", discovery({}, "subnet"))
     assert lan[0].startswith("DDS discovery: the local network")
-    assert lan[1] == ("commands: taken for arm1, base1 only, from any node that discovers it on ROS domain 42 (ROS 2 has no "
-                      "logins), sent as 'ros' while 'ros' owns the robot")
+    assert lan[1] == (
+        "commands: taken for arm1, base1 only, from any node that discovers it on ROS domain 42 (ROS 2 has no "
+        "logins), sent as 'ros' while 'ros' owns the robot"
+    )
     assert "any node on this host" in boundary_lines("ros", ("base1",), "0", discovery({}, None))[1]

@@ -11,7 +11,9 @@ from fabric.interfaces.sensors import BaseInfo
 from user_peer.ros2.commands import CommandError
 from user_peer.ros2.twist import base_limits, twist_check
 
-BASE = BaseInfo(radius=0.3, wheel_separation=0.4, wheel_radius=0.08, max_speed=1.0, max_omega=1.5, max_accel=1.0, max_alpha=3.0)
+BASE = BaseInfo(
+    radius=0.3, wheel_separation=0.4, wheel_radius=0.08, max_speed=1.0, max_omega=1.5, max_accel=1.0, max_alpha=3.0
+)
 
 
 @pytest.mark.parametrize("v, omega", [(math.nan, 0.0), (0.0, math.inf), (-math.inf, math.nan)])
@@ -29,8 +31,10 @@ def test_a_twist_ten_times_the_limit_is_refused_as_a_unit_mistake():
 
 
 def test_above_the_limit_is_sent_with_the_clamp_told_and_within_it_quietly():
-    assert twist_check(2.0, -2.0, BASE) == ("linear.x 2 m/s clamped by the sim to 1 m/s (the base's limit); "
-                                            "angular.z -2 rad/s clamped by the sim to -1.5 rad/s (the base's limit)")
+    assert twist_check(2.0, -2.0, BASE) == (
+        "linear.x 2 m/s clamped by the sim to 1 m/s (the base's limit); "
+        "angular.z -2 rad/s clamped by the sim to -1.5 rad/s (the base's limit)"
+    )
     assert twist_check(1.0, -1.5, BASE) == "" and twist_check(50.0, 0.0, None) == ""
 
 

@@ -24,9 +24,16 @@ def test_b_then_a_against_sim_and_compute_processes(procs):
     ep = f"tcp/127.0.0.1:{port}"
     with Fabric(router_config(world, port), kind="router", peer_id="router") as router:
         sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep), name="sim")
-        wait_until(lambda: router.live_peers("sim"), timeout=90, what="sim peer", seen=lambda: procs.output(sim)[-1500:])
+        wait_until(
+            lambda: router.live_peers("sim"), timeout=90, what="sim peer", seen=lambda: procs.output(sim)[-1500:]
+        )
         comp = procs.start(robofabric_cmd("compute", "--world", world, "--connect", ep), name="compute")
-        wait_until(lambda: "arms arm1" in procs.output(comp), timeout=90, what="compute peer serving arm1", seen=lambda: procs.output(comp)[-1500:])
+        wait_until(
+            lambda: "arms arm1" in procs.output(comp),
+            timeout=90,
+            what="compute peer serving arm1",
+            seen=lambda: procs.output(comp)[-1500:],
+        )
         with World(client_config(world, port), "bob", timeout=10.0) as w:
             res_b = SCENARIOS["test-b"](w, arm_id="arm1")
         with World(client_config(world, port), "alice", timeout=10.0) as w:
@@ -53,10 +60,23 @@ def test_a_in_a_world_without_ownership(procs):
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
     with Fabric(router_config(world, port), kind="router", peer_id="router") as router:
-        sim = procs.start(robofabric_cmd("sim", "--scene", "arm_cell", "--no-ownership", "--world", world, "--connect", ep), name="sim")
-        wait_until(lambda: router.live_peers("sim"), timeout=90, what="sim peer", seen=lambda: procs.output(sim)[-1500:])
-        comp = procs.start(robofabric_cmd("compute", "--no-navigation", "--stream", "arm1:target", "--world", world, "--connect", ep), name="compute")
-        wait_until(lambda: "arms arm1" in procs.output(comp), timeout=90, what="compute peer serving arm1", seen=lambda: procs.output(comp)[-1500:])
+        sim = procs.start(
+            robofabric_cmd("sim", "--scene", "arm_cell", "--no-ownership", "--world", world, "--connect", ep),
+            name="sim",
+        )
+        wait_until(
+            lambda: router.live_peers("sim"), timeout=90, what="sim peer", seen=lambda: procs.output(sim)[-1500:]
+        )
+        comp = procs.start(
+            robofabric_cmd("compute", "--no-navigation", "--stream", "arm1:target", "--world", world, "--connect", ep),
+            name="compute",
+        )
+        wait_until(
+            lambda: "arms arm1" in procs.output(comp),
+            timeout=90,
+            what="compute peer serving arm1",
+            seen=lambda: procs.output(comp)[-1500:],
+        )
         with World(client_config(world, port), "erin", timeout=3.0) as w:
             res = SCENARIOS["test-a"](w, arm_id="arm1", points=3)
     assert res.ok, "\n".join(res.lines)

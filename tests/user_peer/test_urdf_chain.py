@@ -41,13 +41,22 @@ def test_a_prismatic_joint_and_a_fixed_rotation():
     assert np.allclose(pts, [[1.0, 0.25, 0.0], [1.0, 0.75, 0.0]])  # the yaw turns the slide and the tip onto +y
 
 
-@pytest.mark.parametrize("text, words", [
-    ("<robot", "not XML"),
-    ("<robot name='r'><link name='a'/></robot>", "no joints"),
-    ("<robot><joint name='j' type='fixed'><parent link='a'/><child link='b'/><origin xyz='1 2'/></joint></robot>", "three numbers"),
-    ("<robot><joint name='j' type='fixed'><parent link='a'/><child link='b'/></joint>"
-     "<joint name='k' type='fixed'><parent link='b'/><child link='a'/></joint></robot>", "root link"),
-])
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("<robot", "not XML"),
+        ("<robot name='r'><link name='a'/></robot>", "no joints"),
+        (
+            "<robot><joint name='j' type='fixed'><parent link='a'/><child link='b'/><origin xyz='1 2'/></joint></robot>",
+            "three numbers",
+        ),
+        (
+            "<robot><joint name='j' type='fixed'><parent link='a'/><child link='b'/></joint>"
+            "<joint name='k' type='fixed'><parent link='b'/><child link='a'/></joint></robot>",
+            "root link",
+        ),
+    ],
+)
 def test_a_urdf_it_cannot_read_says_why(text, words):
     with pytest.raises(UrdfError, match=words):
         UrdfChain(text)

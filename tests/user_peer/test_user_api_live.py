@@ -52,8 +52,14 @@ def test_move_joints_reaches_targets_and_matches_the_viewers_fk(user):
     # The flange the sim publishes is where the viewer's Pinocchio FK (robots/ URDF + world pose) puts it;
     # compare joints and a flange pose both published after the arm settled (not one from mid-motion).
     info = RobotCatalog(w.info()).drawing("arm1", {"joint_names": arm.entry.joint_names})
-    wait_until(lambda: arm.flange is not None and arm.flange.header.wall_ns > settled_ns
-               and arm.joint_state.header.wall_ns > settled_ns, what="flange pose and joints after settling")
+    wait_until(
+        lambda: (
+            arm.flange is not None
+            and arm.flange.header.wall_ns > settled_ns
+            and arm.joint_state.header.wall_ns > settled_ns
+        ),
+        what="flange pose and joints after settling",
+    )
     fk = info.arm.fk(arm.joints)[-1]
     from user_peer.geometry import compose
 
@@ -118,4 +124,6 @@ def test_repr_of_a_world_describes_every_robot_and_makes_no_handle(user):
     w.info()
     text = repr(w)
     assert "arm1 (" in text and "base1 (" in text, text
-    assert w.robot_handles == {} and w.following.robots == frozenset(), "repr made robot handles or followed their streams"
+    assert w.robot_handles == {} and w.following.robots == frozenset(), (
+        "repr made robot handles or followed their streams"
+    )

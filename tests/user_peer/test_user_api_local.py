@@ -37,7 +37,9 @@ def test_scene_object_pose_reaches_other_peers_and_iterators(alice, connect, wor
 
 
 def test_commands_follow_the_ownership_replica(alice, connect, world):
-    arm = Arm(alice, RobotEntry("arm1", "meca500", "arm", tuple(f"joint_{i}" for i in range(1, 7)), (-1.0,) * 6, (1.0,) * 6))
+    arm = Arm(
+        alice, RobotEntry("arm1", "meca500", "arm", tuple(f"joint_{i}" for i in range(1, 7)), (-1.0,) * 6, (1.0,) * 6)
+    )
     auth = connect("sim", "sim-test")
     # A stand-in authority does what the real one does (ownership/authority.py): it publishes each record and answers
     # a replica that asks for it. A record that reaches alice before sim-test's token is no authority's word yet
@@ -84,7 +86,9 @@ def test_a_service_nobody_serves_says_so_without_claiming_a_wait(alice):
     """zenoh ends a query at once when nobody serves the key: the message says so, and how long it took."""
     import re
 
-    arm = Arm(alice, RobotEntry("arm1", "meca500", "arm", tuple(f"joint_{i}" for i in range(1, 7)), (-1.0,) * 6, (1.0,) * 6))
+    arm = Arm(
+        alice, RobotEntry("arm1", "meca500", "arm", tuple(f"joint_{i}" for i in range(1, 7)), (-1.0,) * 6, (1.0,) * 6)
+    )
     with pytest.raises(user_peer.Timeout) as exc:
         arm.ik([3.2, 0.0, 1.0])
     m = re.search(r"no reply on \S+ after ([0-9.]+) s of 2.0 s: nobody serves it", exc.value.reason)

@@ -31,6 +31,7 @@ async def until(pilot, predicate, what, timeout=10.0):
 def publish_once_heard(fab, items, timeout=10.0) -> threading.Thread:
     """Publish each (key, message) once a subscriber of its key is known, as a live sim's stream reaches a handle
     within a period (a handle waits up to a second for its robot's first state: it was waited out, twice)."""
+
     def run():
         for key, msg in items:
             if fab.wait_matching(key, timeout):
@@ -46,15 +47,23 @@ def setup(world, router, connect):
     auth = connect("sim", "sim-test")
     # as the real authority, sim-test answers a replica that asks: a record that reached alice before its token was
     # refused as foreign, and her replica asks again once the token comes (tests/user_peer/test_user_api_local.py)
-    records = {rec.object: rec for rec in (OwnershipRecord("arm1", owner="bob", epoch=1, queue=("carol",), authority="sim-test"),
-                                            OwnershipRecord("base1", owner="", epoch=1, authority="sim-test"))}
+    records = {
+        rec.object: rec
+        for rec in (
+            OwnershipRecord("arm1", owner="bob", epoch=1, queue=("carol",), authority="sim-test"),
+            OwnershipRecord("base1", owner="", epoch=1, authority="sim-test"),
+        )
+    }
     for obj, rec in records.items():
         auth.rpc.serve(keys.own(world, obj), lambda key, req, rec=rec: rec)
     alice = World(client_config(world, router[1]), "alice", timeout=2.0)
-    first = publish_once_heard(auth, [
-        (keys.robot_joints(world, "arm1"), JointState(NAMES, np.full(6, 0.1), np.zeros(6), Header.now())),
-        (keys.robot_pose(world, "base1"), Pose([1.0, 2.0, 0.0], header=Header.now())),
-    ])
+    first = publish_once_heard(
+        auth,
+        [
+            (keys.robot_joints(world, "arm1"), JointState(NAMES, np.full(6, 0.1), np.zeros(6), Header.now())),
+            (keys.robot_pose(world, "base1"), Pose([1.0, 2.0, 0.0], header=Header.now())),
+        ],
+    )
     arm = Arm(alice, RobotEntry("arm1", "meca500", "arm", NAMES, (-1.0,) * 6, (1.0,) * 6))
     base = Base(alice, RobotEntry("base1", "reeman", "mobile", ("wheel_left", "wheel_right")))
     first.join(timeout=10.0)
@@ -63,8 +72,14 @@ def setup(world, router, connect):
     h = Header(wall_ns=1)
     for obj, rec in records.items():
         auth.publish(keys.own(world, obj), rec)
-    auth.publish(keys.robot_scan(world, "base1"), Scan.from_ranges(np.linspace(1, 4, 240), angle_min=-1.17, angle_increment=0.01, range_max=12, header=h))
-    wait_until(lambda: arm.record is not None and base.record is not None and base.scan is not None and arm.joints is not None, what="replicas")
+    auth.publish(
+        keys.robot_scan(world, "base1"),
+        Scan.from_ranges(np.linspace(1, 4, 240), angle_min=-1.17, angle_increment=0.01, range_max=12, header=h),
+    )
+    wait_until(
+        lambda: arm.record is not None and base.record is not None and base.scan is not None and arm.joints is not None,
+        what="replicas",
+    )
     yield auth, alice, arm, base, cmds
     alice.close()
 
@@ -78,13 +93,19 @@ async def _drive_the_ui(auth, alice, arm, base, cmds, world):
     app = UserApp(alice, arm=arm, base=base)
     async with app.run_test(size=(120, 40)) as pilot:
         # the UI fills itself on timers: wait for it (a loaded CI machine may take a while) instead of a fixed pause
-        await until(pilot, lambda: len(app.query(JointSlider)) == 6 and len(app.query("#arm-owner")) == 1, "the UI mounted")
+        await until(
+            pilot, lambda: len(app.query(JointSlider)) == 6 and len(app.query("#arm-owner")) == 1, "the UI mounted"
+        )
         sliders = list(app.query(JointSlider))
         assert all(s.disabled for s in sliders)
         await until(pilot, lambda: "carol" in str(app.query_one("#arm-owner").render()), "owner shown")
         owner_text = str(app.query_one("#arm-owner").render())
         assert "bob" in owner_text and "disabled" in owner_text
-        await until(pilot, lambda: math.isclose(sliders[0].actual, 0.1) and len(app.query_one("#scan").data) == 240, "joints and scan shown")
+        await until(
+            pilot,
+            lambda: math.isclose(sliders[0].actual, 0.1) and len(app.query_one("#scan").data) == 240,
+            "joints and scan shown",
+        )
 
         # Arrow keys while not owning the base: refused locally, the reason on the status line, nothing sent.
         await pilot.press("up")
@@ -94,7 +115,9 @@ async def _drive_the_ui(auth, alice, arm, base, cmds, world):
         # The authority hands both robots to alice: controls come alive.
         auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="alice", epoch=2, authority="sim-test"))
         auth.publish(keys.own(world, "base1"), OwnershipRecord("base1", owner="alice", epoch=5, authority="sim-test"))
-        await until(pilot, lambda: not sliders[0].disabled and not app.query_one("#base-stop").disabled, "controls enabled")
+        await until(
+            pilot, lambda: not sliders[0].disabled and not app.query_one("#base-stop").disabled, "controls enabled"
+        )
         assert "you" in str(app.query_one("#arm-owner").render())
 
         sliders[1].focus()
@@ -108,18 +131,32 @@ async def _drive_the_ui(auth, alice, arm, base, cmds, world):
 
         # ←/→ move the focused slider, never the base: three Right presses, three degrees, no twist
         await pilot.press("right", "right", "right")
-        await until(pilot, lambda: math.isclose(sliders[1].value, 0.1 + math.radians(6.0), abs_tol=1e-9), "the slider moved with right")
-        await until(pilot, lambda: math.isclose([m for k, m in cmds if "/cmd/joints/by/alice" in k][-1].body.q[1],
-                                                0.1 + math.radians(6.0), abs_tol=1e-9), "its joint target sent")
+        await until(
+            pilot,
+            lambda: math.isclose(sliders[1].value, 0.1 + math.radians(6.0), abs_tol=1e-9),
+            "the slider moved with right",
+        )
+        await until(
+            pilot,
+            lambda: math.isclose(
+                [m for k, m in cmds if "/cmd/joints/by/alice" in k][-1].body.q[1], 0.1 + math.radians(6.0), abs_tol=1e-9
+            ),
+            "its joint target sent",
+        )
         assert not any("/cmd/twist/by/alice" in k for k, _ in cmds)
         # the arm speed setting: ']' is already at full speed, '[' twice is 25 %, and the next target carries it
         await pilot.press("left_square_bracket", "left_square_bracket", "left")
-        await until(pilot, lambda: math.isclose([m for k, m in cmds if "/cmd/joints/by/alice" in k][-1].body.speed_scale, 0.25),
-                    "a target at 25 % speed")
+        await until(
+            pilot,
+            lambda: math.isclose([m for k, m in cmds if "/cmd/joints/by/alice" in k][-1].body.speed_scale, 0.25),
+            "a target at 25 % speed",
+        )
         assert app.arm_speed == 0.25 and "25%" in str(app.query_one("#arm-speed").render())
 
         await pilot.press("escape", "3", "up", "left")  # escape leaves the slider: the arrows drive the base again
-        await until(pilot, lambda: any("/cmd/twist/by/alice" in k and m.body.omega > 0 for k, m in cmds), "twist command")
+        await until(
+            pilot, lambda: any("/cmd/twist/by/alice" in k and m.body.omega > 0 for k, m in cmds), "twist command"
+        )
         tw = [m for k, m in cmds if "/cmd/twist/by/alice" in k][-1]
         assert tw.epoch == 5 and (tw.body.v, tw.body.omega) == SPEEDS[3]
         await pilot.press("space")
@@ -153,7 +190,10 @@ def test_an_event_its_authority_did_not_send_is_marked_display_only():
 
     ev = Event(kind="reject", object="arm1", user="alice", reason="arm1 is owned by mallory, not alice")
     assert event_line(ev, True) == "event reject arm1 [alice]: arm1 is owned by mallory, not alice"
-    assert event_line(ev, False) == "unverified, display only · event reject arm1 [alice]: arm1 is owned by mallory, not alice"
+    assert (
+        event_line(ev, False)
+        == "unverified, display only · event reject arm1 [alice]: arm1 is owned by mallory, not alice"
+    )
     # a kind that holds a newline and a trusted line after it stays on the unverified line, escaped
     forged = Event(kind="decode_error\nevent reject arm1 [alice]", reason="\x1b[2J" + "\n" * 2000)
     line = event_line(forged, False)
@@ -177,13 +217,23 @@ async def _hostile(auth, alice, arm, base, cmds, world, connect):
         token = mallory.session.liveliness().declare_token(f"rf/{world}/peer/sim/with space")
         mallory.session.put(keys.own(world, "arm1"), b"\x00not msgpack")
         mallory.session.put(keys.own(world, "base1"), b"\x93\xa1x")
-        auth.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="[/x]", epoch=2, queue=("[bold]q",), authority="sim-test"))
-        await until(pilot, lambda: "[/x]" in str(app.query_one("#arm-owner").render()), "the markup-like owner shown as text")
+        auth.publish(
+            keys.own(world, "arm1"),
+            OwnershipRecord("arm1", owner="[/x]", epoch=2, queue=("[bold]q",), authority="sim-test"),
+        )
+        await until(
+            pilot, lambda: "[/x]" in str(app.query_one("#arm-owner").render()), "the markup-like owner shown as text"
+        )
         assert "[bold]q" in str(app.query_one("#arm-owner").render())
         await until(pilot, lambda: alice.fabric.counters["decode_errors"] >= 2, "the garbage counted and skipped")
         # alice's own report of the garbage reaches the status line first, then mallory's event replaces it
-        await until(pilot, lambda: "decode_error" in str(app.query_one("#status").render()), "alice's decode report shown")
-        mallory.publish(keys.event_decode(world, "mallory"), Event(kind="decode_error", reason="[/oops] \x1b[2J gone", header=Header.now()))
+        await until(
+            pilot, lambda: "decode_error" in str(app.query_one("#status").render()), "alice's decode report shown"
+        )
+        mallory.publish(
+            keys.event_decode(world, "mallory"),
+            Event(kind="decode_error", reason="[/oops] \x1b[2J gone", header=Header.now()),
+        )
         await until(pilot, lambda: "[/oops]" in str(app.query_one("#status").render()), "the event shown as text")
         status = str(app.query_one("#status").render())
         assert "\x1b" not in status and "\\x1b[2J" in status and "unverified" in status
@@ -193,10 +243,13 @@ async def _hostile(auth, alice, arm, base, cmds, world, connect):
 
 @pytest.mark.slow
 def test_queue_for_an_owned_robot_shows_the_place_then_owns_it(live):
-    """"Queue for it" on a robot someone else moves, against a real sim: the place is shown, and the
+    """ "Queue for it" on a robot someone else moves, against a real sim: the place is shown, and the
     controls come alive when bob lets go (a still robot would be taken over at once instead)."""
     world, port, _ = live
-    with World(client_config(world, port), "bob", timeout=10.0) as bob, World(client_config(world, port), "alice", timeout=10.0) as alice:
+    with (
+        World(client_config(world, port), "bob", timeout=10.0) as bob,
+        World(client_config(world, port), "alice", timeout=10.0) as alice,
+    ):
         arm = bob.robot("arm1")
         arm.request()
         start = arm.wait_for("joints").q
@@ -209,14 +262,24 @@ async def _queue(alice, bob):
     arm = alice.robot("arm1")
     app = UserApp(alice, arm=arm)
     async with app.run_test(size=(120, 40)) as pilot:
-        await until(pilot, lambda: len(app.query("#arm-queue")) == 1 and not app.query_one("#arm-queue").disabled, "Queue enabled")
+        await until(
+            pilot,
+            lambda: len(app.query("#arm-queue")) == 1 and not app.query_one("#arm-queue").disabled,
+            "Queue enabled",
+        )
         assert app.query_one("#arm-request").disabled is False and all(s.disabled for s in app.query(JointSlider))
         await pilot.click("#arm-queue")
-        await until(pilot, lambda: "you are #1 in the queue" in str(app.query_one("#arm-owner").render()), "the queue place shown",
-                    timeout=15)
+        await until(
+            pilot,
+            lambda: "you are #1 in the queue" in str(app.query_one("#arm-owner").render()),
+            "the queue place shown",
+            timeout=15,
+        )
         assert app.message == "queue for arm1: place 1" and app.query_one("#arm-queue").disabled
         await asyncio.get_running_loop().run_in_executor(None, bob.robot("arm1").release)
-        await until(pilot, lambda: not app.query(JointSlider).first().disabled, "alice owns arm1: controls enabled", timeout=15)
+        await until(
+            pilot, lambda: not app.query(JointSlider).first().disabled, "alice owns arm1: controls enabled", timeout=15
+        )
         assert "owner: you" in str(app.query_one("#arm-owner").render())
 
 
@@ -251,7 +314,9 @@ async def _move_a_panda_slider(app, q, cmds):
         assert [s.joint for s in sliders] == list(PANDA)
         assert [(s.lo, s.hi) for s in sliders] == list(zip(PANDA_LO, PANDA_HI))
         assert all(s.lo <= s.value <= s.hi for s in sliders)
-        await until(pilot, lambda: not sliders[0].disabled and math.isclose(sliders[3].value, -1.5), "synced to the joints")
+        await until(
+            pilot, lambda: not sliders[0].disabled and math.isclose(sliders[3].value, -1.5), "synced to the joints"
+        )
         sliders[6].focus()
         await pilot.press("right")
         await until(pilot, lambda: bool(cmds), "a joint command sent")
@@ -269,9 +334,12 @@ def test_the_tui_shows_the_first_arm_and_base_or_the_named_ones_of_their_kind():
     assert tui_robots(kinds, None, None, "w") == ("arm1", "base1")
     assert tui_robots(kinds, "arm2", "base2", "w") == ("arm2", "base2")
     assert tui_robots({"base1": "mobile"}, None, None, "w") == (None, "base1")
-    for arm, base, words in (("base1", None, "'base1' is not an arm robot in world 'w'"),
-                             (None, "arm1", "'arm1' is not a mobile robot in world 'w'"),
-                             ("odd", None, "'odd' is not an arm robot"), (None, "nope", "'nope' is not a mobile robot")):
+    for arm, base, words in (
+        ("base1", None, "'base1' is not an arm robot in world 'w'"),
+        (None, "arm1", "'arm1' is not a mobile robot in world 'w'"),
+        ("odd", None, "'odd' is not an arm robot"),
+        (None, "nope", "'nope' is not a mobile robot"),
+    ):
         with pytest.raises(UserError, match=words) as e:
             tui_robots(kinds, arm, base, "w")
         assert "robots: base1, arm1, odd, arm2, base2" in str(e.value)

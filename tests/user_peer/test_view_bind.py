@@ -25,21 +25,42 @@ def _accepts(host: str, port: int) -> bool:
 
 def test_bind_listens_on_that_address_only(router, world, procs):
     web, grpc = free_port(), free_port()
-    view = procs.start(robofabric_cmd("view", "--serve-web", "--bind", "127.0.0.3", "--web-port", str(web),
-                                      "--grpc-port", str(grpc), "--world", world, "--connect", f"tcp/127.0.0.1:{router[1]}"),
-                       name="view")
-    url = wait_until(lambda: re.search(r"web viewer: open (\S+)", procs.output(view)), timeout=90,
-                     what="the viewer's URL", seen=lambda: procs.output(view)[-2000:]).group(1)
+    view = procs.start(
+        robofabric_cmd(
+            "view",
+            "--serve-web",
+            "--bind",
+            "127.0.0.3",
+            "--web-port",
+            str(web),
+            "--grpc-port",
+            str(grpc),
+            "--world",
+            world,
+            "--connect",
+            f"tcp/127.0.0.1:{router[1]}",
+        ),
+        name="view",
+    )
+    url = wait_until(
+        lambda: re.search(r"web viewer: open (\S+)", procs.output(view)),
+        timeout=90,
+        what="the viewer's URL",
+        seen=lambda: procs.output(view)[-2000:],
+    ).group(1)
     assert url.startswith(f"http://127.0.0.3:{web}/") and f"127.0.0.3%3A{grpc}" in url, url
     assert urllib.request.urlopen(f"http://127.0.0.3:{web}/", timeout=10).status == 200
     assert _accepts("127.0.0.3", grpc)
     assert not _accepts("127.0.0.1", web) and not _accepts("127.0.0.1", grpc)
 
 
-@pytest.mark.parametrize("args, why", [
-    (["--serve-web", "--bind", "lab-pc"], "expected an IPv4 address"),
-    (["--save", "x.rrd", "--bind", "127.0.0.1"], "--bind goes with --serve-web"),
-])
+@pytest.mark.parametrize(
+    "args, why",
+    [
+        (["--serve-web", "--bind", "lab-pc"], "expected an IPv4 address"),
+        (["--save", "x.rrd", "--bind", "127.0.0.1"], "--bind goes with --serve-web"),
+    ],
+)
 def test_a_bad_bind_is_refused_with_the_reason(args, why, tmp_path):
     r = subprocess.run(robofabric_cmd("view", *args), capture_output=True, text=True, timeout=60, cwd=tmp_path)
     assert r.returncode != 0 and why in r.stdout + r.stderr, (r.returncode, r.stdout, r.stderr)

@@ -27,14 +27,45 @@ def test_sixteen_robots_at_full_rate_next_to_nothing_dropped(procs, tmp_path):
     world = f"t{uuid.uuid4().hex[:8]}"
     ep = f"tcp/127.0.0.1:{free_port()}"
     router = procs.start(robofabric_cmd("router", "--world", world, "--listen", ep), name="router")
-    wait_until(lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router))
-    robots = [x for i in range(ARMS) for x in ("--robot", f"meca500:arm{i}")] + [x for i in range(BASES) for x in ("--robot", f"reeman:base{i}")]
-    sim = procs.start(robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *robots, "--world", world, "--connect", ep), name="sim")
-    wait_until(lambda: "Ctrl-C to stop" in procs.output(sim), timeout=180, what="the sim", seen=lambda: procs.output(sim)[-1500:])
-    view = procs.start(robofabric_cmd("view", "--save", str(tmp_path / "class.rrd"), "--max-hz", "0", "--duration", str(SECONDS),
-                                      "--world", world, "--connect", ep), name="view")
-    wait_until(lambda: view.poll() is not None, timeout=SECONDS + 120, interval=0.5, what="the viewer to finish",
-               seen=lambda: procs.output(view)[-1500:])
+    wait_until(
+        lambda: "listening" in procs.output(router), timeout=60, what="the router", seen=lambda: procs.output(router)
+    )
+    robots = [x for i in range(ARMS) for x in ("--robot", f"meca500:arm{i}")] + [
+        x for i in range(BASES) for x in ("--robot", f"reeman:base{i}")
+    ]
+    sim = procs.start(
+        robofabric_cmd("sim", "--scene", "warehouse", "--no-scene-robots", *robots, "--world", world, "--connect", ep),
+        name="sim",
+    )
+    wait_until(
+        lambda: "Ctrl-C to stop" in procs.output(sim),
+        timeout=180,
+        what="the sim",
+        seen=lambda: procs.output(sim)[-1500:],
+    )
+    view = procs.start(
+        robofabric_cmd(
+            "view",
+            "--save",
+            str(tmp_path / "class.rrd"),
+            "--max-hz",
+            "0",
+            "--duration",
+            str(SECONDS),
+            "--world",
+            world,
+            "--connect",
+            ep,
+        ),
+        name="view",
+    )
+    wait_until(
+        lambda: view.poll() is not None,
+        timeout=SECONDS + 120,
+        interval=0.5,
+        what="the viewer to finish",
+        seen=lambda: procs.output(view)[-1500:],
+    )
     out = procs.output(view)
     assert view.returncode == 0, out[-2000:]
     m = re.search(r"viewer: (\d+) messages logged, (\d+) dropped", out)

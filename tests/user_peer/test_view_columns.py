@@ -51,7 +51,11 @@ def test_vectorised_quaternions_match_the_single_ones():
 
 @pytest.fixture
 def viewer(world, router, tmp_path):
-    v = Viewer(client_config(world, router[1]), ViewerOptions(save=tmp_path / "v.rrd", max_hz=0, max_lag_s=0.5), peer_id="viewer-lag")
+    v = Viewer(
+        client_config(world, router[1]),
+        ViewerOptions(save=tmp_path / "v.rrd", max_hz=0, max_lag_s=0.5),
+        peer_id="viewer-lag",
+    )
     try:
         yield v
     finally:
@@ -59,8 +63,12 @@ def viewer(world, router, tmp_path):
 
 
 def _js(i: int) -> JointState:
-    return JointState(("joint_1", "joint_2", "joint_3", "joint_4", "joint_5", "joint_6"), np.full(6, 0.01 * i), np.zeros(6),
-                      Header(stamp=0.01 * (i + 1), seq=i))
+    return JointState(
+        ("joint_1", "joint_2", "joint_3", "joint_4", "joint_5", "joint_6"),
+        np.full(6, 0.01 * i),
+        np.zeros(6),
+        Header(stamp=0.01 * (i + 1), seq=i),
+    )
 
 
 def test_a_viewer_behind_drops_the_oldest_per_stream_never_a_robots_last_state(viewer, world):
@@ -80,14 +88,20 @@ def test_a_viewer_behind_drops_the_oldest_per_stream_never_a_robots_last_state(v
     for i in range(3):
         viewer.receive(base, Pose([0.1 * i, 0.0, 0.0], header=Header(stamp=0.01 * (i + 1), seq=i)))
     late = viewer.take(now_ns=time.time_ns() + 2_000_000_000)  # the drawing thread came back 2 s later
-    assert [(key, msg.header.seq) for _, key, msg in late] == [(arm, 99), (base, 2)] or \
-        [(key, msg.header.seq) for _, key, msg in late] == [(base, 2), (arm, 99)]
+    assert [(key, msg.header.seq) for _, key, msg in late] == [(arm, 99), (base, 2)] or [
+        (key, msg.header.seq) for _, key, msg in late
+    ] == [(base, 2), (arm, 99)]
     assert viewer.dropped == 99 + 2
     assert viewer.dropped_per_stream == {arm: 99, base: 2}
 
 
 def test_a_stalled_viewer_keeps_at_most_queue_size_per_stream(world, router, tmp_path):
-    v = Viewer(client_config(world, router[1]), ViewerOptions(save=tmp_path / "v.rrd", max_hz=0), peer_id="viewer-q", queue_size=10)
+    v = Viewer(
+        client_config(world, router[1]),
+        ViewerOptions(save=tmp_path / "v.rrd", max_hz=0),
+        peer_id="viewer-q",
+        queue_size=10,
+    )
     try:
         key = keys.robot_joints(world, "arm1")
         for i in range(25):

@@ -13,8 +13,11 @@ from user_peer import geometry as g
 from user_peer import rerun_log
 from user_peer.arm_geometry import Placement
 
-_unit = st.lists(st.floats(-1, 1), min_size=4, max_size=4).filter(lambda v: np.linalg.norm(v) > 0.1).map(
-    lambda v: np.asarray(v) / np.linalg.norm(v))
+_unit = (
+    st.lists(st.floats(-1, 1), min_size=4, max_size=4)
+    .filter(lambda v: np.linalg.norm(v) > 0.1)
+    .map(lambda v: np.asarray(v) / np.linalg.norm(v))
+)
 _vec = st.lists(st.floats(-3, 3), min_size=3, max_size=3).map(np.asarray)
 
 
@@ -46,5 +49,12 @@ def test_wxyz_to_xyzw_and_yaw():
 
 
 def test_the_logger_draws_with_the_same_helpers():
-    for name in ("scan_world_points", "grid_rgb", "world_to_map_pixels", "yaw_of", "shown_position", "EXTRAPOLATION_CAP_S"):
+    for name in (
+        "scan_world_points",
+        "grid_rgb",
+        "world_to_map_pixels",
+        "yaw_of",
+        "shown_position",
+        "EXTRAPOLATION_CAP_S",
+    ):
         assert getattr(rerun_log, name) is getattr(g, name), name

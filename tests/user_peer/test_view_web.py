@@ -29,8 +29,14 @@ from robofabric.testing import free_port, robofabric_cmd, wait_until
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = [
-    "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox", "--headless",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--no-sandbox",
+    "--headless",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
 ]
 VIEWPORT = {"width": 1280, "height": 800}
 # Where the blueprint puts the 3D "world" view in a 1280x800 page (rerun-sdk 0.41, panels expanded).
@@ -62,7 +68,16 @@ def _patch(rgb: tuple[int, int, int], shades=(0.6, 0.8, 1.0)) -> np.ndarray:
 def test_robot_colour_classifier_sees_robots_and_not_the_scene():
     from user_peer.rerun_log import ROBOT_COLORS
 
-    scene = [(179, 179, 179), (51, 89, 153), (140, 102, 64), (102, 76, 51), (40, 200, 80), (35, 35, 40), (120, 120, 125), (255, 255, 255)]
+    scene = [
+        (179, 179, 179),
+        (51, 89, 153),
+        (140, 102, 64),
+        (102, 76, 51),
+        (40, 200, 80),
+        (35, 35, 40),
+        (120, 120, 125),
+        (255, 255, 255),
+    ]
     for c in scene:
         assert robot_pixels(_patch(c)) == 0, c
     for c in (ROBOT_COLORS[0], ROBOT_COLORS[1], (230, 40, 40)):
@@ -72,7 +87,9 @@ def test_robot_colour_classifier_sees_robots_and_not_the_scene():
 @pytest.mark.slow
 def test_served_web_viewer_shows_the_robots_from_another_address(router, world, procs, tmp_path):
     # a missing browser fails (a skip would hide it): .ci/run installs it, by hand `apt-get install chromium`
-    assert Path(CHROMIUM).exists() and shutil.which("chromium"), "Debian's chromium is not installed (apt-get install chromium)"
+    assert Path(CHROMIUM).exists() and shutil.which("chromium"), (
+        "Debian's chromium is not installed (apt-get install chromium)"
+    )
     from playwright.sync_api import sync_playwright
 
     ep = f"tcp/127.0.0.1:{router[1]}"
@@ -80,13 +97,25 @@ def test_served_web_viewer_shows_the_robots_from_another_address(router, world, 
     web, grpc = free_port(), free_port()
     view = procs.start(
         robofabric_cmd(
-            "view", "--serve-web", "--advertise", "127.0.0.2", "--web-port", str(web), "--grpc-port", str(grpc),
-            "--world", world, "--connect", ep,
+            "view",
+            "--serve-web",
+            "--advertise",
+            "127.0.0.2",
+            "--web-port",
+            str(web),
+            "--grpc-port",
+            str(grpc),
+            "--world",
+            world,
+            "--connect",
+            ep,
         ),
         name="view",
     )
     found = wait_until(
-        lambda: re.search(r"web viewer: open (http://\S+)", procs.output(view)), timeout=60, what="the viewer to print its URL",
+        lambda: re.search(r"web viewer: open (http://\S+)", procs.output(view)),
+        timeout=60,
+        what="the viewer to print its URL",
         seen=lambda: procs.output(view)[-2000:],
     )
     url = found.group(1)
@@ -111,7 +140,9 @@ def test_served_web_viewer_shows_the_robots_from_another_address(router, world, 
                 counts.append(robot_pixels(rgb[WORLD_VIEW]))
                 # done when the robots show and the page made the calls it meant for other hosts (analytics, the
                 # version check), which must have come here (/_nonet/...)
-                local_calls = {h for h in ("tel.rerun.io", "api.github.com") if any(f"/_nonet/{h}" in u for u in requests)}
+                local_calls = {
+                    h for h in ("tel.rerun.io", "api.github.com") if any(f"/_nonet/{h}" in u for u in requests)
+                }
                 if (counts[-1] >= ROBOT_PIXELS and len(local_calls) == 2) or time.monotonic() > deadline:
                     break
                 page.wait_for_timeout(3000)
@@ -123,6 +154,8 @@ def test_served_web_viewer_shows_the_robots_from_another_address(router, world, 
     assert counts[-1] >= ROBOT_PIXELS, f"robot-coloured pixels in the 3D view over time: {counts}; screenshot {keep}"
     assert view.poll() is None, procs.output(view)
     # nothing left the LAN: every request went to the viewer's own host (page, code, data, swallowed analytics)
-    elsewhere = sorted({u for u in requests if urlsplit(u).hostname != "127.0.0.2" and not u.startswith(("data:", "blob:"))})
+    elsewhere = sorted(
+        {u for u in requests if urlsplit(u).hostname != "127.0.0.2" and not u.startswith(("data:", "blob:"))}
+    )
     assert not elsewhere, f"the page asked other hosts: {elsewhere}"
     assert any(f"127.0.0.2:{grpc}" in u for u in requests), requests  # and it streamed the world

@@ -28,16 +28,30 @@ def test_viewer_saves_robots_scans_maps_paths(world, router, connect, tmp_path):
         h = Header(stamp=0.05 * i, wall_ns=10**18 + i * 50_000_000, seq=i, source="fake-sim")
         pub.publish(keys.robot_joints(world, "arm1"), JointState(ARM_JOINTS, np.full(6, 0.01 * i), np.zeros(6), h))
         yaw = 0.1 * i
-        pub.publish(keys.robot_pose(world, "base1"), Pose([0.1 * i, 0, 0], [math.cos(yaw / 2), 0, 0, math.sin(yaw / 2)], [0.2, 0, 0], [0, 0, 0.1], header=h))
-        pub.publish(keys.robot_scan(world, "base1"), Scan.from_ranges(np.linspace(1, 3, 240), angle_min=-1.178, angle_increment=2.356 / 239, range_max=8.0, header=h))
-        pub.publish(keys.robot_stream(world, "base1", "sonar"), Scan.from_ranges(np.full(8, 0.5), angle_min=0.0, angle_increment=math.pi / 4, range_max=3.0, header=h))
+        pub.publish(
+            keys.robot_pose(world, "base1"),
+            Pose([0.1 * i, 0, 0], [math.cos(yaw / 2), 0, 0, math.sin(yaw / 2)], [0.2, 0, 0], [0, 0, 0.1], header=h),
+        )
+        pub.publish(
+            keys.robot_scan(world, "base1"),
+            Scan.from_ranges(
+                np.linspace(1, 3, 240), angle_min=-1.178, angle_increment=2.356 / 239, range_max=8.0, header=h
+            ),
+        )
+        pub.publish(
+            keys.robot_stream(world, "base1", "sonar"),
+            Scan.from_ranges(np.full(8, 0.5), angle_min=0.0, angle_increment=math.pi / 4, range_max=3.0, header=h),
+        )
         if i % 5 == 0:
-            pub.publish(keys.map_key(world, "base1"), OccupancyGrid(0.05, [-5, -5, 0], np.full((200, 200), 255, np.uint8), h))
+            pub.publish(
+                keys.map_key(world, "base1"), OccupancyGrid(0.05, [-5, -5, 0], np.full((200, 200), 255, np.uint8), h)
+            )
             pub.publish(keys.robot_path(world, "base1"), Path([0, 1, 2], [0, 0.5, 1], [0, 0.4, 0.8], header=h))
             pub.publish(keys.object_pose(world, "target", "alice"), Pose([0.2, 0.0, 0.3], header=h))
             pub.publish(keys.own(world, "arm1"), OwnershipRecord("arm1", owner="alice", epoch=1 + i))
 
     i = 0
+
     def seen_all():
         nonlocal i
         publish_all(i)
@@ -45,7 +59,9 @@ def test_viewer_saves_robots_scans_maps_paths(world, router, connect, tmp_path):
         c = viewer.logger.counts
         return all(c[k] >= 3 for k in ("JointState", "Pose", "Scan", "OccupancyGrid", "Path", "OwnershipRecord"))
 
-    wait_until(seen_all, timeout=20, interval=0.05, what="viewer logging every kind", seen=lambda: dict(viewer.logger.counts))
+    wait_until(
+        seen_all, timeout=20, interval=0.05, what="viewer logging every kind", seen=lambda: dict(viewer.logger.counts)
+    )
     stop.set()
     t.join(10)
     viewer.close()

@@ -18,12 +18,21 @@ INDEX = b"""<html><head>
       rel="stylesheet"
     />
     <title>Rerun Viewer</title></head><body><script src="re_viewer.js"></script></body></html>"""
-WASM = b"\x00asm" + b"identify" + REMOTE_URLS[0].encode() + b"event_id" + REMOTE_URLS[1].encode() + b"x" + REMOTE_URLS[2].encode() + b"0.41"
+WASM = (
+    b"\x00asm"
+    + b"identify"
+    + REMOTE_URLS[0].encode()
+    + b"event_id"
+    + REMOTE_URLS[1].encode()
+    + b"x"
+    + REMOTE_URLS[2].encode()
+    + b"0.41"
+)
 
 
 def test_the_page_loses_its_font_links_and_the_code_its_remote_urls():
     html = patch_index(INDEX)
-    assert b"fonts.g" not in html and b"<title>Rerun Viewer</title>" in html and b're_viewer.js' in html
+    assert b"fonts.g" not in html and b"<title>Rerun Viewer</title>" in html and b"re_viewer.js" in html
     wasm, counts = patch_wasm(WASM)
     assert counts == {u: 1 for u in REMOTE_URLS}
     assert len(wasm) == len(WASM) and b"https://" not in wasm  # same length: the code's offsets stay right
@@ -39,7 +48,9 @@ def _get(port: int, path: str, host: str, method: str = "GET", body: bytes | Non
 
 
 def test_the_plain_address_leads_to_the_live_world_on_the_host_the_browser_used():
-    server = PageServer({"index.html": INDEX, "re_viewer.js": b"js", "re_viewer_bg.wasm": WASM}, free_port(), 9876, bind="127.0.0.1")
+    server = PageServer(
+        {"index.html": INDEX, "re_viewer.js": b"js", "re_viewer_bg.wasm": WASM}, free_port(), 9876, bind="127.0.0.1"
+    )
     try:
         r = _get(server.port, "/", "lab-pc")
         assert r.status == 302 and r.getheader("Location") == "/?url=rerun%2Bhttp%3A%2F%2Flab-pc%3A9876%2Fproxy"

@@ -53,15 +53,39 @@ def test_a_frozen_page_does_not_hold_up_the_others(router, world, procs, tmp_pat
 
     from robofabric.bench.viewer_web import CHROMIUM, CHROMIUM_ARGS, open_pages, page_lag
 
-    assert Path(CHROMIUM).exists() and shutil.which("chromium"), "Debian's chromium is not installed (apt-get install chromium)"
+    assert Path(CHROMIUM).exists() and shutil.which("chromium"), (
+        "Debian's chromium is not installed (apt-get install chromium)"
+    )
     ep = f"tcp/127.0.0.1:{router[1]}"
     procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep), name="sim")
     web, grpc = free_port(), free_port()
-    view = procs.start(robofabric_cmd(
-        "view", "--serve-web", "--advertise", "127.0.0.1", "--web-port", str(web), "--grpc-port", str(grpc),
-        "--window", "0.5", "--max-hz", "5", "--world", world, "--connect", ep), name="view")
-    url = wait_until(lambda: re.search(r"web viewer: open (http://\S+)", procs.output(view)), timeout=60,
-                     what="the viewer to print its URL", seen=lambda: procs.output(view)[-2000:]).group(1)
+    view = procs.start(
+        robofabric_cmd(
+            "view",
+            "--serve-web",
+            "--advertise",
+            "127.0.0.1",
+            "--web-port",
+            str(web),
+            "--grpc-port",
+            str(grpc),
+            "--window",
+            "0.5",
+            "--max-hz",
+            "5",
+            "--world",
+            world,
+            "--connect",
+            ep,
+        ),
+        name="view",
+    )
+    url = wait_until(
+        lambda: re.search(r"web viewer: open (http://\S+)", procs.output(view)),
+        timeout=60,
+        what="the viewer to print its URL",
+        seen=lambda: procs.output(view)[-2000:],
+    ).group(1)
 
     # the other page: it takes its data as fast as it comes (gRPC-web from Python, as a browser sends it), so the
     # relay's contract is read in its bytes, whatever pace the box's software GL draws at. It joins first, so
@@ -73,7 +97,9 @@ def test_a_frozen_page_does_not_hold_up_the_others(router, world, procs, tmp_pat
             wait_until(lambda: reader.received > 0, timeout=60, what="the reader to receive", seen=lambda: reader.ended)
             (page,) = open_pages(browser, url, 1, VIEWPORT)
             shown = time.monotonic() + SHOW_S
-            wait_until(lambda: page_lag(page) is not None, timeout=SHOW_S, interval=2.0, what="the page to show the live world")
+            wait_until(
+                lambda: page_lag(page) is not None, timeout=SHOW_S, interval=2.0, what="the page to show the live world"
+            )
             # its time cursor comes before its 3D view has drawn the scene (at load 9 a shot then held the bare
             # grid): shots until the robots show, within the same deadline; the assertion below judges the last
             shot = tmp_path / "web-pages.png"
@@ -111,6 +137,7 @@ def test_a_frozen_page_does_not_hold_up_the_others(router, world, procs, tmp_pat
     # held up, the other page takes nothing: not held up, it goes on at no less than half its rate before
     assert rate > 0 and frozen_rate >= 0.5 * rate and not ended, (
         f"over {t1 - t0:.0f} s with a page frozen ({found[cuts:] or 'not cut off yet'}), the other took "
-        f"{frozen_rate:.0f} B/s against {rate:.0f} before ({ended or 'still open'})")
+        f"{frozen_rate:.0f} B/s against {rate:.0f} before ({ended or 'still open'})"
+    )
     assert shows_robots(keep), f"the page did not show the robots before it froze: {keep}"
     assert view.poll() is None, out[-3000:]

@@ -75,7 +75,12 @@ def _client(port: int, rcvbuf: int | None = None) -> socket.socket:
 @pytest.mark.slow  # ~3 s
 def test_a_frozen_client_is_cut_off_and_holds_up_neither_the_server_nor_the_others():
     server = StandIn()
-    relay = Relay(("127.0.0.1", server.port), free_port(), bind="127.0.0.1", limits=RelayLimits(max_queue_bytes=8 << 20, max_stall_s=1.0))
+    relay = Relay(
+        ("127.0.0.1", server.port),
+        free_port(),
+        bind="127.0.0.1",
+        limits=RelayLimits(max_queue_bytes=8 << 20, max_stall_s=1.0),
+    )
     frozen = _client(relay.port, rcvbuf=4096)  # never reads
     reader = _client(relay.port)
     try:
@@ -87,7 +92,7 @@ def test_a_frozen_client_is_cut_off_and_holds_up_neither_the_server_nor_the_othe
         # the reading client got the stream whole and in order
         n = len(got) // len(BLOCK)
         assert n > 100, n
-        assert [int.from_bytes(got[k * len(BLOCK):k * len(BLOCK) + 8], "little") for k in range(n)] == list(range(n))
+        assert [int.from_bytes(got[k * len(BLOCK) : k * len(BLOCK) + 8], "little") for k in range(n)] == list(range(n))
         # the frozen one was cut off, and the server never waited for it
         wait_until(lambda: relay.cut == 1, timeout=5, what="the frozen client to be cut off", seen=relay.stats)
         assert server.longest_write < 0.5, server.longest_write
@@ -110,8 +115,12 @@ def test_a_frozen_client_is_cut_off_and_holds_up_neither_the_server_nor_the_othe
 
 def test_connections_are_capped_in_all_and_per_address_and_idle_ones_are_closed():
     server = StandIn()
-    relay = Relay(("127.0.0.1", server.port), free_port(), bind="0.0.0.0",
-                  limits=RelayLimits(max_links=3, max_links_per_address=2, header_timeout_s=30.0))
+    relay = Relay(
+        ("127.0.0.1", server.port),
+        free_port(),
+        bind="0.0.0.0",
+        limits=RelayLimits(max_links=3, max_links_per_address=2, header_timeout_s=30.0),
+    )
     conns: list[socket.socket] = []
 
     def connect(source: str) -> socket.socket:
@@ -150,7 +159,9 @@ def test_a_connection_that_sends_no_request_is_closed():
         c.settimeout(10)
         got = c.recv(4096)
         assert b"grpc-status: 7" in got and b"no request within" in got, got
-        wait_until(lambda: relay.counters().links == 0, timeout=5, what="the idle connection to be closed", seen=relay.counters)
+        wait_until(
+            lambda: relay.counters().links == 0, timeout=5, what="the idle connection to be closed", seen=relay.counters
+        )
         assert relay.counters().refused_connections == 1, relay.counters()
     finally:
         c.close()
@@ -171,8 +182,9 @@ class Session:
         self.rr = rr
         self.inner = free_port()
         self.rec = rr.RecordingStream("robofabric", recording_id=f"relay-{self.inner}")
-        self.rec.set_sinks(rr.GrpcServerSink(bind_ip="127.0.0.1", port=self.inner, newest_first=True,
-                                             server_memory_limit=history))
+        self.rec.set_sinks(
+            rr.GrpcServerSink(bind_ip="127.0.0.1", port=self.inner, newest_first=True, server_memory_limit=history)
+        )
         self.relay = Relay(("127.0.0.1", self.inner), free_port(), bind=bind, limits=limits)
         self.rng = np.random.default_rng(0)
         self._stop = threading.Event()
@@ -187,9 +199,11 @@ class Session:
 
     def live(self, rate: float) -> None:
         """Log ~``rate`` bytes a second until close (the world going on while pages watch)."""
+
         def run() -> None:
             while not self._stop.wait(0.1):
                 self.rec.log("live", self.rr.Points3D(self.rng.random((int(rate / 10 / 12), 3), dtype=np.float32)))
+
         self._live = threading.Thread(target=run, daemon=True)
         self._live.start()
 
@@ -218,9 +232,12 @@ def test_writes_are_refused_and_pages_see_nothing_of_them():
         # mallory's Rerun SDK, as she logged fake events and a recursive Clear into every page
         m = s.rr.RecordingStream("robofabric", recording_id=f"relay-{s.inner}")
         m.set_sinks(s.rr.GrpcSink(f"rerun+http://127.0.0.1:{s.relay.port}/proxy"))
-        for step in (lambda: m.log("events", s.rr.TextLog("MALLORY-SDK-MARKER")),
-                     lambda: m.log("world/robots", s.rr.Clear(recursive=True)),
-                     lambda: m.flush(timeout_sec=5), m.disconnect):
+        for step in (
+            lambda: m.log("events", s.rr.TextLog("MALLORY-SDK-MARKER")),
+            lambda: m.log("world/robots", s.rr.Clear(recursive=True)),
+            lambda: m.flush(timeout_sec=5),
+            m.disconnect,
+        ):
             try:
                 step()
             except RuntimeError as exc:  # the SDK hears of the refusal when its sink's stream ends: at any step
@@ -257,8 +274,14 @@ def test_writes_are_refused_and_pages_see_nothing_of_them():
 
 @pytest.mark.slow  # ~15 s: 100 connections against Rerun's server
 def test_100_stalled_readers_leave_the_relay_within_its_budget_and_an_honest_page_receiving():
-    limits = RelayLimits(max_links=64, max_links_per_address=8, max_queue_bytes=16 << 20, max_total_bytes=48 << 20,
-                         max_stall_s=2.0, header_timeout_s=1.0)
+    limits = RelayLimits(
+        max_links=64,
+        max_links_per_address=8,
+        max_queue_bytes=16 << 20,
+        max_total_bytes=48 << 20,
+        max_stall_s=2.0,
+        header_timeout_s=1.0,
+    )
     s = Session("8MiB", limits, bind="0.0.0.0")  # every loopback address: readers come from 127.0.0.x
     s.log_bulk(12 << 20)  # a session going on: 8 MiB of history for each new reader
     s.live(1e6)
@@ -289,8 +312,13 @@ def test_100_stalled_readers_leave_the_relay_within_its_budget_and_an_honest_pag
             k = s.relay.counters()
             return k.links == 1 and k.cut + k.refused_connections >= 100 + 3 and time.monotonic() - t0 > 3
 
-        wait_until(settled, timeout=60, interval=0.2, what="every stalled and idle connection to be cut or refused",
-                   seen=lambda: (s.relay.counters(), [x for x in s.relay.stats() if not x["closed"]][:5]))
+        wait_until(
+            settled,
+            timeout=60,
+            interval=0.2,
+            what="every stalled and idle connection to be cut or refused",
+            seen=lambda: (s.relay.counters(), [x for x in s.relay.stats() if not x["closed"]][:5]),
+        )
         k = s.relay.counters()
         rss = _rss_mb()
         print(f"100 stalled readers: {k}; RSS {rss0:.0f} -> {rss:.0f} MB; threads {threads0} -> peak {peak_threads}")
@@ -298,8 +326,12 @@ def test_100_stalled_readers_leave_the_relay_within_its_budget_and_an_honest_pag
         assert k.refused_connections >= 3, k  # the idle ones, at least (others over max_links when cuts lag)
         assert peak_threads <= threads0 + 3 * limits.max_links + 16, peak_threads
         got = honest.received
-        wait_until(lambda: honest.received > got + (1 << 20), timeout=20, what="the honest page to keep receiving",
-                   seen=lambda: (honest.received, honest.ended, s.relay.stats()))
+        wait_until(
+            lambda: honest.received > got + (1 << 20),
+            timeout=20,
+            what="the honest page to keep receiving",
+            seen=lambda: (honest.received, honest.ended, s.relay.stats()),
+        )
         assert honest.received > before and honest.ended == "", (honest.ended, s.relay.stats())
         assert all(not x["cut"] for x in s.relay.stats() if x["peer"].startswith("127.0.0.2:")), s.relay.stats()
         # the relay's counters are the measure; RSS also holds Rerun's server (its history, each client's stream)
@@ -318,8 +350,13 @@ def test_a_slow_reader_joining_a_long_session_gets_the_world_first_and_is_not_cu
     s.live(100e3)
     slow = WebReader(s.relay.port, rate=1e6)  # a page on a slow link: 1 MB/s
     try:
-        wait_until(lambda: slow.received > 12 << 20, timeout=60, interval=0.5, what="the slow reader to take the history",
-                   seen=lambda: (slow.received, slow.ended, s.relay.stats()))
+        wait_until(
+            lambda: slow.received > 12 << 20,
+            timeout=60,
+            interval=0.5,
+            what="the slow reader to take the history",
+            seen=lambda: (slow.received, slow.ended, s.relay.stats()),
+        )
         assert s.relay.cut == 0 and slow.ended == "", (slow.ended, s.relay.stats())
         # the scene (static) came first, before the history's bulk
         first = [arrow_payload(f) for f in slow.frames[:20]]

@@ -35,8 +35,11 @@ def make(page: "ConsolePage", info: Any) -> "ArmPanel":
     """The page's arm panel, with the world's IK target sphere when its scene has one (``info``: the world's
     description)."""
     target = next((o for o in info.objects if o.kind == "ik_target"), None)
-    return ArmPanel(page, page.world.object(target.id) if target else None,
-                    np.asarray(target.position, dtype=float) if target else None)
+    return ArmPanel(
+        page,
+        page.world.object(target.id) if target else None,
+        np.asarray(target.position, dtype=float) if target else None,
+    )
 
 
 class ArmPanel(PanelHooks):
@@ -68,20 +71,31 @@ class ArmPanel(PanelHooks):
             self._build_sliders()
             with ui.row().classes("full-width items-center no-wrap"):
                 ui.label("Speed").style("width: 4rem")
-                self.speed = ui.slider(min=0.05, max=1.0, step=0.05, value=0.5).props('label-always aria-label="Speed scale"').classes("full-width")
+                self.speed = (
+                    ui.slider(min=0.05, max=1.0, step=0.05, value=0.5)
+                    .props('label-always aria-label="Speed scale"')
+                    .classes("full-width")
+                )
             with ui.row():
-                stop = ui.button("Stop", color="negative", on_click=lambda: self.page.call(f"stop {self.arm.id}", self.arm.stop))
+                stop = ui.button(
+                    "Stop", color="negative", on_click=lambda: self.page.call(f"stop {self.arm.id}", self.arm.stop)
+                )
                 reset = ui.button("Reset", color="warning", on_click=self._reset)
             with ui.row().classes("items-center"):
                 ui.label("IK target")
                 self.target_label = ui.label("")
-                self.step = ui.select(list(NUDGE_STEPS), value="1 cm", label="Nudge step").props('aria-label="Nudge step" dense')
+                self.step = ui.select(list(NUDGE_STEPS), value="1 cm", label="Nudge step").props(
+                    'aria-label="Nudge step" dense'
+                )
             nudges = []
             with ui.row():
                 for axis, name in enumerate("xyz"):
                     for sign, txt in ((-1, "−"), (1, "+")):
-                        nudges.append(ui.button(f"{name}{txt}", on_click=lambda _, a=axis, s=sign: self._nudge(a, s)).props(
-                            f'dense aria-label="{name} {"plus" if sign > 0 else "minus"}"'))
+                        nudges.append(
+                            ui.button(f"{name}{txt}", on_click=lambda _, a=axis, s=sign: self._nudge(a, s)).props(
+                                f'dense aria-label="{name} {"plus" if sign > 0 else "minus"}"'
+                            )
+                        )
             # two lines high even when short: the map's row under this panel must not move under the mouse
             self.ik_label = ui.label("IK: move the target").style("min-height: 2.8rem")
             apply = ui.button("Apply IK", on_click=self._apply_ik)
@@ -105,8 +119,17 @@ class ArmPanel(PanelHooks):
                 with ui.row().classes("full-width items-center no-wrap"):
                     ui.label(f"J{i + 1}").style("width: 2rem")
                     # the zero pose clamped into the range: a joint whose range leaves out 0 (the Panda's J4)
-                    s = ui.slider(min=round(lo, 1), max=round(hi, 1), step=0.5, value=min(max(0.0, round(lo, 1)), round(hi, 1)),
-                                  on_change=self._slider_moved).props(f'label-always aria-label="J{i + 1} ({name}) degrees"').classes("full-width")
+                    s = (
+                        ui.slider(
+                            min=round(lo, 1),
+                            max=round(hi, 1),
+                            step=0.5,
+                            value=min(max(0.0, round(lo, 1)), round(hi, 1)),
+                            on_change=self._slider_moved,
+                        )
+                        .props(f'label-always aria-label="J{i + 1} ({name}) degrees"')
+                        .classes("full-width")
+                    )
                     self.sliders.append(s)
         self._joints = tuple(e.joint_names)
         self.synced = False
@@ -117,8 +140,15 @@ class ArmPanel(PanelHooks):
         if self._syncing or self.arm is None or not self.arm.can_command:
             return
         q = np.radians([s.value for s in self.sliders])
-        asyncio.ensure_future(self.page.call(f"joints {np.round(np.degrees(q), 1).tolist()} deg", self.arm.move_joints, q,
-                                             wait=False, speed_scale=float(self.speed.value)))
+        asyncio.ensure_future(
+            self.page.call(
+                f"joints {np.round(np.degrees(q), 1).tolist()} deg",
+                self.arm.move_joints,
+                q,
+                wait=False,
+                speed_scale=float(self.speed.value),
+            )
+        )
 
     async def _reset(self) -> None:
         if await self.page.call(f"reset {self.arm.id}", self.arm.reset, confirm=False) is not self.page.FAILED:
@@ -164,7 +194,9 @@ class ArmPanel(PanelHooks):
             js = self.arm.joints
             speeds = ""
             if js is not None and self.arm.entry.max_speed:
-                v, t = synchronised_speeds(js, self.ik_q, np.asarray(self.arm.entry.max_speed) * float(self.speed.value))
+                v, t = synchronised_speeds(
+                    js, self.ik_q, np.asarray(self.arm.entry.max_speed) * float(self.speed.value)
+                )
                 speeds = f" · speeds {np.round(np.degrees(v), 1).tolist()} deg/s ({t:.2f} s)"
             self.ik_label.text = f"IK: {np.round(np.degrees(self.ik_q), 1).tolist()} deg{speeds}"
             return
@@ -174,8 +206,16 @@ class ArmPanel(PanelHooks):
             self.page.say("Apply IK: no IK solution for the target yet")
             return
         q = self.ik_q
-        if await self.page.call(f"apply IK {np.round(np.degrees(q), 1).tolist()} deg", self.arm.move_joints, q,
-                                wait=False, speed_scale=float(self.speed.value)) is not self.page.FAILED:
+        if (
+            await self.page.call(
+                f"apply IK {np.round(np.degrees(q), 1).tolist()} deg",
+                self.arm.move_joints,
+                q,
+                wait=False,
+                speed_scale=float(self.speed.value),
+            )
+            is not self.page.FAILED
+        ):
             self._set_sliders(q)
 
     def _set_sliders(self, q: np.ndarray) -> None:
@@ -195,9 +235,15 @@ class ArmPanel(PanelHooks):
         mine = arm.can_command
         rec = arm.record
         who = "you" if mine and rec is not None else (rec.owner or "nobody") if rec is not None else "?"
-        live = arm.id in self.page.world.following.robots  # else its joints are what was kept when the page let go of it
-        self.title.text = one_line(f"arm {arm.id} ({arm.type}) · owner: {who}" + ("" if mine else " · controls disabled") +
-                                   ("" if live else f" · click {arm.id} to follow its joints"), 300)
+        live = (
+            arm.id in self.page.world.following.robots
+        )  # else its joints are what was kept when the page let go of it
+        self.title.text = one_line(
+            f"arm {arm.id} ({arm.type}) · owner: {who}"
+            + ("" if mine else " · controls disabled")
+            + ("" if live else f" · click {arm.id} to follow its joints"),
+            300,
+        )
         for c in self.controls:
             c.set_enabled(mine)
         js = arm.joints if live else None

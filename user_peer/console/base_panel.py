@@ -165,9 +165,14 @@ class BasePanel(PanelHooks):
             return
         planner = PLANNERS[self.planner.value]
         # on her own map: a student's Build map makes {user}.map (the class's map is the staff's)
-        path = await self.page.call(f"plan ({planner})", self.base.plan_to, *self.goal, planner=planner,
-                                    direction="both" if self.reverse.value else "default",
-                                    map_name=keys.user_map("map", self.page.world.user))
+        path = await self.page.call(
+            f"plan ({planner})",
+            self.base.plan_to,
+            *self.goal,
+            planner=planner,
+            direction="both" if self.reverse.value else "default",
+            map_name=keys.user_map("map", self.page.world.user),
+        )
         if path is not self.page.FAILED:
             self.path = path
             length = float(np.sum(np.hypot(np.diff(path.x), np.diff(path.y)))) if len(path) > 1 else 0.0
@@ -188,12 +193,17 @@ class BasePanel(PanelHooks):
         rec = b.record
         who = "you" if mine and rec is not None else (rec.owner or "nobody") if rec is not None else "?"
         live = b.id in self.page.world.following.robots  # else its pose is what was kept when the page let go of it
-        self.title.text = one_line(f"base {b.id} ({b.type}) · owner: {who}" + ("" if mine else " · controls disabled"), 300)
+        self.title.text = one_line(
+            f"base {b.id} ({b.type}) · owner: {who}" + ("" if mine else " · controls disabled"), 300
+        )
         for c in self.controls:
             c.set_enabled(mine)
         xy, pose = (b.xy_theta, b.pose) if live else (None, None)
-        text = f"pose ({xy[0]:+.2f}, {xy[1]:+.2f}, {math.degrees(xy[2]):+.0f}°)" if xy else \
-            ("pose -" if live else f"pose: click {b.id} to follow it")
+        text = (
+            f"pose ({xy[0]:+.2f}, {xy[1]:+.2f}, {math.degrees(xy[2]):+.0f}°)"
+            if xy
+            else ("pose -" if live else f"pose: click {b.id} to follow it")
+        )
         if pose is not None:
             text += f" · v {math.hypot(pose.linear[0], pose.linear[1]):.2f} m/s"
             stamp = str(pose.header.wall_ns // 1_000_000)

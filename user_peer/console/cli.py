@@ -12,13 +12,41 @@ __all__ = ["console"]
 
 
 def console(
-    listen: Annotated[str, typer.Option("--listen", help="HOST:PORT the page is served on (0.0.0.0: every interface).")] = "0.0.0.0:8080",
-    grace: Annotated[float, typer.Option(help="Seconds a closed page's robots stay hers (stopped) before her session closes and they pass on.")] = 10.0,
-    rerun_url: Annotated[Optional[str], typer.Option("--rerun-url", help="The Rerun web view to link to (robofabric view --serve-web prints it).")] = None,
-    tls_cert: Annotated[Optional[str], typer.Option("--tls-cert", help="Serve HTTPS with this certificate (PEM; secure init --tls writes tls/web/console.pem).")] = None,
-    tls_key: Annotated[Optional[str], typer.Option("--tls-key", help="The certificate's private key (PEM; tls/web/console-key.pem).")] = None,
-    instructors: Annotated[str, typer.Option("--instructors", help="Comma-separated instructor logins that may open the teacher's page (/teacher).")] = "",
-    no_3d: Annotated[bool, typer.Option("--no-3d", help="Pages without the 3D view: the top-down map alone, as before the 3D view (lighter for the server and the browsers).")] = False,
+    listen: Annotated[
+        str, typer.Option("--listen", help="HOST:PORT the page is served on (0.0.0.0: every interface).")
+    ] = "0.0.0.0:8080",
+    grace: Annotated[
+        float,
+        typer.Option(
+            help="Seconds a closed page's robots stay hers (stopped) before her session closes and they pass on."
+        ),
+    ] = 10.0,
+    rerun_url: Annotated[
+        Optional[str],
+        typer.Option("--rerun-url", help="The Rerun web view to link to (robofabric view --serve-web prints it)."),
+    ] = None,
+    tls_cert: Annotated[
+        Optional[str],
+        typer.Option(
+            "--tls-cert", help="Serve HTTPS with this certificate (PEM; secure init --tls writes tls/web/console.pem)."
+        ),
+    ] = None,
+    tls_key: Annotated[
+        Optional[str], typer.Option("--tls-key", help="The certificate's private key (PEM; tls/web/console-key.pem).")
+    ] = None,
+    instructors: Annotated[
+        str,
+        typer.Option(
+            "--instructors", help="Comma-separated instructor logins that may open the teacher's page (/teacher)."
+        ),
+    ] = "",
+    no_3d: Annotated[
+        bool,
+        typer.Option(
+            "--no-3d",
+            help="Pages without the 3D view: the top-down map alone, as before the 3D view (lighter for the server and the browsers).",
+        ),
+    ] = False,
     world: World = None,
     connect: Connect = None,
     zenoh_config: ZenohConfig = None,
@@ -44,20 +72,29 @@ def console(
     try:
         cfg = FabricConfig.resolve(world=world, connect=connect, config_file=zenoh_config)
         if cfg.identity() is not None:
-            raise UserError(f"--zenoh-config {cfg.config_file} logs in as {cfg.identity()!r}: the console holds no login of its own "
-                            "(each page logs in as its student); give a config without credentials")
+            raise UserError(
+                f"--zenoh-config {cfg.config_file} logs in as {cfg.identity()!r}: the console holds no login of its own "
+                "(each page logs in as its student); give a config without credentials"
+            )
     except ConfigError as exc:
         raise UserError(str(exc)) from None
     connect_eps, _ = cfg.endpoints()
     print(f"console for world {cfg.world!r} via {', '.join(connect_eps)}", flush=True)
-    os.environ.setdefault("NICEGUI_STORAGE_PATH", os.path.join(os.path.expanduser("~"), ".cache", "robofabric", "nicegui"))
+    os.environ.setdefault(
+        "NICEGUI_STORAGE_PATH", os.path.join(os.path.expanduser("~"), ".cache", "robofabric", "nicegui")
+    )
     names = tuple(n.strip() for n in instructors.split(",") if n.strip())
     for n in names:
         try:
             keys.validate_id(n, what="instructor login")
         except ValueError as exc:
             raise UserError(f"--instructors: {exc}") from None
-    serve(Console(cfg.world, connect_eps, cfg.config_file, grace, rerun_url, instructors=names, view3d=not no_3d), host.strip("[]"), int(port_text), tls)
+    serve(
+        Console(cfg.world, connect_eps, cfg.config_file, grace, rerun_url, instructors=names, view3d=not no_3d),
+        host.strip("[]"),
+        int(port_text),
+        tls,
+    )
 
 
 def _tls(cert: str | None, key: str | None) -> tuple[str, str] | None:

@@ -28,8 +28,17 @@ from typing import Any, Callable
 
 from user_peer.console.limits import Buckets, Waiting, address_key, pages_to_forget
 
-__all__ = ["Doors", "DoorsMiddleware", "guard_socket_events", "LOADS_BURST", "LOADS_PER_S", "WAITING_PER_ADDRESS",
-           "WAITING_MAX", "SOCKETS_PER_ADDRESS", "PRUNE_EVERY_S"]
+__all__ = [
+    "Doors",
+    "DoorsMiddleware",
+    "guard_socket_events",
+    "LOADS_BURST",
+    "LOADS_PER_S",
+    "WAITING_PER_ADDRESS",
+    "WAITING_MAX",
+    "SOCKETS_PER_ADDRESS",
+    "PRUNE_EVERY_S",
+]
 
 log = logging.getLogger("robofabric.console")
 
@@ -113,7 +122,9 @@ class Doors:
             if c is not None and _waits(c):
                 try:
                     c.delete()
-                except Exception:  # NiceGUI's delete raises when its table lost the client (its #1826): forgotten anyway
+                except (
+                    Exception
+                ):  # NiceGUI's delete raises when its table lost the client (its #1826): forgotten anyway
                     log.debug("console: forgetting page %s", cid, exc_info=True)
                 self.forgotten += 1
                 self.waiting -= 1
@@ -147,8 +158,10 @@ class Doors:
         return bool(self.waiting or self.forgotten or self.refused_loads or self.refused_sockets or self.foreign)
 
     def line(self) -> str:
-        return (f"console: doors: {self.waiting} pages waiting to connect · {self.forgotten} forgotten · refused "
-                f"{self.refused_loads} page loads, {self.refused_sockets} websockets · {self.foreign} foreign socket messages")
+        return (
+            f"console: doors: {self.waiting} pages waiting to connect · {self.forgotten} forgotten · refused "
+            f"{self.refused_loads} page loads, {self.refused_sockets} websockets · {self.foreign} foreign socket messages"
+        )
 
 
 def _waits(c: Any) -> bool:
@@ -190,11 +203,22 @@ class DoorsMiddleware:
 
 
 async def _refuse(send: Any, status: int, wait: float) -> None:
-    body = (b"too many page loads from your address: try again shortly\n" if status == 429
-            else b"the console is busy: try again shortly\n")
-    await send({"type": "http.response.start", "status": status,
-                "headers": [(b"content-type", b"text/plain; charset=utf-8"), (b"retry-after", str(max(1, round(wait))).encode()),
-                            (b"content-length", str(len(body)).encode())]})
+    body = (
+        b"too many page loads from your address: try again shortly\n"
+        if status == 429
+        else b"the console is busy: try again shortly\n"
+    )
+    await send(
+        {
+            "type": "http.response.start",
+            "status": status,
+            "headers": [
+                (b"content-type", b"text/plain; charset=utf-8"),
+                (b"retry-after", str(max(1, round(wait))).encode()),
+                (b"content-length", str(len(body)).encode()),
+            ],
+        }
+    )
     await send({"type": "http.response.body", "body": body})
 
 
@@ -205,13 +229,17 @@ def guard_socket_events(sio: Any, clients: dict[str, Any], doors: Doors) -> None
     for name in GUARDED_EVENTS:
         inner = handlers.get(name)
         if inner is None:
-            raise RuntimeError(f"NiceGUI has no socket.io handler {name!r}: the console's guard of its events needs updating")
+            raise RuntimeError(
+                f"NiceGUI has no socket.io handler {name!r}: the console's guard of its events needs updating"
+            )
 
         def guarded(sid: str, msg: Any, *rest: Any, _inner: Callable = inner, _name: str = name) -> Any:
             cid = msg.get("client_id") if isinstance(msg, dict) else None
             if not isinstance(cid, str) or cid not in clients or cid not in sio.rooms(sid):
                 doors.foreign += 1
-                log.debug("console: a socket sent %r for a page it does not belong to: dropped", _name)  # counted, not logged: a flood
+                log.debug(
+                    "console: a socket sent %r for a page it does not belong to: dropped", _name
+                )  # counted, not logged: a flood
                 return None
             return _inner(sid, msg, *rest)
 

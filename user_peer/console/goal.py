@@ -48,7 +48,10 @@ def _field(name: str, text: str, lo: float, hi: float) -> tuple[float | None, st
         return None, f"Goal {name} is empty: type a number of metres, e.g. {(lo + hi) / 2:.1f}"
     v = read_metres(shown)
     if v is None:
-        return None, f"Goal {name} '{one_line(shown, 20)}' is not a number: type metres with a point, e.g. {(lo + hi) / 2:.1f}"
+        return (
+            None,
+            f"Goal {name} '{one_line(shown, 20)}' is not a number: type metres with a point, e.g. {(lo + hi) / 2:.1f}",
+        )
     if not lo <= v <= hi:
         return None, f"Goal {name} {v:.2f} m is off the map: type a number from {lo:.2f} to {hi:.2f}"
     return v, None

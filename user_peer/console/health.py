@@ -53,7 +53,9 @@ class Health:
     late: list[float] = field(default_factory=list)
     to_server: list[float] = field(default_factory=list)
     to_sent: list[float] = field(default_factory=list)
-    dropped: int = 0  # pages' websocket connections lost this period (each page reconnects within its window, or is gone)
+    dropped: int = (
+        0  # pages' websocket connections lost this period (each page reconnects within its window, or is gone)
+    )
 
     def key(self, browser_ms: float | None, arrived: float, sent: float) -> None:
         """A key's twist went out: ``browser_ms`` the page's ``Date.now()`` at the press (same host clock, or
@@ -74,18 +76,32 @@ class Health:
         late, up, sent = self.late, self.to_server, self.to_sent
         dropped, self.dropped = self.dropped, 0
         self.late, self.to_server, self.to_sent = [], [], []
-        return HealthLine(pages, _pct(late, 50), _pct(late, 99), max(late, default=float("nan")),
-                          _pct(up, 50), _pct(up, 99), _pct(sent, 50), _pct(sent, 99), len(sent), dropped)
+        return HealthLine(
+            pages,
+            _pct(late, 50),
+            _pct(late, 99),
+            max(late, default=float("nan")),
+            _pct(up, 50),
+            _pct(up, 99),
+            _pct(sent, 50),
+            _pct(sent, 99),
+            len(sent),
+            dropped,
+        )
 
     @staticmethod
     def line(h: HealthLine) -> str:
-        return (f"console: health: {h.pages} pages · event loop late p50 {h.late_p50:.0f} / p99 {h.late_p99:.0f} / max "
-                f"{h.late_max:.0f} ms · key to server p50 {h.to_server_p50:.0f} / p99 {h.to_server_p99:.0f} ms, to zenoh p50 "
-                f"{h.to_sent_p50:.0f} / p99 {h.to_sent_p99:.0f} ms ({h.keys} keys) · {h.dropped} connections dropped")
+        return (
+            f"console: health: {h.pages} pages · event loop late p50 {h.late_p50:.0f} / p99 {h.late_p99:.0f} / max "
+            f"{h.late_max:.0f} ms · key to server p50 {h.to_server_p50:.0f} / p99 {h.to_server_p99:.0f} ms, to zenoh p50 "
+            f"{h.to_sent_p50:.0f} / p99 {h.to_sent_p99:.0f} ms ({h.keys} keys) · {h.dropped} connections dropped"
+        )
 
 
-_LINE = re.compile(r"console: health: (\d+) pages · event loop late p50 (\S+) / p99 (\S+) / max (\S+) ms · key to server "
-                   r"p50 (\S+) / p99 (\S+) ms, to zenoh p50 (\S+) / p99 (\S+) ms \((\d+) keys\) · (\d+) connections dropped")
+_LINE = re.compile(
+    r"console: health: (\d+) pages · event loop late p50 (\S+) / p99 (\S+) / max (\S+) ms · key to server "
+    r"p50 (\S+) / p99 (\S+) ms, to zenoh p50 (\S+) / p99 (\S+) ms \((\d+) keys\) · (\d+) connections dropped"
+)
 
 
 def parse_line(text: str) -> HealthLine | None:

@@ -112,8 +112,16 @@ class LoginThrottle:
     machine, which may try several names (a lab's NAT: more free tries). A success clears both. The tables keep
     at most ``TABLE_MAX`` names and addresses, and forget one whose last failure is older than ``forget_s``."""
 
-    def __init__(self, *, name_free: int = 3, address_free: int = 10, base: float = 1.0, cap: float = 60.0,
-                 forget_s: float = 900.0, table_max: int = TABLE_MAX) -> None:
+    def __init__(
+        self,
+        *,
+        name_free: int = 3,
+        address_free: int = 10,
+        base: float = 1.0,
+        cap: float = 60.0,
+        forget_s: float = 900.0,
+        table_max: int = TABLE_MAX,
+    ) -> None:
         self.name_free, self.address_free, self.base, self.cap = name_free, address_free, base, cap
         self.forget_s, self.table_max = forget_s, table_max
         self._names: OrderedDict[str, _Failures] = OrderedDict()
@@ -121,8 +129,10 @@ class LoginThrottle:
 
     def wait(self, name: str, address: str, now: float) -> float:
         """Seconds before a login of ``name`` from ``address`` may be tried (0.0: now)."""
-        return max(self._wait(self._names.get(name), self.name_free, now),
-                   self._wait(self._addresses.get(address_key(address)), self.address_free, now))
+        return max(
+            self._wait(self._names.get(name), self.name_free, now),
+            self._wait(self._addresses.get(address_key(address)), self.address_free, now),
+        )
 
     def failed(self, name: str, address: str, now: float) -> None:
         """A login of ``name`` from ``address`` was refused at ``now``."""

@@ -49,7 +49,9 @@ class LoginError(FabricUserError):
     """A login the page refuses or the router refused; ``reason`` is what the page shows."""
 
 
-def login_config(world: str, connect: tuple[str, ...], name: str, password: str, *, base_file: str | None = None) -> FabricConfig:
+def login_config(
+    world: str, connect: tuple[str, ...], name: str, password: str, *, base_file: str | None = None
+) -> FabricConfig:
     """The client config of one page's session: the router's endpoints, the console's base zenoh config file
     if any (e.g. TLS settings), and the student's usrpwd login when she typed a password."""
     try:
@@ -58,7 +60,10 @@ def login_config(world: str, connect: tuple[str, ...], name: str, password: str,
         raise LoginError(str(exc)) from None
     extra: tuple[tuple[str, str], ...] = ()
     if password:
-        extra = (("transport/auth/usrpwd/user", json.dumps(name)), ("transport/auth/usrpwd/password", json.dumps(password)))
+        extra = (
+            ("transport/auth/usrpwd/user", json.dumps(name)),
+            ("transport/auth/usrpwd/password", json.dumps(password)),
+        )
     try:
         return FabricConfig(world=world, profile="client", connect=connect, config_file=base_file, extra=extra)
     except ConfigError as exc:
@@ -99,8 +104,15 @@ class Logins:
     growing delay (:class:`~.limits.LoginThrottle`, ``clock`` its time): a guess waits its turn without
     reaching the router."""
 
-    def __init__(self, open_world: Callable[[FabricConfig, str], object], *, grace: float, on_leave: Callable[[object], None],
-                 throttle: LoginThrottle | None = None, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        open_world: Callable[[FabricConfig, str], object],
+        *,
+        grace: float,
+        on_leave: Callable[[object], None],
+        throttle: LoginThrottle | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self._open = open_world
         self.grace = grace
         self._on_leave = on_leave
@@ -120,7 +132,9 @@ class Logins:
             wait = self.throttle.wait(name, address, self._clock())
             if wait > 0:
                 self.throttled += 1
-                raise LoginError(f"Too many failed logins for {name} or from this address: try again in {math.ceil(wait)} s")
+                raise LoginError(
+                    f"Too many failed logins for {name} or from this address: try again in {math.ceil(wait)} s"
+                )
             try:
                 held = self._shared(name, password)
             except LoginError:

@@ -50,7 +50,11 @@ class LoginCard:
         with ui.card().style("margin: 4rem auto 0; width: 24rem"):
             ui.label(f"robofabric · world {world}").classes("text-h6").props('role="heading" aria-level="1"')
             self.name_in = ui.input("Name").props('autofocus aria-label="Name"').classes("full-width")
-            self.pw_in = ui.input("Password", password=True, password_toggle_button=False).props('aria-label="Password"').classes("full-width")
+            self.pw_in = (
+                ui.input("Password", password=True, password_toggle_button=False)
+                .props('aria-label="Password"')
+                .classes("full-width")
+            )
             # what applies: a class's login card, or a name of her choice in an open world (both while not known)
             ui.label(login_caption(self.page.console.logins_required)).classes("text-caption")
             self.button = ui.button("Log in", on_click=self.login)
@@ -68,7 +72,9 @@ class LoginCard:
         self.button.disable()
         self.msg.text = f"logging in as {name}..."
         try:
-            cfg = login_config(page.console.world, page.console.connect, name, password, base_file=page.console.base_file)
+            cfg = login_config(
+                page.console.world, page.console.connect, name, password, base_file=page.console.base_file
+            )
             world = await off_loop(LOGINS, self.logins.login, cfg, name, password, page.client.ip)
             token, ticket = self.logins.ticket(name)
         except LoginError as exc:
@@ -86,7 +92,9 @@ class LoginCard:
             return
         self._resuming = True
         try:
-            token = await page.client.run_javascript(f"sessionStorage.getItem({json.dumps(STORAGE_KEY)})", timeout=READ_TIMEOUT_S)
+            token = await page.client.run_javascript(
+                f"sessionStorage.getItem({json.dumps(STORAGE_KEY)})", timeout=READ_TIMEOUT_S
+            )
         except Exception as exc:  # a tab that never answered keeps its login card
             log.info("console: a page did not say whether it holds a ticket: %s", exc)
             token = None

@@ -35,8 +35,8 @@ def bar_metres(frame: Frame) -> float:
     best = 0.01
     for exp in range(-2, 4):
         for m in (1, 2, 5):
-            if m * 10.0 ** exp <= quarter + 1e-9:
-                best = m * 10.0 ** exp
+            if m * 10.0**exp <= quarter + 1e-9:
+                best = m * 10.0**exp
     return best
 
 
@@ -50,10 +50,12 @@ def scale_bar_svg(frame: Frame) -> str:
     m = bar_metres(frame)
     length = m * frame.scale
     x0, y0 = 10.0, frame.height - 12.0
-    return (f'<g class="rf-scale-bar" data-metres="{m:g}">'
-            f'<rect x="{x0 - 4:.1f}" y="{y0 - 18:.1f}" width="{length + 8:.1f}" height="26" fill="#ffffff" fill-opacity="0.85"/>'
-            f'<rect class="rf-scale-bar-line" x="{x0:.1f}" y="{y0:.1f}" width="{length:.1f}" height="4" fill="#212529"/>'
-            f'<text x="{x0:.1f}" y="{y0 - 5:.1f}" font-size="12" fill="#212529">{_words(m)}</text></g>')
+    return (
+        f'<g class="rf-scale-bar" data-metres="{m:g}">'
+        f'<rect x="{x0 - 4:.1f}" y="{y0 - 18:.1f}" width="{length + 8:.1f}" height="26" fill="#ffffff" fill-opacity="0.85"/>'
+        f'<rect class="rf-scale-bar-line" x="{x0:.1f}" y="{y0:.1f}" width="{length:.1f}" height="4" fill="#212529"/>'
+        f'<text x="{x0:.1f}" y="{y0 - 5:.1f}" font-size="12" fill="#212529">{_words(m)}</text></g>'
+    )
 
 
 LEGEND: tuple[tuple[str, str], ...] = (
@@ -64,7 +66,10 @@ LEGEND: tuple[tuple[str, str], ...] = (
     ('<ellipse cx="7" cy="7" rx="5" ry="5" fill="#f59f00" stroke="#212529"/>', "IK target"),
     ('<ellipse cx="7" cy="7" rx="5" ry="5" fill="none" stroke="#2f9e44" stroke-width="2.5"/>', "goal"),
     ('<line x1="1" y1="7" x2="13" y2="7" stroke="#2f9e44" stroke-width="2"/>', "path"),
-    ('<rect x="3" y="3" width="3" height="3" fill="#f03e3e"/><rect x="8" y="8" width="3" height="3" fill="#f03e3e"/>', "LIDAR hits"),
+    (
+        '<rect x="3" y="3" width="3" height="3" fill="#f03e3e"/><rect x="8" y="8" width="3" height="3" fill="#f03e3e"/>',
+        "LIDAR hits",
+    ),
     ('<rect x="1" y="3" width="12" height="8" fill="#ced4da" stroke="#adb5bd"/>', "walls, shelves"),
     ('<rect x="1" y="3" width="12" height="8" fill="#000000"/>', "map: occupied"),
     ('<rect x="1" y="3" width="12" height="8" fill="#ffffff" stroke="#868e96"/>', "map: free"),
@@ -76,7 +81,9 @@ circles: a script (or a test) that finds the map's target or goal by its circle 
 
 def legend_html() -> str:
     """The legend as a list (a screen reader reads its words; the swatches are decoration)."""
-    items = "".join(f'<li style="display:inline-flex;align-items:center;gap:0.25rem;margin-right:0.75rem">'
-                    f'<svg width="14" height="14" aria-hidden="true" focusable="false">{swatch}</svg>{escape(words)}</li>'
-                    for swatch, words in LEGEND)
+    items = "".join(
+        f'<li style="display:inline-flex;align-items:center;gap:0.25rem;margin-right:0.75rem">'
+        f'<svg width="14" height="14" aria-hidden="true" focusable="false">{swatch}</svg>{escape(words)}</li>'
+        for swatch, words in LEGEND
+    )
     return f'<ul class="rf-legend" aria-label="Map legend" style="list-style:none;padding:0;margin:0;font-size:0.8rem">{items}</ul>'

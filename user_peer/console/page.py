@@ -117,8 +117,16 @@ def _first_handles(world: Any, user: str, selected: str | None = None) -> tuple[
     entries = services.robot_entries(info)
     handles = {}
     for kind in dict.fromkeys(e.kind for e in PANELS):
-        mine = [e for e in entries if e.kind == kind and (rec := world.ownership.record(e.id)) is not None and rec.owner == user]
-        first = [e for e in entries if e.kind == kind and e.id == selected] or mine or [e for e in entries if e.kind == kind]
+        mine = [
+            e
+            for e in entries
+            if e.kind == kind and (rec := world.ownership.record(e.id)) is not None and rec.owner == user
+        ]
+        first = (
+            [e for e in entries if e.kind == kind and e.id == selected]
+            or mine
+            or [e for e in entries if e.kind == kind]
+        )
         if first:
             handles[first[0].id] = world.robot(first[0].id)
     return entries, handles, layout
@@ -210,8 +218,12 @@ class ConsolePage:
         if self.view is not None:
             self.view.close()
         if self.world is not None:  # stopping her robots waits on the network: never on the pages' event loop
-            threading.Thread(target=self.console.logins.leave, args=(self.user, self.world), name=f"console-leave-{self.user}",
-                             daemon=True).start()
+            threading.Thread(
+                target=self.console.logins.leave,
+                args=(self.user, self.world),
+                name=f"console-leave-{self.user}",
+                daemon=True,
+            ).start()
 
     # ------------------------------------------------------------------ layout
 
@@ -230,12 +242,16 @@ class ConsolePage:
         self.panels.make(info)
 
         with ui.row().classes("full-width items-center"):
-            ui.label(f"robofabric console · world {w.name} · {w.user}").classes("text-h6").props('role="heading" aria-level="1"')
+            ui.label(f"robofabric console · world {w.name} · {w.user}").classes("text-h6").props(
+                'role="heading" aria-level="1"'
+            )
             if self.console.rerun_url:
                 ui.link("Rerun web view (the rich view)", self.console.rerun_url, new_tab=True)
             ui.button("Log out", on_click=self.card.logout).props("flat no-caps")
         # a line high even when empty: text appearing in it must not move the view under the mouse
-        self.message = ui.label("").props('role="status" aria-live="polite"').classes("text-body1").style("min-height: 1.5rem")
+        self.message = (
+            ui.label("").props('role="status" aria-live="polite"').classes("text-body1").style("min-height: 1.5rem")
+        )
         self._robot_list()
         self.view3d = View3D(self) if self.console.view3d else None  # console --no-3d: the map alone
         self.layout = Layout(self)  # each robot's panel beside its view (user_peer/console/layout.py)
@@ -316,7 +332,9 @@ class ConsolePage:
     def follow_shown(self) -> None:
         """Follow in full only the robots the page shows (:func:`.follow.shown`): the selected one, and the panels'
         robots she owns; the others are drawn from the view's shared pose feed."""
-        follow.follow_only(self.world.following, follow.shown(self.world, self.selected, self.handles, self.robots.values()))
+        follow.follow_only(
+            self.world.following, follow.shown(self.world, self.selected, self.handles, self.robots.values())
+        )
 
     async def _ownership(self, op: str) -> None:
         r = await self._handle(self.selected)
@@ -330,10 +348,14 @@ class ConsolePage:
             await self.panels.let_go(r)  # a key held for it lets go first
             rec = self.world.ownership.record(r.id)
             if rec is not None:
-                self._letting_go[r.id] = rec.epoch  # her own release: the status says "release: ok", not that she lost it
+                self._letting_go[r.id] = (
+                    rec.epoch
+                )  # her own release: the status says "release: ok", not that she lost it
             await self.call(f"release {r.id}", r.release)
         else:  # a place in the queue (granted at once when the robot is still): the client renews a turn that comes
-            out = await self.call(f"queue for {r.id}", self.world.ownership.client.request, r.id, wait=True, timeout=self.world.timeout)
+            out = await self.call(
+                f"queue for {r.id}", self.world.ownership.client.request, r.id, wait=True, timeout=self.world.timeout
+            )
             if out is not self.FAILED:
                 self.say(f"queue for {r.id}: {out}")
         self.refresh()
@@ -360,11 +382,21 @@ class ConsolePage:
             rec = w.ownership.record(r.id)
             if rec is not None and self._owners.get(r.id, rec.owner) != rec.owner:
                 # records come from the robot's authority only (the ownership replica checks): trusted
-                self._push(TRUSTED + one_line(f"ownership {r.id}: {self._owners[r.id] or 'nobody'} -> {rec.owner or 'nobody'} (epoch {rec.epoch})"))
-                mine = self._owners[r.id] == w.user and self._letting_go.pop(r.id, -1) + 1 != rec.epoch  # not her own release
+                self._push(
+                    TRUSTED
+                    + one_line(
+                        f"ownership {r.id}: {self._owners[r.id] or 'nobody'} -> {rec.owner or 'nobody'} (epoch {rec.epoch})"
+                    )
+                )
+                mine = (
+                    self._owners[r.id] == w.user and self._letting_go.pop(r.id, -1) + 1 != rec.epoch
+                )  # not her own release
                 if mine:  # hers no more (a handover, her lease, an instructor): the status says so
-                    self.say(f"{r.id} is no longer yours: " + (f"{rec.owner} owns it now" if rec.owner else "it is free now")
-                             + " (the event log says why)")
+                    self.say(
+                        f"{r.id} is no longer yours: "
+                        + (f"{rec.owner} owns it now" if rec.owner else "it is free now")
+                        + " (the event log says why)"
+                    )
             if rec is not None:
                 self._owners[r.id] = rec.owner
         self.sel_label.text = f"selected: {self.selected}" if self.selected else "no robot"
@@ -389,12 +421,14 @@ class ConsolePage:
             if self.ticket is not None and self.ticket.holder is self:
                 self.ticket.events_seen = mark
             if new > EVENTS_PER_REDRAW:
-                self._push(f"{new - EVENTS_PER_REDRAW} more events since the last redraw, not shown (the latest follow)")
+                self._push(
+                    f"{new - EVENTS_PER_REDRAW} more events since the last redraw, not shown (the latest follow)"
+                )
             for ev, trusted in w.recent_events(min(new, EVENTS_PER_REDRAW)):
                 self._push(event_line(ev, trusted), classes=None if trusted else "text-grey-7 text-italic")
         gone = w.robots_gone
         if len(gone) != self._gone_seen:
-            for rid in gone[self._gone_seen:]:
+            for rid in gone[self._gone_seen :]:
                 self._push(one_line(f"robot {rid} gone: its sim peer left"))
             self._gone_seen = len(gone)
         if not w.world_alive:

@@ -50,8 +50,9 @@ class Panels:
     def __init__(self, page: "ConsolePage", entries: tuple[PanelEntry, ...] = PANELS) -> None:
         for e in entries:
             if e.beside not in VIEWS:
-                raise ValueError(f"panel of kind {e.kind!r}: no view {e.beside!r} to sit beside "
-                                 f"(views: {', '.join(VIEWS)})")
+                raise ValueError(
+                    f"panel of kind {e.kind!r}: no view {e.beside!r} to sit beside (views: {', '.join(VIEWS)})"
+                )
         self.page = page
         self.entries = entries
         self.made: dict[str, Panel] = {}

@@ -56,11 +56,13 @@ def segment_pose(a: Sequence[float], b: Sequence[float]) -> tuple[np.ndarray, np
 def quat_matrix(q_xyzw: Sequence[float]) -> np.ndarray:
     """A unit quaternion (x, y, z, w) as a 3 x 3 rotation matrix."""
     x, y, z, w = (float(v) for v in q_xyzw)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,8 +89,15 @@ def scene_boxes3d(scene: str) -> tuple[Box3, ...]:
             if b.half_size[2] < 0.01:
                 continue
             r, g, bl, _ = b.rgba
-            out.append(Box3(b.name, tuple(float(v) for v in b.center), tuple(float(2 * v) for v in b.half_size),
-                            tuple(tuple(float(v) for v in row) for row in quat_matrix(b.quat_xyzw)), f"#{r:02x}{g:02x}{bl:02x}"))
+            out.append(
+                Box3(
+                    b.name,
+                    tuple(float(v) for v in b.center),
+                    tuple(float(2 * v) for v in b.half_size),
+                    tuple(tuple(float(v) for v in row) for row in quat_matrix(b.quat_xyzw)),
+                    f"#{r:02x}{g:02x}{bl:02x}",
+                )
+            )
         return tuple(out)
     except Exception as exc:  # no mujoco (a student's install), or a scene this install does not have
         log.info("no static geometry for scene %r: %s", scene, exc)

@@ -22,7 +22,16 @@ from user_peer.console.pictures import ROUTE, Pictures
 from user_peer.console.teacher import ROUTE as TEACHER
 from user_peer.console.ticker import OnePerTurn, Ticker
 
-__all__ = ["Console", "serve", "page_urls", "RECONNECT_S", "PRUNE_S", "PING_INTERVAL_S", "PING_TIMEOUT_S", "REFRESH_VIEW_S"]
+__all__ = [
+    "Console",
+    "serve",
+    "page_urls",
+    "RECONNECT_S",
+    "PRUNE_S",
+    "PING_INTERVAL_S",
+    "PING_TIMEOUT_S",
+    "REFRESH_VIEW_S",
+]
 
 REFRESH_VIEW_S = 0.2
 """How often every page redraws (the console's one clock, :mod:`.ticker`): the view may be 0.5 s behind."""
@@ -60,7 +69,9 @@ class Console:
     join_timeout: float = 10.0
     instructors: tuple[str, ...] = ()  # the logins that may open the teacher's page (user_peer/console/teacher.py)
     view3d: bool = True  # each page has the 3D view (console --no-3d: the top-down map alone)
-    logins_required: bool | None = None  # whether the router refuses a session without a login (.world_kind); None: not known yet
+    logins_required: bool | None = (
+        None  # whether the router refuses a session without a login (.world_kind); None: not known yet
+    )
     logins: Logins = field(init=False)
     health: Health = field(init=False, default_factory=Health)
     pictures: Pictures = field(init=False, default_factory=Pictures)
@@ -103,8 +114,10 @@ def page_urls(host: str, port: int, scheme: str = "http") -> list[str]:
         return [f"{scheme}://{host}:{port}/"]
     import ifaddr
 
-    addrs = sorted({ip.ip for a in ifaddr.get_adapters() for ip in a.ips if isinstance(ip.ip, str)},
-                   key=lambda a: (a.startswith("127."), a))
+    addrs = sorted(
+        {ip.ip for a in ifaddr.get_adapters() for ip in a.ips if isinstance(ip.ip, str)},
+        key=lambda a: (a.startswith("127."), a),
+    )
     return [f"{scheme}://{a}:{port}/" for a in addrs] or [f"{scheme}://{socket.gethostname()}:{port}/"]
 
 
@@ -141,7 +154,9 @@ async def _probe(console: Console) -> None:
     from user_peer.console.world_kind import probe_logins
 
     while console.logins_required is None:
-        console.logins_required = await off_loop(LOGINS, probe_logins, console.world, console.connect, console.base_file)
+        console.logins_required = await off_loop(
+            LOGINS, probe_logins, console.world, console.connect, console.base_file
+        )
         if console.logins_required is None:
             await asyncio.sleep(5.0)
 
@@ -194,7 +209,9 @@ def serve(console: Console, host: str, port: int, tls: tuple[str, str] | None = 
         background_tasks.create(console.health.probe(), name="console health probe")
         background_tasks.create(report(), name="console health report")
         background_tasks.create(console.ticker.run(), name="console redraw clock")
-        background_tasks.create(console.doors.forget_waiting(Client.instances), name="console forgets pages that do not connect")
+        background_tasks.create(
+            console.doors.forget_waiting(Client.instances), name="console forgets pages that do not connect"
+        )
 
     def dropped() -> None:
         console.health.dropped += 1
@@ -203,14 +220,24 @@ def serve(console: Console, host: str, port: int, tls: tuple[str, str] | None = 
     app.on_disconnect(dropped)
     app.on_shutdown(console.logins.close)
     try:
-        ui.run(host=host, port=port, title=f"robofabric console · {console.world}", reload=False, show=False,
-               show_welcome_message=False, reconnect_timeout=RECONNECT_S, favicon="🤖", uvicorn_logging_level="warning",
-               # no per-message deflate: it cost the server (and every browser) a compression of each update, to
-               # save bytes a class LAN does not miss
-               ws_per_message_deflate=False,
-               # no Tailwind: its runtime compiles CSS in every page as it loads and watches every change of the
-               # page for new classes; the page uses Quasar's own classes
-               tailwind=False, **({"ssl_certfile": tls[0], "ssl_keyfile": tls[1]} if tls else {}))
+        ui.run(
+            host=host,
+            port=port,
+            title=f"robofabric console · {console.world}",
+            reload=False,
+            show=False,
+            show_welcome_message=False,
+            reconnect_timeout=RECONNECT_S,
+            favicon="🤖",
+            uvicorn_logging_level="warning",
+            # no per-message deflate: it cost the server (and every browser) a compression of each update, to
+            # save bytes a class LAN does not miss
+            ws_per_message_deflate=False,
+            # no Tailwind: its runtime compiles CSS in every page as it loads and watches every change of the
+            # page for new classes; the page uses Quasar's own classes
+            tailwind=False,
+            **({"ssl_certfile": tls[0], "ssl_keyfile": tls[1]} if tls else {}),
+        )
     except KeyboardInterrupt:  # uvicorn shuts down, then raises the Ctrl-C it caught again: we are done
         pass
     finally:

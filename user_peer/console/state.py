@@ -141,7 +141,9 @@ def _mark(world, entry, pose, spawn: dict, selected: set[str], joints=None) -> R
     sx, sy, _, syaw = spawn.get(entry.id, (0.0, 0.0, 0.0, 0.0))
     flange = (float(pose.position[0]), float(pose.position[1])) if pose is not None else None
     links = arm_links(entry.type, joints.q, spawn[entry.id]) if joints is not None and entry.id in spawn else ()
-    return RobotMark(entry.id, entry.kind or "robot", owner, sx, sy, syaw, owner == world.user, entry.id in selected, flange, links)
+    return RobotMark(
+        entry.id, entry.kind or "robot", owner, sx, sy, syaw, owner == world.user, entry.id in selected, flange, links
+    )
 
 
 _SPAWN: dict[int, tuple[Any, dict[str, tuple[float, ...]]]] = {}  # id(description) -> (it, its robots' spawn poses)
@@ -158,7 +160,9 @@ def _spawn(info) -> dict[str, tuple[float, ...]]:
     return held[1]
 
 
-def _drawn(world, entry, handles: dict, poses: dict[str, bytes], frame: Frame, spawn: dict, selected: set[str], decoder: Any) -> str:
+def _drawn(
+    world, entry, handles: dict, poses: dict[str, bytes], frame: Frame, spawn: dict, selected: set[str], decoder: Any
+) -> str:
     """One robot as the page draws it. A robot the page does not follow, whose pose came undecoded, is drawn by
     the console's ``decoder`` once for every page that holds the same pose and draws it the same way."""
     if decoder is not None and entry.id not in handles and entry.id in poses:
@@ -176,9 +180,20 @@ def _drawn(world, entry, handles: dict, poses: dict[str, bytes], frame: Frame, s
     return topview.robot_svg(frame, mark) if mark is not None else ""
 
 
-def view_svg(world, entries: list, handles: dict, poses: dict[str, bytes], frame: Frame, boxes, *, base_id: str | None,
-             selected: set[str], goal: tuple[float, float, float] | None, target: tuple[float, float] | None,
-             decoder: Any = None) -> str:
+def view_svg(
+    world,
+    entries: list,
+    handles: dict,
+    poses: dict[str, bytes],
+    frame: Frame,
+    boxes,
+    *,
+    base_id: str | None,
+    selected: set[str],
+    goal: tuple[float, float, float] | None,
+    target: tuple[float, float] | None,
+    decoder: Any = None,
+) -> str:
     """The live view's overlay: every robot with its owner, the paths and the selected base's scan of the robots
     this page follows, the IK target and the goal. ``decoder``: the console's shared pose decoder."""
     spawn = _spawn(world.info())
@@ -192,6 +207,13 @@ def view_svg(world, entries: list, handles: dict, poses: dict[str, bytes], frame
         if r.id == base_id:
             s, p = r.latest("scan"), r.latest("pose")
             if s is not None and p is not None:
-                scan = topview.scan_points(float(p.position[0]), float(p.position[1]), yaw_from_quaternion(p.quaternion),
-                                           s.angle_min, s.angle_increment, s.ranges, s.range_max)
+                scan = topview.scan_points(
+                    float(p.position[0]),
+                    float(p.position[1]),
+                    yaw_from_quaternion(p.quaternion),
+                    s.angle_min,
+                    s.angle_increment,
+                    s.ranges,
+                    s.range_max,
+                )
     return topview.svg(frame, (), boxes=boxes, scan=scan, paths=paths, target=target, goal=goal, drawn=drawn)

@@ -18,8 +18,19 @@ from fabric.interfaces import STAFF_OPS, OwnershipRecord
 from fabric.text import one_line
 from user_peer.errors import FabricUserError
 
-__all__ = ["NotStaff", "RobotRow", "StudentRow", "LABELS", "ROUTE", "is_staff", "require_staff", "robot_actions", "robot_rows",
-           "student_rows", "class_actions"]
+__all__ = [
+    "NotStaff",
+    "RobotRow",
+    "StudentRow",
+    "LABELS",
+    "ROUTE",
+    "is_staff",
+    "require_staff",
+    "robot_actions",
+    "robot_rows",
+    "student_rows",
+    "class_actions",
+]
 
 ROUTE = "/teacher"
 """Where the console serves the teacher's page."""
@@ -46,7 +57,9 @@ def require_staff(name: str, instructors: Iterable[str], what: str = "the teache
     if is_staff(name, staff):
         return
     if not staff:
-        raise NotStaff(f"{what} is for instructors, and this console names none (robofabric console --instructors NAME)")
+        raise NotStaff(
+            f"{what} is for instructors, and this console names none (robofabric console --instructors NAME)"
+        )
     raise NotStaff(f"{what} is for instructors: {one_line(name, 64) or 'nobody'} is not one of this console's")
 
 
@@ -55,8 +68,14 @@ def robot_actions(rec: OwnershipRecord | None) -> tuple[str, ...]:
     Give and Lock unless it is locked, Unlock only while it is; Stop and Reset always. None for a scene object."""
     if rec is None or rec.policy == "scene":
         return ()
-    show = {"take_back": bool(rec.owner), "give": not rec.locked, "lock": not rec.locked, "unlock": bool(rec.locked),
-            "stop": True, "reset": True}
+    show = {
+        "take_back": bool(rec.owner),
+        "give": not rec.locked,
+        "lock": not rec.locked,
+        "unlock": bool(rec.locked),
+        "stop": True,
+        "reset": True,
+    }
     return tuple(op for op in STAFF_OPS if show[op])
 
 
@@ -92,8 +111,18 @@ def robot_rows(kinds: Mapping[str, str], records: Mapping[str, OwnershipRecord])
         if rec is None:
             rows.append(RobotRow(_name(rid), kinds[rid], "(no record yet)", "", "", "", 0, ()))
             continue
-        rows.append(RobotRow(_name(rid), kinds[rid], _name(rec.owner) or "(free)", ", ".join(_name(u) for u in rec.queue) or "-",
-                             rec.state, _name(rec.locked), rec.epoch, robot_actions(rec)))
+        rows.append(
+            RobotRow(
+                _name(rid),
+                kinds[rid],
+                _name(rec.owner) or "(free)",
+                ", ".join(_name(u) for u in rec.queue) or "-",
+                rec.state,
+                _name(rec.locked),
+                rec.epoch,
+                robot_actions(rec),
+            )
+        )
     return rows
 
 
@@ -110,13 +139,19 @@ class StudentRow:
     waits: str
 
 
-def student_rows(pages: Mapping[str, int], live: Iterable[str], records: Mapping[str, OwnershipRecord],
-                 instructors: Iterable[str]) -> list[StudentRow]:
+def student_rows(
+    pages: Mapping[str, int], live: Iterable[str], records: Mapping[str, OwnershipRecord], instructors: Iterable[str]
+) -> list[StudentRow]:
     """Everyone the class sees: logged in on this console (``pages``: name -> open pages), live in the world
     (``live``: user peers' ids, scripts included), or named by a record (an owner, a queue); students first."""
     staff = set(instructors)
     live = set(live)
-    names = set(pages) | live | {r.owner for r in records.values() if r.owner} | {u for r in records.values() for u in r.queue}
+    names = (
+        set(pages)
+        | live
+        | {r.owner for r in records.values() if r.owner}
+        | {u for r in records.values() for u in r.queue}
+    )
     owns: dict[str, list[str]] = {}
     waits: dict[str, list[str]] = {}
     for rid in sorted(records):
@@ -125,6 +160,16 @@ def student_rows(pages: Mapping[str, int], live: Iterable[str], records: Mapping
             owns.setdefault(rec.owner, []).append(rid)
         for u in rec.queue:
             waits.setdefault(u, []).append(rid)
-    rows = [StudentRow(_name(n), "instructor" if n in staff else "student", int(pages.get(n, 0)), n in live,
-                       ", ".join(owns.get(n, ())) or "-", ", ".join(waits.get(n, ())) or "-") for n in names if n]
+    rows = [
+        StudentRow(
+            _name(n),
+            "instructor" if n in staff else "student",
+            int(pages.get(n, 0)),
+            n in live,
+            ", ".join(owns.get(n, ())) or "-",
+            ", ".join(waits.get(n, ())) or "-",
+        )
+        for n in names
+        if n
+    ]
     return sorted(rows, key=lambda r: (r.role != "student", r.name))

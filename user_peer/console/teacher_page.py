@@ -39,9 +39,17 @@ STORAGE_KEY = "rf-teacher-session"
 REFRESH_S = 1.0
 """How often the tables are read again (the records, the console's logins, the world's live users)."""
 
-STUDENT_COLUMNS = [{"name": n, "label": label, "field": n, "align": "left"} for n, label in
-                   (("name", "Name"), ("role", "Role"), ("pages", "Pages here"), ("live", "In the world"), ("owns", "Owns"),
-                    ("waits", "Waits for"))]
+STUDENT_COLUMNS = [
+    {"name": n, "label": label, "field": n, "align": "left"}
+    for n, label in (
+        ("name", "Name"),
+        ("role", "Role"),
+        ("pages", "Pages here"),
+        ("live", "In the world"),
+        ("owns", "Owns"),
+        ("waits", "Waits for"),
+    )
+]
 
 
 class TeacherPage:
@@ -66,10 +74,14 @@ class TeacherPage:
         ui.add_head_html(A11Y_JS)
         self.root = ui.column().classes("full-width")
         with self.root, ui.card().style("margin: 4rem auto 0; width: 24rem"):
-            ui.label(f"robofabric · teacher's page · world {self.console.world}").classes("text-h6").props('role="heading" aria-level="1"')
+            ui.label(f"robofabric · teacher's page · world {self.console.world}").classes("text-h6").props(
+                'role="heading" aria-level="1"'
+            )
             self.name_in = ui.input("Name").props('autofocus aria-label="Name"').classes("full-width")
             self.pw_in = ui.input("Password", password=True).props('aria-label="Password"').classes("full-width")
-            ui.label("For instructors: type the name and password of your instructor's login card.").classes("text-caption")
+            ui.label("For instructors: type the name and password of your instructor's login card.").classes(
+                "text-caption"
+            )
             self.button = ui.button("Log in", on_click=self.login)
             self.pw_in.on("keydown.enter", self.login)
             self.msg = ui.label("").props('role="alert"').classes("text-negative")
@@ -85,7 +97,9 @@ class TeacherPage:
         self.button.disable()
         self.msg.text = f"logging in as {name}..."
         try:
-            cfg = login_config(self.console.world, self.console.connect, name, password, base_file=self.console.base_file)
+            cfg = login_config(
+                self.console.world, self.console.connect, name, password, base_file=self.console.base_file
+            )
             world = await off_loop(LOGINS, self.console.logins.login, cfg, name, password, self.client.ip)
             self.kinds = await off_loop(LOGINS, _kinds, world)
         except LoginError as exc:
@@ -107,7 +121,9 @@ class TeacherPage:
         from user_peer.console.login_card import READ_TIMEOUT_S
 
         try:
-            token = await self.client.run_javascript(f"sessionStorage.getItem({json.dumps(STORAGE_KEY)})", timeout=READ_TIMEOUT_S)
+            token = await self.client.run_javascript(
+                f"sessionStorage.getItem({json.dumps(STORAGE_KEY)})", timeout=READ_TIMEOUT_S
+            )
         except Exception as exc:  # a tab that never answered keeps its login card
             log.info("console: a teacher's page did not say whether it holds a ticket: %s", exc)
             return
@@ -159,8 +175,11 @@ class TeacherPage:
 
     def _main(self) -> None:
         ui.label(f"robofabric · teacher's page · world {self.console.world} · {self.user}").classes("text-h6").props(
-            'role="heading" aria-level="1"')
-        self.message = ui.label("").props('role="status" aria-live="polite"').classes("text-body1").style("min-height: 1.5rem")
+            'role="heading" aria-level="1"'
+        )
+        self.message = (
+            ui.label("").props('role="status" aria-live="polite"').classes("text-body1").style("min-height: 1.5rem")
+        )
         with ui.row().classes("items-center"):
             ui.button("Stop all", on_click=lambda: self.act_all("stop")).props("color=negative")
             ui.button("Reset world", on_click=self._confirm_reset)
@@ -172,18 +191,25 @@ class TeacherPage:
             for rid in sorted(self.kinds):
                 self._robot_row(rid)
         ui.label("Class").classes("text-subtitle1").props('role="heading" aria-level="2"')
-        self.students = ui.table(columns=STUDENT_COLUMNS, rows=[], row_key="name").props('flat dense aria-label="Class"')
+        self.students = ui.table(columns=STUDENT_COLUMNS, rows=[], row_key="name").props(
+            'flat dense aria-label="Class"'
+        )
         ui.timer(REFRESH_S, self.refresh)
 
     def _robot_row(self, rid: str) -> None:
         row: dict[str, Any] = {"robot": ui.label(f"{rid} ({self.kinds[rid]})")}
         for f in ("owner", "queue", "state", "locked"):
             row[f] = ui.label("")
-        row["to"] = ui.select([], label=f"Give {rid} to").props(f'dense outlined aria-label="Give {rid} to"').style("min-width: 10rem")
+        row["to"] = (
+            ui.select([], label=f"Give {rid} to")
+            .props(f'dense outlined aria-label="Give {rid} to"')
+            .style("min-width: 10rem")
+        )
         with ui.row().classes("items-center no-wrap").style("gap: 0.25rem"):
             for op, label in teacher.LABELS.items():
                 row[op] = ui.button(label, on_click=lambda _, rid=rid, op=op: self.act(rid, op)).props(
-                    f'dense no-caps aria-label="{label} {rid}"')
+                    f'dense no-caps aria-label="{label} {rid}"'
+                )
         self.rows[rid] = row
 
     def _confirm_reset(self) -> None:
@@ -213,7 +239,9 @@ class TeacherPage:
         said = [await off_loop(CALLS, self._staff, rid, op, "") for rid in sorted(self.kinds)]
         refused = [s for s in said if not s.startswith("done")]
         what = "stop all" if op == "stop" else "reset world"
-        self.say(f"{what}: {len(said) - len(refused)} of {len(said)} robots" + (f"; {'; '.join(refused)}" if refused else ""))
+        self.say(
+            f"{what}: {len(said) - len(refused)} of {len(said)} robots" + (f"; {'; '.join(refused)}" if refused else "")
+        )
         await self.refresh()
 
     def _staff(self, rid: str, op: str, to: str) -> str:
@@ -224,11 +252,17 @@ class TeacherPage:
         except teacher.NotStaff as exc:
             return f"refused: {exc.reason}"
         except NoReply:
-            return (f"{teacher.LABELS[op]} {rid}: no answer: the router let it through to no authority (is {self.user} an "
-                    "instructor login of the class, secure init --instructors?)")
+            return (
+                f"{teacher.LABELS[op]} {rid}: no answer: the router let it through to no authority (is {self.user} an "
+                "instructor login of the class, secure init --instructors?)"
+            )
         except ServiceError as exc:
             return f"{teacher.LABELS[op]} {rid}: {exc.reason}"
-        return f"{out.outcome}: {out.reason}" if out.outcome == "done" else f"{teacher.LABELS[op]} {rid} refused: {out.reason}"
+        return (
+            f"{out.outcome}: {out.reason}"
+            if out.outcome == "done"
+            else f"{teacher.LABELS[op]} {rid} refused: {out.reason}"
+        )
 
     # ------------------------------------------------------------------ refresh
 
@@ -257,8 +291,17 @@ class TeacherPage:
             row["to"].set_options(names, value=row["to"].value if row["to"].value in names else None)
             for op in teacher.LABELS:
                 row[op].set_visibility(op in r.actions)
-        self.students.rows = [{"name": s.name, "role": s.role, "pages": s.pages, "live": "yes" if s.live else "no", "owns": s.owns,
-                               "waits": s.waits} for s in students]
+        self.students.rows = [
+            {
+                "name": s.name,
+                "role": s.role,
+                "pages": s.pages,
+                "live": "yes" if s.live else "no",
+                "owns": s.owns,
+                "waits": s.waits,
+            }
+            for s in students
+        ]
 
 
 def _kinds(world: Any) -> dict[str, str]:

@@ -25,7 +25,18 @@ import numpy as np
 
 from robots.kinds import facts
 
-__all__ = ["Frame", "RobotMark", "svg", "robot_svg", "scan_path", "grid_png", "background_png", "png_gray", "data_url", "frame_around"]
+__all__ = [
+    "Frame",
+    "RobotMark",
+    "svg",
+    "robot_svg",
+    "scan_path",
+    "grid_png",
+    "background_png",
+    "png_gray",
+    "data_url",
+    "frame_around",
+]
 
 PX_PER_M = 40.0
 """Image pixels per metre: a 10 m scene is a 400-pixel picture (the browser scales it to the panel)."""
@@ -60,7 +71,9 @@ class Frame:
         return self.xmin + px / self.scale, self.ymax - py / self.scale
 
 
-def frame_around(points: Iterable[Sequence[float]], *, margin: float = 1.0, minimum: float = 10.0, scale: float = PX_PER_M) -> Frame:
+def frame_around(
+    points: Iterable[Sequence[float]], *, margin: float = 1.0, minimum: float = 10.0, scale: float = PX_PER_M
+) -> Frame:
     """A square frame holding ``points`` (x, y) with ``margin``, at least ``minimum`` metres wide, centred on them."""
     pts = np.asarray([(float(p[0]), float(p[1])) for p in points] or [(0.0, 0.0)])
     lo, hi = pts.min(axis=0) - margin, pts.max(axis=0) + margin
@@ -102,18 +115,29 @@ def _robot(frame: Frame, r: RobotMark) -> list[str]:
             pts.append(f"{_f(cx + d * math.cos(r.yaw + a))},{_f(cy - d * math.sin(r.yaw + a))}")
         out.append(f'<polygon points="{" ".join(pts)}" fill="{color}"{stroke}/>')
     else:
-        out.append(f'<rect x="{_f(cx - size / 2)}" y="{_f(cy - size / 2)}" width="{_f(size)}" height="{_f(size)}" fill="{color}"{stroke}/>')
+        out.append(
+            f'<rect x="{_f(cx - size / 2)}" y="{_f(cy - size / 2)}" width="{_f(size)}" height="{_f(size)}" fill="{color}"{stroke}/>'
+        )
         if len(r.links) >= 2:  # the arm's links from above: its joints' origins, base to flange
             pts = " ".join(f"{_f(a)},{_f(b)}" for a, b in (frame.px(x, y) for x, y in r.links))
-            out.append(f'<polyline class="rf-arm-links" points="{pts}" fill="none" stroke="{color}" stroke-width="4" '
-                       'stroke-linejoin="round"/>')
-            out.extend(f'<circle cx="{_f(a)}" cy="{_f(b)}" r="2" fill="#212529"/>' for a, b in (frame.px(x, y) for x, y in r.links[1:]))
+            out.append(
+                f'<polyline class="rf-arm-links" points="{pts}" fill="none" stroke="{color}" stroke-width="4" '
+                'stroke-linejoin="round"/>'
+            )
+            out.extend(
+                f'<circle cx="{_f(a)}" cy="{_f(b)}" r="2" fill="#212529"/>'
+                for a, b in (frame.px(x, y) for x, y in r.links[1:])
+            )
         elif r.flange is not None:
             fx, fy = frame.px(*r.flange)
-            out.append(f'<line x1="{_f(cx)}" y1="{_f(cy)}" x2="{_f(fx)}" y2="{_f(fy)}" stroke="{color}" stroke-width="4"/>')
+            out.append(
+                f'<line x1="{_f(cx)}" y1="{_f(cy)}" x2="{_f(fx)}" y2="{_f(fy)}" stroke="{color}" stroke-width="4"/>'
+            )
             out.append(f'<circle cx="{_f(fx)}" cy="{_f(fy)}" r="3" fill="#212529"/>')
     label = f"{r.id} · {r.owner or 'free'}"
-    out.append(f'<text x="{_f(cx + size * 0.7)}" y="{_f(cy - size * 0.7)}" font-size="12" fill="#212529">{escape(label)}</text>')
+    out.append(
+        f'<text x="{_f(cx + size * 0.7)}" y="{_f(cy - size * 0.7)}" font-size="12" fill="#212529">{escape(label)}</text>'
+    )
     return out
 
 
@@ -146,7 +170,9 @@ def svg(
     for cx, cy, hx, hy, yaw in boxes:
         corners = [(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)]
         c, s = math.cos(yaw), math.sin(yaw)
-        pts = " ".join(f"{_f(p[0])},{_f(p[1])}" for p in (frame.px(cx + c * u - s * v, cy + s * u + c * v) for u, v in corners))
+        pts = " ".join(
+            f"{_f(p[0])},{_f(p[1])}" for p in (frame.px(cx + c * u - s * v, cy + s * u + c * v) for u, v in corners)
+        )
         out.append(f'<polygon points="{pts}" fill="#ced4da" stroke="#adb5bd"/>')
     for path in paths:
         if len(path) >= 2:
@@ -158,7 +184,9 @@ def svg(
         gx, gy = frame.px(goal[0], goal[1])
         tip = frame.px(goal[0] + 0.4 * math.cos(goal[2]), goal[1] + 0.4 * math.sin(goal[2]))
         out.append(f'<circle cx="{_f(gx)}" cy="{_f(gy)}" r="6" fill="none" stroke="#2f9e44" stroke-width="3"/>')
-        out.append(f'<line x1="{_f(gx)}" y1="{_f(gy)}" x2="{_f(tip[0])}" y2="{_f(tip[1])}" stroke="#2f9e44" stroke-width="3"/>')
+        out.append(
+            f'<line x1="{_f(gx)}" y1="{_f(gy)}" x2="{_f(tip[0])}" y2="{_f(tip[1])}" stroke="#2f9e44" stroke-width="3"/>'
+        )
     if target is not None:
         tx, ty = frame.px(*target)
         out.append(f'<circle cx="{_f(tx)}" cy="{_f(ty)}" r="5" fill="#f59f00" stroke="#212529"/>')
@@ -172,14 +200,21 @@ def scan_path(frame: Frame, scan: np.ndarray) -> str:
     draw, and hits that fall in the same pixel drawn once (a 240-ray scan: ~3 kB a redraw, less near walls).
     Computed with numpy: five times a second for every page, a loop per ray was a redraw's largest part."""
     pts = np.asarray(scan, dtype=float).reshape(-1, 2)
-    px = np.rint(np.stack([(pts[:, 0] - frame.xmin) * frame.scale, (frame.ymax - pts[:, 1]) * frame.scale], axis=1)).astype(np.int64) - 1
+    px = (
+        np.rint(
+            np.stack([(pts[:, 0] - frame.xmin) * frame.scale, (frame.ymax - pts[:, 1]) * frame.scale], axis=1)
+        ).astype(np.int64)
+        - 1
+    )
     code = px[:, 0] * 1_000_003 + px[:, 1]  # one number a pixel: numpy's unique is far faster on one axis
     px = px[np.sort(np.unique(code, return_index=True)[1])]  # each pixel once, in the rays' order
     d = "".join(f"M{a} {b}h2v2h-2z" for a, b in px.tolist())
     return f'<path d="{d}" fill="#f03e3e"/>'
 
 
-def scan_points(x: float, y: float, yaw: float, angle_min: float, angle_increment: float, ranges: np.ndarray, range_max: float) -> np.ndarray:
+def scan_points(
+    x: float, y: float, yaw: float, angle_min: float, angle_increment: float, ranges: np.ndarray, range_max: float
+) -> np.ndarray:
     """World (x, y) of a scan's hits (rays that reached ``range_max`` hit nothing and are left out)."""
     r = np.asarray(ranges, dtype=float)
     a = yaw + angle_min + angle_increment * np.arange(len(r))
@@ -197,8 +232,11 @@ def grid_png(cells: np.ndarray, resolution: float, origin: Sequence[float], fram
     return png_gray(grid_pixels(cells, resolution, origin, frame))
 
 
-def background_png(frame: Frame, boxes: Sequence[tuple[float, float, float, float, float]] = (),
-                   grid: tuple[np.ndarray, float, Sequence[float]] | None = None) -> bytes:
+def background_png(
+    frame: Frame,
+    boxes: Sequence[tuple[float, float, float, float, float]] = (),
+    grid: tuple[np.ndarray, float, Sequence[float]] | None = None,
+) -> bytes:
     """The view's still picture: the map (``grid``: cells, resolution, origin; unknown grey without one) with the
     scene's static boxes (cx, cy, half x, half y, yaw) in :data:`BOX` grey over it, except where the map saw
     something darker (an occupied cell stays black). Drawn once per map, not with every redraw of the overlay;
@@ -215,7 +253,9 @@ def _scene_png(frame: Frame, boxes: tuple[tuple[float, ...], ...]) -> bytes:
     return _drawn_png(frame, boxes, None)
 
 
-def _drawn_png(frame: Frame, boxes: Sequence[Sequence[float]], grid: tuple[np.ndarray, float, Sequence[float]] | None) -> bytes:
+def _drawn_png(
+    frame: Frame, boxes: Sequence[Sequence[float]], grid: tuple[np.ndarray, float, Sequence[float]] | None
+) -> bytes:
     img = grid_pixels(*grid, frame) if grid is not None else np.full((frame.height, frame.width), UNKNOWN, np.uint8)
     if boxes:
         X, Y = _pixel_centres(frame)
@@ -258,7 +298,12 @@ def png_gray(img: np.ndarray) -> bytes:
     def chunk(kind: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
 
-    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0)) + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b"")
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
+        + chunk(b"IDAT", zlib.compress(raw, 6))
+        + chunk(b"IEND", b"")
+    )
 
 
 def data_url(png: bytes) -> str:

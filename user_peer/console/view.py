@@ -52,14 +52,27 @@ class LiveView:
         self.token = page.console.pictures.new_token()
 
     def build(self) -> None:
-        self.image = ui.interactive_image(
-            self.page.console.pictures.put(self.token, topview.background_png(self.frame, self.boxes)),
-            content="", on_mouse=self.mouse, events=["mousedown", "mouseup", "click"], sanitize=False,
-        ).classes("full-width").props('aria-label="Live view: click to place the goal, drag the IK target"')
+        self.image = (
+            ui.interactive_image(
+                self.page.console.pictures.put(self.token, topview.background_png(self.frame, self.boxes)),
+                content="",
+                on_mouse=self.mouse,
+                events=["mousedown", "mouseup", "click"],
+                sanitize=False,
+            )
+            .classes("full-width")
+            .props('aria-label="Live view: click to place the goal, drag the IK target"')
+        )
         with self.image:  # over the map's top-right corner: the map's row keeps its height
             with ui.row().classes("absolute-top-right q-ma-xs items-center").style("gap: 0.25rem"):
-                self.zoom_label = ui.label("").classes("text-caption").style("background: #ffffffd9; padding: 0 0.25rem")
-                for words, fn in (("Zoom in", self.zoom_in), ("Zoom out", self.zoom_out), ("Whole map", self.whole_map)):
+                self.zoom_label = (
+                    ui.label("").classes("text-caption").style("background: #ffffffd9; padding: 0 0.25rem")
+                )
+                for words, fn in (
+                    ("Zoom in", self.zoom_in),
+                    ("Zoom out", self.zoom_out),
+                    ("Whole map", self.whole_map),
+                ):
                     ui.button(words, on_click=fn).props("dense no-caps unelevated color=white text-color=dark")
         ui.html(mapframe.legend_html(), sanitize=False)
         self._show_zoom()
@@ -80,7 +93,11 @@ class LiveView:
         self._picture(self._grid)
         self._show_zoom()
         f, base = self.frame, self.page.robots.get("mobile")
-        around = f"around {base.id}" if level > 1 and base is not None and base.id in self.page.world.following.robots else "whole"
+        around = (
+            f"around {base.id}"
+            if level > 1 and base is not None and base.id in self.page.world.following.robots
+            else "whole"
+        )
         self.page.say(f"zoom x{level}: the map {around}, {f.xmax - f.xmin:.1f} m wide")
         self.page.refresh()
 
@@ -100,7 +117,9 @@ class LiveView:
     def _picture(self, grid: Any) -> None:
         """The still picture of the part shown: her map (if any) and the scene's walls."""
         self._grid = grid
-        png = topview.background_png(self.frame, self.boxes, (grid.cells, grid.resolution, grid.origin) if grid is not None else None)
+        png = topview.background_png(
+            self.frame, self.boxes, (grid.cells, grid.resolution, grid.origin) if grid is not None else None
+        )
         self.image.set_source(self.page.console.pictures.put(self.token, png))
 
     def follow_poses(self) -> None:
@@ -114,8 +133,10 @@ class LiveView:
         page, arm_panel = self.page, self.page.panels.get("arm")
         target = arm_panel.target if arm_panel is not None else None
         if e.type == "mousedown":
-            self._drag = target is not None and math.dist(self.frame.px(float(target[0]), float(target[1])),
-                                                          (e.image_x, e.image_y)) <= DRAG_GRAB_PX
+            self._drag = (
+                target is not None
+                and math.dist(self.frame.px(float(target[0]), float(target[1])), (e.image_x, e.image_y)) <= DRAG_GRAB_PX
+            )
         elif e.type == "mouseup" and self._drag:
             self._drag, self._swallow_click = False, True
             x, y = self.frame.world(e.image_x, e.image_y)
@@ -138,15 +159,26 @@ class LiveView:
         """The picture again when her map changed; the overlay from what the page holds now."""
         page, w = self.page, self.page.world
         arm_panel, base_panel, base = page.panels.get("arm"), page.panels.get("mobile"), page.robots.get("mobile")
-        grid = w.latest.get(keys.map_key(w.name, keys.user_map("map", w.user))) or (base_panel.grid if base_panel else None) \
+        grid = (
+            w.latest.get(keys.map_key(w.name, keys.user_map("map", w.user)))
+            or (base_panel.grid if base_panel else None)
             or w.latest.get(keys.map_key(w.name, "map"))
+        )
         if grid is not None and id(grid) != self._map_seq:
             self._map_seq = id(grid)
             self._picture(grid)
         target = arm_panel.target if arm_panel is not None else None
         poses = self.feed.drain() if self.feed is not None else {}
         self.image.content = state.view_svg(
-            w, page.entries, follow.followed(w, page.handles), poses, self.frame, (), base_id=base.id if base else None,
-            selected={page.selected} if page.selected else set(), goal=base_panel.goal if base_panel else None,
-            target=(float(target[0]), float(target[1])) if target is not None else None, decoder=page.console.decoded) \
-            + mapframe.scale_bar_svg(self.frame)
+            w,
+            page.entries,
+            follow.followed(w, page.handles),
+            poses,
+            self.frame,
+            (),
+            base_id=base.id if base else None,
+            selected={page.selected} if page.selected else set(),
+            goal=base_panel.goal if base_panel else None,
+            target=(float(target[0]), float(target[1])) if target is not None else None,
+            decoder=page.console.decoded,
+        ) + mapframe.scale_bar_svg(self.frame)

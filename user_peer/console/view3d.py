@@ -57,9 +57,13 @@ class View3D:
         info = page.world.info()
         self.spawn = {r.id: tuple(float(v) for v in r.pose) for r in info.robots}
         ui.label("3D view").classes("text-subtitle1").props('role="heading" aria-level="2"')
-        self.scene = ui.scene(width=480, height=360, grid=(40, 40), on_drag_end=self._dropped, background_color="#f8f9fa", fps=10)
-        self.scene.classes("rf-scene3d").props('aria-label="3D view: drag to orbit, right-drag to pan, wheel to zoom; '
-                                               'drag the orange sphere to move the IK target"')
+        self.scene = ui.scene(
+            width=480, height=360, grid=(40, 40), on_drag_end=self._dropped, background_color="#f8f9fa", fps=10
+        )
+        self.scene.classes("rf-scene3d").props(
+            'aria-label="3D view: drag to orbit, right-drag to pan, wheel to zoom; '
+            'drag the orange sphere to move the IK target"'
+        )
         with self.scene:
             for b in scene_boxes3d(info.scene):
                 self.scene.box(*b.size).move(*b.center).rotate_R([list(r) for r in b.R]).material(b.color, 0.5)
@@ -68,7 +72,9 @@ class View3D:
             for e in page.entries:
                 sx, sy, sz, yaw = self.spawn.get(e.id, (0.0, 0.0, 0.0, 0.0))
                 if facts(e.kind).base:
-                    self.bases[e.id] = self.scene.box(*BASE_SIZE).material(topview.COLORS["free"]).move(sx, sy, BASE_SIZE[2] / 2)
+                    self.bases[e.id] = (
+                        self.scene.box(*BASE_SIZE).material(topview.COLORS["free"]).move(sx, sy, BASE_SIZE[2] / 2)
+                    )
                 else:
                     self.scene.box(0.12, 0.12, 0.02).material("#495057").move(sx, sy, sz + 0.01)
                 self.scene.text(e.id, "font-size: 12px; color: #212529").move(sx, sy, sz + 0.45)
@@ -76,8 +82,11 @@ class View3D:
             self.target = self.scene.sphere(TARGET_RADIUS).material("#f59f00").draggable().with_name("ik-target")
             self.target.visible(False)
         with ui.row().classes("items-center"):
-            self.height = ui.number("IK target height z (m)", step=0.01, format="%.3f", on_change=self._height_set).props(
-                'aria-label="IK target height z in metres" dense').style("width: 12rem")
+            self.height = (
+                ui.number("IK target height z (m)", step=0.01, format="%.3f", on_change=self._height_set)
+                .props('aria-label="IK target height z in metres" dense')
+                .style("width: 12rem")
+            )
             ui.button("View the arm", on_click=self.look_at_arm).props("flat dense no-caps")
             ui.button("View the whole world", on_click=self.look_at_world).props("flat dense no-caps")
         self.look_at_arm()
@@ -154,7 +163,13 @@ class View3D:
         for rid, box in self.bases.items():
             rec = w.ownership.record(rid)
             owner = rec.owner if rec is not None else ""
-            box.material(topview.COLORS["mine"] if owner == w.user else topview.COLORS["other"] if owner else topview.COLORS["free"])
+            box.material(
+                topview.COLORS["mine"]
+                if owner == w.user
+                else topview.COLORS["other"]
+                if owner
+                else topview.COLORS["free"]
+            )
         self._scan()
         self._show_target()
 
@@ -164,8 +179,9 @@ class View3D:
         links = self.links.get(rid)
         if links is None:
             with self.scene:
-                links = self.links[rid] = [self.scene.cylinder(LINK_RADIUS, LINK_RADIUS, 1.0).material("#1c7ed6")
-                                           for _ in range(len(pts) - 1)]
+                links = self.links[rid] = [
+                    self.scene.cylinder(LINK_RADIUS, LINK_RADIUS, 1.0).material("#1c7ed6") for _ in range(len(pts) - 1)
+                ]
         for cyl, a, b in zip(links, pts[:-1], pts[1:]):
             mid, R, n = segment_pose(a, b)
             cyl.move(*(round(float(v), 4) for v in mid)).rotate_R([[round(float(v), 4) for v in row] for row in R])
@@ -175,7 +191,9 @@ class View3D:
         if pose is None or rid not in self.bases:
             return
         yaw = yaw_from_quaternion(pose.quaternion)
-        self.bases[rid].move(round(float(pose.position[0]), 3), round(float(pose.position[1]), 3), BASE_SIZE[2] / 2).rotate(0.0, 0.0, round(yaw, 3))
+        self.bases[rid].move(
+            round(float(pose.position[0]), 3), round(float(pose.position[1]), 3), BASE_SIZE[2] / 2
+        ).rotate(0.0, 0.0, round(yaw, 3))
 
     def _scan(self) -> None:
         base = self.page.robots.get("mobile")
@@ -184,9 +202,18 @@ class View3D:
         s, p = base.latest("scan"), base.latest("pose")
         if s is None or p is None:
             return
-        pts = topview.scan_points(float(p.position[0]), float(p.position[1]), yaw_from_quaternion(p.quaternion),
-                                  s.angle_min, s.angle_increment, s.ranges, s.range_max)
+        pts = topview.scan_points(
+            float(p.position[0]),
+            float(p.position[1]),
+            yaw_from_quaternion(p.quaternion),
+            s.angle_min,
+            s.angle_increment,
+            s.ranges,
+            s.range_max,
+        )
         key = (id(s), id(p))
         if getattr(self, "_scan_key", None) != key:
             self._scan_key = key
-            self.scan.set_points([[round(float(x), 3), round(float(y), 3), 0.15] for x, y in pts], [[0.94, 0.24, 0.24]] * len(pts))
+            self.scan.set_points(
+                [[round(float(x), 3), round(float(y), 3), 0.15] for x, y in pts], [[0.94, 0.24, 0.24]] * len(pts)
+            )

@@ -47,8 +47,11 @@ def probe_logins(world: str, connect: tuple[str, ...], base_file: str | None = N
         session = zenoh.open(conf)
     except Exception as exc:  # zenoh says "Unable to connect" for a refused login and for nobody there alike
         up = [ep for ep in connect if _answers(ep)]
-        log.info("console: a session without a login %s (%s)", "was refused: logins required" if up else "found no router",
-                 str(exc).split(" at /")[0])
+        log.info(
+            "console: a session without a login %s (%s)",
+            "was refused: logins required" if up else "found no router",
+            str(exc).split(" at /")[0],
+        )
         return True if up else None
     session.close()
     return False

@@ -34,7 +34,9 @@ def log_shape(rec: rr.RecordingStream, path: str, shape: Any) -> None:
         arch = rr.Cylinders3D(lengths=[shape.size[1]], radii=[shape.size[0]], colors=color, fill_mode="solid")
     elif shape.kind == "capsule":
         # Rerun's capsules run along +z from the origin; URDF's are centred.
-        arch = rr.Capsules3D(lengths=[shape.size[1]], radii=[shape.size[0]], translations=[[0, 0, -shape.size[1] / 2]], colors=color)
+        arch = rr.Capsules3D(
+            lengths=[shape.size[1]], radii=[shape.size[0]], translations=[[0, 0, -shape.size[1] / 2]], colors=color
+        )
     elif shape.kind == "mesh" and shape.mesh_path:
         try:
             arch = rr.Asset3D(path=shape.mesh_path)
@@ -71,13 +73,25 @@ class ArmDrawer:
         rec, root, base = self.canvas.rec, f"world/robots/{rid}", info.base
         links = f"{root}/links"
         if base is not None:
-            rec.log(links, rr.Transform3D(translation=base.translation, quaternion=rr.Quaternion(xyzw=base.quat_xyzw)), static=True)
+            rec.log(
+                links,
+                rr.Transform3D(translation=base.translation, quaternion=rr.Quaternion(xyzw=base.quat_xyzw)),
+                static=True,
+            )
         for shape, joint, pl in chain.shapes():
             path = f"{chain.path(links, joint - 1)}/{rr.escape_entity_path_part(shape.name)}"
-            rec.log(path, rr.Transform3D(translation=pl.translation, quaternion=rr.Quaternion(xyzw=pl.quat_xyzw)), static=True)
+            rec.log(
+                path,
+                rr.Transform3D(translation=pl.translation, quaternion=rr.Quaternion(xyzw=pl.quat_xyzw)),
+                static=True,
+            )
             log_shape(rec, path, shape)
-        rec.log(f"{root}/skeleton", rr.LineStrips3D.from_fields(radii=0.006, colors=[info.color]),
-                rr.Points3D.from_fields(radii=0.012, colors=[(60, 60, 60)]), static=True)
+        rec.log(
+            f"{root}/skeleton",
+            rr.LineStrips3D.from_fields(radii=0.006, colors=[info.color]),
+            rr.Points3D.from_fields(radii=0.012, colors=[(60, 60, 60)]),
+            static=True,
+        )
         at = base.translation if base is not None else np.zeros(3)
         self.labels.place(rid, f"{root}/label", np.asarray(at, dtype=float) + [0.0, 0.0, 0.05])
 
@@ -91,9 +105,18 @@ class ArmDrawer:
             local = ts, qs = chain.local(q)
             for j in range(len(chain.joints)):
                 send(self.canvas.rec, chain.path(f"{root}/links", j), times, transforms(ts[:, j], qs[:, j]))
-            origins = chain.origins(q, info.base, local)  # the skeleton: a line strip through the joint origins, and points at them
-            send(self.canvas.rec, f"{root}/skeleton", times, [column(STRIPS3, strips(origins)),
-                                                             column(POSITIONS3, vectors(origins.reshape(-1, 3), 3), np.full(n, origins.shape[1]))])
+            origins = chain.origins(
+                q, info.base, local
+            )  # the skeleton: a line strip through the joint origins, and points at them
+            send(
+                self.canvas.rec,
+                f"{root}/skeleton",
+                times,
+                [
+                    column(STRIPS3, strips(origins)),
+                    column(POSITIONS3, vectors(origins.reshape(-1, 3), 3), np.full(n, origins.shape[1])),
+                ],
+            )
         elif info.arm is not None and k == len(info.arm.joint_names):
             self._draw_rows(rid, info, rows)  # a URDF joint kind the chain does not know: Pinocchio per row
 

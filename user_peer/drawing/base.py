@@ -14,7 +14,18 @@ from user_peer.drawing.canvas import Canvas, Rows
 from user_peer.drawing.labels import OwnershipDrawer
 from user_peer.drawing.robots import RobotDrawing
 from user_peer.geometry import EXTRAPOLATION_CAP_S, scan_world_points, world_to_map_pixels
-from user_peer.rerun_columns import POSITIONS2, POSITIONS3, SCALARS, STRIPS3, column, scalars, send, strips, transforms, vectors
+from user_peer.rerun_columns import (
+    POSITIONS2,
+    POSITIONS3,
+    SCALARS,
+    STRIPS3,
+    column,
+    scalars,
+    send,
+    strips,
+    transforms,
+    vectors,
+)
 
 __all__ = ["BaseDrawer"]
 
@@ -28,8 +39,9 @@ class BaseDrawer:
     ``clock``: the clock that stamped the arrival times (a live view); None (an export from a recording): no
     extrapolation, nothing is "now". ``grids``: the maps a base's dot is drawn on (the map drawer's, shared)."""
 
-    def __init__(self, canvas: Canvas, labels: OwnershipDrawer, grids: dict[str, OccupancyGrid],
-                 clock: Callable[[], int] | None) -> None:
+    def __init__(
+        self, canvas: Canvas, labels: OwnershipDrawer, grids: dict[str, OccupancyGrid], clock: Callable[[], int] | None
+    ) -> None:
         self.canvas = canvas
         self.labels = labels
         self.grids = grids
@@ -45,12 +57,28 @@ class BaseDrawer:
         rec, root = self.canvas.rec, f"world/robots/{rid}"
         path = f"{root}/base"
         r, h = info.radius, info.height
-        rec.log(f"{path}/body", rr.Cylinders3D(lengths=[h], radii=[r], centers=[[0, 0, h / 2]], colors=[info.color], fill_mode="solid"), static=True)
-        rec.log(f"{path}/heading", rr.Arrows3D(vectors=[[r * 1.4, 0, 0]], origins=[[0, 0, h + 0.02]], colors=[(20, 20, 20)]), static=True)
-        rec.log(f"{root}/scan", rr.Points3D.from_fields(radii=0.02, colors=[(230, 40, 40)]),
-                rr.LineStrips3D.from_fields(radii=0.002, colors=[(240, 150, 150)]), static=True)
-        rec.log(f"{root}/sonar", rr.Points3D.from_fields(radii=0.03, colors=[(40, 170, 230)]),
-                rr.LineStrips3D.from_fields(radii=0.003, colors=[(120, 200, 240)]), static=True)
+        rec.log(
+            f"{path}/body",
+            rr.Cylinders3D(lengths=[h], radii=[r], centers=[[0, 0, h / 2]], colors=[info.color], fill_mode="solid"),
+            static=True,
+        )
+        rec.log(
+            f"{path}/heading",
+            rr.Arrows3D(vectors=[[r * 1.4, 0, 0]], origins=[[0, 0, h + 0.02]], colors=[(20, 20, 20)]),
+            static=True,
+        )
+        rec.log(
+            f"{root}/scan",
+            rr.Points3D.from_fields(radii=0.02, colors=[(230, 40, 40)]),
+            rr.LineStrips3D.from_fields(radii=0.002, colors=[(240, 150, 150)]),
+            static=True,
+        )
+        rec.log(
+            f"{root}/sonar",
+            rr.Points3D.from_fields(radii=0.03, colors=[(40, 170, 230)]),
+            rr.LineStrips3D.from_fields(radii=0.003, colors=[(120, 200, 240)]),
+            static=True,
+        )
         rec.log(f"plots/speed/{rid}", rr.SeriesLines(names=["v (m/s)", "omega (rad/s)"]), static=True)
         self.labels.place(rid, f"{path}/label", np.array([0.0, 0.0, h + 0.25]))
 
@@ -67,8 +95,13 @@ class BaseDrawer:
             cx, cy, h, radius = info.sonar or DEFAULT_SONAR
             # ranges are measured from the rim: from the ring's centre they are `radius` longer
             ranges = np.where(np.isfinite(scan.ranges), scan.ranges + radius, np.inf)
-            centred = Scan.from_ranges(ranges, angle_min=scan.angle_min, angle_increment=scan.angle_increment,
-                                       range_max=scan.range_max + radius, header=scan.header)
+            centred = Scan.from_ranges(
+                ranges,
+                angle_min=scan.angle_min,
+                angle_increment=scan.angle_increment,
+                range_max=scan.range_max + radius,
+                header=scan.header,
+            )
             origin, pts, hit = scan_world_points(centred, self.poses.get(rid), (cx, cy, h))
             ends = pts[hit]
         else:
@@ -89,9 +122,15 @@ class BaseDrawer:
                 # hits as points and rays as lines, one entity
                 hits = [it[0] for it in rows.items]
                 rays = [it[1] for it in rows.items]
-                send(self.canvas.rec, f"world/robots/{rid}/{name}", rows.times(),
-                     [column(POSITIONS3, vectors(np.concatenate(hits).reshape(-1, 3), 3), [len(h) for h in hits]),
-                      column(STRIPS3, strips(np.concatenate(rays).reshape(-1, 2, 3)), [len(r) for r in rays])])
+                send(
+                    self.canvas.rec,
+                    f"world/robots/{rid}/{name}",
+                    rows.times(),
+                    [
+                        column(POSITIONS3, vectors(np.concatenate(hits).reshape(-1, 3), 3), [len(h) for h in hits]),
+                        column(STRIPS3, strips(np.concatenate(rays).reshape(-1, 2, 3)), [len(r) for r in rays]),
+                    ],
+                )
                 rows.clear()
 
     def _draw_poses(self, rid: str, info: RobotDrawing, rows: Rows) -> None:
@@ -114,6 +153,12 @@ class BaseDrawer:
         for name, grid in self.grids.items():
             entity = f"map/{name}/robots/{rid}"
             if self.canvas.once(entity):
-                rec.log(entity, rr.Points2D.from_fields(radii=max(2.0, info.radius / grid.resolution), colors=[info.color], labels=[rid]), static=True)
+                rec.log(
+                    entity,
+                    rr.Points2D.from_fields(
+                        radii=max(2.0, info.radius / grid.resolution), colors=[info.color], labels=[rid]
+                    ),
+                    static=True,
+                )
             send(rec, entity, times, [column(POSITIONS2, vectors(world_to_map_pixels(grid, pos[:, :2]), 2))])
         rows.clear()

@@ -51,7 +51,12 @@ class OwnershipDrawer:
         if before is None or before.owner != rec.owner or before.epoch != rec.epoch:
             who = rec.owner or "nobody"
             log("events", rr.TextLog(f"{rec.object}: owned by {who} (epoch {rec.epoch}, {rec.state})", level="INFO"))
-        log(f"ownership/{rec.object}", rr.TextDocument(f"owner: {rec.owner or '-'}\nepoch: {rec.epoch}\nqueue: {', '.join(rec.queue) or '-'}\nstate: {rec.state}"))
+        log(
+            f"ownership/{rec.object}",
+            rr.TextDocument(
+                f"owner: {rec.owner or '-'}\nepoch: {rec.epoch}\nqueue: {', '.join(rec.queue) or '-'}\nstate: {rec.state}"
+            ),
+        )
         return True
 
     def log_event(self, where: str, ev: Event, *, any_login: bool = False) -> bool:

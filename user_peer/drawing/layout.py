@@ -56,15 +56,29 @@ def framing(points: Sequence[Sequence[float]]) -> tuple[np.ndarray, np.ndarray] 
 
 
 def _recent() -> list[rrb.VisibleTimeRange]:
-    return [rrb.VisibleTimeRange(t, start=rrb.TimeRangeBoundary.cursor_relative(seconds=-PLOT_WINDOW_S),
-                                 end=rrb.TimeRangeBoundary.cursor_relative()) for t in (TIMELINE_WALL, TIMELINE_SIM)]
+    return [
+        rrb.VisibleTimeRange(
+            t,
+            start=rrb.TimeRangeBoundary.cursor_relative(seconds=-PLOT_WINDOW_S),
+            end=rrb.TimeRangeBoundary.cursor_relative(),
+        )
+        for t in (TIMELINE_WALL, TIMELINE_SIM)
+    ]
 
 
 def blueprint(frame: tuple[np.ndarray, np.ndarray] | None = None) -> rrb.Blueprint:
     """3D world on the left (its camera on ``frame``: see :func:`framing`); map view, plots of the last
     :data:`PLOT_WINDOW_S` seconds and events on the right."""
-    eye = rrb.EyeControls3D(position=frame[0], look_target=frame[1], eye_up=[0.0, 0.0, 1.0]) if frame is not None else None
-    world = rrb.Spatial3DView(name="world", origin="world", eye_controls=eye) if eye is not None else rrb.Spatial3DView(name="world", origin="world")
+    eye = (
+        rrb.EyeControls3D(position=frame[0], look_target=frame[1], eye_up=[0.0, 0.0, 1.0])
+        if frame is not None
+        else None
+    )
+    world = (
+        rrb.Spatial3DView(name="world", origin="world", eye_controls=eye)
+        if eye is not None
+        else rrb.Spatial3DView(name="world", origin="world")
+    )
     return rrb.Blueprint(
         rrb.Horizontal(
             world,
@@ -73,7 +87,9 @@ def blueprint(frame: tuple[np.ndarray, np.ndarray] | None = None) -> rrb.Bluepri
                 rrb.Tabs(
                     rrb.TimeSeriesView(name="arm joints (deg)", origin="plots/joints", time_ranges=_recent()),
                     rrb.TimeSeriesView(name="wheels (deg)", origin="plots/wheels", time_ranges=_recent()),
-                    rrb.TimeSeriesView(name="arm joint speeds (deg/s)", origin="plots/joint_speed", time_ranges=_recent()),
+                    rrb.TimeSeriesView(
+                        name="arm joint speeds (deg/s)", origin="plots/joint_speed", time_ranges=_recent()
+                    ),
                     rrb.TimeSeriesView(name="base speed", origin="plots/speed", time_ranges=_recent()),
                     rrb.TimeSeriesView(name="stream rates (Hz)", origin="plots/rates", time_ranges=_recent()),
                     rrb.TimeSeriesView(name="viewer lag (ms)", origin="plots/viewer", time_ranges=_recent()),

@@ -32,7 +32,9 @@ class MapDrawer:
         for rid, path in self.paths.items():
             if len(path):
                 xy = np.stack([path.x, path.y], axis=1)
-                rec.log(f"map/{name}/paths/{rid}", rr.LineStrips2D([world_to_map_pixels(grid, xy)], colors=[color_of(rid)]))
+                rec.log(
+                    f"map/{name}/paths/{rid}", rr.LineStrips2D([world_to_map_pixels(grid, xy)], colors=[color_of(rid)])
+                )
         return True
 
     def log_path(self, rid: str, path: Path, color: tuple[int, int, int]) -> bool:

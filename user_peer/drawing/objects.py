@@ -26,15 +26,32 @@ class ObjectDrawer:
     def log_object(self, oid: str, pose: Pose) -> bool:
         rec = self.canvas.rec
         path = f"world/objects/{oid}"
-        rec.log(path, rr.Transform3D(translation=pose.position, quaternion=rr.Quaternion(xyzw=quat_xyzw(pose.quaternion))))
+        rec.log(
+            path, rr.Transform3D(translation=pose.position, quaternion=rr.Quaternion(xyzw=quat_xyzw(pose.quaternion)))
+        )
         if self.canvas.once(path):
             if "goal" in oid:
-                rec.log(f"{path}/shape", rr.Arrows3D(vectors=[[0.5, 0, 0]], colors=[OBJECT_COLOR], labels=[oid]), static=True)
+                rec.log(
+                    f"{path}/shape",
+                    rr.Arrows3D(vectors=[[0.5, 0, 0]], colors=[OBJECT_COLOR], labels=[oid]),
+                    static=True,
+                )
             else:
-                rec.log(f"{path}/shape", rr.Ellipsoids3D(half_sizes=[[0.02, 0.02, 0.02]], colors=[OBJECT_COLOR], fill_mode="solid", labels=[oid]), static=True)
+                rec.log(
+                    f"{path}/shape",
+                    rr.Ellipsoids3D(
+                        half_sizes=[[0.02, 0.02, 0.02]], colors=[OBJECT_COLOR], fill_mode="solid", labels=[oid]
+                    ),
+                    static=True,
+                )
         for name, grid in self.grids.items():
             if "goal" in oid:
-                rec.log(f"map/{name}/objects/{oid}", rr.Points2D(world_to_map_pixels(grid, pose.position[:2]), radii=4.0, colors=[OBJECT_COLOR], labels=[oid]))
+                rec.log(
+                    f"map/{name}/objects/{oid}",
+                    rr.Points2D(
+                        world_to_map_pixels(grid, pose.position[:2]), radii=4.0, colors=[OBJECT_COLOR], labels=[oid]
+                    ),
+                )
         return True
 
     def log_scene(self, boxes: Iterable[Any], name: str = "scene") -> None:

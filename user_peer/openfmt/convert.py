@@ -59,10 +59,17 @@ def export_recording(
     dst.parent.mkdir(parents=True, exist_ok=True)
     info = recorded_world(src)
     if info is None and scene is None:
-        log.warning("%s carries no world description (recorded before recorders kept one, or no sim answered): robots "
-                    "are placed by the scene that names them first; pass --scene NAME to place them by yours", src)
-    sink = open_sink(to, dst, scene=scene or (info.scene if info is not None else None),
-                     catalog=RobotCatalog(info, scene=scene or (info.scene if info is not None else None)))
+        log.warning(
+            "%s carries no world description (recorded before recorders kept one, or no sim answered): robots "
+            "are placed by the scene that names them first; pass --scene NAME to place them by yours",
+            src,
+        )
+    sink = open_sink(
+        to,
+        dst,
+        scene=scene or (info.scene if info is not None else None),
+        catalog=RobotCatalog(info, scene=scene or (info.scene if info is not None else None)),
+    )
     n = bad = done = 0
     try:
         for m in iter_messages(src):
@@ -84,7 +91,9 @@ def export_recording(
         sink.close()
     if progress is not None:
         progress(total, total)
-    return ExportStats(n, sink.written, bad, sink.skipped, tuple(sorted(r for r, i in sink.frames.robots.items() if i.kind)))
+    return ExportStats(
+        n, sink.written, bad, sink.skipped, tuple(sorted(r for r, i in sink.frames.robots.items() if i.kind))
+    )
 
 
 def recorded_world(src: Path) -> WorldInfo | None:

@@ -154,7 +154,9 @@ class FoxgloveWriter(McapFile):
         frames = self.frames.frames(key, msg, t)
         if frames:
             self._tf_pub = max(self._tf_pub, pub)  # /tf's publish times never go back (it merges every robot's keys)
-            self._proto(TF_TOPIC, FrameTransforms(transforms=[self._tf(f, t) for f in frames]), log_time_ns, self._tf_pub)
+            self._proto(
+                TF_TOPIC, FrameTransforms(transforms=[self._tf(f, t) for f in frames]), log_time_ns, self._tf_pub
+            )
             self._draw_new(key, t, log_time_ns, pub)
         if isinstance(msg, Scan):
             owner = key_owner(key)
@@ -163,11 +165,15 @@ class FoxgloveWriter(McapFile):
             self._proto(
                 topic,
                 LaserScan(
-                    timestamp=_stamp(t), frame_id=frame, pose=_pose((0, 0, 0), (0, 0, 0, 1)),
-                    start_angle=float(msg.angle_min), end_angle=float(msg.angle_min + msg.angle_increment * max(n - 1, 0)),
+                    timestamp=_stamp(t),
+                    frame_id=frame,
+                    pose=_pose((0, 0, 0), (0, 0, 0, 1)),
+                    start_angle=float(msg.angle_min),
+                    end_angle=float(msg.angle_min + msg.angle_increment * max(n - 1, 0)),
                     ranges=[float(r) for r in msg.ranges],
                 ),
-                log_time_ns, pub,
+                log_time_ns,
+                pub,
             )
         elif isinstance(msg, OccupancyGrid):
             h, w = msg.cells.shape
@@ -175,23 +181,36 @@ class FoxgloveWriter(McapFile):
             self._proto(
                 topic,
                 Grid(
-                    timestamp=_stamp(t), frame_id=MAP, pose=_pose((ox, oy, 0.0), yaw_quat_xyzw(oth)), column_count=int(w),
-                    cell_size=Vector2(x=float(msg.resolution), y=float(msg.resolution)), row_stride=int(w), cell_stride=1,
+                    timestamp=_stamp(t),
+                    frame_id=MAP,
+                    pose=_pose((ox, oy, 0.0), yaw_quat_xyzw(oth)),
+                    column_count=int(w),
+                    cell_size=Vector2(x=float(msg.resolution), y=float(msg.resolution)),
+                    row_stride=int(w),
+                    cell_stride=1,
                     fields=[PackedElementField(name="occupancy", offset=0, type=PackedElementField.UINT8)],
                     data=np.ascontiguousarray(msg.cells, dtype=np.uint8).tobytes(),
                 ),
-                log_time_ns, pub,
+                log_time_ns,
+                pub,
             )
         elif isinstance(msg, Path):
             frame = ros_frame(msg.frame)
-            poses = [_pose((float(x), float(y), 0.0), yaw_quat_xyzw(float(th))) for x, y, th in zip(msg.x, msg.y, msg.theta)]
+            poses = [
+                _pose((float(x), float(y), 0.0), yaw_quat_xyzw(float(th))) for x, y, th in zip(msg.x, msg.y, msg.theta)
+            ]
             self._proto(topic, PosesInFrame(timestamp=_stamp(t), frame_id=frame, poses=poses), log_time_ns, pub)
         elif isinstance(msg, Pose):
             q = msg.quaternion
             self._proto(
                 topic,
-                PoseInFrame(timestamp=_stamp(t), frame_id=ros_frame(msg.frame), pose=_pose(msg.position, (q[1], q[2], q[3], q[0]))),
-                log_time_ns, pub,
+                PoseInFrame(
+                    timestamp=_stamp(t),
+                    frame_id=ros_frame(msg.frame),
+                    pose=_pose(msg.position, (q[1], q[2], q[3], q[0])),
+                ),
+                log_time_ns,
+                pub,
             )
         else:
             self._json(topic, msg, log_time_ns, pub)
@@ -216,7 +235,9 @@ class FoxgloveWriter(McapFile):
 
     def _tf(self, f: Frame, t: int) -> FrameTransform:
         return FrameTransform(
-            timestamp=_stamp(t), parent_frame_id=f.parent, child_frame_id=f.child,
+            timestamp=_stamp(t),
+            parent_frame_id=f.parent,
+            child_frame_id=f.child,
             translation=Vector3(x=f.translation[0], y=f.translation[1], z=f.translation[2]),
             rotation=Quaternion(x=f.rotation[0], y=f.rotation[1], z=f.rotation[2], w=f.rotation[3]),
         )
@@ -235,8 +256,17 @@ class FoxgloveWriter(McapFile):
         self._drawn.add(name)
         if what == "object":
             ent = SceneEntity(
-                timestamp=_stamp(t), frame_id=f"object/{oid}", id=name, frame_locked=True,
-                spheres=[SpherePrimitive(pose=_pose((0, 0, 0), (0, 0, 0, 1)), size=Vector3(x=0.06, y=0.06, z=0.06), color=_color((230, 60, 60, 255)))],
+                timestamp=_stamp(t),
+                frame_id=f"object/{oid}",
+                id=name,
+                frame_locked=True,
+                spheres=[
+                    SpherePrimitive(
+                        pose=_pose((0, 0, 0), (0, 0, 0, 1)),
+                        size=Vector3(x=0.06, y=0.06, z=0.06),
+                        color=_color((230, 60, 60, 255)),
+                    )
+                ],
             )
             self._proto(SCENE_TOPIC, SceneUpdate(entities=[ent]), log_time, pub)
             return
@@ -258,12 +288,20 @@ class FoxgloveWriter(McapFile):
             return
         self._static = [
             SceneEntity(
-                frame_id=MAP, id=f"scene/{b.name}",
-                cubes=[CubePrimitive(pose=_pose(b.center, b.quat_xyzw), size=Vector3(x=2 * float(b.half_size[0]), y=2 * float(b.half_size[1]), z=2 * float(b.half_size[2])), color=_color(b.rgba))],
+                frame_id=MAP,
+                id=f"scene/{b.name}",
+                cubes=[
+                    CubePrimitive(
+                        pose=_pose(b.center, b.quat_xyzw),
+                        size=Vector3(
+                            x=2 * float(b.half_size[0]), y=2 * float(b.half_size[1]), z=2 * float(b.half_size[2])
+                        ),
+                        color=_color(b.rgba),
+                    )
+                ],
             )
             for b in boxes
         ]
-
 
 
 def _entity(eid: str, frame: str, shape: Shape, pl: Placement, t: int) -> SceneEntity | None:
@@ -275,7 +313,11 @@ def _entity(eid: str, frame: str, shape: Shape, pl: Placement, t: int) -> SceneE
         ent.cubes.append(CubePrimitive(pose=pose, size=Vector3(x=2 * hx, y=2 * hy, z=2 * hz), color=color))
     elif shape.kind in ("cylinder", "capsule"):
         r, length = shape.size
-        ent.cylinders.append(CylinderPrimitive(pose=pose, size=Vector3(x=2 * r, y=2 * r, z=length), bottom_scale=1.0, top_scale=1.0, color=color))
+        ent.cylinders.append(
+            CylinderPrimitive(
+                pose=pose, size=Vector3(x=2 * r, y=2 * r, z=length), bottom_scale=1.0, top_scale=1.0, color=color
+            )
+        )
     elif shape.kind == "sphere":
         (r,) = shape.size
         ent.spheres.append(SpherePrimitive(pose=pose, size=Vector3(x=2 * r, y=2 * r, z=2 * r), color=color))

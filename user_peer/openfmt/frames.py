@@ -39,7 +39,17 @@ from user_peer.geometry import quat_xyzw
 from user_peer.openfmt.urdf_joints import MovingJoint, joint_transform, moving_joints
 from user_peer.rerun_log import RobotDrawing
 
-__all__ = ["Frame", "FrameTracker", "MAP", "FIXED", "base_frame", "key_owner", "ros_frame", "scan_frame", "yaw_quat_xyzw"]
+__all__ = [
+    "Frame",
+    "FrameTracker",
+    "MAP",
+    "FIXED",
+    "base_frame",
+    "key_owner",
+    "ros_frame",
+    "scan_frame",
+    "yaw_quat_xyzw",
+]
 
 MAP = "map"
 FIXED = ("/odom", "/laser", "/sonar")
@@ -82,7 +92,9 @@ def yaw_quat_xyzw(yaw: float) -> tuple[float, float, float, float]:
 def _frame(parent: str, child: str, p: Placement) -> Frame:
     t = np.asarray(p.translation, dtype=float)
     q = np.asarray(p.quat_xyzw, dtype=float)
-    return Frame(parent, child, (float(t[0]), float(t[1]), float(t[2])), (float(q[0]), float(q[1]), float(q[2]), float(q[3])))
+    return Frame(
+        parent, child, (float(t[0]), float(t[1]), float(t[2])), (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+    )
 
 
 def key_owner(key: str) -> tuple[str, str] | None:
@@ -111,8 +123,12 @@ class FrameTracker:
         description once it names ``rid`` (:meth:`describe` says which drawings that changed)."""
         with self._lock:
             info = self.robots.get(rid)
-            if info is None or (not info.kind and hint) or (not info.type and hint.get("joint_names")) \
-                    or (rid not in self._described and self.catalog.describes(rid)):
+            if (
+                info is None
+                or (not info.kind and hint)
+                or (not info.type and hint.get("joint_names"))
+                or (rid not in self._described and self.catalog.describes(rid))
+            ):
                 info = self.robots[rid] = self.catalog.drawing(rid, hint)
                 if self.catalog.describes(rid):
                     self._described.add(rid)
@@ -125,7 +141,12 @@ class FrameTracker:
         changed = []
         for rid, old in list(self.robots.items()):
             new = self.robot(rid, {})
-            if (new.kind, new.type, new.sonar, tuple(new.lidar_offset)) != (old.kind, old.type, old.sonar, tuple(old.lidar_offset)):
+            if (new.kind, new.type, new.sonar, tuple(new.lidar_offset)) != (
+                old.kind,
+                old.type,
+                old.sonar,
+                tuple(old.lidar_offset),
+            ):
                 changed.append(rid)
         return changed
 
@@ -175,7 +196,9 @@ class FrameTracker:
             if what == "object":
                 return [_frame(MAP, f"object/{oid}", p)]
             info = self.robot(oid, {"mobile": True})
-            if facts(info.kind).chain:  # the flange is the URDF's link, from the joints; a pose only where that is unknown
+            if facts(
+                info.kind
+            ).chain:  # the flange is the URDF's link, from the joints; a pose only where that is unknown
                 return [_frame(MAP, f"{oid}/flange", p)] if info.arm is None else []
             return self._base(oid, info, p)
         if isinstance(msg, JointState) and leaf == "joints" and what == "robot":
@@ -222,7 +245,13 @@ class FrameTracker:
             return out
         if facts(info.kind).base:
             body = Shape(f"{rid}_body", "cylinder", (info.radius, info.height), color=(*info.color, 255))
-            return [(base_frame(rid), body, Placement(np.array([0.0, 0.0, info.height / 2.0]), np.array([0.0, 0.0, 0.0, 1.0])))]
+            return [
+                (
+                    base_frame(rid),
+                    body,
+                    Placement(np.array([0.0, 0.0, info.height / 2.0]), np.array([0.0, 0.0, 0.0, 1.0])),
+                )
+            ]
         return []
 
 
@@ -246,11 +275,13 @@ def _relative(base: Placement, p: Placement) -> Placement:
 
 def _matrix_from_xyzw(q: np.ndarray) -> np.ndarray:
     x, y, z, w = (float(v) for v in q / np.linalg.norm(q))
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _xyzw(quat_wxyz: np.ndarray) -> np.ndarray:

@@ -49,11 +49,35 @@ from fabric.interfaces import JointState, OccupancyGrid, Path, Pose, Scan, World
 from robots.kinds import facts
 from user_peer.catalog import RobotCatalog
 from user_peer.message_schema import plain_view
-from user_peer.openfmt.frames import MAP, Frame, FrameTracker, base_frame, key_owner, ros_frame, scan_frame, yaw_quat_xyzw
+from user_peer.openfmt.frames import (
+    MAP,
+    Frame,
+    FrameTracker,
+    base_frame,
+    key_owner,
+    ros_frame,
+    scan_frame,
+    yaw_quat_xyzw,
+)
 from user_peer.openfmt.ros2_msgdefs import definition
 from user_peer.openfmt.ros2_ranges import BEAM_HALF_WIDTH, ULTRASOUND, range_value, transducer_frames, transducer_name
 
-__all__ = ["Ros2Writer", "SimStamps", "ODOM_COVARIANCE", "odometry_fields", "scan_period", "ros2_message", "ros2_topic", "to_body", "sim_time_ns", "ros_topic", "scan_ranges", "sensor_range_min", "sonar_radius", "TF_TOPIC"]
+__all__ = [
+    "Ros2Writer",
+    "SimStamps",
+    "ODOM_COVARIANCE",
+    "odometry_fields",
+    "scan_period",
+    "ros2_message",
+    "ros2_topic",
+    "to_body",
+    "sim_time_ns",
+    "ros_topic",
+    "scan_ranges",
+    "sensor_range_min",
+    "sonar_radius",
+    "TF_TOPIC",
+]
 
 TF_TOPIC = "/tf"
 CLOCK_TOPIC = "/clock"
@@ -190,9 +214,11 @@ def to_body(q_wxyz: Any, v: Any) -> tuple[float, float, float]:
     bridge turns every odometry twist with it, where numpy's small-array calls cost more than the arithmetic."""
     w, x, y, z = (float(c) for c in q_wxyz)
     a, b, c = (float(c) for c in v)
-    return ((1 - 2 * (y * y + z * z)) * a + 2 * (x * y + z * w) * b + 2 * (x * z - y * w) * c,
-            2 * (x * y - z * w) * a + (1 - 2 * (x * x + z * z)) * b + 2 * (y * z + x * w) * c,
-            2 * (x * z + y * w) * a + 2 * (y * z - x * w) * b + (1 - 2 * (x * x + y * y)) * c)
+    return (
+        (1 - 2 * (y * y + z * z)) * a + 2 * (x * y + z * w) * b + 2 * (x * z - y * w) * c,
+        2 * (x * y - z * w) * a + (1 - 2 * (x * x + z * z)) * b + 2 * (y * z + x * w) * c,
+        2 * (x * z + y * w) * a + 2 * (y * z - x * w) * b + (1 - 2 * (x * x + y * y)) * c,
+    )
 
 
 def odometry_fields(robot: str, msg: Pose, stamp_ns: int) -> dict:
@@ -202,13 +228,24 @@ def odometry_fields(robot: str, msg: Pose, stamp_ns: int) -> dict:
     q = msg.quaternion
     v, w = to_body(q, msg.linear), to_body(q, msg.angular)
     vec = lambda a: {"x": a[0], "y": a[1], "z": a[2]}  # noqa: E731
-    return {"header": _header(stamp_ns, f"{robot}/odom"), "child_frame_id": base_frame(robot),
-            "pose": {"pose": _pose(msg.position, (q[1], q[2], q[3], q[0])), "covariance": list(ODOM_COVARIANCE)},
-            "twist": {"twist": {"linear": vec(v), "angular": vec(w)}, "covariance": list(ODOM_COVARIANCE)}}
+    return {
+        "header": _header(stamp_ns, f"{robot}/odom"),
+        "child_frame_id": base_frame(robot),
+        "pose": {"pose": _pose(msg.position, (q[1], q[2], q[3], q[0])), "covariance": list(ODOM_COVARIANCE)},
+        "twist": {"twist": {"linear": vec(v), "angular": vec(w)}, "covariance": list(ODOM_COVARIANCE)},
+    }
 
 
-def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0, range_offset: float = 0.0,
-                 kind: str | None = None, scan_time: float = 0.0) -> tuple[str, dict] | None:
+def ros2_message(
+    key: str,
+    msg: Any,
+    stamp_ns: int,
+    *,
+    range_min: float = 0.0,
+    range_offset: float = 0.0,
+    kind: str | None = None,
+    scan_time: float = 0.0,
+) -> tuple[str, dict] | None:
     """(ROS 2 type name, the message as a dict of its fields) for fabric ``msg`` on ``key``, stamped
     ``stamp_ns``; None for a message ROS 2 has no place for. The one conversion of the MCAP export and the
     live bridge (:mod:`user_peer.ros2`), so that both give the same frames, stamps and values. ``range_min``:
@@ -222,27 +259,51 @@ def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0, r
     owner = key_owner(key)
     rid = owner[1] if owner else MAP
     if isinstance(msg, JointState):
-        return ("sensor_msgs/msg/JointState",
-                {"header": _header(t, base_frame(rid)), "name": list(msg.names), "position": [float(v) for v in msg.q],
-                 "velocity": [float(v) for v in msg.dq], "effort": []})
+        return (
+            "sensor_msgs/msg/JointState",
+            {
+                "header": _header(t, base_frame(rid)),
+                "name": list(msg.names),
+                "position": [float(v) for v in msg.q],
+                "velocity": [float(v) for v in msg.dq],
+                "effort": [],
+            },
+        )
     if isinstance(msg, Scan):
         n = int(msg.ranges_mm.shape[0])
         frame = scan_frame(rid, key)
-        return ("sensor_msgs/msg/LaserScan",
-                {"header": _header(t, frame), "angle_min": float(msg.angle_min),
-                 "angle_max": float(msg.angle_min + msg.angle_increment * max(n - 1, 0)),
-                 "angle_increment": float(msg.angle_increment), "time_increment": 0.0, "scan_time": float(scan_time),
-                 "range_min": float(range_min) + range_offset, "range_max": float(msg.range_max) + range_offset,
-                 "ranges": scan_ranges(msg, range_offset),
-                 "intensities": []})
+        return (
+            "sensor_msgs/msg/LaserScan",
+            {
+                "header": _header(t, frame),
+                "angle_min": float(msg.angle_min),
+                "angle_max": float(msg.angle_min + msg.angle_increment * max(n - 1, 0)),
+                "angle_increment": float(msg.angle_increment),
+                "time_increment": 0.0,
+                "scan_time": float(scan_time),
+                "range_min": float(range_min) + range_offset,
+                "range_max": float(msg.range_max) + range_offset,
+                "ranges": scan_ranges(msg, range_offset),
+                "intensities": [],
+            },
+        )
     if isinstance(msg, OccupancyGrid):
         h, w = msg.cells.shape
         ox, oy, oth = (float(v) for v in msg.origin)
-        return ("nav_msgs/msg/OccupancyGrid",
-                {"header": _header(t, MAP),
-                 "info": {"map_load_time": _time(t), "resolution": float(msg.resolution), "width": int(w), "height": int(h),
-                          "origin": _pose((ox, oy, 0.0), yaw_quat_xyzw(oth))},
-                 "data": grid_data(msg.cells)})
+        return (
+            "nav_msgs/msg/OccupancyGrid",
+            {
+                "header": _header(t, MAP),
+                "info": {
+                    "map_load_time": _time(t),
+                    "resolution": float(msg.resolution),
+                    "width": int(w),
+                    "height": int(h),
+                    "origin": _pose((ox, oy, 0.0), yaw_quat_xyzw(oth)),
+                },
+                "data": grid_data(msg.cells),
+            },
+        )
     if isinstance(msg, Path):
         frame = ros_frame(msg.frame)
         poses = [
@@ -254,8 +315,10 @@ def ros2_message(key: str, msg: Any, stamp_ns: int, *, range_min: float = 0.0, r
         return "nav_msgs/msg/Odometry", odometry_fields(rid, msg, t)
     if isinstance(msg, Pose):
         q = msg.quaternion
-        return ("geometry_msgs/msg/PoseStamped",
-                {"header": _header(t, ros_frame(msg.frame)), "pose": _pose(msg.position, (q[1], q[2], q[3], q[0]))})
+        return (
+            "geometry_msgs/msg/PoseStamped",
+            {"header": _header(t, ros_frame(msg.frame)), "pose": _pose(msg.position, (q[1], q[2], q[3], q[0]))},
+        )
     plain = plain_view(msg) if hasattr(type(msg), "SPEC") else None
     if plain is None or not all(_finite(v) for v in _leaves(plain)):
         return None
@@ -309,9 +372,15 @@ class Ros2Writer(McapFile):
             self._put_static([], t, log_time_ns)
         scan = isinstance(msg, Scan)
         kind = self._kind(key, msg)
-        converted = ros2_message(key, msg, t, range_min=self._range_min(key) if scan else 0.0,
-                                 range_offset=self._sonar_radius(key) if scan else 0.0, kind=kind,
-                                 scan_time=scan_period(self.frames.catalog.world_info) if scan else 0.0)
+        converted = ros2_message(
+            key,
+            msg,
+            t,
+            range_min=self._range_min(key) if scan else 0.0,
+            range_offset=self._sonar_radius(key) if scan else 0.0,
+            kind=kind,
+            scan_time=scan_period(self.frames.catalog.world_info) if scan else 0.0,
+        )
         if converted is None:
             self.skipped += 1
             return
@@ -326,9 +395,17 @@ class Ros2Writer(McapFile):
         if not new:
             return
         self._static.update((f.child, f) for f in new)
-        tfs = [{"header": _header(t, f.parent), "child_frame_id": f.child,
-                "transform": {"translation": dict(zip("xyz", f.translation)), "rotation": dict(zip("xyzw", f.rotation))}}
-               for f in self._static.values()]
+        tfs = [
+            {
+                "header": _header(t, f.parent),
+                "child_frame_id": f.child,
+                "transform": {
+                    "translation": dict(zip("xyz", f.translation)),
+                    "rotation": dict(zip("xyzw", f.rotation)),
+                },
+            }
+            for f in self._static.values()
+        ]
         self._put("/tf_static", "tf2_msgs/msg/TFMessage", {"transforms": tfs}, log_time, log_time)
 
     def _ranges(self, key: str, msg: Scan, t: int, log_time: int, pub: int) -> None:
@@ -338,16 +415,30 @@ class Ros2Writer(McapFile):
         robot = None if info is None else next((r for r in info.robots if r.id == rid), None)
         sonar = None if robot is None else robot.sonar
         ranges = np.asarray(msg.ranges, dtype=np.float64).tolist()
-        angles = (sonar.angles if sonar is not None and len(sonar.angles) == len(ranges)
-                  else [msg.angle_min + i * msg.angle_increment for i in range(len(ranges))])
+        angles = (
+            sonar.angles
+            if sonar is not None and len(sonar.angles) == len(ranges)
+            else [msg.angle_min + i * msg.angle_increment for i in range(len(ranges))]
+        )
         self._put_static(transducer_frames(rid, angles, self._sonar_radius(key)), t, log_time)
         miss = float(msg.range_max) - MISS_TOLERANCE_M
         lo = float(sonar.range_min) if sonar is not None else 0.0
         for i, r in enumerate(ranges):
-            self._put(ros_topic(f"{rid}/{transducer_name(i)}"), "sensor_msgs/msg/Range",
-                      {"header": _header(t, f"{rid}/{transducer_name(i)}"), "radiation_type": ULTRASOUND,
-                       "field_of_view": 2 * BEAM_HALF_WIDTH, "min_range": lo, "max_range": float(msg.range_max),
-                       "range": range_value(r, miss), "variance": 0.0}, log_time, pub)
+            self._put(
+                ros_topic(f"{rid}/{transducer_name(i)}"),
+                "sensor_msgs/msg/Range",
+                {
+                    "header": _header(t, f"{rid}/{transducer_name(i)}"),
+                    "radiation_type": ULTRASOUND,
+                    "field_of_view": 2 * BEAM_HALF_WIDTH,
+                    "min_range": lo,
+                    "max_range": float(msg.range_max),
+                    "range": range_value(r, miss),
+                    "variance": 0.0,
+                },
+                log_time,
+                pub,
+            )
 
     def _kind(self, key: str, msg: Any) -> str | None:
         """A robot's kind ("arm", "mobile") as the frame tree knows it (a pose alone: a mobile base), else None."""
@@ -367,7 +458,6 @@ class Ros2Writer(McapFile):
             info = self.frames.robots.get(owner[1]) if owner else None
             r = float(info.sonar[3]) if info is not None and info.sonar is not None else None
         return r or 0.0
-
 
 
 def _leaves(x: Any):

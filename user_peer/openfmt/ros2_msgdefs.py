@@ -45,19 +45,46 @@ _BASE: dict[str, str] = {
 
 _DEPS: dict[str, tuple[str, ...]] = {
     "std_msgs/String": (),
-    "geometry_msgs/PoseStamped": ("std_msgs/Header", "geometry_msgs/Pose", "geometry_msgs/Point", "geometry_msgs/Quaternion"),
+    "geometry_msgs/PoseStamped": (
+        "std_msgs/Header",
+        "geometry_msgs/Pose",
+        "geometry_msgs/Point",
+        "geometry_msgs/Quaternion",
+    ),
     "sensor_msgs/JointState": ("std_msgs/Header",),
     "sensor_msgs/LaserScan": ("std_msgs/Header",),
-    "nav_msgs/OccupancyGrid": ("std_msgs/Header", "nav_msgs/MapMetaData", "geometry_msgs/Pose", "geometry_msgs/Point", "geometry_msgs/Quaternion"),
-    "nav_msgs/Path": ("std_msgs/Header", "geometry_msgs/PoseStamped", "geometry_msgs/Pose", "geometry_msgs/Point", "geometry_msgs/Quaternion"),
+    "nav_msgs/OccupancyGrid": (
+        "std_msgs/Header",
+        "nav_msgs/MapMetaData",
+        "geometry_msgs/Pose",
+        "geometry_msgs/Point",
+        "geometry_msgs/Quaternion",
+    ),
+    "nav_msgs/Path": (
+        "std_msgs/Header",
+        "geometry_msgs/PoseStamped",
+        "geometry_msgs/Pose",
+        "geometry_msgs/Point",
+        "geometry_msgs/Quaternion",
+    ),
     "tf2_msgs/TFMessage": (
-        "geometry_msgs/TransformStamped", "std_msgs/Header", "geometry_msgs/Transform", "geometry_msgs/Vector3", "geometry_msgs/Quaternion",
+        "geometry_msgs/TransformStamped",
+        "std_msgs/Header",
+        "geometry_msgs/Transform",
+        "geometry_msgs/Vector3",
+        "geometry_msgs/Quaternion",
     ),
     "rosgraph_msgs/Clock": (),
     "sensor_msgs/Range": ("std_msgs/Header",),
     "nav_msgs/Odometry": (
-        "std_msgs/Header", "geometry_msgs/PoseWithCovariance", "geometry_msgs/Pose", "geometry_msgs/Point", "geometry_msgs/Quaternion",
-        "geometry_msgs/TwistWithCovariance", "geometry_msgs/Twist", "geometry_msgs/Vector3",
+        "std_msgs/Header",
+        "geometry_msgs/PoseWithCovariance",
+        "geometry_msgs/Pose",
+        "geometry_msgs/Point",
+        "geometry_msgs/Quaternion",
+        "geometry_msgs/TwistWithCovariance",
+        "geometry_msgs/Twist",
+        "geometry_msgs/Vector3",
     ),
 }
 

@@ -33,8 +33,10 @@ def transducer_name(i: int) -> str:
 def transducer_frames(rid: str, angles: Iterable[float], radius: float) -> list[Frame]:
     """Each transducer's frame in ``rid/sonar`` (the ring's centre, at its height): on the rim at its angle, x out."""
     r = float(radius)
-    return [Frame(f"{rid}/sonar", f"{rid}/{transducer_name(i)}", (r * math.cos(a), r * math.sin(a), 0.0), yaw_quat_xyzw(a))
-            for i, a in enumerate(float(v) for v in angles)]
+    return [
+        Frame(f"{rid}/sonar", f"{rid}/{transducer_name(i)}", (r * math.cos(a), r * math.sin(a), 0.0), yaw_quat_xyzw(a))
+        for i, a in enumerate(float(v) for v in angles)
+    ]
 
 
 def range_value(r: float, miss: float) -> float:

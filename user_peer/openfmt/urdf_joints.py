@@ -43,16 +43,31 @@ def _floats(text: str | None, default: tuple[float, float, float]) -> tuple[floa
 
 def _rpy_quat(r: float, p: float, y: float) -> tuple[float, float, float, float]:
     """URDF's fixed-axis roll, pitch, yaw as a quaternion (x, y, z, w)."""
-    cr, sr, cp, sp, cy, sy = (math.cos(r / 2), math.sin(r / 2), math.cos(p / 2), math.sin(p / 2),
-                              math.cos(y / 2), math.sin(y / 2))
-    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
+    cr, sr, cp, sp, cy, sy = (
+        math.cos(r / 2),
+        math.sin(r / 2),
+        math.cos(p / 2),
+        math.sin(p / 2),
+        math.cos(y / 2),
+        math.sin(y / 2),
+    )
+    return (
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+        cr * cp * cy + sr * sp * sy,
+    )
 
 
 def _mul(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float, float]:
     ax, ay, az, aw = a
     bx, by, bz, bw = b
-    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
 
 
 def _rotate(q: tuple[float, ...], v: tuple[float, ...]) -> tuple[float, float, float]:
@@ -73,8 +88,15 @@ def moving_joints(urdf: str) -> dict[str, MovingJoint]:
         rpy = _floats(origin.get("rpy") if origin is not None else None, (0.0, 0.0, 0.0))
         a = np.asarray(_floats(axis.get("xyz") if axis is not None else None, (1.0, 0.0, 0.0)), dtype=float)
         a = a / (np.linalg.norm(a) or 1.0)
-        out[j.get("name", "")] = MovingJoint(j.get("name", ""), kind, parent.get("link", ""), child.get("link", ""), xyz,
-                                             _rpy_quat(*rpy), (float(a[0]), float(a[1]), float(a[2])))
+        out[j.get("name", "")] = MovingJoint(
+            j.get("name", ""),
+            kind,
+            parent.get("link", ""),
+            child.get("link", ""),
+            xyz,
+            _rpy_quat(*rpy),
+            (float(a[0]), float(a[1]), float(a[2])),
+        )
     return out
 
 

@@ -55,9 +55,13 @@ class ActionHost:
             return
         from rclpy.action import ActionServer, CancelResponse
 
-        self._servers[rid] = ActionServer(self.node, self.action, ros_topic("/".join([self.namespace, rid, self.name])),
-                                          lambda handle, r=rid: self._execute(r, handle),
-                                          cancel_callback=lambda _request: CancelResponse.ACCEPT)
+        self._servers[rid] = ActionServer(
+            self.node,
+            self.action,
+            ros_topic("/".join([self.namespace, rid, self.name])),
+            lambda handle, r=rid: self._execute(r, handle),
+            cancel_callback=lambda _request: CancelResponse.ACCEPT,
+        )
 
     def forget(self, rid: str) -> None:
         server = self._servers.pop(rid, None)

@@ -74,8 +74,16 @@ from robots.kinds import facts
 from user_peer.catalog import RobotCatalog
 from user_peer.errors import FabricUserError
 from user_peer.openfmt.frames import base_frame, scan_frame
-from user_peer.openfmt.ros2 import (SimStamps, ros2_message, ros2_topic, ros_topic, scan_period, sensor_range_min, sim_time_ns,
-                                    sonar_radius)
+from user_peer.openfmt.ros2 import (
+    SimStamps,
+    ros2_message,
+    ros2_topic,
+    ros_topic,
+    scan_period,
+    sensor_range_min,
+    sim_time_ns,
+    sonar_radius,
+)
 from user_peer.pause import is_pause, pause_words
 from user_peer.ros2 import direct
 from user_peer.ros2.bumps import BUMP_KINDS, bump_lines
@@ -114,7 +122,8 @@ FOLLOW_PERIOD_S = 1.0
 _QOS = {"stream": STREAM, "sensor_data": qos_profile_sensor_data, "latched": LATCHED}
 """The profile of each QoS name of :data:`fabric.streams.ROS2_QOS`."""
 _TYPES: dict[str, tuple[type, QoSProfile]] = {
-    **{t.name: (message_class(t.type), _QOS[t.qos]) for s in STREAMS for t in s.ros2}, "map": (OccupancyGrid, LATCHED),
+    **{t.name: (message_class(t.type), _QOS[t.qos]) for s in STREAMS for t in s.ros2},
+    "map": (OccupancyGrid, LATCHED),
 }
 """A topic's last name -> its ROS type and QoS: the robot streams' (fabric.streams.STREAMS) and the map's
 (``/maps/NAME``: a map; ``/object/ID/pose``: a pose)."""
@@ -146,9 +155,19 @@ class _Out:
 class Ros2Bridge:
     """Republish ``world``'s streams on ``node`` and forward its ROS commands; ``close()`` ends it."""
 
-    def __init__(self, world: World, node: Node, *, namespace: str = "", tf_message: type | None = None,
-                 trace: bool = False, drive: Collection[str] = (), stamped_cmd_vel: bool = False,
-                 goal_map: str = "", topic_map: TopicMap | None = None) -> None:
+    def __init__(
+        self,
+        world: World,
+        node: Node,
+        *,
+        namespace: str = "",
+        tf_message: type | None = None,
+        trace: bool = False,
+        drive: Collection[str] = (),
+        stamped_cmd_vel: bool = False,
+        goal_map: str = "",
+        topic_map: TopicMap | None = None,
+    ) -> None:
         self.world = world
         self.rcl_node = node  # what rclpy spins
         self.node = node = MappedNode(node, topic_map) if topic_map is not None else node  # --topic-map (topic_map.py)
@@ -196,28 +215,42 @@ class Ros2Bridge:
         # joint_trajectory's points sent at their times, in the sim's time (/clock's): a sim slower than the wall
         # clock (a loaded machine) or paused stretches a trajectory as it does a ROS controller's with use_sim_time
         self.trajectories = TrajectoryPlayer(clock=lambda: self._clock_ns / 1e9)
-        self.arm_actions = FollowTrajectoryActions(self.rcl_node, namespace, self.trajectories, self._check_owner, self._refuse)
+        self.arm_actions = FollowTrajectoryActions(
+            self.rcl_node, namespace, self.trajectories, self._check_owner, self._refuse
+        )
         self.goals = GoalsIn(node, namespace, RELIABLE, self._check_owner, self._refuse, goal_map)  # goal_pose
         w = world.name
         fab = world.fabric
         self.follow()  # first: the description's sensors (range_min) are known before the first scan
         self.owners.update(list(self._kinds), self.world.ownership.record)
         self._subs = [  # every robot stream with a ROS 2 topic (fabric.streams), a latched one's latest at once
-            *(fab.subscribe(keys.robot_stream_all(w, s.name), self._on_state, history=s.latched) for s in STREAMS if s.ros2),
+            *(
+                fab.subscribe(keys.robot_stream_all(w, s.name), self._on_state, history=s.latched)
+                for s in STREAMS
+                if s.ros2
+            ),
             fab.subscribe(f"{keys.world_root(w)}/map/*", self._on_state, history=True),
             fab.subscribe(keys.object_pose_all(w), self._on_state, history=True),
         ]
         self._timer = node.create_timer(FOLLOW_PERIOD_S, self._tick)
         if not self.tf.available:
-            log.warning("no /tf or /tf_static: tf2_msgs is not importable (it is not among the ROS 2 wheels; "
-                        "build it with: python -m user_peer.ros2.msgbuild)")
+            log.warning(
+                "no /tf or /tf_static: tf2_msgs is not importable (it is not among the ROS 2 wheels; "
+                "build it with: python -m user_peer.ros2.msgbuild)"
+            )
         if not self.goals.actions.available and self.drive:
-            log.warning("no navigate_to_pose actions: nav2_msgs is not importable (build it with: python -m user_peer.ros2.msgbuild)")
+            log.warning(
+                "no navigate_to_pose actions: nav2_msgs is not importable (build it with: python -m user_peer.ros2.msgbuild)"
+            )
         if not self.arm_actions.available and self.drive:
-            log.warning("no follow_joint_trajectory actions: control_msgs is not importable (build it with: python -m user_peer.ros2.msgbuild)")
+            log.warning(
+                "no follow_joint_trajectory actions: control_msgs is not importable (build it with: python -m user_peer.ros2.msgbuild)"
+            )
         if not self.asking.available and self.drive:
-            log.warning("no request_ownership/release_ownership services: std_srvs is not importable "
-                        "(build it with: python -m user_peer.ros2.msgbuild)")
+            log.warning(
+                "no request_ownership/release_ownership services: std_srvs is not importable "
+                "(build it with: python -m user_peer.ros2.msgbuild)"
+            )
 
     # ------------------------------------------------------------------ out
     def _route(self, key: str) -> _Route | None:
@@ -238,9 +271,16 @@ class Ros2Bridge:
         route = _Route(topic, robot, cls, qos, self.prefix + base_frame(robot) if robot else self.prefix)
         if cls is LaserScan:
             sonar = leaf == "sonar"
-            route = _Route(topic, robot, cls, qos, self.prefix + scan_frame(robot or "", key),
-                           sensor_range_min(self._described, key), (sonar_radius(self._described, key) or 0.0) if sonar else 0.0,
-                           scan_period(self._described))
+            route = _Route(
+                topic,
+                robot,
+                cls,
+                qos,
+                self.prefix + scan_frame(robot or "", key),
+                sensor_range_min(self._described, key),
+                (sonar_radius(self._described, key) or 0.0) if sonar else 0.0,
+                scan_period(self._described),
+            )
         self._routes[key] = route
         return route
 
@@ -365,14 +405,23 @@ class Ros2Bridge:
         topic = lambda leaf: ros_topic("/".join([self.namespace.strip("/"), rid, leaf]))  # noqa: E731
         if facts(kind).base:
             cls = TwistStamped if self.stamped_cmd_vel else Twist
-            return [self.node.create_subscription(cls, topic("cmd_vel"), lambda m, r=rid: self._on_cmd_vel(r, m), RELIABLE),
-                    self.goals.subscribe(rid)]
+            return [
+                self.node.create_subscription(cls, topic("cmd_vel"), lambda m, r=rid: self._on_cmd_vel(r, m), RELIABLE),
+                self.goals.subscribe(rid),
+            ]
         if facts(kind).chain:
             self.arm_actions.serve(rid)  # follow_joint_trajectory
-            return [self.node.create_subscription(JointState, topic("joint_command"),
-                                                  lambda m, r=rid: self._on_arm(r, "joint_command", m), RELIABLE),
-                    self.node.create_subscription(JointTrajectory, topic("joint_trajectory"),
-                                                  lambda m, r=rid: self._on_arm(r, "joint_trajectory", m), RELIABLE)]
+            return [
+                self.node.create_subscription(
+                    JointState, topic("joint_command"), lambda m, r=rid: self._on_arm(r, "joint_command", m), RELIABLE
+                ),
+                self.node.create_subscription(
+                    JointTrajectory,
+                    topic("joint_trajectory"),
+                    lambda m, r=rid: self._on_arm(r, "joint_trajectory", m),
+                    RELIABLE,
+                ),
+            ]
         return []
 
     # ------------------------------------------------------------------ in
@@ -387,8 +436,14 @@ class Ros2Bridge:
         """The robot's handle when this login may command it; else None, the refusal told (and given to ``told``)."""
         try:
             handle = self.world.robot(robot)
-            why = "" if handle.can_command else (f"{self.world.user} does not own {robot} (owner: {handle.owner or 'nobody'}); "
-                                                 f"start the bridge with --request {robot}, or release it to this login")
+            why = (
+                ""
+                if handle.can_command
+                else (
+                    f"{self.world.user} does not own {robot} (owner: {handle.owner or 'nobody'}); "
+                    f"start the bridge with --request {robot}, or release it to this login"
+                )
+            )
         except FabricUserError as exc:
             why = exc.reason
         if why:
@@ -423,8 +478,13 @@ class Ros2Bridge:
         try:
             if what == "joint_trajectory":  # played at its points' times (trajectory.py), replacing the one playing
                 timed = timed_points(robot, names, msg, arm.entry.lower, arm.entry.upper)
-                self.trajectories.play(robot, timed, arm.joints, lambda q: arm.move_joints(q, wait=False),
-                                       lambda exc: self._refuse(robot, what, getattr(exc, "reason", str(exc))))
+                self.trajectories.play(
+                    robot,
+                    timed,
+                    arm.joints,
+                    lambda q: arm.move_joints(q, wait=False),
+                    lambda exc: self._refuse(robot, what, getattr(exc, "reason", str(exc))),
+                )
             else:
                 positions = joint_targets(robot, names, list(msg.name), list(msg.position))
                 self.trajectories.stop(robot)
@@ -437,7 +497,9 @@ class Ros2Bridge:
         """The sims' refusals of what this login sent (a lease lost between our look and the sim's) and the bumper
         stops of the world's bases (bumps.py) on /rosout."""
         mark = self.world.event_mark()
-        for warn, text in bump_lines(self.world.event_log.authority_events(self._event_mark, mark, BUMP_KINDS), self.drive):
+        for warn, text in bump_lines(
+            self.world.event_log.authority_events(self._event_mark, mark, BUMP_KINDS), self.drive
+        ):
             log.log(logging.WARNING if warn else logging.INFO, "%s", text)
             ros = self.node.get_logger()
             (ros.warning if warn else ros.info)(text)
@@ -484,10 +546,12 @@ class Ros2Bridge:
 
     def summary(self) -> str:
         """One line: what went out and what came in."""
-        return (f"{sum(self.published.values())} messages published on {len(self.published)} topics "
-                f"({self.published['/clock']} on /clock), "
-                f"{sum(self.forwarded.values())} commands forwarded, {sum(self.refused.values())} refused, "
-                f"{self.unconverted} not converted, {self.tf.sent} /tf messages")
+        return (
+            f"{sum(self.published.values())} messages published on {len(self.published)} topics "
+            f"({self.published['/clock']} on /clock), "
+            f"{sum(self.forwarded.values())} commands forwarded, {sum(self.refused.values())} refused, "
+            f"{self.unconverted} not converted, {self.tf.sent} /tf messages"
+        )
 
 
 def spin(bridge: Ros2Bridge) -> None:

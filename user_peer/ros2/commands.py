@@ -19,7 +19,9 @@ class CommandError(ValueError):
     """A command the bridge cannot turn into an arm target; its text says why (for /rosout)."""
 
 
-def joint_targets(robot: str, arm_joints: Sequence[str], names: Sequence[str], positions: Sequence[float]) -> list[float]:
+def joint_targets(
+    robot: str, arm_joints: Sequence[str], names: Sequence[str], positions: Sequence[float]
+) -> list[float]:
     """``positions`` in the arm's joint order: by ``names`` when given (every joint named once, any order),
     else taken as already in the arm's order (their count checked)."""
     values = [float(v) for v in positions]

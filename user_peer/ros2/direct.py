@@ -58,8 +58,9 @@ def joint_state(out: JointState, robot: str, msg: FabricJointState, ns: int) -> 
     return out
 
 
-def laser_scan(out: LaserScan, frame: str, msg: Scan, ns: int, range_min: float, offset: float,
-               scan_time: float = 0.0) -> LaserScan:
+def laser_scan(
+    out: LaserScan, frame: str, msg: Scan, ns: int, range_min: float, offset: float, scan_time: float = 0.0
+) -> LaserScan:
     """``out`` refilled with ``msg``: a missing echo (the fabric's ``range_max``) is +inf, REP 117; ``offset``
     added to the other ranges and to the limits (a sonar's rim-to-centre radius), as the export does; ``scan_time``
     the sensor's period (``time_increment`` 0: the sim casts a scan's rays at one instant)."""
@@ -104,4 +105,3 @@ def odometry(out: Odometry, robot: str, msg: Pose, ns: int, prefix: str = "") ->
     lin.x, lin.y, lin.z = to_body(msg.quaternion, msg.linear)
     ang.x, ang.y, ang.z = to_body(msg.quaternion, msg.angular)
     return out
-

@@ -38,8 +38,15 @@ from user_peer.ros2.action_host import ActionHost
 from user_peer.ros2.commands import CommandError
 from user_peer.ros2.trajectory import TrajectoryPlayer, sample, timed_points
 
-__all__ = ["GOAL_TIME_S", "GOAL_TOLERANCE_RAD", "FollowTrajectoryActions", "follow_action_class", "joint_names_error",
-           "tolerances", "tolerance_miss"]
+__all__ = [
+    "GOAL_TIME_S",
+    "GOAL_TOLERANCE_RAD",
+    "FollowTrajectoryActions",
+    "follow_action_class",
+    "joint_names_error",
+    "tolerances",
+    "tolerance_miss",
+]
 
 GOAL_TOLERANCE_RAD = 0.01
 """A joint's distance from the last point (rad) within which a goal that gives no ``goal_tolerance`` succeeds."""
@@ -94,8 +101,16 @@ def _seconds(d: Any) -> float:
 class FollowTrajectoryActions(ActionHost):
     """One FollowJointTrajectory action server per driven arm, on a node of its own; goals played by ``player``."""
 
-    def __init__(self, node: Any, namespace: str, player: TrajectoryPlayer, check_owner: Callable[..., Any],
-                 refuse: Callable[[str, str, str], None], *, period: float = 0.05) -> None:
+    def __init__(
+        self,
+        node: Any,
+        namespace: str,
+        player: TrajectoryPlayer,
+        check_owner: Callable[..., Any],
+        refuse: Callable[[str, str, str], None],
+        *,
+        period: float = 0.05,
+    ) -> None:
         super().__init__(node, namespace, follow_action_class(), "follow_joint_trajectory", "trajectory")
         self.player, self.period = player, period
         self.check_owner, self.refuse = check_owner, refuse
@@ -113,7 +128,9 @@ class FollowTrajectoryActions(ActionHost):
         why: list[str] = []
         arm = self.check_owner(rid, "follow_joint_trajectory", why.append)  # the bridge's: the refusal told on /rosout
         if arm is None:
-            return self._end(rid, handle, R.INVALID_GOAL, why[0] if why else f"{rid}: this login may not command it", told=False)
+            return self._end(
+                rid, handle, R.INVALID_GOAL, why[0] if why else f"{rid}: this login may not command it", told=False
+            )
         goal = handle.request
         names = list(arm.entry.joint_names)
         wrong = joint_names_error(rid, names, list(goal.trajectory.joint_names))
@@ -125,9 +142,13 @@ class FollowTrajectoryActions(ActionHost):
         try:
             timed = timed_points(rid, names, goal.trajectory, arm.entry.lower, arm.entry.upper)
             start = arm.joints
-            playing = self.player.play(rid, timed, None if start is None else list(start),
-                                       lambda q: arm.move_joints(q, wait=False),
-                                       lambda exc: failed.append(getattr(exc, "reason", str(exc))))
+            playing = self.player.play(
+                rid,
+                timed,
+                None if start is None else list(start),
+                lambda q: arm.move_joints(q, wait=False),
+                lambda exc: failed.append(getattr(exc, "reason", str(exc))),
+            )
         except (CommandError, FabricUserError, ValueError) as exc:
             return self._end(rid, handle, R.INVALID_GOAL, getattr(exc, "reason", str(exc)))
         if playing is None:
@@ -137,8 +158,18 @@ class FollowTrajectoryActions(ActionHost):
         settle = _seconds(goal.goal_time_tolerance) or GOAL_TIME_S
         return self._watch(rid, handle, arm, names, playing, failed, goal_tol, path_tol, settle)
 
-    def _watch(self, rid: str, handle: Any, arm: Any, names: list[str], playing: Any, failed: list[str],
-               goal_tol: tuple[float, ...], path_tol: tuple[float, ...], settle: float) -> Any:
+    def _watch(
+        self,
+        rid: str,
+        handle: Any,
+        arm: Any,
+        names: list[str],
+        playing: Any,
+        failed: list[str],
+        goal_tol: tuple[float, ...],
+        path_tol: tuple[float, ...],
+        settle: float,
+    ) -> Any:
         """Feedback every ``period`` until the goal ends (see the module's docstring for how)."""
         R, player, traj = self.action.Result, self.player, playing.traj
         feedback = self.action.Feedback(joint_names=names)
@@ -173,15 +204,22 @@ class FollowTrajectoryActions(ActionHost):
                         self.succeeded += 1
                         return R(error_code=R.SUCCESSFUL, error_string="")
                     if now > traj.duration + settle or time.monotonic() > wall_limit:
-                        return self._end(rid, handle, R.GOAL_TOLERANCE_VIOLATED,
-                                         f"{missed}, {settle:.2f} s after the trajectory's end")
+                        return self._end(
+                            rid,
+                            handle,
+                            R.GOAL_TOLERANCE_VIOLATED,
+                            f"{missed}, {settle:.2f} s after the trajectory's end",
+                        )
             if time.monotonic() > wall_limit:
                 player.stop(rid)
-                return self._end(rid, handle, R.GOAL_TOLERANCE_VIOLATED, "the sim's clock stopped: the trajectory did not end")
+                return self._end(
+                    rid, handle, R.GOAL_TOLERANCE_VIOLATED, "the sim's clock stopped: the trajectory did not end"
+                )
             time.sleep(self.period)
 
-    def _feedback(self, fb: Any, playing: Any, now: float, desired: Sequence[float], q: Sequence[float],
-                  errors: Sequence[float]) -> None:
+    def _feedback(
+        self, fb: Any, playing: Any, now: float, desired: Sequence[float], q: Sequence[float], errors: Sequence[float]
+    ) -> None:
         """``fb`` filled for ``now`` (s since the trajectory started): stamp in the sim's time, the point followed."""
         t = playing.t0 + now
         fb.header.stamp.sec, fb.header.stamp.nanosec = int(t), int(t % 1 * 1e9)

@@ -38,9 +38,12 @@ def goal_of(msg: Any, prefix: str = "") -> tuple[float, float, float]:
     """(x, y, yaw) of a ``PoseStamped`` in the world's frame (under a namespace's ``prefix``, ``class1/map``, or
     not); :class:`CommandError` for another frame."""
     frame = msg.header.frame_id.strip("/")
-    if frame not in GOAL_FRAMES and not (prefix and frame.startswith(prefix) and frame[len(prefix):] in GOAL_FRAMES[1:]):
-        raise CommandError(f"goal_pose in frame {frame!r}: give it in '{prefix}map' (or '{prefix}world'), "
-                           "the bridge's fixed frame")
+    if frame not in GOAL_FRAMES and not (
+        prefix and frame.startswith(prefix) and frame[len(prefix) :] in GOAL_FRAMES[1:]
+    ):
+        raise CommandError(
+            f"goal_pose in frame {frame!r}: give it in '{prefix}map' (or '{prefix}world'), the bridge's fixed frame"
+        )
     o = msg.pose.orientation
     return float(msg.pose.position.x), float(msg.pose.position.y), yaw_from_quaternion((o.w, o.x, o.y, o.z))
 
@@ -48,13 +51,22 @@ def goal_of(msg: Any, prefix: str = "") -> tuple[float, float, float]:
 class GoalsIn:
     """The goal_pose subscriptions of the bases a bridge drives; each goal planned and followed on its thread."""
 
-    def __init__(self, node: Node, namespace: str, qos: Any, check_owner: Callable[[str, str], Any],
-                 refuse: Callable[[str, str, str], None], map_name: str = "") -> None:
+    def __init__(
+        self,
+        node: Node,
+        namespace: str,
+        qos: Any,
+        check_owner: Callable[[str, str], Any],
+        refuse: Callable[[str, str, str], None],
+        map_name: str = "",
+    ) -> None:
         self.node, self.namespace, self.qos = node, namespace.strip("/"), qos
         self.prefix = frame_prefix(namespace)
         self.check_owner, self.refuse = check_owner, refuse
         self.map_name = map_name
-        self.actions = NavigateActions(node, namespace, self.prefix, check_owner, refuse, goal_of, map_name)  # navigate_to_pose
+        self.actions = NavigateActions(
+            node, namespace, self.prefix, check_owner, refuse, goal_of, map_name
+        )  # navigate_to_pose
         self._bases: set[str] = set()
         self._shared: Any = None  # /NS/goal_pose, while exactly one base is driven
         self.followed = 0  # goals planned and handed to the follower
@@ -64,10 +76,15 @@ class GoalsIn:
         self._bases.add(rid)
         self.actions.serve(rid)
         if self._shared is None:
-            self._shared = self.node.create_subscription(PoseStamped, ros_topic("/".join([self.namespace, "goal_pose"])),
-                                                         self._on_shared, self.qos)
-        return self.node.create_subscription(PoseStamped, ros_topic("/".join([self.namespace, rid, "goal_pose"])),
-                                             lambda m, r=rid: self.on_goal(r, m), self.qos)
+            self._shared = self.node.create_subscription(
+                PoseStamped, ros_topic("/".join([self.namespace, "goal_pose"])), self._on_shared, self.qos
+            )
+        return self.node.create_subscription(
+            PoseStamped,
+            ros_topic("/".join([self.namespace, rid, "goal_pose"])),
+            lambda m, r=rid: self.on_goal(r, m),
+            self.qos,
+        )
 
     def forget(self, rid: str) -> None:
         self._bases.discard(rid)
@@ -78,8 +95,12 @@ class GoalsIn:
 
     def _on_shared(self, msg: Any) -> None:
         if len(self._bases) != 1:
-            self.refuse("goal_pose", "goal_pose", f"the bridge drives {len(self._bases)} bases "
-                        f"({', '.join(sorted(self._bases)) or 'none'}): send the goal on /ROBOT/goal_pose")
+            self.refuse(
+                "goal_pose",
+                "goal_pose",
+                f"the bridge drives {len(self._bases)} bases "
+                f"({', '.join(sorted(self._bases)) or 'none'}): send the goal on /ROBOT/goal_pose",
+            )
             return
         self.on_goal(next(iter(self._bases)), msg)
 
@@ -100,7 +121,8 @@ class GoalsIn:
             path = base.plan_to(*goal, map_name=name)
             base.follow(path, wait=False)
             self.followed += 1
-            self.node.get_logger().info(f"goal for {rid} at ({goal[0]:.2f}, {goal[1]:.2f}): "
-                                        f"{len(path)} poses planned on map {name!r}, followed")
+            self.node.get_logger().info(
+                f"goal for {rid} at ({goal[0]:.2f}, {goal[1]:.2f}): {len(path)} poses planned on map {name!r}, followed"
+            )
         except (FabricUserError, ValueError) as exc:
             self.refuse(rid, "goal_pose", getattr(exc, "reason", str(exc)))

@@ -72,7 +72,9 @@ class ModelsOut:
             text = self._text(r.type)
             if text is None:
                 continue
-            pub = self.node.create_publisher(String, ros_topic("/".join([self.namespace, r.id, "robot_description"])), LATCHED)
+            pub = self.node.create_publisher(
+                String, ros_topic("/".join([self.namespace, r.id, "robot_description"])), LATCHED
+            )
             pub.publish(String(data=text))
             self._pubs[r.id] = pub
         for rid in [rid for rid in self._pubs if rid not in ids]:

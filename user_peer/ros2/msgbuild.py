@@ -197,12 +197,28 @@ module control_msgs {
 ``nav2_msgs/action/NavigateToPose`` and ``control_msgs/action/FollowJointTrajectory`` (with the two tolerance
 messages it holds) only, what the bridge uses."""
 
-_DEPS = ("geometry_msgs", "trajectory_msgs", "std_msgs", "builtin_interfaces", "service_msgs", "action_msgs", "unique_identifier_msgs")
+_DEPS = (
+    "geometry_msgs",
+    "trajectory_msgs",
+    "std_msgs",
+    "builtin_interfaces",
+    "service_msgs",
+    "action_msgs",
+    "unique_identifier_msgs",
+)
 """The interface packages the interfaces above refer to (a service's event message holds ``service_msgs``', an
 action's goal and result services ``action_msgs``' and ``unique_identifier_msgs``')."""
 
-_RUNTIME = ("rosidl_runtime_c", "rcutils", "rosidl_typesupport_c", "rcpputils", "rosidl_typesupport_fastrtps_c",
-            "rosidl_typesupport_fastrtps_cpp", "fastcdr", "rosidl_typesupport_introspection_c")
+_RUNTIME = (
+    "rosidl_runtime_c",
+    "rcutils",
+    "rosidl_typesupport_c",
+    "rcpputils",
+    "rosidl_typesupport_fastrtps_c",
+    "rosidl_typesupport_fastrtps_cpp",
+    "fastcdr",
+    "rosidl_typesupport_introspection_c",
+)
 
 _TYPESUPPORTS = ("c", "fastrtps_c", "introspection_c")
 
@@ -230,9 +246,13 @@ def _generate(package: str, src: Path, out: Path) -> None:
 
     files = [f"{src}:{rel}" for rel in INTERFACES[package]]
     include = [str(Path(sys.prefix) / "share")]
-    for kind, ext in (("c", GenerateC("c")), ("py", GeneratePython("py")), ("ts_c", GenerateCTypesupport("c")),
-                      ("fastrtps_c", GenerateFastRTPSCTypesupport("fastrtps_c")),
-                      ("introspection_c", GenerateIntrospectionCTypesupport("introspection_c"))):
+    for kind, ext in (
+        ("c", GenerateC("c")),
+        ("py", GeneratePython("py")),
+        ("ts_c", GenerateCTypesupport("c")),
+        ("fastrtps_c", GenerateFastRTPSCTypesupport("fastrtps_c")),
+        ("introspection_c", GenerateIntrospectionCTypesupport("introspection_c")),
+    ):
         ext.generate(package, files, include, output_path=out / kind / package)
 
 
@@ -251,7 +271,8 @@ def type_hashes(package: str, interfaces: dict[str, str] | None = None) -> dict[
             (src / rel).parent.mkdir(parents=True, exist_ok=True)
             (src / rel).write_text(text, encoding="utf-8")
         files = HashTypeDescription("type_description").generate_type_hashes(
-            package, [f"{src}:{rel}" for rel in interfaces], [str(Path(sys.prefix) / "share")], Path(tmp) / "out")
+            package, [f"{src}:{rel}" for rel in interfaces], [str(Path(sys.prefix) / "share")], Path(tmp) / "out"
+        )
         return {h["type_name"]: h["hash_string"] for f in files for h in json.loads(Path(f).read_text())["type_hashes"]}
 
 
@@ -259,7 +280,9 @@ def _include_flags(out: Path) -> list[str]:
     """The generated headers, every wheel's headers, Python's and numpy's; an error naming what is missing."""
     python_include = Path(sysconfig.get_paths()["include"])
     if not (python_include / "Python.h").is_file():
-        raise MsgBuildError(f"no Python.h in {python_include}: install Python's headers (Debian: apt-get install python3-dev)")
+        raise MsgBuildError(
+            f"no Python.h in {python_include}: install Python's headers (Debian: apt-get install python3-dev)"
+        )
     import numpy
 
     prefix_include = Path(sys.prefix) / "include"
@@ -278,8 +301,19 @@ def _compiler(name: str) -> str:
 
 def _link(cc: str, sources: list[Path], target: Path, libs: list[str], flags: list[str]) -> None:
     """One shared library from ``sources``, linked to ``libs`` (only those it uses are kept)."""
-    cmd = [cc, "-shared", "-fPIC", "-O1", "-w", *flags, *map(str, sources), "-o", str(target),
-           "-Wl,--as-needed", *(f"-l{lib}" for lib in libs)]
+    cmd = [
+        cc,
+        "-shared",
+        "-fPIC",
+        "-O1",
+        "-w",
+        *flags,
+        *map(str, sources),
+        "-o",
+        str(target),
+        "-Wl,--as-needed",
+        *(f"-l{lib}" for lib in libs),
+    ]
     done = subprocess.run(cmd, capture_output=True, text=True)
     if done.returncode != 0:
         raise MsgBuildError(f"building {target.name} failed:\n{done.stderr[-3000:]}")
@@ -300,21 +334,47 @@ def _compile(package: str, out: Path, lib: Path, py: Path) -> None:
     def so(kind: str) -> Path:
         return lib / f"lib{package}__{kind}.so"
 
-    _link(cc, sorted((out / "c").rglob("*.c")), so("rosidl_generator_c"), _dep_libs("rosidl_generator_c") + runtime, flags)
-    stage = [(cc, sorted((out / "introspection_c").rglob("*.c")), "rosidl_typesupport_introspection_c"),
-             (cxx, sorted((out / "fastrtps_c").rglob("*.cpp")), "rosidl_typesupport_fastrtps_c"),
-             (cxx, sorted((out / "ts_c").rglob("*.cpp")), "rosidl_typesupport_c")]
+    _link(
+        cc, sorted((out / "c").rglob("*.c")), so("rosidl_generator_c"), _dep_libs("rosidl_generator_c") + runtime, flags
+    )
+    stage = [
+        (cc, sorted((out / "introspection_c").rglob("*.c")), "rosidl_typesupport_introspection_c"),
+        (cxx, sorted((out / "fastrtps_c").rglob("*.cpp")), "rosidl_typesupport_fastrtps_c"),
+        (cxx, sorted((out / "ts_c").rglob("*.cpp")), "rosidl_typesupport_c"),
+    ]
     with ThreadPoolExecutor(3) as pool:
-        for f in [pool.submit(_link, c, srcs, so(kind), [gen_c, *_dep_libs(kind), *_dep_libs("rosidl_generator_c"), *runtime], flags)
-                  for c, srcs, kind in stage]:
+        for f in [
+            pool.submit(
+                _link, c, srcs, so(kind), [gen_c, *_dep_libs(kind), *_dep_libs("rosidl_generator_c"), *runtime], flags
+            )
+            for c, srcs, kind in stage
+        ]:
             f.result()
-    _link(cc, sorted((out / "py" / package).glob("*/_*_s.c")), so("rosidl_generator_py"),
-          [gen_c, f"{package}__rosidl_typesupport_c", *_dep_libs("rosidl_generator_py"), *_dep_libs("rosidl_generator_c"), *runtime], flags)
+    _link(
+        cc,
+        sorted((out / "py" / package).glob("*/_*_s.c")),
+        so("rosidl_generator_py"),
+        [
+            gen_c,
+            f"{package}__rosidl_typesupport_c",
+            *_dep_libs("rosidl_generator_py"),
+            *_dep_libs("rosidl_generator_c"),
+            *runtime,
+        ],
+        flags,
+    )
     with ThreadPoolExecutor(3) as pool:
-        for f in [pool.submit(_link, cc, [out / "py" / package / f"_{package}_s.ep.rosidl_typesupport_{ts}.c"],
-                              py / f"{package}_s__rosidl_typesupport_{ts}.so",
-                              [f"{package}__rosidl_generator_py", f"{package}__rosidl_typesupport_{ts}", gen_c, *runtime], flags)
-                  for ts in _TYPESUPPORTS]:
+        for f in [
+            pool.submit(
+                _link,
+                cc,
+                [out / "py" / package / f"_{package}_s.ep.rosidl_typesupport_{ts}.c"],
+                py / f"{package}_s__rosidl_typesupport_{ts}.so",
+                [f"{package}__rosidl_generator_py", f"{package}__rosidl_typesupport_{ts}", gen_c, *runtime],
+                flags,
+            )
+            for ts in _TYPESUPPORTS
+        ]:
             f.result()
 
 
@@ -353,9 +413,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="python -m user_peer.ros2.msgbuild",
         description="Build the ROS 2 interfaces the bridge uses and no Kilted wheel ships (type support and Python "
-                    "package, compiled with the wheels' own rosidl generators and g++), into this environment.",
-        epilog="`make test` runs it once per virtual environment. Needs g++ and Python's headers.")
-    ap.add_argument("packages", nargs="*", metavar="PACKAGE", help=f"what to build (default: all of {', '.join(INTERFACES)})")
+        "package, compiled with the wheels' own rosidl generators and g++), into this environment.",
+        epilog="`make test` runs it once per virtual environment. Needs g++ and Python's headers.",
+    )
+    ap.add_argument(
+        "packages", nargs="*", metavar="PACKAGE", help=f"what to build (default: all of {', '.join(INTERFACES)})"
+    )
     ap.add_argument("--force", action="store_true", help="build again even when the package is importable")
     a = ap.parse_args(argv)
     force = a.force

@@ -40,10 +40,20 @@ def navigate_action_class() -> type | None:
 class NavigateActions(ActionHost):
     """One NavigateToPose action server per driven base, on the bridge's action node."""
 
-    def __init__(self, node: Any, namespace: str, prefix: str, check_owner: Callable[[str, str], Any],
-                 refuse: Callable[[str, str, str], None], goal_of: Callable[[Any, str], tuple[float, float, float]],
-                 map_name: str = "", *, tol: float = 0.25,
-                 timeout: float = 120.0, period: float = 0.1) -> None:
+    def __init__(
+        self,
+        node: Any,
+        namespace: str,
+        prefix: str,
+        check_owner: Callable[[str, str], Any],
+        refuse: Callable[[str, str, str], None],
+        goal_of: Callable[[Any, str], tuple[float, float, float]],
+        map_name: str = "",
+        *,
+        tol: float = 0.25,
+        timeout: float = 120.0,
+        period: float = 0.1,
+    ) -> None:
         super().__init__(node, namespace, navigate_action_class(), "navigate_to_pose", "navigate")
         self.prefix = prefix
         self.check_owner, self.refuse, self.goal_of, self.map_name = check_owner, refuse, goal_of, map_name
@@ -95,6 +105,10 @@ class NavigateActions(ActionHost):
                     self.succeeded += 1
                     return self.action.Result(error_code=self.action.Result.NONE, error_msg="")
             if elapsed > self.timeout:
-                return self._end(rid, handle, self.action.Result.TIMEOUT,
-                                 f"{rid} did not reach ({end[0]:.2f}, {end[1]:.2f}) within {self.timeout:.0f} s")
+                return self._end(
+                    rid,
+                    handle,
+                    self.action.Result.TIMEOUT,
+                    f"{rid} did not reach ({end[0]:.2f}, {end[1]:.2f}) within {self.timeout:.0f} s",
+                )
             time.sleep(self.period)

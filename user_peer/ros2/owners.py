@@ -51,7 +51,9 @@ class OwnersOut:
                 continue
             pub = self._pubs.get(rid)
             if pub is None:
-                pub = self._pubs[rid] = self.node.create_publisher(String, ros_topic("/".join((self.ns, rid, "owner"))), OWNER_QOS)
+                pub = self._pubs[rid] = self.node.create_publisher(
+                    String, ros_topic("/".join((self.ns, rid, "owner"))), OWNER_QOS
+                )
             pub.publish(String(data=text))
             self._said[rid] = text
             self.sent += 1

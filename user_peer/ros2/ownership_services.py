@@ -38,8 +38,9 @@ class OwnershipServices:
     """The two Trigger services of each driven robot; ``robot(rid)`` gives the login's handle of a robot
     (``World.robot``), whose ``request``/``release`` do the asking."""
 
-    def __init__(self, node: Any, namespace: str, robot: Callable[[str], Any], user: str,
-                 service: type | None = None) -> None:
+    def __init__(
+        self, node: Any, namespace: str, robot: Callable[[str], Any], user: str, service: type | None = None
+    ) -> None:
         self.node, self.ns, self.robot, self.user = node, namespace.strip("/"), robot, user
         self.service = service if service is not None else trigger_class()
         self.available = self.service is not None
@@ -51,10 +52,16 @@ class OwnershipServices:
         if not self.available or rid in self._services:
             return
         self._services[rid] = [
-            self.node.create_service(self.service, ros_topic("/".join((self.ns, rid, "request_ownership"))),
-                                     lambda req, resp, r=rid: self._answer(resp, r, self.request)),
-            self.node.create_service(self.service, ros_topic("/".join((self.ns, rid, "release_ownership"))),
-                                     lambda req, resp, r=rid: self._answer(resp, r, self.release)),
+            self.node.create_service(
+                self.service,
+                ros_topic("/".join((self.ns, rid, "request_ownership"))),
+                lambda req, resp, r=rid: self._answer(resp, r, self.request),
+            ),
+            self.node.create_service(
+                self.service,
+                ros_topic("/".join((self.ns, rid, "release_ownership"))),
+                lambda req, resp, r=rid: self._answer(resp, r, self.release),
+            ),
         ]
 
     def forget(self, rid: str) -> None:

@@ -28,6 +28,7 @@ from user_peer.ros2.direct import stamp
 
 __all__ = ["BEAM_HALF_WIDTH", "RangesOut", "transducer_frames", "transducer_name"]
 
+
 def transducer_frames(rid: str, sonar: SonarInfo) -> list[Frame]:
     """Each transducer's frame in ``rid/sonar`` (the ring's centre, at its height): on the rim at its angle, x out."""
     return _frames(rid, sonar.angles, sonar.radius)
@@ -67,12 +68,18 @@ class RangesOut:
     def describe(self, info: WorldInfo) -> None:
         """A ring's topics for each base that has one (again if its ring changed); none for robots that left."""
         have = {r.id: r.sonar for r in info.robots if r.sonar is not None and len(r.sonar.angles)}
-        for rid in [rid for rid, ring in self._rings.items() if rid not in have or _shape(ring.sonar) != _shape(have[rid])]:
+        for rid in [
+            rid for rid, ring in self._rings.items() if rid not in have or _shape(ring.sonar) != _shape(have[rid])
+        ]:
             self._drop(rid)
         for rid, sonar in have.items():
             if rid not in self._rings:
-                self._rings[rid] = _Ring(self.node, lambda leaf, r=rid: ros_topic("/".join((self.ns, r, leaf))),
-                                         lambda leaf, r=rid: f"{self.prefix}{r}/{leaf}", sonar)
+                self._rings[rid] = _Ring(
+                    self.node,
+                    lambda leaf, r=rid: ros_topic("/".join((self.ns, r, leaf))),
+                    lambda leaf, r=rid: f"{self.prefix}{r}/{leaf}",
+                    sonar,
+                )
 
     def _drop(self, rid: str) -> None:
         for pub in self._rings.pop(rid).pubs:

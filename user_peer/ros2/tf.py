@@ -65,8 +65,15 @@ class TfOut:
     """Publishes the frames robot state gives; ``publisher(topic, qos)`` makes the publishers (the node's by
     default; the test of the path without tf2_msgs gives its own)."""
 
-    def __init__(self, node: Any, catalog: RobotCatalog, *, namespace: str = "", message: type | None = None,
-                 publisher: Callable[[str, QoSProfile], Any] | None = None) -> None:
+    def __init__(
+        self,
+        node: Any,
+        catalog: RobotCatalog,
+        *,
+        namespace: str = "",
+        message: type | None = None,
+        publisher: Callable[[str, QoSProfile], Any] | None = None,
+    ) -> None:
         self.message = message if message is not None else tf_message_class()
         self.available = self.message is not None
         self.frames = FrameTracker(catalog)
@@ -83,7 +90,9 @@ class TfOut:
 
     def _send_static(self, ns: int) -> None:
         """Every static frame in one message: /tf_static keeps only the last (depth 1), as tf2's broadcaster does."""
-        self._static_pub.publish(self.message(transforms=[transform(f, ns, self.prefix) for f in self._static.values()]))
+        self._static_pub.publish(
+            self.message(transforms=[transform(f, ns, self.prefix) for f in self._static.values()])
+        )
 
     def describe(self, info: WorldInfo) -> None:
         """The world's description: where arms stand, what each robot is; each sonar transducer's frame on
@@ -97,7 +106,9 @@ class TfOut:
                 for child in [c for c in self._static if c.startswith(f"{rid}/") and c.endswith(FIXED)]:
                     del self._static[child]
                 self._static.update((f.child, f) for f in self.frames.mounts(rid))
-            self._static.update((f.child, f) for r in info.robots if r.sonar is not None for f in transducer_frames(r.id, r.sonar))
+            self._static.update(
+                (f.child, f) for r in info.robots if r.sonar is not None for f in transducer_frames(r.id, r.sonar)
+            )
             if self._static != before:
                 self._send_static(0)
 

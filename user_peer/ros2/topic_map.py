@@ -77,9 +77,12 @@ class TopicMap:
         if not over:
             return qos
         base = QoSProfile(depth=qos) if isinstance(qos, int) else qos
-        return QoSProfile(history=base.history, depth=over.get("depth", base.depth),
-                          reliability=over.get("reliability", base.reliability),
-                          durability=over.get("durability", base.durability))
+        return QoSProfile(
+            history=base.history,
+            depth=over.get("depth", base.depth),
+            reliability=over.get("reliability", base.reliability),
+            durability=over.get("durability", base.durability),
+        )
 
 
 def _name(value: Any, where: str) -> str:
@@ -136,9 +139,12 @@ def parse_topic_map(data: Any, where: str = "topic map") -> TopicMap:
     twice = sorted({t for t in targets if targets.count(t) > 1})
     if twice:
         raise TopicMapError(f"{where}: rename gives {twice[0]!r} to two topics")
-    return TopicMap(renamed, {_name(k, f"{where}, qos"): _qos(v, f"{where}, qos {k}") for k, v in qos.items()},
-                    _patterns(data["allow"], f"{where}, allow") if data.get("allow") is not None else None,
-                    _patterns(data.get("deny") or [], f"{where}, deny"))
+    return TopicMap(
+        renamed,
+        {_name(k, f"{where}, qos"): _qos(v, f"{where}, qos {k}") for k, v in qos.items()},
+        _patterns(data["allow"], f"{where}, allow") if data.get("allow") is not None else None,
+        _patterns(data.get("deny") or [], f"{where}, deny"),
+    )
 
 
 def load_topic_map(path: str | Path) -> TopicMap:

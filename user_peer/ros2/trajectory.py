@@ -45,8 +45,9 @@ class Timed:
         return self.times[-1]
 
 
-def timed_points(robot: str, arm_joints: Sequence[str], trajectory: Any,
-                 lower: Sequence[float] = (), upper: Sequence[float] = ()) -> Timed:
+def timed_points(
+    robot: str, arm_joints: Sequence[str], trajectory: Any, lower: Sequence[float] = (), upper: Sequence[float] = ()
+) -> Timed:
     """A JointTrajectory's points (``joint_names`` in any order) as :class:`Timed`; :class:`CommandError` for no
     points, a time that goes back or is not finite, a position that is not finite or outside [lower, upper]."""
     points = list(trajectory.points)
@@ -63,8 +64,10 @@ def timed_points(robot: str, arm_joints: Sequence[str], trajectory: Any,
             raise CommandError(f"point {i} has a position that is not finite: {q}")
         for j, v in enumerate(q):
             if len(lower) == len(q) and not lower[j] - 1e-9 <= v <= upper[j] + 1e-9:
-                raise CommandError(f"point {i}: {arm_joints[j]} at {math.degrees(v):.1f} deg is outside its limits "
-                                   f"[{math.degrees(lower[j]):.1f}, {math.degrees(upper[j]):.1f}] deg")
+                raise CommandError(
+                    f"point {i}: {arm_joints[j]} at {math.degrees(v):.1f} deg is outside its limits "
+                    f"[{math.degrees(lower[j]):.1f}, {math.degrees(upper[j]):.1f}] deg"
+                )
         times.append(t)
         positions.append(tuple(q))
     return Timed(tuple(times), tuple(positions))
@@ -100,7 +103,9 @@ class TrajectoryPlayer:
     ``send(q)`` is the arm's command (``move_joints(q, wait=False)``); an exception from it ends that trajectory
     and goes to ``failed`` (the bridge's refusal on /rosout)."""
 
-    def __init__(self, clock: Callable[[], float] = time.monotonic, period: float = PERIOD_S, *, thread: bool = True) -> None:
+    def __init__(
+        self, clock: Callable[[], float] = time.monotonic, period: float = PERIOD_S, *, thread: bool = True
+    ) -> None:
         self.clock, self.period = clock, period
         self._threaded = thread  # False: the caller calls step() (tests, with a fake clock)
         self._playing: dict[str, _Playing] = {}
@@ -109,15 +114,22 @@ class TrajectoryPlayer:
         self._closed = False
         self._thread: threading.Thread | None = None
 
-    def play(self, robot: str, traj: Timed, start: Sequence[float] | None, send: Callable[[tuple[float, ...]], None],
-             failed: Callable[[Exception], None]) -> _Playing | None:
+    def play(
+        self,
+        robot: str,
+        traj: Timed,
+        start: Sequence[float] | None,
+        send: Callable[[tuple[float, ...]], None],
+        failed: Callable[[Exception], None],
+    ) -> _Playing | None:
         """Follow ``traj`` on ``robot`` from now, replacing what it plays; what plays (None once closed), which
         :meth:`current` returns until it is over, failed, stopped or replaced."""
         with self._lock:
             if self._closed:
                 return None
-            p = self._playing[robot] = _Playing(traj, None if start is None else tuple(float(v) for v in start),
-                                                self.clock(), send, failed)
+            p = self._playing[robot] = _Playing(
+                traj, None if start is None else tuple(float(v) for v in start), self.clock(), send, failed
+            )
             if self._thread is None and self._threaded:
                 self._thread = threading.Thread(target=self._run, name="ros2-trajectories", daemon=True)
                 self._thread.start()

@@ -45,15 +45,28 @@ def discovery(environ: Mapping[str, str], option: str | None) -> Discovery:
 
 def boundary_lines(user: str, drive: Collection[str], domain: str, found: Discovery) -> list[str]:
     """What the bridge says at start: whom it takes commands from, for which robots, and how far it is seen."""
-    reach = {"localhost": "this host only", "subnet": "the local network (multicast)", "off": "no automatic discovery",
-             "system_default": "the middleware's default"}.get(found.range, found.range)
-    why = {"default": "the bridge's default; --discovery subnet opens it", "environment": f"{RANGE_VAR} as set",
-           "option": "--discovery"}[found.source]
+    reach = {
+        "localhost": "this host only",
+        "subnet": "the local network (multicast)",
+        "off": "no automatic discovery",
+        "system_default": "the middleware's default",
+    }.get(found.range, found.range)
+    why = {
+        "default": "the bridge's default; --discovery subnet opens it",
+        "environment": f"{RANGE_VAR} as set",
+        "option": "--discovery",
+    }[found.source]
     out = [f"DDS discovery: {reach} ({why}); ROS domain {domain}"]
     if not drive:
         out.append("commands: none taken (publishing only); --drive ROBOT takes cmd_vel and joint commands for it")
     else:
-        who = "any node on this host" if found.range == "localhost" else f"any node that discovers it on ROS domain {domain}"
-        out.append(f"commands: taken for {', '.join(sorted(drive))} only, from {who} (ROS 2 has no logins), "
-                   f"sent as {user!r} while {user!r} owns the robot")
+        who = (
+            "any node on this host"
+            if found.range == "localhost"
+            else f"any node that discovers it on ROS domain {domain}"
+        )
+        out.append(
+            f"commands: taken for {', '.join(sorted(drive))} only, from {who} (ROS 2 has no logins), "
+            f"sent as {user!r} while {user!r} owns the robot"
+        )
     return out

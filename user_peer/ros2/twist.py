@@ -29,12 +29,19 @@ def twist_check(v: float, omega: float, base: Any | None) -> str:
     if base is None:
         return ""
     notes = []
-    for what, value, limit, unit in (("linear.x", v, base.max_speed, "m/s"), ("angular.z", omega, base.max_omega, "rad/s")):
+    for what, value, limit, unit in (
+        ("linear.x", v, base.max_speed, "m/s"),
+        ("angular.z", omega, base.max_omega, "rad/s"),
+    ):
         if limit > 0 and abs(value) > ABSURD * limit:
-            raise CommandError(f"cmd_vel {what} {value:g} {unit} is more than {ABSURD:g} times the base's limit "
-                               f"{limit:g} {unit} (a unit mistake?)")
+            raise CommandError(
+                f"cmd_vel {what} {value:g} {unit} is more than {ABSURD:g} times the base's limit "
+                f"{limit:g} {unit} (a unit mistake?)"
+            )
         if limit > 0 and abs(value) > limit:
-            notes.append(f"{what} {value:g} {unit} clamped by the sim to {math.copysign(limit, value):g} {unit} (the base's limit)")
+            notes.append(
+                f"{what} {value:g} {unit} clamped by the sim to {math.copysign(limit, value):g} {unit} (the base's limit)"
+            )
     return "; ".join(notes)
 
 

@@ -99,7 +99,9 @@ def test_a_description_listing_fewer_joints_than_its_urdf_holds_the_others_at_ze
     assert hand.model.nq == 7 and tuple(hand.model.names)[1:] == panda.joint_names
     q = np.random.default_rng(8).uniform(hand.lower, hand.upper)
     assert np.allclose(hand.fk(q).homogeneous, arms["panda"].fk(q).homogeneous, atol=1e-12)
-    (folder / "robot.toml").write_text(manifest.replace('"panda_joint1", "panda_joint2"', '"panda_joint2", "panda_joint1"'))
+    (folder / "robot.toml").write_text(
+        manifest.replace('"panda_joint1", "panda_joint2"', '"panda_joint2", "panda_joint1"')
+    )
     with pytest.raises(ValueError, match="not the description's"):
         ArmModel(str(folder))
 
@@ -109,15 +111,24 @@ def test_a_prismatic_joints_column_is_its_axis_and_no_turn(tmp_path, monkeypatch
     import pinocchio as pin
 
     def joint(name: str, kind: str, parent: str, child: str, xyz: str, axis: str, lo: float, hi: float) -> str:
-        return (f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
-                f'<origin xyz="{xyz}"/><axis xyz="{axis}"/><limit lower="{lo}" upper="{hi}" velocity="1"/></joint>')
+        return (
+            f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+            f'<origin xyz="{xyz}"/><axis xyz="{axis}"/><limit lower="{lo}" upper="{hi}" velocity="1"/></joint>'
+        )
 
     src = tmp_path / "lift.urdf"
-    src.write_text('<robot name="lift">' + "".join(f'<link name="l{i}"/>' for i in range(4))
-                   + joint("lift", "prismatic", "l0", "l1", "0 0 0.1", "0 0 1", 0.0, 0.5)
-                   + joint("turn", "revolute", "l1", "l2", "0.1 0 0", "0 1 0", -1.5, 1.5)
-                   + joint("reach", "prismatic", "l2", "l3", "0.2 0 0", "0.6 0 0.8", -0.1, 0.1) + "</robot>")
-    assert install(src, into=tmp_path / "robots").arm.joints == ("lift", "turn")  # by default a prismatic end is a finger
+    src.write_text(
+        '<robot name="lift">'
+        + "".join(f'<link name="l{i}"/>' for i in range(4))
+        + joint("lift", "prismatic", "l0", "l1", "0 0 0.1", "0 0 1", 0.0, 0.5)
+        + joint("turn", "revolute", "l1", "l2", "0.1 0 0", "0 1 0", -1.5, 1.5)
+        + joint("reach", "prismatic", "l2", "l3", "0.2 0 0", "0.6 0 0.8", -0.1, 0.1)
+        + "</robot>"
+    )
+    assert install(src, into=tmp_path / "robots").arm.joints == (
+        "lift",
+        "turn",
+    )  # by default a prismatic end is a finger
     made = install(src, into=tmp_path / "robots", tip="l3", replace=True)
     arm = ArmModel(str(made.directory))
     assert made.arm.joints == ("lift", "turn", "reach") and arm.model.nq == 3

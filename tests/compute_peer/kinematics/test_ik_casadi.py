@@ -170,10 +170,13 @@ def _urdf(joints: list[tuple[str, str, str, str, float, float]], tool: str) -> s
     links = ["base"] + [f"l{i + 1}" for i in range(len(joints))]
     body = "".join(f'  <link name="{n}"/>\n' for n in [*links, "tool"])
     for i, (kind, xyz, rpy, axis, lo, hi) in enumerate(joints):
-        body += _JOINT.format(name=f"j{i + 1}", kind=kind, parent=links[i], child=links[i + 1], xyz=xyz, rpy=rpy,
-                              axis=axis, lo=lo, hi=hi)
-    body += (f'  <joint name="tool_joint" type="fixed"><parent link="{links[-1]}"/><child link="tool"/>'
-             f'<origin xyz="{tool}" rpy="0.1 0.2 0.3"/></joint>\n')
+        body += _JOINT.format(
+            name=f"j{i + 1}", kind=kind, parent=links[i], child=links[i + 1], xyz=xyz, rpy=rpy, axis=axis, lo=lo, hi=hi
+        )
+    body += (
+        f'  <joint name="tool_joint" type="fixed"><parent link="{links[-1]}"/><child link="tool"/>'
+        f'<origin xyz="{tool}" rpy="0.1 0.2 0.3"/></joint>\n'
+    )
     return f'<?xml version="1.0"?>\n<robot name="t">\n{body}</robot>\n'
 
 
@@ -195,11 +198,17 @@ def _robot(tmp_path, monkeypatch, name: str, joints, tool: str = "0.1 0 0") -> A
 @pytest.mark.slow
 def test_a_three_joint_arm_from_a_urdf(tmp_path, monkeypatch):
     """Yaw, pitch, then an elbow about a tilted axis (revolute-unaligned in Pinocchio); position-only targets."""
-    arm = _robot(tmp_path, monkeypatch, "tribot", [
-        ("revolute", "0 0 0.1", "0 0 0", "0 0 1", -2.5, 2.5),
-        ("revolute", "0 0 0.05", "0 0 0", "0 1 0", -1.5, 1.5),
-        ("revolute", "0.3 0 0", "0 0 0", "0 0.6 0.8", -2.0, 2.0),
-    ], tool="0.25 0 0.02")
+    arm = _robot(
+        tmp_path,
+        monkeypatch,
+        "tribot",
+        [
+            ("revolute", "0 0 0.1", "0 0 0", "0 0 1", -2.5, 2.5),
+            ("revolute", "0 0 0.05", "0 0 0", "0 1 0", -1.5, 1.5),
+            ("revolute", "0.3 0 0", "0 0 0", "0 0.6 0.8", -2.0, 2.0),
+        ],
+        tool="0.25 0 0.02",
+    )
     assert arm.model.joints[3].shortname() == "JointModelRevoluteUnaligned"
     rng = np.random.default_rng(5)
     _fk_matches(arm, 200, rng)
@@ -224,20 +233,30 @@ def test_a_three_joint_arm_from_a_urdf(tmp_path, monkeypatch):
 
 
 def test_prismatic_joints_and_unsupported_ones(tmp_path, monkeypatch):
-    arm = _robot(tmp_path, monkeypatch, "slider", [
-        ("prismatic", "0 0 0.1", "0 0 0", "0 0 1", 0.0, 0.4),
-        ("revolute", "0 0 0.05", "0 0 0.3", "1 0 0", -1.5, 1.5),
-        ("prismatic", "0.2 0 0", "0.2 0 0", "0.6 0 0.8", -0.1, 0.1),
-    ])
+    arm = _robot(
+        tmp_path,
+        monkeypatch,
+        "slider",
+        [
+            ("prismatic", "0 0 0.1", "0 0 0", "0 0 1", 0.0, 0.4),
+            ("revolute", "0 0 0.05", "0 0 0.3", "1 0 0", -1.5, 1.5),
+            ("prismatic", "0.2 0 0", "0.2 0 0", "0.6 0 0.8", -0.1, 0.1),
+        ],
+    )
     rng = np.random.default_rng(6)
     _fk_matches(arm, 50, rng)
     q = rng.uniform(arm.lower, arm.upper)
     p = arm.fk(q).translation
     sol = solve(arm, p, None, q + 0.01 * (arm.upper - arm.lower), method="casadi")
     assert np.linalg.norm(arm.fk(sol.q).translation - p) <= 1e-6 and _within(arm, sol.q)
-    spinner = _robot(tmp_path, monkeypatch, "spinner", [
-        ("revolute", "0 0 0.1", "0 0 0", "0 0 1", -2.0, 2.0),
-        ("continuous", "0.2 0 0", "0 0 0", "0 1 0", -3.0, 3.0),
-    ])
+    spinner = _robot(
+        tmp_path,
+        monkeypatch,
+        "spinner",
+        [
+            ("revolute", "0 0 0.1", "0 0 0", "0 0 1", -2.0, 2.0),
+            ("continuous", "0.2 0 0", "0 0 0", "0 1 0", -3.0, 3.0),
+        ],
+    )
     with pytest.raises(ValueError, match="'j2' is a JointModelRUBY.*only 1-dof revolute and prismatic"):
         casadi_ik(spinner)

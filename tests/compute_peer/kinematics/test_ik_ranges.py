@@ -28,7 +28,10 @@ def test_the_longest_reach_bounds_every_pose_of_the_arm(arm):
 
 @pytest.mark.parametrize("target", [(1e300, 0.0, 0.0), (1e9, 0.0, 0.1), (5.0, 0.0, 0.2)])
 def test_a_target_beyond_the_reach_is_refused_before_the_numerical_solver(arm, target):
-    with pytest.raises(NoIKSolution, match=r"out of reach: the target is [0-9.e+]+ m from the arm's base, beyond its longest reach of 0\.4980 m"):
+    with pytest.raises(
+        NoIKSolution,
+        match=r"out of reach: the target is [0-9.e+]+ m from the arm's base, beyond its longest reach of 0\.4980 m",
+    ):
         solve(arm, target, method="numerical")
 
 

@@ -138,7 +138,9 @@ def test_numerical_round_trip_near_and_far_seeds(arm):
     for i in range(n):
         q = rng.uniform(arm.lower, arm.upper)
         m = arm.fk(q)
-        seed = np.clip(q + rng.normal(0.0, 0.3, 6), arm.lower, arm.upper) if i % 2 else rng.uniform(arm.lower, arm.upper)
+        seed = (
+            np.clip(q + rng.normal(0.0, 0.3, 6), arm.lower, arm.upper) if i % 2 else rng.uniform(arm.lower, arm.upper)
+        )
         try:
             sol = solve(arm, m.translation, _quat(m), seed, method="numerical")
         except NoIKSolution as exc:
@@ -206,7 +208,9 @@ def test_unreachable_targets_are_refused_with_reasons(arm):
             solve(arm, [0.01, 0.0, 0.05], method=method)
     assert in_base_column(arm, [0.0, 0.05, 0.0]) and not in_base_column(arm, [0.0, 0.05, 0.1])
     # within reach, impossible orientation: the tool pointing straight up just over the base
-    with pytest.raises(NoIKSolution, match=r"all 8 solutions violate joint limits: J5 at 146\.7° \(limits -115\.\.115°\)"):
+    with pytest.raises(
+        NoIKSolution, match=r"all 8 solutions violate joint limits: J5 at 146\.7° \(limits -115\.\.115°\)"
+    ):
         solve(arm, [0.1, 0.0, 0.1], [1.0, 0.0, 0.0, 0.0])
     with pytest.raises(NoIKSolution, match=r"did not converge from 25 starts: best residual .* m, .* rad \(J\d at its"):
         solve(arm, [0.1, 0.0, 0.1], [1.0, 0.0, 0.0, 0.0], method="numerical")
@@ -260,8 +264,12 @@ def test_solution_is_frozen(arm):
 
 _ARM = ArmModel("meca500")
 _coord = st.floats(-0.4, 0.4, allow_nan=False)
-_quats = st.one_of(st.none(), st.lists(st.floats(-1.0, 1.0, allow_nan=False), min_size=4, max_size=4)
-                   .filter(lambda v: math.sqrt(sum(x * x for x in v)) > 1e-3))
+_quats = st.one_of(
+    st.none(),
+    st.lists(st.floats(-1.0, 1.0, allow_nan=False), min_size=4, max_size=4).filter(
+        lambda v: math.sqrt(sum(x * x for x in v)) > 1e-3
+    ),
+)
 
 
 @settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])

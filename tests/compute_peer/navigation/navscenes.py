@@ -52,7 +52,9 @@ def scan_at(scene: Scene, x: float, y: float, yaw: float, *, stamp: float = 0.0,
     amin, ainc = scan_angles(RAYS, FOV)
     rel = amin + ainc * np.arange(RAYS)
     ranges = scene.raycast(x, y, rel + yaw, RANGE_MAX)
-    return Scan.from_ranges(ranges, angle_min=amin, angle_increment=ainc, range_max=RANGE_MAX, header=Header(stamp=stamp, seq=seq))
+    return Scan.from_ranges(
+        ranges, angle_min=amin, angle_increment=ainc, range_max=RANGE_MAX, header=Header(stamp=stamp, seq=seq)
+    )
 
 
 def pose_at(x: float, y: float, yaw: float, *, stamp: float = 0.0, seq: int = 0) -> Pose:

@@ -16,7 +16,17 @@ import pytest
 from compute_peer.navigation import register_navigation
 from compute_peer.navigation.robot_cells import Footprint, robot_cells
 from fabric import keys
-from fabric.interfaces import Command, MapRequest, PlanRequest, Pose, Scan, Stop, Twist, quaternion_from_yaw, yaw_from_quaternion
+from fabric.interfaces import (
+    Command,
+    MapRequest,
+    PlanRequest,
+    Pose,
+    Scan,
+    Stop,
+    Twist,
+    quaternion_from_yaw,
+    yaw_from_quaternion,
+)
 from robofabric.testing import wait_until
 from robots import SceneRobot
 from sim_peer.serving.peer import SimPeer
@@ -42,7 +52,9 @@ def _hits_on(scan: Scan, x: float, y: float, yaw: float, target: tuple[float, fl
 def test_a_map_built_beside_a_parked_base_holds_none_of_it_and_the_plan_is_followed(world, connect):
     sim_fab = connect("sim", "sim-b")
     parked = SceneRobot("reeman", "base2", (PARKED[0], PARKED[1], 0.0, FACING))
-    sim = SimPeer(sim_fab, SimWorld("warehouse", [parked], seed=1), rates={"joints": 10, "pose": 50, "scan": 20}, speed=3.0)
+    sim = SimPeer(
+        sim_fab, SimWorld("warehouse", [parked], seed=1), rates={"joints": 10, "pose": 50, "scan": 20}, speed=3.0
+    )
     sim.start()
     try:
         compute = connect("compute", "compute-b")
@@ -67,7 +79,9 @@ def test_a_map_built_beside_a_parked_base_holds_none_of_it_and_the_plan_is_follo
                 turned[0] = abs(yaws[-1] - yaws[0]) if len(yaws) > 1 else 0.0
                 return nav.counters["scans"] >= 80 and turned[0] > 2 * math.pi + 0.5
 
-            wait_until(turning, timeout=30.0, interval=0.1, what="a full turn of scans", seen=lambda: (nav.counters, turned))
+            wait_until(
+                turning, timeout=30.0, interval=0.1, what="a full turn of scans", seen=lambda: (nav.counters, turned)
+            )
             bob.publish(keys.robot_cmd(world, "base1", "stop", "bob"), Command("bob", 1, Stop()))
             assert seen_base1[0] > 50  # base2 saw base1 all along
 
@@ -80,9 +94,14 @@ def test_a_map_built_beside_a_parked_base_holds_none_of_it_and_the_plan_is_follo
             assert (reply.grid.cells == 100).sum() > 300  # the hall is
 
             goal = (0.0, 4.0, math.pi / 2)  # the aisle behind the shelves' gap
-            bob.publish(keys.object_pose(world, "goal", "bob"), Pose(np.array([goal[0], goal[1], 0.0]), quaternion_from_yaw(goal[2])))
+            bob.publish(
+                keys.object_pose(world, "goal", "bob"),
+                Pose(np.array([goal[0], goal[1], 0.0]), quaternion_from_yaw(goal[2])),
+            )
             wait_until(lambda: nav.plan_service.goal is not None, what="goal pointer")
-            plan = bob.rpc.call(keys.srv_asked(world, "plan", "base1", "bob"), PlanRequest("base1", map="bob.map"), timeout=20.0)
+            plan = bob.rpc.call(
+                keys.srv_asked(world, "plan", "base1", "bob"), PlanRequest("base1", map="bob.map"), timeout=20.0
+            )
             assert (plan.path.x[-1], plan.path.y[-1]) == pytest.approx(goal[:2])
             bob.publish(keys.robot_cmd(world, "base1", "path", "bob"), Command("bob", 1, plan.path))
 

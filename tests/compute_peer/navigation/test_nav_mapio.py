@@ -5,7 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from compute_peer.navigation import NavigationError, load_map, load_npz, load_pgm_yaml, save_map, save_npz, save_pgm_yaml
+from compute_peer.navigation import (
+    NavigationError,
+    load_map,
+    load_npz,
+    load_pgm_yaml,
+    save_map,
+    save_npz,
+    save_pgm_yaml,
+)
 from compute_peer.navigation.grid import UNKNOWN, make_grid
 
 
@@ -38,7 +46,9 @@ def test_npz_round_trip_keeps_probabilities(tmp_path):
     cells[0, :5] = UNKNOWN
     grid = make_grid(cells, 0.1, (3.0, -4.0))
     back = load_map(save_map(grid, tmp_path / "p.npz"))
-    assert np.array_equal(back.cells, grid.cells) and back.resolution == 0.1 and np.array_equal(back.origin, grid.origin)
+    assert (
+        np.array_equal(back.cells, grid.cells) and back.resolution == 0.1 and np.array_equal(back.origin, grid.origin)
+    )
 
 
 def test_scale_mode_keeps_occupied_free_and_unknown(tmp_path):

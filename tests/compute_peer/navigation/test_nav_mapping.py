@@ -75,7 +75,7 @@ def test_hits_win_over_free_marks_and_clamp():
     assert mapper.logodds.min() == pytest.approx(c.l_min)
     row, col = 5, 15  # the end point (1.55, 0.55)
     assert mapper.logodds[row, col] == pytest.approx(c.l_max)
-    assert (mapper.logodds[row, 5:15] == pytest.approx(c.l_min))
+    assert mapper.logodds[row, 5:15] == pytest.approx(c.l_min)
 
 
 def test_bad_scans_are_refused():

@@ -64,8 +64,14 @@ def test_a_scan_ahead_of_its_turning_robots_poses_waits_for_the_pose_after_it_th
     now = [0.0]
     poses = PoseHistory()
     counters: dict[str, int] = {}
-    m = ScanMapping(poses, sensor_offset=lambda r: (0.0, 0.0, 0.0), radius=lambda r: 0.2, counters=counters,
-                    config=ROOM, clock=lambda: now[0])
+    m = ScanMapping(
+        poses,
+        sensor_offset=lambda r: (0.0, 0.0, 0.0),
+        radius=lambda r: 0.2,
+        counters=counters,
+        config=ROOM,
+        clock=lambda: now[0],
+    )
 
     def turning(yaw: float, stamp: float):
         return dataclasses.replace(pose_at(2.0, 2.0, yaw, stamp=stamp), angular=np.array([0.0, 0.0, 1.2]))
@@ -88,7 +94,9 @@ def test_a_scan_ahead_of_its_turning_robots_poses_waits_for_the_pose_after_it_th
     assert counters["scans_out_of_step"] == 6
 
 
-def _mapping(offsets: dict[str, tuple[float, float, float] | None], on: bool = True) -> tuple[ScanMapping, PoseHistory, dict]:
+def _mapping(
+    offsets: dict[str, tuple[float, float, float] | None], on: bool = True
+) -> tuple[ScanMapping, PoseHistory, dict]:
     poses = PoseHistory()
     counters: dict[str, int] = {}
     m = ScanMapping(poses, sensor_offset=offsets.get, radius=lambda r: 0.2, counters=counters, config=ROOM, on=on)
@@ -122,8 +130,14 @@ def test_a_burst_of_rejected_scans_writes_a_few_log_lines(caplog):
     now = [0.0]
     poses = PoseHistory()
     counters: dict[str, int] = {}
-    m = ScanMapping(poses, sensor_offset=lambda r: (float("nan"), 0.0, 0.0), radius=lambda r: 0.2, counters=counters,
-                    config=ROOM, clock=lambda: now[0])
+    m = ScanMapping(
+        poses,
+        sensor_offset=lambda r: (float("nan"), 0.0, 0.0),
+        radius=lambda r: 0.2,
+        counters=counters,
+        config=ROOM,
+        clock=lambda: now[0],
+    )
     poses.add("r", pose_at(2.0, 2.0, 0.0, stamp=1.0))
     scan = scan_at(scene, 2.0, 2.0, 0.0, stamp=1.0)
     with caplog.at_level("WARNING", logger="robofabric.navigation"):

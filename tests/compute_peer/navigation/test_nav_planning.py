@@ -61,7 +61,9 @@ def check_drivable(result, start, goal, reverse: bool) -> None:
     x, y, th = result.x, result.y, result.theta
     assert len(x) >= 2 and len(x) == len(y) == len(th)
     assert np.allclose([x[0], y[0]], start[:2]) and abs(math.remainder(th[0] - start[2], 2 * math.pi)) < 1e-6
-    assert np.allclose([x[-1], y[-1]], goal[:2], atol=1e-6) and abs(math.remainder(th[-1] - goal[2], 2 * math.pi)) < 1e-6
+    assert (
+        np.allclose([x[-1], y[-1]], goal[:2], atol=1e-6) and abs(math.remainder(th[-1] - goal[2], 2 * math.pi)) < 1e-6
+    )
     ds = np.hypot(np.diff(x), np.diff(y))
     assert ds.max() <= RES + 1e-9  # a pose at least every map cell
     dth = np.abs(np.remainder(np.diff(th) + math.pi, 2 * math.pi) - math.pi)

@@ -21,9 +21,14 @@ def _room() -> np.ndarray:
 
 def test_a_radius_past_the_largest_inflation_is_refused_before_computing():
     grid = make_grid(_room(), 0.05)
-    with pytest.raises(NavigationError, match=rf"robot radius 99.00 m is 1980 cells of this map \(0.050 m each\): at most {MAX_INFLATION_CELLS} cells"):
+    with pytest.raises(
+        NavigationError,
+        match=rf"robot radius 99.00 m is 1980 cells of this map \(0.050 m each\): at most {MAX_INFLATION_CELLS} cells",
+    ):
         build_costmap(grid, 99.0)
-    assert build_costmap(grid, 0.25).collision.sum() > build_costmap(grid, 0.0).collision.sum()  # an ordinary one still inflates
+    assert (
+        build_costmap(grid, 0.25).collision.sum() > build_costmap(grid, 0.0).collision.sum()
+    )  # an ordinary one still inflates
 
 
 def test_an_inflation_wider_than_the_map_covers_it_and_fails_nowhere():
@@ -37,7 +42,9 @@ def test_an_inflation_wider_than_the_map_covers_it_and_fails_nowhere():
 def test_the_plan_service_refuses_a_99_m_radius_with_its_reason_and_keeps_answering(peers):  # noqa: F811
     nav, _, user = peers
     call(user, "map", "map", MapRequest("set", grid=make_grid(_room(), 0.1)))
-    reason = refused(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[1.0, 1.0, 0.0], start=[0.5, 0.5, 0.0], robot_radius=99.0))
+    reason = refused(
+        user, "plan", ROBOT, PlanRequest(ROBOT, goal=[1.0, 1.0, 0.0], start=[0.5, 0.5, 0.0], robot_radius=99.0)
+    )
     assert "robot radius 99.00 m is 990 cells" in reason and "broadcast" not in reason, reason
     plan = call(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[1.0, 5.0, 0.0], start=[0.5, 0.5, 0.0], robot_radius=0.2))
     assert plan.length > 0

@@ -10,7 +10,14 @@ import numpy as np
 import pytest
 from hypothesis import given, settings as hsettings, strategies as st
 
-from compute_peer.navigation import NavigationError, PlannerSettings, VehicleModel, build_costmap, path_collision, plan_path
+from compute_peer.navigation import (
+    NavigationError,
+    PlannerSettings,
+    VehicleModel,
+    build_costmap,
+    path_collision,
+    plan_path,
+)
 from compute_peer.navigation.grid import make_grid
 from compute_peer.navigation.recovery import RecoverySettings, nearest_obstacle, recover
 
@@ -46,7 +53,10 @@ def test_a_start_in_the_inflation_plans_with_an_escape_move(costmap, planner):
     result = plan_path(costmap, start, (5.0, 3.5, 0.0), planner=planner, settings=SETTINGS)
     assert (result.x[0], result.y[0]) == pytest.approx(start[:2])
     assert (result.x[-1], result.y[-1]) == pytest.approx((5.0, 3.5))
-    assert re.search(r"an obstacle or unknown space at \(2\.5\d, [12]\.\d\d\), 0\.2\d m away: the path first drives 0\.\d\d m", result.note)
+    assert re.search(
+        r"an obstacle or unknown space at \(2\.5\d, [12]\.\d\d\), 0\.2\d m away: the path first drives 0\.\d\d m",
+        result.note,
+    )
     # the escape move never brings the robot nearer to the shelf than it stood; then the path is clear
     here = _clearance(np.array([start[0]]), np.array([start[1]]))[0]
     clear = _clearance(result.x, result.y)
@@ -60,10 +70,15 @@ def test_a_start_in_the_inflation_plans_with_an_escape_move(costmap, planner):
 def test_a_start_that_cannot_escape_is_refused_naming_the_obstacle():
     cells = np.zeros((40, 40), dtype=np.uint8)
     cells[:, :2] = cells[:, -2:] = cells[:2, :] = cells[-2:, :] = 100
-    cells[:, 19:21] = 100  # a middle wall: 0.85 m between it and the left wall, nowhere 0.6 m (radius + margin) from both
+    cells[:, 19:21] = (
+        100  # a middle wall: 0.85 m between it and the left wall, nowhere 0.6 m (radius + margin) from both
+    )
     costmap = build_costmap(make_grid(cells, RES), RADIUS, margin=0.3)  # a margin no short move gets out of
-    with pytest.raises(NavigationError, match=r"start \(0\.35, 1\.00\) is within the robot radius \(0\.30 m\) of an "
-                                              r"obstacle or unknown space at \(0\.\d\d, \d\.\d\d\), 0\.\d\d m away"):
+    with pytest.raises(
+        NavigationError,
+        match=r"start \(0\.35, 1\.00\) is within the robot radius \(0\.30 m\) of an "
+        r"obstacle or unknown space at \(0\.\d\d, \d\.\d\d\), 0\.\d\d m away",
+    ):
         plan_path(costmap, (0.35, 1.0, 0.0), (1.4, 1.0, 0.0), settings=SETTINGS)
 
 
@@ -76,7 +91,10 @@ def test_a_goal_inside_an_obstacle_is_moved_to_the_nearest_free_pose_and_said(co
     assert math.hypot(end[0] - goal[0], end[1] - goal[1]) <= 0.5
     assert result.note.startswith("goal moved") and f"({end[0]:.2f}, {end[1]:.2f})" in result.note
     assert result.theta[-1] == pytest.approx(goal[2])
-    with pytest.raises(NavigationError, match=r"goal \(3\.00, 2\.00\) is inside an obstacle .* no pose where the robot fits lies within 0\.50 m"):
+    with pytest.raises(
+        NavigationError,
+        match=r"goal \(3\.00, 2\.00\) is inside an obstacle .* no pose where the robot fits lies within 0\.50 m",
+    ):
         plan_path(costmap, (1.0, 1.0, 0.0), (3.0, 2.0, 0.0), planner=planner, settings=SETTINGS)  # the shelf's middle
 
 
@@ -115,18 +133,28 @@ def test_the_plan_service_says_what_it_recovered_from_in_the_reply(connect):
     from robofabric.testing import wait_until
 
     user = connect("user", "bob")
-    with register_navigation(connect("compute", "compute-1"), robots=["base1"], settings=SETTINGS,
-                             sensor_offset=(0.0, 0.0, 0.0), discover=False) as nav:
+    with register_navigation(
+        connect("compute", "compute-1"),
+        robots=["base1"],
+        settings=SETTINGS,
+        sensor_offset=(0.0, 0.0, 0.0),
+        discover=False,
+    ) as nav:
         nav.map_service.handle(MapRequest("set", grid=make_grid(_room(), RES)))
 
         def ask(start, goal):
             try:
-                return user.rpc.call(keys.srv_asked(user.world, "plan", "base1", "bob"),
-                                     PlanRequest("base1", start=np.array(start), goal=np.array(goal)), timeout=10.0)
+                return user.rpc.call(
+                    keys.srv_asked(user.world, "plan", "base1", "bob"),
+                    PlanRequest("base1", start=np.array(start), goal=np.array(goal)),
+                    timeout=10.0,
+                )
             except ServiceError as exc:
                 return exc
 
-        wait_until(lambda: not isinstance(ask((1.0, 1.0, 0.0), (5.0, 3.5, 0.0)), ServiceError) or None, what="plan service")
+        wait_until(
+            lambda: not isinstance(ask((1.0, 1.0, 0.0), (5.0, 3.5, 0.0)), ServiceError) or None, what="plan service"
+        )
         plain = ask((1.0, 1.0, 0.0), (5.0, 3.5, 0.0))
         assert plain.note == ""
         reply = ask((2.3, 2.0, 0.0), (5.0, 3.5, 0.0))

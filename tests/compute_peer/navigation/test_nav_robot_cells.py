@@ -28,8 +28,11 @@ def _footprints():
 
 
 @settings(max_examples=60, deadline=None)
-@given(cells=st.lists(st.sampled_from([0, 30, 100, UNKNOWN]), min_size=40 * 30, max_size=40 * 30),
-       footprints=_footprints(), margin=st.floats(0.0, 0.2))
+@given(
+    cells=st.lists(st.sampled_from([0, 30, 100, UNKNOWN]), min_size=40 * 30, max_size=40 * 30),
+    footprints=_footprints(),
+    margin=st.floats(0.0, 0.2),
+)
 def test_clearing_frees_exactly_the_cells_under_the_robots(cells, footprints, margin):
     grid = make_grid(np.array(cells, dtype=np.uint8).reshape(30, 40), RES, (0.2, -0.3))
     before = grid.cells.copy()
@@ -83,7 +86,11 @@ def test_a_robot_seen_by_a_scan_is_no_wall_and_earlier_marks_are_cleared():
 
 
 def _pose(x, y, *, yaw=0.0, stamp=0.0, wall=0.0, source="sim-a"):
-    return Pose(np.array([x, y, 0.0]), quaternion_from_yaw(yaw), header=Header(stamp=stamp, wall_ns=int(wall * 1e9), source=source))
+    return Pose(
+        np.array([x, y, 0.0]),
+        quaternion_from_yaw(yaw),
+        header=Header(stamp=stamp, wall_ns=int(wall * 1e9), source=source),
+    )
 
 
 def test_where_a_robot_stood_when_a_scan_was_taken():
@@ -108,8 +115,13 @@ def _map_beside(parked: bool):
     scene = _scene_with_robot(3.5, 3.0)
     poses = PoseHistory()
     counters: dict[str, int] = {}
-    scans = ScanMapping(poses, sensor_offset=lambda r: (0.0, 0.0, 0.0), radius=lambda r: RADIUS, counters=counters,
-                        config=MapperConfig(resolution=RES, width=120, height=120, origin_x=0.0, origin_y=0.0))
+    scans = ScanMapping(
+        poses,
+        sensor_offset=lambda r: (0.0, 0.0, 0.0),
+        radius=lambda r: RADIUS,
+        counters=counters,
+        config=MapperConfig(resolution=RES, width=120, height=120, origin_x=0.0, origin_y=0.0),
+    )
     if parked:
         poses.add("base2", _pose(3.5, 3.0, stamp=1.0))
     for k, yaw in enumerate((0.0, 0.3, -0.3, 0.6)):
@@ -139,8 +151,13 @@ def test_a_robots_own_footprint_is_never_an_obstacle_to_its_own_start(connect):
     cells[:2, :] = cells[-2:, :] = cells[:, :2] = cells[:, -2:] = 100  # a 6 m x 4 m room
     cells[38:42, 22:24] = 100  # a ring's worth of hits at the robot's own position (1.15 m, 2 m)
     settings = PlannerSettings(vehicle=VehicleModel(robot_radius=0.25, turning_radius=0.5))
-    with register_navigation(connect("compute", "compute-1"), robots=["base1"], settings=settings,
-                             sensor_offset=(0.0, 0.0, 0.0), discover=False) as nav:
+    with register_navigation(
+        connect("compute", "compute-1"),
+        robots=["base1"],
+        settings=settings,
+        sensor_offset=(0.0, 0.0, 0.0),
+        discover=False,
+    ) as nav:
         nav.map_service.handle(MapRequest("set", grid=make_grid(cells, RES)))
         nav.poses.add("base1", _pose(1.15, 2.0, stamp=1.0))
         goal = np.array([4.5, 2.0, 0.0])
@@ -180,8 +197,9 @@ def test_a_plan_goes_around_the_robots_where_they_stand_now(connect):
     cells = np.zeros((80, 120), dtype=np.uint8)
     cells[:2, :] = cells[-2:, :] = cells[:, :2] = cells[:, -2:] = 100  # a 6 m x 4 m room, nothing inside
     settings = PlannerSettings(vehicle=VehicleModel(robot_radius=0.3, turning_radius=0.5))
-    with register_navigation(connect("compute", "compute-1"), settings=settings, sensor_offset=(0.0, 0.0, 0.0),
-                             discover=False) as nav:
+    with register_navigation(
+        connect("compute", "compute-1"), settings=settings, sensor_offset=(0.0, 0.0, 0.0), discover=False
+    ) as nav:
         nav.map_service.handle(MapRequest("set", grid=make_grid(cells, RES)))
         nav.poses.add("base1", _pose(1.0, 2.0, stamp=5.0))
         goal = np.array([5.0, 2.0, 0.0])
@@ -192,4 +210,6 @@ def test_a_plan_goes_around_the_robots_where_they_stand_now(connect):
         assert np.hypot(around.path.x - 3.0, around.path.y - 2.0).min() >= 2 * 0.3  # never through base2
         assert (around.path.x[-1], around.path.y[-1]) == pytest.approx((5.0, 2.0))
         nav.poses.add("base1", _pose(1.0, 2.0, stamp=8.0))  # base2's pose is now 3 s older than base1's: gone
-        assert nav.plan_service.handle(PlanRequest("base1", goal=goal), publish=False).length == pytest.approx(4.0, abs=0.05)
+        assert nav.plan_service.handle(PlanRequest("base1", goal=goal), publish=False).length == pytest.approx(
+            4.0, abs=0.05
+        )

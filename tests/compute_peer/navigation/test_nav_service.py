@@ -42,7 +42,10 @@ def peers(connect, tmp_path):
         compute, robots=[ROBOT], mapper_config=ROOM, settings=SETTINGS, maps_dir=tmp_path, sensor_offset=(0.0, 0.0, 0.0)
     )
     # the queryables are reachable once a status query is answered
-    wait_until(lambda: _try(lambda: user.rpc.call(keys.srv(user.world, "map", "map"), MapRequest("status"), timeout=1.0)), what="map service")
+    wait_until(
+        lambda: _try(lambda: user.rpc.call(keys.srv(user.world, "map", "map"), MapRequest("status"), timeout=1.0)),
+        what="map service",
+    )
     yield nav, sim, user
     nav.close()
 
@@ -120,8 +123,15 @@ def test_injected_map_with_ompl_given_start_and_goal(peers):
     reply = call(user, "map", "lab", MapRequest("set", name="lab", grid=make_grid(cells, 0.1)))
     assert reply.grid.cells.shape == (100, 100)
     for planner in ("ompl", "hybrid_astar"):
-        plan = call(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[8.0, 2.0, 0.0], start=[2.0, 2.0, 0.0], planner=planner, map="lab", direction="both"),
-                    timeout=60.0)
+        plan = call(
+            user,
+            "plan",
+            ROBOT,
+            PlanRequest(
+                ROBOT, goal=[8.0, 2.0, 0.0], start=[2.0, 2.0, 0.0], planner=planner, map="lab", direction="both"
+            ),
+            timeout=60.0,
+        )
         assert plan.planner.startswith(planner) and plan.map == "lab"
         assert plan.path.y.max() > 7.0
         assert path_collision(nav.plan_service.costmap("lab", 0.25), plan.path.x, plan.path.y) is None
@@ -131,7 +141,9 @@ def test_bad_requests_get_reasons_and_the_service_keeps_answering(peers):
     nav, sim, user = peers
     world = user.world
     # no map yet, no scans
-    assert "no map named 'map'" in refused(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[1.0, 1.0, 0.0], start=[2.0, 2.0, 0.0]))
+    assert "no map named 'map'" in refused(
+        user, "plan", ROBOT, PlanRequest(ROBOT, goal=[1.0, 1.0, 0.0], start=[2.0, 2.0, 0.0])
+    )
     assert "no scans accumulated" in refused(user, "map", "map", MapRequest("build"))
     # unknown robot, and a key that names another robot than the request
     assert "unknown robot 'ghost'" in refused(user, "plan", "ghost", PlanRequest("ghost", goal=[1.0, 1.0, 0.0]))
@@ -143,13 +155,21 @@ def test_bad_requests_get_reasons_and_the_service_keeps_answering(peers):
     call(user, "map", "map", MapRequest("set", grid=make_grid(cells, 0.1)))
     assert "no goal given" in refused(user, "plan", ROBOT, PlanRequest(ROBOT, start=[0.5, 0.5, 0.0]))
     # NaN in the goal: refused by the decoder, with the field named
-    assert "not finite" in refused(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[math.nan, 1.0, 0.0], start=[0.5, 0.5, 0.0]))
+    assert "not finite" in refused(
+        user, "plan", ROBOT, PlanRequest(ROBOT, goal=[math.nan, 1.0, 0.0], start=[0.5, 0.5, 0.0])
+    )
     # goals outside the map and inside obstacles
-    assert "outside the map" in refused(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[9.0, 1.0, 0.0], start=[0.5, 0.5, 0.0]))
-    assert "inside an obstacle" in refused(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[3.0, 3.0, 0.0], start=[0.5, 0.5, 0.0]))
+    assert "outside the map" in refused(
+        user, "plan", ROBOT, PlanRequest(ROBOT, goal=[9.0, 1.0, 0.0], start=[0.5, 0.5, 0.0])
+    )
+    assert "inside an obstacle" in refused(
+        user, "plan", ROBOT, PlanRequest(ROBOT, goal=[3.0, 3.0, 0.0], start=[0.5, 0.5, 0.0])
+    )
     # an all-unknown map is empty
     call(user, "map", "dark", MapRequest("set", name="dark", grid=make_grid(np.full((30, 30), UNKNOWN, np.uint8), 0.1)))
-    assert "is empty" in refused(user, "plan", ROBOT, PlanRequest(ROBOT, goal=[1.0, 1.0, 0.0], start=[2.0, 2.0, 0.0], map="dark"))
+    assert "is empty" in refused(
+        user, "plan", ROBOT, PlanRequest(ROBOT, goal=[1.0, 1.0, 0.0], start=[2.0, 2.0, 0.0], map="dark")
+    )
     # garbage instead of a request
     with pytest.raises(ServiceError, match="not a msgpack|message"):
         for rep in user.session.get(keys.srv(world, "plan", ROBOT), payload=b"\x01\x02garbage", timeout=5.0):
@@ -208,7 +228,10 @@ def test_every_robot_of_the_world_when_none_are_named(connect):
     with register_navigation(compute, settings=SETTINGS, mapper_config=ROOM) as nav:
         cells = np.zeros((60, 60), dtype=np.uint8)
         cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = 100
-        wait_until(lambda: _try(lambda: call(user, "map", "map", MapRequest("set", grid=make_grid(cells, 0.1)), timeout=1.0)), what="map set")
+        wait_until(
+            lambda: _try(lambda: call(user, "map", "map", MapRequest("set", grid=make_grid(cells, 0.1)), timeout=1.0)),
+            what="map set",
+        )
         # joints and commands share the robot's key space: they must not disturb the service
         from fabric.interfaces import JointState
 
@@ -234,11 +257,21 @@ def test_sensor_mounting_and_radius_come_from_the_world_description(connect):
     user = connect("user", "user-3")
     world = user.world
     info = WorldInfo(
-        world=world, scene="test", timestep=0.002, rates={},
+        world=world,
+        scene="test",
+        timestep=0.002,
+        rates={},
         robots=(
             RobotInfo(
-                id="rover", type="reeman", kind="mobile", pose=np.zeros(4), joint_names=(), lower=np.zeros(0),
-                upper=np.zeros(0), max_speed=np.zeros(0), base_radius=0.4,
+                id="rover",
+                type="reeman",
+                kind="mobile",
+                pose=np.zeros(4),
+                joint_names=(),
+                lower=np.zeros(0),
+                upper=np.zeros(0),
+                max_speed=np.zeros(0),
+                base_radius=0.4,
                 lidar=LidarInfo("lidar", 240, 2.356, -1.178, 0.00985, 0.05, 12.0, offset=np.array([0.5, 0.0, 0.25])),
             ),
         ),
@@ -258,11 +291,15 @@ def test_sensor_mounting_and_radius_come_from_the_world_description(connect):
         assert hits.sum() > 50
         assert (hits & dilate(truth, 1)).sum() == hits.sum()  # every hit on a true wall: the offset was applied
         call(user, "map", "map", MapRequest("set", grid=scene.rasterize(0.05)))
-        plan = call(user, "plan", "rover", PlanRequest("rover", goal=[2.0, 8.5, math.pi / 2], start=[2.0, 2.0, math.pi / 2]))
+        plan = call(
+            user, "plan", "rover", PlanRequest("rover", goal=[2.0, 8.5, math.pi / 2], start=[2.0, 2.0, math.pi / 2])
+        )
         # radius 0.4 from the description: 0.45 m from the wall cells at y = 9.8..10 is too close, so the goal is
         # moved to where a robot of that radius fits, and the reply says so (issue 44)
         assert plan.length > 6.0
-        moved = call(user, "plan", "rover", PlanRequest("rover", goal=[2.0, 9.4, math.pi / 2], start=[2.0, 2.0, math.pi / 2]))
+        moved = call(
+            user, "plan", "rover", PlanRequest("rover", goal=[2.0, 9.4, math.pi / 2], start=[2.0, 2.0, math.pi / 2])
+        )
         assert "goal moved" in moved.note and "within the robot radius (0.40 m)" in moved.note
         assert 9.8 - moved.path.y[-1] > 0.4 + 0.05
 
@@ -276,13 +313,22 @@ def test_a_key_of_no_layout_on_a_robots_keys_is_counted_never_a_traceback(connec
     user = connect("user", "user-3")
     world = user.world
     with register_navigation(compute, settings=SETTINGS, mapper_config=ROOM) as nav:
-        wait_until(lambda: _try(lambda: call(user, "map", "map", MapRequest("status"), timeout=1.0)), what="map service")
+        wait_until(
+            lambda: _try(lambda: call(user, "map", "map", MapRequest("status"), timeout=1.0)), what="map service"
+        )
         with caplog.at_level("DEBUG"):
             for key in (f"rf/{world}/robot/base1/cmd/twist", f"rf/{world}/robot/base1/no/such/layout"):
                 user.publish(key, Twist(0.3, 0.0))
-            wait_until(lambda: "ghost9" in nav.poses or nav.counters.get("unknown_robot", 0) > 0
-                       or user.publish(f"rf/{world}/robot/ghost9/pose", Pose([0.0, 0.0, 0.0])) < 0,
-                       what="a pose after them handled", seen=lambda: nav.counters, interval=0.2)
+            wait_until(
+                lambda: (
+                    "ghost9" in nav.poses
+                    or nav.counters.get("unknown_robot", 0) > 0
+                    or user.publish(f"rf/{world}/robot/ghost9/pose", Pose([0.0, 0.0, 0.0])) < 0
+                ),
+                what="a pose after them handled",
+                seen=lambda: nav.counters,
+                interval=0.2,
+            )
         assert compute.counters["callback_errors"] == 0
         assert not [r for r in caplog.records if r.levelname in ("ERROR", "CRITICAL") or r.exc_info], caplog.text
         assert call(user, "map", "map", MapRequest("status")).action == "status"  # still serving
@@ -301,9 +347,16 @@ def test_a_user_asking_in_her_name_may_not_change_the_map_nor_publish_a_plan_for
     assert call(user, "map", "map", MapRequest("set", grid=make_grid(cells, 0.1))).action == "set"  # the staff's form
     full = make_grid(np.full((100, 100), 100, np.uint8), 0.1)
     asked = keys.srv_asked(world, "map", "map", "mallory")
-    for action, req in (("set", MapRequest("set", grid=full)), ("reset", MapRequest("reset")), ("stop", MapRequest("stop")),
-                        ("save", MapRequest("save", file="mine.yaml")), ("load", MapRequest("load", file="mine.yaml"))):
-        with pytest.raises(ServiceError, match=f"map '{action}' changes the map everyone plans on: an instructor's, not mallory's"):
+    for action, req in (
+        ("set", MapRequest("set", grid=full)),
+        ("reset", MapRequest("reset")),
+        ("stop", MapRequest("stop")),
+        ("save", MapRequest("save", file="mine.yaml")),
+        ("load", MapRequest("load", file="mine.yaml")),
+    ):
+        with pytest.raises(
+            ServiceError, match=f"map '{action}' changes the map everyone plans on: an instructor's, not mallory's"
+        ):
             user.rpc.call(asked, req, timeout=5.0)
     assert nav.counters["refused_staff_only"] == 5 and nav.counters["refusals"] >= 5
     assert nav.mapping and not (nav.store.get("map").cells == 100).any()  # still on, still free
@@ -317,7 +370,9 @@ def test_a_user_asking_in_her_name_may_not_change_the_map_nor_publish_a_plan_for
     assert len(paths) == 1 and np.allclose(paths[0].x, staff.path.x)  # hers never came before it
     # the per-peer form in her name too
     with pytest.raises(ServiceError, match="an instructor's, not mallory's"):
-        user.rpc.call(keys.srv_asked(world, "map", "map", "mallory", nav.fabric.peer_id), MapRequest("reset"), timeout=5.0)
+        user.rpc.call(
+            keys.srv_asked(world, "map", "map", "mallory", nav.fabric.peer_id), MapRequest("reset"), timeout=5.0
+        )
 
 
 def test_a_users_build_makes_her_own_map_checked_and_capped(peers):
@@ -343,15 +398,26 @@ def test_a_users_build_makes_her_own_map_checked_and_capped(peers):
     mine = user.rpc.call(asked, MapRequest("build", threshold=0.5), timeout=5.0, expected=MapReply)
     assert mine.name == "mallory.map" and mine.grid.cells.size
     wait_until(lambda: hers, what="her map on map/mallory.map")
-    assert np.array_equal(nav.store.get("map").cells, staff.grid.cells) and len(class_maps) == 1  # the class's map untouched
+    assert (
+        np.array_equal(nav.store.get("map").cells, staff.grid.cells) and len(class_maps) == 1
+    )  # the class's map untouched
     assert nav.store.user_maps("mallory") == ["mallory.map"]
     # plans use the class's map unless they name hers
     plan = PlanRequest(ROBOT, goal=[8.0, 2.0, 0.0], start=[2.0, 2.0, 0.0], direction="both")
-    assert user.rpc.call(keys.srv_asked(world, "plan", ROBOT, "mallory"), plan, timeout=20.0, expected=PlanReply).map == "map"
+    assert (
+        user.rpc.call(keys.srv_asked(world, "plan", ROBOT, "mallory"), plan, timeout=20.0, expected=PlanReply).map
+        == "map"
+    )
     # caps: four maps of hers, then a new name is refused with the reason and counted; rebuilding one of hers is not
     for name in ("a", "b", "mallory.c"):
-        assert user.rpc.call(asked, MapRequest("build", name=name), timeout=5.0, expected=MapReply).name == f"mallory.{name.split('.')[-1]}"
-    with pytest.raises(ServiceError, match=r"mallory holds 4 maps, the most one user may \(mallory.a, mallory.b, mallory.c, mallory.map\)"):
+        assert (
+            user.rpc.call(asked, MapRequest("build", name=name), timeout=5.0, expected=MapReply).name
+            == f"mallory.{name.split('.')[-1]}"
+        )
+    with pytest.raises(
+        ServiceError,
+        match=r"mallory holds 4 maps, the most one user may \(mallory.a, mallory.b, mallory.c, mallory.map\)",
+    ):
         user.rpc.call(asked, MapRequest("build", name="d"), timeout=5.0)
     assert nav.counters["refused_map_limit"] == 1
     assert user.rpc.call(asked, MapRequest("build", name="a"), timeout=5.0, expected=MapReply).name == "mallory.a"

@@ -59,8 +59,10 @@ def test_no_sender_spells_a_kind_as_a_string():
 
 
 def test_the_scan_finds_a_literal_kind():
-    tree = ast.parse('Event(kind="reject")\nself._event("clamp", rid, "x")\nEvent(kind=f"own_{k}")\nEvent(kind=EventKind.REJECT)\n'
-                     'Note("collision", "bumper")\nNote(EventKind.PATH_DONE, "done")')
+    tree = ast.parse(
+        'Event(kind="reject")\nself._event("clamp", rid, "x")\nEvent(kind=f"own_{k}")\nEvent(kind=EventKind.REJECT)\n'
+        'Note("collision", "bumper")\nNote(EventKind.PATH_DONE, "done")'
+    )
     assert [t for _, t in _literal_kinds(tree)] == ["'reject'", "'clamp'", "f'own_{k}'", "'collision'"]
 
 
@@ -80,8 +82,10 @@ def _literal_matches(tree: ast.AST) -> list[tuple[int, str]]:
     for node in ast.walk(tree):
         if isinstance(node, ast.Compare):
             operands = [node.left, *node.comparators]
-            if any((isinstance(o, ast.Attribute) and o.attr == "kind") or (isinstance(o, ast.Name) and o.id == "kind")
-                   for o in operands) and any(v in kinds for o in operands for v in strings(o)):
+            if any(
+                (isinstance(o, ast.Attribute) and o.attr == "kind") or (isinstance(o, ast.Name) and o.id == "kind")
+                for o in operands
+            ) and any(v in kinds for o in operands for v in strings(o)):
                 out.append((node.lineno, ast.unparse(node)))
     return out
 
@@ -96,6 +100,12 @@ def test_no_reader_matches_a_kind_as_a_string():
 
 
 def test_the_scan_finds_a_literal_match():
-    tree = ast.parse('n.kind == "collision"\nkind in ("reject", "x")\nr.kind == "arm"\nn.kind == EventKind.COLLISION\n'
-                     '"path_done" != ev.kind\nname == "clamp"')
-    assert [t for _, t in _literal_matches(tree)] == ["n.kind == 'collision'", "kind in ('reject', 'x')", "'path_done' != ev.kind"]
+    tree = ast.parse(
+        'n.kind == "collision"\nkind in ("reject", "x")\nr.kind == "arm"\nn.kind == EventKind.COLLISION\n'
+        '"path_done" != ev.kind\nname == "clamp"'
+    )
+    assert [t for _, t in _literal_matches(tree)] == [
+        "n.kind == 'collision'",
+        "kind in ('reject', 'x')",
+        "'path_done' != ev.kind",
+    ]

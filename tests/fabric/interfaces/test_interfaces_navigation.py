@@ -29,7 +29,17 @@ headers = st.builds(Header, stamp=finite, wall_ns=st.integers(0, 2**62), seq=st.
 
 
 @settings(max_examples=60, deadline=None)
-@given(ids, pose3, pose3, st.sampled_from(PLANNER_NAMES), ids, st.sampled_from(DIRECTIONS), st.floats(0, 100), st.floats(0, 100), headers)
+@given(
+    ids,
+    pose3,
+    pose3,
+    st.sampled_from(PLANNER_NAMES),
+    ids,
+    st.sampled_from(DIRECTIONS),
+    st.floats(0, 100),
+    st.floats(0, 100),
+    headers,
+)
 def test_plan_request_round_trip(robot, goal, start, planner, map_name, direction, turn, radius, header):
     msg = PlanRequest(robot, goal, start, planner, map_name, direction, turn, radius, header)
     assert messages_equal(decode(encode(msg)), msg)
@@ -45,7 +55,9 @@ def test_plan_reply_round_trip(n, value, expansions, header):
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.sampled_from(MAP_ACTIONS), ids, st.floats(0, 1), st.integers(0, 30), st.integers(0, 30), st.integers(0, 10**6))
+@given(
+    st.sampled_from(MAP_ACTIONS), ids, st.floats(0, 1), st.integers(0, 30), st.integers(0, 30), st.integers(0, 10**6)
+)
 def test_map_messages_round_trip(action, name, threshold, h, w, scans):
     cells = np.random.default_rng(h * 31 + w).choice(np.array([0, 50, 100, 255], np.uint8), size=(h, w))
     grid = OccupancyGrid(0.05, np.array([1.0, -2.0, 0.0]), cells)

@@ -36,14 +36,18 @@ def _samples() -> dict:
     return {
         "JointState": fi.JointState(("j1", "j2"), np.array([0.1, -0.2]), np.array([0.0, 0.5]), h),
         "Pose": fi.Pose(np.array([1.0, 2.0, 0.0]), np.array([1.0, 0.0, 0.0, 0.0]), header=h0),
-        "Scan": fi.Scan.from_ranges([0.5, 1.0, 12.0, float("inf")], angle_min=-1.0, angle_increment=0.5, range_max=12.0, header=h),
+        "Scan": fi.Scan.from_ranges(
+            [0.5, 1.0, 12.0, float("inf")], angle_min=-1.0, angle_increment=0.5, range_max=12.0, header=h
+        ),
         "Command": fi.Command("alice", 3, fi.JointTarget(np.array([0.0, 0.1]), 0.5), h0),
         "OwnershipRecord": fi.OwnershipRecord("arm1", "exclusive", "alice", 4, 12.5, ("bob",), "moving", "sim1", h),
         "Event": fi.Event(fi.EventKind.REJECT, "not_owner", "arm1", "bob", "warning", {"command": "joints"}, h),
         "IKRequest": fi.IKRequest.make([0.2, 0.0, 0.3], None, [0.0] * 6, header=h0),
         "PlanRequest": fi.PlanRequest("base1", goal=np.array([1.0, 2.0, 0.5]), header=h0),
         "OwnRequest": fi.OwnRequest("request", "alice", True, h0),
-        "ObjectInfo": fi.ObjectInfo("target", "ik_target", "scene", np.array([3.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0, 0.0])),
+        "ObjectInfo": fi.ObjectInfo(
+            "target", "ik_target", "scene", np.array([3.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0, 0.0])
+        ),
     }
 
 
@@ -59,17 +63,53 @@ def test_every_built_in_type_is_registered_under_its_class_name():
     mine = {n: c for n, c in types.items() if c.__module__.startswith("fabric.interfaces")}
     assert all(c.__name__ == n for n, c in mine.items())
     before = {  # the wire type names before the move: none may disappear or be renamed
-        "Header", "JointState", "Pose", "Scan", "Path", "OccupancyGrid", "JointTarget", "Twist", "Stop", "Reset",
-        "Command", "OwnershipRecord", "Event", "RobotInfo", "ObjectInfo", "WorldInfo", "RobotState", "WorldState",
-        "IKRequest", "IKReply", "FKRequest", "FKReply", "JacobianRequest", "JacobianReply", "IKStream",
-        "PlanRequest", "PlanReply", "MapRequest", "MapReply", "OwnRequest", "OwnReply",
+        "Header",
+        "JointState",
+        "Pose",
+        "Scan",
+        "Path",
+        "OccupancyGrid",
+        "JointTarget",
+        "Twist",
+        "Stop",
+        "Reset",
+        "Command",
+        "OwnershipRecord",
+        "Event",
+        "RobotInfo",
+        "ObjectInfo",
+        "WorldInfo",
+        "RobotState",
+        "WorldState",
+        "IKRequest",
+        "IKReply",
+        "FKRequest",
+        "FKReply",
+        "JacobianRequest",
+        "JacobianReply",
+        "IKStream",
+        "PlanRequest",
+        "PlanReply",
+        "MapRequest",
+        "MapReply",
+        "OwnRequest",
+        "OwnReply",
     }
     assert before <= set(mine)
     assert set(mine) - before == {"BaseInfo", "LidarInfo", "SonarInfo"}
     assert {n for n in fi.__all__ if n in types} == set(mine)  # each is exported by fabric.interfaces
 
 
-@pytest.mark.parametrize("old", ["fabric.messages", "sim_peer.messages", "compute_peer.messages", "compute_peer.navigation.messages", "ownership.messages"])
+@pytest.mark.parametrize(
+    "old",
+    [
+        "fabric.messages",
+        "sim_peer.messages",
+        "compute_peer.messages",
+        "compute_peer.navigation.messages",
+        "ownership.messages",
+    ],
+)
 def test_the_peers_message_modules_are_gone(old):
     with pytest.raises(ModuleNotFoundError):
         importlib.import_module(old)

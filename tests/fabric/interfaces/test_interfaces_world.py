@@ -26,8 +26,14 @@ def base_infos(draw):
 def lidar_infos(draw):
     lo = draw(st.floats(0, 1))
     return LidarInfo(
-        site=draw(ids), rays=draw(st.integers(1, 4096)), fov=draw(st.floats(0, 6.28)), angle_min=draw(st.floats(-3.14, 0)),
-        angle_increment=draw(st.floats(0, 0.1)), range_min=lo, range_max=lo + draw(pos), noise_std=draw(st.floats(0, 0.1)),
+        site=draw(ids),
+        rays=draw(st.integers(1, 4096)),
+        fov=draw(st.floats(0, 6.28)),
+        angle_min=draw(st.floats(-3.14, 0)),
+        angle_increment=draw(st.floats(0, 0.1)),
+        range_min=lo,
+        range_max=lo + draw(pos),
+        noise_std=draw(st.floats(0, 0.1)),
         offset=np.array(draw(st.lists(fl, min_size=3, max_size=3))),
     )
 
@@ -36,8 +42,12 @@ def lidar_infos(draw):
 def sonar_infos(draw):
     lo = draw(st.floats(0, 1))
     return SonarInfo(
-        angles=np.array(draw(st.lists(st.floats(-3.14, 3.14), max_size=12))), radius=draw(pos), height=draw(fl),
-        range_min=lo, range_max=lo + draw(pos), center=np.array(draw(st.lists(fl, min_size=2, max_size=2))),
+        angles=np.array(draw(st.lists(st.floats(-3.14, 3.14), max_size=12))),
+        radius=draw(pos),
+        height=draw(fl),
+        range_min=lo,
+        range_max=lo + draw(pos),
+        center=np.array(draw(st.lists(fl, min_size=2, max_size=2))),
     )
 
 
@@ -46,9 +56,17 @@ def robot_infos(draw):
     n = draw(st.integers(0, 7))
     arr = lambda k: np.array(draw(st.lists(fl, min_size=k, max_size=k)))  # noqa: E731
     return RobotInfo(
-        id=draw(ids), type=draw(ids), kind=draw(st.sampled_from(["arm", "mobile"])), pose=arr(4),
-        joint_names=tuple(draw(st.lists(ids, min_size=n, max_size=n))), lower=arr(n), upper=arr(n), max_speed=arr(n),
-        base_radius=draw(st.floats(0, 5)), base=draw(st.none() | base_infos()), lidar=draw(st.none() | lidar_infos()),
+        id=draw(ids),
+        type=draw(ids),
+        kind=draw(st.sampled_from(["arm", "mobile"])),
+        pose=arr(4),
+        joint_names=tuple(draw(st.lists(ids, min_size=n, max_size=n))),
+        lower=arr(n),
+        upper=arr(n),
+        max_speed=arr(n),
+        base_radius=draw(st.floats(0, 5)),
+        base=draw(st.none() | base_infos()),
+        lidar=draw(st.none() | lidar_infos()),
         sonar=draw(st.none() | sonar_infos()),
     )
 
@@ -69,7 +87,15 @@ def test_malformed_world_info_is_refused():
     with pytest.raises(DecodeError, match="WorldInfo.robots: expected a list of messages"):
         decode(msgpack.packb(raw, use_bin_type=True))
     with pytest.raises(ValueError, match="1 joints but limits"):
-        encode(WorldInfo("w", "s", 0.002, {}, (RobotInfo("a", "m", "arm", np.zeros(4), ("j1",), np.zeros(2), np.ones(1), np.ones(1)),)))
+        encode(
+            WorldInfo(
+                "w",
+                "s",
+                0.002,
+                {},
+                (RobotInfo("a", "m", "arm", np.zeros(4), ("j1",), np.zeros(2), np.ones(1), np.ones(1)),),
+            )
+        )
 
 
 def _mobile(**kw) -> RobotInfo:
@@ -82,14 +108,20 @@ LIDAR = LidarInfo("lidar", 240, 2.356, -1.178, 0.00985, 0.05, 12.0, offset=np.ar
 def test_sensors_are_typed_fields_and_absent_ones_are_none():
     info = _mobile(base=BaseInfo(0.25, 0.4, 0.08, 1.0, 2.0, 1.0, 2.0), lidar=LIDAR)
     back = decode(encode(WorldInfo("w", "s", 0.002, {}, (info,))), WorldInfo).robot("base1")
-    assert back.lidar.rays == 240 and back.lidar.offset.tolist() == [0.22, 0.0, 0.3] and not back.lidar.offset.flags.writeable
+    assert (
+        back.lidar.rays == 240
+        and back.lidar.offset.tolist() == [0.22, 0.0, 0.3]
+        and not back.lidar.offset.flags.writeable
+    )
     assert back.base.max_speed == 1.0 and back.sonar is None
     arm = RobotInfo("arm1", "meca500", "arm", np.zeros(4), ("j1",), np.zeros(1), np.ones(1), np.ones(1))
     assert decode(encode(WorldInfo("w", "s", 0.002, {}, (arm,))), WorldInfo).robots[0].lidar is None
 
 
 def test_malformed_sensors_are_refused_naming_the_field():
-    raw = msgpack.unpackb(encode(WorldInfo("w", "s", 0.002, {}, (_mobile(lidar=LIDAR),))), raw=False, strict_map_key=False)
+    raw = msgpack.unpackb(
+        encode(WorldInfo("w", "s", 0.002, {}, (_mobile(lidar=LIDAR),))), raw=False, strict_map_key=False
+    )
     robot = raw[5][0]
     lidar_at = 1 + list(RobotInfo.SPEC).index("lidar")
     robot[lidar_at][2] = 0  # rays

@@ -11,7 +11,9 @@ from fabric.interfaces import Header, JointState, Pose, Scan
 
 
 def joint_payload(seq: int, wall_ns: int, source: str = "sim") -> bytes:
-    return encode(JointState(("a", "b"), np.array([0.1 * seq, 0.2]), np.zeros(2), Header(seq * 0.01, wall_ns, seq, source)))
+    return encode(
+        JointState(("a", "b"), np.array([0.1 * seq, 0.2]), np.zeros(2), Header(seq * 0.01, wall_ns, seq, source))
+    )
 
 
 def pose_payload(seq: int, wall_ns: int) -> bytes:
@@ -19,10 +21,20 @@ def pose_payload(seq: int, wall_ns: int) -> bytes:
 
 
 def scan_payload(seq: int, wall_ns: int) -> bytes:
-    return encode(Scan.from_ranges(np.full(240, 1.0 + seq), angle_min=-1.0, angle_increment=0.01, range_max=10.0, header=Header(0.0, wall_ns, seq, "sim")))
+    return encode(
+        Scan.from_ranges(
+            np.full(240, 1.0 + seq),
+            angle_min=-1.0,
+            angle_increment=0.01,
+            range_max=10.0,
+            header=Header(0.0, wall_ns, seq, "sim"),
+        )
+    )
 
 
-def synthetic(world: str, n: int = 50, t0: int = 1_700_000_000_000_000_000, dt_ns: int = 10_000_000) -> list[tuple[str, int, bytes]]:
+def synthetic(
+    world: str, n: int = 50, t0: int = 1_700_000_000_000_000_000, dt_ns: int = 10_000_000
+) -> list[tuple[str, int, bytes]]:
     """(key, log_time, payload) of a tiny world: two robots' joints every tick, a pose every 2nd, a scan every 5th, one raw blob."""
     out = []
     for i in range(n):

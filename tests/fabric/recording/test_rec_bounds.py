@@ -24,8 +24,11 @@ def test_quota_and_key_cap_drop_and_count(tmp_path, world, connect):
     path = tmp_path / "r.mcap"
     rec = Recorder(rec_fab, path, quota_bytes=200_000, max_keys=10).start()
     try:
-        wait_until(lambda: (pub.session.put(keys.robot_joints(world, "warm"), b"x"), rec.stats.messages)[1], timeout=30,
-                   what="the recorder hears the publisher")
+        wait_until(
+            lambda: (pub.session.put(keys.robot_joints(world, "warm"), b"x"), rec.stats.messages)[1],
+            timeout=30,
+            what="the recorder hears the publisher",
+        )
         _flood(pub, lambda i: keys.robot_joints(world, f"r{i}"), 50, 10)  # 50 keys: at most 10 recorded
         _flood(pub, lambda i: keys.robot_joints(world, "warm"), 100, 10_000)  # 1 MB on one key: the quota stops it
         wait_until(lambda: rec.stats.dropped >= 40 + 70, timeout=30, what="drops counted", seen=lambda: rec.stats)
@@ -41,8 +44,11 @@ def test_queue_cap_drops_instead_of_growing(tmp_path, world, connect):
     rec_fab, pub = connect("recorder", "rec"), connect("tool", "flooder")
     rec = Recorder(rec_fab, tmp_path / "q.mcap", max_queue_bytes=1_000_000).start()
     try:
-        wait_until(lambda: (pub.session.put(keys.robot_joints(world, "a"), b"x"), rec.stats.messages)[1], timeout=30,
-                   what="the recorder hears the publisher")
+        wait_until(
+            lambda: (pub.session.put(keys.robot_joints(world, "a"), b"x"), rec.stats.messages)[1],
+            timeout=30,
+            what="the recorder hears the publisher",
+        )
         held = threading.Event()
         write = rec.sink.write
 
@@ -53,12 +59,18 @@ def test_queue_cap_drops_instead_of_growing(tmp_path, world, connect):
         rec.sink.write = slow_write
         try:
             _flood(pub, lambda i: keys.robot_joints(world, "a"), 40, 100_000)
-            wait_until(lambda: rec.stats.dropped >= 25, timeout=30, what="drops while the disk is held", seen=lambda: rec.stats)
+            wait_until(
+                lambda: rec.stats.dropped >= 25, timeout=30, what="drops while the disk is held", seen=lambda: rec.stats
+            )
             assert rec.stats.queued_bytes <= 1_000_000
         finally:
             held.set()
-        wait_until(lambda: rec.stats.messages + rec.stats.dropped >= 41, timeout=30, what="every sample written or dropped",
-                   seen=lambda: rec.stats)
+        wait_until(
+            lambda: rec.stats.messages + rec.stats.dropped >= 41,
+            timeout=30,
+            what="every sample written or dropped",
+            seen=lambda: rec.stats,
+        )
     finally:
         stats = rec.close()
     assert stats.dropped >= 25 and stats.messages + stats.dropped >= 41

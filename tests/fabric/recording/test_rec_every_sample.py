@@ -72,8 +72,13 @@ def test_native_ros2_and_echo_hold_the_same_messages_per_stream(router, procs, w
     wait_until(lambda: fab.live_peers("sim"), timeout=60, what="sim peer", seen=lambda: procs.output(sim)[-2000:])
     native, ros2 = tmp_path / "native.mcap", tmp_path / "ros2.mcap"
     rec = procs.start(robofabric_cmd("record", "-o", str(native), "--duration", str(SECONDS), *common), name="record")
-    live = procs.start(robofabric_cmd("record", "-o", str(ros2), "--to", "ros2", "--duration", str(SECONDS), *common), name="record-ros2")
-    echo = procs.start(robofabric_cmd("echo", "robot/*/pose", "--json", "--duration", str(SECONDS), *common), name="echo")
+    live = procs.start(
+        robofabric_cmd("record", "-o", str(ros2), "--to", "ros2", "--duration", str(SECONDS), *common),
+        name="record-ros2",
+    )
+    echo = procs.start(
+        robofabric_cmd("echo", "robot/*/pose", "--json", "--duration", str(SECONDS), *common), name="echo"
+    )
     for proc in (rec, live, echo):
         assert proc.wait(timeout=SECONDS + 90) == 0, procs.output(proc)[-3000:]
     assert "0 dropped" in procs.output(live), procs.output(live)[-2000:]  # and it means it: checked below
@@ -84,10 +89,14 @@ def test_native_ros2_and_echo_hold_the_same_messages_per_stream(router, procs, w
         a, b = got_native.get(key, []), got_ros2.get(ros2_topic(key, KINDS.get(stream.split("/")[1])), [])
         assert len(a) > 10 * (SECONDS - 5) and b, (stream, len(a), len(b))
         w = _window(a, b)
-        assert _inside(b, w) == _inside(a, w), f"{stream}: native {len(_inside(a, w))}, ros2 {len(_inside(b, w))} in the same window"
+        assert _inside(b, w) == _inside(a, w), (
+            f"{stream}: native {len(_inside(a, w))}, ros2 {len(_inside(b, w))} in the same window"
+        )
     poses = [k for k in got_native if k.endswith("/pose") and "/robot/" in k]
     assert poses and set(poses) <= set(got_echo), (poses, sorted(got_echo))
     for key in poses:
         a, e = got_native[key], got_echo[key]
         w = _window(a, e)
-        assert _inside(e, w) == _inside(a, w), f"{key}: native {len(_inside(a, w))}, echo {len(_inside(e, w))} in the same window"
+        assert _inside(e, w) == _inside(a, w), (
+            f"{key}: native {len(_inside(a, w))}, echo {len(_inside(e, w))} in the same window"
+        )

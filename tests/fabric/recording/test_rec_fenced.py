@@ -81,7 +81,11 @@ def test_a_recorder_records_a_world_restarted_after_a_take_over(world, connect, 
         old = connect("sim", "sim-old")
         old.assume_term(2)
         wait_until(lambda: _put(old, key) or rec.stats.messages > 0, timeout=20, what="term 2 recorded")
-        wait_until(lambda: world in rec.sink.fences and rec.sink.fences[world].sims == {"sim-old"}, timeout=20, what="the recorder follows the sim tokens")
+        wait_until(
+            lambda: world in rec.sink.fences and rec.sink.fences[world].sims == {"sim-old"},
+            timeout=20,
+            what="the recorder follows the sim tokens",
+        )
         old.close()
         wait_until(lambda: rec.sink.fence_resets >= 1, timeout=20, what="the fence reset")
         new = connect("sim", "sim-new")

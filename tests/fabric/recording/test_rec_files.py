@@ -21,8 +21,10 @@ def test_mcap_reader_sees_channels_schemas_encodings_and_times(tmp_path):
     with open(path, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
-        got = [(ch.topic, schema.name if schema else None, ch.message_encoding, m.log_time, m.publish_time, m.data)
-               for schema, ch, m in reader.iter_messages(log_time_order=False)]
+        got = [
+            (ch.topic, schema.name if schema else None, ch.message_encoding, m.log_time, m.publish_time, m.data)
+            for schema, ch, m in reader.iter_messages(log_time_order=False)
+        ]
     assert summary.statistics.message_count == len(samples)
     assert {c.topic for c in summary.channels.values()} == {k for k, _, _ in samples}
     assert all(c.compression == "zstd" for c in summary.chunk_indexes)
@@ -134,8 +136,11 @@ _keys = st.sampled_from(["rf/w/robot/a/joints", "rf/w/robot/b/scan", "rf/v/event
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(st.lists(st.tuples(_keys, st.integers(0, 10**6), st.binary(max_size=2000)), max_size=60),
-       st.sampled_from(["zstd", "lz4", "none"]), st.sampled_from([1024, 1 << 20]))
+@given(
+    st.lists(st.tuples(_keys, st.integers(0, 10**6), st.binary(max_size=2000)), max_size=60),
+    st.sampled_from(["zstd", "lz4", "none"]),
+    st.sampled_from([1024, 1 << 20]),
+)
 def test_whatever_is_written_is_read_back_exactly(tmp_path, items, compression, chunk_size):
     t = 1_000_000_000
     samples = []

@@ -17,7 +17,15 @@ def test_peek_reads_type_and_header_without_validating():
 
 @pytest.mark.parametrize(
     "payload",
-    [b"", b"\xc1", b"hello", msgpack.packb({"a": 1}), msgpack.packb(["NoSuchType", 1]), msgpack.packb([1, 2]), msgpack.packb([])],
+    [
+        b"",
+        b"\xc1",
+        b"hello",
+        msgpack.packb({"a": 1}),
+        msgpack.packb(["NoSuchType", 1]),
+        msgpack.packb([1, 2]),
+        msgpack.packb([]),
+    ],
 )
 def test_peek_calls_anything_else_raw(payload):
     p = peek(payload)

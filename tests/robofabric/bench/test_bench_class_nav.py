@@ -11,13 +11,29 @@ import pytest
 
 from robofabric.bench.class_nav import NO_RESULT, SLOTS, goal_of, placements, row, run_one, summary, verdict
 
-SHELVES = [(-2.5, 2.5, 1.5, 0.3), (2.5, 2.5, 1.5, 0.3), (-2.5, -2.5, 1.5, 0.3), (2.5, -2.5, 1.5, 0.3), (0.0, -1.5, 0.2, 0.2)]
+SHELVES = [
+    (-2.5, 2.5, 1.5, 0.3),
+    (2.5, 2.5, 1.5, 0.3),
+    (-2.5, -2.5, 1.5, 0.3),
+    (2.5, -2.5, 1.5, 0.3),
+    (0.0, -1.5, 0.2, 0.2),
+]
 """The warehouse's shelves and pillar (robots/scenes/warehouse.xml): centre x, y and half sizes."""
 
 
 def _student(**over) -> dict:
-    good = {"plans": [0.2], "reached": True, "stops": 1, "collisions": 0, "blocked": 0, "robot_cells": 0, "errors": [],
-            "final": 0.02, "notes": [], "said": []}
+    good = {
+        "plans": [0.2],
+        "reached": True,
+        "stops": 1,
+        "collisions": 0,
+        "blocked": 0,
+        "robot_cells": 0,
+        "errors": [],
+        "final": 0.02,
+        "notes": [],
+        "said": [],
+    }
     return {**good, **over}
 
 
@@ -41,7 +57,14 @@ def test_every_goal_is_free_apart_off_the_lane_and_seen_from_its_start_through_t
 
 def test_the_report_counts_what_the_students_saw_and_the_budget_line_says_what_missed():
     good = summary(2, [_student(), _student(stops=2, plans=[0.1, 0.3])], 50.0)
-    assert (good["n"], good["reached"], good["plans"], good["stops"], good["collisions"], good["cells"]) == (2, 2, 3, 3, 0, [0, 0])
+    assert (good["n"], good["reached"], good["plans"], good["stops"], good["collisions"], good["cells"]) == (
+        2,
+        2,
+        3,
+        3,
+        0,
+        [0, 0],
+    )
     assert verdict(good) == "2 bases: budget met"
     assert row(good).startswith("| 2 | 2/2 | 3, ")
     bumped = summary(2, [_student(), _student(collisions=1)], 50.0)  # a collision planted: counted, and fails
@@ -57,8 +80,22 @@ def test_the_report_counts_what_the_students_saw_and_the_budget_line_says_what_m
 @pytest.mark.slow
 def test_two_students_do_test_b_at_once(tmp_path):
     r = run_one(2, tmp_path)
-    assert set(r) >= {"n", "reached", "plans", "plan_p50", "plan_p99", "stops", "blocked", "collisions", "cells", "finals",
-                      "seconds", "errors", "notes", "said"}
+    assert set(r) >= {
+        "n",
+        "reached",
+        "plans",
+        "plan_p50",
+        "plan_p99",
+        "stops",
+        "blocked",
+        "collisions",
+        "cells",
+        "finals",
+        "seconds",
+        "errors",
+        "notes",
+        "said",
+    }
     assert r["n"] == 2 and len(r["cells"]) == 2 and len(r["finals"]) == 2
     assert r["plans"] >= 1, r["errors"]  # at least one student planned
     assert r["collisions"] == 0, r["said"]  # the bumper never had to: bases keep apart, whatever the load

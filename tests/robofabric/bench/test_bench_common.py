@@ -12,12 +12,20 @@ import pytest
 from robofabric.bench.common import end_processes, pct
 
 SLEEPER = [sys.executable, "-c", "import time; time.sleep(60)"]
-DEAF = [sys.executable, "-c", "import signal, sys, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); print('ready', flush=True); time.sleep(60)"]
+DEAF = [
+    sys.executable,
+    "-c",
+    "import signal, sys, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); print('ready', flush=True); time.sleep(60)",
+]
 
 
 @pytest.mark.slow  # starts and ends child processes
 def test_end_processes_signals_all_first_then_kills_the_deaf_within_one_timeout():
-    procs = [subprocess.Popen(SLEEPER), subprocess.Popen(SLEEPER), subprocess.Popen(DEAF, stdout=subprocess.PIPE, text=True)]
+    procs = [
+        subprocess.Popen(SLEEPER),
+        subprocess.Popen(SLEEPER),
+        subprocess.Popen(DEAF, stdout=subprocess.PIPE, text=True),
+    ]
     try:
         assert procs[2].stdout.readline().strip() == "ready"  # its SIGTERM handler is in place
         done = subprocess.Popen(SLEEPER)

@@ -13,8 +13,12 @@ from robofabric.testing import robofabric_cmd
 @pytest.mark.slow
 def test_bench_failover_runs_one_round(tmp_path):
     out = tmp_path / "failover.md"
-    proc = subprocess.run(robofabric_cmd("bench", "failover", "--kills", "1", "--out", str(out)), capture_output=True, text=True,
-                          timeout=300)
+    proc = subprocess.run(
+        robofabric_cmd("bench", "failover", "--kills", "1", "--out", str(out)),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     text = out.read_text()
     took = re.search(r"new term, here \| (\d+) / (\d+) ms", text)

@@ -27,7 +27,9 @@ def test_an_owner_is_not_starved_and_peers_stay_bounded_under_the_flood(tmp_path
     assert not r.lapses, report  # her lease never lapsed (nobody else ever owned arm1)
     # the flood reached the sim, not only the flooder's socket: its own count of refused commands (the
     # unique-id ones are each refused, from the key alone), printed when it stops
-    assert r.sim_counts.get("rejected", 0) >= 2_000, report  # 7.5k of the 20k (zenoh drops on congestion) on a 2-core box
+    assert r.sim_counts.get("rejected", 0) >= 2_000, (
+        report
+    )  # 7.5k of the 20k (zenoh drops on congestion) on a 2-core box
     # mid-flood, alice sets the last joint off slowly towards a target ~15 s away, then stops the arm: cmd/stop
     # sent again every 0.1 s until her joint stream shows it still. It must take effect within 1 s of the first
     # send and leave the joint well short of the target: a lost stop leaves it moving

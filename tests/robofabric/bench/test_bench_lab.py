@@ -6,9 +6,18 @@ from robofabric.bench.lab import run_stats, to_markdown
 
 
 def test_report_has_a_row_per_figure_with_median_and_max():
-    raw = {"partition_handover": [1.9, 1.8, 2.4], "router_joints_back": [0.7, 0.5, 3.25],
-           "router_owner_back": [0.7, 3.2], "sim_gone_told": [0.03, 0.05, 0.02]}
-    result = {"runs": 3, "figures": {k: run_stats(v) for k, v in raw.items()}, "raw": raw, "router_owner_restored": "2/3"}
+    raw = {
+        "partition_handover": [1.9, 1.8, 2.4],
+        "router_joints_back": [0.7, 0.5, 3.25],
+        "router_owner_back": [0.7, 3.2],
+        "sim_gone_told": [0.03, 0.05, 0.02],
+    }
+    result = {
+        "runs": 3,
+        "figures": {k: run_stats(v) for k, v in raw.items()},
+        "raw": raw,
+        "router_owner_restored": "2/3",
+    }
     assert result["figures"]["router_owner_back"] == {"n": 2, "median_s": (0.7 + 3.2) / 2, "max_s": 3.2, "min_s": 0.7}
     lines = to_markdown(result).splitlines()
     assert lines[:2] == ["| figure (3 runs) | median | max |", "|---|---|---|"]
@@ -18,5 +27,7 @@ def test_report_has_a_row_per_figure_with_median_and_max():
         "| … the owner holds the arm again (kept under her epoch, or restored within grace) | 1.95 s | 3.20 s |",
         "| sim SIGKILLed: the user is told the world is gone | 0.03 s | 0.05 s |",
     ]
-    assert lines[-1] == ("After the router's restart the owner was restored in 2/3 runs "
-                         "(otherwise the lease had expired first and the arm was free).")
+    assert lines[-1] == (
+        "After the router's restart the owner was restored in 2/3 runs "
+        "(otherwise the lease had expired first and the arm was free)."
+    )

@@ -46,8 +46,12 @@ def test_the_proxy_counts_what_the_kernel_received_and_forwards_it_all():
             chunk = bytes([i]) * (100 + 37 * i)
             client.sendall(chunk)
             sent += len(chunk)
-        wait_until(lambda: proxy.count().stream_bytes == sent, timeout=10, what="the proxy counted every byte",
-                   seen=lambda: proxy.count())
+        wait_until(
+            lambda: proxy.count().stream_bytes == sent,
+            timeout=10,
+            what="the proxy counted every byte",
+            seen=lambda: proxy.count(),
+        )
         (conn,) = proxy.connections()
         assert CountingProxy.kernel_bytes_received(conn) == sent  # the kernel's own count agrees
         c = proxy.count()
@@ -91,11 +95,28 @@ def test_the_paper_figures_name_their_source_and_match_tables_2_and_3():
 
 @pytest.mark.slow
 def test_a_quick_run_gives_one_consistent_document(tmp_path):
-    assert shutil.which("mosquitto") or shutil.which("/usr/sbin/mosquitto"), "mosquitto is required (.ci/run installs it)"
+    assert shutil.which("mosquitto") or shutil.which("/usr/sbin/mosquitto"), (
+        "mosquitto is required (.ci/run installs it)"
+    )
     out = subprocess.run(
-        [sys.executable, "-m", "robofabric", "bench", "paper", "--quick", "--json", "--rates", "50", "--duration", "1",
-         "--plot", str(tmp_path / "mb.svg")],
-        capture_output=True, text=True, timeout=300,
+        [
+            sys.executable,
+            "-m",
+            "robofabric",
+            "bench",
+            "paper",
+            "--quick",
+            "--json",
+            "--rates",
+            "50",
+            "--duration",
+            "1",
+            "--plot",
+            str(tmp_path / "mb.svg"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert out.returncode == 0, out.stderr[-2000:]
     doc = json.loads(out.stdout)
@@ -103,11 +124,22 @@ def test_a_quick_run_gives_one_consistent_document(tmp_path):
     rows = doc["data_usage"]
     assert [(r["transport"], r["payload"]) for r in rows] == [(t, p) for t in ("zenoh", "mqtt") for p in PAYLOADS]
     for r in rows:
-        assert set(r) >= {"transport", "rate_hz", "payload", "payload_bytes_per_msg", "wire_bytes_per_msg", "mb_per_min_max",
-                          "mb_per_min_avg", "mb_per_min_min", "gb_per_hour"}
+        assert set(r) >= {
+            "transport",
+            "rate_hz",
+            "payload",
+            "payload_bytes_per_msg",
+            "wire_bytes_per_msg",
+            "mb_per_min_max",
+            "mb_per_min_avg",
+            "mb_per_min_min",
+            "gb_per_hour",
+        }
         assert r["rate_hz"] == 50 and r["sent"] == 50
         assert 0 < r["received"] <= r["sent"]
-        assert r["received_bytes_per_msg"] == pytest.approx(r["payload_bytes_per_msg"], rel=0.05)  # what arrived is what was sent
+        assert r["received_bytes_per_msg"] == pytest.approx(
+            r["payload_bytes_per_msg"], rel=0.05
+        )  # what arrived is what was sent
         assert r["stream_bytes_per_msg"] >= r["payload_bytes_per_msg"]  # the protocol adds, never removes
         assert r["segments_per_msg"] > 0 and r["wire_bytes_per_msg"] > r["stream_bytes_per_msg"]  # headers on the wire
         assert r["windows"] == 2 and r["window_s"] == 0.5
@@ -127,9 +159,32 @@ def test_one_run_through_the_cli_gives_every_section_of_the_document():
     from robofabric.bench.paper_resources import PEERS
 
     out = subprocess.run(
-        [sys.executable, "-m", "robofabric", "bench", "paper", "--quick", "--json", "--rates", "50", "--payloads", "arm-joints",
-         "--transports", "zenoh", "--duration", "1", "--resources", "--multi-user", "--minutes", "0.25", "--students", "2"],
-        capture_output=True, text=True, timeout=600,
+        [
+            sys.executable,
+            "-m",
+            "robofabric",
+            "bench",
+            "paper",
+            "--quick",
+            "--json",
+            "--rates",
+            "50",
+            "--payloads",
+            "arm-joints",
+            "--transports",
+            "zenoh",
+            "--duration",
+            "1",
+            "--resources",
+            "--multi-user",
+            "--minutes",
+            "0.25",
+            "--students",
+            "2",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert out.returncode == 0, out.stderr[-3000:]
     doc = json.loads(out.stdout)
@@ -147,7 +202,11 @@ def test_one_run_through_the_cli_gives_every_section_of_the_document():
     assert doc["paper"]["multi_user"]["delay_ms"] == 100.0
     from robofabric.testing import wait_until as wait
 
-    wait(lambda: not any(_name_alive(p) for p in ("scenario", "--save", "student")), timeout=30, what="both worlds' peers to end")
+    wait(
+        lambda: not any(_name_alive(p) for p in ("scenario", "--save", "student")),
+        timeout=30,
+        what="both worlds' peers to end",
+    )
 
 
 def _name_alive(word: str) -> bool:
@@ -166,15 +225,18 @@ def _name_alive(word: str) -> bool:
     return False
 
 
-@pytest.mark.parametrize("args, says", [
-    (["--rates", "x"], "--rates 'x'"),
-    (["--payloads", "scan"], "paper-135, rf-240, arm-joints"),
-    (["--transports", "dds"], "zenoh, mqtt"),
-    (["--duration", "1", "--window", "5"], "at most --duration"),
-    (["--no-data-usage"], "nothing to run"),
-    (["--multi-user", "--students", "1"], "--students at least 2"),
-    (["--no-data-usage", "--multi-user", "--plot", "x.svg"], "needs --data-usage"),
-])
+@pytest.mark.parametrize(
+    "args, says",
+    [
+        (["--rates", "x"], "--rates 'x'"),
+        (["--payloads", "scan"], "paper-135, rf-240, arm-joints"),
+        (["--transports", "dds"], "zenoh, mqtt"),
+        (["--duration", "1", "--window", "5"], "at most --duration"),
+        (["--no-data-usage"], "nothing to run"),
+        (["--multi-user", "--students", "1"], "--students at least 2"),
+        (["--no-data-usage", "--multi-user", "--plot", "x.svg"], "needs --data-usage"),
+    ],
+)
 def test_bad_options_are_refused_with_what_is_expected(args, says, capsys):
     from robofabric.cli import main  # in-process: the same exit code and message as the command's
 

@@ -33,8 +33,18 @@ def test_a_watch_keeps_only_the_window_and_counts_sequence_gaps():
 
 
 def _student(name: str, delays: list[tuple[float, float]], ages: list[float]) -> tuple[dict, np.ndarray]:
-    r = {"student": name, "moves": [0.3, 0.4], "refused": 1, "retaken": 1, "lost": [], "errors": [], "ages_ms": ages, "missing": 3,
-         "received": {"arm1": len(delays)}, "rtf": 1.0}
+    r = {
+        "student": name,
+        "moves": [0.3, 0.4],
+        "refused": 1,
+        "retaken": 1,
+        "lost": [],
+        "errors": [],
+        "ages_ms": ages,
+        "missing": 3,
+        "received": {"arm1": len(delays)},
+        "rtf": 1.0,
+    }
     return r, np.asarray(delays, dtype=np.float64).reshape(-1, 2)
 
 
@@ -44,9 +54,17 @@ def test_the_summary_pools_every_student_and_splits_the_minutes():
     b = _student("s1", [(start + 5, 2.0), (start + 90, 20.0)], [9.0])
     doc = summarise([a[0], b[0]], [a[1], b[1]], start, 1.6)
     assert doc["messages"] == 5 and doc["delay_ms_p50"] == 3.0 and doc["delay_ms_max"] == 20.0
-    assert doc["age_ms_p50"] == 7.0 and doc["missing"] == 6 and doc["moves"] == 4 and doc["refused"] == 2 and doc["retaken"] == 2
+    assert (
+        doc["age_ms_p50"] == 7.0
+        and doc["missing"] == 6
+        and doc["moves"] == 4
+        and doc["refused"] == 2
+        and doc["retaken"] == 2
+    )
     assert [m["messages"] for m in doc["per_minute"]] == [3, 2] and doc["per_minute"][1]["delay_ms_p50"] == 15.0
-    assert [s["student"] for s in doc["per_student"]] == ["s0", "s1"] and doc["per_student"][1]["delay_ms_p99"] == pytest.approx(19.82)
+    assert [s["student"] for s in doc["per_student"]] == ["s0", "s1"] and doc["per_student"][1][
+        "delay_ms_p99"
+    ] == pytest.approx(19.82)
 
 
 def test_a_student_with_nothing_gives_nan_not_an_error():

@@ -12,7 +12,9 @@ from robofabric.testing import robofabric_cmd
 def test_bench_record_smoke():
     out = subprocess.run(
         robofabric_cmd("bench", "record", "--scales", "1", "--robots", "1", "--duration", "1", "--json"),
-        capture_output=True, text=True, timeout=120,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert out.returncode == 0, out.stderr
     res = json.loads(out.stdout.strip().splitlines()[-1])

@@ -112,4 +112,7 @@ def test_bench_list_json_is_one_document_naming_every_benchmark():
     assert out.exit_code == 0, out.output
     doc = json.loads(out.output)
     assert [b["name"] for b in doc["benchmarks"]] == list(names())
-    assert all(b["argv"] == get(b["name"]).argv(quick=True) and set(b) == {"name", "measures", "needs", "argv"} for b in doc["benchmarks"])
+    assert all(
+        b["argv"] == get(b["name"]).argv(quick=True) and set(b) == {"name", "measures", "needs", "argv"}
+        for b in doc["benchmarks"]
+    )

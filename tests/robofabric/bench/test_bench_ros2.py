@@ -63,4 +63,3 @@ def test_the_ros_domain_is_the_callers_when_given_or_set_else_the_runs_own():
     assert domain_of(42, {"ROS_DOMAIN_ID": "7"}, 1) == 42  # --domain first
     assert domain_of(None, {"ROS_DOMAIN_ID": "7"}, 1) == 7  # then the caller's environment
     assert domain_of(None, {}, 3) == 1 + (3 * 13) % 100 == domain_of(None, {"ROS_DOMAIN_ID": ""}, 3)
-

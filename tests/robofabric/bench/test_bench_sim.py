@@ -24,8 +24,17 @@ def test_benchmark_helpers_measure_something():
 @pytest.mark.slow
 def test_bench_sim_command_writes_its_table(tmp_path):
     out = tmp_path / "sim.md"
-    res = subprocess.run(robofabric_cmd("bench", "sim", "--seconds", "0.2", "--counts", "1,2", "--out", str(out)), capture_output=True, text=True, timeout=120)
+    res = subprocess.run(
+        robofabric_cmd("bench", "sim", "--seconds", "0.2", "--counts", "1,2", "--out", str(out)),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert res.returncode == 0, res.stderr
     table = out.read_text()
-    assert "| combined (Meca500 sweeping + Reeman driving)" in table and "| warehouse, 2 mobile robots" in table and "240-ray" in table
+    assert (
+        "| combined (Meca500 sweeping + Reeman driving)" in table
+        and "| warehouse, 2 mobile robots" in table
+        and "240-ray" in table
+    )
     assert "| one arm mirror update" in table

@@ -9,7 +9,9 @@ from robofabric.bench.transport import format_table, run_bench
 
 @pytest.mark.slow
 def test_bench_transport_delivers_through_zenoh_and_mosquitto():
-    assert shutil.which("mosquitto") or shutil.which("/usr/sbin/mosquitto"), "mosquitto is required (.ci/run installs it)"
+    assert shutil.which("mosquitto") or shutil.which("/usr/sbin/mosquitto"), (
+        "mosquitto is required (.ci/run installs it)"
+    )
     results = run_bench([200.0], 1.0, mqtt=True)
     assert [r["transport"] for r in results] == ["zenoh", "mqtt"]
     for r in results:

@@ -23,8 +23,10 @@ def test_measure_draws_every_type():
 
 def test_bench_viewer_command(tmp_path):
     out = tmp_path / "viewer.md"
-    res = CliRunner().invoke(build_app(), ["viewer", "--n", "3", "--grids", "2", "--arms", "1", "--bases", "1", "--seconds", "0.2",
-                                           "--out", str(out)])
+    res = CliRunner().invoke(
+        build_app(),
+        ["viewer", "--n", "3", "--grids", "2", "--arms", "1", "--bases", "1", "--seconds", "0.2", "--out", str(out)],
+    )
     assert res.exit_code == 0, res.output
     assert "| Scan (240 rays" in out.read_text() and "us per message" in out.read_text()
     assert CliRunner().invoke(build_app(), ["viewer", "--n", "1"]).exit_code != 0

@@ -23,18 +23,24 @@ def _page(elements: dict, query: str) -> str:
 
 @given(st.text(max_size=40))
 def test_any_label_survives_the_pages_escaping(label):
-    els, q = parse_page(_page({"0": {"tag": "q-layout"}, "7": {"tag": "q-btn", "props": {"label": label}}},
-                              "{'client_id': 'c-1', 'next_message_id': 3, 'implicit_handshake': True}"))
+    els, q = parse_page(
+        _page(
+            {"0": {"tag": "q-layout"}, "7": {"tag": "q-btn", "props": {"label": label}}},
+            "{'client_id': 'c-1', 'next_message_id': 3, 'implicit_handshake': True}",
+        )
+    )
     assert els["7"]["props"]["label"] == label
     assert q == {"client_id": "c-1", "next_message_id": 3, "implicit_handshake": True}
 
 
 def test_controls_are_found_by_label_aria_label_or_text_and_by_tag():
     page = EmulatedPage("http://x/")
-    page.elements = {"1": {"tag": "nicegui-input", "props": {"aria-label": "Name"}},
-                     "2": {"tag": "q-btn", "props": {"label": "Log in"}},
-                     "3": {"tag": "div", "text": "Log in"},
-                     "4": {"tag": "div", "text": "request base3: you own it (epoch 2)"}}
+    page.elements = {
+        "1": {"tag": "nicegui-input", "props": {"aria-label": "Name"}},
+        "2": {"tag": "q-btn", "props": {"label": "Log in"}},
+        "3": {"tag": "div", "text": "Log in"},
+        "4": {"tag": "div", "text": "request base3: you own it (epoch 2)"},
+    }
     assert page.find("Name") == "1"
     assert page.find("Log in", tag="q-btn") == "2" and page.find("Log in", tag="div") == "3"
     assert page.find("you own it", exact=False) == "4" and page.find("you own it") is None
@@ -73,8 +79,10 @@ def test_a_students_page_and_its_socket_both_come_from_her_address():
 
     async def page(request: web.Request) -> web.Response:
         seen["page"] = str(request.remote)
-        return web.Response(text=_page({"0": {"tag": "q-layout"}}, "{'client_id': 'c-1', 'next_message_id': 0}"),
-                            content_type="text/html")
+        return web.Response(
+            text=_page({"0": {"tag": "q-layout"}}, "{'client_id': 'c-1', 'next_message_id': 0}"),
+            content_type="text/html",
+        )
 
     @sio.event
     async def connect(sid, environ, auth=None):
@@ -88,7 +96,9 @@ def test_a_students_page_and_its_socket_both_come_from_her_address():
         port = free_port()
         await web.TCPSite(runner, "127.0.0.1", port).start()
         try:
-            async with aiohttp.ClientSession(connector=aiohttp.TCPConnector(local_addr=(student_address(3), 0))) as http:
+            async with aiohttp.ClientSession(
+                connector=aiohttp.TCPConnector(local_addr=(student_address(3), 0))
+            ) as http:
                 p = EmulatedPage(f"http://127.0.0.1:{port}/")
                 await p.open(http, timeout=20)
                 await p.close()

@@ -40,8 +40,20 @@ def test_replay_with_a_key_filter_into_another_world(small, world, router, conne
     out = path.parent / "filtered.mcap"
     rec_fab = connect("recorder", "rec")
     with Recorder(rec_fab, out) as rec:
-        r = run_cli("replay", str(path), "--keys", "robot/r0/*", "--world", "w", "--remap-world", world,
-                    "--speed", "4", "--connect", f"tcp/127.0.0.1:{router[1]}")
+        r = run_cli(
+            "replay",
+            str(path),
+            "--keys",
+            "robot/r0/*",
+            "--world",
+            "w",
+            "--remap-world",
+            world,
+            "--speed",
+            "4",
+            "--connect",
+            f"tcp/127.0.0.1:{router[1]}",
+        )
         assert r.returncode == 0, r.stderr
         want = Counter(k.replace("rf/w/", f"rf/{world}/") for k, _, _ in samples if k.startswith("rf/w/robot/r0/"))
         wait_until(lambda: rec.stats.messages >= sum(want.values()), what="the filtered replay", seen=lambda: rec.stats)
@@ -63,14 +75,22 @@ def test_info_json_describes_the_file(small):
 
 @pytest.mark.parametrize(
     "content, why",
-    [(None, "no such file"), (b"GIF89a....", "not an MCAP file"), (b"\x89MCAP0\r\n\x01\x02", "truncated beyond repair")],
+    [
+        (None, "no such file"),
+        (b"GIF89a....", "not an MCAP file"),
+        (b"\x89MCAP0\r\n\x01\x02", "truncated beyond repair"),
+    ],
 )
 @pytest.mark.parametrize("command", ["info", "replay"])
 def test_bad_files(tmp_path, content, why, command):
     path = tmp_path / "bad.mcap"
     if content is not None:
         path.write_bytes(content)
-    line = _one_error_line(run_cli(command, str(path), "--connect", "tcp/127.0.0.1:1") if command == "replay" else run_cli(command, str(path)))
+    line = _one_error_line(
+        run_cli(command, str(path), "--connect", "tcp/127.0.0.1:1")
+        if command == "replay"
+        else run_cli(command, str(path))
+    )
     assert why in line
 
 
@@ -98,7 +118,9 @@ def test_empty_recording_cannot_be_replayed(tmp_path):
 
 
 def test_record_refuses_bad_arguments_before_joining(tmp_path):
-    assert "not a valid key expression" in _one_error_line(run_cli("record", "-o", str(tmp_path / "a.mcap"), "robot/**/x$$"))
+    assert "not a valid key expression" in _one_error_line(
+        run_cli("record", "-o", str(tmp_path / "a.mcap"), "robot/**/x$$")
+    )
     assert "does not exist" in _one_error_line(run_cli("record", "-o", str(tmp_path / "no" / "a.mcap")))
     assert "is a directory" in _one_error_line(run_cli("record", "-o", str(tmp_path)))
     assert "--compression" in _one_error_line(run_cli("record", "-o", str(tmp_path / "a.mcap"), "--compression", "zip"))
@@ -106,7 +128,9 @@ def test_record_refuses_bad_arguments_before_joining(tmp_path):
 
 def test_recording_an_unknown_world_says_nothing_was_recorded(tmp_path, router):
     path = tmp_path / "silent.mcap"
-    out = run_cli("record", "-o", str(path), "--world", "nobodyhere", "--duration", "1", "--connect", f"tcp/127.0.0.1:{router[1]}")
+    out = run_cli(
+        "record", "-o", str(path), "--world", "nobodyhere", "--duration", "1", "--connect", f"tcp/127.0.0.1:{router[1]}"
+    )
     assert out.returncode == 1 and "Traceback" not in out.stderr, (out.returncode, out.stderr)  # the world had nothing
     line = out.stderr.strip().splitlines()[-1]
     assert "nothing was recorded on rf/nobodyhere/**" in line

@@ -33,7 +33,9 @@ def test_a_replayed_map_is_latched_for_a_late_joiner(tmp_path, world, connect):
     t0 = 1_700_000_000_000_000_000
     grid = OccupancyGrid(0.05, np.zeros(3), np.full((8, 6), 100, np.uint8), header=Header(0.0, t0, 0, "compute"))
     path = tmp_path / "map.mcap"
-    write_recording(path, [("rf/w/map/map", t0, encode(grid)), ("rf/w/robot/r0/joints", t0 + 1_000_000, joint_payload(1, t0))])
+    write_recording(
+        path, [("rf/w/map/map", t0, encode(grid)), ("rf/w/robot/r0/joints", t0 + 1_000_000, joint_payload(1, t0))]
+    )
 
     live = Inbox()
     listener = connect("viewer", "live")
@@ -44,7 +46,9 @@ def test_a_replayed_map_is_latched_for_a_late_joiner(tmp_path, world, connect):
         wait_until(lambda: len(live.keys()) == 2, what="both replayed messages", seen=live.keys)
         late = Inbox()
         connect("viewer", "late").subscribe(keys.world_all(world), late, history=True)
-        wait_until(lambda: late.keys() == [keys.map_key(world, "map")], what="the replayed map, latched", seen=late.keys)
+        wait_until(
+            lambda: late.keys() == [keys.map_key(world, "map")], what="the replayed map, latched", seen=late.keys
+        )
 
 
 def test_the_replayer_sees_whether_anyone_listens(world, connect):

@@ -37,16 +37,32 @@ def _count(path):
 
 def _start_recorder(procs, path, world, router, *extra, rid="rec"):
     proc = procs.start(
-        robofabric_cmd("record", "-o", str(path), "--world", world, "--connect", _ep(router), "--id", rid,
-                       "--flush-interval", "0.2", *extra),
+        robofabric_cmd(
+            "record",
+            "-o",
+            str(path),
+            "--world",
+            world,
+            "--connect",
+            _ep(router),
+            "--id",
+            rid,
+            "--flush-interval",
+            "0.2",
+            *extra,
+        ),
         name=rid,
     )
     return proc
 
 
 def _wait_token(fab, kind, pid):
-    wait_until(lambda: (kind, pid) in fab.live_peers(kind), timeout=30, what=f"{kind} {pid} to join",
-               seen=lambda: fab.live_peers())
+    wait_until(
+        lambda: (kind, pid) in fab.live_peers(kind),
+        timeout=30,
+        what=f"{kind} {pid} to join",
+        seen=lambda: fab.live_peers(),
+    )
 
 
 def _by_key(path):
@@ -68,11 +84,14 @@ def test_record_replay_into_another_world_and_record_again(tmp_path, world, rout
     streams = robot_streams(world, 2, rates={"joints": 50.0, "pose": 25.0, "scan": 10.0})
     # the recorder's token comes with its session, its subscription a moment later; a put this session sends
     # before it knows of that subscription is dropped (Fabric.wait_matching): under load the first sample was
-    wait_until(lambda: all(sim.wait_matching(s.key, 1.0) for s in streams), timeout=30, what="the recorder's subscription")
+    wait_until(
+        lambda: all(sim.wait_matching(s.key, 1.0) for s in streams), timeout=30, what="the recorder's subscription"
+    )
     sent, _ = run_load(sim.put_raw, streams, duration=3.0)
     total = sum(sent.values())
-    wait_until(lambda: _count(first) >= total, timeout=20, what="every sample in the growing file",
-               seen=lambda: _count(first))
+    wait_until(
+        lambda: _count(first) >= total, timeout=20, what="every sample in the growing file", seen=lambda: _count(first)
+    )
     procs.kill(rec, signal.SIGINT)
     assert rec.returncode == 0, procs.output(rec)
     info = read_info(first)
@@ -85,12 +104,18 @@ def test_record_replay_into_another_world_and_record_again(tmp_path, world, rout
     with client(other, router[1]) as watcher2:
         _wait_token(watcher2, "recorder", "rec2")
     rp = subprocess.run(
-        robofabric_cmd("replay", str(first), "--remap-world", other, "--connect", _ep(router), "--wait", "30"),  # rec2 listens
-        capture_output=True, text=True, timeout=60,
+        robofabric_cmd(
+            "replay", str(first), "--remap-world", other, "--connect", _ep(router), "--wait", "30"
+        ),  # rec2 listens
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert rp.returncode == 0, rp.stderr
     assert f"replayed {total} msgs" in rp.stdout
-    wait_until(lambda: _count(second) >= total, timeout=20, what="the replay to be recorded", seen=lambda: _count(second))
+    wait_until(
+        lambda: _count(second) >= total, timeout=20, what="the replay to be recorded", seen=lambda: _count(second)
+    )
     procs.kill(rec2, signal.SIGTERM)
     assert rec2.returncode == 0, procs.output(rec2)
     assert read_info(second).complete
@@ -120,7 +145,9 @@ def test_a_sigkilled_recorder_leaves_a_readable_unfinished_file(tmp_path, world,
     sim = connect("sim", "sim1")
     stop = threading.Event()
     streams = robot_streams(world, 1)
-    t = threading.Thread(target=run_load, args=(sim.put_raw, streams), kwargs=dict(duration=60.0, stop=stop), daemon=True)
+    t = threading.Thread(
+        target=run_load, args=(sim.put_raw, streams), kwargs=dict(duration=60.0, stop=stop), daemon=True
+    )
     t.start()
     try:
         wait_until(lambda: _count(path) >= 300, timeout=30, what="chunks on disk", seen=lambda: _count(path))
@@ -159,7 +186,12 @@ def test_recorder_api_key_filters_overlaps_and_liveliness(tmp_path, world, conne
     path = tmp_path / "api.mcap"
     rec_fab = connect("recorder", "api-rec")
     sim = connect("sim", "sim1")
-    exprs = [keys.robot_all(world, "r0"), keys.robot_stream(world, "r0", "joints").rsplit("/", 1)[0] + "/*", keys.event_all(world), keys.peers_all(world, "user")]
+    exprs = [
+        keys.robot_all(world, "r0"),
+        keys.robot_stream(world, "r0", "joints").rsplit("/", 1)[0] + "/*",
+        keys.event_all(world),
+        keys.peers_all(world, "user"),
+    ]
     with Recorder(rec_fab, path, exprs, liveliness=True) as rec:
         key = keys.robot_joints(world, "r0")
         pubs = [sim.session.declare_publisher(k) for k in (key, keys.robot_joints(world, "r1"), keys.event(world, "x"))]
@@ -176,7 +208,9 @@ def test_recorder_api_key_filters_overlaps_and_liveliness(tmp_path, world, conne
     # r0 joints matched by two expressions but recorded once; r1 not selected; raw bytes kept
     assert got == Counter({key: 20, keys.event(world, "x"): 20})
     assert stats.raw == 40
-    live = [(m.key, msgpack.unpackb(m.payload)) for m in iter_messages(path, liveliness=True) if m.schema == "liveliness"]
+    live = [
+        (m.key, msgpack.unpackb(m.payload)) for m in iter_messages(path, liveliness=True) if m.schema == "liveliness"
+    ]
     token = keys.peer(world, "user", "late-user")
     assert live == [(token, {"alive": True}), (token, {"alive": False})]
     assert read_info(path).complete

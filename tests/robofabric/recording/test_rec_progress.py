@@ -25,11 +25,15 @@ def test_replay_and_export_show_progress_unless_quiet(tmp_path, world, router):
     assert out.returncode == 0, out.stderr
     assert f"{len(samples)}/{len(samples)}" in out.stderr and "━" in out.stderr, out.stderr  # rich's bar
     quiet = _cli("replay", str(src), "--speed", "20", "--wait", "0", "-q", "--world", world, "--connect", ep)
-    assert quiet.returncode == 0 and "━" not in quiet.stderr and f"{len(samples)}/{len(samples)}" not in quiet.stderr, quiet.stderr
+    assert quiet.returncode == 0 and "━" not in quiet.stderr and f"{len(samples)}/{len(samples)}" not in quiet.stderr, (
+        quiet.stderr
+    )
 
     exp = _cli("export", str(src), "-o", str(tmp_path / "f.mcap"), "--to", "foxglove")
     assert exp.returncode == 0, exp.stderr
-    assert f"{len(samples)}/{len(samples)}" in exp.stderr and f"exported {fabric_msgs} messages" in exp.stdout, exp.stderr + exp.stdout
+    assert f"{len(samples)}/{len(samples)}" in exp.stderr and f"exported {fabric_msgs} messages" in exp.stdout, (
+        exp.stderr + exp.stdout
+    )
 
 
 def test_info_reports_its_progress_through_the_file(tmp_path, world):
@@ -41,5 +45,9 @@ def test_info_reports_its_progress_through_the_file(tmp_path, world):
     inf = read_info(src, progress=lambda done, total: seen.append((done, total)))
     size = src.stat().st_size
     assert inf.messages > 2000 and len(seen) >= 2
-    assert all(t == size for _, t in seen) and [d for d, _ in seen] == sorted(d for d, _ in seen) and seen[-1] == (size, size)
+    assert (
+        all(t == size for _, t in seen)
+        and [d for d, _ in seen] == sorted(d for d, _ in seen)
+        and seen[-1] == (size, size)
+    )
     assert 0 < seen[0][0] < size  # reported while reading, not only at the end

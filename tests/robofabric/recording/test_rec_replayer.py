@@ -55,8 +55,11 @@ def test_keys_filter_window_and_remap(rec):
     path, samples = rec
     plan = plan_replay(path, keys="rf/w/robot/r0/**", start=0.1, end=0.3, remap_world="x")
     sent, _ = _play(plan)
-    want = [(k.replace("rf/w/", "rf/x/"), t, p) for k, t, p in samples
-            if k.startswith("rf/w/robot/r0/") and T0 + 100_000_000 <= t < T0 + 300_000_000]
+    want = [
+        (k.replace("rf/w/", "rf/x/"), t, p)
+        for k, t, p in samples
+        if k.startswith("rf/w/robot/r0/") and T0 + 100_000_000 <= t < T0 + 300_000_000
+    ]
     assert [(k, p) for _, k, p in sent] == [(k, p) for k, _, p in want]
     # the window's start is the timeline's zero
     assert sent[0][0] == pytest.approx(100.0 + (want[0][1] - T0 - 100_000_000) / 1e9, abs=1e-9)

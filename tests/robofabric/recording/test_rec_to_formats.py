@@ -22,7 +22,9 @@ pytestmark = pytest.mark.slow
 def _record(procs, tmp_path, world, port, to):
     out = tmp_path / f"live-{to}.mcap"
     proc = procs.start(
-        robofabric_cmd("record", "-o", str(out), "--to", to, "-q", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"),
+        robofabric_cmd(
+            "record", "-o", str(out), "--to", to, "-q", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"
+        ),
         name=f"record-{to}",
     )
     return out, proc
@@ -37,7 +39,10 @@ def _publish_world(fab, world, n=40):
     for i in range(n):
         h = Header.now(stamp=i * 0.05, seq=i, source="test")
         fab.publish(keys.robot_joints(world, "arm1"), JointState(names, np.full(6, 0.01 * i), np.zeros(6), h))
-        fab.publish(keys.robot_scan(world, "base1"), Scan.from_ranges(np.full(60, 1.5), angle_min=-1.0, angle_increment=0.03, range_max=5.0, header=h))
+        fab.publish(
+            keys.robot_scan(world, "base1"),
+            Scan.from_ranges(np.full(60, 1.5), angle_min=-1.0, angle_increment=0.03, range_max=5.0, header=h),
+        )
     fab.session.put(keys.event(world, "raw"), b"\x00not a fabric message")
 
 
@@ -49,7 +54,12 @@ def test_record_to_writes_a_live_world_in_the_format(router, connect, world, pro
     _fab, port = router
     out, proc = _record(procs, tmp_path, world, port, to)
     pub = connect("tool")
-    wait_until(lambda: pub.live_peers("recorder", timeout=0.5), timeout=60, what="the recorder to join", seen=lambda: procs.output(proc))
+    wait_until(
+        lambda: pub.live_peers("recorder", timeout=0.5),
+        timeout=60,
+        what="the recorder to join",
+        seen=lambda: procs.output(proc),
+    )
     sent = []
 
     def publish_until_seen():
@@ -99,9 +109,17 @@ def test_record_to_writes_a_live_world_in_the_format(router, connect, world, pro
     assert n >= 80, (n, topics)
     k = f"/rf/{world}"
     expect = (
-        {"/arm1/joint_states": "sensor_msgs/msg/JointState", "/base1/scan": "sensor_msgs/msg/LaserScan", "/map": "nav_msgs/msg/OccupancyGrid"}
+        {
+            "/arm1/joint_states": "sensor_msgs/msg/JointState",
+            "/base1/scan": "sensor_msgs/msg/LaserScan",
+            "/map": "nav_msgs/msg/OccupancyGrid",
+        }
         if to == "ros2"  # the live bridge's names (docs/ros2.md)
-        else {f"{k}/robot/arm1/joints": "robofabric.JointState", f"{k}/robot/base1/scan": "foxglove.LaserScan", f"{k}/map/map": "foxglove.Grid"}
+        else {
+            f"{k}/robot/arm1/joints": "robofabric.JointState",
+            f"{k}/robot/base1/scan": "foxglove.LaserScan",
+            f"{k}/map/map": "foxglove.Grid",
+        }
     )
     for topic, name in expect.items():
         assert topics.get(topic) == name, topics

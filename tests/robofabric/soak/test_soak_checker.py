@@ -29,6 +29,7 @@ def only(inv, history, lim=Limits()):
 
 # ---------------------------------------------------------------------- owners
 
+
 def test_two_owners_at_one_epoch_is_a_violation_with_both_records():
     h = [rec(1, "ann", 3), rec(2, "bob", 3)]
     (v,) = only("owners", h)
@@ -36,8 +37,13 @@ def test_two_owners_at_one_epoch_is_a_violation_with_both_records():
 
 
 def test_an_epoch_going_back_is_a_violation_but_a_fenced_stale_record_is_not():
-    assert [v.message for v in only("owners", [rec(1, "ann", 5), rec(2, "", 4, term=1)])] == ["arm0's epoch went back from 5 to 4"]
-    stale = [rec(1, "ann", 5, term=2, source="sim-b"), rec(2, "bob", 4, term=1)]  # a paused old primary: consumers drop it
+    assert [v.message for v in only("owners", [rec(1, "ann", 5), rec(2, "", 4, term=1)])] == [
+        "arm0's epoch went back from 5 to 4"
+    ]
+    stale = [
+        rec(1, "ann", 5, term=2, source="sim-b"),
+        rec(2, "bob", 4, term=1),
+    ]  # a paused old primary: consumers drop it
     assert only("owners", stale) == []
 
 
@@ -46,6 +52,7 @@ def test_owners_clean():
 
 
 # ---------------------------------------------------------------------- applied
+
 
 def test_a_robot_reaching_a_target_only_a_stale_command_asked_for_is_a_violation():
     c = Cmd(3.0, "arm0", "ann", 1, "joints", POISON)
@@ -56,7 +63,13 @@ def test_a_robot_reaching_a_target_only_a_stale_command_asked_for_is_a_violation
 
 
 def test_a_refused_command_whose_target_is_never_reached_is_fine():
-    h = [rec(1, "ann", 2), Cmd(1.5, "arm0", "ann", 2, "joints", A), js(2, A), Cmd(3.0, "arm0", "ann", 1, "joints", POISON), js(4, A)]
+    h = [
+        rec(1, "ann", 2),
+        Cmd(1.5, "arm0", "ann", 2, "joints", A),
+        js(2, A),
+        Cmd(3.0, "arm0", "ann", 1, "joints", POISON),
+        js(4, A),
+    ]
     assert only("applied", h) == []
 
 
@@ -66,6 +79,7 @@ def test_a_late_command_with_an_owners_target_proves_nothing():
 
 
 # ---------------------------------------------------------------------- reset
+
 
 def test_joints_jumping_across_a_fail_over_is_a_violation():
     h = [js(1, A), js(3, (0.0,) * 6, source="sim-b", term=2)]
@@ -88,7 +102,10 @@ def test_a_fail_over_the_observer_was_blind_to_allows_the_motion_it_missed_and_n
     for the blind stretch (here 1.5 s: 3 rad/s allows 4.5 rad), and not for the time the observer could see."""
     far = tuple(x + 1.0 for x in A)
     assert only("reset", [js(1.0, A), Fault(2, "router", "router", 3), js(3.0, far, source="sim-b", term=2)]) == []
-    (v,) = only("reset", [js(1.0, A), Fault(9, "router", "router", 10), js(10.5, A), js(12, A), js(12.5, far, source="sim-b", term=2)])
+    (v,) = only(
+        "reset",
+        [js(1.0, A), Fault(9, "router", "router", 10), js(10.5, A), js(12, A), js(12.5, far, source="sim-b", term=2)],
+    )
     assert "across the change from sim-a to sim-b" in v.message
 
 
@@ -98,6 +115,7 @@ def test_joints_moving_at_speed_and_a_smooth_fail_over_are_fine():
 
 
 # ---------------------------------------------------------------------- handover
+
 
 def test_an_owner_losing_a_moving_robot_without_a_reason_is_a_violation():
     h = [rec(1, "ann", 1, state="moving"), rec(2, "bob", 2, state="moving")]
@@ -114,8 +132,10 @@ def test_an_owner_change_while_the_observer_was_blind_is_counted_not_judged_when
     blind_h = [moving, Fault(2, "router", "router", 3), js(3.2, A), taken]
     assert only("handover", blind_h) == [] and only("queue", blind_h) == []
     assert blind(blind_h) == [(2, 3.7)] and not_judged(blind_h) == 1
-    assert summary(blind_h, [])[0] == ("observer blind: 1 router restarts, 1.7 s in all; not judged: 1 (owner changes "
-                                       "whose records the observer missed there and did not catch up on)")
+    assert summary(blind_h, [])[0] == (
+        "observer blind: 1 router restarts, 1.7 s in all; not judged: 1 (owner changes "
+        "whose records the observer missed there and did not catch up on)"
+    )
     caught_up = [moving, Fault(2, "router", "router", 3), js(3.2, A), rec(4, "bob", 2)]
     assert [v.invariant for v in check(caught_up)] == ["handover"] and not_judged(caught_up) == 0
     assert summary(caught_up, [])[0] == "observer blind: 1 router restarts, 1.7 s in all; not judged: 0"
@@ -125,16 +145,25 @@ def test_an_owner_change_while_the_observer_was_blind_is_counted_not_judged_when
 
 
 def test_release_expiry_and_take_over_of_a_still_robot_are_fine():
-    h = [rec(1, "ann", 1, state="moving"), OwnEvent(2, "own_released", "arm0", "ann", "released", "sim-a"), rec(2, "", 2),
-         rec(3, "bob", 3, state="moving"), OwnEvent(4, "own_expired", "arm0", "bob", "lease expired", "sim-a"),
-         rec(4, "cat", 4, state="still"), rec(5, "dan", 5)]
+    h = [
+        rec(1, "ann", 1, state="moving"),
+        OwnEvent(2, "own_released", "arm0", "ann", "released", "sim-a"),
+        rec(2, "", 2),
+        rec(3, "bob", 3, state="moving"),
+        OwnEvent(4, "own_expired", "arm0", "bob", "lease expired", "sim-a"),
+        rec(4, "cat", 4, state="still"),
+        rec(5, "dan", 5),
+    ]
     assert only("handover", h) == []
 
 
 # ---------------------------------------------------------------------- queue
 
+
 def test_a_queue_changing_order_or_skipping_a_waiting_user_is_a_violation():
-    (v,) = only("queue", [rec(1, "ann", 1, queue=("bob", "cat"), state="moving"), rec(2, "ann", 1, queue=("cat", "bob"))])
+    (v,) = only(
+        "queue", [rec(1, "ann", 1, queue=("bob", "cat"), state="moving"), rec(2, "ann", 1, queue=("cat", "bob"))]
+    )
     assert "changed order" in v.message
     released = OwnEvent(2, "own_handover", "arm0", "cat", "released by ann", "sim-a")
     (w,) = only("queue", [rec(1, "ann", 1, queue=("bob", "cat")), released, rec(2, "cat", 2, queue=("bob",))])
@@ -147,10 +176,14 @@ def test_a_still_robot_taken_over_by_a_queued_user_skips_nobody():
 
 
 def test_a_queue_handing_over_in_order_is_fine():
-    assert only("queue", [rec(1, "ann", 1, queue=("bob", "cat")), rec(2, "bob", 2, queue=("cat",)), rec(3, "cat", 3)]) == []
+    assert (
+        only("queue", [rec(1, "ann", 1, queue=("bob", "cat")), rec(2, "bob", 2, queue=("cat",)), rec(3, "cat", 3)])
+        == []
+    )
 
 
 # ---------------------------------------------------------------------- unowned motion
+
 
 def test_a_robot_moving_long_after_its_owner_went_is_a_violation():
     (v,) = only("unowned_motion", [rec(1, "", 2), js(5, A), js(5.2, tuple(x - 0.1 for x in A))])
@@ -182,9 +215,20 @@ def test_a_grant_heard_after_the_joints_it_moved_is_owned_when_her_command_at_th
 
 # ---------------------------------------------------------------------- resources and exits
 
+
 def _samples(name, slope_mb_h, *, minutes=20, threads=20, fd_rise=0, log_rise=0):
-    return [ProcSample(60.0 * m, name, 7, 100 + slope_mb_h * m / 60, threads, 30 + (fd_rise if m > minutes / 2 else 0),
-                       1000 + log_rise * m) for m in range(minutes + 1)]
+    return [
+        ProcSample(
+            60.0 * m,
+            name,
+            7,
+            100 + slope_mb_h * m / 60,
+            threads,
+            30 + (fd_rise if m > minutes / 2 else 0),
+            1000 + log_rise * m,
+        )
+        for m in range(minutes + 1)
+    ]
 
 
 def test_memory_fds_and_logs_growing_after_warm_up_are_violations():
@@ -197,8 +241,15 @@ def test_memory_fds_and_logs_growing_after_warm_up_are_violations():
 
 def test_a_restarted_peer_warms_up_as_long_as_the_run_did():
     first = [ProcSample(60.0 * m, "sim-a", 7, 100.0, 20, 30, 0) for m in range(40)]
-    again = [ProcSample(60.0 * m, "sim-a", 8, 60 + (m - 40) * 6.0 if m < 45 else 90.0, 20, 30, 0) for m in range(40, 70)]
-    h = [Mark(0, "class"), Mark(300, "warm"), *first, *again]  # the restart grows 30 MB in its first 5 minutes, then flat
+    again = [
+        ProcSample(60.0 * m, "sim-a", 8, 60 + (m - 40) * 6.0 if m < 45 else 90.0, 20, 30, 0) for m in range(40, 70)
+    ]
+    h = [
+        Mark(0, "class"),
+        Mark(300, "warm"),
+        *first,
+        *again,
+    ]  # the restart grows 30 MB in its first 5 minutes, then flat
     assert only("resources", h) == []  # judged from its 5th minute: flat (from its 2nd, 23 MB/h)
 
 
@@ -216,7 +267,12 @@ def test_an_exit_nobody_caused_is_a_violation_and_an_expected_one_is_not():
 def test_summary_counts_faults_by_kind_and_violations():
     h = [Fault(1, "pause", "sim-a", 2), Fault(3, "pause", "s00", 4), Fault(5, "router", "router", 6)]
     lines = summary(h, check([rec(1, "ann", 3), rec(2, "bob", 3)]))
-    assert lines[1:] == ["memory: no samples", "faults: 3", "fault kinds: 2 (pause 2, router 1)", "violations: 1 (owners 1)"]
+    assert lines[1:] == [
+        "memory: no samples",
+        "faults: 3",
+        "fault kinds: 2 (pause 2, router 1)",
+        "violations: 1 (owners 1)",
+    ]
 
 
 def test_the_summary_names_whose_memory_was_judged_and_whose_was_not():
@@ -224,13 +280,24 @@ def test_the_summary_names_whose_memory_was_judged_and_whose_was_not():
     named as not judged."""
     short = [ProcSample(60.0 * m + 1, "compute", 10 + m, 80.0, 10, 20, 0) for m in range(20)]  # a new pid each minute
     h = [Mark(0, "warm"), *_samples("sim-a", 1.5), *short]
-    assert memory_judged(h) == ["compute not judged (no incarnation lived past its warm-up long enough)",
-                                "sim-a +1.5 MB/h over 19 min"]  # its first minute is its warm-up
-    assert summary(h, [])[1] == "memory: compute not judged (no incarnation lived past its warm-up long enough); sim-a +1.5 MB/h over 19 min"
-    assert str(check([rec(1, "ann", 3), rec(2, "bob", 3)])[0]).splitlines()[1].strip().startswith("t=1.000 record arm0: owner=ann")
+    assert memory_judged(h) == [
+        "compute not judged (no incarnation lived past its warm-up long enough)",
+        "sim-a +1.5 MB/h over 19 min",
+    ]  # its first minute is its warm-up
+    assert (
+        summary(h, [])[1]
+        == "memory: compute not judged (no incarnation lived past its warm-up long enough); sim-a +1.5 MB/h over 19 min"
+    )
+    assert (
+        str(check([rec(1, "ann", 3), rec(2, "bob", 3)])[0])
+        .splitlines()[1]
+        .strip()
+        .startswith("t=1.000 record arm0: owner=ann")
+    )
 
 
 # ---------------------------------------------------------------------- a generated class
+
 
 @st.composite
 def histories(draw):
@@ -239,7 +306,9 @@ def histories(draw):
     users = ["ann", "bob", "cat"]
     t, epoch, owner, queue, term, q = 0.0, 0, "", [], 1, list(A)
     out: list = [rec(t, owner, epoch)]
-    for step in draw(st.lists(st.sampled_from(["take", "release", "queue", "move", "failover"]), min_size=1, max_size=25)):
+    for step in draw(
+        st.lists(st.sampled_from(["take", "release", "queue", "move", "failover"]), min_size=1, max_size=25)
+    ):
         t += draw(st.floats(0.5, 3.0))
         src = f"sim-{term}"
         if step == "take" and (not owner or True):
@@ -250,8 +319,16 @@ def histories(draw):
                 queue = [u for u in queue if u != new]
                 out.append(rec(t, owner, epoch, queue=queue, source=src, term=term))
         elif step == "release" and owner:
-            out.append(OwnEvent(t, "own_released" if not queue else "own_handover", "arm0", owner if not queue else queue[0],
-                                "released" if not queue else f"released by {owner}", src))
+            out.append(
+                OwnEvent(
+                    t,
+                    "own_released" if not queue else "own_handover",
+                    "arm0",
+                    owner if not queue else queue[0],
+                    "released" if not queue else f"released by {owner}",
+                    src,
+                )
+            )
             epoch += 1
             owner = queue.pop(0) if queue else ""
             out.append(rec(t, owner, epoch, queue=queue, source=src, term=term))
@@ -289,6 +366,10 @@ def test_a_corrupted_history_is_caught_by_the_invariant_it_breaks(h, how):
     elif how == "reset":
         bad = [js(last + 1, A, term=99, source="x"), js(last + 2, (0.0,) * 6, term=100, source="y")]
     else:
-        bad = [rec(last + 1, "zed", 1000, term=99, source="x"), js(last + 1.5, A, term=99, source="x"),
-               Cmd(last + 2, "arm0", "zed", 999, "joints", POISON), js(last + 3, POISON, term=99, source="x")]
+        bad = [
+            rec(last + 1, "zed", 1000, term=99, source="x"),
+            js(last + 1.5, A, term=99, source="x"),
+            Cmd(last + 2, "arm0", "zed", 999, "joints", POISON),
+            js(last + 3, POISON, term=99, source="x"),
+        ]
     assert how in {v.invariant for v in check(sorted(h + bad, key=lambda r: r.t))}

@@ -18,8 +18,13 @@ ROOT = Path(__file__).resolve().parents[3]
 
 
 def soak(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "robofabric.cli", "bench", "soak", *args], capture_output=True, text=True,
-                          timeout=120, cwd=ROOT)
+    return subprocess.run(
+        [sys.executable, "-m", "robofabric.cli", "bench", "soak", *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+    )
 
 
 def _history(folder: Path, owners: tuple[str, str]) -> Path:
@@ -34,7 +39,16 @@ def _history(folder: Path, owners: tuple[str, str]) -> Path:
     return folder
 
 
-@pytest.mark.parametrize("args", [["--plant", "nope"], ["--faults", "pause,flood"], ["--victims", "router"], ["--victims", "sim=0"], ["--students", "1"]])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--plant", "nope"],
+        ["--faults", "pause,flood"],
+        ["--victims", "router"],
+        ["--victims", "sim=0"],
+        ["--students", "1"],
+    ],
+)
 def test_bad_options_are_refused_with_what_is_expected(args):
     res = soak(*args)
     assert res.returncode == 2, res.stdout + res.stderr
@@ -56,8 +70,9 @@ def test_recheck_writes_the_figures_with_the_violations_it_found_now(tmp_path):
     res = soak("--recheck", str(_history(tmp_path, ("ann", "bob"))), "--out", str(out))
     assert res.returncode == 1, res.stdout + res.stderr
     doc = json.loads(out.read_text())
-    assert doc["violations"] == ["VIOLATION owners: arm0 has two owners at epoch 3: ann and bob\n"
-                                 + "\n".join(res.stdout.splitlines()[1:3])], doc["violations"]
+    assert doc["violations"] == [
+        "VIOLATION owners: arm0 has two owners at epoch 3: ann and bob\n" + "\n".join(res.stdout.splitlines()[1:3])
+    ], doc["violations"]
     assert doc["faults"] == {"pause": 1} and doc["minutes"] == 3.0
     assert doc["memory_mb"] == {"sim-a": [[0.0, 95.0]]}
     assert doc["summary"][-1] == "violations: 1 (owners 1)"

@@ -9,8 +9,21 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from robofabric.soak.history import (KINDS, Cmd, Fault, Joints, Mark, OwnEvent, OwnRec, ProcExit, ProcSample, Writer, from_line,
-                                     read, to_line)
+from robofabric.soak.history import (
+    KINDS,
+    Cmd,
+    Fault,
+    Joints,
+    Mark,
+    OwnEvent,
+    OwnRec,
+    ProcExit,
+    ProcSample,
+    Writer,
+    from_line,
+    read,
+    to_line,
+)
 from robofabric.soak.nemesis import Nemesis, parse_victims
 
 t = st.floats(0, 1e6, allow_nan=False)
@@ -18,14 +31,31 @@ text = st.text(max_size=30)
 names = st.text("abcdefgh0123456789-", min_size=1, max_size=10)
 qs = st.lists(st.floats(-4, 4, allow_nan=False), max_size=7).map(tuple)
 records = st.one_of(
-    st.builds(OwnRec, t, names, names, st.integers(0, 10**6), st.lists(names, max_size=4).map(tuple), st.sampled_from(["still", "moving"]),
-              names, st.integers(0, 99)),
+    st.builds(
+        OwnRec,
+        t,
+        names,
+        names,
+        st.integers(0, 10**6),
+        st.lists(names, max_size=4).map(tuple),
+        st.sampled_from(["still", "moving"]),
+        names,
+        st.integers(0, 99),
+    ),
     st.builds(OwnEvent, t, names, names, names, text, names),
     st.builds(Cmd, t, names, names, st.integers(0, 10**6), names, qs),
     st.builds(Joints, t, names, qs, t, names, st.integers(0, 99)),
     st.builds(Fault, t, names, names, t, text),
-    st.builds(ProcSample, t, names, st.integers(1, 10**6), st.floats(0, 1e5, allow_nan=False), st.integers(0, 999),
-              st.integers(0, 999), st.integers(0, 10**9)),
+    st.builds(
+        ProcSample,
+        t,
+        names,
+        st.integers(1, 10**6),
+        st.floats(0, 1e5, allow_nan=False),
+        st.integers(0, 999),
+        st.integers(0, 999),
+        st.integers(0, 10**9),
+    ),
     st.builds(ProcExit, t, names, st.integers(1, 10**6), st.integers(-64, 255), st.booleans(), text),
     st.builds(Mark, t, names, text),
 )
@@ -45,7 +75,13 @@ def test_files_read_back_in_time_order_and_bad_lines_are_named(tmp_path):
     with Writer(a) as w:
         w.write(Mark(3.0, "end"))
         w.write(Mark(1.0, "start"))
-    b.write_text(to_line(Fault(2.0, "pause", "sim-a", 4.0)) + "\n" + '{"k": "own", "t": 1\n' + '{"k": "nope", "t": 1}\n' + "[1]\n")
+    b.write_text(
+        to_line(Fault(2.0, "pause", "sim-a", 4.0))
+        + "\n"
+        + '{"k": "own", "t": 1\n'
+        + '{"k": "nope", "t": 1}\n'
+        + "[1]\n"
+    )
     recs, bad = read([a, b, tmp_path / "missing.jsonl"])
     assert [r.t for r in recs] == [1.0, 2.0, 3.0]
     assert [x.split(":")[:2] for x in bad] == [["soak.jsonl", "2"], ["soak.jsonl", "3"], ["soak.jsonl", "4"]]
@@ -54,8 +90,12 @@ def test_files_read_back_in_time_order_and_bad_lines_are_named(tmp_path):
 def test_a_writer_shared_by_threads_writes_whole_lines(tmp_path):
     path = tmp_path / "h.jsonl"
     with Writer(path) as w:
-        threads = [threading.Thread(target=lambda i=i: [w.write(Mark(float(i * 1000 + k), "x", "y" * 200)) for k in range(200)])
-                   for i in range(4)]
+        threads = [
+            threading.Thread(
+                target=lambda i=i: [w.write(Mark(float(i * 1000 + k), "x", "y" * 200)) for k in range(200)]
+            )
+            for i in range(4)
+        ]
         for th in threads:
             th.start()
         for th in threads:

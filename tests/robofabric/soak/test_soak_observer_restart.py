@@ -28,8 +28,12 @@ def _router(procs, world: str, port: int, *, connect: int | None = None, name: s
     if connect is not None:
         argv += ["--connect", f"tcp/127.0.0.1:{connect}"]
     proc = procs.start(robofabric_cmd(*argv), name=name)
-    wait_until(lambda: "listening" in procs.output(proc) or proc.poll() is not None, timeout=60, what=f"{name} listening",
-               seen=lambda: procs.output(proc)[-800:])
+    wait_until(
+        lambda: "listening" in procs.output(proc) or proc.poll() is not None,
+        timeout=60,
+        what=f"{name} listening",
+        seen=lambda: procs.output(proc)[-800:],
+    )
     return proc
 
 
@@ -37,16 +41,24 @@ def test_an_observer_across_its_routers_restart_misses_no_owner_change(world, pr
     pa, pb = free_port(), free_port()
     _router(procs, world, pa, name="router-a")
     rb = _router(procs, world, pb, connect=pa, name="router-b")
-    sim = procs.start(robofabric_cmd("sim", "--scene", "arm_cell", "--world", world, "--connect", f"tcp/127.0.0.1:{pa}",
-                                     "--id", "sim-a"), name="sim")
+    sim = procs.start(
+        robofabric_cmd(
+            "sim", "--scene", "arm_cell", "--world", world, "--connect", f"tcp/127.0.0.1:{pa}", "--id", "sim-a"
+        ),
+        name="sim",
+    )
     path = tmp_path / "history.jsonl"
     obs = Observer(world, f"tcp/127.0.0.1:{pb}", path)
     fa, fb = client(world, pa, kind="user", peer_id="alice-s"), client(world, pa, kind="user", peer_id="bob-s")
     alice = OwnershipClient(fa, "alice", timeout=5.0).start()
     bob = OwnershipClient(fb, "bob", timeout=5.0).start()
     try:
-        wait_until(lambda: alice.record("arm1") is not None and "arm1" in obs._records, timeout=90,
-                   what="arm1's record at alice and at the observer", seen=lambda: procs.output(sim)[-800:])
+        wait_until(
+            lambda: alice.record("arm1") is not None and "arm1" in obs._records,
+            timeout=90,
+            what="arm1's record at alice and at the observer",
+            seen=lambda: procs.output(sim)[-800:],
+        )
         epoch0 = alice.record("arm1").epoch
         procs.kill(rb, signal.SIGKILL)
         wait_until(lambda: not obs.fab.connected(), timeout=30, what="the observer cut off")
@@ -65,10 +77,18 @@ def test_an_observer_across_its_routers_restart_misses_no_owner_change(world, pr
         def recs() -> list[OwnRec]:
             return [r for r in history.read([path])[0] if isinstance(r, OwnRec) and r.obj == "arm1"]
 
-        wait_until(lambda: any(r.epoch == last for r in recs()), timeout=60, what="the observer catching up on arm1",
-                   seen=lambda: [(r.epoch, r.owner) for r in recs()])
-        wait_until(lambda: sum(isinstance(r, OwnEvent) and r.obj == "arm1" for r in history.read([path])[0]) >= 2,
-                   timeout=30, what="the two releases' events", seen=lambda: [(r.kind, r.t) for r in history.read([path])[0] if isinstance(r, OwnEvent)])
+        wait_until(
+            lambda: any(r.epoch == last for r in recs()),
+            timeout=60,
+            what="the observer catching up on arm1",
+            seen=lambda: [(r.epoch, r.owner) for r in recs()],
+        )
+        wait_until(
+            lambda: sum(isinstance(r, OwnEvent) and r.obj == "arm1" for r in history.read([path])[0]) >= 2,
+            timeout=30,
+            what="the two releases' events",
+            seen=lambda: [(r.kind, r.t) for r in history.read([path])[0] if isinstance(r, OwnEvent)],
+        )
     finally:
         alice.close()
         bob.close()

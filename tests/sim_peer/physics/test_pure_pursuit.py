@@ -57,7 +57,9 @@ def test_final_heading_is_the_paths_last_theta():
 
 
 def test_a_path_that_passes_its_own_end_on_the_way_out_is_driven_in_full():
-    pts = densify(np.array([(0.0, 0.0), (0.0, -2.0), (0.0, -1.0)]))  # found by hypothesis: it used to stop at y = -1 outbound
+    pts = densify(
+        np.array([(0.0, 0.0), (0.0, -2.0), (0.0, -1.0)])
+    )  # found by hypothesis: it used to stop at y = -1 outbound
     b, trace = drive(pts[:, 0], pts[:, 1])
     assert trace[:, 1].min() < -1.9 and math.hypot(b.x, b.y + 1.0) < 0.1
 

@@ -21,7 +21,10 @@ def test_a_stretch_whose_headings_point_against_its_travel_is_driven_backwards()
     assert pp.backwards == [True, False]
     fwd = PurePursuit(x[21:], np.zeros(30), np.zeros(30), max_speed=1.0, max_omega=1.5, max_accel=1.0)
     assert fwd.backwards == [False]
-    assert PurePursuit(x, np.zeros_like(x), None, max_speed=1.0, max_omega=1.5, max_accel=1.0).backwards == [False, False]
+    assert PurePursuit(x, np.zeros_like(x), None, max_speed=1.0, max_omega=1.5, max_accel=1.0).backwards == [
+        False,
+        False,
+    ]
 
 
 def test_a_reversing_plan_is_followed_backwards():
@@ -51,8 +54,15 @@ def test_a_reversing_plan_is_followed_backwards():
 def test_the_description_says_whether_a_base_may_reverse():
     from robots.description import DescriptionError, _base
 
-    base = {"radius": 0.3, "wheel_separation": 0.4, "wheel_radius": 0.08, "max_speed": 1.0, "max_omega": 1.5,
-            "max_accel": 1.0, "max_alpha": 3.0}
+    base = {
+        "radius": 0.3,
+        "wheel_separation": 0.4,
+        "wheel_radius": 0.08,
+        "max_speed": 1.0,
+        "max_omega": 1.5,
+        "max_accel": 1.0,
+        "max_alpha": 3.0,
+    }
     assert _base({"base": base}, "t").reverse is False
     assert _base({"base": {**base, "reverse": True}}, "t").reverse is True
     with pytest.raises(DescriptionError, match="reverse must be true or false"):

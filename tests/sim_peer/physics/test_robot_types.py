@@ -31,7 +31,9 @@ def _evil_robot(folder: Path, marker: Path, hooks: str = "hooks.py:Evil") -> Pat
     return folder
 
 
-@pytest.mark.parametrize("name", ["/tmp/evil", "../reeman", "reeman/robot.toml", "./reeman", "evil.toml", "", "a" * 65, "re man"])
+@pytest.mark.parametrize(
+    "name", ["/tmp/evil", "../reeman", "reeman/robot.toml", "./reeman", "evil.toml", "", "a" * 65, "re man"]
+)
 def test_a_type_another_peer_names_is_a_name_never_a_path(name):
     with pytest.raises(robots.DescriptionError, match="is not a type name"):
         robots.installed(name)

@@ -32,7 +32,9 @@ def test_of_two_bases_waiting_for_each_other_the_later_waiter_gives_way_once_the
     assert gives_way(tie, "base2", 9.0) == "base1" and gives_way(tie, "base1", 9.0) is None  # the greater id
 
 
-boards = st.dictionaries(st.sampled_from(IDS), st.tuples(st.floats(0.0, 10.0), st.sampled_from((*IDS, None))), max_size=5)
+boards = st.dictionaries(
+    st.sampled_from(IDS), st.tuples(st.floats(0.0, 10.0), st.sampled_from((*IDS, None))), max_size=5
+)
 
 
 @settings(max_examples=300, deadline=None)
@@ -79,11 +81,14 @@ def test_two_ways_that_cross_meet_where_either_first_comes_within_reach_of_the_o
 
 
 @settings(max_examples=200, deadline=None)
-@given(pts=st.lists(st.tuples(st.floats(-3, 3), st.floats(-3, 3)), min_size=4, max_size=24), cut=st.integers(2, 20),
-       reach=st.floats(0.1, 1.5))
+@given(
+    pts=st.lists(st.tuples(st.floats(-3, 3), st.floats(-3, 3)), min_size=4, max_size=24),
+    cut=st.integers(2, 20),
+    reach=st.floats(0.1, 1.5),
+)
 def test_both_guards_weigh_the_same_two_numbers_and_exactly_one_base_yields(pts, cut, reach):
     a = np.array(pts[: max(2, min(cut, len(pts) - 2))])
-    b = np.array(pts[len(a):])
+    b = np.array(pts[len(a) :])
     ab, ba = crossing(a, b, reach), crossing(b, a, reach)
     assert (ab is None) == (ba is None)
     if ab is None:
@@ -105,4 +110,4 @@ def test_a_base_that_yields_keeps_yielding_while_their_ways_meet_and_still_exact
     two = yields("base2", theirs, "base1", mine, board)
     assert one != two
     if held is not None:
-        assert (one if held == "base1" else two)  # the choice made stands, whatever the arcs say now
+        assert one if held == "base1" else two  # the choice made stands, whatever the arcs say now

@@ -11,8 +11,21 @@ from hypothesis import given, settings, strategies as st
 from fabric.interfaces import EventKind
 from robots import SceneRobot
 from sim_peer.physics.traffic import GIVE_WAY_AFTER
-from sim_peer.physics.way_guard import (BACK_OFF, BACK_SPEED, BASE_CLEARANCE, BLOCKED_AFTER, RESUME, WAY_MARGIN, WayState, base_gap,
-                                decide, facing_forwards, trail_back, way_cap, way_gap)
+from sim_peer.physics.way_guard import (
+    BACK_OFF,
+    BACK_SPEED,
+    BASE_CLEARANCE,
+    BLOCKED_AFTER,
+    RESUME,
+    WAY_MARGIN,
+    WayState,
+    base_gap,
+    decide,
+    facing_forwards,
+    trail_back,
+    way_cap,
+    way_gap,
+)
 from sim_peer.physics.world import SimWorld
 
 
@@ -106,7 +119,9 @@ def test_two_bases_driven_at_each_other_stop_apart_say_so_and_one_gives_way():
     away = 1.0 if yielder == "base2" else -1.0  # base2 came from +x, base1 from -x
     assert away * (y.ctrl.x - stood) > 0.75 * BACK_OFF  # backwards, the way it came
     assert y.ctrl.follower is None and k.ctrl.follower is not None  # the other keeps its path
-    assert y.ctrl.paths_done == 0 and not [n for _, n in notes if n.kind == EventKind.PATH_DONE]  # no path of its user's done
+    assert y.ctrl.paths_done == 0 and not [
+        n for _, n in notes if n.kind == EventKind.PATH_DONE
+    ]  # no path of its user's done
     assert yielder not in world.traffic.waiters
     # it stands where it backed off to (its user plans again): the other comes on and stops before it again, and after
     # BLOCKED_AFTER drops its path and reports blocked as before
@@ -167,8 +182,11 @@ def test_another_base_within_reach_may_be_left_never_neared():
 
 
 @settings(max_examples=200, deadline=None)
-@given(pts=st.lists(st.tuples(st.floats(-2, 2), st.floats(-2, 2)), min_size=2, max_size=20),
-       centre=st.tuples(st.floats(-2, 2), st.floats(-2, 2)), radius=st.floats(0.1, 1.5))
+@given(
+    pts=st.lists(st.tuples(st.floats(-2, 2), st.floats(-2, 2)), min_size=2, max_size=20),
+    centre=st.tuples(st.floats(-2, 2), st.floats(-2, 2)),
+    radius=st.floats(0.1, 1.5),
+)
 def test_up_to_the_gap_a_base_never_comes_nearer_another_than_its_reach_or_than_it_stands(pts, centre, radius):
     path = np.array(pts)
     gap = base_gap(path, centre, radius)
@@ -191,7 +209,11 @@ def test_two_bases_crossing_stop_apart_and_both_get_through(later):
     r1.ctrl.x, r1.ctrl.y, r1.ctrl.yaw = *a0, math.atan2(1.8, 3.0)
 
     def line(a, b):
-        return np.linspace(a[0], b[0], 61), np.linspace(a[1], b[1], 61), np.full(61, math.atan2(b[1] - a[1], b[0] - a[0]))
+        return (
+            np.linspace(a[0], b[0], 61),
+            np.linspace(a[1], b[1], 61),
+            np.full(61, math.atan2(b[1] - a[1], b[0] - a[0])),
+        )
 
     r1.path(*line(a0, a1))
     notes, closest, started = [], math.inf, False

@@ -74,7 +74,12 @@ def test_out_of_range_targets_are_clamped_and_reported():
 
 @pytest.mark.parametrize(
     "q, reason",
-    [([0.0] * 5, "wrong_joint_count"), ([0.0] * 7, "wrong_joint_count"), ([0, 0, math.nan, 0, 0, 0], "not_finite"), ([math.inf] * 6, "not_finite")],
+    [
+        ([0.0] * 5, "wrong_joint_count"),
+        ([0.0] * 7, "wrong_joint_count"),
+        ([0, 0, math.nan, 0, 0, 0], "not_finite"),
+        ([math.inf] * 6, "not_finite"),
+    ],
 )
 def test_bad_joint_targets_are_rejected_and_the_last_valid_one_kept(q, reason):
     w = SimWorld("arm_cell")
@@ -281,7 +286,9 @@ def test_free_bodies_are_simulated_while_robots_stay_kinematic(tmp_path):
     run(w, 1.0)
     w.sync()
     assert w.data.xpos[w.model.body("box").id][2] < 0.06  # fell onto the floor under gravity
-    np.testing.assert_allclose(w.data.qpos[w.robot("arm").qadr], [0.0, 0.5, 0.0, 0.0, 0.0, 0.0], atol=1e-12)  # held, no sag
+    np.testing.assert_allclose(
+        w.data.qpos[w.robot("arm").qadr], [0.0, 0.5, 0.0, 0.0, 0.0, 0.0], atol=1e-12
+    )  # held, no sag
     assert not SimWorld("combined").dynamic  # only kinematic robots and markers: no dynamics to integrate
 
 
@@ -305,6 +312,8 @@ def test_the_sim_core_does_not_import_zenoh():
     import subprocess
     import sys
 
-    code = "import sys, sim_peer, sim_peer.physics.world, sim_peer.physics.pacing, robots; print('zenoh' in sys.modules)"
+    code = (
+        "import sys, sim_peer, sim_peer.physics.world, sim_peer.physics.pacing, robots; print('zenoh' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.stdout.strip() == "False", out.stderr

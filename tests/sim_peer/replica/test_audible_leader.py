@@ -30,8 +30,12 @@ def _speak(leader: Fabric, world: str, stop: threading.Event, said: list[int]) -
 def test_a_primary_that_steps_down_waits_for_a_leader_it_hears_whose_token_is_missing(world, router, connect, procs):
     port = router[1]
     roles = SimRoles(connect("tool", "roles"))  # the roles sim-b shows (its role token)
-    sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", f"tcp/127.0.0.1:{port}",
-                                     "--id", "sim-b"), name="sim-b")
+    sim = procs.start(
+        robofabric_cmd(
+            "sim", "--scene", "combined", "--world", world, "--connect", f"tcp/127.0.0.1:{port}", "--id", "sim-b"
+        ),
+        name="sim-b",
+    )
     roles.wait("sim-b", "primary", term=1, timeout=90, seen=lambda: procs.output(sim)[-1500:])
     # a leader with a higher term whose token this sim never sees: its streams are all it has of it
     leader = Fabric(client_config(world, port), kind="sim", peer_id="sim-a", token=False)
@@ -42,11 +46,17 @@ def test_a_primary_that_steps_down_waits_for_a_leader_it_hears_whose_token_is_mi
     try:
         roles.wait("sim-b", "standby", term=2, leader="sim-a", timeout=60, seen=lambda: procs.output(sim)[-1500:])
         # its new view of the live sims (after a lease's wait for sim-a's token) lacks sim-a: heard, it is not gone
-        wait_until(lambda: "still heard" in procs.output(sim) or roles.ever("sim-b", "primary", 3), timeout=30,
-                   what="the standby's look at the live sims", seen=lambda: procs.output(sim)[-1500:])
+        wait_until(
+            lambda: "still heard" in procs.output(sim) or roles.ever("sim-b", "primary", 3),
+            timeout=30,
+            what="the standby's look at the live sims",
+            seen=lambda: procs.output(sim)[-1500:],
+        )
         assert "still heard" in procs.output(sim), procs.output(sim)[-1500:]
         until = said[0] + 150  # three seconds of the leader speaking: past a lease
-        wait_until(lambda: roles.ever("sim-b", "primary", 3) or said[0] >= until, timeout=60, what="the leader speaking on")
+        wait_until(
+            lambda: roles.ever("sim-b", "primary", 3) or said[0] >= until, timeout=60, what="the leader speaking on"
+        )
         assert not roles.ever("sim-b", "primary", 3) and roles.role("sim-b") == "standby", procs.output(sim)[-1500:]
     finally:
         stop.set()

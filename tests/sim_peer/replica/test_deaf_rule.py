@@ -16,10 +16,26 @@ LEASE = 2.0
 CUT = "its link is down"
 
 
-def look(now: float, *, held: bool = False, cut: str = "", frozen: bool = False, beat: hr.Heartbeat | None = None,
-         own_gone_at: float = -math.inf, answered_at: float | None = None) -> dr.Look:
-    return dr.Look(now=now, held=held, cut=cut, frozen=frozen, beat=beat or hr.Heartbeat(last_tick=now),
-                   own_gone_at=own_gone_at, lease=LEASE, answered_at=answered_at)
+def look(
+    now: float,
+    *,
+    held: bool = False,
+    cut: str = "",
+    frozen: bool = False,
+    beat: hr.Heartbeat | None = None,
+    own_gone_at: float = -math.inf,
+    answered_at: float | None = None,
+) -> dr.Look:
+    return dr.Look(
+        now=now,
+        held=held,
+        cut=cut,
+        frozen=frozen,
+        beat=beat or hr.Heartbeat(last_tick=now),
+        own_gone_at=own_gone_at,
+        lease=LEASE,
+        answered_at=answered_at,
+    )
 
 
 def test_a_primary_cut_off_holds_its_robots_once_and_resumes_when_it_hears_again():
@@ -70,9 +86,16 @@ def test_a_primary_that_hears_and_is_not_frozen_does_nothing():
 
 
 looks = hs.lists(
-    hs.tuples(hs.floats(0.01, 2.0), hs.sampled_from(["", CUT, "the router no longer holds its token"]), hs.booleans(),
-              hs.sampled_from(["tick", "freeze", "unlink", "own"]), hs.booleans()),
-    min_size=1, max_size=50)
+    hs.tuples(
+        hs.floats(0.01, 2.0),
+        hs.sampled_from(["", CUT, "the router no longer holds its token"]),
+        hs.booleans(),
+        hs.sampled_from(["tick", "freeze", "unlink", "own"]),
+        hs.booleans(),
+    ),
+    min_size=1,
+    max_size=50,
+)
 
 
 @settings(max_examples=200, deadline=None)

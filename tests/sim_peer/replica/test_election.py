@@ -173,7 +173,12 @@ def test_a_standby_never_follows_a_lower_term(heard):
 def test_two_shards_elect_apart():
     """Two primaries of disjoint robots never fight (each hears only its own robots' terms: the host filters);
     when shard B's primary dies, B's standby takes over even though shard A's sims have lower ids."""
-    shards = {"a": frozenset({"base0"}), "a-sb": frozenset({"base0"}), "b": frozenset({"base1"}), "b-sb": frozenset({"base1"})}
+    shards = {
+        "a": frozenset({"base0"}),
+        "a-sb": frozenset({"base0"}),
+        "b": frozenset({"base1"}),
+        "b-sb": frozenset({"base1"}),
+    }
     view = el.shard_view(frozenset(shards) - {"b"}, shards, "b-sb", frozenset({"base1"}))
     assert view == frozenset({"b-sb"})
     s = el.step(el.start("b-sb", standby=True), el.Heard("b", 1))[0]
@@ -187,8 +192,12 @@ def test_two_shards_elect_apart():
 
 
 @settings(max_examples=200, deadline=None)
-@given(hs.sets(hs.sampled_from(IDS)), hs.dictionaries(hs.sampled_from(IDS), hs.frozensets(hs.sampled_from(["r0", "r1", "r2"]))),
-       hs.sampled_from(IDS), hs.frozensets(hs.sampled_from(["r0", "r1", "r2"]), min_size=1))
+@given(
+    hs.sets(hs.sampled_from(IDS)),
+    hs.dictionaries(hs.sampled_from(IDS), hs.frozensets(hs.sampled_from(["r0", "r1", "r2"]))),
+    hs.sampled_from(IDS),
+    hs.frozensets(hs.sampled_from(["r0", "r1", "r2"]), min_size=1),
+)
 def test_a_shard_view_is_the_live_sims_that_share_a_robot_or_are_not_known(live, shards, me, mine):
     view = el.shard_view(frozenset(live), shards, me, mine)
     assert view <= frozenset(live) | {me}

@@ -66,7 +66,11 @@ class Tape:
 
     def of(self, robot, stream, term=None):
         with self.lock:
-            return [s for s in self.items if s.key.endswith(f"/{robot}/{stream}") and (term is None or s.msg.header.term == term)]
+            return [
+                s
+                for s in self.items
+                if s.key.endswith(f"/{robot}/{stream}") and (term is None or s.msg.header.term == term)
+            ]
 
     def by(self, source):
         with self.lock:
@@ -79,15 +83,23 @@ def _send(fab, world, robot, command, user, cmd) -> bool:
 
 
 def _start(procs, world, ep, pid, *extra):
-    return procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep, "--id", pid, *extra), name=pid)
+    return procs.start(
+        robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep, "--id", pid, *extra), name=pid
+    )
 
 
 def _pair(procs, world, port, roles: SimRoles):
     ep = f"tcp/127.0.0.1:{port}"
     primary = _start(procs, world, ep, "sim-a")
     standby = _start(procs, world, ep, "sim-b", "--standby")
-    roles.wait("sim-b", "standby", term=1, leader="sim-a", timeout=90,
-               seen=lambda: (procs.output(primary)[-1500:], procs.output(standby)[-1500:]))
+    roles.wait(
+        "sim-b",
+        "standby",
+        term=1,
+        leader="sim-a",
+        timeout=90,
+        seen=lambda: (procs.output(primary)[-1500:], procs.output(standby)[-1500:]),
+    )
     return primary, standby
 
 
@@ -101,8 +113,12 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
     fb.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
     alice = OwnershipClient(fa, "alice", renew_s=0.2, timeout=10.0).start()
     bob = OwnershipClient(fb, "bob", renew_s=0.2, timeout=10.0).start()
-    wait_until(lambda: alice.record("arm1") is not None and bob.record("base1") is not None and tape.of("base1", "pose"),
-               timeout=30, what="records and poses", seen=lambda: (alice.snapshot(), len(tape.items)))
+    wait_until(
+        lambda: alice.record("arm1") is not None and bob.record("base1") is not None and tape.of("base1", "pose"),
+        timeout=30,
+        what="records and poses",
+        seen=lambda: (alice.snapshot(), len(tape.items)),
+    )
     assert alice.request("arm1", timeout=10).granted and bob.request("base1", timeout=10).granted
     ea, eb = alice.epoch("arm1"), bob.epoch("base1")
 
@@ -113,20 +129,35 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
     xs, ys = np.linspace(x0, gx, 20), np.linspace(y0, gy, 20)
     path_cmd = Command("bob", eb, Path(xs, ys, np.full(20, math.atan2(gy - y0, gx - x0))))
     # resent until they move: a first put on a fresh publisher can go out before the route to the sim exists
-    wait_until(lambda: alice.record("arm1").state == "moving" or _send(fa, world, "arm1", "joints", "alice", arm_cmd),
-               timeout=20, interval=0.5, what="arm moving")
-    wait_until(lambda: bob.record("base1").state == "moving" or _send(fb, world, "base1", "path", "bob", path_cmd),
-               timeout=20, interval=0.5, what="base moving")
-    wait_until(lambda: math.hypot(*(tape.of("base1", "pose")[-1].msg.position[:2] - np.array([x0, y0]))) > 0.2,
-               timeout=30, what="arm moving, base on its path", seen=lambda: (alice.record("arm1"), bob.record("base1")))
+    wait_until(
+        lambda: alice.record("arm1").state == "moving" or _send(fa, world, "arm1", "joints", "alice", arm_cmd),
+        timeout=20,
+        interval=0.5,
+        what="arm moving",
+    )
+    wait_until(
+        lambda: bob.record("base1").state == "moving" or _send(fb, world, "base1", "path", "bob", path_cmd),
+        timeout=20,
+        interval=0.5,
+        what="base moving",
+    )
+    wait_until(
+        lambda: math.hypot(*(tape.of("base1", "pose")[-1].msg.position[:2] - np.array([x0, y0]))) > 0.2,
+        timeout=30,
+        what="arm moving, base on its path",
+        seen=lambda: (alice.record("arm1"), bob.record("base1")),
+    )
 
     procs.kill(primary)  # SIGKILL
     t_kill = time.monotonic()
     # the standby shows itself primary after its peer has started streaming: wait for both
     streams = (("arm1", "joints"), ("arm1", "pose"), ("base1", "pose"), ("base1", "scan"))
-    wait_until(lambda: all(tape.of(r, s, 2) for r, s in streams) and roles.shows("sim-b", "primary", term=2),
-               timeout=20, what="state from the new authority and its role",
-               seen=lambda: ([(r, s, len(tape.of(r, s, 2))) for r, s in streams], procs.output(standby)[-1500:]))
+    wait_until(
+        lambda: all(tape.of(r, s, 2) for r, s in streams) and roles.shows("sim-b", "primary", term=2),
+        timeout=20,
+        what="state from the new authority and its role",
+        seen=lambda: ([(r, s, len(tape.of(r, s, 2))) for r, s in streams], procs.output(standby)[-1500:]),
+    )
     # every stream resumes from the new authority within 1 s of the kill, and of the old one's last sample
     for r, s in streams:
         first2, last1 = tape.of(r, s, 2)[0], tape.of(r, s, 1)[-1]
@@ -154,17 +185,31 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
     assert new_j.msg.header.seq > old_j.msg.header.seq  # sequence numbers continue
 
     # owners keep their robots and their epochs; the new authority is the one they follow
-    wait_until(lambda: alice.record("arm1").authority == "sim-b" and bob.record("base1").authority == "sim-b", timeout=10,
-               what="records from sim-b", seen=lambda: (alice.record("arm1"), bob.record("base1")))
+    wait_until(
+        lambda: alice.record("arm1").authority == "sim-b" and bob.record("base1").authority == "sim-b",
+        timeout=10,
+        what="records from sim-b",
+        seen=lambda: (alice.record("arm1"), bob.record("base1")),
+    )
     own_events = [(e.kind, e.object, e.user, e.reason, e.header.source) for e in events if e.kind.startswith("own_")]
-    assert alice.owns("arm1") and alice.epoch("arm1") == ea and bob.owns("base1") and bob.epoch("base1") == eb, own_events
+    assert alice.owns("arm1") and alice.epoch("arm1") == ea and bob.owns("base1") and bob.epoch("base1") == eb, (
+        own_events
+    )
     assert alice.record("arm1").header.term == 2
 
     # the motions go on to their ends: the arm reaches alice's target, the base the path's end
-    wait_until(lambda: np.abs(tape.of("arm1", "joints", 2)[-1].msg.q - target).max() < 1e-3, timeout=90,
-               what="arm at alice's target", seen=lambda: tape.of("arm1", "joints", 2)[-1].msg.q)
-    wait_until(lambda: any(e.kind == "path_done" and e.object == "base1" and e.header.term == 2 for e in events), timeout=60,
-               what="path_done from the new authority", seen=lambda: [e.kind for e in events[-10:]])
+    wait_until(
+        lambda: np.abs(tape.of("arm1", "joints", 2)[-1].msg.q - target).max() < 1e-3,
+        timeout=90,
+        what="arm at alice's target",
+        seen=lambda: tape.of("arm1", "joints", 2)[-1].msg.q,
+    )
+    wait_until(
+        lambda: any(e.kind == "path_done" and e.object == "base1" and e.header.term == 2 for e in events),
+        timeout=60,
+        what="path_done from the new authority",
+        seen=lambda: [e.kind for e in events[-10:]],
+    )
     end = tape.of("base1", "pose", 2)[-1].msg.position
     assert math.hypot(end[0] - gx, end[1] - gy) <= 0.25, (end, gx, gy)
     # leases resumed: still owned after several lease periods, and commands under the old epoch are obeyed
@@ -173,7 +218,9 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
     assert alice.owns("arm1") and alice.epoch("arm1") == ea and bob.owns("base1") and bob.epoch("base1") == eb
     fa.publish(keys.robot_cmd(world, "arm1", "joints", "alice"), Command("alice", ea, JointTarget(np.zeros(6))))
     wait_until(lambda: np.abs(tape.of("arm1", "joints", 2)[-1].msg.q).max() < 1e-3, timeout=60, what="arm back at zero")
-    assert not any(e.kind == "reject" and e.user in ("alice", "bob") for e in events), [e for e in events if e.kind == "reject"]
+    assert not any(e.kind == "reject" and e.user in ("alice", "bob") for e in events), [
+        e for e in events if e.kind == "reject"
+    ]
     assert time.monotonic() - t_kill < 300
     alice.close(), bob.close()
 
@@ -183,36 +230,58 @@ def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, 
     roles = SimRoles(connect("tool", "roles"))
     primary, standby = _pair(procs, world, port, roles)
     mcap = tmp_path / "run.mcap"
-    recorder = procs.start(robofabric_cmd("record", "-o", str(mcap), "-q", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"),
-                           name="recorder")
+    recorder = procs.start(
+        robofabric_cmd("record", "-o", str(mcap), "-q", "--world", world, "--connect", f"tcp/127.0.0.1:{port}"),
+        name="recorder",
+    )
     fa = connect("user", "alice")
     tape = Tape(fa, world)
     events: list[Event] = []
     fa.subscribe(keys.event_all(world), lambda k, e: events.append(e), expected=Event)
     alice = OwnershipClient(fa, "alice", renew_s=0.2, timeout=10.0).start()
-    wait_until(lambda: alice.record("arm1") is not None and tape.of("arm1", "joints", 1), timeout=30, what="record and joints")
+    wait_until(
+        lambda: alice.record("arm1") is not None and tape.of("arm1", "joints", 1), timeout=30, what="record and joints"
+    )
     assert alice.request("arm1", timeout=10).granted
     ea = alice.epoch("arm1")
     cmd = Command("alice", ea, JointTarget(np.radians([40.0, 20.0, -20.0, 10.0, 30.0, 0.0]), speed_scale=0.05))
     # resent until it moves: a first put on a fresh publisher can go out before the route to the sim exists
-    wait_until(lambda: alice.record("arm1").state == "moving" or _send(fa, world, "arm1", "joints", "alice", cmd), timeout=20,
-               interval=0.5, what="arm moving", seen=lambda: (alice.record("arm1"), tape.of("arm1", "joints")[-1].msg.q,
-                                                              [e for e in events if e.kind == "reject"][-3:]))
+    wait_until(
+        lambda: alice.record("arm1").state == "moving" or _send(fa, world, "arm1", "joints", "alice", cmd),
+        timeout=20,
+        interval=0.5,
+        what="arm moving",
+        seen=lambda: (
+            alice.record("arm1"),
+            tape.of("arm1", "joints")[-1].msg.q,
+            [e for e in events if e.kind == "reject"][-3:],
+        ),
+    )
 
     wait_until(mcap.exists, timeout=60, what="the recorder's file", seen=lambda: procs.output(recorder)[-800:])
     size = mcap.stat().st_size
-    wait_until(lambda: mcap.stat().st_size > size + 1000, timeout=30, what="the recorder writing",
-               seen=lambda: procs.output(recorder)[-800:])  # a chunk of samples flushed: it hears term 1
+    wait_until(
+        lambda: mcap.stat().st_size > size + 1000,
+        timeout=30,
+        what="the recorder writing",
+        seen=lambda: procs.output(recorder)[-800:],
+    )  # a chunk of samples flushed: it hears term 1
     stop_ns = time.time_ns()
     os.kill(primary.pid, signal.SIGSTOP)
     try:
-        wait_until(lambda: tape.of("arm1", "joints", 2), timeout=30, what="the standby takes over after the lease",
-                   seen=lambda: procs.output(standby)[-1500:])
+        wait_until(
+            lambda: tape.of("arm1", "joints", 2),
+            timeout=30,
+            what="the standby takes over after the lease",
+            seen=lambda: procs.output(standby)[-1500:],
+        )
         wait_until(lambda: alice.record("arm1").authority == "sim-b", timeout=10, what="alice follows sim-b")
     finally:
         cont_ns = time.time_ns()
         os.kill(primary.pid, signal.SIGCONT)
-    roles.wait("sim-a", "standby", term=2, leader="sim-b", timeout=60, seen=lambda: procs.output(primary)[-1500:])  # stepped down
+    roles.wait(
+        "sim-a", "standby", term=2, leader="sim-b", timeout=60, seen=lambda: procs.output(primary)[-1500:]
+    )  # stepped down
     t_down = time.monotonic()
     n = len(tape.of("arm1", "joints", 2))
     wait_until(lambda: len(tape.of("arm1", "joints", 2)) > n + 50, timeout=20, what="term-2 joints go on")
@@ -223,8 +292,12 @@ def test_sigstop_past_the_lease_then_sigcont_steps_down(world, router, connect, 
     # consumer's fence drops them)
     first2 = min(s.msg.header.wall_ns for s in tape.items if s.msg.header.term == 2)
     late1 = [s for s in tape.items if s.msg.header.term == 1 and s.msg.header.wall_ns > first2]
-    assert not late1, ([(s.key, (s.msg.header.wall_ns - first2) / 1e9, s.msg.header.seq) for s in late1[:5]],
-                       (stop_ns - first2) / 1e9, (cont_ns - first2) / 1e9, procs.output(primary)[-1500:])
+    assert not late1, (
+        [(s.key, (s.msg.header.wall_ns - first2) / 1e9, s.msg.header.seq) for s in late1[:5]],
+        (stop_ns - first2) / 1e9,
+        (cont_ns - first2) / 1e9,
+        procs.output(primary)[-1500:],
+    )
     assert not [s for s in tape.items if s.t > t_down + 0.5 and s.msg.header.source == "sim-a"]
     # and the recording of the whole run says the same
     procs.kill(recorder, signal.SIGTERM)
@@ -269,7 +342,9 @@ def _ownership_story(tape: Tape) -> list[str]:
             now = (m.owner, m.epoch, m.state, m.queue, h.term)
             if last.get(m.object) != now:
                 last[m.object] = now
-                out.append(f"{s.t:.3f} own {m.object}: owner={m.owner!r} epoch={m.epoch} {m.state} queue={m.queue} term={h.term} by {h.source}")
+                out.append(
+                    f"{s.t:.3f} own {m.object}: owner={m.owner!r} epoch={m.epoch} {m.state} queue={m.queue} term={h.term} by {h.source}"
+                )
         elif isinstance(m, Event):
             out.append(f"{s.t:.3f} event {m.kind} {m.object} user={m.user!r} {m.reason!r} term={h.term} by {h.source}")
     return out
@@ -297,8 +372,12 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
     sims["sim-b"] = _start(procs, world, ep, "sim-b", "--standby")
     for sid in ("sim-b", "sim-c"):
         roles.wait(sid, "standby", term=1, leader="sim-a", timeout=90, seen=lambda: procs.output(sims[sid])[-1500:])
-    wait_until(lambda: "arms arm1" in procs.output(comp), timeout=90, what="compute peer serving arm1",
-               seen=lambda: procs.output(comp)[-1500:])
+    wait_until(
+        lambda: "arms arm1" in procs.output(comp),
+        timeout=90,
+        what="compute peer serving arm1",
+        seen=lambda: procs.output(comp)[-1500:],
+    )
 
     kills: dict[str, float] = {}
     path_sent: list[float] = []
@@ -312,8 +391,15 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
         elif "sim-a" not in kills and h.term == 1 and s.key.endswith("/arm1/joints") and np.abs(s.msg.dq).max() > 0.05:
             os.kill(sims["sim-a"].pid, signal.SIGKILL)
             kills["sim-a"] = time.monotonic()
-        elif ("sim-a" in kills and "sim-b" not in kills and path_sent and h.term == 2 and s.t > path_sent[0]
-              and s.key.endswith("/base1/pose") and _speed(s.msg) > 0.05):
+        elif (
+            "sim-a" in kills
+            and "sim-b" not in kills
+            and path_sent
+            and h.term == 2
+            and s.t > path_sent[0]
+            and s.key.endswith("/base1/pose")
+            and _speed(s.msg) > 0.05
+        ):
             os.kill(sims["sim-b"].pid, signal.SIGKILL)
             kills["sim-b"] = time.monotonic()
 
@@ -322,26 +408,42 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
     results: dict[str, object] = {}
     # bob does not take his turn on the arm at the end: alice holds it still between her targets, and a
     # request on a still robot takes it (the paper's policy), which would end her run, not test failover
-    threads = [_scenario(world, port, "test-b", "bob", results, arm_id=None),
-               _scenario(world, port, "test-a", "alice", results, arm_id="arm1", points=8)]
+    threads = [
+        _scenario(world, port, "test-b", "bob", results, arm_id=None),
+        _scenario(world, port, "test-a", "alice", results, arm_id="arm1", points=8),
+    ]
 
     streams = (("arm1", "joints"), ("arm1", "pose"), ("base1", "pose"), ("base1", "scan"))
     for dead, heir, other, term in (("sim-a", "sim-b", "sim-c", 2), ("sim-b", "sim-c", None, 3)):
-        wait_until(lambda: dead in kills or not any(t.is_alive() for t in threads), timeout=180, what=f"the moment to kill {dead}",
-                   seen=lambda: (results, len(path_sent)))
+        wait_until(
+            lambda: dead in kills or not any(t.is_alive() for t in threads),
+            timeout=180,
+            what=f"the moment to kill {dead}",
+            seen=lambda: (results, len(path_sent)),
+        )
         assert dead in kills, (f"the scenarios ended before {dead} was killed", results)
-        wait_until(lambda: all(tape.of(r, s, term) for r, s in streams) and roles.shows(heir, "primary", term=term),
-                   timeout=20,
-                   what=f"{heir} serving term {term}", seen=lambda: procs.output(sims[heir])[-1500:])
+        wait_until(
+            lambda: all(tape.of(r, s, term) for r, s in streams) and roles.shows(heir, "primary", term=term),
+            timeout=20,
+            what=f"{heir} serving term {term}",
+            seen=lambda: procs.output(sims[heir])[-1500:],
+        )
         for r, s in streams:  # streams resume within 1 s, from the heir
             first = tape.of(r, s, term)[0]
-            assert first.msg.header.source == heir and first.t - kills[dead] <= 1.0, (r, s, first.msg.header, first.t - kills[dead])
+            assert first.msg.header.source == heir and first.t - kills[dead] <= 1.0, (
+                r,
+                s,
+                first.msg.header,
+                first.t - kills[dead],
+            )
         info = obs.rpc.call(keys.srv(world, "world"), timeout=5.0, expected=WorldInfo)
         assert (info.header.term, info.header.source) == (term, heir), info.header
         if other is not None:
             # the other standby follows the heir and is no authority: nothing on the wire from it, and its
             # srv/state is a refusal (only the heir's answer comes back)
-            roles.wait(other, "standby", term=term, leader=heir, timeout=20, seen=lambda: procs.output(sims[other])[-1500:])
+            roles.wait(
+                other, "standby", term=term, leader=heir, timeout=20, seen=lambda: procs.output(sims[other])[-1500:]
+            )
             assert not roles.ever(other, "primary")
             states = obs.rpc.query(keys.srv(world, "state"), timeout=5.0, expected=WorldState, all_replies=True)
             assert [(r.message.header.source, r.message.header.term) for r in states] == [(heir, term)]
@@ -352,8 +454,12 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
     res_a, res_b = results["alice"], results["bob"]
     story = _ownership_story(tape)
     print("\n".join(story))  # shown on failure: who owned what, under which term
-    assert isinstance(res_a, ScenarioResult) and res_a.ok, res_a if not isinstance(res_a, ScenarioResult) else "\n".join(res_a.lines)
-    assert isinstance(res_b, ScenarioResult) and res_b.ok, res_b if not isinstance(res_b, ScenarioResult) else "\n".join(res_b.lines)
+    assert isinstance(res_a, ScenarioResult) and res_a.ok, (
+        res_a if not isinstance(res_a, ScenarioResult) else "\n".join(res_a.lines)
+    )
+    assert isinstance(res_b, ScenarioResult) and res_b.ok, (
+        res_b if not isinstance(res_b, ScenarioResult) else "\n".join(res_b.lines)
+    )
     assert res_a.figures["targets"] == 8 and res_a.figures["max_error_mm"] <= 5.0
     assert res_b.figures["goal_error_m"] <= 0.3
     # each owner acquired its robot once and kept it, under one epoch, through both take-overs: the
@@ -361,8 +467,11 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
     assert len([line for line in res_a.lines if line.startswith("owns arm1")]) == 1, res_a.lines
     assert len([line for line in res_b.lines if line.startswith("owns base1")]) == 1, res_b.lines
     for robot, user, terms in (("arm1", "alice", {1, 2}), ("base1", "bob", {2, 3})):  # the terms it was owned through
-        held = {(s.msg.header.term, s.msg.epoch) for s in tape.items
-                if isinstance(s.msg, OwnershipRecord) and s.msg.object == robot and s.msg.owner == user}
+        held = {
+            (s.msg.header.term, s.msg.epoch)
+            for s in tape.items
+            if isinstance(s.msg, OwnershipRecord) and s.msg.object == robot and s.msg.owner == user
+        }
         assert terms <= {t for t, _ in held} and len({e for _, e in held}) == 1, (robot, sorted(held))
     rejects = [s.msg for s in tape.items if isinstance(s.msg, Event) and s.msg.kind == "reject"]
     assert not rejects, rejects

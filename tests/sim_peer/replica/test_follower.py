@@ -29,15 +29,25 @@ class Followed:
         self.world, self.serving, self.now = world, False, 10.0
         self.heard: list[tuple[str, int]] = []
         self.seen: list[tuple[str, str, int]] = []
-        self.shard = ShardDirectory(fab, ["arm1"], live=lambda: frozenset(), stopping=threading.Event(),
-                                    on_learnt=lambda view: None)
+        self.shard = ShardDirectory(
+            fab, ["arm1"], live=lambda: frozenset(), stopping=threading.Event(), on_learnt=lambda view: None
+        )
         self.stopping, self.lock = threading.Event(), threading.RLock()
 
     def follower(self, fab, **kw) -> Follower:
-        return Follower(fab, world=lambda: self.world, election=lambda: self.election, shard=self.shard,
-                        heard=lambda *h: self.heard.append(h), seen_serving=lambda *s: self.seen.append(s),
-                        serving=lambda: self.serving, serving_lock=self.lock, stopping=self.stopping,
-                        clock=lambda: self.now, **kw)
+        return Follower(
+            fab,
+            world=lambda: self.world,
+            election=lambda: self.election,
+            shard=self.shard,
+            heard=lambda *h: self.heard.append(h),
+            seen_serving=lambda *s: self.seen.append(s),
+            serving=lambda: self.serving,
+            serving_lock=self.lock,
+            stopping=self.stopping,
+            clock=lambda: self.now,
+            **kw,
+        )
 
 
 def _joints(source: str, term: int, stamp: float, seq: int = 0) -> JointState:
@@ -139,8 +149,12 @@ def test_a_take_over_restores_the_snapshot_brought_forward_by_the_newer_joints(c
     follower = told.follower(fab)
     arm = leaders.robots["arm1"]
     q = np.array(arm.ctrl.q, dtype=float)
-    newer = JointState(tuple(f"j{i}" for i in range(len(q))), q, np.zeros(len(q)),
-                       header=Header(stamp=t + 0.01, seq=41, source="sim-a", term=3))
+    newer = JointState(
+        tuple(f"j{i}" for i in range(len(q))),
+        q,
+        np.zeros(len(q)),
+        header=Header(stamp=t + 0.01, seq=41, source="sim-a", term=3),
+    )
     follower.on_joints(joints_key, newer)
     follower.on_record("k", OwnershipRecord("arm1", epoch=2, header=Header(seq=3, source="sim-a", term=3)))
     with told.lock:

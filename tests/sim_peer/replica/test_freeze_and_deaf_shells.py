@@ -50,8 +50,9 @@ class Shard:
 
 
 def _guard(fab, roles: Electing, said: list[str], gap: float = 0.5) -> FreezeGuard:
-    return FreezeGuard(fab, roles=roles, shard=Shard(), stopping=threading.Event(), announce=said.append, gap=gap,
-                       clock=lambda: 100.0)
+    return FreezeGuard(
+        fab, roles=roles, shard=Shard(), stopping=threading.Event(), announce=said.append, gap=gap, clock=lambda: 100.0
+    )
 
 
 def test_a_primary_frozen_with_no_rival_publishes_again_at_once(connect):
@@ -68,12 +69,20 @@ def test_a_primary_frozen_with_no_rival_publishes_again_at_once(connect):
 def test_a_primary_frozen_past_the_lease_asks_who_holds_its_shard_and_reasserts(connect):
     fab, rival = connect("sim", "sim-a"), connect("sim", "sim-b")
     arm = RobotState("arm1", "arm", np.zeros(1), np.zeros(1), np.zeros(1))
-    rival.rpc.serve(keys.srv(fab.world, "state"),
-                    lambda key, request: WorldState(0.0, 0, (arm,), (), header=Header(source="sim-b", term=1)))
-    wait_until(lambda: any(pid == "sim-b" for _, pid in fab.live_peers("sim", timeout=1.0)), timeout=30,
-               what="the rival's token")
-    wait_until(lambda: fab.rpc.query(keys.srv(fab.world, "state"), timeout=1.0, expected=WorldState, all_replies=True),
-               timeout=30, what="the rival's srv/state at the router")
+    rival.rpc.serve(
+        keys.srv(fab.world, "state"),
+        lambda key, request: WorldState(0.0, 0, (arm,), (), header=Header(source="sim-b", term=1)),
+    )
+    wait_until(
+        lambda: any(pid == "sim-b" for _, pid in fab.live_peers("sim", timeout=1.0)),
+        timeout=30,
+        what="the rival's token",
+    )
+    wait_until(
+        lambda: fab.rpc.query(keys.srv(fab.world, "state"), timeout=1.0, expected=WorldState, all_replies=True),
+        timeout=30,
+        what="the rival's srv/state at the router",
+    )
     said: list[str] = []
     roles = Electing({"sim-a", "sim-b"})
     fab.stamp.muzzle()
@@ -119,8 +128,14 @@ def test_a_cut_off_primary_holds_its_robots_and_lets_them_go_when_it_hears_again
     fab = connect("sim", "sim-a")
     hearing, peer, said = Hearing(), Peer(), []
     serving: list[Peer | None] = [None]
-    stop = DeafStop(fab, hearing=hearing, serving=lambda: serving[0], stopping=threading.Event(), announce=said.append,
-                    clock=lambda: 100.0)
+    stop = DeafStop(
+        fab,
+        hearing=hearing,
+        serving=lambda: serving[0],
+        stopping=threading.Event(),
+        announce=said.append,
+        clock=lambda: 100.0,
+    )
     hearing.why = "its link is down"
     stop.look()
     assert said == [] and stop.state.holds == 0  # serving nothing (a standby): nothing to hold

@@ -23,7 +23,9 @@ def test_a_short_freeze_with_a_rival_asks_at_once_and_keeps_its_term():
 
 
 def test_a_freeze_longer_than_the_lease_listens_a_lease_then_asks_and_goes_on_under_a_new_term():
-    assert fr.plan(3.0, LEASE, frozenset({"s"})) == fr.FreezePlan(publish_now=False, listen_s=LEASE + 0.5, reassert=True)
+    assert fr.plan(3.0, LEASE, frozenset({"s"})) == fr.FreezePlan(
+        publish_now=False, listen_s=LEASE + 0.5, reassert=True
+    )
 
 
 def test_the_rivals_are_the_shards_sims_alive_when_the_freeze_began_or_since():

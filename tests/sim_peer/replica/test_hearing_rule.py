@@ -62,7 +62,9 @@ def test_a_tick_that_finds_the_link_down_marks_when_and_a_lost_token_then_went_w
 def test_a_cut_is_the_link_down_or_our_own_token_gone_for_a_while():
     assert hr.cut(connected=False, own_token_seen=True, own_gone_at=-math.inf, now=1.0) == "its link is down"
     assert hr.cut(connected=True, own_token_seen=True, own_gone_at=0.5, now=1.0) == ""
-    assert hr.cut(connected=True, own_token_seen=False, own_gone_at=0.5, now=1.0) == "the router no longer holds its token"
+    assert (
+        hr.cut(connected=True, own_token_seen=False, own_gone_at=0.5, now=1.0) == "the router no longer holds its token"
+    )
     assert hr.cut(connected=True, own_token_seen=False, own_gone_at=0.5, now=0.5 + hr.OWN_TOKEN_S + 0.1) == ""
 
 

@@ -37,7 +37,7 @@ def test_what_is_kept_is_the_newest_suffix_within_the_window_and_the_caps(items)
     assert len(kept) <= 8 and buf.kept_bytes <= 1000
     assert buf.kept_bytes == sum(k.size for k in kept)
     assert all(k.arrival >= clock.now - 3.0 for k in kept)
-    assert [k.key for k in kept] == [key for _, key, _ in sent[len(sent) - len(kept):]]  # the newest, in order
+    assert [k.key for k in kept] == [key for _, key, _ in sent[len(sent) - len(kept) :]]  # the newest, in order
     if kept and len(kept) < len(sent):  # the one dropped just before the suffix broke a limit with it
         t, _, size = sent[len(sent) - len(kept) - 1]
         assert t < clock.now - 3.0 or len(kept) == 8 or buf.kept_bytes + size > 1000

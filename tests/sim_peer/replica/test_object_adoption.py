@@ -50,15 +50,24 @@ def _serve_world(fab, *, objects: bool) -> None:
 
 def _adoption(fab, server, clock, stopping=None, after_s=0.05):
     said: list[str] = []
-    part = ObjectAdoption(fab, server, stopping=stopping or threading.Event(), announce=said.append,
-                          clock=lambda: clock[0], after_s=after_s)
+    part = ObjectAdoption(
+        fab,
+        server,
+        stopping=stopping or threading.Event(),
+        announce=said.append,
+        clock=lambda: clock[0],
+        after_s=after_s,
+    )
     return part, said
 
 
 def _wait_listed(fab, n: int) -> None:
     """Until ``n`` sims answer ``srv/world`` (a queryable takes a moment to reach the router)."""
-    wait_until(lambda: len(fab.rpc.query(keys.srv(fab.world, "world"), timeout=1.0, all_replies=True)) >= n,
-               timeout=30, what=f"{n} sims on srv/world")
+    wait_until(
+        lambda: len(fab.rpc.query(keys.srv(fab.world, "world"), timeout=1.0, all_replies=True)) >= n,
+        timeout=30,
+        what=f"{n} sims on srv/world",
+    )
 
 
 def test_the_lowest_sim_adopts_orphaned_objects_and_announces_on_its_clock(connect):
@@ -71,8 +80,9 @@ def test_the_lowest_sim_adopts_orphaned_objects_and_announces_on_its_clock(conne
     part, said = _adoption(a, server, clock)
     assert part.adopt_if_orphaned()
     assert server.adopted == 1
-    assert said == ["sim sim-a: no sim serves the scene objects any more; serving box, goal with my robots (term 4) "
-                    "in 250 ms"]
+    assert said == [
+        "sim sim-a: no sim serves the scene objects any more; serving box, goal with my robots (term 4) in 250 ms"
+    ]
     # the other sim is not the lowest: it asks its server nothing
     other = RecordingServer(clock)
     assert not _adoption(b, other, clock)[0].adopt_if_orphaned() and other.adopted == 0

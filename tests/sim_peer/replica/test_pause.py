@@ -41,7 +41,9 @@ class Joints:
 @pytest.mark.parametrize("pause_s", [3.0, 10.0])
 def test_a_paused_sim_without_standby_comes_back_and_owners_keep_their_robots(world, router, connect, procs, pause_s):
     ep = f"tcp/127.0.0.1:{router[1]}"
-    sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep, "--id", "sim-a"), name="sim")
+    sim = procs.start(
+        robofabric_cmd("sim", "--scene", "combined", "--world", world, "--connect", ep, "--id", "sim-a"), name="sim"
+    )
     fa = connect("user", "alice")
     joints = Joints(fa, world, "arm1")
     events: list[Event] = []
@@ -54,8 +56,12 @@ def test_a_paused_sim_without_standby_comes_back_and_owners_keep_their_robots(wo
 
 
 def _pause_and_check(world, procs, sim, fa, alice, joints, events, pause_s) -> None:
-    wait_until(lambda: alice.record("arm1") is not None and joints.since(0.0), timeout=60, what="the sim's record and joints",
-               seen=lambda: procs.output(sim)[-1500:])
+    wait_until(
+        lambda: alice.record("arm1") is not None and joints.since(0.0),
+        timeout=60,
+        what="the sim's record and joints",
+        seen=lambda: procs.output(sim)[-1500:],
+    )
     assert alice.request("arm1", timeout=10).granted
     epoch = alice.epoch("arm1")
 
@@ -65,8 +71,13 @@ def _pause_and_check(world, procs, sim, fa, alice, joints, events, pause_s) -> N
         return False
 
     first = [30.0, 10.0, -10.0, 0.0, 20.0, 0.0]
-    wait_until(lambda: np.allclose(np.degrees(joints.since(0.0)[-1].q), first, atol=1.0) or send(first), timeout=30, interval=0.5,
-               what="the arm at its first target", seen=lambda: np.degrees(joints.since(0.0)[-1].q))
+    wait_until(
+        lambda: np.allclose(np.degrees(joints.since(0.0)[-1].q), first, atol=1.0) or send(first),
+        timeout=30,
+        interval=0.5,
+        what="the arm at its first target",
+        seen=lambda: np.degrees(joints.since(0.0)[-1].q),
+    )
 
     os.kill(sim.pid, signal.SIGSTOP)
     try:
@@ -74,8 +85,12 @@ def _pause_and_check(world, procs, sim, fa, alice, joints, events, pause_s) -> N
     finally:
         os.kill(sim.pid, signal.SIGCONT)
     resumed, resumed_ns = time.monotonic(), time.time_ns()
-    wait_until(lambda: len(joints.since(resumed)) > 20, timeout=20, what="joints again after SIGCONT",
-               seen=lambda: procs.output(sim)[-1500:])
+    wait_until(
+        lambda: len(joints.since(resumed)) > 20,
+        timeout=20,
+        what="joints again after SIGCONT",
+        seen=lambda: procs.output(sim)[-1500:],
+    )
     with joints.lock:  # printed for the record (docs/benchmarks/class.md), never asserted on
         first = min(at for at, js in joints.items if at > resumed and js.header.wall_ns > resumed_ns)
     print(f"paused {pause_s:.0f} s: first joints published after SIGCONT arrived {first - resumed:.3f} s after it")
@@ -84,9 +99,13 @@ def _pause_and_check(world, procs, sim, fa, alice, joints, events, pause_s) -> N
     assert (rec.owner, rec.epoch) == ("alice", epoch), (rec, procs.output(sim)[-1500:])
     # her commands are taken again: the arm goes to a second target
     second = [-20.0, 0.0, 10.0, 0.0, -10.0, 0.0]
-    wait_until(lambda: np.allclose(np.degrees(joints.since(resumed)[-1].q), second, atol=1.0) or send(second), timeout=30,
-               interval=0.5, what="the arm at its second target after the pause",
-               seen=lambda: (np.degrees(joints.since(resumed)[-1].q), [e.reason for e in events if e.kind == "reject"][-3:]))
+    wait_until(
+        lambda: np.allclose(np.degrees(joints.since(resumed)[-1].q), second, atol=1.0) or send(second),
+        timeout=30,
+        interval=0.5,
+        what="the arm at its second target after the pause",
+        seen=lambda: (np.degrees(joints.since(resumed)[-1].q), [e.reason for e in events if e.kind == "reject"][-3:]),
+    )
     # kept past a lease after the pause too (a late expiry would show here)
     t = time.monotonic()
     wait_until(lambda: time.monotonic() > t + 3.0 and len(joints.since(t)) > 100, timeout=20, what="3 s of joints")

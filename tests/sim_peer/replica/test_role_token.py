@@ -19,9 +19,16 @@ def test_a_role_key_names_the_sim_its_role_term_and_leader_and_parses_back():
     assert key == "rf/w/peer/sim/sim-b/standby/3/sim-a"
     p = keys.parse(key)
     assert (p.category, p.subject, p.leaf, p.rest) == ("sim_role", "sim-b", "standby", ("3", "sim-a"))
-    assert keys.sim_roles_all("w") == "rf/w/peer/sim/*/*/*/*" and keys.parse(keys.peer("w", "sim", "sim-b")).category == "peer"
-    for bad in (("sim-b", "leader", 3, "sim-a"), ("sim-b", "primary", -1, "sim-b"), ("sim b", "primary", 1, "sim-b"),
-                ("sim-b", "primary", 1, "")):
+    assert (
+        keys.sim_roles_all("w") == "rf/w/peer/sim/*/*/*/*"
+        and keys.parse(keys.peer("w", "sim", "sim-b")).category == "peer"
+    )
+    for bad in (
+        ("sim-b", "leader", 3, "sim-a"),
+        ("sim-b", "primary", -1, "sim-b"),
+        ("sim b", "primary", 1, "sim-b"),
+        ("sim-b", "primary", 1, ""),
+    ):
         with pytest.raises(ValueError):
             keys.sim_role("w", *bad)
     with pytest.raises(ValueError):
@@ -56,7 +63,9 @@ def test_the_watch_keeps_what_each_sim_shows_now_and_every_role_shown():
     assert roles.now("sim-b") == SimRole("sim-b", "standby", 1, "sim-a") and roles.role("sim-a") == ""
     on(keys.sim_role("w", "sim-b", "primary", 2, "sim-b"), True)  # declared before the old one goes
     on(keys.sim_role("w", "sim-b", "standby", 1, "sim-a"), False)
-    assert roles.role("sim-b") == "primary" and roles.ever("sim-b", "standby", 1) and not roles.ever("sim-b", "standby", 2)
+    assert (
+        roles.role("sim-b") == "primary" and roles.ever("sim-b", "standby", 1) and not roles.ever("sim-b", "standby", 2)
+    )
     assert roles.wait("sim-b", "primary", term=2, timeout=1) == SimRole("sim-b", "primary", 2, "sim-b")
     on(keys.sim_role("w", "sim-b", "primary", 2, "sim-b"), False)  # killed: its tokens go
     assert roles.now("sim-b") is None and len(roles.shown) == 2

@@ -48,10 +48,19 @@ class Effects:
         self.shard, self.lock, self.stopping = Shard(), threading.RLock(), threading.Event()
 
     def roles(self, fab, election: el.Election) -> Roles:
-        return Roles(fab, election, shard=self.shard, serving_lock=self.lock, stopping=self.stopping,
-                     announce=self.said.append, take_over=lambda t0, former: self.taken.append((t0, former)),
-                     reassert=self.reasserted.append, show_role=self.shown.append, adopt_soon=self.adopt,
-                     clock=self.clock)
+        return Roles(
+            fab,
+            election,
+            shard=self.shard,
+            serving_lock=self.lock,
+            stopping=self.stopping,
+            announce=self.said.append,
+            take_over=lambda t0, former: self.taken.append((t0, former)),
+            reassert=self.reasserted.append,
+            show_role=self.shown.append,
+            adopt_soon=self.adopt,
+            clock=self.clock,
+        )
 
     def adopt(self) -> None:
         self.adopting += 1
@@ -69,7 +78,7 @@ def test_a_standby_takes_the_world_over_on_its_own_thread_once_its_leaders_token
         t0 = time.monotonic()
         leader.close()  # its token goes
         wait_until(lambda: effects.taken, timeout=30, what="the take-over", seen=lambda: effects.said)
-        (at, former), = effects.taken
+        ((at, former),) = effects.taken
         assert former == "sim-a" and at >= t0  # on the clock it was given, draining the leader it followed
         assert (roles.election.role, roles.election.term) == (el.PRIMARY, 2)
         assert any("the token of sim-a is gone" in s and "taking over with term 2" in s for s in effects.said)

@@ -24,10 +24,17 @@ def test_a_replicated_sim_trims_its_heap_while_it_runs(world, router):
     stop = threading.Event()
     hosts: list = []
     thread = threading.Thread(
-        target=lambda: hosts.append(run_replicated(lambda: client(world, router[1], kind="sim", peer_id="sim-a"),
-                                                   lambda: SimWorld("combined", seed=1), lambda f, w, r, objects=True: OpenGate(),
-                                                   stop, standby=False)),
-        daemon=True)
+        target=lambda: hosts.append(
+            run_replicated(
+                lambda: client(world, router[1], kind="sim", peer_id="sim-a"),
+                lambda: SimWorld("combined", seed=1),
+                lambda f, w, r, objects=True: OpenGate(),
+                stop,
+                standby=False,
+            )
+        ),
+        daemon=True,
+    )
     thread.start()
     try:
         wait_until(_trimming, timeout=30, what="the sim's heap trimmer running")

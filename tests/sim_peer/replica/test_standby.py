@@ -48,8 +48,11 @@ def test_a_joint_target_sent_after_the_last_snapshot_goes_on_under_the_new_autho
     standby = _host(world, port, "sim-b", standby=True)
     try:
         follower = standby.follower
-        wait_until(lambda: follower.snapshot is not None and follower.snapshot.header.source == "sim-a", timeout=20,
-                   what="a first snapshot")
+        wait_until(
+            lambda: follower.snapshot is not None and follower.snapshot.header.source == "sim-a",
+            timeout=20,
+            what="a first snapshot",
+        )
         # hold the polling: after the poll under way (if any) no snapshot comes until the take-over
         asked = follower.snapshot_asked
         follower.poll_s = 3600.0
@@ -63,16 +66,24 @@ def test_a_joint_target_sent_after_the_last_snapshot_goes_on_under_the_new_autho
         cmd = Command("alice", 0, JointTarget(target, speed_scale=0.2))
         moving = lambda: "arm1" in follower.joints and np.abs(follower.joints["arm1"].dq).max() > 0.05  # noqa: E731
         # resent until the primary moves: a first put on a fresh publisher can go out before the route exists
-        wait_until(lambda: moving() or _send(user, keys.robot_cmd(world, "arm1", "joints", "alice"), cmd), timeout=20,
-                   interval=0.3, what="the primary moving the arm")
+        wait_until(
+            lambda: moving() or _send(user, keys.robot_cmd(world, "arm1", "joints", "alice"), cmd),
+            timeout=20,
+            interval=0.3,
+            what="the primary moving the arm",
+        )
         assert follower.snapshot is held  # still the one from before the command
         assert any(isinstance(k.message, Command) for k in follower.commands)
 
         primary.close()
         primary.fabric.close()  # its token goes: the standby takes over
         wait_until(lambda: standby.takeovers, timeout=20, what="the take-over done")
-        wait_until(lambda: np.abs(arm.ctrl.q - target).max() < 1e-3, timeout=30, what="the arm at the target sent after the snapshot",
-                   seen=lambda: (np.degrees(arm.ctrl.q).round(1), np.degrees(arm.ctrl.target).round(1)))
+        wait_until(
+            lambda: np.abs(arm.ctrl.q - target).max() < 1e-3,
+            timeout=30,
+            what="the arm at the target sent after the snapshot",
+            seen=lambda: (np.degrees(arm.ctrl.q).round(1), np.degrees(arm.ctrl.target).round(1)),
+        )
         assert standby.peer.counters["accepted"] >= 1
     finally:
         for host in (standby, primary):
@@ -97,8 +108,7 @@ def test_a_standby_told_its_leader_waits_for_its_token_before_taking_over(world,
         # and the leader going is still seen: the standby takes over with the next term
         late.join()
         leader[0].close()
-        wait_until(lambda: host.takeovers, timeout=20, what="the take-over done",
-                   seen=lambda: host.election)
+        wait_until(lambda: host.takeovers, timeout=20, what="the take-over done", seen=lambda: host.election)
         assert host.election.term == 3
     finally:
         late.cancel()
@@ -178,7 +188,9 @@ def test_a_take_over_keeps_the_former_leaders_samples_still_on_their_way_in(worl
         assert follower.joints["arm1"] is last
 
         done: list[float] = []
-        drain = threading.Thread(target=lambda: (follower.drain("sim-a", quiet_s=0.1, limit_s=5.0), done.append(time.monotonic())))
+        drain = threading.Thread(
+            target=lambda: (follower.drain("sim-a", quiet_s=0.1, limit_s=5.0), done.append(time.monotonic()))
+        )
         drain.start()
         wait_until(lambda: follower.former == "sim-a", timeout=5, what="the drain begun")
         fed: list[float] = []

@@ -35,8 +35,11 @@ def test_a_grant_after_the_last_snapshot_keeps_its_owner_and_epoch_across_a_take
     alice = None
     try:
         follower = standby.follower
-        wait_until(lambda: follower.snapshot is not None and follower.snapshot.header.source == "sim-a", timeout=20,
-                   what="a first snapshot")
+        wait_until(
+            lambda: follower.snapshot is not None and follower.snapshot.header.source == "sim-a",
+            timeout=20,
+            what="a first snapshot",
+        )
         asked = follower.snapshot_asked
         follower.poll_s = 3600.0  # no snapshot after the poll under way (if any) until the take-over
         wait_until(lambda: follower.snapshot_asked != asked, timeout=10, what="the last poll")
@@ -48,8 +51,12 @@ def test_a_grant_after_the_last_snapshot_keeps_its_owner_and_epoch_across_a_take
         assert granted.granted, granted
         epoch = alice.epoch("arm1")
         assert epoch > held.epoch
-        wait_until(lambda: "arm1" in follower.records and follower.records["arm1"].epoch == epoch, timeout=10,
-                   what="the standby hearing the grant", seen=lambda: follower.records.get("arm1"))
+        wait_until(
+            lambda: "arm1" in follower.records and follower.records["arm1"].epoch == epoch,
+            timeout=10,
+            what="the standby hearing the grant",
+            seen=lambda: follower.records.get("arm1"),
+        )
         assert {r.object: r for r in follower.snapshot.records}["arm1"].epoch == held.epoch  # not in the snapshot
 
         primary.close()
@@ -58,8 +65,12 @@ def test_a_grant_after_the_last_snapshot_keeps_its_owner_and_epoch_across_a_take
         rec = standby.gate.records()["arm1"]
         assert (rec.owner, rec.epoch) == ("alice", epoch), rec
         # what the new authority publishes is what alice holds: her epoch never went back
-        wait_until(lambda: (alice.record("arm1") or held).header.source == "sim-b", timeout=10, what="sim-b's record of arm1",
-                   seen=lambda: alice.record("arm1"))
+        wait_until(
+            lambda: (alice.record("arm1") or held).header.source == "sim-b",
+            timeout=10,
+            what="sim-b's record of arm1",
+            seen=lambda: alice.record("arm1"),
+        )
         assert alice.epoch("arm1") == epoch and alice.owns("arm1")
     finally:
         if alice is not None:

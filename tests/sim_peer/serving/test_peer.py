@@ -97,7 +97,9 @@ def test_a_joint_command_goes_in_and_the_joints_come_out(world, sim, user):
     pose = inbox.latest[keys.robot_pose(world, "arm1")]
     assert isinstance(pose, Pose)
     pos, _ = peer.world.readings.flange("arm1")
-    wait_until(lambda: np.allclose(inbox.latest[keys.robot_pose(world, "arm1")].position, pos, atol=1e-9), what="flange pose")
+    wait_until(
+        lambda: np.allclose(inbox.latest[keys.robot_pose(world, "arm1")].position, pos, atol=1e-9), what="flange pose"
+    )
     # the gate heard the arm start and stop moving
     wait_until(lambda: ("arm1", False) in gate.motion[1:], what="motion updates", seen=lambda: gate.motion)
     assert ("arm1", True) in gate.motion
@@ -109,7 +111,11 @@ def test_twist_moves_the_base_and_pose_and_scan_are_published(world, sim, user):
     fab, inbox = user
     send(fab, world, "base1", "twist", Twist(0.5, 0.0))
     pk = keys.robot_pose(world, "base1")
-    wait_until(lambda: isinstance(inbox.latest.get(pk), Pose) and inbox.latest[pk].position[0] > 0.2, timeout=10, what="base moving")
+    wait_until(
+        lambda: isinstance(inbox.latest.get(pk), Pose) and inbox.latest[pk].position[0] > 0.2,
+        timeout=10,
+        what="base moving",
+    )
     assert inbox.latest[pk].linear[0] > 0.1
     send(fab, world, "base1", "stop", Stop())
     wait_until(lambda: not peer.world.robot("base1").moving, what="base stopped")
@@ -131,7 +137,9 @@ def test_twist_moves_the_base_and_pose_and_scan_are_published(world, sim, user):
         ("arm1", "twist", Twist(0.1, 0.0), "unsupported"),
     ],
 )
-def test_bad_commands_are_rejected_with_a_reason_and_the_last_valid_command_stands(world, sim, user, robot, name, body, reason):
+def test_bad_commands_are_rejected_with_a_reason_and_the_last_valid_command_stands(
+    world, sim, user, robot, name, body, reason
+):
     peer, _ = sim
     fab, inbox = user
     good = np.array([0.3, 0.0, 0.0, 0.0, 0.0, 0.0])
@@ -140,7 +148,9 @@ def test_bad_commands_are_rejected_with_a_reason_and_the_last_valid_command_stan
     send(fab, world, robot, name, body)
     ev = wait_until(lambda: inbox.event("reject", reason), what=f"reject event {reason}", seen=lambda: inbox.events)
     # a command for a robot this sim does not have is refused from its key, undecoded: no user known
-    assert ev.object == robot and ev.user == ("" if reason == "unknown_robot" else "alice") and ev.data["command"] == name
+    assert (
+        ev.object == robot and ev.user == ("" if reason == "unknown_robot" else "alice") and ev.data["command"] == name
+    )
     assert peer.counters["rejected"] == 1 and peer.counters[f"rejected:{reason}"] == 1
     wait_until(lambda: np.allclose(peer.last_state("arm1")["q"], good), what="arm still reaching the good target")
 
@@ -151,7 +161,9 @@ def test_garbage_is_counted_and_the_peer_goes_on(world, sim, user):
     fab.put_raw(keys.robot_cmd(world, "arm1", "joints", "alice"), b"\x93\xff garbage")
     nan = np.array([0.0, 0.0, math.nan, 0.0, 0.0, 0.0])
     fab.put_raw(keys.robot_cmd(world, "arm1", "joints", "alice"), b"")
-    fab.publish(keys.robot_cmd(world, "arm1", "joints", "alice"), Command("alice", 1, JointTarget(nan)))  # refused by the decoder
+    fab.publish(
+        keys.robot_cmd(world, "arm1", "joints", "alice"), Command("alice", 1, JointTarget(nan))
+    )  # refused by the decoder
     wait_until(lambda: peer.fabric.counters["decode_errors"] >= 3, what="decode errors counted")
     assert peer.counters["commands"] == 0 and peer.last_state("arm1")["target"] == [0.0] * 6
     send(fab, world, "arm1", "joints", JointTarget(np.full(6, 0.1)))
@@ -181,7 +193,9 @@ def test_a_payload_naming_someone_else_than_the_key_is_refused(world, sim, user)
     peer, _ = sim
     fab, inbox = user
     fab.publish(keys.robot_cmd(world, "arm1", "joints", "mallory"), Command("alice", 1, JointTarget(np.full(6, 0.2))))
-    ev = wait_until(lambda: inbox.event("reject", "user_mismatch"), what="user_mismatch event", seen=lambda: inbox.events)
+    ev = wait_until(
+        lambda: inbox.event("reject", "user_mismatch"), what="user_mismatch event", seen=lambda: inbox.events
+    )
     assert ev.user == "mallory" and ev.object == "arm1" and "'alice'" in ev.data["detail"]
     assert peer.counters["accepted"] == 0 and peer.last_state("arm1")["target"] == [0.0] * 6
 
@@ -226,30 +240,56 @@ def _world_info(fab, world):
 def test_the_cli_runs_a_sim_peer_that_answers_the_world_service(world, router, connect, procs):
     port = router[1]
     proc = procs.start(
-        robofabric_cmd("sim", "--scene", "arm_cell", "--no-ownership", "--world", world, "--connect", f"tcp/127.0.0.1:{port}", "--id", "sim1"),
+        robofabric_cmd(
+            "sim",
+            "--scene",
+            "arm_cell",
+            "--no-ownership",
+            "--world",
+            world,
+            "--connect",
+            f"tcp/127.0.0.1:{port}",
+            "--id",
+            "sim1",
+        ),
         name="sim",
     )
     fab = connect()
-    wait_until(lambda: ("sim", "sim1") in fab.live_peers("sim"), timeout=30, what="sim peer alive", seen=lambda: procs.output(proc))
+    wait_until(
+        lambda: ("sim", "sim1") in fab.live_peers("sim"),
+        timeout=30,
+        what="sim peer alive",
+        seen=lambda: procs.output(proc),
+    )
     # alive (token) comes a moment before serving: wait for the answer, and show the peer's output if none comes
-    info = wait_until(lambda: _world_info(fab, world), timeout=30, what="srv/world answered", seen=lambda: procs.output(proc))
+    info = wait_until(
+        lambda: _world_info(fab, world), timeout=30, what="srv/world answered", seen=lambda: procs.output(proc)
+    )
     assert [r.id for r in info.robots] == ["arm1"]
     inbox = Inbox()
     fab.subscribe(keys.robot_joints(world, "arm1"), inbox)
     # the sim's command subscriber known to this session first: a command sent before would be lost (no one to hear it)
     assert fab.wait_matching(keys.robot_cmd(world, "arm1", "joints", "alice"), 30.0), procs.output(proc)[-1500:]
     send(fab, world, "arm1", "joints", JointTarget(np.full(6, 0.05)))
-    wait_until(lambda: any(np.allclose(m.q, 0.05) for m in inbox.latest.values()), timeout=30, what="joints from the CLI peer",
-               seen=lambda: ([m.q.round(3).tolist() for m in inbox.latest.values()], procs.output(proc)[-1500:]))
+    wait_until(
+        lambda: any(np.allclose(m.q, 0.05) for m in inbox.latest.values()),
+        timeout=30,
+        what="joints from the CLI peer",
+        seen=lambda: ([m.q.round(3).tolist() for m in inbox.latest.values()], procs.output(proc)[-1500:]),
+    )
 
 
 @pytest.mark.slow
 def test_cli_mistakes_are_one_line_errors(procs):
     import subprocess
 
-    out = subprocess.run(robofabric_cmd("sim", "--robot", "reeman", "--no-ownership"), capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        robofabric_cmd("sim", "--robot", "reeman", "--no-ownership"), capture_output=True, text=True, timeout=60
+    )
     assert out.returncode == 2 and "TYPE:ID" in out.stderr and "Traceback" not in out.stderr
-    out = subprocess.run(robofabric_cmd("sim", "--speed", "fast", "--no-ownership"), capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        robofabric_cmd("sim", "--speed", "fast", "--no-ownership"), capture_output=True, text=True, timeout=60
+    )
     assert out.returncode == 2 and "speed" in out.stderr
 
 
@@ -260,12 +300,28 @@ def test_cli_runs_for_a_duration_at_max_speed_and_exits_cleanly(world, tmp_path)
     from robofabric.testing import free_port
 
     argv = robofabric_cmd(
-        "sim", "--scene", "warehouse", "--speed", "max", "--duration", "3", "--no-ownership", "--profile", "embedded",
-        "--listen", f"tcp/127.0.0.1:{free_port()}", "--world", world, "--robot", "reeman:extra",
+        "sim",
+        "--scene",
+        "warehouse",
+        "--speed",
+        "max",
+        "--duration",
+        "3",
+        "--no-ownership",
+        "--profile",
+        "embedded",
+        "--listen",
+        f"tcp/127.0.0.1:{free_port()}",
+        "--world",
+        world,
+        "--robot",
+        "reeman:extra",
     )
     out = subprocess.run(argv, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    assert "robots base1 (reeman), extra (reeman)" in out.stdout and "sim stopped at t=3.000 s: 1500 steps" in out.stdout
+    assert (
+        "robots base1 (reeman), extra (reeman)" in out.stdout and "sim stopped at t=3.000 s: 1500 steps" in out.stdout
+    )
 
 
 def test_paths_and_bumps_are_announced_as_events(world, connect, user):
@@ -275,7 +331,9 @@ def test_paths_and_bumps_are_announced_as_events(world, connect, user):
     peer = SimPeer(connect("sim", "fast-sim"), SimWorld("combined"), speed=10.0)
     with peer:
         xs = np.linspace(0.0, 0.6, 7)
-        fab.publish(keys.robot_cmd(world, "base1", "path", "alice"), Command("alice", 1, Path(xs, np.zeros(7), np.zeros(7))))
+        fab.publish(
+            keys.robot_cmd(world, "base1", "path", "alice"), Command("alice", 1, Path(xs, np.zeros(7), np.zeros(7)))
+        )
         ev = wait_until(lambda: inbox.event("path_done"), timeout=20, what="path_done event", seen=lambda: inbox.events)
         assert ev.object == "base1" and abs(peer.last_state("base1")["pose"][0] - 0.6) < 0.08
         send(fab, world, "base1", "twist", Twist(1.0, 0.0))  # straight at the table in front of the arm
@@ -290,31 +348,50 @@ def test_a_shard_leaves_other_robots_to_their_sims_and_the_scene_objects_to_the_
     word (it may adopt the objects later: docs/sim.md)."""
     fab, inbox = user
     other = connect("sim", "sim-other")  # another sim of the world: its token is there
-    peer = SimPeer(connect("sim", "sim-shard"), SimWorld("combined", seed=3), rates={"joints": 50, "pose": 50, "scan": 20},
-                   objects=False)
+    peer = SimPeer(
+        connect("sim", "sim-shard"),
+        SimWorld("combined", seed=3),
+        rates={"joints": 50, "pose": 50, "scan": 20},
+        objects=False,
+    )
     peer.start()
     try:
         info = peer.world_info()
         assert info.objects == () and {r.sim for r in info.robots} == {"sim-shard"}
         wait_until(lambda: "sim-other" in peer.other_sims, what="the other sim's token")
         send(fab, world, "base9", "twist", Twist(0.1, 0.0))
-        wait_until(lambda: peer.counters["not_mine"] >= 1 or send(fab, world, "base9", "twist", Twist(0.1, 0.0)), timeout=10,
-                   what="a command for another sim's robot counted")
+        wait_until(
+            lambda: peer.counters["not_mine"] >= 1 or send(fab, world, "base9", "twist", Twist(0.1, 0.0)),
+            timeout=10,
+            what="a command for another sim's robot counted",
+        )
         ok = keys.object_pose(world, "target", "alice")
 
         def own_command_and_poses():
-            fab.publish(ok, Pose(np.array([9.0, 9.0, 9.0]), frame="map", header=fab.header(ok)))  # a bad one: not a word
+            fab.publish(
+                ok, Pose(np.array([9.0, 9.0, 9.0]), frame="map", header=fab.header(ok))
+            )  # a bad one: not a word
             fab.publish(ok, Pose(np.array([0.3, 0.2, 0.4]), header=fab.header(ok)))  # sent beside it, every try
             return send(fab, world, "arm1", "joints", JointTarget(np.full(6, 0.1)))
 
-        wait_until(lambda: (peer.counters["accepted"] >= 1 and peer.counters["object_mirrored"] >= 1) or own_command_and_poses(),
-                   timeout=10, what="its own robot's command and a mirrored object pose")
+        wait_until(
+            lambda: (
+                (peer.counters["accepted"] >= 1 and peer.counters["object_mirrored"] >= 1) or own_command_and_poses()
+            ),
+            timeout=10,
+            what="its own robot's command and a mirrored object pose",
+        )
         assert peer.counters["rejected"] == 0 and inbox.event("reject") is None
-        assert peer.counters["object_updates"] == 0 and np.allclose(peer.world.objects.pose("target")[0], [0.3, 0.2, 0.4])
+        assert peer.counters["object_updates"] == 0 and np.allclose(
+            peer.world.objects.pose("target")[0], [0.3, 0.2, 0.4]
+        )
         other.close()
         wait_until(lambda: not peer.other_sims, what="the other sim gone")
         send(fab, world, "base9", "twist", Twist(0.1, 0.0))
-        wait_until(lambda: peer.counters["rejected:unknown_robot"] >= 1 or send(fab, world, "base9", "twist", Twist(0.1, 0.0)),
-                   timeout=10, what="alone again: an unknown robot is refused")
+        wait_until(
+            lambda: peer.counters["rejected:unknown_robot"] >= 1 or send(fab, world, "base9", "twist", Twist(0.1, 0.0)),
+            timeout=10,
+            what="alone again: an unknown robot is refused",
+        )
     finally:
         peer.close()

@@ -45,13 +45,21 @@ bodies = st.one_of(
     st.builds(lambda q, s: JointTarget(np.array(q), s), st.lists(finite, max_size=8), st.floats(1e-6, 1.0)),
     st.builds(Twist, finite, finite),
     st.integers(0, 30).flatmap(
-        lambda n: st.builds(lambda x, y: Path(np.array(x), np.array(y), np.zeros(n)), st.lists(finite, min_size=n, max_size=n), st.lists(finite, min_size=n, max_size=n))
+        lambda n: st.builds(
+            lambda x, y: Path(np.array(x), np.array(y), np.zeros(n)),
+            st.lists(finite, min_size=n, max_size=n),
+            st.lists(finite, min_size=n, max_size=n),
+        )
     ),
     st.just(Stop()),
     st.just(Reset()),
 )
 commands = st.lists(
-    st.tuples(st.sampled_from(["arm1", "base1", "ghost"]), st.sampled_from(["joints", "twist", "path", "stop", "reset"]), bodies),
+    st.tuples(
+        st.sampled_from(["arm1", "base1", "ghost"]),
+        st.sampled_from(["joints", "twist", "path", "stop", "reset"]),
+        bodies,
+    ),
     max_size=12,
 )
 

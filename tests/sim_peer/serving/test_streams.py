@@ -27,8 +27,13 @@ def test_the_offsets_follow_the_rates_given(router):
     """Rates given at start reorder the groups: the fastest starts at the origin, the others after it, by how
     often their loops tick (joints at 25 Hz for 2 robots: 2 phases, a 50 Hz loop, like the scans')."""
     fab, _ = router
-    loops = StreamLoops(fab, SimWorld("combined", seed=3), threading.RLock(), Counter(),
-                        rates={"joints": 25.0, "pose": 200.0, "scan": 50.0})
+    loops = StreamLoops(
+        fab,
+        SimWorld("combined", seed=3),
+        threading.RLock(),
+        Counter(),
+        rates={"joints": 25.0, "pose": 200.0, "scan": 50.0},
+    )
     assert loops.phases == {"joints": 2, "pose": 1, "scan": 1}
     assert loops.offsets() == pytest.approx({"pose": 0.0, "joints": 1 / 600, "scan": 2 / 600})
 
@@ -55,18 +60,25 @@ def test_staggered_loops_publish_every_group(world, router, connect):
     of every group is published, whatever phase its robot was dealt."""
     fab, _ = router
     sim_fab = connect("sim", "sim-streams")
-    loops = StreamLoops(sim_fab, SimWorld("warehouse", spots(3), scene_robots=False, seed=3), threading.RLock(), Counter())
+    loops = StreamLoops(
+        sim_fab, SimWorld("warehouse", spots(3), scene_robots=False, seed=3), threading.RLock(), Counter()
+    )
     got: Counter[str] = Counter()
     for stream in ("joints", "pose", "scan"):
         fab.subscribe(keys.robot_stream_all(world, stream), lambda key, msg: got.update(["/".join(key.split("/")[3:])]))
-    expected = [key.split("/", 3)[3] for entries in loops.groups.values() for key, _ in entries
-                if key.rsplit("/", 1)[1] in ("joints", "pose", "scan")]
+    expected = [
+        key.split("/", 3)[3]
+        for entries in loops.groups.values()
+        for key, _ in entries
+        if key.rsplit("/", 1)[1] in ("joints", "pose", "scan")
+    ]
     assert len(expected) >= 9 and loops.phases["pose"] == 2
     loops.start()
     try:
         origin = loops.loops["joints"].start_at
         assert {g: loop.start_at - origin for g, loop in loops.loops.items()} == pytest.approx(loops.offsets())
-        wait_until(lambda: all(got[k] >= 3 for k in expected), timeout=30,
-                   what="every robot's stream", seen=lambda: dict(got))
+        wait_until(
+            lambda: all(got[k] >= 3 for k in expected), timeout=30, what="every robot's stream", seen=lambda: dict(got)
+        )
     finally:
         loops.stop()

@@ -30,8 +30,15 @@ def test_records_lose_the_moved_robot_at_the_source_and_gain_it_at_the_target():
 
 
 def test_the_users_a_record_names_move_with_it_ranked_after_the_targets_own():
-    source = {"next_rank": 3, "rank:zed": 0, "rank:alice": 1, "rank:bob": 2, "live:alice": True, "away:bob": [4.0, "q:base2"],
-              "live:zed": True}
+    source = {
+        "next_rank": 3,
+        "rank:zed": 0,
+        "rank:alice": 1,
+        "rank:bob": 2,
+        "live:alice": True,
+        "away:bob": [4.0, "q:base2"],
+        "live:zed": True,
+    }
     named = ho.named_users(source, _rec("base2", "alice", 7, queue=("bob",)))
     assert named == {"rank:alice": 1, "rank:bob": 2, "live:alice": True, "away:bob": [4.0, "q:base2"]}
     target = {"next_rank": 2, "rank:carol": 0, "rank:bob": 1, "live:carol": True, "live:bob": True}
@@ -43,10 +50,24 @@ def test_the_users_a_record_names_move_with_it_ranked_after_the_targets_own():
 
 
 def test_a_handoff_travels_in_an_event_and_back():
-    state = RobotState("base2", "mobile", np.array([1.0, 2.0, 0.5]), np.array([0.3, 0.0]), np.array([0.3, 0.0]),
-                       np.zeros((0, 2)), {"wheel_l": 1.25})
-    h = ho.Handoff(state, SceneRobot("reeman", "base2", (0.0, 2.0, 0.0, 0.0)), _rec("base2", "alice", 7),
-                   {"rank:alice": 1, "live:alice": True}, {"rf/w/robot/base2/pose": 41}, 2, "sim-a")
+    state = RobotState(
+        "base2",
+        "mobile",
+        np.array([1.0, 2.0, 0.5]),
+        np.array([0.3, 0.0]),
+        np.array([0.3, 0.0]),
+        np.zeros((0, 2)),
+        {"wheel_l": 1.25},
+    )
+    h = ho.Handoff(
+        state,
+        SceneRobot("reeman", "base2", (0.0, 2.0, 0.0, 0.0)),
+        _rec("base2", "alice", 7),
+        {"rank:alice": 1, "live:alice": True},
+        {"rf/w/robot/base2/pose": 41},
+        2,
+        "sim-a",
+    )
     ev = decode(encode(ho.to_event(ho.MOVE_OUT, "base2", "sim-b", h, term=2, source="sim-a")), Event)
     back = ho.from_event(ev)
     assert back.placement == h.placement and back.record == h.record and back.term == 2 and back.source == "sim-a"
@@ -102,7 +123,9 @@ def test_a_target_checks_the_robot_the_source_and_the_term_of_what_it_fetched():
 
 
 def test_a_step_carries_no_robot_only_names_and_the_term():
-    ev = decode(encode(ho.step(ho.MOVE_IN, "base2", to="sim-b", source="sim-a", term=3, move_id="m1", asker="t")), Event)
+    ev = decode(
+        encode(ho.step(ho.MOVE_IN, "base2", to="sim-b", source="sim-a", term=3, move_id="m1", asker="t")), Event
+    )
     assert ev.kind == "move_in" and ev.object == "base2"
     assert ev.data == {"to": "sim-b", "from": "sim-a", "term": 3, "move": "m1"}
     assert set(ho.STEPS) == {"move_check", "move_out", "move_prepare", "move_fetch", "move_in"}

@@ -26,13 +26,15 @@ def warehouse() -> SimWorld:
 
 
 def ahead(w: SimWorld) -> float:
-    return float(np.median(w.readings.scan("base0")[FORWARD - 2:FORWARD + 3]))
+    return float(np.median(w.readings.scan("base0")[FORWARD - 2 : FORWARD + 3]))
 
 
 def test_a_mirrored_robot_is_seen_by_the_lidar_where_its_sim_says_it_is(warehouse):
     free = ahead(warehouse)
     assert free > 3.5  # nothing within 3.5 m straight ahead in the warehouse
-    assert warehouse.mirror("base9", radius=0.3, height=0.5, position=[2.0, 0.0, 0.0], quaternion=[1, 0, 0, 0], source="sim-b")
+    assert warehouse.mirror(
+        "base9", radius=0.3, height=0.5, position=[2.0, 0.0, 0.0], quaternion=[1, 0, 0, 0], source="sim-b"
+    )
     at2 = ahead(warehouse)
     assert at2 < free - 2.0
     warehouse.mirror("base9", radius=0.3, height=0.5, position=[3.0, 0.0, 0.0], quaternion=[1, 0, 0, 0], source="sim-b")
@@ -59,7 +61,9 @@ def test_slots_are_bounded_and_own_robots_or_bad_poses_are_not_mirrored(warehous
     assert not warehouse.mirror("c", position=[7, 5, 0], **pose) and warehouse.mirrors.refused == 1  # two slots
     assert not warehouse.mirror("base0", position=[5, 5, 0], **pose)  # this sim's own robot
     assert not warehouse.mirror("a", position=[math.nan, 0, 0], **pose)
-    assert warehouse.unmirror("a") == ["a"] and warehouse.mirror("c", position=[7, 5, 0], **pose)  # a freed slot is reused
+    assert warehouse.unmirror("a") == ["a"] and warehouse.mirror(
+        "c", position=[7, 5, 0], **pose
+    )  # a freed slot is reused
     assert sorted(warehouse.mirrors.held()) == ["b", "c"]
 
 
@@ -88,15 +92,25 @@ def test_the_feed_mirrors_another_sims_base_from_its_poses_and_hides_it_when_tha
     key = keys.robot_pose(world, "base9")
     free = ahead(mine)
     with MirrorFeed(here, mine, lock, describe=lambda: part, stale_s=30.0) as feed:
+
         def put(x: float) -> None:
             other.publish(key, Pose(np.array([x, 0.0, 0.0]), np.array([1.0, 0.0, 0.0, 0.0]), header=other.header(key)))
 
-        wait_until(lambda: put(2.0) or "base9" in mine.mirrors.held(), timeout=10, interval=0.05, what="base9 mirrored",
-                   seen=lambda: feed.counters)
+        wait_until(
+            lambda: put(2.0) or "base9" in mine.mirrors.held(),
+            timeout=10,
+            interval=0.05,
+            what="base9 mirrored",
+            seen=lambda: feed.counters,
+        )
         wait_until(lambda: put(2.0) or ahead(mine) < free - 2.0, timeout=5, what="the LIDAR seeing base9 at 2 m")
         at2 = ahead(mine)
-        wait_until(lambda: put(3.0) or abs(ahead(mine) - (at2 + 1.0)) < 0.02, timeout=5, what="the LIDAR seeing base9 move to 3 m",
-                   seen=lambda: ahead(mine))
+        wait_until(
+            lambda: put(3.0) or abs(ahead(mine) - (at2 + 1.0)) < 0.02,
+            timeout=5,
+            what="the LIDAR seeing base9 move to 3 m",
+            seen=lambda: ahead(mine),
+        )
         assert feed.lag_ms and feed.counters["shown"] == 1
         put(0.0)  # this sim's own robots' poses (its own session's) are never mirrored: not even heard (remote only)
         other.close()  # sim-b goes: its token with it
@@ -110,15 +124,24 @@ def test_a_mirror_whose_robot_falls_silent_is_hidden(world, connect):
     other = connect(kind="sim", peer_id="sim-b")
     part = _other_sim_part(world, "sim-b")
     key = keys.robot_pose(world, "base9")
-    with MirrorFeed(connect(kind="sim", peer_id="sim-a"), mine, threading.RLock(), describe=lambda: part, stale_s=2.0,
-                    clock=lambda: now[0]) as feed:
+    with MirrorFeed(
+        connect(kind="sim", peer_id="sim-a"),
+        mine,
+        threading.RLock(),
+        describe=lambda: part,
+        stale_s=2.0,
+        clock=lambda: now[0],
+    ) as feed:
+
         def put() -> None:
             other.publish(key, Pose(np.array([2.0, 0.0, 0.0]), np.array([1.0, 0, 0, 0]), header=other.header(key)))
 
         wait_until(lambda: put() or "base9" in mine.mirrors.held(), timeout=10, interval=0.05, what="base9 mirrored")
         assert feed.sweep() == []
         now[0] = 2.5  # no pose for longer than stale_s: hidden by the feed's own sweep, or by this one
-        wait_until(lambda: feed.sweep() is not None and "base9" not in mine.mirrors.held(), timeout=5, what="base9 hidden")
+        wait_until(
+            lambda: feed.sweep() is not None and "base9" not in mine.mirrors.held(), timeout=5, what="base9 hidden"
+        )
         assert feed.counters["hidden"] == 1
 
 
@@ -186,19 +209,41 @@ def test_the_feed_mirrors_another_sims_arm_from_its_joints(world, connect):
     part = WorldInfo(world=world, scene="warehouse", timestep=mine.dt, rates={}, robots=(replace(info, sim="sim-b"),))
     pose_key, joints_key = keys.robot_pose(world, "arm9"), keys.robot_joints(world, "arm9")
     free = ahead(mine)
-    with MirrorFeed(connect(kind="sim", peer_id="sim-a"), mine, threading.RLock(), describe=lambda: part, stale_s=30.0) as feed:
+    with MirrorFeed(
+        connect(kind="sim", peer_id="sim-a"), mine, threading.RLock(), describe=lambda: part, stale_s=30.0
+    ) as feed:
+
         def put(q: list[float]) -> None:
-            other.publish(pose_key, Pose(np.array([1.2, 0.0, 0.3]), np.array([1.0, 0, 0, 0]), header=other.header(pose_key)))
-            other.publish(joints_key, JointState(info.joint_names, np.array(q), np.zeros(6), header=other.header(joints_key)))
+            other.publish(
+                pose_key, Pose(np.array([1.2, 0.0, 0.3]), np.array([1.0, 0, 0, 0]), header=other.header(pose_key))
+            )
+            other.publish(
+                joints_key, JointState(info.joint_names, np.array(q), np.zeros(6), header=other.header(joints_key))
+            )
 
         upright, bowed = [0.0] * 6, [0.0, 1.5, 0.0, 0.0, 0.0, 0.0]
-        wait_until(lambda: put(upright) or "arm9" in mine.mirrors.held(), timeout=10, interval=0.05, what="arm9 mirrored",
-                   seen=lambda: feed.counters)
+        wait_until(
+            lambda: put(upright) or "arm9" in mine.mirrors.held(),
+            timeout=10,
+            interval=0.05,
+            what="arm9 mirrored",
+            seen=lambda: feed.counters,
+        )
         assert len(mine.mirrors.held()["arm9"].slots) == 7 and mine.mirrors.held()["arm9"].source == "sim-b"
-        wait_until(lambda: put(upright) or ahead(mine) < 0.8, timeout=5, interval=0.05, what="the LIDAR seeing arm9's upper arm",
-                   seen=lambda: ahead(mine))
-        wait_until(lambda: put(bowed) or ahead(mine) > 1.5, timeout=5, interval=0.05, what="the LIDAR seeing arm9 bow under its plane",
-                   seen=lambda: ahead(mine))
+        wait_until(
+            lambda: put(upright) or ahead(mine) < 0.8,
+            timeout=5,
+            interval=0.05,
+            what="the LIDAR seeing arm9's upper arm",
+            seen=lambda: ahead(mine),
+        )
+        wait_until(
+            lambda: put(bowed) or ahead(mine) > 1.5,
+            timeout=5,
+            interval=0.05,
+            what="the LIDAR seeing arm9 bow under its plane",
+            seen=lambda: ahead(mine),
+        )
         assert feed.counters["joints"] >= 2 and feed.lag_ms
         other.close()
         wait_until(lambda: "arm9" not in mine.mirrors.held(), timeout=10, what="arm9's mirror hidden when sim-b left")
@@ -214,15 +259,29 @@ def test_a_robot_that_finds_too_few_slots_is_told_of_once(world, connect, caplog
     _, info = arm_elsewhere(at="1,0,0,0")
     part = WorldInfo(world=world, scene="warehouse", timestep=mine.dt, rates={}, robots=(replace(info, sim="sim-b"),))
     pose_key, joints_key = keys.robot_pose(world, "arm9"), keys.robot_joints(world, "arm9")
-    with caplog.at_level(logging.WARNING, logger="robofabric.sim"), \
-            MirrorFeed(connect(kind="sim", peer_id="sim-a"), mine, threading.RLock(), describe=lambda: part, stale_s=30.0) as feed:
+    with (
+        caplog.at_level(logging.WARNING, logger="robofabric.sim"),
+        MirrorFeed(
+            connect(kind="sim", peer_id="sim-a"), mine, threading.RLock(), describe=lambda: part, stale_s=30.0
+        ) as feed,
+    ):
+
         def put() -> bool:
-            other.publish(pose_key, Pose(np.array([1.2, 0.0, 0.3]), np.array([1.0, 0, 0, 0]), header=other.header(pose_key)))
-            other.publish(joints_key, JointState(info.joint_names, np.zeros(6), np.zeros(6), header=other.header(joints_key)))
+            other.publish(
+                pose_key, Pose(np.array([1.2, 0.0, 0.3]), np.array([1.0, 0, 0, 0]), header=other.header(pose_key))
+            )
+            other.publish(
+                joints_key, JointState(info.joint_names, np.zeros(6), np.zeros(6), header=other.header(joints_key))
+            )
             return False
 
-        wait_until(lambda: put() or feed.counters["joints"] >= 5, timeout=10, interval=0.05, what="five joint messages of arm9",
-                   seen=lambda: feed.counters)
+        wait_until(
+            lambda: put() or feed.counters["joints"] >= 5,
+            timeout=10,
+            interval=0.05,
+            what="five joint messages of arm9",
+            seen=lambda: feed.counters,
+        )
         assert feed.counters["unslotted"] == 1 and feed.counters["shown"] == 0 and not mine.mirrors.held()
         said = [r.getMessage() for r in caplog.records if "cannot mirror arm9" in r.getMessage()]
         assert len(said) == 1 and "needs 7 mirror slots and 2 of 2 are free" in said[0] and "--mirrors" in said[0], said

@@ -17,7 +17,8 @@ def test_only_a_serving_primary_that_rebuilds_and_has_no_standbys_moves_robots()
     assert "is not serving" in mr.mover_refusal("sim-a", serving=False, can_rebuild=True, standbys=[])
     assert "cannot rebuild" in mr.mover_refusal("sim-a", serving=True, can_rebuild=False, standbys=[])
     assert mr.mover_refusal("sim-a", serving=True, can_rebuild=True, standbys=["sim-s1", "sim-s2"]) == (
-        "sim sim-a has standbys (sim-s1, sim-s2): moving a robot of a replicated shard is not supported")
+        "sim sim-a has standbys (sim-s1, sim-s2): moving a robot of a replicated shard is not supported"
+    )
 
 
 def test_a_source_hands_out_a_robot_it_serves_not_its_last_to_another_live_sim():
@@ -25,10 +26,12 @@ def test_a_source_hands_out_a_robot_it_serves_not_its_last_to_another_live_sim()
     assert mr.move_out_refusal("base0", "sim-b", "sim-a", **ok) == ""
     assert mr.move_out_refusal("base9", "sim-b", "sim-a", **ok) == "sim sim-a does not serve robot base9"
     assert mr.move_out_refusal("base0", "sim-b", "sim-a", **{**ok, "handed_out": {"base0"}}) == (
-        "robot base0 is being moved already")
+        "robot base0 is being moved already"
+    )
     assert "last robot" in mr.move_out_refusal("base0", "sim-b", "sim-a", **{**ok, "robots": {"base0"}})
     assert mr.move_out_refusal("base0", "sim-c", "sim-a", **ok) == (
-        "sim sim-c is not another live sim of world 'w': base0 stays with sim sim-a")
+        "sim sim-c is not another live sim of world 'w': base0 stays with sim sim-a"
+    )
     assert "not another live sim" in mr.move_out_refusal("base0", "sim-a", "sim-a", **ok)
 
 
@@ -43,7 +46,8 @@ def test_a_target_takes_in_a_robot_it_does_not_serve_at_a_term_not_below_its_own
     assert mr.move_in_refusal("base0", "sim-b", term=5, my_term=5, robots={"arm1"}) == ""
     assert mr.move_in_refusal("base0", "sim-b", term=5, my_term=5, robots={"base0"}) == "sim sim-b already serves base0"
     assert mr.move_in_refusal("base0", "sim-b", term=4, my_term=5, robots=set()) == (
-        "move term 4 is below sim sim-b's term 5: ask again")
+        "move term 4 is below sim sim-b's term 5: ask again"
+    )
 
 
 def test_what_a_source_kept_goes_once_its_target_serves_it_and_comes_back_when_nobody_fetched_it():
@@ -58,8 +62,13 @@ def test_what_a_source_kept_goes_once_its_target_serves_it_and_comes_back_when_n
 
 
 @settings(max_examples=100, deadline=None)
-@given(hs.sampled_from(ROBOTS), hs.sampled_from(SIMS), hs.sets(hs.sampled_from(ROBOTS)), hs.sets(hs.sampled_from(ROBOTS)),
-       hs.sets(hs.sampled_from(SIMS)))
+@given(
+    hs.sampled_from(ROBOTS),
+    hs.sampled_from(SIMS),
+    hs.sets(hs.sampled_from(ROBOTS)),
+    hs.sets(hs.sampled_from(ROBOTS)),
+    hs.sets(hs.sampled_from(SIMS)),
+)
 def test_property_a_robot_handed_out_leaves_a_sim_that_keeps_one_for_a_live_other(rid, to, robots, handed_out, live):
     """Whatever the host holds: a hand-out allowed moves a robot the source serves and is not moving yet, leaves it
     at least one, and goes to a live sim other than itself; one refused says so in words and names the robot or

@@ -46,34 +46,67 @@ class Class:
         self.tmp, self.procs = tmp, procs
         self.world = f"m{uuid.uuid4().hex[:8]}"
         ep = f"tcp/127.0.0.1:{free_port()}"
-        self.files = init(tmp / "class", users=["alice", "bob", "mallory"], instructors=["carol"], sims=["sim-a", "sim-b"],
-                          listen=[ep]).clients
-        self.router = procs.start(robofabric_cmd("router", "--zenoh-config", str(tmp / "class" / "router.json5"), "--audit",
-                                                 "--audit-every", "1"), name="router")
-        wait_until(lambda: "listening" in procs.output(self.router), timeout=30, what="router", seen=lambda: procs.output(self.router))
+        self.files = init(
+            tmp / "class",
+            users=["alice", "bob", "mallory"],
+            instructors=["carol"],
+            sims=["sim-a", "sim-b"],
+            listen=[ep],
+        ).clients
+        self.router = procs.start(
+            robofabric_cmd(
+                "router", "--zenoh-config", str(tmp / "class" / "router.json5"), "--audit", "--audit-every", "1"
+            ),
+            name="router",
+        )
+        wait_until(
+            lambda: "listening" in procs.output(self.router),
+            timeout=30,
+            what="router",
+            seen=lambda: procs.output(self.router),
+        )
         self.fabrics: list[Fabric] = []
         self.probe = self.fabric("viewer", "viewer", "probe")
         self.sim_a = self.start("sim-a", "sim", *SIM_A, "--id", "sim-a")
-        wait_until(lambda: "sim-a" in self.parts(), timeout=90, what="sim-a serving", seen=lambda: procs.output(self.sim_a)[-1500:])
+        wait_until(
+            lambda: "sim-a" in self.parts(),
+            timeout=90,
+            what="sim-a serving",
+            seen=lambda: procs.output(self.sim_a)[-1500:],
+        )
         self.sim_b = self.start("sim-b", "sim", *SIM_B, "--id", "sim-b")
-        wait_until(lambda: set(self.parts()) == {"sim-a", "sim-b"}, timeout=90, what="both sims serving",
-                   seen=lambda: procs.output(self.sim_b)[-1500:])
+        wait_until(
+            lambda: set(self.parts()) == {"sim-a", "sim-b"},
+            timeout=90,
+            what="both sims serving",
+            seen=lambda: procs.output(self.sim_b)[-1500:],
+        )
 
     def fabric(self, login: str, kind: str = "user", peer_id: str | None = None) -> Fabric:
-        fab = Fabric(FabricConfig(world=self.world, config_file=str(self.files[login])), kind=kind, peer_id=peer_id or login)
+        fab = Fabric(
+            FabricConfig(world=self.world, config_file=str(self.files[login])), kind=kind, peer_id=peer_id or login
+        )
         self.fabrics.append(fab)
         return fab
 
     def start(self, login: str, *args: str):
-        return self.procs.start(robofabric_cmd(*args, "--world", self.world, "--zenoh-config", str(self.files[login])), name=login)
+        return self.procs.start(
+            robofabric_cmd(*args, "--world", self.world, "--zenoh-config", str(self.files[login])), name=login
+        )
 
     def cli(self, login: str, *args: str) -> subprocess.CompletedProcess:
-        return subprocess.run(robofabric_cmd(*args, "--world", self.world, "--zenoh-config", str(self.files[login])),
-                              capture_output=True, text=True, timeout=120)
+        return subprocess.run(
+            robofabric_cmd(*args, "--world", self.world, "--zenoh-config", str(self.files[login])),
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
 
     def parts(self) -> dict[str, list[str]]:
         try:
-            replies = self.probe.rpc.query(keys.srv(self.world, "world"), timeout=3.0, expected=WorldInfo, all_replies=True)
+            replies = self.probe.rpc.query(
+                keys.srv(self.world, "world"), timeout=3.0, expected=WorldInfo, all_replies=True
+            )
         except ServiceError:
             return {}
         return {r.source: sorted(x.id for x in r.message.robots) for r in replies}
@@ -96,7 +129,10 @@ def cls(tmp_path_factory):
                 r = who.robot(rid)
                 r.wait_for("pose", timeout=30)
                 r.request(timeout=10)
-            c.epochs = {"base0": c.alice.ownership.record("base0").epoch, "base1": c.bob.ownership.record("base1").epoch}
+            c.epochs = {
+                "base0": c.alice.ownership.record("base0").epoch,
+                "base1": c.bob.ownership.record("base1").epoch,
+            }
             c.marker = tmp / "mallory-was-here"
             c.evil = _evil_robot(tmp / "mallory" / "evil", c.marker)
             yield c
@@ -113,8 +149,9 @@ def _evil_robot(folder: Path, marker: Path) -> Path:
     shutil.copy(PLANAR2 / "planar2.xml", folder / "planar2.xml")
     toml = (PLANAR2 / "robot.toml").read_text().replace('name = "planar2"', 'name = "evil"')
     (folder / "robot.toml").write_text(toml.replace("hooks.py:Planar2Arm", "hooks.py:Evil"))
-    (folder / "hooks.py").write_text(f"from pathlib import Path\nPath({str(marker)!r}).write_text('ran')\n"
-                                     "from sim_peer import ArmRobot as Evil\n")
+    (folder / "hooks.py").write_text(
+        f"from pathlib import Path\nPath({str(marker)!r}).write_text('ran')\nfrom sim_peer import ArmRobot as Evil\n"
+    )
     return folder
 
 
@@ -129,8 +166,19 @@ def _unchanged(c: Class) -> None:
     assert not re.search(r"handed \S+ out to|took \S+ in from", c.sims_output())
 
 
-def _forged(c: Class, fab: Fabric, kind: str, rid: str, to: str, *, source_state: RobotState | None = None, rtype: str = "reeman",
-            owner: str = "", pose=(0.0, 0.0, 0.0, 0.0), term: int = 100) -> Event:
+def _forged(
+    c: Class,
+    fab: Fabric,
+    kind: str,
+    rid: str,
+    to: str,
+    *,
+    source_state: RobotState | None = None,
+    rtype: str = "reeman",
+    owner: str = "",
+    pose=(0.0, 0.0, 0.0, 0.0),
+    term: int = 100,
+) -> Event:
     """The old protocol's hand-made step: a handoff carried in the query, which no sim accepts any more."""
     state = source_state or RobotState(rid, "mobile", np.array([pose[0], pose[1], pose[3]]), np.zeros(2), np.zeros(2))
     real = {r.object: r for ws in _states(fab, c.world) for r in ws.records}
@@ -141,7 +189,9 @@ def _forged(c: Class, fab: Fabric, kind: str, rid: str, to: str, *, source_state
 
 def _states(fab: Fabric, world: str) -> list[WorldState]:
     """What srv/state tells any login: every robot's state and record (reading is everyone's)."""
-    return [r.message for r in fab.rpc.query(keys.srv(world, "state"), timeout=5.0, expected=WorldState, all_replies=True)]
+    return [
+        r.message for r in fab.rpc.query(keys.srv(world, "state"), timeout=5.0, expected=WorldState, all_replies=True)
+    ]
 
 
 def _attacks(c: Class, fab: Fabric) -> dict[str, Event]:
@@ -174,8 +224,12 @@ def test_a_students_hand_made_moves_on_srv_state_are_refused_counted_and_publish
         with pytest.raises(ServiceError) as err:
             mallory.rpc.query(keys.srv(cls.world, "state"), ev, timeout=5.0, all_replies=True)
         assert STAFF_ONLY in err.value.reason, (name, err.value.reason)
-    wait_until(lambda: {e.data.get("step") for e in refused} >= {"move_out", "move_in"}, timeout=20,
-               what="the sims' move_refused events", seen=lambda: refused)
+    wait_until(
+        lambda: {e.data.get("step") for e in refused} >= {"move_out", "move_in"},
+        timeout=20,
+        what="the sims' move_refused events",
+        seen=lambda: refused,
+    )
     assert all(e.kind == "move_refused" and STAFF_ONLY in e.reason for e in refused), refused
     assert {e.header.source for e in refused} == {"sim-a", "sim-b"}  # each sim refuses and says so
     _unchanged(cls)
@@ -189,8 +243,12 @@ def test_a_student_may_not_ask_for_a_move_in_her_name_nor_in_the_instructors(cls
             with pytest.raises(ho.NoAnswer):
                 ho.ask(mallory, "sim-b", login, ev, 1.0)
     for login in ("mallory", "carol"):
-        wait_until(lambda: f"mallory query {keys.srv_move(cls.world, 'sim-b', login)}" in cls.procs.output(cls.router), timeout=20,
-                   what=f"the router's count of mallory's queries as {login}", seen=lambda: cls.procs.output(cls.router)[-1500:])
+        wait_until(
+            lambda: f"mallory query {keys.srv_move(cls.world, 'sim-b', login)}" in cls.procs.output(cls.router),
+            timeout=20,
+            what=f"the router's count of mallory's queries as {login}",
+            seen=lambda: cls.procs.output(cls.router)[-1500:],
+        )
     _unchanged(cls)
 
 
@@ -202,23 +260,52 @@ def test_the_sims_refuse_a_bad_move_even_from_the_instructor_and_keep_serving(cl
         ho.ask(carol, "sim-a", "carol", ho.step(ho.MOVE_OUT, "base2", to="sim-nowhere", term=100), 5.0)
     for rid in ("base0", "ghost"):  # a clone of a robot sim-a serves, a phantom: sim-a handed neither out
         with pytest.raises(ho.MoveError, match=f"no robot {rid} was handed out here"):
-            ho.ask(carol, "sim-b", "carol", ho.step(ho.MOVE_IN, rid, to="sim-b", source="sim-a", term=100, move_id="x"), 5.0)
+            ho.ask(
+                carol,
+                "sim-b",
+                "carol",
+                ho.step(ho.MOVE_IN, rid, to="sim-b", source="sim-a", term=100, move_id="x"),
+                5.0,
+            )
     for rtype, why in ((str(cls.evil), "is not a type name"), ("no-such-robot", "is not installed here")):
         with pytest.raises(ho.MoveError, match=why):
-            ho.ask(carol, "sim-b", "carol", ho.step(ho.MOVE_PREPARE, "ghost", to="sim-b", source="sim-a", term=1, rtype=rtype), 5.0)
+            ho.ask(
+                carol,
+                "sim-b",
+                "carol",
+                ho.step(ho.MOVE_PREPARE, "ghost", to="sim-b", source="sim-a", term=1, rtype=rtype),
+                5.0,
+            )
     _unchanged(cls)
     # a real hand-out, then a move_in naming another move: refused; the source takes it back as it kept it
-    terms = {r.source: r.message.header.term for r in cls.probe.rpc.query(keys.srv(cls.world, "world"), expected=WorldInfo, all_replies=True)}
+    terms = {
+        r.source: r.message.header.term
+        for r in cls.probe.rpc.query(keys.srv(cls.world, "world"), expected=WorldInfo, all_replies=True)
+    }
     term = ho.move_term(terms["sim-a"], terms["sim-b"])
     with pytest.raises(ho.MoveError, match="not the one the election gives"):
         ho.ask(carol, "sim-a", "carol", ho.step(ho.MOVE_OUT, "base2", to="sim-b", term=term + 50), 5.0)
     out = ho.ask(carol, "sim-a", "carol", ho.step(ho.MOVE_OUT, "base2", to="sim-b", term=term), 10.0)
     assert cls.parts() == {"sim-a": ["base0"], "sim-b": ["base1"]}
     with pytest.raises(ho.MoveError, match="handed out in another move"):
-        ho.ask(carol, "sim-b", "carol", ho.step(ho.MOVE_IN, "base2", to="sim-b", source="sim-a", term=term, move_id="forged"), 10.0)
-    ho.ask(carol, "sim-a", "carol", ho.step(ho.MOVE_IN, "base2", to="sim-a", source="sim-a", term=term, move_id=out.data["move"]), 10.0)
+        ho.ask(
+            carol,
+            "sim-b",
+            "carol",
+            ho.step(ho.MOVE_IN, "base2", to="sim-b", source="sim-a", term=term, move_id="forged"),
+            10.0,
+        )
+    ho.ask(
+        carol,
+        "sim-a",
+        "carol",
+        ho.step(ho.MOVE_IN, "base2", to="sim-a", source="sim-a", term=term, move_id=out.data["move"]),
+        10.0,
+    )
     assert "took base2" not in cls.procs.output(cls.sim_b)
-    wait_until(lambda: cls.parts() == {"sim-a": ["base0", "base2"], "sim-b": ["base1"]}, timeout=20, what="base2 back at sim-a")
+    wait_until(
+        lambda: cls.parts() == {"sim-a": ["base0", "base2"], "sim-b": ["base1"]}, timeout=20, what="base2 back at sim-a"
+    )
     assert "took base2 in from sim-a" in cls.procs.output(cls.sim_a)  # its own, taken back
     for who, rid, owner in ((cls.alice, "base0", "alice"), (cls.bob, "base1", "bob")):
         assert (who.ownership.record(rid).owner, who.ownership.record(rid).epoch) == (owner, cls.epochs[rid])
@@ -228,15 +315,32 @@ def test_the_sims_refuse_a_bad_move_even_from_the_instructor_and_keep_serving(cl
 def test_a_robot_no_target_fetched_is_served_by_its_source_again(cls):
     """The tool died between its two steps: the source serves the robot again after RETURN_AFTER_S, by itself."""
     carol = cls.fabric("carol", "tool", "carol-tool2")
-    terms = {r.source: r.message.header.term for r in cls.probe.rpc.query(keys.srv(cls.world, "world"), expected=WorldInfo, all_replies=True)}
-    ho.ask(carol, "sim-a", "carol", ho.step(ho.MOVE_OUT, "base2", to="sim-b", term=ho.move_term(terms["sim-a"], terms["sim-b"])), 10.0)
+    terms = {
+        r.source: r.message.header.term
+        for r in cls.probe.rpc.query(keys.srv(cls.world, "world"), expected=WorldInfo, all_replies=True)
+    }
+    ho.ask(
+        carol,
+        "sim-a",
+        "carol",
+        ho.step(ho.MOVE_OUT, "base2", to="sim-b", term=ho.move_term(terms["sim-a"], terms["sim-b"])),
+        10.0,
+    )
     assert cls.parts() == {"sim-a": ["base0"], "sim-b": ["base1"]}
-    wait_until(lambda: cls.parts() == {"sim-a": ["base0", "base2"], "sim-b": ["base1"]}, timeout=ho.RETURN_AFTER_S + 20,
-               what="base2 served by sim-a again", seen=lambda: (cls.parts(), cls.procs.output(cls.sim_a)[-800:]))
+    wait_until(
+        lambda: cls.parts() == {"sim-a": ["base0", "base2"], "sim-b": ["base1"]},
+        timeout=ho.RETURN_AFTER_S + 20,
+        what="base2 served by sim-a again",
+        seen=lambda: (cls.parts(), cls.procs.output(cls.sim_a)[-800:]),
+    )
     said = f"no sim took base2 within {ho.RETURN_AFTER_S:.0f} s; serving it again"
     # the sim says so once it serves base2 again, so the line may come a moment after the world shows it
-    wait_until(lambda: said in cls.procs.output(cls.sim_a), timeout=10, what="sim-a saying it serves base2 again",
-               seen=lambda: cls.procs.output(cls.sim_a)[-800:])
+    wait_until(
+        lambda: said in cls.procs.output(cls.sim_a),
+        timeout=10,
+        what="sim-a saying it serves base2 again",
+        seen=lambda: cls.procs.output(cls.sim_a)[-800:],
+    )
     assert cls.sim_b.poll() is None and "took base2" not in cls.procs.output(cls.sim_b)
 
 
@@ -244,8 +348,12 @@ def test_the_instructors_move_works_and_alice_and_bob_drive_on(cls):
     r = cls.cli("carol", "own", "move", "base2", "--to", "sim-b")
     assert r.returncode == 0, r.stdout + r.stderr
     assert "moved base2 from sim sim-a to sim sim-b" in r.stdout, r.stdout
-    wait_until(lambda: cls.parts() == {"sim-a": ["base0"], "sim-b": ["base1", "base2"]}, timeout=20, what="base2 at sim-b",
-               seen=lambda: (cls.parts(), cls.sims_output()[-1500:]))
+    wait_until(
+        lambda: cls.parts() == {"sim-a": ["base0"], "sim-b": ["base1", "base2"]},
+        timeout=20,
+        what="base2 at sim-b",
+        seen=lambda: (cls.parts(), cls.sims_output()[-1500:]),
+    )
     assert "asked by carol" in cls.procs.output(cls.sim_a) and "asked by carol" in cls.procs.output(cls.sim_b)
     for who, rid, owner in ((cls.alice, "base0", "alice"), (cls.bob, "base1", "bob")):
         rec = who.ownership.record(rid)
@@ -254,8 +362,12 @@ def test_the_instructors_move_works_and_alice_and_bob_drive_on(cls):
         x = base.xy_theta[0]
         base.twist(0.3, 0.0)
         try:
-            wait_until(lambda: abs(base.xy_theta[0] - x) > 0.05, timeout=20, what=f"{owner} driving {rid}",
-                       seen=lambda: (base.xy_theta, who.events[-3:]))
+            wait_until(
+                lambda: abs(base.xy_theta[0] - x) > 0.05,
+                timeout=20,
+                what=f"{owner} driving {rid}",
+                seen=lambda: (base.xy_theta, who.events[-3:]),
+            )
         finally:
             base.stop(timeout=10)
     assert not cls.marker.exists()

@@ -22,11 +22,13 @@ from sim_peer.replica import election as el
 from sim_peer.shards import handoff as ho
 from sim_peer.shards.moving import MoveService
 
+
 class WorldServer:
     """The host's side of the seam: a real world, rebuilt and restored as the host does, under the move's term."""
 
     def __init__(self, fab, robots: list[str], *, role: str = el.PRIMARY, can_rebuild: bool = True) -> None:
         self.world = SimWorld("warehouse", robots, scene_robots=False, seed=1)
+
         def build(placements: list) -> SimWorld:
             return SimWorld("warehouse", placements, scene_robots=False, seed=1)
 
@@ -35,9 +37,16 @@ class WorldServer:
         self.election = el.Election(fab.peer_id, role, 1 if role == el.PRIMARY else 0, fab.peer_id)
         self.lock, self.said, self.now = threading.RLock(), [], 5.0
         self.standbys: list[str] = []
-        self.moves = MoveService(fab, self, serving_lock=self.lock, election=lambda: self.election,
-                                 live=lambda: frozenset({"sim-a", "sim-b"}), standbys=lambda live: list(self.standbys),
-                                 announce=self.said.append, clock=lambda: self.now)
+        self.moves = MoveService(
+            fab,
+            self,
+            serving_lock=self.lock,
+            election=lambda: self.election,
+            live=lambda: frozenset({"sim-a", "sim-b"}),
+            standbys=lambda live: list(self.standbys),
+            announce=self.said.append,
+            clock=lambda: self.now,
+        )
         fab.rpc.serve(keys.srv_move_served(fab.world, fab.peer_id), self.moves.on_query, expected=Event)
 
     def stop_serving(self) -> tuple[WorldState, dict]:
@@ -83,8 +92,11 @@ def test_a_robot_moves_between_two_sims_through_their_move_services(connect):
     out = _ask(tool, "sim-a", ho.step(ho.MOVE_OUT, "base2", to="sim-b", term=term, asker="tool"))
     assert set(src.world.robots) == {"base0"} and src.election.term == term
     assert set(src.moves.handed_out) == {"base2"} and src.moves.handed_out["base2"].at == 5.0  # on its clock
-    _ask(tool, "sim-b", ho.step(ho.MOVE_IN, "base2", to="sim-b", source="sim-a", term=term, move_id=out.data["move"],
-                                asker="tool"))
+    _ask(
+        tool,
+        "sim-b",
+        ho.step(ho.MOVE_IN, "base2", to="sim-b", source="sim-a", term=term, move_id=out.data["move"], asker="tool"),
+    )
     assert set(dst.world.robots) == {"base1", "base2"} and dst.election.term == term
     assert np.isclose(dst.world.robots["base2"].ctrl.y, 1.0)  # where the source had it
     assert any("took base2 in from sim-a" in s for s in dst.said) and any("handed base2 out" in s for s in src.said)

@@ -17,8 +17,13 @@ from sim_peer.shards.directory import SHARD_QUERY, ShardDirectory
 
 
 def _directory(fab, mine, live, stopping=None, learnt=None):
-    return ShardDirectory(fab, mine, live=lambda: frozenset(live), stopping=stopping or threading.Event(),
-                          on_learnt=(learnt.append if learnt is not None else lambda view: None))
+    return ShardDirectory(
+        fab,
+        mine,
+        live=lambda: frozenset(live),
+        stopping=stopping or threading.Event(),
+        on_learnt=(learnt.append if learnt is not None else lambda view: None),
+    )
 
 
 def _answering(fab, directory: ShardDirectory) -> None:
@@ -35,8 +40,9 @@ def test_a_directory_learns_the_live_sims_shards_and_counts_only_its_own(connect
     # not asked yet, every sim counts as ours (one world, one shard)
     assert mine.view(frozenset(live)) == frozenset(live)
     assert mine.same_shard("sim-c")
-    wait_until(lambda: (mine.learn(), len(mine.shards) == 2)[1], timeout=30, what="both sims' shards",
-               seen=lambda: mine.shards)
+    wait_until(
+        lambda: (mine.learn(), len(mine.shards) == 2)[1], timeout=30, what="both sims' shards", seen=lambda: mine.shards
+    )
     assert mine.shards == {"sim-b": frozenset({"arm1"}), "sim-c": frozenset({"base1"})}
     assert mine.view(frozenset(live)) == frozenset({"sim-a", "sim-b"})
     assert mine.same_shard("sim-b") and not mine.same_shard("sim-c")
@@ -54,8 +60,12 @@ def test_learning_soon_tells_the_election_the_view_of_this_shard_once_done(conne
     mine = _directory(a, ["arm1"], live, learnt=learnt)
     _answering(b, _directory(b, ["base1"], live))
     # a first learning may miss sim-b's queryable on its way to the router: learn again until it is in
-    wait_until(lambda: (mine.learn_soon(), learnt and learnt[-1] == frozenset({"sim-a"}))[1], timeout=30,
-               what="the view without the other shard's sim", seen=lambda: learnt)
+    wait_until(
+        lambda: (mine.learn_soon(), learnt and learnt[-1] == frozenset({"sim-a"}))[1],
+        timeout=30,
+        what="the view without the other shard's sim",
+        seen=lambda: learnt,
+    )
     assert mine.shards == {"sim-b": frozenset({"base1"})}
 
 
@@ -73,7 +83,11 @@ def test_the_answer_and_about_mine_read_this_shards_robots(connect):
     mine = _directory(a, ["arm2", "arm1"], {"sim-a"})
     answer = mine.answer("primary")
     assert (answer.kind, answer.reason, answer.data, answer.header.source) == (
-        SHARD_QUERY, "primary", {"robots": ["arm1", "arm2"]}, "sim-a")
+        SHARD_QUERY,
+        "primary",
+        {"robots": ["arm1", "arm2"]},
+        "sim-a",
+    )
 
     def state(*robots: str) -> WorldState:
         zero = np.zeros(1)

@@ -22,7 +22,9 @@ QUERY = re.compile(r"query: (\{.*?\}),\n")
 
 
 def _unescape(raw: str) -> str:
-    return raw.replace("&#36;", "$").replace("&#96;", "`").replace("&gt;", ">").replace("&lt;", "<").replace("&amp;", "&")
+    return (
+        raw.replace("&#36;", "$").replace("&#96;", "`").replace("&gt;", ">").replace("&lt;", "<").replace("&amp;", "&")
+    )
 
 
 class RawPage:
@@ -51,10 +53,17 @@ class RawPage:
         """Open the websocket with this page's ids (``as_client``: another page's client id in the query)."""
         self.sio = socketio.AsyncClient(reconnection=False, ssl_verify=self.verify)
         self.sio.on("update", self._update)
-        q = {**self.query, "client_id": as_client or self.client_id, "tab_id": self.tab_id, "document_id": str(uuid.uuid4()),
-             "implicit_handshake": "true"}
+        q = {
+            **self.query,
+            "client_id": as_client or self.client_id,
+            "tab_id": self.tab_id,
+            "document_id": str(uuid.uuid4()),
+            "implicit_handshake": "true",
+        }
         qs = "&".join(f"{k}={v}" for k, v in q.items())
-        await self.sio.connect(f"{self.url}?{qs}", socketio_path="/_nicegui_ws/socket.io", transports=["websocket"], wait_timeout=20)
+        await self.sio.connect(
+            f"{self.url}?{qs}", socketio_path="/_nicegui_ws/socket.io", transports=["websocket"], wait_timeout=20
+        )
 
     async def _update(self, data: dict) -> None:
         for k, v in data.items():
@@ -68,18 +77,29 @@ class RawPage:
         """The id of the element with this text (a button's label is its text) or this ``label`` prop (a field)."""
         for eid, e in self.elements.items():
             props = e.get("props", {})
-            if (text is not None and (e.get("text") == text or props.get("label") == text)) or (label is not None and props.get("label") == label):
+            if (text is not None and (e.get("text") == text or props.get("label") == text)) or (
+                label is not None and props.get("label") == label
+            ):
                 return eid
         raise KeyError(text or label)
 
     def listener(self, eid: int, kind: str) -> str:
         return [ev["listener_id"] for ev in self.elements[eid].get("events", []) if ev["type"] == kind][0]
 
-    async def send(self, eid: int, kind: str, *args: Any, client_id: str | None = None, listener: str | None = None) -> None:
+    async def send(
+        self, eid: int, kind: str, *args: Any, client_id: str | None = None, listener: str | None = None
+    ) -> None:
         """Send event ``kind`` of element ``eid`` (this page's listener unless ``listener``) naming ``client_id``."""
         assert self.sio is not None
-        await self.sio.emit("event", {"id": eid, "client_id": client_id or self.client_id, "listener_id": listener or self.listener(eid, kind),
-                                      "args": [json.dumps(a) for a in args]})
+        await self.sio.emit(
+            "event",
+            {
+                "id": eid,
+                "client_id": client_id or self.client_id,
+                "listener_id": listener or self.listener(eid, kind),
+                "args": [json.dumps(a) for a in args],
+            },
+        )
 
     async def close(self) -> None:
         if self.sio is not None:

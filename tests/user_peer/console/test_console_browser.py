@@ -37,8 +37,14 @@ pytestmark = pytest.mark.slow
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = [
-    "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox", "--headless",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--no-sandbox",
+    "--headless",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
 ]
 VIEWPORT = {"width": 1280, "height": 1350}
 OUT = Path(__file__).resolve().parents[3] / "out"
@@ -72,27 +78,67 @@ def klass(tmp_path_factory):
     files = made.clients
     with ProcessGroup(tmp) as procs:
         router = procs.start(robofabric_cmd("router", "--zenoh-config", str(d / "router.json5")), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router))
-        sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config", str(files["sim"])), name="sim")
-        procs.start(robofabric_cmd("compute", "--world", world, "--zenoh-config", str(files["compute"])), name="compute")
+        wait_until(
+            lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router)
+        )
+        sim = procs.start(
+            robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config", str(files["sim"])),
+            name="sim",
+        )
+        procs.start(
+            robofabric_cmd("compute", "--world", world, "--zenoh-config", str(files["compute"])), name="compute"
+        )
         web = free_port()
-        console = procs.start(robofabric_cmd("console", "--world", world, "--connect", ep, "--listen", f"127.0.0.1:{web}", "--grace", "3",
-                                             "--instructors", "carol"), name="console")
+        console = procs.start(
+            robofabric_cmd(
+                "console",
+                "--world",
+                world,
+                "--connect",
+                ep,
+                "--listen",
+                f"127.0.0.1:{web}",
+                "--grace",
+                "3",
+                "--instructors",
+                "carol",
+            ),
+            name="console",
+        )
         url = f"http://127.0.0.1:{web}/"
-        wait_until(lambda: f"console: open {url}" in procs.output(console), timeout=60, what="the console's URL",
-                   seen=lambda: procs.output(console)[-2000:])
+        wait_until(
+            lambda: f"console: open {url}" in procs.output(console),
+            timeout=60,
+            what="the console's URL",
+            seen=lambda: procs.output(console)[-2000:],
+        )
         carol = user_peer.connect(world=world, zenoh_config=str(files["carol"]), join_timeout=120)
         try:
-            wait_until(lambda: carol.fabric.live_peers("compute"), timeout=120, what="the compute peer", seen=lambda: procs.output(sim)[-2000:])
-            yield Klass(world, url, f"127.0.0.1:{web}", {n: _password(files[n]) for n in ("alice", "bob", "dave", "carol")}, carol, procs, console,
-                        made.cards)
+            wait_until(
+                lambda: carol.fabric.live_peers("compute"),
+                timeout=120,
+                what="the compute peer",
+                seen=lambda: procs.output(sim)[-2000:],
+            )
+            yield Klass(
+                world,
+                url,
+                f"127.0.0.1:{web}",
+                {n: _password(files[n]) for n in ("alice", "bob", "dave", "carol")},
+                carol,
+                procs,
+                console,
+                made.cards,
+            )
         finally:
             carol.close()
 
 
 @pytest.fixture(scope="module")
 def browser():
-    assert Path(CHROMIUM).exists() and shutil.which("chromium"), "Debian's chromium is not installed (apt-get install chromium)"
+    assert Path(CHROMIUM).exists() and shutil.which("chromium"), (
+        "Debian's chromium is not installed (apt-get install chromium)"
+    )
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p:
@@ -148,8 +194,10 @@ def logged_in(page, klass: Klass, name: str) -> None:
     try:
         page.get_by_text(f"world {klass.world} · {name}").wait_for(timeout=60_000)
     except PlaywrightTimeoutError:
-        raise AssertionError(f"{name}'s page never showed her world in 60 s; it says: "
-                             f"{one_line(page.locator('body').inner_text(), 600)!r}") from None
+        raise AssertionError(
+            f"{name}'s page never showed her world in 60 s; it says: "
+            f"{one_line(page.locator('body').inner_text(), 600)!r}"
+        ) from None
 
 
 def shot(page, name: str) -> Path:
@@ -164,8 +212,12 @@ def message(page) -> str:
 
 
 def wait_message(page, pattern: str, timeout: float = 30.0) -> str:
-    return wait_until(lambda: re.search(pattern, message(page)) and message(page), timeout=timeout, what=f"the page to say /{pattern}/",
-                      seen=lambda: message(page))
+    return wait_until(
+        lambda: re.search(pattern, message(page)) and message(page),
+        timeout=timeout,
+        what=f"the page to say /{pattern}/",
+        seen=lambda: message(page),
+    )
 
 
 def target_label(page) -> np.ndarray:
@@ -180,8 +232,12 @@ def nudge(page, buttons: tuple[str, ...], step: float = 0.01) -> np.ndarray:
     for name in buttons:
         page.get_by_role("button", name=name).click()
         want["xyz".index(name[0])] += step if name.endswith("plus") else -step
-    wait_until(lambda: np.allclose(target_label(page), want, atol=5e-4), timeout=10, what=f"the target at {want}",
-               seen=lambda: target_label(page))
+    wait_until(
+        lambda: np.allclose(target_label(page), want, atol=5e-4),
+        timeout=10,
+        what=f"the target at {want}",
+        seen=lambda: target_label(page),
+    )
     ik = page.get_by_text(re.compile(r"^IK: "))
     wait_until(lambda: ik.inner_text().startswith("IK: ["), timeout=30, what="the IK solution", seen=ik.inner_text)
     return want
@@ -197,8 +253,12 @@ def test_a_from_the_page_and_bob_sees_alice_own_the_arm(browser, klass):
     wait_until(lambda: apply.is_enabled(), timeout=10, what="Apply IK enabled for the owner")
     target = nudge(alice, ("z minus", "z minus", "x minus"))
     seen = klass.carol.object("target")
-    wait_until(lambda: seen.pose is not None and np.allclose(seen.pose.position, target, atol=1e-6), timeout=10,
-               what="the target where alice's page put it (read through the Python API)", seen=lambda: seen.pose)
+    wait_until(
+        lambda: seen.pose is not None and np.allclose(seen.pose.position, target, atol=1e-6),
+        timeout=10,
+        what="the target where alice's page put it (read through the Python API)",
+        seen=lambda: seen.pose,
+    )
     apply.click()
     wait_message(alice, r"apply IK .*: ok")
     arm = klass.carol.robot("arm1")
@@ -210,8 +270,12 @@ def test_a_from_the_page_and_bob_sees_alice_own_the_arm(browser, klass):
         err = float(np.linalg.norm(np.asarray(p.position) - target))
         return err if err <= 1e-3 else None
 
-    err = wait_until(error, timeout=30, what="arm1's flange at the target (read through the Python API)",
-                     seen=lambda: (arm.flange, target, alice.get_by_text(re.compile(r"^IK: ")).inner_text()))
+    err = wait_until(
+        error,
+        timeout=30,
+        what="arm1's flange at the target (read through the Python API)",
+        seen=lambda: (arm.flange, target, alice.get_by_text(re.compile(r"^IK: ")).inner_text()),
+    )
     assert err <= 1e-3
     shot(alice, "alice-test-a")
 
@@ -229,15 +293,25 @@ def test_a_from_the_page_and_bob_sees_alice_own_the_arm(browser, klass):
     speed = alice.get_by_role("slider", name="Speed scale")
     box = speed.bounding_box()
     speed.click(position={"x": 1, "y": box["height"] / 2})  # its left end: the minimum
-    wait_until(lambda: speed.get_attribute("aria-valuenow") == "0.05", timeout=5, what="the speed slider at its minimum",
-               seen=lambda: speed.get_attribute("aria-valuenow"))
+    wait_until(
+        lambda: speed.get_attribute("aria-valuenow") == "0.05",
+        timeout=5,
+        what="the speed slider at its minimum",
+        seen=lambda: speed.get_attribute("aria-valuenow"),
+    )
     j1 = alice.get_by_role("slider", name=re.compile("^J1"))
     box = j1.bounding_box()
     j1.click(position={"x": box["width"] - 1, "y": box["height"] / 2})
-    wait_until(lambda: arm.record is not None and arm.record.state == "moving", timeout=10, what="arm1 moving",
-               seen=lambda: arm.record)
+    wait_until(
+        lambda: arm.record is not None and arm.record.state == "moving",
+        timeout=10,
+        what="arm1 moving",
+        seen=lambda: arm.record,
+    )
     bob.get_by_role("button", name="Request").click()  # arm1 is selected (the first robot)
-    text = wait_message(bob, r"request arm1: arm1 is moving and belongs to alice: wait until it stops, or press Queue to be next")
+    text = wait_message(
+        bob, r"request arm1: arm1 is moving and belongs to alice: wait until it stops, or press Queue to be next"
+    )
     assert "[NotOwner: " in text and "in motion" in text, text  # the next step in plain words, the code's reason after
     shot(bob, "bob-refused")
     # alice stops it; still, it is bob's for the asking: alice's page then shows her controls disabled
@@ -292,11 +366,19 @@ def test_dragging_the_ik_target_on_the_view_moves_it_and_the_arm_is_drawn_link_b
     bob.mouse.move(x0 + dx, y0 + dy)
     bob.mouse.up()
     want = before + np.array([dx * m_per_screen_px, -dy * m_per_screen_px, 0.0])
-    wait_until(lambda: seen.pose is not None and np.allclose(seen.pose.position, want, atol=0.01), timeout=10,
-               what=f"the target dragged to {want} (read through the Python API)", seen=lambda: (before, seen.pose.position))
+    wait_until(
+        lambda: seen.pose is not None and np.allclose(seen.pose.position, want, atol=0.01),
+        timeout=10,
+        what=f"the target dragged to {want} (read through the Python API)",
+        seen=lambda: (before, seen.pose.position),
+    )
     assert seen.pose.position[2] == pytest.approx(before[2], abs=1e-3)  # a drag from above keeps the height
-    wait_until(lambda: math.dist(_center(bob, target_svg), (x0 + dx, y0 + dy)) <= 2.0, timeout=10,
-               what="the page drawing the target where it was dropped", seen=lambda: (_center(bob, target_svg), (x0 + dx, y0 + dy)))
+    wait_until(
+        lambda: math.dist(_center(bob, target_svg), (x0 + dx, y0 + dy)) <= 2.0,
+        timeout=10,
+        what="the page drawing the target where it was dropped",
+        seen=lambda: (_center(bob, target_svg), (x0 + dx, y0 + dy)),
+    )
     assert "goal" not in message(bob)  # the click that ended the drag placed no goal
     assert np.allclose(target_label(bob), seen.pose.position, atol=5e-4)
 
@@ -329,11 +411,16 @@ def test_holding_up_drives_the_base_and_releasing_stops_it(browser, klass):
     poses: list = []
     sub = base.on("pose", lambda _k, p: poses.append(p))
     twists: list = []  # (arrival, Command) of bob's twists to base1, as the wire carries them
-    cmds = klass.carol.fabric.subscribe(keys.robot_cmd(klass.world, "base1", "twist", "bob"),
-                                        lambda _k, c: twists.append((time.time_ns(), c)), expected=Command)
+    cmds = klass.carol.fabric.subscribe(
+        keys.robot_cmd(klass.world, "base1", "twist", "bob"),
+        lambda _k, c: twists.append((time.time_ns(), c)),
+        expected=Command,
+    )
     bob.keyboard.down("ArrowUp")
     try:
-        wait_until(lambda: speed() > 0.1, timeout=10, what="base1 moving while ↑ is held", seen=lambda: (speed(), message(bob)))
+        wait_until(
+            lambda: speed() > 0.1, timeout=10, what="base1 moving while ↑ is held", seen=lambda: (speed(), message(bob))
+        )
         bob.wait_for_timeout(1500)  # held for longer than the sim's twist deadman: the page refreshes it
         assert speed() > 0.1, speed()
     finally:
@@ -341,8 +428,12 @@ def test_holding_up_drives_the_base_and_releasing_stops_it(browser, klass):
         bob.keyboard.up("ArrowUp")
     # the page's own stop: a zero twist on the wire after the release (the sim's twist deadman would stop the base
     # too, with nothing sent; timing the braking cannot tell them apart on a loaded machine)
-    wait_until(lambda: any(t > released and c.body.v == 0 and c.body.omega == 0 for t, c in twists),
-               timeout=5, what="the page's zero twist after the release", seen=lambda: [(t > released, c.body) for t, c in twists[-3:]])
+    wait_until(
+        lambda: any(t > released and c.body.v == 0 and c.body.omega == 0 for t, c in twists),
+        timeout=5,
+        what="the page's zero twist after the release",
+        seen=lambda: [(t > released, c.body) for t, c in twists[-3:]],
+    )
     wait_until(lambda: speed() < 0.02, timeout=5, what="base1 to stop after ↑ was released", seen=speed)
     sub.close()
     cmds.undeclare()
@@ -433,8 +524,12 @@ def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_g
     # bumper"), stood still, and bob's Queue took it over instead of queueing
     base.request(timeout=10)
     base.reset(timeout=10)
-    wait_until(lambda: (p := base.xy_theta) is not None and np.allclose(p, (0.0, 0.0, 0.0), atol=0.01), timeout=10,
-               what="base1 back at its spawn", seen=lambda: base.xy_theta)
+    wait_until(
+        lambda: (p := base.xy_theta) is not None and np.allclose(p, (0.0, 0.0, 0.0), atol=0.01),
+        timeout=10,
+        what="base1 back at its spawn",
+        seen=lambda: base.xy_theta,
+    )
     base.release()
     alice = open_page(browser, klass)
     logged_in(alice, klass, "alice")
@@ -460,10 +555,17 @@ def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_g
     wait_until(still, timeout=15, what="base1 stopped after alice's page closed", seen=lambda: base.pose)
     stopped = time.monotonic() - closed
     assert base.record.owner == "alice", base.record  # still hers: the grace has not begun
-    wait_until(lambda: base.record.owner == "bob", timeout=60, what="base1 passed to bob after the grace", seen=lambda: base.record)
+    wait_until(
+        lambda: base.record.owner == "bob",
+        timeout=60,
+        what="base1 passed to bob after the grace",
+        seen=lambda: base.record,
+    )
     passed = time.monotonic() - closed
-    print(f"alice's page closed: base1 still after {stopped:.2f} s, bob's after {passed:.1f} s "
-          f"(reconnect window {RECONNECT_S:.0f} s + grace 3 s)")
+    print(
+        f"alice's page closed: base1 still after {stopped:.2f} s, bob's after {passed:.1f} s "
+        f"(reconnect window {RECONNECT_S:.0f} s + grace 3 s)"
+    )
     assert passed >= RECONNECT_S + 3.0 - 0.5, passed
     bob.get_by_text(re.compile(r"^mobile · owner: you")).wait_for()
     shot(bob, "bob-after-alice-left")
@@ -476,7 +578,9 @@ def test_a_wrong_password_shows_the_error_and_opens_no_session(browser, klass):
     page = open_page(browser, klass)
     log_in(page, "dave", "not-" + klass.passwords["dave"])
     alert = page.get_by_role("alert")
-    wait_until(lambda: "wrong password" in alert.inner_text(), timeout=30, what="the login error", seen=alert.inner_text)
+    wait_until(
+        lambda: "wrong password" in alert.inner_text(), timeout=30, what="the login error", seen=alert.inner_text
+    )
     shot(page, "wrong-password")
     assert ("user", "dave") not in klass.carol.fabric.live_peers("user")
     assert page.get_by_role("button", name="Request").count() == 0
@@ -491,11 +595,10 @@ def test_the_pages_ask_no_host_but_the_console_server(browser, klass):
     shot(page, "dave-view")
     page.context.close()
     assert any(urlsplit(u).path.startswith("/_nicegui") for u in REQUESTS), REQUESTS  # its assets came from the console
-    elsewhere = sorted({u for u in REQUESTS if urlsplit(u).netloc != klass.host and not u.startswith(("data:", "blob:"))})
+    elsewhere = sorted(
+        {u for u in REQUESTS if urlsplit(u).netloc != klass.host and not u.startswith(("data:", "blob:"))}
+    )
     assert not elsewhere, f"the pages asked other hosts: {elsewhere}"
-
-
-
 
 
 def test_the_3d_view_draws_the_arm_and_a_drag_in_it_moves_the_ik_target_that_apply_ik_reaches(browser, klass):
@@ -517,20 +620,36 @@ def test_the_3d_view_draws_the_arm_and_a_drag_in_it_moves_the_ik_target_that_app
         out = dave.evaluate(SCENE3D_JS)
         return out if out and out.get("target") and len(out["ends"]) >= 12 else None
 
-    scene = wait_until(drawn, timeout=30, what="the 3D view with arm1's links and the target", seen=lambda: dave.evaluate(SCENE3D_JS))
+    scene = wait_until(
+        drawn, timeout=30, what="the 3D view with arm1's links and the target", seen=lambda: dave.evaluate(SCENE3D_JS)
+    )
     flange = np.asarray(arm.flange.position)
-    assert min(math.dist(e, flange) for e in scene["ends"]) <= 0.005, (scene["ends"], flange)  # drawn at its live joints
+    assert min(math.dist(e, flange) for e in scene["ends"]) <= 0.005, (
+        scene["ends"],
+        flange,
+    )  # drawn at its live joints
 
     z = round(float(seen.pose.position[2]) - 0.02, 3)
     height = dave.get_by_label("IK target height z in metres")
     height.fill(f"{z}")
     height.press("Enter")
-    wait_until(lambda: abs(seen.pose.position[2] - z) <= 1e-6, timeout=10, what=f"the target's height at {z}", seen=lambda: seen.pose)
+    wait_until(
+        lambda: abs(seen.pose.position[2] - z) <= 1e-6,
+        timeout=10,
+        what=f"the target's height at {z}",
+        seen=lambda: seen.pose,
+    )
     before = np.asarray(seen.pose.position, dtype=float)
-    wait_until(lambda: (s := drawn()) and abs(s["target"][2] - z) <= 1e-4, timeout=10, what="the sphere at the new height")
+    wait_until(
+        lambda: (s := drawn()) and abs(s["target"][2] - z) <= 1e-4, timeout=10, what="the sphere at the new height"
+    )
     drag_sphere(dave, drawn()["screen"])
-    wait_until(lambda: np.linalg.norm(np.asarray(seen.pose.position)[:2] - before[:2]) >= 0.005, timeout=10,
-               what="the target dragged (read through the Python API)", seen=lambda: (before, seen.pose.position))
+    wait_until(
+        lambda: np.linalg.norm(np.asarray(seen.pose.position)[:2] - before[:2]) >= 0.005,
+        timeout=10,
+        what="the target dragged (read through the Python API)",
+        seen=lambda: (before, seen.pose.position),
+    )
     target = np.asarray(seen.pose.position, dtype=float)
     assert target[2] == pytest.approx(z, abs=1e-6)  # dragged on its own plane
     assert np.linalg.norm(target - before) <= 0.1
@@ -550,10 +669,20 @@ def test_the_3d_view_draws_the_arm_and_a_drag_in_it_moves_the_ik_target_that_app
 
     # there, and still there 20 flange poses later: at rest on it, not passing through (a wrist joint that only
     # turns the flange may still be settling on a loaded box: CI saw the flange on the target with |dq| > 1e-3)
-    first = wait_until(on_target, timeout=30, what="arm1's flange at the dragged target", seen=lambda: (arm.flange, target))
-    wait_until(lambda: (o := on_target()) is not None and o[1] >= first[1] + 20, timeout=30,
-               what="arm1's flange to stay at the dragged target", seen=lambda: (arm.flange, target))
-    wait_until(lambda: min(math.dist(e, target) for e in drawn()["ends"]) <= 0.005, timeout=10, what="the 3D arm drawn at the target")
+    first = wait_until(
+        on_target, timeout=30, what="arm1's flange at the dragged target", seen=lambda: (arm.flange, target)
+    )
+    wait_until(
+        lambda: (o := on_target()) is not None and o[1] >= first[1] + 20,
+        timeout=30,
+        what="arm1's flange to stay at the dragged target",
+        seen=lambda: (arm.flange, target),
+    )
+    wait_until(
+        lambda: min(math.dist(e, target) for e in drawn()["ends"]) <= 0.005,
+        timeout=10,
+        what="the 3D arm drawn at the target",
+    )
     shot(dave, "3d-view-reached")
     dave.get_by_role("button", name="Release").click()
     wait_message(dave, r"release arm1: ok")
@@ -561,8 +690,13 @@ def test_the_3d_view_draws_the_arm_and_a_drag_in_it_moves_the_ik_target_that_app
 
 
 def _in_viewport(box: dict | None, vp: dict) -> bool:
-    return box is not None and box["x"] >= 0 and box["y"] >= 0 and box["x"] + box["width"] <= vp["width"] + 0.5 \
+    return (
+        box is not None
+        and box["x"] >= 0
+        and box["y"] >= 0
+        and box["x"] + box["width"] <= vp["width"] + 0.5
         and box["y"] + box["height"] <= vp["height"] + 0.5
+    )
 
 
 def test_the_selected_robots_panel_sits_beside_its_view_and_fits_1024x700_and_stacks_at_800x600(browser, klass):
@@ -574,16 +708,27 @@ def test_the_selected_robots_panel_sits_beside_its_view_and_fits_1024x700_and_st
     logged_in(page, klass, "bob")
     page.get_by_role("button", name="base1", exact=True).click()
     plan, live = page.get_by_role("button", name="Plan"), page.get_by_label(re.compile("^Live view"))
-    wait_until(lambda: plan.is_visible() and not page.get_by_role("slider", name=re.compile("^J1")).is_visible(), timeout=10,
-               what="base1's panel shown and no arm panel")
+    wait_until(
+        lambda: plan.is_visible() and not page.get_by_role("slider", name=re.compile("^J1")).is_visible(),
+        timeout=10,
+        what="base1's panel shown and no arm panel",
+    )
     vp = page.viewport_size
-    wait_until(lambda: _in_viewport(plan.bounding_box(), vp) and _in_viewport(live.bounding_box(), vp), timeout=10,
-               what="Plan and the map both in the 1024x700 viewport", seen=lambda: (plan.bounding_box(), live.bounding_box()))
+    wait_until(
+        lambda: _in_viewport(plan.bounding_box(), vp) and _in_viewport(live.bounding_box(), vp),
+        timeout=10,
+        what="Plan and the map both in the 1024x700 viewport",
+        seen=lambda: (plan.bounding_box(), live.bounding_box()),
+    )
     assert plan.bounding_box()["x"] + plan.bounding_box()["width"] <= live.bounding_box()["x"]  # beside it
     shot(page, "layout-1024x700")
     page.set_viewport_size({"width": 800, "height": 600})
-    wait_until(lambda: live.bounding_box()["y"] >= plan.bounding_box()["y"] + plan.bounding_box()["height"], timeout=10,
-               what="the map stacked under the base panel at 800x600", seen=lambda: (plan.bounding_box(), live.bounding_box()))
+    wait_until(
+        lambda: live.bounding_box()["y"] >= plan.bounding_box()["y"] + plan.bounding_box()["height"],
+        timeout=10,
+        what="the map stacked under the base panel at 800x600",
+        seen=lambda: (plan.bounding_box(), live.bounding_box()),
+    )
     shot(page, "layout-800x600")
     page.context.close()
 
@@ -616,7 +761,9 @@ def _scale_px_per_m(page) -> float:
     return box["width"] / float(bar.get_attribute("data-metres")) if box else 0.0
 
 
-def test_a_goal_typed_in_metres_is_placed_a_bad_one_is_refused_in_plain_words_and_the_map_zooms_with_its_scale_bar(browser, klass):
+def test_a_goal_typed_in_metres_is_placed_a_bad_one_is_refused_in_plain_words_and_the_map_zooms_with_its_scale_bar(
+    browser, klass
+):
     """The goal's x and y fields: a word is refused with what to type (the goal stays), numbers place the goal (the
     scene's goal pointer, read through the Python API, and the ring on the map). The legend names the map's marks;
     the scale bar's length on the screen matches the map's own scale, and twice it after Zoom in; a click on the
@@ -645,8 +792,12 @@ def test_a_goal_typed_in_metres_is_placed_a_bad_one_is_refused_in_plain_words_an
     gx.fill(f"{want[0]}".replace(".", ","))  # a decimal comma reads as the point
     gx.press("Enter")
     wait_message(dave, re.escape(f"goal at ({want[0]:.2f}, {want[1]:.2f})"))
-    wait_until(lambda: goal_obj.pose is not None and np.allclose(goal_obj.pose.position[:2], want, atol=1e-6), timeout=10,
-               what=f"the goal pointer at {want} (read through the Python API)", seen=lambda: goal_obj.pose)
+    wait_until(
+        lambda: goal_obj.pose is not None and np.allclose(goal_obj.pose.position[:2], want, atol=1e-6),
+        timeout=10,
+        what=f"the goal pointer at {want} (read through the Python API)",
+        seen=lambda: goal_obj.pose,
+    )
     ring = dave.locator('svg circle[r="6"][stroke="#2f9e44"]')
     ring.wait_for(state="attached")
     legend = dave.get_by_label("Map legend")
@@ -656,15 +807,27 @@ def test_a_goal_typed_in_metres_is_placed_a_bad_one_is_refused_in_plain_words_an
     live = dave.get_by_label(re.compile("^Live view"))
     live.scroll_into_view_if_needed()
     screen = live.bounding_box()["width"] / (whole.xmax - whole.xmin)  # the map's screen pixels per metre
-    wait_until(lambda: abs(_scale_px_per_m(dave) / screen - 1) <= 0.02, timeout=10, what="the scale bar at the map's scale",
-               seen=lambda: (_scale_px_per_m(dave), screen))
+    wait_until(
+        lambda: abs(_scale_px_per_m(dave) / screen - 1) <= 0.02,
+        timeout=10,
+        what="the scale bar at the map's scale",
+        seen=lambda: (_scale_px_per_m(dave), screen),
+    )
     shot(dave, "goal-typed")
     dave.get_by_role("button", name="Zoom in").click()
     wait_message(dave, r"^zoom x2: the map around base1, ")  # said in the status line, for a screen reader too
-    wait_until(lambda: abs(_scale_px_per_m(dave) / (2 * screen) - 1) <= 0.02, timeout=10, what="the scale bar twice as long a metre",
-               seen=lambda: (_scale_px_per_m(dave), 2 * screen))
+    wait_until(
+        lambda: abs(_scale_px_per_m(dave) / (2 * screen) - 1) <= 0.02,
+        timeout=10,
+        what="the scale bar twice as long a metre",
+        seen=lambda: (_scale_px_per_m(dave), 2 * screen),
+    )
     # the goal ring redrawn on the zoomed map; a click on its middle places the goal there again
-    wait_until(lambda: (b := ring.bounding_box()) is not None and b["width"] > 0, timeout=10, what="the goal ring on the zoomed map")
+    wait_until(
+        lambda: (b := ring.bounding_box()) is not None and b["width"] > 0,
+        timeout=10,
+        what="the goal ring on the zoomed map",
+    )
     box = live.locator("img").first.bounding_box()
     cx, cy = _center(dave, 'svg circle[r="6"][stroke="#2f9e44"]')
     live.locator("img").first.click(position={"x": cx - box["x"], "y": cy - box["y"]})
@@ -697,17 +860,29 @@ def test_a_reload_keeps_her_session_her_robot_and_her_event_log_until_she_logs_o
     alice.get_by_role("button", name="Request").click()
     wait_message(alice, r"request base1: you own it")
     line = "ownership base1: nobody -> alice"
-    wait_until(lambda: line in _events(alice), timeout=10, what="the ownership line in her event log", seen=lambda: _events(alice))
+    wait_until(
+        lambda: line in _events(alice),
+        timeout=10,
+        what="the ownership line in her event log",
+        seen=lambda: _events(alice),
+    )
     assert alice.evaluate("() => sessionStorage.getItem('rf-console-session')")  # the tab's ticket
     alice.reload(timeout=60_000)
     alice.get_by_text(f"world {klass.world} · alice").wait_for(timeout=60_000)  # nothing typed
     alice.get_by_text(re.compile(r"^base base1 .* owner: you")).wait_for()  # base1 selected again, still hers
     assert base.record.owner == "alice"
-    wait_until(lambda: line in _events(alice), timeout=10, what="her event log back after the reload", seen=lambda: _events(alice))
+    wait_until(
+        lambda: line in _events(alice),
+        timeout=10,
+        what="her event log back after the reload",
+        seen=lambda: _events(alice),
+    )
     shot(alice, "reloaded")
     alice.get_by_role("button", name="Log out").click()
     alice.get_by_role("button", name="Log in").wait_for(timeout=60_000)
-    wait_until(lambda: base.record.owner != "alice", timeout=30, what="base1 released at the logout", seen=lambda: base.record)
+    wait_until(
+        lambda: base.record.owner != "alice", timeout=30, what="base1 released at the logout", seen=lambda: base.record
+    )
     assert alice.evaluate("() => sessionStorage.getItem('rf-console-session')") is None
     alice.reload(timeout=60_000)
     alice.get_by_role("button", name="Log in").wait_for(timeout=60_000)
@@ -737,11 +912,17 @@ def axe_js() -> Path:
 
     path = found()
     if path is None and shutil.which("npm"):
-        out = subprocess.run(["npm", "ci", "--prefix", str(A11Y), "--no-audit", "--no-fund", "--loglevel=error"],
-                             capture_output=True, text=True, timeout=300)
+        out = subprocess.run(
+            ["npm", "ci", "--prefix", str(A11Y), "--no-audit", "--no-fund", "--loglevel=error"],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
         path = found()
         assert path is not None, f"npm ci in {A11Y} did not install axe-core: {out.stderr[-2000:]}"
-    assert path is not None, "axe-core is not installed and there is no npm to install it (apt-get install npm; make test)"
+    assert path is not None, (
+        "axe-core is not installed and there is no npm to install it (apt-get install npm; make test)"
+    )
     return path
 
 
@@ -787,7 +968,9 @@ def open_teacher(browser, klass: Klass, name: str):
     return page
 
 
-def test_the_teacher_releases_a_robot_a_student_holds_a_reload_keeps_her_in_and_a_student_cannot_open_the_teachers_page(browser, klass):
+def test_the_teacher_releases_a_robot_a_student_holds_a_reload_keeps_her_in_and_a_student_cannot_open_the_teachers_page(
+    browser, klass
+):
     """alice's login card asks for her login card's name and password (the console found that the router asks for
     logins); she owns arm1 from her page; carol (an instructor) sees it on the teacher's page and releases it: the
     authority takes it back (read through the Python API), alice's page shows it free, and the class's event log
@@ -802,7 +985,9 @@ def test_the_teacher_releases_a_robot_a_student_holds_a_reload_keeps_her_in_and_
     wait_message(alice, r"request arm1: you own it")
 
     bob = open_teacher(browser, klass, "bob")
-    bob.get_by_text("Refused: the teacher's page is for instructors: bob is not one of this console's").wait_for(timeout=60_000)
+    bob.get_by_text("Refused: the teacher's page is for instructors: bob is not one of this console's").wait_for(
+        timeout=60_000
+    )
     assert bob.get_by_role("button", name="Stop all").count() == 0
 
     carol = open_teacher(browser, klass, "carol")
@@ -812,14 +997,29 @@ def test_the_teacher_releases_a_robot_a_student_holds_a_reload_keeps_her_in_and_
     carol.get_by_role("cell", name="alice", exact=True).first.wait_for()  # the class table: alice, her page
     shot(carol, "teacher")
     release.click()
-    wait_until(lambda: "arm1 taken back from alice by instructor carol" in message(carol), timeout=30,
-               what="the teacher's page to say what it did", seen=lambda: message(carol))
-    wait_until(lambda: arm.record is not None and arm.record.owner == "", timeout=30, what="arm1 free (read through the Python API)",
-               seen=lambda: arm.record)
+    wait_until(
+        lambda: "arm1 taken back from alice by instructor carol" in message(carol),
+        timeout=30,
+        what="the teacher's page to say what it did",
+        seen=lambda: message(carol),
+    )
+    wait_until(
+        lambda: arm.record is not None and arm.record.owner == "",
+        timeout=30,
+        what="arm1 free (read through the Python API)",
+        seen=lambda: arm.record,
+    )
     alice.get_by_text(re.compile(r"^arm arm1 .* owner: nobody")).wait_for(timeout=30_000)
     wait_message(alice, r"arm1 is no longer yours: it is free now")
-    wait_until(lambda: "ownership arm1: alice -> nobody" in _events(alice) and "taken back from alice by instructor carol" in _events(alice),
-               timeout=30, what="alice's event log to say it was taken back, and by whom", seen=lambda: _events(alice))
+    wait_until(
+        lambda: (
+            "ownership arm1: alice -> nobody" in _events(alice)
+            and "taken back from alice by instructor carol" in _events(alice)
+        ),
+        timeout=30,
+        what="alice's event log to say it was taken back, and by whom",
+        seen=lambda: _events(alice),
+    )
     shot(alice, "alice-released-by-teacher")
     found = axe_violations(carol)
     shot(carol, "teacher-after")
@@ -844,12 +1044,18 @@ def test_a_console_without_its_3d_view_serves_the_map_and_the_panels_alone(brows
     args = list(klass.console.args)
     ep = args[args.index("--connect") + 1]
     web = free_port()
-    flat = klass.procs.start(robofabric_cmd("console", "--world", klass.world, "--connect", ep, "--listen", f"127.0.0.1:{web}",
-                                            "--no-3d"), name="console-2d")
+    flat = klass.procs.start(
+        robofabric_cmd("console", "--world", klass.world, "--connect", ep, "--listen", f"127.0.0.1:{web}", "--no-3d"),
+        name="console-2d",
+    )
     try:
         url = f"http://127.0.0.1:{web}/"
-        wait_until(lambda: f"console: open {url}" in klass.procs.output(flat), timeout=60, what="the 2D console's URL",
-                   seen=lambda: klass.procs.output(flat)[-2000:])
+        wait_until(
+            lambda: f"console: open {url}" in klass.procs.output(flat),
+            timeout=60,
+            what="the 2D console's URL",
+            seen=lambda: klass.procs.output(flat)[-2000:],
+        )
         page = new_context(browser, viewport=VIEWPORT).new_page()
         page.set_default_timeout(30_000)
         page.goto(url, timeout=60_000)

@@ -18,11 +18,14 @@ def _run(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run(robofabric_cmd(*args), capture_output=True, text=True, timeout=60)
 
 
-@pytest.mark.parametrize("args,needle", [
-    (("--listen", "8080"), "expected HOST:PORT"),
-    (("--listen", "0.0.0.0:99999"), "expected HOST:PORT"),
-    (("--grace", "-1"), "--grace must be >= 0"),
-])
+@pytest.mark.parametrize(
+    "args,needle",
+    [
+        (("--listen", "8080"), "expected HOST:PORT"),
+        (("--listen", "0.0.0.0:99999"), "expected HOST:PORT"),
+        (("--grace", "-1"), "--grace must be >= 0"),
+    ],
+)
 def test_mistakes_give_one_line_and_exit_2(args, needle):
     out = _run("console", "--connect", "tcp/127.0.0.1:1", *args)
     assert out.returncode == 2 and needle in out.stderr and "Traceback" not in out.stderr, out.stderr
@@ -37,10 +40,19 @@ def test_a_config_that_logs_in_is_refused(tmp_path):
 
 def test_it_prints_the_url_serves_the_page_and_ends_on_ctrl_c(router, world, procs):
     port = free_port()
-    con = procs.start(robofabric_cmd("console", "--world", world, "--connect", f"tcp/127.0.0.1:{router[1]}", "--listen", f"127.0.0.1:{port}"),
-                      name="console")
+    con = procs.start(
+        robofabric_cmd(
+            "console", "--world", world, "--connect", f"tcp/127.0.0.1:{router[1]}", "--listen", f"127.0.0.1:{port}"
+        ),
+        name="console",
+    )
     url = f"http://127.0.0.1:{port}/"
-    wait_until(lambda: f"console: open {url}" in procs.output(con), timeout=60, what="the URL", seen=lambda: procs.output(con)[-2000:])
+    wait_until(
+        lambda: f"console: open {url}" in procs.output(con),
+        timeout=60,
+        what="the URL",
+        seen=lambda: procs.output(con)[-2000:],
+    )
     with urllib.request.urlopen(url, timeout=10) as r:
         page = r.read().decode()
     assert r.status == 200 and "robofabric console" in page

@@ -28,6 +28,7 @@ from raw_page import RawPage
 
 # ---------------------------------------------------------------- the pure decisions
 
+
 def test_an_address_is_its_ipv4_or_its_ipv6_64():
     assert address_key("10.0.0.7") == "10.0.0.7"
     assert address_key("::ffff:10.0.0.7") == "10.0.0.7"
@@ -50,7 +51,10 @@ def test_a_bucket_lets_a_burst_through_then_its_rate():
 
 
 def test_an_address_keeps_its_newest_waiting_pages_and_none_older_than_the_window():
-    waiting = [Waiting(f"a{i}", "A", float(i)) for i in range(10)] + [Waiting("b0", "B", 0.0), Waiting("old", "C", -500.0)]
+    waiting = [Waiting(f"a{i}", "A", float(i)) for i in range(10)] + [
+        Waiting("b0", "B", 0.0),
+        Waiting("old", "C", -500.0),
+    ]
     forget = pages_to_forget(waiting, 10.0, per_address=3, max_age=180.0)
     assert forget == ["old", "a0", "a1", "a2", "a3", "a4", "a5", "a6"]
     assert pages_to_forget([], 0.0, per_address=3, max_age=1.0) == []
@@ -94,14 +98,20 @@ def test_the_throttle_holds_a_name_from_anywhere_and_an_address_for_any_name():
 
 # ---------------------------------------------------------------- logins against a real router
 
+
 @pytest.fixture
 def secure_router(procs, tmp_path):
     ep = f"tcp/127.0.0.1:{free_port()}"
     d = tmp_path / "class"
     files = init(d, users=["alice", "bob"], listen=[ep]).clients
     router = procs.start(robofabric_cmd("router", "--zenoh-config", str(d / "router.json5")), name="router")
-    wait_until(lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router))
-    passwords = {n: json.loads(zenoh.Config.from_file(str(files[n])).get_json("transport/auth/usrpwd/password")) for n in ("alice", "bob")}
+    wait_until(
+        lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router)
+    )
+    passwords = {
+        n: json.loads(zenoh.Config.from_file(str(files[n])).get_json("transport/auth/usrpwd/password"))
+        for n in ("alice", "bob")
+    }
     return ep, passwords
 
 
@@ -134,7 +144,9 @@ def test_a_login_flood_is_throttled_per_name_and_address_and_reaches_the_router_
         assert all("Login failed" in a for a in answers[:3]), answers[:3]
         assert all("Too many failed logins for alice" in a for a in answers[3:]), answers[3:]
         assert len(tried) == 3 and logins.throttled == 27  # 27 guesses never reached the router
-        assert "Too many failed logins" in attempt("alice", passwords["alice"], "10.0.0.5")  # her name waits, from anywhere
+        assert "Too many failed logins" in attempt(
+            "alice", passwords["alice"], "10.0.0.5"
+        )  # her name waits, from anywhere
         assert attempt("bob", passwords["bob"], "10.0.0.5") == "in"  # another name from another machine: not held
         now[0] += 1.0  # the first delay (1 s) passed: one more guess is tried, and the next waits 2 s
         assert "Login failed" in attempt("alice", "guess30", "10.0.0.66") and len(tried) == 5
@@ -148,14 +160,21 @@ def test_a_login_flood_is_throttled_per_name_and_address_and_reaches_the_router_
 
 # ---------------------------------------------------------------- a console process
 
+
 def _console(procs, world: str, router_ep: str, *extra: str) -> tuple[object, str]:
     web = free_port()
     scheme = "https" if "--tls-cert" in extra else "http"
-    con = procs.start(robofabric_cmd("console", "--world", world, "--connect", router_ep, "--listen", f"127.0.0.1:{web}", *extra),
-                      name="console")
+    con = procs.start(
+        robofabric_cmd("console", "--world", world, "--connect", router_ep, "--listen", f"127.0.0.1:{web}", *extra),
+        name="console",
+    )
     url = f"{scheme}://127.0.0.1:{web}/"
-    wait_until(lambda: f"console: open {url}" in procs.output(con), timeout=60, what="the console's URL",
-               seen=lambda: procs.output(con)[-2000:])
+    wait_until(
+        lambda: f"console: open {url}" in procs.output(con),
+        timeout=60,
+        what="the console's URL",
+        seen=lambda: procs.output(con)[-2000:],
+    )
     return con, url
 
 
@@ -195,8 +214,12 @@ def test_a_page_load_flood_is_refused_past_its_burst_and_pages_that_never_connec
         return True
 
     # the served pages beyond the address's newest few are forgotten within seconds: an old page's handshake is refused
-    wait_until(lambda: (w := _waiting(procs.output(con))) is not None and w <= WAITING_PER_ADDRESS, timeout=5,
-               what="the pages beyond the address's newest forgotten", seen=lambda: procs.output(con)[-2000:])
+    wait_until(
+        lambda: (w := _waiting(procs.output(con))) is not None and w <= WAITING_PER_ADDRESS,
+        timeout=5,
+        what="the pages beyond the address's newest forgotten",
+        seen=lambda: procs.output(con)[-2000:],
+    )
     assert not asyncio.run(connects(served[0]))
     assert asyncio.run(connects(served[-1]))  # the newest is kept: a browser that loaded it connects
     kept = sum(asyncio.run(connects(p)) for p in served[:-1])
@@ -254,11 +277,16 @@ def test_a_socket_event_naming_another_pages_client_is_refused(router, world, pr
         asyncio.run(play())
     finally:
         carol.close()
-    wait_until(lambda: "1 foreign socket messages" in procs.output(con), timeout=20, what="the doors' count",
-               seen=lambda: procs.output(con)[-2000:])
+    wait_until(
+        lambda: "1 foreign socket messages" in procs.output(con),
+        timeout=20,
+        what="the doors' count",
+        seen=lambda: procs.output(con)[-2000:],
+    )
 
 
 # ---------------------------------------------------------------- HTTPS
+
 
 @pytest.mark.slow
 def test_the_console_serves_https_with_the_certificate_secure_init_made(router, world, procs, tmp_path):
@@ -266,7 +294,15 @@ def test_the_console_serves_https_with_the_certificate_secure_init_made(router, 
     out = init(d, users=["alice"], tls=True, listen=["tls/0.0.0.0:7447"])
     assert "console (https)" in out.created
     web = d / "tls" / "web"
-    con, url = _console(procs, world, f"tcp/127.0.0.1:{router[1]}", "--tls-cert", str(web / "console.pem"), "--tls-key", str(web / "console-key.pem"))
+    con, url = _console(
+        procs,
+        world,
+        f"tcp/127.0.0.1:{router[1]}",
+        "--tls-cert",
+        str(web / "console.pem"),
+        "--tls-key",
+        str(web / "console-key.pem"),
+    )
     assert url.startswith("https://")
     ctx = ssl.create_default_context(cafile=str(d / "tls" / "ca.pem"))  # the class's CA: the name and chain are checked
     r = httpx.get(url, verify=ctx, timeout=30)
@@ -300,6 +336,14 @@ def test_a_certificate_without_its_key_or_one_that_does_not_load_is_a_usage_erro
 
     bad = tmp_path / "bad.pem"
     bad.write_text("not a certificate")
-    for extra, says in ((("--tls-cert", str(bad)), "go together"), (("--tls-cert", str(bad), "--tls-key", str(bad)), "--tls-cert")):
-        out = subprocess.run(robofabric_cmd("console", "--connect", "tcp/127.0.0.1:1", *extra), capture_output=True, text=True, timeout=60)
+    for extra, says in (
+        (("--tls-cert", str(bad)), "go together"),
+        (("--tls-cert", str(bad), "--tls-key", str(bad)), "--tls-cert"),
+    ):
+        out = subprocess.run(
+            robofabric_cmd("console", "--connect", "tcp/127.0.0.1:1", *extra),
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         assert out.returncode == 2 and says in out.stderr and "Traceback" not in out.stderr, out.stderr

@@ -42,13 +42,20 @@ def test_a_pages_feed_holds_every_robots_newest_pose_and_takes_no_more_than_its_
     for b in range(bursts):
         for rid in robots:
             sim.publish(keys.robot_stream(world, rid, "pose"), _pose(float(b)))
-    wait_until(lambda: len(heard) >= bursts * len(robots), timeout=20, what="every pose at another session", seen=lambda: len(heard))
+    wait_until(
+        lambda: len(heard) >= bursts * len(robots),
+        timeout=20,
+        what="every pose at another session",
+        seen=lambda: len(heard),
+    )
 
     def newest() -> bool:
         raw = feed.drain()
         return set(raw) == set(robots) and all(Decoded().pose(r, raw[r]).position[0] == bursts - 1 for r in robots)
 
-    wait_until(newest, timeout=20, what="the newest pose of every robot in the page's feed", seen=lambda: sorted(feed.raw))
+    wait_until(
+        newest, timeout=20, what="the newest pose of every robot in the page's feed", seen=lambda: sorted(feed.raw)
+    )
     assert feed.taken - taken <= 2 * ring_capacity(len(robots)) < bursts * len(robots), feed.taken - taken
     feed.close()
     assert feed.drain() == feed.raw  # a closed feed keeps what it had and reads nothing
@@ -128,7 +135,12 @@ def test_the_clocks_pass_lets_the_event_loop_turn_between_two_pages_and_skips_on
     asyncio.run(main())
     pages = [x for x in order if x != "loop"]
     assert pages == ["a", "b", "d"] and t.ticks == 1
-    assert order.index("loop", order.index("a")) < order.index("b") < order.index("loop", order.index("b")) < order.index("d")
+    assert (
+        order.index("loop", order.index("a"))
+        < order.index("b")
+        < order.index("loop", order.index("b"))
+        < order.index("d")
+    )
 
 
 def test_pages_ready_to_build_in_the_same_turn_build_one_per_turn_of_the_event_loop():
@@ -150,7 +162,7 @@ def test_pages_ready_to_build_in_the_same_turn_build_one_per_turn_of_the_event_l
     assert asyncio.run(main())[:3] == ["a", "b", "c"]
     at = [i for i, x in enumerate(order) if x != "loop"]
     assert [order[i] for i in at] == ["a", "b", "c"]
-    assert all("loop" in order[i + 1:j] for i, j in zip(at, at[1:]))  # the loop turned between two builds
+    assert all("loop" in order[i + 1 : j] for i, j in zip(at, at[1:]))  # the loop turned between two builds
 
 
 def test_every_page_starts_on_the_same_picture_of_the_scene_drawn_once():

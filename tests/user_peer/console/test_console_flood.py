@@ -50,18 +50,42 @@ def klass(tmp_path_factory):
     files = init(d, users=["alice", "dave"], instructors=["carol"], listen=[ep]).clients
     with ProcessGroup(tmp) as procs:
         router = procs.start(robofabric_cmd("router", "--zenoh-config", str(d / "router.json5")), name="router")
-        wait_until(lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router))
-        sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config", str(files["sim"])), name="sim")
+        wait_until(
+            lambda: "listening" in procs.output(router), timeout=30, what="router", seen=lambda: procs.output(router)
+        )
+        sim = procs.start(
+            robofabric_cmd("sim", "--scene", "combined", "--world", world, "--zenoh-config", str(files["sim"])),
+            name="sim",
+        )
         web = free_port()
-        console = procs.start(robofabric_cmd("console", "--world", world, "--connect", ep, "--listen", f"127.0.0.1:{web}"), name="console")
+        console = procs.start(
+            robofabric_cmd("console", "--world", world, "--connect", ep, "--listen", f"127.0.0.1:{web}"), name="console"
+        )
         url = f"http://127.0.0.1:{web}/"
-        wait_until(lambda: f"console: open {url}" in procs.output(console), timeout=60, what="the console's URL",
-                   seen=lambda: procs.output(console)[-2000:])
+        wait_until(
+            lambda: f"console: open {url}" in procs.output(console),
+            timeout=60,
+            what="the console's URL",
+            seen=lambda: procs.output(console)[-2000:],
+        )
         carol = user_peer.connect(world=world, zenoh_config=str(files["carol"]), join_timeout=120)
         dave = Fabric(FabricConfig(world=world, config_file=str(files["dave"])), kind="user", peer_id="dave")
         try:
-            wait_until(lambda: carol.fabric.live_peers("sim"), timeout=120, what="the sim", seen=lambda: procs.output(sim)[-2000:])
-            k = Klass(world, url, f"127.0.0.1:{web}", {n: _password(files[n]) for n in ("alice", "dave")}, carol, procs, console)
+            wait_until(
+                lambda: carol.fabric.live_peers("sim"),
+                timeout=120,
+                what="the sim",
+                seen=lambda: procs.output(sim)[-2000:],
+            )
+            k = Klass(
+                world,
+                url,
+                f"127.0.0.1:{web}",
+                {n: _password(files[n]) for n in ("alice", "dave")},
+                carol,
+                procs,
+                console,
+            )
             k.dave = dave  # type: ignore[attr-defined]
             yield k
         finally:
@@ -94,9 +118,16 @@ def test_one_logins_event_text_neither_forges_trusted_lines_nor_stalls_anothers_
 
     # a decode report whose kind holds a newline, then a line like the console's own trusted ownership lines
     forged = "trusted · ownership base1: alice -> dave (epoch 7)"
-    dave.publish(keys.event_decode(w, "dave"), Event(kind=f"decode_error\n{forged}", object="base1", user="dave", header=Header.now()))
-    shown = wait_until(lambda: [ln for ln in _log_lines(alice) if "decode_error\\ntrusted" in ln], timeout=30,
-                       what="dave's report in alice's event log", seen=lambda: _log_lines(alice)[-5:])
+    dave.publish(
+        keys.event_decode(w, "dave"),
+        Event(kind=f"decode_error\n{forged}", object="base1", user="dave", header=Header.now()),
+    )
+    shown = wait_until(
+        lambda: [ln for ln in _log_lines(alice) if "decode_error\\ntrusted" in ln],
+        timeout=30,
+        what="dave's report in alice's event log",
+        seen=lambda: _log_lines(alice)[-5:],
+    )
     assert all(ln.startswith("unverified (display only) · ") for ln in shown), shown
     assert not [ln for ln in _log_lines(alice) if ln.startswith("trusted · ") and "dave" in ln], _log_lines(alice)
 
@@ -107,7 +138,9 @@ def test_one_logins_event_text_neither_forges_trusted_lines_nor_stalls_anothers_
     def flood() -> None:
         n, t0 = 0, time.monotonic()
         while (t := time.monotonic() - t0) < FLOOD_S:
-            dave.publish(keys.event_decode(w, "dave"), Event(kind="decode_error", reason="\n" * 2000, header=Header.now()))
+            dave.publish(
+                keys.event_decode(w, "dave"), Event(kind="decode_error", reason="\n" * 2000, header=Header.now())
+            )
             n += 1
             time.sleep(max(0.0, n / FLOOD_HZ - t))
         done.set()
@@ -130,12 +163,18 @@ def test_one_logins_event_text_neither_forges_trusted_lines_nor_stalls_anothers_
         done.set()
         for t in threads:
             t.join(timeout=30)
-    print(f"alice's page during dave's flood: {len(answers)} answers, longest {max(answers):.2f} s, "
-          f"median {sorted(answers)[len(answers) // 2]:.2f} s")
+    print(
+        f"alice's page during dave's flood: {len(answers)} answers, longest {max(answers):.2f} s, "
+        f"median {sorted(answers)[len(answers) // 2]:.2f} s"
+    )
     shot(alice, "after-event-flood")
     sent = int(FLOOD_HZ * FLOOD_S)
-    added = wait_until(lambda: alice.evaluate("window.rfAdded") >= sent and alice.evaluate("window.rfAdded"), timeout=60,
-                       what="a line in alice's log for each report", seen=lambda: alice.evaluate("window.rfAdded"))
+    added = wait_until(
+        lambda: alice.evaluate("window.rfAdded") >= sent and alice.evaluate("window.rfAdded"),
+        timeout=60,
+        what="a line in alice's log for each report",
+        seen=lambda: alice.evaluate("window.rfAdded"),
+    )
     print(f"{sent} reports of 2,000 newlines: {added} nodes added to alice's event log")
     assert added <= sent + 50, added  # a line per report (and a few counts of lines not shown), never one per newline
     assert len(answers) >= 2 and max(answers) <= ANSWER_S, answers  # at least one Stop answered during the flood
@@ -145,15 +184,25 @@ def test_one_logins_event_text_neither_forges_trusted_lines_nor_stalls_anothers_
     alice.get_by_text(f"world {w} · alice").wait_for(timeout=10_000)
     assert not alice.get_by_label("Password").count()
     lines = _log_lines(alice)
-    assert len(lines) <= 200 and [ln for ln in lines if ln.startswith("unverified (display only) · decode_error: \\n\\n")], lines[-5:]
+    assert len(lines) <= 200 and [
+        ln for ln in lines if ln.startswith("unverified (display only) · decode_error: \\n\\n")
+    ], lines[-5:]
     assert all(ln.strip() for ln in lines), "an empty line in the log: a newline was shown as layout"
     # a burst (100 reports at once): a redraw adds at most 10 of them, and says how many it left out
     for i in range(100):
         dave.publish(keys.event_decode(w, "dave"), Event(kind="decode_error", reason=f"burst {i}", header=Header.now()))
-    wait_until(lambda: [ln for ln in _log_lines(alice) if re.match(r"^\d+ more events since the last redraw, not shown", ln)],
-               timeout=30, what="the count of the burst's lines not shown", seen=lambda: _log_lines(alice)[-3:])
-    wait_until(lambda: "decode_error: burst 99" in _log_lines(alice)[-1], timeout=30, what="the burst's last report shown",
-               seen=lambda: _log_lines(alice)[-3:])
+    wait_until(
+        lambda: [ln for ln in _log_lines(alice) if re.match(r"^\d+ more events since the last redraw, not shown", ln)],
+        timeout=30,
+        what="the count of the burst's lines not shown",
+        seen=lambda: _log_lines(alice)[-3:],
+    )
+    wait_until(
+        lambda: "decode_error: burst 99" in _log_lines(alice)[-1],
+        timeout=30,
+        what="the burst's last report shown",
+        seen=lambda: _log_lines(alice)[-3:],
+    )
     assert len([ln for ln in _log_lines(alice) if ": burst " in ln]) < 100
     alice.get_by_role("button", name="Release").click()
     wait_message(alice, r"release base1: ok")

@@ -16,8 +16,10 @@ from user_peer.console.topview import COLORS, Frame
 WHOLE = Frame(-5.2, -5.0, 5.2, 5.4)
 
 
-@pytest.mark.parametrize("text, metres", [("-2.5", -2.5), (" -2,5 ", -2.5), ("3 m", 3.0), ("0.5metres", 0.5), ("\u22121", -1.0),
-                                          ("1e-1", 0.1)])
+@pytest.mark.parametrize(
+    "text, metres",
+    [("-2.5", -2.5), (" -2,5 ", -2.5), ("3 m", 3.0), ("0.5metres", 0.5), ("\u22121", -1.0), ("1e-1", 0.1)],
+)
 def test_a_typed_number_reads_as_a_student_means_it(text, metres):
     assert read_metres(text) == pytest.approx(metres)
 
@@ -57,7 +59,12 @@ def test_a_zoomed_frame_is_inside_the_whole_the_same_picture_size_at_level_times
     f = zoomed(WHOLE, level, (cx, cy))
     assert (f.width, f.height) == (WHOLE.width, WHOLE.height)  # clicks and the picture keep their pixels
     assert f.scale == pytest.approx(WHOLE.scale * level)
-    assert f.xmin >= WHOLE.xmin - 1e-9 and f.xmax <= WHOLE.xmax + 1e-9 and f.ymin >= WHOLE.ymin - 1e-9 and f.ymax <= WHOLE.ymax + 1e-9
+    assert (
+        f.xmin >= WHOLE.xmin - 1e-9
+        and f.xmax <= WHOLE.xmax + 1e-9
+        and f.ymin >= WHOLE.ymin - 1e-9
+        and f.ymax <= WHOLE.ymax + 1e-9
+    )
     if level > 1 and WHOLE.xmin + 5.2 / level <= cx <= WHOLE.xmax - 5.2 / level:
         assert (f.xmin + f.xmax) / 2 == pytest.approx(cx)  # centred on it when the frame need not move to stay inside
     x, y = f.world(*f.px(cx, cy))
@@ -81,6 +88,15 @@ def test_the_legend_names_every_colour_the_map_uses():
     html = legend_html()
     for color in COLORS.values():
         assert color in html
-    for words in ("your robot", "someone else's", "free robot", "IK target", "goal", "path", "LIDAR hits", "map: occupied"):
+    for words in (
+        "your robot",
+        "someone else's",
+        "free robot",
+        "IK target",
+        "goal",
+        "path",
+        "LIDAR hits",
+        "map: occupied",
+    ):
         assert f"{words}</li>" in html.replace("&#x27;", "'")
     assert html.count("<li ") == len(LEGEND) and 'aria-label="Map legend"' in html

@@ -27,7 +27,12 @@ def test_a_period_reports_its_own_samples_and_starts_again():
 finite = st.floats(min_value=0, max_value=1e5, allow_nan=False)
 
 
-@given(st.lists(finite, max_size=20), st.lists(st.tuples(finite, finite), max_size=20), st.integers(0, 500), st.integers(0, 50))
+@given(
+    st.lists(finite, max_size=20),
+    st.lists(st.tuples(finite, finite), max_size=20),
+    st.integers(0, 500),
+    st.integers(0, 50),
+)
 def test_the_line_reads_back_as_printed(late, keys, pages, dropped):
     h = Health()
     h.late += late

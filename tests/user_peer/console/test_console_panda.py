@@ -33,33 +33,52 @@ def _message(page) -> str:
 
 
 def _wait_message(page, pattern: str, timeout: float = 30.0) -> str:
-    return wait_until(lambda: re.search(pattern, _message(page)) and _message(page), timeout=timeout,
-                      what=f"the page to say /{pattern}/", seen=lambda: _message(page))
+    return wait_until(
+        lambda: re.search(pattern, _message(page)) and _message(page),
+        timeout=timeout,
+        what=f"the page to say /{pattern}/",
+        seen=lambda: _message(page),
+    )
 
 
-def test_a_student_drives_the_panda_from_the_console_slider_3d_drag_and_apply_ik(router, world, procs, tmp_path, monkeypatch):
+def test_a_student_drives_the_panda_from_the_console_slider_3d_drag_and_apply_ik(
+    router, world, procs, tmp_path, monkeypatch
+):
     import user_peer
 
     folder = tmp_path / "robots"
     install(example_robot_urdf(PANDA), into=folder, name="panda")
     monkeypatch.setenv(robots.description.ENV_PATH, str(folder))  # this process's user API, and its children
-    assert Path(CHROMIUM).exists() and shutil.which("chromium"), "Debian's chromium is not installed (apt-get install chromium)"
+    assert Path(CHROMIUM).exists() and shutil.which("chromium"), (
+        "Debian's chromium is not installed (apt-get install chromium)"
+    )
     ep = f"tcp/127.0.0.1:{router[1]}"
     robot = f"panda:p1@{PLACE[0]},{PLACE[1]}"
-    sim = procs.start(robofabric_cmd("sim", "--scene", "combined", "--robot", robot, "--world", world, "--connect", ep), name="sim")
+    sim = procs.start(
+        robofabric_cmd("sim", "--scene", "combined", "--robot", robot, "--world", world, "--connect", ep), name="sim"
+    )
     procs.start(robofabric_cmd("compute", "--world", world, "--connect", ep), name="compute")
     web = free_port()
-    console = procs.start(robofabric_cmd("console", "--world", world, "--connect", ep, "--listen", f"127.0.0.1:{web}"),
-                          name="console")
+    console = procs.start(
+        robofabric_cmd("console", "--world", world, "--connect", ep, "--listen", f"127.0.0.1:{web}"), name="console"
+    )
     url = f"http://127.0.0.1:{web}/"
-    wait_until(lambda: f"console: open {url}" in procs.output(console), timeout=90, what="the console's URL",
-               seen=lambda: procs.output(console)[-2000:])
+    wait_until(
+        lambda: f"console: open {url}" in procs.output(console),
+        timeout=90,
+        what="the console's URL",
+        seen=lambda: procs.output(console)[-2000:],
+    )
     carol = user_peer.connect(world=world, connect=ep, user="carol", join_timeout=120)
     from playwright.sync_api import sync_playwright
 
     try:
-        wait_until(lambda: carol.fabric.live_peers("compute"), timeout=120, what="the compute peer",
-                   seen=lambda: procs.output(sim)[-2000:])
+        wait_until(
+            lambda: carol.fabric.live_peers("compute"),
+            timeout=120,
+            what="the compute peer",
+            seen=lambda: procs.output(sim)[-2000:],
+        )
         p1, seen = carol.robot("p1"), carol.object("target")
         wait_until(lambda: p1.flange is not None and p1.joint_state is not None, timeout=60, what="the Panda's flange")
         assert len(p1.joint_state.q) == 7
@@ -87,38 +106,62 @@ def test_a_student_drives_the_panda_from_the_console_slider_3d_drag_and_apply_ik
                     return [sliders.nth(i).get_attribute("aria-label") or "" for i in range(sliders.count())]
 
                 want = [f"J{j} (panda_joint{j}) degrees" for j in range(1, 8)]
-                wait_until(lambda: [x for x in labels() if x.startswith("J")] == want, timeout=30,
-                           what="the Panda's seven joint sliders", seen=labels)
+                wait_until(
+                    lambda: [x for x in labels() if x.startswith("J")] == want,
+                    timeout=30,
+                    what="the Panda's seven joint sliders",
+                    seen=labels,
+                )
 
                 # a slider: J1 to its right end moves the sim's J1 there (its upper limit, 2.8973 rad)
                 q0 = np.asarray(p1.joint_state.q, dtype=float)
                 j1 = page.get_by_role("slider", name="J1 (panda_joint1) degrees")
                 box = j1.bounding_box()
                 j1.click(position={"x": box["width"] - 1, "y": box["height"] / 2})
-                wait_until(lambda: p1.joint_state.q[0] >= 2.85 and np.max(np.abs(p1.joint_state.dq)) < 1e-3, timeout=60,
-                           what="the Panda's J1 at its upper limit, still", seen=lambda: (q0, p1.joint_state.q))
+                wait_until(
+                    lambda: p1.joint_state.q[0] >= 2.85 and np.max(np.abs(p1.joint_state.dq)) < 1e-3,
+                    timeout=60,
+                    what="the Panda's J1 at its upper limit, still",
+                    seen=lambda: (q0, p1.joint_state.q),
+                )
 
                 # the 3D view draws the Panda's links at its live joints, and its target
                 def drawn() -> dict | None:
                     out = page.evaluate(SCENE3D_JS)
                     return out if out and out.get("target") and len(out["ends"]) >= 14 else None
 
-                wait_until(drawn, timeout=60, what="the 3D view with the Panda's links and the target",
-                                   seen=lambda: page.evaluate(SCENE3D_JS))
+                wait_until(
+                    drawn,
+                    timeout=60,
+                    what="the 3D view with the Panda's links and the target",
+                    seen=lambda: page.evaluate(SCENE3D_JS),
+                )
                 flange = np.asarray(p1.flange.position)  # still: J1 stopped at its limit
-                wait_until(lambda: min(math.dist(e, flange) for e in drawn()["ends"]) <= 0.005, timeout=20,
-                           what="the 3D Panda's last link ending at the flange the sim reports",
-                           seen=lambda: (min(math.dist(e, flange) for e in drawn()["ends"]), flange))
+                wait_until(
+                    lambda: min(math.dist(e, flange) for e in drawn()["ends"]) <= 0.005,
+                    timeout=20,
+                    what="the 3D Panda's last link ending at the flange the sim reports",
+                    seen=lambda: (min(math.dist(e, flange) for e in drawn()["ends"]), flange),
+                )
                 before = np.asarray(seen.pose.position, dtype=float)
-                wait_until(lambda: (s := drawn()) and math.dist(s["target"], before) <= 1e-4, timeout=20,
-                           what="the sphere at the target")
+                wait_until(
+                    lambda: (s := drawn()) and math.dist(s["target"], before) <= 1e-4,
+                    timeout=20,
+                    what="the sphere at the target",
+                )
                 drag_sphere(page, drawn()["screen"])
-                wait_until(lambda: np.linalg.norm(np.asarray(seen.pose.position)[:2] - before[:2]) >= 0.005, timeout=20,
-                           what="the target dragged (read through the Python API)", seen=lambda: (before, seen.pose.position))
+                wait_until(
+                    lambda: np.linalg.norm(np.asarray(seen.pose.position)[:2] - before[:2]) >= 0.005,
+                    timeout=20,
+                    what="the target dragged (read through the Python API)",
+                    seen=lambda: (before, seen.pose.position),
+                )
                 target = np.asarray(seen.pose.position, dtype=float)
                 assert target[2] == pytest.approx(before[2], abs=1e-6) and np.linalg.norm(target - before) <= 0.1
                 ik = page.get_by_text(re.compile(r"^IK: "))
-                wait_until(lambda: ik.inner_text().startswith("IK: ["), timeout=60, what="the IK solution", seen=ik.inner_text)
+                wait_until(
+                    lambda: ik.inner_text().startswith("IK: ["), timeout=60, what="the IK solution", seen=ik.inner_text
+                )
                 OUT.mkdir(exist_ok=True)
                 page.screenshot(path=str(OUT / "console-panda-dragged.png"))
                 page.get_by_role("button", name="Apply IK").click()
@@ -129,10 +172,18 @@ def test_a_student_drives_the_panda_from_the_console_slider_3d_drag_and_apply_ik
                     err = float(np.linalg.norm(np.asarray(p.position) - target)) if p is not None else math.inf
                     return (err, p.header.seq) if err <= 1e-3 else None
 
-                first = wait_until(on_target, timeout=60, what="the Panda's flange at the dragged target",
-                                   seen=lambda: (p1.flange, target))
-                wait_until(lambda: (o := on_target()) is not None and o[1] >= first[1] + 20, timeout=30,
-                           what="the Panda's flange to stay at the target", seen=lambda: (p1.flange, target))
+                first = wait_until(
+                    on_target,
+                    timeout=60,
+                    what="the Panda's flange at the dragged target",
+                    seen=lambda: (p1.flange, target),
+                )
+                wait_until(
+                    lambda: (o := on_target()) is not None and o[1] >= first[1] + 20,
+                    timeout=30,
+                    what="the Panda's flange to stay at the target",
+                    seen=lambda: (p1.flange, target),
+                )
                 page.screenshot(path=str(OUT / "console-panda-reached.png"))
                 page.get_by_role("button", name="Release").click()
                 _wait_message(page, r"release p1: ok")

@@ -66,9 +66,14 @@ class StandInView:
 def _page(robots: dict[str, Any], selected: str | None = None) -> SimpleNamespace:
     """What the layout and the panels read of a page; its world runs without ownership (no records)."""
     world = SimpleNamespace(user="alice", ownership=SimpleNamespace(record=lambda rid: None))
-    return SimpleNamespace(robots=dict(robots), selected=selected, handles={r.id: r for r in robots.values()},
-                           world=world,
-                           view3d=StandInView("the 3D view"), view=StandInView("the map"))
+    return SimpleNamespace(
+        robots=dict(robots),
+        selected=selected,
+        handles={r.id: r for r in robots.values()},
+        world=world,
+        view3d=StandInView("the 3D view"),
+        view=StandInView("the map"),
+    )
 
 
 def _drone(rid: str) -> SimpleNamespace:
@@ -133,8 +138,15 @@ def test_every_protocol_call_reaches_the_panels_and_a_switch_comes_before_the_ch
         panels.end()
 
     asyncio.run(run())
-    assert calls == [("make", None), ("key", "ArrowUp"), ("tick", None), ("let_go", "d1"), ("switch", ("d1", "d2")),
-                     ("let_go", "d2"), ("end", None)]
+    assert calls == [
+        ("make", None),
+        ("key", "ArrowUp"),
+        ("tick", None),
+        ("let_go", "d1"),
+        ("switch", ("d1", "d2")),
+        ("let_go", "d2"),
+        ("end", None),
+    ]
     assert page.robots == {"drone": d2}
     assert panels.get("drone") is not None and panels.get("arm") is None
 

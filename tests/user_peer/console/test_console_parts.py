@@ -34,8 +34,17 @@ def test_frame_around_is_square_and_holds_every_point():
 
 def test_svg_draws_robots_with_their_owners_escaped():
     f = Frame(-5, -5, 5, 5)
-    out = topview.svg(f, [RobotMark("base1", "mobile", "<script>", 1.0, 2.0, 0.0), RobotMark("arm1", "arm", "", 3.0, 0.0, 0.0, flange=(3.2, 0.0))],
-                      scan=np.array([[1.0, 1.0]]), paths=[np.array([[0, 0], [1, 1]])], target=(3.2, 0.0), goal=(1.0, 1.0, 0.5))
+    out = topview.svg(
+        f,
+        [
+            RobotMark("base1", "mobile", "<script>", 1.0, 2.0, 0.0),
+            RobotMark("arm1", "arm", "", 3.0, 0.0, 0.0, flange=(3.2, 0.0)),
+        ],
+        scan=np.array([[1.0, 1.0]]),
+        paths=[np.array([[0, 0], [1, 1]])],
+        target=(3.2, 0.0),
+        goal=(1.0, 1.0, 0.5),
+    )
     assert "<script>" not in out and "&lt;script&gt;" in out
     assert "base1 · &lt;script&gt;" in out and "arm1 · free" in out
     assert out.count("<polygon") == 1 and "<polyline" in out and 'fill="#f03e3e"' in out
@@ -77,13 +86,13 @@ def _png_pixels(png: bytes) -> np.ndarray:
     w, h = struct.unpack(">II", png[16:24])
     pos, idat = 8, b""
     while pos < len(png):
-        n = struct.unpack(">I", png[pos:pos + 4])[0]
-        kind = png[pos + 4:pos + 8]
+        n = struct.unpack(">I", png[pos : pos + 4])[0]
+        kind = png[pos + 4 : pos + 8]
         if kind == b"IDAT":
-            idat += png[pos + 8:pos + 8 + n]
+            idat += png[pos + 8 : pos + 8 + n]
         pos += 12 + n
     raw = zlib.decompress(idat)
-    rows = [raw[i * (w + 1):(i + 1) * (w + 1)] for i in range(h)]
+    rows = [raw[i * (w + 1) : (i + 1) * (w + 1)] for i in range(h)]
     assert all(r[0] == 0 for r in rows)
     return np.array([list(r[1:]) for r in rows], dtype=np.uint8)
 
@@ -248,11 +257,16 @@ def test_an_event_whose_kind_holds_a_newline_cannot_make_a_line_that_looks_trust
     from user_peer.console.page import event_line
 
     TRUSTED, UNVERIFIED = "trusted · ", "unverified (display only) · "
-    forged = Event(kind="decode_error\ntrusted · ownership arm1: alice -> mallory (epoch 7)", object="arm1", user="mallory")
+    forged = Event(
+        kind="decode_error\ntrusted · ownership arm1: alice -> mallory (epoch 7)", object="arm1", user="mallory"
+    )
     lines = event_line(forged, False).splitlines()
     assert len(lines) == 1 and lines[0].startswith(UNVERIFIED) and not lines[0].startswith(TRUSTED), lines
     assert "decode_error\\ntrusted · owners" in lines[0]
     flood = event_line(Event(kind="decode_error", reason="\n" * 2000), False)
     assert len(flood.splitlines()) == 1 and len(flood) < 400 and flood.isprintable(), flood[:100]
     # the authority's own events stay as they were
-    assert event_line(Event(kind="reject", object="arm1", user="bob", reason="not_owner"), True) == TRUSTED + "reject arm1 [bob]: not_owner"
+    assert (
+        event_line(Event(kind="reject", object="arm1", user="bob", reason="not_owner"), True)
+        == TRUSTED + "reject arm1 [bob]: not_owner"
+    )

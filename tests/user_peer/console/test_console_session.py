@@ -37,7 +37,9 @@ def test_a_reloaded_tab_gets_her_world_and_its_ticket_back_within_the_grace_with
     assert len(worlds) == 1
 
 
-def test_log_out_ends_her_session_at_once_and_a_page_of_the_old_session_leaves_nothing_of_a_new_one(world, router, worlds):
+def test_log_out_ends_her_session_at_once_and_a_page_of_the_old_session_leaves_nothing_of_a_new_one(
+    world, router, worlds
+):
     stopped: list = []
     logins = _logins(worlds, 60.0, stopped)
     cfg = login_config(world, (f"tcp/127.0.0.1:{router[1]}",), "alice", "")

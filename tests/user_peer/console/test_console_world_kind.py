@@ -26,5 +26,7 @@ def test_a_class_router_refuses_a_session_without_a_login(world, tmp_path, procs
     ep = f"tcp/127.0.0.1:{free_port()}"
     init(tmp_path / "class", users=["alice"], listen=[ep])
     r = procs.start(robofabric_cmd("router", "--zenoh-config", str(tmp_path / "class" / "router.json5")), name="router")
-    wait_until(lambda: "listening" in procs.output(r), timeout=30, what="the class's router", seen=lambda: procs.output(r))
+    wait_until(
+        lambda: "listening" in procs.output(r), timeout=30, what="the class's router", seen=lambda: procs.output(r)
+    )
     assert probe_logins(world, (ep,)) is True

@@ -77,13 +77,20 @@ def test_each_robot_kind_is_drawn_by_its_own_parts():
     calls = Calls()
     logger = WorldLogger(calls.rec, drawing=RobotCatalog(scene="combined").drawing, max_hz=0)
     logger.log("rf/w/map/map", OccupancyGrid(0.1, [0, 0, 0], np.zeros((4, 4), np.uint8)), 1)
-    logger.log("rf/w/robot/arm1/joints", JointState(tuple(f"joint_{k}" for k in range(1, 7)), np.zeros(6), np.zeros(6)), 2)
+    logger.log(
+        "rf/w/robot/arm1/joints", JointState(tuple(f"joint_{k}" for k in range(1, 7)), np.zeros(6), np.zeros(6)), 2
+    )
     logger.log("rf/w/robot/arm1/pose", Pose([0.1, 0.2, 0.3]), 3)
     logger.log("rf/w/robot/base1/joints", JointState(("left", "right"), np.zeros(2), np.zeros(2)), 4)
     logger.log("rf/w/robot/base1/pose", Pose([1.0, 0.2, 0.0]), 5)
     assert logger.pending == 4 and logger.flush() == 4 and logger.pending == 0
     sent = set(calls.entities("cols"))
-    assert {"plots/joints/arm1", "plots/joint_speed/arm1", "world/robots/arm1/links/joint_1", "world/robots/arm1/flange"} <= sent
+    assert {
+        "plots/joints/arm1",
+        "plots/joint_speed/arm1",
+        "world/robots/arm1/links/joint_1",
+        "world/robots/arm1/flange",
+    } <= sent
     assert {"plots/wheels/base1", "world/robots/base1/base", "plots/speed/base1", "map/map/robots/base1"} <= sent
     assert not {"plots/wheels/arm1", "world/robots/arm1/base", "plots/joints/base1", "world/robots/base1/flange"} & sent
     static = {e for c, e, st in calls.seen if c == "log" and st}

@@ -52,7 +52,10 @@ class Planar2Arm(SimRobot):
         physics.data.qvel[self.vadr] = self.dq
 
     def streams(self) -> tuple[Stream, ...]:
-        return (Stream("joints", "joints", self._joint_sample), Stream("pose", "joints", self._tip_sample, positions=True))
+        return (
+            Stream("joints", "joints", self._joint_sample),
+            Stream("pose", "joints", self._tip_sample, positions=True),
+        )
 
     # commands -------------------------------------------------------------------
     def _joints(self, body: Any) -> Clamp | None:
@@ -65,7 +68,9 @@ class Planar2Arm(SimRobot):
         if bad.size == 0:
             return None
         names = self.desc.joint_names
-        return Clamp(tuple(names[i] for i in bad), tuple(float(q[i]) for i in bad), tuple(float(applied[i]) for i in bad))
+        return Clamp(
+            tuple(names[i] for i in bad), tuple(float(q[i]) for i in bad), tuple(float(applied[i]) for i in bad)
+        )
 
     def _stop(self, body: Any) -> None:
         self.target = self.q.copy()
@@ -102,4 +107,10 @@ class Planar2Arm(SimRobot):
         self.q, self.dq, self.target = np.array(state.q), np.array(state.dq), np.array(state.target)
 
     def state(self, physics: Physics) -> dict[str, Any]:
-        return {"type": self.desc.name, "kind": self.kind, "q": self.q.tolist(), "target": self.target.tolist(), "moving": self.moving}
+        return {
+            "type": self.desc.name,
+            "kind": self.kind,
+            "q": self.q.tolist(),
+            "target": self.target.tolist(),
+            "moving": self.moving,
+        }
