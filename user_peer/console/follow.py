@@ -9,20 +9,26 @@ pose feed (:mod:`.feed`), whose decoding the pages share.
 
 from __future__ import annotations
 
-from typing import Any, Iterable
+from typing import TYPE_CHECKING, Iterable
 
 from user_peer.following import Following
+
+if TYPE_CHECKING:
+    from user_peer.robot import Robot
+    from user_peer.world import World
 
 __all__ = ["shown", "follow_only", "followed"]
 
 
-def shown(world: Any, selected: str | None, handles: dict[str, Any], panels: Iterable[Any]) -> set[str]:
+def shown(world: World, selected: str | None, handles: dict[str, Robot], panels: Iterable[Robot | None]) -> set[str]:
     """The robots a page follows: ``selected`` (once its handle is made), and each robot of the ``panels`` (the
     arm and base whose controls are shown; None for a panel the page lacks) that ``world``'s user owns: their
     controls are hers to use, whatever she selected since."""
     out = {selected} if selected is not None and selected in handles else set()
     for r in panels:
-        rec = world.ownership.record(r.id) if r is not None else None
+        if r is None:
+            continue
+        rec = world.ownership.record(r.id)
         if rec is not None and rec.owner == world.user:
             out.add(r.id)
     return out
@@ -38,7 +44,7 @@ def follow_only(following: Following, wanted: set[str]) -> None:
         following.robot(rid)
 
 
-def followed(world: Any, handles: dict[str, Any]) -> dict[str, Any]:
+def followed(world: World, handles: dict[str, Robot]) -> dict[str, Robot]:
     """The ``handles`` whose robots ``world`` follows now: what the view draws from them (links, scan, path)."""
     now = world.following.robots
     return {rid: h for rid, h in handles.items() if rid in now}

@@ -12,7 +12,7 @@ for.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Mapping
 
 from nicegui import ui
 
@@ -20,6 +20,8 @@ from user_peer.console.panels import VIEWS
 
 if TYPE_CHECKING:
     from user_peer.console.page import ConsolePage
+    from user_peer.robot import Robot
+    from user_peer.world import World
 
 __all__ = ["Layout", "CSS", "shown_kinds"]
 
@@ -33,7 +35,7 @@ CSS = """
 a disabled button or slider is grey (Quasar only dims it: a disabled Stop still looked bright red)."""
 
 
-def shown_kinds(world: Any, selected: str | None, robots: dict[str, Any]) -> set[str]:
+def shown_kinds(world: World, selected: str | None, robots: Mapping[str, Robot | None]) -> set[str]:
     """The kinds ("arm", "mobile") whose panel a page shows: its robot of that kind is the selected one or hers.
     ``robots``: the page's robot of each kind (or None)."""
     out = set()

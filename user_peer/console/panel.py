@@ -6,7 +6,12 @@ The page holds its panels in :class:`~.panels.Panels`, made from the one list :d
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Protocol
+
+if TYPE_CHECKING:
+    from nicegui.events import GenericEventArguments
+
+    from user_peer.robot import Robot
 
 __all__ = ["Panel", "PanelHooks"]
 
@@ -21,14 +26,14 @@ class Panel(Protocol):
     def refresh(self) -> None:
         """Its elements from what the page's world holds now: on the console's 5 Hz clock, and after an action."""
 
-    async def switch(self, robot: Any) -> None:
+    async def switch(self, robot: Robot) -> None:
         """The page's robot of this panel's kind becomes ``robot`` (she selected it): called before the change."""
 
     async def let_go(self) -> None:
         """Hold nothing: the page lost focus or its connection, or she releases the robot (a held key's release
         may never come)."""
 
-    async def key(self, e: Any) -> None:
+    async def key(self, e: GenericEventArguments) -> None:
         """A key pressed or let go on the page (``e.args``: ``key``, ``down``, ``t``), outside any field."""
 
     async def tick(self) -> None:
@@ -42,13 +47,13 @@ class PanelHooks:
     """Empty :class:`Panel` hooks that a panel without keys, ticks or a held state inherits: it writes only
     ``build`` and ``refresh``."""
 
-    async def switch(self, robot: Any) -> None:
+    async def switch(self, robot: Robot) -> None:
         """Nothing to do when another robot of its kind is shown."""
 
     async def let_go(self) -> None:
         """Nothing held."""
 
-    async def key(self, e: Any) -> None:
+    async def key(self, e: GenericEventArguments) -> None:
         """Keys are not its."""
 
     async def tick(self) -> None:

@@ -16,7 +16,11 @@ from user_peer.console import arm_panel, base_panel
 from user_peer.console.panel import Panel
 
 if TYPE_CHECKING:
+    from nicegui.events import GenericEventArguments
+
+    from fabric.interfaces import WorldInfo
     from user_peer.console.page import ConsolePage
+    from user_peer.robot import Robot
 
 __all__ = ["PanelEntry", "PANELS", "VIEWS", "Panels"]
 
@@ -32,7 +36,7 @@ class PanelEntry:
     objects), and the view of :data:`VIEWS` it sits beside."""
 
     kind: str
-    make: Callable[["ConsolePage", Any], Panel]
+    make: Callable[["ConsolePage", "WorldInfo"], Panel]
     beside: str
 
 
@@ -57,14 +61,15 @@ class Panels:
         self.entries = entries
         self.made: dict[str, Panel] = {}
 
-    def make(self, info: Any) -> None:
+    def make(self, info: WorldInfo) -> None:
         """A panel for each entry whose kind the page has a robot of (``info``: the world's description)."""
         for e in self.entries:
             if self.page.robots.get(e.kind) is not None:
                 self.made[e.kind] = e.make(self.page, info)
 
     def get(self, kind: str) -> Any:
-        """The page's panel of ``kind``, or None: for a view that works with it (a drag moves the arm's target)."""
+        """The page's panel of ``kind``, or None: for a view that works with it (a drag moves the arm's target), and
+        so calls what that kind's panel offers beyond :class:`~.panel.Panel` (typed as it is: ``Any``)."""
         return self.made.get(kind)
 
     def beside(self, view: str) -> Iterator[tuple[str, Panel]]:
@@ -77,21 +82,21 @@ class Panels:
         for p in self.made.values():
             p.refresh()
 
-    async def switch(self, robot: Any) -> None:
+    async def switch(self, robot: Robot) -> None:
         """``robot`` (a handle) becomes the page's robot of its kind, when the page has a panel of that kind."""
         panel = self.made.get(robot.kind)
         if panel is not None and robot is not self.page.robots.get(robot.kind):
             await panel.switch(robot)
             self.page.robots[robot.kind] = robot
 
-    async def let_go(self, robot: Any = None) -> None:
+    async def let_go(self, robot: Robot | None = None) -> None:
         """Every panel lets go (the page lost focus or its connection); or only the panel of ``robot``, when it
         is the page's robot of its kind (she releases it)."""
         for kind, p in self.made.items():
             if robot is None or robot is self.page.robots.get(kind):
                 await p.let_go()
 
-    async def key(self, e: Any) -> None:
+    async def key(self, e: GenericEventArguments) -> None:
         for p in self.made.values():
             await p.key(e)
 

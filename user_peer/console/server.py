@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import socket
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from robots.kinds import facts
 from user_peer.console.doors import Doors
@@ -21,6 +21,9 @@ from user_peer.console.login import Logins
 from user_peer.console.pictures import ROUTE, Pictures
 from user_peer.console.teacher import ROUTE as TEACHER
 from user_peer.console.ticker import OnePerTurn, Ticker
+
+if TYPE_CHECKING:
+    from user_peer.world import World
 
 __all__ = [
     "Console",
@@ -95,7 +98,7 @@ class Console:
         return w
 
 
-def stop_robots(world: Any) -> None:
+def stop_robots(world: World) -> None:
     """Her page went away: every robot she owns stops where it is (a base brakes, an arm holds)."""
     for rid in world.robots():
         r = world.robot(rid)
