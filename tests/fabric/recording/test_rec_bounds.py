@@ -31,7 +31,14 @@ def test_quota_and_key_cap_drop_and_count(tmp_path, world, connect):
         )
         _flood(pub, lambda i: keys.robot_joints(world, f"r{i}"), 50, 10)  # 50 keys: at most 10 recorded
         _flood(pub, lambda i: keys.robot_joints(world, "warm"), 100, 10_000)  # 1 MB on one key: the quota stops it
-        wait_until(lambda: rec.stats.dropped >= 40 + 70, timeout=30, what="drops counted", seen=lambda: rec.stats)
+        # at least 40 keys over the cap and 70 samples over the quota; which ones depends on how many warm-up
+        # samples arrived (they count as bytes and as a key), so wait until both counts are reached, not the first
+        wait_until(
+            lambda: rec.stats.dropped >= 40 + 70 and rec.stats.dropped_bytes >= 700_000,
+            timeout=30,
+            what="drops counted",
+            seen=lambda: rec.stats,
+        )
     finally:
         stats = rec.close()
     assert stats.quota_reached and stats.keys <= 10
