@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -35,8 +36,20 @@ def _start_host(procs, world, port, motion: Path):
 def _user(procs, world, port, user, obj="arm", wait=False):
     argv = [sys.executable, str(HERE / "user_proc.py"), world, str(port), user, obj] + (["wait"] if wait else [])
     p = procs.start(argv, name=user)
-    wait_until(lambda: "outcome" in procs.output(p), timeout=20, what=f"{user} outcome", seen=lambda: procs.output(p))
+    _outcome(procs, p, user)
     return p
+
+
+def _outcome(procs, p, user) -> str:
+    """The outcome line the user process printed, once it is whole: an unbuffered ``print`` writes its words and
+    its newline one by one, and a look between them saw ``outcome`` alone (the grouped run of 2026-11-30)."""
+    line = wait_until(
+        lambda: re.search(r"^outcome .*\n", procs.output(p), re.M),
+        timeout=20,
+        what=f"{user}'s whole outcome line",
+        seen=lambda: procs.output(p),
+    )
+    return line.group(0)
 
 
 def test_handover_enforcement_kill_and_reconnect(world, router, connect, procs, tmp_path):
@@ -110,8 +123,7 @@ def test_handover_enforcement_kill_and_reconnect(world, router, connect, procs, 
         [sys.executable, str(HERE / "user_proc.py"), world, str(port), "alice", "arm", "wait"], name="alice2"
     )
     wait_until(lambda: bob.record("arm").queue == ("alice",), timeout=20, what="alice queued again", seen=bob.snapshot)
-    wait_until(lambda: "outcome" in procs.output(a2), timeout=20, what="alice2 outcome", seen=lambda: procs.output(a2))
-    assert "queued at position 1" in procs.output(a2)
+    assert "queued at position 1" in _outcome(procs, a2, "alice2")
     deadline = bob.record("arm").lease_expiry
     wait_until(lambda: bob.record("arm").lease_expiry > deadline + LEASE, what="bob renews", seen=bob.snapshot)
     assert bob.record("arm").owner == "bob"
