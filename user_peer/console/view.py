@@ -61,7 +61,7 @@ class LiveView:
                 sanitize=False,
             )
             .classes("full-width")
-            .props('aria-label="Live view: click to place the goal, drag the IK target"')
+            .props('role="group" aria-label="Live view: click to place the goal, drag the IK target"')
         )
         with self.image:  # over the map's top-right corner: the map's row keeps its height
             with ui.row().classes("absolute-top-right q-ma-xs items-center").style("gap: 0.25rem"):

@@ -929,7 +929,7 @@ def axe_js() -> Path:
 AXE_RUN = """async () => {
   const r = await axe.run(document, {resultTypes: ['violations']});
   return r.violations.map((v) => ({id: v.id, impact: v.impact, help: v.help,
-                                   nodes: v.nodes.slice(0, 5).map((n) => n.target.join(' ') + ': ' + n.failureSummary)}));
+                                   nodes: v.nodes.slice(0, 5).map((n) => n.target.join(' ') + ' ' + (n.html || '').slice(0, 300) + ': ' + n.failureSummary)}));
 }"""
 
 
@@ -1028,7 +1028,7 @@ def test_the_teacher_releases_a_robot_a_student_holds_a_reload_keeps_her_in_and_
     assert carol.evaluate("() => sessionStorage.getItem('rf-teacher-session')")
     carol.reload(timeout=60_000)
     carol.get_by_text(f"teacher's page · world {klass.world} · carol").wait_for(timeout=60_000)
-    carol.get_by_role("button", name="Lock arm1").wait_for(timeout=30_000)  # the robots table is back
+    carol.get_by_role("button", name="Lock arm1", exact=True).wait_for(timeout=30_000)  # the robots table is back
     carol.get_by_role("button", name="Log out").click()
     carol.get_by_role("button", name="Log in").wait_for(timeout=60_000)
     assert carol.evaluate("() => sessionStorage.getItem('rf-teacher-session')") is None
