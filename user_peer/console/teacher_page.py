@@ -210,6 +210,9 @@ class TeacherPage:
                 row[op] = ui.button(label, on_click=lambda _, rid=rid, op=op: self.act(rid, op)).props(
                     f'dense no-caps aria-label="{label} {rid}"'
                 )
+                # shown by the first refresh, as the robot's record allows: until then a reloaded page offered
+                # Lock and Unlock together (the grouped run of 2026-11-30 found both on the page at once)
+                row[op].set_visibility(False)
         self.rows[rid] = row
 
     def _confirm_reset(self) -> None:
