@@ -8,8 +8,11 @@ import threading
 from collections import defaultdict
 
 import numpy as np
+from hypothesis import given
+from hypothesis import strategies as st
 
 from fabric import keys
+from fabric.history import Ledger, verdict
 from fabric.interfaces import Header, Pose
 from robofabric.testing import wait_until
 
@@ -23,8 +26,15 @@ def _pose(x: float, seq: int) -> Pose:
 def test_history_delivers_every_live_sample_of_every_publisher_and_each_latest_value_once(world, connect):
     pub = connect("sim", "pub")
     goal = keys.object_pose(world, "goal", "alice")
+    # a witness that hears the goal through the router: once it has heard 3.0, no put of it is still on its way (a
+    # late joiner declared while they were would hear them live, as it should: a loaded run saw 1.0 live first)
+    witnessed: list[float] = []
+    witness = connect("tool", "witness")
+    witness.subscribe(goal, lambda k, m: witnessed.append(float(m.position[0])), expected=Pose)
+    wait_until(lambda: pub.wait_matching(goal, 0.1), what="the witness known to the publisher")
     for x in (1.0, 2.0, 3.0):  # only the last matters to a late joiner
         pub.publish(goal, _pose(x, 0))
+    wait_until(lambda: witnessed[-1:] == [3.0], what="the goal's last put through the router", seen=lambda: witnessed)
     got: dict[str, list[int]] = defaultdict(list)
     goals: list[float] = []
     lock = threading.Lock()
@@ -64,3 +74,46 @@ def test_history_delivers_every_live_sample_of_every_publisher_and_each_latest_v
     pub.publish(goal, _pose(4.0, 1))
     wait_until(lambda: goals[-1:] == [4.0], what="a live goal after the history")
     assert goals == [3.0, 4.0]
+
+
+def _delivered(arrivals: list[tuple[int, bool]], kept: int) -> list[int]:
+    """The stamps a subscription delivers of one key, given its arrivals (stamp, live) in order."""
+    ledger = Ledger()
+    return [stamp for stamp, live in arrivals if ledger.offer("k", stamp, kept, live=live) == "deliver"]
+
+
+def test_a_live_sample_older_than_the_cached_value_shown_does_not_take_a_latched_key_back():
+    # the grouped run's goal: 1 live, then the cache's 3, then 2 live (it was delivered, and the goal left at 2)
+    assert _delivered([(1, True), (3, False), (2, True)], kept=1) == [1, 3]
+    assert _delivered([(3, False), (3, True)], kept=1) == [3]  # the same publication, from the cache then live
+    assert _delivered([(3, True), (2, False)], kept=1) == [3]  # a late cache reply never takes it back either
+    # a kept event or record: an older one live is still news (another publisher's), a cached one is not
+    assert _delivered([(1, True), (3, False), (2, True), (2, False)], kept=4) == [1, 3, 2]
+    assert _delivered([(0, False), (1, False), (0, True), (1, True)], kept=4) == [0, 1]  # both overtaken by the cache
+    assert verdict(1, None, 5, live=True) == verdict(1, 5, None, live=True) == "deliver"  # nothing to compare
+
+
+publications = st.lists(st.integers(0, 50), min_size=1, max_size=12, unique=True)
+
+
+@given(stamps=publications, data=st.data())
+def test_a_latched_key_shows_only_newer_values_and_ends_at_the_newest_whatever_the_arrival_order(stamps, data):
+    """Each publication arrives live, from a cache, or both, in any order: a latched key's values go forward only,
+    and the newest that arrived is the one shown last."""
+    arrivals = [(s, True) for s in stamps] + [(s, False) for s in data.draw(st.lists(st.sampled_from(stamps)))]
+    arrivals = data.draw(st.permutations(arrivals))
+    out = _delivered(arrivals, kept=1)
+    assert out == sorted(set(out)) and out[-1] == max(stamps)
+
+
+@given(stamps=publications, data=st.data())
+def test_a_kept_keys_live_samples_are_all_delivered_once(stamps, data):
+    """Kept events and records of one publisher: every publication that arrives live is delivered exactly once,
+    wherever its cache's replies came among them (a reply delivers only what is newer than every one delivered). One
+    publisher's live samples come in the order it sent them; the cache's replies anywhere between."""
+    replies = data.draw(st.lists(st.sampled_from(stamps)))
+    arrivals: list[tuple[int, bool]] = [(s, True) for s in sorted(stamps)]
+    for r in replies:
+        arrivals.insert(data.draw(st.integers(0, len(arrivals))), (r, False))
+    out = _delivered(arrivals, kept=4)
+    assert sorted(out) == sorted(set(out)) and set(out) == set(stamps)
