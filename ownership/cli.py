@@ -42,6 +42,23 @@ def _client(join: Joining, user: str | None) -> tuple[Fabric, OwnershipClient]:
     return fab, OwnershipClient(fab, fab.peer_id).start()
 
 
+RECORDS_WAIT_S = 5.0
+"""How long ``own list`` waits for the first record. The client's first query is answered at once, but on a loaded
+machine the sim's token can come after it, and its replies are refused as no live sim's until the token comes and
+the client asks again: a `list` that looked once said "no ownership authority answered" of a world that had one."""
+
+
+def _first_records(cl: OwnershipClient, timeout: float) -> dict[str, Any]:
+    """The client's records once it trusts any (a copy taken under its lock: Zenoh's threads write the replica), or
+    none after ``timeout`` s."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while not (records := cl.snapshot()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return records
+
+
 def _shown(text: str) -> str:
     """A name from the network as printed: control characters escaped, so none reaches the terminal, and capped."""
     return one_line(text, 64)
@@ -89,7 +106,7 @@ def list_cmd(
     fab, cl = _client(join, user)
     with fab:
         try:
-            records = cl.snapshot()  # a copy taken under the client's lock: Zenoh's threads write the replica
+            records = _first_records(cl, RECORDS_WAIT_S)
             if not records:  # the world had nothing to list: exit 1 (2 is for what the user got wrong)
                 raise NothingThere(f"no ownership authority answered in world {fab.world!r} (is a sim peer running?)")
         finally:

@@ -4,7 +4,7 @@ import subprocess
 
 import pytest
 
-from robofabric.testing import robofabric_cmd
+from robofabric.testing import robofabric_cmd, wait_until
 
 from ownership import Authority, OwnershipClient
 
@@ -192,3 +192,34 @@ def test_own_staff_takes_back_gives_and_locks_and_says_why_it_refuses(world, rou
         ann.close()
         ben.close()
         auth.close()
+
+
+def test_own_list_started_before_the_sims_token_waits_for_its_records(world, router, connect):
+    """A ``list`` that joined before the authority's token came (a loaded machine): its first query found nothing
+    to trust, and it said "no ownership authority answered" of a world that had one; it now waits up to
+    ``RECORDS_WAIT_S`` for the client to ask again when the token comes."""
+    port = router[1]
+    watcher = connect("tool", "watcher")
+    before = {pid for _, pid in watcher.live_peers("user", timeout=1.0)}
+    lister = subprocess.Popen(
+        robofabric_cmd("own", "list", "--world", world, "--connect", f"tcp/127.0.0.1:{port}", "--user", "ann"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    auth = None
+    try:
+        wait_until(
+            lambda: lister.poll() is not None or {pid for _, pid in watcher.live_peers("user", timeout=0.5)} - before,
+            timeout=30,
+            what="the list's session in the world",
+        )  # or the list has ended already: what it said is asserted below
+        auth = Authority(connect("sim", "host"), {"arm": "exclusive"}, lease_s=5.0).start()
+        out, err = lister.communicate(timeout=60)
+        assert lister.returncode == 0 and "arm" in out and "(free)" in out, out + err
+    finally:
+        if lister.poll() is None:
+            lister.kill()
+            lister.wait(timeout=10)
+        if auth is not None:
+            auth.close()
