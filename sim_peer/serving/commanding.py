@@ -172,8 +172,7 @@ class CommandPipeline:
                 user = self._last_user.get(rid)
                 if user and (q or self.world.robots[rid].moving):
                     self._stopped[rid] = user
-                q.put("stop", Halt("", self._held))
-                self._applied[rid].clear()  # what the hold stopped is to be done again when sent again
+                q.put("stop", Halt("", self._held))  # its halt forgets the ids applied (_halt)
             self._queued.notify()
 
     def resume(self) -> None:
@@ -222,8 +221,14 @@ class CommandPipeline:
                         log.exception("command %s for %s failed", name, rid)
 
     def _halt(self, rid: str, halt: Halt) -> None:
-        """Stop a robot whose owner let go (:meth:`SimRobot.halt`); say why when it was moving."""
+        """Stop a robot whose owner let go, or that a hold stops (:meth:`SimRobot.halt`); say why when it was moving.
+
+        What it stopped is to be done again when sent again: the ids applied are forgotten here, in the worker's
+        order, not when the hold is asked. A command the worker had taken just before a hold, applied after it,
+        kept its id past the forgetting, and every copy its client sent after the sim heard again was a
+        "duplicate": the arm stayed where the halt left it (the grouped suite's run of 2026-11-30)."""
         with self.lock:
+            self._applied[rid].clear()
             robot = self.world.robots[rid]
             moving = robot.moving
             if halt.reset:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from fabric import keys
-from fabric.interfaces import Command, Event, JointState, JointTarget, Pose, Reset, Scan, Stop, Twist, WorldInfo
+from fabric.interfaces import Command, Event, Header, JointState, JointTarget, Pose, Reset, Scan, Stop, Twist, WorldInfo
 from robofabric.testing import robofabric_cmd, wait_until
 from sim_peer.serving.peer import SimPeer
 from sim_peer.physics.world import SimWorld
@@ -392,6 +392,58 @@ def test_a_shard_leaves_other_robots_to_their_sims_and_the_scene_objects_to_the_
             lambda: peer.counters["rejected:unknown_robot"] >= 1 or send(fab, world, "base9", "twist", Twist(0.1, 0.0)),
             timeout=10,
             what="alone again: an unknown robot is refused",
+        )
+    finally:
+        peer.close()
+
+
+class HoldingGate(RecordingGate):
+    """Admits everything; the second look at one command (the worker's, as it applies it) asks the sim to hold first:
+    the hold lands between the worker taking the command and applying it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.peer: SimPeer | None = None
+        self.looks = 0
+
+    def admit(self, robot: str, command: Command) -> str | None:
+        if command.header.seq == 41:
+            self.looks += 1
+            if self.looks == 2 and self.peer is not None:
+                self.peer.commands.hold("a pause, in the test")
+        return None
+
+
+def test_a_command_applied_as_a_hold_came_is_done_again_when_sent_again(world, connect, user):
+    gate = HoldingGate()
+    peer = SimPeer(connect("sim", "sim-hold"), SimWorld("combined", seed=3), gate=gate, rates={"joints": 50})
+    gate.peer = peer
+    peer.start()
+    try:
+        fab, inbox = user
+        jk = keys.robot_joints(world, "arm1")
+        wait_until(lambda: jk in inbox.latest, what="first joint state")
+        target = np.array([0.4, 0.2, -0.3, 0.5, 0.3, -0.6])
+        cmd = Command("alice", 1, JointTarget(target), Header(seq=41, source="alice-1", wall_ns=7))
+        fab.publish(keys.robot_cmd(world, "arm1", "joints", "alice"), cmd)
+        robots = len(peer.world.robots)
+        wait_until(
+            lambda: peer.commands.held and peer.counters["owner_stops"] >= robots,
+            what="the hold, and every robot's halt done by the worker",
+            seen=lambda: (gate.looks, dict(peer.counters)),
+        )
+        peer.commands.resume()
+        fab.publish(keys.robot_cmd(world, "arm1", "joints", "alice"), cmd)  # the client's copy, as after a pause
+
+        def arrived() -> bool:
+            js = inbox.latest.get(jk)
+            return isinstance(js, JointState) and np.allclose(js.q, target, atol=1e-6)
+
+        wait_until(
+            arrived,
+            timeout=15,
+            what="arm1 at the target of the copy",
+            seen=lambda: (inbox.latest.get(jk), dict(peer.counters)),
         )
     finally:
         peer.close()
