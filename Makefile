@@ -40,8 +40,10 @@ demo: $(STAMP)
 
 # Both keep bytecode (PYTHONDONTWRITEBYTECODE emptied, where a shell sets it): with none, every run compiled each
 # module again and pytest rewrote each test module's asserts again, half of the fast suite's collection (docs/testing.md)
+# On four pytest-xdist workers: the box's heavy tests in two units of one worker each (browsers, classes), the rest
+# with their modules on the other two (tests/conftest.py, docs/testing.md)
 test: $(STAMP_TEST) $(AXE) $(ROS_MSGS)
-	PYTHONDONTWRITEBYTECODE= $(PY) -m pytest -q --durations=25
+	PYTHONDONTWRITEBYTECODE= $(PY) -m pytest -q -n 4 --dist loadgroup --durations=25
 
 # the fast suite: no process-spawning or multi-second tests (those are marked slow)
 test-fast: $(STAMP_TEST) $(ROS_MSGS)

@@ -6,7 +6,7 @@ import os
 import subprocess
 import sys
 import uuid
-from typing import Iterator
+from typing import Any, Iterator
 
 import pytest
 from hypothesis import HealthCheck, settings
@@ -21,37 +21,47 @@ settings.register_profile("robofabric", deadline=None, suppress_health_check=[He
 settings.load_profile("robofabric")
 
 
-# Where pytest-xdist runs the whole suite on several workers (`-n N --dist loadgroup`, `make test`), the tests that
-# load the whole box run one after another on one worker: Chromium drawing in software GL and the console's class
-# worlds (a module each: three at once took the box to load 37), soaks and namespace labs, CPU hogs beside paused
-# processes. Two of them at once judge each other's pace, not the code's; the rest share the other workers.
-HEAVY = (
-    "tests/user_peer/console/",
-    "tests/user_peer/test_view_web.py",
-    "tests/user_peer/test_web_pages.py",
-    "tests/robofabric/bench/test_bench_console.py",
-    "tests/robofabric/soak/",
-    "tests/lab/",
-    "tests/user_peer/test_pause_ride_out.py",
-    "tests/sim_peer/replica/test_pause.py",
-    "tests/sim_peer/replica/test_paused_standby.py",
-    "tests/ownership/test_router_stall.py",
-    # a pace at full rate and 0.3 s leases: at load 37 beside Chromium the first logged 0.36x of its full rate and
-    # the second's starved authority waited out its deaf guard (the grouped run of 2026-11-29)
-    "tests/user_peer/test_view_class.py",
-    "tests/robofabric/bench/test_bench_ownership.py",
-)
+# `make test` runs the suite on four pytest-xdist workers (`-n 4 --dist loadgroup`). The tests that load the whole
+# box go in two units of work, each run one test after another on one worker: the browsers (Chromium drawing in
+# software GL, the console's class worlds: three at once took the box to load 37) and the classes (soaks and
+# namespace labs, CPU hogs beside paused processes, paces at full rate and 0.3 s leases). Two browsers or two
+# classes at once judge each other's pace, not the code's; one of each runs beside the other's, and the rest share
+# the other two workers. The two units go out first: each is longer than any other worker's whole share.
+HEAVY: dict[str, tuple[str, ...]] = {
+    "heavy-browser": (
+        "tests/user_peer/console/",
+        "tests/user_peer/test_view_web.py",
+        "tests/user_peer/test_web_pages.py",
+        "tests/robofabric/bench/test_bench_console.py",
+    ),
+    "heavy-class": (
+        "tests/robofabric/soak/",
+        "tests/lab/",
+        "tests/user_peer/test_pause_ride_out.py",
+        "tests/sim_peer/replica/test_pause.py",
+        "tests/sim_peer/replica/test_paused_standby.py",
+        "tests/ownership/test_router_stall.py",
+        # a pace at full rate and 0.3 s leases: at load 37 beside Chromium the first logged 0.36x of its full rate
+        # and the second's starved authority waited out its deaf guard (the grouped run of 2026-11-29)
+        "tests/user_peer/test_view_class.py",
+        "tests/robofabric/bench/test_bench_ownership.py",
+    ),
+}
 
 
 def work_unit(nodeid: str) -> str:
-    """The unit of work a test goes in under ``--dist loadgroup``: every heavy test in one (``heavy``), any other test
-    with the rest of its module, so that a module's shared world (a module fixture) is built by one worker only."""
-    return "heavy" if nodeid.startswith(HEAVY) else nodeid.split("::", 1)[0]
+    """The unit of work a test goes in under ``--dist loadgroup``: a heavy test in its :data:`HEAVY` unit, any other
+    test with the rest of its module, so that a module's shared world (a module fixture) is built by one worker only."""
+    for unit, paths in HEAVY.items():
+        if nodeid.startswith(paths):
+            return unit
+    return nodeid.split("::", 1)[0]
 
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
-    """``--dist loadgroup`` with the units of :func:`work_unit`, decided on the controller from each test's path.
+    """``--dist loadgroup`` with the units of :func:`work_unit`, decided on the controller from each test's path, the
+    heavy units dealt first (xdist deals the units with the most tests first, and the classes' unit has few).
 
     Not xdist's ``xdist_group`` mark: its worker appends the group to the node id, which pytest 9.2's structured
     node ids ignore (pytest-xdist issue 1386), so every worker ran the console's class worlds at once."""
@@ -62,6 +72,12 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
     class ByWorkUnit(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
             return work_unit(nodeid)
+
+        def _assign_work_unit(self, node: Any) -> None:
+            for unit in reversed(HEAVY):
+                if unit in self.workqueue:
+                    self.workqueue.move_to_end(unit, last=False)
+            super()._assign_work_unit(node)
 
     return ByWorkUnit(config, log)  # type: ignore[arg-type]
 
