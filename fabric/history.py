@@ -17,12 +17,15 @@ got 499; a live ROS 2 recording lost 603 of 3,000 poses in a minute (issue 32).
 - a cache that keeps several samples of a key (the ownership records and events of
   :func:`fabric.keys.cache_size`) gives them all, oldest first: a subscriber whose link was down gets those it
   missed;
-- a cached value is delivered only when it is newer (its timestamp) than every value of that key
-  delivered so far, so a history reply that arrives after a live sample never takes the key back; a live
-  sample whose cache reply came first (the same timestamp: the same publication) is not delivered twice;
-- nor does a live sample of a latched key (a latest value, not a kept event or record) that is older than one
-  delivered: a joiner's cache reply can overtake the publications still on their way to it (a goal put 1, 2, 3 as alice's viewer joined reached it
-  as 1, then 3 from the cache, then 2 live: its goal was left at 2, the grouped suite's run of 2026-11-30).
+- a cached value of a latched key or an ownership record is delivered only when it is newer (its timestamp)
+  than every value of that key delivered so far, so a history reply that arrives after a live sample never takes
+  the key back; a live sample whose cache reply came first (the same publication) is not delivered twice;
+- nor is a live sample of a latched key older than one delivered: a joiner's cache reply can overtake the
+  publications still on their way to it (a goal put 1, 2, 3 as a viewer joined reached it as 1, then 3 from the
+  cache, then 2 live, and was left at 2: the grouped suite's run of 2026-11-30);
+- an event (``event/own/*``, ``event/reject/*``) is news, each one: delivered once, whichever way it comes first,
+  even when it is older than one delivered. One missed while the link was down comes from the cache when the link
+  is back, often after a newer one live (:func:`verdict`).
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ import zenoh
 
 from fabric import keys
 
-__all__ = ["LatestThenLive", "Ledger", "cache_selector", "verdict", "MAX_TRACKED"]
+__all__ = ["LatestThenLive", "Ledger", "cache_selector", "keeping", "verdict", "MAX_TRACKED"]
 
 MAX_TRACKED = 1024
 """Latched keys whose newest timestamp a subscription keeps; beyond, a cached value is always delivered."""
@@ -50,45 +53,65 @@ def cache_selector(key_expr: str) -> str:
     return f"{key_expr}/@adv/pub/**"
 
 
-def verdict(kept: int, newest: Any, stamp: Any, *, live: bool, cached: Collection[Any] = ()) -> str:
-    """What a subscription does with one sample of a key whose publisher keeps ``kept`` (> 0) samples: ``newest`` the
-    newest stamp it delivered of that key (None: none yet, or not tracked), ``cached`` the stamps its cache's replies
-    delivered, ``stamp`` the sample's (None: a session without timestamps). ``"deliver"``, ``"duplicate"`` (a live
-    sample whose cache's reply came first: the same publication) or ``"stale"`` (older than one delivered: a cached
-    value always, a live one of a latched key).
+def keeping(key: str) -> str:
+    """How a subscription treats ``key``'s samples: ``""`` a stream (every sample, no bookkeeping); ``"latest"`` a
+    latched key (its newest value); ``"records"`` an ownership record's key (several kept; the newest wins, an
+    older one live is the replica's to judge by its epoch); ``"news"`` an ownership or reject event's key (several
+    kept, each one news: delivered once, in whatever order it comes)."""
+    kept = keys.cache_size(key)
+    if not kept:
+        return ""
+    if kept == 1:
+        return "latest"
+    return "news" if keys.parse(key).category == "event" else "records"
 
-    A kept event or record older than one delivered is still news, live: another publisher's, or the ownership
-    replica's to judge by its epoch. A latched key is a latest value: one older than the one shown takes it back."""
+
+def verdict(keep: str, newest: Any, stamp: Any, *, live: bool, seen: Collection[Any] = ()) -> str:
+    """What a subscription does with one sample of a kept key (``keep``: :func:`keeping`'s word): ``newest`` the
+    newest stamp it delivered of that key (None: none yet, or not tracked), ``seen`` the stamps it delivered of it
+    lately (a record's from its cache, an event's all), ``stamp`` the sample's (None: a session without timestamps).
+    ``"deliver"``, ``"duplicate"`` (a live sample delivered already from its cache: the same publication) or
+    ``"stale"`` (a cached one older than one delivered, or delivered already; a live latest value older than one
+    delivered).
+
+    An event missed while the link was down comes from its publisher's cache when the link is back, often after a
+    newer one live: it is delivered all the same (a soak's router restart lost s01's "released: left" that way, after
+    her "owner again" came live). A latched key is a latest value: one older than the one shown takes it back."""
     if stamp is None or newest is None:
         return "deliver"
-    if live and (stamp == newest or stamp in cached):
-        return "duplicate"
-    if newest < stamp:
+    if stamp == newest or stamp in seen:
+        return "duplicate" if live else "stale"
+    if newest < stamp or keep == "news":
         return "deliver"
-    return "stale" if not live or kept == 1 else "deliver"
+    return "deliver" if live and keep == "records" else "stale"
 
 
 class Ledger:
-    """What one subscription delivered of its kept keys: each key's newest stamp, and the stamps its cache's replies
-    gave of a key that keeps several (their live copies may still be on their way). Pure: the caller holds a lock.
-    Tracks :data:`MAX_TRACKED` keys; beyond, every sample of another key is delivered."""
+    """What one subscription delivered of its kept keys: each key's newest stamp, and the stamps it delivered lately
+    (a record key's from its cache, whose live copies may still be on their way; an event key's all). Pure: the
+    caller holds a lock. Tracks :data:`MAX_TRACKED` keys; beyond, every sample of another key is delivered."""
 
     def __init__(self) -> None:
         self.newest: dict[str, Any] = {}
-        self.cached: dict[str, deque[Any]] = {}
+        self.seen: dict[str, deque[Any]] = {}
 
-    def offer(self, key: str, stamp: Any, kept: int, *, live: bool) -> str:
+    def offer(self, key: str, stamp: Any, keep: str, *, live: bool) -> str:
         """:func:`verdict` on one sample of ``key``, noted when it is delivered."""
         last = self.newest.get(key)
-        cached = self.cached.get(key, ())
-        said = verdict(kept, last, stamp, live=live, cached=cached)
+        seen = self.seen.get(key)
+        said = verdict(keep, last, stamp, live=live, seen=seen or ())
+        if said == "deliver" and keep == "news" and not live and seen is not None and len(seen) == seen.maxlen:
+            if stamp is not None and stamp < min(seen):
+                said = "stale"  # older than all it remembers delivering: taken for one delivered long ago
         if said != "deliver" or stamp is None:
             return said
         if last is None or last < stamp:
             if last is not None or len(self.newest) < MAX_TRACKED:
                 self.newest[key] = stamp
-        if not live and kept > 1 and (cached or len(self.cached) < MAX_TRACKED):
-            self.cached.setdefault(key, deque(maxlen=kept)).append(stamp)
+        if (keep == "news" or (keep == "records" and not live)) and (seen is not None or len(self.seen) < MAX_TRACKED):
+            if seen is None:
+                seen = self.seen[key] = deque(maxlen=2 * keys.KEPT_EVENTS)
+            seen.append(stamp)
         return said
 
 
@@ -101,7 +124,7 @@ class LatestThenLive:
         self._callback = callback
         self._lock = threading.Lock()
         self._ledger = Ledger()
-        self._kept: dict[str, int] = {}  # by key: how many samples its publisher's cache keeps
+        self._keeping: dict[str, str] = {}  # by key: keeping(key)
         self._closed = False
         self.stale = 0
         """Cached values, and live values of a latched key, not delivered because a newer one of their key already was."""
@@ -115,24 +138,26 @@ class LatestThenLive:
 
     # ------------------------------------------------------------------ delivering
 
-    def _kept_samples(self, key: str) -> int:
-        """``keys.cache_size(key)``, remembered for :data:`MAX_TRACKED` keys (a parse costs ~3 µs a sample): 1 on a
-        latched key, more on the ownership records and the events kept for a link that was down, 0 on a stream."""
-        kept = self._kept.get(key)
-        if kept is None:
-            kept = keys.cache_size(key)
-            if len(self._kept) < MAX_TRACKED:
-                self._kept[key] = kept
-        return kept
+    def _keep(self, key: str) -> str:
+        """:func:`keeping`, remembered for :data:`MAX_TRACKED` keys (a parse costs ~3 µs a sample)."""
+        keep = self._keeping.get(key)
+        if keep is None:
+            try:
+                keep = keeping(key)
+            except ValueError:  # not a robofabric key: a stream
+                keep = ""
+            if len(self._keeping) < MAX_TRACKED:
+                self._keeping[key] = keep
+        return keep
 
     def _on_live(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
-        kept = self._kept_samples(key)
-        if not kept:
+        keep = self._keep(key)
+        if not keep:
             self._callback(sample)  # streams: no lock, no bookkeeping
             return
-        with self._lock:  # a latched key: a history reply must not overtake or follow it back in time
-            self._offer(key, sample, kept, live=True)
+        with self._lock:  # a kept key: a history reply must not overtake it, follow it back in time or repeat it
+            self._offer(key, sample, keep, live=True)
 
     def _on_reply(self, reply: zenoh.Reply) -> None:
         sample = reply.ok
@@ -140,11 +165,11 @@ class LatestThenLive:
             return
         key = str(sample.key_expr)
         with self._lock:
-            self._offer(key, sample, self._kept_samples(key), live=False)
+            self._offer(key, sample, self._keep(key), live=False)
 
-    def _offer(self, key: str, sample: zenoh.Sample, kept: int, *, live: bool) -> None:
+    def _offer(self, key: str, sample: zenoh.Sample, keep: str, *, live: bool) -> None:
         """Deliver ``sample`` as the ledger says (called with the lock held)."""
-        said = self._ledger.offer(key, sample.timestamp, kept, live=live)
+        said = self._ledger.offer(key, sample.timestamp, keep, live=live)
         if said == "duplicate":
             self.duplicates += 1
         elif said == "stale":
