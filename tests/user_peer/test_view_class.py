@@ -12,11 +12,15 @@ three in four it guards against; none on a quiet machine is the benchmark's to s
 from __future__ import annotations
 
 import re
+import time
 import uuid
 
 import pytest
 
-from robofabric.testing import free_port, robofabric_cmd, wait_until
+from fabric import keys
+from fabric.interfaces import JointState
+from fabric.session import Fabric
+from robofabric.testing import client_config, free_port, robofabric_cmd, wait_until
 
 ARMS = BASES = 8
 SECONDS = 12
@@ -43,36 +47,52 @@ def test_sixteen_robots_at_full_rate_next_to_nothing_dropped(procs, tmp_path):
         what="the sim",
         seen=lambda: procs.output(sim)[-1500:],
     )
-    view = procs.start(
-        robofabric_cmd(
-            "view",
-            "--save",
-            str(tmp_path / "class.rrd"),
-            "--max-hz",
-            "0",
-            "--duration",
-            str(SECONDS),
-            "--world",
-            world,
-            "--connect",
-            ep,
-        ),
-        name="view",
+    # the sim's own pace while the viewer runs, from arm0's joint stamps (sim time) against this clock: on a loaded
+    # box the sim itself runs slower than real time, which is not the viewer's doing
+    paced: list[tuple[float, float]] = []
+    watch = Fabric(client_config(world, int(ep.rsplit(":", 1)[1])), kind="tool", peer_id="pace")
+    watch.subscribe(
+        keys.robot_joints(world, "arm0"),
+        lambda k, js: paced.append((time.monotonic(), js.header.stamp)),
+        expected=JointState,
     )
-    wait_until(
-        lambda: view.poll() is not None,
-        timeout=SECONDS + 120,
-        interval=0.5,
-        what="the viewer to finish",
-        seen=lambda: procs.output(view)[-1500:],
-    )
+    try:
+        wait_until(lambda: paced, timeout=60, what="arm0's joints")
+        view = procs.start(
+            robofabric_cmd(
+                "view",
+                "--save",
+                str(tmp_path / "class.rrd"),
+                "--max-hz",
+                "0",
+                "--duration",
+                str(SECONDS),
+                "--world",
+                world,
+                "--connect",
+                ep,
+            ),
+            name="view",
+        )
+        wait_until(
+            lambda: view.poll() is not None,
+            timeout=SECONDS + 120,
+            interval=0.5,
+            what="the viewer to finish",
+            seen=lambda: procs.output(view)[-1500:],
+        )
+    finally:
+        watch.close()
     out = procs.output(view)
     assert view.returncode == 0, out[-2000:]
     m = re.search(r"viewer: (\d+) messages logged, (\d+) dropped", out)
     assert m, out[-2000:]
     logged, dropped = int(m.group(1)), int(m.group(2))
     assert dropped <= 0.15 * logged, out[-2000:]
-    # full rate: per arm joints + flange at 100 Hz, per base pose 50, wheels 100, LIDAR and sonar 20 Hz = 3,120/s;
-    # the sim on a loaded machine may run a little slower, never the viewer's doing (it drops nothing)
-    assert logged >= 0.5 * 3120 * SECONDS, out[-2000:]
+    # full rate: per arm joints + flange at 100 Hz, per base pose 50, wheels 100, LIDAR and sonar 20 Hz = 3,120/s of
+    # sim time, at the sim's own pace over the viewer's run (a grouped suite run at load 16 logged 0.43x of the full
+    # rate, 208 dropped, and did not say whose pace it was)
+    (w0, s0), (w1, s1) = paced[0], paced[-1]
+    pace = min(1.0, (s1 - s0) / (w1 - w0))
+    assert logged >= 0.5 * 3120 * SECONDS * pace, (pace, out[-2000:])
     assert sim.poll() is None, procs.output(sim)[-2000:]
