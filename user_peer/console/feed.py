@@ -16,7 +16,7 @@ that holds the same bytes.
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable, Hashable
+from typing import Any, Callable, Hashable, TypeVar
 
 import zenoh
 
@@ -27,6 +27,8 @@ from fabric.interfaces import Pose
 __all__ = ["PoseFeed", "Decoded", "ring_capacity"]
 
 log = logging.getLogger("robofabric.console")
+
+T = TypeVar("T")
 
 
 def ring_capacity(robots: int) -> int:
@@ -78,11 +80,11 @@ class Decoded:
     draw once for each way a page may draw it (:meth:`drawn`)."""
 
     def __init__(self) -> None:
-        self._last: dict[str, tuple[bytes, Pose | None, dict[Hashable, str]]] = {}
+        self._last: dict[str, tuple[bytes, Pose | None, dict[Hashable, Any]]] = {}
         self.decoded = 0  # decodes done (the rest were shared)
         self.bad = 0  # payloads that were not a pose
 
-    def _entry(self, rid: str, raw: bytes) -> tuple[bytes, Pose | None, dict[Hashable, str]]:
+    def _entry(self, rid: str, raw: bytes) -> tuple[bytes, Pose | None, dict[Hashable, Any]]:
         last = self._last.get(rid)
         if last is not None and last[0] == raw:
             return last
@@ -104,10 +106,16 @@ class Decoded:
     def drawn(self, rid: str, raw: bytes, variant: Hashable, draw: Callable[[Pose | None], str]) -> str:
         """``draw(pose)`` of ``raw``'s pose, kept with it: another page holding the same bytes and drawing them the
         same way (``variant``: its owner, whether she is the page's user, whether it is selected) gets it as is."""
+        return self.derived(rid, raw, variant, draw)
+
+    def derived(self, rid: str, raw: bytes, variant: Hashable, make: Callable[[Pose | None], T]) -> T:
+        """``make(pose)`` of ``raw``'s pose, kept with it for every page that holds the same bytes and asks for the
+        same ``variant`` (a drawing of the map, a box's place in the 3D view): made once a tick, not once a page.
+        What it returns is shared: never changed in place."""
         drawings = self._entry(rid, raw)[2]
-        out = drawings.get(variant)
-        if out is None:
-            if len(drawings) > 64:  # a page's variants are few; be sure
-                drawings.clear()
-            out = drawings[variant] = draw(self._last[rid][1])
+        if variant in drawings:
+            return drawings[variant]  # type: ignore[no-any-return]
+        if len(drawings) > 64:  # a page's variants are few; be sure
+            drawings.clear()
+        out = drawings[variant] = make(self._last[rid][1])
         return out

@@ -261,8 +261,10 @@ class ConsolePage:
         ui.on("rf_key", self.panels.key)
         ui.on("rf_blur", self._disconnected)
         ui.run_javascript(KEYS_JS)
-        self._tick = self.console.ticker.add(self.refresh)  # the console's one clock: pages share its tick's work
+        # the console's one clock: every page takes its poses at the start of a pass, then each redraws in turn
+        self._tick = self.console.ticker.add(self.refresh, take=self.view.take)
         ui.timer(REFRESH_S, self.panels.tick)
+        self.view.take()
         self.refresh()
 
     def _robot_list(self) -> None:

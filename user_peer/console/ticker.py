@@ -9,6 +9,12 @@ drawing cache (:func:`user_peer.console.topview.robot_svg`) do the work once per
 The clock's own pass (:meth:`Ticker.run`) lets the event loop turn between two pages: a pass over a class of 32
 took 1-4 s on a loaded 2-core box, and as one call of the loop it held every socket's ping, key and click that
 long. Between two pages the loop answers them; a page that left during the pass is not redrawn.
+
+What the pages share needs them to hold the same samples, and a pass that lets the loop turn lasts longer than the
+sim's 20 ms between two poses of a robot: the pages redrawn late in the pass had newer bytes than the first, so
+every page decoded and drew every robot again (pages x robots: with 8 pages a fifth of the loop's time, by py-spy). So
+a pass first *takes* every page's samples in one go (each page's ``take``: a drain of its ring, no decoding), then
+redraws the pages one per turn of the loop from what they took.
 """
 
 from __future__ import annotations
@@ -31,18 +37,23 @@ class Ticker:
     def __init__(self, period: float) -> None:
         self.period = period
         self._callbacks: dict[int, Callable[[], None]] = {}
+        self._takes: dict[int, Callable[[], None]] = {}  # what a page takes at the start of a pass (its samples)
         self._next = 0
         self.failed = 0
         self.ticks = 0
 
-    def add(self, callback: Callable[[], None]) -> int:
-        """Register ``callback``; the number :meth:`remove` takes."""
+    def add(self, callback: Callable[[], None], take: Callable[[], None] | None = None) -> int:
+        """Register ``callback``, and ``take`` (called for every page at the start of each pass, all in one go,
+        before any page's ``callback``); the number :meth:`remove` takes."""
         self._next += 1
         self._callbacks[self._next] = callback
+        if take is not None:
+            self._takes[self._next] = take
         return self._next
 
     def remove(self, handle: int) -> None:
         self._callbacks.pop(handle, None)
+        self._takes.pop(handle, None)
 
     def __len__(self) -> int:
         return len(self._callbacks)
@@ -50,25 +61,34 @@ class Ticker:
     def tick(self) -> None:
         """One pass over every callback, in one go (tests call it alone)."""
         self.ticks += 1
+        self._take_all()
         for handle in list(self._callbacks):
             self._call(handle)
 
     async def turn(self) -> None:
-        """One pass over every callback, the event loop turning between two of them (the clock's pass)."""
+        """One pass: every page's take in one go, then every callback, the event loop turning between two of them
+        (the clock's pass)."""
         self.ticks += 1
+        self._take_all()
         for handle in list(self._callbacks):
             self._call(handle)
             await asyncio.sleep(0)
 
+    def _take_all(self) -> None:
+        for take in list(self._takes.values()):
+            self._guarded(take, "take")
+
     def _call(self, handle: int) -> None:
         cb = self._callbacks.get(handle)  # None: removed since the pass began (its page left)
-        if cb is None:
-            return
+        if cb is not None:
+            self._guarded(cb, "redraw")
+
+    def _guarded(self, fn: Callable[[], None], what: str) -> None:
         try:
-            cb()
+            fn()
         except Exception:
             self.failed += 1
-            log.exception("console: a page's redraw failed")
+            log.exception("console: a page's %s failed", what)
 
     async def run(self) -> None:
         """Tick every ``period`` seconds on the running loop, aligned to the loop's clock (a late tick does not

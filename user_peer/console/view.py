@@ -9,8 +9,9 @@ redraws only what moves, and only when it moved:
   data: URL would ride along with each redraw);
 - the SVG overlay holds the robots, the scan, the paths, the target and the goal; NiceGUI sends it only when
   its text changed, so a still world costs the browser nothing;
-- every robot's pose comes from the page's :class:`~user_peer.console.feed.PoseFeed`, taken at the redraw
-  (not fifty times a second), decoded and drawn once per tick for every page that holds the same pose.
+- every robot's pose comes from the page's :class:`~user_peer.console.feed.PoseFeed`, taken at the start of the
+  clock's pass (not fifty times a second; every page's at once, :meth:`LiveView.take`), decoded and drawn once per
+  tick for every page that holds the same pose.
 """
 
 from __future__ import annotations
@@ -149,6 +150,13 @@ class LiveView:
             elif page.panels.get("mobile") is not None:
                 page.panels.get("mobile").clicked(e)
 
+    def take(self) -> None:
+        """What the page's feed holds now, taken (not decoded) for the next redraw: the clock calls it for every page
+        at the start of its pass, so that the pages hold the same newest poses and share their drawing
+        (:mod:`.ticker`)."""
+        if self.feed is not None:
+            self.feed.drain()
+
     def close(self) -> None:
         """The page went away: its picture is no longer served, its poses no longer kept."""
         self.page.console.pictures.drop(self.token)
@@ -168,7 +176,7 @@ class LiveView:
             self._map_seq = id(grid)
             self._picture(grid)
         target = arm_panel.target if arm_panel is not None else None
-        poses = self.feed.drain() if self.feed is not None else {}
+        poses = self.feed.raw if self.feed is not None else {}  # what the clock's pass took (.take)
         self.image.content = state.view_svg(
             w,
             page.entries,

@@ -9,12 +9,17 @@ the height field below the view sets that height. A dropped target goes where a 
 follows; Apply IK reaches it.
 
 Light: the static parts are sent once; an arm's links are moved only when its joints changed, a base when its pose
-changed (NiceGUI sends an object's move only when it differs), at the pages' 5 Hz redraw.
+changed (NiceGUI sends an object's move only when it differs), at the pages' 5 Hz redraw, and a redraw's moves go
+down the page's socket as one message (NiceGUI sends each move as a message of its own: 32 moving bases were 64 a
+page a redraw). A base's place is worked out once a tick for every page that holds the same pose
+(:meth:`~user_peer.console.feed.Decoded.derived`), and a scan's points with numpy, not a list per ray.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+import contextlib
+import math
+from typing import TYPE_CHECKING, Any, ContextManager
 
 import numpy as np
 from nicegui import ui
@@ -150,14 +155,28 @@ class View3D:
 
     # ------------------------------------------------------------------ refresh
 
+    def _batched(self) -> ContextManager[Any]:
+        """The scene's calls made meanwhile, sent as one message (NiceGUI's own batching, which its scene uses when
+        a browser's scene starts; a private method of NiceGUI 3: without it, one message a call as before)."""
+        batch = getattr(self.scene, "_batch_calls", None)
+        return batch() if callable(batch) else contextlib.nullcontext()
+
     def refresh(self, poses: dict[str, bytes]) -> None:
-        """Move what moved: the followed arms' links, the bases, the selected base's scan, the target."""
+        """Move what moved: the followed arms' links, the bases, the selected base's scan, the target; one message."""
+        with self._batched():
+            self._refresh(poses)
+
+    def _refresh(self, poses: dict[str, bytes]) -> None:
         page, w, arm = self.page, self.page.world, self.page.robots.get("arm")
         if arm is not None and arm.id != self._looked:  # another arm selected: the camera goes to it
             self.look_at_arm()
+        decoded = page.console.decoded
         for e in page.entries:
             if facts(e.kind).base:
-                self._base(e.id, state._pose(page.handles, poses, e.id, page.console.decoded))
+                if e.id not in page.handles and e.id in poses:  # drawn from the shared feed: placed once a tick
+                    self._place(e.id, decoded.derived(e.id, poses[e.id], "3d", base_place))
+                else:
+                    self._place(e.id, base_place(state._pose(page.handles, poses, e.id, decoded)))
             elif e.id in page.handles:
                 js = page.handles[e.id].latest("joints")
                 if js is not None and e.id in self.spawn:
@@ -189,13 +208,10 @@ class View3D:
             cyl.move(*(round(float(v), 4) for v in mid)).rotate_R([[round(float(v), 4) for v in row] for row in R])
             cyl.scale(1.0, max(round(n, 4), 1e-4), 1.0)
 
-    def _base(self, rid: str, pose: Any) -> None:
-        if pose is None or rid not in self.bases:
+    def _place(self, rid: str, place: tuple[tuple[float, float, float], list[list[float]]] | None) -> None:
+        if place is None or rid not in self.bases:
             return
-        yaw = yaw_from_quaternion(pose.quaternion)
-        self.bases[rid].move(
-            round(float(pose.position[0]), 3), round(float(pose.position[1]), 3), BASE_SIZE[2] / 2
-        ).rotate(0.0, 0.0, round(yaw, 3))
+        self.bases[rid].move(*place[0]).rotate_R(place[1])
 
     def _scan(self) -> None:
         base = self.page.robots.get("mobile")
@@ -216,6 +232,16 @@ class View3D:
         key = (id(s), id(p))
         if getattr(self, "_scan_key", None) != key:
             self._scan_key = key
-            self.scan.set_points(
-                [[round(float(x), 3), round(float(y), 3), 0.15] for x, y in pts], [[0.94, 0.24, 0.24]] * len(pts)
-            )
+            xyz = np.column_stack([np.round(pts, 3), np.full(len(pts), 0.15)])
+            self.scan.set_points(xyz.tolist(), [[0.94, 0.24, 0.24]] * len(pts))
+
+
+def base_place(pose: Any) -> tuple[tuple[float, float, float], list[list[float]]] | None:
+    """Where a base's box goes in the 3D view: its centre (mm) and its rotation (yaw to a mrad), from its pose; None
+    without one. Shared between the pages that hold the same pose (never changed in place)."""
+    if pose is None:
+        return None
+    yaw = round(yaw_from_quaternion(pose.quaternion), 3)
+    centre = (round(float(pose.position[0]), 3), round(float(pose.position[1]), 3), BASE_SIZE[2] / 2)
+    c, s = math.cos(yaw), math.sin(yaw)
+    return centre, [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]  # a turn about z, as ui.scene's rotate(0, 0, yaw)
