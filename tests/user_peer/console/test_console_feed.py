@@ -143,6 +143,50 @@ def test_the_clocks_pass_lets_the_event_loop_turn_between_two_pages_and_skips_on
     )
 
 
+def test_a_pass_takes_every_pages_samples_before_it_redraws_any_page():
+    """A pass that lets the loop turn outlasts the sim's 20 ms between two poses: pages that took their samples as
+    their turn came held newer bytes than the first, and each decoded and drew every robot again."""
+    t = Ticker(0.01)
+    order: list[str] = []
+    handles = {
+        p: t.add(lambda p=p: order.append(f"redraw {p}"), take=lambda p=p: order.append(f"take {p}")) for p in "abc"
+    }
+    t.add(lambda: order.append("redraw d"))  # a page with nothing to take
+    t.tick()
+    assert order == ["take a", "take b", "take c", "redraw a", "redraw b", "redraw c", "redraw d"]
+    order.clear()
+    t.remove(handles["b"])
+
+    async def other() -> None:
+        for _ in range(3):
+            order.append("loop")
+            await asyncio.sleep(0)
+
+    async def main() -> None:
+        await asyncio.gather(t.turn(), other())
+
+    asyncio.run(main())
+    pages = [x for x in order if x != "loop"]
+    assert pages == ["take a", "take c", "redraw a", "redraw c", "redraw d"]
+    assert order.index("loop") < order.index("redraw c")  # the takes in one go, the redraws one per turn
+    assert "loop" not in order[order.index("take a") : order.index("take c")]
+
+
+def test_what_pages_make_of_the_same_bytes_is_made_once_per_variant():
+    d = Decoded()
+    a, b = encode(_pose(1.0)), encode(_pose(2.0))
+    made: list[tuple[str, float]] = []
+
+    def place(pose):
+        made.append(("3d", pose.position[0]))
+        return (pose.position[0], [[1.0]])
+
+    first = d.derived("base1", a, "3d", place)
+    assert d.derived("base1", bytes(a), "3d", place) is first and made == [("3d", 1.0)]
+    assert d.derived("base1", b, "3d", place)[0] == 2.0 and d.decoded == 2
+    assert d.derived("base1", b"\x00not a pose", "3d", lambda pose: pose) is None  # kept as made: None is an answer
+
+
 def test_pages_ready_to_build_in_the_same_turn_build_one_per_turn_of_the_event_loop():
     """32 logins answered together were 32 builds run back to back in one turn: the loop stood still 17-43 s."""
     builds = OnePerTurn()
