@@ -153,6 +153,7 @@ class ConsolePage:
         self._events_seen = 0
         self._gone_seen = 0
         self._owners: dict[str, str] = {}
+        self._rows_from: dict[str, object] = {}  # robot -> the ownership record its row was written from
         self._letting_go: dict[str, int] = {}  # robot -> the epoch at which she released it herself
         self._tick: int | None = None  # its place on the console's redraw clock
         self.ticket: Ticket | None = None  # what the tab keeps across a reload
@@ -380,8 +381,11 @@ class ConsolePage:
             return
         self.follow_shown()
         for r in self.entries:
-            self.rows[r.id].text = state.robot_line(w, r.id, r.kind).text()
             rec = w.ownership.record(r.id)
+            if rec is not None and rec is self._rows_from.get(r.id):
+                continue  # the same record as the last redraw's (a new one is a new object): nothing to say again
+            self._rows_from[r.id] = rec
+            self.rows[r.id].text = state.robot_line(w, r.id, r.kind).text()
             if rec is not None and self._owners.get(r.id, rec.owner) != rec.owner:
                 # records come from the robot's authority only (the ownership replica checks): trusted
                 self._push(

@@ -23,7 +23,7 @@ import asyncio
 import logging
 from typing import Callable, TypeVar
 
-__all__ = ["Ticker", "OnePerTurn"]
+__all__ = ["Ticker", "OnePerTurn", "next_due"]
 
 log = logging.getLogger("robofabric.console")
 
@@ -41,6 +41,8 @@ class Ticker:
         self._next = 0
         self.failed = 0
         self.ticks = 0
+        self.stretched = 0  # passes followed by a rest as long as they took (:func:`next_due`)
+        self.last_pass_s = 0.0  # how long the last pass took, the loop's turns between its pages included
 
     def add(self, callback: Callable[[], None], take: Callable[[], None] | None = None) -> int:
         """Register ``callback``, and ``take`` (called for every page at the start of each pass, all in one go,
@@ -92,7 +94,8 @@ class Ticker:
 
     async def run(self) -> None:
         """Tick every ``period`` seconds on the running loop, aligned to the loop's clock (a late tick does not
-        push the next ones later), until cancelled."""
+        push the next ones later), until cancelled; and never more than half the loop's time: a pass that took
+        longer than half a period (a class on a starved box) is followed by as long a rest (:func:`next_due`)."""
         loop = asyncio.get_running_loop()
         due = loop.time()
         while True:
@@ -100,7 +103,25 @@ class Ticker:
             await asyncio.sleep(max(0.0, due - loop.time()))
             if loop.time() - due > self.period:  # far behind (a stalled loop): start again from now
                 due = loop.time()
+            start = loop.time()
             await self.turn()
+            end = loop.time()
+            self.last_pass_s = end - start
+            nxt = next_due(due, self.period, start, end)
+            if nxt > due + self.period:
+                self.stretched += 1
+            due = nxt - self.period  # the loop's next ``due += period`` lands on it
+
+
+def next_due(due: float, period: float, start: float, end: float) -> float:
+    """When the pass after one due at ``due`` (begun at ``start``, ended at ``end``) is due: a period later, or, when
+    the pass took longer than the rest of that period, as long after its end as it took (the rest of the loop, the
+    sockets' pings, keys and the pages' builds, get at least half of its time).
+
+    A class's passes outlasted the period on a loaded 2-core box and ran back to back: the redraws took what CPU the
+    console got, and each step of a socket's message (a ping's answer, a key, a login's answer) waited a page's
+    redraw. The view is then redrawn less often (its lag grows) instead."""
+    return max(due + period, end + (end - start))
 
 
 class OnePerTurn:

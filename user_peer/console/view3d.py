@@ -56,6 +56,7 @@ class View3D:
         self._syncing = False
         self._z: float | None = None
         self._looked: str | None = None  # the arm the camera was last put on
+        self._coloured: dict[str, object] = {}  # base -> the ownership record its colour comes from
 
     def build(self) -> None:
         page = self.page
@@ -183,6 +184,9 @@ class View3D:
                     self._arm(e.id, arm_points(e.type, js.q, self.spawn[e.id]))
         for rid, box in self.bases.items():
             rec = w.ownership.record(rid)
+            if rec is not None and rec is self._coloured.get(rid):
+                continue  # coloured from this very record already
+            self._coloured[rid] = rec
             owner = rec.owner if rec is not None else ""
             box.material(
                 topview.COLORS["mine"]

@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 
 import numpy as np
+import pytest
 
 from fabric import keys
 from fabric.codec import encode
@@ -15,7 +16,7 @@ from fabric.interfaces import Pose
 from robofabric.testing import wait_until
 from user_peer.console import topview
 from user_peer.console.feed import Decoded, PoseFeed, ring_capacity
-from user_peer.console.ticker import OnePerTurn, Ticker
+from user_peer.console.ticker import OnePerTurn, Ticker, next_due
 
 
 def _pose(x: float) -> Pose:
@@ -185,6 +186,41 @@ def test_what_pages_make_of_the_same_bytes_is_made_once_per_variant():
     assert d.derived("base1", bytes(a), "3d", place) is first and made == [("3d", 1.0)]
     assert d.derived("base1", b, "3d", place)[0] == 2.0 and d.decoded == 2
     assert d.derived("base1", b"\x00not a pose", "3d", lambda pose: pose) is None  # kept as made: None is an answer
+
+
+def test_a_pass_longer_than_half_a_period_is_followed_by_as_long_a_rest():
+    """The clock takes at most half the loop's time: the rest (sockets, keys, builds) gets the other half."""
+    assert next_due(10.0, 0.2, 10.0, 10.05) == 10.2  # a short pass: the next a period after the last was due
+    assert next_due(10.0, 0.2, 10.0, 10.1) == 10.2  # half a period: still on time
+    assert next_due(10.0, 0.2, 10.0, 10.3) == pytest.approx(10.6)  # 0.3 s of pass: 0.3 s of rest after it
+    assert next_due(10.0, 0.2, 10.05, 10.2) == pytest.approx(10.35)  # begun late: its rest counts from its end
+
+
+def test_the_clock_rests_after_a_long_pass():
+    t = Ticker(0.01)
+    starts: list[float] = []
+
+    async def main() -> None:
+        loop = asyncio.get_running_loop()
+
+        def slow() -> None:  # 30 ms of redraw each pass, a period of 10 ms
+            starts.append(loop.time())
+            end = loop.time() + 0.03
+            while loop.time() < end:
+                pass
+
+        t.add(slow)
+        task = asyncio.ensure_future(t.run())
+        for _ in range(4000):
+            if len(starts) >= 4:
+                break
+            await asyncio.sleep(0.005)
+        task.cancel()
+
+    asyncio.run(main())
+    gaps = [b - a for a, b in zip(starts, starts[1:])]
+    assert len(gaps) >= 3 and min(gaps) >= 0.06 - 0.002, gaps  # 30 ms of pass, then at least 30 ms of rest
+    assert t.stretched >= 3 and t.last_pass_s >= 0.03
 
 
 def test_pages_ready_to_build_in_the_same_turn_build_one_per_turn_of_the_event_loop():
