@@ -9,7 +9,9 @@ every message it got. :class:`EmulatedPage` does exactly that, so the server doe
 browser's page: builds her page, owns her robot, drives her base and pushes every update.
 
 The element tree is kept as the page keeps it (``update`` replaces or deletes elements by id) and looked up
-the way a person reads a page: a button by its label, a field by its label, a line by its text.
+the way a person reads a page: a button by its label, a field by its label, a line by its text. A 3D view
+(``ui.scene``) says ``init`` once it arrives, as three.js's component does when it is mounted: the server then
+sends it every object and, from then on, every move, as it does to a browser (:func:`scenes_to_start`).
 
 Each student comes from an address of her own, as a class's machines do: ``127.0.0.2``, ``127.0.0.3``.. (all of
 127/8 is this machine's loopback on Linux), her page's load and its websocket both, through one HTTP session of
@@ -36,7 +38,7 @@ import uuid
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["EmulatedPage", "PageGone", "parse_page", "ClientReport", "student_address", "main"]
+__all__ = ["EmulatedPage", "PageGone", "parse_page", "scenes_to_start", "ClientReport", "student_address", "main"]
 
 _ELEMENTS = re.compile(r"parseElements\(String\.raw`(.*?)`\)", re.S)
 _QUERY = re.compile(r"query: (\{.*?\}),\s*\n")
@@ -75,6 +77,16 @@ def parse_page(html: str) -> tuple[dict[str, dict[str, Any]], dict[str, Any]]:
     return {str(k): v for k, v in json.loads(raw).items()}, dict(ast.literal_eval(q.group(1)))
 
 
+def scenes_to_start(update: dict[str, Any], started: set[str]) -> list[str]:
+    """The elements of an ``update`` that wait for an ``init`` from the page (a 3D view: NiceGUI sends its objects
+    and their moves only once the browser's scene said it is there) and have not had it yet."""
+    return [
+        str(eid)
+        for eid, el in update.items()
+        if el is not None and str(eid) not in started and any(e.get("type") == "init" for e in (el.get("events") or []))
+    ]
+
+
 def _label(el: dict[str, Any]) -> str:
     props = el.get("props") or {}
     return str(props.get("label") or props.get("aria-label") or el.get("text") or "")
@@ -102,6 +114,7 @@ class EmulatedPage:
     _acker: asyncio.Task | None = None
     _opened: float = 0.0
     _final: bool = False  # the socket closed for good: her own close, or no reconnection within its tries
+    scenes: set[str] = field(default_factory=set)  # the 3D views told ``init`` (scenes_to_start)
     dropped_after: float | None = None  # seconds from the socket's connect to its first drop
     drops: int = 0  # times the socket dropped (each then reconnected, as a browser's page does, or was final)
 
@@ -174,6 +187,10 @@ class EmulatedPage:
                         self.elements.pop(str(eid), None)
                     else:
                         self.elements[str(eid)] = el
+                for eid in scenes_to_start(msg, self.scenes):  # a 3D view, mounted: it says so, as three.js does
+                    self.scenes.add(eid)
+                    with contextlib.suppress(PageGone):
+                        await self._fire(eid, "init", [])
             elif name == "run_javascript" and isinstance(msg, dict) and msg.get("request_id") is not None:
                 # a page without a browser has no storage and no DOM: every answer is null, as a fresh tab's
                 await self._emit("javascript_response", {"request_id": msg["request_id"], "result": None})

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from robofabric.bench.console_client import EmulatedPage, PageGone, parse_page, student_address
+from robofabric.bench.console_client import EmulatedPage, PageGone, parse_page, scenes_to_start, student_address
 
 ESC = (("&", "&amp;"), ("<", "&lt;"), (">", "&gt;"), ("`", "&#96;"), ("$", "&#36;"))  # nicegui's, & first
 
@@ -45,6 +45,18 @@ def test_controls_are_found_by_label_aria_label_or_text_and_by_tag():
     assert page.find("Log in", tag="q-btn") == "2" and page.find("Log in", tag="div") == "3"
     assert page.find("you own it", exact=False) == "4" and page.find("you own it") is None
     assert "request base3" in page.text()
+
+
+def test_a_3d_view_is_told_init_once_as_the_browsers_scene_says_it_is_mounted():
+    """NiceGUI sends a 3D view's objects and moves only after the browser's scene said ``init``: an emulated page
+    that never said it cost the server none of a real page's 3D traffic."""
+    update = {
+        "5": {"tag": "nicegui-scene", "events": [{"type": "init", "listener_id": "l1"}, {"type": "dragend"}]},
+        "6": {"tag": "q-btn", "events": [{"type": "click", "listener_id": "l2"}]},
+        "7": None,
+    }
+    assert scenes_to_start(update, set()) == ["5"]
+    assert scenes_to_start(update, {"5"}) == []  # told once
 
 
 def test_a_page_that_is_not_niceguis_is_refused_with_why():
