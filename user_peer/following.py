@@ -10,7 +10,7 @@ follows only the robots it shows in full, and lets go of one when the student se
 from __future__ import annotations
 
 import threading
-from typing import Any
+from typing import Any, Callable, Iterable
 
 from fabric import keys, streams
 from fabric.session import Fabric
@@ -25,10 +25,14 @@ FOLLOWED_STREAMS = tuple(s.name for s in streams.STREAMS if s.followed)
 class Following:
     """Subscriptions that feed ``latest``: objects and maps at once, robots when :meth:`robot` is asked."""
 
-    def __init__(self, fabric: Fabric, world: str, latest: Latest) -> None:
+    def __init__(
+        self, fabric: Fabric, world: str, latest: Latest, streams: Callable[[str], Iterable[str]] | None = None
+    ) -> None:
         self.fabric = fabric
         self.world = world
         self.latest = latest
+        # which of FOLLOWED_STREAMS a followed robot's handle keeps, by robot id (all of them unless told)
+        self._streams = streams
         self._subs: dict[str, list[Any]] = {}  # a followed robot's subscriptions, one per stream
         self._lock = threading.Lock()  # handles are made on callers' threads (a console's pages: its pool's)
         # every writer's pose of an object is kept under the object's reader key (object/{id}/pose/by/*)
@@ -54,7 +58,7 @@ class Following:
                     self.latest.put,
                     history=stream in keys.LATCHED_STREAMS,
                 )
-                for stream in FOLLOWED_STREAMS
+                for stream in (FOLLOWED_STREAMS if self._streams is None else self._streams(robot_id))
             ]
         return True
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import threading
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 from fabric import keys
 from fabric.config import FabricConfig
@@ -56,6 +56,7 @@ class World(contextlib.AbstractContextManager):
         timeout: float = 5.0,
         compute: str | None = None,
         join_timeout: float | None = None,
+        followed: Callable[[str], Iterable[str]] | None = None,
     ) -> None:
         self.user = keys.validate_id(config.user_id(user) or user, what="user id")  # a secure login is the user
         # the compute peer to ask (its peer id, e.g. a local one); None: the nearest that serves the world;
@@ -89,7 +90,11 @@ class World(contextlib.AbstractContextManager):
         self.compute_route = ComputeRoute(self.fabric, self.compute)
         # the latest of every scene object and map (latched: what was set before this user joined comes at
         # once); a robot's streams from its first handle on (robot())
-        self.following = Following(self.fabric, self.name, self.latest)
+        # ``followed(kind)``: which of FOLLOWED_STREAMS a handle of a robot of that kind keeps (every one unless told;
+        # the console's pages leave a base's wheel joints out: user_peer/console/follow.py)
+        self.following = Following(
+            self.fabric, self.name, self.latest, None if followed is None else lambda rid: followed(self._kind(rid))
+        )
         self.event_log = EventLog(
             self.user,
             live_sim=self.presence.serves,
@@ -182,6 +187,12 @@ class World(contextlib.AbstractContextManager):
         sim still starting) it is asked again at most every ``REDESCRIBE_S`` seconds.
         """
         return self.description.get(refresh=refresh, timeout=timeout)
+
+    def _kind(self, robot_id: str) -> str:
+        """The robot's kind by the description held now ("" when it is not known yet)."""
+        info = self.description.current
+        entry = next((r for r in services.robot_entries(info) if r.id == robot_id), None) if info else None
+        return entry.kind if entry is not None else ""
 
     def robots(self) -> list[str]:
         """Ids of the robots in the world (from the sim's description)."""

@@ -87,9 +87,10 @@ class Console:
         self.logins = Logins(self._open, grace=self.grace, on_leave=stop_robots)
 
     def _open(self, config: Any, name: str) -> Any:
+        from user_peer.console.follow import streams
         from user_peer.world import World
 
-        w = World(config, name, join_timeout=self.join_timeout)
+        w = World(config, name, join_timeout=self.join_timeout, followed=streams)
         try:
             w.info()
         except BaseException:
