@@ -29,19 +29,20 @@ import logging
 import threading
 import time
 from dataclasses import replace
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Callable, Protocol
 
+from fabric.session import Fabric
 from sim_peer.replica import deaf_rule as dr
-from sim_peer.replica import election as el
+from sim_peer.replica import hearing_rule as hr
 from sim_peer.replica.deaf_rule import PROOF_S
 from sim_peer.replica.roles import router_answers
 
 if TYPE_CHECKING:
-    from sim_peer.replica.replica_host import ReplicaHost
+    from sim_peer.serving.peer import SimPeer
 
 log = logging.getLogger("robofabric.sim")
 
-__all__ = ["DeafStop", "POLL_S", "PROOF_S", "ASK_S", "REASON"]
+__all__ = ["DeafStop", "Hearing", "POLL_S", "PROOF_S", "ASK_S", "REASON"]
 
 POLL_S = 0.05
 """How often a serving host looks whether it hears anyone."""
@@ -50,11 +51,39 @@ ASK_S = 1.0
 REASON = "this sim hears no one"
 
 
-class DeafStop:
-    """Holds the robots of ``host``'s peer while the host is a primary cut off from its world."""
+class Hearing(Protocol):
+    """What a look reads of whether this sim hears (:class:`sim_peer.replica.roles.Roles`)."""
 
-    def __init__(self, host: "ReplicaHost", clock: Callable[[], float] = time.monotonic) -> None:
-        self.host = host
+    beat: hr.Heartbeat
+    own_gone_at: float
+
+    def cut(self) -> str:
+        """Why this sim's link is gone now ('' : it is not)."""
+        ...
+
+    def frozen(self) -> bool:
+        """Whether this process was frozen just now."""
+        ...
+
+
+class DeafStop:
+    """Holds the robots of the serving peer while this sim is a primary cut off from its world.
+
+    Its collaborators: ``fabric``; ``hearing`` (:class:`Hearing`); ``serving`` (the peer this sim serves as its
+    primary now, None otherwise); ``stopping``; ``announce``; ``clock``. Its state is the look thread's alone."""
+
+    def __init__(
+        self,
+        fabric: Fabric,
+        *,
+        hearing: Hearing,
+        serving: "Callable[[], SimPeer | None]",
+        stopping: threading.Event,
+        announce: Callable[[str], None],
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.fabric = fabric
+        self._hearing, self._serving, self._stopping, self.announce = hearing, serving, stopping, announce
         self.clock = clock
         self.state = dr.DeafState()  # what the core remembers: holds, lates (counted), the router's last answer
         self._thread: threading.Thread | None = None
@@ -66,52 +95,50 @@ class DeafStop:
             self._thread.start()
 
     def _run(self) -> None:
-        while not self.host.stopping.wait(POLL_S):
+        while not self._stopping.wait(POLL_S):
             try:
                 self.look()
             except Exception:  # a closing session or peer: the next look, or the host's end
                 log.debug("deaf stop look failed", exc_info=True)
 
     def _seen(self, held: bool) -> dr.Look:
-        """What the core needs of the host now, the router asked if the core says so."""
-        h = self.host
-        roles = h.roles
+        """What the core needs to know now, the router asked if the core says so."""
+        f, hearing = self.fabric, self._hearing
         seen = dr.Look(
             now=self.clock(),
             held=held,
-            cut=roles.cut(),
-            frozen=roles.frozen(),
-            beat=roles.beat,
-            own_gone_at=roles.own_gone_at,
-            lease=h.fabric.config.lease_ms / 1000.0,
+            cut=hearing.cut(),
+            frozen=hearing.frozen(),
+            beat=hearing.beat,
+            own_gone_at=hearing.own_gone_at,
+            lease=f.config.lease_ms / 1000.0,
         )
-        if dr.must_ask(self.state, seen) and (h.fabric.config.profile == "embedded" or router_answers(h.fabric, ASK_S)):
+        if dr.must_ask(self.state, seen) and (f.config.profile == "embedded" or router_answers(f, ASK_S)):
             seen = replace(seen, answered_at=self.clock())
         return seen
 
     def look(self) -> None:
         """Hold the serving peer's robots if this primary is cut off now, let them go once it hears again; say so
         when it was only late."""
-        h = self.host
-        peer = h.peer
-        if peer is None or h.role != el.PRIMARY:
+        peer, me = self._serving(), self.fabric.peer_id
+        if peer is None:
             return
         self.state, effects = dr.step(self.state, self._seen(bool(peer.commands.held)))
         for e in effects:
             if isinstance(e, dr.Hold):
                 peer.commands.hold(REASON)
-                h.announce(
-                    f"sim {h.fabric.peer_id}: hears no one ({e.why}); its robots stop (bases brake, arms hold) "
+                self.announce(
+                    f"sim {me}: hears no one ({e.why}); its robots stop (bases brake, arms hold) "
                     "and commands are refused until it hears again"
                 )
             elif isinstance(e, dr.Resume):
                 peer.commands.resume()
-                h.announce(
-                    f"sim {h.fabric.peer_id}: hears again (its router answers); commands are accepted (its "
+                self.announce(
+                    f"sim {me}: hears again (its router answers); commands are accepted (its "
                     "robots stay where they stopped)"
                 )
             else:
-                h.announce(
-                    f"sim {h.fabric.peer_id}: was late ({e.late_s:.1f} s frozen or starved), not cut off: its "
+                self.announce(
+                    f"sim {me}: was late ({e.late_s:.1f} s frozen or starved), not cut off: its "
                     "router answers; commands are served on"
                 )

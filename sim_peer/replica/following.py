@@ -8,7 +8,11 @@ into the last snapshot, brought forward by the newer streams, its ownership reco
 (:func:`ownership.carry.overlay`: a grant made after the snapshot keeps its epoch), its sequence numbers continued;
 then the commands that came after the snapshot was asked for are applied again (:meth:`Follower.replay`).
 
-The host (:class:`sim_peer.replica.replica_host.ReplicaHost`) owns the lock this state is guarded by.
+The follower talks to the rest of the sim through what its constructor names (the fabric, the world it restores,
+the election's view, the shard's robots, whom to tell what it heard), never the host. Its own lock guards what it
+heard; the commands it keeps are guarded by the lock of what the host serves (``serving_lock``), passed in: a
+command is either kept before a take-over takes the kept ones, or the new peer, already there, takes it itself.
+The election changes under that lock too, so a polled snapshot is kept only if its source still leads then.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 from fabric import keys
 from fabric.codec import DecodeError, decode
@@ -28,12 +32,13 @@ from sim_peer.replica.kept_commands import CommandBuffer
 
 if TYPE_CHECKING:
     from fabric.gate import CommandGate
+    from fabric.session import Fabric
+    from sim_peer.physics.world import SimWorld
     from sim_peer.serving.peer import SimPeer
-    from sim_peer.replica.replica_host import ReplicaHost
 
 log = logging.getLogger("robofabric.sim")
 
-__all__ = ["Follower", "POLL_S", "REPLAY_MARGIN_S"]
+__all__ = ["Follower", "Shard", "POLL_S", "REPLAY_MARGIN_S"]
 
 POLL_S = 0.05
 """How often a standby asks the primary for the whole state (the streams fill in between)."""
@@ -55,32 +60,73 @@ DRAIN_LIMIT_S = 0.2
 """The longest that wait lasts (a starved host): the take-over's budget is 1 s."""
 
 
-class Follower:
-    """The leader's last state as this sim knows it: its snapshot, its newest streams, the commands since."""
+class Shard(Protocol):
+    """What the follower reads of this sim's shard (:class:`sim_peer.shards.directory.ShardDirectory`)."""
 
-    def __init__(self, host: "ReplicaHost", snapshot: WorldState | None = None, poll_s: float = POLL_S) -> None:
-        self.host = host
+    @property
+    def mine(self) -> frozenset[str]:
+        """The robots this sim serves, or would serve at a take-over."""
+        ...
+
+    def about_mine(self, state: Any) -> bool:
+        """Whether a ``srv/state`` answer is this shard's."""
+        ...
+
+
+class Follower:
+    """The leader's last state as this sim knows it: its snapshot, its newest streams, the commands since.
+
+    Its collaborators: ``fabric``; ``world`` (the world the host builds now: its robots and objects, restored at a
+    take-over); ``election`` (the election's state now: this sim's role and leader); ``shard`` (:class:`Shard`);
+    ``heard`` (a term heard from a sim, for the election) and ``seen_serving`` (a robot's stream from a sim, for the
+    moves); ``serving`` (whether the host's peer serves now) and ``serving_lock`` (what the host serves, see the
+    module); ``stopping``; ``clock`` (monotonic seconds); ``plant`` (a test-only defect, fabric/plant.py)."""
+
+    def __init__(
+        self,
+        fabric: "Fabric",
+        *,
+        world: Callable[[], "SimWorld"],
+        election: Callable[[], el.Election],
+        shard: Shard,
+        heard: Callable[[str, int], None],
+        seen_serving: Callable[[str, str, int], None],
+        serving: Callable[[], bool],
+        serving_lock: threading.RLock,
+        stopping: threading.Event,
+        clock: Callable[[], float] = time.monotonic,
+        snapshot: WorldState | None = None,
+        poll_s: float = POLL_S,
+        plant: str = "",
+    ) -> None:
+        self.fabric = fabric
+        self._world, self._election, self._shard = world, election, shard
+        self._heard, self._seen_serving = heard, seen_serving
+        self._serving, self._serving_lock, self._stopping = serving, serving_lock, stopping
+        self.clock = clock
+        self.plant = plant
+        self._lock = threading.Lock()  # what was heard: snapshot, joints, poses, records, heard_at, former
         self.poll_s = poll_s
         self.snapshot: WorldState | None = snapshot  # a primary that stepped down starts from its own last state
-        self.snapshot_asked = time.monotonic()  # when the snapshot held was asked for: what came after is replayed
+        self.snapshot_asked = clock()  # when the snapshot held was asked for: what came after is replayed
         self.joints: dict[str, JointState] = {}
         self.poses: dict[str, Pose] = {}
         self.records: dict[str, OwnershipRecord] = {}  # the leader's newest record of each of its objects
-        self.commands = CommandBuffer()  # robot commands and object poses of the last seconds
+        # robot commands and object poses of the last seconds (under serving_lock)
+        self.commands = CommandBuffer(clock=clock)
         self.heard_at = float("-inf")  # when the leader's last joints or pose was kept (monotonic)
         self.former: str | None = None  # the leader a take-over is draining, whose streams are kept meanwhile
         self._poller: threading.Thread | None = None
 
     def listen(self, standby: bool) -> None:
         """Subscribe to the other sims' streams, and as a standby to what users send."""
-        h = self.host
-        f, w = h.fabric, h.fabric.world
+        f, w = self.fabric, self.fabric.world
         f.subscribe(keys.robot_stream_all(w, "joints"), self.on_joints, expected=JointState, remote_only=True)
         f.subscribe(keys.robot_stream_all(w, "pose"), self.on_pose, expected=Pose, remote_only=True)
         if standby:
             f.subscribe_raw(keys.robot_cmd_all(w), self.on_command_sample)
             f.subscribe(keys.own_all(w), self.on_record, expected=OwnershipRecord)
-            for obj in h.world.objects:
+            for obj in self._world().objects:
                 f.subscribe(keys.object_pose_all(w, obj), self.on_object, expected=Pose)
 
     def start_polling(self) -> None:
@@ -93,55 +139,53 @@ class Follower:
             self._poller.join(timeout)
 
     def _poll(self) -> None:
-        h = self.host
-        f = h.fabric
-        while not h.stopping.wait(self.poll_s):
-            if h.role != el.STANDBY:
+        f = self.fabric
+        while not self._stopping.wait(self.poll_s):
+            if self._election().role != el.STANDBY:
                 return
-            asked = time.monotonic()
+            asked = self.clock()
             try:
                 replies = f.rpc.query(keys.srv(f.world, "state"), timeout=1.0, expected=WorldState, all_replies=True)
             except ServiceError:
                 continue
             best = max(
-                (r.message for r in replies if h.shards.about_mine(r.message)),
+                (r.message for r in replies if self._shard.about_mine(r.message)),
                 key=lambda m: m.header.term,
                 default=None,
             )
             if best is None:
                 continue
-            h.roles.heard(best.header.source, best.header.term)
-            with h.lock:
-                if best.header.source == h.election.leader:
-                    self.snapshot, self.snapshot_asked = best, asked
+            self._heard(best.header.source, best.header.term)
+            with self._serving_lock:  # the election changes under it: no take-over between the look and the keep
+                if best.header.source == self._election().leader:
+                    with self._lock:
+                        self.snapshot, self.snapshot_asked = best, asked
 
     def on_joints(self, key: str, js: JointState) -> None:
-        h = self.host
         rid = keys.parse(key).subject
-        h.moves.seen_serving(rid, js.header.source, js.header.term)
-        if rid not in h.shards.mine:
+        self._seen_serving(rid, js.header.source, js.header.term)
+        if rid not in self._shard.mine:
             return  # another shard's robot: its term is its shard's
-        h.roles.heard(js.header.source, js.header.term)
+        self._heard(js.header.source, js.header.term)
         if self._from_leader(js.header.source):
-            with h.lock:
+            with self._lock:
                 self.joints[rid] = js
-                self.heard_at = time.monotonic()
+                self.heard_at = self.clock()
 
     def on_pose(self, key: str, p: Pose) -> None:
-        h = self.host
         rid = keys.parse(key).subject
-        if rid not in h.shards.mine:
+        if rid not in self._shard.mine:
             return
         if self._from_leader(p.header.source):
-            with h.lock:
+            with self._lock:
                 self.poses[rid] = p
-                self.heard_at = time.monotonic()
+                self.heard_at = self.clock()
 
     def _from_leader(self, source: str) -> bool:
         """Whether a stream sample from ``source`` is the followed leader's (or, while a take-over drains, the
         former leader's)."""
-        h = self.host
-        return (h.role == el.STANDBY and source == h.election.leader) or (
+        election = self._election()
+        return (election.role == el.STANDBY and source == election.leader) or (
             self.former is not None and source == self.former
         )
 
@@ -149,25 +193,25 @@ class Follower:
         """Keep ``former``'s streams until none came for ``quiet_s`` since the drain began (at most ``limit_s``),
         so that a take-over starts from the newest state that reached this process; the seconds waited. Call
         without the lock; the take-over ends the draining with :meth:`drained` once it caught up."""
-        t0 = time.monotonic()
-        with self.host.lock:
+        t0 = self.clock()
+        with self._lock:
             self.former = former
-        while (now := time.monotonic()) - t0 < limit_s and now - max(self.heard_at, t0) < quiet_s:
+        while (now := self.clock()) - t0 < limit_s and now - max(self.heard_at, t0) < quiet_s:
             time.sleep(min(quiet_s, 0.005))
-        return time.monotonic() - t0
+        return self.clock() - t0
 
     def drained(self) -> None:
-        with self.host.lock:
+        with self._lock:
             self.former = None
 
     def on_record(self, key: str, rec: OwnershipRecord) -> None:
         """Keep the leader's newest record of each object of this shard (epoch, then sequence number): the records it
         published after its last snapshot are carried over at a take-over."""
-        h = self.host
-        if rec.object not in h.world.robots and rec.object not in h.world.objects:
+        world, election = self._world(), self._election()
+        if rec.object not in world.robots and rec.object not in world.objects:
             return  # another shard's, or a made-up object: nothing to carry (and nothing to grow)
-        if h.role == el.STANDBY and rec.header.source == h.election.leader:
-            with h.lock:
+        if election.role == el.STANDBY and rec.header.source == election.leader:
+            with self._lock:
                 held = self.records.get(rec.object)
                 if (
                     held is None
@@ -178,8 +222,8 @@ class Follower:
 
     def keep(self, key: str, msg: Any, size: int = 0) -> None:
         """Keep one command (or object pose) heard now; a serving host's peer takes them itself."""
-        with self.host.lock:
-            if self.host.peer is not None:
+        with self._serving_lock:
+            if self._serving():
                 return  # serving: the peer takes commands itself (until it subscribes, they wait here)
             self.commands.keep(key, msg, size)
 
@@ -195,39 +239,40 @@ class Follower:
 
     def catch_up(self, state: WorldState) -> tuple[Any, Any]:
         """Put the host's world into ``state`` and the newer joints and poses its source streamed since, every robot
-        brought to the newest time heard, the streams' sequence numbers continued (call with the lock held);
+        brought to the newest time heard, the streams' sequence numbers continued (call with ``serving_lock`` held);
         the ownership records and users to restore the gate with: the snapshot's, with the newer records its
         source published since put over them (never an older epoch)."""
-        h = self.host
-        f, world = h.fabric, h.world
+        with self._lock:
+            joints, poses, records = dict(self.joints), dict(self.poses), list(self.records.values())
+        f, world = self.fabric, self._world()
         capture.restore(world, state)
         src = state.header.source
         at = {rid: state.time for rid in world.robots}
-        for rid, js in self.joints.items():
+        for rid, js in joints.items():
             if js.header.stamp >= state.time and js.header.source == src and rid in at:
                 capture.overlay_joints(world, rid, js)
                 at[rid] = js.header.stamp
-        for rid, p in self.poses.items():
+        for rid, p in poses.items():
             if p.header.stamp >= state.time and p.header.source == src and rid in at:
                 capture.overlay_pose(world, rid, p)
                 at[rid] = p.header.stamp
         newest = max([state.time, *at.values()])
         capture.advance(world, {rid: newest - t for rid, t in at.items()})
         world.data.time = newest  # sim time goes on from the newest state heard, never back
-        if self.host.plant == "reset":  # test-only defect (fabric/plant.py): robots start again from their spawn pose
-            for r in world.robots.values():
-                r.initialize(world.physics)
+        if self.plant == "reset":  # test-only defect (fabric/plant.py): robots start again from their spawn pose
+            for robot in world.robots.values():
+                robot.initialize(world.physics)
         seqs = {str(k): int(v) for k, v in state.seqs.items()}
-        for rid, js in self.joints.items():
+        for rid, js in joints.items():
             k = keys.robot_joints(f.world, rid)
             seqs[k] = max(seqs.get(k, 0), js.header.seq + 1)
-        for rid, p in self.poses.items():
+        for rid, p in poses.items():
             k = keys.robot_pose(f.world, rid)
             seqs[k] = max(seqs.get(k, 0), p.header.seq + 1)
-        heard = [r for r in self.records.values() if r.header.source == src]
-        for r in heard:
-            k = keys.own(f.world, r.object)
-            seqs[k] = max(seqs.get(k, 0), r.header.seq + 1)
+        heard = [rec for rec in records if rec.header.source == src]
+        for rec in heard:
+            k = keys.own(f.world, rec.object)
+            seqs[k] = max(seqs.get(k, 0), rec.header.seq + 1)
         f.seqs.carry_on(seqs)
         next_seqs = {r.object: int(state.seqs.get(keys.own(f.world, r.object), 0)) for r in heard}
         return overlay(state.records, state.users, heard, next_seqs)
@@ -236,7 +281,7 @@ class Follower:
         """Apply again what users sent after the snapshot was asked for, in arrival order, before the new
         authority steps: the commands its restored ownership admits (the others the old authority
         refused, or would have; refusing them again would only repeat its events)."""
-        with self.host.lock:
+        with self._serving_lock:
             todo = self.commands.take_since(self.snapshot_asked - REPLAY_MARGIN_S)
         for key, msg in todo:
             try:

@@ -9,33 +9,77 @@ pure core :mod:`sim_peer.replica.freeze_rule`'s plan; this shell gathers the sim
 
 from __future__ import annotations
 
+import threading
 import time
-from typing import TYPE_CHECKING, Callable
+from typing import Any, Callable, Protocol
 
 from fabric import keys
 from fabric.interfaces import ServiceError, WorldState
+from fabric.session import Fabric
 from sim_peer.replica import election as el
 from sim_peer.replica import freeze_rule as fr
 
-if TYPE_CHECKING:
-    from sim_peer.replica.replica_host import ReplicaHost
+__all__ = ["FreezeGuard", "Electing", "ShardOf"]
 
-__all__ = ["FreezeGuard"]
+
+class Electing(Protocol):
+    """What the guard asks of the election's shell (:class:`sim_peer.replica.roles.Roles`)."""
+
+    @property
+    def role(self) -> str:
+        """This sim's role now."""
+        ...
+
+    def gone_since(self, began: float) -> set[str]:
+        """The sims alive now or gone since ``began``."""
+        ...
+
+    def heard(self, source: str, term: int) -> None:
+        """Authority state stamped with ``term`` came from ``source``."""
+        ...
+
+    def step(self, ev: el.Event) -> None:
+        """Apply one observation to the election."""
+        ...
+
+
+class ShardOf(Protocol):
+    """What the guard reads of this sim's shard (:class:`sim_peer.shards.directory.ShardDirectory`)."""
+
+    def view(self, live: frozenset[str]) -> frozenset[str]:
+        """The live sims of this shard."""
+        ...
+
+    def about_mine(self, state: Any) -> bool:
+        """Whether a ``srv/state`` answer is this shard's."""
+        ...
 
 
 class FreezeGuard:
-    """What a primary does after a gap in its own publications longer than ``gap`` seconds."""
+    """What a primary does after a gap in its own publications longer than ``gap`` seconds.
+
+    Its collaborators: ``fabric``; ``roles`` (:class:`Electing`); ``shard`` (:class:`ShardOf`); ``stopping``;
+    ``announce``; ``clock``. It keeps no state that changes."""
 
     def __init__(
-        self, host: "ReplicaHost", gap: float | None = None, clock: Callable[[], float] = time.monotonic
+        self,
+        fabric: Fabric,
+        *,
+        roles: Electing,
+        shard: ShardOf,
+        stopping: threading.Event,
+        announce: Callable[[str], None],
+        gap: float | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        self.host = host
+        self.fabric = fabric
+        self._roles, self._shard, self._stopping, self.announce = roles, shard, stopping, announce
         self.clock = clock
-        self.gap = gap if gap is not None else fr.watch_gap(host.fabric.config.lease_ms / 1000.0)
+        self.gap = gap if gap is not None else fr.watch_gap(fabric.config.lease_ms / 1000.0)
 
     def watch(self) -> None:
         """Ask the fabric to call :meth:`on_freeze` after a gap (a primary's, from when it serves)."""
-        self.host.fabric.stamp.watch_freeze(self.gap, self.on_freeze)
+        self.fabric.stamp.watch_freeze(self.gap, self.on_freeze)
 
     def on_freeze(self, gap: float) -> None:
         """Frozen for ``gap`` s: muzzled until it is known whether another sim may hold the world now.
@@ -45,33 +89,30 @@ class FreezeGuard:
         may not even know yet that its link died), listen muzzled for a lease: a new authority's streams
         reach us once the session is back, and hearing its higher term steps us down before anything goes
         out; then ask ``srv/state``, step down if a higher term answers, carry on otherwise (:func:`freeze_rule.plan`)."""
-        h = self.host
-        f = h.fabric
+        f = self.fabric
         lease = f.config.lease_ms / 1000.0
-        with h.lock:
-            seen = frozenset(h.roles.gone_since(fr.began(self.clock(), gap)))
-        todo = fr.plan(gap, lease, fr.rivals(h.shards.view(seen), f.peer_id))
+        seen = frozenset(self._roles.gone_since(fr.began(self.clock(), gap)))
+        todo = fr.plan(gap, lease, fr.rivals(self._shard.view(seen), f.peer_id))
         if todo.publish_now:
             f.stamp.unmuzzle()
-            h.announce(
+            self.announce(
                 f"sim {f.peer_id}: paused {gap:.1f} s with no other sim in the world; publishing again (term {f.stamp.term})"
             )
             return
         if todo.listen_s:
-            h.stopping.wait(todo.listen_s)
+            self._stopping.wait(todo.listen_s)
         self._ask_who_leads()
-        if h.role == el.PRIMARY:
+        if self._roles.role == el.PRIMARY:
             if todo.reassert:
-                h.roles.step(el.Resumed())
+                self._roles.step(el.Resumed())
             f.stamp.unmuzzle()
-            h.announce(f"sim {f.peer_id}: frozen {gap:.1f} s, still the authority (term {f.stamp.term})")
+            self.announce(f"sim {f.peer_id}: frozen {gap:.1f} s, still the authority (term {f.stamp.term})")
 
     def _ask_who_leads(self) -> None:
         """Once connected again, ask ``srv/state`` who holds this shard now; a higher term heard steps us down."""
-        h = self.host
-        f = h.fabric
+        f = self.fabric
         deadline = self.clock() + fr.ask_for(self.gap)
-        while self.clock() < deadline and not h.stopping.is_set() and h.role == el.PRIMARY:
+        while self.clock() < deadline and not self._stopping.is_set() and self._roles.role == el.PRIMARY:
             if not f.connected():
                 time.sleep(0.1)  # not connected yet: nobody to ask, nobody to tell
                 continue
@@ -85,6 +126,6 @@ class FreezeGuard:
                 except ServiceError:
                     replies = []  # standbys answer with a refusal: no other authority
             for rep in replies:
-                if h.shards.about_mine(rep.message):
-                    h.roles.heard(rep.message.header.source, rep.message.header.term)
+                if self._shard.about_mine(rep.message):
+                    self._roles.heard(rep.message.header.source, rep.message.header.term)
             return

@@ -73,8 +73,11 @@ GateFactory = Callable[[Fabric, SimWorld, Any], Any]
 class ReplicaHost:
     """One session of one sim peer in one role; ``run`` returns when stopped or after stepping down.
 
-    Its parts reach one another through it: ``roles``, ``follower``, ``shards``, ``adoption``, ``freeze`` and
-    ``moves``, all guarded by its one ``lock``; ``stopping`` is set when it closes."""
+    It owns the one ``clock`` its parts read and composes them: ``roles``, ``shards``, ``follower``, ``freeze``,
+    ``adoption``, ``moves`` and ``deaf_stop`` each get only their collaborators (docs/sim.md, "How the parts talk")
+    and guard their own state with their own locks. Its ``lock`` guards what it serves (``peer``, ``gate``,
+    ``world``, ``objects``); the election, the follower's kept commands and the robots the moves handed out change
+    with that, so those parts get it too, as ``serving_lock``; ``stopping`` is set when it closes."""
 
     def __init__(
         self,
@@ -95,8 +98,10 @@ class ReplicaHost:
         rebuild: Callable[[list[SceneRobot]], SimWorld] | None = None,
         adopt_after_s: float | None = None,
         plant: str = "",
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.fabric = fabric
+        self.clock = clock  # monotonic seconds: the one clock every part reads (a fake one in tests)
         self.plant = plant  # a test-only defect for the soak's checker (fabric/plant.py); "" in every real world
         # builds this sim's world again with other robots (the same scene and options): a robot moved in or out
         self.rebuild = rebuild
@@ -119,15 +124,73 @@ class ReplicaHost:
         self.takeovers: list[dict[str, Any]] = []
         self.last_state: WorldState | None = None
         self.role_token = RoleToken(fabric)  # the role shown on the fabric (sim_peer.replica.role_token)
-        self.roles = Roles(self, election)
+        # this shard: the robots this sim serves, or would at a take-over
         self.shards = ShardDirectory(
-            self, world.robots
-        )  # this shard: the robots this sim serves, or would at a take-over
-        self.follower = Follower(self, snapshot, poll_s)
-        self.freeze = FreezeGuard(self, freeze_gap)
-        self.adoption = ObjectAdoption(self, adopt_after_s)
-        self.moves = MoveService(self)
-        self.deaf_stop = DeafStop(self)  # a primary that hears no one stops its robots
+            fabric,
+            world.robots,
+            live=lambda: self.roles.live_sims(),
+            stopping=self.stopping,
+            on_learnt=lambda view: self.roles.shards_learnt(view),
+        )
+        self.roles = Roles(
+            fabric,
+            election,
+            shard=self.shards,
+            serving_lock=self.lock,
+            stopping=self.stopping,
+            announce=self.announce,
+            take_over=self.take_over,
+            reassert=self._reassert,
+            show_role=lambda shown: self.role_token.show(shown, self.peer is not None),
+            adopt_soon=lambda: self.adoption.soon(),
+            clock=clock,
+        )
+        self.follower = Follower(
+            fabric,
+            world=lambda: self.world,
+            election=lambda: self.roles.election,
+            shard=self.shards,
+            heard=self.roles.heard,
+            seen_serving=lambda *seen: self.moves.seen_serving(*seen),
+            serving=lambda: self.serving,
+            serving_lock=self.lock,
+            stopping=self.stopping,
+            clock=clock,
+            snapshot=snapshot,
+            poll_s=poll_s,
+            plant=plant,
+        )
+        self.freeze = FreezeGuard(
+            fabric,
+            roles=self.roles,
+            shard=self.shards,
+            stopping=self.stopping,
+            announce=self.announce,
+            gap=freeze_gap,
+            clock=clock,
+        )
+        self.adoption = ObjectAdoption(
+            fabric, self, stopping=self.stopping, announce=self.announce, clock=self.clock, after_s=adopt_after_s
+        )
+        self.moves = MoveService(
+            fabric,
+            self,
+            serving_lock=self.lock,
+            election=lambda: self.roles.election,
+            live=self.roles.live_sims,
+            standbys=self.shards.standbys,
+            announce=self.announce,
+            clock=clock,
+        )
+        # a primary that hears no one stops its robots
+        self.deaf_stop = DeafStop(
+            fabric,
+            hearing=self.roles,
+            serving=lambda: self.peer if self.role == el.PRIMARY else None,
+            stopping=self.stopping,
+            announce=self.announce,
+            clock=clock,
+        )
         self.state_answers = StateAnswers(
             fabric.counters
         )  # srv/state off zenoh's callback thread (sim_peer.serving.state_answers)
@@ -145,6 +208,11 @@ class ReplicaHost:
     @property
     def closed(self) -> bool:
         return self._closed
+
+    @property
+    def serving(self) -> bool:
+        """Whether its peer serves the world now (a primary between two rebuilds does not)."""
+        return self.peer is not None
 
     def open(self, duration: float | None = None) -> "ReplicaHost":
         f, w = self.fabric, self.fabric.world
@@ -232,6 +300,11 @@ class ReplicaHost:
         self.peer.start(self._duration)
         self.deaf_stop.watch()
 
+    def _reassert(self, term: int) -> None:
+        """Assert ``term`` again over what this sim serves (the election's effect after a freeze)."""
+        with self.lock:
+            self.fabric.assume_term(term, self.scopes())
+
     def scopes(self) -> tuple[str, ...]:
         """What this sim is the authority of: its robots, and the scene objects when it is their authority."""
         return tuple(self.world.robots) + (tuple(self.world.objects) if self.objects else ())
@@ -251,7 +324,7 @@ class ReplicaHost:
             self.serve(state)
         finally:
             self.follower.drained()
-        took = time.monotonic() - t0
+        took = self.clock() - t0
         self.takeovers.append({"term": self.election.term, "s": took, "from": state.header.source if state else ""})
         self.announce(
             f"sim {self.fabric.peer_id}: took over the world with term {self.election.term} in {took * 1000:.0f} ms"
@@ -329,6 +402,29 @@ class ReplicaHost:
         self.serve(replace(state, header=replace(state.header, term=term)))
         self.role_token.show(self.election, True)  # serving again, under the new term
         self.shards.learn_soon()
+
+    def serves_objects(self) -> bool:
+        """Whether no adoption is wanted here: this sim is the scene objects' authority already, or closed."""
+        with self.lock:
+            return self.objects or self._closed
+
+    def scene_objects(self) -> tuple[str, ...]:
+        """The scene objects of the world this sim builds (:class:`~sim_peer.replica.adoption.ObjectsServer`)."""
+        return tuple(self.world.objects)
+
+    def adopt_objects(self) -> int | None:
+        """Serve the scene objects with this sim's robots, one term up (what it serves and its term change together,
+        under the lock); the new term, or None when it is not a serving primary, serves them already, or closed."""
+        with self.lock:
+            if self.role != el.PRIMARY or self.peer is None or self.objects or self._closed:
+                return None
+            self.objects = True  # before the capture: the state carries the objects where this sim mirrored them
+            state, _ = self.stop_serving()
+            term = self.election.term + 1
+            self.roles.set_term(term)
+            self.serve(replace(state, header=replace(state.header, term=term)))
+            self.role_token.show(self.election, True)  # serving again, under the new term
+        return term
 
     def serve_again(self, placements: dict[str, SceneRobot], state: WorldState, term: int) -> None:
         """After a rebuild that failed half-way: whatever started is closed and the old robots served again, at the

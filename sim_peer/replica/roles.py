@@ -1,9 +1,10 @@
 """A sim's role in its shard's election, as it lives it: the live sims it sees, and what each change makes it do.
 
 The pure core (:mod:`sim_peer.replica.election`) decides; this part feeds it what the session observes (the sims'
-liveliness tokens, the terms heard on streams and ``srv/state``) and carries out its effects on the host
-(:class:`sim_peer.replica.replica_host.ReplicaHost`): a take-over on a thread of its own, a step-down (muzzled at once,
-then the host's ``run`` returns), a term asserted again after a freeze, a new leader announced.
+liveliness tokens, the terms heard on streams and ``srv/state``) and carries out its effects through what its
+constructor names, never the host: a take-over on a thread of its own (``take_over``), a step-down (muzzled at
+once, then the host's ``run`` returns), a term asserted again after a freeze (``reassert``), a new leader
+announced, the role shown (``show_role``), the scene objects looked after (``adopt_soon``).
 
 The first complete view of the live sims comes before any change counts (:meth:`Roles.join`): the election
 reads a leader missing from a view as gone, so the view must not be a history still arriving.
@@ -14,17 +15,15 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import replace
-from typing import TYPE_CHECKING, Callable
+from typing import Callable, Protocol
 
 from sim_peer.replica import election as el
 from sim_peer.replica import hearing_rule as hr
 from sim_peer.replica.hearing_rule import AUDIBLE_S, RECHECK_LEASES, TICK_S
 
-if TYPE_CHECKING:
-    from fabric.session import Fabric
-    from sim_peer.replica.replica_host import ReplicaHost
+from fabric.session import Fabric
 
-__all__ = ["Roles", "MAX_GONE", "AUDIBLE_S", "SETTLE_S", "TICK_S", "router_answers"]
+__all__ = ["Roles", "ShardView", "MAX_GONE", "AUDIBLE_S", "SETTLE_S", "TICK_S", "router_answers"]
 
 MAX_GONE = 256
 """How many departed sims' times are remembered (made-up sim tokens must not grow the record)."""
@@ -37,7 +36,7 @@ at once; one that cannot be asked makes a killed leader's fail-over wait this mu
 SETTLE_POLL_S = 0.02
 
 
-def router_answers(fabric: "Fabric", timeout: float) -> bool:
+def router_answers(fabric: Fabric, timeout: float) -> bool:
     """Whether this session's router answers a query on its admin space now: a round trip (a millisecond on a
     LAN) that a dead link cannot make. A router whose admin space is closed to this login, or not ours, answers
     nothing: then only the time tells (:data:`SETTLE_S`)."""
@@ -50,11 +49,49 @@ def router_answers(fabric: "Fabric", timeout: float) -> bool:
         return False
 
 
-class Roles:
-    """The election state of one host, the live sims it sees and when others went."""
+class ShardView(Protocol):
+    """What the roles ask of this sim's shard (:class:`sim_peer.shards.directory.ShardDirectory`)."""
 
-    def __init__(self, host: "ReplicaHost", election: el.Election, clock: Callable[[], float] = time.monotonic) -> None:
-        self.host = host
+    def learn(self) -> None:
+        """Ask every live sim which robots it serves, now."""
+        ...
+
+    def learn_soon(self) -> None:
+        """Learn the shards on a thread of its own, then let the election look again."""
+        ...
+
+    def view(self, live: frozenset[str]) -> frozenset[str]:
+        """The live sims of this shard."""
+        ...
+
+
+class Roles:
+    """The election state of one host, the live sims it sees and when others went.
+
+    Its own lock guards what it sees (the live sims, when they went, its flags). The election itself changes under
+    the lock of what the host serves (``serving_lock``, passed in): a rebuild reads the term and serves under a new
+    one (:meth:`set_term`) with no step-down between. It calls no collaborator while holding either lock."""
+
+    def __init__(
+        self,
+        fabric: Fabric,
+        election: el.Election,
+        *,
+        shard: ShardView,
+        serving_lock: threading.RLock,
+        stopping: threading.Event,
+        announce: Callable[[str], None],
+        take_over: Callable[[float, str | None], None],
+        reassert: Callable[[int], None],
+        show_role: Callable[[el.Election], None],
+        adopt_soon: Callable[[], None],
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.fabric = fabric
+        self._shard, self._serving_lock, self._stopping = shard, serving_lock, stopping
+        self._announce, self._take_over, self._reassert = announce, take_over, reassert
+        self._show_role, self._adopt_soon = show_role, adopt_soon
+        self._lock = threading.RLock()
         self.clock = clock  # monotonic seconds: every time this shell reads, and passes to the cores
         self.election = election
         self.live: set[str] = set()
@@ -81,26 +118,25 @@ class Roles:
         """Watch the sims' tokens, take a first complete view of the live ones, and let the election decide on it.
         The watch comes first (what it hears meanwhile is kept, but decides nothing until the view is settled),
         then a liveliness query."""
-        h = self.host
-        f = h.fabric
+        f = self.fabric
         f.watch_peers(self.on_sim, kind="sim")
         try:
             initial = {pid for _, pid in f.live_peers("sim", timeout=2.0)}
         except Exception:
             initial = set()
-        with h.lock:
+        with self._lock:
             self.live |= initial | {f.peer_id}
         if len(self.live) > 1:
-            h.shards.learn()
+            self._shard.learn()
         self.await_leader(self.election.leader)
         self.beat = hr.Heartbeat(last_tick=self.clock())
         threading.Thread(target=self._tick, name="sim-heartbeat", daemon=True).start()
-        with h.lock:
+        with self._lock:
             self.settled = True
             if self.fresh_until > 0:
                 self.fresh_until = self.clock() + RECHECK_LEASES * f.config.lease_ms / 1000.0
             live = frozenset(self.live)
-        self.step(el.Peers(h.shards.view(live)))
+        self.step(el.Peers(self._shard.view(live)))
 
     def await_leader(self, leader: str) -> None:
         """A standby that already follows ``leader`` (a primary that just stepped down on hearing its higher
@@ -108,20 +144,18 @@ class Roles:
         can answer before the router's tokens have reached it (seen in the lab after a healed partition:
         the view held only our own token, and the stepped-down primary took the world back at once, with
         its own stale state). A leader whose token does not show within the lease is gone: take over."""
-        h = self.host
-        if self.role != el.STANDBY or not leader or leader == h.fabric.peer_id:
+        if self.role != el.STANDBY or not leader or leader == self.fabric.peer_id:
             return
-        deadline = self.clock() + h.fabric.config.lease_ms / 1000.0
-        while self.clock() < deadline and not h.stopping.is_set():
-            with h.lock:
+        deadline = self.clock() + self.fabric.config.lease_ms / 1000.0
+        while self.clock() < deadline and not self._stopping.is_set():
+            with self._lock:
                 if leader in self.live:
                     return
             time.sleep(0.02)
 
     def on_sim(self, kind: str, peer_id: str, alive: bool) -> None:
         """A sim's token came or went."""
-        h = self.host
-        with h.lock:
+        with self._lock:
             (self.live.add if alive else self.live.discard)(peer_id)
             if not alive:
                 self.gone_at[peer_id] = self.clock()
@@ -129,14 +163,14 @@ class Roles:
                     self.gone_at.pop(min(self.gone_at, key=self.gone_at.__getitem__))
             settled = self.settled
         if alive:
-            h.shards.learn_soon()  # which shard it is (a standby of ours, or another shard's sim)
+            self._shard.learn_soon()  # which shard it is (a standby of ours, or another shard's sim)
         if alive or not settled:
             return  # a token appearing (or the history repeating one) never starts a take-over; nor does
             # one going before the first view is settled (join() steps on the whole view then)
-        if peer_id == h.fabric.peer_id:
-            with h.lock:
+        if peer_id == self.fabric.peer_id:
+            with self._lock:
                 self.own_gone_at = self.clock()
-        if peer_id == h.fabric.peer_id or self.deaf():
+        if peer_id == self.fabric.peer_id or self.deaf():
             self.deaf_recheck()
             return
         self.settle(self.clock())
@@ -146,8 +180,7 @@ class Roles:
         stayed up :data:`SETTLE_S`: if the link went down meanwhile (or our own token went), every token went with
         the link, and the look waits for the link (:meth:`deaf_recheck`); else the election looks at the sims alive
         then (the lost one may have been the scene objects' authority)."""
-        h = self.host
-        with h.lock:
+        with self._lock:
             if self.settling:
                 return  # the look under way takes this loss in too
             self.settling = True
@@ -155,30 +188,30 @@ class Roles:
         def judge() -> None:
             unlinked = False
             try:
-                answered = router_answers(h.fabric, SETTLE_S)  # at once on a live link (a router's round trip)
+                answered = router_answers(self.fabric, SETTLE_S)  # at once on a live link (a router's round trip)
                 while (
                     not unlinked
                     and not answered
                     and self.clock() - lost_at < SETTLE_S
-                    and not h.stopping.wait(SETTLE_POLL_S)
+                    and not self._stopping.wait(SETTLE_POLL_S)
                 ):
-                    unlinked = not h.fabric.connected()
+                    unlinked = not self.fabric.connected()
                 unlinked = (
-                    unlinked or not h.fabric.connected() or hr.unlinked_since(self.beat, self.own_gone_at, lost_at)
+                    unlinked or not self.fabric.connected() or hr.unlinked_since(self.beat, self.own_gone_at, lost_at)
                 )
             finally:
-                with h.lock:
+                with self._lock:
                     self.settling = False
-            if h.stopping.is_set():
+            if self._stopping.is_set():
                 return
             if unlinked or self.deaf():
                 self.deaf_recheck(f"its link went {1000 * (self.clock() - lost_at):.0f} ms after a sim's token")
                 return
-            with h.lock:
+            with self._lock:
                 live = frozenset(self.live)
-            self.step(el.Peers(h.shards.view(live)))
+            self.step(el.Peers(self._shard.view(live)))
             if self.role == el.PRIMARY:
-                h.adoption.soon()
+                self._adopt_soon()
 
         threading.Thread(target=judge, name="sim-settle", daemon=True).start()
 
@@ -186,10 +219,9 @@ class Roles:
         """This process's heartbeat: a gap between two ticks longer than half a lease is a freeze (SIGSTOP, a starved
         process), after which the tokens seen are not to be trusted for a lease (:meth:`frozen`); a tick that finds
         the link down marks when (:meth:`settle`)."""
-        h = self.host
-        gap = h.fabric.config.lease_ms / 2000.0
-        while not h.stopping.wait(TICK_S):
-            self.beat = hr.tick(self.beat, self.clock(), gap=gap, connected=h.fabric.connected())
+        gap = self.fabric.config.lease_ms / 2000.0
+        while not self._stopping.wait(TICK_S):
+            self.beat = hr.tick(self.beat, self.clock(), gap=gap, connected=self.fabric.connected())
 
     def frozen(self) -> bool:
         """Whether this process was frozen just now: its heartbeat is late, or came back from a gap within the last
@@ -199,7 +231,7 @@ class Roles:
         The distrust lasts a lease and as long again as the freeze was (up to five leases): a session that slept
         through the router dropping it reads its link's news late (a standby paused 4 s read its leader's token gone
         more than a lease after it woke, link up, and took the world over from no state) (:func:`hearing_rule.frozen`)."""
-        return hr.frozen(self.beat, self.clock(), self.host.fabric.config.lease_ms / 1000.0)
+        return hr.frozen(self.beat, self.clock(), self.fabric.config.lease_ms / 1000.0)
 
     def deaf(self) -> bool:
         """Whether this sim hears no one now: its link is down, the router no longer holds its own token, or this
@@ -209,10 +241,9 @@ class Roles:
     def cut(self) -> str:
         """Why this sim's link is gone now ('' : it is not): the link is down, or the router no longer holds its
         own token. A freeze alone is not a cut (:meth:`frozen`; :mod:`sim_peer.replica.deaf_stop` asks the router then)."""
-        h = self.host
-        with h.lock:
-            seen, gone_at = h.fabric.peer_id in self.live, self.own_gone_at
-        return hr.cut(connected=h.fabric.connected(), own_token_seen=seen, own_gone_at=gone_at, now=self.clock())
+        with self._lock:
+            seen, gone_at = self.fabric.peer_id in self.live, self.own_gone_at
+        return hr.cut(connected=self.fabric.connected(), own_token_seen=seen, own_gone_at=gone_at, now=self.clock())
 
     def deaf_recheck(self, why: str = "its link or its own token gone") -> None:
         """Our own link went (this sim cut off, the router restarted, this process paused past the lease): every sim's
@@ -222,22 +253,21 @@ class Roles:
         :data:`RECHECK_LEASES` leases (and half a second) have passed for the live sims' tokens to come back too, the
         election looks at the sims then alive: a leader whose token did not come back is gone. A cut in the window
         (a second restart of the router) starts it again once the link is back."""
-        h = self.host
-        with h.lock:
+        with self._lock:
             if self.rechecking:
                 return
             self.rechecking = True
         if self.role == el.STANDBY:
-            h.announce(
-                f"standby {h.fabric.peer_id}: cut off ({why}); the live sims are looked "
+            self._announce(
+                f"standby {self.fabric.peer_id}: cut off ({why}); the live sims are looked "
                 f"at again {RECHECK_LEASES} leases after it hears again"
             )
 
         def recheck() -> None:
             try:
-                window = hr.recheck_window(h.fabric.config.lease_ms / 1000.0)
+                window = hr.recheck_window(self.fabric.config.lease_ms / 1000.0)
                 back = hr.NOT_YET
-                while not h.stopping.is_set() and self.clock() < back:
+                while not self._stopping.is_set() and self.clock() < back:
                     # cut off (again): the window starts once it hears
                     now = self.clock()
                     back = hr.recheck(
@@ -245,33 +275,45 @@ class Roles:
                     )
                     time.sleep(0.05)
             finally:
-                with h.lock:
+                with self._lock:
                     self.rechecking = False
-            if h.stopping.is_set():
+            if self._stopping.is_set():
                 return
-            with h.lock:
+            with self._lock:
                 live = frozenset(self.live)
             if self.deaf():
                 self.deaf_recheck()  # cut off again meanwhile
                 return
-            self.step(el.Peers(h.shards.view(live)))
+            self.step(el.Peers(self._shard.view(live)))
             if self.role == el.PRIMARY:
-                h.adoption.soon()
+                self._adopt_soon()
             elif self.election.leader in live:
-                h.announce(
-                    f"standby {h.fabric.peer_id}: hearing again; following {self.election.leader} (term {self.election.term})"
+                self._announce(
+                    f"standby {self.fabric.peer_id}: hearing again; following {self.election.leader} (term {self.election.term})"
                 )
 
         threading.Thread(target=recheck, name="sim-deaf-recheck", daemon=True).start()
 
+    def live_sims(self) -> frozenset[str]:
+        """The sims whose tokens are live now (this one's too)."""
+        with self._lock:
+            return frozenset(self.live)
+
+    def shards_learnt(self, view: frozenset[str]) -> None:
+        """The shard directory learnt which sims share this shard (``view``: its live ones): once the first view
+        is settled, the election counts them again."""
+        if self.settled:
+            self.step(el.Peers(view))
+
     def gone_since(self, began: float) -> set[str]:
-        """The sims alive now or gone since ``began`` (monotonic; call with the lock held)."""
-        return set(hr.gone_since(self.live, self.gone_at, began))
+        """The sims alive now or gone since ``began`` (monotonic)."""
+        with self._lock:
+            return set(hr.gone_since(self.live, self.gone_at, began))
 
     def heard(self, source: str, term: int) -> None:
         """Authority state stamped with ``term`` came from ``source``."""
         if term > 0:
-            if source != self.host.fabric.peer_id:
+            if source != self.fabric.peer_id:
                 if source not in self.heard_at and len(self.heard_at) >= MAX_GONE:
                     self.heard_at.pop(min(self.heard_at, key=self.heard_at.__getitem__))
                 self.heard_at[source] = self.clock()
@@ -288,53 +330,52 @@ class Roles:
     def relook(self) -> None:
         """The leader is missing from the live sims but still heard: look again once it has been quiet for
         :data:`AUDIBLE_S` (it may be gone then: a killed sim's last samples), or sooner if it speaks no more."""
-        h = self.host
-        with h.lock:
+        with self._lock:
             if self.relooking:
                 return
             self.relooking = True
-        h.announce(
-            f"standby {h.fabric.peer_id}: the token of {self.election.leader} is missing, but it is still heard; "
+        self._announce(
+            f"standby {self.fabric.peer_id}: the token of {self.election.leader} is missing, but it is still heard; "
             "waiting until it falls silent before taking over"
         )
 
         def again() -> None:
             try:
-                while not h.stopping.is_set():
+                while not self._stopping.is_set():
                     quiet = self.clock() - self.heard_at.get(self.election.leader, float("-inf"))
                     if quiet >= AUDIBLE_S:
                         break
-                    h.stopping.wait(AUDIBLE_S - quiet + 0.01)
+                    self._stopping.wait(AUDIBLE_S - quiet + 0.01)
             finally:
-                with h.lock:
+                with self._lock:
                     self.relooking = False
-            if h.stopping.is_set():
+            if self._stopping.is_set():
                 return
-            with h.lock:
+            with self._lock:
                 live = frozenset(self.live)
-            self.step(el.Peers(h.shards.view(live)))
+            self.step(el.Peers(self._shard.view(live)))
 
         threading.Thread(target=again, name="sim-relook", daemon=True).start()
 
     def set_term(self, term: int) -> None:
-        """Serve on under ``term`` (a move or an adoption took a new one; call with the lock held)."""
-        self.election = replace(self.election, term=term)
-        self.host.role_token.show(self.election, self.host.peer is not None)
+        """Serve on under ``term`` (a move or an adoption took a new one; call with the serving lock held)."""
+        with self._serving_lock:
+            self.election = replace(self.election, term=term)
+        self._show_role(self.election)
 
     def step(self, ev: el.Event) -> None:
         """Apply one observation to the election and carry out its effects. A view of the live sims taken while this
         sim is deaf, or waits after being deaf, decides nothing (whoever took it: a token's loss, a shard learnt
         after a token came back); the wait ends with a view of its own (:meth:`deaf_recheck`)."""
-        h = self.host
         if isinstance(ev, el.Peers) and self.settled:
-            with h.lock:
+            with self._lock:
                 waiting = self.rechecking
             if waiting or self.deaf():
                 self.deaf_recheck()
                 return
         if isinstance(ev, el.Peers):
             ev = replace(ev, audible=self.audible())
-        with h.lock:
+        with self._serving_lock:
             followed = self.election.leader
             self.election, effects = el.step(self.election, ev)
             leader = self.election.leader
@@ -349,21 +390,22 @@ class Roles:
         for e in effects:
             if e.kind == "take_over":
                 # why, for whoever reads the log after a surprise (a take-over in a router's restart, say)
-                h.announce(
-                    f"standby {h.fabric.peer_id}: the token of {followed or 'the primary'} is gone (live sims: "
+                self._announce(
+                    f"standby {self.fabric.peer_id}: the token of {followed or 'the primary'} is gone (live sims: "
                     f"{', '.join(sorted(ev.live)) if isinstance(ev, el.Peers) else '?'}; link "
-                    f"{'up' if h.fabric.connected() else 'down'}); taking over with term {e.term}"
+                    f"{'up' if self.fabric.connected() else 'down'}); taking over with term {e.term}"
                 )
-                t = threading.Thread(target=h.take_over, args=(self.clock(), followed), name="take-over", daemon=True)
+                t = threading.Thread(
+                    target=self._take_over, args=(self.clock(), followed), name="take-over", daemon=True
+                )
                 self.taking_over = t
                 t.start()
             elif e.kind == "step_down":
-                h.fabric.stamp.muzzle()  # from now on nothing with the old term goes out
-                h.announce(f"sim {h.fabric.peer_id}: {e.leader} holds term {e.term}; stepping down to standby")
+                self.fabric.stamp.muzzle()  # from now on nothing with the old term goes out
+                self._announce(f"sim {self.fabric.peer_id}: {e.leader} holds term {e.term}; stepping down to standby")
                 self.stepped_down.set()
             elif e.kind == "reassert":
-                with h.lock:
-                    h.fabric.assume_term(e.term, h.scopes())
+                self._reassert(e.term)
             elif e.kind == "follow" and self.role == el.STANDBY:
-                h.announce(f"standby {h.fabric.peer_id}: following {e.leader} (term {e.term})")
-        h.role_token.show(self.election, h.peer is not None)  # a take-over shows once it serves (ReplicaHost.take_over)
+                self._announce(f"standby {self.fabric.peer_id}: following {e.leader} (term {e.term})")
+        self._show_role(self.election)  # a take-over shows once it serves (ReplicaHost.take_over)

@@ -11,14 +11,12 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import TYPE_CHECKING, Any, Iterable
+from typing import Any, Callable, Iterable
 
 from fabric import keys
 from fabric.interfaces import Event, Header, WorldState
+from fabric.session import Fabric
 from sim_peer.replica import election as el
-
-if TYPE_CHECKING:
-    from sim_peer.replica.replica_host import ReplicaHost
 
 __all__ = ["ShardDirectory", "SHARD_QUERY"]
 
@@ -27,11 +25,29 @@ SHARD_QUERY = "shard"
 
 
 class ShardDirectory:
-    """This sim's shard (``mine``: the robots it serves, or would serve at a take-over) and the other live sims'."""
+    """This sim's shard (``mine``: the robots it serves, or would serve at a take-over) and the other live sims'.
 
-    def __init__(self, host: "ReplicaHost", mine: Iterable[str]) -> None:
-        self.host = host
+    It talks to the rest of the sim through what its constructor names, never the host: the ``fabric`` it asks on,
+    ``live`` (the live sims now, from the election's shell), ``stopping`` (set when the host closes) and ``on_learnt``
+    (called with this shard's live sims once a shard learnt in the background may change the election's view).
+    Its own lock guards the shards learnt and the learning flags; it calls none of those collaborators while holding
+    it, so a caller holding its own lock may call in. ``mine`` is replaced whole (a frozenset), never changed."""
+
+    def __init__(
+        self,
+        fabric: Fabric,
+        mine: Iterable[str],
+        *,
+        live: Callable[[], frozenset[str]],
+        stopping: threading.Event,
+        on_learnt: Callable[[frozenset[str]], None],
+    ) -> None:
+        self.fabric = fabric
         self.mine = frozenset(mine)
+        self._live = live
+        self._stopping = stopping
+        self._on_learnt = on_learnt
+        self._lock = threading.Lock()
         self.shards: dict[str, frozenset[str]] = {}  # live sim -> the robots it serves (from srv/state, asked)
         self._learning = self._learn_again = False  # a shard query under way, and another wanted after it
 
@@ -42,20 +58,22 @@ class ShardDirectory:
     def same_shard(self, peer_id: str) -> bool:
         """Whether a live sim belongs to this shard; one not asked yet counts as ours (one world, one shard:
         what every sim did before shards)."""
-        with self.host.lock:
+        with self._lock:
             robots = self.shards.get(peer_id)
         return robots is None or bool(robots & self.mine)
 
     def view(self, live: frozenset[str]) -> frozenset[str]:
         """The live sims of this shard: the election of a shard counts no other shard's sims."""
-        with self.host.lock:
+        with self._lock:
             shards = dict(self.shards)
-        return el.shard_view(live, shards, self.host.fabric.peer_id, self.mine)
+        return el.shard_view(live, shards, self.fabric.peer_id, self.mine)
 
     def standbys(self, live: Iterable[str]) -> list[str]:
-        """The other live sims that follow a robot of this shard, by id (call with the lock held)."""
-        me, live = self.host.fabric.peer_id, set(live)
-        return sorted(p for p, robots in self.shards.items() if p != me and p in live and robots & self.mine)
+        """The other live sims that follow a robot of this shard, by id."""
+        me, live = self.fabric.peer_id, set(live)
+        with self._lock:
+            shards = dict(self.shards)
+        return sorted(p for p, robots in shards.items() if p != me and p in live and robots & self.mine)
 
     def answer(self, role: str) -> Event:
         """This sim's answer to a shard query, primary or standby: its robots."""
@@ -64,13 +82,12 @@ class ShardDirectory:
             reason=role,
             object="",
             data={"robots": sorted(self.mine)},
-            header=Header(wall_ns=time.time_ns(), source=self.host.fabric.peer_id),
+            header=Header(wall_ns=time.time_ns(), source=self.fabric.peer_id),
         )
 
     def learn(self) -> None:
         """Ask every live sim which robots it serves (``srv/state`` with a shard query; standbys answer too)."""
-        h = self.host
-        f = h.fabric
+        f = self.fabric
         try:
             replies = f.rpc.query(
                 keys.srv(f.world, "state"),
@@ -81,20 +98,20 @@ class ShardDirectory:
             )
         except Exception:
             return  # nobody else (or closing): unknown sims count as ours
-        with h.lock:
+        live = self._live()  # before taking our lock: the election's shell guards its live sims with its own
+        with self._lock:
             for rep in replies:
                 robots = rep.message.data.get("robots") if isinstance(rep.message.data, dict) else None
                 if rep.message.kind == SHARD_QUERY and isinstance(robots, (list, tuple)) and rep.source:
                     self.shards[rep.source] = frozenset(str(r) for r in robots)
-            for gone in [p for p in self.shards if p not in h.roles.live]:
+            for gone in [p for p in self.shards if p not in live]:
                 del self.shards[gone]
 
     def learn_soon(self) -> None:
         """Learn a new sim's shard on a thread of its own (a token's callback must not wait for a query), then
-        let the election count the live sims of this shard again."""
-        h = self.host
-        with h.lock:
-            if self._learning or h.closed:
+        let the election count the live sims of this shard again (``on_learnt``)."""
+        with self._lock:
+            if self._learning or self._stopping.is_set():
                 self._learn_again = True
                 return
             self._learning, self._learn_again = True, False
@@ -102,13 +119,13 @@ class ShardDirectory:
         def run() -> None:
             while True:
                 self.learn()
-                with h.lock:
-                    if not self._learn_again or h.closed:
-                        self._learning = False
-                        live = frozenset(h.roles.live)
-                        break
+                with self._lock:
+                    again = self._learn_again and not self._stopping.is_set()
                     self._learn_again = False
-            if h.roles.settled:
-                h.roles.step(el.Peers(self.view(live)))
+                    if not again:
+                        self._learning = False
+                if not again:
+                    break
+            self._on_learnt(self.view(self._live()))
 
         threading.Thread(target=run, name="sim-shards", daemon=True).start()

@@ -1,0 +1,150 @@
+"""The freeze guard and the deaf stop built on their own: a real fabric, the election's shell and the shard as small
+recording parts, the stop flag and a fake clock passed in, no ReplicaHost.
+
+A primary frozen with no rival publishes again at once; one with a rival of its shard asks ``srv/state`` who holds
+it and tells the election the term it heard, then publishes again under a new term. A primary cut off holds its
+robots and lets them go once it hears again; a sim that serves nothing is not looked at."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from fabric import keys
+from fabric.interfaces import Header, RobotState, WorldState
+from robofabric.testing import wait_until
+from sim_peer.replica import election as el
+from sim_peer.replica import hearing_rule as hr
+from sim_peer.replica.deaf_stop import REASON, DeafStop
+from sim_peer.replica.freeze_guard import FreezeGuard
+
+
+class Electing:
+    """The election's shell as the guard sees it: a primary, the sims gone since a time, what it was told."""
+
+    def __init__(self, live: set[str]) -> None:
+        self.role, self.live = el.PRIMARY, live
+        self.told: list[tuple[str, int]] = []
+        self.steps: list[el.Event] = []
+
+    def gone_since(self, began: float) -> set[str]:
+        return set(self.live)
+
+    def heard(self, source: str, term: int) -> None:
+        self.told.append((source, term))
+
+    def step(self, ev: el.Event) -> None:
+        self.steps.append(ev)
+
+
+class Shard:
+    """The shard as the guard reads it: every sim is of it, and every state with arm1 is its."""
+
+    def view(self, live: frozenset[str]) -> frozenset[str]:
+        return live
+
+    def about_mine(self, state: object) -> bool:
+        return isinstance(state, WorldState) and any(r.id == "arm1" for r in state.robots)
+
+
+def _guard(fab, roles: Electing, said: list[str], gap: float = 0.5) -> FreezeGuard:
+    return FreezeGuard(
+        fab, roles=roles, shard=Shard(), stopping=threading.Event(), announce=said.append, gap=gap, clock=lambda: 100.0
+    )
+
+
+def test_a_primary_frozen_with_no_rival_publishes_again_at_once(connect):
+    fab = connect("sim", "sim-a")
+    said: list[str] = []
+    roles = Electing({"sim-a"})
+    fab.stamp.muzzle()
+    _guard(fab, roles, said).on_freeze(0.8)
+    assert not fab.stamp.muzzled and roles.steps == [] and roles.told == []
+    assert said[0].startswith("sim sim-a: paused 0.8 s with no other sim in the world; publishing again")
+
+
+@pytest.mark.slow  # it listens a lease, muzzled, before it asks
+def test_a_primary_frozen_past_the_lease_asks_who_holds_its_shard_and_reasserts(connect):
+    fab, rival = connect("sim", "sim-a"), connect("sim", "sim-b")
+    arm = RobotState("arm1", "arm", np.zeros(1), np.zeros(1), np.zeros(1))
+    rival.rpc.serve(
+        keys.srv(fab.world, "state"),
+        lambda key, request: WorldState(0.0, 0, (arm,), (), header=Header(source="sim-b", term=1)),
+    )
+    wait_until(
+        lambda: any(pid == "sim-b" for _, pid in fab.live_peers("sim", timeout=1.0)),
+        timeout=30,
+        what="the rival's token",
+    )
+    wait_until(
+        lambda: fab.rpc.query(keys.srv(fab.world, "state"), timeout=1.0, expected=WorldState, all_replies=True),
+        timeout=30,
+        what="the rival's srv/state at the router",
+    )
+    said: list[str] = []
+    roles = Electing({"sim-a", "sim-b"})
+    fab.stamp.muzzle()
+    gap = fab.config.lease_ms / 1000.0 + 0.01  # past the lease
+    _guard(fab, roles, said, gap=0.05).on_freeze(gap)
+    assert roles.told == [("sim-b", 1)]  # the rival's term, for the election (a lower one: it stays)
+    assert [type(e) for e in roles.steps] == [el.Resumed] and not fab.stamp.muzzled
+    assert said == [f"sim sim-a: frozen {gap:.1f} s, still the authority (term {fab.stamp.term})"]
+
+
+class Hearing:
+    """Whether this sim hears, as the deaf stop reads it: cut or not, never frozen."""
+
+    def __init__(self) -> None:
+        self.why, self.beat, self.own_gone_at = "", hr.Heartbeat(), float("-inf")
+
+    def cut(self) -> str:
+        return self.why
+
+    def frozen(self) -> bool:
+        return False
+
+
+class Commands:
+    """A serving peer's command pipeline as the deaf stop holds and resumes it."""
+
+    def __init__(self) -> None:
+        self.held = ""
+
+    def hold(self, reason: str) -> None:
+        self.held = reason
+
+    def resume(self) -> None:
+        self.held = ""
+
+
+class Peer:
+    def __init__(self) -> None:
+        self.commands = Commands()
+
+
+def test_a_cut_off_primary_holds_its_robots_and_lets_them_go_when_it_hears_again(connect):
+    fab = connect("sim", "sim-a")
+    hearing, peer, said = Hearing(), Peer(), []
+    serving: list[Peer | None] = [None]
+    stop = DeafStop(
+        fab,
+        hearing=hearing,
+        serving=lambda: serving[0],
+        stopping=threading.Event(),
+        announce=said.append,
+        clock=lambda: 100.0,
+    )
+    hearing.why = "its link is down"
+    stop.look()
+    assert said == [] and stop.state.holds == 0  # serving nothing (a standby): nothing to hold
+    serving[0] = peer
+    stop.look()
+    assert peer.commands.held == REASON and stop.state.holds == 1
+    assert said[-1].startswith("sim sim-a: hears no one (its link is down); its robots stop")
+    stop.look()
+    assert stop.state.holds == 1  # held already
+    hearing.why = ""
+    stop.look()
+    assert peer.commands.held == "" and said[-1].startswith("sim sim-a: hears again")
