@@ -67,7 +67,9 @@ class Election:
     role: Role
     term: int = 0
     leader: str = ""
-    leader_seen: bool = False  # the leader's liveliness token was seen alive since we follow it (informative)
+    # the leader's liveliness token was seen alive since we follow it: until then its absence from a view says nothing
+    # of its death (the shell counts such a leader, still heard, as audible: sim_peer.replica.roles.Roles.audible)
+    leader_seen: bool = False
     live: frozenset[str] = frozenset()  # the live sim peers as last reported (``Peers``)
 
 

@@ -20,7 +20,7 @@ The decisions:
   :data:`RECHECK_LEASES` leases (and half a second) for the live sims' tokens to come back, started again by a new
   cut.
 - **the audible sims** (:func:`audible`): those heard within :data:`AUDIBLE_S`, while the view of the tokens may
-  still be arriving.
+  still be arriving, and a leader heard whose token was never seen.
 """
 
 from __future__ import annotations
@@ -124,13 +124,23 @@ def recheck(back: float, now: float, *, deaf: bool, window: float) -> float:
     return now + window if back == NOT_YET else back
 
 
-def audible(heard_at: Mapping[str, float], now: float, *, fresh_until: float, relooking: bool) -> frozenset[str]:
+def audible(
+    heard_at: Mapping[str, float],
+    now: float,
+    *,
+    fresh_until: float,
+    relooking: bool,
+    unseen: Iterable[str] = (),
+) -> frozenset[str]:
     """The sims heard within :data:`AUDIBLE_S`, while the tokens seen may still be arriving (``now`` before
-    ``fresh_until``, or a leader already found missing but heard: ``relooking``); else none (a token's loss is
-    trusted at once)."""
+    ``fresh_until``, or a leader already found missing but heard: ``relooking``); else only those of ``unseen``
+    (a leader whose token this sim never saw since it follows it: a fresh session's first view can lack a live
+    sim's token that has not reached it yet, and a token never seen says nothing of a death), and a token's loss
+    is trusted at once."""
+    heard = frozenset(p for p, t in heard_at.items() if now - t < AUDIBLE_S)
     if now > fresh_until and not relooking:
-        return frozenset()
-    return frozenset(p for p, t in heard_at.items() if now - t < AUDIBLE_S)
+        return heard & frozenset(unseen)
+    return heard
 
 
 def gone_since(live: Iterable[str], gone_at: Mapping[str, float], began: float) -> frozenset[str]:

@@ -324,12 +324,22 @@ class Roles:
         :data:`RECHECK_LEASES` leases of this host (a primary that just stepped down, its session back from a
         pause past the lease, can see its leader's token seconds late), or a leader already found missing but
         heard (:meth:`relook`). Later a token's loss is trusted at once (a killed leader's goes with its link, and
-        waiting would only delay its fail-over); a deaf sim's view is not trusted at all (:meth:`deaf_recheck`)."""
-        return hr.audible(dict(self.heard_at), self.clock(), fresh_until=self.fresh_until, relooking=self.relooking)
+        waiting would only delay its fail-over); a deaf sim's view is not trusted at all (:meth:`deaf_recheck`).
+
+        At any time, a leader still heard whose token this sim has not seen since it follows it is alive: a fresh
+        session's first view can lack tokens that have not reached it yet (a restarted standby that heard its leader's
+        term at once, before its token, took the world over from no state while the leader served on). Call with the
+        serving lock held: the leader read here is the one the election then judges (:meth:`step`)."""
+        e = self.election
+        unseen = (e.leader,) if e.leader and not e.leader_seen else ()
+        return hr.audible(
+            dict(self.heard_at), self.clock(), fresh_until=self.fresh_until, relooking=self.relooking, unseen=unseen
+        )
 
     def relook(self) -> None:
         """The leader is missing from the live sims but still heard: look again once it has been quiet for
-        :data:`AUDIBLE_S` (it may be gone then: a killed sim's last samples), or sooner if it speaks no more."""
+        :data:`AUDIBLE_S` (it may be gone then: a killed sim's last samples), or sooner if it speaks no more, or once
+        its token has come."""
         with self._lock:
             if self.relooking:
                 return
@@ -342,9 +352,10 @@ class Roles:
         def again() -> None:
             try:
                 while not self._stopping.is_set():
-                    quiet = self.clock() - self.heard_at.get(self.election.leader, float("-inf"))
-                    if quiet >= AUDIBLE_S:
-                        break
+                    leader = self.election.leader
+                    quiet = self.clock() - self.heard_at.get(leader, float("-inf"))
+                    if quiet >= AUDIBLE_S or leader in self.live_sims():
+                        break  # fallen silent, or its token came: the live sims tell now
                     self._stopping.wait(AUDIBLE_S - quiet + 0.01)
             finally:
                 with self._lock:
@@ -373,9 +384,11 @@ class Roles:
             if waiting or self.deaf():
                 self.deaf_recheck()
                 return
-        if isinstance(ev, el.Peers):
-            ev = replace(ev, audible=self.audible())
         with self._serving_lock:
+            if isinstance(ev, el.Peers):
+                # what is heard now, under the lock the election changes under: a leader followed since the view was
+                # taken (its term heard on another thread meanwhile) is judged with what is heard of it
+                ev = replace(ev, audible=self.audible())
             followed = self.election.leader
             self.election, effects = el.step(self.election, ev)
             leader = self.election.leader

@@ -87,6 +87,31 @@ def test_the_audible_sims_count_only_while_the_view_is_fresh_or_a_missing_leader
     assert hr.audible(heard, 10.0 + hr.AUDIBLE_S, fresh_until=math.inf, relooking=False) == frozenset()
 
 
+def test_a_leader_heard_whose_token_was_never_seen_stays_audible_after_the_fresh_view():
+    heard = {"p": 10.0, "q": 10.0}
+    assert hr.audible(heard, 10.5, fresh_until=10.0, relooking=False, unseen=("p",)) == {"p"}  # only the unseen one
+    assert hr.audible(heard, 10.0 + hr.AUDIBLE_S, fresh_until=10.0, relooking=False, unseen=("p",)) == frozenset()
+    assert hr.audible(heard, 10.5, fresh_until=10.0, relooking=False, unseen=("r",)) == frozenset()  # never heard
+
+
+@given(
+    hs.dictionaries(hs.sampled_from("pqrs"), hs.floats(0.0, 10.0)),
+    hs.floats(0.0, 12.0),
+    hs.floats(0.0, 12.0),
+    hs.booleans(),
+    hs.sets(hs.sampled_from("pqrs")),
+)
+def test_the_audible_sims_were_heard_just_now_and_after_the_fresh_view_are_unseen_ones(
+    heard, now, fresh_until, relooking, unseen
+):
+    got = hr.audible(heard, now, fresh_until=fresh_until, relooking=relooking, unseen=unseen)
+    assert got <= {p for p, t in heard.items() if now - t < hr.AUDIBLE_S}
+    if now > fresh_until and not relooking:
+        assert got <= unseen
+    else:
+        assert got == hr.audible(heard, now, fresh_until=fresh_until, relooking=relooking)
+
+
 def test_the_sims_alive_or_gone_since_a_freeze_began():
     assert hr.gone_since({"a"}, {"b": 4.0, "c": 6.0}, began=5.0) == {"a", "c"}
 

@@ -123,3 +123,35 @@ def test_tokens_coming_and_going_are_kept_with_their_time_and_ask_the_shard(conn
     assert roles.live_sims() == frozenset() and roles.gone_at == {"sim-c": 60.0}
     assert roles.gone_since(59.0) == {"sim-c"} and roles.gone_since(61.0) == set()
     assert effects.taken == [] and roles.role == el.PRIMARY
+
+
+def test_a_fresh_standby_that_hears_its_leader_before_its_token_does_not_take_the_world_over(connect):
+    """A restarted standby's session can hear its leader's streams before the leader's token reaches it (a fresh
+    session's first liveliness view may lack live sims), and the shard directory's view taken before then arrives
+    after it followed the leader. That view is no news of the leader's death: the leader is heard, its token never
+    seen. The soak saw a restarted sim-b take the world over from no state there while sim-a served on. Once the
+    token came and went, its loss is trusted at once, heard or not: a killed leader's fail-over waits for nothing."""
+    fab = connect("sim", "sim-b")
+    effects = Effects()
+    roles = effects.roles(fab, el.start("sim-b", standby=True))  # a fresh process: no leader, no step-down
+    try:
+        roles.join()  # the leader's token is nowhere yet: the first view is this sim alone
+        assert roles.live_sims() == frozenset({"sim-b"}) and roles.settled
+        roles.heard("sim-a", 3)  # its term on a stream, before its token
+        assert "standby sim-b: following sim-a (term 3)" in effects.said
+        roles.shards_learnt(frozenset({"sim-b"}))  # the shard directory's view, taken before the token came
+        assert effects.taken == [] and roles.role == el.STANDBY, effects.said
+        assert any("the token of sim-a is missing, but it is still heard" in s for s in effects.said)
+
+        leader = connect("sim", "sim-a")  # its token reaches this session
+        wait_until(lambda: "sim-a" in roles.live_sims(), timeout=10, what="the leader's token")
+        wait_until(lambda: roles.election.leader_seen and not roles.relooking, timeout=10, what="the relook ended")
+        assert effects.taken == [] and roles.role == el.STANDBY
+
+        effects.now += 0.1  # heard a moment ago, but its token was seen and went: no alibi
+        leader.close()
+        roles.shards_learnt(frozenset({"sim-b"}))
+        assert [former for _, former in effects.taken] == ["sim-a"] and roles.election.term == 4
+        roles.taking_over.join(10.0)
+    finally:
+        effects.stopping.set()
