@@ -45,6 +45,7 @@ HEAVY: dict[str, tuple[str, ...]] = {
         # and the second's starved authority waited out its deaf guard (the grouped run of 2026-11-29)
         "tests/user_peer/test_view_class.py",
         "tests/robofabric/bench/test_bench_ownership.py",
+        "tests/robofabric/bench/test_bench_flood.py",  # a flooder as fast as it can go: the whole box's load
     ),
 }
 
