@@ -20,7 +20,7 @@ pytestmark = [pytest.mark.lab, pytest.mark.slow]
 JOIN = """
 import time, numpy as np, user_peer
 from fabric import keys
-from fabric.interfaces import Command, JointTarget, Path
+from fabric.interfaces import Command, JointState, JointTarget, Path
 from user_peer import scenarios
 from user_peer.errors import NotOwner
 w = user_peer.connect(world="demo", connect=["{router}"], user="{user}", timeout=10.0)
@@ -34,11 +34,19 @@ arm.wait_for("joints", timeout=30); base.wait_for("pose", timeout=30)
 arm.request(); base.request()
 out = {}
 n = len(arm.entry.joint_names)
-moves = []
+arrived = []  # (this host's monotonic time, q) of every joint state as it arrives here: no other host's clock in it
+w.fabric.subscribe(keys.robot_joints(w.name, "arm1"), lambda k, js: arrived.append((time.monotonic(), np.array(js.q))), expected=JointState)
+moves, lags = [], []
 for q in (np.full(n, 0.3), np.zeros(n)):
-    t = time.monotonic(); got = arm.move_joints(q, timeout=20); moves.append(time.monotonic() - t)
+    t = time.monotonic(); got = arm.move_joints(q, timeout=20); done = time.monotonic(); moves.append(done - t)
     out.setdefault("joint_error", 0.0); out["joint_error"] = max(out["joint_error"], float(np.max(np.abs(got - q))))
+    first, until = None, time.monotonic() + 5.0  # this subscription's callback may run after the handle's, for the same state
+    while first is None and time.monotonic() < until:
+        first = next((a for a, x in list(arrived) if a >= t and float(np.max(np.abs(x - q))) <= 1e-3), None)
+        time.sleep(0.01)
+    lags.append(None if first is None else max(0.0, done - first))
 out["move_joints_s"] = moves
+out["move_joints_lag_s"] = lags  # from the first state at the target to the wait's end, on this host's clock
 target = scenarios._arm_reach_center(w, arm) + np.array([0.0, 0.03, 0.0])
 t = time.monotonic(); arm.move_to(target, timeout=20); out["move_to_s"] = time.monotonic() - t
 mark = w.latest.mark()
@@ -145,12 +153,15 @@ def test_sim_clock_skew_changes_nothing(room: Classroom, offset):
     assert m and int(m.group(1)) > 0 and {"arm1", "base1"} <= set(m.group(2).replace(" ", "").split(",")), view_out[
         -1000:
     ]
+    # as with no skew: a wait that compared the sim's clock with ours would end 5 s after the arm was at its target
+    # (or before, which the joint error above catches). Judged on alice's own clock from the state at the target she
+    # received, not against the no-skew run's durations: on a loaded box the sim's pace, not the skew, set those
+    # (the bound of the no-skew run plus 2 s failed at load 30 on 2026-11-29)
+    for i, lag in enumerate(figures["move_joints_lag_s"]):
+        assert lag is not None and lag < 3.0, f"move {i}: the wait ended {lag} s after the state at the target came"
     if offset is None:
         REFERENCE.update(figures)
         return
-    # as with no skew: a wait that compared the sim's clock with ours would take 5 s longer (or end early)
     assert REFERENCE, "the no-skew reference did not run"
-    for i, (s, ref) in enumerate(zip(figures["move_joints_s"], REFERENCE["move_joints_s"])):
-        assert s <= ref + 2.0, f"move {i}: {s:.2f} s with the sim's clock {offset} s off, {ref:.2f} s without"
     assert figures["move_to_s"] <= REFERENCE["move_to_s"] + 2.0, (figures, REFERENCE)
     assert figures["follow_s"] <= REFERENCE["follow_s"] + 3.0, (figures, REFERENCE)
