@@ -5,6 +5,7 @@ publishers (zenoh's advanced subscriber dropped those: 1,743 of 1,820 poses on r
 from __future__ import annotations
 
 import threading
+from dataclasses import dataclass
 from collections import defaultdict
 
 import numpy as np
@@ -12,7 +13,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from fabric import keys
-from fabric.history import Ledger, keeping, verdict
+from fabric.history import Ledger, keeping, same_clock, verdict
 from fabric.interfaces import Header, Pose
 from robofabric.testing import wait_until
 
@@ -141,3 +142,24 @@ def test_every_event_that_arrives_is_delivered_exactly_once_in_any_order(stamps,
     arrivals += [(s, False) for s in data.draw(st.lists(st.sampled_from(stamps)))]
     out = _delivered(data.draw(st.permutations(arrivals)), "news")
     assert sorted(out) == sorted(set(stamps))
+
+
+@dataclass(frozen=True, order=True)
+class Stamp:
+    """A stand-in for a zenoh timestamp: a time and the id of the clock that made it."""
+
+    time: float
+    clock: str
+
+    def get_id(self) -> str:
+        return self.clock
+
+
+def test_a_latest_value_from_another_publishers_clock_is_judged_by_arrival_not_by_its_clock():
+    """Bob's laptop runs 5 s behind alice's: his goal, set after hers, is stamped older, and is the goal all the same;
+    alice's own older put, overtaken by her cache's reply, is not."""
+    ledger = Ledger()
+    assert ledger.offer("goal", Stamp(100.0, "alice"), "latest", live=True) == "deliver"
+    assert ledger.offer("goal", Stamp(96.0, "bob"), "latest", live=True) == "deliver"
+    assert ledger.offer("goal", Stamp(99.0, "alice"), "latest", live=True) == "stale"
+    assert same_clock(Stamp(1.0, "a"), Stamp(2.0, "a")) and not same_clock(Stamp(1.0, "a"), Stamp(1.0, "b"))
