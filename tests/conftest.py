@@ -23,16 +23,21 @@ settings.load_profile("robofabric")
 
 # `make test` runs the suite on four pytest-xdist workers (`-n 4 --dist loadgroup`). The tests that load the whole
 # box go in two units of work, each run one test after another on one worker: the browsers (Chromium drawing in
-# software GL, the console's class worlds: three at once took the box to load 37) and the classes (soaks and
-# namespace labs, CPU hogs beside paused processes, paces at full rate and 0.3 s leases). Two browsers or two
-# classes at once judge each other's pace, not the code's; one of each runs beside the other's, and the rest share
-# the other two workers. The two units go out first: each is longer than any other worker's whole share.
+# software GL, the console's class worlds: three at once took the box to load 37) with the floods, and the classes
+# (soaks and namespace labs, CPU hogs beside paused processes, paces at full rate and 0.3 s leases). Two browsers or
+# two classes at once judge each other's pace, not the code's; one of each runs beside the other's, and the rest
+# share the other two workers. The two units go out first: each is longer than any other worker's whole share.
 HEAVY: dict[str, tuple[str, ...]] = {
     "heavy-browser": (
         "tests/user_peer/console/",
         "tests/user_peer/test_view_web.py",
         "tests/user_peer/test_web_pages.py",
         "tests/robofabric/bench/test_bench_console.py",
+        # the floods (a flooder as fast as it can go, 6,000 declarations, a login flood) load the whole box too: one
+        # at a time, in the shorter unit (at load 16 beside the classes the declarations stalled the router 20 s)
+        "tests/robofabric/bench/test_bench_flood.py",
+        "tests/robofabric/bench/test_bench_declflood.py",
+        "tests/robofabric/bench/test_bench_secure_flood.py",
     ),
     "heavy-class": (
         "tests/robofabric/soak/",
@@ -45,7 +50,6 @@ HEAVY: dict[str, tuple[str, ...]] = {
         # and the second's starved authority waited out its deaf guard (the grouped run of 2026-11-29)
         "tests/user_peer/test_view_class.py",
         "tests/robofabric/bench/test_bench_ownership.py",
-        "tests/robofabric/bench/test_bench_flood.py",  # a flooder as fast as it can go: the whole box's load
     ),
 }
 
