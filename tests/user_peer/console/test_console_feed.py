@@ -125,15 +125,7 @@ def test_the_clocks_pass_lets_the_event_loop_turn_between_two_pages_and_skips_on
     handles["c"] = t.add(lambda: order.append("c"))
     handles["d"] = t.add(lambda: order.append("d"))
 
-    async def other() -> None:
-        for _ in range(3):
-            order.append("loop")
-            await asyncio.sleep(0)
-
-    async def main() -> None:
-        await asyncio.gather(t.turn(), other())
-
-    asyncio.run(main())
+    _turn_beside_the_loop(t, order)
     pages = [x for x in order if x != "loop"]
     assert pages == ["a", "b", "d"] and t.ticks == 1
     assert (
@@ -158,15 +150,7 @@ def test_a_pass_takes_every_pages_samples_before_it_redraws_any_page():
     order.clear()
     t.remove(handles["b"])
 
-    async def other() -> None:
-        for _ in range(3):
-            order.append("loop")
-            await asyncio.sleep(0)
-
-    async def main() -> None:
-        await asyncio.gather(t.turn(), other())
-
-    asyncio.run(main())
+    _turn_beside_the_loop(t, order)
     pages = [x for x in order if x != "loop"]
     assert pages == ["take a", "take c", "redraw a", "redraw c", "redraw d"]
     assert order.index("loop") < order.index("redraw c")  # the takes in one go, the redraws one per turn
@@ -259,3 +243,17 @@ def test_a_scan_is_one_path_of_squares_one_per_pixel_hit():
     assert out.count("<path") == 1 and out.count("h2v2h-2z") == 2
     x, y = f.px(1.0, 1.0)
     assert f"M{round(x) - 1} {round(y) - 1}h2v2h-2z" in out
+
+
+def _turn_beside_the_loop(t, order: list[str]) -> None:
+    """One turn of the clock while another task of the loop runs three steps, each step written as "loop"."""
+
+    async def other() -> None:
+        for _ in range(3):
+            order.append("loop")
+            await asyncio.sleep(0)
+
+    async def main() -> None:
+        await asyncio.gather(t.turn(), other())
+
+    asyncio.run(main())
