@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 from typing import TYPE_CHECKING, Annotated, Any, Optional
 
 import typer
@@ -51,8 +52,6 @@ the client asks again: a `list` that looked once said "no ownership authority an
 def _first_records(cl: OwnershipClient, timeout: float) -> dict[str, Any]:
     """The client's records once it trusts any (a copy taken under its lock: Zenoh's threads write the replica), or
     none after ``timeout`` s."""
-    import time
-
     deadline = time.monotonic() + timeout
     while not (records := cl.snapshot()) and time.monotonic() < deadline:
         time.sleep(0.05)

@@ -104,12 +104,7 @@ def test_the_clock_runs_on_the_event_loop_until_cancelled():
     t.add(lambda: seen.append(t.ticks))
 
     async def main() -> None:
-        task = asyncio.ensure_future(t.run())
-        for _ in range(2000):
-            if len(seen) >= 3:
-                break
-            await asyncio.sleep(0.005)
-        task.cancel()
+        await _run_until(t, lambda: len(seen) >= 3)
 
     asyncio.run(main())
     assert seen[:3] == [1, 2, 3]
@@ -194,12 +189,7 @@ def test_the_clock_rests_after_a_long_pass():
                 pass
 
         t.add(slow)
-        task = asyncio.ensure_future(t.run())
-        for _ in range(4000):
-            if len(starts) >= 4:
-                break
-            await asyncio.sleep(0.005)
-        task.cancel()
+        await _run_until(t, lambda: len(starts) >= 4)
 
     asyncio.run(main())
     gaps = [b - a for a, b in zip(starts, starts[1:])]
@@ -257,3 +247,13 @@ def _turn_beside_the_loop(t, order: list[str]) -> None:
         await asyncio.gather(t.turn(), other())
 
     asyncio.run(main())
+
+
+async def _run_until(t: Ticker, done, steps: int = 4000) -> None:
+    """Run the clock on this loop until ``done()`` (looked at every 5 ms, at most ``steps`` times), then cancel it."""
+    task = asyncio.ensure_future(t.run())
+    for _ in range(steps):
+        if done():
+            break
+        await asyncio.sleep(0.005)
+    task.cancel()
