@@ -15,6 +15,7 @@ import zenoh
 
 from fabric import keys
 from fabric.fencing import SimFence, fenced_scopes
+from fabric.token_watch import TokenWatch
 
 __all__ = ["FenceWatch"]
 
@@ -55,20 +56,18 @@ class FenceWatch:
                 return
             self._watching = True
 
-        def on_token(sample: zenoh.Sample) -> None:
+        def on_token(key: str, alive: bool) -> None:
             try:
-                pid = keys.parse(str(sample.key_expr)).leaf
+                pid = keys.parse(key).leaf
             except ValueError:
                 return
-            if sample.kind == zenoh.SampleKind.PUT:
+            if alive:
                 self.fence.sim_seen(pid)
             elif self.fence.sim_left(pid):
                 self._counters["fence_resets"] += 1
 
-        try:
-            sub = self._session.liveliness().declare_subscriber(
-                keys.peers_all(self._world, "sim"), on_token, history=True
-            )
+        try:  # a going is checked with the router: one heard after its link came back would refuse a live sim
+            watch = TokenWatch(self._session, keys.peers_all(self._world, "sim"), on_token)
         except Exception:  # a closing session
             return
-        self._resources.append(sub)
+        self._resources.append(watch)

@@ -28,6 +28,13 @@ from fabric.publishers import priority_for
 log = logging.getLogger("robofabric")
 
 ZENOH_QUERY_TIMEOUT = "Timeout"
+RELINK_S = 2.0
+"""After this session's own link was seen down, how long a query that nobody answered at once is asked again (every
+:data:`RELINK_POLL_S`, within its time limit): a client that was paused or starved past its lease finds its link
+closed and reconnects within about a second, and its routes come back a moment after the link. Its first
+query then met "nobody serves it" at once, though the server had been there all along (a 3 s pause of a student's
+process failed her next map query: issue 49)."""
+RELINK_POLL_S = 0.05
 """The error reply zenoh itself gives a query whose time limit ran out while a server was known: a
 silence, which must read as NoReply (retried by those who wait), not as a server's refusal."""
 
@@ -56,8 +63,12 @@ class Rpc:
         header: Callable[[str], Header],
         believe: Callable[[str, Any], bool],
         resources: list[Any],
+        linked: Callable[[], bool] | None = None,
     ) -> None:
+        """``linked()``: whether this session has a link to a router now (None: a router itself, always)."""
         self._session = session
+        self._linked = linked
+        self._down_at = float("-inf")  # when this session's link was last seen down
         self._counters = counters
         self._stamp = stamp
         self._header = header
@@ -182,7 +193,48 @@ class Rpc:
         replies: list[Reply] = []
         errors: list[str] = []
         t0 = time.monotonic()
-        for rep in self._session.get(selector, **self._get_options(selector, request, timeout, all_replies)):
+        while True:
+            self._ask(selector, request, t0 + timeout, all_replies, expected, replies, errors)
+            if replies or errors or not self._relinked(t0 + timeout):
+                break
+        if not replies:
+            if errors:
+                raise Refused(errors[0], key=selector)
+            raise _no_reply(selector, time.monotonic() - t0, timeout)
+        return replies
+
+    def _relinked(self, deadline: float) -> bool:
+        """After nobody answered at once: whether to ask again, having waited for this session's link where it is
+        down now, or a moment where it was down lately (its routes come back after it)."""
+        if self._linked is None:
+            return False
+        now = time.monotonic()
+        if not self._linked():
+            self._down_at = now
+            while not self._linked():
+                if time.monotonic() + RELINK_POLL_S >= deadline:
+                    return False
+                time.sleep(RELINK_POLL_S)
+            self._counters["queries_after_relink"] += 1
+            return True
+        if now - self._down_at > RELINK_S or now + RELINK_POLL_S >= deadline:
+            return False
+        time.sleep(RELINK_POLL_S)
+        return True
+
+    def _ask(
+        self,
+        selector: str,
+        request: Any,
+        deadline: float,
+        all_replies: bool,
+        expected: type | tuple[type, ...] | None,
+        replies: list[Reply],
+        errors: list[str],
+    ) -> None:
+        """One query with what is left of the time limit; replies and refusals are added to the lists."""
+        left = max(0.01, deadline - time.monotonic())
+        for rep in self._session.get(selector, **self._get_options(selector, request, left, all_replies)):
             if rep.ok is not None:
                 try:
                     msg = decode(rep.ok.payload.to_bytes(), expected)
@@ -198,11 +250,6 @@ class Rpc:
                 refusal = _refusal(rep.err)
                 if refusal is not None:
                     errors.append(refusal)
-        if not replies:
-            if errors:
-                raise Refused(errors[0], key=selector)
-            raise _no_reply(selector, time.monotonic() - t0, timeout)
-        return replies
 
     def call(self, selector: str, request: Any = None, *, timeout: float = 2.0, expected: Any = None) -> Any:
         """One query, one answer: the first reply's message."""
@@ -221,16 +268,20 @@ class Rpc:
         a reply that does not decode counts as a refusal, and replies are not fenced."""
         errors: list[str] = []
         t0 = time.monotonic()
-        for rep in self._session.get(selector, **self._get_options(selector, request, timeout, True)):
-            if rep.ok is not None:
-                try:
-                    return decode(rep.ok.payload.to_bytes(), expected)
-                except DecodeError as exc:
-                    errors.append(f"bad reply: {exc}")
-                    continue
-            refusal = _refusal(rep.err)
-            if refusal is not None:
-                errors.append(refusal)
+        while True:
+            left = max(0.01, t0 + timeout - time.monotonic())
+            for rep in self._session.get(selector, **self._get_options(selector, request, left, True)):
+                if rep.ok is not None:
+                    try:
+                        return decode(rep.ok.payload.to_bytes(), expected)
+                    except DecodeError as exc:
+                        errors.append(f"bad reply: {exc}")
+                        continue
+                refusal = _refusal(rep.err)
+                if refusal is not None:
+                    errors.append(refusal)
+            if errors or not self._relinked(t0 + timeout):
+                break
         if errors:
             raise Refused(errors[0], key=selector)
         raise _no_reply(selector, time.monotonic() - t0, timeout)

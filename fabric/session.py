@@ -34,6 +34,7 @@ from fabric.codec import DecodeError, decode, encode, load_plugins
 from fabric.config import FabricConfig, default_peer_id
 from fabric.exit import at_exit
 from fabric.fence_watch import FenceWatch
+from fabric.token_watch import TokenWatch
 from fabric.fencing import SimFence
 from fabric.history import LatestThenLive
 from fabric.interfaces import Header
@@ -95,6 +96,7 @@ class Fabric:
             header=self.header,
             believe=self._fence_watch.believe,
             resources=self._resources,
+            linked=self._linked if config.profile == "client" else None,
         )
         """Services: ``rpc.serve``, ``rpc.query``, ``rpc.call`` (:mod:`fabric.rpc`)."""
         self.reports = Reports(
@@ -304,8 +306,16 @@ class Fabric:
             if rep.ok is not None
         ]
 
-    def watch_peers(self, callback: Callable[[str, str, bool], None], kind: str = "*") -> zenoh.Subscriber[None]:
-        """``callback(kind, id, alive)`` on every token that appears or goes (existing ones first)."""
+    def _linked(self) -> bool:
+        """Whether this client has a link to a router now (it reconnects by itself after losing it)."""
+        try:
+            return any(True for _ in self.session.info.routers_zid())
+        except Exception:  # a closed session: nothing to wait for
+            return True
+
+    def watch_peers(self, callback: Callable[[str, str, bool], None], kind: str = "*") -> TokenWatch:
+        """``callback(kind, id, alive)`` on every token that appears or goes (existing ones first; a going checked
+        with the router: :mod:`fabric.token_watch`)."""
 
         def on_token(key: str, alive: bool) -> None:
             try:
@@ -316,16 +326,14 @@ class Fabric:
 
         return self.watch_tokens(keys.peers_all(self.world, kind), on_token)
 
-    def watch_tokens(self, key_expr: str, callback: Callable[[str, bool], None]) -> zenoh.Subscriber[None]:
+    def watch_tokens(self, key_expr: str, callback: Callable[[str, bool], None]) -> TokenWatch:
         """``callback(key, alive)`` on every liveliness token under ``key_expr`` that appears or goes (existing ones
-        first), its key as declared, parsed or not (a recorder keeps every token it hears, a made-up one too)."""
-
-        def on_sample(sample: zenoh.Sample) -> None:
-            callback(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
-
-        sub = self.session.liveliness().declare_subscriber(key_expr, on_sample, history=True)
-        self._resources.append(sub)
-        return sub
+        first), its key as declared, parsed or not (a recorder keeps every token it hears, a made-up one too). A
+        going is checked with the router, so a link that came back in another order ends with the token there
+        (:mod:`fabric.token_watch`)."""
+        watch = TokenWatch(self.session, key_expr, callback)
+        self._resources.append(watch)
+        return watch
 
 
 def shutdown_event(signals: Iterable[int] = (signal.SIGINT, signal.SIGTERM)) -> threading.Event:

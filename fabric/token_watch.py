@@ -1,0 +1,170 @@
+"""A liveliness watch whose last word on a token is the router's, not the order of two threads.
+
+When a client's link drops and comes back (a process starved or paused past its 2 s lease: a loaded laptop, a
+suite on four workers), zenoh tells its liveliness subscribers that every token it knew through the old link is
+gone, and that the ones the new link shows are there. The two come from different tasks, and nothing orders them
+for the subscriber: the going can come last. A watch that believed its last sample then held a live sim for gone,
+for good: the demo's bob (issue 49's grouped runs) saw "world 'demo' gone" while the sim ran on, and his session's
+fence refused every pose of that sim from then on, so his base reached its goal and he never saw it arrive.
+
+So a watch checks every going with the router: :data:`RECHECK_S` after it, it asks for that token (a liveliness
+query); when the token is there and nothing was heard of it since the going, its callback hears it is back. A
+token that truly went is answered by nobody, and nothing more happens. A change heard while a check is on its way
+wins over the check's answer (:meth:`TokenWatch.recheck_answer`): the check may have been answered before it.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+import zenoh
+
+__all__ = ["RECHECK_S", "TokenWatch"]
+
+log = logging.getLogger("robofabric")
+
+RECHECK_S: tuple[float, ...] = (0.5, 2.0)
+"""Seconds after a going at which its token is asked for again: a client reconnects within about a second of its
+link's loss (:data:`fabric.config.RECONNECT_RETRY`), and the second check covers a loaded box."""
+QUERY_TIMEOUT_S = 2.0
+"""How long a check's liveliness query may take (the router answers from its table)."""
+MAX_PENDING = 4096
+"""Checks kept waiting at once, all watches together: a flood of made-up tokens coming and going costs no more."""
+
+
+class TokenWatch:
+    """``callback(key, alive)`` on every liveliness token under ``key_expr`` that appears or goes (existing ones
+    first, with ``history``), a going checked with the router as the module says. ``undeclare()`` ends it
+    (idempotent). Calls to ``callback`` are serialized: one at a time, in the order decided."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key_expr: str,
+        callback: Callable[[str, bool], None],
+        *,
+        history: bool = True,
+        recheck_s: tuple[float, ...] | None = None,
+    ) -> None:
+        self._session = session
+        self._callback = callback
+        self._recheck_s = RECHECK_S if recheck_s is None else recheck_s  # read now: a test shortens it
+        self._lock = threading.RLock()
+        self._heard: dict[str, int] = {}  # a gone token's key -> changes heard of it (only while checks are due)
+        self._due: dict[str, int] = {}  # that key -> checks still due
+        self._count = itertools.count(1)
+        self._closed = False
+        self.rechecks = 0
+        """Checks answered (or failed): a test waits on it."""
+        self.restored = 0
+        """Tokens a check found there after their going was heard."""
+        self._sub = session.liveliness().declare_subscriber(key_expr, self._on_sample, history=history)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        self.heard(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+
+    def heard(self, key: str, alive: bool) -> None:
+        """A token's change as the subscription delivers it: told to the callback; a going is checked later."""
+        with self._lock:
+            if self._closed:
+                return
+            if key in self._heard:
+                self._heard[key] = next(self._count)
+            elif not alive and len(_RECHECKER) + len(self._recheck_s) <= MAX_PENDING:
+                self._heard[key] = next(self._count)
+            if not alive and key in self._heard:
+                mark = self._heard[key]
+                self._due[key] = self._due.get(key, 0) + len(self._recheck_s)
+                for delay in self._recheck_s:
+                    _RECHECKER.schedule(time.monotonic() + delay, self, key, mark)
+            self._tell(key, alive)
+
+    def recheck_answer(self, key: str, mark: int, present: bool | None) -> None:
+        """A check of ``key`` asked after the change numbered ``mark`` was heard: ``present`` whether the router
+        has the token (None: the query failed). A token still there, with nothing heard of it since, is back."""
+        with self._lock:
+            self.rechecks += 1
+            last = self._heard.get(key)
+            due = self._due.get(key, 0) - 1
+            if due > 0:
+                self._due[key] = due
+            else:  # its last check: the key is forgotten
+                self._due.pop(key, None)
+                self._heard.pop(key, None)
+            if self._closed or not present or last != mark:
+                return
+            if due > 0:
+                self._heard[key] = next(self._count)  # the checks still due were asked about the going: moot now
+            self.restored += 1
+            log.info("token %s is there after its going was heard: the link came back in another order", key)
+            self._tell(key, True)
+
+    def _tell(self, key: str, alive: bool) -> None:
+        try:
+            self._callback(key, alive)
+        except Exception:  # a callback's fault must not stop the watch
+            log.exception("liveliness callback on %s failed", key)
+
+    def ask(self, key: str) -> bool | None:
+        """Whether the router has ``key``'s token now (None: the query failed, or the session is closed)."""
+        try:
+            replies = self._session.liveliness().get(key, timeout=QUERY_TIMEOUT_S)
+            return any(r.ok is not None and str(r.ok.key_expr) == key for r in replies)
+        except Exception:
+            return None
+
+    def undeclare(self) -> None:
+        """Stop: nothing more reaches the callback. Takes no lock, so a closer holding a lock that the callback
+        takes cannot wait on a callback that waits on it."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._sub.undeclare()
+        except Exception:  # gone with a closing session
+            pass
+
+
+class _Rechecker:
+    """One thread for every watch of the process, started when a check is first due: checks are rare (a link
+    that dropped), so a class's pages, each with its watches, cost no thread until then."""
+
+    def __init__(self) -> None:
+        self._heap: list[tuple[float, int, TokenWatch, str, int]] = []
+        self._cond = threading.Condition()
+        self._order = itertools.count()
+        self._thread: threading.Thread | None = None
+
+    def __len__(self) -> int:
+        with self._cond:
+            return len(self._heap)
+
+    def schedule(self, when: float, watch: TokenWatch, key: str, mark: int) -> None:
+        with self._cond:
+            heapq.heappush(self._heap, (when, next(self._order), watch, key, mark))
+            if self._thread is None or not self._thread.is_alive():
+                self._thread = threading.Thread(target=self._run, name="token-recheck", daemon=True)
+                self._thread.start()
+            self._cond.notify()
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._heap or self._heap[0][0] > time.monotonic():
+                    if not self._heap:
+                        self._cond.wait(5.0)
+                        if not self._heap:
+                            self._thread = None  # idle: the next check starts another
+                            return
+                    else:
+                        self._cond.wait(max(0.0, self._heap[0][0] - time.monotonic()))
+                _, _, watch, key, mark = heapq.heappop(self._heap)
+            watch.recheck_answer(key, mark, watch.ask(key))
+
+
+_RECHECKER = _Rechecker()

@@ -1,0 +1,66 @@
+"""A query asked while this client's own link is down waits for the link, within its time limit (real zenoh on
+loopback: the router is closed and opened again on its port, and both clients reconnect by themselves)."""
+
+import threading
+import time
+
+import pytest
+
+from fabric import keys
+from fabric.interfaces import NoReply, Twist
+from fabric.session import Fabric
+from robofabric.testing import client, free_port, router_config, wait_until
+
+
+@pytest.fixture
+def cut_link(world):
+    """(server, caller, cut): two clients of a router on a fresh port; ``cut(down_s)`` closes the router and
+    opens another on the same port ``down_s`` later (in a thread: it returns at once)."""
+    port = free_port()
+    routers = [Fabric(router_config(world, port), kind="router", peer_id="router")]
+    server, caller = client(world, port, kind="compute", peer_id="c1"), client(world, port, kind="user", peer_id="u1")
+    threads: list[threading.Thread] = []
+
+    def cut(down_s: float) -> None:
+        routers[-1].close()
+        wait_until(lambda: not caller._linked(), what="the caller's link down")
+
+        def reopen() -> None:
+            time.sleep(down_s)  # the outage itself, not a wait on a condition
+            routers.append(Fabric(router_config(world, port), kind="router", peer_id="router"))
+
+        threads.append(threading.Thread(target=reopen))
+        threads[-1].start()
+
+    yield server, caller, cut
+    for t in threads:
+        t.join(timeout=10)
+    caller.close()
+    server.close()
+    for r in routers:
+        r.close()
+
+
+def test_a_query_asked_while_the_link_is_down_is_answered_once_it_is_back(world, cut_link):
+    server, caller, cut = cut_link
+    key = keys.srv(world, "fk", "arm1")
+    server.rpc.serve(key, lambda k, req: Twist(req.v * 2, 0.0, header=server.header(k)), expected=Twist)
+    wait_until(lambda: _answer(caller, key, 2.0), what="the first answer")
+    cut(0.8)
+    reply = caller.rpc.call(key, Twist(1.5, 0.0), timeout=10.0)  # before, at once: "nobody serves it"
+    assert reply.v == 3.0
+    assert caller.counters["queries_after_relink"] >= 1  # it waited for the link, then asked again
+
+
+def test_nobody_serving_still_says_so_at_once_on_a_link_that_is_up(world, cut_link):
+    _server, caller, _cut = cut_link
+    with pytest.raises(NoReply, match="nobody serves it"):  # said only within half the limit: not waited out
+        caller.rpc.call(keys.srv(world, "fk", "nobody"), Twist(1.0, 0.0), timeout=5.0)
+    assert caller.counters["queries_after_relink"] == 0
+
+
+def _answer(caller: Fabric, key: str, v: float) -> bool:
+    try:
+        return caller.rpc.call(key, Twist(v / 2, 0.0), timeout=1.0).v == v
+    except NoReply:
+        return False

@@ -1,0 +1,94 @@
+"""A liveliness watch checks every going with the router (real zenoh sessions on loopback).
+
+The order in which a client's link loss and its return reach a subscriber cannot be chosen from a test, so a
+late going is handed to the watch as its subscription hands it one (``heard``); the check that follows asks the
+real router."""
+
+import threading
+
+from fabric import keys
+from fabric.token_watch import TokenWatch
+from robofabric.testing import wait_until
+
+
+class Told:
+    """What a watch told its callback, in order."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, bool]] = []
+        self.lock = threading.Lock()
+
+    def __call__(self, key: str, alive: bool) -> None:
+        with self.lock:
+            self.calls.append((key, alive))
+
+    def of(self, key: str) -> list[bool]:
+        with self.lock:
+            return [alive for k, alive in self.calls if k == key]
+
+
+def _watched_sim(world, connect, recheck_s=(0.05, 0.2)):
+    sim = connect("sim", "s1")
+    user = connect("user", "alice")
+    told = Told()
+    watch = TokenWatch(user.session, keys.peers_all(world, "sim"), told, recheck_s=recheck_s)
+    key = wait_until(
+        lambda: next((k for k, alive in told.calls if alive), None), what="the sim's token", seen=lambda: told.calls
+    )
+    return sim, watch, told, key
+
+
+def test_a_going_heard_after_the_link_came_back_is_undone_by_the_router_s_answer(world, connect):
+    _sim, watch, told, key = _watched_sim(world, connect)
+    watch.heard(key, False)  # the old link's going, delivered after the new link's token
+    wait_until(
+        lambda: told.of(key)[-1:] == [True] and watch.restored == 1, what="the token back", seen=lambda: told.calls
+    )
+    assert told.of(key) == [True, False, True]
+    wait_until(lambda: watch.rechecks == 2, what="both checks answered", seen=lambda: watch.rechecks)
+    assert told.of(key) == [True, False, True] and watch.restored == 1  # the second check found it told already
+    watch.undeclare()
+
+
+def test_a_token_that_truly_went_stays_gone(world, connect):
+    sim, watch, told, key = _watched_sim(world, connect)
+    sim.close()
+    wait_until(lambda: told.of(key)[-1:] == [False], what="the going", seen=lambda: told.calls)
+    wait_until(lambda: watch.rechecks == 2, what="both checks answered", seen=lambda: watch.rechecks)
+    assert told.of(key) == [True, False] and watch.restored == 0
+    watch.undeclare()
+
+
+def test_a_change_heard_while_a_check_is_out_wins_over_its_answer(world, connect):
+    _sim, watch, told, key = _watched_sim(world, connect, recheck_s=(30.0,))
+    watch.heard(key, False)
+    mark = watch._heard[key]
+    watch.heard(key, True)  # heard after the check was asked
+    watch.recheck_answer(key, mark, True)
+    assert told.of(key) == [True, False, True]  # no second "back"
+    watch.heard(key, False)
+    watch.recheck_answer(key, watch._heard[key], False)  # the router has no token: it stays gone
+    assert told.of(key) == [True, False, True, False] and watch.restored == 0
+    watch.undeclare()
+    watch.heard(key, True)
+    assert told.of(key)[-1] is False  # nothing reaches the callback once undeclared
+
+
+def test_a_session_s_fence_believes_its_sim_again_after_a_late_going(world, connect, monkeypatch):
+    """The demo's bob: a going heard after the link came back left the sim departed in his session's fence, and
+    every pose of it was refused from then on."""
+    monkeypatch.setattr("fabric.token_watch.RECHECK_S", (0.05,))
+    _sim, _watch, _told, key = _watched_sim(world, connect)
+    bob = connect("user", "bob")
+    bob._fence_watch._watch_sims()  # as on his first termed sample
+    watch = next(r for r in bob._resources if isinstance(r, TokenWatch))
+    pid = keys.parse(key).leaf
+    wait_until(lambda: pid in bob.sim_fence.sims, what="the sim seen", seen=lambda: bob.sim_fence.sims)
+    assert bob.sim_fence.believe(1, pid, ("base1",))
+    watch.heard(key, False)
+    assert not bob.sim_fence.believe(1, pid, ("base1",))  # departed: its poses are refused
+    wait_until(
+        lambda: bob.sim_fence.believe(1, pid, ("base1",)),
+        what="the sim believed again",
+        seen=lambda: bob.sim_fence.sims,
+    )
