@@ -35,6 +35,10 @@ closed and reconnects within about a second, and its routes come back a moment a
 query then met "nobody serves it" at once, though the server had been there all along (a 3 s pause of a student's
 process failed her next map query: issue 49)."""
 RELINK_POLL_S = 0.05
+RELINK_EARLY_S = 0.25
+"""A query that nobody answered and that ended later than this after it was asked, before its limit, ended early:
+zenoh ends one at once when no route leads to a server, at its limit when a server is silent, and in between
+when the link closed under it."""
 """The error reply zenoh itself gives a query whose time limit ran out while a server was known: a
 silence, which must read as NoReply (retried by those who wait), not as a server's refusal."""
 
@@ -64,11 +68,13 @@ class Rpc:
         believe: Callable[[str, Any], bool],
         resources: list[Any],
         linked: Callable[[], bool] | None = None,
+        lost_at: Callable[[], float] = lambda: float("-inf"),
     ) -> None:
-        """``linked()``: whether this session has a link to a router now (None: a router itself, always)."""
+        """``linked()``: whether this client has a link to a router now (None: a router itself, always linked);
+        ``lost_at()``: when it last lost one (monotonic seconds)."""
         self._session = session
         self._linked = linked
-        self._down_at = float("-inf")  # when this session's link was last seen down
+        self._lost_at = lost_at
         self._counters = counters
         self._stamp = stamp
         self._header = header
@@ -194,8 +200,9 @@ class Rpc:
         errors: list[str] = []
         t0 = time.monotonic()
         while True:
+            asked_at = time.monotonic()
             self._ask(selector, request, t0 + timeout, all_replies, expected, replies, errors)
-            if replies or errors or not self._relinked(t0 + timeout):
+            if replies or errors or not self._relinked(asked_at, t0 + timeout):
                 break
         if not replies:
             if errors:
@@ -203,23 +210,26 @@ class Rpc:
             raise _no_reply(selector, time.monotonic() - t0, timeout)
         return replies
 
-    def _relinked(self, deadline: float) -> bool:
-        """After nobody answered at once: whether to ask again, having waited for this session's link where it is
-        down now, or a moment where it was down lately (its routes come back after it)."""
+    def _relinked(self, asked_at: float, deadline: float) -> bool:
+        """After nobody answered a query asked at ``asked_at``: whether to ask again within ``deadline``. Yes where
+        this client's link is down now (once it is back), was lost lately (its routes come back a moment after it),
+        or the query ended early, neither at once nor at its limit (the link closed under it: a process woken from
+        a pause learns only then that its router closed its link)."""
         if self._linked is None:
             return False
         now = time.monotonic()
+        if now + RELINK_POLL_S >= deadline:
+            return False
         if not self._linked():
-            self._down_at = now
             while not self._linked():
                 if time.monotonic() + RELINK_POLL_S >= deadline:
                     return False
                 time.sleep(RELINK_POLL_S)
-            self._counters["queries_after_relink"] += 1
-            return True
-        if now - self._down_at > RELINK_S or now + RELINK_POLL_S >= deadline:
-            return False
-        time.sleep(RELINK_POLL_S)
+        elif now - self._lost_at() > RELINK_S and now - asked_at < RELINK_EARLY_S:
+            return False  # a link that is up, and was, said at once that nobody serves it: so it is
+        else:
+            time.sleep(RELINK_POLL_S)
+        self._counters["queries_after_relink"] += 1
         return True
 
     def _ask(
@@ -269,7 +279,8 @@ class Rpc:
         errors: list[str] = []
         t0 = time.monotonic()
         while True:
-            left = max(0.01, t0 + timeout - time.monotonic())
+            asked_at = time.monotonic()
+            left = max(0.01, t0 + timeout - asked_at)
             for rep in self._session.get(selector, **self._get_options(selector, request, left, True)):
                 if rep.ok is not None:
                     try:
@@ -280,7 +291,7 @@ class Rpc:
                 refusal = _refusal(rep.err)
                 if refusal is not None:
                     errors.append(refusal)
-            if errors or not self._relinked(t0 + timeout):
+            if errors or not self._relinked(asked_at, t0 + timeout):
                 break
         if errors:
             raise Refused(errors[0], key=selector)

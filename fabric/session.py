@@ -86,6 +86,9 @@ class Fabric:
         self._resources: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
         self.session = zenoh.open(config.zenoh_config())
+        self._link_lost_at = float("-inf")
+        """When a transport of this session last closed (monotonic s): a query ridden over it asks again (fabric.rpc)."""
+        self._resources.append(self.session.info.declare_transport_events_listener(self._on_transport))
         self._fence_watch = FenceWatch(
             self.session, self.world, self.sim_fence, counters=self.counters, resources=self._resources
         )
@@ -97,6 +100,7 @@ class Fabric:
             believe=self._fence_watch.believe,
             resources=self._resources,
             linked=self._linked if config.profile == "client" else None,
+            lost_at=lambda: self._link_lost_at,
         )
         """Services: ``rpc.serve``, ``rpc.query``, ``rpc.call`` (:mod:`fabric.rpc`)."""
         self.reports = Reports(
@@ -305,6 +309,10 @@ class Fabric:
             for rep in self.session.liveliness().get(key_expr, timeout=timeout)
             if rep.ok is not None
         ]
+
+    def _on_transport(self, event: zenoh.TransportEvent) -> None:
+        if event.kind == zenoh.SampleKind.DELETE:
+            self._link_lost_at = time.monotonic()
 
     def _linked(self) -> bool:
         """Whether this client has a link to a router now (it reconnects by itself after losing it)."""

@@ -28,9 +28,10 @@ __all__ = ["RECHECK_S", "TokenWatch"]
 
 log = logging.getLogger("robofabric")
 
-RECHECK_S: tuple[float, ...] = (0.5, 2.0)
+RECHECK_S: tuple[float, ...] = (0.5, 2.0, 5.0, 15.0)
 """Seconds after a going at which its token is asked for again: a client reconnects within about a second of its
-link's loss (:data:`fabric.config.RECONNECT_RETRY`), and the second check covers a loaded box."""
+link's loss (:data:`fabric.config.RECONNECT_RETRY`); the later checks cover a loaded box, where a link can take
+seconds to come back (a check asked while it is down finds nothing, as for a token that went)."""
 QUERY_TIMEOUT_S = 2.0
 """How long a check's liveliness query may take (the router answers from its table)."""
 MAX_PENDING = 4096
