@@ -5,6 +5,7 @@ publishers (zenoh's advanced subscriber dropped those: 1,743 of 1,820 poses on r
 from __future__ import annotations
 
 import threading
+import time
 from dataclasses import dataclass
 from collections import defaultdict
 
@@ -35,7 +36,18 @@ def test_history_delivers_every_live_sample_of_every_publisher_and_each_latest_v
     wait_until(lambda: pub.wait_matching(goal, 0.1), what="the witness known to the publisher")
     for x in (1.0, 2.0, 3.0):  # only the last matters to a late joiner
         pub.publish(goal, _pose(x, 0))
-    wait_until(lambda: witnessed[-1:] == [3.0], what="the goal's last put through the router", seen=lambda: witnessed)
+    again = [time.monotonic() + 3.0]
+
+    def through() -> bool:
+        """3.0 heard last; put again every 3 s until it is (a grouped run at load 16 never heard it: lost on its way)."""
+        if witnessed[-1:] == [3.0]:
+            return True
+        if time.monotonic() > again[0]:
+            pub.publish(goal, _pose(3.0, 0))
+            again[0] = time.monotonic() + 3.0
+        return False
+
+    wait_until(through, timeout=20, what="the goal's last put through the router", seen=lambda: witnessed)
     got: dict[str, list[int]] = defaultdict(list)
     goals: list[float] = []
     lock = threading.Lock()
