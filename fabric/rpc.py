@@ -36,9 +36,11 @@ query then met "nobody serves it" at once, though the server had been there all 
 process failed her next map query: issue 49)."""
 RELINK_POLL_S = 0.05
 RELINK_EARLY_S = 0.25
-"""A query that nobody answered and that ended later than this after it was asked, before its limit, ended early:
-zenoh ends one at once when no route leads to a server, at its limit when a server is silent, and in between
-when the link closed under it."""
+"""A query that nobody answered and that ended later than this after it was asked, before its limit, may have ended
+early: zenoh ends one at once when no route leads to a server, at its limit when a server is silent, and in between
+when the link closed under it (or on a loaded box, at once taking that long)."""
+RELINK_CONFIRM_S = 0.5
+"""How long such a query's end waits to hear whether the link closed under it."""
 """The error reply zenoh itself gives a query whose time limit ran out while a server was known: a
 silence, which must read as NoReply (retried by those who wait), not as a server's refusal."""
 
@@ -213,24 +215,38 @@ class Rpc:
     def _relinked(self, asked_at: float, deadline: float) -> bool:
         """After nobody answered a query asked at ``asked_at``: whether to ask again within ``deadline``. Yes where
         this client's link is down now (once it is back), was lost lately (its routes come back a moment after it),
-        or the query ended early, neither at once nor at its limit (the link closed under it: a process woken from
-        a pause learns only then that its router closed its link)."""
+        or was lost while the query was out (a process woken from a pause learns only then that its router closed
+        its link, and its query ends early, neither at once nor at its limit). A query that a link up all along
+        answered with nobody, slowly or not, is not asked again: "nobody serves it" stays the answer."""
         if self._linked is None:
             return False
-        now = time.monotonic()
-        if now + RELINK_POLL_S >= deadline:
+        if time.monotonic() + RELINK_POLL_S >= deadline:
             return False
-        if not self._linked():
-            while not self._linked():
-                if time.monotonic() + RELINK_POLL_S >= deadline:
-                    return False
-                time.sleep(RELINK_POLL_S)
-        elif now - self._lost_at() > RELINK_S and now - asked_at < RELINK_EARLY_S:
-            return False  # a link that is up, and was, said at once that nobody serves it: so it is
-        else:
+        lost_lately = time.monotonic() - self._lost_at() <= RELINK_S
+        if not (lost_lately or not self._linked() or self._lost_under(asked_at, deadline)):
+            return False
+        while not self._linked():
+            if time.monotonic() + RELINK_POLL_S >= deadline:
+                return False
             time.sleep(RELINK_POLL_S)
+        time.sleep(RELINK_POLL_S)
         self._counters["queries_after_relink"] += 1
         return True
+
+    def _lost_under(self, asked_at: float, deadline: float) -> bool:
+        """Whether the link was lost while a query asked at ``asked_at`` was out: only a query that ended early
+        (later than :data:`RELINK_EARLY_S`) is looked at, for up to :data:`RELINK_CONFIRM_S` (the transport's
+        close is told on another thread, a moment after the query it ended)."""
+        linked = self._linked
+        if linked is None or time.monotonic() - asked_at < RELINK_EARLY_S:
+            return False
+        until = min(deadline, time.monotonic() + RELINK_CONFIRM_S)
+        while True:
+            if self._lost_at() >= asked_at or not linked():
+                return True
+            if time.monotonic() + RELINK_POLL_S >= until:
+                return False
+            time.sleep(RELINK_POLL_S)
 
     def _ask(
         self,
