@@ -140,6 +140,11 @@ def log_scene(logger: WorldLogger, scene: str) -> bool:
         return False
 
 
+FIRST_LOOK_S = 30.0
+"""How long a viewer that knows no world yet asks a sim that came for its description (a loaded sim's token can come
+seconds before its service answers)."""
+
+
 def query_world_info(fab: Fabric, timeout: float = 2.0) -> WorldInfo | None:
     """The sim peer's world description, or None when no sim answers (the viewer then guesses types)."""
     try:
@@ -238,16 +243,21 @@ class Viewer:
     def start(self) -> None:
         """Learn the world, subscribe, and ask for the state a late joiner missed (ownership, maps)."""
         info = self.catalog.world_info = query_world_info(self.fab)
-        if info is not None and info.scene:
-            log_scene(self.logger, info.scene)
-        frame = framing([tuple(float(v) for v in r.pose[:3]) for r in info.robots]) if info is not None else None
-        if frame is not None:  # the first view shows every robot, not the scene's bounds (shelves and walls)
-            self.rec.send_blueprint(blueprint(frame), make_active=True, make_default=True)
+        if info is not None:
+            self._draw_world(info)
         self.fab.subscribe(
             keys.world_all(self.fab.world), self.receive, history=True
         )  # maps, paths, objects set before we joined
         self.fab.watch_peers(self._on_sim, kind="sim")  # "world gone" when the last sim peer leaves
         self._ask_records()
+
+    def _draw_world(self, info: WorldInfo) -> None:
+        """The scene, and a first view that shows every robot, not the scene's bounds (shelves and walls)."""
+        if info.scene:
+            log_scene(self.logger, info.scene)
+        frame = framing([tuple(float(v) for v in r.pose[:3]) for r in info.robots])
+        if frame is not None:
+            self.rec.send_blueprint(blueprint(frame), make_active=True, make_default=True)
 
     def _ask_records(self) -> None:
         """Every ownership record, asked: a record is published only when it changes, so one published before
@@ -267,7 +277,10 @@ class Viewer:
             (self._sims.add if alive else self._sims.discard)(peer_id)
             now = bool(self._sims)
             first, self._world_seen = now and not self._world_seen, self._world_seen or now
-        if new and self.catalog.world_info is not None:  # a sim joining the world (a shard) describes robots of its own
+        # a sim joining the world (a shard) describes robots of its own; the first one does too when the look at start
+        # found no sim (a viewer started before its sim, or one too loaded to answer in time: the clock-skew lab's
+        # viewer drew nothing for its whole run so)
+        if new:
             threading.Thread(target=self._learn_world, args=(peer_id,), name="viewer-world", daemon=True).start()
         if now == was:
             return
@@ -287,14 +300,17 @@ class Viewer:
     def _learn_world(self, sim: str, wait_s: float = 5.0) -> None:
         """Ask the world's description again (the union of every sim's part), off Zenoh's callback threads, until
         it has robots of ``sim`` (its token comes before its service) or ``wait_s`` pass (a standby has none)."""
-        deadline = time.monotonic() + wait_s
+        deadline = time.monotonic() + (wait_s if self.catalog.world_info is not None else FIRST_LOOK_S)
         while not self._stopped.is_set():
             try:
                 info = query_world_info(self.fab)
             except Exception:  # the session closed under it
                 return
             if info is not None:
+                first = self.catalog.world_info is None
                 self.catalog.world_info = info
+                if first:
+                    self._draw_world(info)
                 if any(r.sim == sim for r in info.robots):
                     self._ask_records()  # its ownership records too (its authority serves before its world does)
                     return

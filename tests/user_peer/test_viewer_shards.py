@@ -59,3 +59,26 @@ def test_a_shard_joining_later_has_its_robots_in_the_viewers_world(world, router
     finally:
         stop.set()
         t.join(timeout=20)
+
+
+def test_a_viewer_started_before_its_sim_learns_the_world_when_the_sim_comes(world, router, connect, tmp_path):
+    """Its look at the start finds no sim: the first sim's token makes it ask again (before, it never did, and a
+    loaded lab's viewer drew nothing for its whole run)."""
+    viewer = Viewer(
+        client_config(world, router[1]), ViewerOptions(save=tmp_path / "v.rrd", max_hz=0), peer_id="viewer-early"
+    )
+    try:
+        viewer.start()
+        assert viewer.catalog.world_info is None  # nobody served the world at its start
+        sim_a = connect("sim", "sim-a")
+        sim_a.rpc.serve(keys.srv(world, "world"), lambda key, req: _part(world, "sim-a", "base0"))
+        wait_until(
+            lambda: (
+                viewer.catalog.world_info is not None and [r.id for r in viewer.catalog.world_info.robots] == ["base0"]
+            ),
+            timeout=30,
+            what="the world learnt from the sim that came",
+            seen=lambda: viewer.catalog.world_info,
+        )
+    finally:
+        viewer.close()
