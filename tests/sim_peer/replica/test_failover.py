@@ -435,6 +435,7 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
                 s,
                 first.msg.header,
                 first.t - kills[dead],
+                procs.output(sims[heir])[-2500:],  # the heir's own account: a loaded run saw 9 s, with no log kept
             )
         info = obs.rpc.call(keys.srv(world, "world"), timeout=5.0, expected=WorldInfo)
         assert (info.header.term, info.header.source) == (term, heir), info.header
