@@ -11,6 +11,10 @@ So a watch checks every going with the router: :data:`RECHECK_S` after it, it as
 query); when the token is there and nothing was heard of it since the going, its callback hears it is back. A
 token that truly went is answered by nobody, and nothing more happens. A change heard while a check is on its way
 wins over the check's answer (:meth:`TokenWatch.recheck_answer`): the check may have been answered before it.
+
+A check is one query for the watch's whole key expression, whatever number of goings are due then: a flood of 6,000
+logins declaring and closing costs each watch a query at each check time, not one per token (one per token made
+the declaration flood's test 44 s -> 97 s, and loaded the box for the tests beside it).
 """
 
 from __future__ import annotations
@@ -33,9 +37,11 @@ RECHECK_S: tuple[float, ...] = (0.5, 2.0, 5.0, 15.0)
 link's loss (:data:`fabric.config.RECONNECT_RETRY`); the later checks cover a loaded box, where a link can take
 seconds to come back (a check asked while it is down finds nothing, as for a token that went)."""
 QUERY_TIMEOUT_S = 2.0
+MIN_INTERVAL_S = 0.25
+"""The least time between two of a watch's checks: a flood's goings, due one after another, share a query."""
 """How long a check's liveliness query may take (the router answers from its table)."""
 MAX_PENDING = 4096
-"""Checks kept waiting at once, all watches together: a flood of made-up tokens coming and going costs no more."""
+"""Goings a watch keeps waiting for their checks: a flood of made-up tokens coming and going costs no more."""
 
 
 class TokenWatch:
@@ -59,11 +65,16 @@ class TokenWatch:
         self._heard: dict[str, int] = {}  # a gone token's key -> changes heard of it (only while checks are due)
         self._due: dict[str, int] = {}  # that key -> checks still due
         self._count = itertools.count(1)
+        self._checks: list[tuple[float, str, int]] = []  # (when, key, the change it asks about), a heap
+        self._called_at: float | None = None  # when the rechecker calls check_due next (None: not scheduled)
+        self._key_expr = key_expr
         self._closed = False
         self.rechecks = 0
         """Checks answered (or failed): a test waits on it."""
         self.restored = 0
         """Tokens a check found there after their going was heard."""
+        self.queries = 0
+        """Liveliness queries the checks made."""
         self._sub = session.liveliness().declare_subscriber(key_expr, self._on_sample, history=history)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
@@ -76,14 +87,47 @@ class TokenWatch:
                 return
             if key in self._heard:
                 self._heard[key] = next(self._count)
-            elif not alive and len(_RECHECKER) + len(self._recheck_s) <= MAX_PENDING:
+            elif not alive and len(self._checks) + len(self._recheck_s) <= MAX_PENDING:
                 self._heard[key] = next(self._count)
-            if not alive and key in self._heard:
-                mark = self._heard[key]
+            if not alive and key in self._heard and self._recheck_s:
+                mark, now = self._heard[key], time.monotonic()
                 self._due[key] = self._due.get(key, 0) + len(self._recheck_s)
                 for delay in self._recheck_s:
-                    _RECHECKER.schedule(time.monotonic() + delay, self, key, mark)
+                    heapq.heappush(self._checks, (now + delay, key, mark))
+                first = now + min(self._recheck_s)
+                if self._called_at is None or first < self._called_at:
+                    self._called_at = first
+                    _RECHECKER.schedule(first, self)
             self._tell(key, alive)
+
+    def called_at(self) -> float | None:
+        """When the rechecker is to call :meth:`check_due` next (None: never)."""
+        with self._lock:
+            return self._called_at
+
+    def check_due(self) -> float | None:
+        """Ask the router once for every check due now; returns when to be called next (None: no check left). At
+        most one query every :data:`MIN_INTERVAL_S`, whatever number of goings come due."""
+        with self._lock:
+            now = time.monotonic()
+            due: list[tuple[str, int]] = []
+            while self._checks and self._checks[0][0] <= now:
+                _, key, mark = heapq.heappop(self._checks)
+                due.append((key, mark))
+            if self._closed:
+                self._checks.clear()
+        if due and not self._closed:
+            present = self.ask_all()
+            for key, mark in due:
+                self.recheck_answer(key, mark, None if present is None else key in present)
+        with self._lock:
+            nxt = (
+                max(self._checks[0][0], time.monotonic() + MIN_INTERVAL_S)
+                if self._checks and not self._closed
+                else None
+            )
+            self._called_at = nxt
+            return nxt
 
     def recheck_answer(self, key: str, mark: int, present: bool | None) -> None:
         """A check of ``key`` asked after the change numbered ``mark`` was heard: ``present`` whether the router
@@ -111,11 +155,13 @@ class TokenWatch:
         except Exception:  # a callback's fault must not stop the watch
             log.exception("liveliness callback on %s failed", key)
 
-    def ask(self, key: str) -> bool | None:
-        """Whether the router has ``key``'s token now (None: the query failed, or the session is closed)."""
+    def ask_all(self) -> set[str] | None:
+        """The keys of the tokens the router has under this watch's key expression now (None: the query failed, or
+        the session is closed)."""
+        self.queries += 1
         try:
-            replies = self._session.liveliness().get(key, timeout=QUERY_TIMEOUT_S)
-            return any(r.ok is not None and str(r.ok.key_expr) == key for r in replies)
+            replies = self._session.liveliness().get(self._key_expr, timeout=QUERY_TIMEOUT_S)
+            return {str(r.ok.key_expr) for r in replies if r.ok is not None}
         except Exception:
             return None
 
@@ -136,18 +182,16 @@ class _Rechecker:
     that dropped), so a class's pages, each with its watches, cost no thread until then."""
 
     def __init__(self) -> None:
-        self._heap: list[tuple[float, int, TokenWatch, str, int]] = []
+        self._heap: list[tuple[float, int, TokenWatch]] = []
         self._cond = threading.Condition()
         self._order = itertools.count()
         self._thread: threading.Thread | None = None
 
-    def __len__(self) -> int:
+    def schedule(self, when: float, watch: TokenWatch) -> None:
+        """Have ``watch`` check what is due at ``when`` (a watch scheduled twice checks twice; the second finds
+        nothing due, or what came due since)."""
         with self._cond:
-            return len(self._heap)
-
-    def schedule(self, when: float, watch: TokenWatch, key: str, mark: int) -> None:
-        with self._cond:
-            heapq.heappush(self._heap, (when, next(self._order), watch, key, mark))
+            heapq.heappush(self._heap, (when, next(self._order), watch))
             if self._thread is None or not self._thread.is_alive():
                 self._thread = threading.Thread(target=self._run, name="token-recheck", daemon=True)
                 self._thread.start()
@@ -164,8 +208,12 @@ class _Rechecker:
                             return
                     else:
                         self._cond.wait(max(0.0, self._heap[0][0] - time.monotonic()))
-                _, _, watch, key, mark = heapq.heappop(self._heap)
-            watch.recheck_answer(key, mark, watch.ask(key))
+                when, _, watch = heapq.heappop(self._heap)
+            if watch.called_at() != when:
+                continue  # a watch called sooner since, or no longer: one chain of calls per watch
+            later = watch.check_due()
+            if later is not None:
+                self.schedule(later, watch)
 
 
 _RECHECKER = _Rechecker()

@@ -59,6 +59,22 @@ def test_a_token_that_truly_went_stays_gone(world, connect):
     watch.undeclare()
 
 
+def test_a_flood_of_goings_shares_its_checks_queries(world, connect):
+    """6,000 logins declaring and closing: one query per check time for the watch, not one per token (one per token
+    doubled the declaration flood's test and loaded the box beside it)."""
+    _sim, watch, told, key = _watched_sim(world, connect, recheck_s=(0.05, 0.3))
+    made_up = [key.rsplit("/", 1)[0] + f"/flood{i}" for i in range(2000)]
+    for k in made_up:
+        watch.heard(k, False)
+    wait_until(lambda: watch.rechecks == 2 * len(made_up), what="every check answered", seen=lambda: watch.rechecks)
+    assert watch.restored == 0 and watch.queries <= 6, watch.queries
+    watch.heard(key, False)  # the real one, after: still checked, and back
+    wait_until(
+        lambda: told.of(key)[-1:] == [True] and watch.restored == 1, what="the sim back", seen=lambda: told.calls
+    )
+    watch.undeclare()
+
+
 def test_a_change_heard_while_a_check_is_out_wins_over_its_answer(world, connect):
     _sim, watch, told, key = _watched_sim(world, connect, recheck_s=(30.0,))
     watch.heard(key, False)
