@@ -9,7 +9,7 @@ from scratch (term 1) is believed again after an earlier take-over.
 from __future__ import annotations
 
 import threading
-from typing import Any
+from typing import Any, Callable
 
 import zenoh
 
@@ -25,8 +25,16 @@ class FenceWatch:
     undeclares when it closes. Counts ``stale_authority`` and ``fence_resets`` in ``counters``."""
 
     def __init__(
-        self, session: zenoh.Session, world: str, fence: SimFence, *, counters: Any, resources: list[Any]
+        self,
+        session: zenoh.Session,
+        world: str,
+        fence: SimFence,
+        *,
+        counters: Any,
+        resources: list[Any],
+        link_lost_at: Callable[[], float] | None = None,
     ) -> None:
+        self._link_lost_at = link_lost_at
         self._session = session
         self._world = world
         self.fence = fence
@@ -67,7 +75,9 @@ class FenceWatch:
                 self._counters["fence_resets"] += 1
 
         try:  # a going is checked with the router: one heard after its link came back would refuse a live sim
-            watch = TokenWatch(self._session, keys.peers_all(self._world, "sim"), on_token)
+            watch = TokenWatch(
+                self._session, keys.peers_all(self._world, "sim"), on_token, link_lost_at=self._link_lost_at
+            )
         except Exception:  # a closing session
             return
         self._resources.append(watch)

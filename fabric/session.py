@@ -90,7 +90,12 @@ class Fabric:
         """When a transport of this session last closed (monotonic s): a query ridden over it asks again (fabric.rpc)."""
         self._resources.append(self.session.info.declare_transport_events_listener(self._on_transport))
         self._fence_watch = FenceWatch(
-            self.session, self.world, self.sim_fence, counters=self.counters, resources=self._resources
+            self.session,
+            self.world,
+            self.sim_fence,
+            counters=self.counters,
+            resources=self._resources,
+            link_lost_at=lambda: self._link_lost_at,
         )
         self.rpc = Rpc(
             self.session,
@@ -339,7 +344,7 @@ class Fabric:
         first), its key as declared, parsed or not (a recorder keeps every token it hears, a made-up one too). A
         going is checked with the router, so a link that came back in another order ends with the token there
         (:mod:`fabric.token_watch`)."""
-        watch = TokenWatch(self.session, key_expr, callback)
+        watch = TokenWatch(self.session, key_expr, callback, link_lost_at=lambda: self._link_lost_at)
         self._resources.append(watch)
         return watch
 

@@ -12,9 +12,11 @@ query); when the token is there and nothing was heard of it since the going, its
 token that truly went is answered by nobody, and nothing more happens. A change heard while a check is on its way
 wins over the check's answer (:meth:`TokenWatch.recheck_answer`): the check may have been answered before it.
 
-A check is one query for the watch's whole key expression, whatever number of goings are due then: a flood of 6,000
-logins declaring and closing costs each watch a query at each check time, not one per token (one per token made
-the declaration flood's test 44 s -> 97 s, and loaded the box for the tests beside it).
+Only a going heard about a loss of this session's own link is checked (the race needs one), so a flood of 6,000
+logins closing while the link holds asks nothing; and a check is one query for the watch's whole key expression,
+whatever number of goings are due then. Checking every going, one query per token, made the declaration flood's
+test 44 s -> 97 s and loaded the box beside it; one query per check time for all of them, replies of thousands of
+tokens, did worse (116 s, and six tests beside it failed).
 """
 
 from __future__ import annotations
@@ -37,6 +39,10 @@ RECHECK_S: tuple[float, ...] = (0.5, 2.0, 5.0, 15.0)
 link's loss (:data:`fabric.config.RECONNECT_RETRY`); the later checks cover a loaded box, where a link can take
 seconds to come back (a check asked while it is down finds nothing, as for a token that went)."""
 QUERY_TIMEOUT_S = 2.0
+LINK_NEAR_S = 1.0
+"""A going is checked when this session lost a link no longer than this before it was heard, or any time after (the
+link's close and the goings it brings are told on different threads, in either order). A going heard while the
+link held, as each of a flood's 6,000 closing logins, is the router's word: nothing is asked."""
 MIN_INTERVAL_S = 0.25
 """The least time between two of a watch's checks: a flood's goings, due one after another, share a query."""
 """How long a check's liveliness query may take (the router answers from its table)."""
@@ -57,7 +63,11 @@ class TokenWatch:
         *,
         history: bool = True,
         recheck_s: tuple[float, ...] | None = None,
+        link_lost_at: Callable[[], float] | None = None,
     ) -> None:
+        """``link_lost_at()``: when this session last lost a link (monotonic s); a going is checked only when one was
+        lost about then (None: every going is checked)."""
+        self._link_lost_at = link_lost_at
         self._session = session
         self._callback = callback
         self._recheck_s = RECHECK_S if recheck_s is None else recheck_s  # read now: a test shortens it
@@ -65,7 +75,7 @@ class TokenWatch:
         self._heard: dict[str, int] = {}  # a gone token's key -> changes heard of it (only while checks are due)
         self._due: dict[str, int] = {}  # that key -> checks still due
         self._count = itertools.count(1)
-        self._checks: list[tuple[float, str, int]] = []  # (when, key, the change it asks about), a heap
+        self._checks: list[tuple[float, str, int, float]] = []  # (when, key, the change it asks about, gone at): a heap
         self._called_at: float | None = None  # when the rechecker calls check_due next (None: not scheduled)
         self._key_expr = key_expr
         self._closed = False
@@ -93,7 +103,7 @@ class TokenWatch:
                 mark, now = self._heard[key], time.monotonic()
                 self._due[key] = self._due.get(key, 0) + len(self._recheck_s)
                 for delay in self._recheck_s:
-                    heapq.heappush(self._checks, (now + delay, key, mark))
+                    heapq.heappush(self._checks, (now + delay, key, mark, now))
                 first = now + min(self._recheck_s)
                 if self._called_at is None or first < self._called_at:
                     self._called_at = first
@@ -110,15 +120,20 @@ class TokenWatch:
         most one query every :data:`MIN_INTERVAL_S`, whatever number of goings come due."""
         with self._lock:
             now = time.monotonic()
-            due: list[tuple[str, int]] = []
+            due: list[tuple[str, int, float]] = []
             while self._checks and self._checks[0][0] <= now:
-                _, key, mark = heapq.heappop(self._checks)
-                due.append((key, mark))
+                _, key, mark, gone_at = heapq.heappop(self._checks)
+                due.append((key, mark, gone_at))
             if self._closed:
                 self._checks.clear()
-        if due and not self._closed:
+        lost = self._link_lost_at() if self._link_lost_at is not None else float("inf")
+        asked = [(k, m) for k, m, gone_at in due if lost >= gone_at - LINK_NEAR_S]  # goings about a link's loss
+        for key, mark, gone_at in due:
+            if lost < gone_at - LINK_NEAR_S:
+                self.recheck_answer(key, mark, None)  # this session's link held: the going is the router's word
+        if asked and not self._closed:
             present = self.ask_all()
-            for key, mark in due:
+            for key, mark in asked:
                 self.recheck_answer(key, mark, None if present is None else key in present)
         with self._lock:
             nxt = (

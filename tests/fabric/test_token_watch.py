@@ -5,6 +5,7 @@ late going is handed to the watch as its subscription hands it one (``heard``); 
 real router."""
 
 import threading
+import time
 
 from fabric import keys
 from fabric.token_watch import TokenWatch
@@ -75,6 +76,27 @@ def test_a_flood_of_goings_shares_its_checks_queries(world, connect):
     watch.undeclare()
 
 
+def test_a_going_heard_while_the_link_held_is_not_asked_about(world, connect):
+    """The race needs this session's own link lost: a going heard while it held is the router's word."""
+    sim = connect("sim", "s1")
+    user = connect("user", "alice")
+    told = Told()
+    lost = [float("-inf")]
+    watch = TokenWatch(
+        user.session, keys.peers_all(world, "sim"), told, recheck_s=(0.05,), link_lost_at=lambda: lost[0]
+    )
+    key = wait_until(lambda: next((k for k, a in told.calls if a), None), what="the sim's token")
+    watch.heard(key, False)  # the link held: not asked, and it stays gone for this watch
+    wait_until(lambda: watch.rechecks == 1, what="the check passed over", seen=lambda: watch.rechecks)
+    assert watch.queries == 0 and told.of(key) == [True, False]
+    lost[0] = time.monotonic()  # a link lost: the next going heard about then is asked about
+    watch.heard(key, False)
+    wait_until(lambda: told.of(key)[-1:] == [True], what="the token back", seen=lambda: told.calls)
+    assert watch.queries == 1
+    watch.undeclare()
+    sim.close()
+
+
 def test_a_change_heard_while_a_check_is_out_wins_over_its_answer(world, connect):
     _sim, watch, told, key = _watched_sim(world, connect, recheck_s=(30.0,))
     watch.heard(key, False)
@@ -101,6 +123,7 @@ def test_a_session_s_fence_believes_its_sim_again_after_a_late_going(world, conn
     pid = keys.parse(key).leaf
     wait_until(lambda: pid in bob.sim_fence.sims, what="the sim seen", seen=lambda: bob.sim_fence.sims)
     assert bob.sim_fence.believe(1, pid, ("base1",))
+    bob._link_lost_at = time.monotonic()  # as his transport's close tells it: the going comes with a link's loss
     watch.heard(key, False)
     assert not bob.sim_fence.believe(1, pid, ("base1",))  # departed: its poses are refused
     wait_until(
