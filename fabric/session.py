@@ -87,8 +87,10 @@ class Fabric:
         self._publishers: dict[str, zenoh.Publisher] = {}
         self.session = zenoh.open(config.zenoh_config())
         self._link_lost_at = float("-inf")
-        """When a transport of this session last closed (monotonic s): a query ridden over it asks again (fabric.rpc)."""
-        self._resources.append(self.session.info.declare_transport_events_listener(self._on_transport))
+        """When this client last lost a link to its router (monotonic s; never for a router or a peer): a query ridden over
+        it asks again (fabric.rpc), and a going heard about then is checked (fabric.token_watch)."""
+        if config.profile == "client":  # a client's transports are its links to routers; a router's are its clients'
+            self._resources.append(self.session.info.declare_transport_events_listener(self._on_transport))
         self._fence_watch = FenceWatch(
             self.session,
             self.world,
