@@ -128,9 +128,11 @@ def trajectory_took(out: Path, sent: float, from_q: list[float], to_q: list[floa
     In the sim's time (the joint states' stamps), as a use_sim_time node measures; the wall clock would count the sim
     running behind on a loaded box. A loaded node also reads only some of the states (here 109 of 500 in 5 s at load
     20), so each moment is known between two samples."""
-    states = [
-        (r["stamp"], r["position"]) for r in lines(out, "joint_states") if r["robot"] == "arm1" and r["wall"] >= sent
-    ]
+    arm = [r for r in lines(out, "joint_states") if r["robot"] == "arm1"]
+    # from the last state read before the goal was sent: a loaded node's first state after it can show the arm moving
+    # already (a grouped run: (0, 288)), and the one before says where it still stood
+    after = next((k for k, r in enumerate(arm) if r["wall"] >= sent), len(arm))
+    states = [(r["stamp"], r["position"]) for r in arm[max(0, after - 1) :]]
     i = next(i for i, (t, q) in enumerate(states) if max(abs(a - b) for a, b in zip(q, from_q)) > 1e-3)
     j = next(j for j, (t, q) in enumerate(states) if max(abs(a - b) for a, b in zip(q, to_q)) < 2e-3)
     assert i > 0 and j > i, (i, j)
