@@ -84,10 +84,12 @@ def run_one(n: int, *, lease_s: float, kills: int) -> dict:
             last.request("arm", wait=True)
             t0 = time.perf_counter()
             os.kill(proc.pid, signal.SIGSTOP)
-            wait_until(lambda: last.owns("arm"), timeout=lease_s + 10, interval=0.0005, what="lease recovery")
-            frozen.append(time.perf_counter() - t0)
-            os.kill(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=10)
+            try:
+                wait_until(lambda: last.owns("arm"), timeout=lease_s + 10, interval=0.0005, what="lease recovery")
+                frozen.append(time.perf_counter() - t0)
+            finally:  # a bench that fails leaves no stopped owner behind (two were found so)
+                os.kill(proc.pid, signal.SIGKILL)
+                proc.wait(timeout=10)
             last.release("arm")
         return {
             "n": n,
