@@ -7,7 +7,7 @@ for the subscriber: the going can come last. A watch that believed its last samp
 for good: the demo's bob (issue 49's grouped runs) saw "world 'demo' gone" while the sim ran on, and his session's
 fence refused every pose of that sim from then on, so his base reached its goal and he never saw it arrive.
 
-So a watch checks every going with the router: :data:`RECHECK_S` after it, it asks for that token (a liveliness
+So a watch checks a going with the router: :data:`RECHECK_S` after it, it asks which tokens are there (a liveliness
 query); when the token is there and nothing was heard of it since the going, its callback hears it is back. A
 token that truly went is answered by nobody, and nothing more happens. A change heard while a check is on its way
 wins over the check's answer (:meth:`TokenWatch.recheck_answer`): the check may have been answered before it.
@@ -203,8 +203,8 @@ class _Rechecker:
         self._thread: threading.Thread | None = None
 
     def schedule(self, when: float, watch: TokenWatch) -> None:
-        """Have ``watch`` check what is due at ``when`` (a watch scheduled twice checks twice; the second finds
-        nothing due, or what came due since)."""
+        """Have ``watch`` check what is due at ``when``; an entry for a time the watch no longer expects is passed
+        over (:meth:`TokenWatch.called_at`), so each watch has one chain of calls."""
         with self._cond:
             heapq.heappush(self._heap, (when, next(self._order), watch))
             if self._thread is None or not self._thread.is_alive():
