@@ -46,6 +46,14 @@ def command(
             "each with an optional weight (sim=0.25: sims picked a quarter as often).",
         ),
     ] = None,
+    until: Annotated[
+        Optional[str],
+        typer.Option(
+            "--until",
+            help="End the run a few seconds after this invariant is first broken (owners, applied, reset, ...): "
+            "with --plant, the run lasts as long as catching its defect takes.",
+        ),
+    ] = None,
     out: Annotated[Optional[Path], typer.Option("--out", help="Write the figures as JSON here.")] = None,
     logs: Annotated[
         Optional[Path], typer.Option("--logs", help="Keep every output and the history in this folder.")
@@ -67,6 +75,10 @@ def command(
         raise UserError("--minutes must be positive and --students at least 2 (each queues for a neighbour's arm)")
     if plant is not None and plant not in PLANTS:
         raise UserError(f"--plant {plant!r}: expected one of {', '.join(PLANTS)}")
+    from robofabric.soak.checker import INVARIANTS
+
+    if until is not None and until not in INVARIANTS:
+        raise UserError(f"--until {until!r}: expected one of {', '.join(INVARIANTS)}")
     kinds = tuple(k.strip() for k in faults.split(",") if k.strip()) if faults else KINDS
     unknown = [k for k in kinds if k not in KINDS]
     if unknown or not kinds:
@@ -84,7 +96,8 @@ def command(
         f"Command: robofabric bench soak --minutes {minutes:g} --students {students} --seed {seed}"
         + (f" --plant {plant}" if plant else "")
         + (f" --faults {faults}" if faults else "")
-        + (f" --victims {victims}" if victims else ""),
+        + (f" --victims {victims}" if victims else "")
+        + (f" --until {until}" if until else ""),
         flush=True,
     )
     print(f"Machine: {machine()}; load average at start {os.getloadavg()[0]:.1f}; logs in {logs}", flush=True)
@@ -100,6 +113,7 @@ def command(
                 kinds=kinds,
                 victims=who,
                 weights=tuple(weights.items()),
+                until=until or "",
             )
         )
     finally:

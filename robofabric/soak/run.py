@@ -51,6 +51,13 @@ starting would fail its first connection, which is no fault of the peer's)."""
 HOG = "import time\ne = time.monotonic() + {secs}\nwhile time.monotonic() < e:\n    pass\n"
 
 
+UNTIL_CHECK_S = 3.0
+"""How often a run with ``until`` reads its history so far (it is a few thousand lines a minute)."""
+
+UNTIL_AFTER_S = 3.0
+"""How long a run with ``until`` goes on after the catch: the observer's last lines reach the file."""
+
+
 @dataclass(frozen=True, slots=True)
 class SoakConfig:
     minutes: float
@@ -63,6 +70,10 @@ class SoakConfig:
     gap_s: tuple[float, float] = (2.0, 6.0)
     victims: tuple[str, ...] = VICTIMS
     weights: tuple[tuple[str, float], ...] = ()  # victim kind -> how often it is picked (--victims sim=0.25)
+    until: str = ""
+    """An invariant (:data:`checker.INVARIANTS`): the run ends early, :data:`UNTIL_AFTER_S` after the history so far
+    first breaks it. For a planted defect, whose proof is that it is caught: a run past the catch only burns CPU. The
+    verdict is still the whole history's, read after the end; the early look only decides when the end is."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -354,10 +365,17 @@ class Soak:
         ).start()
         self.writer.write(Mark(t0, "class", "every peer started; the nemesis begins"))
         warmed = False
+        look = t0 + UNTIL_CHECK_S
         while time.monotonic() < end:
             if not warmed and time.monotonic() >= warm:
                 self.writer.write(Mark(time.monotonic(), "warm"))
                 warmed = True
+            if cfg.until and time.monotonic() >= look:
+                look = time.monotonic() + UNTIL_CHECK_S
+                if self._broken(cfg.until):
+                    end = min(end, time.monotonic() + UNTIL_AFTER_S)
+                    self.writer.write(Mark(time.monotonic(), "caught", f"{cfg.until} broken: ending early"))
+                    look = end  # once is enough
             time.sleep(min(1.0, max(0.0, end - time.monotonic())))
         nemesis.stop()
         self.writer.write(Mark(time.monotonic(), "end", f"{nemesis.count} faults"))
@@ -374,6 +392,11 @@ class Soak:
             started,
             {"restarts": self.restarts},
         )
+
+    def _broken(self, invariant: str) -> bool:
+        """Whether the history so far breaks ``invariant`` (its files are whole lines, flushed as written)."""
+        history, _ = read([self.wire_path, self.cfg.log_dir / "soak.jsonl"])
+        return bool(checker.INVARIANTS[invariant](history, checker.Limits()))
 
     def close(self) -> None:
         """End every peer by pid (students first, so their leaving is not the world's), then the lab. The nemesis

@@ -26,7 +26,14 @@ def test_a_student_paused_past_her_lease_after_her_drive_still_reaches_the_goal(
     ep = f"tcp/127.0.0.1:{router[1]}"
     common = ["--world", world, "--connect", ep]
     procs.start(robofabric_cmd("sim", "--scene", "warehouse", *common), name="sim")
-    procs.start(robofabric_cmd("compute", *common), name="compute")
+    compute = procs.start(robofabric_cmd("compute", *common), name="compute")
+    # bob asks the compute peer at once: started beside it, his first query (the map) once came before it served
+    wait_until(
+        lambda: ", serving " in procs.output(compute),  # printed once its queryables are declared
+        timeout=120,
+        what="the compute peer",
+        seen=lambda: procs.output(compute)[-2000:],
+    )
     bob = procs.start(robofabric_cmd("scenario", "test-b", "--user", "bob", *common), name="bob")
     wait_until(
         lambda: "drove while mapping" in procs.output(bob) or bob.poll() is not None,
