@@ -98,8 +98,12 @@ class Follower:
         snapshot: WorldState | None = None,
         poll_s: float = POLL_S,
         plant: str = "",
+        announce: Callable[[str], None] = lambda line: None,
+        kept: Callable[[], None] = lambda: None,
     ) -> None:
         self.fabric = fabric
+        self._announce = announce  # the first state a standby holds of each leader is said: a take-over starts there
+        self._kept = kept  # told after each snapshot kept (the role token shows a standby once it holds one)
         self._world, self._election, self._shard = world, election, shard
         self._heard, self._seen_serving = heard, seen_serving
         self._serving, self._serving_lock, self._stopping = serving, serving_lock, stopping
@@ -156,10 +160,27 @@ class Follower:
             if best is None:
                 continue
             self._heard(best.header.source, best.header.term)
+            first = kept = False
             with self._serving_lock:  # the election changes under it: no take-over between the look and the keep
                 if best.header.source == self._election().leader:
                     with self._lock:
+                        held = self.snapshot
+                        first, kept = held is None or held.header.source != best.header.source, True
                         self.snapshot, self.snapshot_asked = best, asked
+            if not kept:
+                continue
+            if first:
+                self._announce(
+                    f"standby {f.peer_id}: holding the state of {best.header.source} (term {best.header.term}); "
+                    "a take-over starts from it"
+                )
+            self._kept()
+
+    def holds_state(self) -> bool:
+        """Whether a snapshot is held (its leader's, or its own as a primary that stepped down): a take-over from
+        now on carries a world on instead of starting from the scene."""
+        with self._lock:
+            return self.snapshot is not None
 
     def on_joints(self, key: str, js: JointState) -> None:
         rid = keys.parse(key).subject

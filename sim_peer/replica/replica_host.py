@@ -141,7 +141,7 @@ class ReplicaHost:
             announce=self.announce,
             take_over=self.take_over,
             reassert=self._reassert,
-            show_role=lambda shown: self.role_token.show(shown, self.peer is not None),
+            show_role=self._show_role,
             adopt_soon=lambda: self.adoption.soon(),
             clock=clock,
         )
@@ -159,6 +159,8 @@ class ReplicaHost:
             snapshot=snapshot,
             poll_s=poll_s,
             plant=plant,
+            announce=self.announce,
+            kept=lambda: self._show_role(self.roles.election),  # a standby's role shows once it holds a state
         )
         self.freeze = FreezeGuard(
             fabric,
@@ -229,7 +231,7 @@ class ReplicaHost:
             self.announce(
                 f"standby {f.peer_id}: following {self.election.leader or 'the primary'} (term {self.election.term})"
             )
-        self.role_token.show(self.election, self.peer is not None)
+        self._show_role(self.election)
         return self
 
     def run(self, stop: threading.Event, duration: float | None = None) -> str:
@@ -300,6 +302,12 @@ class ReplicaHost:
         self.peer.start(self._duration)
         self.deaf_stop.watch()
 
+    def _show_role(self, election: el.Election) -> None:
+        """Show the role ``election`` gives (sim_peer/replica/role_token.py): a standby's once it holds a state."""
+        follower = getattr(self, "follower", None)  # the election may speak before the follower is made
+        holds = follower is not None and follower.holds_state()
+        self.role_token.show(election, self.peer is not None, holds)
+
     def _reassert(self, term: int) -> None:
         """Assert ``term`` again over what this sim serves (the election's effect after a freeze)."""
         with self.lock:
@@ -330,7 +338,7 @@ class ReplicaHost:
             f"sim {self.fabric.peer_id}: took over the world with term {self.election.term} in {took * 1000:.0f} ms"
             + (f" from the state of {state.header.source} at t={state.time:.3f} s" if state else "")
         )
-        self.role_token.show(self.election, self.peer is not None)
+        self._show_role(self.election)
 
     def world_state(self, *, force: bool = False) -> WorldState:
         """The whole world's state as this sim serves it (``force``: a standby that served until now, too)."""

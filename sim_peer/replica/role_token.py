@@ -4,9 +4,12 @@ Tests, the soak and tools learn from it whether a sim serves its shard or follow
 instead of matching its log lines (which stay, for people, and are no interface). A token goes with its session,
 so a sim killed, cut off or paused past the lease shows no role at all, as it shows no ``peer/sim/{id}`` token.
 
-What is shown is a pure function of the election and whether the world is served yet (:func:`shown`): a primary
-shows once it serves (a take-over's restore comes first), a standby once it knows its leader. Nothing decides
-on these tokens: the election reads the sims' own tokens and the terms it hears.
+What is shown is a pure function of the election, whether the world is served yet and whether the standby holds
+a state (:func:`shown`): a primary shows once it serves (a take-over's restore comes first), a standby once it
+knows its leader and holds a state (its leader's first snapshot, or its own last one as a primary that stepped
+down). Before that, a standby that took over would start the world from its scene: a test or an operator that
+waits for "standby" and then kills the primary meets a standby that can carry the world on (one killed 1-3 s after
+the role showed once took over "with no state seen"). Nothing decides on these tokens: the election reads the sims' own tokens and the terms it hears.
 """
 
 from __future__ import annotations
@@ -28,12 +31,12 @@ log = logging.getLogger("robofabric.sim")
 __all__ = ["RoleToken", "shown"]
 
 
-def shown(election: el.Election, serving: bool) -> tuple[str, int, str] | None:
+def shown(election: el.Election, serving: bool, holds: bool = True) -> tuple[str, int, str] | None:
     """(role, term, leader) a sim shows now, or None: a primary not serving yet (a take-over restoring the world)
-    and a standby that follows nobody yet show nothing."""
+    and a standby that follows nobody yet, or holds no state yet (``holds``), show nothing."""
     if election.role == el.PRIMARY:
         return (el.PRIMARY, election.term, election.me) if serving else None
-    return (el.STANDBY, election.term, election.leader) if election.leader else None
+    return (el.STANDBY, election.term, election.leader) if election.leader and holds else None
 
 
 class RoleToken:
@@ -52,9 +55,9 @@ class RoleToken:
         """What is shown now: (role, term, leader), or None."""
         return self._shown
 
-    def show(self, election: el.Election, serving: bool) -> None:
+    def show(self, election: el.Election, serving: bool, holds: bool = True) -> None:
         """Show what :func:`shown` says for ``election``; a closed session or a closed token shows nothing more."""
-        want = shown(election, serving)
+        want = shown(election, serving, holds)
         with self._lock:
             if self._closed or want is None or want == self._shown:
                 return

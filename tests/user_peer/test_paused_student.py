@@ -42,9 +42,18 @@ def test_a_student_paused_past_her_lease_after_her_drive_still_reaches_the_goal(
         seen=lambda: procs.output(bob)[-2000:],
     )
     assert bob.poll() is None, procs.output(bob)[-3000:]
+    assert ("user", "bob") in router[0].live_peers("user")
     bob.send_signal(signal.SIGSTOP)
     try:
         time.sleep(PAUSE_S)  # the pause is the fault itself, not a wait on a condition
+        # and it lasts until his router has dropped him: at load its lease check came late, and a 3 s pause once
+        # cut nothing (the test proved nothing)
+        wait_until(
+            lambda: ("user", "bob") not in router[0].live_peers("user"),
+            timeout=30,
+            interval=0.25,
+            what="the router dropping bob's link",
+        )
     finally:
         bob.send_signal(signal.SIGCONT)
     try:

@@ -41,6 +41,9 @@ def test_what_a_sim_shows_follows_its_election_and_whether_it_serves():
     assert shown(el.start("b", standby=True), serving=False) is None  # following nobody yet
     follows = el.step(el.start("b", standby=True), el.Heard("a", 1))[0]
     assert shown(follows, serving=False) == ("standby", 1, "a")
+    assert (
+        shown(follows, serving=False, holds=False) is None
+    )  # no state held yet: a take-over would start from the scene
     took = el.step(follows, el.Peers(frozenset({"b"})))[0]
     assert shown(took, serving=True) == ("primary", 2, "b")
     stepped = el.step(el.start("a", standby=False), el.Heard("b", 2))[0]
@@ -86,10 +89,12 @@ def test_a_primary_and_its_standby_show_their_roles_and_a_take_over_shows_the_ne
         primary, standby = hosts
         assert roles.wait("sim-a", "primary", term=1, timeout=20) == SimRole("sim-a", "primary", 1, "sim-a")
         roles.wait("sim-b", "standby", term=1, leader="sim-a", timeout=20, seen=lambda: standby.election)
+        # shown once it holds sim-a's state: killed now, it carries the world on
+        assert standby.follower.holds_state() and standby.follower.snapshot.header.source == "sim-a"
         primary.close()
         primary.fabric.close()  # its tokens go: the standby takes over
         roles.wait("sim-b", "primary", term=2, leader="sim-b", timeout=30, seen=lambda: standby.election)
-        assert standby.takeovers and roles.now("sim-a") is None
+        assert standby.takeovers and standby.takeovers[0]["from"] == "sim-a" and roles.now("sim-a") is None
         assert not roles.ever("sim-a", "standby") and not roles.ever("sim-b", "primary", 1)
     finally:
         for host in hosts:

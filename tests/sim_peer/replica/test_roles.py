@@ -150,7 +150,10 @@ def test_a_fresh_standby_that_hears_its_leader_before_its_token_does_not_take_th
 
         effects.now += 0.1  # heard a moment ago, but its token was seen and went: no alibi
         leader.close()
+        # its token's going reaches this session a moment later (at load, after the next line once: nothing taken)
+        wait_until(lambda: "sim-a" not in roles.live_sims(), timeout=10, what="the leader's token gone")
         roles.shards_learnt(frozenset({"sim-b"}))
+        wait_until(lambda: effects.taken, timeout=10, what="the take-over", seen=lambda: effects.said[-3:])
         assert [former for _, former in effects.taken] == ["sim-a"] and roles.election.term == 4
         roles.taking_over.join(10.0)
     finally:
