@@ -44,6 +44,15 @@ __all__ = ["Recorder", "RecorderStats"]
 _SIMS_OF_EVERY_WORLD = f"{keys.PREFIX}/*/peer/sim/*"
 
 
+DESCRIBE_WAITS_S = (0.2, 1.0, 2.0, 4.0, 8.0, 15.0)
+"""Waits before each ask for a world's description when a sim comes (about 30 s of asking, each ask given 3 s):
+one ask 0.2 s after the token missed it on a loaded box (a recording with no description, whose export then needs
+``--scene``)."""
+
+MAX_DESCRIBING = 8
+"""Worlds whose description is being asked for at once (a thread each, for up to half a minute)."""
+
+
 @dataclass(frozen=True, slots=True)
 class _SimToken:
     """A sim peer's liveliness token came or went: queued with the samples, so the sink's fence
@@ -339,23 +348,31 @@ class Recorder:
         replay place robots from it, with no ``--scene``. One query at a time per world (made-up sim tokens
         must not make a thread each)."""
         with self._lock:
-            if world in self._describing or self._stopped:
-                return
+            if world in self._describing or self._stopped or len(self._describing) >= MAX_DESCRIBING:
+                return  # made-up sim tokens of many worlds get a few threads, not one each
             self._describing.add(world)
 
         def ask() -> None:
             key = keys.srv(world, "world")
             try:
-                time.sleep(0.2)  # a sim's token comes before its queryable: give it a moment
-                replies = self.fabric.rpc.query(key, timeout=3.0, expected=WorldInfo, all_replies=True)
-                for info in [union((rep.source, rep.message) for rep in replies)]:  # every sim's part: one world
+                for wait in DESCRIBE_WAITS_S:  # a sim's token comes before its queryable, and a loaded one answers late
+                    time.sleep(wait)
+                    with self._lock:
+                        if self._stopped:
+                            return
+                    try:
+                        replies = self.fabric.rpc.query(key, timeout=3.0, expected=WorldInfo, all_replies=True)
+                        info = union((rep.source, rep.message) for rep in replies)  # every sim's part: one world
+                    except Exception:  # no answer yet (or a standby alone, access control): asked again, then not
+                        log.debug("no description of world %s to record yet", world, exc_info=True)
+                        continue
                     payload = encode(info)
                     with self._lock:
                         if not self._stopped and self._admit(key, len(payload)):
                             self._q.put((key, payload, time.time_ns(), None))
                             self.described += 1
-            except Exception:  # no answer (a standby alone, access control): the recording goes on without it
-                log.debug("no description of world %s to record", world, exc_info=True)
+                    return
+                log.info("no description of world %s recorded: no sim answered srv/world", world)
             finally:
                 with self._lock:
                     self._describing.discard(world)
