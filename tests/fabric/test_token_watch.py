@@ -34,7 +34,10 @@ def _watched_sim(world, connect, recheck_s=(0.05, 0.2)):
     told = Told()
     watch = TokenWatch(user.session, keys.peers_all(world, "sim"), told, recheck_s=recheck_s)
     key = wait_until(
-        lambda: next((k for k, alive in told.calls if alive), None), what="the sim's token", seen=lambda: told.calls
+        lambda: next((k for k, alive in told.calls if alive), None),
+        timeout=30,
+        what="the sim's token",
+        seen=lambda: told.calls,
     )
     return sim, watch, told, key
 
@@ -43,12 +46,12 @@ def test_a_going_heard_after_the_link_came_back_is_undone_by_the_router_s_answer
     _sim, watch, told, key = _watched_sim(world, connect)
     for _ in range(3):  # a loaded run's subscription once told the token twice: its late copy answered first
         watch.heard(key, False)  # the old link's going, delivered after the new link's token
-        wait_until(lambda: told.of(key)[-1:] == [True], what="the token back", seen=lambda: told.calls)
+        wait_until(lambda: told.of(key)[-1:] == [True], timeout=30, what="the token back", seen=lambda: told.calls)
         if watch.restored:
             break
     assert watch.restored == 1, told.calls
     checks = len(told.of(key)) - 1  # two checks per going: one going per False and True told after the first
-    wait_until(lambda: watch.rechecks == checks, what="the checks answered", seen=lambda: watch.rechecks)
+    wait_until(lambda: watch.rechecks == checks, timeout=30, what="the checks answered", seen=lambda: watch.rechecks)
     assert told.of(key)[-1] is True and watch.restored == 1  # the later check found it told already
     watch.undeclare()
 
@@ -56,8 +59,8 @@ def test_a_going_heard_after_the_link_came_back_is_undone_by_the_router_s_answer
 def test_a_token_that_truly_went_stays_gone(world, connect):
     sim, watch, told, key = _watched_sim(world, connect)
     sim.close()
-    wait_until(lambda: told.of(key)[-1:] == [False], what="the going", seen=lambda: told.calls)
-    wait_until(lambda: watch.rechecks == 2, what="both checks answered", seen=lambda: watch.rechecks)
+    wait_until(lambda: told.of(key)[-1:] == [False], timeout=30, what="the going", seen=lambda: told.calls)
+    wait_until(lambda: watch.rechecks == 2, timeout=30, what="both checks answered", seen=lambda: watch.rechecks)
     assert told.of(key) == [True, False] and watch.restored == 0
     watch.undeclare()
 
@@ -69,11 +72,16 @@ def test_a_flood_of_goings_shares_its_checks_queries(world, connect):
     made_up = [key.rsplit("/", 1)[0] + f"/flood{i}" for i in range(2000)]
     for k in made_up:
         watch.heard(k, False)
-    wait_until(lambda: watch.rechecks == 2 * len(made_up), what="every check answered", seen=lambda: watch.rechecks)
+    wait_until(
+        lambda: watch.rechecks == 2 * len(made_up), timeout=30, what="every check answered", seen=lambda: watch.rechecks
+    )
     assert watch.restored == 0 and watch.queries <= 6, watch.queries
     watch.heard(key, False)  # the real one, after: still checked, and back
     wait_until(
-        lambda: told.of(key)[-1:] == [True] and watch.restored == 1, what="the sim back", seen=lambda: told.calls
+        lambda: told.of(key)[-1:] == [True] and watch.restored == 1,
+        timeout=30,
+        what="the sim back",
+        seen=lambda: (told.of(key), watch.restored, watch.queries),  # its own calls: 4,000 of the flood's precede
     )
     watch.undeclare()
 
@@ -87,13 +95,13 @@ def test_a_going_heard_while_the_link_held_is_not_asked_about(world, connect):
     watch = TokenWatch(
         user.session, keys.peers_all(world, "sim"), told, recheck_s=(0.05,), link_lost_at=lambda: lost[0]
     )
-    key = wait_until(lambda: next((k for k, a in told.calls if a), None), what="the sim's token")
+    key = wait_until(lambda: next((k for k, a in told.calls if a), None), timeout=30, what="the sim's token")
     watch.heard(key, False)  # the link held: not asked, and it stays gone for this watch
-    wait_until(lambda: watch.rechecks == 1, what="the check passed over", seen=lambda: watch.rechecks)
+    wait_until(lambda: watch.rechecks == 1, timeout=30, what="the check passed over", seen=lambda: watch.rechecks)
     assert watch.queries == 0 and told.of(key) == [True, False]
     lost[0] = time.monotonic()  # a link lost: the next going heard about then is asked about
     watch.heard(key, False)
-    wait_until(lambda: told.of(key)[-1:] == [True], what="the token back", seen=lambda: told.calls)
+    wait_until(lambda: told.of(key)[-1:] == [True], timeout=30, what="the token back", seen=lambda: told.calls)
     assert watch.queries == 1
     watch.undeclare()
     sim.close()
@@ -123,13 +131,14 @@ def test_a_session_s_fence_believes_its_sim_again_after_a_late_going(world, conn
     bob._fence_watch._watch_sims()  # as on his first termed sample
     watch = next(r for r in bob._resources if isinstance(r, TokenWatch))
     pid = keys.parse(key).leaf
-    wait_until(lambda: pid in bob.sim_fence.sims, what="the sim seen", seen=lambda: bob.sim_fence.sims)
+    wait_until(lambda: pid in bob.sim_fence.sims, timeout=30, what="the sim seen", seen=lambda: bob.sim_fence.sims)
     assert bob.sim_fence.believe(1, pid, ("base1",))
     bob._link_lost_at = time.monotonic()  # as his transport's close tells it: the going comes with a link's loss
     watch.heard(key, False)
     assert not bob.sim_fence.believe(1, pid, ("base1",))  # departed: its poses are refused
     wait_until(
         lambda: bob.sim_fence.believe(1, pid, ("base1",)),
+        timeout=30,
         what="the sim believed again",
         seen=lambda: bob.sim_fence.sims,
     )
