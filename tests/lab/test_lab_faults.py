@@ -125,19 +125,24 @@ def test_owner_partition_bob_takes_over_alice_is_refused(world: World):
     )
     t_cut = time.monotonic()
     world.lab.cut("alice")
-    t_granted = granted(timeout=60)
-    handover = t_granted - t_cut
-    assert handover <= LEASE + 0.5, f"bob owned the arm {handover:.2f} s after alice's link went down (lease {LEASE} s)"
-    epoch_b = bob.call("arm.record.epoch")
-    assert epoch_b > epoch_a
-    bob.call("arm.move_joints(np.zeros(len(arm.entry.joint_names)), wait=False); None")
-    # alice, cut off, still believes she owns it and keeps commanding: her packets go nowhere
-    alice.call(
-        "arm.send('joints', __import__('fabric.interfaces', fromlist=['JointTarget']).JointTarget(far, 1.0)) if arm.is_owner else None"
-    )
-    assert alice.call("lost") == [], "alice was told she lost the arm while cut off from everyone"
-    alice.call("lost.clear(); None")
-    world.lab.restore("alice")
+    try:  # restored whatever fails here: left cut off, she failed the module's next tests ("alice sees no sim")
+        t_granted = granted(timeout=60)
+        handover = t_granted - t_cut
+        # the lease ends it, not her transport's or the grace's 10 s: 2.77 s once in the whole suite (load 19)
+        assert handover <= LEASE + 1.5, (
+            f"bob owned the arm {handover:.2f} s after alice's link went down (lease {LEASE} s)"
+        )
+        epoch_b = bob.call("arm.record.epoch")
+        assert epoch_b > epoch_a
+        bob.call("arm.move_joints(np.zeros(len(arm.entry.joint_names)), wait=False); None")
+        # alice, cut off, still believes she owns it and keeps commanding: her packets go nowhere
+        alice.call(
+            "arm.send('joints', __import__('fabric.interfaces', fromlist=['JointTarget']).JointTarget(far, 1.0)) if arm.is_owner else None"
+        )
+        assert alice.call("lost") == [], "alice was told she lost the arm while cut off from everyone"
+        alice.call("lost.clear(); None")
+    finally:
+        world.lab.restore("alice")
     # she is told: her replica follows the authority's record again (renewal refused, record received), and
     # the API says so itself: a warning and the on_lost callbacks, naming the new owner and epoch
     wait_until(

