@@ -309,7 +309,13 @@ class MobileRobot(_Driven):
         f = c.follower
         if isinstance(f, PurePursuit):
             path = f.points
-            extra.update(index=f.index, stretch=f.stretch, arrived=bool(f.arrived), done=bool(f.done))
+            extra.update(
+                index=f.index,
+                stretch=f.stretch,
+                arrived=bool(f.arrived),
+                done=bool(f.done),
+                backwards=[bool(b) for b in f.backwards],  # the headings that said so are not sent on
+            )
             if f.final_yaw is not None:
                 extra["final_yaw"] = float(f.final_yaw)
         return RobotState(self.id, "mobile", [c.x, c.y, c.yaw], [c.v, c.omega], [c.v_cmd, c.omega_cmd], path, extra)
@@ -340,6 +346,9 @@ class MobileRobot(_Driven):
                 max_accel=b.max_accel,
             )
             f.final_yaw = float(e["final_yaw"]) if "final_yaw" in e else None
+            backwards = [bool(b) for b in e.get("backwards", ())]
+            if len(backwards) == len(f.stops):  # a state from a sim before it was carried: forwards, as then
+                f.backwards = backwards
             f.index = min(int(e.get("index", 0)), f.points.shape[0] - 1)
             f.stretch = min(int(e.get("stretch", 0)), len(f.stops) - 1)
             f.arrived, f.done = bool(e.get("arrived", False)), bool(e.get("done", False))

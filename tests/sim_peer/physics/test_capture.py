@@ -37,6 +37,26 @@ def test_a_restored_world_continues_the_motions_in_progress_exactly():
     assert np.allclose(w2.readings.flange("arm1")[0], w.readings.flange("arm1")[0])
 
 
+def test_a_base_reversing_when_taken_over_goes_on_backwards():
+    """A Hybrid A* plan may back a base up (a description with ``reverse``): which stretches run backwards is part
+    of the follower's state, not only of the headings sent with the path. A restored follower that lost it drove
+    its backwards stretch forwards, turning about first."""
+    x = np.concatenate([np.linspace(0.0, -1.0, 21), np.linspace(-0.95, 0.5, 30)])  # back 1 m, then forwards
+    w = SimWorld("combined", seed=1)
+    w.robots["base1"].path(x, np.zeros_like(x), np.zeros_like(x))
+    w.step(300)
+    assert w.robots["base1"].ctrl.v < -0.05  # reversing now
+    t, steps, robots, objects = capture.capture(w)
+    state = decode(encode(WorldState(t, steps, robots, objects)))
+    w2 = SimWorld("combined", seed=1)
+    capture.restore(w2, state)
+    assert w2.robots["base1"].ctrl.follower.backwards == [True, False]
+    for _ in range(10):
+        w.step(300), w2.step(300)
+        a, b = w.robots["base1"].ctrl, w2.robots["base1"].ctrl
+        assert (a.x, a.y, a.yaw, a.v, a.omega) == (b.x, b.y, b.yaw, b.v, b.omega)
+
+
 def test_stream_samples_and_advance_bring_robots_to_one_time():
     w = _moving_world()
     t, steps, robots, objects = capture.capture(w)
