@@ -185,7 +185,9 @@ def open_page(browser, klass: Klass):
     lines: list[str] = []
     page.on("console", lambda m: lines.append(m.text))  # NiceGUI says there why it reloads a page
     PAGE_LOGS[id(page)] = lines
-    page.set_default_timeout(30_000)
+    # 60 s for an action: at the suite's load (15-35 on two cores) a page's renderer, drawing its 3D view in software
+    # GL, once took over 30 s to hit-test a visible, enabled, stable button (CI run of 2026-11-30, bob's Request)
+    page.set_default_timeout(60_000)
     page.goto(klass.url, timeout=60_000)
     return page
 
@@ -728,7 +730,9 @@ def test_the_selected_robots_panel_sits_beside_its_view_and_fits_1024x700_and_st
     """Only the selected robot's panel shows (bob selected base1: no arm panel); at 1024x700 the map and Plan are
     both on the screen without scrolling, side by side; at 800x600 the base panel and the map stack."""
     page = new_context(browser, viewport={"width": 1024, "height": 700}).new_page()
-    page.set_default_timeout(30_000)
+    # 60 s for an action: at the suite's load (15-35 on two cores) a page's renderer, drawing its 3D view in software
+    # GL, once took over 30 s to hit-test a visible, enabled, stable button (CI run of 2026-11-30, bob's Request)
+    page.set_default_timeout(60_000)
     page.goto(klass.url, timeout=60_000)
     logged_in(page, klass, "bob")
     page.get_by_role("button", name="base1", exact=True).click(no_wait_after=True)
