@@ -41,6 +41,7 @@ __all__ = [
     "gone_since",
     "AUDIBLE_S",
     "RECHECK_LEASES",
+    "freeze_words",
     "OWN_TOKEN_S",
     "TICK_S",
     "NOT_YET",
@@ -89,6 +90,17 @@ def frozen(beat: Heartbeat, now: float, lease: float) -> bool:
     if beat.last_tick == _NEVER:
         return False
     return now - beat.last_tick > lease / 2 or now - beat.thawed_at < lease + min(beat.late_s, 5 * lease)
+
+
+def freeze_words(beat: Heartbeat, now: float, lease: float) -> str:
+    """Why :func:`frozen` holds, in a log's words ('' : it does not): the heartbeat late now, or lately back from a
+    gap. A standby that reads a token loss then waits before it takes over; its log must say it froze, not that it
+    was cut off (a starved heir read as "its link or its own token gone" for 7 s, its link up all along)."""
+    if not frozen(beat, now, lease):
+        return ""
+    if now - beat.last_tick > lease / 2:
+        return f"frozen: its heartbeat is {now - beat.last_tick:.1f} s late"
+    return f"frozen: its heartbeat came {beat.late_s:.1f} s late {now - beat.thawed_at:.1f} s ago"
 
 
 def cut(*, connected: bool, own_token_seen: bool, own_gone_at: float, now: float) -> str:

@@ -171,7 +171,7 @@ class Roles:
             with self._lock:
                 self.own_gone_at = self.clock()
         if peer_id == self.fabric.peer_id or self.deaf():
-            self.deaf_recheck()
+            self.deaf_recheck("its own token gone" if peer_id == self.fabric.peer_id else self.deaf_words())
             return
         self.settle(self.clock())
 
@@ -205,7 +205,11 @@ class Roles:
             if self._stopping.is_set():
                 return
             if unlinked or self.deaf():
-                self.deaf_recheck(f"its link went {1000 * (self.clock() - lost_at):.0f} ms after a sim's token")
+                self.deaf_recheck(
+                    f"its link went {1000 * (self.clock() - lost_at):.0f} ms after a sim's token"
+                    if unlinked
+                    else self.deaf_words()
+                )
                 return
             with self._lock:
                 live = frozenset(self.live)
@@ -238,6 +242,10 @@ class Roles:
         process was just frozen."""
         return bool(self.cut()) or self.frozen()
 
+    def deaf_words(self) -> str:
+        """Why :meth:`deaf` holds, in the log's words: the cut, or the freeze."""
+        return self.cut() or hr.freeze_words(self.beat, self.clock(), self.fabric.config.lease_ms / 1000.0) or "deaf"
+
     def cut(self) -> str:
         """Why this sim's link is gone now ('' : it is not): the link is down, or the router no longer holds its
         own token. A freeze alone is not a cut (:meth:`frozen`; :mod:`sim_peer.replica.deaf_stop` asks the router then)."""
@@ -245,7 +253,7 @@ class Roles:
             seen, gone_at = self.fabric.peer_id in self.live, self.own_gone_at
         return hr.cut(connected=self.fabric.connected(), own_token_seen=seen, own_gone_at=gone_at, now=self.clock())
 
-    def deaf_recheck(self, why: str = "its link or its own token gone") -> None:
+    def deaf_recheck(self, why: str) -> None:
         """Our own link went (this sim cut off, the router restarted, this process paused past the lease): every sim's
         token went with it, and none of them need have gone. A standby that took the world over then would serve it
         from a state that stops at the cut, and its higher term would step down the primary that served everyone
@@ -259,7 +267,7 @@ class Roles:
             self.rechecking = True
         if self.role == el.STANDBY:
             self._announce(
-                f"standby {self.fabric.peer_id}: cut off ({why}); the live sims are looked "
+                f"standby {self.fabric.peer_id}: deaf ({why}); the live sims are looked "
                 f"at again {RECHECK_LEASES} leases after it hears again"
             )
 
@@ -282,7 +290,7 @@ class Roles:
             with self._lock:
                 live = frozenset(self.live)
             if self.deaf():
-                self.deaf_recheck()  # cut off again meanwhile
+                self.deaf_recheck(self.deaf_words())  # cut off (or frozen) again meanwhile
                 return
             self.step(el.Peers(self._shard.view(live)))
             if self.role == el.PRIMARY:
@@ -382,7 +390,7 @@ class Roles:
             with self._lock:
                 waiting = self.rechecking
             if waiting or self.deaf():
-                self.deaf_recheck()
+                self.deaf_recheck(self.deaf_words())
                 return
         with self._serving_lock:
             if isinstance(ev, el.Peers):

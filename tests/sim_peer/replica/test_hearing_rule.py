@@ -41,6 +41,14 @@ def test_a_late_heartbeat_is_frozen_now_and_a_freeze_is_distrusted_a_lease_and_a
     assert beat.thawed_at == 13.1 and not hr.frozen(beat, beat.last_tick, LEASE)
 
 
+def test_the_log_says_a_freeze_is_a_freeze_late_now_or_lately():
+    beat = beat_at(10.0, 10.1)
+    assert hr.freeze_words(beat, 10.2, LEASE) == ""  # on time: not frozen, nothing to say
+    assert hr.freeze_words(beat, 11.6, LEASE) == "frozen: its heartbeat is 1.5 s late"
+    beat = hr.tick(beat, 13.1, gap=GAP, connected=True)  # back from a 3 s freeze
+    assert hr.freeze_words(beat, 14.1, LEASE) == "frozen: its heartbeat came 3.0 s late 1.0 s ago"
+
+
 def test_a_freeze_longer_than_five_leases_is_distrusted_for_six_leases_only():
     beat = beat_at(0.0, 60.0, *(60.0 + 0.5 * i for i in range(1, 24)))  # on time again up to 71.5
     assert beat.late_s == 60.0 and beat.thawed_at == 60.0
