@@ -320,6 +320,16 @@ class Fabric:
     def _on_transport(self, event: zenoh.TransportEvent) -> None:
         if event.kind == zenoh.SampleKind.DELETE:
             self._link_lost_at = time.monotonic()
+            self.counters["links_lost"] += 1
+            # said: while the link is down this peer's services and streams are gone for everyone (its queries
+            # end with "nobody serves it"); a process starved past its lease loses its link this way
+            log.warning(
+                "%s %s: lost its link to the router (the router went, or no word crossed it for a lease: %.1f s); "
+                "reconnecting",
+                self.kind,
+                self.peer_id,
+                self.config.lease_ms / 1000.0,
+            )
 
     def _linked(self) -> bool:
         """Whether this client has a link to a router now (it reconnects by itself after losing it)."""

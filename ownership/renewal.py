@@ -84,7 +84,10 @@ class Renewal:
                         if obj in self._renewing:
                             continue  # still waiting for the last answer: one renewal per robot in flight
                         self._renewing.add(obj)
-                    pool.submit(self._renew, obj)
+                    try:
+                        pool.submit(self._renew, obj)
+                    except RuntimeError:  # the interpreter is exiting under a session left open: no more rounds
+                        return
 
     def _renew(self, obj: str) -> None:
         try:
