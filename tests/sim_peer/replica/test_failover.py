@@ -380,6 +380,8 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
     )
 
     kills: dict[str, float] = {}
+    # each kill's wall clock: whether the heir made its first sample late, or it came late
+    kills_ns: dict[str, int] = {}
     path_sent: list[float] = []
 
     def on_sample(s: Seen) -> None:
@@ -391,6 +393,7 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
         elif "sim-a" not in kills and h.term == 1 and s.key.endswith("/arm1/joints") and np.abs(s.msg.dq).max() > 0.05:
             os.kill(sims["sim-a"].pid, signal.SIGKILL)
             kills["sim-a"] = time.monotonic()
+            kills_ns["sim-a"] = time.time_ns()
         elif (
             "sim-a" in kills
             and "sim-b" not in kills
@@ -402,6 +405,11 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
         ):
             os.kill(sims["sim-b"].pid, signal.SIGKILL)
             kills["sim-b"] = time.monotonic()
+            kills_ns["sim-b"] = time.time_ns()
+
+    def heirs() -> str:
+        """Every peer's own account, for a failure: what each sim restored and replayed, any hold, the compute's log."""
+        return "".join(f"\n--- {name}:\n{procs.output(p)[-3000:]}" for name, p in (*sims.items(), ("compute", comp)))
 
     obs = connect("tool", "observer")
     tape = Tape(obs, world, on_sample)
@@ -421,21 +429,24 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
             what=f"the moment to kill {dead}",
             seen=lambda: (results, len(path_sent)),
         )
-        assert dead in kills, (f"the scenarios ended before {dead} was killed", results)
+        assert dead in kills, f"the scenarios ended before {dead} was killed: {results}{heirs()}"
         wait_until(
             lambda: all(tape.of(r, s, term) for r, s in streams) and roles.shows(heir, "primary", term=term),
             timeout=20,
             what=f"{heir} serving term {term}",
             seen=lambda: procs.output(sims[heir])[-1500:],
         )
-        for r, s in streams:  # streams resume within 1 s, from the heir
+        # streams resume within 1 s, from the heir; unless the heir froze (starved of CPU) when its leader's token
+        # went: then it trusts no token's loss for a lease and as long again as it was late, and waits three leases
+        # more (docs/sim.md; at load 10 an heir took over 7.5 s after the kill, its log saying why)
+        froze = f"standby {heir}: deaf (frozen" in procs.output(sims[heir])
+        bound = 1.0 if not froze else 20.0
+        for r, s in streams:
             first = tape.of(r, s, term)[0]
-            assert first.msg.header.source == heir and first.t - kills[dead] <= 1.0, (
-                r,
-                s,
-                first.msg.header,
-                first.t - kills[dead],
-                procs.output(sims[heir])[-2500:],  # the heir's own account: a loaded run saw 9 s, with no log kept
+            made = (first.msg.header.wall_ns - kills_ns[dead]) / 1e9
+            assert first.msg.header.source == heir and first.t - kills[dead] <= bound, (
+                f"{r} {s}: {first.msg.header}, seen {first.t - kills[dead]:.2f} s after the kill, made {made:.2f} s after "
+                f"it; the heir's own account:\n{procs.output(sims[heir])[-2500:]}"  # a loaded run saw 9 s, with no log kept
             )
         info = obs.rpc.call(keys.srv(world, "world"), timeout=5.0, expected=WorldInfo)
         assert (info.header.term, info.header.source) == (term, heir), info.header
@@ -455,11 +466,12 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
     res_a, res_b = results["alice"], results["bob"]
     story = _ownership_story(tape)
     print("\n".join(story))  # shown on failure: who owned what, under which term
+
     assert isinstance(res_a, ScenarioResult) and res_a.ok, (
-        res_a if not isinstance(res_a, ScenarioResult) else "\n".join(res_a.lines)
+        f"{res_a if not isinstance(res_a, ScenarioResult) else chr(10).join(res_a.lines)}{heirs()}"
     )
     assert isinstance(res_b, ScenarioResult) and res_b.ok, (
-        res_b if not isinstance(res_b, ScenarioResult) else "\n".join(res_b.lines)
+        f"{res_b if not isinstance(res_b, ScenarioResult) else chr(10).join(res_b.lines)}{heirs()}"
     )
     assert res_a.figures["targets"] == 8 and res_a.figures["max_error_mm"] <= 5.0
     assert res_b.figures["goal_error_m"] <= 0.3
@@ -475,6 +487,10 @@ def test_scenarios_a_and_b_survive_two_sigkills_with_two_standbys(world, router,
         }
         assert terms <= {t for t, _ in held} and len({e for _, e in held}) == 1, (robot, sorted(held))
     rejects = [s.msg for s in tape.items if isinstance(s.msg, Event) and s.msg.kind == "reject"]
-    assert not rejects, rejects
+    # a pause is no refusal: a sim that froze (starved of CPU) holds its robots until it hears again (deaf_stop), the
+    # owner's client sends the command again, and the scenario goes on; only a sim that said it held may pause one
+    pauses = [e for e in rejects if e.reason == "held"]
+    assert not [e for e in rejects if e.reason != "held"], rejects
+    assert not pauses or any("hears no one" in procs.output(p) for p in sims.values()), (pauses, heirs())
     # sim-c published nothing until it took over
     assert all(s.t > kills["sim-b"] for s in tape.by("sim-c"))
