@@ -71,6 +71,8 @@ class FloodResult:
     changes: int = 0
     """Records of arm1 and base1 that named another owner or epoch than before the flood (a release, a
     restore, a handover): what an owner sees even when she has her robot back by the end."""
+    changed: tuple[str, ...] = ()
+    """Those records, as "robot: owner@epoch -> owner@epoch" (the first few): which change it was."""
 
 
 class _Prober:
@@ -212,6 +214,7 @@ def run_flood(counts: list[int], tmp: Path, *, settle: float = 5.0) -> list[Floo
                         base.record is not None and base.record.owner == "bob",
                         len(losses) - lost_before,
                         len(changes) - changed_before,
+                        tuple(changes[changed_before : changed_before + 8]),
                     )
                 )
             watch.undeclare()

@@ -18,6 +18,5 @@ def test_a_declare_and_close_flood_leaves_every_owner_owning(tmp_path):
     (r,) = run_flood([6000], tmp_path, settle=2.0)
     print(table([r]))
     assert r.declare_s == r.declare_s, "mallory never said she had declared"  # not NaN
-    assert r.alice_owns and r.bob_owns and r.losses == 0 and r.changes == 0, table(
-        [r]
-    )  # not even released and restored
+    # not even released and restored
+    assert r.alice_owns and r.bob_owns and r.losses == 0 and r.changes == 0, (table([r]), r.changed)
