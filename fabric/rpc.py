@@ -201,10 +201,16 @@ class Rpc:
         replies: list[Reply] = []
         errors: list[str] = []
         t0 = time.monotonic()
+        went_at: float | None = None  # when an ask ended early with its server gone under it (_server_went)
         while True:
             asked_at = time.monotonic()
             self._ask(selector, request, t0 + timeout, all_replies, expected, replies, errors)
-            if replies or errors or not self._relinked(asked_at, t0 + timeout):
+            if replies or errors:
+                break
+            if self._relinked(asked_at, t0 + timeout):
+                continue
+            went_at = self._server_went(asked_at, t0 + timeout, went_at)
+            if went_at is None:
                 break
         if not replies:
             if errors:
@@ -232,6 +238,27 @@ class Rpc:
         time.sleep(RELINK_POLL_S)
         self._counters["queries_after_relink"] += 1
         return True
+
+    def _server_went(self, asked_at: float, deadline: float, went_at: float | None) -> float | None:
+        """After an ask that nobody answered, on a link that stayed up: when its server went under it, if it is to be
+        asked again (None: not). An ask that ended early (later than :data:`RELINK_EARLY_S`, before half its limit)
+        found a server, which then went before it answered: it died, its own link to the router dropped (a process
+        starved past its lease), or it would not answer yet (an authority unsure of itself after a freeze). For
+        :data:`RELINK_S` from then, within the limit, the key is asked again every :data:`RELINK_POLL_S` (a compute
+        peer reconnects within about a second, a standby takes a dead sim's world over within one). Before, the asker
+        was told "nobody serves it" though the server was back a moment later (issue 49's fail-over runs at load)."""
+        now = time.monotonic()
+        if now + RELINK_POLL_S >= deadline:
+            return None
+        if went_at is None:
+            if now - asked_at < RELINK_EARLY_S or now >= asked_at + 0.5 * (deadline - asked_at):
+                return None  # at once (no server) or at its limit (a silent one): the answer stands
+            went_at = now
+            self._counters["queries_after_server_went"] += 1
+        elif now - went_at > RELINK_S:
+            return None
+        time.sleep(RELINK_POLL_S)
+        return went_at
 
     def _lost_under(self, asked_at: float, deadline: float) -> bool:
         """Whether the link was lost while a query asked at ``asked_at`` was out: only a query that ended early

@@ -64,3 +64,44 @@ def _answer(caller: Fabric, key: str, v: float) -> bool:
         return caller.rpc.call(key, Twist(v / 2, 0.0), timeout=1.0).v == v
     except NoReply:
         return False
+
+
+def test_a_query_whose_server_went_under_it_is_answered_by_the_server_back_a_moment_later(world, cut_link):
+    """The server's side: the query found its server, which went before it answered (here its session closes; a
+    compute peer starved past its lease loses its link that way, a sim dies and its standby takes over). The asker's
+    link stayed up. A server back within about a second answers the same query, within its limit."""
+    server, caller, _cut = cut_link
+    key = keys.srv(world, "fk", "arm1")
+    port = server.config.endpoints()[0][0].rsplit(":", 1)[1]
+    asked, slow_now = threading.Event(), threading.Event()
+
+    def slow(k, req):
+        if slow_now.is_set():
+            asked.set()
+            time.sleep(2.0)  # still working when its session goes
+        return Twist(req.v * 2, 0.0, header=server.header(k))
+
+    server.rpc.serve(key, slow, expected=Twist)
+    wait_until(lambda: _answer(caller, key, 3.0), what="the first answer")
+    slow_now.set()
+    back: list[Fabric] = []
+
+    def go_and_come_back() -> None:
+        asked.wait(10.0)
+        time.sleep(0.5)  # half a second into its answer (an ask ended within RELINK_EARLY_S found no server)
+        server.close()  # the query it holds ends at once for the asker: nobody answered
+        time.sleep(0.3)
+        again = client(world, int(port), kind="compute", peer_id="c2")
+        again.rpc.serve(key, lambda k, req: Twist(req.v * 3, 0.0, header=again.header(k)), expected=Twist)
+        back.append(again)
+
+    t = threading.Thread(target=go_and_come_back)
+    t.start()
+    try:
+        reply = caller.rpc.call(key, Twist(1.5, 0.0), timeout=10.0)  # before: "nobody serves it" after ~0.1 s
+        assert reply.v == 4.5  # the server that came back answered
+        assert caller.counters["queries_after_server_went"] == 1
+    finally:
+        t.join(timeout=10)
+        for f in back:
+            f.close()
