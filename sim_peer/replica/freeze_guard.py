@@ -14,7 +14,7 @@ import time
 from typing import Any, Callable, Protocol
 
 from fabric import keys
-from fabric.interfaces import ServiceError, WorldState
+from fabric.interfaces import NoReply, ServiceError, WorldState
 from fabric.session import Fabric
 from sim_peer.replica import election as el
 from sim_peer.replica import freeze_rule as fr
@@ -53,6 +53,10 @@ class ShardOf(Protocol):
     def about_mine(self, state: Any) -> bool:
         """Whether a ``srv/state`` answer is this shard's."""
         ...
+
+
+EMPTY_LOOKS = 3
+"""How many looks at the sims' tokens a frozen primary takes before it believes no rival is there."""
 
 
 class FreezeGuard:
@@ -112,19 +116,29 @@ class FreezeGuard:
         """Once connected again, ask ``srv/state`` who holds this shard now; a higher term heard steps us down."""
         f = self.fabric
         deadline = self.clock() + fr.ask_for(self.gap)
+        empty = 0
         while self.clock() < deadline and not self._stopping.is_set() and self._roles.role == el.PRIMARY:
             if not f.connected():
                 time.sleep(0.1)  # not connected yet: nobody to ask, nobody to tell
                 continue
             others = [pid for _, pid in f.live_peers("sim", timeout=1.0) if pid != f.peer_id]
             replies = []
+            unanswered = not others
             if others:
                 try:
                     replies = f.rpc.query(
                         keys.srv(f.world, "state"), timeout=1.0, expected=WorldState, all_replies=True
                     )
+                except NoReply:
+                    unanswered = True
                 except ServiceError:
                     replies = []  # standbys answer with a refusal: no other authority
+            if unanswered and empty < EMPTY_LOOKS - 1:
+                # rivals were there when the freeze began: at load a look at the tokens, or the ask, can come back
+                # empty (the suite's run saw a rival that served all along missed), so look again a few times
+                empty += 1
+                time.sleep(0.1)
+                continue
             for rep in replies:
                 if self._shard.about_mine(rep.message):
                     self._roles.heard(rep.message.header.source, rep.message.header.term)
