@@ -250,7 +250,10 @@ def test_a_user_can_spread_ik_over_every_compute_peer(world, router, connect):
                     lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer)
                 )
                 assert np.allclose(q, Q, atol=1e-9)
-            assert svcs["c1"].counters["ik"] == 2 and svcs["c2"].counters["ik"] == 2
+            # an ask whose answer a lost link swallowed is asked again (fabric/rpc.py): at load the test's in-process
+            # router starved past the lease and every client lost its link once, and c1 served one IK twice
+            again = lambda: w.fabric.counters["queries_after_relink"] + w.fabric.counters["queries_after_server_went"]  # noqa: E731
+            assert 2 <= svcs["c1"].counters["ik"] <= 2 + again() and 2 <= svcs["c2"].counters["ik"] <= 2 + again()
             assert w.compute_route.navigation_peer() is None  # maps are not spread: the nearest peer holds one
             svcs.pop("c2").close()  # c2 stops serving; its token stays with its session until the list is read again
             for _ in range(2):
@@ -258,7 +261,7 @@ def test_a_user_can_spread_ik_over_every_compute_peer(world, router, connect):
                     lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer)
                 )
                 assert np.allclose(q, Q, atol=1e-9)
-            assert svcs["c1"].counters["ik"] == 4
+            assert 4 <= svcs["c1"].counters["ik"] <= 4 + again()
     finally:
         for s in svcs.values():
             s.close()
