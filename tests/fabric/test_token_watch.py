@@ -43,14 +43,16 @@ def _watched_sim(world, connect, recheck_s=(0.05, 0.2)):
 
 
 def test_a_going_heard_after_the_link_came_back_is_undone_by_the_router_s_answer(world, connect):
-    _sim, watch, told, key = _watched_sim(world, connect)
+    # three checks, the last 2 s on (the watch's own are 0.5, 2, 5 and 15 s): at load both of two checks within 0.2 s
+    # once found nothing (the suite's run of 2026-11-30), and the token was never told back
+    _sim, watch, told, key = _watched_sim(world, connect, recheck_s=(0.05, 0.5, 2.0))
     for _ in range(3):  # a loaded run's subscription once told the token twice: its late copy answered first
         watch.heard(key, False)  # the old link's going, delivered after the new link's token
         wait_until(lambda: told.of(key)[-1:] == [True], timeout=30, what="the token back", seen=lambda: told.calls)
         if watch.restored:
             break
     assert watch.restored == 1, told.calls
-    checks = len(told.of(key)) - 1  # two checks per going: one going per False and True told after the first
+    checks = 3 * told.of(key).count(False)  # three checks per going
     wait_until(lambda: watch.rechecks == checks, timeout=30, what="the checks answered", seen=lambda: watch.rechecks)
     assert told.of(key)[-1] is True and watch.restored == 1  # the later check found it told already
     watch.undeclare()

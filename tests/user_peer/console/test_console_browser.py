@@ -558,7 +558,9 @@ def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_g
     logged_in(bob, klass, "bob")
     bob.get_by_role("button", name="base1", exact=True).click(no_wait_after=True)
     alice.locator("body").click(no_wait_after=True, position={"x": 5, "y": 5})
-    alice.keyboard.down("ArrowDown")  # backwards, towards the west wall
+    # turning on the spot, for as long as it is held: backing towards the west wall, the base once reached something
+    # (or stood still) before bob's Queue came at load, and his Queue took it over, as a request on a still robot does
+    alice.keyboard.down("ArrowLeft")
     wait_until(lambda: base.record.state == "moving", timeout=10, what="base1 moving", seen=lambda: base.record)
     # moving: bob takes a place in the queue. Not waiting on navigations: in CI (load 10-16) this click once waited
     # 30 s on one (NiceGUI reloads a page whose connection timed out), a reload that resumes his session anyway
@@ -573,11 +575,11 @@ def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_g
             print(f"bob's Queue said nothing in 30 s, clicked again: {e}")
     bob.get_by_text(re.compile(r"^mobile · owner: alice .*your place: 1")).wait_for()
     closed = time.monotonic()
-    alice.context.close()  # with ↓ still held: its release never comes
+    alice.context.close()  # with ← still held: its release never comes
 
     def still() -> bool:
         p = base.pose
-        return p is not None and math.hypot(p.linear[0], p.linear[1]) < 0.02
+        return p is not None and math.hypot(p.linear[0], p.linear[1]) < 0.02 and abs(p.angular[2]) < 0.02
 
     wait_until(still, timeout=15, what="base1 stopped after alice's page closed", seen=lambda: base.pose)
     stopped = time.monotonic() - closed
