@@ -41,6 +41,9 @@ early: zenoh ends one at once when no route leads to a server, at its limit when
 when the link closed under it (or on a loaded box, at once taking that long)."""
 RELINK_CONFIRM_S = 0.5
 """How long such a query's end waits to hear whether the link closed under it."""
+FROZEN_S = 1.0
+"""An ask that ended this long past its limit was not answered because its own process did not run: paused (SIGSTOP,
+a laptop's lid) or starved. Its limit is given again once (:meth:`Rpc._renewed`)."""
 """The error reply zenoh itself gives a query whose time limit ran out while a server was known: a
 silence, which must read as NoReply (retried by those who wait), not as a server's refusal."""
 
@@ -201,15 +204,19 @@ class Rpc:
         replies: list[Reply] = []
         errors: list[str] = []
         t0 = time.monotonic()
+        deadline, renewed = t0 + timeout, False
         went_at: float | None = None  # when an ask ended early with its server gone under it (_server_went)
         while True:
             asked_at = time.monotonic()
-            self._ask(selector, request, t0 + timeout, all_replies, expected, replies, errors)
+            self._ask(selector, request, deadline, all_replies, expected, replies, errors)
             if replies or errors:
                 break
-            if self._relinked(asked_at, t0 + timeout):
+            if self._relinked(asked_at, deadline):
                 continue
-            went_at = self._server_went(asked_at, t0 + timeout, went_at)
+            if not renewed and (again := self._renewed(selector, asked_at, deadline, timeout)) is not None:
+                deadline, renewed = again, True
+                continue
+            went_at = self._server_went(asked_at, deadline, went_at)
             if went_at is None:
                 break
         if not replies:
@@ -217,6 +224,29 @@ class Rpc:
                 raise Refused(errors[0], key=selector)
             raise _no_reply(selector, time.monotonic() - t0, timeout)
         return replies
+
+    def _renewed(self, selector: str, asked_at: float, deadline: float, timeout: float) -> float | None:
+        """After an ask that nobody answered and whose limit ran out: its new deadline, if its own side is to blame
+        (None: the silence stands). So it is when its link was lost under it, or when it ended :data:`FROZEN_S` past
+        its limit (its process did not run: zenoh's timer fires only when it wakes). The limit is then given again,
+        whole, from when the link is back (waited for as long as the limit, :data:`RELINK_S` at least), once per query: a
+        student paused past her lease while her map was built found, on waking, her limit spent and her link closed,
+        and failed her test though the map was ready (issue 49, CI of 2026-11-30)."""
+        now = time.monotonic()
+        if self._linked is None or now + RELINK_POLL_S < deadline:
+            return None
+        if not (now - deadline >= FROZEN_S or self._lost_at() >= asked_at or not self._linked()):
+            return None
+        until = time.monotonic() + max(RELINK_S, timeout)
+        while not self._linked():
+            if time.monotonic() >= until:
+                return None  # its router is gone, not just its link: the silence stands
+            time.sleep(RELINK_POLL_S)
+        self._counters["queries_renewed"] += 1
+        log.info(
+            "query %s: its limit ran out while its own link was lost or its process stood still; asked again", selector
+        )
+        return time.monotonic() + timeout
 
     def _relinked(self, asked_at: float, deadline: float) -> bool:
         """After nobody answered a query asked at ``asked_at``: whether to ask again within ``deadline``. Yes where
@@ -321,9 +351,10 @@ class Rpc:
         a reply that does not decode counts as a refusal, and replies are not fenced."""
         errors: list[str] = []
         t0 = time.monotonic()
+        deadline, renewed = t0 + timeout, False
         while True:
             asked_at = time.monotonic()
-            left = max(0.01, t0 + timeout - asked_at)
+            left = max(0.01, deadline - asked_at)
             for rep in self._session.get(selector, **self._get_options(selector, request, left, True)):
                 if rep.ok is not None:
                     try:
@@ -334,8 +365,13 @@ class Rpc:
                 refusal = _refusal(rep.err)
                 if refusal is not None:
                     errors.append(refusal)
-            if errors or not self._relinked(asked_at, t0 + timeout):
+            if errors:
                 break
+            if self._relinked(asked_at, deadline):
+                continue
+            if renewed or (again := self._renewed(selector, asked_at, deadline, timeout)) is None:
+                break
+            deadline, renewed = again, True
         if errors:
             raise Refused(errors[0], key=selector)
         raise _no_reply(selector, time.monotonic() - t0, timeout)

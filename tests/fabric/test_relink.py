@@ -105,3 +105,46 @@ def test_a_query_whose_server_went_under_it_is_answered_by_the_server_back_a_mom
         t.join(timeout=10)
         for f in back:
             f.close()
+
+
+def test_a_query_whose_limit_ran_out_while_its_link_was_down_is_asked_once_more_when_it_is_back(world, cut_link):
+    """A student paused past her lease while her map was built wakes with her query's limit spent and her link
+    closed: the limit is given again, once, from when her link is back (here the router is down longer than the
+    limit). Before: "no reply after 1.0 s of 1.0 s", though the server was there all along."""
+    server, caller, cut = cut_link
+    key = keys.srv(world, "fk", "arm1")
+    asked, slow_now = threading.Event(), threading.Event()
+
+    def slow(k, req):
+        if slow_now.is_set():
+            asked.set()
+            time.sleep(0.6)  # still working when the router goes
+        return Twist(req.v * 2, 0.0, header=server.header(k))
+
+    server.rpc.serve(key, slow, expected=Twist)
+    # three answers in a row: right after the first, a query once found nobody at once (its routes still settling)
+    wait_until(lambda: all(_answer(caller, key, 3.0) for _ in range(3)), what="three answers in a row")
+    slow_now.set()
+    # the router goes 0.3 s into the answer (an ask ended within RELINK_EARLY_S found no server) and is down 1.2 s:
+    # past the query's limit, and back within RELINK_S of it
+    t = threading.Thread(target=lambda: (asked.wait(10.0), time.sleep(0.3), cut(1.2)))
+    t.start()
+    try:
+        t0 = time.monotonic()
+        reply = caller.rpc.call(key, Twist(1.5, 0.0), timeout=1.0)
+        assert reply.v == 3.0
+        assert caller.counters["queries_renewed"] == 1
+        assert time.monotonic() - t0 >= 1.5  # it outlived its first limit: the router was down for 1.2 s of it
+    finally:
+        t.join(timeout=10)
+
+
+def test_a_query_to_a_router_gone_for_good_is_not_renewed(world, cut_link):
+    _server, caller, cut = cut_link
+    key = keys.srv(world, "fk", "arm1")
+    cut(5.0)  # the router is back only after the query has given up
+    t0 = time.monotonic()
+    with pytest.raises(NoReply):
+        caller.rpc.call(key, Twist(1.0, 0.0), timeout=1.0)
+    assert caller.counters["queries_renewed"] == 0
+    assert time.monotonic() - t0 < 1.0 + 2.0 + 1.0  # its limit, and RELINK_S waiting for a link not back in time
