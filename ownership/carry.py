@@ -16,7 +16,7 @@ from typing import Any, Iterable, Mapping
 
 from fabric.interfaces import OwnershipRecord
 
-__all__ = ["overlay", "newer"]
+__all__ = ["overlay", "newer", "changed_hands"]
 
 
 def newer(heard: OwnershipRecord, snapshot: OwnershipRecord | None, next_seq: int) -> bool:
@@ -65,3 +65,13 @@ def overlay(
                 new_users[f"live:{user}"] = True
     new_users["next_rank"] = rank
     return tuple(out[o] for o in sorted(out)), new_users
+
+
+def changed_hands(snapshot: Iterable[OwnershipRecord], restored: Iterable[OwnershipRecord]) -> tuple[str, ...]:
+    """The objects whose owner or epoch the ``restored`` records (:func:`overlay`'s) moved on from the ``snapshot``'s:
+    their leader stopped each of them when it lost its owner there (``CommandQueue.on_owner_lost``), after the
+    snapshot that carries their controllers, so a take-over must stop them again. Without it a standby drove an arm
+    on to its former owner's target with nobody owning it (the soak's ``unowned_motion``: arm0 moved 4.0 s after its
+    owner went, on the sim that took over)."""
+    before = {r.object: (r.owner, r.epoch) for r in snapshot}
+    return tuple(r.object for r in restored if before.get(r.object, ("", 0)) != (r.owner, r.epoch))

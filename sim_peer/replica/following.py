@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, Callable, Protocol
 from fabric import keys
 from fabric.codec import DecodeError, decode
 from fabric.interfaces import Command, JointState, OwnershipRecord, Pose, ServiceError, WorldState
-from ownership.carry import overlay
+from ownership.carry import changed_hands, overlay
 from sim_peer.replica import election as el
 from sim_peer.physics import capture
 from sim_peer.replica.kept_commands import CommandBuffer
@@ -296,7 +296,13 @@ class Follower:
             seqs[k] = max(seqs.get(k, 0), rec.header.seq + 1)
         f.seqs.carry_on(seqs)
         next_seqs = {r.object: int(state.seqs.get(keys.own(f.world, r.object), 0)) for r in heard}
-        return overlay(state.records, state.users, heard, next_seqs)
+        restored = overlay(state.records, state.users, heard, next_seqs)
+        for rid in changed_hands(state.records, restored[0]):
+            robot = world.robots.get(rid)
+            if robot is not None:
+                robot.halt()  # as its leader did when its owner went, after the snapshot
+                log.info("%s: its owner changed after the snapshot taken over: stopped as its leader stopped it", rid)
+        return restored
 
     def replay(self, peer: "SimPeer", gate: "CommandGate") -> None:
         """Apply again what users sent after the snapshot was asked for, in arrival order, before the new

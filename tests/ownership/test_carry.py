@@ -13,7 +13,7 @@ from hypothesis import strategies as stf
 
 from fabric.interfaces import Header, OwnershipRecord
 from ownership import snapshot, state as st
-from ownership.carry import newer, overlay
+from ownership.carry import changed_hands, newer, overlay
 
 
 def _rec(obj: str, owner: str = "", epoch: int = 0, seq: int = 0, queue: tuple[str, ...] = ()) -> OwnershipRecord:
@@ -86,3 +86,9 @@ def test_no_epoch_ever_goes_below_the_snapshot_or_the_newest_heard(snap_epochs, 
     assert {o: r.epoch for o, r in restored.records.items()} == {o: r.epoch for o, r in by.items()}
     assert all(r.owner in restored.live for r in restored.records.values() if r.owner)
     st.step(restored, st.Tick(0.1))  # and steps
+
+
+def test_only_the_objects_whose_owner_or_epoch_moved_on_changed_hands():
+    snap = (_rec("arm1", "alice", 2), _rec("base1", "bob", 5), _rec("arm2"))
+    restored = (_rec("arm1", "", 3), _rec("base1", "bob", 5, queue=("carol",)), _rec("arm2"), _rec("base2", "dan", 1))
+    assert changed_hands(snap, restored) == ("arm1", "base2")  # a queue change is no change of hands

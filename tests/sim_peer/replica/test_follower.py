@@ -163,3 +163,44 @@ def test_a_take_over_restores_the_snapshot_brought_forward_by_the_newer_joints(c
     assert fab.seqs.take(joints_key) == 42  # the leader's joints numbers continued
     assert {r.object: r.epoch for r in records} == {"arm1": 2}  # granted after the snapshot: carried over
     assert fab.seqs.take(keys.own(fab.world, "arm1")) == 4
+
+
+def _taken_over_mid_move(connect, heard: OwnershipRecord | None) -> float:
+    """How far (rad) arm1 moves in 0.5 s after a take-over from a snapshot of it moving for alice (epoch 2), with
+    ``heard`` the leader's newer record of it, published after the snapshot."""
+    fab = connect("sim", "sim-b")
+    leaders = SimWorld("combined", seed=1)
+    leaders.robots["arm1"].joints(np.radians([60.0, 30.0, -40.0, 30.0, 50.0, -30.0]), 0.3)
+    leaders.step(100)  # under way to its target
+    t, steps, robots, objects = capture.capture(leaders)
+    alices = OwnershipRecord("arm1", owner="alice", epoch=2, header=Header(seq=3, source="sim-a", term=3))
+    state = WorldState(
+        t,
+        steps,
+        robots,
+        objects,
+        records=(alices,),
+        seqs={keys.own(fab.world, "arm1"): 4},
+        header=Header(source="sim-a", term=3),
+    )
+    mine = SimWorld("combined", seed=1)
+    told = Followed(fab, mine)
+    follower = told.follower(fab)
+    if heard is not None:
+        follower.on_record("k", heard)
+    with told.lock:
+        follower.catch_up(state)
+    q0 = np.array(mine.robots["arm1"].ctrl.q, dtype=float)
+    mine.step(int(0.5 / mine.dt))
+    return float(np.max(np.abs(np.array(mine.robots["arm1"].ctrl.q, dtype=float) - q0)))
+
+
+def test_a_robot_whose_owner_went_after_the_snapshot_is_stopped_at_the_take_over(connect):
+    """Its leader stopped it when alice let go, after the snapshot that carries it: the new authority stops it too
+    (the soak once saw a standby drive arm0 on to its former owner's target, owned by nobody)."""
+    went = OwnershipRecord("arm1", owner="", epoch=3, header=Header(seq=4, source="sim-a", term=3))
+    assert _taken_over_mid_move(connect, went) < 0.02
+
+
+def test_a_robot_still_owned_carries_on_its_move_at_the_take_over(connect):
+    assert _taken_over_mid_move(connect, None) > 0.1  # no reset, no stop: it goes on where it was going
