@@ -298,9 +298,8 @@ class Follower:
         next_seqs = {r.object: int(state.seqs.get(keys.own(f.world, r.object), 0)) for r in heard}
         restored = overlay(state.records, state.users, heard, next_seqs)
         for rid in changed_hands(state.records, restored[0]):
-            robot = world.robots.get(rid)
-            if robot is not None:
-                robot.halt()  # as its leader did when its owner went, after the snapshot
+            if (changed := world.robots.get(rid)) is not None:
+                changed.halt()  # as its leader did when its owner went, after the snapshot
                 log.info("%s: its owner changed after the snapshot taken over: stopped as its leader stopped it", rid)
         return restored
 
