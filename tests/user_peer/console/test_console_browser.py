@@ -553,28 +553,21 @@ def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_g
     alice = open_page(browser, klass)
     logged_in(alice, klass, "alice")
     alice.get_by_role("button", name="base1", exact=True).click(no_wait_after=True)
-    alice.get_by_role("button", name="Request").click(no_wait_after=True)
-    wait_message(alice, r"request base1: you own it")
     bob = open_page(browser, klass)
     logged_in(bob, klass, "bob")
     bob.get_by_role("button", name="base1", exact=True).click(no_wait_after=True)
-    alice.locator("body").click(no_wait_after=True, position={"x": 5, "y": 5})
-    # turning on the spot, for as long as it is held: backing towards the west wall, the base once reached something
-    # (or stood still) before bob's Queue came at load, and his Queue took it over, as a request on a still robot does
-    alice.keyboard.down("ArrowLeft")
-    wait_until(lambda: base.record.state == "moving", timeout=10, what="base1 moving", seen=lambda: base.record)
-    # moving: bob takes a place in the queue. Not waiting on navigations: in CI (load 10-16) this click once waited
-    # 30 s on one (NiceGUI reloads a page whose connection timed out), a reload that resumes his session anyway
-    for attempt in (1, 2):  # a click a reload swallowed is clicked again (a second Queue keeps his place)
-        bob.get_by_role("button", name="Queue").click(no_wait_after=True)
-        try:
-            wait_message(bob, r"queue for base1: queued at position 1", timeout=30)
+    for attempt in (1, 2, 3):
+        if _alice_drives_and_bob_queues(alice, bob, base):
             break
-        except AssertionError as e:
-            if attempt == 2:
-                raise
-            print(f"bob's Queue said nothing in 30 s, clicked again: {e}")
-    bob.get_by_text(re.compile(r"^mobile · owner: alice .*your place: 1")).wait_for()
+        # at load her page's connection dropped (its pings unanswered 20 s), which lets go of her keys at once, as a
+        # dropped page must: her base stood still, and bob's Queue took it over, as the rules allow. The test's
+        # premise (bob queued behind a moving base) did not hold: bob gives it back and it is set up again
+        print(f"attempt {attempt}: bob's Queue took base1 over (it stood still): set up again")
+        bob.get_by_role("button", name="Release").click(no_wait_after=True)
+        wait_message(bob, r"release base1: ok", timeout=60)
+        alice.keyboard.up("ArrowLeft")
+    else:
+        pytest.fail("three times bob's Queue found base1 still: alice's page could not keep it moving")
     closed = time.monotonic()
     alice.context.close()  # with ← still held: its release never comes
 
@@ -616,6 +609,33 @@ def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_g
     bob.get_by_role("button", name="Release").click(no_wait_after=True)
     wait_message(bob, r"release base1: ok")
     bob.context.close()
+
+
+def _alice_drives_and_bob_queues(alice, bob, base) -> bool:
+    """alice owns base1 and turns it on the spot with ← held; bob clicks Queue while it moves. True once bob waits
+    at place 1; False where his Queue took it over (it stood still when his click reached the authority)."""
+    alice.get_by_role("button", name="Request").click(no_wait_after=True)
+    wait_message(alice, r"request base1: (you own it|granted .*already owner)", timeout=60)
+    alice.locator("body").click(no_wait_after=True, position={"x": 5, "y": 5})
+    # turning on the spot, for as long as it is held: backing towards the west wall, the base once reached something
+    # (or stood still) before bob's Queue came at load, and his Queue took it over, as a request on a still robot does
+    alice.keyboard.down("ArrowLeft")
+    wait_until(lambda: base.record.state == "moving", timeout=10, what="base1 moving", seen=lambda: base.record)
+    # moving: bob takes a place in the queue. Not waiting on navigations: in CI (load 10-16) this click once waited
+    # 30 s on one (NiceGUI reloads a page whose connection timed out), a reload that resumes his session anyway
+    for attempt in (1, 2):  # a click a reload swallowed is clicked again (a second Queue keeps his place)
+        bob.get_by_role("button", name="Queue").click(no_wait_after=True)
+        try:
+            said = wait_message(bob, r"queue for base1: (queued at position 1|granted)", timeout=30)
+            break
+        except AssertionError as e:
+            if attempt == 2:
+                raise
+            print(f"bob's Queue said nothing in 30 s, clicked again: {e}")
+    if "granted" in said:
+        return False
+    bob.get_by_text(re.compile(r"^mobile · owner: alice .*your place: 1")).wait_for()
+    return True
 
 
 OWN_KINDS = frozenset(str(k) for k in EventKind if k.startswith("own_"))
