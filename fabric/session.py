@@ -330,6 +330,15 @@ class Fabric:
                 self.peer_id,
                 self.config.lease_ms / 1000.0,
             )
+        elif self._link_lost_at != float("-inf"):
+            # a link back after one was lost (the first one is not news), said at the loss's level: who read
+            # "reconnecting" learns it did, and when (the paused student's log had the loss and never the link back)
+            log.warning(
+                "%s %s: linked to the router again, %.1f s after losing its link",
+                self.kind,
+                self.peer_id,
+                time.monotonic() - self._link_lost_at,
+            )
 
     def _linked(self) -> bool:
         """Whether this client has a link to a router now (it reconnects by itself after losing it)."""
