@@ -43,7 +43,8 @@ RELINK_CONFIRM_S = 0.5
 """How long such a query's end waits to hear whether the link closed under it."""
 FROZEN_S = 1.0
 """An ask that ended this long past its limit was not answered because its own process did not run: paused (SIGSTOP,
-a laptop's lid) or starved. Its limit is given again once (:meth:`Rpc._renewed`)."""
+a laptop's lid) or starved. Its link's loss, if it lost it meanwhile, is waited for this long more
+(:meth:`Rpc._renewed`)."""
 """The error reply zenoh itself gives a query whose time limit ran out while a server was known: a
 silence, which must read as NoReply (retried by those who wait), not as a server's refusal."""
 
@@ -226,19 +227,29 @@ class Rpc:
         return replies
 
     def _renewed(self, selector: str, asked_at: float, deadline: float, timeout: float) -> float | None:
-        """After an ask that nobody answered and whose limit ran out: its new deadline, if its own side is to blame
-        (None: the silence stands). So it is when its link was lost under it, or when it ended :data:`FROZEN_S` past
-        its limit (its process did not run: zenoh's timer fires only when it wakes). The limit is then given again,
-        whole, from when the link is back (waited for as long as the limit, :data:`RELINK_S` at least), once per query: a
-        student paused past her lease while her map was built found, on waking, her limit spent and her link closed,
-        and failed her test though the map was ready (issue 49, CI of 2026-11-30)."""
+        """After an ask that nobody answered and whose limit ran out: its new deadline where its own link was lost
+        under it (None: the silence stands). An ask that ended :data:`FROZEN_S` past its limit did not run (paused or
+        starved: zenoh's timer fires only when it wakes), and the link's close is told a moment after it wakes: that
+        is waited for, :data:`FROZEN_S` at most. The limit is then given again, whole, from when the link is back
+        (waited for as long as the limit, :data:`RELINK_S` at least), once per query: a student paused past her lease
+        while her map was built found, on waking, her limit spent and her link closed, and failed her test though the
+        map was ready (issue 49, CI of 2026-11-30). A silent server on a link that held is not asked again."""
+        linked = self._linked
         now = time.monotonic()
-        if self._linked is None or now + RELINK_POLL_S < deadline:
+        if linked is None or now + RELINK_POLL_S < deadline:
             return None
-        if not (now - deadline >= FROZEN_S or self._lost_at() >= asked_at or not self._linked()):
+
+        def lost() -> bool:
+            return self._lost_at() >= asked_at or not linked()
+
+        if now - deadline >= FROZEN_S:
+            until = now + FROZEN_S
+            while not lost() and time.monotonic() < until:
+                time.sleep(RELINK_POLL_S)
+        if not lost():
             return None
         until = time.monotonic() + max(RELINK_S, timeout)
-        while not self._linked():
+        while not linked():
             if time.monotonic() >= until:
                 return None  # its router is gone, not just its link: the silence stands
             time.sleep(RELINK_POLL_S)
