@@ -155,7 +155,7 @@ class OwnState:
     grace_s: float = 10.0
     authority: str = ""
     deaf_s: float = 1.0  # nothing heard from any user for longer: the authority (or its router) is deaf
-    heard: float = float("-inf")  # when the last request, release or renewal reached the authority
+    heard: float = float("-inf")  # when the last request, release, renewal or token reached the authority
     hearing_since: float = float("-inf")  # when it last started hearing again after a silence or its own pause
     last_tick: float = float("-inf")
     regained: float = float(
@@ -278,11 +278,8 @@ def _drop_unproven(
 
 
 def _hear(s: OwnState, now: float) -> OwnState:
-    """Something from a user reached the authority at ``now`` (a request, release or renewal): after a silence
-    longer than ``deaf_s`` the authority starts hearing again from ``now``. A token's coming (a :class:`Join`) is
-    not hearing: tokens travel as declarations, and a router busy with a flood of them (6,000 logins declaring at
-    once) passed them on while it held the owners' renewals back 20.9 s; the authority, hearing tokens, expired
-    alice's and bob's leases and restored them (``bob@1 -> bob@3``, issue 49's whole run 12)."""
+    """Something from a user reached the authority at ``now`` (a request, release, renewal or token):
+    after a silence longer than ``deaf_s`` the authority starts hearing again from ``now``."""
     since = s.hearing_since if now - s.heard <= s.deaf_s else now
     if s.heard >= now and since == s.hearing_since:
         return s
@@ -330,7 +327,7 @@ def step(s: OwnState, ev: Event) -> tuple[OwnState, list[Effect]]:
     if handler is None:
         raise TypeError(f"not an ownership event: {ev!r}")
     effects: list[Effect] = []
-    if isinstance(ev, (Request, Release, Renew)):  # a token's coming is not hearing: see :func:`_hear`
+    if isinstance(ev, (Join, Request, Release, Renew)):
         s = _hear(s, ev.now)
     return handler(s, ev, effects), effects
 
