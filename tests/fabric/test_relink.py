@@ -59,6 +59,24 @@ def test_nobody_serving_still_says_so_at_once_on_a_link_that_is_up(world, cut_li
     assert caller.counters["queries_after_relink"] == 0
 
 
+def _slow_from_now(server: Fabric, caller: Fabric, key: str, slow_s: float) -> threading.Event:
+    """``server`` answers ``key`` (twice the request's ``v``), at once until it answered the caller three times in a
+    row (right after the first, a query once found nobody at once: its routes still settling), then ``slow_s`` late;
+    the event is set when a slow answer begins."""
+    asked, slow_now = threading.Event(), threading.Event()
+
+    def slow(k, req):
+        if slow_now.is_set():
+            asked.set()
+            time.sleep(slow_s)
+        return Twist(req.v * 2, 0.0, header=server.header(k))
+
+    server.rpc.serve(key, slow, expected=Twist)
+    wait_until(lambda: all(_answer(caller, key, 3.0) for _ in range(3)), what="three answers in a row")
+    slow_now.set()
+    return asked
+
+
 def _answer(caller: Fabric, key: str, v: float) -> bool:
     try:
         return caller.rpc.call(key, Twist(v / 2, 0.0), timeout=1.0).v == v
@@ -73,17 +91,7 @@ def test_a_query_whose_server_went_under_it_is_answered_by_the_server_back_a_mom
     server, caller, _cut = cut_link
     key = keys.srv(world, "fk", "arm1")
     port = server.config.endpoints()[0][0].rsplit(":", 1)[1]
-    asked, slow_now = threading.Event(), threading.Event()
-
-    def slow(k, req):
-        if slow_now.is_set():
-            asked.set()
-            time.sleep(2.0)  # still working when its session goes
-        return Twist(req.v * 2, 0.0, header=server.header(k))
-
-    server.rpc.serve(key, slow, expected=Twist)
-    wait_until(lambda: _answer(caller, key, 3.0), what="the first answer")
-    slow_now.set()
+    asked = _slow_from_now(server, caller, key, 2.0)  # still working when its session goes
     back: list[Fabric] = []
 
     def go_and_come_back() -> None:
@@ -113,18 +121,7 @@ def test_a_query_whose_limit_ran_out_while_its_link_was_down_is_asked_once_more_
     limit). Before: "no reply after 1.0 s of 1.0 s", though the server was there all along."""
     server, caller, cut = cut_link
     key = keys.srv(world, "fk", "arm1")
-    asked, slow_now = threading.Event(), threading.Event()
-
-    def slow(k, req):
-        if slow_now.is_set():
-            asked.set()
-            time.sleep(0.6)  # still working when the router goes
-        return Twist(req.v * 2, 0.0, header=server.header(k))
-
-    server.rpc.serve(key, slow, expected=Twist)
-    # three answers in a row: right after the first, a query once found nobody at once (its routes still settling)
-    wait_until(lambda: all(_answer(caller, key, 3.0) for _ in range(3)), what="three answers in a row")
-    slow_now.set()
+    asked = _slow_from_now(server, caller, key, 0.6)  # still working when the router goes
     # the router goes 0.3 s into the answer (an ask ended within RELINK_EARLY_S found no server) and is down 1.2 s:
     # past the query's limit, and back within RELINK_S of it
     t = threading.Thread(target=lambda: (asked.wait(10.0), time.sleep(0.3), cut(1.2)))
