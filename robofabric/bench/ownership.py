@@ -57,7 +57,15 @@ def run_one(n: int, *, lease_s: float, kills: int, grace_s: float = GRACE_S) -> 
         for prev, nxt in zip(users, users[1:]):
             t0 = time.perf_counter()
             prev.release("arm")
-            wait_until(lambda: nxt.owns("arm"), timeout=5, interval=0.0005, what="handover")
+            # 15 s, not 5: the final `make test` of 2026-11-30's fifth session missed 5 s once at the suite's load (0.3 s
+            # leases in one process), cause not known; what its replica held is said if it misses again
+            wait_until(
+                lambda: nxt.owns("arm"),
+                timeout=15,
+                interval=0.0005,
+                what="handover",
+                seen=lambda: (prev.record("arm"), nxt.record("arm")),
+            )
             handovers.append(time.perf_counter() - t0)
         recoveries = []
         last = users[-1]
