@@ -28,6 +28,8 @@ from fabric.publishers import priority_for
 log = logging.getLogger("robofabric")
 
 ZENOH_QUERY_TIMEOUT = "Timeout"
+"""The error reply zenoh itself gives a query whose time limit ran out while a server was known: a
+silence, which must read as NoReply (retried by those who wait), not as a server's refusal."""
 RELINK_S = 2.0
 """After this session's own link was seen down, how long a query that nobody answered at once is asked again (every
 :data:`RELINK_POLL_S`, within its time limit): a client that was paused or starved past its lease finds its link
@@ -45,8 +47,6 @@ FROZEN_S = 1.0
 """An ask that ended this long past its limit was not answered because its own process did not run: paused (SIGSTOP,
 a laptop's lid) or starved. Its link's loss, if it lost it meanwhile, is waited for this long more
 (:meth:`Rpc._renewed`)."""
-"""The error reply zenoh itself gives a query whose time limit ran out while a server was known: a
-silence, which must read as NoReply (retried by those who wait), not as a server's refusal."""
 
 __all__ = ["Rpc", "Reply", "ZENOH_QUERY_TIMEOUT"]
 
@@ -248,11 +248,8 @@ class Rpc:
                 time.sleep(RELINK_POLL_S)
         if not lost():
             return None
-        until = time.monotonic() + max(RELINK_S, timeout)
-        while not linked():
-            if time.monotonic() >= until:
-                return None  # its router is gone, not just its link: the silence stands
-            time.sleep(RELINK_POLL_S)
+        if not self._wait_linked(time.monotonic() + max(RELINK_S, timeout)):
+            return None  # its router is gone, not just its link: the silence stands
         self._counters["queries_renewed"] += 1
         log.info(
             "query %s: its limit ran out while its own link was lost or its process stood still; asked again", selector
@@ -272,12 +269,19 @@ class Rpc:
         lost_lately = time.monotonic() - self._lost_at() <= RELINK_S
         if not (lost_lately or not self._linked() or self._lost_under(asked_at, deadline)):
             return False
-        while not self._linked():
-            if time.monotonic() + RELINK_POLL_S >= deadline:
-                return False
-            time.sleep(RELINK_POLL_S)
+        if not self._wait_linked(deadline - RELINK_POLL_S):
+            return False
         time.sleep(RELINK_POLL_S)
         self._counters["queries_after_relink"] += 1
+        return True
+
+    def _wait_linked(self, until: float) -> bool:
+        """Whether this client's link is up by ``until`` (monotonic s), polled every :data:`RELINK_POLL_S`."""
+        assert self._linked is not None
+        while not self._linked():
+            if time.monotonic() >= until:
+                return False
+            time.sleep(RELINK_POLL_S)
         return True
 
     def _server_went(self, asked_at: float, deadline: float, went_at: float | None) -> float | None:
