@@ -214,7 +214,7 @@ class Rpc:
                 break
             if self._relinked(asked_at, deadline):
                 continue
-            if not renewed and (again := self._renewed(selector, asked_at, deadline, timeout)) is not None:
+            if not renewed and (again := self._renewed(selector, t0, deadline, timeout)) is not None:
                 deadline, renewed = again, True
                 continue
             went_at = self._server_went(asked_at, deadline, went_at)
@@ -226,21 +226,24 @@ class Rpc:
             raise _no_reply(selector, time.monotonic() - t0, timeout)
         return replies
 
-    def _renewed(self, selector: str, asked_at: float, deadline: float, timeout: float) -> float | None:
-        """After an ask that nobody answered and whose limit ran out: its new deadline where its own link was lost
-        under it (None: the silence stands). An ask that ended :data:`FROZEN_S` past its limit did not run (paused or
-        starved: zenoh's timer fires only when it wakes), and the link's close is told a moment after it wakes: that
-        is waited for, :data:`FROZEN_S` at most. The limit is then given again, whole, from when the link is back
-        (waited for as long as the limit, :data:`RELINK_S` at least), once per query: a student paused past her lease
-        while her map was built found, on waking, her limit spent and her link closed, and failed her test though the
-        map was ready (issue 49, CI of 2026-11-30). A silent server on a link that held is not asked again."""
+    def _renewed(self, selector: str, since: float, deadline: float, timeout: float) -> float | None:
+        """After a query asked at ``since`` that nobody answered and whose limit ran out: its new deadline where its
+        own link was lost under it (None: the silence stands). An ask that ended :data:`FROZEN_S` past its limit did
+        not run (paused or starved: zenoh's timer fires only when it wakes), and the link's close is told a moment
+        after it wakes: that is waited for, :data:`FROZEN_S` at most. The limit is then given again, whole, from when
+        the link is back (waited for as long as the limit, :data:`RELINK_S` at least), once per query: a student
+        paused past her lease while her map was built found, on waking, her limit spent and her link closed, and
+        failed her test though the map was ready (issue 49, CI of 2026-11-30). A link lost at any time since the first
+        ask counts, not only under the last one: in CI's next run her link came back 5 s after its loss, 1.4 s before
+        her limit, and the map was not built in what was left. A silent server on a link that held is not asked
+        again."""
         linked = self._linked
         now = time.monotonic()
         if linked is None or now + RELINK_POLL_S < deadline:
             return None
 
         def lost() -> bool:
-            return self._lost_at() >= asked_at or not linked()
+            return self._lost_at() >= since or not linked()
 
         if now - deadline >= FROZEN_S:
             until = now + FROZEN_S
@@ -384,7 +387,7 @@ class Rpc:
                 break
             if self._relinked(asked_at, deadline):
                 continue
-            if renewed or (again := self._renewed(selector, asked_at, deadline, timeout)) is None:
+            if renewed or (again := self._renewed(selector, t0, deadline, timeout)) is None:
                 break
             deadline, renewed = again, True
         if errors:

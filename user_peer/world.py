@@ -132,10 +132,12 @@ class World(contextlib.AbstractContextManager):
 
     def __repr__(self) -> str:
         """Every robot of the world (not only those asked for) from what this world already holds: it
-        makes no handle, subscribes to nothing and asks nobody."""
+        makes no handle, subscribes to nothing and asks nobody. A description forgotten (a sim came back, so the
+        next look asks again) still shows the last one held: "world not seen yet" is for a world never described
+        (a user whose link dropped and came back at load was told it for a world he had driven in; CI, issue 49)."""
         if self.closed:
             return f"<World {self.name!r} as {self.user!r}, closed>"
-        info = self.description.current
+        info = self.description.current or self.description.known
         if info is None:
             return f"<World {self.name!r} as {self.user!r}, world not seen yet>"
         robots = "; ".join(robot_status(self, entry) for entry in services.robot_entries(info))

@@ -3,6 +3,7 @@ loopback: the router is closed and opened again on its port, and both clients re
 
 import threading
 import time
+from collections.abc import Callable
 
 import pytest
 
@@ -59,16 +60,16 @@ def test_nobody_serving_still_says_so_at_once_on_a_link_that_is_up(world, cut_li
     assert caller.counters["queries_after_relink"] == 0
 
 
-def _slow_from_now(server: Fabric, caller: Fabric, key: str, slow_s: float) -> threading.Event:
+def _slow_from_now(server: Fabric, caller: Fabric, key: str, slow_s: float | Callable[[], float]) -> threading.Event:
     """``server`` answers ``key`` (twice the request's ``v``), at once until it answered the caller three times in a
-    row (right after the first, a query once found nobody at once: its routes still settling), then ``slow_s`` late;
-    the event is set when a slow answer begins."""
+    row (right after the first, a query once found nobody at once: its routes still settling), then ``slow_s`` late
+    (or ``slow_s()``, asked at each query); the event is set when a slow answer begins."""
     asked, slow_now = threading.Event(), threading.Event()
 
     def slow(k, req):
         if slow_now.is_set():
             asked.set()
-            time.sleep(slow_s)
+            time.sleep(slow_s() if callable(slow_s) else slow_s)
         return Twist(req.v * 2, 0.0, header=server.header(k))
 
     server.rpc.serve(key, slow, expected=Twist)
@@ -132,6 +133,34 @@ def test_a_query_whose_limit_ran_out_while_its_link_was_down_is_asked_once_more_
         assert reply.v == 3.0
         assert caller.counters["queries_renewed"] == 1
         assert time.monotonic() - t0 >= 1.5  # it outlived its first limit: the router was down for 1.2 s of it
+    finally:
+        t.join(timeout=10)
+
+
+def test_a_query_whose_link_came_back_too_late_in_its_limit_is_given_its_limit_again(world, cut_link):
+    """The link is lost early in the query and back before its limit, with too little of it left for the server's
+    answer (CI: the paused student's link came back 5 s after its loss, 1.4 s before his map's limit). The limit is
+    given again from the link's return. Before: only a loss under the last ask counted, "no reply after 3.0 s of
+    3.0 s", though the server was there all along."""
+    server, caller, cut = cut_link
+    key = keys.srv(world, "fk", "arm1")
+    limit, started = 6.0, [float("inf")]
+    # the first slow answer outlives the link; each later one comes 0.3 s past the first limit, whenever the link is
+    # back (the limit is long: at load a link took 5 s to come back, and one back after it would prove nothing)
+    answers = iter([1.5])
+    asked = _slow_from_now(
+        server, caller, key, lambda: next(answers, max(0.0, started[0] + limit + 0.3 - time.monotonic()))
+    )
+    t = threading.Thread(target=lambda: (asked.wait(10.0), time.sleep(0.3), cut(0.8)))
+    t.start()
+    try:
+        started[0] = t0 = time.monotonic()
+        reply = caller.rpc.call(key, Twist(1.5, 0.0), timeout=limit)
+        took = time.monotonic() - t0
+        assert reply.v == 3.0
+        assert caller.counters["queries_after_relink"] >= 1, "the link was not back within the limit: proves nothing"
+        assert caller.counters["queries_renewed"] == 1
+        assert took >= limit, took  # it outlived its first limit
     finally:
         t.join(timeout=10)
 

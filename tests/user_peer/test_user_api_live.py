@@ -127,3 +127,14 @@ def test_repr_of_a_world_describes_every_robot_and_makes_no_handle(user):
     assert w.robot_handles == {} and w.following.robots == frozenset(), (
         "repr made robot handles or followed their streams"
     )
+
+
+def test_repr_of_a_world_whose_sim_came_back_shows_the_robots_it_held(user):
+    """A sim's token coming again makes the next look ask for the description anew (``forget``): the repr, which asks
+    nobody, shows the last one held meanwhile, not "world not seen yet" (CI: bob's link dropped and came back)."""
+    w = user("frank")
+    w.info()
+    w.presence.seen("sim", "sim-that-came-back", True)  # what a sim's token coming does to the description
+    assert w.description.current is None, "a sim's coming no longer forgets the description: this test proves nothing"
+    text = repr(w)
+    assert "arm1 (" in text and "not seen yet" not in text, text
