@@ -48,7 +48,15 @@ FROZEN_S = 1.0
 a laptop's lid) or starved. Its link's loss, if it lost it meanwhile, is waited for this long more
 (:meth:`Rpc._renewed`)."""
 
-__all__ = ["Rpc", "Reply", "ZENOH_QUERY_TIMEOUT"]
+__all__ = ["Rpc", "Reply", "ZENOH_QUERY_TIMEOUT", "relinked_lately"]
+
+
+def relinked_lately(now: float, lost_at: float, back_at: float) -> bool:
+    """Whether a query that nobody serves is asked again a moment later: the link was lost, or came back, within
+    :data:`RELINK_S` of ``now``. From its return too: a link that took longer than that to come back (5 s for a
+    student woken at load 10, CI of 2026-11-30) has its routes a moment after it, and a query asked then met "nobody
+    serves it" though the sim had been there all along."""
+    return now - max(lost_at, back_at) <= RELINK_S
 
 
 @dataclass(frozen=True, slots=True)
@@ -75,12 +83,14 @@ class Rpc:
         resources: list[Any],
         linked: Callable[[], bool] | None = None,
         lost_at: Callable[[], float] = lambda: float("-inf"),
+        back_at: Callable[[], float] = lambda: float("-inf"),
     ) -> None:
         """``linked()``: whether this client has a link to a router now (None: a router itself, always linked);
-        ``lost_at()``: when it last lost one (monotonic seconds)."""
+        ``lost_at()``: when it last lost one, ``back_at()``: when one last came back after a loss (monotonic s)."""
         self._session = session
         self._linked = linked
         self._lost_at = lost_at
+        self._back_at = back_at
         self._counters = counters
         self._stamp = stamp
         self._header = header
@@ -261,7 +271,7 @@ class Rpc:
 
     def _relinked(self, asked_at: float, deadline: float) -> bool:
         """After nobody answered a query asked at ``asked_at``: whether to ask again within ``deadline``. Yes where
-        this client's link is down now (once it is back), was lost lately (its routes come back a moment after it),
+        this client's link is down now (once it is back), was lost or came back lately (its routes come a moment after it),
         or was lost while the query was out (a process woken from a pause learns only then that its router closed
         its link, and its query ends early, neither at once nor at its limit). A query that a link up all along
         answered with nobody, slowly or not, is not asked again: "nobody serves it" stays the answer."""
@@ -269,7 +279,7 @@ class Rpc:
             return False
         if time.monotonic() + RELINK_POLL_S >= deadline:
             return False
-        lost_lately = time.monotonic() - self._lost_at() <= RELINK_S
+        lost_lately = relinked_lately(time.monotonic(), self._lost_at(), self._back_at())
         if not (lost_lately or not self._linked() or self._lost_under(asked_at, deadline)):
             return False
         if not self._wait_linked(deadline - RELINK_POLL_S):

@@ -89,6 +89,8 @@ class Fabric:
         self._link_lost_at = float("-inf")
         """When this client last lost a link to its router (monotonic s; never for a router or a peer): a query ridden over
         it asks again (fabric.rpc), and a going heard about then is checked (fabric.token_watch)."""
+        self._link_back_at = float("-inf")
+        """When a link came back after one was lost (monotonic s): its routes come a moment after it (fabric.rpc)."""
         if config.profile == "client":  # a client's transports are its links to routers; a router's are its clients'
             self._resources.append(self.session.info.declare_transport_events_listener(self._on_transport))
         self._fence_watch = FenceWatch(
@@ -108,6 +110,7 @@ class Fabric:
             resources=self._resources,
             linked=self._linked if config.profile == "client" else None,
             lost_at=lambda: self._link_lost_at,
+            back_at=lambda: self._link_back_at,
         )
         """Services: ``rpc.serve``, ``rpc.query``, ``rpc.call`` (:mod:`fabric.rpc`)."""
         self.reports = Reports(
@@ -331,6 +334,7 @@ class Fabric:
                 self.config.lease_ms / 1000.0,
             )
         elif self._link_lost_at != float("-inf"):
+            self._link_back_at = time.monotonic()
             # a link back after one was lost (the first one is not news), said at the loss's level: who read
             # "reconnecting" learns it did, and when (the paused student's log had the loss and never the link back)
             log.warning(

@@ -9,6 +9,7 @@ import pytest
 
 from fabric import keys
 from fabric.interfaces import NoReply, Twist
+from fabric.rpc import relinked_lately
 from fabric.session import Fabric
 from robofabric.testing import client, free_port, router_config, wait_until
 
@@ -58,6 +59,27 @@ def test_nobody_serving_still_says_so_at_once_on_a_link_that_is_up(world, cut_li
     with pytest.raises(NoReply, match="nobody serves it"):  # said only within half the limit: not waited out
         caller.rpc.call(keys.srv(world, "fk", "nobody"), Twist(1.0, 0.0), timeout=5.0)
     assert caller.counters["queries_after_relink"] == 0
+
+
+def test_a_link_back_late_is_waited_for_its_routes_as_one_lost_just_now(world, cut_link):
+    """A link that took 5 s to come back (a student woken at load 10) has its routes a moment after it: a query that
+    finds nobody then is asked again for RELINK_S from the link's return, not from its loss (the times are set here,
+    as a clock would; before, "nobody serves it" at once, CI of 2026-11-30)."""
+    _server, caller, _cut = cut_link
+    now = time.monotonic()
+    caller._link_lost_at, caller._link_back_at = now - 5.0, now
+    t0 = time.monotonic()
+    with pytest.raises(NoReply, match="nobody serves it"):
+        caller.rpc.call(keys.srv(world, "fk", "nobody"), Twist(1.0, 0.0), timeout=6.0)
+    assert caller.counters["queries_after_relink"] >= 1
+    assert 1.5 <= time.monotonic() - t0 < 6.0
+
+
+def test_relinked_lately_counts_from_the_loss_or_the_return_whichever_is_later():
+    assert relinked_lately(10.0, lost_at=9.0, back_at=float("-inf"))
+    assert relinked_lately(10.0, lost_at=3.0, back_at=8.5)
+    assert not relinked_lately(10.0, lost_at=3.0, back_at=7.0)
+    assert not relinked_lately(10.0, lost_at=float("-inf"), back_at=float("-inf"))
 
 
 def _slow_from_now(server: Fabric, caller: Fabric, key: str, slow_s: float | Callable[[], float]) -> threading.Event:
