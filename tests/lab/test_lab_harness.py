@@ -75,12 +75,13 @@ def test_freeze_thaw_kill_and_a_shifted_clock(lab: Lab):
     a = lab.add_host("a")
     b = lab.add_host("b", clock_offset="-5")
     pa, pb = a.python(name="a"), b.python(name="b")
-    skew = pb.call("import time; time.time()") - pa.call("import time; time.time()")
-    assert -5.6 < skew < -4.4, skew
-    # the monotonic clock is left alone: intervals stay right on a host whose wall clock is wrong
-    assert pb.call("t = time.monotonic(); time.sleep(0.2); time.monotonic() - t") == pytest.approx(0.2, abs=0.15)
+    pa.call("import time")
+    assert _offset(pa, "time.time()", time.time) == pytest.approx(0.0, abs=0.5)
+    assert _offset(pb, "import time; time.time()", time.time) == pytest.approx(-5.0, abs=0.5)
+    # the monotonic clock is left alone (the box's own): intervals stay right on a host whose wall clock is wrong
+    assert _offset(pb, "time.monotonic()", time.monotonic) == pytest.approx(0.0, abs=0.5)
     ahead = a.python(name="ahead", clock_offset="+5")
-    assert 4.4 < ahead.call("import time; time.time()") - pa.call("time.time()") < 5.6
+    assert _offset(ahead, "import time; time.time()", time.time) == pytest.approx(5.0, abs=0.5)
 
     pending = pb.submit("time.sleep(0.3); 'done'")
     pb.proc.freeze()
@@ -95,6 +96,22 @@ def test_freeze_thaw_kill_and_a_shifted_clock(lab: Lab):
     assert not pb.proc.alive()
     with pytest.raises(LabError, match="ended"):
         pb.call("1")
+
+
+def _offset(host_python, expr: str, clock) -> float:
+    """How far the clock ``expr`` reads in ``host_python`` is from ``clock`` here. Each reading is bracketed by two of
+    ours and the narrowest bracket of five tries is kept, its middle taken: a call slowed by a loaded box (two calls in
+    a row at load 17 were once more than 0.6 s apart) widens a bracket and moves nothing. Fails if no try was
+    quicker than 0.4 s (the tolerance asked of the offset, 0.5 s, would not mean anything)."""
+    best: tuple[float, float] | None = None
+    for _ in range(5):
+        before = clock()
+        theirs = host_python.call(expr)
+        after = clock()
+        if best is None or after - before < best[0]:
+            best = (after - before, theirs - (before + after) / 2)
+    assert best is not None and best[0] < 0.4, f"every call took 0.4 s or more ({best}): the box too loaded to tell"
+    return best[1]
 
 
 def test_everything_is_removed_even_when_the_user_fails(lab_ok, tmp_path):

@@ -141,6 +141,13 @@ def trajectory_took(out: Path, sent: float, from_q: list[float], to_q: list[floa
     return (came_after - left_by) / 1e9, (came_by - left_after) / 1e9, [q for _, q in states[i - 1 : j + 1]]
 
 
+THROUGH_RAD = 0.075
+"""How near the arm must pass its trajectory's middle point, set 0.15 rad off the straight line: within half of that, it
+followed the point and did not cut the corner. The bridge plays the points from its own thread in the sim's time; one
+starved for about a second around the middle point (a whole suite beside two CPU hogs, load 17) sends the point for
+its now and skips what lay between: the arm passed 0.064 rad from it (docs/ros2.md)."""
+
+
 def through(seen: list, mid: list[float]) -> float:
     """How near the states ``seen`` came to ``mid``, the path between two samples read as straight."""
     return min(
@@ -179,7 +186,10 @@ def test_a_3_s_joint_trajectory_takes_3_s_through_its_middle_point(live, procs, 
     # the arm must not have been at the end before 2.7 s, nor still away from it after 3.3 s (3 s +- 10 %)
     earliest, latest, seen = trajectory_took(out, lines(out, "trajectory_sent")[0]["wall"], start_q, target)
     assert earliest < 3.3 and latest > 2.7, (earliest, latest)  # (earliest, latest] meets [2.7, 3.3]
-    assert through(seen, mid) < 0.05, (through(seen, mid), mid)  # through the middle point, 0.15 rad off the line
+    assert through(seen, mid) < THROUGH_RAD, (
+        through(seen, mid),
+        mid,
+    )  # through the middle point, 0.15 rad off the line
     print(f"a 3 s trajectory took {earliest:.2f}-{latest:.2f} s of sim time")
 
     # back to the start through the action (as MoveIt sends it): wrong joints refused, then 3 s, feedback, SUCCESSFUL
@@ -206,7 +216,7 @@ def test_a_3_s_joint_trajectory_takes_3_s_through_its_middle_point(live, procs, 
     )
     earliest, latest, seen = trajectory_took(out, sent, target, start_q)
     assert earliest < 3.3 and latest > 2.7, (earliest, latest)
-    assert through(seen, back_mid) < 0.05, (through(seen, back_mid), back_mid)
+    assert through(seen, back_mid) < THROUGH_RAD, (through(seen, back_mid), back_mid)
     assert len(feedback) >= 5 and list(feedback[0].joint_names) == names
     assert max(abs(e) for e in feedback[len(feedback) // 2].error.positions) < 0.1  # following the desired point
     assert [f.index for f in feedback][-1] == 1 and feedback[-1].desired.positions.tolist() == pytest.approx(start_q)
