@@ -20,11 +20,12 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
 from fabric import keys
+from fabric.interfaces import Header
 from user_peer.api import Arm, Base, World
 from user_peer.errors import FabricUserError, NotOwner, Timeout, Unreachable
 
@@ -87,20 +88,28 @@ def _arm_reach_center(world: World, arm: Arm) -> np.ndarray:
     return np.array([x + c * local[0] - s * local[1], y + s * local[0] + c * local[1], z + local[2]])
 
 
+def _pose_after(pose: Header, settled: Header, now: Any) -> bool:
+    """Whether a pose with header ``pose`` shows the arm after the joints (header ``settled``) that showed it settled:
+    the same sim's, stamped no earlier; or another sim's, that sim serving the arm now (``now``: the latest joints)."""
+    if pose.source == settled.source:
+        return bool(pose.stamp >= settled.stamp)
+    return now is not None and pose.source == now.header.source
+
+
 def _flange_error(arm: Arm, target: np.ndarray, after: int, timeout: float = 3.0) -> float:
     """Distance from the published flange position to ``target``, from a flange pose that arrived after
     the mark ``after`` (``world.latest.mark()``: local arrival order) and that its sim stamped no earlier than the
     joints that showed the arm settled: at load a pose published mid-move arrived after the mark, and target 1 of a
     sharded Test A read 76.6 mm off (whole run 14 of 2026-11-30). Stamps are compared within one sim's streams only;
-    a pose from another sim (a take-over meanwhile) is taken as it comes."""
+    a pose from another sim (a take-over meanwhile) is taken as it comes if that sim serves the arm now (its joints are
+    the latest): a dead sim's last pose, arriving late at load after a second take-over, read 20.55 mm off (a whole
+    run of 2026-11-30, the two-SIGKILL fail-over)."""
     deadline = time.monotonic() + timeout
-    key = keys.robot_pose(arm.world.name, arm.id)
-    settled = arm.world.latest.get(keys.robot_joints(arm.world.name, arm.id))
+    key, joints = keys.robot_pose(arm.world.name, arm.id), keys.robot_joints(arm.world.name, arm.id)
+    settled = arm.world.latest.get(joints)
     while time.monotonic() < deadline:
         p = arm.world.latest.get_after(key, after)
-        if p is not None and (
-            settled is None or p.header.source != settled.header.source or p.header.stamp >= settled.header.stamp
-        ):
+        if p is not None and (settled is None or _pose_after(p.header, settled.header, arm.world.latest.get(joints))):
             return float(np.linalg.norm(np.asarray(p.position) - target))
         time.sleep(0.02)
     raise FabricUserError(f"no flange pose from {arm.id} after the move")

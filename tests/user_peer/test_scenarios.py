@@ -82,3 +82,20 @@ def test_a_in_a_world_without_ownership(procs):
     assert res.ok, "\n".join(res.lines)
     assert any("without a lease" in line for line in res.lines)
     assert res.figures["streamed"] == 3
+
+
+def test_a_flange_pose_counts_from_the_sim_that_settled_the_arm_or_the_one_serving_it_now():
+    """A dead sim's last pose, arriving late after a take-over, is not the arm's (the two-SIGKILL fail-over read
+    20.55 mm off so); the pose of the sim serving it now is, and one sim's pose counts from the settled joints' stamp."""
+    from types import SimpleNamespace
+
+    from fabric.interfaces import Header
+    from user_peer.scenarios import _pose_after
+
+    settled = Header(stamp=18.9, source="sim-c")
+    now = SimpleNamespace(header=Header(stamp=19.2, source="sim-c"))
+    assert _pose_after(Header(stamp=18.9, source="sim-c"), settled, now)
+    assert not _pose_after(Header(stamp=18.8, source="sim-c"), settled, now)  # published mid-move
+    assert not _pose_after(Header(stamp=19.5, source="sim-b"), settled, now)  # the dead sim's, however stamped
+    moved_on = SimpleNamespace(header=Header(stamp=3.0, source="sim-d"))  # another take-over since the arm settled
+    assert _pose_after(Header(stamp=3.1, source="sim-d"), settled, moved_on)
