@@ -174,6 +174,12 @@ class SimRobot:
         return False
 
     @property
+    def underway(self) -> bool:
+        """Whether a command is still being carried out: moving, or (a type that says so) aiming at what it has not
+        reached yet, though it has not stepped since it took the command (a hold then stopped it before it was done)."""
+        return self.moving
+
+    @property
     def kinematic_dofs(self) -> int:
         """How many of the model's degrees of freedom this robot writes itself (the world steps the rest)."""
         return 0

@@ -118,6 +118,12 @@ class ArmRobot(_Driven):
     def joints(self, q, speed_scale: float = 1.0) -> Clamp | None:
         return self.ctrl.set_target(q, speed_scale)
 
+    @property
+    def underway(self) -> bool:
+        """Moving, or with a target it has not reached: a target taken just before a hold, with no step since, has no
+        speed yet (the three-pause test's last moves were lost so: their riders were never told to send them again)."""
+        return self.ctrl.moving or bool(np.any(self.ctrl.target != self.ctrl.q))
+
     # hooks ------------------------------------------------------------------
     def initialize(self, physics: Physics) -> None:
         self.ctrl.teleport(np.zeros(self.ctrl.dof))

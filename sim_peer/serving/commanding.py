@@ -170,14 +170,14 @@ class CommandPipeline:
             self._held = reason or "held"
             for rid, q in self._queues.items():
                 user = self._last_user.get(rid)
-                if user and (q or self.world.robots[rid].moving):
+                if user and (q or self.world.robots[rid].underway):
                     self._stopped[rid] = user
                 q.put("stop", Halt("", self._held))  # its halt forgets the ids applied (_halt)
             self._queued.notify()
 
     def resume(self) -> None:
         """Accept commands again (the robots stay where :meth:`hold` stopped them until their owners send more). The
-        sender of the last command the hold stopped on each robot (its robot moving, the command queued, or refused
+        sender of the last command the hold stopped on each robot (its robot underway, the command queued, or refused
         meanwhile) is told now, with a ``held`` refusal, that it was not carried out: a client that awaits it sends it again (:mod:`user_peer.pause`)."""
         with self._queued:
             self._held = ""

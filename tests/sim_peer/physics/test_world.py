@@ -114,6 +114,21 @@ def test_stop_holds_all_motion_and_reset_returns_to_zero():
     assert (base.ctrl.x, base.ctrl.y, base.ctrl.yaw) == base.ctrl.home
 
 
+def test_an_arm_that_took_a_target_is_underway_before_its_first_step_and_not_once_stopped():
+    """A hold that comes between a command and the next step must know the arm had work to do: it has no speed yet
+    (``moving`` is false), so ``underway`` says so; a stop leaves it with nothing to do."""
+    w = SimWorld("arm_cell")
+    arm = w.robot("arm1")
+    run(w, 0.1)
+    assert not arm.underway
+    arm.joints([0.5, 0.2, -0.3, 0.4, 0.3, 0.5])
+    assert arm.underway and not arm.moving
+    w.step()
+    assert arm.underway and arm.moving
+    arm.stop()
+    assert not arm.underway
+
+
 def test_a_twist_of_v_for_t_moves_v_t():
     w = SimWorld("warehouse")
     base = w.robot("base1")
