@@ -230,8 +230,22 @@ def wait_message(page, pattern: str, timeout: float = 30.0) -> str:
         lambda: re.search(pattern, message(page)) and message(page),
         timeout=timeout,
         what=f"the page to say /{pattern}/",
-        seen=lambda: (message(page), PAGE_LOGS.get(id(page), [])[-10:]),
+        seen=lambda: (message(page), _socket_state(page), PAGE_LOGS.get(id(page), [])[-10:]),
     )
+
+
+def _socket_state(page) -> str:
+    """Whether the page's socket to the console is connected now: a page that lost it shows what it last heard (a
+    reload test's page said "WORLD GONE" for 30 s while the console counted no page connected, load 17)."""
+    try:
+        return str(
+            page.evaluate(
+                "() => window.socket === undefined ? 'no socket' : window.socket.connected ? 'socket connected' "
+                ": 'socket not connected'"
+            )
+        )
+    except Exception as exc:  # the page closed or is navigating: say that instead
+        return f"socket state unknown ({type(exc).__name__})"
 
 
 def target_label(page) -> np.ndarray:
