@@ -193,8 +193,14 @@ def test_a_base_stops_within_half_a_second_of_its_owners_release(held):
         ev = wait_until(lambda: watch.event(EventKind.OWNER_STOP, "base2"), timeout=10, what="the owner_stop event")
         assert (ev.user, ev.reason) == ("alice", "released by alice")
         still = wait_until(lambda: watch.still_after("base2", ev.header.stamp), timeout=10, what="base2 still")
-        assert still.header.stamp - ev.header.stamp <= 0.5, (ev.header.stamp, still.header.stamp)
-        assert still.header.stamp - t0 <= 0.5 + 0.5, (t0, still.header.stamp)  # the release's round trip included
+        # the stop lies between the last turning pose and the first still one, judged on the last turning one: poses
+        # this subscriber lost at load widen the gap (a whole run beside a CPU hog: the first still pose it got was
+        # 0.566 s after the event, for a brake of 0.27 s), as in the deadman's test above
+        last = [p for p in watch.pose("base2") if p.header.stamp < still.header.stamp][-1]
+        around = [(round(p.header.stamp, 3), round(float(p.angular[2]), 3)) for p in watch.pose("base2")]
+        assert last.header.stamp - ev.header.stamp <= 0.5, (ev.header.stamp, [a for a in around if a[0] >= t0 - 0.1])
+        assert last.header.stamp - t0 <= 0.5 + 0.5, (t0, last.header.stamp)  # the release's round trip included
+        assert still.header.stamp - last.header.stamp < 0.25, f"no pose seen from {last.header.stamp:.3f} to {still}"
         speeds = _braked_within_limits(watch.pose("base2"), ev.header.stamp)
         assert any(0.05 < w_ < OMEGA - 0.05 for w_ in speeds), speeds  # it braked: no jump from 0.8 to 0
         assert base.record.owner == ""

@@ -189,6 +189,10 @@ def open_page(browser, klass: Klass):
     # GL, once took over 30 s to hit-test a visible, enabled, stable button (CI run of 2026-11-30, bob's Request)
     page.set_default_timeout(60_000)
     page.goto(klass.url, timeout=60_000)
+    # typed before the page's socket has shaken hands, a field's value and the Log in click wait in timers of their
+    # own, and the click may go first: bob's login once came with no name ("name must not be empty", a whole run
+    # beside a CPU hog, load 15). A student types after the page is up; so does the test
+    page.wait_for_function("() => window.did_handshake === true", timeout=60_000)
     return page
 
 
