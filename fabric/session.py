@@ -49,7 +49,10 @@ log = logging.getLogger("robofabric")
 MAX_KEYS = 1024
 """Publishers and per-key sequence numbers kept per session; keys beyond are published uncached."""
 
-__all__ = ["Fabric", "shutdown_event", "undeclare_all"]
+__all__ = ["CLOSE_S", "Fabric", "close_within", "shutdown_event", "undeclare_all"]
+
+CLOSE_S = 10.0
+"""How long ``Fabric.close`` waits for zenoh to close its session (milliseconds, as a rule)."""
 
 
 def undeclare_all(resources: list[Any]) -> None:
@@ -60,6 +63,31 @@ def undeclare_all(resources: list[Any]) -> None:
             res.undeclare()
         except Exception:  # already gone with a closing session
             pass
+
+
+def close_within(close: Callable[[], object], limit: float, what: str) -> bool:
+    """Run ``close`` on a thread of its own and wait for it ``limit`` s at most; False (and a warning) when it did not
+    end by then, and it is left to the process's exit. A zenoh session's close once never returned (a whole suite
+    beside a CPU hog, a test's teardown blocked in zenoh's runtime for 20 minutes, so the suite never ended): nothing
+    a peer does may block for ever, its own closing least of all."""
+    done = threading.Event()
+
+    def run() -> None:
+        try:
+            close()
+        except Exception:  # a session already closing, or gone with its runtime
+            pass
+        finally:
+            done.set()
+
+    try:
+        threading.Thread(target=run, name=f"close {what}", daemon=True).start()
+    except RuntimeError:  # the interpreter is finalizing (atexit, Python 3.12+): no new thread, close here
+        run()
+    if done.wait(limit):
+        return True
+    log.warning("%s did not close within %.1f s: left to the process's exit", what, limit)
+    return False
 
 
 class Fabric:
@@ -149,10 +177,8 @@ class Fabric:
             self._closed = True
         self._cancel_exit()
         undeclare_all(([self.token] if self.token is not None else []) + self._resources)
-        try:
-            self.session.close()
-        except Exception:
-            pass
+        if not close_within(self.session.close, CLOSE_S, f"the zenoh session of {self.kind} {self.peer_id}"):
+            self.counters["closes_hung"] += 1
 
     # ------------------------------------------------------------------ publishing
 
