@@ -43,6 +43,9 @@ early: zenoh ends one at once when no route leads to a server, at its limit when
 when the link closed under it (or on a loaded box, at once taking that long)."""
 RELINK_CONFIRM_S = 0.5
 """How long such a query's end waits to hear whether the link closed under it."""
+TOKENS_WENT_S = 1.0
+"""A query that found nobody at once less than this after a liveliness token went waits to hear whether its own link
+closed (:meth:`Rpc._lost_under`)."""
 FROZEN_S = 1.0
 """An ask that ended this long past its limit was not answered because its own process did not run: paused (SIGSTOP,
 a laptop's lid) or starved. Its link's loss, if it lost it meanwhile, is waited for this long more
@@ -84,13 +87,16 @@ class Rpc:
         linked: Callable[[], bool] | None = None,
         lost_at: Callable[[], float] = lambda: float("-inf"),
         back_at: Callable[[], float] = lambda: float("-inf"),
+        token_gone_at: Callable[[], float] = lambda: float("-inf"),
     ) -> None:
         """``linked()``: whether this client has a link to a router now (None: a router itself, always linked);
-        ``lost_at()``: when it last lost one, ``back_at()``: when one last came back after a loss (monotonic s)."""
+        ``lost_at()``: when it last lost one, ``back_at()``: when one last came back after a loss, ``token_gone_at()``:
+        when it last heard a liveliness token go (monotonic s)."""
         self._session = session
         self._linked = linked
         self._lost_at = lost_at
         self._back_at = back_at
+        self._token_gone_at = token_gone_at
         self._counters = counters
         self._stamp = stamp
         self._header = header
@@ -320,14 +326,18 @@ class Rpc:
 
     def _lost_under(self, asked_at: float, deadline: float) -> bool:
         """Whether the link was lost while a query asked at ``asked_at`` was out: only a query that ended early
-        (later than :data:`RELINK_EARLY_S`) is looked at, for up to :data:`RELINK_CONFIRM_S` (the transport's
-        close is told on another thread, a moment after the query it ended)."""
+        (later than :data:`RELINK_EARLY_S`), or one that found nobody at once just after tokens went (a closing link
+        takes every token it brought with it, and its close is told after them: a student's plan query, asked in
+        between at load 22, met "nobody serves it" at once), is looked at, for up to :data:`RELINK_CONFIRM_S` (the
+        transport's close is told on another thread, a moment after the query it ended)."""
         linked = self._linked
-        if linked is None or time.monotonic() - asked_at < RELINK_EARLY_S:
+        if linked is None:
             return False
+        if time.monotonic() - asked_at < RELINK_EARLY_S and time.monotonic() - self._token_gone_at() > TOKENS_WENT_S:
+            return False  # at once, with no token gone just before: nobody serves it
         until = min(deadline, time.monotonic() + RELINK_CONFIRM_S)
         while True:
-            if self._lost_at() >= asked_at or not linked():
+            if self._lost_at() >= asked_at - TOKENS_WENT_S or not linked():
                 return True
             if time.monotonic() + RELINK_POLL_S >= until:
                 return False

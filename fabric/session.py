@@ -118,6 +118,8 @@ class Fabric:
         """When this client last lost a link to its router (monotonic s; never for a router or a peer): a query ridden over
         it asks again (fabric.rpc), and a going heard about then is checked (fabric.token_watch)."""
         self._link_back_at = float("-inf")
+        self._token_gone_at = float("-inf")
+        """When a token watched here last went (monotonic s): a closing link takes its tokens first (fabric.rpc)."""
         """When a link came back after one was lost (monotonic s): its routes come a moment after it (fabric.rpc)."""
         if config.profile == "client":  # a client's transports are its links to routers; a router's are its clients'
             self._resources.append(self.session.info.declare_transport_events_listener(self._on_transport))
@@ -139,6 +141,7 @@ class Fabric:
             linked=self._linked if config.profile == "client" else None,
             lost_at=lambda: self._link_lost_at,
             back_at=lambda: self._link_back_at,
+            token_gone_at=lambda: self._token_gone_at,
         )
         """Services: ``rpc.serve``, ``rpc.query``, ``rpc.call`` (:mod:`fabric.rpc`)."""
         self.reports = Reports(
@@ -395,7 +398,13 @@ class Fabric:
         first), its key as declared, parsed or not (a recorder keeps every token it hears, a made-up one too). A
         going is checked with the router, so a link that came back in another order ends with the token there
         (:mod:`fabric.token_watch`)."""
-        watch = TokenWatch(self.session, key_expr, callback, link_lost_at=lambda: self._link_lost_at)
+
+        def told(key: str, alive: bool) -> None:
+            if not alive:
+                self._token_gone_at = time.monotonic()
+            callback(key, alive)
+
+        watch = TokenWatch(self.session, key_expr, told, link_lost_at=lambda: self._link_lost_at)
         self._resources.append(watch)
         return watch
 

@@ -75,6 +75,19 @@ def test_a_link_back_late_is_waited_for_its_routes_as_one_lost_just_now(world, c
     assert 1.5 <= time.monotonic() - t0 < 6.0
 
 
+def test_nobody_at_once_just_after_tokens_went_waits_to_hear_of_the_link_and_still_says_nobody(world, cut_link):
+    """A closing link takes its tokens first and is told closed after them: a query that finds nobody at once just
+    after a token went waits a moment to hear whether its own link closed (a student's plan query, asked in between
+    at load 22). On a link that held, the answer stands: nobody serves it, after that moment (the times set here)."""
+    _server, caller, _cut = cut_link
+    caller._token_gone_at = time.monotonic()
+    t0 = time.monotonic()
+    with pytest.raises(NoReply, match="nobody serves it"):
+        caller.rpc.call(keys.srv(world, "fk", "nobody"), Twist(1.0, 0.0), timeout=5.0)
+    assert 0.3 <= time.monotonic() - t0 < 2.5
+    assert caller.counters["queries_after_relink"] == 0
+
+
 def test_relinked_lately_counts_from_the_loss_or_the_return_whichever_is_later():
     assert relinked_lately(10.0, lost_at=9.0, back_at=float("-inf"))
     assert relinked_lately(10.0, lost_at=3.0, back_at=8.5)
