@@ -30,7 +30,8 @@ Invariants (each a function ``(history, limits) -> violations``, named in :data:
   someone took it over;
 * ``queue``: users waiting for an object keep their order, and nobody is skipped who still waits;
 * ``unowned_motion``: a robot does not move when nobody owns it (``settle_s`` after its owner went; a grant the
-  observer heard after the joints it caused, as its owner's command at the new epoch shows, is not "nobody");
+  observer heard after the joints it caused, as its owner's command at the new epoch heard about then shows, is not
+  "nobody");
 * ``resources``: after warm-up (the run's, and as long again for a peer restarted during it), each peer's memory grows at most ``mem_mb_per_h``, its threads and file
   descriptors at most ``thread_slack``/``fd_slack`` above their first half's peak, its log at most
   ``log_mb_per_h`` (judged on windows of at least ``min_window_s``);
@@ -429,12 +430,14 @@ def unowned_motion(h: Sequence[Record], lim: Limits) -> list[Violation]:
 
 def _grant_heard_late(tl: _Timeline, cmds: Sequence[Cmd], robot: str, t: float, lim: Limits) -> bool:
     """Whether the robot had an owner at ``t`` whose grant the observer heard only after its joints: the robot's next
-    record, within ``order_s``, names an owner at a newer epoch, and a command of hers at that epoch came by ``t``
-    (a user stamps only an epoch she was granted, so the grant came first)."""
+    record, within ``order_s``, names an owner at a newer epoch, and a command of hers at that epoch was heard within
+    ``order_s`` of ``t`` (a user stamps only an epoch she was granted, so the grant came first). Her command may be
+    heard after the joints it moved too: it reaches the observer by her own link, the joints by the sim's (the
+    two-minute soak heard the moving joints, then 6 ms later her command and the record of her grant, at load 13)."""
     nxt = tl.next_after(robot, t)
     if nxt is None or not nxt.owner or nxt.t - t > lim.order_s:
         return False
-    return any(c.user == nxt.owner and c.epoch == nxt.epoch and c.t <= t for c in cmds)
+    return any(c.user == nxt.owner and c.epoch == nxt.epoch and abs(c.t - t) <= lim.order_s for c in cmds)
 
 
 def _slope_per_h(pts: list[tuple[float, float]]) -> float:

@@ -213,6 +213,17 @@ def test_a_grant_heard_after_the_joints_it_moved_is_owned_when_her_command_at_th
     assert len(only("unowned_motion", [*base, Cmd(5.99, "arm0", "s02", 17, "joints", A), rec(6.001, "s02", 18)])) == 1
 
 
+def test_a_grant_whose_command_too_was_heard_after_the_joints_it_moved_is_owned():
+    """The two-minute soak at load 13: s01's arm moved (joints at 91.899), then her command at epoch 10 (91.905) and
+    the record of her grant (91.905) came, each by its own route. A command heard long after proves nothing."""
+    moved = tuple(x + 0.06 for x in B)
+    base = [rec(85.079, "", 9), js(91.086, B), js(91.899, moved)]
+    late = [Cmd(91.905, "arm0", "s01", 10, "joints", A), rec(91.905, "s01", 10)]
+    assert only("unowned_motion", [*base, *late]) == []
+    much_later = [Cmd(92.5, "arm0", "s01", 10, "joints", A), rec(91.905, "s01", 10)]
+    assert len(only("unowned_motion", [*base, *much_later])) == 1
+
+
 # ---------------------------------------------------------------------- resources and exits
 
 
