@@ -39,6 +39,15 @@ RECONNECT_RETRY = {"period_init_ms": 250, "period_max_ms": 1000, "period_increas
 every peer reconnects within a second of the router being back, and at about the same time, so a class resumes at
 once and a standby that waits for its leader's token after its own link came back (sim_peer.replica.roles, three leases)
 does not wait on a leader still sleeping between two attempts. A zenoh config file that sets its own keeps it."""
+ZENOH_DEFAULT_BLOCK_WAIT_US = 5_000_000
+BLOCK_WAIT_SHARE = 4
+"""A router waits at most this share of its lease (a quarter: 0.5 s of a 2 s lease) to queue a blocking sample
+(``transport/link/tx/queue/congestion_control/block/wait_before_close``) for a subscriber that does not read, then
+closes that subscriber's link. Zenoh's default is 5 s, and the router routes a sample on the thread that reads its
+publisher's link: a student's laptop paused with a full queue kept the compute peer's map, or the sim's ownership
+record, waiting that long, and the router, reading nothing more from the publisher meanwhile, dropped the compute
+peer or the sim itself when its lease ran out (issue 49, CI of 2026-11-30). Now the one who does not read loses
+her link, and reconnects when she wakes, and the peers everyone needs keep theirs."""
 SOCKET_BUFFER = 64 * 1024
 """TCP ``so_sndbuf``/``so_rcvbuf`` of every link. With the kernel's autotuned loopback buffers (MBs),
 a flood of small junk samples piled up in the sockets between the router and the sim, ahead of an
@@ -332,6 +341,9 @@ class FabricConfig:
         # a file that chose its own cap keeps it; otherwise a few MB, not zenoh's 1 GiB
         if json.loads(conf.get_json("transport/link/rx/max_message_size")) == ZENOH_DEFAULT_MAX_MESSAGE_SIZE:
             conf.insert_json5("transport/link/rx/max_message_size", json.dumps(MAX_MESSAGE_SIZE))
+        block_wait = "transport/link/tx/queue/congestion_control/block/wait_before_close"
+        if mode == "router" and json.loads(conf.get_json(block_wait)) == ZENOH_DEFAULT_BLOCK_WAIT_US:
+            conf.insert_json5(block_wait, json.dumps(self.lease_ms * 1000 // BLOCK_WAIT_SHARE))
         # A router answers read-only queries on its admin space (``@/ZID/router/{subscriber,queryable,token}/KEY``):
         # who subscribes to and serves what, for ``robofabric ps -v``, ``list`` and ``info`` (robofabric/declarations.py).
         # Never writable; a config file that sets the admin space keeps its choice; ACLs still decide who may ask.
