@@ -226,6 +226,7 @@ class Rpc:
         while True:
             asked_at = time.monotonic()
             self._ask(selector, request, deadline, all_replies, expected, replies, errors)
+            ended_at = time.monotonic()
             if replies or errors:
                 break
             if self._relinked(asked_at, deadline):
@@ -233,7 +234,7 @@ class Rpc:
             if not renewed and (again := self._renewed(selector, t0, deadline, timeout)) is not None:
                 deadline, renewed = again, True
                 continue
-            went_at = self._server_went(asked_at, deadline, went_at)
+            went_at = self._server_went(asked_at, ended_at, deadline, went_at)
             if went_at is None:
                 break
         if not replies:
@@ -303,19 +304,21 @@ class Rpc:
             time.sleep(RELINK_POLL_S)
         return True
 
-    def _server_went(self, asked_at: float, deadline: float, went_at: float | None) -> float | None:
+    def _server_went(self, asked_at: float, ended_at: float, deadline: float, went_at: float | None) -> float | None:
         """After an ask that nobody answered, on a link that stayed up: when its server went under it, if it is to be
         asked again (None: not). An ask that ended early (later than :data:`RELINK_EARLY_S`, before half its limit)
         found a server, which then went before it answered: it died, its own link to the router dropped (a process
         starved past its lease), or it would not answer yet (an authority unsure of itself after a freeze). For
         :data:`RELINK_S` from then, within the limit, the key is asked again every :data:`RELINK_POLL_S` (a compute
         peer reconnects within about a second, a standby takes a dead sim's world over within one). Before, the asker
-        was told "nobody serves it" though the server was back a moment later (issue 49's fail-over runs at load)."""
+        was told "nobody serves it" though the server was back a moment later (issue 49's fail-over runs at load).
+        The ask is judged on when it ended (``ended_at``), not on now: a moment spent since looking at the link
+        (:meth:`_lost_under`) made an ask that found nobody at once look like one that ended early."""
         now = time.monotonic()
         if now + RELINK_POLL_S >= deadline:
             return None
         if went_at is None:
-            if now - asked_at < RELINK_EARLY_S or now >= asked_at + 0.5 * (deadline - asked_at):
+            if ended_at - asked_at < RELINK_EARLY_S or ended_at >= asked_at + 0.5 * (deadline - asked_at):
                 return None  # at once (no server) or at its limit (a silent one): the answer stands
             went_at = now
             self._counters["queries_after_server_went"] += 1

@@ -84,8 +84,11 @@ def test_nobody_at_once_just_after_tokens_went_waits_to_hear_of_the_link_and_sti
     t0 = time.monotonic()
     with pytest.raises(NoReply, match="nobody serves it"):
         caller.rpc.call(keys.srv(world, "fk", "nobody"), Twist(1.0, 0.0), timeout=5.0)
-    assert 0.3 <= time.monotonic() - t0 < 2.5
+    assert time.monotonic() - t0 >= 0.3  # it waited to hear of its link
+    # and asked once: the wait did not make its ask look like one whose server went under it (asked again for 2 s,
+    # 2.5 s in all: the bound this test once had, missed at load)
     assert caller.counters["queries_after_relink"] == 0
+    assert caller.counters["queries_after_server_went"] == 0
 
 
 def test_relinked_lately_counts_from_the_loss_or_the_return_whichever_is_later():
