@@ -40,14 +40,16 @@ every peer reconnects within a second of the router being back, and at about the
 once and a standby that waits for its leader's token after its own link came back (sim_peer.replica.roles, three leases)
 does not wait on a leader still sleeping between two attempts. A zenoh config file that sets its own keeps it."""
 ZENOH_DEFAULT_BLOCK_WAIT_US = 5_000_000
-BLOCK_WAIT_SHARE = 4
-"""A router waits at most this share of its lease (a quarter: 0.5 s of a 2 s lease) to queue a blocking sample
+BLOCK_WAIT_SHARE = 2
+"""A router waits at most this share of its lease (a half: 1 s of a 2 s lease) to queue a blocking sample
 (``transport/link/tx/queue/congestion_control/block/wait_before_close``) for a subscriber that does not read, then
 closes that subscriber's link. Zenoh's default is 5 s, and the router routes a sample on the thread that reads its
 publisher's link: a student's laptop paused with a full queue kept the compute peer's map, or the sim's ownership
 record, waiting that long, and the router, reading nothing more from the publisher meanwhile, dropped the compute
 peer or the sim itself when its lease ran out (issue 49, CI of 2026-11-30). Now the one who does not read loses
-her link, and reconnects when she wakes, and the peers everyone needs keep theirs."""
+her link, and reconnects when she wakes, and the peers everyone needs keep theirs. Half, not less: a subscriber
+starved a moment (a console's page server at load, its GIL held) keeps its link through a second's stall; not more:
+the publisher's link is read again well within its lease (keep-alives come every quarter of it)."""
 SOCKET_BUFFER = 64 * 1024
 """TCP ``so_sndbuf``/``so_rcvbuf`` of every link. With the kernel's autotuned loopback buffers (MBs),
 a flood of small junk samples piled up in the sockets between the router and the sim, ahead of an

@@ -25,12 +25,12 @@ from robofabric.testing import wait_until
 BLOCK_WAIT = "transport/link/tx/queue/congestion_control/block/wait_before_close"
 
 
-def test_a_router_waits_a_quarter_of_its_lease_to_queue_a_blocking_sample_and_clients_keep_zenohs_wait(tmp_path):
+def test_a_router_waits_half_its_lease_to_queue_a_blocking_sample_and_clients_keep_zenohs_wait(tmp_path):
     def wait_us(conf: FabricConfig) -> int:
         return int(json.loads(conf.zenoh_config().get_json(BLOCK_WAIT)))
 
-    assert wait_us(FabricConfig(profile="embedded")) == 500_000
-    assert wait_us(FabricConfig(profile="embedded", lease_ms=4000)) == 1_000_000
+    assert wait_us(FabricConfig(profile="embedded")) == 1_000_000
+    assert wait_us(FabricConfig(profile="embedded", lease_ms=4000)) == 2_000_000
     assert wait_us(FabricConfig(profile="client")) == ZENOH_DEFAULT_BLOCK_WAIT_US
     own = tmp_path / "zenoh.json5"
     own.write_text(
