@@ -94,11 +94,12 @@ class LiveView:
         self._picture(self._grid)
         self._show_zoom()
         f, base = self.frame, self.page.robots.get("mobile")
-        around = (
-            f"around {base.id}"
-            if level > 1 and base is not None and base.id in self.page.world.following.robots
-            else "whole"
-        )
+        if level == 1:
+            around = "whole"
+        elif base is not None and base.id in self.page.world.following.robots:
+            around = f"around {base.id}"
+        else:  # no base of hers followed (none selected or hers): where the zoom centred, not "whole"
+            around = "around its middle"
         self.page.say(f"zoom x{level}: the map {around}, {f.xmax - f.xmin:.1f} m wide")
         self.page.refresh()
 

@@ -877,6 +877,12 @@ def test_a_goal_typed_in_metres_is_placed_a_bad_one_is_refused_in_plain_words_an
     dave = open_page(browser, klass)
     logged_in(dave, klass, "dave")
     dave.get_by_role("button", name="base1", exact=True).click(no_wait_after=True)
+    # base1 selected, its panel shown: the zoom below centres on it only once it is (at load a selection's handle
+    # came after the zoom's click once, and the zoom said "the map whole")
+    plan = dave.get_by_role("button", name="Plan")
+    wait_until(
+        lambda: plan.is_visible(), timeout=30, what="base1's panel", seen=lambda: (message(dave), _socket_state(dave))
+    )
     gx, gy = dave.get_by_label("Goal x in metres"), dave.get_by_label("Goal y in metres")
     gx.fill("two")
     gy.fill(f"{want[1]}")
