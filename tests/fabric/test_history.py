@@ -61,6 +61,15 @@ def test_history_delivers_every_live_sample_of_every_publisher_and_each_latest_v
 
     late = connect("viewer", "late")
     late.subscribe(keys.world_all(world), on, history=True)
+    # what the session itself heard, beside: the poses are streams, dropped by zenoh when a queue is full (at load
+    # 11 the suite's run got 133 of 300 of one), and history must lose and reorder nothing of what reached it
+    heard: dict[str, list[int]] = defaultdict(list)
+
+    def plain(key: str, msg: Pose) -> None:
+        with lock:
+            heard[key].append(msg.header.seq)
+
+    late.subscribe(keys.robot_stream_all(world, "pose"), plain, expected=Pose)
     wait_until(lambda: goals, what="the latched goal", seen=lambda: goals)
     streams = [keys.robot_pose(world, f"base{i}") for i in range(4)]
     for key in streams:
@@ -75,14 +84,23 @@ def test_history_delivers_every_live_sample_of_every_publisher_and_each_latest_v
         t.start()
     for t in threads:
         t.join(timeout=60)
-    wait_until(
-        lambda: all(len(got[k]) >= N for k in streams),
-        timeout=30,
-        what="every pose",
-        seen=lambda: {k: len(v) for k, v in got.items()},
-    )
+    last: list[object] = [None]
+
+    def settled() -> bool:
+        """Every stream's last pose heard, or what was heard the same as half a second before (its tail lost)."""
+        with lock:
+            now = {k: (len(heard[k]), len(got[k])) for k in streams}
+            tails = all(heard[k][-1:] == [N - 1] and len(got[k]) >= len(heard[k]) for k in streams)
+        if tails:
+            return True
+        same, last[0] = now == last[0], now
+        return same
+
+    wait_until(settled, timeout=30, interval=0.5, what="every pose heard", seen=lambda: last[0])
     for key in streams:
-        assert got[key] == list(range(N)), (key, len(got[key]))  # all of them, in the order sent
+        assert heard[key], key  # something of each stream reached the session
+        assert heard[key] == sorted(set(heard[key])), key  # zenoh keeps one publisher's order on a key
+        assert got[key] == heard[key], (key, len(got[key]), len(heard[key]))  # all it heard, in the order sent
     assert goals == [3.0]  # the latest value, once
     pub.publish(goal, _pose(4.0, 1))
     wait_until(lambda: goals[-1:] == [4.0], what="a live goal after the history")
