@@ -78,13 +78,21 @@ def test_a_flood_of_goings_shares_its_checks_queries(world, connect):
         lambda: watch.rechecks == 2 * len(made_up), timeout=30, what="every check answered", seen=lambda: watch.rechecks
     )
     assert watch.restored == 0 and watch.queries <= 6, watch.queries
-    watch.heard(key, False)  # the real one, after: still checked, and back
-    wait_until(
-        lambda: told.of(key)[-1:] == [True] and watch.restored == 1,
-        timeout=30,
-        what="the sim back",
-        seen=lambda: (told.of(key), watch.restored, watch.queries),  # its own calls: 4,000 of the flood's precede
-    )
+    # the real one, after: still checked, and back. Two checks within 0.3 s may both find nothing at load (a query
+    # past its 2 s limit: the suite's make test, queries 5, the sim never told back); the watch's own checks run for
+    # 15 s, so the going is heard again, up to three times, as the test above does
+    checked = watch.rechecks
+    for attempt in range(1, 4):
+        watch.heard(key, False)
+        wait_until(
+            lambda: watch.restored or watch.rechecks >= checked + 2 * attempt,
+            timeout=30,
+            what="the sim back, or its checks answered",
+            seen=lambda: (told.of(key)[-3:], watch.restored, watch.queries),  # the flood's 4,000 calls precede
+        )
+        if watch.restored:  # a late copy of the token's first word told True alone once: the check's is the one
+            break
+    assert told.of(key)[-1:] == [True] and watch.restored == 1, (told.of(key)[-3:], watch.restored, watch.queries)
     watch.undeclare()
 
 

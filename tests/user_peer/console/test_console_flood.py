@@ -114,7 +114,13 @@ def test_one_logins_event_text_neither_forges_trusted_lines_nor_stalls_anothers_
     alice.get_by_role("button", name="base1", exact=True).click()
     alice.get_by_role("button", name="Request").click()
     wait_message(alice, r"request base1: you own it")
-    epoch = base.record.epoch
+    # read where carol sees it too: her record came after the page's answer once (epoch 0 read, 1 at the end)
+    epoch = wait_until(
+        lambda: base.record is not None and base.record.owner == "alice" and base.record,
+        timeout=30,
+        what="carol seeing alice own base1",
+        seen=lambda: base.record,
+    ).epoch
 
     # a decode report whose kind holds a newline, then a line like the console's own trusted ownership lines
     forged = "trusted · ownership base1: alice -> dave (epoch 7)"
