@@ -118,9 +118,9 @@ class Fabric:
         """When this client last lost a link to its router (monotonic s; never for a router or a peer): a query ridden over
         it asks again (fabric.rpc), and a going heard about then is checked (fabric.token_watch)."""
         self._link_back_at = float("-inf")
+        """When a link came back after one was lost (monotonic s): its routes come a moment after it (fabric.rpc)."""
         self._token_gone_at = float("-inf")
         """When a token watched here last went (monotonic s): a closing link takes its tokens first (fabric.rpc)."""
-        """When a link came back after one was lost (monotonic s): its routes come a moment after it (fabric.rpc)."""
         if config.profile == "client":  # a client's transports are its links to routers; a router's are its clients'
             self._resources.append(self.session.info.declare_transport_events_listener(self._on_transport))
         self._fence_watch = FenceWatch(
