@@ -340,7 +340,7 @@ class Rpc:
             return False  # at once, with no token gone just before: nobody serves it
         until = min(deadline, time.monotonic() + RELINK_CONFIRM_S)
         while True:
-            if self._lost_at() >= asked_at - TOKENS_WENT_S or not linked():
+            if self._lost_at() >= asked_at or not linked():  # a loss before the ask: relinked_lately's
                 return True
             if time.monotonic() + RELINK_POLL_S >= until:
                 return False
