@@ -14,6 +14,7 @@ import os
 import signal
 import subprocess
 import sys
+import shutil
 import tempfile
 import time
 import uuid
@@ -111,6 +112,20 @@ def _name(pid: int, launcher: int) -> str | None:
     return None
 
 
+def _kept_logs(tmp: Path, tail: int = 1500) -> str:
+    """The launch's peers' logs copied out of ``tmp`` (a failed run's cause is in them: one `bench paper` run's bob
+    did not reach his path's end, and its logs went with the folder), and each one's last ``tail`` characters."""
+    logs = tmp / "out" / "logs"
+    if not logs.is_dir():
+        return ""
+    kept = Path(tempfile.mkdtemp(prefix="bench-paper-failed-"))
+    words = [f"\n--- the launch's logs are kept in {kept}"]
+    for f in sorted(logs.glob("*.log")):
+        shutil.copy2(f, kept / f.name)
+        words.append(f"--- {f.name}:\n{f.read_text(errors='replace')[-tail:]}")
+    return "\n".join(words)
+
+
 def measure_resources(cap_s: float = 600.0, progress=lambda s: print(s, file=sys.stderr, flush=True)) -> dict:
     """Run the launch once; ``{"rows": [{peer, cpu_min, cpu_max, rss_min_mb, rss_max_mb, samples}], ...}``."""
     from robofabric.testing import free_port
@@ -164,6 +179,8 @@ def measure_resources(cap_s: float = 600.0, progress=lambda s: print(s, file=sys
                     except ProcessLookupError:
                         pass
             up_log = (Path(tmp) / "up.log").read_text(errors="replace")[-3000:]
+            if code:  # the launch failed: keep its peers' logs, which go with the temporary folder, and say where
+                up_log += _kept_logs(Path(tmp))
     rows = []
     for peer in PEERS:
         s = samples[peer]

@@ -10,6 +10,7 @@ import socket
 import subprocess
 import sys
 import threading
+from pathlib import Path
 
 import pytest
 
@@ -243,3 +244,22 @@ def test_bad_options_are_refused_with_what_is_expected(args, says, capsys):
     rc = main(["bench", "paper", *args])
     err = capsys.readouterr().err
     assert rc == 2 and says in err, (rc, err)
+
+
+def test_a_failed_launch_keeps_its_peers_logs(tmp_path):
+    """A failed run's cause is in its peers' logs, which go with the bench's temporary folder: they are copied out,
+    and each one's tail is in the document."""
+    from robofabric.bench.paper_resources import _kept_logs
+
+    assert _kept_logs(tmp_path) == ""  # the launch never got as far as its logs
+    logs = tmp_path / "out" / "logs"
+    logs.mkdir(parents=True)
+    (logs / "bob.log").write_text("x" * 5000 + "did not reach the end of its path")
+    (logs / "sim.log").write_text("sim up")
+    words = _kept_logs(tmp_path, tail=100)
+    kept = Path(words.split("kept in ")[1].split("\n")[0])
+    try:
+        assert sorted(p.name for p in kept.iterdir()) == ["bob.log", "sim.log"]
+        assert "--- bob.log:\n" in words and words.count("x") <= 100 and "did not reach" in words and "sim up" in words
+    finally:
+        shutil.rmtree(kept)
