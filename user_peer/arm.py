@@ -73,9 +73,16 @@ class Arm(Robot):
         cmd = self.send("joints", JointTarget(target, speed_scale, self.world.fabric.header(key)))
         if not wait:
             return target
-        return self._wait_joints(
-            target, tol, timeout, marks, PauseRider(self, "joints", cmd, marks[0], resend_on_takeover=True)
-        )
+        joints = keys.robot_joints(self._w, self.id)
+
+        def heard() -> bool:  # the arm moves, or is there: the sim has the command (else it is sent again)
+            js = self.world.latest.get_after(joints, marks[1])
+            return js is not None and bool(
+                np.max(np.abs(js.dq), initial=0.0) >= 1e-2 or np.max(np.abs(np.asarray(js.q) - target)) <= tol
+            )
+
+        rider = PauseRider(self, "joints", cmd, marks[0], resend_on_takeover=True, heard=heard)
+        return self._wait_joints(target, tol, timeout, marks, rider)
 
     def _wait_joints(
         self, target: np.ndarray, tol: float, timeout: float, marks: tuple[int, int], rider: PauseRider

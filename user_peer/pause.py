@@ -18,6 +18,12 @@ refused while it held may be the last one it reported for seconds (its limit of 
 earlier copies), and its word that it hears again may arrive before its token does (an event from a sim not yet
 back is no authority's): a rider that stopped at the last report it trusted lost the command (CI, a 3 s pause).
 A copy after the first was taken costs one message a second and changes nothing (the sim's ids).
+
+A command can also be lost with no pause at all: a sim that has just started may not yet be known to the router as
+a listener of its commands, and the first one is put to nobody (the lab's clock-skew scenario: the new sim counted
+0 commands and alice's move timed out 17 deg off). A rider given a ``heard`` test (the robot shows a sign of the
+command: an arm moving, or already there) sends the command again every :data:`RESEND_MAX_S` from
+:data:`UNHEARD_S` after it was given until that sign comes.
 """
 
 from __future__ import annotations
@@ -32,13 +38,16 @@ from user_peer.robot import HELD, RESUMED, rejection_error
 if TYPE_CHECKING:
     from user_peer.robot import Robot
 
-__all__ = ["PauseRider", "RESEND_S", "RESEND_MAX_S", "QUIET_S", "is_pause", "pause_words"]
+__all__ = ["PauseRider", "RESEND_S", "RESEND_MAX_S", "QUIET_S", "UNHEARD_S", "is_pause", "pause_words"]
 
 RESEND_S = 0.2
 """The first resend after a hold was seen; each next one waits twice as long, up to :data:`RESEND_MAX_S`."""
 RESEND_MAX_S = 1.0
 QUIET_S = 2.0
 """Resends stop when no hold was reported this long (the sim took the command, or a copy of it)."""
+UNHEARD_S = 1.0
+"""A command whose robot shows no sign of it this long after it was given is sent again (a sim's state streams at
+50 Hz, and a taken arm target moves the arm within a step: a second is twenty states with no sign)."""
 
 
 def is_pause(ev: Event) -> bool:
@@ -72,6 +81,7 @@ class PauseRider:
         clock: Callable[[], float] = time.monotonic,
         *,
         resend_on_takeover: bool = False,
+        heard: Callable[[], bool] | None = None,
     ) -> None:
         self.robot, self.command, self.cmd, self.since = robot, command, cmd, since
         self.clock = clock
@@ -87,6 +97,9 @@ class PauseRider:
         self.sent_at = float("-inf")
         self.interval = RESEND_S
         self.arrivals = robot.world.presence.arrivals
+        self.heard = heard  # None: no sign to wait for (a path's copy would drive it again from its start on a new sim)
+        self.given_at = clock()
+        self.unheard = 0  # copies sent because the robot showed no sign of the command
 
     def check(self) -> None:
         """Raise any refusal but a hold (:class:`~user_peer.errors.NotOwner`, :class:`~user_peer.errors.Rejected`);
@@ -118,6 +131,14 @@ class PauseRider:
             self.resends += 1
             self.sent_at = now
             self.interval = min(2 * self.interval, RESEND_MAX_S)
+        elif self.heard is not None:
+            if self.heard():
+                self.heard = None  # a sign came: the sim has the command; pauses alone send copies from now on
+            elif now - self.given_at >= UNHEARD_S and now - self.sent_at >= RESEND_MAX_S:
+                self.robot.resend(self.command, self.cmd)
+                self.resends += 1
+                self.unheard += 1
+                self.sent_at = now
 
     def _term(self) -> int:
         js = self.robot.latest("joints")
@@ -126,6 +147,10 @@ class PauseRider:
 
     def note(self) -> str:
         """Words for a timeout's message: how the pause went ('' : there was none)."""
+        unheard = f"; no sign of the command came, and it was sent again {self.unheard} time(s)" if self.unheard else ""
         if not self.holds:
-            return ""
-        return f"; the sim held its robots (a pause) {self.holds} time(s) meanwhile and the command was sent again {self.resends} time(s)"
+            return unheard
+        return (
+            unheard
+            + f"; the sim held its robots (a pause) {self.holds} time(s) meanwhile and the command was sent again {self.resends} time(s)"
+        )

@@ -1,7 +1,8 @@
 """The rider of a waited command (user_peer.pause.PauseRider), alone, on a clock passed in: it sends the command again
 while its sim holds, and keeps doing so (once a second) after the sim's reports stop, since the last copy it had
 reported refused may not be the last one it refused (its reports are rate-limited) and its word that it hears again
-may come before its token (untrusted). A robot that never met a pause is never sent a copy."""
+may come before its token (untrusted). A robot that never met a pause is never sent a copy, unless it shows no sign
+of the command (given a ``heard`` test): a new sim not yet known as a listener lost it."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import pytest
 
 from fabric.interfaces import Command, Event
 from user_peer.errors import NotOwner
-from user_peer.pause import QUIET_S, RESEND_MAX_S, PauseRider
+from user_peer.pause import QUIET_S, RESEND_MAX_S, UNHEARD_S, PauseRider
 from user_peer.robot import HELD
 
 
@@ -101,3 +102,22 @@ def test_any_other_refusal_is_raised(robot):
     )
     with pytest.raises(NotOwner):
         rider.check()
+
+
+def test_a_command_with_no_sign_is_sent_again_until_one_comes(robot):
+    sign = {"moved": False}
+    rider = PauseRider(robot, "joints", CMD, 0, clock=robot.clock, heard=lambda: sign["moved"])  # type: ignore[arg-type]
+    _run(robot, rider, UNHEARD_S - 0.1)
+    assert robot.sent == []  # the first state with its sign may take a moment
+    _run(robot, rider, 4.04)
+    assert robot.sent[0] == pytest.approx(UNHEARD_S) and len(robot.sent) == 4, robot.sent  # then once a second
+    assert "no sign of the command came, and it was sent again 4 time(s)" in rider.note()
+    sign["moved"] = True  # the arm moves: the sim has it
+    _run(robot, rider, 20.0)
+    assert len(robot.sent) == 4, robot.sent
+
+
+def test_a_command_heard_at_once_is_never_sent_again(robot):
+    rider = PauseRider(robot, "joints", CMD, 0, clock=robot.clock, heard=lambda: True)  # type: ignore[arg-type]
+    _run(robot, rider, 20.0)
+    assert robot.sent == [] and rider.note() == ""
