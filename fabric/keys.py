@@ -18,7 +18,7 @@ ROBOT_STREAMS = streams.NAMES
 """Every robot stream's name (``robot/{id}/{name}``), from the one table, :data:`fabric.streams.STREAMS`."""
 LATCHED_STREAMS = frozenset(s.name for s in streams.STREAMS if s.latched)
 """The robot streams whose latest a late joiner gets at once (:func:`is_latched`): a planned path."""
-COMMANDS = ("joints", "twist", "path", "stop", "reset")
+COMMANDS = ("joints", "trajectory", "twist", "path", "stop", "reset")
 SERVICES = ("ik", "fk", "jacobian", "plan", "map", "world", "state", "move")
 PEER_KINDS = ("sim", "compute", "user", "viewer", "recorder", "router", "tool")
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fabric.interfaces import EventKind, wrap_angle
+from fabric.interfaces import EventKind, sample_trajectory, wrap_angle
 from robots import BaseSpec
 
 MOVING_JOINT_SPEED = 1e-3  # rad/s: above this a joint counts as moving (the ownership gate's "in motion")
@@ -54,11 +54,29 @@ def _finite_vector(values, n: int, what: str) -> np.ndarray:
     return q
 
 
+@dataclass(slots=True)
+class Playing:
+    """A joint trajectory an arm plays: the joints when it began, its points (clamped to the range), and the sim's
+    time since it began."""
+
+    start: np.ndarray
+    times: np.ndarray
+    positions: np.ndarray
+    elapsed: float = 0.0
+
+    @property
+    def goal(self) -> np.ndarray:
+        return self.positions[-1]
+
+
 class ArmController:
     """Moves joints toward a target in a straight line in joint space, no joint faster than its limit.
 
     All joints start and arrive together (the slowest joint sets the pace), like a
     robot controller's joint move. Targets outside the range are clamped to it.
+
+    A trajectory (:meth:`set_trajectory`) moves the target along timed points in the sim's time, step by step, so
+    the arm keeps the trajectory's timing however late its sender is (within the joints' speed limits).
     """
 
     def __init__(self, names, lower, upper, max_speed) -> None:
@@ -72,6 +90,7 @@ class ArmController:
         self.target = self.q.copy()
         self.scale = 1.0
         self._idle = False
+        self.playing: Playing | None = None
 
     @property
     def dof(self) -> int:
@@ -91,6 +110,7 @@ class ArmController:
         self.target = applied
         self._idle = False
         self.scale = float(speed_scale)
+        self.playing = None
         bad = np.flatnonzero(applied != q)
         if bad.size == 0:
             return None
@@ -98,14 +118,55 @@ class ArmController:
             tuple(self.names[i] for i in bad), tuple(float(q[i]) for i in bad), tuple(float(applied[i]) for i in bad)
         )
 
+    def set_trajectory(self, times, positions) -> Clamp | None:
+        """Play ``positions[i]`` at ``times[i]`` s from now (from where the joints are, linearly between points, at
+        the speed limits); :class:`CommandRejected` for points of the wrong width, not finite, or times that go back.
+        Points outside the range are clamped to it (reported, each joint's furthest)."""
+        try:
+            t = np.asarray(times, dtype=np.float64).reshape(-1)
+            pts = np.asarray(positions, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise CommandRejected("bad_value", "a trajectory's times and positions must be numbers") from None
+        if pts.ndim != 2 or pts.shape[1] != self.dof or pts.shape[0] != t.shape[0] or t.shape[0] == 0:
+            raise CommandRejected(
+                "wrong_joint_count",
+                f"a trajectory of {t.shape[0]} times needs as many points of {self.dof} joints, got {pts.shape}",
+            )
+        if not (np.isfinite(t).all() and np.isfinite(pts).all()):
+            raise CommandRejected("not_finite", "a trajectory's times or positions contain NaN or infinity")
+        if t[0] < 0 or (np.diff(t) < 0).any():
+            raise CommandRejected("bad_value", "a trajectory's times must start at 0 or later and not decrease")
+        applied = np.clip(pts, self.lower, self.upper)
+        self.playing = Playing(self.q.copy(), t, applied)
+        self.scale = 1.0
+        self._idle = False
+        off = np.abs(applied - pts)
+        bad = np.flatnonzero(off.max(axis=0) > 0)
+        if bad.size == 0:
+            return None
+        rows = off.argmax(axis=0)
+        return Clamp(
+            tuple(self.names[j] for j in bad),
+            tuple(float(pts[rows[j], j]) for j in bad),
+            tuple(float(applied[rows[j], j]) for j in bad),
+        )
+
+    @property
+    def goal(self) -> np.ndarray:
+        """Where the joints are headed: the trajectory's last point while one plays, else the target (what a
+        standby that takes the arm over is given: it goes there at the speed limits, not along the trajectory)."""
+        return self.playing.goal.copy() if self.playing is not None else self.target.copy()
+
     def stop(self) -> None:
         """Hold where the joints are now."""
+        self.playing = None
         self.target = self.q.copy()
         self.dq = np.zeros(self.dof)
         self._idle = False
 
     def reset(self) -> None:
         """Go back to zero (within range), at the speed limits."""
+        self.playing = None
         self.target = np.clip(np.zeros(self.dof), self.lower, self.upper)
         self.scale = 1.0
         self._idle = False
@@ -113,6 +174,7 @@ class ArmController:
     def teleport(self, q) -> None:
         """Put the joints at ``q`` at once (clamped), holding there: for restoring a known state."""
         self.q = np.clip(np.asarray(q, dtype=np.float64), self.lower, self.upper)
+        self.playing = None
         self.target = self.q.copy()
         self.dq = np.zeros(self.dof)
         self._idle = False
@@ -122,7 +184,8 @@ class ArmController:
         the next step decides whether it is at rest."""
         self.q = np.clip(np.array(q, dtype=np.float64), self.lower, self.upper)
         self.dq = np.array(dq, dtype=np.float64)
-        if target is not None:
+        if target is not None:  # a whole state (a mirror's joints alone leave a trajectory playing)
+            self.playing = None
             self.target = np.clip(np.array(target, dtype=np.float64), self.lower, self.upper)
         if scale is not None:
             self.scale = float(scale)
@@ -131,20 +194,30 @@ class ArmController:
     def step(self, dt: float) -> None:
         if self._idle:
             return
+        p = self.playing
+        if p is not None:
+            p.elapsed += dt
+            desired, over = sample_trajectory(p.times, p.positions, p.start, p.elapsed)
+            self.target = np.clip(desired, self.lower, self.upper)
+            if over:
+                self.playing = None
         err = self.target - self.q
         vmax = self.max_speed * self.scale
         duration = float(np.max(np.abs(err) / vmax)) if err.size else 0.0
         if duration <= dt:
             self.dq = err / dt if duration > 0 else np.zeros_like(err)
             self.q = self.target.copy()
-            self._idle = duration == 0  # at the target and at rest: nothing to do until the next command
+            # at the target and at rest: nothing to do until the next command (a trajectory holding still goes on)
+            self._idle = duration == 0 and self.playing is None
         else:
             self.dq = err / duration
             self.q = self.q + self.dq * dt
 
     @property
     def moving(self) -> bool:
-        return bool(np.any(np.abs(self.dq) > MOVING_JOINT_SPEED))
+        """Joints faster than :data:`MOVING_JOINT_SPEED`, or a trajectory still playing (one that holds a point for a
+        while is not still: the ownership gate's takeover waits for its end)."""
+        return self.playing is not None or bool(np.any(np.abs(self.dq) > MOVING_JOINT_SPEED))
 
 
 class BaseController:

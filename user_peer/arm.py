@@ -8,7 +8,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from fabric import keys
-from fabric.interfaces import JointState, JointTarget, Pose, ServiceError
+from fabric.interfaces import JointState, JointTarget, JointTrajectory, Pose, ServiceError
 from user_peer import services
 from user_peer.errors import Timeout, Unreachable
 from user_peer.pause import PauseRider
@@ -83,6 +83,48 @@ class Arm(Robot):
 
         rider = PauseRider(self, "joints", cmd, marks[0], resend_on_takeover=True, heard=heard)
         return self._wait_joints(target, tol, timeout, marks, rider)
+
+    def follow_joints(
+        self,
+        times: Sequence[float],
+        positions: Sequence[Sequence[float]],
+        *,
+        wait: bool = True,
+        tol: float = 1e-3,
+        timeout: float | None = None,
+    ) -> np.ndarray:
+        """Play timed joint positions (rad): ``positions[i]`` at ``times[i]`` s after the sim takes the command,
+        from where the arm is, linearly between points (a ROS ``JointTrajectory``'s meaning). The sim plays it in
+        its own time, so a late or starved client changes nothing of its timing. With ``wait``, block until within
+        ``tol`` of the last point and still (``timeout``: the trajectory's duration plus 20 s)."""
+        t = np.asarray(times, dtype=float).reshape(-1)
+        pts = np.asarray(positions, dtype=float)
+        n = len(self.entry.joint_names)
+        if pts.ndim != 2 or pts.shape != (t.shape[0], n) or t.shape[0] == 0:
+            raise ValueError(
+                f"{self.id}: a trajectory of {t.shape[0]} times needs as many points of {n} joints, got {pts.shape}"
+            )
+        if not (np.isfinite(t).all() and np.isfinite(pts).all()):
+            raise ValueError("a trajectory's times and positions must be finite")
+        if t[0] < 0 or (np.diff(t) < 0).any():
+            raise ValueError(f"a trajectory's times must start at 0 or later and not decrease: {t.tolist()}")
+        marks = self.world.event_mark(), self.world.latest.mark()
+        key = keys.robot_cmd(self._w, self.id, "trajectory", self.world.user)
+        cmd = self.send("trajectory", JointTrajectory(t, pts, self.world.fabric.header(key)))
+        goal = pts[-1]
+        if not wait:
+            return goal
+        joints = keys.robot_joints(self._w, self.id)
+
+        def heard() -> bool:  # the arm moves, or is at the end: the sim has the command (else it is sent again)
+            js = self.world.latest.get_after(joints, marks[1])
+            return js is not None and bool(
+                np.max(np.abs(js.dq), initial=0.0) >= 1e-2 or np.max(np.abs(np.asarray(js.q) - goal)) <= tol
+            )
+
+        # not sent again on a standby's takeover: it would play the trajectory again from where the arm stands
+        rider = PauseRider(self, "trajectory", cmd, marks[0], heard=heard)
+        return self._wait_joints(goal, tol, float(t[-1]) + 20.0 if timeout is None else timeout, marks, rider)
 
     def _wait_joints(
         self, target: np.ndarray, tol: float, timeout: float, marks: tuple[int, int], rider: PauseRider

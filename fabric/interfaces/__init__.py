@@ -38,7 +38,17 @@ from fabric.interfaces.std import (
     Pose,
     Scan,
 )
-from fabric.interfaces.robot_commands import COMMAND_BODIES, Command, CommandBody, JointTarget, Reset, Stop, Twist
+from fabric.interfaces.robot_commands import (
+    COMMAND_BODIES,
+    Command,
+    CommandBody,
+    JointTarget,
+    JointTrajectory,
+    Reset,
+    Stop,
+    Twist,
+    sample_trajectory,
+)
 from fabric.interfaces.ownership import MAX_QUEUE, STAFF_OPS, OwnershipRecord, OwnReply, OwnRequest
 from fabric.interfaces.events import REJECT_KINDS, Event, EventKind
 from fabric.interfaces.sensors import BaseInfo, LidarInfo, SonarInfo
@@ -84,6 +94,8 @@ __all__ = [
     "Command",
     "CommandBody",
     "JointTarget",
+    "JointTrajectory",
+    "sample_trajectory",
     "Reset",
     "Stop",
     "Twist",

@@ -66,7 +66,7 @@ class OwnEvent:
 
 @dataclass(frozen=True, slots=True)
 class Cmd:
-    """A command on the wire: ``name`` is joints|twist|path|stop|reset; ``q`` the joint targets of a joints command."""
+    """A command on the wire: ``name`` is joints|trajectory|twist|path|stop|reset; ``q`` the joint targets of a joints command."""
 
     t: float
     robot: str

@@ -111,6 +111,7 @@ class ArmRobot(_Driven):
     def commands(self) -> Mapping[str, CommandHandler]:
         return {
             "joints": lambda body: self.joints(body.q, body.speed_scale),
+            "trajectory": lambda body: self.ctrl.set_trajectory(body.times, body.positions),
             "stop": lambda body: self.stop(),
             "reset": lambda body: self.reset(),
         }
@@ -122,7 +123,7 @@ class ArmRobot(_Driven):
     def underway(self) -> bool:
         """Moving, or with a target it has not reached: a target taken just before a hold, with no step since, has no
         speed yet (the three-pause test's last moves were lost so: their riders were never told to send them again)."""
-        return self.ctrl.moving or bool(np.any(self.ctrl.target != self.ctrl.q))
+        return self.ctrl.moving or bool(np.any(self.ctrl.goal != self.ctrl.q))
 
     # hooks ------------------------------------------------------------------
     def initialize(self, physics: Physics) -> None:
@@ -151,7 +152,7 @@ class ArmRobot(_Driven):
     # state ------------------------------------------------------------------
     def snapshot(self) -> RobotState:
         c = self.ctrl
-        return RobotState(self.id, "arm", c.q, c.dq, c.target, extra={"scale": c.scale, "idle": bool(c.idle)})
+        return RobotState(self.id, "arm", c.q, c.dq, c.goal, extra={"scale": c.scale, "idle": bool(c.idle)})
 
     def restore(self, state: RobotState) -> None:
         c = self.ctrl

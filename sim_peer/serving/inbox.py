@@ -4,7 +4,7 @@ A flood of commands must not delay other robots' commands, nor grow memory, nor 
 stop. So each robot has one :class:`CommandQueue` that never holds more than three
 commands, and still means what the sender meant:
 
-* targets (``joints``, ``twist``, ``path``) replace each other: the latest target wins,
+* targets (``joints``, ``trajectory``, ``twist``, ``path``) replace each other: the latest target wins,
   whichever kind it is (a twist after a path drives the base, as it would applied in turn);
 * ``stop`` supersedes every pending target (they would have been stopped anyway) and is
   kept once; ``reset`` supersedes everything pending, stops included (it stops the robot too);
@@ -21,7 +21,7 @@ from typing import Generic, TypeVar
 
 __all__ = ["CommandQueue", "TARGETS", "CONTROLS"]
 
-TARGETS = ("joints", "twist", "path")
+TARGETS = ("joints", "trajectory", "twist", "path")
 CONTROLS = ("stop", "reset")
 
 T = TypeVar("T")

@@ -17,6 +17,7 @@ from fabric.interfaces import (
     Header,
     JointState,
     JointTarget,
+    JointTrajectory,
     OccupancyGrid,
     OwnershipRecord,
     Path,
@@ -64,8 +65,17 @@ grids = st.builds(
     hnp.arrays(np.uint8, hnp.array_shapes(min_dims=2, max_dims=2, max_side=20), elements=cell_values),
     headers,
 )
+trajectories = st.tuples(st.integers(1, 20), st.integers(1, 8)).flatmap(
+    lambda nk: st.builds(
+        JointTrajectory,
+        hnp.arrays(np.float64, nk[0], elements=st.floats(0.0, 1e3)).map(np.sort),
+        hnp.arrays(np.float64, nk, elements=st.floats(-10.0, 10.0)),
+        headers,
+    )
+)
 bodies = st.one_of(
     st.builds(JointTarget, farr(st.integers(0, 8)), st.floats(0.01, 1.0), headers),
+    trajectories,
     st.builds(Twist, finite, finite, headers),
     paths,
     st.builds(Stop, headers),
@@ -201,6 +211,15 @@ def test_nan_inside_array_and_wrong_shapes_are_refused():
     with pytest.raises(DecodeError, match="expected dtype float64"):
         decode(msgpack.packb(raw, use_bin_type=True))
     assert messages_equal(pose, Pose(np.zeros(3)))
+
+
+def test_a_trajectory_whose_times_go_back_or_whose_points_do_not_match_them_is_refused():
+    with pytest.raises(ValueError, match="not decrease"):
+        encode(JointTrajectory(np.array([1.0, 0.5]), np.zeros((2, 6))))
+    with pytest.raises(ValueError, match="2 times and 1 points"):
+        encode(JointTrajectory(np.array([1.0, 2.0]), np.zeros((1, 6))))
+    good = JointTrajectory(np.array([0.5, 1.0]), np.ones((2, 6)))
+    assert messages_equal(decode(encode(good)), good)
 
 
 def test_expected_type_is_enforced_and_plain_view_is_json_ready():

@@ -96,3 +96,66 @@ def test_a_braking_base_slows_to_zero_within_its_limits_and_forgets_its_twist(v,
         assert abs(b.v) <= abs(pv) + 1e-12 and abs(b.omega) <= abs(pw) + 1e-12  # only ever slower
         pv, pw = b.v, b.omega
     assert (b.v, b.omega) == (0.0, 0.0) and not b.moving
+
+
+def _played(c: ArmController, seconds: float, dt: float = 0.01) -> list[np.ndarray]:
+    out = []
+    for _ in range(int(round(seconds / dt))):
+        c.step(dt)
+        out.append(c.q.copy())
+    return out
+
+
+def test_a_trajectory_is_played_in_the_sims_time_through_its_points_from_where_the_arm_was():
+    c = ArmController(ARM.joint_names, ARM.lower, ARM.upper, ARM.max_speed)
+    c.teleport(np.full(6, 0.1))
+    mid, end = np.full(6, 0.4), np.full(6, 0.2)
+    assert c.set_trajectory([1.5, 3.0], [mid, end]) is None
+    np.testing.assert_allclose(c.goal, end)  # what a standby is given
+    seen = _played(c, 1.5)
+    np.testing.assert_allclose(seen[74], 0.1 + 0.3 * 0.75 / 1.5, atol=1e-9)  # halfway to mid at 0.75 s
+    np.testing.assert_allclose(seen[-1], mid, atol=1e-9)  # at mid at 1.5 s, not before
+    assert c.moving and c.playing is not None
+    seen = _played(c, 1.6)
+    np.testing.assert_allclose(seen[149], end, atol=1e-9)  # at the end at 3.0 s
+    assert not c.moving and c.playing is None
+    c.step(0.01)
+    assert c.idle
+
+
+def test_a_trajectory_that_holds_a_point_is_still_playing_and_a_stop_or_a_target_ends_it():
+    c = ArmController(ARM.joint_names, ARM.lower, ARM.upper, ARM.max_speed)
+    c.set_trajectory([1.0, 2.0, 3.0], [np.zeros(6), np.zeros(6), np.full(6, 0.3)])
+    _played(c, 1.5)
+    assert not c.idle and c.moving  # still, but the ownership gate must not hand it over mid-trajectory
+    c.stop()
+    _played(c, 0.1)
+    assert c.playing is None and not c.moving
+    c.set_trajectory([1.0], [np.full(6, 0.3)])
+    c.set_target(np.zeros(6))
+    assert c.playing is None
+
+
+def test_a_trajectory_is_clamped_to_the_range_never_faster_than_the_limits_and_bad_ones_are_refused():
+    from sim_peer.controllers import CommandRejected
+
+    c = ArmController(ARM.joint_names, ARM.lower, ARM.upper, ARM.max_speed)
+    far = np.array(ARM.upper) + 1.0
+    clamp = c.set_trajectory([0.01], [far])  # asked for at once: reached at the speed limits, clamped
+    assert clamp is not None and clamp.what == tuple(ARM.joint_names) and clamp.applied == tuple(ARM.upper)
+    vmax = np.array(ARM.max_speed)
+    prev = c.q.copy()
+    for _ in range(2000):
+        c.step(0.002)
+        assert np.all(np.abs(c.q - prev) <= vmax * 0.002 * (1 + 1e-9))
+        prev = c.q.copy()
+    for times, points, reason in (
+        ([1.0], [np.zeros(5)], "wrong_joint_count"),
+        ([1.0, 2.0], [np.zeros(6)], "wrong_joint_count"),
+        ([float("nan")], [np.zeros(6)], "not_finite"),
+        ([2.0, 1.0], [np.zeros(6), np.zeros(6)], "bad_value"),
+        ([-1.0], [np.zeros(6)], "bad_value"),
+    ):
+        with pytest.raises(CommandRejected) as err:
+            c.set_trajectory(times, points)
+        assert err.value.reason == reason, (times, err.value)

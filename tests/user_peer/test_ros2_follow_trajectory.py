@@ -86,7 +86,7 @@ def test_a_goal_for_an_arm_not_commandable_or_with_wrong_joints_is_aborted_with_
         told(why)
         return None
 
-    player = TrajectoryPlayer(thread=False)
+    player = TrajectoryPlayer()
     actions = executor = None
     try:
         node = rclpy.create_node("follow_server_test", context=context)
@@ -143,14 +143,14 @@ def test_a_canceled_goal_stops_the_trajectory_and_the_arm():
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=1 + (os.getpid() * 13 + 47) % 100)
     stops: list[bool] = []
-    # arm1's joints and its stop, what the server reads and calls; the player plays no targets (thread=False)
+    # arm1's joints and its stop, what the server reads and calls; the trajectory sent to nobody
     arm1 = SimpleNamespace(
         entry=SimpleNamespace(joint_names=JOINTS, lower=(), upper=()),
         joints=[0.0] * 6,
-        move_joints=lambda q, wait: None,
+        follow_joints=lambda times, positions, wait: None,
         stop=lambda confirm: stops.append(confirm),
     )
-    player = TrajectoryPlayer(thread=False)
+    player = TrajectoryPlayer()
     actions = executor = None
     try:
         node = rclpy.create_node("follow_cancel_test", context=context)

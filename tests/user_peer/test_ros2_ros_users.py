@@ -8,6 +8,7 @@ import importlib.util
 import json
 import math
 import os
+import signal
 import sys
 import threading
 import time
@@ -143,9 +144,9 @@ def trajectory_took(out: Path, sent: float, from_q: list[float], to_q: list[floa
 
 THROUGH_RAD = 0.075
 """How near the arm must pass its trajectory's middle point, set 0.15 rad off the straight line: within half of that, it
-followed the point and did not cut the corner. The bridge plays the points from its own thread in the sim's time; one
-starved for about a second around the middle point (a whole suite beside two CPU hogs, load 17) sends the point for
-its now and skips what lay between: the arm passed 0.064 rad from it (docs/ros2.md)."""
+followed the point and did not cut the corner. The sim plays the points (``cmd/trajectory``); when the bridge played
+them itself, one starved for about a second around the middle point (a whole suite beside two CPU hogs, load 17) sent
+the point for its now and skipped what lay between: the arm passed 0.064 rad from it (docs/ros2.md)."""
 
 
 def through(seen: list, mid: list[float]) -> float:
@@ -221,6 +222,56 @@ def test_a_3_s_joint_trajectory_takes_3_s_through_its_middle_point(live, procs, 
     assert max(abs(e) for e in feedback[len(feedback) // 2].error.positions) < 0.1  # following the desired point
     assert [f.index for f in feedback][-1] == 1 and feedback[-1].desired.positions.tolist() == pytest.approx(start_q)
     print(f"through the action: {earliest:.2f}-{latest:.2f} s of sim time, {len(feedback)} feedback messages")
+
+    # the bridge stopped (SIGSTOP) once the arm moves: the sim plays the trajectory, which keeps its times and points
+    # (a bridge that played it target by target, starved at load 25, sent nothing for 5 s of the sim's time)
+    from fabric import keys
+    from fabric.interfaces import JointState
+    from robofabric.testing import client_config
+    from user_peer.api import World
+
+    watcher = World(client_config(world, port), "trajwatch", timeout=10.0)
+    try:
+        seen_js: list[tuple[float, list[float]]] = []
+        watcher.fabric.subscribe(
+            keys.robot_joints(world, "arm1"),
+            lambda k, js: seen_js.append((js.header.stamp, [float(v) for v in js.q])),
+            expected=JointState,
+        )
+        wait_until(lambda: seen_js, timeout=30, what="arm1's joints in the test's own session")
+        stopped_mid = [(a + b) / 2 + 0.15 for a, b in zip(start_q, target)]
+        (ctl / "trajectory").write_text(json.dumps([names, [[stopped_mid, 1.5], [target, 3.0]]]))
+        far = lambda q, p, tol: max(abs(a - b) for a, b in zip(q, p)) > tol  # noqa: E731
+        wait_until(
+            lambda: any(far(q, start_q, 1e-3) for _, q in seen_js),
+            timeout=60,
+            what="arm1 leaving for the third trajectory",
+            seen=lambda: procs.output(bridge)[-1500:],
+        )
+        os.kill(bridge.pid, signal.SIGSTOP)  # until the arm passed the middle point, 1.5 s of the sim's time on: a
+        try:  # longer stop would be the owner gone (its lease lapses at 2 s), and the sim stops an owner's robots then
+            wait_until(
+                lambda: through([q for _, q in seen_js], stopped_mid) < THROUGH_RAD,
+                timeout=20,
+                what="arm1 through the middle point with its bridge stopped",
+                seen=lambda: seen_js[-1:],
+            )
+        finally:
+            os.kill(bridge.pid, signal.SIGCONT)
+        wait_until(
+            lambda: any(not far(q, target, 2e-3) for _, q in seen_js),
+            timeout=60,
+            what="arm1 at the end",
+            seen=lambda: seen_js[-1:],
+        )
+        left = next(i for i, (_, q) in enumerate(seen_js) if far(q, start_q, 1e-3))
+        came = next(i for i, (_, q) in enumerate(seen_js) if not far(q, target, 2e-3))
+        took = seen_js[came][0] - seen_js[left - 1][0] if left > 0 else seen_js[came][0] - seen_js[left][0]
+        assert 2.7 < took < 3.3, took  # the whole state stream: each stamp is the sim's, 10 ms apart
+        assert through([q for _, q in seen_js[left : came + 1]], stopped_mid) < THROUGH_RAD
+        print(f"with the bridge stopped: {took:.2f} s of sim time")
+    finally:
+        watcher.close()
 
 
 def follow(domain: int, action: str, names: list[list[str]], points: list, *, seen) -> tuple[list, list]:

@@ -73,27 +73,26 @@ class Clock:
         return self.t
 
 
-def test_the_player_sends_the_target_for_now_until_the_end_and_a_new_trajectory_replaces_the_old():
+def test_the_player_sends_a_trajectory_whole_keeps_it_until_its_end_and_a_new_one_replaces_it():
     clock, sent, failed = Clock(), [], []
-    player = TrajectoryPlayer(clock, thread=False)  # stepped by hand
+    player = TrajectoryPlayer(clock)
     t = Timed((2.0,), ((2.0, 4.0),))
-    player.play("arm1", t, (0.0, 0.0), sent.append, failed.append)
+    first = player.play("arm1", t, (0.0, 0.0), sent.append, failed.append)
+    assert sent == [t]  # one command: the sim plays it in its own time
     clock.t += 1.0
-    player.step()
-    assert sent == [(1.0, 2.0)] and player.playing() == {"arm1"}
-    player.play("arm1", Timed((1.0,), ((0.0, 0.0),)), sent[-1], sent.append, failed.append)  # replaces it
+    assert player.current("arm1") is first and player.playing() == {"arm1"}
+    second = player.play("arm1", Timed((1.0,), ((0.0, 0.0),)), (1.0, 2.0), sent.append, failed.append)
+    assert player.current("arm1") is second and len(sent) == 2
     clock.t += 1.0
-    player.step()
-    assert sent[-1] == (0.0, 0.0) and player.playing() == set() and not failed
+    assert player.current("arm1") is None and player.playing() == set() and not failed  # over on the clock
 
 
-def test_a_refused_target_ends_the_trajectory_and_is_told():
+def test_a_refused_trajectory_ends_at_once_and_is_told():
     clock, failed = Clock(), []
 
-    def refuse(q):
+    def refuse(t):
         raise ValueError("arm1 is not yours")
 
-    player = TrajectoryPlayer(clock, thread=False)
+    player = TrajectoryPlayer(clock)
     player.play("arm1", Timed((2.0,), ((2.0, 4.0),)), None, refuse, failed.append)
-    player.step()
     assert [str(e) for e in failed] == ["arm1 is not yours"] and player.playing() == set()

@@ -70,6 +70,32 @@ def test_move_joints_reaches_targets_and_matches_the_viewers_fk(user):
         arm.move_joints(np.radians([0, 120, 0, 0, 0, 0]))
 
 
+def test_a_joint_trajectory_is_played_by_the_sim_at_its_times_through_its_points(user):
+    """``follow_joints``: sent once, played in the sim's time (its stamps), through the middle point, to the end."""
+    w = user("alice")
+    arm = w.robot("arm1")
+    arm.wait_for("joints")
+    if arm.record is not None and not arm.is_owner:
+        arm.request(timeout=10)
+    start = arm.move_joints(np.zeros(6), timeout=20)
+    end = np.radians([15.0, 10.0, -10.0, 10.0, 15.0, 20.0])
+    mid = end / 2 + 0.1  # 0.1 rad off the straight line: followed, not cut
+    states: list = []
+    from fabric import keys
+    from fabric.interfaces import JointState
+
+    w.fabric.subscribe(keys.robot_joints(w.name, "arm1"), lambda k, js: states.append(js), expected=JointState)
+    q = arm.follow_joints([1.0, 2.0], [mid, end], timeout=30)
+    assert np.max(np.abs(q - end)) <= 1e-3
+    left = next(s.header.stamp for s in states if np.max(np.abs(s.q - start)) > 1e-4)
+    there = next(s.header.stamp for s in states if np.max(np.abs(s.q - end)) <= 1e-3)
+    assert 1.9 <= there - left <= 2.1, (left, there)  # 2 s of the sim's time, however the client was scheduled
+    passed = min(float(np.max(np.abs(s.q - mid))) for s in states)
+    assert passed < 0.01, passed  # through the middle point
+    with pytest.raises(ValueError, match="not decrease"):
+        arm.follow_joints([2.0, 1.0], [mid, end])
+
+
 def test_drive_then_follow_a_path_to_its_end(user):
     w = user("bob")
     base = w.robot("base1")

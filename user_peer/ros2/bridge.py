@@ -476,13 +476,13 @@ class Ros2Bridge:
             return
         names = list(arm.entry.joint_names)
         try:
-            if what == "joint_trajectory":  # played at its points' times (trajectory.py), replacing the one playing
+            if what == "joint_trajectory":  # sent whole, played by the sim (trajectory.py), replacing the one playing
                 timed = timed_points(robot, names, msg, arm.entry.lower, arm.entry.upper)
                 self.trajectories.play(
                     robot,
                     timed,
                     arm.joints,
-                    lambda q: arm.move_joints(q, wait=False),
+                    lambda t: arm.follow_joints(t.times, t.positions, wait=False),
                     lambda exc: self._refuse(robot, what, getattr(exc, "reason", str(exc))),
                 )
             else:

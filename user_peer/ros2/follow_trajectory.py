@@ -3,8 +3,9 @@
 What MoveIt's trajectory execution and ros2_control's clients send to a joint trajectory controller: a
 ``JointTrajectory`` with tolerances, feedback (desired, actual and error points, the point being followed) while
 the arm moves, a result at the end. A goal takes the bridge's ``joint_trajectory`` path: its points checked by
-:func:`~user_peer.ros2.trajectory.timed_points` and played at their ``time_from_start`` by the bridge's
-:class:`~user_peer.ros2.trajectory.TrajectoryPlayer`, in the sim's time (/clock's). As ros2_control's
+:func:`~user_peer.ros2.trajectory.timed_points`, sent whole to the sim, which plays them at their
+``time_from_start`` in its own time (the bridge's :class:`~user_peer.ros2.trajectory.TrajectoryPlayer` follows
+them on /clock for feedback). As ros2_control's
 controller does, it answers:
 
 - ``INVALID_JOINTS`` (with ``error_string``) when ``joint_names`` are not the arm's joints, each once;
@@ -146,7 +147,7 @@ class FollowTrajectoryActions(ActionHost):
                 rid,
                 timed,
                 None if start is None else list(start),
-                lambda q: arm.move_joints(q, wait=False),
+                lambda t: arm.follow_joints(t.times, t.positions, wait=False),
                 lambda exc: failed.append(getattr(exc, "reason", str(exc))),
             )
         except (CommandError, FabricUserError, ValueError) as exc:

@@ -96,7 +96,7 @@ def test_every_built_in_type_is_registered_under_its_class_name():
         "OwnReply",
     }
     assert before <= set(mine)
-    assert set(mine) - before == {"BaseInfo", "LidarInfo", "SonarInfo"}
+    assert set(mine) - before == {"BaseInfo", "LidarInfo", "SonarInfo", "JointTrajectory"}  # added since
     assert {n for n in fi.__all__ if n in types} == set(mine)  # each is exported by fabric.interfaces
 
 
