@@ -19,6 +19,12 @@ earlier copies), and its word that it hears again may arrive before its token do
 back is no authority's): a rider that stopped at the last report it trusted lost the command (CI, a 3 s pause).
 A copy after the first was taken costs one message a second and changes nothing (the sim's ids).
 
+A robot can also be taken from its owner and given back while she waits: the authority held her for gone (her token
+went with a link of the sim's, and came back within her grace) and passed the robot on, free, which stopped it; back,
+she owns it under a new epoch, at which the sim refuses the first copy. A rider of a command that ends where it ends
+(``resend_on_takeover``: joint targets) gives it again under her new epoch (a new command, the same body), once per
+epoch: the move a user still waits for is hers to finish (a CI run's move timed out 28 deg off, owned by her again).
+
 A command can also be lost with no pause at all: a sim that has just started may not yet be known to the router as
 a listener of its commands, and the first one is put to nobody (the lab's clock-skew scenario: the new sim counted
 0 commands and alice's move timed out 17 deg off). A rider given a ``heard`` test (the robot shows a sign of the
@@ -100,6 +106,7 @@ class PauseRider:
         self.heard = heard  # None: no sign to wait for (a path's copy would drive it again from its start on a new sim)
         self.given_at = clock()
         self.unheard = 0  # copies sent because the robot showed no sign of the command
+        self.regiven = 0  # commands given again under the owner's new epoch (the robot taken from her and given back)
 
     def check(self) -> None:
         """Raise any refusal but a hold (:class:`~user_peer.errors.NotOwner`, :class:`~user_peer.errors.Rejected`);
@@ -120,6 +127,8 @@ class PauseRider:
         if arrivals != self.arrivals:  # a sim's token came back: it was cut off, and may never have had the command
             self.arrivals = arrivals
             self.interval, self.sent_at, self.last_hold = RESEND_S, float("-inf"), now
+        if self.resend_on_takeover:
+            self._given_back()
         term = self._term() if self.resend_on_takeover else self.term
         if term > self.term:  # a standby took the robot over: it may never have had the command
             self.term = term
@@ -140,6 +149,16 @@ class PauseRider:
                 self.unheard += 1
                 self.sent_at = now
 
+    def _given_back(self) -> None:
+        """Give the command again under the owner's epoch when the robot came back to her (see the module)."""
+        rec = getattr(self.robot, "record", None)
+        if rec is None or rec.owner != self.robot.world.user or rec.epoch <= self.cmd.epoch:
+            return
+        self.cmd = self.robot.send(self.command, self.cmd.body, epoch=rec.epoch)
+        self.regiven += 1
+        self.given_at = self.clock()  # a sign of the new command is awaited from now
+        self.sent_at = self.given_at
+
     def _term(self) -> int:
         js = self.robot.latest("joints")
         header = getattr(js, "header", None)
@@ -148,6 +167,8 @@ class PauseRider:
     def note(self) -> str:
         """Words for a timeout's message: how the pause went ('' : there was none)."""
         unheard = f"; no sign of the command came, and it was sent again {self.unheard} time(s)" if self.unheard else ""
+        if self.regiven:
+            unheard += f"; the robot was taken from its owner and given back, and the command given again {self.regiven} time(s)"
         if not self.holds:
             return unheard
         return (

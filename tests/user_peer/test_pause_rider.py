@@ -121,3 +121,30 @@ def test_a_command_heard_at_once_is_never_sent_again(robot):
     rider = PauseRider(robot, "joints", CMD, 0, clock=robot.clock, heard=lambda: True)  # type: ignore[arg-type]
     _run(robot, rider, 20.0)
     assert robot.sent == [] and rider.note() == ""
+
+
+def test_a_robot_given_back_to_its_owner_gets_the_command_again_under_her_new_epoch_once(robot):
+    """Held for gone (her token went with the sim's link, and came back within grace), she owned the robot again at
+    a higher epoch: the sim had stopped it, and refuses a copy at the old one. Not for a path (no resend_on_takeover)."""
+    given: list[tuple[str, int]] = []
+    robot.world.user = "alice"
+    robot.record = SimpleNamespace(owner="alice", epoch=3)  # type: ignore[attr-defined]
+
+    def send(command: str, body: Any, *, epoch: int) -> Command:
+        given.append((command, epoch))
+        return Command(user="alice", epoch=epoch, body=body)
+
+    robot.send = send  # type: ignore[attr-defined]
+    rider = PauseRider(robot, "joints", CMD, 0, clock=robot.clock, resend_on_takeover=True)  # type: ignore[arg-type]
+    _run(robot, rider, 1.0)
+    robot.record = SimpleNamespace(owner="alice", epoch=5)  # taken (4: free), given back (5)
+    _run(robot, rider, 3.0)
+    assert given == [("joints", 5)] and rider.cmd.epoch == 5 and robot.sent == []
+    assert "given back, and the command given again 1 time(s)" in rider.note()
+    robot.record = SimpleNamespace(owner="bob", epoch=6)  # someone else's: not hers to give again
+    _run(robot, rider, 5.0)
+    assert given == [("joints", 5)]
+    path_rider = PauseRider(robot, "path", CMD, 0, clock=robot.clock)  # type: ignore[arg-type]
+    robot.record = SimpleNamespace(owner="alice", epoch=9)
+    _run(robot, path_rider, 8.0)
+    assert given == [("joints", 5)]
