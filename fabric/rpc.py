@@ -88,15 +88,18 @@ class Rpc:
         lost_at: Callable[[], float] = lambda: float("-inf"),
         back_at: Callable[[], float] = lambda: float("-inf"),
         token_gone_at: Callable[[], float] = lambda: float("-inf"),
+        stood_still: Callable[[], tuple[float, float]] = lambda: (float("-inf"), float("-inf")),
     ) -> None:
         """``linked()``: whether this client has a link to a router now (None: a router itself, always linked);
         ``lost_at()``: when it last lost one, ``back_at()``: when one last came back after a loss, ``token_gone_at()``:
-        when it last heard a liveliness token go (monotonic s)."""
+        when it last heard a liveliness token go, ``stood_still()``: (since, until) this process last stood still
+        (monotonic s, :mod:`fabric.standstill`)."""
         self._session = session
         self._linked = linked
         self._lost_at = lost_at
         self._back_at = back_at
         self._token_gone_at = token_gone_at
+        self._stood_still = stood_still
         self._counters = counters
         self._stamp = stamp
         self._header = header
@@ -331,13 +334,20 @@ class Rpc:
         """Whether the link was lost while a query asked at ``asked_at`` was out: only a query that ended early
         (later than :data:`RELINK_EARLY_S`), or one that found nobody at once just after tokens went (a closing link
         takes every token it brought with it, and its close is told after them: a student's plan query, asked in
-        between at load 22, met "nobody serves it" at once), is looked at, for up to :data:`RELINK_CONFIRM_S` (the
-        transport's close is told on another thread, a moment after the query it ended)."""
+        between at load 22, met "nobody serves it" at once) or during or just after this process stood still (woken
+        from a pause past its lease, it learns of its link's close a moment after it runs again: CI's paused student
+        asked for his plan in that moment), is looked at, for up to :data:`RELINK_CONFIRM_S` (the transport's close
+        is told on another thread, a moment after the query it ended)."""
         linked = self._linked
         if linked is None:
             return False
-        if time.monotonic() - asked_at < RELINK_EARLY_S and time.monotonic() - self._token_gone_at() > TOKENS_WENT_S:
-            return False  # at once, with no token gone just before: nobody serves it
+        now = time.monotonic()
+        if (
+            now - asked_at < RELINK_EARLY_S
+            and now - self._token_gone_at() > TOKENS_WENT_S
+            and now - self._stood_still()[1] > RELINK_S
+        ):
+            return False  # at once, with no token gone just before and no standstill: nobody serves it
         until = min(deadline, time.monotonic() + RELINK_CONFIRM_S)
         while True:
             if self._lost_at() >= asked_at or not linked():  # a loss before the ask: relinked_lately's

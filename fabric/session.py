@@ -34,6 +34,7 @@ from fabric.codec import DecodeError, decode, encode, load_plugins
 from fabric.config import FabricConfig, default_peer_id
 from fabric.exit import at_exit
 from fabric.fence_watch import FenceWatch
+from fabric.standstill import Standstill
 from fabric.token_watch import TokenWatch
 from fabric.fencing import SimFence
 from fabric.history import LatestThenLive
@@ -121,8 +122,13 @@ class Fabric:
         """When a link came back after one was lost (monotonic s): its routes come a moment after it (fabric.rpc)."""
         self._token_gone_at = float("-inf")
         """When a token watched here last went (monotonic s): a closing link takes its tokens first (fabric.rpc)."""
+        self._standstill: Standstill | None = None
+        """When this process last stood still (paused, starved): a query that found nobody then waits to hear whether
+        its link closed (fabric.rpc). A client's alone: a router's or a peer's links are not lost so."""
         if config.profile == "client":  # a client's transports are its links to routers; a router's are its clients'
             self._resources.append(self.session.info.declare_transport_events_listener(self._on_transport))
+            self._standstill = Standstill()
+            self._resources.append(self._standstill)
         self._fence_watch = FenceWatch(
             self.session,
             self.world,
@@ -142,6 +148,9 @@ class Fabric:
             lost_at=lambda: self._link_lost_at,
             back_at=lambda: self._link_back_at,
             token_gone_at=lambda: self._token_gone_at,
+            stood_still=self._standstill.last
+            if self._standstill is not None
+            else lambda: (float("-inf"), float("-inf")),
         )
         """Services: ``rpc.serve``, ``rpc.query``, ``rpc.call`` (:mod:`fabric.rpc`)."""
         self.reports = Reports(
