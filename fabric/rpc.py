@@ -337,18 +337,16 @@ class Rpc:
         between at load 22, met "nobody serves it" at once) or during or just after this process stood still (woken
         from a pause past its lease, it learns of its link's close a moment after it runs again: CI's paused student
         asked for his plan in that moment), is looked at, for up to :data:`RELINK_CONFIRM_S` (the transport's close
-        is told on another thread, a moment after the query it ended)."""
+        is told on another thread, a moment after the query it ended; :data:`RELINK_S` after a standstill)."""
         linked = self._linked
         if linked is None:
             return False
         now = time.monotonic()
-        if (
-            now - asked_at < RELINK_EARLY_S
-            and now - self._token_gone_at() > TOKENS_WENT_S
-            and now - self._stood_still()[1] > RELINK_S
-        ):
+        stood_still = now - self._stood_still()[1] <= RELINK_S
+        if now - asked_at < RELINK_EARLY_S and now - self._token_gone_at() > TOKENS_WENT_S and not stood_still:
             return False  # at once, with no token gone just before and no standstill: nobody serves it
-        until = min(deadline, time.monotonic() + RELINK_CONFIRM_S)
+        # a process that stood still runs again on a loaded box, whose threads tell the close later: RELINK_S for it
+        until = min(deadline, time.monotonic() + (RELINK_S if stood_still else RELINK_CONFIRM_S))
         while True:
             if self._lost_at() >= asked_at or not linked():  # a loss before the ask: relinked_lately's
                 return True

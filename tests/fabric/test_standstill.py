@@ -48,12 +48,15 @@ CHILD = textwrap.dedent(
     from robofabric.testing import client
     world, port, key = sys.argv[1], int(sys.argv[2]), sys.argv[3]
     c = client(world, port, kind="user", peer_id="sleeper")
-    print(c.rpc.call(key, Twist(1.0, 0.0), timeout=10.0).v, flush=True)  # served
-    while True:  # until this process is stopped and woken (its own clock jumps), then ask at once
-        t = time.monotonic()
-        time.sleep(0.01)
-        if time.monotonic() - t > 1.5:
+    answer = c.rpc.call(key, Twist(1.0, 0.0), timeout=10.0).v
+    last = time.monotonic()  # before the test hears the answer: a stop from then on is a jump of this clock
+    print(answer, flush=True)  # served
+    while True:  # until this process is stopped and woken, then ask at once
+        now = time.monotonic()
+        if now - last > 1.5:
             break
+        last = now
+        time.sleep(0.01)
     try:
         print("woke:", c.rpc.call(key, Twist(2.0, 0.0), timeout=10.0).v, flush=True)
     except Exception as exc:
