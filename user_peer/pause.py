@@ -156,7 +156,7 @@ class PauseRider:
             return
         self.cmd = self.robot.send(self.command, self.cmd.body, epoch=rec.epoch)
         self.regiven += 1
-        self.given_at = self.clock()  # a sign of the new command is awaited from now
+        self.given_at = self.clock()  # its copies count from now (a sign is awaited only where none came of the first)
         self.sent_at = self.given_at
 
     def _term(self) -> int:

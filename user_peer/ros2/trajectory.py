@@ -5,15 +5,16 @@ The bridge sends a trajectory whole, as the fabric's ``trajectory`` arm command
 time, from the arm's joints when it takes it (ROS's convention: a first point after 0 s is reached from where the
 arm is), linearly between its points, as a ROS controller with ``use_sim_time`` follows /clock. So a sim slower
 than the wall clock (a loaded machine) or paused stretches the trajectory instead of cutting its corners, and a
-bridge starved for seconds changes nothing of it. (Until the seventh session the bridge played it target by
-target: at load 25 it sent nothing for 5 s of the sim's time, then the last point.) A new trajectory for the arm
+bridge starved for seconds changes nothing of it. (Until the eighth session, 2026-12-01, the bridge played it target
+by target: at load 25 it sent nothing for 5 s of the sim's time, then the last point.) A new trajectory for the arm
 replaces the one it plays, as a ROS joint trajectory controller does; a point faster than the arm's joint speed
 is reached late (the sim moves no joint faster than its limit).
 
 :class:`TrajectoryPlayer` keeps what each arm plays, in the bridge's clock (the sim's time, from /clock), so that
 the FollowJointTrajectory action can give the desired point as feedback and know when it is over.
 
-Pure parts (:func:`timed_points`, :func:`sample`) apart from the player's thread (:class:`TrajectoryPlayer`).
+Pure parts (:func:`timed_points`, :func:`sample`) apart from the player (:class:`TrajectoryPlayer`, on a clock
+passed in).
 """
 
 from __future__ import annotations
