@@ -916,6 +916,15 @@ def test_a_goal_typed_in_metres_is_placed_a_bad_one_is_refused_in_plain_words_an
         seen=lambda: (_scale_px_per_m(dave), screen),
     )
     shot(dave, "goal-typed")
+    # a zoom centres on base1 once the page follows it, as its panel's pose shows (at load it came after the panel,
+    # and the zoom said "around its middle": make test, 2026-12-01)
+    state = dave.locator(".rf-base-state")
+    wait_until(
+        lambda: state.inner_text().startswith("pose ("),
+        timeout=30,
+        what="base1's pose on its panel",
+        seen=state.inner_text,
+    )
     dave.get_by_role("button", name="Zoom in").click(no_wait_after=True)
     wait_message(dave, r"^zoom x2: the map around base1, ")  # said in the status line, for a screen reader too
     wait_until(
