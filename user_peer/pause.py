@@ -24,6 +24,9 @@ went with a link of the sim's, and came back within her grace) and passed the ro
 she owns it under a new epoch, at which the sim refuses the first copy. A rider of a command that ends where it ends
 (``resend_on_takeover``: joint targets) gives it again under her new epoch (a new command, the same body), once per
 epoch: the move a user still waits for is hers to finish (a CI run's move timed out 28 deg off, owned by her again).
+Any command the sim refused for an epoch of hers that is past, while the robot is hers again, is given again so too:
+it was never taken (the paused student, woken, sent his path under the epoch his replica still had: "stale epoch 1
+for base1 (current 3)", and his Test B failed).
 
 A command can also be lost with no pause at all: a sim that has just started may not yet be known to the router as
 a listener of its commands, and the first one is put to nobody (the lab's clock-skew scenario: the new sim counted
@@ -35,10 +38,10 @@ command: an arm moving, or already there) sends the command again every :data:`R
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from fabric.interfaces import REJECT_KINDS, Command, Event
-from user_peer.errors import Paused
+from user_peer.errors import NotOwner, Paused
 from user_peer.robot import HELD, RESUMED, rejection_error
 
 if TYPE_CHECKING:
@@ -115,6 +118,8 @@ class PauseRider:
         now = self.clock()
         for ev in rej[self.seen :]:
             err = rejection_error(self.robot.id, ev)
+            if isinstance(err, NotOwner) and self._refused_at_a_past_epoch():
+                continue  # hers again under a newer epoch: given again (or was already), see the module
             if not isinstance(err, Paused):
                 raise err
             if now - self.last_hold > QUIET_S:
@@ -149,15 +154,33 @@ class PauseRider:
                 self.unheard += 1
                 self.sent_at = now
 
-    def _given_back(self) -> None:
+    def _given_back(self, rec: Any = None) -> None:
         """Give the command again under the owner's epoch when the robot came back to her (see the module)."""
-        rec = getattr(self.robot, "record", None)
+        rec = rec if rec is not None else getattr(self.robot, "record", None)
         if rec is None or rec.owner != self.robot.world.user or rec.epoch <= self.cmd.epoch:
             return
         self.cmd = self.robot.send(self.command, self.cmd.body, epoch=rec.epoch)
         self.regiven += 1
         self.given_at = self.clock()  # its copies count from now (a sign is awaited only where none came of the first)
         self.sent_at = self.given_at
+
+    def _refused_at_a_past_epoch(self) -> bool:
+        """After an ownership refusal: whether the robot is hers now under an epoch newer than the one it refused (she
+        was held for gone and given it back; her replica, just woken, still had the old one). The command is then
+        given again under her epoch, whatever it is (one refused was never taken); a refusal of a copy sent before it
+        was given again changes nothing. Else the refusal stands. The authority is asked when the replica is behind."""
+        user = self.robot.world.user
+        rec = getattr(self.robot, "record", None)
+        if rec is None or rec.owner != user or rec.epoch <= self.cmd.epoch:
+            ownership = getattr(self.robot.world, "ownership", None)
+            if ownership is not None:
+                rec = ownership.fetch(self.robot.id, timeout=1.0)
+        if rec is None or rec.owner != user:
+            return False
+        if rec.epoch > self.cmd.epoch:
+            self._given_back(rec)
+            return True
+        return self.regiven > 0 and rec.epoch == self.cmd.epoch
 
     def _term(self) -> int:
         js = self.robot.latest("joints")

@@ -37,7 +37,7 @@ class Robot:
         self.sent: list[float] = []
         self.clock = FakeClock()
         self.world = SimpleNamespace(
-            rejections=lambda rid, since: list(self.refusals), presence=SimpleNamespace(arrivals=0)
+            rejections=lambda rid, since: list(self.refusals), presence=SimpleNamespace(arrivals=0), user="alice"
         )
 
     def resend(self, command: str, cmd: Any) -> None:
@@ -148,3 +148,40 @@ def test_a_robot_given_back_to_its_owner_gets_the_command_again_under_her_new_ep
     robot.record = SimpleNamespace(owner="alice", epoch=9)
     _run(robot, path_rider, 8.0)
     assert given == [("joints", 5)]
+
+
+def test_a_command_refused_for_a_past_epoch_of_hers_is_given_again_under_her_new_one_any_kind(robot):
+    """Woken from a pause, the paused student sent his path under the epoch his replica still had; the sim refused it
+    ("stale epoch 1 for base1 (current 3)") though base1 was his again: asked, the authority says so, and the path
+    is given again under epoch 3. A later refusal of the old copy changes nothing; one while another owns it stands."""
+    given: list[tuple[str, int]] = []
+    stale = SimpleNamespace(owner="alice", epoch=3)
+    robot.record = stale  # type: ignore[attr-defined]
+    robot.world.user = "alice"
+    robot.world.ownership = SimpleNamespace(fetch=lambda rid, timeout: SimpleNamespace(owner="alice", epoch=5))
+
+    def send(command: str, body: Any, *, epoch: int) -> Command:
+        given.append((command, epoch))
+        return Command(user="alice", epoch=epoch, body=body)
+
+    robot.send = send  # type: ignore[attr-defined]
+    refused = Event(
+        kind="reject",
+        reason="stale epoch 3 for arm1 (current 5)",
+        object="arm1",
+        user="alice",
+        data={"command": "path", "code": "refused"},
+    )
+    rider = PauseRider(robot, "path", CMD, 0, clock=robot.clock)  # type: ignore[arg-type]
+    robot.refusals.append(refused)
+    rider.check()
+    assert given == [("path", 5)] and rider.cmd.epoch == 5
+    robot.record = SimpleNamespace(owner="alice", epoch=5)  # type: ignore[attr-defined]
+    robot.refusals.append(refused)  # the old copy's refusal, late
+    rider.check()
+    assert given == [("path", 5)]
+    robot.world.ownership = SimpleNamespace(fetch=lambda rid, timeout: SimpleNamespace(owner="bob", epoch=6))
+    robot.record = SimpleNamespace(owner="bob", epoch=6)  # type: ignore[attr-defined]
+    robot.refusals.append(refused)
+    with pytest.raises(NotOwner):
+        rider.check()
