@@ -39,12 +39,18 @@ def test_world_description_lists_robots_by_kind(user):
         w.robot("nope")
 
 
-def test_move_joints_reaches_targets_and_matches_the_viewers_fk(user):
-    w = user("alice")
+def _arm1_of(w: World) -> Arm:
+    """arm1, with its joints heard and owned by ``w``'s user (asked for unless the world runs without ownership)."""
     arm = w.robot("arm1")
     arm.wait_for("joints")
     if arm.record is not None and not arm.is_owner:
         arm.request(timeout=10)
+    return arm
+
+
+def test_move_joints_reaches_targets_and_matches_the_viewers_fk(user):
+    w = user("alice")
+    arm = _arm1_of(w)
     target = np.radians([20.0, 10.0, -20.0, 15.0, 30.0, -10.0])
     q = arm.move_joints(target, tol=1e-3, timeout=20)
     assert np.max(np.abs(q - target)) <= 1e-3
@@ -73,10 +79,7 @@ def test_move_joints_reaches_targets_and_matches_the_viewers_fk(user):
 def test_a_joint_trajectory_is_played_by_the_sim_at_its_times_through_its_points(user):
     """``follow_joints``: sent once, played in the sim's time (its stamps), through the middle point, to the end."""
     w = user("alice")
-    arm = w.robot("arm1")
-    arm.wait_for("joints")
-    if arm.record is not None and not arm.is_owner:
-        arm.request(timeout=10)
+    arm = _arm1_of(w)
     start = arm.move_joints(np.zeros(6), timeout=20)
     end = np.radians([15.0, 10.0, -10.0, 10.0, 15.0, 20.0])
     mid = end / 2 + 0.1  # 0.1 rad off the straight line: followed, not cut
@@ -116,10 +119,7 @@ def test_drive_then_follow_a_path_to_its_end(user):
 
 def test_stop_is_confirmed_by_the_robot_standing_still(user):
     w = user("carol")
-    arm = w.robot("arm1")
-    arm.wait_for("joints")
-    if arm.record is not None and not arm.is_owner:
-        arm.request(timeout=10)
+    arm = _arm1_of(w)
     arm.move_joints(np.radians([0.0, 0.0, 0.0, 0.0, 0.0, 170.0]), wait=False, speed_scale=0.05)
     wait_until(lambda: np.max(np.abs(arm.joint_state.dq)) > 0.01, what="the arm moving")
     assert arm.stop() is True  # sent until the joint stream shows it still
