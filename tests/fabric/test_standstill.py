@@ -13,30 +13,23 @@ import pytest
 
 from fabric import keys
 from fabric.interfaces import Twist
+from fabric.rate import FakeClock
 from fabric.session import Fabric
 from fabric.standstill import Standstill
 from robofabric.testing import client, free_port, router_config, wait_until
 
 
-class Clock:
-    def __init__(self) -> None:
-        self.t = 100.0
-
-    def __call__(self) -> float:
-        return self.t
-
-
 def test_a_gap_between_ticks_is_the_latest_standstill_and_one_going_on_ends_now():
-    clock = Clock()
-    still = Standstill(clock, thread=False)
+    clock = FakeClock(100.0)
+    still = Standstill(clock.now, thread=False)
     for _ in range(20):  # a process that runs: ticks 0.1 s apart
-        clock.t += 0.1
+        clock.jump(0.1)
         still.tick()
     assert still.last() == (float("-inf"), float("-inf"))
-    clock.t += 3.0  # stopped: no tick for 3 s, and the caller runs before the thread ticks again
+    clock.jump(3.0)  # stopped: no tick for 3 s, and the caller runs before the thread ticks again
     assert still.last() == pytest.approx((102.0, 105.0))
     still.tick()
-    clock.t += 0.1
+    clock.jump(0.1)
     still.tick()
     assert still.last() == pytest.approx((102.0, 105.0))  # kept as the latest
 
