@@ -73,15 +73,9 @@ class Arm(Robot):
         cmd = self.send("joints", JointTarget(target, speed_scale, self.world.fabric.header(key)))
         if not wait:
             return target
-        joints = keys.robot_joints(self._w, self.id)
-
-        def heard() -> bool:  # the arm moves, or is there: the sim has the command (else it is sent again)
-            js = self.world.latest.get_after(joints, marks[1])
-            return js is not None and bool(
-                np.max(np.abs(js.dq), initial=0.0) >= 1e-2 or np.max(np.abs(np.asarray(js.q) - target)) <= tol
-            )
-
-        rider = PauseRider(self, "joints", cmd, marks[0], resend_on_takeover=True, heard=heard)
+        rider = PauseRider(
+            self, "joints", cmd, marks[0], resend_on_takeover=True, heard=lambda: self._moving_or_at(target, tol, marks)
+        )
         return self._wait_joints(target, tol, timeout, marks, rider)
 
     def follow_joints(
@@ -114,17 +108,17 @@ class Arm(Robot):
         goal = pts[-1]
         if not wait:
             return goal
-        joints = keys.robot_joints(self._w, self.id)
-
-        def heard() -> bool:  # the arm moves, or is at the end: the sim has the command (else it is sent again)
-            js = self.world.latest.get_after(joints, marks[1])
-            return js is not None and bool(
-                np.max(np.abs(js.dq), initial=0.0) >= 1e-2 or np.max(np.abs(np.asarray(js.q) - goal)) <= tol
-            )
-
         # not sent again on a standby's takeover: it would play the trajectory again from where the arm stands
-        rider = PauseRider(self, "trajectory", cmd, marks[0], heard=heard)
+        rider = PauseRider(self, "trajectory", cmd, marks[0], heard=lambda: self._moving_or_at(goal, tol, marks))
         return self._wait_joints(goal, tol, float(t[-1]) + 20.0 if timeout is None else timeout, marks, rider)
+
+    def _moving_or_at(self, goal: np.ndarray, tol: float, marks: tuple[int, int]) -> bool:
+        """Whether joints that arrived after the command show the arm moving, or at ``goal``: a sign that the sim has
+        the command (a :class:`PauseRider`'s ``heard`` test; without one, the command is sent again)."""
+        js = self.world.latest.get_after(keys.robot_joints(self._w, self.id), marks[1])
+        return js is not None and bool(
+            np.max(np.abs(js.dq), initial=0.0) >= 1e-2 or np.max(np.abs(np.asarray(js.q) - goal)) <= tol
+        )
 
     def _wait_joints(
         self, target: np.ndarray, tol: float, timeout: float, marks: tuple[int, int], rider: PauseRider

@@ -162,16 +162,26 @@ class Base(Robot):
             return self.xy_theta
         gx, gy = float(path.x[-1]), float(path.y[-1])
         pkey = keys.robot_pose(self._w, self.id)
-        rider = PauseRider(self, "path", cmd, events_mark)  # a sim that holds its robots is ridden out
+
+        def near_and_still() -> tuple[bool, bool] | None:
+            p = self.world.latest.get_after(pkey, data_mark)  # a pose that arrived after the command
+            if p is None:
+                return None
+            near = math.hypot(p.position[0] - gx, p.position[1] - gy) <= tol
+            return near, math.hypot(p.linear[0], p.linear[1]) < 0.02 and abs(p.angular[2]) < 0.05
+
+        def heard() -> bool:  # the base moves, or is at the end: the sim has the path (else it is sent again unchanged)
+            seen = near_and_still()
+            return seen is not None and (seen[0] or not seen[1])
+
+        # a sim that holds its robots is ridden out; a path the base shows no sign of is sent again (its copies carry
+        # its id: a sim that had it ignores them). Copies are sent only until a sign came, so never to a base under way
+        rider = PauseRider(self, "path", cmd, events_mark, heard=heard)
 
         def arrived() -> bool:
             rider.check()
-            p = self.world.latest.get_after(pkey, data_mark)  # a pose that arrived after the command
-            if p is None:
-                return False
-            near = math.hypot(p.position[0] - gx, p.position[1] - gy) <= tol
-            still = math.hypot(p.linear[0], p.linear[1]) < 0.02 and abs(p.angular[2]) < 0.05
-            return near and still
+            seen = near_and_still()
+            return seen is not None and seen[0] and seen[1]
 
         if not self.world.latest.wait_for(arrived, timeout):
             xy = self.xy_theta

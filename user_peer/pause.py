@@ -31,7 +31,7 @@ for base1 (current 3)", and his Test B failed).
 A command can also be lost with no pause at all: a sim that has just started may not yet be known to the router as
 a listener of its commands, and the first one is put to nobody (the lab's clock-skew scenario: the new sim counted
 0 commands and alice's move timed out 17 deg off). A rider given a ``heard`` test (the robot shows a sign of the
-command: an arm moving, or already there) sends the command again every :data:`RESEND_MAX_S` from
+command: an arm or a base moving, or already there) sends the command again every :data:`RESEND_MAX_S` from
 :data:`UNHEARD_S` after it was given until that sign comes.
 """
 
@@ -106,7 +106,7 @@ class PauseRider:
         self.sent_at = float("-inf")
         self.interval = RESEND_S
         self.arrivals = robot.world.presence.arrivals
-        self.heard = heard  # None: no sign to wait for (a path's copy would drive it again from its start on a new sim)
+        self.heard = heard  # None: no sign to wait for; else copies go only until a sign came
         self.given_at = clock()
         self.unheard = 0  # copies sent because the robot showed no sign of the command
         self.regiven = 0  # commands given again under the owner's new epoch (the robot taken from her and given back)
