@@ -6,6 +6,10 @@ background when a sim comes or goes or joints of an unknown arm arrive, at most 
 request for an arm not known yet is refused, waiting up to its timeout for a lookup. Once the world has
 answered with the sims there are now, an unknown id is refused at once, so a flood of made-up ids never
 stalls the service. Lookups never run on a Zenoh callback thread.
+
+A lookup the sims did not answer in time (a starved world) is tried again later, each time waiting longer for the
+answer, until one comes: nothing else sets one off while the same sims stay (a compute peer started beside two
+starved sims, in a whole `make test` at load 30, knew no arm 90 s on).
 """
 
 from __future__ import annotations
@@ -30,6 +34,10 @@ log = logging.getLogger("robofabric.kinematics")
 
 DISCOVERY_INTERVAL = 1.0  # s between two srv/world lookups set off by streams
 REQUEST_DISCOVERY_INTERVAL = 0.2  # s: a request for an unknown arm may look again this soon (a sim that just came)
+LOOKUP_TIMEOUT_S = 2.0  # s a lookup waits for the sims' answers
+RETRY_MAX_S = (
+    8.0  # s: a lookup that went unanswered is tried again after 1, 2, 4, 8, 8, ... s, waiting that much longer
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,6 +71,8 @@ class ArmDirectory:
         self._answered_at = -1  # the value of _sims_changed when srv/world last answered
         self._started = False
         self._closed = False
+        self._retry_s = DISCOVERY_INTERVAL  # the wait before the next retry of an unanswered lookup
+        self._retry: threading.Timer | None = None
 
     def add(self, robot: str, placement: ArmPlacement) -> PlacedArm:
         """Serve ``robot`` (an arm of type ``placement.type`` at ``placement.pose``)."""
@@ -115,13 +125,18 @@ class ArmDirectory:
             described = described_robots(self.fabric, None, timeout=timeout)
         except NoReply as exc:
             # no sim yet: normal when the compute starts first (`robofabric up`); its token brings a lookup
-            self._failed(str(exc), quiet="nobody serves it" in str(exc))
+            nobody = "nobody serves it" in str(exc)
+            self._failed(str(exc), quiet=nobody)
+            if not nobody:
+                self._retry_later()
             return len(self.names)
         except ServiceError as exc:
             self._failed(str(exc))
+            self._retry_later()
             return len(self.names)
         with self._lock:
             self._answered_at = generation
+            self._retry_s = DISCOVERY_INTERVAL
             self._not_arms |= {r.id for r in described if not facts(r.kind).chain}  # a sim late to answer loses none
         for r in described:
             if not facts(r.kind).chain or self.get(r.id) is not None:
@@ -139,6 +154,22 @@ class ArmDirectory:
         if why != self._last_error:
             self._last_error = why
             log.log(logging.INFO if quiet else logging.WARNING, "looking the world's arms up: %s", why)
+
+    def _retry_later(self) -> None:
+        """Look the world up again after a wait that doubles each time (see the module), with as much longer to
+        answer; one retry pending at a time."""
+        with self._lock:
+            if self._closed or (self._retry is not None and self._retry.is_alive()):
+                return
+            delay = self._retry_s
+            self._retry_s = min(2 * delay, RETRY_MAX_S)
+            self._retry = threading.Timer(delay, self._retry_now, args=(LOOKUP_TIMEOUT_S + delay,))
+            self._retry.name, self._retry.daemon = "kinematics-discovery-retry", True
+            self._retry.start()
+
+    def _retry_now(self, timeout: float) -> None:
+        if self._started and not self._closed:
+            self._lookup.start(0.0, timeout=timeout)
 
     def sim_seen(self, kind: str, peer: str, alive: bool) -> None:
         """A sim came or went (the peers watch's callback): look the world up again now (its description may
@@ -187,7 +218,17 @@ class ArmDirectory:
         """No more lookups; a request waiting for one returns."""
         with self._lock:
             self._closed = True
+            retry = self._retry
+        if retry is not None:
+            retry.cancel()
         self._lookup.close()
 
 
-__all__ = ["ArmDirectory", "ArmPlacement", "DISCOVERY_INTERVAL", "REQUEST_DISCOVERY_INTERVAL"]
+__all__ = [
+    "ArmDirectory",
+    "ArmPlacement",
+    "DISCOVERY_INTERVAL",
+    "LOOKUP_TIMEOUT_S",
+    "REQUEST_DISCOVERY_INTERVAL",
+    "RETRY_MAX_S",
+]

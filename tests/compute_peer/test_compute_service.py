@@ -331,6 +331,42 @@ def test_an_arm_asked_for_before_its_joints_arrive_is_looked_up_not_refused(worl
         svc.close()
 
 
+def _one_arm_world(world: str):
+    from fabric.interfaces import RobotInfo, WorldInfo
+
+    six = np.zeros(6)
+    arm = RobotInfo(
+        "arm1", "meca500", "arm", np.array(BASE), tuple(f"j{i}" for i in range(6)), six - 3, six + 3, six + 1
+    )
+    return WorldInfo(world, "test", 0.002, {}, (arm,))
+
+
+def test_a_world_too_slow_to_answer_is_asked_again_with_longer_to_answer(world, connect):
+    """A sim that answers ``srv/world`` in 2.5 s, past a lookup's 2 s, and nothing else that would set a lookup off
+    (its token came before the service started, no request, no stream): the arm is learnt all the same, from a retry
+    that waits longer (a compute peer beside two starved sims knew no arm 90 s on, in a whole `make test`)."""
+    import time
+
+    info = _one_arm_world(world)
+    asked: list[float] = []
+
+    def slow(key: str, req: object) -> object:
+        asked.append(time.monotonic())
+        time.sleep(2.5)
+        return info
+
+    sim = connect("sim")
+    sim.rpc.serve(keys.srv(world, "world"), slow)
+    svc = KinematicsService(connect("compute"), discover=True)
+    try:
+        wait_until(lambda: ("sim", sim.peer_id) in svc.fabric.live_peers("sim"), what="the sim's token")
+        svc.start()
+        wait_until(lambda: svc.arms == ["arm1"], timeout=20, what="arm1 learnt", seen=lambda: (svc.counters, asked))
+        assert svc.counters.get("discovery_failed", 0) >= 1 and len(asked) >= 2, (svc.counters, asked)
+    finally:
+        svc.close()
+
+
 def _threads(prefix: str) -> list[str]:
     import threading
 
