@@ -35,9 +35,8 @@ log = logging.getLogger("robofabric.kinematics")
 DISCOVERY_INTERVAL = 1.0  # s between two srv/world lookups set off by streams
 REQUEST_DISCOVERY_INTERVAL = 0.2  # s: a request for an unknown arm may look again this soon (a sim that just came)
 LOOKUP_TIMEOUT_S = 2.0  # s a lookup waits for the sims' answers
-RETRY_MAX_S = (
-    8.0  # s: a lookup that went unanswered is tried again after 1, 2, 4, 8, 8, ... s, waiting that much longer
-)
+# s: a lookup that went unanswered is tried again after 1, 2, 4, 8, 8, ... s, each waiting that much longer
+RETRY_MAX_S = 8.0
 
 
 @dataclass(frozen=True, slots=True)
