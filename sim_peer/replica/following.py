@@ -121,6 +121,7 @@ class Follower:
         self.commands = CommandBuffer(clock=clock)
         self.heard_at = float("-inf")  # when the leader's last joints or pose was kept (monotonic)
         self.former: str | None = None  # the leader a take-over is draining, whose streams are kept meanwhile
+        self.followed: str | None = None  # the leader whose streams a standby kept last (see _from_leader)
         self._poller: threading.Thread | None = None
 
     def listen(self, standby: bool) -> None:
@@ -204,12 +205,19 @@ class Follower:
                 self.heard_at = self.clock()
 
     def _from_leader(self, source: str) -> bool:
-        """Whether a stream sample from ``source`` is the followed leader's (or, while a take-over drains, the
-        former leader's)."""
+        """Whether a stream sample from ``source`` is the followed leader's (or, from the moment the election made
+        this sim primary until its take-over caught up, the leader's it followed)."""
         election = self._election()
-        return (election.role == el.STANDBY and source == election.leader) or (
-            self.former is not None and source == self.former
-        )
+        if election.role == el.STANDBY:
+            if source == election.leader:
+                self.followed = source
+                return True
+            return False
+        # taking over: the election has made this sim primary, and its take-over thread has yet to start draining.
+        # The streams of the leader it followed are kept from that moment on, not only from the drain's start: under
+        # load that gap lasted long enough for the leader's last samples to be handled in it, and dropped (the
+        # standby's first state then went 4 and 8 ms of sim time back, past a 60 ms drain)
+        return source == self.former or (source == self.followed and source is not None)
 
     def drain(self, former: str, quiet_s: float = DRAIN_QUIET_S, limit_s: float = DRAIN_LIMIT_S) -> float:
         """Keep ``former``'s streams until none came for ``quiet_s`` since the drain began (at most ``limit_s``),
@@ -224,7 +232,7 @@ class Follower:
 
     def drained(self) -> None:
         with self._lock:
-            self.former = None
+            self.former = self.followed = None
 
     def on_record(self, key: str, rec: OwnershipRecord) -> None:
         """Keep the leader's newest record of each object of this shard (epoch, then sequence number): the records it
