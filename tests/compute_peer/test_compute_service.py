@@ -294,43 +294,6 @@ def test_robofabric_call_asks_a_service_from_the_command_line(served, world, rou
     assert out.returncode == 2 and "IKRequest.position: expected shape (3,)" in out.stderr, out.stdout + out.stderr
 
 
-def test_an_arm_asked_for_before_its_joints_arrive_is_looked_up_not_refused(world, connect):
-    """A sim that comes after the compute peer, and a request before any joints: the request waits for
-    the world's description instead of failing with "serves no arms yet" (a lab run failed that way)."""
-    from fabric.interfaces import RobotInfo, WorldInfo
-
-    svc = KinematicsService(connect("compute"), discover=True).start()
-    try:
-        sim = connect("sim")
-        six = np.zeros(6)
-        info = WorldInfo(
-            world,
-            "test",
-            0.002,
-            {},
-            (
-                RobotInfo(
-                    "arm1",
-                    "meca500",
-                    "arm",
-                    np.array(BASE),
-                    tuple(f"j{i}" for i in range(6)),
-                    six - 3,
-                    six + 3,
-                    six + 1,
-                ),
-            ),
-        )
-        sim.rpc.serve(keys.srv(world, "world"), lambda key, req: info)
-        user = connect("user")
-        wait_until(lambda: user.rpc.call(keys.srv(world, "world"), timeout=1.0), timeout=10.0, what="the world served")
-        target = np.array(BASE[:3]) + np.array([0.19, 0.0, 0.31])
-        reply = user.rpc.call(keys.srv(world, "ik", "arm1"), IKRequest(target), timeout=10.0, expected=IKReply)
-        assert reply.robot == "arm1" and svc.arms == ["arm1"], svc.counters
-    finally:
-        svc.close()
-
-
 def _one_arm_world(world: str):
     from fabric.interfaces import RobotInfo, WorldInfo
 
@@ -339,6 +302,23 @@ def _one_arm_world(world: str):
         "arm1", "meca500", "arm", np.array(BASE), tuple(f"j{i}" for i in range(6)), six - 3, six + 3, six + 1
     )
     return WorldInfo(world, "test", 0.002, {}, (arm,))
+
+
+def test_an_arm_asked_for_before_its_joints_arrive_is_looked_up_not_refused(world, connect):
+    """A sim that comes after the compute peer, and a request before any joints: the request waits for
+    the world's description instead of failing with "serves no arms yet" (a lab run failed that way)."""
+    svc = KinematicsService(connect("compute"), discover=True).start()
+    try:
+        sim = connect("sim")
+        info = _one_arm_world(world)
+        sim.rpc.serve(keys.srv(world, "world"), lambda key, req: info)
+        user = connect("user")
+        wait_until(lambda: user.rpc.call(keys.srv(world, "world"), timeout=1.0), timeout=10.0, what="the world served")
+        target = np.array(BASE[:3]) + np.array([0.19, 0.0, 0.31])
+        reply = user.rpc.call(keys.srv(world, "ik", "arm1"), IKRequest(target), timeout=10.0, expected=IKReply)
+        assert reply.robot == "arm1" and svc.arms == ["arm1"], svc.counters
+    finally:
+        svc.close()
 
 
 def test_a_world_too_slow_to_answer_is_asked_again_with_longer_to_answer(world, connect):
