@@ -217,7 +217,7 @@ class Follower:
         # The streams of the leader it followed are kept from that moment on, not only from the drain's start: under
         # load that gap lasted long enough for the leader's last samples to be handled in it, and dropped (the
         # standby's first state then went 4 and 8 ms of sim time back, past a 60 ms drain)
-        return source == self.former or (source == self.followed and source is not None)
+        return source in (self.former, self.followed)
 
     def drain(self, former: str, quiet_s: float = DRAIN_QUIET_S, limit_s: float = DRAIN_LIMIT_S) -> float:
         """Keep ``former``'s streams until none came for ``quiet_s`` since the drain began (at most ``limit_s``),
