@@ -9,7 +9,7 @@ from scratch (term 1) is believed again after an earlier take-over.
 from __future__ import annotations
 
 import threading
-from typing import Any, Callable
+from typing import Any
 
 import zenoh
 
@@ -32,9 +32,7 @@ class FenceWatch:
         *,
         counters: Any,
         resources: list[Any],
-        link_lost_at: Callable[[], float] | None = None,
     ) -> None:
-        self._link_lost_at = link_lost_at
         self._session = session
         self._world = world
         self.fence = fence
@@ -74,10 +72,8 @@ class FenceWatch:
             elif self.fence.sim_left(pid):
                 self._counters["fence_resets"] += 1
 
-        try:  # a going is checked with the router: one heard after its link came back would refuse a live sim
-            watch = TokenWatch(
-                self._session, keys.peers_all(self._world, "sim"), on_token, link_lost_at=self._link_lost_at
-            )
+        try:  # every going is checked with the router: one it did not mean would refuse a live sim's every sample
+            watch = TokenWatch(self._session, keys.peers_all(self._world, "sim"), on_token)
         except Exception:  # a closing session
             return
         self._resources.append(watch)

@@ -135,7 +135,6 @@ class Fabric:
             self.sim_fence,
             counters=self.counters,
             resources=self._resources,
-            link_lost_at=lambda: self._link_lost_at,
         )
         self.rpc = Rpc(
             self.session,
@@ -391,7 +390,7 @@ class Fabric:
 
     def watch_peers(self, callback: Callable[[str, str, bool], None], kind: str = "*") -> TokenWatch:
         """``callback(kind, id, alive)`` on every token that appears or goes (existing ones first; a going checked
-        with the router: :mod:`fabric.token_watch`)."""
+        with the router: :mod:`fabric.token_watch`; every going of a sim, see :meth:`watch_tokens`)."""
 
         def on_token(key: str, alive: bool) -> None:
             try:
@@ -400,20 +399,25 @@ class Fabric:
                 return
             callback(p.subject, p.leaf, alive)
 
-        return self.watch_tokens(keys.peers_all(self.world, kind), on_token)
+        return self.watch_tokens(keys.peers_all(self.world, kind), on_token, every_going=kind == "sim")
 
-    def watch_tokens(self, key_expr: str, callback: Callable[[str, bool], None]) -> TokenWatch:
+    def watch_tokens(
+        self, key_expr: str, callback: Callable[[str, bool], None], *, every_going: bool = False
+    ) -> TokenWatch:
         """``callback(key, alive)`` on every liveliness token under ``key_expr`` that appears or goes (existing ones
         first), its key as declared, parsed or not (a recorder keeps every token it hears, a made-up one too). A
         going is checked with the router, so a link that came back in another order ends with the token there
-        (:mod:`fabric.token_watch`)."""
+        (:mod:`fabric.token_watch`): one heard about a loss of this session's link, or with ``every_going`` any
+        (sims' tokens: a live sim held for gone has its every sample refused, :mod:`fabric.token_watch`)."""
 
         def told(key: str, alive: bool) -> None:
             if not alive:
                 self._token_gone_at = time.monotonic()
             callback(key, alive)
 
-        watch = TokenWatch(self.session, key_expr, told, link_lost_at=lambda: self._link_lost_at)
+        watch = TokenWatch(
+            self.session, key_expr, told, link_lost_at=None if every_going else lambda: self._link_lost_at
+        )
         self._resources.append(watch)
         return watch
 

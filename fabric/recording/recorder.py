@@ -231,7 +231,7 @@ class Recorder:
             if self.liveliness:
                 self._subs.append(self.fabric.watch_tokens(expr, self._on_token_for(i)))
         for expr in _sim_token_exprs(self.keyexprs):
-            self._subs.append(self.fabric.watch_tokens(expr, self._on_sim_token))
+            self._subs.append(self.fabric.watch_tokens(expr, self._on_sim_token, every_going=True))
         return self
 
     def close(self) -> "RecorderStats":

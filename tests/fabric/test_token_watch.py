@@ -132,9 +132,10 @@ def test_a_change_heard_while_a_check_is_out_wins_over_its_answer(world, connect
     assert told.of(key)[-1] is False  # nothing reaches the callback once undeclared
 
 
-def test_a_session_s_fence_believes_its_sim_again_after_a_late_going(world, connect, monkeypatch):
-    """The demo's bob: a going heard after the link came back left the sim departed in his session's fence, and
-    every pose of it was refused from then on."""
+def test_a_session_s_fence_believes_its_sim_again_after_a_going_the_router_did_not_mean(world, connect, monkeypatch):
+    """The demo's bob: a going heard while the sim served on left it departed in his session's fence, and every pose
+    of it was refused from then on. Heard once after his link came back, once (CI, 2026-12-01) with his link held:
+    the fence checks every going of a sim, whatever its link did."""
     monkeypatch.setattr("fabric.token_watch.RECHECK_S", (0.05,))
     _sim, _watch, _told, key = _watched_sim(world, connect)
     bob = connect("user", "bob")
@@ -143,7 +144,7 @@ def test_a_session_s_fence_believes_its_sim_again_after_a_late_going(world, conn
     pid = keys.parse(key).leaf
     wait_until(lambda: pid in bob.sim_fence.sims, timeout=30, what="the sim seen", seen=lambda: bob.sim_fence.sims)
     assert bob.sim_fence.believe(1, pid, ("base1",))
-    bob._link_lost_at = time.monotonic()  # as his transport's close tells it: the going comes with a link's loss
+    assert bob._link_lost_at == float("-inf")  # his link held
     watch.heard(key, False)
     assert not bob.sim_fence.believe(1, pid, ("base1",))  # departed: its poses are refused
     wait_until(
@@ -152,3 +153,30 @@ def test_a_session_s_fence_believes_its_sim_again_after_a_late_going(world, conn
         what="the sim believed again",
         seen=lambda: bob.sim_fence.sims,
     )
+
+
+def test_a_sessions_watch_of_sims_checks_every_going_and_of_users_only_those_about_a_lost_link(
+    world, connect, monkeypatch
+):
+    """A world's presence (``watch_peers(kind="sim")``): a sim's going heard while the link held is asked about, and
+    the sim told back; a user's is the router's word (a flood of closing logins asks nothing)."""
+    monkeypatch.setattr("fabric.token_watch.RECHECK_S", (0.05,))
+    connect("sim", "s1")
+    alice = connect("user", "alice")
+    bob = connect("user", "bob")
+    sims, users = Told(), Told()
+    sim_watch = bob.watch_peers(lambda kind, pid, alive: sims(pid, alive), kind="sim")
+    user_watch = bob.watch_peers(lambda kind, pid, alive: users(pid, alive), kind="user")
+    wait_until(
+        lambda: sims.of("s1") and users.of("alice"),
+        timeout=30,
+        what="both tokens",
+        seen=lambda: (sims.calls, users.calls),
+    )
+    assert bob._link_lost_at == float("-inf") and alice.token is not None  # the link held; alice is there
+    sim_watch.heard(keys.peer(world, "sim", "s1"), False)
+    user_watch.heard(keys.peer(world, "user", "alice"), False)
+    wait_until(lambda: sims.of("s1")[-1:] == [True], timeout=30, what="the sim back", seen=lambda: sims.calls)
+    wait_until(lambda: user_watch.rechecks == 1, timeout=30, what="the user's check passed over")
+    assert sims.of("s1") == [True, False, True] and sim_watch.restored == 1
+    assert users.of("alice") == [True, False] and user_watch.queries == 0
