@@ -30,6 +30,9 @@ log = logging.getLogger("robofabric")
 ZENOH_QUERY_TIMEOUT = "Timeout"
 """The error reply zenoh itself gives a query whose time limit ran out while a server was known: a
 silence, which must read as NoReply (retried by those who wait), not as a server's refusal."""
+STALE = "stale term"
+"""How a reply this session's fence refused is told (:class:`~fabric.interfaces.Refused`'s reason begins so): an
+authority's answer stamped below a term already heard, or from a sim whose token went (:mod:`fabric.fencing`)."""
 RELINK_S = 2.0
 """After this session's own link was seen down, how long a query that nobody answered at once is asked again (every
 :data:`RELINK_POLL_S`, within its time limit): a client that was paused or starved past its lease finds its link
@@ -51,7 +54,7 @@ FROZEN_S = 1.0
 a laptop's lid) or starved. Its link's loss, if it lost it meanwhile, is waited for this long more
 (:meth:`Rpc._renewed`)."""
 
-__all__ = ["Rpc", "Reply", "ZENOH_QUERY_TIMEOUT", "relinked_lately"]
+__all__ = ["Rpc", "Reply", "STALE", "ZENOH_QUERY_TIMEOUT", "relinked_lately"]
 
 
 def relinked_lately(now: float, lost_at: float, back_at: float) -> bool:
@@ -374,7 +377,7 @@ class Rpc:
                     errors.append(f"bad reply: {exc}")
                     continue
                 if not self._believe(str(rep.ok.key_expr), msg):
-                    errors.append(f"stale term on {rep.ok.key_expr}")
+                    errors.append(f"{STALE} on {rep.ok.key_expr}")
                     continue
                 src = getattr(getattr(msg, "header", None), "source", "")
                 replies.append(Reply(str(rep.ok.key_expr), msg, src))

@@ -15,6 +15,7 @@ from typing import Any, Callable, Protocol
 
 from fabric import keys
 from fabric.interfaces import NoReply, ServiceError, WorldState
+from fabric.rpc import STALE
 from fabric.session import Fabric
 from sim_peer.replica import election as el
 from sim_peer.replica import freeze_rule as fr
@@ -57,6 +58,8 @@ class ShardOf(Protocol):
 
 EMPTY_LOOKS = 3
 """How many looks at the sims' tokens a frozen primary takes before it believes no rival is there."""
+LOOK_AGAIN_S = 0.5
+"""Between two looks: a going its fence heard is checked with the router within this (fabric.token_watch: 0.5 s)."""
 
 
 class FreezeGuard:
@@ -131,13 +134,17 @@ class FreezeGuard:
                     )
                 except NoReply:
                     unanswered = True
-                except ServiceError:
-                    replies = []  # standbys answer with a refusal: no other authority
+                except ServiceError as exc:
+                    # standbys answer with a refusal: no other authority. An answer this session's fence refused
+                    # is no answer: a sim whose token it heard go a moment ago (a stall of this process drops
+                    # every link of it) is refused until its token is checked back (fabric.token_watch)
+                    unanswered = exc.reason.startswith(STALE)
+                    replies = []
             if unanswered and empty < EMPTY_LOOKS - 1:
                 # rivals were there when the freeze began: at load a look at the tokens, or the ask, can come back
                 # empty (the suite's run saw a rival that served all along missed), so look again a few times
                 empty += 1
-                time.sleep(0.1)
+                time.sleep(LOOK_AGAIN_S)
                 continue
             for rep in replies:
                 if self._shard.about_mine(rep.message):

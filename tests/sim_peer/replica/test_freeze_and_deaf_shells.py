@@ -88,9 +88,49 @@ def test_a_primary_frozen_past_the_lease_asks_who_holds_its_shard_and_reasserts(
     fab.stamp.muzzle()
     gap = fab.config.lease_ms / 1000.0 + 0.01  # past the lease
     _guard(fab, roles, said, gap=0.05).on_freeze(gap)
-    assert roles.told == [("sim-b", 1)]  # the rival's term, for the election (a lower one: it stays)
+    # the rival's term, for the election (a lower one: it stays)
+    assert roles.told == [("sim-b", 1)], (said, dict(fab.counters))
     assert [type(e) for e in roles.steps] == [el.Resumed] and not fab.stamp.muzzled
     assert said == [f"sim sim-a: frozen {gap:.1f} s, still the authority (term {fab.stamp.term})"]
+
+
+@pytest.mark.slow  # it listens a lease, muzzled, before it asks
+def test_a_rival_its_fence_holds_gone_for_a_moment_is_asked_again(connect):
+    """A stall of the whole process drops every link of it: the primary's fence hears the rival's token go and refuses
+    its answers until the going is checked with the router (0.5 s on). Taken for a standby's refusal, that answer left
+    the election untold (the suite's run of 2026-12-01): it is asked again."""
+    fab, rival = connect("sim", "sim-a"), connect("sim", "sim-b")
+    arm = RobotState("arm1", "arm", np.zeros(1), np.zeros(1), np.zeros(1))
+    rival.rpc.serve(
+        keys.srv(fab.world, "state"),
+        lambda key, request: WorldState(0.0, 0, (arm,), (), header=Header(source="sim-b", term=1)),
+    )
+    wait_until(
+        lambda: fab.rpc.query(keys.srv(fab.world, "state"), timeout=1.0, expected=WorldState, all_replies=True),
+        timeout=30,
+        what="the rival's srv/state at the router",
+    )
+    said: list[str] = []
+    roles = Electing({"sim-a", "sim-b"})
+    fab.stamp.muzzle()
+    wait_until(lambda: "sim-b" in fab.sim_fence.sims, timeout=30, what="the rival in the fence's sims")
+    fab.sim_fence.sim_left("sim-b")  # its going heard; the check that finds it back comes a moment later
+    done = threading.Event()
+
+    def checked_back() -> None:  # as the token watch's check does, once an answer was refused
+        while not done.is_set() and fab.counters["stale_authority"] < 1:
+            done.wait(0.02)
+        fab.sim_fence.sim_seen("sim-b")
+
+    back = threading.Thread(target=checked_back)
+    back.start()
+    try:
+        _guard(fab, roles, said, gap=0.05).on_freeze(fab.config.lease_ms / 1000.0 + 0.01)
+    finally:
+        done.set()
+        back.join(timeout=10)
+    assert roles.told == [("sim-b", 1)], (said, dict(fab.counters))
+    assert fab.counters["stale_authority"] >= 1  # its first answer was refused, then asked again
 
 
 class Hearing:
