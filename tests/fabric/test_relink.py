@@ -212,3 +212,17 @@ def test_a_query_to_a_router_gone_for_good_is_not_renewed(world, cut_link):
         caller.rpc.call(key, Twist(1.0, 0.0), timeout=1.0)
     assert caller.counters["queries_renewed"] == 0
     assert time.monotonic() - t0 < 1.0 + 2.0 + 1.0  # its limit, and RELINK_S waiting for a link not back in time
+
+
+def test_nobody_found_at_once_just_after_a_standstill_says_so_after_its_wait(world, connect):
+    """A query that found nobody at once just after its process stood still waits to hear whether its link closed,
+    and then says what it found: nobody, not a silent server (a whole run at load read "no server answered in
+    time" where nobody served the key, 2026-12-01)."""
+    caller = connect("user", "u1")
+    assert caller._standstill is not None
+    now = time.monotonic()
+    caller._standstill._since, caller._standstill._until = now - 1.5, now  # as its thread notes a 1.5 s gap
+    with pytest.raises(NoReply) as err:
+        caller.rpc.call(keys.srv(world, "fk", "nobody"), Twist(1.0, 0.0), timeout=1.0)
+    assert "nobody serves it (found at once" in err.value.reason, err.value.reason
+    assert "after 1.0 s of 1.0 s" in err.value.reason, err.value.reason  # it did wait: its link held

@@ -1,11 +1,14 @@
 """The user API's own parts over real Zenoh, no sim needed: token, scene objects, streams, refusals."""
 
+import time
+
 import numpy as np
 import pytest
 
 import user_peer
 from fabric import keys
 from fabric.interfaces import OwnershipRecord
+from fabric.rpc import RELINK_S
 from robofabric.testing import client_config, wait_until
 from user_peer.api import Arm, World
 from user_peer.services import RobotEntry
@@ -89,8 +92,13 @@ def test_a_service_nobody_serves_says_so_without_claiming_a_wait(alice):
     arm = Arm(
         alice, RobotEntry("arm1", "meca500", "arm", tuple(f"joint_{i}" for i in range(1, 7)), (-1.0,) * 6, (1.0,) * 6)
     )
+    asked = time.monotonic()
     with pytest.raises(user_peer.Timeout) as exc:
         arm.ik([3.2, 0.0, 1.0])
     m = re.search(r"no reply on \S+ after ([0-9.]+) s of 2.0 s: nobody serves it", exc.value.reason)
-    # ended early, not at its 2 s limit (it says how long it took): 1.0 s once in the whole suite at load 19
-    assert m and float(m.group(1)) < 2.0, exc.value.reason
+    assert m, exc.value.reason
+    # ended early, not at its 2 s limit (it says how long it took): 1.0 s once in the whole suite at load 19. Unless
+    # this process stood still meanwhile or just before (starved at load): a query that found nobody then waits to hear whether its
+    # link closed (fabric.rpc), and says so (2.0 s once in a whole run of 2026-12-01)
+    stood_still = alice.fabric._standstill is not None and alice.fabric._standstill.last()[1] >= asked - RELINK_S
+    assert float(m.group(1)) < 2.0 or (stood_still and "waited to hear" in exc.value.reason), exc.value.reason
