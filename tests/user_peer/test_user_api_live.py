@@ -88,6 +88,9 @@ def test_a_joint_trajectory_is_played_by_the_sim_at_its_times_through_its_points
     from fabric.interfaces import JointState
 
     w.fabric.subscribe(keys.robot_joints(w.name, "arm1"), lambda k, js: states.append(js), expected=JointState)
+    # the router routes the sim's states to it before the command: states at the start come first (the command's own
+    # way to the sim is a millisecond, shorter than the 10 ms between two states)
+    wait_until(lambda: states, timeout=10, what="a state at the start in the test's own subscription")
     q = arm.follow_joints([1.0, 2.0], [mid, end], timeout=30)
     assert np.max(np.abs(q - end)) <= 1e-3
     # this subscription's callback may run after the handle's for the same state (at load 15 it had not yet)
@@ -105,7 +108,7 @@ def test_a_joint_trajectory_is_played_by_the_sim_at_its_times_through_its_points
     stamps = [s.header.stamp for s in states]
     moved = next(i for i, s in enumerate(states) if np.max(np.abs(s.q - start)) > 1e-4)
     there = next(i for i, s in enumerate(states) if np.max(np.abs(s.q - end)) <= 1e-3)
-    assert moved > 0, "no state seen at the start"  # subscribed before the command was sent
+    assert moved > 0, "no state seen at the start"
     departure = (stamps[moved - 1], stamps[moved])
     arrival = (stamps[there - 1], stamps[there])
     seen = (departure, arrival)
