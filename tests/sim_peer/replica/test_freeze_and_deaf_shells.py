@@ -65,8 +65,9 @@ def test_a_primary_frozen_with_no_rival_publishes_again_at_once(connect):
     assert said[0].startswith("sim sim-a: paused 0.8 s with no other sim in the world; publishing again")
 
 
-@pytest.mark.slow  # it listens a lease, muzzled, before it asks
-def test_a_primary_frozen_past_the_lease_asks_who_holds_its_shard_and_reasserts(connect):
+def _muzzled_beside_a_rival(connect):
+    """sim-a, muzzled as a freeze leaves it, beside sim-b, whose ``srv/state`` says it holds arm1 at term 1 (its token
+    and its answer both reached sim-a's router)."""
     fab, rival = connect("sim", "sim-a"), connect("sim", "sim-b")
     arm = RobotState("arm1", "arm", np.zeros(1), np.zeros(1), np.zeros(1))
     rival.rpc.serve(
@@ -83,9 +84,15 @@ def test_a_primary_frozen_past_the_lease_asks_who_holds_its_shard_and_reasserts(
         timeout=30,
         what="the rival's srv/state at the router",
     )
+    fab.stamp.muzzle()
+    return fab
+
+
+@pytest.mark.slow  # it listens a lease, muzzled, before it asks
+def test_a_primary_frozen_past_the_lease_asks_who_holds_its_shard_and_reasserts(connect):
+    fab = _muzzled_beside_a_rival(connect)
     said: list[str] = []
     roles = Electing({"sim-a", "sim-b"})
-    fab.stamp.muzzle()
     gap = fab.config.lease_ms / 1000.0 + 0.01  # past the lease
     _guard(fab, roles, said, gap=0.05).on_freeze(gap)
     # the rival's term, for the election (a lower one: it stays)
@@ -99,20 +106,9 @@ def test_a_rival_its_fence_holds_gone_for_a_moment_is_asked_again(connect):
     """A stall of the whole process drops every link of it: the primary's fence hears the rival's token go and refuses
     its answers until the going is checked with the router (0.5 s on). Taken for a standby's refusal, that answer left
     the election untold (the suite's run of 2026-12-01): it is asked again."""
-    fab, rival = connect("sim", "sim-a"), connect("sim", "sim-b")
-    arm = RobotState("arm1", "arm", np.zeros(1), np.zeros(1), np.zeros(1))
-    rival.rpc.serve(
-        keys.srv(fab.world, "state"),
-        lambda key, request: WorldState(0.0, 0, (arm,), (), header=Header(source="sim-b", term=1)),
-    )
-    wait_until(
-        lambda: fab.rpc.query(keys.srv(fab.world, "state"), timeout=1.0, expected=WorldState, all_replies=True),
-        timeout=30,
-        what="the rival's srv/state at the router",
-    )
+    fab = _muzzled_beside_a_rival(connect)
     said: list[str] = []
     roles = Electing({"sim-a", "sim-b"})
-    fab.stamp.muzzle()
     wait_until(lambda: "sim-b" in fab.sim_fence.sims, timeout=30, what="the rival in the fence's sims")
     fab.sim_fence.sim_left("sim-b")  # its going heard; the check that finds it back comes a moment later
     done = threading.Event()
