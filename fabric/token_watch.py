@@ -19,9 +19,9 @@ its world's presence, a viewer's, a recorder's): every going of one is checked. 
 sim's token go while his link held (no loss of it logged, and the viewer and the sim heard nothing of it), the sim
 serving on; his fence refused its every pose from then on, and he resent his path for 76 s to a base that had long
 reached its goal. Sims are a world's few peers (a secure world lets no login but a sim's declare their tokens), so
-checking each of their goings costs a query or four when one leaves. Checking every going, one query per token, made the declaration flood's
-test 44 s -> 97 s and loaded the box beside it; one query per check time for all of them, replies of thousands of
-tokens, did worse (116 s, and six tests beside it failed).
+checking each of their goings costs a query or four when one leaves. Checking every going of every watch, one query
+per token, made the declaration flood's test 44 s -> 97 s and loaded the box beside it; one query per check time for
+all of them, replies of thousands of tokens, did worse (116 s, and six tests beside it failed).
 """
 
 from __future__ import annotations
