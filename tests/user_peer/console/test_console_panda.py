@@ -90,9 +90,17 @@ def test_a_student_drives_the_panda_from_the_console_slider_3d_drag_and_apply_ik
                 page = browser.new_context(viewport={"width": 1280, "height": 1350}).new_page()
                 page.set_default_timeout(30_000)
                 page.goto(url, timeout=60_000)
+                # typed before the page's socket has shaken hands, the name and the click wait in timers of their own
+                # and may be lost (a whole run: no world shown in 60 s); a student types after the page is up
+                page.wait_for_function("() => window.did_handshake === true", timeout=60_000)
                 page.get_by_label("Name").fill("dave")  # an open world: a name, no password
                 page.get_by_role("button", name="Log in").click()
-                page.get_by_text(f"world {world} · dave").wait_for(timeout=60_000)
+                wait_until(
+                    lambda: page.get_by_text(f"world {world} · dave").is_visible(),
+                    timeout=60,
+                    what="dave's page to show his world",
+                    seen=lambda: page.locator("body").inner_text()[-600:],
+                )
                 page.get_by_role("button", name="p1", exact=True).click()
                 page.get_by_role("button", name="Request").click()
                 _wait_message(page, r"request p1: you own it")
