@@ -98,7 +98,7 @@ def test_a_service_nobody_serves_says_so_without_claiming_a_wait(alice):
     m = re.search(r"no reply on \S+ after ([0-9.]+) s of 2.0 s: nobody serves it", exc.value.reason)
     assert m, exc.value.reason
     # ended early, not at its 2 s limit (it says how long it took): 1.0 s once in the whole suite at load 19. Unless
-    # this process stood still meanwhile or just before (starved at load): a query that found nobody then waits to hear whether its
-    # link closed (fabric.rpc), and says so (2.0 s once in a whole run of 2026-12-01)
+    # this process stood still meanwhile or just before (starved at load): a query that found nobody then waits to
+    # hear whether its link closed (fabric.rpc), and says so (2.0 s once in a whole run of 2026-12-01)
     stood_still = alice.fabric._standstill is not None and alice.fabric._standstill.last()[1] >= asked - RELINK_S
     assert float(m.group(1)) < 2.0 or (stood_still and "waited to hear" in exc.value.reason), exc.value.reason
