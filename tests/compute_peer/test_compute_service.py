@@ -13,7 +13,7 @@ from compute_peer.kinematics.service import ArmPlacement, KinematicsService
 from fabric.interfaces import Event, FKRequest, IKReply, IKRequest, IKStream, JacobianRequest, JointState, Pose
 from fabric import keys
 from fabric.codec import encode
-from fabric.interfaces import ServiceError
+from fabric.interfaces import NoReply, ServiceError
 from robofabric.testing import robofabric_cmd, wait_until
 
 BASE = (3.0, 0.5, 0.75, math.radians(30.0))  # an arm on a table, turned: exercises the world <-> base frames
@@ -27,7 +27,18 @@ def served(world, connect):
         comp, arms={"arm1": ArmPlacement("meca500", BASE)}, streams=[("arm1", "target")], discover=False
     ) as svc:
         user = connect("user", "alice")
+        # comp's queryables reach the router a moment after they are declared; a user that connects in that moment
+        # is told nobody serves them (a whole run, load 20): the services are asked until they answer
+        wait_until(lambda: _fk_served(user, keys.srv(world, "fk", "arm1")), timeout=10, what="the fk service served")
         yield svc, comp, user
+
+
+def _fk_served(user, key: str) -> bool:
+    try:
+        user.rpc.call(key, FKRequest(Q), timeout=1.0)
+    except NoReply:
+        return False
+    return True
 
 
 def test_fk_ik_round_trip_in_world_and_base_frames(served, world):
