@@ -33,6 +33,10 @@ from ownership.renewal import Renewal
 MAX_EPOCH_RATE = 10_000.0
 EPOCH_SLACK = 1_000
 
+RENEW_LIMIT_S = 5.0
+"""How long one renewal waits for its answer, at most: a lease is a few seconds, and a renewal still out after
+two rounds is sent again beside it (:mod:`ownership.renewal`)."""
+
 
 def epoch_plausible(
     old: int | None, new: int, elapsed_s: float, *, rate: float = MAX_EPOCH_RATE, slack: int = EPOCH_SLACK
@@ -102,7 +106,11 @@ class OwnershipClient:
         self._lock = threading.Lock()
         self._callbacks: list[Callable[[OwnershipRecord], object]] = []
         self.renewal = Renewal(
-            self.user, lambda obj: self._ask(obj, "renew"), self.snapshot, renew_s=renew_s, closed=lambda: fabric.closed
+            self.user,
+            lambda obj: self._ask(obj, "renew", timeout=min(self.timeout, RENEW_LIMIT_S)),
+            self.snapshot,
+            renew_s=renew_s,
+            closed=lambda: fabric.closed,
         )
         self._sims: set[str] = set()
         # per object: the sim that is its authority and the term heard from it (several sims may

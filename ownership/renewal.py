@@ -5,7 +5,10 @@ leases of one user alive. What she holds is what the authority granted her in a 
 to her in a trusted record (a queue's turn, found in ``records()``); only the authority's answer to a
 renewal ends it, never a published record on its own. Each round renews everything at once on a small
 pool, one renewal per object in flight, so a slow answer delays neither the other objects nor the next
-round.
+round. A renewal unanswered for :data:`STUCK_ROUNDS` rounds is not waited for: the object is renewed again
+beside it (at most :data:`MAX_IN_FLIGHT` at once). Before, one query whose answer never came held that
+object's renewals for the query's whole limit (10 s), and its lease of 2 s ran out with its owner there and
+renewing her other robots (a class of eight in a whole run: arm5 expired, base5 renewed on).
 """
 
 from __future__ import annotations
@@ -19,6 +22,12 @@ from concurrent.futures import ThreadPoolExecutor
 from fabric.interfaces import OwnershipRecord, OwnReply, ServiceError
 
 log = logging.getLogger("robofabric.ownership")
+
+STUCK_ROUNDS = 2
+"""A renewal unanswered for this many rounds is not waited for: the object is renewed again beside it."""
+
+MAX_IN_FLIGHT = 3
+"""Renewals of one object in flight at once, at most (each holds a thread of the pool until its limit)."""
 
 
 class Renewal:
@@ -34,6 +43,7 @@ class Renewal:
         *,
         renew_s: float,
         closed: Callable[[], bool] = lambda: False,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.user = user
         self.renew_s = renew_s
@@ -42,7 +52,8 @@ class Renewal:
         self._closed = closed
         self._lock = threading.Lock()
         self._held: set[str] = set()  # granted to us; renewed until the authority says otherwise
-        self._renewing: set[str] = set()  # renewals sent and not answered yet
+        self._renewing: dict[str, list[float]] = {}  # object -> when each renewal in flight was sent
+        self._clock = clock
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -80,21 +91,39 @@ class Renewal:
             while not self._stop.wait(max(0.0, next_at - time.monotonic())):
                 next_at = max(next_at + self.renew_s, time.monotonic())
                 for obj in self.held():
-                    with self._lock:
-                        if obj in self._renewing:
-                            continue  # still waiting for the last answer: one renewal per robot in flight
-                        self._renewing.add(obj)
+                    if not self._take_turn(obj, self._clock()):
+                        continue
                     try:
                         pool.submit(self._renew, obj)
                     except RuntimeError:  # the interpreter is exiting under a session left open: no more rounds
                         return
+
+    def _take_turn(self, obj: str, now: float) -> bool:
+        """Whether ``obj`` is renewed this round (then its renewal counts as sent at ``now``): when none is in
+        flight, or the last one sent has waited :data:`STUCK_ROUNDS` rounds and fewer than :data:`MAX_IN_FLIGHT`
+        are out."""
+        with self._lock:
+            sent = self._renewing.setdefault(obj, [])
+            if sent and (now - sent[-1] < STUCK_ROUNDS * self.renew_s or len(sent) >= MAX_IN_FLIGHT):
+                return False  # still waiting for the last answer
+            sent.append(now)
+            return True
+
+    def in_flight(self, obj: str) -> int:
+        """Renewals of ``obj`` sent and not answered yet."""
+        with self._lock:
+            return len(self._renewing.get(obj, ()))
 
     def _renew(self, obj: str) -> None:
         try:
             self._renew_once(obj)
         finally:
             with self._lock:
-                self._renewing.discard(obj)
+                sent = self._renewing.get(obj)
+                if sent:
+                    sent.pop(0)
+                if not sent:
+                    self._renewing.pop(obj, None)
 
     def _renew_once(self, obj: str) -> None:
         try:
@@ -116,4 +145,4 @@ class Renewal:
             thread.join(timeout=2.0)
 
 
-__all__ = ["Renewal"]
+__all__ = ["MAX_IN_FLIGHT", "Renewal", "STUCK_ROUNDS"]

@@ -550,8 +550,10 @@ def test_a_token_lost_and_back_while_hearing_is_in_doubt_changes_no_record(seq, 
     s, _ = st.step(s, st.Tick(now))
     now += 5.0
     s, _ = st.step(s, st.Tick(now))  # the authority was paused (or starved) for 5 s
-    if user not in s.live or user in s.held or any(d <= now + 4.0 for d in s.unproven.values()):
-        return  # (a requester without a token whose grace ends meanwhile leaves on her own: another rule)
+    if user not in s.live or user in s.held or user in s.away or any(d <= now + 4.0 for d in s.unproven.values()):
+        # (a requester without a token whose grace ends meanwhile leaves on her own; one away who asked again before
+        # her token came back gets her robots back when it does: other rules. Hypothesis found the second in a run)
+        return
     before = _records(s)
     now += 0.1
     assert st.hearing_in_doubt(s, now, user)
