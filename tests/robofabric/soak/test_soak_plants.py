@@ -6,7 +6,9 @@ began, in the histories of four runs each, docs/testing.md), or a minute where t
 first kill comes at about 6 s), so half a minute, but a whole suite at load 22 caught it only in the verdict after
 its half minute, so a minute too; two owners 15-24 s and a stale command 10-40 s (a replay needs
 an arm at its second epoch), so a minute each, as before. A run ends 3 s after the history so far first breaks its
-invariant (``until``): the minute is the most it may take, not what it costs."""
+invariant (``until``): its length is the most it may take, not what it costs. Each may take two minutes since a
+whole run on a slow afternoon (34 min, load 20-35) saw the reset soak's two kills and no catch within its minute:
+a slow box lengthens every fail-over, and a longer limit costs nothing where the plant is caught."""
 
 from __future__ import annotations
 
@@ -21,14 +23,14 @@ pytestmark = [pytest.mark.lab, pytest.mark.slow]
 @pytest.mark.parametrize(
     ("plant", "faults", "victims", "invariant", "minutes"),
     [
-        ("reset", ("kill",), ("sim",), "reset", 1.0),  # a fail-over puts the arms back at their spawn pose
-        ("double-owner", ("hog",), ("student",), "owners", 1.0),  # students take each other's still arms over
+        ("reset", ("kill",), ("sim",), "reset", 2.0),  # a fail-over puts the arms back at their spawn pose
+        ("double-owner", ("hog",), ("student",), "owners", 2.0),  # students take each other's still arms over
         (
             "stale-command",
             ("replay",),
             ("student",),
             "applied",
-            1.0,
+            2.0,
         ),  # an owner's command under an epoch she no longer holds
     ],
 )
