@@ -25,11 +25,60 @@ from fabric.config import FabricConfig
 from fabric.session import Fabric
 
 
+EPHEMERAL_RANGE_FILE = "/proc/sys/net/ipv4/ip_local_port_range"
+PORTS_BELOW_EPHEMERAL = 16_000  # how many ports under the kernel's ephemeral range free_port deals from
+
+_ports_lock = threading.Lock()
+_ports_handed: set[int] = set()
+_ports_next: int | None = None
+
+
+def port_slice(env: dict[str, str] | None = None, ephemeral_low: int | None = None) -> tuple[int, int]:
+    """The ports (first, how many) :func:`free_port` deals in this process: the :data:`PORTS_BELOW_EPHEMERAL`
+    under the kernel's ephemeral range, cut in one slice per pytest-xdist worker and one for processes outside
+    the workers, so that two workers never pick the same port."""
+    env = os.environ if env is None else env
+    if ephemeral_low is None:
+        try:
+            with open(EPHEMERAL_RANGE_FILE) as f:
+                ephemeral_low = int(f.read().split()[0])
+        except (OSError, ValueError, IndexError):
+            ephemeral_low = 32768
+    top = min(ephemeral_low, 65536)
+    bottom = max(1024, top - PORTS_BELOW_EPHEMERAL)
+    count = int(env.get("PYTEST_XDIST_WORKER_COUNT", "0") or 0)
+    worker = env.get("PYTEST_XDIST_WORKER", "")
+    index = int(worker[2:]) if worker[:2] == "gw" and worker[2:].isdigit() and int(worker[2:]) < count else count
+    size = (top - bottom) // (count + 1)
+    return bottom + index * size, size
+
+
 def free_port() -> int:
-    """A TCP port on loopback that was free a moment ago."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+    """A TCP port on loopback, free now and never handed out before by this process.
+
+    Not one the kernel picks (``bind(0)``): those come from its ephemeral range, where every outgoing connection
+    takes its local port, and a whole run's viewer once found the port it was given taken that way ("Address
+    already in use"). Ports come from :func:`port_slice`, in turn from a place set by this process's pid (a
+    benchmark a test starts deals from its worker's slice too)."""
+    global _ports_next
+    first, size = port_slice()
+    with _ports_lock:
+        if _ports_next is None:
+            _ports_next = (os.getpid() * 7919) % size
+        for _ in range(size):
+            port, _ports_next = first + _ports_next, (_ports_next + 1) % size
+            if port in _ports_handed:
+                continue
+            with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+                try:
+                    s.bind(("127.0.0.1", port))
+                except OSError:
+                    continue
+            _ports_handed.add(port)
+            return port
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:  # every port of the slice handed out: the kernel's
         s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+        return int(s.getsockname()[1])
 
 
 def wait_until(
