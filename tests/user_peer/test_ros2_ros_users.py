@@ -75,7 +75,7 @@ def start(procs, tmp_path: Path, world: str, port: int, domain: int, *extra: str
     )
     wait_until(
         lambda: "bridging world" in procs.output(bridge) or bridge.poll() is not None,
-        timeout=60,
+        timeout=180,  # rclpy and the fabric imported, the world joined: a whole run at load 20 took over 60 s
         what="the bridge up",
         seen=lambda: procs.output(bridge)[-2000:],
     )
@@ -488,7 +488,7 @@ def test_two_namespaced_bridges_give_each_its_own_clock_and_none_on_the_shared_o
     )
     wait_until(
         lambda: "bridging world" in procs.output(first),
-        timeout=60,
+        timeout=180,
         what="the first bridge up",
         seen=lambda: procs.output(first)[-1500:],
     )
