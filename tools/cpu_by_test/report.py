@@ -1,6 +1,6 @@
 """Sum an ``RF_CPU_LOG``: CPU seconds by kind of process (``robofabric sim``, ``compute``, ...) and by test file.
 
-    python tools/cpu_by_test/report.py /tmp/cpu.log
+python tools/cpu_by_test/report.py /tmp/cpu.log
 """
 
 import collections
