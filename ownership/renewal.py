@@ -7,8 +7,8 @@ renewal ends it, never a published record on its own. Each round renews everythi
 pool, one renewal per object in flight, so a slow answer delays neither the other objects nor the next
 round. A renewal unanswered for :data:`STUCK_ROUNDS` rounds is not waited for: the object is renewed again
 beside it (at most :data:`MAX_IN_FLIGHT` at once). Before, one query whose answer never came held that
-object's renewals for the query's whole limit (10 s), and its lease of 2 s ran out with its owner there and
-renewing her other robots (a class of eight in a whole run: arm5 expired, base5 renewed on).
+object's renewals for the query's whole limit (10 s), five leases of 2 s, with its owner there and renewing her
+other robots.
 """
 
 from __future__ import annotations
