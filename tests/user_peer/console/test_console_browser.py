@@ -641,33 +641,33 @@ def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_g
 
     wait_until(still, timeout=15, what="base1 stopped after alice's page closed", seen=lambda: base.pose)
     stopped = time.monotonic() - closed
-    if base.record.owner == "alice":  # still hers: the grace has not begun
-        wait_until(
-            lambda: base.record.owner == "bob",
-            timeout=60,
-            what="base1 passed to bob after the grace",
-            seen=lambda: base.record,
-        )
-        passed = time.monotonic() - closed
-        print(
-            f"alice's page closed: base1 still after {stopped:.2f} s, bob's after {passed:.1f} s "
-            f"(reconnect window {RECONNECT_S:.0f} s + grace 3 s)"
-        )
-        assert passed >= RECONNECT_S + 3.0 - 0.5, passed
-    else:
+    wait_until(
+        lambda: base.record.owner == "bob",
+        timeout=60,
+        what="base1 passed to bob after the grace",
+        seen=lambda: base.record,
+    )
+    passed = time.monotonic() - closed
+    print(
+        f"alice's page closed: base1 still after {stopped:.2f} s, bob's after {passed:.1f} s "
+        f"(reconnect window {RECONNECT_S:.0f} s + grace 3 s)"
+    )
+    if passed < RECONNECT_S + 3.0 - 0.5:
         # passed early only where her lease lapsed, and the authority said so: the console renews the leases of its
         # pages' owners, and in CI (load 7-14) it stalled bob's page 30 s, then her base was bob's within 15 s of her
-        # page's closing (issue 45: leases renewed inside a starved console)
+        # page's closing; another CI run (load 6-12) gave it to bob 32.0 s after (issue 45: leases renewed inside a
+        # starved console)
         lapsed = [
             e
             for e in klass.carol.event_log.authority_events(mark, klass.carol.event_mark(), OWN_KINDS)
             if e.object == "base1" and e.kind == "own_expired" and e.user == "alice"
         ]
-        assert lapsed and base.record.owner == "bob", (
-            f"{base.record}\nbase1's ownership events: {_ownership_story(klass, mark)}\n"
+        assert lapsed, (
+            f"base1 was bob's {passed:.1f} s after alice's page closed, and her lease had not lapsed\n"
+            f"base1's ownership events: {_ownership_story(klass, mark)}\n"
             f"console: {klass.procs.output(klass.console)[-3000:]}"
         )
-        print(f"alice's lease lapsed before her page's reconnect window ended: {lapsed[0].reason}")
+        print(f"alice's lease lapsed before her page's reconnect window and grace ended: {lapsed[0].reason}")
     bob.get_by_text(re.compile(r"^mobile · owner: you")).wait_for()
     shot(bob, "bob-after-alice-left")
     bob.get_by_role("button", name="Release").click(no_wait_after=True)
