@@ -201,9 +201,11 @@ def open_page(browser, klass: Klass):
     lines: list[str] = []
     page.on("console", lambda m: lines.append(m.text))  # NiceGUI says there why it reloads a page
     PAGE_LOGS[id(page)] = lines
-    # 60 s for an action: at the suite's load (15-35 on two cores) a page's renderer, drawing its 3D view in software
-    # GL, once took over 30 s to hit-test a visible, enabled, stable button (CI run of 2026-11-30, bob's Request)
-    page.set_default_timeout(60_000)
+    # 120 s for an action: at the suite's load (15-35 on two cores) a page's renderer, drawing its 3D view in software
+    # GL, once took over 30 s to hit-test a visible, enabled, stable button (CI run of 2026-11-30, bob's Request);
+    # a page whose pings went unanswered 20 s is reloaded by NiceGUI, and a click then waits for the page to load
+    # again and resume her session: past 60 s in a whole run at load 10-17 (bob's base1, then his Request)
+    page.set_default_timeout(120_000)
     page.goto(klass.url, timeout=60_000)
     # typed before the page's socket has shaken hands, a field's value and the Log in click wait in timers of their
     # own, and the click may go first: bob's login once came with no name ("name must not be empty", a whole run
@@ -226,10 +228,10 @@ def logged_in(page, klass: Klass, name: str) -> None:
 
     log_in(page, name, klass.passwords[name])
     try:
-        page.get_by_text(f"world {klass.world} · {name}").wait_for(timeout=60_000)
+        page.get_by_text(f"world {klass.world} · {name}").wait_for(timeout=120_000)
     except PlaywrightTimeoutError:
         raise AssertionError(
-            f"{name}'s page never showed her world in 60 s; it says: "
+            f"{name}'s page never showed her world in 120 s; it says: "
             f"{one_line(page.locator('body').inner_text(), 600)!r}"
         ) from None
 
