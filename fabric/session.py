@@ -39,7 +39,7 @@ from fabric.token_watch import TokenWatch
 from fabric.fencing import SimFence
 from fabric.history import LatestThenLive
 from fabric.interfaces import Header
-from fabric.matching import wait_matched
+from fabric.matching import is_matched, wait_matched
 from fabric.publishers import declare_publisher
 from fabric.reports import Reports
 from fabric.rpc import Rpc
@@ -114,6 +114,9 @@ class Fabric:
         self._closed = False
         self._resources: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
+        self._probes: dict[str, zenoh.Publisher] = {}  # key -> a publisher to remote subscribers only (listened())
+        self._local_exprs: frozenset[str] = frozenset()  # this session's own subscriptions that take its samples
+        self._local_keys: dict[str, bool] = {}  # key -> whether one of them takes it (emptied when one is added)
         self.session = zenoh.open(config.zenoh_config())
         self._link_lost_at = float("-inf")
         """When this client last lost a link to its router (monotonic s; never for a router or a peer): a query ridden over
@@ -234,6 +237,32 @@ class Fabric:
             self._resources.append(pub)
         return pub
 
+    def listened(self, key: str) -> bool:
+        """Whether a subscriber of ``key`` is known to this session now: another session's (a router told it), or
+        one of its own that takes its own samples. True where zenoh does not say (a latched or kept key's
+        advanced publisher, a key past :data:`MAX_KEYS`).
+
+        A put nobody listens to is dropped by zenoh at once; what a stream costs is reading, building and
+        encoding its message, which a sim then skips. Asked of a publisher to remote subscribers only: the sim's
+        own ``remote_only`` subscriptions of every sim's joints and poses (for terms and mirrors) match each of
+        its streams, and would say someone listens to all of them."""
+        known = self._local_keys  # the one a subscription added meanwhile replaces: never a stale answer kept
+        local = known.get(key)
+        if local is None:
+            local = bool(keys.cache_size(key)) or any(_intersects(e, key) for e in self._local_exprs)
+            if len(known) < MAX_KEYS:
+                known[key] = local
+        if local:
+            return True
+        probe = self._probes.get(key)
+        if probe is None:
+            if len(self._probes) >= MAX_KEYS:
+                return True
+            probe = self.session.declare_publisher(key, allowed_destination=zenoh.Locality.REMOTE)
+            self._probes[key] = probe
+            self._resources.append(probe)
+        return is_matched(probe)
+
     @property
     def published_keys(self) -> tuple[str, ...]:
         """The keys this session holds a publisher for (at most :data:`MAX_KEYS`; nothing a client sends adds one)."""
@@ -331,6 +360,9 @@ class Fabric:
             sub = LatestThenLive(self.session, key_expr, callback)
         else:
             sub = self.session.declare_subscriber(key_expr, callback)
+        if not remote_only:  # kept after an undeclare: listened() then says yes where it could say no, never worse
+            self._local_exprs = self._local_exprs | {key_expr}
+            self._local_keys = {}  # after the new expression: a check that began before stores into the old map
         self._resources.append(sub)
         return sub
 
@@ -432,3 +464,11 @@ def shutdown_event(signals: Iterable[int] = (signal.SIGINT, signal.SIGTERM)) -> 
         for s in signals:
             signal.signal(s, lambda *_: ev.set())
     return ev
+
+
+def _intersects(expr: str, key: str) -> bool:
+    """Whether key expression ``expr`` takes ``key`` (one of this session's subscriptions; a made-up one says no)."""
+    try:
+        return bool(zenoh.KeyExpr(expr).intersects(zenoh.KeyExpr(key)))
+    except Exception:
+        return False

@@ -111,6 +111,7 @@ class StreamLoops:
         publish outside it (a tick the loop skipped, late, leaves the phases' order as it was)."""
         positions = [any(st.positions for _, st in entries) for entries in dealt]
         turn = [0]
+        listened = getattr(self.fabric, "listened", lambda _key: True)
 
         def publish(now: float) -> None:
             i = turn[0]
@@ -124,6 +125,8 @@ class StreamLoops:
                     world.sync()
                 physics = world.physics
                 for key, st in entries:
+                    if not listened(key):  # nobody listens: zenoh would drop it, after its reading and encoding
+                        continue
                     build = st.read(physics)
                     if build is not None:
                         out.append((key, build))

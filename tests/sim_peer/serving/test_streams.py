@@ -82,3 +82,27 @@ def test_staggered_loops_publish_every_group(world, router, connect):
         )
     finally:
         loops.stop()
+
+
+@pytest.mark.slow
+def test_a_stream_nobody_listens_to_is_not_built_until_someone_does(world, router, connect):
+    """Nobody listens to base1's scans: they are neither read nor published (the sim's CPU), while its pose, which
+    someone listens to, is; once someone subscribes, the scans go out too. The sim's own remote-only watch of
+    every robot's joints (as a sim's terms and mirrors watch) counts as nobody."""
+    fab, _ = router
+    sim_fab = connect("sim", "sim-quiet")
+    sim_fab.subscribe(keys.robot_stream_all(world, "joints"), lambda _k, _m: None, remote_only=True)
+    loops = StreamLoops(sim_fab, SimWorld("combined", seed=3), threading.RLock(), Counter())
+    got: Counter[str] = Counter()
+    fab.subscribe(keys.robot_pose(world, "base1"), lambda key, msg: got.update([key.rsplit("/", 1)[1]]))
+    scan = keys.robot_scan(world, "base1")
+    wait_until(lambda: sim_fab.listened(keys.robot_pose(world, "base1")), timeout=30, what="the pose's subscriber")
+    loops.start()
+    try:
+        wait_until(lambda: got["pose"] >= 50, timeout=30, what="base1's poses", seen=lambda: dict(got))
+        built = sim_fab.seqs.under()  # the keys a header was made for
+        assert scan not in built and keys.robot_stream(world, "arm1", "joints") not in built, sorted(built)
+        fab.subscribe(scan, lambda key, msg: got.update([key.rsplit("/", 1)[1]]))
+        wait_until(lambda: got["scan"] >= 5, timeout=30, what="base1's scans once listened to", seen=lambda: dict(got))
+    finally:
+        loops.stop()
