@@ -257,6 +257,12 @@ def run_one(n: int, seconds: float, tmp: Path, *, extra: int = 0) -> dict[str, A
             else {"moves": [], "refused": 0, "lost": [], "errors": ["no result"], "join_s": None}
             for o in outs
         ]
+        why: list[str] = []  # a robot lost, in the peers' own words: the sim's expiry, its owner's renewals
+        if any(r["lost"] for r in results):
+            why = [line for line in procs.output(sim).splitlines() if "expired" in line][-3:]
+            for r, p in zip(results, students):
+                if r["lost"]:
+                    why += [line for line in procs.output(p).splitlines() if "renewal" in line][-4:]
     moves = [m for r in results for m in r["moves"]]
     joins = [r["join_s"] for r in results if r["join_s"] is not None]
     return {
@@ -272,7 +278,7 @@ def run_one(n: int, seconds: float, tmp: Path, *, extra: int = 0) -> dict[str, A
         "lost": sum(len(r["lost"]) for r in results),
         "refused": sum(r["refused"] for r in results),
         "errors": [e for r in results for e in r["errors"]][:5],
-        "lost_detail": [x for r in results for x in r["lost"]][:5],
+        "lost_detail": [x for r in results for x in r["lost"]][:5] + why,
         "rtf": rtf,
         "own_p50": pct(own_ms, 50),
         "own_p99": pct(own_ms, 99),

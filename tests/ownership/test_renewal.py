@@ -10,7 +10,7 @@ from robofabric.testing import wait_until
 
 
 def _reply(obj: str) -> OwnReply:
-    return OwnReply("renewed", OwnershipRecord(obj, owner="alice", epoch=1))
+    return OwnReply("renewed", "", 0, OwnershipRecord(obj, owner="alice", epoch=1))
 
 
 def test_a_renewal_left_unanswered_is_sent_again_after_two_rounds_and_the_other_robot_renews_on():
@@ -62,3 +62,27 @@ def test_rounds_on_a_real_clock_renew_a_robot_whose_first_answer_is_lost():
     finally:
         hang.set()
         r.close()
+
+
+def test_unanswered_renewals_are_said_once_until_one_is_answered(caplog):
+    """Her lease runs out after a few unanswered renewals: the first is a warning naming the robot and why, the
+    ones after it are not, and the first answered one after them says so."""
+    from fabric.interfaces import ServiceError
+
+    answers = iter([ServiceError("no reply in 2.0 s"), ServiceError("no reply in 2.0 s"), None, None])
+
+    def ask(obj: str) -> OwnReply:
+        exc = next(answers)
+        if exc is not None:
+            raise exc
+        return _reply(obj)
+
+    r = Renewal("alice", ask, dict, renew_s=1.0)
+    r.hold("arm1")
+    with caplog.at_level("WARNING", logger="robofabric.ownership"):
+        for _ in range(4):
+            r._renew_once("arm1")
+    said = [m.getMessage() for m in caplog.records]
+    assert len(said) == 2, said
+    assert said[0].startswith("renewal of arm1 by alice: not renewed after") and "no reply in 2.0 s" in said[0]
+    assert said[1] == "renewal of arm1 by alice: answered again (renewed)"
