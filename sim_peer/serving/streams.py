@@ -112,6 +112,11 @@ class StreamLoops:
         positions = [any(st.positions for _, st in entries) for entries in dealt]
         turn = [0]
         listened = getattr(self.fabric, "listened", lambda _key: True)
+        stamp_ = getattr(self.fabric, "stamp", None)
+        # the freeze watch (fabric.authority_stamp) takes the gap between two publications for a freeze: a sim that
+        # skips its streams, nobody listening, must still tell it that it runs (a lab's primary muzzled itself and
+        # bumped its term when a standby came, its last publication long ago)
+        beat = stamp_.may_put if stamp_ is not None else (lambda: True)
 
         def publish(now: float) -> None:
             i = turn[0]
@@ -130,6 +135,8 @@ class StreamLoops:
                     build = st.read(physics)
                     if build is not None:
                         out.append((key, build))
+            if not out:  # nothing listened to: the tick still counts as one, for the freeze watch
+                beat()
             for key, build in out:
                 self.fabric.publish(key, build(self.fabric.header(key, stamp=stamp)))
 

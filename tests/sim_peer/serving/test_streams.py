@@ -106,3 +106,36 @@ def test_a_stream_nobody_listens_to_is_not_built_until_someone_does(world, route
         wait_until(lambda: got["scan"] >= 5, timeout=30, what="base1's scans once listened to", seen=lambda: dict(got))
     finally:
         loops.stop()
+
+
+@pytest.mark.slow
+def test_streams_nobody_listens_to_still_tell_the_freeze_watch_the_sim_runs(world, router, connect):
+    """The freeze watch takes a long gap between two publications for a freeze (and muzzles the sim, which then asks
+    who holds the world and may take a new term): a sim skipping every stream, nobody listening, publishes nothing,
+    and must not read as frozen when someone subscribes seconds later."""
+    fab, _ = router
+    sim_fab = connect("sim", "sim-beat")
+    frozen: list[float] = []
+    sim_fab.stamp.watch_freeze(0.3, frozen.append)
+    loops = StreamLoops(sim_fab, SimWorld("combined", seed=3), threading.RLock(), Counter())
+    got: Counter[str] = Counter()
+    pose = keys.robot_pose(world, "base1")
+    sub = fab.subscribe(pose, lambda key, msg: got.update(["pose"]))
+    wait_until(lambda: sim_fab.listened(pose), timeout=30, what="the pose's subscriber")
+    loops.start()
+    try:
+        wait_until(lambda: got["pose"] >= 5, timeout=30, what="base1's poses", seen=lambda: dict(got))
+        sub.undeclare()
+        wait_until(lambda: not sim_fab.listened(pose), timeout=30, what="nobody listening")
+        published, ticks = sim_fab.counters["published"], loops.loops["joints"].stats.ticks
+        wait_until(
+            lambda: loops.loops["joints"].stats.ticks >= ticks + 100, timeout=30, what="1 s of ticks, nobody listening"
+        )
+        assert sim_fab.counters["published"] == published
+        fab.subscribe(pose, lambda key, msg: got.update(["again"]))
+        wait_until(
+            lambda: got["again"] >= 20, timeout=30, what="base1's poses listened to again", seen=lambda: dict(got)
+        )
+        assert frozen == [] and not sim_fab.stamp.muzzled, frozen
+    finally:
+        loops.stop()
