@@ -112,7 +112,9 @@ def plan_ompl(
     # tree, each slice twice the last, until time_limit is used up.
     # Near a tight endpoint states are checked without the full margin, so a path may also graze a
     # collision cell between two checked states: finish() refuses it, and OMPL tries afresh.
-    deadline = t0 + cfg.time_limit
+    # the budget is the search's: from here, not from t0 (OMPL's first import and the endpoints' check once took a
+    # loaded box's whole 2 s, and the planner gave up before its first try: "no time to plan")
+    deadline = time.perf_counter() + cfg.time_limit
     slice_s = min(cfg.time_limit, RESTART_FIRST_SLICE)
     refused = 0
     status = None

@@ -33,7 +33,9 @@ from user_peer.console.world_kind import login_caption
 
 from tests.user_peer.console.scene3d_probe import SCENE3D_JS, drag_sphere
 
-pytestmark = pytest.mark.slow
+# 600 s a test: a page's actions wait up to 120 s each (open_page), and a test that sets up again after a page that
+# dropped its connection does it twice or three times; their own waits say what failed, this is the backstop
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = [
@@ -601,6 +603,7 @@ def test_b_from_the_page_map_goal_plan_follow(browser, klass):
     assert dist <= 0.1, f"base1 stopped {dist:.3f} m from the goal"
 
 
+@pytest.mark.timeout(900)  # its own waits are bounded: at load 10-17 its set-up was tried twice, past 300 s
 def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_grace(browser, klass):
     base = klass.carol.robot("base1")
     # from its spawn (the origin, facing +x: 5 m of floor behind it), whatever the tests before did: Test B leaves
