@@ -20,7 +20,9 @@ import pytest
 
 import robots
 import user_peer
-from robofabric.testing import robofabric_cmd, wait_until
+from fabric import keys
+from fabric.interfaces import JointState
+from robofabric.testing import client, robofabric_cmd, wait_until
 from user_peer.ros2.models import robot_description
 
 NODE = Path(__file__).with_name("ros2_listen.py")
@@ -176,6 +178,12 @@ def test_a_3_s_joint_trajectory_takes_3_s_through_its_middle_point(live, procs, 
     start_q = arm1_states(out)[-1][1]
     target = [0.45, 0.3, -0.3, 0.4, 0.3, 0.5]  # at most 0.5 rad in 3 s: far below the Meca500's joint speeds
     mid = [(a + b) / 2 + 0.15 for a, b in zip(start_q, target)]  # 0.15 rad off the straight line: followed, not cut
+    # the sim's own stream of arm1's joints, beside the node's reading of it: a node starved at load 15-24 read three
+    # states of the 3 s (the start, one near the end, the end), and the middle point could not be judged from them
+    sims_q: list[list[float]] = []
+    watch = client(world, port, kind="tool")
+    watch.subscribe(keys.robot_joints(world, "arm1"), lambda _k, js: sims_q.append(list(js.q)), expected=JointState)
+    wait_until(lambda: len(sims_q) > 5, timeout=60, what="arm1's joints at the test")
     (ctl / "trajectory").write_text(json.dumps([names, [[mid, 1.5], [target, 3.0]]]))
     arrived = lambda: [t for t, q in arm1_states(out) if max(abs(a - b) for a, b in zip(q, target)) < 2e-3]  # noqa: E731
     wait_until(
@@ -187,10 +195,11 @@ def test_a_3_s_joint_trajectory_takes_3_s_through_its_middle_point(live, procs, 
     # the arm must not have been at the end before 2.7 s, nor still away from it after 3.3 s (3 s +- 10 %)
     earliest, latest, seen = trajectory_took(out, lines(out, "trajectory_sent")[0]["wall"], start_q, target)
     assert earliest < 3.3 and latest > 2.7, (earliest, latest)  # (earliest, latest] meets [2.7, 3.3]
-    assert through(seen, mid) < THROUGH_RAD, (
-        through(seen, mid),
-        mid,
-    )  # through the middle point, 0.15 rad off the line
+    watch.close()
+    # through the middle point, 0.15 rad off the line: in the states the node read, or where it read too few (a
+    # starved node), in the sim's stream of them
+    near = min(through(seen, mid), through(sims_q, mid))
+    assert near < THROUGH_RAD, (through(seen, mid), through(sims_q, mid), len(seen), len(sims_q), mid)
     print(f"a 3 s trajectory took {earliest:.2f}-{latest:.2f} s of sim time")
 
     # back to the start through the action (as MoveIt sends it): wrong joints refused, then 3 s, feedback, SUCCESSFUL
@@ -226,8 +235,6 @@ def test_a_3_s_joint_trajectory_takes_3_s_through_its_middle_point(live, procs, 
 
     # the bridge stopped (SIGSTOP) once the arm moves: the sim plays the trajectory, which keeps its times and points
     # (a bridge that played it target by target, starved at load 25, sent nothing for 5 s of the sim's time)
-    from fabric import keys
-    from fabric.interfaces import JointState
     from robofabric.testing import client_config
     from user_peer.api import World
 

@@ -8,7 +8,9 @@ its half minute, so a minute too; two owners 15-24 s and a stale command 10-40 s
 an arm at its second epoch), so a minute each, as before. A run ends 3 s after the history so far first breaks its
 invariant (``until``): its length is the most it may take, not what it costs. Each may take two minutes since a
 whole run on a slow afternoon (34 min, load 20-35) saw the reset soak's two kills and no catch within its minute:
-a slow box lengthens every fail-over, and a longer limit costs nothing where the plant is caught."""
+a slow box lengthens every fail-over, and a longer limit costs nothing where the plant is caught. The stale command
+may take three: a whole run at load 15-24 (2026-12-01) saw no replay at all in its two minutes ("faults: 0", no
+peer past its warm-up), and why its nemesis found no moment for one is not known."""
 
 from __future__ import annotations
 
@@ -30,10 +32,11 @@ pytestmark = [pytest.mark.lab, pytest.mark.slow]
             ("replay",),
             ("student",),
             "applied",
-            2.0,
+            3.0,
         ),  # an owner's command under an epoch she no longer holds
     ],
 )
+@pytest.mark.timeout(480)  # a soak of up to three minutes, its lab's start and its verdict
 def test_a_planted_defect_is_caught(lab_ok, tmp_path, plant, faults, victims, invariant, minutes):
     res = run_soak(
         SoakConfig(

@@ -517,6 +517,13 @@ def test_holding_up_drives_the_base_and_releasing_stops_it(browser, klass):
         seen=lambda: [(t > released, c.body) for t, c in twists[-3:]],
     )
     wait_until(lambda: speed() < 0.02, timeout=5, what="base1 to stop after ↑ was released", seen=speed)
+    # and in this subscription's own list, read below: its callback can come after the handle's (a run at load 15-24:
+    # no still pose in it yet when it was closed)
+    wait_until(
+        lambda: any(p.header.wall_ns > released and math.hypot(p.linear[0], p.linear[1]) < 0.02 for p in poses),
+        timeout=10,
+        what="a still pose of base1 in the test's subscription",
+    )
     sub.close()
     cmds.undeclare()
     # when the sim saw it still (its pose's wall clock, this host's): the test process's own delays (playwright,
