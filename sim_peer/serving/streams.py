@@ -121,20 +121,21 @@ class StreamLoops:
         def publish(now: float) -> None:
             i = turn[0]
             turn[0] = (i + 1) % len(dealt)
-            entries = dealt[i]
+            # asked before the world's lock (a key's first ask declares its probe with zenoh): nobody listens, zenoh
+            # would drop it after its reading and encoding
+            entries = [(key, st) for key, st in dealt[i] if listened(key)]
             world = self.world
             out: list[tuple[str, Build]] = []
-            with self.lock:
-                stamp = world.time
-                if positions[i]:
-                    world.sync()
-                physics = world.physics
-                for key, st in entries:
-                    if not listened(key):  # nobody listens: zenoh would drop it, after its reading and encoding
-                        continue
-                    build = st.read(physics)
-                    if build is not None:
-                        out.append((key, build))
+            if entries:
+                with self.lock:
+                    stamp = world.time
+                    if positions[i]:
+                        world.sync()
+                    physics = world.physics
+                    for key, st in entries:
+                        build = st.read(physics)
+                        if build is not None:
+                            out.append((key, build))
             if not out:  # nothing listened to: the tick still counts as one, for the freeze watch
                 beat()
             for key, build in out:
