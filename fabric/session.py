@@ -190,8 +190,13 @@ class Fabric:
                 return
             self._closed = True
         self._cancel_exit()
-        undeclare_all(([self.token] if self.token is not None else []) + self._resources)
-        if not close_within(self.session.close, CLOSE_S, f"the zenoh session of {self.kind} {self.peer_id}"):
+        declared = ([self.token] if self.token is not None else []) + list(self._resources)
+
+        def close() -> None:  # the undeclarations too: each waits in zenoh, as the session's close does
+            undeclare_all(declared)
+            self.session.close()
+
+        if not close_within(close, CLOSE_S, f"the zenoh session of {self.kind} {self.peer_id}"):
             self.counters["closes_hung"] += 1
 
     # ------------------------------------------------------------------ publishing

@@ -12,6 +12,7 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 from fabric.session import Fabric
+from robofabric.pytest_hang_watch import pytest_configure, pytest_runtest_protocol  # noqa: F401 (hooks)
 from robofabric.testing import ProcessGroup, client, free_port, router_config
 
 
