@@ -172,7 +172,9 @@ def test_a_base_turning_on_one_twist_stops_within_the_deadman(world, router, con
         # The stop lies between the last turning pose and the first still one: judged on both, as poses this
         # subscriber lost at load (3 at load 30: the first still pose it got was at 0.878 s) widen the gap between
         assert held_s >= 0.5 and turned_s <= 0.5 + BRAKE_S + 0.05, (turned_s, held_s)
-        assert held_s - turned_s < 0.25, f"no pose seen from {turned_s:.3f} to {held_s:.3f} s: the stop is not seen"
+        assert held_s - turned_s < 0.25 or still.header.seq == last.header.seq + 1, (  # or a starved sim's burst
+            f"no pose seen from {turned_s:.3f} to {held_s:.3f} s: the stop is not seen"
+        )
         assert max(_braked_within_limits(watch.pose("base1"), first.header.stamp)) == pytest.approx(OMEGA)
         ev = wait_until(lambda: watch.event(EventKind.TWIST_TIMEOUT, "base1"), what="the twist_timeout event")
         assert "no fresh twist" in ev.reason
@@ -200,7 +202,11 @@ def test_a_base_stops_within_half_a_second_of_its_owners_release(held):
         around = [(round(p.header.stamp, 3), round(float(p.angular[2]), 3)) for p in watch.pose("base2")]
         assert last.header.stamp - ev.header.stamp <= 0.5, (ev.header.stamp, [a for a in around if a[0] >= t0 - 0.1])
         assert last.header.stamp - t0 <= 0.5 + 0.5, (t0, last.header.stamp)  # the release's round trip included
-        assert still.header.stamp - last.header.stamp < 0.25, f"no pose seen from {last.header.stamp:.3f} to {still}"
+        # a wider gap only where the sim published nothing between them: a sim starved at load steps a burst between
+        # two ticks (run 7 of 2026-12-01: seq 51 at 0.604 s, seq 52 at 0.854 s, 27 ms apart on the wall)
+        assert still.header.stamp - last.header.stamp < 0.25 or still.header.seq == last.header.seq + 1, (
+            f"no pose seen from {last.header.stamp:.3f} to {still}"
+        )
         speeds = _braked_within_limits(watch.pose("base2"), ev.header.stamp)
         assert any(0.05 < w_ < OMEGA - 0.05 for w_ in speeds), speeds  # it braked: no jump from 0.8 to 0
         assert base.record.owner == ""
