@@ -271,6 +271,8 @@ def press(page, button, pattern: str, timeout: float = 30.0) -> str:
     """Click ``button`` and wait for the page to say ``pattern``. A click made while the page's socket is down never
     reaches the console (the page says it is reconnecting): as a student would, it is made again once the socket is
     back, twice at most (run 6 of 2026-12-01 at load 20: bob's Request, his socket down through the 30 s wait)."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeoutError
+
     for tries in range(3):
         wait_until(
             lambda: _socket_state(page) == "socket connected",
@@ -279,13 +281,24 @@ def press(page, button, pattern: str, timeout: float = 30.0) -> str:
             what="the page's socket connected",
             seen=lambda: (_socket_state(page), PAGE_LOGS.get(id(page), [])[-10:]),
         )
+        wait_until(
+            lambda: page.get_by_role("status").count() > 0,
+            timeout=120,
+            interval=0.2,
+            what="the page's status line (a reloaded page's: she is kept logged in)",
+            seen=lambda: one_line(page.locator("body").inner_text(), 300),
+        )
         down: list[str] = []
         button.click(no_wait_after=True)
 
         def said() -> str | None:
+            try:  # a page NiceGUI reloads (its socket gone past the reconnect window) has no status for a while
+                text = page.get_by_role("status").inner_text(timeout=2_000)
+            except PlaywrightTimeoutError:
+                down.append("no status: " + one_line(page.locator("body").inner_text(timeout=5_000), 200))
+                return None
             if _socket_state(page) != "socket connected":
-                down.append(message(page))
-            text = message(page)
+                down.append(text)
             return text if re.search(pattern, text) else None
 
         try:
@@ -294,7 +307,7 @@ def press(page, button, pattern: str, timeout: float = 30.0) -> str:
                 timeout=timeout,
                 interval=0.2,
                 what=f"the page to say /{pattern}/",
-                seen=lambda: (message(page), _socket_state(page), PAGE_LOGS.get(id(page), [])[-10:]),
+                seen=lambda: (down[-3:], _socket_state(page), PAGE_LOGS.get(id(page), [])[-10:]),
             )
         except AssertionError:
             if not down or tries == 2:
