@@ -22,7 +22,7 @@ def cli_router(procs, world):
     ep = f"tcp/127.0.0.1:{port}"
     proc = procs.start(robofabric_cmd("router", "--listen", ep, "--world", world), name="router")
     wait_until(
-        lambda: "listening" in procs.output(proc), timeout=20, what="router to listen", seen=lambda: procs.output(proc)
+        lambda: "listening" in procs.output(proc), timeout=60, what="router to listen", seen=lambda: procs.output(proc)
     )
     return ep
 
