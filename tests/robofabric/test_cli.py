@@ -90,7 +90,7 @@ def test_ps_and_hz_see_a_live_publisher(cli_router, world, procs):
         ),
         name="pub",
     )
-    wait_until(lambda: "stopper" in (_live(world, cli_router, "tool") or []), timeout=20, what="publisher in ps")
+    wait_until(lambda: "stopper" in (_live(world, cli_router, "tool") or []), timeout=60, what="publisher in ps")
     out = run_cli(
         "hz", "robot/arm1/cmd/stop/by/ann", "--duration", "3", "--json", "--world", world, "--connect", cli_router
     )
