@@ -3,7 +3,8 @@
 Pure: the clock is injected and :meth:`Pacer.due` returns a number of steps, so
 pacing is tested with a FakeClock. When the simulation cannot keep up, the
 pacer takes at most ``max_lag`` of sim time at once and lets the rest go (counted
-in ``dropped``) instead of running a long catch-up burst.
+in ``dropped``) instead of running a long catch-up burst. With ``wake_s`` the steps come in chunks of at least that
+much wall time: the same steps at the same sim times, fewer wake-ups of the stepping thread.
 """
 
 from __future__ import annotations
@@ -39,12 +40,15 @@ class Pacer:
         clock: Clock | None = None,
         chunk: int = 50,
         max_lag: float = 0.25,
+        wake_s: float = 0.0,
     ) -> None:
+        """``wake_s``: the least wall time between two chunks at real time or slower (0: each step as it is due)."""
         self.dt = dt
         self.speed = speed
         self.clock = clock or MonotonicClock()
         self.chunk = chunk
         self.max_lag = max_lag
+        self.batch = 1 if speed is None else max(1, int(wake_s * speed / dt + 1e-9))  # steps a chunk waits for
         self._t0: float | None = None
         self._steps = 0  # steps owed to the schedule so far (including dropped ones)
         self.dropped = 0
@@ -62,7 +66,7 @@ class Pacer:
             self.dropped += owed - limit
             self._steps += owed - limit
             owed = limit
-        return max(0, owed)
+        return owed if owed >= self.batch else 0
 
     def done(self, n: int) -> None:
         self._steps += n
@@ -71,5 +75,5 @@ class Pacer:
         """Seconds of wall time until the next step is due."""
         if self.speed is None or self._t0 is None:
             return 0.0
-        next_wall = self._t0 + (self._steps + 1) * self.dt / self.speed
+        next_wall = self._t0 + (self._steps + self.batch) * self.dt / self.speed
         return max(0.0, next_wall - self.clock.now())

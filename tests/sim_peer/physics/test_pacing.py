@@ -45,3 +45,22 @@ def test_falling_behind_drops_time_instead_of_bursting():
     assert n == 125 and p.dropped == 2500 - 125
     p.done(n)
     assert p.due() == 0
+
+
+@pytest.mark.parametrize("speed", [1.0, 0.5, 4.0])
+def test_a_wake_up_takes_its_chunk_of_steps_and_no_step_is_lost(speed):
+    """``wake_s``: steps come in chunks of at least 10 ms of wall time, and over a second all of them come."""
+    clock = FakeClock()
+    p = Pacer(0.002, speed, clock=clock, wake_s=0.01)
+    batch = int(0.01 * speed / 0.002)
+    assert p.batch == batch and p.due() == 0
+    chunks: list[int] = []
+    for _ in range(1000):
+        clock.jump(0.001)
+        n = p.due()
+        if n:
+            chunks.append(n)
+            p.done(n)
+            assert p.wait() == pytest.approx(batch * 0.002 / speed, abs=1e-9)  # the next chunk's whole wait
+    assert min(chunks) >= batch and max(chunks) <= batch + 1
+    assert sum(chunks) == pytest.approx(1.0 * speed / 0.002, abs=batch)
