@@ -114,6 +114,9 @@ class Follower:
         self.poll_s = poll_s
         self.snapshot: WorldState | None = snapshot  # a primary that stepped down starts from its own last state
         self.snapshot_asked = clock()  # when the snapshot held was asked for: what came after is replayed
+        self.waiting_s = poll_s
+        """The wait between two polls the loop is in, or about to begin (no poll under way): a test that holds the
+        polling (a longer ``poll_s``) waits until this is its own."""
         self.joints: dict[str, JointState] = {}
         self.poses: dict[str, Pose] = {}
         self.records: dict[str, OwnershipRecord] = {}  # the leader's newest record of each of its objects
@@ -145,38 +148,44 @@ class Follower:
             self._poller.join(timeout)
 
     def _poll(self) -> None:
-        f = self.fabric
-        while not self._stopping.wait(self.poll_s):
+        while True:
+            self.waiting_s = self.poll_s
+            if self._stopping.wait(self.waiting_s):
+                return
             if self._election().role != el.STANDBY:
                 return
-            asked = self.clock()
-            try:
-                replies = f.rpc.query(keys.srv(f.world, "state"), timeout=1.0, expected=WorldState, all_replies=True)
-            except ServiceError:
-                continue
-            best = max(
-                (r.message for r in replies if self._shard.about_mine(r.message)),
-                key=lambda m: m.header.term,
-                default=None,
+            self._poll_once()
+
+    def _poll_once(self) -> None:
+        f = self.fabric
+        asked = self.clock()
+        try:
+            replies = f.rpc.query(keys.srv(f.world, "state"), timeout=1.0, expected=WorldState, all_replies=True)
+        except ServiceError:
+            return
+        best = max(
+            (r.message for r in replies if self._shard.about_mine(r.message)),
+            key=lambda m: m.header.term,
+            default=None,
+        )
+        if best is None:
+            return
+        self._heard(best.header.source, best.header.term)
+        first = kept = False
+        with self._serving_lock:  # the election changes under it: no take-over between the look and the keep
+            if best.header.source == self._election().leader:
+                with self._lock:
+                    held = self.snapshot
+                    first, kept = held is None or held.header.source != best.header.source, True
+                    self.snapshot, self.snapshot_asked = best, asked
+        if not kept:
+            return
+        if first:
+            self._announce(
+                f"standby {f.peer_id}: holding the state of {best.header.source} (term {best.header.term}); "
+                "a take-over starts from it"
             )
-            if best is None:
-                continue
-            self._heard(best.header.source, best.header.term)
-            first = kept = False
-            with self._serving_lock:  # the election changes under it: no take-over between the look and the keep
-                if best.header.source == self._election().leader:
-                    with self._lock:
-                        held = self.snapshot
-                        first, kept = held is None or held.header.source != best.header.source, True
-                        self.snapshot, self.snapshot_asked = best, asked
-            if not kept:
-                continue
-            if first:
-                self._announce(
-                    f"standby {f.peer_id}: holding the state of {best.header.source} (term {best.header.term}); "
-                    "a take-over starts from it"
-                )
-            self._kept()
+        self._kept()
 
     def holds_state(self) -> bool:
         """Whether a snapshot is held (its leader's, or its own as a primary that stepped down): a take-over from

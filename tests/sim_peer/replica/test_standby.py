@@ -53,10 +53,12 @@ def test_a_joint_target_sent_after_the_last_snapshot_goes_on_under_the_new_autho
             timeout=20,
             what="a first snapshot",
         )
-        # hold the polling: after the poll under way (if any) no snapshot comes until the take-over
-        asked = follower.snapshot_asked
+        # hold the polling: after the poll under way (if any) no snapshot comes until the take-over. Waited on by the
+        # loop's wait, not by a new snapshot: at load the poll under way can time out, and none came (CI, 2026-12-01)
         follower.poll_s = 3600.0
-        wait_until(lambda: follower.snapshot_asked != asked, timeout=10, what="the last poll")
+        wait_until(
+            lambda: follower.waiting_s == 3600.0, timeout=30, what="the last poll", seen=lambda: follower.waiting_s
+        )
         held = follower.snapshot
         arm = standby.world.robots["arm1"]
         assert np.abs(held.robot("arm1").target).max() < 1e-9  # the snapshot knows no target but the spawn pose

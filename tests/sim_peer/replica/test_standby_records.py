@@ -40,9 +40,11 @@ def test_a_grant_after_the_last_snapshot_keeps_its_owner_and_epoch_across_a_take
             timeout=20,
             what="a first snapshot",
         )
-        asked = follower.snapshot_asked
         follower.poll_s = 3600.0  # no snapshot after the poll under way (if any) until the take-over
-        wait_until(lambda: follower.snapshot_asked != asked, timeout=30, what="the last poll")  # 10 s: short at load 20
+        # the loop in its long wait (a new snapshot may not come: at load the poll under way can time out)
+        wait_until(
+            lambda: follower.waiting_s == 3600.0, timeout=30, what="the last poll", seen=lambda: follower.waiting_s
+        )
         held = {r.object: r for r in follower.snapshot.records}["arm1"]
         assert held.owner == ""
 
