@@ -12,6 +12,11 @@ from fabric.token_watch import TokenWatch
 from robofabric.testing import wait_until
 
 
+def squeezed(told: list[bool]) -> list[bool]:
+    """What a callback was told, repeats of the same word taken as one (a token heard twice is there once)."""
+    return [a for i, a in enumerate(told) if i == 0 or told[i - 1] != a]
+
+
 class Told:
     """What a watch told its callback, in order."""
 
@@ -174,9 +179,21 @@ def test_a_sessions_watch_of_sims_checks_every_going_and_of_users_only_those_abo
         seen=lambda: (sims.calls, users.calls),
     )
     assert bob._link_lost_at == float("-inf") and alice.token is not None  # the link held; alice is there
-    sim_watch.heard(keys.peer(world, "sim", "s1"), False)
-    user_watch.heard(keys.peer(world, "user", "alice"), False)
+    # A going is made up by the test while the link holds. At load a second copy of a token (the subscription's
+    # history and its live declaration both) can come after it: the check then rightly stands down (something was
+    # heard since the going; CI, 2026-12-01: [True, False, True] with nothing restored), and the going is made up again.
+    for _ in range(3):
+        checked = sim_watch.rechecks
+        sim_watch.heard(keys.peer(world, "sim", "s1"), False)
+        wait_until(lambda: sim_watch.rechecks > checked, timeout=30, what="the sim's check", seen=lambda: sims.calls)
+        if sim_watch.restored:
+            break
     wait_until(lambda: sims.of("s1")[-1:] == [True], timeout=30, what="the sim back", seen=lambda: sims.calls)
-    wait_until(lambda: user_watch.rechecks == 1, timeout=30, what="the user's check passed over")
-    assert sims.of("s1") == [True, False, True] and sim_watch.restored == 1
-    assert users.of("alice") == [True, False] and user_watch.queries == 0
+    assert squeezed(sims.of("s1"))[-3:] == [True, False, True] and sim_watch.restored == 1, sims.calls
+    for _ in range(3):
+        checked = user_watch.rechecks
+        user_watch.heard(keys.peer(world, "user", "alice"), False)
+        wait_until(lambda: user_watch.rechecks > checked, timeout=30, what="the user's check passed over")
+        if users.of("alice")[-1:] == [False]:
+            break
+    assert squeezed(users.of("alice"))[-2:] == [True, False] and user_watch.queries == 0, users.calls
