@@ -193,3 +193,27 @@ def test_a_latest_value_from_another_publishers_clock_is_judged_by_arrival_not_b
     assert ledger.offer("goal", Stamp(96.0, "bob"), "latest", live=True) == "deliver"
     assert ledger.offer("goal", Stamp(99.0, "alice"), "latest", live=True) == "stale"
     assert same_clock(Stamp(1.0, "a"), Stamp(2.0, "a")) and not same_clock(Stamp(1.0, "a"), Stamp(1.0, "b"))
+
+
+def test_a_cache_that_answered_nothing_as_its_token_came_is_asked_again(world, connect, monkeypatch):
+    """A publisher's token can come before its cache can be reached (a link back across a router's restart): the
+    cache is asked again, and what it holds is delivered."""
+    from fabric.history import LatestThenLive, cache_selector
+
+    monkeypatch.setattr("fabric.history.ASK_AGAIN_S", (0.3, 0.6, 1.0))
+    pub, late = connect("sim", "pub"), connect("tool", "late")
+    key = keys.object_pose(world, "goal", "alice")
+    got: list[str] = []
+    sub = LatestThenLive(late.session, key, lambda s: got.append(s.payload.to_string()))
+    try:
+        cache = cache_selector(key).replace("**", "zid/1/_")
+        token = pub.session.liveliness().declare_token(cache)
+        wait_until(lambda: sub.asked >= 2, timeout=20, what="the token's cache asked", seen=lambda: sub.asked)
+        asked = sub.asked
+        queryable = pub.session.declare_queryable(cache, lambda q: q.reply(key, "the goal"))  # reachable only now
+        wait_until(lambda: got, timeout=20, what="the cache's value", seen=lambda: (sub.asked, got))
+        assert got == ["the goal"] and sub.asked > asked  # asked again, once answered no more
+        queryable.undeclare()
+        token.undeclare()
+    finally:
+        sub.undeclare()
