@@ -33,6 +33,7 @@ __all__ = [
     "PRUNE_S",
     "PING_INTERVAL_S",
     "PING_TIMEOUT_S",
+    "HISTORY_MESSAGES",
     "REFRESH_VIEW_S",
 ]
 
@@ -56,6 +57,14 @@ PING_INTERVAL_S, PING_TIMEOUT_S = 8.0, 12.0
 """The websocket's heartbeat: a ping every 8 s, answered within 12 s (NiceGUI derives 24 s and 12 s from the 30 s
 reconnect window; it was 8 s and 4 s with 10 s). A starved page's late answer is forgiven for longer, and a page
 whose network died silently, with a key down, is still let go of within 20 s (a closed tab: at once)."""
+
+HISTORY_MESSAGES = 20_000
+"""Messages NiceGUI keeps for each page to send again when its connection comes back (its own default is 1,000, and
+it also forgets any older than the ping's and the reconnect window's 50 s). A page whose outbox had lost one of the
+messages it missed is reloaded by NiceGUI ("outbox rewind failed"): a page that redraws its views every 0.2 s met
+1,000 within seconds, so a dropped connection of 10-20 s (a starved browser, a busy server: CI's whole runs) came back
+as a reloaded page, and a click under way was lost with it. The age limit keeps the memory to 50 s of a page's
+updates."""
 
 log = logging.getLogger("robofabric.console")
 
@@ -232,6 +241,7 @@ def serve(console: Console, host: str, port: int, tls: tuple[str, str] | None = 
             show=False,
             show_welcome_message=False,
             reconnect_timeout=RECONNECT_S,
+            message_history_length=HISTORY_MESSAGES,
             favicon="🤖",
             uvicorn_logging_level="warning",
             # no per-message deflate: it cost the server (and every browser) a compression of each update, to
