@@ -55,6 +55,32 @@ HEAVY: dict[str, tuple[str, ...]] = {
 }
 
 
+PAGES: tuple[str, ...] = (
+    "tests/user_peer/console/",
+    "tests/user_peer/test_view_web.py",
+    "tests/user_peer/test_web_pages.py",
+    "tests/robofabric/bench/test_bench_console.py",
+)
+"""The tests of pages in Chromium: on a pytest-xdist worker they run at :data:`PAGES_NICE`, with every process they
+start (robofabric/priority.py): a student's page and its server are not three other suites' neighbours in a
+classroom, and starved here their sockets dropped and their pages were reloaded (half of whole runs' failures)."""
+PAGES_NICE = -10
+_nice_now = [0]
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Before the test's fixtures: its priority (:data:`PAGES`), where the suite runs on pytest-xdist workers."""
+    if "PYTEST_XDIST_WORKER" not in os.environ:
+        return
+    nice = PAGES_NICE if item.nodeid.startswith(PAGES) else 0
+    if nice != _nice_now[0]:
+        from robofabric.priority import set_tree_nice
+
+        set_tree_nice(nice)  # not allowed (no privilege): as before
+        _nice_now[0] = nice
+
+
 def work_unit(nodeid: str) -> str:
     """The unit of work a test goes in under ``--dist loadgroup``: a heavy test in its :data:`HEAVY` unit, any other
     test with the rest of its module, so that a module's shared world (a module fixture) is built by one worker only."""
