@@ -25,19 +25,11 @@ from PIL import Image
 
 from urllib.parse import urlsplit
 
+# Chromium's flags, the benchmarks' own: SwiftShader's software GL, and no page's renderer backgrounded nor its timers
+# throttled (Chromium runs a background renderer at nice 5); the tests' own lists lacked those three
+from robofabric.bench.viewer_web import CHROMIUM, CHROMIUM_ARGS
 from robofabric.testing import free_port, robofabric_cmd, wait_until
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = [
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-    "--no-sandbox",
-    "--headless",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-]
 VIEWPORT = {"width": 1280, "height": 800}
 # Where the blueprint puts the 3D "world" view in a 1280x800 page (rerun-sdk 0.41, panels expanded).
 WORLD_VIEW = (slice(int(0.09 * 800), int(0.71 * 800)), slice(int(0.17 * 1280), int(0.51 * 1280)))

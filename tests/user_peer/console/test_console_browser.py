@@ -28,6 +28,10 @@ from fabric.text import one_line
 from fabric import keys
 from fabric.interfaces import Command, EventKind, OwnershipRecord
 from robofabric.secure import init
+
+# Chromium's flags, the benchmarks' own: SwiftShader's software GL, and no page's renderer backgrounded nor its timers
+# throttled (Chromium runs a background renderer at nice 5); the tests' own lists lacked those three
+from robofabric.bench.viewer_web import CHROMIUM, CHROMIUM_ARGS
 from robofabric.testing import ProcessGroup, free_port, robofabric_cmd, wait_until
 from user_peer.console.server import RECONNECT_S
 from user_peer.console.world_kind import login_caption
@@ -38,17 +42,6 @@ from tests.user_peer.console.scene3d_probe import SCENE3D_JS, drag_sphere
 # dropped its connection does it twice or three times; their own waits say what failed, this is the backstop
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = [
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-    "--no-sandbox",
-    "--headless",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-]
 VIEWPORT = {"width": 1280, "height": 1350}
 GRACE_S = 10.0
 """The class console's grace: the console's default. A reloaded page comes back within it, its ticket read from the

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import robots
+from robofabric.bench.viewer_web import CHROMIUM, CHROMIUM_ARGS  # no renderer backgrounded (test_console_browser.py)
 from robofabric.testing import example_robot_urdf, free_port, robofabric_cmd, wait_until
 from robots.urdf_import import install
 
@@ -21,8 +22,6 @@ from tests.user_peer.console.scene3d_probe import SCENE3D_JS, drag_sphere
 
 pytestmark = pytest.mark.slow
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox", "--headless"]
 OUT = Path(__file__).resolve().parents[3] / "out"
 PANDA = "panda_description/urdf/panda.urdf"
 PLACE = (1.5, -1.5)
