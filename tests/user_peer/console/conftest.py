@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import pytest
 
 
@@ -12,3 +14,17 @@ def worlds():
     yield made
     for w in made:
         w.close()
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> object:
+    """A failed browser test says what NiceGUI told each page's console about reloading it ("reloading because
+    ..."): a click that met a reload fails as a timeout that says nothing of why the page went."""
+    outcome = yield
+    report = outcome.get_result()  # type: ignore[attr-defined]
+    browser_tests = sys.modules.get("test_console_browser")  # whose open_page the console's other modules use
+    logs = getattr(item.module, "PAGE_LOGS", None) or getattr(browser_tests, "PAGE_LOGS", None)
+    if report.when != "call" or not report.failed or not logs:
+        return
+    said = [line for lines in list(logs.values()) for line in list(lines) if "reload" in line.lower()]
+    report.sections.append(("pages' reloads", "\n".join(said[-20:]) or "(no page said it reloaded)"))
