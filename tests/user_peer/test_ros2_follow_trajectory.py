@@ -186,10 +186,12 @@ def test_a_canceled_goal_stops_the_trajectory_and_the_arm():
 
 def test_the_goal_is_judged_on_a_reading_taken_after_its_deadline_not_on_the_clock():
     """A starved bridge's clock (any robot's newest state) can run ahead of the arm's last reading: the goal's
-    tolerance is judged by when that reading was taken (its stamp), not by the clock."""
-    from user_peer.ros2.follow_trajectory import _reading_time
+    tolerance is judged by when that reading was taken (its stamp), its positions from the same sample."""
+    from user_peer.ros2.follow_trajectory import _reading
 
-    stamped = SimpleNamespace(joint_state=SimpleNamespace(header=SimpleNamespace(stamp=103.2)))
-    assert _reading_time(stamped, t0=100.0, now=4.5) == pytest.approx(3.2)  # read 3.2 s in, though the clock says 4.5
-    assert _reading_time(SimpleNamespace(joint_state=None), t0=100.0, now=4.5) == 4.5  # no reading's time: the clock
-    assert _reading_time(SimpleNamespace(joints=[0.0] * 6), t0=100.0, now=4.5) == 4.5
+    js = SimpleNamespace(q=[0.1] * 6, header=SimpleNamespace(stamp=103.2))
+    q, at = _reading(SimpleNamespace(joint_state=js, joints=[9.0] * 6), t0=100.0, now=4.5)
+    assert q == [0.1] * 6 and at == pytest.approx(3.2)  # read 3.2 s in, though the clock says 4.5
+    unstamped = SimpleNamespace(joint_state=SimpleNamespace(q=[0.2] * 6, header=SimpleNamespace(stamp=0.0)))
+    assert _reading(unstamped, t0=100.0, now=4.5) == ([0.2] * 6, 4.5)  # no reading's time: the clock
+    assert _reading(SimpleNamespace(joints=[0.0] * 6), t0=100.0, now=4.5) == ([0.0] * 6, 4.5)
