@@ -195,3 +195,85 @@ def test_the_goal_is_judged_on_a_reading_taken_after_its_deadline_not_on_the_clo
     unstamped = SimpleNamespace(joint_state=SimpleNamespace(q=[0.2] * 6, header=SimpleNamespace(stamp=0.0)))
     assert _reading(unstamped, t0=100.0, now=4.5) == ([0.2] * 6, 4.5)  # no reading's time: the clock
     assert _reading(SimpleNamespace(joints=[0.0] * 6), t0=100.0, now=4.5) == ([0.0] * 6, 4.5)
+
+
+def test_the_start_is_where_the_arm_left_where_it_stood_by_its_readings_stamp():
+    """began_at: the reading's stamp less how far along the trajectory its positions are, on the segment nearest
+    them (a bridge that missed readings finds the arm past the first point)."""
+    from user_peer.ros2.follow_trajectory import began_at
+
+    q0, times, points = [0.0, 0.0], [1.0, 3.0], [[0.2, 0.0], [0.2, 0.4]]
+    assert began_at(times, points, q0, q0, 50.0) is None  # not left yet
+    assert began_at(times, points, q0, [0.05, 0.0], 50.0) == pytest.approx(50.0 - 0.25)
+    assert began_at(times, points, q0, [0.2, 0.1], 50.0) == pytest.approx(50.0 - 1.5)  # on the second segment
+    assert began_at([0.5, 1.5], [q0, [0.4, 0.0]], q0, [0.1, 0.0], 9.0) == pytest.approx(9.0 - 0.75)  # held, then
+    assert began_at([1.0], [q0], q0, [0.1, 0.0], 9.0) is None  # moved, but not by this trajectory
+
+
+def test_a_goal_the_sim_began_late_is_judged_from_when_it_began():
+    """The bridge's clock at the goal is a floor of the sim's start: a goal that reached a loaded sim 2 s late (or a
+    starved bridge that heard /clock 2 s late) is judged from when the arm left where it stood, by its readings'
+    stamps. Judged from the bridge's clock, this 0.5 s trajectory had not begun by its deadline (CI's 3 s one, 2026-12-02: 0.13 rad short)."""
+    assert importlib.util.find_spec("control_msgs") is not None, BUILD_IT
+    import time
+
+    from builtin_interfaces.msg import Duration
+    from control_msgs.action import FollowJointTrajectory
+    from rclpy.action import ActionClient
+    from trajectory_msgs.msg import JointTrajectoryPoint
+
+    from fabric.interfaces import sample_trajectory
+
+    late, q0 = 2.0, [0.0] * 6
+
+    class LateArm:
+        """A sim that takes the trajectory ``late`` s after it was sent, then plays it in its (the wall's) time."""
+
+        entry = SimpleNamespace(joint_names=JOINTS, lower=(), upper=())
+        sent: tuple[float, list, list] | None = None
+
+        def follow_joints(self, times, positions, wait):
+            self.sent = (time.monotonic() + late, list(times), [list(p) for p in positions])
+
+        @property
+        def joint_state(self):
+            now, q, moving = time.monotonic(), q0, False
+            if self.sent is not None and now >= self.sent[0]:
+                q, over = sample_trajectory(self.sent[1], self.sent[2], q0, now - self.sent[0])
+                moving = not over
+            dq = [0.3 if moving else 0.0] * 6
+            return SimpleNamespace(q=[float(v) for v in q], dq=dq, header=SimpleNamespace(stamp=now))
+
+        @property
+        def joints(self):
+            return self.joint_state.q
+
+        def stop(self, confirm):
+            pass
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=1 + (os.getpid() * 13 + 48) % 100)
+    player = TrajectoryPlayer()  # the bridge's clock: the wall's, as the sim's here
+    actions = executor = None
+    try:
+        node = rclpy.create_node("follow_late_test", context=context)
+        arm = LateArm()
+        actions = FollowTrajectoryActions(node, "", player, lambda rid, what, told: arm, lambda rid, what, why: None)
+        actions.serve("arm1")
+        executor, client_node = _client(context, "follow_late_client")
+        client = ActionClient(client_node, FollowJointTrajectory, "/arm1/follow_joint_trajectory")
+        assert client.wait_for_server(timeout_sec=30)
+        goal = FollowJointTrajectory.Goal()
+        goal.trajectory.joint_names = list(JOINTS)
+        goal.trajectory.points = [
+            JointTrajectoryPoint(positions=[0.3] * 6, time_from_start=Duration(nanosec=500_000_000))
+        ]
+        result = _result(client, goal)
+        assert result.result.error_code == FollowJointTrajectory.Result.SUCCESSFUL, result.result.error_string
+        assert arm.sent is not None and time.monotonic() >= arm.sent[0] + 0.5  # judged after the sim's end
+    finally:
+        if actions is not None:
+            actions.close()
+        if executor is not None:
+            executor.shutdown(timeout_sec=2.0)
+        rclpy.shutdown(context=context)

@@ -255,12 +255,28 @@ def message(page) -> str:
     return page.get_by_role("status").inner_text()
 
 
+def status_now(page) -> str:
+    """The page's status line, or what the page shows where it has none within 10 s (its login card, a page
+    reloading): a wait on a message polls this, and fails at its own deadline saying what was there instead of
+    waiting on the element 120 s (CI, 2026-12-02: bob's Queue, no status for 120 s, nothing said of why)."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeoutError
+
+    try:
+        return page.get_by_role("status").inner_text(timeout=10_000)
+    except PlaywrightTimeoutError:
+        try:
+            body = one_line(page.locator("body").inner_text(timeout=5_000), 300)
+        except PlaywrightTimeoutError:
+            body = "(the page's body not read in 5 s)"
+        return f"(no status line in 10 s; the page shows: {body!r})"
+
+
 def wait_message(page, pattern: str, timeout: float = 30.0) -> str:
     return wait_until(
-        lambda: re.search(pattern, message(page)) and message(page),
+        lambda: re.search(pattern, said := status_now(page)) and said,
         timeout=timeout,
         what=f"the page to say /{pattern}/",
-        seen=lambda: (message(page), _socket_state(page), PAGE_LOGS.get(id(page), [])[-10:]),
+        seen=lambda: (status_now(page), _socket_state(page), PAGE_LOGS.get(id(page), [])[-10:]),
     )
 
 
