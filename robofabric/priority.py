@@ -9,16 +9,22 @@ thread of the worker and of its children is set, not the process alone.
 
 A lower nice value needs the privilege to raise priority (root, or ``RLIMIT_NICE``): without it nothing changes,
 and the suite runs as before.
+
+Set once, it did not hold for the pages themselves: Chromium sets its own processes' values (a page's renderer 0, a
+spare renderer 5), and a renderer at 0 among 25 runnable threads on two cores let its page's socket drop and the
+page reload (a console test beside a whole run, 2026-12-02: "implicit handshake failed"). :class:`NiceKeeper` sets
+the tree again every few seconds while the pages' tests run.
 """
 
 from __future__ import annotations
 
 import os
+import threading
 from pathlib import Path
 
 from robofabric.hang_watch import children_of, descendants
 
-__all__ = ["set_tree_nice", "threads_of"]
+__all__ = ["NiceKeeper", "set_tree_nice", "threads_of"]
 
 
 def threads_of(pid: int, proc_root: Path = Path("/proc")) -> list[int]:
@@ -43,3 +49,30 @@ def set_tree_nice(nice: int, pid: int | None = None) -> bool:
             except OSError:  # gone
                 pass
     return allowed
+
+
+class NiceKeeper:
+    """Holds the tree under ``pid`` (this process by default) at ``nice`` from :meth:`start` to :meth:`stop`: set
+    again every ``every`` seconds, for the processes started since and those that set their own."""
+
+    def __init__(self, nice: int, pid: int | None = None, every: float = 2.0) -> None:
+        self.nice, self.pid, self.every = nice, pid, every
+        self.allowed = True
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> "NiceKeeper":
+        self.allowed = set_tree_nice(self.nice, self.pid)
+        if self.allowed:  # without the privilege, nothing to hold
+            self._thread = threading.Thread(target=self._hold, name="nice-keeper", daemon=True)
+            self._thread.start()
+        return self
+
+    def _hold(self) -> None:
+        while not self._stop.wait(self.every):
+            set_tree_nice(self.nice, self.pid)
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=10)

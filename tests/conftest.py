@@ -66,6 +66,7 @@ start (robofabric/priority.py): a student's page and its server are not three ot
 classroom, and starved here their sockets dropped and their pages were reloaded (half of whole runs' failures)."""
 PAGES_NICE = -10
 _nice_now = [0]
+_keeper: list = [None]  # the NiceKeeper holding the pages' priority while they run
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -75,9 +76,15 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
         return
     nice = PAGES_NICE if item.nodeid.startswith(PAGES) else 0
     if nice != _nice_now[0]:
-        from robofabric.priority import set_tree_nice
+        from robofabric.priority import NiceKeeper, set_tree_nice
 
-        set_tree_nice(nice)  # not allowed (no privilege): as before
+        if _keeper[0] is not None:
+            _keeper[0].stop()
+            _keeper[0] = None
+        if nice:  # held while the pages' tests run: Chromium sets its renderers' own values (robofabric/priority.py)
+            _keeper[0] = NiceKeeper(nice).start()  # not allowed (no privilege): as before
+        else:
+            set_tree_nice(nice)
         _nice_now[0] = nice
 
 

@@ -28,3 +28,6 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> objec
         return
     said = [line for lines in list(logs.values()) for line in list(lines) if "reload" in line.lower()]
     report.sections.append(("pages' reloads", "\n".join(said[-20:]) or "(no page said it reloaded)"))
+    klass = getattr(item, "funcargs", {}).get("klass")  # the class console's own words (its pages, its doors)
+    if klass is not None:
+        report.sections.append(("the class console's output", klass.procs.output(klass.console)[-4000:]))
