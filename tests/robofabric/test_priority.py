@@ -28,18 +28,23 @@ def _nice(pid: int, tid: int) -> int:
     return int(stat[stat.rfind(")") + 2 :].split()[16])  # field 19: nice
 
 
+def _tree(pid: int) -> list[int]:
+    """``pid`` and its child, once both have their second thread."""
+    from robofabric.hang_watch import children_of
+
+    def tree() -> list[int] | None:
+        kids = children_of().get(pid, [])
+        ok = kids and len(threads_of(pid)) >= 2 and len(threads_of(kids[0])) >= 2
+        return [pid, kids[0]] if ok else None
+
+    return wait_until(tree, timeout=30, what="the process, its child and their threads")
+
+
 @pytest.mark.slow  # it starts processes
 def test_every_thread_of_a_process_and_of_its_children_gets_the_nice_value() -> None:
     parent = subprocess.Popen([sys.executable, "-c", TREE, "parent", TREE], start_new_session=True)
     try:
-        from robofabric.hang_watch import children_of
-
-        def tree() -> list[int] | None:
-            kids = children_of().get(parent.pid, [])
-            ok = kids and len(threads_of(parent.pid)) >= 2 and len(threads_of(kids[0])) >= 2
-            return [parent.pid, kids[0]] if ok else None
-
-        pids = wait_until(tree, timeout=30, what="the process, its child and their threads")
+        pids = _tree(parent.pid)
         assert set_tree_nice(7, pid=parent.pid)  # raising it needs no privilege
         seen = {(p, t): _nice(p, t) for p in pids for t in threads_of(p)}
         assert len(seen) >= 4 and set(seen.values()) == {7}, seen
@@ -55,14 +60,7 @@ def test_the_keeper_sets_back_a_process_that_set_its_own_value() -> None:
     parent = subprocess.Popen([sys.executable, "-c", TREE, "parent", TREE], start_new_session=True)
     keeper = None
     try:
-        from robofabric.hang_watch import children_of
-
-        def tree() -> list[int] | None:
-            kids = children_of().get(parent.pid, [])
-            ok = kids and len(threads_of(parent.pid)) >= 2 and len(threads_of(kids[0])) >= 2
-            return [parent.pid, kids[0]] if ok else None
-
-        pids = wait_until(tree, timeout=30, what="the process, its child and their threads")
+        pids = _tree(parent.pid)
         keeper = NiceKeeper(-2, pid=parent.pid, every=0.2).start()
         if os.geteuid() != 0 and not keeper.allowed:  # no privilege: it holds nothing, and says so
             assert keeper._thread is None

@@ -7,6 +7,7 @@ goal followed to its end is tests/user_peer/test_ros2_ros_users.py's (slow: a wo
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import math
 import os
@@ -55,6 +56,31 @@ def _client(context, node_name: str):
     executor.add_node(node)
     threading.Thread(target=executor.spin, daemon=True).start()
     return executor, node
+
+
+@contextlib.contextmanager
+def _arm1_served(arm, player: TrajectoryPlayer, name: str, seed: int):
+    """arm1's FollowJointTrajectory server (no namespace; the login may command ``arm``) and a client of it."""
+    from control_msgs.action import FollowJointTrajectory
+    from rclpy.action import ActionClient
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=1 + (os.getpid() * 13 + seed) % 100)
+    actions = executor = None
+    try:
+        node = rclpy.create_node(f"{name}_test", context=context)
+        actions = FollowTrajectoryActions(node, "", player, lambda rid, what, told: arm, lambda rid, what, why: None)
+        actions.serve("arm1")
+        executor, client_node = _client(context, f"{name}_client")
+        client = ActionClient(client_node, FollowJointTrajectory, "/arm1/follow_joint_trajectory")
+        assert client.wait_for_server(timeout_sec=30)
+        yield client
+    finally:
+        if actions is not None:
+            actions.close()
+        if executor is not None:
+            executor.shutdown(timeout_sec=2.0)
+        rclpy.shutdown(context=context)
 
 
 def _result(client, goal):
@@ -138,11 +164,8 @@ def test_a_canceled_goal_stops_the_trajectory_and_the_arm():
     assert importlib.util.find_spec("control_msgs") is not None, BUILD_IT
     from builtin_interfaces.msg import Duration
     from control_msgs.action import FollowJointTrajectory
-    from rclpy.action import ActionClient
     from trajectory_msgs.msg import JointTrajectoryPoint
 
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=1 + (os.getpid() * 13 + 47) % 100)
     stops: list[bool] = []
     # arm1's joints and its stop, what the server reads and calls; the trajectory sent to nobody
     arm1 = SimpleNamespace(
@@ -152,14 +175,7 @@ def test_a_canceled_goal_stops_the_trajectory_and_the_arm():
         stop=lambda confirm: stops.append(confirm),
     )
     player = TrajectoryPlayer()
-    actions = executor = None
-    try:
-        node = rclpy.create_node("follow_cancel_test", context=context)
-        actions = FollowTrajectoryActions(node, "", player, lambda rid, what, told: arm1, lambda rid, what, why: None)
-        actions.serve("arm1")
-        executor, client_node = _client(context, "follow_cancel_client")
-        client = ActionClient(client_node, FollowJointTrajectory, "/arm1/follow_joint_trajectory")
-        assert client.wait_for_server(timeout_sec=30)
+    with _arm1_served(arm1, player, "follow_cancel", 47) as client:
         goal = FollowJointTrajectory.Goal()
         goal.trajectory.joint_names = list(JOINTS)
         goal.trajectory.points = [JointTrajectoryPoint(positions=[0.3] * 6, time_from_start=Duration(sec=60))]
@@ -176,12 +192,6 @@ def test_a_canceled_goal_stops_the_trajectory_and_the_arm():
         wait_until(got.done, timeout=30, what="the result")
         assert got.result().status == 5  # action_msgs/GoalStatus.STATUS_CANCELED
         assert player.playing() == set() and stops == [False]  # the trajectory dropped, the arm told to stop
-    finally:
-        if actions is not None:
-            actions.close()
-        if executor is not None:
-            executor.shutdown(timeout_sec=2.0)
-        rclpy.shutdown(context=context)
 
 
 def test_the_goal_is_judged_on_a_reading_taken_after_its_deadline_not_on_the_clock():
@@ -219,7 +229,6 @@ def test_a_goal_the_sim_began_late_is_judged_from_when_it_began():
 
     from builtin_interfaces.msg import Duration
     from control_msgs.action import FollowJointTrajectory
-    from rclpy.action import ActionClient
     from trajectory_msgs.msg import JointTrajectoryPoint
 
     from fabric.interfaces import sample_trajectory
@@ -251,18 +260,8 @@ def test_a_goal_the_sim_began_late_is_judged_from_when_it_began():
         def stop(self, confirm):
             pass
 
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=1 + (os.getpid() * 13 + 48) % 100)
-    player = TrajectoryPlayer()  # the bridge's clock: the wall's, as the sim's here
-    actions = executor = None
-    try:
-        node = rclpy.create_node("follow_late_test", context=context)
-        arm = LateArm()
-        actions = FollowTrajectoryActions(node, "", player, lambda rid, what, told: arm, lambda rid, what, why: None)
-        actions.serve("arm1")
-        executor, client_node = _client(context, "follow_late_client")
-        client = ActionClient(client_node, FollowJointTrajectory, "/arm1/follow_joint_trajectory")
-        assert client.wait_for_server(timeout_sec=30)
+    arm = LateArm()
+    with _arm1_served(arm, TrajectoryPlayer(), "follow_late", 48) as client:  # its clock the wall's, as the sim's
         goal = FollowJointTrajectory.Goal()
         goal.trajectory.joint_names = list(JOINTS)
         goal.trajectory.points = [
@@ -271,9 +270,3 @@ def test_a_goal_the_sim_began_late_is_judged_from_when_it_began():
         result = _result(client, goal)
         assert result.result.error_code == FollowJointTrajectory.Result.SUCCESSFUL, result.result.error_string
         assert arm.sent is not None and time.monotonic() >= arm.sent[0] + 0.5  # judged after the sim's end
-    finally:
-        if actions is not None:
-            actions.close()
-        if executor is not None:
-            executor.shutdown(timeout_sec=2.0)
-        rclpy.shutdown(context=context)
