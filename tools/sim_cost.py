@@ -1,13 +1,16 @@
 """The sim's CPU per robot per second of sim time, for one or more source trees side by side.
 
     python tools/sim_cost.py --robots 32 --trees /tmp/before,. --rounds 3
+    python tools/sim_cost.py --robots 2 --compute --trees /tmp/before,.   # and an idle compute peer's CPU
 
 For each tree (a checkout of robofabric: ``git worktree add /tmp/before COMMIT``) it starts a router and a
 ``robofabric sim --scene warehouse --no-scene-robots`` with N/2 Meca500 arms and N/2 Reeman bases from that
 tree (``python -m robofabric.cli`` run inside it), lets it settle, then reads the sim's CPU time (/proc) and its
 sim time (the joints headers of arm0) over ``--seconds``. Trees alternate round by round, so a busy machine
 weighs on each alike; the medians and the ratio to the first tree are printed. Nobody owns or commands the
-robots: this is the cost of simulating and publishing them.
+robots: this is the cost of simulating and publishing them. With ``--compute`` a compute peer of the same tree
+joins the world, and its CPU over the same window is printed too (nobody asks it anything: the cost of listening
+to the world and mapping its scans).
 """
 
 from __future__ import annotations
@@ -29,9 +32,19 @@ def _cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def measure(tree: Path, robots: int, seconds: float, settle: float) -> tuple[float, float, float]:
-    """(sim CPU in cores, real-time factor, arm0's joints rate in Hz) of one run of ``tree``'s sim with ``robots``
-    robots. The joints rate (100 Hz asked) tells a sim that kept up from one that thinned its streams."""
+def _listening(port: int) -> bool:
+    import socket
+
+    with socket.socket() as s:
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+def measure(
+    tree: Path, robots: int, seconds: float, settle: float, compute: bool = False
+) -> tuple[float, float, float, float]:
+    """(sim CPU in cores, real-time factor, arm0's joints rate in Hz, the compute peer's CPU in cores or NaN) of one
+    run of ``tree``'s sim with ``robots`` robots. The joints rate (100 Hz asked) tells a sim that kept up from one
+    that thinned its streams."""
     from fabric import keys
     from fabric.interfaces import JointState
     from robofabric.testing import client, free_port, wait_until
@@ -48,9 +61,9 @@ def measure(tree: Path, robots: int, seconds: float, settle: float) -> tuple[flo
         stderr=subprocess.DEVNULL,
     )
     specs = [x for i in range(robots // 2) for x in ("--robot", f"meca500:arm{i}", "--robot", f"reeman:base{i}")]
-    sim = None
+    sim = peer = None
     try:
-        time.sleep(1.5)  # the router binding its port (a child: nothing to poll but the port)
+        wait_until(lambda: _listening(port), timeout=60, what="the router's port")  # a loaded box: seconds
         sim = subprocess.Popen(
             [
                 *cli,
@@ -71,6 +84,14 @@ def measure(tree: Path, robots: int, seconds: float, settle: float) -> tuple[flo
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
         )
+        if compute:
+            peer = subprocess.Popen(
+                [*cli, "compute", "--world", world, "--connect", ep],
+                cwd=tree,
+                env=env,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )
         stamps: list[tuple[float, float]] = []
         lock = threading.Lock()
 
@@ -82,15 +103,19 @@ def measure(tree: Path, robots: int, seconds: float, settle: float) -> tuple[flo
             fab.subscribe(keys.robot_joints(world, "arm0"), on, expected=JointState)
             wait_until(lambda: len(stamps) > 10, timeout=120, what="the sim's joints")
             time.sleep(settle)  # past the start-up (model compile, first publishers)
-            c0, t0 = _cpu_s(sim.pid), time.monotonic()
+            if peer is not None:
+                wait_until(lambda: fab.live_peers("compute"), timeout=120, what="the compute peer")
+                time.sleep(settle)  # its imports and its first look at the world
+            c0, p0, t0 = _cpu_s(sim.pid), _cpu_s(peer.pid) if peer else 0.0, time.monotonic()
             time.sleep(seconds)  # the measurement window
-            c1, t1 = _cpu_s(sim.pid), time.monotonic()
+            c1, p1, t1 = _cpu_s(sim.pid), _cpu_s(peer.pid) if peer else 0.0, time.monotonic()
             with lock:
                 pts = [(w, s) for w, s in stamps if t0 <= w <= t1]
         rtf = (pts[-1][1] - pts[0][1]) / (pts[-1][0] - pts[0][0]) if len(pts) > 1 else float("nan")
-        return (c1 - c0) / (t1 - t0), rtf, len(pts) / (t1 - t0)
+        peer_cores = (p1 - p0) / (t1 - t0) if peer is not None else float("nan")
+        return (c1 - c0) / (t1 - t0), rtf, len(pts) / (t1 - t0), peer_cores
     finally:
-        for p in (sim, router):
+        for p in (peer, sim, router):
             if p is not None:
                 p.terminate()
                 try:
@@ -106,30 +131,37 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--settle", type=float, default=5.0)
+    ap.add_argument("--compute", action="store_true", help="a compute peer joins too; its CPU is printed")
     args = ap.parse_args()
     trees = [Path(t).resolve() for t in args.trees.split(",") if t]
-    res: dict[Path, list[tuple[float, float, float]]] = {t: [] for t in trees}
+    res: dict[Path, list[tuple[float, float, float, float]]] = {t: [] for t in trees}
     for r in range(args.rounds):
         for t in trees:
-            cores, rtf, hz = measure(t, args.robots, args.seconds, args.settle)
-            res[t].append((cores, rtf, hz))
+            cores, rtf, hz, peer = measure(t, args.robots, args.seconds, args.settle, args.compute)
+            res[t].append((cores, rtf, hz, peer))
             print(
-                f"round {r + 1} {t}: sim {cores:.2f} cores, real-time factor {rtf:.3f}, arm0 joints {hz:.0f} Hz "
-                f"(load average {os.getloadavg()[0]:.1f})",
+                f"round {r + 1} {t}: sim {cores:.2f} cores, real-time factor {rtf:.3f}, arm0 joints {hz:.0f} Hz"
+                + (f", compute peer {peer:.3f} cores" if args.compute else "")
+                + f" (load average {os.getloadavg()[0]:.1f})",
                 flush=True,
             )
-    ref = None
+    ref = ref_peer = None
     print(
-        f"\n| tree | sim CPU (cores) | real-time factor | arm0 joints (Hz) | CPU per robot per sim second (ms) | vs {trees[0].name} |"
-        "\n|---|---|---|---|---|---|"
+        "\n| tree | sim CPU (cores) | real-time factor | arm0 joints (Hz) | CPU per robot per sim second (ms) | "
+        f"vs {trees[0].name} | compute peer (cores) | vs {trees[0].name} |\n|---|---|---|---|---|---|---|---|"
     )
     for t in trees:
-        cores = statistics.median(c for c, _, _ in res[t])
-        rtf = statistics.median(x for _, x, _ in res[t])
-        hz = statistics.median(h for _, _, h in res[t])
+        cores = statistics.median(c for c, _, _, _ in res[t])
+        rtf = statistics.median(x for _, x, _, _ in res[t])
+        hz = statistics.median(h for _, _, h, _ in res[t])
+        peer = statistics.median(p for _, _, _, p in res[t])
         per = cores / args.robots / rtf * 1e3
         ref = per if ref is None else ref
-        print(f"| {t} | {cores:.2f} | {rtf:.3f} | {hz:.0f} | {per:.2f} | {per / ref:.2f}x |")
+        ref_peer = peer if ref_peer is None else ref_peer
+        print(
+            f"| {t} | {cores:.2f} | {rtf:.3f} | {hz:.0f} | {per:.2f} | {per / ref:.2f}x | {peer:.3f} | "
+            f"{peer / ref_peer:.2f}x |"
+        )
 
 
 if __name__ == "__main__":
