@@ -220,53 +220,93 @@ def test_the_start_is_where_the_arm_left_where_it_stood_by_its_readings_stamp():
     assert began_at([1.0], [q0], q0, [0.1, 0.0], 9.0) is None  # moved, but not by this trajectory
 
 
+class PlayingArm:
+    """A sim's arm as the server reads it: it takes a trajectory ``late`` s after it was sent and plays it in the
+    wall's time (the player's clock here) from ``q0``, joint_1 ``off(t)`` rad from the trajectory ``t`` s in."""
+
+    entry = SimpleNamespace(joint_names=JOINTS, lower=(), upper=())
+
+    def __init__(self, late: float = 0.0, off=lambda t: 0.0) -> None:
+        self.late, self.off, self.q0 = late, off, [0.0] * 6
+        self.sent: tuple[float, list, list] | None = None
+        self.stops: list[bool] = []
+
+    def follow_joints(self, times, positions, wait):
+        import time
+
+        self.sent = (time.monotonic() + self.late, list(times), [list(p) for p in positions])
+
+    @property
+    def joint_state(self):
+        import time
+
+        from fabric.interfaces import sample_trajectory
+
+        now, q, moving = time.monotonic(), list(self.q0), False
+        if self.sent is not None and now >= self.sent[0] and not self.stops:
+            played, over = sample_trajectory(self.sent[1], self.sent[2], self.q0, now - self.sent[0])
+            q, moving = [float(v) for v in played], not over
+            q[0] += self.off(now - self.sent[0])
+        return SimpleNamespace(q=q, dq=[0.3 if moving else 0.0] * 6, header=SimpleNamespace(stamp=now))
+
+    @property
+    def joints(self):
+        return self.joint_state.q
+
+    def stop(self, confirm):
+        self.stops.append(confirm)
+
+
+def _goal(seconds: float, *, path_tol: float = 0.0, goal_time: float = 0.0):
+    """A goal to 0.3 rad on every joint in ``seconds``; joint_1's path tolerance, the goal time tolerance."""
+    from builtin_interfaces.msg import Duration
+    from control_msgs.action import FollowJointTrajectory
+    from control_msgs.msg import JointTolerance
+    from trajectory_msgs.msg import JointTrajectoryPoint
+
+    goal = FollowJointTrajectory.Goal()
+    goal.trajectory.joint_names = list(JOINTS)
+    at = Duration(sec=int(seconds), nanosec=int(seconds % 1 * 1e9))
+    goal.trajectory.points = [JointTrajectoryPoint(positions=[0.3] * 6, time_from_start=at)]
+    if path_tol:
+        goal.path_tolerance = [JointTolerance(name="joint_1", position=path_tol)]
+    goal.goal_time_tolerance = Duration(sec=int(goal_time), nanosec=int(goal_time % 1 * 1e9))
+    return goal
+
+
 def test_a_goal_the_sim_began_late_is_judged_from_when_it_began():
     """The bridge's clock at the goal is a floor of the sim's start: a goal that reached a loaded sim 2 s late (or a
     starved bridge that heard /clock 2 s late) is judged from when the arm left where it stood, by its readings'
-    stamps. Judged from the bridge's clock, this 0.5 s trajectory had not begun by its deadline (CI's 3 s one, 2026-12-02: 0.13 rad short)."""
+    stamps. Judged from the bridge's clock, this 0.5 s trajectory had not begun by its deadline (CI's 3 s one,
+    2026-12-02: 0.13 rad short)."""
     assert importlib.util.find_spec("control_msgs") is not None, BUILD_IT
     import time
 
-    from builtin_interfaces.msg import Duration
     from control_msgs.action import FollowJointTrajectory
-    from trajectory_msgs.msg import JointTrajectoryPoint
 
-    from fabric.interfaces import sample_trajectory
-
-    late, q0 = 2.0, [0.0] * 6
-
-    class LateArm:
-        """A sim that takes the trajectory ``late`` s after it was sent, then plays it in its (the wall's) time."""
-
-        entry = SimpleNamespace(joint_names=JOINTS, lower=(), upper=())
-        sent: tuple[float, list, list] | None = None
-
-        def follow_joints(self, times, positions, wait):
-            self.sent = (time.monotonic() + late, list(times), [list(p) for p in positions])
-
-        @property
-        def joint_state(self):
-            now, q, moving = time.monotonic(), q0, False
-            if self.sent is not None and now >= self.sent[0]:
-                q, over = sample_trajectory(self.sent[1], self.sent[2], q0, now - self.sent[0])
-                moving = not over
-            dq = [0.3 if moving else 0.0] * 6
-            return SimpleNamespace(q=[float(v) for v in q], dq=dq, header=SimpleNamespace(stamp=now))
-
-        @property
-        def joints(self):
-            return self.joint_state.q
-
-        def stop(self, confirm):
-            pass
-
-    arm = LateArm()
+    arm = PlayingArm(late=2.0)
     with _arm1_served(arm, TrajectoryPlayer(), "follow_late", 48) as client:  # its clock the wall's, as the sim's
-        goal = FollowJointTrajectory.Goal()
-        goal.trajectory.joint_names = list(JOINTS)
-        goal.trajectory.points = [
-            JointTrajectoryPoint(positions=[0.3] * 6, time_from_start=Duration(nanosec=500_000_000))
-        ]
-        result = _result(client, goal)
+        result = _result(client, _goal(0.5))
         assert result.result.error_code == FollowJointTrajectory.Result.SUCCESSFUL, result.result.error_string
         assert arm.sent is not None and time.monotonic() >= arm.sent[0] + 0.5  # judged after the sim's end
+
+
+def test_an_arm_off_its_path_or_short_of_its_goal_is_told_by_how_much():
+    """PATH_TOLERANCE_VIOLATED once joint_1 strays past its path tolerance while it plays (the arm stopped); and
+    GOAL_TOLERANCE_VIOLATED where it ends 0.05 rad short, once the goal time tolerance after the end has passed."""
+    assert importlib.util.find_spec("control_msgs") is not None, BUILD_IT
+    from control_msgs.action import FollowJointTrajectory
+
+    R = FollowJointTrajectory.Result
+    stray = PlayingArm(late=0.5, off=lambda t: 0.2 if t > 0.3 else 0.0)
+    with _arm1_served(stray, TrajectoryPlayer(), "follow_stray", 49) as client:
+        result = _result(client, _goal(1.0, path_tol=0.05)).result
+        assert result.error_code == R.PATH_TOLERANCE_VIOLATED, result.error_string
+        assert result.error_string.startswith("joint_1 is 0.2") and stray.stops == [False], result.error_string
+    short = PlayingArm(late=0.5, off=lambda t: -0.05)
+    with _arm1_served(short, TrajectoryPlayer(), "follow_short", 50) as client:
+        result = _result(client, _goal(0.5, goal_time=0.3)).result
+        assert result.error_code == R.GOAL_TOLERANCE_VIOLATED, result.error_string
+        assert result.error_string == (
+            "joint_1 is 0.0500 rad from where it should be (tolerance 0.0100 rad), 0.30 s after the trajectory's end"
+        )
