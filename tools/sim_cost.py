@@ -53,18 +53,17 @@ def measure(
     ep = f"tcp/127.0.0.1:{port}"
     env = {**os.environ, "PYTHONPATH": str(tree)}
     cli = [sys.executable, "-m", "robofabric.cli"]
-    router = subprocess.Popen(
-        [*cli, "router", "--world", world, "--listen", ep],
-        cwd=tree,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
+
+    def start(args: list[str]) -> subprocess.Popen:
+        """A process of ``tree``'s, quiet."""
+        return subprocess.Popen(args, cwd=tree, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    router = start([*cli, "router", "--world", world, "--listen", ep])
     specs = [x for i in range(robots // 2) for x in ("--robot", f"meca500:arm{i}", "--robot", f"reeman:base{i}")]
     sim = peer = None
     try:
         wait_until(lambda: _listening(port), timeout=60, what="the router's port")  # a loaded box: seconds
-        sim = subprocess.Popen(
+        sim = start(
             [
                 *cli,
                 "sim",
@@ -78,20 +77,10 @@ def measure(
                 ep,
                 "--id",
                 "sim",
-            ],
-            cwd=tree,
-            env=env,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
+            ]
         )
         if compute:
-            peer = subprocess.Popen(
-                [*cli, "compute", "--world", world, "--connect", ep],
-                cwd=tree,
-                env=env,
-                stdout=subprocess.DEVNULL,
-                stderr=subprocess.DEVNULL,
-            )
+            peer = start([*cli, "compute", "--world", world, "--connect", ep])
         stamps: list[tuple[float, float]] = []
         lock = threading.Lock()
 
@@ -125,6 +114,7 @@ def measure(
 
 
 def main() -> None:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the measuring client: this checkout's fabric
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--robots", type=int, default=32, help="robots in the world (half arms, half bases)")
     ap.add_argument("--trees", default=".", help="comma-separated source trees, the first is the reference")

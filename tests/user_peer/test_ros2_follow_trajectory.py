@@ -58,6 +58,15 @@ def _client(context, node_name: str):
     return executor, node
 
 
+def _close(actions, executor, context) -> None:
+    """The action servers, the client's executor and the rclpy context, whichever were made."""
+    if actions is not None:
+        actions.close()
+    if executor is not None:
+        executor.shutdown(timeout_sec=2.0)
+    rclpy.shutdown(context=context)
+
+
 @contextlib.contextmanager
 def _arm1_served(arm, player: TrajectoryPlayer, name: str, seed: int):
     """arm1's FollowJointTrajectory server (no namespace; the login may command ``arm``) and a client of it."""
@@ -76,11 +85,7 @@ def _arm1_served(arm, player: TrajectoryPlayer, name: str, seed: int):
         assert client.wait_for_server(timeout_sec=30)
         yield client
     finally:
-        if actions is not None:
-            actions.close()
-        if executor is not None:
-            executor.shutdown(timeout_sec=2.0)
-        rclpy.shutdown(context=context)
+        _close(actions, executor, context)
 
 
 def _result(client, goal):
@@ -153,11 +158,7 @@ def test_a_goal_for_an_arm_not_commandable_or_with_wrong_joints_is_aborted_with_
         assert result.result.error_string == "point 1's time_from_start 1.000 s goes back (times must not decrease)"
         assert player.playing() == set()  # nothing played for a refused goal
     finally:
-        if actions is not None:
-            actions.close()
-        if executor is not None:
-            executor.shutdown(timeout_sec=2.0)
-        rclpy.shutdown(context=context)
+        _close(actions, executor, context)
 
 
 def test_a_canceled_goal_stops_the_trajectory_and_the_arm():
