@@ -298,10 +298,15 @@ class FollowTrajectoryActions(ActionHost):
         fb.index = min(bisect.bisect_left(playing.traj.times, now), len(playing.traj.times) - 1)
 
 
+def _stamp(js: Any) -> float:
+    """A joint state's stamp (s of the sim's clock); 0 where it carries none."""
+    return float(getattr(getattr(js, "header", None), "stamp", 0.0) or 0.0)
+
+
 def _still(arm: Any) -> tuple[tuple[float, ...], float] | None:
     """Where the arm stands still and the stamp of that reading (one sample); None when it moves or has none."""
     js = getattr(arm, "joint_state", None)
-    stamp = float(getattr(getattr(js, "header", None), "stamp", 0.0) or 0.0)
+    stamp = _stamp(js)
     if js is None or stamp <= 0 or float(np.max(np.abs(np.asarray(js.dq, dtype=float)), initial=0.0)) >= STILL_RAD_S:
         return None
     return tuple(float(v) for v in js.q), stamp
@@ -313,5 +318,5 @@ def _reading(arm: Any, t0: float, now: float) -> tuple[Any, float]:
     js = getattr(arm, "joint_state", None)
     if js is None:
         return arm.joints, now
-    stamp = float(getattr(getattr(js, "header", None), "stamp", 0.0) or 0.0)
+    stamp = _stamp(js)
     return js.q, (stamp - t0 if stamp > 0 else now)
