@@ -500,15 +500,16 @@ def test_a_from_the_page_and_bob_sees_alice_own_the_arm(browser, klass):
                 what="bob's grant of arm1 among its records",
                 seen=lambda: records,
             )
-            assert mine > 0 and records[mine - 1].owner == "alice" and records[mine - 1].state == "still", (
-                records,
-                text,
-            )
-            print(f"attempt {attempt}: arm1 stopped before bob asked ({records[mine - 1]}); alice takes it back")
-            bob.get_by_role("button", name="Release").click(no_wait_after=True)
-            wait_message(bob, r"release arm1: ok")
-            alice.get_by_role("button", name="Request").click(no_wait_after=True)
-            wait_message(alice, r"request arm1: you own it")
+            # lawful after a still arm of alice's, or a free one: alice's hold ended first (CI, load 6-12: her page
+            # reloaded, her arm was free at epoch 5, and bob's Request had it at 6)
+            before = records[mine - 1] if mine > 0 else None
+            assert before is not None and (
+                before.owner == "" or (before.owner == "alice" and before.state == "still")
+            ), (records, text)
+            why = "free" if before.owner == "" else "stopped"
+            print(f"attempt {attempt}: arm1 {why} before bob asked ({before}); alice takes it back")
+            press(bob, bob.get_by_role("button", name="Release"), r"release arm1: ok")
+            press(alice, alice.get_by_role("button", name="Request"), r"request arm1: you own it")
             records.clear()
         else:
             raise AssertionError(f"arm1 stopped before bob asked, three times: {text}")
@@ -765,8 +766,7 @@ def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_g
         # dropped page must: her base stood still, and bob's Queue took it over, as the rules allow. The test's
         # premise (bob queued behind a moving base) did not hold: bob gives it back and it is set up again
         print(f"attempt {attempt}: bob's Queue took base1 over (it stood still): set up again")
-        bob.get_by_role("button", name="Release").click(no_wait_after=True)
-        wait_message(bob, r"release base1: ok", timeout=60)
+        press(bob, bob.get_by_role("button", name="Release"), r"release base1: ok", 60)
         alice.keyboard.up("ArrowLeft")
     else:
         pytest.fail("three times bob's Queue found base1 still: alice's page could not keep it moving")
