@@ -47,6 +47,14 @@ def console(
             help="Pages without the 3D view: the top-down map alone, as before the 3D view (lighter for the server and the browsers).",
         ),
     ] = False,
+    view_fps: Annotated[
+        int,
+        typer.Option(
+            "--view-fps",
+            help="Frames a second each page's 3D view draws in its browser: lower it for old machines or many pages on "
+            "one (a browser with no GPU draws in software; 10 fps cost a core at most).",
+        ),
+    ] = 10,
     world: World = None,
     connect: Connect = None,
     zenoh_config: ZenohConfig = None,
@@ -68,6 +76,8 @@ def console(
         raise UserError(f"--listen {listen}: expected HOST:PORT, e.g. 0.0.0.0:8080")
     if grace < 0:
         raise UserError("--grace must be >= 0 s")
+    if not 1 <= view_fps <= 60:
+        raise UserError(f"--view-fps {view_fps}: expected 1 to 60 frames a second")
     tls = _tls(tls_cert, tls_key)
     try:
         cfg = FabricConfig.resolve(world=world, connect=connect, config_file=zenoh_config)
@@ -90,7 +100,16 @@ def console(
         except ValueError as exc:
             raise UserError(f"--instructors: {exc}") from None
     serve(
-        Console(cfg.world, connect_eps, cfg.config_file, grace, rerun_url, instructors=names, view3d=not no_3d),
+        Console(
+            cfg.world,
+            connect_eps,
+            cfg.config_file,
+            grace,
+            rerun_url,
+            instructors=names,
+            view3d=not no_3d,
+            view_fps=view_fps,
+        ),
         host.strip("[]"),
         int(port_text),
         tls,

@@ -81,6 +81,7 @@ class Console:
     join_timeout: float = 10.0
     instructors: tuple[str, ...] = ()  # the logins that may open the teacher's page (user_peer/console/teacher.py)
     view3d: bool = True  # each page has the 3D view (console --no-3d: the top-down map alone)
+    view_fps: int = 10  # frames a second each page's 3D view draws in its browser (console --view-fps)
     logins_required: bool | None = (
         None  # whether the router refuses a session without a login (.world_kind); None: not known yet
     )

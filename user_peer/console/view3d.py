@@ -64,7 +64,12 @@ class View3D:
         self.spawn = {r.id: tuple(float(v) for v in r.pose) for r in info.robots}
         ui.label("3D view").classes("text-subtitle1").props('role="heading" aria-level="2"')
         self.scene = ui.scene(
-            width=480, height=360, grid=(40, 40), on_drag_end=self._dropped, background_color="#f8f9fa", fps=10
+            width=480,
+            height=360,
+            grid=(40, 40),
+            on_drag_end=self._dropped,
+            background_color="#f8f9fa",
+            fps=page.console.view_fps,
         )
         # a group with a name: a div named but with no role is what axe calls aria-prohibited-attr, reported as
         # serious while three.js has not yet put its canvas in it (a loaded box's axe run saw the empty div)

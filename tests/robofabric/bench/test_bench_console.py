@@ -16,7 +16,7 @@ pytestmark = pytest.mark.slow
 
 def test_two_pages_drive_their_bases_and_lose_nothing(tmp_path):
     """Beside them, two emulated students (the page's socket protocol, no browser) log in and steer theirs."""
-    r = run_one(2, 6.0, tmp_path, clients=2)
+    r = run_one(2, 6.0, tmp_path, clients=2, view_fps=2)  # 2 frames a second: the box's other tests beside it
     assert r["c_joined"] == 2 and r["c_turned"] == 2 and r["c_keys"] >= 4, (r["c_errors"], r)  # both in, both turned
     assert r["c_back"] == r["c_dropped"] == r["c_refused"] == 0 and not r["c_errors"], r
     assert r["joined"] == 2 and r["lost"] == 0 and r["refused"] == 0, r

@@ -104,6 +104,11 @@ def klass(tmp_path_factory):
                 str(GRACE_S),
                 "--instructors",
                 "carol",
+                # the 3D view drawn 2 times a second, not 10: Chromium draws it in software GL, and two pages at 10
+                # took most of this box (a page driving: 1.10 of a core at 10, 0.64 at 2, `robofabric bench console
+                # --pages 1 --seconds 15 --swiftshader --view-fps 10` and `2`, docs/console.md)
+                "--view-fps",
+                "2",
             ),
             name="console",
         )

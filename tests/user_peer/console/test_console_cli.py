@@ -24,6 +24,7 @@ def _run(*args: str) -> subprocess.CompletedProcess:
         (("--listen", "8080"), "expected HOST:PORT"),
         (("--listen", "0.0.0.0:99999"), "expected HOST:PORT"),
         (("--grace", "-1"), "--grace must be >= 0"),
+        (("--view-fps", "0"), "expected 1 to 60 frames a second"),
     ],
 )
 def test_mistakes_give_one_line_and_exit_2(args, needle):
