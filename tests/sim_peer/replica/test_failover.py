@@ -172,7 +172,10 @@ def test_sigkill_while_the_arm_moves_and_the_base_follows_a_path(world, router, 
     # = the new state minus the motion since the old one (velocity x sim time between them)
     old_j, new_j = tape.of("arm1", "joints", 1)[-1], tape.of("arm1", "joints", 2)[0]
     dt = new_j.msg.header.stamp - old_j.msg.header.stamp
-    assert 0.0 <= dt < 1.0, dt  # sim time goes on from where it was
+    # sim time goes on from the newest state the heir heard: joints are best-effort (zenoh drops them under
+    # congestion, fabric/streams.py), so the test may have heard a last sample or two the heir did not (a whole run
+    # at load: dt -0.01, one 100 Hz sample); a reset would start again from 0 and its q far off (err_q below)
+    assert -0.02 - 1e-9 <= dt < 1.0, dt
     err_q = np.abs(new_j.msg.q - (old_j.msg.q + old_j.msg.dq * dt)).max()
     assert err_q <= 0.01, (err_q, old_j.msg.q, new_j.msg.q, dt)
     old_p, new_p = tape.of("arm1", "pose", 1)[-1].msg, tape.of("arm1", "pose", 2)[0].msg
