@@ -34,6 +34,10 @@ if TYPE_CHECKING:
 __all__ = ["command", "measure", "report"]
 
 #: the two joint targets the arm moves between, one per round, slowly (speed scale 0.05)
+ERR_SAY_RAD = 0.005
+"""A take-over's joint error above which the bench prints the two samples and what the heir said (the
+test allows 0.01; a whole run once measured 0.0196 rad, 2026-12-02, with nothing else to go on)."""
+
 POSES = (np.radians([60.0, 30.0, -40.0, 30.0, 50.0, -30.0]), np.radians([-60.0, -20.0, 30.0, -30.0, -50.0, 30.0]))
 
 
@@ -129,6 +133,9 @@ def measure(kills: int) -> list[dict[str, float]]:
                 )
                 rows.append(_take_over(procs, current, samples, term=i + 1))
                 _print_row(i, rows[-1])
+                if rows[-1]["err_rad"] > ERR_SAY_RAD:  # what the heir said it took over from, to look into
+                    said = [ln for ln in procs.output(standby).splitlines() if "took over the world" in ln]
+                    print(f"  the heir: {said[-1] if said else '(said nothing of its take-over)'}", flush=True)
                 current, standby = standby, sims.start(i + 2, standby=True)
                 if own.epoch("arm1") != epoch or not own.owns("arm1"):
                     print(f"  ownership changed! {own.record('arm1')}", flush=True)
@@ -197,6 +204,13 @@ def _take_over(procs: "ProcessGroup", current, samples: _Samples, *, term: int) 
     (t_old, old), (t_new, new) = samples.of("joints", term)[-1], samples.of("joints", term + 1)[0]
     dt = new.header.stamp - old.header.stamp
     err_q = float(np.abs(new.q - (old.q + old.dq * dt)).max())
+    if err_q > ERR_SAY_RAD:
+        print(
+            f"  term {term}'s last joints (t={old.header.stamp:.3f}, seq {old.header.seq}): q {np.round(old.q, 4)}, "
+            f"dq {np.round(old.dq, 4)}; term {term + 1}'s first (t={new.header.stamp:.3f}, seq {new.header.seq}): "
+            f"q {np.round(new.q, 4)}, dq {np.round(new.dq, 4)}",
+            flush=True,
+        )
     (_, po), (_, pn) = samples.of("pose", term)[-1], samples.of("pose", term + 1)[0]
     err_mm = 1000 * float(np.linalg.norm(pn.position - (po.position + po.linear * (pn.header.stamp - po.header.stamp))))
     return {

@@ -24,4 +24,4 @@ def test_bench_failover_runs_one_round(tmp_path):
     took = re.search(r"new term, here \| (\d+) / (\d+) ms", text)
     err = re.search(r"joint error at take-over, motion-compensated \| ([\d.]+) / ([\d.]+) rad", text)
     assert took and err, text
-    assert 0 < int(took.group(1)) and float(err.group(2)) <= 0.01, text
+    assert 0 < int(took.group(1)) and float(err.group(2)) <= 0.01, text + proc.stdout[-2000:]
