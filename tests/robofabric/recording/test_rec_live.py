@@ -131,8 +131,8 @@ def test_record_replay_into_another_world_and_record_again(tmp_path, world, rout
     # timing: the replay keeps the recorded timeline. Judged on the replayer's own clock: every message is due at its
     # recorded offset from the start, so the replay cannot end before the recording's span (a replay that sent all at
     # once ends at once, one at twice the speed in half of it), and a stall only makes it longer. The second
-    # recorder's arrival times are printed, not judged: a starved recorder bunches them (CI, load 6-12: 90 % of them
-    # 0.65 s off their median offset, while the replay had kept its timeline)
+    # recorder's arrival times are printed, and judged only coarsely (below): a starved recorder bunches them (CI,
+    # load 6-12: 90 % of them 0.65 s off their median offset, while the replay had kept its timeline)
     t_a = np.array(sorted(m.log_time for ms in a.values() for m in ms), dtype=np.int64)
     t_b = np.array(sorted(m.log_time for ms in b.values() for m in ms), dtype=np.int64)
     span_a, span_b = (t_a[-1] - t_a[0]) / 1e9, (t_b[-1] - t_b[0]) / 1e9
@@ -146,7 +146,9 @@ def test_record_replay_into_another_world_and_record_again(tmp_path, world, rout
         f"replay: {elapsed:.2f} s for a {span_a:.2f} s recording; re-recorded span {span_b:.2f} s, arrival offsets "
         f"less their median p50/p90/p99 {np.percentile(err_ms, [50, 90, 99]).round(1)} ms"
     )
-    assert abs(span_b - span_a) < 0.1 * span_a, (span_a, span_b)
+    # and as the second recorder saw it, over half the span: one sent all at once arrives within a few milliseconds,
+    # and a starved recorder shortens the span by its stall, not by half (CI's run: its messages at most 0.85 s off)
+    assert span_b > 0.5 * span_a, (span_a, span_b)
 
 
 @pytest.mark.slow
