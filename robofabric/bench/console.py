@@ -665,8 +665,8 @@ def command(
         int,
         typer.Option(
             "--view-fps",
-            help="Frames a second each page's 3D view draws (console --view-fps): a page drawing in software "
-            "GL costs about 0.85 of a core at 10, 0.19 at 2.",
+            help="Frames a second each page's 3D view draws (console --view-fps): a page driving its base, drawn "
+            "in software GL, cost its browser 1.10 of a core at 10 and 0.64 at 2 (docs/console.md).",
         ),
     ] = 10,
 ) -> None:

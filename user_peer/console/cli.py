@@ -52,7 +52,7 @@ def console(
         typer.Option(
             "--view-fps",
             help="Frames a second each page's 3D view draws in its browser: lower it for old machines or many pages on "
-            "one (a browser with no GPU draws in software; 10 fps cost a core at most).",
+            "one (a browser with no GPU draws in software GL: about a core a page at 10, docs/console.md).",
         ),
     ] = 10,
     world: World = None,
