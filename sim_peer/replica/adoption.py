@@ -101,7 +101,10 @@ class ObjectAdoption:
         f, me = self.fabric, self.fabric.peer_id
         try:
             replies = f.rpc.query(keys.srv(f.world, "world"), timeout=2.0, expected=WorldInfo, all_replies=True)
-        except ServiceError:
+        except ServiceError as exc:  # not an answer: asked again after the next wait
+            with self._lock:
+                self._watch = ar.unanswered(self._watch)
+            log.info("%s: whether the scene objects still have a sim went unanswered (%s); asking again", me, exc)
             return False
         parts = {r.source: bool(r.message.objects) for r in replies if r.source}
         objects = self.server.scene_objects()

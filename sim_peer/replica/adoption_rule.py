@@ -10,6 +10,8 @@ The rules:
 - a departure starts one wait of :func:`wait_s` (a standby of the objects' sim takes over well within it), or joins
   the one under way: at most one waits at a time, and no departure is lost (the wait looks once more);
 - after the wait, with no departure since the last look, the wait ends;
+- a look whose question went unanswered (no sim answered ``srv/world`` in time, this one included: a loaded box) is
+  no answer: the wait goes on and looks again, as after a departure;
 - the adopter is the lowest-id sim among those that serve a part of the world, when none of them describes scene
   objects and this world has some: every shard asks the same union, so exactly one adopts.
 """
@@ -19,7 +21,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-__all__ = ["Watch", "departed", "waited", "stopped", "adopter", "wait_s"]
+__all__ = ["Watch", "departed", "waited", "unanswered", "stopped", "adopter", "wait_s"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,6 +51,12 @@ def waited(w: Watch, *, serves_objects: bool) -> tuple[Watch, bool]:
     if not w.again or serves_objects:
         return Watch(), False
     return Watch(running=True, again=False), True
+
+
+def unanswered(w: Watch) -> Watch:
+    """A look found no answer: the wait under way looks again after its next wait (a whole run at load: the only
+    look after sim-a's SIGKILL went unanswered, the wait ended, and the scene objects had no authority for 90 s)."""
+    return Watch(running=w.running, again=True)
 
 
 def stopped(w: Watch) -> Watch:

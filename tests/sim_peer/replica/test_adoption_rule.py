@@ -24,6 +24,16 @@ def test_the_wait_looks_once_per_batch_of_departures_then_ends():
     assert not look and w == ar.Watch()
 
 
+def test_a_look_that_went_unanswered_looks_again_after_the_next_wait():
+    w, _ = ar.departed(ar.Watch(), serves_objects=False)
+    w, look = ar.waited(w, serves_objects=False)
+    w = ar.unanswered(w)  # nobody answered srv/world in time
+    w, look = ar.waited(w, serves_objects=False)
+    assert look and w.running  # before: the wait ended, and nobody adopted the objects
+    w, look = ar.waited(w, serves_objects=False)  # answered this time: nobody left since, the wait ends
+    assert not look and w == ar.Watch()
+
+
 def test_a_sim_that_serves_the_objects_neither_waits_nor_looks():
     assert ar.departed(ar.Watch(), serves_objects=True) == (ar.Watch(), False)
     w, _ = ar.departed(ar.Watch(), serves_objects=False)
