@@ -47,7 +47,7 @@ test: $(STAMP_TEST) $(AXE) $(ROS_MSGS)
 
 # the fast suite: no process-spawning or multi-second tests (those are marked slow)
 test-fast: $(STAMP_TEST) $(ROS_MSGS)
-	PYTHONDONTWRITEBYTECODE= $(PY) -m pytest -q -m "not slow" -n 2
+	PYTHONDONTWRITEBYTECODE= $(PY) -m pytest -q -m "not slow" -n 4
 
 # the linter, the formatter's check and the type checker alone (tests/test_lint.py runs both in `make test`)
 lint: $(STAMP_TEST)

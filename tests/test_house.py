@@ -145,6 +145,7 @@ def report(root: Path, packages: tuple[str, ...] = PACKAGES, benchmarks: tuple[s
     return found
 
 
+@pytest.mark.slow  # seconds: every module of the packages parsed and walked (a report; it warns, never fails a size)
 def test_the_house_sizes_are_reported():
     """A warning per offender (the packages are walked: ``offenders`` fails on a package that is not there)."""
     report(ROOT)

@@ -332,6 +332,7 @@ def test_an_arm_asked_for_before_its_joints_arrive_is_looked_up_not_refused(worl
         svc.close()
 
 
+@pytest.mark.slow  # seconds: a sim that answers in 2.5 s, asked twice
 def test_a_world_too_slow_to_answer_is_asked_again_with_longer_to_answer(world, connect):
     """A sim that answers ``srv/world`` in 2.5 s, past a lookup's 2 s, and nothing else that would set a lookup off
     (its token came before the service started, no request, no stream): the arm is learnt all the same, from a retry

@@ -10,6 +10,8 @@ from __future__ import annotations
 import threading
 import time
 
+import pytest
+
 import zenoh
 
 from fabric import keys
@@ -28,6 +30,7 @@ def test_ownership_and_reject_events_go_with_the_records_ahead_of_data():
     assert priority_for(keys.robot_scan(w, "base1")) is None
 
 
+@pytest.mark.slow  # seconds: a scan flood that overwhelms a subscriber
 def test_every_ownership_event_reaches_a_subscriber_that_a_scan_flood_overwhelms(world, connect):
     sim, slow = connect("sim", "sim-a"), connect("user", "carol")
     got: list[int] = []

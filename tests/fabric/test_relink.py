@@ -43,6 +43,7 @@ def cut_link(world):
         r.close()
 
 
+@pytest.mark.slow  # seconds: a router closed and opened again on its port
 def test_a_query_asked_while_the_link_is_down_is_answered_once_it_is_back(world, cut_link):
     server, caller, cut = cut_link
     key = keys.srv(world, "fk", "arm1")
@@ -61,6 +62,7 @@ def test_nobody_serving_still_says_so_at_once_on_a_link_that_is_up(world, cut_li
     assert caller.counters["queries_after_relink"] == 0
 
 
+@pytest.mark.slow  # seconds: a router closed and opened again on its port
 def test_a_link_back_late_is_waited_for_its_routes_as_one_lost_just_now(world, cut_link):
     """A link that took 5 s to come back (a student woken at load 10) has its routes a moment after it: a query that
     finds nobody then is asked again for RELINK_S from the link's return, not from its loss (the times are set here,
@@ -154,6 +156,7 @@ def test_a_query_whose_server_went_under_it_is_answered_by_the_server_back_a_mom
             f.close()
 
 
+@pytest.mark.slow  # seconds: a router closed and opened again on its port
 def test_a_query_whose_limit_ran_out_while_its_link_was_down_is_asked_once_more_when_it_is_back(world, cut_link):
     """A student paused past her lease while her map was built wakes with her query's limit spent and her link
     closed: the limit is given again, once, from when her link is back (here the router is down longer than the
@@ -175,6 +178,7 @@ def test_a_query_whose_limit_ran_out_while_its_link_was_down_is_asked_once_more_
         t.join(timeout=10)
 
 
+@pytest.mark.slow  # seconds: a router closed and opened again on its port
 def test_a_query_whose_link_came_back_too_late_in_its_limit_is_given_its_limit_again(world, cut_link):
     """The link is lost early in the query and back before its limit, with too little of it left for the server's
     answer (CI: the paused student's link came back 5 s after its loss, 1.4 s before his map's limit). The limit is
@@ -203,6 +207,7 @@ def test_a_query_whose_link_came_back_too_late_in_its_limit_is_given_its_limit_a
         t.join(timeout=10)
 
 
+@pytest.mark.slow  # seconds: its query waits out its limit for a router that never comes back
 def test_a_query_to_a_router_gone_for_good_is_not_renewed(world, cut_link):
     _server, caller, cut = cut_link
     key = keys.srv(world, "fk", "arm1")

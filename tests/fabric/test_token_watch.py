@@ -7,6 +7,8 @@ real router."""
 import threading
 import time
 
+import pytest
+
 from fabric import keys
 from fabric.token_watch import TokenWatch
 from robofabric.testing import wait_until
@@ -47,6 +49,7 @@ def _watched_sim(world, connect, recheck_s=(0.05, 0.2)):
     return sim, watch, told, key
 
 
+@pytest.mark.slow  # seconds: three goings, each checked until 2 s on
 def test_a_going_heard_after_the_link_came_back_is_undone_by_the_router_s_answer(world, connect):
     # three checks, the last 2 s on (the watch's own are 0.5, 2, 5 and 15 s): at load both of two checks within 0.2 s
     # once found nothing (the suite's run of 2026-11-30), and the token was never told back

@@ -90,6 +90,7 @@ def test_watch_starts_from_one_snapshot(client, capsys, monkeypatch):
 
 def test_list_without_records_says_no_authority_answered(monkeypatch):
     monkeypatch.setattr(cli, "_client", lambda *a: (_Fabric(), _Client({})))
+    monkeypatch.setattr(cli, "RECORDS_WAIT_S", 0.2)  # its wait for records, not the 5 s a terminal user gets
     with pytest.raises(cli.NothingThere, match="no ownership authority answered"):  # exit 1: the world had nothing
         cli.list_cmd()
 

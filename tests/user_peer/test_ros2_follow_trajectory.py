@@ -275,6 +275,7 @@ def _goal(seconds: float, *, path_tol: float = 0.0, goal_time: float = 0.0):
     return goal
 
 
+@pytest.mark.slow  # seconds: a trajectory played 2 s late
 def test_a_goal_the_sim_began_late_is_judged_from_when_it_began():
     """The bridge's clock at the goal is a floor of the sim's start: a goal that reached a loaded sim 2 s late (or a
     starved bridge that heard /clock 2 s late) is judged from when the arm left where it stood, by its readings'
@@ -292,6 +293,7 @@ def test_a_goal_the_sim_began_late_is_judged_from_when_it_began():
         assert arm.sent is not None and time.monotonic() >= arm.sent[0] + 0.5  # judged after the sim's end
 
 
+@pytest.mark.slow  # seconds: two trajectories played in real time
 def test_an_arm_off_its_path_or_short_of_its_goal_is_told_by_how_much():
     """PATH_TOLERANCE_VIOLATED once joint_1 strays past its path tolerance while it plays (the arm stopped); and
     GOAL_TOLERANCE_VIOLATED where it ends 0.05 rad short, once the goal time tolerance after the end has passed."""

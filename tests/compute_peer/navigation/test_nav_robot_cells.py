@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
+from hypothesis.extra.numpy import arrays
 
 from compute_peer.navigation import MapperConfig, OccupancyMapper
 from compute_peer.navigation.grid import UNKNOWN, make_grid
@@ -29,12 +30,12 @@ def _footprints():
 
 @settings(max_examples=60, deadline=None)
 @given(
-    cells=st.lists(st.sampled_from([0, 30, 100, UNKNOWN]), min_size=40 * 30, max_size=40 * 30),
+    cells=arrays(np.uint8, (30, 40), elements=st.sampled_from([0, 30, 100, UNKNOWN])),  # not a list: 10x faster drawn
     footprints=_footprints(),
     margin=st.floats(0.0, 0.2),
 )
 def test_clearing_frees_exactly_the_cells_under_the_robots(cells, footprints, margin):
-    grid = make_grid(np.array(cells, dtype=np.uint8).reshape(30, 40), RES, (0.2, -0.3))
+    grid = make_grid(cells, RES, (0.2, -0.3))
     before = grid.cells.copy()
     out = clear_robots(grid, footprints, margin)
     # brute force: a cell is a robot's when its centre lies within radius + margin of the robot's centre
