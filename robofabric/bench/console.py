@@ -307,6 +307,20 @@ def _arm_targets(fab: Any, world: str, arms: int) -> str:
     return ";".join(out)
 
 
+def _owners(fab: Any, bases: int, arms: int) -> tuple[dict[int, Any], dict[str, str | None]]:
+    """Each base's record (by number) and each arm's owner, from a replica of the authority's records."""
+    from ownership.client import OwnershipClient
+
+    own = OwnershipClient(fab, "probe")  # a replica of the records (the probe owns nothing)
+    try:
+        own.refresh()
+        records = {i: own.record(f"base{i}") for i in range(bases)}
+        arm_owners = {f"arm{k}": (r.owner if (r := own.record(f"arm{k}")) is not None else None) for k in range(arms)}
+    finally:
+        own.close()
+    return records, arm_owners
+
+
 def _end_class(procs: Any, proc: Any) -> dict[str, Any]:
     """Stop the emulated students (SIGTERM: each lets go of ← and reads her page once more); their report."""
     import json
@@ -495,21 +509,14 @@ def run_one(
                 messages = [_status(pg) for pg in pages]
                 for pg in pages:
                     pg.keyboard.up("ArrowLeft")
+                # who owns what while every page and student is still there: read once they had left, a slow close
+                # (past the console's 10 s grace) counted every robot its grace had passed on as lost
+                records, arm_owners = _owners(fab, n + clients, arms)
             finally:
                 browser.close()
                 # the emulated students' own process, joins included: what the class's emulation costs this box
                 klass_cpu = proc_cpu_s(klass.pid) / max(time.monotonic() - klass_t0, 1e-9) if klass is not None else 0.0
                 emulated = _end_class(procs, klass) if klass is not None else None
-            from ownership.client import OwnershipClient
-
-            own = OwnershipClient(fab, "probe")  # a replica of the records (the probe owns nothing)
-            own.refresh()
-            records = {i: own.record(f"base{i}") for i in range(n + clients)}
-            arm_owners = {
-                f"arm{k}": (own.record(f"arm{k}").owner if own.record(f"arm{k}") is not None else None)
-                for k in range(arms)
-            }
-            own.close()
     lost = sum(1 for i, r in records.items() if i in bases and (r is None or r.owner != f"s{i}"))
     if emulated is not None:  # a student of the class who got in and whose base no longer names her
         lost += sum(

@@ -477,7 +477,7 @@ async def run_class(
         stop.set()
         pages = [p for p in await asyncio.gather(*tasks) if p is not None]
         watcher.cancel()
-        for p in pages:
+        for k, p in enumerate(pages):
             report.drops += p.drops
             words = p.text()
             if not p.connected:
@@ -486,6 +486,9 @@ async def run_class(
                 report.back_at_login += 1
             elif any(w in words for w in REFUSED):
                 report.refused += 1
+                if len(report.errors) < 5:  # what the page said: a refusal, or a word of one in other text
+                    said = next(ln for ln in words.splitlines() if any(w in ln for w in REFUSED))
+                    report.errors.append(f"a page of the class refused ({k}): {said[:200]}")
             await p.close()
     finally:
         for http in sessions:
