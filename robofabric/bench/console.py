@@ -472,6 +472,9 @@ def run_one(
                 presses: list[float] = []
                 missed = unstopped = 0
                 cpu0, browsers0, t0 = proc_cpu_s(console.pid), chromium_cpu_s(os.getpid()), time.monotonic()
+                # the rest of the box while the pages drive: what a class's world leaves the browsers and the server
+                others = {"sim": sim, "router": router, **({"class": klass} if klass is not None else {})}
+                others0 = {name: proc_cpu_s(pr.pid) for name, pr in others.items()}
                 health_from = len(procs.output(console))
                 k = 0
                 while pages and time.monotonic() - t0 < seconds:
@@ -502,6 +505,14 @@ def run_one(
                 page_cpu, renderer_cpu = _per_page(browsers0, browsers1, took, len(pages))
                 print(
                     f"  browsers while driving (cores, all pages): {_by_kind(browsers0, browsers1, took)}",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                print(
+                    "  the others while driving (cores): "
+                    + ", ".join(
+                        f"{name} {(proc_cpu_s(pr.pid) - others0[name]) / took:.2f}" for name, pr in others.items()
+                    ),
                     file=sys.stderr,
                     flush=True,
                 )
