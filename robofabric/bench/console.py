@@ -687,9 +687,18 @@ def command(
             "in software GL, cost its browser 1.10 of a core at 10 and 0.64 at 2 (docs/console.md).",
         ),
     ] = 10,
+    logs: Annotated[
+        Optional[Path],
+        typer.Option(
+            "--logs",
+            help="Keep every process's output (router, sim, console, the class) in DIR/n<PAGES>/, not in a "
+            "temporary folder removed at the end: what the console said of a lost robot's renewals.",
+        ),
+    ] = None,
 ) -> None:
     """N browser pages on one console server, each driving its own base: view lag in the page, key to motion,
     the server's CPU, robots lost."""
+    import contextlib
     import tempfile
 
     from fabric.cli_common import UserError
@@ -720,7 +729,8 @@ def command(
         *header(),
     ]
     print("\n".join(lines), flush=True)
-    with tempfile.TemporaryDirectory(prefix="bench-console-") as tmp:
+    kept = contextlib.nullcontext(str(logs)) if logs is not None else None
+    with kept or tempfile.TemporaryDirectory(prefix="bench-console-") as tmp:
         for n in counts:
             result = run_one(
                 n,
