@@ -29,7 +29,7 @@ from ownership import snapshot
 from ownership.admission import Admission, OwnBudgets
 from ownership import staff
 from ownership import state as st
-from ownership.hearing import Hearing
+from ownership.hearing import CONFIRM_SLACK_S, Hearing
 
 log = logging.getLogger("robofabric.ownership")
 
@@ -241,7 +241,11 @@ class Authority:
 
     def _on_peer(self, kind: str, peer_id: str, alive: bool) -> None:
         now = self.clock.now()
-        if not alive and self.hearing.deaf(now, self.fabric.connected()):
+        # a going heard within a lease and a second of our own link's loss or return is our link's, like one heard
+        # while it was down: a starved sim whose link dropped for 0.0 s released 33 bases of a class of 36 as
+        # "left", the goings of the old link told after the new one was up (`bench console --clients 32`)
+        heard_well = self.fabric.connected() and not self.fabric.relinked_within(self.hearing.lease_s + CONFIRM_SLACK_S)
+        if not alive and self.hearing.deaf(now, heard_well):
             # our link died (the router dropped it while this process was paused, or the router went):
             # every user's token goes with it, and none of them left. Kept until the link is back and a
             # lease (plus a second for the liveliness history) has passed without their token
