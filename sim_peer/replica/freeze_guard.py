@@ -58,6 +58,9 @@ class ShardOf(Protocol):
 
 EMPTY_LOOKS = 3
 """How many looks at the sims' tokens a frozen primary takes before it believes no rival is there."""
+LOOK_TIMEOUTS_S = (1.0, 2.0, 4.0)
+"""Each look's wait for the tokens and for the answers: longer each time, as a process starved for a few seconds
+(CI's run at load 7-10 saw three one-second looks come back empty with the rival serving all along)."""
 LOOK_AGAIN_S = 0.5
 """Between two looks: a going its fence heard is checked with the router within this (fabric.token_watch: 0.5 s)."""
 
@@ -124,25 +127,28 @@ class FreezeGuard:
             if not f.connected():
                 time.sleep(0.1)  # not connected yet: nobody to ask, nobody to tell
                 continue
-            others = [pid for _, pid in f.live_peers("sim", timeout=1.0) if pid != f.peer_id]
+            wait = LOOK_TIMEOUTS_S[min(empty, len(LOOK_TIMEOUTS_S) - 1)]
+            others = [pid for _, pid in f.live_peers("sim", timeout=wait) if pid != f.peer_id]
             replies = []
-            unanswered = not others
+            missed = "" if others else "no_token"
             if others:
                 try:
                     replies = f.rpc.query(
-                        keys.srv(f.world, "state"), timeout=1.0, expected=WorldState, all_replies=True
+                        keys.srv(f.world, "state"), timeout=wait, expected=WorldState, all_replies=True
                     )
                 except NoReply:
-                    unanswered = True
+                    missed = "no_reply"
                 except ServiceError as exc:
                     # standbys answer with a refusal: no other authority. An answer this session's fence refused
                     # is no answer: a sim whose token it heard go a moment ago (a stall of this process drops
                     # every link of it) is refused until its token is checked back (fabric.token_watch)
-                    unanswered = exc.reason.startswith(STALE)
+                    missed = "refused" if exc.reason.startswith(STALE) else ""
                     replies = []
-            if unanswered and empty < EMPTY_LOOKS - 1:
+            if missed and empty < EMPTY_LOOKS - 1:
                 # rivals were there when the freeze began: at load a look at the tokens, or the ask, can come back
-                # empty (the suite's run saw a rival that served all along missed), so look again a few times
+                # empty (the suite's run saw a rival that served all along missed), so look again a few times,
+                # each waiting longer; counted by what was missed
+                f.counters[f"freeze_look_{missed}"] += 1
                 empty += 1
                 time.sleep(LOOK_AGAIN_S)
                 continue

@@ -8,6 +8,7 @@ robots and lets them go once it hears again; a sim that serves nothing is not lo
 from __future__ import annotations
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -66,15 +67,18 @@ def test_a_primary_frozen_with_no_rival_publishes_again_at_once(connect):
     assert said[0].startswith("sim sim-a: paused 0.8 s with no other sim in the world; publishing again")
 
 
-def _muzzled_beside_a_rival(connect):
+def _muzzled_beside_a_rival(connect, delay: list[float] | None = None):
     """sim-a, muzzled as a freeze leaves it, beside sim-b, whose ``srv/state`` says it holds arm1 at term 1 (its token
-    and its answer both reached sim-a's router)."""
+    and its answer both reached sim-a's router). sim-b answers ``delay[0]`` seconds late, read at each ask."""
     fab, rival = connect("sim", "sim-a"), connect("sim", "sim-b")
     arm = RobotState("arm1", "arm", np.zeros(1), np.zeros(1), np.zeros(1))
-    rival.rpc.serve(
-        keys.srv(fab.world, "state"),
-        lambda key, request: WorldState(0.0, 0, (arm,), (), header=Header(source="sim-b", term=1)),
-    )
+    late = delay if delay is not None else [0.0]
+
+    def answer(key: str, request: object) -> WorldState:
+        time.sleep(late[0])  # as a starved process answers
+        return WorldState(0.0, 0, (arm,), (), header=Header(source="sim-b", term=1))
+
+    rival.rpc.serve(keys.srv(fab.world, "state"), answer)
     wait_until(
         lambda: any(pid == "sim-b" for _, pid in fab.live_peers("sim", timeout=1.0)),
         timeout=30,
@@ -100,6 +104,20 @@ def test_a_primary_frozen_past_the_lease_asks_who_holds_its_shard_and_reasserts(
     assert roles.told == [("sim-b", 1)], (said, dict(fab.counters))
     assert [type(e) for e in roles.steps] == [el.Resumed] and not fab.stamp.muzzled
     assert said == [f"sim sim-a: frozen {gap:.1f} s, still the authority (term {fab.stamp.term})"]
+
+
+@pytest.mark.slow  # it listens a lease, muzzled, before it asks
+def test_a_rival_that_answers_late_is_waited_for_longer_at_each_look(connect):
+    """CI's run at load 7-10 (2026-12-02) saw three one-second looks come back empty while the rival served all along:
+    each look waits longer than the one before (1, 2, 4 s)."""
+    delay = [0.0]
+    fab = _muzzled_beside_a_rival(connect, delay)
+    delay[0] = 1.3  # past a one-second wait, within a two-second one
+    said: list[str] = []
+    roles = Electing({"sim-a", "sim-b"})
+    _guard(fab, roles, said, gap=0.05).on_freeze(fab.config.lease_ms / 1000.0 + 0.01)
+    assert roles.told == [("sim-b", 1)], (said, dict(fab.counters))
+    assert fab.counters["freeze_look_no_reply"] >= 1  # its first look was not answered in time
 
 
 @pytest.mark.slow  # it listens a lease, muzzled, before it asks
