@@ -418,12 +418,18 @@ class Fabric:
                 time.monotonic() - self._link_lost_at,
             )
 
+    def link_changed_at(self) -> float:
+        """When this client last lost its link to the router or had it back (monotonic s; -inf if never): a change
+        since one last looked means what was sent to it meanwhile may be lost with the old link (an authority then
+        gives every owner a whole lease to renew: ownership.state)."""
+        return max(self._link_lost_at, self._link_back_at)
+
     def relinked_within(self, seconds: float) -> bool:
         """Whether this client lost its link to the router, or had it back, within the last ``seconds``: what it
         hears then may be the link's doing, not the world's (every token it knew goes with the old link, and zenoh
         may tell those goings after the new link's tokens). Never for a router or a peer (no link of theirs is
         lost so)."""
-        return time.monotonic() - max(self._link_lost_at, self._link_back_at) <= seconds
+        return time.monotonic() - self.link_changed_at() <= seconds
 
     def _linked(self) -> bool:
         """Whether this client has a link to a router now (it reconnects by itself after losing it)."""

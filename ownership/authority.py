@@ -79,6 +79,7 @@ class Authority:
         self._state = dataclasses.replace(self._state, plant=self._plant)
         self._tick_s = tick_s if tick_s is not None else min(0.02, lease_s / 10)
         self._stop = threading.Event()
+        self._link_seen = fabric.link_changed_at()  # a change since the last tick: owners get a whole lease
         self.counters = {"requests": 0, "rejected": 0, "handovers": 0, "rate_limited": 0}
 
         def report(limit: str, make: Callable[[], Event]) -> None:
@@ -284,8 +285,10 @@ class Authority:
                 log.warning("ownership authority did not run for %.1f s (paused or starved): leases extended", paused)
             if self.hearing.pending:
                 self._forget(self.hearing.due(self.clock.now(), self.fabric.connected()))
+            changed = self.fabric.link_changed_at()
+            relinked, self._link_seen = changed != self._link_seen, changed
             try:
-                self._apply(st.Tick(self.clock.now()))
+                self._apply(st.Tick(self.clock.now(), relinked=relinked))
             except Exception:
                 log.exception("ownership tick failed")
 

@@ -16,7 +16,8 @@ Rules (docs/design.md):
 - The authority's own trouble is never an owner's fault: a lease expires only when its owner's
   renewals stopped while the authority was hearing others (:func:`may_expire`). Nothing heard
   from anyone for ``deaf_s`` (a stalled router, a backlog, a lost link) or a late tick (the
-  authority paused) stops expiries, and once it hears again every owner has a whole lease to renew.
+  authority paused) stops expiries, and once it hears again every owner has a whole lease to renew; so does
+  its own link's loss or return, however short (renewals sent meanwhile went with the old link).
 - Likewise a token lost while the authority's hearing is in doubt (:func:`hearing_in_doubt`: it heard
   nobody for ``deaf_s`` although another owner should have renewed, or heard again after such a deaf
   spell less than ``grace_s`` ago) is not taken as its user leaving: a
@@ -107,6 +108,9 @@ class Renew:
 @dataclass(frozen=True, slots=True)
 class Tick:
     now: float
+    relinked: bool = False
+    """The authority's own link to its router was lost or came back since the last tick: renewals sent to it
+    meanwhile went with the old link, so every owner gets a whole lease to renew from ``now``."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -398,9 +402,13 @@ def _on_tick(s: OwnState, ev: Tick, effects: list[Effect]) -> OwnState:
     """Time passes: leases that may end (:func:`may_expire`) end, tokenless requesters and away users past
     grace are forgotten, held users whose token did not come back within grace leave. A tick long after the
     last one means the authority itself was paused: it hears again from now, so every owner gets a whole
-    lease to renew."""
+    lease to renew; so does a tick that says the authority's own link was lost or came back."""
     if s.last_tick != float("-inf") and ev.now - s.last_tick > s.deaf_s:
         s = replace(s, hearing_since=max(s.hearing_since, ev.now), regained=max(s.regained, ev.now))
+    elif ev.relinked:
+        # a class's starved sim lost its link for 0.0 s and, a second after it was back, expired 24 leases whose
+        # renewals had gone with the old link ("no renewal for 2.0 s": `bench console --clients 32`, 2026-12-02)
+        s = replace(s, hearing_since=max(s.hearing_since, ev.now))
     s = replace(s, last_tick=ev.now)
     recs = dict(s.records)
     for obj, rec in list(recs.items()):

@@ -23,7 +23,7 @@ def events():
             hs.tuples(hs.just("request"), user, obj, hs.booleans(), dt),
             hs.tuples(hs.just("release"), user, obj, dt),
             hs.tuples(hs.just("renew"), user, obj, dt),
-            hs.tuples(hs.just("tick"), dt),
+            hs.tuples(hs.just("tick"), dt, hs.booleans()),
             hs.tuples(hs.just("motion"), obj, hs.booleans()),
         ),
         max_size=60,
@@ -43,7 +43,7 @@ def build(raw, now):
     if kind == "renew":
         return st.Renew(raw[1], raw[2], now)
     if kind == "tick":
-        return st.Tick(now)
+        return st.Tick(now, relinked=len(raw) > 2 and raw[2])
     return st.Motion(raw[1], raw[2])
 
 
@@ -222,6 +222,31 @@ def test_a_paused_authority_extends_leases_instead_of_expiring_them():
         s, _ = st.step(s, st.Renew("b", "base", t))
         s, eff = st.step(s, st.Tick(t))
     assert not eff and s.records["arm"].owner == "a" and s.records["arm"].epoch == 1
+
+
+def test_an_authority_whose_own_link_came_back_gives_every_owner_a_whole_lease_from_then():
+    """Its link lost and back within a tick (a starved sim, 0.0 s), others heard all along: renewals sent to the old
+    link are lost, so no lease ends within a lease of the link's return, and one still not renewed then ends."""
+    s = _owned_by_a()
+    for t in (0.5, 1.0, 1.5):  # b renews; a's renewals go with the old link
+        s, _ = st.step(s, st.Renew("b", "base", t))
+        s, eff = st.step(s, st.Tick(t, relinked=t == 1.5))
+        assert not eff
+    for t in (2.0, 2.5, 3.0, 3.45):  # a's lease ran out at 2.0, but the link was back at 1.5
+        s, _ = st.step(s, st.Renew("b", "base", t))
+        s, eff = st.step(s, st.Tick(t))
+        assert not eff and s.records["arm"].owner == "a", t
+    s, _ = st.step(s, st.Renew("b", "base", 3.55))
+    s, eff = st.step(s, st.Tick(3.55))
+    assert ("expired", "arm") in [(e.kind, e.object) for e in eff]
+
+
+def test_without_its_link_changing_an_owner_who_stops_renewing_loses_the_robot_at_her_leases_end():
+    s = _owned_by_a()
+    for t in (0.5, 1.0, 1.5, 2.05):
+        s, _ = st.step(s, st.Renew("b", "base", t))
+        s, eff = st.step(s, st.Tick(t))
+    assert ("expired", "arm") in [(e.kind, e.object) for e in eff]
 
 
 def test_an_authority_that_hears_nobody_expires_no_lease():
