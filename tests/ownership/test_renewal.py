@@ -5,7 +5,7 @@ from __future__ import annotations
 import threading
 
 from fabric.interfaces import OwnershipRecord, OwnReply
-from ownership.renewal import MAX_IN_FLIGHT, STUCK_ROUNDS, Renewal
+from ownership.renewal import LATE_ROUND_S, MAX_IN_FLIGHT, STUCK_ROUNDS, Renewal
 from robofabric.testing import wait_until
 
 
@@ -86,3 +86,26 @@ def test_unanswered_renewals_are_said_once_until_one_is_answered(caplog):
     assert len(said) == 2, said
     assert said[0].startswith("renewal of arm1 by alice: not renewed after") and "no reply in 2.0 s" in said[0]
     assert said[1] == "renewal of arm1 by alice: answered again (renewed)"
+
+
+def test_a_round_that_began_late_is_said_with_how_late(caplog):
+    """The owner's own process stood still (here its records took 1.2 s to read, once): the next round began over
+    LATE_ROUND_S late, and it says so, so that a lease lost to her own stall is told apart from one lost on the way."""
+    slow = [True]
+
+    def records() -> dict[str, OwnershipRecord]:
+        if slow[0]:
+            slow[0] = False
+            threading.Event().wait(LATE_ROUND_S + 0.3)  # as a paused process does, from the round's own thread
+        return {}
+
+    r = Renewal("alice", _reply, records, renew_s=0.05)
+    r.hold("arm1")
+    with caplog.at_level("WARNING", logger="robofabric.ownership"):
+        r.start()
+        try:
+            wait_until(lambda: r.latest_late_s > 0, timeout=10, what="the late round said")
+        finally:
+            r.close()
+    assert r.latest_late_s >= LATE_ROUND_S, r.latest_late_s
+    assert any("renewals of alice: a round began" in m and "late" in m for m in caplog.messages), caplog.messages
