@@ -121,6 +121,18 @@ def test_a_rival_that_answers_late_is_waited_for_longer_at_each_look(connect):
 
 
 @pytest.mark.slow  # it listens a lease, muzzled, before it asks
+def test_a_rival_whose_token_no_look_finds_is_asked_all_the_same(connect, monkeypatch):
+    """A whole run at load 14 (2026-12-02, run 36) saw three looks find no rival's token (``freeze_look_no_token``),
+    the rival serving all along: the tokens only say what a miss was, the ask goes out whatever they show."""
+    fab = _muzzled_beside_a_rival(connect)
+    monkeypatch.setattr(fab, "live_peers", lambda kind="*", timeout=1.0: [])  # as the run's looks found
+    said: list[str] = []
+    roles = Electing({"sim-a", "sim-b"})
+    _guard(fab, roles, said, gap=0.05).on_freeze(fab.config.lease_ms / 1000.0 + 0.01)
+    assert roles.told == [("sim-b", 1)], (said, dict(fab.counters))
+
+
+@pytest.mark.slow  # it listens a lease, muzzled, before it asks
 def test_a_rival_its_fence_holds_gone_for_a_moment_is_asked_again(connect, monkeypatch):
     """A stall of the whole process drops every link of it: the primary's fence hears the rival's token go and refuses
     its answers until the going is checked with the router (0.5 s on). Taken for a standby's refusal, that answer left
