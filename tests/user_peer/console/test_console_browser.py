@@ -765,7 +765,8 @@ def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_g
     logged_in(bob, klass, "bob")
     select_robot(bob, klass, "bob", "base1")
     for attempt in (1, 2, 3):
-        if _alice_drives_and_bob_queues(alice, bob, base):
+        queued, asked_twice = _alice_drives_and_bob_queues(alice, bob, base)
+        if queued:
             break
         # at load her page's connection dropped (its pings unanswered 20 s), which lets go of her keys at once, as a
         # dropped page must: her base stood still, and bob's Queue took it over, as the rules allow. The test's
@@ -800,17 +801,29 @@ def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_g
         # pages' owners, and in CI (load 7-14) it stalled bob's page 30 s, then her base was bob's within 15 s of her
         # page's closing; another CI run (load 6-12) gave it to bob 32.0 s after (issue 45: leases renewed inside a
         # starved console)
-        lapsed = [
+        story = klass.carol.event_log.authority_events(mark, klass.carol.event_mark(), OWN_KINDS)
+        lapsed = [e for e in story if e.object == "base1" and e.kind == "own_expired" and e.user == "alice"]
+        # or bob's Queue, clicked a second time at load, reached the authority once her page had closed and her base
+        # stood still, and took it over, as a request on a still robot does (run 37 of 2026-12-02: "handed over to
+        # bob while still" 0.6 s after her page closed): lawful, and the grace then has nothing to judge
+        took = [
             e
-            for e in klass.carol.event_log.authority_events(mark, klass.carol.event_mark(), OWN_KINDS)
-            if e.object == "base1" and e.kind == "own_expired" and e.user == "alice"
+            for e in story
+            if asked_twice
+            and e.object == "base1"
+            and e.kind == "own_revoked"
+            and e.user == "alice"
+            and "while still" in e.reason
         ]
-        assert lapsed, (
+        assert lapsed or took, (
             f"base1 was bob's {passed:.1f} s after alice's page closed, and her lease had not lapsed\n"
             f"base1's ownership events: {_ownership_story(klass, mark)}\n"
             f"console: {klass.procs.output(klass.console)[-3000:]}"
         )
-        print(f"alice's lease lapsed before her page's reconnect window and grace ended: {lapsed[0].reason}")
+        if lapsed:
+            print(f"alice's lease lapsed before her page's reconnect window and grace ended: {lapsed[0].reason}")
+        else:
+            print(f"bob's second Queue took base1 over while it stood still: {took[-1].reason}")
     bob.get_by_text(re.compile(r"^mobile · owner: you")).wait_for()
     shot(bob, "bob-after-alice-left")
     bob.get_by_role("button", name="Release").click(no_wait_after=True)
@@ -818,9 +831,10 @@ def test_a_page_that_closes_stops_her_base_which_passes_to_the_queue_after_the_g
     bob.context.close()
 
 
-def _alice_drives_and_bob_queues(alice, bob, base) -> bool:
-    """alice owns base1 and turns it on the spot with ← held; bob clicks Queue while it moves. True once bob waits
-    at place 1; False where his Queue took it over (it stood still when his click reached the authority)."""
+def _alice_drives_and_bob_queues(alice, bob, base) -> tuple[bool, bool]:
+    """alice owns base1 and turns it on the spot with ← held; bob clicks Queue while it moves. (True once bob waits
+    at place 1, False where his Queue took it over: it stood still when his click reached the authority; whether he
+    clicked Queue twice, the first unanswered in 30 s: that one may still reach the authority later.)"""
     press(
         alice, alice.get_by_role("button", name="Request"), r"request base1: (you own it|granted .*already owner)", 60
     )
@@ -841,7 +855,9 @@ def _alice_drives_and_bob_queues(alice, bob, base) -> bool:
     # 30 s on one (NiceGUI reloads a page whose connection timed out), a reload that resumes his session anyway
     from playwright.sync_api import TimeoutError as PlaywrightTimeoutError
 
+    twice = False
     for attempt in (1, 2):  # a click a reload swallowed is clicked again (a second Queue keeps his place)
+        twice = attempt == 2
         try:
             bob.get_by_role("button", name="Queue").click(no_wait_after=True, timeout=60_000)
             said = wait_message(bob, r"queue for base1: (queued at position 1|granted)", timeout=30)
@@ -852,9 +868,9 @@ def _alice_drives_and_bob_queues(alice, bob, base) -> bool:
             print(f"bob's Queue said nothing in 30 s or was not clickable in 60 s, clicked again: {e}")
             back_in(bob)  # his session ended as his page reloaded (beside whole run 17, 2026-12-02)
     if "granted" in said:
-        return False
+        return False, twice
     bob.get_by_text(re.compile(r"^mobile · owner: alice .*your place: 1")).wait_for()
-    return True
+    return True, twice
 
 
 OWN_KINDS = frozenset(str(k) for k in EventKind if k.startswith("own_"))
