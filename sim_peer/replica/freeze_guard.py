@@ -128,14 +128,14 @@ class FreezeGuard:
                 time.sleep(0.1)  # not connected yet: nobody to ask, nobody to tell
                 continue
             wait = LOOK_TIMEOUTS_S[min(empty, len(LOOK_TIMEOUTS_S) - 1)]
-            # the sims' tokens are looked at to say what a miss was; the ask goes out whatever they show: a whole
-            # run (load 14) saw three looks find no rival's token, 1, 2 and 4 s each, the rival serving all along
-            others = [pid for _, pid in f.live_peers("sim", timeout=wait) if pid != f.peer_id]
             replies = []
             missed = ""
             try:
                 replies = f.rpc.query(keys.srv(f.world, "state"), timeout=wait, expected=WorldState, all_replies=True)
             except NoReply:
+                # the sims' tokens only say what the miss was: the ask goes out whatever they show (a whole run at
+                # load 14 saw three looks find no rival's token, 1, 2 and 4 s each, the rival serving all along)
+                others = [pid for _, pid in f.live_peers("sim", timeout=wait) if pid != f.peer_id]
                 missed = "no_reply" if others else "no_token"
             except ServiceError as exc:
                 # standbys answer with a refusal: no other authority. An answer this session's fence refused
