@@ -101,6 +101,8 @@ class RecorderStats:
     dropped_bytes: int = 0
     quota_reached: bool = False
     queued_bytes: int = 0  # payload bytes heard and not yet written (bounded by ``max_queue_bytes``)
+    missed: int = 0  # samples their publishers numbered that never reached this recorder (fabric/recording/gaps.py)
+    holes: int = 0  # in how many stretches
 
     @property
     def rate_hz(self) -> float:
@@ -117,6 +119,11 @@ class RecorderStats:
             f"  {self.keys} keys  file {_human(self.file_bytes)}  {self.elapsed_s:.1f} s"
             + (f"  backlog {self.queued}" if self.queued > 100 else "")
             + (f"  DROPPED {self.dropped} msgs ({_human(self.dropped_bytes)})" if self.dropped else "")
+            + (
+                f"  MISSED {self.missed} msgs on the way (in {self.holes} hole{'s' if self.holes != 1 else ''})"
+                if self.missed
+                else ""
+            )
             + ("  disk quota reached" if self.quota_reached else "")
         )
 
@@ -272,6 +279,8 @@ class Recorder:
             dropped_bytes=self._dropped_bytes,
             quota_reached=self._quota_reached,
             queued_bytes=self._queued_bytes,
+            missed=sink.gaps.missed if sink else 0,
+            holes=sink.gaps.holes if sink else 0,
         )
 
     @property

@@ -27,6 +27,7 @@ from mcap.writer import CompressionType
 from fabric import keys
 from fabric.fencing import SimFence, fenced_scopes
 from fabric.recording.mcap_file import McapFile, mcap_writer
+from fabric.recording.gaps import SeqGaps
 from fabric.recording.format import MESSAGE_ENCODING, METADATA_NAME, PROFILE, peek, schema_data
 
 STALE = "stale"
@@ -71,6 +72,7 @@ class McapSink(McapFile):
         self._fenced: dict[str, tuple[str, tuple[str, ...]] | None] = {}
         self.stale = 0
         self.payload_bytes = 0
+        self.gaps = SeqGaps()  # what the publishers numbered and never reached this file (fabric/recording/gaps.py)
 
     # ------------------------------------------------------------------ writing
 
@@ -98,6 +100,8 @@ class McapSink(McapFile):
         if (p.term or self.fences) and not self._believe(key, p.term, p.source):
             self.stale += 1
             return STALE
+        if p.wall_ns is not None:  # a fabric message with a header: its publisher numbered it
+            self.gaps.seen(key, p.source, p.seq or 0)
         self.write_with(
             key, p.schema, payload, log_time_ns, p.wall_ns if p.wall_ns is not None else log_time_ns, p.seq or 0
         )

@@ -140,9 +140,21 @@ def record(
             file=sys.stderr,
             flush=True,
         )
+    _say_missed(stats)
     if stats.messages == 0:  # exit 1: the world had nothing there
         raise NothingThere(
             f"nothing was recorded on {', '.join(exprs)} (unknown world or no publisher?); {output} is an empty recording"
+        )
+
+
+def _say_missed(stats: Any) -> None:
+    """A warning for samples their publishers numbered and that never came (fabric/recording/gaps.py)."""
+    if stats.missed:
+        print(
+            f"warning: {stats.missed} samples ({stats.holes} stretches) never reached this recorder: best-effort "
+            "streams lose what a process that does not keep up (a starved or paused box) cannot take, on the way",
+            file=sys.stderr,
+            flush=True,
         )
 
 
@@ -190,6 +202,7 @@ def _record_as(to, output, exprs, duration, quiet, scene, cfg, join: Joining, st
         print(f"recording {', '.join(exprs)} as {to} to {output}; Ctrl-C to stop", file=sys.stderr, flush=True)
         stats = _run_until_done(conv, output, duration, stop, quiet, tty)
     print(f"recorded {stats.line()} -> {output} ({to})", file=sys.stderr, flush=True)
+    _say_missed(stats)
     if stats.written == 0:
         raise NothingThere(
             f"nothing was recorded on {', '.join(exprs)} (unknown world or no publisher?); {output} is empty"

@@ -23,6 +23,7 @@ import zenoh
 from fabric.codec import DecodeError, decode, load_plugins
 from fabric.exit import at_exit
 from fabric.limits import put_dropping_oldest
+from fabric.recording.gaps import SeqGaps
 from fabric.session import undeclare_all
 
 __all__ = ["EXPORTERS", "exporters", "LiveConverter", "LiveStats"]
@@ -42,11 +43,18 @@ class LiveStats:
     bad: int  # payloads that did not decode (not fabric messages)
     dropped: int  # oldest samples dropped because the writer fell behind
     elapsed_s: float
+    missed: int = 0  # samples their publishers numbered that never reached this converter (fabric/recording/gaps.py)
+    holes: int = 0  # in how many stretches
 
     def line(self) -> str:
         return (
             f"{self.written} msgs converted  {self.bad} undecodable  {self.dropped} dropped  "
             f"({self.written / self.elapsed_s if self.elapsed_s > 0 else 0:.0f} msg/s)  {self.elapsed_s:.1f} s"
+            + (
+                f"  MISSED {self.missed} msgs on the way (in {self.holes} hole{'s' if self.holes != 1 else ''})"
+                if self.missed
+                else ""
+            )
         )
 
 
@@ -70,6 +78,7 @@ class LiveConverter:
         self._lock = threading.Lock()
         self.received = self.written = self.bad = self.dropped = 0
         self.error: BaseException | None = None
+        self.gaps = SeqGaps()
         self._t0 = 0.0
         self._t_end: float | None = None
         self._started = False
@@ -122,6 +131,8 @@ class LiveConverter:
                     continue
                 header = getattr(msg, "header", None)
                 wall = int(getattr(header, "wall_ns", 0) or 0)
+                if header is not None:
+                    self.gaps.seen(key, str(getattr(header, "source", "")), int(getattr(header, "seq", 0)))
                 self.sink.write(key, msg, t_ns, wall or t_ns)
                 self.written += 1
         except BaseException as exc:  # a full disk must not pass silently
@@ -130,7 +141,15 @@ class LiveConverter:
     @property
     def stats(self) -> LiveStats:
         end = self._t_end if self._t_end is not None else time.monotonic()
-        return LiveStats(self.received, self.written, self.bad, self.dropped, end - self._t0 if self._t0 else 0.0)
+        return LiveStats(
+            self.received,
+            self.written,
+            self.bad,
+            self.dropped,
+            end - self._t0 if self._t0 else 0.0,
+            self.gaps.missed,
+            self.gaps.holes,
+        )
 
     def close(self) -> LiveStats:
         """Stop listening, write what is queued, finish the file. Idempotent."""

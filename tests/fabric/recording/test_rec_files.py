@@ -154,3 +154,23 @@ def test_whatever_is_written_is_read_back_exactly(tmp_path, items, compression, 
         mine = [(c.topic, m.log_time, m.data) for _s, c, m in make_reader(f).iter_messages(log_time_order=False)]
     assert mine == samples
     assert read_info(path).complete
+
+
+def test_the_sink_counts_what_the_publishers_numbered_and_never_reached_it(tmp_path):
+    """A stall at load: zenoh dropped 184 of a base's poses on the way, and the recording must say so."""
+    from fabric.recording import McapSink
+    from fabric.recording.recorder import RecorderStats
+
+    from rec_helpers import joint_payload
+
+    t0 = 1_700_000_000_000_000_000
+    with McapSink(tmp_path / "a.mcap") as sink:
+        for seq in [*range(100), *range(284, 300)]:  # seq 100-283 never came
+            sink.write("rf/w/robot/arm0/joints", joint_payload(seq, t0 + seq), t0 + seq)
+        for seq in range(50):  # another publisher of the same key: its own numbering, complete
+            sink.write("rf/w/robot/arm0/joints", joint_payload(seq, t0 + seq, source="sim-b"), t0 + seq)
+        sink.write("rf/w/event/blob", b"\x00not a fabric message", t0)
+        assert (sink.gaps.missed, sink.gaps.holes) == (184, 1)
+    line = RecorderStats(166, 0, 0, 1, 1.0, 0, 1, 0, missed=184, holes=1).line()
+    assert "MISSED 184 msgs on the way (in 1 hole)" in line
+    assert "MISSED" not in RecorderStats(166, 0, 0, 1, 1.0, 0, 1, 0).line()
