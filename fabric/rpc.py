@@ -92,17 +92,20 @@ class Rpc:
         back_at: Callable[[], float] = lambda: float("-inf"),
         token_gone_at: Callable[[], float] = lambda: float("-inf"),
         stood_still: Callable[[], tuple[float, float]] = lambda: (float("-inf"), float("-inf")),
+        opened_at: float = float("-inf"),
     ) -> None:
         """``linked()``: whether this client has a link to a router now (None: a router itself, always linked);
         ``lost_at()``: when it last lost one, ``back_at()``: when one last came back after a loss, ``token_gone_at()``:
         when it last heard a liveliness token go, ``stood_still()``: (since, until) this process last stood still
-        (monotonic s, :mod:`fabric.standstill`)."""
+        (monotonic s, :mod:`fabric.standstill`); ``opened_at``: when the session opened (its routes come a moment
+        after it, as after a link's return)."""
         self._session = session
         self._linked = linked
         self._lost_at = lost_at
         self._back_at = back_at
         self._token_gone_at = token_gone_at
         self._stood_still = stood_still
+        self._opened_at = opened_at
         self._counters = counters
         self._stamp = stamp
         self._header = header
@@ -288,19 +291,24 @@ class Rpc:
         """After nobody answered a query asked at ``asked_at``: whether to ask again within ``deadline``. Yes where
         this client's link is down now (once it is back), was lost or came back lately (its routes come a moment after it),
         or was lost while the query was out (a process woken from a pause learns only then that its router closed
-        its link, and its query ends early, neither at once nor at its limit). A query that a link up all along
-        answered with nobody, slowly or not, is not asked again: "nobody serves it" stays the answer."""
+        its link, and its query ends early, neither at once nor at its limit). A session opened lately is one whose
+        link just came: the router's routes come a moment after it, and at load a student's first request met "nobody
+        serves it" at once with the authority there all along (twice in whole runs: run 24's mallory, run 42's alice),
+        so for :data:`RELINK_S` from its opening it asks again too. A query that a link up all along (and not just
+        opened) answered with nobody, slowly or not, is not asked again: "nobody serves it" stays the answer."""
         if self._linked is None:
             return False
-        if time.monotonic() + RELINK_POLL_S >= deadline:
+        now = time.monotonic()
+        if now + RELINK_POLL_S >= deadline:
             return False
-        lost_lately = relinked_lately(time.monotonic(), self._lost_at(), self._back_at())
-        if not (lost_lately or not self._linked() or self._lost_under(asked_at, deadline)):
+        lost_lately = relinked_lately(now, self._lost_at(), self._back_at())
+        fresh = now - self._opened_at <= RELINK_S
+        if not (lost_lately or fresh or not self._linked() or self._lost_under(asked_at, deadline)):
             return False
         if not self._wait_linked(deadline - RELINK_POLL_S):
             return False
         time.sleep(RELINK_POLL_S)
-        self._counters["queries_after_relink"] += 1
+        self._counters["queries_after_open" if fresh and not lost_lately else "queries_after_relink"] += 1
         return True
 
     def _wait_linked(self, until: float) -> bool:

@@ -118,6 +118,8 @@ class Fabric:
         self._local_exprs: frozenset[str] = frozenset()  # this session's own subscriptions that take its samples
         self._local_keys: dict[str, bool] = {}  # key -> whether one of them takes it (emptied when one is added)
         self.session = zenoh.open(config.zenoh_config())
+        self.opened_at = time.monotonic()
+        """When the session opened (monotonic s): a query that finds nobody soon after asks again (fabric.rpc)."""
         self._link_lost_at = float("-inf")
         """When this client last lost a link to its router (monotonic s; never for a router or a peer): a query ridden over
         it asks again (fabric.rpc), and a going heard about then is checked (fabric.token_watch)."""
@@ -153,6 +155,7 @@ class Fabric:
             stood_still=self._standstill.last
             if self._standstill is not None
             else lambda: (float("-inf"), float("-inf")),
+            opened_at=self.opened_at,
         )
         """Services: ``rpc.serve``, ``rpc.query``, ``rpc.call`` (:mod:`fabric.rpc`)."""
         self.reports = Reports(

@@ -21,6 +21,9 @@ def cut_link(world):
     port = free_port()
     routers = [Fabric(router_config(world, port), kind="router", peer_id="router")]
     server, caller = client(world, port, kind="compute", peer_id="c1"), client(world, port, kind="user", peer_id="u1")
+    # sessions long open, as the rules these tests judge meet them: a session just opened asks again anything that
+    # found nobody (its own rule, its own test below), which would hide the others
+    caller.rpc._opened_at = server.rpc._opened_at = float("-inf")
     threads: list[threading.Thread] = []
 
     def cut(down_s: float) -> None:
@@ -91,6 +94,35 @@ def test_nobody_at_once_just_after_tokens_went_waits_to_hear_of_the_link_and_sti
     # 2.5 s in all: the bound this test once had, missed at load)
     assert caller.counters["queries_after_relink"] == 0
     assert caller.counters["queries_after_server_went"] == 0
+
+
+def test_a_session_just_opened_asks_again_a_query_that_found_nobody(world, cut_link):
+    """A fresh session's routes come a moment after it opens: at load a student's first request met "nobody serves
+    it" at once with the authority there all along (run 42's alice, run 24's mallory). For RELINK_S from its opening
+    a query that found nobody asks again: here its server comes 0.5 s after the ask, as late routes would."""
+    server, caller, _cut = cut_link
+    key = keys.srv(world, "fk", "late")
+    caller.opened_at = time.monotonic()  # as if just opened (the fixture's wait for the router may have been long)
+    caller.rpc._opened_at = caller.opened_at
+    timer = threading.Timer(
+        0.5,
+        lambda: server.rpc.serve(key, lambda k, req: Twist(req.v * 2, 0.0, header=server.header(k)), expected=Twist),
+    )
+    timer.start()
+    try:
+        reply = caller.rpc.call(key, Twist(1.5, 0.0), timeout=5.0)  # before: "nobody serves it" at once
+    finally:
+        timer.join()
+    assert reply.v == 3.0
+    assert caller.counters["queries_after_open"] >= 1 and caller.counters["queries_after_relink"] == 0
+
+
+def test_an_older_session_still_says_nobody_at_once(world, cut_link):
+    _server, caller, _cut = cut_link
+    caller.rpc._opened_at = time.monotonic() - 10.0  # opened long ago
+    with pytest.raises(NoReply, match="nobody serves it"):
+        caller.rpc.call(keys.srv(world, "fk", "nobody"), Twist(1.0, 0.0), timeout=5.0)
+    assert caller.counters["queries_after_open"] == 0  # said as before: not asked again
 
 
 def test_relinked_lately_counts_from_the_loss_or_the_return_whichever_is_later():
