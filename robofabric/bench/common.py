@@ -27,6 +27,8 @@ __all__ = [
     "cpus",
     "machine",
     "proc_cpu_s",
+    "proc_waited_s",
+    "box_idle_s",
     "proc_rss_mb",
     "end_process",
     "end_processes",
@@ -79,6 +81,32 @@ def proc_cpu_s(pid: int) -> float:
         return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
     except (OSError, IndexError, ValueError):
         return float("nan")
+
+
+def proc_waited_s(pid: int) -> float:
+    """Seconds the threads of a process spent runnable but waiting for a CPU so far, summed over its threads
+    (/proc/PID/task/*/schedstat, its second field; NaN when it is gone). Two processes can use the same CPU time,
+    one on an idle box and one on a full box: what they waited for it tells them apart."""
+    total = 0
+    try:
+        for tid in os.listdir(f"/proc/{pid}/task"):
+            try:
+                with open(f"/proc/{pid}/task/{tid}/schedstat") as f:
+                    total += int(f.read().split()[1])
+            except (OSError, IndexError, ValueError):
+                continue  # a thread that ended meanwhile
+    except OSError:
+        return float("nan")
+    return total / 1e9
+
+
+def box_idle_s() -> tuple[float, float]:
+    """(all CPU seconds, idle CPU seconds) of the machine so far, summed over its CPUs (/proc/stat's first line;
+    idle includes waiting for I/O): between two readings, how full the box was."""
+    with open("/proc/stat") as f:
+        fields = [int(x) for x in f.readline().split()[1:]]
+    tick = os.sysconf("SC_CLK_TCK")
+    return sum(fields) / tick, (fields[3] + fields[4]) / tick
 
 
 def proc_rss_mb(pid: int, field: str = "VmRSS") -> float:

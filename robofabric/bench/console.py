@@ -42,7 +42,7 @@ from typing import Annotated, Any, Optional
 
 import typer
 
-from robofabric.bench.common import append, machine, pct, proc_cpu_s
+from robofabric.bench.common import append, box_idle_s, machine, pct, proc_cpu_s, proc_waited_s
 from robots.kinds import facts
 
 __all__ = ["command", "run_one"]
@@ -475,6 +475,11 @@ def run_one(
                 # the rest of the box while the pages drive: what a class's world leaves the browsers and the server
                 others = {"sim": sim, "router": router, **({"class": klass} if klass is not None else {})}
                 others0 = {name: proc_cpu_s(pr.pid) for name, pr in others.items()}
+                # how full the box was, and what each of the world's processes waited for a CPU: a server short of
+                # CPU on a full box, or one that has it and is slow, read the same in its CPU time alone
+                box0 = box_idle_s()
+                waiting = {"console": console, **others}
+                waited0 = {name: proc_waited_s(pr.pid) for name, pr in waiting.items()}
                 health_from = len(procs.output(console))
                 k = 0
                 while pages and time.monotonic() - t0 < seconds:
@@ -513,6 +518,15 @@ def run_one(
                     + ", ".join(
                         f"{name} {(proc_cpu_s(pr.pid) - others0[name]) / took:.2f}" for name, pr in others.items()
                     ),
+                    file=sys.stderr,
+                    flush=True,
+                )
+                box1 = box_idle_s()
+                busy = 1 - (box1[1] - box0[1]) / max(box1[0] - box0[0], 1e-9)
+                waited = {name: (proc_waited_s(pr.pid) - waited0[name]) / took for name, pr in waiting.items()}
+                print(
+                    f"  the box while driving: {busy:.0%} busy; runnable and waiting for a CPU (thread-s a second): "
+                    + ", ".join(f"{name} {w:.2f}" for name, w in waited.items()),
                     file=sys.stderr,
                     flush=True,
                 )
@@ -577,6 +591,8 @@ def run_one(
         "renderer_cpu": renderer_cpu,
         "join_cpu": pct([x for x in join_cpu if x == x], 50),
         "lost": lost,
+        "busy": busy,  # the box's CPUs while driving: 1.0 is a full box
+        "waited": waited,  # per process: its threads' seconds runnable and waiting for a CPU, a second
         "refused": refused,
         "logged_out": logged_out,
         "reloads": len(reloads),

@@ -43,3 +43,20 @@ def test_end_processes_signals_all_first_then_kills_the_deaf_within_one_timeout(
 def test_pct_of_nothing_is_nan():
     assert math.isnan(pct([], 99))
     assert pct([1.0, 2.0, 3.0], 50, 1e3) == 2000.0
+
+
+def test_a_busy_box_and_a_process_waiting_for_its_cpu_are_read_from_proc():
+    import os
+    import time
+
+    from robofabric.bench.common import box_idle_s, proc_waited_s
+
+    total0, idle0 = box_idle_s()
+    waited0 = proc_waited_s(os.getpid())
+    spin = time.monotonic() + 0.3
+    while time.monotonic() < spin:  # some CPU of this process between the readings
+        pass
+    total1, idle1 = box_idle_s()
+    assert total1 > total0 and idle1 >= idle0 and idle1 - idle0 <= total1 - total0
+    assert waited0 >= 0 and proc_waited_s(os.getpid()) >= waited0
+    assert math.isnan(proc_waited_s(2**22 + 12345))  # a process that is not there

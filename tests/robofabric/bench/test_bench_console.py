@@ -24,6 +24,8 @@ def test_two_pages_drive_their_bases_and_lose_nothing(tmp_path):
     assert r["presses"] >= 2 and r["missed"] == 0, r  # each press moved its base
     assert math.isfinite(r["lag_p50"]) and r["lag_p50"] > 0, r  # the pages showed a pose with its stamp
     assert r["page_cpu"] > 0 and r["join_cpu"] > 0, r  # the pages' own browsers were found and measured
+    assert 0 < r["busy"] <= 1 and set(r["waited"]) == {"console", "sim", "router", "class"}, r  # how full the box was
+    assert all(w >= 0 for w in r["waited"].values()), r
 
 
 def test_a_join_is_counted_on_the_renderer_that_took_the_page():
