@@ -471,5 +471,7 @@ def _no_reply(selector: str, waited: float, timeout: float, *, at_once: bool | N
         at_once = waited < 0.5 * timeout
     why = "nobody serves it" if at_once else "no server answered in time"
     if at_once and waited >= 0.5 * timeout:
-        why += " (found at once; the rest waited to hear whether this session's link had closed)"
-    return NoReply(f"no reply on {selector} after {waited:.1f} s of {timeout:.1f} s: {why}", key=selector)
+        why += " (found at once; the rest waited for this session's link or its routes)"
+    return NoReply(
+        f"no reply on {selector} after {waited:.1f} s of {timeout:.1f} s: {why}", key=selector, nobody=at_once
+    )

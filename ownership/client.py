@@ -247,12 +247,11 @@ class OwnershipClient:
         req = OwnRequest(op, self.user, wait, header=self.fabric.header("own-req"))
         key = keys.own_request(self.fabric.world, obj, self.user)
         limit = timeout or self.timeout
-        t0 = time.monotonic()
         try:
             reply: OwnReply = self.fabric.rpc.call(key, req, timeout=limit, expected=OwnReply)
-        except NoReply:
+        except NoReply as exc:
             known = self.snapshot()
-            if known and obj not in known and time.monotonic() - t0 < 0.5 * limit:  # ended at once: nobody serves it
+            if known and obj not in known and exc.nobody:  # no authority serves it (not one silent)
                 raise ServiceError(
                     f"unknown object {obj!r}: no authority serves it (known: {', '.join(sorted(known))})"
                 ) from None

@@ -33,4 +33,10 @@ class Refused(ServiceError):
 
 
 class NoReply(ServiceError):
-    """Nobody answered the query: nobody serves the key, or no server answered in time."""
+    """Nobody answered the query: nobody serves the key (``nobody``: zenoh found no server to ask), or no server
+    answered in time. Told by ``nobody``, not by how long it took: a query that finds nobody may still be asked
+    again for a moment (a session just opened, a link just back: :mod:`fabric.rpc`)."""
+
+    def __init__(self, reason: str, *, key: str = "", nobody: bool = False) -> None:
+        super().__init__(reason, key=key)
+        self.nobody = nobody

@@ -57,7 +57,10 @@ def test_viewer_saves_robots_scans_maps_paths(world, router, connect, tmp_path):
         publish_all(i)
         i += 1
         c = viewer.logger.counts
-        return all(c[k] >= 3 for k in ("JointState", "Pose", "Scan", "OccupancyGrid", "Path", "OwnershipRecord"))
+        # and a stream's rate filed: it takes a period (0.5 s) of arrivals, which three of each kind need not span
+        # (a whole run at load: the viewer subscribed late, took the latched map at once, and filed no rate)
+        kinds = ("JointState", "Pose", "Scan", "OccupancyGrid", "Path", "OwnershipRecord")
+        return all(c[k] >= 3 for k in kinds) and viewer.logger.rates.filed > 0
 
     wait_until(
         seen_all, timeout=20, interval=0.05, what="viewer logging every kind", seen=lambda: dict(viewer.logger.counts)

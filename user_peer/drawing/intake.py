@@ -78,6 +78,7 @@ class RateMeter:
         self.period = int(period_s * 1e9)
         self._window: dict[str, list[int]] = {}  # label -> [window start ns, messages since]
         self._rows: dict[str, Rows] = {}
+        self.filed = 0  # periods closed and filed, every stream's: a rate is drawn only after a period of arrivals
 
     def count(self, label: str, t_ns: int) -> bool:
         """Count one message of ``label`` at ``t_ns``; True when that closed a period and filed its rate."""
@@ -93,6 +94,7 @@ class RateMeter:
             rows = self._rows[label] = Rows()
         rows.add(t_ns, 0.0, w[1] * 1e9 / (t_ns - w[0]))
         w[0], w[1] = t_ns, 0
+        self.filed += 1
         return True
 
     def flush(self, rec: rr.RecordingStream) -> None:
