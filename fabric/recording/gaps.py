@@ -6,7 +6,8 @@ fabric message carries its publisher's per-key sequence (:class:`fabric.interfac
 tell a hole in what it received: in a whole test run at load 15 the ROS 2 recorder held 3.7 s less of a base's
 poses than the native one beside it, and its line said ``0 dropped`` (its own queue lost nothing).
 
-Pure: the recorders feed it from their writer threads. A stream is one key from one source: a standby that takes a
+Pure: the recorders feed it from their writer threads, after their own queue; what they drop themselves (a full
+queue, a quota) leaves holes too, and is taken off what they say was lost on the way. A stream is one key from one source: a standby that takes a
 world over numbers on from its primary, but under its own id, so a take-over starts a stream and loses nothing.
 """
 

@@ -279,7 +279,8 @@ class Recorder:
             dropped_bytes=self._dropped_bytes,
             quota_reached=self._quota_reached,
             queued_bytes=self._queued_bytes,
-            missed=sink.gaps.missed if sink else 0,
+            # the holes less what it dropped itself (each a numbered sample its sink never saw): on the way
+            missed=max(0, sink.gaps.missed - self._dropped) if sink else 0,
             holes=sink.gaps.holes if sink else 0,
         )
 

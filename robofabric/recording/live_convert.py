@@ -147,7 +147,7 @@ class LiveConverter:
             self.bad,
             self.dropped,
             end - self._t0 if self._t0 else 0.0,
-            self.gaps.missed,
+            max(0, self.gaps.missed - self.dropped),  # the holes less what it dropped itself: lost on the way
             self.gaps.holes,
         )
 
