@@ -151,8 +151,9 @@ def _say_missed(stats: Any) -> None:
     """A warning for samples their publishers numbered and that never came (fabric/recording/gaps.py)."""
     if stats.missed:
         print(
-            f"warning: {stats.missed} samples ({stats.holes} stretches) never reached this recorder: best-effort "
-            "streams lose what a process that does not keep up (a starved or paused box) cannot take, on the way",
+            f"warning: {stats.missed} samples ({stats.holes} stretches) numbered by their publishers never reached this "
+            "recorder: lost on the way (best-effort streams drop what a starved or paused process cannot take), or "
+            "held back by their publisher (a sim muzzled after a freeze)",
             file=sys.stderr,
             flush=True,
         )
