@@ -27,6 +27,7 @@ __all__ = [
     "cpus",
     "machine",
     "proc_cpu_s",
+    "proc_sched_s",
     "proc_waited_s",
     "box_idle_s",
     "proc_rss_mb",
@@ -83,21 +84,29 @@ def proc_cpu_s(pid: int) -> float:
         return float("nan")
 
 
-def proc_waited_s(pid: int) -> float:
-    """Seconds the threads of a process spent runnable but waiting for a CPU so far, summed over its threads
-    (/proc/PID/task/*/schedstat, its second field; NaN when it is gone). Two processes can use the same CPU time,
-    one on an idle box and one on a full box: what they waited for it tells them apart."""
-    total = 0
+def proc_sched_s(pid: int) -> tuple[float, float] | None:
+    """(ran, waited): seconds the threads of a process ran on a CPU and spent runnable but waiting for one so far,
+    summed over its threads (/proc/PID/task/*/schedstat, its first two fields); None once it is gone. Two processes
+    can use the same CPU time, one on an idle box and one on a full box: what they waited for it tells them apart."""
+    ran = waited = 0
     try:
-        for tid in os.listdir(f"/proc/{pid}/task"):
-            try:
-                with open(f"/proc/{pid}/task/{tid}/schedstat") as f:
-                    total += int(f.read().split()[1])
-            except (OSError, IndexError, ValueError):
-                continue  # a thread that ended meanwhile
+        tasks = os.listdir(f"/proc/{pid}/task")
     except OSError:
-        return float("nan")
-    return total / 1e9
+        return None
+    for tid in tasks:
+        try:
+            with open(f"/proc/{pid}/task/{tid}/schedstat") as f:
+                fields = f.read().split()
+            ran, waited = ran + int(fields[0]), waited + int(fields[1])
+        except (OSError, IndexError, ValueError):
+            continue  # a thread that ended meanwhile
+    return ran / 1e9, waited / 1e9
+
+
+def proc_waited_s(pid: int) -> float:
+    """Seconds the threads of a process spent waiting for a CPU so far (:func:`proc_sched_s`); NaN when it is gone."""
+    sched = proc_sched_s(pid)
+    return float("nan") if sched is None else sched[1]
 
 
 def box_idle_s() -> tuple[float, float]:

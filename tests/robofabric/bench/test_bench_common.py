@@ -49,14 +49,17 @@ def test_a_busy_box_and_a_process_waiting_for_its_cpu_are_read_from_proc():
     import os
     import time
 
-    from robofabric.bench.common import box_idle_s, proc_waited_s
+    from robofabric.bench.common import box_idle_s, proc_sched_s, proc_waited_s
 
     total0, idle0 = box_idle_s()
     waited0 = proc_waited_s(os.getpid())
+    sched0 = proc_sched_s(os.getpid())
     spin = time.monotonic() + 0.3
     while time.monotonic() < spin:  # some CPU of this process between the readings
         pass
     total1, idle1 = box_idle_s()
     assert total1 > total0 and idle1 >= idle0 and idle1 - idle0 <= total1 - total0
     assert waited0 >= 0 and proc_waited_s(os.getpid()) >= waited0
-    assert math.isnan(proc_waited_s(2**22 + 12345))  # a process that is not there
+    sched1 = proc_sched_s(os.getpid())
+    assert sched0 is not None and sched1 is not None and sched1[0] - sched0[0] >= 0.2  # the spin ran, and was counted
+    assert math.isnan(proc_waited_s(2**22 + 12345)) and proc_sched_s(2**22 + 12345) is None  # a process not there
