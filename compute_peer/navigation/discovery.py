@@ -75,6 +75,8 @@ class RobotDescriptions:
             on_error=lambda exc: log.debug("robot discovery failed: %s", exc),
         )
         self._lock = threading.RLock()
+        self.on_described: Callable[[set[str]], None] | None = None
+        """Called with the mobile robots followed after each lookup the sims answered (outside the lock)."""
 
     def close(self) -> None:
         """No lookup starts after this (one under way ends on its own)."""
@@ -148,4 +150,7 @@ class RobotDescriptions:
                 if r.base is not None:
                     self._reverse[r.id] = bool(r.base.reverse)
             self._described = known | set(self._followed())  # robots already followed stay
+            followed = set(self._described)
+        if self.on_described is not None:
+            self.on_described(followed)
         return len(described)
