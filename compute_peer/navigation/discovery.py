@@ -76,7 +76,8 @@ class RobotDescriptions:
         )
         self._lock = threading.RLock()
         self.on_described: Callable[[set[str]], None] | None = None
-        """Called with the mobile robots followed after each lookup the sims answered (outside the lock)."""
+        """Called with the mobile robots to hear after each lookup the sims answered (outside the lock): the ones
+        described, and the ones followed that no sim described as another kind."""
 
     def close(self) -> None:
         """No lookup starts after this (one under way ends on its own)."""
@@ -150,7 +151,8 @@ class RobotDescriptions:
                 if r.base is not None:
                     self._reverse[r.id] = bool(r.base.reverse)
             self._described = known | set(self._followed())  # robots already followed stay
-            followed = set(self._described)
+            # an arm whose flange pose came before any sim answered is followed too (it stays): not one to hear
+            heard = known | (self._described - self._not_mobile)
         if self.on_described is not None:
-            self.on_described(followed)
+            self.on_described(heard)
         return len(described)
