@@ -45,6 +45,7 @@ def student(world: str, endpoint: str, index: int, seconds: float, out: str) -> 
     import numpy as np
 
     from user_peer.api import connect
+    from user_peer.errors import NotOwner
 
     t0 = time.monotonic()
     res: dict[str, Any] = {"index": index, "moves": [], "refused": 0, "errors": [], "lost": [], "join_s": None}
@@ -66,6 +67,8 @@ def student(world: str, endpoint: str, index: int, seconds: float, out: str) -> 
                     res["moves"].append(time.monotonic() - t)
                 except Exception as exc:  # a refusal or a timeout: counted, and the class goes on
                     res["refused"] += 1
+                    if isinstance(exc, NotOwner):  # hers no longer: a lease lost (to her own stall, or not)
+                        res["not_owner"] = res.get("not_owner", 0) + 1
                     if len(res["errors"]) < 5:
                         res["errors"].append(f"{type(exc).__name__}: {exc}")
                     time.sleep(0.2)
@@ -283,6 +286,11 @@ def run_one(n: int, seconds: float, tmp: Path, *, extra: int = 0) -> dict[str, A
         # robots whose owner said her own renewals stalled long enough to lose them (STALL_LOSES_S)
         "lost_to_stalls": sum(len(r["lost"]) for r in results if r.get("renewals_late_s", 0.0) >= STALL_LOSES_S),
         "refused": sum(r["refused"] for r in results),
+        # of them, commands refused as no longer hers by a student whose own stall lost her robots (she goes on
+        # driving what the lease took back: the lease's doing, as the loss itself)
+        "refused_after_stalls": sum(
+            r.get("not_owner", 0) for r in results if r["lost"] and r.get("renewals_late_s", 0.0) >= STALL_LOSES_S
+        ),
         "errors": [e for r in results for e in r["errors"]][:5],
         "lost_detail": [x for r in results for x in r["lost"]][:5] + why,
         "rtf": rtf,

@@ -76,6 +76,17 @@ def test_move_joints_reaches_targets_and_matches_the_viewers_fk(user):
         arm.move_joints(np.radians([0, 120, 0, 0, 0, 0]))
 
 
+def _nearest_on_path(states: list, point: np.ndarray, *, max_gap_s: float) -> float:
+    """How near (largest joint's difference) the joints came to ``point``, along the straight segments between
+    consecutive states at most ``max_gap_s`` of sim time apart (the states themselves are samples of the path)."""
+    t = np.linspace(0.0, 1.0, 21)[:, None]
+    best = min(float(np.max(np.abs(s.q - point))) for s in states)
+    for a, b in zip(states, states[1:]):
+        if b.header.stamp - a.header.stamp <= max_gap_s:
+            best = min(best, float(np.min(np.max(np.abs(a.q + t * (b.q - a.q) - point), axis=1))))
+    return best
+
+
 def test_a_joint_trajectory_is_played_by_the_sim_at_its_times_through_its_points(user):
     """``follow_joints``: sent once, played in the sim's time (its stamps), through the middle point, to the end."""
     w = user("alice")
@@ -114,8 +125,10 @@ def test_a_joint_trajectory_is_played_by_the_sim_at_its_times_through_its_points
     seen = (departure, arrival)
     assert departure[1] - departure[0] <= 0.5 and arrival[1] - arrival[0] <= 0.5, seen
     assert arrival[1] - departure[0] >= 1.9 and arrival[0] - departure[1] <= 2.1, seen
-    passed = min(float(np.max(np.abs(s.q - mid))) for s in states)
-    assert passed < 0.01, passed  # through the middle point
+    # through the middle point: between two states seen at most 0.1 s of sim time apart (a burst of a starved sim
+    # put 0.0116 rad between mid and the nearest state seen in run 51, at 0.27 rad/s); a cut corner passes 0.1 away
+    passed = _nearest_on_path(states, mid, max_gap_s=0.1)
+    assert passed < 0.01, passed
     with pytest.raises(ValueError, match="not decrease"):
         arm.follow_joints([2.0, 1.0], [mid, end])
 

@@ -20,5 +20,7 @@ def test_a_class_of_eight_loses_nothing(tmp_path):
     if r["lost_to_stalls"]:
         print(f"lost with their owner's stall past the lease: {r['lost_to_stalls']}: {r['lost_detail']}")
     assert r["lost"] == r["lost_to_stalls"], r["lost_detail"]
-    assert r["refused"] == 0, r["errors"]
+    # and the commands she went on sending to what the lease took back are refused as hers no longer (run 51: s03's
+    # round began 1.7 s late, arm3 and base3 went back, and 56 of her commands were refused): any other refusal fails
+    assert r["refused"] == r["refused_after_stalls"], r["errors"]
     assert r["fewest_moves"] >= 1, r  # every student's arm moved (0.35 s a move when alone)
