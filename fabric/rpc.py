@@ -232,7 +232,7 @@ class Rpc:
         t0 = time.monotonic()
         deadline, renewed = t0 + timeout, False
         went_at: float | None = None  # when an ask ended early with its server gone under it (_server_went)
-        at_once = False  # the last ask ended well before its limit: zenoh found nobody to ask
+        at_once = False  # the last ask found nobody: it ended without zenoh's Timeout
         while True:
             asked_at = time.monotonic()
             timed_out = self._ask(selector, request, deadline, all_replies, expected, replies, errors)
@@ -473,7 +473,7 @@ def _refusal(err: Any) -> str | None:
 def _no_reply(selector: str, waited: float, timeout: float, *, at_once: bool | None = None) -> NoReply:
     """Say what happened: zenoh ends a query at once when nobody serves the key, and waits the whole time
     limit only for a server that is there but silent ("within 5 s" after 0 s would mislead). ``at_once``: whether
-    the last ask ended at once (None: judged from ``waited``). A query that found nobody at once may still have
+    the last ask found nobody, ending without zenoh's Timeout (None: judged from ``waited``). A query that found nobody at once may still have
     waited its limit out to hear whether its own link had closed (its process stood still): said so, not as a
     server that was silent (a test at load read "no server answered in time" where nobody served the key)."""
     if at_once is None:
