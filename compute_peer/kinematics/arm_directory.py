@@ -18,6 +18,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
+from typing import Callable
 
 from fabric import keys
 from fabric.interfaces import NoReply, ServiceError
@@ -72,6 +73,9 @@ class ArmDirectory:
         self._closed = False
         self._retry_s = DISCOVERY_INTERVAL  # the wait before the next retry of an unanswered lookup
         self._retry: threading.Timer | None = None
+        # called with the arms' names after each lookup the sims answered, outside the lock (the service hears
+        # those arms' joints alone from then on); in the thread that looked up, which may be zenoh's
+        self.on_answered: Callable[[list[str]], None] | None = None
 
     def add(self, robot: str, placement: ArmPlacement) -> PlacedArm:
         """Serve ``robot`` (an arm of type ``placement.type`` at ``placement.pose``)."""
@@ -145,7 +149,10 @@ class ArmDirectory:
                 log.info("serving kinematics for %s (%s)", r.id, r.type)
             except Exception as exc:  # a robot type this installation has no model for
                 log.warning("cannot serve kinematics for %s (%s): %s", r.id, r.type, exc)
-        return len(self.names)
+        names = self.names
+        if self.on_answered is not None:
+            self.on_answered(names)
+        return len(names)
 
     def _failed(self, why: str, *, quiet: bool = False) -> None:
         self.counters["discovery_failed"] = self.counters.get("discovery_failed", 0) + 1

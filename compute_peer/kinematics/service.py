@@ -88,8 +88,13 @@ class KinematicsService:
             "refusals": 0,
             "streamed": 0,
             "stream_unreachable": 0,
+            "joints_narrowed": 0,  # 1 once only the described arms' joints are heard (_hear_arms)
         }
         self.directory = ArmDirectory(fabric, discover=discover, clock=self._clock, counters=self.counters)
+        self.directory.on_answered = self._arms_answered
+        self._joint_keys: frozenset[str] = frozenset()  # robot/{id}/joints of each arm heard on its own subscription
+        self._joint_subs: list[Any] = []
+        self._joints_wildcard: Any = None  # robot/*/joints, until the sims have described the world's arms
         for rid, placement in (arms or {}).items():
             self.directory.add(rid, placement)
         self.ik_streams = IKStreams(fabric, streams, self.directory, self._latest_joints, self.counters)
@@ -112,7 +117,12 @@ class KinematicsService:
         for name, (handler, expected) in handlers.items():
             self._resources.append(f.rpc.serve(keys.srv_per_subject(w, name), handler, expected=expected))
             self._resources.append(f.rpc.serve(keys.srv_per_subject(w, name, f.peer_id), handler, expected=expected))
-        self._resources.append(f.subscribe(keys.robot_stream_all(w, "joints"), self._on_joints, expected=JointState))
+        if self.directory.discovering:
+            self._joints_wildcard = f.subscribe(
+                keys.robot_stream_all(w, "joints"), self._on_any_joints, expected=JointState
+            )
+        else:  # the arms given are all there will be
+            self._hear_arms(self.directory.names)
         for _, obj in self.streams:
             self._resources.append(
                 f.subscribe(keys.object_pose_all(w, obj), self.ik_streams.target_seen, expected=Pose, history=True)
@@ -146,10 +156,13 @@ class KinematicsService:
             if self._closed:
                 return
             self._closed = True
+            joints = [*self._joint_subs, *([self._joints_wildcard] if self._joints_wildcard is not None else [])]
+            self._joint_subs, self._joints_wildcard = [], None
         self.directory.close()
         if self._loop is not None:
             self._loop.close()
         undeclare_all(self._resources)
+        undeclare_all(joints)
 
     # ------------------------------------------------------------------ arms
 
@@ -231,6 +244,40 @@ class KinematicsService:
         )
 
     # ------------------------------------------------------------------ joints (the IK's seeds)
+
+    def _on_any_joints(self, key: str, msg: JointState) -> None:
+        """Joints heard on ``robot/*/joints``: passed on unless their arm is heard on its own subscription already."""
+        if key not in self._joint_keys:
+            self._on_joints(key, msg)
+
+    def _arms_answered(self, names: list[str]) -> None:
+        """After each lookup the sims answered: hear the arms' joints alone, declared on a thread of its own (the
+        lookup may run in a query's handler, on zenoh's callback thread). Nothing to do once narrowed to these."""
+        with self._lock:
+            if self._closed or (self._joints_wildcard is None and self._joint_keys.issuperset(self._keys_of(names))):
+                return
+        threading.Thread(target=self._hear_arms, args=(names,), name="kinematics-narrow", daemon=True).start()
+
+    def _keys_of(self, names: Iterable[str]) -> set[str]:
+        return {keys.robot_joints(self.world, robot) for robot in names}
+
+    def _hear_arms(self, names: list[str]) -> None:
+        """Hear the joints of ``names`` alone, each on its own key, and drop ``robot/*/joints``: on it every base's
+        wheel joints came at 100 Hz, each decoded and passed over, and were published by the sims for this service
+        alone. An arm a later lookup names is added; an arm no sim described is not heard (a request for it looks
+        the world up again only when the sims there changed)."""
+        with self._lock:
+            if self._closed:
+                return
+            new = sorted(self._keys_of(names) - self._joint_keys)
+            # marked before declared: the wildcard passes over what the key's own subscription hears from then on
+            self._joint_keys = self._joint_keys | set(new)
+            for key in new:
+                self._joint_subs.append(self.fabric.subscribe(key, self._on_joints, expected=JointState))
+            wildcard, self._joints_wildcard = self._joints_wildcard, None
+        if wildcard is not None:
+            undeclare_all([wildcard])
+            self.counters["joints_narrowed"] = 1
 
     def _on_joints(self, key: str, msg: JointState) -> None:
         """Keep the latest joints of the arms this peer serves, and of nothing else (a flood of
