@@ -25,10 +25,11 @@ a world of R bases: a few pages in a class-sized world give the server's cost pe
 Pages, sim and console share this machine (and the chromium processes are the largest load): the figures are
 the whole class on one box, not the server alone.
 
-Chromium composites the pages as it chooses on this machine (no GPU: in software), since the console's page
-draws no WebGL. ``--swiftshader`` forces its compositing through SwiftShader's software GL instead (the flags the
-Rerun web viewer's benchmark needs for WebGL): every repaint then costs the GPU process ~20 ms of CPU for a
-1280 x 1350 page, whatever changed, about 0.1 core per page that changes five times a second.
+Chromium composites the pages as it chooses on this machine (no GPU: in software) unless ``--swiftshader``, which
+gives it the flags of the tests' browsers (``viewer_web.CHROMIUM_ARGS``): WebGL drawn by SwiftShader's software GL,
+the page composited on the CPU. Until 2026-12-03 those flags composited through SwiftShader too: every repaint then
+cost the GPU process ~20 ms of CPU for a 1280 x 1350 page, whatever changed (a page driving its base at
+``--view-fps 2``: 0.59 of a core, 0.21 composited on the CPU; docs/testing.md).
 """
 
 from __future__ import annotations
@@ -226,10 +227,12 @@ def _open_pages(
 
 
 def browser_args(swiftshader: bool) -> list[str]:
-    """Chromium's flags: the viewer benchmark's, less its forced SwiftShader GL unless ``swiftshader``."""
+    """Chromium's flags: the viewer benchmark's, less its forced SwiftShader GL and CPU compositing unless
+    ``swiftshader``."""
     from robofabric.bench.viewer_web import CHROMIUM_ARGS
 
-    return list(CHROMIUM_ARGS) if swiftshader else [a for a in CHROMIUM_ARGS if "swiftshader" not in a]
+    forced = ("swiftshader", "gpu-compositing")
+    return list(CHROMIUM_ARGS) if swiftshader else [a for a in CHROMIUM_ARGS if not any(f in a for f in forced)]
 
 
 def _start_class(
@@ -646,8 +649,8 @@ def command(
         bool,
         typer.Option(
             "--swiftshader",
-            help="Composite the pages through SwiftShader's software GL "
-            "(forced, as the Rerun viewer's benchmark does), not as Chromium chooses.",
+            help="The tests' Chromium flags (as the Rerun viewer's benchmark): WebGL forced through SwiftShader's "
+            "software GL, the pages composited on the CPU; not as Chromium chooses.",
         ),
     ] = False,
     robots: Annotated[
