@@ -210,6 +210,10 @@ def test_a_3_s_joint_trajectory_takes_3_s_through_its_middle_point(live, procs, 
     assert importlib.util.find_spec("control_msgs") is not None, BUILD_TF2.replace("tf2_msgs", "control_msgs")
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     back_mid = [(a + b) / 2 - 0.15 for a, b in zip(start_q, target)]
+    # where the arm stands when the goal goes: at rest within 2e-3 of the target (what "arrived" waits for), not
+    # always 1e-3, the measure's "left" (run 59 of 2026-12-03: the last state before the goal already 1e-3 from the
+    # target, read as the arm gone before the goal: (0, 385))
+    rest_q = arm1_states(out)[-1][1]
     sent = time.monotonic()
     results, feedback = follow(
         domain,
@@ -228,7 +232,7 @@ def test_a_3_s_joint_trajectory_takes_3_s_through_its_middle_point(live, procs, 
         what="arm1 back at the start",
         seen=lambda: (arm1_states(out)[-1:], procs.output(bridge)[-1500:]),
     )
-    earliest, latest, seen = trajectory_took(out, sent, target, start_q)
+    earliest, latest, seen = trajectory_took(out, sent, rest_q, start_q)
     assert earliest < 3.3 and latest > 2.7, (earliest, latest)
     assert through(seen, back_mid) < THROUGH_RAD, (through(seen, back_mid), back_mid)
     assert len(feedback) >= 5 and list(feedback[0].joint_names) == names
