@@ -87,6 +87,7 @@ app = typer.Typer(
 )
 
 _broken: list[tuple[str, str]] = []
+_loaded: set[str] = set()  # the entry points whose commands are in :data:`app` (or that failed), by name
 
 
 def resolve_annotations(typer_app: typer.Typer) -> None:
@@ -195,8 +196,14 @@ def defer_rich_extras() -> None:
 
 def load_plugins() -> None:
     """Add every installed package's commands (entry points of ``robofabric.commands``) to :data:`app`; a plug-in
-    that fails to load is named in a warning at each run, never fatal."""
+    that fails to load is named in a warning at each run, never fatal.
+
+    Once per entry point and process: :func:`main` calls it at each run, and a script or a test that ran the CLI
+    again added every command again (in one process, the second help took 0.035 s of CPU, the eighth 0.1 s)."""
     for ep in sorted(entry_points(group=GROUP), key=lambda e: e.name):
+        if ep.name in _loaded:
+            continue
+        _loaded.add(ep.name)
         try:
             register = ep.load()
             register(app)
