@@ -118,6 +118,25 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
                     self.workqueue.move_to_end(unit, last=False)
             super()._assign_work_unit(node)
 
+        def remove_node(self, node: Any) -> str | None:
+            """A worker gone (at the end, or crashed: the hang watch ends a hung test's worker): xdist 3.8's
+            ``LoadScopeScheduling`` kept a crashed worker's collection, so its replacement's never completed the
+            count, was never given work nor ended, and the run sat idle (run 3 of 2026-12-04, 40 min); and it put
+            the crashed test back in line, to run again on the replacement. Here the crashed test is reported
+            once, as xdist's ``load`` does, and the replacement runs the rest of its unit."""
+            self.registered_collections.pop(node, None)
+            workload = self.assigned_work.pop(node)
+            crashed = next((t for unit in workload.values() for t, done in unit.items() if not done), None)
+            if crashed is None:
+                return None
+            for unit in workload.values():
+                if crashed in unit:
+                    unit[crashed] = True
+            self.workqueue.update((scope, unit) for scope, unit in workload.items() if not all(unit.values()))
+            for other in self.assigned_work:
+                self._reschedule(other)
+            return crashed
+
     return ByWorkUnit(config, log)  # type: ignore[arg-type]
 
 

@@ -53,12 +53,30 @@ def test_after_it_runs_on_a_new_worker():
 """
 
 
+# the suite's own scheduler (`make test`'s `--dist loadgroup`), loaded from this tree's tests/conftest.py
+UNITS = """
+import importlib.util
+
+_spec = importlib.util.spec_from_file_location("robofabric_tests_conftest", {conftest!r})
+_mod = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_mod)
+pytest_xdist_make_scheduler = _mod.pytest_xdist_make_scheduler
+"""
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(120)
-def test_a_hung_test_is_ended_with_its_stacks_said_its_processes_killed_and_the_run_goes_on(tmp_path: Path) -> None:
+@pytest.mark.parametrize("dist", ["load", "loadgroup"])
+def test_a_hung_test_is_ended_with_its_stacks_said_its_processes_killed_and_the_run_goes_on(
+    tmp_path: Path, dist: str
+) -> None:
+    """On ``make test``'s ``loadgroup`` too: xdist's own scheduling of units gave the crashed worker's replacement
+    nothing and never ended the run (tests/conftest.py, ``remove_node``)."""
     suite = tmp_path / "suite"
     suite.mkdir()
     (suite / "test_hung.py").write_text(textwrap.dedent(HUNG))
+    conftest = Path(__file__).resolve().parents[1] / "conftest.py"
+    (suite / "conftest.py").write_text(UNITS.format(conftest=str(conftest)))
     repo = str(Path(__file__).resolve().parents[2])  # this tree's robofabric, wherever the venv's install points
     env = {
         **os.environ,
@@ -78,6 +96,8 @@ def test_a_hung_test_is_ended_with_its_stacks_said_its_processes_killed_and_the_
             "no:cacheprovider",
             "-n",
             "1",
+            "--dist",
+            dist,
             "--timeout",
             "2",
             f"--basetemp={tmp_path / 'base'}",
