@@ -119,12 +119,12 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
             super()._assign_work_unit(node)
 
         def remove_node(self, node: Any) -> str | None:
-            """A worker gone (at the end, or crashed: the hang watch ends a hung test's worker): xdist 3.8's
-            ``LoadScopeScheduling`` kept a crashed worker's collection, so its replacement's never completed the
-            count, was never given work nor ended, and the run sat idle (run 3 of 2026-12-04, 40 min); and it put
-            the crashed test back in line, to run again on the replacement. Here the crashed test is reported
-            once, as xdist's ``load`` does, and the replacement runs the rest of its unit."""
-            self.registered_collections.pop(node, None)
+            """A worker gone, at the end or crashed (the hang watch ends a hung test's worker). xdist 3.8's
+            ``LoadScopeScheduling`` put the crashed test back in line with the rest of its unit, so each replacement
+            ran it again, hung again and was ended again, until xdist's limit of restarts. Here the crashed test is
+            reported once, as xdist's ``load`` does, and the replacement runs the rest of its unit. (A crashed
+            worker's collection stays registered: the scheduler counts the collections against the initial
+            workers, and a run whose count fell short never ended: b94332a's run 4.)"""
             workload = self.assigned_work.pop(node)
             crashed = next((t for unit in workload.values() for t, done in unit.items() if not done), None)
             if crashed is None:

@@ -75,6 +75,8 @@ def test_a_hung_test_is_ended_with_its_stacks_said_its_processes_killed_and_the_
     suite = tmp_path / "suite"
     suite.mkdir()
     (suite / "test_hung.py").write_text(textwrap.dedent(HUNG))
+    # a worker that ends first
+    (suite / "test_other.py").write_text("def test_on_the_other_worker():\n    assert True\n")
     conftest = Path(__file__).resolve().parents[1] / "conftest.py"
     (suite / "conftest.py").write_text(UNITS.format(conftest=str(conftest)))
     repo = str(Path(__file__).resolve().parents[2])  # this tree's robofabric, wherever the venv's install points
@@ -95,7 +97,7 @@ def test_a_hung_test_is_ended_with_its_stacks_said_its_processes_killed_and_the_
             "-p",
             "no:cacheprovider",
             "-n",
-            "1",
+            "2",
             "--dist",
             dist,
             "--timeout",
@@ -114,7 +116,7 @@ def test_a_hung_test_is_ended_with_its_stacks_said_its_processes_killed_and_the_
     assert "+++ hang watch: test_hung.py::test_hangs_where_the_timeout_cannot_reach still running 4 s" in out, out
     assert "test_hangs_where_the_timeout_cannot_reach" in out.split("+++ hang watch")[1], out  # its stack
     assert f"exits {HUNG_EXIT}" in out and "crashed" in out, out
-    assert "1 failed, 1 passed" in out, out
+    assert "1 failed, 2 passed" in out and "INTERNALERROR" not in out, out
     pid = int((tmp_path / "child.pid").read_text())
     assert not Path(f"/proc/{pid}").exists() or "Z" in Path(f"/proc/{pid}/stat").read_text().split(")")[1][:3], (
         f"its child {pid} still runs"
