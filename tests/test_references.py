@@ -42,6 +42,7 @@ NOT_REFERENCES = {
         "sim_peer/stray.py",
     ),  # the made-up tree's module in no room of the sim (exhaustive layers)
     ("tests/robofabric/test_hang_watch.py", "test_hung.py"),  # the made-up suite the hang watch is tried on
+    ("tests/robofabric/test_hang_watch.py", "test_other.py"),  # and the made-up module beside it
     # the made-up rooms the narrow-shells scan is tried on: a clean shell, and one taking the host each way
     ("tests/sim_peer/test_narrow_shells.py", "sim_peer/shards/clean.py"),
     ("tests/sim_peer/test_narrow_shells.py", "sim_peer/shards/param.py"),
