@@ -129,9 +129,7 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
             crashed = next((t for unit in workload.values() for t, done in unit.items() if not done), None)
             if crashed is None:
                 return None
-            for unit in workload.values():
-                if crashed in unit:
-                    unit[crashed] = True
+            workload[self._split_scope(crashed)][crashed] = True
             self.workqueue.update((scope, unit) for scope, unit in workload.items() if not all(unit.values()))
             for other in self.assigned_work:
                 self._reschedule(other)

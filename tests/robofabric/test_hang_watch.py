@@ -70,8 +70,9 @@ pytest_xdist_make_scheduler = _mod.pytest_xdist_make_scheduler
 def test_a_hung_test_is_ended_with_its_stacks_said_its_processes_killed_and_the_run_goes_on(
     tmp_path: Path, dist: str
 ) -> None:
-    """On ``make test``'s ``loadgroup`` too: xdist's own scheduling of units gave the crashed worker's replacement
-    nothing and never ended the run (tests/conftest.py, ``remove_node``)."""
+    """On ``make test``'s ``loadgroup`` too, with the suite's scheduler (tests/conftest.py, ``remove_node``): xdist's
+    own put the crashed test back in line, to hang again on each replacement; and the other worker ends first, so a
+    scheduler that lost count of the collections never ends the run."""
     suite = tmp_path / "suite"
     suite.mkdir()
     (suite / "test_hung.py").write_text(textwrap.dedent(HUNG))
