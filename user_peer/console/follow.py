@@ -10,10 +10,17 @@ A base followed in full is its pose and scan, not its wheels' joints (:func:`str
 100 Hz, and no part of the page shows them. With them, a class of 32 each following her base was 5,440 messages a
 second handed to Python in the console server (170 a page), and zenoh's threads delivering them held the GIL longer
 than the event loop did.
+
+A student's pages share her world (one session per user, :mod:`.login`): a second tab, or the tab before a reload
+that lingers until its connection times out. Each page says what it shows (:func:`follow_for`) and the world
+follows what any of them shows. When each page made the world follow only its own robots, two pages of hers let
+go of each other's robot at every redraw: a zoom asked while the other page had just let go of her base centred on
+the map's middle ("around its middle", make test in CI, 2026-12-04).
 """
 
 from __future__ import annotations
 
+import weakref
 from typing import TYPE_CHECKING, Iterable
 
 from robots.kinds import facts
@@ -23,7 +30,11 @@ if TYPE_CHECKING:
     from user_peer.robot import Robot
     from user_peer.world import World
 
-__all__ = ["shown", "follow_only", "followed", "streams"]
+__all__ = ["shown", "follow_only", "follow_for", "forget", "followed", "streams"]
+
+# what each page of a world shows, by its world's following (pages and followings: gone with their last reference)
+_SHOWN: weakref.WeakKeyDictionary[Following, weakref.WeakKeyDictionary[object, frozenset[str]]]
+_SHOWN = weakref.WeakKeyDictionary()
 
 
 def shown(world: World, selected: str | None, handles: dict[str, Robot], panels: Iterable[Robot | None]) -> set[str]:
@@ -48,6 +59,22 @@ def follow_only(following: Following, wanted: set[str]) -> None:
         following.unfollow(rid)
     for rid in wanted - followed:
         following.robot(rid)
+
+
+def follow_for(following: Following, page: object, wanted: set[str]) -> None:
+    """``page`` shows ``wanted``: ``following`` follows what any of its pages shows, and no other robot. On the
+    pages' event loop (one thread: the pages' table needs no lock)."""
+    pages = _SHOWN.setdefault(following, weakref.WeakKeyDictionary())
+    pages[page] = frozenset(wanted)
+    follow_only(following, set().union(*pages.values()))
+
+
+def forget(following: Following, page: object) -> None:
+    """``page`` closed: ``following`` keeps only what its other pages show."""
+    pages = _SHOWN.get(following)
+    if pages is None or pages.pop(page, None) is None:
+        return
+    follow_only(following, set().union(*pages.values()))
 
 
 def followed(world: World, handles: dict[str, Robot]) -> dict[str, Robot]:

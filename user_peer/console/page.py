@@ -218,7 +218,9 @@ class ConsolePage:
         self.panels.end()
         if self.view is not None:
             self.view.close()
-        if self.world is not None:  # stopping her robots waits on the network: never on the pages' event loop
+        if self.world is not None:
+            follow.forget(self.world.following, self)  # her other pages keep following what they show
+            # stopping her robots waits on the network: never on the pages' event loop
             threading.Thread(
                 target=self.console.logins.leave,
                 args=(self.user, self.world),
@@ -334,9 +336,10 @@ class ConsolePage:
 
     def follow_shown(self) -> None:
         """Follow in full only the robots the page shows (:func:`.follow.shown`): the selected one, and the panels'
-        robots she owns; the others are drawn from the view's shared pose feed."""
-        follow.follow_only(
-            self.world.following, follow.shown(self.world, self.selected, self.handles, self.robots.values())
+        robots she owns; the others are drawn from the view's shared pose feed. Her other pages' robots stay
+        followed (:func:`.follow.follow_for`)."""
+        follow.follow_for(
+            self.world.following, self, follow.shown(self.world, self.selected, self.handles, self.robots.values())
         )
 
     async def _ownership(self, op: str) -> None:

@@ -8,7 +8,7 @@ import numpy as np
 from fabric import keys
 from fabric.interfaces import JointState, Pose
 from robofabric.testing import wait_until
-from user_peer.console.follow import follow_only, followed, streams
+from user_peer.console.follow import follow_for, follow_only, followed, forget, streams
 from user_peer.following import Following
 from user_peer.latest import Latest
 
@@ -44,6 +44,30 @@ def test_a_page_follows_the_robots_it_shows_and_lets_go_of_the_others(world, con
     assert pose_of("base1") is None  # published with base3's, never decoded here
     follow_only(following, set())
     assert following.robots == frozenset() and followed(_World(following), handles) == {}
+
+
+class _Page:
+    """A page, as :func:`follow_for` knows it: a key."""
+
+
+def test_two_pages_of_one_student_follow_what_either_shows_until_one_closes(world, connect):
+    """Her pages share her world's following: her tab showing arm1 (or the tab before a reload, until its
+    connection times out) no longer lets go of base1, which her other tab shows, at each of its redraws (a zoom then
+    centred on the map's middle: CI, 2026-12-04)."""
+    following = Following(connect("user", "dave"), world, Latest())
+    old, new = _Page(), _Page()
+    follow_for(following, old, {"arm1"})
+    follow_for(following, new, {"base1"})
+    assert following.robots == {"arm1", "base1"}
+    follow_for(following, old, {"arm1"})  # the old tab's next redraw
+    assert following.robots == {"arm1", "base1"}
+    follow_for(following, new, {"base3"})  # she selected base3 in the new tab: base1 is let go of
+    assert following.robots == {"arm1", "base3"}
+    forget(following, old)  # the old tab closed
+    assert following.robots == {"base3"}
+    forget(following, old)  # once is enough
+    forget(following, new)
+    assert following.robots == frozenset()
 
 
 def test_a_page_keeps_a_bases_pose_but_not_its_wheels_joints_and_an_arms_joints(world, connect):
