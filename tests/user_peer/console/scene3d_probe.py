@@ -1,6 +1,11 @@
 """What the console's 3D view drew, read from the page (three.js through NiceGUI's ``getElement``), for the
 browser tests: each link's cylinder ends in the world, the IK target's sphere and its place on the screen; and a
-real mouse drag of that sphere."""
+real mouse drag of that sphere.
+
+The sphere is read where it was last drawn (its ``matrixWorld``, seen through the camera as last drawn), not where
+it was last moved to (its ``position``): three.js updates those matrices only when it renders, 2 times a second in
+these tests (``--view-fps 2``), and the drag's ray is cast against them. A drag aimed at a sphere moved but not yet
+drawn missed it, and nothing moved (1 run in 4 of the 3D test alone, 2026-12-04); a user aims at what she sees."""
 
 from __future__ import annotations
 
@@ -19,8 +24,9 @@ SCENE3D_JS = """() => {
     }
   });
   if (!m || !m.visible) return {ends};
-  const v = m.position.clone().project(s.camera);
-  return {ends, target: [m.position.x, m.position.y, m.position.z],
+  const w = m.position.clone().setFromMatrixPosition(m.matrixWorld);  // as last drawn
+  const v = w.clone().applyMatrix4(s.camera.matrixWorldInverse).applyMatrix4(s.camera.projectionMatrix);
+  return {ends, target: [w.x, w.y, w.z],
           screen: [r.left + (v.x + 1) / 2 * r.width, r.top + (1 - v.y) / 2 * r.height]};
 }"""
 
