@@ -49,6 +49,13 @@ RELINK_CONFIRM_S = 0.5
 TOKENS_WENT_S = 1.0
 """A query that found nobody at once less than this after a liveliness token went waits to hear whether its own link
 closed (:meth:`Rpc._lost_under`)."""
+SERVER_BACK_S = 5.0
+"""After a server's liveliness token went (a compute peer or a sim this session watches), how long a query that found
+nobody at once is asked again (every :data:`RELINK_POLL_S`, within its limit): a server starved past its lease loses
+its link, and with it its services, until it runs again and reconnects, a second or two later at load; a standby sim
+takes over within about a second. Before, a student's plan asked in that gap met "nobody serves it" at once, though
+the compute peer that had just built her map was back a moment later (the scenario test's bob, run 4 of the
+twenty-third session; docs/testing.md). A server gone for good costs its askers this long, within their limits."""
 FROZEN_S = 1.0
 """An ask that ended this long past its limit was not answered because its own process did not run: paused (SIGSTOP,
 a laptop's lid) or starved. Its link's loss, if it lost it meanwhile, is waited for this long more
@@ -233,6 +240,7 @@ class Rpc:
         deadline, renewed = t0 + timeout, False
         went_at: float | None = None  # when an ask ended early with its server gone under it (_server_went)
         at_once = False  # the last ask found nobody: it ended without zenoh's Timeout
+        left_seen = False  # asked again already because a server's token went lately (_server_left_lately)
         while True:
             asked_at = time.monotonic()
             timed_out = self._ask(selector, request, deadline, all_replies, expected, replies, errors)
@@ -248,6 +256,9 @@ class Rpc:
                 continue
             if not renewed and (again := self._renewed(selector, t0, deadline, timeout)) is not None:
                 deadline, renewed = again, True
+                continue
+            if at_once and self._server_left_lately(deadline, counted=left_seen):
+                left_seen = True
                 continue
             went_at = self._server_went(asked_at, ended_at, deadline, went_at)
             if went_at is None:
@@ -346,6 +357,20 @@ class Rpc:
             return None
         time.sleep(RELINK_POLL_S)
         return went_at
+
+    def _server_left_lately(self, deadline: float, *, counted: bool) -> bool:
+        """After an ask that found nobody at once: whether to ask again, because a server's token went less than
+        :data:`SERVER_BACK_S` ago (it may be reconnecting: its services come back with its link). Polled every
+        :data:`RELINK_POLL_S`, within ``deadline``; ``counted``: this query was counted already
+        (``queries_after_server_left``). Only the tokens this session watches count (a user's world: its sims and
+        compute peers); a token that went long ago leaves "nobody serves it" at once."""
+        now = time.monotonic()
+        if now + RELINK_POLL_S >= deadline or now - self._token_gone_at() > SERVER_BACK_S:
+            return False
+        if not counted:
+            self._counters["queries_after_server_left"] += 1
+        time.sleep(RELINK_POLL_S)
+        return True
 
     def _lost_under(self, asked_at: float, deadline: float) -> bool:
         """Whether the link was lost while a query asked at ``asked_at`` was out: only a query that ended early

@@ -57,8 +57,11 @@ class SimPresence:
         self._failover_callbacks: list[Callable[[str, str, list[str]], None]] = []
 
     def watch(self) -> None:
-        """Follow the sims' liveliness from now on."""
+        """Follow the sims' liveliness from now on; and the compute peers', whose going alone matters here: a
+        query that finds nobody at once just after a server's token went is asked again for a moment, while it
+        reconnects (:data:`fabric.rpc.SERVER_BACK_S`)."""
         self.fabric.watch_peers(self.seen, kind="sim")
+        self.fabric.watch_peers(lambda kind, peer, alive: None, kind="compute")
 
     @property
     def alive(self) -> bool:
