@@ -6,6 +6,7 @@ A world joined with ``compute="spread"`` sends each kinematics query to the next
 
 from __future__ import annotations
 
+import logging
 from typing import Any, Callable
 
 from fabric.interfaces import ServiceError
@@ -13,6 +14,8 @@ from fabric.session import Fabric
 from user_peer.spread import SPREAD, RoundRobin
 
 __all__ = ["ComputeRoute"]
+
+log = logging.getLogger("robofabric.user")
 
 
 class ComputeRoute:
@@ -22,6 +25,9 @@ class ComputeRoute:
         self.fabric = fabric
         self.compute = compute
         self._spread = RoundRobin(self.peers) if compute == SPREAD else None
+        # (peer, why) of each spread peer that did not answer, whose query the nearest answered instead: said in
+        # the log, and what a count of each peer's answers must allow for
+        self.skipped: list[tuple[str, str]] = []
 
     def peers(self) -> list[str]:
         """Ids of the compute peers serving this world (from liveliness): candidates for ``compute``."""
@@ -40,6 +46,8 @@ class ComputeRoute:
             if peer is None or not exc.reason.startswith("no reply"):
                 raise
             self._spread.forget(peer)
+            self.skipped.append((peer, exc.reason))
+            log.warning("compute peer %s did not answer (%s): the nearest is asked instead", peer, exc.reason)
             return call(None)
 
     def navigation_peer(self) -> str | None:

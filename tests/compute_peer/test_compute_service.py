@@ -264,7 +264,16 @@ def test_a_user_can_spread_ik_over_every_compute_peer(world, router, connect):
             # an ask whose answer a lost link swallowed is asked again (fabric/rpc.py): at load the test's in-process
             # router starved past the lease and every client lost its link once, and c1 served one IK twice
             again = lambda: w.fabric.counters["queries_after_relink"] + w.fabric.counters["queries_after_server_went"]  # noqa: E731
-            assert 2 <= svcs["c1"].counters["ik"] <= 2 + again() and 2 <= svcs["c2"].counters["ik"] <= 2 + again()
+            counts = lambda: (svcs["c1"].counters["ik"], svcs["c2"].counters["ik"])  # noqa: E731
+            # a peer that did not answer in time is skipped, the nearest asked instead, and left out until the list is
+            # read again (2 s; run 3 of 2026-12-04 at load: c1 served all four, why c2 did not answer is in skipped)
+            skipped = list(w.compute_route.skipped)
+            if not skipped:
+                assert 2 <= counts()[0] <= 2 + again() and 2 <= counts()[1] <= 2 + again(), counts()
+            else:  # every ask answered all the same, by one peer or the other
+                assert all(why.startswith("no reply") for _, why in skipped), skipped
+                assert 4 <= sum(counts()) <= 4 + len(skipped) + again(), (counts(), skipped)
+            c1_before = counts()[0]
             assert w.compute_route.navigation_peer() is None  # maps are not spread: the nearest peer holds one
             svcs.pop("c2").close()  # c2 stops serving; its token stays with its session until the list is read again
             for _ in range(2):
@@ -272,7 +281,7 @@ def test_a_user_can_spread_ik_over_every_compute_peer(world, router, connect):
                     lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer)
                 )
                 assert np.allclose(q, Q, atol=1e-9)
-            assert 4 <= svcs["c1"].counters["ik"] <= 4 + again()
+            assert c1_before + 2 <= svcs["c1"].counters["ik"] <= c1_before + 2 + again()
     finally:
         for s in svcs.values():
             s.close()
