@@ -261,15 +261,29 @@ def test_a_user_can_spread_ik_over_every_compute_peer(world, router, connect):
                     lambda peer: services.ik(w.fabric, "arm1", fk.position, fk.quaternion, Q, peer=peer)
                 )
                 assert np.allclose(q, Q, atol=1e-9)
+
             # an ask whose answer a lost link swallowed is asked again (fabric/rpc.py): at load the test's in-process
-            # router starved past the lease and every client lost its link once, and c1 served one IK twice
-            again = lambda: w.fabric.counters["queries_after_relink"] + w.fabric.counters["queries_after_server_went"]  # noqa: E731
-            counts = lambda: (svcs["c1"].counters["ik"], svcs["c2"].counters["ik"])  # noqa: E731
+            # router starved past the lease and every client lost its link once, and c1 served one IK twice. Every rule
+            # of asking again counts: in a fast suite (make test-fast, 1 run in 8) c1 served 3 and c2 2 with neither of
+            # those two rules counted; which one asked again is not known (the session's counters are in the message)
+            def again() -> int:
+                c = w.fabric.counters
+                return (
+                    sum(c[f"queries_after_{k}"] for k in ("relink", "server_went", "server_left", "open"))
+                    + c["queries_renewed"]
+                )
+
+            def counts() -> tuple[int, int]:
+                return svcs["c1"].counters["ik"], svcs["c2"].counters["ik"]
+
             # a peer that did not answer in time is skipped, the nearest asked instead, and left out until the list is
             # read again (2 s; run 3 of 2026-12-04 at load: c1 served all four, why c2 did not answer is in skipped)
             skipped = list(w.compute_route.skipped)
             if not skipped:
-                assert 2 <= counts()[0] <= 2 + again() and 2 <= counts()[1] <= 2 + again(), counts()
+                assert 2 <= counts()[0] <= 2 + again() and 2 <= counts()[1] <= 2 + again(), (
+                    counts(),
+                    {k: v for k, v in w.fabric.counters.items() if k.startswith("quer")},  # how many, asked again how
+                )
             else:  # every ask answered all the same, by one peer or the other
                 assert all(why.startswith("no reply") for _, why in skipped), skipped
                 assert 4 <= sum(counts()) <= 4 + len(skipped) + again(), (counts(), skipped)
