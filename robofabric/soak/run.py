@@ -36,7 +36,7 @@ from robofabric.soak.history import Fault, Mark, ProcExit, Record, Writer, read
 from robofabric.soak.nemesis import KINDS, VICTIMS, Nemesis
 from robofabric.testing import RemoteRoles
 
-__all__ = ["SoakConfig", "SoakResult", "Soak", "run_soak"]
+__all__ = ["SoakConfig", "SoakResult", "Soak", "after_look", "run_soak"]
 
 SIMS = ("sim-a", "sim-b")
 READY = {
@@ -56,6 +56,23 @@ UNTIL_CHECK_S = 3.0
 
 UNTIL_AFTER_S = 3.0
 """How long a run with ``until`` goes on after the catch: the observer's last lines reach the file."""
+
+
+def after_look(broken: bool, caught: bool, now: float, end: float, planned: float) -> tuple[float, bool, str]:
+    """A run with ``until`` after a look at its history so far (``broken``: whether it breaks the invariant now):
+    (its end, whether the invariant is caught, what to say; "" for nothing). A catch ends the run only once the next
+    look (:data:`UNTIL_CHECK_S` on, with that moment's lines in the files) still finds it: the history read in the
+    middle of a run can break an invariant that the whole one keeps ("applied": an owner's command for the same
+    target, or the record that allowed it, written to its file later). A run of the planted stale command ended 10 s
+    in on such a catch, and its verdict found nothing (run 6 of the twenty-fourth session). A catch taken back lets
+    the run go on to its ``planned`` end."""
+    if broken and not caught:
+        return min(planned, now + UNTIL_CHECK_S + UNTIL_AFTER_S), True, "broken: ending early once the next look agrees"
+    if broken:
+        return min(end, now + UNTIL_AFTER_S), True, "still broken: ending early"
+    if caught:
+        return planned, False, "not broken in the history read since: going on"
+    return end, False, ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -366,16 +383,19 @@ class Soak:
         self.writer.write(Mark(t0, "class", "every peer started; the nemesis begins"))
         warmed = False
         look = t0 + UNTIL_CHECK_S
+        planned, caught = end, False
         while time.monotonic() < end:
             if not warmed and time.monotonic() >= warm:
                 self.writer.write(Mark(time.monotonic(), "warm"))
                 warmed = True
             if cfg.until and time.monotonic() >= look:
                 look = time.monotonic() + UNTIL_CHECK_S
-                if self._broken(cfg.until):
-                    end = min(end, time.monotonic() + UNTIL_AFTER_S)
-                    self.writer.write(Mark(time.monotonic(), "caught", f"{cfg.until} broken: ending early"))
-                    look = end  # once is enough
+                was = caught
+                end, caught, said = after_look(self._broken(cfg.until), caught, time.monotonic(), end, planned)
+                if said:
+                    self.writer.write(Mark(time.monotonic(), "caught", f"{cfg.until} {said}"))
+                if was and caught:
+                    look = end  # confirmed: once is enough
             time.sleep(min(1.0, max(0.0, end - time.monotonic())))
         nemesis.stop()
         self.writer.write(Mark(time.monotonic(), "end", f"{nemesis.count} faults"))
