@@ -346,9 +346,10 @@ class FabricConfig:
         block_wait = "transport/link/tx/queue/congestion_control/block/wait_before_close"
         if mode == "router" and json.loads(conf.get_json(block_wait)) == ZENOH_DEFAULT_BLOCK_WAIT_US:
             conf.insert_json5(block_wait, json.dumps(self.lease_ms * 1000 // BLOCK_WAIT_SHARE))
-        # A router answers read-only queries on its admin space (``@/ZID/router/{subscriber,queryable,token}/KEY``):
-        # who subscribes to and serves what, for ``robofabric ps -v``, ``list`` and ``info`` (robofabric/declarations.py).
-        # Never writable; a config file that sets the admin space keeps its choice; ACLs still decide who may ask.
+        # A router answers read-only queries on its admin space: its own entry (``@/ZID/router``) tells a standby sim its
+        # link is up (sim_peer.replica.roles). Its subscriber and queryable entries can stop a zenoh 1.10.2 router for
+        # good, and no tool of ours asks them (fabric/declared.py). Never writable; a config file that sets the admin
+        # space keeps its choice; ACLs still decide who may ask.
         if (
             mode == "router"
             and not json.loads(conf.get_json("adminspace/enabled"))

@@ -234,6 +234,11 @@ class LatestThenLive:
         except Exception:  # a closing session
             pass
 
+    @property
+    def undeclared(self) -> bool:
+        """Whether :meth:`undeclare` was called (a peer tells only what it still subscribes to: fabric.declared)."""
+        return self._closed
+
     def undeclare(self) -> None:
         """Stop delivering; safe to call twice and after the session closed."""
         self._closed = True

@@ -21,6 +21,7 @@ import zenoh
 from fabric.authority_stamp import AuthorityStamp
 from fabric.budget import RATE_LIMITED
 from fabric.codec import DecodeError, decode, encode
+from fabric.declared import Declared
 from fabric.interfaces import Event, EventKind, Header, NoReply, Refused, ServiceError
 from fabric.limits import clip
 from fabric.publishers import priority_for
@@ -100,13 +101,15 @@ class Rpc:
         token_gone_at: Callable[[], float] = lambda: float("-inf"),
         stood_still: Callable[[], tuple[float, float]] = lambda: (float("-inf"), float("-inf")),
         opened_at: float = float("-inf"),
+        declared: Declared | None = None,
     ) -> None:
         """``linked()``: whether this client has a link to a router now (None: a router itself, always linked);
         ``lost_at()``: when it last lost one, ``back_at()``: when one last came back after a loss, ``token_gone_at()``:
         when it last heard a liveliness token go, ``stood_still()``: (since, until) this process last stood still
         (monotonic s, :mod:`fabric.standstill`); ``opened_at``: when the session opened (its routes come a moment
-        after it, as after a link's return)."""
+        after it, as after a link's return); ``declared``: where each service served is told (:mod:`fabric.declared`)."""
         self._session = session
+        self._declared = declared
         self._linked = linked
         self._lost_at = lost_at
         self._back_at = back_at
@@ -175,6 +178,8 @@ class Rpc:
 
         q = self._session.declare_queryable(key_expr, on_query, complete=complete)
         self._resources.append(q)
+        if self._declared is not None:
+            self._declared.add("queryable", key_expr, q)
         return q
 
     def _answer_later(

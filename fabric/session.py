@@ -32,6 +32,7 @@ from fabric import keys
 from fabric.authority_stamp import AuthorityStamp
 from fabric.codec import DecodeError, decode, encode, load_plugins
 from fabric.config import FabricConfig, default_peer_id
+from fabric.declared import Declared, Told, encode_told
 from fabric.exit import at_exit
 from fabric.fence_watch import FenceWatch
 from fabric.standstill import Standstill
@@ -117,6 +118,8 @@ class Fabric:
         self._probes: dict[str, zenoh.Publisher] = {}  # key -> a publisher to remote subscribers only (listened())
         self._local_exprs: frozenset[str] = frozenset()  # this session's own subscriptions that take its samples
         self._local_keys: dict[str, bool] = {}  # key -> whether one of them takes it (emptied when one is added)
+        self.declared = Declared()
+        """What this peer's code subscribed to and serves, told on its token's key (:mod:`fabric.declared`)."""
         self.session = zenoh.open(config.zenoh_config())
         self.opened_at = time.monotonic()
         """When the session opened (monotonic s): a query that finds nobody soon after asks again (fabric.rpc)."""
@@ -156,6 +159,7 @@ class Fabric:
             if self._standstill is not None
             else lambda: (float("-inf"), float("-inf")),
             opened_at=self.opened_at,
+            declared=self.declared,
         )
         """Services: ``rpc.serve``, ``rpc.query``, ``rpc.call`` (:mod:`fabric.rpc`)."""
         self.reports = Reports(
@@ -170,6 +174,10 @@ class Fabric:
         self.token = (
             self.session.liveliness().declare_token(keys.peer(self.world, kind, self.peer_id)) if token else None
         )
+        if token:  # who asks what this peer subscribes to and serves (list, info, ps -v) asks it here
+            self._resources.append(
+                self.session.declare_queryable(keys.peer(self.world, kind, self.peer_id), self._tell_declared)
+            )
         # zenoh's callback threads keep the interpreter alive until the session closes: a script that
         # never calls close() must still exit (fabric/exit.py)
         self._cancel_exit = at_exit(self.close)
@@ -368,11 +376,21 @@ class Fabric:
             sub = LatestThenLive(self.session, key_expr, callback)
         else:
             sub = self.session.declare_subscriber(key_expr, callback)
+        self.declared.add("subscriber", key_expr, sub)
         if not remote_only:  # kept after an undeclare: listened() then says yes where it could say no, never worse
             self._local_exprs = self._local_exprs | {key_expr}
             self._local_keys = {}  # after the new expression: a check that began before stores into the old map
         self._resources.append(sub)
         return sub
+
+    def _tell_declared(self, query: zenoh.Query) -> None:
+        """Answer ``list``/``info``/``ps -v``: what this peer subscribes to and serves now (fabric.declared)."""
+        subs, served = self.declared.now()
+        key = keys.peer(self.world, self.kind, self.peer_id)
+        try:
+            query.reply(key, encode_told(Told(self.kind, self.peer_id, subs, served)))
+        except Exception:  # a closing session, or an asker the router's access control keeps from the answer
+            self.counters["query_errors"] += 1
 
     # ------------------------------------------------------------------ liveliness
 

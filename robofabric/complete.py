@@ -5,8 +5,8 @@ only while the shell asks for completions (``_ROBOFABRIC_COMPLETE=complete_bash 
 module imports nothing heavy at its top: zenoh, the codec and the exporters load inside the calls.
 A completer never raises and never hangs: no router, a refusing router or a broken plugin gives [].
 
-Keys come from one short look at the world (:func:`live_keys`): the key expressions its routers
-know subscribers and services on (their admin space), the peers' liveliness tokens, and the keys
+Keys come from one short look at the world (:func:`live_keys`): the key expressions its peers
+subscribe to and serve (as each tells, :mod:`fabric.declared`), the peers' liveliness tokens, and the keys
 that carry traffic within ``KEY_LOOK_S``; about a second in all when a router answers, ``connect``
 giving up after ``CONNECT_TIMEOUT_MS`` when none does.
 """
@@ -50,7 +50,7 @@ def live_keys(
     """The keys and key expressions live in ``world``, full (``rf/W/...``); [] when no router answers.
 
     Opens a bare zenoh session (no liveliness token of its own, so ``ps`` never shows it), asks the
-    admin space for subscribers and services, the liveliness space for peers, and listens to the
+    peers what they subscribe to and serve, the liveliness space for peers, and listens to the
     world's traffic for ``look_s`` s."""
     try:
         import zenoh

@@ -1,21 +1,17 @@
-"""Who is live, and who subscribes to and serves what: liveliness tokens and the router's admin space.
+"""Who is live, and who subscribes to and serves what: liveliness tokens, and what each peer tells of itself.
 
 A peer says it is alive with a token ``rf/W/peer/KIND/ID``. A token is declared by whoever holds a
 login, so its key may be anything the router lets through (``peer/viewer/with space``): every
 reader here takes tokens as they come, keeps those that name a peer, and returns the others as
 ``bad`` (their keys, to be shown quoted and skipped), never raising on them.
 
-Subscribers and queryables are not visible to a client; the router knows them. A router started by
-robofabric answers read-only queries on its admin space (:mod:`fabric.config`):
-``@/ROUTER/router/{subscriber,queryable,token}/KEY`` each with the zenoh ids of the clients that
-declared it. A token ties a zenoh id to a peer id, so declarations are named by peer. A router
-that does not answer (a stock zenohd, an ACL that hides ``@/**``) leaves ``available`` False: the
-caller says so instead of showing "no subscriber".
+Subscribers and queryables are not visible to a client: each peer tells its own on its token's key
+(:mod:`fabric.declared`). A world where nobody tells (a class world's student may not ask, peers older than this)
+leaves ``available`` False: the caller says so instead of showing "no subscriber".
 """
 
 from __future__ import annotations
 
-import json
 from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Any
@@ -122,20 +118,19 @@ def live_tokens(fab: Any, *, timeout: float = 1.0) -> tuple[list[Peer], list[str
 
 @dataclass
 class Declarations:
-    """What the routers of a world know: per key, the peers (``kind/id``, or a zenoh id) declaring it."""
+    """What the peers of a world told of themselves: per key expression, the ids of the peers declaring it."""
 
     available: bool = False
+    """Whether any peer told (a class world's student may not ask; peers older than this answer nothing)."""
     subscribers: dict[str, list[str]] = field(default_factory=dict)
     queryables: dict[str, list[str]] = field(default_factory=dict)
-    peers: dict[str, Peer] = field(default_factory=dict)  # zenoh id -> the peer its token names
-    bad_tokens: list[str] = field(default_factory=list)
+    told: dict[str, Peer] = field(default_factory=dict)  # peer id -> the peer, for each peer that told
+    bad_tokens: list[str] = field(default_factory=list)  # keys of answers that name no peer, or another one
 
-    def name(self, zid: str) -> str:
-        p = self.peers.get(zid)
-        return p.id if p is not None else f"zid:{zid[:8]}"
-
-    def of_peer(self, peer_id: str) -> tuple[list[str], list[str]]:
-        """(subscribed key expressions, served key expressions) of one peer."""
+    def of_peer(self, peer_id: str) -> tuple[list[str], list[str]] | None:
+        """(subscribed key expressions, served key expressions) of one peer; None when it did not tell."""
+        if peer_id not in self.told:
+            return None
         subs = sorted(k for k, who in self.subscribers.items() if peer_id in who)
         served = sorted(k for k, who in self.queryables.items() if peer_id in who)
         return subs, served
@@ -159,72 +154,45 @@ class Declarations:
 
 
 def read_declarations(session: Any, world: str, *, timeout: float = 1.0) -> Declarations:
-    """The subscribers, queryables and tokens on ``world``'s keys, from every reachable router's admin space.
+    """The subscribers and queryables of ``world``'s peers, as each peer tells them on its token's key
+    (:mod:`fabric.declared`; not the router's admin space, which can stop the router for good).
 
-    ``session`` is a raw zenoh session (a Fabric's ``session``, or shell completion's bare one): the admin space
-    (``@/...``) and the zenoh ids it answers with are zenoh's own, below anything the Fabric encodes."""
-    root = keys.world_root(world)
-    try:
-        own = str(session.info.zid())  # this reader's own declarations are not the world's
-    except Exception:
-        own = ""
-    raw: dict[str, dict[str, set[str]]] = {"subscriber": defaultdict(set), "queryable": defaultdict(set)}
-    tokens: list[tuple[str, set[str]]] = []
-    answered = False
-    for what in ("subscriber", "queryable", "token"):
-        try:
-            import zenoh
+    ``session`` is a raw zenoh session (a Fabric's ``session``, or shell completion's bare one); this session's own
+    peer is not asked (its declarations are the reader's, not the world's)."""
+    import zenoh
 
-            replies = session.get(
-                f"@/*/router/{what}/{root}/**",
-                timeout=timeout,
-                target=zenoh.QueryTarget.ALL,
-                consolidation=zenoh.ConsolidationMode.NONE,
-            )
-            for rep in replies:
-                if rep.ok is None:
-                    continue
-                answered = True
-                k = str(rep.ok.key_expr)
-                marker = f"/router/{what}/"
-                if marker not in k:
-                    continue
-                expr = k.split(marker, 1)[1]
-                zids = _zids(rep.ok.payload.to_bytes()) - {own}
-                if what == "token":
-                    tokens.append((expr, zids))
-                else:
-                    raw[what][expr] |= zids
-        except Exception:
-            continue
-    out = Declarations(available=answered)
+    from fabric.declared import decode_told
+
+    subs: dict[str, set[str]] = defaultdict(set)
+    served: dict[str, set[str]] = defaultdict(set)
+    out = Declarations()
     bad: set[str] = set()
-    for expr, zids in tokens:
-        if not expr.startswith(f"{root}/peer/"):
-            continue
-        p = _peer_of(expr, world)
-        if p is None:
-            bad.add(expr)
-            continue
-        for z in zids:
-            out.peers[z] = p
-    out.bad_tokens = sorted(bad)
-    out.subscribers = {k: sorted({out.name(z) for z in v}) for k, v in sorted(raw["subscriber"].items()) if v}
-    out.queryables = {k: sorted({out.name(z) for z in v}) for k, v in sorted(raw["queryable"].items()) if v}
-    return out
-
-
-def _zids(payload: bytes) -> set[str]:
-    """The client and peer zenoh ids of an admin-space declaration entry (routers relay, they do not declare)."""
     try:
-        doc = json.loads(payload)
-    except ValueError:
-        return set()
-    if not isinstance(doc, dict):
-        return set()
-    out: set[str] = set()
-    for field_name in ("clients", "peers"):
-        v = doc.get(field_name)
-        if isinstance(v, list):
-            out.update(str(z) for z in v if isinstance(z, str))
+        replies = session.get(
+            keys.peers_all(world),
+            timeout=timeout,
+            target=zenoh.QueryTarget.ALL,
+            consolidation=zenoh.ConsolidationMode.NONE,
+            allowed_destination=zenoh.Locality.REMOTE,
+        )
+        for rep in replies:
+            if rep.ok is None:
+                continue
+            k = str(rep.ok.key_expr)
+            p = _peer_of(k, world)
+            told = decode_told(rep.ok.payload.to_bytes())
+            if p is None or told is None or (told.kind, told.id) != (p.kind, p.id):
+                bad.add(k)  # any login may answer on a key it may declare a token on: taken as it comes, never raised
+                continue
+            out.told[p.id] = p
+            for e in told.subscribers:
+                subs[e].add(p.id)
+            for e in told.queryables:
+                served[e].add(p.id)
+    except Exception:  # a closing session
+        pass
+    out.available = bool(out.told)
+    out.bad_tokens = sorted(bad)
+    out.subscribers = {k: sorted(v) for k, v in sorted(subs.items())}
+    out.queryables = {k: sorted(v) for k, v in sorted(served.items())}
     return out

@@ -92,7 +92,7 @@ def list_keys(
     cfg = join.config()
     expr = _resolve(keyexpr, cfg.world) if keyexpr else keys.world_all(cfg.world)
     with join.open("tool", cfg) as fab:
-        decl = read_declarations(fab.session, cfg.world)  # zenoh's admin space: the raw session
+        decl = read_declarations(fab.session, cfg.world)  # what each peer tells (fabric.declared)
         stats = [] if services else observe(fab, expr, duration)
     if services:
         rows = [
@@ -113,7 +113,10 @@ def list_keys(
             [(r["key"], r["request"], r["reply"], ", ".join(r["servers"])) for r in rows],
         )
         if not decl.available:
-            print("the router does not show its admin space: services unknown", file=sys.stderr)
+            print(
+                "no peer told what it serves (this login may not ask, or the peers are older): services unknown",
+                file=sys.stderr,
+            )
         return
     subs = {s.key: decl.matching(decl.subscribers, s.key) for s in stats}
     if as_json:
@@ -178,7 +181,7 @@ def key_info(key: str, *, as_json: bool, duration: float, join: Joining) -> None
     from robofabric.declarations import read_declarations, service_types
 
     with join.open("tool", cfg) as fab:
-        decl = read_declarations(fab.session, cfg.world)  # zenoh's admin space: the raw session
+        decl = read_declarations(fab.session, cfg.world)  # what each peer tells (fabric.declared)
         stats = observe(fab, full, duration)
         subscribed = None
         if "*" not in full and "$" not in full:

@@ -162,6 +162,10 @@ def _own_rules(ident: Identity) -> list[dict]:
         tokens += [f"{W}/peer/compute/*", *latched]
     else:  # viewer
         tokens += [f"{W}/peer/viewer/*", f"{W}/peer/recorder/*"]
+    # a peer tells what it subscribes to and serves on its own token's key (fabric.declared); the staff may ask
+    serve += [t for t in tokens if t.startswith(f"{W}/peer/") and t.count("/") == 4]
+    if r in STAFF:
+        ask.append(f"{W}/peer/*/*")
     rules = [_rule(f"{n}-put", ["put"], put), _rule(f"{n}-tokens", ["liveliness_token"], tokens)]
     if serve:
         rules.append(_rule(f"{n}-serve", ["declare_queryable", "reply"], serve))

@@ -58,7 +58,7 @@ def ps(
         if verbose:
             from robofabric.introspect_cli import observe
 
-            decl = read_declarations(fab.session, fab.world, timeout=timeout)  # zenoh's admin space: the raw session
+            decl = read_declarations(fab.session, fab.world, timeout=timeout)  # what each peer tells (fabric.declared)
             for s in observe(fab, keys.world_all(fab.world), duration):
                 for src in s.publishers:
                     published.setdefault(src, []).append(s.key)
@@ -69,7 +69,9 @@ def ps(
             raise NothingThere(f"no live peer {peer!r} in world {fab.world!r}")
 
     def detail(pid: str) -> dict:
-        subs, served = decl.of_peer(pid) if decl is not None else ([], [])
+        """What ``pid`` publishes (seen), subscribes to and serves (told; None for a peer that did not tell)."""
+        told = decl.of_peer(pid) if decl is not None else None
+        subs, served = told if told is not None else (None, None)
         return {"publishes": sorted(published.get(pid, [])), "subscribes": subs, "serves": served}
 
     if as_json:
@@ -88,13 +90,20 @@ def ps(
         from robofabric.declarations import service_types
 
         if decl is not None and not decl.available:
-            print("(the router does not show its admin space: subscriptions and services unknown)", file=sys.stderr)
+            print(
+                "(no peer told what it subscribes to and serves: this login may not ask, as a class world's students "
+                "may not, or the peers are older; subscriptions and services unknown)",
+                file=sys.stderr,
+            )
         lines = []
         for k, i in peers:
             d = detail(i)
             lines.append(f"{i} ({k})")
             lines.append("  publishes:" + ("" if d["publishes"] else " -"))
             lines.extend(f"    {key}" for key in d["publishes"])
+            if d["subscribes"] is None:  # a peer that did not tell (older, or raw zenoh): unknown, not none
+                lines.append("  subscribes, serves: ? (it did not tell)")
+                continue
             lines.append("  subscribes:" + ("" if d["subscribes"] else " -"))
             lines.extend(f"    {key}" for key in d["subscribes"])
             lines.append("  serves:" + ("" if d["serves"] else " -"))

@@ -85,6 +85,8 @@ def test_the_routers_put_and_serve_rules_of_sims_and_compute_peers():
         "rf/*/map/*/@adv/**",
         "rf/*/robot/*/path",
         "rf/*/map/*",
+        "rf/*/peer/tool/*",  # what it subscribes to and serves, told on its token's key (fabric.declared)
+        "rf/*/peer/compute/*",
     ]
     assert rules["compute-tokens"] == [
         "rf/*/peer/tool/*",
