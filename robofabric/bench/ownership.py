@@ -53,23 +53,27 @@ def run_one(n: int, *, lease_s: float, kills: int, grace_s: float = GRACE_S) -> 
         users[0].request("arm")
         for u in users[1:]:
             u.request("arm", wait=True)
+        by_user = {u.user: u for u in users}
         handovers = []
-        for prev, nxt in zip(users, users[1:]):
+        holder = users[0]
+        for _ in users[1:]:
+            # the next owner is the queue's head, and the queue is in join order (ownership.state._sorted_queue): the
+            # order the authority heard the users' tokens, not the order they were made. At load 4 (2026-12-04) it
+            # heard u002 before u001, u002 took over, and a bench that waited for u001 timed out with "moving"
+            nxt = by_user[auth.records()["arm"].queue[0]]
             t0 = time.perf_counter()
-            prev.release("arm")
-            # 15 s, not 5: the final `make test` of 2026-11-30's fifth session missed 5 s once at the suite's load (0.3 s
-            # leases in one process), and the eighth session's run beside two CPU hogs missed 15 s, the record still
-            # "moving", causes not known; what the replicas and the authority held (live users, queue) is said
+            holder.release("arm")
             wait_until(
                 lambda: nxt.owns("arm"),
                 timeout=15,
                 interval=0.0005,
                 what="handover",
-                seen=lambda: (prev.record("arm"), nxt.record("arm"), auth.export_state()),
+                seen=lambda: (holder.record("arm"), nxt.record("arm"), auth.export_state()),
             )
             handovers.append(time.perf_counter() - t0)
+            holder = nxt
         recoveries = []
-        last = users[-1]
+        last = holder
         last.release("arm")
         for k in range(kills):
             owner_id = f"k{k}"
