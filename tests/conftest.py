@@ -112,11 +112,23 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
         def _split_scope(self, nodeid: str) -> str:
             return work_unit(nodeid)
 
+        distributed = False
+
+        def schedule(self) -> None:
+            super().schedule()
+            self.distributed = self.collection is not None
+
         def _assign_work_unit(self, node: Any) -> None:
             for unit in reversed(HEAVY):
                 if unit in self.workqueue:
                     self.workqueue.move_to_end(unit, last=False)
+            fresh = self.distributed and self._pending_of(self.assigned_work.get(node, {})) == 0
             super()._assign_work_unit(node)
+            if fresh and not self.workqueue and not node.shutting_down:
+                # A crashed worker's replacement given the last unit: a worker holds its last test until it hears
+                # of a next one or of the end, and a fresh one has no earlier test whose end would bring either.
+                # Streak run 1 (2026-12-04) sat so for 20 min after the hang watch's kill: the end is sent with it.
+                node.shutdown()
 
         def remove_node(self, node: Any) -> str | None:
             """A worker gone, at the end or crashed (the hang watch ends a hung test's worker). xdist 3.8's
