@@ -141,7 +141,7 @@ class PauseRider:
         paused = now - self.last_hold <= QUIET_S  # a hold reported lately: copies at growing intervals
         after = self.last_hold > float("-inf")  # a pause met this command: a copy every RESEND_MAX_S till it is done
         if (paused and now - self.sent_at >= self.interval) or (after and now - self.sent_at >= RESEND_MAX_S):
-            self.robot.resend(self.command, self.cmd)
+            self._copy()
             self.resends += 1
             self.sent_at = now
             self.interval = min(2 * self.interval, RESEND_MAX_S)
@@ -149,10 +149,21 @@ class PauseRider:
             if self.heard():
                 self.heard = None  # a sign came: the sim has the command; pauses alone send copies from now on
             elif now - self.given_at >= UNHEARD_S and now - self.sent_at >= RESEND_MAX_S:
-                self.robot.resend(self.command, self.cmd)
+                self._copy()
                 self.resends += 1
                 self.unheard += 1
                 self.sent_at = now
+
+    def _copy(self) -> None:
+        """Send the command again; given again under her epoch instead when the robot is hers under a newer one (a
+        copy at the past epoch could only be refused, and ``resend`` raises on it). The sim's refusal of a copy says
+        so too (:meth:`_refused_at_a_past_epoch`), but a copy may be due first: the paused student's sim came back
+        (its token) as base1 came back to him at epoch 3, and the copy raised "changed hands" (2026-12-04)."""
+        rec = getattr(self.robot, "record", None)
+        if rec is not None and rec.owner == self.robot.world.user and rec.epoch > self.cmd.epoch:
+            self._given_back(rec)
+            return
+        self.robot.resend(self.command, self.cmd)
 
     def _given_back(self, rec: Any = None) -> None:
         """Give the command again under the owner's epoch when the robot came back to her (see the module)."""

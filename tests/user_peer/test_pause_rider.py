@@ -185,3 +185,33 @@ def test_a_command_refused_for_a_past_epoch_of_hers_is_given_again_under_her_new
     robot.refusals.append(refused)
     with pytest.raises(NotOwner):
         rider.check()
+
+
+def test_a_copy_due_while_the_robot_is_hers_again_at_a_newer_epoch_is_given_under_it(robot):
+    """The paused student (2026-12-04): his sim's token came back as base1 came back to him at epoch 3, and the copy
+    that was due went before any refusal of the sim's: at the past epoch it raised "changed hands" (owner: bob). It is
+    given again under his epoch instead, then copied under it; another's robot still raises."""
+    given: list[tuple[str, int]] = []
+    robot.world.user = "alice"
+    robot.record = SimpleNamespace(owner="alice", epoch=3)  # type: ignore[attr-defined]
+
+    def send(command: str, body: Any, *, epoch: int) -> Command:
+        given.append((command, epoch))
+        return Command(user="alice", epoch=epoch, body=body)
+
+    def resend(command: str, cmd: Command) -> None:  # as Robot.resend: a copy at another epoch than the record's
+        if robot.record.owner != "alice" or robot.record.epoch != cmd.epoch:  # type: ignore[attr-defined]
+            raise NotOwner(f"changed hands (epoch {cmd.epoch}, now {robot.record.epoch})")  # type: ignore[attr-defined]
+        robot.sent.append(robot.clock.t)
+
+    robot.send, robot.resend = send, resend  # type: ignore[method-assign]
+    rider = PauseRider(robot, "path", CMD, 0, clock=robot.clock)  # type: ignore[arg-type]
+    _run(robot, rider, 1.0)
+    robot.record = SimpleNamespace(owner="alice", epoch=5)  # type: ignore[attr-defined]  # held for gone, given back
+    robot.world.presence.arrivals += 1  # the sim's token back: a copy is due at once
+    _run(robot, rider, 4.0)
+    assert given == [("path", 5)] and rider.cmd.epoch == 5 and robot.sent, (given, robot.sent)
+    assert "given back, and the command given again 1 time(s)" in rider.note()
+    robot.record = SimpleNamespace(owner="bob", epoch=6)  # type: ignore[attr-defined]
+    with pytest.raises(NotOwner):
+        _run(robot, rider, 8.0)
