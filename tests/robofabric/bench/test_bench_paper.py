@@ -198,7 +198,9 @@ def test_one_run_through_the_cli_gives_every_section_of_the_document():
         assert 0.0 <= r["cpu_min"] <= r["cpu_max"] and 0.0 < r["rss_min_mb"] <= r["rss_max_mb"], r
     multi = doc["multi_user"]
     assert multi["students"] == 2 and [s["student"] for s in multi["per_student"]] == ["s0", "s1"]
-    assert set(multi["per_student"][0]["received"]) == {"arm1", "base1"} and multi["per_student"][0]["messages"] > 0
+    assert set(multi["per_student"][0]["received"]) == {"arm1", "base1"} and multi["per_student"][0]["messages"] > 0, (
+        multi["per_student"]  # each student's errors, moves and losses: v1 of 2026-12-04 saw s0 receive nothing
+    )
     assert 0 < multi["delay_ms_p50"] <= multi["delay_ms_p99"] and multi["paper_reported"] == PAPER["multi_user"]
     assert doc["paper"]["multi_user"]["delay_ms"] == 100.0
     from robofabric.testing import wait_until as wait
