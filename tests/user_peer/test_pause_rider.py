@@ -62,6 +62,18 @@ def robot() -> Robot:
     return Robot()
 
 
+def _gives(robot: Robot) -> list[tuple[str, int]]:
+    """(command, epoch) of each command the rider gives anew (``Robot.send`` with an epoch), as it gives them."""
+    given: list[tuple[str, int]] = []
+
+    def send(command: str, body: Any, *, epoch: int) -> Command:
+        given.append((command, epoch))
+        return Command(user="alice", epoch=epoch, body=body)
+
+    robot.send = send  # type: ignore[attr-defined]
+    return given
+
+
 def test_no_pause_no_copy(robot):
     rider = PauseRider(robot, "joints", CMD, 0, clock=robot.clock)  # type: ignore[arg-type]
     _run(robot, rider, 30.0)
@@ -126,15 +138,10 @@ def test_a_command_heard_at_once_is_never_sent_again(robot):
 def test_a_robot_given_back_to_its_owner_gets_the_command_again_under_her_new_epoch_once(robot):
     """Held for gone (her token went with the sim's link, and came back within grace), she owned the robot again at
     a higher epoch: the sim had stopped it, and refuses a copy at the old one. Not for a path (no resend_on_takeover)."""
-    given: list[tuple[str, int]] = []
+    given = _gives(robot)
     robot.world.user = "alice"
     robot.record = SimpleNamespace(owner="alice", epoch=3)  # type: ignore[attr-defined]
 
-    def send(command: str, body: Any, *, epoch: int) -> Command:
-        given.append((command, epoch))
-        return Command(user="alice", epoch=epoch, body=body)
-
-    robot.send = send  # type: ignore[attr-defined]
     rider = PauseRider(robot, "joints", CMD, 0, clock=robot.clock, resend_on_takeover=True)  # type: ignore[arg-type]
     _run(robot, rider, 1.0)
     robot.record = SimpleNamespace(owner="alice", epoch=5)  # taken (4: free), given back (5)
@@ -154,17 +161,12 @@ def test_a_command_refused_for_a_past_epoch_of_hers_is_given_again_under_her_new
     """Woken from a pause, the paused student sent his path under the epoch his replica still had; the sim refused it
     ("stale epoch 1 for base1 (current 3)") though base1 was his again: asked, the authority says so, and the path
     is given again under epoch 3. A later refusal of the old copy changes nothing; one while another owns it stands."""
-    given: list[tuple[str, int]] = []
+    given = _gives(robot)
     stale = SimpleNamespace(owner="alice", epoch=3)
     robot.record = stale  # type: ignore[attr-defined]
     robot.world.user = "alice"
     robot.world.ownership = SimpleNamespace(fetch=lambda rid, timeout: SimpleNamespace(owner="alice", epoch=5))
 
-    def send(command: str, body: Any, *, epoch: int) -> Command:
-        given.append((command, epoch))
-        return Command(user="alice", epoch=epoch, body=body)
-
-    robot.send = send  # type: ignore[attr-defined]
     refused = Event(
         kind="reject",
         reason="stale epoch 3 for arm1 (current 5)",
@@ -191,20 +193,16 @@ def test_a_copy_due_while_the_robot_is_hers_again_at_a_newer_epoch_is_given_unde
     """The paused student (2026-12-04): his sim's token came back as base1 came back to him at epoch 3, and the copy
     that was due went before any refusal of the sim's: at the past epoch it raised "changed hands" (owner: bob). It is
     given again under his epoch instead, then copied under it; another's robot still raises."""
-    given: list[tuple[str, int]] = []
+    given = _gives(robot)
     robot.world.user = "alice"
     robot.record = SimpleNamespace(owner="alice", epoch=3)  # type: ignore[attr-defined]
-
-    def send(command: str, body: Any, *, epoch: int) -> Command:
-        given.append((command, epoch))
-        return Command(user="alice", epoch=epoch, body=body)
 
     def resend(command: str, cmd: Command) -> None:  # as Robot.resend: a copy at another epoch than the record's
         if robot.record.owner != "alice" or robot.record.epoch != cmd.epoch:  # type: ignore[attr-defined]
             raise NotOwner(f"changed hands (epoch {cmd.epoch}, now {robot.record.epoch})")  # type: ignore[attr-defined]
         robot.sent.append(robot.clock.t)
 
-    robot.send, robot.resend = send, resend  # type: ignore[method-assign]
+    robot.resend = resend  # type: ignore[method-assign]
     rider = PauseRider(robot, "path", CMD, 0, clock=robot.clock)  # type: ignore[arg-type]
     _run(robot, rider, 1.0)
     robot.record = SimpleNamespace(owner="alice", epoch=5)  # type: ignore[attr-defined]  # held for gone, given back
