@@ -26,9 +26,11 @@ def rss_mb():
     return int([l for l in open("/proc/self/status") if l.startswith("VmRSS")][0].split()[1]) / 1024
 
 kept = []
+together = threading.Barrier(4)  # all four hold their blocks at once: four arenas, whatever the scheduler does
 
 def work():
     blocks = [bytearray(4000) for _ in range(8000)]  # ~32 MB in this thread's arena, in chunks malloc keeps
+    together.wait()
     kept.extend(blocks[::256])  # a few stay alive: the arena cannot simply shrink from its top
     del blocks
 
