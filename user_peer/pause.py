@@ -159,21 +159,20 @@ class PauseRider:
         copy at the past epoch could only be refused, and ``resend`` raises on it). The sim's refusal of a copy says
         so too (:meth:`_refused_at_a_past_epoch`), but a copy may be due first: the paused student's sim came back
         (its token) as base1 came back to him at epoch 3, and the copy raised "changed hands" (2026-12-04)."""
-        rec = getattr(self.robot, "record", None)
-        if rec is not None and rec.owner == self.robot.world.user and rec.epoch > self.cmd.epoch:
-            self._given_back(rec)
-            return
-        self.robot.resend(self.command, self.cmd)
+        if not self._given_back():
+            self.robot.resend(self.command, self.cmd)
 
-    def _given_back(self, rec: Any = None) -> None:
-        """Give the command again under the owner's epoch when the robot came back to her (see the module)."""
+    def _given_back(self, rec: Any = None) -> bool:
+        """Give the command again under the owner's epoch when the robot came back to her (see the module); whether
+        it was given again."""
         rec = rec if rec is not None else getattr(self.robot, "record", None)
         if rec is None or rec.owner != self.robot.world.user or rec.epoch <= self.cmd.epoch:
-            return
+            return False
         self.cmd = self.robot.send(self.command, self.cmd.body, epoch=rec.epoch)
         self.regiven += 1
         self.given_at = self.clock()  # its copies count from now (a sign is awaited only where none came of the first)
         self.sent_at = self.given_at
+        return True
 
     def _refused_at_a_past_epoch(self) -> bool:
         """After an ownership refusal: whether the robot is hers now under an epoch newer than the one it refused (she
@@ -188,10 +187,7 @@ class PauseRider:
                 rec = ownership.fetch(self.robot.id, timeout=1.0)
         if rec is None or rec.owner != user:
             return False
-        if rec.epoch > self.cmd.epoch:
-            self._given_back(rec)
-            return True
-        return self.regiven > 0 and rec.epoch == self.cmd.epoch
+        return self._given_back(rec) or (self.regiven > 0 and rec.epoch == self.cmd.epoch)
 
     def _term(self) -> int:
         js = self.robot.latest("joints")
